@@ -1,0 +1,41 @@
+# Two commands set up and run everything on a fresh Debian 12 machine (as root):
+#   make demo   make test
+# Both install only what is missing, so a second run is quick.
+SHELL := /bin/bash
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+APT_PACKAGES := libsuitesparse-dev libopenblas0-pthread libusb-1.0-0 libvulkan1 mesa-vulkan-drivers libgl1 libgomp1
+STAMP := $(VENV)/.installed
+
+.PHONY: demo test bench system venv clean
+
+demo: $(STAMP)
+	$(PY) -m o3d_lsmesh.cli demo
+
+test: $(STAMP)
+	$(PY) -m pytest -p no:dash -q
+
+bench: $(STAMP)
+	for b in benchmarks/bench_*.py; do $(PY) $$b || exit 1; done
+
+# apt only when a package is missing: dpkg-query is fast, apt-get update is not.
+system:
+	@missing=""; for p in $(APT_PACKAGES); do \
+	  dpkg-query -W -f='$${Status}' $$p 2>/dev/null | grep -q "ok installed" || missing="$$missing $$p"; \
+	done; \
+	if [ -n "$$missing" ]; then \
+	  echo "installing:$$missing"; \
+	  export DEBIAN_FRONTEND=noninteractive; \
+	  apt-get update -qq && apt-get install -y -qq --no-install-recommends $$missing; \
+	fi
+
+$(STAMP): setup.cfg pyproject.toml | system
+	@$(MAKE) --no-print-directory system
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q -e '.[test]'
+	touch $(STAMP)
+
+clean:
+	rm -rf $(VENV) demo_out *.egg-info

@@ -1,0 +1,202 @@
+"""The CHOLMOD gateway: the only module that imports ``sksparse.cholmod``.
+
+:class:`SPDSolver` factors a sparse symmetric positive definite matrix once,
+solves ``(n,)`` or ``(n, k)`` right-hand sides in one call, refactors a matrix
+of the same pattern reusing the symbolic analysis (the fill-reducing ordering
+is about half of a large solve), and applies rank-k updates ``A + C C^T`` in
+place. Without scikit-sparse it falls back to SciPy's ``splu`` with a warning,
+refactoring where CHOLMOD would update.
+"""
+
+from __future__ import annotations
+
+import importlib
+import threading
+import warnings
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from ._errors import O3DLSMeshWarning, SingularSystemError
+from ._validate import as_choice
+
+__all__ = ["SPDSolver", "cholmod_available"]
+
+
+def _import_cholmod():
+    try:
+        # ``import sksparse`` alone does not load the submodule: import it by name.
+        return importlib.import_module("sksparse.cholmod")
+    except ImportError:
+        return None
+
+
+_cholmod = _import_cholmod()
+
+
+def cholmod_available() -> bool:
+    """Whether scikit-sparse's CHOLMOD can be imported."""
+    return _cholmod is not None
+
+
+def _as_csc(matrix: Any) -> sp.csc_matrix:
+    if not sp.issparse(matrix):
+        raise TypeError(f"matrix must be a scipy sparse matrix, got {type(matrix).__name__}")
+    if matrix.shape[0] != matrix.shape[1]:
+        raise ValueError(f"matrix must be square, got shape {matrix.shape}")
+    csc = sp.csc_matrix(matrix, dtype=np.float64)
+    csc.sum_duplicates()
+    csc.sort_indices()
+    return csc
+
+
+class SPDSolver:
+    """Factor a sparse SPD matrix once and solve, refactor or update it.
+
+    Parameters
+    ----------
+    matrix : (n, n) scipy sparse matrix
+        Symmetric positive definite. Only CHOLMOD's lower triangle is read, so
+        the caller must pass a symmetric matrix (``A.T @ A`` forms are).
+    backend : {"auto", "cholmod", "scipy"}
+        ``"auto"`` takes CHOLMOD when scikit-sparse imports, else SciPy's
+        ``splu`` with an :class:`O3DLSMeshWarning`.
+
+    Attributes
+    ----------
+    backend : str
+        The backend that actually runs, ``"cholmod"`` or ``"scipy"``.
+    shape : tuple of int
+
+    Notes
+    -----
+    Solves and updates hold a lock: CHOLMOD's common workspace is shared by
+    the factor, so one solver may be used from several threads but its calls
+    run one at a time. A solver pickles as its matrix and refactors on load.
+
+    Examples
+    --------
+    >>> import scipy.sparse as sp, numpy as np
+    >>> solver = SPDSolver(sp.identity(3, format="csc") * 2.0)
+    >>> solver.solve(np.ones((3, 2))).tolist()
+    [[0.5, 0.5], [0.5, 0.5], [0.5, 0.5]]
+    """
+
+    def __init__(self, matrix: Any, *, backend: str = "auto") -> None:
+        backend = as_choice(backend, ("auto", "cholmod", "scipy"), name="backend")
+        if backend == "cholmod" and _cholmod is None:
+            raise ImportError(
+                "backend='cholmod' needs scikit-sparse: pip install 'o3d_lsmesh[cholmod]' "
+                "(after apt-get install libsuitesparse-dev)"
+            )
+        if backend == "auto":
+            if _cholmod is None:
+                warnings.warn(
+                    "scikit-sparse is not importable; solving with scipy.sparse.linalg.splu, "
+                    "which is slower and refactors instead of updating",
+                    O3DLSMeshWarning,
+                    stacklevel=2,
+                )
+                backend = "scipy"
+            else:
+                backend = "cholmod"
+        self.backend = backend
+        self._lock = threading.RLock()
+        self._matrix = _as_csc(matrix)
+        self._pending: list[sp.csc_matrix] = []
+        self._factor: Any = None
+        self._factorize(analyze=True)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self._matrix.shape
+
+    @property
+    def matrix(self) -> sp.csc_matrix:
+        """The matrix currently factored, updates included, ``(n, n)`` CSC."""
+        with self._lock:
+            self._flush()
+            return self._matrix
+
+    def _flush(self) -> None:
+        if self._pending:
+            for c in self._pending:
+                self._matrix = (self._matrix + c @ c.T).tocsc()
+            self._pending.clear()
+            self._matrix.sort_indices()
+
+    def _factorize(self, *, analyze: bool) -> None:
+        try:
+            if self.backend == "cholmod":
+                if analyze or self._factor is None:
+                    self._factor = _cholmod.analyze(self._matrix)
+                self._factor.cholesky_inplace(self._matrix)
+            else:
+                self._factor = spla.splu(self._matrix, permc_spec="MMD_AT_PLUS_A")
+        except Exception as error:
+            if _cholmod is not None and isinstance(error, _cholmod.CholmodNotPositiveDefiniteError):
+                raise SingularSystemError(
+                    f"matrix must be positive definite, got a failing pivot at column {error.column}"
+                ) from error
+            if isinstance(error, RuntimeError) and "singular" in str(error).lower():
+                raise SingularSystemError(f"matrix must be non-singular: {error}") from error
+            raise
+
+    def refactor(self, matrix: Any) -> None:
+        """Factor a new matrix of the same sparsity pattern, reusing the symbolic analysis."""
+        csc = _as_csc(matrix)
+        if csc.shape != self._matrix.shape:
+            raise ValueError(f"matrix must have shape {self._matrix.shape}, got {csc.shape}")
+        with self._lock:
+            self._matrix = csc
+            self._pending.clear()
+            self._factorize(analyze=False)
+
+    def solve(self, rhs: Any) -> np.ndarray:
+        """Solve ``A x = rhs`` for an ``(n,)`` or ``(n, k)`` right-hand side, all columns at once."""
+        b = np.asarray(rhs, dtype=np.float64)
+        if b.shape[:1] != (self._matrix.shape[0],) or b.ndim > 2:
+            raise ValueError(f"rhs must have shape ({self._matrix.shape[0]},) or ({self._matrix.shape[0]}, k), got {b.shape}")
+        with self._lock:
+            if self.backend == "cholmod":
+                x = self._factor(b)
+            else:
+                x = self._factor.solve(np.asfortranarray(b))
+        if not np.all(np.isfinite(x)):
+            raise SingularSystemError("the factored matrix is numerically singular: the solve returned non-finite values")
+        return np.asarray(x)
+
+    def update(self, c: Any) -> None:
+        """Replace ``A`` by ``A + C C^T`` (CHOLMOD rank-k update, no refactoring).
+
+        ``C`` is an ``(n, k)`` sparse matrix in the matrix's own row order:
+        CHOLMOD applies its fill-reducing permutation itself.
+        """
+        c = sp.csc_matrix(c, dtype=np.float64)
+        if c.shape[0] != self._matrix.shape[0]:
+            raise ValueError(f"C must have {self._matrix.shape[0]} rows, got shape {c.shape}")
+        c.sort_indices()
+        with self._lock:
+            self._pending.append(c)
+            if self.backend == "cholmod":
+                self._factor.update_inplace(c)
+            else:
+                self._flush()
+                self._factorize(analyze=True)
+
+    def __getstate__(self) -> dict:
+        with self._lock:
+            self._flush()
+            return {"backend": self.backend, "matrix": self._matrix}
+
+    def __setstate__(self, state: dict) -> None:
+        self.backend = state["backend"]
+        if self.backend == "cholmod" and _cholmod is None:
+            self.backend = "scipy"
+        self._lock = threading.RLock()
+        self._matrix = state["matrix"]
+        self._pending = []
+        self._factor = None
+        self._factorize(analyze=True)

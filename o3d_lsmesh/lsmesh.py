@@ -1,0 +1,339 @@
+"""Least-squares meshes: geometry from connectivity and a few control points.
+
+Implements Sorkine and Cohen-Or, *Least-squares Meshes* (SMI 2004), eq. 3 and
+its weighted form of section 6, the interpolatory scheme and the progressive
+relaxed-anchor update of Sorkine et al., *Geometry-aware Bases for Shape
+Approximation* (sections II.A, II.B and III).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+
+from ._errors import SingularSystemError
+from ._o3d import MeshData, new_mesh, read_mesh
+from ._solvers import SPDSolver
+from ._validate import as_indices, as_positions, as_weights
+from .laplacian import LAPLACIAN_KINDS, laplacian_matrix
+from ._validate import as_choice
+from .topology import connected_components
+
+__all__ = ["LSMeshSolver", "ls_mesh", "reconstruct_geometry", "check_components_constrained"]
+
+
+def check_components_constrained(triangles: np.ndarray, n: int, constrained: np.ndarray, *, what: str) -> None:
+    """Raise :class:`SingularSystemError` if some connected component holds no constrained vertex.
+
+    ``constrained`` is an index array; unreferenced vertices count as components of their own.
+    """
+    count, labels = connected_components(triangles, n)
+    has = np.zeros(count, dtype=bool)
+    has[labels[constrained]] = True
+    missing = int(count - has.sum())
+    if missing:
+        first = int(np.flatnonzero(~has[labels])[0])
+        raise SingularSystemError(
+            f"every connected component needs at least one {what}, got {missing} of {count} components "
+            f"without one (first at vertex {first}); the least-squares system would be singular"
+        )
+
+
+class LSMeshSolver:
+    """A least-squares mesh system with its Cholesky factor kept for editing.
+
+    Minimizes, separately for x, y and z (eq. 3 and section 6 of LS meshes)::
+
+        ||L X||^2 + sum_s w_s^2 |X_s - C_s|^2
+
+    over the vertex positions ``X (n, 3)`` for the control vertices ``s`` with
+    positions ``C_s`` and weights ``w_s``. The normal matrix ``L^T L + W^2`` is
+    analyzed and factored once; :meth:`solve` with new control positions is a
+    back-substitution (the editing use of section 6) and :meth:`add_anchors`
+    adds relaxed anchors by a rank-k update of the kept factor (section III of
+    the geometry-aware bases paper).
+
+    Parameters
+    ----------
+    mesh : open3d.geometry.TriangleMesh, open3d.t.geometry.TriangleMesh or (vertices, triangles)
+        Only its connectivity matters, and its positions as default control positions.
+    constraint_vertex_indices : (k,) int array-like
+        Control vertices, unique, in ``[0, n)``.
+    weights : float or (k,) array-like
+        Positive weights ``w_s`` of the soft constraints (ignored when ``interpolate``).
+    interpolate : bool
+        Interpolatory scheme (bases paper II.B): the control vertices are
+        eliminated from the unknowns and hit exactly; the system is
+        ``min ||L[:, free] x_free + L[:, ctrl] c||^2``.
+    laplacian : {"uniform", "cotangent"}
+        The smoothness operator; the paper's is ``"uniform"``.
+    backend : {"auto", "cholmod", "scipy"}
+        Passed to the solver gateway.
+
+    Raises
+    ------
+    SingularSystemError
+        A connected component (or unreferenced vertex) has no control vertex.
+
+    Examples
+    --------
+    >>> import open3d as o3d, numpy as np
+    >>> sphere = o3d.geometry.TriangleMesh.create_sphere(resolution=10)
+    >>> solver = LSMeshSolver(sphere, [0, 5, 40, 90])
+    >>> solver.solve().shape
+    (92, 3)
+    """
+
+    def __init__(
+        self,
+        mesh: Any,
+        constraint_vertex_indices: Any,
+        *,
+        weights: Any = 1.0,
+        interpolate: bool = False,
+        laplacian: str = "uniform",
+        backend: str = "auto",
+    ) -> None:
+        data = read_mesh(mesh)
+        n = len(data.vertices)
+        indices = as_indices(constraint_vertex_indices, n, name="constraint_vertex_indices")
+        weights = as_weights(weights, len(indices), name="weights")
+        as_choice(laplacian, LAPLACIAN_KINDS, name="laplacian")
+        if not isinstance(interpolate, (bool, np.bool_)):
+            raise TypeError(f"interpolate must be a bool, got {type(interpolate).__name__}")
+        check_components_constrained(data.triangles, n, indices, what="control vertex")
+        self._data = data
+        self.interpolate = bool(interpolate)
+        self.laplacian = laplacian
+        L = laplacian_matrix(data.vertices, data.triangles, laplacian).tocsc()
+        self._hard = indices if self.interpolate else np.zeros(0, dtype=np.int64)
+        self._soft = np.zeros(0, dtype=np.int64) if self.interpolate else indices
+        self._soft_weights = np.zeros(0) if self.interpolate else weights
+        self._hard_weights = weights if self.interpolate else np.zeros(0)
+        self._positions = data.vertices[indices].copy()
+        if self.interpolate:
+            free = np.ones(n, dtype=bool)
+            free[indices] = False
+            self._free = np.flatnonzero(free)
+            L_free = L[:, self._free]
+            normal = (L_free.T @ L_free).tocsc()
+            # right-hand side operator: -L_free^T L_ctrl maps control positions to the free rhs
+            self._rhs_hard = -(L_free.T @ L[:, indices]).tocsr()
+        else:
+            self._free = np.arange(n)
+            normal = (L.T @ L + sp.csc_matrix((weights**2, (indices, indices)), shape=(n, n))).tocsc()
+            self._rhs_hard = None
+        # reduced index of every vertex (-1 for eliminated ones)
+        self._reduced = np.full(n, -1, dtype=np.int64)
+        self._reduced[self._free] = np.arange(len(self._free))
+        self._solver = SPDSolver(normal, backend=backend)
+
+    @property
+    def backend(self) -> str:
+        """Solver backend that ran: ``"cholmod"`` or ``"scipy"``."""
+        return self._solver.backend
+
+    @property
+    def constraint_vertex_indices(self) -> np.ndarray:
+        """All control vertices in order: the initial ones, then every added anchor."""
+        return np.concatenate([self._hard, self._soft])
+
+    @property
+    def weights(self) -> np.ndarray:
+        """Weight of each control vertex, in :attr:`constraint_vertex_indices` order."""
+        return np.concatenate([self._hard_weights, self._soft_weights])
+
+    def _default_positions(self) -> np.ndarray:
+        return self._positions
+
+    def solve(self, constraint_vertex_positions: Any = None) -> np.ndarray:
+        """Vertex positions ``(n, 3)`` for the given control positions (back-substitution only).
+
+        Parameters
+        ----------
+        constraint_vertex_positions : (k, 3) array-like, optional
+            One row per entry of :attr:`constraint_vertex_indices`; defaults to
+            the positions given so far (the mesh's own, or those passed to
+            :meth:`add_anchors`).
+        """
+        k = len(self._hard) + len(self._soft)
+        if constraint_vertex_positions is None:
+            positions = self._positions
+        else:
+            positions = as_positions(constraint_vertex_positions, k, name="constraint_vertex_positions")
+        hard_pos, soft_pos = positions[: len(self._hard)], positions[len(self._hard):]
+        rhs = np.zeros((len(self._free), 3))
+        if self.interpolate:
+            rhs += self._rhs_hard @ hard_pos
+        rhs[self._reduced[self._soft]] += (self._soft_weights**2)[:, None] * soft_pos
+        solution = self._solver.solve(rhs)
+        if not self.interpolate:
+            return solution
+        result = np.zeros((len(self._reduced), 3))
+        result[self._free] = solution
+        result[self._hard] = hard_pos
+        return result
+
+    def mesh(self, constraint_vertex_positions: Any = None) -> Any:
+        """The least-squares mesh as a new mesh of the input's kind (see :meth:`solve`)."""
+        return new_mesh(self._data, self.solve(constraint_vertex_positions))
+
+    def add_anchors(self, indices: Any, positions: Any = None, *, weights: Any = 1.0) -> None:
+        """Add relaxed anchors by a CHOLMOD rank-k update of the kept factor (no refactoring).
+
+        Adds ``w^2`` to the diagonal of the normal matrix at each new anchor
+        (bases paper, section III); in interpolatory mode the anchors are added
+        as relaxed constraints on free vertices, as the paper suggests.
+
+        Parameters
+        ----------
+        indices : (a,) int array-like
+            New anchors; none may already be a control vertex.
+        positions : (a, 3) array-like, optional
+            Their positions; default: the mesh's own.
+        weights : float or (a,) array-like
+            Positive anchor weights.
+        """
+        n = len(self._reduced)
+        new = as_indices(indices, n, name="indices")
+        existing = np.zeros(n, dtype=bool)
+        existing[self.constraint_vertex_indices] = True
+        if existing[new].any():
+            raise ValueError(
+                f"indices must not already be control vertices, got {int(new[existing[new]][0])}"
+            )
+        w = as_weights(weights, len(new), name="weights")
+        if positions is None:
+            pos = self._data.vertices[new]
+        else:
+            pos = as_positions(positions, len(new), name="positions")
+        rows = self._reduced[new]
+        c = sp.csc_matrix((w, (rows, np.arange(len(new)))), shape=(len(self._free), len(new)))
+        self._solver.update(c)
+        self._soft = np.concatenate([self._soft, new])
+        self._soft_weights = np.concatenate([self._soft_weights, w])
+        self._positions = np.concatenate([self._positions, pos])
+
+    def __getstate__(self) -> dict:
+        state = self.__dict__.copy()
+        # keep arrays, not the caller's Open3D object: rebuild the kind on demand
+        state["_data"] = MeshData(self._data.vertices, self._data.triangles, None, "arrays")
+        state["_kind"] = self._data.kind
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        state.pop("_kind", None)
+        self.__dict__.update(state)
+
+
+def ls_mesh(
+    mesh: Any,
+    constraint_vertex_indices: Any,
+    constraint_vertex_positions: Any = None,
+    *,
+    weights: Any = 1.0,
+    interpolate: bool = False,
+    laplacian: str = "uniform",
+) -> Any:
+    """Least-squares mesh: the fairest geometry for ``mesh``'s connectivity near the control points.
+
+    Minimizes ``||L X||^2 + sum_s w_s^2 |X_s - C_s|^2`` (eq. 3 of Least-squares
+    Meshes with the weights of section 6), or, with ``interpolate=True``,
+    ``||L X||^2`` with the control vertices fixed (bases paper II.B).
+
+    Parameters
+    ----------
+    mesh : open3d.geometry.TriangleMesh or open3d.t.geometry.TriangleMesh
+    constraint_vertex_indices : (k,) int array-like
+    constraint_vertex_positions : (k, 3) array-like, optional
+        Defaults to the mesh's own positions at those indices (approximation).
+    weights, interpolate, laplacian
+        See :class:`LSMeshSolver`.
+
+    Returns
+    -------
+    TriangleMesh
+        A new mesh of the input's kind with the same triangles and vertex
+        colors; normals are recomputed if the input had them.
+
+    Raises
+    ------
+    ValueError
+        Invalid mesh, indices, positions or weights.
+    SingularSystemError
+        A connected component without a control vertex.
+
+    Examples
+    --------
+    >>> import open3d as o3d
+    >>> sphere = o3d.geometry.TriangleMesh.create_sphere(resolution=10)
+    >>> out = ls_mesh(sphere, [0, 5, 40, 90], weights=10.0)
+    >>> len(out.vertices) == len(sphere.vertices)
+    True
+    """
+    solver = LSMeshSolver(
+        mesh, constraint_vertex_indices, weights=weights, interpolate=interpolate, laplacian=laplacian
+    )
+    return solver.mesh(constraint_vertex_positions)
+
+
+def reconstruct_geometry(
+    mesh: Any,
+    unknown_vertex_indices: Any,
+    *,
+    interpolate: bool = True,
+    weights: Any = 1.0,
+    laplacian: str = "uniform",
+) -> Any:
+    """Rebuild the positions of vertices whose geometry is missing (figures 5 and 8 of LS meshes).
+
+    With ``interpolate=True`` the result equals the interpolatory LS mesh with
+    every known vertex as an anchor, but only the rows of ``L`` that touch an
+    unknown vertex are kept (the rows of known vertices alone are constants),
+    so the solve is the size of the unknown region. Known vertices stay
+    bit-identical. With ``interpolate=False`` every known vertex becomes a soft
+    control point of weight ``weights`` and the whole mesh is re-solved.
+
+    Parameters
+    ----------
+    mesh : open3d.geometry.TriangleMesh or open3d.t.geometry.TriangleMesh
+        The positions of the unknown vertices are ignored.
+    unknown_vertex_indices : (u,) int array-like
+
+    Raises
+    ------
+    SingularSystemError
+        A connected component in which every vertex is unknown.
+
+    Examples
+    --------
+    >>> import open3d as o3d, numpy as np
+    >>> sphere = o3d.geometry.TriangleMesh.create_sphere(resolution=10)
+    >>> out = reconstruct_geometry(sphere, np.arange(0, 20))
+    >>> np.asarray(out.vertices).shape
+    (92, 3)
+    """
+    data = read_mesh(mesh)
+    n = len(data.vertices)
+    unknown = as_indices(unknown_vertex_indices, n, name="unknown_vertex_indices")
+    known_mask = np.ones(n, dtype=bool)
+    known_mask[unknown] = False
+    known = np.flatnonzero(known_mask)
+    if not isinstance(interpolate, (bool, np.bool_)):
+        raise TypeError(f"interpolate must be a bool, got {type(interpolate).__name__}")
+    if not interpolate:
+        vertices = LSMeshSolver(mesh, known, weights=weights, laplacian=laplacian).solve()
+        return new_mesh(data, vertices)
+    check_components_constrained(data.triangles, n, known, what="known vertex")
+    L = laplacian_matrix(data.vertices, data.triangles, laplacian).tocsc()
+    L_unknown = L[:, unknown].tocsr()
+    rows = np.flatnonzero(np.diff(L_unknown.indptr) > 0)  # rows touching an unknown vertex
+    A = L_unknown[rows]
+    B = L[rows][:, known]
+    normal = (A.T @ A).tocsc()
+    rhs = -(A.T @ (B @ data.vertices[known]))
+    vertices = data.vertices.copy()
+    vertices[unknown] = SPDSolver(normal).solve(rhs)
+    return new_mesh(data, vertices)
