@@ -31,7 +31,6 @@ system:
 	fi
 
 $(STAMP): setup.cfg pyproject.toml | system
-	@$(MAKE) --no-print-directory system
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q -e '.[test]'

@@ -12,24 +12,25 @@ from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.sparse import csgraph
 
 from ._errors import SingularSystemError
 from ._o3d import MeshData, new_mesh, read_mesh
 from ._solvers import SPDSolver
-from ._validate import as_indices, as_positions, as_weights
+from ._validate import as_choice, as_indices, as_positions, as_weights
 from .laplacian import LAPLACIAN_KINDS, laplacian_matrix
-from ._validate import as_choice
-from .topology import connected_components
 
 __all__ = ["LSMeshSolver", "ls_mesh", "reconstruct_geometry", "check_components_constrained"]
 
 
-def check_components_constrained(triangles: np.ndarray, n: int, constrained: np.ndarray, *, what: str) -> None:
+def check_components_constrained(graph: sp.spmatrix, constrained: np.ndarray, *, what: str) -> None:
     """Raise :class:`SingularSystemError` if some connected component holds no constrained vertex.
 
-    ``constrained`` is an index array; unreferenced vertices count as components of their own.
+    ``graph`` is any ``(n, n)`` matrix with the mesh's edge pattern (the Laplacian
+    serves); ``constrained`` is an index array. Unreferenced vertices count as
+    components of their own.
     """
-    count, labels = connected_components(triangles, n)
+    count, labels = csgraph.connected_components(graph, directed=False)
     has = np.zeros(count, dtype=bool)
     has[labels[constrained]] = True
     missing = int(count - has.sum())
@@ -103,11 +104,11 @@ class LSMeshSolver:
         as_choice(laplacian, LAPLACIAN_KINDS, name="laplacian")
         if not isinstance(interpolate, (bool, np.bool_)):
             raise TypeError(f"interpolate must be a bool, got {type(interpolate).__name__}")
-        check_components_constrained(data.triangles, n, indices, what="control vertex")
+        L = laplacian_matrix(data.vertices, data.triangles, laplacian).tocsc()
+        check_components_constrained(L, indices, what="control vertex")
         self._data = data
         self.interpolate = bool(interpolate)
         self.laplacian = laplacian
-        L = laplacian_matrix(data.vertices, data.triangles, laplacian).tocsc()
         self._hard = indices if self.interpolate else np.zeros(0, dtype=np.int64)
         self._soft = np.zeros(0, dtype=np.int64) if self.interpolate else indices
         self._soft_weights = np.zeros(0) if self.interpolate else weights
@@ -326,8 +327,8 @@ def reconstruct_geometry(
     if not interpolate:
         vertices = LSMeshSolver(mesh, known, weights=weights, laplacian=laplacian).solve()
         return new_mesh(data, vertices)
-    check_components_constrained(data.triangles, n, known, what="known vertex")
     L = laplacian_matrix(data.vertices, data.triangles, laplacian).tocsc()
+    check_components_constrained(L, known, what="known vertex")
     L_unknown = L[:, unknown].tocsr()
     rows = np.flatnonzero(np.diff(L_unknown.indptr) > 0)  # rows touching an unknown vertex
     A = L_unknown[rows]

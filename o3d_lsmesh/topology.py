@@ -73,11 +73,14 @@ def unique_edges(triangles: np.ndarray, n: int | None = None):
 
 def adjacency_matrix(triangles: np.ndarray, n: int) -> sp.csr_matrix:
     """Symmetric binary vertex adjacency ``(n, n)`` CSR (1 where an edge joins two vertices)."""
-    edges, _, _ = unique_edges(triangles, n)
-    rows = np.concatenate([edges[:, 0], edges[:, 1]])
-    cols = np.concatenate([edges[:, 1], edges[:, 0]])
-    data = np.ones(len(rows), dtype=np.float64)
-    return sp.csr_matrix((data, (rows, cols)), shape=(n, n))
+    he = halfedges(triangles)
+    rows = np.concatenate([he[:, 0], he[:, 1]])
+    cols = np.concatenate([he[:, 1], he[:, 0]])
+    # CSR conversion merges the repeated half-edges in linear time, faster than sorting edge keys
+    adjacency = sp.csr_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n))
+    adjacency.sum_duplicates()
+    adjacency.data[:] = 1.0
+    return adjacency
 
 
 def vertex_valences(triangles: np.ndarray, n: int) -> np.ndarray:

@@ -1,0 +1,306 @@
+"""Barycenter-constrained surface fairing (Liu et al. 2001, sections 3.1 and 3.2): array core.
+
+Two solvers of the constrained problem (eq. 5)::
+
+    min  X^T K^T K X   subject to   H (X - X0) = 0,
+
+``K = I - D^-1 W`` the uniform Laplacian (``w_ij = 1/n_i``) and ``H`` the
+``(m, n)`` triangle-vertex incidence (one row per triangle, ones at its three
+vertices, so ``H X`` is three times the barycenters).
+
+* :class:`LocalOperator`: the paper's iterative operator. Each triangle's
+  three vertices minimize their local Laplacian energy under the triangle's
+  barycenter constraint (eq. 6, closed form eq. 7), then each vertex averages
+  its estimates. With uniform weights this is a fixed linear map
+  ``X <- M1 X + M0 X0`` that is assembled once (see :class:`LocalOperator`).
+* :class:`GlobalSolver`: the penalty form of eq. 5 factored once by CHOLMOD.
+
+Both act on the *interior triangles*: those with no boundary vertex. The
+boundary is left to the curve fairing of :mod:`.boundary_curve`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+
+from .._solvers import SPDSolver
+from ..topology import boundary_loops, unique_edges
+
+__all__ = [
+    "FairingTopology",
+    "fairing_topology",
+    "triangle_coefficients",
+    "LocalOperator",
+    "local_operator",
+    "GlobalSolver",
+    "DEFAULT_MU",
+]
+
+#: Default penalty weight of :class:`GlobalSolver`, chosen by measurement
+#: (see its docstring and benchmarks/results/denoise.md).
+DEFAULT_MU = 0.3
+
+
+@dataclass(frozen=True)
+class FairingTopology:
+    """Connectivity facts that both fairing methods need, computed once.
+
+    Attributes
+    ----------
+    n : int
+        Vertex count.
+    edges : (e, 2) int64
+        Undirected edges, ``edges[:, 0] < edges[:, 1]``.
+    inverse : (3m,) int64
+        Edge of every half-edge of :func:`o3d_lsmesh.topology.halfedges`.
+    valence : (n,) int64
+        ``n_i``, the number of edge neighbours (0 for isolated vertices).
+    boundary : (n,) bool
+        Vertices on an edge used by one triangle.
+    interior_triangles : (k,) int64
+        Indices of the triangles with no boundary vertex.
+    loops : list of (l,) int64
+        Ordered boundary loops (empty unless asked for).
+    """
+
+    n: int
+    edges: np.ndarray
+    inverse: np.ndarray
+    valence: np.ndarray
+    boundary: np.ndarray
+    interior_triangles: np.ndarray
+    loops: list = field(default_factory=list)
+
+
+def fairing_topology(triangles: np.ndarray, n: int, *, with_loops: bool) -> FairingTopology:
+    """Edges, valences, boundary and interior triangles of a mesh; the loops if ``with_loops``.
+
+    Raises
+    ------
+    ValueError
+        An edge shared by more than two triangles (first one named), or, with
+        ``with_loops``, a boundary vertex on other than two boundary edges.
+        Vertices joining several *closed* fans (two surfaces touching at a
+        point) are accepted: their uniform 1-ring is the union of the fans.
+    """
+    edges, counts, inverse = unique_edges(triangles, n)
+    if np.any(counts > 2):
+        first = int(np.flatnonzero(counts > 2)[0])
+        raise ValueError(
+            f"mesh must be edge-manifold, got edge ({int(edges[first, 0])}, {int(edges[first, 1])}) shared by "
+            f"{int(counts[first])} triangles ({int(np.count_nonzero(counts > 2))} such edges)"
+        )
+    valence = np.bincount(edges.ravel(), minlength=n).astype(np.int64)
+    boundary = np.zeros(n, dtype=bool)
+    boundary[edges[counts == 1].ravel()] = True
+    interior_triangles = np.flatnonzero(~boundary[triangles].any(axis=1))
+    loops = []
+    if with_loops and boundary.any():
+        try:
+            loops = boundary_loops(triangles, n)
+        except ValueError as error:
+            raise ValueError(
+                f"{error}; the boundary is not a set of simple loops (pass smooth_boundary=False to keep it fixed)"
+            ) from error
+    return FairingTopology(n, edges, inverse, valence, boundary, interior_triangles, loops)
+
+
+def triangle_coefficients(valences: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Closed-form solution of eq. 6 for triangles with the given vertex valences.
+
+    For a triangle with valences ``(n_0, n_1, n_2)`` let
+    ``A = [[1, -1/n_0, -1/n_0], [-1/n_1, 1, -1/n_1], [-1/n_2, -1/n_2, 1]]``
+    (row ``a`` is vertex ``a``'s uniform Laplacian restricted to the
+    triangle, ``w_ab = 1/n_a`` since the three are mutual neighbours) and
+    ``B = [1, 1, 1]``. The minimizer of ``|A P - Q|^2`` subject to
+    ``B P = C`` is linear in ``Q`` and ``C``: ``P = M Q + u C``. With ``A``
+    invertible this is eq. 7, ``M = A^-1 - u B A^-1`` and
+    ``u = A^-1 A^-T B^T / |B A^-1|^2``. It is computed here from the KKT system
+    ``[[A^T A, B^T], [B, 0]]``, which is non-singular for every valence
+    (``A p = 0`` with ``sum p = 0`` forces ``p_a (1 + 1/n_a) = 0``), so that
+    an isolated triangle or a two-triangle pillow (all valences 2, ``A``
+    singular) still has a defined answer. ``M`` and ``u`` depend only on the
+    valences, so they are solved once per distinct valence triple (the
+    paper's look-up tables) and gathered.
+
+    Parameters
+    ----------
+    valences : (k, 3) int
+        Valences of each triangle's vertices, in the triangle's vertex order.
+
+    Returns
+    -------
+    M : (k, 3, 3) float64
+    u : (k, 3) float64
+    """
+    valences = np.asarray(valences, dtype=np.int64).reshape(-1, 3)
+    if len(valences) == 0:
+        return np.zeros((0, 3, 3)), np.zeros((0, 3))
+    base = np.int64(valences.max() + 1)
+    keys = (valences[:, 0] * base + valences[:, 1]) * base + valences[:, 2]
+    # sort-and-mask grouping of the (few hundred) distinct valence triples
+    order = np.argsort(keys, kind="stable")
+    sorted_keys = keys[order]
+    first = np.ones(len(keys), dtype=bool)
+    first[1:] = sorted_keys[1:] != sorted_keys[:-1]
+    group = np.empty_like(order)  # noqa: NPY  (every slot is written on the next line)
+    group[order] = np.cumsum(first) - 1
+    table = valences[order[first]].astype(np.float64)  # (g, 3) distinct triples
+    g = len(table)
+    A = np.repeat(np.eye(3)[None], g, axis=0) - (1.0 / table)[:, :, None] * (1.0 - np.eye(3))[None]
+    kkt = np.zeros((g, 4, 4))
+    kkt[:, :3, :3] = np.transpose(A, (0, 2, 1)) @ A
+    kkt[:, :3, 3] = 1.0
+    kkt[:, 3, :3] = 1.0
+    rhs = np.zeros((g, 4, 4))
+    rhs[:, :3, :3] = np.transpose(A, (0, 2, 1))
+    rhs[:, 3, 3] = 1.0
+    solution = np.linalg.solve(kkt, rhs)  # (g, 4, 4): rows 0..2 are [M | u]
+    return solution[group, :3, :3], solution[group, :3, 3]
+
+
+@dataclass(frozen=True)
+class LocalOperator:
+    """One iteration of the paper's local operator (section 3.2) as fixed sparse matrices.
+
+    For an interior triangle ``t = (i_0, i_1, i_2)`` eq. 7 gives
+    ``P_a = sum_b M_ab q_b + u_a C`` with ``q_b = (S_{i_b} - x_{i_{b+1}} - x_{i_{b+2}}) / n_b``,
+    ``S = W X`` the sum of each vertex's neighbours and ``C = sum_c x^0_{i_c}``.
+    So a vertex's average over its interior triangles is ::
+
+        X_new = E1 @ (W @ X) + E2 @ X + E3 @ X0,
+
+    where ``E1, E2, E3`` have the pattern of the 1-ring (edges plus diagonal)
+    and already hold the ``1/count`` of the averaging. Vertices with no
+    interior triangle (boundary and isolated vertices, or interior vertices
+    whose every triangle touches the boundary) get an identity row in ``E2``.
+    With ``X0`` fixed, ``E3 @ X0`` is computed once, so one iteration costs
+    three sparse mat-vecs on ``(n, 3)``; the set-up is a few ``bincount`` calls
+    on the half-edges and one CSR pattern. The object only holds arrays: it
+    pickles and may be shared between threads.
+    """
+
+    adjacency: sp.csr_matrix
+    e1: sp.csr_matrix
+    e2: sp.csr_matrix
+    e3: sp.csr_matrix
+
+    def constant(self, positions0: np.ndarray) -> np.ndarray:
+        """``E3 @ X0``, the constraint part, ``(n, 3)``."""
+        return self.e3 @ positions0
+
+    def step(self, positions: np.ndarray, constant: np.ndarray) -> np.ndarray:
+        """``E1 @ (W @ X) + E2 @ X + constant``, ``(n, 3)``."""
+        return self.e1 @ (self.adjacency @ positions) + self.e2 @ positions + constant
+
+
+def local_operator(triangles: np.ndarray, topo: FairingTopology) -> LocalOperator:
+    """Assemble the :class:`LocalOperator` of the interior triangles of ``triangles``."""
+    n, edges, inverse = topo.n, topo.edges, topo.inverse
+    m = len(triangles)
+    n_edges = len(edges)
+    sel = topo.interior_triangles
+    tri = triangles[sel]  # (k, 3)
+    k = len(tri)
+    valence = topo.valence[tri].astype(np.float64)  # (k, 3), >= 2 for any vertex of a triangle
+    M, u = triangle_coefficients(topo.valence[tri])
+    alpha = M / valence[:, None, :]  # (k, 3, 3): coefficient of S_{i_b} in P_a
+    beta = alpha - alpha.sum(axis=2, keepdims=True)  # coefficient of x_{i_c}: -sum_{b != c} alpha_ab
+    gamma = np.repeat(u[:, :, None], 3, axis=2)  # coefficient of x0_{i_c}: u_a
+
+    # Slots of the 1-ring pattern: edge e forward (lo -> hi) is e, backward is
+    # n_edges + e, vertex v's diagonal is 2 n_edges + v.
+    # Undirected edge of the pair (a, c) of triangle t: half-edge rows t, m + t,
+    # 2m + t hold the pairs {0,1}, {1,2}, {2,0}.
+    pair_halfedge = np.array([[-1, 0, 2], [0, -1, 1], [2, 1, -1]])
+    slots = np.zeros((k, 3, 3), dtype=np.int64)
+    for a in range(3):  # 9 fixed (a, c) pairs, not a loop over triangles
+        for c in range(3):
+            if a == c:
+                slots[:, a, c] = 2 * n_edges + tri[:, a]
+            else:
+                edge = inverse[pair_halfedge[a, c] * m + sel]
+                slots[:, a, c] = edge + n_edges * (tri[:, a] > tri[:, c])
+    slots = slots.ravel()
+    n_slots = 2 * n_edges + n
+
+    count = np.bincount(tri.ravel(), minlength=n).astype(np.float64)  # estimates per vertex
+    no_estimate = count == 0
+    inv_count = 1.0 / np.where(no_estimate, 1.0, count)
+    slot_row = np.concatenate([edges[:, 0], edges[:, 1], np.arange(n)])
+    slot_col = np.concatenate([edges[:, 1], edges[:, 0], np.arange(n)])
+
+    def accumulate(values: np.ndarray) -> np.ndarray:
+        data = np.bincount(slots, weights=values.ravel(), minlength=n_slots)
+        return data * inv_count[slot_row]
+
+    d1, d2, d3 = accumulate(alpha), accumulate(beta), accumulate(gamma)
+    d2[2 * n_edges + np.flatnonzero(no_estimate)] = 1.0  # vertices without estimates stay put
+    adjacency_data = np.concatenate([np.ones(2 * n_edges), np.zeros(n)])
+
+    # One CSR pattern for all four matrices: build it with the slot numbers as
+    # data to learn where each slot lands, then reuse indptr/indices.
+    pattern = sp.csr_matrix((np.arange(1, n_slots + 1, dtype=np.float64), (slot_row, slot_col)), shape=(n, n))
+    where = pattern.data.astype(np.int64) - 1
+
+    def with_data(data: np.ndarray) -> sp.csr_matrix:
+        return sp.csr_matrix((data[where], pattern.indices, pattern.indptr), shape=(n, n))
+
+    return LocalOperator(with_data(adjacency_data), with_data(d1), with_data(d2), with_data(d3))
+
+
+class GlobalSolver:
+    """Penalty form of eq. 5, factored once: ``min |K_I X|^2 + mu |H_I (X - X0)|^2``.
+
+    ``K_I`` holds the uniform-Laplacian rows of the interior vertices and
+    ``H_I`` the rows of the interior triangles (no boundary vertex); the
+    boundary (and isolated) vertices are known values, eliminated from the
+    unknowns. The normal equations
+    ``(K_F^T K_F + mu H_F^T H_F) X_F = mu H_F^T H_F X0_F - K_F^T K_B X_B``
+    are factored once through :class:`~o3d_lsmesh._solvers.SPDSolver`; each
+    :meth:`solve` is one back-substitution for all three coordinates.
+
+    The matrix is positive definite: ``K_F`` is non-singular on every
+    component that touches the boundary (diagonally dominant rows next to
+    fixed vertices), and on a closed component its only null vector, the
+    constant, has ``H 1 = 3 != 0``.
+    """
+
+    def __init__(self, triangles: np.ndarray, topo: FairingTopology, mu: float) -> None:
+        from ..laplacian import uniform_laplacian
+
+        n = topo.n
+        referenced = topo.valence > 0
+        free = referenced & ~topo.boundary
+        self.free = np.flatnonzero(free)
+        self.known = np.flatnonzero(~free)
+        self.mu = float(mu)
+        K = uniform_laplacian(triangles, n).tocsr()[self.free]  # rows of the interior vertices
+        K_F = K[:, self.free].tocsc()
+        self._K_B = K[:, self.known].tocsc()
+        tri = triangles[topo.interior_triangles]
+        k = len(tri)
+        # reduced column of each free vertex; interior triangles only touch free vertices
+        reduced = np.full(n, -1, dtype=np.int64)
+        reduced[self.free] = np.arange(len(self.free))
+        H = sp.csr_matrix(
+            (np.ones(3 * k), (np.repeat(np.arange(k), 3), reduced[tri].ravel())), shape=(k, len(self.free))
+        )
+        self._HtH = (H.T @ H).tocsc()
+        self._K_F = K_F
+        self._normal = (K_F.T @ K_F + self.mu * self._HtH).tocsc()
+        self._solver = SPDSolver(self._normal) if len(self.free) else None
+
+    def solve(self, positions: np.ndarray, positions0: np.ndarray) -> np.ndarray:
+        """New ``(n, 3)`` positions: free vertices solved with targets ``positions0``, known ones from ``positions``."""
+        out = np.array(positions, dtype=np.float64)
+        if self._solver is None:
+            return out
+        rhs = self.mu * (self._HtH @ positions0[self.free])
+        if len(self.known):
+            rhs -= self._K_F.T @ (self._K_B @ out[self.known])
+        out[self.free] = self._solver.solve(rhs)
+        return out

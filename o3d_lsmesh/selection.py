@@ -1,0 +1,416 @@
+"""Control-point selection for least-squares meshes and geometry-aware approximation.
+
+Implements section 4 of Sorkine and Cohen-Or, *Least-squares Meshes* (SMI
+2004): random, one-by-one greedy and combined local-maxima selection, and the
+greedy anchor selection of section IV of Sorkine et al., *Geometry-aware Bases
+for Shape Approximation*, where every greedy step adds one relaxed anchor by a
+rank-1 update of the kept Cholesky factor (section III) instead of a new
+factorization.
+
+Start set
+---------
+An LS mesh needs a control point in every connected component (otherwise the
+normal matrix ``L^T L + W^2`` is singular), so every selection starts with one
+vertex per component, in increasing component order; unreferenced vertices
+are components of their own. The greedy and combined methods start each
+component at its vertex farthest from the component's centroid: with a single
+anchor the LS mesh of a component collapses onto that anchor (``L 1 = 0``), so
+this is the greedy choice for an "empty" selection that sits at the centroid,
+and it is deterministic. The random method starts each component at a random
+vertex drawn with ``seed``.
+"""
+
+from __future__ import annotations
+
+import numbers
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+
+from ._o3d import MeshData, new_mesh, read_mesh
+from ._solvers import SPDSolver
+from ._validate import as_choice, as_count, as_positive_float
+from .laplacian import uniform_laplacian
+from .lsmesh import LSMeshSolver, ls_mesh
+from .topology import adjacency_matrix, connected_components
+
+__all__ = ["select_control_points", "approximate", "SELECTION_METHODS"]
+
+SELECTION_METHODS = ("random", "greedy", "combined")
+DEFAULT_BATCH = 31  # figure 6 of LS meshes: 31 solves of 31 picks for 1000 control points
+
+
+def _progress_bar(progress: bool, total: int, desc: str):
+    if not isinstance(progress, (bool, np.bool_)):
+        raise TypeError(f"progress must be a bool, got {type(progress).__name__}")
+    if not progress:
+        return None
+    from tqdm.auto import tqdm
+
+    return tqdm(total=total, desc=desc)
+
+
+def _rng(seed: Any) -> np.random.Generator:
+    if seed is None or isinstance(seed, np.random.Generator):
+        return np.random.default_rng(seed)
+    if isinstance(seed, bool) or not isinstance(seed, numbers.Integral):
+        raise TypeError(f"seed must be None, an int or a numpy Generator, got {type(seed).__name__}")
+    if int(seed) < 0:
+        raise ValueError(f"seed must be non-negative, got {int(seed)}")
+    return np.random.default_rng(int(seed))
+
+
+def _first_per_label(labels: np.ndarray, order: np.ndarray, count: int) -> np.ndarray:
+    """For each label, the first vertex of ``order`` that carries it, in label order."""
+    first = np.full(count, len(order), dtype=np.int64)
+    np.minimum.at(first, labels[order], np.arange(len(order)))
+    return order[first]
+
+
+def start_vertices(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """One vertex per connected component: the one farthest from its component's centroid.
+
+    Returns ``(c,) int64`` in component order (see the module docstring).
+    """
+    n = len(vertices)
+    count, labels = connected_components(triangles, n)
+    size = np.bincount(labels, minlength=count).astype(np.float64)
+    centroid = np.stack([np.bincount(labels, weights=vertices[:, a], minlength=count) for a in range(3)], axis=1)
+    centroid /= size[:, None]
+    distance = np.einsum("ij,ij->i", vertices - centroid[labels], vertices - centroid[labels])
+    # farthest first within each component; ties go to the smaller index (stable sort)
+    order = np.lexsort((np.arange(n), -distance))
+    return _first_per_label(labels, order, count)
+
+
+def _random(data: MeshData, count: int, rng: np.random.Generator) -> np.ndarray:
+    n = len(data.vertices)
+    components, labels = connected_components(data.triangles, n)
+    order = rng.permutation(n)
+    start = _first_per_label(labels, order, components)
+    rest = np.ones(n, dtype=bool)
+    rest[start] = False
+    # the rest keeps the random order of the permutation
+    rest_in_order = order[rest[order]]
+    return np.concatenate([start, rest_in_order])[:count]
+
+
+def _squared_errors(solution: np.ndarray, original: np.ndarray) -> np.ndarray:
+    diff = solution - original
+    return np.einsum("ij,ij->i", diff, diff)
+
+
+class _RefactoringSystem:
+    """Reference path for tests and benchmarks: the relaxed LS system refactored at every step.
+
+    Same normal matrix as :class:`LSMeshSolver` (``L^T L + w^2 sum e_s e_s^T``, uniform
+    ``L``), numerically refactored with the kept symbolic analysis instead of updated.
+    """
+
+    def __init__(self, vertices: np.ndarray, triangles: np.ndarray, start: np.ndarray, weight: float) -> None:
+        n = len(vertices)
+        L = uniform_laplacian(triangles, n).tocsc()
+        self._ltl = (L.T @ L).tocsc()
+        self._diagonal = np.zeros(n)
+        self._diagonal[start] = weight**2
+        self._weight = weight
+        self._vertices = vertices
+        self._solver = SPDSolver(self._normal())
+
+    def _normal(self) -> sp.csc_matrix:
+        return (self._ltl + sp.diags(self._diagonal, format="csc")).tocsc()
+
+    def add_anchors(self, indices: np.ndarray) -> None:
+        self._diagonal[indices] = self._weight**2
+        self._solver.refactor(self._normal())
+
+    def solve(self) -> np.ndarray:
+        return self._solver.solve(self._diagonal[:, None] * self._vertices)
+
+
+def _greedy(
+    data: MeshData,
+    count: int,
+    weight: float,
+    *,
+    update: bool = True,
+    progress: bool = False,
+    start: np.ndarray | None = None,
+):
+    """One-by-one greedy selection (LS meshes section 4, bases paper section IV).
+
+    ``update=True`` adds each anchor by a rank-1 update of the kept factor (the
+    method); ``update=False`` refactors the normal matrix at every step (the
+    reference path that tests and benchmarks compare with). Returns the
+    selection and the system holding all of it (for one last solve).
+    """
+    vertices, triangles = data.vertices, data.triangles
+    n = len(vertices)
+    if start is None:
+        start = start_vertices(vertices, triangles)
+    if update:
+        system: Any = LSMeshSolver((vertices, triangles), start, weights=weight)
+    else:
+        system = _RefactoringSystem(vertices, triangles, start, weight)
+    selected = np.zeros(n, dtype=bool)
+    selected[start] = True
+    order = np.empty(count, dtype=np.int64)
+    order[: len(start)] = start
+    bar = _progress_bar(progress, count, "greedy selection")
+    try:
+        for k in range(len(start), count):
+            errors = _squared_errors(system.solve(), vertices)
+            errors[selected] = -np.inf
+            best = int(np.argmax(errors))
+            order[k] = best
+            selected[best] = True
+            if update:
+                system.add_anchors(np.array([best]), weights=weight)
+            else:
+                system.add_anchors(np.array([best]))
+            if bar is not None:
+                bar.update(1)
+    finally:
+        if bar is not None:
+            bar.close()
+    return order, system
+
+
+def _forbid_around(
+    indptr: np.ndarray, neighbours: np.ndarray, errors: np.ndarray, forbidden: np.ndarray, vertex: int
+) -> None:
+    """Mark ``vertex`` and the region reached from it by a breadth-first walk while the error decreases.
+
+    A vertex joins when it is adjacent to a vertex already reached by this walk
+    and has a strictly smaller error than it; vertices already forbidden stop
+    the walk. Expands a whole BFS layer per numpy step.
+    """
+    forbidden[vertex] = True
+    frontier = np.array([vertex], dtype=np.int64)
+    while frontier.size:
+        begin, end = indptr[frontier], indptr[frontier + 1]
+        counts = end - begin
+        total = int(counts.sum())
+        if total == 0:
+            break
+        source = np.repeat(frontier, counts)
+        offsets = np.arange(total) - np.repeat(np.cumsum(counts) - counts, counts)
+        target = neighbours[np.repeat(begin, counts) + offsets]
+        keep = ~forbidden[target] & (errors[target] < errors[source])
+        reached = np.sort(target[keep])
+        if reached.size:
+            reached = reached[np.concatenate([[True], reached[1:] != reached[:-1]])]
+        forbidden[reached] = True
+        frontier = reached
+
+
+def _combined(data: MeshData, count: int, weight: float, batch: int, *, progress: bool = False):
+    """Combined local-maxima selection (LS meshes section 4): one solve per ``batch`` picks."""
+    vertices, triangles = data.vertices, data.triangles
+    n = len(vertices)
+    start = start_vertices(vertices, triangles)
+    adjacency = adjacency_matrix(triangles, n)
+    indptr, neighbours = adjacency.indptr.astype(np.int64), adjacency.indices.astype(np.int64)
+    solver = LSMeshSolver((vertices, triangles), start, weights=weight)
+    selected = np.zeros(n, dtype=bool)
+    selected[start] = True
+    order = [start]
+    done = len(start)
+    bar = _progress_bar(progress, count, "combined selection")
+    try:
+        while done < count:
+            errors = _squared_errors(solver.solve(), vertices)
+            forbidden = selected.copy()
+            picks = []
+            for _ in range(min(batch, count - done)):
+                candidates = np.where(forbidden, -np.inf, errors)
+                best = int(np.argmax(candidates))
+                if forbidden[best]:  # every vertex is selected or forbidden: solve again
+                    break
+                picks.append(best)
+                _forbid_around(indptr, neighbours, errors, forbidden, best)
+            picks = np.asarray(picks, dtype=np.int64)
+            selected[picks] = True
+            solver.add_anchors(picks, weights=weight)
+            order.append(picks)
+            done += len(picks)
+            if bar is not None:
+                bar.update(len(picks))
+    finally:
+        if bar is not None:
+            bar.close()
+    return np.concatenate(order), solver
+
+
+def _select(
+    mesh: Any,
+    count: Any,
+    *,
+    method: str,
+    batch: Any,
+    weights: Any,
+    seed: Any,
+    progress: bool,
+):
+    """Validate and dispatch; returns ``(data, indices, solver or None)``."""
+    data = read_mesh(mesh)
+    n = len(data.vertices)
+    method = as_choice(method, SELECTION_METHODS, name="method")
+    count = as_count(count, name="count", minimum=1, maximum=n)
+    weight = as_positive_float(weights, name="weights")
+    components, _ = connected_components(data.triangles, n)
+    if count < components:
+        raise ValueError(
+            f"count must be at least the number of connected components ({components}, "
+            f"unreferenced vertices included) so that every component gets a control point, got {count}"
+        )
+    if method == "combined":
+        batch = DEFAULT_BATCH if batch is None else as_count(batch, name="batch", minimum=1)
+    elif batch is not None:
+        raise ValueError(f"batch applies only to method='combined', got batch={batch!r} with method={method!r}")
+    rng = _rng(seed)
+    if method == "random":
+        _progress_bar(progress, 0, "")  # validates the flag; random selection is instant
+        return data, _random(data, count, rng), None
+    if method == "greedy":
+        indices, solver = _greedy(data, count, weight, progress=progress)
+    else:
+        indices, solver = _combined(data, count, weight, batch, progress=progress)
+    return data, indices, solver
+
+
+def select_control_points(
+    mesh: Any,
+    count: int,
+    *,
+    method: str = "greedy",
+    batch: int | None = None,
+    weights: float = 1.0,
+    seed: Any = None,
+    progress: bool = False,
+) -> np.ndarray:
+    """Choose ``count`` control points that make the LS mesh close to ``mesh`` (LS meshes section 4).
+
+    The error of a vertex is the 3D distance between its position in the LS
+    mesh of the current selection (eq. 3 of Least-squares Meshes with soft
+    constraints of weight ``weights``, uniform Laplacian) and its original
+    position.
+
+    * ``"random"``: a uniformly random order, reproducible with ``seed``.
+    * ``"greedy"``: one vertex at a time, the one with the largest error. The
+      LS system is factored once; every step adds the new anchor by a rank-1
+      update of the Cholesky factor (section III of the geometry-aware bases
+      paper) and back-substitutes once, so a step costs an update plus a solve.
+    * ``"combined"``: the local-maxima method. The LS mesh is solved once per
+      ``batch`` picks; within a batch each pick is the largest error among the
+      vertices not forbidden, after which the vertices reached from it by a
+      breadth-first walk along which the error strictly decreases are forbidden
+      until the next solve. The picks of a batch join the factor by one rank-``batch``
+      update.
+
+    Every selection starts with one vertex per connected component so that the
+    system is never singular (see the module docstring for which one).
+
+    Parameters
+    ----------
+    mesh : open3d.geometry.TriangleMesh, open3d.t.geometry.TriangleMesh or (vertices, triangles)
+    count : int
+        Number of control points, from the number of connected components to ``n``.
+    method : {"greedy", "combined", "random"}
+    batch : int, optional
+        Picks per solve for ``"combined"`` (default 31, as in figure 6 of the
+        paper); must be None for the other methods.
+    weights : float
+        Positive weight of every soft control point while selecting.
+    seed : int or numpy.random.Generator, optional
+        Random state of ``"random"``; the other methods are deterministic.
+    progress : bool
+        Show a tqdm progress bar.
+
+    Returns
+    -------
+    indices : (count,) int64
+        Vertex indices in selection order, without repetition.
+
+    Raises
+    ------
+    ValueError
+        ``count`` outside ``[components, n]``, unknown ``method``, ``batch`` not
+        positive or given for a method other than ``"combined"``, non-positive
+        ``weights``, negative ``seed``, or an invalid mesh.
+    TypeError
+        ``count``, ``batch``, ``weights``, ``seed`` or ``progress`` of the wrong type.
+
+    Examples
+    --------
+    >>> import open3d as o3d
+    >>> box = o3d.geometry.TriangleMesh.create_box()
+    >>> select_control_points(box, 8, method="greedy").shape
+    (8,)
+    >>> a = select_control_points(box, 5, method="random", seed=1)
+    >>> bool((a == select_control_points(box, 5, method="random", seed=1)).all())
+    True
+    """
+    _, indices, _ = _select(mesh, count, method=method, batch=batch, weights=weights, seed=seed, progress=progress)
+    return indices
+
+
+def approximate(
+    mesh: Any,
+    count: int,
+    *,
+    method: str = "greedy",
+    weights: float = 1.0,
+    interpolate: bool = False,
+    batch: int | None = None,
+    seed: Any = None,
+    progress: bool = False,
+) -> tuple[Any, np.ndarray]:
+    """Approximate ``mesh`` by the LS mesh of ``count`` selected control points.
+
+    Selects the control points with :func:`select_control_points` and returns
+    the LS mesh (eq. 3 of Least-squares Meshes, weights of section 6) through
+    them at their original positions; ``interpolate=True`` gives the
+    interpolatory scheme (geometry-aware bases II.B) instead. For the greedy and
+    combined methods without ``interpolate`` the factor kept by the selection
+    already holds every control point, so the result costs one more
+    back-substitution.
+
+    Parameters
+    ----------
+    mesh : open3d.geometry.TriangleMesh, open3d.t.geometry.TriangleMesh or (vertices, triangles)
+    count, method, weights, batch, seed, progress
+        See :func:`select_control_points`.
+    interpolate : bool
+        Hit the control points exactly.
+
+    Returns
+    -------
+    approximation : TriangleMesh
+        Same kind, triangles and colors as ``mesh``.
+    indices : (count,) int64
+        The control points in selection order.
+
+    Raises
+    ------
+    ValueError, TypeError
+        As :func:`select_control_points`.
+
+    Examples
+    --------
+    >>> import open3d as o3d, numpy as np
+    >>> torus = o3d.geometry.TriangleMesh.create_torus()
+    >>> approx, idx = approximate(torus, 60)
+    >>> np.asarray(approx.vertices).shape == np.asarray(torus.vertices).shape
+    True
+    """
+    if not isinstance(interpolate, (bool, np.bool_)):
+        raise TypeError(f"interpolate must be a bool, got {type(interpolate).__name__}")
+    data, indices, solver = _select(
+        mesh, count, method=method, batch=batch, weights=weights, seed=seed, progress=progress
+    )
+    if solver is not None and not interpolate:
+        return new_mesh(data, solver.solve()), indices
+    weight = as_positive_float(weights, name="weights")
+    return ls_mesh(mesh, indices, weights=weight, interpolate=bool(interpolate)), indices

@@ -1,0 +1,47 @@
+"""Shared fixtures: real meshes from O3D_LSMESH_DATA (default ../shared/data/meshes) and small generated ones."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+DATA = Path(os.environ.get("O3D_LSMESH_DATA", REPO.parent / "shared" / "data" / "meshes"))
+
+
+def load_mesh(name: str):
+    """Read ``name`` (e.g. ``"bunny.ply"``) from the data folder, or skip the test with the reason."""
+    path = DATA / name
+    if not path.exists():
+        pytest.skip(f"real mesh {name} not found in {DATA} (set O3D_LSMESH_DATA to the meshes folder)")
+    import open3d as o3d
+
+    mesh = o3d.io.read_triangle_mesh(str(path))
+    if len(mesh.triangles) == 0:
+        pytest.skip(f"{path} could not be read as a triangle mesh")
+    return mesh
+
+
+def grid(nx: int = 8, ny: int = 8, *, z=None):
+    """A regular triangulated grid in the unit square as ``(vertices, triangles)``; ``z`` maps (x, y) to heights."""
+    x, y = np.meshgrid(np.linspace(0, 1, nx), np.linspace(0, 1, ny), indexing="xy")
+    vertices = np.stack([x.ravel(), y.ravel(), np.zeros(x.size) if z is None else z(x, y).ravel()], axis=1)
+    index = np.arange(nx * ny).reshape(ny, nx)
+    a, b, c, d = index[:-1, :-1].ravel(), index[:-1, 1:].ravel(), index[1:, :-1].ravel(), index[1:, 1:].ravel()
+    triangles = np.concatenate([np.stack([a, b, d], 1), np.stack([a, d, c], 1)])
+    return vertices, triangles.astype(np.int64)
+
+
+@pytest.fixture
+def sphere():
+    import open3d as o3d
+
+    return o3d.geometry.TriangleMesh.create_sphere(radius=1.0, resolution=12)
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(12345)

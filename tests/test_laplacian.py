@@ -1,0 +1,75 @@
+import numpy as np
+import open3d as o3d
+import pytest
+import scipy.sparse as sp
+from conftest import grid
+
+from o3d_lsmesh import laplacian
+from o3d_lsmesh.laplacian import cotangent_laplacian, uniform_laplacian
+
+
+def reference_uniform(triangles, n):
+    neighbours = [set() for _ in range(n)]
+    for a, b, c in triangles.tolist():
+        for i, j in ((a, b), (b, c), (c, a)):
+            neighbours[i].add(j)
+            neighbours[j].add(i)
+    L = np.zeros((n, n))
+    for i, ring in enumerate(neighbours):
+        if ring:
+            L[i, i] = 1.0
+            for j in ring:
+                L[i, j] = -1.0 / len(ring)
+    return L
+
+
+def test_uniform_matches_plain_loop_and_eq1(sphere):
+    V, F = np.asarray(sphere.vertices), np.asarray(sphere.triangles)
+    L = laplacian(sphere)
+    assert sp.isspmatrix_csr(L)
+    np.testing.assert_allclose(L.toarray(), reference_uniform(F, len(V)), atol=1e-15)
+    np.testing.assert_allclose(L @ np.ones(len(V)), 0, atol=1e-14)
+
+
+def test_sign_convention_vertex_minus_average():
+    V, F = grid(3, 3)
+    V[4, 2] = 1.0  # lift the centre of the grid
+    L = uniform_laplacian(F, len(V))
+    assert (L @ V)[4, 2] == pytest.approx(1.0)
+
+
+def test_isolated_vertex_row_is_zero():
+    V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [5, 5, 5.0]])
+    L = uniform_laplacian(np.array([[0, 1, 2]]), 4)
+    assert np.all(L.toarray()[3] == 0)
+
+
+def test_cotangent_reproduces_linear_functions_inside_flat_grid():
+    V, F = grid(7, 7)
+    rng = np.random.default_rng(0)
+    V[:, :2] += rng.normal(scale=0.02, size=(len(V), 2))
+    L = laplacian((V, F), kind="cotangent")
+    interior = np.flatnonzero((np.abs(V[:, 0] - 0.5) < 0.4) & (np.abs(V[:, 1] - 0.5) < 0.4))
+    # cotangent weights have linear precision on flat meshes; uniform weights do not
+    np.testing.assert_allclose((L @ V)[interior], 0, atol=1e-12)
+    assert np.abs((laplacian((V, F)) @ V)[interior]).max() > 1e-4
+    np.testing.assert_allclose(L @ np.ones(len(V)), 0, atol=1e-12)
+
+
+def test_cotangent_degenerate_triangle_stays_finite():
+    V = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [1, 1, 0.0]])
+    F = np.array([[0, 1, 3], [1, 2, 3], [0, 2, 1]])
+    L = cotangent_laplacian(V, F)
+    assert np.all(np.isfinite(L.toarray()))
+
+
+def test_kind_is_validated(sphere):
+    with pytest.raises(ValueError, match="kind must be one of"):
+        laplacian(sphere, kind="robust")
+    with pytest.raises(TypeError, match="mesh must be"):
+        laplacian(np.zeros((3, 3)))
+
+
+def test_tensor_mesh_gives_same_operator(sphere):
+    tmesh = o3d.t.geometry.TriangleMesh.from_legacy(sphere)
+    assert abs(laplacian(tmesh) - laplacian(sphere)).max() < 1e-12

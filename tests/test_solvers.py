@@ -1,0 +1,104 @@
+import pickle
+import threading
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from o3d_lsmesh import SingularSystemError, SPDSolver
+from o3d_lsmesh._solvers import cholmod_available
+
+
+def spd(n=60, seed=0):
+    rng = np.random.default_rng(seed)
+    A = sp.random(n, n, density=0.05, random_state=seed) + sp.identity(n)
+    return (A.T @ A + sp.identity(n)).tocsc(), rng.normal(size=(n, 3))
+
+
+BACKENDS = ["scipy"] + (["cholmod"] if cholmod_available() else [])
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_batched_solve_equals_columnwise_spsolve(backend):
+    A, b = spd()
+    solver = SPDSolver(A, backend=backend)
+    assert solver.backend == backend
+    x = solver.solve(b)
+    for k in range(3):
+        np.testing.assert_allclose(x[:, k], spla.spsolve(A, b[:, k]), rtol=1e-10, atol=1e-12)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_update_equals_fresh_factor(backend):
+    A, b = spd()
+    C = sp.csc_matrix((np.array([3.0, 2.0]), (np.array([4, 17]), np.array([0, 1]))), shape=(A.shape[0], 2))
+    solver = SPDSolver(A, backend=backend)
+    solver.update(C)
+    fresh = SPDSolver(A + C @ C.T, backend=backend)
+    np.testing.assert_allclose(solver.solve(b), fresh.solve(b), rtol=1e-10)
+    assert abs(solver.matrix - (A + C @ C.T)).max() < 1e-12
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_refactor_same_pattern(backend):
+    A, b = spd()
+    solver = SPDSolver(A, backend=backend)
+    solver.refactor(A * 2.0)
+    np.testing.assert_allclose(solver.solve(b), spla.spsolve(A * 2.0, b), rtol=1e-10)
+    with pytest.raises(ValueError, match="matrix must have shape"):
+        solver.refactor(sp.identity(3, format="csc"))
+
+
+def test_pickle_and_threads():
+    A, b = spd()
+    solver = SPDSolver(A)
+    solver.update(sp.csc_matrix((np.array([1.0]), (np.array([3]), np.array([0]))), shape=(A.shape[0], 1)))
+    clone = pickle.loads(pickle.dumps(solver))
+    np.testing.assert_allclose(clone.solve(b), solver.solve(b), rtol=1e-12)
+    results = [None] * 8
+
+    def work(i):
+        results[i] = solver.solve(b * (i + 1))
+
+    threads = [threading.Thread(target=work, args=(i,)) for i in range(8)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    for i, x in enumerate(results):
+        np.testing.assert_allclose(x, solver.solve(b) * (i + 1), rtol=1e-10)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_singular_matrix_raises(backend):
+    singular = sp.csc_matrix(np.array([[1.0, -1.0], [-1.0, 1.0]]))
+    with pytest.raises(SingularSystemError):
+        SPDSolver(singular, backend=backend).solve(np.ones(2))
+
+
+def test_bad_arguments():
+    A, _ = spd(5)
+    with pytest.raises(TypeError, match="matrix must be a scipy sparse matrix"):
+        SPDSolver(np.eye(3))
+    with pytest.raises(ValueError, match="matrix must be square"):
+        SPDSolver(sp.csc_matrix(np.ones((2, 3))))
+    with pytest.raises(ValueError, match="backend must be one of"):
+        SPDSolver(A, backend="magma")
+    with pytest.raises(ValueError, match="rhs must have shape"):
+        SPDSolver(A).solve(np.ones(4))
+    with pytest.raises(ValueError, match="C must have 5 rows"):
+        SPDSolver(A).update(sp.csc_matrix(np.ones((4, 1))))
+
+
+def test_fallback_warns_without_scikit_sparse(monkeypatch):
+    import o3d_lsmesh._solvers as solvers
+    from o3d_lsmesh import O3DLSMeshWarning
+
+    monkeypatch.setattr(solvers, "_cholmod", None)
+    A, b = spd()
+    with pytest.warns(O3DLSMeshWarning, match="scikit-sparse is not importable"):
+        solver = solvers.SPDSolver(A)
+    assert solver.backend == "scipy"
+    with pytest.raises(ImportError, match="needs scikit-sparse"):
+        solvers.SPDSolver(A, backend="cholmod")

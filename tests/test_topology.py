@@ -1,0 +1,81 @@
+import numpy as np
+import open3d as o3d
+import pytest
+from conftest import grid, load_mesh
+
+from o3d_lsmesh.topology import (
+    boundary_loops,
+    check_manifold,
+    connected_components,
+    nonmanifold_vertices,
+    unique_edges,
+)
+
+
+def grid_with_holes():
+    V, F = grid(9, 9)
+    # remove the two triangles of cell (2,2) and of cell (5,5): two square holes
+    cells = [2 * 8 + 2, 5 * 8 + 5]
+    drop = np.array(cells + [c + 64 for c in cells])
+    keep = np.setdiff1d(np.arange(len(F)), drop)
+    return V, F[keep]
+
+
+def is_cycle_in_order(loop, triangles):
+    he = {tuple(e) for e in np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]]).tolist()}
+    nxt = np.roll(loop, -1)
+    return all((a, b) in he for a, b in zip(loop.tolist(), nxt.tolist()))
+
+
+def test_boundary_loops_of_grid_with_two_holes():
+    V, F = grid_with_holes()
+    loops = boundary_loops(F, len(V))
+    assert [len(l) for l in loops] == [32, 4, 4]
+    assert loops[0][0] == 0
+    assert set(loops[1].tolist()) == {2 * 9 + 2, 2 * 9 + 3, 3 * 9 + 2, 3 * 9 + 3}
+    assert set(loops[2].tolist()) == {5 * 9 + 5, 5 * 9 + 6, 6 * 9 + 5, 6 * 9 + 6}
+    for loop in loops:
+        assert is_cycle_in_order(loop, F)
+
+
+def test_boundary_loops_of_real_mesh_with_27_holes():
+    mesh = load_mesh("plane_holes.ply")
+    F = np.asarray(mesh.triangles).astype(np.int64)
+    loops = boundary_loops(F, len(mesh.vertices))
+    assert len(loops) == 27 and sum(map(len, loops)) == 341
+    assert all(is_cycle_in_order(l, F) for l in loops)
+
+
+def test_closed_mesh_has_no_loops(sphere):
+    assert boundary_loops(np.asarray(sphere.triangles).astype(np.int64), len(sphere.vertices)) == []
+
+
+def test_unique_edges_counts():
+    F = np.array([[0, 1, 2], [0, 2, 3]])
+    edges, counts, inverse = unique_edges(F, 4)
+    assert edges.tolist() == [[0, 1], [0, 2], [0, 3], [1, 2], [2, 3]]
+    assert counts.tolist() == [1, 2, 1, 1, 1]
+    assert np.all(edges[inverse].min(1) == np.minimum(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])[:, 0], np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])[:, 1]))
+
+
+def test_nonmanifold_vertices_match_open3d():
+    mesh = load_mesh("bunny_scan.ply")
+    F = np.asarray(mesh.triangles).astype(np.int64)
+    ours = nonmanifold_vertices(F, len(mesh.vertices))
+    assert sorted(ours.tolist()) == sorted(np.asarray(mesh.get_non_manifold_vertices()).tolist())
+
+
+def test_check_manifold_names_first_offender():
+    bowtie = np.array([[0, 1, 2], [0, 3, 4]])
+    with pytest.raises(ValueError, match="vertex-manifold, got vertex 0"):
+        check_manifold(bowtie, 5)
+    fin = np.array([[0, 1, 2], [1, 0, 3], [0, 1, 4]])
+    with pytest.raises(ValueError, match=r"edge-manifold, got edge \(0, 1\)"):
+        check_manifold(fin, 5)
+    with pytest.raises(ValueError, match="boundary must be manifold"):
+        boundary_loops(bowtie, 5)
+
+
+def test_components_count_isolated_vertices():
+    count, labels = connected_components(np.array([[0, 1, 2], [3, 4, 5]]), 7)
+    assert count == 3 and labels[0] == labels[2] and labels[3] != labels[0]
