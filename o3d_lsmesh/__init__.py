@@ -1,11 +1,24 @@
-"""o3d_lsmesh: least-squares meshes, constrained fairing and multiresolution fairing for Open3D."""
+"""o3d_lsmesh: least-squares meshes, constrained fairing and multiresolution fairing for Open3D.
+
+Every public function takes an ``open3d.geometry.TriangleMesh``, an
+``open3d.t.geometry.TriangleMesh`` or a ``(vertices, triangles)`` tuple and
+returns a new mesh of the same kind; the input is never modified.
+"""
 
 __version__ = "0.1.0"
 
+from . import metrics
 from ._errors import O3DLSMeshWarning, SingularSystemError
 from ._solvers import SPDSolver
+from .encoding import decode_geometry, encode_geometry, iter_decode_geometry
+from .fairing import constrained_fairing, multiresolution_fairing, smooth_boundary_curves
+from .hierarchy import MeshHierarchy, build_hierarchy, from_fast_simplification
 from .laplacian import laplacian
 from .lsmesh import LSMeshSolver, ls_mesh, reconstruct_geometry
+from .register import register
+from .render import render
+from .selection import approximate, select_control_points
+from .spectral import spectral_approximation
 
 __all__ = [
     "O3DLSMeshWarning",
@@ -15,4 +28,19 @@ __all__ = [
     "LSMeshSolver",
     "ls_mesh",
     "reconstruct_geometry",
+    "select_control_points",
+    "approximate",
+    "encode_geometry",
+    "decode_geometry",
+    "iter_decode_geometry",
+    "spectral_approximation",
+    "constrained_fairing",
+    "smooth_boundary_curves",
+    "multiresolution_fairing",
+    "MeshHierarchy",
+    "build_hierarchy",
+    "from_fast_simplification",
+    "metrics",
+    "register",
+    "render",
 ]

@@ -173,8 +173,8 @@ def encode_geometry(
     >>> import open3d as o3d
     >>> sphere = o3d.geometry.TriangleMesh.create_sphere(resolution=10)
     >>> data = encode_geometry(sphere, 20, bits=10)
-    >>> len(data)
-    163
+    >>> len(data)  # 76-byte header + 20 * (8 + 3 * 10) bits + 4-byte CRC
+    175
     >>> decoded = decode_geometry(sphere, data)
     >>> len(decoded.vertices) == len(sphere.vertices)
     True
@@ -326,8 +326,14 @@ def iter_decode_geometry(mesh: Any, data: Any, *, step: int | None = None) -> It
 
     The first mesh uses the first ``step`` anchors (a factorization); every
     following one adds the next ``step`` anchors by a rank-``step`` update of
-    the kept factor and one back-substitution, never refactoring. The last mesh
+    the kept factor and back-substitutes, never refactoring. The last mesh
     uses every anchor and equals :func:`decode_geometry` up to round-off.
+
+    Updates that add ``omega^2 = (10 n)^2`` to the diagonal lose accuracy: on
+    the 9,770-vertex camel with 300 anchors the updated solve is off by 3.6e-6
+    of the model size where a fresh factorization is accurate to 1e-14. Every
+    refinement therefore does one step of iterative refinement with the same
+    factor (a second back-substitution), which brings it back to ~1e-14.
 
     Parameters
     ----------
@@ -380,5 +386,6 @@ def _refinements(
         end = min(begin + step, len(indices))
         solver.add_anchors(indices[begin:end], positions[begin:end], weights=omega)
         # pass every position: the solver's defaults for the first anchors are the
-        # decoder mesh's own (meaningless) coordinates
+        # decoder mesh's own (meaningless) coordinates. After updates the solver
+        # refines its solution once, which keeps omega = 10 n accurate.
         yield new_mesh(mesh_data, solver.solve(positions[:end]))

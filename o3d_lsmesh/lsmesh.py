@@ -119,13 +119,18 @@ class LSMeshSolver:
             free[indices] = False
             self._free = np.flatnonzero(free)
             L_free = L[:, self._free]
-            normal = (L_free.T @ L_free).tocsc()
+            smoothness = (L_free.T @ L_free).tocsr()
+            normal = smoothness.tocsc()
             # right-hand side operator: -L_free^T L_ctrl maps control positions to the free rhs
             self._rhs_hard = -(L_free.T @ L[:, indices]).tocsr()
         else:
             self._free = np.arange(n)
-            normal = (L.T @ L + sp.csc_matrix((weights**2, (indices, indices)), shape=(n, n))).tocsc()
+            smoothness = (L.T @ L).tocsr()
+            normal = (smoothness + sp.csr_matrix((weights**2, (indices, indices)), shape=(n, n))).tocsc()
             self._rhs_hard = None
+        # kept for the residual of iterative refinement after rank-k updates
+        self._smoothness = smoothness
+        self._updated = False
         # reduced index of every vertex (-1 for eliminated ones)
         self._reduced = np.full(n, -1, dtype=np.int64)
         self._reduced[self._free] = np.arange(len(self._free))
@@ -146,10 +151,7 @@ class LSMeshSolver:
         """Weight of each control vertex, in :attr:`constraint_vertex_indices` order."""
         return np.concatenate([self._hard_weights, self._soft_weights])
 
-    def _default_positions(self) -> np.ndarray:
-        return self._positions
-
-    def solve(self, constraint_vertex_positions: Any = None) -> np.ndarray:
+    def solve(self, constraint_vertex_positions: Any = None, *, refine: bool | None = None) -> np.ndarray:
         """Vertex positions ``(n, 3)`` for the given control positions (back-substitution only).
 
         Parameters
@@ -158,6 +160,15 @@ class LSMeshSolver:
             One row per entry of :attr:`constraint_vertex_indices`; defaults to
             the positions given so far (the mesh's own, or those passed to
             :meth:`add_anchors`).
+        refine : bool, optional
+            One step of iterative refinement: a second back-substitution on the
+            residual. By default it runs only after :meth:`add_anchors`: updates
+            that add large ``w^2`` (the bases paper's ``omega = 10 n``) to the
+            diagonal lose the small ``L^T L`` entries of those rows to round-off
+            (measured on the 9.8k camel with 300 anchors: 4e-6 of the model size,
+            against 1e-14 for a fresh factor), and one refinement step restores
+            full accuracy. The residual ``b - L^T L x - w^2 x_a`` is formed as
+            ``w^2 (c - x_a) - L^T L x`` so that it has no cancellation.
         """
         k = len(self._hard) + len(self._soft)
         if constraint_vertex_positions is None:
@@ -170,6 +181,13 @@ class LSMeshSolver:
             rhs += self._rhs_hard @ hard_pos
         rhs[self._reduced[self._soft]] += (self._soft_weights**2)[:, None] * soft_pos
         solution = self._solver.solve(rhs)
+        if self._updated if refine is None else refine:
+            reduced_soft = self._reduced[self._soft]
+            residual = -(self._smoothness @ solution)
+            if self.interpolate:
+                residual += self._rhs_hard @ hard_pos
+            residual[reduced_soft] += (self._soft_weights**2)[:, None] * (soft_pos - solution[reduced_soft])
+            solution = solution + self._solver.solve(residual)
         if not self.interpolate:
             return solution
         result = np.zeros((len(self._reduced), 3))
@@ -177,9 +195,9 @@ class LSMeshSolver:
         result[self._hard] = hard_pos
         return result
 
-    def mesh(self, constraint_vertex_positions: Any = None) -> Any:
+    def mesh(self, constraint_vertex_positions: Any = None, *, refine: bool | None = None) -> Any:
         """The least-squares mesh as a new mesh of the input's kind (see :meth:`solve`)."""
-        return new_mesh(self._data, self.solve(constraint_vertex_positions))
+        return new_mesh(self._data, self.solve(constraint_vertex_positions, refine=refine))
 
     def add_anchors(self, indices: Any, positions: Any = None, *, weights: Any = 1.0) -> None:
         """Add relaxed anchors by a CHOLMOD rank-k update of the kept factor (no refactoring).
@@ -213,6 +231,7 @@ class LSMeshSolver:
         rows = self._reduced[new]
         c = sp.csc_matrix((w, (rows, np.arange(len(new)))), shape=(len(self._free), len(new)))
         self._solver.update(c)
+        self._updated = True
         self._soft = np.concatenate([self._soft, new])
         self._soft_weights = np.concatenate([self._soft_weights, w])
         self._positions = np.concatenate([self._positions, pos])

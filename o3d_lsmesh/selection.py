@@ -41,9 +41,12 @@ SELECTION_METHODS = ("random", "greedy", "combined")
 DEFAULT_BATCH = 31  # figure 6 of LS meshes: 31 solves of 31 picks for 1000 control points
 
 
-def _progress_bar(progress: bool, total: int, desc: str):
+def _check_progress(progress: Any) -> None:
     if not isinstance(progress, (bool, np.bool_)):
         raise TypeError(f"progress must be a bool, got {type(progress).__name__}")
+
+
+def _progress_bar(progress: bool, total: int, desc: str):
     if not progress:
         return None
     from tqdm.auto import tqdm
@@ -125,7 +128,8 @@ class _RefactoringSystem:
         self._diagonal[indices] = self._weight**2
         self._solver.refactor(self._normal())
 
-    def solve(self) -> np.ndarray:
+    def solve(self, *, refine: bool = False) -> np.ndarray:
+        # a fresh factor needs no refinement: the keyword only mirrors LSMeshSolver.solve
         return self._solver.solve(self._diagonal[:, None] * self._vertices)
 
 
@@ -160,7 +164,7 @@ def _greedy(
     bar = _progress_bar(progress, count, "greedy selection")
     try:
         for k in range(len(start), count):
-            errors = _squared_errors(system.solve(), vertices)
+            errors = _squared_errors(system.solve(refine=False), vertices)
             errors[selected] = -np.inf
             best = int(np.argmax(errors))
             order[k] = best
@@ -220,7 +224,7 @@ def _combined(data: MeshData, count: int, weight: float, batch: int, *, progress
     bar = _progress_bar(progress, count, "combined selection")
     try:
         while done < count:
-            errors = _squared_errors(solver.solve(), vertices)
+            errors = _squared_errors(solver.solve(refine=False), vertices)
             forbidden = selected.copy()
             picks = []
             for _ in range(min(batch, count - done)):
@@ -270,8 +274,8 @@ def _select(
     elif batch is not None:
         raise ValueError(f"batch applies only to method='combined', got batch={batch!r} with method={method!r}")
     rng = _rng(seed)
-    if method == "random":
-        _progress_bar(progress, 0, "")  # validates the flag; random selection is instant
+    _check_progress(progress)
+    if method == "random":  # instant: no progress bar
         return data, _random(data, count, rng), None
     if method == "greedy":
         indices, solver = _greedy(data, count, weight, progress=progress)

@@ -249,3 +249,19 @@ def test_mesh_errors():
         ls_mesh((V, F.astype(float)), [0])
     with pytest.raises(ValueError, match=r"vertices must have shape \(n, 3\)"):
         ls_mesh((V[:, :2], F), [0])
+
+
+def test_add_anchors_with_paper_weight_is_refined_to_fresh_accuracy():
+    mesh = load_mesh("camel.ply")
+    V, _ = arrays(mesh)
+    n = len(V)
+    omega = 10.0 * n  # the bases paper's weight: updates alone lose accuracy here
+    order = np.random.default_rng(3).choice(n, 300, replace=False)
+    solver = LSMeshSolver(mesh, order[:10], weights=omega)
+    for chunk in np.array_split(order[10:], 29):
+        solver.add_anchors(chunk, weights=omega)
+    fresh = LSMeshSolver(mesh, order, weights=omega).solve()
+    refined = solver.solve()
+    assert np.linalg.norm(refined - fresh) <= 1e-8 * np.linalg.norm(fresh)
+    unrefined = solver.solve(refine=False)
+    assert np.linalg.norm(unrefined - fresh) > np.linalg.norm(refined - fresh)

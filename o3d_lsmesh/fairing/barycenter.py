@@ -40,8 +40,8 @@ __all__ = [
 ]
 
 #: Default penalty weight of :class:`GlobalSolver`, chosen by measurement
-#: (see its docstring and benchmarks/results/denoise.md).
-DEFAULT_MU = 0.3
+#: (see constrained_fairing's docstring and benchmarks/results/denoise.md).
+DEFAULT_MU = 0.03
 
 
 @dataclass(frozen=True)
@@ -141,14 +141,18 @@ def triangle_coefficients(valences: np.ndarray) -> tuple[np.ndarray, np.ndarray]
         return np.zeros((0, 3, 3)), np.zeros((0, 3))
     base = np.int64(valences.max() + 1)
     keys = (valences[:, 0] * base + valences[:, 1]) * base + valences[:, 2]
-    # sort-and-mask grouping of the (few hundred) distinct valence triples
-    order = np.argsort(keys, kind="stable")
-    sorted_keys = keys[order]
-    first = np.ones(len(keys), dtype=bool)
-    first[1:] = sorted_keys[1:] != sorted_keys[:-1]
-    group = np.empty_like(order)  # noqa: NPY  (every slot is written on the next line)
-    group[order] = np.cumsum(first) - 1
-    table = valences[order[first]].astype(np.float64)  # (g, 3) distinct triples
+    # group the (few hundred) distinct valence triples: a dense look-up when the
+    # key range is small (the usual case), else sort-and-mask
+    if base**3 <= 1 << 22:
+        present = np.zeros(base**3, dtype=bool)
+        present[keys] = True
+        distinct = np.flatnonzero(present)
+        slot = np.zeros(base**3, dtype=np.int64)
+        slot[distinct] = np.arange(len(distinct))
+        group = slot[keys]
+    else:
+        distinct, group = _sorted_groups(keys)
+    table = np.stack([distinct // (base * base), (distinct // base) % base, distinct % base], axis=1).astype(np.float64)
     g = len(table)
     A = np.repeat(np.eye(3)[None], g, axis=0) - (1.0 / table)[:, :, None] * (1.0 - np.eye(3))[None]
     kkt = np.zeros((g, 4, 4))
@@ -162,6 +166,17 @@ def triangle_coefficients(valences: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     return solution[group, :3, :3], solution[group, :3, 3]
 
 
+def _sorted_groups(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    # sort-and-mask: distinct keys (sorted) and the group of every key
+    order = np.argsort(keys, kind="stable")
+    sorted_keys = keys[order]
+    first = np.ones(len(keys), dtype=bool)
+    first[1:] = sorted_keys[1:] != sorted_keys[:-1]
+    group = np.zeros_like(order)
+    group[order] = np.cumsum(first) - 1
+    return sorted_keys[first], group
+
+
 @dataclass(frozen=True)
 class LocalOperator:
     """One iteration of the paper's local operator (section 3.2) as fixed sparse matrices.
@@ -173,35 +188,78 @@ class LocalOperator:
 
         X_new = E1 @ (W @ X) + E2 @ X + E3 @ X0,
 
-    where ``E1, E2, E3`` have the pattern of the 1-ring (edges plus diagonal)
-    and already hold the ``1/count`` of the averaging. Vertices with no
-    interior triangle (boundary and isolated vertices, or interior vertices
-    whose every triangle touches the boundary) get an identity row in ``E2``.
-    With ``X0`` fixed, ``E3 @ X0`` is computed once, so one iteration costs
-    three sparse mat-vecs on ``(n, 3)``; the set-up is a few ``bincount`` calls
-    on the half-edges and one CSR pattern. The object only holds arrays: it
-    pickles and may be shared between threads.
+    where ``E1, E2`` have the pattern of the 1-ring (edges plus diagonal) and
+    already hold the ``1/count`` of the averaging. ``E3 @ X0`` (the
+    constraint part, ``u_a C / count`` scattered to the vertices) is
+    computed once per set of targets by :meth:`constant`, without forming
+    ``E3``. Vertices with no interior triangle (boundary and isolated
+    vertices, or interior vertices whose every triangle touches the
+    boundary) get an identity row in ``E2`` and a zero constant. One
+    iteration costs three sparse mat-vecs on ``(n, 3)``; the set-up is a few
+    ``bincount`` calls on the half-edges accumulated straight into one CSR
+    pattern. The object only holds arrays: it pickles and may be shared
+    between threads.
     """
 
     adjacency: sp.csr_matrix
     e1: sp.csr_matrix
     e2: sp.csr_matrix
-    e3: sp.csr_matrix
+    triangles: np.ndarray  # (k, 3) the interior triangles
+    weights: np.ndarray  # (k, 3) u_a / count of vertex i_a
 
     def constant(self, positions0: np.ndarray) -> np.ndarray:
         """``E3 @ X0``, the constraint part, ``(n, 3)``."""
-        return self.e3 @ positions0
+        n = self.adjacency.shape[0]
+        centers = positions0[self.triangles].sum(axis=1)  # (k, 3) C of every triangle
+        rows = self.triangles.ravel()
+        out = np.zeros((n, 3))
+        for axis in range(3):  # the three coordinates
+            out[:, axis] = np.bincount(rows, weights=(self.weights * centers[:, axis, None]).ravel(), minlength=n)
+        return out
 
     def step(self, positions: np.ndarray, constant: np.ndarray) -> np.ndarray:
         """``E1 @ (W @ X) + E2 @ X + constant``, ``(n, 3)``."""
         return self.e1 @ (self.adjacency @ positions) + self.e2 @ positions + constant
 
 
+def _ring_pattern(edges: np.ndarray, n: int):
+    """CSR layout of the 1-ring pattern (diagonal plus both directions of every edge).
+
+    Row ``v`` holds, in this order, its diagonal, the edges where ``v`` is the
+    larger end (backward) and the edges where ``v`` is the smaller end
+    (forward). Returns ``indptr (n+1,)``, ``indices (nnz,)`` and the CSR
+    positions of the diagonal ``(n,)``, of each edge forward ``(e,)`` and of
+    each edge backward ``(e,)``. Computed from counts and one stable sort of
+    the edges by their larger end, so that data can be accumulated straight
+    into CSR order (a permuting gather of the data was the slowest step).
+    """
+    lo, hi = edges[:, 0], edges[:, 1]
+    n_forward = np.bincount(lo, minlength=n)
+    n_backward = np.bincount(hi, minlength=n)
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(1 + n_forward + n_backward, out=indptr[1:])
+    diagonal = indptr[:-1]
+    # edges are sorted by (lo, hi), so the forward edges of a row are contiguous
+    first_forward = np.zeros(n, dtype=np.int64)
+    np.cumsum(n_forward[:-1], out=first_forward[1:])
+    forward = diagonal[lo] + 1 + n_backward[lo] + (np.arange(len(edges)) - first_forward[lo])
+    by_hi = np.argsort(hi, kind="stable")
+    first_backward = np.zeros(n, dtype=np.int64)
+    np.cumsum(n_backward[:-1], out=first_backward[1:])
+    rank = np.zeros(len(edges), dtype=np.int64)
+    rank[by_hi] = np.arange(len(edges)) - first_backward[hi[by_hi]]
+    backward = diagonal[hi] + 1 + rank
+    indices = np.zeros(indptr[-1], dtype=np.int64)
+    indices[diagonal] = np.arange(n)
+    indices[forward] = hi
+    indices[backward] = lo
+    return indptr, indices, diagonal, forward, backward
+
+
 def local_operator(triangles: np.ndarray, topo: FairingTopology) -> LocalOperator:
     """Assemble the :class:`LocalOperator` of the interior triangles of ``triangles``."""
     n, edges, inverse = topo.n, topo.edges, topo.inverse
     m = len(triangles)
-    n_edges = len(edges)
     sel = topo.interior_triangles
     tri = triangles[sel]  # (k, 3)
     k = len(tri)
@@ -209,47 +267,43 @@ def local_operator(triangles: np.ndarray, topo: FairingTopology) -> LocalOperato
     M, u = triangle_coefficients(topo.valence[tri])
     alpha = M / valence[:, None, :]  # (k, 3, 3): coefficient of S_{i_b} in P_a
     beta = alpha - alpha.sum(axis=2, keepdims=True)  # coefficient of x_{i_c}: -sum_{b != c} alpha_ab
-    gamma = np.repeat(u[:, :, None], 3, axis=2)  # coefficient of x0_{i_c}: u_a
 
-    # Slots of the 1-ring pattern: edge e forward (lo -> hi) is e, backward is
-    # n_edges + e, vertex v's diagonal is 2 n_edges + v.
-    # Undirected edge of the pair (a, c) of triangle t: half-edge rows t, m + t,
-    # 2m + t hold the pairs {0,1}, {1,2}, {2,0}.
+    indptr, indices, diagonal, forward, backward = _ring_pattern(edges, n)
+    nnz = len(indices)
+    # CSR position of the entry (i_a, i_c) for each triangle and pair (a, c).
+    # Undirected edge of the pair: half-edge rows t, m + t, 2m + t of triangle
+    # t hold the pairs {0,1}, {1,2}, {2,0}.
     pair_halfedge = np.array([[-1, 0, 2], [0, -1, 1], [2, 1, -1]])
-    slots = np.zeros((k, 3, 3), dtype=np.int64)
+    position = np.zeros((k, 3, 3), dtype=np.int64)
     for a in range(3):  # 9 fixed (a, c) pairs, not a loop over triangles
         for c in range(3):
             if a == c:
-                slots[:, a, c] = 2 * n_edges + tri[:, a]
+                position[:, a, c] = diagonal[tri[:, a]]
             else:
                 edge = inverse[pair_halfedge[a, c] * m + sel]
-                slots[:, a, c] = edge + n_edges * (tri[:, a] > tri[:, c])
-    slots = slots.ravel()
-    n_slots = 2 * n_edges + n
+                position[:, a, c] = np.where(tri[:, a] < tri[:, c], forward[edge], backward[edge])
+    position = position.ravel()
 
     count = np.bincount(tri.ravel(), minlength=n).astype(np.float64)  # estimates per vertex
     no_estimate = count == 0
-    inv_count = 1.0 / np.where(no_estimate, 1.0, count)
-    slot_row = np.concatenate([edges[:, 0], edges[:, 1], np.arange(n)])
-    slot_col = np.concatenate([edges[:, 1], edges[:, 0], np.arange(n)])
+    inv_count = np.repeat(1.0 / np.where(no_estimate, 1.0, count), np.diff(indptr))  # per CSR entry
+
+    # SciPy keeps 32-bit indices when they fit; giving them so avoids a copy per matrix
+    index_dtype = np.int32 if nnz < np.iinfo(np.int32).max else np.int64
+    indices, indptr = indices.astype(index_dtype), indptr.astype(index_dtype)
+
+    def matrix(data: np.ndarray) -> sp.csr_matrix:
+        return sp.csr_matrix((data, indices, indptr), shape=(n, n))
 
     def accumulate(values: np.ndarray) -> np.ndarray:
-        data = np.bincount(slots, weights=values.ravel(), minlength=n_slots)
-        return data * inv_count[slot_row]
+        return np.bincount(position, weights=values.ravel(), minlength=nnz) * inv_count
 
-    d1, d2, d3 = accumulate(alpha), accumulate(beta), accumulate(gamma)
-    d2[2 * n_edges + np.flatnonzero(no_estimate)] = 1.0  # vertices without estimates stay put
-    adjacency_data = np.concatenate([np.ones(2 * n_edges), np.zeros(n)])
-
-    # One CSR pattern for all four matrices: build it with the slot numbers as
-    # data to learn where each slot lands, then reuse indptr/indices.
-    pattern = sp.csr_matrix((np.arange(1, n_slots + 1, dtype=np.float64), (slot_row, slot_col)), shape=(n, n))
-    where = pattern.data.astype(np.int64) - 1
-
-    def with_data(data: np.ndarray) -> sp.csr_matrix:
-        return sp.csr_matrix((data[where], pattern.indices, pattern.indptr), shape=(n, n))
-
-    return LocalOperator(with_data(adjacency_data), with_data(d1), with_data(d2), with_data(d3))
+    e2 = accumulate(beta)
+    e2[diagonal[no_estimate]] = 1.0  # vertices without estimates stay put
+    adjacency = np.ones(nnz)
+    adjacency[diagonal] = 0.0
+    weights = u / np.where(no_estimate, 1.0, count)[tri]  # (k, 3) u_a / count, for the constant part
+    return LocalOperator(matrix(adjacency), matrix(accumulate(alpha)), matrix(e2), tri, weights)
 
 
 class GlobalSolver:

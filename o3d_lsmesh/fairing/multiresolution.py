@@ -1,0 +1,149 @@
+"""Multiresolution fairing (Liu et al. 2001, section 4.2): fair a coarse level, split back up, repeat."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from .._o3d import new_mesh
+from .._validate import as_choice, as_count
+from ..topology import boundary_halfedges
+from ..hierarchy.hierarchy import MeshHierarchy, build_hierarchy_arrays, read_manifold_mesh
+from .constrained import FAIRING_METHODS, constrained_fairing_arrays
+
+__all__ = ["multiresolution_fairing", "multiresolution_fairing_arrays"]
+
+
+def multiresolution_fairing_arrays(
+    hierarchy: MeshHierarchy,
+    level: int,
+    *,
+    number_of_iterations: int = 5,
+    method: str = "local",
+    progress: bool = False,
+) -> np.ndarray:
+    """Array core of :func:`multiresolution_fairing`: faired ``(n_0, 3)`` positions of level 0."""
+    if level == 0:
+        return constrained_fairing_arrays(
+            hierarchy.vertices, hierarchy.triangles[0], number_of_iterations, method=method
+        )
+    positions = hierarchy.level_arrays(level)[0]
+    steps = range(level, 0, -1)
+    if progress:
+        from tqdm.auto import tqdm
+
+        steps = tqdm(steps, desc="multiresolution fairing")
+    for i in steps:
+        triangles = hierarchy.triangles[i]
+        positions = constrained_fairing_arrays(
+            positions, triangles, number_of_iterations, method=method,
+            smooth_boundary=_simple_boundary(triangles, len(positions)),
+        )
+        positions = hierarchy.refine(i, positions)
+    return positions
+
+
+def _simple_boundary(triangles: np.ndarray, n: int) -> bool:
+    """Whether every boundary vertex has two boundary edges (always so on a volume-cost hierarchy level).
+
+    Levels of a fast-simplification hierarchy can have pinched boundaries;
+    their boundary is then held fixed instead of curve-faired.
+    """
+    boundary = boundary_halfedges(triangles, n)
+    degree = np.bincount(boundary.ravel(), minlength=n)
+    return bool(np.all((degree == 0) | (degree == 2)))
+
+
+def multiresolution_fairing(
+    mesh: Any,
+    level: int,
+    *,
+    hierarchy: MeshHierarchy | None = None,
+    number_of_iterations: int = 5,
+    method: str = "local",
+    progress: bool = False,
+) -> Any:
+    """Smooth a mesh at a chosen scale by fairing a coarse level and splitting back up (Liu et al. 2001, 4.2).
+
+    For ``i`` from ``level`` down to 1: (2.1) fair level ``M_i`` by
+    constrained fairing (section 3, ``number_of_iterations`` iterations of
+    ``method``), holding the barycenters of its own triangles at the
+    positions it had on entering the step; (2.2) refine to ``M_{i-1}`` by
+    vertex splits, each split vertex put at its 1-ring average and moved by
+    Kobbelt's step ``x <- x - L^2(x)/nu`` (:meth:`MeshHierarchy.refine`).
+    Details smaller than the vertex spacing of ``M_level`` are not restored,
+    so a larger ``level`` removes larger details. ``level=0`` is plain
+    constrained fairing of the input.
+
+    Parameters
+    ----------
+    mesh : open3d.geometry.TriangleMesh, open3d.t.geometry.TriangleMesh or (vertices, triangles)
+        Manifold mesh without unreferenced vertices; not modified.
+    level : int
+        Starting level, ``0 <= level < len(hierarchy)``.
+    hierarchy : MeshHierarchy, optional, keyword-only
+        Built from ``mesh`` (by :func:`~o3d_lsmesh.hierarchy.build_hierarchy` or
+        :func:`~o3d_lsmesh.hierarchy.from_fast_simplification`); reuse it across
+        calls. By default the first ``level`` levels of
+        ``build_hierarchy(mesh, min_vertices=4)`` are built.
+    number_of_iterations : int, keyword-only
+        Fairing iterations on every level.
+    method : {"local", "global"}, keyword-only
+        Constrained fairing solver (see ``constrained_fairing``).
+    progress : bool, keyword-only
+        Show a tqdm bar over the levels.
+
+    Returns
+    -------
+    Mesh of the input's kind with the input's connectivity.
+
+    Raises
+    ------
+    TypeError
+        Wrong argument types.
+    ValueError
+        Non-manifold mesh, negative ``level``, ``level`` beyond the hierarchy, or a
+        hierarchy built from another mesh.
+
+    Examples
+    --------
+    >>> import numpy as np, open3d as o3d
+    >>> sphere = o3d.geometry.TriangleMesh.create_sphere(resolution=20)
+    >>> smooth = multiresolution_fairing(sphere, 3)
+    >>> np.asarray(smooth.triangles).shape == np.asarray(sphere.triangles).shape
+    True
+    """
+    level = as_count(level, name="level")
+    number_of_iterations = as_count(number_of_iterations, name="number_of_iterations")
+    method = as_choice(method, FAIRING_METHODS, name="method")
+    if not isinstance(progress, (bool, np.bool_)):
+        raise TypeError(f"progress must be a bool, got {type(progress).__name__}")
+    data = read_manifold_mesh(mesh)
+    if hierarchy is None:
+        hierarchy = build_hierarchy_arrays(data.vertices, data.triangles, max_levels=level, min_vertices=4)
+        if level >= len(hierarchy):
+            raise ValueError(
+                f"level must be < {len(hierarchy)} (the levels build_hierarchy reaches for this mesh), got {level}"
+            )
+    else:
+        if not isinstance(hierarchy, MeshHierarchy):
+            raise TypeError(f"hierarchy must be a MeshHierarchy, got {type(hierarchy).__name__}")
+        if len(hierarchy.vertices) != len(data.vertices) or not np.array_equal(hierarchy.triangles[0], data.triangles):
+            raise ValueError(
+                f"hierarchy must be built from mesh, got one of {len(hierarchy.vertices)} vertices and "
+                f"{len(hierarchy.triangles[0])} triangles for a mesh of {len(data.vertices)} and {len(data.triangles)}"
+            )
+        if level >= len(hierarchy):
+            raise ValueError(f"level must be < len(hierarchy) = {len(hierarchy)}, got {level}")
+        if not np.array_equal(hierarchy.vertices, data.vertices):
+            # same connectivity, new positions: the coarse levels take their positions from this mesh
+            hierarchy = MeshHierarchy(
+                data.vertices, hierarchy.triangles, hierarchy.representatives, hierarchy.parents,
+                hierarchy.removed, hierarchy.targets, hierarchy.ring_offsets, hierarchy.rings,
+                hierarchy.independent, hierarchy.method, hierarchy.mesh_kind, hierarchy.tensor_format,
+            )
+    positions = multiresolution_fairing_arrays(
+        hierarchy, level, number_of_iterations=number_of_iterations, method=method, progress=bool(progress)
+    )
+    return new_mesh(data, positions)

@@ -1,0 +1,220 @@
+"""A :class:`MeshHierarchy` from fast-simplification's QEM edge collapses.
+
+``fast_simplification.simplify(..., return_collapses=True)`` decimates once to
+the coarsest level and returns its collapse sequence; each level is the
+``replay_simplification`` of a prefix of that sequence, whose vertex mapping
+(unlike the raw list) also accounts for the vertices it merges afterwards.
+Both functions keep module-global state in the extension, so every call goes
+through one lock.
+"""
+
+from __future__ import annotations
+
+import threading
+from typing import Any, Sequence
+
+import numpy as np
+
+from .._validate import as_count
+from ..topology import adjacency_matrix, unique_edges
+from .hierarchy import MeshHierarchy, _tensor_format, read_manifold_mesh
+
+__all__ = ["from_fast_simplification"]
+
+_LOCK = threading.Lock()
+
+
+def _level_counts(levels: Any, n: int, min_vertices: int) -> np.ndarray:
+    if isinstance(levels, (bool, np.bool_)):
+        raise TypeError(f"levels must be an integer or a sequence of vertex counts, got {levels!r}")
+    if isinstance(levels, (int, np.integer)):
+        count = as_count(levels, name="levels", minimum=1)
+        low = max(min(min_vertices, n - 1), 4)
+        ratios = (low / n) ** (np.arange(1, count + 1) / count)
+        counts = np.round(n * ratios).astype(np.int64)
+    else:
+        try:
+            counts = np.asarray(levels)
+        except Exception as error:  # ragged input
+            raise TypeError(f"levels must be an integer or a sequence of vertex counts, got {levels!r}") from error
+        if counts.ndim != 1 or counts.size == 0 or not np.issubdtype(counts.dtype, np.integer):
+            raise TypeError(f"levels must be an integer or a sequence of integer vertex counts, got {levels!r}")
+        counts = counts.astype(np.int64)
+        if np.any(counts < 4) or np.any(counts >= n) or np.any(np.diff(counts) >= 0):
+            raise ValueError(
+                f"levels must be strictly decreasing vertex counts in [4, {n}), got {counts.tolist()}"
+            )
+    counts = counts[np.r_[True, np.diff(counts) < 0]]
+    return counts
+
+
+def from_fast_simplification(
+    mesh: Any,
+    *,
+    levels: int | Sequence[int] = 8,
+    min_vertices: int = 100,
+    agg: float = 7.0,
+    progress: bool = False,
+) -> MeshHierarchy:
+    """Build a :class:`MeshHierarchy` from fast-simplification's quadric-error collapses.
+
+    The same structure as :func:`build_hierarchy` (level meshes at input
+    positions, fine-to-coarse maps, collapse records, :meth:`~MeshHierarchy.refine`),
+    so that multiresolution fairing can run on either. The QEM collapses are
+    neither independent nor checked for topology: a level's removed vertices
+    may be adjacent (refinement then solves for them together) and, unlike
+    :func:`build_hierarchy`, a level may change the topology.
+
+    Parameters
+    ----------
+    mesh : open3d.geometry.TriangleMesh, open3d.t.geometry.TriangleMesh or (vertices, triangles)
+        Manifold mesh without unreferenced vertices; not modified.
+    levels : int or sequence of int, keyword-only
+        Number of levels below the input, at geometrically decreasing vertex
+        counts down to ``min_vertices``; or the strictly decreasing target
+        vertex counts themselves (e.g. those of a :func:`build_hierarchy`).
+    min_vertices : int, keyword-only
+        Coarsest vertex count when ``levels`` is an integer.
+    agg : float, keyword-only
+        fast-simplification's aggressiveness.
+    progress : bool, keyword-only
+        Show a tqdm bar over the levels.
+
+    Returns
+    -------
+    MeshHierarchy
+        ``method == "fast_simplification"``. A level whose target cannot be
+        reached (fast-simplification stopped early) is left out.
+
+    Examples
+    --------
+    >>> import open3d as o3d
+    >>> sphere = o3d.geometry.TriangleMesh.create_sphere(resolution=20)
+    >>> h = from_fast_simplification(sphere, levels=[400, 200, 100])
+    >>> [h.vertex_count(i) for i in range(len(h))]
+    [762, 400, 200, 100]
+    """
+    import fast_simplification
+
+    min_vertices = as_count(min_vertices, name="min_vertices", minimum=4)
+    if isinstance(agg, (bool, np.bool_)) or not isinstance(agg, (int, float, np.floating, np.integer)):
+        raise TypeError(f"agg must be a number, got {agg!r}")
+    if not np.isfinite(agg) or agg < 0:
+        raise ValueError(f"agg must be non-negative and finite, got {agg}")
+    if not isinstance(progress, (bool, np.bool_)):
+        raise TypeError(f"progress must be a bool, got {type(progress).__name__}")
+    data = read_manifold_mesh(mesh)
+    V, F = data.vertices, data.triangles
+    n0, m0 = len(V), len(F)
+    counts = _level_counts(levels, n0, min_vertices)
+
+    target_triangles = max(int(m0 * counts[-1] / n0 * 0.95), 4)
+    points32 = V.astype(np.float32)
+    with _LOCK:
+        _, _, collapses = fast_simplification.simplify(
+            V, F.astype(np.int32), target_count=target_triangles, agg=float(agg), return_collapses=True
+        )
+        collapses = np.asarray(collapses, dtype=np.int32).reshape(-1, 2)
+        mappings = []
+        iterator = counts
+        if progress:
+            from tqdm.auto import tqdm
+
+            iterator = tqdm(counts, desc="fast-simplification levels")
+        for count in iterator:
+            prefix = min(n0 - int(count), len(collapses))
+            if prefix <= 0:
+                continue
+            _, _, mapping = fast_simplification.replay_simplification(points32, F, collapses[:prefix])
+            mappings.append((prefix, np.asarray(mapping, dtype=np.int64)))
+
+    tris = [F]
+    reps = [np.arange(n0, dtype=np.int64)]
+    empty = np.zeros(0, dtype=np.int64)
+    parents, removed, targets, offsets, rings = [empty], [empty], [empty], [np.zeros(1, dtype=np.int64)], [empty]
+    for prefix, mapping in mappings:
+        n_prev = len(reps[-1])
+        # nesting by construction: a level-(i-1) vertex goes where its input representative goes
+        raw_parent = mapping[reps[-1]]
+        used = np.zeros(int(raw_parent.max()) + 1, dtype=bool)
+        used[raw_parent] = True
+        compact = np.cumsum(used) - 1
+        parent = compact[raw_parent]
+        n_new = int(parent.max()) + 1
+        if n_new >= n_prev:
+            continue
+        # the kept child of each level-i vertex: one never collapsed in this prefix, else the first
+        collapsed = np.zeros(n0, dtype=bool)
+        collapsed[collapses[:prefix, 1]] = True
+        root = ~collapsed[reps[-1]]
+        child = np.arange(n_prev)
+        order = np.lexsort((child, ~root, parent))
+        first = np.ones(n_prev, dtype=bool)
+        first[1:] = parent[order[1:]] != parent[order[:-1]]
+        kept_child = np.empty(n_new, dtype=np.int64)
+        kept_child[parent[order[first]]] = order[first]
+        keep = np.zeros(n_prev, dtype=bool)
+        keep[kept_child] = True
+        # renumber level i in the order of its kept children, like the volume hierarchy
+        renumber = np.empty(n_new, dtype=np.int64)
+        renumber[parent[np.flatnonzero(keep)]] = np.arange(n_new)
+        parent = renumber[parent]
+        gone = np.flatnonzero(~keep)
+        mapped = parent[tris[-1]]
+        alive = (mapped[:, 0] != mapped[:, 1]) & (mapped[:, 1] != mapped[:, 2]) & (mapped[:, 2] != mapped[:, 0])
+        mapped = _drop_nonmanifold(_drop_duplicate_triangles(mapped[alive], n_new), n_new)
+        adjacency = adjacency_matrix(tris[-1], n_prev)
+        ring_offsets = np.r_[0, np.cumsum(np.diff(adjacency.indptr)[gone])].astype(np.int64)
+        ring = _csr_rows(adjacency, gone)
+        tris.append(mapped)
+        reps.append(reps[-1][keep])
+        parents.append(parent)
+        removed.append(gone)
+        targets.append(np.flatnonzero(keep)[parent[gone]])
+        offsets.append(ring_offsets)
+        rings.append(ring)
+    return MeshHierarchy(
+        V, tuple(tris), tuple(reps), tuple(parents), tuple(removed), tuple(targets), tuple(offsets),
+        tuple(rings), False, "fast_simplification", data.kind, _tensor_format(data),
+    )
+
+
+def _csr_rows(matrix, rows: np.ndarray) -> np.ndarray:
+    starts = matrix.indptr[rows]
+    counts = matrix.indptr[rows + 1] - starts
+    offsets = np.cumsum(counts) - counts
+    index = np.arange(int(counts.sum()), dtype=np.int64) + np.repeat(starts - offsets, counts)
+    return matrix.indices[index].astype(np.int64)
+
+
+def _drop_duplicate_triangles(triangles: np.ndarray, n: int) -> np.ndarray:
+    """Keep the first of triangles over the same three vertices (sort-and-mask)."""
+    if len(triangles) == 0:
+        return triangles.astype(np.int64)
+    s = np.sort(triangles, axis=1)
+    keys = (s[:, 0] * np.int64(n) + s[:, 1]) * np.int64(n) + s[:, 2]
+    order = np.argsort(keys, kind="stable")
+    first = np.ones(len(keys), dtype=bool)
+    first[1:] = keys[order[1:]] != keys[order[:-1]]
+    return np.ascontiguousarray(triangles[np.sort(order[first])], dtype=np.int64)
+
+
+def _drop_nonmanifold(triangles: np.ndarray, n: int) -> np.ndarray:
+    """Drop every triangle beyond the first two on an edge, so that the level stays edge-manifold.
+
+    QEM collapses do not check the link condition and can fold three
+    triangles onto one edge; constrained fairing needs an edge-manifold mesh.
+    """
+    edges, counts, inverse = unique_edges(triangles, n)
+    if not np.any(counts > 2):
+        return triangles
+    m = len(triangles)
+    tri = np.tile(np.arange(m), 3)
+    order = np.lexsort((tri, inverse))
+    grouped = inverse[order]
+    start = np.ones(len(order), dtype=bool)
+    start[1:] = grouped[1:] != grouped[:-1]
+    position = np.arange(len(order)) - np.maximum.accumulate(np.where(start, np.arange(len(order)), 0))
+    drop = np.zeros(m, dtype=bool)
+    drop[tri[order[position >= 2]]] = True
+    return np.ascontiguousarray(triangles[~drop])

@@ -1,0 +1,393 @@
+"""The mesh hierarchy of Liu et al. 2001 (section 4): levels, fine-to-coarse maps, vertex splits.
+
+A :class:`MeshHierarchy` holds plain numpy arrays only (it pickles, and its
+arrays are read-only, so concurrent reads are safe). Level ``0`` is the input;
+level ``i`` is level ``i - 1`` after one batch of half-edge collapses, so every
+vertex of level ``i`` is a vertex of the input and sits at its input position.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+
+from .._o3d import MeshData, new_mesh, read_mesh
+from .._validate import as_count, as_positions, as_positive_float
+from ..topology import adjacency_matrix, boundary_halfedges, check_manifold
+from .collapse import collapse_level
+
+__all__ = ["MeshHierarchy", "build_hierarchy", "build_hierarchy_arrays", "read_manifold_mesh"]
+
+
+def _frozen(array: np.ndarray) -> np.ndarray:
+    array = np.ascontiguousarray(array)
+    array.flags.writeable = False
+    return array
+
+
+@dataclass(frozen=True, eq=False)
+class MeshHierarchy:
+    """Levels ``M_0, M_1, ..., M_L`` of decreasing size with the collapses between them.
+
+    Build it with :func:`build_hierarchy` (volume-cost collapses) or
+    :func:`~o3d_lsmesh.hierarchy.from_fast_simplification` (QEM collapses).
+
+    Attributes
+    ----------
+    vertices : (n_0, 3) float64
+        Input positions.
+    triangles : tuple of (m_i, 3) int64
+        Triangles of each level, in that level's vertex indices.
+    representatives : tuple of (n_i,) int64
+        Input index of every vertex of each level (level 0: ``arange(n_0)``).
+    parents : tuple of (n_{i-1},) int64
+        ``parents[i]`` maps level ``i - 1`` vertices to level ``i`` (``parents[0]`` is empty).
+    removed, targets : tuple of (r_i,) int64
+        Level-``i - 1`` indices of the vertices removed at level ``i`` and of the
+        vertex each was merged into (empty for level 0).
+    ring_offsets, rings : tuple of int64 arrays
+        CSR 1-ring (level ``i - 1`` indices) of each removed vertex.
+    independent : bool
+        Whether every level's removed vertices are pairwise non-adjacent (true for
+        :func:`build_hierarchy`); :meth:`refine` then splits them in closed form.
+    method : str
+        ``"volume"`` or ``"fast_simplification"``.
+    mesh_kind : str
+        Kind of mesh :meth:`level` returns: ``"legacy"``, ``"tensor"`` or ``"arrays"``.
+    tensor_format : tuple of str
+        ``(device, position dtype, index dtype)`` of a tensor input, else empty.
+    """
+
+    vertices: np.ndarray
+    triangles: tuple
+    representatives: tuple
+    parents: tuple
+    removed: tuple
+    targets: tuple
+    ring_offsets: tuple
+    rings: tuple
+    independent: bool
+    method: str
+    mesh_kind: str
+    tensor_format: tuple = ()
+
+    def __post_init__(self) -> None:
+        freeze = lambda seq: tuple(_frozen(a) for a in seq)  # noqa: E731
+        object.__setattr__(self, "vertices", _frozen(self.vertices))
+        for name in ("triangles", "representatives", "parents", "removed", "targets", "ring_offsets", "rings"):
+            object.__setattr__(self, name, freeze(getattr(self, name)))
+
+    # ------------------------------------------------------------------ queries
+    def __len__(self) -> int:
+        return len(self.triangles)
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, MeshHierarchy):
+            return NotImplemented
+        for f in fields(self):
+            a, b = getattr(self, f.name), getattr(other, f.name)
+            if isinstance(a, np.ndarray):
+                if not np.array_equal(a, b):
+                    return False
+            elif isinstance(a, tuple) and a and isinstance(a[0], np.ndarray):
+                if len(a) != len(b) or not all(np.array_equal(x, y) for x, y in zip(a, b)):
+                    return False
+            elif a != b:
+                return False
+        return True
+
+    __hash__ = None  # type: ignore[assignment]
+
+    def _check_level(self, i: Any, *, minimum: int = 0, name: str = "i") -> int:
+        return as_count(i, name=name, minimum=minimum, maximum=len(self) - 1)
+
+    def vertex_count(self, i: int) -> int:
+        """Number of vertices of level ``i``."""
+        return len(self.representatives[self._check_level(i)])
+
+    def level_arrays(self, i: int) -> tuple[np.ndarray, np.ndarray]:
+        """``(vertices (n_i, 3) float64, triangles (m_i, 3) int64)`` of level ``i`` (copies)."""
+        i = self._check_level(i)
+        return self.vertices[self.representatives[i]], self.triangles[i].copy()
+
+    def level(self, i: int) -> Any:
+        """Level ``i`` as a mesh of the input's kind; positions are the input positions of its vertices.
+
+        Examples
+        --------
+        >>> import open3d as o3d
+        >>> h = build_hierarchy(o3d.geometry.TriangleMesh.create_sphere(resolution=10), min_vertices=20)
+        >>> len(h.level(1).vertices) == h.vertex_count(1)
+        True
+        """
+        vertices, triangles = self.level_arrays(i)
+        return new_mesh(self._template(), vertices, triangles)
+
+    def vertex_map(self, i: int) -> np.ndarray:
+        """``(n_0,) int64``: the level-``i`` vertex that represents each input vertex."""
+        i = self._check_level(i)
+        mapping = np.arange(len(self.vertices), dtype=np.int64)
+        for j in range(1, i + 1):
+            mapping = self.parents[j][mapping]
+        return mapping
+
+    def collapses(self, i: int) -> dict[str, np.ndarray]:
+        """Collapse records of level ``i >= 1`` in level ``i - 1`` indices.
+
+        Returns a dict with ``removed (r,)``, ``targets (r,)``, ``ring_offsets (r + 1,)``
+        and ``ring`` (the 1-ring of ``removed[j]`` is ``ring[ring_offsets[j]:ring_offsets[j + 1]]``).
+        """
+        i = self._check_level(i, minimum=1)
+        return {
+            "removed": self.removed[i],
+            "targets": self.targets[i],
+            "ring_offsets": self.ring_offsets[i],
+            "ring": self.rings[i],
+        }
+
+    # --------------------------------------------------------------- refinement
+    def refine(self, i: int, positions: Any) -> np.ndarray:
+        """Split the vertices removed at level ``i`` back in: positions of level ``i - 1``.
+
+        Vertices kept from level ``i`` keep their positions exactly. Each split
+        vertex is first put at the average of its 1-ring at level ``i - 1``
+        (for an independent set the 1-ring holds kept vertices only; otherwise
+        the split vertices solve these averages together, a discrete harmonic
+        fill), then moved once by Kobbelt's step (section 4.2)::
+
+            x <- x - U^2(x) / nu,   nu = 1 + (1/n_i) sum_j 1/n_ij,
+
+        with the uniform umbrella ``U(x) = mean of neighbours - x`` of level
+        ``i - 1``. ``U^2`` is evaluated with all level ``i - 1`` positions after
+        the averaging and every split vertex moves at once (a Jacobi step, so
+        the result does not depend on an order). Split vertices on the
+        boundary use the boundary curve instead: their two boundary
+        neighbours, for both the average and ``U`` (so ``nu = 3/2``), which keeps
+        an open boundary from being pulled inwards.
+
+        Parameters
+        ----------
+        i : int
+            Level to refine from, ``1 <= i < len(self)``.
+        positions : (n_i, 3) array-like of float
+            Positions of level ``i``'s vertices.
+
+        Returns
+        -------
+        (n_{i-1}, 3) float64 ndarray
+        """
+        i = self._check_level(i, minimum=1)
+        positions = as_positions(positions, len(self.representatives[i]), name="positions")
+        parent = self.parents[i]
+        removed = self.removed[i]
+        out = positions[parent]
+        if len(removed) == 0:
+            return out
+        triangles = self.triangles[i - 1]
+        n = len(parent)
+        weights = _umbrella_weights(triangles, n)
+        kept = np.ones(n, dtype=bool)
+        kept[removed] = False
+        if self.independent:
+            out[removed] = weights[removed] @ out
+        else:
+            out[removed] = _harmonic_fill(weights, out, removed, kept)
+        umbrella = weights @ out - out
+        second = weights @ umbrella - umbrella
+        nu = 1.0 + np.asarray(weights.multiply(weights.T).sum(axis=1)).ravel()
+        out[removed] -= second[removed] / nu[removed, None]
+        return out
+
+    # ---------------------------------------------------------------- internals
+    def _template(self) -> MeshData:
+        """A stand-in for the input mesh so that :func:`new_mesh` builds the input's kind."""
+        empty_v, empty_t = np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)
+        if self.mesh_kind == "arrays":
+            return MeshData(empty_v, empty_t, None, "arrays")
+        from .._o3d import open3d
+
+        o3d = open3d()
+        if self.mesh_kind == "legacy":
+            return MeshData(empty_v, empty_t, o3d.geometry.TriangleMesh(), "legacy")
+        device, position_dtype, index_dtype = self.tensor_format
+        source = o3d.t.geometry.TriangleMesh(o3d.core.Device(device))
+        source.vertex.positions = o3d.core.Tensor(
+            np.zeros((0, 3)), dtype=getattr(o3d.core, position_dtype.lower()), device=o3d.core.Device(device)
+        )
+        source.triangle.indices = o3d.core.Tensor(
+            np.zeros((0, 3), dtype=np.int64), dtype=getattr(o3d.core, index_dtype.lower()), device=o3d.core.Device(device)
+        )
+        return MeshData(empty_v, empty_t, source, "tensor")
+
+
+def _umbrella_weights(triangles: np.ndarray, n: int) -> sp.csr_matrix:
+    """Row-stochastic ``W`` of the umbrella operator: 1-ring inside, the two boundary neighbours on a boundary."""
+    adjacency = adjacency_matrix(triangles, n)
+    boundary = boundary_halfedges(triangles, n)
+    if len(boundary):
+        on_boundary = np.zeros(n, dtype=bool)
+        on_boundary[boundary.ravel()] = True
+        curve = sp.csr_matrix(
+            (np.ones(2 * len(boundary)), (np.r_[boundary[:, 0], boundary[:, 1]], np.r_[boundary[:, 1], boundary[:, 0]])),
+            shape=(n, n),
+        )
+        inside = sp.diags((~on_boundary).astype(np.float64))
+        adjacency = (inside @ adjacency + sp.diags(on_boundary.astype(np.float64)) @ curve).tocsr()
+    degree = np.asarray(adjacency.sum(axis=1)).ravel()
+    inverse = np.divide(1.0, degree, out=np.zeros(n), where=degree > 0)
+    return (sp.diags(inverse) @ adjacency).tocsr()
+
+
+def _harmonic_fill(weights: sp.csr_matrix, out: np.ndarray, removed: np.ndarray, kept: np.ndarray) -> np.ndarray:
+    """Positions of ``removed`` that equal the ``weights`` average of their neighbours, kept vertices fixed."""
+    import scipy.sparse.linalg as spla
+
+    w_rr = weights[removed][:, removed]
+    w_rk = weights[removed][:, np.flatnonzero(kept)]
+    # a vertex whose neighbours are all split too and never reach a kept one
+    # would make the system singular: tie it weakly to its placeholder position
+    system = (sp.identity(len(removed)) * (1.0 + 1e-9) - w_rr).tocsc()
+    rhs = w_rk @ out[kept] + 1e-9 * out[removed]
+    solution = spla.spsolve(system, rhs)
+    return np.asarray(solution).reshape(len(removed), 3)
+
+
+def read_manifold_mesh(mesh: Any) -> MeshData:
+    """Read ``mesh`` for a hierarchy: no unreferenced vertices, edge- and vertex-manifold."""
+    data = read_mesh(mesh, name="mesh", allow_isolated=False)
+    check_manifold(data.triangles, len(data.vertices), name="mesh")
+    return data
+
+
+def _tensor_format(data: MeshData) -> tuple:
+    if data.kind != "tensor":
+        return ()
+    src = data.source
+    index_dtype = str(src.triangle.indices.dtype) if "indices" in src.triangle else "Int64"
+    return (str(src.vertex.positions.device), str(src.vertex.positions.dtype), index_dtype)
+
+
+def build_hierarchy_arrays(
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    *,
+    alpha: float = 1.0,
+    beta: float = 0.01,
+    min_vertices: int = 100,
+    max_levels: int | None = None,
+    progress: bool = False,
+    mesh_kind: str = "arrays",
+    tensor_format: tuple = (),
+) -> MeshHierarchy:
+    """Array core of :func:`build_hierarchy` (inputs already validated as a manifold mesh)."""
+    vertices = np.asarray(vertices, dtype=np.float64)
+    triangles = np.asarray(triangles, dtype=np.int64)
+    n0 = len(vertices)
+    tris = [triangles]
+    reps = [np.arange(n0, dtype=np.int64)]
+    empty = np.zeros(0, dtype=np.int64)
+    parents, removed, targets, offsets, rings = [empty], [empty], [empty], [np.zeros(1, dtype=np.int64)], [empty]
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=max(n0 - min_vertices, 0), desc="mesh hierarchy", unit="vertex")
+    positions = vertices
+    while (max_levels is None or len(tris) - 1 < max_levels) and len(positions) > min_vertices:
+        level = collapse_level(
+            positions, tris[-1], alpha=alpha, beta=beta, max_removals=len(positions) - min_vertices
+        )
+        if level is None:
+            break
+        keep = np.ones(len(positions), dtype=bool)
+        keep[level.removed] = False
+        reps.append(reps[-1][keep])
+        positions = vertices[reps[-1]]
+        tris.append(level.triangles)
+        parents.append(level.parent)
+        removed.append(level.removed)
+        targets.append(level.targets)
+        offsets.append(level.ring_offsets)
+        rings.append(level.ring)
+        if bar is not None:
+            bar.update(len(level.removed))
+    if bar is not None:
+        bar.close()
+    return MeshHierarchy(
+        vertices, tuple(tris), tuple(reps), tuple(parents), tuple(removed), tuple(targets), tuple(offsets),
+        tuple(rings), True, "volume", mesh_kind, tensor_format,
+    )
+
+
+def build_hierarchy(
+    mesh: Any,
+    *,
+    alpha: float = 1.0,
+    beta: float = 0.01,
+    min_vertices: int = 100,
+    max_levels: int | None = None,
+    progress: bool = False,
+) -> MeshHierarchy:
+    """Build the multiresolution hierarchy of Liu et al. 2001, section 4.1, by volume-cost half-edge collapses.
+
+    Each level removes an independent set of vertices, taken in increasing
+    ``cost(x) = alpha * min_edge(x) + beta * max_edge(x)``; each is merged into
+    the 1-ring neighbour ``x_k`` of least cone volume
+    ``|sum_j (x_j - x_k) x (x_{j+1} - x_k) . (x - x_k)|``. Only collapses that
+    pass the link condition, keep boundary vertices on the boundary, and
+    neither flip nor degenerate a triangle are made, so every level is a
+    manifold mesh with the input's Euler characteristic and boundary loops.
+    See :mod:`o3d_lsmesh.hierarchy.collapse` for the independence used.
+
+    Parameters
+    ----------
+    mesh : open3d.geometry.TriangleMesh, open3d.t.geometry.TriangleMesh or (vertices, triangles)
+        Manifold mesh without unreferenced vertices; not modified.
+    alpha, beta : float, keyword-only
+        Non-negative weights of the shortest and longest incident edge in the cost.
+    min_vertices : int, keyword-only
+        Stop when a level has this many vertices (or fewer cannot be reached).
+    max_levels : int, optional, keyword-only
+        Stop after this many levels below the input.
+    progress : bool, keyword-only
+        Show a tqdm bar.
+
+    Returns
+    -------
+    MeshHierarchy
+        Level 0 is the input; it stops when no valid collapse remains.
+
+    Raises
+    ------
+    TypeError
+        ``mesh`` is not a mesh, or an option has the wrong type.
+    ValueError
+        Non-manifold mesh, unreferenced vertices, negative options.
+
+    Examples
+    --------
+    >>> import open3d as o3d
+    >>> sphere = o3d.geometry.TriangleMesh.create_sphere(resolution=20)
+    >>> h = build_hierarchy(sphere, min_vertices=50)
+    >>> h.vertex_count(0), h.vertex_count(len(h) - 1) >= 50
+    (762, True)
+    >>> coarse = h.level(len(h) - 1)
+    >>> fine = h.refine(1, h.level_arrays(1)[0])
+    >>> fine.shape
+    (762, 3)
+    """
+    alpha = as_positive_float(alpha, name="alpha", allow_zero=True)
+    beta = as_positive_float(beta, name="beta", allow_zero=True)
+    min_vertices = as_count(min_vertices, name="min_vertices")
+    if max_levels is not None:
+        max_levels = as_count(max_levels, name="max_levels")
+    if not isinstance(progress, (bool, np.bool_)):
+        raise TypeError(f"progress must be a bool, got {type(progress).__name__}")
+    data = read_manifold_mesh(mesh)
+    return build_hierarchy_arrays(
+        data.vertices, data.triangles, alpha=alpha, beta=beta, min_vertices=min_vertices,
+        max_levels=max_levels, progress=bool(progress), mesh_kind=data.kind, tensor_format=_tensor_format(data),
+    )

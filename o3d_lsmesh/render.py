@@ -1,0 +1,399 @@
+"""Pictures of meshes side by side, drawn headless on the CPU.
+
+:func:`render` lays several meshes out in a row under one orthographic camera
+(so equal sizes look equal) and draws them with Open3D's Filament
+``OffscreenRenderer``. On a machine without a GPU, Filament runs on Mesa's
+software Vulkan driver (llvmpipe): Debian's ``libvulkan1`` and
+``mesa-vulkan-drivers`` are all it needs, no X server, no environment variable.
+
+Two facts about ``OffscreenRenderer`` in open3d 0.20 shape this module
+(both measured here):
+
+* a second ``OffscreenRenderer`` in the same process hangs in its first
+  ``render_to_image`` (100% CPU, never returns), even after the first one was
+  deleted; and Filament prints its start-up banner on the process's stdout,
+  which would corrupt ``o3d-lsmesh --json`` output.
+
+  So every Filament picture is drawn in a short-lived child process
+  (about 1-3 s of start-up), which also means a driver crash cannot take the
+  caller down.
+* with post-processing (tone mapping, SSAO, anti-aliasing) on, llvmpipe is
+  several times slower; it is switched off.
+
+``backend="raycast"`` draws the same layout with Open3D's Embree
+``RaycastingScene`` in-process (Lambert shading, no shadows): it needs no
+graphics driver at all, and ``backend="auto"`` falls back to it, with a
+warning, when Filament cannot start.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import warnings
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from ._errors import O3DLSMeshWarning
+from ._o3d import open3d, read_mesh
+from ._validate import as_choice, as_count, as_positive_float
+
+__all__ = ["render", "error_colors", "VIRIDIS"]
+
+#: matplotlib's viridis sampled at 11 points, interpolated linearly (no matplotlib needed).
+VIRIDIS = np.array(
+    [
+        [0.267, 0.005, 0.329], [0.283, 0.141, 0.458], [0.254, 0.265, 0.530], [0.207, 0.372, 0.553],
+        [0.164, 0.471, 0.558], [0.128, 0.567, 0.551], [0.135, 0.659, 0.518], [0.267, 0.749, 0.441],
+        [0.478, 0.821, 0.318], [0.741, 0.873, 0.150], [0.993, 0.906, 0.144],
+    ]
+)
+
+_DEFAULT_COLOR = (0.72, 0.74, 0.78)
+_BACKENDS = ("auto", "filament", "raycast")
+
+
+def error_colors(values: np.ndarray, vmax: float) -> np.ndarray:
+    """Map ``values (n,) >= 0`` to viridis colors ``(n, 3)`` on the scale ``[0, vmax]`` (clipped)."""
+    t = np.clip(np.asarray(values, dtype=np.float64) / max(float(vmax), 1e-300), 0.0, 1.0)
+    grid = np.linspace(0.0, 1.0, len(VIRIDIS))
+    return np.stack([np.interp(t, grid, VIRIDIS[:, c]) for c in range(3)], axis=1)
+
+
+def _vertex_colors(mesh: Any) -> np.ndarray | None:
+    if isinstance(mesh, tuple):
+        return None
+    o3d = open3d()
+    if isinstance(mesh, o3d.geometry.TriangleMesh):
+        return np.asarray(mesh.vertex_colors, dtype=np.float64).copy() if mesh.has_vertex_colors() else None
+    if "colors" in mesh.vertex:
+        return mesh.vertex.colors.cpu().numpy().astype(np.float64).reshape(-1, 3)
+    return None
+
+
+def _distances_to_surface(points: np.ndarray, vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    o3d = open3d()
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(
+        o3d.core.Tensor(vertices.astype(np.float32)), o3d.core.Tensor(triangles.astype(np.uint32))
+    )
+    return scene.compute_distance(o3d.core.Tensor(points.astype(np.float32))).numpy().astype(np.float64)
+
+
+def _unit(vector: Any, *, name: str) -> np.ndarray:
+    v = np.asarray(vector, dtype=np.float64)
+    if v.shape != (3,) or not np.isfinite(v).all() or np.linalg.norm(v) == 0:
+        raise ValueError(f"{name} must be a non-zero finite 3-vector, got {vector!r}")
+    return v / np.linalg.norm(v)
+
+
+def _layout(arrays, view_direction, up, width, height, margin, align):
+    """Offset each mesh into its own panel along the camera's right axis; return the scene and camera.
+
+    ``align="common"``: one center for all meshes (of their joint bounding
+    box), so a point lands on the same pixel of every panel and the panels
+    differ exactly where the meshes do. ``align="each"``: every mesh centered
+    by its own bounding box.
+    """
+    back = _unit(view_direction, name="view_direction")
+    up = _unit(up, name="up")
+    right = np.cross(up, back)
+    if np.linalg.norm(right) < 1e-9:
+        raise ValueError(f"up must not be parallel to view_direction, got up={up.tolist()}, view_direction={back.tolist()}")
+    right /= np.linalg.norm(right)
+    true_up = np.cross(back, right)
+    if align == "common":
+        low = np.min([v.min(axis=0) for v, _ in arrays], axis=0)
+        high = np.max([v.max(axis=0) for v, _ in arrays], axis=0)
+        centers = [0.5 * (low + high)] * len(arrays)
+    else:
+        centers = [0.5 * (v.min(axis=0) + v.max(axis=0)) for v, _ in arrays]
+    extents = np.array(
+        [np.abs((v - c) @ np.stack([right, true_up, back], axis=1)).max(axis=0) for (v, _), c in zip(arrays, centers)]
+    )
+    half = max(extents[:, 0].max(), extents[:, 1].max(), 1e-12) * (1.0 + margin)
+    # Panels keep the pixel aspect ratio so that nothing is stretched.
+    aspect = width / height
+    half_w, half_h = half * max(1.0, aspect), half * max(1.0, 1.0 / aspect)
+    count = len(arrays)
+    all_vertices, all_triangles, offset = [], [], 0
+    for k, ((vertices, triangles), center) in enumerate(zip(arrays, centers)):
+        shift = (2.0 * k - (count - 1)) * half_w * right
+        all_vertices.append(vertices - center + shift)
+        all_triangles.append(triangles + offset)
+        offset += len(vertices)
+    depth = max(extents[:, 2].max(), half) * 2.0 + 1.0
+    camera = {
+        "center": [0.0, 0.0, 0.0],
+        "eye": (back * depth).tolist(),
+        "up": true_up.tolist(),
+        "right": right.tolist(),
+        "back": back.tolist(),
+        "left": -count * half_w,
+        "right_edge": count * half_w,
+        "bottom": -half_h,
+        "top": half_h,
+        "near": 1e-3 * depth,
+        "far": 3.0 * depth,
+    }
+    return np.concatenate(all_vertices), np.concatenate(all_triangles), camera
+
+
+def _vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    corners = vertices[triangles]
+    face = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    # Area-weighted: the cross product's length is twice the triangle area.
+    corner_of = triangles.ravel()
+    face3 = np.repeat(face, 3, axis=0)
+    normals = np.stack([np.bincount(corner_of, weights=face3[:, c], minlength=len(vertices)) for c in range(3)], axis=1)
+    length = np.linalg.norm(normals, axis=1, keepdims=True)
+    return normals / np.where(length > 0, length, 1.0)
+
+
+def _raycast(vertices, triangles, colors, camera, width, height, background) -> np.ndarray:
+    o3d = open3d()
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.core.Tensor(vertices.astype(np.float32)), o3d.core.Tensor(triangles.astype(np.uint32)))
+    right, up, back = (np.array(camera[k]) for k in ("right", "up", "back"))
+    xs = camera["left"] + (np.arange(width) + 0.5) / width * (camera["right_edge"] - camera["left"])
+    ys = camera["top"] - (np.arange(height) + 0.5) / height * (camera["top"] - camera["bottom"])
+    px, py = np.meshgrid(xs, ys)
+    origins = np.array(camera["eye"]) + px[..., None] * right + py[..., None] * up
+    rays = np.concatenate([origins, np.broadcast_to(-back, origins.shape)], axis=-1).astype(np.float32)
+    hit = scene.cast_rays(o3d.core.Tensor(rays))
+    t_hit = hit["t_hit"].numpy()
+    found = np.isfinite(t_hit)
+    ids = hit["primitive_ids"].numpy()[found].astype(np.int64)
+    uv = hit["primitive_uvs"].numpy()[found].astype(np.float64)
+    bary = np.stack([1.0 - uv[:, 0] - uv[:, 1], uv[:, 0], uv[:, 1]], axis=1)
+    corners = triangles[ids]
+    normals = _vertex_normals(vertices, triangles)
+    normal = np.einsum("pk,pkc->pc", bary, normals[corners])
+    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
+    color = np.einsum("pk,pkc->pc", bary, colors[corners])
+    light = back + 0.4 * up - 0.3 * right
+    light /= np.linalg.norm(light)
+    # abs(): the inside of an open mesh, seen through a hole, is lit rather than black.
+    shade = 0.25 + 0.75 * np.abs(normal @ light)
+    image = np.zeros((height, width, 3))
+    image[...] = background
+    image[found] = np.clip(color * shade[:, None], 0.0, 1.0)
+    return np.round(image * 255.0).astype(np.uint8)
+
+
+def _filament_worker(spec_path: str, image_path: str) -> None:
+    """Child-process entry point: draw the scene in ``spec_path`` (npz) and save the image to ``image_path`` (npy)."""
+    o3d = open3d()
+    o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
+    spec = np.load(spec_path)
+    camera = json.loads(str(spec["camera"]))
+    width, height = int(spec["size"][0]), int(spec["size"][1])
+    rendering = o3d.visualization.rendering
+    renderer = rendering.OffscreenRenderer(width, height)
+    view = renderer.scene.view
+    view.set_post_processing(False)
+    view.set_antialiasing(False)
+    view.set_ambient_occlusion(False)
+    view.set_shadowing(False)
+    background = spec["background"].astype(np.float32)
+    renderer.scene.set_background(np.append(background, 1.0))
+    mesh = o3d.geometry.TriangleMesh(
+        o3d.utility.Vector3dVector(spec["vertices"]), o3d.utility.Vector3iVector(spec["triangles"].astype(np.int32))
+    )
+    mesh.vertex_colors = o3d.utility.Vector3dVector(spec["colors"])
+    mesh.compute_vertex_normals()
+    material = rendering.MaterialRecord()
+    material.shader = "defaultLit"
+    renderer.scene.add_geometry("meshes", mesh, material)
+    right, up, back = (np.array(camera[k]) for k in ("right", "up", "back"))
+    # A sun from behind the viewer's upper left (the direction is the one the light travels),
+    # the same as the raycast backend's, plus the default image-based ambient light.
+    light = -(back + 0.4 * up - 0.3 * right)
+    renderer.scene.set_lighting(renderer.scene.LightingProfile.NO_SHADOWS, light / np.linalg.norm(light))
+    renderer.scene.scene.set_sun_light(light / np.linalg.norm(light), [1.0, 1.0, 1.0], 50000)
+    renderer.scene.scene.enable_sun_light(True)
+    renderer.scene.camera.set_projection(
+        rendering.Camera.Projection.Ortho,
+        camera["left"], camera["right_edge"], camera["bottom"], camera["top"], camera["near"], camera["far"],
+    )
+    renderer.scene.camera.look_at(camera["center"], camera["eye"], camera["up"])
+    image = np.asarray(renderer.render_to_image())[..., :3]
+    np.save(image_path, np.ascontiguousarray(image, dtype=np.uint8))
+
+
+def _filament(vertices, triangles, colors, camera, width, height, background, timeout) -> np.ndarray:
+    with tempfile.TemporaryDirectory(prefix="o3d_lsmesh_render_") as folder:
+        spec_path, image_path = os.path.join(folder, "spec.npz"), os.path.join(folder, "image.npy")
+        np.savez(
+            spec_path, vertices=vertices, triangles=triangles, colors=colors,
+            camera=json.dumps(camera), size=np.array([width, height]), background=np.asarray(background, dtype=np.float64),
+        )
+        package_parent = str(Path(__file__).resolve().parents[1])
+        env = dict(os.environ)
+        env["PYTHONPATH"] = package_parent + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+        code = "import sys; from o3d_lsmesh.render import _filament_worker; _filament_worker(sys.argv[1], sys.argv[2])"
+        try:
+            done = subprocess.run(
+                [sys.executable, "-c", code, spec_path, image_path],
+                stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, timeout=timeout, check=False,
+            )
+        except subprocess.TimeoutExpired as error:
+            raise RuntimeError(f"Filament OffscreenRenderer did not finish within timeout={timeout} s") from error
+        if done.returncode != 0 or not os.path.exists(image_path):
+            lines = [line for line in done.stderr.decode(errors="replace").splitlines() if line.strip()]
+            reason = lines[-1] if lines else f"exit code {done.returncode}"
+            raise RuntimeError(f"Filament OffscreenRenderer failed: {reason}")
+        return np.load(image_path)
+
+
+def _colorbar(image: np.ndarray, thickness: int) -> None:
+    strip = error_colors(np.linspace(0.0, 1.0, image.shape[1]), 1.0)
+    image[-thickness:] = np.round(strip * 255.0).astype(np.uint8)[None]
+
+
+def render(
+    meshes: Any,
+    path: str | os.PathLike | None = None,
+    *,
+    width: int = 480,
+    height: int = 480,
+    reference: Any = None,
+    error_max: float | None = None,
+    color: Sequence[float] = _DEFAULT_COLOR,
+    background: Sequence[float] = (1.0, 1.0, 1.0),
+    view_direction: Sequence[float] = (0.0, 0.0, 1.0),
+    up: Sequence[float] = (0.0, 1.0, 0.0),
+    margin: float = 0.05,
+    align: str = "common",
+    backend: str = "auto",
+    timeout: float = 180.0,
+) -> np.ndarray:
+    """Draw one or several meshes side by side and write the picture as a PNG.
+
+    Every mesh gets its own ``width x height`` panel, left to right, all under
+    one orthographic camera looking along ``-view_direction``, so equal sizes
+    look equal across panels. By default all meshes share one center, so the
+    panels of two versions of a surface differ exactly where the surfaces do.
+
+    Parameters
+    ----------
+    meshes : TriangleMesh, tensor TriangleMesh, (V, F) tuple, or a sequence of them
+    path : str or path-like, optional
+        PNG file to write; ``None`` only returns the image.
+    width, height : int
+        Size of one panel in pixels; the picture is ``(height, width * len(meshes))``.
+    reference : mesh, optional
+        Color every vertex by its distance to the surface of ``reference``
+        (viridis, dark = 0, yellow = ``error_max``), and add a color bar along
+        the bottom of the picture. Without it, a mesh's own vertex colors are
+        used, or else ``color``.
+    error_max : float, optional
+        Top of the error scale; defaults to the 99th percentile of the
+        distances over all meshes (noise outliers would otherwise wash it out).
+    color, background : RGB triples in [0, 1]
+    view_direction, up : 3-vectors
+        From the scene towards the camera, and the camera's up direction.
+    margin : float
+        Empty border around the largest mesh, as a fraction of its half size.
+    align : {"common", "each"}
+        ``"common"``: one center (of all meshes' joint bounding box) for every
+        panel, for comparing versions of one surface. ``"each"``: every mesh
+        centered by its own bounding box, for different objects.
+    backend : {"auto", "filament", "raycast"}
+        ``"filament"``: Open3D's ``OffscreenRenderer`` (CPU via Mesa's
+        llvmpipe Vulkan driver), in a child process; raises ``RuntimeError``
+        if it cannot render. ``"raycast"``: Open3D's ``RaycastingScene`` with
+        Lambert shading, in-process, needs no graphics driver. ``"auto"``:
+        Filament, falling back to raycasting with an ``O3DLSMeshWarning``.
+    timeout : float
+        Seconds to wait for the Filament child process.
+
+    Returns
+    -------
+    (height, width * len(meshes), 3) uint8 ndarray
+        The picture that was written.
+
+    Raises
+    ------
+    TypeError, ValueError
+        A mesh or option is invalid (message names the parameter).
+    RuntimeError
+        ``backend="filament"`` and the offscreen renderer failed or timed out.
+
+    Examples
+    --------
+    >>> import open3d as o3d
+    >>> sphere = o3d.geometry.TriangleMesh.create_sphere(resolution=20)
+    >>> box = o3d.geometry.TriangleMesh.create_box()
+    >>> image = render([sphere, box], None, width=64, height=64, backend="raycast")
+    >>> image.shape
+    (64, 128, 3)
+    """
+    if isinstance(meshes, (list, tuple)) and not (
+        isinstance(meshes, tuple) and len(meshes) == 2 and isinstance(meshes[0], np.ndarray)
+    ):
+        items = list(meshes)
+    else:
+        items = [meshes]
+    if not items:
+        raise ValueError("meshes must hold at least one mesh, got an empty sequence")
+    width = as_count(width, name="width", minimum=8, maximum=8192)
+    height = as_count(height, name="height", minimum=8, maximum=8192)
+    backend = as_choice(backend, _BACKENDS, name="backend")
+    align = as_choice(align, ("common", "each"), name="align")
+    margin = as_positive_float(margin, name="margin", allow_zero=True)
+    timeout = as_positive_float(timeout, name="timeout")
+    background = np.asarray(background, dtype=np.float64)
+    base_color = np.asarray(color, dtype=np.float64)
+    for name, value in (("background", background), ("color", base_color)):
+        if value.shape != (3,) or not np.isfinite(value).all() or value.min() < 0 or value.max() > 1:
+            raise ValueError(f"{name} must be an RGB triple in [0, 1], got {value.tolist()}")
+
+    datas = [read_mesh(mesh, name=f"meshes[{k}]") for k, mesh in enumerate(items)]
+    arrays = [(d.vertices, d.triangles) for d in datas]
+    if reference is not None:
+        ref = read_mesh(reference, name="reference")
+        distances = [_distances_to_surface(v, ref.vertices, ref.triangles) for v, _ in arrays]
+        if error_max is None:
+            error_max = float(np.percentile(np.concatenate(distances), 99.0))
+            if error_max <= 0:
+                error_max = 1.0
+        else:
+            error_max = as_positive_float(error_max, name="error_max")
+        colors = [error_colors(d, error_max) for d in distances]
+    else:
+        colors = []
+        for mesh, (vertices, _) in zip(items, arrays):
+            own = _vertex_colors(mesh)
+            colors.append(own if own is not None and len(own) == len(vertices) else np.tile(base_color, (len(vertices), 1)))
+
+    vertices, triangles, camera = _layout(arrays, view_direction, up, width, height, margin, align)
+    all_colors = np.concatenate(colors)
+    total_width = width * len(arrays)
+    image = None
+    if backend in ("auto", "filament"):
+        try:
+            image = _filament(vertices, triangles, all_colors, camera, total_width, height, background, timeout)
+        except RuntimeError as error:
+            if backend == "filament":
+                raise
+            warnings.warn(f"{error}; drawing with the RaycastingScene backend instead", O3DLSMeshWarning, stacklevel=2)
+    if image is None:
+        image = _raycast(vertices, triangles, all_colors, camera, total_width, height, background)
+    image = np.ascontiguousarray(image, dtype=np.uint8)
+    if reference is not None:
+        _colorbar(image, max(3, height // 40))
+    if path is not None:
+        path = os.fspath(path)
+        o3d = open3d()
+        folder = os.path.dirname(os.path.abspath(path))
+        if not os.path.isdir(folder):
+            raise ValueError(f"path must be in an existing folder, got {path!r}")
+        if not o3d.io.write_image(path, o3d.geometry.Image(image)):
+            raise ValueError(f"path must name a writable .png file, got {path!r}")
+    return image

@@ -1,0 +1,412 @@
+"""Mesh hierarchy (issue 4): sizes, independence, maps, refinement, topology of every level, pickling, errors."""
+
+from __future__ import annotations
+
+import pickle
+import threading
+
+import numpy as np
+import open3d as o3d
+import pytest
+
+from conftest import grid, load_mesh
+from o3d_lsmesh.hierarchy import build_hierarchy, from_fast_simplification
+from o3d_lsmesh.topology import (
+    adjacency_matrix,
+    boundary_halfedges,
+    boundary_loops,
+    euler_characteristic,
+    nonmanifold_edges,
+    nonmanifold_vertices,
+)
+
+
+def _noisy_sphere(resolution=16, seed=0):
+    sphere = o3d.geometry.TriangleMesh.create_sphere(radius=1.0, resolution=resolution)
+    V = np.asarray(sphere.vertices).copy()
+    V *= 1 + 0.02 * np.random.default_rng(seed).standard_normal((len(V), 1))
+    return V, np.asarray(sphere.triangles).astype(np.int64)
+
+
+@pytest.fixture(scope="module")
+def sphere_h():
+    V, F = _noisy_sphere()
+    return (V, F), build_hierarchy((V, F), min_vertices=30)
+
+
+@pytest.fixture(scope="module")
+def grid_h():
+    V, F = grid(14, 11, z=lambda x, y: 0.1 * np.sin(3 * x) * np.cos(2 * y))
+    return (V, F), build_hierarchy((V, F), min_vertices=20)
+
+
+def _triangle_set(F):
+    return {tuple(sorted(t)) for t in np.asarray(F).tolist()}
+
+
+# ------------------------------------------------------------------ structure
+
+
+@pytest.mark.parametrize("name", ["sphere_h", "grid_h"])
+def test_level_sizes_strictly_decrease_to_min_vertices(name, request):
+    _, h = request.getfixturevalue(name)
+    counts = [h.vertex_count(i) for i in range(len(h))]
+    assert len(h) > 5
+    assert all(a > b for a, b in zip(counts, counts[1:]))
+    assert counts[-1] >= (30 if name == "sphere_h" else 20)
+
+
+@pytest.mark.parametrize("name", ["sphere_h", "grid_h"])
+def test_removed_sets_are_independent_collapses(name, request):
+    _, h = request.getfixturevalue(name)
+    for i in range(1, len(h)):
+        rec = h.collapses(i)
+        removed, targets = rec["removed"], rec["targets"]
+        A = adjacency_matrix(h.triangles[i - 1], h.vertex_count(i - 1))
+        # no two removed vertices are neighbours ...
+        assert A[removed][:, removed].nnz == 0
+        # ... every target is a neighbour, and no other removed vertex neighbours a target (module docstring)
+        hits = A[removed][:, targets].tocoo()
+        assert np.all(hits.row == hits.col) and hits.nnz == len(removed)
+        # the recorded 1-ring is the adjacency row at level i - 1
+        for j in range(0, len(removed), 7):
+            ring = rec["ring"][rec["ring_offsets"][j]:rec["ring_offsets"][j + 1]]
+            row = A[removed[j]].indices
+            assert sorted(ring.tolist()) == sorted(row.tolist())
+            assert targets[j] in ring
+
+
+@pytest.mark.parametrize("name", ["sphere_h", "grid_h"])
+def test_vertex_maps_are_in_range_and_consistent_with_levels(name, request):
+    (V, F), h = request.getfixturevalue(name)
+    for i in range(len(h)):
+        vmap = h.vertex_map(i)
+        n_i = h.vertex_count(i)
+        assert vmap.shape == (len(V),) and vmap.min() == 0 and vmap.max() == n_i - 1
+        Vi, Fi = h.level_arrays(i)
+        # level positions are input positions, and each level vertex represents itself
+        assert np.array_equal(Vi, V[h.representatives[i]])
+        assert np.array_equal(vmap[h.representatives[i]], np.arange(n_i))
+        # the level's triangles are exactly the input triangles mapped down, minus collapsed ones
+        mapped = vmap[F]
+        keep = (mapped[:, 0] != mapped[:, 1]) & (mapped[:, 1] != mapped[:, 2]) & (mapped[:, 0] != mapped[:, 2])
+        assert _triangle_set(mapped[keep]) == _triangle_set(Fi)
+        assert len(_triangle_set(Fi)) == len(Fi)
+
+
+def test_target_is_the_cone_volume_minimum(sphere_h):
+    """Cone volume by the paper's ordered 1-ring formula (plain loop) against the enclosed-volume change."""
+    (V, F), h = sphere_h
+    rec = h.collapses(1)
+
+    def signed_volume(P, T):
+        return np.einsum("ij,ij->i", P[T[:, 0]], np.cross(P[T[:, 1]], P[T[:, 2]])).sum() / 6
+
+    def ordered_ring(x):
+        star = [t for t in F.tolist() if x in t]
+        nxt = {}
+        for t in star:
+            p = t.index(x)
+            nxt[t[(p + 1) % 3]] = t[(p + 2) % 3]
+        ring = [next(iter(nxt))]
+        while len(ring) < len(nxt):
+            ring.append(nxt[ring[-1]])
+        return ring
+
+    def cone(x, k, ring):
+        total = 0.0
+        for j in range(len(ring)):
+            a, b = V[ring[j]], V[ring[(j + 1) % len(ring)]]
+            total += np.dot(np.cross(a - V[k], b - V[k]), V[x] - V[k])
+        return abs(total)
+
+    before = signed_volume(V, F)
+    argmin_hits = 0
+    sample = rec["removed"][:40]
+    for x, k in zip(sample, rec["targets"][:40]):
+        ring = ordered_ring(x)
+        # one collapse alone changes the enclosed volume by exactly the cone volume / 6
+        parent = np.arange(len(V))
+        parent[x] = k
+        T = parent[F]
+        T = T[(T[:, 0] != T[:, 1]) & (T[:, 1] != T[:, 2]) & (T[:, 0] != T[:, 2])]
+        assert abs(signed_volume(V, T) - before) == pytest.approx(cone(x, k, ring) / 6, rel=1e-9, abs=1e-15)
+        argmin_hits += cone(x, k, ring) <= min(cone(x, j, ring) for j in ring) + 1e-15
+    # the unconstrained minimum is nearly always valid on a smooth sphere
+    assert argmin_hits >= 0.9 * len(sample)
+
+
+def test_cost_order_prefers_short_edges():
+    # a grid refined in one half: when only a few vertices may go, they come from the fine half
+    V, F = grid(21, 11)
+    V[:, 0] = np.where(V[:, 0] < 0.5, V[:, 0] * 0.3, 0.15 + (V[:, 0] - 0.5) * 1.7)
+    h = build_hierarchy((V, F), max_levels=1, min_vertices=len(V) - 15)
+    x = V[h.collapses(1)["removed"], 0]
+    assert len(x) == 15 and np.all(x <= 0.15 + 1e-12)  # 0.15: the seam column, also fine-spaced
+    # without the limit both halves lose vertices, the fine half a larger share of its vertices
+    h = build_hierarchy((V, F), max_levels=1, min_vertices=3)
+    x = V[h.collapses(1)["removed"], 0]
+    assert np.mean(x < 0.15) > 0.3
+
+
+# ----------------------------------------------------------------- refinement
+
+
+def _reference_refine(h, i, positions):
+    """Plain-loop version of MeshHierarchy.refine for an independent set."""
+    F = h.triangles[i - 1]
+    n = h.vertex_count(i - 1)
+    parent = h.parents[i]
+    out = np.asarray(positions, dtype=float)[parent].copy()
+    nbrs = [set() for _ in range(n)]
+    for a, b, c in F.tolist():
+        nbrs[a] |= {b, c}
+        nbrs[b] |= {a, c}
+        nbrs[c] |= {a, b}
+    bnd = [set() for _ in range(n)]
+    for a, b in boundary_halfedges(F, n).tolist():
+        bnd[a].add(b)
+        bnd[b].add(a)
+    ring = [sorted(bnd[v]) if bnd[v] else sorted(nbrs[v]) for v in range(n)]
+    removed = h.collapses(i)["removed"].tolist()
+    for x in removed:
+        out[x] = np.mean([out[j] for j in ring[x]], axis=0)
+    U = np.array([np.mean([out[j] for j in ring[v]], axis=0) - out[v] for v in range(n)])
+    result = out.copy()
+    for x in removed:
+        U2 = np.mean([U[j] for j in ring[x]], axis=0) - U[x]
+        nu = 1 + sum((1 / len(ring[j])) * (x in ring[j]) for j in ring[x]) / len(ring[x])
+        result[x] = out[x] - U2 / nu
+    return result
+
+
+@pytest.mark.parametrize("name", ["sphere_h", "grid_h"])
+def test_refine_matches_reference_and_keeps_kept_vertices(name, request, rng):
+    _, h = request.getfixturevalue(name)
+    for i in (1, 3, len(h) - 1):
+        Vi = h.level_arrays(i)[0] + 0.01 * rng.standard_normal((h.vertex_count(i), 3))
+        fine = h.refine(i, Vi)
+        assert fine.shape == (h.vertex_count(i - 1), 3)
+        kept = np.setdiff1d(np.arange(h.vertex_count(i - 1)), h.collapses(i)["removed"])
+        assert np.array_equal(fine[kept], Vi[h.parents[i][kept]])
+        np.testing.assert_allclose(fine, _reference_refine(h, i, Vi), atol=1e-12)
+
+
+@pytest.mark.parametrize("builder", ["volume", "fast"])
+def test_splitting_a_flat_region_stays_on_the_plane(builder, rng):
+    V, F = grid(15, 15)
+    V[:, :2] += 0.02 * rng.standard_normal((len(V), 2))  # irregular in-plane spacing
+    normal = np.array([1.0, 2.0, 2.0]) / 3.0
+    frame = np.linalg.qr(np.stack([normal, [1.0, 0, 0], [0, 1.0, 0]], axis=1))[0]
+    tilted = (V @ np.stack([frame[:, 1], frame[:, 2], frame[:, 0]])) + 0.5  # plane through (0.5, 0.5, 0.5)
+    if builder == "volume":
+        h = build_hierarchy((tilted, F), min_vertices=30)
+    else:
+        h = from_fast_simplification((tilted, F), levels=[150, 80, 40])
+    for i in range(1, len(h)):
+        Vi = h.level_arrays(i)[0]
+        # move the coarse vertices within the plane: split vertices must follow it
+        Vi = Vi + 0.05 * np.cross(normal, rng.standard_normal((len(Vi), 3)))
+        fine = h.refine(i, Vi)
+        offset = (fine - 0.5) @ normal
+        assert np.abs(offset).max() < 1e-12
+        assert np.abs(fine - h.level_arrays(i - 1)[0]).max() < 0.5
+
+
+def test_refine_of_exact_level_positions_is_close_on_a_smooth_surface(sphere_h):
+    (V, F), h = sphere_h
+    Vi, _ = h.level_arrays(1)
+    fine = h.refine(1, Vi)
+    err = np.abs(np.linalg.norm(fine, axis=1) - 1).max()
+    assert err < 0.15  # split vertices land near the sphere (noise is 2%)
+
+
+# -------------------------------------------------- topology on real meshes
+
+
+@pytest.mark.parametrize(
+    "name, loops",
+    [("bunny.ply", 5), ("horse.ply", 0), ("camel.ply", 0), ("eight.ply", 0), ("venus.ply", 1), ("pig.ply", 7),
+     ("maxplanck.ply", 1)],
+)
+def test_every_level_is_manifold_with_input_topology(name, loops):
+    mesh = load_mesh(name)
+    V, F = np.asarray(mesh.vertices), np.asarray(mesh.triangles).astype(np.int64)
+    chi = euler_characteristic(F, len(V))
+    h = build_hierarchy(mesh, min_vertices=20)
+    assert h.vertex_count(len(h) - 1) <= max(60, 0.01 * len(V))
+    for i in range(len(h)):
+        Vi, Fi = h.level_arrays(i)
+        n = len(Vi)
+        assert len(np.unique(Fi)) == n
+        assert euler_characteristic(Fi, n) == chi
+        assert len(boundary_loops(Fi, n)) == loops
+        assert len(nonmanifold_edges(Fi, n)) == 0
+        assert len(nonmanifold_vertices(Fi, n)) == 0
+        assert len(_triangle_set(Fi)) == len(Fi)
+    if name == "eight.ply":
+        assert chi == -2  # genus 2
+
+
+def test_tetrahedron_and_single_triangle_are_not_collapsed():
+    tet = o3d.geometry.TriangleMesh.create_tetrahedron()
+    h = build_hierarchy(tet, min_vertices=0)
+    assert len(h) == 1
+    tri = (np.eye(3), np.array([[0, 1, 2]]))
+    assert len(build_hierarchy(tri, min_vertices=0)) == 1
+    octa = o3d.geometry.TriangleMesh.create_octahedron()
+    h = build_hierarchy(octa, min_vertices=0)
+    assert h.vertex_count(len(h) - 1) == 4
+    assert euler_characteristic(h.triangles[-1], 4) == 2
+
+
+# ------------------------------------------------------ kinds, pickling, threads
+
+
+def test_level_returns_the_input_kind():
+    sphere = o3d.geometry.TriangleMesh.create_sphere(resolution=10)
+    h = build_hierarchy(sphere, min_vertices=30)
+    assert isinstance(h.level(2), o3d.geometry.TriangleMesh)
+    assert len(h.level(2).vertices) == h.vertex_count(2)
+    tensor = o3d.t.geometry.TriangleMesh.from_legacy(sphere)
+    ht = build_hierarchy(tensor, min_vertices=30)
+    level = ht.level(1)
+    assert isinstance(level, o3d.t.geometry.TriangleMesh)
+    assert level.vertex.positions.dtype == tensor.vertex.positions.dtype
+    assert level.vertex.positions.shape[0] == ht.vertex_count(1)
+    V, F = np.asarray(sphere.vertices), np.asarray(sphere.triangles)
+    arrays = build_hierarchy((V, F), min_vertices=30).level(1)
+    assert isinstance(arrays, tuple) and arrays[0].shape[1] == 3 and arrays[1].shape[1] == 3
+    # the input is not modified
+    assert np.array_equal(np.asarray(sphere.vertices), V)
+
+
+def test_pickle_round_trip_equals_original(sphere_h):
+    _, h = sphere_h
+    copy = pickle.loads(pickle.dumps(h))
+    assert copy == h and copy is not h
+    assert np.array_equal(copy.refine(2, copy.level_arrays(2)[0]), h.refine(2, h.level_arrays(2)[0]))
+    other = build_hierarchy(h.level(0), min_vertices=60)
+    assert other != h
+
+
+def test_arrays_are_read_only_and_concurrent_reads_agree(sphere_h):
+    _, h = sphere_h
+    with pytest.raises(ValueError, match="read-only"):
+        h.triangles[1][0, 0] = 0
+    expected = [h.refine(i, h.level_arrays(i)[0]) for i in range(1, len(h))]
+    results = {}
+
+    def work(k):
+        results[k] = [h.refine(i, h.level_arrays(i)[0]) for i in range(1, len(h))]
+
+    threads = [threading.Thread(target=work, args=(k,)) for k in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    for k in range(4):
+        assert all(np.array_equal(a, b) for a, b in zip(results[k], expected))
+
+
+def test_progress_bar_runs(capsys):
+    h = build_hierarchy(o3d.geometry.TriangleMesh.create_sphere(resolution=8), min_vertices=20, progress=True)
+    assert len(h) > 1
+    assert "mesh hierarchy" in capsys.readouterr().err
+
+
+def test_max_levels_limits_the_depth():
+    V, F = _noisy_sphere()
+    h = build_hierarchy((V, F), max_levels=3, min_vertices=0)
+    assert len(h) == 4
+
+
+# -------------------------------------------------------- fast-simplification
+
+
+def test_from_fast_simplification_structure():
+    V, F = _noisy_sphere(20)
+    h = from_fast_simplification((V, F), levels=[500, 250, 120])
+    assert h.method == "fast_simplification" and not h.independent
+    assert [h.vertex_count(i) for i in range(len(h))] == [len(V), 500, 250, 120]
+    for i in range(1, len(h)):
+        vmap = h.vertex_map(i)
+        assert vmap.min() == 0 and vmap.max() == h.vertex_count(i) - 1
+        mapped = vmap[F]
+        keep = (mapped[:, 0] != mapped[:, 1]) & (mapped[:, 1] != mapped[:, 2]) & (mapped[:, 0] != mapped[:, 2])
+        assert _triangle_set(mapped[keep]) == _triangle_set(h.triangles[i])
+        fine = h.refine(i, h.level_arrays(i)[0])
+        kept = np.setdiff1d(np.arange(h.vertex_count(i - 1)), h.collapses(i)["removed"])
+        assert np.array_equal(fine[kept], h.level_arrays(i)[0][h.parents[i][kept]])
+        # harmonic fill then Kobbelt: split vertices stay near the sphere
+        assert np.abs(np.linalg.norm(fine, axis=1) - 1).max() < 0.2
+    geometric = from_fast_simplification((V, F), levels=4, min_vertices=60)
+    counts = [geometric.vertex_count(i) for i in range(len(geometric))]
+    assert len(counts) == 5 and all(a > b for a, b in zip(counts, counts[1:])) and counts[-1] <= 70
+
+
+# ------------------------------------------------------------------- errors
+
+
+def _nonmanifold():
+    V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1]], dtype=float)
+    return V, np.array([[0, 1, 2], [1, 0, 3], [0, 1, 4]])
+
+
+def test_bad_input_raises():
+    with pytest.raises(ValueError, match="edge-manifold"):
+        build_hierarchy(_nonmanifold())
+    with pytest.raises(ValueError, match="edge-manifold"):
+        from_fast_simplification(_nonmanifold(), levels=1, min_vertices=4)
+    V, F = _noisy_sphere(8)
+    with pytest.raises(ValueError, match="unreferenced"):
+        build_hierarchy((np.vstack([V, [[5.0, 5, 5]]]), F))
+    with pytest.raises(TypeError, match="mesh must be"):
+        build_hierarchy("mesh.ply")
+    with pytest.raises(ValueError, match="min_vertices must be >= 0"):
+        build_hierarchy((V, F), min_vertices=-1)
+    with pytest.raises(TypeError, match="min_vertices must be an integer"):
+        build_hierarchy((V, F), min_vertices=2.5)
+    with pytest.raises(ValueError, match="max_levels must be >= 0"):
+        build_hierarchy((V, F), max_levels=-2)
+    with pytest.raises(ValueError, match="alpha must be non-negative"):
+        build_hierarchy((V, F), alpha=-1.0)
+    with pytest.raises(ValueError, match="beta must be non-negative"):
+        build_hierarchy((V, F), beta=float("nan"))
+    with pytest.raises(TypeError, match="progress must be a bool"):
+        build_hierarchy((V, F), progress="yes")
+    with pytest.raises(ValueError, match="levels must be strictly decreasing"):
+        from_fast_simplification((V, F), levels=[30, 40])
+    with pytest.raises(ValueError, match="levels must be >= 1"):
+        from_fast_simplification((V, F), levels=0)
+    with pytest.raises(TypeError, match="levels must be an integer"):
+        from_fast_simplification((V, F), levels=True)
+    with pytest.raises(TypeError, match="levels must be an integer or a sequence of integer"):
+        from_fast_simplification((V, F), levels=[30.5])
+    with pytest.raises(ValueError, match="agg must be non-negative"):
+        from_fast_simplification((V, F), agg=-1.0)
+    with pytest.raises(TypeError, match="agg must be a number"):
+        from_fast_simplification((V, F), agg="7")
+    with pytest.raises(TypeError, match="progress must be a bool"):
+        from_fast_simplification((V, F), progress=None)
+    with pytest.raises(ValueError, match="min_vertices must be >= 4"):
+        from_fast_simplification((V, F), min_vertices=2)
+
+
+def test_bad_level_queries_raise(sphere_h):
+    _, h = sphere_h
+    L = len(h)
+    with pytest.raises(ValueError, match=f"i must be <= {L - 1}, got {L}"):
+        h.level(L)
+    with pytest.raises(ValueError, match="i must be >= 0"):
+        h.vertex_map(-1)
+    with pytest.raises(ValueError, match="i must be >= 1"):
+        h.refine(0, h.level_arrays(0)[0])
+    with pytest.raises(ValueError, match="i must be >= 1"):
+        h.collapses(0)
+    with pytest.raises(TypeError, match="i must be an integer"):
+        h.vertex_count(1.0)
+    with pytest.raises(ValueError, match=r"positions must have shape \("):
+        h.refine(1, np.zeros((3, 3)))
+    with pytest.raises(ValueError, match="positions must be finite"):
+        h.refine(1, np.full((h.vertex_count(1), 3), np.nan))

@@ -1,0 +1,191 @@
+"""render(): side-by-side pictures that are not blank and differ exactly where the meshes differ."""
+
+from __future__ import annotations
+
+import importlib
+import sys
+
+import numpy as np
+import open3d as o3d
+import pytest
+
+from o3d_lsmesh._errors import O3DLSMeshWarning
+
+# The module, not the function of the same name that the package may export.
+render_module = importlib.import_module("o3d_lsmesh.render")
+render = render_module.render
+
+W = H = 96
+BACKGROUND = np.array([255, 255, 255])
+
+
+def _sphere():
+    return o3d.geometry.TriangleMesh.create_sphere(radius=1.0, resolution=30)
+
+
+def _bumped(mesh):
+    """``mesh`` with a bump on its +x side: only the right part of the silhouette and shading changes."""
+    out = o3d.geometry.TriangleMesh(mesh)
+    vertices = np.asarray(out.vertices)
+    direction = vertices / np.linalg.norm(vertices, axis=1, keepdims=True)
+    weight = np.exp(-0.5 * (np.arccos(np.clip(direction[:, 0], -1, 1)) / 0.25) ** 2)
+    vertices += 0.3 * weight[:, None] * direction
+    return out, weight > 0.01
+
+
+def _panels(image, count):
+    return [image[:, k * W:(k + 1) * W].astype(np.int64) for k in range(count)]
+
+
+def _foreground(panel):
+    return np.any(np.abs(panel - BACKGROUND) > 8, axis=2)
+
+
+def _check_layout(image):
+    sphere = _sphere()
+    bumped, _ = _bumped(sphere)
+    assert image.shape == (H, 3 * W, 3) and image.dtype == np.uint8
+    a, a_again, b = _panels(image, 3)
+    # Not blank: the sphere covers a good part of its panel (pi r^2 in a square of side 2.1 r: ~0.6
+    # less the bump's margin), and it is shaded, not flat.
+    covered = _foreground(a).mean()
+    assert 0.25 < covered < 0.9
+    assert a[_foreground(a)].std() > 5
+    # The same mesh in two panels draws the same picture.
+    assert np.abs(a - a_again).mean() < 1.0
+    # The bumped sphere differs, and only on its +x (right, for the default camera) side.
+    diff = np.any(np.abs(a_again - b) > 24, axis=2)
+    assert diff.mean() > 0.01
+    columns = np.flatnonzero(diff.any(axis=0))
+    assert columns.min() > W // 2, "differences must lie on the bump's side of the panel"
+
+
+def test_raycast_backend_draws_side_by_side():
+    sphere = _sphere()
+    bumped, _ = _bumped(sphere)
+    image = render([sphere, sphere, bumped], None, width=W, height=H, backend="raycast")
+    _check_layout(image)
+
+
+def test_filament_offscreen_renderer_draws_side_by_side(tmp_path):
+    sphere = _sphere()
+    bumped, _ = _bumped(sphere)
+    path = tmp_path / "three.png"
+    try:
+        image = render([sphere, sphere, bumped], path, width=W, height=H, backend="filament", timeout=240)
+    except RuntimeError as error:
+        pytest.skip(f"Open3D's OffscreenRenderer cannot render on this machine: {error}")
+    _check_layout(image)
+    # The PNG holds exactly the returned picture.
+    np.testing.assert_array_equal(np.asarray(o3d.io.read_image(str(path))), image)
+
+
+def test_error_color_map_marks_the_changed_region():
+    sphere = _sphere()
+    bumped, changed = _bumped(sphere)
+    image = render([sphere, bumped], None, width=W, height=H, reference=sphere, backend="raycast")
+    bar = max(3, H // 40)
+    body = image[:-bar]
+    a, b = body[:, :W].astype(np.int64), body[:, W:].astype(np.int64)
+    # Yellow-green end of viridis: red and green high, blue low. Shading only darkens,
+    # so a dark-purple (zero error) pixel can never look like this.
+    def hot(panel):
+        return (panel[..., 1] > 110) & (panel[..., 2] < 110) & _foreground(panel)
+
+    assert not hot(a).any()
+    assert hot(b).sum() > 20
+    assert np.flatnonzero(hot(b).any(axis=0)).min() > W // 2
+    # The color bar spans the scale from viridis' first to last color.
+    np.testing.assert_array_equal(image[-1, 0], np.round(render_module.VIRIDIS[0] * 255).astype(np.uint8))
+    np.testing.assert_array_equal(image[-1, -1], np.round(render_module.VIRIDIS[-1] * 255).astype(np.uint8))
+
+
+def test_error_colors_scale():
+    colors = render_module.error_colors(np.array([0.0, 0.5, 1.0, 7.0]), 1.0)
+    np.testing.assert_allclose(colors[0], render_module.VIRIDIS[0])
+    np.testing.assert_allclose(colors[2], render_module.VIRIDIS[-1])
+    np.testing.assert_allclose(colors[3], render_module.VIRIDIS[-1])  # clipped
+    np.testing.assert_allclose(colors[1], render_module.VIRIDIS[5])
+
+
+def test_align_each_centers_every_mesh():
+    sphere = _sphere()
+    bumped, _ = _bumped(sphere)
+    common = render([sphere, bumped], None, width=W, height=H, backend="raycast")
+    each = render([sphere, bumped], None, width=W, height=H, backend="raycast", align="each")
+
+    def center_column(panel):
+        return np.flatnonzero(_foreground(panel).any(axis=0)).mean()
+
+    # The joint box is the bumped sphere's, whose center lies on the bump's (+x) side: with a common
+    # center the plain sphere sits left of its panel's middle; centered on its own box it does not.
+    assert abs(center_column(_panels(each, 2)[0]) - (W - 1) / 2) < 1
+    assert center_column(_panels(common, 2)[0]) < (W - 1) / 2 - 3
+
+
+def test_vertex_colors_and_tensor_meshes_are_drawn():
+    sphere = _sphere()
+    sphere.paint_uniform_color([1.0, 0.0, 0.0])
+    tensor = o3d.t.geometry.TriangleMesh.from_legacy(_sphere())
+    image = render([sphere, tensor, (np.asarray(sphere.vertices), np.asarray(sphere.triangles))], None,
+                   width=W, height=H, backend="raycast")
+    red, gray, tuple_panel = _panels(image, 3)
+    mask = _foreground(red)
+    assert (red[mask][:, 0] > 3 * red[mask][:, 2] + 10).mean() > 0.9  # red stays red
+    assert np.abs(gray[_foreground(gray)][:, 0] - gray[_foreground(gray)][:, 2]).mean() < 40  # default gray-blue
+    assert _foreground(tuple_panel).mean() > 0.25
+
+
+def test_auto_falls_back_to_raycasting_with_a_warning(monkeypatch):
+    monkeypatch.setattr(sys, "executable", "/bin/false")
+    with pytest.warns(O3DLSMeshWarning, match="RaycastingScene backend"):
+        image = render(_sphere(), None, width=32, height=32, backend="auto")
+    assert _foreground(image.astype(np.int64)).any()
+
+
+def test_filament_failure_and_timeout_raise(monkeypatch):
+    with pytest.raises(RuntimeError, match="did not finish within timeout"):
+        render(_sphere(), None, width=32, height=32, backend="filament", timeout=0.001)
+    monkeypatch.setattr(sys, "executable", "/bin/false")
+    with pytest.raises(RuntimeError, match="OffscreenRenderer failed: exit code 1"):
+        render(_sphere(), None, width=32, height=32, backend="filament")
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"width": 2}, "width"),
+        ({"height": 0}, "height"),
+        ({"backend": "vulkan"}, "backend"),
+        ({"align": "left"}, "align"),
+        ({"timeout": 0}, "timeout"),
+        ({"margin": -1.0}, "margin"),
+        ({"color": (2.0, 0.0, 0.0)}, "color must be an RGB triple"),
+        ({"background": (0.0, 0.0)}, "background must be an RGB triple"),
+        ({"view_direction": (0.0, 0.0, 0.0)}, "view_direction must be a non-zero finite 3-vector"),
+        ({"up": (0.0, 0.0, 2.0)}, "up must not be parallel to view_direction"),
+        ({"reference": "sphere.ply"}, "mesh must be"),
+        ({"error_max": -1.0, "reference": None}, None),
+    ],
+)
+def test_bad_options_raise(kwargs, match):
+    if match is None:  # error_max is only read with a reference
+        render(_sphere(), None, width=16, height=16, backend="raycast", **kwargs)
+        with pytest.raises(ValueError, match="error_max"):
+            render(_sphere(), None, width=16, height=16, backend="raycast", error_max=-1.0, reference=_sphere())
+        return
+    with pytest.raises((ValueError, TypeError), match=match):
+        render(_sphere(), None, width=16, height=16, backend="raycast", **kwargs)
+
+
+def test_bad_meshes_and_paths_raise(tmp_path):
+    with pytest.raises(ValueError, match="meshes must hold at least one mesh"):
+        render([], None)
+    with pytest.raises(TypeError, match="mesh must be"):
+        render(["not a mesh"], None, backend="raycast")
+    with pytest.raises(ValueError, match="must have vertices, got an empty mesh"):
+        render(o3d.geometry.TriangleMesh(), None, backend="raycast")
+    with pytest.raises(ValueError, match="path must be in an existing folder"):
+        render(_sphere(), tmp_path / "missing" / "x.png", width=16, height=16, backend="raycast")
+    with pytest.raises(ValueError, match="path must name a writable .png file"):
+        render(_sphere(), tmp_path / "x.unknown", width=16, height=16, backend="raycast")
