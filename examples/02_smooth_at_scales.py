@@ -25,7 +25,7 @@ from o3d_lsmesh.demo import add_noise, demo_mesh, mean_edge_length
 from o3d_lsmesh.fairing.multiresolution import multiresolution_fairing
 from o3d_lsmesh.hierarchy import build_hierarchy
 from o3d_lsmesh.metrics import signed_volume
-from o3d_lsmesh.render import render
+from o3d_lsmesh.rendering import render
 
 
 def main(argv=None) -> int:

@@ -23,7 +23,7 @@ import open3d as o3d
 
 from o3d_lsmesh import LSMeshSolver
 from o3d_lsmesh.demo import demo_mesh
-from o3d_lsmesh.render import render
+from o3d_lsmesh.rendering import render
 from o3d_lsmesh.selection import approximate
 
 

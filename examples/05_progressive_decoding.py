@@ -23,7 +23,7 @@ import open3d as o3d
 
 from o3d_lsmesh.demo import demo_mesh
 from o3d_lsmesh.encoding import decode_geometry, encode_geometry, iter_decode_geometry
-from o3d_lsmesh.render import render
+from o3d_lsmesh.rendering import render
 
 
 def main(argv=None) -> int:

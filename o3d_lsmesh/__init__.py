@@ -15,8 +15,8 @@ from .fairing import constrained_fairing, multiresolution_fairing, smooth_bounda
 from .hierarchy import MeshHierarchy, build_hierarchy, from_fast_simplification
 from .laplacian import laplacian
 from .lsmesh import LSMeshSolver, ls_mesh, reconstruct_geometry
-from .register import register
-from .render import render
+from .registration import register, unregister
+from .rendering import render
 from .selection import approximate, select_control_points
 from .spectral import spectral_approximation
 
@@ -42,5 +42,6 @@ __all__ = [
     "from_fast_simplification",
     "metrics",
     "register",
+    "unregister",
     "render",
 ]

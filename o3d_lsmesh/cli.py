@@ -275,7 +275,7 @@ def cmd_denoise(args: argparse.Namespace, run: _Run) -> int:
 
 
 def _render(meshes: list, path: str, run: _Run) -> str:
-    from .render import render
+    from .rendering import render
 
     start = time.perf_counter()
     run.call(render, meshes, path, desc="rendering")

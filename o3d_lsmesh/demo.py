@@ -280,7 +280,7 @@ def run_demo(
         (folder / "metrics.md").write_text("```\n" + table + "\n```\n")
         files += [folder / "metrics.json", folder / "metrics.md"]
         if render:
-            from .render import render as draw
+            from .rendering import render as draw
 
             panels = [results["noisy"]]
             done = [r for r in rows if "skipped" not in r and r["key"] != "noisy"]

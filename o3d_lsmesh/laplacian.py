@@ -38,7 +38,15 @@ def uniform_laplacian(triangles: np.ndarray, n: int) -> sp.csr_matrix:
     >>> L.toarray().tolist()
     [[1.0, -0.5, -0.5], [-0.5, 1.0, -0.5], [-0.5, -0.5, 1.0]]
     """
-    return _normalized(adjacency_matrix(triangles, n), n)
+    adjacency = adjacency_matrix(triangles, n)
+    degree = np.diff(adjacency.indptr)
+    row = np.repeat(np.arange(n), degree)
+    referenced = np.flatnonzero(degree)
+    # one COO->CSR pass with the diagonal appended: cheaper than I - D^-1 @ A as sparse products
+    rows = np.concatenate([row, referenced])
+    cols = np.concatenate([adjacency.indices, referenced])
+    data = np.concatenate([-1.0 / degree[row], np.ones(len(referenced))])
+    return sp.csr_matrix((data, (rows, cols)), shape=(n, n))
 
 
 def cotangent_laplacian(vertices: np.ndarray, triangles: np.ndarray) -> sp.csr_matrix:

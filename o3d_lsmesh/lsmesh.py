@@ -72,6 +72,9 @@ class LSMeshSolver:
         The smoothness operator; the paper's is ``"uniform"``.
     backend : {"auto", "cholmod", "scipy"}
         Passed to the solver gateway.
+    ordering : str
+        CHOLMOD's fill-reducing ordering, passed to :class:`~o3d_lsmesh.SPDSolver`;
+        ``"nesdis"`` makes :meth:`add_anchors` cheaper and factor/solve dearer.
 
     Raises
     ------
@@ -96,6 +99,7 @@ class LSMeshSolver:
         interpolate: bool = False,
         laplacian: str = "uniform",
         backend: str = "auto",
+        ordering: str = "default",
     ) -> None:
         data = read_mesh(mesh)
         n = len(data.vertices)
@@ -104,7 +108,7 @@ class LSMeshSolver:
         as_choice(laplacian, LAPLACIAN_KINDS, name="laplacian")
         if not isinstance(interpolate, (bool, np.bool_)):
             raise TypeError(f"interpolate must be a bool, got {type(interpolate).__name__}")
-        L = laplacian_matrix(data.vertices, data.triangles, laplacian).tocsc()
+        L = laplacian_matrix(data.vertices, data.triangles, laplacian).tocsr()
         check_components_constrained(L, indices, what="control vertex")
         self._data = data
         self.interpolate = bool(interpolate)
@@ -118,6 +122,7 @@ class LSMeshSolver:
             free = np.ones(n, dtype=bool)
             free[indices] = False
             self._free = np.flatnonzero(free)
+            L = L.tocsc()
             L_free = L[:, self._free]
             smoothness = (L_free.T @ L_free).tocsr()
             normal = smoothness.tocsc()
@@ -125,8 +130,10 @@ class LSMeshSolver:
             self._rhs_hard = -(L_free.T @ L[:, indices]).tocsr()
         else:
             self._free = np.arange(n)
-            smoothness = (L.T @ L).tocsr()
-            normal = (smoothness + sp.csr_matrix((weights**2, (indices, indices)), shape=(n, n))).tocsc()
+            smoothness = L.T.tocsr() @ L
+            normal = smoothness + sp.csr_matrix((weights**2, (indices, indices)), shape=(n, n))
+            # the matrix is symmetric, so its CSR arrays are already its CSC arrays
+            normal = sp.csc_matrix((normal.data, normal.indices, normal.indptr), shape=(n, n))
             self._rhs_hard = None
         # kept for the residual of iterative refinement after rank-k updates
         self._smoothness = smoothness
@@ -134,7 +141,7 @@ class LSMeshSolver:
         # reduced index of every vertex (-1 for eliminated ones)
         self._reduced = np.full(n, -1, dtype=np.int64)
         self._reduced[self._free] = np.arange(len(self._free))
-        self._solver = SPDSolver(normal, backend=backend)
+        self._solver = SPDSolver(normal, backend=backend, ordering=ordering)
 
     @property
     def backend(self) -> str:
@@ -228,8 +235,10 @@ class LSMeshSolver:
             pos = self._data.vertices[new]
         else:
             pos = as_positions(positions, len(new), name="positions")
-        rows = self._reduced[new]
-        c = sp.csc_matrix((w, (rows, np.arange(len(new)))), shape=(len(self._free), len(new)))
+        # one nonzero per column: build the CSC arrays directly (the COO route costs more than a small update)
+        c = sp.csc_matrix(
+            (w, self._reduced[new], np.arange(len(new) + 1)), shape=(len(self._free), len(new))
+        )
         self._solver.update(c)
         self._updated = True
         self._soft = np.concatenate([self._soft, new])

@@ -111,7 +111,9 @@ class _RefactoringSystem:
     ``L``), numerically refactored with the kept symbolic analysis instead of updated.
     """
 
-    def __init__(self, vertices: np.ndarray, triangles: np.ndarray, start: np.ndarray, weight: float) -> None:
+    def __init__(
+        self, vertices: np.ndarray, triangles: np.ndarray, start: np.ndarray, weight: float, ordering: str = "default"
+    ) -> None:
         n = len(vertices)
         L = uniform_laplacian(triangles, n).tocsc()
         self._ltl = (L.T @ L).tocsc()
@@ -119,7 +121,7 @@ class _RefactoringSystem:
         self._diagonal[start] = weight**2
         self._weight = weight
         self._vertices = vertices
-        self._solver = SPDSolver(self._normal())
+        self._solver = SPDSolver(self._normal(), ordering=ordering)
 
     def _normal(self) -> sp.csc_matrix:
         return (self._ltl + sp.diags(self._diagonal, format="csc")).tocsc()

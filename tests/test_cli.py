@@ -327,7 +327,7 @@ def test_render_failure_exits_1(tmp_path, capsys, clean, monkeypatch):
     def broken(*args, **kwargs):
         raise RuntimeError("Filament OffscreenRenderer failed: no device")
 
-    monkeypatch.setattr(importlib.import_module("o3d_lsmesh.render"), "render", broken)
+    monkeypatch.setattr(importlib.import_module("o3d_lsmesh.rendering"), "render", broken)
     src = str(_write(clean, tmp_path / "clean.ply"))
     code = main(["denoise", src, str(tmp_path / "o.ply"), "--render", str(tmp_path / "p.png"), "--quiet"])
     err = capsys.readouterr().err

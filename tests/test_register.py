@@ -12,7 +12,7 @@ import pytest
 
 from o3d_lsmesh import ls_mesh, reconstruct_geometry
 from o3d_lsmesh.fairing import constrained_fairing, smooth_boundary_curves
-from o3d_lsmesh.register import METHOD_NAMES, register, registered_methods, unregister
+from o3d_lsmesh.registration import METHOD_NAMES, register, registered_methods, unregister
 
 from conftest import REPO, grid
 
@@ -41,7 +41,7 @@ def test_importing_the_package_patches_nothing():
         import open3d as o3d
         classes = (o3d.geometry.TriangleMesh, o3d.t.geometry.TriangleMesh)
         before = [set(vars(c)) for c in classes]
-        import o3d_lsmesh, o3d_lsmesh.register, o3d_lsmesh.render, o3d_lsmesh.cli, o3d_lsmesh.demo
+        import o3d_lsmesh, o3d_lsmesh.registration, o3d_lsmesh.rendering, o3d_lsmesh.cli, o3d_lsmesh.demo
         import o3d_lsmesh.fairing, o3d_lsmesh.hierarchy
         added = [sorted(set(vars(c)) - b) for c, b in zip(classes, before)]
         print(added)

@@ -12,7 +12,7 @@ import pytest
 from o3d_lsmesh._errors import O3DLSMeshWarning
 
 # The module, not the function of the same name that the package may export.
-render_module = importlib.import_module("o3d_lsmesh.render")
+render_module = importlib.import_module("o3d_lsmesh.rendering")
 render = render_module.render
 
 W = H = 96

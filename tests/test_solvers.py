@@ -102,3 +102,19 @@ def test_fallback_warns_without_scikit_sparse(monkeypatch):
     assert solver.backend == "scipy"
     with pytest.raises(ImportError, match="needs scikit-sparse"):
         solvers.SPDSolver(A, backend="cholmod")
+
+
+@pytest.mark.skipif(not cholmod_available(), reason="scikit-sparse is not installed")
+@pytest.mark.parametrize("ordering", ["nesdis", "amd", "natural"])
+def test_orderings_agree(ordering):
+    A, b = spd()
+    solver = SPDSolver(A, ordering=ordering)
+    solver.update(sp.csc_matrix((np.array([2.0]), (np.array([7]), np.array([0]))), shape=(A.shape[0], 1)))
+    np.testing.assert_allclose(solver.solve(b), SPDSolver(solver.matrix).solve(b), rtol=1e-10)
+    assert pickle.loads(pickle.dumps(solver)).ordering == ordering
+
+
+def test_bad_ordering():
+    A, _ = spd(5)
+    with pytest.raises(ValueError, match="ordering must be one of"):
+        SPDSolver(A, ordering="random")

@@ -81,8 +81,12 @@ class LevelCollapse:
 def _ranges(begin: np.ndarray, counts: np.ndarray) -> np.ndarray:
     """Concatenated ``arange(b, b + c)`` for every pair, vectorized."""
     total = int(counts.sum())
-    offsets = np.cumsum(counts) - counts
-    return np.arange(total, dtype=np.int64) + np.repeat(begin - offsets, counts)
+    offsets = np.cumsum(counts)
+    offsets -= counts
+    np.subtract(begin, offsets, out=offsets)
+    out = np.repeat(offsets, counts)
+    out += np.arange(total, dtype=np.int64)
+    return out
 
 
 class _Adjacency:
@@ -94,18 +98,24 @@ class _Adjacency:
     """
 
     def __init__(self, triangles: np.ndarray, n: int):
-        he = halfedges(triangles)
-        forward = he[:, 0] * np.int64(n) + he[:, 1]
-        backward = he[:, 1] * np.int64(n) + he[:, 0]
-        keys = np.concatenate([forward, backward])
+        n64 = np.int64(n)
+        a, b, c = triangles[:, 0], triangles[:, 1], triangles[:, 2]
+        an, bn, cn = a * n64, b * n64, c * n64
+        # SIMD sort of int64 keys is linear-ish and far faster than argsort or np.unique
+        keys = np.concatenate([an + b, bn + c, cn + a, bn + a, cn + b, an + c])
+        del an, bn, cn
         keys.sort()
-        first = np.ones(len(keys), dtype=bool)
-        first[1:] = keys[1:] != keys[:-1]
+        first = np.empty(len(keys), dtype=bool)
+        first[0] = True
+        np.not_equal(keys[1:], keys[:-1], out=first[1:])
         at = np.flatnonzero(first)
         self.keys = keys[at]
-        self.triangle_count = np.diff(np.append(at, len(keys)))
-        self.src = self.keys // n
-        self.dst = self.keys - self.src * n
+        del keys, first
+        self.triangle_count = np.empty(len(at), dtype=np.int64)
+        np.subtract(at[1:], at[:-1], out=self.triangle_count[:-1])
+        self.triangle_count[-1] = 6 * len(triangles) - at[-1]
+        self.src = self.keys // n64
+        self.dst = self.keys - self.src * n64
         self.valence = np.bincount(self.src, minlength=n)
         self.indptr = np.zeros(n + 1, dtype=np.int64)
         np.cumsum(self.valence, out=self.indptr[1:])
@@ -116,6 +126,10 @@ class _Adjacency:
 
     def rings(self, vertices: np.ndarray) -> np.ndarray:
         return self.dst[_ranges(self.indptr[vertices], self.valence[vertices])]
+
+    def per_edge(self, values: np.ndarray) -> np.ndarray:
+        """``values[src]``: a repeat, since ``src`` is sorted (cheaper than a gather)."""
+        return np.repeat(values, self.valence)
 
 
 def collapse_level(
@@ -160,17 +174,28 @@ def collapse_level(
         ``None`` when no valid collapse remains.
     """
     n = len(vertices)
-    P = vertices
     F = triangles
     adj = _Adjacency(F, n)
     src, dst, valence, indptr = adj.src, adj.dst, adj.valence, adj.indptr
     on_boundary = adj.on_boundary
     has_edges = valence > 0
     seg = indptr[:-1][has_edges]
+    # component arrays: contiguous gathers and no (N, 3) temporaries
+    X, Y, Z = (np.ascontiguousarray(vertices[:, i], dtype=np.float64) for i in range(3))
 
     # vertex cost of section 4.1
-    vec = P[dst] - P[src]
-    length = np.sqrt(np.einsum("ij,ij->i", vec, vec))
+    dx = X[dst]
+    dx -= adj.per_edge(X)
+    dy = Y[dst]
+    dy -= adj.per_edge(Y)
+    dz = Z[dst]
+    dz -= adj.per_edge(Z)
+    # (x + z) + y: the summation order of np.einsum("ij,ij->i"), which the
+    # levels were first defined with, so that results stay bit-identical
+    length = dx * dx
+    length += dz * dz
+    length += dy * dy
+    np.sqrt(length, out=length)
     min_edge = np.zeros(n)
     max_edge = np.zeros(n)
     min_edge[has_edges] = np.minimum.reduceat(length, seg)
@@ -178,33 +203,53 @@ def collapse_level(
     cost = alpha * min_edge + beta * max_edge
 
     # cone volume |N_x . (x_k - x)| (module docstring)
-    face_normal = np.cross(P[F[:, 1]] - P[F[:, 0]], P[F[:, 2]] - P[F[:, 0]])
+    f0, f1, f2 = F[:, 0], F[:, 1], F[:, 2]
+    ux, uy, uz = X[f1] - X[f0], Y[f1] - Y[f0], Z[f1] - Z[f0]
+    vx, vy, vz = X[f2] - X[f0], Y[f2] - Y[f0], Z[f2] - Z[f0]
+    normal = (uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx)
+    del ux, uy, uz, vx, vy, vz
     corners = F.ravel()
-    star_normal = np.stack(
-        [np.bincount(corners, weights=np.repeat(face_normal[:, c], 3), minlength=n) for c in range(3)],
-        axis=1,
-    )
-    volume = np.abs(np.einsum("ij,ij->i", star_normal[src], vec))
+    volume = np.zeros(len(dst))
+    for c in (0, 2, 1):  # einsum's order again
+        star = np.bincount(corners, weights=np.repeat(normal[c], 3), minlength=n)
+        volume += adj.per_edge(star) * (dx, dy, dz)[c]
+    np.abs(volume, out=volume)
+    del dx, dy, dz
 
     # the cheap per-edge rules first; the link condition and the geometry are
     # checked for each vertex's best remaining target only
-    ok = np.where(on_boundary[src], adj.boundary_edge, ~adj.boundary_edge)
-    interior_pair = ~on_boundary[src] & ~on_boundary[dst]
-    ok &= ~(interior_pair & (valence[src] == 3) & (valence[dst] == 3))
-    ok &= ~(on_boundary[src] & on_boundary[dst] & (valence[src] == 2) & (valence[dst] == 2))
+    src_boundary = adj.per_edge(on_boundary)
+    dst_boundary = on_boundary[dst]
+    src_valence = adj.per_edge(valence)
+    dst_valence = valence[dst]
+    ok = np.where(src_boundary, adj.boundary_edge, ~adj.boundary_edge)
+    ok &= ~(~src_boundary & ~dst_boundary & (src_valence == 3) & (dst_valence == 3))
+    ok &= ~(src_boundary & dst_boundary & (src_valence == 2) & (dst_valence == 2))
+    del src_boundary, dst_boundary, src_valence, dst_valence
 
+    geometry = _Geometry(X, Y, Z, F, normal, n, max_normal_angle, min_quality)
     target = np.full(n, -1, dtype=np.int64)
-    for _ in range(max_tries):
-        pick = _best_targets(volume, length, ok, src, seg, has_edges, n)
-        pick = pick[target[src[pick]] < 0]
+    # every vertex is offered its best target; later tries only revisit the
+    # vertices whose pick failed, on their own edges
+    pick = _best_targets(volume, length, ok, src, seg)
+    for attempt in range(max_tries):
         if len(pick) == 0:
             break
         x, k = src[pick], dst[pick]
-        good = _link_condition(adj, x, k, pick) & _geometry(P, F, face_normal, x, k, n, max_normal_angle, min_quality)
+        good = _link_condition(adj, x, k, pick) & geometry(x, k)
         target[x[good]] = k[good]
+        if attempt == max_tries - 1:
+            break
         ok[pick[~good]] = False
-        # vertices with a valid target are settled: stop offering their other edges
-        ok[pick[good]] = False
+        retry = x[~good]
+        if len(retry) == 0:
+            break
+        edges = _ranges(indptr[retry], valence[retry])
+        sub_seg = np.zeros(len(retry), dtype=np.int64)
+        np.cumsum(valence[retry][:-1], out=sub_seg[1:])
+        local = _best_targets(volume[edges], length[edges], ok[edges], src[edges], sub_seg)
+        pick = edges[local]
+    del volume, length, ok, geometry
 
     candidate = target >= 0
     if not candidate.any():
@@ -233,16 +278,20 @@ def collapse_level(
     return LevelCollapse(removed, targets, ring_offsets, ring, parent, new_triangles)
 
 
-def _best_targets(volume, length, ok, src, seg, has_edges, n):
-    """Directed-edge position of each vertex's valid target of least volume (ties: shortest edge)."""
+def _best_targets(volume, length, ok, src, seg):
+    """Edge position of each vertex's valid target of least volume (ties: shortest edge, then first).
+
+    The edges are grouped by vertex, ``seg`` holding the start of each group.
+    """
     vol = np.where(ok, volume, np.inf)
-    best = np.full(n, np.inf)
-    best[has_edges] = np.minimum.reduceat(vol, seg)
-    near = ok & (vol <= best[src] * (1.0 + 1e-9))
+    best = np.minimum.reduceat(vol, seg)
+    counts = np.diff(np.append(seg, len(vol)))
+    near = vol <= np.repeat(best * (1.0 + 1e-9), counts)
+    near &= ok
     tie = np.where(near, length, np.inf)
-    shortest = np.full(n, np.inf)
-    shortest[has_edges] = np.minimum.reduceat(tie, seg)
-    hits = np.flatnonzero(near & (tie == shortest[src]))
+    shortest = np.minimum.reduceat(tie, seg)
+    near &= tie == np.repeat(shortest, counts)
+    hits = np.flatnonzero(near)
     if len(hits) == 0:
         return hits
     first = np.ones(len(hits), dtype=bool)
@@ -256,62 +305,95 @@ def _link_condition(adj: _Adjacency, x: np.ndarray, k: np.ndarray, edge: np.ndar
     Common neighbours are counted by sorting ``(query, neighbour)`` keys of both
     rings together: a neighbour of both appears twice.
     """
-    n = adj.n
+    n = np.int64(adj.n)
     q = len(x)
     query = np.arange(q, dtype=np.int64)
-    keys = np.concatenate(
-        [
-            np.repeat(query, adj.valence[x]) * n + adj.rings(x),
-            np.repeat(query, adj.valence[k]) * n + adj.rings(k),
-        ]
-    )
+    if q == adj.n and q == len(adj.valence) and adj.valence.all():
+        # every vertex asks (x is sorted): its rings are the whole CSR
+        ring_x = np.repeat(query * n, adj.valence)
+        ring_x += adj.dst
+    else:
+        ring_x = np.repeat(query * n, adj.valence[x])
+        ring_x += adj.rings(x)
+    ring_k = np.repeat(query * n, adj.valence[k])
+    ring_k += adj.rings(k)
+    keys = np.concatenate([ring_x, ring_k])
+    del ring_x, ring_k
     keys.sort()
     twice = keys[1:][keys[1:] == keys[:-1]]
-    common = np.bincount(twice // n, minlength=q)
+    twice //= n
+    common = np.bincount(twice, minlength=q)
     return common == adj.triangle_count[edge]
 
 
-def _geometry(P, F, face_normal, x, k, n, max_normal_angle, min_quality):
+class _Geometry:
     """Whether moving ``x`` onto ``k`` keeps every surviving star triangle unflipped and non-degenerate."""
-    query_of = np.full(n, -1, dtype=np.int64)
-    query_of[x] = np.arange(len(x))
-    corner_query = query_of[F.ravel()]
-    if 2 * len(x) > n:  # most vertices are queried: scan every corner
-        c = None
-        q = corner_query
-        t = np.repeat(np.arange(len(F)), 3)
-        a = F[:, [1, 2, 0]].ravel()
-        b = F[:, [2, 0, 1]].ravel()
-    else:
-        c = np.flatnonzero(corner_query >= 0)
-        q = corner_query[c]
-        t = c // 3
-        base = 3 * t
-        p = c - base
+
+    def __init__(self, X, Y, Z, F, normal, n, max_normal_angle, min_quality):
+        self.X, self.Y, self.Z, self.F, self.normal, self.n = X, Y, Z, F, normal, n
+        ox, oy, oz = normal
+        self.old_sq = ox * ox + oz * oz + oy * oy  # einsum's order
+        self.cos_sq = np.cos(np.deg2rad(max_normal_angle)) ** 2
+        self.min_quality = min_quality
+
+    def __call__(self, x: np.ndarray, k: np.ndarray) -> np.ndarray:
+        X, Y, Z, F, n = self.X, self.Y, self.Z, self.F, self.n
+        query_of = np.full(n, -1, dtype=np.int64)
+        query_of[x] = np.arange(len(x))
         flat = F.ravel()
-        a = flat[base + _NEXT[p]]
-        b = flat[base + _PREV[p]]
-    kk = k[np.maximum(q, 0)]
-    survives = (q >= 0) & (a != kk) & (b != kk)
-    t, a, b, kk, q = t[survives], a[survives], b[survives], kk[survives], q[survives]
-    # component-wise arithmetic: much faster than np.cross on (N, 3) gathers
-    X, Y, Z = (np.ascontiguousarray(P[:, i]) for i in range(3))
-    kx, ky, kz = X[kk], Y[kk], Z[kk]
-    ax, ay, az = X[a] - kx, Y[a] - ky, Z[a] - kz
-    bx, by, bz = X[b] - kx, Y[b] - ky, Z[b] - kz
-    nx = ay * bz - az * by
-    ny = az * bx - ax * bz
-    nz = ax * by - ay * bx
-    o = face_normal[t]
-    new_sq = nx * nx + ny * ny + nz * nz
-    old_sq = np.einsum("ij,ij->i", o, o)
-    dot = nx * o[:, 0] + ny * o[:, 1] + nz * o[:, 2]
-    cos_max = np.cos(np.deg2rad(max_normal_angle))
-    turned = (dot <= 0) | (dot * dot <= cos_max * cos_max * new_sq * old_sq)
-    abx, aby, abz = bx - ax, by - ay, bz - az
-    squared = ax * ax + ay * ay + az * az + bx * bx + by * by + bz * bz + abx * abx + aby * aby + abz * abz
-    degenerate = new_sq <= (min_quality * squared) ** 2
-    return np.bincount(q[turned | degenerate], minlength=len(x)) == 0
+        corner_query = query_of[flat]
+        del query_of
+        if 2 * len(x) > n:  # most vertices are queried: scan every corner
+            kk = k[corner_query]  # -1 reads k[-1]; masked below
+            a = np.roll(F, -1, axis=1).ravel()
+            survives = a != kk
+            b = np.roll(F, 1, axis=1).ravel()
+            survives &= b != kk
+            survives &= corner_query >= 0
+            c = np.flatnonzero(survives)
+            del survives
+            a, b, kk, q = a[c], b[c], kk[c], corner_query[c]
+            t = c // 3
+        else:
+            c = np.flatnonzero(corner_query >= 0)
+            q = corner_query[c]
+            t = c // 3
+            p = c - 3 * t
+            a = flat[3 * t + _NEXT[p]]
+            b = flat[3 * t + _PREV[p]]
+            kk = k[q]
+            survives = (a != kk) & (b != kk)
+            t, a, b, kk, q = t[survives], a[survives], b[survives], kk[survives], q[survives]
+        del c, corner_query
+        kx, ky, kz = X[kk], Y[kk], Z[kk]
+        del kk
+        ax, ay, az = X[a] - kx, Y[a] - ky, Z[a] - kz
+        bx, by, bz = X[b] - kx, Y[b] - ky, Z[b] - kz
+        del a, b, kx, ky, kz
+        nx = ay * bz - az * by
+        ny = az * bx - ax * bz
+        nz = ax * by - ay * bx
+        ox, oy, oz = self.normal
+        new_sq = nx * nx + ny * ny + nz * nz
+        dot = nx * ox[t] + ny * oy[t] + nz * oz[t]
+        del nx, ny, nz
+        bad = dot <= 0
+        dot *= dot
+        bound = self.cos_sq * new_sq
+        bound *= self.old_sq[t]
+        bad |= dot <= bound
+        del dot, bound
+        squared = ax * ax + ay * ay + az * az + bx * bx + by * by + bz * bz
+        bx -= ax
+        by -= ay
+        bz -= az
+        squared += bx * bx
+        squared += by * by
+        squared += bz * bz
+        squared *= self.min_quality
+        squared *= squared
+        bad |= new_sq <= squared
+        return np.bincount(q[bad], minlength=len(x)) == 0
 
 
 _NEXT = np.array([1, 2, 0])
@@ -326,24 +408,44 @@ def _select_independent(cost, candidate, target, adj: _Adjacency, max_rounds):
     every undecided candidate that precedes all its undecided conflicting
     candidates and drops those; run to the end, the rounds give the sequential
     greedy set.
+
+    Each candidate keeps the number of its undecided conflicting candidates
+    that precede it (with the multiplicity of the conflict lists below); a
+    round's winners are those at zero, and only the conflicts of the vertices
+    dropped in a round are revisited, so all rounds together touch every
+    conflict about once instead of once per round.
     """
     n = len(cost)
-    src, dst = adj.src, adj.dst
+    src, dst, valence, indptr = adj.src, adj.dst, adj.valence, adj.indptr
     cand = np.flatnonzero(candidate)
-    # conflicts through adjacency (both directions are already listed)
-    both = candidate[src] & candidate[dst]
-    u1, v1 = src[both], dst[both]
-    # conflicts through a target: y in N(target[x])
-    t = target[cand]
-    u2 = np.repeat(cand, adj.valence[t])
-    v2 = adj.rings(t)
-    keep = candidate[v2] & (v2 != u2)
-    u2, v2 = u2[keep], v2[keep]
-    u = np.concatenate([u1, u2, v2])
-    v = np.concatenate([v1, v2, u2])
-    # v precedes u in the greedy order
-    before = (cost[v] < cost[u]) | ((cost[v] == cost[u]) & (v < u))
-    u, v = u[before], v[before]
+    none = np.int64(n)  # rank of non-candidates: after every candidate
+    rank = np.full(n, none, dtype=np.int64)
+    rank[cand[np.argsort(cost[cand], kind="stable")]] = np.arange(len(cand), dtype=np.int64)
+    # the candidates grouped by target, for "target[y] in N(x)"
+    t_cand = target[cand]
+    aiming = cand[np.argsort(t_cand, kind="stable")]
+    aiming_count = np.bincount(t_cand, minlength=n)
+    aiming_ptr = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(aiming_count, out=aiming_ptr[1:])
+
+    # preceding conflicts through adjacency
+    rank_src = adj.per_edge(rank)
+    rank_dst = rank[dst]
+    earlier = rank_dst < rank_src
+    earlier &= rank_src < none
+    count = np.bincount(src[earlier], minlength=n)
+    del rank_src, rank_dst, earlier
+    # through a target: pairs (x, w) with w in N(target[x]); x precedes w or w precedes x
+    t_valence = valence[t_cand]
+    w = dst[_ranges(indptr[t_cand], t_valence)]
+    x = np.repeat(cand, t_valence)
+    rank_x = np.repeat(rank[cand], t_valence)
+    rank_w = rank[w]
+    real = (rank_w < none) & (w != x)
+    w_first = rank_w < rank_x
+    count += np.bincount(x[real & w_first], minlength=n)
+    count += np.bincount(w[real & ~w_first], minlength=n)
+    del w, x, rank_x, rank_w, real, w_first
 
     state = np.zeros(n, dtype=np.int8)  # 0 undecided, 1 selected, 2 dropped
     state[~candidate] = 2
@@ -351,14 +453,46 @@ def _select_independent(cost, candidate, target, adj: _Adjacency, max_rounds):
     for _ in range(max_rounds):
         if len(undecided) == 0:
             break
-        blocked = np.zeros(n, dtype=bool)
-        blocked[u] = True
-        winners = undecided[~blocked[undecided]]
+        winners = undecided[count[undecided] == 0]
         state[winners] = 1
-        # drop the later conflicting candidates of each winner
-        lost = u[state[v] == 1]
-        state[lost[state[lost] == 0]] = 2
-        undecided = undecided[state[undecided] == 0]
-        live = (state[u] == 0) & (state[v] == 0)
-        u, v = u[live], v[live]
+        # every undecided conflicting candidate of a winner comes after it: drop it
+        near_winner = np.zeros(n, dtype=bool)
+        near_winner[adj.rings(winners)] = True
+        near_winner_target = np.zeros(n, dtype=bool)
+        near_winner_target[adj.rings(target[winners])] = True
+        rest = undecided[state[undecided] == 0]
+        lost_mask = near_winner[rest] | near_winner_target[rest] | near_winner[target[rest]]
+        lost = rest[lost_mask]
+        state[lost] = 2
+        undecided = rest[~lost_mask]
+        if len(undecided) == 0 or len(lost) == 0:
+            continue
+        # the dropped ones no longer hold back the undecided ones after them
+        owner, other = _conflicts(lost, target, adj, aiming, aiming_count, aiming_ptr)
+        later = state[other] == 0
+        later &= rank[other] > rank[owner]
+        count -= np.bincount(other[later], minlength=n)
     return np.flatnonzero(state == 1)
+
+
+def _conflicts(vertices, target, adj, aiming, aiming_count, aiming_ptr):
+    """``(owner, other)`` pairs: the conflict multiset of each vertex, as counted in :func:`_select_independent`.
+
+    ``other`` runs over ``N(x)``, ``N(target[x])`` without ``x``, and the
+    candidates ``y != x`` with ``target[y]`` in ``N(x)``.
+    """
+    valence, indptr, dst = adj.valence, adj.indptr, adj.dst
+    v1 = valence[vertices]
+    ring = dst[_ranges(indptr[vertices], v1)]
+    owner1 = np.repeat(vertices, v1)
+    t = target[vertices]
+    v2 = valence[t]
+    other2 = dst[_ranges(indptr[t], v2)]
+    owner2 = np.repeat(vertices, v2)
+    c3 = aiming_count[ring]
+    other3 = aiming[_ranges(aiming_ptr[ring], c3)]
+    owner3 = np.repeat(owner1, c3)
+    owner = np.concatenate([owner1, owner2, owner3])
+    other = np.concatenate([ring, other2, other3])
+    distinct = owner != other
+    return owner[distinct], other[distinct]

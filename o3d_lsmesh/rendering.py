@@ -236,7 +236,7 @@ def _filament(vertices, triangles, colors, camera, width, height, background, ti
         package_parent = str(Path(__file__).resolve().parents[1])
         env = dict(os.environ)
         env["PYTHONPATH"] = package_parent + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
-        code = "import sys; from o3d_lsmesh.render import _filament_worker; _filament_worker(sys.argv[1], sys.argv[2])"
+        code = "import sys; from o3d_lsmesh.rendering import _filament_worker; _filament_worker(sys.argv[1], sys.argv[2])"
         try:
             done = subprocess.run(
                 [sys.executable, "-c", code, spec_path, image_path],

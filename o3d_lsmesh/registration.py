@@ -183,7 +183,7 @@ def register() -> tuple[str, ...]:
     Examples
     --------
     >>> import open3d as o3d
-    >>> from o3d_lsmesh.register import register, unregister  # also exported as o3d_lsmesh.register
+    >>> from o3d_lsmesh.registration import register, unregister  # also exported as o3d_lsmesh.register
     >>> names = register()
     >>> sphere = o3d.geometry.TriangleMesh.create_sphere(resolution=10)
     >>> out = sphere.ls_mesh([0, 10, 50], weights=5.0)
