@@ -34,18 +34,40 @@ def halfedges(triangles: np.ndarray) -> np.ndarray:
     )
 
 
-def _group(keys: np.ndarray):
-    """Sort-and-mask grouping: (order, starts, counts, inverse) of integer ``keys``."""
-    order = np.argsort(keys, kind="stable")
-    sorted_keys = keys[order]
-    first = np.ones(len(keys), dtype=bool)
+def _group(keys: np.ndarray, bound: int):
+    """Sort-and-mask grouping of integer ``keys`` in ``[0, bound)``: (order, starts, counts, inverse).
+
+    When key and position fit in 64 bits together they are packed and sorted as
+    one ``uint64`` array (numpy sorts plain integers several times faster than
+    it argsorts them); ties keep their input order either way.
+    """
+    count = len(keys)
+    index_bits = max(1, int(count - 1).bit_length())
+    if max(1, int(bound - 1).bit_length()) + index_bits <= 64:
+        packed = (keys.astype(np.uint64) << np.uint64(index_bits)) | np.arange(count, dtype=np.uint64)
+        packed.sort()
+        order = (packed & np.uint64((1 << index_bits) - 1)).astype(np.int64)
+        sorted_keys = (packed >> np.uint64(index_bits)).astype(np.int64)
+    else:
+        order = np.argsort(keys, kind="stable")
+        sorted_keys = keys[order]
+    first = np.ones(count, dtype=bool)
     first[1:] = sorted_keys[1:] != sorted_keys[:-1]
     starts = np.flatnonzero(first)
-    counts = np.diff(np.append(starts, len(keys)))
-    group_of_sorted = np.cumsum(first) - 1
-    inverse = np.empty(len(keys), dtype=np.int64)
-    inverse[order] = group_of_sorted
+    counts = np.diff(np.append(starts, count))
+    inverse = np.empty(count, dtype=np.int64)
+    inverse[order] = np.cumsum(first) - 1
     return order, starts, counts, inverse
+
+
+def _edge_table(triangles: np.ndarray, n: int | None):
+    # half-edges grouped by undirected edge: (halfedges, order, starts, counts, inverse)
+    he = halfedges(triangles)
+    if n is None:
+        n = int(triangles.max()) + 1 if len(triangles) else 0
+    lo = np.minimum(he[:, 0], he[:, 1])
+    hi = np.maximum(he[:, 0], he[:, 1])
+    return (he,) + _group(lo * np.int64(n) + hi, n * n)
 
 
 def unique_edges(triangles: np.ndarray, n: int | None = None):
@@ -60,14 +82,9 @@ def unique_edges(triangles: np.ndarray, n: int | None = None):
     inverse : (3m,) int64
         Edge index of each half-edge of :func:`halfedges`.
     """
-    he = halfedges(triangles)
-    if n is None:
-        n = int(triangles.max()) + 1 if len(triangles) else 0
-    lo = np.minimum(he[:, 0], he[:, 1])
-    hi = np.maximum(he[:, 0], he[:, 1])
-    order, starts, counts, inverse = _group(lo * np.int64(n) + hi)
-    first = order[starts]
-    edges = np.stack([lo[first], hi[first]], axis=1)
+    he, order, starts, counts, inverse = _edge_table(triangles, n)
+    first = he[order[starts]]
+    edges = np.sort(first, axis=1)
     return edges, counts, inverse
 
 
@@ -115,7 +132,7 @@ def nonmanifold_edges(triangles: np.ndarray, n: int | None = None) -> np.ndarray
     return edges[counts > 2]
 
 
-def nonmanifold_vertices(triangles: np.ndarray, n: int) -> np.ndarray:
+def nonmanifold_vertices(triangles: np.ndarray, n: int, *, _table=None) -> np.ndarray:
     """Vertices whose triangles do not form a single fan (bow-ties and the like), sorted.
 
     The corners ``(t, v)`` of the triangles around a vertex are linked when two
@@ -123,48 +140,40 @@ def nonmanifold_vertices(triangles: np.ndarray, n: int) -> np.ndarray:
     its corners fall into more than one linked group.
     """
     m = len(triangles)
-    he = halfedges(triangles)
-    tri = np.tile(np.arange(m), 3)
-    # corner id of vertex at position p of triangle t is p * m + t; half-edge row r = q*m + t
-    # runs from position q to position (q + 1) % 3.
-    pos_from = np.repeat(np.arange(3), m)
-    corner_from = pos_from * m + tri
-    corner_to = ((pos_from + 1) % 3) * m + tri
-    _, counts, inverse = unique_edges(triangles, n)
-    interior = counts[inverse] == 2
-    rows = np.flatnonzero(interior)
-    order = np.argsort(inverse[rows], kind="stable")
-    pairs = rows[order].reshape(-1, 2)  # the two half-edges of each manifold interior edge
-    a, b = pairs[:, 0], pairs[:, 1]
+    he, order, starts, counts, _ = _edge_table(triangles, n) if _table is None else _table
+    # corner p*m + t holds triangles[t, p]; half-edge row q*m + t runs from position q to (q + 1) % 3
+    row = np.arange(3 * m)
+    corner_from = row
+    corner_to = (row + m) % (3 * m)
+    # the two half-edges of each manifold interior edge sit next to each other in the grouping
+    interior_start = starts[counts == 2]
+    a, b = order[interior_start], order[interior_start + 1]
     same_direction = he[a, 0] == he[b, 0]
     # link the corners holding the same vertex on either side of the shared edge
-    a_first_b = np.where(same_direction, corner_from[b], corner_to[b])
-    a_second_b = np.where(same_direction, corner_to[b], corner_from[b])
     links_u = np.concatenate([corner_from[a], corner_to[a]])
-    links_v = np.concatenate([a_first_b, a_second_b])
-    graph = sp.coo_matrix(
-        (np.ones(len(links_u)), (links_u, links_v)), shape=(3 * m, 3 * m)
-    ).tocsr()
-    _, fan = csgraph.connected_components(graph, directed=False)
-    corner_vertex = triangles.T.ravel()  # corner p*m+t holds triangles[t, p]
-    keys = corner_vertex * np.int64(3 * m) + fan
-    keys.sort()
-    distinct = np.ones(len(keys), dtype=bool)
-    distinct[1:] = keys[1:] != keys[:-1]
-    fans_per_vertex = np.bincount(keys[distinct] // (3 * m), minlength=n)
-    return np.flatnonzero(fans_per_vertex > 1)
+    links_v = np.concatenate(
+        [np.where(same_direction, corner_from[b], corner_to[b]), np.where(same_direction, corner_to[b], corner_from[b])]
+    )
+    graph = sp.csr_matrix((np.ones(len(links_u)), (links_u, links_v)), shape=(3 * m, 3 * m))
+    fan_count, fan = csgraph.connected_components(graph, directed=False)
+    # links only join corners of one vertex, so every fan belongs to exactly one vertex
+    vertex_of_fan = np.zeros(fan_count, dtype=np.int64)
+    vertex_of_fan[fan] = triangles.T.ravel()
+    return np.flatnonzero(np.bincount(vertex_of_fan, minlength=n) > 1)
 
 
 def check_manifold(triangles: np.ndarray, n: int, *, name: str = "mesh") -> None:
     """Raise ``ValueError`` naming the first non-manifold edge or vertex of the mesh."""
-    bad_edges = nonmanifold_edges(triangles, n)
-    if len(bad_edges):
-        e = bad_edges[0]
+    table = _edge_table(triangles, n)
+    he, order, starts, counts, _ = table
+    bad = np.flatnonzero(counts > 2)
+    if len(bad):
+        e = np.sort(he[order[starts[bad[0]]]])
         raise ValueError(
             f"{name} must be edge-manifold, got edge ({int(e[0])}, {int(e[1])}) shared by more than two "
-            f"triangles ({len(bad_edges)} such edges)"
+            f"triangles ({len(bad)} such edges)"
         )
-    bad_vertices = nonmanifold_vertices(triangles, n)
+    bad_vertices = nonmanifold_vertices(triangles, n, _table=table)
     if len(bad_vertices):
         raise ValueError(
             f"{name} must be vertex-manifold, got vertex {int(bad_vertices[0])} joining separate fans of "

@@ -99,7 +99,7 @@ class _Adjacency:
 
     def __init__(self, triangles: np.ndarray, n: int):
         n64 = np.int64(n)
-        a, b, c = triangles[:, 0], triangles[:, 1], triangles[:, 2]
+        a, b, c = (np.ascontiguousarray(triangles[:, i]) for i in range(3))
         an, bn, cn = a * n64, b * n64, c * n64
         # SIMD sort of int64 keys is linear-ish and far faster than argsort or np.unique
         keys = np.concatenate([an + b, bn + c, cn + a, bn + a, cn + b, an + c])
@@ -203,9 +203,12 @@ def collapse_level(
     cost = alpha * min_edge + beta * max_edge
 
     # cone volume |N_x . (x_k - x)| (module docstring)
-    f0, f1, f2 = F[:, 0], F[:, 1], F[:, 2]
-    ux, uy, uz = X[f1] - X[f0], Y[f1] - Y[f0], Z[f1] - Z[f0]
-    vx, vy, vz = X[f2] - X[f0], Y[f2] - Y[f0], Z[f2] - Z[f0]
+    columns = [np.ascontiguousarray(F[:, c]) for c in range(3)]
+    corner_coords = tuple((X[f], Y[f], Z[f]) for f in columns)
+    del columns
+    (x0, y0, z0), (x1, y1, z1), (x2, y2, z2) = corner_coords
+    ux, uy, uz = x1 - x0, y1 - y0, z1 - z0
+    vx, vy, vz = x2 - x0, y2 - y0, z2 - z0
     normal = (uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx)
     del ux, uy, uz, vx, vy, vz
     corners = F.ravel()
@@ -227,7 +230,7 @@ def collapse_level(
     ok &= ~(src_boundary & dst_boundary & (src_valence == 2) & (dst_valence == 2))
     del src_boundary, dst_boundary, src_valence, dst_valence
 
-    geometry = _Geometry(X, Y, Z, F, normal, n, max_normal_angle, min_quality)
+    geometry = _Geometry(X, Y, Z, F, corner_coords, normal, n, max_normal_angle, min_quality)
     target = np.full(n, -1, dtype=np.int64)
     # every vertex is offered its best target; later tries only revisit the
     # vertices whose pick failed, on their own edges
@@ -249,7 +252,7 @@ def collapse_level(
         np.cumsum(valence[retry][:-1], out=sub_seg[1:])
         local = _best_targets(volume[edges], length[edges], ok[edges], src[edges], sub_seg)
         pick = edges[local]
-    del volume, length, ok, geometry
+    del volume, length, ok, geometry, corner_coords
 
     candidate = target >= 0
     if not candidate.any():
@@ -329,71 +332,87 @@ def _link_condition(adj: _Adjacency, x: np.ndarray, k: np.ndarray, edge: np.ndar
 class _Geometry:
     """Whether moving ``x`` onto ``k`` keeps every surviving star triangle unflipped and non-degenerate."""
 
-    def __init__(self, X, Y, Z, F, normal, n, max_normal_angle, min_quality):
-        self.X, self.Y, self.Z, self.F, self.normal, self.n = X, Y, Z, F, normal, n
+    def __init__(self, X, Y, Z, F, corner_coords, normal, n, max_normal_angle, min_quality):
+        self.X, self.Y, self.Z, self.F, self.n = X, Y, Z, F, n
+        self.corner_coords = corner_coords  # ((X, Y, Z) of column 0, of column 1, of column 2) of F
+        self.normal = normal
         ox, oy, oz = normal
         self.old_sq = ox * ox + oz * oz + oy * oy  # einsum's order
         self.cos_sq = np.cos(np.deg2rad(max_normal_angle)) ** 2
         self.min_quality = min_quality
 
-    def __call__(self, x: np.ndarray, k: np.ndarray) -> np.ndarray:
-        X, Y, Z, F, n = self.X, self.Y, self.Z, self.F, self.n
-        query_of = np.full(n, -1, dtype=np.int64)
-        query_of[x] = np.arange(len(x))
-        flat = F.ravel()
-        corner_query = query_of[flat]
-        del query_of
-        if 2 * len(x) > n:  # most vertices are queried: scan every corner
-            kk = k[corner_query]  # -1 reads k[-1]; masked below
-            a = np.roll(F, -1, axis=1).ravel()
-            survives = a != kk
-            b = np.roll(F, 1, axis=1).ravel()
-            survives &= b != kk
-            survives &= corner_query >= 0
-            c = np.flatnonzero(survives)
-            del survives
-            a, b, kk, q = a[c], b[c], kk[c], corner_query[c]
-            t = c // 3
-        else:
-            c = np.flatnonzero(corner_query >= 0)
-            q = corner_query[c]
-            t = c // 3
-            p = c - 3 * t
-            a = flat[3 * t + _NEXT[p]]
-            b = flat[3 * t + _PREV[p]]
-            kk = k[q]
-            survives = (a != kk) & (b != kk)
-            t, a, b, kk, q = t[survives], a[survives], b[survives], kk[survives], q[survives]
-        del c, corner_query
-        kx, ky, kz = X[kk], Y[kk], Z[kk]
-        del kk
-        ax, ay, az = X[a] - kx, Y[a] - ky, Z[a] - kz
-        bx, by, bz = X[b] - kx, Y[b] - ky, Z[b] - kz
-        del a, b, kx, ky, kz
+    def _bad(self, ax, ay, az, bx, by, bz, ox, oy, oz, old_sq):
+        """Flipped or degenerate new triangles ``(k, a, b)``, from ``a - k`` and ``b - k``."""
         nx = ay * bz - az * by
         ny = az * bx - ax * bz
         nz = ax * by - ay * bx
-        ox, oy, oz = self.normal
         new_sq = nx * nx + ny * ny + nz * nz
-        dot = nx * ox[t] + ny * oy[t] + nz * oz[t]
+        dot = nx * ox + ny * oy + nz * oz
         del nx, ny, nz
         bad = dot <= 0
         dot *= dot
         bound = self.cos_sq * new_sq
-        bound *= self.old_sq[t]
+        bound *= old_sq
         bad |= dot <= bound
         del dot, bound
         squared = ax * ax + ay * ay + az * az + bx * bx + by * by + bz * bz
-        bx -= ax
-        by -= ay
-        bz -= az
+        bx = bx - ax
+        by = by - ay
+        bz = bz - az
         squared += bx * bx
         squared += by * by
         squared += bz * bz
         squared *= self.min_quality
         squared *= squared
         bad |= new_sq <= squared
+        return bad
+
+    def __call__(self, x: np.ndarray, k: np.ndarray) -> np.ndarray:
+        X, Y, Z, F, n = self.X, self.Y, self.Z, self.F, self.n
+        query_of = np.full(n, -1, dtype=np.int64)
+        query_of[x] = np.arange(len(x))
+        if 2 * len(x) > n:
+            return self._all_corners(query_of, k, len(x))
+        flat = F.ravel()
+        c = np.flatnonzero(query_of[flat] >= 0)
+        q = query_of[flat[c]]
+        t = c // 3
+        p = c - 3 * t
+        a = flat[3 * t + _NEXT[p]]
+        b = flat[3 * t + _PREV[p]]
+        kk = k[q]
+        survives = (a != kk) & (b != kk)
+        t, a, b, kk, q = t[survives], a[survives], b[survives], kk[survives], q[survives]
+        kx, ky, kz = X[kk], Y[kk], Z[kk]
+        ox, oy, oz = self.normal
+        bad = self._bad(X[a] - kx, Y[a] - ky, Z[a] - kz, X[b] - kx, Y[b] - ky, Z[b] - kz,
+                        ox[t], oy[t], oz[t], self.old_sq[t])
         return np.bincount(q[bad], minlength=len(x)) == 0
+
+    def _all_corners(self, query_of, k, q):
+        """Most vertices are queried: go triangle by triangle, so that a triangle's own
+        coordinates and old normal are read without a gather, one corner column at a time."""
+        X, Y, Z, F = self.X, self.Y, self.Z, self.F
+        ox, oy, oz = self.normal
+        target_of = np.full(self.n, -1, dtype=np.int64)
+        asked = query_of >= 0
+        target_of[asked] = k[query_of[asked]]
+        bad_queries = []
+        for p in range(3):
+            a, b = _NEXT[p], _PREV[p]
+            kk = target_of[F[:, p]]
+            live = kk >= 0
+            live &= F[:, a] != kk
+            live &= F[:, b] != kk
+            rows = np.flatnonzero(live)
+            kk = kk[rows]
+            kx, ky, kz = X[kk], Y[kk], Z[kk]
+            (axs, ays, azs), (bxs, bys, bzs) = self.corner_coords[a], self.corner_coords[b]
+            bad = self._bad(axs[rows] - kx, ays[rows] - ky, azs[rows] - kz,
+                            bxs[rows] - kx, bys[rows] - ky, bzs[rows] - kz,
+                            ox[rows], oy[rows], oz[rows], self.old_sq[rows])
+            bad_queries.append(query_of[F[rows[bad], p]])
+        return np.bincount(np.concatenate(bad_queries), minlength=q) == 0
 
 
 _NEXT = np.array([1, 2, 0])
@@ -420,10 +439,10 @@ def _select_independent(cost, candidate, target, adj: _Adjacency, max_rounds):
     cand = np.flatnonzero(candidate)
     none = np.int64(n)  # rank of non-candidates: after every candidate
     rank = np.full(n, none, dtype=np.int64)
-    rank[cand[np.argsort(cost[cand], kind="stable")]] = np.arange(len(cand), dtype=np.int64)
-    # the candidates grouped by target, for "target[y] in N(x)"
+    rank[cand[_stable_argsort(cost[cand])]] = np.arange(len(cand), dtype=np.int64)
+    # the candidates grouped by target, for "target[y] in N(x)" (any order within a group)
     t_cand = target[cand]
-    aiming = cand[np.argsort(t_cand, kind="stable")]
+    aiming = cand[np.argsort(t_cand)]
     aiming_count = np.bincount(t_cand, minlength=n)
     aiming_ptr = np.zeros(n + 1, dtype=np.int64)
     np.cumsum(aiming_count, out=aiming_ptr[1:])
@@ -468,31 +487,40 @@ def _select_independent(cost, candidate, target, adj: _Adjacency, max_rounds):
         if len(undecided) == 0 or len(lost) == 0:
             continue
         # the dropped ones no longer hold back the undecided ones after them
-        owner, other = _conflicts(lost, target, adj, aiming, aiming_count, aiming_ptr)
-        later = state[other] == 0
-        later &= rank[other] > rank[owner]
-        count -= np.bincount(other[later], minlength=n)
+        live_rank = np.full(n, -1, dtype=np.int64)
+        live_rank[undecided] = rank[undecided]
+        released = [
+            other[live_rank[other] > owner_rank]
+            for other, owner_rank in _conflicts(lost, rank, target, adj, aiming, aiming_count, aiming_ptr)
+        ]
+        count -= np.bincount(np.concatenate(released), minlength=n)
     return np.flatnonzero(state == 1)
 
 
-def _conflicts(vertices, target, adj, aiming, aiming_count, aiming_ptr):
-    """``(owner, other)`` pairs: the conflict multiset of each vertex, as counted in :func:`_select_independent`.
+def _conflicts(vertices, rank, target, adj, aiming, aiming_count, aiming_ptr):
+    """The conflict multiset of each vertex, as counted in :func:`_select_independent`, in three parts.
 
-    ``other`` runs over ``N(x)``, ``N(target[x])`` without ``x``, and the
-    candidates ``y != x`` with ``target[y]`` in ``N(x)``.
+    Yields ``(other, rank of its owner)``: ``other`` runs over ``N(x)``,
+    ``N(target[x])`` and the candidates ``y`` with ``target[y]`` in ``N(x)``;
+    ``x`` itself may appear in the last two, with its own rank, which no
+    strict rank comparison lets through.
     """
     valence, indptr, dst = adj.valence, adj.indptr, adj.dst
     v1 = valence[vertices]
     ring = dst[_ranges(indptr[vertices], v1)]
-    owner1 = np.repeat(vertices, v1)
+    ring_rank = np.repeat(rank[vertices], v1)
+    yield ring, ring_rank
     t = target[vertices]
     v2 = valence[t]
-    other2 = dst[_ranges(indptr[t], v2)]
-    owner2 = np.repeat(vertices, v2)
+    yield dst[_ranges(indptr[t], v2)], np.repeat(rank[vertices], v2)
     c3 = aiming_count[ring]
-    other3 = aiming[_ranges(aiming_ptr[ring], c3)]
-    owner3 = np.repeat(owner1, c3)
-    owner = np.concatenate([owner1, owner2, owner3])
-    other = np.concatenate([ring, other2, other3])
-    distinct = owner != other
-    return owner[distinct], other[distinct]
+    yield aiming[_ranges(aiming_ptr[ring], c3)], np.repeat(ring_rank, c3)
+
+
+def _stable_argsort(values):
+    """``np.argsort(values, kind="stable")``, by the much faster unstable sort when there are no ties."""
+    order = np.argsort(values)
+    ordered = values[order]
+    if np.any(ordered[1:] == ordered[:-1]):
+        return np.argsort(values, kind="stable")
+    return order
