@@ -54,17 +54,36 @@ def _as_csc(matrix: Any) -> sp.csc_matrix:
     return csc
 
 
+def _symmetric_from_lower(lower: sp.csc_matrix) -> sp.csc_matrix:
+    strict = sp.tril(lower, k=-1)
+    full = (lower + strict.T).tocsc()
+    full.sort_indices()
+    return full
+
+
+def _stored(csc: sp.csc_matrix, *, given_lower: bool, keep_lower: bool) -> sp.csc_matrix:
+    """The form an :class:`SPDSolver` keeps: the lower triangle for CHOLMOD, the whole matrix otherwise."""
+    if keep_lower:
+        stored = csc if given_lower else sp.tril(csc, format="csc")
+    else:
+        stored = _symmetric_from_lower(csc) if given_lower else csc
+    stored.sort_indices()
+    return stored
+
+
 class SPDSolver:
     """Factor a sparse SPD matrix once and solve, refactor or update it.
 
     Parameters
     ----------
     matrix : (n, n) scipy sparse matrix
-        Symmetric positive definite. Only CHOLMOD's lower triangle is read, so
-        the caller must pass a symmetric matrix (``A.T @ A`` forms are).
+        Symmetric positive definite: the whole matrix, or only its lower
+        triangle with ``lower=True`` (which lets the caller free the whole one).
     backend : {"auto", "cholmod", "scipy"}
         ``"auto"`` takes CHOLMOD when scikit-sparse imports, else SciPy's
         ``splu`` with an :class:`O3DLSMeshWarning`.
+    lower : bool
+        ``matrix`` holds only its lower triangle.
     ordering : {"default", "nesdis", "metis", "amd", "colamd", "natural"}
         CHOLMOD's fill-reducing ordering. ``"default"`` lets CHOLMOD pick the
         least fill (usually AMD on meshes). ``"nesdis"`` (nested dissection) has
@@ -92,7 +111,7 @@ class SPDSolver:
     [[0.5, 0.5], [0.5, 0.5], [0.5, 0.5]]
     """
 
-    def __init__(self, matrix: Any, *, backend: str = "auto", ordering: str = "default") -> None:
+    def __init__(self, matrix: Any, *, backend: str = "auto", ordering: str = "default", lower: bool = False) -> None:
         backend = as_choice(backend, ("auto", "cholmod", "scipy"), name="backend")
         self.ordering = as_choice(ordering, ORDERINGS, name="ordering")
         if backend == "cholmod" and _cholmod is None:
@@ -113,7 +132,10 @@ class SPDSolver:
                 backend = "cholmod"
         self.backend = backend
         self._lock = threading.RLock()
-        self._matrix = _as_csc(matrix)
+        # CHOLMOD reads only the lower triangle, so it is all that is kept (half the memory
+        # while the factor is computed); SciPy's LU needs the whole matrix
+        self._lower = self.backend == "cholmod"
+        self._matrix = _stored(_as_csc(matrix), given_lower=bool(lower), keep_lower=self._lower)
         self._pending: list[sp.csc_matrix] = []
         self._factor: Any = None
         self._factorize(analyze=True)
@@ -124,15 +146,18 @@ class SPDSolver:
 
     @property
     def matrix(self) -> sp.csc_matrix:
-        """The matrix currently factored, updates included, ``(n, n)`` CSC."""
+        """The whole matrix currently factored, updates included, ``(n, n)`` CSC."""
         with self._lock:
             self._flush()
-            return self._matrix
+            if not self._lower:
+                return self._matrix
+            return _symmetric_from_lower(self._matrix)
 
     def _flush(self) -> None:
         if self._pending:
             for c in self._pending:
-                self._matrix = (self._matrix + c @ c.T).tocsc()
+                product = c @ c.T
+                self._matrix = (self._matrix + (sp.tril(product) if self._lower else product)).tocsc()
             self._pending.clear()
             self._matrix.sort_indices()
 
@@ -153,13 +178,16 @@ class SPDSolver:
                 raise SingularSystemError(f"matrix must be non-singular: {error}") from error
             raise
 
-    def refactor(self, matrix: Any) -> None:
-        """Factor a new matrix of the same sparsity pattern, reusing the symbolic analysis."""
+    def refactor(self, matrix: Any, *, lower: bool = False) -> None:
+        """Factor a new matrix of the same sparsity pattern, reusing the symbolic analysis.
+
+        ``lower=True`` says that ``matrix`` holds only its lower triangle.
+        """
         csc = _as_csc(matrix)
         if csc.shape != self._matrix.shape:
             raise ValueError(f"matrix must have shape {self._matrix.shape}, got {csc.shape}")
         with self._lock:
-            self._matrix = csc
+            self._matrix = _stored(csc, given_lower=lower, keep_lower=self._lower)
             self._pending.clear()
             self._factorize(analyze=False)
 
@@ -200,7 +228,7 @@ class SPDSolver:
     def __getstate__(self) -> dict:
         with self._lock:
             self._flush()
-            return {"backend": self.backend, "ordering": self.ordering, "matrix": self._matrix}
+            return {"backend": self.backend, "ordering": self.ordering, "matrix": self._matrix, "lower": self._lower}
 
     def __setstate__(self, state: dict) -> None:
         self.backend = state["backend"]
@@ -208,7 +236,9 @@ class SPDSolver:
         if self.backend == "cholmod" and _cholmod is None:
             self.backend = "scipy"
         self._lock = threading.RLock()
-        self._matrix = state["matrix"]
+        was_lower = state.get("lower", False)
+        self._lower = self.backend == "cholmod"
+        self._matrix = _stored(state["matrix"], given_lower=was_lower, keep_lower=self._lower)
         self._pending = []
         self._factor = None
         self._factorize(analyze=True)

@@ -42,6 +42,21 @@ def check_components_constrained(graph: sp.spmatrix, constrained: np.ndarray, *,
         )
 
 
+def _add_to_diagonal(matrix: sp.csr_matrix, rows: np.ndarray, values: np.ndarray) -> sp.csr_matrix:
+    """``matrix + diag`` at ``rows``: in place where the diagonal entries exist (no sparse addition)."""
+    n = matrix.shape[0]
+    row_of_entry = np.repeat(np.arange(n), np.diff(matrix.indptr))
+    on_diagonal = np.flatnonzero(matrix.indices == row_of_entry)
+    position = np.full(n, -1, dtype=np.int64)
+    position[row_of_entry[on_diagonal]] = on_diagonal
+    where = position[rows]
+    if np.all(where >= 0):
+        matrix.data[where] += values
+        return matrix
+    # unreferenced vertices have no diagonal entry in L^T L
+    return (matrix + sp.csr_matrix((values, (rows, rows)), shape=matrix.shape)).tocsr()
+
+
 class LSMeshSolver:
     """A least-squares mesh system with its Cholesky factor kept for editing.
 
@@ -124,24 +139,26 @@ class LSMeshSolver:
             self._free = np.flatnonzero(free)
             L = L.tocsc()
             L_free = L[:, self._free]
-            smoothness = (L_free.T @ L_free).tocsr()
-            normal = smoothness.tocsc()
+            normal = sp.tril(L_free.T @ L_free, format="csc")
+            operator = L_free.tocsr()
             # right-hand side operator: -L_free^T L_ctrl maps control positions to the free rhs
             self._rhs_hard = -(L_free.T @ L[:, indices]).tocsr()
         else:
             self._free = np.arange(n)
-            smoothness = L.T.tocsr() @ L
-            normal = smoothness + sp.csr_matrix((weights**2, (indices, indices)), shape=(n, n))
-            # the matrix is symmetric, so its CSR arrays are already its CSC arrays
-            normal = sp.csc_matrix((normal.data, normal.indices, normal.indptr), shape=(n, n))
+            # only the lower triangle goes on: the whole matrix is freed before CHOLMOD factors
+            normal = sp.tril(_add_to_diagonal(L.T.tocsr() @ L, indices, weights**2), format="csc")
+            # rebuilt on demand for refinement: not holding it while CHOLMOD factors lowers the peak memory
+            operator = None
             self._rhs_hard = None
-        # kept for the residual of iterative refinement after rank-k updates
-        self._smoothness = smoothness
+        # the Laplacian (of the free columns) serves the residual of iterative refinement:
+        # L^T (L x) needs a third of the memory of L^T L
+        self._operator = operator
+        del L
         self._updated = False
         # reduced index of every vertex (-1 for eliminated ones)
         self._reduced = np.full(n, -1, dtype=np.int64)
         self._reduced[self._free] = np.arange(len(self._free))
-        self._solver = SPDSolver(normal, backend=backend, ordering=ordering)
+        self._solver = SPDSolver(normal, backend=backend, ordering=ordering, lower=True)
 
     @property
     def backend(self) -> str:
@@ -190,7 +207,9 @@ class LSMeshSolver:
         solution = self._solver.solve(rhs)
         if self._updated if refine is None else refine:
             reduced_soft = self._reduced[self._soft]
-            residual = -(self._smoothness @ solution)
+            if self._operator is None:
+                self._operator = laplacian_matrix(self._data.vertices, self._data.triangles, self.laplacian).tocsr()
+            residual = -(self._operator.T @ (self._operator @ solution))
             if self.interpolate:
                 residual += self._rhs_hard @ hard_pos
             residual[reduced_soft] += (self._soft_weights**2)[:, None] * (soft_pos - solution[reduced_soft])

@@ -277,3 +277,12 @@ def test_add_anchors_with_paper_weight_is_refined_to_fresh_accuracy():
     assert np.linalg.norm(refined - fresh) <= 1e-8 * np.linalg.norm(fresh)
     unrefined = solver.solve(refine=False)
     assert np.linalg.norm(unrefined - fresh) > np.linalg.norm(refined - fresh)
+
+
+def test_constrained_unreferenced_vertex_keeps_its_position():
+    V, F = grid(4, 4)
+    V = np.concatenate([V, [[7.0, 8.0, 9.0]]])  # vertex 16 is in no triangle
+    out, _ = ls_mesh((V, F), [0, 16], weights=2.0)
+    np.testing.assert_allclose(out[16], V[16])
+    full, _ = ls_mesh((V[:16], F), [0], weights=2.0)
+    np.testing.assert_allclose(out[:16], full, atol=1e-12)

@@ -118,3 +118,15 @@ def test_bad_ordering():
     A, _ = spd(5)
     with pytest.raises(ValueError, match="ordering must be one of"):
         SPDSolver(A, ordering="random")
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_lower_triangle_input_equals_whole_matrix(backend):
+    A, b = spd()
+    solver = SPDSolver(sp.tril(A, format="csc"), backend=backend, lower=True)
+    np.testing.assert_allclose(solver.solve(b), spla.spsolve(A, b), rtol=1e-10)
+    assert abs(solver.matrix - A).max() < 1e-14
+    solver.refactor(sp.tril(A * 3.0), lower=True)
+    np.testing.assert_allclose(solver.solve(b), spla.spsolve(A * 3.0, b), rtol=1e-10)
+    clone = pickle.loads(pickle.dumps(solver))
+    np.testing.assert_allclose(clone.solve(b), solver.solve(b), rtol=1e-12)
