@@ -42,19 +42,29 @@ def check_components_constrained(graph: sp.spmatrix, constrained: np.ndarray, *,
         )
 
 
-def _add_to_diagonal(matrix: sp.csr_matrix, rows: np.ndarray, values: np.ndarray) -> sp.csr_matrix:
-    """``matrix + diag`` at ``rows``: in place where the diagonal entries exist (no sparse addition)."""
-    n = matrix.shape[0]
-    row_of_entry = np.repeat(np.arange(n), np.diff(matrix.indptr))
-    on_diagonal = np.flatnonzero(matrix.indices == row_of_entry)
+def _lower_normal_matrix(product: sp.csr_matrix, rows: np.ndarray, values: np.ndarray) -> sp.csc_matrix:
+    """Lower triangle, as CSC, of the symmetric ``product + diag`` (``values`` added at ``rows``).
+
+    A symmetric matrix's CSR arrays are its CSC arrays, so the lower triangle in
+    CSC keeps, in each CSR row ``j``, the entries of index ``>= j``; the
+    diagonal is updated in place where it exists. Cheaper than ``scipy.sparse.tril``
+    plus a sparse addition, which go through COO.
+    """
+    n = product.shape[0]
+    row_of_entry = np.repeat(np.arange(n), np.diff(product.indptr))
     position = np.full(n, -1, dtype=np.int64)
+    on_diagonal = np.flatnonzero(product.indices == row_of_entry)
     position[row_of_entry[on_diagonal]] = on_diagonal
     where = position[rows]
-    if np.all(where >= 0):
-        matrix.data[where] += values
-        return matrix
-    # unreferenced vertices have no diagonal entry in L^T L
-    return (matrix + sp.csr_matrix((values, (rows, rows)), shape=matrix.shape)).tocsr()
+    if np.any(where < 0):
+        # unreferenced vertices have no diagonal entry in L^T L: the slow, general path
+        full = (product + sp.csr_matrix((values, (rows, rows)), shape=product.shape)).tocsr()
+        return sp.tril(full, format="csc")
+    product.data[where] += values
+    keep = product.indices >= row_of_entry
+    indptr = np.zeros(n + 1, dtype=product.indptr.dtype)
+    np.cumsum(np.bincount(row_of_entry[keep], minlength=n), out=indptr[1:])
+    return sp.csc_matrix((product.data[keep], product.indices[keep], indptr), shape=product.shape)
 
 
 class LSMeshSolver:
@@ -146,7 +156,7 @@ class LSMeshSolver:
         else:
             self._free = np.arange(n)
             # only the lower triangle goes on: the whole matrix is freed before CHOLMOD factors
-            normal = sp.tril(_add_to_diagonal(L.T.tocsr() @ L, indices, weights**2), format="csc")
+            normal = _lower_normal_matrix(L.T.tocsr() @ L, indices, weights**2)
             # rebuilt on demand for refinement: not holding it while CHOLMOD factors lowers the peak memory
             operator = None
             self._rhs_hard = None
@@ -324,7 +334,10 @@ def ls_mesh(
     solver = LSMeshSolver(
         mesh, constraint_vertex_indices, weights=weights, interpolate=interpolate, laplacian=laplacian
     )
-    return solver.mesh(constraint_vertex_positions)
+    vertices, data = solver.solve(constraint_vertex_positions), solver._data
+    # the factor goes before the output mesh is built: a lower peak of memory on large meshes
+    del solver
+    return new_mesh(data, vertices)
 
 
 def reconstruct_geometry(
