@@ -27,7 +27,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._solvers import SPDSolver
-from ..topology import boundary_loops, unique_edges
+from ..topology import _group, boundary_loops, unique_edges
 
 __all__ = [
     "FairingTopology",
@@ -167,14 +167,9 @@ def triangle_coefficients(valences: np.ndarray) -> tuple[np.ndarray, np.ndarray]
 
 
 def _sorted_groups(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    # sort-and-mask: distinct keys (sorted) and the group of every key
-    order = np.argsort(keys, kind="stable")
-    sorted_keys = keys[order]
-    first = np.ones(len(keys), dtype=bool)
-    first[1:] = sorted_keys[1:] != sorted_keys[:-1]
-    group = np.zeros_like(order)
-    group[order] = np.cumsum(first) - 1
-    return sorted_keys[first], group
+    # distinct keys (sorted) and the group of every key, by the topology module's sort-and-mask
+    order, starts, _, group = _group(keys, int(keys.max()) + 1)
+    return keys[order[starts]], group
 
 
 @dataclass(frozen=True)
