@@ -105,6 +105,19 @@ def read_mesh(mesh: Any, *, name: str = "mesh", allow_isolated: bool = True) -> 
     return MeshData(vertices, triangles, mesh, kind)
 
 
+def source_triangles(data: MeshData) -> np.ndarray:
+    """The triangles of ``data.source`` read again, without validation, ``(m, 3)``.
+
+    For callers that drop ``data.triangles`` while they hold large state (the
+    source was validated by :func:`read_mesh` and is not modified by us).
+    """
+    if data.kind == "legacy":
+        return np.asarray(data.source.triangles).reshape(-1, 3)
+    if data.kind == "tensor":
+        return data.source.triangle.indices.cpu().numpy().reshape(-1, 3)
+    return np.asarray(data.source[1]).reshape(-1, 3)
+
+
 def new_mesh(data: MeshData, vertices: np.ndarray, triangles: np.ndarray | None = None) -> Any:
     """Build a new mesh of ``data``'s kind with ``vertices`` (and ``triangles``, if they changed).
 

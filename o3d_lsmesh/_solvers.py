@@ -54,6 +54,19 @@ def _as_csc(matrix: Any) -> sp.csc_matrix:
     return csc
 
 
+def _as_factor_of_product(matrix: Any) -> sp.csc_matrix:
+    if not sp.issparse(matrix):
+        raise TypeError(f"product_of must be a scipy sparse matrix, got {type(matrix).__name__}")
+    csc = sp.csc_matrix(matrix, dtype=np.float64)
+    if not csc.has_canonical_format:
+        csc = csc.copy()  # canonical (sorted, summed) without touching the caller's arrays
+        csc.sum_duplicates()
+    if csc.indices.dtype != np.int32 and max(csc.nnz, *csc.shape) < np.iinfo(np.int32).max:
+        # CHOLMOD's int interface: the long one would copy and store 64-bit indices
+        csc = sp.csc_matrix((csc.data, csc.indices.astype(np.int32), csc.indptr.astype(np.int32)), shape=csc.shape)
+    return csc
+
+
 def _symmetric_from_lower(lower: sp.csc_matrix) -> sp.csc_matrix:
     strict = sp.tril(lower, k=-1)
     full = (lower + strict.T).tocsc()
@@ -76,9 +89,16 @@ class SPDSolver:
 
     Parameters
     ----------
-    matrix : (n, n) scipy sparse matrix
+    matrix : (n, n) scipy sparse matrix or None
         Symmetric positive definite: the whole matrix, or only its lower
         triangle with ``lower=True`` (which lets the caller free the whole one).
+        ``None`` with ``product_of``.
+    product_of : (n, k) scipy sparse matrix, optional, keyword-only
+        Factor ``A A^T`` for this ``A`` without forming the product (CHOLMOD
+        assembles it column by column while it factors): the normal matrix of a
+        least-squares problem ``min |A^T x - b|`` from the transposed rows, in
+        less memory and time than ``A @ A.T``. Updates append their columns to
+        ``A``.
     backend : {"auto", "cholmod", "scipy"}
         ``"auto"`` takes CHOLMOD when scikit-sparse imports, else SciPy's
         ``splu`` with an :class:`O3DLSMeshWarning`.
@@ -111,7 +131,15 @@ class SPDSolver:
     [[0.5, 0.5], [0.5, 0.5], [0.5, 0.5]]
     """
 
-    def __init__(self, matrix: Any, *, backend: str = "auto", ordering: str = "default", lower: bool = False) -> None:
+    def __init__(
+        self,
+        matrix: Any = None,
+        *,
+        backend: str = "auto",
+        ordering: str = "default",
+        lower: bool = False,
+        product_of: Any = None,
+    ) -> None:
         backend = as_choice(backend, ("auto", "cholmod", "scipy"), name="backend")
         self.ordering = as_choice(ordering, ORDERINGS, name="ordering")
         if backend == "cholmod" and _cholmod is None:
@@ -135,13 +163,22 @@ class SPDSolver:
         # CHOLMOD reads only the lower triangle, so it is all that is kept (half the memory
         # while the factor is computed); SciPy's LU needs the whole matrix
         self._lower = self.backend == "cholmod"
-        self._matrix = _stored(_as_csc(matrix), given_lower=bool(lower), keep_lower=self._lower)
+        self._matrix: sp.csc_matrix | None = None
+        self._product_of: sp.csc_matrix | None = None
+        if (matrix is None) == (product_of is None):
+            raise TypeError("pass exactly one of matrix and product_of")
+        if product_of is None:
+            self._matrix = _stored(_as_csc(matrix), given_lower=bool(lower), keep_lower=self._lower)
+        else:
+            self._product_of = _as_factor_of_product(product_of)
         self._pending: list[sp.csc_matrix] = []
         self._factor: Any = None
         self._factorize(analyze=True)
 
     @property
     def shape(self) -> tuple[int, int]:
+        if self._product_of is not None:
+            return (self._product_of.shape[0],) * 2
         return self._matrix.shape
 
     @property
@@ -149,12 +186,21 @@ class SPDSolver:
         """The whole matrix currently factored, updates included, ``(n, n)`` CSC."""
         with self._lock:
             self._flush()
+            if self._product_of is not None:
+                product = (self._product_of @ self._product_of.T).tocsc()
+                product.sort_indices()
+                return product
             if not self._lower:
                 return self._matrix
             return _symmetric_from_lower(self._matrix)
 
     def _flush(self) -> None:
         if self._pending:
+            if self._product_of is not None:
+                # A A^T + C C^T = [A C] [A C]^T
+                self._product_of = sp.hstack([self._product_of, *self._pending], format="csc")
+                self._pending.clear()
+                return
             for c in self._pending:
                 product = c @ c.T
                 self._matrix = (self._matrix + (sp.tril(product) if self._lower else product)).tocsc()
@@ -163,10 +209,17 @@ class SPDSolver:
 
     def _factorize(self, *, analyze: bool) -> None:
         try:
-            if self.backend == "cholmod":
+            if self.backend == "cholmod" and self._product_of is not None:
+                if analyze or self._factor is None:
+                    self._factor = _cholmod.analyze_AAt(self._product_of, ordering_method=self.ordering)
+                self._factor.cholesky_AAt_inplace(self._product_of)
+            elif self.backend == "cholmod":
                 if analyze or self._factor is None:
                     self._factor = _cholmod.analyze(self._matrix, ordering_method=self.ordering)
                 self._factor.cholesky_inplace(self._matrix)
+            elif self._product_of is not None:
+                product = (self._product_of @ self._product_of.T).tocsc()
+                self._factor = spla.splu(product, permc_spec="MMD_AT_PLUS_A")
             else:
                 self._factor = spla.splu(self._matrix, permc_spec="MMD_AT_PLUS_A")
         except Exception as error:
@@ -183,6 +236,8 @@ class SPDSolver:
 
         ``lower=True`` says that ``matrix`` holds only its lower triangle.
         """
+        if self._product_of is not None:
+            raise TypeError("refactor takes a matrix, and this solver factors a product: build a new SPDSolver")
         csc = _as_csc(matrix)
         if csc.shape != self._matrix.shape:
             raise ValueError(f"matrix must have shape {self._matrix.shape}, got {csc.shape}")
@@ -194,8 +249,9 @@ class SPDSolver:
     def solve(self, rhs: Any) -> np.ndarray:
         """Solve ``A x = rhs`` for an ``(n,)`` or ``(n, k)`` right-hand side, all columns at once."""
         b = np.asarray(rhs, dtype=np.float64)
-        if b.shape[:1] != (self._matrix.shape[0],) or b.ndim > 2:
-            raise ValueError(f"rhs must have shape ({self._matrix.shape[0]},) or ({self._matrix.shape[0]}, k), got {b.shape}")
+        n = self.shape[0]
+        if b.shape[:1] != (n,) or b.ndim > 2:
+            raise ValueError(f"rhs must have shape ({n},) or ({n}, k), got {b.shape}")
         with self._lock:
             if self.backend == "cholmod":
                 x = self._factor(b)
@@ -213,8 +269,8 @@ class SPDSolver:
         """
         if not (sp.isspmatrix_csc(c) and c.dtype == np.float64):
             c = sp.csc_matrix(c, dtype=np.float64)
-        if c.shape[0] != self._matrix.shape[0]:
-            raise ValueError(f"C must have {self._matrix.shape[0]} rows, got shape {c.shape}")
+        if c.shape[0] != self.shape[0]:
+            raise ValueError(f"C must have {self.shape[0]} rows, got shape {c.shape}")
         if not c.has_sorted_indices:
             c = c.sorted_indices()
         with self._lock:
@@ -228,7 +284,13 @@ class SPDSolver:
     def __getstate__(self) -> dict:
         with self._lock:
             self._flush()
-            return {"backend": self.backend, "ordering": self.ordering, "matrix": self._matrix, "lower": self._lower}
+            return {
+                "backend": self.backend,
+                "ordering": self.ordering,
+                "matrix": self._matrix,
+                "lower": self._lower,
+                "product_of": self._product_of,
+            }
 
     def __setstate__(self, state: dict) -> None:
         self.backend = state["backend"]
@@ -238,7 +300,10 @@ class SPDSolver:
         self._lock = threading.RLock()
         was_lower = state.get("lower", False)
         self._lower = self.backend == "cholmod"
-        self._matrix = _stored(state["matrix"], given_lower=was_lower, keep_lower=self._lower)
+        self._product_of = state.get("product_of")
+        self._matrix = None
+        if self._product_of is None:
+            self._matrix = _stored(state["matrix"], given_lower=was_lower, keep_lower=self._lower)
         self._pending = []
         self._factor = None
         self._factorize(analyze=True)

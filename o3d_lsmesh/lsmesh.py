@@ -15,7 +15,7 @@ import scipy.sparse as sp
 from scipy.sparse import csgraph
 
 from ._errors import SingularSystemError
-from ._o3d import MeshData, new_mesh, read_mesh
+from ._o3d import MeshData, new_mesh, read_mesh, source_triangles
 from ._solvers import SPDSolver
 from ._validate import as_choice, as_indices, as_positions, as_weights
 from .laplacian import LAPLACIAN_KINDS, laplacian_matrix
@@ -42,31 +42,6 @@ def check_components_constrained(graph: sp.spmatrix, constrained: np.ndarray, *,
         )
 
 
-def _lower_normal_matrix(product: sp.csr_matrix, rows: np.ndarray, values: np.ndarray) -> sp.csc_matrix:
-    """Lower triangle, as CSC, of the symmetric ``product + diag`` (``values`` added at ``rows``).
-
-    A symmetric matrix's CSR arrays are its CSC arrays, so the lower triangle in
-    CSC keeps, in each CSR row ``j``, the entries of index ``>= j``; the
-    diagonal is updated in place where it exists. Cheaper than ``scipy.sparse.tril``
-    plus a sparse addition, which go through COO.
-    """
-    n = product.shape[0]
-    row_of_entry = np.repeat(np.arange(n), np.diff(product.indptr))
-    position = np.full(n, -1, dtype=np.int64)
-    on_diagonal = np.flatnonzero(product.indices == row_of_entry)
-    position[row_of_entry[on_diagonal]] = on_diagonal
-    where = position[rows]
-    if np.any(where < 0):
-        # unreferenced vertices have no diagonal entry in L^T L: the slow, general path
-        full = (product + sp.csr_matrix((values, (rows, rows)), shape=product.shape)).tocsr()
-        return sp.tril(full, format="csc")
-    product.data[where] += values
-    keep = product.indices >= row_of_entry
-    indptr = np.zeros(n + 1, dtype=product.indptr.dtype)
-    np.cumsum(np.bincount(row_of_entry[keep], minlength=n), out=indptr[1:])
-    return sp.csc_matrix((product.data[keep], product.indices[keep], indptr), shape=product.shape)
-
-
 class LSMeshSolver:
     """A least-squares mesh system with its Cholesky factor kept for editing.
 
@@ -76,7 +51,9 @@ class LSMeshSolver:
 
     over the vertex positions ``X (n, 3)`` for the control vertices ``s`` with
     positions ``C_s`` and weights ``w_s``. The normal matrix ``L^T L + W^2`` is
-    analyzed and factored once; :meth:`solve` with new control positions is a
+    analyzed and factored once, as the product ``A A^T`` of ``A = [L^T | W]``
+    (CHOLMOD assembles it while it factors, so it is never formed: less time
+    and memory than ``L^T L``); :meth:`solve` with new control positions is a
     back-substitution (the editing use of section 6) and :meth:`add_anchors`
     adds relaxed anchors by a rank-k update of the kept factor (section III of
     the geometry-aware bases paper).
@@ -125,7 +102,10 @@ class LSMeshSolver:
         laplacian: str = "uniform",
         backend: str = "auto",
         ordering: str = "default",
+        _release_arrays: bool = False,
     ) -> None:
+        # _release_arrays (for ls_mesh): drop the copied vertex and triangle arrays before
+        # CHOLMOD factors, the memory peak; mesh() and refinement of a relaxed system then fail
         data = read_mesh(mesh)
         n = len(data.vertices)
         indices = as_indices(constraint_vertex_indices, n, name="constraint_vertex_indices")
@@ -149,14 +129,17 @@ class LSMeshSolver:
             self._free = np.flatnonzero(free)
             L = L.tocsc()
             L_free = L[:, self._free]
-            normal = sp.tril(L_free.T @ L_free, format="csc")
+            # the normal matrix L_free^T L_free, given to CHOLMOD as a product it never forms
+            product = L_free.T.tocsc()
             operator = L_free.tocsr()
             # right-hand side operator: -L_free^T L_ctrl maps control positions to the free rhs
             self._rhs_hard = -(L_free.T @ L[:, indices]).tocsr()
         else:
-            self._free = np.arange(n)
-            # only the lower triangle goes on: the whole matrix is freed before CHOLMOD factors
-            normal = _lower_normal_matrix(L.T.tocsr() @ L, indices, weights**2)
+            self._free = None  # every vertex is unknown: no index arrays to hold
+            # L^T L + W^2 = A A^T for A = [L^T | W] (one weighted column per control vertex):
+            # CHOLMOD factors it without it being formed, in less time and memory than L^T L
+            controls = sp.csc_matrix((weights, indices, np.arange(len(indices) + 1)), shape=(n, len(indices)))
+            product = sp.hstack([L.T, controls], format="csc")
             # rebuilt on demand for refinement: not holding it while CHOLMOD factors lowers the peak memory
             operator = None
             self._rhs_hard = None
@@ -165,10 +148,21 @@ class LSMeshSolver:
         self._operator = operator
         del L
         self._updated = False
+        self._n = n
+        self._unknowns = n if self._free is None else len(self._free)
         # reduced index of every vertex (-1 for eliminated ones)
-        self._reduced = np.full(n, -1, dtype=np.int64)
-        self._reduced[self._free] = np.arange(len(self._free))
-        self._solver = SPDSolver(normal, backend=backend, ordering=ordering, lower=True)
+        self._reduced = None
+        if self._free is not None:
+            self._reduced = np.full(n, -1, dtype=np.int64)
+            self._reduced[self._free] = np.arange(len(self._free))
+        if _release_arrays:
+            self._data = MeshData(None, None, data.source, data.kind)
+        del data
+        self._solver = SPDSolver(product_of=product, backend=backend, ordering=ordering)
+
+    def _reduce(self, indices: np.ndarray) -> np.ndarray:
+        # row of each (free) vertex in the reduced system
+        return indices if self._reduced is None else self._reduced[indices]
 
     @property
     def backend(self) -> str:
@@ -210,13 +204,13 @@ class LSMeshSolver:
         else:
             positions = as_positions(constraint_vertex_positions, k, name="constraint_vertex_positions")
         hard_pos, soft_pos = positions[: len(self._hard)], positions[len(self._hard):]
-        rhs = np.zeros((len(self._free), 3))
+        rhs = np.zeros((self._unknowns, 3))
         if self.interpolate:
             rhs += self._rhs_hard @ hard_pos
-        rhs[self._reduced[self._soft]] += (self._soft_weights**2)[:, None] * soft_pos
+        rhs[self._reduce(self._soft)] += (self._soft_weights**2)[:, None] * soft_pos
         solution = self._solver.solve(rhs)
         if self._updated if refine is None else refine:
-            reduced_soft = self._reduced[self._soft]
+            reduced_soft = self._reduce(self._soft)
             if self._operator is None:
                 self._operator = laplacian_matrix(self._data.vertices, self._data.triangles, self.laplacian).tocsr()
             residual = -(self._operator.T @ (self._operator @ solution))
@@ -226,7 +220,7 @@ class LSMeshSolver:
             solution = solution + self._solver.solve(residual)
         if not self.interpolate:
             return solution
-        result = np.zeros((len(self._reduced), 3))
+        result = np.zeros((self._n, 3))
         result[self._free] = solution
         result[self._hard] = hard_pos
         return result
@@ -251,7 +245,7 @@ class LSMeshSolver:
         weights : float or (a,) array-like
             Positive anchor weights.
         """
-        n = len(self._reduced)
+        n = self._n
         new = as_indices(indices, n, name="indices")
         existing = np.zeros(n, dtype=bool)
         existing[self.constraint_vertex_indices] = True
@@ -266,7 +260,7 @@ class LSMeshSolver:
             pos = as_positions(positions, len(new), name="positions")
         # one nonzero per column: build the CSC arrays directly (the COO route costs more than a small update)
         c = sp.csc_matrix(
-            (w, self._reduced[new], np.arange(len(new) + 1)), shape=(len(self._free), len(new))
+            (w, self._reduce(new), np.arange(len(new) + 1)), shape=(self._unknowns, len(new))
         )
         self._solver.update(c)
         self._updated = True
@@ -331,13 +325,15 @@ def ls_mesh(
     >>> len(out.vertices) == len(sphere.vertices)
     True
     """
+    # the solver holds no copy of the mesh while CHOLMOD factors, and the factor goes
+    # before the output mesh is built: a lower peak of memory on large meshes
     solver = LSMeshSolver(
-        mesh, constraint_vertex_indices, weights=weights, interpolate=interpolate, laplacian=laplacian
+        mesh, constraint_vertex_indices, weights=weights, interpolate=interpolate, laplacian=laplacian,
+        _release_arrays=True,
     )
     vertices, data = solver.solve(constraint_vertex_positions), solver._data
-    # the factor goes before the output mesh is built: a lower peak of memory on large meshes
     del solver
-    return new_mesh(data, vertices)
+    return new_mesh(MeshData(vertices, source_triangles(data), data.source, data.kind), vertices)
 
 
 def reconstruct_geometry(

@@ -14,6 +14,7 @@ from scipy.sparse import csgraph
 __all__ = [
     "halfedges",
     "unique_edges",
+    "directed_edges",
     "adjacency_matrix",
     "vertex_valences",
     "connected_components",
@@ -39,35 +40,50 @@ def _group(keys: np.ndarray, bound: int):
 
     When key and position fit in 64 bits together they are packed and sorted as
     one ``uint64`` array (numpy sorts plain integers several times faster than
-    it argsorts them); ties keep their input order either way.
+    it argsorts them); ties keep their input order either way. Work arrays are
+    reused in place: on large meshes fresh memory costs as much as the sort.
     """
     count = len(keys)
     index_bits = max(1, int(count - 1).bit_length())
     if max(1, int(bound - 1).bit_length()) + index_bits <= 64:
-        packed = (keys.astype(np.uint64) << np.uint64(index_bits)) | np.arange(count, dtype=np.uint64)
+        packed = keys.astype(np.uint64)
+        packed <<= np.uint64(index_bits)
+        packed |= np.arange(count, dtype=np.uint64)
         packed.sort()
-        order = (packed & np.uint64((1 << index_bits) - 1)).astype(np.int64)
-        sorted_keys = (packed >> np.uint64(index_bits)).astype(np.int64)
+        order = np.bitwise_and(packed, np.uint64((1 << index_bits) - 1)).view(np.int64)
+        packed >>= np.uint64(index_bits)
+        sorted_keys = packed.view(np.int64)
     else:
         order = np.argsort(keys, kind="stable")
         sorted_keys = keys[order]
-    first = np.ones(count, dtype=bool)
-    first[1:] = sorted_keys[1:] != sorted_keys[:-1]
+    first = np.empty(count, dtype=bool)
+    first[:1] = True
+    np.not_equal(sorted_keys[1:], sorted_keys[:-1], out=first[1:])
     starts = np.flatnonzero(first)
-    counts = np.diff(np.append(starts, count))
+    counts = np.diff(starts, append=count)
+    rank = np.cumsum(first, dtype=np.int64)
+    rank -= 1
     inverse = np.empty(count, dtype=np.int64)
-    inverse[order] = np.cumsum(first) - 1
+    inverse[order] = rank
     return order, starts, counts, inverse
+
+
+def _edge_keys(triangles: np.ndarray, n: int) -> np.ndarray:
+    # undirected key lo * n + hi of every half-edge, in the row order of halfedges()
+    m = len(triangles)
+    tail = triangles.T
+    head = triangles[:, [1, 2, 0]].T
+    keys = np.minimum(tail, head, out=np.empty((3, m), dtype=np.int64))
+    keys *= np.int64(n)
+    keys += np.maximum(tail, head)
+    return keys.reshape(-1)
 
 
 def _edge_table(triangles: np.ndarray, n: int | None):
     # half-edges grouped by undirected edge: (halfedges, order, starts, counts, inverse)
-    he = halfedges(triangles)
     if n is None:
         n = int(triangles.max()) + 1 if len(triangles) else 0
-    lo = np.minimum(he[:, 0], he[:, 1])
-    hi = np.maximum(he[:, 0], he[:, 1])
-    return (he,) + _group(lo * np.int64(n) + hi, n * n)
+    return (halfedges(triangles),) + _group(_edge_keys(triangles, n), n * n)
 
 
 def unique_edges(triangles: np.ndarray, n: int | None = None):
@@ -82,21 +98,59 @@ def unique_edges(triangles: np.ndarray, n: int | None = None):
     inverse : (3m,) int64
         Edge index of each half-edge of :func:`halfedges`.
     """
-    he, order, starts, counts, inverse = _edge_table(triangles, n)
-    first = he[order[starts]]
-    edges = np.sort(first, axis=1)
+    if n is None:
+        n = int(triangles.max()) + 1 if len(triangles) else 0
+    keys = _edge_keys(triangles, n)
+    order, starts, counts, inverse = _group(keys, n * n)
+    first = keys[order[starts]]
+    edges = np.empty((len(first), 2), dtype=np.int64)
+    np.floor_divide(first, n, out=edges[:, 0])
+    np.remainder(first, n, out=edges[:, 1])
     return edges, counts, inverse
 
 
+def directed_edges(triangles: np.ndarray, n: int):
+    """Both directions of every edge, sorted by ``(source, target)``, with their triangle counts.
+
+    Returns
+    -------
+    src, dst : (2e,) int64
+        Edge ``src[k] -> dst[k]``; ``src`` is sorted, so these are the CSR
+        arrays of the adjacency (``dst`` the column indices).
+    triangle_count : (2e,) int64
+        Triangles on each edge (1 on a boundary, 2 inside, more when
+        non-manifold), whatever the orientation of the triangles.
+
+    Each triangle gives the key ``src * n + dst`` of each direction of its
+    three edges once; one sort of the plain int64 keys (numpy's SIMD sort, far
+    faster than argsort, ``np.unique`` or a COO-to-CSR merge) groups them.
+    """
+    n64 = np.int64(n)
+    a, b, c = (np.ascontiguousarray(triangles[:, i], dtype=np.int64) for i in range(3))
+    an, bn, cn = a * n64, b * n64, c * n64
+    keys = np.concatenate([an + b, bn + c, cn + a, bn + a, cn + b, an + c])
+    del an, bn, cn
+    keys.sort()
+    first = np.empty(len(keys), dtype=bool)
+    first[:1] = True
+    np.not_equal(keys[1:], keys[:-1], out=first[1:])
+    at = np.flatnonzero(first)
+    triangle_count = np.diff(at, append=len(keys))
+    keys = keys[at]
+    src = keys // n64
+    keys -= src * n64
+    return src, keys, triangle_count
+
+
 def adjacency_matrix(triangles: np.ndarray, n: int) -> sp.csr_matrix:
-    """Symmetric binary vertex adjacency ``(n, n)`` CSR (1 where an edge joins two vertices)."""
-    he = halfedges(triangles)
-    rows = np.concatenate([he[:, 0], he[:, 1]])
-    cols = np.concatenate([he[:, 1], he[:, 0]])
-    # CSR conversion merges the repeated half-edges in linear time, faster than sorting edge keys
-    adjacency = sp.csr_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n))
-    adjacency.sum_duplicates()
-    adjacency.data[:] = 1.0
+    """Symmetric binary vertex adjacency ``(n, n)`` CSR (1 where an edge joins two vertices), sorted indices."""
+    src, dst, _ = directed_edges(triangles, n)
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(np.bincount(src, minlength=n), out=indptr[1:])
+    # SciPy keeps 32-bit indices when they fit; giving them so avoids a copy
+    index_dtype = np.int32 if len(dst) < np.iinfo(np.int32).max and n < np.iinfo(np.int32).max else np.int64
+    adjacency = sp.csr_matrix((np.ones(len(dst)), dst.astype(index_dtype), indptr.astype(index_dtype)), shape=(n, n))
+    adjacency.has_canonical_format = True  # sorted, no duplicates
     return adjacency
 
 

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import strategies as st
 
 REPO = Path(__file__).resolve().parents[1]
 DATA = Path(os.environ.get("O3D_LSMESH_DATA", REPO.parent / "shared" / "data" / "meshes"))
@@ -45,3 +46,14 @@ def sphere():
 @pytest.fixture
 def rng():
     return np.random.default_rng(12345)
+
+
+def triangle_soups(max_vertices: int = 12, max_triangles: int = 25):
+    """Hypothesis strategy of ``(n, triangles)``: any triangles without a repeated vertex, so
+    non-manifold edges, mixed orientations, repeated triangles and unreferenced vertices."""
+    return st.integers(3, max_vertices).flatmap(
+        lambda n: st.tuples(
+            st.just(n),
+            st.lists(st.permutations(range(n)).map(lambda p: p[:3]), min_size=1, max_size=max_triangles),
+        )
+    )

@@ -11,6 +11,7 @@ import pytest
 
 from conftest import grid, load_mesh
 from o3d_lsmesh.hierarchy import build_hierarchy, from_fast_simplification
+from o3d_lsmesh.hierarchy.hierarchy import build_hierarchy_arrays
 from o3d_lsmesh.topology import (
     adjacency_matrix,
     boundary_halfedges,
@@ -410,3 +411,26 @@ def test_bad_level_queries_raise(sphere_h):
         h.refine(1, np.zeros((3, 3)))
     with pytest.raises(ValueError, match="positions must be finite"):
         h.refine(1, np.full((h.vertex_count(1), 3), np.nan))
+
+
+
+def test_pinched_vertex_and_empty_hierarchy_still_checked():
+    # a pinched vertex (two closed fans) is rejected before any collapse, and so is a
+    # non-manifold mesh when no level is asked for
+    V, F = _noisy_sphere(8)
+    pinched_V = np.vstack([V, V[1:] + [3.0, 0, 0]])
+    second = np.where(F == 0, 0, F + len(V) - 1)  # the copy shares vertex 0 with the original
+    with pytest.raises(ValueError, match="vertex-manifold, got vertex 0"):
+        build_hierarchy((pinched_V, np.vstack([F, second])), min_vertices=30)
+    with pytest.raises(ValueError, match="edge-manifold"):
+        build_hierarchy(_nonmanifold(), max_levels=0)
+
+
+def test_array_core_leaves_the_callers_arrays_writeable():
+    # the hierarchy holds read-only views; fast-simplification (nanobind) rejects read-only input
+    V, F = _noisy_sphere(8)
+    h = build_hierarchy_arrays(V, F, min_vertices=30)
+    assert V.flags.writeable and F.flags.writeable
+    assert not h.vertices.flags.writeable
+    with pytest.raises(ValueError, match="read-only"):
+        h.vertices[0, 0] = 1.0

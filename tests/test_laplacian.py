@@ -2,7 +2,8 @@ import numpy as np
 import open3d as o3d
 import pytest
 import scipy.sparse as sp
-from conftest import grid
+from hypothesis import given, settings
+from conftest import grid, triangle_soups
 
 from o3d_lsmesh import laplacian
 from o3d_lsmesh.laplacian import cotangent_laplacian, uniform_laplacian
@@ -73,3 +74,17 @@ def test_kind_is_validated(sphere):
 def test_tensor_mesh_gives_same_operator(sphere):
     tmesh = o3d.t.geometry.TriangleMesh.from_legacy(sphere)
     assert abs(laplacian(tmesh) - laplacian(sphere)).max() < 1e-12
+
+
+@settings(max_examples=60, deadline=None)
+@given(triangle_soups())
+def test_uniform_is_canonical_and_matches_loop_on_any_triangle_soup(case):
+    # non-manifold edges, mixed orientations, repeated triangles and unreferenced vertices included
+    n, triangles = case
+    F = np.array(triangles, dtype=np.int64)
+    L = uniform_laplacian(F, n)
+    np.testing.assert_allclose(L.toarray(), reference_uniform(F, n), atol=1e-15)
+    canonical = L.copy()
+    canonical.sum_duplicates()
+    canonical.sort_indices()
+    assert np.array_equal(L.indices, canonical.indices) and np.array_equal(L.indptr, canonical.indptr)

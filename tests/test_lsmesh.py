@@ -197,6 +197,13 @@ def test_kinds_attributes_and_input_untouched(sphere):
     assert "colors" in tout.vertex and "normals" in tout.vertex
     assert np.array_equal(tmesh.vertex.positions.numpy(), tbefore)
     np.testing.assert_allclose(tout.vertex.positions.numpy(), np.asarray(out.vertices), atol=1e-5)
+    # ls_mesh drops its copy of the triangles while it factors and reads them again from the input
+    assert np.array_equal(np.asarray(out.triangles), np.asarray(sphere.triangles))
+    assert np.array_equal(tout.triangle.indices.numpy(), tmesh.triangle.indices.numpy())
+    V, F = np.asarray(sphere.vertices), np.asarray(sphere.triangles).astype(np.int32)
+    arrays_out = ls_mesh((V, F), [0, 5, 40])
+    assert arrays_out[1].dtype == np.int64 and np.array_equal(arrays_out[1], F)
+    np.testing.assert_allclose(arrays_out[0], np.asarray(out.vertices), atol=1e-12)
     rec = reconstruct_geometry(sphere, [1, 2, 3])
     assert np.array_equal(np.asarray(sphere.vertices), before) and isinstance(rec, o3d.geometry.TriangleMesh)
 

@@ -130,3 +130,38 @@ def test_lower_triangle_input_equals_whole_matrix(backend):
     np.testing.assert_allclose(solver.solve(b), spla.spsolve(A * 3.0, b), rtol=1e-10)
     clone = pickle.loads(pickle.dumps(solver))
     np.testing.assert_allclose(clone.solve(b), solver.solve(b), rtol=1e-12)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_product_mode_factors_a_at_without_forming_it(backend):
+    # an LS problem's transposed rows: A (n, k) with k > n, int64 indices, non-canonical order
+    rng = np.random.default_rng(3)
+    n, k = 40, 90
+    A = (sp.random(n, k, density=0.08, random_state=3) + sp.hstack([sp.identity(n), sp.csc_matrix((n, k - n))])).tocoo()
+    A = sp.csc_matrix((A.data[::-1], (A.row[::-1], A.col[::-1])), shape=(n, k))
+    b = rng.normal(size=(n, 3))
+    normal = (A @ A.T).tocsc()
+    solver = SPDSolver(product_of=A, backend=backend)
+    np.testing.assert_allclose(solver.solve(b), spla.spsolve(normal, b), rtol=1e-9, atol=1e-12)
+    assert solver.shape == (n, n) and abs(solver.matrix - normal).max() < 1e-12
+    C = sp.csc_matrix((np.array([2.0, 0.5]), (np.array([1, 30]), np.array([0, 1]))), shape=(n, 2))
+    solver.update(C)
+    updated = normal + C @ C.T
+    np.testing.assert_allclose(solver.solve(b), spla.spsolve(updated.tocsc(), b), rtol=1e-9, atol=1e-12)
+    clone = pickle.loads(pickle.dumps(solver))  # pickles as [A C], refactors on load
+    np.testing.assert_allclose(clone.solve(b), solver.solve(b), rtol=1e-10)
+    assert abs(clone.matrix - updated).max() < 1e-12
+    with pytest.raises(TypeError, match="refactor takes a matrix"):
+        solver.refactor(updated)
+
+
+def test_product_mode_raises():
+    A, _ = spd()
+    with pytest.raises(TypeError, match="exactly one of matrix and product_of"):
+        SPDSolver(A, product_of=A)
+    with pytest.raises(TypeError, match="exactly one of matrix and product_of"):
+        SPDSolver()
+    with pytest.raises(TypeError, match="product_of must be a scipy sparse matrix, got ndarray"):
+        SPDSolver(product_of=np.eye(3))
+    with pytest.raises(SingularSystemError):
+        SPDSolver(product_of=sp.csc_matrix(np.array([[1.0, 0.0], [0.0, 0.0]]))).solve(np.ones(2))

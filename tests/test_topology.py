@@ -1,12 +1,15 @@
 import numpy as np
 import open3d as o3d
 import pytest
-from conftest import grid, load_mesh
+from conftest import grid, load_mesh, triangle_soups
+from hypothesis import given, settings
 
 from o3d_lsmesh.topology import (
+    adjacency_matrix,
     boundary_loops,
     check_manifold,
     connected_components,
+    directed_edges,
     nonmanifold_vertices,
     unique_edges,
 )
@@ -79,3 +82,23 @@ def test_check_manifold_names_first_offender():
 def test_components_count_isolated_vertices():
     count, labels = connected_components(np.array([[0, 1, 2], [3, 4, 5]]), 7)
     assert count == 3 and labels[0] == labels[2] and labels[3] != labels[0]
+
+
+@settings(max_examples=60, deadline=None)
+@given(triangle_soups())
+def test_directed_edges_and_adjacency_match_a_plain_count(case):
+    n, triangles = case
+    F = np.array(triangles, dtype=np.int64)
+    counts = {}
+    for tri in triangles:
+        for a, b in ((tri[0], tri[1]), (tri[1], tri[2]), (tri[2], tri[0])):
+            counts[(a, b)] = counts.get((a, b), 0) + 1
+            counts[(b, a)] = counts.get((b, a), 0) + 1
+    src, dst, triangle_count = directed_edges(F, n)
+    assert list(zip(src.tolist(), dst.tolist())) == sorted(counts)
+    assert triangle_count.tolist() == [counts[key] for key in sorted(counts)]
+    A = adjacency_matrix(F, n)
+    dense = np.zeros((n, n))
+    for a, b in counts:
+        dense[a, b] = 1.0
+    assert np.array_equal(A.toarray(), dense) and A.has_canonical_format

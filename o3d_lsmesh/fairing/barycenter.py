@@ -136,9 +136,19 @@ def triangle_coefficients(valences: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     M : (k, 3, 3) float64
     u : (k, 3) float64
     """
+    group, table, M, u = _valence_tables(valences)
+    return M[group], u[group]
+
+
+def _valence_tables(valences: np.ndarray):
+    """Eq. 7 once per distinct valence triple: ``group (k,)``, ``table (g, 3)``, ``M (g, 3, 3)``, ``u (g, 3)``.
+
+    Triangle ``t`` has valences ``table[group[t]]`` and coefficients
+    ``M[group[t]]``, ``u[group[t]]`` (see :func:`triangle_coefficients`).
+    """
     valences = np.asarray(valences, dtype=np.int64).reshape(-1, 3)
     if len(valences) == 0:
-        return np.zeros((0, 3, 3)), np.zeros((0, 3))
+        return np.zeros(0, dtype=np.int64), np.ones((0, 3)), np.zeros((0, 3, 3)), np.zeros((0, 3))
     base = np.int64(valences.max() + 1)
     keys = (valences[:, 0] * base + valences[:, 1]) * base + valences[:, 2]
     # group the (few hundred) distinct valence triples: a dense look-up when the
@@ -163,7 +173,7 @@ def triangle_coefficients(valences: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     rhs[:, :3, :3] = np.transpose(A, (0, 2, 1))
     rhs[:, 3, 3] = 1.0
     solution = np.linalg.solve(kkt, rhs)  # (g, 4, 4): rows 0..2 are [M | u]
-    return solution[group, :3, :3], solution[group, :3, 3]
+    return group, table, solution[:, :3, :3], solution[:, :3, 3]
 
 
 def _sorted_groups(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -185,36 +195,33 @@ class LocalOperator:
 
     where ``E1, E2`` have the pattern of the 1-ring (edges plus diagonal) and
     already hold the ``1/count`` of the averaging. ``E3 @ X0`` (the
-    constraint part, ``u_a C / count`` scattered to the vertices) is
-    computed once per set of targets by :meth:`constant`, without forming
-    ``E3``. Vertices with no interior triangle (boundary and isolated
-    vertices, or interior vertices whose every triangle touches the
+    constraint part) is computed once per set of targets by :meth:`constant`
+    as ``spread @ (centers @ X0)``: ``centers`` ``(k, n)`` sums each interior
+    triangle's vertices (``C``) and ``spread`` ``(n, k)`` hands ``u_a / count``
+    of it to vertex ``i_a``; both have three entries per triangle and are
+    built without sorting. Vertices with no interior triangle (boundary and
+    isolated vertices, or interior vertices whose every triangle touches the
     boundary) get an identity row in ``E2`` and a zero constant. One
-    iteration costs three sparse mat-vecs on ``(n, 3)``; the set-up is a few
-    ``bincount`` calls on the half-edges accumulated straight into one CSR
-    pattern. The object only holds arrays: it pickles and may be shared
-    between threads.
+    iteration costs three sparse mat-vecs on ``(n, 3)``. The object only
+    holds arrays: it pickles and may be shared between threads.
     """
 
     adjacency: sp.csr_matrix
     e1: sp.csr_matrix
     e2: sp.csr_matrix
-    triangles: np.ndarray  # (k, 3) the interior triangles
-    weights: np.ndarray  # (k, 3) u_a / count of vertex i_a
+    centers: sp.csr_matrix
+    spread: sp.csc_matrix
 
     def constant(self, positions0: np.ndarray) -> np.ndarray:
         """``E3 @ X0``, the constraint part, ``(n, 3)``."""
-        n = self.adjacency.shape[0]
-        centers = positions0[self.triangles].sum(axis=1)  # (k, 3) C of every triangle
-        rows = self.triangles.ravel()
-        out = np.zeros((n, 3))
-        for axis in range(3):  # the three coordinates
-            out[:, axis] = np.bincount(rows, weights=(self.weights * centers[:, axis, None]).ravel(), minlength=n)
-        return out
+        return self.spread @ (self.centers @ positions0)
 
     def step(self, positions: np.ndarray, constant: np.ndarray) -> np.ndarray:
         """``E1 @ (W @ X) + E2 @ X + constant``, ``(n, 3)``."""
-        return self.e1 @ (self.adjacency @ positions) + self.e2 @ positions + constant
+        out = self.e1 @ (self.adjacency @ positions)
+        out += self.e2 @ positions
+        out += constant
+        return out
 
 
 def _ring_pattern(edges: np.ndarray, n: int):
@@ -225,8 +232,8 @@ def _ring_pattern(edges: np.ndarray, n: int):
     (forward). Returns ``indptr (n+1,)``, ``indices (nnz,)`` and the CSR
     positions of the diagonal ``(n,)``, of each edge forward ``(e,)`` and of
     each edge backward ``(e,)``. Computed from counts and one stable sort of
-    the edges by their larger end, so that data can be accumulated straight
-    into CSR order (a permuting gather of the data was the slowest step).
+    the edges by their larger end, so that data can be scattered straight
+    into CSR order.
     """
     lo, hi = edges[:, 0], edges[:, 1]
     n_forward = np.bincount(lo, minlength=n)
@@ -237,14 +244,14 @@ def _ring_pattern(edges: np.ndarray, n: int):
     # edges are sorted by (lo, hi), so the forward edges of a row are contiguous
     first_forward = np.zeros(n, dtype=np.int64)
     np.cumsum(n_forward[:-1], out=first_forward[1:])
-    forward = diagonal[lo] + 1 + n_backward[lo] + (np.arange(len(edges)) - first_forward[lo])
+    forward = np.arange(len(edges), dtype=np.int64)
+    forward += (diagonal + 1 + n_backward - first_forward)[lo]
     by_hi = np.argsort(hi, kind="stable")
     first_backward = np.zeros(n, dtype=np.int64)
     np.cumsum(n_backward[:-1], out=first_backward[1:])
-    rank = np.zeros(len(edges), dtype=np.int64)
-    rank[by_hi] = np.arange(len(edges)) - first_backward[hi[by_hi]]
-    backward = diagonal[hi] + 1 + rank
-    indices = np.zeros(indptr[-1], dtype=np.int64)
+    backward = np.empty(len(edges), dtype=np.int64)
+    backward[by_hi] = np.arange(len(edges), dtype=np.int64) + (diagonal + 1 - first_backward)[hi[by_hi]]
+    indices = np.empty(indptr[-1], dtype=np.int64)
     indices[diagonal] = np.arange(n)
     indices[forward] = hi
     indices[backward] = lo
@@ -252,53 +259,58 @@ def _ring_pattern(edges: np.ndarray, n: int):
 
 
 def local_operator(triangles: np.ndarray, topo: FairingTopology) -> LocalOperator:
-    """Assemble the :class:`LocalOperator` of the interior triangles of ``triangles``."""
+    """Assemble the :class:`LocalOperator` of the interior triangles of ``triangles``.
+
+    Every coefficient depends only on a triangle's valence triple, so the
+    per-triangle work is gathers from small tables and ``bincount`` sums into
+    the diagonal (per vertex) and the two directions of every edge; no
+    ``(k, 3, 3)`` array is formed.
+    """
     n, edges, inverse = topo.n, topo.edges, topo.inverse
     m = len(triangles)
     sel = topo.interior_triangles
     tri = triangles[sel]  # (k, 3)
     k = len(tri)
-    valence = topo.valence[tri].astype(np.float64)  # (k, 3), >= 2 for any vertex of a triangle
-    M, u = triangle_coefficients(topo.valence[tri])
-    alpha = M / valence[:, None, :]  # (k, 3, 3): coefficient of S_{i_b} in P_a
+    group, table, M, u = _valence_tables(topo.valence[tri])
+    alpha = M / table[:, None, :]  # (g, 3, 3): coefficient of S_{i_b} in P_a
     beta = alpha - alpha.sum(axis=2, keepdims=True)  # coefficient of x_{i_c}: -sum_{b != c} alpha_ab
+
+    count = np.bincount(tri.ravel(), minlength=n)  # estimates per vertex
+    no_estimate = count == 0
+    scale = 1.0 / np.maximum(count, 1)
+    # slot s of a triangle is its edge (i_s, i_{s+1}); halfedges() rows s*m + t
+    head = [1, 2, 0]
+    slot_edge = inverse.reshape(3, m)[:, sel].T.ravel()  # (3k,) t-major like tri.ravel()
+    tail_is_lo = (tri < tri[:, head]).ravel()
+    lo, hi = edges[:, 0], edges[:, 1]
 
     indptr, indices, diagonal, forward, backward = _ring_pattern(edges, n)
     nnz = len(indices)
-    # CSR position of the entry (i_a, i_c) for each triangle and pair (a, c).
-    # Undirected edge of the pair: half-edge rows t, m + t, 2m + t of triangle
-    # t hold the pairs {0,1}, {1,2}, {2,0}.
-    pair_halfedge = np.array([[-1, 0, 2], [0, -1, 1], [2, 1, -1]])
-    position = np.zeros((k, 3, 3), dtype=np.int64)
-    for a in range(3):  # 9 fixed (a, c) pairs, not a loop over triangles
-        for c in range(3):
-            if a == c:
-                position[:, a, c] = diagonal[tri[:, a]]
-            else:
-                edge = inverse[pair_halfedge[a, c] * m + sel]
-                position[:, a, c] = np.where(tri[:, a] < tri[:, c], forward[edge], backward[edge])
-    position = position.ravel()
-
-    count = np.bincount(tri.ravel(), minlength=n).astype(np.float64)  # estimates per vertex
-    no_estimate = count == 0
-    inv_count = np.repeat(1.0 / np.where(no_estimate, 1.0, count), np.diff(indptr))  # per CSR entry
-
     # SciPy keeps 32-bit indices when they fit; giving them so avoids a copy per matrix
-    index_dtype = np.int32 if nnz < np.iinfo(np.int32).max else np.int64
+    index_dtype = np.int32 if max(nnz, 3 * k) < np.iinfo(np.int32).max else np.int64
     indices, indptr = indices.astype(index_dtype), indptr.astype(index_dtype)
+    e = len(edges)
 
-    def matrix(data: np.ndarray) -> sp.csr_matrix:
+    def matrix(coefficients: np.ndarray) -> sp.csr_matrix:
+        # entry (i_a, i_c) of every interior triangle, summed and divided by the row's count
+        data = np.empty(nnz)
+        data[diagonal] = np.bincount(tri.ravel(), coefficients[:, [0, 1, 2], [0, 1, 2]][group].ravel(), minlength=n)
+        data[diagonal] *= scale
+        to_head = coefficients[:, [0, 1, 2], head][group].ravel()  # row i_s, column i_{s+1}
+        to_tail = coefficients[:, head, [0, 1, 2]][group].ravel()  # row i_{s+1}, column i_s
+        data[forward] = np.bincount(slot_edge, np.where(tail_is_lo, to_head, to_tail), minlength=e) * scale[lo]
+        data[backward] = np.bincount(slot_edge, np.where(tail_is_lo, to_tail, to_head), minlength=e) * scale[hi]
         return sp.csr_matrix((data, indices, indptr), shape=(n, n))
 
-    def accumulate(values: np.ndarray) -> np.ndarray:
-        return np.bincount(position, weights=values.ravel(), minlength=nnz) * inv_count
-
-    e2 = accumulate(beta)
-    e2[diagonal[no_estimate]] = 1.0  # vertices without estimates stay put
+    e1, e2 = matrix(alpha), matrix(beta)
+    e2.data[diagonal[no_estimate]] = 1.0  # vertices without estimates stay put
     adjacency = np.ones(nnz)
     adjacency[diagonal] = 0.0
-    weights = u / np.where(no_estimate, 1.0, count)[tri]  # (k, 3) u_a / count, for the constant part
-    return LocalOperator(matrix(adjacency), matrix(accumulate(alpha)), matrix(e2), tri, weights)
+    corners = tri.ravel().astype(index_dtype)
+    triple = np.arange(0, 3 * k + 1, 3, dtype=index_dtype)
+    centers = sp.csr_matrix((np.ones(3 * k), corners, triple), shape=(k, n))
+    spread = sp.csc_matrix(((u[group] * scale[tri]).ravel(), corners, triple), shape=(n, k))
+    return LocalOperator(sp.csr_matrix((adjacency, indices, indptr), shape=(n, n)), e1, e2, centers, spread)
 
 
 class GlobalSolver:

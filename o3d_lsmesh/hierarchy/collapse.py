@@ -45,7 +45,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..topology import halfedges
+from ..topology import directed_edges
 
 __all__ = ["LevelCollapse", "collapse_level"]
 
@@ -98,24 +98,7 @@ class _Adjacency:
     """
 
     def __init__(self, triangles: np.ndarray, n: int):
-        n64 = np.int64(n)
-        a, b, c = (np.ascontiguousarray(triangles[:, i]) for i in range(3))
-        an, bn, cn = a * n64, b * n64, c * n64
-        # SIMD sort of int64 keys is linear-ish and far faster than argsort or np.unique
-        keys = np.concatenate([an + b, bn + c, cn + a, bn + a, cn + b, an + c])
-        del an, bn, cn
-        keys.sort()
-        first = np.empty(len(keys), dtype=bool)
-        first[0] = True
-        np.not_equal(keys[1:], keys[:-1], out=first[1:])
-        at = np.flatnonzero(first)
-        self.keys = keys[at]
-        del keys, first
-        self.triangle_count = np.empty(len(at), dtype=np.int64)
-        np.subtract(at[1:], at[:-1], out=self.triangle_count[:-1])
-        self.triangle_count[-1] = 6 * len(triangles) - at[-1]
-        self.src = self.keys // n64
-        self.dst = self.keys - self.src * n64
+        self.src, self.dst, self.triangle_count = directed_edges(triangles, n)
         self.valence = np.bincount(self.src, minlength=n)
         self.indptr = np.zeros(n + 1, dtype=np.int64)
         np.cumsum(self.valence, out=self.indptr[1:])

@@ -23,9 +23,10 @@ __all__ = ["MeshHierarchy", "build_hierarchy", "build_hierarchy_arrays", "read_m
 
 
 def _frozen(array: np.ndarray) -> np.ndarray:
-    array = np.ascontiguousarray(array)
-    array.flags.writeable = False
-    return array
+    # a read-only view: the caller's own array (the input of build_hierarchy_arrays) stays writeable
+    view = np.ascontiguousarray(array).view()
+    view.flags.writeable = False
+    return view
 
 
 @dataclass(frozen=True, eq=False)
