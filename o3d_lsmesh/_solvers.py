@@ -43,23 +43,18 @@ def cholmod_available() -> bool:
     return _cholmod is not None
 
 
-def _as_csc(matrix: Any) -> sp.csc_matrix:
-    if not sp.issparse(matrix):
-        raise TypeError(f"matrix must be a scipy sparse matrix, got {type(matrix).__name__}")
-    if matrix.shape[0] != matrix.shape[1]:
-        raise ValueError(f"matrix must be square, got shape {matrix.shape}")
-    csc = sp.csc_matrix(matrix, dtype=np.float64)
-    csc.sum_duplicates()
-    csc.sort_indices()
-    return csc
+def _as_csc(matrix: Any, *, name: str = "matrix", square: bool = True) -> sp.csc_matrix:
+    """``matrix`` as canonical float64 CSC (sorted, summed) with CHOLMOD's 32-bit indices where they fit.
 
-
-def _as_factor_of_product(matrix: Any) -> sp.csc_matrix:
+    The caller's arrays are not touched: a non-canonical matrix is copied first.
+    """
     if not sp.issparse(matrix):
-        raise TypeError(f"product_of must be a scipy sparse matrix, got {type(matrix).__name__}")
+        raise TypeError(f"{name} must be a scipy sparse matrix, got {type(matrix).__name__}")
+    if square and matrix.shape[0] != matrix.shape[1]:
+        raise ValueError(f"{name} must be square, got shape {matrix.shape}")
     csc = sp.csc_matrix(matrix, dtype=np.float64)
     if not csc.has_canonical_format:
-        csc = csc.copy()  # canonical (sorted, summed) without touching the caller's arrays
+        csc = csc.copy()
         csc.sum_duplicates()
     if csc.indices.dtype != np.int32 and max(csc.nnz, *csc.shape) < np.iinfo(np.int32).max:
         # CHOLMOD's int interface: the long one would copy and store 64-bit indices
@@ -170,7 +165,7 @@ class SPDSolver:
         if product_of is None:
             self._matrix = _stored(_as_csc(matrix), given_lower=bool(lower), keep_lower=self._lower)
         else:
-            self._product_of = _as_factor_of_product(product_of)
+            self._product_of = _as_csc(product_of, name="product_of", square=False)
         self._pending: list[sp.csc_matrix] = []
         self._factor: Any = None
         self._factorize(analyze=True)

@@ -129,9 +129,10 @@ class LSMeshSolver:
             self._free = np.flatnonzero(free)
             L = L.tocsc()
             L_free = L[:, self._free]
-            # the normal matrix L_free^T L_free, given to CHOLMOD as a product it never forms
-            product = L_free.T.tocsc()
             operator = L_free.tocsr()
+            # the normal matrix L_free^T L_free, given to CHOLMOD as a product it never forms:
+            # L_free^T in CSC is L_free's CSR arrays, shared with the refinement operator
+            product = operator.T
             # right-hand side operator: -L_free^T L_ctrl maps control positions to the free rhs
             self._rhs_hard = -(L_free.T @ L[:, indices]).tocsr()
         else:
@@ -333,7 +334,7 @@ def ls_mesh(
     )
     vertices, data = solver.solve(constraint_vertex_positions), solver._data
     del solver
-    return new_mesh(MeshData(vertices, source_triangles(data), data.source, data.kind), vertices)
+    return new_mesh(MeshData(None, source_triangles(data), data.source, data.kind), vertices)
 
 
 def reconstruct_geometry(
