@@ -35,8 +35,10 @@ def halfedges(triangles: np.ndarray) -> np.ndarray:
     )
 
 
-def _group(keys: np.ndarray, bound: int):
+def _group(keys: np.ndarray, bound: int, *, inverse: bool = True):
     """Sort-and-mask grouping of integer ``keys`` in ``[0, bound)``: (order, starts, counts, inverse).
+
+    ``inverse=False`` returns ``None`` in its place (it costs a third of the grouping).
 
     When key and position fit in 64 bits together they are packed and sorted as
     one ``uint64`` array (numpy sorts plain integers several times faster than
@@ -61,11 +63,13 @@ def _group(keys: np.ndarray, bound: int):
     np.not_equal(sorted_keys[1:], sorted_keys[:-1], out=first[1:])
     starts = np.flatnonzero(first)
     counts = np.diff(starts, append=count)
+    if not inverse:
+        return order, starts, counts, None
     rank = np.cumsum(first, dtype=np.int64)
     rank -= 1
-    inverse = np.empty(count, dtype=np.int64)
-    inverse[order] = rank
-    return order, starts, counts, inverse
+    inverse_ = np.empty(count, dtype=np.int64)
+    inverse_[order] = rank
+    return order, starts, counts, inverse_
 
 
 def _edge_keys(triangles: np.ndarray, n: int) -> np.ndarray:
@@ -79,11 +83,9 @@ def _edge_keys(triangles: np.ndarray, n: int) -> np.ndarray:
     return keys.reshape(-1)
 
 
-def _edge_table(triangles: np.ndarray, n: int | None):
-    # half-edges grouped by undirected edge: (halfedges, order, starts, counts, inverse)
-    if n is None:
-        n = int(triangles.max()) + 1 if len(triangles) else 0
-    return (halfedges(triangles),) + _group(_edge_keys(triangles, n), n * n)
+def _edge_runs(triangles: np.ndarray, n: int):
+    # half-edge rows of halfedges() grouped by undirected edge: (order, starts, counts)
+    return _group(_edge_keys(triangles, n), n * n, inverse=False)[:3]
 
 
 def unique_edges(triangles: np.ndarray, n: int | None = None):
@@ -121,15 +123,24 @@ def directed_edges(triangles: np.ndarray, n: int):
         Triangles on each edge (1 on a boundary, 2 inside, more when
         non-manifold), whatever the orientation of the triangles.
 
-    Each triangle gives the key ``src * n + dst`` of each direction of its
+    Each triangle gives the key ``src << bits | dst`` of each direction of its
     three edges once; one sort of the plain int64 keys (numpy's SIMD sort, far
     faster than argsort, ``np.unique`` or a COO-to-CSR merge) groups them.
     """
-    n64 = np.int64(n)
-    a, b, c = (np.ascontiguousarray(triangles[:, i], dtype=np.int64) for i in range(3))
-    an, bn, cn = a * n64, b * n64, c * n64
-    keys = np.concatenate([an + b, bn + c, cn + a, bn + a, cn + b, an + c])
-    del an, bn, cn
+    bits = max(1, int(n - 1).bit_length())
+    if 2 * bits > 62:  # beyond 2^31 vertices: keys by multiplication do not fit either
+        raise ValueError(f"n must be below 2**31, got {n}")
+    shift = np.int64(bits)
+    m = len(triangles)
+    corners = np.ascontiguousarray(triangles.T, dtype=np.int64)
+    # written in place: on large meshes fresh temporaries cost as much as the sort
+    keys = np.empty(6 * m, dtype=np.int64)
+    rows = keys.reshape(6, m)
+    np.left_shift(corners, shift, out=rows[:3])
+    rows[3:] = rows[:3]
+    for row, head in enumerate((1, 2, 0, 2, 0, 1)):
+        rows[row] |= corners[head]
+    del corners
     keys.sort()
     first = np.empty(len(keys), dtype=bool)
     first[:1] = True
@@ -137,8 +148,8 @@ def directed_edges(triangles: np.ndarray, n: int):
     at = np.flatnonzero(first)
     triangle_count = np.diff(at, append=len(keys))
     keys = keys[at]
-    src = keys // n64
-    keys -= src * n64
+    src = keys >> shift
+    keys &= np.int64((1 << bits) - 1)
     return src, keys, triangle_count
 
 
@@ -186,7 +197,7 @@ def nonmanifold_edges(triangles: np.ndarray, n: int | None = None) -> np.ndarray
     return edges[counts > 2]
 
 
-def nonmanifold_vertices(triangles: np.ndarray, n: int, *, _table=None) -> np.ndarray:
+def nonmanifold_vertices(triangles: np.ndarray, n: int, *, _runs=None) -> np.ndarray:
     """Vertices whose triangles do not form a single fan (bow-ties and the like), sorted.
 
     The corners ``(t, v)`` of the triangles around a vertex are linked when two
@@ -194,40 +205,61 @@ def nonmanifold_vertices(triangles: np.ndarray, n: int, *, _table=None) -> np.nd
     its corners fall into more than one linked group.
     """
     m = len(triangles)
-    he, order, starts, counts, _ = _edge_table(triangles, n) if _table is None else _table
-    # corner p*m + t holds triangles[t, p]; half-edge row q*m + t runs from position q to (q + 1) % 3
-    row = np.arange(3 * m)
-    corner_from = row
-    corner_to = (row + m) % (3 * m)
-    # the two half-edges of each manifold interior edge sit next to each other in the grouping
-    interior_start = starts[counts == 2]
-    a, b = order[interior_start], order[interior_start + 1]
-    same_direction = he[a, 0] == he[b, 0]
-    # link the corners holding the same vertex on either side of the shared edge
-    links_u = np.concatenate([corner_from[a], corner_to[a]])
-    links_v = np.concatenate(
-        [np.where(same_direction, corner_from[b], corner_to[b]), np.where(same_direction, corner_to[b], corner_from[b])]
+    corners = 3 * m
+    order, starts, counts = _edge_runs(triangles, n) if _runs is None else _runs
+    # corner p*m + t holds triangles[t, p]; half-edge row q*m + t runs from corner q*m + t
+    # to corner ((q + 1) % 3)*m + t, so every corner starts one half-edge and ends one
+    tail = triangles.T.reshape(-1)
+    interior = starts[counts == 2]
+    a, b = order[interior], order[interior + 1]
+    del interior
+    same_direction = tail[a] == tail[b]
+    end_a = a + m
+    end_a[end_a >= corners] -= corners
+    end_b = b + m
+    end_b[end_b >= corners] -= corners
+    # every corner has at most two links, one through the half-edge it starts and one through the
+    # one it ends, so the graph is written as CSR directly (a self-link where there is none)
+    index = np.int32 if 2 * corners < np.iinfo(np.int32).max else np.int64
+    link = np.empty((corners, 2), dtype=index)
+    link[:, 0] = np.arange(corners, dtype=index)
+    link[:, 1] = link[:, 0]
+    link[a, 0] = np.where(same_direction, b, end_b)
+    link[b, 0] = np.where(same_direction, a, end_a)
+    link[end_a, 1] = np.where(same_direction, end_b, b)
+    link[end_b, 1] = np.where(same_direction, end_a, a)
+    del a, b, end_a, end_b, same_direction
+    first = np.minimum(link[:, 0], link[:, 1])
+    np.maximum(link[:, 0], link[:, 1], out=link[:, 1])
+    link[:, 0] = first
+    del first
+    graph = sp.csr_matrix(
+        (np.ones(2 * corners, dtype=np.int8), link.reshape(-1), np.arange(0, 2 * corners + 1, 2, dtype=index)),
+        shape=(corners, corners),
     )
-    graph = sp.csr_matrix((np.ones(len(links_u)), (links_u, links_v)), shape=(3 * m, 3 * m))
-    fan_count, fan = csgraph.connected_components(graph, directed=False)
+    graph.has_sorted_indices = True  # each row's two links were just ordered
+    # the links are symmetric, so strong components are the components, and finding them
+    # reads the graph alone (weak or undirected ones transpose it first)
+    fan_count, fan = csgraph.connected_components(graph, directed=True, connection="strong")
     # links only join corners of one vertex, so every fan belongs to exactly one vertex
     vertex_of_fan = np.zeros(fan_count, dtype=np.int64)
-    vertex_of_fan[fan] = triangles.T.ravel()
+    vertex_of_fan[fan] = tail
     return np.flatnonzero(np.bincount(vertex_of_fan, minlength=n) > 1)
 
 
 def check_manifold(triangles: np.ndarray, n: int, *, name: str = "mesh") -> None:
     """Raise ``ValueError`` naming the first non-manifold edge or vertex of the mesh."""
-    table = _edge_table(triangles, n)
-    he, order, starts, counts, _ = table
+    runs = _edge_runs(triangles, n)
+    order, starts, counts = runs
     bad = np.flatnonzero(counts > 2)
     if len(bad):
-        e = np.sort(he[order[starts[bad[0]]]])
+        row = order[starts[bad[0]]]
+        e = np.sort(halfedges(triangles)[row])
         raise ValueError(
             f"{name} must be edge-manifold, got edge ({int(e[0])}, {int(e[1])}) shared by more than two "
             f"triangles ({len(bad)} such edges)"
         )
-    bad_vertices = nonmanifold_vertices(triangles, n, _table=table)
+    bad_vertices = nonmanifold_vertices(triangles, n, _runs=runs)
     if len(bad_vertices):
         raise ValueError(
             f"{name} must be vertex-manifold, got vertex {int(bad_vertices[0])} joining separate fans of "

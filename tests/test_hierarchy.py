@@ -66,9 +66,13 @@ def test_removed_sets_are_independent_collapses(name, request):
         A = adjacency_matrix(h.triangles[i - 1], h.vertex_count(i - 1))
         # no two removed vertices are neighbours ...
         assert A[removed][:, removed].nnz == 0
-        # ... every target is a neighbour, and no other removed vertex neighbours a target (module docstring)
+        # ... every target is a neighbour and is kept, and a removed vertex next to another one's target
+        # comes after it in cost order (module docstring: the collapses apply one by one in that order)
+        assert np.all(A[removed, targets] == 1) and not np.isin(targets, removed).any()
         hits = A[removed][:, targets].tocoo()
-        assert np.all(hits.row == hits.col) and hits.nnz == len(removed)
+        other = hits.row != hits.col
+        cost = _vertex_cost(*h.level_arrays(i - 1))[removed]
+        assert np.all(cost[hits.col[other]] <= cost[hits.row[other]] + 1e-12)
         # the recorded 1-ring is the adjacency row at level i - 1
         for j in range(0, len(removed), 7):
             ring = rec["ring"][rec["ring_offsets"][j]:rec["ring_offsets"][j + 1]]
@@ -135,6 +139,51 @@ def test_target_is_the_cone_volume_minimum(sphere_h):
         argmin_hits += cone(x, k, ring) <= min(cone(x, j, ring) for j in ring) + 1e-15
     # the unconstrained minimum is nearly always valid on a smooth sphere
     assert argmin_hits >= 0.9 * len(sample)
+
+
+def _vertex_cost(V, F, alpha=1.0, beta=0.01):
+    """Section 4.1's cost by a plain loop over the edges."""
+    lengths = [[] for _ in range(len(V))]
+    for a, b in {tuple(sorted(e)) for t in F.tolist() for e in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0]))}:
+        d = float(np.linalg.norm(V[a] - V[b]))
+        lengths[a].append(d)
+        lengths[b].append(d)
+    return np.array([alpha * min(ls) + beta * max(ls) for ls in lengths])
+
+
+def _sequential_greedy(cost, target, F, n):
+    """Plain loop: take the candidates in (cost, index) order; keep one unless it or its target is in
+    the closed 1-ring of one kept before."""
+    nbrs = [set() for _ in range(n)]
+    for a, b, c in F.tolist():
+        nbrs[a] |= {b, c}
+        nbrs[b] |= {a, c}
+        nbrs[c] |= {a, b}
+    kept = []
+    for x in sorted(np.flatnonzero(target >= 0).tolist(), key=lambda v: (cost[v], v)):
+        if all(x not in nbrs[y] and target[x] not in nbrs[y] | {y} for y in kept):
+            kept.append(x)
+    return sorted(kept)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_selection_rounds_give_the_sequential_greedy_set(seed):
+    from o3d_lsmesh.hierarchy.collapse import _Adjacency, _select_independent
+
+    rng = np.random.default_rng(seed)
+    V, F = _noisy_sphere(resolution=8, seed=seed) if seed % 2 else grid(9, 8)
+    n = len(V)
+    adj = _Adjacency(F, n)
+    # random targets among the neighbours, some vertices without one; costs with ties (index order decides)
+    target = np.array([rng.choice(adj.rings(np.array([v]))) for v in range(n)])
+    target[rng.random(n) < 0.2] = -1
+    cost = rng.integers(0, 6, n).astype(float)
+    expected = _sequential_greedy(cost, target, F, n)
+    for max_rounds in (None, 1000):
+        got = _select_independent(cost, target >= 0, target, adj, max_rounds)
+        assert got.tolist() == expected
+    # stopped early, the rounds keep a subset of it
+    assert set(_select_independent(cost, target >= 0, target, adj, 1).tolist()) <= set(expected)
 
 
 def test_cost_order_prefers_short_edges():

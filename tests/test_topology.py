@@ -68,6 +68,54 @@ def test_nonmanifold_vertices_match_open3d():
     assert sorted(ours.tolist()) == sorted(np.asarray(mesh.get_non_manifold_vertices()).tolist())
 
 
+def _fans_reference(F, n):
+    """Per vertex, the number of groups of its triangles linked through edges of exactly two triangles."""
+    edge_triangles = {}
+    for t, tri in enumerate(F.tolist()):
+        for i in range(3):
+            edge_triangles.setdefault(frozenset((tri[i], tri[(i + 1) % 3])), []).append(t)
+    fans = np.zeros(n, dtype=int)
+    for v in range(n):
+        around = [t for t, tri in enumerate(F.tolist()) if v in tri]
+        seen = set()
+        for start in around:
+            if start in seen:
+                continue
+            fans[v] += 1
+            stack = [start]
+            seen.add(start)
+            while stack:
+                t = stack.pop()
+                for w in F[t].tolist():
+                    shared = edge_triangles[frozenset((v, w))] if w != v else []
+                    if len(shared) == 2:
+                        for other in shared:
+                            if other not in seen:
+                                seen.add(other)
+                                stack.append(other)
+    return fans
+
+
+@settings(max_examples=150, deadline=None)
+@given(triangle_soups())
+def test_nonmanifold_vertices_match_a_reference_walk(soup):
+    n, triangles = soup
+    F = np.array(triangles, dtype=np.int64)
+    assert nonmanifold_vertices(F, n).tolist() == np.flatnonzero(_fans_reference(F, n) > 1).tolist()
+
+
+def test_nonmanifold_vertices_finds_closed_fans_sharing_an_apex():
+    # two closed cones (octahedron halves glued at the apex 0), each fan around 0 is a cycle, and one
+    # of them has its triangles flipped: counting edges or boundary edges cannot see this
+    cone = lambda ring: [[0, ring[i], ring[(i + 1) % 4]] for i in range(4)]
+    caps = lambda ring, bottom: [[bottom, ring[(i + 1) % 4], ring[i]] for i in range(4)]
+    first = cone([1, 2, 3, 4]) + caps([1, 2, 3, 4], 5)
+    second = [t[::-1] for t in cone([6, 7, 8, 9]) + caps([6, 7, 8, 9], 10)]
+    F = np.array(first + second)
+    assert nonmanifold_vertices(F, 11).tolist() == [0]
+    assert nonmanifold_vertices(np.array(first), 6).tolist() == []
+
+
 def test_check_manifold_names_first_offender():
     bowtie = np.array([[0, 1, 2], [0, 3, 4]])
     with pytest.raises(ValueError, match="vertex-manifold, got vertex 0"):
@@ -102,3 +150,8 @@ def test_directed_edges_and_adjacency_match_a_plain_count(case):
     for a, b in counts:
         dense[a, b] = 1.0
     assert np.array_equal(A.toarray(), dense) and A.has_canonical_format
+
+
+def test_directed_edges_refuses_vertex_counts_its_keys_cannot_hold():
+    with pytest.raises(ValueError, match=r"n must be below 2\*\*31"):
+        directed_edges(np.array([[0, 1, 2]]), 2**40)

@@ -13,14 +13,16 @@ level gives the volume of every candidate collapse, and no ordered 1-ring is
 needed (boundary vertices use the open fan of their triangles).
 
 Independence. A collapse ``x -> k`` changes the neighbour sets of ``N(x)``
-(the 1-ring of ``x``) and nothing else, and its validity reads only the
-neighbour sets of ``x`` and ``k`` and the positions of ``x`` and ``N(x)``,
-which no half-edge collapse moves. Two collapses ``x -> k`` and ``y -> l``
-are therefore independent when ``y, l`` are not in the closed 1-ring
-``N[x]`` and ``x, k`` are not in ``N[y]``. Every level selects, greedily in
-increasing ``cost(x) = alpha * min_edge(x) + beta * max_edge(x)``, a set of
-collapses that are pairwise independent in this sense, so each one can be
-validated on the level's mesh and all are applied at once.
+(the 1-ring of ``x``, ``k`` included) and nothing else, and its validity
+reads only the neighbour sets of ``x`` and ``k`` and the positions of ``x``
+and ``N(x)``, which no half-edge collapse moves. So a collapse ``y -> l``
+stays valid after ``x -> k`` when ``y`` and ``l`` are not in the closed
+1-ring ``N[x]``. Every level selects, greedily in increasing
+``cost(x) = alpha * min_edge(x) + beta * max_edge(x)``, collapses that each
+satisfy this against every one selected before it; each is validated on the
+level's mesh, and all are applied at once, which gives the mesh of applying
+them one by one in cost order (no triangle holds two removed vertices, so
+none is changed twice).
 
 Validity of ``x -> k`` (each is a per-edge array test):
 
@@ -41,6 +43,7 @@ Validity of ``x -> k`` (each is a per-edge array test):
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -124,7 +127,7 @@ def collapse_level(
     max_removals: int | None = None,
     max_normal_angle: float = 60.0,
     min_quality: float = 1e-3,
-    max_rounds: int = 12,
+    max_rounds: int | None = None,
     max_tries: int = 3,
 ) -> LevelCollapse | None:
     """Select and apply one level of independent volume-cost half-edge collapses.
@@ -144,9 +147,10 @@ def collapse_level(
     min_quality : float
         Smallest ``2 * area / (sum of squared edge lengths)`` of a new triangle
         (an equilateral triangle has ``1/sqrt(3)``).
-    max_rounds : int
-        Rounds of the parallel greedy selection; undecided vertices wait for
-        the next level.
+    max_rounds : int, optional
+        Rounds of the parallel greedy selection; vertices still undecided wait
+        for the next level. ``None`` runs the rounds until every candidate is
+        decided, which gives the sequential greedy set.
     max_tries : int
         Targets tried per vertex, in increasing volume, before it waits for the
         next level.
@@ -193,7 +197,8 @@ def collapse_level(
     ux, uy, uz = x1 - x0, y1 - y0, z1 - z0
     vx, vy, vz = x2 - x0, y2 - y0, z2 - z0
     normal = (uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx)
-    del ux, uy, uz, vx, vy, vz
+    edges = ((ux, uy, uz), (vx, vy, vz))
+    del ux, uy, uz, vx, vy, vz, corner_coords, x0, y0, z0, x1, y1, z1, x2, y2, z2
     corners = F.ravel()
     volume = np.zeros(len(dst))
     for c in (0, 2, 1):  # einsum's order again
@@ -213,7 +218,8 @@ def collapse_level(
     ok &= ~(src_boundary & dst_boundary & (src_valence == 2) & (dst_valence == 2))
     del src_boundary, dst_boundary, src_valence, dst_valence
 
-    geometry = _Geometry(X, Y, Z, F, corner_coords, normal, n, max_normal_angle, min_quality)
+    geometry = _Geometry(X, Y, Z, F, edges, normal, n, max_normal_angle, min_quality)
+    del edges
     target = np.full(n, -1, dtype=np.int64)
     # every vertex is offered its best target; later tries only revisit the
     # vertices whose pick failed, on their own edges
@@ -222,7 +228,9 @@ def collapse_level(
         if len(pick) == 0:
             break
         x, k = src[pick], dst[pick]
-        good = _link_condition(adj, x, k, pick) & geometry(x, k)
+        # the geometry fails far more often than the link condition: test the link on its survivors
+        good = geometry(x, k)
+        good[good] = _link_condition(adj, x[good], k[good], pick[good])
         target[x[good]] = k[good]
         if attempt == max_tries - 1:
             break
@@ -235,7 +243,7 @@ def collapse_level(
         np.cumsum(valence[retry][:-1], out=sub_seg[1:])
         local = _best_targets(volume[edges], length[edges], ok[edges], src[edges], sub_seg)
         pick = edges[local]
-    del volume, length, ok, geometry, corner_coords
+    del volume, length, ok, geometry
 
     candidate = target >= 0
     if not candidate.any():
@@ -305,7 +313,7 @@ def _link_condition(adj: _Adjacency, x: np.ndarray, k: np.ndarray, edge: np.ndar
     ring_k += adj.rings(k)
     keys = np.concatenate([ring_x, ring_k])
     del ring_x, ring_k
-    keys.sort()
+    keys.sort(kind="stable")  # two sorted runs (query-major, rings sorted): a merge
     twice = keys[1:][keys[1:] == keys[:-1]]
     twice //= n
     common = np.bincount(twice, minlength=q)
@@ -315,36 +323,63 @@ def _link_condition(adj: _Adjacency, x: np.ndarray, k: np.ndarray, edge: np.ndar
 class _Geometry:
     """Whether moving ``x`` onto ``k`` keeps every surviving star triangle unflipped and non-degenerate."""
 
-    def __init__(self, X, Y, Z, F, corner_coords, normal, n, max_normal_angle, min_quality):
+    def __init__(self, X, Y, Z, F, edges, normal, n, max_normal_angle, min_quality):
         self.X, self.Y, self.Z, self.F, self.n = X, Y, Z, F, n
-        self.corner_coords = corner_coords  # ((X, Y, Z) of column 0, of column 1, of column 2) of F
+        self.edges = edges  # (u, v): corner 1 - corner 0 and corner 2 - corner 0 of every triangle, by component
         self.normal = normal
         ox, oy, oz = normal
         self.old_sq = ox * ox + oz * oz + oy * oy  # einsum's order
         self.cos_sq = np.cos(np.deg2rad(max_normal_angle)) ** 2
         self.min_quality = min_quality
 
-    def _bad(self, ax, ay, az, bx, by, bz, ox, oy, oz, old_sq):
-        """Flipped or degenerate new triangles ``(k, a, b)``, from ``a - k`` and ``b - k``."""
-        nx = ay * bz - az * by
-        ny = az * bx - ax * bz
-        nz = ax * by - ay * bx
-        new_sq = nx * nx + ny * ny + nz * nz
-        dot = nx * ox + ny * oy + nz * oz
-        del nx, ny, nz
+    def _bad(self, ax, ay, az, bx, by, bz, ox, oy, oz, old_sq, opposite_sq=None):
+        """Flipped or degenerate new triangles ``(k, a, b)``, from ``a - k`` and ``b - k`` (overwritten).
+
+        ``opposite_sq`` is ``|b - a|^2`` when known (the edge the move leaves alone).
+        """
+        # in place throughout: these run over every corner of the level, and fresh temporaries
+        # cost as much as the arithmetic
+        nx = ay * bz
+        nx -= az * by
+        ny = az * bx
+        ny -= ax * bz
+        nz = ax * by
+        nz -= ay * bx
+        dot = nx * ox
+        dot += ny * oy
+        dot += nz * oz
+        nx *= nx
+        ny *= ny
+        nx += ny
+        nz *= nz
+        nx += nz
+        new_sq = nx
+        del ny, nz
         bad = dot <= 0
         dot *= dot
-        bound = self.cos_sq * new_sq
+        bound = new_sq * self.cos_sq
         bound *= old_sq
         bad |= dot <= bound
         del dot, bound
-        squared = ax * ax + ay * ay + az * az + bx * bx + by * by + bz * bz
-        bx = bx - ax
-        by = by - ay
-        bz = bz - az
+        # squared edge lengths |a|^2 + |b|^2 + |b - a|^2 (left to right, as before)
+        squared = ax * ax
+        squared += ay * ay
+        squared += az * az
         squared += bx * bx
         squared += by * by
         squared += bz * bz
+        if opposite_sq is not None:
+            squared += opposite_sq
+        else:
+            bx -= ax
+            by -= ay
+            bz -= az
+            bx *= bx
+            squared += bx
+            by *= by
+            squared += by
+            bz *= bz
+            squared += bz
         squared *= self.min_quality
         squared *= squared
         bad |= new_sq <= squared
@@ -372,29 +407,70 @@ class _Geometry:
                         ox[t], oy[t], oz[t], self.old_sq[t])
         return np.bincount(q[bad], minlength=len(x)) == 0
 
+    def _opposite_sq(self, p):
+        """Squared length of the edge opposite corner ``p`` of every triangle: ``v - u``, ``v``, ``u``."""
+        (ux, uy, uz), (vx, vy, vz) = self.edges
+        if p == 0:
+            dx, dy, dz = vx - ux, vy - uy, vz - uz
+            dx *= dx
+            dy *= dy
+            dz *= dz
+        else:
+            ex, ey, ez = (vx, vy, vz) if p == 1 else (ux, uy, uz)
+            dx, dy, dz = ex * ex, ey * ey, ez * ez
+        dx += dy
+        dx += dz
+        return dx
+
     def _all_corners(self, query_of, k, q):
-        """Most vertices are queried: go triangle by triangle, so that a triangle's own
-        coordinates and old normal are read without a gather, one corner column at a time."""
-        X, Y, Z, F = self.X, self.Y, self.Z, self.F
+        """Most vertices are queried: go triangle by triangle, one corner column at a time.
+
+        The new triangle of corner ``x`` is ``(k, a, b)``, and ``a - k = (a - x) - d``,
+        ``b - k = (b - x) - d`` with ``d = k - x``: the triangle's own edge vectors and one
+        gather of ``d`` per corner, instead of gathering coordinates and normals row by row.
+        """
+        F, n = self.F, self.n
         ox, oy, oz = self.normal
-        target_of = np.full(self.n, -1, dtype=np.int64)
-        asked = query_of >= 0
+        (ux, uy, uz), (vx, vy, vz) = self.edges
+        target_of = np.full(n, -1, dtype=np.int64)
+        asked = np.flatnonzero(query_of >= 0)
         target_of[asked] = k[query_of[asked]]
+        kk = target_of[asked]
+        shift = []
+        for coordinate in (self.X, self.Y, self.Z):
+            d = np.zeros(n)
+            d[asked] = coordinate[kk]
+            d[asked] -= coordinate[asked]
+            shift.append(d)
+        del kk
         bad_queries = []
         for p in range(3):
-            a, b = _NEXT[p], _PREV[p]
-            kk = target_of[F[:, p]]
+            corner = F[:, p]
+            kk = target_of[corner]
             live = kk >= 0
-            live &= F[:, a] != kk
-            live &= F[:, b] != kk
-            rows = np.flatnonzero(live)
-            kk = kk[rows]
-            kx, ky, kz = X[kk], Y[kk], Z[kk]
-            (axs, ays, azs), (bxs, bys, bzs) = self.corner_coords[a], self.corner_coords[b]
-            bad = self._bad(axs[rows] - kx, ays[rows] - ky, azs[rows] - kz,
-                            bxs[rows] - kx, bys[rows] - ky, bzs[rows] - kz,
-                            ox[rows], oy[rows], oz[rows], self.old_sq[rows])
-            bad_queries.append(query_of[F[rows[bad], p]])
+            live &= F[:, _NEXT[p]] != kk
+            live &= F[:, _PREV[p]] != kk
+            del kk
+            dx, dy, dz = (d[corner] for d in shift)
+            # a - x and b - x: (u, v) at corner 0, (v - u, -u) at corner 1, (-v, u - v) at corner 2
+            if p == 0:
+                ax, ay, az, bx, by, bz = ux - dx, uy - dy, uz - dz, vx - dx, vy - dy, vz - dz
+            elif p == 1:
+                ax, ay, az = vx - ux, vy - uy, vz - uz
+                ax -= dx
+                ay -= dy
+                az -= dz
+                bx, by, bz = -ux - dx, -uy - dy, -uz - dz
+            else:
+                ax, ay, az = -vx - dx, -vy - dy, -vz - dz
+                bx, by, bz = ux - vx, uy - vy, uz - vz
+                bx -= dx
+                by -= dy
+                bz -= dz
+            del dx, dy, dz
+            bad = self._bad(ax, ay, az, bx, by, bz, ox, oy, oz, self.old_sq, self._opposite_sq(p))
+            bad &= live
+            bad_queries.append(query_of[corner[bad]])
         return np.bincount(np.concatenate(bad_queries), minlength=q) == 0
 
 
@@ -405,99 +481,132 @@ _PREV = np.array([2, 0, 1])
 def _select_independent(cost, candidate, target, adj: _Adjacency, max_rounds):
     """Greedy independent set of collapses in increasing ``(cost, index)`` order, by rounds of local minima.
 
-    ``x`` and ``y`` conflict when ``y`` is in ``N(x)``, ``target[x]`` is in
-    ``N(y)`` or ``target[y]`` is in ``N(x)`` (module docstring). A round takes
+    A later ``y`` conflicts with an earlier ``x`` when ``y`` is in ``N(x)`` or
+    ``target[y]`` is in ``N[x]`` (module docstring). A round takes
     every undecided candidate that precedes all its undecided conflicting
     candidates and drops those; run to the end, the rounds give the sequential
     greedy set.
 
-    Each candidate keeps the number of its undecided conflicting candidates
-    that precede it (with the multiplicity of the conflict lists below); a
-    round's winners are those at zero, and only the conflicts of the vertices
-    dropped in a round are revisited, so all rounds together touch every
-    conflict about once instead of once per round.
+    The conflicts are listed once, each under the candidate that comes first
+    (its *followers*), and every candidate keeps the number of undecided
+    conflicting candidates that precede it. A round's winners are those at
+    zero; their undecided followers are dropped, and the followers of the
+    dropped ones count one fewer. Every list is read about twice in all
+    rounds together, however many rounds the cost order needs.
     """
     n = len(cost)
-    src, dst, valence, indptr = adj.src, adj.dst, adj.valence, adj.indptr
     cand = np.flatnonzero(candidate)
     none = np.int64(n)  # rank of non-candidates: after every candidate
     rank = np.full(n, none, dtype=np.int64)
     rank[cand[_stable_argsort(cost[cand])]] = np.arange(len(cand), dtype=np.int64)
-    # the candidates grouped by target, for "target[y] in N(x)" (any order within a group)
-    t_cand = target[cand]
-    aiming = cand[np.argsort(t_cand)]
-    aiming_count = np.bincount(t_cand, minlength=n)
-    aiming_ptr = np.zeros(n + 1, dtype=np.int64)
-    np.cumsum(aiming_count, out=aiming_ptr[1:])
-
-    # preceding conflicts through adjacency
-    rank_src = adj.per_edge(rank)
-    rank_dst = rank[dst]
-    earlier = rank_dst < rank_src
-    earlier &= rank_src < none
-    count = np.bincount(src[earlier], minlength=n)
-    del rank_src, rank_dst, earlier
-    # through a target: pairs (x, w) with w in N(target[x]); x precedes w or w precedes x
-    t_valence = valence[t_cand]
-    w = dst[_ranges(indptr[t_cand], t_valence)]
-    x = np.repeat(cand, t_valence)
-    rank_x = np.repeat(rank[cand], t_valence)
-    rank_w = rank[w]
-    real = (rank_w < none) & (w != x)
-    w_first = rank_w < rank_x
-    count += np.bincount(x[real & w_first], minlength=n)
-    count += np.bincount(w[real & ~w_first], minlength=n)
-    del w, x, rank_x, rank_w, real, w_first
+    followers = _Followers(rank, none, cand, target, adj)
+    count = followers.preceding(n)
 
     state = np.zeros(n, dtype=np.int8)  # 0 undecided, 1 selected, 2 dropped
     state[~candidate] = 2
     undecided = cand
-    for _ in range(max_rounds):
+    rounds = itertools.count() if max_rounds is None else range(max_rounds)
+    for _ in rounds:
         if len(undecided) == 0:
             break
         winners = undecided[count[undecided] == 0]
+        if len(winners) == 0:  # cannot happen (the first undecided one is free): never spin
+            break
         state[winners] = 1
         # every undecided conflicting candidate of a winner comes after it: drop it
-        near_winner = np.zeros(n, dtype=bool)
-        near_winner[adj.rings(winners)] = True
-        near_winner_target = np.zeros(n, dtype=bool)
-        near_winner_target[adj.rings(target[winners])] = True
-        rest = undecided[state[undecided] == 0]
-        lost_mask = near_winner[rest] | near_winner_target[rest] | near_winner[target[rest]]
-        lost = rest[lost_mask]
+        lost = followers(winners)
+        lost = lost[state[lost] == 0]
         state[lost] = 2
-        undecided = rest[~lost_mask]
+        undecided = undecided[state[undecided] == 0]
         if len(undecided) == 0 or len(lost) == 0:
             continue
+        lost.sort()
+        lost = lost[np.append(True, lost[1:] != lost[:-1])]
         # the dropped ones no longer hold back the undecided ones after them
-        live_rank = np.full(n, -1, dtype=np.int64)
-        live_rank[undecided] = rank[undecided]
-        released = [
-            other[live_rank[other] > owner_rank]
-            for other, owner_rank in _conflicts(lost, rank, target, adj, aiming, aiming_count, aiming_ptr)
-        ]
-        count -= np.bincount(np.concatenate(released), minlength=n)
+        released = followers(lost)
+        count -= np.bincount(released[state[released] == 0], minlength=n)
     return np.flatnonzero(state == 1)
 
 
-def _conflicts(vertices, rank, target, adj, aiming, aiming_count, aiming_ptr):
-    """The conflict multiset of each vertex, as counted in :func:`_select_independent`, in three parts.
+class _Followers:
+    """Each candidate's conflicting candidates that come after it, as two CSR lists.
 
-    Yields ``(other, rank of its owner)``: ``other`` runs over ``N(x)``,
-    ``N(target[x])`` and the candidates ``y`` with ``target[y]`` in ``N(x)``;
-    ``x`` itself may appear in the last two, with its own rank, which no
-    strict rank comparison lets through.
+    The followers of ``x`` are its later neighbours and the later candidates
+    ``y`` with ``target[y]`` in ``N(x)`` (``target[y] == x`` makes ``y`` a
+    neighbour): the second are found from ``y``'s side, as the earlier
+    candidates around ``target[y]``, and filed under them.
     """
-    valence, indptr, dst = adj.valence, adj.indptr, adj.dst
-    v1 = valence[vertices]
-    ring = dst[_ranges(indptr[vertices], v1)]
-    ring_rank = np.repeat(rank[vertices], v1)
-    yield ring, ring_rank
-    t = target[vertices]
-    v2 = valence[t]
-    yield dst[_ranges(indptr[t], v2)], np.repeat(rank[vertices], v2)
-    c3 = aiming_count[ring]
-    yield aiming[_ranges(aiming_ptr[ring], c3)], np.repeat(ring_rank, c3)
+
+    def __init__(self, rank, none, cand, target, adj: _Adjacency):
+        n = len(rank)
+        src, dst, valence, indptr = adj.src, adj.dst, adj.valence, adj.indptr
+        self.parts = []
+        # neighbours: the edges x -> y with x before y (both candidates); already grouped by x
+        rank_dst = rank[dst]
+        later = adj.per_edge(rank) < rank_dst
+        later &= rank_dst < none
+        del rank_dst
+        self._add(np.add.reduceat(later, adj.indptr[:-1][adj.valence > 0]), dst[later], n, adj.valence > 0)
+        del later
+        # through a target: y follows each earlier candidate w around target[y]
+        t_cand = target[cand]
+        t_valence = valence[t_cand]
+        w = dst[_ranges(indptr[t_cand], t_valence)]
+        earlier = rank[w] < np.repeat(rank[cand], t_valence)  # y == w has equal ranks: not in
+        y = np.repeat(cand, t_valence)[earlier]
+        w = w[earlier]
+        del earlier
+        order = _group_by(w, n)
+        w, y = w[order], y[order]
+        self._add(np.bincount(w, minlength=n), y, n)
+
+    def _add(self, counts, follower, n, owners=None):
+        """File ``follower`` (grouped by owner) under ``owners`` (all vertices when None) with ``counts`` each."""
+        if owners is not None:
+            full = np.zeros(n, dtype=np.int64)
+            full[owners] = counts
+            counts = full
+        starts = np.cumsum(counts)
+        starts -= counts
+        self.parts.append((starts, counts, follower))
+
+    def preceding(self, n):
+        """Number of conflicting candidates before each vertex, with multiplicity, ``(n,) int64``."""
+        count = np.zeros(n, dtype=np.int64)
+        for _, _, follower in self.parts:
+            count += np.bincount(follower, minlength=n)
+        return count
+
+    def __call__(self, vertices):
+        """The followers of ``vertices``, concatenated (with repeats)."""
+        return np.concatenate(
+            [follower[_ranges(starts[vertices], counts[vertices])] for starts, counts, follower in self.parts]
+        )
+
+
+def _offsets(counts):
+    """Start of each of consecutive groups of ``counts`` (all positive)."""
+    starts = np.cumsum(counts)
+    starts -= counts
+    return starts
+
+
+def _group_by(values, bound):
+    """Positions of ``values`` (ints in ``[0, bound)``) sorted by value, ties in position order.
+
+    Value and position are packed into one int64 when they fit: numpy sorts
+    plain integers several times faster than it argsorts them.
+    """
+    count = len(values)
+    bits = max(1, int(count - 1).bit_length())
+    if max(1, int(bound - 1).bit_length()) + bits > 63:
+        return np.argsort(values, kind="stable")
+    packed = values.astype(np.int64)
+    packed <<= np.int64(bits)
+    packed |= np.arange(count, dtype=np.int64)
+    packed.sort()
+    packed &= np.int64((1 << bits) - 1)
+    return packed
 
 
 def _stable_argsort(values):
