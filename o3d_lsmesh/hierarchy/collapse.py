@@ -190,15 +190,21 @@ def collapse_level(
     cost = alpha * min_edge + beta * max_edge
 
     # cone volume |N_x . (x_k - x)| (module docstring)
-    columns = [np.ascontiguousarray(F[:, c]) for c in range(3)]
-    corner_coords = tuple((X[f], Y[f], Z[f]) for f in columns)
-    del columns
-    (x0, y0, z0), (x1, y1, z1), (x2, y2, z2) = corner_coords
-    ux, uy, uz = x1 - x0, y1 - y0, z1 - z0
-    vx, vy, vz = x2 - x0, y2 - y0, z2 - z0
+    columns = np.ascontiguousarray(F.T)
+    edge_vectors = []
+    for coordinate in (X, Y, Z):
+        base = coordinate.take(columns[0])
+        u = coordinate.take(columns[1])
+        u -= base
+        v = coordinate.take(columns[2])
+        v -= base
+        edge_vectors += [u, v]
+    del columns, base, u, v
+    ux, vx, uy, vy, uz, vz = edge_vectors
+    del edge_vectors
     normal = (uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx)
     edges = ((ux, uy, uz), (vx, vy, vz))
-    del ux, uy, uz, vx, vy, vz, corner_coords, x0, y0, z0, x1, y1, z1, x2, y2, z2
+    del ux, uy, uz, vx, vy, vz
     corners = F.ravel()
     volume = np.zeros(len(dst))
     for c in (0, 2, 1):  # einsum's order again
