@@ -298,6 +298,34 @@ def test_every_level_is_manifold_with_input_topology(name, loops):
         assert chi == -2  # genus 2
 
 
+@pytest.mark.parametrize("seed", range(8))
+def test_levels_of_noisy_generated_meshes_keep_topology(seed):
+    # crumpled spheres, tori and open grids down to a few vertices: each level is many collapses
+    # applied at once, so the independence rule is what keeps these valid
+    rng = np.random.default_rng(seed)
+    kind = seed % 3
+    if kind == 0:
+        mesh = o3d.geometry.TriangleMesh.create_sphere(resolution=int(rng.integers(5, 14)))
+    elif kind == 1:
+        mesh = o3d.geometry.TriangleMesh.create_torus(
+            radial_resolution=int(rng.integers(8, 24)), tubular_resolution=int(rng.integers(5, 14))
+        )
+    else:
+        V, F = grid(int(rng.integers(5, 16)), int(rng.integers(5, 16)))
+        mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(V), o3d.utility.Vector3iVector(F))
+    V = np.asarray(mesh.vertices) + rng.normal(scale=0.03, size=(len(mesh.vertices), 3))
+    F = np.asarray(mesh.triangles).astype(np.int64)
+    chi, loops = euler_characteristic(F, len(V)), len(boundary_loops(F, len(V)))
+    h = build_hierarchy((V, F), min_vertices=8)
+    assert len(h) > 3
+    for i in range(len(h)):
+        Vi, Fi = h.level_arrays(i)
+        n = len(Vi)
+        assert len(np.unique(Fi)) == n and len(_triangle_set(Fi)) == len(Fi)
+        assert euler_characteristic(Fi, n) == chi and len(boundary_loops(Fi, n)) == loops
+        assert len(nonmanifold_edges(Fi, n)) == 0 and len(nonmanifold_vertices(Fi, n)) == 0
+
+
 def test_tetrahedron_and_single_triangle_are_not_collapsed():
     tet = o3d.geometry.TriangleMesh.create_tetrahedron()
     h = build_hierarchy(tet, min_vertices=0)

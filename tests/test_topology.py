@@ -1,5 +1,4 @@
 import numpy as np
-import open3d as o3d
 import pytest
 from conftest import grid, load_mesh, triangle_soups
 from hypothesis import given, settings

@@ -545,7 +545,7 @@ class _Followers:
 
     def __init__(self, rank, none, cand, target, adj: _Adjacency):
         n = len(rank)
-        src, dst, valence, indptr = adj.src, adj.dst, adj.valence, adj.indptr
+        dst, valence, indptr = adj.dst, adj.valence, adj.indptr
         self.parts = []
         # neighbours: the edges x -> y with x before y (both candidates); already grouped by x
         rank_dst = rank[dst]
