@@ -367,7 +367,7 @@ class _Geometry:
         bound *= old_sq
         bad |= dot <= bound
         del dot, bound
-        # squared edge lengths |a|^2 + |b|^2 + |b - a|^2 (left to right, as before)
+        # squared edge lengths |a|^2 + |b|^2 + |b - a|^2, summed left to right
         squared = ax * ax
         squared += ay * ay
         squared += az * az
