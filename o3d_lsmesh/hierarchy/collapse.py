@@ -530,7 +530,7 @@ def _select_independent(cost, candidate, target, adj: _Adjacency, max_rounds):
         lost = lost[np.append(True, lost[1:] != lost[:-1])]
         # the dropped ones no longer hold back the undecided ones after them
         released = followers(lost)
-        count -= np.bincount(released[state[released] == 0], minlength=n)
+        np.subtract.at(count, released[state[released] == 0], 1)
     return np.flatnonzero(state == 1)
 
 
