@@ -141,6 +141,28 @@ def test_target_is_the_cone_volume_minimum(sphere_h):
     assert argmin_hits >= 0.9 * len(sample)
 
 
+@pytest.mark.parametrize("seed", range(5))
+def test_best_targets_match_a_plain_loop_with_ties(seed):
+    from o3d_lsmesh.hierarchy.collapse import _best_targets
+
+    rng = np.random.default_rng(seed)
+    counts = rng.integers(1, 7, 300)
+    src = np.repeat(np.arange(len(counts)), counts)
+    seg = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    volume = rng.integers(0, 3, len(src)) * 0.5  # many exact ties, and some within the tolerance
+    volume[rng.random(len(src)) < 0.2] *= 1 + 1e-12
+    length = rng.integers(1, 3, len(src)).astype(float)
+    ok = rng.random(len(src)) < 0.8
+    expected = []
+    for v, start in enumerate(seg):
+        edges = [e for e in range(start, start + counts[v]) if ok[e]]
+        if edges:
+            best = min(volume[e] for e in edges)
+            near = [e for e in edges if volume[e] <= best * (1 + 1e-9)]
+            expected.append(min(near, key=lambda e: (length[e], e)))
+    assert _best_targets(volume, length, ok, src, seg).tolist() == expected
+
+
 def _vertex_cost(V, F, alpha=1.0, beta=0.01):
     """Section 4.1's cost by a plain loop over the edges."""
     lengths = [[] for _ in range(len(V))]

@@ -285,18 +285,26 @@ def _best_targets(volume, length, ok, src, seg):
     """
     vol = np.where(ok, volume, np.inf)
     best = np.minimum.reduceat(vol, seg)
-    counts = np.diff(np.append(seg, len(vol)))
-    near = vol <= np.repeat(best * (1.0 + 1e-9), counts)
+    best *= 1.0 + 1e-9
+    near = vol <= np.repeat(best, np.diff(np.append(seg, len(vol))))
     near &= ok
-    tie = np.where(near, length, np.inf)
-    shortest = np.minimum.reduceat(tie, seg)
-    near &= tie == np.repeat(shortest, counts)
     hits = np.flatnonzero(near)
     if len(hits) == 0:
         return hits
-    first = np.ones(len(hits), dtype=bool)
-    first[1:] = src[hits[1:]] != src[hits[:-1]]
-    return hits[first]
+    owner = src[hits]
+    shared = np.zeros(len(hits), dtype=bool)
+    np.equal(owner[1:], owner[:-1], out=shared[1:])
+    if not shared.any():
+        return hits
+    # a few vertices have several picks within the tolerance: the shortest edge, then the first
+    shared[:-1] |= shared[1:]
+    tied = np.flatnonzero(shared)
+    order = tied[np.lexsort((length[hits[tied]], owner[tied]))]
+    first = np.ones(len(order), dtype=bool)
+    first[1:] = owner[order[1:]] != owner[order[:-1]]
+    keep = ~shared
+    keep[order[first]] = True
+    return hits[keep]
 
 
 def _link_condition(adj: _Adjacency, x: np.ndarray, k: np.ndarray, edge: np.ndarray) -> np.ndarray:
@@ -305,23 +313,23 @@ def _link_condition(adj: _Adjacency, x: np.ndarray, k: np.ndarray, edge: np.ndar
     Common neighbours are counted by sorting ``(query, neighbour)`` keys of both
     rings together: a neighbour of both appears twice.
     """
-    n = np.int64(adj.n)
+    shift = np.int64(max(1, int(adj.n - 1).bit_length()))
     q = len(x)
-    query = np.arange(q, dtype=np.int64)
+    query = np.arange(q, dtype=np.int64) << shift
     if q == adj.n and q == len(adj.valence) and adj.valence.all():
         # every vertex asks (x is sorted): its rings are the whole CSR
-        ring_x = np.repeat(query * n, adj.valence)
-        ring_x += adj.dst
+        ring_x = np.repeat(query, adj.valence)
+        ring_x |= adj.dst
     else:
-        ring_x = np.repeat(query * n, adj.valence[x])
-        ring_x += adj.rings(x)
-    ring_k = np.repeat(query * n, adj.valence[k])
-    ring_k += adj.rings(k)
+        ring_x = np.repeat(query, adj.valence[x])
+        ring_x |= adj.rings(x)
+    ring_k = np.repeat(query, adj.valence[k])
+    ring_k |= adj.rings(k)
     keys = np.concatenate([ring_x, ring_k])
     del ring_x, ring_k
     keys.sort(kind="stable")  # two sorted runs (query-major, rings sorted): a merge
     twice = keys[1:][keys[1:] == keys[:-1]]
-    twice //= n
+    twice >>= shift
     common = np.bincount(twice, minlength=q)
     return common == adj.triangle_count[edge]
 
