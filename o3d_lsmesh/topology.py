@@ -132,7 +132,7 @@ def directed_edges(triangles: np.ndarray, n: int):
         raise ValueError(f"n must be below 2**31, got {n}")
     shift = np.int64(bits)
     m = len(triangles)
-    corners = np.ascontiguousarray(triangles.T, dtype=np.int64)
+    corners = np.asarray(triangles, dtype=np.int64).T  # a view: columns read in place
     # written in place: on large meshes fresh temporaries cost as much as the sort
     keys = np.empty(6 * m, dtype=np.int64)
     rows = keys.reshape(6, m)

@@ -170,26 +170,7 @@ def collapse_level(
     # component arrays: contiguous gathers and no (N, 3) temporaries
     X, Y, Z = (np.ascontiguousarray(vertices[:, i], dtype=np.float64) for i in range(3))
 
-    # vertex cost of section 4.1
-    dx = X[dst]
-    dx -= adj.per_edge(X)
-    dy = Y[dst]
-    dy -= adj.per_edge(Y)
-    dz = Z[dst]
-    dz -= adj.per_edge(Z)
-    # (x + z) + y: the summation order of np.einsum("ij,ij->i"), which the
-    # levels were first defined with, so that results stay bit-identical
-    length = dx * dx
-    length += dz * dz
-    length += dy * dy
-    np.sqrt(length, out=length)
-    min_edge = np.zeros(n)
-    max_edge = np.zeros(n)
-    min_edge[has_edges] = np.minimum.reduceat(length, seg)
-    max_edge[has_edges] = np.maximum.reduceat(length, seg)
-    cost = alpha * min_edge + beta * max_edge
-
-    # cone volume |N_x . (x_k - x)| (module docstring)
+    # triangle edge vectors and normals (for the cone volumes and the flip test)
     columns = np.ascontiguousarray(F.T)
     edge_vectors = []
     for coordinate in (X, Y, Z):
@@ -205,31 +186,17 @@ def collapse_level(
     normal = (uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx)
     edges = ((ux, uy, uz), (vx, vy, vz))
     del ux, uy, uz, vx, vy, vz
+    # N_x of the module docstring: the summed normals of the triangles around each vertex
     corners = F.ravel()
-    volume = np.zeros(len(dst))
-    for c in (0, 2, 1):  # einsum's order again
-        star = np.bincount(corners, weights=np.repeat(normal[c], 3), minlength=n)
-        volume += adj.per_edge(star) * (dx, dy, dz)[c]
-    np.abs(volume, out=volume)
-    del dx, dy, dz
-
-    # the cheap per-edge rules first; the link condition and the geometry are
-    # checked for each vertex's best remaining target only
-    src_boundary = adj.per_edge(on_boundary)
-    dst_boundary = on_boundary[dst]
-    src_valence = adj.per_edge(valence)
-    dst_valence = valence[dst]
-    ok = np.where(src_boundary, adj.boundary_edge, ~adj.boundary_edge)
-    ok &= ~(~src_boundary & ~dst_boundary & (src_valence == 3) & (dst_valence == 3))
-    ok &= ~(src_boundary & dst_boundary & (src_valence == 2) & (dst_valence == 2))
-    del src_boundary, dst_boundary, src_valence, dst_valence
+    star = [np.bincount(corners, weights=np.repeat(normal[c], 3), minlength=n) for c in range(3)]
+    cost, length, volume, ok, pick = _edge_terms(adj, X, Y, Z, star, alpha, beta)
+    del star
 
     geometry = _Geometry(X, Y, Z, F, edges, normal, n, max_normal_angle, min_quality)
     del edges
     target = np.full(n, -1, dtype=np.int64)
     # every vertex is offered its best target; later tries only revisit the
     # vertices whose pick failed, on their own edges
-    pick = _best_targets(volume, length, ok, src, seg)
     for attempt in range(max_tries):
         if len(pick) == 0:
             break
@@ -278,6 +245,69 @@ def collapse_level(
     return LevelCollapse(removed, targets, ring_offsets, ring, parent, new_triangles)
 
 
+def _edge_terms(adj: _Adjacency, X, Y, Z, star, alpha, beta, block=1 << 19):
+    """Per directed edge: length, cone volume ``|N_x . (x_k - x)|``, the per-edge rules (module
+    docstring); per vertex: the cost of section 4.1 and the edge of its best pick.
+
+    Computed over blocks of whole vertex rings, so that the temporaries stay small: the allocator
+    then reuses their memory, where every level-sized temporary costs fresh pages, which take the
+    kernel longer to provide than the arithmetic on them.
+    """
+    n, src, dst, valence, indptr = adj.n, adj.src, adj.dst, adj.valence, adj.indptr
+    total = len(dst)
+    length = np.empty(total)
+    volume = np.empty(total)
+    ok = np.empty(total, dtype=bool)
+    min_edge = np.zeros(n)
+    max_edge = np.zeros(n)
+    picks = []
+    cuts = np.unique(np.searchsorted(indptr, np.arange(0, total, block), side="right") - 1)
+    for v0, v1 in zip(cuts, np.append(cuts[1:], n)):
+        e0, e1 = int(indptr[v0]), int(indptr[v1])
+        if e0 == e1:
+            continue
+        d = dst[e0:e1]
+        ring = valence[v0:v1]
+        has = ring > 0
+        seg = indptr[v0:v1][has] - e0
+        dx = X[d]
+        dx -= np.repeat(X[v0:v1], ring)
+        dy = Y[d]
+        dy -= np.repeat(Y[v0:v1], ring)
+        dz = Z[d]
+        dz -= np.repeat(Z[v0:v1], ring)
+        # (x + z) + y: the summation order of np.einsum("ij,ij->i"), which the
+        # levels were first defined with, so that results stay bit-identical
+        part = length[e0:e1]
+        np.multiply(dx, dx, out=part)
+        part += dz * dz
+        part += dy * dy
+        np.sqrt(part, out=part)
+        min_edge[v0:v1][has] = np.minimum.reduceat(part, seg)
+        max_edge[v0:v1][has] = np.maximum.reduceat(part, seg)
+        cone = volume[e0:e1]
+        np.multiply(np.repeat(star[0][v0:v1], ring), dx, out=cone)
+        for c, delta in ((2, dz), (1, dy)):  # einsum's order again
+            delta *= np.repeat(star[c][v0:v1], ring)
+            cone += delta
+        np.abs(cone, out=cone)
+        del dx, dy, dz
+        # a boundary vertex collapses along a boundary edge, an interior one along an interior
+        # edge; no closed tetrahedron, no isolated triangle
+        src_boundary = np.repeat(adj.on_boundary[v0:v1], ring)
+        dst_boundary = adj.on_boundary[d]
+        src_valence = np.repeat(ring, ring)
+        dst_valence = valence[d]
+        boundary_edge = adj.boundary_edge[e0:e1]
+        allowed = ok[e0:e1]
+        np.copyto(allowed, np.where(src_boundary, boundary_edge, ~boundary_edge))
+        allowed &= ~(~src_boundary & ~dst_boundary & (src_valence == 3) & (dst_valence == 3))
+        allowed &= ~(src_boundary & dst_boundary & (src_valence == 2) & (dst_valence == 2))
+        picks.append(_best_targets(cone, part, allowed, src[e0:e1], seg) + e0)
+    cost = alpha * min_edge + beta * max_edge
+    return cost, length, volume, ok, np.concatenate(picks) if picks else np.zeros(0, dtype=np.int64)
+
+
 def _best_targets(volume, length, ok, src, seg):
     """Edge position of each vertex's valid target of least volume (ties: shortest edge, then first).
 
@@ -307,12 +337,18 @@ def _best_targets(volume, length, ok, src, seg):
     return hits[keep]
 
 
-def _link_condition(adj: _Adjacency, x: np.ndarray, k: np.ndarray, edge: np.ndarray) -> np.ndarray:
+def _link_condition(adj: _Adjacency, x: np.ndarray, k: np.ndarray, edge: np.ndarray, block=1 << 17) -> np.ndarray:
     """Whether ``x`` and ``k`` share exactly the opposite vertices of the edge ``x -> k``.
 
     Common neighbours are counted by sorting ``(query, neighbour)`` keys of both
-    rings together: a neighbour of both appears twice.
+    rings together: a neighbour of both appears twice. Large queries go by
+    blocks, so that the temporaries stay small (see :func:`_edge_terms`).
     """
+    if len(x) > block:
+        return np.concatenate([
+            _link_condition(adj, x[i:i + block], k[i:i + block], edge[i:i + block], block)
+            for i in range(0, len(x), block)
+        ])
     shift = np.int64(max(1, int(adj.n - 1).bit_length()))
     q = len(x)
     query = np.arange(q, dtype=np.int64) << shift
@@ -458,33 +494,39 @@ class _Geometry:
             shift.append(d)
         del kk
         bad_queries = []
+        block = 1 << 18  # triangles at a time: small temporaries (see _edge_terms)
         for p in range(3):
-            corner = F[:, p]
-            kk = target_of[corner]
-            live = kk >= 0
-            live &= F[:, _NEXT[p]] != kk
-            live &= F[:, _PREV[p]] != kk
-            del kk
-            dx, dy, dz = (d[corner] for d in shift)
-            # a - x and b - x: (u, v) at corner 0, (v - u, -u) at corner 1, (-v, u - v) at corner 2
-            if p == 0:
-                ax, ay, az, bx, by, bz = ux - dx, uy - dy, uz - dz, vx - dx, vy - dy, vz - dz
-            elif p == 1:
-                ax, ay, az = vx - ux, vy - uy, vz - uz
-                ax -= dx
-                ay -= dy
-                az -= dz
-                bx, by, bz = -ux - dx, -uy - dy, -uz - dz
-            else:
-                ax, ay, az = -vx - dx, -vy - dy, -vz - dz
-                bx, by, bz = ux - vx, uy - vy, uz - vz
-                bx -= dx
-                by -= dy
-                bz -= dz
-            del dx, dy, dz
-            bad = self._bad(ax, ay, az, bx, by, bz, ox, oy, oz, self.old_sq, self._opposite_sq(p))
-            bad &= live
-            bad_queries.append(query_of[corner[bad]])
+            opposite_sq = self._opposite_sq(p)
+            for r0 in range(0, len(F), block):
+                rows = slice(r0, r0 + block)
+                corner = F[rows, p]
+                kk = target_of[corner]
+                live = kk >= 0
+                live &= F[rows, _NEXT[p]] != kk
+                live &= F[rows, _PREV[p]] != kk
+                del kk
+                dx, dy, dz = (d[corner] for d in shift)
+                # a - x and b - x: (u, v) at corner 0, (v - u, -u) at corner 1, (-v, u - v) at corner 2
+                if p == 0:
+                    ax, ay, az = ux[rows] - dx, uy[rows] - dy, uz[rows] - dz
+                    bx, by, bz = vx[rows] - dx, vy[rows] - dy, vz[rows] - dz
+                elif p == 1:
+                    ax, ay, az = vx[rows] - ux[rows], vy[rows] - uy[rows], vz[rows] - uz[rows]
+                    ax -= dx
+                    ay -= dy
+                    az -= dz
+                    bx, by, bz = -ux[rows] - dx, -uy[rows] - dy, -uz[rows] - dz
+                else:
+                    ax, ay, az = -vx[rows] - dx, -vy[rows] - dy, -vz[rows] - dz
+                    bx, by, bz = ux[rows] - vx[rows], uy[rows] - vy[rows], uz[rows] - vz[rows]
+                    bx -= dx
+                    by -= dy
+                    bz -= dz
+                del dx, dy, dz
+                bad = self._bad(ax, ay, az, bx, by, bz, ox[rows], oy[rows], oz[rows], self.old_sq[rows],
+                                opposite_sq[rows])
+                bad &= live
+                bad_queries.append(query_of[corner[bad]])
         return np.bincount(np.concatenate(bad_queries), minlength=q) == 0
 
 
@@ -551,25 +593,42 @@ class _Followers:
     candidates around ``target[y]``, and filed under them.
     """
 
-    def __init__(self, rank, none, cand, target, adj: _Adjacency):
+    def __init__(self, rank, none, cand, target, adj: _Adjacency, block=1 << 19):
         n = len(rank)
         dst, valence, indptr = adj.dst, adj.valence, adj.indptr
         self.parts = []
+        # by blocks of vertices, so that the temporaries stay small (see _edge_terms)
         # neighbours: the edges x -> y with x before y (both candidates); already grouped by x
-        rank_dst = rank[dst]
-        later = adj.per_edge(rank) < rank_dst
-        later &= rank_dst < none
-        del rank_dst
-        self._add(np.add.reduceat(later, adj.indptr[:-1][adj.valence > 0]), dst[later], n, adj.valence > 0)
-        del later
+        counts = np.zeros(n, dtype=np.int64)
+        later_neighbours = []
+        cuts = np.unique(np.searchsorted(indptr, np.arange(0, len(dst), block), side="right") - 1)
+        for v0, v1 in zip(cuts, np.append(cuts[1:], n)):
+            e0, e1 = int(indptr[v0]), int(indptr[v1])
+            if e0 == e1:
+                continue
+            ring = valence[v0:v1]
+            has = ring > 0
+            d = dst[e0:e1]
+            rank_dst = rank[d]
+            later = np.repeat(rank[v0:v1], ring) < rank_dst
+            later &= rank_dst < none
+            counts[v0:v1][has] = np.add.reduceat(later, indptr[v0:v1][has] - e0)
+            later_neighbours.append(d[later])
+        self._add(counts, np.concatenate(later_neighbours) if later_neighbours else np.zeros(0, np.int64), n)
         # through a target: y follows each earlier candidate w around target[y]
-        t_cand = target[cand]
-        t_valence = valence[t_cand]
-        w = dst[_ranges(indptr[t_cand], t_valence)]
-        earlier = rank[w] < np.repeat(rank[cand], t_valence)  # y == w has equal ranks: not in
-        y = np.repeat(cand, t_valence)[earlier]
-        w = w[earlier]
-        del earlier
+        owners, followers = [], []
+        step = max(1, block // 8)
+        for i in range(0, len(cand), step):
+            y = cand[i:i + step]
+            t = target[y]
+            t_valence = valence[t]
+            w = dst[_ranges(indptr[t], t_valence)]
+            earlier = rank[w] < np.repeat(rank[y], t_valence)  # y == w has equal ranks: not in
+            followers.append(np.repeat(y, t_valence)[earlier])
+            owners.append(w[earlier])
+        w = np.concatenate(owners) if owners else np.zeros(0, np.int64)
+        y = np.concatenate(followers) if followers else np.zeros(0, np.int64)
+        del owners, followers
         order = _group_by(w, n)
         w, y = w[order], y[order]
         self._add(np.bincount(w, minlength=n), y, n)
