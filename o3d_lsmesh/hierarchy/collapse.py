@@ -48,7 +48,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..topology import directed_edges
+from ..topology import _group, directed_edges
 
 __all__ = ["LevelCollapse", "collapse_level"]
 
@@ -164,9 +164,6 @@ def collapse_level(
     F = triangles
     adj = _Adjacency(F, n)
     src, dst, valence, indptr = adj.src, adj.dst, adj.valence, adj.indptr
-    on_boundary = adj.on_boundary
-    has_edges = valence > 0
-    seg = indptr[:-1][has_edges]
     # component arrays: contiguous gathers and no (N, 3) temporaries
     X, Y, Z = (np.ascontiguousarray(vertices[:, i], dtype=np.float64) for i in range(3))
 
@@ -665,21 +662,8 @@ def _offsets(counts):
 
 
 def _group_by(values, bound):
-    """Positions of ``values`` (ints in ``[0, bound)``) sorted by value, ties in position order.
-
-    Value and position are packed into one int64 when they fit: numpy sorts
-    plain integers several times faster than it argsorts them.
-    """
-    count = len(values)
-    bits = max(1, int(count - 1).bit_length())
-    if max(1, int(bound - 1).bit_length()) + bits > 63:
-        return np.argsort(values, kind="stable")
-    packed = values.astype(np.int64)
-    packed <<= np.int64(bits)
-    packed |= np.arange(count, dtype=np.int64)
-    packed.sort()
-    packed &= np.int64((1 << bits) - 1)
-    return packed
+    """Positions of ``values`` (ints in ``[0, bound)``) sorted by value, ties in position order."""
+    return _group(values, bound, inverse=False)[0]
 
 
 def _stable_argsort(values):
