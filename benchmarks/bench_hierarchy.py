@@ -15,8 +15,10 @@ Run: ``.venv/bin/python benchmarks/bench_hierarchy.py [--quick]``.
 
 from __future__ import annotations
 
+import os
 import sys
 import time
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
@@ -24,6 +26,7 @@ from _common import load_mesh, markdown_table, timed, write_markdown
 
 import fast_simplification
 
+from o3d_lsmesh._validate import as_workers
 from o3d_lsmesh.hierarchy import build_hierarchy
 from o3d_lsmesh.hierarchy.collapse import collapse_level
 from o3d_lsmesh.hierarchy.hierarchy import build_hierarchy_arrays, read_manifold_mesh
@@ -34,11 +37,13 @@ SAMPLES = 20_000 if QUICK else 50_000
 
 
 def level_times(V, F, min_vertices=100):
-    """Cumulative wall time after each level, by the same loop that build_hierarchy runs."""
+    """Cumulative wall time after each level, by the same loop (and thread pool) that build_hierarchy runs."""
     times, total, reps, P, T = [0.0], 0.0, np.arange(len(V)), V, F
+    workers = as_workers(None)
+    executor = ThreadPoolExecutor(workers) if workers > 1 else None
     while len(P) > min_vertices:
         start = time.perf_counter()
-        level = collapse_level(P, T, max_removals=len(P) - min_vertices)
+        level = collapse_level(P, T, max_removals=len(P) - min_vertices, executor=executor)
         if level is None:
             break
         keep = np.ones(len(P), dtype=bool)
@@ -47,6 +52,8 @@ def level_times(V, F, min_vertices=100):
         P, T = V[reps], level.triangles
         total += time.perf_counter() - start
         times.append(total)
+    if executor is not None:
+        executor.shutdown()
     return times
 
 
@@ -123,32 +130,42 @@ def large():
     F32 = F.astype(np.int32)
     del mesh
     target = len(V) // 100
-    # rounds of (ours, fast-simplification) at this size: the first calls pay for fresh memory, which costs
+    # rounds of (ours, fast-simplification, ours in one thread) at this size: the first calls pay for fresh memory, which costs
     # ~2 ms per MB on this VM and hits both libraries; the later rounds show both warm, interleaved so that
     # a slow spell of the shared machine hits both sides
-    ours, fs = [], []
+    ours, fs, single, cpu = [], [], [], []
     for _ in range(1 if QUICK else 3):
         h = None  # the previous round's hierarchy is not kept while the next one is built
+        before = os.times()
         h, t = timed(lambda: build_hierarchy((V, F), min_vertices=target))
+        after = os.times()
         ours.append(t)
+        cpu.append(after.user + after.system - before.user - before.system)
         coarse = h.level_arrays(len(h) - 1)
         (Vf, Ff), t = timed(lambda: fast_simplification.simplify(V, F32, target_count=len(coarse[1])))
         fs.append(t)
+        h1, t = timed(lambda: build_hierarchy((V, F), min_vertices=target, workers=1))
+        single.append(t)
+        assert h1 == h, "the hierarchy must not depend on the number of threads"
+        del h1
     # the input check (edge- and vertex-manifold, topology.check_manifold) is part of build_hierarchy;
     # fast-simplification checks nothing, so the check alone and the hierarchy without it are timed too
     _, t_check = timed(lambda: read_manifold_mesh((V, F)), repeat=2)
     _, t_core = timed(lambda: build_hierarchy_arrays(V, F, min_vertices=target), repeat=1 if QUICK else 2)
+    best = int(np.argmin(ours))
     return markdown_table(
         ["mesh", "V", "F", "levels", "V coarsest (ours / fs)", "ours first call s", "fs first call s",
-         "ratio first calls", "ours best s", "fs best s", "ratio best", "input check alone s",
+         "ratio first calls", "ours best s", "fs best s", "ratio best", f"ours CPU s (user+sys, {as_workers(None)} threads)",
+         "ours 1 thread, best s", "ratio 1 thread, best", "input check alone s",
          "ours without the check, best s", "ratio without the check, best"],
         [[
             "horse, Loop-subdivided x" + ("1" if QUICK else "3"), len(V), len(F), len(h),
             f"{h.vertex_count(len(h) - 1)} / {len(np.unique(Ff))}", f"{ours[0]:.2f}", f"{fs[0]:.2f}",
             f"{ours[0] / fs[0]:.2f}", f"{min(ours):.2f}", f"{min(fs):.2f}", f"{min(ours) / min(fs):.2f}",
+            f"{cpu[best]:.2f}", f"{min(single):.2f}", f"{min(single) / min(fs):.2f}",
             f"{t_check:.2f}", f"{t_core:.2f}", f"{t_core / min(fs):.2f}",
         ]],
-    ), (ours, fs)
+    ), (ours, fs, single)
 
 
 def main():
@@ -161,8 +178,9 @@ def main():
             summaries.append(summary)
     big = large()
     if big is not None:
-        big, (ours, fs) = big
-        print("1M rounds, ours s:", [round(t, 2) for t in ours], "fs s:", [round(t, 2) for t in fs], flush=True)
+        big, (ours, fs, single) = big
+        print("1M rounds, ours s:", [round(t, 2) for t in ours], "fs s:", [round(t, 2) for t in fs],
+              "ours 1 thread s:", [round(t, 2) for t in single], flush=True)
     head = [(
         "Summary",
         markdown_table(
@@ -180,10 +198,13 @@ def main():
         "is the signed volume (divergence theorem; open meshes included) against the input's. `manifold`: y = edge- "
         "and vertex-manifold, edge = edge-manifold only, n = neither. `euler/loops`: Euler characteristic / boundary "
         "loops (the input's must be kept). Our time is cumulative over the levels (one timed loop of the same "
-        "`collapse_level` calls); fast-simplification's is one fresh run to that count. The machine has 2 cores "
-        "shared with other jobs: compare ratios within a run. 1M table: three interleaved rounds of (our "
-        "`build_hierarchy`, fast-simplification to our coarsest triangle count); `first call` is round one, where "
-        "both pay for fresh memory (this VM maps guest memory lazily), `best` the best of the three rounds of each."
+        "`collapse_level` calls, on the same thread pool); fast-simplification's is one fresh run to that count. "
+        "The machine has 2 cores shared with other jobs: compare ratios within a run. 1M table: three interleaved "
+        "rounds of (our `build_hierarchy` with its default `workers=None`, i.e. every CPU, fast-simplification to "
+        "our coarsest triangle count, our `build_hierarchy(workers=1)`, checked to give the same hierarchy); "
+        "fast-simplification runs in one thread. `first call` is round one, where both pay for fresh memory (this "
+        "VM maps guest memory lazily), `best` the best of the three rounds of each; `CPU s` is the user + system "
+        "time of our best round over all threads."
     )
     write_markdown("hierarchy.md", "Volume-cost hierarchy vs fast-simplification", head + [("How to read", notes)]
                    + sections)

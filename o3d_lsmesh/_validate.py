@@ -7,6 +7,7 @@ see at once which argument is wrong and why.
 from __future__ import annotations
 
 import numbers
+import os
 from typing import Any, Sequence
 
 import numpy as np
@@ -17,6 +18,7 @@ __all__ = [
     "as_positions",
     "as_weights",
     "as_count",
+    "as_workers",
     "as_positive_float",
     "as_choice",
     "isolated_vertices",
@@ -174,6 +176,16 @@ def as_count(value: Any, *, name: str, minimum: int = 0, maximum: int | None = N
     if maximum is not None and value > maximum:
         raise ValueError(f"{name} must be <= {maximum}, got {value}")
     return value
+
+
+def as_workers(value: Any, *, name: str = "workers") -> int:
+    """Return a thread count: ``None`` means every CPU this process may run on, else an int >= 1."""
+    if value is None:
+        try:
+            return max(1, len(os.sched_getaffinity(0)))
+        except AttributeError:  # not on Linux
+            return max(1, os.cpu_count() or 1)
+    return as_count(value, name=name, minimum=1)
 
 
 def as_positive_float(value: Any, *, name: str, allow_zero: bool = False) -> float:

@@ -111,7 +111,7 @@ def unique_edges(triangles: np.ndarray, n: int | None = None):
     return edges, counts, inverse
 
 
-def directed_edges(triangles: np.ndarray, n: int):
+def directed_edges(triangles: np.ndarray, n: int, *, executor=None):
     """Both directions of every edge, sorted by ``(source, target)``, with their triangle counts.
 
     Returns
@@ -126,13 +126,33 @@ def directed_edges(triangles: np.ndarray, n: int):
     Each triangle gives the key ``src << bits | dst`` of each direction of its
     three edges once; one sort of the plain int64 keys (numpy's SIMD sort, far
     faster than argsort, ``np.unique`` or a COO-to-CSR merge) groups them.
+    With a thread pool ``executor``, each half of the triangles is sorted in
+    its own thread, and the two sorted halves are merged as two pairs of runs
+    split at one key, again in two threads (same result).
     """
     bits = max(1, int(n - 1).bit_length())
     if 2 * bits > 62:  # beyond 2^31 vertices: keys by multiplication do not fit either
         raise ValueError(f"n must be below 2**31, got {n}")
     shift = np.int64(bits)
+    triangles = np.asarray(triangles, dtype=np.int64)
     m = len(triangles)
-    corners = np.asarray(triangles, dtype=np.int64).T  # a view: columns read in place
+    if executor is None or m < 1 << 16:
+        return _unique_keys(_sorted_keys(triangles, shift), shift)
+    half = m // 2
+    low, high = executor.map(lambda rows: _sorted_keys(triangles[rows], shift), (slice(0, half), slice(half, m)))
+    pivot = high[len(high) // 2]
+    cut_low, cut_high = np.searchsorted(low, pivot), np.searchsorted(high, pivot)
+    parts = list(executor.map(
+        lambda pair: _unique_keys(_merged(*pair), shift),
+        ((low[:cut_low], high[:cut_high]), (low[cut_low:], high[cut_high:])),
+    ))
+    del low, high
+    return tuple(np.concatenate([part[i] for part in parts]) for i in range(3))
+
+
+def _sorted_keys(triangles: np.ndarray, shift: np.int64) -> np.ndarray:
+    m = len(triangles)
+    corners = triangles.T  # a view: columns read in place
     # written in place: on large meshes fresh temporaries cost as much as the sort
     keys = np.empty(6 * m, dtype=np.int64)
     rows = keys.reshape(6, m)
@@ -140,8 +160,17 @@ def directed_edges(triangles: np.ndarray, n: int):
     rows[3:] = rows[:3]
     for row, head in enumerate((1, 2, 0, 2, 0, 1)):
         rows[row] |= corners[head]
-    del corners
     keys.sort()
+    return keys
+
+
+def _merged(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    keys = np.concatenate([a, b])
+    keys.sort(kind="stable")  # two sorted runs: one merge
+    return keys
+
+
+def _unique_keys(keys: np.ndarray, shift: np.int64):
     first = np.empty(len(keys), dtype=bool)
     first[:1] = True
     np.not_equal(keys[1:], keys[:-1], out=first[1:])
@@ -149,7 +178,7 @@ def directed_edges(triangles: np.ndarray, n: int):
     triangle_count = np.diff(at, append=len(keys))
     keys = keys[at]
     src = keys >> shift
-    keys &= np.int64((1 << bits) - 1)
+    keys &= np.int64((1 << int(shift)) - 1)
     return src, keys, triangle_count
 
 

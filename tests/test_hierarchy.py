@@ -409,6 +409,44 @@ def test_arrays_are_read_only_and_concurrent_reads_agree(sphere_h):
         assert all(np.array_equal(a, b) for a, b in zip(results[k], expected))
 
 
+@pytest.mark.parametrize("builder", ["torus", "grid"])
+def test_blocks_and_threads_give_the_same_hierarchy(builder, monkeypatch):
+    # the level's work runs by blocks, on a thread pool: tiny blocks (many per level, ragged last
+    # ones, vertex rings cut at block ends) and any number of threads must give the one-block result
+    from o3d_lsmesh.hierarchy import collapse
+
+    rng = np.random.default_rng(5)
+    if builder == "torus":
+        mesh = o3d.geometry.TriangleMesh.create_torus(radial_resolution=40, tubular_resolution=24)
+        V, F = np.asarray(mesh.vertices), np.asarray(mesh.triangles).astype(np.int64)
+    else:
+        V, F = grid(36, 29)
+    V = V + rng.normal(scale=0.01, size=V.shape)
+    whole = build_hierarchy((V, F), min_vertices=20, workers=1)
+    assert len(whole) > 10
+    monkeypatch.setattr(collapse, "_EDGE_BLOCK", 61)
+    monkeypatch.setattr(collapse, "_TRIANGLE_BLOCK", 37)
+    monkeypatch.setattr(collapse, "_QUERY_BLOCK", 13)
+    for workers in (1, 2, 3):
+        assert build_hierarchy((V, F), min_vertices=20, workers=workers) == whole
+
+
+def test_concurrent_builds_agree():
+    V, F = _noisy_sphere(24)
+    expected = build_hierarchy((V, F), min_vertices=30, workers=1)
+    results = {}
+
+    def work(k):
+        results[k] = build_hierarchy((V, F), min_vertices=30, workers=2)
+
+    threads = [threading.Thread(target=work, args=(k,)) for k in range(3)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert all(results[k] == expected for k in range(3))
+
+
 def test_progress_bar_runs(capsys):
     h = build_hierarchy(o3d.geometry.TriangleMesh.create_sphere(resolution=8), min_vertices=20, progress=True)
     assert len(h) > 1
@@ -475,6 +513,12 @@ def test_bad_input_raises():
         build_hierarchy((V, F), beta=float("nan"))
     with pytest.raises(TypeError, match="progress must be a bool"):
         build_hierarchy((V, F), progress="yes")
+    with pytest.raises(ValueError, match="workers must be >= 1, got 0"):
+        build_hierarchy((V, F), workers=0)
+    with pytest.raises(TypeError, match="workers must be an integer"):
+        build_hierarchy((V, F), workers=2.0)
+    with pytest.raises(TypeError, match="workers must be an integer"):
+        build_hierarchy((V, F), workers=True)
     with pytest.raises(ValueError, match="levels must be strictly decreasing"):
         from_fast_simplification((V, F), levels=[30, 40])
     with pytest.raises(ValueError, match="levels must be >= 1"):

@@ -43,6 +43,8 @@ def test_isolated_vertex_row_is_zero():
     V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [5, 5, 5.0]])
     L = uniform_laplacian(np.array([[0, 1, 2]]), 4)
     assert np.all(L.toarray()[3] == 0)
+    # an isolated vertex is a fixed point of smoothing: its Laplacian is zero wherever it sits
+    assert np.all((L @ V)[3] == 0) and np.any((L @ V)[:3] != 0)
 
 
 def test_cotangent_reproduces_linear_functions_inside_flat_grid():

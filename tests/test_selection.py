@@ -123,9 +123,10 @@ def test_combined_never_picks_a_forbidden_vertex(batch):
     assert len(np.unique(selection)) == count
     checked = 0
     in_batch = batch  # forces a solve before the first pick
+    forbidden = err = None  # set by that first solve
     for position in range(1, count):
         pick = selection[position]
-        if in_batch == batch or not np.isfinite(np.where(forbidden, -np.inf, err)).any():
+        if forbidden is None or in_batch == batch or not np.isfinite(np.where(forbidden, -np.inf, err)).any():
             # a new batch: one solve with everything selected so far; a batch also ends
             # early once every vertex is selected or forbidden
             err = errors_of(V, F, selection[:position])

@@ -39,11 +39,19 @@ Validity of ``x -> k`` (each is a per-edge array test):
   (its new and old normals make an angle below ``max_normal_angle``) and
   does not become degenerate (area over summed squared edge lengths above
   ``min_quality``).
+
+Blocks and threads. The per-edge terms, the flip test, the link condition
+and the follower lists of the selection are computed over blocks of vertex
+rings, triangles or queries, which can run on a thread pool (numpy releases
+the GIL in its loops); each block writes its own slice or returns its own
+array, combined in block order, so the level is the same for any number of
+threads and any block size.
 """
 
 from __future__ import annotations
 
 import itertools
+from concurrent.futures import Executor
 from dataclasses import dataclass
 
 import numpy as np
@@ -51,6 +59,14 @@ import numpy as np
 from ..topology import _group, directed_edges
 
 __all__ = ["LevelCollapse", "collapse_level"]
+
+# Work goes by blocks of these many directed edges, triangles or link queries, so that the
+# temporaries stay small: the allocator then reuses their memory, where every level-sized
+# temporary costs fresh pages (which take the kernel longer to provide than the arithmetic on
+# them), and the blocks can run on several threads (numpy releases the GIL in its loops).
+_EDGE_BLOCK = 1 << 19
+_TRIANGLE_BLOCK = 1 << 18
+_QUERY_BLOCK = 1 << 17
 
 
 @dataclass(frozen=True)
@@ -81,6 +97,24 @@ class LevelCollapse:
     triangles: np.ndarray
 
 
+def _map(executor, fn, items):
+    """``[fn(*item) for item in items]``, on ``executor``'s threads when given (results in order).
+
+    ``fn`` only writes to disjoint slices of shared arrays or returns new ones,
+    so the result does not depend on the number of threads.
+    """
+    if executor is None or len(items) < 2:
+        return [fn(*item) for item in items]
+    return list(executor.map(lambda item: fn(*item), items))
+
+
+def _vertex_blocks(indptr: np.ndarray, size: int) -> list[tuple[int, int]]:
+    """Ranges ``(v0, v1)`` of whole vertex rings holding about ``size`` directed edges each."""
+    n = len(indptr) - 1
+    cuts = np.unique(np.searchsorted(indptr, np.arange(0, int(indptr[-1]), size), side="right") - 1)
+    return [(int(v0), int(v1)) for v0, v1 in zip(cuts, np.append(cuts[1:], n))]
+
+
 def _ranges(begin: np.ndarray, counts: np.ndarray) -> np.ndarray:
     """Concatenated ``arange(b, b + c)`` for every pair, vectorized."""
     total = int(counts.sum())
@@ -100,8 +134,8 @@ class _Adjacency:
     edge whatever the orientation of the triangles.
     """
 
-    def __init__(self, triangles: np.ndarray, n: int):
-        self.src, self.dst, self.triangle_count = directed_edges(triangles, n)
+    def __init__(self, triangles: np.ndarray, n: int, executor=None):
+        self.src, self.dst, self.triangle_count = directed_edges(triangles, n, executor=executor)
         self.valence = np.bincount(self.src, minlength=n)
         self.indptr = np.zeros(n + 1, dtype=np.int64)
         np.cumsum(self.valence, out=self.indptr[1:])
@@ -129,6 +163,7 @@ def collapse_level(
     min_quality: float = 1e-3,
     max_rounds: int | None = None,
     max_tries: int = 3,
+    executor: Executor | None = None,
 ) -> LevelCollapse | None:
     """Select and apply one level of independent volume-cost half-edge collapses.
 
@@ -154,6 +189,9 @@ def collapse_level(
     max_tries : int
         Targets tried per vertex, in increasing volume, before it waits for the
         next level.
+    executor : concurrent.futures.Executor, optional
+        Thread pool on which the blocks of the level's work run (the result is
+        the same with or without it).
 
     Returns
     -------
@@ -162,34 +200,39 @@ def collapse_level(
     """
     n = len(vertices)
     F = triangles
-    adj = _Adjacency(F, n)
+    adj = _Adjacency(F, n, executor)
     src, dst, valence, indptr = adj.src, adj.dst, adj.valence, adj.indptr
     # component arrays: contiguous gathers and no (N, 3) temporaries
     X, Y, Z = (np.ascontiguousarray(vertices[:, i], dtype=np.float64) for i in range(3))
 
     # triangle edge vectors and normals (for the cone volumes and the flip test)
     columns = np.ascontiguousarray(F.T)
-    edge_vectors = []
-    for coordinate in (X, Y, Z):
+
+    def edge_vectors(coordinate):
         base = coordinate.take(columns[0])
         u = coordinate.take(columns[1])
         u -= base
         v = coordinate.take(columns[2])
         v -= base
-        edge_vectors += [u, v]
-    del columns, base, u, v
-    ux, vx, uy, vy, uz, vz = edge_vectors
-    del edge_vectors
+        return u, v
+
+    (ux, vx), (uy, vy), (uz, vz) = _map(executor, edge_vectors, [(X,), (Y,), (Z,)])
     normal = (uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx)
     edges = ((ux, uy, uz), (vx, vy, vz))
     del ux, uy, uz, vx, vy, vz
+
     # N_x of the module docstring: the summed normals of the triangles around each vertex
-    corners = F.ravel()
-    star = [np.bincount(corners, weights=np.repeat(normal[c], 3), minlength=n) for c in range(3)]
-    cost, length, volume, ok, pick = _edge_terms(adj, X, Y, Z, star, alpha, beta)
+    def star_component(weights):
+        total = np.bincount(columns[0], weights=weights, minlength=n)
+        total += np.bincount(columns[1], weights=weights, minlength=n)
+        total += np.bincount(columns[2], weights=weights, minlength=n)
+        return total
+
+    star = _map(executor, star_component, [(c,) for c in normal])
+    cost, length, volume, ok, pick = _edge_terms(adj, X, Y, Z, star, alpha, beta, executor)
     del star
 
-    geometry = _Geometry(X, Y, Z, F, edges, normal, n, max_normal_angle, min_quality)
+    geometry = _Geometry(X, Y, Z, F, edges, normal, n, max_normal_angle, min_quality, executor)
     del edges
     target = np.full(n, -1, dtype=np.int64)
     # every vertex is offered its best target; later tries only revisit the
@@ -200,7 +243,7 @@ def collapse_level(
         x, k = src[pick], dst[pick]
         # the geometry fails far more often than the link condition: test the link on its survivors
         good = geometry(x, k)
-        good[good] = _link_condition(adj, x[good], k[good], pick[good])
+        good[good] = _link_condition(adj, x[good], k[good], pick[good], executor)
         target[x[good]] = k[good]
         if attempt == max_tries - 1:
             break
@@ -218,7 +261,7 @@ def collapse_level(
     candidate = target >= 0
     if not candidate.any():
         return None
-    selected = _select_independent(cost, candidate, target, adj, max_rounds)
+    selected = _select_independent(cost, candidate, target, adj, max_rounds, executor)
     if max_removals is not None and len(selected) > max_removals:
         cheapest = np.lexsort((selected, cost[selected]))[:max_removals]
         selected = np.sort(selected[cheapest])
@@ -242,13 +285,11 @@ def collapse_level(
     return LevelCollapse(removed, targets, ring_offsets, ring, parent, new_triangles)
 
 
-def _edge_terms(adj: _Adjacency, X, Y, Z, star, alpha, beta, block=1 << 19):
+def _edge_terms(adj: _Adjacency, X, Y, Z, star, alpha, beta, executor=None):
     """Per directed edge: length, cone volume ``|N_x . (x_k - x)|``, the per-edge rules (module
     docstring); per vertex: the cost of section 4.1 and the edge of its best pick.
 
-    Computed over blocks of whole vertex rings, so that the temporaries stay small: the allocator
-    then reuses their memory, where every level-sized temporary costs fresh pages, which take the
-    kernel longer to provide than the arithmetic on them.
+    Computed over blocks of whole vertex rings (``_EDGE_BLOCK``), on ``executor`` when given.
     """
     n, src, dst, valence, indptr = adj.n, adj.src, adj.dst, adj.valence, adj.indptr
     total = len(dst)
@@ -257,12 +298,11 @@ def _edge_terms(adj: _Adjacency, X, Y, Z, star, alpha, beta, block=1 << 19):
     ok = np.empty(total, dtype=bool)
     min_edge = np.zeros(n)
     max_edge = np.zeros(n)
-    picks = []
-    cuts = np.unique(np.searchsorted(indptr, np.arange(0, total, block), side="right") - 1)
-    for v0, v1 in zip(cuts, np.append(cuts[1:], n)):
+
+    def run(v0, v1):
         e0, e1 = int(indptr[v0]), int(indptr[v1])
         if e0 == e1:
-            continue
+            return np.zeros(0, dtype=np.int64)
         d = dst[e0:e1]
         ring = valence[v0:v1]
         has = ring > 0
@@ -300,7 +340,9 @@ def _edge_terms(adj: _Adjacency, X, Y, Z, star, alpha, beta, block=1 << 19):
         np.copyto(allowed, np.where(src_boundary, boundary_edge, ~boundary_edge))
         allowed &= ~(~src_boundary & ~dst_boundary & (src_valence == 3) & (dst_valence == 3))
         allowed &= ~(src_boundary & dst_boundary & (src_valence == 2) & (dst_valence == 2))
-        picks.append(_best_targets(cone, part, allowed, src[e0:e1], seg) + e0)
+        return _best_targets(cone, part, allowed, src[e0:e1], seg) + e0
+
+    picks = _map(executor, run, _vertex_blocks(indptr, _EDGE_BLOCK))
     cost = alpha * min_edge + beta * max_edge
     return cost, length, volume, ok, np.concatenate(picks) if picks else np.zeros(0, dtype=np.int64)
 
@@ -334,18 +376,18 @@ def _best_targets(volume, length, ok, src, seg):
     return hits[keep]
 
 
-def _link_condition(adj: _Adjacency, x: np.ndarray, k: np.ndarray, edge: np.ndarray, block=1 << 17) -> np.ndarray:
+def _link_condition(adj: _Adjacency, x: np.ndarray, k: np.ndarray, edge: np.ndarray, executor=None) -> np.ndarray:
     """Whether ``x`` and ``k`` share exactly the opposite vertices of the edge ``x -> k``.
 
     Common neighbours are counted by sorting ``(query, neighbour)`` keys of both
     rings together: a neighbour of both appears twice. Large queries go by
-    blocks, so that the temporaries stay small (see :func:`_edge_terms`).
+    blocks (``_QUERY_BLOCK``), on ``executor`` when given.
     """
+    block = _QUERY_BLOCK
     if len(x) > block:
-        return np.concatenate([
-            _link_condition(adj, x[i:i + block], k[i:i + block], edge[i:i + block], block)
-            for i in range(0, len(x), block)
-        ])
+        return np.concatenate(_map(executor, lambda i: _link_condition(
+            adj, x[i:i + block], k[i:i + block], edge[i:i + block]
+        ), [(i,) for i in range(0, len(x), block)]))
     shift = np.int64(max(1, int(adj.n - 1).bit_length()))
     q = len(x)
     query = np.arange(q, dtype=np.int64) << shift
@@ -370,8 +412,9 @@ def _link_condition(adj: _Adjacency, x: np.ndarray, k: np.ndarray, edge: np.ndar
 class _Geometry:
     """Whether moving ``x`` onto ``k`` keeps every surviving star triangle unflipped and non-degenerate."""
 
-    def __init__(self, X, Y, Z, F, edges, normal, n, max_normal_angle, min_quality):
+    def __init__(self, X, Y, Z, F, edges, normal, n, max_normal_angle, min_quality, executor=None):
         self.X, self.Y, self.Z, self.F, self.n = X, Y, Z, F, n
+        self.executor = executor
         self.edges = edges  # (u, v): corner 1 - corner 0 and corner 2 - corner 0 of every triangle, by component
         self.normal = normal
         ox, oy, oz = normal
@@ -438,33 +481,40 @@ class _Geometry:
         query_of[x] = np.arange(len(x))
         if 2 * len(x) > n:
             return self._all_corners(query_of, k, len(x))
-        flat = F.ravel()
-        c = np.flatnonzero(query_of[flat] >= 0)
-        q = query_of[flat[c]]
-        t = c // 3
-        p = c - 3 * t
-        a = flat[3 * t + _NEXT[p]]
-        b = flat[3 * t + _PREV[p]]
-        kk = k[q]
-        survives = (a != kk) & (b != kk)
-        t, a, b, kk, q = t[survives], a[survives], b[survives], kk[survives], q[survives]
-        kx, ky, kz = X[kk], Y[kk], Z[kk]
         ox, oy, oz = self.normal
-        bad = self._bad(X[a] - kx, Y[a] - ky, Z[a] - kz, X[b] - kx, Y[b] - ky, Z[b] - kz,
-                        ox[t], oy[t], oz[t], self.old_sq[t])
-        return np.bincount(q[bad], minlength=len(x)) == 0
 
-    def _opposite_sq(self, p):
-        """Squared length of the edge opposite corner ``p`` of every triangle: ``v - u``, ``v``, ``u``."""
+        def run(r0, r1):
+            flat = F[r0:r1].ravel()
+            c = np.flatnonzero(query_of[flat] >= 0)
+            q = query_of[flat[c]]
+            t = c // 3
+            p = c - 3 * t
+            a = flat[3 * t + _NEXT[p]]
+            b = flat[3 * t + _PREV[p]]
+            kk = k[q]
+            survives = (a != kk) & (b != kk)
+            t, a, b, kk, q = t[survives], a[survives], b[survives], kk[survives], q[survives]
+            t += r0
+            kx, ky, kz = X[kk], Y[kk], Z[kk]
+            bad = self._bad(X[a] - kx, Y[a] - ky, Z[a] - kz, X[b] - kx, Y[b] - ky, Z[b] - kz,
+                            ox[t], oy[t], oz[t], self.old_sq[t])
+            return q[bad]
+
+        block = _TRIANGLE_BLOCK
+        bad_queries = _map(self.executor, run, [(r0, min(r0 + block, len(F))) for r0 in range(0, len(F), block)])
+        return np.bincount(np.concatenate(bad_queries), minlength=len(x)) == 0
+
+    def _opposite_sq(self, p, rows):
+        """Squared length of the edge opposite corner ``p`` of triangles ``rows``: ``v - u``, ``v``, ``u``."""
         (ux, uy, uz), (vx, vy, vz) = self.edges
         if p == 0:
-            dx, dy, dz = vx - ux, vy - uy, vz - uz
+            dx, dy, dz = vx[rows] - ux[rows], vy[rows] - uy[rows], vz[rows] - uz[rows]
             dx *= dx
             dy *= dy
             dz *= dz
         else:
             ex, ey, ez = (vx, vy, vz) if p == 1 else (ux, uy, uz)
-            dx, dy, dz = ex * ex, ey * ey, ez * ez
+            dx, dy, dz = ex[rows] * ex[rows], ey[rows] * ey[rows], ez[rows] * ez[rows]
         dx += dy
         dx += dz
         return dx
@@ -490,40 +540,41 @@ class _Geometry:
             d[asked] -= coordinate[asked]
             shift.append(d)
         del kk
-        bad_queries = []
-        block = 1 << 18  # triangles at a time: small temporaries (see _edge_terms)
-        for p in range(3):
-            opposite_sq = self._opposite_sq(p)
-            for r0 in range(0, len(F), block):
-                rows = slice(r0, r0 + block)
-                corner = F[rows, p]
-                kk = target_of[corner]
-                live = kk >= 0
-                live &= F[rows, _NEXT[p]] != kk
-                live &= F[rows, _PREV[p]] != kk
-                del kk
-                dx, dy, dz = (d[corner] for d in shift)
-                # a - x and b - x: (u, v) at corner 0, (v - u, -u) at corner 1, (-v, u - v) at corner 2
-                if p == 0:
-                    ax, ay, az = ux[rows] - dx, uy[rows] - dy, uz[rows] - dz
-                    bx, by, bz = vx[rows] - dx, vy[rows] - dy, vz[rows] - dz
-                elif p == 1:
-                    ax, ay, az = vx[rows] - ux[rows], vy[rows] - uy[rows], vz[rows] - uz[rows]
-                    ax -= dx
-                    ay -= dy
-                    az -= dz
-                    bx, by, bz = -ux[rows] - dx, -uy[rows] - dy, -uz[rows] - dz
-                else:
-                    ax, ay, az = -vx[rows] - dx, -vy[rows] - dy, -vz[rows] - dz
-                    bx, by, bz = ux[rows] - vx[rows], uy[rows] - vy[rows], uz[rows] - vz[rows]
-                    bx -= dx
-                    by -= dy
-                    bz -= dz
-                del dx, dy, dz
-                bad = self._bad(ax, ay, az, bx, by, bz, ox[rows], oy[rows], oz[rows], self.old_sq[rows],
-                                opposite_sq[rows])
-                bad &= live
-                bad_queries.append(query_of[corner[bad]])
+
+        def run(p, r0, r1):
+            rows = slice(r0, r1)
+            corner = F[rows, p]
+            kk = target_of[corner]
+            live = kk >= 0
+            live &= F[rows, _NEXT[p]] != kk
+            live &= F[rows, _PREV[p]] != kk
+            del kk
+            dx, dy, dz = (d[corner] for d in shift)
+            # a - x and b - x: (u, v) at corner 0, (v - u, -u) at corner 1, (-v, u - v) at corner 2
+            if p == 0:
+                ax, ay, az = ux[rows] - dx, uy[rows] - dy, uz[rows] - dz
+                bx, by, bz = vx[rows] - dx, vy[rows] - dy, vz[rows] - dz
+            elif p == 1:
+                ax, ay, az = vx[rows] - ux[rows], vy[rows] - uy[rows], vz[rows] - uz[rows]
+                ax -= dx
+                ay -= dy
+                az -= dz
+                bx, by, bz = -ux[rows] - dx, -uy[rows] - dy, -uz[rows] - dz
+            else:
+                ax, ay, az = -vx[rows] - dx, -vy[rows] - dy, -vz[rows] - dz
+                bx, by, bz = ux[rows] - vx[rows], uy[rows] - vy[rows], uz[rows] - vz[rows]
+                bx -= dx
+                by -= dy
+                bz -= dz
+            del dx, dy, dz
+            bad = self._bad(ax, ay, az, bx, by, bz, ox[rows], oy[rows], oz[rows], self.old_sq[rows],
+                            self._opposite_sq(p, rows))
+            bad &= live
+            return query_of[corner[bad]]
+
+        block = _TRIANGLE_BLOCK
+        tasks = [(p, r0, min(r0 + block, len(F))) for p in range(3) for r0 in range(0, len(F), block)]
+        bad_queries = _map(self.executor, run, tasks)
         return np.bincount(np.concatenate(bad_queries), minlength=q) == 0
 
 
@@ -531,7 +582,7 @@ _NEXT = np.array([1, 2, 0])
 _PREV = np.array([2, 0, 1])
 
 
-def _select_independent(cost, candidate, target, adj: _Adjacency, max_rounds):
+def _select_independent(cost, candidate, target, adj: _Adjacency, max_rounds, executor=None):
     """Greedy independent set of collapses in increasing ``(cost, index)`` order, by rounds of local minima.
 
     A later ``y`` conflicts with an earlier ``x`` when ``y`` is in ``N(x)`` or
@@ -552,7 +603,7 @@ def _select_independent(cost, candidate, target, adj: _Adjacency, max_rounds):
     none = np.int64(n)  # rank of non-candidates: after every candidate
     rank = np.full(n, none, dtype=np.int64)
     rank[cand[_stable_argsort(cost[cand])]] = np.arange(len(cand), dtype=np.int64)
-    followers = _Followers(rank, none, cand, target, adj)
+    followers = _Followers(rank, none, cand, target, adj, executor)
     count = followers.preceding(n)
 
     state = np.zeros(n, dtype=np.int8)  # 0 undecided, 1 selected, 2 dropped
@@ -590,19 +641,18 @@ class _Followers:
     candidates around ``target[y]``, and filed under them.
     """
 
-    def __init__(self, rank, none, cand, target, adj: _Adjacency, block=1 << 19):
+    def __init__(self, rank, none, cand, target, adj: _Adjacency, executor=None):
         n = len(rank)
         dst, valence, indptr = adj.dst, adj.valence, adj.indptr
         self.parts = []
-        # by blocks of vertices, so that the temporaries stay small (see _edge_terms)
+        # by blocks of vertex rings (see _EDGE_BLOCK)
         # neighbours: the edges x -> y with x before y (both candidates); already grouped by x
         counts = np.zeros(n, dtype=np.int64)
-        later_neighbours = []
-        cuts = np.unique(np.searchsorted(indptr, np.arange(0, len(dst), block), side="right") - 1)
-        for v0, v1 in zip(cuts, np.append(cuts[1:], n)):
+
+        def neighbours(v0, v1):
             e0, e1 = int(indptr[v0]), int(indptr[v1])
             if e0 == e1:
-                continue
+                return np.zeros(0, np.int64)
             ring = valence[v0:v1]
             has = ring > 0
             d = dst[e0:e1]
@@ -610,19 +660,26 @@ class _Followers:
             later = np.repeat(rank[v0:v1], ring) < rank_dst
             later &= rank_dst < none
             counts[v0:v1][has] = np.add.reduceat(later, indptr[v0:v1][has] - e0)
-            later_neighbours.append(d[later])
+            return d[later]
+
+        later_neighbours = _map(executor, neighbours, _vertex_blocks(indptr, _EDGE_BLOCK))
         self._add(counts, np.concatenate(later_neighbours) if later_neighbours else np.zeros(0, np.int64), n)
+        del later_neighbours
         # through a target: y follows each earlier candidate w around target[y]
-        owners, followers = [], []
-        step = max(1, block // 8)
-        for i in range(0, len(cand), step):
-            y = cand[i:i + step]
+
+        def through_targets(i, j):
+            y = cand[i:j]
             t = target[y]
             t_valence = valence[t]
             w = dst[_ranges(indptr[t], t_valence)]
             earlier = rank[w] < np.repeat(rank[y], t_valence)  # y == w has equal ranks: not in
-            followers.append(np.repeat(y, t_valence)[earlier])
-            owners.append(w[earlier])
+            return w[earlier], np.repeat(y, t_valence)[earlier]
+
+        step = max(1, _EDGE_BLOCK // 8)
+        pairs = _map(executor, through_targets, [(i, i + step) for i in range(0, len(cand), step)])
+        owners = [w for w, _ in pairs]
+        followers = [y for _, y in pairs]
+        del pairs
         w = np.concatenate(owners) if owners else np.zeros(0, np.int64)
         y = np.concatenate(followers) if followers else np.zeros(0, np.int64)
         del owners, followers

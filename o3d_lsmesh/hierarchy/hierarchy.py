@@ -8,6 +8,8 @@ vertex of level ``i`` is a vertex of the input and sits at its input position.
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
+from contextlib import ExitStack
 from dataclasses import dataclass, fields
 from typing import Any
 
@@ -15,7 +17,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._o3d import MeshData, new_mesh, read_mesh
-from .._validate import as_count, as_positions, as_positive_float
+from .._validate import as_count, as_positions, as_positive_float, as_workers
 from ..topology import adjacency_matrix, boundary_halfedges, check_manifold
 from .collapse import collapse_level
 
@@ -280,10 +282,12 @@ def build_hierarchy_arrays(
     min_vertices: int = 100,
     max_levels: int | None = None,
     progress: bool = False,
+    workers: int | None = None,
     mesh_kind: str = "arrays",
     tensor_format: tuple = (),
 ) -> MeshHierarchy:
     """Array core of :func:`build_hierarchy` (inputs already validated as a manifold mesh)."""
+    workers = as_workers(workers)
     vertices = np.asarray(vertices, dtype=np.float64)
     triangles = np.asarray(triangles, dtype=np.int64)
     n0 = len(vertices)
@@ -297,24 +301,30 @@ def build_hierarchy_arrays(
 
         bar = tqdm(total=max(n0 - min_vertices, 0), desc="mesh hierarchy", unit="vertex")
     positions = vertices
-    while (max_levels is None or len(tris) - 1 < max_levels) and len(positions) > min_vertices:
-        level = collapse_level(
-            positions, tris[-1], alpha=alpha, beta=beta, max_removals=len(positions) - min_vertices
-        )
-        if level is None:
-            break
-        keep = np.ones(len(positions), dtype=bool)
-        keep[level.removed] = False
-        reps.append(reps[-1][keep])
-        positions = vertices[reps[-1]]
-        tris.append(level.triangles)
-        parents.append(level.parent)
-        removed.append(level.removed)
-        targets.append(level.targets)
-        offsets.append(level.ring_offsets)
-        rings.append(level.ring)
-        if bar is not None:
-            bar.update(len(level.removed))
+    with ExitStack() as stack:
+        # one pool for all levels; the blocks of a level share it (none of them submits work itself)
+        executor = None
+        if workers > 1:
+            executor = stack.enter_context(ThreadPoolExecutor(workers, thread_name_prefix="o3d_lsmesh"))
+        while (max_levels is None or len(tris) - 1 < max_levels) and len(positions) > min_vertices:
+            level = collapse_level(
+                positions, tris[-1], alpha=alpha, beta=beta, max_removals=len(positions) - min_vertices,
+                executor=executor,
+            )
+            if level is None:
+                break
+            keep = np.ones(len(positions), dtype=bool)
+            keep[level.removed] = False
+            reps.append(reps[-1][keep])
+            positions = vertices[reps[-1]]
+            tris.append(level.triangles)
+            parents.append(level.parent)
+            removed.append(level.removed)
+            targets.append(level.targets)
+            offsets.append(level.ring_offsets)
+            rings.append(level.ring)
+            if bar is not None:
+                bar.update(len(level.removed))
     if bar is not None:
         bar.close()
     return MeshHierarchy(
@@ -331,6 +341,7 @@ def build_hierarchy(
     min_vertices: int = 100,
     max_levels: int | None = None,
     progress: bool = False,
+    workers: int | None = None,
 ) -> MeshHierarchy:
     """Build the multiresolution hierarchy of Liu et al. 2001, section 4.1, by volume-cost half-edge collapses.
 
@@ -355,6 +366,10 @@ def build_hierarchy(
         Stop after this many levels below the input.
     progress : bool, keyword-only
         Show a tqdm bar.
+    workers : int, optional, keyword-only
+        Threads for the blocks of each level's work (numpy releases the GIL
+        in them); ``None`` uses every CPU this process may run on, ``1`` runs
+        in the calling thread only. The hierarchy is the same for any value.
 
     Returns
     -------
@@ -387,8 +402,10 @@ def build_hierarchy(
         max_levels = as_count(max_levels, name="max_levels")
     if not isinstance(progress, (bool, np.bool_)):
         raise TypeError(f"progress must be a bool, got {type(progress).__name__}")
+    workers = as_workers(workers)
     data = read_manifold_mesh(mesh)
     return build_hierarchy_arrays(
         data.vertices, data.triangles, alpha=alpha, beta=beta, min_vertices=min_vertices,
-        max_levels=max_levels, progress=bool(progress), mesh_kind=data.kind, tensor_format=_tensor_format(data),
+        max_levels=max_levels, progress=bool(progress), workers=workers, mesh_kind=data.kind,
+        tensor_format=_tensor_format(data),
     )
