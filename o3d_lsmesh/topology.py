@@ -175,7 +175,10 @@ def _unique_keys(keys: np.ndarray, shift: np.int64):
     first[:1] = True
     np.not_equal(keys[1:], keys[:-1], out=first[1:])
     at = np.flatnonzero(first)
-    triangle_count = np.diff(at, append=len(keys))
+    # run lengths, written in place (np.diff with append copies ``at`` first)
+    triangle_count = np.empty(len(at), dtype=np.int64)
+    np.subtract(at[1:], at[:-1], out=triangle_count[:-1])
+    triangle_count[-1:] = len(keys) - at[-1:]
     keys = keys[at]
     src = keys >> shift
     keys &= np.int64((1 << int(shift)) - 1)
