@@ -4,7 +4,15 @@ import pytest
 from conftest import grid
 
 from o3d_lsmesh._o3d import new_mesh, read_mesh
-from o3d_lsmesh._validate import as_choice, as_count, as_indices, as_positions, as_positive_float, as_weights
+from o3d_lsmesh._validate import (
+    as_choice,
+    as_count,
+    as_indices,
+    as_positions,
+    as_positive_float,
+    as_weights,
+    as_workers,
+)
 
 
 def test_read_mesh_copies_and_casts(sphere):
@@ -95,3 +103,15 @@ def test_small_validators():
     assert as_indices(o3d.utility.IntVector([1, 2]), 5, name="idx").tolist() == [1, 2]
     assert as_indices([], 5, name="idx", allow_empty=True).shape == (0,)
     assert as_positions(o3d.utility.Vector3dVector(np.ones((2, 3))), 2, name="p").shape == (2, 3)
+
+
+def test_workers_default_to_the_cpus_this_process_may_use():
+    import os
+
+    expected = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    assert as_workers(None) == max(1, expected)
+    assert as_workers(3) == 3 and isinstance(as_workers(np.int64(2)), int)
+    with pytest.raises(ValueError, match="workers must be >= 1, got -1"):
+        as_workers(-1)
+    with pytest.raises(TypeError, match="workers must be an integer, got 'all'"):
+        as_workers("all")
