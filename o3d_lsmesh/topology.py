@@ -58,11 +58,7 @@ def _group(keys: np.ndarray, bound: int, *, inverse: bool = True):
     else:
         order = np.argsort(keys, kind="stable")
         sorted_keys = keys[order]
-    first = np.empty(count, dtype=bool)
-    first[:1] = True
-    np.not_equal(sorted_keys[1:], sorted_keys[:-1], out=first[1:])
-    starts = np.flatnonzero(first)
-    counts = np.diff(starts, append=count)
+    first, starts, counts = _runs(sorted_keys)
     if not inverse:
         return order, starts, counts, None
     rank = np.cumsum(first, dtype=np.int64)
@@ -70,6 +66,20 @@ def _group(keys: np.ndarray, bound: int, *, inverse: bool = True):
     inverse_ = np.empty(count, dtype=np.int64)
     inverse_[order] = rank
     return order, starts, counts, inverse_
+
+
+def _runs(sorted_keys: np.ndarray):
+    """Runs of equal values in sorted ``keys``: (first-of-run mask, run starts, run lengths)."""
+    count = len(sorted_keys)
+    first = np.empty(count, dtype=bool)
+    first[:1] = True
+    np.not_equal(sorted_keys[1:], sorted_keys[:-1], out=first[1:])
+    starts = np.flatnonzero(first)
+    # lengths written in place (np.diff with append copies ``starts`` first)
+    lengths = np.empty(len(starts), dtype=np.int64)
+    np.subtract(starts[1:], starts[:-1], out=lengths[:-1])
+    lengths[-1:] = count - starts[-1:]
+    return first, starts, lengths
 
 
 def _edge_keys(triangles: np.ndarray, n: int) -> np.ndarray:
@@ -171,14 +181,7 @@ def _merged(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def _unique_keys(keys: np.ndarray, shift: np.int64):
-    first = np.empty(len(keys), dtype=bool)
-    first[:1] = True
-    np.not_equal(keys[1:], keys[:-1], out=first[1:])
-    at = np.flatnonzero(first)
-    # run lengths, written in place (np.diff with append copies ``at`` first)
-    triangle_count = np.empty(len(at), dtype=np.int64)
-    np.subtract(at[1:], at[:-1], out=triangle_count[:-1])
-    triangle_count[-1:] = len(keys) - at[-1:]
+    _, at, triangle_count = _runs(keys)
     keys = keys[at]
     src = keys >> shift
     keys &= np.int64((1 << int(shift)) - 1)

@@ -118,8 +118,7 @@ def _vertex_blocks(indptr: np.ndarray, size: int) -> list[tuple[int, int]]:
 def _ranges(begin: np.ndarray, counts: np.ndarray) -> np.ndarray:
     """Concatenated ``arange(b, b + c)`` for every pair, vectorized."""
     total = int(counts.sum())
-    offsets = np.cumsum(counts)
-    offsets -= counts
+    offsets = _offsets(counts)
     np.subtract(begin, offsets, out=offsets)
     out = np.repeat(offsets, counts)
     out += np.arange(total, dtype=np.int64)
@@ -146,10 +145,6 @@ class _Adjacency:
 
     def rings(self, vertices: np.ndarray) -> np.ndarray:
         return self.dst[_ranges(self.indptr[vertices], self.valence[vertices])]
-
-    def per_edge(self, values: np.ndarray) -> np.ndarray:
-        """``values[src]``: a repeat, since ``src`` is sorted (cheaper than a gather)."""
-        return np.repeat(values, self.valence)
 
 
 def collapse_level(
@@ -663,7 +658,7 @@ class _Followers:
             return d[later]
 
         later_neighbours = _map(executor, neighbours, _vertex_blocks(indptr, _EDGE_BLOCK))
-        self._add(counts, np.concatenate(later_neighbours) if later_neighbours else np.zeros(0, np.int64), n)
+        self._add(counts, np.concatenate(later_neighbours) if later_neighbours else np.zeros(0, np.int64))
         del later_neighbours
         # through a target: y follows each earlier candidate w around target[y]
 
@@ -685,17 +680,11 @@ class _Followers:
         del owners, followers
         order = _group_by(w, n)
         w, y = w[order], y[order]
-        self._add(np.bincount(w, minlength=n), y, n)
+        self._add(np.bincount(w, minlength=n), y)
 
-    def _add(self, counts, follower, n, owners=None):
-        """File ``follower`` (grouped by owner) under ``owners`` (all vertices when None) with ``counts`` each."""
-        if owners is not None:
-            full = np.zeros(n, dtype=np.int64)
-            full[owners] = counts
-            counts = full
-        starts = np.cumsum(counts)
-        starts -= counts
-        self.parts.append((starts, counts, follower))
+    def _add(self, counts, follower):
+        """File ``follower`` (grouped by owner, every vertex in order) with ``counts`` per vertex."""
+        self.parts.append((_offsets(counts), counts, follower))
 
     def preceding(self, n):
         """Number of conflicting candidates before each vertex, with multiplicity, ``(n,) int64``."""
@@ -712,7 +701,7 @@ class _Followers:
 
 
 def _offsets(counts):
-    """Start of each of consecutive groups of ``counts`` (all positive)."""
+    """Start of each of consecutive groups of ``counts`` (exclusive cumulative sum)."""
     starts = np.cumsum(counts)
     starts -= counts
     return starts
