@@ -181,8 +181,14 @@ def test_bad_options_raise(kwargs, match):
 def test_bad_meshes_and_paths_raise(tmp_path):
     with pytest.raises(ValueError, match="meshes must hold at least one mesh"):
         render([], None)
-    with pytest.raises(TypeError, match="mesh must be"):
+    with pytest.raises(TypeError, match=r"meshes\[0\] must be"):
         render(["not a mesh"], None, backend="raycast")
+    with pytest.raises(TypeError, match=r"meshes\[1\] must be an open3d.geometry.TriangleMesh.*got str"):
+        render([_sphere(), "x"], None, backend="raycast")
+    with pytest.raises(TypeError, match=r"color must be a sequence of 3 numbers, got 'red'"):
+        render(_sphere(), None, color="red", backend="raycast")
+    with pytest.raises(TypeError, match=r"up must be a sequence of 3 numbers of real numbers, got dtype complex"):
+        render(_sphere(), None, up=(0, 1j, 0), backend="raycast")
     with pytest.raises(ValueError, match="must have vertices, got an empty mesh"):
         render(o3d.geometry.TriangleMesh(), None, backend="raycast")
     with pytest.raises(ValueError, match="path must be in an existing folder"):
