@@ -254,8 +254,13 @@ def as_indices(
     return array
 
 
-def as_positions(positions: Any, count: int, *, name: str) -> np.ndarray:
-    """Return ``positions`` as a finite ``(count, 3) float64`` array (a copy) within :data:`COORDINATE_LIMIT`."""
+def as_positions(positions: Any, count: int, *, name: str, limit: bool = False) -> np.ndarray:
+    """Return ``positions`` as a finite ``(count, 3) float64`` array (a copy).
+
+    ``limit=True`` (positions a user gives as coordinates) also refuses
+    coordinates beyond :data:`COORDINATE_LIMIT`, as for mesh vertices; internal
+    callers pass computed positions, which may overshoot the input slightly.
+    """
     array = _real_array(positions, name=name, expected=f"an array of shape ({count}, 3)")
     if array.shape != (count, 3):
         raise ValueError(f"{name} must have shape ({count}, 3), got {array.shape}")
@@ -264,7 +269,8 @@ def as_positions(positions: Any, count: int, *, name: str) -> np.ndarray:
     if not finite.all():
         row = int(np.flatnonzero(~finite)[0])
         raise ValueError(f"{name} must be finite, got {array[row].tolist()} at row {row}")
-    _check_magnitude(array, what=name, row="row")
+    if limit:
+        _check_magnitude(array, what=name, row="row")
     return array
 
 

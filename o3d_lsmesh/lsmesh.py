@@ -211,7 +211,7 @@ class LSMeshSolver:
         if constraint_vertex_positions is None:
             positions = self._positions
         else:
-            positions = as_positions(constraint_vertex_positions, k, name="constraint_vertex_positions")
+            positions = as_positions(constraint_vertex_positions, k, name="constraint_vertex_positions", limit=True)
         hard_pos, soft_pos = positions[: len(self._hard)], positions[len(self._hard):]
         rhs = np.zeros((self._unknowns, 3))
         if self.interpolate:
@@ -270,7 +270,7 @@ class LSMeshSolver:
         if positions is None:
             pos = self._data.vertices[new]
         else:
-            pos = as_positions(positions, len(new), name="positions")
+            pos = as_positions(positions, len(new), name="positions", limit=True)
         # one nonzero per column: build the CSC arrays directly (the COO route costs more than a small update)
         c = sp.csc_matrix(
             (w, self._reduce(new), np.arange(len(new) + 1)), shape=(self._unknowns, len(new))
@@ -394,6 +394,9 @@ def reconstruct_geometry(
     known_mask[unknown] = False
     known = np.flatnonzero(known_mask)
     interpolate = as_bool(interpolate, name="interpolate")
+    as_choice(laplacian, LAPLACIAN_KINDS, name="laplacian")
+    # checked with either scheme (the interpolatory one does not use them): a bad value is a mistake either way
+    as_weights(weights, len(known), name="weights")
     L = laplacian_matrix(data.vertices, data.triangles, laplacian).tocsc()
     # checked here for both schemes, so that the message names the known vertices the caller left
     check_components_constrained(L, known, what="known vertex (outside unknown_vertex_indices)")

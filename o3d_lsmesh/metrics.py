@@ -160,8 +160,12 @@ def normal_deviation(a: Any, b: Any) -> float:
             f"a and b must share a triangle of non-zero area to compare normals, got {len(na)} triangles "
             "all of zero area in a or b"
         )
-    cos = np.clip(np.einsum("ij,ij->i", na[defined], nb[defined]), -1.0, 1.0)
-    return float(np.degrees(np.arccos(cos)).mean())
+    na, nb = na[defined], nb[defined]
+    # atan2(|a x b|, a . b): accurate for small angles, where arccos(a . b) turns round-off
+    # into 1e-6 degrees between identical normals
+    sine = np.linalg.norm(np.cross(na, nb), axis=1)
+    cosine = np.einsum("ij,ij->i", na, nb)
+    return float(np.degrees(np.arctan2(sine, cosine)).mean())
 
 
 def triangle_angles(mesh: Any) -> dict:
