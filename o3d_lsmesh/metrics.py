@@ -5,7 +5,6 @@ All functions accept Open3D meshes (legacy or tensor) or ``(vertices, triangles)
 
 from __future__ import annotations
 
-import numbers
 from typing import Any
 
 import numpy as np
@@ -82,8 +81,7 @@ def surface_distance(a: Any, b: Any, *, number_of_points: int = 100_000, seed: i
         of the geometry-aware bases paper).
     """
     number_of_points = as_count(number_of_points, name="number_of_points", minimum=1, maximum=MAX_SAMPLE_POINTS)
-    if isinstance(seed, bool) or not isinstance(seed, numbers.Integral):
-        raise TypeError(f"seed must be an integer, got {type(seed).__name__} {seed!r}")
+    seed = as_count(seed, name="seed")
     da, db = read_mesh(a, name="a"), read_mesh(b, name="b")
     # Distances are measured in single precision (RaycastingScene): in a frame centered on both
     # meshes and scaled to unit size, they keep float32's relative precision whatever the

@@ -348,6 +348,8 @@ def render(
     align = as_choice(align, ("common", "each"), name="align")
     margin = as_positive_float(margin, name="margin", allow_zero=True)
     timeout = as_positive_float(timeout, name="timeout")
+    if error_max is not None:  # checked without a reference too: a wrong value is a mistake either way
+        error_max = as_positive_float(error_max, name="error_max")
     background = as_real_vector(background, 3, name="background", low=0.0, high=1.0)
     base_color = as_real_vector(color, 3, name="color", low=0.0, high=1.0)
 
@@ -364,8 +366,6 @@ def render(
             error_max = float(np.percentile(np.concatenate(distances), 99.0))
             if error_max <= 0:
                 error_max = 1.0
-        else:
-            error_max = as_positive_float(error_max, name="error_max")
         colors = [error_colors(d, error_max) for d in distances]
     else:
         colors = []

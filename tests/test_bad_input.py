@@ -330,7 +330,8 @@ def test_add_anchors_and_solve_on_other_threads_see_whole_updates():
         (lambda m: lsm.reconstruct_geometry(m, [0, 5], interpolate=0), r"interpolate must be a bool, got int"),
         (lambda m: lsm.LSMeshSolver(m, [0, 5]).add_anchors([7], weights="3"), r"weights must be a positive number"),
         (lambda m: lsm.LSMeshSolver(m, [0, 5]).add_anchors([7], [["a", "b", "c"]]), r"positions must .* got dtype <U1"),
-        (lambda m: metrics.surface_distance(m, m, seed="0"), r"seed must be an integer, got str"),
+        (lambda m: metrics.surface_distance(m, m, seed="0"), r"seed must be an integer, got '0'"),
+        (lambda m: metrics.surface_distance(m, m, seed=1.5), r"seed must be an integer, got 1.5"),
         (lambda m: lsm.render(m, None, up="up", backend="raycast"), r"up must be a sequence of 3 numbers, got 'up'"),
         (lambda m: lsm.render(m, None, background=[1, 1, 1j], backend="raycast"), r"background must .* got dtype complex"),
     ],
@@ -341,6 +342,11 @@ def test_wrong_types_are_a_type_error(call, match):
 
 
 # --------------------------------------------------------------------------- class 7: absurd sizes
+
+
+def test_negative_seed_is_named():
+    with pytest.raises(ValueError, match="seed must be >= 0, got -1"):
+        metrics.surface_distance(_sphere(), _sphere(), seed=-1)
 
 
 def test_absurd_sample_count_is_refused_with_the_limit():

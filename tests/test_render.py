@@ -169,8 +169,11 @@ def test_filament_failure_and_timeout_raise(monkeypatch):
     ],
 )
 def test_bad_options_raise(kwargs, match):
-    if match is None:  # error_max is only read with a reference
-        render(_sphere(), None, width=16, height=16, backend="raycast", **kwargs)
+    if match is None:  # error_max is checked with or without a reference
+        with pytest.raises(ValueError, match="error_max must be positive and finite, got -1.0"):
+            render(_sphere(), None, width=16, height=16, backend="raycast", **kwargs)
+        with pytest.raises(TypeError, match="error_max must be a number, got 'big'"):
+            render(_sphere(), None, width=16, height=16, backend="raycast", error_max="big")
         with pytest.raises(ValueError, match="error_max"):
             render(_sphere(), None, width=16, height=16, backend="raycast", error_max=-1.0, reference=_sphere())
         return
