@@ -261,7 +261,10 @@ def check_output(path: str, inputs: Sequence[str], *, force: bool, suffixes: Seq
         if _same_file(path, source) and not force:
             raise CLIError(f"OUTPUT {path!r} is the input file {source!r}; refusing to overwrite it (use --force)")
     if suffixes is not None and Path(path).suffix.lower() not in suffixes:
-        raise CLIError(f"OUTPUT {path!r} must end in one of {', '.join(suffixes)}")
+        hint = ""
+        if Path(path).suffix.lower() == ".glb" and ".gltf" in suffixes:
+            hint = " (Open3D writes .glb files it cannot read back: use .gltf)"
+        raise CLIError(f"OUTPUT {path!r} must end in one of {', '.join(suffixes)}{hint}")
     folder = os.path.dirname(os.path.abspath(path))
     if not os.path.isdir(folder):
         raise CLIError(f"OUTPUT folder {folder!r} does not exist")

@@ -394,3 +394,59 @@ def test_normal_deviation_leaves_out_zero_area_triangles():
     flat = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0]], dtype=float)
     with pytest.raises(ValueError, match="a and b must share a triangle of non-zero area"):
         metrics.normal_deviation((flat, [[0, 1, 2]]), (flat, [[0, 1, 2]]))
+
+
+# --------------------------------------------------------------------------- the probe: every public option x wrong values
+
+
+def _probe_cases():
+    sphere = _sphere()
+    data = lsm.encode_geometry(sphere, 10)
+    return [
+        (lsm.laplacian, (sphere,), {}, ["kind"]),
+        (lsm.LSMeshSolver, (sphere, [0, 5]), {}, ["weights", "interpolate", "laplacian", "backend", "ordering"]),
+        (lsm.ls_mesh, (sphere,), {"constraint_vertex_indices": [0, 5]},
+         ["constraint_vertex_indices", "constraint_vertex_positions", "weights", "interpolate", "laplacian"]),
+        (lsm.reconstruct_geometry, (sphere,), {"unknown_vertex_indices": [0, 5]},
+         ["unknown_vertex_indices", "interpolate", "weights", "laplacian"]),
+        (lsm.select_control_points, (sphere,), {"count": 5}, ["count", "method", "batch", "weights", "seed", "progress"]),
+        (lsm.approximate, (sphere,), {"count": 5}, ["count", "method", "weights", "interpolate", "batch", "seed"]),
+        (lsm.encode_geometry, (sphere,), {"count": 5}, ["count", "bits", "method", "weight", "progress"]),
+        (lsm.decode_geometry, (sphere,), {"data": data}, ["data", "anchors"]),
+        (lambda m, **k: list(lsm.iter_decode_geometry(m, **k)), (sphere,), {"data": data}, ["step"]),
+        (lsm.spectral_approximation, (sphere,), {"k": 5}, ["k", "bits"]),
+        (lsm.constrained_fairing, (sphere,), {"number_of_iterations": 2},
+         ["number_of_iterations", "method", "mu", "smooth_boundary", "reimpose_every", "progress"]),
+        (lsm.smooth_boundary_curves, (sphere,), {"number_of_iterations": 2}, ["number_of_iterations"]),
+        (lsm.multiresolution_fairing, (sphere,), {"level": 1},
+         ["level", "hierarchy", "number_of_iterations", "method", "progress"]),
+        (lsm.build_hierarchy, (sphere,), {}, ["alpha", "beta", "min_vertices", "max_levels", "progress", "workers"]),
+        (lsm.from_fast_simplification, (sphere,), {}, ["levels", "min_vertices", "agg", "progress"]),
+        (lsm.render, (sphere, None), {"backend": "raycast", "width": 16, "height": 16},
+         ["width", "height", "reference", "error_max", "color", "background", "view_direction", "up", "margin",
+          "align", "backend", "timeout"]),
+        (metrics.surface_distance, (sphere, sphere), {"number_of_points": 100}, ["number_of_points", "seed"]),
+    ]
+
+
+_WRONG = {"a string": "2", "a complex array": np.array([1j, 2j]), "NaN": float("nan"), "a list of strings": ["a", "b"]}
+
+
+def test_every_public_option_refuses_wrong_values_by_name():
+    # for every option of every public function: a string, a complex array, NaN and a list of strings are
+    # refused with TypeError or ValueError whose message names the option (never accepted, never another error)
+    failures = []
+    for function, args, base, params in _probe_cases():
+        for param in params:
+            for label, value in _WRONG.items():
+                kwargs = {**base, param: value}
+                name = getattr(function, "__name__", "iter_decode_geometry")
+                try:
+                    function(*args, **kwargs)
+                    failures.append(f"{name}({param}={label}) accepted")
+                except (TypeError, ValueError) as error:
+                    if param not in str(error):
+                        failures.append(f"{name}({param}={label}): message does not name it: {error}")
+                except Exception as error:  # noqa: BLE001 - collected and reported
+                    failures.append(f"{name}({param}={label}) raised {type(error).__name__}: {error}")
+    assert not failures, "\n".join(failures)

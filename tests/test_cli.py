@@ -276,6 +276,7 @@ def test_unreadable_and_empty_meshes(tmp_path, capsys, clean):
         (["hierarchy", "{src}", "{dir}", "--levels", "one"], "--levels must be 'all' or comma-separated"),
         (["hierarchy", "{src}", "{dir}", "--format", "xyz"], "--format must be one of"),
         (["denoise", "{src}", "{dir}/out.xyz"], "must end in one of .ply, .obj, .stl, .off, .gltf"),
+        (["denoise", "{src}", "{dir}/out.glb"], "(Open3D writes .glb files it cannot read back: use .gltf)"),
         (["denoise", "{src}", "{dir}/missing/out.ply"], "OUTPUT folder"),
         (["denoise", "{src}", "{out}", "--render", "{dir}/picture.jpg"], "must end in one of .png"),
         (["approximate", "{src}", "{out}", "--count", "100000"], "--count must be <= 642, got 100000"),
@@ -529,3 +530,15 @@ def test_denoise_level_passes_or_refuses_every_option(tmp_path, capsys, noisy):
                           "--iterations", "4"])
     assert not np.array_equal(np.asarray(_read(tmp_path / "b.ply").vertices), np.asarray(_read(tmp_path / "c.ply").vertices))
     assert c["method"] == "global"
+
+
+def test_out_of_memory_is_a_user_error(tmp_path, capsys, clean, monkeypatch):
+    import importlib
+
+    def greedy(*args, **kwargs):
+        raise MemoryError
+
+    monkeypatch.setattr(importlib.import_module("o3d_lsmesh.fairing"), "constrained_fairing", greedy)
+    source = _write(clean, tmp_path / "clean.ply")
+    line = run_error(capsys, ["denoise", str(source), str(tmp_path / "out.ply")])
+    assert line == "o3d-lsmesh: error: not enough memory for this request: try a smaller mesh or smaller options"
