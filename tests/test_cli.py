@@ -542,3 +542,20 @@ def test_out_of_memory_is_a_user_error(tmp_path, capsys, clean, monkeypatch):
     source = _write(clean, tmp_path / "clean.ply")
     line = run_error(capsys, ["denoise", str(source), str(tmp_path / "out.ply")])
     assert line == "o3d-lsmesh: error: not enough memory for this request: try a smaller mesh or smaller options"
+
+
+def test_flag_names_replace_api_names_in_library_messages():
+    from o3d_lsmesh._validate import as_count
+    from o3d_lsmesh.cli import _flags
+
+    with pytest.raises(CLIError, match=r"^--unknown must be >= 0, got -1$"):
+        with _flags(unknown="unknown_vertex_indices"):
+            as_count(-1, name="unknown_vertex_indices")
+    # the fairing's advice for a boundary it cannot smooth names the CLI flag
+    with pytest.raises(CLIError, match=r"pass --fixed-boundary to keep it fixed"):
+        with _flags():
+            as_count(-1, name="boundary (pass smooth_boundary=False to keep it fixed)")
+    # an error that is not one of our checks passes through untouched (it is a bug, shown with its traceback)
+    with pytest.raises(ValueError, match="operands could not be broadcast"):
+        with _flags(unknown="unknown_vertex_indices"):
+            np.zeros(2) + np.zeros(3)
