@@ -643,6 +643,17 @@ def _int_at_least(minimum: int, description: str, maximum: int | None = None):
     return parse
 
 
+def _nonnegative_float(text: str) -> float:
+    """An argparse type for finite floats ``>= 0`` (``nan``, ``inf`` and negatives refused)."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = None
+    if value is None or not np.isfinite(value) or value < 0:
+        raise argparse.ArgumentTypeError(f"must be a non-negative finite number, got {text!r}")
+    return value
+
+
 _positive_int = _int_at_least(1, "positive")
 _nonnegative_int = _int_at_least(0, "non-negative")
 #: metrics.MAX_SAMPLE_POINTS (not imported here: --help must not load the numeric modules)
@@ -779,7 +790,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-render", action="store_true", help="skip the picture")
     p.add_argument("--subdivisions", type=_int_at_least(1, "positive", MAX_SUBDIVISIONS), default=6,
                    help="size of the built-in mesh: 10 * 4**s + 2 vertices (6: 40,962)")
-    p.add_argument("--noise", type=float, default=0.3, help="noise sigma in mean edge lengths")
+    p.add_argument("--noise", type=_nonnegative_float, default=0.3, help="noise sigma in mean edge lengths")
     p.add_argument("--seed", type=int, default=0, help="random seed of the noise")
     return parser
 

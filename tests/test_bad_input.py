@@ -172,6 +172,8 @@ def _calls():
         "approximate": lambda m: lsm.approximate(m, 10)[0][0],
         "reconstruct_geometry": lambda m: lsm.reconstruct_geometry(m, np.arange(10))[0],
         "multiresolution_fairing": lambda m: lsm.multiresolution_fairing(m, 1)[0],
+        "encode/decode": lambda m: lsm.decode_geometry(m, lsm.encode_geometry(m, 20, bits=16))[0],
+        "smooth_boundary_curves": lambda m: lsm.smooth_boundary_curves((m[0], m[1][:-40]), 3)[0],
         "signed_volume": metrics.signed_volume,
         "triangle_angles": lambda m: metrics.triangle_angles(m)["min_angle"],
         "normal_deviation": lambda m: metrics.normal_deviation(m, m),

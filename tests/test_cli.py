@@ -286,6 +286,8 @@ def test_unreadable_and_empty_meshes(tmp_path, capsys, clean):
         (["reconstruct", "{src}", "{out}", "--unknown", "0:642", "--soft"], "(outside --unknown)"),
         (["compare", "{src}", "{src}", "--points", "10000000000"], "--points: must be at most 10,000,000"),
         (["demo", "--subdivisions", "12"], "--subdivisions: must be at most 9"),
+        (["demo", "--noise", "-1"], "--noise: must be a non-negative finite number, got '-1'"),
+        (["demo", "--noise", "nan"], "--noise: must be a non-negative finite number, got 'nan'"),
         (["denoise", "{src}", "{out}", "--level", "2", "--mu", "1"], "--mu cannot be combined with --level"),
         (["denoise", "{src}", "{out}", "--level", "2", "--reimpose-every", "2", "--fixed-boundary"],
          "--reimpose-every, --fixed-boundary cannot be combined with --level"),
