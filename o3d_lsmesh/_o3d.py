@@ -186,6 +186,8 @@ def _o3d_dtype(name: str) -> Any:
 def mesh_from_state(state: dict) -> MeshData:
     """Rebuild the :class:`MeshData` described by :func:`mesh_state`, with a source mesh of the same kind."""
     vertices, triangles, kind = state["vertices"], state["triangles"], state["kind"]
+    if vertices is None:  # arrays released (see LSMeshSolver's _release_arrays): nothing to rebuild
+        return MeshData(None, None, None, kind)
     if kind == "arrays" or ("device" not in state and "vertex_normals" not in state):
         return MeshData(vertices, triangles, (vertices, triangles), kind if kind == "arrays" else "arrays")
     o3d = open3d()
