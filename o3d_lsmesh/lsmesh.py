@@ -89,8 +89,8 @@ class LSMeshSolver:
     >>> import open3d as o3d, numpy as np
     >>> sphere = o3d.geometry.TriangleMesh.create_sphere(resolution=10)
     >>> solver = LSMeshSolver(sphere, [0, 5, 40, 90])
-    >>> solver.solve().shape
-    (92, 3)
+    >>> solver.solve().shape == (len(sphere.vertices), 3)
+    True
     """
 
     def __init__(
@@ -384,8 +384,8 @@ def reconstruct_geometry(
     >>> import open3d as o3d, numpy as np
     >>> sphere = o3d.geometry.TriangleMesh.create_sphere(resolution=10)
     >>> out = reconstruct_geometry(sphere, np.arange(0, 20))
-    >>> np.asarray(out.vertices).shape
-    (92, 3)
+    >>> np.asarray(out.vertices).shape == (len(sphere.vertices), 3)
+    True
     """
     data = read_mesh(mesh)
     n = len(data.vertices)
