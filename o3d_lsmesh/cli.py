@@ -349,8 +349,8 @@ def _volume(mesh: Any) -> float:
 
 def _normal_deviation(a: Any, b: Any) -> float | None:
     """Mean normal deviation, or None when no triangle has an area in both meshes (the angle is undefined)."""
-    from .metrics import _face_normals, normal_deviation
     from ._o3d import read_mesh
+    from .metrics import _face_normals, normal_deviation
 
     da, db = read_mesh(a), read_mesh(b)
     if not ((np.abs(_face_normals(da.vertices, da.triangles)).sum(axis=1) > 0)

@@ -13,7 +13,6 @@ import open3d as o3d
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from hypothesis.extra import numpy as hnp
 
 import o3d_lsmesh as lsm
 from o3d_lsmesh import metrics

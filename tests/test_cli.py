@@ -550,14 +550,11 @@ def test_flag_names_replace_api_names_in_library_messages():
     from o3d_lsmesh._validate import as_count
     from o3d_lsmesh.cli import _flags
 
-    with pytest.raises(CLIError, match=r"^--unknown must be >= 0, got -1$"):
-        with _flags(unknown="unknown_vertex_indices"):
-            as_count(-1, name="unknown_vertex_indices")
+    with pytest.raises(CLIError, match=r"^--unknown must be >= 0, got -1$"), _flags(unknown="unknown_vertex_indices"):
+        as_count(-1, name="unknown_vertex_indices")
     # the fairing's advice for a boundary it cannot smooth names the CLI flag
-    with pytest.raises(CLIError, match=r"pass --fixed-boundary to keep it fixed"):
-        with _flags():
-            as_count(-1, name="boundary (pass smooth_boundary=False to keep it fixed)")
+    with pytest.raises(CLIError, match=r"pass --fixed-boundary to keep it fixed"), _flags():
+        as_count(-1, name="boundary (pass smooth_boundary=False to keep it fixed)")
     # an error that is not one of our checks passes through untouched (it is a bug, shown with its traceback)
-    with pytest.raises(ValueError, match="operands could not be broadcast"):
-        with _flags(unknown="unknown_vertex_indices"):
-            np.zeros(2) + np.zeros(3)
+    with pytest.raises(ValueError, match="operands could not be broadcast"), _flags(unknown="unknown_vertex_indices"):
+        np.zeros(2) + np.zeros(3)
