@@ -251,6 +251,14 @@ def read_input(path: str, *, what: str = "INPUT") -> Any:
         raise CLIError(f"{what} {path!r} has {len(mesh.vertices)} vertices but no triangles")
     if Path(path).suffix.lower() == ".stl":
         mesh = mesh.remove_duplicated_vertices()
+    # the checks every command would make, made once here so that the message names the file
+    # (an index past the vertices is also how a cut-off text file shows: "3 18" read as 182)
+    from ._o3d import read_mesh
+
+    try:
+        read_mesh(mesh, name=f"{what} {path!r}")
+    except (ValueError, TypeError) as error:
+        raise CLIError(str(error)) from None
     return mesh
 
 

@@ -558,3 +558,17 @@ def test_flag_names_replace_api_names_in_library_messages():
     # an error that is not one of our checks passes through untouched (it is a bug, shown with its traceback)
     with pytest.raises(ValueError, match="operands could not be broadcast"), _flags(unknown="unknown_vertex_indices"):
         np.zeros(2) + np.zeros(3)
+
+
+def test_invalid_mesh_files_are_named_in_the_error(tmp_path, capsys, clean):
+    # a face past the last vertex (what a text file cut inside its last line reads as) names the file
+    whole = tmp_path / "whole.ply"
+    assert o3d.io.write_triangle_mesh(str(whole), clean, write_ascii=True)
+    lines = whole.read_text().splitlines()
+    lines[-1] = "3 0 1 99999"
+    (tmp_path / "bad.ply").write_text("\n".join(lines) + "\n")
+    line = run_error(capsys, ["denoise", str(tmp_path / "bad.ply"), str(tmp_path / "out.ply")])
+    assert line == (f"o3d-lsmesh: error: INPUT '{tmp_path / 'bad.ply'}' triangle indices must lie in [0, "
+                    f"{len(clean.vertices)}), got [0, 1, 99999] at triangle {len(clean.triangles) - 1}")
+    line = run_error(capsys, ["compare", str(whole), str(tmp_path / "bad.ply")])
+    assert line.startswith(f"o3d-lsmesh: error: B '{tmp_path / 'bad.ply'}' triangle indices must lie in")
