@@ -10,7 +10,9 @@ result with :func:`new_mesh`, so the attribute policy lives here alone:
 * with the connectivity unchanged, vertex colors (and, for tensor meshes, every
   other per-vertex and per-triangle attribute except normals) are kept;
 * vertex and triangle normals are recomputed when the input had them;
-* a tensor mesh keeps its device and its position and index dtypes.
+* a tensor mesh keeps its device and its position and index dtypes (integer
+  positions come back as float64: computed positions rounded to integers would
+  be a wrong answer).
 
 The open3d import is lazy so that the array core works without it.
 """
@@ -65,13 +67,24 @@ def _kind(mesh: Any, *, name: str = "mesh") -> str:
 def read_mesh(mesh: Any, *, name: str = "mesh", allow_isolated: bool = True) -> MeshData:
     """Copy ``mesh`` into ``(n,3) float64`` vertices and ``(m,3) int64`` triangles and validate them.
 
+    Every kind goes through the same checks (:func:`~o3d_lsmesh._validate.as_vertex_array`,
+    :func:`~o3d_lsmesh._validate.as_triangle_array`): positions of a real
+    dtype (integers are converted exactly) and indices of an integer dtype,
+    each of shape ``(k, 3)`` exactly (never reshaped), indices range-checked
+    before any cast.
+
     Raises
     ------
     TypeError
-        ``mesh`` is not a supported mesh kind.
+        ``mesh`` is not a supported mesh kind; positions that are not real
+        numbers (bool, complex, strings, objects); indices that are not
+        integers (a float index would be truncated).
     ValueError
-        Empty mesh, no triangles, non-finite coordinates, out-of-range indices,
-        triangles repeating a vertex, or unreferenced vertices when not allowed.
+        Positions or indices not of shape ``(k, 3)``; empty mesh, no
+        triangles, non-finite coordinates, coordinates beyond
+        :data:`~o3d_lsmesh._validate.COORDINATE_LIMIT` (``1e30``), out-of-range
+        indices, triangles repeating a vertex, or unreferenced vertices when
+        not allowed.
     """
     kind = _kind(mesh, name=name)
     # every kind goes through the same two checks: real-number (n, 3) positions and

@@ -55,6 +55,8 @@ VIRIDIS = np.array(
 )
 
 _DEFAULT_COLOR = (0.72, 0.74, 0.78)
+#: Largest picture: 64 megapixels, whose rays and image buffers take about 5 GB on the raycast path.
+MAX_PIXELS = 64 * 1024 * 1024
 _BACKENDS = ("auto", "filament", "raycast")
 
 
@@ -353,6 +355,12 @@ def render(
     background = as_real_vector(background, 3, name="background", low=0.0, high=1.0)
     base_color = as_real_vector(color, 3, name="color", low=0.0, high=1.0)
 
+    if width * height * len(items) > MAX_PIXELS:
+        # each panel is checked alone above; many panels multiply the picture (and its ray buffers)
+        raise ValueError(
+            f"width * height * len(meshes) must be at most {MAX_PIXELS:,} pixels, got {width} * {height} * "
+            f"{len(items)} = {width * height * len(items):,}"
+        )
     datas = [read_mesh(mesh, name=f"meshes[{k}]") for k, mesh in enumerate(items)]
     ref = read_mesh(reference, name="reference") if reference is not None else None
     # Draw in a frame scaled to unit size: an orthographic picture does not depend on the scale,

@@ -198,3 +198,13 @@ def test_bad_meshes_and_paths_raise(tmp_path):
         render(_sphere(), tmp_path / "missing" / "x.png", width=16, height=16, backend="raycast")
     with pytest.raises(ValueError, match="path must name a writable .png file"):
         render(_sphere(), tmp_path / "x.unknown", width=16, height=16, backend="raycast")
+
+
+def test_absurd_picture_sizes_are_refused_before_drawing():
+    from o3d_lsmesh.rendering import MAX_PIXELS
+
+    meshes = [_sphere()] * 20
+    assert 8192 * 8192 * 20 > MAX_PIXELS
+    with pytest.raises(ValueError, match=r"width \* height \* len\(meshes\) must be at most 67,108,864 pixels, "
+                                         r"got 8192 \* 8192 \* 20 = 1,342,177,280"):
+        render(meshes, None, width=8192, height=8192, backend="raycast")

@@ -2,6 +2,8 @@ import numpy as np
 import open3d as o3d
 import pytest
 from conftest import grid
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from o3d_lsmesh._o3d import mesh_from_state, mesh_state, new_mesh, read_mesh
 from o3d_lsmesh._validate import (
@@ -230,3 +232,23 @@ def test_tensor_with_integer_positions_gives_float_positions():
     out = new_mesh(read_mesh(mesh), v * 10 + 0.25)
     assert out.vertex.positions.dtype == o3d.core.float64
     np.testing.assert_array_equal(out.vertex.positions.numpy(), v * 10 + 0.25)
+
+
+@settings(max_examples=80, deadline=None)
+@given(
+    value=st.one_of(
+        st.text(max_size=5), st.booleans(), st.complex_numbers(), st.none(),
+        st.lists(st.text(max_size=3), min_size=1, max_size=3),
+        st.lists(st.complex_numbers(allow_nan=False), min_size=3, max_size=3),
+        st.lists(st.booleans(), min_size=3, max_size=3),
+    )
+)
+def test_weights_positions_and_vectors_never_accept_non_numbers(value):
+    # strings, bools, complex numbers, None and lists of them are refused, never converted
+    for check in (
+        lambda: as_weights(value, 3, name="w"),
+        lambda: as_positions(value, 1, name="p"),
+        lambda: as_real_vector(value, 3, name="v"),
+    ):
+        with pytest.raises((TypeError, ValueError), match="^[wpv] must"):
+            check()
