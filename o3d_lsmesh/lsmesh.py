@@ -91,6 +91,14 @@ class LSMeshSolver:
     >>> solver = LSMeshSolver(sphere, [0, 5, 40, 90])
     >>> solver.solve().shape == (len(sphere.vertices), 3)
     True
+
+    Notes
+    -----
+    Thread-safe: :meth:`solve`, :meth:`mesh`, :meth:`add_anchors` and the
+    properties hold one lock, so a solve on one thread sees the system before
+    or after an update on another, never half of it. Pickles with its
+    factor's matrix (refactored on load) and returns meshes of the input's
+    kind after unpickling.
     """
 
     def __init__(
@@ -176,12 +184,14 @@ class LSMeshSolver:
     @property
     def constraint_vertex_indices(self) -> np.ndarray:
         """All control vertices in order: the initial ones, then every added anchor."""
-        return np.concatenate([self._hard, self._soft])
+        with self._lock:  # never half of an add_anchors() running on another thread
+            return np.concatenate([self._hard, self._soft])
 
     @property
     def weights(self) -> np.ndarray:
         """Weight of each control vertex, in :attr:`constraint_vertex_indices` order."""
-        return np.concatenate([self._hard_weights, self._soft_weights])
+        with self._lock:
+            return np.concatenate([self._hard_weights, self._soft_weights])
 
     def solve(self, constraint_vertex_positions: Any = None, *, refine: bool | None = None) -> np.ndarray:
         """Vertex positions ``(n, 3)`` for the given control positions (back-substitution only).
