@@ -68,11 +68,13 @@ _PHRASES = {
 
 
 @contextlib.contextmanager
-def _flags(**flag_of: str) -> Iterator[None]:
+def _flags(*, mesh: str | None = None, **flag_of: str) -> Iterator[None]:
     """Re-raise the library's user errors in the block as :class:`CLIError` naming CLI flags, not API parameters.
 
     ``flag_of`` maps a flag (``unknown`` for ``--unknown``) to the API parameter
     it feeds (``unknown_vertex_indices``); messages start "<param> must ...".
+    ``mesh`` replaces the word "mesh" that starts a message about the input
+    mesh (``"INPUT 'scan.ply'"``).
     """
     try:
         yield
@@ -84,6 +86,8 @@ def _flags(**flag_of: str) -> Iterator[None]:
             text = re.sub(rf"(?<![\w.-]){re.escape(param)}(?= must\b)", "--" + flag.replace("_", "-"), text)
         for phrase, replacement in _PHRASES.items():
             text = text.replace(phrase, replacement)
+        if mesh is not None:
+            text = re.sub(r"^mesh\b", lambda _: mesh, text)
         raise CLIError(text) from error
 
 
@@ -407,7 +411,7 @@ def cmd_denoise(args: argparse.Namespace, run: _Run) -> int:
     if args.iterations is None:
         args.iterations = 5 if args.level else 10
     start = time.perf_counter()
-    with _flags(iterations="number_of_iterations", level="level", mu="mu", reimpose_every="reimpose_every",
+    with _flags(mesh=f"INPUT {args.input!r}", iterations="number_of_iterations", level="level", mu="mu", reimpose_every="reimpose_every",
                 method="method"):
         if args.level:
             from .fairing.multiresolution import multiresolution_fairing
@@ -452,7 +456,7 @@ def cmd_approximate(args: argparse.Namespace, run: _Run) -> int:
     from .selection import approximate
 
     start = time.perf_counter()
-    with _flags(count="count", method="method", seed="seed"):
+    with _flags(mesh=f"INPUT {args.input!r}", count="count", method="method", seed="seed"):
         out, indices = approximate(mesh, args.count, method=args.method, interpolate=args.interpolate,
                                    seed=args.seed, progress=run.progress)
     seconds = time.perf_counter() - start
@@ -478,7 +482,7 @@ def cmd_reconstruct(args: argparse.Namespace, run: _Run) -> int:
     from .lsmesh import reconstruct_geometry
 
     start = time.perf_counter()
-    with _flags(unknown="unknown_vertex_indices"):
+    with _flags(mesh=f"INPUT {args.input!r}", unknown="unknown_vertex_indices"):
         out = reconstruct_geometry(mesh, unknown, interpolate=not args.soft)
     seconds = time.perf_counter() - start
     write_output(args.output, out)
@@ -516,7 +520,7 @@ def cmd_hierarchy(args: argparse.Namespace, run: _Run) -> int:
     from .hierarchy import build_hierarchy
 
     start = time.perf_counter()
-    with _flags(min_vertices="min_vertices", max_levels="max_levels"):
+    with _flags(mesh=f"INPUT {args.input!r}", min_vertices="min_vertices", max_levels="max_levels"):
         hierarchy = build_hierarchy(mesh, min_vertices=args.min_vertices, max_levels=args.max_levels,
                                     progress=run.progress)
     seconds = time.perf_counter() - start
@@ -549,7 +553,7 @@ def cmd_encode(args: argparse.Namespace, run: _Run) -> int:
     from .metrics import vertex_error
 
     start = time.perf_counter()
-    with _flags(count="count", bits="bits", method="method"):
+    with _flags(mesh=f"INPUT {args.input!r}", count="count", bits="bits", method="method"):
         data = encode_geometry(mesh, count, bits=args.bits, method=args.method, progress=run.progress)
     seconds = time.perf_counter() - start
     Path(args.output).write_bytes(data)
@@ -571,7 +575,7 @@ def cmd_decode(args: argparse.Namespace, run: _Run) -> int:
     from .encoding import decode_geometry
 
     start = time.perf_counter()
-    with _flags(anchors="anchors"):
+    with _flags(mesh=f"MESH {args.mesh!r}", anchors="anchors"):
         out = decode_geometry(mesh, data, anchors=args.anchors)
     seconds = time.perf_counter() - start
     write_output(args.output, out)

@@ -572,3 +572,19 @@ def test_invalid_mesh_files_are_named_in_the_error(tmp_path, capsys, clean):
                     f"{len(clean.vertices)}), got [0, 1, 99999] at triangle {len(clean.triangles) - 1}")
     line = run_error(capsys, ["compare", str(whole), str(tmp_path / "bad.ply")])
     assert line.startswith(f"o3d-lsmesh: error: B '{tmp_path / 'bad.ply'}' triangle indices must lie in")
+
+
+def test_messages_about_the_input_mesh_name_the_file(tmp_path, capsys, clean):
+    from o3d_lsmesh._validate import as_choice
+    from o3d_lsmesh.cli import _flags
+
+    # a check of ours whose message starts with "mesh" names the file instead
+    with pytest.raises(CLIError, match=r"^INPUT 'scan.ply' must be one of \['manifold'\], got 'x'$"), \
+            _flags(mesh="INPUT 'scan.ply'"):
+        as_choice("x", ["manifold"], name="mesh")
+    # the decoder's mesh is MESH on the command line
+    source = _write(clean, tmp_path / "clean.ply")
+    other = _write(demo_mesh(2), tmp_path / "other.ply")
+    assert main(["encode", str(source), str(tmp_path / "c.bin"), "--quiet"]) == 0
+    line = run_error(capsys, ["decode", str(other), str(tmp_path / "c.bin"), str(tmp_path / "d.ply")])
+    assert line.startswith(f"o3d-lsmesh: error: MESH '{other}' must have the {len(clean.vertices)} vertices")
