@@ -42,6 +42,13 @@ COORDINATE_LIMIT = 1e30
 _REAL_KINDS = "iuf"
 
 
+def _open3d_tensor_to_numpy(value: Any) -> Any:
+    """An ``open3d.core.Tensor`` as a numpy array (numpy alone sees it as one opaque object); else ``value``."""
+    if (type(value).__module__ or "").startswith("open3d") and hasattr(value, "numpy") and hasattr(value, "cpu"):
+        return value.cpu().numpy()
+    return value
+
+
 def _describe(value: Any) -> str:
     if isinstance(value, np.ndarray):
         return f"array of shape {value.shape} and dtype {value.dtype}"
@@ -121,7 +128,7 @@ def _real_array(value: Any, *, name: str, expected: str) -> np.ndarray:
     if isinstance(value, (str, bytes)) or value is None:
         raise TypeError(f"{name} must be {expected}, got {_describe(value)}")
     try:
-        array = np.asarray(value)
+        array = np.asarray(_open3d_tensor_to_numpy(value))
     except Exception as error:  # ragged input and the like: a type problem
         raise TypeError(f"{name} must be {expected}, got {_describe(value)}") from error
     if array.dtype.kind not in _REAL_KINDS:
@@ -224,7 +231,7 @@ def as_indices(
     if isinstance(indices, (str, bytes)) or indices is None:
         raise TypeError(f"{name} must be a sequence of integer vertex indices, got {_describe(indices)}")
     try:
-        array = np.asarray(indices)
+        array = np.asarray(_open3d_tensor_to_numpy(indices))
     except Exception as error:  # ragged input and the like: report it as a type problem
         raise TypeError(f"{name} must be a sequence of integer vertex indices, got {_describe(indices)}") from error
     if array.ndim == 0:

@@ -451,3 +451,18 @@ def test_every_public_option_refuses_wrong_values_by_name():
                 except Exception as error:  # noqa: BLE001 - collected and reported
                     failures.append(f"{name}({param}={label}) raised {type(error).__name__}: {error}")
     assert not failures, "\n".join(failures)
+
+
+def test_open3d_tensors_as_indices_and_positions_are_checked_like_arrays():
+    # the tensor API's users pass o3d.core.Tensor arguments: same answers and same errors as numpy arrays
+    sphere = _sphere()
+    reference = _vertices_of(lsm.ls_mesh(sphere, [0, 5], [[0, 0, 2], [1, 0, 0]]))
+    out = lsm.ls_mesh(sphere, o3d.core.Tensor(np.array([0, 5], dtype=np.int32)),
+                      o3d.core.Tensor(np.array([[0, 0, 2], [1, 0, 0]], dtype=np.float32)))
+    np.testing.assert_allclose(_vertices_of(out), reference, rtol=0, atol=1e-12)
+    with pytest.raises(TypeError, match="constraint_vertex_indices must have an integer dtype, got float64"):
+        lsm.ls_mesh(sphere, o3d.core.Tensor(np.array([0.0, 5.0])))
+    with pytest.raises(ValueError, match=r"constraint_vertex_positions must have shape \(2, 3\), got \(6,\)"):
+        lsm.ls_mesh(sphere, [0, 5], o3d.core.Tensor(np.zeros(6)))
+    with pytest.raises(TypeError, match="constraint_vertex_positions must .* real numbers, got dtype bool"):
+        lsm.ls_mesh(sphere, [0, 5], o3d.core.Tensor(np.zeros((2, 3), dtype=bool)))
