@@ -686,9 +686,9 @@ def _command(sub: Any, name: str, *, summary: str, description: str, example: st
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog=PROG,
-        description="Least-squares meshes and constrained fairing for Open3D meshes. Reads and writes every "
-                    "triangle-mesh format Open3D does (PLY, OBJ, STL, OFF, glTF). Each call imports Open3D "
-                    "(about 2 s).",
+        description=textwrap.fill("Least-squares meshes and constrained fairing for Open3D meshes. Reads and "
+                                  "writes every triangle-mesh format Open3D does (PLY, OBJ, STL, OFF, glTF). Each "
+                                  "call imports Open3D (about 2 s).", 79),
         epilog=f"example:\n  {PROG} denoise scan.ply smooth.ply\n  {PROG} denoise --help",
     )
     from . import __version__
@@ -730,7 +730,9 @@ def build_parser() -> argparse.ArgumentParser:
                  example=f"{PROG} approximate bunny.ply approx.ply --count 400 --indices controls.npy")
     p.add_argument("input", metavar="INPUT", help="mesh file")
     p.add_argument("output", metavar="OUTPUT", help="mesh file to write")
-    p.add_argument("--count", type=_positive_int, required=True, help="number of control points")
+    # (required options: no "(default: None)" in --help)
+    p.add_argument("--count", type=_positive_int, required=True, default=argparse.SUPPRESS,
+                   help="number of control points")
     p.add_argument("--method", choices=("greedy", "random", "combined"), default="greedy",
                    help="how the control points are chosen")
     p.add_argument("--interpolate", action="store_true", help="interpolate the control points exactly")
@@ -745,7 +747,7 @@ def build_parser() -> argparse.ArgumentParser:
                  example=f"{PROG} reconstruct scan.ply filled.ply --unknown 0:100,250")
     p.add_argument("input", metavar="INPUT", help="mesh file")
     p.add_argument("output", metavar="OUTPUT", help="mesh file to write")
-    p.add_argument("--unknown", required=True, metavar="SPEC",
+    p.add_argument("--unknown", required=True, metavar="SPEC", default=argparse.SUPPRESS,
                    help="index file (.npy or text) or list of indices and a:b ranges, e.g. '0:100,250'")
     p.add_argument("--soft", action="store_true", help="known vertices as soft constraints (whole mesh re-solved)")
 

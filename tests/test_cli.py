@@ -516,6 +516,10 @@ def test_help_lists_the_real_defaults(capsys):
         main(["denoise", "--help"])
     text = " ".join(capsys.readouterr().out.split())
     assert "(default: local)" in text and "multiresolution level (0: plain fairing) (default: 0)" in text
+    with pytest.raises(SystemExit):
+        main(["reconstruct", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "e.g. '0:100,250'" in text and "'0:100,250' (default" not in text  # a required option has no default
 
 
 def test_denoise_level_passes_or_refuses_every_option(tmp_path, capsys, noisy):
