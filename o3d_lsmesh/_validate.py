@@ -13,7 +13,12 @@ from typing import Any, Sequence
 import numpy as np
 
 __all__ = [
+    "COORDINATE_LIMIT",
     "check_mesh_arrays",
+    "as_vertex_array",
+    "as_triangle_array",
+    "as_bool",
+    "as_real_vector",
     "as_indices",
     "as_positions",
     "as_weights",
@@ -23,6 +28,25 @@ __all__ = [
     "as_choice",
     "isolated_vertices",
 ]
+
+
+#: Largest coordinate magnitude accepted in a mesh or in control positions. The algorithms
+#: square and cube lengths (areas, volumes, normal equations, the volume cost of the
+#: hierarchy raises them to the sixth power) and Open3D's RaycastingScene works in single
+#: precision (largest float32 3.4e38): 1e30 leaves room for all of it, where 1e300 would
+#: overflow to inf and NaN. Scale such a mesh down first (the algorithms are scale-free).
+COORDINATE_LIMIT = 1e30
+
+# dtype kinds that hold real numbers: signed and unsigned integers and floats (not bool,
+# complex, strings or objects, which np.array(..., dtype=float) would silently convert)
+_REAL_KINDS = "iuf"
+
+
+def _open3d_tensor_to_numpy(value: Any) -> Any:
+    """An ``open3d.core.Tensor`` as a numpy array (numpy alone sees it as one opaque object); else ``value``."""
+    if (type(value).__module__ or "").startswith("open3d") and hasattr(value, "numpy") and hasattr(value, "cpu"):
+        return value.cpu().numpy()
+    return value
 
 
 def _describe(value: Any) -> str:
@@ -56,6 +80,7 @@ def check_mesh_arrays(
         raise ValueError(
             f"{name} vertices must be finite, got {vertices[bad].tolist()} at vertex {bad}"
         )
+    _check_magnitude(vertices, what=f"{name} vertices", row="vertex")
     low, high = int(triangles.min()), int(triangles.max())
     if low < 0 or high >= n:
         row = int(np.flatnonzero(((triangles < 0) | (triangles >= n)).any(axis=1))[0])
@@ -84,6 +109,110 @@ def check_mesh_arrays(
             )
 
 
+def _check_magnitude(array: np.ndarray, *, what: str, row: str) -> None:
+    """Raise ``ValueError`` if a coordinate of ``array (k, 3)`` exceeds :data:`COORDINATE_LIMIT`."""
+    if array.size == 0:
+        return
+    big = np.abs(array).max(axis=1) > COORDINATE_LIMIT
+    if big.any():
+        first = int(np.flatnonzero(big)[0])
+        raise ValueError(
+            f"{what} must have coordinates of magnitude at most {COORDINATE_LIMIT:.0e} (areas, volumes "
+            f"and normal equations would overflow), got {array[first].tolist()} at {row} {first}; "
+            "scale the mesh down first"
+        )
+
+
+def _real_array(value: Any, *, name: str, expected: str) -> np.ndarray:
+    """``np.asarray(value)`` if it holds real numbers, else ``TypeError`` (strings, bool, complex, objects)."""
+    if isinstance(value, (str, bytes)) or value is None:
+        raise TypeError(f"{name} must be {expected}, got {_describe(value)}")
+    try:
+        array = np.asarray(_open3d_tensor_to_numpy(value))
+    except Exception as error:  # ragged input and the like: a type problem
+        raise TypeError(f"{name} must be {expected}, got {_describe(value)}") from error
+    if array.dtype.kind not in _REAL_KINDS:
+        raise TypeError(f"{name} must be {expected} of real numbers, got dtype {array.dtype}")
+    return array
+
+
+def as_vertex_array(value: Any, *, name: str = "mesh") -> np.ndarray:
+    """Vertex positions as a new ``(n, 3) float64`` array; the one check every mesh kind goes through.
+
+    Integer positions are converted exactly (the result of an algorithm is then
+    floating point); bool, complex, string and object arrays are a ``TypeError``
+    and any shape but ``(n, 3)`` a ``ValueError`` (never reshaped).
+    """
+    array = _real_array(value, name=f"{name} vertices", expected="an (n, 3) array")
+    if array.size == 0 and array.ndim <= 2:
+        return np.zeros((0, 3))  # an empty mesh: check_mesh_arrays says so
+    if array.ndim != 2 or array.shape[1] != 3:
+        raise ValueError(f"{name} vertices must have shape (n, 3), got {array.shape}")
+    return np.array(array, dtype=np.float64)
+
+
+def as_triangle_array(value: Any, n: int, *, name: str = "mesh") -> np.ndarray:
+    """Triangle indices as a new ``(m, 3) int64`` array, checked against ``n`` vertices before any cast.
+
+    Float, bool and other non-integer dtypes are a ``TypeError`` (a float index
+    would be truncated); any shape but ``(m, 3)`` a ``ValueError``; indices
+    outside ``[0, n)`` a ``ValueError`` reporting the value as given (an
+    unsigned index too large for int64 is not wrapped to a negative one).
+    An empty array of any dtype means no triangles.
+    """
+    if isinstance(value, (str, bytes)) or value is None:
+        raise TypeError(f"{name} triangles must be an (m, 3) integer array, got {_describe(value)}")
+    try:
+        array = np.asarray(value)
+    except Exception as error:
+        raise TypeError(f"{name} triangles must be an (m, 3) integer array, got {_describe(value)}") from error
+    if array.size == 0 and array.ndim <= 2 and (array.ndim < 2 or array.shape[1] in (0, 3)):
+        return np.zeros((0, 3), dtype=np.int64)
+    if array.dtype == bool or array.dtype.kind not in "iu":
+        raise TypeError(f"{name} triangles must be an (m, 3) integer array, got dtype {array.dtype}")
+    if array.ndim != 2 or array.shape[1] != 3:
+        raise ValueError(f"{name} triangles must have shape (m, 3), got {array.shape}")
+    bad = (array < 0) | (array >= n)  # compared in the given dtype: no wrap-around
+    if n > 0 and bad.any():  # (no vertices at all: check_mesh_arrays reports the empty mesh)
+        row = int(np.flatnonzero(bad.any(axis=1))[0])
+        raise ValueError(
+            f"{name} triangle indices must lie in [0, {n}), got {[int(i) for i in array[row]]} at triangle {row}"
+        )
+    return array.astype(np.int64)
+
+
+def as_bool(value: Any, *, name: str, allow_none: bool = False) -> bool | None:
+    """Return ``value`` as a bool; anything but ``True``/``False`` (or ``None`` if allowed) is a ``TypeError``."""
+    if value is None and allow_none:
+        return None
+    if not isinstance(value, (bool, np.bool_)):
+        rule = "a bool or None" if allow_none else "a bool"
+        raise TypeError(f"{name} must be {rule}, got {type(value).__name__} {_describe(value)}")
+    return bool(value)
+
+
+def as_real_vector(value: Any, length: int, *, name: str, low: float | None = None, high: float | None = None) -> np.ndarray:
+    """Return ``value`` as a finite ``(length,) float64`` array (e.g. an RGB triple or a direction).
+
+    Strings, bools and complex numbers are a ``TypeError``; a wrong length,
+    non-finite entries or entries outside ``[low, high]`` a ``ValueError``.
+    """
+    expected = f"a sequence of {length} numbers"
+    array = _real_array(value, name=name, expected=expected)
+    if array.shape != (length,):
+        raise ValueError(f"{name} must be {expected}, got shape {array.shape}: {_describe(value)}")
+    array = np.array(array, dtype=np.float64)
+    outside = ~np.isfinite(array)
+    if low is not None:
+        outside |= array < low
+    if high is not None:
+        outside |= array > high
+    if outside.any():
+        rule = "finite" if low is None and high is None else f"in [{low:g}, {high:g}]"
+        raise ValueError(f"{name} must have {length} entries {rule}, got {array.tolist()}")
+    return array
+
+
 def isolated_vertices(triangles: np.ndarray, n: int) -> np.ndarray:
     """Indices of the vertices that no triangle references, ``(k,) int64``."""
     used = np.zeros(n, dtype=bool)
@@ -102,7 +231,7 @@ def as_indices(
     if isinstance(indices, (str, bytes)) or indices is None:
         raise TypeError(f"{name} must be a sequence of integer vertex indices, got {_describe(indices)}")
     try:
-        array = np.asarray(indices)
+        array = np.asarray(_open3d_tensor_to_numpy(indices))
     except Exception as error:  # ragged input and the like: report it as a type problem
         raise TypeError(f"{name} must be a sequence of integer vertex indices, got {_describe(indices)}") from error
     if array.ndim == 0:
@@ -119,12 +248,12 @@ def as_indices(
                 f"{name} must have an integer dtype, got {array.dtype} (cast with astype(int) if these are indices)"
             )
         raise TypeError(f"{name} must hold integer vertex indices, got dtype {array.dtype}")
-    array = array.astype(np.int64)
-    bad = (array < 0) | (array >= n)
+    bad = (array < 0) | (array >= n)  # in the given dtype: a uint64 index is not wrapped to -1
     if bad.any():
         raise ValueError(
             f"{name} must lie in [0, {n}), got {int(array[bad][0])} at position {int(np.flatnonzero(bad)[0])}"
         )
+    array = array.astype(np.int64)
     order = np.sort(array)
     dup = order[1:] == order[:-1]
     if dup.any():
@@ -132,29 +261,31 @@ def as_indices(
     return array
 
 
-def as_positions(positions: Any, count: int, *, name: str) -> np.ndarray:
-    """Return ``positions`` as a finite ``(count, 3) float64`` array (a copy)."""
-    try:
-        array = np.array(positions, dtype=np.float64)
-    except (TypeError, ValueError) as error:
-        raise TypeError(f"{name} must be an array of shape ({count}, 3), got {_describe(positions)}") from error
+def as_positions(positions: Any, count: int, *, name: str, limit: bool = False) -> np.ndarray:
+    """Return ``positions`` as a finite ``(count, 3) float64`` array (a copy).
+
+    ``limit=True`` (positions a user gives as coordinates) also refuses
+    coordinates beyond :data:`COORDINATE_LIMIT`, as for mesh vertices; internal
+    callers pass computed positions, which may overshoot the input slightly.
+    """
+    array = _real_array(positions, name=name, expected=f"an array of shape ({count}, 3)")
     if array.shape != (count, 3):
         raise ValueError(f"{name} must have shape ({count}, 3), got {array.shape}")
+    array = np.array(array, dtype=np.float64)
     finite = np.isfinite(array).all(axis=1)
     if not finite.all():
         row = int(np.flatnonzero(~finite)[0])
         raise ValueError(f"{name} must be finite, got {array[row].tolist()} at row {row}")
+    if limit:
+        _check_magnitude(array, what=name, row="row")
     return array
 
 
 def as_weights(weights: Any, count: int, *, name: str = "weights") -> np.ndarray:
     """Return a scalar or per-item weight as a positive finite ``(count,) float64`` array."""
-    if isinstance(weights, bool):
+    if isinstance(weights, (bool, np.bool_)):
         raise TypeError(f"{name} must be a positive number or an array of them, got {weights!r}")
-    try:
-        array = np.array(weights, dtype=np.float64)
-    except (TypeError, ValueError) as error:
-        raise TypeError(f"{name} must be a positive number or an array of them, got {_describe(weights)}") from error
+    array = np.array(_real_array(weights, name=name, expected="a positive number or an array"), dtype=np.float64)
     if array.ndim == 0:
         array = np.full(count, float(array))
     if array.shape != (count,):

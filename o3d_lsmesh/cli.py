@@ -14,10 +14,15 @@ STL, OFF, glTF, ...). Subcommands::
 
 Every subcommand takes ``--quiet`` (no progress, no report), ``--json``
 (print one JSON object with the metrics on stdout, nothing else goes there)
-and ``--force`` (allow OUTPUT to be an input file). Exit codes: 0 success,
-2 for a missing file, an unreadable or empty mesh, bad arguments or input the
-algorithms reject (one line on stderr, no traceback), 1 when a picture could
-not be drawn.
+and ``--force`` (allow OUTPUT to be an input file). Exit codes: 0 success;
+2 for every user failure: a missing, unreadable, truncated or empty mesh file,
+bad arguments, a request too large for memory, or input the algorithms reject
+(one line on stderr naming the CLI flag, no traceback); 1 when a picture could
+not be drawn, and 1 with a traceback for an internal error (a bug: please
+report it). Errors the library raises on purpose (``ValueError``,
+``TypeError``, ``SingularSystemError`` from its own checks) are user errors;
+the same exception types raised anywhere else (numpy, a mistake in our code)
+are internal errors.
 
 STL files store every triangle with its own three vertices; they are read
 with duplicated vertices merged, so the algorithms see one surface.
@@ -27,13 +32,17 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import inspect
+import dis
 import json
 import os
+import re
 import sys
+import tempfile
+import textwrap
 import time
+import traceback
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any, Iterator, Sequence
 
 import numpy as np
 
@@ -48,7 +57,70 @@ class CLIError(Exception):
     """A user error: reported as one line on stderr with exit code 2."""
 
 
+#: Phrases of library messages that name an API option, and the CLI flag the user typed instead.
+_PHRASES = {
+    "pass smooth_boundary=False to keep it fixed": "pass --fixed-boundary to keep it fixed",
+    "smooth_boundary=False": "--fixed-boundary",
+    "must be None for method='global'": "cannot be used with --method global",
+    "must be None for method='local'": "cannot be used with --method local",
+    "(outside unknown_vertex_indices)": "(outside --unknown)",
+}
+
+
+@contextlib.contextmanager
+def _flags(*, mesh: str | None = None, **flag_of: str) -> Iterator[None]:
+    """Re-raise the library's user errors in the block as :class:`CLIError` naming CLI flags, not API parameters.
+
+    ``flag_of`` maps a flag (``unknown`` for ``--unknown``) to the API parameter
+    it feeds (``unknown_vertex_indices``); messages start "<param> must ...".
+    ``mesh`` replaces the word "mesh" that starts a message about the input
+    mesh (``"INPUT 'scan.ply'"``).
+    """
+    try:
+        yield
+    except (ValueError, TypeError) as error:
+        if not _is_user_error(error):
+            raise
+        text = str(error)
+        for flag, param in flag_of.items():
+            text = re.sub(rf"(?<![\w.-]){re.escape(param)}(?= must\b)", "--" + flag.replace("_", "-"), text)
+        for phrase, replacement in _PHRASES.items():
+            text = text.replace(phrase, replacement)
+        if mesh is not None:
+            text = re.sub(r"^mesh\b", lambda _: mesh, text)
+        raise CLIError(text) from error
+
+
+def _is_user_error(error: BaseException) -> bool:
+    """Whether ``error`` is one the library raised on purpose (a ``raise`` statement in o3d_lsmesh).
+
+    A ``ValueError`` or ``TypeError`` from numpy, Open3D or a slip in our own
+    code (a bad format string) is an internal error and must show its
+    traceback, not pass as the user's fault.
+    """
+    from ._errors import SingularSystemError
+
+    if isinstance(error, (CLIError, SingularSystemError)):
+        return True
+    tb = error.__traceback__
+    if tb is None:
+        return False
+    while tb.tb_next is not None:
+        tb = tb.tb_next
+    code = tb.tb_frame.f_code
+    package = os.path.dirname(os.path.abspath(__file__))
+    if not os.path.abspath(code.co_filename).startswith(package + os.sep):
+        return False
+    # the instruction that raised: an explicit `raise` statement, not an operation failing
+    return any(i.offset == tb.tb_lasti and i.opname == "RAISE_VARARGS" for i in dis.get_instructions(code))
+
+
 class _Parser(argparse.ArgumentParser):
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        # every subcommand's --help shows the defaults (subparsers are made with this class too)
+        kwargs.setdefault("formatter_class", _HelpFormatter)
+        super().__init__(*args, **kwargs)
+
     def error(self, message: str) -> None:  # one line, no usage block
         raise CLIError(f"{self.prog}: error: {message} (see {self.prog} --help)")
 
@@ -69,22 +141,13 @@ class _Run:
         if not self.quiet:
             print(text, file=sys.stderr if self.json else sys.stdout, flush=True)
 
-    def call(self, function: Callable, *args: Any, desc: str = "", **kwargs: Any) -> Any:
-        """Call ``function``; give it ``progress=`` if it takes one, else show a one-step bar."""
-        try:
-            accepts = "progress" in inspect.signature(function).parameters
-        except (TypeError, ValueError):
-            accepts = False
-        if accepts:
-            return function(*args, progress=self.progress, **kwargs)
-        if not self.progress:
-            return function(*args, **kwargs)
-        from tqdm.auto import tqdm
+    def call(self, function: Any, *args: Any, desc: str = "", **kwargs: Any) -> Any:
+        """Call ``function(*args, **kwargs)``; kept for subcommands written against the old helper.
 
-        with tqdm(total=1, desc=desc or getattr(function, "__name__", "working"), file=sys.stderr) as bar:
-            result = function(*args, **kwargs)
-            bar.update(1)
-        return result
+        It no longer inspects signatures nor draws a one-step bar ("0/1 -> 1/1"
+        is noise): pass ``progress=run.progress`` to functions that take it.
+        """
+        return function(*args, **kwargs)
 
     def finish(self, report: dict) -> int:
         if self.json:
@@ -112,38 +175,94 @@ def _o3d():
 
 
 @contextlib.contextmanager
-def _quiet_native_output():
-    """Silence C/C++ libraries writing straight to file descriptors 1 and 2 (RPly, Assimp) for the duration."""
+def _captured_native_output() -> Iterator[list]:
+    """Capture what C/C++ libraries write straight to file descriptors 1 and 2 (RPly, Assimp, Open3D).
+
+    Yields a list that holds the captured text once the block ends: it keeps
+    ``--json`` output clean and lets :func:`read_input` see the reader's
+    complaints (Open3D returns what it read so far from a truncated file and
+    only says so in a warning).
+    """
     sys.stdout.flush()
     sys.stderr.flush()
     saved = [os.dup(1), os.dup(2)]
-    devnull = os.open(os.devnull, os.O_WRONLY)
+    captured: list = []
+    with tempfile.TemporaryFile() as sink:
+        try:
+            os.dup2(sink.fileno(), 1)
+            os.dup2(sink.fileno(), 2)
+            yield captured
+        finally:
+            os.dup2(saved[0], 1)
+            os.dup2(saved[1], 2)
+            for fd in saved:
+                os.close(fd)
+            sink.seek(0)
+            captured.append(sink.read().decode("utf-8", "replace"))
+
+
+# Open3D's readers report a file they could not read to the end with these words (and return what they got)
+_READ_FAILURE = re.compile(r"(?i)(read \w+ failed|rply: error|unable to read|error reading|unexpected end)[^\n]*")
+_ANSI = re.compile(r"\x1b\[[0-9;]*m")
+
+
+def _ply_header_counts(path: str) -> dict:
+    """Element counts of a PLY header (``{"vertex": n, "face": m}``); empty if the header is unreadable."""
+    counts = {}
     try:
-        os.dup2(devnull, 1)
-        os.dup2(devnull, 2)
-        yield
-    finally:
-        os.dup2(saved[0], 1)
-        os.dup2(saved[1], 2)
-        for fd in saved + [devnull]:
-            os.close(fd)
+        with open(path, "rb") as handle:
+            if handle.readline().strip() != b"ply":
+                return {}
+            for _ in range(10_000):
+                line = handle.readline()
+                if not line or line.strip() == b"end_header":
+                    break
+                parts = line.split()
+                if len(parts) == 3 and parts[0] == b"element":
+                    counts[parts[1].decode("ascii", "replace")] = int(parts[2])
+    except (OSError, ValueError):
+        return {}
+    return counts
 
 
 def read_input(path: str, *, what: str = "INPUT") -> Any:
-    """Read a triangle mesh or raise :class:`CLIError` naming the problem."""
+    """Read a triangle mesh or raise :class:`CLIError` naming the problem (missing, unreadable, truncated, empty)."""
     o3d = _o3d()
     if not os.path.exists(path):
         raise CLIError(f"{what} {path!r} does not exist")
     if os.path.isdir(path):
         raise CLIError(f"{what} {path!r} is a folder, not a mesh file")
-    with _quiet_native_output():
-        mesh = o3d.io.read_triangle_mesh(path)
+    o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Warning)
+    try:
+        with _captured_native_output() as captured:
+            mesh = o3d.io.read_triangle_mesh(path)
+    finally:
+        o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
+    failure = _READ_FAILURE.search(_ANSI.sub("", captured[0]))
+    if failure and len(mesh.vertices):
+        raise CLIError(f"{what} {path!r} is truncated or corrupt: Open3D read only part of it ({failure.group(0).strip()})")
+    if Path(path).suffix.lower() == ".ply" and len(mesh.vertices):
+        header = _ply_header_counts(path)
+        # a polygon face gives at least one triangle: fewer triangles than faces means faces were lost
+        if header.get("vertex", len(mesh.vertices)) != len(mesh.vertices) or header.get("face", 0) > len(mesh.triangles):
+            raise CLIError(
+                f"{what} {path!r} is truncated or corrupt: its header declares {header.get('vertex')} vertices "
+                f"and {header.get('face', 0)} faces, Open3D read {len(mesh.vertices)} and {len(mesh.triangles)} triangles"
+            )
     if len(mesh.vertices) == 0:
         raise CLIError(f"{what} {path!r} could not be read as a triangle mesh (empty, corrupt or unsupported format)")
     if len(mesh.triangles) == 0:
         raise CLIError(f"{what} {path!r} has {len(mesh.vertices)} vertices but no triangles")
     if Path(path).suffix.lower() == ".stl":
         mesh = mesh.remove_duplicated_vertices()
+    # the checks every command would make, made once here so that the message names the file
+    # (an index past the vertices is also how a cut-off text file shows: "3 18" read as 182)
+    from ._o3d import read_mesh
+
+    try:
+        read_mesh(mesh, name=f"{what} {path!r}")
+    except (ValueError, TypeError) as error:
+        raise CLIError(str(error)) from None
     return mesh
 
 
@@ -160,7 +279,10 @@ def check_output(path: str, inputs: Sequence[str], *, force: bool, suffixes: Seq
         if _same_file(path, source) and not force:
             raise CLIError(f"OUTPUT {path!r} is the input file {source!r}; refusing to overwrite it (use --force)")
     if suffixes is not None and Path(path).suffix.lower() not in suffixes:
-        raise CLIError(f"OUTPUT {path!r} must end in one of {', '.join(suffixes)}")
+        hint = ""
+        if Path(path).suffix.lower() == ".glb" and ".gltf" in suffixes:
+            hint = " (Open3D writes .glb files it cannot read back: use .gltf)"
+        raise CLIError(f"OUTPUT {path!r} must end in one of {', '.join(suffixes)}{hint}")
     folder = os.path.dirname(os.path.abspath(path))
     if not os.path.isdir(folder):
         raise CLIError(f"OUTPUT folder {folder!r} does not exist")
@@ -172,7 +294,7 @@ def write_output(path: str, mesh: Any) -> None:
         # Open3D's STL writer needs triangle normals and refuses without them.
         mesh = o3d.geometry.TriangleMesh(mesh)
         mesh.compute_triangle_normals()
-    with _quiet_native_output():
+    with _captured_native_output():
         written = o3d.io.write_triangle_mesh(path, mesh)
     if not written:
         raise CLIError(f"could not write OUTPUT {path!r}")
@@ -195,7 +317,13 @@ def parse_index_spec(spec: str, n: int) -> np.ndarray:
         values = np.asarray(values).ravel()
         if values.size and not np.issubdtype(values.dtype, np.integer):
             raise CLIError(f"--unknown file {spec!r} must hold integer vertex indices, got dtype {values.dtype}")
-        return values.astype(np.int64)
+        if values.size == 0:
+            raise CLIError(f"--unknown file {spec!r} must name at least one vertex, got none")
+        bad = (values < 0) | (values >= n)
+        if bad.any():
+            raise CLIError(f"--unknown file {spec!r} must hold vertex indices in 0..{n - 1} (the mesh has {n} "
+                           f"vertices), got {int(values[bad][0])}")
+        return np.unique(values.astype(np.int64))
     parts = []
     for item in spec.split(","):
         item = item.strip()
@@ -205,16 +333,24 @@ def parse_index_spec(spec: str, n: int) -> np.ndarray:
                 start, stop = int(start) if start else 0, int(stop) if stop else n
                 if start < 0 or stop < start:
                     raise ValueError
-                parts.append(np.arange(start, stop, dtype=np.int64))
             elif item:
-                parts.append(np.array([int(item)], dtype=np.int64))
+                start = int(item)
+                stop = start + 1
+            else:
+                continue
         except ValueError:
             raise CLIError(
                 f"--unknown must be an existing index file or a list like '0:100,250', got {spec!r}"
             ) from None
+        if start < 0 or stop > n:
+            # checked before any array is made: '0:99999999999' must not allocate 800 GB
+            what = f"range {item!r}" if ":" in item else f"index {item!r}"
+            raise CLIError(f"--unknown must name vertices in 0..{n - 1} (the mesh has {n} vertices), got {what}")
+        parts.append(np.arange(start, stop, dtype=np.int64))
     if not parts:
         raise CLIError(f"--unknown must name at least one vertex, got {spec!r}")
-    return np.concatenate(parts)
+    # overlapping items ('0:10,5') name a vertex twice: the union is meant
+    return np.unique(np.concatenate(parts))
 
 
 def _volume(mesh: Any) -> float:
@@ -223,8 +359,20 @@ def _volume(mesh: Any) -> float:
     return signed_volume(mesh)
 
 
+def _normal_deviation(a: Any, b: Any) -> float | None:
+    """Mean normal deviation, or None when no triangle has an area in both meshes (the angle is undefined)."""
+    from ._o3d import read_mesh
+    from .metrics import _face_normals, normal_deviation
+
+    da, db = read_mesh(a), read_mesh(b)
+    if not ((np.abs(_face_normals(da.vertices, da.triangles)).sum(axis=1) > 0)
+            & (np.abs(_face_normals(db.vertices, db.triangles)).sum(axis=1) > 0)).any():
+        return None
+    return normal_deviation(a, b)
+
+
 def _change_report(before: Any, after: Any) -> dict:
-    from .metrics import normal_deviation, vertex_error
+    from .metrics import vertex_error
 
     moved = vertex_error(after, before)
     v0, v1 = _volume(before), _volume(after)
@@ -232,7 +380,7 @@ def _change_report(before: Any, after: Any) -> dict:
         "displacement_mean": moved["mean"],
         "displacement_max": moved["linf"],
         "volume_change_percent": 100.0 * (v1 - v0) / v0 if v0 != 0 else None,
-        "normal_change_deg": normal_deviation(after, before),
+        "normal_change_deg": _normal_deviation(after, before),
     }
 
 
@@ -243,7 +391,19 @@ def _mesh_size(mesh: Any) -> dict:
 # --------------------------------------------------------------------------- subcommands
 
 
+def _percent(value: float | None) -> str:
+    # a flat or open mesh can enclose no volume: there is no relative change to print
+    return "n/a (input volume 0)" if value is None else f"{value:.3f}%"
+
+
 def cmd_denoise(args: argparse.Namespace, run: _Run) -> int:
+    if args.level:
+        # multiresolution fairing fairs every level with its own defaults: these options would be ignored
+        given = [flag for flag, value in (("--mu", args.mu), ("--reimpose-every", args.reimpose_every),
+                                          ("--fixed-boundary", args.fixed_boundary or None)) if value is not None]
+        if given:
+            raise CLIError(f"{', '.join(given)} cannot be combined with --level (multiresolution fairing "
+                           f"does not take {'them' if len(given) > 1 else 'it'}), got --level {args.level}")
     check_output(args.output, [args.input], force=args.force)
     if args.render:
         check_output(args.render, [args.input], force=args.force, suffixes=(".png",))
@@ -251,24 +411,28 @@ def cmd_denoise(args: argparse.Namespace, run: _Run) -> int:
     if args.iterations is None:
         args.iterations = 5 if args.level else 10
     start = time.perf_counter()
-    if args.level:
-        from .fairing.multiresolution import multiresolution_fairing
+    with _flags(mesh=f"INPUT {args.input!r}", iterations="number_of_iterations", level="level", mu="mu", reimpose_every="reimpose_every",
+                method="method"):
+        if args.level:
+            from .fairing.multiresolution import multiresolution_fairing
 
-        out = run.call(multiresolution_fairing, mesh, args.level, number_of_iterations=args.iterations,
-                       method=args.method, desc="multiresolution fairing")
-    else:
-        from .fairing import constrained_fairing
+            out = multiresolution_fairing(mesh, args.level, number_of_iterations=args.iterations, method=args.method,
+                                          progress=run.progress)
+        else:
+            from .fairing import constrained_fairing
 
-        out = run.call(constrained_fairing, mesh, args.iterations, method=args.method, mu=args.mu,
-                       smooth_boundary=not args.fixed_boundary, reimpose_every=args.reimpose_every,
-                       desc="constrained fairing")
+            out = constrained_fairing(mesh, args.iterations, method=args.method, mu=args.mu,
+                                      smooth_boundary=not args.fixed_boundary, reimpose_every=args.reimpose_every,
+                                      progress=run.progress)
     seconds = time.perf_counter() - start
-    write_output(args.output, out)
     report = {"command": "denoise", "input": args.input, "output": args.output, **_mesh_size(mesh),
               "method": args.method, "iterations": args.iterations, "level": args.level, "seconds": seconds,
               **_change_report(mesh, out)}
-    run.say(f"denoised {args.input} ({report['vertices']} vertices) in {seconds:.2f} s -> {args.output}; "
-            f"mean displacement {report['displacement_mean']:.4g}, volume change {report['volume_change_percent']:.3f}%")
+    message = (f"denoised {args.input} ({report['vertices']} vertices) in {seconds:.2f} s -> {args.output}; "
+               f"mean displacement {report['displacement_mean']:.4g}, "
+               f"volume change {_percent(report['volume_change_percent'])}")
+    write_output(args.output, out)
+    run.say(message)
     if args.render:
         report["render"] = _render([mesh, out], args.render, run)
     return run.finish(report)
@@ -278,7 +442,7 @@ def _render(meshes: list, path: str, run: _Run) -> str:
     from .rendering import render
 
     start = time.perf_counter()
-    run.call(render, meshes, path, desc="rendering")
+    render(meshes, path)
     run.say(f"picture ({time.perf_counter() - start:.1f} s): {path}  (left: input, right: result)")
     return path
 
@@ -292,8 +456,9 @@ def cmd_approximate(args: argparse.Namespace, run: _Run) -> int:
     from .selection import approximate
 
     start = time.perf_counter()
-    out, indices = run.call(approximate, mesh, args.count, method=args.method, interpolate=args.interpolate,
-                            seed=args.seed, desc="approximate")
+    with _flags(mesh=f"INPUT {args.input!r}", count="count", method="method", seed="seed"):
+        out, indices = approximate(mesh, args.count, method=args.method, interpolate=args.interpolate,
+                                   seed=args.seed, progress=run.progress)
     seconds = time.perf_counter() - start
     write_output(args.output, out)
     if args.indices:
@@ -317,7 +482,8 @@ def cmd_reconstruct(args: argparse.Namespace, run: _Run) -> int:
     from .lsmesh import reconstruct_geometry
 
     start = time.perf_counter()
-    out = run.call(reconstruct_geometry, mesh, unknown, interpolate=not args.soft, desc="reconstruct")
+    with _flags(mesh=f"INPUT {args.input!r}", unknown="unknown_vertex_indices"):
+        out = reconstruct_geometry(mesh, unknown, interpolate=not args.soft)
     seconds = time.perf_counter() - start
     write_output(args.output, out)
     unknown_unique = np.unique(unknown)
@@ -354,8 +520,9 @@ def cmd_hierarchy(args: argparse.Namespace, run: _Run) -> int:
     from .hierarchy import build_hierarchy
 
     start = time.perf_counter()
-    hierarchy = run.call(build_hierarchy, mesh, min_vertices=args.min_vertices, max_levels=args.max_levels,
-                         desc="hierarchy")
+    with _flags(mesh=f"INPUT {args.input!r}", min_vertices="min_vertices", max_levels="max_levels"):
+        hierarchy = build_hierarchy(mesh, min_vertices=args.min_vertices, max_levels=args.max_levels,
+                                    progress=run.progress)
     seconds = time.perf_counter() - start
     levels = _parse_levels(args.levels, len(hierarchy))
     outdir.mkdir(parents=True, exist_ok=True)
@@ -386,7 +553,8 @@ def cmd_encode(args: argparse.Namespace, run: _Run) -> int:
     from .metrics import vertex_error
 
     start = time.perf_counter()
-    data = run.call(encode_geometry, mesh, count, bits=args.bits, method=args.method, desc="encode")
+    with _flags(mesh=f"INPUT {args.input!r}", count="count", bits="bits", method="method"):
+        data = encode_geometry(mesh, count, bits=args.bits, method=args.method, progress=run.progress)
     seconds = time.perf_counter() - start
     Path(args.output).write_bytes(data)
     error = vertex_error(decode_geometry(mesh, data), mesh)
@@ -407,7 +575,8 @@ def cmd_decode(args: argparse.Namespace, run: _Run) -> int:
     from .encoding import decode_geometry
 
     start = time.perf_counter()
-    out = run.call(decode_geometry, mesh, data, anchors=args.anchors, desc="decode")
+    with _flags(mesh=f"MESH {args.mesh!r}", anchors="anchors"):
+        out = decode_geometry(mesh, data, anchors=args.anchors)
     seconds = time.perf_counter() - start
     write_output(args.output, out)
     report = {"command": "decode", "mesh": args.mesh, "data": args.data, "output": args.output, **_mesh_size(mesh),
@@ -418,14 +587,15 @@ def cmd_decode(args: argparse.Namespace, run: _Run) -> int:
 
 def cmd_compare(args: argparse.Namespace, run: _Run) -> int:
     a, b = read_input(args.a, what="A"), read_input(args.b, what="B")
-    from .metrics import normal_deviation, surface_distance, topology_summary, triangle_angles, vertex_error
+    from .metrics import surface_distance, topology_summary, triangle_angles, vertex_error
 
     report: dict = {"command": "compare", "a": args.a, "b": args.b, "size_a": _mesh_size(a), "size_b": _mesh_size(b)}
-    report["surface_distance"] = run.call(surface_distance, a, b, number_of_points=args.points, desc="surface distance")
+    with _flags(points="number_of_points"):
+        report["surface_distance"] = surface_distance(a, b, number_of_points=args.points)
     if len(a.vertices) == len(b.vertices):
         report["vertex_error"] = vertex_error(a, b)
         if np.array_equal(np.asarray(a.triangles), np.asarray(b.triangles)):
-            report["normal_deviation_deg"] = normal_deviation(a, b)
+            report["normal_deviation_deg"] = _normal_deviation(a, b)
     va, vb = _volume(a), _volume(b)
     report["volume_a"], report["volume_b"] = va, vb
     report["volume_change_percent"] = 100.0 * (vb - va) / va if va != 0 else None
@@ -438,7 +608,7 @@ def cmd_compare(args: argparse.Namespace, run: _Run) -> int:
         if "vertex_error" in report:
             ve = report["vertex_error"]
             lines.append(f"vertex error: L-inf {ve['linf']:.6g}, RMS {ve['rms']:.6g}, mean {ve['mean']:.6g}")
-        if "normal_deviation_deg" in report:
+        if report.get("normal_deviation_deg") is not None:
             lines.append(f"face normal deviation: {report['normal_deviation_deg']:.4f} degrees")
         change = report["volume_change_percent"]
         lines.append(f"volume: A {va:.6g}, B {vb:.6g}" + (f" ({change:+.4f}%)" if change is not None else ""))
@@ -464,8 +634,12 @@ def cmd_demo(args: argparse.Namespace, run: _Run) -> int:
 # --------------------------------------------------------------------------- parser
 
 
-def _int_at_least(minimum: int, description: str):
-    """An argparse type for integers ``>= minimum`` with a one-line error naming the rule."""
+class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescriptionHelpFormatter):
+    """``--help`` shows every option's default and keeps the examples' line breaks."""
+
+
+def _int_at_least(minimum: int, description: str, maximum: int | None = None):
+    """An argparse type for integers in ``[minimum, maximum]`` with a one-line error naming the rule."""
 
     def parse(text: str) -> int:
         try:
@@ -474,17 +648,49 @@ def _int_at_least(minimum: int, description: str):
             value = None
         if value is None or value < minimum:
             raise argparse.ArgumentTypeError(f"must be a {description} integer, got {text!r}")
+        if maximum is not None and value > maximum:
+            raise argparse.ArgumentTypeError(f"must be at most {maximum:,}, got {text!r}")
         return value
 
     return parse
 
 
+def _nonnegative_float(text: str) -> float:
+    """An argparse type for finite floats ``>= 0`` (``nan``, ``inf`` and negatives refused)."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = None
+    if value is None or not np.isfinite(value) or value < 0:
+        raise argparse.ArgumentTypeError(f"must be a non-negative finite number, got {text!r}")
+    return value
+
+
 _positive_int = _int_at_least(1, "positive")
 _nonnegative_int = _int_at_least(0, "non-negative")
+#: metrics.MAX_SAMPLE_POINTS (not imported here: --help must not load the numeric modules)
+MAX_POINTS = 10_000_000
+#: the demo's blob has 10 * 4**s + 2 vertices: 9 gives 2.6 million (about 3 GB to denoise), 12 would need 170 million
+MAX_SUBDIVISIONS = 9
+
+
+def _command(sub: Any, name: str, *, summary: str, description: str, example: str, handler: Any,
+             parents: Sequence[argparse.ArgumentParser]) -> argparse.ArgumentParser:
+    """Add subcommand ``name`` with its one-line summary, description and an example in ``--help``."""
+    parser = sub.add_parser(name, parents=list(parents), help=summary, description=textwrap.fill(description, 79),
+                            epilog=f"example:\n  {example}")
+    parser.set_defaults(handler=handler)
+    return parser
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog=PROG, description="Least-squares meshes and constrained fairing for Open3D meshes.")
+    parser = _Parser(
+        prog=PROG,
+        description=textwrap.fill("Least-squares meshes and constrained fairing for Open3D meshes. Reads and "
+                                  "writes every triangle-mesh format Open3D does (PLY, OBJ, STL, OFF, glTF). Each "
+                                  "call imports Open3D (about 2 s).", 79),
+        epilog=f"example:\n  {PROG} denoise scan.ply smooth.ply\n  {PROG} denoise --help",
+    )
     from . import __version__
 
     parser.add_argument("--version", action="version", version=f"{PROG} {__version__}")
@@ -494,103 +700,174 @@ def build_parser() -> argparse.ArgumentParser:
     common.add_argument("--force", action="store_true", help="allow overwriting an input file")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     sub.required = True
+    both = [common]
 
-    p = sub.add_parser("denoise", parents=[common], help="barycenter-constrained (or multiresolution) fairing",
-                       description="Remove noise with barycenter-constrained fairing (Liu et al. 2001).")
-    p.add_argument("input", metavar="INPUT")
-    p.add_argument("output", metavar="OUTPUT")
+    p = _command(sub, "denoise", parents=both, handler=cmd_denoise,
+                 summary="barycenter-constrained (or multiresolution) fairing",
+                 description="Remove noise with barycenter-constrained fairing (Liu et al. 2001, section 3): the "
+                             "membrane energy is minimized while every triangle keeps its barycenter. With "
+                             "--level L, multiresolution fairing (section 4.2): fair a coarse level of the "
+                             "volume-cost hierarchy, then split back up.",
+                 example=f"{PROG} denoise scan.ply smooth.ply --iterations 20 --render before_after.png")
+    p.add_argument("input", metavar="INPUT", help="mesh file to denoise")
+    p.add_argument("output", metavar="OUTPUT", help="mesh file to write (.ply, .obj, .stl, .off, .gltf)")
     p.add_argument("--iterations", type=_nonnegative_int, default=None,
-                   help="number_of_iterations (default 10; with --level, 5 per level)")
-    p.add_argument("--method", choices=("local", "global"), default="local")
+                   help="number of fairing iterations (None: 10; with --level, 5 per level)")
+    p.add_argument("--method", choices=("local", "global"), default="local",
+                   help="local: per-vertex updates (eq. 7); global: one sparse solve per iteration")
     p.add_argument("--level", type=_nonnegative_int, default=0, help="multiresolution level (0: plain fairing)")
-    p.add_argument("--mu", type=float, default=None, help="penalty weight of --method global")
-    p.add_argument("--reimpose-every", type=_positive_int, default=None, help="re-take the barycenters every k iterations")
-    p.add_argument("--fixed-boundary", action="store_true", help="keep boundary vertices fixed")
+    p.add_argument("--mu", type=float, default=None, help="penalty weight of --method global (not with --level)")
+    p.add_argument("--reimpose-every", type=_positive_int, default=None,
+                   help="re-take the barycenters every k iterations (not with --level)")
+    p.add_argument("--fixed-boundary", action="store_true",
+                   help="keep boundary vertices fixed instead of smoothing the boundary curves (not with --level)")
     p.add_argument("--render", metavar="PNG", default=None, help="write a before/after picture")
-    p.set_defaults(handler=cmd_denoise)
 
-    p = sub.add_parser("approximate", parents=[common], help="LS-mesh approximation from N control points")
-    p.add_argument("input", metavar="INPUT")
-    p.add_argument("output", metavar="OUTPUT")
-    p.add_argument("--count", type=_positive_int, required=True)
-    p.add_argument("--method", choices=("greedy", "random", "combined"), default="greedy")
+    p = _command(sub, "approximate", parents=both, handler=cmd_approximate,
+                 summary="LS-mesh approximation from N control points",
+                 description="Rebuild the geometry from the connectivity and N control points chosen on the "
+                             "mesh (least-squares meshes, Sorkine and Cohen-Or 2004).",
+                 example=f"{PROG} approximate bunny.ply approx.ply --count 400 --indices controls.npy")
+    p.add_argument("input", metavar="INPUT", help="mesh file")
+    p.add_argument("output", metavar="OUTPUT", help="mesh file to write")
+    # (required options: no "(default: None)" in --help)
+    p.add_argument("--count", type=_positive_int, required=True, default=argparse.SUPPRESS,
+                   help="number of control points")
+    p.add_argument("--method", choices=("greedy", "random", "combined"), default="greedy",
+                   help="how the control points are chosen")
     p.add_argument("--interpolate", action="store_true", help="interpolate the control points exactly")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="random seed of --method random/combined")
     p.add_argument("--indices", metavar="FILE", default=None, help="also write the control indices (.npy or .txt)")
-    p.set_defaults(handler=cmd_approximate)
 
-    p = sub.add_parser("reconstruct", parents=[common], help="rebuild the geometry of unknown vertices")
-    p.add_argument("input", metavar="INPUT")
-    p.add_argument("output", metavar="OUTPUT")
-    p.add_argument("--unknown", required=True, metavar="SPEC",
+    p = _command(sub, "reconstruct", parents=both, handler=cmd_reconstruct,
+                 summary="rebuild the geometry of unknown vertices",
+                 description="Replace the positions of the --unknown vertices by the least-squares mesh of the "
+                             "known ones (LS meshes, figures 5 and 8); known vertices stay as they are unless "
+                             "--soft.",
+                 example=f"{PROG} reconstruct scan.ply filled.ply --unknown 0:100,250")
+    p.add_argument("input", metavar="INPUT", help="mesh file")
+    p.add_argument("output", metavar="OUTPUT", help="mesh file to write")
+    p.add_argument("--unknown", required=True, metavar="SPEC", default=argparse.SUPPRESS,
                    help="index file (.npy or text) or list of indices and a:b ranges, e.g. '0:100,250'")
     p.add_argument("--soft", action="store_true", help="known vertices as soft constraints (whole mesh re-solved)")
-    p.set_defaults(handler=cmd_reconstruct)
 
-    p = sub.add_parser("hierarchy", parents=[common], help="write levels of the volume-cost collapse hierarchy")
-    p.add_argument("input", metavar="INPUT")
-    p.add_argument("outdir", metavar="OUTDIR")
+    p = _command(sub, "hierarchy", parents=both, handler=cmd_hierarchy,
+                 summary="write levels of the volume-cost collapse hierarchy",
+                 description="Build the volume-cost edge-collapse hierarchy (Liu et al. 2001, section 4.1) and "
+                             "write the chosen levels as mesh files.",
+                 example=f"{PROG} hierarchy bunny.ply levels/ --levels 0,2,4 --maps")
+    p.add_argument("input", metavar="INPUT", help="mesh file")
+    p.add_argument("outdir", metavar="OUTDIR", help="folder for level_NN files (created if needed)")
     p.add_argument("--levels", default="all", help="'all' or comma-separated level numbers (0 is the input)")
-    p.add_argument("--min-vertices", type=_positive_int, default=100)
-    p.add_argument("--max-levels", type=_positive_int, default=None)
+    p.add_argument("--min-vertices", type=_positive_int, default=100, help="stop at this many vertices")
+    p.add_argument("--max-levels", type=_positive_int, default=None, help="stop after this many levels (None: no limit)")
     p.add_argument("--format", default="ply", help="file format of the levels (ply, obj, stl, off, gltf)")
     p.add_argument("--maps", action="store_true", help="also write vertex_maps.npz (input vertex -> level vertex)")
-    p.set_defaults(handler=cmd_hierarchy)
 
-    p = sub.add_parser("encode", parents=[common], help="encode the geometry as quantized LS-mesh anchors")
-    p.add_argument("input", metavar="INPUT")
-    p.add_argument("output", metavar="OUTPUT")
-    p.add_argument("--count", type=_positive_int, default=None, help="anchors (default 2%% of the vertices)")
-    p.add_argument("--bits", type=_positive_int, default=12)
-    p.add_argument("--method", choices=("greedy", "random", "combined"), default="greedy")
-    p.set_defaults(handler=cmd_encode)
+    p = _command(sub, "encode", parents=both, handler=cmd_encode,
+                 summary="encode the geometry as quantized LS-mesh anchors",
+                 description="Store the geometry as the quantized positions of a few anchors; decode rebuilds it "
+                             "from the connectivity (geometry-aware bases, Sorkine et al.).",
+                 example=f"{PROG} encode bunny.ply bunny.lsm --count 500 --bits 12")
+    p.add_argument("input", metavar="INPUT", help="mesh file")
+    p.add_argument("output", metavar="OUTPUT", help="file for the encoded bytes")
+    p.add_argument("--count", type=_positive_int, default=None, help="anchors (None: 2%% of the vertices)")
+    p.add_argument("--bits", type=_positive_int, default=12, help="quantization bits per coordinate")
+    p.add_argument("--method", choices=("greedy", "random", "combined"), default="greedy",
+                   help="how the anchors are chosen")
 
-    p = sub.add_parser("decode", parents=[common], help="decode geometry onto a mesh's connectivity")
-    p.add_argument("mesh", metavar="MESH")
-    p.add_argument("data", metavar="DATA")
-    p.add_argument("output", metavar="OUTPUT")
-    p.add_argument("--anchors", type=_positive_int, default=None, help="use only the first K anchors")
-    p.set_defaults(handler=cmd_decode)
+    p = _command(sub, "decode", parents=both, handler=cmd_decode,
+                 summary="decode geometry onto a mesh's connectivity",
+                 description="Rebuild the geometry stored by encode on the connectivity of MESH.",
+                 example=f"{PROG} decode bunny.ply bunny.lsm decoded.ply --anchors 200")
+    p.add_argument("mesh", metavar="MESH", help="mesh file whose connectivity the data was encoded on")
+    p.add_argument("data", metavar="DATA", help="file written by encode")
+    p.add_argument("output", metavar="OUTPUT", help="mesh file to write")
+    p.add_argument("--anchors", type=_positive_int, default=None, help="use only the first K anchors (None: all)")
 
-    p = sub.add_parser("compare", parents=[common], help="metrics between two meshes")
-    p.add_argument("a", metavar="A")
-    p.add_argument("b", metavar="B")
-    p.add_argument("--points", type=_positive_int, default=100_000, help="surface samples per mesh")
-    p.set_defaults(handler=cmd_compare)
+    p = _command(sub, "compare", parents=both, handler=cmd_compare,
+                 summary="metrics between two meshes",
+                 description="Surface distance (sampled, both ways), vertex error and normal deviation when the "
+                             "meshes correspond, volume, triangle angles and topology of both.",
+                 example=f"{PROG} compare clean.ply smooth.ply --json")
+    p.add_argument("a", metavar="A", help="first mesh file")
+    p.add_argument("b", metavar="B", help="second mesh file")
+    p.add_argument("--points", type=_int_at_least(1, "positive", MAX_POINTS), default=100_000,
+                   help="surface samples per mesh")
 
-    p = sub.add_parser("demo", parents=[common], help="denoise a built-in mesh and compare with Open3D's filters")
-    p.add_argument("--out", default="demo_out", help="output folder (default demo_out)")
+    p = _command(sub, "demo", parents=both, handler=cmd_demo,
+                 summary="denoise a built-in mesh and compare with Open3D's filters",
+                 description="Add noise to a built-in blob, denoise it with every method of this package and "
+                             "Open3D's filters, and print a table of errors (and a picture).",
+                 example=f"{PROG} demo --out demo_out --subdivisions 5")
+    p.add_argument("--out", default="demo_out", help="output folder")
     p.add_argument("--no-render", action="store_true", help="skip the picture")
-    p.add_argument("--subdivisions", type=_positive_int, default=6, help="size of the built-in mesh (6: 40,962 vertices)")
-    p.add_argument("--noise", type=float, default=0.3, help="noise sigma in mean edge lengths")
-    p.add_argument("--seed", type=int, default=0)
-    p.set_defaults(handler=cmd_demo)
+    p.add_argument("--subdivisions", type=_int_at_least(1, "positive", MAX_SUBDIVISIONS), default=6,
+                   help="size of the built-in mesh: 10 * 4**s + 2 vertices (6: 40,962)")
+    p.add_argument("--noise", type=_nonnegative_float, default=0.3, help="noise sigma in mean edge lengths")
+    p.add_argument("--seed", type=int, default=0, help="random seed of the noise")
     return parser
 
 
+def _close_progress_bars() -> None:
+    """End every live tqdm bar with its newline, so that an error message starts on a line of its own.
+
+    A bar left open by an exception (held alive by the traceback) would otherwise
+    have the message printed after its last ``\r``, on the bar's line.
+    """
+    tqdm_module = sys.modules.get("tqdm.std")
+    if tqdm_module is None:
+        return
+    for bar in list(getattr(tqdm_module.tqdm, "_instances", ())):
+        with contextlib.suppress(Exception):
+            bar.close()
+
+
+def _fail(text: str, code: int) -> int:
+    _close_progress_bars()
+    sys.stdout.flush()
+    print(text if text.startswith(PROG) else f"{PROG}: error: {text}", file=sys.stderr, flush=True)
+    return code
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run ``o3d-lsmesh`` with ``argv`` (default ``sys.argv[1:]``); return the exit code."""
+    """Run ``o3d-lsmesh`` with ``argv`` (default ``sys.argv[1:]``); return the exit code.
+
+    Exit codes: 0 success, 2 a user error (one line on stderr), 1 a picture
+    that could not be drawn or an internal error (with its traceback), 130 an
+    interrupt.
+    """
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
         return args.handler(args, _Run(args))
     except CLIError as error:
-        text = str(error)
-        print(text if text.startswith(PROG) else f"{PROG}: error: {text}", file=sys.stderr)
-        return 2
+        return _fail(str(error), 2)
     except (ValueError, TypeError) as error:
-        # The library's messages name the parameter, what was expected and what came.
-        print(f"{PROG}: error: {error}", file=sys.stderr)
-        return 2
+        if not _is_user_error(error):
+            return _internal_error(error)
+        # The library's own checks: the message names the parameter, what was expected and what came.
+        return _fail(str(error), 2)
+    except MemoryError:
+        return _fail("not enough memory for this request: try a smaller mesh or smaller options", 2)
     except OSError as error:
-        print(f"{PROG}: error: {error.strerror or error}: {error.filename or ''}".rstrip(": "), file=sys.stderr)
-        return 2
-    except RuntimeError as error:
-        print(f"{PROG}: error: {error}", file=sys.stderr)
-        return 1
+        return _fail(f"{error.strerror or error}: {error.filename or ''}".rstrip(": "), 2)
+    except RuntimeError as error:  # a picture that could not be drawn (exit 1, not a user error)
+        return _fail(str(error), 1)
     except KeyboardInterrupt:
+        _close_progress_bars()
         print(f"{PROG}: interrupted", file=sys.stderr)
         return 130
+    except Exception as error:  # noqa: BLE001 - anything else is a bug: show it as one
+        return _internal_error(error)
+
+
+def _internal_error(error: BaseException) -> int:
+    _close_progress_bars()
+    traceback.print_exception(type(error), error, error.__traceback__, file=sys.stderr)
+    print(f"{PROG}: internal error (a bug in o3d-lsmesh, not in your input: please report it with the "
+          "traceback above)", file=sys.stderr, flush=True)
+    return 1
 
 
 if __name__ == "__main__":

@@ -8,6 +8,7 @@ Approximation* (sections II.A, II.B and III).
 
 from __future__ import annotations
 
+import threading
 from typing import Any
 
 import numpy as np
@@ -15,9 +16,9 @@ import scipy.sparse as sp
 from scipy.sparse import csgraph
 
 from ._errors import SingularSystemError
-from ._o3d import MeshData, new_mesh, read_mesh, source_triangles
+from ._o3d import MeshData, mesh_from_state, mesh_state, new_mesh, read_mesh, source_triangles
 from ._solvers import SPDSolver
-from ._validate import as_choice, as_indices, as_positions, as_weights
+from ._validate import as_bool, as_choice, as_indices, as_positions, as_weights
 from .laplacian import LAPLACIAN_KINDS, laplacian_matrix
 
 __all__ = ["LSMeshSolver", "ls_mesh", "reconstruct_geometry", "check_components_constrained"]
@@ -88,8 +89,16 @@ class LSMeshSolver:
     >>> import open3d as o3d, numpy as np
     >>> sphere = o3d.geometry.TriangleMesh.create_sphere(resolution=10)
     >>> solver = LSMeshSolver(sphere, [0, 5, 40, 90])
-    >>> solver.solve().shape
-    (92, 3)
+    >>> solver.solve().shape == (len(sphere.vertices), 3)
+    True
+
+    Notes
+    -----
+    Thread-safe: :meth:`solve`, :meth:`mesh`, :meth:`add_anchors` and the
+    properties hold one lock, so a solve on one thread sees the system before
+    or after an update on another, never half of it. Pickles with its
+    factor's matrix (refactored on load) and returns meshes of the input's
+    kind after unpickling.
     """
 
     def __init__(
@@ -111,8 +120,10 @@ class LSMeshSolver:
         indices = as_indices(constraint_vertex_indices, n, name="constraint_vertex_indices")
         weights = as_weights(weights, len(indices), name="weights")
         as_choice(laplacian, LAPLACIAN_KINDS, name="laplacian")
-        if not isinstance(interpolate, (bool, np.bool_)):
-            raise TypeError(f"interpolate must be a bool, got {type(interpolate).__name__}")
+        interpolate = as_bool(interpolate, name="interpolate")
+        # solve() and add_anchors() each read and change the factor and the anchor arrays:
+        # one lock makes an update and a solve on other threads exclusive (never a half-updated system)
+        self._lock = threading.RLock()
         L = laplacian_matrix(data.vertices, data.triangles, laplacian).tocsr()
         check_components_constrained(L, indices, what="control vertex")
         self._data = data
@@ -173,12 +184,14 @@ class LSMeshSolver:
     @property
     def constraint_vertex_indices(self) -> np.ndarray:
         """All control vertices in order: the initial ones, then every added anchor."""
-        return np.concatenate([self._hard, self._soft])
+        with self._lock:  # never half of an add_anchors() running on another thread
+            return np.concatenate([self._hard, self._soft])
 
     @property
     def weights(self) -> np.ndarray:
         """Weight of each control vertex, in :attr:`constraint_vertex_indices` order."""
-        return np.concatenate([self._hard_weights, self._soft_weights])
+        with self._lock:
+            return np.concatenate([self._hard_weights, self._soft_weights])
 
     def solve(self, constraint_vertex_positions: Any = None, *, refine: bool | None = None) -> np.ndarray:
         """Vertex positions ``(n, 3)`` for the given control positions (back-substitution only).
@@ -199,11 +212,16 @@ class LSMeshSolver:
             full accuracy. The residual ``b - L^T L x - w^2 x_a`` is formed as
             ``w^2 (c - x_a) - L^T L x`` so that it has no cancellation.
         """
+        refine = as_bool(refine, name="refine", allow_none=True)
+        with self._lock:
+            return self._solve(constraint_vertex_positions, refine)
+
+    def _solve(self, constraint_vertex_positions: Any, refine: bool | None) -> np.ndarray:
         k = len(self._hard) + len(self._soft)
         if constraint_vertex_positions is None:
             positions = self._positions
         else:
-            positions = as_positions(constraint_vertex_positions, k, name="constraint_vertex_positions")
+            positions = as_positions(constraint_vertex_positions, k, name="constraint_vertex_positions", limit=True)
         hard_pos, soft_pos = positions[: len(self._hard)], positions[len(self._hard):]
         rhs = np.zeros((self._unknowns, 3))
         if self.interpolate:
@@ -227,7 +245,7 @@ class LSMeshSolver:
         return result
 
     def mesh(self, constraint_vertex_positions: Any = None, *, refine: bool | None = None) -> Any:
-        """The least-squares mesh as a new mesh of the input's kind (see :meth:`solve`)."""
+        """The least-squares mesh as a new mesh of the input's kind (see :meth:`solve`); also after unpickling."""
         return new_mesh(self._data, self.solve(constraint_vertex_positions, refine=refine))
 
     def add_anchors(self, indices: Any, positions: Any = None, *, weights: Any = 1.0) -> None:
@@ -246,6 +264,10 @@ class LSMeshSolver:
         weights : float or (a,) array-like
             Positive anchor weights.
         """
+        with self._lock:
+            self._add_anchors(indices, positions, weights)
+
+    def _add_anchors(self, indices: Any, positions: Any, weights: Any) -> None:
         n = self._n
         new = as_indices(indices, n, name="indices")
         existing = np.zeros(n, dtype=bool)
@@ -258,7 +280,7 @@ class LSMeshSolver:
         if positions is None:
             pos = self._data.vertices[new]
         else:
-            pos = as_positions(positions, len(new), name="positions")
+            pos = as_positions(positions, len(new), name="positions", limit=True)
         # one nonzero per column: build the CSC arrays directly (the COO route costs more than a small update)
         c = sp.csc_matrix(
             (w, self._reduce(new), np.arange(len(new) + 1)), shape=(self._unknowns, len(new))
@@ -270,15 +292,17 @@ class LSMeshSolver:
         self._positions = np.concatenate([self._positions, pos])
 
     def __getstate__(self) -> dict:
-        state = self.__dict__.copy()
-        # keep arrays, not the caller's Open3D object: rebuild the kind on demand
-        state["_data"] = MeshData(self._data.vertices, self._data.triangles, None, "arrays")
-        state["_kind"] = self._data.kind
+        with self._lock:
+            state = self.__dict__.copy()
+        del state["_lock"]
+        # Open3D meshes do not pickle: keep arrays and what rebuilds a mesh of the input's kind
+        state["_data"] = mesh_state(self._data)
         return state
 
     def __setstate__(self, state: dict) -> None:
-        state.pop("_kind", None)
+        state["_data"] = mesh_from_state(state["_data"])
         self.__dict__.update(state)
+        self._lock = threading.RLock()
 
 
 def ls_mesh(
@@ -370,8 +394,8 @@ def reconstruct_geometry(
     >>> import open3d as o3d, numpy as np
     >>> sphere = o3d.geometry.TriangleMesh.create_sphere(resolution=10)
     >>> out = reconstruct_geometry(sphere, np.arange(0, 20))
-    >>> np.asarray(out.vertices).shape
-    (92, 3)
+    >>> np.asarray(out.vertices).shape == (len(sphere.vertices), 3)
+    True
     """
     data = read_mesh(mesh)
     n = len(data.vertices)
@@ -379,13 +403,16 @@ def reconstruct_geometry(
     known_mask = np.ones(n, dtype=bool)
     known_mask[unknown] = False
     known = np.flatnonzero(known_mask)
-    if not isinstance(interpolate, (bool, np.bool_)):
-        raise TypeError(f"interpolate must be a bool, got {type(interpolate).__name__}")
+    interpolate = as_bool(interpolate, name="interpolate")
+    as_choice(laplacian, LAPLACIAN_KINDS, name="laplacian")
+    # checked with either scheme (the interpolatory one does not use them): a bad value is a mistake either way
+    as_weights(weights, len(known), name="weights")
+    L = laplacian_matrix(data.vertices, data.triangles, laplacian).tocsc()
+    # checked here for both schemes, so that the message names the known vertices the caller left
+    check_components_constrained(L, known, what="known vertex (outside unknown_vertex_indices)")
     if not interpolate:
         vertices = LSMeshSolver(mesh, known, weights=weights, laplacian=laplacian).solve()
         return new_mesh(data, vertices)
-    L = laplacian_matrix(data.vertices, data.triangles, laplacian).tocsc()
-    check_components_constrained(L, known, what="known vertex")
     L_unknown = L[:, unknown].tocsr()
     rows = np.flatnonzero(np.diff(L_unknown.indptr) > 0)  # rows touching an unknown vertex
     A = L_unknown[rows]

@@ -13,7 +13,13 @@ from ._o3d import open3d, read_mesh
 from ._validate import as_count
 from .topology import boundary_halfedges, connected_components, euler_characteristic, nonmanifold_edges, nonmanifold_vertices
 
+#: Largest ``number_of_points`` of :func:`surface_distance`: every sample costs about 100
+#: bytes on the way (positions, barycentric draws, the float32 copy Open3D reads, distances),
+#: so 1e7 samples per mesh stay near 2 GB; more would not change a distance estimate.
+MAX_SAMPLE_POINTS = 10_000_000
+
 __all__ = [
+    "MAX_SAMPLE_POINTS",
     "vertex_error",
     "surface_distance",
     "signed_volume",
@@ -74,13 +80,19 @@ def surface_distance(a: Any, b: Any, *, number_of_points: int = 100_000, seed: i
         samples) and ``rms`` (root mean square over both samples: the L2 error
         of the geometry-aware bases paper).
     """
-    number_of_points = as_count(number_of_points, name="number_of_points", minimum=1)
+    number_of_points = as_count(number_of_points, name="number_of_points", minimum=1, maximum=MAX_SAMPLE_POINTS)
+    seed = as_count(seed, name="seed")
     da, db = read_mesh(a, name="a"), read_mesh(b, name="b")
+    # Distances are measured in single precision (RaycastingScene): in a frame centered on both
+    # meshes and scaled to unit size, they keep float32's relative precision whatever the
+    # coordinates' offset and never overflow; they are scaled back to model units.
+    center, scale = _common_frame(da.vertices, db.vertices)
+    va, vb = (da.vertices - center) / scale, (db.vertices - center) / scale
     rng = np.random.default_rng(seed)
-    pa = _sample_surface(da.vertices, da.triangles, number_of_points, rng)
-    pb = _sample_surface(db.vertices, db.triangles, number_of_points, rng)
-    ab = _distances_to(db.vertices, db.triangles, pa)
-    ba = _distances_to(da.vertices, da.triangles, pb)
+    pa = _sample_surface(va, da.triangles, number_of_points, rng)
+    pb = _sample_surface(vb, db.triangles, number_of_points, rng)
+    ab = scale * _distances_to(vb, db.triangles, pa)
+    ba = scale * _distances_to(va, da.triangles, pb)
     both = np.concatenate([ab, ba])
     return {
         "hausdorff": float(max(ab.max(), ba.max())),
@@ -89,34 +101,75 @@ def surface_distance(a: Any, b: Any, *, number_of_points: int = 100_000, seed: i
     }
 
 
+def _common_frame(*vertex_arrays: np.ndarray) -> tuple[np.ndarray, float]:
+    """Center (of the joint bounding box) and half extent of the arrays, for scale-free computations."""
+    low = np.min([v.min(axis=0) for v in vertex_arrays], axis=0)
+    high = np.max([v.max(axis=0) for v in vertex_arrays], axis=0)
+    center = 0.5 * (low + high)
+    scale = float(np.max(high - low)) * 0.5
+    return center, scale if scale > 0 else 1.0
+
+
+def _unit_scale(vertices: np.ndarray) -> np.ndarray:
+    """``vertices`` divided by their largest magnitude: angles and normals without overflow or underflow."""
+    top = float(np.abs(vertices).max())
+    return vertices / top if top > 0 else vertices
+
+
 def signed_volume(mesh: Any) -> float:
-    """Signed volume enclosed by the mesh (divergence theorem); positive when wound outward."""
+    """Signed volume enclosed by the mesh (divergence theorem); positive when wound outward.
+
+    Computed on the vertices scaled to unit size and scaled back by the cube of
+    the factor, so that neither huge nor tiny coordinates overflow or underflow
+    the triple products.
+    """
     data = read_mesh(mesh)
-    c = data.vertices[data.triangles]
-    return float(np.einsum("ij,ij->i", c[:, 0], np.cross(c[:, 1], c[:, 2])).sum() / 6.0)
+    top = float(np.abs(data.vertices).max()) or 1.0
+    c = data.vertices[data.triangles] / top
+    return float(np.einsum("ij,ij->i", c[:, 0], np.cross(c[:, 1], c[:, 2])).sum() / 6.0) * top**3
 
 
 def _face_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
-    c = vertices[triangles]
+    """Unit face normals ``(m, 3)``; zero rows for triangles of zero area."""
+    c = _unit_scale(vertices)[triangles]
     normal = np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])
     length = np.linalg.norm(normal, axis=1, keepdims=True)
     return np.divide(normal, length, out=np.zeros_like(normal), where=length > 0)
 
 
 def normal_deviation(a: Any, b: Any) -> float:
-    """Mean angle in degrees between corresponding face normals of two meshes with the same triangles."""
+    """Mean angle in degrees between corresponding face normals of two meshes with the same triangles.
+
+    A triangle of zero area (in either mesh) has no normal: it is left out of
+    the mean rather than counted as 90 degrees.
+
+    Raises
+    ------
+    ValueError
+        Different triangles, or no triangle with non-zero area in both meshes.
+    """
     da, db = read_mesh(a, name="a"), read_mesh(b, name="b")
     if da.triangles.shape != db.triangles.shape or not np.array_equal(da.triangles, db.triangles):
         raise ValueError("b must have the same triangles as a")
     na, nb = _face_normals(da.vertices, da.triangles), _face_normals(db.vertices, db.triangles)
-    cos = np.clip(np.einsum("ij,ij->i", na, nb), -1.0, 1.0)
-    return float(np.degrees(np.arccos(cos)).mean())
+    defined = (np.abs(na).sum(axis=1) > 0) & (np.abs(nb).sum(axis=1) > 0)
+    if not defined.any():
+        raise ValueError(
+            f"a and b must share a triangle of non-zero area to compare normals, got {len(na)} triangles "
+            "all of zero area in a or b"
+        )
+    na, nb = na[defined], nb[defined]
+    # atan2(|a x b|, a . b): accurate for small angles, where arccos(a . b) turns round-off
+    # into 1e-6 degrees between identical normals
+    sine = np.linalg.norm(np.cross(na, nb), axis=1)
+    cosine = np.einsum("ij,ij->i", na, nb)
+    return float(np.degrees(np.arctan2(sine, cosine)).mean())
 
 
 def triangle_angles(mesh: Any) -> dict:
     """Smallest interior angle (degrees) and the share of triangles with an angle under 10 degrees."""
     data = read_mesh(mesh)
-    c = data.vertices[data.triangles]
+    c = _unit_scale(data.vertices)[data.triangles]
     angles = []
     for p in range(3):
         u = c[:, (p + 1) % 3] - c[:, p]

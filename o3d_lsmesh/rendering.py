@@ -41,7 +41,7 @@ import numpy as np
 
 from ._errors import O3DLSMeshWarning
 from ._o3d import open3d, read_mesh
-from ._validate import as_choice, as_count, as_positive_float
+from ._validate import as_choice, as_count, as_positive_float, as_real_vector
 
 __all__ = ["render", "error_colors", "VIRIDIS"]
 
@@ -55,6 +55,8 @@ VIRIDIS = np.array(
 )
 
 _DEFAULT_COLOR = (0.72, 0.74, 0.78)
+#: Largest picture: 64 megapixels, whose rays and image buffers take about 5 GB on the raycast path.
+MAX_PIXELS = 64 * 1024 * 1024
 _BACKENDS = ("auto", "filament", "raycast")
 
 
@@ -86,8 +88,8 @@ def _distances_to_surface(points: np.ndarray, vertices: np.ndarray, triangles: n
 
 
 def _unit(vector: Any, *, name: str) -> np.ndarray:
-    v = np.asarray(vector, dtype=np.float64)
-    if v.shape != (3,) or not np.isfinite(v).all() or np.linalg.norm(v) == 0:
+    v = as_real_vector(vector, 3, name=name)
+    if np.abs(v).max() == 0:
         raise ValueError(f"{name} must be a non-zero finite 3-vector, got {vector!r}")
     return v / np.linalg.norm(v)
 
@@ -348,23 +350,30 @@ def render(
     align = as_choice(align, ("common", "each"), name="align")
     margin = as_positive_float(margin, name="margin", allow_zero=True)
     timeout = as_positive_float(timeout, name="timeout")
-    background = np.asarray(background, dtype=np.float64)
-    base_color = np.asarray(color, dtype=np.float64)
-    for name, value in (("background", background), ("color", base_color)):
-        if value.shape != (3,) or not np.isfinite(value).all() or value.min() < 0 or value.max() > 1:
-            raise ValueError(f"{name} must be an RGB triple in [0, 1], got {value.tolist()}")
+    if error_max is not None:  # checked without a reference too: a wrong value is a mistake either way
+        error_max = as_positive_float(error_max, name="error_max")
+    background = as_real_vector(background, 3, name="background", low=0.0, high=1.0)
+    base_color = as_real_vector(color, 3, name="color", low=0.0, high=1.0)
 
+    if width * height * len(items) > MAX_PIXELS:
+        # each panel is checked alone above; many panels multiply the picture (and its ray buffers)
+        raise ValueError(
+            f"width * height * len(meshes) must be at most {MAX_PIXELS:,} pixels, got {width} * {height} * "
+            f"{len(items)} = {width * height * len(items):,}"
+        )
     datas = [read_mesh(mesh, name=f"meshes[{k}]") for k, mesh in enumerate(items)]
-    arrays = [(d.vertices, d.triangles) for d in datas]
-    if reference is not None:
-        ref = read_mesh(reference, name="reference")
-        distances = [_distances_to_surface(v, ref.vertices, ref.triangles) for v, _ in arrays]
+    ref = read_mesh(reference, name="reference") if reference is not None else None
+    # Draw in a frame scaled to unit size: an orthographic picture does not depend on the scale,
+    # and single-precision raycasting would overflow on coordinates near 1e30 (distances are
+    # scaled back to model units for the colors).
+    scale = max([float(np.abs(d.vertices).max()) for d in datas + ([ref] if ref is not None else [])] + [1e-300])
+    arrays = [(d.vertices / scale, d.triangles) for d in datas]
+    if ref is not None:
+        distances = [scale * _distances_to_surface(v, ref.vertices / scale, ref.triangles) for v, _ in arrays]
         if error_max is None:
             error_max = float(np.percentile(np.concatenate(distances), 99.0))
             if error_max <= 0:
                 error_max = 1.0
-        else:
-            error_max = as_positive_float(error_max, name="error_max")
         colors = [error_colors(d, error_max) for d in distances]
     else:
         colors = []

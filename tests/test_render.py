@@ -160,17 +160,20 @@ def test_filament_failure_and_timeout_raise(monkeypatch):
         ({"align": "left"}, "align"),
         ({"timeout": 0}, "timeout"),
         ({"margin": -1.0}, "margin"),
-        ({"color": (2.0, 0.0, 0.0)}, "color must be an RGB triple"),
-        ({"background": (0.0, 0.0)}, "background must be an RGB triple"),
+        ({"color": (2.0, 0.0, 0.0)}, r"color must have 3 entries in \[0, 1\], got \[2.0, 0.0, 0.0\]"),
+        ({"background": (0.0, 0.0)}, r"background must be a sequence of 3 numbers, got shape \(2,\)"),
         ({"view_direction": (0.0, 0.0, 0.0)}, "view_direction must be a non-zero finite 3-vector"),
         ({"up": (0.0, 0.0, 2.0)}, "up must not be parallel to view_direction"),
-        ({"reference": "sphere.ply"}, "mesh must be"),
+        ({"reference": "sphere.ply"}, "reference must be"),
         ({"error_max": -1.0, "reference": None}, None),
     ],
 )
 def test_bad_options_raise(kwargs, match):
-    if match is None:  # error_max is only read with a reference
-        render(_sphere(), None, width=16, height=16, backend="raycast", **kwargs)
+    if match is None:  # error_max is checked with or without a reference
+        with pytest.raises(ValueError, match="error_max must be positive and finite, got -1.0"):
+            render(_sphere(), None, width=16, height=16, backend="raycast", **kwargs)
+        with pytest.raises(TypeError, match="error_max must be a number, got 'big'"):
+            render(_sphere(), None, width=16, height=16, backend="raycast", error_max="big")
         with pytest.raises(ValueError, match="error_max"):
             render(_sphere(), None, width=16, height=16, backend="raycast", error_max=-1.0, reference=_sphere())
         return
@@ -181,11 +184,27 @@ def test_bad_options_raise(kwargs, match):
 def test_bad_meshes_and_paths_raise(tmp_path):
     with pytest.raises(ValueError, match="meshes must hold at least one mesh"):
         render([], None)
-    with pytest.raises(TypeError, match="mesh must be"):
+    with pytest.raises(TypeError, match=r"meshes\[0\] must be"):
         render(["not a mesh"], None, backend="raycast")
+    with pytest.raises(TypeError, match=r"meshes\[1\] must be an open3d.geometry.TriangleMesh.*got str"):
+        render([_sphere(), "x"], None, backend="raycast")
+    with pytest.raises(TypeError, match=r"color must be a sequence of 3 numbers, got 'red'"):
+        render(_sphere(), None, color="red", backend="raycast")
+    with pytest.raises(TypeError, match=r"up must be a sequence of 3 numbers of real numbers, got dtype complex"):
+        render(_sphere(), None, up=(0, 1j, 0), backend="raycast")
     with pytest.raises(ValueError, match="must have vertices, got an empty mesh"):
         render(o3d.geometry.TriangleMesh(), None, backend="raycast")
     with pytest.raises(ValueError, match="path must be in an existing folder"):
         render(_sphere(), tmp_path / "missing" / "x.png", width=16, height=16, backend="raycast")
     with pytest.raises(ValueError, match="path must name a writable .png file"):
         render(_sphere(), tmp_path / "x.unknown", width=16, height=16, backend="raycast")
+
+
+def test_absurd_picture_sizes_are_refused_before_drawing():
+    from o3d_lsmesh.rendering import MAX_PIXELS
+
+    meshes = [_sphere()] * 20
+    assert 8192 * 8192 * 20 > MAX_PIXELS
+    with pytest.raises(ValueError, match=r"width \* height \* len\(meshes\) must be at most 67,108,864 pixels, "
+                                         r"got 8192 \* 8192 \* 20 = 1,342,177,280"):
+        render(meshes, None, width=8192, height=8192, backend="raycast")

@@ -2,14 +2,21 @@ import numpy as np
 import open3d as o3d
 import pytest
 from conftest import grid
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-from o3d_lsmesh._o3d import new_mesh, read_mesh
+from o3d_lsmesh._o3d import mesh_from_state, mesh_state, new_mesh, read_mesh
 from o3d_lsmesh._validate import (
+    COORDINATE_LIMIT,
+    as_bool,
     as_choice,
     as_count,
     as_indices,
     as_positions,
     as_positive_float,
+    as_real_vector,
+    as_triangle_array,
+    as_vertex_array,
     as_weights,
     as_workers,
 )
@@ -115,3 +122,133 @@ def test_workers_default_to_the_cpus_this_process_may_use():
         as_workers(-1)
     with pytest.raises(TypeError, match="workers must be an integer, got 'all'"):
         as_workers("all")
+
+
+def test_vertex_and_triangle_arrays_check_dtype_and_shape_without_casting_first():
+    v = as_vertex_array(np.arange(12, dtype=np.int8).reshape(4, 3))
+    assert v.dtype == np.float64 and v[3, 2] == 11.0
+    for bad, error, match in [
+        (np.ones((4, 3), complex), TypeError, r"mesh vertices must be an \(n, 3\) array of real numbers, got dtype complex128"),
+        (np.ones((4, 3), bool), TypeError, "got dtype bool"),
+        ([["1", "2", "3"]], TypeError, "got dtype <U1"),
+        ("vertices", TypeError, "mesh vertices must be an \\(n, 3\\) array, got 'vertices'"),
+        ([[1, 2, 3], [4, 5]], TypeError, "mesh vertices must be an \\(n, 3\\) array"),
+        (np.ones(12), ValueError, r"mesh vertices must have shape \(n, 3\), got \(12,\)"),
+        (np.ones((4, 4)), ValueError, r"got \(4, 4\)"),
+    ]:
+        with pytest.raises(error, match=match):
+            as_vertex_array(bad)
+    assert as_vertex_array(np.zeros((0,))).shape == (0, 3)
+
+    t = as_triangle_array(np.array([[0, 1, 2]], dtype=np.uint8), 3)
+    assert t.dtype == np.int64 and t.tolist() == [[0, 1, 2]]
+    assert as_triangle_array([], 3, name="m").shape == (0, 3)
+    for bad, error, match in [
+        (np.array([[0, 1, 2.5]]), TypeError, r"mesh triangles must be an \(m, 3\) integer array, got dtype float64"),
+        (np.array([[0.0, 1.0, 2.0]]), TypeError, "got dtype float64"),  # integral floats too: no silent cast
+        (np.ones((1, 3), bool), TypeError, "got dtype bool"),
+        (np.arange(6), ValueError, r"mesh triangles must have shape \(m, 3\), got \(6,\)"),
+        (np.array([[0, 1, 2**64 - 1]], dtype=np.uint64), ValueError,
+         r"mesh triangle indices must lie in \[0, 3\), got \[0, 1, 18446744073709551615\] at triangle 0"),
+        (np.array([[0, 1, 2], [0, -1, 2]]), ValueError, r"got \[0, -1, 2\] at triangle 1"),
+    ]:
+        with pytest.raises(error, match=match):
+            as_triangle_array(bad, 3)
+
+
+def test_bool_and_real_vector_validators():
+    assert as_bool(np.bool_(True), name="x") is True
+    assert as_bool(None, name="x", allow_none=True) is None
+    for bad in (1, "yes", None, np.array([True])):
+        with pytest.raises(TypeError, match="x must be a bool, got"):
+            as_bool(bad, name="x")
+    np.testing.assert_array_equal(as_real_vector([0, 1, 0.5], 3, name="c", low=0, high=1), [0, 1, 0.5])
+    with pytest.raises(TypeError, match="c must be a sequence of 3 numbers, got 'red'"):
+        as_real_vector("red", 3, name="c")
+    with pytest.raises(ValueError, match=r"c must have 3 entries in \[0, 1\], got \[0.0, 2.0, 0.0\]"):
+        as_real_vector([0, 2, 0], 3, name="c", low=0, high=1)
+    with pytest.raises(ValueError, match=r"c must have 3 entries finite, got \[0.0, nan, 0.0\]"):
+        as_real_vector([0, np.nan, 0], 3, name="c")
+
+
+def test_weights_and_positions_refuse_what_is_not_a_real_number():
+    for bad in ("2", True, np.array([1j]), np.array([True]), ["a"], None):
+        with pytest.raises(TypeError, match="w must be a positive number"):
+            as_weights(bad, 1, name="w")
+    for bad in ([["1", "2", "3"]], np.ones((1, 3), complex), np.ones((1, 3), bool), "abc"):
+        with pytest.raises(TypeError, match=r"p must be an array of shape \(1, 3\)"):
+            as_positions(bad, 1, name="p")
+    # user coordinates have the mesh's limit, computed ones (limit=False) do not
+    assert as_positions([[2 * COORDINATE_LIMIT, 0, 0]], 1, name="p")[0, 0] == 2 * COORDINATE_LIMIT
+    with pytest.raises(ValueError, match=r"p must have coordinates of magnitude at most 1e\+30"):
+        as_positions([[2 * COORDINATE_LIMIT, 0, 0]], 1, name="p", limit=True)
+    with pytest.raises(ValueError, match=r"i must lie in \[0, 5\), got 18446744073709551615 at position 1"):
+        as_indices(np.array([1, 2**64 - 1], dtype=np.uint64), 5, name="i")
+
+
+def test_mesh_limit_is_inclusive_and_names_the_vertex():
+    v, f = grid(3, 3)
+    read_mesh((v * COORDINATE_LIMIT, f))
+    big = v.copy()
+    big[4, 1] = -1.5 * COORDINATE_LIMIT
+    with pytest.raises(ValueError, match=r"mesh vertices must have coordinates of magnitude at most 1e\+30 .* at vertex 4"):
+        read_mesh((big, f))
+
+
+def test_mesh_state_rebuilds_every_kind(sphere):
+    sphere.vertex_colors = o3d.utility.Vector3dVector(np.full((len(sphere.vertices), 3), 0.5))
+    sphere.compute_triangle_normals()
+    tensor = o3d.t.geometry.TriangleMesh.from_legacy(sphere)
+    tensor.vertex.positions = tensor.vertex.positions.to(o3d.core.float32)
+    tensor.triangle.indices = tensor.triangle.indices.to(o3d.core.int32)
+    tensor.vertex.labels = o3d.core.Tensor(np.arange(len(sphere.vertices), dtype=np.int16).reshape(-1, 1))
+    for mesh in (sphere, tensor, grid(4, 4)):
+        data = read_mesh(mesh)
+        state = mesh_state(data)
+        import pickle
+
+        rebuilt = mesh_from_state(pickle.loads(pickle.dumps(state)))
+        assert rebuilt.kind == data.kind
+        a, b = new_mesh(data, data.vertices * 2), new_mesh(rebuilt, data.vertices * 2)
+        assert type(a) is type(b)
+        if data.kind == "legacy":
+            np.testing.assert_array_equal(np.asarray(a.vertex_colors), np.asarray(b.vertex_colors))
+            np.testing.assert_array_equal(np.asarray(a.triangle_normals), np.asarray(b.triangle_normals))
+            assert b.has_triangle_normals() and not b.has_vertex_normals()
+        elif data.kind == "tensor":
+            assert b.vertex.positions.dtype == o3d.core.float32 and b.triangle.indices.dtype == o3d.core.int32
+            assert b.vertex.labels.dtype == o3d.core.int16
+            np.testing.assert_array_equal(a.vertex.labels.numpy(), b.vertex.labels.numpy())
+            np.testing.assert_array_equal(a.vertex.colors.numpy(), b.vertex.colors.numpy())
+        else:
+            np.testing.assert_array_equal(a[0], b[0])
+
+
+def test_tensor_with_integer_positions_gives_float_positions():
+    v, f = grid(3, 3)
+    mesh = o3d.t.geometry.TriangleMesh()
+    mesh.vertex.positions = o3d.core.Tensor((v * 10).astype(np.int32))
+    mesh.triangle.indices = o3d.core.Tensor(f)
+    out = new_mesh(read_mesh(mesh), v * 10 + 0.25)
+    assert out.vertex.positions.dtype == o3d.core.float64
+    np.testing.assert_array_equal(out.vertex.positions.numpy(), v * 10 + 0.25)
+
+
+@settings(max_examples=80, deadline=None)
+@given(
+    value=st.one_of(
+        st.text(max_size=5), st.booleans(), st.complex_numbers(), st.none(),
+        st.lists(st.text(max_size=3), min_size=1, max_size=3),
+        st.lists(st.complex_numbers(allow_nan=False), min_size=3, max_size=3),
+        st.lists(st.booleans(), min_size=3, max_size=3),
+    )
+)
+def test_weights_positions_and_vectors_never_accept_non_numbers(value):
+    # strings, bools, complex numbers, None and lists of them are refused, never converted
+    for check in (
+        lambda: as_weights(value, 3, name="w"),
+        lambda: as_positions(value, 1, name="p"),
+        lambda: as_real_vector(value, 3, name="v"),
+    ):
+        with pytest.raises((TypeError, ValueError), match="^[wpv] must"):
+            check()

@@ -83,6 +83,11 @@ class MeshHierarchy:
         for name in ("triangles", "representatives", "parents", "removed", "targets", "ring_offsets", "rings"):
             object.__setattr__(self, name, freeze(getattr(self, name)))
 
+    def __setstate__(self, state: dict) -> None:
+        # pickle restores the arrays writeable: freeze them again, as construction does
+        self.__dict__.update(state)
+        self.__post_init__()
+
     # ------------------------------------------------------------------ queries
     def __len__(self) -> int:
         return len(self.triangles)
