@@ -565,6 +565,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--noise", type=float, default=0.3, help="noise sigma in mean edge lengths")
     p.add_argument("--seed", type=int, default=0)
     p.set_defaults(handler=cmd_demo)
+
+    # o3d-lsmesh batch INPUT... OUTDIR --op OP: parser and handler live in o3d_lsmesh/batch.py.
+    from .batch import add_parser as add_batch_parser
+
+    add_batch_parser(sub, common)
     return parser
 
 
