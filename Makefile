@@ -33,7 +33,7 @@ system:
 $(STAMP): setup.cfg pyproject.toml | system
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
-	$(PY) -m pip install -q -e '.[test,dask]'
+	$(PY) -m pip install -q -e '.[test]'
 	touch $(STAMP)
 
 clean:

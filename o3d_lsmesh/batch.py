@@ -17,12 +17,12 @@ once the parent has used CHOLMOD's OpenMP runtime. ``scheduler=``,
 cluster instead. Without Dask, the files run one after another in this process
 (never in a fork-based pool).
 
-Tasks are submitted through ``client.map`` in a window of as many tasks as the
-cluster has worker threads, refilled from ``as_completed``: every worker then
-holds exactly the task it runs, so a worker that dies takes no queued,
-innocent task with it (the scheduler counts every task held by a dying worker
-as suspect), and the scheduler's memory does not grow with the number of
-files.
+Tasks are submitted through ``client.map`` in a window a few times the
+cluster's worker threads, refilled from ``as_completed``. The local cluster
+sets Dask's ``worker-saturation`` to 1, so the scheduler queues the window and
+hands every worker exactly the task it runs: a worker that dies takes no
+innocent task with it (Dask counts every task held by a dying worker as
+suspect), and the scheduler's memory does not grow with the number of files.
 """
 
 from __future__ import annotations
@@ -192,6 +192,8 @@ def local_cluster(workers: int, threads_per_worker: int = 1, *, retries: int = 1
     environ.update(OMP_NUM_THREADS=threads, OPENBLAS_NUM_THREADS=threads, MKL_NUM_THREADS=threads)
     with dask.config.set({"distributed.worker.multiprocessing-method": _start_method(),
                           "distributed.scheduler.allowed-failures": retries,
+                          # One task per worker thread at a time: a dying worker takes no queued task along.
+                          "distributed.scheduler.worker-saturation": 1.0,
                           "distributed.nanny.pre-spawn-environ": environ}):
         # The scheduler always serves HTTP (8787 unless told): a free local port avoids clashing with another
         # cluster on this machine (and gives a dashboard when bokeh is installed).
@@ -200,16 +202,25 @@ def local_cluster(workers: int, threads_per_worker: int = 1, *, retries: int = 1
         return LocalCluster(n_workers=workers, threads_per_worker=threads_per_worker, processes=True, **kwargs)
 
 
-class _Capacity:
-    """Worker threads of the cluster, re-read at most once a second (clusters grow and shrink)."""
+class _Window:
+    """How many tasks to keep submitted: sized from the cluster's worker threads, re-read at most once a second.
 
-    def __init__(self, client: Any):
-        self.client, self.value, self.when = client, 1, -1.0
+    Above ``2 x threads`` tasks, Dask treats the tasks as root tasks and queues them on the scheduler,
+    handing each worker only ``worker-saturation x threads`` at a time (1 on :func:`local_cluster`): so a
+    worker that dies holds no innocent task, and a finished worker gets its next file from the scheduler
+    without a round trip through this client. A window of ``4 x threads + 4`` keeps that queue filled while
+    the scheduler's memory stays independent of the number of files. A batch of at most ``2 x threads``
+    files, which Dask would hand out all at once, gets a window of ``threads`` instead.
+    """
+
+    def __init__(self, client: Any, total: int):
+        self.client, self.total, self.value, self.when = client, total, 1, -1.0
 
     def __call__(self) -> int:
         now = time.monotonic()
         if now - self.when > 1.0:
-            self.value = max(1, sum(self.client.nthreads().values()))
+            threads = max(1, sum(self.client.nthreads().values()))
+            self.value = threads if self.total <= 2 * threads else 4 * threads + 4
             self.when = now
         return self.value
 
@@ -221,8 +232,14 @@ def _failure(task: _Task, op: str, message: str, stage: str = "worker") -> dict:
 
 
 def _run_dask(client: Any, tasks: list[_Task], job: dict, emit: Callable[[dict], bool], retries: int) -> None:
+    from concurrent.futures import CancelledError
+
     from distributed import as_completed
-    from distributed.client import FutureCancelledError
+
+    try:
+        from distributed.client import FutureCancelledError
+    except ImportError:  # pragma: no cover - distributed before 2024.8
+        FutureCancelledError = CancelledError  # noqa: N806
 
     try:
         from distributed import KilledWorker
@@ -232,7 +249,6 @@ def _run_dask(client: Any, tasks: list[_Task], job: dict, emit: Callable[[dict],
     token = os.urandom(4).hex()
     pending = iter(tasks)
     by_key: dict[str, _Task] = {}
-    capacity = _Capacity(client)
     queue = as_completed()
 
     def submit(n: int) -> None:
@@ -247,24 +263,30 @@ def _run_dask(client: Any, tasks: list[_Task], job: dict, emit: Callable[[dict],
             by_key[future.key] = task
             queue.add(future)
 
-    submit(capacity())
+    window = _Window(client, len(tasks))
+    submit(window())
     op_name = ",".join(op.name for op in job["ops"])
     try:
         for future in queue:
             task = by_key.pop(future.key)
             try:
                 record = future.result()
-            except KilledWorker:
-                record = _failure(task, op_name, f"KilledWorker: the worker running it died {retries + 1} time(s) "
-                                  "(a crash such as a segfault, or killed, e.g. for memory); retried up to --retries")
-            except FutureCancelledError:
+            except KilledWorker as error:
+                tries = getattr(error, "allowed_failures", retries) + 1
+                last = getattr(getattr(error, "last_worker", None), "address", "?")
+                record = _failure(task, op_name, f"KilledWorker: each of the {tries} workers that ran it died (a crash "
+                                  f"such as a segfault, or killed, e.g. for memory); last worker {last}")
+                record["worker"] = last
+            except (FutureCancelledError, CancelledError):
                 record = _failure(task, op_name, "cancelled")
             except Exception as error:  # noqa: BLE001 - e.g. the task could not be unpickled on the worker
                 record = _failure(task, op_name, f"{type(error).__name__}: {error}")
             future.release()
             if not emit(record):
                 break
-            submit(capacity() - queue.count())
+            size, held = window(), queue.count()
+            if held <= size // 2:  # refill in chunks: each client.map is one graph update on the scheduler
+                submit(size - held)
     finally:
         # Whatever stopped the loop (--fail-fast, an exception, Ctrl-C): drop what is still queued or running.
         remaining = list(getattr(queue, "futures", ()))
