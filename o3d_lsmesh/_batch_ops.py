@@ -457,11 +457,11 @@ def _size(mesh: Any) -> tuple[int, int]:
 def run_task(path: str, relative: str, outdir: str, ops: Sequence[BatchOp], options: Sequence[dict], suffix: str,
              threads: int | None, key: str) -> dict:
     """Read ``path``, run the pipeline, write the result; return the JSON record (never raises an Exception)."""
-    start = time.perf_counter()
+    start, cpu = time.perf_counter(), time.process_time()
     record: dict[str, Any] = {
         "input": path, "output": None, "status": "failed", "error": None, "stage": "read",
-        "op": ",".join(op.name for op in ops), "key": key, "seconds": None, "worker": _worker_address(),
-        "pid": os.getpid(), "vertices_before": None, "triangles_before": None,
+        "op": ",".join(op.name for op in ops), "key": key, "seconds": None, "cpu_seconds": None,
+        "worker": _worker_address(), "pid": os.getpid(), "vertices_before": None, "triangles_before": None,
         "vertices_after": None, "triangles_after": None, "metrics": {},
     }
     try:
@@ -486,6 +486,7 @@ def run_task(path: str, relative: str, outdir: str, ops: Sequence[BatchOp], opti
     except Exception as error:  # noqa: BLE001 - every failure of one file is a record, not the end of the batch
         record["error"] = f"{type(error).__name__}: {error}"
     record["seconds"] = time.perf_counter() - start
+    record["cpu_seconds"] = time.process_time() - cpu  # CPU time of this worker process (all its threads)
     return _jsonable(record)
 
 
@@ -618,8 +619,10 @@ def _compare(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]
         raise ValueError("--reference FOLDER is required by --op compare (the file each input is compared with)")
     reference_path = find_reference(options["reference"], context.relative)
     reference = read_mesh_file(reference_path)
-    metrics: dict[str, Any] = {"reference": reference_path, "vertices_reference": len(reference.vertices),
-                               "surface_distance": surface_distance(mesh, reference, number_of_points=options["points"])}
+    metrics: dict[str, Any] = {
+        "reference": reference_path, "vertices_reference": len(reference.vertices),
+        "surface_distance": surface_distance(mesh, reference, number_of_points=options["points"]),
+    }
     if len(mesh.vertices) == len(reference.vertices):
         metrics["vertex_error"] = vertex_error(mesh, reference)
     metrics.update(_change(reference, mesh))
@@ -628,8 +631,10 @@ def _compare(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]
 
 _METHODS = ("greedy", "random", "combined")
 
-register_op(BatchOp("denoise", _denoise, help="barycenter-constrained (or multiresolution with --level) fairing", options=(
-    Option("iterations", optional(int_at_least(0)), None, "number_of_iterations (default 10; with --level, 5 per level)"),
+register_op(BatchOp("denoise", _denoise, help="barycenter-constrained (or multiresolution with --level) fairing",
+                    options=(
+    Option("iterations", optional(int_at_least(0)), None,
+           "number_of_iterations (default 10; with --level, 5 per level)"),
     Option("method", choice("local", "global"), "local", "local or global fairing"),
     Option("level", int_at_least(0), 0, "multiresolution level (0: plain fairing)"),
     Option("mu", optional(real), None, "penalty weight of --method global"),
@@ -655,7 +660,8 @@ register_op(BatchOp("encode", _encode, output="bytes", extension=".bin", help="q
     Option("bits", int_at_least(1), 12, "bits per quantized coordinate"),
     Option("method", choice(*_METHODS), "greedy", "anchor selection"),
 )))
-register_op(BatchOp("compare", _compare, output="none", help="metrics against the matching file in --reference", options=(
+register_op(BatchOp("compare", _compare, output="none", help="metrics against the matching file in --reference",
+                    options=(
     Option("reference", optional(_folder), None, "folder holding a reference for every input (same name or stem)"),
     Option("points", int_at_least(1), 100_000, "surface samples per mesh"),
 )))
