@@ -650,7 +650,7 @@ register_op(BatchOp("hierarchy", _hierarchy, output="files", help="levels of the
 )))
 register_op(BatchOp("approximate", _approximate, help="LS-mesh approximation from control points", options=(
     Option("count", count_or_percent, "2%", "control points: a count, or a share of each mesh's vertices like 2%"),
-    Option("method", choice(*_METHODS), "greedy", "control point selection"),
+    Option("method", choice(*_METHODS), "greedy", "control point selection: greedy, random or combined"),
     Option("interpolate", flag, False, "interpolate the control points exactly", is_flag=True),
     Option("seed", int_at_least(0), 0, "seed of the random selections"),
 )))
@@ -658,7 +658,7 @@ register_op(BatchOp("encode", _encode, output="bytes", extension=".bin", help="q
                     "as OUTDIR/<name>.bin", options=(
     Option("count", count_or_percent, "2%", "anchors: a count, or a share of each mesh's vertices like 2%"),
     Option("bits", int_at_least(1), 12, "bits per quantized coordinate"),
-    Option("method", choice(*_METHODS), "greedy", "anchor selection"),
+    Option("method", choice(*_METHODS), "greedy", "anchor selection: greedy, random or combined"),
 )))
 register_op(BatchOp("compare", _compare, output="none", help="metrics against the matching file in --reference",
                     options=(

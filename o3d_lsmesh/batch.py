@@ -567,15 +567,16 @@ def _option_flags(parser: argparse.ArgumentParser) -> None:
     """One flag per option name of the registered ops; values are parsed per op by resolve_options."""
     group = parser.add_argument_group("operation options (each applies to every op of the pipeline that has it; "
                                       "--set OP.NAME=VALUE for one op)")
-    seen: dict[str, list[str]] = {}
-    specs: dict[str, Option] = {}
+    seen: dict[str, list[tuple[str, Option]]] = {}
     for op in OPS.values():
         for option in op.options:
-            seen.setdefault(option.name, []).append(op.name)
-            specs.setdefault(option.name, option)
+            seen.setdefault(option.name, []).append((op.name, option))
     for name, owners in seen.items():
-        option = specs[name]
-        text = f"{option.help} [{', '.join(owners)}]"
+        option = owners[0][1]
+        helps = {o.help for _, o in owners}
+        text = (f"{option.help} [{', '.join(n for n, _ in owners)}]" if len(helps) == 1
+                else "; ".join(f"{n}: {o.help}" for n, o in owners))
+        text = text.replace("%", "%%")  # argparse %-formats help
         if option.is_flag:
             group.add_argument(option.cli_flag, dest=f"opt_{name}", action="store_true", default=argparse.SUPPRESS,
                                help=text)

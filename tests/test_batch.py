@@ -254,6 +254,17 @@ def test_cli_exit_codes_summary_and_report(data, cluster, tmp_path, capsys):
     assert json.loads(capsys.readouterr().out)["counts"] == {"ok": 2}
 
 
+def test_cli_help_lists_every_op_option(capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        main(["batch", "--help"])
+    assert exit_info.value.code == 0
+    text = capsys.readouterr().out
+    for op in OPS.values():
+        assert op.name in text
+        for option in op.options:
+            assert option.cli_flag in text
+
+
 @pytest.mark.parametrize("argv, message", [
     (["MISSING", "OUT", "--op", "denoise"], "does not exist"),
     (["GOOD", "OUT", "--op", "nope"], "--op must be one of"),
