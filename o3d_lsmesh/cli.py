@@ -806,6 +806,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="size of the built-in mesh: 10 * 4**s + 2 vertices (6: 40,962)")
     p.add_argument("--noise", type=_nonnegative_float, default=0.3, help="noise sigma in mean edge lengths")
     p.add_argument("--seed", type=int, default=0, help="random seed of the noise")
+
+    # o3d-lsmesh batch INPUT... OUTDIR --op OP: parser and handler live in o3d_lsmesh/batch.py.
+    from .batch import add_parser as add_batch_parser
+
+    add_batch_parser(sub, common)
     return parser
 
 

@@ -1,0 +1,667 @@
+"""The operations ``o3d-lsmesh batch`` runs on every file, and the task a worker runs for one file.
+
+An operation is one :class:`BatchOp` entry registered with :func:`register_op`:
+a function ``function(mesh, options, context) -> (output, metrics)`` that takes
+the mesh read from the file (or the previous operation's result in a
+pipeline), a dict of its parsed options and a :class:`TaskContext` (input
+path, relative name, thread budget), and returns the result and a small dict
+of JSON-able metrics. Its options are :class:`Option` entries; the CLI makes a
+flag of each (``--iterations``). Adding an operation, e.g. hole filling::
+
+    def _fill(mesh, options, context):
+        from .fill_holes import fill_holes
+        out = fill_holes(mesh, **options)
+        return out, {"triangles_added": len(out.triangles) - len(mesh.triangles)}
+
+    register_op(BatchOp("fill", _fill, options=(Option("max_hole_edges", int_at_least(1), None, "..."),),
+                        help="fill holes"))
+
+The task (:func:`run_task`) reads, runs and writes inside the worker and
+returns a small JSON record, so meshes never travel between processes. Every
+failure (unreadable, empty or corrupt file, an operation raising, a write that
+Open3D refuses) becomes a failure record instead of an exception. Outputs are
+written under a temporary name and moved into place with ``os.replace``, so a
+killed batch never leaves a half-written output under the final name.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import os
+import shutil
+import sys
+import time
+import uuid
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Mapping, Sequence
+
+import numpy as np
+
+__all__ = [
+    "Option",
+    "BatchOp",
+    "TaskContext",
+    "OPS",
+    "register_op",
+    "parse_ops",
+    "resolve_options",
+    "run_task",
+    "READABLE",
+    "WRITABLE",
+    "RESERVED",
+]
+
+#: Mesh files a folder INPUT is searched for.
+READABLE = (".ply", ".obj", ".stl", ".off", ".gltf", ".glb")
+#: Extensions Open3D 0.20 writes back readably (its .glb writer produces files it cannot read back).
+WRITABLE = (".ply", ".obj", ".stl", ".off", ".gltf")
+#: Names an operation option may not take: they are flags of ``o3d-lsmesh batch`` itself.
+RESERVED = frozenset({"op", "workers", "threads_per_worker", "scheduler", "scheduler_file", "resume", "report",
+                      "retries", "fail_fast", "suffix", "set", "quiet", "json", "force", "help"})
+
+
+# --------------------------------------------------------------------------- option parsers
+
+
+def int_at_least(minimum: int) -> Callable[[Any], int]:
+    """Parser of an integer ``>= minimum`` given as an int or a string."""
+
+    def parse(value: Any) -> int:
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer, str)):
+            raise ValueError(f"must be an integer >= {minimum}, got {value!r}")
+        try:
+            number = int(value)
+        except ValueError:
+            raise ValueError(f"must be an integer >= {minimum}, got {value!r}") from None
+        if number < minimum:
+            raise ValueError(f"must be an integer >= {minimum}, got {value!r}")
+        return number
+
+    return parse
+
+
+def optional(parse: Callable[[Any], Any]) -> Callable[[Any], Any]:
+    """Parser accepting ``None`` as well."""
+    return lambda value: None if value is None else parse(value)
+
+
+def real(value: Any) -> float:
+    """Parser of a finite float."""
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"must be a number, got {value!r}") from None
+    if not np.isfinite(number):
+        raise ValueError(f"must be a finite number, got {value!r}")
+    return number
+
+
+def choice(*choices: str) -> Callable[[Any], str]:
+    def parse(value: Any) -> str:
+        if value not in choices:
+            raise ValueError(f"must be one of {', '.join(choices)}, got {value!r}")
+        return value
+
+    return parse
+
+
+def flag(value: Any) -> bool:
+    """Parser of a boolean (``True``/``False`` or the strings true/false/1/0/yes/no)."""
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    text = str(value).strip().lower()
+    if text in ("1", "true", "yes", "on"):
+        return True
+    if text in ("0", "false", "no", "off"):
+        return False
+    raise ValueError(f"must be true or false, got {value!r}")
+
+
+def count_or_percent(value: Any) -> int | float:
+    """Parser of a vertex count: an integer >= 1, or a share of each mesh's vertices like ``"2%"``.
+
+    A share is returned as a float in (0, 1]; :func:`_resolve_count` turns it into a count per mesh,
+    since one count rarely suits every file of a batch.
+    """
+    if isinstance(value, str) and value.strip().endswith("%"):
+        share = real(value.strip()[:-1])
+        if not 0 < share <= 100:
+            raise ValueError(f"must be a percentage in (0, 100], got {value!r}")
+        return share / 100.0
+    return int_at_least(1)(value)
+
+
+def _resolve_count(value: int | float, n: int) -> int:
+    return max(1, int(np.ceil(value * n))) if isinstance(value, float) else int(value)
+
+
+# --------------------------------------------------------------------------- registry
+
+
+@dataclass(frozen=True)
+class Option:
+    """One option of a batch operation; the CLI flag is ``--`` + ``name`` with ``-`` for ``_``.
+
+    ``parse`` takes the value as given (a string from the command line, or any
+    value from Python) and returns the parsed value or raises ``ValueError``
+    saying what it must be; ``is_flag`` makes the CLI flag a switch.
+    """
+
+    name: str
+    parse: Callable[[Any], Any]
+    default: Any = None
+    help: str = ""
+    is_flag: bool = False
+
+    @property
+    def cli_flag(self) -> str:
+        return "--" + self.name.replace("_", "-")
+
+
+@dataclass(frozen=True)
+class BatchOp:
+    """A registered batch operation.
+
+    ``output`` is what ``function`` returns as its first value: ``"mesh"`` (a
+    TriangleMesh, written as ``<name><suffix>``), ``"bytes"`` (written as
+    ``<name><extension>``), ``"files"`` (a dict ``{file name: mesh or bytes}``
+    written into the folder ``<name>/``; meshes get ``<suffix>``) or ``"none"``
+    (metrics only). Only ``"mesh"`` operations can feed a later operation of a
+    pipeline.
+    """
+
+    name: str
+    function: Callable[[Any, dict, "TaskContext"], tuple[Any, dict]]
+    options: tuple[Option, ...] = ()
+    output: str = "mesh"
+    extension: str = ""
+    help: str = ""
+
+    def __post_init__(self) -> None:
+        if self.output not in ("mesh", "bytes", "files", "none"):
+            raise ValueError(f"output must be one of mesh, bytes, files, none, got {self.output!r}")
+        if self.output == "bytes" and not self.extension.startswith("."):
+            raise ValueError(f"extension must start with '.' for a bytes output, got {self.extension!r}")
+        for option in self.options:
+            if option.name in RESERVED:
+                raise ValueError(f"option name {option.name!r} of op {self.name!r} is a flag of the batch itself")
+
+
+@dataclass(frozen=True)
+class TaskContext:
+    """What an operation knows about the file it runs on."""
+
+    input: str  # path of the input file
+    relative: str  # its name relative to the INPUT it came from (used for the output and reference names)
+    threads: int | None  # thread budget of this worker (None: not managed, e.g. in the serial loop)
+    extra: dict = field(default_factory=dict)
+
+
+OPS: dict[str, BatchOp] = {}
+
+
+def register_op(op: BatchOp) -> BatchOp:
+    """Add ``op`` to :data:`OPS` (replacing an op of the same name) and return it."""
+    if not isinstance(op, BatchOp):
+        raise TypeError(f"op must be a BatchOp, got {type(op).__name__}")
+    OPS[op.name] = op
+    return op
+
+
+def parse_ops(op: Any) -> list[BatchOp]:
+    """``"fill,denoise"``, ``["fill", "denoise"]`` or BatchOp objects -> the pipeline, checked."""
+    if isinstance(op, (str, BatchOp)):
+        items: list[Any] = op.split(",") if isinstance(op, str) else [op]
+    elif isinstance(op, Sequence):
+        items = list(op)
+    else:
+        raise TypeError(f"op must be a name, a comma-separated pipeline or a list of names, got {type(op).__name__}")
+    ops = []
+    for item in items:
+        if isinstance(item, BatchOp):
+            ops.append(item)
+            continue
+        name = str(item).strip()
+        if name not in OPS:
+            raise ValueError(f"--op must be one of {', '.join(sorted(OPS))} or a pipeline like 'denoise,compare', "
+                             f"got {name!r}")
+        ops.append(OPS[name])
+    if not ops:
+        raise ValueError(f"--op must name at least one operation, got {op!r}")
+    for first in ops[:-1]:
+        if first.output != "mesh":
+            raise ValueError(f"--op {first.name!r} writes {first.output}, not a mesh, so it must be last in a pipeline")
+    return ops
+
+
+def resolve_options(ops: Sequence[BatchOp], options: Mapping[str, Any] | None) -> list[dict]:
+    """Parse ``options`` for each op of a pipeline; return one ``{name: value}`` dict per op.
+
+    A key ``"name"`` applies to every op of the pipeline that has that option; a
+    key ``"op.name"`` (or a nested ``{"op": {"name": value}}``) to that op only.
+    Unknown names and bad values raise ``ValueError`` naming the CLI flag.
+    """
+    options = dict(options or {})
+    shared: dict[str, Any] = {}
+    specific: dict[tuple[str, str], Any] = {}
+    names = {op.name for op in ops}
+    for key, value in options.items():
+        if isinstance(value, Mapping) and key in names:
+            specific.update({(key, k): v for k, v in value.items()})
+        elif "." in key and key.split(".", 1)[0] in names:
+            op_name, name = key.split(".", 1)
+            specific[(op_name, name.replace("-", "_"))] = value
+        else:
+            shared[key.replace("-", "_")] = value
+    known = {option.name for op in ops for option in op.options}
+    pipeline = ",".join(op.name for op in ops)
+    for name in shared:
+        if name not in known:
+            raise ValueError(f"--{name.replace('_', '-')} is not an option of --op {pipeline} "
+                             f"(its options: {', '.join(sorted(known)) or 'none'})")
+    for op_name, name in specific:
+        op = next(op for op in ops if op.name == op_name)
+        if name not in {option.name for option in op.options}:
+            raise ValueError(f"--set {op_name}.{name}: {op_name} has no option {name!r} "
+                             f"(its options: {', '.join(o.name for o in op.options) or 'none'})")
+    resolved = []
+    for op in ops:
+        values = {}
+        for option in op.options:
+            if (op.name, option.name) in specific:
+                given, where = specific[(op.name, option.name)], f"--set {op.name}.{option.name}"
+            elif option.name in shared:
+                given, where = shared[option.name], option.cli_flag
+            else:
+                values[option.name] = option.default
+                continue
+            try:
+                values[option.name] = option.parse(given)
+            except ValueError as error:
+                raise ValueError(f"{where} (option {option.name} of --op {op.name}) {error}") from None
+        resolved.append(values)
+    return resolved
+
+
+# --------------------------------------------------------------------------- reading and writing
+
+
+@contextlib.contextmanager
+def _quiet_native_output():
+    """Silence RPly/Assimp writing straight to file descriptors 1 and 2 while a file is read or written."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = [os.dup(1), os.dup(2)]
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, 1)
+        os.dup2(devnull, 2)
+        yield
+    finally:
+        os.dup2(saved[0], 1)
+        os.dup2(saved[1], 2)
+        for fd in saved + [devnull]:
+            os.close(fd)
+
+
+def _open3d():
+    from ._o3d import open3d
+
+    o3d = open3d()
+    o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
+    return o3d
+
+
+def read_mesh_file(path: str) -> Any:
+    """Read a triangle mesh; ``ValueError`` for a missing, empty, corrupt or triangle-less file.
+
+    Open3D returns an empty mesh instead of raising for a corrupt file, hence the checks.
+    """
+    o3d = _open3d()
+    if not os.path.isfile(path):
+        raise ValueError(f"INPUT {path!r} does not exist or is not a file")
+    if os.path.getsize(path) == 0:
+        raise ValueError(f"INPUT {path!r} is an empty file")
+    with _quiet_native_output():
+        mesh = o3d.io.read_triangle_mesh(path)
+    if len(mesh.vertices) == 0:
+        raise ValueError(f"INPUT {path!r} could not be read as a triangle mesh (corrupt or unsupported format)")
+    if len(mesh.triangles) == 0:
+        raise ValueError(f"INPUT {path!r} has {len(mesh.vertices)} vertices but no triangles")
+    if Path(path).suffix.lower() == ".stl":
+        # STL stores three vertices per triangle: merge them so the algorithms see one surface.
+        mesh = mesh.remove_duplicated_vertices()
+    return mesh
+
+
+def _temporary(final: Path) -> Path:
+    # Same folder (so os.replace is atomic), same extension (Open3D picks the format from it), hidden name.
+    return final.with_name(f".{final.stem}.{uuid.uuid4().hex[:12]}.tmp{final.suffix}")
+
+
+def _write_mesh(mesh: Any, path: Path) -> None:
+    o3d = _open3d()
+    if path.suffix.lower() == ".stl":
+        mesh = o3d.geometry.TriangleMesh(mesh)
+        mesh.compute_triangle_normals()  # Open3D's STL writer refuses a mesh without them
+    with _quiet_native_output():
+        written = o3d.io.write_triangle_mesh(str(path), mesh)
+    # Open3D returns False instead of raising when it cannot write.
+    if not written or not path.exists() or path.stat().st_size == 0:
+        raise OSError(f"Open3D could not write {str(path)!r}")
+
+
+def _write_item(value: Any, path: Path) -> None:
+    if isinstance(value, (bytes, bytearray)):
+        path.write_bytes(bytes(value))
+    else:
+        _write_mesh(value, path)
+
+
+def write_atomic(value: Any, final: Path, *, kind: str, suffix: str) -> None:
+    """Write ``value`` to a temporary name beside ``final``, then move it into place in one step."""
+    final.parent.mkdir(parents=True, exist_ok=True)
+    if kind == "files":
+        temporary = final.with_name(f".{final.name}.{uuid.uuid4().hex[:12]}.tmp")
+        temporary.mkdir()
+        try:
+            for name, item in value.items():
+                _write_item(item, temporary / (name if isinstance(item, (bytes, bytearray)) else name + suffix))
+            if final.exists():
+                # A folder cannot be replaced in one step: move the old one aside first.
+                old = final.with_name(f".{final.name}.{uuid.uuid4().hex[:12]}.old")
+                os.replace(final, old)
+                os.replace(temporary, final)
+                shutil.rmtree(old, ignore_errors=True)
+            else:
+                os.replace(temporary, final)
+        except BaseException:
+            shutil.rmtree(temporary, ignore_errors=True)
+            raise
+        return
+    temporary = _temporary(final)
+    try:
+        _write_item(value, temporary)
+        os.replace(temporary, final)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            temporary.unlink()
+        raise
+
+
+def output_path(outdir: Path, relative: str, op: BatchOp, suffix: str) -> Path | None:
+    """Where the result of ``op`` on the input named ``relative`` goes (None for metrics-only ops)."""
+    stem = Path(relative).with_suffix("")
+    if op.output == "none":
+        return None
+    if op.output == "mesh":
+        return outdir / stem.with_name(stem.name + suffix)
+    if op.output == "bytes":
+        return outdir / stem.with_name(stem.name + op.extension)
+    return outdir / stem
+
+
+# --------------------------------------------------------------------------- worker set-up and the task
+
+_THREADS_SET: list[int] = []
+
+
+def configure_threads(threads: int | None) -> None:
+    """Cap this process's BLAS/OpenMP/Open3D threads at ``threads`` (once per process).
+
+    The environment variables only take effect for libraries not loaded yet
+    (CHOLMOD's libgomp and OpenBLAS read them when they load), which is why a
+    local cluster also sets them before spawning its workers.
+    """
+    if threads is None or _THREADS_SET == [threads]:
+        return
+    for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ[name] = str(threads)
+    o3d = _open3d()
+    if hasattr(o3d.utility, "set_max_threads"):
+        o3d.utility.set_max_threads(threads)
+    _THREADS_SET[:] = [threads]
+
+
+def _worker_address() -> str:
+    try:
+        from distributed import get_worker
+
+        return get_worker().address
+    except (ImportError, ValueError):
+        return "local"
+
+
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _jsonable(value.tolist())
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float) and not np.isfinite(value):
+        return None  # JSON has no NaN/inf
+    if value is None or isinstance(value, (str, int, float, bool)):
+        return value
+    return str(value)
+
+
+def _size(mesh: Any) -> tuple[int, int]:
+    return len(mesh.vertices), len(mesh.triangles)
+
+
+def run_task(path: str, relative: str, outdir: str, ops: Sequence[BatchOp], options: Sequence[dict], suffix: str,
+             threads: int | None, key: str) -> dict:
+    """Read ``path``, run the pipeline, write the result; return the JSON record (never raises an Exception)."""
+    start, cpu = time.perf_counter(), time.process_time()
+    record: dict[str, Any] = {
+        "input": path, "output": None, "status": "failed", "error": None, "stage": "read",
+        "op": ",".join(op.name for op in ops), "key": key, "seconds": None, "cpu_seconds": None,
+        "worker": _worker_address(), "pid": os.getpid(), "vertices_before": None, "triangles_before": None,
+        "vertices_after": None, "triangles_after": None, "metrics": {},
+    }
+    try:
+        configure_threads(threads)
+        mesh = read_mesh_file(path)
+        record["vertices_before"], record["triangles_before"] = _size(mesh)
+        context = TaskContext(input=path, relative=relative, threads=threads)
+        current = mesh
+        for index, (op, values) in enumerate(zip(ops, options)):
+            record["stage"] = op.name
+            current, metrics = op.function(current, dict(values), context)
+            record["metrics"][op.name if op.name not in record["metrics"] else f"{op.name}#{index + 1}"] = metrics
+        last = ops[-1]
+        if last.output == "mesh":
+            record["vertices_after"], record["triangles_after"] = _size(current)
+        target = output_path(Path(outdir), relative, last, suffix)
+        if target is not None:
+            record["stage"] = "write"
+            write_atomic(current, target, kind=last.output, suffix=suffix)
+            record["output"] = str(target)
+        record["status"], record["stage"] = "ok", None
+    except Exception as error:  # noqa: BLE001 - every failure of one file is a record, not the end of the batch
+        record["error"] = f"{type(error).__name__}: {error}"
+    record["seconds"] = time.perf_counter() - start
+    record["cpu_seconds"] = time.process_time() - cpu  # CPU time of this worker process (all its threads)
+    return _jsonable(record)
+
+
+# --------------------------------------------------------------------------- the operations
+
+
+def _change(before: Any, after: Any) -> dict:
+    from .metrics import normal_deviation, signed_volume, vertex_error
+
+    out: dict[str, Any] = {}
+    if len(before.vertices) == len(after.vertices):
+        moved = vertex_error(after, before)
+        out["displacement_mean"], out["displacement_max"] = moved["mean"], moved["linf"]
+        if np.array_equal(np.asarray(before.triangles), np.asarray(after.triangles)):
+            out["normal_change_deg"] = normal_deviation(after, before)
+    v0, v1 = signed_volume(before), signed_volume(after)
+    out["volume_change_percent"] = 100.0 * (v1 - v0) / v0 if v0 != 0 else None
+    return out
+
+
+def _denoise(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
+    level = options["level"]
+    iterations = options["iterations"] if options["iterations"] is not None else (5 if level else 10)
+    if level:
+        from .fairing.multiresolution import multiresolution_fairing
+        from .hierarchy import build_hierarchy
+
+        # Built here so that it uses this worker's thread budget, not every CPU of the machine.
+        hierarchy = build_hierarchy(mesh, workers=context.threads)
+        out = multiresolution_fairing(mesh, level, hierarchy=hierarchy, number_of_iterations=iterations,
+                                      method=options["method"])
+    else:
+        from .fairing import constrained_fairing
+
+        out = constrained_fairing(mesh, iterations, method=options["method"], mu=options["mu"],
+                                  smooth_boundary=not options["fixed_boundary"],
+                                  reimpose_every=options["reimpose_every"])
+    return out, {"method": options["method"], "iterations": iterations, "level": level, **_change(mesh, out)}
+
+
+def _parse_levels(spec: str, count: int) -> list[int]:
+    if spec == "all":
+        return list(range(count))
+    levels = sorted({int(item) for item in spec.split(",") if item.strip()})
+    bad = [level for level in levels if not 0 <= level < count]
+    if bad or not levels:
+        raise ValueError(f"--levels must be in 0..{count - 1} (this hierarchy has {count} levels), got {spec!r}")
+    return levels
+
+
+def _levels_spec(value: Any) -> str:
+    text = str(value).strip()
+    if text == "all":
+        return text
+    try:
+        levels = [int(item) for item in text.split(",") if item.strip()]
+    except ValueError:
+        levels = []
+    if not levels or min(levels) < 0:
+        raise ValueError(f"must be 'all' or comma-separated level numbers >= 0, got {value!r}")
+    return text
+
+
+def _hierarchy(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
+    from .hierarchy import build_hierarchy
+
+    hierarchy = build_hierarchy(mesh, min_vertices=options["min_vertices"], max_levels=options["max_levels"],
+                                workers=context.threads)
+    levels = _parse_levels(options["levels"], len(hierarchy))
+    files: dict[str, Any] = {f"level_{level:02d}": hierarchy.level(level) for level in levels}
+    if options["maps"]:
+        buffer = io.BytesIO()
+        np.savez_compressed(buffer, **{f"level_{level:02d}": np.asarray(hierarchy.vertex_map(level), dtype=np.int64)
+                                       for level in levels})
+        files["vertex_maps.npz"] = buffer.getvalue()
+    return files, {"levels": len(hierarchy), "written_levels": levels,
+                   "vertex_counts": [int(hierarchy.vertex_count(i)) for i in range(len(hierarchy))]}
+
+
+def _approximate(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
+    from .metrics import vertex_error
+    from .selection import approximate
+
+    count = _resolve_count(options["count"], len(mesh.vertices))
+    out, indices = approximate(mesh, count, method=options["method"], interpolate=options["interpolate"],
+                               seed=options["seed"])
+    error = vertex_error(out, mesh)
+    return out, {"count": int(len(indices)), "method": options["method"], "error_linf": error["linf"],
+                 "error_rms": error["rms"]}
+
+
+def _encode(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
+    from .encoding import decode_geometry, encode_geometry
+    from .metrics import vertex_error
+
+    n = len(mesh.vertices)
+    count = _resolve_count(options["count"], n)
+    data = encode_geometry(mesh, count, bits=options["bits"], method=options["method"])
+    error = vertex_error(decode_geometry(mesh, data), mesh)
+    return data, {"anchors": count, "bits": options["bits"], "bytes": len(data), "bits_per_vertex": 8.0 * len(data) / n,
+                  "decoded_error_linf": error["linf"], "decoded_error_rms": error["rms"]}
+
+
+def find_reference(folder: str, relative: str) -> str:
+    """The reference for the input named ``relative``: same relative path, else same stem with any mesh extension."""
+    base = Path(folder)
+    exact = base / relative
+    if exact.is_file():
+        return str(exact)
+    stem = Path(relative).with_suffix("")
+    for extension in READABLE:
+        candidate = base / stem.with_name(stem.name + extension)
+        if candidate.is_file():
+            return str(candidate)
+    raise ValueError(f"--reference {folder!r} has no file matching {relative!r} (same name, or same stem with "
+                     f"one of {', '.join(READABLE)})")
+
+
+def _folder(value: Any) -> str:
+    text = str(value)
+    if not os.path.isdir(text):
+        raise ValueError(f"must be an existing folder, got {value!r}")
+    return os.path.abspath(text)
+
+
+def _compare(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
+    from .metrics import surface_distance, vertex_error
+
+    if options["reference"] is None:
+        raise ValueError("--reference FOLDER is required by --op compare (the file each input is compared with)")
+    reference_path = find_reference(options["reference"], context.relative)
+    reference = read_mesh_file(reference_path)
+    metrics: dict[str, Any] = {
+        "reference": reference_path, "vertices_reference": len(reference.vertices),
+        "surface_distance": surface_distance(mesh, reference, number_of_points=options["points"]),
+    }
+    if len(mesh.vertices) == len(reference.vertices):
+        metrics["vertex_error"] = vertex_error(mesh, reference)
+    metrics.update(_change(reference, mesh))
+    return None, metrics
+
+
+_METHODS = ("greedy", "random", "combined")
+
+register_op(BatchOp("denoise", _denoise, help="barycenter-constrained (or multiresolution with --level) fairing",
+                    options=(
+    Option("iterations", optional(int_at_least(0)), None,
+           "number_of_iterations (default 10; with --level, 5 per level)"),
+    Option("method", choice("local", "global"), "local", "local or global fairing"),
+    Option("level", int_at_least(0), 0, "multiresolution level (0: plain fairing)"),
+    Option("mu", optional(real), None, "penalty weight of --method global"),
+    Option("reimpose_every", optional(int_at_least(1)), None, "re-take the barycenters every k iterations"),
+    Option("fixed_boundary", flag, False, "keep boundary vertices fixed", is_flag=True),
+)))
+register_op(BatchOp("hierarchy", _hierarchy, output="files", help="levels of the volume-cost collapse hierarchy, "
+                    "written to OUTDIR/<name>/level_NN<suffix>", options=(
+    Option("levels", _levels_spec, "all", "'all' or comma-separated level numbers (0 is the input)"),
+    Option("min_vertices", int_at_least(1), 100, "stop coarsening below this many vertices"),
+    Option("max_levels", optional(int_at_least(1)), None, "at most this many levels"),
+    Option("maps", flag, False, "also write vertex_maps.npz", is_flag=True),
+)))
+register_op(BatchOp("approximate", _approximate, help="LS-mesh approximation from control points", options=(
+    Option("count", count_or_percent, "2%", "control points: a count, or a share of each mesh's vertices like 2%"),
+    Option("method", choice(*_METHODS), "greedy", "control point selection: greedy, random or combined"),
+    Option("interpolate", flag, False, "interpolate the control points exactly", is_flag=True),
+    Option("seed", int_at_least(0), 0, "seed of the random selections"),
+)))
+register_op(BatchOp("encode", _encode, output="bytes", extension=".bin", help="quantized LS-mesh anchors, written "
+                    "as OUTDIR/<name>.bin", options=(
+    Option("count", count_or_percent, "2%", "anchors: a count, or a share of each mesh's vertices like 2%"),
+    Option("bits", int_at_least(1), 12, "bits per quantized coordinate"),
+    Option("method", choice(*_METHODS), "greedy", "anchor selection: greedy, random or combined"),
+)))
+register_op(BatchOp("compare", _compare, output="none", help="metrics against the matching file in --reference",
+                    options=(
+    Option("reference", optional(_folder), None, "folder holding a reference for every input (same name or stem)"),
+    Option("points", int_at_least(1), 100_000, "surface samples per mesh"),
+)))

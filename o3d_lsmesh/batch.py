@@ -1,0 +1,651 @@
+"""Run an operation over many mesh files: on a local Dask cluster by default, or on an existing one.
+
+``o3d-lsmesh batch INPUT... OUTDIR --op OP`` and :func:`run` take files,
+folders (searched recursively for mesh files) and glob patterns. Each file is
+one task that reads, runs and writes inside a worker process and returns a
+small JSON record (:mod:`o3d_lsmesh._batch_ops`), so meshes never travel
+between processes and a file that fails, even one that crashes its worker,
+costs that file only.
+
+Engine
+------
+``dask.distributed`` (``pip install 'o3d_lsmesh[dask]'``). Without a client
+or scheduler address, a ``LocalCluster(n_workers=N, threads_per_worker=1,
+processes=True)`` is started with *spawned* workers: a forked worker deadlocks
+once the parent has used CHOLMOD's OpenMP runtime. ``scheduler=``,
+``scheduler_file=`` or ``DASK_SCHEDULER_ADDRESS`` connect to an existing
+cluster instead. Without Dask, the files run one after another in this process
+(never in a fork-based pool).
+
+Tasks are submitted through ``client.map`` in a window a few times the
+cluster's worker threads, refilled from ``as_completed``. The local cluster
+sets Dask's ``worker-saturation`` to 1, so the scheduler queues the window and
+hands every worker exactly the task it runs: a worker that dies takes no
+innocent task with it (Dask counts every task held by a dying worker as
+suspect), and the scheduler's memory does not grow with the number of files.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import glob
+import hashlib
+import json
+import logging
+import os
+import sys
+import time
+import warnings
+from collections import Counter
+from dataclasses import dataclass
+from itertools import islice
+from pathlib import Path
+from typing import Any, Callable, Iterable, Mapping, Sequence
+
+from ._batch_ops import (
+    OPS,
+    READABLE,
+    WRITABLE,
+    BatchOp,
+    Option,
+    output_path,
+    parse_ops,
+    register_op,
+    resolve_options,
+    run_task,
+)
+from ._errors import O3DLSMeshWarning
+
+__all__ = ["run", "collect_inputs", "summarize", "BatchOp", "Option", "register_op", "OPS", "add_parser", "cmd_batch"]
+
+_GLOB_CHARACTERS = set("*?[")
+
+
+# --------------------------------------------------------------------------- inputs
+
+
+def collect_inputs(inputs: str | os.PathLike | Iterable[str | os.PathLike]) -> list[tuple[str, str]]:
+    """Expand files, folders and glob patterns into ``(path, relative name)`` pairs, in a stable order.
+
+    A folder is searched recursively for files ending in one of
+    ``.ply .obj .stl .off .gltf .glb`` and each keeps its path below the folder
+    as its relative name (so outputs mirror the folder tree); a file or glob
+    match keeps its base name. A path given twice is taken once.
+    """
+    if isinstance(inputs, (str, os.PathLike)):
+        inputs = [inputs]
+    inputs = list(inputs)
+    items: list[tuple[str, str]] = []
+    seen: set[str] = set()
+
+    def add(path: Path, relative: str) -> None:
+        key = os.path.realpath(path)
+        if key not in seen:
+            seen.add(key)
+            items.append((str(path), relative))
+
+    def add_folder(folder: Path) -> None:
+        files = sorted(p for p in folder.rglob("*") if p.is_file() and p.suffix.lower() in READABLE)
+        for path in files:
+            add(path, str(path.relative_to(folder)))
+
+    for item in inputs:
+        if not isinstance(item, (str, os.PathLike)):
+            raise TypeError(f"inputs must be paths or glob patterns, got {type(item).__name__}")
+        text = os.fspath(item)
+        if os.path.isdir(text):
+            add_folder(Path(text))
+        elif os.path.isfile(text):
+            add(Path(text), Path(text).name)
+        elif _GLOB_CHARACTERS & set(text):
+            matches = sorted(glob.glob(text, recursive=True))
+            if not matches:
+                raise ValueError(f"INPUT {text!r} matches no file")
+            for match in matches:
+                if os.path.isdir(match):
+                    add_folder(Path(match))
+                else:
+                    add(Path(match), Path(match).name)
+        else:
+            raise ValueError(f"INPUT {text!r} does not exist (expected a file, a folder or a glob pattern)")
+    if not items:
+        raise ValueError(f"INPUT must name at least one mesh file ({', '.join(READABLE)}), "
+                         f"got none in {list(inputs)!r}")
+    return items
+
+
+@dataclass(frozen=True)
+class _Task:
+    index: int
+    path: str
+    relative: str
+    output: str | None
+    key: str
+
+
+def task_key(path: str, ops: Sequence[BatchOp], options: Sequence[dict], suffix: str) -> str:
+    """Hash of the pipeline, its options, the output suffix and the input's size and mtime (the resume key)."""
+    stat = os.stat(path)
+    payload = json.dumps({"op": [op.name for op in ops], "options": options, "suffix": suffix,
+                          "size": stat.st_size, "mtime_ns": stat.st_mtime_ns}, sort_keys=True, default=str)
+    return hashlib.sha256(payload.encode()).hexdigest()[:32]
+
+
+def _read_report(path: Path) -> dict[str, dict]:
+    """Last record per input of an existing report (lines that do not parse, e.g. a torn last line, are skipped)."""
+    last: dict[str, dict] = {}
+    if not path.exists():
+        return last
+    with open(path, encoding="utf-8") as handle:
+        for line in handle:
+            try:
+                record = json.loads(line)
+            except json.JSONDecodeError:
+                continue
+            if isinstance(record, dict) and "input" in record:
+                last[record["input"]] = record
+    return last
+
+
+# --------------------------------------------------------------------------- engines
+
+
+def _dask_available() -> bool:
+    try:
+        import distributed  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def _scheduler_address() -> str | None:
+    address = os.environ.get("DASK_SCHEDULER_ADDRESS")
+    if address:
+        return address
+    try:
+        import dask
+
+        return dask.config.get("scheduler-address", None)
+    except ImportError:
+        return None
+
+
+def _start_method() -> str:
+    """The worker start method: the configured one unless it is ``fork`` (then ``spawn``)."""
+    import dask
+
+    method = dask.config.get("distributed.worker.multiprocessing-method", "spawn")
+    return "spawn" if method not in ("spawn", "forkserver") else method
+
+
+def local_cluster(workers: int, threads_per_worker: int = 1, *, retries: int = 1, **kwargs: Any) -> Any:
+    """A ``LocalCluster`` of ``workers`` spawned processes with ``threads_per_worker`` threads each.
+
+    BLAS/OpenMP thread variables are set before the workers start (CHOLMOD and
+    OpenBLAS read them once, when they load), Dask's ``MALLOC_TRIM_THRESHOLD_``
+    is left out (it doubles the time of array-heavy tasks), a task may kill at most
+    ``retries + 1`` workers before it is reported failed (Dask's
+    ``allowed-failures``), and the dashboard takes a free port on 127.0.0.1.
+    """
+    import dask
+    from distributed import LocalCluster
+
+    threads = str(threads_per_worker)
+    environ = dict(dask.config.get("distributed.nanny.pre-spawn-environ", {}) or {})
+    environ.update(OMP_NUM_THREADS=threads, OPENBLAS_NUM_THREADS=threads, MKL_NUM_THREADS=threads)
+    # Dask sets MALLOC_TRIM_THRESHOLD_=65536 by default. Setting it turns off glibc's dynamic mmap threshold,
+    # so every array above 128 KiB becomes a fresh mmap whose pages fault in zeroed: measured on the denoise
+    # tasks, 8x the page faults, 4x the system time and twice the wall time of the same loop without it.
+    environ.pop("MALLOC_TRIM_THRESHOLD_", None)
+    with dask.config.set({"distributed.worker.multiprocessing-method": _start_method(),
+                          "distributed.scheduler.allowed-failures": retries,
+                          # One task per worker thread at a time: a dying worker takes no queued task along.
+                          "distributed.scheduler.worker-saturation": 1.0,
+                          "distributed.nanny.pre-spawn-environ": environ}):
+        # The scheduler always serves HTTP (8787 unless told): a free local port avoids clashing with another
+        # cluster on this machine (and gives a dashboard when bokeh is installed).
+        kwargs.setdefault("dashboard_address", "127.0.0.1:0")
+        kwargs.setdefault("silence_logs", logging.ERROR)
+        return LocalCluster(n_workers=workers, threads_per_worker=threads_per_worker, processes=True, **kwargs)
+
+
+class _Window:
+    """How many tasks to keep submitted: sized from the cluster's worker threads, re-read at most once a second.
+
+    Above ``2 x threads`` tasks, Dask treats the tasks as root tasks and queues them on the scheduler,
+    handing each worker only ``worker-saturation x threads`` at a time (1 on :func:`local_cluster`): so a
+    worker that dies holds no innocent task, and a finished worker gets its next file from the scheduler
+    without a round trip through this client. A window of ``4 x threads + 4`` keeps that queue filled while
+    the scheduler's memory stays independent of the number of files. A batch of at most ``2 x threads``
+    files, which Dask would hand out all at once, gets a window of ``threads`` instead.
+    """
+
+    def __init__(self, client: Any, total: int):
+        self.client, self.total, self.value, self.when = client, total, 1, -1.0
+
+    def __call__(self) -> int:
+        now = time.monotonic()
+        if now - self.when > 1.0:
+            threads = max(1, sum(self.client.nthreads().values()))
+            self.value = threads if self.total <= 2 * threads else 4 * threads + 4
+            self.when = now
+        return self.value
+
+
+def _failure(task: _Task, op: str, message: str, stage: str = "worker") -> dict:
+    return {"input": task.path, "output": None, "status": "failed", "error": message, "stage": stage, "op": op,
+            "key": task.key, "seconds": None, "cpu_seconds": None, "worker": None, "pid": None,
+            "vertices_before": None, "triangles_before": None, "vertices_after": None, "triangles_after": None,
+            "metrics": {}}
+
+
+def _run_dask(client: Any, tasks: list[_Task], job: dict, emit: Callable[[dict], bool], retries: int) -> None:
+    from concurrent.futures import CancelledError
+
+    from distributed import as_completed
+
+    try:
+        from distributed.client import FutureCancelledError
+    except ImportError:  # pragma: no cover - distributed before 2024.8
+        FutureCancelledError = CancelledError  # noqa: N806
+
+    try:
+        from distributed import KilledWorker
+    except ImportError:  # pragma: no cover - older distributed
+        from distributed.scheduler import KilledWorker
+
+    token = os.urandom(4).hex()
+    pending = iter(tasks)
+    by_key: dict[str, _Task] = {}
+    queue = as_completed()
+
+    def submit(n: int) -> None:
+        chunk = list(islice(pending, max(0, n)))
+        if not chunk:
+            return
+        keys = [f"o3d-lsmesh-batch-{token}-{task.index}" for task in chunk]
+        futures = client.map(_remote_task, [t.path for t in chunk], [t.relative for t in chunk],
+                             [t.key for t in chunk], key=keys, pure=False, outdir=job["outdir"], ops=job["ops"],
+                             options=job["options"], suffix=job["suffix"], threads=job["threads"])
+        for task, future in zip(chunk, futures):
+            by_key[future.key] = task
+            queue.add(future)
+
+    window = _Window(client, len(tasks))
+    submit(window())
+    op_name = ",".join(op.name for op in job["ops"])
+    try:
+        for future in queue:
+            task = by_key.pop(future.key)
+            try:
+                record = future.result()
+            except KilledWorker as error:
+                tries = getattr(error, "allowed_failures", retries) + 1
+                last = getattr(getattr(error, "last_worker", None), "address", "?")
+                record = _failure(task, op_name, f"KilledWorker: each of the {tries} workers that ran it died (a crash "
+                                  f"such as a segfault, or killed, e.g. for memory); last worker {last}")
+                record["worker"] = last
+            except (FutureCancelledError, CancelledError):
+                record = _failure(task, op_name, "cancelled")
+            except Exception as error:  # noqa: BLE001 - e.g. the task could not be unpickled on the worker
+                record = _failure(task, op_name, f"{type(error).__name__}: {error}")
+            future.release()
+            if not emit(record):
+                break
+            size, held = window(), queue.count()
+            if held <= size // 2:  # refill in chunks: each client.map is one graph update on the scheduler
+                submit(size - held)
+    finally:
+        # Whatever stopped the loop (--fail-fast, an exception, Ctrl-C): drop what is still queued or running.
+        remaining = list(getattr(queue, "futures", ()))
+        if remaining:
+            client.cancel(remaining)
+
+
+def _remote_task(path: str, relative: str, key: str, *, outdir: str, ops: Sequence[BatchOp], options: Sequence[dict],
+                 suffix: str, threads: int | None) -> dict:
+    return run_task(path, relative, outdir, ops, options, suffix, threads, key)
+
+
+# --------------------------------------------------------------------------- the API
+
+
+def run(
+    inputs: str | os.PathLike | Iterable[str | os.PathLike],
+    outdir: str | os.PathLike,
+    *,
+    op: str | Sequence[str] | BatchOp = "denoise",
+    options: Mapping[str, Any] | None = None,
+    client: Any = None,
+    workers: int | None = None,
+    threads_per_worker: int = 1,
+    scheduler: str | None = None,
+    scheduler_file: str | os.PathLike | None = None,
+    resume: bool = False,
+    report: str | os.PathLike | None = None,
+    retries: int = 1,
+    fail_fast: bool = False,
+    suffix: str = ".ply",
+    force: bool = False,
+    progress: bool = True,
+    on_record: Callable[[dict], None] | None = None,
+) -> list[dict]:
+    """Run ``op`` on every mesh file of ``inputs`` and write the results into ``outdir``.
+
+    Parameters
+    ----------
+    inputs : path, glob pattern, or a list of them
+        Files, folders (searched recursively for ``.ply .obj .stl .off .gltf .glb``) and globs.
+    outdir : path
+        Output folder (created). The result of ``a/b.ply`` from a folder INPUT
+        is ``outdir/a/b<suffix>``; ``encode`` writes ``<name>.bin``,
+        ``hierarchy`` a folder ``<name>/``, ``compare`` nothing.
+    op : str, keyword-only
+        An operation of :data:`OPS` (``denoise``, ``hierarchy``,
+        ``approximate``, ``encode``, ``compare``, ...) or a pipeline run in
+        order on each file, e.g. ``"denoise,compare"``.
+    options : dict, keyword-only
+        Options of the operations, e.g. ``{"iterations": 5, "method": "global"}``
+        (applies to every op of the pipeline that has the option) or
+        ``{"denoise.method": "global"}`` for one op.
+    client : dask.distributed.Client, keyword-only
+        Use this client (its cluster is left running). Otherwise ``scheduler``,
+        ``scheduler_file`` or ``DASK_SCHEDULER_ADDRESS`` connect to an existing
+        cluster, else a local cluster of ``workers`` spawned processes is
+        started for this call and closed at the end.
+    workers : int, keyword-only
+        Local worker processes (default: CPUs // ``threads_per_worker``);
+        ``0`` runs the files one after another in this process.
+    threads_per_worker : int, keyword-only
+        Threads of each worker and its BLAS/OpenMP/Open3D thread cap.
+    resume : bool, keyword-only
+        Skip inputs whose last ``report`` entry is ``ok`` for the same key
+        (pipeline, options, suffix, input size and mtime) and whose output
+        still exists; they come back with status ``skipped``.
+    report : path, keyword-only
+        JSON-lines file getting one record per result as it arrives (appended
+        to with ``resume``, else overwritten).
+    retries : int, keyword-only
+        How many times a task whose worker died is run again on a new worker
+        (Dask's ``allowed-failures`` of the local cluster; an existing
+        cluster keeps its own setting).
+    fail_fast : bool, keyword-only
+        Stop at the first failure; files not run come back as ``cancelled``.
+    suffix : str, keyword-only
+        Output mesh format, one of ``.ply .obj .stl .off .gltf``.
+    force : bool, keyword-only
+        Allow an output path to be one of the input files.
+    progress : bool, keyword-only
+        Show a tqdm bar with done/failed counts and an ETA.
+    on_record : callable, keyword-only
+        Called with each record as it arrives; an exception it raises stops the batch.
+
+    Returns
+    -------
+    list of dict
+        One record per input, in input order: ``input``, ``output``,
+        ``status`` (``ok``, ``failed``, ``skipped`` or ``cancelled``),
+        ``error``, ``stage`` (where it failed: ``read``, an op name, ``write``
+        or ``worker``), ``seconds`` and ``cpu_seconds`` of the task, ``vertices_before/after``,
+        ``triangles_before/after``, ``metrics`` (per op), ``key``, ``worker``.
+
+    Raises
+    ------
+    ValueError
+        Unknown op or option, bad option value, no input file, two inputs with
+        the same output, an output that is an input file (without ``force``).
+    TypeError
+        ``inputs`` or ``op`` of the wrong kind.
+
+    Examples
+    --------
+    >>> import tempfile, open3d as o3d, o3d_lsmesh.batch as batch
+    >>> folder = tempfile.mkdtemp()
+    >>> _ = o3d.io.write_triangle_mesh(f"{folder}/ball.ply", o3d.geometry.TriangleMesh.create_sphere())
+    >>> [r["status"] for r in batch.run(folder, f"{folder}/out", op="denoise", workers=0, progress=False)]
+    ['ok']
+    """
+    ops = parse_ops(op)
+    values = resolve_options(ops, options)
+    if not isinstance(suffix, str) or suffix.lower() not in WRITABLE:
+        raise ValueError(f"--suffix must be one of {', '.join(WRITABLE)}, got {suffix!r}")
+    suffix = suffix.lower()
+    if isinstance(threads_per_worker, bool) or not isinstance(threads_per_worker, int) or threads_per_worker < 1:
+        raise ValueError(f"--threads-per-worker must be an integer >= 1, got {threads_per_worker!r}")
+    if isinstance(retries, bool) or not isinstance(retries, int) or retries < 0:
+        raise ValueError(f"--retries must be an integer >= 0, got {retries!r}")
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 0):
+        raise ValueError(f"--workers must be an integer >= 0, got {workers!r}")
+    if scheduler is not None and scheduler_file is not None:
+        raise ValueError("give --scheduler or --scheduler-file, not both")
+    if resume and report is None:
+        raise ValueError("--resume needs --report (the file that says which inputs are done)")
+
+    items = collect_inputs(inputs)
+    outdir = Path(outdir).absolute()
+    if outdir.exists() and not outdir.is_dir():
+        raise ValueError(f"OUTDIR {str(outdir)!r} exists and is not a folder")
+    tasks, outputs = [], {}
+    for index, (path, relative) in enumerate(items):
+        target = output_path(outdir, relative, ops[-1], suffix)
+        if target is not None:
+            if str(target) in outputs:
+                raise ValueError(f"INPUT files {outputs[str(target)]!r} and {path!r} would both write {str(target)!r}; "
+                                 "pass their folder instead of a glob so that outputs keep the subfolders")
+            outputs[str(target)] = path
+            if not force and os.path.exists(target) and os.path.samefile(target, path):
+                raise ValueError(f"OUTDIR {str(outdir)!r} would overwrite the input {path!r} (use another OUTDIR, "
+                                 "another --suffix, or --force)")
+        tasks.append(_Task(index, os.path.abspath(path), relative, None if target is None else str(target),
+                           task_key(path, ops, values, suffix)))
+
+    records: list[dict | None] = [None] * len(tasks)
+    report_path = None if report is None else Path(report)
+    todo = tasks
+    if resume:
+        previous = _read_report(report_path)
+        todo = []
+        for task in tasks:
+            old = previous.get(task.path)
+            if (old is not None and old.get("status") == "ok" and old.get("key") == task.key
+                    and (task.output is None or os.path.exists(task.output))):
+                records[task.index] = {**old, "status": "skipped"}
+            else:
+                todo.append(task)
+    outdir.mkdir(parents=True, exist_ok=True)
+    # The workers need the op functions, not the option parsers: without them (closures that only cloudpickle
+    # can send) every task pickles in ~200 bytes with the standard pickle instead of ~3 kB.
+    shipped = [dataclasses.replace(o, options=()) for o in ops]
+    job = {"outdir": str(outdir), "ops": shipped, "options": values, "suffix": suffix, "threads": threads_per_worker}
+
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=len(tasks), initial=len(tasks) - len(todo), desc=f"batch {','.join(o.name for o in ops)}",
+                   unit="file", file=sys.stderr, dynamic_ncols=True)
+    counts: Counter = Counter()
+    index_of = {task.path: task.index for task in tasks}
+    handle = None
+    if report_path is not None:
+        report_path.parent.mkdir(parents=True, exist_ok=True)
+        handle = open(report_path, "a" if resume else "w", encoding="utf-8")
+
+    def emit(record: dict) -> bool:
+        """Store, report and show one result; False asks the engine to stop (--fail-fast)."""
+        records[index_of[record["input"]]] = record
+        counts[record["status"]] += 1
+        if handle is not None:
+            handle.write(json.dumps(record) + "\n")
+            handle.flush()
+        if bar is not None:
+            bar.update(1)
+            bar.set_postfix(ok=counts["ok"], failed=counts["failed"], refresh=False)
+        if on_record is not None:
+            on_record(record)
+        return not (fail_fast and record["status"] == "failed")
+
+    try:
+        if todo:
+            _dispatch(todo, job, emit, client=client, workers=workers, threads_per_worker=threads_per_worker,
+                      scheduler=scheduler, scheduler_file=scheduler_file, retries=retries)
+    finally:
+        if bar is not None:
+            bar.close()
+        if handle is not None:
+            handle.close()
+    op_name = ",".join(o.name for o in ops)
+    return [record if record is not None else _failure(task, op_name, "not run (--fail-fast stopped the batch)",
+                                                       stage="cancelled") | {"status": "cancelled"}
+            for task, record in zip(tasks, records)]
+
+
+def _dispatch(todo: list[_Task], job: dict, emit: Callable[[dict], bool], *, client: Any, workers: int | None,
+              threads_per_worker: int, scheduler: Any, scheduler_file: Any, retries: int) -> None:
+    address = None if client is not None else (scheduler or _scheduler_address())
+    remote = client is not None or address is not None or scheduler_file is not None
+    if not remote and workers == 0:
+        return _run_serial(todo, job, emit)
+    if not _dask_available():
+        if remote:
+            raise ImportError("connecting to a Dask scheduler needs dask.distributed: pip install 'o3d_lsmesh[dask]'")
+        warnings.warn("dask.distributed is not installed, so the files run one after another in this process; "
+                      "pip install 'o3d_lsmesh[dask]' to use every core or a cluster", O3DLSMeshWarning, stacklevel=3)
+        return _run_serial(todo, job, emit)
+    from distributed import Client
+
+    if client is not None:
+        return _run_dask(client, todo, job, emit, retries)
+    if remote:
+        if workers is not None:
+            warnings.warn("--workers is ignored when connecting to an existing cluster", O3DLSMeshWarning, stacklevel=3)
+        kwargs = {"scheduler_file": os.fspath(scheduler_file)} if scheduler_file is not None else {"address": address}
+        with Client(**kwargs) as own:
+            return _run_dask(own, todo, job, emit, retries)
+    cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    n = workers if workers is not None else max(1, cpus // threads_per_worker)
+    n = min(n, len(todo))  # no worker that would never get a file
+    with local_cluster(n, threads_per_worker, retries=retries) as cluster, Client(cluster) as own:
+        return _run_dask(own, todo, job, emit, retries)
+
+
+def _run_serial(todo: list[_Task], job: dict, emit: Callable[[dict], bool]) -> None:
+    # Threads are left as the caller's process has them: this loop runs in the caller's process.
+    for task in todo:
+        record = run_task(task.path, task.relative, job["outdir"], job["ops"], job["options"], job["suffix"], None,
+                          task.key)
+        if not emit(record):
+            return
+
+
+def summarize(records: Sequence[dict], seconds: float | None = None) -> str:
+    """A plain-text summary table of ``records`` (counts and time per status, then the failures)."""
+    rows = []
+    for status in ("ok", "failed", "skipped", "cancelled"):
+        chosen = [r for r in records if r["status"] == status]
+        if chosen or status in ("ok", "failed"):
+            times = [r["seconds"] for r in chosen if r.get("seconds") is not None and status != "skipped"]
+            rows.append((status, len(chosen), sum(times), (sum(times) / len(times)) if times else 0.0))
+    lines = [f"{'status':<10} {'files':>7} {'task s':>9} {'s/file':>8}"]
+    lines += [f"{s:<10} {n:>7} {t:>9.1f} {m:>8.2f}" for s, n, t, m in rows]
+    if seconds is not None:
+        done = sum(1 for r in records if r["status"] in ("ok", "failed"))
+        lines.append(f"wall time {seconds:.1f} s" + (f", {done / seconds:.2f} files/s" if seconds > 0 and done else ""))
+    failed = [r for r in records if r["status"] == "failed"]
+    for record in failed[:20]:
+        lines.append(f"FAILED {record['input']} [{record.get('stage')}]: {record['error']}")
+    if len(failed) > 20:
+        lines.append(f"... and {len(failed) - 20} more failures (see the report)")
+    return "\n".join(lines)
+
+
+# --------------------------------------------------------------------------- CLI
+
+
+def _option_flags(parser: argparse.ArgumentParser) -> None:
+    """One flag per option name of the registered ops; values are parsed per op by resolve_options."""
+    group = parser.add_argument_group("operation options (each applies to every op of the pipeline that has it; "
+                                      "--set OP.NAME=VALUE for one op)")
+    seen: dict[str, list[tuple[str, Option]]] = {}
+    for op in OPS.values():
+        for option in op.options:
+            seen.setdefault(option.name, []).append((op.name, option))
+    for name, owners in seen.items():
+        option = owners[0][1]
+        helps = {o.help for _, o in owners}
+        text = (f"{option.help} [{', '.join(n for n, _ in owners)}]" if len(helps) == 1
+                else "; ".join(f"{n}: {o.help}" for n, o in owners))
+        text = text.replace("%", "%%")  # argparse %-formats help
+        if option.is_flag:
+            group.add_argument(option.cli_flag, dest=f"opt_{name}", action="store_true", default=argparse.SUPPRESS,
+                               help=text)
+        else:
+            group.add_argument(option.cli_flag, dest=f"opt_{name}", default=argparse.SUPPRESS, metavar="VALUE",
+                               help=text)
+
+
+def add_parser(sub: Any, common: argparse.ArgumentParser | None = None) -> argparse.ArgumentParser:
+    """Register the ``batch`` subcommand on ``sub`` (the subparsers of the ``o3d-lsmesh`` parser)."""
+    parents = [common] if common is not None else []
+    p = sub.add_parser("batch", parents=parents, help="run an operation over many files (Dask cluster or local)",
+                       description="Run an operation over many mesh files, each as one task on a local Dask cluster "
+                                   "(default), an existing one (--scheduler), or in this process without Dask. "
+                                   f"Operations: {', '.join(f'{n} ({o.help})' for n, o in OPS.items())}.")
+    p.add_argument("inputs", nargs="+", metavar="INPUT", help="files, folders (searched recursively) or globs")
+    p.add_argument("outdir", metavar="OUTDIR")
+    p.add_argument("--op", required=True, help="an operation or a pipeline in order, e.g. denoise or denoise,compare")
+    p.add_argument("--set", action="append", default=[], metavar="OP.NAME=VALUE", help="an option of one op")
+    p.add_argument("--workers", type=int, default=None, help="local worker processes (default CPUs; 0: this process)")
+    p.add_argument("--threads-per-worker", type=int, default=1, help="threads of each worker (default 1)")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                       help="existing Dask scheduler, e.g. tcp://host:8786 (default: $DASK_SCHEDULER_ADDRESS)")
+    where.add_argument("--scheduler-file", default=None, metavar="FILE", help="existing scheduler's JSON file")
+    p.add_argument("--resume", action="store_true", help="skip inputs the report lists as ok with the same key")
+    p.add_argument("--report", default=None, metavar="FILE",
+                   help="JSON-lines report, one record per file (default OUTDIR/batch_report.jsonl)")
+    p.add_argument("--retries", type=int, default=1, help="runs of a task whose worker died before it fails")
+    p.add_argument("--fail-fast", action="store_true", help="stop at the first failure")
+    p.add_argument("--suffix", default=".ply", help="output mesh format (.ply .obj .stl .off .gltf)")
+    _option_flags(p)
+    p.set_defaults(handler=cmd_batch)
+    return p
+
+
+def _run_for_cli(args: argparse.Namespace, options: dict, report: str) -> list[dict]:
+    return run(args.inputs, args.outdir, op=args.op, options=options, workers=args.workers,
+               threads_per_worker=args.threads_per_worker, scheduler=args.scheduler,
+               scheduler_file=args.scheduler_file, resume=args.resume, report=report, retries=args.retries,
+               fail_fast=args.fail_fast, suffix=args.suffix, force=bool(getattr(args, "force", False)),
+               progress=not getattr(args, "quiet", False))
+
+
+def cmd_batch(args: argparse.Namespace, run_policy: Any = None) -> int:
+    """Handler of ``o3d-lsmesh batch``: exit code 0 when every file succeeded, 2 when any failed."""
+    quiet = bool(getattr(args, "quiet", False))
+    as_json = bool(getattr(args, "json", False))
+    options: dict[str, Any] = {k[4:]: v for k, v in vars(args).items() if k.startswith("opt_")}
+    for item in args.set:
+        if "=" not in item or "." not in item.split("=", 1)[0]:
+            raise ValueError(f"--set must look like OP.NAME=VALUE, got {item!r}")
+        name, value = item.split("=", 1)
+        options[name] = value
+    report = args.report if args.report is not None else os.path.join(args.outdir, "batch_report.jsonl")
+    start = time.perf_counter()
+    try:
+        records = _run_for_cli(args, options, report)
+    except ImportError as error:
+        from .cli import CLIError
+
+        raise CLIError(str(error)) from None
+    seconds = time.perf_counter() - start
+    counts = Counter(record["status"] for record in records)
+    if as_json:
+        print(json.dumps({"command": "batch", "op": args.op, "report": report, "seconds": seconds,
+                          "counts": dict(counts), "failed": [r["input"] for r in records if r["status"] == "failed"]},
+                         indent=2), flush=True)
+    if not quiet:
+        print(summarize(records, seconds), file=sys.stderr if as_json else sys.stdout, flush=True)
+        print(f"report: {report}", file=sys.stderr if as_json else sys.stdout, flush=True)
+    return 0 if counts["failed"] == 0 and counts["cancelled"] == 0 else 2
