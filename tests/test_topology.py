@@ -122,8 +122,7 @@ def test_check_manifold_names_first_offender():
     fin = np.array([[0, 1, 2], [1, 0, 3], [0, 1, 4]])
     with pytest.raises(ValueError, match=r"edge-manifold, got edge \(0, 1\)"):
         check_manifold(fin, 5)
-    with pytest.raises(ValueError, match="boundary must be manifold"):
-        boundary_loops(bowtie, 5)
+    assert [loop.tolist() for loop in boundary_loops(bowtie, 5)] == [[0, 1, 2], [0, 3, 4]]  # a pinch is fine
 
 
 def test_components_count_isolated_vertices():
