@@ -23,6 +23,7 @@ __all__ = [
     "boundary_halfedges",
     "boundary_loops",
     "boundary_chains",
+    "boundary_curves",
     "BoundaryCurves",
     "nonmanifold_edges",
     "nonmanifold_vertices",
@@ -439,6 +440,37 @@ def boundary_chains(triangles: np.ndarray, n: int) -> BoundaryCurves:
     triangles = np.asarray(triangles, dtype=np.int64)
     closed, open_ = _boundary_walk(triangles, n, split_at_junctions=True)
     return BoundaryCurves(closed, open_, _junctions(triangles, n)[0])
+
+
+def boundary_curves(triangles: np.ndarray, n: int) -> BoundaryCurves:
+    """The boundary as the curves that the boundary-curve fairing walks, on any mesh.
+
+    ``loops`` are the closed loops of :func:`boundary_loops` (which pass
+    *through* pinch vertices, pairing boundary edges by fan), ``chains`` the
+    open boundary paths that end where a fan stops at an edge of more than two
+    triangles (fins), and ``junctions`` the boundary vertices on such edges.
+    Every boundary edge lies on exactly one loop or chain.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> fin = np.array([[0, 1, 2], [1, 0, 3], [0, 1, 4]])  # three triangles on edge (0, 1)
+    >>> curves = boundary_curves(fin, 5)
+    >>> curves.loops, [c.tolist() for c in curves.chains], curves.junctions.tolist()
+    ([], [[0, 3, 1], [1, 2, 0], [1, 4, 0]], [0, 1])
+    """
+    triangles = np.asarray(triangles, dtype=np.int64)
+    closed, open_ = _boundary_walk(triangles, n, split_at_junctions=False)
+    if len(triangles) == 0:
+        return BoundaryCurves(closed, open_, np.zeros(0, dtype=np.int64))
+    runs = _edge_runs(triangles, n)
+    rows, tail, head, crowded, _ = _boundary_rows(triangles, n, runs)
+    on_boundary = np.zeros(n, dtype=bool)
+    on_boundary[tail[rows]] = True
+    on_crowded = np.zeros(n, dtype=bool)
+    on_crowded[tail[crowded]] = True
+    on_crowded[head[crowded]] = True
+    return BoundaryCurves(closed, open_, np.flatnonzero(on_boundary & on_crowded))
 
 
 def _boundary_rows(triangles: np.ndarray, n: int, runs):

@@ -27,7 +27,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._solvers import SPDSolver
-from ..topology import _group, boundary_chains, unique_edges
+from ..topology import _group, boundary_curves, unique_edges
 
 __all__ = [
     "FairingTopology",
@@ -82,8 +82,9 @@ def fairing_topology(triangles: np.ndarray, n: int, *, with_loops: bool) -> Fair
     vertices on an edge of more than two triangles (a fin): neither has a
     two-sided 1-ring, so both are held out of the surface relaxation.
     ``loops`` is the :class:`~o3d_lsmesh.topology.BoundaryCurves` of
-    :func:`~o3d_lsmesh.topology.boundary_chains` (simple loops and chains
-    between pinch vertices), which :func:`.boundary_curve.curve_operator` takes.
+    :func:`~o3d_lsmesh.topology.boundary_curves` (loops through pinch
+    vertices, and chains ending at fins), which
+    :func:`.boundary_curve.curve_operator` takes.
     Vertices joining several fans (two surfaces touching at a point, or a
     pinched boundary) are accepted: their uniform 1-ring is the union of the fans.
     """
@@ -92,7 +93,7 @@ def fairing_topology(triangles: np.ndarray, n: int, *, with_loops: bool) -> Fair
     boundary = np.zeros(n, dtype=bool)
     boundary[edges[counts != 2].ravel()] = True
     interior_triangles = np.flatnonzero(~boundary[triangles].any(axis=1))
-    loops = boundary_chains(triangles, n) if with_loops and boundary.any() else []
+    loops = boundary_curves(triangles, n) if with_loops and boundary.any() else []
     return FairingTopology(n, edges, inverse, valence, boundary, interior_triangles, loops)
 
 
