@@ -14,21 +14,21 @@ import scipy.sparse as sp
 from scipy.sparse import csgraph
 
 __all__ = [
-    "halfedges",
-    "unique_edges",
-    "directed_edges",
+    "BoundaryCurves",
     "adjacency_matrix",
-    "vertex_valences",
-    "connected_components",
-    "boundary_halfedges",
-    "boundary_loops",
     "boundary_chains",
     "boundary_curves",
-    "BoundaryCurves",
+    "boundary_halfedges",
+    "boundary_loops",
+    "check_manifold",
+    "connected_components",
+    "directed_edges",
+    "euler_characteristic",
+    "halfedges",
     "nonmanifold_edges",
     "nonmanifold_vertices",
-    "check_manifold",
-    "euler_characteristic",
+    "unique_edges",
+    "vertex_valences",
 ]
 
 
@@ -460,10 +460,10 @@ def boundary_curves(triangles: np.ndarray, n: int) -> BoundaryCurves:
     ([], [[0, 3, 1], [1, 2, 0], [1, 4, 0]], [0, 1])
     """
     triangles = np.asarray(triangles, dtype=np.int64)
-    closed, open_ = _boundary_walk(triangles, n, split_at_junctions=False)
     if len(triangles) == 0:
-        return BoundaryCurves(closed, open_, np.zeros(0, dtype=np.int64))
+        return BoundaryCurves([], [], np.zeros(0, dtype=np.int64))
     runs = _edge_runs(triangles, n)
+    closed, open_ = _boundary_walk(triangles, n, split_at_junctions=False, runs=runs)
     rows, tail, head, crowded, _ = _boundary_rows(triangles, n, runs)
     on_boundary = np.zeros(n, dtype=bool)
     on_boundary[tail[rows]] = True
@@ -488,7 +488,7 @@ def _boundary_rows(triangles: np.ndarray, n: int, runs):
 def _junctions(triangles: np.ndarray, n: int, runs=None):
     if runs is None:
         runs = _edge_runs(triangles, n)
-    rows, tail, head, crowded, m = _boundary_rows(triangles, n, runs)
+    rows, tail, head, crowded, _ = _boundary_rows(triangles, n, runs)
     degree = np.bincount(tail[rows], minlength=n) + np.bincount(head[rows], minlength=n)
     special = (degree > 0) & (degree != 2)
     on_crowded = np.zeros(n, dtype=bool)
@@ -498,7 +498,7 @@ def _junctions(triangles: np.ndarray, n: int, runs=None):
     return np.flatnonzero(special), special, rows, tail, head, runs
 
 
-def _boundary_walk(triangles: np.ndarray, n: int, *, split_at_junctions: bool):
+def _boundary_walk(triangles: np.ndarray, n: int, *, split_at_junctions: bool, runs=None):
     """Closed and open boundary curves: ``(closed, open)``, each a sorted list of vertex arrays.
 
     Boundary edge ``i`` (half-edge row ``rows[i]``) has two ends: ``2i`` at its
@@ -513,7 +513,7 @@ def _boundary_walk(triangles: np.ndarray, n: int, *, split_at_junctions: bool):
     empty: tuple[list, list] = ([], [])
     if len(triangles) == 0:
         return empty
-    junctions, special, rows, tail, head, runs = _junctions(triangles, n)
+    _, special, rows, tail, head, runs = _junctions(triangles, n, runs)
     b = len(rows)
     if b == 0:
         return empty

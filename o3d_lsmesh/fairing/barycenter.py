@@ -30,13 +30,13 @@ from .._solvers import SPDSolver
 from ..topology import _group, boundary_curves, unique_edges
 
 __all__ = [
-    "FairingTopology",
-    "fairing_topology",
-    "triangle_coefficients",
-    "LocalOperator",
-    "local_operator",
-    "GlobalSolver",
     "DEFAULT_MU",
+    "FairingTopology",
+    "GlobalSolver",
+    "LocalOperator",
+    "fairing_topology",
+    "local_operator",
+    "triangle_coefficients",
 ]
 
 #: Default penalty weight of :class:`GlobalSolver`, chosen by measurement

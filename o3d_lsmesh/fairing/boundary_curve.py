@@ -57,11 +57,11 @@ from .._validate import as_count
 from ..topology import BoundaryCurves, boundary_curves
 
 __all__ = [
+    "MIN_LOOP_LENGTH",
     "CurveOperator",
     "curve_operator",
-    "smooth_boundary_curves_arrays",
     "smooth_boundary_curves",
-    "MIN_LOOP_LENGTH",
+    "smooth_boundary_curves_arrays",
 ]
 
 #: Closed loops shorter than this are held fixed. The exact minimizer of the
