@@ -39,9 +39,9 @@ def bowtie(seed: int = 0):
     V1, F1 = patch(6, 6, seed=seed)
     V2, F2 = patch(6, 6, seed=seed + 1, origin=(0.5, 0.5))
     shared = 35  # last vertex of the first patch, (0.5, 0.5)
-    index = np.arange(len(V2)) + len(V1)
-    index[0] = shared  # first vertex of the second patch is (0.5, 0.5)
-    vertices = np.vstack([V1, V2])
+    index = np.arange(len(V2)) + len(V1) - 1
+    index[0] = shared  # first vertex of the second patch is (0.5, 0.5): not copied
+    vertices = np.vstack([V1, V2[1:]])
     triangles = np.vstack([F1, index[F2]])
     return vertices, triangles, {"nonmanifold_vertices": 1, "components": 1, "surface_pieces": 2}
 

@@ -237,8 +237,18 @@ def test_selection_approximation_and_encoding_seed_every_component(key):
     for last in o3d_lsmesh.iter_decode_geometry(mesh, data):
         pass
     assert last is not None and np.isfinite(np.asarray(last.vertices)).all()
-    spectral = o3d_lsmesh.spectral_approximation(mesh, min(n - 1, 20))
-    _same_connectivity(spectral, V, F)
+    _untouched(mesh, V, F)
+
+
+# spectral_approximation is slow on scans (tens of seconds on bun090: the k smallest eigenvalues are
+# all 0 when a scan has more than k components, a degenerate cluster for shift-invert Lanczos), so it
+# runs on the scans only with O3D_LSMESH_FULL=1
+@pytest.mark.parametrize("key", [f"defect:{name}" for name in DEFECT_NAMES] + (
+    ["bunny_scan"] + [f"scan:{name}" for name in SCAN_NAMES] if FULL else []))
+def test_spectral_approximation(key):
+    mesh, V, F = corpus(key)
+    out = o3d_lsmesh.spectral_approximation(mesh, min(len(V) - 1, 20))
+    _same_connectivity(out, V, F)
     _untouched(mesh, V, F)
 
 
@@ -271,7 +281,8 @@ def test_render(key, tmp_path):
 def _level_invariants(hierarchy, F0, n0):
     base = o3d_lsmesh.topology_summary((np.zeros((n0, 3)), F0))
     keys = ("euler", "components", "boundary_loops", "nonmanifold_vertices", "nonmanifold_edges")
-    for i in range(len(hierarchy.levels) if hasattr(hierarchy, "levels") else hierarchy.level_count):
+    assert len(hierarchy) >= 2 or len(F0) < 200
+    for i in range(len(hierarchy)):
         Vi, Fi = hierarchy.level_arrays(i)
         assert np.isfinite(Vi).all()
         s = o3d_lsmesh.topology_summary((Vi, Fi))
@@ -293,9 +304,11 @@ def test_from_fast_simplification_hierarchy(key):
     mesh, V, F = corpus(key)
     hierarchy = o3d_lsmesh.from_fast_simplification(mesh)
     _untouched(mesh, V, F)
-    for i in range(1, 3):
-        Vi, _ = hierarchy.level_arrays(min(i, len(hierarchy.levels) - 1) if hasattr(hierarchy, "levels") else i)
-        assert np.isfinite(Vi).all()
+    for i in range(len(hierarchy)):
+        Vi, Fi = hierarchy.level_arrays(i)
+        assert np.isfinite(Vi).all() and (len(Fi) == 0 or Fi.max() < len(Vi))
+        vmap = hierarchy.vertex_map(i)
+        assert len(vmap) == len(V) and vmap.min() >= 0 and vmap.max() < len(Vi)
 
 
 @pytest.mark.parametrize("key", ALL)
