@@ -31,7 +31,7 @@ def is_cycle_in_order(loop, triangles):
     he = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]]).astype(np.int64)
     size = int(triangles.max()) + 1
     steps = np.asarray(loop, dtype=np.int64) * size + np.roll(loop, -1)
-    return bool(np.isin(steps, he[:, 0] * size + he[:, 1]).all())
+    return bool(np.isin(steps, he[:, 0] * size + he[:, 1], kind="sort").all())
 
 
 def test_boundary_loops_of_grid_with_two_holes():
