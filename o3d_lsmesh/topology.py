@@ -376,12 +376,17 @@ def boundary_loops(triangles: np.ndarray, n: int) -> list[np.ndarray]:
     outgoing one *of the same fan*: the one reached by walking around the
     vertex through the triangles that share its manifold edges, so a loop
     runs along the rim of one piece of surface and may visit a pinch vertex
-    more than once (``bunny_scan.ply``: 109 loops where 2,898 boundary edges
-    meet at 51 pinched vertices). A fan whose triangles disagree in
-    orientation still pairs its two boundary edges; the loop then follows the
-    majority of its edges' orientation. A boundary edge whose fan ends at an
-    edge of more than two triangles (a fin) belongs to no closed loop; see
-    :func:`boundary_chains`, which covers every boundary edge.
+    more than once. These are the boundary components of the surface with
+    every non-manifold vertex split into its fans, so the Euler
+    characteristic holds: ``bunny_scan.ply`` has 131 loops on 54 disk-like
+    pieces (``2 * 54 - (chi + 51 split vertices) = 131``), while its 2,898
+    boundary edges form 109 *connected* pieces of the boundary graph, loops
+    touching at 22 of the 51 pinches counting once. A fan whose triangles
+    disagree in orientation still pairs its two boundary edges; the loop then
+    follows the majority of its edges' orientation. A boundary edge whose fan
+    ends at an edge of more than two triangles (a fin) belongs to no closed
+    loop; see :func:`boundary_curves` and :func:`boundary_chains`, which cover
+    every boundary edge.
 
     A loop follows the orientation of its triangles and starts at its
     smallest vertex index (its first visit there); loops are sorted by that
