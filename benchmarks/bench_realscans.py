@@ -66,12 +66,16 @@ def _read(path: Path):
     return mesh, np.asarray(mesh.vertices).copy(), np.asarray(mesh.triangles).astype(np.int64)
 
 
-def _attempt(fn):
-    """(result, seconds) or (None, 'refused: <message start>')."""
+REFUSALS: dict = {}
+
+
+def _attempt(op, fn):
+    """(result, seconds) or (None, 'refused'), the first message of each refused operation kept for the notes."""
     try:
         result, seconds = timed(fn)
     except (ValueError, MemoryError) as error:
-        return None, f"refused: {str(error)[:60]}"
+        REFUSALS.setdefault(op, str(error))
+        return None, "refused"
     return result, seconds
 
 
@@ -132,7 +136,7 @@ def timing_and_topology(scans, *, want_timing=True, want_topology=True):
         ops, count = _operations(name, mesh, V, F)
         results, times = {}, {}
         for op, fn in ops.items():
-            results[op], times[op] = _attempt(fn)
+            results[op], times[op] = _attempt(op, fn)
             print(f"{name:12s} {op:20s} {times[op] if isinstance(times[op], str) else f'{times[op]:.3f} s'}", flush=True)
         assert np.array_equal(np.asarray(mesh.vertices), V), "an operation modified its input"
         if names is None:
@@ -146,24 +150,24 @@ def timing_and_topology(scans, *, want_timing=True, want_topology=True):
                          if isinstance(times["spectral k=20"], str) else
                          f"spectral_approximation(k=20) on bunny_scan: {times['spectral k=20']:.1f} s")
         if want_topology:
-            before = o3d_lsmesh.topology_summary(mesh)
-            topology_rows.append([name, "input", *_counts(before)])
-            for op in ("fairing local", "fairing global", "boundary curves"):
+            before = _counts(o3d_lsmesh.topology_summary(mesh))
+            same, changed = [], []
+            for op in ("fairing local", "fairing global", "boundary curves", "o3d taubin"):
                 if results.get(op) is not None:
-                    topology_rows.append([name, op, *_counts(o3d_lsmesh.topology_summary(results[op]))])
-            taubin_mesh = results.get("o3d taubin")
-            if taubin_mesh is not None:
-                topology_rows.append([name, "o3d taubin", *_counts(o3d_lsmesh.topology_summary(taubin_mesh))])
+                    after = _counts(o3d_lsmesh.topology_summary(results[op]))
+                    (same if after == before else changed).append((op, after))
             simplified = results.get("fast_simplification")
             if simplified is not None:
-                topology_rows.append([name, "fast_simplification 50%", *_counts(o3d_lsmesh.topology_summary(
-                    (np.asarray(simplified[0], dtype=np.float64), np.asarray(simplified[1], dtype=np.int64))))])
+                changed.append(("fast_simplification 50%", _counts(o3d_lsmesh.topology_summary(
+                    (np.asarray(simplified[0], dtype=np.float64), np.asarray(simplified[1], dtype=np.int64))))))
             for op in ("build_hierarchy", "from_fast_simpl."):
                 hierarchy = results.get(op)
                 if hierarchy is not None and len(hierarchy) > 1:
                     top = len(hierarchy) - 1
-                    topology_rows.append([name, f"{op} level {top}", *_counts(
-                        o3d_lsmesh.topology_summary(hierarchy.level_arrays(top)))])
+                    changed.append((f"{op} level {top}", _counts(o3d_lsmesh.topology_summary(hierarchy.level_arrays(top)))))
+            label = "input" + (f" (= {', '.join(op for op, _ in same)})" if same else "")
+            topology_rows.append([name, label, *before])
+            topology_rows += [[name, op, *after] for op, after in changed]
     sections = []
     if want_timing and names:
         # ops with a time on every scan go first; the table is split in two to stay readable
@@ -174,6 +178,7 @@ def timing_and_topology(scans, *, want_timing=True, want_topology=True):
                 "Time of every operation with defaults, s (ratio to Open3D's filter_smooth_taubin)",
                 markdown_table(["scan", "V", "count"] + part, [row[:3] + [row[3 + c] for c in columns]
                                                               for row in timing_rows])))
+        notes += [f"{op} refused the scans: {message}" for op, message in REFUSALS.items()]
         if notes:
             sections.append(("Notes", "\n".join(f"- {note}" for note in notes)))
     if want_topology and topology_rows:
