@@ -30,13 +30,13 @@ from .._solvers import SPDSolver
 from ..topology import _group, boundary_curves, unique_edges
 
 __all__ = [
-    "DEFAULT_MU",
     "FairingTopology",
-    "GlobalSolver",
-    "LocalOperator",
     "fairing_topology",
-    "local_operator",
     "triangle_coefficients",
+    "LocalOperator",
+    "local_operator",
+    "GlobalSolver",
+    "DEFAULT_MU",
 ]
 
 #: Default penalty weight of :class:`GlobalSolver`, chosen by measurement
@@ -63,7 +63,7 @@ class FairingTopology:
     interior_triangles : (k,) int64
         Indices of the triangles with no boundary vertex.
     loops : BoundaryCurves or list
-        The boundary cut into simple loops and chains (empty unless asked for).
+        The boundary curves: loops through pinches, chains ending at fins (empty unless asked for).
     """
 
     n: int

@@ -16,7 +16,7 @@ from .._validate import as_choice, as_count, as_positive_float
 from .barycenter import DEFAULT_MU, GlobalSolver, fairing_topology, local_operator
 from .boundary_curve import curve_operator
 
-__all__ = ["FAIRING_METHODS", "constrained_fairing", "constrained_fairing_arrays"]
+__all__ = ["constrained_fairing", "constrained_fairing_arrays", "FAIRING_METHODS"]
 
 FAIRING_METHODS = ("local", "global")
 
