@@ -27,7 +27,7 @@ passages (four at a vertex joining two fans).
 
 Pinch vertices move. Measured on the ten raw bunny scans against the
 reference reconstruction ``bunny.ply`` (``constrained_fairing`` with its
-defaults; mean distance to the reference over the 509 pinch vertices, the
+defaults; mean distance to the reference over the 549 pinch vertices, the
 alternative being to cut the boundary at the pinches into chains with
 fixed ends, :func:`o3d_lsmesh.topology.boundary_chains`)::
 
@@ -38,7 +38,7 @@ fixed ends, :func:`o3d_lsmesh.topology.boundary_chains`)::
     global, pinches held         176.8          193.7                 266.0
     global, pinches move         155.9          170.1                 262.7
 
-(every scan agrees in sign). Held pinches stay as noisy as the input and pin
+(every scan agrees in sign; ``benchmarks/bench_realscans.py pinches``). Held pinches stay as noisy as the input and pin
 their neighbours to it. Where a fan ends at an edge of more than two
 triangles (a fin) the boundary is an open chain; its ends, and every vertex
 on such an edge, are held.
