@@ -38,8 +38,8 @@ fixed ends, :func:`o3d_lsmesh.topology.boundary_chains`)::
     global, pinches held         176.8          193.7                 266.0
     global, pinches move         155.9          170.1                 262.7
 
-(every scan agrees in sign; ``benchmarks/bench_realscans.py pinches``). Held pinches stay as noisy as the input and pin
-their neighbours to it. Where a fan ends at an edge of more than two
+(every scan agrees in sign; ``benchmarks/bench_realscans.py pinches``).
+Held pinches stay as noisy as the input and pin their neighbours to it. Where a fan ends at an edge of more than two
 triangles (a fin) the boundary is an open chain; its ends, and every vertex
 on such an edge, are held.
 """
