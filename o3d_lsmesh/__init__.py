@@ -19,6 +19,7 @@ from .registration import register, unregister
 from .rendering import render
 from .selection import approximate, select_control_points
 from .spectral import spectral_approximation
+from .summary import topology_summary
 
 __all__ = [
     "O3DLSMeshWarning",
@@ -41,6 +42,7 @@ __all__ = [
     "build_hierarchy",
     "from_fast_simplification",
     "metrics",
+    "topology_summary",
     "register",
     "unregister",
     "render",

@@ -617,6 +617,12 @@ def cmd_compare(args: argparse.Namespace, run: _Run) -> int:
             lines.append(f"{key.upper()}: min angle {angles['min_angle']:.2f} deg, {100 * angles['share_under_10']:.2f}% "
                          f"under 10 deg, components {topo['components']}, boundary loops {topo['boundary_loops']}, "
                          f"genus {topo['genus']}, edge-manifold {topo['edge_manifold']}")
+            holes = ", ".join(f"{size}: {count}" for size, count in topo["holes_by_size"].items())
+            lines.append(f"{key.upper()}: surface pieces {topo['surface_pieces']}, boundary edges {topo['boundary_edges']} "
+                         f"in {topo['boundary_components']} connected pieces, holes by edge count ({holes}), "
+                         f"non-manifold vertices {topo['nonmanifold_vertices']}, non-manifold edges "
+                         f"{topo['nonmanifold_edges']}, unreferenced vertices {topo['unreferenced_vertices']}, "
+                         f"degenerate triangles {topo['degenerate_triangles']}")
         for line in lines:
             run.say(line)
     return run.finish(report)

@@ -49,7 +49,7 @@ from ._o3d import MeshData, new_mesh, read_mesh
 from ._validate import as_choice, as_count, as_positive_float
 from .lsmesh import LSMeshSolver
 from .selection import SELECTION_METHODS, _select
-from .topology import unique_edges
+from .topology import connected_components, unique_edges
 
 __all__ = ["encode_geometry", "decode_geometry", "iter_decode_geometry"]
 
@@ -340,7 +340,9 @@ def iter_decode_geometry(mesh: Any, data: Any, *, step: int | None = None) -> It
     mesh, data
         As :func:`decode_geometry`.
     step : int, optional
-        Anchors per refinement; default ``ceil(k / 10)`` (ten meshes).
+        Anchors per refinement; default ``ceil(k / 10)`` (ten meshes), or the
+        number of connected components when that is larger, so that the first
+        mesh has an anchor in each.
 
     Yields
     ------
@@ -365,7 +367,13 @@ def iter_decode_geometry(mesh: Any, data: Any, *, step: int | None = None) -> It
     mesh_data = read_mesh(mesh)
     indices, positions, omega = _parse(data, mesh_data)
     k = len(indices)
-    step = max(1, math.ceil(k / 10)) if step is None else as_count(step, name="step", minimum=1)
+    if step is None:
+        # the first mesh needs an anchor in every component (the selection puts those first): on a
+        # raw scan with many small components a tenth of the anchors may not cover them
+        components = connected_components(mesh_data.triangles, len(mesh_data.vertices))[0]
+        step = max(1, math.ceil(k / 10), min(k, components))
+    else:
+        step = as_count(step, name="step", minimum=1)
     first = min(step, k)
     # factor now, so that a bad prefix raises at the call and not at the first next()
     solver = LSMeshSolver((mesh_data.vertices, mesh_data.triangles), indices[:first], weights=omega)

@@ -11,7 +11,9 @@ import numpy as np
 
 from ._o3d import open3d, read_mesh
 from ._validate import as_count
-from .topology import boundary_halfedges, connected_components, euler_characteristic, nonmanifold_edges, nonmanifold_vertices
+from .summary import (
+    topology_summary,  # re-exported: metrics.topology_summary is the historical name
+)
 
 #: Largest ``number_of_points`` of :func:`surface_distance`: every sample costs about 100
 #: bytes on the way (positions, barycentric draws, the float32 copy Open3D reads, distances),
@@ -20,12 +22,12 @@ MAX_SAMPLE_POINTS = 10_000_000
 
 __all__ = [
     "MAX_SAMPLE_POINTS",
-    "vertex_error",
-    "surface_distance",
-    "signed_volume",
     "normal_deviation",
-    "triangle_angles",
+    "signed_volume",
+    "surface_distance",
     "topology_summary",
+    "triangle_angles",
+    "vertex_error",
 ]
 
 
@@ -179,27 +181,3 @@ def triangle_angles(mesh: Any) -> dict:
         angles.append(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
     smallest = np.min(np.stack(angles, axis=1), axis=1)
     return {"min_angle": float(smallest.min()), "share_under_10": float(np.mean(smallest < 10.0))}
-
-
-def topology_summary(mesh: Any) -> dict:
-    """Manifoldness, components, boundary loops, Euler characteristic and genus (when connected)."""
-    from .topology import boundary_loops
-
-    data = read_mesh(mesh)
-    n, F = len(data.vertices), data.triangles
-    referenced = np.unique(F)
-    edge_manifold = len(nonmanifold_edges(F, n)) == 0
-    vertex_manifold = edge_manifold and len(nonmanifold_vertices(F, n)) == 0
-    count, labels = connected_components(F, n)
-    components = len(np.unique(labels[referenced]))
-    chi = euler_characteristic(F, len(referenced))
-    loops = len(boundary_loops(F, n)) if vertex_manifold else len(boundary_halfedges(F, n))
-    genus = (2 - chi - loops) // 2 if components == 1 and vertex_manifold else None
-    return {
-        "edge_manifold": edge_manifold,
-        "vertex_manifold": vertex_manifold,
-        "components": components,
-        "boundary_loops": loops,
-        "euler": chi,
-        "genus": genus,
-    }

@@ -10,7 +10,7 @@ from numpy.testing import assert_allclose
 
 from o3d_lsmesh.fairing import smooth_boundary_curves, smooth_boundary_curves_arrays
 from o3d_lsmesh.fairing.boundary_curve import curve_operator
-from o3d_lsmesh.topology import boundary_halfedges, boundary_loops
+from o3d_lsmesh.topology import BoundaryCurves, boundary_chains, boundary_curves, boundary_halfedges, boundary_loops
 
 TIGHT = 1e-12
 
@@ -119,14 +119,17 @@ def test_loops_of_a_grid_with_two_holes_are_found_in_order():
 def _assert_operator_walks_the_boundary(F, n, loops):
     op = curve_operator(loops)
     bhe = boundary_halfedges(F, n)
-    undirected = {tuple(sorted(e)) for e in bhe.tolist()}
-    walked = {tuple(sorted(e)) for e in zip(op.vertex.tolist(), op.next.tolist())}
-    assert walked == undirected  # every boundary edge exactly once: consecutive loop vertices are neighbours
-    assert len(op.vertex) == len(bhe)
-    # prev and next are inverse walks
-    position = {v: i for i, v in enumerate(op.vertex.tolist())}
-    assert all(op.prev[position[w]] == v for v, w in zip(op.vertex.tolist(), op.next.tolist()))
-    assert all(op.next2[i] == op.next[position[op.next[i]]] for i in range(len(op.vertex)))
+    assert sorted(op.vertex.tolist()) == sorted(set(bhe.ravel().tolist()))  # every boundary vertex moves once
+    # each row reads the vertex's loop neighbours one and two steps away (weights +1/12 and -1/12 each)
+    for loop in loops:
+        for i, v in enumerate(loop.tolist()):
+            row = op.moving.getrow(int(np.searchsorted(op.vertex, v)))
+            read = dict(zip(op.support[row.indices].tolist(), (12 * row.data).round().tolist()))
+            expected = {}
+            for step, weight in ((1, 1), (-1, 1), (2, -1), (-2, -1)):
+                w = int(loop[(i + step) % len(loop)])
+                expected[w] = expected.get(w, 0) + weight
+            assert read == {k: float(w) for k, w in expected.items() if w}
 
 
 def test_loops_of_plane_with_holes_real_mesh():
@@ -172,11 +175,123 @@ def test_raises():
         smooth_boundary_curves_arrays(V, F, 2, reimpose_every=0)
     with pytest.raises(TypeError, match="mesh must be an open3d"):
         smooth_boundary_curves("not a mesh", 2)
-    # a fourth triangle on edge (0, 1)
+
+
+def test_fin_and_bowtie_boundaries_are_smoothed_with_their_junctions_fixed(rng):
+    V, F = grid(4, 4)
+    # a third and fourth triangle on edge (0, 1): vertices 0 and 1 are fin junctions
     extra = np.vstack([V, [[0.5, -0.5, 0.3]]])
-    with pytest.raises(ValueError, match=r"edge-manifold, got edge \(0, 1\)"):
-        smooth_boundary_curves_arrays(extra, np.vstack([F, [[0, 1, 16], [1, 0, 16]]]), 1)
-    # two triangles touching at vertex 0 only: a boundary bow-tie
+    F2 = np.vstack([F, [[0, 1, 16], [1, 0, 16]]])
+    noisy = extra + rng.normal(0, 0.01, extra.shape)
+    out = smooth_boundary_curves_arrays(noisy, F2, 3)
+    assert np.isfinite(out).all() and np.array_equal(out[[0, 1]], noisy[[0, 1]])
+    assert np.abs(out - noisy).max() > 1e-4  # the rest of the outer loop is smoothed
+    # two triangles touching at vertex 0 only: a boundary bow-tie; every chain is a triangle's rim, held
     bow = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [-1, 0, 0], [0, -1, 0.0]])
-    with pytest.raises(ValueError, match="vertex 0 on 4 boundary edges"):
-        smooth_boundary_curves_arrays(bow, np.array([[0, 1, 2], [0, 3, 4]]), 1)
+    assert_allclose(smooth_boundary_curves_arrays(bow, np.array([[0, 1, 2], [0, 3, 4]]), 1), bow, atol=0)
+
+
+def plain_estimates(curves, positions, positions0, held=(), closed=True):
+    """The section 3.3 step written per segment with Python loops: every segment's estimates for its
+    free ends, a held end keeping the midpoint alone; each vertex averages all its estimates."""
+    total, count = {}, {}
+
+    def add(v, p):
+        total[v] = total.get(v, 0) + p
+        count[v] = count.get(v, 0) + 1
+
+    for curve in curves:
+        c = [int(v) for v in curve]
+        l = len(c)
+        segments = range(l) if closed else range(l - 1)
+        for j in segments:
+            a, b = c[j], c[(j + 1) % l]
+            mid2 = positions0[a] + positions0[b]
+            if a in held and b in held:
+                continue
+            if a in held:
+                add(b, mid2 - positions[a])
+            elif b in held:
+                add(a, mid2 - positions[b])
+            else:
+                oa, ob = positions[c[(j - 1) % l]], positions[c[(j + 2) % l]]
+                add(a, (oa - ob) / 6 + mid2 / 2)
+                add(b, (ob - oa) / 6 + mid2 / 2)
+    out = positions.copy()
+    for v in total:
+        out[v] = total[v] / count[v]
+    return out
+
+
+def pinched_grid(rng):
+    """5x5 grid with cells (1,1) and (2,2) removed: their rim is one loop through vertex 12 twice."""
+    V, F = grid(5, 5)
+    F = F[[not (set(t) <= {6, 7, 11, 12} or set(t) <= {12, 13, 17, 18}) for t in F.tolist()]]
+    return V + rng.normal(0, 0.02, V.shape), F
+
+
+def test_pinch_vertex_averages_its_estimates_from_every_passage(rng):
+    V, F = pinched_grid(rng)
+    loops = boundary_loops(F, len(V))
+    assert [loop.tolist().count(12) for loop in loops] == [0, 2]
+    out = smooth_boundary_curves_arrays(V, F, 1)
+    assert_allclose(out, plain_estimates(loops, V, V), atol=TIGHT)
+    assert np.abs(out[12] - V[12]).max() > 1e-4  # the pinch moves
+    # two steps with fixed targets
+    expected = plain_estimates(loops, plain_estimates(loops, V, V), V)
+    assert_allclose(smooth_boundary_curves_arrays(V, F, 2), expected, atol=TIGHT)
+
+
+def test_chains_at_a_fin_hold_their_ends(rng):
+    # a strip of 6 cells plus a third triangle on the interior edge (1, 8): the outer boundary runs into
+    # the fin's edge at vertices 1 and 8 and becomes open chains held there
+    V, F = grid(7, 2)
+    V = np.vstack([V, [[0.2, 0.5, 0.4]]]) + rng.normal(0, 0.02, (15, 3))
+    F = np.vstack([F, [[1, 8, 14]]])
+    curves = boundary_curves(F, len(V))
+    assert curves.loops == [] and curves.junctions.tolist() == [1, 8]
+    long_chains = [c for c in curves.chains if len(c) > 4]
+    assert long_chains, [c.tolist() for c in curves.chains]
+    out = smooth_boundary_curves_arrays(V, F, 1)
+    expected = plain_estimates(long_chains, V, V, held={1, 8}, closed=False)
+    assert_allclose(out, expected, atol=TIGHT)
+    assert np.array_equal(out[[1, 8, 14]], V[[1, 8, 14]])
+
+
+def test_short_curves_are_held():
+    # three-edge loops (a lone triangle), chains of one to three edges between junctions (a fin's rims)
+    V = np.random.default_rng(1).normal(size=(5, 3))
+    fin = np.array([[0, 1, 2], [1, 0, 3], [0, 1, 4]])
+    assert_allclose(smooth_boundary_curves_arrays(V, fin, 3), V, atol=0)
+    assert_allclose(smooth_boundary_curves_arrays(V[:3], fin[:1], 3), V[:3], atol=0)
+    assert len(curve_operator(boundary_chains(fin, 5))) == 0
+
+
+def test_curve_operator_takes_loops_or_curves_and_pickles():
+    import pickle
+
+    loop = np.array([5, 6, 7, 8, 9])
+    from_list = curve_operator([loop])
+    from_curves = curve_operator(BoundaryCurves([loop], [], np.zeros(0, dtype=np.int64)))
+    positions = np.random.default_rng(2).normal(size=(10, 3))
+    assert_allclose(from_list.step(positions, from_list.target(positions)),
+                    from_curves.step(positions, from_curves.target(positions)), atol=0)
+    again = pickle.loads(pickle.dumps(from_list))
+    assert_allclose(again.step(positions, again.target(positions)),
+                    from_list.step(positions, from_list.target(positions)), atol=0)
+    assert len(curve_operator([])) == 0 and len(curve_operator([np.array([1, 2, 3])])) == 0
+
+
+def test_bunny_scan_boundary_is_smoothed_with_its_pinches():
+    mesh = load_mesh("bunny_scan.ply")
+    V, F = np.asarray(mesh.vertices), np.asarray(mesh.triangles).astype(np.int64)
+    out = smooth_boundary_curves_arrays(V, F, 10)
+    bhe = boundary_halfedges(F, len(V))
+    boundary = np.zeros(len(V), dtype=bool)
+    boundary[bhe.ravel()] = True
+    assert np.isfinite(out).all() and np.array_equal(out[~boundary], V[~boundary])
+    pinches = boundary_chains(F, len(V)).junctions
+    assert len(pinches) == 51 and np.all(np.linalg.norm(out[pinches] - V[pinches], axis=1) > 0)
+    # the curve gets shorter (fairer) but not shrunk away: total boundary length drops by under a third
+    length = lambda P: np.linalg.norm(P[bhe[:, 0]] - P[bhe[:, 1]], axis=1).sum()
+    assert 0.67 * length(V) < length(out) < length(V)

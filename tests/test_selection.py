@@ -266,3 +266,34 @@ def test_greedy_factors_once_and_updates_per_anchor(monkeypatch):
     # this small sphere once every vertex is forbidden)
     assert calls["factorize"] == 1
     assert sum(calls["ranks"]) == 19 and max(calls["ranks"]) == 8 and len(calls["ranks"]) >= 3
+
+
+@pytest.mark.parametrize("method", ["greedy", "random", "combined"])
+def test_scan_defects_seed_every_small_component(method):
+    # isolated triangles, a valence-2 pillow, a sliver strip and unreferenced vertices: each is a component
+    # and gets a control point, so the LS systems of approximate and encode_geometry are never singular
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from defect_meshes import all_defects
+
+    from o3d_lsmesh import SingularSystemError, decode_geometry, encode_geometry
+    from o3d_lsmesh.topology import connected_components
+
+    V, F, _ = all_defects()
+    V = np.vstack([V, [[9.0, 9.0, 9.0], [9.5, 9.0, 9.0]]])  # two unreferenced vertices: components too
+    count, labels = connected_components(F, len(V))
+    assert count == 16
+    for k in (count, count + 7):
+        chosen = select_control_points((V, F), k, method=method, seed=0)
+        assert len(np.unique(chosen)) == k and set(labels[chosen].tolist()) == set(range(count))
+        approx, indices = approximate((V, F), k, method=method, seed=0)
+        assert np.isfinite(approx[0]).all() and set(labels[indices].tolist()) == set(range(count))
+    decoded = decode_geometry((V, F), encode_geometry((V, F), count + 7, method=method))
+    assert np.isfinite(decoded[0]).all()
+    # the user's own controls: a component without one is the user's singular system
+    with pytest.raises(SingularSystemError, match="every connected component needs at least one control vertex"):
+        ls_mesh((V, F), np.flatnonzero(labels == labels[0]))
+    with pytest.raises(ValueError, match=f"count must be at least the number of connected components \\({count}"):
+        select_control_points((V, F), count - 1, method=method)

@@ -27,7 +27,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._solvers import SPDSolver
-from ..topology import _group, boundary_loops, unique_edges
+from ..topology import _group, boundary_curves, unique_edges
 
 __all__ = [
     "FairingTopology",
@@ -59,11 +59,11 @@ class FairingTopology:
     valence : (n,) int64
         ``n_i``, the number of edge neighbours (0 for isolated vertices).
     boundary : (n,) bool
-        Vertices on an edge used by one triangle.
+        Vertices on an edge used by one triangle or by more than two.
     interior_triangles : (k,) int64
         Indices of the triangles with no boundary vertex.
-    loops : list of (l,) int64
-        Ordered boundary loops (empty unless asked for).
+    loops : BoundaryCurves or list
+        The boundary curves: loops through pinches, chains ending at fins (empty unless asked for).
     """
 
     n: int
@@ -76,35 +76,24 @@ class FairingTopology:
 
 
 def fairing_topology(triangles: np.ndarray, n: int, *, with_loops: bool) -> FairingTopology:
-    """Edges, valences, boundary and interior triangles of a mesh; the loops if ``with_loops``.
+    """Edges, valences, boundary and interior triangles of a mesh; the boundary curves if ``with_loops``.
 
-    Raises
-    ------
-    ValueError
-        An edge shared by more than two triangles (first one named), or, with
-        ``with_loops``, a boundary vertex on other than two boundary edges.
-        Vertices joining several *closed* fans (two surfaces touching at a
-        point) are accepted: their uniform 1-ring is the union of the fans.
+    ``boundary`` marks the vertices on an edge of one triangle and the
+    vertices on an edge of more than two triangles (a fin): neither has a
+    two-sided 1-ring, so both are held out of the surface relaxation.
+    ``loops`` is the :class:`~o3d_lsmesh.topology.BoundaryCurves` of
+    :func:`~o3d_lsmesh.topology.boundary_curves` (loops through pinch
+    vertices, and chains ending at fins), which
+    :func:`.boundary_curve.curve_operator` takes.
+    Vertices joining several fans (two surfaces touching at a point, or a
+    pinched boundary) are accepted: their uniform 1-ring is the union of the fans.
     """
     edges, counts, inverse = unique_edges(triangles, n)
-    if np.any(counts > 2):
-        first = int(np.flatnonzero(counts > 2)[0])
-        raise ValueError(
-            f"mesh must be edge-manifold, got edge ({int(edges[first, 0])}, {int(edges[first, 1])}) shared by "
-            f"{int(counts[first])} triangles ({int(np.count_nonzero(counts > 2))} such edges)"
-        )
     valence = np.bincount(edges.ravel(), minlength=n).astype(np.int64)
     boundary = np.zeros(n, dtype=bool)
-    boundary[edges[counts == 1].ravel()] = True
+    boundary[edges[counts != 2].ravel()] = True
     interior_triangles = np.flatnonzero(~boundary[triangles].any(axis=1))
-    loops = []
-    if with_loops and boundary.any():
-        try:
-            loops = boundary_loops(triangles, n)
-        except ValueError as error:
-            raise ValueError(
-                f"{error}; the boundary is not a set of simple loops (pass smooth_boundary=False to keep it fixed)"
-            ) from error
+    loops = boundary_curves(triangles, n) if with_loops and boundary.any() else []
     return FairingTopology(n, edges, inverse, valence, boundary, interior_triangles, loops)
 
 

@@ -1,0 +1,174 @@
+"""What a scan user wants to know about a mesh's connectivity, on any mesh: :func:`topology_summary`."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse import csgraph
+
+from ._o3d import read_mesh
+from .topology import (
+    _boundary_rows,
+    _corner_fans,
+    _edge_runs,
+    boundary_curves,
+    connected_components,
+)
+
+__all__ = ["HOLE_SIZE_BINS", "topology_summary", "topology_summary_arrays"]
+
+#: Edge-count bins of ``holes_by_size``: a loop of ``k`` edges falls in the bin ``lo <= k <= hi``.
+HOLE_SIZE_BINS = ((3, 3), (4, 9), (10, 99), (100, 999), (1000, None))
+
+#: A triangle is degenerate when twice its area is at most this times its longest edge squared
+#: (an angle below about 1e-10 rad: collinear or coincident corners up to rounding).
+DEGENERATE_TOLERANCE = 1e-10
+
+
+def _bin_label(lo: int, hi: int | None) -> str:
+    return f"{lo}+" if hi is None else (str(lo) if lo == hi else f"{lo}-{hi}")
+
+
+def topology_summary_arrays(vertices: np.ndarray, triangles: np.ndarray) -> dict:
+    """Array core of :func:`topology_summary` (``(n, 3) float64`` vertices, ``(m, 3) int64`` triangles)."""
+    vertices = np.asarray(vertices, dtype=np.float64)
+    F = np.asarray(triangles, dtype=np.int64)
+    n, m = len(vertices), len(F)
+    referenced = np.zeros(n, dtype=bool)
+    referenced[F.ravel()] = True
+    runs = _edge_runs(F, n)
+    order, starts, counts = runs
+    edge_count = len(counts)
+    crowded_edges = int(np.count_nonzero(counts > 2))
+    # fans: corners linked through manifold edges; a vertex with several is non-manifold
+    fan_count, fan = _corner_fans(F, n, runs)
+    tail = F.T.reshape(-1)
+    vertex_of_fan = np.zeros(fan_count, dtype=np.int64)
+    vertex_of_fan[fan] = tail
+    fans_per_vertex = np.bincount(vertex_of_fan, minlength=n)
+    nonmanifold_vertex_count = int(np.count_nonzero(fans_per_vertex > 1))
+    # components over vertices (what Open3D's cluster_connected_triangles would join at a shared vertex)
+    _, labels = connected_components(F, n)
+    components = len(np.unique(labels[referenced]))
+    # surface pieces: triangles joined through edges of exactly two triangles (a pinch or fin separates)
+    pair = starts[counts == 2]
+    a, b = order[pair] % max(m, 1), order[pair + 1] % max(m, 1)
+    pieces = csgraph.connected_components(
+        sp.coo_matrix((np.ones(len(a)), (a, b)), shape=(m, m)), directed=False)[0] if m else 0
+    # a manifold edge run twice in the same direction: the two triangles disagree in orientation
+    misoriented = int(np.count_nonzero(tail[order[pair]] == tail[order[pair + 1]]))
+    # boundary
+    rows, _, head, _, _ = _boundary_rows(F, n, runs)
+    boundary_edges = len(rows)
+    curves = boundary_curves(F, n)  # (recomputes the edge runs: cheap next to the fans)
+    loop_edges = np.array([len(loop) for loop in curves.loops], dtype=np.int64)
+    holes = {}
+    for lo, hi in HOLE_SIZE_BINS:
+        inside = (loop_edges >= lo) & (loop_edges <= (np.iinfo(np.int64).max if hi is None else hi))
+        holes[_bin_label(lo, hi)] = int(np.count_nonzero(inside))
+    if boundary_edges:
+        graph = sp.coo_matrix((np.ones(boundary_edges), (tail[rows], head[rows])), shape=(n, n))
+        _, boundary_label = csgraph.connected_components(graph, directed=False)
+        on_boundary = np.zeros(n, dtype=bool)
+        on_boundary[tail[rows]] = True
+        boundary_components = len(np.unique(boundary_label[on_boundary]))
+    else:
+        boundary_components = 0
+    # degenerate triangles: (near) zero area relative to the longest edge
+    corners = vertices[F]
+    twice_area = np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
+    longest = np.max(np.stack([np.einsum("ij,ij->i", d, d) for d in (
+        corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 1], corners[:, 0] - corners[:, 2])]), axis=0)
+    degenerate = int(np.count_nonzero(twice_area <= DEGENERATE_TOLERANCE * longest))
+    sorted_triangles = np.sort(F, axis=1)
+    if m and n**3 < 2**62:  # one packed key per triangle: a plain sort instead of a row-wise unique
+        keys = (sorted_triangles[:, 0] * n + sorted_triangles[:, 1]) * n + sorted_triangles[:, 2]
+        keys.sort()
+        duplicate = int(np.count_nonzero(keys[1:] == keys[:-1]))
+    else:
+        duplicate = m - len(np.unique(sorted_triangles, axis=0)) if m else 0
+    chi = int(np.count_nonzero(referenced)) - edge_count + m
+    edge_manifold = crowded_edges == 0
+    vertex_manifold = edge_manifold and nonmanifold_vertex_count == 0
+    loops = len(curves.loops)
+    genus = (2 - chi - loops) // 2 if components == 1 and vertex_manifold else None
+    # total genus of the surface with every non-manifold vertex split into its fans (an oriented
+    # surface of `pieces` parts, each sum (2 - 2 g - b) = V' - E + F)
+    total_genus = None
+    if edge_manifold and misoriented == 0:
+        split_chi = fan_count - edge_count + m
+        total_genus = (2 * pieces - split_chi - loops) // 2
+    return {
+        "vertices": n,
+        "triangles": m,
+        "edge_manifold": edge_manifold,
+        "vertex_manifold": vertex_manifold,
+        "components": components,
+        "surface_pieces": int(pieces),
+        "boundary_loops": loops,
+        "boundary_components": boundary_components,
+        "boundary_edges": boundary_edges,
+        "open_boundary_chains": len(curves.chains),
+        "holes_by_size": holes,
+        "largest_hole_edges": int(loop_edges.max()) if len(loop_edges) else 0,
+        "nonmanifold_edges": crowded_edges,
+        "nonmanifold_vertices": nonmanifold_vertex_count,
+        "unreferenced_vertices": int(n - np.count_nonzero(referenced)),
+        "degenerate_triangles": degenerate,
+        "duplicate_triangles": int(duplicate),
+        "misoriented_edges": misoriented,
+        "euler": chi,
+        "genus": genus,
+        "total_genus": total_genus,
+    }
+
+
+def topology_summary(mesh: Any) -> dict:
+    """Connectivity facts of any mesh, raw scans included: the numbers a scan user checks.
+
+    Parameters
+    ----------
+    mesh : open3d.geometry.TriangleMesh, open3d.t.geometry.TriangleMesh or (vertices, triangles)
+
+    Returns
+    -------
+    dict
+        ``vertices``, ``triangles``;
+        ``edge_manifold`` (no edge of more than two triangles) and
+        ``vertex_manifold`` (also every vertex's triangles form one fan);
+        ``components`` (connected over shared vertices, referenced vertices
+        only) and ``surface_pieces`` (triangles connected over edges of
+        exactly two triangles: pinches and fins separate them);
+        ``boundary_loops``: closed loops of boundary edges, continuing at a
+        pinch along the rim of the same fan (:func:`o3d_lsmesh.topology.boundary_loops`);
+        ``boundary_components``: connected pieces of the boundary graph
+        (loops touching at a pinch count once: an upper bound on hole count
+        a user might read off a picture, and what Open3D-based counts give);
+        ``boundary_edges``; ``open_boundary_chains`` (boundary paths ending at
+        a fin, on no closed loop); ``holes_by_size``: loops per edge-count bin
+        (:data:`HOLE_SIZE_BINS`, the outer rim of an open scan included) and
+        ``largest_hole_edges``;
+        ``nonmanifold_edges``, ``nonmanifold_vertices``,
+        ``unreferenced_vertices``, ``degenerate_triangles`` (twice the area at
+        most :data:`DEGENERATE_TOLERANCE` times the longest edge squared),
+        ``duplicate_triangles`` (same three vertices as an earlier one),
+        ``misoriented_edges`` (edges of two triangles that run them the same
+        way: flipped triangles);
+        ``euler`` (``V - E + F`` over referenced vertices), ``genus`` (when
+        connected and manifold, else ``None``) and ``total_genus`` (of the
+        surface with every non-manifold vertex split into its fans, when
+        edge-manifold and consistently oriented, else ``None``: ``0`` for a
+        range scan).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> bowtie = np.array([[0, 1, 2], [0, 3, 4]])  # two triangles touching at vertex 0
+    >>> s = topology_summary((np.random.default_rng(0).random((5, 3)), bowtie))
+    >>> s["boundary_loops"], s["boundary_components"], s["nonmanifold_vertices"], s["total_genus"]
+    (2, 1, 1, 0)
+    """
+    data = read_mesh(mesh)
+    return topology_summary_arrays(data.vertices, data.triangles)
