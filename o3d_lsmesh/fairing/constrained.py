@@ -15,15 +15,37 @@ from .._o3d import new_mesh, read_mesh
 from .._validate import as_choice, as_count, as_positive_float
 from .barycenter import DEFAULT_MU, GlobalSolver, fairing_topology, local_operator
 from .boundary_curve import curve_operator
+from .scan_fairing import SCAN_BOUNDARY_WEIGHT, SCAN_MEMBRANE, SCAN_MU, ScanFairingSolver
 
-__all__ = ["constrained_fairing", "constrained_fairing_arrays", "FAIRING_METHODS"]
+__all__ = ["constrained_fairing", "constrained_fairing_arrays", "FAIRING_METHODS", "DEFAULT_METHOD"]
 
-FAIRING_METHODS = ("local", "global")
+FAIRING_METHODS = ("scan", "local", "global")
+#: The energy of ``constrained_fairing(mesh)`` (see its docstring for the measurements).
+DEFAULT_METHOD = "scan"
+_DEFAULT_ITERATIONS = {"scan": 1, "local": 10, "global": 10}
 
 
-def _check_options(number_of_iterations, method, mu, smooth_boundary, reimpose_every, progress):
-    number_of_iterations = as_count(number_of_iterations, name="number_of_iterations")
+def _check_options(number_of_iterations, method, mu, smooth_boundary, reimpose_every, progress, membrane=None,
+                   boundary_weight=None):
+    if method is None:
+        # reimpose_every only means something for the paper's local operator: a call written for the
+        # former default (method="local") keeps its meaning
+        method = "local" if reimpose_every is not None else DEFAULT_METHOD
     method = as_choice(method, FAIRING_METHODS, name="method")
+    if number_of_iterations is None:
+        number_of_iterations = _DEFAULT_ITERATIONS[method]
+    number_of_iterations = as_count(number_of_iterations, name="number_of_iterations")
+    for name, value in (("membrane", membrane), ("boundary_weight", boundary_weight)):
+        if value is not None and method != "scan":
+            raise ValueError(f"{name} must be None for method={method!r} (it weighs a term of method='scan'), got "
+                             f"{value}")
+    if membrane is not None:
+        membrane = as_positive_float(membrane, name="membrane", allow_zero=True)
+    if boundary_weight is not None:
+        boundary_weight = as_positive_float(boundary_weight, name="boundary_weight")
+    if method == "scan" and reimpose_every is not None:
+        raise ValueError(f"reimpose_every must be None for method='scan' (it is a local-operator option), got "
+                         f"{reimpose_every}")
     if mu is not None:
         mu = as_positive_float(mu, name="mu")
         if method == "local":
@@ -39,7 +61,11 @@ def _check_options(number_of_iterations, method, mu, smooth_boundary, reimpose_e
     for name, value in (("smooth_boundary", smooth_boundary), ("progress", progress)):
         if not isinstance(value, (bool, np.bool_)):
             raise TypeError(f"{name} must be a bool, got {type(value).__name__}")
-    return number_of_iterations, method, mu, bool(smooth_boundary), reimpose_every, bool(progress)
+    if method == "scan" and not smooth_boundary:
+        raise ValueError("smooth_boundary must be True for method='scan' (its boundary moves with the surface; "
+                         "hold it fixed with method='global' or 'local'), got False")
+    options = (number_of_iterations, method, mu, bool(smooth_boundary), reimpose_every, bool(progress))
+    return options, {"membrane": membrane, "boundary_weight": boundary_weight}
 
 
 def _iterations(count: int, progress: bool, description: str):
@@ -53,10 +79,12 @@ def _iterations(count: int, progress: bool, description: str):
 def constrained_fairing_arrays(
     vertices: np.ndarray,
     triangles: np.ndarray,
-    number_of_iterations: int = 10,
+    number_of_iterations: int | None = None,
     *,
-    method: str = "local",
+    method: str | None = None,
     mu: float | None = None,
+    membrane: float | None = None,
+    boundary_weight: float | None = None,
     smooth_boundary: bool = True,
     reimpose_every: int | None = None,
     progress: bool = False,
@@ -72,7 +100,7 @@ def constrained_fairing_arrays(
     ----------
     vertices : (n, 3) array-like of float
     triangles : (m, 3) array-like of int
-    number_of_iterations, method, mu, smooth_boundary, reimpose_every, progress
+    number_of_iterations, method, mu, membrane, boundary_weight, smooth_boundary, reimpose_every, progress
         As in :func:`constrained_fairing`.
 
     Returns
@@ -87,18 +115,24 @@ def constrained_fairing_arrays(
     >>> constrained_fairing_arrays(V, F, 5).shape
     (8, 3)
     """
-    number_of_iterations, method, mu, smooth_boundary, reimpose_every, progress = _check_options(
-        number_of_iterations, method, mu, smooth_boundary, reimpose_every, progress
-    )
+    options, extra = _check_options(number_of_iterations, method, mu, smooth_boundary, reimpose_every, progress,
+                                    membrane, boundary_weight)
     data = read_mesh((vertices, triangles), name="mesh")
-    return _fair(data.vertices, data.triangles, number_of_iterations, method, mu, smooth_boundary, reimpose_every,
-                 progress)
+    return _fair(data.vertices, data.triangles, *options, **extra)
 
 
-def _fair(positions, triangles, number_of_iterations, method, mu, smooth_boundary, reimpose_every, progress):
+def _fair(positions, triangles, number_of_iterations, method, mu, smooth_boundary, reimpose_every, progress, *,
+          membrane=None, boundary_weight=None):
     # validated arrays in, new (n, 3) positions out (``positions`` is a private copy)
     if number_of_iterations == 0:
         return positions
+    if method == "scan":
+        solver = ScanFairingSolver(
+            triangles, len(positions), mu=SCAN_MU if mu is None else mu,
+            membrane=SCAN_MEMBRANE if membrane is None else membrane,
+            boundary_weight=SCAN_BOUNDARY_WEIGHT if boundary_weight is None else boundary_weight,
+        )
+        return solver.solve(positions, number_of_iterations=number_of_iterations)
     topo = fairing_topology(triangles, len(positions), with_loops=smooth_boundary)
     curve = curve_operator(topo.loops)
     steps = _iterations(number_of_iterations, progress, f"constrained fairing ({method})")
@@ -124,10 +158,12 @@ def _fair(positions, triangles, number_of_iterations, method, mu, smooth_boundar
 
 def constrained_fairing(
     mesh: Any,
-    number_of_iterations: int = 10,
+    number_of_iterations: int | None = None,
     *,
-    method: str = "local",
+    method: str | None = None,
     mu: float | None = None,
+    membrane: float | None = None,
+    boundary_weight: float | None = None,
     smooth_boundary: bool = True,
     reimpose_every: int | None = None,
     progress: bool = False,
@@ -261,6 +297,7 @@ def constrained_fairing(
     >>> bool(error(smooth) < error(noisy))
     True
     """
-    options = _check_options(number_of_iterations, method, mu, smooth_boundary, reimpose_every, progress)
+    options, extra = _check_options(number_of_iterations, method, mu, smooth_boundary, reimpose_every, progress,
+                                    membrane, boundary_weight)
     data = read_mesh(mesh)
-    return new_mesh(data, _fair(data.vertices.copy(), data.triangles, *options))
+    return new_mesh(data, _fair(data.vertices.copy(), data.triangles, *options, **extra))
