@@ -248,17 +248,20 @@ def cmd_denoise(args: argparse.Namespace, run: _Run) -> int:
     if args.render:
         check_output(args.render, [args.input], force=args.force, suffixes=(".png",))
     mesh = read_input(args.input)
-    if args.iterations is None:
-        args.iterations = 5 if args.level else 10
     start = time.perf_counter()
     if args.level:
         from .fairing.multiresolution import multiresolution_fairing
 
+        args.iterations = 5 if args.iterations is None else args.iterations
+        args.method = args.method or "local"
         out = run.call(multiresolution_fairing, mesh, args.level, number_of_iterations=args.iterations,
                        method=args.method, desc="multiresolution fairing")
     else:
         from .fairing import constrained_fairing
+        from .fairing.constrained import resolved_options
 
+        # no flag: the API's defaults (method='scan'); the report names what ran
+        args.method, args.iterations = resolved_options(args.method, args.iterations, args.reimpose_every)
         out = run.call(constrained_fairing, mesh, args.iterations, method=args.method, mu=args.mu,
                        smooth_boundary=not args.fixed_boundary, reimpose_every=args.reimpose_every,
                        desc="constrained fairing")
@@ -501,7 +504,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("output", metavar="OUTPUT")
     p.add_argument("--iterations", type=_nonnegative_int, default=None,
                    help="number_of_iterations (default 10; with --level, 5 per level)")
-    p.add_argument("--method", choices=("local", "global"), default="local")
+    p.add_argument("--method", choices=("scan", "local", "global"), default=None,
+                   help="fairing energy (default: scan, the API's default; local for --level or --reimpose-every)")
     p.add_argument("--level", type=_nonnegative_int, default=0, help="multiresolution level (0: plain fairing)")
     p.add_argument("--mu", type=float, default=None, help="penalty weight of --method global")
     p.add_argument("--reimpose-every", type=_positive_int, default=None, help="re-take the barycenters every k iterations")
