@@ -87,9 +87,9 @@ def _iterations(count: int, progress: bool, description: str):
 def constrained_fairing_arrays(
     vertices: np.ndarray,
     triangles: np.ndarray,
-    number_of_iterations: int | None = None,
+    number_of_iterations: int | None = 10,
     *,
-    method: str | None = None,
+    method: str | None = "local",
     mu: float | None = None,
     membrane: float | None = None,
     boundary_weight: float | None = None,
@@ -100,9 +100,12 @@ def constrained_fairing_arrays(
     """Array core of :func:`constrained_fairing`: faired ``(n, 3) float64`` positions.
 
     Takes and returns plain arrays so that the multiresolution fairing can
-    run it on every level of a hierarchy; the arguments and the method are
-    described in :func:`constrained_fairing`. The input arrays are not
-    modified.
+    run it on every level of a hierarchy; the arguments and the methods are
+    described in :func:`constrained_fairing`. Unlike the wrapper, whose
+    default is ``method="scan"``, the array core keeps its explicit callers'
+    defaults (``method="local"``, 10 iterations, the multiresolution
+    fairing's kernel); pass ``method=None`` (and ``number_of_iterations=None``)
+    for the wrapper's default. The input arrays are not modified.
 
     Parameters
     ----------
