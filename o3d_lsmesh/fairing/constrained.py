@@ -2,7 +2,10 @@
 
 :func:`constrained_fairing_arrays` is the array core (also the kernel that the
 multiresolution fairing runs on every hierarchy level);
-:func:`constrained_fairing` converts Open3D meshes to and from it.
+:func:`constrained_fairing` converts Open3D meshes to and from it. Three
+energies: ``"scan"`` (the default of :func:`constrained_fairing`, for raw
+range scans, :mod:`.scan_fairing`), and the paper's ``"local"`` (eq. 7) and
+``"global"`` (penalty form of eq. 5) operators (:mod:`.barycenter`).
 """
 
 from __future__ import annotations
