@@ -49,6 +49,7 @@ __all__ = [
     "SCAN_MU",
     "SCAN_MEMBRANE",
     "SCAN_BOUNDARY_WEIGHT",
+    "SCAN_THIN_PLATE",
 ]
 
 #: Barycenter penalty weight of the scan energy (measured on the raw scans,
@@ -56,6 +57,8 @@ __all__ = [
 SCAN_MU = 0.03
 #: Membrane weight ``lambda`` of the scan energy.
 SCAN_MEMBRANE = 0.45
+#: Weight ``kappa`` of the thin-plate term ``|K X|^2`` (Liu et al.'s energy).
+SCAN_THIN_PLATE = 1.0
 #: Barycenter weight of triangles touching the boundary, relative to the interior's.
 SCAN_BOUNDARY_WEIGHT = 0.1
 
@@ -64,21 +67,20 @@ SCAN_BOUNDARY_WEIGHT = 0.1
 class ScanSystem:
     """The scan energy as weighted least-squares equations, per coordinate.
 
-    ``E(X) = |R X - T|^2`` with the stacked rows ``R = [K; sqrt(mu W) H;
-    sqrt(lambda) D]`` (``D`` the ``(e, n)`` edge-difference matrix) and
-    targets ``T = [0; sqrt(mu W) H X0; 0]``, so the normal matrix is
-    ``R^T R = K^T K + mu H^T W H + lambda D^T D`` (``D^T D`` is the graph
-    Laplacian ``G``). Unreferenced vertices get a unit row of their own, so
-    the system is positive definite and leaves them in place.
+    ``E(X) = |R X - T|^2`` with the stacked rows ``R = [sqrt(mu W) H;
+    sqrt(lambda) D; (unit rows); sqrt(kappa) K]`` (``D`` the ``(e, n)``
+    edge-difference matrix; the thin-plate rows only when ``kappa > 0``) and
+    targets ``T = [sqrt(mu W) H X0; 0; ...]``, so the normal matrix is
+    ``R^T R = mu H^T W H + lambda D^T D + kappa K^T K`` (``D^T D`` is the
+    graph Laplacian ``G``). Unreferenced vertices get a unit row of their
+    own, so the system is positive definite and leaves them in place.
 
     Attributes
     ----------
-    rows : (n + m + e + u, n) CSR
-        ``R`` (``u`` unreferenced vertices).
+    rows : (m + e + u [+ n], n) CSR
+        ``R`` (``u`` unreferenced vertices); its first ``m`` rows are ``penalty``.
     penalty : (m, n) CSR
         ``sqrt(mu W) H``, the rows that carry the targets.
-    first_penalty_row : int
-        Index of ``penalty``'s first row in ``rows`` (``n``).
     referenced, boundary : (n,) bool
     triangle_weight : (m,) float64
         ``w_t``.
@@ -99,7 +101,8 @@ class ScanSystem:
         return self.penalty.T @ (self.penalty @ positions0)
 
 
-def scan_system(triangles: np.ndarray, n: int, *, mu: float, membrane: float, boundary_weight: float) -> ScanSystem:
+def scan_system(triangles: np.ndarray, n: int, *, mu: float, membrane: float, boundary_weight: float,
+                thin_plate: float = SCAN_THIN_PLATE) -> ScanSystem:
     """The least-squares rows of the scan energy for ``(m, 3) int64`` triangles on ``n`` vertices.
 
     No manifold condition: an edge of three or more triangles is an interior
@@ -122,14 +125,21 @@ def scan_system(triangles: np.ndarray, n: int, *, mu: float, membrane: float, bo
     root = np.sqrt(mu * weight)
     membrane_root = np.sqrt(membrane)
     ref_rows = np.flatnonzero(referenced)
-    # rows [0, n): K (row i: 1 at i, -1/n_i at each neighbour); [n, n+m): sqrt(mu w_t) at t's corners;
-    # [n+m, n+m+e): sqrt(lambda) (x_lo - x_hi); then a unit row per unreferenced vertex
-    row = np.concatenate([ref_rows, lo, hi, np.repeat(n + np.arange(m), 3), n + m + np.arange(e), n + m + np.arange(e),
-                          n + m + e + np.arange(len(unreferenced))])
-    col = np.concatenate([ref_rows, hi, lo, triangles.ravel(), lo, hi, unreferenced])
-    data = np.concatenate([np.ones(len(ref_rows)), -inverse[lo], -inverse[hi], np.repeat(root, 3),
-                           np.full(e, membrane_root), np.full(e, -membrane_root), np.ones(len(unreferenced))])
-    rows = sp.csr_matrix((data, (row, col)), shape=(n + m + e + len(unreferenced), n))
+    # rows [0, m): sqrt(mu w_t) at t's corners; [m, m+e): sqrt(lambda) (x_lo - x_hi); a unit row per
+    # unreferenced vertex; then, with a thin-plate weight kappa, sqrt(kappa) K (row i: 1 at i, -1/n_i at
+    # each neighbour)
+    u = len(unreferenced)
+    row = [np.repeat(np.arange(m), 3), m + np.arange(e), m + np.arange(e), m + e + np.arange(u)]
+    col = [triangles.ravel(), lo, hi, unreferenced]
+    data = [np.repeat(root, 3), np.full(e, membrane_root), np.full(e, -membrane_root), np.ones(u)]
+    count = m + e + u
+    if thin_plate > 0.0:
+        plate = np.sqrt(thin_plate)
+        row += [count + ref_rows, count + lo, count + hi]
+        col += [ref_rows, hi, lo]
+        data += [np.full(len(ref_rows), plate), -plate * inverse[lo], -plate * inverse[hi]]
+        count += n
+    rows = sp.csr_matrix((np.concatenate(data), (np.concatenate(row), np.concatenate(col))), shape=(count, n))
     corners = np.arange(0, 3 * m + 1, 3)
     penalty = sp.csr_matrix((np.repeat(root, 3), triangles.ravel(), corners), shape=(m, n))
     return ScanSystem(rows, penalty, referenced, boundary, weight)
@@ -159,10 +169,12 @@ class ScanFairingSolver:
     serialized by the solver's lock.
     """
 
-    def __init__(self, triangles: np.ndarray, n: int, *, mu: float, membrane: float, boundary_weight: float) -> None:
+    def __init__(self, triangles: np.ndarray, n: int, *, mu: float, membrane: float, boundary_weight: float,
+                 thin_plate: float = SCAN_THIN_PLATE) -> None:
         self.mu = float(mu)
         self.membrane = float(membrane)
-        self.system = scan_system(triangles, n, mu=self.mu, membrane=self.membrane, boundary_weight=boundary_weight)
+        self.system = scan_system(triangles, n, mu=self.mu, membrane=self.membrane, boundary_weight=boundary_weight,
+                                  thin_plate=thin_plate)
         self._solver = SPDSolver(product_of=self.system.rows.T.tocsc(), ordering="amd")
 
     def filter(self, positions0: np.ndarray) -> np.ndarray:
