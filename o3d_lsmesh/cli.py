@@ -507,7 +507,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--method", choices=("scan", "local", "global"), default=None,
                    help="fairing energy (default: scan, the API's default; local for --level or --reimpose-every)")
     p.add_argument("--level", type=_nonnegative_int, default=0, help="multiresolution level (0: plain fairing)")
-    p.add_argument("--mu", type=float, default=None, help="penalty weight of --method global")
+    p.add_argument("--mu", type=float, default=None, help="barycenter penalty weight of --method global or scan")
     p.add_argument("--reimpose-every", type=_positive_int, default=None, help="re-take the barycenters every k iterations")
     p.add_argument("--fixed-boundary", action="store_true", help="keep boundary vertices fixed")
     p.add_argument("--render", metavar="PNG", default=None, help="write a before/after picture")
