@@ -36,10 +36,9 @@ MESHES = ["bunny.ply", "venus.ply", "screwdriver.ply", "feline.ply"]
 NOISE = [0.2, 0.5]
 SEED = 2001
 # (label, iterations, reimpose_every)
-LOCAL_SWEEP = [(1, None), (3, None), (5, None), (10, None), (20, None),
-               (3, 1), (5, 1), (10, 1), (10, 2), (20, 2), (20, 5)]
+LOCAL_SWEEP = [(10, None), (3, 1), (10, 1), (10, 2), (20, 2)]
 GLOBAL_SWEEP = [1, 2, 3, 5]
-MU_SWEEP = [0.01, 0.03, 0.1, 0.3, 1.0]
+MU_SWEEP = [0.01, 0.03, 0.1]
 
 
 def legacy(vertices, triangles):
@@ -145,7 +144,8 @@ def main():
             case_rows, _ = run_case(clean, name.removesuffix(".ply"), sigma, sweep_lines)
             cases.append(case_rows)
             rows += case_rows
-    n, speed_rows = speed_comparison()
+    # the local operator's speed against Open3D (10 iterations at 537k vertices) is measured with --speed
+    n, speed_rows = speed_comparison() if "--speed" in sys.argv else (None, [])
     header = ["mesh", "noise", "method", "best setting", "mean err", "max err", "volume %", "normal dev deg",
               "boundary disp", "ms / iteration"]
     wins = []
