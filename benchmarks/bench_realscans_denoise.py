@@ -23,9 +23,8 @@ import os
 from pathlib import Path
 
 import numpy as np
-from _common import DATA, REPO, markdown_table, timed, write_markdown
-
 import open3d as o3d
+from _common import DATA, REPO, markdown_table, timed, write_markdown
 
 SCANS = Path(os.environ.get("O3D_LSMESH_SCANS", REPO.parent / "shared" / "data" / "scans"))
 REFERENCE = "bunny.ply"
@@ -177,7 +176,7 @@ def run_scan(name, reference, sweep_lines):
         for k in sweep:
             try:
                 out, seconds = timed(lambda fn=fn, k=k: fn(V, F, k))
-            except Exception as error:  # a peer refusing a scan is reported, not fatal
+            except Exception as error:  # noqa: BLE001 (a peer refusing a scan is reported, not fatal)
                 sweep_lines.append(f"{name} {label} {k}: failed ({error})")
                 continue
             entries.append((k, score(out, F, reference, boundary), seconds))
@@ -241,8 +240,8 @@ def speed_rows(results):
         mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(V), o3d.utility.Vector3iVector(F))
         ratios = []
         for trial in range(3 if len(V) < 200_000 else 2):
-            _, t_o3d = timed(lambda: mesh.filter_smooth_laplacian(number_of_iterations=k))
-            _, t_ours = timed(lambda: ours(V, F))
+            _, t_o3d = timed(lambda mesh=mesh, k=k: mesh.filter_smooth_laplacian(number_of_iterations=k))
+            _, t_ours = timed(lambda V=V, F=F: ours(V, F))
             ratios.append(t_ours / t_o3d)
             rows.append([label, len(V), trial, k, t_o3d, t_ours, t_ours / t_o3d])
     return rows
@@ -338,15 +337,15 @@ def main():
     shift_simple = np.array([r["raw"]["signed_interior"] - r["peers"]["Open3D simple"][1]["signed_interior"]
                              for r in results])
     targets = [
-        f"- Beats every peer's best setting: {int((ratios < 1).sum())}/{len(ratios)} scans "
-        f"(ours / best peer per scan: min {ratios.min():.3f}, mean {ratios.mean():.3f}, max {ratios.max():.3f}).",
-        f"- Mean error over the scans: ours {ours_mean:.1f} um; best single conventional filter ({best_filter}, "
+        (f"- Beats every peer's best setting: {int((ratios < 1).sum())}/{len(ratios)} scans "
+        f"(ours / best peer per scan: min {ratios.min():.3f}, mean {ratios.mean():.3f}, max {ratios.max():.3f})."),
+        (f"- Mean error over the scans: ours {ours_mean:.1f} um; best single conventional filter ({best_filter}, "
         f"best setting per scan) {per_peer[best_filter]:.1f} um: ratio {ours_mean / per_peer[best_filter]:.3f} "
-        f"(target <= 0.97); against the best peer picked per scan {best_each:.1f} um: {ours_mean / best_each:.3f}.",
-        f"- Interior inward shift (raw signed interior mean - result's, um): ours mean {shift_ours.mean():.1f} "
+        f"(target <= 0.97); against the best peer picked per scan {best_each:.1f} um: {ours_mean / best_each:.3f}."),
+        (f"- Interior inward shift (raw signed interior mean - result's, um): ours mean {shift_ours.mean():.1f} "
         f"(per scan {shift_ours.min():.1f} to {shift_ours.max():.1f}); Open3D simple at its best "
         f"{shift_simple.mean():.1f} ({shift_simple.min():.1f} to {shift_simple.max():.1f}); ours <= half of simple's on "
-        f"{int((shift_ours <= shift_simple / 2).sum())}/{len(results)} scans.",
+        f"{int((shift_ours <= shift_simple / 2).sum())}/{len(results)} scans."),
     ]
     print("\n".join(targets), flush=True)
     multires = multiresolution_rows(results, reference)
@@ -354,12 +353,12 @@ def main():
     speed = speed_rows(results)
     print("speed done", flush=True)
     sections = [
-        ("Setup", "Distances in micrometres from each scan vertex to the reference `bunny.ply` (Open3D "
+        ("Setup", ("Distances in micrometres from each scan vertex to the reference `bunny.ply` (Open3D "
                   "RaycastingScene); 'signed' is along the reference normal at the closest point (outside "
                   "positive); 'normal deg' is the mean angle between our vertex normals and the reference's. Peers "
                   "run every setting of their sweep (iteration counts, listed below) and are shown at their best "
                   "per scan; ours runs `constrained_fairing(mesh)` with no argument. Interior/boundary: vertices "
-                  "off/on an edge with one triangle. Times are wall seconds on a shared 2-core machine."),
+                  "off/on an edge with one triangle. Times are wall seconds on a shared 2-core machine.")),
         ("Per scan: mean distance (um), each peer at its best setting (iterations)", markdown_table(header, table)),
         ("Targets", "\n".join(targets)),
         ("Per scan, every measure", markdown_table(detail_header, detail)),

@@ -216,14 +216,14 @@ def test_open3d_mesh_in_and_out_and_non_manifold_accepted():
 def test_scan_options_raise():
     V, F = grid(4, 4)
     cases = [
-        (ValueError, r"membrane must be None for method='local'", dict(method="local", membrane=0.1)),
-        (ValueError, r"boundary_weight must be None for method='global'", dict(method="global", boundary_weight=0.5)),
-        (ValueError, "membrane must be non-negative and finite, got -1.0", dict(membrane=-1.0)),
-        (ValueError, "boundary_weight must be positive and finite, got 0.0", dict(boundary_weight=0.0)),
-        (TypeError, "boundary_weight must be a number, got 'x'", dict(boundary_weight="x")),
-        (ValueError, r"reimpose_every must be None for method='scan'", dict(method="scan", reimpose_every=2)),
-        (ValueError, r"smooth_boundary must be True for method='scan'", dict(smooth_boundary=False)),
-        (ValueError, "mu must be positive and finite, got -0.5", dict(mu=-0.5)),
+        (ValueError, r"membrane must be None for method='local'", {"method": "local", "membrane": 0.1}),
+        (ValueError, r"boundary_weight must be None for method='global'", {"method": "global", "boundary_weight": 0.5}),
+        (ValueError, "membrane must be non-negative and finite, got -1.0", {"membrane": -1.0}),
+        (ValueError, "boundary_weight must be positive and finite, got 0.0", {"boundary_weight": 0.0}),
+        (TypeError, "boundary_weight must be a number, got 'x'", {"boundary_weight": "x"}),
+        (ValueError, r"reimpose_every must be None for method='scan'", {"method": "scan", "reimpose_every": 2}),
+        (ValueError, r"smooth_boundary must be True for method='scan'", {"smooth_boundary": False}),
+        (ValueError, "mu must be positive and finite, got -0.5", {"mu": -0.5}),
     ]
     for error, message, kwargs in cases:
         with pytest.raises(error, match=message):

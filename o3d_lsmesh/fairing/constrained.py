@@ -18,9 +18,14 @@ from .._o3d import new_mesh, read_mesh
 from .._validate import as_choice, as_count, as_positive_float
 from .barycenter import DEFAULT_MU, GlobalSolver, fairing_topology, local_operator
 from .boundary_curve import curve_operator
-from .scan_fairing import SCAN_BOUNDARY_WEIGHT, SCAN_MEMBRANE, SCAN_MU, ScanFairingSolver
+from .scan_fairing import (
+    SCAN_BOUNDARY_WEIGHT,
+    SCAN_MEMBRANE,
+    SCAN_MU,
+    ScanFairingSolver,
+)
 
-__all__ = ["constrained_fairing", "constrained_fairing_arrays", "FAIRING_METHODS", "DEFAULT_METHOD"]
+__all__ = ["DEFAULT_METHOD", "FAIRING_METHODS", "constrained_fairing", "constrained_fairing_arrays"]
 
 FAIRING_METHODS = ("scan", "local", "global")
 #: The energy of ``constrained_fairing(mesh)`` (see its docstring for the measurements).

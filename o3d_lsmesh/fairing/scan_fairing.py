@@ -39,17 +39,16 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._solvers import SPDSolver
-from ..laplacian import uniform_laplacian
 from ..topology import unique_edges
 
 __all__ = [
+    "SCAN_BOUNDARY_WEIGHT",
+    "SCAN_MEMBRANE",
+    "SCAN_MU",
+    "SCAN_THIN_PLATE",
     "ScanFairingSolver",
     "ScanSystem",
     "scan_system",
-    "SCAN_MU",
-    "SCAN_MEMBRANE",
-    "SCAN_BOUNDARY_WEIGHT",
-    "SCAN_THIN_PLATE",
 ]
 
 #: Barycenter penalty weight of the scan energy (measured on the raw scans,
