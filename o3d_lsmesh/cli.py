@@ -408,19 +408,22 @@ def cmd_denoise(args: argparse.Namespace, run: _Run) -> int:
     if args.render:
         check_output(args.render, [args.input], force=args.force, suffixes=(".png",))
     mesh = read_input(args.input)
-    if args.iterations is None:
-        args.iterations = 5 if args.level else 10
     start = time.perf_counter()
     with _flags(mesh=f"INPUT {args.input!r}", iterations="number_of_iterations", level="level", mu="mu", reimpose_every="reimpose_every",
                 method="method"):
         if args.level:
             from .fairing.multiresolution import multiresolution_fairing
 
+            args.iterations = 5 if args.iterations is None else args.iterations
+            args.method = args.method or "local"
             out = multiresolution_fairing(mesh, args.level, number_of_iterations=args.iterations, method=args.method,
                                           progress=run.progress)
         else:
             from .fairing import constrained_fairing
+            from .fairing.constrained import resolved_options
 
+            # no flag: the API's defaults (method='scan'); the report names what ran
+            args.method, args.iterations = resolved_options(args.method, args.iterations, args.reimpose_every)
             out = constrained_fairing(mesh, args.iterations, method=args.method, mu=args.mu,
                                       smooth_boundary=not args.fixed_boundary, reimpose_every=args.reimpose_every,
                                       progress=run.progress)
@@ -643,6 +646,12 @@ def cmd_demo(args: argparse.Namespace, run: _Run) -> int:
 class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescriptionHelpFormatter):
     """``--help`` shows every option's default and keeps the examples' line breaks."""
 
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        # an option whose default is resolved later (None standing for the API's choice) says so itself
+        if action.help and "(default:" in action.help:
+            return action.help
+        return super()._get_help_string(action)
+
 
 def _int_at_least(minimum: int, description: str, maximum: int | None = None):
     """An argparse type for integers in ``[minimum, maximum]`` with a one-line error naming the rule."""
@@ -718,11 +727,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("input", metavar="INPUT", help="mesh file to denoise")
     p.add_argument("output", metavar="OUTPUT", help="mesh file to write (.ply, .obj, .stl, .off, .gltf)")
     p.add_argument("--iterations", type=_nonnegative_int, default=None,
-                   help="number of fairing iterations (None: 10; with --level, 5 per level)")
-    p.add_argument("--method", choices=("local", "global"), default="local",
-                   help="local: per-vertex updates (eq. 7); global: one sparse solve per iteration")
+                   help="number of fairing iterations (default: the API's, 10 for local; with --level, 5 per level)")
+    p.add_argument("--method", choices=("scan", "local", "global"), default=None,
+                   help="fairing energy (default: scan, the API's default; local with --level or --reimpose-every)")
     p.add_argument("--level", type=_nonnegative_int, default=0, help="multiresolution level (0: plain fairing)")
-    p.add_argument("--mu", type=float, default=None, help="penalty weight of --method global (not with --level)")
+    p.add_argument("--mu", type=float, default=None,
+                   help="barycenter penalty weight of --method global or scan (not with --level)")
     p.add_argument("--reimpose-every", type=_positive_int, default=None,
                    help="re-take the barycenters every k iterations (not with --level)")
     p.add_argument("--fixed-boundary", action="store_true",

@@ -33,10 +33,10 @@ _MARKER = "__o3d_lsmesh_method__"
 _LOCK = threading.Lock()
 
 
-def _filter_smooth_constrained(self: Any, number_of_iterations: int = 10, **kwargs: Any) -> Any:
+def _filter_smooth_constrained(self: Any, number_of_iterations: int | None = None, **kwargs: Any) -> Any:
     """Barycenter-constrained fairing (Liu et al. 2001, eq. 5-7); see :func:`o3d_lsmesh.fairing.constrained_fairing`.
 
-    Keyword options: ``method="local"|"global"``, ``mu``, ``smooth_boundary``,
+    Keyword options: ``method="scan"|"local"|"global"``, ``mu``, ``smooth_boundary``,
     ``reimpose_every``, ``progress``. Returns a new mesh.
     """
     from .fairing import constrained_fairing
