@@ -9,7 +9,7 @@ import numpy as np
 from .._o3d import new_mesh
 from .._validate import as_choice, as_count
 from ..topology import boundary_halfedges
-from ..hierarchy.hierarchy import MeshHierarchy, build_hierarchy_arrays, read_manifold_mesh
+from ..hierarchy.hierarchy import MeshHierarchy, build_hierarchy_arrays, read_hierarchy_mesh
 from .constrained import FAIRING_METHODS, constrained_fairing_arrays
 
 __all__ = ["multiresolution_fairing", "multiresolution_fairing_arrays"]
@@ -119,7 +119,7 @@ def multiresolution_fairing(
     method = as_choice(method, FAIRING_METHODS, name="method")
     if not isinstance(progress, (bool, np.bool_)):
         raise TypeError(f"progress must be a bool, got {type(progress).__name__}")
-    data = read_manifold_mesh(mesh)
+    data = read_hierarchy_mesh(mesh)
     if hierarchy is None:
         hierarchy = build_hierarchy_arrays(data.vertices, data.triangles, max_levels=level, min_vertices=4)
         if level >= len(hierarchy):

@@ -17,7 +17,7 @@ import numpy as np
 
 from .._validate import as_count
 from ..topology import adjacency_matrix, unique_edges
-from .hierarchy import MeshHierarchy, _tensor_format, read_manifold_mesh
+from .hierarchy import MeshHierarchy, _tensor_format, read_hierarchy_mesh
 
 __all__ = ["from_fast_simplification"]
 
@@ -103,7 +103,7 @@ def from_fast_simplification(
         raise ValueError(f"agg must be non-negative and finite, got {agg}")
     if not isinstance(progress, (bool, np.bool_)):
         raise TypeError(f"progress must be a bool, got {type(progress).__name__}")
-    data = read_manifold_mesh(mesh)
+    data = read_hierarchy_mesh(mesh)
     V, F = data.vertices, data.triangles
     n0, m0 = len(V), len(F)
     counts = _level_counts(levels, n0, min_vertices)
