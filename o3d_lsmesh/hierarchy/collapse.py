@@ -125,7 +125,8 @@ def collapse_level(
     max_removals : int, optional
         Remove at most this many vertices (the first ones in cost order).
     max_normal_angle : float
-        Angle in degrees a surviving triangle's normal must turn less than.
+        Angle in degrees a surviving triangle's normal must turn less than (90 or more: it
+        must only not flip).
     min_quality : float
         ``2 * area / (sum of squared edge lengths)`` a new triangle must stay
         above (an equilateral triangle has ``1/sqrt(3)``).
@@ -146,7 +147,8 @@ def collapse_level(
     n = len(vertices)
     locked = np.zeros(n, dtype=np.uint8) if locked is None else np.ascontiguousarray(locked, dtype=np.uint8)
     limit = n if max_removals is None else max(int(max_removals), 0)
-    cos_sq = float(np.cos(np.deg2rad(max_normal_angle)) ** 2)
+    # at 90 degrees or more only the flip test (a positive dot product of the normals) remains
+    cos_sq = float(np.cos(np.deg2rad(max_normal_angle)) ** 2) if max_normal_angle < 90 else 0.0
     if workspace is None:
         workspace = _kernel().Workspace()
     result = workspace.collapse_level(
