@@ -368,14 +368,22 @@ def build_hierarchy(
     the 1-ring neighbour ``x_k`` of least cone volume
     ``|sum_j (x_j - x_k) x (x_{j+1} - x_k) . (x - x_k)|``. Only collapses that
     pass the link condition, keep boundary vertices on the boundary, and
-    neither flip nor degenerate a triangle are made, so every level is a
-    manifold mesh with the input's Euler characteristic and boundary loops.
-    See :mod:`o3d_lsmesh.hierarchy.collapse` for the independence used.
+    neither flip nor degenerate a triangle are made, so every level keeps the
+    input's Euler characteristic, components and boundary loops. One compiled
+    sequential loop per level (:mod:`o3d_lsmesh.hierarchy.collapse` states
+    its rules).
+
+    Any mesh is accepted, as scanners produce them: a vertex whose triangles
+    form several fans, or that lies on an edge of more than two triangles, is
+    locked (never removed, never a collapse target), and so is every
+    unreferenced vertex (kept at every level, mapped to itself); everything
+    else simplifies as on a manifold mesh, so every level has the input's set
+    of non-manifold vertices and edges.
 
     Parameters
     ----------
     mesh : open3d.geometry.TriangleMesh, open3d.t.geometry.TriangleMesh or (vertices, triangles)
-        Manifold mesh without unreferenced vertices; not modified.
+        Any triangle mesh; not modified.
     alpha, beta : float, keyword-only
         Non-negative weights of the shortest and longest incident edge in the cost.
     min_vertices : int, keyword-only
@@ -385,9 +393,9 @@ def build_hierarchy(
     progress : bool, keyword-only
         Show a tqdm bar.
     workers : int, optional, keyword-only
-        Threads for the blocks of each level's work (numpy releases the GIL
-        in them); ``None`` uses every CPU this process may run on, ``1`` runs
-        in the calling thread only. The hierarchy is the same for any value.
+        Deprecated and ignored (a ``FutureWarning``): the levels are one
+        sequential compiled loop, which releases the GIL, so several
+        hierarchies can be built on threads at once.
 
     Returns
     -------
@@ -399,7 +407,7 @@ def build_hierarchy(
     TypeError
         ``mesh`` is not a mesh, or an option has the wrong type.
     ValueError
-        Non-manifold mesh, unreferenced vertices, negative options.
+        Invalid mesh arrays (non-finite, out-of-range or repeated indices), negative options.
 
     Examples
     --------
