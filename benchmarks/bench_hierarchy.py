@@ -30,19 +30,22 @@ import sys
 import threading
 import time
 
+import fast_simplification
 import numpy as np
 import psutil
 import scipy.sparse as sp
-
 from _common import load_mesh, markdown_table, timed, write_markdown
-
-import fast_simplification
 
 from o3d_lsmesh.fairing.multiresolution import multiresolution_fairing_arrays
 from o3d_lsmesh.hierarchy import build_hierarchy
 from o3d_lsmesh.hierarchy.collapse import collapse_level, workspace
 from o3d_lsmesh.hierarchy.hierarchy import build_hierarchy_arrays, locked_vertices
-from o3d_lsmesh.metrics import signed_volume, surface_distance, topology_summary, triangle_angles
+from o3d_lsmesh.metrics import (
+    signed_volume,
+    surface_distance,
+    topology_summary,
+    triangle_angles,
+)
 
 QUICK = "--quick" in sys.argv
 SAMPLES = 20_000 if QUICK else 50_000
@@ -176,7 +179,7 @@ def speed_row(label, V, F, rounds):
         ours.append(o)
         fs.append(f)
     ours, fs = np.array(ours), np.array(fs)
-    best = lambda a, i: a[:, i].min()  # noqa: E731
+    best = lambda a, i: a[:, i].min()
     return [
         label, len(V), len(F), len(h), f"{h.vertex_count(len(h) - 1)} / {len(np.unique(out[1]))}",
         f"{best(ours, 0):.2f}", f"{best(fs, 0):.2f}", f"{best(ours, 0) / best(fs, 0):.2f}",

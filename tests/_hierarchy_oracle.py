@@ -148,7 +148,7 @@ def collapse_level(V, F, locked, *, alpha=1.0, beta=0.01, max_removals=None, max
         offsets.append(len(flat))
     triangles = [[parent[v] for v in t] for t in T]
     triangles = [t for t in triangles if t[0] != t[1] and t[1] != t[2] and t[2] != t[0]]
-    as_int = lambda values: np.array(values, dtype=np.int64)  # noqa: E731
+    as_int = lambda values: np.array(values, dtype=np.int64)
     return (as_int(removed), as_int([target[x] for x in removed]), as_int(offsets), as_int(flat), as_int(parent),
             as_int(triangles).reshape(-1, 3))
 

@@ -5,14 +5,14 @@ from __future__ import annotations
 import pickle
 import threading
 
+import _hierarchy_oracle as oracle
 import numpy as np
 import open3d as o3d
 import pytest
+from conftest import grid, load_mesh, triangle_soups
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import _hierarchy_oracle as oracle
-from conftest import grid, load_mesh, triangle_soups
 from o3d_lsmesh.hierarchy import build_hierarchy, from_fast_simplification
 from o3d_lsmesh.hierarchy.collapse import collapse_level
 from o3d_lsmesh.hierarchy.hierarchy import build_hierarchy_arrays, locked_vertices

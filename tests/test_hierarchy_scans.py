@@ -6,12 +6,16 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+import _hierarchy_oracle as oracle
 import numpy as np
 import pytest
-
-import _hierarchy_oracle as oracle
 from conftest import REPO, load_mesh
-from o3d_lsmesh import build_hierarchy, from_fast_simplification, multiresolution_fairing
+
+from o3d_lsmesh import (
+    build_hierarchy,
+    from_fast_simplification,
+    multiresolution_fairing,
+)
 
 SCANS = Path(os.environ.get("O3D_LSMESH_SCANS", REPO.parent / "shared" / "data" / "scans"))
 SCAN_NAMES = [f"scans/{p.name}" for p in sorted(SCANS.glob("*.ply"))] or ["scans/(none found)"]

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import open3d as o3d
 import pytest
-
 from conftest import grid
+
 from o3d_lsmesh.fairing.constrained import constrained_fairing_arrays
 from o3d_lsmesh.fairing.multiresolution import multiresolution_fairing
 from o3d_lsmesh.hierarchy import build_hierarchy, from_fast_simplification

@@ -8,8 +8,12 @@ import numpy as np
 
 from .._o3d import new_mesh
 from .._validate import as_choice, as_count
+from ..hierarchy.hierarchy import (
+    MeshHierarchy,
+    build_hierarchy_arrays,
+    read_hierarchy_mesh,
+)
 from ..topology import boundary_halfedges
-from ..hierarchy.hierarchy import MeshHierarchy, build_hierarchy_arrays, read_hierarchy_mesh
 from .constrained import FAIRING_METHODS, constrained_fairing_arrays
 
 __all__ = ["multiresolution_fairing", "multiresolution_fairing_arrays"]

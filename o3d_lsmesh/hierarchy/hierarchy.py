@@ -77,7 +77,7 @@ class MeshHierarchy:
     tensor_format: tuple = ()
 
     def __post_init__(self) -> None:
-        freeze = lambda seq: tuple(_frozen(a) for a in seq)  # noqa: E731
+        freeze = lambda seq: tuple(_frozen(a) for a in seq)
         object.__setattr__(self, "vertices", _frozen(self.vertices))
         for name in ("triangles", "representatives", "parents", "removed", "targets", "ring_offsets", "rings"):
             object.__setattr__(self, name, freeze(getattr(self, name)))
