@@ -5,7 +5,7 @@ SHELL := /bin/bash
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
-APT_PACKAGES := libsuitesparse-dev libopenblas0-pthread libusb-1.0-0 libvulkan1 mesa-vulkan-drivers libgl1 libgomp1
+APT_PACKAGES := gcc python3-dev libsuitesparse-dev libopenblas0-pthread libusb-1.0-0 libvulkan1 mesa-vulkan-drivers libgl1 libgomp1
 STAMP := $(VENV)/.installed
 
 .PHONY: demo test bench system venv clean
@@ -30,7 +30,7 @@ system:
 	  apt-get update -qq && apt-get install -y -qq --no-install-recommends $$missing; \
 	fi
 
-$(STAMP): setup.cfg pyproject.toml | system
+$(STAMP): setup.cfg setup.py pyproject.toml o3d_lsmesh/hierarchy/_kernel.pyx | system
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q -e '.[test]'

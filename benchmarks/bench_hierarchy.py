@@ -1,49 +1,66 @@
-"""Volume-cost hierarchy (issue 4) against fast-simplification at the same vertex counts.
+"""Volume-cost hierarchy (issues 4, 13) against fast-simplification, and multiresolution fairing by scale.
 
-For every level of ``build_hierarchy`` on bunny, horse, camel and igea, and
-fast-simplification run (from the input, fresh) to the same triangle count:
-two-sided Hausdorff and mean surface distance to the input (in % of the
-bounding-box diagonal), volume change in %, smallest angle and share of
-triangles with an angle under 10 degrees, manifoldness, Euler characteristic
-and boundary loops, and time (ours: cumulative time of the levels so far).
-Then the whole hierarchy of a ~1.3M-vertex mesh (horse, Loop-subdivided three
-times) down to ~1% of its vertices against fast-simplification to the same
-count, in the same run, as a ratio.
+1. For every level of ``build_hierarchy`` on bunny, horse, camel and igea, and
+   fast-simplification run (from the input, fresh) to the same triangle count:
+   two-sided Hausdorff and mean surface distance to the input (in % of the
+   bounding-box diagonal), volume change in %, smallest angle and share of
+   triangles with an angle under 10 degrees, manifoldness, Euler characteristic
+   and boundary loops, and time (ours: cumulative time of the levels so far).
+2. Speed: the whole hierarchy down to 1% of the vertices against
+   fast-simplification run once to the same triangle count, on Igea (134k),
+   the horse Loop-subdivided three times (1.27M) and four times (5.1M),
+   interleaved rounds, one thread each (our kernel is one sequential loop;
+   fast-simplification is single-threaded); wall time and the calling
+   thread's CPU time (the machine is shared), and the peak memory above the
+   baseline of each call (RSS sampled every 2 ms). The bunny's whole hierarchy
+   to 100 vertices is timed too.
+3. Multiresolution fairing by scale: levels 0..6 on the bunny, the horse and a
+   generated blob with Gaussian noise of 0.3 and 0.1 mean edge lengths:
+   roughness (normal component of the uniform Laplacian, squared, over the
+   squared mean edge length), the whole uniform-Laplacian energy, volume change
+   against the clean mesh, and mean distance to the clean vertices in edge
+   lengths; with and without the final fairing of ``M_0``.
 
 Run: ``.venv/bin/python benchmarks/bench_hierarchy.py [--quick]``.
 """
 
 from __future__ import annotations
 
-import os
 import sys
+import threading
 import time
-from concurrent.futures import ThreadPoolExecutor
-
-import numpy as np
-
-from _common import load_mesh, markdown_table, timed, write_markdown
 
 import fast_simplification
+import numpy as np
+import psutil
+import scipy.sparse as sp
+from _common import load_mesh, markdown_table, timed, write_markdown
 
-from o3d_lsmesh._validate import as_workers
+from o3d_lsmesh.fairing.multiresolution import multiresolution_fairing_arrays
 from o3d_lsmesh.hierarchy import build_hierarchy
-from o3d_lsmesh.hierarchy.collapse import collapse_level
-from o3d_lsmesh.hierarchy.hierarchy import build_hierarchy_arrays, read_manifold_mesh
-from o3d_lsmesh.metrics import signed_volume, surface_distance, topology_summary, triangle_angles
+from o3d_lsmesh.hierarchy.collapse import collapse_level, workspace
+from o3d_lsmesh.hierarchy.hierarchy import build_hierarchy_arrays, locked_vertices
+from o3d_lsmesh.metrics import (
+    signed_volume,
+    surface_distance,
+    topology_summary,
+    triangle_angles,
+)
 
 QUICK = "--quick" in sys.argv
 SAMPLES = 20_000 if QUICK else 50_000
 
 
 def level_times(V, F, min_vertices=100):
-    """Cumulative wall time after each level, by the same loop (and thread pool) that build_hierarchy runs."""
-    times, total, reps, P, T = [0.0], 0.0, np.arange(len(V)), V, F
-    workers = as_workers(None)
-    executor = ThreadPoolExecutor(workers) if workers > 1 else None
+    """Cumulative wall time after each level, by the same loop that build_hierarchy runs."""
+    start = time.perf_counter()
+    buffers = workspace()
+    locked = locked_vertices(F, len(V))
+    times, reps, P, T = [time.perf_counter() - start], np.arange(len(V)), V, F
+    total = times[0]
     while len(P) > min_vertices:
         start = time.perf_counter()
-        level = collapse_level(P, T, max_removals=len(P) - min_vertices, executor=executor)
+        level = collapse_level(P, T, max_removals=len(P) - min_vertices, locked=locked[reps], workspace=buffers)
         if level is None:
             break
         keep = np.ones(len(P), dtype=bool)
@@ -52,8 +69,6 @@ def level_times(V, F, min_vertices=100):
         P, T = V[reps], level.triangles
         total += time.perf_counter() - start
         times.append(total)
-    if executor is not None:
-        executor.shutdown()
     return times
 
 
@@ -120,93 +135,188 @@ def compare(name):
             markdown_table(header, rows)), summary
 
 
-def large():
-    mesh = load_mesh("horse.ply")
-    if mesh is None:
-        return None
-    mesh = mesh.subdivide_loop(number_of_iterations=1 if QUICK else 3)
-    V = np.asarray(mesh.vertices).copy()
-    F = np.asarray(mesh.triangles).astype(np.int64)
+class PeakMemory:
+    """Peak resident memory above the starting level while the block runs (sampled every 2 ms), in MB."""
+
+    def __enter__(self):
+        self.process = psutil.Process()
+        self.base = self.peak = self.process.memory_info().rss
+        self.running = True
+        self.thread = threading.Thread(target=self._sample, daemon=True)
+        self.thread.start()
+        return self
+
+    def _sample(self):
+        while self.running:
+            self.peak = max(self.peak, self.process.memory_info().rss)
+            time.sleep(0.002)
+
+    def __exit__(self, *exc):
+        self.running = False
+        self.thread.join()
+        self.peak = max(self.peak, self.process.memory_info().rss)
+        self.mb = (self.peak - self.base) / 2**20
+
+
+def _run(fn):
+    with PeakMemory() as memory:
+        wall, cpu = time.perf_counter(), time.thread_time()
+        result = fn()
+        cpu, wall = time.thread_time() - cpu, time.perf_counter() - wall
+    return result, wall, cpu, memory.mb
+
+
+def speed_row(label, V, F, rounds):
     F32 = F.astype(np.int32)
-    del mesh
-    target = len(V) // 100
-    # rounds of (ours, fast-simplification, ours in one thread) at this size: the first calls pay for fresh memory, which costs
-    # ~2 ms per MB on this VM and hits both libraries; the later rounds show both warm, interleaved so that
-    # a slow spell of the shared machine hits both sides
-    ours, fs, single, cpu = [], [], [], []
-    for _ in range(1 if QUICK else 3):
-        h = None  # the previous round's hierarchy is not kept while the next one is built
-        before = os.times()
-        h, t = timed(lambda: build_hierarchy((V, F), min_vertices=target))
-        after = os.times()
-        ours.append(t)
-        cpu.append(after.user + after.system - before.user - before.system)
-        coarse = h.level_arrays(len(h) - 1)
-        (Vf, Ff), t = timed(lambda: fast_simplification.simplify(V, F32, target_count=len(coarse[1])))
-        fs.append(t)
-        h1, t = timed(lambda: build_hierarchy((V, F), min_vertices=target, workers=1))
-        single.append(t)
-        assert h1 == h, "the hierarchy must not depend on the number of threads"
-        del h1
-    # the input check (edge- and vertex-manifold, topology.check_manifold) is part of build_hierarchy;
-    # fast-simplification checks nothing, so the check alone and the hierarchy without it are timed too
-    _, t_check = timed(lambda: read_manifold_mesh((V, F)), repeat=2)
-    _, t_core = timed(lambda: build_hierarchy_arrays(V, F, min_vertices=target), repeat=1 if QUICK else 2)
-    best = int(np.argmin(ours))
-    return markdown_table(
-        ["mesh", "V", "F", "levels", "V coarsest (ours / fs)", "ours first call s", "fs first call s",
-         "ratio first calls", "ours best s", "fs best s", "ratio best", f"ours CPU s (user+sys, {as_workers(None)} threads)",
-         "ours 1 thread, best s", "ratio 1 thread, best", "input check alone s",
-         "ours without the check, best s", "ratio without the check, best"],
-        [[
-            "horse, Loop-subdivided x" + ("1" if QUICK else "3"), len(V), len(F), len(h),
-            f"{h.vertex_count(len(h) - 1)} / {len(np.unique(Ff))}", f"{ours[0]:.2f}", f"{fs[0]:.2f}",
-            f"{ours[0] / fs[0]:.2f}", f"{min(ours):.2f}", f"{min(fs):.2f}", f"{min(ours) / min(fs):.2f}",
-            f"{cpu[best]:.2f}", f"{min(single):.2f}", f"{min(single) / min(fs):.2f}",
-            f"{t_check:.2f}", f"{t_core:.2f}", f"{t_core / min(fs):.2f}",
-        ]],
-    ), (ours, fs, single)
+    target = max(len(V) // 100, 100)
+    ours, fs = [], []
+    h = None
+    for _ in range(rounds):  # interleaved, so that a slow spell of the shared machine hits both
+        h = None
+        h, *o = _run(lambda: build_hierarchy_arrays(V, F, min_vertices=target))
+        count = len(h.triangles[-1])
+        out, *f = _run(lambda: fast_simplification.simplify(V, F32, target_count=count))
+        ours.append(o)
+        fs.append(f)
+    ours, fs = np.array(ours), np.array(fs)
+    best = lambda a, i: a[:, i].min()
+    return [
+        label, len(V), len(F), len(h), f"{h.vertex_count(len(h) - 1)} / {len(np.unique(out[1]))}",
+        f"{best(ours, 0):.2f}", f"{best(fs, 0):.2f}", f"{best(ours, 0) / best(fs, 0):.2f}",
+        f"{best(ours, 1):.2f}", f"{best(fs, 1):.2f}", f"{best(ours, 1) / best(fs, 1):.2f}",
+        f"{ours[:, 2].max():.0f}", f"{fs[:, 2].max():.0f}",
+    ], (ours[:, 0].round(2).tolist(), fs[:, 0].round(2).tolist())
+
+
+def speed():
+    rows, raw = [], []
+    bunny = load_mesh("bunny.ply")
+    if bunny is not None:
+        V, F = np.asarray(bunny.vertices).copy(), np.asarray(bunny.triangles).astype(np.int64)
+        runs = [_run(lambda: build_hierarchy_arrays(V, F))[1:3] for _ in range(5)]
+        raw.append(f"bunny ({len(V)} vertices) whole hierarchy to 100 vertices, best of 5: "
+                   f"{min(r[0] for r in runs):.3f} s wall, {min(r[1] for r in runs):.3f} s thread CPU")
+    igea = load_mesh("igea.ply")
+    if igea is not None:
+        V, F = np.asarray(igea.vertices).copy(), np.asarray(igea.triangles).astype(np.int64)
+        row, times = speed_row("igea", V, F, 3 if QUICK else 5)
+        rows.append(row)
+        raw.append(f"igea rounds, ours s {times[0]}, fs s {times[1]}")
+    horse = load_mesh("horse.ply")
+    if horse is not None:
+        for k in ((1,) if QUICK else (3, 4)):
+            mesh = horse.subdivide_loop(number_of_iterations=k)
+            V, F = np.asarray(mesh.vertices).copy(), np.asarray(mesh.triangles).astype(np.int64)
+            del mesh
+            row, times = speed_row(f"horse, Loop-subdivided x{k}", V, F, 3 if k <= 3 else 1)
+            rows.append(row)
+            raw.append(f"horse x{k} rounds, ours s {times[0]}, fs s {times[1]}")
+            del V, F
+    table = markdown_table(
+        ["mesh", "V", "F", "levels", "V coarsest (ours / fs)", "ours wall s", "fs wall s", "ratio wall",
+         "ours thread CPU s", "fs thread CPU s", "ratio CPU", "ours peak MB", "fs peak MB"],
+        rows,
+    )
+    return table + "\n\n" + "\n".join(f"- {line}" for line in raw)
+
+
+# ------------------------------------------------------------ multiresolution by scale
+
+
+def _blob():
+    import open3d as o3d
+
+    sphere = o3d.geometry.TriangleMesh.create_sphere(radius=1.0, resolution=60)
+    V = np.asarray(sphere.vertices)
+    u = V / np.linalg.norm(V, axis=1, keepdims=True)
+    r = 1 + 0.15 * np.sin(3 * u[:, 0]) * np.cos(2 * u[:, 1]) + 0.1 * u[:, 2] ** 2
+    return u * r[:, None], np.asarray(sphere.triangles).astype(np.int64)
+
+
+def _energies(P, F):
+    n = len(P)
+    edges = np.unique(np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1), axis=0)
+    A = sp.coo_matrix((np.ones(2 * len(edges)), (np.r_[edges[:, 0], edges[:, 1]], np.r_[edges[:, 1], edges[:, 0]])),
+                      shape=(n, n)).tocsr()
+    laplacian = A @ P / np.asarray(A.sum(axis=1)) - P
+    normals = np.zeros_like(P)
+    face = np.cross(P[F[:, 1]] - P[F[:, 0]], P[F[:, 2]] - P[F[:, 0]])
+    for c in range(3):
+        np.add.at(normals, F[:, c], face)
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    h2 = np.linalg.norm(P[edges[:, 0]] - P[edges[:, 1]], axis=1).mean() ** 2
+    return (np.mean(np.einsum("ij,ij->i", laplacian, normals) ** 2) / h2,
+            np.mean(np.sum(laplacian ** 2, axis=1)) / h2)
+
+
+def scale():
+    meshes = [("blob", _blob())]
+    for name in ("bunny", "horse"):
+        mesh = load_mesh(name + ".ply")
+        if mesh is not None:
+            meshes.append((name, (np.asarray(mesh.vertices).copy(), np.asarray(mesh.triangles).astype(np.int64))))
+    rows = []
+    summary = []
+    for name, (V, F) in meshes:
+        spacing = np.linalg.norm(V[F[:, 0]] - V[F[:, 1]], axis=1).mean()
+        volume = signed_volume((V, F))
+        for sigma in (0.3, 0.1):
+            noisy = V + np.random.default_rng(0).normal(scale=sigma * spacing, size=V.shape)
+            h = build_hierarchy_arrays(noisy, F, max_levels=6, min_vertices=4)
+            for final, label in ((None, "final fairing (default)"), (0, "paper's loop only")):
+                rough = []
+                for level in range(7):
+                    P = multiresolution_fairing_arrays(h, level, final_iterations=final)
+                    normal_energy, energy = _energies(P, F)
+                    rough.append(normal_energy)
+                    rows.append([name, sigma, label, level, f"{normal_energy:.3g}", f"{energy:.3g}",
+                                 f"{100 * (signed_volume((P, F)) / volume - 1):+.3f}",
+                                 f"{np.linalg.norm(P - V, axis=1).mean() / spacing:.3f}"])
+                monotone = all(a > b for a, b in zip(rough, rough[1:]))
+                summary.append([name, sigma, label, "yes" if monotone else "no", f"{rough[0]:.3g}", f"{rough[-1]:.3g}"])
+    return (markdown_table(["mesh", "noise (edge lengths)", "variant", "roughness falls at every level 0..6",
+                            "roughness level 0", "roughness level 6"], summary),
+            markdown_table(["mesh", "noise", "variant", "level", "roughness (normal Laplacian)",
+                            "uniform Laplacian energy", "volume change %", "mean distance to clean (edge lengths)"],
+                           rows))
 
 
 def main():
-    sections = []
-    summaries = []
+    sections, summaries = [], []
+    speed_table = speed()
+    print(speed_table, flush=True)
+    scale_summary, scale_rows = scale()
+    print(scale_summary, flush=True)
     for name in ("bunny", "horse", "camel", "igea"):
         section, summary = compare(name)
         if section is not None:
             sections.append(section)
             summaries.append(summary)
-    big = large()
-    if big is not None:
-        big, (ours, fs, single) = big
-        print("1M rounds, ours s:", [round(t, 2) for t in ours], "fs s:", [round(t, 2) for t in fs],
-              "ours 1 thread s:", [round(t, 2) for t in single], flush=True)
-    head = [(
-        "Summary",
-        markdown_table(
-            ["mesh", "V", "levels", "V coarsest", "whole hierarchy s (best of runs)",
-             "levels with |volume change| <= fast-simplification's"],
-            summaries,
-        ),
-    )]
-    if big is not None:
-        head.append(("1M-vertex hierarchy against fast-simplification (same run)", big))
+    head = [
+        ("Whole hierarchy to 1% against one fast-simplification run (same run, interleaved, one thread each)",
+         speed_table),
+        ("Multiresolution fairing by scale", scale_summary),
+        ("Summary of the per-level cross-check",
+         markdown_table(["mesh", "V", "levels", "V coarsest", "whole hierarchy s (best of runs)",
+                         "levels with |volume change| <= fast-simplification's"], summaries)),
+    ]
     notes = (
-        "Each row: our level i against fast-simplification run from the input to the same triangle count "
+        "Speed table: rounds of (our `build_hierarchy_arrays` to 1% of the vertices, fast-simplification to our "
+        "coarsest triangle count) interleaved; `wall` is the best round's wall time, `thread CPU` the best round's "
+        "CPU time of the calling thread (both run in one thread; the machine is shared with other jobs, so CPU time "
+        "is the steadier figure); peak MB is the largest rise of the process's resident memory during a call. "
+        "Our time includes the lock computation (non-manifold vertices) and the copies of the caller's arrays. "
+        "Cross-check tables: our level i against fast-simplification run from the input to the same triangle count "
         "(`target_count` = our level's triangles; its vertex count is shown). Distances are two-sided, sampled "
         f"({SAMPLES} points per side + vertices, RaycastingScene), in % of the bounding-box diagonal. Volume change "
-        "is the signed volume (divergence theorem; open meshes included) against the input's. `manifold`: y = edge- "
-        "and vertex-manifold, edge = edge-manifold only, n = neither. `euler/loops`: Euler characteristic / boundary "
-        "loops (the input's must be kept). Our time is cumulative over the levels (one timed loop of the same "
-        "`collapse_level` calls, on the same thread pool); fast-simplification's is one fresh run to that count. "
-        "The machine has 2 cores shared with other jobs: compare ratios within a run. 1M table: three interleaved "
-        "rounds of (our `build_hierarchy` with its default `workers=None`, i.e. every CPU, fast-simplification to "
-        "our coarsest triangle count, our `build_hierarchy(workers=1)`, checked to give the same hierarchy); "
-        "fast-simplification runs in one thread. `first call` is round one, where both pay for fresh memory (this "
-        "VM maps guest memory lazily), `best` the best of the three rounds of each; `CPU s` is the user + system "
-        "time of our best round over all threads."
+        "is the signed volume against the input's. `manifold`: y = edge- and vertex-manifold, edge = edge-manifold "
+        "only, n = neither. `euler/loops`: Euler characteristic / boundary loops (the input's must be kept). Our time "
+        "is cumulative over the levels (the same `collapse_level` calls); fast-simplification's is one fresh run to "
+        "that count. Scale table: roughness = mean squared normal component of the uniform Laplacian over the squared "
+        "mean edge length (the tangential part measures the triangulation, not the surface)."
     )
-    write_markdown("hierarchy.md", "Volume-cost hierarchy vs fast-simplification", head + [("How to read", notes)]
+    write_markdown("hierarchy.md", "Volume-cost hierarchy vs fast-simplification, multiresolution fairing by scale",
+                   head + [("How to read", notes), ("Multiresolution fairing by scale, every level", scale_rows)]
                    + sections)
 
 

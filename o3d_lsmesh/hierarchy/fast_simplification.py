@@ -11,13 +11,14 @@ through one lock.
 from __future__ import annotations
 
 import threading
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
 from .._validate import as_count
-from ..topology import adjacency_matrix, unique_edges
-from .hierarchy import MeshHierarchy, _tensor_format, read_manifold_mesh
+from ..topology import adjacency_matrix, connected_components, unique_edges
+from .hierarchy import MeshHierarchy, _tensor_format, read_hierarchy_mesh
 
 __all__ = ["from_fast_simplification"]
 
@@ -63,12 +64,24 @@ def from_fast_simplification(
     so that multiresolution fairing can run on either. The QEM collapses are
     neither independent nor checked for topology: a level's removed vertices
     may be adjacent (refinement then solves for them together) and, unlike
-    :func:`build_hierarchy`, a level may change the topology.
+    :func:`build_hierarchy`, a level may change the topology (non-manifold
+    input is accepted, but fast-simplification cannot be told to keep its
+    non-manifold vertices). Unreferenced vertices are left out of the QEM run
+    and kept at every level.
+
+    Level ``i``'s triangles are those of level ``i - 1`` mapped by
+    ``parents[i]``, in order, without (1) the collapsed ones, (2) repeats of a
+    vertex set already taken and (3) every triangle beyond the first two on an
+    edge: QEM collapses can fold a third triangle onto an edge (on the
+    bunny, 1 to 3 triangles at 3 of 8 levels), and constrained fairing needs
+    edge-manifold levels. So a level is the image of the input triangles under
+    :meth:`~MeshHierarchy.vertex_map` except for the triangles rule (3) dropped
+    at this level or above.
 
     Parameters
     ----------
     mesh : open3d.geometry.TriangleMesh, open3d.t.geometry.TriangleMesh or (vertices, triangles)
-        Manifold mesh without unreferenced vertices; not modified.
+        Any mesh (non-manifold ones too; unreferenced vertices are kept at every level); not modified.
     levels : int or sequence of int, keyword-only
         Number of levels below the input, at geometrically decreasing vertex
         counts down to ``min_vertices``; or the strictly decreasing target
@@ -103,16 +116,23 @@ def from_fast_simplification(
         raise ValueError(f"agg must be non-negative and finite, got {agg}")
     if not isinstance(progress, (bool, np.bool_)):
         raise TypeError(f"progress must be a bool, got {type(progress).__name__}")
-    data = read_manifold_mesh(mesh)
+    data = read_hierarchy_mesh(mesh)
     V, F = data.vertices, data.triangles
     n0, m0 = len(V), len(F)
     counts = _level_counts(levels, n0, min_vertices)
 
     target_triangles = max(int(m0 * counts[-1] / n0 * 0.95), 4)
-    points32 = V.astype(np.float32)
+    # fast-simplification merges unreferenced vertices too: it runs on the referenced ones only, and
+    # the others are carried through every level as they are
+    used = np.zeros(n0, dtype=bool)
+    used[F.ravel()] = True
+    referenced = np.flatnonzero(used)
+    compact = np.cumsum(used) - 1
+    Vr, Fr = np.ascontiguousarray(V[referenced]), np.ascontiguousarray(compact[F])
+    points32 = Vr.astype(np.float32)
     with _LOCK:
         _, _, collapses = fast_simplification.simplify(
-            V, F.astype(np.int32), target_count=target_triangles, agg=float(agg), return_collapses=True
+            Vr, Fr.astype(np.int32), target_count=target_triangles, agg=float(agg), return_collapses=True
         )
         collapses = np.asarray(collapses, dtype=np.int32).reshape(-1, 2)
         mappings = []
@@ -125,9 +145,13 @@ def from_fast_simplification(
             prefix = min(n0 - int(count), len(collapses))
             if prefix <= 0:
                 continue
-            _, _, mapping = fast_simplification.replay_simplification(points32, F, collapses[:prefix])
-            mappings.append((prefix, np.asarray(mapping, dtype=np.int64)))
+            _, _, mapping = fast_simplification.replay_simplification(points32, Fr, collapses[:prefix])
+            full = np.arange(n0, dtype=np.int64) + len(referenced)  # unreferenced: labels of their own
+            full[referenced] = np.asarray(mapping, dtype=np.int64)
+            mappings.append((prefix, full))
+    collapses = referenced[collapses] if len(collapses) else collapses.astype(np.int64)
 
+    n_components, component = connected_components(F, n0)
     tris = [F]
     reps = [np.arange(n0, dtype=np.int64)]
     empty = np.zeros(0, dtype=np.int64)
@@ -136,6 +160,10 @@ def from_fast_simplification(
         n_prev = len(reps[-1])
         # nesting by construction: a level-(i-1) vertex goes where its input representative goes
         raw_parent = mapping[reps[-1]]
+        # a component whose triangles all collapsed is mapped anywhere by the replay: merges stay
+        # within the input's components (else split vertices land on another component)
+        raw_parent = np.unique(raw_parent * np.int64(n_components) + component[reps[-1]], return_inverse=True)[1]
+        raw_parent = raw_parent.reshape(-1).astype(np.int64)
         used = np.zeros(int(raw_parent.max()) + 1, dtype=bool)
         used[raw_parent] = True
         compact = np.cumsum(used) - 1

@@ -8,8 +8,7 @@ vertex of level ``i`` is a vertex of the input and sits at its input position.
 
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
-from contextlib import ExitStack
+import warnings
 from dataclasses import dataclass, fields
 from typing import Any
 
@@ -17,11 +16,11 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._o3d import MeshData, new_mesh, read_mesh
-from .._validate import as_count, as_positions, as_positive_float, as_workers
-from ..topology import adjacency_matrix, boundary_halfedges, check_manifold
-from .collapse import collapse_level
+from .._validate import as_count, as_positions, as_positive_float
+from ..topology import adjacency_matrix, boundary_halfedges
+from .collapse import collapse_level, workspace
 
-__all__ = ["MeshHierarchy", "build_hierarchy", "build_hierarchy_arrays", "read_manifold_mesh"]
+__all__ = ["MeshHierarchy", "build_hierarchy", "build_hierarchy_arrays", "locked_vertices", "read_hierarchy_mesh"]
 
 
 def _frozen(array: np.ndarray) -> np.ndarray:
@@ -78,7 +77,7 @@ class MeshHierarchy:
     tensor_format: tuple = ()
 
     def __post_init__(self) -> None:
-        freeze = lambda seq: tuple(_frozen(a) for a in seq)  # noqa: E731
+        freeze = lambda seq: tuple(_frozen(a) for a in seq)
         object.__setattr__(self, "vertices", _frozen(self.vertices))
         for name in ("triangles", "representatives", "parents", "removed", "targets", "ring_offsets", "rings"):
             object.__setattr__(self, name, freeze(getattr(self, name)))
@@ -263,11 +262,20 @@ def _harmonic_fill(weights: sp.csr_matrix, out: np.ndarray, removed: np.ndarray,
     return np.asarray(solution).reshape(len(removed), 3)
 
 
-def read_manifold_mesh(mesh: Any) -> MeshData:
-    """Read ``mesh`` for a hierarchy: no unreferenced vertices, edge- and vertex-manifold."""
-    data = read_mesh(mesh, name="mesh", allow_isolated=False)
-    check_manifold(data.triangles, len(data.vertices), name="mesh")
-    return data
+def read_hierarchy_mesh(mesh: Any) -> MeshData:
+    """Read ``mesh`` for a hierarchy: any mesh :func:`read_mesh` accepts (non-manifold, unreferenced vertices)."""
+    return read_mesh(mesh, name="mesh", allow_isolated=True)
+
+
+def locked_vertices(triangles: np.ndarray, n: int) -> np.ndarray:
+    """``(n,) bool``: the vertices a hierarchy keeps at every level, unmoved and never a collapse target.
+
+    Vertices whose triangles form several fans (as
+    :func:`~o3d_lsmesh.topology.nonmanifold_vertices`), vertices on an edge of
+    more than two triangles, and vertices no triangle references.
+    """
+    triangles = np.ascontiguousarray(triangles, dtype=np.int64)
+    return workspace().locked_vertices(triangles, n)
 
 
 def _tensor_format(data: MeshData) -> tuple:
@@ -276,6 +284,16 @@ def _tensor_format(data: MeshData) -> tuple:
     src = data.source
     index_dtype = str(src.triangle.indices.dtype) if "indices" in src.triangle else "Int64"
     return (str(src.vertex.positions.device), str(src.vertex.positions.dtype), index_dtype)
+
+
+def _warn_workers(workers: Any) -> None:
+    if workers is not None:
+        warnings.warn(
+            "workers is deprecated and ignored: the hierarchy is built by one compiled sequential loop, "
+            "which threads did not speed up; drop the argument",
+            FutureWarning,
+            stacklevel=3,
+        )
 
 
 def build_hierarchy_arrays(
@@ -291,11 +309,16 @@ def build_hierarchy_arrays(
     mesh_kind: str = "arrays",
     tensor_format: tuple = (),
 ) -> MeshHierarchy:
-    """Array core of :func:`build_hierarchy` (inputs already validated as a manifold mesh)."""
-    workers = as_workers(workers)
-    vertices = np.asarray(vertices, dtype=np.float64)
-    triangles = np.asarray(triangles, dtype=np.int64)
+    """Array core of :func:`build_hierarchy` (inputs already validated by :func:`read_hierarchy_mesh`).
+
+    The arrays are copied: changing them afterwards does not change the hierarchy.
+    """
+    _warn_workers(workers)
+    vertices = np.array(vertices, dtype=np.float64, order="C", copy=True)
+    triangles = np.array(triangles, dtype=np.int64, order="C", copy=True)
     n0 = len(vertices)
+    buffers = workspace()
+    locked = buffers.locked_vertices(triangles, n0)
     tris = [triangles]
     reps = [np.arange(n0, dtype=np.int64)]
     empty = np.zeros(0, dtype=np.int64)
@@ -306,30 +329,25 @@ def build_hierarchy_arrays(
 
         bar = tqdm(total=max(n0 - min_vertices, 0), desc="mesh hierarchy", unit="vertex")
     positions = vertices
-    with ExitStack() as stack:
-        # one pool for all levels; the blocks of a level share it (none of them submits work itself)
-        executor = None
-        if workers > 1:
-            executor = stack.enter_context(ThreadPoolExecutor(workers, thread_name_prefix="o3d_lsmesh"))
-        while (max_levels is None or len(tris) - 1 < max_levels) and len(positions) > min_vertices:
-            level = collapse_level(
-                positions, tris[-1], alpha=alpha, beta=beta, max_removals=len(positions) - min_vertices,
-                executor=executor,
-            )
-            if level is None:
-                break
-            keep = np.ones(len(positions), dtype=bool)
-            keep[level.removed] = False
-            reps.append(reps[-1][keep])
-            positions = vertices[reps[-1]]
-            tris.append(level.triangles)
-            parents.append(level.parent)
-            removed.append(level.removed)
-            targets.append(level.targets)
-            offsets.append(level.ring_offsets)
-            rings.append(level.ring)
-            if bar is not None:
-                bar.update(len(level.removed))
+    while (max_levels is None or len(tris) - 1 < max_levels) and len(positions) > min_vertices:
+        level = collapse_level(
+            positions, tris[-1], alpha=alpha, beta=beta, max_removals=len(positions) - min_vertices,
+            locked=locked[reps[-1]], workspace=buffers,
+        )
+        if level is None:
+            break
+        keep = np.ones(len(positions), dtype=bool)
+        keep[level.removed] = False
+        reps.append(reps[-1][keep])
+        positions = vertices[reps[-1]]
+        tris.append(level.triangles)
+        parents.append(level.parent)
+        removed.append(level.removed)
+        targets.append(level.targets)
+        offsets.append(level.ring_offsets)
+        rings.append(level.ring)
+        if bar is not None:
+            bar.update(len(level.removed))
     if bar is not None:
         bar.close()
     return MeshHierarchy(
@@ -355,14 +373,22 @@ def build_hierarchy(
     the 1-ring neighbour ``x_k`` of least cone volume
     ``|sum_j (x_j - x_k) x (x_{j+1} - x_k) . (x - x_k)|``. Only collapses that
     pass the link condition, keep boundary vertices on the boundary, and
-    neither flip nor degenerate a triangle are made, so every level is a
-    manifold mesh with the input's Euler characteristic and boundary loops.
-    See :mod:`o3d_lsmesh.hierarchy.collapse` for the independence used.
+    neither flip nor degenerate a triangle are made, so every level keeps the
+    input's Euler characteristic, components and boundary loops. One compiled
+    sequential loop per level (:mod:`o3d_lsmesh.hierarchy.collapse` states
+    its rules).
+
+    Any mesh is accepted, as scanners produce them: a vertex whose triangles
+    form several fans, or that lies on an edge of more than two triangles, is
+    locked (never removed, never a collapse target), and so is every
+    unreferenced vertex (kept at every level, mapped to itself); everything
+    else simplifies as on a manifold mesh, so every level has the input's set
+    of non-manifold vertices and edges.
 
     Parameters
     ----------
     mesh : open3d.geometry.TriangleMesh, open3d.t.geometry.TriangleMesh or (vertices, triangles)
-        Manifold mesh without unreferenced vertices; not modified.
+        Any triangle mesh; not modified.
     alpha, beta : float, keyword-only
         Non-negative weights of the shortest and longest incident edge in the cost.
     min_vertices : int, keyword-only
@@ -372,9 +398,9 @@ def build_hierarchy(
     progress : bool, keyword-only
         Show a tqdm bar.
     workers : int, optional, keyword-only
-        Threads for the blocks of each level's work (numpy releases the GIL
-        in them); ``None`` uses every CPU this process may run on, ``1`` runs
-        in the calling thread only. The hierarchy is the same for any value.
+        Deprecated and ignored (a ``FutureWarning``): the levels are one
+        sequential compiled loop, which releases the GIL, so several
+        hierarchies can be built on threads at once.
 
     Returns
     -------
@@ -386,7 +412,7 @@ def build_hierarchy(
     TypeError
         ``mesh`` is not a mesh, or an option has the wrong type.
     ValueError
-        Non-manifold mesh, unreferenced vertices, negative options.
+        Invalid mesh arrays (non-finite, out-of-range or repeated indices), negative options.
 
     Examples
     --------
@@ -407,10 +433,9 @@ def build_hierarchy(
         max_levels = as_count(max_levels, name="max_levels")
     if not isinstance(progress, (bool, np.bool_)):
         raise TypeError(f"progress must be a bool, got {type(progress).__name__}")
-    workers = as_workers(workers)
-    data = read_manifold_mesh(mesh)
+    _warn_workers(workers)
+    data = read_hierarchy_mesh(mesh)
     return build_hierarchy_arrays(
         data.vertices, data.triangles, alpha=alpha, beta=beta, min_vertices=min_vertices,
-        max_levels=max_levels, progress=bool(progress), workers=workers, mesh_kind=data.kind,
-        tensor_format=_tensor_format(data),
+        max_levels=max_levels, progress=bool(progress), mesh_kind=data.kind, tensor_format=_tensor_format(data),
     )

@@ -1,0 +1,14 @@
+"""Build the compiled hierarchy kernel; everything else about the package is in setup.cfg."""
+
+import sys
+
+from Cython.Build import cythonize
+from setuptools import Extension, setup
+
+# -ffp-contract=off: no fused multiply-adds, so the kernel's arithmetic is the plain IEEE arithmetic
+# of the reference loop in tests/_hierarchy_oracle.py (identical levels on every platform)
+flags = [] if sys.platform == "win32" else ["-O3", "-ffp-contract=off"]
+extensions = [
+    Extension("o3d_lsmesh.hierarchy._kernel", ["o3d_lsmesh/hierarchy/_kernel.pyx"], extra_compile_args=flags),
+]
+setup(ext_modules=cythonize(extensions, compiler_directives={"language_level": "3"}))
