@@ -263,9 +263,9 @@ def _harmonic_fill(weights: sp.csr_matrix, out: np.ndarray, removed: np.ndarray,
     return np.asarray(solution).reshape(len(removed), 3)
 
 
-def read_manifold_mesh(mesh: Any) -> MeshData:
-    """Read ``mesh`` for a hierarchy: no unreferenced vertices, edge- and vertex-manifold."""
-    data = read_mesh(mesh, name="mesh", allow_isolated=False)
+def read_manifold_mesh(mesh: Any, *, weld: bool = False) -> MeshData:
+    """Read ``mesh`` for a hierarchy: no unreferenced vertices, edge- and vertex-manifold (``weld``: see ``read_mesh``)."""
+    data = read_mesh(mesh, name="mesh", allow_isolated=False, weld=weld)
     check_manifold(data.triangles, len(data.vertices), name="mesh")
     return data
 
