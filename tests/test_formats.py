@@ -149,3 +149,22 @@ def test_new_connectivity_drops_uvs_with_one_warning():
     assert len(record) == 1
     assert not out.has_triangle_uvs() and not out.has_triangle_material_ids()
     assert len(out.triangles) == len(mesh.triangles) - 2
+
+
+def test_obj_seams_stay_closed_through_encoding(tmp_path):
+    mesh, _ = _noisy_uv_sphere(tmp_path)
+    stream = o3d_lsmesh.encode_geometry(mesh, 60, bits=12)
+    for out in (o3d_lsmesh.decode_geometry(mesh, stream), list(o3d_lsmesh.iter_decode_geometry(mesh, stream, step=30))[-1]):
+        assert len(out.vertices) == len(mesh.vertices)
+        np.testing.assert_array_equal(np.asarray(out.triangles), np.asarray(mesh.triangles))
+        _assert_seams_closed(mesh, out)
+        np.testing.assert_array_equal(np.asarray(out.triangle_uvs), np.asarray(mesh.triangle_uvs))
+    # the decoded surface approximates the input (60 anchors on ~760 welded vertices: a smooth sphere)
+    err = np.linalg.norm(np.asarray(out.vertices) - np.asarray(mesh.vertices), axis=1)
+    assert err.mean() < 0.1
+
+
+def test_spectral_approximation_keeps_seams_closed(tmp_path):
+    mesh, _ = _noisy_uv_sphere(tmp_path)
+    out = o3d_lsmesh.spectral_approximation(mesh, 30)
+    _assert_seams_closed(mesh, out)
