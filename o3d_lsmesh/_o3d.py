@@ -33,10 +33,9 @@ The open3d import is lazy so that the array core works without it.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from typing import Any
-
-import warnings
 
 import numpy as np
 

@@ -313,8 +313,8 @@ def _annotate(image, panel_width, titles, bar, background):
     FigureCanvasAgg, ColorbarBase, LinearSegmentedColormap, Normalize, Figure = _matplotlib()
     height, total_width = image.shape[:2]
     font = float(np.clip(panel_width / 22.0, 8.0, 18.0))  # points = pixels at dpi 72
-    title_band = int(round(2.2 * font)) if titles is not None else 0
-    bar_band = int(round(5.2 * font)) if bar is not None else 0
+    title_band = round(2.2 * font) if titles is not None else 0
+    bar_band = round(5.2 * font) if bar is not None else 0
     full = height + title_band + bar_band
     dpi = 72.0
     fig = Figure(figsize=(total_width / dpi, full / dpi), dpi=dpi, facecolor=tuple(background))

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 
@@ -10,9 +11,10 @@ import pytest
 
 o3d = pytest.importorskip("open3d")
 
-import o3d_lsmesh  # noqa: E402
-from o3d_lsmesh import O3DLSMeshWarning  # noqa: E402
-from o3d_lsmesh._o3d import new_mesh, read_mesh, weld_map  # noqa: E402
+import o3d_lsmesh
+from conftest import REPO
+from o3d_lsmesh import O3DLSMeshWarning
+from o3d_lsmesh._o3d import new_mesh, read_mesh, weld_map
 
 
 def _noisy_uv_sphere(tmp_path):
@@ -101,7 +103,8 @@ def test_obj_seams_stay_closed_cli(tmp_path):
     mesh, path = _noisy_uv_sphere(tmp_path)
     out_path = tmp_path / "out.obj"
     run = subprocess.run([sys.executable, "-m", "o3d_lsmesh.cli", "denoise", str(path), str(out_path),
-                          "--iterations", "10", "--quiet"], capture_output=True, text=True)
+                          "--iterations", "10", "--quiet"], capture_output=True, text=True, check=False,
+                         env=dict(os.environ, PYTHONPATH=str(REPO)), timeout=300)
     assert run.returncode == 0, run.stderr
     out = o3d.io.read_triangle_mesh(str(out_path))
     assert len(out.vertices) == len(mesh.vertices)
