@@ -11,8 +11,9 @@ import pytest
 
 o3d = pytest.importorskip("open3d")
 
-import o3d_lsmesh
 from conftest import REPO
+
+import o3d_lsmesh
 from o3d_lsmesh import O3DLSMeshWarning
 from o3d_lsmesh._o3d import new_mesh, read_mesh, weld_map
 
