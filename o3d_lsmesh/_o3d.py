@@ -42,7 +42,8 @@ import numpy as np
 from ._errors import O3DLSMeshWarning
 from ._validate import as_triangle_array, as_vertex_array, check_mesh_arrays
 
-__all__ = ["MeshData", "read_mesh", "new_mesh", "open3d", "mesh_state", "mesh_from_state", "weld_map"]
+__all__ = ["MeshData", "read_mesh", "new_mesh", "open3d", "mesh_state", "mesh_from_state", "weld_map",
+           "warn_dropped_attributes"]
 
 _NORMAL_KEYS = ("normals",)
 
@@ -193,6 +194,22 @@ def _dropped(data: MeshData) -> list[str]:
     return dropped
 
 
+def warn_dropped_attributes(data: MeshData, reason: str, *, stacklevel: int = 3) -> bool:
+    """Warn once (:class:`~o3d_lsmesh.O3DLSMeshWarning`) if ``data``'s source has attributes a new connectivity drops.
+
+    For functions whose results have new triangles but are not built by
+    :func:`new_mesh` from ``data`` (hierarchy levels): call it once per call
+    with the reason, e.g. ``"hierarchy levels have new connectivity"``.
+    Returns whether it warned. ``stacklevel=3`` points at the caller of the
+    public function that calls this.
+    """
+    dropped = _dropped(data)
+    if dropped:
+        warnings.warn(f"{reason}: {', '.join(dropped)} of the input cannot follow it and were dropped",
+                      O3DLSMeshWarning, stacklevel=stacklevel)
+    return bool(dropped)
+
+
 def new_mesh(data: MeshData, vertices: np.ndarray, triangles: np.ndarray | None = None) -> Any:
     """Build a new mesh of ``data``'s kind with ``vertices`` (and ``triangles``, if they changed).
 
@@ -211,12 +228,7 @@ def new_mesh(data: MeshData, vertices: np.ndarray, triangles: np.ndarray | None 
     elif triangles is None:
         triangles = data.triangles
     elif data.source is not None:
-        dropped = _dropped(data)
-        if dropped:
-            warnings.warn(
-                f"the result has new connectivity: {', '.join(dropped)} of the input cannot follow it and "
-                "were dropped", O3DLSMeshWarning, stacklevel=3,
-            )
+        warn_dropped_attributes(data, "the result has new connectivity", stacklevel=4)
     vertices = np.ascontiguousarray(vertices, dtype=np.float64)
     triangles = np.ascontiguousarray(triangles, dtype=np.int64)
     if data.kind == "arrays":

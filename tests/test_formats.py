@@ -172,3 +172,14 @@ def test_spectral_approximation_keeps_seams_closed(tmp_path):
     mesh, _ = _noisy_uv_sphere(tmp_path)
     out = o3d_lsmesh.spectral_approximation(mesh, 30)
     _assert_seams_closed(mesh, out)
+
+
+def test_warn_dropped_attributes_names_what_is_lost():
+    from o3d_lsmesh._o3d import warn_dropped_attributes
+
+    plain = read_mesh(o3d.geometry.TriangleMesh.create_sphere(resolution=5))
+    assert warn_dropped_attributes(plain, "levels") is False  # nothing to drop: no warning
+    tensor = o3d.t.geometry.TriangleMesh.from_legacy(o3d.geometry.TriangleMesh.create_sphere(resolution=5,
+                                                                                             create_uv_map=True))
+    with pytest.warns(O3DLSMeshWarning, match=r"^levels: triangle attribute 'texture_uvs' of the input"):
+        assert warn_dropped_attributes(read_mesh(tensor), "levels") is True
