@@ -183,3 +183,12 @@ def test_warn_dropped_attributes_names_what_is_lost():
                                                                                              create_uv_map=True))
     with pytest.warns(O3DLSMeshWarning, match=r"^levels: triangle attribute 'texture_uvs' of the input"):
         assert warn_dropped_attributes(read_mesh(tensor), "levels") is True
+
+
+def test_hierarchy_levels_warn_once_that_uvs_are_dropped():
+    mesh = o3d.geometry.TriangleMesh.create_sphere(resolution=10, create_uv_map=True)
+    with pytest.warns(O3DLSMeshWarning, match="hierarchy levels have new connectivity: triangle UVs") as record:
+        hierarchy = o3d_lsmesh.build_hierarchy(mesh, max_levels=3)
+    assert len(record) == 1
+    level = hierarchy.level(len(hierarchy.triangles) - 1)
+    assert len(level.triangles) < len(mesh.triangles) and not level.has_triangle_uvs()

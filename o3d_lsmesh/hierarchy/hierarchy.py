@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
-from .._o3d import MeshData, new_mesh, read_mesh
+from .._o3d import MeshData, new_mesh, read_mesh, warn_dropped_attributes
 from .._validate import as_count, as_positions, as_positive_float, as_workers
 from ..topology import adjacency_matrix, boundary_halfedges, check_manifold
 from .collapse import collapse_level
@@ -379,7 +379,10 @@ def build_hierarchy(
     Returns
     -------
     MeshHierarchy
-        Level 0 is the input; it stops when no valid collapse remains.
+        Level 0 is the input; it stops when no valid collapse remains. Levels
+        hold positions and triangles only: the input's vertex colors, UVs,
+        material ids and other attributes cannot follow the new connectivity
+        and are dropped, with one ``O3DLSMeshWarning`` naming them.
 
     Raises
     ------
@@ -409,6 +412,7 @@ def build_hierarchy(
         raise TypeError(f"progress must be a bool, got {type(progress).__name__}")
     workers = as_workers(workers)
     data = read_manifold_mesh(mesh)
+    warn_dropped_attributes(data, "hierarchy levels have new connectivity")
     return build_hierarchy_arrays(
         data.vertices, data.triangles, alpha=alpha, beta=beta, min_vertices=min_vertices,
         max_levels=max_levels, progress=bool(progress), workers=workers, mesh_kind=data.kind,
