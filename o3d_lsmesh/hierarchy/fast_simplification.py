@@ -17,6 +17,7 @@ import numpy as np
 
 from .._validate import as_count
 from ..topology import adjacency_matrix, unique_edges
+from .._o3d import warn_dropped_attributes
 from .hierarchy import MeshHierarchy, _tensor_format, read_manifold_mesh
 
 __all__ = ["from_fast_simplification"]
@@ -104,6 +105,7 @@ def from_fast_simplification(
     if not isinstance(progress, (bool, np.bool_)):
         raise TypeError(f"progress must be a bool, got {type(progress).__name__}")
     data = read_manifold_mesh(mesh)
+    warn_dropped_attributes(data, "hierarchy levels have new connectivity")
     V, F = data.vertices, data.triangles
     n0, m0 = len(V), len(F)
     counts = _level_counts(levels, n0, min_vertices)
