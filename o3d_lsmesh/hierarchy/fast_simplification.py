@@ -15,9 +15,9 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from .._o3d import warn_dropped_attributes
 from .._validate import as_count
 from ..topology import adjacency_matrix, unique_edges
-from .._o3d import warn_dropped_attributes
 from .hierarchy import MeshHierarchy, _tensor_format, read_manifold_mesh
 
 __all__ = ["from_fast_simplification"]
