@@ -7,8 +7,22 @@ result with :func:`new_mesh`, so the attribute policy lives here alone:
   ``open3d.geometry.TriangleMesh``, tensor ``open3d.t.geometry.TriangleMesh``,
   or a ``(vertices, triangles)`` tuple of arrays);
 * the input is never modified: vertices and triangles are copied out;
-* with the connectivity unchanged, vertex colors (and, for tensor meshes, every
-  other per-vertex and per-triangle attribute except normals) are kept;
+* with the connectivity unchanged, every attribute is kept: vertex colors,
+  triangle UVs, triangle material ids and textures of legacy meshes; every
+  per-vertex and per-triangle attribute except normals, and the material, of
+  tensor meshes;
+* where the connectivity changes (hierarchy levels, hole filling), per-triangle
+  and per-corner data (UVs, material ids, textures, tensor triangle attributes)
+  and per-vertex colors no longer match the new triangles and are dropped, with
+  one :class:`~o3d_lsmesh.O3DLSMeshWarning` per call naming what was dropped (a
+  tensor mesh keeps its material, which does not depend on connectivity);
+* with ``read_mesh(..., weld=True)``, vertices at exactly equal coordinates
+  (the two sides of a UV seam or a normal crease as Open3D's OBJ, glTF and
+  STL readers split them) are merged before the algorithm runs, and the result
+  gets the input's split layout back, the welded position copied to every
+  duplicate, so seams stay closed and UVs stay valid. Only bit-for-bit equal
+  coordinates are merged: a tolerance would also merge distinct nearby
+  vertices of a dense scan and change its topology;
 * vertex and triangle normals are recomputed when the input had them;
 * a tensor mesh keeps its device and its position and index dtypes (integer
   positions come back as float64: computed positions rounded to integers would
@@ -19,14 +33,17 @@ The open3d import is lazy so that the array core works without it.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from ._errors import O3DLSMeshWarning
 from ._validate import as_triangle_array, as_vertex_array, check_mesh_arrays
 
-__all__ = ["MeshData", "read_mesh", "new_mesh", "open3d", "mesh_state", "mesh_from_state"]
+__all__ = ["MeshData", "read_mesh", "new_mesh", "open3d", "mesh_state", "mesh_from_state", "weld_map",
+           "warn_dropped_attributes"]
 
 _NORMAL_KEYS = ("normals",)
 
@@ -40,12 +57,46 @@ def open3d():
 
 @dataclass(frozen=True)
 class MeshData:
-    """Arrays copied out of a mesh, plus the mesh itself to rebuild its kind."""
+    """Arrays copied out of a mesh, plus the mesh itself to rebuild its kind.
+
+    When the mesh was welded (``read_mesh(..., weld=True)`` found exact
+    duplicates), ``vertices`` and ``triangles`` are the welded surface and
+    ``split`` maps each of the source's vertices to its welded vertex
+    ``(n_source,)``; otherwise ``split`` is None.
+    """
 
     vertices: np.ndarray  # (n, 3) float64
     triangles: np.ndarray  # (m, 3) int64
     source: Any
     kind: str  # "legacy", "tensor" or "arrays"
+    split: np.ndarray | None = None  # (n_source,) int64 source vertex -> welded vertex
+
+
+def weld_map(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray | None:
+    """Map each vertex to the first vertex at exactly the same coordinates, ``(n,)`` int64, or None.
+
+    None when no two vertices coincide, or when merging them would make a
+    triangle repeat a vertex (a triangle with two coincident corners: welding
+    it would need removing it, which changes connectivity; such a mesh is
+    processed as it is). Welded vertices are numbered in order of first
+    occurrence, so a mesh without duplicates keeps its numbering.
+    """
+    if len(vertices) == 0:
+        return None
+    # -0.0 == 0.0: add 0.0 so both have the same bytes in np.unique's row comparison
+    _, first, inverse = np.unique(vertices + 0.0, axis=0, return_index=True, return_inverse=True)
+    inverse = inverse.reshape(-1)
+    if len(first) == len(vertices):
+        return None
+    # renumber unique rows by first occurrence (np.unique numbers them in sorted order)
+    order = np.argsort(first, kind="stable")
+    rank = np.zeros_like(order)
+    rank[order] = np.arange(len(order))
+    split = rank[inverse].astype(np.int64)
+    welded = split[triangles]  # (m, 3)
+    if np.any((welded[:, 0] == welded[:, 1]) | (welded[:, 1] == welded[:, 2]) | (welded[:, 0] == welded[:, 2])):
+        return None
+    return split
 
 
 def _kind(mesh: Any, *, name: str = "mesh") -> str:
@@ -64,8 +115,13 @@ def _kind(mesh: Any, *, name: str = "mesh") -> str:
     )
 
 
-def read_mesh(mesh: Any, *, name: str = "mesh", allow_isolated: bool = True) -> MeshData:
+def read_mesh(mesh: Any, *, name: str = "mesh", allow_isolated: bool = True, weld: bool = False) -> MeshData:
     """Copy ``mesh`` into ``(n,3) float64`` vertices and ``(m,3) int64`` triangles and validate them.
+
+    ``weld=True`` merges vertices at exactly equal coordinates (see
+    :func:`weld_map`); :func:`new_mesh` then restores the source's split
+    layout. Only functions whose arguments and results hold no vertex indices
+    may weld (an index given in the split layout would name another vertex).
 
     Every kind goes through the same checks (:func:`~o3d_lsmesh._validate.as_vertex_array`,
     :func:`~o3d_lsmesh._validate.as_triangle_array`): positions of a real
@@ -101,6 +157,11 @@ def read_mesh(mesh: Any, *, name: str = "mesh", allow_isolated: bool = True) -> 
     vertices = as_vertex_array(raw_v, name=name)
     triangles = as_triangle_array(raw_t, len(vertices), name=name)
     check_mesh_arrays(vertices, triangles, name=name, allow_isolated=allow_isolated)
+    split = weld_map(vertices, triangles) if weld else None
+    if split is not None:
+        welded = np.zeros((int(split.max()) + 1, 3))
+        welded[split] = vertices  # duplicates hold the same coordinates: any writer gives the same row
+        return MeshData(welded, split[triangles], mesh, kind, split)
     return MeshData(vertices, triangles, mesh, kind)
 
 
@@ -110,6 +171,8 @@ def source_triangles(data: MeshData) -> np.ndarray:
     For callers that drop ``data.triangles`` while they hold large state (the
     source was validated by :func:`read_mesh` and is not modified by us).
     """
+    if data.split is not None:
+        return data.triangles
     if data.kind == "legacy":
         return np.asarray(data.source.triangles).reshape(-1, 3)
     if data.kind == "tensor":
@@ -117,15 +180,55 @@ def source_triangles(data: MeshData) -> np.ndarray:
     return np.asarray(data.source[1]).reshape(-1, 3)
 
 
+def _dropped(data: MeshData) -> list[str]:
+    """Names of the source's attributes that a result with new connectivity cannot keep."""
+    src = data.source
+    if src is None or data.kind == "arrays":
+        return []
+    if data.kind == "legacy":
+        checks = (("vertex colors", src.has_vertex_colors()), ("triangle UVs", src.has_triangle_uvs()),
+                  ("triangle material ids", src.has_triangle_material_ids()), ("textures", src.has_textures()))
+        return [label for label, present in checks if present]
+    dropped = [f"vertex attribute {key!r}" for key in src.vertex if key not in ("positions",) + _NORMAL_KEYS]
+    dropped += [f"triangle attribute {key!r}" for key in src.triangle if key not in ("indices",) + _NORMAL_KEYS]
+    return dropped
+
+
+def warn_dropped_attributes(data: MeshData, reason: str, *, stacklevel: int = 3) -> bool:
+    """Warn once (:class:`~o3d_lsmesh.O3DLSMeshWarning`) if ``data``'s source has attributes a new connectivity drops.
+
+    For functions whose results have new triangles but are not built by
+    :func:`new_mesh` from ``data`` (hierarchy levels): call it once per call
+    with the reason, e.g. ``"hierarchy levels have new connectivity"``.
+    Returns whether it warned. ``stacklevel=3`` points at the caller of the
+    public function that calls this.
+    """
+    dropped = _dropped(data)
+    if dropped:
+        warnings.warn(f"{reason}: {', '.join(dropped)} of the input cannot follow it and were dropped",
+                      O3DLSMeshWarning, stacklevel=stacklevel)
+    return bool(dropped)
+
+
 def new_mesh(data: MeshData, vertices: np.ndarray, triangles: np.ndarray | None = None) -> Any:
     """Build a new mesh of ``data``'s kind with ``vertices`` (and ``triangles``, if they changed).
 
     ``triangles=None`` means the connectivity of ``data`` is kept, and so are
-    its per-vertex and per-triangle attributes (see the module docstring).
+    its per-vertex and per-triangle attributes and its material (see the module
+    docstring). If ``data`` was welded, ``vertices`` are the welded vertices
+    and the result has the source's split layout, each duplicate at its welded
+    vertex's position. New ``triangles`` (in ``data``'s numbering) drop what
+    no longer matches them, with one :class:`~o3d_lsmesh.O3DLSMeshWarning`.
     """
     same_topology = triangles is None
-    if triangles is None:
+    if same_topology and data.split is not None:
+        # back to the source's split layout: every duplicate gets its welded vertex's position
+        vertices = np.asarray(vertices, dtype=np.float64)[data.split]
+        triangles = source_triangles(MeshData(None, None, data.source, data.kind))
+    elif triangles is None:
         triangles = data.triangles
+    elif data.source is not None:
+        warn_dropped_attributes(data, "the result has new connectivity", stacklevel=4)
     vertices = np.ascontiguousarray(vertices, dtype=np.float64)
     triangles = np.ascontiguousarray(triangles, dtype=np.int64)
     if data.kind == "arrays":
@@ -136,8 +239,15 @@ def new_mesh(data: MeshData, vertices: np.ndarray, triangles: np.ndarray | None 
         out = o3d.geometry.TriangleMesh(
             o3d.utility.Vector3dVector(vertices), o3d.utility.Vector3iVector(triangles.astype(np.int32))
         )
-        if same_topology and src.has_vertex_colors():
-            out.vertex_colors = o3d.utility.Vector3dVector(np.asarray(src.vertex_colors).copy())
+        if same_topology:
+            if src.has_vertex_colors():
+                out.vertex_colors = o3d.utility.Vector3dVector(np.asarray(src.vertex_colors).copy())
+            if src.has_triangle_uvs():
+                out.triangle_uvs = o3d.utility.Vector2dVector(np.asarray(src.triangle_uvs).copy())
+            if src.has_triangle_material_ids():
+                out.triangle_material_ids = o3d.utility.IntVector(np.asarray(src.triangle_material_ids).copy())
+            if src.has_textures():
+                out.textures = [o3d.geometry.Image(texture) for texture in src.textures]
         if src.has_vertex_normals():
             out.compute_vertex_normals()
         if src.has_triangle_normals():
@@ -159,6 +269,9 @@ def new_mesh(data: MeshData, vertices: np.ndarray, triangles: np.ndarray | None 
         for key in src.triangle:
             if key not in ("indices",) + _NORMAL_KEYS:
                 out.triangle[key] = src.triangle[key].clone()
+    if src.has_valid_material():
+        # a copy: the caller's material must not change when the result's is edited
+        out.material = o3d.visualization.Material(src.material)
     had_vertex_normals = "normals" in src.vertex
     had_triangle_normals = "normals" in src.triangle
     if had_vertex_normals or had_triangle_normals:
@@ -176,10 +289,16 @@ def mesh_state(data: MeshData) -> dict:
     tensor meshes the device and dtypes. The result of :func:`new_mesh` on the
     rebuilt data is then the same as on the original.
     """
-    state = {"vertices": data.vertices, "triangles": data.triangles, "kind": data.kind}
+    state = {"vertices": data.vertices, "triangles": data.triangles, "kind": data.kind, "split": data.split}
     src = data.source
     if data.kind == "legacy" and src is not None:
+        state["source_vertices"] = np.asarray(src.vertices).copy() if data.split is not None else None
+        state["source_triangles"] = np.asarray(src.triangles).copy() if data.split is not None else None
         state["vertex_colors"] = np.asarray(src.vertex_colors).copy() if src.has_vertex_colors() else None
+        state["triangle_uvs"] = np.asarray(src.triangle_uvs).copy() if src.has_triangle_uvs() else None
+        state["triangle_material_ids"] = (
+            np.asarray(src.triangle_material_ids).copy() if src.has_triangle_material_ids() else None
+        )
         state["vertex_normals"] = bool(src.has_vertex_normals())
         state["triangle_normals"] = bool(src.has_triangle_normals())
     elif data.kind == "tensor" and src is not None:
@@ -199,26 +318,33 @@ def _o3d_dtype(name: str) -> Any:
 def mesh_from_state(state: dict) -> MeshData:
     """Rebuild the :class:`MeshData` described by :func:`mesh_state`, with a source mesh of the same kind."""
     vertices, triangles, kind = state["vertices"], state["triangles"], state["kind"]
+    split = state.get("split")
     if vertices is None:  # arrays released (see LSMeshSolver's _release_arrays): nothing to rebuild
         return MeshData(None, None, None, kind)
     if kind == "arrays" or ("device" not in state and "vertex_normals" not in state):
         return MeshData(vertices, triangles, (vertices, triangles), kind if kind == "arrays" else "arrays")
     o3d = open3d()
     if kind == "legacy":
+        source_v = state.get("source_vertices") if split is not None else vertices
+        source_t = state.get("source_triangles") if split is not None else triangles
         source = o3d.geometry.TriangleMesh(
-            o3d.utility.Vector3dVector(vertices), o3d.utility.Vector3iVector(triangles.astype(np.int32))
+            o3d.utility.Vector3dVector(source_v), o3d.utility.Vector3iVector(source_t.astype(np.int32))
         )
         if state["vertex_colors"] is not None:
             source.vertex_colors = o3d.utility.Vector3dVector(state["vertex_colors"])
+        if state.get("triangle_uvs") is not None:
+            source.triangle_uvs = o3d.utility.Vector2dVector(state["triangle_uvs"])
+        if state.get("triangle_material_ids") is not None:
+            source.triangle_material_ids = o3d.utility.IntVector(state["triangle_material_ids"])
         if state["vertex_normals"]:
             source.compute_vertex_normals()
         if state["triangle_normals"]:
             source.compute_triangle_normals()
-        return MeshData(vertices, triangles, source, kind)
+        return MeshData(vertices, triangles, source, kind, split)
     device = o3d.core.Device(state["device"])
     source = o3d.t.geometry.TriangleMesh(device)
     for group, attributes in (("vertex", state["vertex"]), ("triangle", state["triangle"])):
         target = getattr(source, group)
         for key, (array, dtype) in attributes.items():
             target[key] = o3d.core.Tensor(array, device=device).to(_o3d_dtype(dtype))
-    return MeshData(vertices, triangles, source, kind)
+    return MeshData(vertices, triangles, source, kind, split)

@@ -9,7 +9,7 @@ STL, OFF, glTF, ...). Subcommands::
     o3d-lsmesh hierarchy INPUT OUTDIR [--levels 0,2,4|all]
     o3d-lsmesh encode INPUT OUTPUT [--count N] [--bits B]
     o3d-lsmesh decode MESH DATA OUTPUT [--anchors K]
-    o3d-lsmesh compare A B
+    o3d-lsmesh compare A B [--render PNG]
     o3d-lsmesh demo [--out demo_out]
 
 Every subcommand takes ``--quiet`` (no progress, no report), ``--json``
@@ -25,7 +25,10 @@ the same exception types raised anywhere else (numpy, a mistake in our code)
 are internal errors.
 
 STL files store every triangle with its own three vertices; they are read
-with duplicated vertices merged, so the algorithms see one surface.
+with duplicated vertices merged, so the algorithms see one surface. Other
+formats keep the layout Open3D reads (OBJ and glTF split vertices at UV
+seams): fairing welds exactly coincident vertices itself and writes the
+input's layout back, so seams stay closed and UVs stay valid.
 """
 
 from __future__ import annotations
@@ -437,16 +440,19 @@ def cmd_denoise(args: argparse.Namespace, run: _Run) -> int:
     write_output(args.output, out)
     run.say(message)
     if args.render:
-        report["render"] = _render([mesh, out], args.render, run)
+        method = (f"multiresolution fairing, level {args.level}" if args.level
+                  else f"{args.method} fairing" + (f", mu {args.mu:g}" if args.mu is not None else ""))
+        titles = [f"input: {Path(args.input).name}", f"{method}, {args.iterations} iterations"]
+        report["render"] = _render([mesh, out], args.render, run, titles=titles)
     return run.finish(report)
 
 
-def _render(meshes: list, path: str, run: _Run) -> str:
+def _render(meshes: list, path: str, run: _Run, *, what: str = "left: input, right: result", **options) -> str:
     from .rendering import render
 
     start = time.perf_counter()
-    render(meshes, path)
-    run.say(f"picture ({time.perf_counter() - start:.1f} s): {path}  (left: input, right: result)")
+    render(meshes, path, **options)
+    run.say(f"picture ({time.perf_counter() - start:.1f} s): {path}  ({what})")
     return path
 
 
@@ -589,6 +595,8 @@ def cmd_decode(args: argparse.Namespace, run: _Run) -> int:
 
 
 def cmd_compare(args: argparse.Namespace, run: _Run) -> int:
+    if args.render:
+        check_output(args.render, [args.a, args.b], force=args.force, suffixes=(".png",))
     a, b = read_input(args.a, what="A"), read_input(args.b, what="B")
     from .metrics import surface_distance, topology_summary, triangle_angles, vertex_error
 
@@ -628,6 +636,13 @@ def cmd_compare(args: argparse.Namespace, run: _Run) -> int:
                          f"degenerate triangles {topo['degenerate_triangles']}")
         for line in lines:
             run.say(line)
+    if args.render:
+        units = "mean edge lengths of A" if args.units == "edge" else "model units"
+        report["render"] = _render(
+            [a, b], args.render, run, reference=a, units=args.units, what=f"B colored by distance to A, in {units}",
+            titles=[f"A: {Path(args.a).name} (reference)", f"B: {Path(args.b).name}"],
+            colorbar_title="distance to A",
+        )
     return run.finish(report)
 
 
@@ -810,6 +825,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("b", metavar="B", help="second mesh file")
     p.add_argument("--points", type=_int_at_least(1, "positive", MAX_POINTS), default=100_000,
                    help="surface samples per mesh")
+    p.add_argument("--render", metavar="PNG", default=None,
+                   help="write a distance map: A and B side by side, colored by distance to A, with a color bar")
+    p.add_argument("--units", choices=("model", "edge"), default="model",
+                   help="units of the distance map: model units or mean edge lengths of A")
 
     p = _command(sub, "demo", parents=both, handler=cmd_demo,
                  summary="denoise a built-in mesh and compare with Open3D's filters",

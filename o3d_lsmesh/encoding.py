@@ -179,7 +179,7 @@ def encode_geometry(
     >>> len(decoded.vertices) == len(sphere.vertices)
     True
     """
-    data = read_mesh(mesh)
+    data = read_mesh(mesh, weld=True)
     n = len(data.vertices)
     if n > 0xFFFFFFFF:
         raise ValueError(f"mesh must have fewer than 2**32 vertices to be encoded, got {n}")
@@ -313,7 +313,7 @@ def decode_geometry(mesh: Any, data: Any, *, anchors: int | None = None) -> Any:
     >>> float(np.abs(np.asarray(decoded.vertices) - np.asarray(box.vertices)).max()) < 1e-3
     True
     """
-    mesh_data = read_mesh(mesh)
+    mesh_data = read_mesh(mesh, weld=True)
     indices, positions, omega = _parse(data, mesh_data)
     m = _prefix(anchors, len(indices))
     # LSMeshSolver raises SingularSystemError if the prefix misses a component
@@ -364,7 +364,7 @@ def iter_decode_geometry(mesh: Any, data: Any, *, step: int | None = None) -> It
     >>> len(list(iter_decode_geometry(sphere, stream, step=10)))
     3
     """
-    mesh_data = read_mesh(mesh)
+    mesh_data = read_mesh(mesh, weld=True)
     indices, positions, omega = _parse(data, mesh_data)
     k = len(indices)
     if step is None:

@@ -43,7 +43,7 @@ from ._errors import O3DLSMeshWarning
 from ._o3d import open3d, read_mesh
 from ._validate import as_choice, as_count, as_positive_float, as_real_vector
 
-__all__ = ["render", "error_colors", "VIRIDIS"]
+__all__ = ["render", "error_colors", "VIRIDIS", "RenderedImage"]
 
 #: matplotlib's viridis sampled at 11 points, interpolated linearly (no matplotlib needed).
 VIRIDIS = np.array(
@@ -58,6 +58,11 @@ _DEFAULT_COLOR = (0.72, 0.74, 0.78)
 #: Largest picture: 64 megapixels, whose rays and image buffers take about 5 GB on the raycast path.
 MAX_PIXELS = 64 * 1024 * 1024
 _BACKENDS = ("auto", "filament", "raycast")
+#: Sun and image-based (ambient) light for Filament, with tone mapping off: a surface facing the
+#: light comes out at about 0.95 of its color, so not even a white mesh clips to white
+#: (measured: Open3D's 50000 + 30000 turned a third of a light-grey sphere pure white).
+_SUN_LUX, _AMBIENT = 36000.0, 18000.0
+_UNITS = ("model", "edge")
 
 
 def error_colors(values: np.ndarray, vmax: float) -> np.ndarray:
@@ -217,8 +222,9 @@ def _filament_worker(spec_path: str, image_path: str) -> None:
     # the same as the raycast backend's, plus the default image-based ambient light.
     light = -(back + 0.4 * up - 0.3 * right)
     renderer.scene.set_lighting(renderer.scene.LightingProfile.NO_SHADOWS, light / np.linalg.norm(light))
-    renderer.scene.scene.set_sun_light(light / np.linalg.norm(light), [1.0, 1.0, 1.0], 50000)
+    renderer.scene.scene.set_sun_light(light / np.linalg.norm(light), [1.0, 1.0, 1.0], _SUN_LUX)
     renderer.scene.scene.enable_sun_light(True)
+    renderer.scene.scene.set_indirect_light_intensity(_AMBIENT)
     renderer.scene.camera.set_projection(
         rendering.Camera.Projection.Ortho,
         camera["left"], camera["right_edge"], camera["bottom"], camera["top"], camera["near"], camera["far"],
@@ -254,8 +260,90 @@ def _filament(vertices, triangles, colors, camera, width, height, background, ti
 
 
 def _colorbar(image: np.ndarray, thickness: int) -> None:
+    """The unlabelled fallback (no matplotlib): a viridis strip over the picture's bottom rows."""
     strip = error_colors(np.linspace(0.0, 1.0, image.shape[1]), 1.0)
     image[-thickness:] = np.round(strip * 255.0).astype(np.uint8)[None]
+
+
+class RenderedImage(np.ndarray):
+    """The picture ``render`` drew: a ``(height, width, 3)`` uint8 ndarray with the scale it used.
+
+    Attributes
+    ----------
+    error_max : float or None
+        Top of the color scale, in ``units`` (None without a reference).
+    units : str or None
+        ``"model"`` or ``"edge"`` (mean edge lengths of the reference), or None.
+    edge_length : float or None
+        The reference's mean edge length, in model units (None without a reference).
+    """
+
+    error_max: float | None
+    units: str | None
+    edge_length: float | None
+
+    def __new__(cls, image: np.ndarray, error_max=None, units=None, edge_length=None):
+        obj = np.asarray(image).view(cls)
+        obj.error_max, obj.units, obj.edge_length = error_max, units, edge_length
+        return obj
+
+    def __array_finalize__(self, obj) -> None:
+        self.error_max = getattr(obj, "error_max", None)
+        self.units = getattr(obj, "units", None)
+        self.edge_length = getattr(obj, "edge_length", None)
+
+
+def _matplotlib():
+    """matplotlib's object API (no pyplot: no global state, no display), or None when it is not installed."""
+    try:
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.colorbar import ColorbarBase
+        from matplotlib.colors import LinearSegmentedColormap, Normalize
+        from matplotlib.figure import Figure
+    except ImportError:
+        return None
+    return FigureCanvasAgg, ColorbarBase, LinearSegmentedColormap, Normalize, Figure
+
+
+def _annotate(image, panel_width, titles, bar, background):
+    """Add a title band above the panels and, if ``bar = (error_max, label)``, a labelled color bar below.
+
+    The panels' pixels are copied unchanged (``figimage``, no resampling).
+    """
+    FigureCanvasAgg, ColorbarBase, LinearSegmentedColormap, Normalize, Figure = _matplotlib()
+    height, total_width = image.shape[:2]
+    font = float(np.clip(panel_width / 22.0, 8.0, 18.0))  # points = pixels at dpi 72
+    title_band = round(2.2 * font) if titles is not None else 0
+    bar_band = round(5.2 * font) if bar is not None else 0
+    full = height + title_band + bar_band
+    dpi = 72.0
+    fig = Figure(figsize=(total_width / dpi, full / dpi), dpi=dpi, facecolor=tuple(background))
+    fig.figimage(image, xo=0, yo=bar_band, origin="upper")
+    text_color = "white" if np.mean(background) < 0.5 else "black"
+    if titles is not None:
+        for k, title in enumerate(titles):
+            fig.text((k + 0.5) * panel_width / total_width, 1.0 - 0.5 * title_band / full, title, ha="center",
+                     va="center", fontsize=font, color=text_color, clip_on=True)
+    if bar is not None:
+        error_max, label = bar
+        cmap = LinearSegmentedColormap.from_list("o3d_lsmesh_viridis", VIRIDIS)
+        left = 0.1 if total_width >= 300 else 0.05
+        strip = 1.1 * font
+        cax = fig.add_axes((left, (2.2 * font) / full, 1.0 - 2 * left, strip / full))
+        bar_artist = ColorbarBase(cax, cmap=cmap, norm=Normalize(0.0, error_max), orientation="horizontal",
+                                  extend="max")
+        bar_artist.ax.tick_params(labelsize=0.85 * font, colors=text_color, length=0.3 * font)
+        bar_artist.outline.set_edgecolor(text_color)
+        cax.set_title(label, fontsize=0.9 * font, color=text_color, pad=0.25 * font)
+    canvas = FigureCanvasAgg(fig)
+    canvas.draw()
+    return np.ascontiguousarray(np.asarray(canvas.buffer_rgba())[..., :3])
+
+
+def _mean_edge_length(vertices: np.ndarray, triangles: np.ndarray) -> float:
+    edges = np.sort(triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    edges = np.unique(edges, axis=0)
+    return float(np.linalg.norm(vertices[edges[:, 0]] - vertices[edges[:, 1]], axis=1).mean())
 
 
 def render(
@@ -274,7 +362,10 @@ def render(
     align: str = "common",
     backend: str = "auto",
     timeout: float = 180.0,
-) -> np.ndarray:
+    titles: Sequence[str] | None = None,
+    units: str = "model",
+    colorbar_title: str | None = None,
+) -> RenderedImage:
     """Draw one or several meshes side by side and write the picture as a PNG.
 
     Every mesh gets its own ``width x height`` panel, left to right, all under
@@ -291,12 +382,25 @@ def render(
         Size of one panel in pixels; the picture is ``(height, width * len(meshes))``.
     reference : mesh, optional
         Color every vertex by its distance to the surface of ``reference``
-        (viridis, dark = 0, yellow = ``error_max``), and add a color bar along
-        the bottom of the picture. Without it, a mesh's own vertex colors are
-        used, or else ``color``.
+        (viridis, dark = 0, yellow = ``error_max``), and add a color bar below
+        the panels, with numbers, its units and a title (a band of about
+        five font heights). Without it, a mesh's own vertex colors are used,
+        or else ``color``.
     error_max : float, optional
-        Top of the error scale; defaults to the 99th percentile of the
-        distances over all meshes (noise outliers would otherwise wash it out).
+        Top of the error scale, in ``units``; distances above it get the top
+        color (the bar ends in an arrow). Defaults to the 99th percentile of
+        the distances over all meshes (noise outliers would otherwise wash it
+        out). The scale used is returned as ``image.error_max``.
+    titles : sequence of str, optional
+        One title per panel (say, the method and its parameters), drawn in a
+        band above the panels. ``None``: no band, the picture is exactly the
+        panels.
+    units : {"model", "edge"}
+        Units of the distances: model units, or mean edge lengths of
+        ``reference`` (a scale that does not depend on the model's size).
+    colorbar_title : str, optional
+        Title of the color bar; defaults to "distance to reference" and the
+        units.
     color, background : RGB triples in [0, 1]
     view_direction, up : 3-vectors
         From the scene towards the camera, and the camera's up direction.
@@ -317,9 +421,20 @@ def render(
 
     Returns
     -------
-    (height, width * len(meshes), 3) uint8 ndarray
-        The picture that was written.
+    RenderedImage
+        The picture that was written: a ``(H, width * len(meshes), 3)`` uint8
+        ndarray (a subclass, so code that used the plain array of earlier
+        versions keeps working), ``H = height`` plus the title band and the
+        color bar when drawn. ``image.error_max`` is the scale it used (in
+        ``image.units``), None without a reference.
 
+    Notes
+    -----
+    Titles and the labelled color bar are drawn with matplotlib when it is
+    installed (``pip install matplotlib``; it is not a requirement of the
+    package). Without it, titles are left out and the color bar is an
+    unlabelled strip over the bottom rows of the panels, with an
+    ``O3DLSMeshWarning``.
     Raises
     ------
     TypeError, ValueError
@@ -335,6 +450,10 @@ def render(
     >>> image = render([sphere, box], None, width=64, height=64, backend="raycast")
     >>> image.shape
     (64, 128, 3)
+    >>> image = render([sphere, sphere], None, width=64, height=64, backend="raycast", reference=sphere,
+    ...                error_max=0.1)
+    >>> image.error_max
+    0.1
     """
     if isinstance(meshes, (list, tuple)) and not (
         isinstance(meshes, tuple) and len(meshes) == 2 and isinstance(meshes[0], np.ndarray)
@@ -353,6 +472,16 @@ def render(
     if error_max is not None:  # checked without a reference too: a wrong value is a mistake either way
         error_max = as_positive_float(error_max, name="error_max")
     background = as_real_vector(background, 3, name="background", low=0.0, high=1.0)
+    units = as_choice(units, _UNITS, name="units")
+    if titles is not None:
+        if isinstance(titles, str) or not isinstance(titles, Sequence):
+            raise TypeError(f"titles must be a sequence of strings (one per mesh), got {type(titles).__name__}")
+        if len(titles) != len(items):
+            raise ValueError(f"titles must hold one title per mesh ({len(items)}), got {len(titles)}")
+        if not all(isinstance(t, str) for t in titles):
+            raise TypeError("titles must be a sequence of strings (one per mesh), got a non-string item")
+    if colorbar_title is not None and not isinstance(colorbar_title, str):
+        raise TypeError(f"colorbar_title must be a string, got {type(colorbar_title).__name__}")
     base_color = as_real_vector(color, 3, name="color", low=0.0, high=1.0)
 
     if width * height * len(items) > MAX_PIXELS:
@@ -368,8 +497,12 @@ def render(
     # scaled back to model units for the colors).
     scale = max([float(np.abs(d.vertices).max()) for d in datas + ([ref] if ref is not None else [])] + [1e-300])
     arrays = [(d.vertices / scale, d.triangles) for d in datas]
+    edge_length = None
     if ref is not None:
         distances = [scale * _distances_to_surface(v, ref.vertices / scale, ref.triangles) for v, _ in arrays]
+        edge_length = _mean_edge_length(ref.vertices, ref.triangles)
+        if units == "edge":
+            distances = [d / edge_length for d in distances]
         if error_max is None:
             error_max = float(np.percentile(np.concatenate(distances), 99.0))
             if error_max <= 0:
@@ -395,8 +528,18 @@ def render(
     if image is None:
         image = _raycast(vertices, triangles, all_colors, camera, total_width, height, background)
     image = np.ascontiguousarray(image, dtype=np.uint8)
+    bar = None
     if reference is not None:
-        _colorbar(image, max(3, height // 40))
+        unit_text = "mean edge lengths of the reference" if units == "edge" else "model units"
+        bar = (error_max, f"{colorbar_title or 'distance to reference'} ({unit_text})")
+    if titles is not None or bar is not None:
+        if _matplotlib() is not None:
+            image = _annotate(image, width, titles, bar, background)
+        else:
+            warnings.warn("matplotlib is not installed: the picture has no titles and an unlabelled color bar "
+                          "(pip install matplotlib)", O3DLSMeshWarning, stacklevel=2)
+            if bar is not None:
+                _colorbar(image, max(3, height // 40))
     if path is not None:
         path = os.fspath(path)
         o3d = open3d()
@@ -405,4 +548,5 @@ def render(
             raise ValueError(f"path must be in an existing folder, got {path!r}")
         if not o3d.io.write_image(path, o3d.geometry.Image(image)):
             raise ValueError(f"path must name a writable .png file, got {path!r}")
-    return image
+    return RenderedImage(image, error_max if reference is not None else None, units if reference is not None else None,
+                         edge_length)

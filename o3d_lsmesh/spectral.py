@@ -127,7 +127,7 @@ def spectral_approximation(mesh: Any, k: int, *, bits: int | None = None) -> Any
     >>> bool(np.allclose(np.asarray(full.vertices), np.asarray(sphere.vertices)))
     True
     """
-    data = read_mesh(mesh)
+    data = read_mesh(mesh, weld=True)
     n = len(data.vertices)
     k = as_count(k, name="k", minimum=1, maximum=n)
     if bits is not None:

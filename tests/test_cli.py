@@ -594,3 +594,71 @@ def test_messages_about_the_input_mesh_name_the_file(tmp_path, capsys, clean):
     assert main(["encode", str(source), str(tmp_path / "c.bin"), "--quiet"]) == 0
     line = run_error(capsys, ["decode", str(other), str(tmp_path / "c.bin"), str(tmp_path / "d.ply")])
     assert line.startswith(f"o3d-lsmesh: error: MESH '{other}' must have the {len(clean.vertices)} vertices")
+
+
+# ----------------------------------------------------------------- pictures
+
+
+@pytest.fixture
+def raycast_render(monkeypatch):
+    """Draw the CLI's pictures with the in-process raycast backend (fast, no child process); record the calls."""
+    import importlib
+
+    rendering = importlib.import_module("o3d_lsmesh.rendering")
+    real, calls = rendering.render, []
+
+    def spy(*args, **kwargs):
+        calls.append(kwargs)
+        return real(*args, **{**kwargs, "backend": "raycast", "width": 160, "height": 160})
+
+    monkeypatch.setattr(rendering, "render", spy)
+    return calls
+
+
+def _ink(region):
+    return np.any(np.abs(region.astype(np.int64) - 255) > 60, axis=2)
+
+
+def test_compare_render_draws_a_labelled_distance_map(tmp_path, capsys, clean, raycast_render):
+    bumped = o3d.geometry.TriangleMesh(clean)
+    v = np.asarray(bumped.vertices)
+    top = v[:, 1] > np.percentile(v[:, 1], 90)  # move the top cap only: the +y side, the panel's upper part
+    v[top] += 0.3 * mean_edge_length(clean) * np.array([0.0, 1.0, 0.0]) * 3
+    a, b = _write(clean, tmp_path / "a.ply"), _write(bumped, tmp_path / "b.ply")
+    picture = tmp_path / "distance.png"
+    report = run_json(capsys, ["compare", str(a), str(b), "--render", str(picture), "--units", "edge"])
+    assert report["render"] == str(picture)
+    assert raycast_render[0]["units"] == "edge" and raycast_render[0]["titles"][1] == "B: b.ply"
+    image = np.asarray(o3d.io.read_image(str(picture)))
+    assert image.shape[1] == 320 and image.shape[0] > 160
+    # titles over both panels, then the panels, then the labelled color bar
+    rows_with_ink = np.flatnonzero(_ink(image).any(axis=1))
+    assert rows_with_ink.min() < 25  # the title band holds text
+    top_band = image[:22]
+    assert _ink(top_band[:, :160]).sum() > 10 and _ink(top_band[:, 160:]).sum() > 10
+    # B differs from A on its moved cap only: yellow-green pixels in B's panel, none in A's
+    def hot(panel):
+        p = panel.astype(np.int64)
+        return (p[..., 1] > 110) & (p[..., 2] < 110) & (p[..., 0] < 250)
+
+    panels = image[22:22 + 150]
+    assert not hot(panels[:, :160]).any()
+    rows = np.flatnonzero(hot(panels[:, 160:]).any(axis=1))
+    assert len(rows) and rows.max() < 75  # in the upper half
+    # the bottom band (color bar) has ink: tick labels and title
+    assert _ink(image[-40:]).sum() > 50
+
+
+def test_denoise_render_titles_name_the_method(tmp_path, capsys, noisy, raycast_render):
+    src = _write(noisy, tmp_path / "scan.ply")
+    run_json(capsys, ["denoise", str(src), str(tmp_path / "o.ply"), "--render", str(tmp_path / "p.png"),
+                      "--iterations", "3", "--method", "global"])
+    assert raycast_render[0]["titles"] == ["input: scan.ply", "global fairing, 3 iterations"]
+    image = np.asarray(o3d.io.read_image(str(tmp_path / "p.png")))
+    assert image.shape[0] > 160 and _ink(image[:15]).sum() > 20
+
+
+def test_compare_render_bad_values_exit_2(tmp_path, capsys, clean):
+    a = str(_write(clean, tmp_path / "a.ply"))
+    assert "must end in one of .png" in run_error(capsys, ["compare", a, a, "--render", str(tmp_path / "x.jpg")])
+    assert "--units" in run_error(capsys, ["compare", a, a, "--render", str(tmp_path / "x.png"), "--units", "inch"])

@@ -284,7 +284,7 @@ def test_too_many_vertices_raises(monkeypatch):
 
     fake = Huge()
     fake.vertices = np.zeros((3, 3)).view(FakeLen)
-    monkeypatch.setattr(encoding, "read_mesh", lambda mesh: fake)
+    monkeypatch.setattr(encoding, "read_mesh", lambda mesh, **kwargs: fake)
     with pytest.raises(ValueError, match="fewer than 2\\*\\*32 vertices"):
         encode_geometry(None, 1)
 

@@ -84,8 +84,9 @@ def test_error_color_map_marks_the_changed_region():
     sphere = _sphere()
     bumped, changed = _bumped(sphere)
     image = render([sphere, bumped], None, width=W, height=H, reference=sphere, backend="raycast")
-    bar = max(3, H // 40)
-    body = image[:-bar]
+    # the panels keep their rows; the labelled color bar is a band below them
+    assert image.shape[0] > H and image.shape[1] == 2 * W
+    body = image[:H]
     a, b = body[:, :W].astype(np.int64), body[:, W:].astype(np.int64)
     # Yellow-green end of viridis: red and green high, blue low. Shading only darkens,
     # so a dark-purple (zero error) pixel can never look like this.
@@ -95,7 +96,121 @@ def test_error_color_map_marks_the_changed_region():
     assert not hot(a).any()
     assert hot(b).sum() > 20
     assert np.flatnonzero(hot(b).any(axis=0)).min() > W // 2
-    # The color bar spans the scale from viridis' first to last color.
+    # The color bar spans the scale from viridis' first to last color (left and right end of its strip).
+    band = image[H:].astype(np.int64)
+    first, last = (np.round(render_module.VIRIDIS[i] * 255).astype(np.int64) for i in (0, -1))
+    assert (np.abs(band - first).max(axis=2) <= 3).sum() > 10
+    assert (np.abs(band - last).max(axis=2) <= 3).sum() > 10
+
+
+def _sphere_pair():
+    sphere = _sphere()
+    bumped, _ = _bumped(sphere)
+    return sphere, bumped
+
+
+def _ink(region):
+    """Pixels that are not background (text or lines drawn on a white band)."""
+    return np.any(np.abs(region.astype(np.int64) - BACKGROUND) > 60, axis=2)
+
+
+def test_titles_label_every_panel_and_leave_the_panels_unchanged():
+    sphere, bumped = _sphere_pair()
+    plain = render([sphere, bumped], None, width=W * 2, height=H * 2, backend="raycast")
+    titled = render([sphere, bumped], None, width=W * 2, height=H * 2, backend="raycast",
+                    titles=["input", "constrained fairing (local, 10 iterations)"])
+    band = titled.shape[0] - plain.shape[0]
+    assert band > 10 and titled.shape[1] == plain.shape[1]
+    # the panels are copied pixel for pixel below the title band
+    np.testing.assert_array_equal(np.asarray(titled[band:]), np.asarray(plain))
+    # each panel's title band holds text, centered over its panel, and nothing else does
+    for k in range(2):
+        panel_band = _ink(titled[:band, k * 2 * W:(k + 1) * 2 * W])
+        assert panel_band.sum() > 20
+        columns = np.flatnonzero(panel_band.any(axis=0))
+        assert abs(columns.mean() - W) < W / 2
+    # a longer title inks more pixels
+    assert _ink(titled[:band, 2 * W:]).sum() > _ink(titled[:band, :2 * W]).sum()
+    assert titled.error_max is None and titled.units is None
+
+
+def test_color_bar_has_tick_labels_units_and_a_title():
+    sphere, bumped = _sphere_pair()
+    image = render([sphere, bumped], None, width=W * 2, height=H * 2, backend="raycast", reference=sphere,
+                   error_max=0.2)
+    assert image.error_max == 0.2 and image.units == "model"
+    band = image[2 * H:]
+    ink = _ink(band)
+    strip_rows = np.flatnonzero((np.abs(band.astype(np.int64) - np.round(render_module.VIRIDIS[5] * 255)).max(axis=2)
+                                 <= 6).any(axis=1))
+    assert len(strip_rows)
+    above, below = ink[:strip_rows.min()], ink[strip_rows.max() + 1:]
+    assert above.sum() > 30, "the color bar needs a title above it"
+    assert below.sum() > 30, "the color bar needs tick labels below it"
+    # tick labels spread along the bar: ink in each third of its width
+    columns = np.flatnonzero(below.any(axis=0))
+    thirds = np.array_split(np.arange(band.shape[1]), 3)
+    assert all(np.isin(t, columns).any() for t in thirds)
+    # a larger scale changes the numbers, not the panels
+    other = render([sphere, bumped], None, width=W * 2, height=H * 2, backend="raycast", reference=sphere,
+                   error_max=7.5)
+    assert np.any(np.asarray(other[2 * H:]) != np.asarray(band))
+
+
+def test_returned_scale_matches_distances_and_units():
+    sphere, bumped = _sphere_pair()
+    model = render([sphere, bumped], None, width=W, height=H, backend="raycast", reference=sphere)
+    edge = render([sphere, bumped], None, width=W, height=H, backend="raycast", reference=sphere, units="edge")
+    # independent reference: the vertex distances to the sphere of radius 1 (its mesh lies inside by at most
+    # the sagitta of a facet), and the mean edge length by a plain loop over triangles
+    distances = np.abs(np.linalg.norm(np.asarray(bumped.vertices), axis=1) - 1.0)
+    assert model.error_max == pytest.approx(np.percentile(np.concatenate([np.zeros(len(distances)), distances]), 99),
+                                            abs=0.01)
+    edges = set()
+    for tri in np.asarray(sphere.triangles).tolist():
+        for i, j in ((tri[0], tri[1]), (tri[1], tri[2]), (tri[2], tri[0])):
+            edges.add((min(i, j), max(i, j)))
+    v = np.asarray(sphere.vertices)
+    mean_edge = np.mean([np.linalg.norm(v[i] - v[j]) for i, j in edges])
+    assert edge.edge_length == pytest.approx(mean_edge, rel=1e-9)
+    assert edge.error_max == pytest.approx(model.error_max / mean_edge, rel=1e-6)
+    assert edge.units == "edge"
+
+
+def test_filament_exposure_keeps_highlights():
+    sphere, _ = _sphere_pair()
+    sphere.paint_uniform_color([1.0, 1.0, 1.0])
+    try:
+        image = render(sphere, None, width=W, height=H, backend="filament", background=(0.0, 0.0, 0.0), timeout=240)
+    except RuntimeError as error:
+        pytest.skip(f"Open3D's OffscreenRenderer cannot render on this machine: {error}")
+    lit = image[np.any(image > 8, axis=2)]
+    # a white sphere under the default light: shaded from dark to bright, and not clipped to pure white
+    assert lit.max() > 200
+    assert (lit >= 254).all(axis=1).mean() < 0.01
+
+
+def test_titles_and_units_bad_values_raise():
+    sphere = _sphere()
+    with pytest.raises(ValueError, match=r"titles must hold one title per mesh \(2\), got 1"):
+        render([sphere, sphere], None, width=16, height=16, backend="raycast", titles=["a"])
+    with pytest.raises(TypeError, match="titles must be a sequence of strings"):
+        render([sphere], None, width=16, height=16, backend="raycast", titles="a")
+    with pytest.raises(TypeError, match="titles must be a sequence of strings"):
+        render([sphere], None, width=16, height=16, backend="raycast", titles=[3])
+    with pytest.raises(ValueError, match="units"):
+        render([sphere], None, width=16, height=16, backend="raycast", units="inch")
+    with pytest.raises(TypeError, match="colorbar_title must be a string, got int"):
+        render([sphere], None, width=16, height=16, backend="raycast", colorbar_title=3)
+
+
+def test_without_matplotlib_the_picture_keeps_an_unlabelled_bar(monkeypatch):
+    monkeypatch.setattr(render_module, "_matplotlib", lambda: None)
+    sphere, bumped = _sphere_pair()
+    with pytest.warns(O3DLSMeshWarning, match="matplotlib is not installed"):
+        image = render([sphere, bumped], None, width=W, height=H, reference=sphere, backend="raycast",
+                       titles=["a", "b"])
+    assert image.shape == (H, 2 * W, 3)
     np.testing.assert_array_equal(image[-1, 0], np.round(render_module.VIRIDIS[0] * 255).astype(np.uint8))
     np.testing.assert_array_equal(image[-1, -1], np.round(render_module.VIRIDIS[-1] * 255).astype(np.uint8))
 

@@ -299,5 +299,5 @@ def smooth_boundary_curves(mesh: Any, number_of_iterations: int = 10) -> Any:
     True
     """
     number_of_iterations = as_count(number_of_iterations, name="number_of_iterations")
-    data = read_mesh(mesh)
+    data = read_mesh(mesh, weld=True)
     return new_mesh(data, smooth_boundary_curves_arrays(data.vertices, data.triangles, number_of_iterations))

@@ -384,5 +384,5 @@ def constrained_fairing(
     """
     options, extra = _check_options(number_of_iterations, method, mu, smooth_boundary, reimpose_every, progress,
                                     membrane, boundary_weight)
-    data = read_mesh(mesh)
+    data = read_mesh(mesh, weld=True)
     return new_mesh(data, _fair(data.vertices.copy(), data.triangles, *options, **extra))

@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from .._o3d import warn_dropped_attributes
 from .._validate import as_count
 from ..topology import adjacency_matrix, connected_components, unique_edges
 from .hierarchy import MeshHierarchy, _tensor_format, read_hierarchy_mesh
@@ -117,6 +118,7 @@ def from_fast_simplification(
     if not isinstance(progress, (bool, np.bool_)):
         raise TypeError(f"progress must be a bool, got {type(progress).__name__}")
     data = read_hierarchy_mesh(mesh)
+    warn_dropped_attributes(data, "hierarchy levels have new connectivity")
     V, F = data.vertices, data.triangles
     n0, m0 = len(V), len(F)
     counts = _level_counts(levels, n0, min_vertices)

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
-from .._o3d import MeshData, new_mesh, read_mesh
+from .._o3d import MeshData, new_mesh, read_mesh, warn_dropped_attributes
 from .._validate import as_count, as_positions, as_positive_float
 from ..topology import adjacency_matrix, boundary_halfedges
 from .collapse import collapse_level, workspace
@@ -262,9 +262,10 @@ def _harmonic_fill(weights: sp.csr_matrix, out: np.ndarray, removed: np.ndarray,
     return np.asarray(solution).reshape(len(removed), 3)
 
 
-def read_hierarchy_mesh(mesh: Any) -> MeshData:
-    """Read ``mesh`` for a hierarchy: any mesh :func:`read_mesh` accepts (non-manifold, unreferenced vertices)."""
-    return read_mesh(mesh, name="mesh", allow_isolated=True)
+def read_hierarchy_mesh(mesh: Any, *, weld: bool = False) -> MeshData:
+    """Read ``mesh`` for a hierarchy: any mesh :func:`read_mesh` accepts (non-manifold, unreferenced
+    vertices); ``weld``: see :func:`~o3d_lsmesh._o3d.read_mesh`."""
+    return read_mesh(mesh, name="mesh", allow_isolated=True, weld=weld)
 
 
 def locked_vertices(triangles: np.ndarray, n: int) -> np.ndarray:
@@ -405,7 +406,10 @@ def build_hierarchy(
     Returns
     -------
     MeshHierarchy
-        Level 0 is the input; it stops when no valid collapse remains.
+        Level 0 is the input; it stops when no valid collapse remains. Levels
+        hold positions and triangles only: the input's vertex colors, UVs,
+        material ids and other attributes cannot follow the new connectivity
+        and are dropped, with one ``O3DLSMeshWarning`` naming them.
 
     Raises
     ------
@@ -435,6 +439,7 @@ def build_hierarchy(
         raise TypeError(f"progress must be a bool, got {type(progress).__name__}")
     _warn_workers(workers)
     data = read_hierarchy_mesh(mesh)
+    warn_dropped_attributes(data, "hierarchy levels have new connectivity")
     return build_hierarchy_arrays(
         data.vertices, data.triangles, alpha=alpha, beta=beta, min_vertices=min_vertices,
         max_levels=max_levels, progress=bool(progress), mesh_kind=data.kind, tensor_format=_tensor_format(data),
