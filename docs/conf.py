@@ -17,11 +17,11 @@ HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
 sys.path.insert(0, str(REPO))
 
-import o3d_lsmesh  # noqa: E402
+import o3d_lsmesh
 
 project = "o3d_lsmesh"
 author = "The o3d_lsmesh developers"
-copyright = "2026, The o3d_lsmesh developers"  # noqa: A001 (Sphinx's name)
+copyright = "2026, The o3d_lsmesh developers"
 release = version = o3d_lsmesh.__version__
 
 extensions = [
@@ -77,7 +77,7 @@ def _api_pages() -> None:
     for name in o3d_lsmesh.__all__:
         obj = getattr(o3d_lsmesh, name)
         if inspect.ismodule(obj):
-            directive = f".. automodule:: {obj.__name__}\n   :members:\n   :no-index:\n"
+            directive = f".. automodule:: {obj.__name__}\n   :members:\n"
             kind = "module"
         elif inspect.isclass(obj):
             directive = f".. autoclass:: o3d_lsmesh.{name}\n   :members:\n"

@@ -1,0 +1,172 @@
+"""Open the built site in headless Chromium and check that it renders.
+
+Asserts, on the DOM as the browser built it:
+
+* every name in ``o3d_lsmesh.__all__`` has its page under ``api/`` with the
+  object's anchor (``id="o3d_lsmesh.<name>"``; for a module, its functions'
+  anchors);
+* the gallery index has one thumbnail per ``examples/NN_*.py`` and every
+  example page shows a picture;
+* every algorithm page shows its figure;
+* every ``<img>`` on these pages was decoded by the browser (``complete`` and
+  ``naturalWidth > 0``) and its file exists in the build.
+
+The pages are served over a local HTTP server (one origin, so a check page can
+read the pages it loads in iframes: one browser start for the whole site).
+
+Usage: ``python docs/check_site.py [docs/_build/html]``. Exit status 1 with a
+list of failures, 0 with a one-line summary.
+"""
+
+from __future__ import annotations
+
+import functools
+import http.server
+import inspect
+import json
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+import threading
+import urllib.parse
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+REPO = HERE.parent
+sys.path.insert(0, str(REPO))
+
+CHECK_PAGE = "_site_check.html"
+
+COLLECT = """
+<script>
+window.addEventListener("load", () => {
+  const out = [];
+  for (const frame of document.querySelectorAll("iframe")) {
+    const doc = frame.contentDocument;
+    out.push({
+      page: frame.getAttribute("src"),
+      loaded: doc !== null && doc.readyState === "complete" && doc.body !== null,
+      title: doc ? doc.title : "",
+      ids: doc ? [...doc.querySelectorAll("[id]")].map(e => e.id).filter(i => i.startsWith("o3d_lsmesh")) : [],
+      images: doc ? [...doc.images].map(img => ({
+        src: img.getAttribute("src"), url: img.src, ok: img.complete && img.naturalWidth > 0,
+        width: img.naturalWidth})) : [],
+    });
+  }
+  const pre = document.createElement("pre");
+  pre.id = "site-check-result";
+  pre.textContent = JSON.stringify(out);
+  document.body.appendChild(pre);
+});
+</script>
+"""
+
+
+def find_chromium() -> str:
+    for name in ("chromium", "chromium-browser", "google-chrome"):
+        path = shutil.which(name)
+        if path:
+            return path
+    raise SystemExit("check_site: no chromium on PATH (Debian: apt-get install chromium)")
+
+
+def expected_pages(build: Path) -> dict[str, dict]:
+    """Page path -> what it must contain: ``ids`` (anchors) and ``min_images``."""
+    import o3d_lsmesh
+
+    pages: dict[str, dict] = {}
+    for name in o3d_lsmesh.__all__:
+        obj = getattr(o3d_lsmesh, name)
+        if inspect.ismodule(obj):
+            public = getattr(obj, "__all__", [n for n in dir(obj) if not n.startswith("_")])
+            ids = [f"{obj.__name__}.{n}" for n in public if callable(getattr(obj, n))]
+        else:
+            ids = [f"o3d_lsmesh.{name}"]
+        pages[f"api/{name}.html"] = {"ids": ids, "min_images": 0}
+    examples = sorted((REPO / "examples").glob("[0-9][0-9]_*.py"))
+    pages["auto_examples/index.html"] = {"ids": [], "min_images": len(examples)}
+    for path in examples:
+        pages[f"auto_examples/{path.stem}.html"] = {"ids": [], "min_images": 1}
+    for path in sorted((HERE / "algorithms").glob("*.rst")):
+        pages[f"algorithms/{path.stem}.html"] = {"ids": [], "min_images": 1}
+    for page in ("index.html", "choosing.html", "api/index.html"):
+        pages[page] = {"ids": [], "min_images": 0}
+    missing = [p for p in pages if not (build / p).is_file()]
+    if missing:
+        raise SystemExit("check_site: pages missing from the build: " + ", ".join(missing))
+    return pages
+
+
+def run_browser(build: Path, pages: list[str], timeout: float) -> list[dict]:
+    handler = functools.partial(_QuietHandler, directory=str(build))
+    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), handler)
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    frames = "\n".join(f'<iframe src="/{p}" width="1280" height="2400"></iframe>' for p in pages)
+    check = build / CHECK_PAGE
+    check.write_text(f"<!DOCTYPE html><html><head><title>site check</title></head><body>\n{frames}\n{COLLECT}</body></html>\n")
+    profile = tempfile.mkdtemp(prefix="o3d_lsmesh_chromium_")
+    try:
+        url = f"http://127.0.0.1:{server.server_address[1]}/{CHECK_PAGE}"
+        cmd = [find_chromium(), "--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
+               "--disable-component-update", "--disable-sync", "--no-first-run", "--disable-dev-shm-usage",
+               f"--user-data-dir={profile}", "--virtual-time-budget=30000", "--dump-dom", url]
+        done = subprocess.run(cmd, check=False, capture_output=True, text=True, timeout=timeout)
+    finally:
+        server.shutdown()
+        check.unlink(missing_ok=True)
+        shutil.rmtree(profile, ignore_errors=True)
+    found = re.search(r'<pre id="site-check-result">(.*?)</pre>', done.stdout, re.DOTALL)
+    if not found:
+        raise SystemExit(f"check_site: chromium returned no result (exit {done.returncode}):\n{done.stderr[-2000:]}")
+    import html
+
+    return json.loads(html.unescape(found.group(1)))
+
+
+class _QuietHandler(http.server.SimpleHTTPRequestHandler):
+    def log_message(self, format, *args):
+        pass
+
+
+def check(build: Path, *, timeout: float = 180.0) -> tuple[list[str], int, int]:
+    pages = expected_pages(build)
+    results = run_browser(build, list(pages), timeout)
+    failures: list[str] = []
+    seen = {r["page"].lstrip("/"): r for r in results}
+    for page, want in pages.items():
+        got = seen.get(page)
+        if got is None or not got["loaded"]:
+            failures.append(f"{page}: did not load in the browser")
+            continue
+        for anchor in want["ids"]:
+            if anchor not in got["ids"]:
+                failures.append(f"{page}: no element with id {anchor!r}")
+        if len(got["images"]) < want["min_images"]:
+            failures.append(f"{page}: {len(got['images'])} images, expected at least {want['min_images']}")
+        for image in got["images"]:
+            if not image["ok"]:
+                failures.append(f"{page}: image {image['src']} did not render")
+            path = urllib.parse.urlparse(image["url"]).path
+            if not (build / urllib.parse.unquote(path).lstrip("/")).is_file():
+                failures.append(f"{page}: image file {image['src']} missing from the build")
+    n_images = sum(len(r["images"]) for r in results)
+    return failures, len(pages), n_images
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    build = Path(argv[0] if argv else HERE / "_build" / "html").resolve()
+    failures, n_pages, n_images = check(build)
+    if failures:
+        print("check_site: FAILED\n  " + "\n  ".join(failures))
+        return 1
+    print(f"check_site: {n_pages} pages loaded in Chromium, {n_images} images rendered, "
+          f"every public name's page has its anchor ({build})")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
