@@ -8,6 +8,8 @@ Asserts, on the DOM as the browser built it:
 * the gallery index has one thumbnail per ``examples/NN_*.py`` and every
   example page shows a picture;
 * every algorithm page shows its figure;
+* every equation (``.math``) on these pages was typeset by MathJax, without
+  a TeX error;
 * every ``<img>`` on these pages was decoded by the browser (``complete`` and
   ``naturalWidth > 0``) and its file exists in the build.
 
@@ -41,10 +43,15 @@ CHECK_PAGE = "_site_check.html"
 
 COLLECT = """
 <script>
-window.addEventListener("load", () => {
+window.addEventListener("load", async () => {
   const out = [];
   for (const frame of document.querySelectorAll("iframe")) {
     const doc = frame.contentDocument;
+    const win = frame.contentWindow;
+    // MathJax typesets after the load event: wait for it where the page has equations.
+    if (win && win.MathJax && win.MathJax.startup && win.MathJax.startup.promise) {
+      try { await win.MathJax.startup.promise; } catch (e) {}
+    }
     out.push({
       page: frame.getAttribute("src"),
       loaded: doc !== null && doc.readyState === "complete" && doc.body !== null,
@@ -53,6 +60,9 @@ window.addEventListener("load", () => {
       images: doc ? [...doc.images].map(img => ({
         src: img.getAttribute("src"), url: img.src, ok: img.complete && img.naturalWidth > 0,
         width: img.naturalWidth})) : [],
+      math: doc ? doc.querySelectorAll("span.math, div.math").length : 0,
+      typeset: doc ? doc.querySelectorAll("mjx-container").length : 0,
+      mathErrors: doc ? doc.querySelectorAll("mjx-merror").length : 0,
     });
   }
   const pre = document.createElement("pre");
@@ -131,7 +141,7 @@ class _QuietHandler(http.server.SimpleHTTPRequestHandler):
         pass
 
 
-def check(build: Path, *, timeout: float = 180.0) -> tuple[list[str], int, int]:
+def check(build: Path, *, timeout: float = 180.0) -> tuple[list[str], int, int, int]:
     pages = expected_pages(build)
     results = run_browser(build, list(pages), timeout)
     failures: list[str] = []
@@ -146,6 +156,9 @@ def check(build: Path, *, timeout: float = 180.0) -> tuple[list[str], int, int]:
                 failures.append(f"{page}: no element with id {anchor!r}")
         if len(got["images"]) < want["min_images"]:
             failures.append(f"{page}: {len(got['images'])} images, expected at least {want['min_images']}")
+        if got["typeset"] < got["math"] or got["mathErrors"]:
+            failures.append(f"{page}: {got['typeset']} of {got['math']} equations typeset by MathJax, "
+                            f"{got['mathErrors']} with errors")
         for image in got["images"]:
             if not image["ok"]:
                 failures.append(f"{page}: image {image['src']} did not render")
@@ -153,17 +166,18 @@ def check(build: Path, *, timeout: float = 180.0) -> tuple[list[str], int, int]:
             if not (build / urllib.parse.unquote(path).lstrip("/")).is_file():
                 failures.append(f"{page}: image file {image['src']} missing from the build")
     n_images = sum(len(r["images"]) for r in results)
-    return failures, len(pages), n_images
+    n_math = sum(r["typeset"] for r in results)
+    return failures, len(pages), n_images, n_math
 
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     build = Path(argv[0] if argv else HERE / "_build" / "html").resolve()
-    failures, n_pages, n_images = check(build)
+    failures, n_pages, n_images, n_math = check(build)
     if failures:
         print("check_site: FAILED\n  " + "\n  ".join(failures))
         return 1
-    print(f"check_site: {n_pages} pages loaded in Chromium, {n_images} images rendered, "
+    print(f"check_site: {n_pages} pages loaded in Chromium, {n_images} images and {n_math} equations rendered, "
           f"every public name's page has its anchor ({build})")
     return 0
 

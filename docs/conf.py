@@ -31,13 +31,13 @@ extensions = [
     "numpydoc",
     "sphinx_gallery.gen_gallery",
     "myst_parser",
+    "sphinx-mathjax-offline",  # MathJax 3 copied into _static: equations render without a CDN
 ]
 source_suffix = {".rst": "restructuredtext", ".md": "markdown"}
 exclude_patterns = ["_build", "auto_examples/*.ipynb", "auto_examples/*.py", "**/*.codeobj.json"]
 html_theme = "furo"
 html_title = f"o3d_lsmesh {release}"
-# Offline: no intersphinx, no remote MathJax fonts needed for the check (MathJax is
-# loaded from its CDN by the browser only; the check does not depend on it).
+# Offline: no intersphinx, MathJax served from the build (the CI browser check has no CDN).
 
 autodoc_default_options = {"members": True, "inherited-members": False, "show-inheritance": True}
 autodoc_typehints = "none"  # numpydoc's Parameters sections carry the types
