@@ -29,6 +29,7 @@ docs: $(DOCS_STAMP)
 
 # Open the built site in headless Chromium: every public name's page and every image renders.
 docs-check: docs
+	$(PY) docs/check_site.py --self-test
 	$(PY) docs/check_site.py $(DOCS_BUILD)
 
 docs-system:

@@ -16,7 +16,9 @@ Asserts, on the DOM as the browser built it:
 The pages are served over a local HTTP server (one origin, so a check page can
 read the pages it loads in iframes: one browser start for the whole site).
 
-Usage: ``python docs/check_site.py [docs/_build/html]``. Exit status 1 with a
+Usage: ``python docs/check_site.py [docs/_build/html]``;
+``python docs/check_site.py --self-test`` checks the checker on a tiny site
+with a missing anchor, a corrupt and a missing image. Exit status 1 with a
 list of failures, 0 with a one-line summary.
 """
 
@@ -141,8 +143,10 @@ class _QuietHandler(http.server.SimpleHTTPRequestHandler):
         pass
 
 
-def check(build: Path, *, timeout: float = 180.0) -> tuple[list[str], int, int, int]:
-    pages = expected_pages(build)
+def check(build: Path, *, pages: dict[str, dict] | None = None,
+          timeout: float = 180.0) -> tuple[list[str], int, int, int]:
+    """Failures (empty when the site renders), page count, image count, typeset equation count."""
+    pages = expected_pages(build) if pages is None else pages
     results = run_browser(build, list(pages), timeout)
     failures: list[str] = []
     seen = {r["page"].lstrip("/"): r for r in results}
@@ -170,8 +174,37 @@ def check(build: Path, *, timeout: float = 180.0) -> tuple[list[str], int, int, 
     return failures, len(pages), n_images, n_math
 
 
+def self_test() -> None:
+    """The checker catches what it claims to: a missing anchor, an undecodable and a missing image."""
+    with tempfile.TemporaryDirectory(prefix="o3d_lsmesh_site_") as tmp:
+        site = Path(tmp)
+        shutil.copyfile(HERE / "images" / "01_denoise_scan.png", site / "good.png")
+        (site / "corrupt.png").write_bytes(b"not a png")
+        (site / "ok.html").write_text('<html><body><dl><dt id="o3d_lsmesh.good">good</dt></dl>'
+                                      '<img src="good.png"></body></html>')
+        (site / "bad.html").write_text('<html><body><dl><dt id="o3d_lsmesh.other">other</dt></dl>'
+                                       '<img src="corrupt.png"><img src="gone.png"></body></html>')
+        pages = {"ok.html": {"ids": ["o3d_lsmesh.good"], "min_images": 1},
+                 "bad.html": {"ids": ["o3d_lsmesh.wanted"], "min_images": 3}}
+        failures, n_pages, n_images, _ = check(site, pages=pages, timeout=60.0)
+    expected = [
+        "bad.html: no element with id 'o3d_lsmesh.wanted'",
+        "bad.html: 2 images, expected at least 3",
+        "bad.html: image corrupt.png did not render",
+        "bad.html: image gone.png did not render",
+        "bad.html: image file gone.png missing from the build",
+    ]
+    if sorted(failures) != sorted(expected) or (n_pages, n_images) != (2, 3):
+        raise SystemExit(f"check_site: self-test failed: the checker reported {failures} on {n_pages} pages, "
+                         f"{n_images} images; expected {expected} on 2 pages, 3 images")
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
+    if argv[:1] == ["--self-test"]:
+        self_test()
+        print("check_site: self-test passed (missing anchor, corrupt and missing images are caught)")
+        return 0
     build = Path(argv[0] if argv else HERE / "_build" / "html").resolve()
     failures, n_pages, n_images, n_math = check(build)
     if failures:
