@@ -92,8 +92,10 @@ def expected_pages(build: Path) -> dict[str, dict]:
     for name in o3d_lsmesh.__all__:
         obj = getattr(o3d_lsmesh, name)
         if inspect.ismodule(obj):
-            public = getattr(obj, "__all__", [n for n in dir(obj) if not n.startswith("_")])
-            ids = [f"{obj.__name__}.{n}" for n in public if callable(getattr(obj, n))]
+            # What automodule :members: documents: the module's __all__, else what it defines itself.
+            public = getattr(obj, "__all__", None) or [
+                n for n in dir(obj) if not n.startswith("_") and getattr(getattr(obj, n), "__module__", None) == obj.__name__]
+            ids = [f"{obj.__name__}.{n}" for n in public if callable(getattr(obj, n)) and getattr(obj, n).__doc__]
         else:
             ids = [f"o3d_lsmesh.{name}"]
         pages[f"api/{name}.html"] = {"ids": ids, "min_images": 0}
