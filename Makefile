@@ -7,14 +7,37 @@ VENV := .venv
 PY := $(VENV)/bin/python
 APT_PACKAGES := gcc python3-dev libsuitesparse-dev libopenblas0-pthread libusb-1.0-0 libvulkan1 mesa-vulkan-drivers libgl1 libgomp1
 STAMP := $(VENV)/.installed
+# The docs build (Sphinx, the `docs` extra) and its browser check (Debian's chromium).
+DOCS_APT_PACKAGES := chromium
+DOCS_STAMP := $(VENV)/.docs-installed
+DOCS_BUILD := docs/_build/html
 
-.PHONY: demo test bench system venv clean
+.PHONY: demo test bench system venv clean docs docs-check docs-system
 
 demo: $(STAMP)
 	$(PY) -m o3d_lsmesh.cli demo
 
 test: $(STAMP)
 	$(PY) -m pytest -p no:dash -q
+	$(MAKE) docs-check
+
+# Sphinx with warnings as errors; -E rereads every source so no warning hides in a cached page.
+# The gallery shows the committed docs/images pictures and does not run the examples.
+docs: $(DOCS_STAMP)
+	rm -rf docs/auto_examples docs/api docs/benchmarks
+	$(PY) -m sphinx -E -W --keep-going -q -b html docs $(DOCS_BUILD)
+
+# Open the built site in headless Chromium: every public name's page and every image renders.
+docs-check: docs
+	$(PY) docs/check_site.py --self-test
+	$(PY) docs/check_site.py $(DOCS_BUILD)
+
+docs-system:
+	@$(MAKE) --no-print-directory system APT_PACKAGES="$(DOCS_APT_PACKAGES)"
+
+$(DOCS_STAMP): $(STAMP) | docs-system
+	$(PY) -m pip install -q -e '.[docs]'
+	touch $(DOCS_STAMP)
 
 bench: $(STAMP)
 	for b in benchmarks/bench_*.py; do $(PY) $$b || exit 1; done
@@ -37,4 +60,4 @@ $(STAMP): setup.cfg setup.py pyproject.toml o3d_lsmesh/hierarchy/_kernel.pyx | s
 	touch $(STAMP)
 
 clean:
-	rm -rf $(VENV) demo_out *.egg-info
+	rm -rf $(VENV) demo_out *.egg-info docs/_build docs/auto_examples docs/api docs/benchmarks docs/sg_execution_times.rst

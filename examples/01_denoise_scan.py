@@ -1,4 +1,5 @@
 """01 - Denoise a scan with barycenter-constrained fairing.
+========================================================
 
 Scanned meshes carry measurement noise. Laplacian smoothing removes it but
 shrinks the surface and rounds its features; constrained fairing (Liu et al.
@@ -14,7 +15,12 @@ or on your own scan (no clean reference: the summary reports how far the
 vertices moved and the volume change)::
 
     python examples/01_denoise_scan.py scan.ply --out pictures
+
+.. image:: /images/01_denoise_scan.png
+   :alt: the picture this script writes with --out
 """
+
+# sphinx_gallery_thumbnail_path = "images/01_denoise_scan.png"
 
 from __future__ import annotations
 

@@ -1,4 +1,5 @@
 """02 - Smooth at several scales with multiresolution fairing.
+===========================================================
 
 Constrained fairing at the full resolution removes only the finest wiggles.
 Multiresolution fairing (Liu et al. 2001, section 4) builds a hierarchy of
@@ -8,7 +9,12 @@ details that go, while the connectivity of the result is the input's.
 
     python examples/02_smooth_at_scales.py                  # built-in bumpy blob
     python examples/02_smooth_at_scales.py mesh.ply --out pictures
+
+.. image:: /images/02_smooth_at_scales.png
+   :alt: the picture this script writes with --out
 """
+
+# sphinx_gallery_thumbnail_path = "images/02_smooth_at_scales.png"
 
 from __future__ import annotations
 

@@ -1,4 +1,5 @@
 """03 - Approximate a mesh with few control points, then edit it by moving them.
+=============================================================================
 
 A least-squares mesh (Sorkine and Cohen-Or 2004) is the smoothest geometry of
 a given connectivity that passes near a few control points. Chosen greedily
@@ -9,7 +10,12 @@ back-substitution.
 
     python examples/03_approximate_and_edit.py
     python examples/03_approximate_and_edit.py mesh.ply --count 300 --out pictures
+
+.. image:: /images/03_approximate_and_edit.png
+   :alt: the picture this script writes with --out
 """
+
+# sphinx_gallery_thumbnail_path = "images/03_approximate_and_edit.png"
 
 from __future__ import annotations
 

@@ -1,4 +1,5 @@
 """04 - Reconstruct the geometry of a missing region from the connectivity around it.
+==================================================================================
 
 When a region's positions are lost (a scanner shadow, a corrupted block, the
 camel's hump in figure 5 of the LS-meshes paper) but its connectivity is
@@ -8,7 +9,12 @@ system of the unknown vertices, and leaves the known ones bit-identical.
 
     python examples/04_reconstruct_region.py
     python examples/04_reconstruct_region.py mesh.ply --fraction 0.05 --out pictures
+
+.. image:: /images/04_reconstruct_region.png
+   :alt: the picture this script writes with --out
 """
+
+# sphinx_gallery_thumbnail_path = "images/04_reconstruct_region.png"
 
 from __future__ import annotations
 

@@ -1,4 +1,5 @@
 """05 - Compact geometry encoding and progressive decoding.
+========================================================
 
 The geometry-aware bases paper (Sorkine, Cohen-Or, Irony, Toledo) stores a
 mesh's geometry as a few anchors: their indices and quantized positions. The
@@ -9,7 +10,12 @@ a rank-k update of the kept Cholesky factor, not a new factorization.
 
     python examples/05_progressive_decoding.py
     python examples/05_progressive_decoding.py mesh.ply --count 500 --out pictures
+
+.. image:: /images/05_progressive_decoding.png
+   :alt: the picture this script writes with --out
 """
+
+# sphinx_gallery_thumbnail_path = "images/05_progressive_decoding.png"
 
 from __future__ import annotations
 

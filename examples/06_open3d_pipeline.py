@@ -1,4 +1,5 @@
 """06 - An Open3D pipeline that chains o3d_lsmesh steps with Open3D's own.
+=======================================================================
 
 ``o3d_lsmesh.register()`` adds our operations as methods of Open3D's legacy
 and tensor ``TriangleMesh`` (explicitly: importing o3d_lsmesh changes
@@ -8,7 +9,12 @@ nothing). Each returns a new mesh, so they chain with Open3D's methods:
 
     python examples/06_open3d_pipeline.py
     python examples/06_open3d_pipeline.py scan.ply --out pictures
+
+.. image:: /images/06_open3d_pipeline.png
+   :alt: the picture this script writes with --out
 """
+
+# sphinx_gallery_thumbnail_path = "images/06_open3d_pipeline.png"
 
 from __future__ import annotations
 

@@ -155,7 +155,7 @@ def register() -> tuple[str, ...]:
     Adds, to ``open3d.geometry.TriangleMesh`` and
     ``open3d.t.geometry.TriangleMesh``:
 
-    ========================================  ==================================================
+    =========================================  ==================================================
     ``filter_smooth_constrained(n=10, **kw)``  :func:`o3d_lsmesh.fairing.constrained_fairing`
     ``filter_smooth_multiresolution(level)``   :func:`o3d_lsmesh.fairing.multiresolution_fairing`
     ``filter_smooth_boundary_curves(n=10)``    :func:`o3d_lsmesh.fairing.smooth_boundary_curves`
@@ -163,7 +163,7 @@ def register() -> tuple[str, ...]:
     ``reconstruct_geometry(unknown)``          :func:`o3d_lsmesh.reconstruct_geometry`
     ``approximate_ls(count, **kw)``            :func:`o3d_lsmesh.approximate` (mesh only)
     ``decode_geometry(data, anchors=None)``    :func:`o3d_lsmesh.decode_geometry`
-    ========================================  ==================================================
+    =========================================  ==================================================
 
     Each returns a new mesh of the caller's kind. Explicit and idempotent:
     importing o3d_lsmesh changes nothing, and a second call re-installs the
