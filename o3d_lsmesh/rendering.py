@@ -435,6 +435,7 @@ def render(
     package). Without it, titles are left out and the color bar is an
     unlabelled strip over the bottom rows of the panels, with an
     ``O3DLSMeshWarning``.
+
     Raises
     ------
     TypeError, ValueError
