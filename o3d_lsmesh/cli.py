@@ -10,6 +10,7 @@ STL, OFF, glTF, ...). Subcommands::
     o3d-lsmesh encode INPUT OUTPUT [--count N] [--bits B]
     o3d-lsmesh decode MESH DATA OUTPUT [--anchors K]
     o3d-lsmesh compare A B
+    o3d-lsmesh fill INPUT OUTPUT [--max-hole-edges K] [--max-hole-diameter D] [--continuity 0|1|2] [--density X] [--fill-border]
     o3d-lsmesh demo [--out demo_out]
 
 Every subcommand takes ``--quiet`` (no progress, no report), ``--json``
@@ -461,6 +462,35 @@ def cmd_demo(args: argparse.Namespace, run: _Run) -> int:
     return run.finish({"command": "demo", **result})
 
 
+def cmd_fill(args: argparse.Namespace, run: _Run) -> int:
+    check_output(args.output, [args.input], force=args.force)
+    mesh = read_input(args.input)
+    from .hole_filling import find_holes, fill_holes
+
+    vertices, triangles = np.asarray(mesh.vertices), np.asarray(mesh.triangles).astype(np.int64)
+    before = find_holes(vertices, triangles)
+    start = time.perf_counter()
+    try:
+        out = run.call(fill_holes, mesh, max_hole_edges=args.max_hole_edges, max_hole_diameter=args.max_hole_diameter,
+                       continuity=args.continuity, density=args.density, fill_border=args.fill_border, desc="fill")
+    except (TypeError, ValueError) as error:  # name the flag, not the keyword
+        text = str(error)
+        for keyword in ("max_hole_edges", "max_hole_diameter", "continuity", "density"):
+            text = text.replace(keyword, "--" + keyword.replace("_", "-"))
+        raise CLIError(text) from None
+    seconds = time.perf_counter() - start
+    write_output(args.output, out)
+    after = find_holes(np.asarray(out.vertices), np.asarray(out.triangles).astype(np.int64))
+    report = {"command": "fill", "input": args.input, "output": args.output, **_mesh_size(mesh),
+              "holes_before": len(before), "holes_after": len(after),
+              "borders_left_open": sum(hole.border for hole in before) if not args.fill_border else 0,
+              "new_vertices": len(out.vertices) - len(mesh.vertices),
+              "new_triangles": len(out.triangles) - len(mesh.triangles), "seconds": seconds}
+    run.say(f"filled {len(before) - len(after)} of {len(before)} holes of {args.input} in {seconds:.2f} s "
+            f"({report['new_vertices']} new vertices) -> {args.output}; {len(after)} loops left open")
+    return run.finish(report)
+
+
 # --------------------------------------------------------------------------- parser
 
 
@@ -565,6 +595,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--noise", type=float, default=0.3, help="noise sigma in mean edge lengths")
     p.add_argument("--seed", type=int, default=0)
     p.set_defaults(handler=cmd_demo)
+
+    p = sub.add_parser("fill", parents=[common], help="fill holes with faired patches (LS meshes)",
+                       description="Close holes: minimum-weight triangulation, refinement, LS-mesh fairing. "
+                                   "Each open component's outer border stays open unless --fill-border.")
+    p.add_argument("input", metavar="INPUT")
+    p.add_argument("output", metavar="OUTPUT")
+    p.add_argument("--max-hole-edges", type=_int_at_least(3, ">= 3"), default=None, help="fill only holes this small")
+    p.add_argument("--max-hole-diameter", type=float, default=None, help="fill only holes this narrow (mesh units)")
+    p.add_argument("--continuity", type=int, choices=(0, 1, 2), default=2, help="0 harmonic, 1 LS mesh, 2 tri-Laplacian")
+    p.add_argument("--density", type=float, default=1.0, help="new vertex density relative to the surroundings")
+    p.add_argument("--fill-border", action="store_true", help="also fill outer borders")
+    p.set_defaults(handler=cmd_fill)
     return parser
 
 
