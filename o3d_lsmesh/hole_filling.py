@@ -907,44 +907,46 @@ def _fair_all(vertices: np.ndarray, triangles: np.ndarray, m: int, n: int, holes
     vertex_owner[new_tris[inside] - n] = np.broadcast_to(tri_owner[:, None], new_tris.shape)[inside]
     count = len(holes)
     chosen = np.full(count, -1)
-    fewest = np.full(count, np.inf)
     out = vertices.copy()
-    candidates = []
-    for level in range(continuity, -1, -1):
-        try:
-            solution = _fair(vertices[local_vertices], remap[local_tris], unknown_local, local_rings, level)
-        except SingularSystemError:
-            continue
-        if not np.isfinite(solution).all():
-            continue
-        faired = vertices.copy()
-        faired[unknown] = solution
-        if weights == "cotangent" and level > 0:
-            # cotangent weights (clamped positive, vertex-area normalized) read off the uniform solution: a
-            # fair embedding, where weights from the flat refined patch diverged (camel, 15h hole: 87 h off)
+
+    def candidates():  # lazily: most calls stop at the first
+        for level in range(continuity, -1, -1):
             try:
-                again = _fair(faired[local_vertices], remap[local_tris], unknown_local, local_rings, level,
-                              "cotangent-area")
+                solution = _fair(vertices[local_vertices], remap[local_tris], unknown_local, local_rings, level)
             except SingularSystemError:
-                again = None
-            if again is not None and np.isfinite(again).all() and _no_fold(faired, again, unknown, new_tris):
-                better = faired.copy()
-                better[unknown] = again
-                candidates.append((level, better))
-        candidates.append((level, faired))
-    candidates.append((-1, vertices))  # the refined patch as triangulated
-    for rank, (level, candidate) in enumerate(candidates):
+                continue
+            if not np.isfinite(solution).all():
+                continue
+            faired = vertices.copy()
+            faired[unknown] = solution
+            if weights == "cotangent" and level > 0:
+                # cotangent weights (clamped positive, vertex-area normalized) read off the uniform solution:
+                # a fair embedding, where weights from the flat refined patch diverged (camel, 15h: 87 h off)
+                try:
+                    again = _fair(faired[local_vertices], remap[local_tris], unknown_local, local_rings, level,
+                                  "cotangent-area")
+                except SingularSystemError:
+                    again = None
+                if again is not None and np.isfinite(again).all() and _no_fold(faired, again, unknown, new_tris):
+                    better = faired.copy()
+                    better[unknown] = again
+                    yield level, better
+            yield level, faired
+        yield -1, vertices  # the refined patch as triangulated
+
+    tried = []
+    for rank, (level, candidate) in enumerate(candidates()):
+        tried.append((level, candidate))
         crossing = _crossings(candidate, triangles, m)  # (q,) per new triangle
         per_hole = np.bincount(tri_owner, weights=crossing, minlength=count)
         take = (chosen < 0) & (per_hole == 0)
-        improve = (chosen < 0) & (per_hole < fewest)
-        fewest[improve] = per_hole[improve]
         for hole_index in np.flatnonzero(take):
             mine = vertex_owner == hole_index
             out[n:][mine] = candidate[n:][mine]
             chosen[hole_index] = rank
         if (chosen >= 0).all():
             break
+    candidates = tried
     used = np.array([candidates[c][0] if c >= 0 else candidates[0][0] for c in chosen], dtype=np.int64)
     stuck = np.flatnonzero(chosen < 0)
     if len(stuck):
@@ -971,19 +973,49 @@ def _crossings(vertices: np.ndarray, triangles: np.ndarray, first_new: int) -> n
     if len(new) == 0:
         return result
     p_new = vertices[triangles[new]]
-    low, high = p_new.reshape(-1, 3).min(0), p_new.reshape(-1, 3).max(0)
-    p_all = vertices[triangles]
-    boxed = np.flatnonzero(((p_all.max(1) >= low) & (p_all.min(1) <= high)).all(axis=1))
-    centre = p_all[boxed].mean(axis=1)
-    radius = np.linalg.norm(p_all[boxed] - centre[:, None, :], axis=2).max(axis=1)
     c_new = p_new.mean(axis=1)
     r_new = np.linalg.norm(p_new - c_new[:, None, :], axis=2).max(axis=1)
-    near = cKDTree(centre).query_ball_point(c_new, r=r_new + radius.max())
-    counts = np.array([len(x) for x in near])
-    if counts.sum() == 0:
+    # candidates: triangles with a vertex in the new triangles' box grown by twice the largest of them
+    # (a per-vertex test: a pass over the vertices, not a copy of every triangle's corners)
+    pad = 2.0 * r_new.max()
+    low, high = p_new.reshape(-1, 3).min(0) - pad, p_new.reshape(-1, 3).max(0) + pad
+    in_box = ((vertices >= low) & (vertices <= high)).all(axis=1)
+    boxed = np.flatnonzero(in_box[triangles].any(axis=1))
+    p_box = vertices[triangles[boxed]]
+    centre = p_box.mean(axis=1)
+    radius = np.linalg.norm(p_box - centre[:, None, :], axis=2).max(axis=1)
+    # bounding spheres overlap: |c_a - c_b| <= r_a + r_b. Queried at two scales, so that a few long
+    # slivers do not make every query radius long: "small" spheres (at most 4 times the median) against
+    # small ones with the small bound, and each big one on its own.
+    cut = 4.0 * np.median(np.concatenate([radius, r_new]))
+    small_c, small_n = radius <= cut, r_new <= cut
+    a_parts, b_parts = [], []
+
+    def pairs(queries, tree_points, reach, owners_q, owners_t):
+        if len(queries) == 0 or len(tree_points) == 0:
+            return
+        found = cKDTree(tree_points).query_ball_point(queries, r=reach)
+        counts = np.array([len(x) for x in found])
+        if counts.sum():
+            a_parts.append(np.repeat(owners_q, counts))
+            b_parts.append(owners_t[np.concatenate([np.asarray(x, dtype=np.int64) for x in found if len(x)])])
+
+    idx_c, idx_n = np.arange(len(boxed)), np.arange(len(new))
+    sc = idx_c[small_c]
+    pairs(c_new[small_n], centre[sc], r_new[small_n] + (radius[sc].max() if len(sc) else 0.0), idx_n[small_n], sc)
+    pairs(c_new[~small_n], centre, r_new[~small_n] + radius.max(), idx_n[~small_n], idx_c)
+    sn = idx_n[small_n]
+    if len(sn):
+        bc = idx_c[~small_c]
+        before = len(a_parts)
+        pairs(centre[bc], c_new[sn], radius[bc] + r_new[sn].max(), bc, sn)
+        if len(a_parts) > before:  # these came as (candidate, new): swap
+            a_parts[-1], b_parts[-1] = b_parts[-1], a_parts[-1]
+    if not a_parts:
         return result
-    a = np.repeat(new, counts)
-    b = boxed[np.concatenate([np.asarray(x, dtype=np.int64) for x in near if len(x)])]
+    ia, ib = np.concatenate(a_parts), np.concatenate(b_parts)  # (new index, candidate index)
+    close = np.linalg.norm(c_new[ia] - centre[ib], axis=1) <= r_new[ia] + radius[ib]
+    a, b = new[ia[close]], boxed[ib[close]]
     shared = (triangles[a][:, :, None] == triangles[b][:, None, :]).any(axis=(1, 2))
     keep = ~shared & ((b < first_new) | (a < b))  # each new-new pair once
     a, b = a[keep], b[keep]
@@ -1006,7 +1038,8 @@ def _crossings(vertices: np.ndarray, triangles: np.ndarray, first_new: int) -> n
         pp = np.einsum("kij,kj->ki", P, unit)
         qq = np.einsum("kij,kj->ki", Q, unit)
         gap = np.maximum(qq.min(1) - pp.max(1), pp.min(1) - qq.max(1))
-        separated |= usable & (gap > -1e-9 * scale)
+        # strictly apart: coplanar pairs project to one point on their common normal (gap 0)
+        separated |= usable & (gap > 1e-12 * scale)
     hit = ~separated
     np.add.at(result, a[hit] - first_new, 1.0)
     both_new = hit & (b >= first_new)

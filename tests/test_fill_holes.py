@@ -367,13 +367,13 @@ def test_large_hole_uses_the_chord_split_and_finishes(tmp_path):
     import time
 
     start = time.perf_counter()
-    out = fill_holes_arrays(V, T, density=0.05)  # ~1,500 new vertices instead of ~400,000
+    out = fill_holes_arrays(V, T, density=0.03)  # ~400 new vertices instead of ~400,000
     seconds = time.perf_counter() - start
     assert len(out.holes) == 1 and out.holes[0].edges == k
     assert boundary_edge_count(out.triangles, len(out.vertices)) == k  # only the outer rim is left
     check_valid(out.vertices, out.triangles, len(T))
     np.testing.assert_allclose(out.vertices[len(V):, 2], 0.0, atol=1e-9)
-    assert seconds < 60  # measured 3 s on a loaded 2-core machine
+    assert seconds < 60  # measured 3-20 s on this 2-core machine shared by 7 jobs
 
 
 def test_outer_border_of_a_scan_stays_open():
@@ -406,7 +406,8 @@ def test_outer_border_of_a_scan_stays_open():
 
 
 def test_fill_border_fills_it():
-    V, T = grid(8, 8)
+    V, T = grid(8, 8, z=lambda x, y: (x - 0.5) ** 2 + (y - 0.5) ** 2)  # a bowl: its rim is the border
+    assert find_holes(V, T)[0].border
     out = fill_holes_arrays(V, T, fill_border=True)
     assert len(out.holes) == 1 and out.skipped == []
     assert boundary_edge_count(out.triangles, len(out.vertices)) == 0
