@@ -35,11 +35,10 @@ import tempfile
 import time
 
 import numpy as np
+import open3d as o3d
 from _common import load_mesh, markdown_table, write_markdown
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
-
-import open3d as o3d
 
 from o3d_lsmesh.hole_filling import fill_holes_arrays
 

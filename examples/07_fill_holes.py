@@ -77,7 +77,7 @@ def main(argv=None) -> int:
         seconds = time.perf_counter() - start
         new = np.asarray(out.vertices)[len(holed.vertices):]
         d = truth.compute_distance(o3d.core.Tensor(new.astype(np.float32))).numpy() / h
-        print(f"{continuity:10d}  {len(new):12d}  {d.mean():26.4f}  {d.max():7.3f}  {str(out.is_watertight()):6s}"
+        print(f"{continuity:10d}  {len(new):12d}  {d.mean():26.4f}  {d.max():7.3f}  {out.is_watertight()!s:6s}"
               f"  {1000 * seconds:9.1f}")
         filled = out
     print(f"signed volume: input {mesh.get_volume() if mesh.is_watertight() else float('nan'):.5g}, "

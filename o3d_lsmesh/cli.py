@@ -465,7 +465,7 @@ def cmd_demo(args: argparse.Namespace, run: _Run) -> int:
 def cmd_fill(args: argparse.Namespace, run: _Run) -> int:
     check_output(args.output, [args.input], force=args.force)
     mesh = read_input(args.input)
-    from .hole_filling import find_holes, fill_holes
+    from .hole_filling import fill_holes, find_holes
 
     vertices, triangles = np.asarray(mesh.vertices), np.asarray(mesh.triangles).astype(np.int64)
     before = find_holes(vertices, triangles)

@@ -258,7 +258,7 @@ def test_real_mesh_hole_within_bound_of_truth(name, bound):
     errors = {}
     for radius in (2.5, 6.0):
         for _ in range(20):  # a centre whose disk leaves one hole
-            Vh, Th, removed = cut_disk(V, T, int(rng.integers(len(V))), radius * h)
+            Vh, Th, _ = cut_disk(V, T, int(rng.integers(len(V))), radius * h)
             if len(_hole_loops(Th, len(Vh))) == 1:
                 break
         for continuity in (0, 1, 2):
