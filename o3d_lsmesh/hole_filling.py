@@ -793,13 +793,14 @@ def fill_holes_arrays(
                            np.zeros(0, dtype=np.int64))
     edges = edge_info[0]
     edge_keys = edges[:, 0] * n + edges[:, 1]  # sorted
-    # unit normals of the input's triangles (for the dihedral angles at the loop edges)
-    face_normal, _ = _unit(_cross(vertices[triangles[:, 1]] - vertices[triangles[:, 0]],
-                                    vertices[triangles[:, 2]] - vertices[triangles[:, 0]]))
-    # local edge scale of each vertex: mean length of its edges (Liepa's sigma)
-    length = np.linalg.norm(vertices[edges[:, 0]] - vertices[edges[:, 1]], axis=1)
-    degree = np.bincount(edges.ravel(), minlength=n)
-    sigma_all = np.bincount(edges.ravel(), weights=np.repeat(length, 2), minlength=n) / np.maximum(degree, 1)
+    # local edge scale of the loop vertices: mean length of their edges (Liepa's sigma); only edges at
+    # a loop vertex are measured
+    on_loop = np.zeros(n, dtype=bool)
+    on_loop[np.concatenate([hole.vertices for hole in holes])] = True
+    at_loop = edges[on_loop[edges].any(axis=1)]
+    length = np.linalg.norm(vertices[at_loop[:, 0]] - vertices[at_loop[:, 1]], axis=1)
+    degree = np.bincount(at_loop.ravel(), minlength=n)
+    sigma_all = np.bincount(at_loop.ravel(), weights=np.repeat(length, 2), minlength=n) / np.maximum(degree, 1)
     new_points, new_tris = [], []
     interp_rows, interp_cols, interp_vals = [], [], []
     offset = n
@@ -813,7 +814,9 @@ def fill_holes_arrays(
         for loop, rows in _simple_pieces(hole.vertices, hole.rows):
             k = len(loop)
             points = vertices[loop]
-            outer = face_normal[rows % m]
+            outer_tris = triangles[rows % m]  # the mesh triangle on each loop edge, for dihedral angles
+            outer, _ = _unit(_cross(vertices[outer_tris[:, 1]] - vertices[outer_tris[:, 0]],
+                                    vertices[outer_tris[:, 2]] - vertices[outer_tris[:, 0]]))
             # chords that already are edges of the mesh (between loop vertices that are not neighbours)
             a, b = np.meshgrid(loop, loop, indexing="ij")
             key = np.minimum(a, b) * n + np.maximum(a, b)
