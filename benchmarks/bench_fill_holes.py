@@ -15,7 +15,8 @@ whose truth is unknown. Every tool fills every hole of the case:
   best of ``refinehole`` off and on (by mean distance);
 * Open3D ``t.geometry.TriangleMesh.fill_holes(hole_size=inf)``.
 
-Measured per case and tool: time per hole, new vertices, mean and Hausdorff
+Measured per case and tool: time per hole (ours and CGAL: best of 3; CGAL's half-edge structure is
+built before its clock starts, ours starts from arrays), new vertices, mean and Hausdorff
 distance of the fill to the truth (in h; the fill is the triangles not in the
 input, sampled by area; Hausdorff is two-sided against the removed part of the
 original), smallest angle of the new triangles, boundary edges left, edge- and
@@ -144,10 +145,16 @@ def polyhedron_arrays(P):
     return np.array(vertices, dtype=np.float64), np.roll(np.array(faces, dtype=np.int64), 1, axis=1)
 
 
+REPEAT = 3  # best of three: the machine is shared, and timings are noisy
+
+
 def ours(V, T):
-    start = time.perf_counter()
-    out = fill_holes_arrays(V, T)
-    return (out.vertices, out.triangles), time.perf_counter() - start
+    best = np.inf
+    for _ in range(REPEAT):
+        start = time.perf_counter()
+        out = fill_holes_arrays(V, T)
+        best = min(best, time.perf_counter() - start)
+    return (out.vertices, out.triangles), best
 
 
 def cgal(continuity):
@@ -155,21 +162,24 @@ def cgal(continuity):
         from CGAL import CGAL_Polygon_mesh_processing as pmp
         from CGAL.CGAL_Polyhedron_3 import Polyhedron_3
 
+        best = np.inf
         with tempfile.TemporaryDirectory() as folder:
             path = os.path.join(folder, "in.off")
             write_off(path, V, T)
-            P = Polyhedron_3(path)
-            seconds = 0.0
-            with quiet_stderr():
-                for _ in range(10_000):
-                    P.normalize_border()  # border halfedges last: iterate only those
-                    border = next((h for h in P.border_halfedges() if h.is_border()), None)
-                    if border is None:
-                        break
-                    start = time.perf_counter()
-                    pmp.triangulate_refine_and_fair_hole(P, border, [], [], 1.41, continuity)
-                    seconds += time.perf_counter() - start
-            return polyhedron_arrays(P), seconds
+            for _ in range(REPEAT):  # a fresh polyhedron each time (its build is not timed)
+                P = Polyhedron_3(path)
+                seconds = 0.0
+                with quiet_stderr():
+                    for _ in range(10_000):
+                        P.normalize_border()  # border halfedges last: iterate only those
+                        border = next((h for h in P.border_halfedges() if h.is_border()), None)
+                        if border is None:
+                            break
+                        start = time.perf_counter()
+                        pmp.triangulate_refine_and_fair_hole(P, border, [], [], 1.41, continuity)
+                        seconds += time.perf_counter() - start
+                best = min(best, seconds)
+            return polyhedron_arrays(P), best
 
     return run
 
