@@ -210,7 +210,8 @@ def warn_dropped_attributes(data: MeshData, reason: str, *, stacklevel: int = 3)
     return bool(dropped)
 
 
-def new_mesh(data: MeshData, vertices: np.ndarray, triangles: np.ndarray | None = None) -> Any:
+def new_mesh(data: MeshData, vertices: np.ndarray, triangles: np.ndarray | None = None, *,
+             warn: bool = True) -> Any:
     """Build a new mesh of ``data``'s kind with ``vertices`` (and ``triangles``, if they changed).
 
     ``triangles=None`` means the connectivity of ``data`` is kept, and so are
@@ -218,7 +219,8 @@ def new_mesh(data: MeshData, vertices: np.ndarray, triangles: np.ndarray | None 
     docstring). If ``data`` was welded, ``vertices`` are the welded vertices
     and the result has the source's split layout, each duplicate at its welded
     vertex's position. New ``triangles`` (in ``data``'s numbering) drop what
-    no longer matches them, with one :class:`~o3d_lsmesh.O3DLSMeshWarning`.
+    no longer matches them, with one :class:`~o3d_lsmesh.O3DLSMeshWarning`
+    (``warn=False``: the caller carries over what it can and warns itself).
     """
     same_topology = triangles is None
     if same_topology and data.split is not None:
@@ -227,7 +229,7 @@ def new_mesh(data: MeshData, vertices: np.ndarray, triangles: np.ndarray | None 
         triangles = source_triangles(MeshData(None, None, data.source, data.kind))
     elif triangles is None:
         triangles = data.triangles
-    elif data.source is not None:
+    elif data.source is not None and warn:
         warn_dropped_attributes(data, "the result has new connectivity", stacklevel=4)
     vertices = np.ascontiguousarray(vertices, dtype=np.float64)
     triangles = np.ascontiguousarray(triangles, dtype=np.int64)

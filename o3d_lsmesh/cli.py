@@ -10,6 +10,7 @@ STL, OFF, glTF, ...). Subcommands::
     o3d-lsmesh encode INPUT OUTPUT [--count N] [--bits B]
     o3d-lsmesh decode MESH DATA OUTPUT [--anchors K]
     o3d-lsmesh compare A B [--render PNG]
+    o3d-lsmesh fill INPUT OUTPUT [--max-hole-edges K] [--max-hole-diameter D] [--continuity 0|1|2] [--density X] [--fill-border]
     o3d-lsmesh demo [--out demo_out]
 
 Every subcommand takes ``--quiet`` (no progress, no report), ``--json``
@@ -655,6 +656,32 @@ def cmd_demo(args: argparse.Namespace, run: _Run) -> int:
     return run.finish({"command": "demo", **result})
 
 
+def cmd_fill(args: argparse.Namespace, run: _Run) -> int:
+    check_output(args.output, [args.input], force=args.force)
+    mesh = read_input(args.input)
+    from .hole_filling import fill_holes, find_holes
+
+    vertices, triangles = np.asarray(mesh.vertices), np.asarray(mesh.triangles).astype(np.int64)
+    before = find_holes(vertices, triangles)
+    start = time.perf_counter()
+    with _flags(mesh=f"INPUT {args.input!r}", max_hole_edges="max_hole_edges",
+                max_hole_diameter="max_hole_diameter", continuity="continuity", density="density"):
+        out = fill_holes(mesh, max_hole_edges=args.max_hole_edges, max_hole_diameter=args.max_hole_diameter,
+                         continuity=args.continuity, density=args.density, fill_border=args.fill_border,
+                         progress=run.progress)
+    seconds = time.perf_counter() - start
+    write_output(args.output, out)
+    after = find_holes(np.asarray(out.vertices), np.asarray(out.triangles).astype(np.int64))
+    report = {"command": "fill", "input": args.input, "output": args.output, **_mesh_size(mesh),
+              "holes_before": len(before), "holes_after": len(after),
+              "borders_left_open": sum(hole.border for hole in before) if not args.fill_border else 0,
+              "new_vertices": len(out.vertices) - len(mesh.vertices),
+              "new_triangles": len(out.triangles) - len(mesh.triangles), "seconds": seconds}
+    run.say(f"filled {len(before) - len(after)} of {len(before)} holes of {args.input} in {seconds:.2f} s "
+            f"({report['new_vertices']} new vertices) -> {args.output}; {len(after)} loops left open")
+    return run.finish(report)
+
+
 # --------------------------------------------------------------------------- parser
 
 
@@ -841,6 +868,24 @@ def build_parser() -> argparse.ArgumentParser:
                    help="size of the built-in mesh: 10 * 4**s + 2 vertices (6: 40,962)")
     p.add_argument("--noise", type=_nonnegative_float, default=0.3, help="noise sigma in mean edge lengths")
     p.add_argument("--seed", type=int, default=0, help="random seed of the noise")
+
+    p = _command(sub, "fill", parents=both, handler=cmd_fill,
+                 summary="fill holes with faired patches (LS meshes)",
+                 description="Close holes: minimum-weight triangulation (Liepa 2003), refinement to the "
+                             "surrounding edge density, then LS-mesh fairing of the new vertices with the "
+                             "hole's rings as anchors. Each open component's outer border stays open unless "
+                             "--fill-border.",
+                 example=f"{PROG} fill scan.ply filled.ply --max-hole-edges 200")
+    p.add_argument("input", metavar="INPUT", help="mesh file")
+    p.add_argument("output", metavar="OUTPUT", help="mesh file to write")
+    p.add_argument("--max-hole-edges", type=_int_at_least(3, "3-or-more"), default=None,
+                   help="fill only holes of at most this many edges (None: no limit)")
+    p.add_argument("--max-hole-diameter", type=float, default=None,
+                   help="fill only holes at most this wide, in mesh units (None: no limit)")
+    p.add_argument("--continuity", type=int, choices=(0, 1, 2), default=2,
+                   help="0 harmonic, 1 LS mesh (bi-Laplacian), 2 tri-Laplacian")
+    p.add_argument("--density", type=float, default=1.0, help="new vertex density relative to the surroundings")
+    p.add_argument("--fill-border", action="store_true", help="also fill the outer border of open components")
 
     # o3d-lsmesh batch INPUT... OUTDIR --op OP: parser and handler live in o3d_lsmesh/batch.py.
     from .batch import add_parser as add_batch_parser

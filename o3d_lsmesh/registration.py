@@ -109,6 +109,17 @@ def _decode_geometry(self: Any, data: Any, **kwargs: Any) -> Any:
     return decode_geometry(self, data, **kwargs)
 
 
+def _fill_holes_faired(self: Any, **kwargs: Any) -> Any:
+    """Close holes with triangulated, refined patches faired as LS meshes; see :func:`o3d_lsmesh.fill_holes`.
+
+    Keyword options: ``max_hole_edges``, ``max_hole_diameter``, ``continuity``,
+    ``density``, ``fill_border``, ``progress``. Returns a new mesh.
+    """
+    from .hole_filling import fill_holes
+
+    return fill_holes(self, **kwargs)
+
+
 _METHODS: dict[str, Callable[..., Any]] = {
     "filter_smooth_constrained": _filter_smooth_constrained,
     "filter_smooth_multiresolution": _filter_smooth_multiresolution,
@@ -117,6 +128,7 @@ _METHODS: dict[str, Callable[..., Any]] = {
     "reconstruct_geometry": _reconstruct_geometry,
     "approximate_ls": _approximate_ls,
     "decode_geometry": _decode_geometry,
+    "fill_holes_faired": _fill_holes_faired,
 }
 
 #: Names that :func:`register` adds to both mesh classes.
@@ -163,8 +175,8 @@ def register() -> tuple[str, ...]:
     ``reconstruct_geometry(unknown)``          :func:`o3d_lsmesh.reconstruct_geometry`
     ``approximate_ls(count, **kw)``            :func:`o3d_lsmesh.approximate` (mesh only)
     ``decode_geometry(data, anchors=None)``    :func:`o3d_lsmesh.decode_geometry`
-    =========================================  ==================================================
-
+    ``fill_holes_faired(**kw)``                :func:`o3d_lsmesh.fill_holes`
+    =========================================  ===========================================
     Each returns a new mesh of the caller's kind. Explicit and idempotent:
     importing o3d_lsmesh changes nothing, and a second call re-installs the
     same methods.

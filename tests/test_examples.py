@@ -22,8 +22,8 @@ def run(path, *args, cwd=None):
                           cwd=cwd or REPO, env=env, timeout=300)
 
 
-def test_there_are_six_numbered_examples():
-    assert [p.name[:2] for p in EXAMPLES] == ["01", "02", "03", "04", "05", "06"]
+def test_there_are_seven_numbered_examples():
+    assert [p.name[:2] for p in EXAMPLES] == ["01", "02", "03", "04", "05", "06", "07"]
 
 
 @pytest.mark.parametrize("path", EXAMPLES, ids=[p.stem for p in EXAMPLES])

@@ -1,0 +1,444 @@
+"""Hole-filling benchmark: o3d_lsmesh.fill_holes against CGAL, MeshLib, PyMeshLab and Open3D, side by side.
+
+Cases (the truth known where a hole is cut): geodesic disks of radius 2.5h, 6h
+and 15h (h = mean edge length) cut from ``horse.ply`` and ``camel.ply`` around
+seeded centres (a centre is re-drawn until the cut leaves a single hole), and
+the real holes of ``bunny.ply`` (5, in its base) and ``plane_holes.ply`` (27),
+whose truth is unknown. Every tool fills every hole of the case:
+
+* ours: :func:`o3d_lsmesh.fill_holes_arrays` with its defaults (continuity 2);
+* CGAL ``triangulate_refine_and_fair_hole`` (PyPI ``cgal``), fairing continuity 1
+  (CGAL's default) and 2, density 1.41 (CGAL's ``sqrt(2)`` default);
+* MeshLib ``fillHoleNicely`` (PyPI ``meshlib``), default settings
+  (triangulate, subdivide, smooth);
+* PyMeshLab ``meshing_close_holes`` with ``maxholesize`` above every hole,
+  best of ``refinehole`` off and on (by mean distance);
+* Open3D ``t.geometry.TriangleMesh.fill_holes(hole_size=inf)``.
+
+Measured per case and tool: time per hole (ours and CGAL: best of 3; CGAL's half-edge structure is
+built before its clock starts, ours starts from arrays), new vertices, mean and Hausdorff
+distance of the fill to the truth (in h; the fill is the triangles not in the
+input, sampled by area; Hausdorff is two-sided against the removed part of the
+original), smallest angle of the new triangles, boundary edges left, edge- and
+vertex-manifold, orientation (no edge used twice in one direction), and the
+number of intersecting triangle pairs that involve a new triangle.
+
+Run: ``.venv/bin/python benchmarks/bench_fill_holes.py`` (about 5 minutes on 2 cores).
+Peers: ``pip install -r benchmarks/requirements.txt``; a missing one is skipped.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import sys
+import tempfile
+import time
+
+import numpy as np
+import open3d as o3d
+from _common import load_mesh, markdown_table, write_markdown
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import dijkstra
+
+from o3d_lsmesh.hole_filling import fill_holes_arrays
+
+RADII = [2.5, 6.0, 15.0]
+SEED = 15
+SAMPLES = 20_000
+
+
+# --------------------------------------------------------------------------- cases
+
+
+def mean_edge(V, T):
+    e = np.concatenate([T[:, [0, 1]], T[:, [1, 2]], T[:, [2, 0]]])
+    return float(np.linalg.norm(V[e[:, 0]] - V[e[:, 1]], axis=1).mean())
+
+
+def cut_disk(V, T, radius, rng):
+    """Remove a geodesic disk (edge-graph distance) of ``radius``; return the holed mesh and the removed triangles."""
+    e = np.concatenate([T[:, [0, 1]], T[:, [1, 2]], T[:, [2, 0]]])
+    w = np.linalg.norm(V[e[:, 0]] - V[e[:, 1]], axis=1)
+    graph = coo_matrix((w, (e[:, 0], e[:, 1])), shape=(len(V), len(V))).tocsr()
+    for _ in range(50):
+        centre = int(rng.integers(len(V)))
+        dist = dijkstra(graph, directed=False, indices=centre, limit=radius * 1.01)
+        inside = dist < radius
+        removed = inside[T].any(axis=1)
+        kept = T[~removed]
+        used = np.unique(kept)
+        remap = np.full(len(V), -1)
+        remap[used] = np.arange(len(used))
+        holed = (V[used], remap[kept])
+        if boundary_loop_count(*holed) == 1:
+            return holed, (V, T[removed])
+    raise RuntimeError("no centre gives a single hole")
+
+
+def boundary_edges(V, T):
+    e = np.sort(np.concatenate([T[:, [0, 1]], T[:, [1, 2]], T[:, [2, 0]]]), axis=1)
+    _, count = np.unique(e[:, 0] * len(V) + e[:, 1], return_counts=True)
+    return int((count == 1).sum())
+
+
+def boundary_loop_count(V, T):
+    e = np.sort(np.concatenate([T[:, [0, 1]], T[:, [1, 2]], T[:, [2, 0]]]), axis=1)
+    keys, count = np.unique(e[:, 0] * len(V) + e[:, 1], return_counts=True)
+    b = keys[count == 1]
+    if len(b) == 0:
+        return 0
+    i, j = b // len(V), b % len(V)
+    from scipy.sparse.csgraph import connected_components
+
+    g = coo_matrix((np.ones(len(b)), (i, j)), shape=(len(V), len(V)))
+    _, label = connected_components(g, directed=False)
+    return len(np.unique(label[np.unique(np.concatenate([i, j]))]))
+
+
+# --------------------------------------------------------------------------- tools
+
+
+@contextlib.contextmanager
+def quiet_stderr():
+    """CGAL's SWIG layer prints a leak notice per facet handle on fd 2."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, 2)
+    try:
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+        os.close(devnull)
+
+
+def write_off(path, V, T):
+    with open(path, "w") as f:
+        f.write(f"OFF\n{len(V)} {len(T)} 0\n")
+        np.savetxt(f, V, fmt="%.17g")
+        np.savetxt(f, np.column_stack([np.full(len(T), 3), T]), fmt="%d")
+
+
+def read_off(path):
+    with open(path) as f:
+        lines = [line for line in f.read().split("\n") if line.strip() and not line.startswith("#")]
+    nv, nf = map(int, lines[1].split()[:2])
+    V = np.array([[float(x) for x in line.split()[:3]] for line in lines[2:2 + nv]])
+    F = np.array([[int(x) for x in line.split()[1:4]] for line in lines[2 + nv:2 + nv + nf]], dtype=np.int64)
+    return V, F
+
+
+def polyhedron_arrays(P):
+    """Exact vertex coordinates and triangles of a CGAL Polyhedron_3 (its OFF writer rounds to 6 digits)."""
+    vertices = []
+    for i, v in enumerate(P.vertices()):
+        v.set_id(i)
+        p = v.point()
+        vertices.append((p.x(), p.y(), p.z()))
+    faces = []
+    for f in P.facets():
+        h = f.halfedge()
+        faces.append((h.vertex().id(), h.next().vertex().id(), h.next().next().vertex().id()))
+    # a halfedge points to its target: the facet's corners in its order are prev's targets
+    return np.array(vertices, dtype=np.float64), np.roll(np.array(faces, dtype=np.int64), 1, axis=1)
+
+
+REPEAT = 3  # best of three: the machine is shared, and timings are noisy
+
+
+def ours(V, T):
+    best = np.inf
+    for _ in range(REPEAT):
+        start = time.perf_counter()
+        out = fill_holes_arrays(V, T)
+        best = min(best, time.perf_counter() - start)
+    return (out.vertices, out.triangles), best
+
+
+def cgal(continuity):
+    def run(V, T):
+        from CGAL import CGAL_Polygon_mesh_processing as pmp
+        from CGAL.CGAL_Polyhedron_3 import Polyhedron_3
+
+        best = np.inf
+        with tempfile.TemporaryDirectory() as folder:
+            path = os.path.join(folder, "in.off")
+            write_off(path, V, T)
+            for _ in range(REPEAT):  # a fresh polyhedron each time (its build is not timed)
+                P = Polyhedron_3(path)
+                seconds = 0.0
+                with quiet_stderr():
+                    for _ in range(10_000):
+                        P.normalize_border()  # border halfedges last: iterate only those
+                        border = next((h for h in P.border_halfedges() if h.is_border()), None)
+                        if border is None:
+                            break
+                        start = time.perf_counter()
+                        pmp.triangulate_refine_and_fair_hole(P, border, [], [], 1.41, continuity)
+                        seconds += time.perf_counter() - start
+                best = min(best, seconds)
+            return polyhedron_arrays(P), best
+
+    return run
+
+
+def meshlib(V, T):
+    import meshlib.mrmeshnumpy as mn
+    import meshlib.mrmeshpy as mr
+
+    mesh = mn.meshFromFacesVerts(T.astype(np.int32), V.astype(np.float32))
+    start = time.perf_counter()
+    for edge in mesh.topology.findHoleRepresentiveEdges():
+        mr.fillHoleNicely(mesh, edge, mr.FillHoleNicelySettings())
+    seconds = time.perf_counter() - start
+    verts = mn.getNumpyVerts(mesh).astype(np.float64)
+    faces = mn.getNumpyFaces(mesh.topology).astype(np.int64)
+    return (verts, faces), seconds
+
+
+def pymeshlab_best(V, T, truth_fn):
+    import pymeshlab
+
+    best = None
+    for refine in (False, True):
+        ms = pymeshlab.MeshSet()
+        ms.add_mesh(pymeshlab.Mesh(V, T.astype(np.int32)))
+        start = time.perf_counter()
+        ms.meshing_close_holes(maxholesize=10 * len(V), refinehole=refine, selfintersection=False)
+        seconds = time.perf_counter() - start
+        m = ms.current_mesh()
+        result = ((m.vertex_matrix().astype(np.float64), m.face_matrix().astype(np.int64)), seconds)
+        score = truth_fn(result[0])
+        if best is None or score < best[0]:
+            best = (score, result)
+    return best[1]
+
+
+def open3d_tensor(V, T):
+    mesh = o3d.t.geometry.TriangleMesh(o3d.core.Tensor(V), o3d.core.Tensor(T))
+    start = time.perf_counter()
+    out = mesh.fill_holes(hole_size=1e30)
+    seconds = time.perf_counter() - start
+    return (out.vertex.positions.numpy().astype(np.float64), out.triangle.indices.numpy().astype(np.int64)), seconds
+
+
+# --------------------------------------------------------------------------- metrics
+
+
+def new_triangles(V_in, T_in, V_out, T_out):
+    """Rows of T_out that are not triangles of the input (vertices matched within 1e-6 of the bounding box)."""
+    from scipy.spatial import cKDTree
+
+    tolerance = 1e-6 * np.ptp(V_in, axis=0).max()
+    dist, nearest = cKDTree(V_in).query(V_out, distance_upper_bound=tolerance)
+    old_of = np.where(np.isfinite(dist), nearest, -1)
+    mapped = old_of[T_out]
+    known = (mapped >= 0).all(axis=1)
+    n = len(V_in)
+    s_in = np.sort(T_in, axis=1)
+    keys_in = np.sort((s_in[:, 0] * n + s_in[:, 1]) * n + s_in[:, 2])
+    s_out = np.sort(np.where(mapped >= 0, mapped, 0), axis=1)
+    keys_out = (s_out[:, 0] * n + s_out[:, 1]) * n + s_out[:, 2]
+    pos = np.minimum(np.searchsorted(keys_in, keys_out), len(keys_in) - 1)
+    is_old = known & (keys_in[pos] == keys_out)
+    return np.flatnonzero(~is_old)
+
+
+def sample(V, T, count, rng):
+    if len(T) == 0:
+        return np.zeros((0, 3))
+    a, b, c = V[T[:, 0]], V[T[:, 1]], V[T[:, 2]]
+    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    if area.sum() <= 0:
+        return a
+    pick = rng.choice(len(T), size=count, p=area / area.sum())
+    u, v = rng.random(count), rng.random(count)
+    flip = u + v > 1
+    u[flip], v[flip] = 1 - u[flip], 1 - v[flip]
+    return a[pick] + u[:, None] * (b - a)[pick] + v[:, None] * (c - a)[pick]
+
+
+def distance_to(V, T, points):
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.core.Tensor(V.astype(np.float32)), o3d.core.Tensor(T.astype(np.uint32)))
+    return scene.compute_distance(o3d.core.Tensor(points.astype(np.float32))).numpy().astype(np.float64)
+
+
+def smallest_angle(V, T):
+    if len(T) == 0:
+        return float("nan")
+    p = V[T]
+    angles = []
+    for i in range(3):
+        u = p[:, (i + 1) % 3] - p[:, i]
+        w = p[:, (i + 2) % 3] - p[:, i]
+        cos = (u * w).sum(1) / np.maximum(np.linalg.norm(u, axis=1) * np.linalg.norm(w, axis=1), 1e-300)
+        angles.append(np.degrees(np.arccos(np.clip(cos, -1, 1))))
+    return float(np.min(angles))
+
+
+def consistently_oriented(T, n):
+    he = np.concatenate([T[:, [0, 1]], T[:, [1, 2]], T[:, [2, 0]]])
+    keys = he[:, 0] * n + he[:, 1]
+    return len(np.unique(keys)) == len(keys)
+
+
+def new_intersections(V, T, new):
+    """Intersecting triangle pairs that involve a new triangle (Open3D's test, on the neighbourhood of the new ones).
+
+    Open3D's ``get_self_intersecting_triangles`` is quadratic (a minute on the horse), so it runs on the
+    triangles whose centroids lie within reach of a new triangle's centroid.
+    """
+    from scipy.spatial import cKDTree
+
+    if len(new) == 0:
+        return 0
+    centroid = V[T].mean(axis=1)
+    reach = np.linalg.norm(V[T] - centroid[:, None, :], axis=2).max()  # the largest centroid-corner distance
+    near = cKDTree(centroid).query_ball_point(centroid[new], r=2 * reach)
+    local = np.unique(np.concatenate([np.asarray(x, dtype=np.int64) for x in near] + [new]))
+    mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(V), o3d.utility.Vector3iVector(T[local].astype(np.int32)))
+    pairs = np.asarray(mesh.get_self_intersecting_triangles())
+    if len(pairs) == 0:
+        return 0
+    is_new = np.zeros(len(T), dtype=bool)
+    is_new[new] = True
+    return int((is_new[local[pairs[:, 0]]] | is_new[local[pairs[:, 1]]]).sum())
+
+
+def measure(case, out, seconds, holes):
+    (V_in, T_in), truth, h = case["holed"], case["truth"], case["h"]
+    V, T = out
+    new = new_triangles(V_in, T_in, V, T)
+    rng = np.random.default_rng(0)
+    # vertices the triangles use (MeshLib's arrays keep slots of deleted vertices)
+    row = {"time/hole (ms)": 1000 * seconds / holes, "new vertices": len(np.unique(T)) - len(np.unique(T_in))}
+    if truth is not None and len(new):
+        points = sample(V, T[new], SAMPLES, rng)
+        d = distance_to(*truth["full"], points) / h
+        removed_points = sample(truth["full"][0], truth["removed"], SAMPLES, rng)
+        back = distance_to(V, T, removed_points) / h
+        row["mean dist (h)"] = float(d.mean())
+        row["Hausdorff (h)"] = float(max(d.max(), back.max()))
+    else:
+        row["mean dist (h)"] = row["Hausdorff (h)"] = "-" if truth is None else float("nan")
+    row["min angle (deg)"] = smallest_angle(V, T[new])
+    row["boundary edges"] = boundary_edges(V, T)
+    mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(V), o3d.utility.Vector3iVector(T.astype(np.int32)))
+    row["manifold"] = "yes" if mesh.is_edge_manifold(allow_boundary_edges=True) and mesh.is_vertex_manifold() else "NO"
+    row["oriented"] = "yes" if consistently_oriented(T, len(V)) else "NO"
+    row["self-int. pairs"] = new_intersections(V, T, new)
+    return row
+
+
+# --------------------------------------------------------------------------- run
+
+
+def cases():
+    rng = np.random.default_rng(SEED)
+    for name in ("horse.ply", "camel.ply"):
+        mesh = load_mesh(name)
+        if mesh is None:
+            continue
+        V, T = np.asarray(mesh.vertices), np.asarray(mesh.triangles).astype(np.int64)
+        h = mean_edge(V, T)
+        for radius in RADII:
+            holed, (_, removed) = cut_disk(V, T, radius * h, rng)
+            yield {"name": f"{name[:-4]} {radius:g}h", "holed": holed, "h": h, "holes": 1,
+                   "truth": {"full": (V, T), "removed": removed}}
+    for name in ("bunny.ply", "plane_holes.ply"):
+        mesh = load_mesh(name)
+        if mesh is None:
+            continue
+        mesh.remove_unreferenced_vertices()
+        V, T = np.asarray(mesh.vertices), np.asarray(mesh.triangles).astype(np.int64)
+        yield {"name": f"{name[:-4]} ({boundary_loop_count(V, T)} holes)", "holed": (V, T), "h": mean_edge(V, T),
+               "holes": boundary_loop_count(V, T), "truth": None}
+
+
+NOTES = """\
+* Quality: on the horse ours is closer to the truth than CGAL continuity 2 at every size (ratios
+  0.96 / 0.90 / 0.70) with larger smallest angles; on the coarse camel it is not (3.0 / 1.07 / 1.4):
+  there the loops are short next to thin parts, our refinement adds fewer vertices than CGAL's (0 / 12 /
+  0 against 3 / 16 / 4), and the crossing check can lower a hole's continuity there (on the camel 6h
+  hole of tests/test_fill_holes.py the tri-Laplacian patch crossed the neck). Camel 15h cuts off a protrusion: the Hausdorff distance is the part no fill
+  can restore (every tool 14.3 h).
+* Validity: ours is closed, edge- and vertex-manifold, consistently oriented and free of crossings in
+  every case (as CGAL); MeshLib and PyMeshLab leave crossings on the camel and bunny, Open3D winds every
+  new triangle backwards and leaves boundary edges.
+* Time: CGAL's clock starts on a built half-edge structure and runs only its hole calls; ours starts
+  from arrays and includes finding the holes (a sort of every edge), the crossing check and two solves
+  (uniform, cotangent). Ours is 2-10 times CGAL's on large holes and far more on 3-edge-scale holes,
+  where our fixed whole-mesh cost (tens of ms) dominates a sub-millisecond CGAL call. The machine was
+  shared by about 7 jobs (load 12-18 on 2 cores): single timings varied by 3x between runs.
+"""
+
+
+def available(module):
+    try:
+        __import__(module)
+        return True
+    except ImportError:
+        print(f"skipping the peer that needs {module!r}: pip install -r benchmarks/requirements.txt")
+        return False
+
+
+def main() -> int:
+    tools = [("ours (continuity 2)", ours)]
+    if available("CGAL"):
+        tools += [("CGAL continuity 2", cgal(2)), ("CGAL continuity 1", cgal(1))]
+    if available("meshlib"):
+        tools.append(("MeshLib fillHoleNicely", meshlib))
+    if available("pymeshlab"):
+        tools.append(("PyMeshLab close_holes", "pymeshlab"))
+    tools.append(("Open3D t fill_holes", open3d_tensor))
+    header = ["case", "tool", "time/hole (ms)", "new vertices", "mean dist (h)", "Hausdorff (h)", "min angle (deg)",
+              "boundary edges", "manifold", "oriented", "self-int. pairs"]
+    rows = []
+    summary = {}
+    # warm-up: imports and first-call costs of every tool happen before anything is timed
+    grid_v = np.array([[x, y, 0.0] for y in range(4) for x in range(4)], dtype=np.float64)
+    quads = [(4 * y + x, 4 * y + x + 1, 4 * y + x + 5, 4 * y + x + 4) for y in range(3) for x in range(3)]
+    grid_t = np.array([t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))][:-2], dtype=np.int64)
+    for _, tool in tools:
+        if callable(tool):
+            tool(grid_v, grid_t)
+    for case in cases():
+        V, T = case["holed"]
+        for label, tool in tools:
+            if tool == "pymeshlab":
+                def score(out, case=case):
+                    row = measure(case, out, 1.0, 1)
+                    value = row["mean dist (h)"]
+                    return value if isinstance(value, float) else row["boundary edges"]
+
+                out, seconds = pymeshlab_best(V, T, score)
+            else:
+                out, seconds = tool(V, T)
+            row = measure(case, out, seconds, case["holes"])
+            rows.append([case["name"], label] + [row[key] for key in header[2:]])
+            summary[(case["name"], label)] = row
+            print(" | ".join(str(x if not isinstance(x, float) else f"{x:.4g}") for x in rows[-1]), flush=True)
+    ratios = []
+    for case_name in dict.fromkeys(name for name, _ in summary):
+        a, b = summary.get((case_name, "ours (continuity 2)")), summary.get((case_name, "CGAL continuity 2"))
+        if a is None or b is None:
+            continue
+        dist = (a["mean dist (h)"] / b["mean dist (h)"]) if isinstance(a["mean dist (h)"], float) else "-"
+        ratios.append([case_name, dist, a["min angle (deg)"] - b["min angle (deg)"],
+                       a["time/hole (ms)"] / b["time/hole (ms)"]])
+    write_markdown("fill_holes.md", "Hole filling: o3d_lsmesh.fill_holes against CGAL, MeshLib, PyMeshLab, Open3D", [
+        ("Setup", __doc__.split("\n\n", 1)[1].split("Run:")[0].strip()),
+        ("Results", markdown_table(header, rows)),
+        ("Ours against CGAL continuity 2 (targets: distance ratio <= 1, angle difference >= 0, time ratio <= 2)",
+         markdown_table(["case", "mean distance ours / CGAL", "min angle ours - CGAL (deg)", "time ours / CGAL"],
+                        ratios)),
+        ("Reading (from the run of 2026-12-01; check against the tables above after a rerun)", NOTES),
+    ])
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
