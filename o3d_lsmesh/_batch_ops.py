@@ -509,22 +509,32 @@ def _change(before: Any, after: Any) -> dict:
 
 def _denoise(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
     level = options["level"]
-    iterations = options["iterations"] if options["iterations"] is not None else (5 if level else 10)
     if level:
         from .fairing.multiresolution import multiresolution_fairing
-        from .hierarchy import build_hierarchy
 
-        # Built here so that it uses this worker's thread budget, not every CPU of the machine.
-        hierarchy = build_hierarchy(mesh, workers=context.threads)
-        out = multiresolution_fairing(mesh, level, hierarchy=hierarchy, number_of_iterations=iterations,
-                                      method=options["method"])
+        iterations = 5 if options["iterations"] is None else options["iterations"]
+        method = options["method"] or "local"
+        out = multiresolution_fairing(mesh, level, number_of_iterations=iterations, method=method)
     else:
         from .fairing import constrained_fairing
+        from .fairing.constrained import resolved_options
 
-        out = constrained_fairing(mesh, iterations, method=options["method"], mu=options["mu"],
+        # no flag: the API's defaults (method='scan'); the record names what ran
+        method, iterations = resolved_options(options["method"], options["iterations"], options["reimpose_every"])
+        out = constrained_fairing(mesh, iterations, method=method, mu=options["mu"],
                                   smooth_boundary=not options["fixed_boundary"],
                                   reimpose_every=options["reimpose_every"])
-    return out, {"method": options["method"], "iterations": iterations, "level": level, **_change(mesh, out)}
+    return out, {"method": method, "iterations": iterations, "level": level, **_change(mesh, out)}
+
+
+def _fill(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
+    from .hole_filling import fill_holes
+
+    out = fill_holes(mesh, max_hole_edges=options["max_hole_edges"], max_hole_diameter=options["max_hole_diameter"],
+                     continuity=int(options["continuity"]), density=options["density"],
+                     fill_border=options["fill_border"])
+    return out, {"new_vertices": len(out.vertices) - len(mesh.vertices),
+                 "new_triangles": len(out.triangles) - len(mesh.triangles)}
 
 
 def _parse_levels(spec: str, count: int) -> list[int]:
@@ -553,8 +563,7 @@ def _levels_spec(value: Any) -> str:
 def _hierarchy(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
     from .hierarchy import build_hierarchy
 
-    hierarchy = build_hierarchy(mesh, min_vertices=options["min_vertices"], max_levels=options["max_levels"],
-                                workers=context.threads)
+    hierarchy = build_hierarchy(mesh, min_vertices=options["min_vertices"], max_levels=options["max_levels"])
     levels = _parse_levels(options["levels"], len(hierarchy))
     files: dict[str, Any] = {f"level_{level:02d}": hierarchy.level(level) for level in levels}
     if options["maps"]:
@@ -634,12 +643,20 @@ _METHODS = ("greedy", "random", "combined")
 register_op(BatchOp("denoise", _denoise, help="barycenter-constrained (or multiresolution with --level) fairing",
                     options=(
     Option("iterations", optional(int_at_least(0)), None,
-           "number_of_iterations (default 10; with --level, 5 per level)"),
-    Option("method", choice("local", "global"), "local", "local or global fairing"),
+           "number_of_iterations (default: the API's; with --level, 5 per level)"),
+    Option("method", optional(choice("scan", "local", "global")), None,
+           "fairing energy (default: scan, the API's; local with --level or --reimpose-every)"),
     Option("level", int_at_least(0), 0, "multiresolution level (0: plain fairing)"),
-    Option("mu", optional(real), None, "penalty weight of --method global"),
+    Option("mu", optional(real), None, "barycenter penalty weight of --method global or scan"),
     Option("reimpose_every", optional(int_at_least(1)), None, "re-take the barycenters every k iterations"),
     Option("fixed_boundary", flag, False, "keep boundary vertices fixed", is_flag=True),
+)))
+register_op(BatchOp("fill", _fill, help="fill holes with faired patches (LS meshes)", options=(
+    Option("max_hole_edges", optional(int_at_least(3)), None, "fill only holes of at most this many edges"),
+    Option("max_hole_diameter", optional(real), None, "fill only holes at most this wide (mesh units)"),
+    Option("continuity", choice("0", "1", "2"), "2", "0 harmonic, 1 LS mesh, 2 tri-Laplacian"),
+    Option("density", real, 1.0, "new vertex density relative to the surroundings"),
+    Option("fill_border", flag, False, "also fill the outer border of open components", is_flag=True),
 )))
 register_op(BatchOp("hierarchy", _hierarchy, output="files", help="levels of the volume-cost collapse hierarchy, "
                     "written to OUTDIR/<name>/level_NN<suffix>", options=(

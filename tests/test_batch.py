@@ -88,14 +88,15 @@ def _by_name(records):
 
 
 def test_outputs_equal_direct_library_calls_bit_for_bit(data, client, tmp_path):
-    records = batch.run(data.good_dir, tmp_path / "out", op="denoise", options={"iterations": 4}, client=client,
+    records = batch.run(data.good_dir, tmp_path / "out", op="denoise", options={"iterations": 4, "method": "local"},
+                        client=client,
                         progress=False)
     assert [r["status"] for r in records] == ["ok"] * 4
     assert len({r["pid"] for r in records}) == 2  # both workers took files
     for path, record in zip(sorted(data.good), sorted(records, key=lambda r: r["input"])):
         assert record["output"] == str(tmp_path / "out" / path.relative_to(data.good_dir))
         source = o3d.io.read_triangle_mesh(str(path))
-        expected = constrained_fairing(source, 4)
+        expected = constrained_fairing(source, 4, method="local")
         vertices, triangles = _read(record["output"])
         np.testing.assert_array_equal(vertices, np.asarray(expected.vertices))
         np.testing.assert_array_equal(triangles, np.asarray(expected.triangles))
@@ -433,3 +434,28 @@ def test_api_errors(data, tmp_path):
         BatchOp("x", _environment, options=(Option("workers", int),))
     with pytest.raises(TypeError, match="BatchOp"):
         batch.register_op("denoise")
+
+
+def test_fill_op_and_a_fill_denoise_pipeline_match_the_library(data, tmp_path):
+    from o3d_lsmesh import fill_holes
+
+    mesh = o3d.io.read_triangle_mesh(str(data.good[0]))
+    # cut a hole: drop the triangles around vertex 0
+    triangles = np.asarray(mesh.triangles)
+    holed = o3d.geometry.TriangleMesh(mesh.vertices, o3d.utility.Vector3iVector(triangles[(triangles != 0).all(1)]))
+    holed.remove_unreferenced_vertices()
+    source = tmp_path / "holed.ply"
+    o3d.io.write_triangle_mesh(str(source), holed)
+    holed = o3d.io.read_triangle_mesh(str(source))
+
+    (record,) = batch.run(source, tmp_path / "f", op="fill", options={"continuity": "1"}, workers=0, progress=False)
+    expected = fill_holes(holed, continuity=1)
+    vertices, filled = _read(record["output"])
+    np.testing.assert_array_equal(filled, np.asarray(expected.triangles))
+    np.testing.assert_allclose(vertices, np.asarray(expected.vertices), rtol=0, atol=1e-12)
+    assert record["metrics"]["fill"]["new_triangles"] == len(filled) - len(holed.triangles) > 0
+
+    (record,) = batch.run(source, tmp_path / "fd", op="fill,denoise", options={"method": "local", "iterations": 2},
+                          workers=0, progress=False)
+    assert record["status"] == "ok"
+    np.testing.assert_array_equal(_read(record["output"])[1], np.asarray(expected.triangles))
