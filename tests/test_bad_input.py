@@ -421,7 +421,7 @@ def _probe_cases():
         (lsm.smooth_boundary_curves, (sphere,), {"number_of_iterations": 2}, ["number_of_iterations"]),
         (lsm.multiresolution_fairing, (sphere,), {"level": 1},
          ["level", "hierarchy", "number_of_iterations", "method", "progress"]),
-        (lsm.build_hierarchy, (sphere,), {}, ["alpha", "beta", "min_vertices", "max_levels", "progress", "workers"]),
+        (lsm.build_hierarchy, (sphere,), {}, ["alpha", "beta", "min_vertices", "max_levels", "progress"]),
         (lsm.from_fast_simplification, (sphere,), {}, ["levels", "min_vertices", "agg", "progress"]),
         (lsm.render, (sphere, None), {"backend": "raycast", "width": 16, "height": 16},
          ["width", "height", "reference", "error_max", "color", "background", "view_direction", "up", "margin",
