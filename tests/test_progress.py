@@ -145,6 +145,7 @@ def test_every_function_rejects_a_non_bool_progress():
         for bad in (1, "yes", None, 0.0):
             with pytest.raises(TypeError, match="progress must be a bool"):
                 call(bad)
+                pytest.fail(f"{name} accepted progress={bad!r}")
         call(np.bool_(False))  # numpy's bool is a bool
 
 
@@ -157,10 +158,9 @@ def test_helpers(bars):
     silent.update(3)
     silent.close()
     assert made == []
-    with pytest.raises(RuntimeError):
-        with stages(True, "failing", ("factor", "solve")) as begin:
-            begin("factor")
-            raise RuntimeError("boom")
+    with pytest.raises(RuntimeError), stages(True, "failing", ("factor", "solve")) as begin:
+        begin("factor")
+        raise RuntimeError("boom")
     assert made[-1].n == 0 and made[-1].total == 2  # an error leaves the bar where it happened
     with stages(True, "ok", ("factor", "solve")) as begin:
         begin("factor")
