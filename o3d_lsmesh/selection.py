@@ -321,7 +321,9 @@ def select_control_points(
     seed : int or numpy.random.Generator, optional
         Random state of ``"random"``; the other methods are deterministic.
     progress : bool
-        Show a tqdm progress bar.
+        Show a tqdm bar over the control points, ending at ``count``: it
+        starts at the per-component seeds and shows the first factorization
+        as its ``factor`` stage. ``"random"`` shows none (instant).
 
     Returns
     -------
@@ -376,7 +378,9 @@ def approximate(
     ----------
     mesh : open3d.geometry.TriangleMesh, open3d.t.geometry.TriangleMesh or (vertices, triangles)
     count, method, weights, batch, seed, progress
-        See :func:`select_control_points`.
+        See :func:`select_control_points`. When the result needs a new
+        factorization (``interpolate`` or ``"random"``), ``progress`` also
+        shows its stages (factor, solve).
     interpolate : bool
         Hit the control points exactly.
 
