@@ -493,7 +493,7 @@ def cmd_reconstruct(args: argparse.Namespace, run: _Run) -> int:
 
     start = time.perf_counter()
     with _flags(mesh=f"INPUT {args.input!r}", unknown="unknown_vertex_indices"):
-        out = reconstruct_geometry(mesh, unknown, interpolate=not args.soft)
+        out = reconstruct_geometry(mesh, unknown, interpolate=not args.soft, progress=run.progress)
     seconds = time.perf_counter() - start
     write_output(args.output, out)
     unknown_unique = np.unique(unknown)
@@ -567,7 +567,7 @@ def cmd_encode(args: argparse.Namespace, run: _Run) -> int:
         data = encode_geometry(mesh, count, bits=args.bits, method=args.method, progress=run.progress)
     seconds = time.perf_counter() - start
     Path(args.output).write_bytes(data)
-    error = vertex_error(decode_geometry(mesh, data), mesh)
+    error = vertex_error(decode_geometry(mesh, data, progress=run.progress), mesh)
     report = {"command": "encode", "input": args.input, "output": args.output, **_mesh_size(mesh),
               "anchors": count, "bits": args.bits, "bytes": len(data), "bits_per_vertex": 8.0 * len(data) / n,
               "seconds": seconds, "decoded_error_linf": error["linf"], "decoded_error_rms": error["rms"]}
@@ -586,7 +586,7 @@ def cmd_decode(args: argparse.Namespace, run: _Run) -> int:
 
     start = time.perf_counter()
     with _flags(mesh=f"MESH {args.mesh!r}", anchors="anchors"):
-        out = decode_geometry(mesh, data, anchors=args.anchors)
+        out = decode_geometry(mesh, data, anchors=args.anchors, progress=run.progress)
     seconds = time.perf_counter() - start
     write_output(args.output, out)
     report = {"command": "decode", "mesh": args.mesh, "data": args.data, "output": args.output, **_mesh_size(mesh),

@@ -46,6 +46,7 @@ from typing import Any, Iterator
 import numpy as np
 
 from ._o3d import MeshData, new_mesh, read_mesh
+from ._progress import check_progress, progress_bar, stages
 from ._validate import as_choice, as_count, as_positive_float
 from .lsmesh import LSMeshSolver
 from .selection import SELECTION_METHODS, _select
@@ -156,7 +157,8 @@ def encode_geometry(
     weight : float, optional
         Anchor weight ``omega``; default ``10 n`` as in the paper.
     progress : bool
-        Show a progress bar during selection.
+        Show a tqdm bar over the anchors selected (the per-component seeds
+        first, then one per greedy step, ending at ``count``).
 
     Returns
     -------
@@ -274,7 +276,7 @@ def _prefix(anchors: Any, k: int) -> int:
     return as_count(anchors, name="anchors", minimum=1, maximum=k)
 
 
-def decode_geometry(mesh: Any, data: Any, *, anchors: int | None = None) -> Any:
+def decode_geometry(mesh: Any, data: Any, *, anchors: int | None = None, progress: bool = False) -> Any:
     """Reconstruct the geometry encoded by :func:`encode_geometry` on the connectivity of ``mesh``.
 
     Solves eq. 1 of the geometry-aware bases paper (relaxed anchors of weight
@@ -290,6 +292,8 @@ def decode_geometry(mesh: Any, data: Any, *, anchors: int | None = None) -> Any:
         A stream written by :func:`encode_geometry` for this connectivity.
     anchors : int, optional
         Number of leading anchors to use, ``1..k``; default all.
+    progress : bool
+        Show a tqdm bar over the stages (factor, solve).
 
     Returns
     -------
@@ -303,7 +307,7 @@ def decode_geometry(mesh: Any, data: Any, *, anchors: int | None = None) -> Any:
         vertex count or connectivity; ``anchors`` out of range; a prefix that
         leaves a connected component without an anchor (``SingularSystemError``).
     TypeError
-        ``data`` is not bytes-like.
+        ``data`` is not bytes-like, or ``progress`` is not a bool.
 
     Examples
     --------
@@ -313,15 +317,22 @@ def decode_geometry(mesh: Any, data: Any, *, anchors: int | None = None) -> Any:
     >>> float(np.abs(np.asarray(decoded.vertices) - np.asarray(box.vertices)).max()) < 1e-3
     True
     """
+    check_progress(progress)
     mesh_data = read_mesh(mesh, weld=True)
     indices, positions, omega = _parse(data, mesh_data)
     m = _prefix(anchors, len(indices))
-    # LSMeshSolver raises SingularSystemError if the prefix misses a component
-    solver = LSMeshSolver((mesh_data.vertices, mesh_data.triangles), indices[:m], weights=omega)
-    return new_mesh(mesh_data, solver.solve(positions[:m]))
+    with stages(progress, "decode_geometry", ("factor", "solve")) as begin:
+        begin("factor")
+        # LSMeshSolver raises SingularSystemError if the prefix misses a component
+        solver = LSMeshSolver((mesh_data.vertices, mesh_data.triangles), indices[:m], weights=omega)
+        begin("solve")
+        vertices = solver.solve(positions[:m])
+    return new_mesh(mesh_data, vertices)
 
 
-def iter_decode_geometry(mesh: Any, data: Any, *, step: int | None = None) -> Iterator[Any]:
+def iter_decode_geometry(
+    mesh: Any, data: Any, *, step: int | None = None, progress: bool = False
+) -> Iterator[Any]:
     """Yield successively refined reconstructions as anchors arrive (progressive scheme, section III).
 
     The first mesh uses the first ``step`` anchors (a factorization); every
@@ -343,6 +354,9 @@ def iter_decode_geometry(mesh: Any, data: Any, *, step: int | None = None) -> It
         Anchors per refinement; default ``ceil(k / 10)`` (ten meshes), or the
         number of connected components when that is larger, so that the first
         mesh has an anchor in each.
+    progress : bool
+        Show a tqdm bar over the anchors decoded, ending at ``k`` with the
+        last mesh (the first factorization happens at the call, before it).
 
     Yields
     ------
@@ -355,6 +369,8 @@ def iter_decode_geometry(mesh: Any, data: Any, *, step: int | None = None) -> It
         As :func:`decode_geometry`, or ``step`` below 1 or smaller than the
         number of connected components (the first mesh needs an anchor in each).
         Raised by the call itself, before any mesh is yielded.
+    TypeError
+        ``data`` is not bytes-like, or ``progress`` is not a bool.
 
     Examples
     --------
@@ -364,6 +380,7 @@ def iter_decode_geometry(mesh: Any, data: Any, *, step: int | None = None) -> It
     >>> len(list(iter_decode_geometry(sphere, stream, step=10)))
     3
     """
+    progress = check_progress(progress)
     mesh_data = read_mesh(mesh, weld=True)
     indices, positions, omega = _parse(data, mesh_data)
     k = len(indices)
@@ -377,7 +394,7 @@ def iter_decode_geometry(mesh: Any, data: Any, *, step: int | None = None) -> It
     first = min(step, k)
     # factor now, so that a bad prefix raises at the call and not at the first next()
     solver = LSMeshSolver((mesh_data.vertices, mesh_data.triangles), indices[:first], weights=omega)
-    return _refinements(mesh_data, solver, indices, positions, omega, first, step)
+    return _refinements(mesh_data, solver, indices, positions, omega, first, step, progress)
 
 
 def _refinements(
@@ -388,12 +405,20 @@ def _refinements(
     omega: float,
     first: int,
     step: int,
+    progress: bool,
 ) -> Iterator[Any]:
-    yield new_mesh(mesh_data, solver.solve(positions[:first]))
-    for begin in range(first, len(indices), step):
-        end = min(begin + step, len(indices))
-        solver.add_anchors(indices[begin:end], positions[begin:end], weights=omega)
-        # pass every position: the solver's defaults for the first anchors are the
-        # decoder mesh's own (meaningless) coordinates. After updates the solver
-        # refines its solution once, which keeps omega = 10 n accurate.
-        yield new_mesh(mesh_data, solver.solve(positions[:end]))
+    # the bar counts the anchors in the mesh about to be yielded; it closes when the
+    # caller stops iterating too (GeneratorExit runs the finally)
+    with progress_bar(progress, total=len(indices), desc="progressive decoding", unit="anchor") as bar:
+        mesh = new_mesh(mesh_data, solver.solve(positions[:first]))
+        bar.update(first)
+        yield mesh
+        for begin in range(first, len(indices), step):
+            end = min(begin + step, len(indices))
+            solver.add_anchors(indices[begin:end], positions[begin:end], weights=omega)
+            # pass every position: the solver's defaults for the first anchors are the
+            # decoder mesh's own (meaningless) coordinates. After updates the solver
+            # refines its solution once, which keeps omega = 10 n accurate.
+            mesh = new_mesh(mesh_data, solver.solve(positions[:end]))
+            bar.update(end - begin)
+            yield mesh

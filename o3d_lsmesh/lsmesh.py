@@ -17,6 +17,7 @@ from scipy.sparse import csgraph
 
 from ._errors import SingularSystemError
 from ._o3d import MeshData, mesh_from_state, mesh_state, new_mesh, read_mesh, source_triangles
+from ._progress import check_progress, stages
 from ._solvers import SPDSolver
 from ._validate import as_bool, as_choice, as_indices, as_positions, as_weights
 from .laplacian import LAPLACIAN_KINDS, laplacian_matrix
@@ -313,6 +314,7 @@ def ls_mesh(
     weights: Any = 1.0,
     interpolate: bool = False,
     laplacian: str = "uniform",
+    progress: bool = False,
 ) -> Any:
     """Least-squares mesh: the fairest geometry for ``mesh``'s connectivity near the control points.
 
@@ -328,6 +330,8 @@ def ls_mesh(
         Defaults to the mesh's own positions at those indices (approximation).
     weights, interpolate, laplacian
         See :class:`LSMeshSolver`.
+    progress : bool
+        Show a tqdm bar over the stages (factor, solve).
 
     Returns
     -------
@@ -352,12 +356,15 @@ def ls_mesh(
     """
     # the solver holds no copy of the mesh while CHOLMOD factors, and the factor goes
     # before the output mesh is built: a lower peak of memory on large meshes
-    solver = LSMeshSolver(
-        mesh, constraint_vertex_indices, weights=weights, interpolate=interpolate, laplacian=laplacian,
-        _release_arrays=True,
-    )
-    vertices, data = solver.solve(constraint_vertex_positions), solver._data
-    del solver
+    with stages(progress, "ls_mesh", ("factor", "solve")) as begin:
+        begin("factor")
+        solver = LSMeshSolver(
+            mesh, constraint_vertex_indices, weights=weights, interpolate=interpolate, laplacian=laplacian,
+            _release_arrays=True,
+        )
+        begin("solve")
+        vertices, data = solver.solve(constraint_vertex_positions), solver._data
+        del solver
     return new_mesh(MeshData(None, source_triangles(data), data.source, data.kind), vertices)
 
 
@@ -368,6 +375,7 @@ def reconstruct_geometry(
     interpolate: bool = True,
     weights: Any = 1.0,
     laplacian: str = "uniform",
+    progress: bool = False,
 ) -> Any:
     """Rebuild the positions of vertices whose geometry is missing (figures 5 and 8 of LS meshes).
 
@@ -383,6 +391,8 @@ def reconstruct_geometry(
     mesh : open3d.geometry.TriangleMesh or open3d.t.geometry.TriangleMesh
         The positions of the unknown vertices are ignored.
     unknown_vertex_indices : (u,) int array-like
+    progress : bool
+        Show a tqdm bar over the stages (factor, solve).
 
     Raises
     ------
@@ -407,18 +417,24 @@ def reconstruct_geometry(
     as_choice(laplacian, LAPLACIAN_KINDS, name="laplacian")
     # checked with either scheme (the interpolatory one does not use them): a bad value is a mistake either way
     as_weights(weights, len(known), name="weights")
+    check_progress(progress)
     L = laplacian_matrix(data.vertices, data.triangles, laplacian).tocsc()
     # checked here for both schemes, so that the message names the known vertices the caller left
     check_components_constrained(L, known, what="known vertex (outside unknown_vertex_indices)")
-    if not interpolate:
-        vertices = LSMeshSolver(mesh, known, weights=weights, laplacian=laplacian).solve()
-        return new_mesh(data, vertices)
-    L_unknown = L[:, unknown].tocsr()
-    rows = np.flatnonzero(np.diff(L_unknown.indptr) > 0)  # rows touching an unknown vertex
-    A = L_unknown[rows]
-    B = L[rows][:, known]
-    normal = (A.T @ A).tocsc()
-    rhs = -(A.T @ (B @ data.vertices[known]))
-    vertices = data.vertices.copy()
-    vertices[unknown] = SPDSolver(normal).solve(rhs)
+    with stages(progress, "reconstruct_geometry", ("factor", "solve")) as begin:
+        begin("factor")
+        if not interpolate:
+            solver = LSMeshSolver(mesh, known, weights=weights, laplacian=laplacian)
+            begin("solve")
+            return new_mesh(data, solver.solve())
+        L_unknown = L[:, unknown].tocsr()
+        rows = np.flatnonzero(np.diff(L_unknown.indptr) > 0)  # rows touching an unknown vertex
+        A = L_unknown[rows]
+        B = L[rows][:, known]
+        normal = (A.T @ A).tocsc()
+        rhs = -(A.T @ (B @ data.vertices[known]))
+        factor = SPDSolver(normal)
+        begin("solve")
+        vertices = data.vertices.copy()
+        vertices[unknown] = factor.solve(rhs)
     return new_mesh(data, vertices)

@@ -29,6 +29,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ._o3d import MeshData, new_mesh, read_mesh
+from ._progress import check_progress, progress_bar
 from ._solvers import SPDSolver
 from ._validate import as_choice, as_count, as_positive_float
 from .laplacian import uniform_laplacian
@@ -39,19 +40,6 @@ __all__ = ["select_control_points", "approximate", "SELECTION_METHODS"]
 
 SELECTION_METHODS = ("random", "greedy", "combined")
 DEFAULT_BATCH = 31  # figure 6 of LS meshes: 31 solves of 31 picks for 1000 control points
-
-
-def _check_progress(progress: Any) -> None:
-    if not isinstance(progress, (bool, np.bool_)):
-        raise TypeError(f"progress must be a bool, got {type(progress).__name__}")
-
-
-def _progress_bar(progress: bool, total: int, desc: str):
-    if not progress:
-        return None
-    from tqdm.auto import tqdm
-
-    return tqdm(total=total, desc=desc)
 
 
 def _rng(seed: Any) -> np.random.Generator:
@@ -155,16 +143,19 @@ def _greedy(
     n = len(vertices)
     if start is None:
         start = start_vertices(vertices, triangles)
-    if update:
-        system: Any = LSMeshSolver((vertices, triangles), start, weights=weight)
-    else:
-        system = _RefactoringSystem(vertices, triangles, start, weight)
-    selected = np.zeros(n, dtype=bool)
-    selected[start] = True
-    order = np.empty(count, dtype=np.int64)
-    order[: len(start)] = start
-    bar = _progress_bar(progress, count, "greedy selection")
+    # the per-component seeds are control points too: the bar starts at them and ends at count
+    bar = progress_bar(progress, total=count, initial=len(start), desc="greedy selection", unit="point")
     try:
+        bar.set_postfix_str("factor")
+        if update:
+            system: Any = LSMeshSolver((vertices, triangles), start, weights=weight)
+        else:
+            system = _RefactoringSystem(vertices, triangles, start, weight)
+        selected = np.zeros(n, dtype=bool)
+        selected[start] = True
+        order = np.empty(count, dtype=np.int64)
+        order[: len(start)] = start
+        bar.set_postfix_str("select")
         for k in range(len(start), count):
             errors = _squared_errors(system.solve(refine=False), vertices)
             errors[selected] = -np.inf
@@ -175,11 +166,9 @@ def _greedy(
                 system.add_anchors(np.array([best]), weights=weight)
             else:
                 system.add_anchors(np.array([best]))
-            if bar is not None:
-                bar.update(1)
+            bar.update(1)
     finally:
-        if bar is not None:
-            bar.close()
+        bar.close()
     return order, system
 
 
@@ -216,15 +205,17 @@ def _combined(data: MeshData, count: int, weight: float, batch: int, *, progress
     vertices, triangles = data.vertices, data.triangles
     n = len(vertices)
     start = start_vertices(vertices, triangles)
-    adjacency = adjacency_matrix(triangles, n)
-    indptr, neighbours = adjacency.indptr.astype(np.int64), adjacency.indices.astype(np.int64)
-    solver = LSMeshSolver((vertices, triangles), start, weights=weight)
-    selected = np.zeros(n, dtype=bool)
-    selected[start] = True
-    order = [start]
-    done = len(start)
-    bar = _progress_bar(progress, count, "combined selection")
+    bar = progress_bar(progress, total=count, initial=len(start), desc="combined selection", unit="point")
     try:
+        bar.set_postfix_str("factor")
+        adjacency = adjacency_matrix(triangles, n)
+        indptr, neighbours = adjacency.indptr.astype(np.int64), adjacency.indices.astype(np.int64)
+        solver = LSMeshSolver((vertices, triangles), start, weights=weight)
+        selected = np.zeros(n, dtype=bool)
+        selected[start] = True
+        order = [start]
+        done = len(start)
+        bar.set_postfix_str("select")
         while done < count:
             errors = _squared_errors(solver.solve(refine=False), vertices)
             forbidden = selected.copy()
@@ -241,11 +232,9 @@ def _combined(data: MeshData, count: int, weight: float, batch: int, *, progress
             solver.add_anchors(picks, weights=weight)
             order.append(picks)
             done += len(picks)
-            if bar is not None:
-                bar.update(len(picks))
+            bar.update(len(picks))
     finally:
-        if bar is not None:
-            bar.close()
+        bar.close()
     return np.concatenate(order), solver
 
 
@@ -276,7 +265,7 @@ def _select(
     elif batch is not None:
         raise ValueError(f"batch applies only to method='combined', got batch={batch!r} with method={method!r}")
     rng = _rng(seed)
-    _check_progress(progress)
+    check_progress(progress)
     if method == "random":  # instant: no progress bar
         return data, _random(data, count, rng), None
     if method == "greedy":
@@ -332,7 +321,9 @@ def select_control_points(
     seed : int or numpy.random.Generator, optional
         Random state of ``"random"``; the other methods are deterministic.
     progress : bool
-        Show a tqdm progress bar.
+        Show a tqdm bar over the control points, ending at ``count``: it
+        starts at the per-component seeds and shows the first factorization
+        as its ``factor`` stage. ``"random"`` shows none (instant).
 
     Returns
     -------
@@ -387,7 +378,9 @@ def approximate(
     ----------
     mesh : open3d.geometry.TriangleMesh, open3d.t.geometry.TriangleMesh or (vertices, triangles)
     count, method, weights, batch, seed, progress
-        See :func:`select_control_points`.
+        See :func:`select_control_points`. When the result needs a new
+        factorization (``interpolate`` or ``"random"``), ``progress`` also
+        shows its stages (factor, solve).
     interpolate : bool
         Hit the control points exactly.
 
@@ -419,4 +412,4 @@ def approximate(
     if solver is not None and not interpolate:
         return new_mesh(data, solver.solve()), indices
     weight = as_positive_float(weights, name="weights")
-    return ls_mesh(mesh, indices, weights=weight, interpolate=bool(interpolate)), indices
+    return ls_mesh(mesh, indices, weights=weight, interpolate=bool(interpolate), progress=progress), indices

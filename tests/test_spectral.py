@@ -95,3 +95,60 @@ def test_errors(monkeypatch):
     monkeypatch.setattr(spectral, "SPECTRAL_MAX_WORK", n * 3)
     with pytest.raises(ValueError, match="k must be at most 3 for a mesh of"):
         spectral_approximation((V, F), 4)
+
+
+def several_components():
+    """Four grids of different sizes side by side plus an unreferenced vertex: 5 components, 187 vertices."""
+    parts, offset = [], 0
+    vertices, triangles = [], []
+    for i, (nx, ny) in enumerate(((11, 7), (8, 6), (6, 5), (4, 3))):
+        V, F = grid(nx, ny, z=lambda x, y: 0.1 * np.sin(3 * x + y))
+        vertices.append(V + [2.0 * i, 0.5 * i, 0.0])
+        triangles.append(F + offset)
+        parts.append(np.arange(offset, offset + len(V)))
+        offset += len(V)
+    vertices.append(np.array([[10.0, 10.0, 10.0]]))  # isolated: a component of its own
+    parts.append(np.array([offset]))
+    return np.vstack(vertices), np.vstack(triangles), parts
+
+
+def test_multi_component_basis_matches_dense_eigh():
+    V, F, parts = several_components()
+    n, c = len(V), len(parts)
+    dense_values, dense_vectors = sla.eigh(combinatorial_laplacian(F, n).toarray())
+    assert np.abs(dense_values[:c]).max() < 1e-10 < dense_values[c]  # c zero eigenvalues, as the components
+    # every cut between distinct eigenvalues past the null space, on both sides of n / 4 (sparse and dense paths)
+    cuts = np.flatnonzero(np.diff(dense_values) > 1e-6) + 1
+    cuts = cuts[(cuts > c) & (cuts < n)]
+    chosen = [int(cuts[0]), int(cuts[cuts <= n // 4].max()), int(cuts[cuts > n // 4].min())]
+    for k in chosen:
+        values, vectors = spectral_basis(F, n, k)
+        np.testing.assert_allclose(values, dense_values[:k], atol=1e-9, err_msg=f"k={k}")
+        np.testing.assert_allclose(vectors.T @ vectors, np.eye(k), atol=1e-9, err_msg=f"k={k}")
+        reference = dense_vectors[:, :k] @ (dense_vectors[:, :k].T @ V)
+        np.testing.assert_allclose(spectral_approximation((V, F), k)[0], reference, atol=1e-8, err_msg=f"k={k}")
+
+
+def test_fewer_eigenvectors_than_components_keeps_the_largest_components():
+    V, F, parts = several_components()
+    n = len(V)
+    for k in (1, 3, 5):
+        values, vectors = spectral_basis(F, n, k)
+        np.testing.assert_array_equal(values, np.zeros(k))
+        L = combinatorial_laplacian(F, n)
+        np.testing.assert_allclose(L @ vectors, 0, atol=1e-12)
+        out = spectral_approximation((V, F), k)[0]
+        expected = np.zeros_like(V)
+        # parts are listed largest first: each kept one goes to its centroid, the rest to the origin
+        for part in parts[:k]:
+            expected[part] = V[part].mean(axis=0)
+        np.testing.assert_allclose(out, expected, atol=1e-12)
+
+
+def test_progress():
+    V, F = bumpy_grid(8)
+    dense = spectral_approximation((V, F), 8)[0]
+    np.testing.assert_allclose(spectral_approximation((V, F), 8, progress=True)[0], dense, atol=1e-12)
+    for bad in (1, "yes", None):
+        with pytest.raises(TypeError, match="progress must be a bool"):
+            spectral_approximation((V, F), 8, progress=bad)

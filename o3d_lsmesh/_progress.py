@@ -1,0 +1,91 @@
+"""The one tqdm gateway: progress bars of every long operation (``progress=True`` in the API).
+
+Every bar ends at its total when the work completes (tests check it), counts
+in units of the work itself (vertices, anchors, control points) or, for a
+single factorization, in named stages. With ``progress=False`` tqdm is not
+even imported and the bar is a silent stand-in with the same methods.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Callable, Iterator, Sequence
+from typing import Any
+
+import numpy as np
+
+__all__ = ["check_progress", "progress_bar", "stages"]
+
+
+def check_progress(progress: Any) -> bool:
+    """``progress`` as a bool; ``TypeError`` naming ``progress`` for anything else (1, "yes", None)."""
+    if not isinstance(progress, (bool, np.bool_)):
+        raise TypeError(f"progress must be a bool, got {type(progress).__name__}")
+    return bool(progress)
+
+
+class _Silent:
+    """Stand-in for a disabled bar: tqdm's methods, doing nothing."""
+
+    n = 0
+
+    def update(self, count: int = 1) -> None:
+        pass
+
+    def set_postfix_str(self, text: str = "", refresh: bool = True) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+    def __enter__(self) -> _Silent:  # noqa: PYI034 (typing.Self needs Python 3.11)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        pass
+
+
+def progress_bar(progress: Any, *, total: int, desc: str, unit: str = "it", initial: int = 0, file: Any = None) -> Any:
+    """A tqdm bar over ``total`` units (a silent stand-in when ``progress`` is False).
+
+    ``initial`` counts work done before the bar starts (the per-component seeds
+    of a selection), so that the bar still ends at ``total``. Writes to stderr
+    (tqdm's default) unless ``file`` is given. Use as a context manager, or
+    call ``close()``.
+    """
+    if not check_progress(progress):
+        return _Silent()
+    from tqdm.auto import tqdm
+
+    return tqdm(total=int(total), initial=int(initial), desc=desc, unit=unit, file=file)
+
+
+@contextlib.contextmanager
+def stages(progress: Any, desc: str, names: Sequence[str]) -> Iterator[Callable[[str], None]]:
+    """A bar over the named stages of one operation (e.g. factor, solve).
+
+    Yields ``begin(name)``: call it as each stage starts; it completes the
+    previous stage and shows ``name``. On a normal exit the last stage is
+    completed, so the bar ends at ``len(names)``; after an error it stays where
+    the error happened.
+
+    >>> with stages(False, "ls_mesh", ("factor", "solve")) as begin:
+    ...     begin("factor")
+    ...     begin("solve")
+    """
+    bar = progress_bar(progress, total=len(names), desc=desc, unit="stage")
+    started = 0
+
+    def begin(name: str) -> None:
+        nonlocal started
+        if started:
+            bar.update(1)
+        started += 1
+        bar.set_postfix_str(name)
+
+    try:
+        yield begin
+        if started:
+            bar.update(1)
+    finally:
+        bar.close()
