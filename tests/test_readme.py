@@ -13,7 +13,7 @@ def test_readme_tour_runs(tmp_path):
     assert 'o3d.io.read_triangle_mesh("scan.ply")' in code
     code = code.replace(
         'mesh = o3d.io.read_triangle_mesh("scan.ply")',
-        "from o3d_lsmesh.demo import demo_mesh\nmesh = demo_mesh(4)\nmissing_vertex_indices = np.arange(40)",
+        "from o3d_lsmesh.demo import demo_mesh\nmesh = demo_mesh(4)",
     ).replace('"before_after.png"', repr(str(tmp_path / "before_after.png")))
     namespace: dict = {}
     try:
@@ -26,3 +26,12 @@ def test_readme_tour_runs(tmp_path):
     before = np.asarray(namespace["mesh"].vertices)
     assert np.abs(np.asarray(namespace["edited"].vertices) - before).max() > 0
     assert len(namespace["out"].triangles) <= 5000
+
+
+def test_readme_has_no_repeated_paragraph():
+    paragraphs = [p.strip() for p in README.read_text().split("\n\n") if len(p.strip()) > 80]
+    repeated = {p[:60] for p in paragraphs if paragraphs.count(p) > 1}
+    assert not repeated
+    for paragraph in paragraphs:
+        sentences = [s.strip() for s in paragraph.replace("\n", " ").split(". ") if len(s.strip()) > 40]
+        assert len(sentences) == len(set(sentences)), paragraph[:80]
