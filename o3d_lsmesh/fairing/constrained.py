@@ -60,6 +60,7 @@ def constrained_fairing_arrays(
     smooth_boundary: bool = True,
     reimpose_every: int | None = None,
     progress: bool = False,
+    solver: str = "auto",
 ) -> np.ndarray:
     """Array core of :func:`constrained_fairing`: faired ``(n, 3) float64`` positions.
 
@@ -92,10 +93,11 @@ def constrained_fairing_arrays(
     )
     data = read_mesh((vertices, triangles), name="mesh")
     return _fair(data.vertices, data.triangles, number_of_iterations, method, mu, smooth_boundary, reimpose_every,
-                 progress)
+                 progress, solver=solver)
 
 
-def _fair(positions, triangles, number_of_iterations, method, mu, smooth_boundary, reimpose_every, progress):
+def _fair(positions, triangles, number_of_iterations, method, mu, smooth_boundary, reimpose_every, progress, *,
+          solver="auto"):
     # validated arrays in, new (n, 3) positions out (``positions`` is a private copy)
     if number_of_iterations == 0:
         return positions
@@ -113,12 +115,12 @@ def _fair(positions, triangles, number_of_iterations, method, mu, smooth_boundar
                 relaxed[curve.vertex] = curve.step(positions, curve_target)
             positions = relaxed
         return positions
-    solver = GlobalSolver(triangles, topo, DEFAULT_MU if mu is None else mu)
+    system = GlobalSolver(triangles, topo, DEFAULT_MU if mu is None else mu, solver=solver, progress=progress)
     for _ in steps:
         known = positions.copy()
         if len(curve):
             known[curve.vertex] = curve.step(positions, curve.target(positions))
-        positions = solver.solve(known, positions)
+        positions = system.solve(known, positions)
     return positions
 
 
@@ -131,6 +133,7 @@ def constrained_fairing(
     smooth_boundary: bool = True,
     reimpose_every: int | None = None,
     progress: bool = False,
+    solver: str = "auto",
 ) -> Any:
     """Remove noise from a mesh while holding its triangle barycenters (Liu et al. 2001).
 
@@ -215,6 +218,11 @@ def constrained_fairing(
         current positions every this many iterations.
     progress : bool
         Show a tqdm progress bar over the iterations.
+    solver : {"auto", "cholmod", "iterative"}
+        ``method="global"`` only: how the system is solved (see
+        :class:`~o3d_lsmesh.SPDSolver`); ``"auto"`` factors it unless the factor
+        would exceed the memory budget, then runs conjugate gradients with an
+        AMG preconditioner, warm-started from the current positions.
 
     Returns
     -------
@@ -263,4 +271,4 @@ def constrained_fairing(
     """
     options = _check_options(number_of_iterations, method, mu, smooth_boundary, reimpose_every, progress)
     data = read_mesh(mesh)
-    return new_mesh(data, _fair(data.vertices.copy(), data.triangles, *options))
+    return new_mesh(data, _fair(data.vertices.copy(), data.triangles, *options, solver=solver))
