@@ -13,8 +13,12 @@ STAMP := $(VENV)/.installed
 demo: $(STAMP)
 	$(PY) -m o3d_lsmesh.cli demo
 
+# second pass: the solver-facing tests again on the SciPy fallback (as without scikit-sparse)
+FALLBACK_TESTS := tests/test_solvers.py tests/test_fallback.py tests/test_lsmesh.py tests/test_encoding.py tests/test_selection.py
+
 test: $(STAMP)
 	$(PY) -m pytest -p no:dash -q
+	O3D_LSMESH_NO_CHOLMOD=1 $(PY) -m pytest -p no:dash -q $(FALLBACK_TESTS)
 
 bench: $(STAMP)
 	for b in benchmarks/bench_*.py; do $(PY) $$b || exit 1; done
