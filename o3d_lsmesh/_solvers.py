@@ -139,11 +139,12 @@ def estimate_factor_bytes(n: int, nnz: int) -> float:
     """Measured model of the peak memory of a CHOLMOD factor of an ``(n, n)`` mesh system with ``nnz`` entries.
 
     Fill-reducing orderings of mesh (near-planar) graphs give ``O(n log n)``
-    fill; the constant is fitted to CHOLMOD factors of LS-mesh normal
-    matrices (``L^T L + W^2``, about 19 entries per row) from 20k to 500k
-    vertices and scales with the entries per row (benchmarks/results/scale.md):
-    8 bytes per factor entry, plus CHOLMOD's integer and supernodal
-    workspace (about 1.5x the values at these sizes).
+    fill; the constant (11 factor entries per ``n log2 n``) is fitted to
+    CHOLMOD factors of LS-mesh normal matrices (``L^T L + W^2``, about 19
+    entries per row) from 20k to 500k vertices and is scaled by the entries
+    per row; 8 bytes per factor entry, times 1.5 for CHOLMOD's integer and
+    supernodal workspace and the matrix itself (measured peak at 200k: 440 MB
+    over the input, model 460 MB). About 2.6 GB at 1M vertices, 31 GB at 10M.
     """
     if n <= 1:
         return float(nnz) * 16.0
@@ -152,8 +153,10 @@ def estimate_factor_bytes(n: int, nnz: int) -> float:
     return 1.5 * 8.0 * factor_entries
 
 
-# nnz(L) / (n log2 n) measured on LS-mesh normal matrices (torus grids, 2% controls, CHOLMOD's default ordering)
-_FILL_PER_ROW_LOG = 4.0
+# nnz(L) / (n log2 n) of CHOLMOD's factor (default ordering) of LS-mesh normal matrices, 2% controls, on
+# torus grids: 12.8 at 20k vertices, 10.1 at 80k, 10.5 at 245k, 10.8 at 500k (benchmarks/results/scale.md).
+# At 10M this predicts 31 GB, as measured growth from 2M (5.5 GB peak) suggests.
+_FILL_PER_ROW_LOG = 11.0
 
 
 def operator_scale(operator: sp.spmatrix) -> float:
@@ -693,7 +696,14 @@ def _amg_preconditioner(matrix: sp.spmatrix) -> Any:
         dense = _splu_spd(csr.tocsc())
         return lambda r: dense.solve(np.asfortranarray(r))
     hierarchy = pyamg.smoothed_aggregation_solver(
-        csr, B=np.ones((n, 1)), symmetry="symmetric", max_coarse=500
+        csr,
+        B=np.ones((n, 1)),
+        symmetry="symmetric",
+        # a local (Gershgorin) bound for the prolongation smoother's step instead of pyamg's
+        # default eigenvalue estimate, which took a fifth of the whole solve at 100k vertices
+        smooth=("jacobi", {"weighting": "local"}),
+        max_coarse=500,
+        coarse_solver="splu",
     )
     levels = hierarchy.levels
     coarse = hierarchy.coarse_solver

@@ -96,6 +96,7 @@ def test_fallback_warns_without_scikit_sparse(monkeypatch):
     from o3d_lsmesh import O3DLSMeshWarning
 
     monkeypatch.setattr(solvers, "_cholmod", None)
+    monkeypatch.delenv(solvers.NO_CHOLMOD_ENV, raising=False)
     A, b = spd()
     with pytest.warns(O3DLSMeshWarning, match="scikit-sparse is not importable"):
         solver = solvers.SPDSolver(A)
