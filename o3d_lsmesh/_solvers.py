@@ -5,8 +5,8 @@ solves ``(n,)`` or ``(n, k)`` right-hand sides in one call, refactors a matrix
 of the same pattern reusing the symbolic analysis (the fill-reducing ordering
 is about half of a large solve), and applies rank-k updates ``A + C C^T`` in
 place. Without scikit-sparse it falls back to SciPy's ``splu`` set for SPD
-matrices (symmetric ordering, no pivoting) with a warning, and updates
-through the Woodbury identity (refactoring once their rank grows); ``O3D_LSMESH_NO_CHOLMOD=1`` chooses that path on
+matrices (symmetric ordering, no pivoting) with a warning, refactoring
+where CHOLMOD would update; ``O3D_LSMESH_NO_CHOLMOD=1`` chooses that path on
 purpose (no warning). Systems whose factor would not fit in a memory budget
 are solved by conjugate gradients preconditioned with smoothed-aggregation
 algebraic multigrid (``pyamg``), warm-started where the caller has a guess.
@@ -482,7 +482,6 @@ class SPDSolver:
         del given
         self._pending: list[sp.csc_matrix] = []
         self._factor: Any = None
-        self._woodbury: _Woodbury | None = None
         self._factorize(analyze=True)
 
     @property
@@ -516,7 +515,6 @@ class SPDSolver:
             self._matrix.sort_indices()
 
     def _factorize(self, *, analyze: bool) -> None:
-        self._woodbury = None
         try:
             if self.backend == "iterative":
                 # the AMG hierarchy is built at the first solve: updates and refactors before it cost nothing
@@ -580,8 +578,6 @@ class SPDSolver:
                 x = self._factor(b)
             else:
                 x = self._factor.solve(np.asfortranarray(b))
-                if self._woodbury is not None:
-                    x = self._woodbury.correct(x)
         if not np.all(np.isfinite(x)):
             raise SingularSystemError(
                 "the factored matrix is numerically singular: the solve of a finite right-hand side "
@@ -619,10 +615,10 @@ class SPDSolver:
 
         ``C`` is an ``(n, k)`` sparse matrix in the matrix's own row order:
         CHOLMOD applies its fill-reducing permutation itself. SciPy's LU has
-        no update: the SciPy path applies the Woodbury identity on its kept
-        factor while the total rank stays small (``rank * n <= WOODBURY_ENTRIES``),
-        then refactors; the iterative path rebuilds its preconditioner at the
-        next solve.
+        no update: the SciPy path refactors (a Woodbury update on the kept LU
+        was tried and lost the accuracy of the bases paper's ``w = 10 n``
+        anchors); the iterative path rebuilds its preconditioner at the next
+        solve.
         """
         if not (sp.isspmatrix_csc(c) and c.dtype == np.float64):
             c = sp.csc_matrix(c, dtype=np.float64)
@@ -638,13 +634,6 @@ class SPDSolver:
                 self._factor.update_inplace(c)
                 return
             self._flush()
-            if self.backend == "scipy":
-                rank = c.shape[1] + (0 if self._woodbury is None else self._woodbury.rank)
-                if rank <= _woodbury_limit(self.shape[0]):
-                    # SuperLU has no update: apply A0 + U U^T through the Woodbury identity on the kept
-                    # factor (n x rank work per solve) until the rank gets large, then refactor
-                    self._woodbury = _Woodbury.extend(self._woodbury, self._factor, c)
-                    return
             self._factorize(analyze=True)
 
     def __getstate__(self) -> dict:
@@ -682,47 +671,7 @@ class SPDSolver:
             self._matrix = _stored(state["matrix"], given_lower=was_lower, keep_lower=self._lower)
         self._pending = []
         self._factor = None
-        self._woodbury = None
         self._factorize(analyze=True)
-
-
-#: Entries of the dense ``A0^{-1} U`` that the SciPy path's Woodbury updates may hold (160 MB).
-WOODBURY_ENTRIES = 20_000_000
-
-
-def _woodbury_limit(n: int) -> int:
-    return int(min(512, WOODBURY_ENTRIES // max(n, 1)))
-
-
-class _Woodbury:
-    """``(A0 + U U^T)^{-1} b = y - Z S^{-1} U^T y`` with ``y = A0^{-1} b``, ``Z = A0^{-1} U``, ``S = I + U^T Z``.
-
-    ``S`` is SPD (``I`` plus a Gram matrix in the ``A0^{-1}`` inner product), so it is
-    Cholesky-factored; it is rebuilt (``rank^2`` entries) at each extension.
-    """
-
-    def __init__(self, u: sp.csc_matrix, z: np.ndarray) -> None:
-        import scipy.linalg as sla
-
-        self.u, self.z = u, z
-        capacitance = np.eye(u.shape[1]) + np.asarray(u.T @ z)
-        self.s = sla.cho_factor(capacitance, lower=True)
-
-    @property
-    def rank(self) -> int:
-        return self.u.shape[1]
-
-    @classmethod
-    def extend(cls, old: "_Woodbury | None", factor: Any, c: sp.csc_matrix) -> "_Woodbury":
-        z_new = factor.solve(np.asfortranarray(c.toarray()))
-        if old is None:
-            return cls(c, z_new)
-        return cls(sp.hstack([old.u, c], format="csc"), np.hstack([old.z, z_new]))
-
-    def correct(self, y: np.ndarray) -> np.ndarray:
-        import scipy.linalg as sla
-
-        return y - self.z @ sla.cho_solve(self.s, np.asarray(self.u.T @ y))
 
 
 def _product(a: sp.csc_matrix) -> sp.csc_matrix:
@@ -759,6 +708,11 @@ def _amg_preconditioner(matrix: sp.spmatrix) -> Any:
         max_coarse=500,
         coarse_solver="splu",
     )
+    return _vcycle(hierarchy)
+
+
+def _vcycle(hierarchy: Any) -> Any:
+    """A pyamg hierarchy's V-cycle applied to each column of an ``(n, k)`` block."""
     levels = hierarchy.levels
     coarse = hierarchy.coarse_solver
 

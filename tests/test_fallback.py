@@ -69,25 +69,3 @@ def test_spd_superlu_equals_partial_pivoting_and_does_not_pivot():
     # and the fill is that of a symmetric factorization: U has the pattern of L^T
     assert abs(fast.U.nnz - fast.L.nnz) <= N.shape[0]
 
-
-def test_scipy_updates_use_woodbury_then_refactor(monkeypatch):
-    rng = np.random.default_rng(4)
-    A = sp.random(300, 300, density=0.02, random_state=4)
-    matrix = (A @ A.T + sp.identity(300)).tocsc()
-    b = rng.normal(size=(300, 3))
-    solver = solvers.SPDSolver(matrix, backend="scipy")
-    factor = solver._factor
-    total = matrix.copy()
-    for step in range(6):
-        # large weights as in the bases paper's omega = 10 n
-        C = sp.csc_matrix((np.full(2, 3000.0), (rng.choice(300, 2, replace=False), [0, 1])), shape=(300, 2))
-        solver.update(C)
-        total = (total + C @ C.T).tocsc()
-        np.testing.assert_allclose(solver.solve(b), spla.spsolve(total, b), rtol=1e-7, atol=1e-12)
-    assert solver._factor is factor and solver._woodbury.rank == 12  # no refactor so far
-    monkeypatch.setattr(solvers, "WOODBURY_ENTRIES", 300 * 13)
-    solver.update(sp.csc_matrix((np.array([1.0, 1.0]), ([5, 6], [0, 1])), shape=(300, 2)))
-    assert solver._factor is not factor and solver._woodbury is None  # rank 14 > 13: refactored
-    total = (total + sp.csc_matrix((np.array([1.0, 1.0]), ([5, 6], [0, 1])), shape=(300, 2)) @ sp.csc_matrix((np.array([1.0, 1.0]), ([5, 6], [0, 1])), shape=(300, 2)).T).tocsc()
-    np.testing.assert_allclose(solver.solve(b), spla.spsolve(total, b), rtol=1e-9, atol=1e-12)
-    assert abs(solver.matrix - total).max() < 1e-9
