@@ -1,6 +1,6 @@
 """Exception and warning classes of o3d_lsmesh."""
 
-__all__ = ["SingularSystemError", "O3DLSMeshWarning"]
+__all__ = ["SingularSystemError", "O3DLSMeshWarning", "ConvergenceError"]
 
 
 class SingularSystemError(ValueError):
@@ -13,3 +13,7 @@ class SingularSystemError(ValueError):
 
 class O3DLSMeshWarning(UserWarning):
     """A warning about a fallback or about data that was dropped."""
+
+
+class ConvergenceError(RuntimeError):
+    """An iterative solve did not reach its tolerance within its iteration limit."""

@@ -4,13 +4,24 @@
 solves ``(n,)`` or ``(n, k)`` right-hand sides in one call, refactors a matrix
 of the same pattern reusing the symbolic analysis (the fill-reducing ordering
 is about half of a large solve), and applies rank-k updates ``A + C C^T`` in
-place. Without scikit-sparse it falls back to SciPy's ``splu`` with a warning,
-refactoring where CHOLMOD would update.
+place. Without scikit-sparse it falls back to SciPy's ``splu`` set for SPD
+matrices (symmetric ordering, no pivoting) with a warning, refactoring
+where CHOLMOD would update; ``O3D_LSMESH_NO_CHOLMOD=1`` chooses that path on
+purpose (no warning). Systems whose factor would not fit in a memory budget
+are solved by conjugate gradients preconditioned with smoothed-aggregation
+algebraic multigrid (``pyamg``), warm-started where the caller has a guess.
+
+The module also holds the checks that keep an ill-posed least-squares system
+from giving a wrong answer silently: :func:`check_constant_modes` (a
+penalty too weak against ``||L^T L||``) and :func:`check_finite`
+(overflow), which raise ``ValueError`` naming the caller's parameter.
 """
 
 from __future__ import annotations
 
 import importlib
+import os
+import sys
 import threading
 import warnings
 from typing import Any
@@ -19,15 +30,53 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from ._errors import O3DLSMeshWarning, SingularSystemError
+from ._errors import ConvergenceError, O3DLSMeshWarning, SingularSystemError
 from ._validate import as_choice
 
-__all__ = ["SPDSolver", "cholmod_available", "ORDERINGS"]
+__all__ = [
+    "SPDSolver",
+    "cholmod_available",
+    "ORDERINGS",
+    "SOLVERS",
+    "BACKENDS",
+    "DEFAULT_TOLERANCE",
+    "estimate_factor_bytes",
+    "default_memory_budget",
+    "check_constant_modes",
+    "check_finite",
+    "operator_scale",
+    "check_weight_pins_components",
+    "solver_backend",
+]
 
 ORDERINGS = ("default", "nesdis", "metis", "amd", "colamd", "natural")
+#: What the public functions take as ``solver=``.
+SOLVERS = ("auto", "cholmod", "iterative")
+#: What :class:`SPDSolver` takes as ``backend=``.
+BACKENDS = ("auto", "cholmod", "scipy", "iterative")
+#: Relative residual ``||b - A x|| / ||b||`` at which conjugate gradients stop, per column.
+#: Measured: 1e-10 gives solutions within 2e-9 (100k vertices) and 1e-7 (1M) of CHOLMOD's,
+#: relative, on LS meshes with 2% controls (benchmarks/results/scale.md).
+DEFAULT_TOLERANCE = 1e-10
+#: Fraction of the available memory that the factor may take under ``backend="auto"``.
+BUDGET_FRACTION = 0.5
+#: A component whose constant mode has a Rayleigh quotient below this fraction of ``||L^T L||``
+#: is not determined by the system in float64: round-off of size eps ||L^T L|| |x| moves it by
+#: more than 1e-6 of |x|.
+NEGLIGIBLE = 1e-10
+
+
+NO_CHOLMOD_ENV = "O3D_LSMESH_NO_CHOLMOD"
+
+
+def _cholmod_disabled() -> bool:
+    """Whether the user chose the SciPy path with ``O3D_LSMESH_NO_CHOLMOD=1`` (``make test``'s second pass)."""
+    return os.environ.get(NO_CHOLMOD_ENV, "").strip().lower() not in ("", "0", "false", "no")
 
 
 def _import_cholmod():
+    if _cholmod_disabled():
+        return None
     try:
         # ``import sksparse`` alone does not load the submodule: import it by name.
         return importlib.import_module("sksparse.cholmod")
@@ -43,6 +92,177 @@ def cholmod_available() -> bool:
     return _cholmod is not None
 
 
+def solver_backend(solver: Any, backend: str = "auto") -> str:
+    """The :class:`SPDSolver` backend for a public function's ``solver=`` (and older ``backend=``) option.
+
+    ``solver="auto"`` defers to ``backend`` (itself ``"auto"`` by default:
+    CHOLMOD or SciPy below the memory budget, iterative above it).
+    """
+    solver = as_choice(solver, SOLVERS, name="solver")
+    return backend if solver == "auto" else solver
+
+
+def available_memory() -> int:
+    """Bytes of memory available to new allocations (``MemAvailable`` on Linux)."""
+    try:
+        with open("/proc/meminfo") as meminfo:
+            for line in meminfo:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    try:
+        return int(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+    except (ValueError, OSError, AttributeError):
+        return 8 << 30
+
+
+def default_memory_budget() -> int:
+    """Bytes a direct factor may take under ``backend="auto"``: half of the available memory.
+
+    ``O3D_LSMESH_MEMORY_BUDGET`` (bytes, or with a ``K``/``M``/``G`` suffix) overrides it.
+    """
+    text = os.environ.get("O3D_LSMESH_MEMORY_BUDGET", "").strip().upper()
+    if text:
+        factor = {"K": 1 << 10, "M": 1 << 20, "G": 1 << 30}.get(text[-1], 1)
+        number = text[:-1] if factor > 1 else text
+        try:
+            return int(float(number) * factor)
+        except ValueError as error:
+            raise ValueError(
+                f"O3D_LSMESH_MEMORY_BUDGET must be a number of bytes such as 8G, got {text!r}"
+            ) from error
+    return int(BUDGET_FRACTION * available_memory())
+
+
+def estimate_factor_bytes(n: int, nnz: int) -> float:
+    """Measured model of the peak memory of a CHOLMOD factor of an ``(n, n)`` mesh system with ``nnz`` entries.
+
+    Fill-reducing orderings of mesh (near-planar) graphs give ``O(n log n)``
+    fill; the constant (11 factor entries per ``n log2 n``) is fitted to
+    CHOLMOD factors of LS-mesh normal matrices (``L^T L + W^2``, about 19
+    entries per row) from 20k to 500k vertices and is scaled by the entries
+    per row; 8 bytes per factor entry, times 1.5 for CHOLMOD's integer and
+    supernodal workspace and the matrix itself (measured peak at 200k: 440 MB
+    over the input, model 460 MB). About 2.6 GB at 1M vertices, 31 GB at 10M.
+    """
+    if n <= 1:
+        return float(nnz) * 16.0
+    per_row = max(nnz / n, 1.0)
+    factor_entries = _FILL_PER_ROW_LOG * per_row / 19.0 * n * np.log2(n)
+    return 1.5 * 8.0 * factor_entries
+
+
+# nnz(L) / (n log2 n) of CHOLMOD's factor (default ordering) of LS-mesh normal matrices, 2% controls, on
+# torus grids: 12.8 at 20k vertices, 10.1 at 80k, 10.5 at 245k, 10.8 at 500k (benchmarks/results/scale.md).
+# At 10M this predicts 31 GB, as measured growth from 2M (5.5 GB peak) suggests.
+_FILL_PER_ROW_LOG = 11.0
+
+
+def operator_scale(operator: sp.spmatrix) -> float:
+    """``max_j ||L e_j||^2 = max diag(L^T L)``: a lower bound on ``||L^T L||_2`` within the row count factor.
+
+    The scale against which a penalty is negligible (:func:`check_constant_modes`).
+    """
+    csc = sp.csc_matrix(operator)
+    if csc.nnz == 0:
+        return 0.0
+    squares = np.add.reduceat(csc.data**2, csc.indptr[:-1][np.diff(csc.indptr) > 0])
+    return float(squares.max())
+
+
+def check_finite(values: Any, *, name: str, what: str) -> None:
+    """Raise ``ValueError`` naming ``name`` when ``values`` (something built from it) holds inf or NaN.
+
+    ``values`` may be a callable that computes them: it runs with overflow warnings off,
+    since the overflow is what this reports.
+    """
+    if callable(values):
+        with np.errstate(over="ignore", invalid="ignore"):
+            values = values()
+    finite = np.isfinite(values)
+    if not finite.all():
+        first = int(np.flatnonzero(~finite.ravel())[0])
+        raise ValueError(
+            f"{name} must be small enough that {what} is finite, got {np.ravel(values)[first]} "
+            f"(overflow) at entry {first}"
+        )
+
+
+def check_constant_modes(
+    ones_product: np.ndarray,
+    labels: np.ndarray,
+    *,
+    scale: float,
+    name: str,
+    value: Any,
+    what: str = "the constraints",
+) -> None:
+    """Raise ``ValueError`` naming ``name`` if a penalty leaves a component's translation undetermined.
+
+    For a system ``N = L^T L + P`` where ``L`` annihilates the constant vector
+    ``1_c`` of each connected component ``c``, the smallest eigenvalue of ``N``
+    on ``c`` is at most the Rayleigh quotient ``q_c = 1_c^T N 1_c / n_c``,
+    which only the penalty ``P`` makes positive. Round-off perturbs the
+    factor by about ``eps ||L^T L||``, which moves the solution along ``1_c``
+    by ``eps ||L^T L|| / q_c`` of its size: the whole component drifts (a
+    translated sphere solved with ``weights=1e-8`` lands at the origin). This
+    raises when ``q_c < NEGLIGIBLE * scale``.
+
+    Parameters
+    ----------
+    ones_product : (u,) float array
+        ``N @ 1`` (components are diagonal blocks, so ``1_c^T N 1_c`` is its sum over ``c``).
+    labels : (u,) int array
+        Connected component of each unknown.
+    scale : float
+        ``||L^T L||``, e.g. :func:`operator_scale` of ``L``: the smoothness term only,
+        so that huge weights (a near-interpolatory system, well posed) pass.
+    name, value
+        The caller's parameter and its value, for the message.
+    """
+    labels = np.asarray(labels)
+    if labels.size == 0 or not scale > 0:
+        return
+    check_finite(ones_product, name=name, what="the system's entries")
+    sizes = np.bincount(labels)
+    quotient = np.bincount(labels, weights=ones_product, minlength=len(sizes)) / np.maximum(sizes, 1)
+    weak = (sizes > 0) & (quotient < NEGLIGIBLE * scale)
+    if weak.any():
+        worst = int(np.argmin(np.where(sizes > 0, quotient, np.inf)))
+        vertex = int(np.flatnonzero(labels == worst)[0])
+        raise ValueError(
+            f"{name} is too small: {what} must pin every connected component, got {name}={_short(value)}, "
+            f"which leaves {int(weak.sum())} component(s) (the first with vertex {vertex}) held with strength "
+            f"{quotient[worst]:.3g}, {quotient[worst] / scale:.2g} of the smoothness term (need >= {NEGLIGIBLE:g}): "
+            f"the solution would drift by round-off; increase {name}"
+        )
+
+
+def check_weight_pins_components(operator: sp.spmatrix, weight: float, *, name: str) -> None:
+    """Check a scalar weight ``w`` of ``||L x||^2 + w^2 sum_a |x_a - c_a|^2`` with one anchor per component at least.
+
+    The weakest case of :func:`check_constant_modes` (``q_c = w^2 / n_c``) for
+    callers that choose the anchors later (encoding, selection); also
+    rejects ``w`` whose square overflows.
+    """
+    from scipy.sparse import csgraph
+
+    check_finite(lambda: np.asarray([weight], dtype=np.float64) ** 2, name=name, what=f"{name}**2")
+    labels = csgraph.connected_components(operator, directed=False)[1]
+    pinned = np.zeros(operator.shape[0])
+    pinned[np.unique(labels, return_index=True)[1]] = float(weight) ** 2
+    check_constant_modes(pinned, labels, scale=operator_scale(operator), name=name, value=weight,
+                         what="the anchor weight")
+
+
+def _short(value: Any) -> str:
+    array = np.asarray(value)
+    if array.ndim == 0 or array.size == 1:
+        return f"{float(array.ravel()[0]):g}"
+    return f"array of {array.size} (min {array.min():g})"
+
+
 def _as_csc(matrix: Any, *, name: str = "matrix", square: bool = True) -> sp.csc_matrix:
     """``matrix`` as canonical float64 CSC (sorted, summed) with CHOLMOD's 32-bit indices where they fit.
 
@@ -53,6 +273,11 @@ def _as_csc(matrix: Any, *, name: str = "matrix", square: bool = True) -> sp.csc
     if square and matrix.shape[0] != matrix.shape[1]:
         raise ValueError(f"{name} must be square, got shape {matrix.shape}")
     csc = sp.csc_matrix(matrix, dtype=np.float64)
+    if not np.isfinite(csc.data).all():
+        first = int(np.flatnonzero(~np.isfinite(csc.data))[0])
+        raise ValueError(
+            f"{name} must have finite entries, got {csc.data[first]} (an overflowing weight or a NaN input?)"
+        )
     if not csc.has_canonical_format:
         csc = csc.copy()
         csc.sum_duplicates()
@@ -79,6 +304,37 @@ def _stored(csc: sp.csc_matrix, *, given_lower: bool, keep_lower: bool) -> sp.cs
     return stored
 
 
+def _splu_spd(matrix: sp.csc_matrix) -> Any:
+    """SuperLU set for an SPD matrix: a symmetric ordering of ``A + A^T`` and diagonal pivots.
+
+    With partial pivoting (SciPy's default) SuperLU abandons the fill-reducing
+    ordering whenever an off-diagonal entry wins a pivot test, which on these
+    diagonally heavy matrices costs 30-40x the time for the same result; an SPD
+    matrix needs no pivoting at all (Cholesky is stable without it).
+    """
+    return spla.splu(
+        matrix, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True}
+    )
+
+
+_PACKAGE_DIR = os.path.dirname(os.path.abspath(__file__))
+
+
+def user_stacklevel() -> int:
+    """The ``stacklevel`` that makes a warning point at the first caller outside o3d_lsmesh.
+
+    A warning raised deep in the gateway (``ls_mesh`` -> ``LSMeshSolver`` ->
+    ``SPDSolver``) is about the user's call, so it should name the user's line;
+    a fixed ``stacklevel`` would be right for one call path only.
+    """
+    frame = sys._getframe(1)  # the caller of user_stacklevel, i.e. the function that warns
+    level = 1
+    while frame is not None and os.path.abspath(frame.f_code.co_filename).startswith(_PACKAGE_DIR + os.sep):
+        frame = frame.f_back
+        level += 1
+    return level
+
+
 class SPDSolver:
     """Factor a sparse SPD matrix once and solve, refactor or update it.
 
@@ -94,9 +350,14 @@ class SPDSolver:
         least-squares problem ``min |A^T x - b|`` from the transposed rows, in
         less memory and time than ``A @ A.T``. Updates append their columns to
         ``A``.
-    backend : {"auto", "cholmod", "scipy"}
-        ``"auto"`` takes CHOLMOD when scikit-sparse imports, else SciPy's
-        ``splu`` with an :class:`O3DLSMeshWarning`.
+    backend : {"auto", "cholmod", "scipy", "iterative"}
+        ``"auto"`` estimates the direct factor's memory
+        (:func:`estimate_factor_bytes`) and takes the iterative path above
+        ``memory_budget``; below it CHOLMOD when scikit-sparse imports, else
+        SciPy's ``splu`` (with an :class:`O3DLSMeshWarning` unless
+        ``O3D_LSMESH_NO_CHOLMOD=1`` chose it). ``"iterative"``: conjugate
+        gradients preconditioned by a smoothed-aggregation AMG V-cycle
+        (``pyamg``) on the matrix, to relative residual ``tol``.
     lower : bool
         ``matrix`` holds only its lower triangle.
     ordering : {"default", "nesdis", "metis", "amd", "colamd", "natural"}
@@ -104,13 +365,29 @@ class SPDSolver:
         least fill (usually AMD on meshes). ``"nesdis"`` (nested dissection) has
         a balanced elimination tree, the structure the geometry-aware bases
         paper's update bound assumes: rank-1 updates touch fewer entries, at
-        the price of a slower factor and solve. Ignored by the SciPy backend.
+        the price of a slower factor and solve. Ignored by the other backends.
+    memory_budget : int, optional
+        Bytes the direct factor may take under ``backend="auto"``; default
+        :func:`default_memory_budget` (half the available memory, or
+        ``O3D_LSMESH_MEMORY_BUDGET``).
+    tol : float
+        Relative residual ``||b - A x|| / ||b||`` per column at which the
+        iterative path stops (default :data:`DEFAULT_TOLERANCE`, which matches
+        CHOLMOD to about 1e-7 relative at 1M vertices).
+    max_iterations : int
+        Conjugate-gradient iterations before :class:`ConvergenceError`.
+    progress : bool
+        Show the iterative solves' relative residual in a tqdm bar.
 
     Attributes
     ----------
     backend : str
-        The backend that actually runs, ``"cholmod"`` or ``"scipy"``.
+        The backend that actually runs, ``"cholmod"``, ``"scipy"`` or ``"iterative"``.
     shape : tuple of int
+    iterations : int
+        Conjugate-gradient iterations of the last solve (0 for direct backends).
+    residual : float
+        Largest relative residual of the last iterative solve (0.0 for direct backends).
 
     Notes
     -----
@@ -134,38 +411,75 @@ class SPDSolver:
         ordering: str = "default",
         lower: bool = False,
         product_of: Any = None,
+        memory_budget: int | None = None,
+        tol: float = DEFAULT_TOLERANCE,
+        max_iterations: int = 5000,
+        progress: bool = False,
     ) -> None:
-        backend = as_choice(backend, ("auto", "cholmod", "scipy"), name="backend")
+        backend = as_choice(backend, BACKENDS, name="backend")
         self.ordering = as_choice(ordering, ORDERINGS, name="ordering")
+        if isinstance(tol, bool) or not isinstance(tol, (int, float, np.floating)) or not 0 < tol < 1:
+            raise ValueError(f"tol must be a number in (0, 1), got {tol!r}")
+        if isinstance(max_iterations, bool) or not isinstance(max_iterations, (int, np.integer)) or max_iterations < 1:
+            raise ValueError(f"max_iterations must be a positive integer, got {max_iterations!r}")
+        if memory_budget is not None and (
+            isinstance(memory_budget, bool) or not isinstance(memory_budget, (int, float, np.integer)) or memory_budget < 0
+        ):
+            raise ValueError(f"memory_budget must be a non-negative number of bytes, got {memory_budget!r}")
+        self.tol = float(tol)
+        self.max_iterations = int(max_iterations)
+        self.progress = bool(progress)
+        self.memory_budget = memory_budget
         if backend == "cholmod" and _cholmod is None:
             raise ImportError(
                 "backend='cholmod' needs scikit-sparse: pip install 'o3d_lsmesh[cholmod]' "
                 "(after apt-get install libsuitesparse-dev)"
+                + (f"; {NO_CHOLMOD_ENV} is set" if _cholmod_disabled() else "")
             )
+        if (matrix is None) == (product_of is None):
+            raise TypeError("pass exactly one of matrix and product_of")
+        if product_of is None:
+            given = _as_csc(matrix)
+        else:
+            given = _as_csc(product_of, name="product_of", square=False)
+        if backend == "auto":
+            n = given.shape[0]
+            # entries of the (whole) matrix: the product's are about those of A A^T's pattern
+            nnz = given.nnz * (2 if lower else 1) if product_of is None else 3 * given.nnz
+            budget = default_memory_budget() if memory_budget is None else memory_budget
+            self.estimated_factor_bytes = estimate_factor_bytes(n, nnz)
+            if self.estimated_factor_bytes > budget:
+                backend = "iterative"
         if backend == "auto":
             if _cholmod is None:
-                warnings.warn(
-                    "scikit-sparse is not importable; solving with scipy.sparse.linalg.splu, "
-                    "which is slower and refactors instead of updating",
-                    O3DLSMeshWarning,
-                    stacklevel=2,
-                )
+                if not _cholmod_disabled():
+                    warnings.warn(
+                        "scikit-sparse is not importable; solving with scipy.sparse.linalg.splu, which "
+                        "refactors instead of updating (pip install 'o3d_lsmesh[cholmod]' for CHOLMOD, "
+                        f"or set {NO_CHOLMOD_ENV}=1 to choose SciPy and silence this warning)",
+                        O3DLSMeshWarning,
+                        stacklevel=user_stacklevel(),
+                    )
                 backend = "scipy"
             else:
                 backend = "cholmod"
         self.backend = backend
+        self.iterations = 0
+        self.residual = 0.0
         self._lock = threading.RLock()
         # CHOLMOD reads only the lower triangle, so it is all that is kept (half the memory
-        # while the factor is computed); SciPy's LU needs the whole matrix
+        # while the factor is computed); SciPy's LU and the iterative path need the whole matrix
         self._lower = self.backend == "cholmod"
         self._matrix: sp.csc_matrix | None = None
         self._product_of: sp.csc_matrix | None = None
-        if (matrix is None) == (product_of is None):
-            raise TypeError("pass exactly one of matrix and product_of")
         if product_of is None:
-            self._matrix = _stored(_as_csc(matrix), given_lower=bool(lower), keep_lower=self._lower)
+            self._matrix = _stored(given, given_lower=bool(lower), keep_lower=self._lower)
+        elif self.backend == "iterative":
+            # CG multiplies by the matrix and AMG coarsens it: form A A^T once
+            self._matrix = _product(given)
         else:
-            self._product_of = _as_csc(product_of, name="product_of", square=False)
+            self._product_of = given
+        del given
         self._pending: list[sp.csc_matrix] = []
         self._factor: Any = None
         self._factorize(analyze=True)
@@ -182,9 +496,7 @@ class SPDSolver:
         with self._lock:
             self._flush()
             if self._product_of is not None:
-                product = (self._product_of @ self._product_of.T).tocsc()
-                product.sort_indices()
-                return product
+                return _product(self._product_of)
             if not self._lower:
                 return self._matrix
             return _symmetric_from_lower(self._matrix)
@@ -204,7 +516,10 @@ class SPDSolver:
 
     def _factorize(self, *, analyze: bool) -> None:
         try:
-            if self.backend == "cholmod" and self._product_of is not None:
+            if self.backend == "iterative":
+                # the AMG hierarchy is built at the first solve: updates and refactors before it cost nothing
+                self._factor = None
+            elif self.backend == "cholmod" and self._product_of is not None:
                 if analyze or self._factor is None:
                     self._factor = _cholmod.analyze_AAt(self._product_of, ordering_method=self.ordering)
                 self._factor.cholesky_AAt_inplace(self._product_of)
@@ -213,10 +528,9 @@ class SPDSolver:
                     self._factor = _cholmod.analyze(self._matrix, ordering_method=self.ordering)
                 self._factor.cholesky_inplace(self._matrix)
             elif self._product_of is not None:
-                product = (self._product_of @ self._product_of.T).tocsc()
-                self._factor = spla.splu(product, permc_spec="MMD_AT_PLUS_A")
+                self._factor = _splu_spd(_product(self._product_of))
             else:
-                self._factor = spla.splu(self._matrix, permc_spec="MMD_AT_PLUS_A")
+                self._factor = _splu_spd(self._matrix)
         except Exception as error:
             if _cholmod is not None and isinstance(error, _cholmod.CholmodNotPositiveDefiniteError):
                 raise SingularSystemError(
@@ -241,40 +555,86 @@ class SPDSolver:
             self._pending.clear()
             self._factorize(analyze=False)
 
-    def solve(self, rhs: Any) -> np.ndarray:
-        """Solve ``A x = rhs`` for an ``(n,)`` or ``(n, k)`` right-hand side, all columns at once."""
+    def solve(self, rhs: Any, *, x0: Any = None) -> np.ndarray:
+        """Solve ``A x = rhs`` for an ``(n,)`` or ``(n, k)`` right-hand side, all columns at once.
+
+        ``x0`` (same shape) is a starting guess for the iterative backend (current
+        positions when fairing, a prolongated coarse solution); direct backends ignore it.
+        """
         b = np.asarray(rhs, dtype=np.float64)
         n = self.shape[0]
         if b.shape[:1] != (n,) or b.ndim > 2:
             raise ValueError(f"rhs must have shape ({n},) or ({n}, k), got {b.shape}")
+        if not np.isfinite(b).all():
+            first = int(np.flatnonzero(~np.isfinite(b).ravel())[0])
+            raise ValueError(
+                f"rhs must be finite, got {b.ravel()[first]} at row {first // max(b.size // n, 1)} "
+                "(an overflowing weight or position?)"
+            )
         with self._lock:
-            if self.backend == "cholmod":
+            if self.backend == "iterative":
+                x = self._solve_iterative(b, x0)
+            elif self.backend == "cholmod":
                 x = self._factor(b)
             else:
                 x = self._factor.solve(np.asfortranarray(b))
         if not np.all(np.isfinite(x)):
-            raise SingularSystemError("the factored matrix is numerically singular: the solve returned non-finite values")
+            raise SingularSystemError(
+                "the factored matrix is numerically singular: the solve of a finite right-hand side "
+                "returned non-finite values"
+            )
         return np.asarray(x)
+
+    def _preconditioner(self) -> Any:
+        if self._factor is None:
+            self._flush()
+            self._factor = _amg_preconditioner(self._matrix)
+        return self._factor
+
+    def _solve_iterative(self, b: np.ndarray, x0: Any) -> np.ndarray:
+        if x0 is not None:
+            x0 = np.asarray(x0, dtype=np.float64)
+            if x0.shape != b.shape:
+                raise ValueError(f"x0 must have the shape of rhs {b.shape}, got {x0.shape}")
+            if not np.isfinite(x0).all():
+                raise ValueError("x0 must be finite")
+        precondition = self._preconditioner()
+        x, self.iterations, self.residual = _block_cg(
+            self._matrix.tocsr() if not sp.isspmatrix_csr(self._matrix) else self._matrix,
+            b,
+            x0,
+            precondition,
+            tol=self.tol,
+            max_iterations=self.max_iterations,
+            progress=self.progress,
+        )
+        return x
 
     def update(self, c: Any) -> None:
         """Replace ``A`` by ``A + C C^T`` (CHOLMOD rank-k update, no refactoring).
 
         ``C`` is an ``(n, k)`` sparse matrix in the matrix's own row order:
-        CHOLMOD applies its fill-reducing permutation itself.
+        CHOLMOD applies its fill-reducing permutation itself. SciPy's LU has
+        no update: the SciPy path refactors (a Woodbury update on the kept LU
+        was tried and lost the accuracy of the bases paper's ``w = 10 n``
+        anchors); the iterative path rebuilds its preconditioner at the next
+        solve.
         """
         if not (sp.isspmatrix_csc(c) and c.dtype == np.float64):
             c = sp.csc_matrix(c, dtype=np.float64)
         if c.shape[0] != self.shape[0]:
             raise ValueError(f"C must have {self.shape[0]} rows, got shape {c.shape}")
+        if not np.isfinite(c.data).all():
+            raise ValueError("C must have finite entries (an overflowing weight?)")
         if not c.has_sorted_indices:
             c = c.sorted_indices()
         with self._lock:
             self._pending.append(c)
             if self.backend == "cholmod":
                 self._factor.update_inplace(c)
-            else:
-                self._flush()
-                self._factorize(analyze=True)
+                return
+            self._flush()
+            self._factorize(analyze=True)
 
     def __getstate__(self) -> dict:
         with self._lock:
@@ -285,11 +645,21 @@ class SPDSolver:
                 "matrix": self._matrix,
                 "lower": self._lower,
                 "product_of": self._product_of,
+                "tol": self.tol,
+                "max_iterations": self.max_iterations,
+                "progress": self.progress,
+                "memory_budget": self.memory_budget,
             }
 
     def __setstate__(self, state: dict) -> None:
         self.backend = state["backend"]
         self.ordering = state.get("ordering", "default")
+        self.tol = state.get("tol", DEFAULT_TOLERANCE)
+        self.max_iterations = state.get("max_iterations", 5000)
+        self.progress = state.get("progress", False)
+        self.memory_budget = state.get("memory_budget")
+        self.iterations = 0
+        self.residual = 0.0
         if self.backend == "cholmod" and _cholmod is None:
             self.backend = "scipy"
         self._lock = threading.RLock()
@@ -302,3 +672,136 @@ class SPDSolver:
         self._pending = []
         self._factor = None
         self._factorize(analyze=True)
+
+
+def _product(a: sp.csc_matrix) -> sp.csc_matrix:
+    product = (a @ a.T).tocsc()
+    product.sort_indices()
+    return product
+
+
+def _amg_preconditioner(matrix: sp.spmatrix) -> Any:
+    """One smoothed-aggregation AMG V-cycle per column of a block, as a function ``(n, k) -> (n, k)``.
+
+    Measured against AMG on the Laplacian alone (``G^{-1} D^2 G^{-1}`` for
+    ``L^T L = G D^{-2} G``) and against linear near-null-space candidates
+    (benchmarks/results/scale.md): smoothed aggregation on the system itself,
+    with the constant vector as its near-null space, took the least time.
+    """
+    try:
+        import pyamg
+    except ImportError as error:  # pragma: no cover - pyamg is in install_requires
+        raise ImportError("the iterative solver path needs pyamg: pip install pyamg") from error
+    csr = sp.csr_matrix(matrix)
+    n = csr.shape[0]
+    if n <= 500:
+        # too small for a hierarchy: the exact inverse is the best preconditioner
+        dense = _splu_spd(csr.tocsc())
+        return lambda r: dense.solve(np.asfortranarray(r))
+    hierarchy = pyamg.smoothed_aggregation_solver(
+        csr,
+        B=np.ones((n, 1)),
+        symmetry="symmetric",
+        # a local (Gershgorin) bound for the prolongation smoother's step instead of pyamg's
+        # default eigenvalue estimate, which took a fifth of the whole solve at 100k vertices
+        smooth=("jacobi", {"weighting": "local"}),
+        max_coarse=500,
+        coarse_solver="splu",
+    )
+    return _vcycle(hierarchy)
+
+
+def _vcycle(hierarchy: Any) -> Any:
+    """A pyamg hierarchy's V-cycle applied to each column of an ``(n, k)`` block."""
+    levels = hierarchy.levels
+    coarse = hierarchy.coarse_solver
+
+    def cycle(depth: int, b: np.ndarray) -> np.ndarray:
+        # pyamg's own V-cycle (MultilevelSolver.solve) computes norms with BLAS dot products, which
+        # on a loaded machine cost more than the cycle: this one does only the multigrid work
+        level = levels[depth]
+        if depth == len(levels) - 1:
+            return np.asarray(coarse(level.A, b)).reshape(b.shape)
+        x = np.zeros_like(b)
+        level.presmoother(level.A, x, b)
+        restricted = level.R @ (b - level.A @ x)
+        x += level.P @ cycle(depth + 1, restricted)
+        level.postsmoother(level.A, x, b)
+        return x
+
+    def apply(r: np.ndarray) -> np.ndarray:
+        return np.column_stack([cycle(0, np.ascontiguousarray(r[:, j])) for j in range(r.shape[1])])
+
+    return apply
+
+
+def _block_cg(
+    matrix: sp.csr_matrix,
+    b: np.ndarray,
+    x0: np.ndarray | None,
+    precondition: Any,
+    *,
+    tol: float,
+    max_iterations: int,
+    progress: bool,
+) -> tuple[np.ndarray, int, float]:
+    """Preconditioned conjugate gradients on every column of ``b`` at once (one sparse product per step).
+
+    Each column keeps its own step lengths (these are independent CG runs
+    sharing the matrix passes), stops when ``||r_j|| <= tol ||b_j||``.
+    Returns the solution, the iteration count and the largest relative residual.
+    """
+    vector = b.ndim == 1
+    B = b[:, None] if vector else b
+    X = np.zeros_like(B) if x0 is None else np.array(x0, dtype=np.float64).reshape(B.shape)
+    norms = np.linalg.norm(B, axis=0)
+    scale = np.where(norms > 0, norms, 1.0)
+    R = B - matrix @ X if x0 is not None else B.copy()
+    relative = np.linalg.norm(R, axis=0) / scale
+    relative[norms == 0] = 0.0
+    if norms.size and not (norms > 0).any():
+        return (np.zeros_like(b), 0, 0.0)
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=max_iterations, desc="conjugate gradients", leave=False)
+    Z = precondition(R)
+    P = Z.copy()
+    rz = np.einsum("ij,ij->j", R, Z)
+    iteration = 0
+    try:
+        while relative.max(initial=0.0) > tol:
+            if iteration >= max_iterations:
+                raise ConvergenceError(
+                    f"conjugate gradients reached relative residual {relative.max():.3g} after {iteration} "
+                    f"iterations, tolerance {tol:g}: raise max_iterations or tol, or use solver='cholmod'"
+                )
+            Q = matrix @ P
+            pq = np.einsum("ij,ij->j", P, Q)
+            active = relative > tol
+            if (pq[active] <= 0).any():
+                raise SingularSystemError(
+                    "matrix must be positive definite: conjugate gradients met a direction of non-positive "
+                    "curvature"
+                )
+            alpha = np.where(active, rz / np.where(active, pq, 1.0), 0.0)
+            X += alpha * P
+            R -= alpha * Q
+            relative = np.linalg.norm(R, axis=0) / scale
+            relative[norms == 0] = 0.0
+            iteration += 1
+            if bar is not None:
+                bar.update(1)
+                bar.set_postfix(residual=f"{relative.max():.2e}", refresh=False)
+            Z = precondition(R)
+            rz_new = np.einsum("ij,ij->j", R, Z)
+            beta = np.where(active, rz_new / np.where(rz != 0, rz, 1.0), 0.0)
+            P = Z + beta * P
+            rz = rz_new
+    finally:
+        if bar is not None:
+            bar.close()
+    if not np.isfinite(X).all():
+        raise SingularSystemError("conjugate gradients diverged: the matrix is not positive definite")
+    return (X[:, 0] if vector else X), iteration, float(relative.max(initial=0.0))

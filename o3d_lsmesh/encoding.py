@@ -47,7 +47,9 @@ import numpy as np
 
 from ._o3d import MeshData, new_mesh, read_mesh
 from ._progress import check_progress, progress_bar, stages
+from ._solvers import check_weight_pins_components
 from ._validate import as_choice, as_count, as_positive_float
+from .laplacian import laplacian_matrix
 from .lsmesh import LSMeshSolver
 from .selection import SELECTION_METHODS, _select
 from .topology import connected_components, unique_edges
@@ -188,6 +190,8 @@ def encode_geometry(
     bits = as_count(bits, name="bits", minimum=1, maximum=MAX_BITS)
     method = as_choice(method, SELECTION_METHODS, name="method")
     omega = 10.0 * n if weight is None else as_positive_float(weight, name="weight")
+    if weight is not None:  # a weight too small to pin the anchors decodes to a drifted mesh
+        check_weight_pins_components(laplacian_matrix(data.vertices, data.triangles), omega, name="weight")
     _, indices, _ = _select(
         (data.vertices, data.triangles), count, method=method, batch=None, weights=omega, seed=0, progress=progress
     )

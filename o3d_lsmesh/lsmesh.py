@@ -18,14 +18,14 @@ from scipy.sparse import csgraph
 from ._errors import SingularSystemError
 from ._o3d import MeshData, mesh_from_state, mesh_state, new_mesh, read_mesh, source_triangles
 from ._progress import check_progress, stages
-from ._solvers import SPDSolver
+from ._solvers import SPDSolver, check_constant_modes, check_finite, operator_scale, solver_backend
 from ._validate import as_bool, as_choice, as_indices, as_positions, as_weights
 from .laplacian import LAPLACIAN_KINDS, laplacian_matrix
 
 __all__ = ["LSMeshSolver", "ls_mesh", "reconstruct_geometry", "check_components_constrained"]
 
 
-def check_components_constrained(graph: sp.spmatrix, constrained: np.ndarray, *, what: str) -> None:
+def check_components_constrained(graph: sp.spmatrix, constrained: np.ndarray, *, what: str) -> np.ndarray:
     """Raise :class:`SingularSystemError` if some connected component holds no constrained vertex.
 
     ``graph`` is any ``(n, n)`` matrix with the mesh's edge pattern (the Laplacian
@@ -42,6 +42,7 @@ def check_components_constrained(graph: sp.spmatrix, constrained: np.ndarray, *,
             f"every connected component needs at least one {what}, got {missing} of {count} components "
             f"without one (first at vertex {first}); the least-squares system would be singular"
         )
+    return labels
 
 
 class LSMeshSolver:
@@ -79,6 +80,14 @@ class LSMeshSolver:
     ordering : str
         CHOLMOD's fill-reducing ordering, passed to :class:`~o3d_lsmesh.SPDSolver`;
         ``"nesdis"`` makes :meth:`add_anchors` cheaper and factor/solve dearer.
+    solver : {"auto", "cholmod", "iterative"}
+        ``"auto"`` (default) factors the system unless the factor would exceed
+        the memory budget (half the available memory), then solves by
+        conjugate gradients with an AMG preconditioner; ``"iterative"`` forces
+        that path (``"auto"`` leaves the choice of direct backend to ``backend``).
+    tol : float, optional
+        Relative residual of the iterative path (default
+        :data:`o3d_lsmesh._solvers.DEFAULT_TOLERANCE`, CHOLMOD's result to about 1e-7).
 
     Raises
     ------
@@ -112,6 +121,9 @@ class LSMeshSolver:
         laplacian: str = "uniform",
         backend: str = "auto",
         ordering: str = "default",
+        solver: str = "auto",
+        tol: float | None = None,
+        progress: bool = False,
         _release_arrays: bool = False,
     ) -> None:
         # _release_arrays (for ls_mesh): drop the copied vertex and triangle arrays before
@@ -125,8 +137,19 @@ class LSMeshSolver:
         # solve() and add_anchors() each read and change the factor and the anchor arrays:
         # one lock makes an update and a solve on other threads exclusive (never a half-updated system)
         self._lock = threading.RLock()
+        backend = solver_backend(solver, backend)
         L = laplacian_matrix(data.vertices, data.triangles, laplacian).tocsr()
-        check_components_constrained(L, indices, what="control vertex")
+        labels = check_components_constrained(L, indices, what="control vertex")
+        if not interpolate:
+            # squares of huge weights overflow; tiny ones leave a component's translation to round-off
+            check_finite(lambda: weights**2, name="weights", what="weights**2")
+            pinned = np.zeros(n)
+            np.add.at(pinned, indices, weights**2)
+            check_constant_modes(
+                L.T @ (L @ np.ones(n)) + pinned, labels, scale=operator_scale(L), name="weights", value=weights,
+                what="the control weights",
+            )
+        del labels
         self._data = data
         self.interpolate = bool(interpolate)
         self.laplacian = laplacian
@@ -171,7 +194,8 @@ class LSMeshSolver:
         if _release_arrays:
             self._data = MeshData(None, None, data.source, data.kind)
         del data
-        self._solver = SPDSolver(product_of=product, backend=backend, ordering=ordering)
+        options = {} if tol is None else {"tol": tol}
+        self._solver = SPDSolver(product_of=product, backend=backend, ordering=ordering, progress=progress, **options)
 
     def _reduce(self, indices: np.ndarray) -> np.ndarray:
         # row of each (free) vertex in the reduced system
@@ -227,7 +251,9 @@ class LSMeshSolver:
         rhs = np.zeros((self._unknowns, 3))
         if self.interpolate:
             rhs += self._rhs_hard @ hard_pos
-        rhs[self._reduce(self._soft)] += (self._soft_weights**2)[:, None] * soft_pos
+        with np.errstate(over="ignore", invalid="ignore"):  # overflow is reported by name below
+            rhs[self._reduce(self._soft)] += (self._soft_weights**2)[:, None] * soft_pos
+        check_finite(rhs, name="constraint_vertex_positions", what="weights**2 * constraint_vertex_positions")
         solution = self._solver.solve(rhs)
         if self._updated if refine is None else refine:
             reduced_soft = self._reduce(self._soft)
@@ -314,6 +340,8 @@ def ls_mesh(
     weights: Any = 1.0,
     interpolate: bool = False,
     laplacian: str = "uniform",
+    solver: str = "auto",
+    tol: float | None = None,
     progress: bool = False,
 ) -> Any:
     """Least-squares mesh: the fairest geometry for ``mesh``'s connectivity near the control points.
@@ -328,10 +356,10 @@ def ls_mesh(
     constraint_vertex_indices : (k,) int array-like
     constraint_vertex_positions : (k, 3) array-like, optional
         Defaults to the mesh's own positions at those indices (approximation).
-    weights, interpolate, laplacian
+    weights, interpolate, laplacian, solver, tol
         See :class:`LSMeshSolver`.
     progress : bool
-        Show a tqdm bar over the stages (factor, solve).
+        Show a tqdm bar over the stages (factor, solve); the iterative path also shows its residual.
 
     Returns
     -------
@@ -360,7 +388,7 @@ def ls_mesh(
         begin("factor")
         solver = LSMeshSolver(
             mesh, constraint_vertex_indices, weights=weights, interpolate=interpolate, laplacian=laplacian,
-            _release_arrays=True,
+            solver=solver, tol=tol, progress=progress, _release_arrays=True,
         )
         begin("solve")
         vertices, data = solver.solve(constraint_vertex_positions), solver._data
@@ -376,6 +404,8 @@ def reconstruct_geometry(
     weights: Any = 1.0,
     laplacian: str = "uniform",
     progress: bool = False,
+    solver: str = "auto",
+    tol: float | None = None,
 ) -> Any:
     """Rebuild the positions of vertices whose geometry is missing (figures 5 and 8 of LS meshes).
 
@@ -393,6 +423,8 @@ def reconstruct_geometry(
     unknown_vertex_indices : (u,) int array-like
     progress : bool
         Show a tqdm bar over the stages (factor, solve).
+    solver, tol
+        See :class:`LSMeshSolver`.
 
     Raises
     ------
@@ -424,7 +456,7 @@ def reconstruct_geometry(
     with stages(progress, "reconstruct_geometry", ("factor", "solve")) as begin:
         begin("factor")
         if not interpolate:
-            solver = LSMeshSolver(mesh, known, weights=weights, laplacian=laplacian)
+            solver = LSMeshSolver(mesh, known, weights=weights, laplacian=laplacian, solver=solver, tol=tol)
             begin("solve")
             return new_mesh(data, solver.solve())
         L_unknown = L[:, unknown].tocsr()
@@ -433,7 +465,7 @@ def reconstruct_geometry(
         B = L[rows][:, known]
         normal = (A.T @ A).tocsc()
         rhs = -(A.T @ (B @ data.vertices[known]))
-        factor = SPDSolver(normal)
+        factor = SPDSolver(normal, backend=solver_backend(solver), **({} if tol is None else {"tol": tol}))
         begin("solve")
         vertices = data.vertices.copy()
         vertices[unknown] = factor.solve(rhs)

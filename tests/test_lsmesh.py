@@ -283,7 +283,8 @@ def test_add_anchors_with_paper_weight_is_refined_to_fresh_accuracy():
     refined = solver.solve()
     assert np.linalg.norm(refined - fresh) <= 1e-8 * np.linalg.norm(fresh)
     unrefined = solver.solve(refine=False)
-    assert np.linalg.norm(unrefined - fresh) > np.linalg.norm(refined - fresh)
+    if solver.backend == "cholmod":  # SciPy refactors instead of updating: nothing to refine there
+        assert np.linalg.norm(unrefined - fresh) > np.linalg.norm(refined - fresh)
 
 
 def test_constrained_unreferenced_vertex_keeps_its_position():

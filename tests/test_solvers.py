@@ -96,6 +96,7 @@ def test_fallback_warns_without_scikit_sparse(monkeypatch):
     from o3d_lsmesh import O3DLSMeshWarning
 
     monkeypatch.setattr(solvers, "_cholmod", None)
+    monkeypatch.delenv(solvers.NO_CHOLMOD_ENV, raising=False)
     A, b = spd()
     with pytest.warns(O3DLSMeshWarning, match="scikit-sparse is not importable"):
         solver = solvers.SPDSolver(A)
@@ -165,3 +166,113 @@ def test_product_mode_raises():
         SPDSolver(product_of=np.eye(3))
     with pytest.raises(SingularSystemError):
         SPDSolver(product_of=sp.csc_matrix(np.array([[1.0, 0.0], [0.0, 0.0]]))).solve(np.ones(2))
+
+
+# --- issue 12, classes 1 and 4: negligible or overflowing penalties raise, naming the parameter
+
+
+def _translated_sphere():
+    import open3d as o3d
+
+    sphere = o3d.geometry.TriangleMesh.create_sphere(resolution=12)
+    moved = o3d.geometry.TriangleMesh(sphere)
+    moved.translate((5.0, 5.0, 5.0))
+    return sphere, moved
+
+
+@pytest.mark.parametrize("weights", [1e-8, 1e-300, [1e-9, 1e-8, 1e-8]])
+def test_negligible_ls_mesh_weights_raise_naming_weights(weights):
+    from o3d_lsmesh import ls_mesh
+
+    _, moved = _translated_sphere()
+    with pytest.raises(ValueError, match="weights is too small.*increase weights"):
+        ls_mesh(moved, [0, 5, 40], weights=weights)
+
+
+def test_small_but_sufficient_weights_are_exact_up_to_translation():
+    # L 1 = 0, so the LS mesh of a translated mesh is the translated LS mesh: an independent reference
+    from o3d_lsmesh import ls_mesh
+
+    sphere, moved = _translated_sphere()
+    for weights in (1e-3, 1.0, 1e3):
+        here = np.asarray(ls_mesh(sphere, [0, 5, 40], weights=weights).vertices)
+        there = np.asarray(ls_mesh(moved, [0, 5, 40], weights=weights).vertices)
+        np.testing.assert_allclose(there, here + 5.0, atol=1e-6)
+
+
+def test_overflowing_weights_raise_naming_weights():
+    from o3d_lsmesh import ls_mesh
+    from o3d_lsmesh.lsmesh import LSMeshSolver
+
+    _, moved = _translated_sphere()
+    with pytest.raises(ValueError, match=r"weights must be small enough that weights\*\*2 is finite"):
+        ls_mesh(moved, [0, 5, 40], weights=1e200)
+    solver = LSMeshSolver(moved, [0, 5, 40], weights=1e150)
+    with pytest.raises(ValueError, match="constraint_vertex_positions must be small enough"):
+        solver.solve(np.full((3, 3), 1e300))
+
+
+def test_encoding_weight_checked():
+    from o3d_lsmesh.encoding import decode_geometry, encode_geometry
+
+    _, moved = _translated_sphere()
+    with pytest.raises(ValueError, match="weight is too small"):
+        encode_geometry(moved, 20, weight=1e-300)
+    with pytest.raises(ValueError, match=r"weight must be small enough that weight\*\*2"):
+        encode_geometry(moved, 20, weight=1e200)
+    decoded = np.asarray(decode_geometry(moved, encode_geometry(moved, 20, weight=1.0)).vertices)
+    assert abs(decoded.mean(axis=0) - 5.0).max() < 0.1
+
+
+def test_global_fairing_mu_checked():
+    from o3d_lsmesh import constrained_fairing
+
+    _, moved = _translated_sphere()
+    for mu in (1e-300, 1e-12):
+        with pytest.raises(ValueError, match="mu is too small"):
+            constrained_fairing(moved, 2, method="global", mu=mu)
+    with pytest.raises(ValueError, match=r"mu must be small enough that mu \* H\^T H is finite"):
+        constrained_fairing(moved, 2, method="global", mu=1e308)
+    # mu that pins the sphere keeps it where it is (the barycenters hold the centre)
+    out = np.asarray(constrained_fairing(moved, 2, method="global", mu=1e-3).vertices)
+    np.testing.assert_allclose(out.mean(axis=0), 5.0, atol=1e-6)
+    # a mesh with a boundary is pinned by its boundary: tiny mu is well posed there
+    from conftest import grid
+
+    V, F = grid(8, 8, z=lambda x, y: x * y)
+    V, _ = constrained_fairing((V, F), 1, method="global", mu=1e-300)
+    assert np.isfinite(V).all()
+
+
+def test_non_finite_inputs_to_the_gateway_raise():
+    A, b = spd(10)
+    with pytest.raises(ValueError, match="rhs must be finite, got nan at row 1"):
+        SPDSolver(A).solve(np.r_[1.0, np.nan, np.zeros(8)])
+    bad = A.copy()
+    bad.data[0] = np.inf
+    with pytest.raises(ValueError, match="matrix must have finite entries"):
+        SPDSolver(bad)
+    with pytest.raises(ValueError, match="C must have finite entries"):
+        SPDSolver(A).update(sp.csc_matrix((np.array([np.inf]), (np.array([0]), np.array([0]))), shape=(10, 1)))
+
+
+def test_check_constant_modes_against_the_smallest_eigenvalue():
+    # the quotient bounds the smallest eigenvalue from above: a system it rejects is truly near-singular
+    from o3d_lsmesh._solvers import NEGLIGIBLE, check_constant_modes, operator_scale
+    from o3d_lsmesh.laplacian import laplacian_matrix
+    from conftest import grid
+
+    V, F = grid(6, 6)
+    L = laplacian_matrix(V, F).tocsr()
+    labels = np.zeros(len(V), dtype=np.int64)
+    for w2 in (1e-20, 1e-2):
+        N = (L.T @ L + sp.diags(np.r_[w2, np.zeros(len(V) - 1)])).toarray()
+        smallest = np.linalg.eigvalsh(N)[0]
+        quotient = w2 / len(V)
+        assert smallest <= quotient * (1 + 1e-6) + 1e-15
+        if quotient < NEGLIGIBLE * operator_scale(L):
+            with pytest.raises(ValueError, match="w is too small"):
+                check_constant_modes(N @ np.ones(len(V)), labels, scale=operator_scale(L), name="w", value=w2)
+        else:
+            check_constant_modes(N @ np.ones(len(V)), labels, scale=operator_scale(L), name="w", value=w2)
+    assert operator_scale(L) == pytest.approx(np.max(np.diag((L.T @ L).toarray())))

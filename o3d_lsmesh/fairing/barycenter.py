@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from .._solvers import SPDSolver
+from .._solvers import SPDSolver, check_constant_modes, check_finite, operator_scale, solver_backend
 from ..topology import _group, boundary_curves, unique_edges
 
 __all__ = [
@@ -319,7 +319,12 @@ class GlobalSolver:
     constant, has ``H 1 = 3 != 0``.
     """
 
-    def __init__(self, triangles: np.ndarray, topo: FairingTopology, mu: float) -> None:
+    def __init__(
+        self, triangles: np.ndarray, topo: FairingTopology, mu: float, *, solver: str = "auto",
+        progress: bool = False,
+    ) -> None:
+        from scipy.sparse import csgraph
+
         from ..laplacian import uniform_laplacian
 
         n = topo.n
@@ -341,8 +346,17 @@ class GlobalSolver:
         )
         self._HtH = (H.T @ H).tocsc()
         self._K_F = K_F
+        check_finite(lambda: self.mu * self._HtH.data, name="mu", what="mu * H^T H")
         self._normal = (K_F.T @ K_F + self.mu * self._HtH).tocsc()
-        self._solver = SPDSolver(self._normal) if len(self.free) else None
+        if len(self.free):
+            # a closed component is held in place only by mu |H 1|^2: a tiny mu lets it drift
+            labels = csgraph.connected_components(self._normal, directed=False)[1]
+            check_constant_modes(
+                self._normal @ np.ones(len(self.free)), labels, scale=operator_scale(K_F), name="mu", value=mu,
+                what="the barycenter penalty",
+            )
+        backend = solver_backend(solver)
+        self._solver = SPDSolver(self._normal, backend=backend, progress=progress) if len(self.free) else None
 
     def solve(self, positions: np.ndarray, positions0: np.ndarray) -> np.ndarray:
         """New ``(n, 3)`` positions: free vertices solved with targets ``positions0``, known ones from ``positions``."""
@@ -352,5 +366,6 @@ class GlobalSolver:
         rhs = self.mu * (self._HtH @ positions0[self.free])
         if len(self.known):
             rhs -= self._K_F.T @ (self._K_B @ out[self.known])
-        out[self.free] = self._solver.solve(rhs)
+        # the iterative path starts from the current positions (direct solvers ignore x0)
+        out[self.free] = self._solver.solve(rhs, x0=out[self.free])
         return out

@@ -104,6 +104,7 @@ def constrained_fairing_arrays(
     smooth_boundary: bool = True,
     reimpose_every: int | None = None,
     progress: bool = False,
+    solver: str = "auto",
 ) -> np.ndarray:
     """Array core of :func:`constrained_fairing`: faired ``(n, 3) float64`` positions.
 
@@ -137,21 +138,22 @@ def constrained_fairing_arrays(
     options, extra = _check_options(number_of_iterations, method, mu, smooth_boundary, reimpose_every, progress,
                                     membrane, boundary_weight)
     data = read_mesh((vertices, triangles), name="mesh")
-    return _fair(data.vertices, data.triangles, *options, **extra)
+    return _fair(data.vertices, data.triangles, *options, solver=solver, **extra)
 
 
 def _fair(positions, triangles, number_of_iterations, method, mu, smooth_boundary, reimpose_every, progress, *,
-          membrane=None, boundary_weight=None):
+          membrane=None, boundary_weight=None, solver="auto"):
     # validated arrays in, new (n, 3) positions out (``positions`` is a private copy)
     if number_of_iterations == 0:
         return positions
     if method == "scan":
-        solver = ScanFairingSolver(
+        # one CHOLMOD factorization for now (the iterative path of ``solver`` serves "global" only)
+        scan = ScanFairingSolver(
             triangles, len(positions), mu=SCAN_MU if mu is None else mu,
             membrane=SCAN_MEMBRANE if membrane is None else membrane,
             boundary_weight=SCAN_BOUNDARY_WEIGHT if boundary_weight is None else boundary_weight,
         )
-        return solver.solve(positions, number_of_iterations=number_of_iterations)
+        return scan.solve(positions, number_of_iterations=number_of_iterations)
     topo = fairing_topology(triangles, len(positions), with_loops=smooth_boundary)
     curve = curve_operator(topo.loops)
     steps = _iterations(number_of_iterations, progress, f"constrained fairing ({method})")
@@ -166,12 +168,12 @@ def _fair(positions, triangles, number_of_iterations, method, mu, smooth_boundar
                 relaxed[curve.vertex] = curve.step(positions, curve_target)
             positions = relaxed
         return positions
-    solver = GlobalSolver(triangles, topo, DEFAULT_MU if mu is None else mu)
+    system = GlobalSolver(triangles, topo, DEFAULT_MU if mu is None else mu, solver=solver, progress=progress)
     for _ in steps:
         known = positions.copy()
         if len(curve):
             known[curve.vertex] = curve.step(positions, curve.target(positions))
-        positions = solver.solve(known, positions)
+        positions = system.solve(known, positions)
     return positions
 
 
@@ -186,6 +188,7 @@ def constrained_fairing(
     smooth_boundary: bool = True,
     reimpose_every: int | None = None,
     progress: bool = False,
+    solver: str = "auto",
 ) -> Any:
     """Remove noise from a mesh while holding its triangle barycenters (Liu et al. 2001).
 
@@ -329,6 +332,11 @@ def constrained_fairing(
         current positions every this many iterations.
     progress : bool
         Show a tqdm progress bar over the iterations.
+    solver : {"auto", "cholmod", "iterative"}
+        ``method="global"`` only: how the system is solved (see
+        :class:`~o3d_lsmesh.SPDSolver`); ``"auto"`` factors it unless the factor
+        would exceed the memory budget, then runs conjugate gradients with an
+        AMG preconditioner, warm-started from the current positions.
 
     Returns
     -------
@@ -385,4 +393,4 @@ def constrained_fairing(
     options, extra = _check_options(number_of_iterations, method, mu, smooth_boundary, reimpose_every, progress,
                                     membrane, boundary_weight)
     data = read_mesh(mesh, weld=True)
-    return new_mesh(data, _fair(data.vertices.copy(), data.triangles, *options, **extra))
+    return new_mesh(data, _fair(data.vertices.copy(), data.triangles, *options, solver=solver, **extra))

@@ -1,0 +1,246 @@
+"""Scale: LS meshes and global fairing at 1M+ vertices, CHOLMOD against the iterative path.
+
+Run: ``.venv/bin/python benchmarks/bench_scale.py [--sizes 1000000 4000000] [--ops lsmesh,fairing]
+[--iterative-only-above N]``. Every (mesh, operation, solver) runs in a fresh subprocess so that its
+peak memory (``ru_maxrss``) is its own. Meshes: a seeded noisy UV sphere (the issue's generator) and
+a real mesh subdivided (midpoint) to about the same size. Reports time, peak memory, the iterative
+path's relative residual and iteration count, and the relative difference ``||X_it - X_chol|| /
+||X_chol||`` of the two solutions. Writes ``benchmarks/results/scale.md``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import multiprocessing as mp
+import os
+import tempfile
+import time
+
+import numpy as np
+
+from _common import DATA, RESULTS, markdown_table, peak_rss_mb, write_markdown
+
+HEADER = ["mesh", "vertices", "operation", "solver", "time s", "x CHOLMOD", "peak GB", "peak over input GB",
+          "rel. residual", "CG its", "rel. diff to CHOLMOD", "load"]
+STUDY_HEADER = ["preconditioner", "vertices", "setup s", "setup + CG s", "CG iterations", "rel. residual", "load"]
+
+
+def merged(name: str, header: list, rows: list, key: int) -> list:
+    """Rows of ``results/<name>`` (JSON lines) with these rows replacing those of the same first ``key`` cells.
+
+    Sizes run in separate invocations (each under ten minutes) accumulate into one table.
+    """
+    import json
+
+    path = RESULTS / name
+    old = [json.loads(line) for line in path.read_text().splitlines()] if path.exists() else []
+    fresh = {tuple(map(str, r[:key])) for r in rows}
+    kept = [r for r in old if len(r) == len(header) and tuple(map(str, r[:key])) not in fresh]
+    every = sorted(kept + [list(r) for r in rows], key=lambda r: (str(r[0]), int(r[1]), *map(str, r[2:key])))
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    path.write_text("".join(json.dumps(r) + "\n" for r in every))
+    return every
+
+
+def noisy_sphere(n: int, seed: int = 0):
+    """Seeded noisy UV sphere with about ``n`` vertices (``2 r^2`` for resolution ``r``): (V, F)."""
+    import open3d as o3d
+
+    resolution = max(4, int(round(np.sqrt(n / 2.0))))
+    mesh = o3d.geometry.TriangleMesh.create_sphere(radius=1.0, resolution=resolution)
+    V = np.asarray(mesh.vertices).copy()
+    V += np.random.default_rng(seed).normal(scale=0.2 / resolution, size=V.shape)
+    return V, np.asarray(mesh.triangles).astype(np.int64)
+
+
+def subdivided(name: str, n: int):
+    """A real mesh midpoint-subdivided until it has at least ``n / 2`` vertices, or None when absent."""
+    import open3d as o3d
+
+    path = DATA / name
+    if not path.exists():
+        return None
+    mesh = o3d.io.read_triangle_mesh(str(path))
+    while len(mesh.vertices) < n / 2:
+        mesh = mesh.subdivide_midpoint(1)
+    return np.asarray(mesh.vertices).copy(), np.asarray(mesh.triangles).astype(np.int64)
+
+
+def make_mesh(kind: str, n: int):
+    return noisy_sphere(n) if kind == "noisy sphere" else subdivided("feline.ply", n)
+
+
+def controls(n: int, fraction: float = 0.02, seed: int = 0) -> np.ndarray:
+    return np.sort(np.random.default_rng(seed).choice(n, max(1, int(fraction * n)), replace=False))
+
+
+def _worker(kind: str, n: int, op: str, solver: str, out: str, queue) -> None:
+    import sys
+
+    sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    from o3d_lsmesh.fairing.constrained import constrained_fairing_arrays
+    from o3d_lsmesh.lsmesh import LSMeshSolver
+
+    V, F = make_mesh(kind, n)
+    base = peak_rss_mb()
+    start = time.perf_counter()
+    residual, iterations = 0.0, 0
+    if op == "lsmesh":
+        system = LSMeshSolver((V, F), controls(len(V)), solver=solver, _release_arrays=True)
+        X = system.solve()
+        residual, iterations = system._solver.residual, system._solver.iterations
+    else:
+        X = constrained_fairing_arrays(V, F, 2, method="global", solver=solver)
+    seconds = time.perf_counter() - start
+    np.save(out, X)
+    queue.put((len(V), seconds, peak_rss_mb(), base, residual, iterations))
+
+
+def run(kind: str, n: int, op: str, solver: str, out: str):
+    ctx = mp.get_context("spawn")
+    queue = ctx.Queue()
+    proc = ctx.Process(target=_worker, args=(kind, n, op, solver, out, queue))
+    proc.start()
+    proc.join()
+    return queue.get() if proc.exitcode == 0 else None
+
+
+def _study_worker(n: int, variant: str, queue) -> None:
+    """One preconditioner of the LS-mesh normal matrix (2% controls, weight 1) under CG to 1e-10."""
+    import sys
+
+    sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    import pyamg
+    import scipy.sparse as sp
+
+    from o3d_lsmesh._solvers import _amg_preconditioner, _block_cg, _vcycle
+    from o3d_lsmesh.laplacian import laplacian_matrix
+
+    V, F = noisy_sphere(n)
+    n = len(V)
+    L = laplacian_matrix(V, F).tocsr()
+    w2 = np.zeros(n)
+    w2[controls(n)] = 1.0
+    N = (L.T @ L + sp.diags(w2)).tocsr()
+    b = w2[:, None] * V
+    start = time.perf_counter()
+    if variant == "SA on N, B = 1 (ours)":
+        apply = _amg_preconditioner(N)
+    else:
+        if variant == "SA on N, B = [1, x, y, z]":
+            apply = _vcycle(pyamg.smoothed_aggregation_solver(
+                N, B=np.column_stack([np.ones(n), V - V.mean(axis=0)]), symmetry="symmetric", max_coarse=500,
+                smooth=("jacobi", {"weighting": "local"}), coarse_solver="splu",
+            ))
+        else:  # AMG on the graph Laplacian G (L = D^-1 G): L^T L = G D^-2 G ~ G^-1 D^2 G^-1 inverted
+            degree = np.diff(L.indptr).astype(float) - 1
+            G = (sp.diags(degree) @ L).tocsr()
+            Gs = (G + sp.diags(np.sqrt(w2) * degree * 1e-3 + 1e-8 * degree)).tocsr()
+            cycle = _vcycle(pyamg.smoothed_aggregation_solver(
+                Gs, symmetry="symmetric", max_coarse=500, smooth=("jacobi", {"weighting": "local"}),
+                coarse_solver="splu",
+            ))
+
+            def apply(r):
+                return cycle(degree[:, None] ** 2 * cycle(r))
+    setup = time.perf_counter() - start
+    try:
+        _, iterations, residual = _block_cg(N, b, None, apply, tol=1e-10, max_iterations=600, progress=False)
+    except Exception:  # ConvergenceError
+        iterations, residual = "> 600", float("nan")
+    queue.put((n, setup, time.perf_counter() - start, iterations, residual))
+
+
+def study(n: int) -> str:
+    rows = []
+    for variant in ("SA on N, B = 1 (ours)", "SA on N, B = [1, x, y, z]", "AMG on G: G^-1 D^2 G^-1"):
+        ctx = mp.get_context("spawn")
+        queue = ctx.Queue()
+        proc = ctx.Process(target=_study_worker, args=(n, variant, queue))
+        proc.start()
+        proc.join(900)
+        if proc.is_alive():
+            proc.kill()
+            rows.append([variant, n, "-", "> 900", "-", "-", round(os.getloadavg()[0], 1)])
+            continue
+        vertices, setup, total, iterations, residual = queue.get()
+        rows.append([variant, vertices, setup, total, iterations, f"{residual:.1e}", round(os.getloadavg()[0], 1)])
+        print(rows[-1], flush=True)
+    return rows
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--sizes", type=int, nargs="*", default=[1_000_000])
+    parser.add_argument("--ops", default="lsmesh,fairing")
+    parser.add_argument("--kinds", default="noisy sphere,subdivided feline")
+    parser.add_argument("--iterative-only-above", type=int, default=2_000_000,
+                        help="sizes above this run the iterative path only (CHOLMOD would not fit)")
+    parser.add_argument("--solvers", default="cholmod,iterative", help="which solvers to run")
+    parser.add_argument("--study", type=int, default=0,
+                        help="also compare preconditioners on an LS-mesh system of this many vertices")
+    args = parser.parse_args()
+    study_rows = study(args.study) if args.study else []
+    rows = []
+    tmp = tempfile.mkdtemp(prefix="bench_scale_")
+    for n in args.sizes:
+        for kind in args.kinds.split(","):
+            for op in args.ops.split(","):
+                solvers = ["iterative"] if n > args.iterative_only_above else args.solvers.split(",")
+                result = {}
+                for solver in solvers:
+                    out = os.path.join(tmp, f"{op}_{solver}.npy")
+                    got = run(kind, n, op, solver, out)
+                    if got is None:
+                        print(f"{kind} {n} {op} {solver}: failed")
+                        continue
+                    result[solver] = got
+                    print(kind, op, solver, got, flush=True)
+                if not result:
+                    continue
+                diff = ""
+                if len(result) == 2:
+                    a = np.load(os.path.join(tmp, f"{op}_cholmod.npy"))
+                    b = np.load(os.path.join(tmp, f"{op}_iterative.npy"))
+                    diff = float(np.linalg.norm(b - a) / np.linalg.norm(a))
+                chol = result.get("cholmod")
+                for solver, (vertices, seconds, peak, base, residual, iterations) in result.items():
+                    ratio = seconds / chol[1] if chol else ""
+                    rows.append([
+                        kind, vertices, "LS mesh, 2% controls" if op == "lsmesh" else "global fairing, 2 iterations",
+                        solver, seconds, ratio, peak / 1024, (peak - base) / 1024,
+                        f"{residual:.1e}" if solver == "iterative" and op == "lsmesh" else "",
+                        iterations if solver == "iterative" and op == "lsmesh" else "",
+                        f"{diff:.1e}" if solver == "iterative" and diff != "" else "",
+                        round(os.getloadavg()[0], 1),
+                    ])
+    every = merged("scale.jsonl", HEADER, rows, 4)
+    # the time ratio also across runs: a row's CHOLMOD partner may come from another invocation
+    cholmod_time = {tuple(r[:3]): r[4] for r in every if r[3] == "cholmod"}
+    for r in every:
+        if r[5] == "" and tuple(r[:3]) in cholmod_time:
+            r[5] = r[4] / cholmod_time[tuple(r[:3])]
+    table = markdown_table(HEADER, every)
+    studied = merged("scale_study.jsonl", STUDY_HEADER, study_rows, 2)
+    note = (
+        "\n\nOne subprocess per row (peak = its ru_maxrss; 'over input' subtracts the peak once the mesh was "
+        f"generated). 'load' is the 1-minute load average when the row finished, on {os.cpu_count()} cores shared "
+        "with other jobs: read the ratios within a size, not the seconds. Sizes accumulate across runs "
+        "(results/scale.jsonl)."
+    )
+    sections = [("CHOLMOD against the iterative path", table + note)]
+    if studied:
+        sections.append((
+            "Preconditioner study (LS mesh, 2% controls, CG to relative residual 1e-10)",
+            markdown_table(STUDY_HEADER, studied)
+            + "\n\nSmoothed aggregation on the normal matrix with the constant as near-null space (ours) costs the "
+            "least: linear near-null-space candidates (B = [1, x, y, z]) save iterations (84 against 97 at 50k, "
+            "51 against 77 at 5k) but double the setup and raise the operator complexity, for no gain in time; AMG on the second-order graph Laplacian G (L = D^-1 G, so L^T L = G D^-2 G, applied as "
+            "G^-1 D^2 G^-1) leaves the control weights W^2 (2% of the diagonal) outside the preconditioner, and CG "
+            "pays about one iteration per outlying eigenvalue.",
+        ))
+    write_markdown("scale.md", "Scale: CHOLMOD against the iterative path (PCG + smoothed-aggregation AMG)", sections)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,172 @@
+"""The iterative solver path of the gateway: PCG with smoothed-aggregation AMG, and ``solver="auto"``'s choice.
+
+References are independent: CHOLMOD's (or SuperLU's) direct solution of the same system.
+"""
+
+import io
+import pickle
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from conftest import grid, load_mesh
+from o3d_lsmesh import SPDSolver, constrained_fairing, ls_mesh, reconstruct_geometry
+from o3d_lsmesh._errors import ConvergenceError
+from o3d_lsmesh._solvers import DEFAULT_TOLERANCE, default_memory_budget, estimate_factor_bytes
+from o3d_lsmesh.lsmesh import LSMeshSolver
+
+MATCH = 1e-6  # the documented agreement with the direct solution, relative
+
+
+def relative(a, b):
+    return np.linalg.norm(np.asarray(a) - np.asarray(b)) / np.linalg.norm(np.asarray(b))
+
+
+def vertices(mesh):
+    return np.asarray(mesh.vertices)
+
+
+def two_components_with_boundaries():
+    # two open grids side by side: several components, each with a boundary
+    V1, F1 = grid(30, 25, z=lambda x, y: 0.1 * np.sin(3 * x) * np.cos(2 * y))
+    V2, F2 = grid(20, 20)
+    V2 = V2 + [2.0, 0.0, 0.5]
+    return np.vstack([V1, V2]), np.vstack([F1, F2 + len(V1)])
+
+
+def test_iterative_equals_direct_on_ls_mesh_soft_and_interpolatory():
+    mesh = load_mesh("camel.ply")
+    n = len(mesh.vertices)
+    controls = np.random.default_rng(0).choice(n, n // 50, replace=False)
+    for interpolate in (False, True):
+        direct = vertices(ls_mesh(mesh, controls, interpolate=interpolate, solver="cholmod" if _cholmod() else "auto"))
+        iterative = vertices(ls_mesh(mesh, controls, interpolate=interpolate, solver="iterative"))
+        assert relative(iterative, direct) < MATCH
+
+
+def test_iterative_equals_direct_on_reconstruct_geometry():
+    mesh = load_mesh("camelhead.ply")
+    unknown = np.arange(0, len(mesh.vertices), 7)
+    for interpolate in (True, False):
+        direct = vertices(reconstruct_geometry(mesh, unknown, interpolate=interpolate))
+        iterative = vertices(reconstruct_geometry(mesh, unknown, interpolate=interpolate, solver="iterative"))
+        assert relative(iterative[unknown], direct[unknown]) < MATCH
+
+
+def test_iterative_equals_direct_on_global_fairing():
+    mesh = load_mesh("pig.ply")  # 7 boundary loops
+    direct = vertices(constrained_fairing(mesh, 2, method="global"))
+    iterative = vertices(constrained_fairing(mesh, 2, method="global", solver="iterative"))
+    assert relative(iterative, direct) < MATCH
+
+
+def test_converges_on_several_components_with_boundaries():
+    V, F = two_components_with_boundaries()
+    controls = np.array([0, 300, 749, 760, 1000, 1149])
+    direct = LSMeshSolver((V, F), controls, backend="scipy").solve()
+    system = LSMeshSolver((V, F), controls, solver="iterative")
+    assert system.backend == "iterative"
+    assert relative(system.solve(), direct) < MATCH
+    assert system._solver.residual <= DEFAULT_TOLERANCE
+    faired = constrained_fairing((V, F), 2, method="global", solver="iterative")
+    reference = constrained_fairing((V, F), 2, method="global")
+    assert relative(faired[0], reference[0]) < MATCH
+
+
+def test_auto_picks_direct_below_the_budget_and_iterative_above():
+    V, F = grid(40, 40)
+    controls = np.arange(0, 1600, 37)
+    assert LSMeshSolver((V, F), controls)._solver.backend in ("cholmod", "scipy")
+    tiny = LSMeshSolver((V, F), controls, solver="auto")
+    assert tiny.backend != "iterative"
+    A = sp.random(2000, 2000, density=0.002, random_state=0)
+    matrix = (A @ A.T + sp.identity(2000)).tocsc()
+    assert SPDSolver(matrix, memory_budget=10**12).backend in ("cholmod", "scipy")
+    small_budget = SPDSolver(matrix, memory_budget=1000)
+    assert small_budget.backend == "iterative"
+    assert small_budget.estimated_factor_bytes > 1000
+    b = np.random.default_rng(1).normal(size=(2000, 3))
+    assert relative(small_budget.solve(b), SPDSolver(matrix, backend="scipy").solve(b)) < MATCH
+
+
+def test_memory_budget_from_the_environment(monkeypatch):
+    monkeypatch.setenv("O3D_LSMESH_MEMORY_BUDGET", "2K")
+    assert default_memory_budget() == 2048
+    V, F = grid(40, 40)
+    assert LSMeshSolver((V, F), np.arange(0, 1600, 37)).backend == "iterative"
+    monkeypatch.setenv("O3D_LSMESH_MEMORY_BUDGET", "lots")
+    with pytest.raises(ValueError, match="O3D_LSMESH_MEMORY_BUDGET must be a number"):
+        default_memory_budget()
+    monkeypatch.delenv("O3D_LSMESH_MEMORY_BUDGET")
+    assert default_memory_budget() > 0
+
+
+def test_factor_model_grows_like_n_log_n():
+    small, large = estimate_factor_bytes(10**5, 19 * 10**5), estimate_factor_bytes(10**6, 19 * 10**6)
+    assert 10 < large / small < 10 * np.log2(10**6) / np.log2(10**5) + 1e-9
+
+
+def test_warm_start_needs_fewer_iterations_and_tolerance_is_honoured():
+    V, F = grid(60, 60, z=lambda x, y: np.sin(4 * x) * y)
+    controls = np.arange(0, 3600, 53)
+    system = LSMeshSolver((V, F), controls, solver="iterative")
+    x = system.solve()
+    cold = system._solver.iterations
+    rhs = np.zeros((3600, 3))
+    rhs[controls] = V[controls]
+    again = system._solver.solve(rhs, x0=x)
+    assert system._solver.iterations < cold / 3
+    assert relative(again, x) < MATCH
+    loose = LSMeshSolver((V, F), controls, solver="iterative", tol=1e-3)
+    loose.solve()
+    assert 1e-4 < loose._solver.residual <= 1e-3 or loose._solver.iterations < cold
+    matrix = system._solver.matrix
+    residual = np.linalg.norm(rhs - matrix @ x, axis=0) / np.linalg.norm(rhs, axis=0)
+    assert residual.max() <= DEFAULT_TOLERANCE * 1.0001
+
+
+def test_progress_bar_shows_the_residual(monkeypatch):
+    import tqdm.auto
+
+    stream = io.StringIO()
+    original = tqdm.auto.tqdm
+    monkeypatch.setattr(tqdm.auto, "tqdm", lambda *a, **k: original(*a, **{**k, "file": stream, "mininterval": 0}))
+    V, F = grid(30, 30)
+    ls_mesh((V, F), np.arange(0, 900, 31), solver="iterative", progress=True)
+    assert "conjugate gradients" in stream.getvalue() and "residual=" in stream.getvalue()
+
+
+def test_update_refactor_pickle_and_errors():
+    rng = np.random.default_rng(2)
+    A = sp.random(800, 800, density=0.01, random_state=2)
+    matrix = (A @ A.T + sp.identity(800)).tocsc()
+    b = rng.normal(size=(800, 2))
+    solver = SPDSolver(matrix, backend="iterative")
+    C = sp.csc_matrix((np.array([3.0, 2.0]), (np.array([4, 17]), np.array([0, 1]))), shape=(800, 2))
+    solver.update(C)
+    updated = (matrix + C @ C.T).tocsc()
+    assert relative(solver.solve(b), SPDSolver(updated, backend="scipy").solve(b)) < MATCH
+    solver.refactor(matrix * 2.0)
+    assert relative(solver.solve(b[:, 0]), SPDSolver(matrix * 2.0, backend="scipy").solve(b[:, 0])) < MATCH
+    clone = pickle.loads(pickle.dumps(solver))
+    assert clone.backend == "iterative" and relative(clone.solve(b), solver.solve(b)) < MATCH
+    assert np.all(solver.solve(np.zeros((800, 2))) == 0)
+    with pytest.raises(ConvergenceError, match="raise max_iterations"):
+        SPDSolver(matrix, backend="iterative", max_iterations=1, tol=1e-14).solve(b)
+    with pytest.raises(ValueError, match="x0 must have the shape"):
+        solver.solve(b, x0=np.zeros(3))
+    with pytest.raises(ValueError, match="tol must be a number in"):
+        SPDSolver(matrix, tol=0)
+    with pytest.raises(ValueError, match="max_iterations must be a positive"):
+        SPDSolver(matrix, max_iterations=0)
+    with pytest.raises(ValueError, match="memory_budget must be"):
+        SPDSolver(matrix, memory_budget=-1)
+    with pytest.raises(ValueError, match="solver must be one of"):
+        ls_mesh(load_mesh("camel.ply"), [0], solver="magic")
+
+
+def _cholmod():
+    from o3d_lsmesh._solvers import cholmod_available
+
+    return cholmod_available()
