@@ -5,6 +5,7 @@ from conftest import grid
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from o3d_lsmesh import O3DLSMeshWarning
 from o3d_lsmesh._o3d import mesh_from_state, mesh_state, new_mesh, read_mesh
 from o3d_lsmesh._validate import (
     COORDINATE_LIMIT,
@@ -34,8 +35,11 @@ def test_new_mesh_policy_legacy(sphere):
     data = read_mesh(sphere)
     same = new_mesh(data, data.vertices * 2)
     assert same.has_vertex_colors() and not same.has_vertex_normals()
-    changed = new_mesh(data, data.vertices[:3], np.array([[0, 1, 2]]))
+    with pytest.warns(O3DLSMeshWarning, match="vertex colors"):
+        changed = new_mesh(data, data.vertices[:3], np.array([[0, 1, 2]]))
     assert not changed.has_vertex_colors()
+    quiet = new_mesh(data, data.vertices[:3], np.array([[0, 1, 2]]), warn=False)  # the caller warns itself
+    assert not quiet.has_vertex_colors()
     sphere.compute_vertex_normals()
     with_normals = new_mesh(read_mesh(sphere), data.vertices * 2)
     assert with_normals.has_vertex_normals()

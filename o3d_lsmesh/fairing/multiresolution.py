@@ -145,7 +145,9 @@ def multiresolution_fairing(
     method = as_choice(method, FAIRING_METHODS, name="method")
     if not isinstance(progress, (bool, np.bool_)):
         raise TypeError(f"progress must be a bool, got {type(progress).__name__}")
-    data = read_hierarchy_mesh(mesh, weld=True)
+    # a given hierarchy indexes the mesh's own vertices (build_hierarchy does not weld): weld only
+    # when the hierarchy is built here, on the welded surface
+    data = read_hierarchy_mesh(mesh, weld=hierarchy is None)
     if hierarchy is None:
         hierarchy = build_hierarchy_arrays(data.vertices, data.triangles, max_levels=level, min_vertices=4)
         if level >= len(hierarchy):
