@@ -19,10 +19,10 @@ from .._validate import as_choice, as_count, as_positive_float
 from .barycenter import DEFAULT_MU, GlobalSolver, fairing_topology, local_operator
 from .boundary_curve import curve_operator
 from .scan_fairing import (
-    SCAN_BOUNDARY_WEIGHT,
     SCAN_MEMBRANE,
     SCAN_MU,
     ScanFairingSolver,
+    measured_boundary_weight,
 )
 
 __all__ = ["DEFAULT_METHOD", "FAIRING_METHODS", "constrained_fairing", "constrained_fairing_arrays"]
@@ -149,7 +149,8 @@ def _fair(positions, triangles, number_of_iterations, method, mu, smooth_boundar
         solver = ScanFairingSolver(
             triangles, len(positions), mu=SCAN_MU if mu is None else mu,
             membrane=SCAN_MEMBRANE if membrane is None else membrane,
-            boundary_weight=SCAN_BOUNDARY_WEIGHT if boundary_weight is None else boundary_weight,
+            boundary_weight=measured_boundary_weight(positions, triangles) if boundary_weight is None
+            else boundary_weight,
         )
         return solver.solve(positions, number_of_iterations=number_of_iterations)
     topo = fairing_topology(triangles, len(positions), with_loops=smooth_boundary)

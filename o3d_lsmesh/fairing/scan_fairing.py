@@ -43,11 +43,13 @@ from ..topology import unique_edges
 
 __all__ = [
     "SCAN_BOUNDARY_WEIGHT",
+    "SCAN_BOUNDARY_WEIGHT_MAX",
     "SCAN_MEMBRANE",
     "SCAN_MU",
     "SCAN_THIN_PLATE",
     "ScanFairingSolver",
     "ScanSystem",
+    "measured_boundary_weight",
     "scan_system",
 ]
 
@@ -58,8 +60,76 @@ SCAN_MU = 0.03
 SCAN_MEMBRANE = 0.45
 #: Weight ``kappa`` of the thin-plate term ``|K X|^2`` (Liu et al.'s energy).
 SCAN_THIN_PLATE = 1.0
-#: Barycenter weight of triangles touching the boundary, relative to the interior's.
+#: Lowest barycenter weight of triangles touching the boundary, relative to the
+#: interior's (a ragged scan silhouette: see :func:`measured_boundary_weight`).
 SCAN_BOUNDARY_WEIGHT = 0.1
+#: Highest one (a boundary as noisy as the interior).
+SCAN_BOUNDARY_WEIGHT_MAX = 1.0
+# Expected ratio (boundary curve / interior) of the mean squared uniform Laplacian for i.i.d. noise of
+# one variance: a curve vertex's (x_(i-1) + x_(i+1)) / 2 - x_i has variance 1.5 sigma^2, an interior
+# vertex of valence 6 has (1 + 1/6) sigma^2.
+_IID_BOUNDARY_RATIO = 1.5 / (1.0 + 1.0 / 6.0)
+
+
+def measured_boundary_weight(vertices: np.ndarray, triangles: np.ndarray) -> float:
+    """The boundary triangles' barycenter weight ``w`` estimated from the noise of the input.
+
+    ``w = clip((9/7) E_int / E_bd, 0.1, 1)``, with ``E_int`` the mean of
+    ``|L x_i|^2`` over interior vertices (``L`` the uniform Laplacian over
+    every edge) and ``E_bd`` the mean over boundary vertices of the squared
+    uniform Laplacian *along the boundary curve* (neighbours across edges of
+    one triangle). For i.i.d. noise of one variance ``E_bd / E_int = 9/7``
+    (valence 6), so ``w`` is the estimated inverse ratio of the boundary's
+    to the interior's noise variance. Both are quadratic in coordinate
+    differences: ``w`` is invariant under rigid motions and uniform scaling.
+    Returns 1 when the mesh has no boundary or a straight noiseless one.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64
+    triangles : (m, 3) int64
+
+    Returns
+    -------
+    float in ``[SCAN_BOUNDARY_WEIGHT, SCAN_BOUNDARY_WEIGHT_MAX]``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> g = np.stack(np.meshgrid(np.arange(30.0), np.arange(30.0), indexing="ij"), -1).reshape(-1, 2)
+    >>> F = np.array([[i * 30 + j, i * 30 + j + 30, i * 30 + j + 1] for i in range(29) for j in range(29)]
+    ...              + [[i * 30 + j + 1, i * 30 + j + 30, i * 30 + j + 31] for i in range(29) for j in range(29)])
+    >>> V = np.c_[g, np.zeros(900)] + np.random.default_rng(0).normal(0.0, 0.3, (900, 3))
+    >>> measured_boundary_weight(V, F) > 0.8  # i.i.d. noise: the rim is as noisy as the interior
+    True
+    >>> ragged = V.copy(); rim = (g == 0).any(1) | (g == 29).any(1)
+    >>> ragged[rim] += np.random.default_rng(1).normal(0.0, 1.5, (rim.sum(), 3))
+    >>> measured_boundary_weight(ragged, F)  # a scan's silhouette: the rim 5 times noisier
+    0.1
+    """
+    n = len(vertices)
+    edges, counts, _ = unique_edges(triangles, n)
+    on_curve = edges[counts == 1]
+    if not len(on_curve):
+        return SCAN_BOUNDARY_WEIGHT_MAX
+    boundary = np.zeros(n, dtype=bool)
+    boundary[on_curve.ravel()] = True
+    valence = np.bincount(edges.ravel(), minlength=n)
+    interior = (valence > 0) & ~boundary
+
+    def mean_square_laplacian(pairs, mask):
+        degree = np.bincount(pairs.ravel(), minlength=n).astype(np.float64)
+        total = np.zeros((n, 3))
+        np.add.at(total, pairs[:, 0], vertices[pairs[:, 1]])
+        np.add.at(total, pairs[:, 1], vertices[pairs[:, 0]])
+        lap = total[mask] / degree[mask, None] - vertices[mask]
+        return float((lap * lap).sum(axis=1).mean())
+
+    curve_energy = mean_square_laplacian(on_curve, boundary)
+    if not interior.any() or curve_energy <= 0.0:
+        return SCAN_BOUNDARY_WEIGHT_MAX
+    ratio = _IID_BOUNDARY_RATIO * mean_square_laplacian(edges, interior) / curve_energy
+    return float(np.clip(ratio, SCAN_BOUNDARY_WEIGHT, SCAN_BOUNDARY_WEIGHT_MAX))
 
 
 @dataclass(frozen=True)
