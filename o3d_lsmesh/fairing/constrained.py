@@ -202,10 +202,14 @@ def constrained_fairing(
         X1 = argmin E,   X = X1 + S (X0 - X1)   (S: the same minimization, kept factor)
 
     with every referenced vertex unknown (a boundary vertex keeps its
-    one-sided Laplacian row), ``w_t = 0.1`` for a triangle with a boundary
-    vertex and 1 otherwise (inverse noise variance of the rim's barycenters),
-    ``mu = 0.03`` and ``lambda = 0.45`` (``SCAN_MU``, ``SCAN_MEMBRANE``,
-    ``SCAN_BOUNDARY_WEIGHT``). All weights are dimensionless, so the result
+    one-sided Laplacian row), ``w_t = w`` for a triangle with a boundary
+    vertex and 1 otherwise, ``mu = 0.03`` and ``lambda = 0.45``
+    (``SCAN_MU``, ``SCAN_MEMBRANE``). ``w`` is the rim barycenters' inverse
+    noise variance relative to the interior's, measured from the input
+    (:func:`~o3d_lsmesh.fairing.scan_fairing.measured_boundary_weight`:
+    boundary-curve against interior Laplacian energy, clipped to
+    ``[0.1, 1]``): 0.1 on every raw scan's ragged silhouette, 1 on a clean
+    outline carrying the interior's noise. All weights are dimensionless, so the result
     is equivariant under rigid motions and scaling. Measured on the ten raw
     Stanford bunny scans against a reference surface
     (benchmarks/results/realscans_denoise.md), each peer (Open3D
@@ -222,13 +226,13 @@ def constrained_fairing(
     twicing step puts back most of the shrinkage the membrane causes.
 
     Limits of the default (measured, see benchmarks/results/denoise.md): it
-    pulls a free boundary inward along the surface (the rim is trusted less
-    than the interior), about 1.6 edge lengths on a flat noisy grid, which is
-    what a scan's ragged rim needs but shrinks the outline of an open mesh
-    with a clean boundary; and on synthetic independent Gaussian noise it
-    smooths more than needed (mean vertex error 1.01-1.12 times the best
-    peer's at its best setting on bunny, screwdriver and feline, 1.14-1.56 on
-    the open Venus, noise 0.2 and 0.5 mean edge lengths). For such meshes use
+    still pulls a free boundary inward along the surface, 0.7-0.8 edge
+    lengths on a flat grid with i.i.d. noise (1.4 with the scan rim's weight
+    0.1), and the noisy open Venus's outline 1.04-1.07 edge lengths; and on
+    synthetic independent Gaussian noise it smooths more than needed (mean
+    vertex error 1.01-1.10 times the best peer's at its best setting on
+    bunny, screwdriver and feline, 1.01-1.34 on the open Venus, noise 0.2
+    and 0.5 mean edge lengths). For such meshes use
     ``method="global"`` or ``"local"`` (the better of the two at its best
     setting is 0.97-1.003 times the best peer's in every synthetic case).
     Closed-mesh volume change at noise 0.5: -0.07% (feline), -0.09% (horse),
@@ -320,7 +324,8 @@ def constrained_fairing(
         ``"scan"`` only: membrane weight ``lambda >= 0`` (``None``: 0.45).
     boundary_weight : float or None
         ``"scan"`` only: barycenter weight ``w_t > 0`` of the triangles with a
-        boundary vertex (``None``: 0.1; 1 trusts the rim like the interior).
+        boundary vertex (``None``: measured from the input, in ``[0.1, 1]``,
+        see ``measured_boundary_weight``; 1 trusts the rim like the interior).
     smooth_boundary : bool
         Fair the boundary loops (True) or keep boundary vertices fixed
         (``"local"`` and ``"global"``; ``"scan"`` needs True, its boundary is
