@@ -207,9 +207,11 @@ def constrained_fairing(
     (``SCAN_MU``, ``SCAN_MEMBRANE``). ``w`` is the rim barycenters' inverse
     noise variance relative to the interior's, measured from the input
     (:func:`~o3d_lsmesh.fairing.scan_fairing.measured_boundary_weight`:
-    boundary-curve against interior Laplacian energy, clipped to
-    ``[0.1, 1]``): 0.1 on every raw scan's ragged silhouette, 1 on a clean
-    outline carrying the interior's noise. All weights are dimensionless, so the result
+    boundary-curve against interior Laplacian energy, times the coverage
+    ratio ``c ~ 2`` since a rim vertex lies in half as many barycenters,
+    clipped to ``[0.1, c]``): 0.10-0.13 on the raw scans' ragged
+    silhouettes, ``c`` on a clean outline carrying the interior's noise.
+    All weights are dimensionless, so the result
     is equivariant under rigid motions and scaling. Measured on the ten raw
     Stanford bunny scans against a reference surface
     (benchmarks/results/realscans_denoise.md), each peer (Open3D
@@ -226,13 +228,14 @@ def constrained_fairing(
     twicing step puts back most of the shrinkage the membrane causes.
 
     Limits of the default (measured, see benchmarks/results/denoise.md): it
-    still pulls a free boundary inward along the surface, 0.7-0.8 edge
+    still pulls a free boundary inward along the surface, 0.46-0.56 edge
     lengths on a flat grid with i.i.d. noise (1.4 with the scan rim's weight
-    0.1), and the noisy open Venus's outline 1.04-1.07 edge lengths; and on
-    synthetic independent Gaussian noise it smooths more than needed (mean
-    vertex error 1.01-1.10 times the best peer's at its best setting on
-    bunny, screwdriver and feline, 1.01-1.34 on the open Venus, noise 0.2
-    and 0.5 mean edge lengths). For such meshes use
+    0.1), and the noisy open Venus's outline moves 0.76-0.83 edge lengths
+    (boundary vertex error); and on synthetic independent Gaussian noise it
+    smooths more than needed at noise 0.2 mean edge lengths (mean vertex
+    error 1.06-1.11 times the best peer's at its best setting on bunny,
+    screwdriver and feline, 1.29 on the open Venus; at noise 0.5: 0.99-1.04).
+    For such meshes use
     ``method="global"`` or ``"local"`` (the better of the two at its best
     setting is 0.97-1.003 times the best peer's in every synthetic case).
     Closed-mesh volume change at noise 0.5: -0.07% (feline), -0.09% (horse),
