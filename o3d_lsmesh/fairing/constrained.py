@@ -217,8 +217,8 @@ def constrained_fairing(
     (benchmarks/results/realscans_denoise.md), each peer (Open3D
     simple/Laplacian/Taubin, PyMeshLab HC/Laplacian/Taubin/two-step, trimesh
     Taubin/Humphrey) at its best setting per scan: the default beats every
-    peer on 10 of 10 scans (error / best peer 0.90-0.999, mean 0.939), mean
-    distance 70.1 um against 75.0 um for the best single filter (Open3D
+    peer on 10 of 10 scans (error / best peer 0.90-0.999, mean 0.940), mean
+    distance 70.3 um against 75.0 um for the best single filter (Open3D
     ``filter_smooth_simple`` at its best count), and moves the interior
     inward by 4.4 um (Open3D simple: 17.9 um). Why not the paper's
     operators: with the boundary held (``"local"``, ``"global"``) the rim
