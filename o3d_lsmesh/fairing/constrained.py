@@ -19,10 +19,10 @@ from .._validate import as_choice, as_count, as_positive_float
 from .barycenter import DEFAULT_MU, GlobalSolver, fairing_topology, local_operator
 from .boundary_curve import curve_operator
 from .scan_fairing import (
-    SCAN_BOUNDARY_WEIGHT,
     SCAN_MEMBRANE,
     SCAN_MU,
     ScanFairingSolver,
+    measured_boundary_weight,
 )
 
 __all__ = ["DEFAULT_METHOD", "FAIRING_METHODS", "constrained_fairing", "constrained_fairing_arrays"]
@@ -151,7 +151,8 @@ def _fair(positions, triangles, number_of_iterations, method, mu, smooth_boundar
         scan = ScanFairingSolver(
             triangles, len(positions), mu=SCAN_MU if mu is None else mu,
             membrane=SCAN_MEMBRANE if membrane is None else membrane,
-            boundary_weight=SCAN_BOUNDARY_WEIGHT if boundary_weight is None else boundary_weight,
+            boundary_weight=measured_boundary_weight(positions, triangles) if boundary_weight is None
+            else boundary_weight,
         )
         return scan.solve(positions, number_of_iterations=number_of_iterations)
     topo = fairing_topology(triangles, len(positions), with_loops=smooth_boundary)
@@ -204,17 +205,23 @@ def constrained_fairing(
         X1 = argmin E,   X = X1 + S (X0 - X1)   (S: the same minimization, kept factor)
 
     with every referenced vertex unknown (a boundary vertex keeps its
-    one-sided Laplacian row), ``w_t = 0.1`` for a triangle with a boundary
-    vertex and 1 otherwise (inverse noise variance of the rim's barycenters),
-    ``mu = 0.03`` and ``lambda = 0.45`` (``SCAN_MU``, ``SCAN_MEMBRANE``,
-    ``SCAN_BOUNDARY_WEIGHT``). All weights are dimensionless, so the result
+    one-sided Laplacian row), ``w_t = w`` for a triangle with a boundary
+    vertex and 1 otherwise, ``mu = 0.03`` and ``lambda = 0.45``
+    (``SCAN_MU``, ``SCAN_MEMBRANE``). ``w`` is the rim barycenters' inverse
+    noise variance relative to the interior's, measured from the input
+    (:func:`~o3d_lsmesh.fairing.scan_fairing.measured_boundary_weight`:
+    boundary-curve against interior Laplacian energy, times the coverage
+    ratio ``c ~ 2`` since a rim vertex lies in half as many barycenters,
+    clipped to ``[0.1, c]``): 0.10-0.13 on the raw scans' ragged
+    silhouettes, ``c`` on a clean outline carrying the interior's noise.
+    All weights are dimensionless, so the result
     is equivariant under rigid motions and scaling. Measured on the ten raw
     Stanford bunny scans against a reference surface
     (benchmarks/results/realscans_denoise.md), each peer (Open3D
     simple/Laplacian/Taubin, PyMeshLab HC/Laplacian/Taubin/two-step, trimesh
     Taubin/Humphrey) at its best setting per scan: the default beats every
-    peer on 10 of 10 scans (error / best peer 0.90-0.999, mean 0.939), mean
-    distance 70.1 um against 75.0 um for the best single filter (Open3D
+    peer on 10 of 10 scans (error / best peer 0.90-0.999, mean 0.940), mean
+    distance 70.3 um against 75.0 um for the best single filter (Open3D
     ``filter_smooth_simple`` at its best count), and moves the interior
     inward by 4.4 um (Open3D simple: 17.9 um). Why not the paper's
     operators: with the boundary held (``"local"``, ``"global"``) the rim
@@ -224,13 +231,14 @@ def constrained_fairing(
     twicing step puts back most of the shrinkage the membrane causes.
 
     Limits of the default (measured, see benchmarks/results/denoise.md): it
-    pulls a free boundary inward along the surface (the rim is trusted less
-    than the interior), about 1.6 edge lengths on a flat noisy grid, which is
-    what a scan's ragged rim needs but shrinks the outline of an open mesh
-    with a clean boundary; and on synthetic independent Gaussian noise it
-    smooths more than needed (mean vertex error 1.01-1.12 times the best
-    peer's at its best setting on bunny, screwdriver and feline, 1.14-1.56 on
-    the open Venus, noise 0.2 and 0.5 mean edge lengths). For such meshes use
+    still pulls a free boundary inward along the surface, 0.46-0.56 edge
+    lengths on a flat grid with i.i.d. noise (1.4 with the scan rim's weight
+    0.1), and the noisy open Venus's outline moves 0.76-0.83 edge lengths
+    (boundary vertex error); and on synthetic independent Gaussian noise it
+    smooths more than needed at noise 0.2 mean edge lengths (mean vertex
+    error 1.06-1.11 times the best peer's at its best setting on bunny,
+    screwdriver and feline, 1.29 on the open Venus; at noise 0.5: 0.99-1.04).
+    For such meshes use
     ``method="global"`` or ``"local"`` (the better of the two at its best
     setting is 0.97-1.003 times the best peer's in every synthetic case).
     Closed-mesh volume change at noise 0.5: -0.07% (feline), -0.09% (horse),
@@ -322,7 +330,8 @@ def constrained_fairing(
         ``"scan"`` only: membrane weight ``lambda >= 0`` (``None``: 0.45).
     boundary_weight : float or None
         ``"scan"`` only: barycenter weight ``w_t > 0`` of the triangles with a
-        boundary vertex (``None``: 0.1; 1 trusts the rim like the interior).
+        boundary vertex (``None``: measured from the input, in ``[0.1, 1]``,
+        see ``measured_boundary_weight``; 1 trusts the rim like the interior).
     smooth_boundary : bool
         Fair the boundary loops (True) or keep boundary vertices fixed
         (``"local"`` and ``"global"``; ``"scan"`` needs True, its boundary is

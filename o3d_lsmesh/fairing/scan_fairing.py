@@ -48,6 +48,7 @@ __all__ = [
     "SCAN_THIN_PLATE",
     "ScanFairingSolver",
     "ScanSystem",
+    "measured_boundary_weight",
     "scan_system",
 ]
 
@@ -58,8 +59,83 @@ SCAN_MU = 0.03
 SCAN_MEMBRANE = 0.45
 #: Weight ``kappa`` of the thin-plate term ``|K X|^2`` (Liu et al.'s energy).
 SCAN_THIN_PLATE = 1.0
-#: Barycenter weight of triangles touching the boundary, relative to the interior's.
+#: Lowest barycenter weight of triangles touching the boundary, relative to the
+#: interior's (a ragged scan silhouette: see :func:`measured_boundary_weight`).
 SCAN_BOUNDARY_WEIGHT = 0.1
+# Expected ratio (boundary curve / interior) of the mean squared uniform Laplacian for i.i.d. noise of
+# one variance: a curve vertex's (x_(i-1) + x_(i+1)) / 2 - x_i has variance 1.5 sigma^2, an interior
+# vertex of valence 6 has (1 + 1/6) sigma^2.
+_IID_BOUNDARY_RATIO = 1.5 / (1.0 + 1.0 / 6.0)
+
+
+def measured_boundary_weight(vertices: np.ndarray, triangles: np.ndarray) -> float:
+    """The boundary triangles' barycenter weight ``w`` estimated from the noise of the input.
+
+    ``w = clip(c (9/7) E_int / E_bd, 0.1, c)``, with ``E_int`` the mean of
+    ``|L x_i|^2`` over interior vertices (``L`` the uniform Laplacian over
+    every edge), ``E_bd`` the mean over boundary vertices of the squared
+    uniform Laplacian *along the boundary curve* (neighbours across edges of
+    one triangle), and ``c >= 1`` the coverage ratio: the mean number of
+    triangles at an interior vertex over that at a boundary vertex (about 2).
+    For i.i.d. noise of one variance ``E_bd / E_int = 9/7`` (valence 6), so
+    ``(9/7) E_int / E_bd`` is the estimated inverse ratio of the boundary's
+    to the interior's noise variance; ``c`` gives a boundary vertex, which
+    lies in about half as many barycenters, the data weight of an interior
+    vertex when its noise is the interior's. Both energies are quadratic in
+    coordinate differences: ``w`` is invariant under rigid motions and
+    uniform scaling. Returns 1 when the mesh has no boundary, and ``c`` for
+    a straight noiseless one.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64
+    triangles : (m, 3) int64
+
+    Returns
+    -------
+    float in ``[SCAN_BOUNDARY_WEIGHT, c]``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> g = np.stack(np.meshgrid(np.arange(30.0), np.arange(30.0), indexing="ij"), -1).reshape(-1, 2)
+    >>> F = np.array([[i * 30 + j, i * 30 + j + 30, i * 30 + j + 1] for i in range(29) for j in range(29)]
+    ...              + [[i * 30 + j + 1, i * 30 + j + 30, i * 30 + j + 31] for i in range(29) for j in range(29)])
+    >>> V = np.c_[g, np.zeros(900)] + np.random.default_rng(0).normal(0.0, 0.3, (900, 3))
+    >>> measured_boundary_weight(V, F) > 1.5  # i.i.d. noise: a rim vertex weighs like an interior one
+    True
+    >>> ragged = V.copy(); rim = (g == 0).any(1) | (g == 29).any(1)
+    >>> ragged[rim] += np.random.default_rng(1).normal(0.0, 2.0, (rim.sum(), 3))
+    >>> measured_boundary_weight(ragged, F)  # a scan's silhouette: the rim 7 times noisier
+    0.1
+    """
+    n = len(vertices)
+    edges, counts, _ = unique_edges(triangles, n)
+    on_curve = edges[counts == 1]
+    if not len(on_curve):
+        return 1.0
+    boundary = np.zeros(n, dtype=bool)
+    boundary[on_curve.ravel()] = True
+    valence = np.bincount(edges.ravel(), minlength=n)
+    interior = (valence > 0) & ~boundary
+    if not interior.any():
+        return 1.0
+    in_triangles = np.bincount(triangles.ravel(), minlength=n)
+    coverage = max(1.0, float(in_triangles[interior].mean() / in_triangles[boundary].mean()))
+
+    def mean_square_laplacian(pairs, mask):
+        degree = np.bincount(pairs.ravel(), minlength=n).astype(np.float64)
+        total = np.zeros((n, 3))
+        np.add.at(total, pairs[:, 0], vertices[pairs[:, 1]])
+        np.add.at(total, pairs[:, 1], vertices[pairs[:, 0]])
+        lap = total[mask] / degree[mask, None] - vertices[mask]
+        return float((lap * lap).sum(axis=1).mean())
+
+    curve_energy = mean_square_laplacian(on_curve, boundary)
+    if curve_energy <= 0.0:
+        return coverage
+    ratio = coverage * _IID_BOUNDARY_RATIO * mean_square_laplacian(edges, interior) / curve_energy
+    return float(np.clip(ratio, SCAN_BOUNDARY_WEIGHT, coverage))
 
 
 @dataclass(frozen=True)
