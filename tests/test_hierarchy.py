@@ -456,6 +456,13 @@ def test_bad_input_raises():
         from_fast_simplification((V, F), progress=None)
     with pytest.raises(ValueError, match="min_vertices must be >= 4"):
         from_fast_simplification((V, F), min_vertices=2)
+    # absurd level counts are refused by name before any array is sized by them
+    with pytest.raises(ValueError, match=rf"levels must be <= {len(V)}, got 1000000000"):
+        from_fast_simplification((V, F), levels=10**9)
+    # one or two triangles: nothing coarser exists, said of the mesh (not of an internal target count)
+    square = (np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0.0]]), np.array([[0, 1, 2], [1, 3, 2]]))
+    with pytest.raises(ValueError, match="mesh must have at least 5 vertices to be simplified, got 4"):
+        from_fast_simplification(square)
 
 
 def test_bad_level_queries_raise(sphere_h):

@@ -208,8 +208,12 @@ def test_overflowing_weights_raise_naming_weights():
     with pytest.raises(ValueError, match=r"weights must be small enough that weights\*\*2 is finite"):
         ls_mesh(moved, [0, 5, 40], weights=1e200)
     solver = LSMeshSolver(moved, [0, 5, 40], weights=1e150)
-    with pytest.raises(ValueError, match="constraint_vertex_positions must be small enough"):
+    # positions beyond the adapter's coordinate limit are refused by name before any product is formed
+    with pytest.raises(ValueError, match="constraint_vertex_positions must have coordinates of magnitude at most"):
         solver.solve(np.full((3, 3), 1e300))
+    # within the limit, the weighted right-hand side (weights**2 * positions) overflows: named too
+    with pytest.raises(ValueError, match="constraint_vertex_positions must be small enough"):
+        solver.solve(np.full((3, 3), 1e29))
 
 
 def test_encoding_weight_checked():

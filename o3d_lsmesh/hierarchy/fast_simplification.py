@@ -30,7 +30,8 @@ def _level_counts(levels: Any, n: int, min_vertices: int) -> np.ndarray:
     if isinstance(levels, (bool, np.bool_)):
         raise TypeError(f"levels must be an integer or a sequence of vertex counts, got {levels!r}")
     if isinstance(levels, (int, np.integer)):
-        count = as_count(levels, name="levels", minimum=1)
+        # more levels than vertices could not be distinct: the limit also keeps the request's memory bounded
+        count = as_count(levels, name="levels", minimum=1, maximum=max(n, 1))
         low = max(min(min_vertices, n - 1), 4)
         ratios = (low / n) ** (np.arange(1, count + 1) / count)
         counts = np.round(n * ratios).astype(np.int64)
@@ -121,6 +122,9 @@ def from_fast_simplification(
     warn_dropped_attributes(data, "hierarchy levels have new connectivity")
     V, F = data.vertices, data.triangles
     n0, m0 = len(V), len(F)
+    if n0 < 5:
+        # levels are vertex counts in [4, n): a mesh of four or fewer vertices has no coarser level
+        raise ValueError(f"mesh must have at least 5 vertices to be simplified, got {n0}")
     counts = _level_counts(levels, n0, min_vertices)
 
     target_triangles = max(int(m0 * counts[-1] / n0 * 0.95), 4)
