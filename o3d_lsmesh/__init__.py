@@ -5,10 +5,10 @@ Every public function takes an ``open3d.geometry.TriangleMesh``, an
 returns a new mesh of the same kind; the input is never modified.
 """
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 from . import metrics
-from ._errors import O3DLSMeshWarning, SingularSystemError
+from ._errors import ConvergenceError, O3DLSMeshWarning, SingularSystemError
 from ._solvers import SPDSolver
 from .encoding import decode_geometry, encode_geometry, iter_decode_geometry
 from .fairing import constrained_fairing, multiresolution_fairing, smooth_boundary_curves
@@ -24,6 +24,7 @@ from .summary import topology_summary
 
 __all__ = [
     "O3DLSMeshWarning",
+    "ConvergenceError",
     "SingularSystemError",
     "SPDSolver",
     "laplacian",
