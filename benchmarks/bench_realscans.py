@@ -97,8 +97,10 @@ def _operations(name, mesh, V, F):
 
     ops = {
         "topology_summary": lambda: o3d_lsmesh.topology_summary(mesh),
-        "fairing local": lambda: o3d_lsmesh.constrained_fairing(mesh),
+        "fairing (default)": lambda: o3d_lsmesh.constrained_fairing(mesh),
+        "fairing local": lambda: o3d_lsmesh.constrained_fairing(mesh, method="local"),
         "fairing global": lambda: o3d_lsmesh.constrained_fairing(mesh, method="global"),
+        "fill_holes": lambda: o3d_lsmesh.fill_holes(mesh),
         "boundary curves": lambda: o3d_lsmesh.smooth_boundary_curves(mesh),
         "build_hierarchy": lambda: o3d_lsmesh.build_hierarchy(mesh),
         "multires. fairing": lambda: o3d_lsmesh.multiresolution_fairing(mesh, 1),
@@ -152,10 +154,12 @@ def timing_and_topology(scans, *, want_timing=True, want_topology=True):
         if want_topology:
             before = _counts(o3d_lsmesh.topology_summary(mesh))
             same, changed = [], []
-            for op in ("fairing local", "fairing global", "boundary curves", "o3d taubin"):
+            for op in ("fairing (default)", "fairing local", "fairing global", "boundary curves", "o3d taubin"):
                 if results.get(op) is not None:
                     after = _counts(o3d_lsmesh.topology_summary(results[op]))
                     (same if after == before else changed).append((op, after))
+            if results.get("fill_holes") is not None:
+                changed.append(("fill_holes", _counts(o3d_lsmesh.topology_summary(results["fill_holes"]))))
             simplified = results.get("fast_simplification")
             if simplified is not None:
                 changed.append(("fast_simplification 50%", _counts(o3d_lsmesh.topology_summary(

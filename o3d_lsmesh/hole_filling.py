@@ -787,7 +787,10 @@ def fill_holes_arrays(
     for hole in find_holes(vertices, triangles, _edge_info=edge_info):
         too_big = (max_hole_edges is not None and hole.edges > max_hole_edges) or (
             max_hole_diameter is not None and hole.diameter > max_hole_diameter)
-        (skipped if too_big or (hole.border and not fill_border) else holes).append(hole)
+        # a loop made of the three edges of one triangle is the rim of a flap (a triangle hanging by a
+        # vertex, common in raw scans), not a hole: "filling" it would add that triangle's reverse
+        flap = hole.edges == 3 and len(np.unique(np.asarray(hole.rows) % m)) == 1
+        (skipped if too_big or flap or (hole.border and not fill_border) else holes).append(hole)
     if not holes:
         return FilledHoles(vertices.copy(), triangles.copy(), [], skipped, sp.csr_matrix((0, n)),
                            np.zeros(0, dtype=np.int64))

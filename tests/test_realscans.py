@@ -16,6 +16,7 @@ import functools
 import json
 import os
 import re
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +26,7 @@ from conftest import DATA, REPO
 from defect_meshes import DEFECTS, all_defects
 
 import o3d_lsmesh
+from o3d_lsmesh import O3DLSMeshWarning
 from o3d_lsmesh import metrics
 from o3d_lsmesh.cli import main
 from o3d_lsmesh.selection import start_vertices
@@ -146,7 +148,7 @@ def test_compare_prints_scan_topology(capsys, tmp_path):
 # --------------------------------------------------------------------------- fairing
 
 
-@pytest.mark.parametrize("method", ["local", "global"])
+@pytest.mark.parametrize("method", [None, "local", "global"])
 @pytest.mark.parametrize("key", ALL)
 def test_constrained_fairing_defaults(key, method):
     mesh, V, F = corpus(key)
@@ -187,6 +189,41 @@ def test_small_components_fair_without_nan(key):
         for smooth_boundary in (True, False):
             W = np.asarray(o3d_lsmesh.constrained_fairing(mesh, 20, method=method, smooth_boundary=smooth_boundary).vertices)
             assert np.isfinite(W).all()
+
+
+# --------------------------------------------------------------------------- hole filling
+
+
+# known defect (issue 15 stays open): on ear_back the refined patch of one hole holds a triangle and its
+# reverse among new vertices (one non-manifold edge); strict, so the fix shows here
+_FILL_KEYS = [pytest.param(key, marks=pytest.mark.xfail(strict=True, reason="fill_holes: one non-manifold edge "
+              "among the new triangles of ear_back")) if key == "scan:ear_back" else key for key in ALL]
+
+
+@pytest.mark.parametrize("key", _FILL_KEYS)
+def test_fill_holes_defaults(key):
+    mesh, V, F = corpus(key)
+    before = o3d_lsmesh.topology_summary(mesh)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        out = o3d_lsmesh.fill_holes(mesh)
+    # the one warning allowed: a raw scan's own folds next to a hole make every fill cross them (said, not hidden)
+    for warning in caught:
+        assert issubclass(warning.category, O3DLSMeshWarning) and "cross other triangles" in str(warning.message)
+    _untouched(mesh, V, F)
+    W, G = np.asarray(out.vertices), np.asarray(out.triangles)
+    assert np.isfinite(W).all()
+    # the input is kept as it is, new vertices and triangles are appended
+    assert np.array_equal(W[: len(V)], V) and np.array_equal(G[: len(F)], F)
+    after = o3d_lsmesh.topology_summary(out)
+    assert after["boundary_loops"] <= before["boundary_loops"]
+    assert after["nonmanifold_edges"] <= before["nonmanifold_edges"]
+    assert after["duplicate_triangles"] <= before["duplicate_triangles"]
+    if before["boundary_loops"] > before["surface_pieces"]:  # inner holes beside each piece's border
+        assert after["boundary_loops"] < before["boundary_loops"]
+    # new vertices stay within the mesh's extent (a faired patch, not a spike)
+    assert np.all(W[len(V):] >= V.min(axis=0) - 0.1 * _scale(V))
+    assert np.all(W[len(V):] <= V.max(axis=0) + 0.1 * _scale(V))
 
 
 # --------------------------------------------------------------------------- LS meshes, selection, encoding
@@ -345,6 +382,8 @@ def _read(path):
     return np.asarray(mesh.vertices), np.asarray(mesh.triangles)
 
 
+# a raw scan's own folds next to a hole can make every fill cross them: fill_holes says so with a warning
+@pytest.mark.filterwarnings("default:fill_holes. the fills of")
 @pytest.mark.parametrize("scan_file", CLI_KEYS, indirect=True)
 def test_cli_subcommands_on_scans(scan_file, tmp_path, capsys):
     path, V, F = scan_file
@@ -364,6 +403,12 @@ def test_cli_subcommands_on_scans(scan_file, tmp_path, capsys):
     assert np.isfinite(_read(tmp_path / "dec.ply")[0]).all()
     report = _cli(capsys, ["compare", str(path), str(out), "--points", "2000"])
     assert report["topology_a"]["boundary_loops"] == report["topology_b"]["boundary_loops"]
+    report = _cli(capsys, ["fill", str(path), str(tmp_path / "filled.ply")])
+    W, G = _read(tmp_path / "filled.ply")
+    assert np.isfinite(W).all() and np.array_equal(G[: len(F)], F) and report["holes_after"] < report["holes_before"]
+    _cli(capsys, ["batch", str(path), str(tmp_path / "batch"), "--op", "fill,denoise", "--workers", "0"])
+    W, G = _read(tmp_path / "batch" / path.name)
+    assert np.isfinite(W).all() and len(G) > len(F)
     assert path.read_bytes() == before
 
 
