@@ -1,4 +1,5 @@
 """07 - Fill holes with patches faired as least-squares meshes.
+===============================================================
 
 Scans have holes (occlusions, grazing angles, dark spots). ``fill_holes``
 closes each one: a minimum-weight triangulation of the hole's loop (Liepa
@@ -11,7 +12,12 @@ measured against the removed surface. A scan's outer border stays open.
 
     python examples/07_fill_holes.py
     python examples/07_fill_holes.py horse.ply --radius 10 --out pictures
+
+.. image:: /images/08_fill_holes.png
+   :alt: the picture this script writes with --out
 """
+
+# sphinx_gallery_thumbnail_path = "images/08_fill_holes.png"
 
 from __future__ import annotations
 

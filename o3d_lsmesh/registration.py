@@ -176,7 +176,8 @@ def register() -> tuple[str, ...]:
     ``approximate_ls(count, **kw)``            :func:`o3d_lsmesh.approximate` (mesh only)
     ``decode_geometry(data, anchors=None)``    :func:`o3d_lsmesh.decode_geometry`
     ``fill_holes_faired(**kw)``                :func:`o3d_lsmesh.fill_holes`
-    =========================================  ===========================================
+    =========================================  ==================================================
+
     Each returns a new mesh of the caller's kind. Explicit and idempotent:
     importing o3d_lsmesh changes nothing, and a second call re-installs the
     same methods.
