@@ -12,16 +12,15 @@ import contextlib
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
-import numpy as np
+
+from ._validate import as_bool
 
 __all__ = ["check_progress", "progress_bar", "stages"]
 
 
 def check_progress(progress: Any) -> bool:
     """``progress`` as a bool; ``TypeError`` naming ``progress`` for anything else (1, "yes", None)."""
-    if not isinstance(progress, (bool, np.bool_)):
-        raise TypeError(f"progress must be a bool, got {type(progress).__name__}")
-    return bool(progress)
+    return bool(as_bool(progress, name="progress"))
 
 
 class _Silent:

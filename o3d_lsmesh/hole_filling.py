@@ -40,7 +40,7 @@ from scipy.sparse import csgraph
 from ._errors import O3DLSMeshWarning, SingularSystemError
 from ._o3d import new_mesh, read_mesh
 from ._solvers import SPDSolver
-from ._validate import as_choice, as_count, as_positive_float
+from ._validate import as_bool, as_choice, as_count, as_positive_float
 from .topology import halfedges, unique_edges
 
 __all__ = [
@@ -777,8 +777,7 @@ def fill_holes_arrays(
     max_hole_edges, max_hole_diameter, continuity, density = _check_options(
         max_hole_edges, max_hole_diameter, continuity, density)
     weights = as_choice(weights, ("uniform", "cotangent"), name="weights")
-    if not isinstance(fill_border, (bool, np.bool_)):
-        raise TypeError(f"fill_border must be a bool, got {type(fill_border).__name__}")
+    fill_border = as_bool(fill_border, name="fill_border")
     vertices = np.asarray(vertices, dtype=np.float64)
     triangles = np.asarray(triangles, dtype=np.int64)
     n, m = len(vertices), len(triangles)

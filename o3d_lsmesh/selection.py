@@ -31,7 +31,7 @@ import scipy.sparse as sp
 from ._o3d import MeshData, new_mesh, read_mesh
 from ._progress import check_progress, progress_bar
 from ._solvers import SPDSolver
-from ._validate import as_choice, as_count, as_positive_float
+from ._validate import as_bool, as_choice, as_count, as_positive_float
 from .laplacian import uniform_laplacian
 from .lsmesh import LSMeshSolver, ls_mesh
 from .topology import adjacency_matrix, connected_components
@@ -404,8 +404,7 @@ def approximate(
     >>> np.asarray(approx.vertices).shape == np.asarray(torus.vertices).shape
     True
     """
-    if not isinstance(interpolate, (bool, np.bool_)):
-        raise TypeError(f"interpolate must be a bool, got {type(interpolate).__name__}")
+    interpolate = as_bool(interpolate, name="interpolate")
     data, indices, solver = _select(
         mesh, count, method=method, batch=batch, weights=weights, seed=seed, progress=progress
     )

@@ -15,7 +15,8 @@ from typing import Any
 import numpy as np
 
 from .._o3d import new_mesh, read_mesh
-from .._validate import as_choice, as_count, as_positive_float
+from .._progress import check_progress
+from .._validate import as_bool, as_choice, as_count, as_positive_float
 from .barycenter import DEFAULT_MU, GlobalSolver, fairing_topology, local_operator
 from .boundary_curve import curve_operator
 from .scan_fairing import (
@@ -74,9 +75,8 @@ def _check_options(number_of_iterations, method, mu, smooth_boundary, reimpose_e
                 "reimpose_every must be None for method='global' (every global iteration re-imposes the "
                 f"constraints at the previous result), got {reimpose_every}"
             )
-    for name, value in (("smooth_boundary", smooth_boundary), ("progress", progress)):
-        if not isinstance(value, (bool, np.bool_)):
-            raise TypeError(f"{name} must be a bool, got {type(value).__name__}")
+    smooth_boundary = as_bool(smooth_boundary, name="smooth_boundary")
+    progress = check_progress(progress)
     if method == "scan" and not smooth_boundary:
         raise ValueError("smooth_boundary must be True for method='scan' (its boundary moves with the surface; "
                          "hold it fixed with method='global' or 'local'), got False")

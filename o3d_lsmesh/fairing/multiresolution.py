@@ -7,6 +7,7 @@ from typing import Any
 import numpy as np
 
 from .._o3d import new_mesh
+from .._progress import check_progress
 from .._validate import as_choice, as_count
 from ..hierarchy.hierarchy import (
     MeshHierarchy,
@@ -143,8 +144,7 @@ def multiresolution_fairing(
     if final_iterations is not None:
         final_iterations = as_count(final_iterations, name="final_iterations")
     method = as_choice(method, FAIRING_METHODS, name="method")
-    if not isinstance(progress, (bool, np.bool_)):
-        raise TypeError(f"progress must be a bool, got {type(progress).__name__}")
+    progress = check_progress(progress)
     # a given hierarchy indexes the mesh's own vertices (build_hierarchy does not weld): weld only
     # when the hierarchy is built here, on the welded surface
     data = read_hierarchy_mesh(mesh, weld=hierarchy is None)

@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from .._o3d import warn_dropped_attributes
+from .._progress import check_progress
 from .._validate import as_count
 from ..topology import adjacency_matrix, connected_components, unique_edges
 from .hierarchy import MeshHierarchy, _tensor_format, read_hierarchy_mesh
@@ -116,8 +117,7 @@ def from_fast_simplification(
         raise TypeError(f"agg must be a number, got {agg!r}")
     if not np.isfinite(agg) or agg < 0:
         raise ValueError(f"agg must be non-negative and finite, got {agg}")
-    if not isinstance(progress, (bool, np.bool_)):
-        raise TypeError(f"progress must be a bool, got {type(progress).__name__}")
+    progress = check_progress(progress)
     data = read_hierarchy_mesh(mesh)
     warn_dropped_attributes(data, "hierarchy levels have new connectivity")
     V, F = data.vertices, data.triangles

@@ -16,6 +16,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._o3d import MeshData, new_mesh, read_mesh, warn_dropped_attributes
+from .._progress import check_progress
 from .._validate import as_count, as_positions, as_positive_float
 from ..topology import adjacency_matrix, boundary_halfedges
 from .collapse import collapse_level, workspace
@@ -435,8 +436,7 @@ def build_hierarchy(
     min_vertices = as_count(min_vertices, name="min_vertices")
     if max_levels is not None:
         max_levels = as_count(max_levels, name="max_levels")
-    if not isinstance(progress, (bool, np.bool_)):
-        raise TypeError(f"progress must be a bool, got {type(progress).__name__}")
+    progress = check_progress(progress)
     _warn_workers(workers)
     data = read_hierarchy_mesh(mesh)
     warn_dropped_attributes(data, "hierarchy levels have new connectivity")
