@@ -12,7 +12,6 @@ import contextlib
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
-
 from ._validate import as_bool
 
 __all__ = ["check_progress", "progress_bar", "stages"]
