@@ -48,9 +48,9 @@ DASK_DOCUMENTED_OVERHEAD_S = 1e-3
 MALLOC_NOTE = (
     "Dask's nanny sets `MALLOC_TRIM_THRESHOLD_=65536` in its workers by default. Setting that variable turns off "
     "glibc's dynamic mmap threshold, so every array above 128 KiB becomes a fresh mmap whose pages fault in "
-    'zeroed. Measured while writing this benchmark (6 noisy bunnies, local denoise, 1 worker, two rounds each): '
-    'with the variable, 370k minor page faults, 1.0-1.1 s system CPU and 23-24 s wall; without it, 44k faults, '
-    '0.2-0.3 s system CPU and 10-11 s wall. A serial loop took 9 s. `batch.local_cluster` therefore leaves it '
+    "zeroed. Measured while writing this benchmark (6 noisy bunnies, local denoise, 1 worker, two rounds each): "
+    "with the variable, 370k minor page faults, 1.0-1.1 s system CPU and 23-24 s wall; without it, 44k faults, "
+    "0.2-0.3 s system CPU and 10-11 s wall. A serial loop took 9 s. `batch.local_cluster` therefore leaves it "
     "out, and the README's cluster recipe does the same for `dask worker`."
 )
 ONE_THREAD = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
@@ -92,9 +92,18 @@ def make_files(folder: Path, kinds: tuple[str, ...], copies: int, *, noise: floa
 
 
 def run_serial(folder: Path, out: Path, method: str, iterations: int) -> dict:
-    environ = {**os.environ, **ONE_THREAD, "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")])}
-    done = subprocess.run([sys.executable, "-c", _SERIAL_CHILD, str(folder), str(out), method, str(iterations)],
-                          env=environ, capture_output=True, text=True, check=True)
+    environ = {
+        **os.environ,
+        **ONE_THREAD,
+        "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")]),
+    }
+    done = subprocess.run(
+        [sys.executable, "-c", _SERIAL_CHILD, str(folder), str(out), method, str(iterations)],
+        env=environ,
+        capture_output=True,
+        text=True,
+        check=True,
+    )
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
@@ -128,8 +137,14 @@ def run_cluster(folder: Path, out: Path, method: str, iterations: int, workers: 
         client.run(_warm)
         warmed = time.perf_counter()
         worker_cpu, client_cpu = client.run(_cpu), time.process_time()
-        records = batch.run(folder, out, op="denoise", options={"method": method, "iterations": iterations},
-                            client=client, progress=False)
+        records = batch.run(
+            folder,
+            out,
+            op="denoise",
+            options={"method": method, "iterations": iterations},
+            client=client,
+            progress=False,
+        )
         wall = time.perf_counter() - warmed
         # CPU time is what a loaded machine does not inflate: the workers' processes beyond their tasks, and
         # this process (the client loop and, for a LocalCluster, the scheduler) per file.
@@ -138,11 +153,18 @@ def run_cluster(folder: Path, out: Path, method: str, iterations: int, workers: 
         worker_cpu = sum(after[k] - worker_cpu[k] for k in after)
         peaks = client.run(_peak_mb)
     task_cpu = sum(r["cpu_seconds"] for r in records)
-    return {"wall": wall, "start": started - start, "warm": warmed - started,
-            "task_seconds": sum(r["seconds"] for r in records), "task_cpu": task_cpu,
-            "worker_cpu_overhead": worker_cpu - task_cpu, "client_cpu": client_cpu,
-            "ok": sum(r["status"] == "ok" for r in records), "peak_mb": max(peaks.values()),
-            "files_per_worker": _per_worker(records)}
+    return {
+        "wall": wall,
+        "start": started - start,
+        "warm": warmed - started,
+        "task_seconds": sum(r["seconds"] for r in records),
+        "task_cpu": task_cpu,
+        "worker_cpu_overhead": worker_cpu - task_cpu,
+        "client_cpu": client_cpu,
+        "ok": sum(r["status"] == "ok" for r in records),
+        "peak_mb": max(peaks.values()),
+        "files_per_worker": _per_worker(records),
+    }
 
 
 def _per_worker(records: list[dict]) -> list[int]:
@@ -155,7 +177,8 @@ def _per_worker(records: list[dict]) -> list[int]:
 def same_outputs(a: Path, b: Path) -> bool:
     names = sorted(p.name for p in a.glob("*.ply"))
     return names == sorted(p.name for p in b.glob("*.ply")) and all(
-        (a / n).read_bytes() == (b / n).read_bytes() for n in names)
+        (a / n).read_bytes() == (b / n).read_bytes() for n in names
+    )
 
 
 def tiny_overhead(root: Path, count: int, workers: int) -> dict:
@@ -173,20 +196,40 @@ def tiny_overhead(root: Path, count: int, workers: int) -> dict:
     return {"files": count, "workers": workers, **result}
 
 
-def _row(label: str, engine: str, workers: int, result: dict, serial: dict, copies: int, identical: str) -> list:
+def _row(
+    label: str, engine: str, workers: int, result: dict, serial: dict, copies: int, identical: str
+) -> list:
     wall_overhead = (workers * result["wall"] - result["task_seconds"]) / copies if workers else None
-    return [label, engine, workers or 1, result["wall"],
-            f"{result['start']:.1f} + {result['warm']:.1f}" if "start" in result else "-",
-            serial["wall"] / result["wall"], result["task_cpu"] / copies,
-            "-" if wall_overhead is None else 1e3 * wall_overhead,
-            "-" if "worker_cpu_overhead" not in result else 1e3 * result["worker_cpu_overhead"] / copies,
-            "-" if "client_cpu" not in result else 1e3 * result["client_cpu"] / copies,
-            result["peak_mb"], identical]
+    return [
+        label,
+        engine,
+        workers or 1,
+        result["wall"],
+        f"{result['start']:.1f} + {result['warm']:.1f}" if "start" in result else "-",
+        serial["wall"] / result["wall"],
+        result["task_cpu"] / copies,
+        "-" if wall_overhead is None else 1e3 * wall_overhead,
+        "-" if "worker_cpu_overhead" not in result else 1e3 * result["worker_cpu_overhead"] / copies,
+        "-" if "client_cpu" not in result else 1e3 * result["client_cpu"] / copies,
+        result["peak_mb"],
+        identical,
+    ]
 
 
-HEADER = ["batch", "engine", "workers", "run wall s", "cluster start + warm-up s", "speed-up vs serial (wall)",
-          "task CPU s/file", "wall overhead ms/file", "worker CPU overhead ms/file",
-          "client + scheduler CPU ms/file", "peak RSS per process MB", "outputs = serial bytes"]
+HEADER = [
+    "batch",
+    "engine",
+    "workers",
+    "run wall s",
+    "cluster start + warm-up s",
+    "speed-up vs serial (wall)",
+    "task CPU s/file",
+    "wall overhead ms/file",
+    "worker CPU overhead ms/file",
+    "client + scheduler CPU ms/file",
+    "peak RSS per process MB",
+    "outputs = serial bytes",
+]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -194,7 +237,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--copies", type=int, default=40)
     parser.add_argument("--methods", default="local,global")
     parser.add_argument("--iterations", type=int, default=10)
-    parser.add_argument("--rounds", type=int, default=1, help="interleaved rounds; the fastest wall of each is kept")
+    parser.add_argument(
+        "--rounds", type=int, default=1, help="interleaved rounds; the fastest wall of each is kept"
+    )
     parser.add_argument("--tiny", type=int, default=200)
     args = parser.parse_args(argv)
     missing = [name for name in KINDS if not (DATA / name).exists()]
@@ -235,11 +280,26 @@ def main(argv: list[str] | None = None) -> int:
             serial = best[0]
             rows.append(_row(label, "serial loop (1 process, 1 thread)", 0, serial, serial, args.copies, "-"))
             for workers in (1, 2):
-                rows.append(_row(label, f"batch, LocalCluster {workers} worker{'s' * (workers > 1)}", workers,
-                                 best[workers], serial, args.copies, "yes" if identical[workers] else "NO"))
+                rows.append(
+                    _row(
+                        label,
+                        f"batch, LocalCluster {workers} worker{'s' * (workers > 1)}",
+                        workers,
+                        best[workers],
+                        serial,
+                        args.copies,
+                        "yes" if identical[workers] else "NO",
+                    )
+                )
             two = best[2]
-            projections.append((method, two["task_cpu"] / args.copies,
-                                (two["worker_cpu_overhead"]) / args.copies, two["client_cpu"] / args.copies))
+            projections.append(
+                (
+                    method,
+                    two["task_cpu"] / args.copies,
+                    (two["worker_cpu_overhead"]) / args.copies,
+                    two["client_cpu"] / args.copies,
+                )
+            )
         if args.tiny:
             tiny = tiny_overhead(root, args.tiny, 2)
             print(f"tiny: {tiny}", flush=True)
@@ -247,28 +307,53 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         shutil.rmtree(root, ignore_errors=True)
 
-    note = (f"Machine: {os.cpu_count()} cores, **shared with other helpers' jobs during the run** (1-minute load "
-            f"average {min(loads):.0f}-{max(loads):.0f} on 2 cores), so wall times and speed-ups are noisy and far "
-            "below what an idle machine gives; serial, 1 and 2 workers ran back to back"
-            + (f", {args.rounds} interleaved rounds, fastest kept" if args.rounds > 1 else "") + ". "
-            "`run wall` excludes the cluster start and the workers' first imports (shown apart; a batch pays them "
-            "once). `wall overhead` = (workers x run wall - sum of task wall seconds) / files: worker time not spent "
-            "inside a task, which on a loaded machine includes waiting for a CPU. The CPU columns do not depend on "
-            "the load: `worker CPU overhead` is the worker processes' CPU time beyond their tasks' (Dask's worker "
-            "side: receiving the task, sending the record, heartbeats), `client + scheduler CPU` is this process's "
-            "CPU time (the `as_completed` loop and the LocalCluster's scheduler, which runs in the client process), "
-            "both per file. Peak RSS is the largest worker's (the serial loop's own for serial).")
+    note = (
+        f"Machine: {os.cpu_count()} cores, **shared with other helpers' jobs during the run** (1-minute load "
+        f"average {min(loads):.0f}-{max(loads):.0f} on 2 cores), so wall times and speed-ups are noisy and far "
+        "below what an idle machine gives; serial, 1 and 2 workers ran back to back"
+        + (f", {args.rounds} interleaved rounds, fastest kept" if args.rounds > 1 else "")
+        + ". "
+        "`run wall` excludes the cluster start and the workers' first imports (shown apart; a batch pays them "
+        "once). `wall overhead` = (workers x run wall - sum of task wall seconds) / files: worker time not spent "
+        "inside a task, which on a loaded machine includes waiting for a CPU. The CPU columns do not depend on "
+        "the load: `worker CPU overhead` is the worker processes' CPU time beyond their tasks' (Dask's worker "
+        "side: receiving the task, sending the record, heartbeats), `client + scheduler CPU` is this process's "
+        "CPU time (the `as_completed` loop and the LocalCluster's scheduler, which runs in the client process), "
+        "both per file. Peak RSS is the largest worker's (the serial loop's own for serial)."
+    )
     sections = [("Denoise many files", markdown_table(HEADER, rows) + "\n\n" + note)]
     if tiny:
-        sections.append(("Per-task cost of the engine", markdown_table(
-            ["files", "workers", "run wall s", "files/s", "task CPU ms/file", "worker CPU overhead ms/file",
-             "client + scheduler CPU ms/file"],
-            [[tiny["files"], tiny["workers"], tiny["wall"], tiny["files"] / tiny["wall"],
-              1e3 * tiny["task_cpu"] / tiny["files"], 1e3 * tiny["worker_cpu_overhead"] / tiny["files"],
-              1e3 * tiny["client_cpu"] / tiny["files"]]]) + "\n\n"
-            "162-vertex files, one fairing iteration: the task itself takes milliseconds, so what is left is the "
-            "engine's cost per file (a `client.map` submit in chunks, the scheduler's bookkeeping, the record "
-            "coming back)."))
+        sections.append(
+            (
+                "Per-task cost of the engine",
+                markdown_table(
+                    [
+                        "files",
+                        "workers",
+                        "run wall s",
+                        "files/s",
+                        "task CPU ms/file",
+                        "worker CPU overhead ms/file",
+                        "client + scheduler CPU ms/file",
+                    ],
+                    [
+                        [
+                            tiny["files"],
+                            tiny["workers"],
+                            tiny["wall"],
+                            tiny["files"] / tiny["wall"],
+                            1e3 * tiny["task_cpu"] / tiny["files"],
+                            1e3 * tiny["worker_cpu_overhead"] / tiny["files"],
+                            1e3 * tiny["client_cpu"] / tiny["files"],
+                        ]
+                    ],
+                )
+                + "\n\n"
+                "162-vertex files, one fairing iteration: the task itself takes milliseconds, so what is left is the "
+                "engine's cost per file (a `client.map` submit in chunks, the scheduler's bookkeeping, the record "
+                "coming back).",
+            )
+        )
     lines = []
     documented = 1.0 / DASK_DOCUMENTED_OVERHEAD_S
     # The client process's CPU per file in the tiny-file run is the engine's marginal cost per task (client
@@ -280,16 +365,31 @@ def main(argv: list[str] | None = None) -> int:
             workers = machines * cores
             compute = workers / (task_cpu + worker_overhead)
             lines.append([method, machines, cores, workers, compute, ceiling, min(compute, ceiling)])
-    sections.append(("Projected throughput on N machines", markdown_table(
-        ["method", "machines", "cores each", "workers (1 thread)", "files/s from task + worker overhead",
-         "scheduler ceiling files/s", "projected files/s"], lines) + "\n\n"
-        "Projection: `workers / (task CPU s/file + worker CPU overhead s/file)` from the 2-worker run above (CPU "
-        "time, so not inflated by this machine's load), capped by one scheduler: the smaller of Dask's documented "
-        "rate, about 1 ms of overhead per task (https://distributed.dask.org/en/latest/: \"Each task suffers about "
-        "1ms of overhead\"), i.e. ~1000 tasks/s, and 1 / the client + scheduler CPU per file measured in the tiny-file "
-        "run. Files are "
-        "assumed local to each machine or on a file system that keeps up (a shared file system adds its own "
-        "limit); past the ceiling, split the inputs over several schedulers."))
+    sections.append(
+        (
+            "Projected throughput on N machines",
+            markdown_table(
+                [
+                    "method",
+                    "machines",
+                    "cores each",
+                    "workers (1 thread)",
+                    "files/s from task + worker overhead",
+                    "scheduler ceiling files/s",
+                    "projected files/s",
+                ],
+                lines,
+            )
+            + "\n\n"
+            "Projection: `workers / (task CPU s/file + worker CPU overhead s/file)` from the 2-worker run above (CPU "
+            "time, so not inflated by this machine's load), capped by one scheduler: the smaller of Dask's documented "
+            'rate, about 1 ms of overhead per task (https://distributed.dask.org/en/latest/: "Each task suffers about '
+            '1ms of overhead"), i.e. ~1000 tasks/s, and 1 / the client + scheduler CPU per file measured in the tiny-file '
+            "run. Files are "
+            "assumed local to each machine or on a file system that keeps up (a shared file system adds its own "
+            "limit); past the ceiling, split the inputs over several schedulers.",
+        )
+    )
     sections.append(("Worker memory setting", MALLOC_NOTE))
     write_markdown("batch.md", "Batch over many files: serial loop vs o3d_lsmesh.batch on Dask", sections)
     return 0

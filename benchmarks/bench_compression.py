@@ -41,7 +41,9 @@ FRACTIONS = (0.005, 0.01, 0.02, 0.03, 0.05, 0.075, 0.10, 0.15)
 def cut(vertices: np.ndarray, triangles: np.ndarray, seed_vertex: int, size: int):
     """The connected submesh of the ``size`` vertices nearest ``seed_vertex`` in BFS order."""
     n = len(vertices)
-    region = breadth_first_order(adjacency_matrix(triangles, n), seed_vertex, return_predecessors=False)[:size]
+    region = breadth_first_order(adjacency_matrix(triangles, n), seed_vertex, return_predecessors=False)[
+        :size
+    ]
     inside = np.zeros(n, dtype=bool)
     inside[region] = True
     tris = triangles[inside[triangles].all(axis=1)]
@@ -97,7 +99,7 @@ def main() -> None:
         counts = sorted({max(1, round(f * n)) for f in fractions})
         k_spectral = [max(1, round(k * per_anchor / (3 * SPECTRAL_BITS))) for k in counts]
         start = time.perf_counter()
-        values, basis = spectral_basis(F, n, max(k_spectral))
+        _values, basis = spectral_basis(F, n, max(k_spectral))
         eig_s = time.perf_counter() - start
         encode_s = 0.0
         for k, ks in zip(counts, k_spectral):
@@ -114,11 +116,26 @@ def main() -> None:
                 ("spectral", 3 * ks * SPECTRAL_BITS, spectral, ks),
             ):
                 rows.append(
-                    dict(part=name, vertices=n, method=method, basis_size=used, bits=size, bpv=size / n, **err)
+                    dict(
+                        part=name, vertices=n, method=method, basis_size=used, bits=size, bpv=size / n, **err
+                    )
                 )
             summary.append(
-                [name, n, k, ks, payload / n, 3 * ks * SPECTRAL_BITS / n, ours["linf"], spectral["linf"],
-                 spectral["linf"] / ours["linf"], ours["rms"], spectral["rms"], ours["surface_l2"], spectral["surface_l2"]]
+                [
+                    name,
+                    n,
+                    k,
+                    ks,
+                    payload / n,
+                    3 * ks * SPECTRAL_BITS / n,
+                    ours["linf"],
+                    spectral["linf"],
+                    spectral["linf"] / ours["linf"],
+                    ours["rms"],
+                    spectral["rms"],
+                    ours["surface_l2"],
+                    spectral["surface_l2"],
+                ]
             )
             print(summary[-1], flush=True)
         timing.append([name, n, max(k_spectral), eig_s, len(counts), encode_s])
@@ -129,21 +146,43 @@ def main() -> None:
         writer.writerows(rows)
     plot(rows)
     table = markdown_table(
-        ["part", "n", "anchors k", "eigenvectors k'", "bpv (ours)", "bpv (spectral)", "L-inf ours", "L-inf spectral",
-         "spectral / ours L-inf", "RMS ours", "RMS spectral", "surface L2 ours", "surface L2 spectral"],
+        [
+            "part",
+            "n",
+            "anchors k",
+            "eigenvectors k'",
+            "bpv (ours)",
+            "bpv (spectral)",
+            "L-inf ours",
+            "L-inf spectral",
+            "spectral / ours L-inf",
+            "RMS ours",
+            "RMS spectral",
+            "surface L2 ours",
+            "surface L2 spectral",
+        ],
         summary,
     )
     wins = sum(1 for r in summary if r[6] < r[7])
-    times = markdown_table(["part", "n", "eigenvectors", "eigen s", "encodings", "greedy encode s (all)"], timing)
+    times = markdown_table(
+        ["part", "n", "eigenvectors", "eigen s", "encodings", "greedy encode s (all)"], timing
+    )
     write_markdown(
         "compression.md",
         "Rate-distortion: geometry-aware encoding against spectral compression",
         [
-            ("Equal-size comparison", table + f"\n\nGeometry-aware L-inf below spectral in {wins} of {len(summary)} points. "
-             f"Ours: {BITS}-bit coordinates, ceil(log2 n)-bit indices, omega = 10 n, greedy anchors. Spectral: {SPECTRAL_BITS}-bit "
-             "coefficients (Karni and Gotsman), k' chosen for the same payload size. Sizes are payloads (see the script docstring); "
-             "errors in camel units (the camel is 1.0 long). Full curves: compression.csv and compression.png."),
-            ("Time", times + "\n\nEigenvectors: `spectral_basis`, shift-invert `eigsh` through CHOLMOD for k' <= n/4 (all rows here), dense LAPACK `eigh` above. Greedy encode: selection of all 8 anchor counts with omega = 10 n."),
+            (
+                "Equal-size comparison",
+                table + f"\n\nGeometry-aware L-inf below spectral in {wins} of {len(summary)} points. "
+                f"Ours: {BITS}-bit coordinates, ceil(log2 n)-bit indices, omega = 10 n, greedy anchors. Spectral: {SPECTRAL_BITS}-bit "
+                "coefficients (Karni and Gotsman), k' chosen for the same payload size. Sizes are payloads (see the script docstring); "
+                "errors in camel units (the camel is 1.0 long). Full curves: compression.csv and compression.png.",
+            ),
+            (
+                "Time",
+                times
+                + "\n\nEigenvectors: `spectral_basis`, shift-invert `eigsh` through CHOLMOD for k' <= n/4 (all rows here), dense LAPACK `eigh` above. Greedy encode: selection of all 8 anchor counts with omega = 10 n.",
+            ),
         ],
     )
 
@@ -154,7 +193,11 @@ def plot(rows: list[dict]) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    metrics = [("linf", "L-infinity (vertex)"), ("rms", "RMS (vertex)"), ("surface_l2", "surface L2 (Metro rms)")]
+    metrics = [
+        ("linf", "L-infinity (vertex)"),
+        ("rms", "RMS (vertex)"),
+        ("surface_l2", "surface L2 (Metro rms)"),
+    ]
     fig, axes = plt.subplots(1, 3, figsize=(15, 4.5))
     part_names = sorted({r["part"] for r in rows})
     colors = dict(zip(part_names, plt.rcParams["axes.prop_cycle"].by_key()["color"]))
@@ -162,7 +205,14 @@ def plot(rows: list[dict]) -> None:
         for part in part_names:
             for method, style in (("geometry-aware", "o-"), ("spectral", "s--")):
                 pts = [r for r in rows if r["part"] == part and r["method"] == method]
-                ax.plot([r["bpv"] for r in pts], [r[key] for r in pts], style, color=colors[part], label=f"{part}, {method}", ms=4)
+                ax.plot(
+                    [r["bpv"] for r in pts],
+                    [r[key] for r in pts],
+                    style,
+                    color=colors[part],
+                    label=f"{part}, {method}",
+                    ms=4,
+                )
         ax.set_xlabel("bits per vertex")
         ax.set_ylabel(label)
         ax.set_yscale("log")

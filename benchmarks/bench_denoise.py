@@ -24,10 +24,9 @@ import sys
 import time
 
 import numpy as np
+import open3d as o3d
 from _common import load_mesh, markdown_table, timed, write_markdown
 from bench_realscans_denoise import PEERS
-
-import open3d as o3d
 
 from o3d_lsmesh.fairing import constrained_fairing
 from o3d_lsmesh.metrics import normal_deviation, signed_volume, vertex_error
@@ -42,7 +41,9 @@ MU_SWEEP = [0.01, 0.03, 0.1]
 
 
 def legacy(vertices, triangles):
-    return o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(vertices), o3d.utility.Vector3iVector(triangles))
+    return o3d.geometry.TriangleMesh(
+        o3d.utility.Vector3dVector(vertices), o3d.utility.Vector3iVector(triangles)
+    )
 
 
 def score(out, clean, boundary):
@@ -55,7 +56,9 @@ def score(out, clean, boundary):
         "max": err["linf"],
         "volume %": 100.0 * (signed_volume(out) / vol_clean - 1.0),
         "normals deg": normal_deviation(out, clean),
-        "boundary": float(np.linalg.norm(v_out[boundary] - v_clean[boundary], axis=1).mean()) if boundary.any() else None,
+        "boundary": float(np.linalg.norm(v_out[boundary] - v_clean[boundary], axis=1).mean())
+        if boundary.any()
+        else None,
     }
     return row
 
@@ -89,26 +92,59 @@ def run_case(clean, name, sigma, sweep_lines):
             add(label, f"{k}", lambda fn=fn, k=k: legacy(fn(Vn, Fn, k), Fn), k)
     add("ours default", "defaults", lambda: constrained_fairing(noisy), 1)
     for k, r in LOCAL_SWEEP:
-        add("ours local", f"{k}" + (f" r{r}" if r else ""),
-            lambda k=k, r=r: constrained_fairing(noisy, k, method="local", reimpose_every=r), k)
+        add(
+            "ours local",
+            f"{k}" + (f" r{r}" if r else ""),
+            lambda k=k, r=r: constrained_fairing(noisy, k, method="local", reimpose_every=r),
+            k,
+        )
     for k in GLOBAL_SWEEP:
         add("ours global", f"{k}", lambda k=k: constrained_fairing(noisy, k, method="global"), k)
     for mu in MU_SWEEP:
-        add("global mu sweep", f"mu={mu}", lambda mu=mu: constrained_fairing(noisy, 1, method="global", mu=mu), 1)
+        add(
+            "global mu sweep",
+            f"mu={mu}",
+            lambda mu=mu: constrained_fairing(noisy, 1, method="global", mu=mu),
+            1,
+        )
 
     noisy_row = score(noisy, clean, boundary)
-    rows = [[name, sigma, "noisy input", "-", noisy_row["mean"] / edge, noisy_row["max"] / edge,
-             noisy_row["volume %"], noisy_row["normals deg"],
-             "-" if noisy_row["boundary"] is None else noisy_row["boundary"] / edge, "-"]]
+    rows = [
+        [
+            name,
+            sigma,
+            "noisy input",
+            "-",
+            noisy_row["mean"] / edge,
+            noisy_row["max"] / edge,
+            noisy_row["volume %"],
+            noisy_row["normals deg"],
+            "-" if noisy_row["boundary"] is None else noisy_row["boundary"] / edge,
+            "-",
+        ]
+    ]
     for method, entries in candidates.items():
-        sweep_lines.append(f"{name} noise {sigma} {method}: " + ", ".join(
-            f"{s}: {r['mean'] / edge:.3f} ({r['volume %']:+.2f}%)" for s, r, _ in entries))
+        sweep_lines.append(
+            f"{name} noise {sigma} {method}: "
+            + ", ".join(f"{s}: {r['mean'] / edge:.3f} ({r['volume %']:+.2f}%)" for s, r, _ in entries)
+        )
         if method == "global mu sweep":
             continue
         setting, row, per_iteration = min(entries, key=lambda e: e[1]["mean"])
-        rows.append([name, sigma, method, setting, row["mean"] / edge, row["max"] / edge, row["volume %"],
-                     row["normals deg"], "-" if row["boundary"] is None else row["boundary"] / edge,
-                     1000.0 * per_iteration])
+        rows.append(
+            [
+                name,
+                sigma,
+                method,
+                setting,
+                row["mean"] / edge,
+                row["max"] / edge,
+                row["volume %"],
+                row["normals deg"],
+                "-" if row["boundary"] is None else row["boundary"] / edge,
+                1000.0 * per_iteration,
+            ]
+        )
     print(sweep_lines[-1], flush=True)
     return rows, len(rows)
 
@@ -127,7 +163,9 @@ def speed_comparison():
         _, t_o3d = timed(lambda: big.filter_smooth_laplacian(number_of_iterations=10))
         _, t_ours = timed(lambda: constrained_fairing(big, 10, method="local"))
         ratios.append(t_ours / t_o3d)
-        rows.append([trial if trial else "0 (first call)", n, len(big.triangles), t_o3d, t_ours, t_ours / t_o3d])
+        rows.append(
+            [trial if trial else "0 (first call)", n, len(big.triangles), t_o3d, t_ours, t_ours / t_o3d]
+        )
     return n, rows
 
 
@@ -146,42 +184,74 @@ def main():
             rows += case_rows
     # the local operator's speed against Open3D (10 iterations at 537k vertices) is measured with --speed
     n, speed_rows = speed_comparison() if "--speed" in sys.argv else (None, [])
-    header = ["mesh", "noise", "method", "best setting", "mean err", "max err", "volume %", "normal dev deg",
-              "boundary disp", "ms / iteration"]
+    header = [
+        "mesh",
+        "noise",
+        "method",
+        "best setting",
+        "mean err",
+        "max err",
+        "volume %",
+        "normal dev deg",
+        "boundary disp",
+        "ms / iteration",
+    ]
     wins = []
     ours_labels = ("ours local", "ours global", "ours default")
     for case in cases:
         peers = [r for r in case[1:] if r[2] not in ours_labels]
         best_peer = min(peers, key=lambda r: r[4])
         mine = {r[2]: r for r in case if r[2] in ours_labels}
-        wins.append(f"- {case[0][0]} noise {case[0][1]}: best peer {best_peer[2]} ({best_peer[3]}) "
-                    f"{best_peer[4]:.4f}; ours default {mine['ours default'][4]:.4f} "
-                    f"(ratio {mine['ours default'][4] / best_peer[4]:.3f}, volume {mine['ours default'][6]:+.3f}%), "
-                    f"ours global at its best {mine['ours global'][4]:.4f} "
-                    f"(ratio {mine['ours global'][4] / best_peer[4]:.3f}), ours local at its best "
-                    f"{mine['ours local'][4]:.4f} (ratio {mine['ours local'][4] / best_peer[4]:.3f})")
+        wins.append(
+            f"- {case[0][0]} noise {case[0][1]}: best peer {best_peer[2]} ({best_peer[3]}) "
+            f"{best_peer[4]:.4f}; ours default {mine['ours default'][4]:.4f} "
+            f"(ratio {mine['ours default'][4] / best_peer[4]:.3f}, volume {mine['ours default'][6]:+.3f}%), "
+            f"ours global at its best {mine['ours global'][4]:.4f} "
+            f"(ratio {mine['ours global'][4] / best_peer[4]:.3f}), ours local at its best "
+            f"{mine['ours local'][4]:.4f} (ratio {mine['ours local'][4] / best_peer[4]:.3f})"
+        )
     sections = [
-        ("Setup", "Errors are in mean edge lengths of the clean mesh; noise is Gaussian per coordinate with the "
-                  f"given standard deviation (in mean edge lengths), seed {SEED}. Each method is shown at its "
-                  "best setting from the sweep below (lowest mean vertex error): `k` = iterations, `k rN` = local "
-                  "with `reimpose_every=N`. Global uses the default mu. 'boundary disp' is the mean distance of "
-                  "boundary vertices to their clean position (open meshes). 'volume %' is relative to the clean "
-                  "mesh. Time per iteration is wall time of the whole call divided by the iteration count "
-                  "(set-up included), on a shared, loaded 2-core machine."),
+        (
+            "Setup",
+            "Errors are in mean edge lengths of the clean mesh; noise is Gaussian per coordinate with the "
+            f"given standard deviation (in mean edge lengths), seed {SEED}. Each method is shown at its "
+            "best setting from the sweep below (lowest mean vertex error): `k` = iterations, `k rN` = local "
+            "with `reimpose_every=N`. Global uses the default mu. 'boundary disp' is the mean distance of "
+            "boundary vertices to their clean position (open meshes). 'volume %' is relative to the clean "
+            "mesh. Time per iteration is wall time of the whole call divided by the iteration count "
+            "(set-up included), on a shared, loaded 2-core machine.",
+        ),
         ("Best setting per method", markdown_table(header, rows)),
         ("Who wins", "\n".join(wins)),
-        ("Notes", "- 'ours default' is `constrained_fairing(mesh)` with no argument (method='scan', tuned for "
-                  "raw range scans, see realscans_denoise.md); 'ours global' and 'ours local' are the paper's "
-                  "operators at the best setting of their sweeps.\n"
-                  "- Speed: timings on this shared 2-core machine vary by up to 2x between runs of the same call; "
-                  "the ratio is measured interleaved: a first call of each, then three repeats."),
+        (
+            "Notes",
+            "- 'ours default' is `constrained_fairing(mesh)` with no argument (method='scan', tuned for "
+            "raw range scans, see realscans_denoise.md); 'ours global' and 'ours local' are the paper's "
+            "operators at the best setting of their sweeps.\n"
+            "- Speed: timings on this shared 2-core machine vary by up to 2x between runs of the same call; "
+            "the ratio is measured interleaved: a first call of each, then three repeats.",
+        ),
         ("Sweeps (mean error, volume change)", "```\n" + "\n".join(sweep_lines) + "\n```"),
     ]
     if speed_rows:
-        sections.append((f"Speed: 10 iterations on igea subdivided once ({n} vertices)", markdown_table(
-            ["trial", "vertices", "triangles", "o3d filter_smooth_laplacian(10) s", "ours local(10) s", "ratio"],
-            speed_rows) + f"\n\nTarget: ratio <= 1.5. Median ratio of the repeats {np.median([r[-1] for r in speed_rows[1:]]):.2f}; "
-            f"first calls {speed_rows[0][-1]:.2f}."))
+        sections.append(
+            (
+                f"Speed: 10 iterations on igea subdivided once ({n} vertices)",
+                markdown_table(
+                    [
+                        "trial",
+                        "vertices",
+                        "triangles",
+                        "o3d filter_smooth_laplacian(10) s",
+                        "ours local(10) s",
+                        "ratio",
+                    ],
+                    speed_rows,
+                )
+                + f"\n\nTarget: ratio <= 1.5. Median ratio of the repeats {np.median([r[-1] for r in speed_rows[1:]]):.2f}; "
+                f"first calls {speed_rows[0][-1]:.2f}.",
+            )
+        )
     write_markdown("denoise.md", "Denoising: constrained fairing vs Open3D smoothing", sections)
     print(f"total {time.perf_counter() - start:.0f} s", file=sys.stderr)
 

@@ -125,8 +125,10 @@ def read_off(path):
     with open(path) as f:
         lines = [line for line in f.read().split("\n") if line.strip() and not line.startswith("#")]
     nv, nf = map(int, lines[1].split()[:2])
-    V = np.array([[float(x) for x in line.split()[:3]] for line in lines[2:2 + nv]])
-    F = np.array([[int(x) for x in line.split()[1:4]] for line in lines[2 + nv:2 + nv + nf]], dtype=np.int64)
+    V = np.array([[float(x) for x in line.split()[:3]] for line in lines[2 : 2 + nv]])
+    F = np.array(
+        [[int(x) for x in line.split()[1:4]] for line in lines[2 + nv : 2 + nv + nf]], dtype=np.int64
+    )
     return V, F
 
 
@@ -221,7 +223,10 @@ def open3d_tensor(V, T):
     start = time.perf_counter()
     out = mesh.fill_holes(hole_size=1e30)
     seconds = time.perf_counter() - start
-    return (out.vertex.positions.numpy().astype(np.float64), out.triangle.indices.numpy().astype(np.int64)), seconds
+    return (
+        out.vertex.positions.numpy().astype(np.float64),
+        out.triangle.indices.numpy().astype(np.int64),
+    ), seconds
 
 
 # --------------------------------------------------------------------------- metrics
@@ -299,7 +304,9 @@ def new_intersections(V, T, new):
     reach = np.linalg.norm(V[T] - centroid[:, None, :], axis=2).max()  # the largest centroid-corner distance
     near = cKDTree(centroid).query_ball_point(centroid[new], r=2 * reach)
     local = np.unique(np.concatenate([np.asarray(x, dtype=np.int64) for x in near] + [new]))
-    mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(V), o3d.utility.Vector3iVector(T[local].astype(np.int32)))
+    mesh = o3d.geometry.TriangleMesh(
+        o3d.utility.Vector3dVector(V), o3d.utility.Vector3iVector(T[local].astype(np.int32))
+    )
     pairs = np.asarray(mesh.get_self_intersecting_triangles())
     if len(pairs) == 0:
         return 0
@@ -326,8 +333,12 @@ def measure(case, out, seconds, holes):
         row["mean dist (h)"] = row["Hausdorff (h)"] = "-" if truth is None else float("nan")
     row["min angle (deg)"] = smallest_angle(V, T[new])
     row["boundary edges"] = boundary_edges(V, T)
-    mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(V), o3d.utility.Vector3iVector(T.astype(np.int32)))
-    row["manifold"] = "yes" if mesh.is_edge_manifold(allow_boundary_edges=True) and mesh.is_vertex_manifold() else "NO"
+    mesh = o3d.geometry.TriangleMesh(
+        o3d.utility.Vector3dVector(V), o3d.utility.Vector3iVector(T.astype(np.int32))
+    )
+    row["manifold"] = (
+        "yes" if mesh.is_edge_manifold(allow_boundary_edges=True) and mesh.is_vertex_manifold() else "NO"
+    )
     row["oriented"] = "yes" if consistently_oriented(T, len(V)) else "NO"
     row["self-int. pairs"] = new_intersections(V, T, new)
     return row
@@ -346,16 +357,26 @@ def cases():
         h = mean_edge(V, T)
         for radius in RADII:
             holed, (_, removed) = cut_disk(V, T, radius * h, rng)
-            yield {"name": f"{name[:-4]} {radius:g}h", "holed": holed, "h": h, "holes": 1,
-                   "truth": {"full": (V, T), "removed": removed}}
+            yield {
+                "name": f"{name[:-4]} {radius:g}h",
+                "holed": holed,
+                "h": h,
+                "holes": 1,
+                "truth": {"full": (V, T), "removed": removed},
+            }
     for name in ("bunny.ply", "plane_holes.ply"):
         mesh = load_mesh(name)
         if mesh is None:
             continue
         mesh.remove_unreferenced_vertices()
         V, T = np.asarray(mesh.vertices), np.asarray(mesh.triangles).astype(np.int64)
-        yield {"name": f"{name[:-4]} ({boundary_loop_count(V, T)} holes)", "holed": (V, T), "h": mean_edge(V, T),
-               "holes": boundary_loop_count(V, T), "truth": None}
+        yield {
+            "name": f"{name[:-4]} ({boundary_loop_count(V, T)} holes)",
+            "holed": (V, T),
+            "h": mean_edge(V, T),
+            "holes": boundary_loop_count(V, T),
+            "truth": None,
+        }
 
 
 NOTES = """\
@@ -394,8 +415,19 @@ def main() -> int:
     if available("pymeshlab"):
         tools.append(("PyMeshLab close_holes", "pymeshlab"))
     tools.append(("Open3D t fill_holes", open3d_tensor))
-    header = ["case", "tool", "time/hole (ms)", "new vertices", "mean dist (h)", "Hausdorff (h)", "min angle (deg)",
-              "boundary edges", "manifold", "oriented", "self-int. pairs"]
+    header = [
+        "case",
+        "tool",
+        "time/hole (ms)",
+        "new vertices",
+        "mean dist (h)",
+        "Hausdorff (h)",
+        "min angle (deg)",
+        "boundary edges",
+        "manifold",
+        "oriented",
+        "self-int. pairs",
+    ]
     rows = []
     summary = {}
     # warm-up: imports and first-call costs of every tool happen before anything is timed
@@ -409,6 +441,7 @@ def main() -> int:
         V, T = case["holed"]
         for label, tool in tools:
             if tool == "pymeshlab":
+
                 def score(out, case=case):
                     row = measure(case, out, 1.0, 1)
                     value = row["mean dist (h)"]
@@ -420,23 +453,39 @@ def main() -> int:
             row = measure(case, out, seconds, case["holes"])
             rows.append([case["name"], label] + [row[key] for key in header[2:]])
             summary[(case["name"], label)] = row
-            print(" | ".join(str(x if not isinstance(x, float) else f"{x:.4g}") for x in rows[-1]), flush=True)
+            print(
+                " | ".join(str(x if not isinstance(x, float) else f"{x:.4g}") for x in rows[-1]), flush=True
+            )
     ratios = []
     for case_name in dict.fromkeys(name for name, _ in summary):
         a, b = summary.get((case_name, "ours (continuity 2)")), summary.get((case_name, "CGAL continuity 2"))
         if a is None or b is None:
             continue
         dist = (a["mean dist (h)"] / b["mean dist (h)"]) if isinstance(a["mean dist (h)"], float) else "-"
-        ratios.append([case_name, dist, a["min angle (deg)"] - b["min angle (deg)"],
-                       a["time/hole (ms)"] / b["time/hole (ms)"]])
-    write_markdown("fill_holes.md", "Hole filling: o3d_lsmesh.fill_holes against CGAL, MeshLib, PyMeshLab, Open3D", [
-        ("Setup", __doc__.split("\n\n", 1)[1].split("Run:")[0].strip()),
-        ("Results", markdown_table(header, rows)),
-        ("Ours against CGAL continuity 2 (targets: distance ratio <= 1, angle difference >= 0, time ratio <= 2)",
-         markdown_table(["case", "mean distance ours / CGAL", "min angle ours - CGAL (deg)", "time ours / CGAL"],
-                        ratios)),
-        ("Reading (from the run of 2026-12-01; check against the tables above after a rerun)", NOTES),
-    ])
+        ratios.append(
+            [
+                case_name,
+                dist,
+                a["min angle (deg)"] - b["min angle (deg)"],
+                a["time/hole (ms)"] / b["time/hole (ms)"],
+            ]
+        )
+    write_markdown(
+        "fill_holes.md",
+        "Hole filling: o3d_lsmesh.fill_holes against CGAL, MeshLib, PyMeshLab, Open3D",
+        [
+            ("Setup", __doc__.split("\n\n", 1)[1].split("Run:")[0].strip()),
+            ("Results", markdown_table(header, rows)),
+            (
+                "Ours against CGAL continuity 2 (targets: distance ratio <= 1, angle difference >= 0, time ratio <= 2)",
+                markdown_table(
+                    ["case", "mean distance ours / CGAL", "min angle ours - CGAL (deg)", "time ours / CGAL"],
+                    ratios,
+                ),
+            ),
+            ("Reading (from the run of 2026-12-01; check against the tables above after a rerun)", NOTES),
+        ],
+    )
     return 0
 
 

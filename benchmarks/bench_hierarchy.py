@@ -60,7 +60,9 @@ def level_times(V, F, min_vertices=100):
     total = times[0]
     while len(P) > min_vertices:
         start = time.perf_counter()
-        level = collapse_level(P, T, max_removals=len(P) - min_vertices, locked=locked[reps], workspace=buffers)
+        level = collapse_level(
+            P, T, max_removals=len(P) - min_vertices, locked=locked[reps], workspace=buffers
+        )
         if level is None:
             break
         keep = np.ones(len(P), dtype=bool)
@@ -115,24 +117,47 @@ def compare(name):
         fs = describe(Vf, Ff, V0, F0, vol0, diag)
         compared += 1
         worse_volume += abs(ours["vol"]) > abs(fs["vol"])
-        rows.append([
-            i, len(V), len(Vf),
-            f"{ours['haus']:.3g} / {fs['haus']:.3g}", f"{ours['mean']:.3g} / {fs['mean']:.3g}",
-            f"{ours['vol']:+.3g} / {fs['vol']:+.3g}",
-            f"{ours['min_angle']:.2g} / {fs['min_angle']:.2g}", f"{ours['under10']:.3g} / {fs['under10']:.3g}",
-            f"{ours['manifold']} / {fs['manifold']}", f"{ours['topo']} / {fs['topo']}",
-            f"{1000 * cumulative[i]:.0f} / {1000 * t_fs:.0f}",
-        ])
+        rows.append(
+            [
+                i,
+                len(V),
+                len(Vf),
+                f"{ours['haus']:.3g} / {fs['haus']:.3g}",
+                f"{ours['mean']:.3g} / {fs['mean']:.3g}",
+                f"{ours['vol']:+.3g} / {fs['vol']:+.3g}",
+                f"{ours['min_angle']:.2g} / {fs['min_angle']:.2g}",
+                f"{ours['under10']:.3g} / {fs['under10']:.3g}",
+                f"{ours['manifold']} / {fs['manifold']}",
+                f"{ours['topo']} / {fs['topo']}",
+                f"{1000 * cumulative[i]:.0f} / {1000 * t_fs:.0f}",
+            ]
+        )
     header = [
-        "level", "V ours", "V fs", "Hausdorff % diag (ours / fs)", "mean dist % diag", "volume change %",
-        "min angle deg", "% tris < 10 deg", "manifold", "euler/loops", "time ms (ours cumul. / fs)",
+        "level",
+        "V ours",
+        "V fs",
+        "Hausdorff % diag (ours / fs)",
+        "mean dist % diag",
+        "volume change %",
+        "min angle deg",
+        "% tris < 10 deg",
+        "manifold",
+        "euler/loops",
+        "time ms (ours cumul. / fs)",
     ]
     summary = [
-        name, len(V0), len(h), h.vertex_count(len(h) - 1), f"{t_total:.3f}", f"{compared - worse_volume}/{compared}",
+        name,
+        len(V0),
+        len(h),
+        h.vertex_count(len(h) - 1),
+        f"{t_total:.3f}",
+        f"{compared - worse_volume}/{compared}",
     ]
-    return (f"{name}: {len(V0)} vertices, input euler/loops "
-            f"{topology_summary((V0, F0))['euler']}/{topology_summary((V0, F0))['boundary_loops']}",
-            markdown_table(header, rows)), summary
+    return (
+        f"{name}: {len(V0)} vertices, input euler/loops "
+        f"{topology_summary((V0, F0))['euler']}/{topology_summary((V0, F0))['boundary_loops']}",
+        markdown_table(header, rows),
+    ), summary
 
 
 class PeakMemory:
@@ -181,10 +206,19 @@ def speed_row(label, V, F, rounds):
     ours, fs = np.array(ours), np.array(fs)
     best = lambda a, i: a[:, i].min()
     return [
-        label, len(V), len(F), len(h), f"{h.vertex_count(len(h) - 1)} / {len(np.unique(out[1]))}",
-        f"{best(ours, 0):.2f}", f"{best(fs, 0):.2f}", f"{best(ours, 0) / best(fs, 0):.2f}",
-        f"{best(ours, 1):.2f}", f"{best(fs, 1):.2f}", f"{best(ours, 1) / best(fs, 1):.2f}",
-        f"{ours[:, 2].max():.0f}", f"{fs[:, 2].max():.0f}",
+        label,
+        len(V),
+        len(F),
+        len(h),
+        f"{h.vertex_count(len(h) - 1)} / {len(np.unique(out[1]))}",
+        f"{best(ours, 0):.2f}",
+        f"{best(fs, 0):.2f}",
+        f"{best(ours, 0) / best(fs, 0):.2f}",
+        f"{best(ours, 1):.2f}",
+        f"{best(fs, 1):.2f}",
+        f"{best(ours, 1) / best(fs, 1):.2f}",
+        f"{ours[:, 2].max():.0f}",
+        f"{fs[:, 2].max():.0f}",
     ], (ours[:, 0].round(2).tolist(), fs[:, 0].round(2).tolist())
 
 
@@ -194,8 +228,10 @@ def speed():
     if bunny is not None:
         V, F = np.asarray(bunny.vertices).copy(), np.asarray(bunny.triangles).astype(np.int64)
         runs = [_run(lambda: build_hierarchy_arrays(V, F))[1:3] for _ in range(5)]
-        raw.append(f"bunny ({len(V)} vertices) whole hierarchy to 100 vertices, best of 5: "
-                   f"{min(r[0] for r in runs):.3f} s wall, {min(r[1] for r in runs):.3f} s thread CPU")
+        raw.append(
+            f"bunny ({len(V)} vertices) whole hierarchy to 100 vertices, best of 5: "
+            f"{min(r[0] for r in runs):.3f} s wall, {min(r[1] for r in runs):.3f} s thread CPU"
+        )
     igea = load_mesh("igea.ply")
     if igea is not None:
         V, F = np.asarray(igea.vertices).copy(), np.asarray(igea.triangles).astype(np.int64)
@@ -204,7 +240,7 @@ def speed():
         raw.append(f"igea rounds, ours s {times[0]}, fs s {times[1]}")
     horse = load_mesh("horse.ply")
     if horse is not None:
-        for k in ((1,) if QUICK else (3, 4)):
+        for k in (1,) if QUICK else (3, 4):
             mesh = horse.subdivide_loop(number_of_iterations=k)
             V, F = np.asarray(mesh.vertices).copy(), np.asarray(mesh.triangles).astype(np.int64)
             del mesh
@@ -213,8 +249,21 @@ def speed():
             raw.append(f"horse x{k} rounds, ours s {times[0]}, fs s {times[1]}")
             del V, F
     table = markdown_table(
-        ["mesh", "V", "F", "levels", "V coarsest (ours / fs)", "ours wall s", "fs wall s", "ratio wall",
-         "ours thread CPU s", "fs thread CPU s", "ratio CPU", "ours peak MB", "fs peak MB"],
+        [
+            "mesh",
+            "V",
+            "F",
+            "levels",
+            "V coarsest (ours / fs)",
+            "ours wall s",
+            "fs wall s",
+            "ratio wall",
+            "ours thread CPU s",
+            "fs thread CPU s",
+            "ratio CPU",
+            "ours peak MB",
+            "fs peak MB",
+        ],
         rows,
     )
     return table + "\n\n" + "\n".join(f"- {line}" for line in raw)
@@ -236,8 +285,10 @@ def _blob():
 def _energies(P, F):
     n = len(P)
     edges = np.unique(np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1), axis=0)
-    A = sp.coo_matrix((np.ones(2 * len(edges)), (np.r_[edges[:, 0], edges[:, 1]], np.r_[edges[:, 1], edges[:, 0]])),
-                      shape=(n, n)).tocsr()
+    A = sp.coo_matrix(
+        (np.ones(2 * len(edges)), (np.r_[edges[:, 0], edges[:, 1]], np.r_[edges[:, 1], edges[:, 0]])),
+        shape=(n, n),
+    ).tocsr()
     laplacian = A @ P / np.asarray(A.sum(axis=1)) - P
     normals = np.zeros_like(P)
     face = np.cross(P[F[:, 1]] - P[F[:, 0]], P[F[:, 2]] - P[F[:, 0]])
@@ -245,8 +296,10 @@ def _energies(P, F):
         np.add.at(normals, F[:, c], face)
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
     h2 = np.linalg.norm(P[edges[:, 0]] - P[edges[:, 1]], axis=1).mean() ** 2
-    return (np.mean(np.einsum("ij,ij->i", laplacian, normals) ** 2) / h2,
-            np.mean(np.sum(laplacian ** 2, axis=1)) / h2)
+    return (
+        np.mean(np.einsum("ij,ij->i", laplacian, normals) ** 2) / h2,
+        np.mean(np.sum(laplacian**2, axis=1)) / h2,
+    )
 
 
 def scale():
@@ -254,7 +307,9 @@ def scale():
     for name in ("bunny", "horse"):
         mesh = load_mesh(name + ".ply")
         if mesh is not None:
-            meshes.append((name, (np.asarray(mesh.vertices).copy(), np.asarray(mesh.triangles).astype(np.int64))))
+            meshes.append(
+                (name, (np.asarray(mesh.vertices).copy(), np.asarray(mesh.triangles).astype(np.int64)))
+            )
     rows = []
     summary = []
     for name, (V, F) in meshes:
@@ -269,16 +324,48 @@ def scale():
                     P = multiresolution_fairing_arrays(h, level, final_iterations=final)
                     normal_energy, energy = _energies(P, F)
                     rough.append(normal_energy)
-                    rows.append([name, sigma, label, level, f"{normal_energy:.3g}", f"{energy:.3g}",
-                                 f"{100 * (signed_volume((P, F)) / volume - 1):+.3f}",
-                                 f"{np.linalg.norm(P - V, axis=1).mean() / spacing:.3f}"])
+                    rows.append(
+                        [
+                            name,
+                            sigma,
+                            label,
+                            level,
+                            f"{normal_energy:.3g}",
+                            f"{energy:.3g}",
+                            f"{100 * (signed_volume((P, F)) / volume - 1):+.3f}",
+                            f"{np.linalg.norm(P - V, axis=1).mean() / spacing:.3f}",
+                        ]
+                    )
                 monotone = all(a > b for a, b in zip(rough, rough[1:]))
-                summary.append([name, sigma, label, "yes" if monotone else "no", f"{rough[0]:.3g}", f"{rough[-1]:.3g}"])
-    return (markdown_table(["mesh", "noise (edge lengths)", "variant", "roughness falls at every level 0..6",
-                            "roughness level 0", "roughness level 6"], summary),
-            markdown_table(["mesh", "noise", "variant", "level", "roughness (normal Laplacian)",
-                            "uniform Laplacian energy", "volume change %", "mean distance to clean (edge lengths)"],
-                           rows))
+                summary.append(
+                    [name, sigma, label, "yes" if monotone else "no", f"{rough[0]:.3g}", f"{rough[-1]:.3g}"]
+                )
+    return (
+        markdown_table(
+            [
+                "mesh",
+                "noise (edge lengths)",
+                "variant",
+                "roughness falls at every level 0..6",
+                "roughness level 0",
+                "roughness level 6",
+            ],
+            summary,
+        ),
+        markdown_table(
+            [
+                "mesh",
+                "noise",
+                "variant",
+                "level",
+                "roughness (normal Laplacian)",
+                "uniform Laplacian energy",
+                "volume change %",
+                "mean distance to clean (edge lengths)",
+            ],
+            rows,
+        ),
+    )
 
 
 def main():
@@ -293,12 +380,25 @@ def main():
             sections.append(section)
             summaries.append(summary)
     head = [
-        ("Whole hierarchy to 1% against one fast-simplification run (same run, interleaved, one thread each)",
-         speed_table),
+        (
+            "Whole hierarchy to 1% against one fast-simplification run (same run, interleaved, one thread each)",
+            speed_table,
+        ),
         ("Multiresolution fairing by scale", scale_summary),
-        ("Summary of the per-level cross-check",
-         markdown_table(["mesh", "V", "levels", "V coarsest", "whole hierarchy s (best of runs)",
-                         "levels with |volume change| <= fast-simplification's"], summaries)),
+        (
+            "Summary of the per-level cross-check",
+            markdown_table(
+                [
+                    "mesh",
+                    "V",
+                    "levels",
+                    "V coarsest",
+                    "whole hierarchy s (best of runs)",
+                    "levels with |volume change| <= fast-simplification's",
+                ],
+                summaries,
+            ),
+        ),
     ]
     notes = (
         "Speed table: rounds of (our `build_hierarchy_arrays` to 1% of the vertices, fast-simplification to our "
@@ -315,9 +415,13 @@ def main():
         "that count. Scale table: roughness = mean squared normal component of the uniform Laplacian over the squared "
         "mean edge length (the tangential part measures the triangulation, not the surface)."
     )
-    write_markdown("hierarchy.md", "Volume-cost hierarchy vs fast-simplification, multiresolution fairing by scale",
-                   head + [("How to read", notes), ("Multiresolution fairing by scale, every level", scale_rows)]
-                   + sections)
+    write_markdown(
+        "hierarchy.md",
+        "Volume-cost hierarchy vs fast-simplification, multiresolution fairing by scale",
+        head
+        + [("How to read", notes), ("Multiresolution fairing by scale, every level", scale_rows)]
+        + sections,
+    )
 
 
 if __name__ == "__main__":

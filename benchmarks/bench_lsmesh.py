@@ -13,11 +13,14 @@ import multiprocessing as mp
 import time
 
 import numpy as np
-
 from _common import load_mesh, markdown_table, peak_rss_mb, write_markdown
 
 # Sorkine & Cohen-Or 2004, Table 1 (2.4 GHz Pentium 4): vertices, factor s, total s
-PAPER = {"horse": (19_851, 0.900, 0.996), "screwdriver": (27_152, 1.646, 1.850), "camel": (39_074, 2.096, 2.315)}
+PAPER = {
+    "horse": (19_851, 0.900, 0.996),
+    "screwdriver": (27_152, 1.646, 1.850),
+    "camel": (39_074, 2.096, 2.315),
+}
 SPLU_LIMIT = 200_000  # splu on larger meshes runs for minutes: skipped, and said so
 SPLU_SPD_LIMIT = 500_000  # the fallback's SPD setting (symmetric mode, no pivoting) is run up to here
 SPLU_TIMEOUT = 240.0  # seconds; a slower splu is reported as "> 240" (a lower bound on the ratio)
@@ -28,14 +31,22 @@ def torus_mesh(nu: int, nv: int):
     """A closed, bumpy torus grid (nu * nv vertices), generated in code."""
     import open3d as o3d
 
-    u, v = np.meshgrid(np.linspace(0, 2 * np.pi, nu, endpoint=False), np.linspace(0, 2 * np.pi, nv, endpoint=False), indexing="ij")
+    u, v = np.meshgrid(
+        np.linspace(0, 2 * np.pi, nu, endpoint=False),
+        np.linspace(0, 2 * np.pi, nv, endpoint=False),
+        indexing="ij",
+    )
     r = 0.35 + 0.02 * np.sin(7 * u) * np.cos(5 * v)
-    V = np.stack([(1 + r * np.cos(v)) * np.cos(u), (1 + r * np.cos(v)) * np.sin(u), r * np.sin(v)], -1).reshape(-1, 3)
+    V = np.stack(
+        [(1 + r * np.cos(v)) * np.cos(u), (1 + r * np.cos(v)) * np.sin(u), r * np.sin(v)], -1
+    ).reshape(-1, 3)
     idx = np.arange(nu * nv).reshape(nu, nv)
     a, b = idx, np.roll(idx, -1, axis=0)
     c, d = np.roll(idx, -1, axis=1), np.roll(np.roll(idx, -1, axis=0), -1, axis=1)
     F = np.concatenate([np.stack([a, b, d], -1).reshape(-1, 3), np.stack([a, d, c], -1).reshape(-1, 3)])
-    return o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(V), o3d.utility.Vector3iVector(F.astype(np.int32)))
+    return o3d.geometry.TriangleMesh(
+        o3d.utility.Vector3dVector(V), o3d.utility.Vector3iVector(F.astype(np.int32))
+    )
 
 
 def control_points(mesh, fraction=0.02, seed=0):
@@ -44,7 +55,7 @@ def control_points(mesh, fraction=0.02, seed=0):
     F = np.asarray(mesh.triangles).astype(np.int64)
     n = len(mesh.vertices)
     rng = np.random.default_rng(seed)
-    count, labels = connected_components(F, n)
+    _count, labels = connected_components(F, n)
     one_per_component = np.unique(labels, return_index=True)[1]
     chosen = rng.choice(n, max(1, int(fraction * n)), replace=False)
     return np.union1d(chosen, one_per_component)
@@ -165,9 +176,19 @@ def run_one(name: str, queue) -> None:
         row["splu SPD s"] = "skipped"
         row["splu SPD/ours"] = "-"
     if n <= LSQR_LIMIT:
-        A = sp.vstack([L, sp.csr_matrix((np.ones(len(idx)), (np.arange(len(idx)), idx)), shape=(len(idx), n))]).tocsr()
+        A = sp.vstack(
+            [L, sp.csr_matrix((np.ones(len(idx)), (np.arange(len(idx)), idx)), shape=(len(idx), n))]
+        ).tocsr()
         start = time.perf_counter()
-        sol = np.stack([spla.lsqr(A, np.concatenate([np.zeros(n), V[idx, k]]), atol=1e-10, btol=1e-10, iter_lim=20_000)[0] for k in range(3)], 1)
+        sol = np.stack(
+            [
+                spla.lsqr(
+                    A, np.concatenate([np.zeros(n), V[idx, k]]), atol=1e-10, btol=1e-10, iter_lim=20_000
+                )[0]
+                for k in range(3)
+            ],
+            1,
+        )
         row["lsqr s"] = time.perf_counter() - start
         row["lsqr rel err"] = float(np.linalg.norm(sol - x) / np.linalg.norm(x))
     else:
@@ -181,7 +202,9 @@ def run_one(name: str, queue) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--quick", action="store_true", help="small meshes only")
-    parser.add_argument("--only", nargs="+", help="run these meshes only (prints, does not write the results file)")
+    parser.add_argument(
+        "--only", nargs="+", help="run these meshes only (prints, does not write the results file)"
+    )
     args = parser.parse_args()
     names = ["horse", "screwdriver", "camel", "feline", "igea", "dragon", "torus-1024"]
     if args.quick:
@@ -218,7 +241,9 @@ def main() -> None:
         "included; target < 3000 MB at 1M vertices). The paper's Table 1 is from a 2.4 GHz "
         "Pentium 4 (its camel has 39k vertices, ours 9.8k)."
     )
-    write_markdown("lsmesh.md", "Least-squares meshes: speed and memory", [("Results", table), ("Notes", notes)])
+    write_markdown(
+        "lsmesh.md", "Least-squares meshes: speed and memory", [("Results", table), ("Notes", notes)]
+    )
 
 
 if __name__ == "__main__":

@@ -37,9 +37,8 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _common import DATA, REPO, markdown_table, timed, write_markdown
-
 import open3d as o3d
+from _common import DATA, REPO, markdown_table, timed, write_markdown
 
 import o3d_lsmesh
 from o3d_lsmesh.selection import start_vertices
@@ -121,8 +120,16 @@ def _operations(name, mesh, V, F):
     return ops, count
 
 
-TOPOLOGY_KEYS = ("components", "surface_pieces", "boundary_loops", "boundary_components", "nonmanifold_vertices",
-                 "nonmanifold_edges", "degenerate_triangles", "total_genus")
+TOPOLOGY_KEYS = (
+    "components",
+    "surface_pieces",
+    "boundary_loops",
+    "boundary_components",
+    "nonmanifold_vertices",
+    "nonmanifold_edges",
+    "degenerate_triangles",
+    "total_genus",
+)
 
 
 def _counts(summary: dict) -> list:
@@ -139,22 +146,39 @@ def timing_and_topology(scans, *, want_timing=True, want_topology=True):
         results, times = {}, {}
         for op, fn in ops.items():
             results[op], times[op] = _attempt(op, fn)
-            print(f"{name:12s} {op:20s} {times[op] if isinstance(times[op], str) else f'{times[op]:.3f} s'}", flush=True)
+            print(
+                f"{name:12s} {op:20s} {times[op] if isinstance(times[op], str) else f'{times[op]:.3f} s'}",
+                flush=True,
+            )
         assert np.array_equal(np.asarray(mesh.vertices), V), "an operation modified its input"
         if names is None:
             names = list(ops)
         taubin = times["o3d taubin"]
-        timing_rows.append([name, len(V), count] + [
-            times[op] if isinstance(times.get(op), (str, type(None))) else f"{times[op]:.3f} ({times[op] / taubin:.0f}x)"
-            for op in names])
+        timing_rows.append(
+            [name, len(V), count]
+            + [
+                times[op]
+                if isinstance(times.get(op), (str, type(None)))
+                else f"{times[op]:.3f} ({times[op] / taubin:.0f}x)"
+                for op in names
+            ]
+        )
         if name == "bunny_scan" and "spectral k=20" in times:
-            notes.append(f"spectral_approximation(k=20) on bunny_scan: {times['spectral k=20']}"
-                         if isinstance(times["spectral k=20"], str) else
-                         f"spectral_approximation(k=20) on bunny_scan: {times['spectral k=20']:.1f} s")
+            notes.append(
+                f"spectral_approximation(k=20) on bunny_scan: {times['spectral k=20']}"
+                if isinstance(times["spectral k=20"], str)
+                else f"spectral_approximation(k=20) on bunny_scan: {times['spectral k=20']:.1f} s"
+            )
         if want_topology:
             before = _counts(o3d_lsmesh.topology_summary(mesh))
             same, changed = [], []
-            for op in ("fairing (default)", "fairing local", "fairing global", "boundary curves", "o3d taubin"):
+            for op in (
+                "fairing (default)",
+                "fairing local",
+                "fairing global",
+                "boundary curves",
+                "o3d taubin",
+            ):
                 if results.get(op) is not None:
                     after = _counts(o3d_lsmesh.topology_summary(results[op]))
                     (same if after == before else changed).append((op, after))
@@ -162,13 +186,29 @@ def timing_and_topology(scans, *, want_timing=True, want_topology=True):
                 changed.append(("fill_holes", _counts(o3d_lsmesh.topology_summary(results["fill_holes"]))))
             simplified = results.get("fast_simplification")
             if simplified is not None:
-                changed.append(("fast_simplification 50%", _counts(o3d_lsmesh.topology_summary(
-                    (np.asarray(simplified[0], dtype=np.float64), np.asarray(simplified[1], dtype=np.int64))))))
+                changed.append(
+                    (
+                        "fast_simplification 50%",
+                        _counts(
+                            o3d_lsmesh.topology_summary(
+                                (
+                                    np.asarray(simplified[0], dtype=np.float64),
+                                    np.asarray(simplified[1], dtype=np.int64),
+                                )
+                            )
+                        ),
+                    )
+                )
             for op in ("build_hierarchy", "from_fast_simpl."):
                 hierarchy = results.get(op)
                 if hierarchy is not None and len(hierarchy) > 1:
                     top = len(hierarchy) - 1
-                    changed.append((f"{op} level {top}", _counts(o3d_lsmesh.topology_summary(hierarchy.level_arrays(top)))))
+                    changed.append(
+                        (
+                            f"{op} level {top}",
+                            _counts(o3d_lsmesh.topology_summary(hierarchy.level_arrays(top))),
+                        )
+                    )
             label = "input" + (f" (= {', '.join(op for op, _ in same)})" if same else "")
             topology_rows.append([name, label, *before])
             topology_rows += [[name, op, *after] for op, after in changed]
@@ -178,17 +218,25 @@ def timing_and_topology(scans, *, want_timing=True, want_topology=True):
         half = len(names) // 2 + 1
         for part in (names[:half], names[half:]):
             columns = [names.index(op) for op in part]
-            sections.append((
-                "Time of every operation with defaults, s (ratio to Open3D's filter_smooth_taubin)",
-                markdown_table(["scan", "V", "count"] + part, [row[:3] + [row[3 + c] for c in columns]
-                                                              for row in timing_rows])))
+            sections.append(
+                (
+                    "Time of every operation with defaults, s (ratio to Open3D's filter_smooth_taubin)",
+                    markdown_table(
+                        ["scan", "V", "count"] + part,
+                        [row[:3] + [row[3 + c] for c in columns] for row in timing_rows],
+                    ),
+                )
+            )
         notes += [f"{op} refused the scans: {message}" for op, message in REFUSALS.items()]
         if notes:
             sections.append(("Notes", "\n".join(f"- {note}" for note in notes)))
     if want_topology and topology_rows:
-        sections.append((
-            "topology_summary before and after (holes = loops with 3 / 4-9 / 10-99 / 100-999 / 1000+ edges)",
-            markdown_table(["scan", "mesh", "V", "F", *TOPOLOGY_KEYS, "holes"], topology_rows)))
+        sections.append(
+            (
+                "topology_summary before and after (holes = loops with 3 / 4-9 / 10-99 / 100-999 / 1000+ edges)",
+                markdown_table(["scan", "mesh", "V", "F", *TOPOLOGY_KEYS, "holes"], topology_rows),
+            )
+        )
     return sections
 
 
@@ -210,7 +258,11 @@ def pinches(scans):
 
     def held(triangles, n, *, with_loops):
         topo = moving(triangles, n, with_loops=with_loops)
-        return dataclasses.replace(topo, loops=boundary_chains(triangles, n)) if with_loops and len(topo.loops) else topo
+        return (
+            dataclasses.replace(topo, loops=boundary_chains(triangles, n))
+            if with_loops and len(topo.loops)
+            else topo
+        )
 
     rows, totals = [], []
     for name, path in scans:
@@ -224,9 +276,10 @@ def pinches(scans):
         ends = [c[[1, -2]] for c in chains.chains]
         near = np.setdiff1d(np.unique(np.concatenate(ends)) if ends else np.zeros(0, dtype=np.int64), pinch)
         line = []
-        variants = [("input", None, None)] + [(f"{m}, pinches {h}", m, h) for m in ("local", "global")
-                                               for h in ("move", "held")]
-        for label, method, mode in variants:
+        variants = [("input", None, None)] + [
+            (f"{m}, pinches {h}", m, h) for m in ("local", "global") for h in ("move", "held")
+        ]
+        for _label, method, mode in variants:
             if method is None:
                 P = V
             else:
@@ -235,7 +288,11 @@ def pinches(scans):
                     P = o3d_lsmesh.fairing.constrained_fairing_arrays(V, F, method=method)
                 finally:
                     constrained.fairing_topology = moving
-            line += [1e6 * distance(P[pinch]).mean(), 1e6 * distance(P[near]).mean(), 1e6 * distance(P[boundary]).mean()]
+            line += [
+                1e6 * distance(P[pinch]).mean(),
+                1e6 * distance(P[near]).mean(),
+                1e6 * distance(P[boundary]).mean(),
+            ]
         totals.append(line)
         rows.append([name, len(pinch)] + [f"{x:.1f}" for x in line])
         print(name, " ".join(rows[-1][2:]), flush=True)
@@ -246,8 +303,13 @@ def pinches(scans):
     header = ["scan", "pinches"]
     for label in ("input", "local move", "local held", "global move", "global held"):
         header += [f"{label}: pinch", "chain nbrs", "boundary"]
-    return [("Pinch vertices: mean distance to bunny.ply (um) of pinch vertices, their chain neighbours and all "
-             "boundary vertices, after constrained_fairing with defaults", markdown_table(header, rows))]
+    return [
+        (
+            "Pinch vertices: mean distance to bunny.ply (um) of pinch vertices, their chain neighbours and all "
+            "boundary vertices, after constrained_fairing with defaults",
+            markdown_table(header, rows),
+        )
+    ]
 
 
 def denoise(scans):
@@ -268,13 +330,20 @@ def main(sections=SECTIONS) -> Path:
     start = time.perf_counter()
     out = []
     if "timing" in sections or "topology" in sections:
-        out += timing_and_topology(scans, want_timing="timing" in sections, want_topology="topology" in sections)
+        out += timing_and_topology(
+            scans, want_timing="timing" in sections, want_topology="topology" in sections
+        )
     if "pinches" in sections:
         out += pinches(scans)
     if "denoise" in sections:
         out += denoise(scans)
-    out.append(("Run", f"{len(scans)} meshes, {time.perf_counter() - start:.0f} s, open3d {o3d.__version__}, "
-                       f"o3d_lsmesh {o3d_lsmesh.__version__}"))
+    out.append(
+        (
+            "Run",
+            f"{len(scans)} meshes, {time.perf_counter() - start:.0f} s, open3d {o3d.__version__}, "
+            f"o3d_lsmesh {o3d_lsmesh.__version__}",
+        )
+    )
     return write_markdown("realscans.md", "Raw scans: every operation with defaults", out)
 
 

@@ -49,7 +49,9 @@ class Reference:
 
     def closest(self, points: np.ndarray):
         answer = self.scene.compute_closest_points(o3d.core.Tensor(points.astype(np.float32)))
-        return answer["points"].numpy().astype(np.float64), answer["primitive_normals"].numpy().astype(np.float64)
+        return answer["points"].numpy().astype(np.float64), answer["primitive_normals"].numpy().astype(
+            np.float64
+        )
 
 
 def boundary_vertices(triangles: np.ndarray, n: int) -> np.ndarray:
@@ -97,7 +99,9 @@ def score(vertices: np.ndarray, triangles: np.ndarray, reference: Reference, bou
 
 
 def _legacy(vertices, triangles):
-    return o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(vertices), o3d.utility.Vector3iVector(triangles))
+    return o3d.geometry.TriangleMesh(
+        o3d.utility.Vector3dVector(vertices), o3d.utility.Vector3iVector(triangles)
+    )
 
 
 def _o3d(kind):
@@ -146,7 +150,10 @@ PEERS = {
     "Open3D Laplacian": (_o3d("laplacian"), [1, 2, 3, 5, 8, 12, 20]),
     "Open3D Taubin": (_o3d("taubin"), [5, 10, 20, 50, 100, 200]),
     "MeshLab HC": (_meshlab("apply_coord_hc_laplacian_smoothing"), [1, 2, 3, 5, 8]),
-    "MeshLab Laplacian": (_meshlab("apply_coord_laplacian_smoothing", cotangentweight=False), [1, 2, 3, 5, 8]),
+    "MeshLab Laplacian": (
+        _meshlab("apply_coord_laplacian_smoothing", cotangentweight=False),
+        [1, 2, 3, 5, 8],
+    ),
     "MeshLab Taubin": (_meshlab("apply_coord_taubin_smoothing"), [5, 10, 20, 50, 100, 200]),
     "MeshLab two-step": (_meshlab("apply_coord_two_steps_smoothing"), [1, 2, 3, 5, 8]),
     "trimesh Taubin": (_trimesh("taubin"), [5, 10, 20, 50, 100, 200, 500]),
@@ -176,7 +183,7 @@ def run_scan(name, reference, sweep_lines):
         for k in sweep:
             try:
                 out, seconds = timed(lambda fn=fn, k=k: fn(V, F, k))
-            except Exception as error:  # noqa: BLE001 (a peer refusing a scan is reported, not fatal)
+            except Exception as error:
                 sweep_lines.append(f"{name} {label} {k}: failed ({error})")
                 continue
             entries.append((k, score(out, F, reference, boundary), seconds))
@@ -185,8 +192,19 @@ def run_scan(name, reference, sweep_lines):
     out, seconds = timed(lambda: ours(V, F))
     mine = score(out, F, reference, boundary)
     best_peer = min(peers.items(), key=lambda p: p[1][1]["mean"])
-    return {"name": name, "n": len(V), "raw": raw, "peers": peers, "ours": mine, "ours_seconds": seconds,
-            "ours_vertices": out, "best_peer": best_peer, "V": V, "F": F, "boundary": boundary}
+    return {
+        "name": name,
+        "n": len(V),
+        "raw": raw,
+        "peers": peers,
+        "ours": mine,
+        "ours_seconds": seconds,
+        "ours_vertices": out,
+        "best_peer": best_peer,
+        "V": V,
+        "F": F,
+        "boundary": boundary,
+    }
 
 
 def multiresolution_rows(results, reference, levels=(1, 2, 3)):
@@ -208,11 +226,17 @@ def multiresolution_rows(results, reference, levels=(1, 2, 3)):
             used, Fk = np.unique(Fk[keep], return_inverse=True)
             Fk, Vk = Fk.reshape(-1, 3), Vk[used]
         boundary = boundary_vertices(Fk, len(Vk))
-        row = [r["name"], removed, score(Vk, Fk, reference, boundary)["mean"],
-               score(constrained_fairing_arrays(Vk, Fk, None, method=None), Fk, reference, boundary)["mean"]]
+        row = [
+            r["name"],
+            removed,
+            score(Vk, Fk, reference, boundary)["mean"],
+            score(constrained_fairing_arrays(Vk, Fk, None, method=None), Fk, reference, boundary)["mean"],
+        ]
         for level in levels:
             try:
-                mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(Vk), o3d.utility.Vector3iVector(Fk))
+                mesh = o3d.geometry.TriangleMesh(
+                    o3d.utility.Vector3dVector(Vk), o3d.utility.Vector3iVector(Fk)
+                )
                 out = np.asarray(multiresolution_fairing(mesh, level).vertices)
                 row.append(score(out, Fk, reference, boundary)["mean"])
             except ValueError as error:
@@ -229,13 +253,20 @@ def speed_rows(results):
         big_v.append(r["V"])
         big_f.append(r["F"] + offset)
         offset += len(r["V"])
-    merged = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(np.vstack(big_v)),
-                                       o3d.utility.Vector3iVector(np.vstack(big_f)))
+    merged = o3d.geometry.TriangleMesh(
+        o3d.utility.Vector3dVector(np.vstack(big_v)), o3d.utility.Vector3iVector(np.vstack(big_f))
+    )
     merged = merged.subdivide_midpoint(number_of_iterations=1)
     counts = [r["peers"]["Open3D Laplacian"][0] for r in results]
-    cases = [(results[0]["name"], results[0]["V"], results[0]["F"], counts[0]),
-             ("10 scans merged, subdivided", np.asarray(merged.vertices).copy(),
-              np.asarray(merged.triangles).astype(np.int64), int(np.median(counts)))]
+    cases = [
+        (results[0]["name"], results[0]["V"], results[0]["F"], counts[0]),
+        (
+            "10 scans merged, subdivided",
+            np.asarray(merged.vertices).copy(),
+            np.asarray(merged.triangles).astype(np.int64),
+            int(np.median(counts)),
+        ),
+    ]
     for label, V, F, k in cases:
         mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(V), o3d.utility.Vector3iVector(F))
         ratios = []
@@ -258,8 +289,10 @@ def picture(result, reference, path):
     from o3d_lsmesh.rendering import error_colors, render
 
     V, F = result["V"], result["F"]
-    o3d_label = min(((label, p) for label, p in result["peers"].items() if label.startswith("Open3D")),
-                    key=lambda lp: lp[1][1]["mean"])
+    o3d_label = min(
+        ((label, p) for label, p in result["peers"].items() if label.startswith("Open3D")),
+        key=lambda lp: lp[1][1]["mean"],
+    )
     label, (k, _, _) = o3d_label
     fn = PEERS[label][0]
     vmax_um = 250.0
@@ -273,17 +306,24 @@ def picture(result, reference, path):
     a, b, c = (V[F[:, i]] for i in range(3))
     view = np.cross(b - a, c - a).sum(axis=0)
     image = render(meshes, None, width=520, height=520, view_direction=view / np.linalg.norm(view))
-    titles = [f"raw scan: {result['raw']['mean']:.0f} um",
-              f"Open3D best ({label.split()[1]}, {k} it.): {o3d_label[1][1]['mean']:.0f} um",
-              f"ours, defaults: {result['ours']['mean']:.0f} um"]
+    titles = [
+        f"raw scan: {result['raw']['mean']:.0f} um",
+        f"Open3D best ({label.split()[1]}, {k} it.): {o3d_label[1][1]['mean']:.0f} um",
+        f"ours, defaults: {result['ours']['mean']:.0f} um",
+    ]
     fig, ax = plt.subplots(figsize=(image.shape[1] / 100, image.shape[0] / 100 + 0.9), dpi=100)
     ax.imshow(image)
     ax.set_axis_off()
     w = image.shape[1] / 3
     for i, t in enumerate(titles):
         ax.text(w * (i + 0.5), -8, t, ha="center", va="bottom", fontsize=11)
-    bar = fig.colorbar(cm.ScalarMappable(norm=colors.Normalize(0, vmax_um), cmap="viridis"), ax=ax,
-                       orientation="horizontal", fraction=0.05, pad=0.02)
+    bar = fig.colorbar(
+        cm.ScalarMappable(norm=colors.Normalize(0, vmax_um), cmap="viridis"),
+        ax=ax,
+        orientation="horizontal",
+        fraction=0.05,
+        pad=0.02,
+    )
     bar.set_label(f"distance to the reference surface (um), {result['name']}")
     fig.savefig(path, bbox_inches="tight", dpi=100)
     plt.close(fig)
@@ -304,28 +344,53 @@ def main():
     for name in names:
         results.append(run_scan(name, reference, sweep_lines))
         r = results[-1]
-        print(f"{name}: raw {r['raw']['mean']:.1f} um, best peer {r['best_peer'][0]} {r['best_peer'][1][1]['mean']:.1f}, "
-              f"ours {r['ours']['mean']:.1f} ({r['ours_seconds']:.2f} s)", flush=True)
+        print(
+            f"{name}: raw {r['raw']['mean']:.1f} um, best peer {r['best_peer'][0]} {r['best_peer'][1][1]['mean']:.1f}, "
+            f"ours {r['ours']['mean']:.1f} ({r['ours_seconds']:.2f} s)",
+            flush=True,
+        )
 
     header = ["scan", "raw um"] + list(PEERS) + ["ours (defaults)", "ours / best peer"]
     table = []
     for r in results:
         best = r["best_peer"][1][1]["mean"]
-        table.append([r["name"].removesuffix(".ply"), r["raw"]["mean"]]
-                     + [f"{p[1]['mean']:.1f} ({p[0]})" for p in r["peers"].values()]
-                     + [r["ours"]["mean"], r["ours"]["mean"] / best])
-    detail_header = ["scan", "method", "setting", "mean um", "p90 um", "interior um", "boundary um", "signed um",
-                     "normal deg", "s", "/ best peer"]
+        table.append(
+            [r["name"].removesuffix(".ply"), r["raw"]["mean"]]
+            + [f"{p[1]['mean']:.1f} ({p[0]})" for p in r["peers"].values()]
+            + [r["ours"]["mean"], r["ours"]["mean"] / best]
+        )
+    detail_header = [
+        "scan",
+        "method",
+        "setting",
+        "mean um",
+        "p90 um",
+        "interior um",
+        "boundary um",
+        "signed um",
+        "normal deg",
+        "s",
+        "/ best peer",
+    ]
     detail = []
     for r in results:
         best = r["best_peer"][1][1]["mean"]
-        detail.append([r["name"].removesuffix(".ply"), "raw", "-"] + [r["raw"][c] for c in COLUMNS]
-                      + ["-", r["raw"]["mean"] / best])
+        detail.append(
+            [r["name"].removesuffix(".ply"), "raw", "-"]
+            + [r["raw"][c] for c in COLUMNS]
+            + ["-", r["raw"]["mean"] / best]
+        )
         for label, (k, s, seconds) in r["peers"].items():
-            detail.append([r["name"].removesuffix(".ply"), label, k] + [s[c] for c in ["mean", "p90", "interior",
-                          "boundary", "signed", "angle"]] + [seconds, s["mean"] / best])
-        detail.append([r["name"].removesuffix(".ply"), "ours", "defaults"] + [r["ours"][c] for c in ["mean", "p90",
-                      "interior", "boundary", "signed", "angle"]] + [r["ours_seconds"], r["ours"]["mean"] / best])
+            detail.append(
+                [r["name"].removesuffix(".ply"), label, k]
+                + [s[c] for c in ["mean", "p90", "interior", "boundary", "signed", "angle"]]
+                + [seconds, s["mean"] / best]
+            )
+        detail.append(
+            [r["name"].removesuffix(".ply"), "ours", "defaults"]
+            + [r["ours"][c] for c in ["mean", "p90", "interior", "boundary", "signed", "angle"]]
+            + [r["ours_seconds"], r["ours"]["mean"] / best]
+        )
 
     ratios = np.array([r["ours"]["mean"] / r["best_peer"][1][1]["mean"] for r in results])
     # "best conventional filter" over the scans: the one peer whose best settings give the lowest mean error
@@ -334,18 +399,25 @@ def main():
     ours_mean = float(np.mean([r["ours"]["mean"] for r in results]))
     best_each = float(np.mean([r["best_peer"][1][1]["mean"] for r in results]))
     shift_ours = np.array([r["raw"]["signed_interior"] - r["ours"]["signed_interior"] for r in results])
-    shift_simple = np.array([r["raw"]["signed_interior"] - r["peers"]["Open3D simple"][1]["signed_interior"]
-                             for r in results])
+    shift_simple = np.array(
+        [r["raw"]["signed_interior"] - r["peers"]["Open3D simple"][1]["signed_interior"] for r in results]
+    )
     targets = [
-        (f"- Beats every peer's best setting: {int((ratios < 1).sum())}/{len(ratios)} scans "
-        f"(ours / best peer per scan: min {ratios.min():.3f}, mean {ratios.mean():.3f}, max {ratios.max():.3f})."),
-        (f"- Mean error over the scans: ours {ours_mean:.1f} um; best single conventional filter ({best_filter}, "
-        f"best setting per scan) {per_peer[best_filter]:.1f} um: ratio {ours_mean / per_peer[best_filter]:.3f} "
-        f"(target <= 0.97); against the best peer picked per scan {best_each:.1f} um: {ours_mean / best_each:.3f}."),
-        (f"- Interior inward shift (raw signed interior mean - result's, um): ours mean {shift_ours.mean():.1f} "
-        f"(per scan {shift_ours.min():.1f} to {shift_ours.max():.1f}); Open3D simple at its best "
-        f"{shift_simple.mean():.1f} ({shift_simple.min():.1f} to {shift_simple.max():.1f}); ours <= half of simple's on "
-        f"{int((shift_ours <= shift_simple / 2).sum())}/{len(results)} scans."),
+        (
+            f"- Beats every peer's best setting: {int((ratios < 1).sum())}/{len(ratios)} scans "
+            f"(ours / best peer per scan: min {ratios.min():.3f}, mean {ratios.mean():.3f}, max {ratios.max():.3f})."
+        ),
+        (
+            f"- Mean error over the scans: ours {ours_mean:.1f} um; best single conventional filter ({best_filter}, "
+            f"best setting per scan) {per_peer[best_filter]:.1f} um: ratio {ours_mean / per_peer[best_filter]:.3f} "
+            f"(target <= 0.97); against the best peer picked per scan {best_each:.1f} um: {ours_mean / best_each:.3f}."
+        ),
+        (
+            f"- Interior inward shift (raw signed interior mean - result's, um): ours mean {shift_ours.mean():.1f} "
+            f"(per scan {shift_ours.min():.1f} to {shift_ours.max():.1f}); Open3D simple at its best "
+            f"{shift_simple.mean():.1f} ({shift_simple.min():.1f} to {shift_simple.max():.1f}); ours <= half of simple's on "
+            f"{int((shift_ours <= shift_simple / 2).sum())}/{len(results)} scans."
+        ),
     ]
     print("\n".join(targets), flush=True)
     multires = multiresolution_rows(results, reference)
@@ -353,23 +425,42 @@ def main():
     speed = speed_rows(results)
     print("speed done", flush=True)
     sections = [
-        ("Setup", ("Distances in micrometres from each scan vertex to the reference `bunny.ply` (Open3D "
-                  "RaycastingScene); 'signed' is along the reference normal at the closest point (outside "
-                  "positive); 'normal deg' is the mean angle between our vertex normals and the reference's. Peers "
-                  "run every setting of their sweep (iteration counts, listed below) and are shown at their best "
-                  "per scan; ours runs `constrained_fairing(mesh)` with no argument. Interior/boundary: vertices "
-                  "off/on an edge with one triangle. Times are wall seconds on a shared 2-core machine.")),
-        ("Per scan: mean distance (um), each peer at its best setting (iterations)", markdown_table(header, table)),
+        (
+            "Setup",
+            (
+                "Distances in micrometres from each scan vertex to the reference `bunny.ply` (Open3D "
+                "RaycastingScene); 'signed' is along the reference normal at the closest point (outside "
+                "positive); 'normal deg' is the mean angle between our vertex normals and the reference's. Peers "
+                "run every setting of their sweep (iteration counts, listed below) and are shown at their best "
+                "per scan; ours runs `constrained_fairing(mesh)` with no argument. Interior/boundary: vertices "
+                "off/on an edge with one triangle. Times are wall seconds on a shared 2-core machine."
+            ),
+        ),
+        (
+            "Per scan: mean distance (um), each peer at its best setting (iterations)",
+            markdown_table(header, table),
+        ),
         ("Targets", "\n".join(targets)),
         ("Per scan, every measure", markdown_table(detail_header, detail)),
-        ("Multiresolution fairing on the scans (non-manifold vertices' triangles removed; mean um)",
-         markdown_table(["scan", "triangles removed", "raw", "ours (defaults)"] + [f"multires level {lv}" for lv in
-                        (1, 2, 3)], multires)),
-        ("Speed: ours (defaults) vs Open3D filter_smooth_laplacian at its best count, interleaved",
-         markdown_table(["mesh", "vertices", "trial", "o3d iterations", "o3d s", "ours s", "ratio"], speed)),
+        (
+            "Multiresolution fairing on the scans (non-manifold vertices' triangles removed; mean um)",
+            markdown_table(
+                ["scan", "triangles removed", "raw", "ours (defaults)"]
+                + [f"multires level {lv}" for lv in (1, 2, 3)],
+                multires,
+            ),
+        ),
+        (
+            "Speed: ours (defaults) vs Open3D filter_smooth_laplacian at its best count, interleaved",
+            markdown_table(
+                ["mesh", "vertices", "trial", "o3d iterations", "o3d s", "ours s", "ratio"], speed
+            ),
+        ),
         ("Sweeps (mean um)", "```\n" + "\n".join(sweep_lines) + "\n```"),
     ]
-    write_markdown("realscans_denoise.md", "Denoising raw range scans: defaults against every peer's best", sections)
+    write_markdown(
+        "realscans_denoise.md", "Denoising raw range scans: defaults against every peer's best", sections
+    )
     # the scan where ours gains most on the best peer
     picture_result = min(results, key=lambda r: r["ours"]["mean"] / r["best_peer"][1][1]["mean"])
     picture(picture_result, reference, REPO / "docs" / "images" / "07_realscan_denoise.png")

@@ -17,12 +17,31 @@ import tempfile
 import time
 
 import numpy as np
-
 from _common import DATA, RESULTS, markdown_table, peak_rss_mb, write_markdown
 
-HEADER = ["mesh", "vertices", "operation", "solver", "time s", "x CHOLMOD", "peak GB", "peak over input GB",
-          "rel. residual", "CG its", "rel. diff to CHOLMOD", "load"]
-STUDY_HEADER = ["preconditioner", "vertices", "setup s", "setup + CG s", "CG iterations", "rel. residual", "load"]
+HEADER = [
+    "mesh",
+    "vertices",
+    "operation",
+    "solver",
+    "time s",
+    "x CHOLMOD",
+    "peak GB",
+    "peak over input GB",
+    "rel. residual",
+    "CG its",
+    "rel. diff to CHOLMOD",
+    "load",
+]
+STUDY_HEADER = [
+    "preconditioner",
+    "vertices",
+    "setup s",
+    "setup + CG s",
+    "CG iterations",
+    "rel. residual",
+    "load",
+]
 
 
 def merged(name: str, header: list, rows: list, key: int) -> list:
@@ -46,7 +65,7 @@ def noisy_sphere(n: int, seed: int = 0):
     """Seeded noisy UV sphere with about ``n`` vertices (``2 r^2`` for resolution ``r``): (V, F)."""
     import open3d as o3d
 
-    resolution = max(4, int(round(np.sqrt(n / 2.0))))
+    resolution = max(4, round(np.sqrt(n / 2.0)))
     mesh = o3d.geometry.TriangleMesh.create_sphere(radius=1.0, resolution=resolution)
     V = np.asarray(mesh.vertices).copy()
     V += np.random.default_rng(seed).normal(scale=0.2 / resolution, size=V.shape)
@@ -128,21 +147,33 @@ def _study_worker(n: int, variant: str, queue) -> None:
         apply = _amg_preconditioner(N)
     else:
         if variant == "SA on N, B = [1, x, y, z]":
-            apply = _vcycle(pyamg.smoothed_aggregation_solver(
-                N, B=np.column_stack([np.ones(n), V - V.mean(axis=0)]), symmetry="symmetric", max_coarse=500,
-                smooth=("jacobi", {"weighting": "local"}), coarse_solver="splu",
-            ))
+            apply = _vcycle(
+                pyamg.smoothed_aggregation_solver(
+                    N,
+                    B=np.column_stack([np.ones(n), V - V.mean(axis=0)]),
+                    symmetry="symmetric",
+                    max_coarse=500,
+                    smooth=("jacobi", {"weighting": "local"}),
+                    coarse_solver="splu",
+                )
+            )
         else:  # AMG on the graph Laplacian G (L = D^-1 G): L^T L = G D^-2 G ~ G^-1 D^2 G^-1 inverted
             degree = np.diff(L.indptr).astype(float) - 1
             G = (sp.diags(degree) @ L).tocsr()
             Gs = (G + sp.diags(np.sqrt(w2) * degree * 1e-3 + 1e-8 * degree)).tocsr()
-            cycle = _vcycle(pyamg.smoothed_aggregation_solver(
-                Gs, symmetry="symmetric", max_coarse=500, smooth=("jacobi", {"weighting": "local"}),
-                coarse_solver="splu",
-            ))
+            cycle = _vcycle(
+                pyamg.smoothed_aggregation_solver(
+                    Gs,
+                    symmetry="symmetric",
+                    max_coarse=500,
+                    smooth=("jacobi", {"weighting": "local"}),
+                    coarse_solver="splu",
+                )
+            )
 
             def apply(r):
                 return cycle(degree[:, None] ** 2 * cycle(r))
+
     setup = time.perf_counter() - start
     try:
         _, iterations, residual = _block_cg(N, b, None, apply, tol=1e-10, max_iterations=600, progress=False)
@@ -164,7 +195,9 @@ def study(n: int) -> str:
             rows.append([variant, n, "-", "> 900", "-", "-", round(os.getloadavg()[0], 1)])
             continue
         vertices, setup, total, iterations, residual = queue.get()
-        rows.append([variant, vertices, setup, total, iterations, f"{residual:.1e}", round(os.getloadavg()[0], 1)])
+        rows.append(
+            [variant, vertices, setup, total, iterations, f"{residual:.1e}", round(os.getloadavg()[0], 1)]
+        )
         print(rows[-1], flush=True)
     return rows
 
@@ -174,11 +207,19 @@ def main() -> None:
     parser.add_argument("--sizes", type=int, nargs="*", default=[1_000_000])
     parser.add_argument("--ops", default="lsmesh,fairing")
     parser.add_argument("--kinds", default="noisy sphere,subdivided feline")
-    parser.add_argument("--iterative-only-above", type=int, default=2_000_000,
-                        help="sizes above this run the iterative path only (CHOLMOD would not fit)")
+    parser.add_argument(
+        "--iterative-only-above",
+        type=int,
+        default=2_000_000,
+        help="sizes above this run the iterative path only (CHOLMOD would not fit)",
+    )
     parser.add_argument("--solvers", default="cholmod,iterative", help="which solvers to run")
-    parser.add_argument("--study", type=int, default=0,
-                        help="also compare preconditioners on an LS-mesh system of this many vertices")
+    parser.add_argument(
+        "--study",
+        type=int,
+        default=0,
+        help="also compare preconditioners on an LS-mesh system of this many vertices",
+    )
     args = parser.parse_args()
     study_rows = study(args.study) if args.study else []
     rows = []
@@ -206,14 +247,22 @@ def main() -> None:
                 chol = result.get("cholmod")
                 for solver, (vertices, seconds, peak, base, residual, iterations) in result.items():
                     ratio = seconds / chol[1] if chol else ""
-                    rows.append([
-                        kind, vertices, "LS mesh, 2% controls" if op == "lsmesh" else "global fairing, 2 iterations",
-                        solver, seconds, ratio, peak / 1024, (peak - base) / 1024,
-                        f"{residual:.1e}" if solver == "iterative" and op == "lsmesh" else "",
-                        iterations if solver == "iterative" and op == "lsmesh" else "",
-                        f"{diff:.1e}" if solver == "iterative" and diff != "" else "",
-                        round(os.getloadavg()[0], 1),
-                    ])
+                    rows.append(
+                        [
+                            kind,
+                            vertices,
+                            "LS mesh, 2% controls" if op == "lsmesh" else "global fairing, 2 iterations",
+                            solver,
+                            seconds,
+                            ratio,
+                            peak / 1024,
+                            (peak - base) / 1024,
+                            f"{residual:.1e}" if solver == "iterative" and op == "lsmesh" else "",
+                            iterations if solver == "iterative" and op == "lsmesh" else "",
+                            f"{diff:.1e}" if solver == "iterative" and diff != "" else "",
+                            round(os.getloadavg()[0], 1),
+                        ]
+                    )
     every = merged("scale.jsonl", HEADER, rows, 4)
     # the time ratio also across runs: a row's CHOLMOD partner may come from another invocation
     cholmod_time = {tuple(r[:3]): r[4] for r in every if r[3] == "cholmod"}
@@ -230,16 +279,20 @@ def main() -> None:
     )
     sections = [("CHOLMOD against the iterative path", table + note)]
     if studied:
-        sections.append((
-            "Preconditioner study (LS mesh, 2% controls, CG to relative residual 1e-10)",
-            markdown_table(STUDY_HEADER, studied)
-            + "\n\nSmoothed aggregation on the normal matrix with the constant as near-null space (ours) costs the "
-            "least: linear near-null-space candidates (B = [1, x, y, z]) save iterations (84 against 97 at 50k, "
-            "51 against 77 at 5k) but double the setup and raise the operator complexity, for no gain in time; AMG on the second-order graph Laplacian G (L = D^-1 G, so L^T L = G D^-2 G, applied as "
-            "G^-1 D^2 G^-1) leaves the control weights W^2 (2% of the diagonal) outside the preconditioner, and CG "
-            "pays about one iteration per outlying eigenvalue.",
-        ))
-    write_markdown("scale.md", "Scale: CHOLMOD against the iterative path (PCG + smoothed-aggregation AMG)", sections)
+        sections.append(
+            (
+                "Preconditioner study (LS mesh, 2% controls, CG to relative residual 1e-10)",
+                markdown_table(STUDY_HEADER, studied)
+                + "\n\nSmoothed aggregation on the normal matrix with the constant as near-null space (ours) costs the "
+                "least: linear near-null-space candidates (B = [1, x, y, z]) save iterations (84 against 97 at 50k, "
+                "51 against 77 at 5k) but double the setup and raise the operator complexity, for no gain in time; AMG on the second-order graph Laplacian G (L = D^-1 G, so L^T L = G D^-2 G, applied as "
+                "G^-1 D^2 G^-1) leaves the control weights W^2 (2% of the diagonal) outside the preconditioner, and CG "
+                "pays about one iteration per outlying eigenvalue.",
+            )
+        )
+    write_markdown(
+        "scale.md", "Scale: CHOLMOD against the iterative path (PCG + smoothed-aggregation AMG)", sections
+    )
 
 
 if __name__ == "__main__":

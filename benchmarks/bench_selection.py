@@ -37,11 +37,21 @@ def figure6(count: int, surface_points: int) -> str:
         approx = ls_mesh(mesh, indices)
         error = vertex_error(approx, mesh)
         surface = surface_distance(approx, mesh, number_of_points=surface_points)
-        rows.append([method, count, seconds, error["linf"], error["rms"], surface["rms"], surface["hausdorff"]])
+        rows.append(
+            [method, count, seconds, error["linf"], error["rms"], surface["rms"], surface["hausdorff"]]
+        )
         print(rows[-1], flush=True)
     best = {i: min(r[i] for r in rows) for i in (3, 4, 5)}
     table = markdown_table(
-        ["method", "control points", "selection s", "L-inf (vertex)", "RMS (vertex)", "surface L2 (Metro rms)", "surface Hausdorff"],
+        [
+            "method",
+            "control points",
+            "selection s",
+            "L-inf (vertex)",
+            "RMS (vertex)",
+            "surface L2 (Metro rms)",
+            "surface Hausdorff",
+        ],
         rows,
     )
     note = (
@@ -147,7 +157,18 @@ def update_timing(steps: int, refactor_steps: int) -> tuple[str, str]:
             refactor_times.append(time.perf_counter() - t0)
         step_update = float(np.median(step_times))
         step_refactor = float(np.median(refactor_times))
-        ratio_rows.append([name, ordering, n, steps, step_update, refactor_steps, step_refactor, step_refactor / step_update])
+        ratio_rows.append(
+            [
+                name,
+                ordering,
+                n,
+                steps,
+                step_update,
+                refactor_steps,
+                step_refactor,
+                step_refactor / step_update,
+            ]
+        )
         print(ratio_rows[-1], flush=True)
     table = markdown_table(
         [
@@ -170,7 +191,16 @@ def update_timing(steps: int, refactor_steps: int) -> tuple[str, str]:
         rows,
     )
     ratio = markdown_table(
-        ["mesh", "ordering", "vertices", "update steps", "median s per greedy step (update + solve)", "refactor steps", "median s per greedy step (refactor + solve)", "refactor / update"],
+        [
+            "mesh",
+            "ordering",
+            "vertices",
+            "update steps",
+            "median s per greedy step (update + solve)",
+            "refactor steps",
+            "median s per greedy step (refactor + solve)",
+            "refactor / update",
+        ],
         ratio_rows,
     )
     return table, ratio
@@ -179,7 +209,9 @@ def update_timing(steps: int, refactor_steps: int) -> tuple[str, str]:
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--quick", action="store_true", help="fewer control points and steps")
-    parser.add_argument("--updates-only", action="store_true", help="skip the screwdriver comparison (keeps its last table)")
+    parser.add_argument(
+        "--updates-only", action="store_true", help="skip the screwdriver comparison (keeps its last table)"
+    )
     args = parser.parse_args()
     count = 200 if args.quick else 1000
     steps = 50 if args.quick else 200
@@ -187,7 +219,9 @@ def main() -> None:
     if args.updates_only:
         previous = (RESULTS / "selection.md").read_text() if (RESULTS / "selection.md").exists() else ""
         heading = "## Figure 6: screwdriver, 1000 control points"
-        body = previous.split(heading, 1)[1].split("\n## ", 1)[0].strip() if heading in previous else "not run"
+        body = (
+            previous.split(heading, 1)[1].split("\n## ", 1)[0].strip() if heading in previous else "not run"
+        )
         sections = [(heading[3:], body)]
     else:
         title = "Figure 6: screwdriver, 1000 control points" if not args.quick else "Figure 6 (quick)"
@@ -196,8 +230,7 @@ def main() -> None:
     sections.append(
         (
             "Table I: per-anchor update against the geometry-aware bases paper",
-            table
-            + f"\n\nOurs: CHOLMOD through `SPDSolver`, weight 1, over the first {steps} greedy anchors "
+            table + f"\n\nOurs: CHOLMOD through `SPDSolver`, weight 1, over the first {steps} greedy anchors "
             "(the paper averages over up to n anchors). Medians, because 2 cores shared with other jobs give "
             "outliers (the worst column); the ratio uses the median. Paper: 2.4 GHz Pentium 4, TAUCS, Givens rotations. "
             "Camel (39k) is the 9,770-vertex camel subdivided once at the midpoints (39,074 vertices, the paper's count). "

@@ -65,13 +65,39 @@ def main() -> None:
             (vn, Un), tn = timed(lambda F=F, n=n, k=k: spectral_basis(F, n, k))
             unique = k > c and vn[k - 1] > 0
             projection = np.abs(Uo @ (Uo.T @ V) - Un @ (Un.T @ V)).max() / np.ptp(V, axis=0).max()
-            rows.append([name, n, c, k, to, tn, to / tn, float(np.abs(vo - vn).max()),
-                         f"{projection:.1e}" if unique else "n/a (k <= components)"])
+            rows.append(
+                [
+                    name,
+                    n,
+                    c,
+                    k,
+                    to,
+                    tn,
+                    to / tn,
+                    float(np.abs(vo - vn).max()),
+                    f"{projection:.1e}" if unique else "n/a (k <= components)",
+                ]
+            )
             print(rows[-1], flush=True)
-    table = markdown_table(["mesh", "n", "components", "k", "plain eigsh s", "deflated s", "speed-up",
-                            "max abs eigenvalue difference", "max projection difference / bbox"], rows)
-    write_markdown("spectral.md", "Spectral basis: null-space deflation against plain shift-invert eigsh",
-                   [("Time and agreement (interleaved, one run)", table + f"\n\nPython {sys.version.split()[0]}.")])
+    table = markdown_table(
+        [
+            "mesh",
+            "n",
+            "components",
+            "k",
+            "plain eigsh s",
+            "deflated s",
+            "speed-up",
+            "max abs eigenvalue difference",
+            "max projection difference / bbox",
+        ],
+        rows,
+    )
+    write_markdown(
+        "spectral.md",
+        "Spectral basis: null-space deflation against plain shift-invert eigsh",
+        [("Time and agreement (interleaved, one run)", table + f"\n\nPython {sys.version.split()[0]}.")],
+    )
 
 
 if __name__ == "__main__":

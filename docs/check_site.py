@@ -94,8 +94,13 @@ def expected_pages(build: Path) -> dict[str, dict]:
         if inspect.ismodule(obj):
             # What automodule :members: documents: the module's __all__, else what it defines itself.
             public = getattr(obj, "__all__", None) or [
-                n for n in dir(obj) if not n.startswith("_") and getattr(getattr(obj, n), "__module__", None) == obj.__name__]
-            ids = [f"{obj.__name__}.{n}" for n in public if callable(getattr(obj, n)) and getattr(obj, n).__doc__]
+                n
+                for n in dir(obj)
+                if not n.startswith("_") and getattr(getattr(obj, n), "__module__", None) == obj.__name__
+            ]
+            ids = [
+                f"{obj.__name__}.{n}" for n in public if callable(getattr(obj, n)) and getattr(obj, n).__doc__
+            ]
         else:
             ids = [f"o3d_lsmesh.{name}"]
         pages[f"api/{name}.html"] = {"ids": ids, "min_images": 0}
@@ -120,13 +125,27 @@ def run_browser(build: Path, pages: list[str], timeout: float) -> list[dict]:
     thread.start()
     frames = "\n".join(f'<iframe src="/{p}" width="1280" height="2400"></iframe>' for p in pages)
     check = build / CHECK_PAGE
-    check.write_text(f"<!DOCTYPE html><html><head><title>site check</title></head><body>\n{frames}\n{COLLECT}</body></html>\n")
+    check.write_text(
+        f"<!DOCTYPE html><html><head><title>site check</title></head><body>\n{frames}\n{COLLECT}</body></html>\n"
+    )
     profile = tempfile.mkdtemp(prefix="o3d_lsmesh_chromium_")
     try:
         url = f"http://127.0.0.1:{server.server_address[1]}/{CHECK_PAGE}"
-        cmd = [find_chromium(), "--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
-               "--disable-component-update", "--disable-sync", "--no-first-run", "--disable-dev-shm-usage",
-               f"--user-data-dir={profile}", "--virtual-time-budget=30000", "--dump-dom", url]
+        cmd = [
+            find_chromium(),
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--disable-background-networking",
+            "--disable-component-update",
+            "--disable-sync",
+            "--no-first-run",
+            "--disable-dev-shm-usage",
+            f"--user-data-dir={profile}",
+            "--virtual-time-budget=30000",
+            "--dump-dom",
+            url,
+        ]
         done = subprocess.run(cmd, check=False, capture_output=True, text=True, timeout=timeout)
     finally:
         server.shutdown()
@@ -134,7 +153,9 @@ def run_browser(build: Path, pages: list[str], timeout: float) -> list[dict]:
         shutil.rmtree(profile, ignore_errors=True)
     found = re.search(r'<pre id="site-check-result">(.*?)</pre>', done.stdout, re.DOTALL)
     if not found:
-        raise SystemExit(f"check_site: chromium returned no result (exit {done.returncode}):\n{done.stderr[-2000:]}")
+        raise SystemExit(
+            f"check_site: chromium returned no result (exit {done.returncode}):\n{done.stderr[-2000:]}"
+        )
     import html
 
     return json.loads(html.unescape(found.group(1)))
@@ -145,8 +166,9 @@ class _QuietHandler(http.server.SimpleHTTPRequestHandler):
         pass
 
 
-def check(build: Path, *, pages: dict[str, dict] | None = None,
-          timeout: float = 180.0) -> tuple[list[str], int, int, int]:
+def check(
+    build: Path, *, pages: dict[str, dict] | None = None, timeout: float = 180.0
+) -> tuple[list[str], int, int, int]:
     """Failures (empty when the site renders), page count, image count, typeset equation count."""
     pages = expected_pages(build) if pages is None else pages
     results = run_browser(build, list(pages), timeout)
@@ -163,8 +185,10 @@ def check(build: Path, *, pages: dict[str, dict] | None = None,
         if len(got["images"]) < want["min_images"]:
             failures.append(f"{page}: {len(got['images'])} images, expected at least {want['min_images']}")
         if got["typeset"] < got["math"] or got["mathErrors"]:
-            failures.append(f"{page}: {got['typeset']} of {got['math']} equations typeset by MathJax, "
-                            f"{got['mathErrors']} with errors")
+            failures.append(
+                f"{page}: {got['typeset']} of {got['math']} equations typeset by MathJax, "
+                f"{got['mathErrors']} with errors"
+            )
         for image in got["images"]:
             if not image["ok"]:
                 failures.append(f"{page}: image {image['src']} did not render")
@@ -182,12 +206,17 @@ def self_test() -> None:
         site = Path(tmp)
         shutil.copyfile(HERE / "images" / "01_denoise_scan.png", site / "good.png")
         (site / "corrupt.png").write_bytes(b"not a png")
-        (site / "ok.html").write_text('<html><body><dl><dt id="o3d_lsmesh.good">good</dt></dl>'
-                                      '<img src="good.png"></body></html>')
-        (site / "bad.html").write_text('<html><body><dl><dt id="o3d_lsmesh.other">other</dt></dl>'
-                                       '<img src="corrupt.png"><img src="gone.png"></body></html>')
-        pages = {"ok.html": {"ids": ["o3d_lsmesh.good"], "min_images": 1},
-                 "bad.html": {"ids": ["o3d_lsmesh.wanted"], "min_images": 3}}
+        (site / "ok.html").write_text(
+            '<html><body><dl><dt id="o3d_lsmesh.good">good</dt></dl><img src="good.png"></body></html>'
+        )
+        (site / "bad.html").write_text(
+            '<html><body><dl><dt id="o3d_lsmesh.other">other</dt></dl>'
+            '<img src="corrupt.png"><img src="gone.png"></body></html>'
+        )
+        pages = {
+            "ok.html": {"ids": ["o3d_lsmesh.good"], "min_images": 1},
+            "bad.html": {"ids": ["o3d_lsmesh.wanted"], "min_images": 3},
+        }
         failures, n_pages, n_images, _ = check(site, pages=pages, timeout=60.0)
     expected = [
         "bad.html: no element with id 'o3d_lsmesh.wanted'",
@@ -197,8 +226,10 @@ def self_test() -> None:
         "bad.html: image file gone.png missing from the build",
     ]
     if sorted(failures) != sorted(expected) or (n_pages, n_images) != (2, 3):
-        raise SystemExit(f"check_site: self-test failed: the checker reported {failures} on {n_pages} pages, "
-                         f"{n_images} images; expected {expected} on 2 pages, 3 images")
+        raise SystemExit(
+            f"check_site: self-test failed: the checker reported {failures} on {n_pages} pages, "
+            f"{n_images} images; expected {expected} on 2 pages, 3 images"
+        )
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -212,8 +243,10 @@ def main(argv: list[str] | None = None) -> int:
     if failures:
         print("check_site: FAILED\n  " + "\n  ".join(failures))
         return 1
-    print(f"check_site: {n_pages} pages loaded in Chromium, {n_images} images and {n_math} equations rendered, "
-          f"every public name's page has its anchor ({build})")
+    print(
+        f"check_site: {n_pages} pages loaded in Chromium, {n_images} images and {n_math} equations rendered, "
+        f"every public name's page has its anchor ({build})"
+    )
     return 0
 
 

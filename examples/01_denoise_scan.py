@@ -63,8 +63,11 @@ def main(argv=None) -> int:
     for name, mesh in (("constrained fairing (ours)", ours), ("Open3D filter_smooth_laplacian", laplacian)):
         moved = np.linalg.norm(np.asarray(mesh.vertices) - np.asarray(noisy.vertices), axis=1).mean()
         change = 100.0 * (signed_volume(mesh) - volume) / volume
-        error = (np.linalg.norm(np.asarray(mesh.vertices) - np.asarray(clean.vertices), axis=1).mean()
-                 if clean is not None else float("nan"))
+        error = (
+            np.linalg.norm(np.asarray(mesh.vertices) - np.asarray(clean.vertices), axis=1).mean()
+            if clean is not None
+            else float("nan")
+        )
         print(f"{name:32s} {change:16.3f} {moved:10.5f} {error:11.5f}")
     print(f"constrained fairing: {args.iterations} iterations in {seconds:.3f} s")
 
@@ -73,7 +76,10 @@ def main(argv=None) -> int:
         path = Path(args.out) / "01_denoise_scan.png"
         panels = [noisy, ours, laplacian] + ([clean] if clean is not None else [])
         render(panels, path, width=360, height=360, reference=clean)
-        print(f"picture: {path} (noisy | ours | Laplacian" + (" | clean; colored by distance to clean)" if clean else ")"))
+        print(
+            f"picture: {path} (noisy | ours | Laplacian"
+            + (" | clean; colored by distance to clean)" if clean else ")")
+        )
     return 0
 
 

@@ -49,8 +49,10 @@ def main(argv=None) -> int:
     vertices = np.asarray(mesh.vertices)
     start = time.perf_counter()
     hierarchy = build_hierarchy(mesh)
-    print(f"input: {len(vertices)} vertices; hierarchy: {len(hierarchy)} levels down to "
-          f"{hierarchy.vertex_count(len(hierarchy) - 1)} vertices in {time.perf_counter() - start:.2f} s")
+    print(
+        f"input: {len(vertices)} vertices; hierarchy: {len(hierarchy)} levels down to "
+        f"{hierarchy.vertex_count(len(hierarchy) - 1)} vertices in {time.perf_counter() - start:.2f} s"
+    )
 
     L = laplacian(mesh)
     volume = signed_volume(mesh)
@@ -58,7 +60,9 @@ def main(argv=None) -> int:
     # "mean move" grows with the level: coarser levels change larger features. The finest-scale
     # roughness |Lx| is what level 0 (plain fairing) attacks; at higher levels the split vertices,
     # placed by Kobbelt's step, keep a little of it.
-    print(f"{'level':>5s} {'vertices at level':>18s} {'mean move':>10s} {'roughness |Lx|':>15s} {'volume %':>9s}")
+    print(
+        f"{'level':>5s} {'vertices at level':>18s} {'mean move':>10s} {'roughness |Lx|':>15s} {'volume %':>9s}"
+    )
     results = []
     for level in levels:
         out = multiresolution_fairing(mesh, level, hierarchy=hierarchy, number_of_iterations=5)

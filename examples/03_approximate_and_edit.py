@@ -36,7 +36,9 @@ from o3d_lsmesh.selection import approximate
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("mesh", nargs="?", help="a triangle mesh file (default: built-in blob)")
-    parser.add_argument("--count", type=int, default=None, help="control points (default 2%% of the vertices)")
+    parser.add_argument(
+        "--count", type=int, default=None, help="control points (default 2%% of the vertices)"
+    )
     parser.add_argument("--out", help="folder for the picture")
     args = parser.parse_args(argv)
 
@@ -50,7 +52,9 @@ def main(argv=None) -> int:
     seconds = time.perf_counter() - start
     error = np.linalg.norm(np.asarray(approximation.vertices) - vertices, axis=1)
     print(f"input: {len(vertices)} vertices; {count} greedy control points in {seconds:.2f} s")
-    print(f"approximation error / bounding-box diagonal: max {error.max() / size:.5f}, RMS {np.sqrt(np.mean(error**2)) / size:.5f}")
+    print(
+        f"approximation error / bounding-box diagonal: max {error.max() / size:.5f}, RMS {np.sqrt(np.mean(error**2)) / size:.5f}"
+    )
 
     # The same system as approximate(): solve() reproduces its result, and edits reuse the factor.
     start = time.perf_counter()
@@ -72,15 +76,26 @@ def main(argv=None) -> int:
     achieved = moved[indices[handles], 2].mean()
     low = vertices[:, 2] < np.percentile(vertices[:, 2], 20)
     print(f"solver.solve() vs approximate(): max difference {same:.2e}")
-    print(f"edit: {handles.sum()} handles lifted by {lift:.4f}; they moved {achieved:.4f} on average "
-          f"(soft constraints, weight 1); the bottom 20% moved {np.linalg.norm(moved[low], axis=1).mean():.2e}")
-    print(f"factor {factor_seconds * 1000:.1f} ms, each edit {edit_seconds * 1000:.1f} ms "
-          f"({factor_seconds / max(edit_seconds, 1e-9):.1f}x faster than refactoring)")
+    print(
+        f"edit: {handles.sum()} handles lifted by {lift:.4f}; they moved {achieved:.4f} on average "
+        f"(soft constraints, weight 1); the bottom 20% moved {np.linalg.norm(moved[low], axis=1).mean():.2e}"
+    )
+    print(
+        f"factor {factor_seconds * 1000:.1f} ms, each edit {edit_seconds * 1000:.1f} ms "
+        f"({factor_seconds / max(edit_seconds, 1e-9):.1f}x faster than refactoring)"
+    )
 
     if args.out:
         Path(args.out).mkdir(parents=True, exist_ok=True)
         path = Path(args.out) / "03_approximate_and_edit.png"
-        render([mesh, approximation, edited], path, width=360, height=360, view_direction=(1.0, -0.6, 0.3), up=(0, 0, 1))
+        render(
+            [mesh, approximation, edited],
+            path,
+            width=360,
+            height=360,
+            view_direction=(1.0, -0.6, 0.3),
+            up=(0, 0, 1),
+        )
         print(f"picture: {path} (input | {count}-point approximation | edited)")
     return 0
 

@@ -57,8 +57,12 @@ def main(argv=None) -> int:
     error = np.linalg.norm(result[unknown] - truth[unknown], axis=1)
     size = np.linalg.norm(truth.max(axis=0) - truth.min(axis=0))
     known = np.setdiff1d(np.arange(n), unknown)
-    print(f"input: {n} vertices; {len(unknown)} unknown ({100 * len(unknown) / n:.1f}%) reconstructed in {seconds * 1000:.1f} ms")
-    print(f"error at the unknown vertices / bounding-box diagonal: mean {error.mean() / size:.5f}, max {error.max() / size:.5f}")
+    print(
+        f"input: {n} vertices; {len(unknown)} unknown ({100 * len(unknown) / n:.1f}%) reconstructed in {seconds * 1000:.1f} ms"
+    )
+    print(
+        f"error at the unknown vertices / bounding-box diagonal: mean {error.mean() / size:.5f}, max {error.max() / size:.5f}"
+    )
     print(f"known vertices unchanged: {np.array_equal(result[known], truth[known])}")
     print(f"region radius / diagonal: {distance[unknown].max() / size:.4f}")
 

@@ -48,8 +48,10 @@ def main(argv=None) -> int:
 
     start = time.perf_counter()
     data = encode_geometry(mesh, count, bits=args.bits)
-    print(f"input: {n} vertices; {count} anchors at {args.bits} bits -> {len(data)} bytes "
-          f"({8 * len(data) / n:.2f} bits per vertex) in {time.perf_counter() - start:.2f} s")
+    print(
+        f"input: {n} vertices; {count} anchors at {args.bits} bits -> {len(data)} bytes "
+        f"({8 * len(data) / n:.2f} bits per vertex) in {time.perf_counter() - start:.2f} s"
+    )
     print(f"(uncompressed float32 positions: {12 * n} bytes)")
 
     step = max(1, count // 6)
@@ -71,7 +73,9 @@ def main(argv=None) -> int:
         path = Path(args.out) / "05_progressive_decoding.png"
         picks = [snapshots[0], snapshots[len(snapshots) // 2], snapshots[-1], mesh]
         render(picks, path, width=300, height=300, reference=mesh, view_direction=(0.3, 0.4, 1.0))
-        print(f"picture: {path} (first, middle, last decoded | original; colored by distance to the original)")
+        print(
+            f"picture: {path} (first, middle, last decoded | original; colored by distance to the original)"
+        )
     return 0
 
 

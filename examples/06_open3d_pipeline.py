@@ -56,25 +56,37 @@ def main(argv=None) -> int:
             .filter_smooth_constrained(5)
         )
         legacy.compute_vertex_normals()
-        print(f"legacy pipeline: {len(mesh.vertices)} -> {len(legacy.vertices)} vertices in "
-              f"{time.perf_counter() - start:.2f} s; volume {signed_volume(mesh):.4f} -> {signed_volume(legacy):.4f}")
+        print(
+            f"legacy pipeline: {len(mesh.vertices)} -> {len(legacy.vertices)} vertices in "
+            f"{time.perf_counter() - start:.2f} s; volume {signed_volume(mesh):.4f} -> {signed_volume(legacy):.4f}"
+        )
 
         # The same on a tensor mesh: device and dtypes are kept.
         tensor = o3d.t.geometry.TriangleMesh.from_legacy(mesh)
         start = time.perf_counter()
-        tensor_out = tensor.filter_smooth_constrained(10, reimpose_every=2).simplify_quadric_decimation(target_reduction=0.75)
-        print(f"tensor pipeline: {tensor.vertex.positions.shape[0]} -> {tensor_out.vertex.positions.shape[0]} vertices "
-              f"in {time.perf_counter() - start:.2f} s on {tensor_out.device}, positions {tensor_out.vertex.positions.dtype}")
+        tensor_out = tensor.filter_smooth_constrained(10, reimpose_every=2).simplify_quadric_decimation(
+            target_reduction=0.75
+        )
+        print(
+            f"tensor pipeline: {tensor.vertex.positions.shape[0]} -> {tensor_out.vertex.positions.shape[0]} vertices "
+            f"in {time.perf_counter() - start:.2f} s on {tensor_out.device}, positions {tensor_out.vertex.positions.dtype}"
+        )
 
         # Least-squares steps chain too: approximate from 2% control points, then restore a patch.
         approx = mesh.filter_smooth_constrained(10).approximate_ls(max(1, len(mesh.vertices) // 50))
-        top = np.flatnonzero(np.asarray(approx.vertices)[:, 2] > np.percentile(np.asarray(approx.vertices)[:, 2], 95))
+        top = np.flatnonzero(
+            np.asarray(approx.vertices)[:, 2] > np.percentile(np.asarray(approx.vertices)[:, 2], 95)
+        )
         restored = approx.reconstruct_geometry(top)
         error = np.linalg.norm(np.asarray(restored.vertices) - np.asarray(approx.vertices), axis=1)
-        print(f"approximate_ls + reconstruct_geometry: {len(top)} vertices rebuilt, max change {error.max():.2e}")
+        print(
+            f"approximate_ls + reconstruct_geometry: {len(top)} vertices rebuilt, max change {error.max():.2e}"
+        )
     finally:
         unregister()
-    print(f"after unregister(): hasattr(mesh, 'filter_smooth_constrained') = {hasattr(mesh, 'filter_smooth_constrained')}")
+    print(
+        f"after unregister(): hasattr(mesh, 'filter_smooth_constrained') = {hasattr(mesh, 'filter_smooth_constrained')}"
+    )
 
     if args.out:
         Path(args.out).mkdir(parents=True, exist_ok=True)

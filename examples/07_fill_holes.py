@@ -40,7 +40,9 @@ def cut_disk(mesh, centre: int, radius: float):
     """The mesh without the triangles within geodesic (edge-path) ``radius`` of vertex ``centre``."""
     V, T = np.asarray(mesh.vertices), np.asarray(mesh.triangles)
     e = np.concatenate([T[:, [0, 1]], T[:, [1, 2]], T[:, [2, 0]]])
-    graph = coo_matrix((np.linalg.norm(V[e[:, 0]] - V[e[:, 1]], axis=1), (e[:, 0], e[:, 1])), shape=(len(V),) * 2)
+    graph = coo_matrix(
+        (np.linalg.norm(V[e[:, 0]] - V[e[:, 1]], axis=1), (e[:, 0], e[:, 1])), shape=(len(V),) * 2
+    )
     inside = dijkstra(graph.tocsr(), directed=False, indices=centre, limit=radius * 1.01) < radius
     holed = o3d.geometry.TriangleMesh(mesh)
     holed.remove_triangles_by_mask(inside[T].any(axis=1))
@@ -73,21 +75,27 @@ def main(argv=None) -> int:
     holed = cut_disk(holed, int(np.argmin(np.asarray(holed.vertices)[:, 1])), args.radius * h)
     truth = o3d.t.geometry.RaycastingScene()
     truth.add_triangles(o3d.t.geometry.TriangleMesh.from_legacy(mesh))
-    print(f"input: {len(V)} vertices, mean edge h = {h:.4g}; two holes of radius {args.radius:g} h "
-          f"({len(holed.triangles)} triangles left)")
+    print(
+        f"input: {len(V)} vertices, mean edge h = {h:.4g}; two holes of radius {args.radius:g} h "
+        f"({len(holed.triangles)} triangles left)"
+    )
     print("continuity  new vertices  mean distance to truth (h)  max (h)  closed  time (ms)")
     filled = None
     for continuity in (0, 1, 2):
         start = time.perf_counter()
         out = fill_holes(holed, continuity=continuity)
         seconds = time.perf_counter() - start
-        new = np.asarray(out.vertices)[len(holed.vertices):]
+        new = np.asarray(out.vertices)[len(holed.vertices) :]
         d = truth.compute_distance(o3d.core.Tensor(new.astype(np.float32))).numpy() / h
-        print(f"{continuity:10d}  {len(new):12d}  {d.mean():26.4f}  {d.max():7.3f}  {out.is_watertight()!s:6s}"
-              f"  {1000 * seconds:9.1f}")
+        print(
+            f"{continuity:10d}  {len(new):12d}  {d.mean():26.4f}  {d.max():7.3f}  {out.is_watertight()!s:6s}"
+            f"  {1000 * seconds:9.1f}"
+        )
         filled = out
-    print(f"signed volume: input {mesh.get_volume() if mesh.is_watertight() else float('nan'):.5g}, "
-          f"filled {filled.get_volume():.5g}")
+    print(
+        f"signed volume: input {mesh.get_volume() if mesh.is_watertight() else float('nan'):.5g}, "
+        f"filled {filled.get_volume():.5g}"
+    )
 
     if args.out:
         Path(args.out).mkdir(parents=True, exist_ok=True)
@@ -97,8 +105,10 @@ def main(argv=None) -> int:
         normal = np.asarray(mesh.compute_vertex_normals().vertex_normals)[int(np.argmax(V[:, 0]))]
         crop = [crop_ball(m, centre, 3.5 * args.radius * h) for m in (holed, filled)]
         render(crop, path, width=360, height=360, reference=mesh, error_max=0.5 * h, view_direction=normal)
-        print(f"picture: {path} (holed | filled with continuity 2, colored by distance to the original, "
-              "yellow = 0.5 h)")
+        print(
+            f"picture: {path} (holed | filled with continuity 2, colored by distance to the original, "
+            "yellow = 0.5 h)"
+        )
     return 0
 
 

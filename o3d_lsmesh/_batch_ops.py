@@ -33,24 +33,25 @@ import shutil
 import sys
 import time
 import uuid
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any, Callable
 
 import numpy as np
 
 __all__ = [
-    "Option",
-    "BatchOp",
-    "TaskContext",
     "OPS",
-    "register_op",
+    "READABLE",
+    "RESERVED",
+    "WRITABLE",
+    "BatchOp",
+    "Option",
+    "TaskContext",
     "parse_ops",
+    "register_op",
     "resolve_options",
     "run_task",
-    "READABLE",
-    "WRITABLE",
-    "RESERVED",
 ]
 
 #: Mesh files a folder INPUT is searched for.
@@ -58,8 +59,25 @@ READABLE = (".ply", ".obj", ".stl", ".off", ".gltf", ".glb")
 #: Extensions Open3D 0.20 writes back readably (its .glb writer produces files it cannot read back).
 WRITABLE = (".ply", ".obj", ".stl", ".off", ".gltf")
 #: Names an operation option may not take: they are flags of ``o3d-lsmesh batch`` itself.
-RESERVED = frozenset({"op", "workers", "threads_per_worker", "scheduler", "scheduler_file", "resume", "report",
-                      "retries", "fail_fast", "suffix", "set", "quiet", "json", "force", "help"})
+RESERVED = frozenset(
+    {
+        "op",
+        "workers",
+        "threads_per_worker",
+        "scheduler",
+        "scheduler_file",
+        "resume",
+        "report",
+        "retries",
+        "fail_fast",
+        "suffix",
+        "set",
+        "quiet",
+        "json",
+        "force",
+        "help",
+    }
+)
 
 
 # --------------------------------------------------------------------------- option parsers
@@ -173,7 +191,7 @@ class BatchOp:
     """
 
     name: str
-    function: Callable[[Any, dict, "TaskContext"], tuple[Any, dict]]
+    function: Callable[[Any, dict, TaskContext], tuple[Any, dict]]
     options: tuple[Option, ...] = ()
     output: str = "mesh"
     extension: str = ""
@@ -186,7 +204,9 @@ class BatchOp:
             raise ValueError(f"extension must start with '.' for a bytes output, got {self.extension!r}")
         for option in self.options:
             if option.name in RESERVED:
-                raise ValueError(f"option name {option.name!r} of op {self.name!r} is a flag of the batch itself")
+                raise ValueError(
+                    f"option name {option.name!r} of op {self.name!r} is a flag of the batch itself"
+                )
 
 
 @dataclass(frozen=True)
@@ -217,7 +237,9 @@ def parse_ops(op: Any) -> list[BatchOp]:
     elif isinstance(op, Sequence):
         items = list(op)
     else:
-        raise TypeError(f"op must be a name, a comma-separated pipeline or a list of names, got {type(op).__name__}")
+        raise TypeError(
+            f"op must be a name, a comma-separated pipeline or a list of names, got {type(op).__name__}"
+        )
     ops = []
     for item in items:
         if isinstance(item, BatchOp):
@@ -225,14 +247,18 @@ def parse_ops(op: Any) -> list[BatchOp]:
             continue
         name = str(item).strip()
         if name not in OPS:
-            raise ValueError(f"--op must be one of {', '.join(sorted(OPS))} or a pipeline like 'denoise,compare', "
-                             f"got {name!r}")
+            raise ValueError(
+                f"--op must be one of {', '.join(sorted(OPS))} or a pipeline like 'denoise,compare', "
+                f"got {name!r}"
+            )
         ops.append(OPS[name])
     if not ops:
         raise ValueError(f"--op must name at least one operation, got {op!r}")
     for first in ops[:-1]:
         if first.output != "mesh":
-            raise ValueError(f"--op {first.name!r} writes {first.output}, not a mesh, so it must be last in a pipeline")
+            raise ValueError(
+                f"--op {first.name!r} writes {first.output}, not a mesh, so it must be last in a pipeline"
+            )
     return ops
 
 
@@ -259,13 +285,17 @@ def resolve_options(ops: Sequence[BatchOp], options: Mapping[str, Any] | None) -
     pipeline = ",".join(op.name for op in ops)
     for name in shared:
         if name not in known:
-            raise ValueError(f"--{name.replace('_', '-')} is not an option of --op {pipeline} "
-                             f"(its options: {', '.join(sorted(known)) or 'none'})")
+            raise ValueError(
+                f"--{name.replace('_', '-')} is not an option of --op {pipeline} "
+                f"(its options: {', '.join(sorted(known)) or 'none'})"
+            )
     for op_name, name in specific:
         op = next(op for op in ops if op.name == op_name)
         if name not in {option.name for option in op.options}:
-            raise ValueError(f"--set {op_name}.{name}: {op_name} has no option {name!r} "
-                             f"(its options: {', '.join(o.name for o in op.options) or 'none'})")
+            raise ValueError(
+                f"--set {op_name}.{name}: {op_name} has no option {name!r} "
+                f"(its options: {', '.join(o.name for o in op.options) or 'none'})"
+            )
     resolved = []
     for op in ops:
         values = {}
@@ -327,7 +357,9 @@ def read_mesh_file(path: str) -> Any:
     with _quiet_native_output():
         mesh = o3d.io.read_triangle_mesh(path)
     if len(mesh.vertices) == 0:
-        raise ValueError(f"INPUT {path!r} could not be read as a triangle mesh (corrupt or unsupported format)")
+        raise ValueError(
+            f"INPUT {path!r} could not be read as a triangle mesh (corrupt or unsupported format)"
+        )
     if len(mesh.triangles) == 0:
         raise ValueError(f"INPUT {path!r} has {len(mesh.vertices)} vertices but no triangles")
     if Path(path).suffix.lower() == ".stl":
@@ -368,7 +400,9 @@ def write_atomic(value: Any, final: Path, *, kind: str, suffix: str) -> None:
         temporary.mkdir()
         try:
             for name, item in value.items():
-                _write_item(item, temporary / (name if isinstance(item, (bytes, bytearray)) else name + suffix))
+                _write_item(
+                    item, temporary / (name if isinstance(item, (bytes, bytearray)) else name + suffix)
+                )
             if final.exists():
                 # A folder cannot be replaced in one step: move the old one aside first.
                 old = final.with_name(f".{final.name}.{uuid.uuid4().hex[:12]}.old")
@@ -454,15 +488,35 @@ def _size(mesh: Any) -> tuple[int, int]:
     return len(mesh.vertices), len(mesh.triangles)
 
 
-def run_task(path: str, relative: str, outdir: str, ops: Sequence[BatchOp], options: Sequence[dict], suffix: str,
-             threads: int | None, key: str) -> dict:
+def run_task(
+    path: str,
+    relative: str,
+    outdir: str,
+    ops: Sequence[BatchOp],
+    options: Sequence[dict],
+    suffix: str,
+    threads: int | None,
+    key: str,
+) -> dict:
     """Read ``path``, run the pipeline, write the result; return the JSON record (never raises an Exception)."""
     start, cpu = time.perf_counter(), time.process_time()
     record: dict[str, Any] = {
-        "input": path, "output": None, "status": "failed", "error": None, "stage": "read",
-        "op": ",".join(op.name for op in ops), "key": key, "seconds": None, "cpu_seconds": None,
-        "worker": _worker_address(), "pid": os.getpid(), "vertices_before": None, "triangles_before": None,
-        "vertices_after": None, "triangles_after": None, "metrics": {},
+        "input": path,
+        "output": None,
+        "status": "failed",
+        "error": None,
+        "stage": "read",
+        "op": ",".join(op.name for op in ops),
+        "key": key,
+        "seconds": None,
+        "cpu_seconds": None,
+        "worker": _worker_address(),
+        "pid": os.getpid(),
+        "vertices_before": None,
+        "triangles_before": None,
+        "vertices_after": None,
+        "triangles_after": None,
+        "metrics": {},
     }
     try:
         configure_threads(threads)
@@ -473,7 +527,9 @@ def run_task(path: str, relative: str, outdir: str, ops: Sequence[BatchOp], opti
         for index, (op, values) in enumerate(zip(ops, options)):
             record["stage"] = op.name
             current, metrics = op.function(current, dict(values), context)
-            record["metrics"][op.name if op.name not in record["metrics"] else f"{op.name}#{index + 1}"] = metrics
+            record["metrics"][op.name if op.name not in record["metrics"] else f"{op.name}#{index + 1}"] = (
+                metrics
+            )
         last = ops[-1]
         if last.output == "mesh":
             record["vertices_after"], record["triangles_after"] = _size(current)
@@ -483,7 +539,7 @@ def run_task(path: str, relative: str, outdir: str, ops: Sequence[BatchOp], opti
             write_atomic(current, target, kind=last.output, suffix=suffix)
             record["output"] = str(target)
         record["status"], record["stage"] = "ok", None
-    except Exception as error:  # noqa: BLE001 - every failure of one file is a record, not the end of the batch
+    except Exception as error:
         record["error"] = f"{type(error).__name__}: {error}"
     record["seconds"] = time.perf_counter() - start
     record["cpu_seconds"] = time.process_time() - cpu  # CPU time of this worker process (all its threads)
@@ -520,21 +576,35 @@ def _denoise(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]
         from .fairing.constrained import resolved_options
 
         # no flag: the API's defaults (method='scan'); the record names what ran
-        method, iterations = resolved_options(options["method"], options["iterations"], options["reimpose_every"])
-        out = constrained_fairing(mesh, iterations, method=method, mu=options["mu"],
-                                  smooth_boundary=not options["fixed_boundary"],
-                                  reimpose_every=options["reimpose_every"])
+        method, iterations = resolved_options(
+            options["method"], options["iterations"], options["reimpose_every"]
+        )
+        out = constrained_fairing(
+            mesh,
+            iterations,
+            method=method,
+            mu=options["mu"],
+            smooth_boundary=not options["fixed_boundary"],
+            reimpose_every=options["reimpose_every"],
+        )
     return out, {"method": method, "iterations": iterations, "level": level, **_change(mesh, out)}
 
 
 def _fill(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
     from .hole_filling import fill_holes
 
-    out = fill_holes(mesh, max_hole_edges=options["max_hole_edges"], max_hole_diameter=options["max_hole_diameter"],
-                     continuity=int(options["continuity"]), density=options["density"],
-                     fill_border=options["fill_border"])
-    return out, {"new_vertices": len(out.vertices) - len(mesh.vertices),
-                 "new_triangles": len(out.triangles) - len(mesh.triangles)}
+    out = fill_holes(
+        mesh,
+        max_hole_edges=options["max_hole_edges"],
+        max_hole_diameter=options["max_hole_diameter"],
+        continuity=int(options["continuity"]),
+        density=options["density"],
+        fill_border=options["fill_border"],
+    )
+    return out, {
+        "new_vertices": len(out.vertices) - len(mesh.vertices),
+        "new_triangles": len(out.triangles) - len(mesh.triangles),
+    }
 
 
 def _parse_levels(spec: str, count: int) -> list[int]:
@@ -543,7 +613,9 @@ def _parse_levels(spec: str, count: int) -> list[int]:
     levels = sorted({int(item) for item in spec.split(",") if item.strip()})
     bad = [level for level in levels if not 0 <= level < count]
     if bad or not levels:
-        raise ValueError(f"--levels must be in 0..{count - 1} (this hierarchy has {count} levels), got {spec!r}")
+        raise ValueError(
+            f"--levels must be in 0..{count - 1} (this hierarchy has {count} levels), got {spec!r}"
+        )
     return levels
 
 
@@ -568,11 +640,19 @@ def _hierarchy(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dic
     files: dict[str, Any] = {f"level_{level:02d}": hierarchy.level(level) for level in levels}
     if options["maps"]:
         buffer = io.BytesIO()
-        np.savez_compressed(buffer, **{f"level_{level:02d}": np.asarray(hierarchy.vertex_map(level), dtype=np.int64)
-                                       for level in levels})
+        np.savez_compressed(
+            buffer,
+            **{
+                f"level_{level:02d}": np.asarray(hierarchy.vertex_map(level), dtype=np.int64)
+                for level in levels
+            },
+        )
         files["vertex_maps.npz"] = buffer.getvalue()
-    return files, {"levels": len(hierarchy), "written_levels": levels,
-                   "vertex_counts": [int(hierarchy.vertex_count(i)) for i in range(len(hierarchy))]}
+    return files, {
+        "levels": len(hierarchy),
+        "written_levels": levels,
+        "vertex_counts": [int(hierarchy.vertex_count(i)) for i in range(len(hierarchy))],
+    }
 
 
 def _approximate(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
@@ -580,11 +660,16 @@ def _approximate(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, d
     from .selection import approximate
 
     count = _resolve_count(options["count"], len(mesh.vertices))
-    out, indices = approximate(mesh, count, method=options["method"], interpolate=options["interpolate"],
-                               seed=options["seed"])
+    out, indices = approximate(
+        mesh, count, method=options["method"], interpolate=options["interpolate"], seed=options["seed"]
+    )
     error = vertex_error(out, mesh)
-    return out, {"count": int(len(indices)), "method": options["method"], "error_linf": error["linf"],
-                 "error_rms": error["rms"]}
+    return out, {
+        "count": len(indices),
+        "method": options["method"],
+        "error_linf": error["linf"],
+        "error_rms": error["rms"],
+    }
 
 
 def _encode(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
@@ -595,8 +680,14 @@ def _encode(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
     count = _resolve_count(options["count"], n)
     data = encode_geometry(mesh, count, bits=options["bits"], method=options["method"])
     error = vertex_error(decode_geometry(mesh, data), mesh)
-    return data, {"anchors": count, "bits": options["bits"], "bytes": len(data), "bits_per_vertex": 8.0 * len(data) / n,
-                  "decoded_error_linf": error["linf"], "decoded_error_rms": error["rms"]}
+    return data, {
+        "anchors": count,
+        "bits": options["bits"],
+        "bytes": len(data),
+        "bits_per_vertex": 8.0 * len(data) / n,
+        "decoded_error_linf": error["linf"],
+        "decoded_error_rms": error["rms"],
+    }
 
 
 def find_reference(folder: str, relative: str) -> str:
@@ -610,8 +701,10 @@ def find_reference(folder: str, relative: str) -> str:
         candidate = base / stem.with_name(stem.name + extension)
         if candidate.is_file():
             return str(candidate)
-    raise ValueError(f"--reference {folder!r} has no file matching {relative!r} (same name, or same stem with "
-                     f"one of {', '.join(READABLE)})")
+    raise ValueError(
+        f"--reference {folder!r} has no file matching {relative!r} (same name, or same stem with "
+        f"one of {', '.join(READABLE)})"
+    )
 
 
 def _folder(value: Any) -> str:
@@ -625,11 +718,14 @@ def _compare(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]
     from .metrics import surface_distance, vertex_error
 
     if options["reference"] is None:
-        raise ValueError("--reference FOLDER is required by --op compare (the file each input is compared with)")
+        raise ValueError(
+            "--reference FOLDER is required by --op compare (the file each input is compared with)"
+        )
     reference_path = find_reference(options["reference"], context.relative)
     reference = read_mesh_file(reference_path)
     metrics: dict[str, Any] = {
-        "reference": reference_path, "vertices_reference": len(reference.vertices),
+        "reference": reference_path,
+        "vertices_reference": len(reference.vertices),
         "surface_distance": surface_distance(mesh, reference, number_of_points=options["points"]),
     }
     if len(mesh.vertices) == len(reference.vertices):
@@ -640,45 +736,124 @@ def _compare(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]
 
 _METHODS = ("greedy", "random", "combined")
 
-register_op(BatchOp("denoise", _denoise, help="barycenter-constrained (or multiresolution with --level) fairing",
-                    options=(
-    Option("iterations", optional(int_at_least(0)), None,
-           "number_of_iterations (default: the API's; with --level, 5 per level)"),
-    Option("method", optional(choice("scan", "local", "global")), None,
-           "fairing energy (default: scan, the API's; local with --level or --reimpose-every)"),
-    Option("level", int_at_least(0), 0, "multiresolution level (0: plain fairing)"),
-    Option("mu", optional(real), None, "barycenter penalty weight of --method global or scan"),
-    Option("reimpose_every", optional(int_at_least(1)), None, "re-take the barycenters every k iterations"),
-    Option("fixed_boundary", flag, False, "keep boundary vertices fixed", is_flag=True),
-)))
-register_op(BatchOp("fill", _fill, help="fill holes with faired patches (LS meshes)", options=(
-    Option("max_hole_edges", optional(int_at_least(3)), None, "fill only holes of at most this many edges"),
-    Option("max_hole_diameter", optional(real), None, "fill only holes at most this wide (mesh units)"),
-    Option("continuity", choice("0", "1", "2"), "2", "0 harmonic, 1 LS mesh, 2 tri-Laplacian"),
-    Option("density", real, 1.0, "new vertex density relative to the surroundings"),
-    Option("fill_border", flag, False, "also fill the outer border of open components", is_flag=True),
-)))
-register_op(BatchOp("hierarchy", _hierarchy, output="files", help="levels of the volume-cost collapse hierarchy, "
-                    "written to OUTDIR/<name>/level_NN<suffix>", options=(
-    Option("levels", _levels_spec, "all", "'all' or comma-separated level numbers (0 is the input)"),
-    Option("min_vertices", int_at_least(1), 100, "stop coarsening below this many vertices"),
-    Option("max_levels", optional(int_at_least(1)), None, "at most this many levels"),
-    Option("maps", flag, False, "also write vertex_maps.npz", is_flag=True),
-)))
-register_op(BatchOp("approximate", _approximate, help="LS-mesh approximation from control points", options=(
-    Option("count", count_or_percent, "2%", "control points: a count, or a share of each mesh's vertices like 2%"),
-    Option("method", choice(*_METHODS), "greedy", "control point selection: greedy, random or combined"),
-    Option("interpolate", flag, False, "interpolate the control points exactly", is_flag=True),
-    Option("seed", int_at_least(0), 0, "seed of the random selections"),
-)))
-register_op(BatchOp("encode", _encode, output="bytes", extension=".bin", help="quantized LS-mesh anchors, written "
-                    "as OUTDIR/<name>.bin", options=(
-    Option("count", count_or_percent, "2%", "anchors: a count, or a share of each mesh's vertices like 2%"),
-    Option("bits", int_at_least(1), 12, "bits per quantized coordinate"),
-    Option("method", choice(*_METHODS), "greedy", "anchor selection: greedy, random or combined"),
-)))
-register_op(BatchOp("compare", _compare, output="none", help="metrics against the matching file in --reference",
-                    options=(
-    Option("reference", optional(_folder), None, "folder holding a reference for every input (same name or stem)"),
-    Option("points", int_at_least(1), 100_000, "surface samples per mesh"),
-)))
+register_op(
+    BatchOp(
+        "denoise",
+        _denoise,
+        help="barycenter-constrained (or multiresolution with --level) fairing",
+        options=(
+            Option(
+                "iterations",
+                optional(int_at_least(0)),
+                None,
+                "number_of_iterations (default: the API's; with --level, 5 per level)",
+            ),
+            Option(
+                "method",
+                optional(choice("scan", "local", "global")),
+                None,
+                "fairing energy (default: scan, the API's; local with --level or --reimpose-every)",
+            ),
+            Option("level", int_at_least(0), 0, "multiresolution level (0: plain fairing)"),
+            Option("mu", optional(real), None, "barycenter penalty weight of --method global or scan"),
+            Option(
+                "reimpose_every",
+                optional(int_at_least(1)),
+                None,
+                "re-take the barycenters every k iterations",
+            ),
+            Option("fixed_boundary", flag, False, "keep boundary vertices fixed", is_flag=True),
+        ),
+    )
+)
+register_op(
+    BatchOp(
+        "fill",
+        _fill,
+        help="fill holes with faired patches (LS meshes)",
+        options=(
+            Option(
+                "max_hole_edges",
+                optional(int_at_least(3)),
+                None,
+                "fill only holes of at most this many edges",
+            ),
+            Option(
+                "max_hole_diameter", optional(real), None, "fill only holes at most this wide (mesh units)"
+            ),
+            Option("continuity", choice("0", "1", "2"), "2", "0 harmonic, 1 LS mesh, 2 tri-Laplacian"),
+            Option("density", real, 1.0, "new vertex density relative to the surroundings"),
+            Option("fill_border", flag, False, "also fill the outer border of open components", is_flag=True),
+        ),
+    )
+)
+register_op(
+    BatchOp(
+        "hierarchy",
+        _hierarchy,
+        output="files",
+        help="levels of the volume-cost collapse hierarchy, written to OUTDIR/<name>/level_NN<suffix>",
+        options=(
+            Option("levels", _levels_spec, "all", "'all' or comma-separated level numbers (0 is the input)"),
+            Option("min_vertices", int_at_least(1), 100, "stop coarsening below this many vertices"),
+            Option("max_levels", optional(int_at_least(1)), None, "at most this many levels"),
+            Option("maps", flag, False, "also write vertex_maps.npz", is_flag=True),
+        ),
+    )
+)
+register_op(
+    BatchOp(
+        "approximate",
+        _approximate,
+        help="LS-mesh approximation from control points",
+        options=(
+            Option(
+                "count",
+                count_or_percent,
+                "2%",
+                "control points: a count, or a share of each mesh's vertices like 2%",
+            ),
+            Option(
+                "method", choice(*_METHODS), "greedy", "control point selection: greedy, random or combined"
+            ),
+            Option("interpolate", flag, False, "interpolate the control points exactly", is_flag=True),
+            Option("seed", int_at_least(0), 0, "seed of the random selections"),
+        ),
+    )
+)
+register_op(
+    BatchOp(
+        "encode",
+        _encode,
+        output="bytes",
+        extension=".bin",
+        help="quantized LS-mesh anchors, written as OUTDIR/<name>.bin",
+        options=(
+            Option(
+                "count",
+                count_or_percent,
+                "2%",
+                "anchors: a count, or a share of each mesh's vertices like 2%",
+            ),
+            Option("bits", int_at_least(1), 12, "bits per quantized coordinate"),
+            Option("method", choice(*_METHODS), "greedy", "anchor selection: greedy, random or combined"),
+        ),
+    )
+)
+register_op(
+    BatchOp(
+        "compare",
+        _compare,
+        output="none",
+        help="metrics against the matching file in --reference",
+        options=(
+            Option(
+                "reference",
+                optional(_folder),
+                None,
+                "folder holding a reference for every input (same name or stem)",
+            ),
+            Option("points", int_at_least(1), 100_000, "surface samples per mesh"),
+        ),
+    )
+)

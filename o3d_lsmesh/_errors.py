@@ -1,6 +1,6 @@
 """Exception and warning classes of o3d_lsmesh."""
 
-__all__ = ["SingularSystemError", "O3DLSMeshWarning", "ConvergenceError"]
+__all__ = ["ConvergenceError", "O3DLSMeshWarning", "SingularSystemError"]
 
 
 class SingularSystemError(ValueError):

@@ -42,8 +42,16 @@ import numpy as np
 from ._errors import O3DLSMeshWarning
 from ._validate import as_triangle_array, as_vertex_array, check_mesh_arrays
 
-__all__ = ["MeshData", "read_mesh", "new_mesh", "open3d", "mesh_state", "mesh_from_state", "weld_map",
-           "warn_dropped_attributes"]
+__all__ = [
+    "MeshData",
+    "mesh_from_state",
+    "mesh_state",
+    "new_mesh",
+    "open3d",
+    "read_mesh",
+    "warn_dropped_attributes",
+    "weld_map",
+]
 
 _NORMAL_KEYS = ("normals",)
 
@@ -94,7 +102,9 @@ def weld_map(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray | None:
     rank[order] = np.arange(len(order))
     split = rank[inverse].astype(np.int64)
     welded = split[triangles]  # (m, 3)
-    if np.any((welded[:, 0] == welded[:, 1]) | (welded[:, 1] == welded[:, 2]) | (welded[:, 0] == welded[:, 2])):
+    if np.any(
+        (welded[:, 0] == welded[:, 1]) | (welded[:, 1] == welded[:, 2]) | (welded[:, 0] == welded[:, 2])
+    ):
         return None
     return split
 
@@ -151,7 +161,9 @@ def read_mesh(mesh: Any, *, name: str = "mesh", allow_isolated: bool = True, wel
         if "positions" not in mesh.vertex:
             raise ValueError(f"{name} must have vertex positions, got an empty mesh")
         raw_v = mesh.vertex.positions.cpu().numpy()
-        raw_t = mesh.triangle.indices.cpu().numpy() if "indices" in mesh.triangle else np.zeros((0, 3), np.int64)
+        raw_t = (
+            mesh.triangle.indices.cpu().numpy() if "indices" in mesh.triangle else np.zeros((0, 3), np.int64)
+        )
     else:
         raw_v, raw_t = mesh
     vertices = as_vertex_array(raw_v, name=name)
@@ -186,11 +198,17 @@ def _dropped(data: MeshData) -> list[str]:
     if src is None or data.kind == "arrays":
         return []
     if data.kind == "legacy":
-        checks = (("vertex colors", src.has_vertex_colors()), ("triangle UVs", src.has_triangle_uvs()),
-                  ("triangle material ids", src.has_triangle_material_ids()), ("textures", src.has_textures()))
+        checks = (
+            ("vertex colors", src.has_vertex_colors()),
+            ("triangle UVs", src.has_triangle_uvs()),
+            ("triangle material ids", src.has_triangle_material_ids()),
+            ("textures", src.has_textures()),
+        )
         return [label for label, present in checks if present]
     dropped = [f"vertex attribute {key!r}" for key in src.vertex if key not in ("positions",) + _NORMAL_KEYS]
-    dropped += [f"triangle attribute {key!r}" for key in src.triangle if key not in ("indices",) + _NORMAL_KEYS]
+    dropped += [
+        f"triangle attribute {key!r}" for key in src.triangle if key not in ("indices",) + _NORMAL_KEYS
+    ]
     return dropped
 
 
@@ -205,13 +223,17 @@ def warn_dropped_attributes(data: MeshData, reason: str, *, stacklevel: int = 3)
     """
     dropped = _dropped(data)
     if dropped:
-        warnings.warn(f"{reason}: {', '.join(dropped)} of the input cannot follow it and were dropped",
-                      O3DLSMeshWarning, stacklevel=stacklevel)
+        warnings.warn(
+            f"{reason}: {', '.join(dropped)} of the input cannot follow it and were dropped",
+            O3DLSMeshWarning,
+            stacklevel=stacklevel,
+        )
     return bool(dropped)
 
 
-def new_mesh(data: MeshData, vertices: np.ndarray, triangles: np.ndarray | None = None, *,
-             warn: bool = True) -> Any:
+def new_mesh(
+    data: MeshData, vertices: np.ndarray, triangles: np.ndarray | None = None, *, warn: bool = True
+) -> Any:
     """Build a new mesh of ``data``'s kind with ``vertices`` (and ``triangles``, if they changed).
 
     ``triangles=None`` means the connectivity of ``data`` is kept, and so are
@@ -247,7 +269,9 @@ def new_mesh(data: MeshData, vertices: np.ndarray, triangles: np.ndarray | None 
             if src.has_triangle_uvs():
                 out.triangle_uvs = o3d.utility.Vector2dVector(np.asarray(src.triangle_uvs).copy())
             if src.has_triangle_material_ids():
-                out.triangle_material_ids = o3d.utility.IntVector(np.asarray(src.triangle_material_ids).copy())
+                out.triangle_material_ids = o3d.utility.IntVector(
+                    np.asarray(src.triangle_material_ids).copy()
+                )
             if src.has_textures():
                 out.textures = [o3d.geometry.Image(texture) for texture in src.textures]
         if src.has_vertex_normals():
@@ -305,9 +329,12 @@ def mesh_state(data: MeshData) -> dict:
         state["triangle_normals"] = bool(src.has_triangle_normals())
     elif data.kind == "tensor" and src is not None:
         state["device"] = str(src.vertex.positions.device)
-        state["vertex"] = {key: (src.vertex[key].cpu().numpy().copy(), str(src.vertex[key].dtype)) for key in src.vertex}
+        state["vertex"] = {
+            key: (src.vertex[key].cpu().numpy().copy(), str(src.vertex[key].dtype)) for key in src.vertex
+        }
         state["triangle"] = {
-            key: (src.triangle[key].cpu().numpy().copy(), str(src.triangle[key].dtype)) for key in src.triangle
+            key: (src.triangle[key].cpu().numpy().copy(), str(src.triangle[key].dtype))
+            for key in src.triangle
         }
     return state
 

@@ -36,14 +36,16 @@ class _Silent:
     def close(self) -> None:
         pass
 
-    def __enter__(self) -> _Silent:  # noqa: PYI034 (typing.Self needs Python 3.11)
+    def __enter__(self) -> _Silent:
         return self
 
     def __exit__(self, *exc: object) -> None:
         pass
 
 
-def progress_bar(progress: Any, *, total: int, desc: str, unit: str = "it", initial: int = 0, file: Any = None) -> Any:
+def progress_bar(
+    progress: Any, *, total: int, desc: str, unit: str = "it", initial: int = 0, file: Any = None
+) -> Any:
     """A tqdm bar over ``total`` units (a silent stand-in when ``progress`` is False).
 
     ``initial`` counts work done before the bar starts (the per-component seeds

@@ -34,18 +34,18 @@ from ._errors import ConvergenceError, O3DLSMeshWarning, SingularSystemError
 from ._validate import as_choice
 
 __all__ = [
-    "SPDSolver",
-    "cholmod_available",
-    "ORDERINGS",
-    "SOLVERS",
     "BACKENDS",
     "DEFAULT_TOLERANCE",
-    "estimate_factor_bytes",
-    "default_memory_budget",
+    "ORDERINGS",
+    "SOLVERS",
+    "SPDSolver",
     "check_constant_modes",
     "check_finite",
-    "operator_scale",
     "check_weight_pins_components",
+    "cholmod_available",
+    "default_memory_budget",
+    "estimate_factor_bytes",
+    "operator_scale",
     "solver_backend",
 ]
 
@@ -252,8 +252,9 @@ def check_weight_pins_components(operator: sp.spmatrix, weight: float, *, name: 
     labels = csgraph.connected_components(operator, directed=False)[1]
     pinned = np.zeros(operator.shape[0])
     pinned[np.unique(labels, return_index=True)[1]] = float(weight) ** 2
-    check_constant_modes(pinned, labels, scale=operator_scale(operator), name=name, value=weight,
-                         what="the anchor weight")
+    check_constant_modes(
+        pinned, labels, scale=operator_scale(operator), name=name, value=weight, what="the anchor weight"
+    )
 
 
 def _short(value: Any) -> str:
@@ -283,7 +284,9 @@ def _as_csc(matrix: Any, *, name: str = "matrix", square: bool = True) -> sp.csc
         csc.sum_duplicates()
     if csc.indices.dtype != np.int32 and max(csc.nnz, *csc.shape) < np.iinfo(np.int32).max:
         # CHOLMOD's int interface: the long one would copy and store 64-bit indices
-        csc = sp.csc_matrix((csc.data, csc.indices.astype(np.int32), csc.indptr.astype(np.int32)), shape=csc.shape)
+        csc = sp.csc_matrix(
+            (csc.data, csc.indices.astype(np.int32), csc.indptr.astype(np.int32)), shape=csc.shape
+        )
     return csc
 
 
@@ -420,10 +423,16 @@ class SPDSolver:
         self.ordering = as_choice(ordering, ORDERINGS, name="ordering")
         if isinstance(tol, bool) or not isinstance(tol, (int, float, np.floating)) or not 0 < tol < 1:
             raise ValueError(f"tol must be a number in (0, 1), got {tol!r}")
-        if isinstance(max_iterations, bool) or not isinstance(max_iterations, (int, np.integer)) or max_iterations < 1:
+        if (
+            isinstance(max_iterations, bool)
+            or not isinstance(max_iterations, (int, np.integer))
+            or max_iterations < 1
+        ):
             raise ValueError(f"max_iterations must be a positive integer, got {max_iterations!r}")
         if memory_budget is not None and (
-            isinstance(memory_budget, bool) or not isinstance(memory_budget, (int, float, np.integer)) or memory_budget < 0
+            isinstance(memory_budget, bool)
+            or not isinstance(memory_budget, (int, float, np.integer))
+            or memory_budget < 0
         ):
             raise ValueError(f"memory_budget must be a non-negative number of bytes, got {memory_budget!r}")
         self.tol = float(tol)
@@ -546,7 +555,9 @@ class SPDSolver:
         ``lower=True`` says that ``matrix`` holds only its lower triangle.
         """
         if self._product_of is not None:
-            raise TypeError("refactor takes a matrix, and this solver factors a product: build a new SPDSolver")
+            raise TypeError(
+                "refactor takes a matrix, and this solver factors a product: build a new SPDSolver"
+            )
         csc = _as_csc(matrix)
         if csc.shape != self._matrix.shape:
             raise ValueError(f"matrix must have shape {self._matrix.shape}, got {csc.shape}")

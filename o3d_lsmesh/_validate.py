@@ -8,24 +8,25 @@ from __future__ import annotations
 
 import numbers
 import os
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
 __all__ = [
     "COORDINATE_LIMIT",
-    "check_mesh_arrays",
-    "as_vertex_array",
-    "as_triangle_array",
     "as_bool",
-    "as_real_vector",
+    "as_choice",
+    "as_count",
     "as_indices",
     "as_positions",
-    "as_weights",
-    "as_count",
-    "as_workers",
     "as_positive_float",
-    "as_choice",
+    "as_real_vector",
+    "as_triangle_array",
+    "as_vertex_array",
+    "as_weights",
+    "as_workers",
+    "check_mesh_arrays",
     "isolated_vertices",
 ]
 
@@ -44,7 +45,11 @@ _REAL_KINDS = "iuf"
 
 def _open3d_tensor_to_numpy(value: Any) -> Any:
     """An ``open3d.core.Tensor`` as a numpy array (numpy alone sees it as one opaque object); else ``value``."""
-    if (type(value).__module__ or "").startswith("open3d") and hasattr(value, "numpy") and hasattr(value, "cpu"):
+    if (
+        (type(value).__module__ or "").startswith("open3d")
+        and hasattr(value, "numpy")
+        and hasattr(value, "cpu")
+    ):
         return value.cpu().numpy()
     return value
 
@@ -77,16 +82,13 @@ def check_mesh_arrays(
     finite = np.isfinite(vertices).all(axis=1)
     if not finite.all():
         bad = int(np.flatnonzero(~finite)[0])
-        raise ValueError(
-            f"{name} vertices must be finite, got {vertices[bad].tolist()} at vertex {bad}"
-        )
+        raise ValueError(f"{name} vertices must be finite, got {vertices[bad].tolist()} at vertex {bad}")
     _check_magnitude(vertices, what=f"{name} vertices", row="vertex")
     low, high = int(triangles.min()), int(triangles.max())
     if low < 0 or high >= n:
         row = int(np.flatnonzero(((triangles < 0) | (triangles >= n)).any(axis=1))[0])
         raise ValueError(
-            f"{name} triangle indices must lie in [0, {n}), got {triangles[row].tolist()} "
-            f"at triangle {row}"
+            f"{name} triangle indices must lie in [0, {n}), got {triangles[row].tolist()} at triangle {row}"
         )
     repeated = (
         (triangles[:, 0] == triangles[:, 1])
@@ -165,7 +167,9 @@ def as_triangle_array(value: Any, n: int, *, name: str = "mesh") -> np.ndarray:
     try:
         array = np.asarray(value)
     except Exception as error:
-        raise TypeError(f"{name} triangles must be an (m, 3) integer array, got {_describe(value)}") from error
+        raise TypeError(
+            f"{name} triangles must be an (m, 3) integer array, got {_describe(value)}"
+        ) from error
     if array.size == 0 and array.ndim <= 2 and (array.ndim < 2 or array.shape[1] in (0, 3)):
         return np.zeros((0, 3), dtype=np.int64)
     if array.dtype == bool or array.dtype.kind not in "iu":
@@ -191,7 +195,9 @@ def as_bool(value: Any, *, name: str, allow_none: bool = False) -> bool | None:
     return bool(value)
 
 
-def as_real_vector(value: Any, length: int, *, name: str, low: float | None = None, high: float | None = None) -> np.ndarray:
+def as_real_vector(
+    value: Any, length: int, *, name: str, low: float | None = None, high: float | None = None
+) -> np.ndarray:
     """Return ``value`` as a finite ``(length,) float64`` array (e.g. an RGB triple or a direction).
 
     Strings, bools and complex numbers are a ``TypeError``; a wrong length,
@@ -233,7 +239,9 @@ def as_indices(
     try:
         array = np.asarray(_open3d_tensor_to_numpy(indices))
     except Exception as error:  # ragged input and the like: report it as a type problem
-        raise TypeError(f"{name} must be a sequence of integer vertex indices, got {_describe(indices)}") from error
+        raise TypeError(
+            f"{name} must be a sequence of integer vertex indices, got {_describe(indices)}"
+        ) from error
     if array.ndim == 0:
         array = array.reshape(1)
     if array.ndim != 1:
@@ -243,7 +251,11 @@ def as_indices(
             return np.zeros(0, dtype=np.int64)
         raise ValueError(f"{name} must hold at least one vertex index, got none")
     if array.dtype == bool or not np.issubdtype(array.dtype, np.integer):
-        if np.issubdtype(array.dtype, np.floating) and np.all(np.isfinite(array)) and np.all(array == np.round(array)):
+        if (
+            np.issubdtype(array.dtype, np.floating)
+            and np.all(np.isfinite(array))
+            and np.all(array == np.round(array))
+        ):
             raise TypeError(
                 f"{name} must have an integer dtype, got {array.dtype} (cast with astype(int) if these are indices)"
             )
@@ -285,7 +297,9 @@ def as_weights(weights: Any, count: int, *, name: str = "weights") -> np.ndarray
     """Return a scalar or per-item weight as a positive finite ``(count,) float64`` array."""
     if isinstance(weights, (bool, np.bool_)):
         raise TypeError(f"{name} must be a positive number or an array of them, got {weights!r}")
-    array = np.array(_real_array(weights, name=name, expected="a positive number or an array"), dtype=np.float64)
+    array = np.array(
+        _real_array(weights, name=name, expected="a positive number or an array"), dtype=np.float64
+    )
     if array.ndim == 0:
         array = np.full(count, float(array))
     if array.shape != (count,):

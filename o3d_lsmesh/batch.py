@@ -38,10 +38,11 @@ import sys
 import time
 import warnings
 from collections import Counter
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from itertools import islice
 from pathlib import Path
-from typing import Any, Callable, Iterable, Mapping, Sequence
+from typing import Any, Callable
 
 from ._batch_ops import (
     OPS,
@@ -57,7 +58,17 @@ from ._batch_ops import (
 )
 from ._errors import O3DLSMeshWarning
 
-__all__ = ["run", "collect_inputs", "summarize", "BatchOp", "Option", "register_op", "OPS", "add_parser", "cmd_batch"]
+__all__ = [
+    "OPS",
+    "BatchOp",
+    "Option",
+    "add_parser",
+    "cmd_batch",
+    "collect_inputs",
+    "register_op",
+    "run",
+    "summarize",
+]
 
 _GLOB_CHARACTERS = set("*?[")
 
@@ -110,8 +121,9 @@ def collect_inputs(inputs: str | os.PathLike | Iterable[str | os.PathLike]) -> l
         else:
             raise ValueError(f"INPUT {text!r} does not exist (expected a file, a folder or a glob pattern)")
     if not items:
-        raise ValueError(f"INPUT must name at least one mesh file ({', '.join(READABLE)}), "
-                         f"got none in {list(inputs)!r}")
+        raise ValueError(
+            f"INPUT must name at least one mesh file ({', '.join(READABLE)}), got none in {list(inputs)!r}"
+        )
     return items
 
 
@@ -127,8 +139,17 @@ class _Task:
 def task_key(path: str, ops: Sequence[BatchOp], options: Sequence[dict], suffix: str) -> str:
     """Hash of the pipeline, its options, the output suffix and the input's size and mtime (the resume key)."""
     stat = os.stat(path)
-    payload = json.dumps({"op": [op.name for op in ops], "options": options, "suffix": suffix,
-                          "size": stat.st_size, "mtime_ns": stat.st_mtime_ns}, sort_keys=True, default=str)
+    payload = json.dumps(
+        {
+            "op": [op.name for op in ops],
+            "options": options,
+            "suffix": suffix,
+            "size": stat.st_size,
+            "mtime_ns": stat.st_mtime_ns,
+        },
+        sort_keys=True,
+        default=str,
+    )
     return hashlib.sha256(payload.encode()).hexdigest()[:32]
 
 
@@ -198,16 +219,22 @@ def local_cluster(workers: int, threads_per_worker: int = 1, *, retries: int = 1
     # so every array above 128 KiB becomes a fresh mmap whose pages fault in zeroed: measured on the denoise
     # tasks, 8x the page faults, 4x the system time and twice the wall time of the same loop without it.
     environ.pop("MALLOC_TRIM_THRESHOLD_", None)
-    with dask.config.set({"distributed.worker.multiprocessing-method": _start_method(),
-                          "distributed.scheduler.allowed-failures": retries,
-                          # One task per worker thread at a time: a dying worker takes no queued task along.
-                          "distributed.scheduler.worker-saturation": 1.0,
-                          "distributed.nanny.pre-spawn-environ": environ}):
+    with dask.config.set(
+        {
+            "distributed.worker.multiprocessing-method": _start_method(),
+            "distributed.scheduler.allowed-failures": retries,
+            # One task per worker thread at a time: a dying worker takes no queued task along.
+            "distributed.scheduler.worker-saturation": 1.0,
+            "distributed.nanny.pre-spawn-environ": environ,
+        }
+    ):
         # The scheduler always serves HTTP (8787 unless told): a free local port avoids clashing with another
         # cluster on this machine (and gives a dashboard when bokeh is installed).
         kwargs.setdefault("dashboard_address", "127.0.0.1:0")
         kwargs.setdefault("silence_logs", logging.ERROR)
-        return LocalCluster(n_workers=workers, threads_per_worker=threads_per_worker, processes=True, **kwargs)
+        return LocalCluster(
+            n_workers=workers, threads_per_worker=threads_per_worker, processes=True, **kwargs
+        )
 
 
 class _Window:
@@ -234,10 +261,24 @@ class _Window:
 
 
 def _failure(task: _Task, op: str, message: str, stage: str = "worker") -> dict:
-    return {"input": task.path, "output": None, "status": "failed", "error": message, "stage": stage, "op": op,
-            "key": task.key, "seconds": None, "cpu_seconds": None, "worker": None, "pid": None,
-            "vertices_before": None, "triangles_before": None, "vertices_after": None, "triangles_after": None,
-            "metrics": {}}
+    return {
+        "input": task.path,
+        "output": None,
+        "status": "failed",
+        "error": message,
+        "stage": stage,
+        "op": op,
+        "key": task.key,
+        "seconds": None,
+        "cpu_seconds": None,
+        "worker": None,
+        "pid": None,
+        "vertices_before": None,
+        "triangles_before": None,
+        "vertices_after": None,
+        "triangles_after": None,
+        "metrics": {},
+    }
 
 
 def _run_dask(client: Any, tasks: list[_Task], job: dict, emit: Callable[[dict], bool], retries: int) -> None:
@@ -248,7 +289,7 @@ def _run_dask(client: Any, tasks: list[_Task], job: dict, emit: Callable[[dict],
     try:
         from distributed.client import FutureCancelledError
     except ImportError:  # pragma: no cover - distributed before 2024.8
-        FutureCancelledError = CancelledError  # noqa: N806
+        FutureCancelledError = CancelledError
 
     try:
         from distributed import KilledWorker
@@ -265,9 +306,19 @@ def _run_dask(client: Any, tasks: list[_Task], job: dict, emit: Callable[[dict],
         if not chunk:
             return
         keys = [f"o3d-lsmesh-batch-{token}-{task.index}" for task in chunk]
-        futures = client.map(_remote_task, [t.path for t in chunk], [t.relative for t in chunk],
-                             [t.key for t in chunk], key=keys, pure=False, outdir=job["outdir"], ops=job["ops"],
-                             options=job["options"], suffix=job["suffix"], threads=job["threads"])
+        futures = client.map(
+            _remote_task,
+            [t.path for t in chunk],
+            [t.relative for t in chunk],
+            [t.key for t in chunk],
+            key=keys,
+            pure=False,
+            outdir=job["outdir"],
+            ops=job["ops"],
+            options=job["options"],
+            suffix=job["suffix"],
+            threads=job["threads"],
+        )
         for task, future in zip(chunk, futures):
             by_key[future.key] = task
             queue.add(future)
@@ -283,12 +334,16 @@ def _run_dask(client: Any, tasks: list[_Task], job: dict, emit: Callable[[dict],
             except KilledWorker as error:
                 tries = getattr(error, "allowed_failures", retries) + 1
                 last = getattr(getattr(error, "last_worker", None), "address", "?")
-                record = _failure(task, op_name, f"KilledWorker: each of the {tries} workers that ran it died (a crash "
-                                  f"such as a segfault, or killed, e.g. for memory); last worker {last}")
+                record = _failure(
+                    task,
+                    op_name,
+                    f"KilledWorker: each of the {tries} workers that ran it died (a crash "
+                    f"such as a segfault, or killed, e.g. for memory); last worker {last}",
+                )
                 record["worker"] = last
             except (FutureCancelledError, CancelledError):
                 record = _failure(task, op_name, "cancelled")
-            except Exception as error:  # noqa: BLE001 - e.g. the task could not be unpickled on the worker
+            except Exception as error:
                 record = _failure(task, op_name, f"{type(error).__name__}: {error}")
             future.release()
             if not emit(record):
@@ -303,8 +358,17 @@ def _run_dask(client: Any, tasks: list[_Task], job: dict, emit: Callable[[dict],
             client.cancel(remaining)
 
 
-def _remote_task(path: str, relative: str, key: str, *, outdir: str, ops: Sequence[BatchOp], options: Sequence[dict],
-                 suffix: str, threads: int | None) -> dict:
+def _remote_task(
+    path: str,
+    relative: str,
+    key: str,
+    *,
+    outdir: str,
+    ops: Sequence[BatchOp],
+    options: Sequence[dict],
+    suffix: str,
+    threads: int | None,
+) -> dict:
     return run_task(path, relative, outdir, ops, options, suffix, threads, key)
 
 
@@ -411,7 +475,11 @@ def run(
     if not isinstance(suffix, str) or suffix.lower() not in WRITABLE:
         raise ValueError(f"--suffix must be one of {', '.join(WRITABLE)}, got {suffix!r}")
     suffix = suffix.lower()
-    if isinstance(threads_per_worker, bool) or not isinstance(threads_per_worker, int) or threads_per_worker < 1:
+    if (
+        isinstance(threads_per_worker, bool)
+        or not isinstance(threads_per_worker, int)
+        or threads_per_worker < 1
+    ):
         raise ValueError(f"--threads-per-worker must be an integer >= 1, got {threads_per_worker!r}")
     if isinstance(retries, bool) or not isinstance(retries, int) or retries < 0:
         raise ValueError(f"--retries must be an integer >= 0, got {retries!r}")
@@ -431,14 +499,25 @@ def run(
         target = output_path(outdir, relative, ops[-1], suffix)
         if target is not None:
             if str(target) in outputs:
-                raise ValueError(f"INPUT files {outputs[str(target)]!r} and {path!r} would both write {str(target)!r}; "
-                                 "pass their folder instead of a glob so that outputs keep the subfolders")
+                raise ValueError(
+                    f"INPUT files {outputs[str(target)]!r} and {path!r} would both write {str(target)!r}; "
+                    "pass their folder instead of a glob so that outputs keep the subfolders"
+                )
             outputs[str(target)] = path
             if not force and os.path.exists(target) and os.path.samefile(target, path):
-                raise ValueError(f"OUTDIR {str(outdir)!r} would overwrite the input {path!r} (use another OUTDIR, "
-                                 "another --suffix, or --force)")
-        tasks.append(_Task(index, os.path.abspath(path), relative, None if target is None else str(target),
-                           task_key(path, ops, values, suffix)))
+                raise ValueError(
+                    f"OUTDIR {str(outdir)!r} would overwrite the input {path!r} (use another OUTDIR, "
+                    "another --suffix, or --force)"
+                )
+        tasks.append(
+            _Task(
+                index,
+                os.path.abspath(path),
+                relative,
+                None if target is None else str(target),
+                task_key(path, ops, values, suffix),
+            )
+        )
 
     records: list[dict | None] = [None] * len(tasks)
     report_path = None if report is None else Path(report)
@@ -448,8 +527,12 @@ def run(
         todo = []
         for task in tasks:
             old = previous.get(task.path)
-            if (old is not None and old.get("status") == "ok" and old.get("key") == task.key
-                    and (task.output is None or os.path.exists(task.output))):
+            if (
+                old is not None
+                and old.get("status") == "ok"
+                and old.get("key") == task.key
+                and (task.output is None or os.path.exists(task.output))
+            ):
                 records[task.index] = {**old, "status": "skipped"}
             else:
                 todo.append(task)
@@ -457,14 +540,26 @@ def run(
     # The workers need the op functions, not the option parsers: without them (closures that only cloudpickle
     # can send) every task pickles in ~200 bytes with the standard pickle instead of ~3 kB.
     shipped = [dataclasses.replace(o, options=()) for o in ops]
-    job = {"outdir": str(outdir), "ops": shipped, "options": values, "suffix": suffix, "threads": threads_per_worker}
+    job = {
+        "outdir": str(outdir),
+        "ops": shipped,
+        "options": values,
+        "suffix": suffix,
+        "threads": threads_per_worker,
+    }
 
     bar = None
     if progress:
         from tqdm.auto import tqdm
 
-        bar = tqdm(total=len(tasks), initial=len(tasks) - len(todo), desc=f"batch {','.join(o.name for o in ops)}",
-                   unit="file", file=sys.stderr, dynamic_ncols=True)
+        bar = tqdm(
+            total=len(tasks),
+            initial=len(tasks) - len(todo),
+            desc=f"batch {','.join(o.name for o in ops)}",
+            unit="file",
+            file=sys.stderr,
+            dynamic_ncols=True,
+        )
     counts: Counter = Counter()
     index_of = {task.path: task.index for task in tasks}
     handle = None
@@ -488,30 +583,59 @@ def run(
 
     try:
         if todo:
-            _dispatch(todo, job, emit, client=client, workers=workers, threads_per_worker=threads_per_worker,
-                      scheduler=scheduler, scheduler_file=scheduler_file, retries=retries)
+            _dispatch(
+                todo,
+                job,
+                emit,
+                client=client,
+                workers=workers,
+                threads_per_worker=threads_per_worker,
+                scheduler=scheduler,
+                scheduler_file=scheduler_file,
+                retries=retries,
+            )
     finally:
         if bar is not None:
             bar.close()
         if handle is not None:
             handle.close()
     op_name = ",".join(o.name for o in ops)
-    return [record if record is not None else _failure(task, op_name, "not run (--fail-fast stopped the batch)",
-                                                       stage="cancelled") | {"status": "cancelled"}
-            for task, record in zip(tasks, records)]
+    return [
+        record
+        if record is not None
+        else _failure(task, op_name, "not run (--fail-fast stopped the batch)", stage="cancelled")
+        | {"status": "cancelled"}
+        for task, record in zip(tasks, records)
+    ]
 
 
-def _dispatch(todo: list[_Task], job: dict, emit: Callable[[dict], bool], *, client: Any, workers: int | None,
-              threads_per_worker: int, scheduler: Any, scheduler_file: Any, retries: int) -> None:
+def _dispatch(
+    todo: list[_Task],
+    job: dict,
+    emit: Callable[[dict], bool],
+    *,
+    client: Any,
+    workers: int | None,
+    threads_per_worker: int,
+    scheduler: Any,
+    scheduler_file: Any,
+    retries: int,
+) -> None:
     address = None if client is not None else (scheduler or _scheduler_address())
     remote = client is not None or address is not None or scheduler_file is not None
     if not remote and workers == 0:
         return _run_serial(todo, job, emit)
     if not _dask_available():
         if remote:
-            raise ImportError("connecting to a Dask scheduler needs dask.distributed: pip install 'o3d_lsmesh[dask]'")
-        warnings.warn("dask.distributed is not installed, so the files run one after another in this process; "
-                      "pip install 'o3d_lsmesh[dask]' to use every core or a cluster", O3DLSMeshWarning, stacklevel=3)
+            raise ImportError(
+                "connecting to a Dask scheduler needs dask.distributed: pip install 'o3d_lsmesh[dask]'"
+            )
+        warnings.warn(
+            "dask.distributed is not installed, so the files run one after another in this process; "
+            "pip install 'o3d_lsmesh[dask]' to use every core or a cluster",
+            O3DLSMeshWarning,
+            stacklevel=3,
+        )
         return _run_serial(todo, job, emit)
     from distributed import Client
 
@@ -519,8 +643,14 @@ def _dispatch(todo: list[_Task], job: dict, emit: Callable[[dict], bool], *, cli
         return _run_dask(client, todo, job, emit, retries)
     if remote:
         if workers is not None:
-            warnings.warn("--workers is ignored when connecting to an existing cluster", O3DLSMeshWarning, stacklevel=3)
-        kwargs = {"scheduler_file": os.fspath(scheduler_file)} if scheduler_file is not None else {"address": address}
+            warnings.warn(
+                "--workers is ignored when connecting to an existing cluster", O3DLSMeshWarning, stacklevel=3
+            )
+        kwargs = (
+            {"scheduler_file": os.fspath(scheduler_file)}
+            if scheduler_file is not None
+            else {"address": address}
+        )
         with Client(**kwargs) as own:
             return _run_dask(own, todo, job, emit, retries)
     cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
@@ -533,8 +663,9 @@ def _dispatch(todo: list[_Task], job: dict, emit: Callable[[dict], bool], *, cli
 def _run_serial(todo: list[_Task], job: dict, emit: Callable[[dict], bool]) -> None:
     # Threads are left as the caller's process has them: this loop runs in the caller's process.
     for task in todo:
-        record = run_task(task.path, task.relative, job["outdir"], job["ops"], job["options"], job["suffix"], None,
-                          task.key)
+        record = run_task(
+            task.path, task.relative, job["outdir"], job["ops"], job["options"], job["suffix"], None, task.key
+        )
         if not emit(record):
             return
 
@@ -551,7 +682,9 @@ def summarize(records: Sequence[dict], seconds: float | None = None) -> str:
     lines += [f"{s:<10} {n:>7} {t:>9.1f} {m:>8.2f}" for s, n, t, m in rows]
     if seconds is not None:
         done = sum(1 for r in records if r["status"] in ("ok", "failed"))
-        lines.append(f"wall time {seconds:.1f} s" + (f", {done / seconds:.2f} files/s" if seconds > 0 and done else ""))
+        lines.append(
+            f"wall time {seconds:.1f} s" + (f", {done / seconds:.2f} files/s" if seconds > 0 and done else "")
+        )
     failed = [r for r in records if r["status"] == "failed"]
     for record in failed[:20]:
         lines.append(f"FAILED {record['input']} [{record.get('stage')}]: {record['error']}")
@@ -565,8 +698,10 @@ def summarize(records: Sequence[dict], seconds: float | None = None) -> str:
 
 def _option_flags(parser: argparse.ArgumentParser) -> None:
     """One flag per option name of the registered ops; values are parsed per op by resolve_options."""
-    group = parser.add_argument_group("operation options (each applies to every op of the pipeline that has it; "
-                                      "--set OP.NAME=VALUE for one op)")
+    group = parser.add_argument_group(
+        "operation options (each applies to every op of the pipeline that has it; "
+        "--set OP.NAME=VALUE for one op)"
+    )
     seen: dict[str, list[tuple[str, Option]]] = {}
     for op in OPS.values():
         for option in op.options:
@@ -574,37 +709,64 @@ def _option_flags(parser: argparse.ArgumentParser) -> None:
     for name, owners in seen.items():
         option = owners[0][1]
         helps = {o.help for _, o in owners}
-        text = (f"{option.help} [{', '.join(n for n, _ in owners)}]" if len(helps) == 1
-                else "; ".join(f"{n}: {o.help}" for n, o in owners))
+        text = (
+            f"{option.help} [{', '.join(n for n, _ in owners)}]"
+            if len(helps) == 1
+            else "; ".join(f"{n}: {o.help}" for n, o in owners)
+        )
         text = text.replace("%", "%%")  # argparse %-formats help
         if option.is_flag:
-            group.add_argument(option.cli_flag, dest=f"opt_{name}", action="store_true", default=argparse.SUPPRESS,
-                               help=text)
+            group.add_argument(
+                option.cli_flag, dest=f"opt_{name}", action="store_true", default=argparse.SUPPRESS, help=text
+            )
         else:
-            group.add_argument(option.cli_flag, dest=f"opt_{name}", default=argparse.SUPPRESS, metavar="VALUE",
-                               help=text)
+            group.add_argument(
+                option.cli_flag, dest=f"opt_{name}", default=argparse.SUPPRESS, metavar="VALUE", help=text
+            )
 
 
 def add_parser(sub: Any, common: argparse.ArgumentParser | None = None) -> argparse.ArgumentParser:
     """Register the ``batch`` subcommand on ``sub`` (the subparsers of the ``o3d-lsmesh`` parser)."""
     parents = [common] if common is not None else []
-    p = sub.add_parser("batch", parents=parents, help="run an operation over many files (Dask cluster or local)",
-                       description="Run an operation over many mesh files, each as one task on a local Dask cluster "
-                                   "(default), an existing one (--scheduler), or in this process without Dask. "
-                                   f"Operations: {', '.join(f'{n} ({o.help})' for n, o in OPS.items())}.")
-    p.add_argument("inputs", nargs="+", metavar="INPUT", help="files, folders (searched recursively) or globs")
+    p = sub.add_parser(
+        "batch",
+        parents=parents,
+        help="run an operation over many files (Dask cluster or local)",
+        description="Run an operation over many mesh files, each as one task on a local Dask cluster "
+        "(default), an existing one (--scheduler), or in this process without Dask. "
+        f"Operations: {', '.join(f'{n} ({o.help})' for n, o in OPS.items())}.",
+    )
+    p.add_argument(
+        "inputs", nargs="+", metavar="INPUT", help="files, folders (searched recursively) or globs"
+    )
     p.add_argument("outdir", metavar="OUTDIR")
-    p.add_argument("--op", required=True, help="an operation or a pipeline in order, e.g. denoise or denoise,compare")
+    p.add_argument(
+        "--op", required=True, help="an operation or a pipeline in order, e.g. denoise or denoise,compare"
+    )
     p.add_argument("--set", action="append", default=[], metavar="OP.NAME=VALUE", help="an option of one op")
-    p.add_argument("--workers", type=int, default=None, help="local worker processes (default CPUs; 0: this process)")
+    p.add_argument(
+        "--workers", type=int, default=None, help="local worker processes (default CPUs; 0: this process)"
+    )
     p.add_argument("--threads-per-worker", type=int, default=1, help="threads of each worker (default 1)")
     where = p.add_mutually_exclusive_group()
-    where.add_argument("--scheduler", default=None, metavar="ADDRESS",
-                       help="existing Dask scheduler, e.g. tcp://host:8786 (default: $DASK_SCHEDULER_ADDRESS)")
-    where.add_argument("--scheduler-file", default=None, metavar="FILE", help="existing scheduler's JSON file")
-    p.add_argument("--resume", action="store_true", help="skip inputs the report lists as ok with the same key")
-    p.add_argument("--report", default=None, metavar="FILE",
-                   help="JSON-lines report, one record per file (default OUTDIR/batch_report.jsonl)")
+    where.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="ADDRESS",
+        help="existing Dask scheduler, e.g. tcp://host:8786 (default: $DASK_SCHEDULER_ADDRESS)",
+    )
+    where.add_argument(
+        "--scheduler-file", default=None, metavar="FILE", help="existing scheduler's JSON file"
+    )
+    p.add_argument(
+        "--resume", action="store_true", help="skip inputs the report lists as ok with the same key"
+    )
+    p.add_argument(
+        "--report",
+        default=None,
+        metavar="FILE",
+        help="JSON-lines report, one record per file (default OUTDIR/batch_report.jsonl)",
+    )
     p.add_argument("--retries", type=int, default=1, help="runs of a task whose worker died before it fails")
     p.add_argument("--fail-fast", action="store_true", help="stop at the first failure")
     p.add_argument("--suffix", default=".ply", help="output mesh format (.ply .obj .stl .off .gltf)")
@@ -614,11 +776,23 @@ def add_parser(sub: Any, common: argparse.ArgumentParser | None = None) -> argpa
 
 
 def _run_for_cli(args: argparse.Namespace, options: dict, report: str) -> list[dict]:
-    return run(args.inputs, args.outdir, op=args.op, options=options, workers=args.workers,
-               threads_per_worker=args.threads_per_worker, scheduler=args.scheduler,
-               scheduler_file=args.scheduler_file, resume=args.resume, report=report, retries=args.retries,
-               fail_fast=args.fail_fast, suffix=args.suffix, force=bool(getattr(args, "force", False)),
-               progress=not getattr(args, "quiet", False))
+    return run(
+        args.inputs,
+        args.outdir,
+        op=args.op,
+        options=options,
+        workers=args.workers,
+        threads_per_worker=args.threads_per_worker,
+        scheduler=args.scheduler,
+        scheduler_file=args.scheduler_file,
+        resume=args.resume,
+        report=report,
+        retries=args.retries,
+        fail_fast=args.fail_fast,
+        suffix=args.suffix,
+        force=bool(getattr(args, "force", False)),
+        progress=not getattr(args, "quiet", False),
+    )
 
 
 def cmd_batch(args: argparse.Namespace, run_policy: Any = None) -> int:
@@ -642,9 +816,20 @@ def cmd_batch(args: argparse.Namespace, run_policy: Any = None) -> int:
     seconds = time.perf_counter() - start
     counts = Counter(record["status"] for record in records)
     if as_json:
-        print(json.dumps({"command": "batch", "op": args.op, "report": report, "seconds": seconds,
-                          "counts": dict(counts), "failed": [r["input"] for r in records if r["status"] == "failed"]},
-                         indent=2), flush=True)
+        print(
+            json.dumps(
+                {
+                    "command": "batch",
+                    "op": args.op,
+                    "report": report,
+                    "seconds": seconds,
+                    "counts": dict(counts),
+                    "failed": [r["input"] for r in records if r["status"] == "failed"],
+                },
+                indent=2,
+            ),
+            flush=True,
+        )
     if not quiet:
         print(summarize(records, seconds), file=sys.stderr if as_json else sys.stdout, flush=True)
         print(f"report: {report}", file=sys.stderr if as_json else sys.stdout, flush=True)

@@ -45,12 +45,13 @@ import tempfile
 import textwrap
 import time
 import traceback
+from collections.abc import Iterator, Sequence
 from pathlib import Path
-from typing import Any, Iterator, Sequence
+from typing import Any
 
 import numpy as np
 
-__all__ = ["main", "build_parser", "parse_index_spec", "CLIError"]
+__all__ = ["CLIError", "build_parser", "main", "parse_index_spec"]
 
 PROG = "o3d-lsmesh"
 #: Extensions Open3D 0.20 writes back readably (its .glb writer produces files it cannot read back).
@@ -206,7 +207,9 @@ def _captured_native_output() -> Iterator[list]:
 
 
 # Open3D's readers report a file they could not read to the end with these words (and return what they got)
-_READ_FAILURE = re.compile(r"(?i)(read \w+ failed|rply: error|unable to read|error reading|unexpected end)[^\n]*")
+_READ_FAILURE = re.compile(
+    r"(?i)(read \w+ failed|rply: error|unable to read|error reading|unexpected end)[^\n]*"
+)
 _ANSI = re.compile(r"\x1b\[[0-9;]*m")
 
 
@@ -244,17 +247,23 @@ def read_input(path: str, *, what: str = "INPUT") -> Any:
         o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
     failure = _READ_FAILURE.search(_ANSI.sub("", captured[0]))
     if failure and len(mesh.vertices):
-        raise CLIError(f"{what} {path!r} is truncated or corrupt: Open3D read only part of it ({failure.group(0).strip()})")
+        raise CLIError(
+            f"{what} {path!r} is truncated or corrupt: Open3D read only part of it ({failure.group(0).strip()})"
+        )
     if Path(path).suffix.lower() == ".ply" and len(mesh.vertices):
         header = _ply_header_counts(path)
         # a polygon face gives at least one triangle: fewer triangles than faces means faces were lost
-        if header.get("vertex", len(mesh.vertices)) != len(mesh.vertices) or header.get("face", 0) > len(mesh.triangles):
+        if header.get("vertex", len(mesh.vertices)) != len(mesh.vertices) or header.get("face", 0) > len(
+            mesh.triangles
+        ):
             raise CLIError(
                 f"{what} {path!r} is truncated or corrupt: its header declares {header.get('vertex')} vertices "
                 f"and {header.get('face', 0)} faces, Open3D read {len(mesh.vertices)} and {len(mesh.triangles)} triangles"
             )
     if len(mesh.vertices) == 0:
-        raise CLIError(f"{what} {path!r} could not be read as a triangle mesh (empty, corrupt or unsupported format)")
+        raise CLIError(
+            f"{what} {path!r} could not be read as a triangle mesh (empty, corrupt or unsupported format)"
+        )
     if len(mesh.triangles) == 0:
         raise CLIError(f"{what} {path!r} has {len(mesh.vertices)} vertices but no triangles")
     if Path(path).suffix.lower() == ".stl":
@@ -277,11 +286,15 @@ def _same_file(a: str, b: str) -> bool:
         return False
 
 
-def check_output(path: str, inputs: Sequence[str], *, force: bool, suffixes: Sequence[str] | None = WRITABLE) -> None:
+def check_output(
+    path: str, inputs: Sequence[str], *, force: bool, suffixes: Sequence[str] | None = WRITABLE
+) -> None:
     """Refuse, before any work, an output that would overwrite an input or cannot be written."""
     for source in inputs:
         if _same_file(path, source) and not force:
-            raise CLIError(f"OUTPUT {path!r} is the input file {source!r}; refusing to overwrite it (use --force)")
+            raise CLIError(
+                f"OUTPUT {path!r} is the input file {source!r}; refusing to overwrite it (use --force)"
+            )
     if suffixes is not None and Path(path).suffix.lower() not in suffixes:
         hint = ""
         if Path(path).suffix.lower() == ".glb" and ".gltf" in suffixes:
@@ -320,13 +333,17 @@ def parse_index_spec(spec: str, n: int) -> np.ndarray:
             raise CLIError(f"--unknown file {spec!r} must hold integer vertex indices ({error})") from None
         values = np.asarray(values).ravel()
         if values.size and not np.issubdtype(values.dtype, np.integer):
-            raise CLIError(f"--unknown file {spec!r} must hold integer vertex indices, got dtype {values.dtype}")
+            raise CLIError(
+                f"--unknown file {spec!r} must hold integer vertex indices, got dtype {values.dtype}"
+            )
         if values.size == 0:
             raise CLIError(f"--unknown file {spec!r} must name at least one vertex, got none")
         bad = (values < 0) | (values >= n)
         if bad.any():
-            raise CLIError(f"--unknown file {spec!r} must hold vertex indices in 0..{n - 1} (the mesh has {n} "
-                           f"vertices), got {int(values[bad][0])}")
+            raise CLIError(
+                f"--unknown file {spec!r} must hold vertex indices in 0..{n - 1} (the mesh has {n} "
+                f"vertices), got {int(values[bad][0])}"
+            )
         return np.unique(values.astype(np.int64))
     parts = []
     for item in spec.split(","):
@@ -349,7 +366,9 @@ def parse_index_spec(spec: str, n: int) -> np.ndarray:
         if start < 0 or stop > n:
             # checked before any array is made: '0:99999999999' must not allocate 800 GB
             what = f"range {item!r}" if ":" in item else f"index {item!r}"
-            raise CLIError(f"--unknown must name vertices in 0..{n - 1} (the mesh has {n} vertices), got {what}")
+            raise CLIError(
+                f"--unknown must name vertices in 0..{n - 1} (the mesh has {n} vertices), got {what}"
+            )
         parts.append(np.arange(start, stop, dtype=np.int64))
     if not parts:
         raise CLIError(f"--unknown must name at least one vertex, got {spec!r}")
@@ -369,8 +388,10 @@ def _normal_deviation(a: Any, b: Any) -> float | None:
     from .metrics import _face_normals, normal_deviation
 
     da, db = read_mesh(a), read_mesh(b)
-    if not ((np.abs(_face_normals(da.vertices, da.triangles)).sum(axis=1) > 0)
-            & (np.abs(_face_normals(db.vertices, db.triangles)).sum(axis=1) > 0)).any():
+    if not (
+        (np.abs(_face_normals(da.vertices, da.triangles)).sum(axis=1) > 0)
+        & (np.abs(_face_normals(db.vertices, db.triangles)).sum(axis=1) > 0)
+    ).any():
         return None
     return normal_deviation(a, b)
 
@@ -403,52 +424,93 @@ def _percent(value: float | None) -> str:
 def cmd_denoise(args: argparse.Namespace, run: _Run) -> int:
     if args.level:
         # multiresolution fairing fairs every level with its own defaults: these options would be ignored
-        given = [flag for flag, value in (("--mu", args.mu), ("--reimpose-every", args.reimpose_every),
-                                          ("--fixed-boundary", args.fixed_boundary or None)) if value is not None]
+        given = [
+            flag
+            for flag, value in (
+                ("--mu", args.mu),
+                ("--reimpose-every", args.reimpose_every),
+                ("--fixed-boundary", args.fixed_boundary or None),
+            )
+            if value is not None
+        ]
         if given:
-            raise CLIError(f"{', '.join(given)} cannot be combined with --level (multiresolution fairing "
-                           f"does not take {'them' if len(given) > 1 else 'it'}), got --level {args.level}")
+            raise CLIError(
+                f"{', '.join(given)} cannot be combined with --level (multiresolution fairing "
+                f"does not take {'them' if len(given) > 1 else 'it'}), got --level {args.level}"
+            )
     check_output(args.output, [args.input], force=args.force)
     if args.render:
         check_output(args.render, [args.input], force=args.force, suffixes=(".png",))
     mesh = read_input(args.input)
     start = time.perf_counter()
-    with _flags(mesh=f"INPUT {args.input!r}", iterations="number_of_iterations", level="level", mu="mu", reimpose_every="reimpose_every",
-                method="method"):
+    with _flags(
+        mesh=f"INPUT {args.input!r}",
+        iterations="number_of_iterations",
+        level="level",
+        mu="mu",
+        reimpose_every="reimpose_every",
+        method="method",
+    ):
         if args.level:
             from .fairing.multiresolution import multiresolution_fairing
 
             args.iterations = 5 if args.iterations is None else args.iterations
             args.method = args.method or "local"
-            out = multiresolution_fairing(mesh, args.level, number_of_iterations=args.iterations, method=args.method,
-                                          progress=run.progress)
+            out = multiresolution_fairing(
+                mesh,
+                args.level,
+                number_of_iterations=args.iterations,
+                method=args.method,
+                progress=run.progress,
+            )
         else:
             from .fairing import constrained_fairing
             from .fairing.constrained import resolved_options
 
             # no flag: the API's defaults (method='scan'); the report names what ran
             args.method, args.iterations = resolved_options(args.method, args.iterations, args.reimpose_every)
-            out = constrained_fairing(mesh, args.iterations, method=args.method, mu=args.mu,
-                                      smooth_boundary=not args.fixed_boundary, reimpose_every=args.reimpose_every,
-                                      progress=run.progress)
+            out = constrained_fairing(
+                mesh,
+                args.iterations,
+                method=args.method,
+                mu=args.mu,
+                smooth_boundary=not args.fixed_boundary,
+                reimpose_every=args.reimpose_every,
+                progress=run.progress,
+            )
     seconds = time.perf_counter() - start
-    report = {"command": "denoise", "input": args.input, "output": args.output, **_mesh_size(mesh),
-              "method": args.method, "iterations": args.iterations, "level": args.level, "seconds": seconds,
-              **_change_report(mesh, out)}
-    message = (f"denoised {args.input} ({report['vertices']} vertices) in {seconds:.2f} s -> {args.output}; "
-               f"mean displacement {report['displacement_mean']:.4g}, "
-               f"volume change {_percent(report['volume_change_percent'])}")
+    report = {
+        "command": "denoise",
+        "input": args.input,
+        "output": args.output,
+        **_mesh_size(mesh),
+        "method": args.method,
+        "iterations": args.iterations,
+        "level": args.level,
+        "seconds": seconds,
+        **_change_report(mesh, out),
+    }
+    message = (
+        f"denoised {args.input} ({report['vertices']} vertices) in {seconds:.2f} s -> {args.output}; "
+        f"mean displacement {report['displacement_mean']:.4g}, "
+        f"volume change {_percent(report['volume_change_percent'])}"
+    )
     write_output(args.output, out)
     run.say(message)
     if args.render:
-        method = (f"multiresolution fairing, level {args.level}" if args.level
-                  else f"{args.method} fairing" + (f", mu {args.mu:g}" if args.mu is not None else ""))
+        method = (
+            f"multiresolution fairing, level {args.level}"
+            if args.level
+            else f"{args.method} fairing" + (f", mu {args.mu:g}" if args.mu is not None else "")
+        )
         titles = [f"input: {Path(args.input).name}", f"{method}, {args.iterations} iterations"]
         report["render"] = _render([mesh, out], args.render, run, titles=titles)
     return run.finish(report)
 
 
-def _render(meshes: list, path: str, run: _Run, *, what: str = "left: input, right: result", **options) -> str:
+def _render(
+    meshes: list, path: str, run: _Run, *, what: str = "left: input, right: result", **options
+) -> str:
     from .rendering import render
 
     start = time.perf_counter()
@@ -467,8 +529,14 @@ def cmd_approximate(args: argparse.Namespace, run: _Run) -> int:
 
     start = time.perf_counter()
     with _flags(mesh=f"INPUT {args.input!r}", count="count", method="method", seed="seed"):
-        out, indices = approximate(mesh, args.count, method=args.method, interpolate=args.interpolate,
-                                   seed=args.seed, progress=run.progress)
+        out, indices = approximate(
+            mesh,
+            args.count,
+            method=args.method,
+            interpolate=args.interpolate,
+            seed=args.seed,
+            progress=run.progress,
+        )
     seconds = time.perf_counter() - start
     write_output(args.output, out)
     if args.indices:
@@ -477,11 +545,21 @@ def cmd_approximate(args: argparse.Namespace, run: _Run) -> int:
         else:
             np.savetxt(args.indices, np.asarray(indices, dtype=np.int64), fmt="%d")
     error = vertex_error(out, mesh)
-    report = {"command": "approximate", "input": args.input, "output": args.output, **_mesh_size(mesh),
-              "count": int(len(indices)), "method": args.method, "seconds": seconds,
-              "error_linf": error["linf"], "error_rms": error["rms"]}
-    run.say(f"approximated {args.input} from {report['count']} control points in {seconds:.2f} s -> {args.output}; "
-            f"L-inf error {error['linf']:.4g}, RMS {error['rms']:.4g}")
+    report = {
+        "command": "approximate",
+        "input": args.input,
+        "output": args.output,
+        **_mesh_size(mesh),
+        "count": len(indices),
+        "method": args.method,
+        "seconds": seconds,
+        "error_linf": error["linf"],
+        "error_rms": error["rms"],
+    }
+    run.say(
+        f"approximated {args.input} from {report['count']} control points in {seconds:.2f} s -> {args.output}; "
+        f"L-inf error {error['linf']:.4g}, RMS {error['rms']:.4g}"
+    )
     return run.finish(report)
 
 
@@ -497,12 +575,23 @@ def cmd_reconstruct(args: argparse.Namespace, run: _Run) -> int:
     seconds = time.perf_counter() - start
     write_output(args.output, out)
     unknown_unique = np.unique(unknown)
-    moved = np.linalg.norm(np.asarray(out.vertices)[unknown_unique] - np.asarray(mesh.vertices)[unknown_unique], axis=1)
-    report = {"command": "reconstruct", "input": args.input, "output": args.output, **_mesh_size(mesh),
-              "unknown": int(len(unknown_unique)), "seconds": seconds,
-              "distance_to_input_mean": float(moved.mean()), "distance_to_input_max": float(moved.max())}
-    run.say(f"reconstructed {report['unknown']} vertices of {args.input} in {seconds:.2f} s -> {args.output}; "
-            f"mean distance to the file's positions {report['distance_to_input_mean']:.4g}")
+    moved = np.linalg.norm(
+        np.asarray(out.vertices)[unknown_unique] - np.asarray(mesh.vertices)[unknown_unique], axis=1
+    )
+    report = {
+        "command": "reconstruct",
+        "input": args.input,
+        "output": args.output,
+        **_mesh_size(mesh),
+        "unknown": len(unknown_unique),
+        "seconds": seconds,
+        "distance_to_input_mean": float(moved.mean()),
+        "distance_to_input_max": float(moved.max()),
+    }
+    run.say(
+        f"reconstructed {report['unknown']} vertices of {args.input} in {seconds:.2f} s -> {args.output}; "
+        f"mean distance to the file's positions {report['distance_to_input_mean']:.4g}"
+    )
     return run.finish(report)
 
 
@@ -531,8 +620,9 @@ def cmd_hierarchy(args: argparse.Namespace, run: _Run) -> int:
 
     start = time.perf_counter()
     with _flags(mesh=f"INPUT {args.input!r}", min_vertices="min_vertices", max_levels="max_levels"):
-        hierarchy = build_hierarchy(mesh, min_vertices=args.min_vertices, max_levels=args.max_levels,
-                                    progress=run.progress)
+        hierarchy = build_hierarchy(
+            mesh, min_vertices=args.min_vertices, max_levels=args.max_levels, progress=run.progress
+        )
     seconds = time.perf_counter() - start
     levels = _parse_levels(args.levels, len(hierarchy))
     outdir.mkdir(parents=True, exist_ok=True)
@@ -546,11 +636,20 @@ def cmd_hierarchy(args: argparse.Namespace, run: _Run) -> int:
     if args.maps:
         np.savez_compressed(outdir / "vertex_maps.npz", **maps)
         files.append(str(outdir / "vertex_maps.npz"))
-    report = {"command": "hierarchy", "input": args.input, "outdir": str(outdir), **_mesh_size(mesh),
-              "levels": len(hierarchy), "vertex_counts": [int(hierarchy.vertex_count(i)) for i in range(len(hierarchy))],
-              "written": files, "seconds": seconds}
-    run.say(f"hierarchy of {args.input}: {len(hierarchy)} levels ({report['vertex_counts'][0]} -> "
-            f"{report['vertex_counts'][-1]} vertices) in {seconds:.2f} s; wrote {len(files)} files to {outdir}/")
+    report = {
+        "command": "hierarchy",
+        "input": args.input,
+        "outdir": str(outdir),
+        **_mesh_size(mesh),
+        "levels": len(hierarchy),
+        "vertex_counts": [int(hierarchy.vertex_count(i)) for i in range(len(hierarchy))],
+        "written": files,
+        "seconds": seconds,
+    }
+    run.say(
+        f"hierarchy of {args.input}: {len(hierarchy)} levels ({report['vertex_counts'][0]} -> "
+        f"{report['vertex_counts'][-1]} vertices) in {seconds:.2f} s; wrote {len(files)} files to {outdir}/"
+    )
     return run.finish(report)
 
 
@@ -568,11 +667,23 @@ def cmd_encode(args: argparse.Namespace, run: _Run) -> int:
     seconds = time.perf_counter() - start
     Path(args.output).write_bytes(data)
     error = vertex_error(decode_geometry(mesh, data, progress=run.progress), mesh)
-    report = {"command": "encode", "input": args.input, "output": args.output, **_mesh_size(mesh),
-              "anchors": count, "bits": args.bits, "bytes": len(data), "bits_per_vertex": 8.0 * len(data) / n,
-              "seconds": seconds, "decoded_error_linf": error["linf"], "decoded_error_rms": error["rms"]}
-    run.say(f"encoded {args.input}: {count} anchors at {args.bits} bits -> {len(data)} bytes "
-            f"({report['bits_per_vertex']:.3f} bits/vertex) in {seconds:.2f} s; decoded L-inf error {error['linf']:.4g}")
+    report = {
+        "command": "encode",
+        "input": args.input,
+        "output": args.output,
+        **_mesh_size(mesh),
+        "anchors": count,
+        "bits": args.bits,
+        "bytes": len(data),
+        "bits_per_vertex": 8.0 * len(data) / n,
+        "seconds": seconds,
+        "decoded_error_linf": error["linf"],
+        "decoded_error_rms": error["rms"],
+    }
+    run.say(
+        f"encoded {args.input}: {count} anchors at {args.bits} bits -> {len(data)} bytes "
+        f"({report['bits_per_vertex']:.3f} bits/vertex) in {seconds:.2f} s; decoded L-inf error {error['linf']:.4g}"
+    )
     return run.finish(report)
 
 
@@ -589,8 +700,15 @@ def cmd_decode(args: argparse.Namespace, run: _Run) -> int:
         out = decode_geometry(mesh, data, anchors=args.anchors, progress=run.progress)
     seconds = time.perf_counter() - start
     write_output(args.output, out)
-    report = {"command": "decode", "mesh": args.mesh, "data": args.data, "output": args.output, **_mesh_size(mesh),
-              "anchors": args.anchors, "seconds": seconds}
+    report = {
+        "command": "decode",
+        "mesh": args.mesh,
+        "data": args.data,
+        "output": args.output,
+        **_mesh_size(mesh),
+        "anchors": args.anchors,
+        "seconds": seconds,
+    }
     run.say(f"decoded {args.data} on the connectivity of {args.mesh} in {seconds:.2f} s -> {args.output}")
     return run.finish(report)
 
@@ -601,7 +719,13 @@ def cmd_compare(args: argparse.Namespace, run: _Run) -> int:
     a, b = read_input(args.a, what="A"), read_input(args.b, what="B")
     from .metrics import surface_distance, topology_summary, triangle_angles, vertex_error
 
-    report: dict = {"command": "compare", "a": args.a, "b": args.b, "size_a": _mesh_size(a), "size_b": _mesh_size(b)}
+    report: dict = {
+        "command": "compare",
+        "a": args.a,
+        "b": args.b,
+        "size_a": _mesh_size(a),
+        "size_b": _mesh_size(b),
+    }
     with _flags(points="number_of_points"):
         report["surface_distance"] = surface_distance(a, b, number_of_points=args.points)
     if len(a.vertices) == len(b.vertices):
@@ -615,8 +739,10 @@ def cmd_compare(args: argparse.Namespace, run: _Run) -> int:
     report["topology_a"], report["topology_b"] = topology_summary(a), topology_summary(b)
     if not run.quiet and not run.json:
         sd = report["surface_distance"]
-        lines = [f"A {args.a}: {report['size_a']['vertices']} vertices, B {args.b}: {report['size_b']['vertices']} vertices",
-                 f"surface distance: Hausdorff {sd['hausdorff']:.6g}, mean {sd['mean']:.6g}, RMS {sd['rms']:.6g}"]
+        lines = [
+            f"A {args.a}: {report['size_a']['vertices']} vertices, B {args.b}: {report['size_b']['vertices']} vertices",
+            f"surface distance: Hausdorff {sd['hausdorff']:.6g}, mean {sd['mean']:.6g}, RMS {sd['rms']:.6g}",
+        ]
         if "vertex_error" in report:
             ve = report["vertex_error"]
             lines.append(f"vertex error: L-inf {ve['linf']:.6g}, RMS {ve['rms']:.6g}, mean {ve['mean']:.6g}")
@@ -626,21 +752,30 @@ def cmd_compare(args: argparse.Namespace, run: _Run) -> int:
         lines.append(f"volume: A {va:.6g}, B {vb:.6g}" + (f" ({change:+.4f}%)" if change is not None else ""))
         for key in ("a", "b"):
             angles, topo = report[f"angles_{key}"], report[f"topology_{key}"]
-            lines.append(f"{key.upper()}: min angle {angles['min_angle']:.2f} deg, {100 * angles['share_under_10']:.2f}% "
-                         f"under 10 deg, components {topo['components']}, boundary loops {topo['boundary_loops']}, "
-                         f"genus {topo['genus']}, edge-manifold {topo['edge_manifold']}")
+            lines.append(
+                f"{key.upper()}: min angle {angles['min_angle']:.2f} deg, {100 * angles['share_under_10']:.2f}% "
+                f"under 10 deg, components {topo['components']}, boundary loops {topo['boundary_loops']}, "
+                f"genus {topo['genus']}, edge-manifold {topo['edge_manifold']}"
+            )
             holes = ", ".join(f"{size}: {count}" for size, count in topo["holes_by_size"].items())
-            lines.append(f"{key.upper()}: surface pieces {topo['surface_pieces']}, boundary edges {topo['boundary_edges']} "
-                         f"in {topo['boundary_components']} connected pieces, holes by edge count ({holes}), "
-                         f"non-manifold vertices {topo['nonmanifold_vertices']}, non-manifold edges "
-                         f"{topo['nonmanifold_edges']}, unreferenced vertices {topo['unreferenced_vertices']}, "
-                         f"degenerate triangles {topo['degenerate_triangles']}")
+            lines.append(
+                f"{key.upper()}: surface pieces {topo['surface_pieces']}, boundary edges {topo['boundary_edges']} "
+                f"in {topo['boundary_components']} connected pieces, holes by edge count ({holes}), "
+                f"non-manifold vertices {topo['nonmanifold_vertices']}, non-manifold edges "
+                f"{topo['nonmanifold_edges']}, unreferenced vertices {topo['unreferenced_vertices']}, "
+                f"degenerate triangles {topo['degenerate_triangles']}"
+            )
         for line in lines:
             run.say(line)
     if args.render:
         units = "mean edge lengths of A" if args.units == "edge" else "model units"
         report["render"] = _render(
-            [a, b], args.render, run, reference=a, units=args.units, what=f"B colored by distance to A, in {units}",
+            [a, b],
+            args.render,
+            run,
+            reference=a,
+            units=args.units,
+            what=f"B colored by distance to A, in {units}",
             titles=[f"A: {Path(args.a).name} (reference)", f"B: {Path(args.b).name}"],
             colorbar_title="distance to A",
         )
@@ -650,9 +785,16 @@ def cmd_compare(args: argparse.Namespace, run: _Run) -> int:
 def cmd_demo(args: argparse.Namespace, run: _Run) -> int:
     from .demo import run_demo
 
-    result = run_demo(args.out, subdivisions=args.subdivisions, noise=args.noise, seed=args.seed,
-                      render=not args.no_render, quiet=run.quiet, progress=run.progress,
-                      stream=sys.stderr if run.json else sys.stdout)
+    result = run_demo(
+        args.out,
+        subdivisions=args.subdivisions,
+        noise=args.noise,
+        seed=args.seed,
+        render=not args.no_render,
+        quiet=run.quiet,
+        progress=run.progress,
+        stream=sys.stderr if run.json else sys.stdout,
+    )
     return run.finish({"command": "demo", **result})
 
 
@@ -664,21 +806,41 @@ def cmd_fill(args: argparse.Namespace, run: _Run) -> int:
     vertices, triangles = np.asarray(mesh.vertices), np.asarray(mesh.triangles).astype(np.int64)
     before = find_holes(vertices, triangles)
     start = time.perf_counter()
-    with _flags(mesh=f"INPUT {args.input!r}", max_hole_edges="max_hole_edges",
-                max_hole_diameter="max_hole_diameter", continuity="continuity", density="density"):
-        out = fill_holes(mesh, max_hole_edges=args.max_hole_edges, max_hole_diameter=args.max_hole_diameter,
-                         continuity=args.continuity, density=args.density, fill_border=args.fill_border,
-                         progress=run.progress)
+    with _flags(
+        mesh=f"INPUT {args.input!r}",
+        max_hole_edges="max_hole_edges",
+        max_hole_diameter="max_hole_diameter",
+        continuity="continuity",
+        density="density",
+    ):
+        out = fill_holes(
+            mesh,
+            max_hole_edges=args.max_hole_edges,
+            max_hole_diameter=args.max_hole_diameter,
+            continuity=args.continuity,
+            density=args.density,
+            fill_border=args.fill_border,
+            progress=run.progress,
+        )
     seconds = time.perf_counter() - start
     write_output(args.output, out)
     after = find_holes(np.asarray(out.vertices), np.asarray(out.triangles).astype(np.int64))
-    report = {"command": "fill", "input": args.input, "output": args.output, **_mesh_size(mesh),
-              "holes_before": len(before), "holes_after": len(after),
-              "borders_left_open": sum(hole.border for hole in before) if not args.fill_border else 0,
-              "new_vertices": len(out.vertices) - len(mesh.vertices),
-              "new_triangles": len(out.triangles) - len(mesh.triangles), "seconds": seconds}
-    run.say(f"filled {len(before) - len(after)} of {len(before)} holes of {args.input} in {seconds:.2f} s "
-            f"({report['new_vertices']} new vertices) -> {args.output}; {len(after)} loops left open")
+    report = {
+        "command": "fill",
+        "input": args.input,
+        "output": args.output,
+        **_mesh_size(mesh),
+        "holes_before": len(before),
+        "holes_after": len(after),
+        "borders_left_open": sum(hole.border for hole in before) if not args.fill_border else 0,
+        "new_vertices": len(out.vertices) - len(mesh.vertices),
+        "new_triangles": len(out.triangles) - len(mesh.triangles),
+        "seconds": seconds,
+    }
+    run.say(
+        f"filled {len(before) - len(after)} of {len(before)} holes of {args.input} in {seconds:.2f} s "
+        f"({report['new_vertices']} new vertices) -> {args.output}; {len(after)} loops left open"
+    )
     return run.finish(report)
 
 
@@ -731,11 +893,24 @@ MAX_POINTS = 10_000_000
 MAX_SUBDIVISIONS = 9
 
 
-def _command(sub: Any, name: str, *, summary: str, description: str, example: str, handler: Any,
-             parents: Sequence[argparse.ArgumentParser]) -> argparse.ArgumentParser:
+def _command(
+    sub: Any,
+    name: str,
+    *,
+    summary: str,
+    description: str,
+    example: str,
+    handler: Any,
+    parents: Sequence[argparse.ArgumentParser],
+) -> argparse.ArgumentParser:
     """Add subcommand ``name`` with its one-line summary, description and an example in ``--help``."""
-    parser = sub.add_parser(name, parents=list(parents), help=summary, description=textwrap.fill(description, 79),
-                            epilog=f"example:\n  {example}")
+    parser = sub.add_parser(
+        name,
+        parents=list(parents),
+        help=summary,
+        description=textwrap.fill(description, 79),
+        epilog=f"example:\n  {example}",
+    )
     parser.set_defaults(handler=handler)
     return parser
 
@@ -743,9 +918,12 @@ def _command(sub: Any, name: str, *, summary: str, description: str, example: st
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog=PROG,
-        description=textwrap.fill("Least-squares meshes and constrained fairing for Open3D meshes. Reads and "
-                                  "writes every triangle-mesh format Open3D does (PLY, OBJ, STL, OFF, glTF). Each "
-                                  "call imports Open3D (about 2 s).", 79),
+        description=textwrap.fill(
+            "Least-squares meshes and constrained fairing for Open3D meshes. Reads and "
+            "writes every triangle-mesh format Open3D does (PLY, OBJ, STL, OFF, glTF). Each "
+            "call imports Open3D (about 2 s).",
+            79,
+        ),
         epilog=f"example:\n  {PROG} denoise scan.ply smooth.ply\n  {PROG} denoise --help",
     )
     from . import __version__
@@ -759,132 +937,257 @@ def build_parser() -> argparse.ArgumentParser:
     sub.required = True
     both = [common]
 
-    p = _command(sub, "denoise", parents=both, handler=cmd_denoise,
-                 summary="barycenter-constrained (or multiresolution) fairing",
-                 description="Remove noise with barycenter-constrained fairing (Liu et al. 2001, section 3): the "
-                             "membrane energy is minimized while every triangle keeps its barycenter. With "
-                             "--level L, multiresolution fairing (section 4.2): fair a coarse level of the "
-                             "volume-cost hierarchy, then split back up.",
-                 example=f"{PROG} denoise scan.ply smooth.ply --iterations 20 --render before_after.png")
+    p = _command(
+        sub,
+        "denoise",
+        parents=both,
+        handler=cmd_denoise,
+        summary="barycenter-constrained (or multiresolution) fairing",
+        description="Remove noise with barycenter-constrained fairing (Liu et al. 2001, section 3): the "
+        "membrane energy is minimized while every triangle keeps its barycenter. With "
+        "--level L, multiresolution fairing (section 4.2): fair a coarse level of the "
+        "volume-cost hierarchy, then split back up.",
+        example=f"{PROG} denoise scan.ply smooth.ply --iterations 20 --render before_after.png",
+    )
     p.add_argument("input", metavar="INPUT", help="mesh file to denoise")
     p.add_argument("output", metavar="OUTPUT", help="mesh file to write (.ply, .obj, .stl, .off, .gltf)")
-    p.add_argument("--iterations", type=_nonnegative_int, default=None,
-                   help="number of fairing iterations (default: the API's, 10 for local; with --level, 5 per level)")
-    p.add_argument("--method", choices=("scan", "local", "global"), default=None,
-                   help="fairing energy (default: scan, the API's default; local with --level or --reimpose-every)")
-    p.add_argument("--level", type=_nonnegative_int, default=0, help="multiresolution level (0: plain fairing)")
-    p.add_argument("--mu", type=float, default=None,
-                   help="barycenter penalty weight of --method global or scan (not with --level)")
-    p.add_argument("--reimpose-every", type=_positive_int, default=None,
-                   help="re-take the barycenters every k iterations (not with --level)")
-    p.add_argument("--fixed-boundary", action="store_true",
-                   help="keep boundary vertices fixed instead of smoothing the boundary curves (not with --level)")
+    p.add_argument(
+        "--iterations",
+        type=_nonnegative_int,
+        default=None,
+        help="number of fairing iterations (default: the API's, 10 for local; with --level, 5 per level)",
+    )
+    p.add_argument(
+        "--method",
+        choices=("scan", "local", "global"),
+        default=None,
+        help="fairing energy (default: scan, the API's default; local with --level or --reimpose-every)",
+    )
+    p.add_argument(
+        "--level", type=_nonnegative_int, default=0, help="multiresolution level (0: plain fairing)"
+    )
+    p.add_argument(
+        "--mu",
+        type=float,
+        default=None,
+        help="barycenter penalty weight of --method global or scan (not with --level)",
+    )
+    p.add_argument(
+        "--reimpose-every",
+        type=_positive_int,
+        default=None,
+        help="re-take the barycenters every k iterations (not with --level)",
+    )
+    p.add_argument(
+        "--fixed-boundary",
+        action="store_true",
+        help="keep boundary vertices fixed instead of smoothing the boundary curves (not with --level)",
+    )
     p.add_argument("--render", metavar="PNG", default=None, help="write a before/after picture")
 
-    p = _command(sub, "approximate", parents=both, handler=cmd_approximate,
-                 summary="LS-mesh approximation from N control points",
-                 description="Rebuild the geometry from the connectivity and N control points chosen on the "
-                             "mesh (least-squares meshes, Sorkine and Cohen-Or 2004).",
-                 example=f"{PROG} approximate bunny.ply approx.ply --count 400 --indices controls.npy")
+    p = _command(
+        sub,
+        "approximate",
+        parents=both,
+        handler=cmd_approximate,
+        summary="LS-mesh approximation from N control points",
+        description="Rebuild the geometry from the connectivity and N control points chosen on the "
+        "mesh (least-squares meshes, Sorkine and Cohen-Or 2004).",
+        example=f"{PROG} approximate bunny.ply approx.ply --count 400 --indices controls.npy",
+    )
     p.add_argument("input", metavar="INPUT", help="mesh file")
     p.add_argument("output", metavar="OUTPUT", help="mesh file to write")
     # (required options: no "(default: None)" in --help)
-    p.add_argument("--count", type=_positive_int, required=True, default=argparse.SUPPRESS,
-                   help="number of control points")
-    p.add_argument("--method", choices=("greedy", "random", "combined"), default="greedy",
-                   help="how the control points are chosen")
+    p.add_argument(
+        "--count",
+        type=_positive_int,
+        required=True,
+        default=argparse.SUPPRESS,
+        help="number of control points",
+    )
+    p.add_argument(
+        "--method",
+        choices=("greedy", "random", "combined"),
+        default="greedy",
+        help="how the control points are chosen",
+    )
     p.add_argument("--interpolate", action="store_true", help="interpolate the control points exactly")
     p.add_argument("--seed", type=int, default=0, help="random seed of --method random/combined")
-    p.add_argument("--indices", metavar="FILE", default=None, help="also write the control indices (.npy or .txt)")
+    p.add_argument(
+        "--indices", metavar="FILE", default=None, help="also write the control indices (.npy or .txt)"
+    )
 
-    p = _command(sub, "reconstruct", parents=both, handler=cmd_reconstruct,
-                 summary="rebuild the geometry of unknown vertices",
-                 description="Replace the positions of the --unknown vertices by the least-squares mesh of the "
-                             "known ones (LS meshes, figures 5 and 8); known vertices stay as they are unless "
-                             "--soft.",
-                 example=f"{PROG} reconstruct scan.ply filled.ply --unknown 0:100,250")
+    p = _command(
+        sub,
+        "reconstruct",
+        parents=both,
+        handler=cmd_reconstruct,
+        summary="rebuild the geometry of unknown vertices",
+        description="Replace the positions of the --unknown vertices by the least-squares mesh of the "
+        "known ones (LS meshes, figures 5 and 8); known vertices stay as they are unless "
+        "--soft.",
+        example=f"{PROG} reconstruct scan.ply filled.ply --unknown 0:100,250",
+    )
     p.add_argument("input", metavar="INPUT", help="mesh file")
     p.add_argument("output", metavar="OUTPUT", help="mesh file to write")
-    p.add_argument("--unknown", required=True, metavar="SPEC", default=argparse.SUPPRESS,
-                   help="index file (.npy or text) or list of indices and a:b ranges, e.g. '0:100,250'")
-    p.add_argument("--soft", action="store_true", help="known vertices as soft constraints (whole mesh re-solved)")
+    p.add_argument(
+        "--unknown",
+        required=True,
+        metavar="SPEC",
+        default=argparse.SUPPRESS,
+        help="index file (.npy or text) or list of indices and a:b ranges, e.g. '0:100,250'",
+    )
+    p.add_argument(
+        "--soft", action="store_true", help="known vertices as soft constraints (whole mesh re-solved)"
+    )
 
-    p = _command(sub, "hierarchy", parents=both, handler=cmd_hierarchy,
-                 summary="write levels of the volume-cost collapse hierarchy",
-                 description="Build the volume-cost edge-collapse hierarchy (Liu et al. 2001, section 4.1) and "
-                             "write the chosen levels as mesh files.",
-                 example=f"{PROG} hierarchy bunny.ply levels/ --levels 0,2,4 --maps")
+    p = _command(
+        sub,
+        "hierarchy",
+        parents=both,
+        handler=cmd_hierarchy,
+        summary="write levels of the volume-cost collapse hierarchy",
+        description="Build the volume-cost edge-collapse hierarchy (Liu et al. 2001, section 4.1) and "
+        "write the chosen levels as mesh files.",
+        example=f"{PROG} hierarchy bunny.ply levels/ --levels 0,2,4 --maps",
+    )
     p.add_argument("input", metavar="INPUT", help="mesh file")
     p.add_argument("outdir", metavar="OUTDIR", help="folder for level_NN files (created if needed)")
     p.add_argument("--levels", default="all", help="'all' or comma-separated level numbers (0 is the input)")
     p.add_argument("--min-vertices", type=_positive_int, default=100, help="stop at this many vertices")
-    p.add_argument("--max-levels", type=_positive_int, default=None, help="stop after this many levels (None: no limit)")
+    p.add_argument(
+        "--max-levels", type=_positive_int, default=None, help="stop after this many levels (None: no limit)"
+    )
     p.add_argument("--format", default="ply", help="file format of the levels (ply, obj, stl, off, gltf)")
-    p.add_argument("--maps", action="store_true", help="also write vertex_maps.npz (input vertex -> level vertex)")
+    p.add_argument(
+        "--maps", action="store_true", help="also write vertex_maps.npz (input vertex -> level vertex)"
+    )
 
-    p = _command(sub, "encode", parents=both, handler=cmd_encode,
-                 summary="encode the geometry as quantized LS-mesh anchors",
-                 description="Store the geometry as the quantized positions of a few anchors; decode rebuilds it "
-                             "from the connectivity (geometry-aware bases, Sorkine et al.).",
-                 example=f"{PROG} encode bunny.ply bunny.lsm --count 500 --bits 12")
+    p = _command(
+        sub,
+        "encode",
+        parents=both,
+        handler=cmd_encode,
+        summary="encode the geometry as quantized LS-mesh anchors",
+        description="Store the geometry as the quantized positions of a few anchors; decode rebuilds it "
+        "from the connectivity (geometry-aware bases, Sorkine et al.).",
+        example=f"{PROG} encode bunny.ply bunny.lsm --count 500 --bits 12",
+    )
     p.add_argument("input", metavar="INPUT", help="mesh file")
     p.add_argument("output", metavar="OUTPUT", help="file for the encoded bytes")
     p.add_argument("--count", type=_positive_int, default=None, help="anchors (None: 2%% of the vertices)")
     p.add_argument("--bits", type=_positive_int, default=12, help="quantization bits per coordinate")
-    p.add_argument("--method", choices=("greedy", "random", "combined"), default="greedy",
-                   help="how the anchors are chosen")
+    p.add_argument(
+        "--method",
+        choices=("greedy", "random", "combined"),
+        default="greedy",
+        help="how the anchors are chosen",
+    )
 
-    p = _command(sub, "decode", parents=both, handler=cmd_decode,
-                 summary="decode geometry onto a mesh's connectivity",
-                 description="Rebuild the geometry stored by encode on the connectivity of MESH.",
-                 example=f"{PROG} decode bunny.ply bunny.lsm decoded.ply --anchors 200")
+    p = _command(
+        sub,
+        "decode",
+        parents=both,
+        handler=cmd_decode,
+        summary="decode geometry onto a mesh's connectivity",
+        description="Rebuild the geometry stored by encode on the connectivity of MESH.",
+        example=f"{PROG} decode bunny.ply bunny.lsm decoded.ply --anchors 200",
+    )
     p.add_argument("mesh", metavar="MESH", help="mesh file whose connectivity the data was encoded on")
     p.add_argument("data", metavar="DATA", help="file written by encode")
     p.add_argument("output", metavar="OUTPUT", help="mesh file to write")
-    p.add_argument("--anchors", type=_positive_int, default=None, help="use only the first K anchors (None: all)")
+    p.add_argument(
+        "--anchors", type=_positive_int, default=None, help="use only the first K anchors (None: all)"
+    )
 
-    p = _command(sub, "compare", parents=both, handler=cmd_compare,
-                 summary="metrics between two meshes",
-                 description="Surface distance (sampled, both ways), vertex error and normal deviation when the "
-                             "meshes correspond, volume, triangle angles and topology of both.",
-                 example=f"{PROG} compare clean.ply smooth.ply --json")
+    p = _command(
+        sub,
+        "compare",
+        parents=both,
+        handler=cmd_compare,
+        summary="metrics between two meshes",
+        description="Surface distance (sampled, both ways), vertex error and normal deviation when the "
+        "meshes correspond, volume, triangle angles and topology of both.",
+        example=f"{PROG} compare clean.ply smooth.ply --json",
+    )
     p.add_argument("a", metavar="A", help="first mesh file")
     p.add_argument("b", metavar="B", help="second mesh file")
-    p.add_argument("--points", type=_int_at_least(1, "positive", MAX_POINTS), default=100_000,
-                   help="surface samples per mesh")
-    p.add_argument("--render", metavar="PNG", default=None,
-                   help="write a distance map: A and B side by side, colored by distance to A, with a color bar")
-    p.add_argument("--units", choices=("model", "edge"), default="model",
-                   help="units of the distance map: model units or mean edge lengths of A")
+    p.add_argument(
+        "--points",
+        type=_int_at_least(1, "positive", MAX_POINTS),
+        default=100_000,
+        help="surface samples per mesh",
+    )
+    p.add_argument(
+        "--render",
+        metavar="PNG",
+        default=None,
+        help="write a distance map: A and B side by side, colored by distance to A, with a color bar",
+    )
+    p.add_argument(
+        "--units",
+        choices=("model", "edge"),
+        default="model",
+        help="units of the distance map: model units or mean edge lengths of A",
+    )
 
-    p = _command(sub, "demo", parents=both, handler=cmd_demo,
-                 summary="denoise a built-in mesh and compare with Open3D's filters",
-                 description="Add noise to a built-in blob, denoise it with every method of this package and "
-                             "Open3D's filters, and print a table of errors (and a picture).",
-                 example=f"{PROG} demo --out demo_out --subdivisions 5")
+    p = _command(
+        sub,
+        "demo",
+        parents=both,
+        handler=cmd_demo,
+        summary="denoise a built-in mesh and compare with Open3D's filters",
+        description="Add noise to a built-in blob, denoise it with every method of this package and "
+        "Open3D's filters, and print a table of errors (and a picture).",
+        example=f"{PROG} demo --out demo_out --subdivisions 5",
+    )
     p.add_argument("--out", default="demo_out", help="output folder")
     p.add_argument("--no-render", action="store_true", help="skip the picture")
-    p.add_argument("--subdivisions", type=_int_at_least(1, "positive", MAX_SUBDIVISIONS), default=6,
-                   help="size of the built-in mesh: 10 * 4**s + 2 vertices (6: 40,962)")
+    p.add_argument(
+        "--subdivisions",
+        type=_int_at_least(1, "positive", MAX_SUBDIVISIONS),
+        default=6,
+        help="size of the built-in mesh: 10 * 4**s + 2 vertices (6: 40,962)",
+    )
     p.add_argument("--noise", type=_nonnegative_float, default=0.3, help="noise sigma in mean edge lengths")
     p.add_argument("--seed", type=int, default=0, help="random seed of the noise")
 
-    p = _command(sub, "fill", parents=both, handler=cmd_fill,
-                 summary="fill holes with faired patches (LS meshes)",
-                 description="Close holes: minimum-weight triangulation (Liepa 2003), refinement to the "
-                             "surrounding edge density, then LS-mesh fairing of the new vertices with the "
-                             "hole's rings as anchors. Each open component's outer border stays open unless "
-                             "--fill-border.",
-                 example=f"{PROG} fill scan.ply filled.ply --max-hole-edges 200")
+    p = _command(
+        sub,
+        "fill",
+        parents=both,
+        handler=cmd_fill,
+        summary="fill holes with faired patches (LS meshes)",
+        description="Close holes: minimum-weight triangulation (Liepa 2003), refinement to the "
+        "surrounding edge density, then LS-mesh fairing of the new vertices with the "
+        "hole's rings as anchors. Each open component's outer border stays open unless "
+        "--fill-border.",
+        example=f"{PROG} fill scan.ply filled.ply --max-hole-edges 200",
+    )
     p.add_argument("input", metavar="INPUT", help="mesh file")
     p.add_argument("output", metavar="OUTPUT", help="mesh file to write")
-    p.add_argument("--max-hole-edges", type=_int_at_least(3, "3-or-more"), default=None,
-                   help="fill only holes of at most this many edges (None: no limit)")
-    p.add_argument("--max-hole-diameter", type=float, default=None,
-                   help="fill only holes at most this wide, in mesh units (None: no limit)")
-    p.add_argument("--continuity", type=int, choices=(0, 1, 2), default=2,
-                   help="0 harmonic, 1 LS mesh (bi-Laplacian), 2 tri-Laplacian")
-    p.add_argument("--density", type=float, default=1.0, help="new vertex density relative to the surroundings")
+    p.add_argument(
+        "--max-hole-edges",
+        type=_int_at_least(3, "3-or-more"),
+        default=None,
+        help="fill only holes of at most this many edges (None: no limit)",
+    )
+    p.add_argument(
+        "--max-hole-diameter",
+        type=float,
+        default=None,
+        help="fill only holes at most this wide, in mesh units (None: no limit)",
+    )
+    p.add_argument(
+        "--continuity",
+        type=int,
+        choices=(0, 1, 2),
+        default=2,
+        help="0 harmonic, 1 LS mesh (bi-Laplacian), 2 tri-Laplacian",
+    )
+    p.add_argument(
+        "--density", type=float, default=1.0, help="new vertex density relative to the surroundings"
+    )
     p.add_argument("--fill-border", action="store_true", help="also fill the outer border of open components")
 
     # o3d-lsmesh batch INPUT... OUTDIR --op OP: parser and handler live in o3d_lsmesh/batch.py.
@@ -943,15 +1246,19 @@ def main(argv: Sequence[str] | None = None) -> int:
         _close_progress_bars()
         print(f"{PROG}: interrupted", file=sys.stderr)
         return 130
-    except Exception as error:  # noqa: BLE001 - anything else is a bug: show it as one
+    except Exception as error:
         return _internal_error(error)
 
 
 def _internal_error(error: BaseException) -> int:
     _close_progress_bars()
     traceback.print_exception(type(error), error, error.__traceback__, file=sys.stderr)
-    print(f"{PROG}: internal error (a bug in o3d-lsmesh, not in your input: please report it with the "
-          "traceback above)", file=sys.stderr, flush=True)
+    print(
+        f"{PROG}: internal error (a bug in o3d-lsmesh, not in your input: please report it with the "
+        "traceback above)",
+        file=sys.stderr,
+        flush=True,
+    )
     return 1
 
 

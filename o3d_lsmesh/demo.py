@@ -24,7 +24,7 @@ import numpy as np
 
 from ._o3d import open3d
 
-__all__ = ["demo_mesh", "add_noise", "run_demo", "METHODS"]
+__all__ = ["METHODS", "add_noise", "demo_mesh", "run_demo"]
 
 
 def demo_mesh(subdivisions: int = 6, *, seed: int = 7) -> Any:
@@ -76,7 +76,9 @@ def add_noise(mesh: Any, sigma: float, *, seed: int = 0) -> Any:
     o3d = open3d()
     vertices = np.asarray(mesh.vertices, dtype=np.float64)
     noisy = vertices + np.random.default_rng(seed).normal(scale=sigma, size=vertices.shape)
-    return o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(noisy), o3d.geometry.TriangleMesh(mesh).triangles)
+    return o3d.geometry.TriangleMesh(
+        o3d.utility.Vector3dVector(noisy), o3d.geometry.TriangleMesh(mesh).triangles
+    )
 
 
 def _ours_local(mesh, value):
@@ -110,11 +112,38 @@ def _o3d_taubin(mesh, n):
 METHODS: list[tuple[str, str, Callable, str, tuple, str | None]] = [
     # With fixed targets the local operator converges in a few iterations; re-imposing
     # the barycenters every r iterations (the paper's "by turns") smooths further.
-    ("constrained_local", "ours: constrained fairing, local", _ours_local, "iter/reimp",
-     ((10, None), (10, 2), (20, 2), (30, 3)), "o3d_lsmesh.fairing"),
-    ("constrained_global", "ours: constrained fairing, global", _ours_global, "iterations", (1, 2, 4), "o3d_lsmesh.fairing"),
-    ("multiresolution", "ours: multiresolution fairing", _ours_multiresolution, "level", (1, 2, 3), "o3d_lsmesh.fairing.multiresolution"),
-    ("o3d_laplacian", "Open3D filter_smooth_laplacian", _o3d_laplacian, "iterations", (1, 2, 5, 10, 20), None),
+    (
+        "constrained_local",
+        "ours: constrained fairing, local",
+        _ours_local,
+        "iter/reimp",
+        ((10, None), (10, 2), (20, 2), (30, 3)),
+        "o3d_lsmesh.fairing",
+    ),
+    (
+        "constrained_global",
+        "ours: constrained fairing, global",
+        _ours_global,
+        "iterations",
+        (1, 2, 4),
+        "o3d_lsmesh.fairing",
+    ),
+    (
+        "multiresolution",
+        "ours: multiresolution fairing",
+        _ours_multiresolution,
+        "level",
+        (1, 2, 3),
+        "o3d_lsmesh.fairing.multiresolution",
+    ),
+    (
+        "o3d_laplacian",
+        "Open3D filter_smooth_laplacian",
+        _o3d_laplacian,
+        "iterations",
+        (1, 2, 5, 10, 20),
+        None,
+    ),
     ("o3d_taubin", "Open3D filter_smooth_taubin", _o3d_taubin, "iterations", (5, 10, 20, 50, 100), None),
 ]
 
@@ -209,10 +238,20 @@ def run_demo(
     edge = mean_edge_length(clean)
     noisy = add_noise(clean, noise * edge, seed=seed)
     points = 50_000
-    say(f"o3d-lsmesh demo: built-in blob, {len(clean.vertices)} vertices, {len(clean.triangles)} triangles, "
-        f"Gaussian noise sigma = {noise} mean edge lengths (seed {seed})")
-    rows = [{"key": "noisy", "label": "noisy input", "parameter": None, "value": None, "seconds": 0.0,
-             **_metrics(noisy, clean, number_of_points=points)}]
+    say(
+        f"o3d-lsmesh demo: built-in blob, {len(clean.vertices)} vertices, {len(clean.triangles)} triangles, "
+        f"Gaussian noise sigma = {noise} mean edge lengths (seed {seed})"
+    )
+    rows = [
+        {
+            "key": "noisy",
+            "label": "noisy input",
+            "parameter": None,
+            "value": None,
+            "seconds": 0.0,
+            **_metrics(noisy, clean, number_of_points=points),
+        }
+    ]
     results = {"noisy": noisy}
     sweeps = {}
     methods = METHODS
@@ -243,7 +282,9 @@ def run_demo(
                 seconds = time.perf_counter() - start
                 if key == "multiresolution":
                     seconds += hierarchy_seconds
-                error = float(np.linalg.norm(np.asarray(result.vertices) - np.asarray(clean.vertices), axis=1).mean())
+                error = float(
+                    np.linalg.norm(np.asarray(result.vertices) - np.asarray(clean.vertices), axis=1).mean()
+                )
                 sweeps[key].append((value, error / edge))
                 if best is None or error < best[0]:
                     best = (error, value, result, seconds)
@@ -252,15 +293,25 @@ def run_demo(
             continue
         _, value, result, seconds = best
         results[key] = result
-        rows.append({"key": key, "label": label, "parameter": parameter, "value": value, "seconds": seconds,
-                     **_metrics(result, clean, number_of_points=points)})
+        rows.append(
+            {
+                "key": key,
+                "label": label,
+                "parameter": parameter,
+                "value": value,
+                "seconds": seconds,
+                **_metrics(result, clean, number_of_points=points),
+            }
+        )
 
     table = _format_table(rows, edge)
     say("")
     say(table)
     say("")
-    say(f"errors in mean edge lengths e = {edge:.5f}; 'param' is the best value of the sweep "
-        "(iterations, or iterations/reimpose_every, or hierarchy level):")
+    say(
+        f"errors in mean edge lengths e = {edge:.5f}; 'param' is the best value of the sweep "
+        "(iterations, or iterations/reimpose_every, or hierarchy level):"
+    )
     for key, sweep in sweeps.items():
         say(f"  {key:20s} " + ", ".join(f"{_format_value(v)}: {err:.3f}" for v, err in sweep))
 
@@ -274,8 +325,13 @@ def run_demo(
         for key, mesh in results.items():
             o3d.io.write_triangle_mesh(str(folder / f"{key}.ply"), mesh)
             files.append(folder / f"{key}.ply")
-        payload = {"mean_edge_length": edge, "noise_sigma_edges": noise, "seed": seed, "rows": rows,
-                   "sweeps": {k: [[v, e] for v, e in s] for k, s in sweeps.items()}}
+        payload = {
+            "mean_edge_length": edge,
+            "noise_sigma_edges": noise,
+            "seed": seed,
+            "rows": rows,
+            "sweeps": {k: [[v, e] for v, e in s] for k, s in sweeps.items()},
+        }
         (folder / "metrics.json").write_text(json.dumps(payload, indent=2))
         (folder / "metrics.md").write_text("```\n" + table + "\n```\n")
         files += [folder / "metrics.json", folder / "metrics.md"]
@@ -294,8 +350,14 @@ def run_demo(
             start = time.perf_counter()
             draw(panels, picture, width=420, height=420, reference=clean, view_direction=(0.3, 0.4, 1.0))
             files.append(picture)
-            names = ["noisy"] + [min(g, key=lambda r: r["mean_vertex_error"])["key"] for g in (ours, theirs) if g] + ["clean"]
-            say(f"picture ({time.perf_counter() - start:.1f} s): {picture}  panels: {' | '.join(names)}, "
-                "colored by distance to the clean mesh")
+            names = (
+                ["noisy"]
+                + [min(g, key=lambda r: r["mean_vertex_error"])["key"] for g in (ours, theirs) if g]
+                + ["clean"]
+            )
+            say(
+                f"picture ({time.perf_counter() - start:.1f} s): {picture}  panels: {' | '.join(names)}, "
+                "colored by distance to the clean mesh"
+            )
         say(f"wrote {len(files)} files to {folder}/")
     return {"rows": rows, "mean_edge_length": edge, "sweeps": sweeps, "files": [str(f) for f in files]}

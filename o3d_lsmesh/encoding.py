@@ -41,7 +41,8 @@ from __future__ import annotations
 import math
 import struct
 import zlib
-from typing import Any, Iterator
+from collections.abc import Iterator
+from typing import Any
 
 import numpy as np
 
@@ -54,7 +55,7 @@ from .lsmesh import LSMeshSolver
 from .selection import SELECTION_METHODS, _select
 from .topology import connected_components, unique_edges
 
-__all__ = ["encode_geometry", "decode_geometry", "iter_decode_geometry"]
+__all__ = ["decode_geometry", "encode_geometry", "iter_decode_geometry"]
 
 MAGIC = b"LSMG"
 VERSION = 1
@@ -125,7 +126,9 @@ def _dequantize(quantized: np.ndarray, lower: np.ndarray, upper: np.ndarray, bit
 
 def quantization_bound(lower: np.ndarray, upper: np.ndarray, bits: int) -> np.ndarray:
     """Largest quantization error per coordinate, ``(3,)``: half a quantization step."""
-    return (np.asarray(upper, dtype=np.float64) - np.asarray(lower, dtype=np.float64)) / (2 * ((1 << bits) - 1))
+    return (np.asarray(upper, dtype=np.float64) - np.asarray(lower, dtype=np.float64)) / (
+        2 * ((1 << bits) - 1)
+    )
 
 
 def encode_geometry(
@@ -193,7 +196,13 @@ def encode_geometry(
     if weight is not None:  # a weight too small to pin the anchors decodes to a drifted mesh
         check_weight_pins_components(laplacian_matrix(data.vertices, data.triangles), omega, name="weight")
     _, indices, _ = _select(
-        (data.vertices, data.triangles), count, method=method, batch=None, weights=omega, seed=0, progress=progress
+        (data.vertices, data.triangles),
+        count,
+        method=method,
+        batch=None,
+        weights=omega,
+        seed=0,
+        progress=progress,
     )
     positions = data.vertices[indices]
     lower, upper = positions.min(axis=0), positions.max(axis=0)
@@ -217,13 +226,13 @@ def _parse(data: Any, mesh_data: MeshData) -> tuple[np.ndarray, np.ndarray, floa
     raw = bytes(data)
     if raw[: len(MAGIC)] != MAGIC:
         raise ValueError(
-            f"data must start with the magic {MAGIC!r} of an o3d_lsmesh geometry stream, got {raw[:len(MAGIC)]!r}"
+            f"data must start with the magic {MAGIC!r} of an o3d_lsmesh geometry stream, got {raw[: len(MAGIC)]!r}"
         )
     if len(raw) < _HEADER.size + _CRC.size:
         raise ValueError(
             f"data must hold at least {_HEADER.size + _CRC.size} bytes (header and checksum), got {len(raw)}: truncated stream"
         )
-    (magic, version, bits, index_bits, reserved, n, k, edges_crc, omega, *box) = _HEADER.unpack_from(raw)
+    (_magic, version, bits, index_bits, reserved, n, k, edges_crc, omega, *box) = _HEADER.unpack_from(raw)
     if version != VERSION:
         raise ValueError(f"data must be a version {VERSION} stream, got version {version}")
     body, (crc,) = raw[: -_CRC.size], _CRC.unpack_from(raw, len(raw) - _CRC.size)
@@ -237,19 +246,25 @@ def _parse(data: Any, mesh_data: MeshData) -> tuple[np.ndarray, np.ndarray, floa
         )
     actual = zlib.crc32(body) & 0xFFFFFFFF
     if crc != actual:
-        raise ValueError(f"data checksum must match its content, got {crc:#010x} stored and {actual:#010x} computed: corrupted stream")
+        raise ValueError(
+            f"data checksum must match its content, got {crc:#010x} stored and {actual:#010x} computed: corrupted stream"
+        )
     # from here on the stream is intact: errors are streams written inconsistently, or the wrong mesh
     if reserved != 0:
         raise ValueError(f"data header reserved byte must be 0, got {reserved}")
     if n < 1 or index_bits != _index_bits(n):
-        raise ValueError(f"data header index_bits must be ceil(log2 n) = {_index_bits(max(n, 1))} for n = {n}, got {index_bits}")
+        raise ValueError(
+            f"data header index_bits must be ceil(log2 n) = {_index_bits(max(n, 1))} for n = {n}, got {index_bits}"
+        )
     if not 1 <= k <= n:
         raise ValueError(f"data header anchor count must lie in [1, {n}], got {k}")
     lower, upper = np.array(box[:3]), np.array(box[3:])
     if not (np.isfinite(omega) and omega > 0):
         raise ValueError(f"data header omega must be positive and finite, got {omega}")
     if not (np.isfinite(lower).all() and np.isfinite(upper).all() and (lower <= upper).all()):
-        raise ValueError(f"data header bounding box must be finite with min <= max, got {lower.tolist()} and {upper.tolist()}")
+        raise ValueError(
+            f"data header bounding box must be finite with min <= max, got {lower.tolist()} and {upper.tolist()}"
+        )
     vertex_count = len(mesh_data.vertices)
     if vertex_count != n:
         raise ValueError(f"mesh must have the {n} vertices the stream was encoded for, got {vertex_count}")
@@ -270,7 +285,9 @@ def _parse(data: Any, mesh_data: MeshData) -> tuple[np.ndarray, np.ndarray, floa
     ordered = np.sort(indices)
     repeated = ordered[1:] == ordered[:-1]
     if repeated.any():
-        raise ValueError(f"data anchor indices must not repeat, got {int(ordered[1:][repeated][0])} more than once")
+        raise ValueError(
+            f"data anchor indices must not repeat, got {int(ordered[1:][repeated][0])} more than once"
+        )
     return indices, _dequantize(quantized, lower, upper, bits), float(omega)
 
 

@@ -144,7 +144,7 @@ def _loop_rows(triangles: np.ndarray, n: int, edge_info=None) -> list[np.ndarray
             else:
                 leftovers.setdefault(v, []).append(e)
         for v, incoming in leftovers.items():
-            free = [int(x) for x in out_order[out_start[v]:out_start[v + 1]] if not taken[x]]
+            free = [int(x) for x in out_order[out_start[v] : out_start[v + 1]] if not taken[x]]
             for e, f in zip(incoming, free):
                 succ[e] = f
                 taken[f] = True
@@ -244,7 +244,7 @@ class Hole:
 def _diameter(points: np.ndarray) -> float:
     best = 0.0
     for start in range(0, len(points), 512):  # chunks bound memory at 512 * k distances
-        block = points[start:start + 512]
+        block = points[start : start + 512]
         d2 = ((block[:, None, :] - points[None, :, :]) ** 2).sum(-1)
         best = max(best, float(d2.max()))
     return float(np.sqrt(best))
@@ -280,11 +280,23 @@ def find_holes(vertices: np.ndarray, triangles: np.ndarray, *, _edge_info=None) 
     if not loops:
         return []
     graph = sp.coo_matrix(
-        (np.ones(2 * m), (np.concatenate([triangles[:, 0], triangles[:, 1]]),
-                          np.concatenate([triangles[:, 1], triangles[:, 2]]))), shape=(n, n))
+        (
+            np.ones(2 * m),
+            (
+                np.concatenate([triangles[:, 0], triangles[:, 1]]),
+                np.concatenate([triangles[:, 1], triangles[:, 2]]),
+            ),
+        ),
+        shape=(n, n),
+    )
     _, label = csgraph.connected_components(graph, directed=False)
-    area = 0.5 * np.linalg.norm(np.cross(vertices[triangles[:, 1]] - vertices[triangles[:, 0]],
-                                         vertices[triangles[:, 2]] - vertices[triangles[:, 0]]), axis=1)
+    area = 0.5 * np.linalg.norm(
+        np.cross(
+            vertices[triangles[:, 1]] - vertices[triangles[:, 0]],
+            vertices[triangles[:, 2]] - vertices[triangles[:, 0]],
+        ),
+        axis=1,
+    )
     component_area = np.bincount(label[triangles[:, 0]], weights=area, minlength=label.max() + 1)
     holes = []
     for rows in loops:
@@ -302,8 +314,10 @@ def find_holes(vertices: np.ndarray, triangles: np.ndarray, *, _edge_info=None) 
     border = np.zeros(len(holes), dtype=bool)
     for component, index in longest.items():
         border[index] = holes[index][1] ** 2 > BORDER_RATIO * component_area[component]
-    out = [Hole(loop, len(loop), perimeter, diameter, component, bool(border[i]), rows)
-           for i, (loop, perimeter, diameter, component, rows) in enumerate(holes)]
+    out = [
+        Hole(loop, len(loop), perimeter, diameter, component, bool(border[i]), rows)
+        for i, (loop, perimeter, diameter, component, rows) in enumerate(holes)
+    ]
     out.sort(key=lambda hole: int(hole.vertices[0]))
     return out
 
@@ -326,8 +340,9 @@ def _unit(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return v / safe[..., None], norm
 
 
-def _minimum_weight_triangulation(points: np.ndarray, outer_normals: np.ndarray,
-                                  forbidden: np.ndarray | None) -> np.ndarray:
+def _minimum_weight_triangulation(
+    points: np.ndarray, outer_normals: np.ndarray, forbidden: np.ndarray | None
+) -> np.ndarray:
     """Liepa's dynamic programme on a loop of ``k`` points, triangles ``(k - 2, 3)`` of local indices.
 
     Minimizes, lexicographically, the largest dihedral angle (between new
@@ -407,8 +422,9 @@ def _minimum_weight_triangulation(points: np.ndarray, outer_normals: np.ndarray,
     return np.array(out, dtype=np.int64)
 
 
-def _triangulate(points: np.ndarray, outer_normals: np.ndarray, forbidden: np.ndarray | None,
-                 spacing: float) -> tuple[np.ndarray, np.ndarray]:
+def _triangulate(
+    points: np.ndarray, outer_normals: np.ndarray, forbidden: np.ndarray | None, spacing: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Triangulate a loop, splitting it by chords while it is longer than :data:`DP_MAX_EDGES`.
 
     Returns the extra points (on the chords) and triangles over the indices
@@ -491,13 +507,16 @@ def _circumsphere(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray):
     ww = (w * w).sum(-1)
     safe = np.where(ww > 0, ww, 1.0)
     centre = p0 + (_cross(w, u) * (v * v).sum(-1)[:, None] + _cross(v, w) * (u * u).sum(-1)[:, None]) / (
-        2.0 * safe[:, None])
+        2.0 * safe[:, None]
+    )
     radius = np.linalg.norm(centre - p0, axis=1)
     radius = np.where(ww > 0, radius, np.inf)
     return centre, radius
 
 
-def _relax(points: np.ndarray, tris: np.ndarray, fixed_pairs: np.ndarray, max_passes: int = 100) -> np.ndarray:
+def _relax(
+    points: np.ndarray, tris: np.ndarray, fixed_pairs: np.ndarray, max_passes: int = 100
+) -> np.ndarray:
     """Delaunay edge flips (Liepa's relaxation) until none applies; batches of independent flips.
 
     An interior edge ``(a, b)`` between triangles ``(a, b, c)`` and ``(b, a, d)`` is
@@ -508,7 +527,9 @@ def _relax(points: np.ndarray, tris: np.ndarray, fixed_pairs: np.ndarray, max_pa
     """
     nv = len(points)
     tris = tris.copy()
-    fixed_keys = np.minimum(fixed_pairs[:, 0], fixed_pairs[:, 1]) * nv + np.maximum(fixed_pairs[:, 0], fixed_pairs[:, 1])
+    fixed_keys = np.minimum(fixed_pairs[:, 0], fixed_pairs[:, 1]) * nv + np.maximum(
+        fixed_pairs[:, 0], fixed_pairs[:, 1]
+    )
     for _ in range(max_passes):
         t1, s1, t2, s2, a, b, key = _edge_table(tris, nv)
         if len(t1) == 0:
@@ -525,7 +546,8 @@ def _relax(points: np.ndarray, tris: np.ndarray, fixed_pairs: np.ndarray, max_pa
         inside &= (existing[pos] != new_key) & (c != d)
         # the new triangles (c, a, d) and (d, b, c) must not fold over
         old = _cross(points[b] - points[a], points[c] - points[a]) + _cross(
-            points[a] - points[b], points[d] - points[b])
+            points[a] - points[b], points[d] - points[b]
+        )
         n1 = _cross(points[a] - points[c], points[d] - points[c])
         n2 = _cross(points[b] - points[d], points[c] - points[d])
         inside &= ((n1 * old).sum(1) > 0) & ((n2 * old).sum(1) > 0)
@@ -544,8 +566,9 @@ def _relax(points: np.ndarray, tris: np.ndarray, fixed_pairs: np.ndarray, max_pa
     return tris
 
 
-def _refine(points: np.ndarray, sigma: np.ndarray, tris: np.ndarray, fixed_pairs: np.ndarray,
-            max_rounds: int = 60) -> tuple[np.ndarray, np.ndarray]:
+def _refine(
+    points: np.ndarray, sigma: np.ndarray, tris: np.ndarray, fixed_pairs: np.ndarray, max_rounds: int = 60
+) -> tuple[np.ndarray, np.ndarray]:
     """Liepa's refinement: centroid splits of triangles larger than the local scale, then relaxation.
 
     A triangle ``(i, j, k)`` with centroid ``c`` and ``sigma_c`` the mean of its
@@ -628,8 +651,9 @@ def _uniform_operators(tris: np.ndarray, nv: int, vertices: np.ndarray | None = 
             cot[:, c] = (u * v).sum(1) / np.maximum(cross, 1e-300)
         w = 0.5 * np.bincount(inverse, weights=cot.T.reshape(-1), minlength=len(i))
         w = np.maximum(w, 0.05 * np.abs(w).mean())
-    adjacency = sp.coo_matrix((np.concatenate([w, w]), (np.concatenate([i, j]), np.concatenate([j, i]))),
-                              shape=(nv, nv)).tocsr()
+    adjacency = sp.coo_matrix(
+        (np.concatenate([w, w]), (np.concatenate([i, j]), np.concatenate([j, i]))), shape=(nv, nv)
+    ).tocsr()
     degree = np.asarray(adjacency.sum(axis=1)).ravel()
     K = (sp.diags(degree) - adjacency).tocsr()
     if kind == "cotangent-area":
@@ -645,8 +669,14 @@ def _uniform_operators(tris: np.ndarray, nv: int, vertices: np.ndarray | None = 
     return K, L, np.stack([i, j], axis=1)
 
 
-def _fair(vertices: np.ndarray, local_tris: np.ndarray, unknown: np.ndarray, rings: list[np.ndarray],
-          continuity: int, kind: str = "uniform") -> np.ndarray:
+def _fair(
+    vertices: np.ndarray,
+    local_tris: np.ndarray,
+    unknown: np.ndarray,
+    rings: list[np.ndarray],
+    continuity: int,
+    kind: str = "uniform",
+) -> np.ndarray:
     """Positions of the ``unknown`` local vertices minimizing the continuity's energy, the others fixed.
 
     * ``0``: ``x^T K x`` (membrane, harmonic: ``L x = 0`` at the unknowns);
@@ -680,9 +710,13 @@ def _fair(vertices: np.ndarray, local_tris: np.ndarray, unknown: np.ndarray, rin
             valid[rings[1]] = True
             keep = (rows[edges[:, 0]] | rows[edges[:, 1]]) & valid[edges[:, 0]] & valid[edges[:, 1]]
             sel = edges[keep]
-            G = sp.coo_matrix((np.concatenate([np.ones(len(sel)), -np.ones(len(sel))]),
-                               (np.tile(np.arange(len(sel)), 2), np.concatenate([sel[:, 0], sel[:, 1]]))),
-                              shape=(len(sel), nv)).tocsr()
+            G = sp.coo_matrix(
+                (
+                    np.concatenate([np.ones(len(sel)), -np.ones(len(sel))]),
+                    (np.tile(np.arange(len(sel)), 2), np.concatenate([sel[:, 0], sel[:, 1]])),
+                ),
+                shape=(len(sel), nv),
+            ).tocsr()
             A_full = (G @ L).tocsc()
         A_full = A_full.tocsc()
         A_u = A_full[:, unknown]
@@ -775,7 +809,8 @@ def fill_holes_arrays(
     (2, 1)
     """
     max_hole_edges, max_hole_diameter, continuity, density = _check_options(
-        max_hole_edges, max_hole_diameter, continuity, density)
+        max_hole_edges, max_hole_diameter, continuity, density
+    )
     weights = as_choice(weights, ("uniform", "cotangent"), name="weights")
     fill_border = as_bool(fill_border, name="fill_border")
     vertices = np.asarray(vertices, dtype=np.float64)
@@ -785,14 +820,16 @@ def fill_holes_arrays(
     edge_info = unique_edges(triangles, n)  # the one whole-mesh sort
     for hole in find_holes(vertices, triangles, _edge_info=edge_info):
         too_big = (max_hole_edges is not None and hole.edges > max_hole_edges) or (
-            max_hole_diameter is not None and hole.diameter > max_hole_diameter)
+            max_hole_diameter is not None and hole.diameter > max_hole_diameter
+        )
         # a loop made of the three edges of one triangle is the rim of a flap (a triangle hanging by a
         # vertex, common in raw scans), not a hole: "filling" it would add that triangle's reverse
         flap = hole.edges == 3 and len(np.unique(np.asarray(hole.rows) % m)) == 1
         (skipped if too_big or flap or (hole.border and not fill_border) else holes).append(hole)
     if not holes:
-        return FilledHoles(vertices.copy(), triangles.copy(), [], skipped, sp.csr_matrix((0, n)),
-                           np.zeros(0, dtype=np.int64))
+        return FilledHoles(
+            vertices.copy(), triangles.copy(), [], skipped, sp.csr_matrix((0, n)), np.zeros(0, dtype=np.int64)
+        )
     edges = edge_info[0]
     edge_keys = edges[:, 0] * n + edges[:, 1]  # sorted
     # local edge scale of the loop vertices: mean length of their edges (Liepa's sigma); only edges at
@@ -802,7 +839,9 @@ def fill_holes_arrays(
     at_loop = edges[on_loop[edges].any(axis=1)]
     length = np.linalg.norm(vertices[at_loop[:, 0]] - vertices[at_loop[:, 1]], axis=1)
     degree = np.bincount(at_loop.ravel(), minlength=n)
-    sigma_all = np.bincount(at_loop.ravel(), weights=np.repeat(length, 2), minlength=n) / np.maximum(degree, 1)
+    sigma_all = np.bincount(at_loop.ravel(), weights=np.repeat(length, 2), minlength=n) / np.maximum(
+        degree, 1
+    )
     new_points, new_tris = [], []
     interp_rows, interp_cols, interp_vals = [], [], []
     offset = n
@@ -817,8 +856,12 @@ def fill_holes_arrays(
             k = len(loop)
             points = vertices[loop]
             outer_tris = triangles[rows % m]  # the mesh triangle on each loop edge, for dihedral angles
-            outer, _ = _unit(_cross(vertices[outer_tris[:, 1]] - vertices[outer_tris[:, 0]],
-                                    vertices[outer_tris[:, 2]] - vertices[outer_tris[:, 0]]))
+            outer, _ = _unit(
+                _cross(
+                    vertices[outer_tris[:, 1]] - vertices[outer_tris[:, 0]],
+                    vertices[outer_tris[:, 2]] - vertices[outer_tris[:, 0]],
+                )
+            )
             # chords that already are edges of the mesh (between loop vertices that are not neighbours)
             a, b = np.meshgrid(loop, loop, indexing="ij")
             key = np.minimum(a, b) * n + np.maximum(a, b)
@@ -830,7 +873,9 @@ def fill_holes_arrays(
             forbidden_arg = forbidden if forbidden.any() else None
             spacing = float(np.mean(np.linalg.norm(np.roll(points, -1, 0) - points, axis=1)))
             # chords are sampled at the spacing the refinement aims for (none without refinement)
-            extra, tris = _triangulate(points, outer, forbidden_arg, spacing / density if density > 0 else 0.0)
+            extra, tris = _triangulate(
+                points, outer, forbidden_arg, spacing / density if density > 0 else 0.0
+            )
             local_points = np.concatenate([points, extra])
             if density > 0:
                 sigma = np.concatenate([sigma_all[loop] / density, np.full(len(extra), spacing / density)])
@@ -861,13 +906,16 @@ def fill_holes_arrays(
     out_triangles = np.concatenate([triangles, new_tris])
     p = len(new_points)
     if p and continuity >= 0:
-        out_vertices, used = _fair_all(out_vertices, out_triangles, m, n, holes, continuity, weights,
-                                       np.concatenate(tri_owner))
+        out_vertices, used = _fair_all(
+            out_vertices, out_triangles, m, n, holes, continuity, weights, np.concatenate(tri_owner)
+        )
     else:
         used = np.full(len(holes), -1, dtype=np.int64)
     if interp_rows:
-        interpolation = sp.csr_matrix((np.concatenate(interp_vals), (np.concatenate(interp_rows),
-                                                                      np.concatenate(interp_cols))), shape=(p, n))
+        interpolation = sp.csr_matrix(
+            (np.concatenate(interp_vals), (np.concatenate(interp_rows), np.concatenate(interp_cols))),
+            shape=(p, n),
+        )
     else:
         interpolation = sp.csr_matrix((p, n))
     return FilledHoles(out_vertices, out_triangles, holes, skipped, interpolation, used)
@@ -894,8 +942,16 @@ def _simple_pieces(loop: np.ndarray, rows: np.ndarray):
         stack.append((np.concatenate([loop[:p], loop[q:]]), np.concatenate([rows[:p], rows[q:]])))
 
 
-def _fair_all(vertices: np.ndarray, triangles: np.ndarray, m: int, n: int, holes: list, continuity: int,
-              weights: str, tri_owner: np.ndarray):
+def _fair_all(
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    m: int,
+    n: int,
+    holes: list,
+    continuity: int,
+    weights: str,
+    tri_owner: np.ndarray,
+):
     """Fair every new vertex at once: one local system over the patches and the rings around them.
 
     Candidates, best first: the asked continuity (after its cotangent pass if asked, then without), then
@@ -927,7 +983,9 @@ def _fair_all(vertices: np.ndarray, triangles: np.ndarray, m: int, n: int, holes
     def candidates():  # lazily: most calls stop at the first
         for level in range(continuity, -1, -1):
             try:
-                solution = _fair(vertices[local_vertices], remap[local_tris], unknown_local, local_rings, level)
+                solution = _fair(
+                    vertices[local_vertices], remap[local_tris], unknown_local, local_rings, level
+                )
             except SingularSystemError:
                 continue
             if not np.isfinite(solution).all():
@@ -938,11 +996,21 @@ def _fair_all(vertices: np.ndarray, triangles: np.ndarray, m: int, n: int, holes
                 # cotangent weights (clamped positive, vertex-area normalized) read off the uniform solution:
                 # a fair embedding, where weights from the flat refined patch diverged (camel, 15h: 87 h off)
                 try:
-                    again = _fair(faired[local_vertices], remap[local_tris], unknown_local, local_rings, level,
-                                  "cotangent-area")
+                    again = _fair(
+                        faired[local_vertices],
+                        remap[local_tris],
+                        unknown_local,
+                        local_rings,
+                        level,
+                        "cotangent-area",
+                    )
                 except SingularSystemError:
                     again = None
-                if again is not None and np.isfinite(again).all() and _no_fold(faired, again, unknown, new_tris):
+                if (
+                    again is not None
+                    and np.isfinite(again).all()
+                    and _no_fold(faired, again, unknown, new_tris)
+                ):
                     better = faired.copy()
                     better[unknown] = again
                     yield level, better
@@ -969,8 +1037,12 @@ def _fair_all(vertices: np.ndarray, triangles: np.ndarray, m: int, n: int, holes
         # or unavoidable), and say so
         mine = np.isin(vertex_owner, stuck)
         out[n:][mine] = candidates[0][1][n:][mine]
-        warnings.warn(f"fill_holes: the fills of {len(stuck)} hole(s) cross other triangles at every continuity "
-                      "(folded or overlapping surface next to them)", O3DLSMeshWarning, stacklevel=3)
+        warnings.warn(
+            f"fill_holes: the fills of {len(stuck)} hole(s) cross other triangles at every continuity "
+            "(folded or overlapping surface next to them)",
+            O3DLSMeshWarning,
+            stacklevel=3,
+        )
     return out, used
 
 
@@ -1017,7 +1089,13 @@ def _crossings(vertices: np.ndarray, triangles: np.ndarray, first_new: int) -> n
 
     idx_c, idx_n = np.arange(len(boxed)), np.arange(len(new))
     sc = idx_c[small_c]
-    pairs(c_new[small_n], centre[sc], r_new[small_n] + (radius[sc].max() if len(sc) else 0.0), idx_n[small_n], sc)
+    pairs(
+        c_new[small_n],
+        centre[sc],
+        r_new[small_n] + (radius[sc].max() if len(sc) else 0.0),
+        idx_n[small_n],
+        sc,
+    )
     pairs(c_new[~small_n], centre, r_new[~small_n] + radius.max(), idx_n[~small_n], idx_c)
     sn = idx_n[small_n]
     if len(sn):
@@ -1048,7 +1126,7 @@ def _crossings(vertices: np.ndarray, triangles: np.ndarray, first_new: int) -> n
     separated = np.zeros(len(a), dtype=bool)
     for axis in axes:
         length = np.linalg.norm(axis, axis=1)
-        usable = length > 1e-12 * scale ** 2
+        usable = length > 1e-12 * scale**2
         unit = axis / np.where(usable, length, 1.0)[:, None]
         pp = np.einsum("kij,kj->ki", P, unit)
         qq = np.einsum("kij,kj->ki", Q, unit)
@@ -1068,9 +1146,11 @@ def _no_fold(uniform: np.ndarray, again: np.ndarray, unknown: np.ndarray, new_tr
     then the uniform solution is kept)."""
     moved = uniform.copy()
     moved[unknown] = again
+
     def normals(x):
         p = x[new_tris]
         return _cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+
     if ((normals(uniform) * normals(moved)).sum(axis=1) <= 0).any():
         return False
     size = np.linalg.norm(np.ptp(uniform[new_tris.ravel()], axis=0))
@@ -1196,10 +1276,18 @@ def fill_holes(
     (True, True)
     """
     data = read_mesh(mesh)
-    result = fill_holes_arrays(data.vertices, data.triangles, max_hole_edges=max_hole_edges,
-                               max_hole_diameter=max_hole_diameter, continuity=continuity, density=density,
-                               weights=weights, fill_border=fill_border, interpolation=_has_vertex_data(data),
-                               progress=progress)
+    result = fill_holes_arrays(
+        data.vertices,
+        data.triangles,
+        max_hole_edges=max_hole_edges,
+        max_hole_diameter=max_hole_diameter,
+        continuity=continuity,
+        density=density,
+        weights=weights,
+        fill_border=fill_border,
+        interpolation=_has_vertex_data(data),
+        progress=progress,
+    )
     return _rebuild(data, result)
 
 
@@ -1246,12 +1334,16 @@ def _rebuild(data: Any, result: FilledHoles) -> Any:
             value = src.vertex[key]
             if value.dtype in (o3d.core.float32, o3d.core.float64):
                 arr = extend(value.cpu().numpy())
-                out.vertex[key] = o3d.core.Tensor(arr.reshape((-1,) + tuple(value.shape[1:])),
-                                                  device=device).to(value.dtype)
+                out.vertex[key] = o3d.core.Tensor(
+                    arr.reshape((-1,) + tuple(value.shape[1:])), device=device
+                ).to(value.dtype)
             else:
                 dropped.append(f"vertex.{key}")
         dropped += [f"triangle.{key}" for key in src.triangle if key not in ("indices", "normals")]
     if dropped:
-        warnings.warn(f"fill_holes changes the connectivity: dropped {', '.join(dropped)}",
-                      O3DLSMeshWarning, stacklevel=3)
+        warnings.warn(
+            f"fill_holes changes the connectivity: dropped {', '.join(dropped)}",
+            O3DLSMeshWarning,
+            stacklevel=3,
+        )
     return out

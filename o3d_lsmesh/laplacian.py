@@ -11,7 +11,7 @@ from ._o3d import read_mesh
 from ._validate import as_choice
 from .topology import adjacency_matrix
 
-__all__ = ["laplacian", "uniform_laplacian", "cotangent_laplacian", "laplacian_matrix"]
+__all__ = ["cotangent_laplacian", "laplacian", "laplacian_matrix", "uniform_laplacian"]
 
 LAPLACIAN_KINDS = ("uniform", "cotangent")
 

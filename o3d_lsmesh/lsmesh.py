@@ -22,7 +22,7 @@ from ._solvers import SPDSolver, check_constant_modes, check_finite, operator_sc
 from ._validate import as_bool, as_choice, as_indices, as_positions, as_weights
 from .laplacian import LAPLACIAN_KINDS, laplacian_matrix
 
-__all__ = ["LSMeshSolver", "ls_mesh", "reconstruct_geometry", "check_components_constrained"]
+__all__ = ["LSMeshSolver", "check_components_constrained", "ls_mesh", "reconstruct_geometry"]
 
 
 def check_components_constrained(graph: sp.spmatrix, constrained: np.ndarray, *, what: str) -> np.ndarray:
@@ -146,7 +146,11 @@ class LSMeshSolver:
             pinned = np.zeros(n)
             np.add.at(pinned, indices, weights**2)
             check_constant_modes(
-                L.T @ (L @ np.ones(n)) + pinned, labels, scale=operator_scale(L), name="weights", value=weights,
+                L.T @ (L @ np.ones(n)) + pinned,
+                labels,
+                scale=operator_scale(L),
+                name="weights",
+                value=weights,
                 what="the control weights",
             )
         del labels
@@ -195,7 +199,9 @@ class LSMeshSolver:
             self._data = MeshData(None, None, data.source, data.kind)
         del data
         options = {} if tol is None else {"tol": tol}
-        self._solver = SPDSolver(product_of=product, backend=backend, ordering=ordering, progress=progress, **options)
+        self._solver = SPDSolver(
+            product_of=product, backend=backend, ordering=ordering, progress=progress, **options
+        )
 
     def _reduce(self, indices: np.ndarray) -> np.ndarray:
         # row of each (free) vertex in the reduced system
@@ -246,8 +252,10 @@ class LSMeshSolver:
         if constraint_vertex_positions is None:
             positions = self._positions
         else:
-            positions = as_positions(constraint_vertex_positions, k, name="constraint_vertex_positions", limit=True)
-        hard_pos, soft_pos = positions[: len(self._hard)], positions[len(self._hard):]
+            positions = as_positions(
+                constraint_vertex_positions, k, name="constraint_vertex_positions", limit=True
+            )
+        hard_pos, soft_pos = positions[: len(self._hard)], positions[len(self._hard) :]
         rhs = np.zeros((self._unknowns, 3))
         if self.interpolate:
             rhs += self._rhs_hard @ hard_pos
@@ -258,7 +266,9 @@ class LSMeshSolver:
         if self._updated if refine is None else refine:
             reduced_soft = self._reduce(self._soft)
             if self._operator is None:
-                self._operator = laplacian_matrix(self._data.vertices, self._data.triangles, self.laplacian).tocsr()
+                self._operator = laplacian_matrix(
+                    self._data.vertices, self._data.triangles, self.laplacian
+                ).tocsr()
             residual = -(self._operator.T @ (self._operator @ solution))
             if self.interpolate:
                 residual += self._rhs_hard @ hard_pos
@@ -309,9 +319,7 @@ class LSMeshSolver:
         else:
             pos = as_positions(positions, len(new), name="positions", limit=True)
         # one nonzero per column: build the CSC arrays directly (the COO route costs more than a small update)
-        c = sp.csc_matrix(
-            (w, self._reduce(new), np.arange(len(new) + 1)), shape=(self._unknowns, len(new))
-        )
+        c = sp.csc_matrix((w, self._reduce(new), np.arange(len(new) + 1)), shape=(self._unknowns, len(new)))
         self._solver.update(c)
         self._updated = True
         self._soft = np.concatenate([self._soft, new])
@@ -387,8 +395,15 @@ def ls_mesh(
     with stages(progress, "ls_mesh", ("factor", "solve")) as begin:
         begin("factor")
         solver = LSMeshSolver(
-            mesh, constraint_vertex_indices, weights=weights, interpolate=interpolate, laplacian=laplacian,
-            solver=solver, tol=tol, progress=progress, _release_arrays=True,
+            mesh,
+            constraint_vertex_indices,
+            weights=weights,
+            interpolate=interpolate,
+            laplacian=laplacian,
+            solver=solver,
+            tol=tol,
+            progress=progress,
+            _release_arrays=True,
         )
         begin("solve")
         vertices, data = solver.solve(constraint_vertex_positions), solver._data

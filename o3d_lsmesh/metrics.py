@@ -43,9 +43,13 @@ def vertex_error(a: Any, b: Any) -> dict:
     return {"linf": float(d.max()), "rms": float(np.sqrt(np.mean(d**2))), "mean": float(d.mean())}
 
 
-def _sample_surface(vertices: np.ndarray, triangles: np.ndarray, count: int, rng: np.random.Generator) -> np.ndarray:
+def _sample_surface(
+    vertices: np.ndarray, triangles: np.ndarray, count: int, rng: np.random.Generator
+) -> np.ndarray:
     corners = vertices[triangles]
-    area = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
+    area = 0.5 * np.linalg.norm(
+        np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1
+    )
     total = area.sum()
     probabilities = area / total if total > 0 else np.full(len(area), 1.0 / len(area))
     chosen = rng.choice(len(triangles), size=count, p=probabilities)
@@ -54,7 +58,9 @@ def _sample_surface(vertices: np.ndarray, triangles: np.ndarray, count: int, rng
     u, v, w = 1 - s, s * (1 - r2), s * r2
     c = corners[chosen]
     # include the vertices themselves so that spikes at vertices are never missed
-    return np.concatenate([u[:, None] * c[:, 0] + v[:, None] * c[:, 1] + w[:, None] * c[:, 2], vertices[np.unique(triangles)]])
+    return np.concatenate(
+        [u[:, None] * c[:, 0] + v[:, None] * c[:, 1] + w[:, None] * c[:, 2], vertices[np.unique(triangles)]]
+    )
 
 
 def _distances_to(vertices: np.ndarray, triangles: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -82,7 +88,9 @@ def surface_distance(a: Any, b: Any, *, number_of_points: int = 100_000, seed: i
         samples) and ``rms`` (root mean square over both samples: the L2 error
         of the geometry-aware bases paper).
     """
-    number_of_points = as_count(number_of_points, name="number_of_points", minimum=1, maximum=MAX_SAMPLE_POINTS)
+    number_of_points = as_count(
+        number_of_points, name="number_of_points", minimum=1, maximum=MAX_SAMPLE_POINTS
+    )
     seed = as_count(seed, name="seed")
     da, db = read_mesh(a, name="a"), read_mesh(b, name="b")
     # Distances are measured in single precision (RaycastingScene): in a frame centered on both

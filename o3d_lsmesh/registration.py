@@ -27,7 +27,7 @@ from __future__ import annotations
 import threading
 from typing import Any, Callable
 
-__all__ = ["register", "unregister", "registered_methods", "METHOD_NAMES"]
+__all__ = ["METHOD_NAMES", "register", "registered_methods", "unregister"]
 
 _MARKER = "__o3d_lsmesh_method__"
 _LOCK = threading.Lock()
@@ -65,7 +65,9 @@ def _filter_smooth_boundary_curves(self: Any, number_of_iterations: int = 10) ->
     return smooth_boundary_curves(self, number_of_iterations)
 
 
-def _ls_mesh(self: Any, constraint_vertex_indices: Any, constraint_vertex_positions: Any = None, **kwargs: Any) -> Any:
+def _ls_mesh(
+    self: Any, constraint_vertex_indices: Any, constraint_vertex_positions: Any = None, **kwargs: Any
+) -> Any:
     """Least-squares mesh of this connectivity near the control vertices (Sorkine and Cohen-Or 2004, eq. 3).
 
     See :func:`o3d_lsmesh.ls_mesh`; keyword options ``weights``,

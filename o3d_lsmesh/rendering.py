@@ -34,8 +34,9 @@ import subprocess
 import sys
 import tempfile
 import warnings
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -43,14 +44,22 @@ from ._errors import O3DLSMeshWarning
 from ._o3d import open3d, read_mesh
 from ._validate import as_choice, as_count, as_positive_float, as_real_vector
 
-__all__ = ["render", "error_colors", "VIRIDIS", "RenderedImage"]
+__all__ = ["VIRIDIS", "RenderedImage", "error_colors", "render"]
 
 #: matplotlib's viridis sampled at 11 points, interpolated linearly (no matplotlib needed).
 VIRIDIS = np.array(
     [
-        [0.267, 0.005, 0.329], [0.283, 0.141, 0.458], [0.254, 0.265, 0.530], [0.207, 0.372, 0.553],
-        [0.164, 0.471, 0.558], [0.128, 0.567, 0.551], [0.135, 0.659, 0.518], [0.267, 0.749, 0.441],
-        [0.478, 0.821, 0.318], [0.741, 0.873, 0.150], [0.993, 0.906, 0.144],
+        [0.267, 0.005, 0.329],
+        [0.283, 0.141, 0.458],
+        [0.254, 0.265, 0.530],
+        [0.207, 0.372, 0.553],
+        [0.164, 0.471, 0.558],
+        [0.128, 0.567, 0.551],
+        [0.135, 0.659, 0.518],
+        [0.267, 0.749, 0.441],
+        [0.478, 0.821, 0.318],
+        [0.741, 0.873, 0.150],
+        [0.993, 0.906, 0.144],
     ]
 )
 
@@ -111,7 +120,9 @@ def _layout(arrays, view_direction, up, width, height, margin, align):
     up = _unit(up, name="up")
     right = np.cross(up, back)
     if np.linalg.norm(right) < 1e-9:
-        raise ValueError(f"up must not be parallel to view_direction, got up={up.tolist()}, view_direction={back.tolist()}")
+        raise ValueError(
+            f"up must not be parallel to view_direction, got up={up.tolist()}, view_direction={back.tolist()}"
+        )
     right /= np.linalg.norm(right)
     true_up = np.cross(back, right)
     if align == "common":
@@ -121,7 +132,10 @@ def _layout(arrays, view_direction, up, width, height, margin, align):
     else:
         centers = [0.5 * (v.min(axis=0) + v.max(axis=0)) for v, _ in arrays]
     extents = np.array(
-        [np.abs((v - c) @ np.stack([right, true_up, back], axis=1)).max(axis=0) for (v, _), c in zip(arrays, centers)]
+        [
+            np.abs((v - c) @ np.stack([right, true_up, back], axis=1)).max(axis=0)
+            for (v, _), c in zip(arrays, centers)
+        ]
     )
     half = max(extents[:, 0].max(), extents[:, 1].max(), 1e-12) * (1.0 + margin)
     # Panels keep the pixel aspect ratio so that nothing is stretched.
@@ -157,7 +171,9 @@ def _vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     # Area-weighted: the cross product's length is twice the triangle area.
     corner_of = triangles.ravel()
     face3 = np.repeat(face, 3, axis=0)
-    normals = np.stack([np.bincount(corner_of, weights=face3[:, c], minlength=len(vertices)) for c in range(3)], axis=1)
+    normals = np.stack(
+        [np.bincount(corner_of, weights=face3[:, c], minlength=len(vertices)) for c in range(3)], axis=1
+    )
     length = np.linalg.norm(normals, axis=1, keepdims=True)
     return normals / np.where(length > 0, length, 1.0)
 
@@ -165,7 +181,9 @@ def _vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
 def _raycast(vertices, triangles, colors, camera, width, height, background) -> np.ndarray:
     o3d = open3d()
     scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(o3d.core.Tensor(vertices.astype(np.float32)), o3d.core.Tensor(triangles.astype(np.uint32)))
+    scene.add_triangles(
+        o3d.core.Tensor(vertices.astype(np.float32)), o3d.core.Tensor(triangles.astype(np.uint32))
+    )
     right, up, back = (np.array(camera[k]) for k in ("right", "up", "back"))
     xs = camera["left"] + (np.arange(width) + 0.5) / width * (camera["right_edge"] - camera["left"])
     ys = camera["top"] - (np.arange(height) + 0.5) / height * (camera["top"] - camera["bottom"])
@@ -210,7 +228,8 @@ def _filament_worker(spec_path: str, image_path: str) -> None:
     background = spec["background"].astype(np.float32)
     renderer.scene.set_background(np.append(background, 1.0))
     mesh = o3d.geometry.TriangleMesh(
-        o3d.utility.Vector3dVector(spec["vertices"]), o3d.utility.Vector3iVector(spec["triangles"].astype(np.int32))
+        o3d.utility.Vector3dVector(spec["vertices"]),
+        o3d.utility.Vector3iVector(spec["triangles"].astype(np.int32)),
     )
     mesh.vertex_colors = o3d.utility.Vector3dVector(spec["colors"])
     mesh.compute_vertex_normals()
@@ -227,7 +246,12 @@ def _filament_worker(spec_path: str, image_path: str) -> None:
     renderer.scene.scene.set_indirect_light_intensity(_AMBIENT)
     renderer.scene.camera.set_projection(
         rendering.Camera.Projection.Ortho,
-        camera["left"], camera["right_edge"], camera["bottom"], camera["top"], camera["near"], camera["far"],
+        camera["left"],
+        camera["right_edge"],
+        camera["bottom"],
+        camera["top"],
+        camera["near"],
+        camera["far"],
     )
     renderer.scene.camera.look_at(camera["center"], camera["eye"], camera["up"])
     image = np.asarray(renderer.render_to_image())[..., :3]
@@ -238,8 +262,13 @@ def _filament(vertices, triangles, colors, camera, width, height, background, ti
     with tempfile.TemporaryDirectory(prefix="o3d_lsmesh_render_") as folder:
         spec_path, image_path = os.path.join(folder, "spec.npz"), os.path.join(folder, "image.npy")
         np.savez(
-            spec_path, vertices=vertices, triangles=triangles, colors=colors,
-            camera=json.dumps(camera), size=np.array([width, height]), background=np.asarray(background, dtype=np.float64),
+            spec_path,
+            vertices=vertices,
+            triangles=triangles,
+            colors=colors,
+            camera=json.dumps(camera),
+            size=np.array([width, height]),
+            background=np.asarray(background, dtype=np.float64),
         )
         package_parent = str(Path(__file__).resolve().parents[1])
         env = dict(os.environ)
@@ -248,10 +277,15 @@ def _filament(vertices, triangles, colors, camera, width, height, background, ti
         try:
             done = subprocess.run(
                 [sys.executable, "-c", code, spec_path, image_path],
-                stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, timeout=timeout, check=False,
+                capture_output=True,
+                env=env,
+                timeout=timeout,
+                check=False,
             )
         except subprocess.TimeoutExpired as error:
-            raise RuntimeError(f"Filament OffscreenRenderer did not finish within timeout={timeout} s") from error
+            raise RuntimeError(
+                f"Filament OffscreenRenderer did not finish within timeout={timeout} s"
+            ) from error
         if done.returncode != 0 or not os.path.exists(image_path):
             lines = [line for line in done.stderr.decode(errors="replace").splitlines() if line.strip()]
             reason = lines[-1] if lines else f"exit code {done.returncode}"
@@ -322,16 +356,25 @@ def _annotate(image, panel_width, titles, bar, background):
     text_color = "white" if np.mean(background) < 0.5 else "black"
     if titles is not None:
         for k, title in enumerate(titles):
-            fig.text((k + 0.5) * panel_width / total_width, 1.0 - 0.5 * title_band / full, title, ha="center",
-                     va="center", fontsize=font, color=text_color, clip_on=True)
+            fig.text(
+                (k + 0.5) * panel_width / total_width,
+                1.0 - 0.5 * title_band / full,
+                title,
+                ha="center",
+                va="center",
+                fontsize=font,
+                color=text_color,
+                clip_on=True,
+            )
     if bar is not None:
         error_max, label = bar
         cmap = LinearSegmentedColormap.from_list("o3d_lsmesh_viridis", VIRIDIS)
         left = 0.1 if total_width >= 300 else 0.05
         strip = 1.1 * font
         cax = fig.add_axes((left, (2.2 * font) / full, 1.0 - 2 * left, strip / full))
-        bar_artist = ColorbarBase(cax, cmap=cmap, norm=Normalize(0.0, error_max), orientation="horizontal",
-                                  extend="max")
+        bar_artist = ColorbarBase(
+            cax, cmap=cmap, norm=Normalize(0.0, error_max), orientation="horizontal", extend="max"
+        )
         bar_artist.ax.tick_params(labelsize=0.85 * font, colors=text_color, length=0.3 * font)
         bar_artist.outline.set_edgecolor(text_color)
         cax.set_title(label, fontsize=0.9 * font, color=text_color, pad=0.25 * font)
@@ -476,7 +519,9 @@ def render(
     units = as_choice(units, _UNITS, name="units")
     if titles is not None:
         if isinstance(titles, str) or not isinstance(titles, Sequence):
-            raise TypeError(f"titles must be a sequence of strings (one per mesh), got {type(titles).__name__}")
+            raise TypeError(
+                f"titles must be a sequence of strings (one per mesh), got {type(titles).__name__}"
+            )
         if len(titles) != len(items):
             raise ValueError(f"titles must hold one title per mesh ({len(items)}), got {len(titles)}")
         if not all(isinstance(t, str) for t in titles):
@@ -496,7 +541,9 @@ def render(
     # Draw in a frame scaled to unit size: an orthographic picture does not depend on the scale,
     # and single-precision raycasting would overflow on coordinates near 1e30 (distances are
     # scaled back to model units for the colors).
-    scale = max([float(np.abs(d.vertices).max()) for d in datas + ([ref] if ref is not None else [])] + [1e-300])
+    scale = max(
+        [float(np.abs(d.vertices).max()) for d in datas + ([ref] if ref is not None else [])] + [1e-300]
+    )
     arrays = [(d.vertices / scale, d.triangles) for d in datas]
     edge_length = None
     if ref is not None:
@@ -513,7 +560,11 @@ def render(
         colors = []
         for mesh, (vertices, _) in zip(items, arrays):
             own = _vertex_colors(mesh)
-            colors.append(own if own is not None and len(own) == len(vertices) else np.tile(base_color, (len(vertices), 1)))
+            colors.append(
+                own
+                if own is not None and len(own) == len(vertices)
+                else np.tile(base_color, (len(vertices), 1))
+            )
 
     vertices, triangles, camera = _layout(arrays, view_direction, up, width, height, margin, align)
     all_colors = np.concatenate(colors)
@@ -521,11 +572,15 @@ def render(
     image = None
     if backend in ("auto", "filament"):
         try:
-            image = _filament(vertices, triangles, all_colors, camera, total_width, height, background, timeout)
+            image = _filament(
+                vertices, triangles, all_colors, camera, total_width, height, background, timeout
+            )
         except RuntimeError as error:
             if backend == "filament":
                 raise
-            warnings.warn(f"{error}; drawing with the RaycastingScene backend instead", O3DLSMeshWarning, stacklevel=2)
+            warnings.warn(
+                f"{error}; drawing with the RaycastingScene backend instead", O3DLSMeshWarning, stacklevel=2
+            )
     if image is None:
         image = _raycast(vertices, triangles, all_colors, camera, total_width, height, background)
     image = np.ascontiguousarray(image, dtype=np.uint8)
@@ -537,8 +592,12 @@ def render(
         if _matplotlib() is not None:
             image = _annotate(image, width, titles, bar, background)
         else:
-            warnings.warn("matplotlib is not installed: the picture has no titles and an unlabelled color bar "
-                          "(pip install matplotlib)", O3DLSMeshWarning, stacklevel=2)
+            warnings.warn(
+                "matplotlib is not installed: the picture has no titles and an unlabelled color bar "
+                "(pip install matplotlib)",
+                O3DLSMeshWarning,
+                stacklevel=2,
+            )
             if bar is not None:
                 _colorbar(image, max(3, height // 40))
     if path is not None:
@@ -549,5 +608,9 @@ def render(
             raise ValueError(f"path must be in an existing folder, got {path!r}")
         if not o3d.io.write_image(path, o3d.geometry.Image(image)):
             raise ValueError(f"path must name a writable .png file, got {path!r}")
-    return RenderedImage(image, error_max if reference is not None else None, units if reference is not None else None,
-                         edge_length)
+    return RenderedImage(
+        image,
+        error_max if reference is not None else None,
+        units if reference is not None else None,
+        edge_length,
+    )

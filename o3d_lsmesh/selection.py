@@ -36,7 +36,7 @@ from .laplacian import uniform_laplacian
 from .lsmesh import LSMeshSolver, ls_mesh
 from .topology import adjacency_matrix, connected_components
 
-__all__ = ["select_control_points", "approximate", "SELECTION_METHODS"]
+__all__ = ["SELECTION_METHODS", "approximate", "select_control_points"]
 
 SELECTION_METHODS = ("random", "greedy", "combined")
 DEFAULT_BATCH = 31  # figure 6 of LS meshes: 31 solves of 31 picks for 1000 control points
@@ -67,7 +67,9 @@ def start_vertices(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     n = len(vertices)
     count, labels = connected_components(triangles, n)
     size = np.bincount(labels, minlength=count).astype(np.float64)
-    centroid = np.stack([np.bincount(labels, weights=vertices[:, a], minlength=count) for a in range(3)], axis=1)
+    centroid = np.stack(
+        [np.bincount(labels, weights=vertices[:, a], minlength=count) for a in range(3)], axis=1
+    )
     centroid /= size[:, None]
     distance = np.einsum("ij,ij->i", vertices - centroid[labels], vertices - centroid[labels])
     # farthest first within each component; ties go to the smaller index (stable sort)
@@ -100,7 +102,12 @@ class _RefactoringSystem:
     """
 
     def __init__(
-        self, vertices: np.ndarray, triangles: np.ndarray, start: np.ndarray, weight: float, ordering: str = "default"
+        self,
+        vertices: np.ndarray,
+        triangles: np.ndarray,
+        start: np.ndarray,
+        weight: float,
+        ordering: str = "default",
     ) -> None:
         n = len(vertices)
         L = uniform_laplacian(triangles, n).tocsc()
@@ -263,7 +270,9 @@ def _select(
     if method == "combined":
         batch = DEFAULT_BATCH if batch is None else as_count(batch, name="batch", minimum=1)
     elif batch is not None:
-        raise ValueError(f"batch applies only to method='combined', got batch={batch!r} with method={method!r}")
+        raise ValueError(
+            f"batch applies only to method='combined', got batch={batch!r} with method={method!r}"
+        )
     rng = _rng(seed)
     check_progress(progress)
     if method == "random":  # instant: no progress bar
@@ -349,7 +358,9 @@ def select_control_points(
     >>> bool((a == select_control_points(box, 5, method="random", seed=1)).all())
     True
     """
-    _, indices, _ = _select(mesh, count, method=method, batch=batch, weights=weights, seed=seed, progress=progress)
+    _, indices, _ = _select(
+        mesh, count, method=method, batch=batch, weights=weights, seed=seed, progress=progress
+    )
     return indices
 
 

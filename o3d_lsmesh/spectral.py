@@ -76,7 +76,9 @@ def null_space_basis(adjacency: sp.spmatrix) -> sp.csc_matrix:
     return sp.csc_matrix((1.0 / np.sqrt(size[labels]), (np.arange(n), rank[labels])), shape=(n, count))
 
 
-def spectral_basis(triangles: np.ndarray, n: int, k: int, *, progress: bool = False) -> tuple[np.ndarray, np.ndarray]:
+def spectral_basis(
+    triangles: np.ndarray, n: int, k: int, *, progress: bool = False
+) -> tuple[np.ndarray, np.ndarray]:
     """The ``k`` smallest eigenpairs of ``D - A``: ``(eigenvalues (k,), eigenvectors (n, k))``, ascending.
 
     The eigenvalue 0 has one eigenvector per connected component: these are
@@ -119,7 +121,9 @@ def spectral_basis(triangles: np.ndarray, n: int, k: int, *, progress: bool = Fa
     m = k - c
     # ARPACK needs m well below the rank n - c of the deflated operator; small meshes go dense
     dense = dense or (m > (n - c) // 4 and n <= DENSE_MAX_VERTICES)
-    with stages(progress, "spectral basis", ("eigensolve (dense)",) if dense else ("factor", "eigensolve")) as begin:
+    with stages(
+        progress, "spectral basis", ("eigensolve (dense)",) if dense else ("factor", "eigensolve")
+    ) as begin:
         if dense:
             begin("eigensolve (dense)")
             # indices c..k-1: past the c zero eigenvalues, the smallest nonzero ones

@@ -55,8 +55,13 @@ def topology_summary_arrays(vertices: np.ndarray, triangles: np.ndarray) -> dict
     # surface pieces: triangles joined through edges of exactly two triangles (a pinch or fin separates)
     pair = starts[counts == 2]
     a, b = order[pair] % max(m, 1), order[pair + 1] % max(m, 1)
-    pieces = csgraph.connected_components(
-        sp.coo_matrix((np.ones(len(a)), (a, b)), shape=(m, m)), directed=False)[0] if m else 0
+    pieces = (
+        csgraph.connected_components(sp.coo_matrix((np.ones(len(a)), (a, b)), shape=(m, m)), directed=False)[
+            0
+        ]
+        if m
+        else 0
+    )
     # a manifold edge run twice in the same direction: the two triangles disagree in orientation
     misoriented = int(np.count_nonzero(tail[order[pair]] == tail[order[pair + 1]]))
     # boundary
@@ -78,9 +83,22 @@ def topology_summary_arrays(vertices: np.ndarray, triangles: np.ndarray) -> dict
         boundary_components = 0
     # degenerate triangles: (near) zero area relative to the longest edge
     corners = vertices[F]
-    twice_area = np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
-    longest = np.max(np.stack([np.einsum("ij,ij->i", d, d) for d in (
-        corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 1], corners[:, 0] - corners[:, 2])]), axis=0)
+    twice_area = np.linalg.norm(
+        np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1
+    )
+    longest = np.max(
+        np.stack(
+            [
+                np.einsum("ij,ij->i", d, d)
+                for d in (
+                    corners[:, 1] - corners[:, 0],
+                    corners[:, 2] - corners[:, 1],
+                    corners[:, 0] - corners[:, 2],
+                )
+            ]
+        ),
+        axis=0,
+    )
     degenerate = int(np.count_nonzero(twice_area <= DEGENERATE_TOLERANCE * longest))
     sorted_triangles = np.sort(F, axis=1)
     if m and n**3 < 2**62:  # one packed key per triangle: a plain sort instead of a row-wise unique

@@ -35,9 +35,7 @@ __all__ = [
 def halfedges(triangles: np.ndarray) -> np.ndarray:
     """Directed edges ``(3m, 2)`` in triangle order: rows ``t``, ``m + t``, ``2m + t`` are
     ``(a, b)``, ``(b, c)``, ``(c, a)`` of triangle ``t = (a, b, c)``."""
-    return np.concatenate(
-        [triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]], axis=0
-    )
+    return np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]], axis=0)
 
 
 def _group(keys: np.ndarray, bound: int, *, inverse: bool = True):
@@ -154,13 +152,17 @@ def directed_edges(triangles: np.ndarray, n: int, *, executor=None):
     if executor is None or m < 1 << 16:
         return _unique_keys(_sorted_keys(triangles, shift), shift)
     half = m // 2
-    low, high = executor.map(lambda rows: _sorted_keys(triangles[rows], shift), (slice(0, half), slice(half, m)))
+    low, high = executor.map(
+        lambda rows: _sorted_keys(triangles[rows], shift), (slice(0, half), slice(half, m))
+    )
     pivot = high[len(high) // 2]
     cut_low, cut_high = np.searchsorted(low, pivot), np.searchsorted(high, pivot)
-    parts = list(executor.map(
-        lambda pair: _unique_keys(_merged(*pair), shift),
-        ((low[:cut_low], high[:cut_high]), (low[cut_low:], high[cut_high:])),
-    ))
+    parts = list(
+        executor.map(
+            lambda pair: _unique_keys(_merged(*pair), shift),
+            ((low[:cut_low], high[:cut_high]), (low[cut_low:], high[cut_high:])),
+        )
+    )
     del low, high
     return tuple(np.concatenate([part[i] for part in parts]) for i in range(3))
 
@@ -200,7 +202,9 @@ def adjacency_matrix(triangles: np.ndarray, n: int) -> sp.csr_matrix:
     np.cumsum(np.bincount(src, minlength=n), out=indptr[1:])
     # SciPy keeps 32-bit indices when they fit; giving them so avoids a copy
     index_dtype = np.int32 if len(dst) < np.iinfo(np.int32).max and n < np.iinfo(np.int32).max else np.int64
-    adjacency = sp.csr_matrix((np.ones(len(dst)), dst.astype(index_dtype), indptr.astype(index_dtype)), shape=(n, n))
+    adjacency = sp.csr_matrix(
+        (np.ones(len(dst)), dst.astype(index_dtype), indptr.astype(index_dtype)), shape=(n, n)
+    )
     adjacency.has_canonical_format = True  # sorted, no duplicates
     return adjacency
 
@@ -299,7 +303,11 @@ def _corner_fans(triangles: np.ndarray, n: int, runs, *, only: np.ndarray | None
     link[:, 0] = first
     del first
     graph = sp.csr_matrix(
-        (np.ones(2 * corners, dtype=np.int8), link.reshape(-1), np.arange(0, 2 * corners + 1, 2, dtype=index)),
+        (
+            np.ones(2 * corners, dtype=np.int8),
+            link.reshape(-1),
+            np.arange(0, 2 * corners + 1, 2, dtype=index),
+        ),
         shape=(corners, corners),
     )
     graph.has_sorted_indices = True  # each row's two links were just ordered

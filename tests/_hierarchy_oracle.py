@@ -56,8 +56,18 @@ def _geometry_ok(V, corners, x, k, cos_sq, min_quality):
     return True
 
 
-def collapse_level(V, F, locked, *, alpha=1.0, beta=0.01, max_removals=None, max_normal_angle=60.0,
-                   min_quality=1e-3, max_tries=3):
+def collapse_level(
+    V,
+    F,
+    locked,
+    *,
+    alpha=1.0,
+    beta=0.01,
+    max_removals=None,
+    max_normal_angle=60.0,
+    min_quality=1e-3,
+    max_tries=3,
+):
     """``(removed, targets, ring_offsets, ring, parent, triangles)`` of one level, or ``None``."""
     n = len(V)
     cos_sq = float(np.cos(np.deg2rad(max_normal_angle)) ** 2) if max_normal_angle < 90 else 0.0
@@ -149,8 +159,14 @@ def collapse_level(V, F, locked, *, alpha=1.0, beta=0.01, max_removals=None, max
     triangles = [[parent[v] for v in t] for t in T]
     triangles = [t for t in triangles if t[0] != t[1] and t[1] != t[2] and t[2] != t[0]]
     as_int = lambda values: np.array(values, dtype=np.int64)
-    return (as_int(removed), as_int([target[x] for x in removed]), as_int(offsets), as_int(flat), as_int(parent),
-            as_int(triangles).reshape(-1, 3))
+    return (
+        as_int(removed),
+        as_int([target[x] for x in removed]),
+        as_int(offsets),
+        as_int(flat),
+        as_int(parent),
+        as_int(triangles).reshape(-1, 3),
+    )
 
 
 def hierarchy(V, F, *, min_vertices=100, max_levels=None, **options):
@@ -162,7 +178,9 @@ def hierarchy(V, F, *, min_vertices=100, max_levels=None, **options):
     levels = []
     triangles = F
     while (max_levels is None or len(levels) < max_levels) and len(reps) > min_vertices:
-        level = collapse_level(V[reps], triangles, locked[reps], max_removals=len(reps) - min_vertices, **options)
+        level = collapse_level(
+            V[reps], triangles, locked[reps], max_removals=len(reps) - min_vertices, **options
+        )
         if level is None:
             break
         levels.append(level)
@@ -205,7 +223,9 @@ def boundary_loop_count(F: np.ndarray, n: int) -> int:
         return 0
     u, v = fan[c_tail[boundary]], fan[c_head[boundary]]
     nodes, local = np.unique(np.r_[u, v], return_inverse=True)
-    loops = sp.coo_matrix((np.ones(len(boundary)), (local[: len(u)], local[len(u):])), shape=(len(nodes),) * 2)
+    loops = sp.coo_matrix(
+        (np.ones(len(boundary)), (local[: len(u)], local[len(u) :])), shape=(len(nodes),) * 2
+    )
     return int(connected_components(loops, directed=False)[0])
 
 

@@ -31,7 +31,12 @@ def grid(nx: int = 8, ny: int = 8, *, z=None):
     x, y = np.meshgrid(np.linspace(0, 1, nx), np.linspace(0, 1, ny), indexing="xy")
     vertices = np.stack([x.ravel(), y.ravel(), np.zeros(x.size) if z is None else z(x, y).ravel()], axis=1)
     index = np.arange(nx * ny).reshape(ny, nx)
-    a, b, c, d = index[:-1, :-1].ravel(), index[:-1, 1:].ravel(), index[1:, :-1].ravel(), index[1:, 1:].ravel()
+    a, b, c, d = (
+        index[:-1, :-1].ravel(),
+        index[:-1, 1:].ravel(),
+        index[1:, :-1].ravel(),
+        index[1:, 1:].ravel(),
+    )
     triangles = np.concatenate([np.stack([a, b, d], 1), np.stack([a, d, c], 1)])
     return vertices, triangles.astype(np.int64)
 

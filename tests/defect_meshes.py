@@ -19,7 +19,12 @@ def patch(nx: int = 12, ny: int = 10, *, seed: int = 0, noise: float = 0.01, ori
     z = 0.2 * np.sin(2 * x) * np.cos(3 * y)
     vertices = np.stack([x.ravel(), y.ravel(), z.ravel()], axis=1) + rng.normal(0, noise, (nx * ny, 3))
     index = np.arange(nx * ny).reshape(ny, nx)
-    a, b, c, d = index[:-1, :-1].ravel(), index[:-1, 1:].ravel(), index[1:, :-1].ravel(), index[1:, 1:].ravel()
+    a, b, c, d = (
+        index[:-1, :-1].ravel(),
+        index[:-1, 1:].ravel(),
+        index[1:, :-1].ravel(),
+        index[1:, 1:].ravel(),
+    )
     triangles = np.concatenate([np.stack([a, b, d], 1), np.stack([a, d, c], 1)])
     return vertices, triangles.astype(np.int64)
 
@@ -50,7 +55,7 @@ def fin(seed: int = 0):
     """A patch with one more triangle on an interior edge: an edge of three triangles (a fin)."""
     V, F = patch(8, 8, seed=seed)
     a, b = 27, 36  # the diagonal of cell (row 3, column 3): an interior edge of two triangles
-    assert any(set((a, b)) <= set(t) for t in F.tolist())
+    assert any({a, b} <= set(t) for t in F.tolist())
     tip = V[[a, b]].mean(axis=0) + [0.0, 0.0, 0.3]
     vertices = np.vstack([V, tip])
     triangles = np.vstack([F, [[a, b, len(V)]]])  # one more: three triangles on (a, b)
@@ -82,8 +87,11 @@ def isolated_triangles(seed: int = 0):
     base += 3
     strip = np.array([[0, 0, 0], [1, 0, 0], [0, 0.01, 0], [1, 0.01, 0], [2, 0.0, 0]]) + [0, 3.0, 0]
     extra_v.append(strip)
-    extra_f += [np.array([base, base + 1, base + 3]), np.array([base, base + 3, base + 2]),
-                np.array([base + 1, base + 4, base + 3])]
+    extra_f += [
+        np.array([base, base + 1, base + 3]),
+        np.array([base, base + 3, base + 2]),
+        np.array([base + 1, base + 4, base + 3]),
+    ]
     vertices = np.vstack([V, *extra_v])
     triangles = np.vstack([F, np.array(extra_f)])
     return vertices, triangles, {"components": 7}
@@ -97,7 +105,7 @@ def duplicated_seam(seed: int = 0):
     copy = np.arange(len(seam)) + len(V)
     vertices = np.vstack([V, V[seam]])
     # triangles right of the seam use the copies
-    right = (V[F].mean(axis=1)[:, 0] > V[seam[0], 0])
+    right = V[F].mean(axis=1)[:, 0] > V[seam[0], 0]
     remap = np.arange(len(V))
     remap[seam] = copy
     triangles = F.copy()

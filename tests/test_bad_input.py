@@ -52,7 +52,9 @@ def _vertices_of(mesh) -> np.ndarray:
 @pytest.mark.parametrize("dtype", [np.float32, np.float64, np.bool_])
 def test_non_integer_indices_are_a_type_error_for_every_kind(kind, dtype):
     vertices, triangles = _arrays(_sphere())
-    bad = triangles.astype(dtype) if dtype is np.bool_ else triangles.astype(dtype) + 0.5  # truncation would hide .5
+    bad = (
+        triangles.astype(dtype) if dtype is np.bool_ else triangles.astype(dtype) + 0.5
+    )  # truncation would hide .5
     mesh = _tensor(vertices, bad) if kind == "tensor" else (vertices, bad)
     with pytest.raises(TypeError, match=r"mesh triangles must be an \(m, 3\) integer array, got dtype"):
         lsm.ls_mesh(mesh, [0, 5])
@@ -65,7 +67,11 @@ def test_non_integer_indices_are_a_type_error_for_every_kind(kind, dtype):
         ("vertices", lambda a: a.reshape(-1, 1), r"mesh vertices must have shape \(n, 3\), got \(\d+, 1\)"),
         ("vertices", lambda a: a.reshape(-1), r"mesh vertices must have shape \(n, 3\), got \(\d+,\)"),
         ("vertices", lambda a: a[:, :2].copy(), r"mesh vertices must have shape \(n, 3\), got \(\d+, 2\)"),
-        ("vertices", lambda a: a.reshape(-1, 3, 1), r"mesh vertices must have shape \(n, 3\), got \(\d+, 3, 1\)"),
+        (
+            "vertices",
+            lambda a: a.reshape(-1, 3, 1),
+            r"mesh vertices must have shape \(n, 3\), got \(\d+, 3, 1\)",
+        ),
         ("triangles", lambda a: a.reshape(-1, 1), r"mesh triangles must have shape \(m, 3\), got \(\d+, 1\)"),
         ("triangles", lambda a: a.reshape(-1), r"mesh triangles must have shape \(m, 3\), got \(\d+,\)"),
         ("triangles", lambda a: a.reshape(-1, 6), r"mesh triangles must have shape \(m, 3\), got \(\d+, 6\)"),
@@ -87,7 +93,11 @@ def test_integer_positions_give_the_float_answer(dtype):
     # a grid with integer coordinates: the result must equal the result on the same float positions,
     # not rounded back to integers (tensor) or wrapped (int8)
     vertices, triangles = _arrays(_sphere())
-    integer = np.round(vertices * 50).astype(dtype) if dtype is not np.uint16 else np.round(vertices * 50 + 60).astype(dtype)
+    integer = (
+        np.round(vertices * 50).astype(dtype)
+        if dtype is not np.uint16
+        else np.round(vertices * 50 + 60).astype(dtype)
+    )
     reference = lsm.ls_mesh((integer.astype(np.float64), triangles), [0, 5, 40], weights=3.0)[0]
     for mesh in (_tensor(integer, triangles), (integer, triangles)):
         out = _vertices_of(lsm.ls_mesh(mesh, [0, 5, 40], weights=3.0))
@@ -102,7 +112,10 @@ def test_unsigned_indices_out_of_range_are_reported_as_given(kind):
     bad = triangles.astype(np.uint64)
     bad[3, 1] = np.iinfo(np.uint64).max  # would wrap to -1 as int64
     mesh = _tensor(vertices, bad) if kind == "tensor" else (vertices, bad)
-    with pytest.raises(ValueError, match=r"triangle indices must lie in \[0, \d+\), got \[\d+, 18446744073709551615, \d+\] at triangle 3"):
+    with pytest.raises(
+        ValueError,
+        match=r"triangle indices must lie in \[0, \d+\), got \[\d+, 18446744073709551615, \d+\] at triangle 3",
+    ):
         lsm.ls_mesh(mesh, [0, 5])
 
 
@@ -117,11 +130,15 @@ def test_unsigned_indices_out_of_range_are_reported_as_given(kind):
 )
 def test_positions_that_are_not_real_numbers_are_a_type_error(vertices, match):
     v, f = _arrays(_sphere())
-    with pytest.raises(TypeError, match="mesh vertices must be an \\(n, 3\\) array of real numbers, " + match):
+    with pytest.raises(
+        TypeError, match="mesh vertices must be an \\(n, 3\\) array of real numbers, " + match
+    ):
         lsm.constrained_fairing((vertices(v), f), 2)
 
 
-_DTYPES = st.sampled_from(["float32", "float64", "int8", "int32", "int64", "uint8", "uint64", "bool", "complex128"])
+_DTYPES = st.sampled_from(
+    ["float32", "float64", "int8", "int32", "int64", "uint8", "uint64", "bool", "complex128"]
+)
 
 
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -176,7 +193,9 @@ def _calls():
         "signed_volume": metrics.signed_volume,
         "triangle_angles": lambda m: metrics.triangle_angles(m)["min_angle"],
         "normal_deviation": lambda m: metrics.normal_deviation(m, m),
-        "surface_distance": lambda m: metrics.surface_distance(m, (m[0] * 0.99, m[1]), number_of_points=2000)["mean"],
+        "surface_distance": lambda m: metrics.surface_distance(m, (m[0] * 0.99, m[1]), number_of_points=2000)[
+            "mean"
+        ],
         "vertex_error": lambda m: metrics.vertex_error(m, (m[0] * 0.99, m[1]))["rms"],
     }
 
@@ -201,7 +220,9 @@ def test_results_at_the_limits_are_finite_and_scale_with_the_mesh(name, scale):
     # off-center (the volume and the fairing see an offset too) and bumpy (no ties in greedy selection)
     v = v + np.array([0.1, -0.2, 0.3]) + 0.02 * np.random.default_rng(7).standard_normal(v.shape)
     unit = np.asarray(_calls()[name]((v, f)), dtype=np.float64)
-    scale = scale / np.abs(v).max() * (1 - 1e-15)  # the largest coordinate at the limit (not rounded above it)
+    scale = (
+        scale / np.abs(v).max() * (1 - 1e-15)
+    )  # the largest coordinate at the limit (not rounded above it)
     big = np.asarray(_calls()[name]((v * scale, f)), dtype=np.float64)
     assert np.isfinite(big).all()
     tolerance = 1e-4 if name == "surface_distance" else 1e-7  # surface_distance samples in float32
@@ -209,7 +230,9 @@ def test_results_at_the_limits_are_finite_and_scale_with_the_mesh(name, scale):
 
 
 def test_control_positions_beyond_the_limit_are_refused():
-    with pytest.raises(ValueError, match=r"constraint_vertex_positions must have coordinates of magnitude at most"):
+    with pytest.raises(
+        ValueError, match=r"constraint_vertex_positions must have coordinates of magnitude at most"
+    ):
         lsm.ls_mesh(_sphere(), [0, 5], [[0, 0, 1e300], [0, 0, 0]])
     solver = lsm.LSMeshSolver(_sphere(), [0, 5])
     with pytest.raises(ValueError, match=r"positions must have coordinates of magnitude at most 1e\+30"):
@@ -292,7 +315,7 @@ def test_add_anchors_and_solve_on_other_threads_see_whole_updates():
         try:
             while not stop.is_set():
                 results.append(solver.solve())
-        except Exception as error:  # noqa: BLE001 - recorded and failed below
+        except Exception as error:
             errors.append(error)
 
     threads = [threading.Thread(target=solve_loop) for _ in range(3)]
@@ -318,23 +341,59 @@ def test_add_anchors_and_solve_on_other_threads_see_whole_updates():
 @pytest.mark.parametrize(
     "call, match",
     [
-        (lambda m: lsm.ls_mesh(m, [0, 5], weights="2"), r"weights must be a positive number or an array, got '2'"),
+        (
+            lambda m: lsm.ls_mesh(m, [0, 5], weights="2"),
+            r"weights must be a positive number or an array, got '2'",
+        ),
         (lambda m: lsm.ls_mesh(m, [0, 5], weights=True), r"weights must be a positive number"),
-        (lambda m: lsm.ls_mesh(m, [0, 5], weights=np.array([1 + 0j, 2])), r"weights must be .* real numbers, got dtype complex"),
-        (lambda m: lsm.ls_mesh(m, [0, 5], weights=np.array([True, True])), r"weights must be .* real numbers, got dtype bool"),
-        (lambda m: lsm.ls_mesh(m, [0, 5], [["1", "2", "3"], ["4", "5", "6"]]), r"constraint_vertex_positions must .* got dtype <U1"),
-        (lambda m: lsm.ls_mesh(m, [0, 5], np.ones((2, 3), complex)), r"constraint_vertex_positions must .* got dtype complex"),
-        (lambda m: lsm.ls_mesh(m, [0, 5], np.ones((2, 3), bool)), r"constraint_vertex_positions must .* got dtype bool"),
-        (lambda m: lsm.LSMeshSolver(m, [0, 5]).solve(refine="no"), r"refine must be a bool or None, got str 'no'"),
+        (
+            lambda m: lsm.ls_mesh(m, [0, 5], weights=np.array([1 + 0j, 2])),
+            r"weights must be .* real numbers, got dtype complex",
+        ),
+        (
+            lambda m: lsm.ls_mesh(m, [0, 5], weights=np.array([True, True])),
+            r"weights must be .* real numbers, got dtype bool",
+        ),
+        (
+            lambda m: lsm.ls_mesh(m, [0, 5], [["1", "2", "3"], ["4", "5", "6"]]),
+            r"constraint_vertex_positions must .* got dtype <U1",
+        ),
+        (
+            lambda m: lsm.ls_mesh(m, [0, 5], np.ones((2, 3), complex)),
+            r"constraint_vertex_positions must .* got dtype complex",
+        ),
+        (
+            lambda m: lsm.ls_mesh(m, [0, 5], np.ones((2, 3), bool)),
+            r"constraint_vertex_positions must .* got dtype bool",
+        ),
+        (
+            lambda m: lsm.LSMeshSolver(m, [0, 5]).solve(refine="no"),
+            r"refine must be a bool or None, got str 'no'",
+        ),
         (lambda m: lsm.LSMeshSolver(m, [0, 5]).solve(refine=1), r"refine must be a bool or None, got int"),
         (lambda m: lsm.LSMeshSolver(m, [0, 5], interpolate="yes"), r"interpolate must be a bool, got str"),
-        (lambda m: lsm.reconstruct_geometry(m, [0, 5], interpolate=0), r"interpolate must be a bool, got int"),
-        (lambda m: lsm.LSMeshSolver(m, [0, 5]).add_anchors([7], weights="3"), r"weights must be a positive number"),
-        (lambda m: lsm.LSMeshSolver(m, [0, 5]).add_anchors([7], [["a", "b", "c"]]), r"positions must .* got dtype <U1"),
+        (
+            lambda m: lsm.reconstruct_geometry(m, [0, 5], interpolate=0),
+            r"interpolate must be a bool, got int",
+        ),
+        (
+            lambda m: lsm.LSMeshSolver(m, [0, 5]).add_anchors([7], weights="3"),
+            r"weights must be a positive number",
+        ),
+        (
+            lambda m: lsm.LSMeshSolver(m, [0, 5]).add_anchors([7], [["a", "b", "c"]]),
+            r"positions must .* got dtype <U1",
+        ),
         (lambda m: metrics.surface_distance(m, m, seed="0"), r"seed must be an integer, got '0'"),
         (lambda m: metrics.surface_distance(m, m, seed=1.5), r"seed must be an integer, got 1.5"),
-        (lambda m: lsm.render(m, None, up="up", backend="raycast"), r"up must be a sequence of 3 numbers, got 'up'"),
-        (lambda m: lsm.render(m, None, background=[1, 1, 1j], backend="raycast"), r"background must .* got dtype complex"),
+        (
+            lambda m: lsm.render(m, None, up="up", backend="raycast"),
+            r"up must be a sequence of 3 numbers, got 'up'",
+        ),
+        (
+            lambda m: lsm.render(m, None, background=[1, 1, 1j], backend="raycast"),
+            r"background must .* got dtype complex",
+        ),
     ],
 )
 def test_wrong_types_are_a_type_error(call, match):
@@ -351,7 +410,9 @@ def test_negative_seed_is_named():
 
 
 def test_absurd_sample_count_is_refused_with_the_limit():
-    with pytest.raises(ValueError, match=rf"number_of_points must be <= {metrics.MAX_SAMPLE_POINTS}, got 10000000000"):
+    with pytest.raises(
+        ValueError, match=rf"number_of_points must be <= {metrics.MAX_SAMPLE_POINTS}, got 10000000000"
+    ):
         metrics.surface_distance(_sphere(), _sphere(), number_of_points=10**10)
     # the limit itself is accepted by the check (the sampling is not run here: 10 million points)
     assert metrics.MAX_SAMPLE_POINTS >= 1_000_000
@@ -374,7 +435,9 @@ def test_messages_name_the_argument_at_fault():
         lsm.render([sphere, "x"], None, backend="raycast")
     with pytest.raises(TypeError, match=r"^color must be a sequence of 3 numbers, got 'red'"):
         lsm.render(sphere, None, color="red", backend="raycast")
-    with pytest.raises(ValueError, match=r"constraint_vertex_indices must lie in \[0, \d+\), got 18446744073709551615"):
+    with pytest.raises(
+        ValueError, match=r"constraint_vertex_indices must lie in \[0, \d+\), got 18446744073709551615"
+    ):
         lsm.ls_mesh(sphere, np.array([3, 2**64 - 1], dtype=np.uint64))
     n = len(sphere.vertices)
     for interpolate in (True, False):
@@ -390,8 +453,19 @@ def test_normal_deviation_leaves_out_zero_area_triangles():
     # tilted by 90 degrees in one triangle of two with area: the mean is 45 degrees
     moved = vertices.copy()
     moved[3] = [0.5, 0.5, 1.0]  # triangle 1 now stands upright
-    expected = np.degrees(np.arccos(np.dot(*[np.cross(v[3] - v[1], v[2] - v[1]) / np.linalg.norm(np.cross(v[3] - v[1], v[2] - v[1])) for v in (vertices, moved)])))
-    assert metrics.normal_deviation((vertices, triangles), (moved, triangles)) == pytest.approx(expected / 2, rel=1e-12)
+    expected = np.degrees(
+        np.arccos(
+            np.dot(
+                *[
+                    np.cross(v[3] - v[1], v[2] - v[1]) / np.linalg.norm(np.cross(v[3] - v[1], v[2] - v[1]))
+                    for v in (vertices, moved)
+                ]
+            )
+        )
+    )
+    assert metrics.normal_deviation((vertices, triangles), (moved, triangles)) == pytest.approx(
+        expected / 2, rel=1e-12
+    )
     flat = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0]], dtype=float)
     with pytest.raises(ValueError, match="a and b must share a triangle of non-zero area"):
         metrics.normal_deviation((flat, [[0, 1, 2]]), (flat, [[0, 1, 2]]))
@@ -405,32 +479,96 @@ def _probe_cases():
     data = lsm.encode_geometry(sphere, 10)
     return [
         (lsm.laplacian, (sphere,), {}, ["kind"]),
-        (lsm.LSMeshSolver, (sphere, [0, 5]), {}, ["weights", "interpolate", "laplacian", "backend", "ordering"]),
-        (lsm.ls_mesh, (sphere,), {"constraint_vertex_indices": [0, 5]},
-         ["constraint_vertex_indices", "constraint_vertex_positions", "weights", "interpolate", "laplacian", "progress"]),
-        (lsm.reconstruct_geometry, (sphere,), {"unknown_vertex_indices": [0, 5]},
-         ["unknown_vertex_indices", "interpolate", "weights", "laplacian", "progress"]),
-        (lsm.select_control_points, (sphere,), {"count": 5}, ["count", "method", "batch", "weights", "seed", "progress"]),
-        (lsm.approximate, (sphere,), {"count": 5}, ["count", "method", "weights", "interpolate", "batch", "seed", "progress"]),
+        (
+            lsm.LSMeshSolver,
+            (sphere, [0, 5]),
+            {},
+            ["weights", "interpolate", "laplacian", "backend", "ordering"],
+        ),
+        (
+            lsm.ls_mesh,
+            (sphere,),
+            {"constraint_vertex_indices": [0, 5]},
+            [
+                "constraint_vertex_indices",
+                "constraint_vertex_positions",
+                "weights",
+                "interpolate",
+                "laplacian",
+                "progress",
+            ],
+        ),
+        (
+            lsm.reconstruct_geometry,
+            (sphere,),
+            {"unknown_vertex_indices": [0, 5]},
+            ["unknown_vertex_indices", "interpolate", "weights", "laplacian", "progress"],
+        ),
+        (
+            lsm.select_control_points,
+            (sphere,),
+            {"count": 5},
+            ["count", "method", "batch", "weights", "seed", "progress"],
+        ),
+        (
+            lsm.approximate,
+            (sphere,),
+            {"count": 5},
+            ["count", "method", "weights", "interpolate", "batch", "seed", "progress"],
+        ),
         (lsm.encode_geometry, (sphere,), {"count": 5}, ["count", "bits", "method", "weight", "progress"]),
         (lsm.decode_geometry, (sphere,), {"data": data}, ["data", "anchors", "progress"]),
-        (lambda m, **k: list(lsm.iter_decode_geometry(m, **k)), (sphere,), {"data": data}, ["step", "progress"]),
+        (
+            lambda m, **k: list(lsm.iter_decode_geometry(m, **k)),
+            (sphere,),
+            {"data": data},
+            ["step", "progress"],
+        ),
         (lsm.spectral_approximation, (sphere,), {"k": 5}, ["k", "bits", "progress"]),
-        (lsm.constrained_fairing, (sphere,), {"number_of_iterations": 2},
-         ["number_of_iterations", "method", "mu", "smooth_boundary", "reimpose_every", "progress"]),
+        (
+            lsm.constrained_fairing,
+            (sphere,),
+            {"number_of_iterations": 2},
+            ["number_of_iterations", "method", "mu", "smooth_boundary", "reimpose_every", "progress"],
+        ),
         (lsm.smooth_boundary_curves, (sphere,), {"number_of_iterations": 2}, ["number_of_iterations"]),
-        (lsm.multiresolution_fairing, (sphere,), {"level": 1},
-         ["level", "hierarchy", "number_of_iterations", "method", "progress"]),
+        (
+            lsm.multiresolution_fairing,
+            (sphere,),
+            {"level": 1},
+            ["level", "hierarchy", "number_of_iterations", "method", "progress"],
+        ),
         (lsm.build_hierarchy, (sphere,), {}, ["alpha", "beta", "min_vertices", "max_levels", "progress"]),
         (lsm.from_fast_simplification, (sphere,), {}, ["levels", "min_vertices", "agg", "progress"]),
-        (lsm.render, (sphere, None), {"backend": "raycast", "width": 16, "height": 16},
-         ["width", "height", "reference", "error_max", "color", "background", "view_direction", "up", "margin",
-          "align", "backend", "timeout"]),
+        (
+            lsm.render,
+            (sphere, None),
+            {"backend": "raycast", "width": 16, "height": 16},
+            [
+                "width",
+                "height",
+                "reference",
+                "error_max",
+                "color",
+                "background",
+                "view_direction",
+                "up",
+                "margin",
+                "align",
+                "backend",
+                "timeout",
+            ],
+        ),
         (metrics.surface_distance, (sphere, sphere), {"number_of_points": 100}, ["number_of_points", "seed"]),
     ]
 
 
-_WRONG = {"a string": "2", "a complex array": np.array([1j, 2j]), "NaN": float("nan"), "a list of strings": ["a", "b"]}
+_WRONG = {
+    "a string": "2",
+    "a complex array": np.array([1j, 2j]),
+    "NaN": float("nan"),
+    "a list of strings": ["a", "b"],
+}
 
 
 def test_every_public_option_refuses_wrong_values_by_name():
@@ -448,7 +586,7 @@ def test_every_public_option_refuses_wrong_values_by_name():
                 except (TypeError, ValueError) as error:
                     if param not in str(error):
                         failures.append(f"{name}({param}={label}): message does not name it: {error}")
-                except Exception as error:  # noqa: BLE001 - collected and reported
+                except Exception as error:
                     failures.append(f"{name}({param}={label}) raised {type(error).__name__}: {error}")
     assert not failures, "\n".join(failures)
 
@@ -457,8 +595,11 @@ def test_open3d_tensors_as_indices_and_positions_are_checked_like_arrays():
     # the tensor API's users pass o3d.core.Tensor arguments: same answers and same errors as numpy arrays
     sphere = _sphere()
     reference = _vertices_of(lsm.ls_mesh(sphere, [0, 5], [[0, 0, 2], [1, 0, 0]]))
-    out = lsm.ls_mesh(sphere, o3d.core.Tensor(np.array([0, 5], dtype=np.int32)),
-                      o3d.core.Tensor(np.array([[0, 0, 2], [1, 0, 0]], dtype=np.float32)))
+    out = lsm.ls_mesh(
+        sphere,
+        o3d.core.Tensor(np.array([0, 5], dtype=np.int32)),
+        o3d.core.Tensor(np.array([[0, 0, 2], [1, 0, 0]], dtype=np.float32)),
+    )
     np.testing.assert_allclose(_vertices_of(out), reference, rtol=0, atol=1e-12)
     with pytest.raises(TypeError, match="constraint_vertex_indices must have an integer dtype, got float64"):
         lsm.ls_mesh(sphere, o3d.core.Tensor(np.array([0.0, 5.0])))

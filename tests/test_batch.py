@@ -28,7 +28,9 @@ from o3d_lsmesh.cli import main
 from o3d_lsmesh.demo import add_noise, demo_mesh, mean_edge_length
 from o3d_lsmesh.fairing import constrained_fairing
 
-distributed = pytest.importorskip("distributed", reason="dask.distributed is the batch engine: pip install '.[dask]'")
+distributed = pytest.importorskip(
+    "distributed", reason="dask.distributed is the batch engine: pip install '.[dask]'"
+)
 
 # A module a forked child would inherit and a spawned one cannot have (it exists only in this process).
 _SENTINEL = "_o3d_lsmesh_batch_test_parent_only"
@@ -51,8 +53,10 @@ def data(tmp_path_factory):
     root = tmp_path_factory.mktemp("batch")
     clean = demo_mesh(3)  # 642 vertices, closed
     sigma = 0.3 * mean_edge_length(clean)
-    good = [_write(add_noise(clean, sigma, seed=s), root / "good" / name)
-            for s, name in enumerate(["a.ply", "b.ply", "c.ply", "sub/d.ply"])]
+    good = [
+        _write(add_noise(clean, sigma, seed=s), root / "good" / name)
+        for s, name in enumerate(["a.ply", "b.ply", "c.ply", "sub/d.ply"])
+    ]
     mixed = [_write(add_noise(clean, sigma, seed=10 + s), root / "mixed" / f"ok{s}.ply") for s in range(2)]
     (root / "mixed" / "corrupt.ply").write_bytes(b"ply\nformat binary_little_endian 1.0\n" + os.urandom(200))
     (root / "mixed" / "empty.ply").write_bytes(b"")
@@ -61,7 +65,9 @@ def data(tmp_path_factory):
     vertices[5] = np.nan
     nan.vertices = o3d.utility.Vector3dVector(vertices)
     _write(nan, root / "mixed" / "nan.ply")  # reads fine; fairing refuses non-finite coordinates
-    return types.SimpleNamespace(root=root, good=good, good_dir=root / "good", mixed=mixed, mixed_dir=root / "mixed")
+    return types.SimpleNamespace(
+        root=root, good=good, good_dir=root / "good", mixed=mixed, mixed_dir=root / "mixed"
+    )
 
 
 @pytest.fixture(scope="module")
@@ -88,9 +94,14 @@ def _by_name(records):
 
 
 def test_outputs_equal_direct_library_calls_bit_for_bit(data, client, tmp_path):
-    records = batch.run(data.good_dir, tmp_path / "out", op="denoise", options={"iterations": 4, "method": "local"},
-                        client=client,
-                        progress=False)
+    records = batch.run(
+        data.good_dir,
+        tmp_path / "out",
+        op="denoise",
+        options={"iterations": 4, "method": "local"},
+        client=client,
+        progress=False,
+    )
     assert [r["status"] for r in records] == ["ok"] * 4
     assert len({r["pid"] for r in records}) == 2  # both workers took files
     for path, record in zip(sorted(data.good), sorted(records, key=lambda r: r["input"])):
@@ -109,12 +120,38 @@ def test_outputs_equal_direct_library_calls_bit_for_bit(data, client, tmp_path):
 def test_global_method_equals_the_serial_cli_with_the_same_threads_bit_for_bit(data, client, tmp_path):
     # CHOLMOD's supernodal factor sums in an order that depends on the BLAS thread count, so the serial
     # reference runs where the workers' thread cap (1) holds from the start: a fresh process.
-    records = batch.run(data.good_dir, tmp_path / "out", op="denoise", options={"method": "global"}, client=client,
-                        progress=False)
-    environ = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
-               "PYTHONPATH": os.pathsep.join([str(Path(batch.__file__).parents[1]), os.environ.get("PYTHONPATH", "")])}
-    argv = [sys.executable, "-m", "o3d_lsmesh.cli", "batch", str(data.good_dir), str(tmp_path / "serial"),
-            "--op", "denoise", "--method", "global", "--workers", "0", "--quiet"]
+    records = batch.run(
+        data.good_dir,
+        tmp_path / "out",
+        op="denoise",
+        options={"method": "global"},
+        client=client,
+        progress=False,
+    )
+    environ = {
+        **os.environ,
+        "OMP_NUM_THREADS": "1",
+        "OPENBLAS_NUM_THREADS": "1",
+        "MKL_NUM_THREADS": "1",
+        "PYTHONPATH": os.pathsep.join(
+            [str(Path(batch.__file__).parents[1]), os.environ.get("PYTHONPATH", "")]
+        ),
+    }
+    argv = [
+        sys.executable,
+        "-m",
+        "o3d_lsmesh.cli",
+        "batch",
+        str(data.good_dir),
+        str(tmp_path / "serial"),
+        "--op",
+        "denoise",
+        "--method",
+        "global",
+        "--workers",
+        "0",
+        "--quiet",
+    ]
     done = subprocess.run(argv, env=environ, capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
     for record in records:
@@ -124,10 +161,19 @@ def test_global_method_equals_the_serial_cli_with_the_same_threads_bit_for_bit(d
 
 def test_failures_are_records_and_the_rest_succeed(data, client, tmp_path):
     report = tmp_path / "report.jsonl"
-    records = _by_name(batch.run(data.mixed_dir, tmp_path / "out", client=client, report=report, progress=False))
+    records = _by_name(
+        batch.run(data.mixed_dir, tmp_path / "out", client=client, report=report, progress=False)
+    )
     assert {n: r["status"] for n, r in records.items()} == {
-        "ok0.ply": "ok", "ok1.ply": "ok", "corrupt.ply": "failed", "empty.ply": "failed", "nan.ply": "failed"}
-    assert records["corrupt.ply"]["stage"] == "read" and "could not be read" in records["corrupt.ply"]["error"]
+        "ok0.ply": "ok",
+        "ok1.ply": "ok",
+        "corrupt.ply": "failed",
+        "empty.ply": "failed",
+        "nan.ply": "failed",
+    }
+    assert (
+        records["corrupt.ply"]["stage"] == "read" and "could not be read" in records["corrupt.ply"]["error"]
+    )
     assert records["empty.ply"]["stage"] == "read" and "empty file" in records["empty.ply"]["error"]
     assert records["nan.ply"]["stage"] == "denoise" and records["nan.ply"]["error"].startswith("ValueError")
     assert records["nan.ply"]["vertices_before"] == 642
@@ -155,12 +201,23 @@ def test_a_task_that_kills_its_worker_fails_alone(data, client, cluster, tmp_pat
     _write(o3d.io.read_triangle_mesh(str(data.good[0])), folder / "crash.ply")
     batch.register_op(BatchOp("_test_crash", _crash_or_copy, options=(Option("shift", int_at_least(0), 1),)))
     try:
-        records = _by_name(batch.run(folder, tmp_path / "out", op="_test_crash", options={"shift": 2},
-                                     client=client, retries=1, progress=False))
+        records = _by_name(
+            batch.run(
+                folder,
+                tmp_path / "out",
+                op="_test_crash",
+                options={"shift": 2},
+                client=client,
+                retries=1,
+                progress=False,
+            )
+        )
     finally:
         OPS.pop("_test_crash")
     assert records["crash.ply"]["status"] == "failed"
-    assert records["crash.ply"]["error"].startswith("KilledWorker: each of the 2 workers")  # --retries 1: 2 runs
+    assert records["crash.ply"]["error"].startswith(
+        "KilledWorker: each of the 2 workers"
+    )  # --retries 1: 2 runs
     for name in ("a.ply", "b.ply", "c.ply", "d.ply"):
         assert records[name]["status"] == "ok", records[name]
         vertices, _ = _read(records[name]["output"])
@@ -190,7 +247,9 @@ def test_resume_after_an_interrupted_batch_redoes_only_what_is_missing(data, cli
         batch.run(folder, out, client=client, report=report, on_record=stop_after_two, progress=False)
     done = {r["input"] for r in seen}
     assert len(done) == 2
-    assert [json.loads(line)["input"] for line in report.read_text().splitlines()] == [r["input"] for r in seen]
+    assert [json.loads(line)["input"] for line in report.read_text().splitlines()] == [
+        r["input"] for r in seen
+    ]
     stamps = {p: os.stat(Path(r["output"])).st_mtime_ns for p, r in ((r["input"], r) for r in seen)}
 
     records = batch.run(folder, out, client=client, report=report, resume=True, progress=False)
@@ -210,7 +269,9 @@ def test_resume_after_an_interrupted_batch_redoes_only_what_is_missing(data, cli
     again = batch.run(folder, out, workers=0, report=report, resume=True, progress=False)
     assert {Path(r["input"]).name for r in again if r["status"] == "ok"} == {"m0.ply", "m1.ply"}
     assert sum(r["status"] == "skipped" for r in again) == 4
-    other = batch.run(folder, out, workers=0, report=report, resume=True, options={"iterations": 3}, progress=False)
+    other = batch.run(
+        folder, out, workers=0, report=report, resume=True, options={"iterations": 3}, progress=False
+    )
     assert all(r["status"] == "ok" for r in other)
 
 
@@ -220,8 +281,20 @@ def test_resume_after_an_interrupted_batch_redoes_only_what_is_missing(data, cli
 def test_cli_uses_an_existing_scheduler(data, client, cluster, tmp_path, capsys, monkeypatch):
     workers = set(client.scheduler_info()["workers"])
     out = tmp_path / "out"
-    code = main(["batch", str(data.good_dir), str(out), "--op", "denoise", "--iterations", "3",
-                 "--scheduler", cluster.scheduler_address, "--quiet"])
+    code = main(
+        [
+            "batch",
+            str(data.good_dir),
+            str(out),
+            "--op",
+            "denoise",
+            "--iterations",
+            "3",
+            "--scheduler",
+            cluster.scheduler_address,
+            "--quiet",
+        ]
+    )
     assert code == 0, capsys.readouterr().err
     lines = [json.loads(line) for line in (out / "batch_report.jsonl").read_text().splitlines()]
     assert len(lines) == 4 and all(r["status"] == "ok" for r in lines)
@@ -241,16 +314,38 @@ def test_cli_uses_an_existing_scheduler(data, client, cluster, tmp_path, capsys,
 def test_cli_exit_codes_summary_and_report(data, cluster, tmp_path, capsys):
     address = cluster.scheduler_address
     report = tmp_path / "r.jsonl"
-    code = main(["batch", str(data.mixed_dir), str(tmp_path / "out"), "--op", "denoise", "--scheduler", address,
-                 "--report", str(report)])
+    code = main(
+        [
+            "batch",
+            str(data.mixed_dir),
+            str(tmp_path / "out"),
+            "--op",
+            "denoise",
+            "--scheduler",
+            address,
+            "--report",
+            str(report),
+        ]
+    )
     out = capsys.readouterr().out
     assert code == 2
     assert any(line.split()[:2] == ["failed", "3"] for line in out.splitlines())
     assert any(line.split()[:2] == ["ok", "2"] for line in out.splitlines())
     assert "FAILED" in out and "corrupt.ply" in out
     assert len(report.read_text().splitlines()) == 5
-    code = main(["batch", *map(str, data.mixed), str(tmp_path / "out2"), "--op", "denoise", "--scheduler", address,
-                 "--quiet", "--json"])
+    code = main(
+        [
+            "batch",
+            *map(str, data.mixed),
+            str(tmp_path / "out2"),
+            "--op",
+            "denoise",
+            "--scheduler",
+            address,
+            "--quiet",
+            "--json",
+        ]
+    )
     assert code == 0
     assert json.loads(capsys.readouterr().out)["counts"] == {"ok": 2}
 
@@ -266,23 +361,33 @@ def test_cli_help_lists_every_op_option(capsys):
             assert option.cli_flag in text
 
 
-@pytest.mark.parametrize("argv, message", [
-    (["MISSING", "OUT", "--op", "denoise"], "does not exist"),
-    (["GOOD", "OUT", "--op", "nope"], "--op must be one of"),
-    (["GOOD", "OUT", "--op", "denoise", "--count", "5"], "--count is not an option of --op denoise"),
-    (["GOOD", "OUT", "--op", "denoise", "--iterations", "-1"], "--iterations (option iterations of --op denoise) must"),
-    (["GOOD", "OUT", "--op", "denoise", "--suffix", ".xyz"], "--suffix must be one of"),
-    (["GOOD", "OUT", "--op", "denoise", "--set", "method=global"], "--set must look like OP.NAME=VALUE"),
-    (["GOOD", "OUT", "--op", "denoise", "--set", "denoise.count=3"], "denoise has no option 'count'"),
-    (["GOOD", "OUT", "--op", "encode,denoise"], "must be last in a pipeline"),
-    (["GOOD", "OUT", "--op", "compare", "--reference", "NOWHERE"], "must be an existing folder"),
-    (["GOOD", "OUT", "--op", "denoise", "--threads-per-worker", "0"], "--threads-per-worker must be"),
-    (["GOOD", "OUT", "--op", "denoise", "--retries", "-1"], "--retries must be"),
-    (["GOOD", "OUT", "--op", "denoise", "--workers", "-2"], "--workers must be"),
-])
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["MISSING", "OUT", "--op", "denoise"], "does not exist"),
+        (["GOOD", "OUT", "--op", "nope"], "--op must be one of"),
+        (["GOOD", "OUT", "--op", "denoise", "--count", "5"], "--count is not an option of --op denoise"),
+        (
+            ["GOOD", "OUT", "--op", "denoise", "--iterations", "-1"],
+            "--iterations (option iterations of --op denoise) must",
+        ),
+        (["GOOD", "OUT", "--op", "denoise", "--suffix", ".xyz"], "--suffix must be one of"),
+        (["GOOD", "OUT", "--op", "denoise", "--set", "method=global"], "--set must look like OP.NAME=VALUE"),
+        (["GOOD", "OUT", "--op", "denoise", "--set", "denoise.count=3"], "denoise has no option 'count'"),
+        (["GOOD", "OUT", "--op", "encode,denoise"], "must be last in a pipeline"),
+        (["GOOD", "OUT", "--op", "compare", "--reference", "NOWHERE"], "must be an existing folder"),
+        (["GOOD", "OUT", "--op", "denoise", "--threads-per-worker", "0"], "--threads-per-worker must be"),
+        (["GOOD", "OUT", "--op", "denoise", "--retries", "-1"], "--retries must be"),
+        (["GOOD", "OUT", "--op", "denoise", "--workers", "-2"], "--workers must be"),
+    ],
+)
 def test_cli_bad_arguments_exit_2_with_one_line(data, tmp_path, capsys, argv, message):
-    replace = {"MISSING": str(tmp_path / "nothing.ply"), "GOOD": str(data.good_dir), "OUT": str(tmp_path / "o"),
-               "NOWHERE": str(tmp_path / "nowhere")}
+    replace = {
+        "MISSING": str(tmp_path / "nothing.ply"),
+        "GOOD": str(data.good_dir),
+        "OUT": str(tmp_path / "o"),
+        "NOWHERE": str(tmp_path / "nowhere"),
+    }
     code = main(["batch", *(replace.get(a, a) for a in argv)])
     err = capsys.readouterr().err
     assert code == 2
@@ -309,8 +414,14 @@ def test_local_cluster_workers_are_spawned_never_forked(data, tmp_path, monkeypa
     try:
         # Even with Dask configured for fork, the batch's own cluster spawns its workers.
         with dask.config.set({"distributed.worker.multiprocessing-method": "fork"}):
-            records = batch.run(data.good[:2], tmp_path / "out", op="_test_env", workers=1, threads_per_worker=2,
-                                progress=False)
+            records = batch.run(
+                data.good[:2],
+                tmp_path / "out",
+                op="_test_env",
+                workers=1,
+                threads_per_worker=2,
+                progress=False,
+            )
     finally:
         OPS.pop("_test_env")
     assert "fork" not in methods and "spawn" in methods
@@ -335,8 +446,13 @@ def test_no_fork_based_pool_in_the_package():
     package = Path(batch.__file__).parent
     for path in package.rglob("*.py"):
         text = path.read_text()
-        for banned in ("ProcessPoolExecutor", "multiprocessing.Pool", "os.fork(", 'get_context("fork")',
-                       "get_context('fork')"):
+        for banned in (
+            "ProcessPoolExecutor",
+            "multiprocessing.Pool",
+            "os.fork(",
+            'get_context("fork")',
+            "get_context('fork')",
+        ):
             assert banned not in text, f"{path.name} uses {banned}"
 
 
@@ -361,8 +477,15 @@ def test_a_write_open3d_refuses_is_a_failure_record(data, tmp_path, monkeypatch)
 
 
 def test_fail_fast_stops_at_the_first_failure(data, tmp_path):
-    records = _by_name(batch.run([data.mixed_dir / "corrupt.ply", *data.mixed], tmp_path / "out", workers=0,
-                                 fail_fast=True, progress=False))
+    records = _by_name(
+        batch.run(
+            [data.mixed_dir / "corrupt.ply", *data.mixed],
+            tmp_path / "out",
+            workers=0,
+            fail_fast=True,
+            progress=False,
+        )
+    )
     assert records["corrupt.ply"]["status"] == "failed"
     assert records["ok0.ply"]["status"] == records["ok1.ply"]["status"] == "cancelled"
 
@@ -376,22 +499,42 @@ def test_other_ops_and_a_pipeline_match_the_library(data, tmp_path):
     source = data.good[0]
     mesh = o3d.io.read_triangle_mesh(str(source))
 
-    (record,) = batch.run(source, tmp_path / "a", op="approximate", options={"count": "5%"}, workers=0,
-                          progress=False, suffix=".off")
+    (record,) = batch.run(
+        source,
+        tmp_path / "a",
+        op="approximate",
+        options={"count": "5%"},
+        workers=0,
+        progress=False,
+        suffix=".off",
+    )
     expected, indices = approximate(mesh, int(np.ceil(0.05 * 642)))
-    assert record["output"].endswith("a.off") and record["metrics"]["approximate"]["count"] == len(indices) == 33
+    assert (
+        record["output"].endswith("a.off") and record["metrics"]["approximate"]["count"] == len(indices) == 33
+    )
     # OFF stores 6 significant digits.
-    np.testing.assert_allclose(_read(record["output"])[0], np.asarray(expected.vertices), rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(
+        _read(record["output"])[0], np.asarray(expected.vertices), rtol=1e-5, atol=1e-6
+    )
 
-    (record,) = batch.run(source, tmp_path / "e", op="encode", options={"count": 20, "bits": 10}, workers=0,
-                          progress=False)
+    (record,) = batch.run(
+        source, tmp_path / "e", op="encode", options={"count": 20, "bits": 10}, workers=0, progress=False
+    )
     data_bytes = Path(record["output"]).read_bytes()
     assert record["output"].endswith("a.bin") and data_bytes == encode_geometry(mesh, 20, bits=10)
-    np.testing.assert_array_equal(np.asarray(decode_geometry(mesh, data_bytes).vertices),
-                                  np.asarray(decode_geometry(mesh, encode_geometry(mesh, 20, bits=10)).vertices))
+    np.testing.assert_array_equal(
+        np.asarray(decode_geometry(mesh, data_bytes).vertices),
+        np.asarray(decode_geometry(mesh, encode_geometry(mesh, 20, bits=10)).vertices),
+    )
 
-    (record,) = batch.run(source, tmp_path / "h", op="hierarchy", options={"levels": "0,2", "maps": True},
-                          workers=0, progress=False)
+    (record,) = batch.run(
+        source,
+        tmp_path / "h",
+        op="hierarchy",
+        options={"levels": "0,2", "maps": True},
+        workers=0,
+        progress=False,
+    )
     hierarchy = build_hierarchy(mesh)
     folder = Path(record["output"])
     assert sorted(p.name for p in folder.iterdir()) == ["level_00.ply", "level_02.ply", "vertex_maps.npz"]
@@ -399,14 +542,23 @@ def test_other_ops_and_a_pipeline_match_the_library(data, tmp_path):
     np.testing.assert_array_equal(np.load(folder / "vertex_maps.npz")["level_02"], hierarchy.vertex_map(2))
 
     # denoise, then compare with the matching file of the reference folder (here: the noisy input itself).
-    (record,) = batch.run(source, tmp_path / "c", op="denoise,compare", options={"reference": data.good_dir,
-                          "iterations": 3}, workers=0, progress=False)
+    (record,) = batch.run(
+        source,
+        tmp_path / "c",
+        op="denoise,compare",
+        options={"reference": data.good_dir, "iterations": 3},
+        workers=0,
+        progress=False,
+    )
     faired = constrained_fairing(mesh, 3)
     assert record["output"] is None and record["status"] == "ok"
     distance = surface_distance(faired, mesh, number_of_points=100_000)
-    assert record["metrics"]["compare"]["surface_distance"]["hausdorff"] == pytest.approx(distance["hausdorff"])
-    missing = batch.run(source, tmp_path / "m", op="compare", options={"reference": tmp_path}, workers=0,
-                        progress=False)
+    assert record["metrics"]["compare"]["surface_distance"]["hausdorff"] == pytest.approx(
+        distance["hausdorff"]
+    )
+    missing = batch.run(
+        source, tmp_path / "m", op="compare", options={"reference": tmp_path}, workers=0, progress=False
+    )
     assert missing[0]["status"] == "failed" and "has no file matching" in missing[0]["error"]
 
 
@@ -442,20 +594,30 @@ def test_fill_op_and_a_fill_denoise_pipeline_match_the_library(data, tmp_path):
     mesh = o3d.io.read_triangle_mesh(str(data.good[0]))
     # cut a hole: drop the triangles around vertex 0
     triangles = np.asarray(mesh.triangles)
-    holed = o3d.geometry.TriangleMesh(mesh.vertices, o3d.utility.Vector3iVector(triangles[(triangles != 0).all(1)]))
+    holed = o3d.geometry.TriangleMesh(
+        mesh.vertices, o3d.utility.Vector3iVector(triangles[(triangles != 0).all(1)])
+    )
     holed.remove_unreferenced_vertices()
     source = tmp_path / "holed.ply"
     o3d.io.write_triangle_mesh(str(source), holed)
     holed = o3d.io.read_triangle_mesh(str(source))
 
-    (record,) = batch.run(source, tmp_path / "f", op="fill", options={"continuity": "1"}, workers=0, progress=False)
+    (record,) = batch.run(
+        source, tmp_path / "f", op="fill", options={"continuity": "1"}, workers=0, progress=False
+    )
     expected = fill_holes(holed, continuity=1)
     vertices, filled = _read(record["output"])
     np.testing.assert_array_equal(filled, np.asarray(expected.triangles))
     np.testing.assert_allclose(vertices, np.asarray(expected.vertices), rtol=0, atol=1e-12)
     assert record["metrics"]["fill"]["new_triangles"] == len(filled) - len(holed.triangles) > 0
 
-    (record,) = batch.run(source, tmp_path / "fd", op="fill,denoise", options={"method": "local", "iterations": 2},
-                          workers=0, progress=False)
+    (record,) = batch.run(
+        source,
+        tmp_path / "fd",
+        op="fill,denoise",
+        options={"method": "local", "iterations": 2},
+        workers=0,
+        progress=False,
+    )
     assert record["status"] == "ok"
     np.testing.assert_array_equal(_read(record["output"])[1], np.asarray(expected.triangles))

@@ -10,7 +10,13 @@ from numpy.testing import assert_allclose
 
 from o3d_lsmesh.fairing import smooth_boundary_curves, smooth_boundary_curves_arrays
 from o3d_lsmesh.fairing.boundary_curve import curve_operator
-from o3d_lsmesh.topology import BoundaryCurves, boundary_chains, boundary_curves, boundary_halfedges, boundary_loops
+from o3d_lsmesh.topology import (
+    BoundaryCurves,
+    boundary_chains,
+    boundary_curves,
+    boundary_halfedges,
+    boundary_loops,
+)
 
 TIGHT = 1e-12
 
@@ -148,8 +154,11 @@ def test_zero_iterations_copy_and_kinds(sphere):
     V, F = grid_with_holes()
     out = smooth_boundary_curves((V, F), 0)
     assert out[0] is not V and np.array_equal(out[0], V)
-    tensor = o3d.t.geometry.TriangleMesh.from_legacy(o3d.geometry.TriangleMesh(
-        o3d.utility.Vector3dVector(V), o3d.utility.Vector3iVector(F.astype(np.int32))))
+    tensor = o3d.t.geometry.TriangleMesh.from_legacy(
+        o3d.geometry.TriangleMesh(
+            o3d.utility.Vector3dVector(V), o3d.utility.Vector3iVector(F.astype(np.int32))
+        )
+    )
     result = smooth_boundary_curves(tensor, 2)
     assert isinstance(result, o3d.t.geometry.TriangleMesh)
     assert_allclose(result.vertex.positions.numpy(), smooth_boundary_curves_arrays(V, F, 2), atol=1e-6)
@@ -274,11 +283,17 @@ def test_curve_operator_takes_loops_or_curves_and_pickles():
     from_list = curve_operator([loop])
     from_curves = curve_operator(BoundaryCurves([loop], [], np.zeros(0, dtype=np.int64)))
     positions = np.random.default_rng(2).normal(size=(10, 3))
-    assert_allclose(from_list.step(positions, from_list.target(positions)),
-                    from_curves.step(positions, from_curves.target(positions)), atol=0)
+    assert_allclose(
+        from_list.step(positions, from_list.target(positions)),
+        from_curves.step(positions, from_curves.target(positions)),
+        atol=0,
+    )
     again = pickle.loads(pickle.dumps(from_list))
-    assert_allclose(again.step(positions, again.target(positions)),
-                    from_list.step(positions, from_list.target(positions)), atol=0)
+    assert_allclose(
+        again.step(positions, again.target(positions)),
+        from_list.step(positions, from_list.target(positions)),
+        atol=0,
+    )
     assert len(curve_operator([])) == 0 and len(curve_operator([np.array([1, 2, 3])])) == 0
 
 

@@ -11,9 +11,9 @@ from pathlib import Path
 import numpy as np
 import open3d as o3d
 import pytest
-
 from conftest import REPO, load_mesh
-from o3d_lsmesh.cli import main, parse_index_spec, CLIError
+
+from o3d_lsmesh.cli import CLIError, main, parse_index_spec
 from o3d_lsmesh.demo import add_noise, demo_mesh, mean_edge_length
 from o3d_lsmesh.fairing import constrained_fairing
 from o3d_lsmesh.metrics import signed_volume
@@ -85,13 +85,27 @@ def test_denoise_multiresolution_and_global(tmp_path, capsys, noisy):
     assert report["level"] == 2 and report["iterations"] == 5
     np.testing.assert_allclose(
         np.asarray(_read(tmp_path / "multi.ply").vertices),
-        np.asarray(multiresolution_fairing(_read(source), 2, number_of_iterations=5).vertices), atol=1e-12,
+        np.asarray(multiresolution_fairing(_read(source), 2, number_of_iterations=5).vertices),
+        atol=1e-12,
     )
-    report = run_json(capsys, ["denoise", str(source), str(tmp_path / "global.ply"), "--method", "global",
-                               "--iterations", "1", "--mu", "0.5"])
+    report = run_json(
+        capsys,
+        [
+            "denoise",
+            str(source),
+            str(tmp_path / "global.ply"),
+            "--method",
+            "global",
+            "--iterations",
+            "1",
+            "--mu",
+            "0.5",
+        ],
+    )
     np.testing.assert_allclose(
         np.asarray(_read(tmp_path / "global.ply").vertices),
-        np.asarray(constrained_fairing(_read(source), 1, method="global", mu=0.5).vertices), atol=1e-12,
+        np.asarray(constrained_fairing(_read(source), 1, method="global", mu=0.5).vertices),
+        atol=1e-12,
     )
 
 
@@ -101,7 +115,10 @@ def test_real_mesh_denoise_and_compare(tmp_path, capsys):
     clean = _write(mesh, tmp_path / "venus.ply")
     # synthetic Gaussian noise on a clean open boundary: the paper's global method (the default, made for raw
     # scans, pulls the rim inward along the surface: see constrained_fairing's docstring)
-    run_json(capsys, ["denoise", str(source), str(tmp_path / "venus_out.ply"), "--method", "global", "--iterations", "1"])
+    run_json(
+        capsys,
+        ["denoise", str(source), str(tmp_path / "venus_out.ply"), "--method", "global", "--iterations", "1"],
+    )
     before = run_json(capsys, ["compare", str(source), str(clean), "--points", "20000"])
     after = run_json(capsys, ["compare", str(tmp_path / "venus_out.ply"), str(clean), "--points", "20000"])
     assert after["vertex_error"]["mean"] < before["vertex_error"]["mean"]
@@ -139,12 +156,24 @@ def test_approximate_writes_mesh_and_indices(tmp_path, capsys, clean):
     from o3d_lsmesh.selection import approximate
 
     source = _write(clean, tmp_path / "clean.ply")
-    report = run_json(capsys, ["approximate", str(source), str(tmp_path / "approx.ply"), "--count", "40",
-                               "--indices", str(tmp_path / "idx.txt")])
+    report = run_json(
+        capsys,
+        [
+            "approximate",
+            str(source),
+            str(tmp_path / "approx.ply"),
+            "--count",
+            "40",
+            "--indices",
+            str(tmp_path / "idx.txt"),
+        ],
+    )
     indices = np.loadtxt(tmp_path / "idx.txt", dtype=np.int64)
     expected, expected_indices = approximate(_read(source), 40, method="greedy", seed=0)
     np.testing.assert_array_equal(indices, expected_indices)
-    np.testing.assert_allclose(np.asarray(_read(tmp_path / "approx.ply").vertices), np.asarray(expected.vertices), atol=1e-12)
+    np.testing.assert_allclose(
+        np.asarray(_read(tmp_path / "approx.ply").vertices), np.asarray(expected.vertices), atol=1e-12
+    )
     error = np.linalg.norm(np.asarray(expected.vertices) - np.asarray(clean.vertices), axis=1)
     assert report["count"] == 40 and report["error_linf"] == pytest.approx(error.max())
 
@@ -160,11 +189,17 @@ def test_reconstruct_from_range_and_file(tmp_path, capsys, clean):
     known = np.setdiff1d(np.arange(len(result)), unknown)
     np.testing.assert_array_equal(result[known], np.asarray(clean.vertices)[known])
     (tmp_path / "unknown.txt").write_text(" ".join(map(str, unknown)) + "\n")
-    report = run_json(capsys, ["reconstruct", str(source), str(tmp_path / "r2.ply"), "--unknown", str(tmp_path / "unknown.txt")])
+    report = run_json(
+        capsys,
+        ["reconstruct", str(source), str(tmp_path / "r2.ply"), "--unknown", str(tmp_path / "unknown.txt")],
+    )
     np.testing.assert_array_equal(np.asarray(_read(tmp_path / "r2.ply").vertices), result)
     assert report["unknown"] == len(unknown)
     np.save(tmp_path / "unknown.npy", unknown)
-    run_json(capsys, ["reconstruct", str(source), str(tmp_path / "r3.ply"), "--unknown", str(tmp_path / "unknown.npy")])
+    run_json(
+        capsys,
+        ["reconstruct", str(source), str(tmp_path / "r3.ply"), "--unknown", str(tmp_path / "unknown.npy")],
+    )
     np.testing.assert_array_equal(np.asarray(_read(tmp_path / "r3.ply").vertices), result)
 
 
@@ -181,7 +216,9 @@ def test_hierarchy_writes_chosen_levels(tmp_path, capsys, clean):
 
     source = _write(clean, tmp_path / "clean.ply")
     outdir = tmp_path / "levels"
-    report = run_json(capsys, ["hierarchy", str(source), str(outdir), "--levels", "0,2,4", "--maps", "--format", "obj"])
+    report = run_json(
+        capsys, ["hierarchy", str(source), str(outdir), "--levels", "0,2,4", "--maps", "--format", "obj"]
+    )
     hierarchy = build_hierarchy(_read(source))
     assert report["levels"] == len(hierarchy)
     assert report["vertex_counts"] == [hierarchy.vertex_count(i) for i in range(len(hierarchy))]
@@ -198,14 +235,20 @@ def test_encode_then_decode(tmp_path, capsys, clean):
     from o3d_lsmesh.encoding import decode_geometry
 
     source = _write(clean, tmp_path / "clean.ply")
-    report = run_json(capsys, ["encode", str(source), str(tmp_path / "geo.bin"), "--count", "30", "--bits", "10"])
+    report = run_json(
+        capsys, ["encode", str(source), str(tmp_path / "geo.bin"), "--count", "30", "--bits", "10"]
+    )
     data = (tmp_path / "geo.bin").read_bytes()
     assert report["bytes"] == len(data) and report["anchors"] == 30
     assert report["bits_per_vertex"] == pytest.approx(8 * len(data) / len(clean.vertices))
-    run_json(capsys, ["decode", str(source), str(tmp_path / "geo.bin"), str(tmp_path / "dec.ply"), "--anchors", "20"])
+    run_json(
+        capsys,
+        ["decode", str(source), str(tmp_path / "geo.bin"), str(tmp_path / "dec.ply"), "--anchors", "20"],
+    )
     np.testing.assert_allclose(
         np.asarray(_read(tmp_path / "dec.ply").vertices),
-        np.asarray(decode_geometry(_read(source), data, anchors=20).vertices), atol=1e-12,
+        np.asarray(decode_geometry(_read(source), data, anchors=20).vertices),
+        atol=1e-12,
     )
 
 
@@ -251,7 +294,9 @@ def test_unreadable_and_empty_meshes(tmp_path, capsys, clean):
     points = o3d.geometry.TriangleMesh()
     points.vertices = o3d.utility.Vector3dVector(np.random.default_rng(0).random((5, 3)))
     o3d.io.write_triangle_mesh(str(tmp_path / "points.ply"), points)
-    line = run_error(capsys, ["approximate", str(tmp_path / "points.ply"), str(tmp_path / "o.ply"), "--count", "2"])
+    line = run_error(
+        capsys, ["approximate", str(tmp_path / "points.ply"), str(tmp_path / "o.ply"), "--count", "2"]
+    )
     assert line.endswith("has 5 vertices but no triangles")
     line = run_error(capsys, ["denoise", str(tmp_path), str(tmp_path / "o.ply")])
     assert "is a folder" in line
@@ -284,18 +329,28 @@ def test_unreadable_and_empty_meshes(tmp_path, capsys, clean):
         (["approximate", "{src}", "{out}", "--count", "100000"], "--count must be <= 642, got 100000"),
         (["reconstruct", "{src}", "{out}", "--unknown", "100000"], "--unknown must name vertices in 0..641"),
         (["reconstruct", "{src}", "{out}", "--unknown", "0:99999999999"], "got range '0:99999999999'"),
-        (["reconstruct", "{src}", "{out}", "--unknown", "0:642"], "needs at least one known vertex (outside --unknown)"),
+        (
+            ["reconstruct", "{src}", "{out}", "--unknown", "0:642"],
+            "needs at least one known vertex (outside --unknown)",
+        ),
         (["reconstruct", "{src}", "{out}", "--unknown", "0:642", "--soft"], "(outside --unknown)"),
         (["compare", "{src}", "{src}", "--points", "10000000000"], "--points: must be at most 10,000,000"),
         (["demo", "--subdivisions", "12"], "--subdivisions: must be at most 9"),
         (["demo", "--noise", "-1"], "--noise: must be a non-negative finite number, got '-1'"),
         (["demo", "--noise", "nan"], "--noise: must be a non-negative finite number, got 'nan'"),
         (["denoise", "{src}", "{out}", "--level", "2", "--mu", "1"], "--mu cannot be combined with --level"),
-        (["denoise", "{src}", "{out}", "--level", "2", "--reimpose-every", "2", "--fixed-boundary"],
-         "--reimpose-every, --fixed-boundary cannot be combined with --level"),
-        (["denoise", "{src}", "{out}", "--iterations", "1", "--method", "global", "--reimpose-every", "2"],
-         "--reimpose-every cannot be used with --method global"),
-        (["denoise", "{src}", "{out}", "--method", "local", "--mu", "1"], "--mu cannot be used with --method local"),
+        (
+            ["denoise", "{src}", "{out}", "--level", "2", "--reimpose-every", "2", "--fixed-boundary"],
+            "--reimpose-every, --fixed-boundary cannot be combined with --level",
+        ),
+        (
+            ["denoise", "{src}", "{out}", "--iterations", "1", "--method", "global", "--reimpose-every", "2"],
+            "--reimpose-every cannot be used with --method global",
+        ),
+        (
+            ["denoise", "{src}", "{out}", "--method", "local", "--mu", "1"],
+            "--mu cannot be used with --method local",
+        ),
         (["denoise", "{src}", "{out}", "--method", "global", "--mu", "-1"], "--mu must be"),
     ],
 )
@@ -324,10 +379,14 @@ def test_refuses_to_overwrite_the_input_unless_forced(tmp_path, capsys, noisy):
 def test_bad_index_files_outdir_and_write_failures(tmp_path, capsys, clean, monkeypatch):
     src = str(_write(clean, tmp_path / "clean.ply"))
     (tmp_path / "words.txt").write_text("1 2 three")
-    line = run_error(capsys, ["reconstruct", src, str(tmp_path / "r.ply"), "--unknown", str(tmp_path / "words.txt")])
+    line = run_error(
+        capsys, ["reconstruct", src, str(tmp_path / "r.ply"), "--unknown", str(tmp_path / "words.txt")]
+    )
     assert "must hold integer vertex indices" in line
     np.save(tmp_path / "floats.npy", np.array([1.5, 2.0]))
-    line = run_error(capsys, ["reconstruct", src, str(tmp_path / "r.ply"), "--unknown", str(tmp_path / "floats.npy")])
+    line = run_error(
+        capsys, ["reconstruct", src, str(tmp_path / "r.ply"), "--unknown", str(tmp_path / "floats.npy")]
+    )
     assert "must hold integer vertex indices, got dtype float64" in line
     (tmp_path / "plainfile").write_text("x")
     line = run_error(capsys, ["hierarchy", src, str(tmp_path / "plainfile")])
@@ -355,8 +414,14 @@ def test_render_failure_exits_1(tmp_path, capsys, clean, monkeypatch):
 
 def _python(*args, cwd):
     env = dict(os.environ, PYTHONPATH=str(REPO))
-    return subprocess.run([sys.executable, "-m", "o3d_lsmesh.cli", *args], capture_output=True, text=True,
-                          cwd=cwd, env=env, timeout=300)
+    return subprocess.run(
+        [sys.executable, "-m", "o3d_lsmesh.cli", *args],
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+        env=env,
+        timeout=300,
+    )
 
 
 def test_module_entry_point_error_is_one_line(tmp_path):
@@ -386,7 +451,16 @@ def test_console_script_is_installed():
         pytest.skip(f"console script not installed next to {sys.executable} (pip install -e . creates it)")
     done = subprocess.run([str(script), "--help"], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0
-    for command in ("denoise", "approximate", "reconstruct", "hierarchy", "encode", "decode", "compare", "demo"):
+    for command in (
+        "denoise",
+        "approximate",
+        "reconstruct",
+        "hierarchy",
+        "encode",
+        "decode",
+        "compare",
+        "demo",
+    ):
         assert command in done.stdout
 
 
@@ -398,7 +472,9 @@ def test_flat_mesh_denoise_reports_no_volume_change(tmp_path, capsys):
     from conftest import grid
 
     vertices, triangles = grid(9, 9, z=lambda x, y: 0.02 * np.sin(9 * x) * 0)
-    mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(vertices), o3d.utility.Vector3iVector(triangles))
+    mesh = o3d.geometry.TriangleMesh(
+        o3d.utility.Vector3dVector(vertices), o3d.utility.Vector3iVector(triangles)
+    )
     source = _write(mesh, tmp_path / "flat.ply")
     assert signed_volume(_read(source)) == 0.0
     code = main(["denoise", str(source), str(tmp_path / "out.ply")])
@@ -428,10 +504,14 @@ def test_ply_header_counts_are_checked(tmp_path, capsys, clean):
     # a header that promises more faces than the file holds (a writer that died early, Open3D silent)
     whole = tmp_path / "whole.ply"
     assert o3d.io.write_triangle_mesh(str(whole), clean, write_ascii=True)
-    text = whole.read_text().replace(f"element face {len(clean.triangles)}", f"element face {len(clean.triangles) + 5}")
+    text = whole.read_text().replace(
+        f"element face {len(clean.triangles)}", f"element face {len(clean.triangles) + 5}"
+    )
     (tmp_path / "lying.ply").write_text(text)
     line = run_error(capsys, ["compare", str(tmp_path / "lying.ply"), str(whole)])
-    assert "truncated or corrupt" in line and f"{len(clean.triangles) + 5} faces" in line or "Open3D read only part" in line
+    assert (
+        "truncated or corrupt" in line and f"{len(clean.triangles) + 5} faces" in line
+    ) or "Open3D read only part" in line
 
 
 def test_internal_errors_show_a_traceback_and_exit_1(tmp_path, capsys, clean, monkeypatch):
@@ -490,15 +570,18 @@ def test_error_during_a_bar_starts_its_own_line(tmp_path, capsys, clean, monkeyp
 
 def test_no_one_step_progress_bars(tmp_path, capsys, clean):
     source = _write(clean, tmp_path / "clean.ply")
-    for argv in (["compare", str(source), str(source), "--points", "200"],
-                 ["reconstruct", str(source), str(tmp_path / "r.ply"), "--unknown", "0:5"]):
+    for argv in (
+        ["compare", str(source), str(source), "--points", "200"],
+        ["reconstruct", str(source), str(tmp_path / "r.ply"), "--unknown", "0:5"],
+    ):
         assert main(argv) == 0
         err = capsys.readouterr().err
         assert "0/1" not in err and "1/1" not in err
 
 
-@pytest.mark.parametrize("command", ["denoise", "approximate", "reconstruct", "hierarchy", "encode", "decode",
-                                     "compare", "demo"])
+@pytest.mark.parametrize(
+    "command", ["denoise", "approximate", "reconstruct", "hierarchy", "encode", "decode", "compare", "demo"]
+)
 def test_help_shows_defaults_description_and_example(capsys, command):
     with pytest.raises(SystemExit) as exit_:
         main([command, "--help"])
@@ -517,11 +600,16 @@ def test_help_lists_the_real_defaults(capsys):
     with pytest.raises(SystemExit):
         main(["denoise", "--help"])
     text = " ".join(capsys.readouterr().out.split())
-    assert "(default: scan, the API's default" in text and "multiresolution level (0: plain fairing) (default: 0)" in text
+    assert (
+        "(default: scan, the API's default" in text
+        and "multiresolution level (0: plain fairing) (default: 0)" in text
+    )
     with pytest.raises(SystemExit):
         main(["reconstruct", "--help"])
     text = " ".join(capsys.readouterr().out.split())
-    assert "e.g. '0:100,250'" in text and "'0:100,250' (default" not in text  # a required option has no default
+    assert (
+        "e.g. '0:100,250'" in text and "'0:100,250' (default" not in text
+    )  # a required option has no default
 
 
 def test_denoise_level_passes_or_refuses_every_option(tmp_path, capsys, noisy):
@@ -531,12 +619,30 @@ def test_denoise_level_passes_or_refuses_every_option(tmp_path, capsys, noisy):
         line = run_error(capsys, ["denoise", str(source), str(tmp_path / "o.ply"), "--level", "1", *option])
         assert f"{option[0]} cannot be combined with --level" in line
     # the options it does take change the result
-    a = run_json(capsys, ["denoise", str(source), str(tmp_path / "a.ply"), "--level", "1", "--iterations", "1"])
-    b = run_json(capsys, ["denoise", str(source), str(tmp_path / "b.ply"), "--level", "1", "--iterations", "4"])
+    a = run_json(
+        capsys, ["denoise", str(source), str(tmp_path / "a.ply"), "--level", "1", "--iterations", "1"]
+    )
+    b = run_json(
+        capsys, ["denoise", str(source), str(tmp_path / "b.ply"), "--level", "1", "--iterations", "4"]
+    )
     assert a["displacement_mean"] != b["displacement_mean"]
-    c = run_json(capsys, ["denoise", str(source), str(tmp_path / "c.ply"), "--level", "1", "--method", "global",
-                          "--iterations", "4"])
-    assert not np.array_equal(np.asarray(_read(tmp_path / "b.ply").vertices), np.asarray(_read(tmp_path / "c.ply").vertices))
+    c = run_json(
+        capsys,
+        [
+            "denoise",
+            str(source),
+            str(tmp_path / "c.ply"),
+            "--level",
+            "1",
+            "--method",
+            "global",
+            "--iterations",
+            "4",
+        ],
+    )
+    assert not np.array_equal(
+        np.asarray(_read(tmp_path / "b.ply").vertices), np.asarray(_read(tmp_path / "c.ply").vertices)
+    )
     assert c["method"] == "global"
 
 
@@ -549,20 +655,28 @@ def test_out_of_memory_is_a_user_error(tmp_path, capsys, clean, monkeypatch):
     monkeypatch.setattr(importlib.import_module("o3d_lsmesh.fairing"), "constrained_fairing", greedy)
     source = _write(clean, tmp_path / "clean.ply")
     line = run_error(capsys, ["denoise", str(source), str(tmp_path / "out.ply")])
-    assert line == "o3d-lsmesh: error: not enough memory for this request: try a smaller mesh or smaller options"
+    assert (
+        line == "o3d-lsmesh: error: not enough memory for this request: try a smaller mesh or smaller options"
+    )
 
 
 def test_flag_names_replace_api_names_in_library_messages():
     from o3d_lsmesh._validate import as_count
     from o3d_lsmesh.cli import _flags
 
-    with pytest.raises(CLIError, match=r"^--unknown must be >= 0, got -1$"), _flags(unknown="unknown_vertex_indices"):
+    with (
+        pytest.raises(CLIError, match=r"^--unknown must be >= 0, got -1$"),
+        _flags(unknown="unknown_vertex_indices"),
+    ):
         as_count(-1, name="unknown_vertex_indices")
     # the fairing's advice for a boundary it cannot smooth names the CLI flag
     with pytest.raises(CLIError, match=r"pass --fixed-boundary to keep it fixed"), _flags():
         as_count(-1, name="boundary (pass smooth_boundary=False to keep it fixed)")
     # an error that is not one of our checks passes through untouched (it is a bug, shown with its traceback)
-    with pytest.raises(ValueError, match="operands could not be broadcast"), _flags(unknown="unknown_vertex_indices"):
+    with (
+        pytest.raises(ValueError, match="operands could not be broadcast"),
+        _flags(unknown="unknown_vertex_indices"),
+    ):
         np.zeros(2) + np.zeros(3)
 
 
@@ -574,8 +688,10 @@ def test_invalid_mesh_files_are_named_in_the_error(tmp_path, capsys, clean):
     lines[-1] = "3 0 1 99999"
     (tmp_path / "bad.ply").write_text("\n".join(lines) + "\n")
     line = run_error(capsys, ["denoise", str(tmp_path / "bad.ply"), str(tmp_path / "out.ply")])
-    assert line == (f"o3d-lsmesh: error: INPUT '{tmp_path / 'bad.ply'}' triangle indices must lie in [0, "
-                    f"{len(clean.vertices)}), got [0, 1, 99999] at triangle {len(clean.triangles) - 1}")
+    assert line == (
+        f"o3d-lsmesh: error: INPUT '{tmp_path / 'bad.ply'}' triangle indices must lie in [0, "
+        f"{len(clean.vertices)}), got [0, 1, 99999] at triangle {len(clean.triangles) - 1}"
+    )
     line = run_error(capsys, ["compare", str(whole), str(tmp_path / "bad.ply")])
     assert line.startswith(f"o3d-lsmesh: error: B '{tmp_path / 'bad.ply'}' triangle indices must lie in")
 
@@ -585,8 +701,10 @@ def test_messages_about_the_input_mesh_name_the_file(tmp_path, capsys, clean):
     from o3d_lsmesh.cli import _flags
 
     # a check of ours whose message starts with "mesh" names the file instead
-    with pytest.raises(CLIError, match=r"^INPUT 'scan.ply' must be one of \['manifold'\], got 'x'$"), \
-            _flags(mesh="INPUT 'scan.ply'"):
+    with (
+        pytest.raises(CLIError, match=r"^INPUT 'scan.ply' must be one of \['manifold'\], got 'x'$"),
+        _flags(mesh="INPUT 'scan.ply'"),
+    ):
         as_choice("x", ["manifold"], name="mesh")
     # the decoder's mesh is MESH on the command line
     source = _write(clean, tmp_path / "clean.ply")
@@ -636,12 +754,13 @@ def test_compare_render_draws_a_labelled_distance_map(tmp_path, capsys, clean, r
     assert rows_with_ink.min() < 25  # the title band holds text
     top_band = image[:22]
     assert _ink(top_band[:, :160]).sum() > 10 and _ink(top_band[:, 160:]).sum() > 10
+
     # B differs from A on its moved cap only: yellow-green pixels in B's panel, none in A's
     def hot(panel):
         p = panel.astype(np.int64)
         return (p[..., 1] > 110) & (p[..., 2] < 110) & (p[..., 0] < 250)
 
-    panels = image[22:22 + 150]
+    panels = image[22 : 22 + 150]
     assert not hot(panels[:, :160]).any()
     rows = np.flatnonzero(hot(panels[:, 160:]).any(axis=1))
     assert len(rows) and rows.max() < 75  # in the upper half
@@ -651,8 +770,20 @@ def test_compare_render_draws_a_labelled_distance_map(tmp_path, capsys, clean, r
 
 def test_denoise_render_titles_name_the_method(tmp_path, capsys, noisy, raycast_render):
     src = _write(noisy, tmp_path / "scan.ply")
-    run_json(capsys, ["denoise", str(src), str(tmp_path / "o.ply"), "--render", str(tmp_path / "p.png"),
-                      "--iterations", "3", "--method", "global"])
+    run_json(
+        capsys,
+        [
+            "denoise",
+            str(src),
+            str(tmp_path / "o.ply"),
+            "--render",
+            str(tmp_path / "p.png"),
+            "--iterations",
+            "3",
+            "--method",
+            "global",
+        ],
+    )
     assert raycast_render[0]["titles"] == ["input: scan.ply", "global fairing, 3 iterations"]
     image = np.asarray(o3d.io.read_image(str(tmp_path / "p.png")))
     assert image.shape[0] > 160 and _ink(image[:15]).sum() > 20
@@ -660,5 +791,9 @@ def test_denoise_render_titles_name_the_method(tmp_path, capsys, noisy, raycast_
 
 def test_compare_render_bad_values_exit_2(tmp_path, capsys, clean):
     a = str(_write(clean, tmp_path / "a.ply"))
-    assert "must end in one of .png" in run_error(capsys, ["compare", a, a, "--render", str(tmp_path / "x.jpg")])
-    assert "--units" in run_error(capsys, ["compare", a, a, "--render", str(tmp_path / "x.png"), "--units", "inch"])
+    assert "must end in one of .png" in run_error(
+        capsys, ["compare", a, a, "--render", str(tmp_path / "x.jpg")]
+    )
+    assert "--units" in run_error(
+        capsys, ["compare", a, a, "--render", str(tmp_path / "x.png"), "--units", "inch"]
+    )

@@ -71,7 +71,7 @@ def test_fairing_gives_a_finite_result_on_any_soup(soup, method, smooth_boundary
 @given(defect_soups())
 def test_ls_mesh_on_any_soup(soup):
     V, F = soup
-    count, labels = connected_components(F, len(V))
+    count, _labels = connected_components(F, len(V))
     controls = start_vertices(V, F)
     out = o3d_lsmesh.ls_mesh((V, F), controls)[0]
     assert np.isfinite(out).all()
@@ -84,14 +84,19 @@ def test_ls_mesh_on_any_soup(soup):
 
 def _summary(V, F):
     s = o3d_lsmesh.topology_summary((V, F))
-    return {k: s[k] for k in ("euler", "components", "boundary_loops", "nonmanifold_vertices", "nonmanifold_edges")}
+    return {
+        k: s[k]
+        for k in ("euler", "components", "boundary_loops", "nonmanifold_vertices", "nonmanifold_edges")
+    }
 
 
 @SETTINGS
 @given(defect_soups())
 def test_hierarchy_and_multiresolution_fairing_on_any_soup(soup):
     V, F = soup
-    V = V[: int(F.max()) + 1]  # the hierarchy takes referenced vertices (unreferenced ones are tested elsewhere)
+    V = V[
+        : int(F.max()) + 1
+    ]  # the hierarchy takes referenced vertices (unreferenced ones are tested elsewhere)
     if len(np.unique(F)) < len(V):
         return
     try:

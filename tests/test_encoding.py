@@ -63,7 +63,7 @@ def fields(torus, **overrides):
 
 
 def test_round_trip_is_within_the_quantization_bound_at_anchors(torus):
-    V, F = torus
+    V, _F = torus
     for bits in (6, 10, 16):
         data = encode_geometry(torus, 60, bits=bits)
         idx = select_control_points(torus, 60, weights=10.0 * len(V))
@@ -88,7 +88,7 @@ def test_decoding_ignores_the_decoder_mesh_positions(torus, stream):
 
 
 def test_decoding_equals_the_ls_mesh_of_dequantized_anchors(torus):
-    V, F = torus
+    V, _F = torus
     data = encode_geometry(torus, 40, bits=31)
     idx = select_control_points(torus, 40, weights=10.0 * len(V))
     expected = ls_mesh(torus, idx, V[idx], weights=10.0 * len(V))[0]
@@ -114,7 +114,7 @@ def test_progressive_decoding_stays_accurate_at_omega_10n_on_a_real_mesh():
     data = encode_geometry(mesh, 200, method="combined")
     full = np.asarray(decode_geometry(mesh, data).vertices)
     last = None
-    for last in iter_decode_geometry(mesh, data, step=1):
+    for last in iter_decode_geometry(mesh, data, step=1):  # noqa: B007 (the last one is kept)
         pass
     # the rank-1 updates alone drift by ~1e-6 of the model here; one refinement step removes it
     assert np.abs(np.asarray(last.vertices) - full).max() < 1e-11
@@ -128,7 +128,9 @@ def test_error_decreases_as_anchors_arrive(torus, stream):
 
 def test_mesh_kinds(torus, stream):
     V, F = torus
-    legacy = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(V), o3d.utility.Vector3iVector(F.astype(np.int32)))
+    legacy = o3d.geometry.TriangleMesh(
+        o3d.utility.Vector3dVector(V), o3d.utility.Vector3iVector(F.astype(np.int32))
+    )
     tensor = o3d.t.geometry.TriangleMesh.from_legacy(legacy)
     assert encode_geometry(legacy, 60, bits=10) == stream
     out = decode_geometry(tensor, stream)
@@ -190,7 +192,9 @@ def test_wrong_version_raises(torus, stream):
 def test_wrong_mesh_raises(torus, stream):
     V, F = torus
     other = o3d.geometry.TriangleMesh.create_sphere(resolution=10)
-    with pytest.raises(ValueError, match=f"mesh must have the {len(V)} vertices the stream was encoded for, got 182"):
+    with pytest.raises(
+        ValueError, match=f"mesh must have the {len(V)} vertices the stream was encoded for, got 182"
+    ):
         decode_geometry(other, stream)
     flipped = F.copy()
     flipped[0] = [F[0, 0], F[0, 1], F[5, 2] if F[5, 2] not in F[0, :2] else F[6, 2]]
@@ -198,7 +202,9 @@ def test_wrong_mesh_raises(torus, stream):
         decode_geometry((V, flipped), stream)
     # reordering and rotating triangles keeps the connectivity: accepted
     same = np.roll(F[::-1], 1, axis=1)
-    np.testing.assert_allclose(decode_geometry((V, same), stream)[0], decode_geometry(torus, stream)[0], atol=1e-12)
+    np.testing.assert_allclose(
+        decode_geometry((V, same), stream)[0], decode_geometry(torus, stream)[0], atol=1e-12
+    )
 
 
 def test_consistent_checksum_but_invalid_fields_raise(torus):
@@ -211,13 +217,27 @@ def test_consistent_checksum_but_invalid_fields_raise(torus):
         (dict(bits=32), r"bits must lie in \[1, 31\], got 32"),
         (dict(index_bits=_index_bits(n) + 1), "index_bits must be ceil"),
         (dict(n=0, index_bits=1), "index_bits must be ceil"),
-        (dict(indices=np.zeros(0, dtype=np.int64), quantized=np.zeros((0, 3), dtype=np.int64)), "anchor count must lie"),
-        (dict(n=10, index_bits=_index_bits(10), indices=np.arange(11), quantized=np.zeros((11, 3), dtype=np.int64)), "anchor count must lie"),
+        (
+            dict(indices=np.zeros(0, dtype=np.int64), quantized=np.zeros((0, 3), dtype=np.int64)),
+            "anchor count must lie",
+        ),
+        (
+            dict(
+                n=10,
+                index_bits=_index_bits(10),
+                indices=np.arange(11),
+                quantized=np.zeros((11, 3), dtype=np.int64),
+            ),
+            "anchor count must lie",
+        ),
         (dict(omega=0.0), "omega must be positive"),
         (dict(omega=float("nan")), "omega must be positive"),
         (dict(lower=np.array([0.0, np.nan, 0.0])), "bounding box must be finite"),
         (dict(upper=V.min(axis=0) - 1.0), "bounding box must be finite with min <= max"),
-        (dict(indices=np.append(np.arange(19), (1 << _index_bits(n)) - 1)), rf"anchor indices must lie in \[0, {n}\)"),
+        (
+            dict(indices=np.append(np.arange(19), (1 << _index_bits(n)) - 1)),
+            rf"anchor indices must lie in \[0, {n}\)",
+        ),
         (dict(indices=np.array([3] * 20)), "must not repeat, got 3"),
         (dict(edges_crc=connectivity_checksum(F, n) ^ 1), "connectivity"),
     ]

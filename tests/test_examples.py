@@ -9,7 +9,6 @@ import sys
 
 import numpy as np
 import pytest
-
 from conftest import REPO
 
 EXAMPLES = sorted((REPO / "examples").glob("[0-9][0-9]_*.py"))
@@ -18,8 +17,14 @@ NUMBER = re.compile(r"\d+\.\d+")
 
 def run(path, *args, cwd=None):
     env = dict(os.environ, PYTHONPATH=str(REPO))
-    return subprocess.run([sys.executable, str(path), *args], capture_output=True, text=True,
-                          cwd=cwd or REPO, env=env, timeout=300)
+    return subprocess.run(
+        [sys.executable, str(path), *args],
+        capture_output=True,
+        text=True,
+        cwd=cwd or REPO,
+        env=env,
+        timeout=300,
+    )
 
 
 def test_there_are_seven_numbered_examples():
@@ -57,8 +62,9 @@ def test_example_claims_hold():
 def test_example_on_a_mesh_file_writes_a_picture(tmp_path):
     import open3d as o3d
 
-    mesh = o3d.geometry.TriangleMesh.create_torus(torus_radius=1.0, tube_radius=0.4, radial_resolution=40,
-                                                  tubular_resolution=20)
+    mesh = o3d.geometry.TriangleMesh.create_torus(
+        torus_radius=1.0, tube_radius=0.4, radial_resolution=40, tubular_resolution=20
+    )
     path = tmp_path / "torus.ply"
     o3d.io.write_triangle_mesh(str(path), mesh)
     done = run(REPO / "examples" / "04_reconstruct_region.py", str(path), "--out", str(tmp_path / "pictures"))

@@ -120,7 +120,9 @@ def test_barycenters_move_far_less_than_vertices():
         return np.linalg.norm(out[F].mean(axis=1) - V[F].mean(axis=1), axis=1).mean() / vertex_move
 
     ours = constrained_fairing_arrays(V, F, 1, method="local")
-    mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(V), o3d.utility.Vector3iVector(F.astype(np.int32)))
+    mesh = o3d.geometry.TriangleMesh(
+        o3d.utility.Vector3dVector(V), o3d.utility.Vector3iVector(F.astype(np.int32))
+    )
     laplacian = np.asarray(mesh.filter_smooth_laplacian(number_of_iterations=1).vertices)
     assert np.linalg.norm(ours - V, axis=1).mean() > 0.03
     assert ratio(ours) < 0.45
@@ -129,7 +131,9 @@ def test_barycenters_move_far_less_than_vertices():
 
 def test_volume_is_kept_while_open3d_laplacian_shrinks():
     V, F = noisy_sphere(resolution=20, sigma=0.01, seed=4)
-    mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(V), o3d.utility.Vector3iVector(F.astype(np.int32)))
+    mesh = o3d.geometry.TriangleMesh(
+        o3d.utility.Vector3dVector(V), o3d.utility.Vector3iVector(F.astype(np.int32))
+    )
     before = signed_volume(mesh)
     ours = signed_volume(constrained_fairing(mesh, 20, method="local"))
     laplacian = signed_volume(mesh.filter_smooth_laplacian(number_of_iterations=20))
@@ -180,8 +184,10 @@ def test_global_iteration_equals_direct_penalty_solve():
 
 def test_global_mu_trades_smoothing_for_fidelity():
     V, F = noisy_sphere(resolution=10, seed=9)
-    moves = [np.linalg.norm(constrained_fairing_arrays(V, F, 1, method="global", mu=mu) - V, axis=1).mean()
-             for mu in (0.01, 0.1, 1.0, 100.0)]
+    moves = [
+        np.linalg.norm(constrained_fairing_arrays(V, F, 1, method="global", mu=mu) - V, axis=1).mean()
+        for mu in (0.01, 0.1, 1.0, 100.0)
+    ]
     assert moves[0] > moves[1] > moves[2] > moves[3]
     assert moves[3] < 0.05 * moves[0]
 
@@ -203,8 +209,11 @@ def test_denoising_a_real_scan_lowers_distance_to_clean_mesh():
     noisy = (V + np.random.default_rng(11).normal(0, 0.3 * edge, V.shape), F)
     before = surface_distance(noisy, clean, number_of_points=20_000)["mean"]
     for method in ("local", "global"):
-        after = surface_distance(constrained_fairing(noisy, 10 if method == "local" else 1, method=method), clean,
-                                 number_of_points=20_000)["mean"]
+        after = surface_distance(
+            constrained_fairing(noisy, 10 if method == "local" else 1, method=method),
+            clean,
+            number_of_points=20_000,
+        )["mean"]
         assert after < 0.75 * before, method
 
 
@@ -216,7 +225,7 @@ def test_components_are_faired_independently():
     F = np.vstack([F1, F2 + len(V1)])
     out = constrained_fairing_arrays(V, F, 3, method="local")
     assert_allclose(out[: len(V1)], constrained_fairing_arrays(V1, F1, 3, method="local"), atol=TIGHT)
-    assert_allclose(out[len(V1):], constrained_fairing_arrays(V2, F2, 3, method="local"), atol=TIGHT)
+    assert_allclose(out[len(V1) :], constrained_fairing_arrays(V2, F2, 3, method="local"), atol=TIGHT)
 
 
 @pytest.mark.parametrize("method", ["local", "global"])
@@ -229,12 +238,16 @@ def test_awkward_inputs_give_finite_results(method):
     sliver = np.array([[0, 0, 4.0], [1, 0, 4], [2, 0, 4]])  # collinear
     V = np.vstack([V, pillow, lone, sliver])
     b = 26
-    F = np.vstack([F, [[b, b + 1, b + 2], [b, b + 2, b + 1]], [[b + 3, b + 4, b + 5]], [[b + 6, b + 7, b + 8]]])
+    F = np.vstack(
+        [F, [[b, b + 1, b + 2], [b, b + 2, b + 1]], [[b + 3, b + 4, b + 5]], [[b + 6, b + 7, b + 8]]]
+    )
     out = constrained_fairing_arrays(V, F, 4, method=method)
     assert np.isfinite(out).all()
     assert_allclose(out[25], V[25], atol=0)  # the isolated vertex stays
-    assert_allclose(out[b + 3:], V[b + 3:], atol=0)  # triangle loops are held fixed
-    assert_allclose(out[b:b + 3].sum(axis=0), V[b:b + 3].sum(axis=0), atol=1e-12)  # pillow keeps its barycenter
+    assert_allclose(out[b + 3 :], V[b + 3 :], atol=0)  # triangle loops are held fixed
+    assert_allclose(
+        out[b : b + 3].sum(axis=0), V[b : b + 3].sum(axis=0), atol=1e-12
+    )  # pillow keeps its barycenter
 
 
 def test_vertex_joining_two_closed_fans_is_accepted():
@@ -268,7 +281,9 @@ def test_zero_iterations_returns_an_unchanged_copy_of_each_kind(sphere):
 def test_input_is_not_modified_and_colors_are_kept(sphere):
     noisy = o3d.geometry.TriangleMesh(sphere)
     noisy.vertices = o3d.utility.Vector3dVector(noisy_sphere(12)[0])
-    noisy.vertex_colors = o3d.utility.Vector3dVector(np.random.default_rng(0).random((len(noisy.vertices), 3)))
+    noisy.vertex_colors = o3d.utility.Vector3dVector(
+        np.random.default_rng(0).random((len(noisy.vertices), 3))
+    )
     before = np.asarray(noisy.vertices).copy()
     out = constrained_fairing(noisy, 3, progress=True)
     assert np.array_equal(np.asarray(noisy.vertices), before)
@@ -297,7 +312,11 @@ def test_raises():
         (ValueError, r"mu must be None for method='local'", dict(method="local", mu=1.0)),
         (ValueError, "reimpose_every must be >= 1, got 0", dict(reimpose_every=0)),
         (TypeError, "reimpose_every must be an integer, got 2.0", dict(reimpose_every=2.0)),
-        (ValueError, r"reimpose_every must be None for method='global'", dict(method="global", reimpose_every=2)),
+        (
+            ValueError,
+            r"reimpose_every must be None for method='global'",
+            dict(method="global", reimpose_every=2),
+        ),
         (TypeError, "smooth_boundary must be a bool, got int", dict(method="local", smooth_boundary=1)),
         (TypeError, "progress must be a bool, got str", dict(progress="yes")),
     ]
@@ -319,5 +338,6 @@ def test_raises():
     bow = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [-1, 0, 0], [0, -1, 0.0]])
     bow_triangles = np.array([[0, 1, 2], [0, 3, 4]])
     assert_allclose(constrained_fairing_arrays(bow, bow_triangles, 1, method="local"), bow, atol=0)
-    assert_allclose(constrained_fairing_arrays(bow, bow_triangles, 1, smooth_boundary=False, method="local"), bow,
-                    atol=0)
+    assert_allclose(
+        constrained_fairing_arrays(bow, bow_triangles, 1, smooth_boundary=False, method="local"), bow, atol=0
+    )

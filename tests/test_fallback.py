@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
+from conftest import REPO, grid
 
 import o3d_lsmesh._solvers as solvers
-from conftest import REPO, grid
 from o3d_lsmesh import O3DLSMeshWarning, ls_mesh
 
 
@@ -20,7 +20,8 @@ def test_fallback_warning_points_at_the_users_call(monkeypatch):
     V, F = grid(6, 6)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        ls_mesh((V, F), [0, 7]); line = sys._getframe().f_lineno  # noqa: E702 - the call's own line
+        ls_mesh((V, F), [0, 7])
+        line = sys._getframe().f_lineno
     ours = [w for w in caught if issubclass(w.category, O3DLSMeshWarning)]
     assert len(ours) == 1
     assert ours[0].filename == __file__ and ours[0].lineno == line
@@ -39,7 +40,9 @@ def test_the_environment_variable_chooses_scipy_without_warning(monkeypatch):
         solvers.SPDSolver((A @ A.T).tocsc(), backend="cholmod")
 
 
-@pytest.mark.parametrize("value, disabled", [("1", True), ("yes", True), ("0", False), ("", False), ("false", False)])
+@pytest.mark.parametrize(
+    "value, disabled", [("1", True), ("yes", True), ("0", False), ("", False), ("false", False)]
+)
 def test_environment_values(monkeypatch, value, disabled):
     monkeypatch.setenv(solvers.NO_CHOLMOD_ENV, value)
     assert solvers._cholmod_disabled() is disabled
@@ -68,4 +71,3 @@ def test_spd_superlu_equals_partial_pivoting_and_does_not_pivot():
     np.testing.assert_array_equal(fast.perm_r, fast.perm_c)
     # and the fill is that of a symmetric factorization: U has the pattern of L^T
     assert abs(fast.U.nnz - fast.L.nnz) <= N.shape[0]
-

@@ -76,7 +76,9 @@ def signed_volume(V, T):
 
 
 def legacy(V, T):
-    return o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(V), o3d.utility.Vector3iVector(T.astype(np.int32)))
+    return o3d.geometry.TriangleMesh(
+        o3d.utility.Vector3dVector(V), o3d.utility.Vector3iVector(T.astype(np.int32))
+    )
 
 
 def new_intersections(V, T, first_new):
@@ -143,7 +145,8 @@ def test_loops_match_the_reference_and_topology_on_manifold_boundaries():
     mesh = load_mesh("bunny.ply")
     tris = np.asarray(mesh.triangles).astype(np.int64)
     assert [loop.tolist() for loop in _hole_loops(tris, len(mesh.vertices))] == reference_loops(
-        tris, len(mesh.vertices))
+        tris, len(mesh.vertices)
+    )
 
 
 def test_pinched_boundary_pairs_within_a_fan():
@@ -192,8 +195,11 @@ def reference_triangulation(points, outer):
             cosines = [n @ n1, n @ n2] + ([n @ outer[k - 1]] if (i, j) == (0, k - 1) else [])
             angle = max(np.arccos(np.clip(min(cosines), -1, 1)), a1, a2)
             candidate = (angle, area + s1 + s2, n, t1 + t2 + [(j, m, i)])
-            if best is None or candidate[0] < best[0] - 1e-9 or (
-                    abs(candidate[0] - best[0]) <= 1e-9 and candidate[1] < best[1]):
+            if (
+                best is None
+                or candidate[0] < best[0] - 1e-9
+                or (abs(candidate[0] - best[0]) <= 1e-9 and candidate[1] < best[1])
+            ):
                 best = candidate
         memo[i, j] = best
         return best
@@ -238,7 +244,7 @@ def test_sphere_hole_close_to_the_sphere_and_continuity_order():
     errors = []
     for continuity in (0, 1, 2):
         out = fill_holes_arrays(Vh, Th, continuity=continuity)
-        new = out.vertices[len(Vh):]
+        new = out.vertices[len(Vh) :]
         assert len(new) > 50
         errors.append(np.abs(np.linalg.norm(new, axis=1) - 1.0).mean() / h)
         check_valid(out.vertices, out.triangles, len(Th))
@@ -262,8 +268,8 @@ def test_real_mesh_hole_within_bound_of_truth(name, bound):
                 break
         for continuity in (0, 1, 2):
             out = fill_holes_arrays(Vh, Th, continuity=continuity)
-            new_tris = out.triangles[len(Th):]
-            points = np.concatenate([out.vertices[len(Vh):], out.vertices[new_tris].mean(axis=1)])
+            new_tris = out.triangles[len(Th) :]
+            points = np.concatenate([out.vertices[len(Vh) :], out.vertices[new_tris].mean(axis=1)])
             errors[radius, continuity] = float(distance_to(V, T, points).mean() / h)
             if continuity == 2:
                 check_valid(out.vertices, out.triangles, len(Th))
@@ -283,15 +289,28 @@ def test_planar_hole_fills_planar():
     out = fill_holes_arrays(V, holed)
     assert len(out.holes) == 1 and len(out.skipped) == 1  # the square's rim is the outer border
     assert len(out.vertices) > len(V)
-    np.testing.assert_allclose(out.vertices[len(V):, 2], 0.0, atol=1e-12)
+    np.testing.assert_allclose(out.vertices[len(V) :, 2], 0.0, atol=1e-12)
     # the fill covers exactly the removed area
-    a, b, c = (out.vertices[out.triangles[len(holed):, i]] for i in range(3))
+    a, b, c = (out.vertices[out.triangles[len(holed) :, i]] for i in range(3))
     area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1).sum()
-    a, b, c = (V[T[~np.isin(np.arange(len(T)), np.flatnonzero(np.linalg.norm(V[T].mean(1)[:, :2] - 0.5, axis=1) > 0.25)), i]] for i in range(3))
+    a, b, c = (
+        V[
+            T[
+                ~np.isin(
+                    np.arange(len(T)),
+                    np.flatnonzero(np.linalg.norm(V[T].mean(1)[:, :2] - 0.5, axis=1) > 0.25),
+                ),
+                i,
+            ]
+        ]
+        for i in range(3)
+    )
     assert area == pytest.approx(0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1).sum(), rel=1e-9)
     # every new triangle faces +z like the grid's
-    normals = np.cross(out.vertices[out.triangles[len(holed):, 1]] - out.vertices[out.triangles[len(holed):, 0]],
-                       out.vertices[out.triangles[len(holed):, 2]] - out.vertices[out.triangles[len(holed):, 0]])
+    normals = np.cross(
+        out.vertices[out.triangles[len(holed) :, 1]] - out.vertices[out.triangles[len(holed) :, 0]],
+        out.vertices[out.triangles[len(holed) :, 2]] - out.vertices[out.triangles[len(holed) :, 0]],
+    )
     assert (normals[:, 2] > 0).all()
 
 
@@ -326,8 +345,10 @@ def test_three_edge_hole_is_one_triangle():
     out = fill_holes_arrays(V, T[1:])
     assert len(out.vertices) == len(V)
     np.testing.assert_array_equal(out.triangles[:-1], T[1:])
-    assert np.roll(out.triangles[-1], -int(np.argmin(out.triangles[-1]))).tolist() == np.roll(
-        T[0], -int(np.argmin(T[0]))).tolist()
+    assert (
+        np.roll(out.triangles[-1], -int(np.argmin(out.triangles[-1]))).tolist()
+        == np.roll(T[0], -int(np.argmin(T[0]))).tolist()
+    )
 
 
 def test_two_holes_sharing_a_vertex():
@@ -371,7 +392,7 @@ def test_large_hole_uses_the_chord_split_and_finishes(tmp_path):
     assert len(out.holes) == 1 and out.holes[0].edges == k
     assert boundary_edge_count(out.triangles, len(out.vertices)) == k  # only the outer rim is left
     check_valid(out.vertices, out.triangles, len(T))
-    np.testing.assert_allclose(out.vertices[len(V):, 2], 0.0, atol=1e-9)
+    np.testing.assert_allclose(out.vertices[len(V) :, 2], 0.0, atol=1e-9)
     assert seconds < 60  # measured 3-20 s on this 2-core machine shared by 7 jobs
 
 
@@ -404,7 +425,8 @@ def test_outer_border_of_a_scan_stays_open():
     n_bad_in = len(np.asarray(mesh.get_non_manifold_vertices()))
     assert len(np.asarray(out.get_non_manifold_vertices())) <= n_bad_in
     assert len(np.asarray(out.get_non_manifold_edges(allow_boundary_edges=True))) == len(
-        np.asarray(mesh.get_non_manifold_edges(allow_boundary_edges=True)))
+        np.asarray(mesh.get_non_manifold_edges(allow_boundary_edges=True))
+    )
 
 
 def test_fill_border_fills_it():
@@ -427,7 +449,9 @@ def test_size_limits_choose_holes():
     assert len(out.holes) == 1 and out.holes[0].diameter == small.diameter
     # diameter: the largest distance between two loop vertices (plain loops as reference)
     points = Vh[small.vertices]
-    assert small.diameter == pytest.approx(max(np.linalg.norm(p - q) for p, q in itertools.combinations(points, 2)))
+    assert small.diameter == pytest.approx(
+        max(np.linalg.norm(p - q) for p, q in itertools.combinations(points, 2))
+    )
 
 
 def test_density_zero_adds_no_vertex_and_nonmanifold_elsewhere_is_kept():
@@ -441,7 +465,7 @@ def test_density_zero_adds_no_vertex_and_nonmanifold_elsewhere_is_kept():
     Tf = np.concatenate([Th, [[a, b, len(Vh)]]])
     out = fill_holes_arrays(Vf, Tf, density=0)
     assert len(out.vertices) == len(Vf)
-    np.testing.assert_array_equal(out.triangles[:len(Tf)], Tf)
+    np.testing.assert_array_equal(out.triangles[: len(Tf)], Tf)
     assert len(np.asarray(legacy(out.vertices, out.triangles).get_non_manifold_edges())) == 1
 
 
@@ -459,8 +483,9 @@ def test_input_untouched_colours_interpolated_and_tensor_kind():
     np.testing.assert_array_equal(np.asarray(mesh.vertices), before[0])
     np.testing.assert_array_equal(np.asarray(mesh.triangles), before[1])
     assert len(out.vertices) > len(mesh.vertices)
-    np.testing.assert_allclose(np.asarray(out.vertex_colors), np.tile([0.2, 0.5, 0.9], (len(out.vertices), 1)),
-                               atol=1e-9)
+    np.testing.assert_allclose(
+        np.asarray(out.vertex_colors), np.tile([0.2, 0.5, 0.9], (len(out.vertices), 1)), atol=1e-9
+    )
     tensor = o3d.t.geometry.TriangleMesh.from_legacy(mesh)
     out_t = fill_holes(tensor)
     assert isinstance(out_t, o3d.t.geometry.TriangleMesh)
@@ -523,18 +548,21 @@ def test_cli_fill(tmp_path, capsys):
 # --------------------------------------------------------------------------- every raise
 
 
-@pytest.mark.parametrize("kwargs, error, match", [
-    ({"max_hole_edges": 2}, ValueError, "max_hole_edges must be >= 3"),
-    ({"max_hole_edges": 5.0}, TypeError, "max_hole_edges must be an integer"),
-    ({"max_hole_diameter": 0.0}, ValueError, "max_hole_diameter must be positive"),
-    ({"max_hole_diameter": "big"}, TypeError, "max_hole_diameter must be a number"),
-    ({"continuity": 3}, ValueError, "continuity must be <= 2"),
-    ({"continuity": -1}, ValueError, "continuity must be >= 0"),
-    ({"continuity": 1.0}, TypeError, "continuity must be an integer"),
-    ({"density": -0.5}, ValueError, "density must be non-negative"),
-    ({"density": float("nan")}, ValueError, "density must be non-negative"),
-    ({"fill_border": 1}, TypeError, "fill_border must be a bool"),
-])
+@pytest.mark.parametrize(
+    "kwargs, error, match",
+    [
+        ({"max_hole_edges": 2}, ValueError, "max_hole_edges must be >= 3"),
+        ({"max_hole_edges": 5.0}, TypeError, "max_hole_edges must be an integer"),
+        ({"max_hole_diameter": 0.0}, ValueError, "max_hole_diameter must be positive"),
+        ({"max_hole_diameter": "big"}, TypeError, "max_hole_diameter must be a number"),
+        ({"continuity": 3}, ValueError, "continuity must be <= 2"),
+        ({"continuity": -1}, ValueError, "continuity must be >= 0"),
+        ({"continuity": 1.0}, TypeError, "continuity must be an integer"),
+        ({"density": -0.5}, ValueError, "density must be non-negative"),
+        ({"density": float("nan")}, ValueError, "density must be non-negative"),
+        ({"fill_border": 1}, TypeError, "fill_border must be a bool"),
+    ],
+)
 def test_bad_options_raise(kwargs, error, match):
     V, T = icosphere(1)
     with pytest.raises(error, match=match):
@@ -545,16 +573,21 @@ def test_bad_meshes_raise():
     with pytest.raises(TypeError, match="mesh must be"):
         fill_holes("mesh.ply")
     with pytest.raises(ValueError, match="must have triangles"):
-        fill_holes(o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(np.eye(3)), o3d.utility.Vector3iVector()))
+        fill_holes(
+            o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(np.eye(3)), o3d.utility.Vector3iVector())
+        )
 
 
 def test_a_flap_triangle_hanging_by_a_vertex_is_not_a_hole():
     # a closed octahedron with one extra triangle attached at vertex 0 only: that triangle's three
     # boundary edges form a 3-loop, but filling it would add the same triangle reversed
-    V = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1],
-                  [2, 0.5, 0], [2, -0.5, 0.2]], dtype=float)
-    T = np.array([[0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4], [2, 0, 5], [1, 2, 5], [3, 1, 5], [0, 3, 5],
-                  [0, 6, 7]])
+    V = np.array(
+        [[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1], [2, 0.5, 0], [2, -0.5, 0.2]],
+        dtype=float,
+    )
+    T = np.array(
+        [[0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4], [2, 0, 5], [1, 2, 5], [3, 1, 5], [0, 3, 5], [0, 6, 7]]
+    )
     out = fill_holes_arrays(V, T)
     np.testing.assert_array_equal(out.triangles, T)  # nothing added
     assert len(out.holes) == 0 and any(hole.edges == 3 for hole in out.skipped)

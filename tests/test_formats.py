@@ -11,11 +11,11 @@ import pytest
 
 o3d = pytest.importorskip("open3d")
 
-from conftest import REPO
+from conftest import REPO  # noqa: E402
 
-import o3d_lsmesh
-from o3d_lsmesh import O3DLSMeshWarning
-from o3d_lsmesh._o3d import new_mesh, read_mesh, weld_map
+import o3d_lsmesh  # noqa: E402
+from o3d_lsmesh import O3DLSMeshWarning  # noqa: E402
+from o3d_lsmesh._o3d import new_mesh, read_mesh, weld_map  # noqa: E402
 
 
 def _noisy_uv_sphere(tmp_path):
@@ -75,9 +75,11 @@ def test_obj_seams_stay_closed_api(tmp_path):
     # welded, the sphere is closed: the seam is no boundary curve, so boundary smoothing moves nothing
     still = o3d_lsmesh.smooth_boundary_curves(mesh, 3)
     np.testing.assert_array_equal(np.asarray(still.vertices), np.asarray(mesh.vertices))
-    for out in (o3d_lsmesh.constrained_fairing(mesh, 10),
-                o3d_lsmesh.constrained_fairing(mesh, 5, method="global"),
-                o3d_lsmesh.multiresolution_fairing(mesh, 2)):
+    for out in (
+        o3d_lsmesh.constrained_fairing(mesh, 10),
+        o3d_lsmesh.constrained_fairing(mesh, 5, method="global"),
+        o3d_lsmesh.multiresolution_fairing(mesh, 2),
+    ):
         assert len(out.vertices) == len(mesh.vertices)
         np.testing.assert_array_equal(np.asarray(out.triangles), np.asarray(mesh.triangles))
         _assert_seams_closed(mesh, out)
@@ -103,9 +105,24 @@ def test_fairing_welded_equals_fairing_of_welded_mesh(tmp_path):
 def test_obj_seams_stay_closed_cli(tmp_path):
     mesh, path = _noisy_uv_sphere(tmp_path)
     out_path = tmp_path / "out.obj"
-    run = subprocess.run([sys.executable, "-m", "o3d_lsmesh.cli", "denoise", str(path), str(out_path),
-                          "--iterations", "10", "--quiet"], capture_output=True, text=True, check=False,
-                         env=dict(os.environ, PYTHONPATH=str(REPO)), timeout=300)
+    run = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "o3d_lsmesh.cli",
+            "denoise",
+            str(path),
+            str(out_path),
+            "--iterations",
+            "10",
+            "--quiet",
+        ],
+        capture_output=True,
+        text=True,
+        check=False,
+        env=dict(os.environ, PYTHONPATH=str(REPO)),
+        timeout=300,
+    )
     assert run.returncode == 0, run.stderr
     out = o3d.io.read_triangle_mesh(str(out_path))
     assert len(out.vertices) == len(mesh.vertices)
@@ -130,7 +147,8 @@ def test_legacy_uvs_and_material_ids_survive_fairing():
 
 def test_tensor_material_and_triangle_attributes_survive_fairing():
     mesh = o3d.t.geometry.TriangleMesh.from_legacy(
-        o3d.geometry.TriangleMesh.create_sphere(resolution=10, create_uv_map=True))
+        o3d.geometry.TriangleMesh.create_sphere(resolution=10, create_uv_map=True)
+    )
     mesh.material.set_default_properties()
     mesh.material.material_name = "defaultLit"
     mesh.material.scalar_properties["roughness"] = 0.25
@@ -158,7 +176,10 @@ def test_new_connectivity_drops_uvs_with_one_warning():
 def test_obj_seams_stay_closed_through_encoding(tmp_path):
     mesh, _ = _noisy_uv_sphere(tmp_path)
     stream = o3d_lsmesh.encode_geometry(mesh, 60, bits=12)
-    for out in (o3d_lsmesh.decode_geometry(mesh, stream), list(o3d_lsmesh.iter_decode_geometry(mesh, stream, step=30))[-1]):
+    for out in (
+        o3d_lsmesh.decode_geometry(mesh, stream),
+        list(o3d_lsmesh.iter_decode_geometry(mesh, stream, step=30))[-1],
+    ):
         assert len(out.vertices) == len(mesh.vertices)
         np.testing.assert_array_equal(np.asarray(out.triangles), np.asarray(mesh.triangles))
         _assert_seams_closed(mesh, out)
@@ -179,15 +200,18 @@ def test_warn_dropped_attributes_names_what_is_lost():
 
     plain = read_mesh(o3d.geometry.TriangleMesh.create_sphere(resolution=5))
     assert warn_dropped_attributes(plain, "levels") is False  # nothing to drop: no warning
-    tensor = o3d.t.geometry.TriangleMesh.from_legacy(o3d.geometry.TriangleMesh.create_sphere(resolution=5,
-                                                                                             create_uv_map=True))
+    tensor = o3d.t.geometry.TriangleMesh.from_legacy(
+        o3d.geometry.TriangleMesh.create_sphere(resolution=5, create_uv_map=True)
+    )
     with pytest.warns(O3DLSMeshWarning, match=r"^levels: triangle attribute 'texture_uvs' of the input"):
         assert warn_dropped_attributes(read_mesh(tensor), "levels") is True
 
 
 def test_hierarchy_levels_warn_once_that_uvs_are_dropped():
     mesh = o3d.geometry.TriangleMesh.create_sphere(resolution=10, create_uv_map=True)
-    with pytest.warns(O3DLSMeshWarning, match="hierarchy levels have new connectivity: triangle UVs") as record:
+    with pytest.warns(
+        O3DLSMeshWarning, match="hierarchy levels have new connectivity: triangle UVs"
+    ) as record:
         hierarchy = o3d_lsmesh.build_hierarchy(mesh, max_levels=3)
     assert len(record) == 1
     level = hierarchy.level(len(hierarchy.triangles) - 1)

@@ -79,7 +79,7 @@ def test_removed_sets_are_independent_collapses(name, request):
         assert np.all(cost[hits.col[other]] <= cost[hits.row[other]] + 1e-12)
         # the recorded 1-ring is the adjacency row at level i - 1
         for j in range(0, len(removed), 7):
-            ring = rec["ring"][rec["ring_offsets"][j]:rec["ring_offsets"][j + 1]]
+            ring = rec["ring"][rec["ring_offsets"][j] : rec["ring_offsets"][j + 1]]
             row = A[removed[j]].indices
             assert sorted(ring.tolist()) == sorted(row.tolist())
             assert targets[j] in ring
@@ -98,7 +98,9 @@ def test_vertex_maps_are_in_range_and_consistent_with_levels(name, request):
         assert np.array_equal(vmap[h.representatives[i]], np.arange(n_i))
         # the level's triangles are exactly the input triangles mapped down, minus collapsed ones
         mapped = vmap[F]
-        keep = (mapped[:, 0] != mapped[:, 1]) & (mapped[:, 1] != mapped[:, 2]) & (mapped[:, 0] != mapped[:, 2])
+        keep = (
+            (mapped[:, 0] != mapped[:, 1]) & (mapped[:, 1] != mapped[:, 2]) & (mapped[:, 0] != mapped[:, 2])
+        )
         assert _triangle_set(mapped[keep]) == _triangle_set(Fi)
         assert len(_triangle_set(Fi)) == len(Fi)
 
@@ -233,7 +235,7 @@ def test_splitting_a_flat_region_stays_on_the_plane(builder, rng):
 
 
 def test_refine_of_exact_level_positions_is_close_on_a_smooth_surface(sphere_h):
-    (V, F), h = sphere_h
+    (_V, _F), h = sphere_h
     Vi, _ = h.level_arrays(1)
     fine = h.refine(1, Vi)
     err = np.abs(np.linalg.norm(fine, axis=1) - 1).max()
@@ -245,8 +247,15 @@ def test_refine_of_exact_level_positions_is_close_on_a_smooth_surface(sphere_h):
 
 @pytest.mark.parametrize(
     "name, loops",
-    [("bunny.ply", 5), ("horse.ply", 0), ("camel.ply", 0), ("eight.ply", 0), ("venus.ply", 1), ("pig.ply", 7),
-     ("maxplanck.ply", 1)],
+    [
+        ("bunny.ply", 5),
+        ("horse.ply", 0),
+        ("camel.ply", 0),
+        ("eight.ply", 0),
+        ("venus.ply", 1),
+        ("pig.ply", 7),
+        ("maxplanck.ply", 1),
+    ],
 )
 def test_every_level_is_manifold_with_input_topology(name, loops):
     mesh = load_mesh(name)
@@ -396,7 +405,9 @@ def test_from_fast_simplification_structure():
         vmap = h.vertex_map(i)
         assert vmap.min() == 0 and vmap.max() == h.vertex_count(i) - 1
         mapped = vmap[F]
-        keep = (mapped[:, 0] != mapped[:, 1]) & (mapped[:, 1] != mapped[:, 2]) & (mapped[:, 0] != mapped[:, 2])
+        keep = (
+            (mapped[:, 0] != mapped[:, 1]) & (mapped[:, 1] != mapped[:, 2]) & (mapped[:, 0] != mapped[:, 2])
+        )
         assert _triangle_set(mapped[keep]) == _triangle_set(h.triangles[i])
         fine = h.refine(i, h.level_arrays(i)[0])
         kept = np.setdiff1d(np.arange(h.vertex_count(i - 1)), h.collapses(i)["removed"])
@@ -484,7 +495,6 @@ def test_bad_level_queries_raise(sphere_h):
         h.refine(1, np.full((h.vertex_count(1), 3), np.nan))
 
 
-
 def test_array_core_leaves_the_callers_arrays_writeable():
     # the hierarchy holds read-only views; fast-simplification (nanobind) rejects read-only input
     V, F = _noisy_sphere(8)
@@ -549,7 +559,9 @@ def test_every_level_equals_the_plain_python_oracle(kind, seed):
 def test_every_level_of_small_real_meshes_equals_the_oracle(name):
     mesh = load_mesh(name)
     V, F = np.asarray(mesh.vertices), np.asarray(mesh.triangles).astype(np.int64)
-    _assert_levels_equal(build_hierarchy_arrays(V, F, min_vertices=20), oracle.hierarchy(V, F, min_vertices=20))
+    _assert_levels_equal(
+        build_hierarchy_arrays(V, F, min_vertices=20), oracle.hierarchy(V, F, min_vertices=20)
+    )
 
 
 def test_first_levels_of_the_bunny_equal_the_oracle():
@@ -558,17 +570,25 @@ def test_first_levels_of_the_bunny_equal_the_oracle():
     _assert_levels_equal(build_hierarchy_arrays(V, F, max_levels=2), oracle.hierarchy(V, F, max_levels=2))
 
 
-@pytest.mark.parametrize("options", [
-    {"alpha": 0.0, "beta": 1.0}, {"max_normal_angle": 20.0}, {"min_quality": 0.2}, {"max_tries": 1},
-    {"max_removals": 7},
-])
+@pytest.mark.parametrize(
+    "options",
+    [
+        {"alpha": 0.0, "beta": 1.0},
+        {"max_normal_angle": 20.0},
+        {"min_quality": 0.2},
+        {"max_tries": 1},
+        {"max_removals": 7},
+    ],
+)
 def test_options_reach_the_kernel_like_the_oracle(options):
     V, F = _generated("torus", 1)
     locked = np.zeros(len(V), dtype=bool)
     level = collapse_level(V, F, **options)
     expected = oracle.collapse_level(V, F, locked, **options)
-    for got, want in zip((level.removed, level.targets, level.ring_offsets, level.ring, level.parent,
-                          level.triangles), expected):
+    for got, want in zip(
+        (level.removed, level.targets, level.ring_offsets, level.ring, level.parent, level.triangles),
+        expected,
+    ):
         assert np.array_equal(got, want)
 
 
@@ -681,7 +701,9 @@ def _bowtie_and_fin():
     F = np.vstack([F1, F2])
     n = len(V)
     inner = F1[40]  # a fin on an interior edge of the first grid
-    V = np.vstack([V, [[0.5, 0.5, 0.7]], [[3.0, 3.0, 0.0], [3.1, 3.0, 0.0], [3.0, 3.1, 0.0]], [[9.0, 9.0, 9.0]]])
+    V = np.vstack(
+        [V, [[0.5, 0.5, 0.7]], [[3.0, 3.0, 0.0], [3.1, 3.0, 0.0], [3.0, 3.1, 0.0]], [[9.0, 9.0, 9.0]]]
+    )
     F = np.vstack([F, [[inner[0], inner[1], n]], [[n + 1, n + 2, n + 3]]])
     return V, F.astype(np.int64)
 

@@ -88,7 +88,9 @@ def test_fast_simplification_levels_are_the_image_of_the_level_above_by_its_rule
         assert np.array_equal(h.triangles[i], expected), i
         vmap = h.vertex_map(i)
         image = vmap[F]
-        image = image[(image[:, 0] != image[:, 1]) & (image[:, 1] != image[:, 2]) & (image[:, 2] != image[:, 0])]
+        image = image[
+            (image[:, 0] != image[:, 1]) & (image[:, 1] != image[:, 2]) & (image[:, 2] != image[:, 0])
+        ]
         got = {tuple(sorted(t)) for t in h.triangles[i].tolist()}
         wanted = {tuple(sorted(t)) for t in image.tolist()}
         assert got <= wanted

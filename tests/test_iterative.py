@@ -9,8 +9,8 @@ import pickle
 import numpy as np
 import pytest
 import scipy.sparse as sp
-
 from conftest import grid, load_mesh
+
 from o3d_lsmesh import SPDSolver, constrained_fairing, ls_mesh, reconstruct_geometry
 from o3d_lsmesh._errors import ConvergenceError
 from o3d_lsmesh._solvers import DEFAULT_TOLERANCE, default_memory_budget, estimate_factor_bytes
@@ -40,7 +40,9 @@ def test_iterative_equals_direct_on_ls_mesh_soft_and_interpolatory():
     n = len(mesh.vertices)
     controls = np.random.default_rng(0).choice(n, n // 50, replace=False)
     for interpolate in (False, True):
-        direct = vertices(ls_mesh(mesh, controls, interpolate=interpolate, solver="cholmod" if _cholmod() else "auto"))
+        direct = vertices(
+            ls_mesh(mesh, controls, interpolate=interpolate, solver="cholmod" if _cholmod() else "auto")
+        )
         iterative = vertices(ls_mesh(mesh, controls, interpolate=interpolate, solver="iterative"))
         assert relative(iterative, direct) < MATCH
 
@@ -131,7 +133,9 @@ def test_progress_bar_shows_the_residual(monkeypatch):
 
     stream = io.StringIO()
     original = tqdm.auto.tqdm
-    monkeypatch.setattr(tqdm.auto, "tqdm", lambda *a, **k: original(*a, **{**k, "file": stream, "mininterval": 0}))
+    monkeypatch.setattr(
+        tqdm.auto, "tqdm", lambda *a, **k: original(*a, **{**k, "file": stream, "mininterval": 0})
+    )
     V, F = grid(30, 30)
     ls_mesh((V, F), np.arange(0, 900, 31), solver="iterative", progress=True)
     assert "conjugate gradients" in stream.getvalue() and "residual=" in stream.getvalue()

@@ -2,8 +2,8 @@ import numpy as np
 import open3d as o3d
 import pytest
 import scipy.sparse as sp
-from hypothesis import given, settings
 from conftest import grid, triangle_soups
+from hypothesis import given, settings
 
 from o3d_lsmesh import laplacian
 from o3d_lsmesh.laplacian import cotangent_laplacian, uniform_laplacian

@@ -73,7 +73,10 @@ def test_interpolate_hits_constraints_and_soft_converges(sphere):
     target = V[idx] + 0.3
     hard = np.asarray(ls_mesh(sphere, idx, target, interpolate=True).vertices)
     assert np.array_equal(hard[idx], target)
-    gaps = [np.abs(np.asarray(ls_mesh(sphere, idx, target, weights=w).vertices) - hard).max() for w in (1, 10, 100, 1000)]
+    gaps = [
+        np.abs(np.asarray(ls_mesh(sphere, idx, target, weights=w).vertices) - hard).max()
+        for w in (1, 10, 100, 1000)
+    ]
     assert all(b < a for a, b in zip(gaps, gaps[1:]))
     assert gaps[-1] < 1e-4
 
@@ -135,7 +138,9 @@ def test_solve_with_moved_constraints_equals_fresh_ls_mesh(sphere):
     idx = [0, 5, 40, 90]
     solver = LSMeshSolver(sphere, idx, weights=4.0)
     moved = V[idx] + np.array([0.0, 0.0, 0.5])
-    np.testing.assert_allclose(solver.solve(moved), np.asarray(ls_mesh(sphere, idx, moved, weights=4.0).vertices), atol=1e-12)
+    np.testing.assert_allclose(
+        solver.solve(moved), np.asarray(ls_mesh(sphere, idx, moved, weights=4.0).vertices), atol=1e-12
+    )
     assert np.asarray(solver.mesh(moved).triangles).shape == np.asarray(sphere.triangles).shape
 
 
@@ -161,7 +166,7 @@ def test_several_components_need_constraints():
 
 def test_reconstruct_equals_interpolatory_ls_mesh():
     mesh = load_mesh("camel.ply")
-    V, F = arrays(mesh)
+    V, _F = arrays(mesh)
     # the hump region: vertices within a ball around the highest vertex
     top = np.argmax(V[:, 1])
     unknown = np.flatnonzero(np.linalg.norm(V - V[top], axis=1) < 0.15 * np.ptp(V, axis=0).max())
@@ -179,7 +184,9 @@ def test_reconstruct_equals_interpolatory_ls_mesh():
 
 def test_kinds_attributes_and_input_untouched(sphere):
     sphere.compute_vertex_normals()
-    sphere.vertex_colors = o3d.utility.Vector3dVector(np.random.default_rng(0).random((len(sphere.vertices), 3)))
+    sphere.vertex_colors = o3d.utility.Vector3dVector(
+        np.random.default_rng(0).random((len(sphere.vertices), 3))
+    )
     before = np.asarray(sphere.vertices).copy()
     out = ls_mesh(sphere, [0, 5, 40], weights=1.0)
     assert np.array_equal(np.asarray(sphere.vertices), before)

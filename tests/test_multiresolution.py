@@ -66,7 +66,9 @@ def test_one_level_is_fair_then_refine(rippled):
     np.testing.assert_allclose(out, expected, atol=0)
     # final_iterations=None repeats number_of_iterations on M_0; 0 leaves the splits as they are
     out, _ = multiresolution_fairing((V, F), 1, hierarchy=h, number_of_iterations=3)
-    np.testing.assert_allclose(out, constrained_fairing_arrays(h.refine(1, coarse), F, 3, method="local"), atol=0)
+    np.testing.assert_allclose(
+        out, constrained_fairing_arrays(h.refine(1, coarse), F, 3, method="local"), atol=0
+    )
     out, _ = multiresolution_fairing((V, F), 1, hierarchy=h, number_of_iterations=3, final_iterations=0)
     np.testing.assert_allclose(out, h.refine(1, coarse), atol=0)
 
@@ -158,8 +160,10 @@ def _normal_laplacian_energy(P, F):
 
     n = len(P)
     edges = np.unique(np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1), axis=0)
-    A = sp.coo_matrix((np.ones(2 * len(edges)), (np.r_[edges[:, 0], edges[:, 1]], np.r_[edges[:, 1], edges[:, 0]])),
-                      shape=(n, n)).tocsr()
+    A = sp.coo_matrix(
+        (np.ones(2 * len(edges)), (np.r_[edges[:, 0], edges[:, 1]], np.r_[edges[:, 1], edges[:, 0]])),
+        shape=(n, n),
+    ).tocsr()
     laplacian = A @ P / np.asarray(A.sum(axis=1)) - P
     normals = np.zeros_like(P)
     face = np.cross(P[F[:, 1]] - P[F[:, 0]], P[F[:, 2]] - P[F[:, 0]])

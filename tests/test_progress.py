@@ -124,7 +124,12 @@ def test_ls_mesh_reconstruct_spectral_bars(bars):
     for interpolate in (True, False):
         reconstruct_geometry((V, F), np.arange(10, 30), interpolate=interpolate, progress=True)
     spectral_approximation((V, F), 10, progress=True)  # 3 components, then 7 eigenpairs by shift-invert
-    assert [bar.desc for bar in made] == ["ls_mesh", "reconstruct_geometry", "reconstruct_geometry", "spectral basis"]
+    assert [bar.desc for bar in made] == [
+        "ls_mesh",
+        "reconstruct_geometry",
+        "reconstruct_geometry",
+        "spectral basis",
+    ]
     assert_complete(made, stream)
 
 

@@ -26,8 +26,7 @@ from conftest import DATA, REPO
 from defect_meshes import DEFECTS, all_defects
 
 import o3d_lsmesh
-from o3d_lsmesh import O3DLSMeshWarning
-from o3d_lsmesh import metrics
+from o3d_lsmesh import O3DLSMeshWarning, metrics
 from o3d_lsmesh.cli import main
 from o3d_lsmesh.selection import start_vertices
 from o3d_lsmesh.topology import boundary_halfedges, connected_components
@@ -35,14 +34,19 @@ from o3d_lsmesh.topology import boundary_halfedges, connected_components
 SCANS = Path(os.environ.get("O3D_LSMESH_SCANS", REPO.parent / "shared" / "data" / "scans"))
 FULL = os.environ.get("O3D_LSMESH_FULL") == "1"
 SCAN_NAMES = sorted(p.stem for p in SCANS.glob("*.ply")) if SCANS.is_dir() else ["(no scans)"]
-LIGHT_SCANS = [name for name in ("bun090", "chin") if name in SCAN_NAMES] or SCAN_NAMES[:2]  # costly calls, CLI
+LIGHT_SCANS = [name for name in ("bun090", "chin") if name in SCAN_NAMES] or SCAN_NAMES[
+    :2
+]  # costly calls, CLI
 DEFECT_NAMES = [*DEFECTS, "all_defects"]
 ALL = [f"scan:{name}" for name in SCAN_NAMES] + ["bunny_scan"] + [f"defect:{name}" for name in DEFECT_NAMES]
-COSTLY = ["bunny_scan"] + [f"defect:{name}" for name in DEFECT_NAMES] + [
-    f"scan:{name}" for name in (SCAN_NAMES if FULL else LIGHT_SCANS[:1])]
+COSTLY = (
+    ["bunny_scan"]
+    + [f"defect:{name}" for name in DEFECT_NAMES]
+    + [f"scan:{name}" for name in (SCAN_NAMES if FULL else LIGHT_SCANS[:1])]
+)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _arrays(key: str):
     if key.startswith("scan:"):
         path = SCANS / f"{key[5:]}.ply"
@@ -66,7 +70,9 @@ def corpus(key: str):
     if arrays is None:
         pytest.skip(reason)
     V, F = arrays
-    mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(V), o3d.utility.Vector3iVector(F.astype(np.int32)))
+    mesh = o3d.geometry.TriangleMesh(
+        o3d.utility.Vector3dVector(V), o3d.utility.Vector3iVector(F.astype(np.int32))
+    )
     return mesh, V.copy(), F.copy()
 
 
@@ -109,7 +115,9 @@ def test_topology_summary_counts_against_independent_ones(key):
     # independent: the scans' MANIFEST below, Open3D's counts elsewhere (Open3D does not count a
     # vertex whose fans end at an edge of more than two triangles, so only on edge-manifold meshes)
     if not key.startswith("scan:"):
-        assert s["nonmanifold_edges"] == len(np.asarray(mesh.get_non_manifold_edges(allow_boundary_edges=True)))
+        assert s["nonmanifold_edges"] == len(
+            np.asarray(mesh.get_non_manifold_edges(allow_boundary_edges=True))
+        )
         if s["edge_manifold"]:
             assert s["nonmanifold_vertices"] == len(np.asarray(mesh.get_non_manifold_vertices()))
     assert s["boundary_edges"] == len(boundary_halfedges(F, n))
@@ -121,7 +129,9 @@ def test_topology_summary_counts_against_independent_ones(key):
     if key.startswith("scan:"):
         expected = _manifest(key[5:])
         assert {k: s[k] for k in expected} == expected
-        assert s["total_genus"] == 0  # every piece of a range scan is a disk with holes: Euler agrees with the loops
+        assert (
+            s["total_genus"] == 0
+        )  # every piece of a range scan is a disk with holes: Euler agrees with the loops
     if key == "bunny_scan":
         # the meshes MANIFEST: 32 components, 2,898 boundary edges in 109 connected boundary pieces
         assert (s["components"], s["boundary_edges"], s["boundary_components"]) == (32, 2898, 109)
@@ -132,7 +142,7 @@ def test_topology_summary_counts_against_independent_ones(key):
 
 
 def test_compare_prints_scan_topology(capsys, tmp_path):
-    mesh, V, F = corpus("bunny_scan")
+    mesh, _V, _F = corpus("bunny_scan")
     path = tmp_path / "scan.ply"
     o3d.io.write_triangle_mesh(str(path), mesh)
     assert main(["compare", str(path), str(path), "--points", "2000", "--quiet", "--json"]) == 0
@@ -142,7 +152,9 @@ def test_compare_prints_scan_topology(capsys, tmp_path):
     assert topo["nonmanifold_vertices"] == 51 and topo["holes_by_size"]["3"] == 9
     assert main(["compare", str(path), str(path), "--points", "2000"]) == 0
     out = capsys.readouterr().out
-    assert "boundary loops 131" in out and "in 109 connected pieces" in out and "non-manifold vertices 51" in out
+    assert (
+        "boundary loops 131" in out and "in 109 connected pieces" in out and "non-manifold vertices 51" in out
+    )
 
 
 # --------------------------------------------------------------------------- fairing
@@ -173,7 +185,9 @@ def test_smooth_boundary_curves_and_registered_filters(key):
     try:
         filtered = mesh.filter_smooth_constrained()
         _same_connectivity(filtered, V, F)
-        assert np.array_equal(np.asarray(filtered.vertices), np.asarray(o3d_lsmesh.constrained_fairing(mesh).vertices))
+        assert np.array_equal(
+            np.asarray(filtered.vertices), np.asarray(o3d_lsmesh.constrained_fairing(mesh).vertices)
+        )
         _same_connectivity(mesh.filter_smooth_boundary_curves(), V, F)
     finally:
         o3d_lsmesh.unregister()
@@ -184,10 +198,14 @@ def test_smooth_boundary_curves_and_registered_filters(key):
 @pytest.mark.parametrize("key", [f"defect:{name}" for name in DEFECT_NAMES])
 def test_small_components_fair_without_nan(key):
     # isolated triangles (all valences 2: eq. 7's A is singular, the KKT form is not) and slivers
-    mesh, V, F = corpus(key)
+    mesh, _V, _F = corpus(key)
     for method in ("local", "global"):
         for smooth_boundary in (True, False):
-            W = np.asarray(o3d_lsmesh.constrained_fairing(mesh, 20, method=method, smooth_boundary=smooth_boundary).vertices)
+            W = np.asarray(
+                o3d_lsmesh.constrained_fairing(
+                    mesh, 20, method=method, smooth_boundary=smooth_boundary
+                ).vertices
+            )
             assert np.isfinite(W).all()
 
 
@@ -196,8 +214,17 @@ def test_small_components_fair_without_nan(key):
 
 # known defect (issue 15 stays open): on ear_back the refined patch of one hole holds a triangle and its
 # reverse among new vertices (one non-manifold edge); strict, so the fix shows here
-_FILL_KEYS = [pytest.param(key, marks=pytest.mark.xfail(strict=True, reason="fill_holes: one non-manifold edge "
-              "among the new triangles of ear_back")) if key == "scan:ear_back" else key for key in ALL]
+_FILL_KEYS = [
+    pytest.param(
+        key,
+        marks=pytest.mark.xfail(
+            strict=True, reason="fill_holes: one non-manifold edge among the new triangles of ear_back"
+        ),
+    )
+    if key == "scan:ear_back"
+    else key
+    for key in ALL
+]
 
 
 @pytest.mark.parametrize("key", _FILL_KEYS)
@@ -209,7 +236,9 @@ def test_fill_holes_defaults(key):
         out = o3d_lsmesh.fill_holes(mesh)
     # the one warning allowed: a raw scan's own folds next to a hole make every fill cross them (said, not hidden)
     for warning in caught:
-        assert issubclass(warning.category, O3DLSMeshWarning) and "cross other triangles" in str(warning.message)
+        assert issubclass(warning.category, O3DLSMeshWarning) and "cross other triangles" in str(
+            warning.message
+        )
     _untouched(mesh, V, F)
     W, G = np.asarray(out.vertices), np.asarray(out.triangles)
     assert np.isfinite(W).all()
@@ -222,8 +251,8 @@ def test_fill_holes_defaults(key):
     if before["boundary_loops"] > before["surface_pieces"]:  # inner holes beside each piece's border
         assert after["boundary_loops"] < before["boundary_loops"]
     # new vertices stay within the mesh's extent (a faired patch, not a spike)
-    assert np.all(W[len(V):] >= V.min(axis=0) - 0.1 * _scale(V))
-    assert np.all(W[len(V):] <= V.max(axis=0) + 0.1 * _scale(V))
+    assert np.all(W[len(V) :] >= V.min(axis=0) - 0.1 * _scale(V))
+    assert np.all(W[len(V) :] <= V.max(axis=0) + 0.1 * _scale(V))
 
 
 # --------------------------------------------------------------------------- LS meshes, selection, encoding
@@ -271,7 +300,7 @@ def test_selection_approximation_and_encoding_seed_every_component(key):
     W = _same_connectivity(decoded, V, F)
     assert np.abs(W - V).max() < _scale(V)
     last = None
-    for last in o3d_lsmesh.iter_decode_geometry(mesh, data):
+    for last in o3d_lsmesh.iter_decode_geometry(mesh, data):  # noqa: B007 (the last one is kept)
         pass
     assert last is not None and np.isfinite(np.asarray(last.vertices)).all()
     _untouched(mesh, V, F)
@@ -280,8 +309,11 @@ def test_selection_approximation_and_encoding_seed_every_component(key):
 # spectral_approximation is slow on scans (tens of seconds on bun090: the k smallest eigenvalues are
 # all 0 when a scan has more than k components, a degenerate cluster for shift-invert Lanczos), so it
 # runs on the scans only with O3D_LSMESH_FULL=1
-@pytest.mark.parametrize("key", [f"defect:{name}" for name in DEFECT_NAMES] + (
-    ["bunny_scan"] + [f"scan:{name}" for name in SCAN_NAMES] if FULL else []))
+@pytest.mark.parametrize(
+    "key",
+    [f"defect:{name}" for name in DEFECT_NAMES]
+    + (["bunny_scan"] + [f"scan:{name}" for name in SCAN_NAMES] if FULL else []),
+)
 def test_spectral_approximation(key):
     mesh, V, F = corpus(key)
     out = o3d_lsmesh.spectral_approximation(mesh, min(len(V) - 1, 20))
@@ -307,7 +339,9 @@ def test_metrics(key):
 @pytest.mark.parametrize("key", ["defect:all_defects"] + (["bunny_scan"] if FULL else []))
 def test_render(key, tmp_path):
     mesh, V, F = corpus(key)
-    image = o3d_lsmesh.render([mesh, o3d_lsmesh.constrained_fairing(mesh)], tmp_path / "out.png", width=160, height=120)
+    image = o3d_lsmesh.render(
+        [mesh, o3d_lsmesh.constrained_fairing(mesh)], tmp_path / "out.png", width=160, height=120
+    )
     assert image.ndim == 3 and image.shape[:2] == (120, 320 if image.shape[1] > 160 else 160)
     _untouched(mesh, V, F)
 
@@ -359,7 +393,9 @@ def test_multiresolution_fairing_on_scans(key):
 # --------------------------------------------------------------------------- CLI
 
 
-CLI_KEYS = ["defect:all_defects"] + [f"scan:{name}" for name in LIGHT_SCANS] + (["bunny_scan"] if FULL else [])
+CLI_KEYS = (
+    ["defect:all_defects"] + [f"scan:{name}" for name in LIGHT_SCANS] + (["bunny_scan"] if FULL else [])
+)
 
 
 @pytest.fixture
@@ -405,7 +441,11 @@ def test_cli_subcommands_on_scans(scan_file, tmp_path, capsys):
     assert report["topology_a"]["boundary_loops"] == report["topology_b"]["boundary_loops"]
     report = _cli(capsys, ["fill", str(path), str(tmp_path / "filled.ply")])
     W, G = _read(tmp_path / "filled.ply")
-    assert np.isfinite(W).all() and np.array_equal(G[: len(F)], F) and report["holes_after"] < report["holes_before"]
+    assert (
+        np.isfinite(W).all()
+        and np.array_equal(G[: len(F)], F)
+        and report["holes_after"] < report["holes_before"]
+    )
     _cli(capsys, ["batch", str(path), str(tmp_path / "batch"), "--op", "fill,denoise", "--workers", "0"])
     W, G = _read(tmp_path / "batch" / path.name)
     assert np.isfinite(W).all() and len(G) > len(F)
@@ -414,7 +454,7 @@ def test_cli_subcommands_on_scans(scan_file, tmp_path, capsys):
 
 @pytest.mark.parametrize("scan_file", CLI_KEYS, indirect=True)
 def test_cli_hierarchy_and_denoise_level_on_scans(scan_file, tmp_path, capsys):
-    path, V, F = scan_file
+    path, _V, F = scan_file
     _cli(capsys, ["hierarchy", str(path), str(tmp_path / "levels")])
     assert any((tmp_path / "levels").iterdir())
     _cli(capsys, ["denoise", str(path), str(tmp_path / "level.ply"), "--level", "1"])

@@ -9,12 +9,11 @@ import textwrap
 import numpy as np
 import open3d as o3d
 import pytest
+from conftest import REPO, grid
 
 from o3d_lsmesh import ls_mesh, reconstruct_geometry
 from o3d_lsmesh.fairing import constrained_fairing, smooth_boundary_curves
 from o3d_lsmesh.registration import METHOD_NAMES, register, registered_methods, unregister
-
-from conftest import REPO, grid
 
 CLASSES = (o3d.geometry.TriangleMesh, o3d.t.geometry.TriangleMesh)
 
@@ -75,7 +74,9 @@ def test_register_is_idempotent(noisy):
         assert register() == first
         # The second call re-installs the same operation: results are identical.
         again = o3d.geometry.TriangleMesh.filter_smooth_constrained
-        np.testing.assert_array_equal(np.asarray(method(noisy, 3).vertices), np.asarray(again(noisy, 3).vertices))
+        np.testing.assert_array_equal(
+            np.asarray(method(noisy, 3).vertices), np.asarray(again(noisy, 3).vertices)
+        )
     finally:
         unregister()
         unregister()  # harmless when nothing is registered
@@ -162,14 +163,18 @@ def test_multiresolution_and_boundary_methods(registered):
     from o3d_lsmesh.fairing.multiresolution import multiresolution_fairing
 
     sphere = o3d.geometry.TriangleMesh.create_sphere(resolution=20)
-    np.asarray(sphere.vertices)[:] += np.random.default_rng(5).normal(scale=0.01, size=(len(sphere.vertices), 3))
+    np.asarray(sphere.vertices)[:] += np.random.default_rng(5).normal(
+        scale=0.01, size=(len(sphere.vertices), 3)
+    )
     np.testing.assert_array_equal(
         np.asarray(sphere.filter_smooth_multiresolution(1).vertices),
         np.asarray(multiresolution_fairing(sphere, 1).vertices),
     )
     vertices, triangles = grid(8, 8, z=lambda x, y: 0.05 * np.sin(9 * x))
     vertices[:, :2] += np.random.default_rng(1).normal(scale=0.01, size=(len(vertices), 2))
-    plane = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(vertices), o3d.utility.Vector3iVector(triangles))
+    plane = o3d.geometry.TriangleMesh(
+        o3d.utility.Vector3dVector(vertices), o3d.utility.Vector3iVector(triangles)
+    )
     np.testing.assert_array_equal(
         np.asarray(plane.filter_smooth_boundary_curves(3).vertices),
         np.asarray(smooth_boundary_curves(plane, 3).vertices),

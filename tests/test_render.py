@@ -34,7 +34,7 @@ def _bumped(mesh):
 
 
 def _panels(image, count):
-    return [image[:, k * W:(k + 1) * W].astype(np.int64) for k in range(count)]
+    return [image[:, k * W : (k + 1) * W].astype(np.int64) for k in range(count)]
 
 
 def _foreground(panel):
@@ -43,7 +43,7 @@ def _foreground(panel):
 
 def _check_layout(image):
     sphere = _sphere()
-    bumped, _ = _bumped(sphere)
+    _bumped(sphere)
     assert image.shape == (H, 3 * W, 3) and image.dtype == np.uint8
     a, a_again, b = _panels(image, 3)
     # Not blank: the sphere covers a good part of its panel (pi r^2 in a square of side 2.1 r: ~0.6
@@ -82,12 +82,13 @@ def test_filament_offscreen_renderer_draws_side_by_side(tmp_path):
 
 def test_error_color_map_marks_the_changed_region():
     sphere = _sphere()
-    bumped, changed = _bumped(sphere)
+    bumped, _changed = _bumped(sphere)
     image = render([sphere, bumped], None, width=W, height=H, reference=sphere, backend="raycast")
     # the panels keep their rows; the labelled color bar is a band below them
     assert image.shape[0] > H and image.shape[1] == 2 * W
     body = image[:H]
     a, b = body[:, :W].astype(np.int64), body[:, W:].astype(np.int64)
+
     # Yellow-green end of viridis: red and green high, blue low. Shading only darkens,
     # so a dark-purple (zero error) pixel can never look like this.
     def hot(panel):
@@ -117,34 +118,44 @@ def _ink(region):
 def test_titles_label_every_panel_and_leave_the_panels_unchanged():
     sphere, bumped = _sphere_pair()
     plain = render([sphere, bumped], None, width=W * 2, height=H * 2, backend="raycast")
-    titled = render([sphere, bumped], None, width=W * 2, height=H * 2, backend="raycast",
-                    titles=["input", "constrained fairing (local, 10 iterations)"])
+    titled = render(
+        [sphere, bumped],
+        None,
+        width=W * 2,
+        height=H * 2,
+        backend="raycast",
+        titles=["input", "constrained fairing (local, 10 iterations)"],
+    )
     band = titled.shape[0] - plain.shape[0]
     assert band > 10 and titled.shape[1] == plain.shape[1]
     # the panels are copied pixel for pixel below the title band
     np.testing.assert_array_equal(np.asarray(titled[band:]), np.asarray(plain))
     # each panel's title band holds text, centered over its panel, and nothing else does
     for k in range(2):
-        panel_band = _ink(titled[:band, k * 2 * W:(k + 1) * 2 * W])
+        panel_band = _ink(titled[:band, k * 2 * W : (k + 1) * 2 * W])
         assert panel_band.sum() > 20
         columns = np.flatnonzero(panel_band.any(axis=0))
         assert abs(columns.mean() - W) < W / 2
     # a longer title inks more pixels
-    assert _ink(titled[:band, 2 * W:]).sum() > _ink(titled[:band, :2 * W]).sum()
+    assert _ink(titled[:band, 2 * W :]).sum() > _ink(titled[:band, : 2 * W]).sum()
     assert titled.error_max is None and titled.units is None
 
 
 def test_color_bar_has_tick_labels_units_and_a_title():
     sphere, bumped = _sphere_pair()
-    image = render([sphere, bumped], None, width=W * 2, height=H * 2, backend="raycast", reference=sphere,
-                   error_max=0.2)
+    image = render(
+        [sphere, bumped], None, width=W * 2, height=H * 2, backend="raycast", reference=sphere, error_max=0.2
+    )
     assert image.error_max == 0.2 and image.units == "model"
-    band = image[2 * H:]
+    band = image[2 * H :]
     ink = _ink(band)
-    strip_rows = np.flatnonzero((np.abs(band.astype(np.int64) - np.round(render_module.VIRIDIS[5] * 255)).max(axis=2)
-                                 <= 6).any(axis=1))
+    strip_rows = np.flatnonzero(
+        (np.abs(band.astype(np.int64) - np.round(render_module.VIRIDIS[5] * 255)).max(axis=2) <= 6).any(
+            axis=1
+        )
+    )
     assert len(strip_rows)
-    above, below = ink[:strip_rows.min()], ink[strip_rows.max() + 1:]
+    above, below = ink[: strip_rows.min()], ink[strip_rows.max() + 1 :]
     assert above.sum() > 30, "the color bar needs a title above it"
     assert below.sum() > 30, "the color bar needs tick labels below it"
     # tick labels spread along the bar: ink in each third of its width
@@ -152,20 +163,24 @@ def test_color_bar_has_tick_labels_units_and_a_title():
     thirds = np.array_split(np.arange(band.shape[1]), 3)
     assert all(np.isin(t, columns).any() for t in thirds)
     # a larger scale changes the numbers, not the panels
-    other = render([sphere, bumped], None, width=W * 2, height=H * 2, backend="raycast", reference=sphere,
-                   error_max=7.5)
-    assert np.any(np.asarray(other[2 * H:]) != np.asarray(band))
+    other = render(
+        [sphere, bumped], None, width=W * 2, height=H * 2, backend="raycast", reference=sphere, error_max=7.5
+    )
+    assert np.any(np.asarray(other[2 * H :]) != np.asarray(band))
 
 
 def test_returned_scale_matches_distances_and_units():
     sphere, bumped = _sphere_pair()
     model = render([sphere, bumped], None, width=W, height=H, backend="raycast", reference=sphere)
-    edge = render([sphere, bumped], None, width=W, height=H, backend="raycast", reference=sphere, units="edge")
+    edge = render(
+        [sphere, bumped], None, width=W, height=H, backend="raycast", reference=sphere, units="edge"
+    )
     # independent reference: the vertex distances to the sphere of radius 1 (its mesh lies inside by at most
     # the sagitta of a facet), and the mean edge length by a plain loop over triangles
     distances = np.abs(np.linalg.norm(np.asarray(bumped.vertices), axis=1) - 1.0)
-    assert model.error_max == pytest.approx(np.percentile(np.concatenate([np.zeros(len(distances)), distances]), 99),
-                                            abs=0.01)
+    assert model.error_max == pytest.approx(
+        np.percentile(np.concatenate([np.zeros(len(distances)), distances]), 99), abs=0.01
+    )
     edges = set()
     for tri in np.asarray(sphere.triangles).tolist():
         for i, j in ((tri[0], tri[1]), (tri[1], tri[2]), (tri[2], tri[0])):
@@ -181,7 +196,9 @@ def test_filament_exposure_keeps_highlights():
     sphere, _ = _sphere_pair()
     sphere.paint_uniform_color([1.0, 1.0, 1.0])
     try:
-        image = render(sphere, None, width=W, height=H, backend="filament", background=(0.0, 0.0, 0.0), timeout=240)
+        image = render(
+            sphere, None, width=W, height=H, backend="filament", background=(0.0, 0.0, 0.0), timeout=240
+        )
     except RuntimeError as error:
         pytest.skip(f"Open3D's OffscreenRenderer cannot render on this machine: {error}")
     lit = image[np.any(image > 8, axis=2)]
@@ -208,8 +225,9 @@ def test_without_matplotlib_the_picture_keeps_an_unlabelled_bar(monkeypatch):
     monkeypatch.setattr(render_module, "_matplotlib", lambda: None)
     sphere, bumped = _sphere_pair()
     with pytest.warns(O3DLSMeshWarning, match="matplotlib is not installed"):
-        image = render([sphere, bumped], None, width=W, height=H, reference=sphere, backend="raycast",
-                       titles=["a", "b"])
+        image = render(
+            [sphere, bumped], None, width=W, height=H, reference=sphere, backend="raycast", titles=["a", "b"]
+        )
     assert image.shape == (H, 2 * W, 3)
     np.testing.assert_array_equal(image[-1, 0], np.round(render_module.VIRIDIS[0] * 255).astype(np.uint8))
     np.testing.assert_array_equal(image[-1, -1], np.round(render_module.VIRIDIS[-1] * 255).astype(np.uint8))
@@ -242,12 +260,19 @@ def test_vertex_colors_and_tensor_meshes_are_drawn():
     sphere = _sphere()
     sphere.paint_uniform_color([1.0, 0.0, 0.0])
     tensor = o3d.t.geometry.TriangleMesh.from_legacy(_sphere())
-    image = render([sphere, tensor, (np.asarray(sphere.vertices), np.asarray(sphere.triangles))], None,
-                   width=W, height=H, backend="raycast")
+    image = render(
+        [sphere, tensor, (np.asarray(sphere.vertices), np.asarray(sphere.triangles))],
+        None,
+        width=W,
+        height=H,
+        backend="raycast",
+    )
     red, gray, tuple_panel = _panels(image, 3)
     mask = _foreground(red)
     assert (red[mask][:, 0] > 3 * red[mask][:, 2] + 10).mean() > 0.9  # red stays red
-    assert np.abs(gray[_foreground(gray)][:, 0] - gray[_foreground(gray)][:, 2]).mean() < 40  # default gray-blue
+    assert (
+        np.abs(gray[_foreground(gray)][:, 0] - gray[_foreground(gray)][:, 2]).mean() < 40
+    )  # default gray-blue
     assert _foreground(tuple_panel).mean() > 0.25
 
 
@@ -290,7 +315,9 @@ def test_bad_options_raise(kwargs, match):
         with pytest.raises(TypeError, match="error_max must be a number, got 'big'"):
             render(_sphere(), None, width=16, height=16, backend="raycast", error_max="big")
         with pytest.raises(ValueError, match="error_max"):
-            render(_sphere(), None, width=16, height=16, backend="raycast", error_max=-1.0, reference=_sphere())
+            render(
+                _sphere(), None, width=16, height=16, backend="raycast", error_max=-1.0, reference=_sphere()
+            )
         return
     with pytest.raises((ValueError, TypeError), match=match):
         render(_sphere(), None, width=16, height=16, backend="raycast", **kwargs)
@@ -305,7 +332,9 @@ def test_bad_meshes_and_paths_raise(tmp_path):
         render([_sphere(), "x"], None, backend="raycast")
     with pytest.raises(TypeError, match=r"color must be a sequence of 3 numbers, got 'red'"):
         render(_sphere(), None, color="red", backend="raycast")
-    with pytest.raises(TypeError, match=r"up must be a sequence of 3 numbers of real numbers, got dtype complex"):
+    with pytest.raises(
+        TypeError, match=r"up must be a sequence of 3 numbers of real numbers, got dtype complex"
+    ):
         render(_sphere(), None, up=(0, 1j, 0), backend="raycast")
     with pytest.raises(ValueError, match="must have vertices, got an empty mesh"):
         render(o3d.geometry.TriangleMesh(), None, backend="raycast")
@@ -320,6 +349,9 @@ def test_absurd_picture_sizes_are_refused_before_drawing():
 
     meshes = [_sphere()] * 20
     assert 8192 * 8192 * 20 > MAX_PIXELS
-    with pytest.raises(ValueError, match=r"width \* height \* len\(meshes\) must be at most 67,108,864 pixels, "
-                                         r"got 8192 \* 8192 \* 20 = 1,342,177,280"):
+    with pytest.raises(
+        ValueError,
+        match=r"width \* height \* len\(meshes\) must be at most 67,108,864 pixels, "
+        r"got 8192 \* 8192 \* 20 = 1,342,177,280",
+    ):
         render(meshes, None, width=8192, height=8192, backend="raycast")

@@ -112,8 +112,11 @@ def reference_boundary_weight(V, F):
     for t in F.tolist():
         for i in t:
             in_triangles[i] = in_triangles.get(i, 0) + 1
-    c = max(1.0, np.mean([in_triangles[i] for i in ring if i not in curve])
-            / np.mean([in_triangles[i] for i in curve]))
+    c = max(
+        1.0,
+        np.mean([in_triangles[i] for i in ring if i not in curve])
+        / np.mean([in_triangles[i] for i in curve]),
+    )
     if np.mean(rim) == 0:
         return c
     return float(min(c, max(0.1, c * 1.5 / (7 / 6) * np.mean(inner) / np.mean(rim))))
@@ -136,7 +139,9 @@ def small_meshes():
 
 
 @pytest.mark.parametrize("case", list(small_meshes()), ids=lambda c: c[0])
-@pytest.mark.parametrize("weights", [(SCAN_MU, SCAN_MEMBRANE, SCAN_BOUNDARY_WEIGHT), (0.3, 0.0, 1.0), (0.05, 0.2, 0.5)])
+@pytest.mark.parametrize(
+    "weights", [(SCAN_MU, SCAN_MEMBRANE, SCAN_BOUNDARY_WEIGHT), (0.3, 0.0, 1.0), (0.05, 0.2, 0.5)]
+)
 def test_energy_and_solution_match_a_plain_loop_assembly(case, weights):
     _, V, F = case
     mu, membrane, boundary_weight = weights
@@ -152,21 +157,28 @@ def test_energy_and_solution_match_a_plain_loop_assembly(case, weights):
     # rows: barycenters (m), edges (e), a unit row per unreferenced vertex (left out: not part of E), thin plate
     first_unit = len(F) + len(edges_of(F))
     unit_rows = np.zeros(system.rows.shape[0], dtype=bool)
-    unit_rows[first_unit: first_unit + np.count_nonzero(~referenced)] = True
+    unit_rows[first_unit : first_unit + np.count_nonzero(~referenced)] = True
     energy = ((system.rows @ X - T)[~unit_rows] ** 2).sum()
     used = np.ix_(referenced, referenced)
     Xr = X[referenced]
-    constant = mu * sum((boundary_weight if w < 1 else 1.0) * ((V[t].sum(0)) ** 2).sum()
-                        for t, w in zip(F.tolist(), system.triangle_weight))
-    loop_energy = np.einsum("ij,ij->", Xr, A[used] @ Xr) - 2 * np.einsum("ij,ij->", Xr, b[referenced]) + constant
+    constant = mu * sum(
+        (boundary_weight if w < 1 else 1.0) * ((V[t].sum(0)) ** 2).sum()
+        for t, w in zip(F.tolist(), system.triangle_weight)
+    )
+    loop_energy = (
+        np.einsum("ij,ij->", Xr, A[used] @ Xr) - 2 * np.einsum("ij,ij->", Xr, b[referenced]) + constant
+    )
     assert_allclose(energy, loop_energy, rtol=1e-9)
     X1, twiced = reference_solution(V, F, mu, membrane, boundary_weight)
     solver = ScanFairingSolver(F, len(V), mu=mu, membrane=membrane, boundary_weight=boundary_weight)
     assert_allclose(solver.filter(V), X1, atol=1e-9)
     assert_allclose(solver.solve(V), twiced, atol=1e-9)
     if weights[0] == SCAN_MU:
-        assert_allclose(constrained_fairing_arrays(V, F, None, method=None, boundary_weight=boundary_weight), twiced,
-                        atol=1e-9)
+        assert_allclose(
+            constrained_fairing_arrays(V, F, None, method=None, boundary_weight=boundary_weight),
+            twiced,
+            atol=1e-9,
+        )
         default = reference_solution(V, F, mu, membrane, reference_boundary_weight(V, F))[1]
         assert_allclose(constrained_fairing_arrays(V, F, None, method=None), default, atol=1e-9)
     copy = pickle.loads(pickle.dumps(solver))
@@ -177,12 +189,19 @@ def test_default_is_scan_and_reimpose_every_keeps_the_local_meaning():
     assert DEFAULT_METHOD == "scan"
     V, F = grid(6, 6, z=lambda x, y: 0.1 * np.sin(3 * x) * y)
     V = V + np.random.default_rng(3).normal(0, 0.01, V.shape)
-    assert_allclose(constrained_fairing_arrays(V, F, None, method=None),
-                    constrained_fairing_arrays(V, F, 1, method="scan"), atol=0)
-    assert_allclose(np.asarray(constrained_fairing((V, F))[0]), constrained_fairing_arrays(V, F, 1, method="scan"),
-                    atol=0)
-    assert_allclose(constrained_fairing_arrays(V, F, 4, reimpose_every=2),
-                    constrained_fairing_arrays(V, F, 4, method="local", reimpose_every=2), atol=0)
+    assert_allclose(
+        constrained_fairing_arrays(V, F, None, method=None),
+        constrained_fairing_arrays(V, F, 1, method="scan"),
+        atol=0,
+    )
+    assert_allclose(
+        np.asarray(constrained_fairing((V, F))[0]), constrained_fairing_arrays(V, F, 1, method="scan"), atol=0
+    )
+    assert_allclose(
+        constrained_fairing_arrays(V, F, 4, reimpose_every=2),
+        constrained_fairing_arrays(V, F, 4, method="local", reimpose_every=2),
+        atol=0,
+    )
 
 
 def test_measured_boundary_weight_against_loops_and_its_properties(rng):
@@ -205,7 +224,8 @@ def test_measured_boundary_weight_against_loops_and_its_properties(rng):
     q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
     for mesh in (iid, ragged):
         assert measured_boundary_weight(37.0 * mesh @ q.T + [5.0, -2.0, 1e3], F) == pytest.approx(
-            measured_boundary_weight(mesh, F), rel=1e-9)
+            measured_boundary_weight(mesh, F), rel=1e-9
+        )
     # no boundary: the weight multiplies nothing
     S, T = arrays(o3d.geometry.TriangleMesh.create_sphere(radius=1.0, resolution=6))
     assert measured_boundary_weight(S, T) == 1.0
@@ -224,8 +244,10 @@ def test_rigid_motion_and_scale_equivariance(rng):
 def test_flat_noisy_grid_gets_flatter_and_keeps_its_boundary_shape(rng):
     V, F = grid(30, 30)
     h = 1.0 / 29
-    noisy = V + np.stack([rng.normal(0, 0.1 * h, len(V)), rng.normal(0, 0.1 * h, len(V)),
-                          rng.normal(0, 0.3 * h, len(V))], axis=1)
+    noisy = V + np.stack(
+        [rng.normal(0, 0.1 * h, len(V)), rng.normal(0, 0.1 * h, len(V)), rng.normal(0, 0.3 * h, len(V))],
+        axis=1,
+    )
     out = constrained_fairing_arrays(noisy, F, None, method=None)
     boundary = (V[:, 0] == 0) | (V[:, 0] == 1) | (V[:, 1] == 0) | (V[:, 1] == 1)
     assert np.abs(out[:, 2]).mean() < 0.35 * np.abs(noisy[:, 2]).mean()
@@ -271,7 +293,9 @@ def test_open3d_mesh_in_and_out_and_non_manifold_accepted():
     mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(fin), o3d.utility.Vector3iVector(F2))
     out = constrained_fairing(mesh)
     assert isinstance(out, o3d.geometry.TriangleMesh) and out is not mesh
-    assert_allclose(np.asarray(out.vertices), constrained_fairing_arrays(fin, F2, None, method=None), atol=1e-12)
+    assert_allclose(
+        np.asarray(out.vertices), constrained_fairing_arrays(fin, F2, None, method=None), atol=1e-12
+    )
     assert np.array_equal(np.asarray(mesh.vertices), fin)
 
 
@@ -279,11 +303,19 @@ def test_scan_options_raise():
     V, F = grid(4, 4)
     cases = [
         (ValueError, r"membrane must be None for method='local'", {"method": "local", "membrane": 0.1}),
-        (ValueError, r"boundary_weight must be None for method='global'", {"method": "global", "boundary_weight": 0.5}),
+        (
+            ValueError,
+            r"boundary_weight must be None for method='global'",
+            {"method": "global", "boundary_weight": 0.5},
+        ),
         (ValueError, "membrane must be non-negative and finite, got -1.0", {"membrane": -1.0}),
         (ValueError, "boundary_weight must be positive and finite, got 0.0", {"boundary_weight": 0.0}),
         (TypeError, "boundary_weight must be a number, got 'x'", {"boundary_weight": "x"}),
-        (ValueError, r"reimpose_every must be None for method='scan'", {"method": "scan", "reimpose_every": 2}),
+        (
+            ValueError,
+            r"reimpose_every must be None for method='scan'",
+            {"method": "scan", "reimpose_every": 2},
+        ),
         (ValueError, r"smooth_boundary must be True for method='scan'", {"smooth_boundary": False}),
         (ValueError, "mu must be positive and finite, got -0.5", {"mu": -0.5}),
     ]

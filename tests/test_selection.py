@@ -187,13 +187,15 @@ def test_multiple_components_get_a_start_vertex_each():
     for method in ("greedy", "combined"):
         selection = select_control_points((V, F), 2, method=method)
         assert sorted(selection < n1) == [False, True]
-    approx, idx = approximate((V, F), 10)
+    approx, _idx = approximate((V, F), 10)
     assert np.isfinite(approx[0]).all()
 
 
 def test_approximate_matches_ls_mesh_and_keeps_kind():
     V, F = noisy_sphere(8)
-    legacy = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(V), o3d.utility.Vector3iVector(F.astype(np.int32)))
+    legacy = o3d.geometry.TriangleMesh(
+        o3d.utility.Vector3dVector(V), o3d.utility.Vector3iVector(F.astype(np.int32))
+    )
     before = np.asarray(legacy.vertices).copy()
     for method in ("greedy", "combined", "random"):
         out, idx = approximate(legacy, 20, method=method, seed=0)
@@ -295,7 +297,11 @@ def test_scan_defects_seed_every_small_component(method):
     decoded = decode_geometry((V, F), encode_geometry((V, F), count + 7, method=method))
     assert np.isfinite(decoded[0]).all()
     # the user's own controls: a component without one is the user's singular system
-    with pytest.raises(SingularSystemError, match="every connected component needs at least one control vertex"):
+    with pytest.raises(
+        SingularSystemError, match="every connected component needs at least one control vertex"
+    ):
         ls_mesh((V, F), np.flatnonzero(labels == labels[0]))
-    with pytest.raises(ValueError, match=f"count must be at least the number of connected components \\({count}"):
+    with pytest.raises(
+        ValueError, match=f"count must be at least the number of connected components \\({count}"
+    ):
         select_control_points((V, F), count - 1, method=method)

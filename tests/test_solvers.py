@@ -97,7 +97,7 @@ def test_fallback_warns_without_scikit_sparse(monkeypatch):
 
     monkeypatch.setattr(solvers, "_cholmod", None)
     monkeypatch.delenv(solvers.NO_CHOLMOD_ENV, raising=False)
-    A, b = spd()
+    A, _b = spd()
     with pytest.warns(O3DLSMeshWarning, match="scikit-sparse is not importable"):
         solver = solvers.SPDSolver(A)
     assert solver.backend == "scipy"
@@ -138,7 +138,9 @@ def test_product_mode_factors_a_at_without_forming_it(backend):
     # an LS problem's transposed rows: A (n, k) with k > n, int64 indices, non-canonical order
     rng = np.random.default_rng(3)
     n, k = 40, 90
-    A = (sp.random(n, k, density=0.08, random_state=3) + sp.hstack([sp.identity(n), sp.csc_matrix((n, k - n))])).tocoo()
+    A = (
+        sp.random(n, k, density=0.08, random_state=3) + sp.hstack([sp.identity(n), sp.csc_matrix((n, k - n))])
+    ).tocoo()
     A = sp.csc_matrix((A.data[::-1], (A.row[::-1], A.col[::-1])), shape=(n, k))
     b = rng.normal(size=(n, 3))
     normal = (A @ A.T).tocsc()
@@ -209,7 +211,9 @@ def test_overflowing_weights_raise_naming_weights():
         ls_mesh(moved, [0, 5, 40], weights=1e200)
     solver = LSMeshSolver(moved, [0, 5, 40], weights=1e150)
     # positions beyond the adapter's coordinate limit are refused by name before any product is formed
-    with pytest.raises(ValueError, match="constraint_vertex_positions must have coordinates of magnitude at most"):
+    with pytest.raises(
+        ValueError, match="constraint_vertex_positions must have coordinates of magnitude at most"
+    ):
         solver.solve(np.full((3, 3), 1e300))
     # within the limit, the weighted right-hand side (weights**2 * positions) overflows: named too
     with pytest.raises(ValueError, match="constraint_vertex_positions must be small enough"):
@@ -249,7 +253,7 @@ def test_global_fairing_mu_checked():
 
 
 def test_non_finite_inputs_to_the_gateway_raise():
-    A, b = spd(10)
+    A, _b = spd(10)
     with pytest.raises(ValueError, match="rhs must be finite, got nan at row 1"):
         SPDSolver(A).solve(np.r_[1.0, np.nan, np.zeros(8)])
     bad = A.copy()
@@ -257,14 +261,17 @@ def test_non_finite_inputs_to_the_gateway_raise():
     with pytest.raises(ValueError, match="matrix must have finite entries"):
         SPDSolver(bad)
     with pytest.raises(ValueError, match="C must have finite entries"):
-        SPDSolver(A).update(sp.csc_matrix((np.array([np.inf]), (np.array([0]), np.array([0]))), shape=(10, 1)))
+        SPDSolver(A).update(
+            sp.csc_matrix((np.array([np.inf]), (np.array([0]), np.array([0]))), shape=(10, 1))
+        )
 
 
 def test_check_constant_modes_against_the_smallest_eigenvalue():
     # the quotient bounds the smallest eigenvalue from above: a system it rejects is truly near-singular
+    from conftest import grid
+
     from o3d_lsmesh._solvers import NEGLIGIBLE, check_constant_modes, operator_scale
     from o3d_lsmesh.laplacian import laplacian_matrix
-    from conftest import grid
 
     V, F = grid(6, 6)
     L = laplacian_matrix(V, F).tocsr()

@@ -5,7 +5,12 @@ import scipy.linalg as sla
 from conftest import grid
 
 import o3d_lsmesh.spectral as spectral
-from o3d_lsmesh.spectral import combinatorial_laplacian, quantize_coefficients, spectral_approximation, spectral_basis
+from o3d_lsmesh.spectral import (
+    combinatorial_laplacian,
+    quantize_coefficients,
+    spectral_approximation,
+    spectral_basis,
+)
 from o3d_lsmesh.topology import adjacency_matrix
 
 
@@ -126,7 +131,9 @@ def test_multi_component_basis_matches_dense_eigh():
         np.testing.assert_allclose(values, dense_values[:k], atol=1e-9, err_msg=f"k={k}")
         np.testing.assert_allclose(vectors.T @ vectors, np.eye(k), atol=1e-9, err_msg=f"k={k}")
         reference = dense_vectors[:, :k] @ (dense_vectors[:, :k].T @ V)
-        np.testing.assert_allclose(spectral_approximation((V, F), k)[0], reference, atol=1e-8, err_msg=f"k={k}")
+        np.testing.assert_allclose(
+            spectral_approximation((V, F), k)[0], reference, atol=1e-8, err_msg=f"k={k}"
+        )
 
 
 def test_fewer_eigenvectors_than_components_keeps_the_largest_components():

@@ -32,8 +32,13 @@ def is_cycle_in_order(loop, triangles):
 
 
 def all_cycles_in_order(loops, triangles):
-    he = {tuple(e) for e in np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]]).tolist()}
-    return all((a, b) in he for loop in loops for a, b in zip(np.asarray(loop).tolist(), np.roll(loop, -1).tolist()))
+    he = {
+        tuple(e)
+        for e in np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]]).tolist()
+    }
+    return all(
+        (a, b) in he for loop in loops for a, b in zip(np.asarray(loop).tolist(), np.roll(loop, -1).tolist())
+    )
 
 
 def test_boundary_loops_of_grid_with_two_holes():
@@ -64,7 +69,13 @@ def test_unique_edges_counts():
     edges, counts, inverse = unique_edges(F, 4)
     assert edges.tolist() == [[0, 1], [0, 2], [0, 3], [1, 2], [2, 3]]
     assert counts.tolist() == [1, 2, 1, 1, 1]
-    assert np.all(edges[inverse].min(1) == np.minimum(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])[:, 0], np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])[:, 1]))
+    assert np.all(
+        edges[inverse].min(1)
+        == np.minimum(
+            np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])[:, 0],
+            np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])[:, 1],
+        )
+    )
 
 
 def test_nonmanifold_vertices_match_open3d():
@@ -276,11 +287,17 @@ def _assert_matches_reference(F, n):
     loops = boundary_loops(F, n)
     assert sorted(_canonical(l.tolist(), True) for l in loops) == sorted(_canonical(c, True) for c in closed)
     curves = boundary_curves(F, n)
-    assert sorted(_canonical(c.tolist(), False) for c in curves.chains) == sorted(_canonical(c, False) for c in open_)
+    assert sorted(_canonical(c.tolist(), False) for c in curves.chains) == sorted(
+        _canonical(c, False) for c in open_
+    )
     closed, open_ = _reference_boundary(F, n, split=True)
     chains = boundary_chains(F, n)
-    assert sorted(_canonical(l.tolist(), True) for l in chains.loops) == sorted(_canonical(c, True) for c in closed)
-    assert sorted(_canonical(c.tolist(), False) for c in chains.chains) == sorted(_canonical(c, False) for c in open_)
+    assert sorted(_canonical(l.tolist(), True) for l in chains.loops) == sorted(
+        _canonical(c, True) for c in closed
+    )
+    assert sorted(_canonical(c.tolist(), False) for c in chains.chains) == sorted(
+        _canonical(c, False) for c in open_
+    )
     # every boundary edge on exactly one curve, in both descriptions
     bhe = [tuple(sorted(e)) for e in boundary_halfedges(F, n).tolist() if e[0] != e[1]]
     for loops_, chains_ in ((curves.loops, curves.chains), (chains.loops, chains.chains)):
@@ -289,8 +306,10 @@ def _assert_matches_reference(F, n):
         assert sorted(walked) == sorted(bhe)
     # chains end at junctions and pass through none; simple loops meet no junction
     junctions = set(chains.junctions.tolist())
-    assert all(c[0] in junctions and c[-1] in junctions and not junctions & set(c[1:-1].tolist())
-               for c in chains.chains)
+    assert all(
+        c[0] in junctions and c[-1] in junctions and not junctions & set(c[1:-1].tolist())
+        for c in chains.chains
+    )
     assert all(not junctions & set(l.tolist()) for l in chains.loops)
     # a loop follows its triangles where they agree (a consistently oriented mesh: every step)
     return loops
@@ -322,7 +341,7 @@ def test_pinched_loops_of_bunny_scan_match_a_plain_walk():
 def test_pinch_continues_along_the_rim_of_its_fan():
     # two square holes of a 5x5 grid touching at vertex 12 (cells (1,1) and (2,2) removed): the
     # surface's rim around them is one loop through 12 twice; cut at 12 it is two chains 12 -> 12
-    V, F = grid(5, 5)
+    _V, F = grid(5, 5)
     F = F[[not (set(t) <= {6, 7, 11, 12} or set(t) <= {12, 13, 17, 18}) for t in F.tolist()]]
     loops = boundary_loops(F, 25)
     assert [len(l) for l in loops] == [16, 8]
@@ -343,7 +362,7 @@ def test_fin_boundary_is_open_chains_between_its_edge_ends():
 
 
 def test_boundary_loops_follow_the_majority_orientation_of_flipped_triangles():
-    V, F = grid(5, 5)
+    _V, F = grid(5, 5)
     F = F.copy()
     F[0] = F[0, ::-1]  # a corner triangle flipped: its boundary edges run against the loop
     loops = boundary_loops(F, 25)

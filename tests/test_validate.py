@@ -132,7 +132,11 @@ def test_vertex_and_triangle_arrays_check_dtype_and_shape_without_casting_first(
     v = as_vertex_array(np.arange(12, dtype=np.int8).reshape(4, 3))
     assert v.dtype == np.float64 and v[3, 2] == 11.0
     for bad, error, match in [
-        (np.ones((4, 3), complex), TypeError, r"mesh vertices must be an \(n, 3\) array of real numbers, got dtype complex128"),
+        (
+            np.ones((4, 3), complex),
+            TypeError,
+            r"mesh vertices must be an \(n, 3\) array of real numbers, got dtype complex128",
+        ),
         (np.ones((4, 3), bool), TypeError, "got dtype bool"),
         ([["1", "2", "3"]], TypeError, "got dtype <U1"),
         ("vertices", TypeError, "mesh vertices must be an \\(n, 3\\) array, got 'vertices'"),
@@ -148,12 +152,19 @@ def test_vertex_and_triangle_arrays_check_dtype_and_shape_without_casting_first(
     assert t.dtype == np.int64 and t.tolist() == [[0, 1, 2]]
     assert as_triangle_array([], 3, name="m").shape == (0, 3)
     for bad, error, match in [
-        (np.array([[0, 1, 2.5]]), TypeError, r"mesh triangles must be an \(m, 3\) integer array, got dtype float64"),
+        (
+            np.array([[0, 1, 2.5]]),
+            TypeError,
+            r"mesh triangles must be an \(m, 3\) integer array, got dtype float64",
+        ),
         (np.array([[0.0, 1.0, 2.0]]), TypeError, "got dtype float64"),  # integral floats too: no silent cast
         (np.ones((1, 3), bool), TypeError, "got dtype bool"),
         (np.arange(6), ValueError, r"mesh triangles must have shape \(m, 3\), got \(6,\)"),
-        (np.array([[0, 1, 2**64 - 1]], dtype=np.uint64), ValueError,
-         r"mesh triangle indices must lie in \[0, 3\), got \[0, 1, 18446744073709551615\] at triangle 0"),
+        (
+            np.array([[0, 1, 2**64 - 1]], dtype=np.uint64),
+            ValueError,
+            r"mesh triangle indices must lie in \[0, 3\), got \[0, 1, 18446744073709551615\] at triangle 0",
+        ),
         (np.array([[0, 1, 2], [0, -1, 2]]), ValueError, r"got \[0, -1, 2\] at triangle 1"),
     ]:
         with pytest.raises(error, match=match):
@@ -195,7 +206,9 @@ def test_mesh_limit_is_inclusive_and_names_the_vertex():
     read_mesh((v * COORDINATE_LIMIT, f))
     big = v.copy()
     big[4, 1] = -1.5 * COORDINATE_LIMIT
-    with pytest.raises(ValueError, match=r"mesh vertices must have coordinates of magnitude at most 1e\+30 .* at vertex 4"):
+    with pytest.raises(
+        ValueError, match=r"mesh vertices must have coordinates of magnitude at most 1e\+30 .* at vertex 4"
+    ):
         read_mesh((big, f))
 
 
@@ -241,7 +254,10 @@ def test_tensor_with_integer_positions_gives_float_positions():
 @settings(max_examples=80, deadline=None)
 @given(
     value=st.one_of(
-        st.text(max_size=5), st.booleans(), st.complex_numbers(), st.none(),
+        st.text(max_size=5),
+        st.booleans(),
+        st.complex_numbers(),
+        st.none(),
         st.lists(st.text(max_size=3), min_size=1, max_size=3),
         st.lists(st.complex_numbers(allow_nan=False), min_size=3, max_size=3),
         st.lists(st.booleans(), min_size=3, max_size=3),

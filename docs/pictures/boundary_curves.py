@@ -28,7 +28,9 @@ def main() -> int:
     triangles = np.asarray(noisy.triangles)
     # Cut the cap above z = 0.2 (of the noisy positions, so the cut is jagged).
     keep = ~(vertices[triangles, 2] > 0.2).any(axis=1)
-    cut = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(vertices), o3d.utility.Vector3iVector(triangles[keep]))
+    cut = o3d.geometry.TriangleMesh(
+        o3d.utility.Vector3dVector(vertices), o3d.utility.Vector3iVector(triangles[keep])
+    )
     cut = cut.remove_unreferenced_vertices()
     plain = constrained_fairing(cut, number_of_iterations=20, smooth_boundary=False)
     faired = constrained_fairing(cut, number_of_iterations=20, smooth_boundary=True)

@@ -2,7 +2,6 @@
 
 from .boundary_curve import smooth_boundary_curves, smooth_boundary_curves_arrays
 from .constrained import constrained_fairing, constrained_fairing_arrays
-
 from .multiresolution import multiresolution_fairing, multiresolution_fairing_arrays
 
 __all__ = [

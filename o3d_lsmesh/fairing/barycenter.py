@@ -30,13 +30,13 @@ from .._solvers import SPDSolver, check_constant_modes, check_finite, operator_s
 from ..topology import _group, boundary_curves, unique_edges
 
 __all__ = [
-    "FairingTopology",
-    "fairing_topology",
-    "triangle_coefficients",
-    "LocalOperator",
-    "local_operator",
-    "GlobalSolver",
     "DEFAULT_MU",
+    "FairingTopology",
+    "GlobalSolver",
+    "LocalOperator",
+    "fairing_topology",
+    "local_operator",
+    "triangle_coefficients",
 ]
 
 #: Default penalty weight of :class:`GlobalSolver`, chosen by measurement
@@ -125,7 +125,7 @@ def triangle_coefficients(valences: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     M : (k, 3, 3) float64
     u : (k, 3) float64
     """
-    group, table, M, u = _valence_tables(valences)
+    group, _table, M, u = _valence_tables(valences)
     return M[group], u[group]
 
 
@@ -151,7 +151,9 @@ def _valence_tables(valences: np.ndarray):
         group = slot[keys]
     else:
         distinct, group = _sorted_groups(keys)
-    table = np.stack([distinct // (base * base), (distinct // base) % base, distinct % base], axis=1).astype(np.float64)
+    table = np.stack([distinct // (base * base), (distinct // base) % base, distinct % base], axis=1).astype(
+        np.float64
+    )
     g = len(table)
     A = np.repeat(np.eye(3)[None], g, axis=0) - (1.0 / table)[:, :, None] * (1.0 - np.eye(3))[None]
     kkt = np.zeros((g, 4, 4))
@@ -283,12 +285,18 @@ def local_operator(triangles: np.ndarray, topo: FairingTopology) -> LocalOperato
     def matrix(coefficients: np.ndarray) -> sp.csr_matrix:
         # entry (i_a, i_c) of every interior triangle, summed and divided by the row's count
         data = np.empty(nnz)
-        data[diagonal] = np.bincount(tri.ravel(), coefficients[:, [0, 1, 2], [0, 1, 2]][group].ravel(), minlength=n)
+        data[diagonal] = np.bincount(
+            tri.ravel(), coefficients[:, [0, 1, 2], [0, 1, 2]][group].ravel(), minlength=n
+        )
         data[diagonal] *= scale
         to_head = coefficients[:, [0, 1, 2], head][group].ravel()  # row i_s, column i_{s+1}
         to_tail = coefficients[:, head, [0, 1, 2]][group].ravel()  # row i_{s+1}, column i_s
-        data[forward] = np.bincount(slot_edge, np.where(tail_is_lo, to_head, to_tail), minlength=e) * scale[lo]
-        data[backward] = np.bincount(slot_edge, np.where(tail_is_lo, to_tail, to_head), minlength=e) * scale[hi]
+        data[forward] = (
+            np.bincount(slot_edge, np.where(tail_is_lo, to_head, to_tail), minlength=e) * scale[lo]
+        )
+        data[backward] = (
+            np.bincount(slot_edge, np.where(tail_is_lo, to_tail, to_head), minlength=e) * scale[hi]
+        )
         return sp.csr_matrix((data, indices, indptr), shape=(n, n))
 
     e1, e2 = matrix(alpha), matrix(beta)
@@ -320,7 +328,12 @@ class GlobalSolver:
     """
 
     def __init__(
-        self, triangles: np.ndarray, topo: FairingTopology, mu: float, *, solver: str = "auto",
+        self,
+        triangles: np.ndarray,
+        topo: FairingTopology,
+        mu: float,
+        *,
+        solver: str = "auto",
         progress: bool = False,
     ) -> None:
         from scipy.sparse import csgraph
@@ -352,7 +365,11 @@ class GlobalSolver:
             # a closed component is held in place only by mu |H 1|^2: a tiny mu lets it drift
             labels = csgraph.connected_components(self._normal, directed=False)[1]
             check_constant_modes(
-                self._normal @ np.ones(len(self.free)), labels, scale=operator_scale(K_F), name="mu", value=mu,
+                self._normal @ np.ones(len(self.free)),
+                labels,
+                scale=operator_scale(K_F),
+                name="mu",
+                value=mu,
                 what="the barycenter penalty",
             )
         backend = solver_backend(solver)

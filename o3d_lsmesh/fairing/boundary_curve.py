@@ -168,8 +168,12 @@ def curve_operator(curves: BoundaryCurves | list) -> CurveOperator:
 
     def matrix(part: int) -> sp.csr_matrix:
         rows = np.concatenate([np.searchsorted(vertex, block[0]) for block in blocks for _ in block[part]])
-        columns = np.searchsorted(support, np.concatenate([column for block in blocks for column, _ in block[part]]))
-        weights = np.concatenate([np.full(len(column), weight) for block in blocks for column, weight in block[part]])
+        columns = np.searchsorted(
+            support, np.concatenate([column for block in blocks for column, _ in block[part]])
+        )
+        weights = np.concatenate(
+            [np.full(len(column), weight) for block in blocks for column, weight in block[part]]
+        )
         out = sp.csr_matrix((weights * scale[rows], (rows, columns)), shape=(len(vertex), len(support)))
         out.sum_duplicates()
         return out

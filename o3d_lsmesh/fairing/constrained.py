@@ -45,8 +45,16 @@ def resolved_options(method: str | None, number_of_iterations: int | None, reimp
     return method, number_of_iterations
 
 
-def _check_options(number_of_iterations, method, mu, smooth_boundary, reimpose_every, progress, membrane=None,
-                   boundary_weight=None):
+def _check_options(
+    number_of_iterations,
+    method,
+    mu,
+    smooth_boundary,
+    reimpose_every,
+    progress,
+    membrane=None,
+    boundary_weight=None,
+):
     method, number_of_iterations = resolved_options(method, number_of_iterations, reimpose_every)
     method = as_choice(method, FAIRING_METHODS, name="method")
     if number_of_iterations is None:
@@ -54,20 +62,24 @@ def _check_options(number_of_iterations, method, mu, smooth_boundary, reimpose_e
     number_of_iterations = as_count(number_of_iterations, name="number_of_iterations")
     for name, value in (("membrane", membrane), ("boundary_weight", boundary_weight)):
         if value is not None and method != "scan":
-            raise ValueError(f"{name} must be None for method={method!r} (it weighs a term of method='scan'), got "
-                             f"{value}")
+            raise ValueError(
+                f"{name} must be None for method={method!r} (it weighs a term of method='scan'), got {value}"
+            )
     if membrane is not None:
         membrane = as_positive_float(membrane, name="membrane", allow_zero=True)
     if boundary_weight is not None:
         boundary_weight = as_positive_float(boundary_weight, name="boundary_weight")
     if method == "scan" and reimpose_every is not None:
-        raise ValueError(f"reimpose_every must be None for method='scan' (it is a local-operator option), got "
-                         f"{reimpose_every}")
+        raise ValueError(
+            f"reimpose_every must be None for method='scan' (it is a local-operator option), got "
+            f"{reimpose_every}"
+        )
     if mu is not None:
         mu = as_positive_float(mu, name="mu")
         if method == "local":
-            raise ValueError("mu must be None for method='local' (it weighs the penalty of method='global'), got "
-                             f"{mu}")
+            raise ValueError(
+                f"mu must be None for method='local' (it weighs the penalty of method='global'), got {mu}"
+            )
     if reimpose_every is not None:
         reimpose_every = as_count(reimpose_every, name="reimpose_every", minimum=1)
         if method == "global":
@@ -78,8 +90,10 @@ def _check_options(number_of_iterations, method, mu, smooth_boundary, reimpose_e
     smooth_boundary = as_bool(smooth_boundary, name="smooth_boundary")
     progress = check_progress(progress)
     if method == "scan" and not smooth_boundary:
-        raise ValueError("smooth_boundary must be True for method='scan' (its boundary moves with the surface; "
-                         "hold it fixed with method='global' or 'local'), got False")
+        raise ValueError(
+            "smooth_boundary must be True for method='scan' (its boundary moves with the surface; "
+            "hold it fixed with method='global' or 'local'), got False"
+        )
     options = (number_of_iterations, method, mu, bool(smooth_boundary), reimpose_every, bool(progress))
     return options, {"membrane": membrane, "boundary_weight": boundary_weight}
 
@@ -135,23 +149,39 @@ def constrained_fairing_arrays(
     >>> constrained_fairing_arrays(V, F, 5).shape
     (8, 3)
     """
-    options, extra = _check_options(number_of_iterations, method, mu, smooth_boundary, reimpose_every, progress,
-                                    membrane, boundary_weight)
+    options, extra = _check_options(
+        number_of_iterations, method, mu, smooth_boundary, reimpose_every, progress, membrane, boundary_weight
+    )
     data = read_mesh((vertices, triangles), name="mesh")
     return _fair(data.vertices, data.triangles, *options, solver=solver, **extra)
 
 
-def _fair(positions, triangles, number_of_iterations, method, mu, smooth_boundary, reimpose_every, progress, *,
-          membrane=None, boundary_weight=None, solver="auto"):
+def _fair(
+    positions,
+    triangles,
+    number_of_iterations,
+    method,
+    mu,
+    smooth_boundary,
+    reimpose_every,
+    progress,
+    *,
+    membrane=None,
+    boundary_weight=None,
+    solver="auto",
+):
     # validated arrays in, new (n, 3) positions out (``positions`` is a private copy)
     if number_of_iterations == 0:
         return positions
     if method == "scan":
         # one CHOLMOD factorization for now (the iterative path of ``solver`` serves "global" only)
         scan = ScanFairingSolver(
-            triangles, len(positions), mu=SCAN_MU if mu is None else mu,
+            triangles,
+            len(positions),
+            mu=SCAN_MU if mu is None else mu,
             membrane=SCAN_MEMBRANE if membrane is None else membrane,
-            boundary_weight=measured_boundary_weight(positions, triangles) if boundary_weight is None
+            boundary_weight=measured_boundary_weight(positions, triangles)
+            if boundary_weight is None
             else boundary_weight,
         )
         return scan.solve(positions, number_of_iterations=number_of_iterations)
@@ -399,7 +429,8 @@ def constrained_fairing(
     >>> bool(error(smooth) < error(noisy))
     True
     """
-    options, extra = _check_options(number_of_iterations, method, mu, smooth_boundary, reimpose_every, progress,
-                                    membrane, boundary_weight)
+    options, extra = _check_options(
+        number_of_iterations, method, mu, smooth_boundary, reimpose_every, progress, membrane, boundary_weight
+    )
     data = read_mesh(mesh, weld=True)
     return new_mesh(data, _fair(data.vertices.copy(), data.triangles, *options, solver=solver, **extra))

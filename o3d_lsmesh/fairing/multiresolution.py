@@ -49,7 +49,11 @@ def multiresolution_fairing_arrays(
 
 def _fair_level(positions: np.ndarray, triangles: np.ndarray, iterations: int, method: str) -> np.ndarray:
     return constrained_fairing_arrays(
-        positions, triangles, iterations, method=method, smooth_boundary=_simple_boundary(triangles, len(positions))
+        positions,
+        triangles,
+        iterations,
+        method=method,
+        smooth_boundary=_simple_boundary(triangles, len(positions)),
     )
 
 
@@ -157,7 +161,9 @@ def multiresolution_fairing(
     else:
         if not isinstance(hierarchy, MeshHierarchy):
             raise TypeError(f"hierarchy must be a MeshHierarchy, got {type(hierarchy).__name__}")
-        if len(hierarchy.vertices) != len(data.vertices) or not np.array_equal(hierarchy.triangles[0], data.triangles):
+        if len(hierarchy.vertices) != len(data.vertices) or not np.array_equal(
+            hierarchy.triangles[0], data.triangles
+        ):
             raise ValueError(
                 f"hierarchy must be built from mesh, got one of {len(hierarchy.vertices)} vertices and "
                 f"{len(hierarchy.triangles[0])} triangles for a mesh of {len(data.vertices)} and {len(data.triangles)}"
@@ -167,12 +173,25 @@ def multiresolution_fairing(
         if not np.array_equal(hierarchy.vertices, data.vertices):
             # same connectivity, new positions: the coarse levels take their positions from this mesh
             hierarchy = MeshHierarchy(
-                data.vertices, hierarchy.triangles, hierarchy.representatives, hierarchy.parents,
-                hierarchy.removed, hierarchy.targets, hierarchy.ring_offsets, hierarchy.rings,
-                hierarchy.independent, hierarchy.method, hierarchy.mesh_kind, hierarchy.tensor_format,
+                data.vertices,
+                hierarchy.triangles,
+                hierarchy.representatives,
+                hierarchy.parents,
+                hierarchy.removed,
+                hierarchy.targets,
+                hierarchy.ring_offsets,
+                hierarchy.rings,
+                hierarchy.independent,
+                hierarchy.method,
+                hierarchy.mesh_kind,
+                hierarchy.tensor_format,
             )
     positions = multiresolution_fairing_arrays(
-        hierarchy, level, number_of_iterations=number_of_iterations, final_iterations=final_iterations,
-        method=method, progress=bool(progress),
+        hierarchy,
+        level,
+        number_of_iterations=number_of_iterations,
+        final_iterations=final_iterations,
+        method=method,
+        progress=bool(progress),
     )
     return new_mesh(data, positions)

@@ -176,8 +176,15 @@ class ScanSystem:
         return self.penalty.T @ (self.penalty @ positions0)
 
 
-def scan_system(triangles: np.ndarray, n: int, *, mu: float, membrane: float, boundary_weight: float,
-                thin_plate: float = SCAN_THIN_PLATE) -> ScanSystem:
+def scan_system(
+    triangles: np.ndarray,
+    n: int,
+    *,
+    mu: float,
+    membrane: float,
+    boundary_weight: float,
+    thin_plate: float = SCAN_THIN_PLATE,
+) -> ScanSystem:
     """The least-squares rows of the scan energy for ``(m, 3) int64`` triangles on ``n`` vertices.
 
     No manifold condition: an edge of three or more triangles is an interior
@@ -244,12 +251,26 @@ class ScanFairingSolver:
     serialized by the solver's lock.
     """
 
-    def __init__(self, triangles: np.ndarray, n: int, *, mu: float, membrane: float, boundary_weight: float,
-                 thin_plate: float = SCAN_THIN_PLATE) -> None:
+    def __init__(
+        self,
+        triangles: np.ndarray,
+        n: int,
+        *,
+        mu: float,
+        membrane: float,
+        boundary_weight: float,
+        thin_plate: float = SCAN_THIN_PLATE,
+    ) -> None:
         self.mu = float(mu)
         self.membrane = float(membrane)
-        self.system = scan_system(triangles, n, mu=self.mu, membrane=self.membrane, boundary_weight=boundary_weight,
-                                  thin_plate=thin_plate)
+        self.system = scan_system(
+            triangles,
+            n,
+            mu=self.mu,
+            membrane=self.membrane,
+            boundary_weight=boundary_weight,
+            thin_plate=thin_plate,
+        )
         self._solver = SPDSolver(product_of=self.system.rows.T.tocsc(), ordering="amd")
 
     def filter(self, positions0: np.ndarray) -> np.ndarray:
@@ -259,7 +280,9 @@ class ScanFairingSolver:
         out[unused] = positions0[unused]
         return out
 
-    def solve(self, positions0: np.ndarray, *, number_of_iterations: int = 1, twice: bool = True) -> np.ndarray:
+    def solve(
+        self, positions0: np.ndarray, *, number_of_iterations: int = 1, twice: bool = True
+    ) -> np.ndarray:
         """``number_of_iterations`` filter passes (targets re-taken each time), then the twicing step."""
         positions = np.array(positions0, dtype=np.float64)
         for _ in range(number_of_iterations):

@@ -152,6 +152,14 @@ def collapse_level(
     if workspace is None:
         workspace = _kernel().Workspace()
     result = workspace.collapse_level(
-        vertices, triangles, locked, float(alpha), float(beta), limit, cos_sq, float(min_quality), int(max_tries)
+        vertices,
+        triangles,
+        locked,
+        float(alpha),
+        float(beta),
+        limit,
+        cos_sq,
+        float(min_quality),
+        int(max_tries),
     )
     return None if result is None else LevelCollapse(*result)

@@ -40,9 +40,13 @@ def _level_counts(levels: Any, n: int, min_vertices: int) -> np.ndarray:
         try:
             counts = np.asarray(levels)
         except Exception as error:  # ragged input
-            raise TypeError(f"levels must be an integer or a sequence of vertex counts, got {levels!r}") from error
+            raise TypeError(
+                f"levels must be an integer or a sequence of vertex counts, got {levels!r}"
+            ) from error
         if counts.ndim != 1 or counts.size == 0 or not np.issubdtype(counts.dtype, np.integer):
-            raise TypeError(f"levels must be an integer or a sequence of integer vertex counts, got {levels!r}")
+            raise TypeError(
+                f"levels must be an integer or a sequence of integer vertex counts, got {levels!r}"
+            )
         counts = counts.astype(np.int64)
         if np.any(counts < 4) or np.any(counts >= n) or np.any(np.diff(counts) >= 0):
             raise ValueError(
@@ -161,14 +165,22 @@ def from_fast_simplification(
     tris = [F]
     reps = [np.arange(n0, dtype=np.int64)]
     empty = np.zeros(0, dtype=np.int64)
-    parents, removed, targets, offsets, rings = [empty], [empty], [empty], [np.zeros(1, dtype=np.int64)], [empty]
+    parents, removed, targets, offsets, rings = (
+        [empty],
+        [empty],
+        [empty],
+        [np.zeros(1, dtype=np.int64)],
+        [empty],
+    )
     for prefix, mapping in mappings:
         n_prev = len(reps[-1])
         # nesting by construction: a level-(i-1) vertex goes where its input representative goes
         raw_parent = mapping[reps[-1]]
         # a component whose triangles all collapsed is mapped anywhere by the replay: merges stay
         # within the input's components (else split vertices land on another component)
-        raw_parent = np.unique(raw_parent * np.int64(n_components) + component[reps[-1]], return_inverse=True)[1]
+        raw_parent = np.unique(
+            raw_parent * np.int64(n_components) + component[reps[-1]], return_inverse=True
+        )[1]
         raw_parent = raw_parent.reshape(-1).astype(np.int64)
         used = np.zeros(int(raw_parent.max()) + 1, dtype=bool)
         used[raw_parent] = True
@@ -195,7 +207,9 @@ def from_fast_simplification(
         parent = renumber[parent]
         gone = np.flatnonzero(~keep)
         mapped = parent[tris[-1]]
-        alive = (mapped[:, 0] != mapped[:, 1]) & (mapped[:, 1] != mapped[:, 2]) & (mapped[:, 2] != mapped[:, 0])
+        alive = (
+            (mapped[:, 0] != mapped[:, 1]) & (mapped[:, 1] != mapped[:, 2]) & (mapped[:, 2] != mapped[:, 0])
+        )
         mapped = _drop_nonmanifold(_drop_duplicate_triangles(mapped[alive], n_new), n_new)
         adjacency = adjacency_matrix(tris[-1], n_prev)
         ring_offsets = np.r_[0, np.cumsum(np.diff(adjacency.indptr)[gone])].astype(np.int64)
@@ -208,8 +222,18 @@ def from_fast_simplification(
         offsets.append(ring_offsets)
         rings.append(ring)
     return MeshHierarchy(
-        V, tuple(tris), tuple(reps), tuple(parents), tuple(removed), tuple(targets), tuple(offsets),
-        tuple(rings), False, "fast_simplification", data.kind, _tensor_format(data),
+        V,
+        tuple(tris),
+        tuple(reps),
+        tuple(parents),
+        tuple(removed),
+        tuple(targets),
+        tuple(offsets),
+        tuple(rings),
+        False,
+        "fast_simplification",
+        data.kind,
+        _tensor_format(data),
     )
 
 
@@ -239,7 +263,7 @@ def _drop_nonmanifold(triangles: np.ndarray, n: int) -> np.ndarray:
     QEM collapses do not check the link condition and can fold three
     triangles onto one edge; constrained fairing needs an edge-manifold mesh.
     """
-    edges, counts, inverse = unique_edges(triangles, n)
+    _edges, counts, inverse = unique_edges(triangles, n)
     if not np.any(counts > 2):
         return triangles
     m = len(triangles)

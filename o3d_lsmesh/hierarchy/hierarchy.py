@@ -21,7 +21,13 @@ from .._validate import as_count, as_positions, as_positive_float
 from ..topology import adjacency_matrix, boundary_halfedges
 from .collapse import collapse_level, workspace
 
-__all__ = ["MeshHierarchy", "build_hierarchy", "build_hierarchy_arrays", "locked_vertices", "read_hierarchy_mesh"]
+__all__ = [
+    "MeshHierarchy",
+    "build_hierarchy",
+    "build_hierarchy_arrays",
+    "locked_vertices",
+    "read_hierarchy_mesh",
+]
 
 
 def _frozen(array: np.ndarray) -> np.ndarray:
@@ -80,7 +86,15 @@ class MeshHierarchy:
     def __post_init__(self) -> None:
         freeze = lambda seq: tuple(_frozen(a) for a in seq)
         object.__setattr__(self, "vertices", _frozen(self.vertices))
-        for name in ("triangles", "representatives", "parents", "removed", "targets", "ring_offsets", "rings"):
+        for name in (
+            "triangles",
+            "representatives",
+            "parents",
+            "removed",
+            "targets",
+            "ring_offsets",
+            "rings",
+        ):
             object.__setattr__(self, name, freeze(getattr(self, name)))
 
     def __setstate__(self, state: dict) -> None:
@@ -226,7 +240,9 @@ class MeshHierarchy:
             np.zeros((0, 3)), dtype=getattr(o3d.core, position_dtype.lower()), device=o3d.core.Device(device)
         )
         source.triangle.indices = o3d.core.Tensor(
-            np.zeros((0, 3), dtype=np.int64), dtype=getattr(o3d.core, index_dtype.lower()), device=o3d.core.Device(device)
+            np.zeros((0, 3), dtype=np.int64),
+            dtype=getattr(o3d.core, index_dtype.lower()),
+            device=o3d.core.Device(device),
         )
         return MeshData(empty_v, empty_t, source, "tensor")
 
@@ -239,7 +255,10 @@ def _umbrella_weights(triangles: np.ndarray, n: int) -> sp.csr_matrix:
         on_boundary = np.zeros(n, dtype=bool)
         on_boundary[boundary.ravel()] = True
         curve = sp.csr_matrix(
-            (np.ones(2 * len(boundary)), (np.r_[boundary[:, 0], boundary[:, 1]], np.r_[boundary[:, 1], boundary[:, 0]])),
+            (
+                np.ones(2 * len(boundary)),
+                (np.r_[boundary[:, 0], boundary[:, 1]], np.r_[boundary[:, 1], boundary[:, 0]]),
+            ),
             shape=(n, n),
         )
         inside = sp.diags((~on_boundary).astype(np.float64))
@@ -249,7 +268,9 @@ def _umbrella_weights(triangles: np.ndarray, n: int) -> sp.csr_matrix:
     return (sp.diags(inverse) @ adjacency).tocsr()
 
 
-def _harmonic_fill(weights: sp.csr_matrix, out: np.ndarray, removed: np.ndarray, kept: np.ndarray) -> np.ndarray:
+def _harmonic_fill(
+    weights: sp.csr_matrix, out: np.ndarray, removed: np.ndarray, kept: np.ndarray
+) -> np.ndarray:
     """Positions of ``removed`` that equal the ``weights`` average of their neighbours, kept vertices fixed."""
     import scipy.sparse.linalg as spla
 
@@ -324,7 +345,13 @@ def build_hierarchy_arrays(
     tris = [triangles]
     reps = [np.arange(n0, dtype=np.int64)]
     empty = np.zeros(0, dtype=np.int64)
-    parents, removed, targets, offsets, rings = [empty], [empty], [empty], [np.zeros(1, dtype=np.int64)], [empty]
+    parents, removed, targets, offsets, rings = (
+        [empty],
+        [empty],
+        [empty],
+        [np.zeros(1, dtype=np.int64)],
+        [empty],
+    )
     bar = None
     if progress:
         from tqdm.auto import tqdm
@@ -333,8 +360,13 @@ def build_hierarchy_arrays(
     positions = vertices
     while (max_levels is None or len(tris) - 1 < max_levels) and len(positions) > min_vertices:
         level = collapse_level(
-            positions, tris[-1], alpha=alpha, beta=beta, max_removals=len(positions) - min_vertices,
-            locked=locked[reps[-1]], workspace=buffers,
+            positions,
+            tris[-1],
+            alpha=alpha,
+            beta=beta,
+            max_removals=len(positions) - min_vertices,
+            locked=locked[reps[-1]],
+            workspace=buffers,
         )
         if level is None:
             break
@@ -353,8 +385,18 @@ def build_hierarchy_arrays(
     if bar is not None:
         bar.close()
     return MeshHierarchy(
-        vertices, tuple(tris), tuple(reps), tuple(parents), tuple(removed), tuple(targets), tuple(offsets),
-        tuple(rings), True, "volume", mesh_kind, tensor_format,
+        vertices,
+        tuple(tris),
+        tuple(reps),
+        tuple(parents),
+        tuple(removed),
+        tuple(targets),
+        tuple(offsets),
+        tuple(rings),
+        True,
+        "volume",
+        mesh_kind,
+        tensor_format,
     )
 
 
@@ -441,6 +483,13 @@ def build_hierarchy(
     data = read_hierarchy_mesh(mesh)
     warn_dropped_attributes(data, "hierarchy levels have new connectivity")
     return build_hierarchy_arrays(
-        data.vertices, data.triangles, alpha=alpha, beta=beta, min_vertices=min_vertices,
-        max_levels=max_levels, progress=bool(progress), mesh_kind=data.kind, tensor_format=_tensor_format(data),
+        data.vertices,
+        data.triangles,
+        alpha=alpha,
+        beta=beta,
+        min_vertices=min_vertices,
+        max_levels=max_levels,
+        progress=bool(progress),
+        mesh_kind=data.kind,
+        tensor_format=_tensor_format(data),
     )
