@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import dis
+import inspect
 import json
 import os
 import re
@@ -37,8 +38,8 @@ class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescript
     """``--help`` shows every option's default and keeps the examples' line breaks."""
 
     def _get_help_string(self, action: argparse.Action) -> str | None:
-        # an option whose default is resolved later (None standing for the API's choice) says so itself
-        if action.help and "(default:" in action.help:
+        # a required option has no default; one resolved later (None: the API's choice) says so itself
+        if action.required or (action.help and "(default:" in action.help):
             return action.help
         return super()._get_help_string(action)
 
@@ -54,31 +55,27 @@ class Parser(argparse.ArgumentParser):
 
 def add_command(
     sub: Any,
-    name: str,
     common: argparse.ArgumentParser,
     handler: Callable[[argparse.Namespace, Run], int],
-    *,
-    summary: str,
-    description: str,
-    example: str,
-    flags: dict[str, str] | None = None,
-    mesh_argument: str | None = None,
+    arguments: dict[str, str],
 ) -> argparse.ArgumentParser:
-    """Add subcommand ``name`` with its summary, description and an example in ``--help``.
+    """Add the subcommand ``handler.__name__`` with its positional ``arguments`` (name: help).
 
-    ``flags`` maps a CLI flag (``--unknown``) to the API parameter it feeds
-    (``unknown_vertex_indices``) and ``mesh_argument`` names the positional
-    argument holding the mesh the library calls "mesh" (``input``): a library
-    error then names what the user typed (:func:`cli_words`).
+    ``--help`` is the handler's docstring: its first line the summary, its last
+    paragraph (``example: ...``) the example, the paragraphs between the
+    description.
     """
+    summary, *body, example = inspect.cleandoc(handler.__doc__ or "").split("\n\n")
     parser = sub.add_parser(
-        name,
+        handler.__name__,
         parents=[common],
-        help=summary,
-        description=textwrap.fill(description, 79),
-        epilog=f"example:\n  {PROG} {name} {example}",
+        help=summary.rstrip("."),
+        description="\n\n".join(textwrap.fill(" ".join(p.split()), 79) for p in body),
+        epilog=f"example:\n  {PROG} {handler.__name__} {example.removeprefix('example: ')}",
     )
-    parser.set_defaults(handler=handler, api_names=flags or {}, mesh_argument=mesh_argument)
+    for name, text in arguments.items():
+        parser.add_argument(name, metavar=name.upper(), help=text)
+    parser.set_defaults(handler=handler, positionals=tuple(arguments))
     return parser
 
 
@@ -89,7 +86,7 @@ def int_at_least(minimum: int, description: str, maximum: int | None = None) -> 
         try:
             value = int(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"must be a {description} integer, got {text!r}") from None
+            value = minimum - 1
         if value < minimum:
             raise argparse.ArgumentTypeError(f"must be a {description} integer, got {text!r}")
         if maximum is not None and value > maximum:
@@ -135,8 +132,8 @@ class Run:
     """Output policy of one invocation: progress bars, human report, JSON."""
 
     def __init__(self, args: argparse.Namespace):
-        self.quiet = bool(getattr(args, "quiet", False))
-        self.json = bool(getattr(args, "json", False))
+        self.args = args
+        self.quiet, self.json = args.quiet, args.json
         self.progress = not self.quiet
         # with --json, stdout carries only the JSON object: the report goes to stderr
         self.stream = sys.stderr if self.json else sys.stdout
@@ -145,16 +142,21 @@ class Run:
         if not self.quiet:
             print(text, file=self.stream, flush=True)
 
-    def finish(self, report: dict) -> int:
+    def finish(self, mesh: Any = None, **fields: Any) -> int:
+        """With ``--json``, print the report: the command, its files, the mesh's size, then ``fields``."""
         if self.json:
-            print(json.dumps(report, indent=2, default=_jsonable), flush=True)
+            report = {
+                "command": self.args.command,
+                **{n: getattr(self.args, n) for n in self.args.positionals},
+            }
+            if mesh is not None:
+                report.update(vertices=len(mesh.vertices), triangles=len(mesh.triangles))
+            print(json.dumps({**report, **fields}, indent=2, default=_jsonable), flush=True)
         return 0
 
 
 def _jsonable(value: Any) -> Any:
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
+    if isinstance(value, (np.generic, np.ndarray)):
         return value.tolist()
     if isinstance(value, Path):
         return str(value)
@@ -163,6 +165,12 @@ def _jsonable(value: Any) -> Any:
 
 # --------------------------------------------------------------------------- errors
 
+#: API parameters whose CLI flag has another name; every other option's flag is its parameter's name.
+_FLAG_OF = {
+    "number_of_iterations": "iterations",
+    "unknown_vertex_indices": "unknown",
+    "number_of_points": "points",
+}
 #: Phrases of library messages that name an API option, and the CLI words the user typed instead.
 _PHRASES = (
     (r"smooth_boundary=False", "--fixed-boundary"),
@@ -175,14 +183,25 @@ _PHRASES = (
 
 
 def cli_words(text: str, args: argparse.Namespace | None) -> str:
-    """A library message in the words of the command line: CLI flags for API parameters, the file for "mesh"."""
-    for flag, param in getattr(args, "api_names", {}).items():
-        text = re.sub(rf"(?<![\w.-]){re.escape(param)}(?= must\b)", flag, text)
+    """A library message in the words of the command line: ``--count`` for ``count``, ``INPUT 'scan.ply'`` for ``mesh``.
+
+    A message of the library's checks starts "<parameter> must ..." (or "mesh
+    ..." about the input mesh); the parameter becomes the option of the same
+    name, or the positional argument (the file the user named).
+    """
+    positionals = getattr(args, "positionals", ())
+
+    def spell(api_name: str) -> str:
+        name = _FLAG_OF.get(api_name, api_name)
+        if name == "mesh" and "input" in positionals:
+            name = "input"
+        if name in positionals:
+            return f"{name.upper()} {getattr(args, name)!r}"
+        return "--" + name.replace("_", "-") if hasattr(args, name) else api_name
+
+    text = re.sub(r"^(mesh)\b|(?<![\w.-])([a-z][a-z_]*)(?= must\b)", lambda m: spell(m[1] or m[2]), text)
     for pattern, replacement in _PHRASES:
         text = re.sub(pattern, replacement, text)
-    argument = getattr(args, "mesh_argument", None)
-    if argument is not None:
-        text = re.sub(r"^mesh\b", lambda _: f"{argument.upper()} {getattr(args, argument)!r}", text)
     return text
 
 

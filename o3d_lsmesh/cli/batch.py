@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import textwrap
 import time
 from collections import Counter
 from typing import Any
@@ -13,27 +14,16 @@ from ._common import CLIError, Run, add_command
 
 
 def add_parsers(sub: Any, common: argparse.ArgumentParser) -> None:
-    p = add_command(
-        sub,
-        "batch",
-        common,
-        batch,
-        summary="run an operation over many files (Dask cluster or local)",
-        description="Run an operation over many mesh files, each as one task on a local Dask cluster "
-        "(default), an existing one (--scheduler), or in this process without Dask: Open3D is imported "
-        "once per worker, not once per file. "
-        f"Operations: {', '.join(f'{n} ({o.help})' for n, o in OPS.items())}.",
-        example="scans/ out/ --op fill,denoise --workers 2",
-    )
+    p = add_command(sub, common, batch, {})
     p.add_argument(
         "inputs", nargs="+", metavar="INPUT", help="files, folders (searched recursively) or globs"
     )
     p.add_argument("outdir", metavar="OUTDIR", help="folder for the outputs and the report")
+    p.set_defaults(positionals=("inputs", "outdir"))
+    operations = ", ".join(f"{name} ({op.help})" for name, op in OPS.items())
+    p.description = f"{p.description}\n\n" + textwrap.fill(f"Operations: {operations}.", 79)
     p.add_argument(
-        "--op",
-        required=True,
-        default=argparse.SUPPRESS,
-        help="an operation or a pipeline in order, e.g. denoise or denoise,compare",
+        "--op", required=True, help="an operation or a pipeline in order, e.g. denoise or denoise,compare"
     )
     p.add_argument("--set", action="append", default=[], metavar="OP.NAME=VALUE", help="an option of one op")
     p.add_argument("--workers", type=int, help="local worker processes (default: CPUs; 0: this process)")
@@ -86,7 +76,15 @@ def _option_flags(parser: argparse.ArgumentParser) -> None:
 
 
 def batch(args: argparse.Namespace, run: Run) -> int:
-    """Exit code 0 when every file succeeded, 2 when any failed or was cancelled."""
+    """Run an operation over many files (Dask cluster or local).
+
+    Run an operation, or a pipeline of them, over many mesh files, each as one task on a local Dask
+    cluster (default), an existing one (--scheduler), or in this process without Dask: Open3D is
+    imported once per worker, not once per file. Exit code 0 when every file succeeded, 2 when
+    any failed (the report lists why).
+
+    example: scans/ out/ --op fill,denoise --workers 2
+    """
     from ..batch import run as run_batch
     from ..batch import summarize
 
@@ -123,13 +121,10 @@ def batch(args: argparse.Namespace, run: Run) -> int:
     run.say(summarize(records, seconds))
     run.say(f"report: {report}")
     run.finish(
-        {
-            "command": "batch",
-            "op": args.op,
-            "report": report,
-            "seconds": seconds,
-            "counts": dict(counts),
-            "failed": [r["input"] for r in records if r["status"] == "failed"],
-        }
+        op=args.op,
+        report=report,
+        seconds=seconds,
+        counts=dict(counts),
+        failed=[r["input"] for r in records if r["status"] == "failed"],
     )
     return 0 if counts["failed"] == 0 and counts["cancelled"] == 0 else 2

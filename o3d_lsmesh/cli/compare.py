@@ -17,19 +17,7 @@ MAX_POINTS = 10_000_000
 
 
 def add_parsers(sub: Any, common: argparse.ArgumentParser) -> None:
-    p = add_command(
-        sub,
-        "compare",
-        common,
-        compare,
-        summary="metrics between two meshes",
-        description="Surface distance (sampled, both ways), vertex error and normal deviation when the "
-        "meshes correspond, volume, triangle angles and topology of both.",
-        example="clean.ply smooth.ply --json",
-        flags={"--points": "number_of_points"},
-    )
-    p.add_argument("a", metavar="A", help="first mesh file")
-    p.add_argument("b", metavar="B", help="second mesh file")
+    p = add_command(sub, common, compare, {"a": "first mesh file (the reference)", "b": "second mesh file"})
     p.add_argument(
         "--points",
         type=int_at_least(1, "positive", MAX_POINTS),
@@ -42,10 +30,7 @@ def add_parsers(sub: Any, common: argparse.ArgumentParser) -> None:
         help="write a distance map: A and B side by side, colored by distance to A, with a color bar",
     )
     p.add_argument(
-        "--units",
-        choices=("model", "edge"),
-        default="model",
-        help="units of the distance map: model units or mean edge lengths of A",
+        "--units", choices=("model", "edge"), default="model", help="model units or mean edge lengths of A"
     )
 
 
@@ -99,19 +84,20 @@ def draw(
 
 
 def compare(args: argparse.Namespace, run: Run) -> int:
+    """Metrics between two meshes.
+
+    Surface distance (sampled, both ways), vertex error and normal deviation when the meshes
+    correspond, volume, triangle angles and topology of both; with --render, a distance map.
+
+    example: clean.ply smooth.ply --json --render distance.png
+    """
     if args.render:
         check_output(args.render, [args.a, args.b], force=args.force, suffixes=(".png",))
     a, b = read_input(args.a, what="A"), read_input(args.b, what="B")
     from ..metrics import signed_volume, surface_distance, topology_summary, triangle_angles, vertex_error
 
-    report: dict[str, Any] = {
-        "command": "compare",
-        "a": args.a,
-        "b": args.b,
-        "size_a": mesh_size(a),
-        "size_b": mesh_size(b),
-        "surface_distance": surface_distance(a, b, number_of_points=args.points),
-    }
+    report: dict[str, Any] = {"a": args.a, "b": args.b, "size_a": mesh_size(a), "size_b": mesh_size(b)}
+    report["surface_distance"] = surface_distance(a, b, number_of_points=args.points)
     if len(a.vertices) == len(b.vertices):
         report["vertex_error"] = vertex_error(a, b)
         if np.array_equal(np.asarray(a.triangles), np.asarray(b.triangles)):
@@ -136,7 +122,7 @@ def compare(args: argparse.Namespace, run: Run) -> int:
             titles=[f"A: {Path(args.a).name} (reference)", f"B: {Path(args.b).name}"],
             colorbar_title="distance to A",
         )
-    return run.finish(report)
+    return run.finish(**report)
 
 
 def _lines(report: dict[str, Any]) -> list[str]:

@@ -12,16 +12,7 @@ MAX_SUBDIVISIONS = 9
 
 
 def add_parsers(sub: Any, common: argparse.ArgumentParser) -> None:
-    p = add_command(
-        sub,
-        "demo",
-        common,
-        demo,
-        summary="denoise a built-in mesh and compare with Open3D's filters",
-        description="Add noise to a built-in blob, denoise it with every method of this package and "
-        "Open3D's filters, and print a table of errors (and a picture).",
-        example="--out demo_out --subdivisions 5",
-    )
+    p = add_command(sub, common, demo, {})
     p.add_argument("--out", default="demo_out", help="output folder")
     p.add_argument("--no-render", action="store_true", help="skip the picture")
     p.add_argument(
@@ -35,6 +26,13 @@ def add_parsers(sub: Any, common: argparse.ArgumentParser) -> None:
 
 
 def demo(args: argparse.Namespace, run: Run) -> int:
+    """Denoise a built-in mesh and compare with Open3D's filters.
+
+    Add noise to a built-in blob, denoise it with every method of this package and Open3D's
+    filters, each at the best value of a small sweep, and print a table of errors (and a picture).
+
+    example: --out demo_out --subdivisions 5
+    """
     from ..demo import run_demo
 
     result = run_demo(
@@ -47,4 +45,4 @@ def demo(args: argparse.Namespace, run: Run) -> int:
         progress=run.progress,
         stream=run.stream,
     )
-    return run.finish({"command": "demo", **result})
+    return run.finish(**result)

@@ -7,34 +7,18 @@ import time
 from pathlib import Path
 from typing import Any
 
-from ._common import CLIError, Run, add_command, nonnegative_int, positive_int
+from ._common import WRITABLE, CLIError, Run, add_command, nonnegative_int, positive_int
 from ._files import check_output, read_input, write_output
-from .compare import change_report, draw, mesh_size
+from .compare import change_report, draw
 
 
 def add_parsers(sub: Any, common: argparse.ArgumentParser) -> None:
     p = add_command(
         sub,
-        "denoise",
         common,
         denoise,
-        summary="barycenter-constrained (or multiresolution) fairing",
-        description="Remove noise with barycenter-constrained fairing (Liu et al. 2001, section 3): the "
-        "membrane energy is minimized while every triangle keeps its barycenter. With "
-        "--level L, multiresolution fairing (section 4.2): fair a coarse level of the "
-        "volume-cost hierarchy, then split back up.",
-        example="scan.ply smooth.ply --iterations 20 --render before_after.png",
-        flags={
-            "--iterations": "number_of_iterations",
-            "--level": "level",
-            "--mu": "mu",
-            "--reimpose-every": "reimpose_every",
-            "--method": "method",
-        },
-        mesh_argument="input",
+        {"input": "mesh file to denoise", "output": f"mesh file to write ({', '.join(WRITABLE)})"},
     )
-    p.add_argument("input", metavar="INPUT", help="mesh file to denoise")
-    p.add_argument("output", metavar="OUTPUT", help="mesh file to write (.ply, .obj, .stl, .off, .gltf)")
     p.add_argument(
         "--iterations",
         type=nonnegative_int,
@@ -48,39 +32,38 @@ def add_parsers(sub: Any, common: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--level", type=nonnegative_int, default=0, help="multiresolution level (0: plain fairing)"
     )
-    p.add_argument(
-        "--mu", type=float, help="barycenter penalty weight of --method global or scan (not with --level)"
-    )
-    p.add_argument(
-        "--reimpose-every",
-        type=positive_int,
-        help="re-take the barycenters every k iterations (not with --level)",
-    )
+    p.add_argument("--mu", type=float, help="barycenter penalty weight of --method global or scan")
+    p.add_argument("--reimpose-every", type=positive_int, help="re-take the barycenters every k iterations")
     p.add_argument(
         "--fixed-boundary",
         action="store_true",
-        help="keep boundary vertices fixed instead of smoothing the boundary curves (not with --level)",
+        help="keep boundary vertices fixed (default: smooth the boundary curves)",
     )
     p.add_argument("--render", metavar="PNG", help="write a before/after picture")
 
 
 def denoise(args: argparse.Namespace, run: Run) -> int:
-    if args.level:
+    """Barycenter-constrained (or multiresolution) fairing.
+
+    Remove noise with barycenter-constrained fairing (Liu et al. 2001, section 3): the membrane
+    energy is minimized while every triangle keeps its barycenter. With --level L, multiresolution
+    fairing (section 4.2): fair a coarse level of the volume-cost hierarchy, then split back up
+    (--mu, --reimpose-every and --fixed-boundary are refused with it).
+
+    example: scan.ply smooth.ply --iterations 20 --render before_after.png
+    """
+    options = {
+        "--mu": args.mu,
+        "--reimpose-every": args.reimpose_every,
+        "--fixed-boundary": args.fixed_boundary or None,
+    }
+    given = [flag for flag, value in options.items() if value is not None]
+    if args.level and given:
         # multiresolution fairing fairs every level with its own defaults: these options would be ignored
-        given = [
-            flag
-            for flag, value in (
-                ("--mu", args.mu),
-                ("--reimpose-every", args.reimpose_every),
-                ("--fixed-boundary", args.fixed_boundary or None),
-            )
-            if value is not None
-        ]
-        if given:
-            raise CLIError(
-                f"{', '.join(given)} cannot be combined with --level (multiresolution fairing "
-                f"does not take {'them' if len(given) > 1 else 'it'}), got --level {args.level}"
-            )
+        raise CLIError(
+            f"{', '.join(given)} cannot be combined with --level "
+            f"(multiresolution fairing does not take {'them' if len(given) > 1 else 'it'}), got --level {args.level}"
+        )
     check_output(args.output, [args.input], force=args.force)
     if args.render:
         check_output(args.render, [args.input], force=args.force, suffixes=(".png",))
@@ -115,30 +98,19 @@ def denoise(args: argparse.Namespace, run: Run) -> int:
             progress=run.progress,
         )
     seconds = time.perf_counter() - start
-    report = {
-        "command": "denoise",
-        "input": args.input,
-        "output": args.output,
-        **mesh_size(mesh),
-        "method": args.method,
-        "iterations": args.iterations,
-        "level": args.level,
-        "seconds": seconds,
-        **change_report(mesh, out),
-    }
-    change = report["volume_change_percent"]
+    report = {"method": args.method, "iterations": args.iterations, "level": args.level, "seconds": seconds}
+    report.update(change_report(mesh, out))
     write_output(args.output, out)
+    change = report["volume_change_percent"]
     run.say(
-        f"denoised {args.input} ({report['vertices']} vertices) in {seconds:.2f} s -> {args.output}; "
+        f"denoised {args.input} ({len(mesh.vertices)} vertices) in {seconds:.2f} s -> {args.output}; "
         f"mean displacement {report['displacement_mean']:.4g}, volume change "
         + ("n/a (input volume 0)" if change is None else f"{change:.3f}%")
     )
     if args.render:
-        method = (
-            f"multiresolution fairing, level {args.level}"
-            if args.level
-            else f"{args.method} fairing" + (f", mu {args.mu:g}" if args.mu is not None else "")
-        )
+        method = f"{args.method} fairing" + (f", mu {args.mu:g}" if args.mu is not None else "")
+        if args.level:
+            method = f"multiresolution fairing, level {args.level}"
         titles = [f"input: {Path(args.input).name}", f"{method}, {args.iterations} iterations"]
         report["render"] = draw([mesh, out], args.render, run, titles=titles)
-    return run.finish(report)
+    return run.finish(mesh, **report)

@@ -11,32 +11,20 @@ import numpy as np
 
 from ._common import CLIError, Run, add_command, mesh_suffix, positive_int
 from ._files import check_output, read_input, write_output
-from .compare import mesh_size
 
 
 def add_parsers(sub: Any, common: argparse.ArgumentParser) -> None:
     p = add_command(
         sub,
-        "hierarchy",
         common,
         hierarchy,
-        summary="write levels of the volume-cost collapse hierarchy",
-        description="Build the volume-cost edge-collapse hierarchy (Liu et al. 2001, section 4.1) and "
-        "write the chosen levels as mesh files.",
-        example="bunny.ply levels/ --levels 0,2,4 --maps",
-        flags={"--min-vertices": "min_vertices", "--max-levels": "max_levels"},
-        mesh_argument="input",
+        {"input": "mesh file", "outdir": "folder for level_NN files (created if needed)"},
     )
-    p.add_argument("input", metavar="INPUT", help="mesh file")
-    p.add_argument("outdir", metavar="OUTDIR", help="folder for level_NN files (created if needed)")
     p.add_argument("--levels", default="all", help="'all' or comma-separated level numbers (0 is the input)")
     p.add_argument("--min-vertices", type=positive_int, default=100, help="stop at this many vertices")
     p.add_argument("--max-levels", type=positive_int, help="stop after this many levels (default: no limit)")
     p.add_argument(
-        "--format",
-        type=mesh_suffix,
-        default=".ply",
-        help="file format of the levels (ply, obj, stl, off, gltf)",
+        "--format", type=mesh_suffix, default=".ply", help="file format of the levels (.ply .obj ...)"
     )
     p.add_argument(
         "--maps", action="store_true", help="also write vertex_maps.npz (input vertex -> level vertex)"
@@ -56,6 +44,13 @@ def _parse_levels(spec: str, count: int) -> list[int]:
 
 
 def hierarchy(args: argparse.Namespace, run: Run) -> int:
+    """Write levels of the volume-cost collapse hierarchy.
+
+    Build the volume-cost edge-collapse hierarchy (Liu et al. 2001, section 4.1) and write the
+    chosen levels as mesh files, level_00 being the input.
+
+    example: bunny.ply levels/ --levels 0,2,4 --maps
+    """
     mesh = read_input(args.input)
     outdir = Path(args.outdir)
     if outdir.exists() and not outdir.is_dir():
@@ -69,7 +64,8 @@ def hierarchy(args: argparse.Namespace, run: Run) -> int:
     seconds = time.perf_counter() - start
     chosen = _parse_levels(args.levels, len(built))
     outdir.mkdir(parents=True, exist_ok=True)
-    files, maps = [], {}
+    files: list[str] = []
+    maps: dict[str, Any] = {}  # level name -> vertex map
     for level in chosen:
         path = str(outdir / f"level_{level:02d}{args.format}")
         check_output(path, [args.input], force=args.force, suffixes=None)
@@ -84,15 +80,4 @@ def hierarchy(args: argparse.Namespace, run: Run) -> int:
         f"hierarchy of {args.input}: {len(built)} levels ({counts[0]} -> {counts[-1]} vertices) "
         f"in {seconds:.2f} s; wrote {len(files)} files to {outdir}/"
     )
-    return run.finish(
-        {
-            "command": "hierarchy",
-            "input": args.input,
-            "outdir": str(outdir),
-            **mesh_size(mesh),
-            "levels": len(built),
-            "vertex_counts": counts,
-            "written": files,
-            "seconds": seconds,
-        }
-    )
+    return run.finish(mesh, levels=len(built), vertex_counts=counts, written=files, seconds=seconds)

@@ -12,101 +12,56 @@ import numpy as np
 
 from ._common import CLIError, Run, add_command, positive_int
 from ._files import check_output, read_input, write_output
-from .compare import mesh_size
 
 _SELECTION = ("greedy", "random", "combined")
 
 
 def add_parsers(sub: Any, common: argparse.ArgumentParser) -> None:
-    p = add_command(
-        sub,
-        "approximate",
-        common,
-        approximate,
-        summary="LS-mesh approximation from N control points",
-        description="Rebuild the geometry from the connectivity and N control points chosen on the "
-        "mesh (least-squares meshes, Sorkine and Cohen-Or 2004).",
-        example="bunny.ply approx.ply --count 400 --indices controls.npy",
-        flags={"--count": "count", "--method": "method", "--seed": "seed"},
-        mesh_argument="input",
-    )
-    p.add_argument("input", metavar="INPUT", help="mesh file")
-    p.add_argument("output", metavar="OUTPUT", help="mesh file to write")
-    # required options: default=SUPPRESS keeps "(default: None)" out of --help
-    p.add_argument(
-        "--count",
-        type=positive_int,
-        required=True,
-        default=argparse.SUPPRESS,
-        help="number of control points",
-    )
+    files = {"input": "mesh file", "output": "mesh file to write"}
+    p = add_command(sub, common, approximate, files)
+    p.add_argument("--count", type=positive_int, required=True, help="number of control points")
     p.add_argument("--method", choices=_SELECTION, default="greedy", help="how the control points are chosen")
     p.add_argument("--interpolate", action="store_true", help="interpolate the control points exactly")
     p.add_argument("--seed", type=int, default=0, help="random seed of --method random/combined")
     p.add_argument("--indices", metavar="FILE", help="also write the control indices (.npy or .txt)")
 
-    p = add_command(
-        sub,
-        "reconstruct",
-        common,
-        reconstruct,
-        summary="rebuild the geometry of unknown vertices",
-        description="Replace the positions of the --unknown vertices by the least-squares mesh of the "
-        "known ones (LS meshes, figures 5 and 8); known vertices stay as they are unless --soft.",
-        example="scan.ply filled.ply --unknown 0:100,250",
-        flags={"--unknown": "unknown_vertex_indices"},
-        mesh_argument="input",
-    )
-    p.add_argument("input", metavar="INPUT", help="mesh file")
-    p.add_argument("output", metavar="OUTPUT", help="mesh file to write")
+    p = add_command(sub, common, reconstruct, files)
     p.add_argument(
         "--unknown",
         required=True,
         metavar="SPEC",
-        default=argparse.SUPPRESS,
         help="index file (.npy or text) or list of indices and a:b ranges, e.g. '0:100,250'",
     )
     p.add_argument(
         "--soft", action="store_true", help="known vertices as soft constraints (whole mesh re-solved)"
     )
 
-    p = add_command(
-        sub,
-        "encode",
-        common,
-        encode,
-        summary="encode the geometry as quantized LS-mesh anchors",
-        description="Store the geometry as the quantized positions of a few anchors; decode rebuilds it "
-        "from the connectivity (geometry-aware bases, Sorkine et al.).",
-        example="bunny.ply bunny.lsm --count 500 --bits 12",
-        flags={"--count": "count", "--bits": "bits", "--method": "method"},
-        mesh_argument="input",
-    )
-    p.add_argument("input", metavar="INPUT", help="mesh file")
-    p.add_argument("output", metavar="OUTPUT", help="file for the encoded bytes")
+    p = add_command(sub, common, encode, {"input": "mesh file", "output": "file for the encoded bytes"})
     p.add_argument("--count", type=positive_int, help="anchors (default: 2%% of the vertices)")
     p.add_argument("--bits", type=positive_int, default=12, help="quantization bits per coordinate")
     p.add_argument("--method", choices=_SELECTION, default="greedy", help="how the anchors are chosen")
 
     p = add_command(
         sub,
-        "decode",
         common,
         decode,
-        summary="decode geometry onto a mesh's connectivity",
-        description="Rebuild the geometry stored by encode on the connectivity of MESH, from all its "
-        "anchors or the first K (progressive decoding).",
-        example="bunny.ply bunny.lsm decoded.ply --anchors 200",
-        flags={"--anchors": "anchors"},
-        mesh_argument="mesh",
+        {
+            "mesh": "mesh file the data was encoded on",
+            "data": "file written by encode",
+            "output": files["output"],
+        },
     )
-    p.add_argument("mesh", metavar="MESH", help="mesh file whose connectivity the data was encoded on")
-    p.add_argument("data", metavar="DATA", help="file written by encode")
-    p.add_argument("output", metavar="OUTPUT", help="mesh file to write")
     p.add_argument("--anchors", type=positive_int, help="use only the first K anchors (default: all)")
 
 
 def approximate(args: argparse.Namespace, run: Run) -> int:
+    """LS-mesh approximation from N control points.
+
+    Rebuild the geometry from the connectivity and N control points chosen on the mesh
+    (least-squares meshes, Sorkine and Cohen-Or 2004).
+
+    example: bunny.ply approx.ply --count 400 --indices controls.npy
+    """
     check_output(args.output, [args.input], force=args.force)
     if args.indices:
         check_output(args.indices, [args.input], force=args.force, suffixes=(".npy", ".txt"))
@@ -137,17 +92,12 @@ def approximate(args: argparse.Namespace, run: Run) -> int:
         f"L-inf error {error['linf']:.4g}, RMS {error['rms']:.4g}"
     )
     return run.finish(
-        {
-            "command": "approximate",
-            "input": args.input,
-            "output": args.output,
-            **mesh_size(mesh),
-            "count": len(indices),
-            "method": args.method,
-            "seconds": seconds,
-            "error_linf": error["linf"],
-            "error_rms": error["rms"],
-        }
+        mesh,
+        count=len(indices),
+        method=args.method,
+        seconds=seconds,
+        error_linf=error["linf"],
+        error_rms=error["rms"],
     )
 
 
@@ -210,6 +160,13 @@ def _index_file(path: str, n: int) -> np.ndarray:
 
 
 def reconstruct(args: argparse.Namespace, run: Run) -> int:
+    """Rebuild the geometry of unknown vertices.
+
+    Replace the positions of the --unknown vertices by the least-squares mesh of the known ones
+    (LS meshes, figures 5 and 8); known vertices stay as they are unless --soft.
+
+    example: scan.ply filled.ply --unknown 0:100,250
+    """
     check_output(args.output, [args.input], force=args.force)
     mesh = read_input(args.input)
     unknown = parse_index_spec(args.unknown, len(mesh.vertices))
@@ -225,20 +182,22 @@ def reconstruct(args: argparse.Namespace, run: Run) -> int:
         f"mean distance to the file's positions {moved.mean():.4g}"
     )
     return run.finish(
-        {
-            "command": "reconstruct",
-            "input": args.input,
-            "output": args.output,
-            **mesh_size(mesh),
-            "unknown": len(unknown),
-            "seconds": seconds,
-            "distance_to_input_mean": float(moved.mean()),
-            "distance_to_input_max": float(moved.max()),
-        }
+        mesh,
+        unknown=len(unknown),
+        seconds=seconds,
+        distance_to_input_mean=float(moved.mean()),
+        distance_to_input_max=float(moved.max()),
     )
 
 
 def encode(args: argparse.Namespace, run: Run) -> int:
+    """Encode the geometry as quantized LS-mesh anchors.
+
+    Store the geometry as the quantized positions of a few anchors; decode rebuilds it from the
+    connectivity (geometry-aware bases, Sorkine et al.).
+
+    example: bunny.ply bunny.lsm --count 500 --bits 12
+    """
     check_output(args.output, [args.input], force=args.force, suffixes=None)
     mesh = read_input(args.input)
     n = len(mesh.vertices)
@@ -256,23 +215,25 @@ def encode(args: argparse.Namespace, run: Run) -> int:
         f"({8.0 * len(data) / n:.3f} bits/vertex) in {seconds:.2f} s; decoded L-inf error {error['linf']:.4g}"
     )
     return run.finish(
-        {
-            "command": "encode",
-            "input": args.input,
-            "output": args.output,
-            **mesh_size(mesh),
-            "anchors": count,
-            "bits": args.bits,
-            "bytes": len(data),
-            "bits_per_vertex": 8.0 * len(data) / n,
-            "seconds": seconds,
-            "decoded_error_linf": error["linf"],
-            "decoded_error_rms": error["rms"],
-        }
+        mesh,
+        anchors=count,
+        bits=args.bits,
+        bytes=len(data),
+        bits_per_vertex=8.0 * len(data) / n,
+        seconds=seconds,
+        decoded_error_linf=error["linf"],
+        decoded_error_rms=error["rms"],
     )
 
 
 def decode(args: argparse.Namespace, run: Run) -> int:
+    """Decode geometry onto a mesh's connectivity.
+
+    Rebuild the geometry stored by encode on the connectivity of MESH, from all its anchors or
+    the first K (progressive decoding).
+
+    example: bunny.ply bunny.lsm decoded.ply --anchors 200
+    """
     check_output(args.output, [args.mesh, args.data], force=args.force)
     mesh = read_input(args.mesh, what="MESH")
     if not os.path.exists(args.data):
@@ -285,14 +246,4 @@ def decode(args: argparse.Namespace, run: Run) -> int:
     seconds = time.perf_counter() - start
     write_output(args.output, out)
     run.say(f"decoded {args.data} on the connectivity of {args.mesh} in {seconds:.2f} s -> {args.output}")
-    return run.finish(
-        {
-            "command": "decode",
-            "mesh": args.mesh,
-            "data": args.data,
-            "output": args.output,
-            **mesh_size(mesh),
-            "anchors": args.anchors,
-            "seconds": seconds,
-        }
-    )
+    return run.finish(mesh, anchors=args.anchors, seconds=seconds)
