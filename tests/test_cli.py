@@ -544,6 +544,35 @@ def test_internal_errors_show_a_traceback_and_exit_1(tmp_path, capsys, clean, mo
     assert "Traceback" in capsys.readouterr().err
 
 
+def test_only_expected_user_errors_exit_2(tmp_path, capsys, clean, monkeypatch):
+    import importlib
+
+    fairing = importlib.import_module("o3d_lsmesh.fairing")
+    source = _write(clean, tmp_path / "clean.ply")
+    argv = ["denoise", str(source), str(tmp_path / "out.ply"), "--quiet"]
+
+    def raising(error):
+        def function(*args, **kwargs):
+            raise error
+
+        return function
+
+    # I/O errors are the user's (a full disk, a folder without write permission): one line, exit 2
+    monkeypatch.setattr(
+        fairing, "constrained_fairing", raising(PermissionError(13, "Permission denied", "x.ply"))
+    )
+    assert run_error(capsys, argv) == "o3d-lsmesh: error: Permission denied: x.ply"
+    # a ValueError raised outside o3d_lsmesh (here: this test file), a RuntimeError from a solver, an
+    # AssertionError: internal errors, shown with their traceback and exit 1
+    for error in (ValueError("x must be 1"), RuntimeError("CHOLMOD failed"), AssertionError("bug")):
+        monkeypatch.setattr(fairing, "constrained_fairing", raising(error))
+        assert main(argv) == 1
+        err = capsys.readouterr().err
+        assert "Traceback (most recent call last):" in err and str(error) in err
+        assert err.splitlines()[-1].startswith("o3d-lsmesh: internal error")
+    # a picture that cannot be drawn is not a bug: one line, exit 1 (test_render_failure_exits_1)
+
+
 def test_library_checks_are_user_errors_naming_flags(tmp_path, capsys, clean):
     source = _write(clean, tmp_path / "clean.ply")
     line = run_error(capsys, ["encode", str(source), str(tmp_path / "x.bin"), "--bits", "40"])

@@ -251,13 +251,7 @@ def fail(text: str, code: int) -> int:
 def internal_error(error: BaseException) -> int:
     close_progress_bars()
     traceback.print_exception(type(error), error, error.__traceback__, file=sys.stderr)
-    print(
-        f"{PROG}: internal error (a bug in o3d-lsmesh, not in your input: please report it with the "
-        "traceback above)",
-        file=sys.stderr,
-        flush=True,
-    )
-    return 1
+    return fail(f"{PROG}: internal error (a bug in o3d-lsmesh, not in your input: please report it)", 1)
 
 
 def run_handler(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> int:
@@ -280,8 +274,6 @@ def run_handler(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> 
     except PictureError as error:
         return fail(str(error), 1)
     except KeyboardInterrupt:
-        close_progress_bars()
-        print(f"{PROG}: interrupted", file=sys.stderr)
-        return 130
+        return fail(f"{PROG}: interrupted", 130)
     except Exception as error:
         return internal_error(error)
