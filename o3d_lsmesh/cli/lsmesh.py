@@ -67,10 +67,10 @@ def approximate(args: argparse.Namespace, run: Run) -> int:
         check_output(args.indices, [args.input], force=args.force, suffixes=(".npy", ".txt"))
     mesh = read_input(args.input)
     from ..metrics import vertex_error
-    from ..selection import approximate
+    from ..selection import approximate as approximate_mesh
 
     start = time.perf_counter()
-    out, indices = approximate(
+    out, indices = approximate_mesh(
         mesh,
         args.count,
         method=args.method,
