@@ -711,6 +711,7 @@ def test_help_shows_defaults_description_and_example(capsys, command):
         if command == "batch" and "operation options" in text.split(entry)[0]:
             continue  # left to each op's default, which may differ between ops (listed in the op's help)
         assert "(default:" in " ".join(entry.split()), f"{command} {flag} does not show its default"
+    assert "(default: None)" not in text  # an unset option says what happens (never, no limit, the API's)
 
 
 def test_top_level_help_states_the_start_up_cost_and_points_to_batch(capsys):

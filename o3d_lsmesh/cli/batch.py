@@ -34,7 +34,9 @@ def add_parsers(sub: Any, common: argparse.ArgumentParser) -> None:
         metavar="ADDRESS",
         help="existing Dask scheduler, e.g. tcp://host:8786 (default: $DASK_SCHEDULER_ADDRESS)",
     )
-    where.add_argument("--scheduler-file", metavar="FILE", help="existing scheduler's JSON file")
+    where.add_argument(
+        "--scheduler-file", metavar="FILE", help="existing scheduler's JSON file (default: none)"
+    )
     p.add_argument(
         "--resume", action="store_true", help="skip inputs the report lists as ok with the same key"
     )

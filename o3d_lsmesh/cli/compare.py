@@ -27,7 +27,7 @@ def add_parsers(sub: Any, common: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--render",
         metavar="PNG",
-        help="write a distance map: A and B side by side, colored by distance to A, with a color bar",
+        help="write a distance map: A and B side by side, colored by distance to A (default: none)",
     )
     p.add_argument(
         "--units", choices=("model", "edge"), default="model", help="model units or mean edge lengths of A"

@@ -32,14 +32,20 @@ def add_parsers(sub: Any, common: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--level", type=nonnegative_int, default=0, help="multiresolution level (0: plain fairing)"
     )
-    p.add_argument("--mu", type=float, help="barycenter penalty weight of --method global or scan")
-    p.add_argument("--reimpose-every", type=positive_int, help="re-take the barycenters every k iterations")
+    p.add_argument(
+        "--mu", type=float, help="barycenter penalty weight of --method global or scan (default: the API's)"
+    )
+    p.add_argument(
+        "--reimpose-every",
+        type=positive_int,
+        help="re-take the barycenters every k iterations (default: never)",
+    )
     p.add_argument(
         "--fixed-boundary",
         action="store_true",
         help="keep boundary vertices fixed (default: smooth the boundary curves)",
     )
-    p.add_argument("--render", metavar="PNG", help="write a before/after picture")
+    p.add_argument("--render", metavar="PNG", help="write a before/after picture (default: none)")
 
 
 def denoise(args: argparse.Namespace, run: Run) -> int:

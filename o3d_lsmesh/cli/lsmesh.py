@@ -23,7 +23,11 @@ def add_parsers(sub: Any, common: argparse.ArgumentParser) -> None:
     p.add_argument("--method", choices=_SELECTION, default="greedy", help="how the control points are chosen")
     p.add_argument("--interpolate", action="store_true", help="interpolate the control points exactly")
     p.add_argument("--seed", type=int, default=0, help="random seed of --method random/combined")
-    p.add_argument("--indices", metavar="FILE", help="also write the control indices (.npy or .txt)")
+    p.add_argument(
+        "--indices",
+        metavar="FILE",
+        help="also write the control indices, .npy or .txt (default: not written)",
+    )
 
     p = add_command(sub, common, reconstruct, files)
     p.add_argument(
