@@ -32,10 +32,10 @@ from pathlib import Path
 import numpy as np
 import open3d as o3d
 
-from o3d_lsmesh.demo import add_noise, demo_mesh, mean_edge_length
 from o3d_lsmesh.fairing import constrained_fairing
 from o3d_lsmesh.metrics import signed_volume
 from o3d_lsmesh.rendering import render
+from o3d_lsmesh.shapes import add_noise, demo_mesh, mean_edge_length
 
 
 def main(argv=None) -> int:

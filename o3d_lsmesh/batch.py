@@ -27,7 +27,6 @@ suspect), and the scheduler's memory does not grow with the number of files.
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import glob
 import hashlib
@@ -62,8 +61,6 @@ __all__ = [
     "OPS",
     "BatchOp",
     "Option",
-    "add_parser",
-    "cmd_batch",
     "collect_inputs",
     "register_op",
     "run",
@@ -691,146 +688,3 @@ def summarize(records: Sequence[dict], seconds: float | None = None) -> str:
     if len(failed) > 20:
         lines.append(f"... and {len(failed) - 20} more failures (see the report)")
     return "\n".join(lines)
-
-
-# --------------------------------------------------------------------------- CLI
-
-
-def _option_flags(parser: argparse.ArgumentParser) -> None:
-    """One flag per option name of the registered ops; values are parsed per op by resolve_options."""
-    group = parser.add_argument_group(
-        "operation options (each applies to every op of the pipeline that has it; "
-        "--set OP.NAME=VALUE for one op)"
-    )
-    seen: dict[str, list[tuple[str, Option]]] = {}
-    for op in OPS.values():
-        for option in op.options:
-            seen.setdefault(option.name, []).append((op.name, option))
-    for name, owners in seen.items():
-        option = owners[0][1]
-        helps = {o.help for _, o in owners}
-        text = (
-            f"{option.help} [{', '.join(n for n, _ in owners)}]"
-            if len(helps) == 1
-            else "; ".join(f"{n}: {o.help}" for n, o in owners)
-        )
-        text = text.replace("%", "%%")  # argparse %-formats help
-        if option.is_flag:
-            group.add_argument(
-                option.cli_flag, dest=f"opt_{name}", action="store_true", default=argparse.SUPPRESS, help=text
-            )
-        else:
-            group.add_argument(
-                option.cli_flag, dest=f"opt_{name}", default=argparse.SUPPRESS, metavar="VALUE", help=text
-            )
-
-
-def add_parser(sub: Any, common: argparse.ArgumentParser | None = None) -> argparse.ArgumentParser:
-    """Register the ``batch`` subcommand on ``sub`` (the subparsers of the ``o3d-lsmesh`` parser)."""
-    parents = [common] if common is not None else []
-    p = sub.add_parser(
-        "batch",
-        parents=parents,
-        help="run an operation over many files (Dask cluster or local)",
-        description="Run an operation over many mesh files, each as one task on a local Dask cluster "
-        "(default), an existing one (--scheduler), or in this process without Dask. "
-        f"Operations: {', '.join(f'{n} ({o.help})' for n, o in OPS.items())}.",
-    )
-    p.add_argument(
-        "inputs", nargs="+", metavar="INPUT", help="files, folders (searched recursively) or globs"
-    )
-    p.add_argument("outdir", metavar="OUTDIR")
-    p.add_argument(
-        "--op", required=True, help="an operation or a pipeline in order, e.g. denoise or denoise,compare"
-    )
-    p.add_argument("--set", action="append", default=[], metavar="OP.NAME=VALUE", help="an option of one op")
-    p.add_argument(
-        "--workers", type=int, default=None, help="local worker processes (default CPUs; 0: this process)"
-    )
-    p.add_argument("--threads-per-worker", type=int, default=1, help="threads of each worker (default 1)")
-    where = p.add_mutually_exclusive_group()
-    where.add_argument(
-        "--scheduler",
-        default=None,
-        metavar="ADDRESS",
-        help="existing Dask scheduler, e.g. tcp://host:8786 (default: $DASK_SCHEDULER_ADDRESS)",
-    )
-    where.add_argument(
-        "--scheduler-file", default=None, metavar="FILE", help="existing scheduler's JSON file"
-    )
-    p.add_argument(
-        "--resume", action="store_true", help="skip inputs the report lists as ok with the same key"
-    )
-    p.add_argument(
-        "--report",
-        default=None,
-        metavar="FILE",
-        help="JSON-lines report, one record per file (default OUTDIR/batch_report.jsonl)",
-    )
-    p.add_argument("--retries", type=int, default=1, help="runs of a task whose worker died before it fails")
-    p.add_argument("--fail-fast", action="store_true", help="stop at the first failure")
-    p.add_argument("--suffix", default=".ply", help="output mesh format (.ply .obj .stl .off .gltf)")
-    _option_flags(p)
-    p.set_defaults(handler=cmd_batch)
-    return p
-
-
-def _run_for_cli(args: argparse.Namespace, options: dict, report: str) -> list[dict]:
-    return run(
-        args.inputs,
-        args.outdir,
-        op=args.op,
-        options=options,
-        workers=args.workers,
-        threads_per_worker=args.threads_per_worker,
-        scheduler=args.scheduler,
-        scheduler_file=args.scheduler_file,
-        resume=args.resume,
-        report=report,
-        retries=args.retries,
-        fail_fast=args.fail_fast,
-        suffix=args.suffix,
-        force=bool(getattr(args, "force", False)),
-        progress=not getattr(args, "quiet", False),
-    )
-
-
-def cmd_batch(args: argparse.Namespace, run_policy: Any = None) -> int:
-    """Handler of ``o3d-lsmesh batch``: exit code 0 when every file succeeded, 2 when any failed."""
-    quiet = bool(getattr(args, "quiet", False))
-    as_json = bool(getattr(args, "json", False))
-    options: dict[str, Any] = {k[4:]: v for k, v in vars(args).items() if k.startswith("opt_")}
-    for item in args.set:
-        if "=" not in item or "." not in item.split("=", 1)[0]:
-            raise ValueError(f"--set must look like OP.NAME=VALUE, got {item!r}")
-        name, value = item.split("=", 1)
-        options[name] = value
-    report = args.report if args.report is not None else os.path.join(args.outdir, "batch_report.jsonl")
-    start = time.perf_counter()
-    try:
-        records = _run_for_cli(args, options, report)
-    except ImportError as error:
-        from .cli import CLIError
-
-        raise CLIError(str(error)) from None
-    seconds = time.perf_counter() - start
-    counts = Counter(record["status"] for record in records)
-    if as_json:
-        print(
-            json.dumps(
-                {
-                    "command": "batch",
-                    "op": args.op,
-                    "report": report,
-                    "seconds": seconds,
-                    "counts": dict(counts),
-                    "failed": [r["input"] for r in records if r["status"] == "failed"],
-                },
-                indent=2,
-            ),
-            flush=True,
-        )
-    if not quiet:
-        print(summarize(records, seconds), file=sys.stderr if as_json else sys.stdout, flush=True)
-        print(f"report: {report}", file=sys.stderr if as_json else sys.stdout, flush=True)
-    return 0 if counts["failed"] == 0 and counts["cancelled"] == 0 else 2

@@ -25,8 +25,8 @@ from o3d_lsmesh import batch
 from o3d_lsmesh._batch_ops import OPS, BatchOp, Option, int_at_least
 from o3d_lsmesh._errors import O3DLSMeshWarning
 from o3d_lsmesh.cli import main
-from o3d_lsmesh.demo import add_noise, demo_mesh, mean_edge_length
 from o3d_lsmesh.fairing import constrained_fairing
+from o3d_lsmesh.shapes import add_noise, demo_mesh, mean_edge_length
 
 distributed = pytest.importorskip(
     "distributed", reason="dask.distributed is the batch engine: pip install '.[dask]'"

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import argparse
 import json
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -13,10 +15,10 @@ import open3d as o3d
 import pytest
 from conftest import REPO, load_mesh
 
-from o3d_lsmesh.cli import CLIError, main, parse_index_spec
-from o3d_lsmesh.demo import add_noise, demo_mesh, mean_edge_length
+from o3d_lsmesh.cli import CLIError, build_parser, main, parse_index_spec
 from o3d_lsmesh.fairing import constrained_fairing
 from o3d_lsmesh.metrics import signed_volume
+from o3d_lsmesh.shapes import add_noise, demo_mesh, mean_edge_length
 
 
 @pytest.fixture(scope="module")
@@ -303,7 +305,8 @@ def test_unreadable_and_empty_meshes(tmp_path, capsys, clean):
     source = _write(clean, tmp_path / "clean.ply")
     (tmp_path / "bad.bin").write_bytes(b"definitely not a stream")
     line = run_error(capsys, ["decode", str(source), str(tmp_path / "bad.bin"), str(tmp_path / "d.ply")])
-    assert line.startswith("o3d-lsmesh: error: data")
+    # the library's "data must ..." names the file the user gave as DATA
+    assert line.startswith(f"o3d-lsmesh: error: DATA '{tmp_path / 'bad.bin'}' must start with the magic")
     line = run_error(capsys, ["decode", str(source), str(tmp_path / "missing.bin"), str(tmp_path / "d.ply")])
     assert line.startswith("o3d-lsmesh: error: DATA")
 
@@ -321,7 +324,11 @@ def test_unreadable_and_empty_meshes(tmp_path, capsys, clean):
         (["reconstruct", "{src}", "{out}", "--unknown", "4:x"], "--unknown must be an existing index file"),
         (["hierarchy", "{src}", "{dir}", "--levels", "99"], "--levels must be in 0.."),
         (["hierarchy", "{src}", "{dir}", "--levels", "one"], "--levels must be 'all' or comma-separated"),
-        (["hierarchy", "{src}", "{dir}", "--format", "xyz"], "--format must be one of"),
+        (["hierarchy", "{src}", "{dir}", "--format", "xyz"], "--format: must be one of .ply, .obj"),
+        (
+            ["hierarchy", "{src}", "{dir}", "--format", "glb"],
+            "(Open3D writes .glb files it cannot read back: use .gltf)",
+        ),
         (["denoise", "{src}", "{dir}/out.xyz"], "must end in one of .ply, .obj, .stl, .off, .gltf"),
         (["denoise", "{src}", "{dir}/out.glb"], "(Open3D writes .glb files it cannot read back: use .gltf)"),
         (["denoise", "{src}", "{dir}/missing/out.ply"], "OUTPUT folder"),
@@ -537,6 +544,35 @@ def test_internal_errors_show_a_traceback_and_exit_1(tmp_path, capsys, clean, mo
     assert "Traceback" in capsys.readouterr().err
 
 
+def test_only_expected_user_errors_exit_2(tmp_path, capsys, clean, monkeypatch):
+    import importlib
+
+    fairing = importlib.import_module("o3d_lsmesh.fairing")
+    source = _write(clean, tmp_path / "clean.ply")
+    argv = ["denoise", str(source), str(tmp_path / "out.ply"), "--quiet"]
+
+    def raising(error):
+        def function(*args, **kwargs):
+            raise error
+
+        return function
+
+    # I/O errors are the user's (a full disk, a folder without write permission): one line, exit 2
+    monkeypatch.setattr(
+        fairing, "constrained_fairing", raising(PermissionError(13, "Permission denied", "x.ply"))
+    )
+    assert run_error(capsys, argv) == "o3d-lsmesh: error: Permission denied: x.ply"
+    # a ValueError raised outside o3d_lsmesh (here: this test file), a RuntimeError from a solver, an
+    # AssertionError: internal errors, shown with their traceback and exit 1
+    for error in (ValueError("x must be 1"), RuntimeError("CHOLMOD failed"), AssertionError("bug")):
+        monkeypatch.setattr(fairing, "constrained_fairing", raising(error))
+        assert main(argv) == 1
+        err = capsys.readouterr().err
+        assert "Traceback (most recent call last):" in err and str(error) in err
+        assert err.splitlines()[-1].startswith("o3d-lsmesh: internal error")
+    # a picture that cannot be drawn is not a bug: one line, exit 1 (test_render_failure_exits_1)
+
+
 def test_library_checks_are_user_errors_naming_flags(tmp_path, capsys, clean):
     source = _write(clean, tmp_path / "clean.ply")
     line = run_error(capsys, ["encode", str(source), str(tmp_path / "x.bin"), "--bits", "40"])
@@ -559,38 +595,176 @@ def test_error_during_a_bar_starts_its_own_line(tmp_path, capsys, clean, monkeyp
         bar.update(3)
         as_count(-1, name="number_of_iterations")  # a check of ours fails mid-bar
 
-    monkeypatch.setattr(importlib.import_module("o3d_lsmesh.fairing"), "constrained_fairing", failing)
+    def crashing(mesh, iterations, **kwargs):
+        bar = tqdm(total=10, desc="fairing")
+        bar.update(3)
+        return np.zeros(3) + np.zeros(2)  # a bug mid-bar: the traceback too starts on its own line
+
+    fairing = importlib.import_module("o3d_lsmesh.fairing")
     source = _write(clean, tmp_path / "clean.ply")
-    code = main(["denoise", str(source), str(tmp_path / "out.ply")])
-    err = capsys.readouterr().err
-    assert code == 2
-    last = err.splitlines()[-1]
-    assert last == "o3d-lsmesh: error: --iterations must be >= 0, got -1"
+    monkeypatch.setattr(fairing, "constrained_fairing", failing)
+    assert main(["denoise", str(source), str(tmp_path / "out.ply")]) == 2
+    lines = capsys.readouterr().err.splitlines()
+    assert lines[-1] == "o3d-lsmesh: error: --iterations must be >= 0, got -1"
+    assert "fairing:  30%" in lines[-2]  # the bar kept its own line, ended by a newline
+    monkeypatch.setattr(fairing, "constrained_fairing", crashing)
+    assert main(["denoise", str(source), str(tmp_path / "out.ply")]) == 1
+    lines = capsys.readouterr().err.splitlines()
+    assert "Traceback (most recent call last):" in lines
+    assert "fairing:  30%" in lines[lines.index("Traceback (most recent call last):") - 1]
 
 
-def test_no_one_step_progress_bars(tmp_path, capsys, clean):
-    source = _write(clean, tmp_path / "clean.ply")
-    for argv in (
-        ["compare", str(source), str(source), "--points", "200"],
-        ["reconstruct", str(source), str(tmp_path / "r.ply"), "--unknown", "0:5"],
-    ):
-        assert main(argv) == 0
-        err = capsys.readouterr().err
-        assert "0/1" not in err and "1/1" not in err
+_BAR = re.compile(r"^(?P<desc>[^\r\n]*?):\s+\d+%\|[^|]*\|\s*(?P<n>\d+)/(?P<total>\d+)")
 
 
-@pytest.mark.parametrize(
-    "command", ["denoise", "approximate", "reconstruct", "hierarchy", "encode", "decode", "compare", "demo"]
-)
+def _bars(err: str) -> dict[str, list[tuple[int, int]]]:
+    """Every state each tqdm bar printed, by description, in order."""
+    states: dict[str, list[tuple[int, int]]] = {}
+    for piece in re.split(r"[\r\n]+", err):
+        match = _BAR.match(piece.strip())
+        if match:
+            states.setdefault(match["desc"], []).append((int(match["n"]), int(match["total"])))
+    return states
+
+
+def test_approximate_bar_ends_at_its_count_on_a_mesh_of_several_pieces(tmp_path, capsys):
+    # one seed per component is placed before the greedy loop: the bar counts them (it ended at 399/400)
+    pieces = demo_mesh(4) + demo_mesh(3).translate((3, 0, 0)) + demo_mesh(2).translate((6, 0, 0))
+    source = _write(pieces, tmp_path / "three.ply")
+    assert main(["approximate", str(source), str(tmp_path / "a.ply"), "--count", "400"]) == 0
+    bars = _bars(capsys.readouterr().err)
+    assert bars, "no progress bar drawn"
+    for desc, states in bars.items():
+        assert states[-1] == (400, 400), (desc, states[-1])
+        assert all(total == 400 for _, total in states)
+
+
+def test_every_bar_ends_at_its_total_and_none_has_one_step(tmp_path, capsys, clean):
+    source = str(_write(clean, tmp_path / "clean.ply"))
+    holed = o3d.geometry.TriangleMesh(clean)
+    holed.remove_triangles_by_index(list(range(0, 40, 3)))
+    holed_file = str(_write(holed, tmp_path / "holed.ply"))
+    runs = [
+        ["denoise", source, str(tmp_path / "d.ply")],
+        ["denoise", source, str(tmp_path / "d.ply"), "--level", "2"],
+        ["denoise", source, str(tmp_path / "d.ply"), "--method", "global", "--iterations", "2"],
+        ["fill", holed_file, str(tmp_path / "f.ply")],
+        ["approximate", source, str(tmp_path / "a.ply"), "--count", "30", "--method", "combined"],
+        ["reconstruct", source, str(tmp_path / "r.ply"), "--unknown", "0:50"],
+        ["hierarchy", source, str(tmp_path / "levels"), "--levels", "0"],
+        ["encode", source, str(tmp_path / "c.bin"), "--count", "40"],
+        ["decode", source, str(tmp_path / "c.bin"), str(tmp_path / "e.ply")],
+        ["compare", source, str(tmp_path / "d.ply"), "--points", "500"],
+    ]
+    drawn = set()
+    for argv in runs:
+        assert main(argv) == 0, argv
+        for desc, states in _bars(capsys.readouterr().err).items():
+            n, total = states[-1]
+            assert n == total, (argv, desc, states[-1])
+            assert total > 1, (argv, desc, "a one-step bar is noise")
+            drawn.add(argv[0])
+    # the long operations show a bar (compare only samples and measures)
+    assert drawn >= {"denoise", "fill", "approximate", "reconstruct", "hierarchy", "encode", "decode"}
+
+
+def _commands() -> list[str]:
+    parser = build_parser()
+    (sub,) = (a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    return list(sub.choices)
+
+
+def test_every_subcommand_is_checked_below():
+    assert sorted(_commands()) == sorted(COMMANDS)
+
+
+COMMANDS = [
+    "denoise",
+    "fill",
+    "approximate",
+    "reconstruct",
+    "hierarchy",
+    "encode",
+    "decode",
+    "compare",
+    "batch",
+]
+COMMANDS += ["demo"]
+
+
+@pytest.mark.parametrize("command", COMMANDS)
 def test_help_shows_defaults_description_and_example(capsys, command):
     with pytest.raises(SystemExit) as exit_:
         main([command, "--help"])
     assert exit_.value.code == 0
     text = capsys.readouterr().out
-    assert "(default: " in text
     assert f"example:\n  o3d-lsmesh {command} " in text
     description = text.split("\n\n")[1]
     assert len(description.split()) >= 8  # a sentence, not a title
+    # every option (but --help, the required ones and the switches of batch's ops) names its default
+    options = re.split(r"\n  (?=-)", text.split("options:", 1)[1])[1:]
+    assert options
+    for entry in options:
+        flag = entry.split()[0].rstrip(",")
+        if flag in ("-h", "--help") or entry.startswith(("--op ", "--count COUNT", "--unknown SPEC")):
+            continue
+        if command == "batch" and "operation options" in text.split(entry)[0]:
+            continue  # left to each op's default, which may differ between ops (listed in the op's help)
+        assert "(default:" in " ".join(entry.split()), f"{command} {flag} does not show its default"
+    assert "(default: None)" not in text  # an unset option says what happens (never, no limit, the API's)
+
+
+def test_top_level_help_states_the_start_up_cost_and_points_to_batch(capsys):
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "Each call imports Open3D (about 2 s): for many files use 'o3d-lsmesh batch'" in text
+    for command in COMMANDS:
+        assert f" {command} " in text
+    readme = " ".join((REPO / "README.md").read_text().split())
+    assert "imports Open3D (about 2 s): for many files use `batch`" in readme
+
+
+@pytest.mark.parametrize(
+    "argv, expected",
+    [
+        (
+            ["denoise", "{src}", "{out}", "--fixed-boundary"],
+            "--fixed-boundary cannot be used with --method scan",
+        ),
+        (
+            ["denoise", "{src}", "{out}", "--method", "local", "--mu", "2"],
+            "--mu cannot be used with --method local",
+        ),
+        (
+            ["denoise", "{src}", "{out}", "--method", "scan", "--reimpose-every", "2"],
+            "--reimpose-every cannot",
+        ),
+        (["denoise", "{src}", "{out}", "--method", "global", "--mu", "0"], "--mu must be positive"),
+        (["denoise", "{src}", "{out}", "--level", "50"], "--level must be <"),
+        (["fill", "{src}", "{out}", "--max-hole-diameter", "-1"], "--max-hole-diameter must be positive"),
+        (["fill", "{src}", "{out}", "--density", "nan"], "--density must be"),
+        (
+            ["approximate", "{src}", "{out}", "--count", "10", "--method", "random", "--seed", "-1"],
+            "--seed must",
+        ),
+        (["encode", "{src}", "{dir}/x.bin", "--bits", "64"], "--bits must be <= "),
+        (
+            ["decode", "{src}", "{dir}/c.bin", "{out}", "--anchors", "1000"],
+            "--anchors must be <= 20, got 1000",
+        ),
+        (["reconstruct", "{src}", "{out}", "--unknown", "0:642"], "(outside --unknown)"),
+    ],
+)
+def test_errors_name_cli_flags_not_api_parameters(tmp_path, capsys, clean, argv, expected):
+    src = _write(clean, tmp_path / "clean.ply")
+    assert main(["encode", str(src), str(tmp_path / "c.bin"), "--count", "20", "--quiet"]) == 0
+    names = {"src": str(src), "out": str(tmp_path / "out.ply"), "dir": str(tmp_path)}
+    line = run_error(capsys, [a.format(**names) for a in argv])
+    assert expected in line
+    words = re.sub(r"'[^']*'", "", line)  # file names may hold anything
+    # no Python identifier (number_of_iterations, smooth_boundary, build_hierarchy) and no keyword=value
+    assert not re.search(r"\b[a-z]+_[a-z_]+\b|\w=", words), line
 
 
 def test_help_lists_the_real_defaults(capsys):
@@ -662,22 +836,25 @@ def test_out_of_memory_is_a_user_error(tmp_path, capsys, clean, monkeypatch):
 
 def test_flag_names_replace_api_names_in_library_messages():
     from o3d_lsmesh._validate import as_count
-    from o3d_lsmesh.cli import _flags
+    from o3d_lsmesh.cli._common import cli_words
 
-    with (
-        pytest.raises(CLIError, match=r"^--unknown must be >= 0, got -1$"),
-        _flags(unknown="unknown_vertex_indices"),
-    ):
-        as_count(-1, name="unknown_vertex_indices")
+    def message(call):
+        with pytest.raises((ValueError, TypeError)) as error:
+            call()
+        return str(error.value)
+
+    args = build_parser().parse_args(["reconstruct", "scan.ply", "out.ply", "--unknown", "0"])
+    text = message(lambda: as_count(-1, name="unknown_vertex_indices"))
+    assert cli_words(text, args) == "--unknown must be >= 0, got -1"
+    # a parameter name inside a longer word is left alone; the flag map is the subcommand's own
+    assert cli_words("my_unknown_vertex_indices must be x", args) == "my_unknown_vertex_indices must be x"
+    assert cli_words("count must be >= 1", args) == "count must be >= 1"
     # the fairing's advice for a boundary it cannot smooth names the CLI flag
-    with pytest.raises(CLIError, match=r"pass --fixed-boundary to keep it fixed"), _flags():
-        as_count(-1, name="boundary (pass smooth_boundary=False to keep it fixed)")
-    # an error that is not one of our checks passes through untouched (it is a bug, shown with its traceback)
-    with (
-        pytest.raises(ValueError, match="operands could not be broadcast"),
-        _flags(unknown="unknown_vertex_indices"),
-    ):
-        np.zeros(2) + np.zeros(3)
+    assert cli_words("boundary ... (pass smooth_boundary=False to keep it fixed)", None).endswith(
+        "(pass --fixed-boundary to keep it fixed)"
+    )
+    # "mesh" starting a message is the file the user named
+    assert cli_words("mesh must be a triangle mesh", args) == "INPUT 'scan.ply' must be a triangle mesh"
 
 
 def test_invalid_mesh_files_are_named_in_the_error(tmp_path, capsys, clean):
@@ -697,15 +874,6 @@ def test_invalid_mesh_files_are_named_in_the_error(tmp_path, capsys, clean):
 
 
 def test_messages_about_the_input_mesh_name_the_file(tmp_path, capsys, clean):
-    from o3d_lsmesh._validate import as_choice
-    from o3d_lsmesh.cli import _flags
-
-    # a check of ours whose message starts with "mesh" names the file instead
-    with (
-        pytest.raises(CLIError, match=r"^INPUT 'scan.ply' must be one of \['manifold'\], got 'x'$"),
-        _flags(mesh="INPUT 'scan.ply'"),
-    ):
-        as_choice("x", ["manifold"], name="mesh")
     # the decoder's mesh is MESH on the command line
     source = _write(clean, tmp_path / "clean.ply")
     other = _write(demo_mesh(2), tmp_path / "other.ply")

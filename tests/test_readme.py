@@ -13,7 +13,7 @@ def test_readme_tour_runs(tmp_path):
     assert 'o3d.io.read_triangle_mesh("scan.ply")' in code
     code = code.replace(
         'mesh = o3d.io.read_triangle_mesh("scan.ply")',
-        "from o3d_lsmesh.demo import demo_mesh\nmesh = demo_mesh(4)",
+        "from o3d_lsmesh.shapes import demo_mesh\nmesh = demo_mesh(4)",
     ).replace('"before_after.png"', repr(str(tmp_path / "before_after.png")))
     namespace: dict = {}
     try:

@@ -1,0 +1,7 @@
+"""``python -m o3d_lsmesh.cli`` (what ``make demo`` runs)."""
+
+import sys
+
+from . import main
+
+sys.exit(main())
