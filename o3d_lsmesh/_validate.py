@@ -28,6 +28,7 @@ __all__ = [
     "as_workers",
     "check_mesh_arrays",
     "isolated_vertices",
+    "mesh_arrays",
 ]
 
 
@@ -109,6 +110,36 @@ def check_mesh_arrays(
                 f"{name} must not have unreferenced vertices, got {len(isolated)} "
                 f"(first: vertex {int(isolated[0])}); remove_unreferenced_vertices() drops them"
             )
+
+
+def mesh_arrays(
+    vertices: Any, triangles: Any, *, name: str = "mesh", allow_isolated: bool = True
+) -> tuple[np.ndarray, np.ndarray]:
+    """The one check of a mesh given as arrays: new ``(n, 3) float64`` vertices and ``(m, 3) int64`` triangles.
+
+    Every array function and :func:`~o3d_lsmesh._o3d.read_mesh` (for every mesh kind) go through it:
+    :func:`as_vertex_array`, :func:`as_triangle_array` and :func:`check_mesh_arrays`. The results are
+    copies: the caller's arrays are never modified.
+
+    Raises
+    ------
+    TypeError
+        Positions that are not real numbers or indices that are not integers.
+    ValueError
+        Arrays not of shape ``(k, 3)``; an empty mesh, no triangles, non-finite or too large
+        coordinates, out-of-range indices, triangles repeating a vertex, or unreferenced vertices
+        when ``allow_isolated`` is False.
+
+    Examples
+    --------
+    >>> v, f = mesh_arrays([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]])
+    >>> v.dtype, f.dtype, f.shape
+    (dtype('float64'), dtype('int64'), (1, 3))
+    """
+    vertices = as_vertex_array(vertices, name=name)
+    triangles = as_triangle_array(triangles, len(vertices), name=name)
+    check_mesh_arrays(vertices, triangles, name=name, allow_isolated=allow_isolated)
+    return vertices, triangles
 
 
 def _check_magnitude(array: np.ndarray, *, what: str, row: str) -> None:

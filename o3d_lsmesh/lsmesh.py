@@ -16,13 +16,13 @@ import scipy.sparse as sp
 from scipy.sparse import csgraph
 
 from ._errors import SingularSystemError
-from ._o3d import MeshData, mesh_from_state, mesh_state, new_mesh, read_mesh, source_triangles
+from ._o3d import mesh_from_state, mesh_state, new_mesh, read_mesh
 from ._progress import check_progress, stages
 from ._solvers import SPDSolver, check_constant_modes, check_finite, operator_scale, solver_backend
 from ._validate import as_bool, as_choice, as_indices, as_positions, as_weights
 from .laplacian import LAPLACIAN_KINDS, laplacian_matrix
 
-__all__ = ["LSMeshSolver", "check_components_constrained", "ls_mesh", "reconstruct_geometry"]
+__all__ = ["LSMeshSolver", "LSMeshSystem", "check_components_constrained", "ls_mesh", "reconstruct_geometry"]
 
 
 def check_components_constrained(graph: sp.spmatrix, constrained: np.ndarray, *, what: str) -> np.ndarray:
@@ -45,75 +45,30 @@ def check_components_constrained(graph: sp.spmatrix, constrained: np.ndarray, *,
     return labels
 
 
-class LSMeshSolver:
-    """A least-squares mesh system with its Cholesky factor kept for editing.
+class LSMeshSystem:
+    """The array core of :class:`LSMeshSolver`: the least-squares mesh system on validated arrays.
 
-    Minimizes, separately for x, y and z (eq. 3 and section 6 of LS meshes)::
-
-        ||L X||^2 + sum_s w_s^2 |X_s - C_s|^2
-
-    over the vertex positions ``X (n, 3)`` for the control vertices ``s`` with
-    positions ``C_s`` and weights ``w_s``. The normal matrix ``L^T L + W^2`` is
-    analyzed and factored once, as the product ``A A^T`` of ``A = [L^T | W]``
-    (CHOLMOD assembles it while it factors, so it is never formed: less time
-    and memory than ``L^T L``); :meth:`solve` with new control positions is a
-    back-substitution (the editing use of section 6) and :meth:`add_anchors`
-    adds relaxed anchors by a rank-k update of the kept factor (section III of
-    the geometry-aware bases paper).
-
-    Parameters
-    ----------
-    mesh : open3d.geometry.TriangleMesh, open3d.t.geometry.TriangleMesh or (vertices, triangles)
-        Only its connectivity matters, and its positions as default control positions.
-    constraint_vertex_indices : (k,) int array-like
-        Control vertices, unique, in ``[0, n)``.
-    weights : float or (k,) array-like
-        Positive weights ``w_s`` of the soft constraints (ignored when ``interpolate``).
-    interpolate : bool
-        Interpolatory scheme (bases paper II.B): the control vertices are
-        eliminated from the unknowns and hit exactly; the system is
-        ``min ||L[:, free] x_free + L[:, ctrl] c||^2``.
-    laplacian : {"uniform", "cotangent"}
-        The smoothness operator; the paper's is ``"uniform"``.
-    backend : {"auto", "cholmod", "scipy"}
-        Passed to the solver gateway.
-    ordering : str
-        CHOLMOD's fill-reducing ordering, passed to :class:`~o3d_lsmesh.SPDSolver`;
-        ``"nesdis"`` makes :meth:`add_anchors` cheaper and factor/solve dearer.
-    solver : {"auto", "cholmod", "iterative"}
-        ``"auto"`` (default) factors the system unless the factor would exceed
-        the memory budget (half the available memory), then solves by
-        conjugate gradients with an AMG preconditioner; ``"iterative"`` forces
-        that path (``"auto"`` leaves the choice of direct backend to ``backend``).
-    tol : float, optional
-        Relative residual of the iterative path (default
-        :data:`o3d_lsmesh._solvers.DEFAULT_TOLERANCE`, CHOLMOD's result to about 1e-7).
-
-    Raises
-    ------
-    SingularSystemError
-        A connected component (or unreferenced vertex) has no control vertex.
+    ``vertices (n, 3) float64`` and ``triangles (m, 3) int64`` as
+    :func:`~o3d_lsmesh._validate.mesh_arrays` returns them (not checked again
+    here: the callers read them once), ``constraint_vertex_indices`` in their
+    numbering; the options and the methods are :class:`LSMeshSolver`'s, which
+    adds meshes, welding and the input's layout on top. :meth:`solve` returns
+    ``(n, 3)`` positions. Holds references to the arrays (for iterative
+    refinement and the default anchor positions), not copies: do not modify them.
 
     Examples
     --------
-    >>> import open3d as o3d, numpy as np
-    >>> sphere = o3d.geometry.TriangleMesh.create_sphere(resolution=10)
-    >>> solver = LSMeshSolver(sphere, [0, 5, 40, 90])
-    >>> solver.solve().shape == (len(sphere.vertices), 3)
-    True
-
-    Notes
-    -----
-    Thread-safe: :meth:`solve`, :meth:`mesh`, :meth:`add_anchors` and the
-    properties hold one lock, so a solve on one thread sees the system before
-    or after an update on another, never half of it. Pickles with its
-    factor's matrix (refactored on load) and returns meshes of the input's
-    kind after unpickling.
+    >>> import numpy as np
+    >>> from o3d_lsmesh._validate import mesh_arrays
+    >>> V, F = mesh_arrays([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 1]], [[0, 1, 2], [1, 3, 2]])
+    >>> LSMeshSystem(V, F, [0, 3], interpolate=True).solve().shape
+    (4, 3)
     """
 
     def __init__(
         self,
-        mesh: Any,
+        vertices: np.ndarray,
+        triangles: np.ndarray,
         constraint_vertex_indices: Any,
         *,
         weights: Any = 1.0,
@@ -124,12 +79,8 @@ class LSMeshSolver:
         solver: str = "auto",
         tol: float | None = None,
         progress: bool = False,
-        _release_arrays: bool = False,
     ) -> None:
-        # _release_arrays (for ls_mesh): drop the copied vertex and triangle arrays before
-        # CHOLMOD factors, the memory peak; mesh() and refinement of a relaxed system then fail
-        data = read_mesh(mesh)
-        n = len(data.vertices)
+        n = len(vertices)
         indices = as_indices(constraint_vertex_indices, n, name="constraint_vertex_indices")
         weights = as_weights(weights, len(indices), name="weights")
         as_choice(laplacian, LAPLACIAN_KINDS, name="laplacian")
@@ -138,7 +89,7 @@ class LSMeshSolver:
         # one lock makes an update and a solve on other threads exclusive (never a half-updated system)
         self._lock = threading.RLock()
         backend = solver_backend(solver, backend)
-        L = laplacian_matrix(data.vertices, data.triangles, laplacian).tocsr()
+        L = laplacian_matrix(vertices, triangles, laplacian).tocsr()
         labels = check_components_constrained(L, indices, what="control vertex")
         if not interpolate:
             # squares of huge weights overflow; tiny ones leave a component's translation to round-off
@@ -154,14 +105,14 @@ class LSMeshSolver:
                 what="the control weights",
             )
         del labels
-        self._data = data
+        self._vertices, self._triangles = vertices, triangles
         self.interpolate = bool(interpolate)
         self.laplacian = laplacian
         self._hard = indices if self.interpolate else np.zeros(0, dtype=np.int64)
         self._soft = np.zeros(0, dtype=np.int64) if self.interpolate else indices
         self._soft_weights = np.zeros(0) if self.interpolate else weights
         self._hard_weights = weights if self.interpolate else np.zeros(0)
-        self._positions = data.vertices[indices].copy()
+        self._positions = vertices[indices].copy()
         if self.interpolate:
             free = np.ones(n, dtype=bool)
             free[indices] = False
@@ -195,9 +146,6 @@ class LSMeshSolver:
         if self._free is not None:
             self._reduced = np.full(n, -1, dtype=np.int64)
             self._reduced[self._free] = np.arange(len(self._free))
-        if _release_arrays:
-            self._data = MeshData(None, None, data.source, data.kind)
-        del data
         options = {} if tol is None else {"tol": tol}
         self._solver = SPDSolver(
             product_of=product, backend=backend, ordering=ordering, progress=progress, **options
@@ -266,9 +214,7 @@ class LSMeshSolver:
         if self._updated if refine is None else refine:
             reduced_soft = self._reduce(self._soft)
             if self._operator is None:
-                self._operator = laplacian_matrix(
-                    self._data.vertices, self._data.triangles, self.laplacian
-                ).tocsr()
+                self._operator = laplacian_matrix(self._vertices, self._triangles, self.laplacian).tocsr()
             residual = -(self._operator.T @ (self._operator @ solution))
             if self.interpolate:
                 residual += self._rhs_hard @ hard_pos
@@ -280,10 +226,6 @@ class LSMeshSolver:
         result[self._free] = solution
         result[self._hard] = hard_pos
         return result
-
-    def mesh(self, constraint_vertex_positions: Any = None, *, refine: bool | None = None) -> Any:
-        """The least-squares mesh as a new mesh of the input's kind (see :meth:`solve`); also after unpickling."""
-        return new_mesh(self._data, self.solve(constraint_vertex_positions, refine=refine))
 
     def add_anchors(self, indices: Any, positions: Any = None, *, weights: Any = 1.0) -> None:
         """Add relaxed anchors by a CHOLMOD rank-k update of the kept factor (no refactoring).
@@ -310,12 +252,14 @@ class LSMeshSolver:
         existing = np.zeros(n, dtype=bool)
         existing[self.constraint_vertex_indices] = True
         if existing[new].any():
+            at = int(np.flatnonzero(existing[new])[0])
+            # the position names it in the caller's list too when LSMeshSolver welded the mesh
             raise ValueError(
-                f"indices must not already be control vertices, got {int(new[existing[new]][0])}"
+                f"indices must not already be control vertices, got {int(new[at])} at position {at}"
             )
         w = as_weights(weights, len(new), name="weights")
         if positions is None:
-            pos = self._data.vertices[new]
+            pos = self._vertices[new]
         else:
             pos = as_positions(positions, len(new), name="positions", limit=True)
         # one nonzero per column: build the CSC arrays directly (the COO route costs more than a small update)
@@ -330,14 +274,140 @@ class LSMeshSolver:
         with self._lock:
             state = self.__dict__.copy()
         del state["_lock"]
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._lock = threading.RLock()
+
+
+class LSMeshSolver(LSMeshSystem):
+    """A least-squares mesh system with its Cholesky factor kept for editing.
+
+    Minimizes, separately for x, y and z (eq. 3 and section 6 of LS meshes)::
+
+        ||L X||^2 + sum_s w_s^2 |X_s - C_s|^2
+
+    over the vertex positions ``X (n, 3)`` for the control vertices ``s`` with
+    positions ``C_s`` and weights ``w_s``. The normal matrix ``L^T L + W^2`` is
+    analyzed and factored once, as the product ``A A^T`` of ``A = [L^T | W]``
+    (CHOLMOD assembles it while it factors, so it is never formed: less time
+    and memory than ``L^T L``); :meth:`solve` with new control positions is a
+    back-substitution (the editing use of section 6) and :meth:`add_anchors`
+    adds relaxed anchors by a rank-k update of the kept factor (section III of
+    the geometry-aware bases paper).
+
+    Parameters
+    ----------
+    mesh : open3d.geometry.TriangleMesh, open3d.t.geometry.TriangleMesh or (vertices, triangles)
+        Only its connectivity matters, and its positions as default control positions.
+        Vertices at exactly equal coordinates (the copies a file reader makes
+        at UV seams) are welded into one; indices stay in the mesh's own
+        layout, an index to any copy naming the welded vertex, and
+        :meth:`solve` and :meth:`mesh` give every copy its position.
+    constraint_vertex_indices : (k,) int array-like
+        Control vertices, unique, in ``[0, n)``, at most one copy of a split vertex.
+    weights : float or (k,) array-like
+        Positive weights ``w_s`` of the soft constraints (ignored when ``interpolate``).
+    interpolate : bool
+        Interpolatory scheme (bases paper II.B): the control vertices are
+        eliminated from the unknowns and hit exactly; the system is
+        ``min ||L[:, free] x_free + L[:, ctrl] c||^2``.
+    laplacian : {"uniform", "cotangent"}
+        The smoothness operator; the paper's is ``"uniform"``.
+    backend : {"auto", "cholmod", "scipy"}
+        Passed to the solver gateway.
+    ordering : str
+        CHOLMOD's fill-reducing ordering, passed to :class:`~o3d_lsmesh.SPDSolver`;
+        ``"nesdis"`` makes :meth:`add_anchors` cheaper and factor/solve dearer.
+    solver : {"auto", "cholmod", "iterative"}
+        ``"auto"`` (default) factors the system unless the factor would exceed
+        the memory budget (half the available memory), then solves by
+        conjugate gradients with an AMG preconditioner; ``"iterative"`` forces
+        that path (``"auto"`` leaves the choice of direct backend to ``backend``).
+    tol : float, optional
+        Relative residual of the iterative path (default
+        :data:`o3d_lsmesh._solvers.DEFAULT_TOLERANCE`, CHOLMOD's result to about 1e-7).
+
+    Raises
+    ------
+    SingularSystemError
+        A connected component (or unreferenced vertex) has no control vertex.
+
+    Examples
+    --------
+    >>> import open3d as o3d, numpy as np
+    >>> sphere = o3d.geometry.TriangleMesh.create_sphere(resolution=10)
+    >>> solver = LSMeshSolver(sphere, [0, 5, 40, 90])
+    >>> solver.solve().shape == (len(sphere.vertices), 3)
+    True
+
+    Notes
+    -----
+    Thread-safe: :meth:`solve`, :meth:`mesh`, :meth:`add_anchors` and the
+    properties hold one lock, so a solve on one thread sees the system before
+    or after an update on another, never half of it. Pickles with its
+    factor's matrix (refactored on load) and returns meshes of the input's
+    kind after unpickling.
+    """
+
+    def __init__(
+        self,
+        mesh: Any,
+        constraint_vertex_indices: Any,
+        *,
+        weights: Any = 1.0,
+        interpolate: bool = False,
+        laplacian: str = "uniform",
+        backend: str = "auto",
+        ordering: str = "default",
+        solver: str = "auto",
+        tol: float | None = None,
+        progress: bool = False,
+    ) -> None:
+        data = read_mesh(mesh, weld=True)
+        self._data = data
+        indices = data.welded_indices(constraint_vertex_indices, name="constraint_vertex_indices")
+        super().__init__(
+            data.vertices,
+            data.triangles,
+            indices,
+            weights=weights,
+            interpolate=interpolate,
+            laplacian=laplacian,
+            backend=backend,
+            ordering=ordering,
+            solver=solver,
+            tol=tol,
+            progress=progress,
+        )
+
+    @property
+    def constraint_vertex_indices(self) -> np.ndarray:
+        """All control vertices in order, the initial ones then every added anchor (input's layout)."""
+        return self._data.source_indices(super().constraint_vertex_indices)
+
+    def solve(self, constraint_vertex_positions: Any = None, *, refine: bool | None = None) -> np.ndarray:
+        """Vertex positions ``(n, 3)`` in the input's layout; see :meth:`LSMeshSystem.solve`."""
+        return self._data.source_positions(super().solve(constraint_vertex_positions, refine=refine))
+
+    def mesh(self, constraint_vertex_positions: Any = None, *, refine: bool | None = None) -> Any:
+        """The least-squares mesh as a new mesh of the input's kind (see :meth:`solve`); also after unpickling."""
+        return new_mesh(self._data, super().solve(constraint_vertex_positions, refine=refine))
+
+    def add_anchors(self, indices: Any, positions: Any = None, *, weights: Any = 1.0) -> None:
+        """Add relaxed anchors (indices in the input's layout); see :meth:`LSMeshSystem.add_anchors`."""
+        super().add_anchors(self._data.welded_indices(indices, name="indices"), positions, weights=weights)
+
+    def __getstate__(self) -> dict:
+        state = super().__getstate__()
         # Open3D meshes do not pickle: keep arrays and what rebuilds a mesh of the input's kind
         state["_data"] = mesh_state(self._data)
         return state
 
     def __setstate__(self, state: dict) -> None:
         state["_data"] = mesh_from_state(state["_data"])
-        self.__dict__.update(state)
-        self._lock = threading.RLock()
+        super().__setstate__(state)
 
 
 def ls_mesh(
@@ -360,7 +430,8 @@ def ls_mesh(
 
     Parameters
     ----------
-    mesh : open3d.geometry.TriangleMesh or open3d.t.geometry.TriangleMesh
+    mesh : open3d.geometry.TriangleMesh, open3d.t.geometry.TriangleMesh or (vertices, triangles)
+        Split vertices (UV seams) are welded, indices given in its own layout (see :class:`LSMeshSolver`).
     constraint_vertex_indices : (k,) int array-like
     constraint_vertex_positions : (k, 3) array-like, optional
         Defaults to the mesh's own positions at those indices (approximation).
@@ -390,25 +461,25 @@ def ls_mesh(
     >>> len(out.vertices) == len(sphere.vertices)
     True
     """
-    # the solver holds no copy of the mesh while CHOLMOD factors, and the factor goes
-    # before the output mesh is built: a lower peak of memory on large meshes
+    data = read_mesh(mesh, weld=True)
+    indices = data.welded_indices(constraint_vertex_indices, name="constraint_vertex_indices")
     with stages(progress, "ls_mesh", ("factor", "solve")) as begin:
         begin("factor")
-        solver = LSMeshSolver(
-            mesh,
-            constraint_vertex_indices,
+        system = LSMeshSystem(
+            data.vertices,
+            data.triangles,
+            indices,
             weights=weights,
             interpolate=interpolate,
             laplacian=laplacian,
             solver=solver,
             tol=tol,
             progress=progress,
-            _release_arrays=True,
         )
         begin("solve")
-        vertices, data = solver.solve(constraint_vertex_positions), solver._data
-        del solver
-    return new_mesh(MeshData(None, source_triangles(data), data.source, data.kind), vertices)
+        vertices = system.solve(constraint_vertex_positions)
+        del system  # the factor goes before the output mesh is built
+    return new_mesh(data, vertices)
 
 
 def reconstruct_geometry(
@@ -433,9 +504,11 @@ def reconstruct_geometry(
 
     Parameters
     ----------
-    mesh : open3d.geometry.TriangleMesh or open3d.t.geometry.TriangleMesh
-        The positions of the unknown vertices are ignored.
+    mesh : open3d.geometry.TriangleMesh, open3d.t.geometry.TriangleMesh or (vertices, triangles)
+        The positions of the unknown vertices are ignored. Split vertices (UV
+        seams) are welded, as in :class:`LSMeshSolver`.
     unknown_vertex_indices : (u,) int array-like
+        In the mesh's own layout; any copy of a split vertex makes the welded vertex unknown.
     progress : bool
         Show a tqdm bar over the stages (factor, solve).
     solver, tol
@@ -454,9 +527,9 @@ def reconstruct_geometry(
     >>> np.asarray(out.vertices).shape == (len(sphere.vertices), 3)
     True
     """
-    data = read_mesh(mesh)
+    data = read_mesh(mesh, weld=True)
     n = len(data.vertices)
-    unknown = as_indices(unknown_vertex_indices, n, name="unknown_vertex_indices")
+    unknown = data.welded_indices(unknown_vertex_indices, name="unknown_vertex_indices", merge=True)
     known_mask = np.ones(n, dtype=bool)
     known_mask[unknown] = False
     known = np.flatnonzero(known_mask)
@@ -471,9 +544,17 @@ def reconstruct_geometry(
     with stages(progress, "reconstruct_geometry", ("factor", "solve")) as begin:
         begin("factor")
         if not interpolate:
-            solver = LSMeshSolver(mesh, known, weights=weights, laplacian=laplacian, solver=solver, tol=tol)
+            system = LSMeshSystem(
+                data.vertices,
+                data.triangles,
+                known,
+                weights=weights,
+                laplacian=laplacian,
+                solver=solver,
+                tol=tol,
+            )
             begin("solve")
-            return new_mesh(data, solver.solve())
+            return new_mesh(data, system.solve())
         L_unknown = L[:, unknown].tocsr()
         rows = np.flatnonzero(np.diff(L_unknown.indptr) > 0)  # rows touching an unknown vertex
         A = L_unknown[rows]
