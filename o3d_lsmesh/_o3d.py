@@ -354,7 +354,9 @@ def mesh_state(data: MeshData) -> dict:
         state["triangle_material_ids"] = (
             np.asarray(src.triangle_material_ids).copy() if src.has_triangle_material_ids() else None
         )
-        state["textures"] = [np.asarray(texture).copy() for texture in src.textures]
+        # as new_mesh copies them: only when the mesh has textures (readers may leave empty images)
+        textures = src.textures if src.has_textures() else []
+        state["textures"] = [None if t.is_empty() else np.asarray(t).copy() for t in textures]
         state["vertex_normals"] = bool(src.has_vertex_normals())
         state["triangle_normals"] = bool(src.has_triangle_normals())
     elif data.kind == "tensor":
@@ -417,7 +419,10 @@ def mesh_from_state(state: dict) -> MeshData:
             source.triangle_uvs = o3d.utility.Vector2dVector(state["triangle_uvs"])
         if state["triangle_material_ids"] is not None:
             source.triangle_material_ids = o3d.utility.IntVector(state["triangle_material_ids"])
-        source.textures = [o3d.geometry.Image(texture) for texture in state["textures"]]
+        source.textures = [
+            o3d.geometry.Image() if texture is None else o3d.geometry.Image(texture)
+            for texture in state["textures"]
+        ]
         if state["vertex_normals"]:
             source.compute_vertex_normals()
         if state["triangle_normals"]:

@@ -250,7 +250,7 @@ class LSMeshSystem:
         n = self._n
         new = as_indices(indices, n, name="indices")
         existing = np.zeros(n, dtype=bool)
-        existing[self.constraint_vertex_indices] = True
+        existing[self._hard] = existing[self._soft] = True  # (not the property: LSMeshSolver maps it)
         if existing[new].any():
             at = int(np.flatnonzero(existing[new])[0])
             # the position names it in the caller's list too when LSMeshSolver welded the mesh
