@@ -9,7 +9,7 @@ from __future__ import annotations
 import numbers
 import os
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, Literal, overload
 
 import numpy as np
 
@@ -214,6 +214,14 @@ def as_triangle_array(value: Any, n: int, *, name: str = "mesh") -> np.ndarray:
             f"{name} triangle indices must lie in [0, {n}), got {[int(i) for i in array[row]]} at triangle {row}"
         )
     return array.astype(np.int64)
+
+
+@overload
+def as_bool(value: Any, *, name: str, allow_none: Literal[False] = False) -> bool: ...
+
+
+@overload
+def as_bool(value: Any, *, name: str, allow_none: bool) -> bool | None: ...
 
 
 def as_bool(value: Any, *, name: str, allow_none: bool = False) -> bool | None:

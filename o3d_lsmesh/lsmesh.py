@@ -18,7 +18,14 @@ from scipy.sparse import csgraph
 from ._errors import SingularSystemError
 from ._o3d import mesh_from_state, mesh_state, new_mesh, read_mesh
 from ._progress import check_progress, stages
-from ._solvers import SPDSolver, check_constant_modes, check_finite, operator_scale, solver_backend
+from ._solvers import (
+    DEFAULT_TOLERANCE,
+    SPDSolver,
+    check_constant_modes,
+    check_finite,
+    operator_scale,
+    solver_backend,
+)
 from ._validate import as_bool, as_choice, as_indices, as_positions, as_weights
 from .laplacian import LAPLACIAN_KINDS, laplacian_matrix
 
@@ -116,7 +123,7 @@ class LSMeshSystem:
         if self.interpolate:
             free = np.ones(n, dtype=bool)
             free[indices] = False
-            self._free = np.flatnonzero(free)
+            self._free: np.ndarray | None = np.flatnonzero(free)
             L = L.tocsc()
             L_free = L[:, self._free]
             operator = L_free.tocsr()
@@ -146,9 +153,12 @@ class LSMeshSystem:
         if self._free is not None:
             self._reduced = np.full(n, -1, dtype=np.int64)
             self._reduced[self._free] = np.arange(len(self._free))
-        options = {} if tol is None else {"tol": tol}
         self._solver = SPDSolver(
-            product_of=product, backend=backend, ordering=ordering, progress=progress, **options
+            product_of=product,
+            backend=backend,
+            ordering=ordering,
+            progress=progress,
+            tol=DEFAULT_TOLERANCE if tol is None else tol,
         )
 
     def _reduce(self, indices: np.ndarray) -> np.ndarray:
@@ -561,7 +571,9 @@ def reconstruct_geometry(
         B = L[rows][:, known]
         normal = (A.T @ A).tocsc()
         rhs = -(A.T @ (B @ data.vertices[known]))
-        factor = SPDSolver(normal, backend=solver_backend(solver), **({} if tol is None else {"tol": tol}))
+        factor = SPDSolver(
+            normal, backend=solver_backend(solver), tol=DEFAULT_TOLERANCE if tol is None else tol
+        )
         begin("solve")
         vertices = data.vertices.copy()
         vertices[unknown] = factor.solve(rhs)

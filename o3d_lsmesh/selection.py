@@ -64,10 +64,8 @@ def start_vertices(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     n = len(vertices)
     count, labels = connected_components(triangles, n)
     size = np.bincount(labels, minlength=count).astype(np.float64)
-    centroid = np.stack(
-        [np.bincount(labels, weights=vertices[:, a], minlength=count) for a in range(3)], axis=1
-    )
-    centroid /= size[:, None]
+    sums = np.stack([np.bincount(labels, weights=vertices[:, a], minlength=count) for a in range(3)], axis=1)
+    centroid = sums / size[:, None]
     distance = np.einsum("ij,ij->i", vertices - centroid[labels], vertices - centroid[labels])
     # farthest first within each component; ties go to the smaller index (stable sort)
     order = np.lexsort((np.arange(n), -distance))
