@@ -131,18 +131,24 @@ def weld_map(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray | None:
     processed as it is). Welded vertices are numbered in order of first
     occurrence, so a mesh without duplicates keeps its numbering.
     """
-    if len(vertices) == 0:
+    n = len(vertices)
+    if n == 0:
         return None
-    # -0.0 == 0.0: add 0.0 so both have the same bytes in np.unique's row comparison
-    _, first, inverse = np.unique(vertices + 0.0, axis=0, return_index=True, return_inverse=True)
-    inverse = inverse.reshape(-1)
-    if len(first) == len(vertices):
+    # rows sorted by (x, y, z): equal rows become neighbours (a stable sort keeps each group in
+    # index order, so its first row is its first occurrence); -0.0 and 0.0 compare equal
+    order = np.lexsort(vertices.T[::-1])
+    ordered = vertices[order]
+    starts = np.ones(n, dtype=bool)
+    starts[1:] = (ordered[1:] != ordered[:-1]).any(axis=1)
+    if starts.all():
         return None
-    # renumber unique rows by first occurrence (np.unique numbers them in sorted order)
-    order = np.argsort(first, kind="stable")
-    rank = np.zeros_like(order)
-    rank[order] = np.arange(len(order))
-    split = rank[inverse].astype(np.int64)
+    group = np.empty(n, dtype=np.int64)
+    group[order] = np.cumsum(starts) - 1  # group of each vertex, groups in sorted order
+    first = order[starts]  # first occurrence of each group
+    # renumber the groups by first occurrence
+    rank = np.empty(len(first), dtype=np.int64)
+    rank[np.argsort(first, kind="stable")] = np.arange(len(first))
+    split = rank[group]
     welded = split[triangles]  # (m, 3)
     if np.any(
         (welded[:, 0] == welded[:, 1]) | (welded[:, 1] == welded[:, 2]) | (welded[:, 0] == welded[:, 2])
