@@ -8,6 +8,8 @@ import sys
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 o3d = pytest.importorskip("open3d")
 
@@ -56,6 +58,25 @@ def test_weld_map_reference():
     assert weld_map(vertices[:3], triangles[:1]) is None  # no duplicates
     # a triangle with two coincident corners would collapse: the mesh is not welded
     assert weld_map(vertices, np.array([[0, 1, 3]])) is None
+
+
+@settings(max_examples=150, deadline=None)
+@given(
+    rows=st.lists(st.sampled_from([-1.0, -0.0, 0.0, 0.5, 2.0]), min_size=3, max_size=3).map(tuple),
+    picks=st.lists(st.integers(0, 7), min_size=1, max_size=40),
+    seed=st.integers(0, 2**16),
+)
+def test_weld_map_groups_equal_rows_by_first_occurrence(rows, picks, seed):
+    pool = np.random.default_rng(seed).choice([-1.0, -0.0, 0.0, 0.5, 2.0], size=(8, 3))
+    pool[0] = rows
+    vertices = pool[picks]
+    split = weld_map(vertices, np.zeros((0, 3), dtype=np.int64))
+    index: dict = {}  # plain reference: number rows by first occurrence (-0.0 == 0.0 as dict keys)
+    expected = np.array([index.setdefault(tuple(p), len(index)) for p in vertices])
+    if len(index) == len(vertices):
+        assert split is None
+    else:
+        np.testing.assert_array_equal(split, expected)
 
 
 def test_read_mesh_weld_round_trip_arrays():
