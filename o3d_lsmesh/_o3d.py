@@ -89,26 +89,15 @@ class MeshData:
         """Check vertex indices given in the source's layout and return the welded vertices', ``(k,) int64``.
 
         An index to any copy of a split vertex means the welded vertex. Indices
-        must lie in ``[0, n_source)`` without repetition (:func:`~o3d_lsmesh._validate.as_indices`).
-        Two copies of one welded vertex are a ``ValueError`` when the indices go
-        with per-index data (positions, weights); ``merge=True`` (a set of
-        vertices, e.g. the unknown ones) merges them instead, in sorted order.
+        must lie in ``[0, n_source)`` without repetition (:func:`~o3d_lsmesh._validate.as_indices`);
+        two copies of one vertex give it twice (a list aligned with per-index data
+        such as positions keeps its length), or once with ``merge=True`` (a set
+        of vertices, e.g. the unknown ones; sorted).
         """
         if self.split is None:
             return as_indices(indices, len(self.vertices), name=name)
-        given = as_indices(indices, len(self.split), name=name)
-        welded = self.split[given]
-        if merge:
-            return np.unique(welded)
-        order = np.argsort(welded, kind="stable")
-        twice = np.flatnonzero(welded[order][1:] == welded[order][:-1])
-        if len(twice):
-            a, b = given[order[twice[0]]], given[order[twice[0] + 1]]
-            raise ValueError(
-                f"{name} must name each vertex once, got vertices {int(a)} and {int(b)}, two copies of one "
-                "vertex at the same position (the file's reader split it, e.g. at a UV seam); give one of them"
-            )
-        return welded
+        welded = self.split[as_indices(indices, len(self.split), name=name)]
+        return np.unique(welded) if merge else welded
 
     def source_indices(self, welded: np.ndarray) -> np.ndarray:
         """Indices of welded vertices in the source's layout: the first copy of each, ``(k,) int64``."""

@@ -271,8 +271,9 @@ def as_indices(
     *,
     name: str,
     allow_empty: bool = False,
+    allow_repeats: bool = False,
 ) -> np.ndarray:
-    """Return ``indices`` as a unique ``(k,) int64`` array of vertex indices in ``[0, n)``."""
+    """Return ``indices`` as a unique ``(k,) int64`` array of vertex indices in ``[0, n)`` (repeats if allowed)."""
     if isinstance(indices, (str, bytes)) or indices is None:
         raise TypeError(f"{name} must be a sequence of integer vertex indices, got {_describe(indices)}")
     try:
@@ -305,6 +306,8 @@ def as_indices(
             f"{name} must lie in [0, {n}), got {int(array[bad][0])} at position {int(np.flatnonzero(bad)[0])}"
         )
     array = array.astype(np.int64)
+    if allow_repeats:
+        return array
     order = np.sort(array)
     dup = order[1:] == order[:-1]
     if dup.any():

@@ -88,7 +88,10 @@ class LSMeshSystem:
         progress: bool = False,
     ) -> None:
         n = len(vertices)
-        indices = as_indices(constraint_vertex_indices, n, name="constraint_vertex_indices")
+        # a vertex named twice (two copies of a welded vertex) is two terms of the energy
+        indices = as_indices(
+            constraint_vertex_indices, n, name="constraint_vertex_indices", allow_repeats=True
+        )
         weights = as_weights(weights, len(indices), name="weights")
         as_choice(laplacian, LAPLACIAN_KINDS, name="laplacian")
         interpolate = as_bool(interpolate, name="interpolate")
@@ -131,7 +134,11 @@ class LSMeshSystem:
             # L_free^T in CSC is L_free's CSR arrays, shared with the refinement operator
             product = operator.T
             # right-hand side operator: -L_free^T L_ctrl maps control positions to the free rhs
-            self._rhs_hard = -(L_free.T @ L[:, indices]).tocsr()
+            # a vertex fixed twice is one column: its positions must agree (checked by _solve)
+            _, first, self._hard_groups = np.unique(indices, return_index=True, return_inverse=True)
+            self._hard_first = first if len(first) < len(indices) else None
+            columns = indices if self._hard_first is None else indices[first]
+            self._rhs_hard = -(L_free.T @ L[:, columns]).tocsr()
         else:
             self._free = None  # every vertex is unknown: no index arrays to hold
             # L^T L + W^2 = A A^T for A = [L^T | W] (one weighted column per control vertex):
@@ -141,6 +148,7 @@ class LSMeshSystem:
             # rebuilt on demand for refinement: not holding it while CHOLMOD factors lowers the peak memory
             operator = None
             self._rhs_hard = None
+            self._hard_first = None
         # the Laplacian (of the free columns) serves the residual of iterative refinement:
         # L^T (L x) needs a third of the memory of L^T L
         self._operator = operator
@@ -214,11 +222,13 @@ class LSMeshSystem:
                 constraint_vertex_positions, k, name="constraint_vertex_positions", limit=True
             )
         hard_pos, soft_pos = positions[: len(self._hard)], positions[len(self._hard) :]
+        fixed = hard_pos if self._hard_first is None else self._fixed_positions(hard_pos)
         rhs = np.zeros((self._unknowns, 3))
         if self.interpolate:
-            rhs += self._rhs_hard @ hard_pos
+            rhs += self._rhs_hard @ fixed
         with np.errstate(over="ignore", invalid="ignore"):  # overflow is reported by name below
-            rhs[self._reduce(self._soft)] += (self._soft_weights**2)[:, None] * soft_pos
+            # add.at: a vertex named twice takes both terms
+            np.add.at(rhs, self._reduce(self._soft), (self._soft_weights**2)[:, None] * soft_pos)
         check_finite(rhs, name="constraint_vertex_positions", what="weights**2 * constraint_vertex_positions")
         solution = self._solver.solve(rhs)
         if self._updated if refine is None else refine:
@@ -227,8 +237,10 @@ class LSMeshSystem:
                 self._operator = laplacian_matrix(self._vertices, self._triangles, self.laplacian).tocsr()
             residual = -(self._operator.T @ (self._operator @ solution))
             if self.interpolate:
-                residual += self._rhs_hard @ hard_pos
-            residual[reduced_soft] += (self._soft_weights**2)[:, None] * (soft_pos - solution[reduced_soft])
+                residual += self._rhs_hard @ fixed
+            np.add.at(
+                residual, reduced_soft, (self._soft_weights**2)[:, None] * (soft_pos - solution[reduced_soft])
+            )
             solution = solution + self._solver.solve(residual)
         if not self.interpolate:
             return solution
@@ -236,6 +248,19 @@ class LSMeshSystem:
         result[self._free] = solution
         result[self._hard] = hard_pos
         return result
+
+    def _fixed_positions(self, hard_pos: np.ndarray) -> np.ndarray:
+        """One position per distinct fixed vertex; the rows naming one vertex must agree."""
+        fixed = hard_pos[self._hard_first]
+        differ = (fixed[self._hard_groups] != hard_pos).any(axis=1)
+        if differ.any():
+            row = int(np.flatnonzero(differ)[0])
+            raise ValueError(
+                "constraint_vertex_positions must agree where constraint_vertex_indices name one vertex "
+                f"twice (copies of a welded vertex) with interpolate=True, got {hard_pos[row].tolist()} at "
+                f"row {row} and {fixed[self._hard_groups[row]].tolist()}"
+            )
+        return fixed
 
     def add_anchors(self, indices: Any, positions: Any = None, *, weights: Any = 1.0) -> None:
         """Add relaxed anchors by a CHOLMOD rank-k update of the kept factor (no refactoring).
@@ -258,7 +283,7 @@ class LSMeshSystem:
 
     def _add_anchors(self, indices: Any, positions: Any, weights: Any) -> None:
         n = self._n
-        new = as_indices(indices, n, name="indices")
+        new = as_indices(indices, n, name="indices", allow_repeats=True)
         existing = np.zeros(n, dtype=bool)
         existing[self._hard] = existing[self._soft] = True  # (not the property: LSMeshSolver maps it)
         if existing[new].any():
@@ -316,7 +341,9 @@ class LSMeshSolver(LSMeshSystem):
         layout, an index to any copy naming the welded vertex, and
         :meth:`solve` and :meth:`mesh` give every copy its position.
     constraint_vertex_indices : (k,) int array-like
-        Control vertices, unique, in ``[0, n)``, at most one copy of a split vertex.
+        Control vertices, unique, in ``[0, n)``. Two copies of a split vertex
+        name it twice: two terms of the energy (with ``interpolate``, their
+        positions must agree).
     weights : float or (k,) array-like
         Positive weights ``w_s`` of the soft constraints (ignored when ``interpolate``).
     interpolate : bool

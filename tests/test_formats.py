@@ -291,10 +291,17 @@ def test_ls_mesh_on_split_obj_equals_the_welded_mesh_and_honours_indices(tmp_pat
     soft = o3d_lsmesh.ls_mesh(mesh, controls, weights=3.0)
     ref_soft, _ = o3d_lsmesh.ls_mesh((welded, welded_t), split[controls], weights=3.0)
     np.testing.assert_allclose(np.asarray(soft.vertices), ref_soft[split], rtol=0, atol=1e-10)
-    with pytest.raises(
-        ValueError, match=rf"constraint_vertex_indices must name each vertex once, got vertices {a} and {b}"
-    ):
-        o3d_lsmesh.ls_mesh(mesh, [first[3], a, b])
+    # both copies of one vertex: two terms on it (soft: weight sqrt(2)); interpolate: one fixed vertex
+    both = np.append(controls, a)
+    twice = o3d_lsmesh.ls_mesh(mesh, both, weights=3.0)
+    ref_twice, _ = o3d_lsmesh.ls_mesh(
+        (welded, welded_t), split[controls], weights=np.where(np.arange(6) == 5, 3.0 * np.sqrt(2), 3.0)
+    )
+    np.testing.assert_allclose(np.asarray(twice.vertices), ref_twice[split], rtol=0, atol=1e-10)
+    fixed_twice = o3d_lsmesh.ls_mesh(mesh, both, np.vstack([target, target[5]]), interpolate=True)
+    np.testing.assert_allclose(np.asarray(fixed_twice.vertices), np.asarray(out.vertices), rtol=0, atol=1e-12)
+    with pytest.raises(ValueError, match="constraint_vertex_positions must agree where"):
+        o3d_lsmesh.ls_mesh(mesh, both, np.vstack([target, target[5] + 1.0]), interpolate=True)
 
 
 def test_ls_mesh_solver_on_split_obj_keeps_the_layout_through_updates_and_pickling(tmp_path):
