@@ -167,8 +167,9 @@ def read_mesh(mesh: Any, *, name: str = "mesh", allow_isolated: bool = True, wel
 
     ``weld=True`` merges vertices at exactly equal coordinates (see
     :func:`weld_map`); :func:`new_mesh` then restores the source's split
-    layout. Only functions whose arguments and results hold no vertex indices
-    may weld (an index given in the split layout would name another vertex).
+    layout. Functions whose arguments or results hold vertex indices map them
+    with :meth:`MeshData.welded_indices` and :meth:`MeshData.source_indices`
+    (an index given in the split layout would otherwise name another vertex).
 
     Every kind goes through the same checks (:func:`~o3d_lsmesh._validate.as_vertex_array`,
     :func:`~o3d_lsmesh._validate.as_triangle_array`): positions of a real
