@@ -28,7 +28,7 @@ import numpy as np
 from _common import RESULTS, load_mesh, markdown_table, write_markdown
 from scipy.sparse.csgraph import breadth_first_order
 
-from o3d_lsmesh.encoding import _HEADER, decode_geometry, encode_geometry
+from o3d_lsmesh.encoding import HEADER, decode_geometry, encode_geometry
 from o3d_lsmesh.metrics import surface_distance, vertex_error
 from o3d_lsmesh.spectral import quantize_coefficients, spectral_basis
 from o3d_lsmesh.topology import adjacency_matrix, connected_components
@@ -106,7 +106,7 @@ def main() -> None:
             start = time.perf_counter()
             stream = encode_geometry((V, F), k, bits=BITS)
             encode_s += time.perf_counter() - start
-            payload = (len(stream) - _HEADER.size - 4) * 8
+            payload = (len(stream) - HEADER.size - 4) * 8
             ours = errors(decode_geometry((V, F), stream)[0], V, F, points)
             U = basis[:, :ks]
             coefficients = quantize_coefficients(U.T @ V, SPECTRAL_BITS)

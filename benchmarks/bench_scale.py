@@ -105,7 +105,7 @@ def _worker(kind: str, n: int, op: str, solver: str, out: str, queue) -> None:
     start = time.perf_counter()
     residual, iterations = 0.0, 0
     if op == "lsmesh":
-        system = LSMeshSolver((V, F), controls(len(V)), solver=solver, _release_arrays=True)
+        system = LSMeshSolver((V, F), controls(len(V)), solver=solver)
         X = system.solve()
         residual, iterations = system._solver.residual, system._solver.iterations
     else:

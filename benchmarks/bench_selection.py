@@ -8,16 +8,20 @@ Writes benchmarks/results/selection.md.
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 
 import numpy as np
-from _common import RESULTS, load_mesh, markdown_table, timed, write_markdown
+from _common import REPO, RESULTS, load_mesh, markdown_table, timed, write_markdown
 
 from o3d_lsmesh import ls_mesh
 from o3d_lsmesh._o3d import read_mesh
 from o3d_lsmesh.lsmesh import LSMeshSolver
 from o3d_lsmesh.metrics import surface_distance, vertex_error
-from o3d_lsmesh.selection import _RefactoringSystem, select_control_points, start_vertices
+from o3d_lsmesh.selection import select_control_points, start_vertices
+
+sys.path.insert(0, str(REPO / "tests"))  # the refactoring reference lives with the tests that use it
+from selection_reference import RefactoringSystem
 
 # Table I of the geometry-aware bases paper (2.4 GHz Pentium 4, TAUCS): factor, solve (one
 # coordinate), average update by one relaxed anchor, worst update; seconds.
@@ -143,7 +147,7 @@ def update_timing(steps: int, refactor_steps: int) -> tuple[str, str]:
         )
         print(rows[-1], flush=True)
         # refactoring reference: a few steps (each a numeric refactorization and a solve)
-        reference = _RefactoringSystem(V, F, np.flatnonzero(selected), 1.0, ordering)
+        reference = RefactoringSystem(V, F, np.flatnonzero(selected), 1.0, ordering)
         refactor_times = []
         Y = reference.solve()
         for _ in range(refactor_steps):

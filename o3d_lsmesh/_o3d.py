@@ -22,7 +22,11 @@ result with :func:`new_mesh`, so the attribute policy lives here alone:
   gets the input's split layout back, the welded position copied to every
   duplicate, so seams stay closed and UVs stay valid. Only bit-for-bit equal
   coordinates are merged: a tolerance would also merge distinct nearby
-  vertices of a dense scan and change its topology;
+  vertices of a dense scan and change its topology. Vertex indices that the
+  caller gives or gets (control points, unknown vertices) stay in the input's
+  split layout: :meth:`MeshData.welded_indices` maps them in (an index to
+  any copy of a split vertex means the welded vertex) and
+  :meth:`MeshData.source_indices` maps results back (to the first copy);
 * vertex and triangle normals are recomputed when the input had them;
 * a tensor mesh keeps its device and its position and index dtypes (integer
   positions come back as float64: computed positions rounded to integers would
@@ -40,7 +44,7 @@ from typing import Any
 import numpy as np
 
 from ._errors import O3DLSMeshWarning
-from ._validate import as_triangle_array, as_vertex_array, check_mesh_arrays
+from ._validate import as_indices, mesh_arrays
 
 __all__ = [
     "MeshData",
@@ -68,9 +72,10 @@ class MeshData:
     """Arrays copied out of a mesh, plus the mesh itself to rebuild its kind.
 
     When the mesh was welded (``read_mesh(..., weld=True)`` found exact
-    duplicates), ``vertices`` and ``triangles`` are the welded surface and
+    duplicates), ``vertices`` and ``triangles`` are the welded surface,
     ``split`` maps each of the source's vertices to its welded vertex
-    ``(n_source,)``; otherwise ``split`` is None.
+    ``(n_source,)`` and ``split_triangles`` are the source's triangles
+    ``(m, 3)`` (what :func:`new_mesh` gives back); otherwise both are None.
     """
 
     vertices: np.ndarray  # (n, 3) float64
@@ -78,6 +83,32 @@ class MeshData:
     source: Any
     kind: str  # "legacy", "tensor" or "arrays"
     split: np.ndarray | None = None  # (n_source,) int64 source vertex -> welded vertex
+    split_triangles: np.ndarray | None = None  # (m, 3) int64 the source's triangles, when welded
+
+    def welded_indices(self, indices: Any, *, name: str, merge: bool = False) -> np.ndarray:
+        """Check vertex indices given in the source's layout and return the welded vertices', ``(k,) int64``.
+
+        An index to any copy of a split vertex means the welded vertex. Indices
+        must lie in ``[0, n_source)`` without repetition (:func:`~o3d_lsmesh._validate.as_indices`);
+        two copies of one vertex give it twice (a list aligned with per-index data
+        such as positions keeps its length), or once with ``merge=True`` (a set
+        of vertices, e.g. the unknown ones; sorted).
+        """
+        if self.split is None:
+            return as_indices(indices, len(self.vertices), name=name)
+        welded = self.split[as_indices(indices, len(self.split), name=name)]
+        return np.unique(welded) if merge else welded
+
+    def source_indices(self, welded: np.ndarray) -> np.ndarray:
+        """Indices of welded vertices in the source's layout: the first copy of each, ``(k,) int64``."""
+        if self.split is None:
+            return welded
+        first = np.unique(self.split, return_index=True)[1]  # welded vertex v is first seen at first[v]
+        return first[welded].astype(np.int64)
+
+    def source_positions(self, positions: np.ndarray) -> np.ndarray:
+        """Positions of the welded vertices ``(n, 3)`` in the source's layout ``(n_source, 3)``."""
+        return positions if self.split is None else positions[self.split]
 
 
 def weld_map(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray | None:
@@ -89,18 +120,24 @@ def weld_map(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray | None:
     processed as it is). Welded vertices are numbered in order of first
     occurrence, so a mesh without duplicates keeps its numbering.
     """
-    if len(vertices) == 0:
+    n = len(vertices)
+    if n == 0:
         return None
-    # -0.0 == 0.0: add 0.0 so both have the same bytes in np.unique's row comparison
-    _, first, inverse = np.unique(vertices + 0.0, axis=0, return_index=True, return_inverse=True)
-    inverse = inverse.reshape(-1)
-    if len(first) == len(vertices):
+    # rows sorted by (x, y, z): equal rows become neighbours (a stable sort keeps each group in
+    # index order, so its first row is its first occurrence); -0.0 and 0.0 compare equal
+    order = np.lexsort(vertices.T[::-1])
+    ordered = vertices[order]
+    starts = np.ones(n, dtype=bool)
+    starts[1:] = (ordered[1:] != ordered[:-1]).any(axis=1)
+    if starts.all():
         return None
-    # renumber unique rows by first occurrence (np.unique numbers them in sorted order)
-    order = np.argsort(first, kind="stable")
-    rank = np.zeros_like(order)
-    rank[order] = np.arange(len(order))
-    split = rank[inverse].astype(np.int64)
+    group = np.empty(n, dtype=np.int64)
+    group[order] = np.cumsum(starts) - 1  # group of each vertex, groups in sorted order
+    first = order[starts]  # first occurrence of each group
+    # renumber the groups by first occurrence
+    rank = np.empty(len(first), dtype=np.int64)
+    rank[np.argsort(first, kind="stable")] = np.arange(len(first))
+    split = rank[group]
     welded = split[triangles]  # (m, 3)
     if np.any(
         (welded[:, 0] == welded[:, 1]) | (welded[:, 1] == welded[:, 2]) | (welded[:, 0] == welded[:, 2])
@@ -130,8 +167,9 @@ def read_mesh(mesh: Any, *, name: str = "mesh", allow_isolated: bool = True, wel
 
     ``weld=True`` merges vertices at exactly equal coordinates (see
     :func:`weld_map`); :func:`new_mesh` then restores the source's split
-    layout. Only functions whose arguments and results hold no vertex indices
-    may weld (an index given in the split layout would name another vertex).
+    layout. Functions whose arguments or results hold vertex indices map them
+    with :meth:`MeshData.welded_indices` and :meth:`MeshData.source_indices`
+    (an index given in the split layout would otherwise name another vertex).
 
     Every kind goes through the same checks (:func:`~o3d_lsmesh._validate.as_vertex_array`,
     :func:`~o3d_lsmesh._validate.as_triangle_array`): positions of a real
@@ -166,30 +204,13 @@ def read_mesh(mesh: Any, *, name: str = "mesh", allow_isolated: bool = True, wel
         )
     else:
         raw_v, raw_t = mesh
-    vertices = as_vertex_array(raw_v, name=name)
-    triangles = as_triangle_array(raw_t, len(vertices), name=name)
-    check_mesh_arrays(vertices, triangles, name=name, allow_isolated=allow_isolated)
+    vertices, triangles = mesh_arrays(raw_v, raw_t, name=name, allow_isolated=allow_isolated)
     split = weld_map(vertices, triangles) if weld else None
     if split is not None:
         welded = np.zeros((int(split.max()) + 1, 3))
         welded[split] = vertices  # duplicates hold the same coordinates: any writer gives the same row
-        return MeshData(welded, split[triangles], mesh, kind, split)
+        return MeshData(welded, split[triangles], mesh, kind, split, triangles)
     return MeshData(vertices, triangles, mesh, kind)
-
-
-def source_triangles(data: MeshData) -> np.ndarray:
-    """The triangles of ``data.source`` read again, without validation, ``(m, 3)``.
-
-    For callers that drop ``data.triangles`` while they hold large state (the
-    source was validated by :func:`read_mesh` and is not modified by us).
-    """
-    if data.split is not None:
-        return data.triangles
-    if data.kind == "legacy":
-        return np.asarray(data.source.triangles).reshape(-1, 3)
-    if data.kind == "tensor":
-        return data.source.triangle.indices.cpu().numpy().reshape(-1, 3)
-    return np.asarray(data.source[1]).reshape(-1, 3)
 
 
 def _dropped(data: MeshData) -> list[str]:
@@ -247,8 +268,8 @@ def new_mesh(
     same_topology = triangles is None
     if same_topology and data.split is not None:
         # back to the source's split layout: every duplicate gets its welded vertex's position
-        vertices = np.asarray(vertices, dtype=np.float64)[data.split]
-        triangles = source_triangles(MeshData(None, None, data.source, data.kind))
+        vertices = data.source_positions(np.asarray(vertices, dtype=np.float64))
+        triangles = data.split_triangles
     elif triangles is None:
         triangles = data.triangles
     elif data.source is not None and warn:
@@ -310,24 +331,31 @@ def new_mesh(
 def mesh_state(data: MeshData) -> dict:
     """A picklable description of ``data`` (Open3D meshes do not pickle) that :func:`mesh_from_state` rebuilds.
 
-    It keeps the arrays, the kind and what :func:`new_mesh` takes from the
-    source: per-vertex and per-triangle attributes, normals present, and for
-    tensor meshes the device and dtypes. The result of :func:`new_mesh` on the
-    rebuilt data is then the same as on the original.
+    It keeps the arrays, the kind, the weld and what :func:`new_mesh` takes from the source:
+    per-vertex and per-triangle attributes, textures, the tensor material, normals present, and
+    for tensor meshes the device and dtypes. The result of :func:`new_mesh` on the rebuilt data is
+    then the same as on the original.
     """
-    state = {"vertices": data.vertices, "triangles": data.triangles, "kind": data.kind, "split": data.split}
+    state: dict[str, Any] = {
+        "vertices": data.vertices,
+        "triangles": data.triangles,
+        "kind": data.kind,
+        "split": data.split,
+        "split_triangles": data.split_triangles,
+    }
     src = data.source
-    if data.kind == "legacy" and src is not None:
-        state["source_vertices"] = np.asarray(src.vertices).copy() if data.split is not None else None
-        state["source_triangles"] = np.asarray(src.triangles).copy() if data.split is not None else None
+    if data.kind == "legacy":
         state["vertex_colors"] = np.asarray(src.vertex_colors).copy() if src.has_vertex_colors() else None
         state["triangle_uvs"] = np.asarray(src.triangle_uvs).copy() if src.has_triangle_uvs() else None
         state["triangle_material_ids"] = (
             np.asarray(src.triangle_material_ids).copy() if src.has_triangle_material_ids() else None
         )
+        # as new_mesh copies them: only when the mesh has textures (readers may leave empty images)
+        textures = src.textures if src.has_textures() else []
+        state["textures"] = [None if t.is_empty() else np.asarray(t).copy() for t in textures]
         state["vertex_normals"] = bool(src.has_vertex_normals())
         state["triangle_normals"] = bool(src.has_triangle_normals())
-    elif data.kind == "tensor" and src is not None:
+    elif data.kind == "tensor":
         state["device"] = str(src.vertex.positions.device)
         state["vertex"] = {
             key: (src.vertex[key].cpu().numpy().copy(), str(src.vertex[key].dtype)) for key in src.vertex
@@ -336,7 +364,30 @@ def mesh_state(data: MeshData) -> dict:
             key: (src.triangle[key].cpu().numpy().copy(), str(src.triangle[key].dtype))
             for key in src.triangle
         }
+        state["material"] = _material_state(src.material) if src.has_valid_material() else None
     return state
+
+
+def _material_state(material: Any) -> dict:
+    """The fields of an ``open3d.visualization.Material`` (which does not pickle) as plain values."""
+    return {
+        "name": material.material_name,
+        "scalar": dict(material.scalar_properties),
+        "vector": {key: np.array(value) for key, value in material.vector_properties.items()},
+        "textures": {key: image.as_tensor().numpy().copy() for key, image in material.texture_maps.items()},
+    }
+
+
+def _material_from_state(state: dict) -> Any:
+    o3d = open3d()
+    material = o3d.visualization.Material(state["name"])
+    for key, value in state["scalar"].items():
+        material.scalar_properties[key] = value
+    for key, value in state["vector"].items():
+        material.vector_properties[key] = value
+    for key, value in state["textures"].items():
+        material.texture_maps[key] = o3d.t.geometry.Image(o3d.core.Tensor(value))
+    return material
 
 
 def _o3d_dtype(name: str) -> Any:
@@ -347,33 +398,38 @@ def _o3d_dtype(name: str) -> Any:
 def mesh_from_state(state: dict) -> MeshData:
     """Rebuild the :class:`MeshData` described by :func:`mesh_state`, with a source mesh of the same kind."""
     vertices, triangles, kind = state["vertices"], state["triangles"], state["kind"]
-    split = state.get("split")
-    if vertices is None:  # arrays released (see LSMeshSolver's _release_arrays): nothing to rebuild
-        return MeshData(None, None, None, kind)
-    if kind == "arrays" or ("device" not in state and "vertex_normals" not in state):
-        return MeshData(vertices, triangles, (vertices, triangles), kind if kind == "arrays" else "arrays")
+    split, split_triangles = state["split"], state["split_triangles"]
+    # the source's own layout: a welded source's positions are its welded vertices' (they coincide)
+    source_v = vertices if split is None else vertices[split]
+    source_t = triangles if split is None else split_triangles
+    if kind == "arrays":
+        return MeshData(vertices, triangles, (source_v, source_t), kind, split, split_triangles)
     o3d = open3d()
     if kind == "legacy":
-        source_v = state.get("source_vertices") if split is not None else vertices
-        source_t = state.get("source_triangles") if split is not None else triangles
         source = o3d.geometry.TriangleMesh(
             o3d.utility.Vector3dVector(source_v), o3d.utility.Vector3iVector(source_t.astype(np.int32))
         )
         if state["vertex_colors"] is not None:
             source.vertex_colors = o3d.utility.Vector3dVector(state["vertex_colors"])
-        if state.get("triangle_uvs") is not None:
+        if state["triangle_uvs"] is not None:
             source.triangle_uvs = o3d.utility.Vector2dVector(state["triangle_uvs"])
-        if state.get("triangle_material_ids") is not None:
+        if state["triangle_material_ids"] is not None:
             source.triangle_material_ids = o3d.utility.IntVector(state["triangle_material_ids"])
+        source.textures = [
+            o3d.geometry.Image() if texture is None else o3d.geometry.Image(texture)
+            for texture in state["textures"]
+        ]
         if state["vertex_normals"]:
             source.compute_vertex_normals()
         if state["triangle_normals"]:
             source.compute_triangle_normals()
-        return MeshData(vertices, triangles, source, kind, split)
+        return MeshData(vertices, triangles, source, kind, split, split_triangles)
     device = o3d.core.Device(state["device"])
     source = o3d.t.geometry.TriangleMesh(device)
     for group, attributes in (("vertex", state["vertex"]), ("triangle", state["triangle"])):
         target = getattr(source, group)
         for key, (array, dtype) in attributes.items():
             target[key] = o3d.core.Tensor(array, device=device).to(_o3d_dtype(dtype))
-    return MeshData(vertices, triangles, source, kind, split)
+    if state["material"] is not None:
+        source.material = _material_from_state(state["material"])
+    return MeshData(vertices, triangles, source, kind, split, split_triangles)

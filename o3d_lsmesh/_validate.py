@@ -9,7 +9,7 @@ from __future__ import annotations
 import numbers
 import os
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, Literal, overload
 
 import numpy as np
 
@@ -28,6 +28,7 @@ __all__ = [
     "as_workers",
     "check_mesh_arrays",
     "isolated_vertices",
+    "mesh_arrays",
 ]
 
 
@@ -111,6 +112,36 @@ def check_mesh_arrays(
             )
 
 
+def mesh_arrays(
+    vertices: Any, triangles: Any, *, name: str = "mesh", allow_isolated: bool = True
+) -> tuple[np.ndarray, np.ndarray]:
+    """The one check of a mesh given as arrays: new ``(n, 3) float64`` vertices and ``(m, 3) int64`` triangles.
+
+    Every array function and :func:`~o3d_lsmesh._o3d.read_mesh` (for every mesh kind) go through it:
+    :func:`as_vertex_array`, :func:`as_triangle_array` and :func:`check_mesh_arrays`. The results are
+    copies: the caller's arrays are never modified.
+
+    Raises
+    ------
+    TypeError
+        Positions that are not real numbers or indices that are not integers.
+    ValueError
+        Arrays not of shape ``(k, 3)``; an empty mesh, no triangles, non-finite or too large
+        coordinates, out-of-range indices, triangles repeating a vertex, or unreferenced vertices
+        when ``allow_isolated`` is False.
+
+    Examples
+    --------
+    >>> v, f = mesh_arrays([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]])
+    >>> v.dtype, f.dtype, f.shape
+    (dtype('float64'), dtype('int64'), (1, 3))
+    """
+    vertices = as_vertex_array(vertices, name=name)
+    triangles = as_triangle_array(triangles, len(vertices), name=name)
+    check_mesh_arrays(vertices, triangles, name=name, allow_isolated=allow_isolated)
+    return vertices, triangles
+
+
 def _check_magnitude(array: np.ndarray, *, what: str, row: str) -> None:
     """Raise ``ValueError`` if a coordinate of ``array (k, 3)`` exceeds :data:`COORDINATE_LIMIT`."""
     if array.size == 0:
@@ -185,6 +216,14 @@ def as_triangle_array(value: Any, n: int, *, name: str = "mesh") -> np.ndarray:
     return array.astype(np.int64)
 
 
+@overload
+def as_bool(value: Any, *, name: str, allow_none: Literal[False] = False) -> bool: ...
+
+
+@overload
+def as_bool(value: Any, *, name: str, allow_none: bool) -> bool | None: ...
+
+
 def as_bool(value: Any, *, name: str, allow_none: bool = False) -> bool | None:
     """Return ``value`` as a bool; anything but ``True``/``False`` (or ``None`` if allowed) is a ``TypeError``."""
     if value is None and allow_none:
@@ -232,8 +271,9 @@ def as_indices(
     *,
     name: str,
     allow_empty: bool = False,
+    allow_repeats: bool = False,
 ) -> np.ndarray:
-    """Return ``indices`` as a unique ``(k,) int64`` array of vertex indices in ``[0, n)``."""
+    """Return ``indices`` as a unique ``(k,) int64`` array of vertex indices in ``[0, n)`` (repeats if allowed)."""
     if isinstance(indices, (str, bytes)) or indices is None:
         raise TypeError(f"{name} must be a sequence of integer vertex indices, got {_describe(indices)}")
     try:
@@ -266,6 +306,8 @@ def as_indices(
             f"{name} must lie in [0, {n}), got {int(array[bad][0])} at position {int(np.flatnonzero(bad)[0])}"
         )
     array = array.astype(np.int64)
+    if allow_repeats:
+        return array
     order = np.sort(array)
     dup = order[1:] == order[:-1]
     if dup.any():

@@ -51,20 +51,20 @@ from ._progress import check_progress, progress_bar, stages
 from ._solvers import check_weight_pins_components
 from ._validate import as_choice, as_count, as_positive_float
 from .laplacian import laplacian_matrix
-from .lsmesh import LSMeshSolver
-from .selection import SELECTION_METHODS, _select
+from .lsmesh import LSMeshSystem
+from .selection import SELECTION_METHODS, control_point_selection
 from .topology import connected_components, unique_edges
 
 __all__ = ["decode_geometry", "encode_geometry", "iter_decode_geometry"]
 
 MAGIC = b"LSMG"
 VERSION = 1
-_HEADER = struct.Struct("<4sBBBBIIId3d3d")
+HEADER = struct.Struct("<4sBBBBIIId3d3d")
 _CRC = struct.Struct("<I")
 MAX_BITS = 31
 
 
-def _index_bits(n: int) -> int:
+def index_width(n: int) -> int:
     return max(1, math.ceil(math.log2(n))) if n > 1 else 1
 
 
@@ -74,19 +74,19 @@ def connectivity_checksum(triangles: np.ndarray, n: int) -> int:
     return zlib.crc32(np.ascontiguousarray(edges, dtype="<i8").tobytes()) & 0xFFFFFFFF
 
 
-def _to_bits(values: np.ndarray, width: int) -> np.ndarray:
+def to_bits(values: np.ndarray, width: int) -> np.ndarray:
     """``(len(values) * width,) uint8`` bits of ``values``, MSB first."""
     shifts = np.arange(width - 1, -1, -1, dtype=np.uint64)
     return ((values.astype(np.uint64)[:, None] >> shifts) & np.uint64(1)).astype(np.uint8).ravel()
 
 
-def _from_bits(bits: np.ndarray, width: int) -> np.ndarray:
-    """Inverse of :func:`_to_bits`: ``(len(bits) // width,) int64``."""
+def from_bits(bits: np.ndarray, width: int) -> np.ndarray:
+    """Inverse of :func:`to_bits`: ``(len(bits) // width,) int64``."""
     weights = np.uint64(1) << np.arange(width - 1, -1, -1, dtype=np.uint64)
     return (bits.reshape(-1, width).astype(np.uint64) * weights).sum(axis=1).astype(np.int64)
 
 
-def _assemble(
+def assemble_stream(
     *,
     n: int,
     indices: np.ndarray,
@@ -102,26 +102,37 @@ def _assemble(
     magic: bytes = MAGIC,
 ) -> bytes:
     """Write a stream from its fields (no validation: tests build malformed streams with it)."""
-    header = _HEADER.pack(
+    header = HEADER.pack(
         magic, version, bits, index_bits, reserved, n, len(indices), edges_crc, omega, *lower, *upper
     )
-    payload_bits = np.concatenate([_to_bits(indices, index_bits), _to_bits(quantized.ravel(), bits)])
+    payload_bits = np.concatenate([to_bits(indices, index_bits), to_bits(quantized.ravel(), bits)])
     payload = np.packbits(payload_bits).tobytes()
     body = header + payload
     return body + _CRC.pack(zlib.crc32(body) & 0xFFFFFFFF)
 
 
-def _quantize(positions: np.ndarray, lower: np.ndarray, upper: np.ndarray, bits: int) -> np.ndarray:
+def quantize(values: np.ndarray, lower: np.ndarray, upper: np.ndarray, bits: int) -> np.ndarray:
+    """Uniform quantization of each column of ``values (k, d)`` to ``bits`` bits in ``[lower, upper]``.
+
+    Returns the ``(k, d) int64`` codes ``round((x - lo) / (hi - lo) * (2^bits - 1))`` (0 for a
+    column of zero extent); :func:`dequantize` maps them back. The one quantizer of the package
+    (the anchor coordinates here, the spectral coefficients of
+    :func:`~o3d_lsmesh.spectral.quantize_coefficients`).
+
+    >>> quantize(np.array([[0.0], [0.5], [1.0]]), np.zeros(1), np.ones(1), 2).ravel().tolist()
+    [0, 2, 3]
+    """
     levels = (1 << bits) - 1
     extent = upper - lower
-    scale = np.divide(levels, extent, out=np.zeros(3), where=extent > 0)
-    q = np.rint((positions - lower) * scale)
+    scale = np.divide(levels, extent, out=np.zeros_like(extent, dtype=np.float64), where=extent > 0)
+    q = np.rint((values - lower) * scale)
     return np.clip(q, 0, levels).astype(np.int64)
 
 
-def _dequantize(quantized: np.ndarray, lower: np.ndarray, upper: np.ndarray, bits: int) -> np.ndarray:
+def dequantize(codes: np.ndarray, lower: np.ndarray, upper: np.ndarray, bits: int) -> np.ndarray:
+    """The values ``lo + q (hi - lo) / (2^bits - 1)`` of the codes of :func:`quantize`, ``(k, d) float64``."""
     levels = (1 << bits) - 1
-    return lower + quantized * ((upper - lower) / levels)
+    return lower + codes * ((upper - lower) / levels)
 
 
 def quantization_bound(lower: np.ndarray, upper: np.ndarray, bits: int) -> np.ndarray:
@@ -195,23 +206,17 @@ def encode_geometry(
     omega = 10.0 * n if weight is None else as_positive_float(weight, name="weight")
     if weight is not None:  # a weight too small to pin the anchors decodes to a drifted mesh
         check_weight_pins_components(laplacian_matrix(data.vertices, data.triangles), omega, name="weight")
-    _, indices, _ = _select(
-        (data.vertices, data.triangles),
-        count,
-        method=method,
-        batch=None,
-        weights=omega,
-        seed=0,
-        progress=progress,
+    indices, _ = control_point_selection(
+        data.vertices, data.triangles, count, method=method, weights=omega, seed=0, progress=progress
     )
     positions = data.vertices[indices]
     lower, upper = positions.min(axis=0), positions.max(axis=0)
-    return _assemble(
+    return assemble_stream(
         n=n,
         indices=indices,
-        quantized=_quantize(positions, lower, upper, bits),
+        quantized=quantize(positions, lower, upper, bits),
         bits=bits,
-        index_bits=_index_bits(n),
+        index_bits=index_width(n),
         edges_crc=connectivity_checksum(data.triangles, n),
         omega=omega,
         lower=lower,
@@ -228,18 +233,18 @@ def _parse(data: Any, mesh_data: MeshData) -> tuple[np.ndarray, np.ndarray, floa
         raise ValueError(
             f"data must start with the magic {MAGIC!r} of an o3d_lsmesh geometry stream, got {raw[: len(MAGIC)]!r}"
         )
-    if len(raw) < _HEADER.size + _CRC.size:
+    if len(raw) < HEADER.size + _CRC.size:
         raise ValueError(
-            f"data must hold at least {_HEADER.size + _CRC.size} bytes (header and checksum), got {len(raw)}: truncated stream"
+            f"data must hold at least {HEADER.size + _CRC.size} bytes (header and checksum), got {len(raw)}: truncated stream"
         )
-    (_magic, version, bits, index_bits, reserved, n, k, edges_crc, omega, *box) = _HEADER.unpack_from(raw)
+    (_magic, version, bits, index_bits, reserved, n, k, edges_crc, omega, *box) = HEADER.unpack_from(raw)
     if version != VERSION:
         raise ValueError(f"data must be a version {VERSION} stream, got version {version}")
     body, (crc,) = raw[: -_CRC.size], _CRC.unpack_from(raw, len(raw) - _CRC.size)
     if not 1 <= bits <= MAX_BITS:
         raise ValueError(f"data header bits must lie in [1, {MAX_BITS}], got {bits}: corrupted stream")
     payload_bytes = (k * (index_bits + 3 * bits) + 7) // 8
-    expected = _HEADER.size + payload_bytes + _CRC.size
+    expected = HEADER.size + payload_bytes + _CRC.size
     if len(raw) != expected:
         raise ValueError(
             f"data must be {expected} bytes long for {k} anchors, got {len(raw)}: truncated or padded stream"
@@ -252,9 +257,9 @@ def _parse(data: Any, mesh_data: MeshData) -> tuple[np.ndarray, np.ndarray, floa
     # from here on the stream is intact: errors are streams written inconsistently, or the wrong mesh
     if reserved != 0:
         raise ValueError(f"data header reserved byte must be 0, got {reserved}")
-    if n < 1 or index_bits != _index_bits(n):
+    if n < 1 or index_bits != index_width(n):
         raise ValueError(
-            f"data header index_bits must be ceil(log2 n) = {_index_bits(max(n, 1))} for n = {n}, got {index_bits}"
+            f"data header index_bits must be ceil(log2 n) = {index_width(max(n, 1))} for n = {n}, got {index_bits}"
         )
     if not 1 <= k <= n:
         raise ValueError(f"data header anchor count must lie in [1, {n}], got {k}")
@@ -273,12 +278,12 @@ def _parse(data: Any, mesh_data: MeshData) -> tuple[np.ndarray, np.ndarray, floa
             "mesh must have the connectivity the stream was encoded for, got a mesh whose edges differ "
             "(connectivity checksum mismatch)"
         )
-    bit_stream = np.unpackbits(np.frombuffer(raw, dtype=np.uint8, offset=_HEADER.size, count=payload_bytes))
+    bit_stream = np.unpackbits(np.frombuffer(raw, dtype=np.uint8, offset=HEADER.size, count=payload_bytes))
     used = k * (index_bits + 3 * bits)
     if bit_stream[used:].any():
         raise ValueError("data padding bits must be zero, got non-zero padding")
-    indices = _from_bits(bit_stream[: k * index_bits], index_bits)
-    quantized = _from_bits(bit_stream[k * index_bits : used], bits).reshape(k, 3)
+    indices = from_bits(bit_stream[: k * index_bits], index_bits)
+    quantized = from_bits(bit_stream[k * index_bits : used], bits).reshape(k, 3)
     if (indices >= n).any():
         bad = int(np.flatnonzero(indices >= n)[0])
         raise ValueError(f"data anchor indices must lie in [0, {n}), got {int(indices[bad])} at anchor {bad}")
@@ -288,7 +293,7 @@ def _parse(data: Any, mesh_data: MeshData) -> tuple[np.ndarray, np.ndarray, floa
         raise ValueError(
             f"data anchor indices must not repeat, got {int(ordered[1:][repeated][0])} more than once"
         )
-    return indices, _dequantize(quantized, lower, upper, bits), float(omega)
+    return indices, dequantize(quantized, lower, upper, bits), float(omega)
 
 
 def _prefix(anchors: Any, k: int) -> int:
@@ -345,7 +350,7 @@ def decode_geometry(mesh: Any, data: Any, *, anchors: int | None = None, progres
     with stages(progress, "decode_geometry", ("factor", "solve")) as begin:
         begin("factor")
         # LSMeshSolver raises SingularSystemError if the prefix misses a component
-        solver = LSMeshSolver((mesh_data.vertices, mesh_data.triangles), indices[:m], weights=omega)
+        solver = LSMeshSystem(mesh_data.vertices, mesh_data.triangles, indices[:m], weights=omega)
         begin("solve")
         vertices = solver.solve(positions[:m])
     return new_mesh(mesh_data, vertices)
@@ -414,13 +419,13 @@ def iter_decode_geometry(
         step = as_count(step, name="step", minimum=1)
     first = min(step, k)
     # factor now, so that a bad prefix raises at the call and not at the first next()
-    solver = LSMeshSolver((mesh_data.vertices, mesh_data.triangles), indices[:first], weights=omega)
+    solver = LSMeshSystem(mesh_data.vertices, mesh_data.triangles, indices[:first], weights=omega)
     return _refinements(mesh_data, solver, indices, positions, omega, first, step, progress)
 
 
 def _refinements(
     mesh_data: MeshData,
-    solver: LSMeshSolver,
+    solver: LSMeshSystem,
     indices: np.ndarray,
     positions: np.ndarray,
     omega: float,

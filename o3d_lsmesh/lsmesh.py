@@ -16,13 +16,20 @@ import scipy.sparse as sp
 from scipy.sparse import csgraph
 
 from ._errors import SingularSystemError
-from ._o3d import MeshData, mesh_from_state, mesh_state, new_mesh, read_mesh, source_triangles
+from ._o3d import mesh_from_state, mesh_state, new_mesh, read_mesh
 from ._progress import check_progress, stages
-from ._solvers import SPDSolver, check_constant_modes, check_finite, operator_scale, solver_backend
+from ._solvers import (
+    DEFAULT_TOLERANCE,
+    SPDSolver,
+    check_constant_modes,
+    check_finite,
+    operator_scale,
+    solver_backend,
+)
 from ._validate import as_bool, as_choice, as_indices, as_positions, as_weights
 from .laplacian import LAPLACIAN_KINDS, laplacian_matrix
 
-__all__ = ["LSMeshSolver", "check_components_constrained", "ls_mesh", "reconstruct_geometry"]
+__all__ = ["LSMeshSolver", "LSMeshSystem", "check_components_constrained", "ls_mesh", "reconstruct_geometry"]
 
 
 def check_components_constrained(graph: sp.spmatrix, constrained: np.ndarray, *, what: str) -> np.ndarray:
@@ -45,7 +52,271 @@ def check_components_constrained(graph: sp.spmatrix, constrained: np.ndarray, *,
     return labels
 
 
-class LSMeshSolver:
+class LSMeshSystem:
+    """The array core of :class:`LSMeshSolver`: the least-squares mesh system on validated arrays.
+
+    ``vertices (n, 3) float64`` and ``triangles (m, 3) int64`` as
+    :func:`~o3d_lsmesh._validate.mesh_arrays` returns them (not checked again
+    here: the callers read them once), ``constraint_vertex_indices`` in their
+    numbering; the options and the methods are :class:`LSMeshSolver`'s, which
+    adds meshes, welding and the input's layout on top. :meth:`solve` returns
+    ``(n, 3)`` positions. Holds references to the arrays (for iterative
+    refinement and the default anchor positions), not copies: do not modify them.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from o3d_lsmesh._validate import mesh_arrays
+    >>> V, F = mesh_arrays([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 1]], [[0, 1, 2], [1, 3, 2]])
+    >>> LSMeshSystem(V, F, [0, 3], interpolate=True).solve().shape
+    (4, 3)
+    """
+
+    def __init__(
+        self,
+        vertices: np.ndarray,
+        triangles: np.ndarray,
+        constraint_vertex_indices: Any,
+        *,
+        weights: Any = 1.0,
+        interpolate: bool = False,
+        laplacian: str = "uniform",
+        backend: str = "auto",
+        ordering: str = "default",
+        solver: str = "auto",
+        tol: float | None = None,
+        progress: bool = False,
+    ) -> None:
+        n = len(vertices)
+        # a vertex named twice (two copies of a welded vertex) is two terms of the energy
+        indices = as_indices(
+            constraint_vertex_indices, n, name="constraint_vertex_indices", allow_repeats=True
+        )
+        weights = as_weights(weights, len(indices), name="weights")
+        as_choice(laplacian, LAPLACIAN_KINDS, name="laplacian")
+        interpolate = as_bool(interpolate, name="interpolate")
+        # solve() and add_anchors() each read and change the factor and the anchor arrays:
+        # one lock makes an update and a solve on other threads exclusive (never a half-updated system)
+        self._lock = threading.RLock()
+        backend = solver_backend(solver, backend)
+        L = laplacian_matrix(vertices, triangles, laplacian).tocsr()
+        labels = check_components_constrained(L, indices, what="control vertex")
+        if not interpolate:
+            # squares of huge weights overflow; tiny ones leave a component's translation to round-off
+            check_finite(lambda: weights**2, name="weights", what="weights**2")
+            pinned = np.zeros(n)
+            np.add.at(pinned, indices, weights**2)
+            check_constant_modes(
+                L.T @ (L @ np.ones(n)) + pinned,
+                labels,
+                scale=operator_scale(L),
+                name="weights",
+                value=weights,
+                what="the control weights",
+            )
+        del labels
+        self._vertices, self._triangles = vertices, triangles
+        self.interpolate = bool(interpolate)
+        self.laplacian = laplacian
+        self._hard = indices if self.interpolate else np.zeros(0, dtype=np.int64)
+        self._soft = np.zeros(0, dtype=np.int64) if self.interpolate else indices
+        self._soft_weights = np.zeros(0) if self.interpolate else weights
+        self._hard_weights = weights if self.interpolate else np.zeros(0)
+        self._positions = vertices[indices].copy()
+        if self.interpolate:
+            free = np.ones(n, dtype=bool)
+            free[indices] = False
+            self._free: np.ndarray | None = np.flatnonzero(free)
+            L = L.tocsc()
+            L_free = L[:, self._free]
+            operator = L_free.tocsr()
+            # the normal matrix L_free^T L_free, given to CHOLMOD as a product it never forms:
+            # L_free^T in CSC is L_free's CSR arrays, shared with the refinement operator
+            product = operator.T
+            # right-hand side operator: -L_free^T L_ctrl maps control positions to the free rhs
+            # a vertex fixed twice is one column: its positions must agree (checked by _solve)
+            _, first, self._hard_groups = np.unique(indices, return_index=True, return_inverse=True)
+            self._hard_first = first if len(first) < len(indices) else None
+            columns = indices if self._hard_first is None else indices[first]
+            self._rhs_hard = -(L_free.T @ L[:, columns]).tocsr()
+        else:
+            self._free = None  # every vertex is unknown: no index arrays to hold
+            # L^T L + W^2 = A A^T for A = [L^T | W] (one weighted column per control vertex):
+            # CHOLMOD factors it without it being formed, in less time and memory than L^T L
+            controls = sp.csc_matrix((weights, indices, np.arange(len(indices) + 1)), shape=(n, len(indices)))
+            product = sp.hstack([L.T, controls], format="csc")
+            # rebuilt on demand for refinement: not holding it while CHOLMOD factors lowers the peak memory
+            operator = None
+            self._rhs_hard = None
+            self._hard_first = None
+        # the Laplacian (of the free columns) serves the residual of iterative refinement:
+        # L^T (L x) needs a third of the memory of L^T L
+        self._operator = operator
+        del L
+        self._updated = False
+        self._n = n
+        self._unknowns = n if self._free is None else len(self._free)
+        # reduced index of every vertex (-1 for eliminated ones)
+        self._reduced = None
+        if self._free is not None:
+            self._reduced = np.full(n, -1, dtype=np.int64)
+            self._reduced[self._free] = np.arange(len(self._free))
+        self._solver = SPDSolver(
+            product_of=product,
+            backend=backend,
+            ordering=ordering,
+            progress=progress,
+            tol=DEFAULT_TOLERANCE if tol is None else tol,
+        )
+
+    def _reduce(self, indices: np.ndarray) -> np.ndarray:
+        # row of each (free) vertex in the reduced system
+        return indices if self._reduced is None else self._reduced[indices]
+
+    @property
+    def backend(self) -> str:
+        """Solver backend that ran: ``"cholmod"`` or ``"scipy"``."""
+        return self._solver.backend
+
+    @property
+    def constraint_vertex_indices(self) -> np.ndarray:
+        """All control vertices in order: the initial ones, then every added anchor."""
+        with self._lock:  # never half of an add_anchors() running on another thread
+            return np.concatenate([self._hard, self._soft])
+
+    @property
+    def weights(self) -> np.ndarray:
+        """Weight of each control vertex, in :attr:`constraint_vertex_indices` order."""
+        with self._lock:
+            return np.concatenate([self._hard_weights, self._soft_weights])
+
+    def solve(self, constraint_vertex_positions: Any = None, *, refine: bool | None = None) -> np.ndarray:
+        """Vertex positions ``(n, 3)`` for the given control positions (back-substitution only).
+
+        Parameters
+        ----------
+        constraint_vertex_positions : (k, 3) array-like, optional
+            One row per entry of :attr:`constraint_vertex_indices`; defaults to
+            the positions given so far (the mesh's own, or those passed to
+            :meth:`add_anchors`).
+        refine : bool, optional
+            One step of iterative refinement: a second back-substitution on the
+            residual. By default it runs only after :meth:`add_anchors`: updates
+            that add large ``w^2`` (the bases paper's ``omega = 10 n``) to the
+            diagonal lose the small ``L^T L`` entries of those rows to round-off
+            (measured on the 9.8k camel with 300 anchors: 4e-6 of the model size,
+            against 1e-14 for a fresh factor), and one refinement step restores
+            full accuracy. The residual ``b - L^T L x - w^2 x_a`` is formed as
+            ``w^2 (c - x_a) - L^T L x`` so that it has no cancellation.
+        """
+        refine = as_bool(refine, name="refine", allow_none=True)
+        with self._lock:
+            return self._solve(constraint_vertex_positions, refine)
+
+    def _solve(self, constraint_vertex_positions: Any, refine: bool | None) -> np.ndarray:
+        k = len(self._hard) + len(self._soft)
+        if constraint_vertex_positions is None:
+            positions = self._positions
+        else:
+            positions = as_positions(
+                constraint_vertex_positions, k, name="constraint_vertex_positions", limit=True
+            )
+        hard_pos, soft_pos = positions[: len(self._hard)], positions[len(self._hard) :]
+        fixed = hard_pos if self._hard_first is None else self._fixed_positions(hard_pos)
+        rhs = np.zeros((self._unknowns, 3))
+        if self.interpolate:
+            rhs += self._rhs_hard @ fixed
+        with np.errstate(over="ignore", invalid="ignore"):  # overflow is reported by name below
+            # add.at: a vertex named twice takes both terms
+            np.add.at(rhs, self._reduce(self._soft), (self._soft_weights**2)[:, None] * soft_pos)
+        check_finite(rhs, name="constraint_vertex_positions", what="weights**2 * constraint_vertex_positions")
+        solution = self._solver.solve(rhs)
+        if self._updated if refine is None else refine:
+            reduced_soft = self._reduce(self._soft)
+            if self._operator is None:
+                self._operator = laplacian_matrix(self._vertices, self._triangles, self.laplacian).tocsr()
+            residual = -(self._operator.T @ (self._operator @ solution))
+            if self.interpolate:
+                residual += self._rhs_hard @ fixed
+            np.add.at(
+                residual, reduced_soft, (self._soft_weights**2)[:, None] * (soft_pos - solution[reduced_soft])
+            )
+            solution = solution + self._solver.solve(residual)
+        if not self.interpolate:
+            return solution
+        result = np.zeros((self._n, 3))
+        result[self._free] = solution
+        result[self._hard] = hard_pos
+        return result
+
+    def _fixed_positions(self, hard_pos: np.ndarray) -> np.ndarray:
+        """One position per distinct fixed vertex; the rows naming one vertex must agree."""
+        fixed = hard_pos[self._hard_first]
+        differ = (fixed[self._hard_groups] != hard_pos).any(axis=1)
+        if differ.any():
+            row = int(np.flatnonzero(differ)[0])
+            raise ValueError(
+                "constraint_vertex_positions must agree where constraint_vertex_indices name one vertex "
+                f"twice (copies of a welded vertex) with interpolate=True, got {hard_pos[row].tolist()} at "
+                f"row {row} and {fixed[self._hard_groups[row]].tolist()}"
+            )
+        return fixed
+
+    def add_anchors(self, indices: Any, positions: Any = None, *, weights: Any = 1.0) -> None:
+        """Add relaxed anchors by a CHOLMOD rank-k update of the kept factor (no refactoring).
+
+        Adds ``w^2`` to the diagonal of the normal matrix at each new anchor
+        (bases paper, section III); in interpolatory mode the anchors are added
+        as relaxed constraints on free vertices, as the paper suggests.
+
+        Parameters
+        ----------
+        indices : (a,) int array-like
+            New anchors; none may already be a control vertex.
+        positions : (a, 3) array-like, optional
+            Their positions; default: the mesh's own.
+        weights : float or (a,) array-like
+            Positive anchor weights.
+        """
+        with self._lock:
+            self._add_anchors(indices, positions, weights)
+
+    def _add_anchors(self, indices: Any, positions: Any, weights: Any) -> None:
+        n = self._n
+        new = as_indices(indices, n, name="indices", allow_repeats=True)
+        existing = np.zeros(n, dtype=bool)
+        existing[self._hard] = existing[self._soft] = True  # (not the property: LSMeshSolver maps it)
+        if existing[new].any():
+            at = int(np.flatnonzero(existing[new])[0])
+            # the position names it in the caller's list too when LSMeshSolver welded the mesh
+            raise ValueError(
+                f"indices must not already be control vertices, got {int(new[at])} at position {at}"
+            )
+        w = as_weights(weights, len(new), name="weights")
+        if positions is None:
+            pos = self._vertices[new]
+        else:
+            pos = as_positions(positions, len(new), name="positions", limit=True)
+        # one nonzero per column: build the CSC arrays directly (the COO route costs more than a small update)
+        c = sp.csc_matrix((w, self._reduce(new), np.arange(len(new) + 1)), shape=(self._unknowns, len(new)))
+        self._solver.update(c)
+        self._updated = True
+        self._soft = np.concatenate([self._soft, new])
+        self._soft_weights = np.concatenate([self._soft_weights, w])
+        self._positions = np.concatenate([self._positions, pos])
+
+    def __getstate__(self) -> dict:
+        with self._lock:
+            state = self.__dict__.copy()
+        del state["_lock"]
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._lock = threading.RLock()
+
+
+class LSMeshSolver(LSMeshSystem):
     """A least-squares mesh system with its Cholesky factor kept for editing.
 
     Minimizes, separately for x, y and z (eq. 3 and section 6 of LS meshes)::
@@ -65,8 +336,14 @@ class LSMeshSolver:
     ----------
     mesh : open3d.geometry.TriangleMesh, open3d.t.geometry.TriangleMesh or (vertices, triangles)
         Only its connectivity matters, and its positions as default control positions.
+        Vertices at exactly equal coordinates (the copies a file reader makes
+        at UV seams) are welded into one; indices stay in the mesh's own
+        layout, an index to any copy naming the welded vertex, and
+        :meth:`solve` and :meth:`mesh` give every copy its position.
     constraint_vertex_indices : (k,) int array-like
-        Control vertices, unique, in ``[0, n)``.
+        Control vertices, unique, in ``[0, n)``. Two copies of a split vertex
+        name it twice: two terms of the energy (with ``interpolate``, their
+        positions must agree).
     weights : float or (k,) array-like
         Positive weights ``w_s`` of the soft constraints (ignored when ``interpolate``).
     interpolate : bool
@@ -124,220 +401,50 @@ class LSMeshSolver:
         solver: str = "auto",
         tol: float | None = None,
         progress: bool = False,
-        _release_arrays: bool = False,
     ) -> None:
-        # _release_arrays (for ls_mesh): drop the copied vertex and triangle arrays before
-        # CHOLMOD factors, the memory peak; mesh() and refinement of a relaxed system then fail
-        data = read_mesh(mesh)
-        n = len(data.vertices)
-        indices = as_indices(constraint_vertex_indices, n, name="constraint_vertex_indices")
-        weights = as_weights(weights, len(indices), name="weights")
-        as_choice(laplacian, LAPLACIAN_KINDS, name="laplacian")
-        interpolate = as_bool(interpolate, name="interpolate")
-        # solve() and add_anchors() each read and change the factor and the anchor arrays:
-        # one lock makes an update and a solve on other threads exclusive (never a half-updated system)
-        self._lock = threading.RLock()
-        backend = solver_backend(solver, backend)
-        L = laplacian_matrix(data.vertices, data.triangles, laplacian).tocsr()
-        labels = check_components_constrained(L, indices, what="control vertex")
-        if not interpolate:
-            # squares of huge weights overflow; tiny ones leave a component's translation to round-off
-            check_finite(lambda: weights**2, name="weights", what="weights**2")
-            pinned = np.zeros(n)
-            np.add.at(pinned, indices, weights**2)
-            check_constant_modes(
-                L.T @ (L @ np.ones(n)) + pinned,
-                labels,
-                scale=operator_scale(L),
-                name="weights",
-                value=weights,
-                what="the control weights",
-            )
-        del labels
+        data = read_mesh(mesh, weld=True)
         self._data = data
-        self.interpolate = bool(interpolate)
-        self.laplacian = laplacian
-        self._hard = indices if self.interpolate else np.zeros(0, dtype=np.int64)
-        self._soft = np.zeros(0, dtype=np.int64) if self.interpolate else indices
-        self._soft_weights = np.zeros(0) if self.interpolate else weights
-        self._hard_weights = weights if self.interpolate else np.zeros(0)
-        self._positions = data.vertices[indices].copy()
-        if self.interpolate:
-            free = np.ones(n, dtype=bool)
-            free[indices] = False
-            self._free = np.flatnonzero(free)
-            L = L.tocsc()
-            L_free = L[:, self._free]
-            operator = L_free.tocsr()
-            # the normal matrix L_free^T L_free, given to CHOLMOD as a product it never forms:
-            # L_free^T in CSC is L_free's CSR arrays, shared with the refinement operator
-            product = operator.T
-            # right-hand side operator: -L_free^T L_ctrl maps control positions to the free rhs
-            self._rhs_hard = -(L_free.T @ L[:, indices]).tocsr()
-        else:
-            self._free = None  # every vertex is unknown: no index arrays to hold
-            # L^T L + W^2 = A A^T for A = [L^T | W] (one weighted column per control vertex):
-            # CHOLMOD factors it without it being formed, in less time and memory than L^T L
-            controls = sp.csc_matrix((weights, indices, np.arange(len(indices) + 1)), shape=(n, len(indices)))
-            product = sp.hstack([L.T, controls], format="csc")
-            # rebuilt on demand for refinement: not holding it while CHOLMOD factors lowers the peak memory
-            operator = None
-            self._rhs_hard = None
-        # the Laplacian (of the free columns) serves the residual of iterative refinement:
-        # L^T (L x) needs a third of the memory of L^T L
-        self._operator = operator
-        del L
-        self._updated = False
-        self._n = n
-        self._unknowns = n if self._free is None else len(self._free)
-        # reduced index of every vertex (-1 for eliminated ones)
-        self._reduced = None
-        if self._free is not None:
-            self._reduced = np.full(n, -1, dtype=np.int64)
-            self._reduced[self._free] = np.arange(len(self._free))
-        if _release_arrays:
-            self._data = MeshData(None, None, data.source, data.kind)
-        del data
-        options = {} if tol is None else {"tol": tol}
-        self._solver = SPDSolver(
-            product_of=product, backend=backend, ordering=ordering, progress=progress, **options
+        indices = data.welded_indices(constraint_vertex_indices, name="constraint_vertex_indices")
+        super().__init__(
+            data.vertices,
+            data.triangles,
+            indices,
+            weights=weights,
+            interpolate=interpolate,
+            laplacian=laplacian,
+            backend=backend,
+            ordering=ordering,
+            solver=solver,
+            tol=tol,
+            progress=progress,
         )
-
-    def _reduce(self, indices: np.ndarray) -> np.ndarray:
-        # row of each (free) vertex in the reduced system
-        return indices if self._reduced is None else self._reduced[indices]
-
-    @property
-    def backend(self) -> str:
-        """Solver backend that ran: ``"cholmod"`` or ``"scipy"``."""
-        return self._solver.backend
 
     @property
     def constraint_vertex_indices(self) -> np.ndarray:
-        """All control vertices in order: the initial ones, then every added anchor."""
-        with self._lock:  # never half of an add_anchors() running on another thread
-            return np.concatenate([self._hard, self._soft])
-
-    @property
-    def weights(self) -> np.ndarray:
-        """Weight of each control vertex, in :attr:`constraint_vertex_indices` order."""
-        with self._lock:
-            return np.concatenate([self._hard_weights, self._soft_weights])
+        """All control vertices in order, the initial ones then every added anchor (input's layout)."""
+        return self._data.source_indices(super().constraint_vertex_indices)
 
     def solve(self, constraint_vertex_positions: Any = None, *, refine: bool | None = None) -> np.ndarray:
-        """Vertex positions ``(n, 3)`` for the given control positions (back-substitution only).
-
-        Parameters
-        ----------
-        constraint_vertex_positions : (k, 3) array-like, optional
-            One row per entry of :attr:`constraint_vertex_indices`; defaults to
-            the positions given so far (the mesh's own, or those passed to
-            :meth:`add_anchors`).
-        refine : bool, optional
-            One step of iterative refinement: a second back-substitution on the
-            residual. By default it runs only after :meth:`add_anchors`: updates
-            that add large ``w^2`` (the bases paper's ``omega = 10 n``) to the
-            diagonal lose the small ``L^T L`` entries of those rows to round-off
-            (measured on the 9.8k camel with 300 anchors: 4e-6 of the model size,
-            against 1e-14 for a fresh factor), and one refinement step restores
-            full accuracy. The residual ``b - L^T L x - w^2 x_a`` is formed as
-            ``w^2 (c - x_a) - L^T L x`` so that it has no cancellation.
-        """
-        refine = as_bool(refine, name="refine", allow_none=True)
-        with self._lock:
-            return self._solve(constraint_vertex_positions, refine)
-
-    def _solve(self, constraint_vertex_positions: Any, refine: bool | None) -> np.ndarray:
-        k = len(self._hard) + len(self._soft)
-        if constraint_vertex_positions is None:
-            positions = self._positions
-        else:
-            positions = as_positions(
-                constraint_vertex_positions, k, name="constraint_vertex_positions", limit=True
-            )
-        hard_pos, soft_pos = positions[: len(self._hard)], positions[len(self._hard) :]
-        rhs = np.zeros((self._unknowns, 3))
-        if self.interpolate:
-            rhs += self._rhs_hard @ hard_pos
-        with np.errstate(over="ignore", invalid="ignore"):  # overflow is reported by name below
-            rhs[self._reduce(self._soft)] += (self._soft_weights**2)[:, None] * soft_pos
-        check_finite(rhs, name="constraint_vertex_positions", what="weights**2 * constraint_vertex_positions")
-        solution = self._solver.solve(rhs)
-        if self._updated if refine is None else refine:
-            reduced_soft = self._reduce(self._soft)
-            if self._operator is None:
-                self._operator = laplacian_matrix(
-                    self._data.vertices, self._data.triangles, self.laplacian
-                ).tocsr()
-            residual = -(self._operator.T @ (self._operator @ solution))
-            if self.interpolate:
-                residual += self._rhs_hard @ hard_pos
-            residual[reduced_soft] += (self._soft_weights**2)[:, None] * (soft_pos - solution[reduced_soft])
-            solution = solution + self._solver.solve(residual)
-        if not self.interpolate:
-            return solution
-        result = np.zeros((self._n, 3))
-        result[self._free] = solution
-        result[self._hard] = hard_pos
-        return result
+        """Vertex positions ``(n, 3)`` in the input's layout; see :meth:`LSMeshSystem.solve`."""
+        return self._data.source_positions(super().solve(constraint_vertex_positions, refine=refine))
 
     def mesh(self, constraint_vertex_positions: Any = None, *, refine: bool | None = None) -> Any:
         """The least-squares mesh as a new mesh of the input's kind (see :meth:`solve`); also after unpickling."""
-        return new_mesh(self._data, self.solve(constraint_vertex_positions, refine=refine))
+        return new_mesh(self._data, super().solve(constraint_vertex_positions, refine=refine))
 
     def add_anchors(self, indices: Any, positions: Any = None, *, weights: Any = 1.0) -> None:
-        """Add relaxed anchors by a CHOLMOD rank-k update of the kept factor (no refactoring).
-
-        Adds ``w^2`` to the diagonal of the normal matrix at each new anchor
-        (bases paper, section III); in interpolatory mode the anchors are added
-        as relaxed constraints on free vertices, as the paper suggests.
-
-        Parameters
-        ----------
-        indices : (a,) int array-like
-            New anchors; none may already be a control vertex.
-        positions : (a, 3) array-like, optional
-            Their positions; default: the mesh's own.
-        weights : float or (a,) array-like
-            Positive anchor weights.
-        """
-        with self._lock:
-            self._add_anchors(indices, positions, weights)
-
-    def _add_anchors(self, indices: Any, positions: Any, weights: Any) -> None:
-        n = self._n
-        new = as_indices(indices, n, name="indices")
-        existing = np.zeros(n, dtype=bool)
-        existing[self.constraint_vertex_indices] = True
-        if existing[new].any():
-            raise ValueError(
-                f"indices must not already be control vertices, got {int(new[existing[new]][0])}"
-            )
-        w = as_weights(weights, len(new), name="weights")
-        if positions is None:
-            pos = self._data.vertices[new]
-        else:
-            pos = as_positions(positions, len(new), name="positions", limit=True)
-        # one nonzero per column: build the CSC arrays directly (the COO route costs more than a small update)
-        c = sp.csc_matrix((w, self._reduce(new), np.arange(len(new) + 1)), shape=(self._unknowns, len(new)))
-        self._solver.update(c)
-        self._updated = True
-        self._soft = np.concatenate([self._soft, new])
-        self._soft_weights = np.concatenate([self._soft_weights, w])
-        self._positions = np.concatenate([self._positions, pos])
+        """Add relaxed anchors (indices in the input's layout); see :meth:`LSMeshSystem.add_anchors`."""
+        super().add_anchors(self._data.welded_indices(indices, name="indices"), positions, weights=weights)
 
     def __getstate__(self) -> dict:
-        with self._lock:
-            state = self.__dict__.copy()
-        del state["_lock"]
+        state = super().__getstate__()
         # Open3D meshes do not pickle: keep arrays and what rebuilds a mesh of the input's kind
         state["_data"] = mesh_state(self._data)
         return state
 
     def __setstate__(self, state: dict) -> None:
         state["_data"] = mesh_from_state(state["_data"])
-        self.__dict__.update(state)
-        self._lock = threading.RLock()
+        super().__setstate__(state)
 
 
 def ls_mesh(
@@ -360,7 +467,8 @@ def ls_mesh(
 
     Parameters
     ----------
-    mesh : open3d.geometry.TriangleMesh or open3d.t.geometry.TriangleMesh
+    mesh : open3d.geometry.TriangleMesh, open3d.t.geometry.TriangleMesh or (vertices, triangles)
+        Split vertices (UV seams) are welded, indices given in its own layout (see :class:`LSMeshSolver`).
     constraint_vertex_indices : (k,) int array-like
     constraint_vertex_positions : (k, 3) array-like, optional
         Defaults to the mesh's own positions at those indices (approximation).
@@ -390,25 +498,25 @@ def ls_mesh(
     >>> len(out.vertices) == len(sphere.vertices)
     True
     """
-    # the solver holds no copy of the mesh while CHOLMOD factors, and the factor goes
-    # before the output mesh is built: a lower peak of memory on large meshes
+    data = read_mesh(mesh, weld=True)
+    indices = data.welded_indices(constraint_vertex_indices, name="constraint_vertex_indices")
     with stages(progress, "ls_mesh", ("factor", "solve")) as begin:
         begin("factor")
-        solver = LSMeshSolver(
-            mesh,
-            constraint_vertex_indices,
+        system = LSMeshSystem(
+            data.vertices,
+            data.triangles,
+            indices,
             weights=weights,
             interpolate=interpolate,
             laplacian=laplacian,
             solver=solver,
             tol=tol,
             progress=progress,
-            _release_arrays=True,
         )
         begin("solve")
-        vertices, data = solver.solve(constraint_vertex_positions), solver._data
-        del solver
-    return new_mesh(MeshData(None, source_triangles(data), data.source, data.kind), vertices)
+        vertices = system.solve(constraint_vertex_positions)
+        del system  # the factor goes before the output mesh is built
+    return new_mesh(data, vertices)
 
 
 def reconstruct_geometry(
@@ -433,9 +541,11 @@ def reconstruct_geometry(
 
     Parameters
     ----------
-    mesh : open3d.geometry.TriangleMesh or open3d.t.geometry.TriangleMesh
-        The positions of the unknown vertices are ignored.
+    mesh : open3d.geometry.TriangleMesh, open3d.t.geometry.TriangleMesh or (vertices, triangles)
+        The positions of the unknown vertices are ignored. Split vertices (UV
+        seams) are welded, as in :class:`LSMeshSolver`.
     unknown_vertex_indices : (u,) int array-like
+        In the mesh's own layout; any copy of a split vertex makes the welded vertex unknown.
     progress : bool
         Show a tqdm bar over the stages (factor, solve).
     solver, tol
@@ -454,9 +564,9 @@ def reconstruct_geometry(
     >>> np.asarray(out.vertices).shape == (len(sphere.vertices), 3)
     True
     """
-    data = read_mesh(mesh)
+    data = read_mesh(mesh, weld=True)
     n = len(data.vertices)
-    unknown = as_indices(unknown_vertex_indices, n, name="unknown_vertex_indices")
+    unknown = data.welded_indices(unknown_vertex_indices, name="unknown_vertex_indices", merge=True)
     known_mask = np.ones(n, dtype=bool)
     known_mask[unknown] = False
     known = np.flatnonzero(known_mask)
@@ -471,16 +581,26 @@ def reconstruct_geometry(
     with stages(progress, "reconstruct_geometry", ("factor", "solve")) as begin:
         begin("factor")
         if not interpolate:
-            solver = LSMeshSolver(mesh, known, weights=weights, laplacian=laplacian, solver=solver, tol=tol)
+            system = LSMeshSystem(
+                data.vertices,
+                data.triangles,
+                known,
+                weights=weights,
+                laplacian=laplacian,
+                solver=solver,
+                tol=tol,
+            )
             begin("solve")
-            return new_mesh(data, solver.solve())
+            return new_mesh(data, system.solve())
         L_unknown = L[:, unknown].tocsr()
         rows = np.flatnonzero(np.diff(L_unknown.indptr) > 0)  # rows touching an unknown vertex
         A = L_unknown[rows]
         B = L[rows][:, known]
         normal = (A.T @ A).tocsc()
         rhs = -(A.T @ (B @ data.vertices[known]))
-        factor = SPDSolver(normal, backend=solver_backend(solver), **({} if tol is None else {"tol": tol}))
+        factor = SPDSolver(
+            normal, backend=solver_backend(solver), tol=DEFAULT_TOLERANCE if tol is None else tol
+        )
         begin("solve")
         vertices = data.vertices.copy()
         vertices[unknown] = factor.solve(rhs)

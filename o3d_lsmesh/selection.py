@@ -26,17 +26,14 @@ import numbers
 from typing import Any
 
 import numpy as np
-import scipy.sparse as sp
 
-from ._o3d import MeshData, new_mesh, read_mesh
-from ._progress import check_progress, progress_bar
-from ._solvers import SPDSolver
+from ._o3d import new_mesh, read_mesh
+from ._progress import check_progress, progress_bar, stages
 from ._validate import as_bool, as_choice, as_count, as_positive_float
-from .laplacian import uniform_laplacian
-from .lsmesh import LSMeshSolver, ls_mesh
+from .lsmesh import LSMeshSystem
 from .topology import adjacency_matrix, connected_components
 
-__all__ = ["SELECTION_METHODS", "approximate", "select_control_points"]
+__all__ = ["SELECTION_METHODS", "approximate", "control_point_selection", "select_control_points"]
 
 SELECTION_METHODS = ("random", "greedy", "combined")
 DEFAULT_BATCH = 31  # figure 6 of LS meshes: 31 solves of 31 picks for 1000 control points
@@ -67,19 +64,17 @@ def start_vertices(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     n = len(vertices)
     count, labels = connected_components(triangles, n)
     size = np.bincount(labels, minlength=count).astype(np.float64)
-    centroid = np.stack(
-        [np.bincount(labels, weights=vertices[:, a], minlength=count) for a in range(3)], axis=1
-    )
-    centroid /= size[:, None]
+    sums = np.stack([np.bincount(labels, weights=vertices[:, a], minlength=count) for a in range(3)], axis=1)
+    centroid = sums / size[:, None]
     distance = np.einsum("ij,ij->i", vertices - centroid[labels], vertices - centroid[labels])
     # farthest first within each component; ties go to the smaller index (stable sort)
     order = np.lexsort((np.arange(n), -distance))
     return _first_per_label(labels, order, count)
 
 
-def _random(data: MeshData, count: int, rng: np.random.Generator) -> np.ndarray:
-    n = len(data.vertices)
-    components, labels = connected_components(data.triangles, n)
+def _random(vertices: np.ndarray, triangles: np.ndarray, count: int, rng: np.random.Generator) -> np.ndarray:
+    n = len(vertices)
+    components, labels = connected_components(triangles, n)
     order = rng.permutation(n)
     start = _first_per_label(labels, order, components)
     rest = np.ones(n, dtype=bool)
@@ -94,70 +89,21 @@ def _squared_errors(solution: np.ndarray, original: np.ndarray) -> np.ndarray:
     return np.einsum("ij,ij->i", diff, diff)
 
 
-class _RefactoringSystem:
-    """Reference path for tests and benchmarks: the relaxed LS system refactored at every step.
-
-    Same normal matrix as :class:`LSMeshSolver` (``L^T L + w^2 sum e_s e_s^T``, uniform
-    ``L``), numerically refactored with the kept symbolic analysis instead of updated.
-    """
-
-    def __init__(
-        self,
-        vertices: np.ndarray,
-        triangles: np.ndarray,
-        start: np.ndarray,
-        weight: float,
-        ordering: str = "default",
-    ) -> None:
-        n = len(vertices)
-        L = uniform_laplacian(triangles, n).tocsc()
-        self._ltl = (L.T @ L).tocsc()
-        self._diagonal = np.zeros(n)
-        self._diagonal[start] = weight**2
-        self._weight = weight
-        self._vertices = vertices
-        self._solver = SPDSolver(self._normal(), ordering=ordering)
-
-    def _normal(self) -> sp.csc_matrix:
-        return (self._ltl + sp.diags(self._diagonal, format="csc")).tocsc()
-
-    def add_anchors(self, indices: np.ndarray) -> None:
-        self._diagonal[indices] = self._weight**2
-        self._solver.refactor(self._normal())
-
-    def solve(self, *, refine: bool = False) -> np.ndarray:
-        # a fresh factor needs no refinement: the keyword only mirrors LSMeshSolver.solve
-        return self._solver.solve(self._diagonal[:, None] * self._vertices)
-
-
 def _greedy(
-    data: MeshData,
-    count: int,
-    weight: float,
-    *,
-    update: bool = True,
-    progress: bool = False,
-    start: np.ndarray | None = None,
-):
+    vertices: np.ndarray, triangles: np.ndarray, count: int, weight: float, *, progress: bool = False
+) -> tuple[np.ndarray, LSMeshSystem]:
     """One-by-one greedy selection (LS meshes section 4, bases paper section IV).
 
-    ``update=True`` adds each anchor by a rank-1 update of the kept factor (the
-    method); ``update=False`` refactors the normal matrix at every step (the
-    reference path that tests and benchmarks compare with). Returns the
+    Adds each anchor by a rank-1 update of the kept factor. Returns the
     selection and the system holding all of it (for one last solve).
     """
-    vertices, triangles = data.vertices, data.triangles
     n = len(vertices)
-    if start is None:
-        start = start_vertices(vertices, triangles)
+    start = start_vertices(vertices, triangles)
     # the per-component seeds are control points too: the bar starts at them and ends at count
     bar = progress_bar(progress, total=count, initial=len(start), desc="greedy selection", unit="point")
     try:
         bar.set_postfix_str("factor")
-        if update:
-            system: Any = LSMeshSolver((vertices, triangles), start, weights=weight)
-        else:
-            system = _RefactoringSystem(vertices, triangles, start, weight)
+        system = LSMeshSystem(vertices, triangles, start, weights=weight)
         selected = np.zeros(n, dtype=bool)
         selected[start] = True
         order = np.empty(count, dtype=np.int64)
@@ -169,17 +115,14 @@ def _greedy(
             best = int(np.argmax(errors))
             order[k] = best
             selected[best] = True
-            if update:
-                system.add_anchors(np.array([best]), weights=weight)
-            else:
-                system.add_anchors(np.array([best]))
+            system.add_anchors(np.array([best]), weights=weight)
             bar.update(1)
     finally:
         bar.close()
     return order, system
 
 
-def _forbid_around(
+def forbid_around(
     indptr: np.ndarray, neighbours: np.ndarray, errors: np.ndarray, forbidden: np.ndarray, vertex: int
 ) -> None:
     """Mark ``vertex`` and the region reached from it by a breadth-first walk while the error decreases.
@@ -207,9 +150,16 @@ def _forbid_around(
         frontier = reached
 
 
-def _combined(data: MeshData, count: int, weight: float, batch: int, *, progress: bool = False):
+def _combined(
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    count: int,
+    weight: float,
+    batch: int,
+    *,
+    progress: bool = False,
+) -> tuple[np.ndarray, LSMeshSystem]:
     """Combined local-maxima selection (LS meshes section 4): one solve per ``batch`` picks."""
-    vertices, triangles = data.vertices, data.triangles
     n = len(vertices)
     start = start_vertices(vertices, triangles)
     bar = progress_bar(progress, total=count, initial=len(start), desc="combined selection", unit="point")
@@ -217,7 +167,7 @@ def _combined(data: MeshData, count: int, weight: float, batch: int, *, progress
         bar.set_postfix_str("factor")
         adjacency = adjacency_matrix(triangles, n)
         indptr, neighbours = adjacency.indptr.astype(np.int64), adjacency.indices.astype(np.int64)
-        solver = LSMeshSolver((vertices, triangles), start, weights=weight)
+        solver = LSMeshSystem(vertices, triangles, start, weights=weight)
         selected = np.zeros(n, dtype=bool)
         selected[start] = True
         order = [start]
@@ -233,35 +183,51 @@ def _combined(data: MeshData, count: int, weight: float, batch: int, *, progress
                 if forbidden[best]:  # every vertex is selected or forbidden: solve again
                     break
                 picks.append(best)
-                _forbid_around(indptr, neighbours, errors, forbidden, best)
-            picks = np.asarray(picks, dtype=np.int64)
-            selected[picks] = True
-            solver.add_anchors(picks, weights=weight)
-            order.append(picks)
-            done += len(picks)
-            bar.update(len(picks))
+                forbid_around(indptr, neighbours, errors, forbidden, best)
+            chosen = np.asarray(picks, dtype=np.int64)
+            selected[chosen] = True
+            solver.add_anchors(chosen, weights=weight)
+            order.append(chosen)
+            done += len(chosen)
+            bar.update(len(chosen))
     finally:
         bar.close()
     return np.concatenate(order), solver
 
 
-def _select(
-    mesh: Any,
+def control_point_selection(
+    vertices: np.ndarray,
+    triangles: np.ndarray,
     count: Any,
     *,
-    method: str,
-    batch: Any,
-    weights: Any,
-    seed: Any,
-    progress: bool,
-):
-    """Validate and dispatch; returns ``(data, indices, solver or None)``."""
-    data = read_mesh(mesh)
-    n = len(data.vertices)
+    method: str = "greedy",
+    batch: Any = None,
+    weights: Any = 1.0,
+    seed: Any = None,
+    progress: bool = False,
+) -> tuple[np.ndarray, LSMeshSystem | None]:
+    """Array core of :func:`select_control_points` on validated arrays: the indices and their system.
+
+    ``vertices (n, 3) float64`` and ``triangles (m, 3) int64`` as
+    :func:`~o3d_lsmesh._validate.mesh_arrays` returns them (the callers read
+    them once); the options are checked here. Returns the ``(count,) int64``
+    selection and, for ``"greedy"`` and ``"combined"``, the
+    :class:`~o3d_lsmesh.lsmesh.LSMeshSystem` whose factor holds every
+    selected control point at weight ``weights`` (None for ``"random"``).
+
+    Examples
+    --------
+    >>> from o3d_lsmesh._validate import mesh_arrays
+    >>> V, F = mesh_arrays([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 1]], [[0, 1, 2], [1, 3, 2]])
+    >>> indices, system = control_point_selection(V, F, 2)
+    >>> indices.shape, system.solve().shape
+    ((2,), (4, 3))
+    """
+    n = len(vertices)
     method = as_choice(method, SELECTION_METHODS, name="method")
     count = as_count(count, name="count", minimum=1, maximum=n)
     weight = as_positive_float(weights, name="weights")
-    components, _ = connected_components(data.triangles, n)
+    components, _ = connected_components(triangles, n)
     if count < components:
         raise ValueError(
             f"count must be at least the number of connected components ({components}, "
@@ -276,12 +242,10 @@ def _select(
     rng = _rng(seed)
     check_progress(progress)
     if method == "random":  # instant: no progress bar
-        return data, _random(data, count, rng), None
+        return _random(vertices, triangles, count, rng), None
     if method == "greedy":
-        indices, solver = _greedy(data, count, weight, progress=progress)
-    else:
-        indices, solver = _combined(data, count, weight, batch, progress=progress)
-    return data, indices, solver
+        return _greedy(vertices, triangles, count, weight, progress=progress)
+    return _combined(vertices, triangles, count, weight, batch, progress=progress)
 
 
 def select_control_points(
@@ -319,8 +283,12 @@ def select_control_points(
     Parameters
     ----------
     mesh : open3d.geometry.TriangleMesh, open3d.t.geometry.TriangleMesh or (vertices, triangles)
+        Vertices at exactly equal coordinates (the copies a file reader makes
+        at UV seams) are welded and selected once; the indices returned are
+        in the mesh's own layout (the first copy of a split vertex).
     count : int
-        Number of control points, from the number of connected components to ``n``.
+        Number of control points, from the number of connected components to
+        ``n`` (``n`` counts a split vertex once).
     method : {"greedy", "combined", "random"}
     batch : int, optional
         Picks per solve for ``"combined"`` (default 31, as in figure 6 of the
@@ -358,10 +326,18 @@ def select_control_points(
     >>> bool((a == select_control_points(box, 5, method="random", seed=1)).all())
     True
     """
-    _, indices, _ = _select(
-        mesh, count, method=method, batch=batch, weights=weights, seed=seed, progress=progress
+    data = read_mesh(mesh, weld=True)
+    indices, _ = control_point_selection(
+        data.vertices,
+        data.triangles,
+        count,
+        method=method,
+        batch=batch,
+        weights=weights,
+        seed=seed,
+        progress=progress,
     )
-    return indices
+    return data.source_indices(indices)
 
 
 def approximate(
@@ -388,6 +364,8 @@ def approximate(
     Parameters
     ----------
     mesh : open3d.geometry.TriangleMesh, open3d.t.geometry.TriangleMesh or (vertices, triangles)
+        Split vertices are welded as in :func:`select_control_points`; the
+        result has the mesh's own layout, each copy at its vertex's position.
     count, method, weights, batch, seed, progress
         See :func:`select_control_points`. When the result needs a new
         factorization (``interpolate`` or ``"random"``), ``progress`` also
@@ -416,10 +394,19 @@ def approximate(
     True
     """
     interpolate = as_bool(interpolate, name="interpolate")
-    data, indices, solver = _select(
-        mesh, count, method=method, batch=batch, weights=weights, seed=seed, progress=progress
+    data = read_mesh(mesh, weld=True)
+    V, F = data.vertices, data.triangles
+    indices, system = control_point_selection(
+        V, F, count, method=method, batch=batch, weights=weights, seed=seed, progress=progress
     )
-    if solver is not None and not interpolate:
-        return new_mesh(data, solver.solve()), indices
-    weight = as_positive_float(weights, name="weights")
-    return ls_mesh(mesh, indices, weights=weight, interpolate=bool(interpolate), progress=progress), indices
+    if system is not None and not interpolate:
+        return new_mesh(data, system.solve()), data.source_indices(indices)
+    # a new factorization: the LS mesh of the selection, with ls_mesh's bar
+    with stages(progress, "ls_mesh", ("factor", "solve")) as begin:
+        begin("factor")
+        system = LSMeshSystem(
+            V, F, indices, weights=weights, interpolate=bool(interpolate), progress=progress
+        )
+        begin("solve")
+        vertices = system.solve()
+    return new_mesh(data, vertices), data.source_indices(indices)

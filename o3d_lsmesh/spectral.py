@@ -22,6 +22,7 @@ from ._o3d import new_mesh, read_mesh
 from ._progress import check_progress, stages
 from ._solvers import SPDSolver
 from ._validate import as_count
+from .encoding import dequantize, quantize
 from .topology import adjacency_matrix
 
 __all__ = ["SPECTRAL_MAX_VERTICES", "combinatorial_laplacian", "null_space_basis", "spectral_approximation"]
@@ -152,13 +153,13 @@ def spectral_basis(
 
 
 def quantize_coefficients(coefficients: np.ndarray, bits: int) -> np.ndarray:
-    """Uniformly quantize each column to ``bits`` bits in its ``[min, max]`` and return the dequantized values."""
-    levels = (1 << bits) - 1
+    """Uniformly quantize each column to ``bits`` bits in its ``[min, max]`` and return the dequantized values.
+
+    The quantizer of the geometry stream (:func:`~o3d_lsmesh.encoding.quantize`), so that the two
+    compression methods are compared at the same quantization.
+    """
     lower, upper = coefficients.min(axis=0), coefficients.max(axis=0)
-    extent = upper - lower
-    scale = np.divide(levels, extent, out=np.zeros_like(extent), where=extent > 0)
-    q = np.rint((coefficients - lower) * scale)
-    return lower + q * np.divide(extent, levels)
+    return dequantize(quantize(coefficients, lower, upper, bits), lower, upper, bits)
 
 
 def spectral_approximation(mesh: Any, k: int, *, bits: int | None = None, progress: bool = False) -> Any:

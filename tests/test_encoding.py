@@ -10,17 +10,17 @@ from hypothesis import strategies as st
 
 from o3d_lsmesh import SingularSystemError, ls_mesh
 from o3d_lsmesh.encoding import (
-    _HEADER,
+    HEADER,
     MAGIC,
-    _assemble,
-    _from_bits,
-    _index_bits,
-    _to_bits,
+    assemble_stream,
     connectivity_checksum,
     decode_geometry,
     encode_geometry,
+    from_bits,
+    index_width,
     iter_decode_geometry,
     quantization_bound,
+    to_bits,
 )
 from o3d_lsmesh.selection import select_control_points
 
@@ -52,7 +52,7 @@ def fields(torus, **overrides):
         indices=idx,
         quantized=np.zeros((len(idx), 3), dtype=np.int64),
         bits=8,
-        index_bits=_index_bits(n),
+        index_bits=index_width(n),
         edges_crc=connectivity_checksum(F, n),
         omega=10.0 * n,
         lower=V.min(axis=0),
@@ -78,7 +78,7 @@ def test_round_trip_is_within_the_quantization_bound_at_anchors(torus):
 def test_stream_size_is_k_log_n_plus_3kq(torus, stream):
     n = len(torus[0])
     payload_bits = 60 * (math.ceil(math.log2(n)) + 3 * 10)
-    assert len(stream) == _HEADER.size + (payload_bits + 7) // 8 + 4
+    assert len(stream) == HEADER.size + (payload_bits + 7) // 8 + 4
 
 
 def test_decoding_ignores_the_decoder_mesh_positions(torus, stream):
@@ -143,9 +143,9 @@ def test_mesh_kinds(torus, stream):
 @given(st.integers(1, 40), st.lists(st.integers(0, 2**40), min_size=1, max_size=30))
 def test_bit_packing_round_trips(width, values):
     values = np.array([v % (1 << width) for v in values], dtype=np.int64)
-    bits = _to_bits(values, width)
+    bits = to_bits(values, width)
     packed = np.unpackbits(np.packbits(bits))[: len(bits)]
-    np.testing.assert_array_equal(_from_bits(packed, width), values)
+    np.testing.assert_array_equal(from_bits(packed, width), values)
 
 
 def test_every_truncation_raises(torus, stream):
@@ -186,7 +186,7 @@ def test_wrong_version_raises(torus, stream):
     with pytest.raises(ValueError, match="version 1 stream, got version 2"):
         decode_geometry(torus, resealed)
     with pytest.raises(ValueError, match="version 1 stream, got version 0"):
-        decode_geometry(torus, _assemble(**fields(torus), version=0))
+        decode_geometry(torus, assemble_stream(**fields(torus), version=0))
 
 
 def test_wrong_mesh_raises(torus, stream):
@@ -210,12 +210,12 @@ def test_wrong_mesh_raises(torus, stream):
 def test_consistent_checksum_but_invalid_fields_raise(torus):
     V, F = torus
     n = len(V)
-    decode_geometry(torus, _assemble(**fields(torus)))  # the baseline is valid
+    decode_geometry(torus, assemble_stream(**fields(torus)))  # the baseline is valid
     cases = [
         (dict(reserved=1), "reserved byte must be 0"),
         (dict(bits=0), r"bits must lie in \[1, 31\], got 0"),
         (dict(bits=32), r"bits must lie in \[1, 31\], got 32"),
-        (dict(index_bits=_index_bits(n) + 1), "index_bits must be ceil"),
+        (dict(index_bits=index_width(n) + 1), "index_bits must be ceil"),
         (dict(n=0, index_bits=1), "index_bits must be ceil"),
         (
             dict(indices=np.zeros(0, dtype=np.int64), quantized=np.zeros((0, 3), dtype=np.int64)),
@@ -224,7 +224,7 @@ def test_consistent_checksum_but_invalid_fields_raise(torus):
         (
             dict(
                 n=10,
-                index_bits=_index_bits(10),
+                index_bits=index_width(10),
                 indices=np.arange(11),
                 quantized=np.zeros((11, 3), dtype=np.int64),
             ),
@@ -235,7 +235,7 @@ def test_consistent_checksum_but_invalid_fields_raise(torus):
         (dict(lower=np.array([0.0, np.nan, 0.0])), "bounding box must be finite"),
         (dict(upper=V.min(axis=0) - 1.0), "bounding box must be finite with min <= max"),
         (
-            dict(indices=np.append(np.arange(19), (1 << _index_bits(n)) - 1)),
+            dict(indices=np.append(np.arange(19), (1 << index_width(n)) - 1)),
             rf"anchor indices must lie in \[0, {n}\)",
         ),
         (dict(indices=np.array([3] * 20)), "must not repeat, got 3"),
@@ -243,12 +243,12 @@ def test_consistent_checksum_but_invalid_fields_raise(torus):
     ]
     for overrides, message in cases:
         with pytest.raises(ValueError, match=message):
-            decode_geometry(torus, _assemble(**fields(torus, **overrides)))
+            decode_geometry(torus, assemble_stream(**fields(torus, **overrides)))
 
 
 def test_nonzero_padding_raises(torus):
     values = fields(torus, bits=7, indices=np.arange(21), quantized=np.zeros((21, 3), dtype=np.int64))
-    data = _assemble(**values)
+    data = assemble_stream(**values)
     used = len(values["indices"]) * (values["index_bits"] + 3 * 7)
     assert used % 8 != 0
     body = bytearray(data[:-4])

@@ -8,6 +8,8 @@ import sys
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 o3d = pytest.importorskip("open3d")
 
@@ -56,6 +58,25 @@ def test_weld_map_reference():
     assert weld_map(vertices[:3], triangles[:1]) is None  # no duplicates
     # a triangle with two coincident corners would collapse: the mesh is not welded
     assert weld_map(vertices, np.array([[0, 1, 3]])) is None
+
+
+@settings(max_examples=150, deadline=None)
+@given(
+    rows=st.lists(st.sampled_from([-1.0, -0.0, 0.0, 0.5, 2.0]), min_size=3, max_size=3).map(tuple),
+    picks=st.lists(st.integers(0, 7), min_size=1, max_size=40),
+    seed=st.integers(0, 2**16),
+)
+def test_weld_map_groups_equal_rows_by_first_occurrence(rows, picks, seed):
+    pool = np.random.default_rng(seed).choice([-1.0, -0.0, 0.0, 0.5, 2.0], size=(8, 3))
+    pool[0] = rows
+    vertices = pool[picks]
+    split = weld_map(vertices, np.zeros((0, 3), dtype=np.int64))
+    index: dict = {}  # plain reference: number rows by first occurrence (-0.0 == 0.0 as dict keys)
+    expected = np.array([index.setdefault(tuple(p), len(index)) for p in vertices])
+    if len(index) == len(vertices):
+        assert split is None
+    else:
+        np.testing.assert_array_equal(split, expected)
 
 
 def test_read_mesh_weld_round_trip_arrays():
@@ -216,3 +237,173 @@ def test_hierarchy_levels_warn_once_that_uvs_are_dropped():
     assert len(record) == 1
     level = hierarchy.level(len(hierarchy.triangles) - 1)
     assert len(level.triangles) < len(mesh.triangles) and not level.has_triangle_uvs()
+
+
+# ---- functions that take or return vertex indices weld too: indices stay in the caller's split layout ----
+
+
+def _plain_weld(mesh):
+    """Weld by a plain dictionary (independent of np.unique): welded arrays, split map and first copies."""
+    v, t = np.asarray(mesh.vertices), np.asarray(mesh.triangles)
+    index: dict = {}
+    split = np.array([index.setdefault(tuple(p), len(index)) for p in v])
+    welded = np.zeros((len(index), 3))
+    welded[split] = v
+    first = np.array([split.tolist().index(w) for w in range(len(index))])
+    return welded, split[t], split, first
+
+
+def _seam_pair(mesh):
+    """Two copies of one vertex on the UV seam (not a pole)."""
+    groups = [g for g in _coincident_groups(mesh.vertices) if len(g) == 2]
+    return groups[len(groups) // 2]
+
+
+def _assert_same_layout(mesh_in, mesh_out):
+    np.testing.assert_array_equal(np.asarray(mesh_out.triangles), np.asarray(mesh_in.triangles))
+    np.testing.assert_array_equal(np.asarray(mesh_out.triangle_uvs), np.asarray(mesh_in.triangle_uvs))
+    _assert_seams_closed(mesh_in, mesh_out)
+
+
+def test_ls_mesh_on_split_obj_equals_the_welded_mesh_and_honours_indices(tmp_path):
+    mesh, _ = _noisy_uv_sphere(tmp_path)
+    welded, welded_t, split, first = _plain_weld(mesh)
+    a, b = _seam_pair(mesh)
+    # distinct vertices (a pole has many copies), the last one b: the second copy of a seam vertex
+    controls = np.append(first[[3, 40, 120, 200, 333]], b)
+    assert len(np.unique(split[controls])) == 6
+    target = np.asarray(mesh.vertices)[controls] * 1.3
+    out = o3d_lsmesh.ls_mesh(mesh, controls, target, interpolate=True)
+    _assert_same_layout(mesh, out)
+    ref, _ = o3d_lsmesh.ls_mesh((welded, welded_t), split[controls], target, interpolate=True)
+    np.testing.assert_allclose(np.asarray(out.vertices), ref[split], rtol=0, atol=1e-10)
+    # honoured: every copy of each control vertex sits at its target, a's copy too
+    np.testing.assert_allclose(np.asarray(out.vertices)[controls], target, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(np.asarray(out.vertices)[a], target[5])
+    # an index to either copy names the same vertex
+    other = controls.copy()
+    other[5] = a
+    np.testing.assert_array_equal(
+        np.asarray(o3d_lsmesh.ls_mesh(mesh, other, target, interpolate=True).vertices),
+        np.asarray(out.vertices),
+    )
+    # soft constraints too
+    soft = o3d_lsmesh.ls_mesh(mesh, controls, weights=3.0)
+    ref_soft, _ = o3d_lsmesh.ls_mesh((welded, welded_t), split[controls], weights=3.0)
+    np.testing.assert_allclose(np.asarray(soft.vertices), ref_soft[split], rtol=0, atol=1e-10)
+    # both copies of one vertex: two terms on it (soft: weight sqrt(2)); interpolate: one fixed vertex
+    both = np.append(controls, a)
+    twice = o3d_lsmesh.ls_mesh(mesh, both, weights=3.0)
+    ref_twice, _ = o3d_lsmesh.ls_mesh(
+        (welded, welded_t), split[controls], weights=np.where(np.arange(6) == 5, 3.0 * np.sqrt(2), 3.0)
+    )
+    np.testing.assert_allclose(np.asarray(twice.vertices), ref_twice[split], rtol=0, atol=1e-10)
+    fixed_twice = o3d_lsmesh.ls_mesh(mesh, both, np.vstack([target, target[5]]), interpolate=True)
+    np.testing.assert_allclose(np.asarray(fixed_twice.vertices), np.asarray(out.vertices), rtol=0, atol=1e-12)
+    with pytest.raises(ValueError, match="constraint_vertex_positions must agree where"):
+        o3d_lsmesh.ls_mesh(mesh, both, np.vstack([target, target[5] + 1.0]), interpolate=True)
+
+
+def test_ls_mesh_solver_on_split_obj_keeps_the_layout_through_updates_and_pickling(tmp_path):
+    import pickle
+
+    mesh, _ = _noisy_uv_sphere(tmp_path)
+    welded, welded_t, split, first = _plain_weld(mesh)
+    a, b = _seam_pair(mesh)
+    controls, anchors = [first[3], first[50], b], first[[300, 400]]
+    solver = o3d_lsmesh.LSMeshSolver(mesh, controls, weights=2.0)
+    assert len(solver.solve()) == len(mesh.vertices)
+    # reported in the input's layout: the first copy of the seam vertex
+    np.testing.assert_array_equal(solver.constraint_vertex_indices, [first[3], first[50], min(a, b)])
+    solver.add_anchors(anchors, weights=5.0)
+    with pytest.raises(ValueError, match="indices must not already be control vertices"):
+        solver.add_anchors([a])  # a copy of a control vertex is that control vertex
+    ref = o3d_lsmesh.LSMeshSolver((welded, welded_t), split[controls], weights=2.0)
+    ref.add_anchors(split[anchors], weights=5.0)
+    np.testing.assert_allclose(solver.solve(), ref.solve()[split], rtol=0, atol=1e-10)
+    for s in (solver, pickle.loads(pickle.dumps(solver))):
+        out = s.mesh()
+        _assert_same_layout(mesh, out)
+        np.testing.assert_allclose(np.asarray(out.vertices), ref.solve()[split], rtol=0, atol=1e-10)
+    np.testing.assert_array_equal(
+        first[split[solver.constraint_vertex_indices]], solver.constraint_vertex_indices
+    )
+
+
+def test_reconstruct_geometry_on_split_obj_unknown_copy_means_the_vertex(tmp_path):
+    mesh, _ = _noisy_uv_sphere(tmp_path)
+    welded, welded_t, split, _ = _plain_weld(mesh)
+    a, b = _seam_pair(mesh)
+    region = np.array([b, 100, 101, 102, 120, 121])  # one copy of the seam vertex only
+    out = o3d_lsmesh.reconstruct_geometry(mesh, region)
+    _assert_same_layout(mesh, out)
+    ref, _ = o3d_lsmesh.reconstruct_geometry((welded, welded_t), np.unique(split[region]))
+    np.testing.assert_allclose(np.asarray(out.vertices), ref[split], rtol=0, atol=1e-10)
+    # both copies of the seam vertex moved (it was unknown), every vertex outside the region is bit-identical
+    moved = np.flatnonzero((np.asarray(out.vertices) != np.asarray(mesh.vertices)).any(axis=1))
+    assert a in moved and b in moved
+    assert set(split[moved]) <= set(split[region])
+    # listing both copies is the same set
+    both = o3d_lsmesh.reconstruct_geometry(mesh, np.append(region, a))
+    np.testing.assert_array_equal(np.asarray(both.vertices), np.asarray(out.vertices))
+
+
+@pytest.mark.parametrize("method", ["greedy", "combined", "random"])
+def test_selection_and_approximation_on_split_obj(tmp_path, method):
+    mesh, _ = _noisy_uv_sphere(tmp_path)
+    welded, welded_t, split, first = _plain_weld(mesh)
+    chosen = o3d_lsmesh.select_control_points(mesh, 40, method=method, seed=0)
+    # the selection of the welded surface, each vertex named by its first copy
+    ref = o3d_lsmesh.select_control_points((welded, welded_t), 40, method=method, seed=0)
+    np.testing.assert_array_equal(chosen, first[ref])
+    assert len(np.unique(split[chosen])) == 40
+    approx, indices = o3d_lsmesh.approximate(mesh, 40, method=method, seed=0)
+    np.testing.assert_array_equal(indices, chosen)
+    _assert_same_layout(mesh, approx)
+    ref_approx, _ = o3d_lsmesh.approximate((welded, welded_t), 40, method=method, seed=0)
+    np.testing.assert_allclose(np.asarray(approx.vertices), ref_approx[0][split], rtol=0, atol=1e-10)
+    # count runs up to the number of distinct vertices
+    assert len(o3d_lsmesh.select_control_points(mesh, len(welded), method="random", seed=1)) == len(welded)
+    with pytest.raises(ValueError, match=rf"count must be <= {len(welded)}"):
+        o3d_lsmesh.select_control_points(mesh, len(welded) + 1, method="random")
+
+
+def test_tensor_material_and_legacy_attributes_survive_solver_pickling():
+    import pickle
+
+    tensor = o3d.t.geometry.TriangleMesh.from_legacy(
+        o3d.geometry.TriangleMesh.create_sphere(resolution=10, create_uv_map=True)
+    )
+    tensor.material.set_default_properties()
+    tensor.material.material_name = "defaultLit"
+    tensor.material.scalar_properties["roughness"] = 0.25
+    tensor.material.vector_properties["base_color"] = np.array([0.2, 0.4, 0.6, 1.0], dtype=np.float32)
+    texture = (np.arange(4 * 4 * 3, dtype=np.uint8) * 5).reshape(4, 4, 3)
+    tensor.material.texture_maps["albedo"] = o3d.t.geometry.Image(o3d.core.Tensor(texture))
+    out = pickle.loads(pickle.dumps(o3d_lsmesh.LSMeshSolver(tensor, [0, 30, 60]))).mesh()
+    assert out.has_valid_material() and out.material.material_name == "defaultLit"
+    assert out.material.scalar_properties["roughness"] == pytest.approx(0.25)
+    np.testing.assert_allclose(out.material.vector_properties["base_color"], [0.2, 0.4, 0.6, 1.0], rtol=1e-6)
+    np.testing.assert_array_equal(out.material.texture_maps["albedo"].as_tensor().numpy(), texture)
+    np.testing.assert_array_equal(out.triangle.texture_uvs.numpy(), tensor.triangle.texture_uvs.numpy())
+
+    legacy = o3d.geometry.TriangleMesh.create_sphere(resolution=10, create_uv_map=True)
+    ids = np.arange(len(legacy.triangles), dtype=np.int32) % 3
+    legacy.triangle_material_ids = o3d.utility.IntVector(ids)
+    legacy.textures = [o3d.geometry.Image(texture)]
+    out = pickle.loads(pickle.dumps(o3d_lsmesh.LSMeshSolver(legacy, [0, 30, 60]))).mesh()
+    np.testing.assert_array_equal(np.asarray(out.triangle_uvs), np.asarray(legacy.triangle_uvs))
+    np.testing.assert_array_equal(np.asarray(out.triangle_material_ids), ids)
+    assert len(out.textures) == 1 and np.array_equal(np.asarray(out.textures[0]), texture)
+
+
+def test_split_arrays_keep_their_layout_after_pickling():
+    import pickle
+
+    vertices = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 0, 0], [1, 1, 0]], dtype=float)
+    triangles = np.array([[0, 1, 2], [3, 4, 2]])
+    solver = o3d_lsmesh.LSMeshSolver((vertices, triangles), [0, 2, 3, 4], interpolate=True)
+    for s in (solver, pickle.loads(pickle.dumps(solver))):
+        v, t = s.mesh()
+        np.testing.assert_array_equal(t, triangles)
+        np.testing.assert_array_equal(v, vertices)  # every vertex is a control or fixed by them

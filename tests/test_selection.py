@@ -6,13 +6,12 @@ import pytest
 from conftest import grid, load_mesh
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from selection_reference import greedy_by_refactoring
 
 from o3d_lsmesh import ls_mesh
-from o3d_lsmesh._o3d import read_mesh
 from o3d_lsmesh.selection import (
-    _forbid_around,
-    _greedy,
     approximate,
+    forbid_around,
     select_control_points,
     start_vertices,
 )
@@ -99,19 +98,15 @@ def test_greedy_picks_the_true_maximum_at_each_step():
 
 def test_greedy_with_updates_equals_greedy_with_refactoring():
     V, F = noisy_sphere(12, seed=3)
-    data = read_mesh((V, F))
-    updated, _ = _greedy(data, 80, 1.0, update=True)
-    refactored, _ = _greedy(data, 80, 1.0, update=False)
-    np.testing.assert_array_equal(updated, refactored)
+    updated = select_control_points((V, F), 80, method="greedy", weights=1.0)
+    np.testing.assert_array_equal(updated, greedy_by_refactoring(V, F, 80, 1.0))
 
 
 def test_greedy_with_updates_equals_refactoring_at_the_encoding_weight():
     V, F = noisy_sphere(10, seed=4)
-    data = read_mesh((V, F))
     omega = 10.0 * len(V)
-    updated, _ = _greedy(data, 50, omega, update=True)
-    refactored, _ = _greedy(data, 50, omega, update=False)
-    np.testing.assert_array_equal(updated, refactored)
+    updated = select_control_points((V, F), 50, method="greedy", weights=omega)
+    np.testing.assert_array_equal(updated, greedy_by_refactoring(V, F, 50, omega))
 
 
 @pytest.mark.parametrize("batch", [1, 5, 31])
@@ -161,7 +156,7 @@ def test_vectorized_bfs_matches_queue_bfs(seed, start):
     pre = rng.random(len(V)) < 0.1
     pre[start] = False
     fast, slow = pre.copy(), pre.copy()
-    _forbid_around(adjacency.indptr.astype(np.int64), adjacency.indices.astype(np.int64), errors, fast, start)
+    forbid_around(adjacency.indptr.astype(np.int64), adjacency.indices.astype(np.int64), errors, fast, start)
     reference_forbid(adjacency, errors, slow, start)
     np.testing.assert_array_equal(fast, slow)
 

@@ -272,3 +272,33 @@ def test_weights_positions_and_vectors_never_accept_non_numbers(value):
     ):
         with pytest.raises((TypeError, ValueError), match="^[wpv] must"):
             check()
+
+
+def test_mesh_arrays_is_the_one_check_of_array_functions_and_read_mesh():
+    from o3d_lsmesh._validate import mesh_arrays
+    from o3d_lsmesh.fairing import constrained_fairing_arrays
+
+    v, f = grid(3, 3)
+    bad = {
+        "nan": (np.where(np.arange(27).reshape(9, 3) == 4, np.nan, v), f),
+        "range": (v, np.where(f == 8, 9, f)),
+        "repeat": (v, np.vstack([f, [[0, 0, 1]]])),
+        "float index": (v, f.astype(float)),
+        "shape": (v[:, :2], f),
+        "empty": (np.zeros((0, 3)), f[:0]),
+    }
+    for case, (vertices, triangles) in bad.items():
+        errors = []
+        for check, args in (
+            (mesh_arrays, (vertices, triangles)),
+            (read_mesh, ((vertices, triangles),)),
+            (constrained_fairing_arrays, (vertices, triangles, 1)),
+        ):
+            with pytest.raises((TypeError, ValueError)) as info:
+                check(*args)
+            errors.append((type(info.value), str(info.value)))
+        assert errors[0] == errors[1] == errors[2], case
+    # copies: the caller's arrays are never the results
+    out_v, out_f = mesh_arrays(v, f)
+    assert not np.shares_memory(out_v, v) and not np.shares_memory(out_f, f)
+    np.testing.assert_array_equal(out_v, v)

@@ -16,7 +16,7 @@ import numpy as np
 
 from .._o3d import new_mesh, read_mesh
 from .._progress import check_progress
-from .._validate import as_bool, as_choice, as_count, as_positive_float
+from .._validate import as_bool, as_choice, as_count, as_positive_float, mesh_arrays
 from .barycenter import DEFAULT_MU, GlobalSolver, fairing_topology, local_operator
 from .boundary_curve import curve_operator
 from .scan_fairing import (
@@ -152,8 +152,8 @@ def constrained_fairing_arrays(
     options, extra = _check_options(
         number_of_iterations, method, mu, smooth_boundary, reimpose_every, progress, membrane, boundary_weight
     )
-    data = read_mesh((vertices, triangles), name="mesh")
-    return _fair(data.vertices, data.triangles, *options, solver=solver, **extra)
+    vertices, triangles = mesh_arrays(vertices, triangles)  # copies: _fair may write to its positions
+    return _fair(vertices, triangles, *options, solver=solver, **extra)
 
 
 def _fair(
