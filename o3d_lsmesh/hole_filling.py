@@ -385,7 +385,11 @@ def _minimum_weight_triangulation(
             if np.abs(n3).sum() > 0:
                 worst = np.minimum(worst, tri_normal @ n3)
         theta = np.arccos(np.clip(worst, -1.0, 1.0))
-        theta = np.where(twice_area > 0, theta, np.pi)  # a degenerate triangle is the worst
+        # a degenerate triangle (three collinear points: a chord's samples) is worse than any real one; its
+        # rounding-noise normal must not count, nor its zero area win a tie (both sides of a chord would
+        # then take the same sliver, wound both ways: a non-manifold edge)
+        longest = np.maximum(((b - a) ** 2).sum(-1), ((c - a) ** 2).sum(-1))
+        theta = np.where(twice_area > 1e-9 * longest, theta, 2.0 * np.pi)
         total_angle = np.maximum(theta, np.maximum(angle[i, mm], angle[mm, j]))
         total_area = 0.5 * twice_area + area[i, mm] + area[mm, j]
         if forbidden is not None:
@@ -905,12 +909,15 @@ def fill_holes_arrays(
     out_vertices = np.concatenate([vertices, new_points])
     out_triangles = np.concatenate([triangles, new_tris])
     p = len(new_points)
-    if p and continuity >= 0:
-        out_vertices, used = _fair_all(
-            out_vertices, out_triangles, m, n, holes, continuity, weights, np.concatenate(tri_owner)
+    owner = np.concatenate(tri_owner)
+    if p:
+        out_vertices, used, stuck = _fair_all(
+            out_vertices, out_triangles, m, n, holes, continuity, weights, owner
         )
-    else:
+    else:  # nothing to fair: the triangulations alone are checked
         used = np.full(len(holes), -1, dtype=np.int64)
+        crossing = _crossings(out_vertices, out_triangles, m)
+        stuck = np.flatnonzero(np.bincount(owner, weights=crossing, minlength=len(holes)) > 0)
     if interp_rows:
         interpolation = sp.csr_matrix(
             (np.concatenate(interp_vals), (np.concatenate(interp_rows), np.concatenate(interp_cols))),
@@ -918,6 +925,29 @@ def fill_holes_arrays(
         )
     else:
         interpolation = sp.csr_matrix((p, n))
+    if len(stuck):
+        # every fill of these crosses the mesh (the scan is folded or overlaps itself next to them): a
+        # crossing patch would be a broken mesh, so they are left open, and said
+        warnings.warn(
+            f"fill_holes: {len(stuck)} hole(s) left open: their fills cross other triangles at every "
+            "continuity (folded or overlapping surface next to them); see FilledHoles.skipped",
+            O3DLSMeshWarning,
+            stacklevel=3,
+        )
+        keep_tri = ~np.isin(owner, stuck)
+        vertex_owner = np.zeros(p, dtype=np.int64)
+        new_tris = out_triangles[m:]
+        inside = new_tris >= n
+        vertex_owner[new_tris[inside] - n] = np.broadcast_to(owner[:, None], new_tris.shape)[inside]
+        keep_vertex = ~np.isin(vertex_owner, stuck)
+        remap = np.concatenate([np.arange(n), n + np.cumsum(keep_vertex) - 1])
+        out_vertices = np.concatenate([vertices, out_vertices[n:][keep_vertex]])
+        out_triangles = np.concatenate([triangles, remap[new_tris[keep_tri]]])
+        interpolation = interpolation[np.flatnonzero(keep_vertex)]
+        left = set(stuck.tolist())
+        skipped = skipped + [hole for i, hole in enumerate(holes) if i in left]
+        used = used[[i not in left for i in range(len(holes))]]
+        holes = [hole for i, hole in enumerate(holes) if i not in left]
     return FilledHoles(out_vertices, out_triangles, holes, skipped, interpolation, used)
 
 
@@ -1031,19 +1061,7 @@ def _fair_all(
             break
     candidates = tried
     used = np.array([candidates[c][0] if c >= 0 else candidates[0][0] for c in chosen], dtype=np.int64)
-    stuck = np.flatnonzero(chosen < 0)
-    if len(stuck):
-        # no candidate is free of crossings: keep the asked one (the crossings are the input's own folds
-        # or unavoidable), and say so
-        mine = np.isin(vertex_owner, stuck)
-        out[n:][mine] = candidates[0][1][n:][mine]
-        warnings.warn(
-            f"fill_holes: the fills of {len(stuck)} hole(s) cross other triangles at every continuity "
-            "(folded or overlapping surface next to them)",
-            O3DLSMeshWarning,
-            stacklevel=3,
-        )
-    return out, used
+    return out, used, np.flatnonzero(chosen < 0)
 
 
 def _crossings(vertices: np.ndarray, triangles: np.ndarray, first_new: int) -> np.ndarray:

@@ -106,6 +106,22 @@ def check_valid(V, T, first_new):
     assert new_intersections(V, T, first_new) == 0
 
 
+def check_valid_edges(V, T, first_new):
+    """As :func:`check_valid` on a mesh non-manifold elsewhere: no edge used by a new triangle is used
+    more than twice or twice in one direction, and no new triangle crosses another."""
+    e = np.concatenate([T[:, [0, 1]], T[:, [1, 2]], T[:, [2, 0]]])
+    n = len(V)
+    directed = e[:, 0] * n + e[:, 1]
+    undirected = np.minimum(e[:, 0], e[:, 1]) * n + np.maximum(e[:, 0], e[:, 1])
+    new_edges = np.unique(undirected[np.tile(np.arange(len(T)) >= first_new, 3)])
+    keys, counts = np.unique(undirected, return_counts=True)
+    assert counts[np.searchsorted(keys, new_edges)].max() <= 2
+    dkeys, dcounts = np.unique(directed, return_counts=True)
+    new_directed = np.unique(directed[np.tile(np.arange(len(T)) >= first_new, 3)])
+    assert dcounts[np.searchsorted(dkeys, new_directed)].max() == 1
+    assert new_intersections(V, T, first_new) == 0
+
+
 def distance_to(V, T, points):
     scene = o3d.t.geometry.RaycastingScene()
     scene.add_triangles(o3d.core.Tensor(V.astype(np.float32)), o3d.core.Tensor(T.astype(np.uint32)))
@@ -232,6 +248,33 @@ def test_dynamic_programme_avoids_existing_edges():
     tris = _minimum_weight_triangulation(points, outer, forbidden)
     edges = {frozenset(e) for t in tris.tolist() for e in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0]))}
     assert frozenset((1, 3)) in edges and frozenset((0, 2)) not in edges
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_dynamic_programme_never_takes_collinear_chord_samples(seed):
+    # two wiggly arcs joined by two straight chords sampled at the loop's spacing (a long loop cut twice,
+    # as the chord split does) and a few chords that already are mesh edges: a triangle of three collinear
+    # chord samples has a rounding-noise normal and zero area; taken on both sides of a chord it made a
+    # triangle and its reverse, a non-manifold edge (the ear_back scan). Reference: the triangle areas.
+    rng = np.random.default_rng(seed)
+    t = np.linspace(0, np.pi / 2, 12)
+    arc1 = np.stack([np.cos(t), np.sin(t), 0.3 * rng.standard_normal(12)], 1)
+    arc2 = -arc1
+    s = np.linspace(0, 1, 10)[1:-1, None]
+    points = np.concatenate(
+        [arc1, arc1[-1] + s * (arc2[0] - arc1[-1]), arc2, arc2[-1] + s * (arc1[0] - arc2[-1])]
+    )
+    k = len(points)
+    forbidden = np.zeros((k, k), dtype=bool)
+    for i in (0, 3, 22, 25):
+        forbidden[i, i + 2] = forbidden[i + 2, i] = True
+    outer = np.zeros((k, 3))
+    outer[:11] = outer[20:31] = [0, 0, 1]  # the arcs border the mesh; the chords border the other piece
+    tris = _minimum_weight_triangulation(points, outer, forbidden)
+    assert len(tris) == k - 2
+    p = points[tris]
+    area = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+    assert area.min() > 1e-3
 
 
 # --------------------------------------------------------------------------- geometry of the fill
@@ -411,16 +454,25 @@ def test_outer_border_of_a_scan_stays_open():
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         out = fill_holes(mesh, max_hole_edges=200)
-    # a few fills meet folded scan geometry at every continuity: said, not hidden (measured: 3 holes)
-    assert all("cross other triangles" in str(w.message) for w in caught)
-    after = find_holes(np.asarray(out.vertices), np.asarray(out.triangles).astype(np.int64))
+        result = fill_holes_arrays(V, T, max_hole_edges=200)
+    # a few fills meet folded scan geometry at every continuity: left open, said, not hidden (measured: 4)
+    assert all("left open: their fills cross other triangles" in str(w.message) for w in caught)
+    W, G = np.asarray(out.vertices), np.asarray(out.triangles).astype(np.int64)
+    np.testing.assert_array_equal(W, result.vertices)
+    np.testing.assert_array_equal(G, result.triangles)
+    after = find_holes(W, G)
     kept = {tuple(sorted(hole.vertices.tolist())) for hole in after}
     assert tuple(sorted(main.vertices.tolist())) in kept  # the silhouette is untouched
     # the rim of a flap (one triangle hanging by a vertex) is no hole: left open, like the border
     is_flap = [hole.edges == 3 and len(np.unique(np.asarray(hole.rows) % len(T))) == 1 for hole in inner]
     assert all(tuple(sorted(hole.vertices.tolist())) in kept for hole, flap in zip(inner, is_flap) if flap)
-    filled = [hole for hole, flap in zip(inner, is_flap) if hole.edges <= 200 and not flap]
-    assert filled and not any(tuple(sorted(hole.vertices.tolist())) in kept for hole in filled)
+    wanted = {tuple(sorted(h.vertices.tolist())) for h, f in zip(inner, is_flap) if h.edges <= 200 and not f}
+    filled = {tuple(sorted(hole.vertices.tolist())) for hole in result.holes}
+    left = {tuple(sorted(hole.vertices.tolist())) for hole in result.skipped} & wanted
+    assert filled and filled | left == wanted and not filled & left
+    assert len(left) <= 5 and (len(left) > 0) == (len(caught) > 0)
+    assert not filled & kept and left <= kept  # the filled ones are closed, the ones left open are open
+    check_valid_edges(W, G, len(T))  # what the fills add is manifold, oriented and crosses nothing
     # the scan is non-manifold elsewhere: the filled mesh is not worse than the input
     n_bad_in = len(np.asarray(mesh.get_non_manifold_vertices()))
     assert len(np.asarray(out.get_non_manifold_vertices())) <= n_bad_in
