@@ -748,7 +748,7 @@ class FilledHoles:
     holes : list of Hole
         The holes that were filled.
     skipped : list of Hole
-        Loops left open (outer borders, or beyond the size limits).
+        Loops left open (outer borders, beyond the size limits, or every fill crossing the mesh).
     interpolation : (p, n) scipy.sparse.csr_matrix
         Harmonic weights of the new vertices over the input's (rows sum to 1):
         ``interpolation @ colors`` gives the new vertices' colours (empty unless asked for).
@@ -987,7 +987,7 @@ def _fair_all(
     Candidates, best first: the asked continuity (after its cotangent pass if asked, then without), then
     each lower continuity, then the refined patch unfaired. Each hole keeps the first candidate whose new
     triangles cross no triangle of the mesh (a tri-Laplacian patch can overshoot into a thin part next to
-    the hole), or, if none is free of crossings, the one with the fewest (with a warning).
+    the hole); the holes where none is are returned (the caller leaves them open).
     """
     total = len(vertices)
     unknown = np.arange(n, total)
@@ -1269,7 +1269,8 @@ def fill_holes(
     (uniform weights, then continuity 1, 0, then left as refined), per hole;
     :attr:`FilledHoles.continuity` says which one each hole got. If none is
     free of crossings (the surface next to the hole is itself folded), the
-    asked one is kept with an :class:`O3DLSMeshWarning`. A system that is
+    hole is left open with an :class:`O3DLSMeshWarning` (a crossing patch
+    would be a broken mesh). A system that is
     numerically singular is skipped the same way.
 
     The outer border of a component is never filled by default (a scan's
