@@ -21,7 +21,6 @@ from scipy.sparse.csgraph import dijkstra
 from o3d_lsmesh import O3DLSMeshWarning, fill_holes
 from o3d_lsmesh.hole_filling import (
     DP_MAX_EDGES,
-    _hole_loops,
     _minimum_weight_triangulation,
     fill_holes_arrays,
     find_holes,
@@ -151,33 +150,35 @@ def reference_loops(T, n):
     return loops
 
 
-def test_loops_match_the_reference_and_topology_on_manifold_boundaries():
+def test_holes_are_the_topology_loops_with_their_triangles():
+    # find_holes uses o3d_lsmesh.topology.boundary_loops (its own tests cover pinches and fins); here the
+    # plain-walk reference on manifold boundaries, and each hole's rows name the one triangle on each edge
     V, T = grid(9, 7)
     holed = T[np.linalg.norm(V[T].mean(1)[:, :2] - 0.5, axis=1) > 0.2]
-    for tris, n in [(T, len(V)), (holed, len(V))]:
-        ours = [loop.tolist() for loop in _hole_loops(tris, n)]
-        assert ours == reference_loops(tris, n)
-        assert ours == [loop.tolist() for loop in boundary_loops(tris, n)]
     mesh = load_mesh("bunny.ply")
-    tris = np.asarray(mesh.triangles).astype(np.int64)
-    assert [loop.tolist() for loop in _hole_loops(tris, len(mesh.vertices))] == reference_loops(
-        tris, len(mesh.vertices)
-    )
+    bunny = np.asarray(mesh.triangles).astype(np.int64), np.asarray(mesh.vertices)
+    for tris, W in [(T, V), (holed, V), (bunny[0], bunny[1])]:
+        holes = find_holes(W, tris)
+        assert [hole.vertices.tolist() for hole in holes] == reference_loops(tris, len(W))
+        for hole in holes:
+            triangle = tris[hole.rows % len(tris)]
+            a, b = hole.vertices, np.roll(hole.vertices, -1)
+            assert ((triangle == a[:, None]).any(1) & (triangle == b[:, None]).any(1)).all()
 
 
 def test_pinched_boundary_pairs_within_a_fan():
-    # two fans at vertex 0 (a bow-tie): each loop turns within its own fan
+    # two fans at vertex 0 (a bow-tie): each loop turns within its own fan, and both are filled
     T = np.array([[0, 1, 2], [0, 2, 3], [0, 4, 5], [0, 5, 6]])
-    loops = sorted(loop.tolist() for loop in _hole_loops(T, 7))
+    V = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0.2], [0, 1, 0], [-1, 0, 0], [-1, -1, 0.2], [0, -1, 0.0]])
+    loops = sorted(hole.vertices.tolist() for hole in find_holes(V, T))
     assert loops == [[0, 1, 2, 3], [0, 4, 5, 6]]
-    # the topology module's loops pair boundary edges within fans the same way
     assert sorted(loop.tolist() for loop in boundary_loops(T, 7)) == loops
 
 
 def test_loops_of_a_lone_triangle_and_closed_mesh():
-    assert [loop.tolist() for loop in _hole_loops(np.array([[0, 1, 2]]), 3)] == [[0, 1, 2]]
+    assert [hole.vertices.tolist() for hole in find_holes(np.eye(3), np.array([[0, 1, 2]]))] == [[0, 1, 2]]
     V, T = icosphere(1)
-    assert _hole_loops(T, len(V)) == []
+    assert find_holes(V, T) == []
 
 
 # --------------------------------------------------------------------------- the dynamic programme
@@ -307,7 +308,7 @@ def test_real_mesh_hole_within_bound_of_truth(name, bound):
     for radius in (2.5, 6.0):
         for _ in range(20):  # a centre whose disk leaves one hole
             Vh, Th, _ = cut_disk(V, T, int(rng.integers(len(V))), radius * h)
-            if len(_hole_loops(Th, len(Vh))) == 1:
+            if len(boundary_loops(Th, len(Vh))) == 1:
                 break
         for continuity in (0, 1, 2):
             out = fill_holes_arrays(Vh, Th, continuity=continuity)
@@ -374,7 +375,7 @@ def test_closed_result_has_positive_volume_and_no_boundary():
     V, T = icosphere(3)
     Vh, Th, _ = cut_disk(V, T, 0, 0.4)
     Vh, Th, _ = cut_disk(Vh, Th, int(np.argmin(Vh[:, 0])), 0.3)  # a second hole, far from the first
-    assert len(_hole_loops(Th, len(Vh))) == 2
+    assert len(boundary_loops(Th, len(Vh))) == 2
     out = fill_holes(legacy(Vh, Th))
     V2, T2 = np.asarray(out.vertices), np.asarray(out.triangles)
     assert boundary_edge_count(T2, len(V2)) == 0
@@ -408,7 +409,7 @@ def test_two_holes_sharing_a_vertex():
     assert not legacy(V, Th).is_vertex_manifold()
     # the boundary of the surface passes v twice (the two gaps form one loop turning within each fan);
     # it is filled as the two gaps
-    loops = _hole_loops(Th, len(V))
+    loops = boundary_loops(Th, len(V))
     assert len(loops) == 1 and np.count_nonzero(loops[0] == v) == 2 and len(loops[0]) == 6
     out = fill_holes_arrays(V, Th)
     assert len(out.holes) == 1 and len(out.triangles) == len(T)  # each 3-edge gap gets one triangle
