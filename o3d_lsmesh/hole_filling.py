@@ -386,6 +386,15 @@ def _circumsphere(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray):
     return centre, radius
 
 
+def _min_angle(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray) -> np.ndarray:
+    """Smallest interior angle (radians) of each triangle ``(p0, p1, p2)`` (rows)."""
+    best = np.full(len(p0), np.pi)
+    for u, v, w in ((p0, p1, p2), (p1, p2, p0), (p2, p0, p1)):
+        e1, e2 = v - u, w - u
+        best = np.minimum(best, np.arctan2(np.linalg.norm(_cross(e1, e2), axis=1), (e1 * e2).sum(1)))
+    return best
+
+
 def _relax(
     points: np.ndarray, tris: np.ndarray, fixed_pairs: np.ndarray, max_passes: int = 100
 ) -> np.ndarray:
@@ -426,6 +435,15 @@ def _relax(
         n1 = _cross(points[a] - points[c], points[d] - points[c])
         n2 = _cross(points[b] - points[d], points[c] - points[d])
         inside &= ((n1 * old).sum(1) > 0) & ((n2 * old).sum(1) > 0)
+        # and the smallest angle of the pair grows: the two sphere tests disagree in 3D, so without this
+        # an edge could flip back and forth; with it every flip is progress and the passes end
+        before = np.minimum(
+            _min_angle(points[a], points[b], points[c]), _min_angle(points[b], points[a], points[d])
+        )
+        after = np.minimum(
+            _min_angle(points[c], points[a], points[d]), _min_angle(points[d], points[b], points[c])
+        )
+        inside &= after > before + 1e-9
         cand = np.flatnonzero(inside)
         if len(cand) == 0:
             break
@@ -442,16 +460,22 @@ def _relax(
 
 
 def _refine(
-    points: np.ndarray, sigma: np.ndarray, tris: np.ndarray, fixed_pairs: np.ndarray, max_rounds: int = 60
-) -> tuple[np.ndarray, np.ndarray]:
+    points: np.ndarray,
+    sigma: np.ndarray,
+    tris: np.ndarray,
+    fixed_pairs: np.ndarray,
+    owner: np.ndarray,
+    max_rounds: int = 60,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Liepa's refinement: centroid splits of triangles larger than the local scale, then relaxation.
 
     A triangle ``(i, j, k)`` with centroid ``c`` and ``sigma_c`` the mean of its
     corners' scales is split when ``alpha * |c - v_m| > max(sigma_c, sigma_m)``
     for each of its corners (``alpha = sqrt(2)``); the new vertex takes scale
     ``sigma_c``. Rounds of splits (all at once) and flips run until no
-    triangle splits. Returns the points (the first ``len(points)`` unchanged)
-    and the triangles.
+    triangle splits. Several patches (disjoint index ranges) refine at once, each as if alone:
+    ``owner`` names each point's patch. Returns the points (the first ``len(points)`` unchanged), the
+    triangles and the owners of the points.
     """
     points = points.copy()
     sigma = sigma.copy()
@@ -470,11 +494,12 @@ def _refine(
         new = len(points) + np.arange(len(chosen))
         points = np.concatenate([points, centre[chosen]])
         sigma = np.concatenate([sigma, sigma_c[chosen]])
+        owner = np.concatenate([owner, owner[tris[chosen, 0]]])
         a, b, c = tris[chosen, 0], tris[chosen, 1], tris[chosen, 2]
         tris[chosen] = np.stack([a, b, new], axis=1)
         tris = np.concatenate([tris, np.stack([b, c, new], axis=1), np.stack([c, a, new], axis=1)])
         tris = _relax(points, tris, fixed_pairs)
-    return points, tris
+    return points, tris, owner
 
 
 # --------------------------------------------------------------------------- fairing
@@ -720,11 +745,10 @@ def fill_holes_arrays(
     sigma_all = np.bincount(at_loop.ravel(), weights=np.repeat(length, 2), minlength=n) / np.maximum(
         degree, 1
     )
-    new_points, new_tris = [], []
-    interp_rows, interp_cols, interp_vals = [], [], []
-    offset = n
+    # each piece (a loop; a loop through a vertex twice is cut into pieces) is triangulated on its own;
+    # then every piece is refined at once, in disjoint local index ranges
     bar = progress_bar(progress, total=len(holes), desc="filling holes", unit="hole")
-    tri_owner = []  # the hole (index in `holes`) of each new triangle
+    piece_hole, piece_loop, piece_points, piece_tris, piece_sigma, piece_fixed = [], [], [], [], [], []
     for hole_index, hole in enumerate(holes):
         bar.update()
         for loop, rows in _simple_pieces(hole.vertices, hole.rows):
@@ -745,39 +769,72 @@ def fill_holes_arrays(
             idx = np.arange(k)
             forbidden[idx, (idx + 1) % k] = False
             forbidden[(idx + 1) % k, idx] = False
-            forbidden_arg = forbidden if forbidden.any() else None
             spacing = float(np.mean(np.linalg.norm(np.roll(points, -1, 0) - points, axis=1)))
             # chords are sampled at the spacing the refinement aims for (none without refinement)
             extra, tris = _triangulate(
-                points, outer, forbidden_arg, spacing / density if density > 0 else 0.0
+                points,
+                outer,
+                forbidden if forbidden.any() else None,
+                spacing / density if density > 0 else 0.0,
             )
-            local_points = np.concatenate([points, extra])
-            if density > 0:
-                sigma = np.concatenate([sigma_all[loop] / density, np.full(len(extra), spacing / density)])
-                fixed_pairs = np.argwhere(np.triu(forbidden))  # mesh edges between loop vertices
-                local_points, tris = _refine(local_points, sigma, tris, fixed_pairs)
-            nl = len(local_points)
-            mapping = np.concatenate([loop, offset + np.arange(nl - k)])
-            new_points.append(local_points[k:])
-            tri_owner.append(np.full(len(tris), hole_index))
-            new_tris.append(mapping[tris])
-            # harmonic weights of the new vertices over the loop's (for colours and other attributes)
-            if nl > k and interpolation:
-                K, _, _ = _uniform_operators(tris, nl)
-                unknown = np.arange(k, nl)
-                K_uu = K[unknown][:, unknown].tocsc()
-                K_ub = K[unknown][:, :k]
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore", O3DLSMeshWarning)
-                    harmonic = SPDSolver(K_uu).solve(-K_ub.toarray())  # (p, k) dense: one loop wide
-                r, c = np.nonzero(np.abs(harmonic) > 1e-12)
-                interp_rows.append(offset - n + r)
-                interp_cols.append(loop[c])
-                interp_vals.append(harmonic[r, c])
-            offset += nl - k
+            piece_hole.append(hole_index)
+            piece_loop.append(loop)
+            piece_points.append(np.concatenate([points, extra]))
+            piece_tris.append(tris)
+            spread = spacing / density if density > 0 else 0.0
+            piece_sigma.append(
+                np.concatenate([sigma_all[loop] / max(density, 1e-300), np.full(len(extra), spread)])
+            )
+            piece_fixed.append(np.argwhere(np.triu(forbidden)))  # mesh edges between loop vertices
     bar.close()
-    new_points = np.concatenate(new_points) if new_points else np.zeros((0, 3))
-    new_tris = np.concatenate(new_tris)
+    sizes = np.array([len(x) for x in piece_points])
+    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    all_points = np.concatenate(piece_points)
+    all_tris = np.concatenate([t + start for t, start in zip(piece_tris, starts)])
+    point_piece = np.repeat(np.arange(len(sizes)), sizes)
+    if density > 0:
+        all_fixed = np.concatenate([f + start for f, start in zip(piece_fixed, starts)])
+        all_points, all_tris, point_piece = _refine(
+            all_points, np.concatenate(piece_sigma), all_tris, all_fixed, point_piece
+        )
+    # global numbering: loop points are mesh vertices; the others are new, numbered piece by piece
+    is_loop = np.zeros(len(all_points), dtype=bool)
+    loop_lengths = np.array([len(loop) for loop in piece_loop])
+    is_loop[np.concatenate([start + np.arange(k) for start, k in zip(starts, loop_lengths)])] = True
+    global_index = np.empty(len(all_points), dtype=np.int64)
+    global_index[is_loop] = np.concatenate(piece_loop)  # loop points come first in each piece, in order
+    fresh = np.flatnonzero(~is_loop)
+    fresh = fresh[np.argsort(point_piece[fresh], kind="stable")]
+    global_index[fresh] = n + np.arange(len(fresh))
+    new_points = all_points[fresh]
+    tri_piece = point_piece[all_tris[:, 0]]
+    tri_order = np.argsort(tri_piece, kind="stable")
+    new_tris = global_index[all_tris[tri_order]]
+    tri_owner = [np.asarray(piece_hole, dtype=np.int64)[tri_piece[tri_order]]]
+    interp_rows, interp_cols, interp_vals = [], [], []
+    if interpolation and len(fresh):
+        # harmonic weights of the new vertices over their loop's vertices (for colours and other
+        # attributes): one small dense solve per piece (a loop wide)
+        tri_bounds = np.searchsorted(tri_piece[tri_order], np.arange(len(sizes) + 1))
+        for piece in range(len(sizes)):
+            local = new_tris[tri_bounds[piece] : tri_bounds[piece + 1]]
+            loop = piece_loop[piece]
+            inner = np.unique(local[local >= n])
+            if len(inner) == 0:
+                continue
+            numbering = np.concatenate([loop, inner])
+            by_index = np.argsort(numbering)
+            tris_local = by_index[np.searchsorted(numbering[by_index], local)]
+            k, nl = len(loop), len(numbering)
+            K, _, _ = _uniform_operators(tris_local, nl)
+            unknown = np.arange(k, nl)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", O3DLSMeshWarning)
+                harmonic = SPDSolver(K[unknown][:, unknown].tocsc()).solve(-K[unknown][:, :k].toarray())
+            r, c = np.nonzero(np.abs(harmonic) > 1e-12)
+            interp_rows.append(inner[r] - n)
+            interp_cols.append(loop[c])
+            interp_vals.append(harmonic[r, c])
     out_vertices = np.concatenate([vertices, new_points])
     out_triangles = np.concatenate([triangles, new_tris])
     p = len(new_points)
