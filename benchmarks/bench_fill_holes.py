@@ -35,6 +35,10 @@ import sys
 import tempfile
 import time
 
+# one BLAS thread, set before numpy loads: on this 2-core machine shared by ~7 jobs, OpenBLAS's default
+# thread pool made a 600 x 600 dense Cholesky take 6 s instead of 9 ms (CHOLMOD's supernodes call BLAS)
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
 import numpy as np
 import open3d as o3d
 from _common import load_mesh, markdown_table, write_markdown

@@ -13,18 +13,21 @@ A hole is a closed loop of boundary half-edges. Each chosen hole is
    O(k^2) for the chord search plus O(k * DP_MAX_EDGES^2) and cannot hang;
 2. refined to the density of the surrounding edges (Liepa, section 4):
    centroid splits where a triangle is larger than the local edge-length scale,
-   each round followed by Delaunay edge flips (circumsphere test);
+   each round followed by edge flips (either circumsphere test, as CGAL's
+   relax, and only where the pair's smallest angle grows, so flips end);
 3. faired as a least-squares mesh (Sorkine and Cohen-Or 2004, section 6:
    "the known vertices around the hole serve as control points, the geometry
    of the unknown vertices is reconstructed"): the new vertices are the only
    unknowns, and enough rings of the surrounding mesh are fixed anchors for the
-   chosen continuity.
-
+   chosen continuity; then a few tangential relaxation steps round the new
+   triangles without leaving the faired surface (to first order);
 4. checked: a patch whose new triangles cross the mesh is faired again with a
-   lower continuity (see :func:`fill_holes`, Notes).
+   lower continuity, and left open if every one crosses (see :func:`fill_holes`, Notes).
 
-Everything is vectorized per hole (the dynamic programme per diagonal of its
-table, refinement and flips per round); the one Python loop is over holes.
+The loops are those of :func:`o3d_lsmesh.topology.boundary_loops`. The only Python loop over holes
+is the dynamic programme (vectorized per diagonal of its table); every piece is then refined at
+once (disjoint index ranges, one flip pass per round for all), and all patches are faired in one
+sparse system and checked for crossings in one pass.
 """
 
 from __future__ import annotations
@@ -170,21 +173,31 @@ def find_holes(vertices: np.ndarray, triangles: np.ndarray, *, _edge_info=None) 
         axis=1,
     )
     component_area = np.bincount(label[triangles[:, 0]], weights=area, minlength=label.max() + 1)
-    holes = []
-    for loop, rows in loops:  # each starts at its smallest vertex
-        points = vertices[loop]
-        perimeter = float(np.linalg.norm(np.roll(points, -1, axis=0) - points, axis=1).sum())
-        holes.append([loop, perimeter, _diameter(points), int(label[loop[0]]), rows])
-    longest: dict[int, int] = {}
-    for index, (_, perimeter, _, component, _) in enumerate(holes):
-        if component not in longest or perimeter > holes[longest[component]][1]:
-            longest[component] = index
-    border = np.zeros(len(holes), dtype=bool)
-    for component, index in longest.items():
-        border[index] = holes[index][1] ** 2 > BORDER_RATIO * component_area[component]
+    perimeters = np.array(
+        [
+            np.linalg.norm(np.roll(vertices[loop], -1, axis=0) - vertices[loop], axis=1).sum()
+            for loop, _ in loops
+        ]
+    )
+    components = np.array([label[loop[0]] for loop, _ in loops], dtype=np.int64)
+    # the longest loop of each component (by perimeter)
+    by_length = np.lexsort((-perimeters, components))
+    first = np.ones(len(loops), dtype=bool)
+    first[1:] = components[by_length][1:] != components[by_length][:-1]
+    longest = by_length[first]
+    border = np.zeros(len(loops), dtype=bool)
+    border[longest] = perimeters[longest] ** 2 > BORDER_RATIO * component_area[components[longest]]
     out = [
-        Hole(loop, len(loop), perimeter, diameter, component, bool(border[i]), rows)
-        for i, (loop, perimeter, diameter, component, rows) in enumerate(holes)
+        Hole(
+            loop,
+            len(loop),
+            float(perimeters[i]),
+            _diameter(vertices[loop]),
+            int(components[i]),
+            bool(border[i]),
+            rows,
+        )
+        for i, (loop, rows) in enumerate(loops)
     ]
     out.sort(key=lambda hole: int(hole.vertices[0]))
     return out
@@ -281,16 +294,16 @@ def _minimum_weight_triangulation(
     if not np.isfinite(angle[0, k - 1]) and forbidden is not None:
         # no triangulation avoids every existing edge: accept one that does not
         return _minimum_weight_triangulation(points, outer_normals, None)
-    out = []
+    out: list[tuple[int, int, int]] = []
     stack = [(0, k - 1)]
     while stack:  # k - 2 triangles
-        i, j = stack.pop()
-        if j - i < 2:
+        lo, hi = stack.pop()
+        if hi - lo < 2:
             continue
-        mid = int(split[i, j])
-        out.append((j, mid, i))
-        stack.append((i, mid))
-        stack.append((mid, j))
+        mid = int(split[lo, hi])
+        out.append((hi, mid, lo))
+        stack.append((lo, mid))
+        stack.append((mid, hi))
     return np.array(out, dtype=np.int64)
 
 
@@ -541,9 +554,11 @@ def _uniform_operators(tris: np.ndarray, nv: int, vertices: np.ndarray | None = 
     keys = e[:, 0] * nv + e[:, 1]
     e_keys, inverse = np.unique(keys, return_inverse=True)
     i, j = e_keys // nv, e_keys % nv
+    w: np.ndarray
     if kind == "uniform":
         w = np.ones(len(i))
     else:
+        assert vertices is not None  # the weighted kinds read the geometry
         p = vertices[tris]  # (t, 3, 3)
         cot = np.zeros((len(tris), 3))  # cotangent of the angle opposite edge (c, c + 1)
         for c in range(3):
@@ -559,6 +574,7 @@ def _uniform_operators(tris: np.ndarray, nv: int, vertices: np.ndarray | None = 
     degree = np.asarray(adjacency.sum(axis=1)).ravel()
     K = (sp.diags(degree) - adjacency).tocsr()
     if kind == "cotangent-area":
+        assert vertices is not None
         p = vertices[tris]
         area = 0.5 * np.linalg.norm(_cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
         mass = np.bincount(tris.ravel(), weights=np.repeat(area / 3.0, 3), minlength=nv)
@@ -626,7 +642,7 @@ def _fair(
         rhs = -(A_u.T @ (A_full[:, known] @ vertices[known]))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", O3DLSMeshWarning)  # the SciPy fallback warning: tiny systems
-        solution = SPDSolver(normal).solve(np.asarray(rhs))
+        solution = SPDSolver(normal, ordering="amd").solve(np.asarray(rhs))
     return solution
 
 
@@ -714,12 +730,13 @@ def fill_holes_arrays(
         max_hole_edges, max_hole_diameter, continuity, density
     )
     weights = as_choice(weights, ("uniform", "cotangent"), name="weights")
-    fill_border = as_bool(fill_border, name="fill_border")
-    progress = check_progress(progress)
+    fill_border = bool(as_bool(fill_border, name="fill_border"))
+    check_progress(progress)
     vertices = np.asarray(vertices, dtype=np.float64)
     triangles = np.asarray(triangles, dtype=np.int64)
     n, m = len(vertices), len(triangles)
-    holes, skipped = [], []
+    holes: list[Hole] = []
+    skipped: list[Hole] = []
     edge_info = unique_edges(triangles, n)  # the one whole-mesh sort
     for hole in find_holes(vertices, triangles, _edge_info=edge_info):
         too_big = (max_hole_edges is not None and hole.edges > max_hole_edges) or (
@@ -848,12 +865,12 @@ def fill_holes_arrays(
         crossing = _crossings(out_vertices, out_triangles, m)
         stuck = np.flatnonzero(np.bincount(owner, weights=crossing, minlength=len(holes)) > 0)
     if interp_rows:
-        interpolation = sp.csr_matrix(
+        weights_matrix = sp.csr_matrix(
             (np.concatenate(interp_vals), (np.concatenate(interp_rows), np.concatenate(interp_cols))),
             shape=(p, n),
         )
     else:
-        interpolation = sp.csr_matrix((p, n))
+        weights_matrix = sp.csr_matrix((p, n))
     if len(stuck):
         # every fill of these crosses the mesh (the scan is folded or overlaps itself next to them): a
         # crossing patch would be a broken mesh, so they are left open, and said
@@ -872,12 +889,12 @@ def fill_holes_arrays(
         remap = np.concatenate([np.arange(n), n + np.cumsum(keep_vertex) - 1])
         out_vertices = np.concatenate([vertices, out_vertices[n:][keep_vertex]])
         out_triangles = np.concatenate([triangles, remap[new_tris[keep_tri]]])
-        interpolation = interpolation[np.flatnonzero(keep_vertex)]
+        weights_matrix = weights_matrix[np.flatnonzero(keep_vertex)]
         left = set(stuck.tolist())
         skipped = skipped + [hole for i, hole in enumerate(holes) if i in left]
         used = used[[i not in left for i in range(len(holes))]]
         holes = [hole for i, hole in enumerate(holes) if i not in left]
-    return FilledHoles(out_vertices, out_triangles, holes, skipped, interpolation, used)
+    return FilledHoles(out_vertices, out_triangles, holes, skipped, weights_matrix, used)
 
 
 def _simple_pieces(loop: np.ndarray, rows: np.ndarray):
@@ -988,8 +1005,7 @@ def _fair_all(
             chosen[hole_index] = rank
         if (chosen >= 0).all():
             break
-    candidates = tried
-    used = np.array([candidates[c][0] if c >= 0 else candidates[0][0] for c in chosen], dtype=np.int64)
+    used = np.array([tried[c][0] if c >= 0 else tried[0][0] for c in chosen], dtype=np.int64)
     return out, used, np.flatnonzero(chosen < 0)
 
 
