@@ -38,13 +38,14 @@ from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.sparse import csgraph
 
 from ._errors import O3DLSMeshWarning, SingularSystemError
 from ._o3d import new_mesh, read_mesh
 from ._progress import check_progress, progress_bar
 from ._solvers import SPDSolver
 from ._validate import as_bool, as_choice, as_count, as_positive_float
-from .topology import boundary_loops, connected_components, unique_edges
+from .topology import _unique_edges_and_runs, boundary_loops
 
 __all__ = [
     "BORDER_RATIO",
@@ -79,12 +80,14 @@ def _loop_rows(triangles: np.ndarray, n: int, edge_info: Any = None) -> list[tup
     :func:`o3d_lsmesh.topology.halfedges`): the row of loop edge ``(loop[i], loop[i + 1])`` is the one
     triangle's half-edge on it (a boundary edge has exactly one).
 
-    ``edge_info`` is :func:`o3d_lsmesh.topology.unique_edges` of the mesh, if already computed.
+    ``edge_info`` is ``o3d_lsmesh.topology._unique_edges_and_runs`` of the mesh, if already computed.
     """
-    loops = boundary_loops(triangles, n)
+    if edge_info is None:
+        edge_info = _unique_edges_and_runs(triangles, n)
+    (edges, counts, inverse), runs = edge_info
+    loops = boundary_loops(triangles, n, _runs=runs)
     if not loops:
         return []
-    edges, counts, inverse = unique_edges(triangles, n) if edge_info is None else edge_info
     single = np.flatnonzero(counts[inverse] == 1)
     row_of_edge = np.full(len(edges), -1, dtype=np.int64)
     row_of_edge[inverse[single]] = single
@@ -161,10 +164,15 @@ def find_holes(vertices: np.ndarray, triangles: np.ndarray, *, _edge_info=None) 
     (3, True)
     """
     n = len(vertices)
+    if _edge_info is None:
+        _edge_info = _unique_edges_and_runs(triangles, n)
     loops = _loop_rows(triangles, n, _edge_info)
     if not loops:
         return []
-    _, label = connected_components(triangles, n)
+    edges = _edge_info[0][0]
+    # components over the edges already sorted (no second whole-mesh sort)
+    graph = sp.coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
+    _, label = csgraph.connected_components(graph, directed=False)
     area = 0.5 * np.linalg.norm(
         np.cross(
             vertices[triangles[:, 1]] - vertices[triangles[:, 0]],
@@ -737,7 +745,7 @@ def fill_holes_arrays(
     n, m = len(vertices), len(triangles)
     holes: list[Hole] = []
     skipped: list[Hole] = []
-    edge_info = unique_edges(triangles, n)  # the one whole-mesh sort
+    edge_info = _unique_edges_and_runs(triangles, n)  # the one whole-mesh sort
     for hole in find_holes(vertices, triangles, _edge_info=edge_info):
         too_big = (max_hole_edges is not None and hole.edges > max_hole_edges) or (
             max_hole_diameter is not None and hole.diameter > max_hole_diameter
@@ -750,7 +758,7 @@ def fill_holes_arrays(
         return FilledHoles(
             vertices.copy(), triangles.copy(), [], skipped, sp.csr_matrix((0, n)), np.zeros(0, dtype=np.int64)
         )
-    edges = edge_info[0]
+    edges = edge_info[0][0]
     edge_keys = edges[:, 0] * n + edges[:, 1]  # sorted
     # local edge scale of the loop vertices: mean length of their edges (Liepa's sigma); only edges at
     # a loop vertex are measured
