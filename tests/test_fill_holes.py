@@ -297,6 +297,56 @@ def test_sphere_hole_close_to_the_sphere_and_continuity_order():
     assert errors[2] < 0.05
 
 
+def test_holes_filled_together_as_each_alone():
+    # all pieces are refined in one batch and faired in one system: far-apart holes must not interact.
+    # Reference: the same mesh with only the small hole chosen (max_hole_edges).
+    V, T = icosphere(4)
+    h = mean_edge(V, T)
+    Vh, Th, _ = cut_disk(V, T, 0, 2.5 * h)
+    far = int(np.argmin(Vh[:, 2]))  # the south pole, far from vertex 0
+    Vh, Th, _ = cut_disk(Vh, Th, far, 6 * h)
+    holes = find_holes(Vh, Th)
+    assert len(holes) == 2
+    small = min(hole.edges for hole in holes)
+    both = fill_holes_arrays(Vh, Th)
+    alone = fill_holes_arrays(Vh, Th, max_hole_edges=small)
+    assert len(both.holes) == 2 and len(alone.holes) == 1
+    new_both, new_alone = both.vertices[len(Vh) :], alone.vertices[len(Vh) :]
+    assert 0 < len(new_alone) < len(new_both)
+    nearest = np.linalg.norm(new_alone[:, None, :] - new_both[None, :, :], axis=2).min(axis=1)
+    assert nearest.max() < 1e-9 * h
+    check_valid(both.vertices, both.triangles, len(Th))
+
+
+def test_coarse_hole_is_refined_and_rounder_than_its_triangulation():
+    # a hole on a coarse sphere: the minimum-weight triangulation has big triangles, so the refinement
+    # must split, and the smallest angle of the fill (flips, tangential relaxation) is at least that of
+    # the plain triangulation (density=0); the new vertices lie on the sphere
+    V, T = icosphere(2)  # 162 vertices
+    h = mean_edge(V, T)
+    Vh, Th, _ = cut_disk(V, T, 0, 2.5 * h)
+    flat = fill_holes_arrays(Vh, Th, density=0)
+    out = fill_holes_arrays(Vh, Th)
+    assert len(out.vertices) > len(Vh)
+
+    def smallest_angle(W, G):
+        p = W[G]
+        angles = []
+        for i in range(3):
+            u, w = p[:, (i + 1) % 3] - p[:, i], p[:, (i + 2) % 3] - p[:, i]
+            cos = (u * w).sum(1) / (np.linalg.norm(u, axis=1) * np.linalg.norm(w, axis=1))
+            angles.append(np.degrees(np.arccos(np.clip(cos, -1, 1))))
+        return float(np.min(angles))
+
+    assert smallest_angle(out.vertices, out.triangles[len(Th) :]) >= smallest_angle(
+        flat.vertices, flat.triangles[len(Th) :]
+    )
+    # closer to the sphere than the flat triangulation
+    new = out.vertices[len(Vh) :]
+    assert np.abs(np.linalg.norm(new, axis=1) - 1).max() < 0.1 * h
+    check_valid(out.vertices, out.triangles, len(Th))
+
+
 @pytest.mark.parametrize("name, bound", [("horse.ply", 0.1), ("camel.ply", 0.5)])
 def test_real_mesh_hole_within_bound_of_truth(name, bound):
     # mean distance of the new vertices and new triangle centroids to the original surface, in h
@@ -511,7 +561,7 @@ def test_density_zero_adds_no_vertex_and_nonmanifold_elsewhere_is_kept():
     V, T = icosphere(2)
     Vh, Th, _ = cut_disk(V, T, 0, 0.5)
     # a fin: a third triangle on an edge far from the hole (a non-manifold edge)
-    far = int(np.argmin(Vh[:, 2]))
+    far = int(np.argmin(Vh[:, 2]))  # the south pole, far from vertex 0
     t = int(np.flatnonzero((Th == far).any(axis=1))[0])
     a, b = Th[t, 0], Th[t, 1]
     Vf = np.concatenate([Vh, [Vh[a] * 1.5]])
