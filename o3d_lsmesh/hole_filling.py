@@ -350,7 +350,6 @@ def _triangulate(
     one = np.concatenate([np.arange(a, b + 1), e[::-1]])
     two = np.concatenate([np.arange(b, k), np.arange(0, a + 1), e])
     all_points = np.concatenate([points, chord])
-    zero = np.zeros((count, 3))
     triangles = []
     extra = [chord]
     offset = k + count
@@ -372,7 +371,6 @@ def _triangulate(
         offset += len(sub_extra)
         extra.append(sub_extra)
         triangles.append(mapping[sub_tris])
-    del zero
     return np.concatenate(extra), np.concatenate(triangles)
 
 
@@ -381,7 +379,6 @@ def _triangulate(
 
 def _edge_table(tris: np.ndarray, nv: int):
     """Interior edges of a consistently oriented patch: (triangle 1, slot 1, triangle 2, slot 2, a, b)."""
-    nt = len(tris)
     a = tris.reshape(-1)
     b = tris[:, [1, 2, 0]].reshape(-1)
     key = np.minimum(a, b) * nv + np.maximum(a, b)
@@ -389,7 +386,6 @@ def _edge_table(tris: np.ndarray, nv: int):
     ks = key[order]
     pair = np.flatnonzero(ks[1:] == ks[:-1])
     h1, h2 = order[pair], order[pair + 1]
-    del nt
     return h1 // 3, h1 % 3, h2 // 3, h2 % 3, a[h1], b[h1], key
 
 
