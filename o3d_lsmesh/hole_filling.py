@@ -879,8 +879,8 @@ def fill_holes_arrays(
         # every fill of these crosses the mesh (the scan is folded or overlaps itself next to them): a
         # crossing patch would be a broken mesh, so they are left open, and said
         warnings.warn(
-            f"fill_holes: {len(stuck)} hole(s) left open: their fills cross other triangles at every "
-            "continuity (folded or overlapping surface next to them); see FilledHoles.skipped",
+            f"fill_holes: the fills of {len(stuck)} hole(s) cross other triangles at every continuity "
+            "(folded or overlapping surface next to them): left open, see FilledHoles.skipped",
             O3DLSMeshWarning,
             stacklevel=3,
         )

@@ -436,7 +436,8 @@ def _read(path):
     return np.asarray(mesh.vertices), np.asarray(mesh.triangles)
 
 
-# a raw scan's own folds next to a hole can make every fill cross them: fill_holes says so with a warning
+# a raw scan's own folds next to a hole can make every fill cross them: fill_holes leaves those holes
+# open and says so with a warning
 @pytest.mark.filterwarnings("default:fill_holes. the fills of")
 @pytest.mark.parametrize("scan_file", CLI_KEYS, indirect=True)
 def test_cli_subcommands_on_scans(scan_file, tmp_path, capsys):
