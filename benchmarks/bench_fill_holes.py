@@ -35,6 +35,10 @@ import sys
 import tempfile
 import time
 
+# one BLAS thread, set before numpy loads: on this 2-core machine shared by ~7 jobs, OpenBLAS's default
+# thread pool made a 600 x 600 dense Cholesky take 6 s instead of 9 ms (CHOLMOD's supernodes call BLAS)
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
 import numpy as np
 import open3d as o3d
 from _common import load_mesh, markdown_table, write_markdown
@@ -380,20 +384,23 @@ def cases():
 
 
 NOTES = """\
-* Quality: on the horse ours is closer to the truth than CGAL continuity 2 at every size (ratios
-  0.96 / 0.90 / 0.70) with larger smallest angles; on the coarse camel it is not (3.0 / 1.07 / 1.4):
-  there the loops are short next to thin parts, our refinement adds fewer vertices than CGAL's (0 / 12 /
-  0 against 3 / 16 / 4), and the crossing check can lower a hole's continuity there (on the camel 6h
-  hole of tests/test_fill_holes.py the tri-Laplacian patch crossed the neck). Camel 15h cuts off a protrusion: the Hausdorff distance is the part no fill
-  can restore (every tool 14.3 h).
+* Quality: ours is closer to the truth than CGAL continuity 2 on the horse at every size (ratios about
+  0.9 / 0.95 / 0.6) and on camel 15h (0.8), but not on camel 2.5h (1.75) and 6h (1.2): on the coarse
+  camel the faired new vertices move away from the minimum-weight triangulation, which alone is closer
+  (0.05 / 0.29 h with ``density=0``, poor angles); neither the solve (CGAL's ``Delta^(c+1) x = 0``
+  form with uniform or cotangent weights gave 0.11-0.14 / 0.45) nor tangential relaxation explains it,
+  so the gap is in the triangulation and refinement (CGAL adds 3 / 16 vertices, we add 7 / 18).
+  Smallest angles: ours larger everywhere but plane_holes (0.5 deg below) and camel 6h (equal: the
+  same triangle of loop vertices in both).
 * Validity: ours is closed, edge- and vertex-manifold, consistently oriented and free of crossings in
   every case (as CGAL); MeshLib and PyMeshLab leave crossings on the camel and bunny, Open3D winds every
   new triangle backwards and leaves boundary edges.
 * Time: CGAL's clock starts on a built half-edge structure and runs only its hole calls; ours starts
-  from arrays and includes finding the holes (a sort of every edge), the crossing check and two solves
-  (uniform, cotangent). Ours is 2-10 times CGAL's on large holes and far more on 3-edge-scale holes,
-  where our fixed whole-mesh cost (tens of ms) dominates a sub-millisecond CGAL call. The machine was
-  shared by about 7 jobs (load 12-18 on 2 cores): single timings varied by 3x between runs.
+  from arrays and includes finding the holes (one sort of every edge), the crossing check and two solves
+  (uniform, cotangent). Ours is several times CGAL's on large holes and far more on small ones, where
+  the fixed whole-mesh cost (tens of ms) dominates a sub-millisecond CGAL call. BLAS is held to one
+  thread (see the top of the script). The machine was shared by about 7 jobs (load ~20 on 2 cores):
+  single timings varied by 3x between runs.
 """
 
 

@@ -113,6 +113,11 @@ def unique_edges(triangles: np.ndarray, n: int | None = None):
     inverse : (3m,) int64
         Edge index of each half-edge of :func:`halfedges`.
     """
+    return _unique_edges_and_runs(triangles, n)[0]
+
+
+def _unique_edges_and_runs(triangles: np.ndarray, n: int | None = None):
+    """:func:`unique_edges` and the half-edge runs of :func:`boundary_loops` (``_runs``) from one sort."""
     if n is None:
         n = int(triangles.max()) + 1 if len(triangles) else 0
     keys = _edge_keys(triangles, n)
@@ -121,7 +126,7 @@ def unique_edges(triangles: np.ndarray, n: int | None = None):
     edges = np.empty((len(first), 2), dtype=np.int64)
     np.floor_divide(first, n, out=edges[:, 0])
     np.remainder(first, n, out=edges[:, 1])
-    return edges, counts, inverse
+    return (edges, counts, inverse), (order, starts, counts)
 
 
 def directed_edges(triangles: np.ndarray, n: int, *, executor=None):
@@ -374,7 +379,7 @@ class BoundaryCurves:
         return len(self.loops) + len(self.chains)
 
 
-def boundary_loops(triangles: np.ndarray, n: int) -> list[np.ndarray]:
+def boundary_loops(triangles: np.ndarray, n: int, *, _runs=None) -> list[np.ndarray]:
     """Every closed boundary loop as an ordered ``(l,) int64`` array of vertex indices, on any mesh.
 
     A loop is a closed cycle of boundary half-edges (edges of exactly one
@@ -418,7 +423,7 @@ def boundary_loops(triangles: np.ndarray, n: int) -> list[np.ndarray]:
     >>> [loop.tolist() for loop in boundary_loops(bowtie, 5)]
     [[0, 1, 2], [0, 3, 4]]
     """
-    closed, _ = _boundary_walk(np.asarray(triangles, dtype=np.int64), n, split_at_junctions=False)
+    closed, _ = _boundary_walk(np.asarray(triangles, dtype=np.int64), n, split_at_junctions=False, runs=_runs)
     return closed
 
 
