@@ -286,10 +286,13 @@ def _run_dask(client: Any, tasks: list[_Task], job: dict, emit: Callable[[dict],
 
     from distributed import as_completed
 
+    cancelled: tuple[type[BaseException], ...]
     try:
         from distributed.client import FutureCancelledError
+
+        cancelled = (CancelledError, FutureCancelledError)
     except ImportError:  # pragma: no cover - distributed before 2024.8
-        FutureCancelledError = CancelledError
+        cancelled = (CancelledError,)
 
     try:
         from distributed import KilledWorker
@@ -341,7 +344,7 @@ def _run_dask(client: Any, tasks: list[_Task], job: dict, emit: Callable[[dict],
                     f"such as a segfault, or killed, e.g. for memory); last worker {last}",
                 )
                 record["worker"] = last
-            except (FutureCancelledError, CancelledError):
+            except cancelled:
                 record = _failure(task, op_name, "cancelled")
             except Exception as error:
                 record = _failure(task, op_name, f"{type(error).__name__}: {error}")
@@ -494,7 +497,8 @@ def run(
     outdir = Path(outdir).absolute()
     if outdir.exists() and not outdir.is_dir():
         raise ValueError(f"OUTDIR {str(outdir)!r} exists and is not a folder")
-    tasks, outputs = [], {}
+    tasks: list[_Task] = []
+    outputs: dict[str, str] = {}
     for index, (path, relative) in enumerate(items):
         target = output_path(outdir, relative, ops[-1], suffix)
         if target is not None:
@@ -522,7 +526,7 @@ def run(
     records: list[dict | None] = [None] * len(tasks)
     report_path = None if report is None else Path(report)
     todo = tasks
-    if resume:
+    if resume and report_path is not None:  # resume without a report was refused above
         previous = _read_report(report_path)
         todo = []
         for task in tasks:

@@ -24,6 +24,7 @@ and refuses to replace a method Open3D itself defines under the same name.
 
 from __future__ import annotations
 
+import functools
 import threading
 from typing import Any, Callable
 
@@ -156,9 +157,9 @@ def _method(name: str, function: Callable[..., Any], cls: type) -> Callable[...,
 
     method.__name__ = name
     method.__qualname__ = f"{cls.__qualname__}.{name}"
-    method.__doc__ = function.__doc__
     method.__module__ = __name__
-    method.__wrapped__ = function  # inspect.signature() shows the real parameters
+    # the docstring, and __wrapped__ so that inspect.signature() shows the real parameters
+    functools.update_wrapper(method, function, assigned=("__doc__",), updated=())
     setattr(method, _MARKER, True)
     return method
 

@@ -398,7 +398,7 @@ def render(
     reference: Any = None,
     error_max: float | None = None,
     color: Sequence[float] = _DEFAULT_COLOR,
-    background: Sequence[float] = (1.0, 1.0, 1.0),
+    background: Sequence[float] | np.ndarray = (1.0, 1.0, 1.0),
     view_direction: Sequence[float] = (0.0, 0.0, 1.0),
     up: Sequence[float] = (0.0, 1.0, 0.0),
     margin: float = 0.05,
