@@ -42,7 +42,7 @@ import math
 import struct
 import zlib
 from collections.abc import Iterator
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -54,6 +54,9 @@ from .laplacian import laplacian_matrix
 from .lsmesh import LSMeshSolver
 from .selection import SELECTION_METHODS, _select
 from .topology import connected_components, unique_edges
+
+if TYPE_CHECKING:
+    from ._types import AnyMesh, MeshT
 
 __all__ = ["decode_geometry", "encode_geometry", "iter_decode_geometry"]
 
@@ -132,7 +135,7 @@ def quantization_bound(lower: np.ndarray, upper: np.ndarray, bits: int) -> np.nd
 
 
 def encode_geometry(
-    mesh: Any,
+    mesh: AnyMesh,
     count: int,
     *,
     bits: int = 12,
@@ -297,7 +300,7 @@ def _prefix(anchors: Any, k: int) -> int:
     return as_count(anchors, name="anchors", minimum=1, maximum=k)
 
 
-def decode_geometry(mesh: Any, data: Any, *, anchors: int | None = None, progress: bool = False) -> Any:
+def decode_geometry(mesh: MeshT, data: Any, *, anchors: int | None = None, progress: bool = False) -> MeshT:
     """Reconstruct the geometry encoded by :func:`encode_geometry` on the connectivity of ``mesh``.
 
     Solves eq. 1 of the geometry-aware bases paper (relaxed anchors of weight
@@ -352,8 +355,8 @@ def decode_geometry(mesh: Any, data: Any, *, anchors: int | None = None, progres
 
 
 def iter_decode_geometry(
-    mesh: Any, data: Any, *, step: int | None = None, progress: bool = False
-) -> Iterator[Any]:
+    mesh: MeshT, data: Any, *, step: int | None = None, progress: bool = False
+) -> Iterator[MeshT]:
     """Yield successively refined reconstructions as anchors arrive (progressive scheme, section III).
 
     The first mesh uses the first ``step`` anchors (a factorization); every

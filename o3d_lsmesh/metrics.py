@@ -5,7 +5,7 @@ All functions accept Open3D meshes (legacy or tensor) or ``(vertices, triangles)
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -14,6 +14,9 @@ from ._validate import as_count
 from .summary import (
     topology_summary,  # re-exported: metrics.topology_summary is the historical name
 )
+
+if TYPE_CHECKING:
+    from ._types import AnyMesh
 
 #: Largest ``number_of_points`` of :func:`surface_distance`: every sample costs about 100
 #: bytes on the way (positions, barycentric draws, the float32 copy Open3D reads, distances),
@@ -31,7 +34,7 @@ __all__ = [
 ]
 
 
-def vertex_error(a: Any, b: Any) -> dict:
+def vertex_error(a: AnyMesh, b: AnyMesh) -> dict:
     """Per-vertex distances between two meshes with the same vertex count.
 
     Returns ``{"linf": max_i |a_i - b_i|, "rms": sqrt(mean_i |a_i - b_i|^2), "mean": mean_i |a_i - b_i|}``.
@@ -73,7 +76,7 @@ def _distances_to(vertices: np.ndarray, triangles: np.ndarray, points: np.ndarra
     return result.numpy().astype(np.float64)
 
 
-def surface_distance(a: Any, b: Any, *, number_of_points: int = 100_000, seed: int = 0) -> dict:
+def surface_distance(a: AnyMesh, b: AnyMesh, *, number_of_points: int = 100_000, seed: int = 0) -> dict:
     """Two-sided sampled surface distance (Metro style) between two meshes.
 
     Samples ``number_of_points`` points uniformly by area on each surface (plus
@@ -126,7 +129,7 @@ def _unit_scale(vertices: np.ndarray) -> np.ndarray:
     return vertices / top if top > 0 else vertices
 
 
-def signed_volume(mesh: Any) -> float:
+def signed_volume(mesh: AnyMesh) -> float:
     """Signed volume enclosed by the mesh (divergence theorem); positive when wound outward.
 
     Computed on the vertices scaled to unit size and scaled back by the cube of
@@ -147,7 +150,7 @@ def _face_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     return np.divide(normal, length, out=np.zeros_like(normal), where=length > 0)
 
 
-def normal_deviation(a: Any, b: Any) -> float:
+def normal_deviation(a: AnyMesh, b: AnyMesh) -> float:
     """Mean angle in degrees between corresponding face normals of two meshes with the same triangles.
 
     A triangle of zero area (in either mesh) has no normal: it is left out of
@@ -176,7 +179,7 @@ def normal_deviation(a: Any, b: Any) -> float:
     return float(np.degrees(np.arctan2(sine, cosine)).mean())
 
 
-def triangle_angles(mesh: Any) -> dict:
+def triangle_angles(mesh: AnyMesh) -> dict:
     """Smallest interior angle (degrees) and the share of triangles with an angle under 10 degrees."""
     data = read_mesh(mesh)
     c = _unit_scale(data.vertices)[data.triangles]

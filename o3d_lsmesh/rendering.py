@@ -36,13 +36,16 @@ import tempfile
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ._errors import O3DLSMeshWarning
 from ._o3d import open3d, read_mesh
 from ._validate import as_choice, as_count, as_positive_float, as_real_vector
+
+if TYPE_CHECKING:
+    from ._types import AnyMesh
 
 __all__ = ["VIRIDIS", "RenderedImage", "error_colors", "render"]
 
@@ -390,12 +393,12 @@ def _mean_edge_length(vertices: np.ndarray, triangles: np.ndarray) -> float:
 
 
 def render(
-    meshes: Any,
+    meshes: AnyMesh | Sequence[AnyMesh],
     path: str | os.PathLike | None = None,
     *,
     width: int = 480,
     height: int = 480,
-    reference: Any = None,
+    reference: AnyMesh | None = None,
     error_max: float | None = None,
     color: Sequence[float] = _DEFAULT_COLOR,
     background: Sequence[float] | np.ndarray = (1.0, 1.0, 1.0),

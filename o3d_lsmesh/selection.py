@@ -23,7 +23,7 @@ vertex drawn with ``seed``.
 from __future__ import annotations
 
 import numbers
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -35,6 +35,9 @@ from ._validate import as_bool, as_choice, as_count, as_positive_float
 from .laplacian import uniform_laplacian
 from .lsmesh import LSMeshSolver, ls_mesh
 from .topology import adjacency_matrix, connected_components
+
+if TYPE_CHECKING:
+    from ._types import AnyMesh, MeshT
 
 __all__ = ["SELECTION_METHODS", "approximate", "select_control_points"]
 
@@ -285,7 +288,7 @@ def _select(
 
 
 def select_control_points(
-    mesh: Any,
+    mesh: AnyMesh,
     count: int,
     *,
     method: str = "greedy",
@@ -365,7 +368,7 @@ def select_control_points(
 
 
 def approximate(
-    mesh: Any,
+    mesh: MeshT,
     count: int,
     *,
     method: str = "greedy",
@@ -374,7 +377,7 @@ def approximate(
     batch: int | None = None,
     seed: Any = None,
     progress: bool = False,
-) -> tuple[Any, np.ndarray]:
+) -> tuple[MeshT, np.ndarray]:
     """Approximate ``mesh`` by the LS mesh of ``count`` selected control points.
 
     Selects the control points with :func:`select_control_points` and returns

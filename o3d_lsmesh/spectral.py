@@ -10,7 +10,7 @@ practical: the eigenvectors cost ``O(n k)`` memory and about ``O(n k^2)`` time.
 from __future__ import annotations
 
 import contextlib
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import scipy.linalg as sla
@@ -23,6 +23,9 @@ from ._progress import check_progress, stages
 from ._solvers import SPDSolver
 from ._validate import as_count
 from .topology import adjacency_matrix
+
+if TYPE_CHECKING:
+    from ._types import MeshT
 
 __all__ = ["SPECTRAL_MAX_VERTICES", "combinatorial_laplacian", "null_space_basis", "spectral_approximation"]
 
@@ -161,7 +164,7 @@ def quantize_coefficients(coefficients: np.ndarray, bits: int) -> np.ndarray:
     return lower + q * np.divide(extent, levels)
 
 
-def spectral_approximation(mesh: Any, k: int, *, bits: int | None = None, progress: bool = False) -> Any:
+def spectral_approximation(mesh: MeshT, k: int, *, bits: int | None = None, progress: bool = False) -> MeshT:
     """Project the geometry on the first ``k`` Laplacian eigenvectors (Karni and Gotsman's spectral compression).
 
     With ``U (n, k)`` the eigenvectors of the ``k`` smallest eigenvalues of

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.sparse as sp
@@ -16,6 +16,9 @@ from .topology import (
     boundary_curves,
     connected_components,
 )
+
+if TYPE_CHECKING:
+    from ._types import AnyMesh
 
 __all__ = ["HOLE_SIZE_BINS", "topology_summary", "topology_summary_arrays"]
 
@@ -143,7 +146,7 @@ def topology_summary_arrays(vertices: np.ndarray, triangles: np.ndarray) -> dict
     }
 
 
-def topology_summary(mesh: Any) -> dict:
+def topology_summary(mesh: AnyMesh) -> dict:
     """Connectivity facts of any mesh, raw scans included: the numbers a scan user checks.
 
     Parameters

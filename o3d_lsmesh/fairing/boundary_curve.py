@@ -47,7 +47,7 @@ on such an edge, are held.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.sparse as sp
@@ -55,6 +55,9 @@ import scipy.sparse as sp
 from .._o3d import new_mesh, read_mesh
 from .._validate import as_count
 from ..topology import BoundaryCurves, boundary_curves
+
+if TYPE_CHECKING:
+    from .._types import MeshT
 
 __all__ = [
     "MIN_LOOP_LENGTH",
@@ -254,7 +257,7 @@ def run_curve_iterations(
     return out
 
 
-def smooth_boundary_curves(mesh: Any, number_of_iterations: int = 10) -> Any:
+def smooth_boundary_curves(mesh: MeshT, number_of_iterations: int = 10) -> MeshT:
     """Smooth every boundary loop of an open mesh with midpoint-constrained curve fairing.
 
     Implements the local curve equation of Liu et al. 2001, section 3.3 (see

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -21,6 +21,9 @@ from .._progress import check_progress
 from .._validate import as_count
 from ..topology import adjacency_matrix, connected_components, unique_edges
 from .hierarchy import MeshHierarchy, _tensor_format, read_hierarchy_mesh
+
+if TYPE_CHECKING:
+    from .._types import AnyMesh
 
 __all__ = ["from_fast_simplification"]
 
@@ -57,7 +60,7 @@ def _level_counts(levels: Any, n: int, min_vertices: int) -> np.ndarray:
 
 
 def from_fast_simplification(
-    mesh: Any,
+    mesh: AnyMesh,
     *,
     levels: int | Sequence[int] = 8,
     min_vertices: int = 100,
