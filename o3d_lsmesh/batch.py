@@ -57,6 +57,7 @@ from ._batch_ops import (
     run_task,
 )
 from ._errors import O3DLSMeshWarning
+from ._progress import check_progress, progress_bar
 
 __all__ = [
     "OPS",
@@ -490,6 +491,7 @@ def run(
         raise ValueError(f"--workers must be an integer >= 0, got {workers!r}")
     if scheduler is not None and scheduler_file is not None:
         raise ValueError("give --scheduler or --scheduler-file, not both")
+    progress = check_progress(progress)
     if resume and report is None:
         raise ValueError("--resume needs --report (the file that says which inputs are done)")
 
@@ -552,18 +554,15 @@ def run(
         "threads": threads_per_worker,
     }
 
-    bar = None
-    if progress:
-        from tqdm.auto import tqdm
-
-        bar = tqdm(
-            total=len(tasks),
-            initial=len(tasks) - len(todo),
-            desc=f"batch {','.join(o.name for o in ops)}",
-            unit="file",
-            file=sys.stderr,
-            dynamic_ncols=True,
-        )
+    bar = progress_bar(
+        progress,
+        total=len(tasks),
+        initial=len(tasks) - len(todo),
+        desc=f"batch {','.join(o.name for o in ops)}",
+        unit="file",
+        file=sys.stderr,
+        dynamic_ncols=True,
+    )
     counts: Counter = Counter()
     index_of = {task.path: task.index for task in tasks}
     handle = None
@@ -578,9 +577,8 @@ def run(
         if handle is not None:
             handle.write(json.dumps(record) + "\n")
             handle.flush()
-        if bar is not None:
-            bar.update(1)
-            bar.set_postfix(ok=counts["ok"], failed=counts["failed"], refresh=False)
+        bar.update(1)
+        bar.set_postfix(ok=counts["ok"], failed=counts["failed"], refresh=False)
         if on_record is not None:
             on_record(record)
         return not (fail_fast and record["status"] == "failed")
@@ -599,8 +597,7 @@ def run(
                 retries=retries,
             )
     finally:
-        if bar is not None:
-            bar.close()
+        bar.close()
         if handle is not None:
             handle.close()
     op_name = ",".join(o.name for o in ops)
