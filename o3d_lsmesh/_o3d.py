@@ -39,6 +39,7 @@ from typing import Any
 
 import numpy as np
 
+from ._collapsed import collapsed_triangles
 from ._errors import O3DLSMeshWarning
 from ._validate import as_triangle_array, as_vertex_array, check_mesh_arrays
 
@@ -102,9 +103,7 @@ def weld_map(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray | None:
     rank[order] = np.arange(len(order))
     split = rank[inverse].astype(np.int64)
     welded = split[triangles]  # (m, 3)
-    if np.any(
-        (welded[:, 0] == welded[:, 1]) | (welded[:, 1] == welded[:, 2]) | (welded[:, 0] == welded[:, 2])
-    ):
+    if collapsed_triangles(welded).any():
         return None
     return split
 

@@ -66,7 +66,12 @@ def _sample_surface(
     )
 
 
-def _distances_to(vertices: np.ndarray, triangles: np.ndarray, points: np.ndarray) -> np.ndarray:
+def distances_to_surface(points: np.ndarray, vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Distance ``(p,)`` from each of ``points (p, 3)`` to the nearest point of the surface ``(vertices, triangles)``.
+
+    Open3D's ``RaycastingScene`` in single precision: callers pass coordinates
+    in a frame of unit size (see :func:`surface_distance`) and scale back.
+    """
     o3d = open3d()
     scene = o3d.t.geometry.RaycastingScene()
     scene.add_triangles(
@@ -104,8 +109,8 @@ def surface_distance(a: AnyMesh, b: AnyMesh, *, number_of_points: int = 100_000,
     rng = np.random.default_rng(seed)
     pa = _sample_surface(va, da.triangles, number_of_points, rng)
     pb = _sample_surface(vb, db.triangles, number_of_points, rng)
-    ab = scale * _distances_to(vb, db.triangles, pa)
-    ba = scale * _distances_to(va, da.triangles, pb)
+    ab = scale * distances_to_surface(pa, vb, db.triangles)
+    ba = scale * distances_to_surface(pb, va, da.triangles)
     both = np.concatenate([ab, ba])
     return {
         "hausdorff": float(max(ab.max(), ba.max())),

@@ -30,6 +30,7 @@ import scipy.sparse as sp
 
 from ._o3d import MeshData, new_mesh, read_mesh
 from ._progress import check_progress, progress_bar
+from ._ranges import concatenated_ranges
 from ._solvers import SPDSolver
 from ._validate import as_bool, as_choice, as_count, as_positive_float
 from .laplacian import uniform_laplacian
@@ -200,8 +201,7 @@ def _forbid_around(
         if total == 0:
             break
         source = np.repeat(frontier, counts)
-        offsets = np.arange(total) - np.repeat(np.cumsum(counts) - counts, counts)
-        target = neighbours[np.repeat(begin, counts) + offsets]
+        target = neighbours[concatenated_ranges(begin, counts)]
         keep = ~forbidden[target] & (errors[target] < errors[source])
         reached = np.sort(target[keep])
         if reached.size:

@@ -53,6 +53,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._o3d import new_mesh, read_mesh
+from .._ranges import concatenated_ranges
 from .._validate import as_count
 from ..topology import BoundaryCurves, boundary_curves
 
@@ -191,9 +192,9 @@ def _segments(curves: list, *, closed: bool):
         return empty, empty, empty, empty
     lengths = np.array([len(c) for c in curves], dtype=np.int64)
     vertex = np.concatenate(curves)
-    start = np.repeat(np.concatenate([[0], np.cumsum(lengths)[:-1]]), lengths)
+    position = concatenated_ranges(0, lengths)  # within its curve
+    start = np.arange(len(vertex)) - position
     length = np.repeat(lengths, lengths)
-    position = np.arange(len(vertex)) - start
     if closed:
         # e.g. loop [5, 6, 7, 8]: segment (5, 6) has outer neighbours (8, 7)
         def at(by):
