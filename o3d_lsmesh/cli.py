@@ -385,12 +385,12 @@ def _volume(mesh: Any) -> float:
 def _normal_deviation(a: Any, b: Any) -> float | None:
     """Mean normal deviation, or None when no triangle has an area in both meshes (the angle is undefined)."""
     from ._o3d import read_mesh
-    from .metrics import _face_normals, normal_deviation
+    from .metrics import face_normals, normal_deviation
 
     da, db = read_mesh(a), read_mesh(b)
     if not (
-        (np.abs(_face_normals(da.vertices, da.triangles)).sum(axis=1) > 0)
-        & (np.abs(_face_normals(db.vertices, db.triangles)).sum(axis=1) > 0)
+        (np.abs(face_normals(da.vertices, da.triangles)).sum(axis=1) > 0)
+        & (np.abs(face_normals(db.vertices, db.triangles)).sum(axis=1) > 0)
     ).any():
         return None
     return normal_deviation(a, b)

@@ -52,7 +52,7 @@ from ._solvers import check_weight_pins_components
 from ._validate import as_choice, as_count, as_positive_float
 from .laplacian import laplacian_matrix
 from .lsmesh import LSMeshSolver
-from .selection import SELECTION_METHODS, _select
+from .selection import SELECTION_METHODS, select_indices
 from .topology import connected_components, unique_edges
 
 if TYPE_CHECKING:
@@ -198,7 +198,7 @@ def encode_geometry(
     omega = 10.0 * n if weight is None else as_positive_float(weight, name="weight")
     if weight is not None:  # a weight too small to pin the anchors decodes to a drifted mesh
         check_weight_pins_components(laplacian_matrix(data.vertices, data.triangles), omega, name="weight")
-    _, indices, _ = _select(
+    _, indices, _ = select_indices(
         (data.vertices, data.triangles),
         count,
         method=method,

@@ -147,7 +147,7 @@ def signed_volume(mesh: AnyMesh) -> float:
     return float(np.einsum("ij,ij->i", c[:, 0], np.cross(c[:, 1], c[:, 2])).sum() / 6.0) * top**3
 
 
-def _face_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+def face_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     """Unit face normals ``(m, 3)``; zero rows for triangles of zero area."""
     c = _unit_scale(vertices)[triangles]
     normal = np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])
@@ -169,7 +169,7 @@ def normal_deviation(a: AnyMesh, b: AnyMesh) -> float:
     da, db = read_mesh(a, name="a"), read_mesh(b, name="b")
     if da.triangles.shape != db.triangles.shape or not np.array_equal(da.triangles, db.triangles):
         raise ValueError("b must have the same triangles as a")
-    na, nb = _face_normals(da.vertices, da.triangles), _face_normals(db.vertices, db.triangles)
+    na, nb = face_normals(da.vertices, da.triangles), face_normals(db.vertices, db.triangles)
     defined = (np.abs(na).sum(axis=1) > 0) & (np.abs(nb).sum(axis=1) > 0)
     if not defined.any():
         raise ValueError(

@@ -248,7 +248,7 @@ def _combined(data: MeshData, count: int, weight: float, batch: int, *, progress
     return np.concatenate(order), solver
 
 
-def _select(
+def select_indices(
     mesh: Any,
     count: Any,
     *,
@@ -361,7 +361,7 @@ def select_control_points(
     >>> bool((a == select_control_points(box, 5, method="random", seed=1)).all())
     True
     """
-    _, indices, _ = _select(
+    _, indices, _ = select_indices(
         mesh, count, method=method, batch=batch, weights=weights, seed=seed, progress=progress
     )
     return indices
@@ -419,7 +419,7 @@ def approximate(
     True
     """
     interpolate = as_bool(interpolate, name="interpolate")
-    data, indices, solver = _select(
+    data, indices, solver = select_indices(
         mesh, count, method=method, batch=batch, weights=weights, seed=seed, progress=progress
     )
     if solver is not None and not interpolate:

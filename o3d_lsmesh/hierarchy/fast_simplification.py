@@ -22,7 +22,7 @@ from .._progress import check_progress
 from .._ranges import concatenated_ranges
 from .._validate import as_count
 from ..topology import adjacency_matrix, connected_components, unique_edges
-from .hierarchy import MeshHierarchy, _tensor_format, read_hierarchy_mesh
+from .hierarchy import MeshHierarchy, read_hierarchy_mesh, tensor_format_of
 
 if TYPE_CHECKING:
     from .._types import AnyMesh
@@ -236,7 +236,7 @@ def from_fast_simplification(
         False,
         "fast_simplification",
         data.kind,
-        _tensor_format(data),
+        tensor_format_of(data),
     )
 
 

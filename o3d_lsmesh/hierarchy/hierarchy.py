@@ -304,7 +304,7 @@ def locked_vertices(triangles: np.ndarray, n: int) -> np.ndarray:
     return workspace().locked_vertices(triangles, n)
 
 
-def _tensor_format(data: MeshData) -> tuple:
+def tensor_format_of(data: MeshData) -> tuple:
     if data.kind != "tensor":
         return ()
     src = data.source
@@ -494,5 +494,5 @@ def build_hierarchy(
         max_levels=max_levels,
         progress=bool(progress),
         mesh_kind=data.kind,
-        tensor_format=_tensor_format(data),
+        tensor_format=tensor_format_of(data),
     )
