@@ -469,9 +469,11 @@ def run(
     Examples
     --------
     >>> import tempfile, open3d as o3d, o3d_lsmesh.batch as batch
-    >>> folder = tempfile.mkdtemp()
-    >>> _ = o3d.io.write_triangle_mesh(f"{folder}/ball.ply", o3d.geometry.TriangleMesh.create_sphere())
-    >>> [r["status"] for r in batch.run(folder, f"{folder}/out", op="denoise", workers=0, progress=False)]
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     ball = o3d.geometry.TriangleMesh.create_sphere(resolution=8)
+    ...     _ = o3d.io.write_triangle_mesh(f"{folder}/ball.ply", ball)
+    ...     records = batch.run(folder, f"{folder}/out", op="denoise", workers=0, progress=False)
+    >>> [r["status"] for r in records]
     ['ok']
     """
     ops = parse_ops(op)
