@@ -48,6 +48,7 @@ import numpy as np
 
 from ._o3d import MeshData, new_mesh, read_mesh
 from ._progress import check_progress, progress_bar, stages
+from ._quantization import dequantize, quantize
 from ._solvers import check_weight_pins_components
 from ._validate import as_choice, as_count, as_positive_float
 from .laplacian import laplacian_matrix
@@ -112,19 +113,6 @@ def _assemble(
     payload = np.packbits(payload_bits).tobytes()
     body = header + payload
     return body + _CRC.pack(zlib.crc32(body) & 0xFFFFFFFF)
-
-
-def _quantize(positions: np.ndarray, lower: np.ndarray, upper: np.ndarray, bits: int) -> np.ndarray:
-    levels = (1 << bits) - 1
-    extent = upper - lower
-    scale = np.divide(levels, extent, out=np.zeros(3), where=extent > 0)
-    q = np.rint((positions - lower) * scale)
-    return np.clip(q, 0, levels).astype(np.int64)
-
-
-def _dequantize(quantized: np.ndarray, lower: np.ndarray, upper: np.ndarray, bits: int) -> np.ndarray:
-    levels = (1 << bits) - 1
-    return lower + quantized * ((upper - lower) / levels)
 
 
 def quantization_bound(lower: np.ndarray, upper: np.ndarray, bits: int) -> np.ndarray:
@@ -212,7 +200,7 @@ def encode_geometry(
     return _assemble(
         n=n,
         indices=indices,
-        quantized=_quantize(positions, lower, upper, bits),
+        quantized=quantize(positions, lower, upper, bits),
         bits=bits,
         index_bits=_index_bits(n),
         edges_crc=connectivity_checksum(data.triangles, n),
@@ -291,7 +279,7 @@ def _parse(data: Any, mesh_data: MeshData) -> tuple[np.ndarray, np.ndarray, floa
         raise ValueError(
             f"data anchor indices must not repeat, got {int(ordered[1:][repeated][0])} more than once"
         )
-    return indices, _dequantize(quantized, lower, upper, bits), float(omega)
+    return indices, dequantize(quantized, lower, upper, bits), float(omega)
 
 
 def _prefix(anchors: Any, k: int) -> int:

@@ -20,6 +20,7 @@ from scipy.sparse import csgraph
 
 from ._o3d import new_mesh, read_mesh
 from ._progress import check_progress, stages
+from ._quantization import dequantize, quantize
 from ._solvers import SPDSolver
 from ._validate import as_count
 from .topology import adjacency_matrix
@@ -156,12 +157,8 @@ def spectral_basis(
 
 def quantize_coefficients(coefficients: np.ndarray, bits: int) -> np.ndarray:
     """Uniformly quantize each column to ``bits`` bits in its ``[min, max]`` and return the dequantized values."""
-    levels = (1 << bits) - 1
     lower, upper = coefficients.min(axis=0), coefficients.max(axis=0)
-    extent = upper - lower
-    scale = np.divide(levels, extent, out=np.zeros_like(extent), where=extent > 0)
-    q = np.rint((coefficients - lower) * scale)
-    return lower + q * np.divide(extent, levels)
+    return dequantize(quantize(coefficients, lower, upper, bits), lower, upper, bits)
 
 
 def spectral_approximation(mesh: MeshT, k: int, *, bits: int | None = None, progress: bool = False) -> MeshT:
