@@ -20,6 +20,7 @@ from o3d_lsmesh._validate import (
     as_vertex_array,
     as_weights,
     as_workers,
+    check_mesh_arrays,
 )
 
 
@@ -272,3 +273,43 @@ def test_weights_positions_and_vectors_never_accept_non_numbers(value):
     ):
         with pytest.raises((TypeError, ValueError), match="^[wpv] must"):
             check()
+
+
+def test_check_mesh_arrays_refuses_each_defect_on_its_own():
+    # the array core's validator, called directly (read_mesh checks dtype and index range before it)
+    V, F = grid(3, 3)
+    assert check_mesh_arrays(V, F) is None
+    cases = [
+        (np.zeros((0, 3)), F[:0], {}, "mesh must have vertices, got an empty mesh"),
+        (V, F[:0], {}, "mesh must have triangles, got 9 vertices and no triangles"),
+        (
+            np.where(np.arange(9)[:, None] == 4, np.nan, V),
+            F,
+            {},
+            r"vertices must be finite, got .* at vertex 4",
+        ),
+        (
+            V * np.where(np.arange(9)[:, None] == 2, 1e31, 1.0),
+            F,
+            {},
+            "magnitude at most 1e\\+30.* at vertex 2",
+        ),
+        (V, np.vstack([F, [[0, 1, 9]]]), {}, r"indices must lie in \[0, 9\), got \[0, 1, 9\] at triangle 8"),
+        (
+            V,
+            np.vstack([F, [[0, -1, 2]]]),
+            {},
+            r"indices must lie in \[0, 9\), got \[0, -1, 2\] at triangle 8",
+        ),
+        (V, np.vstack([F, [[3, 5, 3]]]), {}, r"three distinct vertices, got \[3, 5, 3\] at triangle 8"),
+        (
+            np.vstack([V, [[5.0, 5, 5]]]),
+            F,
+            {"allow_isolated": False},
+            "unreferenced vertices, got 1 .*vertex 9",
+        ),
+    ]
+    for vertices, triangles, options, message in cases:
+        with pytest.raises(ValueError, match=message):
+            check_mesh_arrays(vertices, triangles, **options)
+    check_mesh_arrays(np.vstack([V, [[5.0, 5, 5]]]), F)  # an unreferenced vertex is allowed by default
