@@ -167,6 +167,10 @@ def test_vertex_and_triangle_arrays_check_dtype_and_shape_without_casting_first(
             r"mesh triangle indices must lie in \[0, 3\), got \[0, 1, 18446744073709551615\] at triangle 0",
         ),
         (np.array([[0, 1, 2], [0, -1, 2]]), ValueError, r"got \[0, -1, 2\] at triangle 1"),
+        # named as given, not as the array numpy would make of them
+        ("faces", TypeError, r"mesh triangles must be an \(m, 3\) integer array, got 'faces'$"),
+        (None, TypeError, "integer array, got None$"),
+        ([[0, 1, 2], [0, 1]], TypeError, r"integer array, got \[\[0, 1, 2\], \[0, 1\]\]$"),
     ]:
         with pytest.raises(error, match=match):
             as_triangle_array(bad, 3)
