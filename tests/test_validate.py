@@ -189,6 +189,9 @@ def test_bool_and_real_vector_validators():
         as_real_vector([0, 2, 0], 3, name="c", low=0, high=1)
     with pytest.raises(ValueError, match=r"c must have 3 entries finite, got \[0.0, nan, 0.0\]"):
         as_real_vector([0, np.nan, 0], 3, name="c")
+    for bad, shape in (([0.5, 0.5], r"\(2,\)"), ([[0, 0, 1]], r"\(1, 3\)"), (0.5, r"\(\)")):
+        with pytest.raises(ValueError, match=rf"c must be a sequence of 3 numbers, got shape {shape}"):
+            as_real_vector(bad, 3, name="c")
 
 
 def test_weights_and_positions_refuse_what_is_not_a_real_number():
