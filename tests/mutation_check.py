@@ -123,12 +123,17 @@ def run_tests(root: Path, files: list[str], env: dict) -> tuple[bool, list[str]]
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--with-data", action="store_true", help="keep O3D_LSMESH_DATA/SCANS as set")
-    parser.add_argument("--only", default="", help="run the mutants whose name contains this text")
+    parser.add_argument(
+        "--only",
+        action="append",
+        default=[],
+        help="run the mutants whose name contains this text (repeatable)",
+    )
     parser.add_argument("--skip-baseline", action="store_true", help="do not first run the unmutated tests")
     args = parser.parse_args(argv)
 
     mutants = [cotangent_fallback_mutant(), *raise_mutants("o3d_lsmesh/_validate.py")]
-    mutants = [m for m in mutants if args.only in m.name]
+    mutants = [m for m in mutants if not args.only or any(text in m.name for text in args.only)]
     env = dict(os.environ, PYTHONDONTWRITEBYTECODE="1")
     env.pop("PYTHONPATH", None)
     if not args.with_data:

@@ -104,6 +104,8 @@ def test_small_validators():
         as_weights(True, 2)
     with pytest.raises(TypeError, match="weights must be a positive number"):
         as_weights("x", 2)
+    with pytest.raises(TypeError, match=r"weights must be a positive number or an array of them, got True$"):
+        as_weights(True, 2)  # named as given, not as the bool array numpy makes of it
     with pytest.raises(TypeError, match="idx must be a sequence"):
         as_indices(None, 5, name="idx")
     with pytest.raises(TypeError, match="idx must be a sequence"):
