@@ -22,7 +22,12 @@ demo: $(STAMP)
 FALLBACK_TESTS := tests/test_solvers.py tests/test_fallback.py tests/test_lsmesh.py tests/test_encoding.py tests/test_selection.py
 FALLBACK_SKIP := not progressive_decoding_stays_accurate_at_omega_10n
 
+# lint, format and types first: they take seconds and fail on any finding; then the docstring examples
 test: $(STAMP)
+	$(PY) -m ruff check .
+	$(PY) -m ruff format --check .
+	$(PY) -m mypy
+	$(PY) -m pytest -p no:dash -q --doctest-modules o3d_lsmesh
 	$(PY) -m pytest -p no:dash -q
 	O3D_LSMESH_NO_CHOLMOD=1 $(PY) -m pytest -p no:dash -q $(FALLBACK_TESTS) -k "$(FALLBACK_SKIP)"
 	$(MAKE) docs-check

@@ -640,13 +640,10 @@ def _hierarchy(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dic
     files: dict[str, Any] = {f"level_{level:02d}": hierarchy.level(level) for level in levels}
     if options["maps"]:
         buffer = io.BytesIO()
-        np.savez_compressed(
-            buffer,
-            **{
-                f"level_{level:02d}": np.asarray(hierarchy.vertex_map(level), dtype=np.int64)
-                for level in levels
-            },
-        )
+        maps: dict[str, Any] = {
+            f"level_{level:02d}": np.asarray(hierarchy.vertex_map(level), dtype=np.int64) for level in levels
+        }
+        np.savez_compressed(buffer, **maps)
         files["vertex_maps.npz"] = buffer.getvalue()
     return files, {
         "levels": len(hierarchy),

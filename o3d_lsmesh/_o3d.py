@@ -43,6 +43,7 @@ from typing import Any
 
 import numpy as np
 
+from ._collapsed import collapsed_triangles
 from ._errors import O3DLSMeshWarning
 from ._validate import as_indices, mesh_arrays
 
@@ -139,9 +140,7 @@ def weld_map(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray | None:
     rank[np.argsort(first, kind="stable")] = np.arange(len(first))
     split = rank[group]
     welded = split[triangles]  # (m, 3)
-    if np.any(
-        (welded[:, 0] == welded[:, 1]) | (welded[:, 1] == welded[:, 2]) | (welded[:, 0] == welded[:, 2])
-    ):
+    if collapsed_triangles(welded).any():
         return None
     return split
 

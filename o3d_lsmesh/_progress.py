@@ -1,5 +1,8 @@
 """The one tqdm gateway: progress bars of every long operation (``progress=True`` in the API).
 
+:func:`progress_bar` counts work the caller reports; :func:`iterate` wraps a
+loop; :func:`stages` names the steps of one operation.
+
 Every bar ends at its total when the work completes (tests check it), counts
 in units of the work itself (vertices, anchors, control points) or, for a
 single factorization, in named stages. With ``progress=False`` tqdm is not
@@ -9,12 +12,14 @@ even imported and the bar is a silent stand-in with the same methods.
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Callable, Iterator, Sequence
-from typing import Any
+from collections.abc import Callable, Iterable, Iterator, Sequence, Sized
+from typing import Any, TypeVar
 
 from ._validate import as_bool
 
-__all__ = ["check_progress", "progress_bar", "stages"]
+__all__ = ["check_progress", "iterate", "progress_bar", "stages"]
+
+T = TypeVar("T")
 
 
 def check_progress(progress: Any) -> bool:
@@ -33,6 +38,9 @@ class _Silent:
     def set_postfix_str(self, text: str = "", refresh: bool = True) -> None:
         pass
 
+    def set_postfix(self, refresh: bool = True, **values: Any) -> None:
+        pass
+
     def close(self) -> None:
         pass
 
@@ -44,20 +52,59 @@ class _Silent:
 
 
 def progress_bar(
-    progress: Any, *, total: int, desc: str, unit: str = "it", initial: int = 0, file: Any = None
+    progress: Any,
+    *,
+    total: int,
+    desc: str,
+    unit: str = "it",
+    initial: int = 0,
+    file: Any = None,
+    leave: bool = True,
+    dynamic_ncols: bool = False,
 ) -> Any:
     """A tqdm bar over ``total`` units (a silent stand-in when ``progress`` is False).
 
     ``initial`` counts work done before the bar starts (the per-component seeds
-    of a selection), so that the bar still ends at ``total``. Writes to stderr
-    (tqdm's default) unless ``file`` is given. Use as a context manager, or
-    call ``close()``.
+    of a selection, the files a resumed batch already did), so that the bar
+    still ends at ``total``. Writes to stderr (tqdm's default) unless ``file``
+    is given; ``leave=False`` erases it when it closes (an inner bar). Use as a
+    context manager, or call ``close()``.
+
+    >>> with progress_bar(False, total=3, desc="work") as bar:
+    ...     bar.update(3)
     """
     if not check_progress(progress):
         return _Silent()
     from tqdm.auto import tqdm
 
-    return tqdm(total=int(total), initial=int(initial), desc=desc, unit=unit, file=file)
+    return tqdm(
+        total=int(total),
+        initial=int(initial),
+        desc=desc,
+        unit=unit,
+        file=file,
+        leave=leave,
+        dynamic_ncols=dynamic_ncols,
+    )
+
+
+def iterate(
+    progress: Any, items: Iterable[T], *, desc: str, unit: str = "it", total: int | None = None
+) -> Iterator[T]:
+    """``items`` with a tqdm bar that advances as each is taken (``items`` itself when ``progress`` is False).
+
+    ``total`` defaults to ``len(items)`` when it has one, so the bar ends at its total.
+
+    >>> list(iterate(False, range(3), desc="levels"))
+    [0, 1, 2]
+    """
+    if not check_progress(progress):
+        return iter(items)
+    from tqdm.auto import tqdm
+
+    if total is None and isinstance(items, Sized):
+        total = len(items)
+    return iter(tqdm(items, total=total, desc=desc, unit=unit))
 
 
 @contextlib.contextmanager

@@ -13,6 +13,8 @@ from typing import Any, Literal, overload
 
 import numpy as np
 
+from ._collapsed import collapsed_triangles
+
 __all__ = [
     "COORDINATE_LIMIT",
     "as_bool",
@@ -91,11 +93,7 @@ def check_mesh_arrays(
         raise ValueError(
             f"{name} triangle indices must lie in [0, {n}), got {triangles[row].tolist()} at triangle {row}"
         )
-    repeated = (
-        (triangles[:, 0] == triangles[:, 1])
-        | (triangles[:, 1] == triangles[:, 2])
-        | (triangles[:, 2] == triangles[:, 0])
-    )
+    repeated = collapsed_triangles(triangles)
     if repeated.any():
         row = int(np.flatnonzero(repeated)[0])
         raise ValueError(

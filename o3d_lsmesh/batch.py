@@ -56,6 +56,7 @@ from ._batch_ops import (
     run_task,
 )
 from ._errors import O3DLSMeshWarning
+from ._progress import check_progress, progress_bar
 
 __all__ = [
     "OPS",
@@ -283,10 +284,13 @@ def _run_dask(client: Any, tasks: list[_Task], job: dict, emit: Callable[[dict],
 
     from distributed import as_completed
 
+    cancelled: tuple[type[BaseException], ...]
     try:
         from distributed.client import FutureCancelledError
+
+        cancelled = (CancelledError, FutureCancelledError)
     except ImportError:  # pragma: no cover - distributed before 2024.8
-        FutureCancelledError = CancelledError
+        cancelled = (CancelledError,)
 
     try:
         from distributed import KilledWorker
@@ -338,7 +342,7 @@ def _run_dask(client: Any, tasks: list[_Task], job: dict, emit: Callable[[dict],
                     f"such as a segfault, or killed, e.g. for memory); last worker {last}",
                 )
                 record["worker"] = last
-            except (FutureCancelledError, CancelledError):
+            except cancelled:
                 record = _failure(task, op_name, "cancelled")
             except Exception as error:
                 record = _failure(task, op_name, f"{type(error).__name__}: {error}")
@@ -462,9 +466,11 @@ def run(
     Examples
     --------
     >>> import tempfile, open3d as o3d, o3d_lsmesh.batch as batch
-    >>> folder = tempfile.mkdtemp()
-    >>> _ = o3d.io.write_triangle_mesh(f"{folder}/ball.ply", o3d.geometry.TriangleMesh.create_sphere())
-    >>> [r["status"] for r in batch.run(folder, f"{folder}/out", op="denoise", workers=0, progress=False)]
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     ball = o3d.geometry.TriangleMesh.create_sphere(resolution=8)
+    ...     _ = o3d.io.write_triangle_mesh(f"{folder}/ball.ply", ball)
+    ...     records = batch.run(folder, f"{folder}/out", op="denoise", workers=0, progress=False)
+    >>> [r["status"] for r in records]
     ['ok']
     """
     ops = parse_ops(op)
@@ -484,6 +490,7 @@ def run(
         raise ValueError(f"--workers must be an integer >= 0, got {workers!r}")
     if scheduler is not None and scheduler_file is not None:
         raise ValueError("give --scheduler or --scheduler-file, not both")
+    progress = check_progress(progress)
     if resume and report is None:
         raise ValueError("--resume needs --report (the file that says which inputs are done)")
 
@@ -491,7 +498,8 @@ def run(
     outdir = Path(outdir).absolute()
     if outdir.exists() and not outdir.is_dir():
         raise ValueError(f"OUTDIR {str(outdir)!r} exists and is not a folder")
-    tasks, outputs = [], {}
+    tasks: list[_Task] = []
+    outputs: dict[str, str] = {}
     for index, (path, relative) in enumerate(items):
         target = output_path(outdir, relative, ops[-1], suffix)
         if target is not None:
@@ -519,7 +527,7 @@ def run(
     records: list[dict | None] = [None] * len(tasks)
     report_path = None if report is None else Path(report)
     todo = tasks
-    if resume:
+    if resume and report_path is not None:  # resume without a report was refused above
         previous = _read_report(report_path)
         todo = []
         for task in tasks:
@@ -545,18 +553,15 @@ def run(
         "threads": threads_per_worker,
     }
 
-    bar = None
-    if progress:
-        from tqdm.auto import tqdm
-
-        bar = tqdm(
-            total=len(tasks),
-            initial=len(tasks) - len(todo),
-            desc=f"batch {','.join(o.name for o in ops)}",
-            unit="file",
-            file=sys.stderr,
-            dynamic_ncols=True,
-        )
+    bar = progress_bar(
+        progress,
+        total=len(tasks),
+        initial=len(tasks) - len(todo),
+        desc=f"batch {','.join(o.name for o in ops)}",
+        unit="file",
+        file=sys.stderr,
+        dynamic_ncols=True,
+    )
     counts: Counter = Counter()
     index_of = {task.path: task.index for task in tasks}
     handle = None
@@ -571,9 +576,8 @@ def run(
         if handle is not None:
             handle.write(json.dumps(record) + "\n")
             handle.flush()
-        if bar is not None:
-            bar.update(1)
-            bar.set_postfix(ok=counts["ok"], failed=counts["failed"], refresh=False)
+        bar.update(1)
+        bar.set_postfix(ok=counts["ok"], failed=counts["failed"], refresh=False)
         if on_record is not None:
             on_record(record)
         return not (fail_fast and record["status"] == "failed")
@@ -592,8 +596,7 @@ def run(
                 retries=retries,
             )
     finally:
-        if bar is not None:
-            bar.close()
+        bar.close()
         if handle is not None:
             handle.close()
     op_name = ",".join(o.name for o in ops)

@@ -42,18 +42,22 @@ import math
 import struct
 import zlib
 from collections.abc import Iterator
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ._o3d import MeshData, new_mesh, read_mesh
 from ._progress import check_progress, progress_bar, stages
+from ._quantization import dequantize, quantize
 from ._solvers import check_weight_pins_components
 from ._validate import as_choice, as_count, as_positive_float
 from .laplacian import laplacian_matrix
 from .lsmesh import LSMeshSystem
 from .selection import SELECTION_METHODS, control_point_selection
 from .topology import connected_components, unique_edges
+
+if TYPE_CHECKING:
+    from ._types import AnyMesh, MeshT
 
 __all__ = ["decode_geometry", "encode_geometry", "iter_decode_geometry"]
 
@@ -111,30 +115,6 @@ def assemble_stream(
     return body + _CRC.pack(zlib.crc32(body) & 0xFFFFFFFF)
 
 
-def quantize(values: np.ndarray, lower: np.ndarray, upper: np.ndarray, bits: int) -> np.ndarray:
-    """Uniform quantization of each column of ``values (k, d)`` to ``bits`` bits in ``[lower, upper]``.
-
-    Returns the ``(k, d) int64`` codes ``round((x - lo) / (hi - lo) * (2^bits - 1))`` (0 for a
-    column of zero extent); :func:`dequantize` maps them back. The one quantizer of the package
-    (the anchor coordinates here, the spectral coefficients of
-    :func:`~o3d_lsmesh.spectral.quantize_coefficients`).
-
-    >>> quantize(np.array([[0.0], [0.5], [1.0]]), np.zeros(1), np.ones(1), 2).ravel().tolist()
-    [0, 2, 3]
-    """
-    levels = (1 << bits) - 1
-    extent = upper - lower
-    scale = np.divide(levels, extent, out=np.zeros_like(extent, dtype=np.float64), where=extent > 0)
-    q = np.rint((values - lower) * scale)
-    return np.clip(q, 0, levels).astype(np.int64)
-
-
-def dequantize(codes: np.ndarray, lower: np.ndarray, upper: np.ndarray, bits: int) -> np.ndarray:
-    """The values ``lo + q (hi - lo) / (2^bits - 1)`` of the codes of :func:`quantize`, ``(k, d) float64``."""
-    levels = (1 << bits) - 1
-    return lower + codes * ((upper - lower) / levels)
-
-
 def quantization_bound(lower: np.ndarray, upper: np.ndarray, bits: int) -> np.ndarray:
     """Largest quantization error per coordinate, ``(3,)``: half a quantization step."""
     return (np.asarray(upper, dtype=np.float64) - np.asarray(lower, dtype=np.float64)) / (
@@ -143,7 +123,7 @@ def quantization_bound(lower: np.ndarray, upper: np.ndarray, bits: int) -> np.nd
 
 
 def encode_geometry(
-    mesh: Any,
+    mesh: AnyMesh,
     count: int,
     *,
     bits: int = 12,
@@ -302,7 +282,7 @@ def _prefix(anchors: Any, k: int) -> int:
     return as_count(anchors, name="anchors", minimum=1, maximum=k)
 
 
-def decode_geometry(mesh: Any, data: Any, *, anchors: int | None = None, progress: bool = False) -> Any:
+def decode_geometry(mesh: MeshT, data: Any, *, anchors: int | None = None, progress: bool = False) -> MeshT:
     """Reconstruct the geometry encoded by :func:`encode_geometry` on the connectivity of ``mesh``.
 
     Solves eq. 1 of the geometry-aware bases paper (relaxed anchors of weight
@@ -357,8 +337,8 @@ def decode_geometry(mesh: Any, data: Any, *, anchors: int | None = None, progres
 
 
 def iter_decode_geometry(
-    mesh: Any, data: Any, *, step: int | None = None, progress: bool = False
-) -> Iterator[Any]:
+    mesh: MeshT, data: Any, *, step: int | None = None, progress: bool = False
+) -> Iterator[MeshT]:
     """Yield successively refined reconstructions as anchors arrive (progressive scheme, section III).
 
     The first mesh uses the first ``step`` anchors (a factorization); every

@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -46,6 +46,9 @@ from ._progress import check_progress, progress_bar
 from ._solvers import SPDSolver
 from ._validate import as_bool, as_choice, as_count, as_positive_float
 from .topology import _unique_edges_and_runs, boundary_loops
+
+if TYPE_CHECKING:
+    from ._types import MeshT
 
 __all__ = [
     "BORDER_RATIO",
@@ -1158,7 +1161,7 @@ def _no_fold(uniform: np.ndarray, again: np.ndarray, unknown: np.ndarray, new_tr
 
 
 def fill_holes(
-    mesh: Any,
+    mesh: MeshT,
     *,
     max_hole_edges: int | None = None,
     max_hole_diameter: float | None = None,
@@ -1167,7 +1170,7 @@ def fill_holes(
     weights: str = "cotangent",
     fill_border: bool = False,
     progress: bool = False,
-) -> Any:
+) -> MeshT:
     """Close the mesh's holes with patches faired as least-squares meshes; a new mesh.
 
     Each chosen hole (a closed loop of boundary edges) is triangulated by

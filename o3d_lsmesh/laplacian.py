@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.sparse as sp
@@ -10,6 +10,9 @@ import scipy.sparse as sp
 from ._o3d import read_mesh
 from ._validate import as_choice
 from .topology import adjacency_matrix
+
+if TYPE_CHECKING:
+    from ._types import AnyMesh
 
 __all__ = ["cotangent_laplacian", "laplacian", "laplacian_matrix", "uniform_laplacian"]
 
@@ -105,7 +108,7 @@ def laplacian_matrix(vertices: np.ndarray, triangles: np.ndarray, kind: str = "u
     return cotangent_laplacian(vertices, triangles)
 
 
-def laplacian(mesh: Any, kind: str = "uniform") -> sp.csr_matrix:
+def laplacian(mesh: AnyMesh, kind: str = "uniform") -> sp.csr_matrix:
     """The ``(n, n)`` Laplacian operator of a mesh, ``L = I - D^-1 W`` (scipy CSR).
 
     Parameters

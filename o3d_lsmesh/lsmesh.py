@@ -9,7 +9,7 @@ Approximation* (sections II.A, II.B and III).
 from __future__ import annotations
 
 import threading
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -28,6 +28,9 @@ from ._solvers import (
 )
 from ._validate import as_bool, as_choice, as_indices, as_positions, as_weights
 from .laplacian import LAPLACIAN_KINDS, laplacian_matrix
+
+if TYPE_CHECKING:
+    from ._types import AnyMesh, MeshT
 
 __all__ = ["LSMeshSolver", "LSMeshSystem", "check_components_constrained", "ls_mesh", "reconstruct_geometry"]
 
@@ -390,7 +393,7 @@ class LSMeshSolver(LSMeshSystem):
 
     def __init__(
         self,
-        mesh: Any,
+        mesh: AnyMesh,
         constraint_vertex_indices: Any,
         *,
         weights: Any = 1.0,
@@ -428,7 +431,7 @@ class LSMeshSolver(LSMeshSystem):
         """Vertex positions ``(n, 3)`` in the input's layout; see :meth:`LSMeshSystem.solve`."""
         return self._data.source_positions(super().solve(constraint_vertex_positions, refine=refine))
 
-    def mesh(self, constraint_vertex_positions: Any = None, *, refine: bool | None = None) -> Any:
+    def mesh(self, constraint_vertex_positions: Any = None, *, refine: bool | None = None) -> AnyMesh:
         """The least-squares mesh as a new mesh of the input's kind (see :meth:`solve`); also after unpickling."""
         return new_mesh(self._data, super().solve(constraint_vertex_positions, refine=refine))
 
@@ -448,7 +451,7 @@ class LSMeshSolver(LSMeshSystem):
 
 
 def ls_mesh(
-    mesh: Any,
+    mesh: MeshT,
     constraint_vertex_indices: Any,
     constraint_vertex_positions: Any = None,
     *,
@@ -458,7 +461,7 @@ def ls_mesh(
     solver: str = "auto",
     tol: float | None = None,
     progress: bool = False,
-) -> Any:
+) -> MeshT:
     """Least-squares mesh: the fairest geometry for ``mesh``'s connectivity near the control points.
 
     Minimizes ``||L X||^2 + sum_s w_s^2 |X_s - C_s|^2`` (eq. 3 of Least-squares
@@ -520,7 +523,7 @@ def ls_mesh(
 
 
 def reconstruct_geometry(
-    mesh: Any,
+    mesh: MeshT,
     unknown_vertex_indices: Any,
     *,
     interpolate: bool = True,
@@ -529,7 +532,7 @@ def reconstruct_geometry(
     progress: bool = False,
     solver: str = "auto",
     tol: float | None = None,
-) -> Any:
+) -> MeshT:
     """Rebuild the positions of vertices whose geometry is missing (figures 5 and 8 of LS meshes).
 
     With ``interpolate=True`` the result equals the interpolatory LS mesh with

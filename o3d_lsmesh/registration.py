@@ -24,8 +24,12 @@ and refuses to replace a method Open3D itself defines under the same name.
 
 from __future__ import annotations
 
+import functools
 import threading
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
+
+if TYPE_CHECKING:
+    from ._types import Open3DMesh
 
 __all__ = ["METHOD_NAMES", "register", "registered_methods", "unregister"]
 
@@ -33,7 +37,9 @@ _MARKER = "__o3d_lsmesh_method__"
 _LOCK = threading.Lock()
 
 
-def _filter_smooth_constrained(self: Any, number_of_iterations: int | None = None, **kwargs: Any) -> Any:
+def _filter_smooth_constrained(
+    self: Open3DMesh, number_of_iterations: int | None = None, **kwargs: Any
+) -> Open3DMesh:
     """Barycenter-constrained fairing (Liu et al. 2001, eq. 5-7); see :func:`o3d_lsmesh.fairing.constrained_fairing`.
 
     Keyword options: ``method="scan"|"local"|"global"``, ``mu``, ``smooth_boundary``,
@@ -44,7 +50,7 @@ def _filter_smooth_constrained(self: Any, number_of_iterations: int | None = Non
     return constrained_fairing(self, number_of_iterations, **kwargs)
 
 
-def _filter_smooth_multiresolution(self: Any, level: int, **kwargs: Any) -> Any:
+def _filter_smooth_multiresolution(self: Open3DMesh, level: int, **kwargs: Any) -> Open3DMesh:
     """Multiresolution fairing at hierarchy ``level`` (Liu et al. 2001, section 4); see :func:`o3d_lsmesh.fairing.multiresolution_fairing`.
 
     Keyword options: ``hierarchy``, ``number_of_iterations``, ``method``,
@@ -55,7 +61,7 @@ def _filter_smooth_multiresolution(self: Any, level: int, **kwargs: Any) -> Any:
     return multiresolution_fairing(self, level, **kwargs)
 
 
-def _filter_smooth_boundary_curves(self: Any, number_of_iterations: int = 10) -> Any:
+def _filter_smooth_boundary_curves(self: Open3DMesh, number_of_iterations: int = 10) -> Open3DMesh:
     """Smooth only the boundary loops with the curve operator of Liu et al. 2001, section 3.3.
 
     See :func:`o3d_lsmesh.fairing.smooth_boundary_curves`. Returns a new mesh.
@@ -66,8 +72,8 @@ def _filter_smooth_boundary_curves(self: Any, number_of_iterations: int = 10) ->
 
 
 def _ls_mesh(
-    self: Any, constraint_vertex_indices: Any, constraint_vertex_positions: Any = None, **kwargs: Any
-) -> Any:
+    self: Open3DMesh, constraint_vertex_indices: Any, constraint_vertex_positions: Any = None, **kwargs: Any
+) -> Open3DMesh:
     """Least-squares mesh of this connectivity near the control vertices (Sorkine and Cohen-Or 2004, eq. 3).
 
     See :func:`o3d_lsmesh.ls_mesh`; keyword options ``weights``,
@@ -78,7 +84,7 @@ def _ls_mesh(
     return ls_mesh(self, constraint_vertex_indices, constraint_vertex_positions, **kwargs)
 
 
-def _reconstruct_geometry(self: Any, unknown_vertex_indices: Any, **kwargs: Any) -> Any:
+def _reconstruct_geometry(self: Open3DMesh, unknown_vertex_indices: Any, **kwargs: Any) -> Open3DMesh:
     """Rebuild the positions of the vertices in ``unknown_vertex_indices`` from the rest (LS meshes, figures 5 and 8).
 
     See :func:`o3d_lsmesh.reconstruct_geometry`. Returns a new mesh.
@@ -88,7 +94,7 @@ def _reconstruct_geometry(self: Any, unknown_vertex_indices: Any, **kwargs: Any)
     return reconstruct_geometry(self, unknown_vertex_indices, **kwargs)
 
 
-def _approximate_ls(self: Any, count: int, **kwargs: Any) -> Any:
+def _approximate_ls(self: Open3DMesh, count: int, **kwargs: Any) -> Open3DMesh:
     """LS-mesh approximation from ``count`` selected control points; see :func:`o3d_lsmesh.approximate`.
 
     Returns only the new mesh so that calls chain; call
@@ -100,7 +106,7 @@ def _approximate_ls(self: Any, count: int, **kwargs: Any) -> Any:
     return mesh
 
 
-def _decode_geometry(self: Any, data: Any, **kwargs: Any) -> Any:
+def _decode_geometry(self: Open3DMesh, data: Any, **kwargs: Any) -> Open3DMesh:
     """Geometry decoded from ``data`` (bytes of :func:`o3d_lsmesh.encode_geometry`) on this connectivity.
 
     See :func:`o3d_lsmesh.decode_geometry`; keyword option ``anchors`` for
@@ -111,7 +117,7 @@ def _decode_geometry(self: Any, data: Any, **kwargs: Any) -> Any:
     return decode_geometry(self, data, **kwargs)
 
 
-def _fill_holes_faired(self: Any, **kwargs: Any) -> Any:
+def _fill_holes_faired(self: Open3DMesh, **kwargs: Any) -> Open3DMesh:
     """Close holes with triangulated, refined patches faired as LS meshes; see :func:`o3d_lsmesh.fill_holes`.
 
     Keyword options: ``max_hole_edges``, ``max_hole_diameter``, ``continuity``,
@@ -156,9 +162,9 @@ def _method(name: str, function: Callable[..., Any], cls: type) -> Callable[...,
 
     method.__name__ = name
     method.__qualname__ = f"{cls.__qualname__}.{name}"
-    method.__doc__ = function.__doc__
     method.__module__ = __name__
-    method.__wrapped__ = function  # inspect.signature() shows the real parameters
+    # the docstring, and __wrapped__ so that inspect.signature() shows the real parameters
+    functools.update_wrapper(method, function, assigned=("__doc__",), updated=())
     setattr(method, _MARKER, True)
     return method
 

@@ -36,13 +36,17 @@ import tempfile
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ._errors import O3DLSMeshWarning
 from ._o3d import open3d, read_mesh
 from ._validate import as_choice, as_count, as_positive_float, as_real_vector
+from .metrics import distances_to_surface
+
+if TYPE_CHECKING:
+    from ._types import AnyMesh
 
 __all__ = ["VIRIDIS", "RenderedImage", "error_colors", "render"]
 
@@ -90,15 +94,6 @@ def _vertex_colors(mesh: Any) -> np.ndarray | None:
     if "colors" in mesh.vertex:
         return mesh.vertex.colors.cpu().numpy().astype(np.float64).reshape(-1, 3)
     return None
-
-
-def _distances_to_surface(points: np.ndarray, vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
-    o3d = open3d()
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(
-        o3d.core.Tensor(vertices.astype(np.float32)), o3d.core.Tensor(triangles.astype(np.uint32))
-    )
-    return scene.compute_distance(o3d.core.Tensor(points.astype(np.float32))).numpy().astype(np.float64)
 
 
 def _unit(vector: Any, *, name: str) -> np.ndarray:
@@ -390,15 +385,15 @@ def _mean_edge_length(vertices: np.ndarray, triangles: np.ndarray) -> float:
 
 
 def render(
-    meshes: Any,
+    meshes: AnyMesh | Sequence[AnyMesh],
     path: str | os.PathLike | None = None,
     *,
     width: int = 480,
     height: int = 480,
-    reference: Any = None,
+    reference: AnyMesh | None = None,
     error_max: float | None = None,
     color: Sequence[float] = _DEFAULT_COLOR,
-    background: Sequence[float] = (1.0, 1.0, 1.0),
+    background: Sequence[float] | np.ndarray = (1.0, 1.0, 1.0),
     view_direction: Sequence[float] = (0.0, 0.0, 1.0),
     up: Sequence[float] = (0.0, 1.0, 0.0),
     margin: float = 0.05,
@@ -547,7 +542,7 @@ def render(
     arrays = [(d.vertices / scale, d.triangles) for d in datas]
     edge_length = None
     if ref is not None:
-        distances = [scale * _distances_to_surface(v, ref.vertices / scale, ref.triangles) for v, _ in arrays]
+        distances = [scale * distances_to_surface(v, ref.vertices / scale, ref.triangles) for v, _ in arrays]
         edge_length = _mean_edge_length(ref.vertices, ref.triangles)
         if units == "edge":
             distances = [d / edge_length for d in distances]

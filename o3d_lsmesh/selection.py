@@ -23,15 +23,19 @@ vertex drawn with ``seed``.
 from __future__ import annotations
 
 import numbers
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ._o3d import new_mesh, read_mesh
 from ._progress import check_progress, progress_bar, stages
+from ._ranges import concatenated_ranges
 from ._validate import as_bool, as_choice, as_count, as_positive_float
 from .lsmesh import LSMeshSystem
 from .topology import adjacency_matrix, connected_components
+
+if TYPE_CHECKING:
+    from ._types import AnyMesh, MeshT
 
 __all__ = ["SELECTION_METHODS", "approximate", "control_point_selection", "select_control_points"]
 
@@ -140,8 +144,7 @@ def forbid_around(
         if total == 0:
             break
         source = np.repeat(frontier, counts)
-        offsets = np.arange(total) - np.repeat(np.cumsum(counts) - counts, counts)
-        target = neighbours[np.repeat(begin, counts) + offsets]
+        target = neighbours[concatenated_ranges(begin, counts)]
         keep = ~forbidden[target] & (errors[target] < errors[source])
         reached = np.sort(target[keep])
         if reached.size:
@@ -249,7 +252,7 @@ def control_point_selection(
 
 
 def select_control_points(
-    mesh: Any,
+    mesh: AnyMesh,
     count: int,
     *,
     method: str = "greedy",
@@ -341,7 +344,7 @@ def select_control_points(
 
 
 def approximate(
-    mesh: Any,
+    mesh: MeshT,
     count: int,
     *,
     method: str = "greedy",
@@ -350,7 +353,7 @@ def approximate(
     batch: int | None = None,
     seed: Any = None,
     progress: bool = False,
-) -> tuple[Any, np.ndarray]:
+) -> tuple[MeshT, np.ndarray]:
     """Approximate ``mesh`` by the LS mesh of ``count`` selected control points.
 
     Selects the control points with :func:`select_control_points` and returns

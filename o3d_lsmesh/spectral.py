@@ -10,7 +10,7 @@ practical: the eigenvectors cost ``O(n k)`` memory and about ``O(n k^2)`` time.
 from __future__ import annotations
 
 import contextlib
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import scipy.linalg as sla
@@ -20,10 +20,13 @@ from scipy.sparse import csgraph
 
 from ._o3d import new_mesh, read_mesh
 from ._progress import check_progress, stages
+from ._quantization import dequantize, quantize
 from ._solvers import SPDSolver
 from ._validate import as_count
-from .encoding import dequantize, quantize
 from .topology import adjacency_matrix
+
+if TYPE_CHECKING:
+    from ._types import MeshT
 
 __all__ = ["SPECTRAL_MAX_VERTICES", "combinatorial_laplacian", "null_space_basis", "spectral_approximation"]
 
@@ -155,14 +158,14 @@ def spectral_basis(
 def quantize_coefficients(coefficients: np.ndarray, bits: int) -> np.ndarray:
     """Uniformly quantize each column to ``bits`` bits in its ``[min, max]`` and return the dequantized values.
 
-    The quantizer of the geometry stream (:func:`~o3d_lsmesh.encoding.quantize`), so that the two
+    The quantizer of the geometry stream (:func:`o3d_lsmesh._quantization.quantize`), so that the two
     compression methods are compared at the same quantization.
     """
     lower, upper = coefficients.min(axis=0), coefficients.max(axis=0)
     return dequantize(quantize(coefficients, lower, upper, bits), lower, upper, bits)
 
 
-def spectral_approximation(mesh: Any, k: int, *, bits: int | None = None, progress: bool = False) -> Any:
+def spectral_approximation(mesh: MeshT, k: int, *, bits: int | None = None, progress: bool = False) -> MeshT:
     """Project the geometry on the first ``k`` Laplacian eigenvectors (Karni and Gotsman's spectral compression).
 
     With ``U (n, k)`` the eigenvectors of the ``k`` smallest eigenvalues of

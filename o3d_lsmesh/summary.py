@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.sparse as sp
@@ -10,12 +10,15 @@ from scipy.sparse import csgraph
 
 from ._o3d import read_mesh
 from .topology import (
-    _boundary_rows,
-    _corner_fans,
-    _edge_runs,
     boundary_curves,
+    boundary_rows,
     connected_components,
+    corner_fans,
+    edge_runs,
 )
+
+if TYPE_CHECKING:
+    from ._types import AnyMesh
 
 __all__ = ["HOLE_SIZE_BINS", "topology_summary", "topology_summary_arrays"]
 
@@ -38,12 +41,12 @@ def topology_summary_arrays(vertices: np.ndarray, triangles: np.ndarray) -> dict
     n, m = len(vertices), len(F)
     referenced = np.zeros(n, dtype=bool)
     referenced[F.ravel()] = True
-    runs = _edge_runs(F, n)
+    runs = edge_runs(F, n)
     order, starts, counts = runs
     edge_count = len(counts)
     crowded_edges = int(np.count_nonzero(counts > 2))
     # fans: corners linked through manifold edges; a vertex with several is non-manifold
-    fan_count, fan = _corner_fans(F, n, runs)
+    fan_count, fan = corner_fans(F, n, runs)
     tail = F.T.reshape(-1)
     vertex_of_fan = np.zeros(fan_count, dtype=np.int64)
     vertex_of_fan[fan] = tail
@@ -65,7 +68,7 @@ def topology_summary_arrays(vertices: np.ndarray, triangles: np.ndarray) -> dict
     # a manifold edge run twice in the same direction: the two triangles disagree in orientation
     misoriented = int(np.count_nonzero(tail[order[pair]] == tail[order[pair + 1]]))
     # boundary
-    rows, _, head, _, _ = _boundary_rows(F, n, runs)
+    rows, _, head, _, _ = boundary_rows(F, n, runs)
     boundary_edges = len(rows)
     curves = boundary_curves(F, n)  # (recomputes the edge runs: cheap next to the fans)
     loop_edges = np.array([len(loop) for loop in curves.loops], dtype=np.int64)
@@ -143,7 +146,7 @@ def topology_summary_arrays(vertices: np.ndarray, triangles: np.ndarray) -> dict
     }
 
 
-def topology_summary(mesh: Any) -> dict:
+def topology_summary(mesh: AnyMesh) -> dict:
     """Connectivity facts of any mesh, raw scans included: the numbers a scan user checks.
 
     Parameters

@@ -38,7 +38,7 @@ def halfedges(triangles: np.ndarray) -> np.ndarray:
     return np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]], axis=0)
 
 
-def _group(keys: np.ndarray, bound: int, *, inverse: bool = True):
+def group_keys(keys: np.ndarray, bound: int, *, inverse: bool = True):
     """Sort-and-mask grouping of integer ``keys`` in ``[0, bound)``: (order, starts, counts, inverse).
 
     ``inverse=False`` returns ``None`` in its place (it costs a third of the grouping).
@@ -96,9 +96,9 @@ def _edge_keys(triangles: np.ndarray, n: int) -> np.ndarray:
     return keys.reshape(-1)
 
 
-def _edge_runs(triangles: np.ndarray, n: int):
+def edge_runs(triangles: np.ndarray, n: int):
     # half-edge rows of halfedges() grouped by undirected edge: (order, starts, counts)
-    return _group(_edge_keys(triangles, n), n * n, inverse=False)[:3]
+    return group_keys(_edge_keys(triangles, n), n * n, inverse=False)[:3]
 
 
 def unique_edges(triangles: np.ndarray, n: int | None = None):
@@ -121,7 +121,7 @@ def _unique_edges_and_runs(triangles: np.ndarray, n: int | None = None):
     if n is None:
         n = int(triangles.max()) + 1 if len(triangles) else 0
     keys = _edge_keys(triangles, n)
-    order, starts, counts, inverse = _group(keys, n * n)
+    order, starts, counts, inverse = group_keys(keys, n * n)
     first = keys[order[starts]]
     edges = np.empty((len(first), 2), dtype=np.int64)
     np.floor_divide(first, n, out=edges[:, 0])
@@ -254,14 +254,14 @@ def nonmanifold_vertices(triangles: np.ndarray, n: int, *, _runs=None) -> np.nda
     its corners fall into more than one linked group.
     """
     tail = triangles.T.reshape(-1)
-    fan_count, fan = _corner_fans(triangles, n, _edge_runs(triangles, n) if _runs is None else _runs)
+    fan_count, fan = corner_fans(triangles, n, edge_runs(triangles, n) if _runs is None else _runs)
     # links only join corners of one vertex, so every fan belongs to exactly one vertex
     vertex_of_fan = np.zeros(fan_count, dtype=np.int64)
     vertex_of_fan[fan] = tail
     return np.flatnonzero(np.bincount(vertex_of_fan, minlength=n) > 1)
 
 
-def _corner_fans(triangles: np.ndarray, n: int, runs, *, only: np.ndarray | None = None):
+def corner_fans(triangles: np.ndarray, n: int, runs, *, only: np.ndarray | None = None):
     """Fans of triangle corners: ``(count, label)``, corners linked across manifold edges.
 
     Corner ``p*m + t`` holds ``triangles[t, p]``. Two corners of one vertex are
@@ -329,7 +329,7 @@ def _corner_fans(triangles: np.ndarray, n: int, runs, *, only: np.ndarray | None
 
 def check_manifold(triangles: np.ndarray, n: int, *, name: str = "mesh") -> None:
     """Raise ``ValueError`` naming the first non-manifold edge or vertex of the mesh."""
-    runs = _edge_runs(triangles, n)
+    runs = edge_runs(triangles, n)
     order, starts, counts = runs
     bad = np.flatnonzero(counts > 2)
     if len(bad):
@@ -480,9 +480,9 @@ def boundary_curves(triangles: np.ndarray, n: int) -> BoundaryCurves:
     triangles = np.asarray(triangles, dtype=np.int64)
     if len(triangles) == 0:
         return BoundaryCurves([], [], np.zeros(0, dtype=np.int64))
-    runs = _edge_runs(triangles, n)
+    runs = edge_runs(triangles, n)
     closed, open_ = _boundary_walk(triangles, n, split_at_junctions=False, runs=runs)
-    rows, tail, head, crowded, _ = _boundary_rows(triangles, n, runs)
+    rows, tail, head, crowded, _ = boundary_rows(triangles, n, runs)
     on_boundary = np.zeros(n, dtype=bool)
     on_boundary[tail[rows]] = True
     on_crowded = np.zeros(n, dtype=bool)
@@ -491,7 +491,7 @@ def boundary_curves(triangles: np.ndarray, n: int) -> BoundaryCurves:
     return BoundaryCurves(closed, open_, np.flatnonzero(on_boundary & on_crowded))
 
 
-def _boundary_rows(triangles: np.ndarray, n: int, runs):
+def boundary_rows(triangles: np.ndarray, n: int, runs):
     """Rows of :func:`halfedges` on edges of exactly one triangle (no self-edges), and of non-manifold edges."""
     order, starts, counts = runs
     rows = order[starts[counts == 1]]
@@ -505,8 +505,8 @@ def _boundary_rows(triangles: np.ndarray, n: int, runs):
 
 def _junctions(triangles: np.ndarray, n: int, runs=None):
     if runs is None:
-        runs = _edge_runs(triangles, n)
-    rows, tail, head, crowded, _ = _boundary_rows(triangles, n, runs)
+        runs = edge_runs(triangles, n)
+    rows, tail, head, crowded, _ = boundary_rows(triangles, n, runs)
     degree = np.bincount(tail[rows], minlength=n) + np.bincount(head[rows], minlength=n)
     special = (degree > 0) & (degree != 2)
     on_crowded = np.zeros(n, dtype=bool)
@@ -546,7 +546,7 @@ def _boundary_walk(triangles: np.ndarray, n: int, *, split_at_junctions: bool, r
         if split_at_junctions:
             key[ends] = n + np.arange(len(ends))  # unique: never paired
         else:
-            _, fan = _corner_fans(triangles, n, runs, only=special)
+            _, fan = corner_fans(triangles, n, runs, only=special)
             corner = np.empty(2 * b, dtype=np.int64)
             corner[0::2] = rows  # a half-edge's row is the corner it starts from
             q, t = np.divmod(rows, m)

@@ -11,7 +11,6 @@ from hypothesis import strategies as st
 from o3d_lsmesh import SingularSystemError, ls_mesh
 from o3d_lsmesh.encoding import (
     HEADER,
-    MAGIC,
     assemble_stream,
     connectivity_checksum,
     decode_geometry,
@@ -257,8 +256,36 @@ def test_nonzero_padding_raises(torus):
         decode_geometry(torus, bytes(body) + struct.pack("<I", zlib.crc32(bytes(body))))
 
 
-def test_header_layout_starts_with_magic(stream):
-    assert stream[:4] == MAGIC and stream[4] == 1
+def test_stream_follows_the_documented_layout_field_by_field(torus, stream):
+    """Read the stream by hand from the layout table of the module docstring, not with the module's reader."""
+    V, F = torus
+    n, k, bits = len(V), 60, 10
+    assert stream[:4] == b"LSMG" and stream[4] == 1 and stream[5] == bits and stream[7] == 0
+    index_bits = stream[6]
+    assert 2 ** (index_bits - 1) < n <= 2**index_bits  # ceil(log2 n)
+    assert struct.unpack_from("<III", stream, 8)[:2] == (n, k)
+    # connectivity checksum: CRC-32 of the sorted unique edges, here from a plain set of edges
+    edges = sorted({(min(a, b), max(a, b)) for t in F.tolist() for a, b in zip(t, t[1:] + t[:1])})
+    assert struct.unpack_from("<I", stream, 16)[0] == zlib.crc32(np.array(edges, dtype="<i8").tobytes())
+    assert struct.unpack_from("<d", stream, 20)[0] == 10.0 * n
+    anchors = select_control_points(torus, k, weights=10.0 * n)
+    lower, upper = (
+        np.array(struct.unpack_from("<3d", stream, 28)),
+        np.array(struct.unpack_from("<3d", stream, 52)),
+    )
+    np.testing.assert_array_equal(lower, V[anchors].min(axis=0))
+    np.testing.assert_array_equal(upper, V[anchors].max(axis=0))
+    # payload, MSB first: k indices of index_bits bits, then x, y, z of each anchor in bits bits
+    payload = "".join(f"{byte:08b}" for byte in stream[76:-4])
+    fields = [payload[i : i + index_bits] for i in range(0, k * index_bits, index_bits)]
+    fields += [payload[i : i + bits] for i in range(k * index_bits, k * (index_bits + 3 * bits), bits)]
+    assert [int(f, 2) for f in fields[:k]] == anchors.tolist()  # in selection order
+    quantized = np.array([int(f, 2) for f in fields[k:]]).reshape(k, 3)
+    exact = (V[anchors] - lower) / (upper - lower) * (2**bits - 1)
+    assert np.abs(quantized - exact).max() <= 0.5 + 1e-9  # round((x - lo) / (hi - lo) * (2^bits - 1))
+    padding = payload[k * (index_bits + 3 * bits) :]
+    assert len(padding) < 8 and set(padding) <= {"0"}
+    assert struct.unpack("<I", stream[-4:])[0] == zlib.crc32(stream[:-4])
 
 
 def two_components():

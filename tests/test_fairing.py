@@ -250,8 +250,9 @@ def test_awkward_inputs_give_finite_results(method):
     )  # pillow keeps its barycenter
 
 
-def test_vertex_joining_two_closed_fans_is_accepted():
-    # two octahedra sharing vertex 0: vertex-non-manifold, no boundary
+def test_vertex_joining_two_closed_fans_follows_eq7_with_its_whole_ring():
+    # two octahedra sharing one vertex: vertex-non-manifold, no boundary. Eq. 7 still holds triangle by
+    # triangle, the joined vertex's valence counting both fans (8 neighbours), as in the reference loop.
     octa = o3d.geometry.TriangleMesh.create_octahedron()
     V, F = arrays(octa)
     V2 = V + np.array([0, 0, 2.0])  # vertex with z = 1 of the first equals z = -1 of the second after shift
@@ -260,9 +261,22 @@ def test_vertex_joining_two_closed_fans_is_accepted():
     index = np.arange(len(V)) + len(V)
     index[bottom] = top
     F2 = index[F]
-    Vall = np.vstack([V, V2])
-    out = constrained_fairing_arrays(Vall, np.vstack([F, F2]), 3, method="local")
-    assert np.isfinite(out).all()
+    Vall, Fall = np.vstack([V, V2]), np.vstack([F, F2])
+    noisy = Vall + np.random.default_rng(5).normal(0, 0.05, Vall.shape)
+    out = constrained_fairing_arrays(noisy, Fall, 3, method="local")
+    X = noisy
+    for _ in range(3):
+        X = eq7_reference_step(X, noisy, Fall, lambda t: True)
+    assert_allclose(out, X, atol=TIGHT)
+    assert np.abs(out[top] - noisy[top]).max() > 1e-3  # the joined vertex is faired, not held
+    assert_allclose(out[len(V) + bottom], noisy[len(V) + bottom], atol=0)  # the vertex no triangle uses
+    # the noiseless pair is symmetric under z -> 2 - z (the octahedra swap): so is its fairing
+    faired = constrained_fairing_arrays(Vall, Fall, 3, method="local")
+    used = np.unique(Fall)
+    mirrored = Vall[used] * [1, 1, -1] + [0, 0, 2]
+    image = used[np.argmin(np.linalg.norm(mirrored[:, None] - Vall[used][None], axis=2), axis=1)]
+    assert_allclose(faired[image], faired[used] * [1, 1, -1] + [0, 0, 2], atol=1e-12)
+    assert_allclose(faired[top, :2], 0.0, atol=1e-12)
 
 
 def test_zero_iterations_returns_an_unchanged_copy_of_each_kind(sphere):

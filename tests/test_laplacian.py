@@ -66,6 +66,24 @@ def test_cotangent_degenerate_triangle_stays_finite():
     assert np.all(np.isfinite(L.toarray()))
 
 
+def test_cotangent_rows_it_cannot_normalize_take_uniform_weights():
+    # a collinear sliver beside a grid: at its end vertices the clamped cotangents (+1e4 for the zero
+    # angle, -1e4 for the straight one) cancel, a row with no weight to normalize by
+    G, FG = grid(4, 4)
+    sliver = np.array([[0, 0, 4.0], [1, 0, 4], [2, 0, 4]])
+    V = np.vstack([G, sliver])
+    F = np.vstack([FG, [[16, 17, 18]]])
+    L = cotangent_laplacian(V, F).toarray()
+    uniform = reference_uniform(F, len(V))
+    for i in (16, 18):  # both ends: the average of their two neighbours, as the uniform Laplacian
+        np.testing.assert_allclose(L[i], uniform[i], atol=1e-15)
+    # every referenced vertex keeps a row that averages its neighbours: 1 on the diagonal, rows sum to 0
+    np.testing.assert_allclose(np.diag(L), 1.0, atol=1e-15)
+    np.testing.assert_allclose(L.sum(axis=1), 0.0, atol=1e-12)
+    # the rest is the grid's own cotangent Laplacian, untouched by the fallback
+    np.testing.assert_allclose(L[:16, :16], cotangent_laplacian(G, FG).toarray(), atol=1e-15)
+
+
 def test_kind_is_validated(sphere):
     with pytest.raises(ValueError, match="kind must be one of"):
         laplacian(sphere, kind="robust")

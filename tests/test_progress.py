@@ -9,7 +9,7 @@ import tqdm.auto
 import tqdm.std
 from conftest import grid
 
-from o3d_lsmesh._progress import check_progress, progress_bar, stages
+from o3d_lsmesh._progress import check_progress, iterate, progress_bar, stages
 from o3d_lsmesh.encoding import decode_geometry, encode_geometry, iter_decode_geometry
 from o3d_lsmesh.lsmesh import ls_mesh, reconstruct_geometry
 from o3d_lsmesh.selection import approximate, select_control_points
@@ -176,3 +176,14 @@ def test_helpers(bars):
     with progress_bar(True, total=10, initial=4, desc="seeded") as bar:
         bar.update(6)
     assert "10/10" in stream.getvalue()
+
+
+def test_iterate_yields_every_item_and_its_bar_ends_at_the_total(bars):
+    made, stream = bars
+    assert list(iterate(True, (x * x for x in range(4)), desc="squares", total=4)) == [0, 1, 4, 9]
+    assert list(iterate(True, [5, 6, 7], desc="list")) == [5, 6, 7]  # total from len()
+    assert_complete(made, stream, count=3)
+    assert list(iterate(False, "ab", desc="silent")) == ["a", "b"]
+    assert len(made) == 2
+    with pytest.raises(TypeError, match="progress"):
+        iterate(1, [1], desc="x")

@@ -20,6 +20,7 @@ from o3d_lsmesh._validate import (
     as_vertex_array,
     as_weights,
     as_workers,
+    check_mesh_arrays,
 )
 
 
@@ -103,6 +104,8 @@ def test_small_validators():
         as_weights(True, 2)
     with pytest.raises(TypeError, match="weights must be a positive number"):
         as_weights("x", 2)
+    with pytest.raises(TypeError, match=r"weights must be a positive number or an array of them, got True$"):
+        as_weights(True, 2)  # named as given, not as the bool array numpy makes of it
     with pytest.raises(TypeError, match="idx must be a sequence"):
         as_indices(None, 5, name="idx")
     with pytest.raises(TypeError, match="idx must be a sequence"):
@@ -166,6 +169,10 @@ def test_vertex_and_triangle_arrays_check_dtype_and_shape_without_casting_first(
             r"mesh triangle indices must lie in \[0, 3\), got \[0, 1, 18446744073709551615\] at triangle 0",
         ),
         (np.array([[0, 1, 2], [0, -1, 2]]), ValueError, r"got \[0, -1, 2\] at triangle 1"),
+        # named as given, not as the array numpy would make of them
+        ("faces", TypeError, r"mesh triangles must be an \(m, 3\) integer array, got 'faces'$"),
+        (None, TypeError, "integer array, got None$"),
+        ([[0, 1, 2], [0, 1]], TypeError, r"integer array, got \[\[0, 1, 2\], \[0, 1\]\]$"),
     ]:
         with pytest.raises(error, match=match):
             as_triangle_array(bad, 3)
@@ -184,6 +191,9 @@ def test_bool_and_real_vector_validators():
         as_real_vector([0, 2, 0], 3, name="c", low=0, high=1)
     with pytest.raises(ValueError, match=r"c must have 3 entries finite, got \[0.0, nan, 0.0\]"):
         as_real_vector([0, np.nan, 0], 3, name="c")
+    for bad, shape in (([0.5, 0.5], r"\(2,\)"), ([[0, 0, 1]], r"\(1, 3\)"), (0.5, r"\(\)")):
+        with pytest.raises(ValueError, match=rf"c must be a sequence of 3 numbers, got shape {shape}"):
+            as_real_vector(bad, 3, name="c")
 
 
 def test_weights_and_positions_refuse_what_is_not_a_real_number():
@@ -302,3 +312,43 @@ def test_mesh_arrays_is_the_one_check_of_array_functions_and_read_mesh():
     out_v, out_f = mesh_arrays(v, f)
     assert not np.shares_memory(out_v, v) and not np.shares_memory(out_f, f)
     np.testing.assert_array_equal(out_v, v)
+
+
+def test_check_mesh_arrays_refuses_each_defect_on_its_own():
+    # the array core's validator, called directly (read_mesh checks dtype and index range before it)
+    V, F = grid(3, 3)
+    assert check_mesh_arrays(V, F) is None
+    cases = [
+        (np.zeros((0, 3)), F[:0], {}, "mesh must have vertices, got an empty mesh"),
+        (V, F[:0], {}, "mesh must have triangles, got 9 vertices and no triangles"),
+        (
+            np.where(np.arange(9)[:, None] == 4, np.nan, V),
+            F,
+            {},
+            r"vertices must be finite, got .* at vertex 4",
+        ),
+        (
+            V * np.where(np.arange(9)[:, None] == 2, 1e31, 1.0),
+            F,
+            {},
+            "magnitude at most 1e\\+30.* at vertex 2",
+        ),
+        (V, np.vstack([F, [[0, 1, 9]]]), {}, r"indices must lie in \[0, 9\), got \[0, 1, 9\] at triangle 8"),
+        (
+            V,
+            np.vstack([F, [[0, -1, 2]]]),
+            {},
+            r"indices must lie in \[0, 9\), got \[0, -1, 2\] at triangle 8",
+        ),
+        (V, np.vstack([F, [[3, 5, 3]]]), {}, r"three distinct vertices, got \[3, 5, 3\] at triangle 8"),
+        (
+            np.vstack([V, [[5.0, 5, 5]]]),
+            F,
+            {"allow_isolated": False},
+            "unreferenced vertices, got 1 .*vertex 9",
+        ),
+    ]
+    for vertices, triangles, options, message in cases:
+        with pytest.raises(ValueError, match=message):
+            check_mesh_arrays(vertices, triangles, **options)
+    check_mesh_arrays(np.vstack([V, [[5.0, 5, 5]]]), F)  # an unreferenced vertex is allowed by default

@@ -27,7 +27,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._solvers import SPDSolver, check_constant_modes, check_finite, operator_scale, solver_backend
-from ..topology import _group, boundary_curves, unique_edges
+from ..topology import boundary_curves, group_keys, unique_edges
 
 __all__ = [
     "DEFAULT_MU",
@@ -169,7 +169,7 @@ def _valence_tables(valences: np.ndarray):
 
 def _sorted_groups(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     # distinct keys (sorted) and the group of every key, by the topology module's sort-and-mask
-    order, starts, _, group = _group(keys, int(keys.max()) + 1)
+    order, starts, _, group = group_keys(keys, int(keys.max()) + 1)
     return keys[order[starts]], group
 
 

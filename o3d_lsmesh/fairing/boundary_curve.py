@@ -47,14 +47,18 @@ on such an edge, are held.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.sparse as sp
 
 from .._o3d import new_mesh, read_mesh
+from .._ranges import concatenated_ranges
 from .._validate import as_count
 from ..topology import BoundaryCurves, boundary_curves
+
+if TYPE_CHECKING:
+    from .._types import MeshT
 
 __all__ = [
     "MIN_LOOP_LENGTH",
@@ -188,9 +192,9 @@ def _segments(curves: list, *, closed: bool):
         return empty, empty, empty, empty
     lengths = np.array([len(c) for c in curves], dtype=np.int64)
     vertex = np.concatenate(curves)
-    start = np.repeat(np.concatenate([[0], np.cumsum(lengths)[:-1]]), lengths)
+    position = concatenated_ranges(0, lengths)  # within its curve
+    start = np.arange(len(vertex)) - position
     length = np.repeat(lengths, lengths)
-    position = np.arange(len(vertex)) - start
     if closed:
         # e.g. loop [5, 6, 7, 8]: segment (5, 6) has outer neighbours (8, 7)
         def at(by):
@@ -254,7 +258,7 @@ def run_curve_iterations(
     return out
 
 
-def smooth_boundary_curves(mesh: Any, number_of_iterations: int = 10) -> Any:
+def smooth_boundary_curves(mesh: MeshT, number_of_iterations: int = 10) -> MeshT:
     """Smooth every boundary loop of an open mesh with midpoint-constrained curve fairing.
 
     Implements the local curve equation of Liu et al. 2001, section 3.3 (see

@@ -10,7 +10,7 @@ range scans, :mod:`.scan_fairing`), and the paper's ``"local"`` (eq. 7) and
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -25,6 +25,9 @@ from .scan_fairing import (
     ScanFairingSolver,
     measured_boundary_weight,
 )
+
+if TYPE_CHECKING:
+    from .._types import MeshT
 
 __all__ = ["DEFAULT_METHOD", "FAIRING_METHODS", "constrained_fairing", "constrained_fairing_arrays"]
 
@@ -209,7 +212,7 @@ def _fair(
 
 
 def constrained_fairing(
-    mesh: Any,
+    mesh: MeshT,
     number_of_iterations: int | None = None,
     *,
     method: str | None = None,
@@ -220,7 +223,7 @@ def constrained_fairing(
     reimpose_every: int | None = None,
     progress: bool = False,
     solver: str = "auto",
-) -> Any:
+) -> MeshT:
     """Remove noise from a mesh while holding its triangle barycenters (Liu et al. 2001).
 
     **Default** (``constrained_fairing(mesh)``, ``method="scan"``, one

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -16,6 +16,9 @@ from ..hierarchy.hierarchy import (
 )
 from ..topology import boundary_halfedges
 from .constrained import FAIRING_METHODS, constrained_fairing_arrays
+
+if TYPE_CHECKING:
+    from .._types import MeshT
 
 __all__ = ["multiresolution_fairing", "multiresolution_fairing_arrays"]
 
@@ -69,7 +72,7 @@ def _simple_boundary(triangles: np.ndarray, n: int) -> bool:
 
 
 def multiresolution_fairing(
-    mesh: Any,
+    mesh: MeshT,
     level: int,
     *,
     hierarchy: MeshHierarchy | None = None,
@@ -77,7 +80,7 @@ def multiresolution_fairing(
     final_iterations: int | None = None,
     method: str = "local",
     progress: bool = False,
-) -> Any:
+) -> MeshT:
     """Smooth a mesh at a chosen scale by fairing a coarse level and splitting back up (Liu et al. 2001, 4.2).
 
     For ``i`` from ``level`` down to 1: (2.1) fair level ``M_i`` by

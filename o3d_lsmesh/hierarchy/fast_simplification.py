@@ -12,15 +12,20 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .._collapsed import collapsed_triangles
 from .._o3d import warn_dropped_attributes
 from .._progress import check_progress
+from .._ranges import concatenated_ranges
 from .._validate import as_count
 from ..topology import adjacency_matrix, connected_components, unique_edges
-from .hierarchy import MeshHierarchy, _tensor_format, read_hierarchy_mesh
+from .hierarchy import MeshHierarchy, read_hierarchy_mesh, tensor_format_of
+
+if TYPE_CHECKING:
+    from .._types import AnyMesh
 
 __all__ = ["from_fast_simplification"]
 
@@ -57,7 +62,7 @@ def _level_counts(levels: Any, n: int, min_vertices: int) -> np.ndarray:
 
 
 def from_fast_simplification(
-    mesh: Any,
+    mesh: AnyMesh,
     *,
     levels: int | Sequence[int] = 8,
     min_vertices: int = 100,
@@ -207,9 +212,7 @@ def from_fast_simplification(
         parent = renumber[parent]
         gone = np.flatnonzero(~keep)
         mapped = parent[tris[-1]]
-        alive = (
-            (mapped[:, 0] != mapped[:, 1]) & (mapped[:, 1] != mapped[:, 2]) & (mapped[:, 2] != mapped[:, 0])
-        )
+        alive = ~collapsed_triangles(mapped)
         mapped = _drop_nonmanifold(_drop_duplicate_triangles(mapped[alive], n_new), n_new)
         adjacency = adjacency_matrix(tris[-1], n_prev)
         ring_offsets = np.r_[0, np.cumsum(np.diff(adjacency.indptr)[gone])].astype(np.int64)
@@ -233,16 +236,13 @@ def from_fast_simplification(
         False,
         "fast_simplification",
         data.kind,
-        _tensor_format(data),
+        tensor_format_of(data),
     )
 
 
 def _csr_rows(matrix, rows: np.ndarray) -> np.ndarray:
     starts = matrix.indptr[rows]
-    counts = matrix.indptr[rows + 1] - starts
-    offsets = np.cumsum(counts) - counts
-    index = np.arange(int(counts.sum()), dtype=np.int64) + np.repeat(starts - offsets, counts)
-    return matrix.indices[index].astype(np.int64)
+    return matrix.indices[concatenated_ranges(starts, matrix.indptr[rows + 1] - starts)].astype(np.int64)
 
 
 def _drop_duplicate_triangles(triangles: np.ndarray, n: int) -> np.ndarray:

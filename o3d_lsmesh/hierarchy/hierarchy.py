@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass, fields
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -20,6 +20,9 @@ from .._progress import check_progress
 from .._validate import as_count, as_positions, as_positive_float
 from ..topology import adjacency_matrix, boundary_halfedges
 from .collapse import collapse_level, workspace
+
+if TYPE_CHECKING:
+    from .._types import AnyMesh
 
 __all__ = [
     "MeshHierarchy",
@@ -135,7 +138,7 @@ class MeshHierarchy:
         i = self._check_level(i)
         return self.vertices[self.representatives[i]], self.triangles[i].copy()
 
-    def level(self, i: int) -> Any:
+    def level(self, i: int) -> AnyMesh:
         """Level ``i`` as a mesh of the input's kind; positions are the input positions of its vertices.
 
         Examples
@@ -284,7 +287,7 @@ def _harmonic_fill(
     return np.asarray(solution).reshape(len(removed), 3)
 
 
-def read_hierarchy_mesh(mesh: Any, *, weld: bool = False) -> MeshData:
+def read_hierarchy_mesh(mesh: AnyMesh, *, weld: bool = False) -> MeshData:
     """Read ``mesh`` for a hierarchy: any mesh :func:`read_mesh` accepts (non-manifold, unreferenced
     vertices); ``weld``: see :func:`~o3d_lsmesh._o3d.read_mesh`."""
     return read_mesh(mesh, name="mesh", allow_isolated=True, weld=weld)
@@ -301,7 +304,7 @@ def locked_vertices(triangles: np.ndarray, n: int) -> np.ndarray:
     return workspace().locked_vertices(triangles, n)
 
 
-def _tensor_format(data: MeshData) -> tuple:
+def tensor_format_of(data: MeshData) -> tuple:
     if data.kind != "tensor":
         return ()
     src = data.source
@@ -401,7 +404,7 @@ def build_hierarchy_arrays(
 
 
 def build_hierarchy(
-    mesh: Any,
+    mesh: AnyMesh,
     *,
     alpha: float = 1.0,
     beta: float = 0.01,
@@ -491,5 +494,5 @@ def build_hierarchy(
         max_levels=max_levels,
         progress=bool(progress),
         mesh_kind=data.kind,
-        tensor_format=_tensor_format(data),
+        tensor_format=tensor_format_of(data),
     )
