@@ -45,14 +45,15 @@ def _percent_change(before: float, after: float) -> float | None:
 
 def normal_deviation(a: Any, b: Any) -> float | None:
     """Mean normal deviation, or None when no triangle has an area in both meshes (the angle is undefined)."""
+    from .._o3d import read_mesh
+    from ..metrics import face_normals
     from ..metrics import normal_deviation as deviation
 
-    try:
-        return deviation(a, b)
-    except ValueError as error:
-        if "non-zero area" in str(error):
-            return None
-        raise
+    da, db = read_mesh(a), read_mesh(b)
+    has_area = (np.abs(face_normals(da.vertices, da.triangles)).sum(axis=1) > 0) & (
+        np.abs(face_normals(db.vertices, db.triangles)).sum(axis=1) > 0
+    )
+    return deviation(a, b) if has_area.any() else None
 
 
 def change_report(before: Any, after: Any) -> dict[str, Any]:
