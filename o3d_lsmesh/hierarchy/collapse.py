@@ -1,78 +1,48 @@
-"""One level of the volume-cost mesh hierarchy (Liu et al. 2001, section 4.1).
+"""Levels of the volume-cost mesh hierarchy (Liu et al. 2001, section 4.1).
 
-A level removes a set of vertices, each by a half-edge collapse ``x -> k``
-into the 1-ring neighbour ``k`` of least cone volume
+A level removes vertices by half-edge collapses ``x -> k`` into the 1-ring
+neighbour of least cone volume ``V(x -> k) = |N_x . (x_k - x)|``, ``N_x`` the
+sum of the doubled-area normals around ``x`` (ties within a relative ``1e-9``
+to the shortest edge, then the first in index order). The compiled loop
+(``_kernel.pyx``; the same loop in plain Python is the tests' oracle) visits
+the vertices in increasing ``cost(x) = alpha * min_edge(x) + beta * max_edge(x)``
+(ties by index) and skips ``x`` when ``x`` or its target lies in the closed
+1-ring of a vertex already removed in this level: a collapse reads the 1-rings
+of ``x`` and ``k`` and changes only those of ``N(x)``, so every collapse stays
+valid and the removed vertices are pairwise non-adjacent (as
+:meth:`MeshHierarchy.refine` needs). At most ``max_tries`` targets are tried;
+one is taken when
 
-    V(x -> k) = | sum_j (x_j - x_k) x (x_{j+1} - x_k) . (x - x_k) | = | N_x . (x_k - x) |,
-
-``N_x`` being the sum of the (doubled-area) normals of the triangles around
-``x`` (each term is six times the volume of the tetrahedron ``(x, x_j,
-x_{j+1}, x_k)``, affine in ``x_k``). Ties within a relative ``1e-9`` go to
-the shortest edge, then to the first neighbour in index order.
-
-The loop (compiled, ``_kernel.pyx``; the same loop in plain Python is the
-oracle of the tests) visits the vertices in increasing
-``cost(x) = alpha * min_edge(x) + beta * max_edge(x)`` (ties by index) and
-skips ``x`` when ``x`` or its target lies in the closed 1-ring of a vertex
-already removed in this level. A collapse reads only the 1-rings of ``x`` and
-``k``, and changes only the 1-rings of ``N(x)``, so with this rule every
-collapse of the level is valid on the level's mesh as well as after the ones
-before it, and the removed vertices are pairwise non-adjacent (what
-:meth:`MeshHierarchy.refine` needs to split them back in closed form).
-
-A target is tried in that order, at most ``max_tries`` of them, and taken when
-the collapse is valid:
-
-* link condition: ``x`` and ``k`` have exactly the common neighbours of the
-  edge's triangles (2 inside, 1 on a boundary edge). With a virtual vertex
-  coning off each boundary loop this is the link condition of Dey et al., and
-  it keeps the Euler characteristic and the boundary loops;
-* a boundary vertex collapses only along a boundary edge, an interior one
-  only along an interior edge;
-* no closed tetrahedron (``x`` and ``k`` interior of valence 3) and no
-  isolated triangle (``x`` and ``k`` on the boundary, of valence 2);
-* every triangle of the star of ``x`` that survives keeps its orientation and
-  turns its normal by less than ``max_normal_angle``, and its
-  ``2 * area / (sum of squared edge lengths)`` stays above ``min_quality``;
-* locked vertices are never removed and never a target.
-
-Locked are the vertices the caller names (non-manifold ones: several fans of
-triangles, see :func:`o3d_lsmesh.topology.nonmanifold_vertices`, and
-unreferenced ones) and every vertex on an edge of more than two triangles.
-Every other vertex has a disk or half-disk for its star, so the rules above
-are those of a manifold mesh, and the set of non-manifold vertices stays the
-same at every level.
+* the link condition holds: ``x`` and ``k`` share exactly the opposite
+  vertices of their edge's triangles (this keeps Euler characteristic and
+  boundary loops);
+* a boundary ``x`` collapses along a boundary edge (an interior ``x`` has only
+  edges of two triangles: one of one triangle makes it boundary, one of three
+  locks it);
+* no isolated triangle or closed tetrahedron would remain;
+* every surviving triangle of the star of ``x`` keeps its orientation, turns
+  its normal by less than ``max_normal_angle``, and keeps
+  ``2 * area / (sum of squared edge lengths)`` above ``min_quality``;
+* ``k`` is not locked. Locked are the caller's vertices and every vertex on an
+  edge of more than two triangles (with ``lock_fans``: also unreferenced
+  vertices and those whose triangles form several fans), so every other star
+  is a disk or half-disk and the non-manifold vertices stay at every level.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Callable
+from typing import Any, NamedTuple
 
 import numpy as np
 
-__all__ = ["LevelCollapse", "collapse_level", "workspace"]
+__all__ = ["LevelCollapse", "collapse_level", "collapse_levels"]
 
 
-@dataclass(frozen=True)
-class LevelCollapse:
-    """The collapses of one level, in the indices of the finer level ``i - 1``.
-
-    Attributes
-    ----------
-    removed : (r,) int64
-        Vertices removed, sorted.
-    targets : (r,) int64
-        The vertex each one was merged into (kept at level ``i``).
-    ring_offsets : (r + 1,) int64
-        CSR offsets into ``ring``.
-    ring : (sum of valences,) int64
-        The 1-ring of each removed vertex at level ``i - 1``, sorted.
-    parent : (n_{i-1},) int64
-        Index at level ``i`` of every vertex of level ``i - 1``.
-    triangles : (m_i, 3) int64
-        Triangles of level ``i`` (those of level ``i - 1`` mapped by ``parent``,
-        in order, collapsed ones dropped).
-    """
+class LevelCollapse(NamedTuple):
+    """One level's collapses in level ``i - 1`` indices: ``removed``/``targets`` (r,), CSR ``ring_offsets``/``ring``
+    (sorted 1-rings of the removed), ``parent`` (n_{i-1},) to level ``i``, its ``triangles`` (m_i, 3)
+    (mapped in order, collapsed ones dropped), ``kept`` (n_i,) indices at level 0; int64."""
 
     removed: np.ndarray
     targets: np.ndarray
@@ -80,86 +50,63 @@ class LevelCollapse:
     ring: np.ndarray
     parent: np.ndarray
     triangles: np.ndarray
+    kept: np.ndarray
 
 
-def _kernel():
-    try:
-        from . import _kernel
-    except ImportError as error:  # a source tree used without building it
-        raise ImportError(
-            "o3d_lsmesh's compiled hierarchy kernel is not built: install the package with "
-            "`pip install .` (or `pip install -e .`), or run `python setup.py build_ext --inplace` "
-            "in a source tree (needs Cython and a C compiler)"
-        ) from error
-    return _kernel
-
-
-def workspace():
-    """Buffers the kernel reuses from level to level (fresh pages cost more than the loop on them)."""
-    return _kernel().Workspace()
-
-
-def collapse_level(
+def collapse_levels(
     vertices: np.ndarray,
     triangles: np.ndarray,
     *,
     alpha: float = 1.0,
     beta: float = 0.01,
-    max_removals: int | None = None,
+    min_vertices: int = 0,
+    max_levels: int | None = None,
     max_normal_angle: float = 60.0,
     min_quality: float = 1e-3,
     max_tries: int = 3,
     locked: np.ndarray | None = None,
-    workspace: object | None = None,
-) -> LevelCollapse | None:
-    """Select and apply one level of volume-cost half-edge collapses (module docstring).
+    lock_fans: bool = False,
+    report: Callable[[int], Any] | None = None,
+) -> tuple[np.ndarray, list[LevelCollapse]]:
+    """``(locked (n,) bool, levels)``: levels until ``min_vertices`` or no valid collapse (module docstring).
 
-    Parameters
-    ----------
-    vertices : (n, 3) float64
-        Positions of the level's vertices.
-    triangles : (m, 3) int64
-        Triangles with three distinct vertices each.
-    alpha, beta : float
-        Non-negative weights of the shortest and longest incident edge in the cost.
-    max_removals : int, optional
-        Remove at most this many vertices (the first ones in cost order).
-    max_normal_angle : float
-        Angle in degrees a surviving triangle's normal must turn less than (90 or more: it
-        must only not flip).
-    min_quality : float
-        ``2 * area / (sum of squared edge lengths)`` a new triangle must stay
-        above (an equilateral triangle has ``1/sqrt(3)``).
-    max_tries : int
-        Targets tried per vertex, in the order above, before it waits for the next level.
-    locked : (n,) bool, optional
-        Vertices never removed and never a target.
-    workspace : optional
-        A :func:`workspace` to reuse between the levels of one hierarchy (one thread at a time).
-
-    Returns
-    -------
-    LevelCollapse or None
-        ``None`` when no valid collapse remains.
+    ``alpha, beta >= 0`` weigh the shortest and longest edge of the cost; a level removes at most
+    ``n_i - min_vertices``; ``report(removed)`` is called after each level. The returned lock is ``locked``
+    with what the kernel locks at level 0.
     """
-    vertices = np.ascontiguousarray(vertices, dtype=np.float64)
-    triangles = np.ascontiguousarray(triangles, dtype=np.int64)
+    try:
+        from . import _kernel
+    except ImportError as error:  # a source tree used without building it
+        raise ImportError(
+            "o3d_lsmesh's compiled hierarchy kernel is not built: `pip install .` (or `pip install -e .`), or "
+            "`python setup.py build_ext --inplace` in a source tree (needs Cython and a C compiler)"
+        ) from error
     n = len(vertices)
-    locked = np.zeros(n, dtype=np.uint8) if locked is None else np.ascontiguousarray(locked, dtype=np.uint8)
-    limit = n if max_removals is None else max(int(max_removals), 0)
+    lock = np.zeros(n, np.uint8) if locked is None else np.array(locked, dtype=bool).view(np.uint8)
     # at 90 degrees or more only the flip test (a positive dot product of the normals) remains
     cos_sq = float(np.cos(np.deg2rad(max_normal_angle)) ** 2) if max_normal_angle < 90 else 0.0
-    if workspace is None:
-        workspace = _kernel().Workspace()
-    result = workspace.collapse_level(
-        vertices,
-        triangles,
-        locked,
+    first, levels = _kernel.hierarchy(
+        np.array(vertices, dtype=np.float64, order="C"),  # positions and lock: compacted in place
+        np.ascontiguousarray(triangles, dtype=np.int64),
+        lock,
         float(alpha),
         float(beta),
-        limit,
+        int(min_vertices),
+        n + 1 if max_levels is None else int(max_levels),
         cos_sq,
         float(min_quality),
         int(max_tries),
+        bool(lock_fans),
+        report,
     )
-    return None if result is None else LevelCollapse(*result)
+    return first, [LevelCollapse(*t) for t in levels]
+
+
+def collapse_level(
+    vertices: np.ndarray, triangles: np.ndarray, *, max_removals: int | None = None, **options: Any
+) -> LevelCollapse | None:
+    """One level of at most ``max_removals`` collapses (options of :func:`collapse_levels`), or ``None``."""
+    n = len(vertices)
+    limit = n if max_removals is None else max(int(max_removals), 0)
+    levels = collapse_levels(vertices, triangles, min_vertices=n - limit, max_levels=1, **options)[1]
+    return levels[0] if levels else None
