@@ -38,8 +38,8 @@ from _common import load_mesh, markdown_table, timed, write_markdown
 
 from o3d_lsmesh.fairing.multiresolution import multiresolution_fairing_arrays
 from o3d_lsmesh.hierarchy import build_hierarchy
-from o3d_lsmesh.hierarchy.collapse import collapse_level, workspace
-from o3d_lsmesh.hierarchy.hierarchy import build_hierarchy_arrays, locked_vertices
+from o3d_lsmesh.hierarchy.collapse import collapse_levels
+from o3d_lsmesh.hierarchy.hierarchy import build_hierarchy_arrays
 from o3d_lsmesh.metrics import (
     signed_volume,
     surface_distance,
@@ -52,25 +52,16 @@ SAMPLES = 20_000 if QUICK else 50_000
 
 
 def level_times(V, F, min_vertices=100):
-    """Cumulative wall time after each level, by the same loop that build_hierarchy runs."""
+    """Cumulative wall time after each level, from the kernel's report after each level (as build_hierarchy)."""
     start = time.perf_counter()
-    buffers = workspace()
-    locked = locked_vertices(F, len(V))
-    times, reps, P, T = [time.perf_counter() - start], np.arange(len(V)), V, F
-    total = times[0]
-    while len(P) > min_vertices:
-        start = time.perf_counter()
-        level = collapse_level(
-            P, T, max_removals=len(P) - min_vertices, locked=locked[reps], workspace=buffers
-        )
-        if level is None:
-            break
-        keep = np.ones(len(P), dtype=bool)
-        keep[level.removed] = False
-        reps = reps[keep]
-        P, T = V[reps], level.triangles
-        total += time.perf_counter() - start
-        times.append(total)
+    times = [0.0]
+    collapse_levels(
+        V,
+        F,
+        min_vertices=min_vertices,
+        lock_fans=True,
+        report=lambda _: times.append(time.perf_counter() - start),
+    )
     return times
 
 
@@ -411,7 +402,7 @@ def main():
         f"({SAMPLES} points per side + vertices, RaycastingScene), in % of the bounding-box diagonal. Volume change "
         "is the signed volume against the input's. `manifold`: y = edge- and vertex-manifold, edge = edge-manifold "
         "only, n = neither. `euler/loops`: Euler characteristic / boundary loops (the input's must be kept). Our time "
-        "is cumulative over the levels (the same `collapse_level` calls); fast-simplification's is one fresh run to "
+        "is cumulative over the levels (the kernel's report after each level); fast-simplification's is one fresh run to "
         "that count. Scale table: roughness = mean squared normal component of the uniform Laplacian over the squared "
         "mean edge length (the tangential part measures the triangulation, not the surface)."
     )

@@ -1,32 +1,25 @@
-"""Levels of the volume-cost mesh hierarchy (Liu et al. 2001, section 4.1).
+"""Levels of the volume-cost hierarchy (Liu et al. 2001, section 4.1): the rules of the compiled loop.
 
-A level removes vertices by half-edge collapses ``x -> k`` into the 1-ring
-neighbour of least cone volume ``V(x -> k) = |N_x . (x_k - x)|``, ``N_x`` the
-sum of the doubled-area normals around ``x`` (ties within a relative ``1e-9``
-to the shortest edge, then the first in index order). The compiled loop
-(``_kernel.pyx``; the same loop in plain Python is the tests' oracle) visits
-the vertices in increasing ``cost(x) = alpha * min_edge(x) + beta * max_edge(x)``
-(ties by index) and skips ``x`` when ``x`` or its target lies in the closed
-1-ring of a vertex already removed in this level: a collapse reads the 1-rings
-of ``x`` and ``k`` and changes only those of ``N(x)``, so every collapse stays
-valid and the removed vertices are pairwise non-adjacent (as
-:meth:`MeshHierarchy.refine` needs). At most ``max_tries`` targets are tried;
-one is taken when
+The loop (``_kernel.pyx``; ``tests/_hierarchy_oracle.py`` is the same loop in plain Python) visits the
+unlocked vertices in increasing ``cost(x) = alpha * min_edge(x) + beta * max_edge(x)`` (ties by index) and
+skips ``x`` when ``x`` or its target is in the closed 1-ring of a vertex already removed in this level: a
+collapse reads the 1-rings of ``x`` and ``k`` and changes only those of ``N(x)``, so every collapse stays
+valid and the removed vertices are pairwise non-adjacent (:meth:`MeshHierarchy.refine` needs it). ``x``
+goes to the neighbour ``k`` of least cone volume ``|N_x . (x_k - x)|`` (``N_x`` the summed doubled-area
+normals around ``x``; ties within a relative 1e-9 to the shortest edge, then the first in index order),
+trying at most ``max_tries`` of them, and a collapse is made when
 
-* the link condition holds: ``x`` and ``k`` share exactly the opposite
-  vertices of their edge's triangles (this keeps Euler characteristic and
-  boundary loops);
-* a boundary ``x`` collapses along a boundary edge (an interior ``x`` has only
-  edges of two triangles: one of one triangle makes it boundary, one of three
-  locks it);
+* ``k`` is not locked, and a boundary ``x`` moves along a boundary edge (an interior one has only edges of
+  two triangles: an edge of one would make it boundary, of three locks it);
 * no isolated triangle or closed tetrahedron would remain;
-* every surviving triangle of the star of ``x`` keeps its orientation, turns
-  its normal by less than ``max_normal_angle``, and keeps
-  ``2 * area / (sum of squared edge lengths)`` above ``min_quality``;
-* ``k`` is not locked. Locked are the caller's vertices and every vertex on an
-  edge of more than two triangles (with ``lock_fans``: also unreferenced
-  vertices and those whose triangles form several fans), so every other star
-  is a disk or half-disk and the non-manifold vertices stay at every level.
+* every surviving triangle of the star of ``x`` keeps its orientation, turns its normal by less than
+  ``max_normal_angle`` and keeps ``2 * area / (sum of squared edge lengths)`` above ``min_quality``;
+* the link condition holds: ``x`` and ``k`` share only the opposite vertices of their edge (Euler
+  characteristic and boundary loops stay).
+
+Locked are the caller's vertices and every vertex on an edge of more than two triangles (``lock_fans``:
+also unreferenced vertices and those whose triangles form several fans), so every other star is a disk or
+half-disk, and every level keeps the input's non-manifold vertices.
 """
 
 from __future__ import annotations
@@ -36,13 +29,13 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-__all__ = ["LevelCollapse", "collapse_level", "collapse_levels"]
+__all__ = ["LevelCollapse", "collapse_levels"]
 
 
 class LevelCollapse(NamedTuple):
-    """One level's collapses in level ``i - 1`` indices: ``removed``/``targets`` (r,), CSR ``ring_offsets``/``ring``
-    (sorted 1-rings of the removed), ``parent`` (n_{i-1},) to level ``i``, its ``triangles`` (m_i, 3)
-    (mapped in order, collapsed ones dropped), ``kept`` (n_i,) indices at level 0; int64."""
+    """A level in level ``i - 1`` indices (int64): ``removed`` and their ``targets``, their sorted 1-rings
+    (CSR ``ring_offsets``, ``ring``), ``parent`` (index at level ``i``), the level's ``triangles`` (mapped in
+    order, collapsed ones dropped), and ``kept``: the input index of each vertex of level ``i``."""
 
     removed: np.ndarray
     targets: np.ndarray
@@ -68,45 +61,15 @@ def collapse_levels(
     lock_fans: bool = False,
     report: Callable[[int], Any] | None = None,
 ) -> tuple[np.ndarray, list[LevelCollapse]]:
-    """``(locked (n,) bool, levels)``: levels until ``min_vertices`` or no valid collapse (module docstring).
+    """``(lock of level 0 (n,) bool, levels)``, a level removing at most ``n_i - min_vertices`` vertices,
+    until ``max_levels`` or no valid collapse; ``report(removed count)`` after each level."""
+    from . import _kernel  # built by the package's build (``pip install .``, ``setup.py build_ext``)
 
-    ``alpha, beta >= 0`` weigh the shortest and longest edge of the cost; a level removes at most
-    ``n_i - min_vertices``; ``report(removed)`` is called after each level. The returned lock is ``locked``
-    with what the kernel locks at level 0.
-    """
-    try:
-        from . import _kernel
-    except ImportError as error:  # a source tree used without building it
-        raise ImportError(
-            "o3d_lsmesh's compiled hierarchy kernel is not built: `pip install .` (or `pip install -e .`), or "
-            "`python setup.py build_ext --inplace` in a source tree (needs Cython and a C compiler)"
-        ) from error
-    n = len(vertices)
-    lock = np.zeros(n, np.uint8) if locked is None else np.array(locked, dtype=bool).view(np.uint8)
+    lock = np.zeros(len(vertices), bool) if locked is None else np.array(locked, dtype=bool)
     # at 90 degrees or more only the flip test (a positive dot product of the normals) remains
     cos_sq = float(np.cos(np.deg2rad(max_normal_angle)) ** 2) if max_normal_angle < 90 else 0.0
-    first, levels = _kernel.hierarchy(
-        np.array(vertices, dtype=np.float64, order="C"),  # positions and lock: compacted in place
-        np.ascontiguousarray(triangles, dtype=np.int64),
-        lock,
-        float(alpha),
-        float(beta),
-        int(min_vertices),
-        n + 1 if max_levels is None else int(max_levels),
-        cos_sq,
-        float(min_quality),
-        int(max_tries),
-        bool(lock_fans),
-        report,
-    )
-    return first, [LevelCollapse(*t) for t in levels]
-
-
-def collapse_level(
-    vertices: np.ndarray, triangles: np.ndarray, *, max_removals: int | None = None, **options: Any
-) -> LevelCollapse | None:
-    """One level of at most ``max_removals`` collapses (options of :func:`collapse_levels`), or ``None``."""
-    n = len(vertices)
-    limit = n if max_removals is None else max(int(max_removals), 0)
-    levels = collapse_levels(vertices, triangles, min_vertices=n - limit, max_levels=1, **options)[1]
-    return levels[0] if levels else None
+    P, T = np.array(vertices, dtype=np.float64, order="C"), np.ascontiguousarray(triangles, dtype=np.int64)
+    limit = len(P) + 1 if max_levels is None else max_levels
+    options = (alpha, beta, min_vertices, limit, cos_sq, min_quality, max_tries, lock_fans, report)
+    first, levels = _kernel.hierarchy(P, T, lock.view(np.uint8), *options)
+    return first, [LevelCollapse(*level) for level in levels]
