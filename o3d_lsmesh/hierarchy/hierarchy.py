@@ -342,7 +342,8 @@ def build_hierarchy_arrays(
     vertices = np.array(vertices, dtype=np.float64, order="C", copy=True)
     triangles = np.array(triangles, dtype=np.int64, order="C", copy=True)
     n0 = len(vertices)
-    with progress_bar(progress, total=max(n0 - min_vertices, 0), desc="mesh hierarchy", unit="vertex") as bar:
+    total = max(n0 - min_vertices, 0)  # at most: a level may find no valid collapse before
+    with progress_bar(progress, total=total, desc="mesh hierarchy", unit="vertex") as bar:
         _, levels = collapse_levels(
             vertices,
             triangles,
@@ -353,6 +354,7 @@ def build_hierarchy_arrays(
             lock_fans=True,
             report=bar.update,
         )
+        bar.update(total - bar.n)  # done: the bar ends at its total
     empty = np.zeros(0, dtype=np.int64)
     tris = [triangles] + [level.triangles for level in levels]
     reps = [np.arange(n0, dtype=np.int64)] + [level.kept for level in levels]
