@@ -63,7 +63,7 @@ def collapse_levels(
 ) -> tuple[np.ndarray, list[LevelCollapse]]:
     """``(lock of level 0 (n,) bool, levels)``, a level removing at most ``n_i - min_vertices`` vertices,
     until ``max_levels`` or no valid collapse; ``report(removed count)`` after each level."""
-    from . import _kernel  # built by the package's build (``pip install .``, ``setup.py build_ext``)
+    from ._kernel import hierarchy  # built by the package's build (``pip install .``, ``setup.py build_ext``)
 
     lock = np.zeros(len(vertices), bool) if locked is None else np.array(locked, dtype=bool)
     # at 90 degrees or more only the flip test (a positive dot product of the normals) remains
@@ -71,5 +71,5 @@ def collapse_levels(
     P, T = np.array(vertices, dtype=np.float64, order="C"), np.ascontiguousarray(triangles, dtype=np.int64)
     limit = len(P) + 1 if max_levels is None else max_levels
     options = (alpha, beta, min_vertices, limit, cos_sq, min_quality, max_tries, lock_fans, report)
-    first, levels = _kernel.hierarchy(P, T, lock.view(np.uint8), *options)
+    first, levels = hierarchy(P, T, lock.view(np.uint8), *options)
     return first, [LevelCollapse(*level) for level in levels]
