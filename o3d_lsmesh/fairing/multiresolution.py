@@ -98,12 +98,13 @@ def multiresolution_fairing(
     level 0, 4.8e-3 at level 6); with a single final fairing the energy still
     rose from level 2 on, since that fairing holds the barycenters the splits
     made. With the rounds, measured at levels 0..6
-    (``benchmarks/bench_hierarchy.py``): the normal component of the Laplacian
-    falls at every level on the bunny, the horse and a generated blob (noise
-    0.3 and 0.1 edge lengths), the energy in the upper half of the
-    graph-Laplacian spectrum of 2000-vertex copies falls at every level on the
-    horse and the blob (not on the bunny: it rises again from level 2), and
-    the volume stays within 0.3%. Details smaller than the vertex spacing of
+    (``benchmarks/bench_hierarchy.py``, noise 0.3 and 0.1 edge lengths): the
+    energy in the upper half of the graph-Laplacian spectrum of 2000-vertex
+    copies falls at every level on the horse (both noises) and the blob (0.3;
+    at 0.1 it levels off near 1/16 of level 0's) but not on the
+    bunny (it falls to half and rises again); the normal component of the Laplacian
+    falls at every level on the bunny and the horse; the volume stays within
+    0.3%. Details smaller than the vertex spacing of
     ``M_level`` are not restored, so a larger ``level`` removes
     larger details. ``level=0`` is plain constrained fairing of the input.
 
