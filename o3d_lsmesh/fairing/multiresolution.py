@@ -102,7 +102,7 @@ def multiresolution_fairing(
     energy in the upper half of the graph-Laplacian spectrum of 2000-vertex
     copies falls at every level on the horse (both noises) and the blob (0.3;
     at 0.1 it levels off near 1/16 of level 0's) but not on the
-    bunny (it falls to half and rises again); the normal component of the Laplacian
+    bunny (it falls, then rises again); the normal component of the Laplacian
     falls at every level on the bunny and the horse; the volume stays within
     0.3%. Details smaller than the vertex spacing of
     ``M_level`` are not restored, so a larger ``level`` removes
