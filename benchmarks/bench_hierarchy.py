@@ -21,7 +21,8 @@
    against the clean mesh, and mean distance to the clean vertices in edge
    lengths; with and without the final fairing of ``M_0``.
 
-Run: ``.venv/bin/python benchmarks/bench_hierarchy.py [--quick]``.
+Run: ``.venv/bin/python benchmarks/bench_hierarchy.py [--quick] [--speed]`` (``--speed``: the speed table only,
+printed).
 """
 
 from __future__ import annotations
@@ -38,8 +39,8 @@ from _common import load_mesh, markdown_table, timed, write_markdown
 
 from o3d_lsmesh.fairing.multiresolution import multiresolution_fairing_arrays
 from o3d_lsmesh.hierarchy import build_hierarchy
-from o3d_lsmesh.hierarchy.collapse import collapse_level, workspace
-from o3d_lsmesh.hierarchy.hierarchy import build_hierarchy_arrays, locked_vertices
+from o3d_lsmesh.hierarchy.collapse import collapse_levels
+from o3d_lsmesh.hierarchy.hierarchy import build_hierarchy_arrays
 from o3d_lsmesh.metrics import (
     signed_volume,
     surface_distance,
@@ -52,25 +53,16 @@ SAMPLES = 20_000 if QUICK else 50_000
 
 
 def level_times(V, F, min_vertices=100):
-    """Cumulative wall time after each level, by the same loop that build_hierarchy runs."""
+    """Cumulative wall time after each level, from the kernel's report after each level (as build_hierarchy)."""
     start = time.perf_counter()
-    buffers = workspace()
-    locked = locked_vertices(F, len(V))
-    times, reps, P, T = [time.perf_counter() - start], np.arange(len(V)), V, F
-    total = times[0]
-    while len(P) > min_vertices:
-        start = time.perf_counter()
-        level = collapse_level(
-            P, T, max_removals=len(P) - min_vertices, locked=locked[reps], workspace=buffers
-        )
-        if level is None:
-            break
-        keep = np.ones(len(P), dtype=bool)
-        keep[level.removed] = False
-        reps = reps[keep]
-        P, T = V[reps], level.triangles
-        total += time.perf_counter() - start
-        times.append(total)
+    times = [0.0]
+    collapse_levels(
+        V,
+        F,
+        min_vertices=min_vertices,
+        lock_fans=True,
+        report=lambda _: times.append(time.perf_counter() - start),
+    )
     return times
 
 
@@ -217,6 +209,8 @@ def speed_row(label, V, F, rounds):
         f"{best(ours, 1):.2f}",
         f"{best(fs, 1):.2f}",
         f"{best(ours, 1) / best(fs, 1):.2f}",
+        f"{np.min(ours[:, 1] / fs[:, 1]):.2f} / {np.median(ours[:, 1] / fs[:, 1]):.2f}",
+        f"{np.min(ours[:, 0] / fs[:, 0]):.2f} / {np.median(ours[:, 0] / fs[:, 0]):.2f}",
         f"{ours[:, 2].max():.0f}",
         f"{fs[:, 2].max():.0f}",
     ], (ours[:, 0].round(2).tolist(), fs[:, 0].round(2).tolist())
@@ -244,7 +238,7 @@ def speed():
             mesh = horse.subdivide_loop(number_of_iterations=k)
             V, F = np.asarray(mesh.vertices).copy(), np.asarray(mesh.triangles).astype(np.int64)
             del mesh
-            row, times = speed_row(f"horse, Loop-subdivided x{k}", V, F, 3 if k <= 3 else 1)
+            row, times = speed_row(f"horse, Loop-subdivided x{k}", V, F, 5 if k <= 3 else 1)
             rows.append(row)
             raw.append(f"horse x{k} rounds, ours s {times[0]}, fs s {times[1]}")
             del V, F
@@ -261,6 +255,8 @@ def speed():
             "ours thread CPU s",
             "fs thread CPU s",
             "ratio CPU",
+            "CPU ratio per round, min / median",
+            "wall ratio per round, min / median",
             "ours peak MB",
             "fs peak MB",
         ],
@@ -302,6 +298,20 @@ def _energies(P, F):
     )
 
 
+def _upper_spectrum(V, F):
+    """A 2000-vertex copy (our coarsest level at 2000) and the upper half of its graph-Laplacian eigenbasis."""
+    h = build_hierarchy_arrays(V, F, min_vertices=2000)
+    V, F = h.level_arrays(len(h) - 1)
+    n = len(V)
+    edges = np.r_[F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]
+    A = np.zeros((n, n))
+    A[edges[:, 0], edges[:, 1]] = A[edges[:, 1], edges[:, 0]] = 1
+    return V, F, np.linalg.eigh(np.diag(A.sum(axis=1)) - A)[1][:, n // 2 :]
+
+
+VARIANTS = ((None, "rounds on M_0 (default)"), (5, "one final fairing (before)"), (0, "paper's loop only"))
+
+
 def scale():
     meshes = [("blob", _blob())]
     for name in ("bunny", "horse"):
@@ -310,45 +320,57 @@ def scale():
             meshes.append(
                 (name, (np.asarray(mesh.vertices).copy(), np.asarray(mesh.triangles).astype(np.int64)))
             )
-    rows = []
-    summary = []
+    rows, summary = [], []
     for name, (V, F) in meshes:
-        spacing = np.linalg.norm(V[F[:, 0]] - V[F[:, 1]], axis=1).mean()
-        volume = signed_volume((V, F))
+        small = _upper_spectrum(V, F)
         for sigma in (0.3, 0.1):
-            noisy = V + np.random.default_rng(0).normal(scale=sigma * spacing, size=V.shape)
-            h = build_hierarchy_arrays(noisy, F, max_levels=6, min_vertices=4)
-            for final, label in ((None, "final fairing (default)"), (0, "paper's loop only")):
-                rough = []
+            for final, label in VARIANTS:
+                measures = []
+                for W, T, basis in ((V, F, None), small):
+                    spacing = np.linalg.norm(W[T[:, 0]] - W[T[:, 1]], axis=1).mean()
+                    volume = signed_volume((W, T))
+                    noisy = W + np.random.default_rng(0).normal(scale=sigma * spacing, size=W.shape)
+                    h = build_hierarchy_arrays(noisy, T, max_levels=6, min_vertices=4)
+                    for level in range(7):
+                        P = multiresolution_fairing_arrays(h, level, final_iterations=final)
+                        if basis is None:
+                            normal_energy, energy = _energies(P, T)
+                            measures.append(
+                                [
+                                    normal_energy,
+                                    energy,
+                                    100 * (signed_volume((P, T)) / volume - 1),
+                                    np.linalg.norm(P - W, axis=1).mean() / spacing,
+                                ]
+                            )
+                        else:
+                            Q = P - P.mean(axis=0)
+                            measures[level].append(np.sum((basis.T @ Q) ** 2) / len(P) / spacing**2)
+                m = np.array(measures)
                 for level in range(7):
-                    P = multiresolution_fairing_arrays(h, level, final_iterations=final)
-                    normal_energy, energy = _energies(P, F)
-                    rough.append(normal_energy)
                     rows.append(
-                        [
-                            name,
-                            sigma,
-                            label,
-                            level,
-                            f"{normal_energy:.3g}",
-                            f"{energy:.3g}",
-                            f"{100 * (signed_volume((P, F)) / volume - 1):+.3f}",
-                            f"{np.linalg.norm(P - V, axis=1).mean() / spacing:.3f}",
-                        ]
+                        [name, sigma, label, level]
+                        + [f"{m[level, 0]:.3g}", f"{m[level, 1]:.3g}", f"{m[level, 4]:.3g}"]
+                        + [f"{m[level, 2]:+.3f}", f"{m[level, 3]:.3f}"]
                     )
-                monotone = all(a > b for a, b in zip(rough, rough[1:]))
+                falls = ["yes" if np.all(np.diff(m[:, c]) < 0) else "no" for c in (0, 1, 4)]
                 summary.append(
-                    [name, sigma, label, "yes" if monotone else "no", f"{rough[0]:.3g}", f"{rough[-1]:.3g}"]
+                    [name, sigma, label, *falls]
+                    + [f"{m[0, 4]:.3g} / {m[6, 4]:.3g}", f"{np.abs(m[:, 2]).max():.2f}"]
+                    + [f"{m[:, 3].min():.2f}-{m[:, 3].max():.2f}"]
                 )
     return (
         markdown_table(
             [
                 "mesh",
                 "noise (edge lengths)",
-                "variant",
-                "roughness falls at every level 0..6",
-                "roughness level 0",
-                "roughness level 6",
+                "M_0 fairing",
+                "normal roughness falls 0..6",
+                "uniform Laplacian energy falls 0..6",
+                "upper-spectrum energy falls 0..6",
+                "upper-spectrum energy level 0 / 6",
+                "max |volume change| %",
+                "mean distance to clean (edge lengths)",
             ],
             summary,
         ),
@@ -356,10 +378,11 @@ def scale():
             [
                 "mesh",
                 "noise",
-                "variant",
+                "M_0 fairing",
                 "level",
                 "roughness (normal Laplacian)",
                 "uniform Laplacian energy",
+                "upper-spectrum energy (2000-vertex copy)",
                 "volume change %",
                 "mean distance to clean (edge lengths)",
             ],
@@ -370,6 +393,9 @@ def scale():
 
 def main():
     sections, summaries = [], []
+    if "--speed" in sys.argv:  # the speed table alone, printed (the results file is left as it is)
+        print(speed())
+        return
     speed_table = speed()
     print(speed_table, flush=True)
     scale_summary, scale_rows = scale()
@@ -411,9 +437,16 @@ def main():
         f"({SAMPLES} points per side + vertices, RaycastingScene), in % of the bounding-box diagonal. Volume change "
         "is the signed volume against the input's. `manifold`: y = edge- and vertex-manifold, edge = edge-manifold "
         "only, n = neither. `euler/loops`: Euler characteristic / boundary loops (the input's must be kept). Our time "
-        "is cumulative over the levels (the same `collapse_level` calls); fast-simplification's is one fresh run to "
+        "is cumulative over the levels (the kernel's report after each level); fast-simplification's is one fresh run to "
         "that count. Scale table: roughness = mean squared normal component of the uniform Laplacian over the squared "
-        "mean edge length (the tangential part measures the triangulation, not the surface)."
+        "mean edge length (the tangential part measures the triangulation, not the surface); uniform Laplacian "
+        "energy = mean squared uniform Laplacian over the squared mean edge length; upper-spectrum energy = energy "
+        "of the centred positions in the upper half of the graph-Laplacian spectrum (dense eigh) of a 2000-vertex "
+        "copy (our coarsest level at 2000 vertices, noised and faired the same way), per vertex, over the squared "
+        "mean edge length; roughness, uniform energy, volume and distance are on the full mesh. M_0 fairing: "
+        "`rounds` is the default (number_of_iterations * (level + 1) iterations on M_0, barycenters re-imposed "
+        "every 5), `one final fairing` is final_iterations=5 (the default before), `paper's loop` is "
+        "final_iterations=0."
     )
     write_markdown(
         "hierarchy.md",

@@ -14,7 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from o3d_lsmesh.hierarchy import build_hierarchy, from_fast_simplification
-from o3d_lsmesh.hierarchy.collapse import collapse_level
+from o3d_lsmesh.hierarchy.collapse import collapse_levels
 from o3d_lsmesh.hierarchy.hierarchy import build_hierarchy_arrays, locked_vertices
 from o3d_lsmesh.topology import (
     adjacency_matrix,
@@ -43,6 +43,13 @@ def sphere_h():
 def grid_h():
     V, F = grid(14, 11, z=lambda x, y: 0.1 * np.sin(3 * x) * np.cos(2 * y))
     return (V, F), build_hierarchy((V, F), min_vertices=20)
+
+
+def collapse_level(V, F, *, max_removals=None, **options):
+    """One level of the compiled loop, with at most ``max_removals`` collapses (None when there are none)."""
+    limit = len(V) if max_removals is None else max_removals
+    levels = collapse_levels(V, F, min_vertices=len(V) - limit, max_levels=1, **options)[1]
+    return levels[0] if levels else None
 
 
 def _triangle_set(F):

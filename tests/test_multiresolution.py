@@ -7,7 +7,6 @@ import open3d as o3d
 import pytest
 from conftest import grid
 
-from o3d_lsmesh.fairing.constrained import constrained_fairing_arrays
 from o3d_lsmesh.fairing.multiresolution import multiresolution_fairing
 from o3d_lsmesh.hierarchy import build_hierarchy, from_fast_simplification
 
@@ -36,11 +35,13 @@ def _ripple_amplitude(P):
     return (dev @ basis) / (basis @ basis)
 
 
-def test_level_zero_is_constrained_fairing(rippled):
+def test_level_zero_fairs_in_place_and_zero_iterations_leave_the_input(rippled):
     (V, F), h = rippled
-    out, tris = multiresolution_fairing((V, F), 0, hierarchy=h, number_of_iterations=4)
-    np.testing.assert_array_equal(out, constrained_fairing_arrays(V, F, 4, method="local"))
-    assert np.array_equal(tris, F)
+    untouched, tris = multiresolution_fairing((V, F), 0, hierarchy=h, number_of_iterations=0)
+    assert np.array_equal(untouched, V) and np.array_equal(tris, F)
+    out, _ = multiresolution_fairing((V, F), 0, hierarchy=h, number_of_iterations=4)
+    assert _normal_laplacian_energy(out, F) < 0.5 * _normal_laplacian_energy(V, F)
+    assert abs(_signed_volume(out, F) / _signed_volume(V, F) - 1) < 0.005
 
 
 def test_larger_level_removes_larger_details(rippled):
@@ -58,19 +59,44 @@ def test_larger_level_removes_larger_details(rippled):
         assert residual.std() < 0.006
 
 
-def test_one_level_is_fair_then_refine(rippled):
+def _plain_split(h, coarse):
+    """Section 4.2's vertex split in plain loops: kept vertices stay, each removed one goes to the mean of
+    its 1-ring, then every removed one moves at once by ``-U^2(x) / nu`` (uniform umbrella ``U`` of level 0,
+    ``nu = 1 + (1/n_x) sum_j 1/n_j``). The rippled sphere is closed: no boundary rule."""
+    F, parent, removed = h.triangles[0], h.parents[1], h.removed[1]
+    ring = [set() for _ in parent]
+    for t in F.tolist():
+        for a, b in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0])):
+            ring[a].add(b)
+            ring[b].add(a)
+    out = coarse[parent]
+    for x in removed.tolist():
+        out[x] = np.mean([out[j] for j in ring[x]], axis=0)
+    umbrella = [np.mean([out[j] for j in ring[v]], axis=0) - out[v] for v in range(len(out))]
+    moved = out.copy()
+    for x in removed.tolist():
+        second = np.mean([umbrella[j] for j in ring[x]], axis=0) - umbrella[x]
+        moved[x] = out[x] - second / (1 + np.mean([1 / len(ring[j]) for j in ring[x]]))
+    return moved
+
+
+def test_zero_iterations_are_the_splits_alone(rippled):
     (V, F), h = rippled
-    coarse = constrained_fairing_arrays(h.level_arrays(1)[0], h.triangles[1], 3, method="local")
-    expected = constrained_fairing_arrays(h.refine(1, coarse), F, 2, method="local")
-    out, _ = multiresolution_fairing((V, F), 1, hierarchy=h, number_of_iterations=3, final_iterations=2)
-    np.testing.assert_allclose(out, expected, atol=0)
-    # final_iterations=None repeats number_of_iterations on M_0; 0 leaves the splits as they are
-    out, _ = multiresolution_fairing((V, F), 1, hierarchy=h, number_of_iterations=3)
-    np.testing.assert_allclose(
-        out, constrained_fairing_arrays(h.refine(1, coarse), F, 3, method="local"), atol=0
-    )
-    out, _ = multiresolution_fairing((V, F), 1, hierarchy=h, number_of_iterations=3, final_iterations=0)
-    np.testing.assert_allclose(out, h.refine(1, coarse), atol=0)
+    out, _ = multiresolution_fairing((V, F), 1, hierarchy=h, number_of_iterations=0, final_iterations=0)
+    np.testing.assert_allclose(out, _plain_split(h, h.level_arrays(1)[0]), atol=1e-12)
+    # two levels: the split of a split, each from the level's own positions
+    out, _ = multiresolution_fairing((V, F), 2, hierarchy=h, number_of_iterations=0, final_iterations=0)
+    kept = np.isin(np.arange(len(V)), h.representatives[2])
+    np.testing.assert_array_equal(out[kept], V[kept])  # vertices of M_2 never move without fairing
+
+
+def test_the_final_rounds_smooth_what_the_splits_leave(rippled):
+    (V, F), h = rippled
+    rough = [
+        _normal_laplacian_energy(multiresolution_fairing((V, F), 4, hierarchy=h, final_iterations=k)[0], F)
+        for k in (0, 5, 25)
+    ]
+    assert rough[0] > rough[1] > rough[2], rough
 
 
 def test_default_hierarchy_equals_a_given_one(rippled):
@@ -210,3 +236,46 @@ def test_at_low_noise_the_result_stays_near_the_clean_surface():
         P, _ = multiresolution_fairing((noisy, F), level, hierarchy=h)
         # measured 0.10, 0.18, 0.31 edge lengths (the noise is 0.16): coarser starts drift by their scale
         assert np.linalg.norm(P - V, axis=1).mean() < 0.4 * spacing + noise, level
+
+
+def _high_frequency_energy(P, F, basis, spacing):
+    """Energy of the centred positions in the upper half of the graph-Laplacian spectrum (dense ``eigh``
+    basis), per vertex, over the squared mean edge length: the noise band, not the shape."""
+    Q = P - P.mean(axis=0)
+    return np.sum((basis[:, len(basis) // 2 :].T @ Q) ** 2) / len(P) / spacing**2
+
+
+@pytest.mark.parametrize(
+    "name",
+    [
+        "blob",
+        "horse.ply",
+        pytest.param("bunny.ply", marks=pytest.mark.xfail(strict=True, reason="rises again from level 2")),
+    ],
+)
+def test_a_coarser_start_leaves_less_energy_in_the_upper_spectrum(name):
+    from conftest import load_mesh
+
+    if name == "blob":
+        V, F = _blob()
+    else:
+        mesh = load_mesh(name)
+        V, F = np.asarray(mesh.vertices), np.asarray(mesh.triangles).astype(np.int64)
+    # a copy small enough for a dense eigendecomposition: the coarsest level of 2000 vertices
+    coarse = build_hierarchy((V, F), min_vertices=2000)
+    V, F = coarse.level_arrays(len(coarse) - 1)
+    n = len(V)
+    edges = np.r_[F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]
+    adjacency = np.zeros((n, n))
+    adjacency[edges[:, 0], edges[:, 1]] = adjacency[edges[:, 1], edges[:, 0]] = 1
+    basis = np.linalg.eigh(np.diag(adjacency.sum(axis=1)) - adjacency)[1]
+    spacing = np.linalg.norm(V[F[:, 0]] - V[F[:, 1]], axis=1).mean()
+    noisy = V + np.random.default_rng(0).normal(scale=0.3 * spacing, size=V.shape)
+    h = build_hierarchy((noisy, F), max_levels=6, min_vertices=4)
+    energy = [
+        _high_frequency_energy(multiresolution_fairing((noisy, F), lv, hierarchy=h)[0], F, basis, spacing)
+        for lv in range(7)
+    ]
+    # measured on the blob 4.6e-3 at level 0 (the noise: 4.6e-2 before fairing) down to 1.1e-4 at level 6
+    assert all(a > b for a, b in zip(energy, energy[1:])), energy
+    assert energy[0] < 0.2 * _high_frequency_energy(noisy, F, basis, spacing)

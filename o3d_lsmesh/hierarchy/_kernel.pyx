@@ -1,518 +1,233 @@
 # cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
-"""One level of the volume-cost hierarchy (Liu et al. 2001, section 4.1) as a sequential loop.
-
-The rules are stated in :mod:`o3d_lsmesh.hierarchy.collapse`; the plain-Python
-oracle in ``tests/_hierarchy_oracle.py`` performs the same arithmetic in the
-same order, so both give identical levels.
-"""
+"""The volume-cost hierarchy as one sequential loop, shaped like OpenMesh's ``DecimaterT`` (rules:
+:mod:`o3d_lsmesh.hierarchy.collapse`). ``tests/_hierarchy_oracle.py`` does the same floating-point operations
+in the same order, so the levels are identical."""
 
 import numpy as np
 
-from libc.math cimport sqrt, fabs, INFINITY
+from libc.math cimport INFINITY, fabs, sqrt
 from libc.stdint cimport int32_t, int64_t, uint8_t, uint64_t
-from libc.stdlib cimport malloc, free
-from libc.string cimport memset, memcpy
+from libc.string cimport memcpy, memset
 
-ctypedef int32_t idx
+cdef enum:
+    LOCKED = 1
+    BOUNDARY = 2
+    TOUCHED = 4  # in the closed 1-ring of a vertex removed in this level
 
-
-cdef void* _alloc(size_t size) except NULL:
-    cdef void* p = malloc(size if size > 0 else 1)
-    if p == NULL:
-        raise MemoryError(f"the hierarchy kernel could not allocate {size} bytes")
-    return p
-
-
-cdef void _sort_candidates(const double* cost, idx* order, idx* scratch, uint64_t* keys, uint64_t* keys2,
-                           Py_ssize_t count) noexcept nogil:
-    """Stable LSD radix sort of ``order`` by ``cost`` (non-negative doubles: their bits sort as integers).
-
-    ``order`` comes in increasing index order, so ties stay in index order.
-    """
-    cdef Py_ssize_t i, shift, pass_, total
-    cdef Py_ssize_t[6][2048] hist
-    cdef uint64_t key
-    cdef idx* src = order
-    cdef idx* dst = scratch
-    cdef uint64_t* ksrc = keys
-    cdef uint64_t* kdst = keys2
-    cdef idx* tmp
-    cdef uint64_t* ktmp
-    memset(&hist[0][0], 0, sizeof(hist))
-    for i in range(count):
-        key = (<const uint64_t*> cost)[order[i]]
-        keys[i] = key
-        for pass_ in range(6):
-            hist[pass_][(key >> (11 * pass_)) & 2047] += 1
-    for pass_ in range(6):
-        if hist[pass_][(keys[0] >> (11 * pass_)) & 2047] == count:
-            continue  # every key has this digit: the pass would not move anything
-        total = 0
-        for i in range(2048):
-            shift = hist[pass_][i]
-            hist[pass_][i] = total
-            total += shift
-        for i in range(count):
-            key = ksrc[i]
-            shift = (key >> (11 * pass_)) & 2047
-            dst[hist[pass_][shift]] = src[i]
-            kdst[hist[pass_][shift]] = key
-            hist[pass_][shift] += 1
-        tmp = src
-        src = dst
-        dst = tmp
-        ktmp = ksrc
-        ksrc = kdst
-        kdst = ktmp
-    if src != order:
-        memcpy(order, src, count * sizeof(idx))
-
-
-cdef inline bint _geometry_ok(const double[:, ::1] V, const idx* pair, int64_t c0, int64_t c1, idx x, idx k,
-                              double cos_sq, double min_quality) noexcept nogil:
-    """No surviving triangle ``(x, a, b)`` of the star of ``x`` (corners ``c0:c1``) turns its normal by
-    ``max_normal_angle`` or more, or falls to ``min_quality`` or less, when ``x`` moves onto ``k``."""
-    cdef int64_t j
-    cdef idx a, b
-    cdef double ax, ay, az, bx, by, bz, nx, ny, nz, ox, oy, oz, dot, new_sq, old_sq, ex, ey, ez, squared
-    for j in range(c0, c1):
-        a = pair[2 * j]
-        b = pair[2 * j + 1]
-        if a == k or b == k:
-            continue  # the triangle collapses with the edge
-        ax = V[a, 0] - V[x, 0]
-        ay = V[a, 1] - V[x, 1]
-        az = V[a, 2] - V[x, 2]
-        bx = V[b, 0] - V[x, 0]
-        by = V[b, 1] - V[x, 1]
-        bz = V[b, 2] - V[x, 2]
-        ox = ay * bz - az * by
-        oy = az * bx - ax * bz
-        oz = ax * by - ay * bx
-        ax = V[a, 0] - V[k, 0]
-        ay = V[a, 1] - V[k, 1]
-        az = V[a, 2] - V[k, 2]
-        bx = V[b, 0] - V[k, 0]
-        by = V[b, 1] - V[k, 1]
-        bz = V[b, 2] - V[k, 2]
-        nx = ay * bz - az * by
-        ny = az * bx - ax * bz
-        nz = ax * by - ay * bx
-        dot = nx * ox + ny * oy + nz * oz
-        if dot <= 0.0:
-            return False  # flipped (or degenerate before or after)
-        new_sq = nx * nx + ny * ny + nz * nz
-        old_sq = ox * ox + oy * oy + oz * oz
-        if dot * dot <= new_sq * cos_sq * old_sq:
-            return False  # the normal turns by max_normal_angle or more
-        ex = bx - ax
-        ey = by - ay
-        ez = bz - az
-        squared = ax * ax + ay * ay + az * az + bx * bx + by * by + bz * bz + ex * ex + ey * ey + ez * ez
-        squared *= min_quality
-        if new_sq <= squared * squared:
-            return False  # 2 * area / (sum of squared edge lengths) too small
-    return True
-
-
-cdef inline bint _link_ok(const idx* nb, const int64_t* vt_ptr, const int32_t* valence, idx x, idx k,
-                          int edge_count) noexcept nogil:
-    """Link condition: ``x`` and ``k`` share exactly the opposite vertices of their edge (sorted rings)."""
-    cdef int64_t i = 2 * vt_ptr[x], i_end = 2 * vt_ptr[x] + valence[x]
-    cdef int64_t j = 2 * vt_ptr[k], j_end = 2 * vt_ptr[k] + valence[k]
-    cdef int common = 0
-    while i < i_end and j < j_end:
-        if nb[i] < nb[j]:
-            i += 1
-        elif nb[i] > nb[j]:
-            j += 1
-        else:
-            common += 1
-            i += 1
-            j += 1
-    return common == edge_count
-
+cdef struct Vertex:  # together, so that a visit's random reads of a neighbour hit one cache line
+    int32_t start, corners, valence, flags  # corners start:start + corners; ring ring[2 * start:][:valence]
 
 cdef extern from *:
-    """
-    #if defined(__GNUC__) || defined(__clang__)
-    #define O3D_LSMESH_PREFETCH(p) __builtin_prefetch(p)
-    #else
-    #define O3D_LSMESH_PREFETCH(p) ((void)0)
-    #endif
-    """
-    void prefetch "O3D_LSMESH_PREFETCH"(const void* p) noexcept nogil
+    "#if defined(__GNUC__) || defined(__clang__)\n#define PREFETCH(p) __builtin_prefetch(p)\n#else\n#define PREFETCH(p) ((void)0)\n#endif"
+    void prefetch "PREFETCH"(const void* p) noexcept nogil
 
 
-cdef class Workspace:
-    """Buffers for the levels of one hierarchy, allocated for the first (largest) level and reused.
-
-    Fresh memory costs page faults that take longer than the loop's arithmetic
-    on it, so every level after the first runs in the same pages. Not shared
-    between threads: each build makes its own.
-    """
-
-    cdef Py_ssize_t n_cap, m_cap, ring_cap
-    cdef int64_t* corner_ptr  # corners of vertex v: corner_ptr[v]:corner_ptr[v + 1]
-    cdef idx* pair  # the next and previous vertex of each corner's triangle, 2 per corner
-    cdef idx* nb  # sorted 1-ring of v at nb[2 * corner_ptr[v]:][:valence[v]]
-    cdef uint8_t* ec  # triangles on each ring edge (capped at 255)
-    cdef int32_t* valence
-    cdef uint8_t* flags  # 1 locked, 2 on the boundary, 4 in the closed 1-ring of a removal
-    cdef double* cost
-    cdef idx* order
-    cdef idx* scratch
-    cdef uint64_t* keys
-    cdef uint64_t* keys2
-    cdef idx* target
-    cdef double* ring_vol
-    cdef double* ring_len
-    cdef uint8_t* ring_ok
-    cdef idx* root
-
-    def __dealloc__(self):
-        self._release()
-
-    cdef void _release(self) noexcept:
-        free(self.corner_ptr); free(self.pair); free(self.nb); free(self.ec); free(self.valence); free(self.flags)
-        free(self.cost); free(self.order); free(self.scratch); free(self.keys); free(self.keys2); free(self.target)
-        free(self.ring_vol); free(self.ring_len); free(self.ring_ok); free(self.root)
-        self.corner_ptr = NULL; self.pair = NULL; self.nb = NULL; self.ec = NULL; self.valence = NULL
-        self.flags = NULL; self.cost = NULL; self.order = NULL; self.scratch = NULL; self.keys = NULL
-        self.keys2 = NULL; self.target = NULL; self.ring_vol = NULL; self.ring_len = NULL; self.ring_ok = NULL
-        self.root = NULL
-        self.n_cap = self.m_cap = self.ring_cap = 0
-
-    cdef int _reserve(self, Py_ssize_t n, Py_ssize_t m) except -1:
-        if n <= self.n_cap and m <= self.m_cap:
-            return 0
-        self._release()
-        self.corner_ptr = <int64_t*> _alloc((n + 1) * sizeof(int64_t))
-        self.pair = <idx*> _alloc(6 * m * sizeof(idx))
-        self.nb = <idx*> _alloc(6 * m * sizeof(idx))
-        self.ec = <uint8_t*> _alloc(6 * m * sizeof(uint8_t))
-        self.valence = <int32_t*> _alloc(n * sizeof(int32_t))
-        self.flags = <uint8_t*> _alloc(n * sizeof(uint8_t))
-        self.cost = <double*> _alloc(n * sizeof(double))
-        self.order = <idx*> _alloc(n * sizeof(idx))
-        self.scratch = <idx*> _alloc(n * sizeof(idx))
-        self.keys = <uint64_t*> _alloc(n * sizeof(uint64_t))
-        self.keys2 = <uint64_t*> _alloc(n * sizeof(uint64_t))
-        self.target = <idx*> _alloc(n * sizeof(idx))
-        self.n_cap, self.m_cap = n, m
-        return 0
-
-    cdef int _reserve_ring(self, Py_ssize_t size) except -1:
-        if size <= self.ring_cap:
-            return 0
-        free(self.ring_vol); free(self.ring_len); free(self.ring_ok); free(self.root)
-        self.ring_vol = self.ring_len = NULL
-        self.ring_ok = NULL
-        self.root = NULL
-        self.ring_vol = <double*> _alloc(size * sizeof(double))
-        self.ring_len = <double*> _alloc(size * sizeof(double))
-        self.ring_ok = <uint8_t*> _alloc(size * sizeof(uint8_t))
-        self.root = <idx*> _alloc(size * sizeof(idx))
-        self.ring_cap = size
-        return 0
-
-    cdef int _rings(self, Py_ssize_t n, const int64_t[:, ::1] F, const uint8_t[::1] locked) except -1:
-        """Corners of every vertex, sorted 1-rings with triangle counts per edge, flags.
-
-        Returns the largest valence.
-        """
-        cdef Py_ssize_t m = F.shape[0], i
-        cdef int64_t s, e, e0, e1, slot
-        cdef idx t, v, u
-        cdef int c, deg, max_valence = 0
-        cdef int64_t* corner_ptr = self.corner_ptr
-        cdef idx* pair = self.pair
-        cdef idx* nb = self.nb
-        cdef uint8_t* ec = self.ec
-        cdef idx* fill = self.order
-        with nogil:
-            memset(corner_ptr, 0, (n + 1) * sizeof(int64_t))
-            for t in range(m):
-                for c in range(3):
-                    corner_ptr[F[t, c] + 1] += 1
-            for i in range(n):
-                corner_ptr[i + 1] += corner_ptr[i]
-                fill[i] = 0
-            # each corner's next and previous vertex, to its vertex's slots (in triangle order)
-            for t in range(m):
-                for c in range(3):
-                    v = <idx> F[t, c]
-                    slot = corner_ptr[v] + fill[v]
-                    fill[v] += 1
-                    pair[2 * slot] = <idx> F[t, (c + 1) % 3]
-                    pair[2 * slot + 1] = <idx> F[t, (c + 2) % 3]
-            for v in range(n):
-                s = 2 * corner_ptr[v]
-                e = 2 * corner_ptr[v + 1]
-                for e0 in range(s, e):  # insertion sort: rings are short
-                    u = pair[e0]
-                    e1 = e0
-                    while e1 > s and nb[e1 - 1] > u:
-                        nb[e1] = nb[e1 - 1]
-                        e1 -= 1
-                    nb[e1] = u
-                deg = 0
-                self.flags[v] = 1 if locked[v] else 0
-                e0 = s
-                while e0 < e:
-                    e1 = e0
-                    while e1 < e and nb[e1] == nb[e0]:
-                        e1 += 1
-                    nb[s + deg] = nb[e0]
-                    ec[s + deg] = <uint8_t> (e1 - e0 if e1 - e0 < 255 else 255)
-                    if e1 - e0 == 1:
-                        self.flags[v] |= 2
-                    elif e1 - e0 > 2:
-                        self.flags[v] |= 1  # on an edge of more than two triangles
-                    deg += 1
-                    e0 = e1
-                self.valence[v] = deg
-                if deg > max_valence:
-                    max_valence = deg
-        return max_valence
-
-    def locked_vertices(self, const int64_t[:, ::1] F, Py_ssize_t n):
-        """``(n,) bool``: unreferenced vertices, vertices on an edge of more than two triangles, and vertices
-        whose triangles form more than one fan (their links, over shared ring vertices, fall apart)."""
-        cdef Py_ssize_t m = F.shape[0]
-        cdef idx v, ra, rb
-        cdef int64_t s, j
-        cdef int deg, parts, max_valence
-        _check_sizes(n, m)
-        if m and (np.min(F) < 0 or np.max(F) >= n):
-            raise ValueError(f"triangles must index vertices in [0, {n})")
-        self._reserve(n, m)
-        max_valence = self._rings(n, F, np.zeros(n, dtype=np.uint8))
-        self._reserve_ring(max_valence)
-        out = np.zeros(n, dtype=bool)
-        cdef uint8_t[::1] locked = out.view(np.uint8)
-        cdef idx* root = self.root
-        with nogil:
-            for v in range(n):
-                deg = self.valence[v]
-                if deg == 0 or self.flags[v] & 1:
-                    locked[v] = 1
-                    continue
-                s = 2 * self.corner_ptr[v]
-                for j in range(deg):
-                    root[j] = <idx> j
-                parts = deg
-                for j in range(self.corner_ptr[v], self.corner_ptr[v + 1]):
-                    ra = _position(self.nb, s, deg, self.pair[2 * j])
-                    rb = _position(self.nb, s, deg, self.pair[2 * j + 1])
-                    while root[ra] != ra:
-                        ra = root[ra]
-                    while root[rb] != rb:
-                        rb = root[rb]
-                    if ra != rb:
-                        root[ra if ra > rb else rb] = ra if ra < rb else rb
-                        parts -= 1
-                if parts > 1:
-                    locked[v] = 1
-        return out
-
-    def collapse_level(self, const double[:, ::1] V, const int64_t[:, ::1] F, const uint8_t[::1] locked,
-                       double alpha, double beta, Py_ssize_t max_removals, double cos_sq, double min_quality,
-                       int max_tries):
-        """Select and apply one level; see :func:`o3d_lsmesh.hierarchy.collapse.collapse_level`.
-
-        Returns ``(removed, targets, ring_offsets, ring, parent, triangles)`` or ``None``.
-        """
-        cdef Py_ssize_t n = V.shape[0], m = F.shape[0]
-        cdef Py_ssize_t i, count, selected = 0, alive = 0, ring_total = 0
-        cdef int64_t j, e, s
-        cdef idx v, u, x, k, t, best
-        cdef int c, attempt, deg, max_valence
-        cdef double dx, dy, dz, length, lo, hi, best_vol, best_len, threshold, sx, sy, sz, ax, ay, az, bx, by, bz
-        cdef idx a, b
-        cdef int64_t[::1] removed, targets, offsets, parent, ring
-        cdef int64_t[:, ::1] triangles
-        _check_sizes(n, m)
-        if locked.shape[0] != n:
-            raise ValueError(f"locked must have one entry per vertex ({n}), got {locked.shape[0]}")
-        self._reserve(n, m)
-        max_valence = self._rings(n, F, locked)
-        self._reserve_ring(max_valence)
-        cdef int64_t* vt_ptr = self.corner_ptr
-        cdef idx* pair = self.pair
-        cdef idx* nb = self.nb
-        cdef uint8_t* ec = self.ec
-        cdef int32_t* valence = self.valence
-        cdef uint8_t* flags = self.flags
-        cdef double* cost = self.cost
-        cdef idx* order = self.order
-        cdef idx* target = self.target
-        cdef double* ring_vol = self.ring_vol
-        cdef double* ring_len = self.ring_len
-        cdef uint8_t* ring_ok = self.ring_ok
-        with nogil:
-            # cost of section 4.1 and the candidates: unlocked vertices with neighbours
-            count = 0
-            for v in range(n):
-                target[v] = -1
-                if valence[v] == 0 or flags[v] & 1:
-                    continue
-                lo = INFINITY
-                hi = 0.0
-                s = 2 * vt_ptr[v]
-                for e in range(s, s + valence[v]):
-                    u = nb[e]
-                    dx = V[u, 0] - V[v, 0]
-                    dy = V[u, 1] - V[v, 1]
-                    dz = V[u, 2] - V[v, 2]
-                    length = sqrt(dx * dx + dy * dy + dz * dz)
-                    if length < lo:
-                        lo = length
-                    if length > hi:
-                        hi = length
-                cost[v] = alpha * lo + beta * hi
-                order[count] = v
-                count += 1
-            _sort_candidates(cost, order, self.scratch, self.keys, self.keys2, count)
+cdef void _sort(int32_t* order, int32_t* spare, uint64_t* key, uint64_t* key2, Py_ssize_t count) noexcept nogil:
+    """Stable LSD radix sort of ``order`` by ``key``, bits of non-negative doubles: ties stay in index order."""
+    cdef Py_ssize_t hist[2048]
+    cdef Py_ssize_t i, d, total
+    cdef int p
+    for p in range(0, 66, 11):
+        memset(hist, 0, sizeof(hist))
+        for i in range(count):
+            hist[(key[i] >> p) & 2047] += 1
+        if count and hist[(key[0] >> p) & 2047] < count:  # else every key has this digit
+            total = 0
+            for d in range(2048):
+                total, hist[d] = total + hist[d], total
             for i in range(count):
-                if selected >= max_removals:
-                    break
-                if i + 16 < count:  # the visit goes in cost order, all over memory: ask for it early
-                    prefetch(&flags[order[i + 16]])
-                    prefetch(&vt_ptr[order[i + 16]])
-                    prefetch(&valence[order[i + 16]])
-                    prefetch(&V[order[i + 16], 0])
-                if i + 8 < count:
-                    prefetch(&nb[2 * vt_ptr[order[i + 8]]])
-                    prefetch(&pair[2 * vt_ptr[order[i + 8]]])
-                x = order[i]
-                if flags[x] & 4:
-                    continue
-                # N_x: the summed normals of the triangles around x, from the corner of x
-                sx = sy = sz = 0.0
-                for e in range(vt_ptr[x], vt_ptr[x + 1]):
-                    a = pair[2 * e]
-                    b = pair[2 * e + 1]
-                    ax = V[a, 0] - V[x, 0]
-                    ay = V[a, 1] - V[x, 1]
-                    az = V[a, 2] - V[x, 2]
-                    bx = V[b, 0] - V[x, 0]
-                    by = V[b, 1] - V[x, 1]
-                    bz = V[b, 2] - V[x, 2]
-                    sx += ay * bz - az * by
-                    sy += az * bx - ax * bz
-                    sz += ax * by - ay * bx
-                # the allowed edges of x with their cone volume |N_x . (x_k - x)| and length
-                s = 2 * vt_ptr[x]
-                deg = valence[x]
-                for e in range(deg):
-                    k = nb[s + e]
-                    c = ec[s + e]
-                    ring_ok[e] = not (flags[k] & 1)
-                    if flags[x] & 2:
-                        ring_ok[e] = ring_ok[e] and c == 1  # along the boundary
-                        if deg == 2 and valence[k] == 2 and flags[k] & 2:
-                            ring_ok[e] = False  # an isolated triangle
-                    else:
-                        ring_ok[e] = ring_ok[e] and c == 2
-                        if deg == 3 and valence[k] == 3 and not (flags[k] & 2):
-                            ring_ok[e] = False  # a closed tetrahedron
-                    dx = V[k, 0] - V[x, 0]
-                    dy = V[k, 1] - V[x, 1]
-                    dz = V[k, 2] - V[x, 2]
-                    ring_len[e] = sqrt(dx * dx + dy * dy + dz * dz)
-                    ring_vol[e] = fabs(sx * dx + sy * dy + sz * dz)
-                best = -1
-                for attempt in range(max_tries):
-                    # least volume (within a relative 1e-9), then shortest edge, then first
-                    best_vol = INFINITY
-                    for e in range(deg):
-                        if ring_ok[e] and ring_vol[e] < best_vol:
-                            best_vol = ring_vol[e]
-                    if best_vol == INFINITY:
-                        break
-                    threshold = best_vol * (1.0 + 1e-9)
-                    best_len = INFINITY
-                    for e in range(deg):
-                        if ring_ok[e] and ring_vol[e] <= threshold and ring_len[e] < best_len:
-                            best_len = ring_len[e]
-                            best = <idx> e
-                    k = nb[s + best]
-                    if (_geometry_ok(V, pair, vt_ptr[x], vt_ptr[x + 1], x, k, cos_sq, min_quality)
-                            and _link_ok(nb, vt_ptr, valence, x, k, ec[s + best])):
-                        break
-                    ring_ok[best] = False
-                    best = -1
-                if best < 0:
-                    continue
-                k = nb[s + best]
-                if flags[k] & 4:
-                    continue  # its target is in the closed 1-ring of an earlier removal
-                target[x] = k
-                selected += 1
-                flags[x] |= 4
-                for e in range(s, s + deg):
-                    flags[nb[e]] |= 4
-        if selected == 0:
-            return None
+                d = (key[i] >> p) & 2047
+                spare[hist[d]], key2[hist[d]], hist[d] = order[i], key[i], hist[d] + 1
+            memcpy(order, spare, count * sizeof(int32_t))
+            memcpy(key, key2, count * sizeof(uint64_t))
 
-        removed_a = np.zeros(selected, dtype=np.int64)
-        targets_a = np.zeros(selected, dtype=np.int64)
-        offsets_a = np.zeros(selected + 1, dtype=np.int64)
-        parent_a = np.zeros(n, dtype=np.int64)
-        removed, targets, offsets, parent = removed_a, targets_a, offsets_a, parent_a
-        with nogil:
-            count = 0
-            j = 0
+
+cdef bint _legal(const double* P, const Vertex* V, const int32_t* pair, const int32_t* ring, const uint8_t* count,
+                 int32_t x, int32_t e, double cos_sq, double min_quality) noexcept nogil:
+    """Whether ``x`` may collapse into its ring slot ``e`` (the geometric rules, then the link condition)."""
+    cdef int32_t k = ring[2 * V[x].start + e], i = 2 * V[x].start, l = 2 * V[k].start, j, c, common = 0
+    cdef double o[3]
+    cdef double n[3]
+    cdef double u[3]
+    cdef double w[3]
+    cdef double dot, new_sq
+    for j in range(2 * V[x].start, 2 * (V[x].start + V[x].corners), 2):
+        if pair[j] == k or pair[j + 1] == k:
+            continue  # the triangle collapses with the edge
+        for c in range(3):
+            u[c], w[c] = P[3 * pair[j] + c] - P[3 * x + c], P[3 * pair[j + 1] + c] - P[3 * x + c]
+        o[0], o[1], o[2] = u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2], u[0] * w[1] - u[1] * w[0]
+        for c in range(3):
+            u[c], w[c] = P[3 * pair[j] + c] - P[3 * k + c], P[3 * pair[j + 1] + c] - P[3 * k + c]
+        n[0], n[1], n[2] = u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2], u[0] * w[1] - u[1] * w[0]
+        dot, new_sq = n[0] * o[0] + n[1] * o[1] + n[2] * o[2], n[0] * n[0] + n[1] * n[1] + n[2] * n[2]
+        if dot <= 0.0 or dot * dot <= new_sq * cos_sq * (o[0] * o[0] + o[1] * o[1] + o[2] * o[2]):
+            return False  # flipped (or degenerate), or turned by max_normal_angle or more
+        o[0], o[1], o[2] = w[0] - u[0], w[1] - u[1], w[2] - u[2]
+        dot = (u[0] * u[0] + u[1] * u[1] + u[2] * u[2] + w[0] * w[0] + w[1] * w[1] + w[2] * w[2] + o[0] * o[0]
+               + o[1] * o[1] + o[2] * o[2]) * min_quality
+        if new_sq <= dot * dot:
+            return False  # 2 * area / (sum of squared edge lengths) at most min_quality
+    while i < 2 * V[x].start + V[x].valence and l < 2 * V[k].start + V[k].valence:  # merge the sorted rings
+        common, c = common + (ring[i] == ring[l]), ring[i] <= ring[l]
+        l += ring[l] <= ring[i]
+        i += c
+    return common == count[2 * V[x].start + e]  # link condition: only the edge's opposite vertices in common
+
+
+def hierarchy(double[:, ::1] positions, const int64_t[:, ::1] triangles, uint8_t[::1] lock, double alpha,
+              double beta, Py_ssize_t min_vertices, Py_ssize_t max_levels, double cos_sq, double min_quality,
+              int max_tries, bint lock_fans, report):
+    """:func:`o3d_lsmesh.hierarchy.collapse.collapse_levels`; compacts ``positions`` and ``lock`` in place."""
+    cdef Py_ssize_t n = positions.shape[0], m = triangles.shape[0], i, count, selected, alive, total
+    if n >= 2 ** 31 - 1 or 6 * m >= 2 ** 31 - 1:
+        raise ValueError(f"mesh must have fewer than 2**31 vertices and 2**31 / 6 triangles, got {n} and {m}")
+    vertex_a, pair_a, ring_a = np.zeros((n + 1, 4), np.int32), np.zeros(6 * m, np.int32), np.zeros(6 * m, np.int32)
+    mult_a, key_a, order_a = np.zeros(6 * m, np.uint8), np.zeros((2, n + 1), np.uint64), np.zeros((3, n + 1), np.int32)
+    kept_a = np.arange(n, dtype=np.int64)
+    cdef int32_t[:, ::1] vertex = vertex_a, order = order_a  # order: candidates, sort spare, targets
+    cdef int32_t[::1] pair = pair_a, ring = ring_a, root
+    cdef uint8_t[::1] mult = mult_a  # triangles on each ring edge (at most 255 counted)
+    cdef int64_t[::1] kept = kept_a, removed, target, offsets, flat, parent
+    cdef uint64_t[:, ::1] key = key_a
+    cdef const int64_t[:, ::1] T = triangles
+    cdef int64_t[:, ::1] out
+    cdef double[:, ::1] edge  # volume, length, allowed of each ring edge of the visited vertex
+    cdef Vertex* V = <Vertex*> &vertex[0, 0]
+    cdef int32_t* goal = &order[2, 0]
+    cdef double* p = &positions[0, 0] if n else NULL
+    cdef int32_t v, u, x, k, best, j, s, r, c, e, deg, attempt, max_valence
+    cdef double dx, dy, dz, d, lo, hi, sx, sy, sz, least
+    levels = []
+    while True:
+        m = T.shape[0]
+        with nogil:  # corners (next and previous vertex of each triangle of a vertex), sorted unique 1-rings
+            memset(V, 0, n * sizeof(Vertex))
+            for i in range(3 * m):
+                V[T[i // 3, i % 3]].corners += 1
+            for v in range(1, n):
+                V[v].start = V[v - 1].start + V[v - 1].corners
+            for i in range(3 * m):
+                v, c, j = T[i // 3, i % 3], i % 3, 2 * (V[T[i // 3, i % 3]].start + V[T[i // 3, i % 3]].valence)
+                pair[j], pair[j + 1], V[v].valence = T[i // 3, (c + 1) % 3], T[i // 3, (c + 2) % 3], V[v].valence + 1
+            max_valence = 0
             for v in range(n):
-                if target[v] >= 0:
-                    removed[count] = v
-                    targets[count] = target[v]
-                    ring_total += valence[v]
-                    count += 1
-                    offsets[count] = ring_total
-                else:
-                    parent[v] = j
-                    j += 1
-            for i in range(selected):
-                parent[removed[i]] = parent[targets[i]]
-            for t in range(m):
-                if (parent[F[t, 0]] != parent[F[t, 1]] and parent[F[t, 1]] != parent[F[t, 2]]
-                        and parent[F[t, 2]] != parent[F[t, 0]]):
-                    alive += 1
-        ring_a = np.zeros(ring_total, dtype=np.int64)
-        triangles_a = np.zeros((alive, 3), dtype=np.int64)
-        ring, triangles = ring_a, triangles_a
+                s, deg, V[v].flags = 2 * V[v].start, 0, lock[v]
+                for j in range(s, s + 2 * V[v].corners):  # insertion sort: rings are short
+                    u, r = pair[j], j
+                    while r > s and ring[r - 1] > u:
+                        ring[r], r = ring[r - 1], r - 1
+                    ring[r] = u
+                j = s
+                while j < s + 2 * V[v].corners:
+                    r = j + 1
+                    while r < s + 2 * V[v].corners and ring[r] == ring[j]:
+                        r += 1
+                    ring[s + deg], mult[s + deg] = ring[j], min(r - j, 255)
+                    V[v].flags |= BOUNDARY if r - j == 1 else (LOCKED if r - j > 2 else 0)
+                    deg, j = deg + 1, r
+                V[v].valence, max_valence = deg, max(max_valence, deg)
+        edge, root = np.zeros((3, max_valence)), np.zeros(max_valence, np.int32)
+        if lock_fans and not levels:  # also lock unreferenced vertices and those whose corners form several fans
+            with nogil:
+                for v in range(n):
+                    s, deg = 2 * V[v].start, V[v].valence
+                    for e in range(deg):
+                        root[e] = e
+                    for j in range(s, s + 2 * V[v].corners, 2):  # union-find of ring slots joined by a corner
+                        r, e = 0, 0
+                        while ring[s + r] != pair[j]: r += 1
+                        while ring[s + e] != pair[j + 1]: e += 1
+                        while root[r] != r: r = root[r]
+                        while root[e] != e: e = root[e]
+                        root[max(r, e)], deg = min(r, e), deg - (r != e)
+                    if V[v].valence == 0 or deg > 1 or V[v].flags & LOCKED:
+                        lock[v], V[v].flags = 1, V[v].flags | LOCKED
+        if not levels:
+            first = np.array(lock, dtype=bool)
+        if len(levels) == max_levels or n <= min_vertices:
+            return first, levels
         with nogil:
-            j = 0
+            count = selected = total = 0  # candidates: unlocked vertices with neighbours, by cost (section 4.1)
+            for v in range(n):
+                goal[v] = -1
+                if V[v].valence and not V[v].flags & LOCKED:
+                    lo, hi = INFINITY, 0.0
+                    for j in range(2 * V[v].start, 2 * V[v].start + V[v].valence):
+                        u = ring[j]
+                        dx, dy, dz = p[3 * u] - p[3 * v], p[3 * u + 1] - p[3 * v + 1], p[3 * u + 2] - p[3 * v + 2]
+                        d = sqrt(dx * dx + dy * dy + dz * dz)
+                        lo, hi = min(lo, d), max(hi, d)
+                    d = alpha * lo + beta * hi
+                    memcpy(&key[0, count], &d, sizeof(double))
+                    order[0, count], count = v, count + 1
+            _sort(&order[0, 0], &order[1, 0], &key[0, 0], &key[1, 0], count)
+            for i in range(count):
+                if selected >= n - min_vertices:
+                    break
+                x = order[0, i + 16 if i + 16 < count else i]  # the visit goes all over memory: ask early
+                prefetch(&V[x]); prefetch(&p[3 * x])
+                x = order[0, i + 8 if i + 8 < count else i]
+                prefetch(&ring[2 * V[x].start]); prefetch(&pair[2 * V[x].start])
+                x, sx, sy, sz, best = order[0, i], 0.0, 0.0, 0.0, -1
+                if V[x].flags & TOUCHED:
+                    continue  # the independence rule
+                for j in range(2 * V[x].start, 2 * (V[x].start + V[x].corners), 2):  # N_x, summed normals
+                    u, v = pair[j], pair[j + 1]
+                    dx, dy, dz = p[3 * u] - p[3 * x], p[3 * u + 1] - p[3 * x + 1], p[3 * u + 2] - p[3 * x + 2]
+                    lo, hi, d = p[3 * v] - p[3 * x], p[3 * v + 1] - p[3 * x + 1], p[3 * v + 2] - p[3 * x + 2]
+                    sx, sy, sz = sx + (dy * d - dz * hi), sy + (dz * lo - dx * d), sz + (dx * hi - dy * lo)
+                s, deg = 2 * V[x].start, V[x].valence
+                for e in range(deg):  # allowed edges with their cone volume |N_x . (x_k - x)| and length
+                    k = ring[s + e]
+                    # a boundary x goes along the boundary; an interior x has only 2-triangle edges (a 1 would make
+                    # it boundary, a 3 locks it); no isolated triangle or closed tetrahedron may remain
+                    edge[2, e] = not V[k].flags & LOCKED and (mult[s + e] == 1 or not V[x].flags & BOUNDARY) and not (
+                        deg == (2 if V[x].flags & BOUNDARY else 3) == V[k].valence
+                        and (V[k].flags & BOUNDARY) == (V[x].flags & BOUNDARY))
+                    dx, dy, dz = p[3 * k] - p[3 * x], p[3 * k + 1] - p[3 * x + 1], p[3 * k + 2] - p[3 * x + 2]
+                    edge[1, e], edge[0, e] = sqrt(dx * dx + dy * dy + dz * dz), fabs(sx * dx + sy * dy + sz * dz)
+                for attempt in range(max_tries):  # least volume (within 1e-9), then shortest, then first
+                    best, least, d = -1, INFINITY, INFINITY
+                    for e in range(deg):
+                        if edge[2, e] and edge[0, e] < least:
+                            least = edge[0, e]
+                    for e in range(deg):
+                        if edge[2, e] and edge[0, e] <= least * (1.0 + 1e-9) and edge[1, e] < d:
+                            d, best = edge[1, e], e
+                    if best < 0 or _legal(p, V, &pair[0], &ring[0], &mult[0], x, best, cos_sq, min_quality):
+                        break
+                    edge[2, best], best = 0, -1
+                if best >= 0 and not V[ring[s + best]].flags & TOUCHED:  # its target, too, must be untouched
+                    goal[x], selected, total, V[x].flags = ring[s + best], selected + 1, total + deg, V[x].flags | TOUCHED
+                    for j in range(s, s + deg):
+                        V[ring[j]].flags |= TOUCHED
+        if selected == 0:
+            return first, levels
+        level = [np.zeros(selected, np.int64), np.zeros(selected, np.int64), np.zeros(selected + 1, np.int64),
+                 np.zeros(total, np.int64), np.zeros(n, np.int64), np.empty((m, 3), np.int64)]
+        removed, target, offsets, flat, parent, out = level
+        with nogil:  # apply: the parent map, the removed 1-rings, the triangles with three distinct vertices
+            i = j = total = alive = 0
+            for v in range(n):
+                if goal[v] >= 0:
+                    removed[i], target[i] = v, goal[v]
+                    for e in range(V[v].valence):
+                        flat[total + e] = ring[2 * V[v].start + e]
+                    i, total = i + 1, total + V[v].valence
+                    offsets[i] = total
+                else:
+                    parent[v], p[3 * j], p[3 * j + 1], p[3 * j + 2] = j, p[3 * v], p[3 * v + 1], p[3 * v + 2]
+                    lock[j], kept[j], j = lock[v], kept[v], j + 1
             for i in range(selected):
-                v = <idx> removed[i]
-                s = 2 * vt_ptr[v]
-                for e in range(s, s + valence[v]):
-                    ring[j] = nb[e]
-                    j += 1
-            j = 0
-            for t in range(m):
-                if (parent[F[t, 0]] != parent[F[t, 1]] and parent[F[t, 1]] != parent[F[t, 2]]
-                        and parent[F[t, 2]] != parent[F[t, 0]]):
-                    for c in range(3):
-                        triangles[j, c] = parent[F[t, c]]
-                    j += 1
-        return removed_a, targets_a, offsets_a, ring_a, parent_a, triangles_a
-
-
-cdef inline idx _position(const idx* nb, int64_t s, int deg, idx value) noexcept nogil:
-    """Index of ``value`` in the sorted ring ``nb[s:s + deg]`` (it is there)."""
-    cdef int lo = 0, hi = deg - 1, mid
-    while lo < hi:
-        mid = (lo + hi) // 2
-        if nb[s + mid] < value:
-            lo = mid + 1
-        else:
-            hi = mid
-    return <idx> lo
-
-
-def _check_sizes(Py_ssize_t n, Py_ssize_t m):
-    if n >= 2 ** 31 - 1 or 3 * m >= 2 ** 31 - 1:
-        raise ValueError(f"mesh must have fewer than 2**31 vertices and 2**31 / 3 triangles, got {n} and {m}")
+                parent[removed[i]] = parent[target[i]]
+            for i in range(m):
+                out[alive, 0], out[alive, 1], out[alive, 2] = parent[T[i, 0]], parent[T[i, 1]], parent[T[i, 2]]
+                alive += (out[alive, 0] != out[alive, 1] and out[alive, 1] != out[alive, 2]
+                          and out[alive, 2] != out[alive, 0])
+        out = None  # let go of the buffer, then cut it to the triangles kept (pages never written cost nothing)
+        level[5].resize((alive, 3), refcheck=False)
+        n, T = n - selected, level[5]
+        levels.append((*level, kept_a[:n].copy()))
+        if report is not None:
+            report(selected)

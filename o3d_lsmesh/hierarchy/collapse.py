@@ -1,78 +1,41 @@
-"""One level of the volume-cost mesh hierarchy (Liu et al. 2001, section 4.1).
+"""Levels of the volume-cost hierarchy (Liu et al. 2001, section 4.1): the rules of the compiled loop.
 
-A level removes a set of vertices, each by a half-edge collapse ``x -> k``
-into the 1-ring neighbour ``k`` of least cone volume
+The loop (``_kernel.pyx``; ``tests/_hierarchy_oracle.py`` is the same loop in plain Python) visits the
+unlocked vertices in increasing ``cost(x) = alpha * min_edge(x) + beta * max_edge(x)`` (ties by index) and
+skips ``x`` when ``x`` or its target is in the closed 1-ring of a vertex already removed in this level: a
+collapse reads the 1-rings of ``x`` and ``k`` and changes only those of ``N(x)``, so every collapse stays
+valid and the removed vertices are pairwise non-adjacent (:meth:`MeshHierarchy.refine` needs it). ``x``
+goes to the neighbour ``k`` of least cone volume ``|N_x . (x_k - x)|`` (``N_x`` the summed doubled-area
+normals around ``x``; ties within a relative 1e-9 to the shortest edge, then the first in index order),
+trying at most ``max_tries`` of them, and a collapse is made when
 
-    V(x -> k) = | sum_j (x_j - x_k) x (x_{j+1} - x_k) . (x - x_k) | = | N_x . (x_k - x) |,
+* ``k`` is not locked, and a boundary ``x`` moves along a boundary edge (an interior one has only edges of
+  two triangles: an edge of one would make it boundary, of three locks it);
+* no isolated triangle or closed tetrahedron would remain;
+* every surviving triangle of the star of ``x`` keeps its orientation, turns its normal by less than
+  ``max_normal_angle`` and keeps ``2 * area / (sum of squared edge lengths)`` above ``min_quality``;
+* the link condition holds: ``x`` and ``k`` share only the opposite vertices of their edge (Euler
+  characteristic and boundary loops stay).
 
-``N_x`` being the sum of the (doubled-area) normals of the triangles around
-``x`` (each term is six times the volume of the tetrahedron ``(x, x_j,
-x_{j+1}, x_k)``, affine in ``x_k``). Ties within a relative ``1e-9`` go to
-the shortest edge, then to the first neighbour in index order.
-
-The loop (compiled, ``_kernel.pyx``; the same loop in plain Python is the
-oracle of the tests) visits the vertices in increasing
-``cost(x) = alpha * min_edge(x) + beta * max_edge(x)`` (ties by index) and
-skips ``x`` when ``x`` or its target lies in the closed 1-ring of a vertex
-already removed in this level. A collapse reads only the 1-rings of ``x`` and
-``k``, and changes only the 1-rings of ``N(x)``, so with this rule every
-collapse of the level is valid on the level's mesh as well as after the ones
-before it, and the removed vertices are pairwise non-adjacent (what
-:meth:`MeshHierarchy.refine` needs to split them back in closed form).
-
-A target is tried in that order, at most ``max_tries`` of them, and taken when
-the collapse is valid:
-
-* link condition: ``x`` and ``k`` have exactly the common neighbours of the
-  edge's triangles (2 inside, 1 on a boundary edge). With a virtual vertex
-  coning off each boundary loop this is the link condition of Dey et al., and
-  it keeps the Euler characteristic and the boundary loops;
-* a boundary vertex collapses only along a boundary edge, an interior one
-  only along an interior edge;
-* no closed tetrahedron (``x`` and ``k`` interior of valence 3) and no
-  isolated triangle (``x`` and ``k`` on the boundary, of valence 2);
-* every triangle of the star of ``x`` that survives keeps its orientation and
-  turns its normal by less than ``max_normal_angle``, and its
-  ``2 * area / (sum of squared edge lengths)`` stays above ``min_quality``;
-* locked vertices are never removed and never a target.
-
-Locked are the vertices the caller names (non-manifold ones: several fans of
-triangles, see :func:`o3d_lsmesh.topology.nonmanifold_vertices`, and
-unreferenced ones) and every vertex on an edge of more than two triangles.
-Every other vertex has a disk or half-disk for its star, so the rules above
-are those of a manifold mesh, and the set of non-manifold vertices stays the
-same at every level.
+Locked are the caller's vertices and every vertex on an edge of more than two triangles (``lock_fans``:
+also unreferenced vertices and those whose triangles form several fans), so every other star is a disk or
+half-disk, and every level keeps the input's non-manifold vertices.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Callable
+from typing import Any, NamedTuple
 
 import numpy as np
 
-__all__ = ["LevelCollapse", "collapse_level", "workspace"]
+__all__ = ["LevelCollapse", "collapse_levels"]
 
 
-@dataclass(frozen=True)
-class LevelCollapse:
-    """The collapses of one level, in the indices of the finer level ``i - 1``.
-
-    Attributes
-    ----------
-    removed : (r,) int64
-        Vertices removed, sorted.
-    targets : (r,) int64
-        The vertex each one was merged into (kept at level ``i``).
-    ring_offsets : (r + 1,) int64
-        CSR offsets into ``ring``.
-    ring : (sum of valences,) int64
-        The 1-ring of each removed vertex at level ``i - 1``, sorted.
-    parent : (n_{i-1},) int64
-        Index at level ``i`` of every vertex of level ``i - 1``.
-    triangles : (m_i, 3) int64
-        Triangles of level ``i`` (those of level ``i - 1`` mapped by ``parent``,
-        in order, collapsed ones dropped).
-    """
+class LevelCollapse(NamedTuple):
+    """A level in level ``i - 1`` indices (int64): ``removed`` and their ``targets``, their sorted 1-rings
+    (CSR ``ring_offsets``, ``ring``), ``parent`` (index at level ``i``), the level's ``triangles`` (mapped in
+    order, collapsed ones dropped), and ``kept``: the input index of each vertex of level ``i``."""
 
     removed: np.ndarray
     targets: np.ndarray
@@ -80,86 +43,33 @@ class LevelCollapse:
     ring: np.ndarray
     parent: np.ndarray
     triangles: np.ndarray
+    kept: np.ndarray
 
 
-def _kernel():
-    try:
-        from . import _kernel
-    except ImportError as error:  # a source tree used without building it
-        raise ImportError(
-            "o3d_lsmesh's compiled hierarchy kernel is not built: install the package with "
-            "`pip install .` (or `pip install -e .`), or run `python setup.py build_ext --inplace` "
-            "in a source tree (needs Cython and a C compiler)"
-        ) from error
-    return _kernel
-
-
-def workspace():
-    """Buffers the kernel reuses from level to level (fresh pages cost more than the loop on them)."""
-    return _kernel().Workspace()
-
-
-def collapse_level(
+def collapse_levels(
     vertices: np.ndarray,
     triangles: np.ndarray,
     *,
     alpha: float = 1.0,
     beta: float = 0.01,
-    max_removals: int | None = None,
+    min_vertices: int = 0,
+    max_levels: int | None = None,
     max_normal_angle: float = 60.0,
     min_quality: float = 1e-3,
     max_tries: int = 3,
     locked: np.ndarray | None = None,
-    workspace: object | None = None,
-) -> LevelCollapse | None:
-    """Select and apply one level of volume-cost half-edge collapses (module docstring).
+    lock_fans: bool = False,
+    report: Callable[[int], Any] | None = None,
+) -> tuple[np.ndarray, list[LevelCollapse]]:
+    """``(lock of level 0 (n,) bool, levels)``, a level removing at most ``n_i - min_vertices`` vertices,
+    until ``max_levels`` or no valid collapse; ``report(removed count)`` after each level."""
+    from ._kernel import hierarchy  # built by the package's build (``pip install .``, ``setup.py build_ext``)
 
-    Parameters
-    ----------
-    vertices : (n, 3) float64
-        Positions of the level's vertices.
-    triangles : (m, 3) int64
-        Triangles with three distinct vertices each.
-    alpha, beta : float
-        Non-negative weights of the shortest and longest incident edge in the cost.
-    max_removals : int, optional
-        Remove at most this many vertices (the first ones in cost order).
-    max_normal_angle : float
-        Angle in degrees a surviving triangle's normal must turn less than (90 or more: it
-        must only not flip).
-    min_quality : float
-        ``2 * area / (sum of squared edge lengths)`` a new triangle must stay
-        above (an equilateral triangle has ``1/sqrt(3)``).
-    max_tries : int
-        Targets tried per vertex, in the order above, before it waits for the next level.
-    locked : (n,) bool, optional
-        Vertices never removed and never a target.
-    workspace : optional
-        A :func:`workspace` to reuse between the levels of one hierarchy (one thread at a time).
-
-    Returns
-    -------
-    LevelCollapse or None
-        ``None`` when no valid collapse remains.
-    """
-    vertices = np.ascontiguousarray(vertices, dtype=np.float64)
-    triangles = np.ascontiguousarray(triangles, dtype=np.int64)
-    n = len(vertices)
-    locked = np.zeros(n, dtype=np.uint8) if locked is None else np.ascontiguousarray(locked, dtype=np.uint8)
-    limit = n if max_removals is None else max(int(max_removals), 0)
+    lock = np.zeros(len(vertices), bool) if locked is None else np.array(locked, dtype=bool)
     # at 90 degrees or more only the flip test (a positive dot product of the normals) remains
     cos_sq = float(np.cos(np.deg2rad(max_normal_angle)) ** 2) if max_normal_angle < 90 else 0.0
-    if workspace is None:
-        workspace = _kernel().Workspace()
-    result = workspace.collapse_level(
-        vertices,
-        triangles,
-        locked,
-        float(alpha),
-        float(beta),
-        limit,
-        cos_sq,
-        float(min_quality),
-        int(max_tries),
-    )
-    return None if result is None else LevelCollapse(*result)
+    P, T = np.array(vertices, dtype=np.float64, order="C"), np.ascontiguousarray(triangles, dtype=np.int64)
+    limit = len(P) + 1 if max_levels is None else max_levels
+    options = (alpha, beta, min_vertices, limit, cos_sq, min_quality, max_tries, lock_fans, report)
+    first, levels = hierarchy(P, T, lock.view(np.uint8), *options)
+    return first, [LevelCollapse(*level) for level in levels]

@@ -18,7 +18,7 @@ import numpy as np
 
 from .._collapsed import collapsed_triangles
 from .._o3d import warn_dropped_attributes
-from .._progress import check_progress
+from .._progress import check_progress, progress_bar
 from .._ranges import concatenated_ranges
 from .._validate import as_count
 from ..topology import adjacency_matrix, connected_components, unique_edges
@@ -151,19 +151,18 @@ def from_fast_simplification(
         )
         collapses = np.asarray(collapses, dtype=np.int32).reshape(-1, 2)
         mappings = []
-        iterator = counts
-        if progress:
-            from tqdm.auto import tqdm
-
-            iterator = tqdm(counts, desc="fast-simplification levels")
-        for count in iterator:
-            prefix = min(n0 - int(count), len(collapses))
-            if prefix <= 0:
-                continue
-            _, _, mapping = fast_simplification.replay_simplification(points32, Fr, collapses[:prefix])
-            full = np.arange(n0, dtype=np.int64) + len(referenced)  # unreferenced: labels of their own
-            full[referenced] = np.asarray(mapping, dtype=np.int64)
-            mappings.append((prefix, full))
+        with progress_bar(
+            progress, total=len(counts), desc="fast-simplification levels", unit="level"
+        ) as bar:
+            for count in counts:
+                bar.update(1)
+                prefix = min(n0 - int(count), len(collapses))
+                if prefix <= 0:
+                    continue
+                _, _, mapping = fast_simplification.replay_simplification(points32, Fr, collapses[:prefix])
+                full = np.arange(n0, dtype=np.int64) + len(referenced)  # unreferenced: labels of their own
+                full[referenced] = np.asarray(mapping, dtype=np.int64)
+                mappings.append((prefix, full))
     collapses = referenced[collapses] if len(collapses) else collapses.astype(np.int64)
 
     n_components, component = connected_components(F, n0)

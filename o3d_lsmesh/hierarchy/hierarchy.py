@@ -16,10 +16,10 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._o3d import MeshData, new_mesh, read_mesh, warn_dropped_attributes
-from .._progress import check_progress
+from .._progress import check_progress, progress_bar
 from .._validate import as_count, as_positions, as_positive_float
 from ..topology import adjacency_matrix, boundary_halfedges
-from .collapse import collapse_level, workspace
+from .collapse import collapse_levels
 
 if TYPE_CHECKING:
     from .._types import AnyMesh
@@ -301,7 +301,9 @@ def locked_vertices(triangles: np.ndarray, n: int) -> np.ndarray:
     more than two triangles, and vertices no triangle references.
     """
     triangles = np.ascontiguousarray(triangles, dtype=np.int64)
-    return workspace().locked_vertices(triangles, n)
+    if len(triangles) and (triangles.min() < 0 or triangles.max() >= n):
+        raise ValueError(f"triangles must index vertices in [0, {n}), got indices up to {triangles.max()}")
+    return collapse_levels(np.zeros((n, 3)), triangles, max_levels=0, lock_fans=True)[0]
 
 
 def tensor_format_of(data: MeshData) -> tuple:
@@ -343,50 +345,27 @@ def build_hierarchy_arrays(
     vertices = np.array(vertices, dtype=np.float64, order="C", copy=True)
     triangles = np.array(triangles, dtype=np.int64, order="C", copy=True)
     n0 = len(vertices)
-    buffers = workspace()
-    locked = buffers.locked_vertices(triangles, n0)
-    tris = [triangles]
-    reps = [np.arange(n0, dtype=np.int64)]
-    empty = np.zeros(0, dtype=np.int64)
-    parents, removed, targets, offsets, rings = (
-        [empty],
-        [empty],
-        [empty],
-        [np.zeros(1, dtype=np.int64)],
-        [empty],
-    )
-    bar = None
-    if progress:
-        from tqdm.auto import tqdm
-
-        bar = tqdm(total=max(n0 - min_vertices, 0), desc="mesh hierarchy", unit="vertex")
-    positions = vertices
-    while (max_levels is None or len(tris) - 1 < max_levels) and len(positions) > min_vertices:
-        level = collapse_level(
-            positions,
-            tris[-1],
+    total = max(n0 - min_vertices, 0)  # at most: a level may find no valid collapse before
+    with progress_bar(progress, total=total, desc="mesh hierarchy", unit="vertex") as bar:
+        _, levels = collapse_levels(
+            vertices,
+            triangles,
             alpha=alpha,
             beta=beta,
-            max_removals=len(positions) - min_vertices,
-            locked=locked[reps[-1]],
-            workspace=buffers,
+            min_vertices=min_vertices,
+            max_levels=max_levels,
+            lock_fans=True,
+            report=bar.update,
         )
-        if level is None:
-            break
-        keep = np.ones(len(positions), dtype=bool)
-        keep[level.removed] = False
-        reps.append(reps[-1][keep])
-        positions = vertices[reps[-1]]
-        tris.append(level.triangles)
-        parents.append(level.parent)
-        removed.append(level.removed)
-        targets.append(level.targets)
-        offsets.append(level.ring_offsets)
-        rings.append(level.ring)
-        if bar is not None:
-            bar.update(len(level.removed))
-    if bar is not None:
-        bar.close()
+        bar.update(total - bar.n)  # done: the bar ends at its total
+    empty = np.zeros(0, dtype=np.int64)
+    tris = [triangles] + [level.triangles for level in levels]
+    reps = [np.arange(n0, dtype=np.int64)] + [level.kept for level in levels]
+    parents, removed, targets = (
+        [empty] + [getattr(lv, name) for lv in levels] for name in ("parent", "removed", "targets")
+    )
+    offsets = [np.zeros(1, dtype=np.int64)] + [level.ring_offsets for level in levels]
+    rings = [empty] + [level.ring for level in levels]
     return MeshHierarchy(
         vertices,
         tuple(tris),
