@@ -80,6 +80,23 @@ class MeshData:
     split: np.ndarray | None = None  # (n_source,) int64 source vertex -> welded vertex
 
 
+def _may_have_duplicates(vertices: np.ndarray) -> bool:
+    """False when no two rows of ``vertices`` are equal (exact): a sort of one 64-bit hash per row.
+
+    Equal rows have equal hashes, so distinct hashes prove there is nothing to
+    weld at the cost of one plain integer sort, a tenth of ``np.unique``'s row
+    sort on large scans; a shared hash only sends the caller to the exact check.
+    """
+    bits = (vertices + 0.0).view(np.uint64)  # -0.0 -> 0.0, so equal coordinates have equal bits
+    key = bits[:, 0] * np.uint64(0x9E3779B97F4A7C15)
+    key ^= bits[:, 1]
+    key *= np.uint64(0xC2B2AE3D27D4EB4F)
+    key ^= bits[:, 2]
+    key *= np.uint64(0x165667B19E3779F9)
+    key.sort()
+    return bool(np.any(key[1:] == key[:-1]))
+
+
 def weld_map(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray | None:
     """Map each vertex to the first vertex at exactly the same coordinates, ``(n,)`` int64, or None.
 
@@ -90,6 +107,8 @@ def weld_map(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray | None:
     occurrence, so a mesh without duplicates keeps its numbering.
     """
     if len(vertices) == 0:
+        return None
+    if not _may_have_duplicates(vertices):
         return None
     # -0.0 == 0.0: add 0.0 so both have the same bytes in np.unique's row comparison
     _, first, inverse = np.unique(vertices + 0.0, axis=0, return_index=True, return_inverse=True)
