@@ -228,15 +228,16 @@ class LocalOperator:
         """``E3 @ X0``, the constraint part, ``(n, 3)``."""
         n, corners = len(self.scale), self.corners
         out = np.zeros((n, 3))
-        if len(corners) == 0:
+        k = len(corners)
+        if k == 0:
             return out
         center = positions0[corners[:, 0]]
         center += positions0[corners[:, 1]]
         center += positions0[corners[:, 2]]
+        first = np.arange(k + 1, dtype=corners.dtype)
         for a in range(3):
             share = self.u[self.group, a] * self.scale[corners[:, a]]
-            for d in range(3):
-                out[:, d] += np.bincount(corners[:, a], share * center[:, d], minlength=n)
+            out += sp.csc_matrix((share, corners[:, a], first), shape=(n, k)) @ center
         return out
 
     def step(self, positions: np.ndarray, constant: np.ndarray) -> np.ndarray:
@@ -261,6 +262,7 @@ def local_operator(triangles: np.ndarray, topo: FairingTopology) -> LocalOperato
     sel = topo.interior_triangles
     tri = triangles[sel]  # (k, 3)
     group, table, M, u = _valence_tables(topo.valence[tri])
+    group = group.astype(np.int32)
     alpha = M / table[:, None, :]  # (g, 3, 3): coefficient of S_{i_b} in P_a
     beta = alpha - alpha.sum(axis=2, keepdims=True)  # coefficient of x_{i_c}: -sum_{b != c} alpha_ab
 
@@ -272,35 +274,50 @@ def local_operator(triangles: np.ndarray, topo: FairingTopology) -> LocalOperato
     # slot s of a triangle is its edge (i_s, i_{s+1}); halfedges() rows s*m + t
     head = [1, 2, 0]
     slot_edge = inverse.reshape(3, m)[:, sel].T.ravel()  # (3k,) t-major like tri.ravel()
-    # entry key of every (triangle, slot): which of the group's six off-diagonal
-    # coefficients goes forward (row lo) and which backward, by whether i_s < i_{s+1}
-    tail_is_lo = tri < tri[:, head]
-    pick = group[:, None] * 6 + np.arange(3) * 2  # (k, 3)
-    pick += tail_is_lo
+    # row of every (triangle, slot) in the per-group table below: which coefficients go
+    # forward (row lo) and which backward depends on whether i_s < i_{s+1}
+    pick = group[:, None] * 6 + np.arange(0, 6, 2, dtype=np.int32)  # (k, 3)
+    pick += tri < tri[:, head]
     pick = pick.ravel()
-    del tail_is_lo
-    diag_pick = (group[:, None] * 3 + np.arange(3)).ravel()
 
     indptr, indices, diagonal, forward, backward = ring_pattern(edges, n)
     nnz, e = len(indices), len(edges)
     lo, hi = edges[:, 0], edges[:, 1]
 
-    def matrix(coefficients: np.ndarray) -> sp.csr_matrix:
-        # entry (i_a, i_c) of every interior triangle, summed and divided by the row's count
+    # per (group, slot, tail-is-lo): [E1 forward, E1 backward, E2 forward, E2 backward]; the sums
+    # over triangles are one sparse product (slots scattered onto their edges) for all four
+    columns = []
+    for coefficients in (alpha, beta):
         to_head = coefficients[:, [0, 1, 2], head]  # (g, 3): row i_s, column i_{s+1}
         to_tail = coefficients[:, head, [0, 1, 2]]  # row i_{s+1}, column i_s
-        # [tail is hi, tail is lo] per (group, slot): forward takes to_tail / to_head, backward the other
-        fwd_table = np.stack([to_tail, to_head], axis=2).ravel()
-        bwd_table = np.stack([to_head, to_tail], axis=2).ravel()
-        data = np.empty(nnz)
-        diag_table = coefficients[:, [0, 1, 2], [0, 1, 2]].ravel()
-        data[diagonal] = np.bincount(corners, diag_table[diag_pick], minlength=n) * scale
-        data[forward] = np.bincount(slot_edge, fwd_table[pick], minlength=e) * scale[lo]
-        data[backward] = np.bincount(slot_edge, bwd_table[pick], minlength=e) * scale[hi]
-        return sp.csr_matrix((data, indices, indptr), shape=(n, n))
+        columns += [
+            np.stack([to_tail, to_head], axis=2).ravel(),
+            np.stack([to_head, to_tail], axis=2).ravel(),
+        ]
+    slot_table = np.stack(columns, axis=1)  # (6g, 4)
+    unit = np.ones(len(pick))
+    first = np.arange(len(pick) + 1, dtype=indptr.dtype)
+    by_edge = sp.csc_matrix((unit, slot_edge, first), shape=(e, len(pick))) @ slot_table[pick]  # (e, 4)
+    del slot_edge, pick
+    diag_table = np.stack(
+        [alpha[:, [0, 1, 2], [0, 1, 2]].ravel(), beta[:, [0, 1, 2], [0, 1, 2]].ravel()], axis=1
+    )
+    diag_pick = (group[:, None] * 3 + np.arange(3, dtype=np.int32)).ravel()
+    by_vertex = (
+        sp.csc_matrix((unit, corners, first), shape=(n, len(corners))) @ diag_table[diag_pick]
+    )  # (n, 2)
+    del unit, first, diag_pick
 
-    e1 = matrix(alpha)
-    e2 = matrix(beta)
+    matrices = []
+    for part in (0, 1):
+        # entry (i_a, i_c) of every interior triangle, summed and divided by the row's count
+        data = np.empty(nnz)
+        data[diagonal] = by_vertex[:, part] * scale
+        data[forward] = by_edge[:, 2 * part] * scale[lo]
+        data[backward] = by_edge[:, 2 * part + 1] * scale[hi]
+        matrices.append(sp.csr_matrix((data, indices, indptr), shape=(n, n)))
+    e1, e2 = matrices
+    del by_edge, by_vertex, data, matrices
     e2.data[diagonal[no_estimate]] = 1.0  # vertices without estimates stay put
     adjacency = np.ones(nnz)
     adjacency[diagonal] = 0.0
@@ -310,7 +327,7 @@ def local_operator(triangles: np.ndarray, topo: FairingTopology) -> LocalOperato
         e1,
         e2,
         tri.astype(index_dtype),
-        group.astype(np.int32),
+        group,
         u,
         scale,
     )
