@@ -260,73 +260,74 @@ def local_operator(triangles: np.ndarray, topo: FairingTopology) -> LocalOperato
     n, edges, inverse = topo.n, topo.edges, topo.inverse
     m = len(triangles)
     sel = topo.interior_triangles
-    tri = triangles[sel]  # (k, 3)
+    index = np.int32 if max(3 * m, n) < np.iinfo(np.int32).max else np.int64
+    tri = triangles[sel].astype(index)  # (k, 3)
+    k = len(tri)
     group, table, M, u = _valence_tables(topo.valence[tri])
-    group = group.astype(np.int32)
+    group = group.astype(index)
     alpha = M / table[:, None, :]  # (g, 3, 3): coefficient of S_{i_b} in P_a
     beta = alpha - alpha.sum(axis=2, keepdims=True)  # coefficient of x_{i_c}: -sum_{b != c} alpha_ab
 
-    corners = tri.ravel()
+    # the 1-ring pattern first: its temporaries are gone before the per-slot arrays exist
+    indptr, indices, diagonal, forward, backward = ring_pattern(edges, n)
+    nnz, e = len(indices), len(edges)
+
+    corners = tri.reshape(-1)
     count = np.bincount(corners, minlength=n)  # estimates per vertex
     no_estimate = count == 0
     scale = 1.0 / np.maximum(count, 1)
     del count
     # slot s of a triangle is its edge (i_s, i_{s+1}); halfedges() rows s*m + t
     head = [1, 2, 0]
-    slot_edge = inverse.reshape(3, m)[:, sel].T.ravel()  # (3k,) t-major like tri.ravel()
-    # row of every (triangle, slot) in the per-group table below: which coefficients go
+    slot_edge = np.empty((k, 3), dtype=inverse.dtype)  # t-major like corners
+    for slot in range(3):
+        slot_edge[:, slot] = inverse[slot * m + sel]
+    slot_edge = slot_edge.reshape(-1)
+    # row of every (triangle, slot) in the per-group tables below: which coefficient goes
     # forward (row lo) and which backward depends on whether i_s < i_{s+1}
-    pick = group[:, None] * 6 + np.arange(0, 6, 2, dtype=np.int32)  # (k, 3)
-    pick += tri < tri[:, head]
-    pick = pick.ravel()
-
-    indptr, indices, diagonal, forward, backward = ring_pattern(edges, n)
-    nnz, e = len(indices), len(edges)
+    pick = np.empty((k, 3), dtype=index)
+    for slot in range(3):
+        np.multiply(group, 6, out=pick[:, slot])
+        pick[:, slot] += 2 * slot
+        pick[:, slot] += tri[:, slot] < tri[:, head[slot]]
+    pick = pick.reshape(-1)
+    # sums over the interior triangles as sparse products: every slot scattered onto its edge,
+    # every corner onto its vertex (one (3k,) coefficient column at a time)
+    unit = np.ones(3 * k)
+    first = np.arange(3 * k + 1, dtype=index)
+    onto_edges = sp.csc_matrix((unit, slot_edge, first), shape=(e, 3 * k))
+    onto_vertices = sp.csc_matrix((unit, corners, first), shape=(n, 3 * k))
+    del slot_edge
+    diag_pick = (group[:, None] * 3 + np.arange(3, dtype=index)).reshape(-1)
     lo, hi = edges[:, 0], edges[:, 1]
 
-    # per (group, slot, tail-is-lo): [E1 forward, E1 backward, E2 forward, E2 backward]; the sums
-    # over triangles are one sparse product (slots scattered onto their edges) for all four
-    columns = []
+    matrices = []
     for coefficients in (alpha, beta):
+        # entry (i_a, i_c) of every interior triangle, summed and divided by the row's count
         to_head = coefficients[:, [0, 1, 2], head]  # (g, 3): row i_s, column i_{s+1}
         to_tail = coefficients[:, head, [0, 1, 2]]  # row i_{s+1}, column i_s
-        columns += [
-            np.stack([to_tail, to_head], axis=2).ravel(),
-            np.stack([to_head, to_tail], axis=2).ravel(),
-        ]
-    slot_table = np.stack(columns, axis=1)  # (6g, 4)
-    unit = np.ones(len(pick))
-    first = np.arange(len(pick) + 1, dtype=indptr.dtype)
-    by_edge = sp.csc_matrix((unit, slot_edge, first), shape=(e, len(pick))) @ slot_table[pick]  # (e, 4)
-    del slot_edge, pick
-    diag_table = np.stack(
-        [alpha[:, [0, 1, 2], [0, 1, 2]].ravel(), beta[:, [0, 1, 2], [0, 1, 2]].ravel()], axis=1
-    )
-    diag_pick = (group[:, None] * 3 + np.arange(3, dtype=np.int32)).ravel()
-    by_vertex = (
-        sp.csc_matrix((unit, corners, first), shape=(n, len(corners))) @ diag_table[diag_pick]
-    )  # (n, 2)
-    del unit, first, diag_pick
-
-    matrices = []
-    for part in (0, 1):
-        # entry (i_a, i_c) of every interior triangle, summed and divided by the row's count
         data = np.empty(nnz)
-        data[diagonal] = by_vertex[:, part] * scale
-        data[forward] = by_edge[:, 2 * part] * scale[lo]
-        data[backward] = by_edge[:, 2 * part + 1] * scale[hi]
+        for positions, table_, ends in (
+            (forward, np.stack([to_tail, to_head], axis=2), lo),
+            (backward, np.stack([to_head, to_tail], axis=2), hi),
+        ):
+            summed = onto_edges @ table_.reshape(-1)[pick]
+            summed *= scale[ends]
+            data[positions] = summed
+        summed = onto_vertices @ coefficients[:, [0, 1, 2], [0, 1, 2]].reshape(-1)[diag_pick]
+        summed *= scale
+        data[diagonal] = summed
         matrices.append(sp.csr_matrix((data, indices, indptr), shape=(n, n)))
+    del onto_edges, onto_vertices, unit, first, pick, diag_pick, forward, backward, data, summed
     e1, e2 = matrices
-    del by_edge, by_vertex, data, matrices
     e2.data[diagonal[no_estimate]] = 1.0  # vertices without estimates stay put
     adjacency = np.ones(nnz)
     adjacency[diagonal] = 0.0
-    index_dtype = np.int32 if n < np.iinfo(np.int32).max else np.int64
     return LocalOperator(
         sp.csr_matrix((adjacency, indices, indptr), shape=(n, n)),
         e1,
         e2,
-        tri.astype(index_dtype),
+        tri,
         group,
         u,
         scale,
