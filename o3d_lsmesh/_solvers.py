@@ -31,6 +31,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ._errors import ConvergenceError, O3DLSMeshWarning, SingularSystemError
+from ._progress import progress_bar
 from ._validate import as_choice
 
 __all__ = [
@@ -772,11 +773,9 @@ def _block_cg(
     relative[norms == 0] = 0.0
     if norms.size and not (norms > 0).any():
         return (np.zeros_like(b), 0, 0.0)
-    bar = None
-    if progress:
-        from tqdm.auto import tqdm
-
-        bar = tqdm(total=max_iterations, desc="conjugate gradients", leave=False)
+    # the residual shows in the bar; its total (the iteration cap) shrinks to the count reached on success
+    bar = progress_bar(progress, total=max_iterations, desc="conjugate gradients")
+    converged = False
     Z = precondition(R)
     P = Z.copy()
     rz = np.einsum("ij,ij->j", R, Z)
@@ -802,17 +801,18 @@ def _block_cg(
             relative = np.linalg.norm(R, axis=0) / scale
             relative[norms == 0] = 0.0
             iteration += 1
-            if bar is not None:
-                bar.update(1)
-                bar.set_postfix(residual=f"{relative.max():.2e}", refresh=False)
+            bar.update(1)
+            bar.set_postfix_str(f"residual={relative.max():.2e}", refresh=False)
             Z = precondition(R)
             rz_new = np.einsum("ij,ij->j", R, Z)
             beta = np.where(active, rz_new / np.where(rz != 0, rz, 1.0), 0.0)
             P = Z + beta * P
             rz = rz_new
+        converged = True
     finally:
-        if bar is not None:
-            bar.close()
+        if converged:
+            bar.total = iteration
+        bar.close()
     if not np.isfinite(X).all():
         raise SingularSystemError("conjugate gradients diverged: the matrix is not positive definite")
     return (X[:, 0] if vector else X), iteration, float(relative.max(initial=0.0))
