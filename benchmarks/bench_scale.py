@@ -5,8 +5,8 @@ runs each (operation, size) and its peer (Open3D ``filter_smooth_laplacian(10)``
 fast-simplification for the hierarchy; none for LS meshes, global fairing and multiresolution fairing
 at sizes CHOLMOD cannot hold) in a fresh subprocess under an address-space limit (``--limit-gb``,
 default 16: ``ulimit -v``), so that a blow-up cannot take down a shared machine; writes
-``benchmarks/results/scale_peers.md`` (time, CPU time, peak memory, peak per vertex, ratios) and
-``scale_memory.md`` (``--memory``: the peak per vertex of every public operation at one size).
+``benchmarks/results/scale.md`` (time, CPU time, peak memory, ratios; with ``--memory N`` the peak
+per vertex of every public operation at ``N`` vertices).
 
 Solvers: ``.venv/bin/python benchmarks/bench_scale.py [--sizes 1000000 4000000] [--ops lsmesh,fairing]
 [--iterative-only-above N]``. Every (mesh, operation, solver) runs in a fresh subprocess so that its
@@ -390,39 +390,12 @@ def main() -> None:
         "--limit-gb", type=float, default=16.0, help="address-space limit of every subprocess"
     )
     args = parser.parse_args()
+    if args.peers:
+        merged("scale_peers.jsonl", PEER_HEADER, peers(args.peers.split(","), args.sizes, args.limit_gb), 2)
+    if args.memory:
+        merged("scale_memory.jsonl", MEMORY_HEADER, memory_table(args.memory, args.limit_gb), 2)
     if args.peers or args.memory:
-        if args.peers:
-            every = merged(
-                "scale_peers.jsonl", PEER_HEADER, peers(args.peers.split(","), args.sizes, args.limit_gb), 2
-            )
-            write_markdown(
-                "scale_peers.md",
-                "Scale: every operation against its peer (noisy UV sphere, one subprocess per run)",
-                [
-                    (
-                        "Time and peak memory",
-                        markdown_table(PEER_HEADER, every)
-                        + "\n\nEach cell is its own subprocess (peak = ru_maxrss, including the mesh generated in "
-                        "it, the same for both columns) under an address-space limit of "
-                        f"{args.limit_gb:g} GB. 'CPU' is process time: the machine ({os.cpu_count()} cores) is "
-                        "shared, so wall-clock ratios swing with the load; CPU ratios hold.",
-                    )
-                ],
-            )
-        if args.memory:
-            rows = merged("scale_memory.jsonl", MEMORY_HEADER, memory_table(args.memory, args.limit_gb), 2)
-            write_markdown(
-                "scale_memory.md",
-                "Peak memory per vertex of every public operation",
-                [
-                    (
-                        "Measured on a noisy UV sphere",
-                        markdown_table(MEMORY_HEADER, rows)
-                        + "\n\nPeak over mesh: the operation's subprocess peak minus that of a subprocess that only "
-                        "generates the same Open3D mesh; per vertex of the input.",
-                    )
-                ],
-            )
+        write_scale(args.limit_gb)
         return
     study_rows = study(args.study) if args.study else []
     rows = []
@@ -466,21 +439,56 @@ def main() -> None:
                             round(os.getloadavg()[0], 1),
                         ]
                     )
-    every = merged("scale.jsonl", HEADER, rows, 4)
+    merged("scale.jsonl", HEADER, rows, 4)
+    merged("scale_study.jsonl", STUDY_HEADER, study_rows, 2)
+    write_scale(args.limit_gb)
+
+
+def write_scale(limit_gb: float) -> None:
+    """``results/scale.md`` from every measurement so far (results/scale*.jsonl): peers, memory, solvers."""
+    sections = []
+    peers_rows = merged("scale_peers.jsonl", PEER_HEADER, [], 2)
+    if peers_rows:
+        sections.append(
+            (
+                "Every operation against its peer (noisy UV sphere, one subprocess per run)",
+                markdown_table(PEER_HEADER, peers_rows)
+                + "\n\nEach cell is its own subprocess (peak = ru_maxrss, including the mesh generated in "
+                "it, the same for both columns) under an address-space limit of "
+                f"{limit_gb:g} GB (ulimit -v). 'CPU' is process time: the machine ({os.cpu_count()} cores) was "
+                "shared with other jobs (load in the last column), so wall-clock ratios swing with the load; "
+                "CPU ratios hold better.",
+            )
+        )
+    memory_rows = merged("scale_memory.jsonl", MEMORY_HEADER, [], 2)
+    if memory_rows:
+        sections.append(
+            (
+                "Peak memory per vertex of every public operation",
+                markdown_table(MEMORY_HEADER, memory_rows)
+                + "\n\nPeak over mesh: the operation's subprocess peak minus that of a subprocess that only "
+                "generates the same Open3D mesh (imports included in both), per vertex of the input.",
+            )
+        )
+    every = merged("scale.jsonl", HEADER, [], 4)
     # the time ratio also across runs: a row's CHOLMOD partner may come from another invocation
     cholmod_time = {tuple(r[:3]): r[4] for r in every if r[3] == "cholmod"}
     for r in every:
         if r[5] == "" and tuple(r[:3]) in cholmod_time:
             r[5] = r[4] / cholmod_time[tuple(r[:3])]
-    table = markdown_table(HEADER, every)
-    studied = merged("scale_study.jsonl", STUDY_HEADER, study_rows, 2)
     note = (
         "\n\nOne subprocess per row (peak = its ru_maxrss; 'over input' subtracts the peak once the mesh was "
         f"generated). 'load' is the 1-minute load average when the row finished, on {os.cpu_count()} cores shared "
         "with other jobs: read the ratios within a size, not the seconds. Sizes accumulate across runs "
         "(results/scale.jsonl)."
     )
-    sections = [("CHOLMOD against the iterative path", table + note)]
+    sections.append(
+        (
+            "CHOLMOD against the iterative path (PCG + smoothed-aggregation AMG)",
+            markdown_table(HEADER, every) + note,
+        )
+    )
+    studied = merged("scale_study.jsonl", STUDY_HEADER, [], 2)
     if studied:
         sections.append(
             (
@@ -488,13 +496,14 @@ def main() -> None:
                 markdown_table(STUDY_HEADER, studied)
                 + "\n\nSmoothed aggregation on the normal matrix with the constant as near-null space (ours) costs the "
                 "least: linear near-null-space candidates (B = [1, x, y, z]) save iterations (84 against 97 at 50k, "
-                "51 against 77 at 5k) but double the setup and raise the operator complexity, for no gain in time; AMG on the second-order graph Laplacian G (L = D^-1 G, so L^T L = G D^-2 G, applied as "
+                "51 against 77 at 5k) but double the setup and raise the operator complexity, for no gain in time; "
+                "AMG on the second-order graph Laplacian G (L = D^-1 G, so L^T L = G D^-2 G, applied as "
                 "G^-1 D^2 G^-1) leaves the control weights W^2 (2% of the diagonal) outside the preconditioner, and CG "
                 "pays about one iteration per outlying eigenvalue.",
             )
         )
     write_markdown(
-        "scale.md", "Scale: CHOLMOD against the iterative path (PCG + smoothed-aggregation AMG)", sections
+        "scale.md", "Scale: every operation at 1M-10M vertices, peers, memory and solvers", sections
     )
 
 
