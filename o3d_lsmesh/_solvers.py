@@ -331,7 +331,7 @@ def user_stacklevel() -> int:
     ``SPDSolver``) is about the user's call, so it should name the user's line;
     a fixed ``stacklevel`` would be right for one call path only.
     """
-    frame = sys._getframe(1)  # the caller of user_stacklevel, i.e. the function that warns
+    frame: Any = sys._getframe(1)  # the caller of user_stacklevel, i.e. the function that warns
     level = 1
     while frame is not None and os.path.abspath(frame.f_code.co_filename).startswith(_PACKAGE_DIR + os.sep):
         frame = frame.f_back
@@ -498,6 +498,7 @@ class SPDSolver:
     def shape(self) -> tuple[int, int]:
         if self._product_of is not None:
             return (self._product_of.shape[0],) * 2
+        assert self._matrix is not None  # one of the two is always set
         return self._matrix.shape
 
     @property
@@ -522,6 +523,7 @@ class SPDSolver:
                 product = c @ c.T
                 self._matrix = (self._matrix + (sp.tril(product) if self._lower else product)).tocsc()
             self._pending.clear()
+            assert self._matrix is not None
             self._matrix.sort_indices()
 
     def _factorize(self, *, analyze: bool) -> None:
@@ -560,6 +562,7 @@ class SPDSolver:
                 "refactor takes a matrix, and this solver factors a product: build a new SPDSolver"
             )
         csc = _as_csc(matrix)
+        assert self._matrix is not None  # a product solver raised above
         if csc.shape != self._matrix.shape:
             raise ValueError(f"matrix must have shape {self._matrix.shape}, got {csc.shape}")
         with self._lock:
@@ -611,6 +614,7 @@ class SPDSolver:
             if not np.isfinite(x0).all():
                 raise ValueError("x0 must be finite")
         precondition = self._preconditioner()
+        assert self._matrix is not None  # the iterative path takes matrices only
         x, self.iterations, self.residual = _block_cg(
             self._matrix.tocsr() if not sp.isspmatrix_csr(self._matrix) else self._matrix,
             b,

@@ -27,7 +27,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._solvers import SPDSolver, check_constant_modes, check_finite, operator_scale, solver_backend
-from ..topology import EdgeStructure, _group, boundary_curves, edge_structure, ring_pattern
+from ..topology import BoundaryCurves, EdgeStructure, _group, boundary_curves, edge_structure, ring_pattern
 
 __all__ = [
     "DEFAULT_MU",
@@ -74,7 +74,7 @@ class FairingTopology:
     valence: np.ndarray
     boundary: np.ndarray
     interior_triangles: np.ndarray
-    loops: list = field(default_factory=list)
+    loops: BoundaryCurves | list = field(default_factory=list)
     structure: EdgeStructure | None = None
 
 
@@ -102,7 +102,9 @@ def fairing_topology(
     boundary = np.zeros(n, dtype=bool)
     boundary[es.edges[es.counts != 2].ravel()] = True
     interior_triangles = np.flatnonzero(~boundary[triangles].any(axis=1))
-    loops = boundary_curves(triangles, n, edges=es) if with_loops and boundary.any() else []
+    loops: BoundaryCurves | list = (
+        boundary_curves(triangles, n, edges=es) if with_loops and boundary.any() else []
+    )
     return FairingTopology(n, es.edges, es.inverse, valence, boundary, interior_triangles, loops, es)
 
 
@@ -279,18 +281,20 @@ def local_operator(triangles: np.ndarray, topo: FairingTopology) -> LocalOperato
     del count
     # slot s of a triangle is its edge (i_s, i_{s+1}); halfedges() rows s*m + t
     head = [1, 2, 0]
-    slot_edge = np.empty((k, 3), dtype=inverse.dtype)  # t-major like corners
+    slot_edges = np.empty((k, 3), dtype=inverse.dtype)  # t-major like corners
     for slot in range(3):
-        slot_edge[:, slot] = inverse[slot * m + sel]
-    slot_edge = slot_edge.reshape(-1)
+        slot_edges[:, slot] = inverse[slot * m + sel]
+    slot_edge = slot_edges.reshape(-1)
+    del slot_edges
     # row of every (triangle, slot) in the per-group tables below: which coefficient goes
     # forward (row lo) and which backward depends on whether i_s < i_{s+1}
-    pick = np.empty((k, 3), dtype=index)
+    picks = np.empty((k, 3), dtype=index)
     for slot in range(3):
-        np.multiply(group, 6, out=pick[:, slot])
-        pick[:, slot] += 2 * slot
-        pick[:, slot] += tri[:, slot] < tri[:, head[slot]]
-    pick = pick.reshape(-1)
+        np.multiply(group, 6, out=picks[:, slot])
+        picks[:, slot] += 2 * slot
+        picks[:, slot] += tri[:, slot] < tri[:, head[slot]]
+    pick = picks.reshape(-1)
+    del picks
     # sums over the interior triangles as sparse products: every slot scattered onto its edge,
     # every corner onto its vertex (one (3k,) coefficient column at a time)
     unit = np.ones(3 * k)
