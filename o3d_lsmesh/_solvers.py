@@ -721,6 +721,13 @@ def _amg_preconditioner(matrix: sp.spmatrix) -> Any:
         # a local (Gershgorin) bound for the prolongation smoother's step instead of pyamg's
         # default eigenvalue estimate, which took a fifth of the whole solve at 100k vertices
         smooth=("jacobi", {"weighting": "local"}),
+        # one forward Gauss-Seidel sweep before the coarse correction and one backward sweep after
+        # (the pair keeps the V-cycle symmetric, as CG needs) instead of pyamg's default symmetric
+        # block sweeps on both sides: 135 iterations against 102, but 10% less CPU time per solve
+        # (6.6 s against 7.3 s; LS mesh, 2% controls, 100k vertices, same residual and difference to
+        # CHOLMOD, 3e-9)
+        presmoother=("gauss_seidel", {"sweep": "forward"}),
+        postsmoother=("gauss_seidel", {"sweep": "backward"}),
         max_coarse=500,
         coarse_solver="splu",
     )
