@@ -1,6 +1,14 @@
-"""Scale: LS meshes and global fairing at 1M+ vertices, CHOLMOD against the iterative path.
+"""Scale: every operation at 1M-10M vertices against its peer; CHOLMOD against the iterative path.
 
-Run: ``.venv/bin/python benchmarks/bench_scale.py [--sizes 1000000 4000000] [--ops lsmesh,fairing]
+Peers: ``.venv/bin/python benchmarks/bench_scale.py --peers local,hierarchy --sizes 1000000 4000000``
+runs each (operation, size) and its peer (Open3D ``filter_smooth_laplacian(10)`` for local fairing,
+fast-simplification for the hierarchy; none for LS meshes, global fairing and multiresolution fairing
+at sizes CHOLMOD cannot hold) in a fresh subprocess under an address-space limit (``--limit-gb``,
+default 16: ``ulimit -v``), so that a blow-up cannot take down a shared machine; writes
+``benchmarks/results/scale.md`` (time, CPU time, peak memory, ratios; with ``--memory N`` the peak
+per vertex of every public operation at ``N`` vertices).
+
+Solvers: ``.venv/bin/python benchmarks/bench_scale.py [--sizes 1000000 4000000] [--ops lsmesh,fairing]
 [--iterative-only-above N]``. Every (mesh, operation, solver) runs in a fresh subprocess so that its
 peak memory (``ru_maxrss``) is its own. Meshes: a seeded noisy UV sphere (the issue's generator) and
 a real mesh subdivided (midpoint) to about the same size. Reports time, peak memory, the iterative
@@ -202,6 +210,160 @@ def study(n: int) -> str:
     return rows
 
 
+PEER_HEADER = [
+    "operation",
+    "mesh vertices",
+    "ours s",
+    "ours CPU s",
+    "ours peak GB",
+    "peer",
+    "peer s",
+    "peer CPU s",
+    "peer peak GB",
+    "time ratio",
+    "CPU ratio",
+    "peak ratio",
+    "load",
+]
+#: operation -> (ours, peer or None); each a statement run on ``mesh`` (an Open3D legacy mesh) with
+#: ``V, F`` its arrays and ``n`` the vertex count
+PEER_OPS = {
+    "local": (
+        "constrained_fairing(mesh, 10, method='local')",
+        ("Open3D filter_smooth_laplacian(10)", "mesh.filter_smooth_laplacian(10)"),
+    ),
+    "hierarchy": (
+        "build_hierarchy(mesh, min_vertices=n // 100)",
+        ("fast-simplification to n/100", "fast_simplification.simplify(V, F32, target_count=len(F) // 100)"),
+    ),
+    "multires": ("multiresolution_fairing(mesh, level=4)", None),
+    "lsmesh": ("ls_mesh(mesh, controls(n), solver='auto')", None),
+    "global": ("constrained_fairing(mesh, 2, method='global')", None),
+}
+MEMORY_OPS = {
+    "laplacian (uniform)": "laplacian(mesh)",
+    "constrained_fairing local, 10 its": "constrained_fairing(mesh, 10, method='local')",
+    "constrained_fairing global, 2 its": "constrained_fairing(mesh, 2, method='global')",
+    "constrained_fairing scan (default)": "constrained_fairing(mesh)",
+    "smooth_boundary_curves, 10 its": "smooth_boundary_curves(mesh, 10)",
+    "ls_mesh, 2% controls": "ls_mesh(mesh, controls(n))",
+    "build_hierarchy to n/100": "build_hierarchy(mesh, min_vertices=n // 100)",
+    "multiresolution_fairing level 4": "multiresolution_fairing(mesh, level=4)",
+    "Open3D filter_smooth_laplacian(10)": "mesh.filter_smooth_laplacian(10)",
+}
+
+
+def _one(statement: str, n: int, out) -> None:
+    """Run one statement on a fresh noisy sphere; print a JSON line with times and peaks (child process)."""
+    import json
+    import sys
+
+    sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    import fast_simplification
+    import open3d as o3d
+
+    from o3d_lsmesh import (
+        build_hierarchy,
+        constrained_fairing,
+        laplacian,
+        ls_mesh,
+        multiresolution_fairing,
+        smooth_boundary_curves,
+    )
+
+    V, F = noisy_sphere(n)
+    mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(V), o3d.utility.Vector3iVector(F))
+    F32 = F.astype(np.int32)
+    n = len(V)
+    names = dict(
+        o3d=o3d,
+        fast_simplification=fast_simplification,
+        build_hierarchy=build_hierarchy,
+        constrained_fairing=constrained_fairing,
+        laplacian=laplacian,
+        ls_mesh=ls_mesh,
+        multiresolution_fairing=multiresolution_fairing,
+        smooth_boundary_curves=smooth_boundary_curves,
+        controls=controls,
+        mesh=mesh,
+        V=V,
+        F=F,
+        F32=F32,
+        n=n,
+    )
+    base = peak_rss_mb()
+    start, cpu = time.perf_counter(), time.process_time()
+    result = eval(statement, names)  # a fixed table of statements
+    seconds, cpu = time.perf_counter() - start, time.process_time() - cpu
+    del result
+    json.dump({"n": n, "s": seconds, "cpu": cpu, "peak": peak_rss_mb(), "base": base}, out)
+    out.write("\n")
+    out.flush()
+
+
+def run_one(statement: str, n: int, limit_gb: float) -> dict | None:
+    """``statement`` in a fresh interpreter under ``ulimit -v`` of ``limit_gb``; None if it failed."""
+    import json
+    import resource
+    import subprocess
+    import sys
+
+    limit = int(limit_gb * 1024**3)
+
+    def cap() -> None:
+        resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
+
+    here = os.path.dirname(os.path.abspath(__file__))
+    code = f"import sys; sys.path.insert(0, {here!r}); import bench_scale; bench_scale._one({statement!r}, {n}, sys.stdout)"
+    proc = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, preexec_fn=cap, timeout=1800
+    )
+    lines = [line for line in proc.stdout.splitlines() if line.startswith("{")]
+    if proc.returncode != 0 or not lines:
+        print(f"failed ({proc.returncode}): {statement} at {n}: {proc.stderr[-600:]}", flush=True)
+        return None
+    return json.loads(lines[-1])
+
+
+def peers(ops: list, sizes: list, limit_gb: float) -> list:
+    rows = []
+    for n in sizes:
+        for op in ops:
+            ours_statement, peer = PEER_OPS[op]
+            ours = run_one(ours_statement, n, limit_gb)
+            other = run_one(peer[1], n, limit_gb) if peer else None
+            if ours is None:
+                rows.append([ours_statement, n, "failed", "", "", peer[0] if peer else "-"] + [""] * 7)
+                continue
+            row = [ours_statement, ours["n"], ours["s"], ours["cpu"], ours["peak"] / 1024]
+            if other:
+                row += [peer[0], other["s"], other["cpu"], other["peak"] / 1024]
+                row += [ours["s"] / other["s"], ours["cpu"] / other["cpu"], ours["peak"] / other["peak"]]
+            else:
+                row += [peer[0] if peer else "-", "", "", "", "", "", ""]
+            row.append(round(os.getloadavg()[0], 1))
+            rows.append(row)
+            print(row, flush=True)
+    return rows
+
+
+def memory_table(n: int, limit_gb: float) -> list:
+    rows = []
+    baseline = run_one("None", n, limit_gb)
+    for label, statement in MEMORY_OPS.items():
+        got = run_one(statement, n, limit_gb)
+        if got is None:
+            rows.append([label, n, "failed", "", "", ""])
+            continue
+        over = got["peak"] - baseline["peak"]
+        rows.append([label, got["n"], got["s"], got["peak"] / 1024, over / 1024, over * 1024**2 / got["n"]])
+        print(rows[-1], flush=True)
+    return rows
+
+
+MEMORY_HEADER = ["operation", "vertices", "time s", "peak GB", "peak over mesh GB", "bytes per vertex"]
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", type=int, nargs="*", default=[1_000_000])
@@ -220,7 +382,21 @@ def main() -> None:
         default=0,
         help="also compare preconditioners on an LS-mesh system of this many vertices",
     )
+    parser.add_argument("--peers", default="", help="operations against their peers: " + ",".join(PEER_OPS))
+    parser.add_argument(
+        "--memory", type=int, default=0, help="peak per vertex of every operation at this size"
+    )
+    parser.add_argument(
+        "--limit-gb", type=float, default=16.0, help="address-space limit of every subprocess"
+    )
     args = parser.parse_args()
+    if args.peers:
+        merged("scale_peers.jsonl", PEER_HEADER, peers(args.peers.split(","), args.sizes, args.limit_gb), 2)
+    if args.memory:
+        merged("scale_memory.jsonl", MEMORY_HEADER, memory_table(args.memory, args.limit_gb), 2)
+    if args.peers or args.memory:
+        write_scale(args.limit_gb)
+        return
     study_rows = study(args.study) if args.study else []
     rows = []
     tmp = tempfile.mkdtemp(prefix="bench_scale_")
@@ -263,21 +439,56 @@ def main() -> None:
                             round(os.getloadavg()[0], 1),
                         ]
                     )
-    every = merged("scale.jsonl", HEADER, rows, 4)
+    merged("scale.jsonl", HEADER, rows, 4)
+    merged("scale_study.jsonl", STUDY_HEADER, study_rows, 2)
+    write_scale(args.limit_gb)
+
+
+def write_scale(limit_gb: float) -> None:
+    """``results/scale.md`` from every measurement so far (results/scale*.jsonl): peers, memory, solvers."""
+    sections = []
+    peers_rows = merged("scale_peers.jsonl", PEER_HEADER, [], 2)
+    if peers_rows:
+        sections.append(
+            (
+                "Every operation against its peer (noisy UV sphere, one subprocess per run)",
+                markdown_table(PEER_HEADER, peers_rows)
+                + "\n\nEach cell is its own subprocess (peak = ru_maxrss, including the mesh generated in "
+                "it, the same for both columns) under an address-space limit of "
+                f"{limit_gb:g} GB (ulimit -v). 'CPU' is process time: the machine ({os.cpu_count()} cores) was "
+                "shared with other jobs (load in the last column), so wall-clock ratios swing with the load; "
+                "CPU ratios hold better.",
+            )
+        )
+    memory_rows = merged("scale_memory.jsonl", MEMORY_HEADER, [], 2)
+    if memory_rows:
+        sections.append(
+            (
+                "Peak memory per vertex of every public operation",
+                markdown_table(MEMORY_HEADER, memory_rows)
+                + "\n\nPeak over mesh: the operation's subprocess peak minus that of a subprocess that only "
+                "generates the same Open3D mesh (imports included in both), per vertex of the input.",
+            )
+        )
+    every = merged("scale.jsonl", HEADER, [], 4)
     # the time ratio also across runs: a row's CHOLMOD partner may come from another invocation
     cholmod_time = {tuple(r[:3]): r[4] for r in every if r[3] == "cholmod"}
     for r in every:
         if r[5] == "" and tuple(r[:3]) in cholmod_time:
             r[5] = r[4] / cholmod_time[tuple(r[:3])]
-    table = markdown_table(HEADER, every)
-    studied = merged("scale_study.jsonl", STUDY_HEADER, study_rows, 2)
     note = (
         "\n\nOne subprocess per row (peak = its ru_maxrss; 'over input' subtracts the peak once the mesh was "
         f"generated). 'load' is the 1-minute load average when the row finished, on {os.cpu_count()} cores shared "
         "with other jobs: read the ratios within a size, not the seconds. Sizes accumulate across runs "
         "(results/scale.jsonl)."
     )
-    sections = [("CHOLMOD against the iterative path", table + note)]
+    sections.append(
+        (
+            "CHOLMOD against the iterative path (PCG + smoothed-aggregation AMG)",
+            markdown_table(HEADER, every) + note,
+        )
+    )
+    studied = merged("scale_study.jsonl", STUDY_HEADER, [], 2)
     if studied:
         sections.append(
             (
@@ -285,13 +496,14 @@ def main() -> None:
                 markdown_table(STUDY_HEADER, studied)
                 + "\n\nSmoothed aggregation on the normal matrix with the constant as near-null space (ours) costs the "
                 "least: linear near-null-space candidates (B = [1, x, y, z]) save iterations (84 against 97 at 50k, "
-                "51 against 77 at 5k) but double the setup and raise the operator complexity, for no gain in time; AMG on the second-order graph Laplacian G (L = D^-1 G, so L^T L = G D^-2 G, applied as "
+                "51 against 77 at 5k) but double the setup and raise the operator complexity, for no gain in time; "
+                "AMG on the second-order graph Laplacian G (L = D^-1 G, so L^T L = G D^-2 G, applied as "
                 "G^-1 D^2 G^-1) leaves the control weights W^2 (2% of the diagonal) outside the preconditioner, and CG "
                 "pays about one iteration per outlying eigenvalue.",
             )
         )
     write_markdown(
-        "scale.md", "Scale: CHOLMOD against the iterative path (PCG + smoothed-aggregation AMG)", sections
+        "scale.md", "Scale: every operation at 1M-10M vertices, peers, memory and solvers", sections
     )
 
 

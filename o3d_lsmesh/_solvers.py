@@ -31,6 +31,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ._errors import ConvergenceError, O3DLSMeshWarning, SingularSystemError
+from ._progress import progress_bar
 from ._validate import as_choice
 
 __all__ = [
@@ -330,7 +331,7 @@ def user_stacklevel() -> int:
     ``SPDSolver``) is about the user's call, so it should name the user's line;
     a fixed ``stacklevel`` would be right for one call path only.
     """
-    frame = sys._getframe(1)  # the caller of user_stacklevel, i.e. the function that warns
+    frame: Any = sys._getframe(1)  # the caller of user_stacklevel, i.e. the function that warns
     level = 1
     while frame is not None and os.path.abspath(frame.f_code.co_filename).startswith(_PACKAGE_DIR + os.sep):
         frame = frame.f_back
@@ -497,6 +498,7 @@ class SPDSolver:
     def shape(self) -> tuple[int, int]:
         if self._product_of is not None:
             return (self._product_of.shape[0],) * 2
+        assert self._matrix is not None  # one of the two is always set
         return self._matrix.shape
 
     @property
@@ -521,6 +523,7 @@ class SPDSolver:
                 product = c @ c.T
                 self._matrix = (self._matrix + (sp.tril(product) if self._lower else product)).tocsc()
             self._pending.clear()
+            assert self._matrix is not None
             self._matrix.sort_indices()
 
     def _factorize(self, *, analyze: bool) -> None:
@@ -559,6 +562,7 @@ class SPDSolver:
                 "refactor takes a matrix, and this solver factors a product: build a new SPDSolver"
             )
         csc = _as_csc(matrix)
+        assert self._matrix is not None  # a product solver raised above
         if csc.shape != self._matrix.shape:
             raise ValueError(f"matrix must have shape {self._matrix.shape}, got {csc.shape}")
         with self._lock:
@@ -610,6 +614,7 @@ class SPDSolver:
             if not np.isfinite(x0).all():
                 raise ValueError("x0 must be finite")
         precondition = self._preconditioner()
+        assert self._matrix is not None  # the iterative path takes matrices only
         x, self.iterations, self.residual = _block_cg(
             self._matrix.tocsr() if not sp.isspmatrix_csr(self._matrix) else self._matrix,
             b,
@@ -716,6 +721,13 @@ def _amg_preconditioner(matrix: sp.spmatrix) -> Any:
         # a local (Gershgorin) bound for the prolongation smoother's step instead of pyamg's
         # default eigenvalue estimate, which took a fifth of the whole solve at 100k vertices
         smooth=("jacobi", {"weighting": "local"}),
+        # one forward Gauss-Seidel sweep before the coarse correction and one backward sweep after
+        # (the pair keeps the V-cycle symmetric, as CG needs) instead of pyamg's default symmetric
+        # block sweeps on both sides: 135 iterations against 102, but 10% less CPU time per solve
+        # (6.6 s against 7.3 s; LS mesh, 2% controls, 100k vertices, same residual and difference to
+        # CHOLMOD, 3e-9)
+        presmoother=("gauss_seidel", {"sweep": "forward"}),
+        postsmoother=("gauss_seidel", {"sweep": "backward"}),
         max_coarse=500,
         coarse_solver="splu",
     )
@@ -772,11 +784,9 @@ def _block_cg(
     relative[norms == 0] = 0.0
     if norms.size and not (norms > 0).any():
         return (np.zeros_like(b), 0, 0.0)
-    bar = None
-    if progress:
-        from tqdm.auto import tqdm
-
-        bar = tqdm(total=max_iterations, desc="conjugate gradients", leave=False)
+    # the residual shows in the bar; its total (the iteration cap) shrinks to the count reached on success
+    bar = progress_bar(progress, total=max_iterations, desc="conjugate gradients")
+    converged = False
     Z = precondition(R)
     P = Z.copy()
     rz = np.einsum("ij,ij->j", R, Z)
@@ -802,17 +812,18 @@ def _block_cg(
             relative = np.linalg.norm(R, axis=0) / scale
             relative[norms == 0] = 0.0
             iteration += 1
-            if bar is not None:
-                bar.update(1)
-                bar.set_postfix(residual=f"{relative.max():.2e}", refresh=False)
+            bar.update(1)
+            bar.set_postfix_str(f"residual={relative.max():.2e}", refresh=False)
             Z = precondition(R)
             rz_new = np.einsum("ij,ij->j", R, Z)
             beta = np.where(active, rz_new / np.where(rz != 0, rz, 1.0), 0.0)
             P = Z + beta * P
             rz = rz_new
+        converged = True
     finally:
-        if bar is not None:
-            bar.close()
+        if converged:
+            bar.total = iteration
+        bar.close()
     if not np.isfinite(X).all():
         raise SingularSystemError("conjugate gradients diverged: the matrix is not positive definite")
     return (X[:, 0] if vector else X), iteration, float(relative.max(initial=0.0))

@@ -45,7 +45,7 @@ from ._o3d import new_mesh, read_mesh
 from ._progress import check_progress, progress_bar
 from ._solvers import SPDSolver
 from ._validate import as_bool, as_choice, as_count, as_positive_float
-from .topology import _unique_edges_and_runs, boundary_loops
+from .topology import boundary_loops, unique_edges_and_runs
 
 if TYPE_CHECKING:
     from ._types import MeshT
@@ -83,10 +83,10 @@ def _loop_rows(triangles: np.ndarray, n: int, edge_info: Any = None) -> list[tup
     :func:`o3d_lsmesh.topology.halfedges`): the row of loop edge ``(loop[i], loop[i + 1])`` is the one
     triangle's half-edge on it (a boundary edge has exactly one).
 
-    ``edge_info`` is ``o3d_lsmesh.topology._unique_edges_and_runs`` of the mesh, if already computed.
+    ``edge_info`` is ``o3d_lsmesh.topology.unique_edges_and_runs`` of the mesh, if already computed.
     """
     if edge_info is None:
-        edge_info = _unique_edges_and_runs(triangles, n)
+        edge_info = unique_edges_and_runs(triangles, n)
     (edges, counts, inverse), runs = edge_info
     loops = boundary_loops(triangles, n, _runs=runs)
     if not loops:
@@ -168,7 +168,7 @@ def find_holes(vertices: np.ndarray, triangles: np.ndarray, *, _edge_info=None) 
     """
     n = len(vertices)
     if _edge_info is None:
-        _edge_info = _unique_edges_and_runs(triangles, n)
+        _edge_info = unique_edges_and_runs(triangles, n)
     loops = _loop_rows(triangles, n, _edge_info)
     if not loops:
         return []
@@ -744,7 +744,7 @@ def fill_holes_arrays(
     n, m = len(vertices), len(triangles)
     holes: list[Hole] = []
     skipped: list[Hole] = []
-    edge_info = _unique_edges_and_runs(triangles, n)  # the one whole-mesh sort
+    edge_info = unique_edges_and_runs(triangles, n)  # the one whole-mesh sort
     for hole in find_holes(vertices, triangles, _edge_info=edge_info):
         too_big = (max_hole_edges is not None and hole.edges > max_hole_edges) or (
             max_hole_diameter is not None and hole.diameter > max_hole_diameter

@@ -9,7 +9,7 @@ import scipy.sparse as sp
 
 from ._o3d import read_mesh
 from ._validate import as_choice
-from .topology import adjacency_matrix
+from .topology import adjacency_matrix, ring_pattern
 
 if TYPE_CHECKING:
     from ._types import AnyMesh
@@ -27,12 +27,15 @@ def _normalized(weights: sp.csr_matrix, n: int) -> sp.csr_matrix:
     return (sp.diags(has_neighbours) - sp.diags(inv) @ weights).tocsr()
 
 
-def uniform_laplacian(triangles: np.ndarray, n: int) -> sp.csr_matrix:
+def uniform_laplacian(triangles: np.ndarray, n: int, *, edges: np.ndarray | None = None) -> sp.csr_matrix:
     """Uniform Laplacian ``(n, n)`` CSR of eq. 1: ``L_ii = 1``, ``L_ij = -1/d_i`` for each edge neighbour ``j``.
 
     ``(L x)_i = x_i - mean of the neighbours of i``: positive where ``x_i`` sticks
     out above its neighbours (the sign of Least-squares Meshes, eq. 1). Rows sum
-    to zero. Rows of unreferenced vertices are all zero.
+    to zero. Rows of unreferenced vertices are all zero. ``edges``: the mesh's
+    undirected edges ``(e, 2)`` (``lo < hi``, sorted, as in
+    :class:`~o3d_lsmesh.topology.EdgeStructure`) when the caller has them:
+    the matrix is then written into the 1-ring pattern without another edge sort.
 
     Examples
     --------
@@ -41,6 +44,8 @@ def uniform_laplacian(triangles: np.ndarray, n: int) -> sp.csr_matrix:
     >>> L.toarray().tolist()
     [[1.0, -0.5, -0.5], [-0.5, 1.0, -0.5], [-0.5, -0.5, 1.0]]
     """
+    if edges is not None:
+        return _laplacian_from_edges(edges, n)
     adjacency = adjacency_matrix(triangles, n)
     indices = adjacency.indices
     degree = np.diff(adjacency.indptr)
@@ -61,6 +66,21 @@ def uniform_laplacian(triangles: np.ndarray, n: int) -> sp.csr_matrix:
     out_indices[diagonal[referenced]] = referenced
     data[diagonal[referenced]] = 1.0
     laplacian = sp.csr_matrix((data, out_indices, indptr.astype(indices.dtype)), shape=(n, n))
+    laplacian.has_canonical_format = True
+    return laplacian
+
+
+def _laplacian_from_edges(edges: np.ndarray, n: int) -> sp.csr_matrix:
+    # rows of isolated vertices keep an explicit zero on the diagonal (same operator)
+    indptr, indices, diagonal, forward, backward = ring_pattern(edges, n)
+    degree = np.bincount(edges.ravel(), minlength=n)
+    inv = np.zeros(n)
+    np.divide(-1.0, degree, out=inv, where=degree > 0)
+    data = np.empty(len(indices))
+    data[diagonal] = degree > 0
+    data[forward] = inv[edges[:, 0]]
+    data[backward] = inv[edges[:, 1]]
+    laplacian = sp.csr_matrix((data, indices, indptr), shape=(n, n))
     laplacian.has_canonical_format = True
     return laplacian
 

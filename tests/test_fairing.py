@@ -355,3 +355,77 @@ def test_raises():
     assert_allclose(
         constrained_fairing_arrays(bow, bow_triangles, 1, smooth_boundary=False, method="local"), bow, atol=0
     )
+
+
+def _soup(seed):
+    # an open, non-manifold mesh: a sphere with a hole, a fin (three triangles on one edge) and a
+    # pinched corner, numbered at random
+    V, F = noisy_sphere(resolution=10, seed=seed)
+    F = F[5:]
+    n = len(V)
+    extra = np.array([[F[0, 0], F[0, 1], n], [F[1, 0], F[1, 1], n + 1], [F[2, 2], n + 2, n + 3]])
+    V = np.vstack([V, np.random.default_rng(seed).normal(size=(4, 3))])
+    perm = np.random.default_rng(seed).permutation(len(V))
+    return V[np.argsort(perm)], perm[np.vstack([F, extra])]
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_edge_structure_equals_a_stable_sort_of_the_edge_keys(seed):
+    from o3d_lsmesh.topology import edge_structure, halfedges
+
+    V, F = _soup(seed)
+    n = len(V)
+    es = edge_structure(F, n)
+    h = halfedges(F)
+    keys = np.minimum(h[:, 0], h[:, 1]) * n + np.maximum(h[:, 0], h[:, 1])
+    order = np.argsort(keys, kind="stable")  # the reference: numpy's stable sort
+    distinct, starts, inverse, counts = np.unique(
+        keys[order], return_index=True, return_inverse=True, return_counts=True
+    )
+    assert es.order.tolist() == order.tolist()
+    assert es.starts.tolist() == starts.tolist() and es.counts.tolist() == counts.tolist()
+    assert es.edges.tolist() == np.stack([distinct // n, distinct % n], axis=1).tolist()
+    assert (es.inverse[order] == inverse).all()
+    assert (es.counts > 2).any() and (es.counts == 1).any()  # the soup has a fin and a boundary
+
+
+def test_laplacian_from_the_edge_structure_equals_the_reference():
+    from o3d_lsmesh.laplacian import uniform_laplacian
+    from o3d_lsmesh.topology import edge_structure
+
+    V, F = _soup(3)
+    n = len(V) + 2  # two unreferenced vertices: zero rows
+    L = uniform_laplacian(F, n, edges=edge_structure(F, n).edges)
+    ring = neighbours(F, n)
+    reference = np.zeros((n, n))
+    for i, js in enumerate(ring):
+        if js:
+            reference[i, i] = 1.0
+            reference[i, sorted(js)] = -1.0 / len(js)
+    assert_allclose(L.toarray(), reference, atol=TIGHT)
+    assert L.has_canonical_format and (np.diff(L.indices[L.indptr[0] : L.indptr[1]]) > 0).all()
+
+
+@pytest.mark.parametrize("method", ["local", "global"])
+def test_one_edge_sort_per_fairing_call(monkeypatch, method):
+    # issue 18: the edges of an open mesh were sorted two or three times in one call
+    import o3d_lsmesh.fairing.barycenter as barycenter
+    import o3d_lsmesh.topology as topology
+
+    calls = []
+
+    def counting(name, function):
+        def wrapped(*args, **kwargs):
+            calls.append(name)
+            return function(*args, **kwargs)
+
+        return wrapped
+
+    monkeypatch.setattr(barycenter, "edge_structure", counting("edge_structure", topology.edge_structure))
+    monkeypatch.setattr(topology, "_edge_runs", counting("_edge_runs", topology._edge_runs))
+    monkeypatch.setattr(topology, "directed_edges", counting("directed_edges", topology.directed_edges))
+    V, F = grid(12, 12)
+    V = V + np.random.default_rng(0).normal(scale=0.01, size=V.shape)
+    out = constrained_fairing_arrays(V, F, 2, method=method)
+    assert calls == ["edge_structure"]
+    assert np.isfinite(out).all() and not np.allclose(out, V)

@@ -1,4 +1,5 @@
 import pickle
+import sys
 import threading
 
 import numpy as np
@@ -287,3 +288,63 @@ def test_check_constant_modes_against_the_smallest_eigenvalue():
         else:
             check_constant_modes(N @ np.ones(len(V)), labels, scale=operator_scale(L), name="w", value=w2)
     assert operator_scale(L) == pytest.approx(np.max(np.diag((L.T @ L).toarray())))
+
+
+# peak memory over the input mesh, bytes per vertex, at 200k vertices: twice the README's
+# "Memory and scale" figures (benchmarks/results/scale_memory.md), which leaves room for allocator
+# and library-version noise but not for an extra (n, n) matrix or a dense (m, 3, 3) array
+MEMORY_BOUNDS = {
+    "constrained_fairing(mesh, 10, method='local')": 1500,
+    "ls_mesh(mesh, controls)": 6000,
+    "laplacian(mesh)": 1000,
+}
+
+_MEMORY_SCRIPT = """
+import sys, numpy as np
+from o3d_lsmesh import constrained_fairing, laplacian, ls_mesh
+
+def torus(a, b):
+    # a closed a x b grid torus: every vertex of valence 6, all sizes of scan order
+    u, v = np.meshgrid(np.arange(a), np.arange(b), indexing="ij")
+    s, t = 2 * np.pi * u.ravel() / a, 2 * np.pi * v.ravel() / b
+    V = np.stack([(3 + np.cos(t)) * np.cos(s), (3 + np.cos(t)) * np.sin(s), np.sin(t)], axis=1)
+    V += np.random.default_rng(0).normal(scale=1e-3, size=V.shape)
+    i = (u * b + v).ravel(); r = (((u + 1) % a) * b + v).ravel(); d = (u * b + (v + 1) % b).ravel()
+    rd = (((u + 1) % a) * b + (v + 1) % b).ravel()
+    F = np.concatenate([np.stack([i, r, rd], 1), np.stack([i, rd, d], 1)]).astype(np.int64)
+    return V, F
+
+def high_water_kb():
+    # VmHWM, not ru_maxrss: Linux keeps ru_maxrss across exec, so a child of a large pytest process
+    # would start at the parent's peak
+    for line in open("/proc/self/status"):
+        if line.startswith("VmHWM:"):
+            return int(line.split()[1])
+
+V, F = torus(450, 450)
+mesh = (V, F)
+controls = np.arange(0, len(V), 50)
+base = high_water_kb()
+out = eval(sys.argv[1])
+print((high_water_kb() - base) * 1024 / len(V))
+"""
+
+
+@pytest.mark.parametrize("statement", sorted(MEMORY_BOUNDS))
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads VmHWM from /proc/self/status")
+def test_peak_memory_per_vertex_at_200k(statement):
+    # a subprocess, so that the peak (its VmHWM) is this operation's alone
+    import os
+    import subprocess
+
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([os.getcwd(), os.environ.get("PYTHONPATH", "")])}
+    proc = subprocess.run(
+        [sys.executable, "-c", _MEMORY_SCRIPT, statement],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=900,
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    per_vertex = float(proc.stdout.strip().splitlines()[-1])
+    assert 0 < per_vertex <= MEMORY_BOUNDS[statement], (statement, per_vertex)

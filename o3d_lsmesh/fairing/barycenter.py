@@ -27,7 +27,14 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._solvers import SPDSolver, check_constant_modes, check_finite, operator_scale, solver_backend
-from ..topology import boundary_curves, group_keys, unique_edges
+from ..topology import (
+    BoundaryCurves,
+    EdgeStructure,
+    boundary_curves,
+    edge_structure,
+    group_keys,
+    ring_pattern,
+)
 
 __all__ = [
     "DEFAULT_MU",
@@ -64,6 +71,8 @@ class FairingTopology:
         Indices of the triangles with no boundary vertex.
     loops : BoundaryCurves or list
         The boundary curves: loops through pinches, chains ending at fins (empty unless asked for).
+    structure : EdgeStructure or None
+        The edge structure all of the above come from (one edge sort per call).
     """
 
     n: int
@@ -72,10 +81,13 @@ class FairingTopology:
     valence: np.ndarray
     boundary: np.ndarray
     interior_triangles: np.ndarray
-    loops: list = field(default_factory=list)
+    loops: BoundaryCurves | list = field(default_factory=list)
+    structure: EdgeStructure | None = None
 
 
-def fairing_topology(triangles: np.ndarray, n: int, *, with_loops: bool) -> FairingTopology:
+def fairing_topology(
+    triangles: np.ndarray, n: int, *, with_loops: bool, edges: EdgeStructure | None = None
+) -> FairingTopology:
     """Edges, valences, boundary and interior triangles of a mesh; the boundary curves if ``with_loops``.
 
     ``boundary`` marks the vertices on an edge of one triangle and the
@@ -87,14 +99,20 @@ def fairing_topology(triangles: np.ndarray, n: int, *, with_loops: bool) -> Fair
     :func:`.boundary_curve.curve_operator` takes.
     Vertices joining several fans (two surfaces touching at a point, or a
     pinched boundary) are accepted: their uniform 1-ring is the union of the fans.
+    The edges are sorted once (:func:`~o3d_lsmesh.topology.edge_structure`,
+    or ``edges`` when the caller has it) and that one structure serves the
+    valences, the boundary, the boundary curves and, through :attr:`structure`,
+    the operators built on it.
     """
-    edges, counts, inverse = unique_edges(triangles, n)
-    valence = np.bincount(edges.ravel(), minlength=n).astype(np.int64)
+    es = edge_structure(triangles, n) if edges is None else edges
+    valence = np.bincount(es.edges.ravel(), minlength=n).astype(np.int64)
     boundary = np.zeros(n, dtype=bool)
-    boundary[edges[counts != 2].ravel()] = True
+    boundary[es.edges[es.counts != 2].ravel()] = True
     interior_triangles = np.flatnonzero(~boundary[triangles].any(axis=1))
-    loops = boundary_curves(triangles, n) if with_loops and boundary.any() else []
-    return FairingTopology(n, edges, inverse, valence, boundary, interior_triangles, loops)
+    loops: BoundaryCurves | list = (
+        boundary_curves(triangles, n, edges=es) if with_loops and boundary.any() else []
+    )
+    return FairingTopology(n, es.edges, es.inverse, valence, boundary, interior_triangles, loops, es)
 
 
 def triangle_coefficients(valences: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -138,8 +156,17 @@ def _valence_tables(valences: np.ndarray):
     valences = np.asarray(valences, dtype=np.int64).reshape(-1, 3)
     if len(valences) == 0:
         return np.zeros(0, dtype=np.int64), np.ones((0, 3)), np.zeros((0, 3, 3)), np.zeros((0, 3))
-    base = np.int64(valences.max() + 1)
-    keys = (valences[:, 0] * base + valences[:, 1]) * base + valences[:, 2]
+    # key on the rank of each valence among the distinct ones (a few dozen even with a
+    # pole of valence 1000): the triple keys then fit the dense look-up below
+    present_valence = np.zeros(int(valences.max()) + 1, dtype=bool)
+    present_valence[valences.ravel()] = True
+    values = np.flatnonzero(present_valence)
+    rank = np.zeros(len(present_valence), dtype=np.int64)
+    rank[values] = np.arange(len(values))
+    ranked = rank[valences]
+    base = np.int64(len(values))
+    keys = (ranked[:, 0] * base + ranked[:, 1]) * base + ranked[:, 2]
+    del ranked
     # group the (few hundred) distinct valence triples: a dense look-up when the
     # key range is small (the usual case), else sort-and-mask
     if base**3 <= 1 << 22:
@@ -151,9 +178,8 @@ def _valence_tables(valences: np.ndarray):
         group = slot[keys]
     else:
         distinct, group = _sorted_groups(keys)
-    table = np.stack([distinct // (base * base), (distinct // base) % base, distinct % base], axis=1).astype(
-        np.float64
-    )
+    table = values[np.stack([distinct // (base * base), (distinct // base) % base, distinct % base], axis=1)]
+    table = table.astype(np.float64)
     g = len(table)
     A = np.repeat(np.eye(3)[None], g, axis=0) - (1.0 / table)[:, :, None] * (1.0 - np.eye(3))[None]
     kkt = np.zeros((g, 4, 4))
@@ -185,27 +211,43 @@ class LocalOperator:
         X_new = E1 @ (W @ X) + E2 @ X + E3 @ X0,
 
     where ``E1, E2`` have the pattern of the 1-ring (edges plus diagonal) and
-    already hold the ``1/count`` of the averaging. ``E3 @ X0`` (the
-    constraint part) is computed once per set of targets by :meth:`constant`
-    as ``spread @ (centers @ X0)``: ``centers`` ``(k, n)`` sums each interior
-    triangle's vertices (``C``) and ``spread`` ``(n, k)`` hands ``u_a / count``
-    of it to vertex ``i_a``; both have three entries per triangle and are
-    built without sorting. Vertices with no interior triangle (boundary and
-    isolated vertices, or interior vertices whose every triangle touches the
-    boundary) get an identity row in ``E2`` and a zero constant. One
-    iteration costs three sparse mat-vecs on ``(n, 3)``. The object only
-    holds arrays: it pickles and may be shared between threads.
+    already hold the ``1/count`` of the averaging; the three matrices share one
+    index array (int32 where it fits). ``E3 @ X0`` (the constraint part) is
+    computed once per set of targets by :meth:`constant`, from the interior
+    triangles' corners and their valence-triple group (``u_a / count`` of ``C``
+    handed to vertex ``i_a``), so no ``(n, k)`` matrix is kept. Vertices with
+    no interior triangle (boundary and isolated vertices, or interior vertices
+    whose every triangle touches the boundary) get an identity row in ``E2``
+    and a zero constant. One iteration costs three sparse mat-vecs on
+    ``(n, 3)`` over the 1-ring pattern (about 20 entries per vertex; the one
+    2-ring matrix ``E1 W + E2`` has about as many and would cost a sparse
+    product to set up). The object only holds arrays: it pickles and may be
+    shared between threads.
     """
 
     adjacency: sp.csr_matrix
     e1: sp.csr_matrix
     e2: sp.csr_matrix
-    centers: sp.csr_matrix
-    spread: sp.csc_matrix
+    corners: np.ndarray  # (k, 3) interior triangles (int32 where it fits)
+    group: np.ndarray  # (k,) valence-triple group of each
+    u: np.ndarray  # (g, 3) eq. 7's u per group
+    scale: np.ndarray  # (n,) 1 / number of estimates
 
     def constant(self, positions0: np.ndarray) -> np.ndarray:
         """``E3 @ X0``, the constraint part, ``(n, 3)``."""
-        return self.spread @ (self.centers @ positions0)
+        n, corners = len(self.scale), self.corners
+        out = np.zeros((n, 3))
+        k = len(corners)
+        if k == 0:
+            return out
+        center = positions0[corners[:, 0]]
+        center += positions0[corners[:, 1]]
+        center += positions0[corners[:, 2]]
+        first = np.arange(k + 1, dtype=corners.dtype)
+        for a in range(3):
+            share = self.u[self.group, a] * self.scale[corners[:, a]]
+            out += sp.csc_matrix((share, corners[:, a], first), shape=(n, k)) @ center
+        return out
 
     def step(self, positions: np.ndarray, constant: np.ndarray) -> np.ndarray:
         """``E1 @ (W @ X) + E2 @ X + constant``, ``(n, 3)``."""
@@ -215,99 +257,92 @@ class LocalOperator:
         return out
 
 
-def _ring_pattern(edges: np.ndarray, n: int):
-    """CSR layout of the 1-ring pattern (diagonal plus both directions of every edge).
-
-    Row ``v`` holds, in this order, its diagonal, the edges where ``v`` is the
-    larger end (backward) and the edges where ``v`` is the smaller end
-    (forward). Returns ``indptr (n+1,)``, ``indices (nnz,)`` and the CSR
-    positions of the diagonal ``(n,)``, of each edge forward ``(e,)`` and of
-    each edge backward ``(e,)``. Computed from counts and one stable sort of
-    the edges by their larger end, so that data can be scattered straight
-    into CSR order.
-    """
-    lo, hi = edges[:, 0], edges[:, 1]
-    n_forward = np.bincount(lo, minlength=n)
-    n_backward = np.bincount(hi, minlength=n)
-    indptr = np.zeros(n + 1, dtype=np.int64)
-    np.cumsum(1 + n_forward + n_backward, out=indptr[1:])
-    diagonal = indptr[:-1]
-    # edges are sorted by (lo, hi), so the forward edges of a row are contiguous
-    first_forward = np.zeros(n, dtype=np.int64)
-    np.cumsum(n_forward[:-1], out=first_forward[1:])
-    forward = np.arange(len(edges), dtype=np.int64)
-    forward += (diagonal + 1 + n_backward - first_forward)[lo]
-    by_hi = np.argsort(hi, kind="stable")
-    first_backward = np.zeros(n, dtype=np.int64)
-    np.cumsum(n_backward[:-1], out=first_backward[1:])
-    backward = np.empty(len(edges), dtype=np.int64)
-    backward[by_hi] = np.arange(len(edges), dtype=np.int64) + (diagonal + 1 - first_backward)[hi[by_hi]]
-    indices = np.empty(indptr[-1], dtype=np.int64)
-    indices[diagonal] = np.arange(n)
-    indices[forward] = hi
-    indices[backward] = lo
-    return indptr, indices, diagonal, forward, backward
-
-
 def local_operator(triangles: np.ndarray, topo: FairingTopology) -> LocalOperator:
     """Assemble the :class:`LocalOperator` of the interior triangles of ``triangles``.
 
     Every coefficient depends only on a triangle's valence triple, so the
     per-triangle work is gathers from small tables and ``bincount`` sums into
     the diagonal (per vertex) and the two directions of every edge; no
-    ``(k, 3, 3)`` array is formed.
+    ``(k, 3, 3)`` array is formed and nothing is sorted (the 1-ring pattern
+    comes from the edge structure of ``topo``).
     """
     n, edges, inverse = topo.n, topo.edges, topo.inverse
     m = len(triangles)
     sel = topo.interior_triangles
-    tri = triangles[sel]  # (k, 3)
+    index = np.int32 if max(3 * m, n) < np.iinfo(np.int32).max else np.int64
+    tri = triangles[sel].astype(index)  # (k, 3)
     k = len(tri)
     group, table, M, u = _valence_tables(topo.valence[tri])
+    group = group.astype(index)
     alpha = M / table[:, None, :]  # (g, 3, 3): coefficient of S_{i_b} in P_a
     beta = alpha - alpha.sum(axis=2, keepdims=True)  # coefficient of x_{i_c}: -sum_{b != c} alpha_ab
 
-    count = np.bincount(tri.ravel(), minlength=n)  # estimates per vertex
+    # the 1-ring pattern first: its temporaries are gone before the per-slot arrays exist
+    indptr, indices, diagonal, forward, backward = ring_pattern(edges, n)
+    nnz, e = len(indices), len(edges)
+
+    corners = tri.reshape(-1)
+    count = np.bincount(corners, minlength=n)  # estimates per vertex
     no_estimate = count == 0
     scale = 1.0 / np.maximum(count, 1)
+    del count
     # slot s of a triangle is its edge (i_s, i_{s+1}); halfedges() rows s*m + t
     head = [1, 2, 0]
-    slot_edge = inverse.reshape(3, m)[:, sel].T.ravel()  # (3k,) t-major like tri.ravel()
-    tail_is_lo = (tri < tri[:, head]).ravel()
+    slot_edges = np.empty((k, 3), dtype=inverse.dtype)  # t-major like corners
+    for slot in range(3):
+        slot_edges[:, slot] = inverse[slot * m + sel]
+    slot_edge = slot_edges.reshape(-1)
+    del slot_edges
+    # row of every (triangle, slot) in the per-group tables below: which coefficient goes
+    # forward (row lo) and which backward depends on whether i_s < i_{s+1}
+    picks = np.empty((k, 3), dtype=index)
+    for slot in range(3):
+        np.multiply(group, 6, out=picks[:, slot])
+        picks[:, slot] += 2 * slot
+        picks[:, slot] += tri[:, slot] < tri[:, head[slot]]
+    pick = picks.reshape(-1)
+    del picks
+    # sums over the interior triangles as sparse products: every slot scattered onto its edge,
+    # every corner onto its vertex (one (3k,) coefficient column at a time)
+    unit = np.ones(3 * k)
+    first = np.arange(3 * k + 1, dtype=index)
+    onto_edges = sp.csc_matrix((unit, slot_edge, first), shape=(e, 3 * k))
+    onto_vertices = sp.csc_matrix((unit, corners, first), shape=(n, 3 * k))
+    del slot_edge
+    diag_pick = (group[:, None] * 3 + np.arange(3, dtype=index)).reshape(-1)
     lo, hi = edges[:, 0], edges[:, 1]
 
-    indptr, indices, diagonal, forward, backward = _ring_pattern(edges, n)
-    nnz = len(indices)
-    # SciPy keeps 32-bit indices when they fit; giving them so avoids a copy per matrix
-    index_dtype = np.int32 if max(nnz, 3 * k) < np.iinfo(np.int32).max else np.int64
-    indices, indptr = indices.astype(index_dtype), indptr.astype(index_dtype)
-    e = len(edges)
-
-    def matrix(coefficients: np.ndarray) -> sp.csr_matrix:
+    matrices = []
+    for coefficients in (alpha, beta):
         # entry (i_a, i_c) of every interior triangle, summed and divided by the row's count
+        to_head = coefficients[:, [0, 1, 2], head]  # (g, 3): row i_s, column i_{s+1}
+        to_tail = coefficients[:, head, [0, 1, 2]]  # row i_{s+1}, column i_s
         data = np.empty(nnz)
-        data[diagonal] = np.bincount(
-            tri.ravel(), coefficients[:, [0, 1, 2], [0, 1, 2]][group].ravel(), minlength=n
-        )
-        data[diagonal] *= scale
-        to_head = coefficients[:, [0, 1, 2], head][group].ravel()  # row i_s, column i_{s+1}
-        to_tail = coefficients[:, head, [0, 1, 2]][group].ravel()  # row i_{s+1}, column i_s
-        data[forward] = (
-            np.bincount(slot_edge, np.where(tail_is_lo, to_head, to_tail), minlength=e) * scale[lo]
-        )
-        data[backward] = (
-            np.bincount(slot_edge, np.where(tail_is_lo, to_tail, to_head), minlength=e) * scale[hi]
-        )
-        return sp.csr_matrix((data, indices, indptr), shape=(n, n))
-
-    e1, e2 = matrix(alpha), matrix(beta)
+        for positions, table_, ends in (
+            (forward, np.stack([to_tail, to_head], axis=2), lo),
+            (backward, np.stack([to_head, to_tail], axis=2), hi),
+        ):
+            summed = onto_edges @ table_.reshape(-1)[pick]
+            summed *= scale[ends]
+            data[positions] = summed
+        summed = onto_vertices @ coefficients[:, [0, 1, 2], [0, 1, 2]].reshape(-1)[diag_pick]
+        summed *= scale
+        data[diagonal] = summed
+        matrices.append(sp.csr_matrix((data, indices, indptr), shape=(n, n)))
+    del onto_edges, onto_vertices, unit, first, pick, diag_pick, forward, backward, data, summed
+    e1, e2 = matrices
     e2.data[diagonal[no_estimate]] = 1.0  # vertices without estimates stay put
     adjacency = np.ones(nnz)
     adjacency[diagonal] = 0.0
-    corners = tri.ravel().astype(index_dtype)
-    triple = np.arange(0, 3 * k + 1, 3, dtype=index_dtype)
-    centers = sp.csr_matrix((np.ones(3 * k), corners, triple), shape=(k, n))
-    spread = sp.csc_matrix(((u[group] * scale[tri]).ravel(), corners, triple), shape=(n, k))
-    return LocalOperator(sp.csr_matrix((adjacency, indices, indptr), shape=(n, n)), e1, e2, centers, spread)
+    return LocalOperator(
+        sp.csr_matrix((adjacency, indices, indptr), shape=(n, n)),
+        e1,
+        e2,
+        tri,
+        group,
+        u,
+        scale,
+    )
 
 
 class GlobalSolver:
@@ -346,7 +381,7 @@ class GlobalSolver:
         self.free = np.flatnonzero(free)
         self.known = np.flatnonzero(~free)
         self.mu = float(mu)
-        K = uniform_laplacian(triangles, n).tocsr()[self.free]  # rows of the interior vertices
+        K = uniform_laplacian(triangles, n, edges=topo.edges)[self.free]  # rows of the interior vertices
         K_F = K[:, self.free].tocsc()
         self._K_B = K[:, self.known].tocsc()
         tri = triangles[topo.interior_triangles]

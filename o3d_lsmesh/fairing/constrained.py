@@ -193,6 +193,7 @@ def _fair(
     steps = _iterations(number_of_iterations, progress, f"constrained fairing ({method})")
     if method == "local":
         op = local_operator(triangles, topo)
+        del topo  # the edge structure is not needed once the operator holds its matrices
         constant, curve_target = op.constant(positions), curve.target(positions)
         for iteration in steps:
             if reimpose_every is not None and iteration and iteration % reimpose_every == 0:
