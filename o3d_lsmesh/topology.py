@@ -464,6 +464,9 @@ def corner_fans(triangles: np.ndarray, n: int, runs, *, only: np.ndarray | None 
         shape=(corners, corners),
     )
     graph.has_sorted_indices = True  # each row's two links were just ordered
+    # a corner without a link (or linked twice to one corner) repeats an entry: merged in one linear
+    # pass, since SciPy < 1.15's strong components never return on repeated entries
+    graph.sum_duplicates()
     # the links are symmetric, so strong components are the components, and finding them
     # reads the graph alone (weak or undirected ones transpose it first)
     fan_count, fan = csgraph.connected_components(graph, directed=True, connection="strong")
