@@ -19,12 +19,7 @@ from .._progress import check_progress
 from .._validate import as_bool, as_choice, as_count, as_positive_float
 from .barycenter import DEFAULT_MU, GlobalSolver, fairing_topology, local_operator
 from .boundary_curve import curve_operator
-from .scan_fairing import (
-    SCAN_MEMBRANE,
-    SCAN_MU,
-    ScanFairingSolver,
-    measured_boundary_weight,
-)
+from .scan_fairing import scan_denoise
 
 __all__ = ["DEFAULT_METHOD", "FAIRING_METHODS", "constrained_fairing", "constrained_fairing_arrays"]
 
@@ -175,16 +170,14 @@ def _fair(
         return positions
     if method == "scan":
         # one CHOLMOD factorization for now (the iterative path of ``solver`` serves "global" only)
-        scan = ScanFairingSolver(
+        return scan_denoise(
+            positions,
             triangles,
-            len(positions),
-            mu=SCAN_MU if mu is None else mu,
-            membrane=SCAN_MEMBRANE if membrane is None else membrane,
-            boundary_weight=measured_boundary_weight(positions, triangles)
-            if boundary_weight is None
-            else boundary_weight,
+            number_of_iterations=number_of_iterations,
+            mu=mu,
+            membrane=membrane,
+            boundary_weight=boundary_weight,
         )
-        return scan.solve(positions, number_of_iterations=number_of_iterations)
     topo = fairing_topology(triangles, len(positions), with_loops=smooth_boundary)
     curve = curve_operator(topo.loops)
     steps = _iterations(number_of_iterations, progress, f"constrained fairing ({method})")
