@@ -353,6 +353,37 @@ def main():
     if not names or not (DATA / REFERENCE).exists():
         print(f"skipping: no scans in {SCANS} (set O3D_LSMESH_SCANS) or no {REFERENCE} in {DATA}")
         return
+    if "--speed-only" in sys.argv:
+        # only the timing section: Open3D Laplacian's best count per scan from its own sweep, then the
+        # interleaved timings (for re-measuring speed on a loaded machine without the 40-minute sweeps)
+        reference = Reference()
+        results = []
+        for name in names:
+            V, F = load_scan(name)
+            boundary = boundary_vertices(F, len(V))
+            fn, sweep = PEERS["Open3D Laplacian"]
+            best = min(sweep, key=lambda k: score(fn(V, F, k), F, reference, boundary)["mean"])
+            results.append({"name": name, "V": V, "F": F, "peers": {"Open3D Laplacian": (best, None, None)}})
+        speed = speed_rows(results)
+        write_markdown(
+            "realscans_denoise_speed.md",
+            "Denoising raw range scans: time of the default against Open3D's Laplacian at its best count",
+            [
+                (
+                    "Speed, interleaved",
+                    markdown_table(
+                        ["mesh", "vertices", "trial", "o3d iterations", "o3d s", "ours s", "ratio"], speed
+                    )
+                    + "\n\nTarget: ratio <= 5. Median ratio: "
+                    + "; ".join(
+                        f"{label} ({n} vertices) {np.median([row[-1] for row in speed if row[0] == label]):.2f}"
+                        for label, n in dict.fromkeys((row[0], row[1]) for row in speed)
+                    )
+                    + ".",
+                )
+            ],
+        )
+        return
     reference = Reference()
     sweep_lines: list[str] = []
     results = []
