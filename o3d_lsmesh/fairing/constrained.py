@@ -280,8 +280,9 @@ def constrained_fairing(
     benchmarks/results/realscans_denoise.md); weakening the membrane at the
     rim halves them but loses scans to the peers. Time: one sparse
     Cholesky factorization of the bi-Laplacian-pattern matrix and one or two
-    back-substitutions, 6-10 times Open3D's ``filter_smooth_laplacian`` at
-    its best count (the factorization alone is about 6 times).
+    back-substitutions, about 10 times Open3D's ``filter_smooth_laplacian``
+    at its best count at 40k vertices, 7-19 times at 1.4M (the factorization
+    alone is about 6 times at 40k).
 
     The paper's operators minimize the uniform-Laplacian energy under the
     constraint that every triangle keeps its barycenter (eq. 5)::
