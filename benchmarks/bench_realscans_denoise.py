@@ -72,6 +72,20 @@ def vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     return normals / np.maximum(length, 1e-300)
 
 
+#: a triangle is degenerate (near-zero area or a sliver) when 4 sqrt(3) area / (sum of squared edges) is
+#: below this (1 for an equilateral triangle; 0.05 is a 1:20 isosceles sliver or a flattened triangle)
+DEGENERATE_QUALITY = 0.05
+
+
+def degenerate_rim_triangles(vertices: np.ndarray, triangles: np.ndarray, boundary: np.ndarray) -> int:
+    """Triangles with a boundary vertex whose quality is below ``DEGENERATE_QUALITY``."""
+    a, b, c = (vertices[triangles[:, i]] for i in range(3))
+    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    squares = ((b - c) ** 2).sum(1) + ((c - a) ** 2).sum(1) + ((a - b) ** 2).sum(1)
+    quality = 4.0 * np.sqrt(3.0) * area / np.maximum(squares, np.finfo(float).tiny)
+    return int(((quality < DEGENERATE_QUALITY) & boundary[triangles].any(axis=1)).sum())
+
+
 def score(vertices: np.ndarray, triangles: np.ndarray, reference: Reference, boundary: np.ndarray) -> dict:
     """Distances (in micrometres) of the scan's referenced vertices to the reference surface."""
     used = np.zeros(len(vertices), dtype=bool)
@@ -91,6 +105,7 @@ def score(vertices: np.ndarray, triangles: np.ndarray, reference: Reference, bou
         "signed": float(signed.mean()),
         "signed_interior": float(signed[~rim].mean()),
         "angle": float(angle.mean()),
+        "degenerate": degenerate_rim_triangles(vertices, triangles, boundary),
         "distance": distance,
     }
 
@@ -170,7 +185,7 @@ def ours(vertices, triangles):
     return constrained_fairing_arrays(vertices, triangles, None, method=None)  # = constrained_fairing(mesh)
 
 
-COLUMNS = ["mean", "p90", "interior", "boundary", "signed", "angle"]
+COLUMNS = ["mean", "p90", "interior", "boundary", "signed", "angle", "degenerate"]
 
 
 def run_scan(name, reference, sweep_lines):
@@ -338,6 +353,37 @@ def main():
     if not names or not (DATA / REFERENCE).exists():
         print(f"skipping: no scans in {SCANS} (set O3D_LSMESH_SCANS) or no {REFERENCE} in {DATA}")
         return
+    if "--speed-only" in sys.argv:
+        # only the timing section: Open3D Laplacian's best count per scan from its own sweep, then the
+        # interleaved timings (for re-measuring speed on a loaded machine without the 40-minute sweeps)
+        reference = Reference()
+        results = []
+        for name in names:
+            V, F = load_scan(name)
+            boundary = boundary_vertices(F, len(V))
+            fn, sweep = PEERS["Open3D Laplacian"]
+            best = min(sweep, key=lambda k: score(fn(V, F, k), F, reference, boundary)["mean"])
+            results.append({"name": name, "V": V, "F": F, "peers": {"Open3D Laplacian": (best, None, None)}})
+        speed = speed_rows(results)
+        write_markdown(
+            "realscans_denoise_speed.md",
+            "Denoising raw range scans: time of the default against Open3D's Laplacian at its best count",
+            [
+                (
+                    "Speed, interleaved",
+                    markdown_table(
+                        ["mesh", "vertices", "trial", "o3d iterations", "o3d s", "ours s", "ratio"], speed
+                    )
+                    + "\n\nTarget: ratio <= 5. Median ratio: "
+                    + "; ".join(
+                        f"{label} ({n} vertices) {np.median([row[-1] for row in speed if row[0] == label]):.2f}"
+                        for label, n in dict.fromkeys((row[0], row[1]) for row in speed)
+                    )
+                    + ".",
+                )
+            ],
+        )
+        return
     reference = Reference()
     sweep_lines: list[str] = []
     results = []
@@ -369,6 +415,7 @@ def main():
         "boundary um",
         "signed um",
         "normal deg",
+        "degenerate rim tris",
         "s",
         "/ best peer",
     ]
@@ -383,12 +430,12 @@ def main():
         for label, (k, s, seconds) in r["peers"].items():
             detail.append(
                 [r["name"].removesuffix(".ply"), label, k]
-                + [s[c] for c in ["mean", "p90", "interior", "boundary", "signed", "angle"]]
+                + [s[c] for c in COLUMNS]
                 + [seconds, s["mean"] / best]
             )
         detail.append(
             [r["name"].removesuffix(".ply"), "ours", "defaults"]
-            + [r["ours"][c] for c in ["mean", "p90", "interior", "boundary", "signed", "angle"]]
+            + [r["ours"][c] for c in COLUMNS]
             + [r["ours_seconds"], r["ours"]["mean"] / best]
         )
 
@@ -419,6 +466,16 @@ def main():
             f"{int((shift_ours <= shift_simple / 2).sum())}/{len(results)} scans."
         ),
     ]
+    degenerate = {
+        "raw": [r["raw"]["degenerate"] for r in results],
+        "best peer": [r["best_peer"][1][1]["degenerate"] for r in results],
+        "Open3D simple": [r["peers"]["Open3D simple"][1]["degenerate"] for r in results],
+        "ours": [r["ours"]["degenerate"] for r in results],
+    }
+    targets.append(
+        f"- Degenerate rim triangles (quality 4 sqrt(3) area / sum of squared edges < {DEGENERATE_QUALITY}, "
+        "per scan, min-max): " + "; ".join(f"{k} {min(v)}-{max(v)}" for k, v in degenerate.items()) + "."
+    )
     print("\n".join(targets), flush=True)
     multires = multiresolution_rows(results, reference)
     print("multiresolution done", flush=True)
@@ -452,9 +509,13 @@ def main():
         ),
         (
             "Speed: ours (defaults) vs Open3D filter_smooth_laplacian at its best count, interleaved",
-            markdown_table(
-                ["mesh", "vertices", "trial", "o3d iterations", "o3d s", "ours s", "ratio"], speed
-            ),
+            markdown_table(["mesh", "vertices", "trial", "o3d iterations", "o3d s", "ours s", "ratio"], speed)
+            + "\n\nTarget: ratio <= 5. Median ratio: "
+            + "; ".join(
+                f"{label} ({n} vertices) {np.median([row[-1] for row in speed if row[0] == label]):.2f}"
+                for label, n in dict.fromkeys((row[0], row[1]) for row in speed)
+            )
+            + ".",
         ),
         ("Sweeps (mean um)", "```\n" + "\n".join(sweep_lines) + "\n```"),
     ]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import pickle
 from pathlib import Path
@@ -15,11 +16,19 @@ from numpy.testing import assert_allclose
 from o3d_lsmesh.fairing import constrained_fairing, constrained_fairing_arrays
 from o3d_lsmesh.fairing.constrained import DEFAULT_METHOD
 from o3d_lsmesh.fairing.scan_fairing import (
+    MU_RANGE,
+    NOISE_MU_POWER,
+    NOISE_MU_SCALE,
+    SCAN_BOUNDARY_FRACTION,
     SCAN_BOUNDARY_WEIGHT,
     SCAN_MEMBRANE,
     SCAN_MU,
+    SCAN_RIM_RATIO,
     ScanFairingSolver,
     measured_boundary_weight,
+    measured_noise,
+    scan_likeness,
+    scan_parameters,
     scan_system,
 )
 
@@ -34,12 +43,14 @@ def arrays(mesh):
     return np.asarray(mesh.vertices).copy(), np.asarray(mesh.triangles).astype(np.int64)
 
 
-def reference_energy_matrices(V, F, mu, membrane, boundary_weight):
+def reference_energy_matrices(V, F, mu, membrane, boundary_weight, rim_curve=0.0):
     """The scan energy's normal matrix and right-hand side from plain loops, dense.
 
     E(X) = sum_i |x_i - mean of i's neighbours|^2
            + mu sum_t w_t |x_a + x_b + x_c - (x0_a + x0_b + x0_c)|^2 + membrane sum_edges |x_i - x_j|^2,
-    w_t = boundary_weight when t has a vertex on an edge used by exactly one triangle, else 1.
+    w_t = boundary_weight when t has a vertex on an edge used by exactly one triangle, else 1; a rim
+    vertex's first term is |x_i - (1 - rim_curve) mean of its neighbours - rim_curve mean of its
+    neighbours across boundary edges|^2.
     """
     n = len(V)
     neighbours = [set() for _ in range(n)]
@@ -52,9 +63,12 @@ def reference_energy_matrices(V, F, mu, membrane, boundary_weight):
             key = (min(i, j), max(i, j))
             edge_count[key] = edge_count.get(key, 0) + 1
     on_boundary = set()
+    curve_neighbours = [set() for _ in range(n)]
     for (i, j), count in edge_count.items():
         if count == 1:
             on_boundary |= {i, j}
+            curve_neighbours[i].add(j)
+            curve_neighbours[j].add(i)
     A = np.zeros((n, n))
     b = np.zeros((n, 3))
     for i in range(n):
@@ -64,8 +78,11 @@ def reference_energy_matrices(V, F, mu, membrane, boundary_weight):
             continue
         row = np.zeros(n)
         row[i] = 1.0
+        t = rim_curve if i in on_boundary else 0.0
         for j in neighbours[i]:
-            row[j] -= 1.0 / len(neighbours[i])
+            row[j] -= (1.0 - t) / len(neighbours[i])
+        for j in curve_neighbours[i] if t else ():
+            row[j] -= t / len(curve_neighbours[i])
         A += np.outer(row, row)
     for t in F.tolist():
         w = boundary_weight if on_boundary & set(t) else 1.0
@@ -80,12 +97,97 @@ def reference_energy_matrices(V, F, mu, membrane, boundary_weight):
     return A, b
 
 
-def reference_solution(V, F, mu, membrane, boundary_weight):
-    """Minimizer (dense numpy solve) and its twiced version X1 + S (X0 - X1)."""
-    A, b = reference_energy_matrices(V, F, mu, membrane, boundary_weight)
+def reference_solution(V, F, mu, membrane, boundary_weight, rim_curve=0.0, twicing=1.0):
+    """Minimizer (dense numpy solve) and its twiced version X1 + t S (X0 - X1)."""
+    A, b = reference_energy_matrices(V, F, mu, membrane, boundary_weight, rim_curve)
     X1 = np.linalg.solve(A, b)
-    A2, b2 = reference_energy_matrices(V - X1, F, mu, membrane, boundary_weight)
-    return X1, X1 + np.linalg.solve(A2, b2)
+    A2, b2 = reference_energy_matrices(V - X1, F, mu, membrane, boundary_weight, rim_curve)
+    return X1, X1 + twicing * np.linalg.solve(A2, b2)
+
+
+def reference_rim_ratio(V, F):
+    """Plain loops: the unclipped c (9/7) E_int / E_bd (inf without a boundary or an interior vertex)."""
+    count = {}
+    for t in F.tolist():
+        for a, b in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0])):
+            key = (min(a, b), max(a, b))
+            count[key] = count.get(key, 0) + 1
+    ring, curve = {}, {}
+    for (a, b), c in count.items():
+        ring.setdefault(a, set()).add(b)
+        ring.setdefault(b, set()).add(a)
+        if c == 1:
+            curve.setdefault(a, set()).add(b)
+            curve.setdefault(b, set()).add(a)
+    inner = [i for i in ring if i not in curve]
+    if not curve or not inner:
+        return np.inf, len(curve) / max(len(ring), 1)
+    e_int = np.mean([np.sum((np.mean([V[j] for j in ring[i]], axis=0) - V[i]) ** 2) for i in inner])
+    e_bd = np.mean([np.sum((np.mean([V[j] for j in curve[i]], axis=0) - V[i]) ** 2) for i in curve])
+    tri = {}
+    for t in F.tolist():
+        for i in t:
+            tri[i] = tri.get(i, 0) + 1
+    c = max(1.0, np.mean([tri[i] for i in inner]) / np.mean([tri[i] for i in curve]))
+    return c * 1.5 / (7 / 6) * e_int / e_bd, len(curve) / len(ring)
+
+
+def reference_noise(V, F):
+    """Plain loops: (sigma, g) from the 1- and 2-ring umbrellas along the normal (see measured_noise)."""
+    n = len(V)
+    ring = [set() for _ in range(n)]
+    count = {}
+    for t in F.tolist():
+        for a, b in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0])):
+            ring[a].add(b)
+            ring[b].add(a)
+            key = (min(a, b), max(a, b))
+            count[key] = count.get(key, 0) + 1
+    rim = {i for key, c in count.items() if c == 1 for i in key}
+    near_rim = rim | {j for i in rim for j in ring[i]}
+    inner = [i for i in range(n) if ring[i] and i not in near_rim]
+    if not inner:
+        return 0.0, 0.0
+    S = V.copy()
+    for i in range(n):
+        if ring[i]:
+            S[i] = np.mean([V[j] for j in ring[i]], axis=0)
+    normal = np.zeros((n, 3))
+    for t in F.tolist():
+        face = np.cross(S[t[1]] - S[t[0]], S[t[2]] - S[t[0]])
+        for i in t:
+            normal[i] += face
+    e1, e2, k1, k2, h2, s2 = [], [], [], [], [], []
+    for i in inner:
+        two = (ring[i] | {k for j in ring[i] for k in ring[j]}) - {i}
+        u = normal[i] / np.linalg.norm(normal[i])
+        e1.append(np.dot(np.mean([V[j] for j in ring[i]], axis=0) - V[i], u) ** 2)
+        e2.append(np.dot(np.mean([V[j] for j in two], axis=0) - V[i], u) ** 2)
+        k1.append(1 + 1 / len(ring[i]))
+        k2.append(1 + 1 / len(two))
+        h2.append(np.mean([np.sum((S[j] - S[i]) ** 2) for j in ring[i]]))
+        s2.append(np.mean([np.sum((S[j] - S[i]) ** 2) for j in two]))
+    e1, e2, k1, k2, h2 = np.mean(e1), np.mean(e2), np.mean(k1), np.mean(k2), np.mean(h2)
+    growth = (np.mean(s2) / h2) ** 2
+    g = max((e2 - e1 * k2 / k1) / (growth - k2 / k1), 0.0)
+    return np.sqrt(max((e1 - g) / k1, 0.0) / h2), np.sqrt(g / h2)
+
+
+def reference_parameters(V, F):
+    """Plain-loop version of scan_parameters: (mu, membrane, boundary weight, rim_curve, twicing)."""
+    ratio, fraction = reference_rim_ratio(V, F)
+    with np.errstate(divide="ignore"):
+        rim = np.clip(np.log(ratio / SCAN_RIM_RATIO[1]) / np.log(SCAN_RIM_RATIO[0] / SCAN_RIM_RATIO[1]), 0, 1)
+        part = np.log(fraction / SCAN_BOUNDARY_FRACTION[0]) / np.log(
+            SCAN_BOUNDARY_FRACTION[1] / SCAN_BOUNDARY_FRACTION[0]
+        )
+    s = float(rim * np.clip(part, 0, 1))
+    sigma, g = reference_noise(V, F)
+    independent = (
+        MU_RANGE[1] if sigma == 0 else np.clip(NOISE_MU_SCALE * (g / sigma) ** NOISE_MU_POWER, *MU_RANGE)
+    )
+    mu = np.exp((1 - s) * np.log(independent) + s * np.log(SCAN_MU))
+    return mu, s * SCAN_MEMBRANE, reference_boundary_weight(V, F), 1 - s, s
 
 
 def reference_boundary_weight(V, F):
@@ -136,17 +238,28 @@ def small_meshes():
     extra = np.vstack([V, [[0.4, 0.3, 0.5], [3, 3, 0], [4, 3, 0], [3, 4, 0.2], [9, 9, 9]]])
     fin = np.vstack([F, [[6, 7, 20], [21, 22, 23]]])
     yield "non-manifold soup", extra + rng.normal(0, 0.02, extra.shape), fin
+    # a rim twice as noisy as the interior, in between a scan's and i.i.d. noise: scan likeness ~0.7, so
+    # every weight is a blend, and the interior two rings from the rim gives both noise measures
+    rough = np.random.default_rng(11)
+    G, T = grid(9, 9)
+    G = G + rough.normal(0, 0.01, G.shape)
+    rim = (G[:, :2] < 0.01).any(axis=1) | (G[:, :2] > 0.99).any(axis=1)
+    G[rim] += rough.normal(0, 0.02, (rim.sum(), 3))
+    yield "ragged grid", G, T
 
 
 @pytest.mark.parametrize("case", list(small_meshes()), ids=lambda c: c[0])
 @pytest.mark.parametrize(
-    "weights", [(SCAN_MU, SCAN_MEMBRANE, SCAN_BOUNDARY_WEIGHT), (0.3, 0.0, 1.0), (0.05, 0.2, 0.5)]
+    "weights",
+    [(SCAN_MU, SCAN_MEMBRANE, SCAN_BOUNDARY_WEIGHT, 0.0), (0.3, 0.0, 1.0, 1.0), (0.05, 0.2, 0.5, 0.4)],
 )
 def test_energy_and_solution_match_a_plain_loop_assembly(case, weights):
     _, V, F = case
-    mu, membrane, boundary_weight = weights
-    A, b = reference_energy_matrices(V, F, mu, membrane, boundary_weight)
-    system = scan_system(F, len(V), mu=mu, membrane=membrane, boundary_weight=boundary_weight)
+    mu, membrane, boundary_weight, rim_curve = weights
+    A, b = reference_energy_matrices(V, F, mu, membrane, boundary_weight, rim_curve)
+    system = scan_system(
+        F, len(V), mu=mu, membrane=membrane, boundary_weight=boundary_weight, rim_curve=rim_curve
+    )
     assert_allclose(system.normal_matrix().toarray(), A, atol=TIGHT)
     referenced = system.referenced
     assert_allclose(system.normal_rhs(V)[referenced], b[referenced], atol=TIGHT)
@@ -169,17 +282,21 @@ def test_energy_and_solution_match_a_plain_loop_assembly(case, weights):
         np.einsum("ij,ij->", Xr, A[used] @ Xr) - 2 * np.einsum("ij,ij->", Xr, b[referenced]) + constant
     )
     assert_allclose(energy, loop_energy, rtol=1e-9)
-    X1, twiced = reference_solution(V, F, mu, membrane, boundary_weight)
-    solver = ScanFairingSolver(F, len(V), mu=mu, membrane=membrane, boundary_weight=boundary_weight)
+    X1, twiced = reference_solution(V, F, mu, membrane, boundary_weight, rim_curve)
+    solver = ScanFairingSolver(
+        F, len(V), mu=mu, membrane=membrane, boundary_weight=boundary_weight, rim_curve=rim_curve
+    )
     assert_allclose(solver.filter(V), X1, atol=1e-9)
     assert_allclose(solver.solve(V), twiced, atol=1e-9)
     if weights[0] == SCAN_MU:
-        assert_allclose(
-            constrained_fairing_arrays(V, F, None, method=None, boundary_weight=boundary_weight),
-            twiced,
-            atol=1e-9,
+        # the default: every weight measured by scan_parameters, checked against plain loops
+        mu0, membrane0, weight0, curve0, twicing0 = reference_parameters(V, F)
+        measured = scan_parameters(V, F)
+        assert (measured.mu, measured.membrane, measured.boundary_weight) == pytest.approx(
+            (mu0, membrane0, weight0), rel=1e-9
         )
-        default = reference_solution(V, F, mu, membrane, reference_boundary_weight(V, F))[1]
+        assert (measured.rim_curve, measured.twicing) == pytest.approx((curve0, twicing0), rel=1e-9)
+        default = reference_solution(V, F, mu0, membrane0, weight0, curve0, twicing0)[1]
         assert_allclose(constrained_fairing_arrays(V, F, None, method=None), default, atol=1e-9)
     copy = pickle.loads(pickle.dumps(solver))
     assert_allclose(copy.solve(V), twiced, atol=1e-9)
@@ -231,6 +348,63 @@ def test_measured_boundary_weight_against_loops_and_its_properties(rng):
     assert measured_boundary_weight(S, T) == 1.0
 
 
+def test_measured_noise_against_loops_the_added_noise_and_the_curvature(rng):
+    S, T = arrays(o3d.geometry.TriangleMesh.create_sphere(radius=1.0, resolution=12))
+    for _, V, F in [*small_meshes(), ("sphere", S + rng.normal(0, 0.02, S.shape), T)]:
+        assert measured_noise(V, F) == pytest.approx(reference_noise(V, F), rel=1e-9, abs=1e-12)
+    # on a fine sphere: sigma recovers the deviation we added (in root-mean-square edge lengths), and g the
+    # sphere's own umbrella h^2 / (2 R) per unit h (the mean of the 1-ring lies (mean |x_j - x_i|^2) / 2R
+    # inside), the same at every noise level
+    V, F = arrays(o3d.geometry.TriangleMesh.create_sphere(radius=1.0, resolution=60))
+    h = np.sqrt(np.mean(np.sum((V[F[:, 0]] - V[F[:, 1]]) ** 2, axis=1)))
+    for sigma in (0.1, 0.3):
+        noise, detail = measured_noise(V + rng.normal(0, sigma * h, V.shape), F)
+        assert noise == pytest.approx(sigma, rel=0.12)
+        assert detail == pytest.approx(h / 2.0, rel=0.35)
+    moved = 17.0 * V @ np.linalg.qr(rng.normal(size=(3, 3)))[0].T + [1.0, 2.0, 3.0]
+    assert measured_noise(moved, F) == pytest.approx(measured_noise(V, F), rel=1e-7)
+
+
+def test_scan_likeness_tells_a_range_scan_from_independent_noise(rng):
+    V, F = arrays(o3d.geometry.TriangleMesh.create_sphere(radius=1.0, resolution=10))
+    assert scan_parameters(V + rng.normal(0, 0.01, V.shape), F).scan_likeness == 0.0  # closed
+    G, T = grid(25, 25)
+    rim = (G[:, :2] == 0).any(axis=1) | (G[:, :2] == 1).any(axis=1)
+    iid = G + rng.normal(0, 0.3 / 24, G.shape)
+    ragged = iid.copy()
+    ragged[rim] += rng.normal(0, 2.0 / 24, (rim.sum(), 3))
+    assert scan_parameters(iid, T).scan_likeness == 0.0
+    scan = scan_parameters(ragged, T)
+    assert scan.scan_likeness == 1.0
+    assert (scan.mu, scan.membrane, scan.twicing, scan.rim_curve) == (
+        pytest.approx(SCAN_MU),
+        SCAN_MEMBRANE,
+        1.0,
+        0.0,
+    )
+    # the ramps: log-linear between their ends, 0 and 1 outside
+    low, high = SCAN_RIM_RATIO
+    assert scan_likeness(low, 1.0) == 1.0 and scan_likeness(high, 1.0) == 0.0
+    assert scan_likeness(np.sqrt(low * high), 1.0) == pytest.approx(0.5)
+    assert scan_likeness(low, SCAN_BOUNDARY_FRACTION[0]) == 0.0
+    assert scan_likeness(np.inf, 0.0) == 0.0
+
+
+def test_rigid_motion_and_scale_equivariance_of_the_measured_weights(rng):
+    _, V, F = list(small_meshes())[-1]  # the ragged grid: every weight a blend
+    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    moved = 40.0 * V @ q.T + [2.0, -1.0, 500.0]
+    assert dataclasses.astuple(scan_parameters(moved, F)) == pytest.approx(
+        dataclasses.astuple(scan_parameters(V, F)), rel=1e-6
+    )
+    out = constrained_fairing_arrays(V, F, None, method=None)
+    assert_allclose(
+        constrained_fairing_arrays(moved, F, None, method=None),
+        40.0 * out @ q.T + [2.0, -1.0, 500.0],
+        atol=1e-9 * 500,
+    )
+
+
 def test_rigid_motion_and_scale_equivariance(rng):
     V, F = arrays(o3d.geometry.TriangleMesh.create_sphere(radius=1.0, resolution=10))
     V = V + rng.normal(0, 0.03, V.shape)
@@ -253,15 +427,17 @@ def test_flat_noisy_grid_gets_flatter_and_keeps_its_boundary_shape(rng):
     assert np.abs(out[:, 2]).mean() < 0.35 * np.abs(noisy[:, 2]).mean()
     assert np.abs(out[boundary, 2]).mean() < 0.5 * np.abs(noisy[boundary, 2]).mean()
     # each side of the square stays a straight line (straighter than the noisy input), parallel to where
-    # it was, and moves inward by less than 0.75 edge lengths: this rim is as noisy as the interior, so the
-    # measured boundary weight trusts it like the interior (with the scan rim's weight 0.1 the side moves
-    # 1.40-1.45 edge lengths inward here)
+    # it was, and stays where it was: this rim is as noisy as the interior (scan likeness 0), so a rim
+    # vertex's thin-plate row is the Laplacian along the boundary curve, which has no inward pull (with the
+    # one-sided row of a scan the side moves 0.46-0.56 edge lengths inward here, 1.40-1.45 with the scan
+    # rim's weight 0.1)
+    assert scan_parameters(noisy, F).rim_curve == 1.0
     for axis, value in ((0, 0.0), (0, 1.0), (1, 0.0), (1, 1.0)):
         other = 1 - axis
         side = (V[:, axis] == value) & (V[:, other] > 0) & (V[:, other] < 1)
         assert out[side, axis].std() < min(0.1 * h, noisy[side, axis].std())
         inward = (out[side, axis] - value) * (1.0 if value == 0.0 else -1.0)
-        assert 0.0 < inward.mean() < 0.75 * h
+        assert abs(inward.mean()) < 0.1 * h
         # the along-side spacing stays ordered (no folding at the rim)
         order = np.argsort(V[side, other])
         assert np.all(np.diff(out[side, other][order]) > 0)

@@ -19,12 +19,7 @@ from .._progress import check_progress
 from .._validate import as_bool, as_choice, as_count, as_positive_float, mesh_arrays
 from .barycenter import DEFAULT_MU, GlobalSolver, fairing_topology, local_operator
 from .boundary_curve import curve_operator
-from .scan_fairing import (
-    SCAN_MEMBRANE,
-    SCAN_MU,
-    ScanFairingSolver,
-    measured_boundary_weight,
-)
+from .scan_fairing import scan_denoise
 
 if TYPE_CHECKING:
     from .._types import MeshT
@@ -178,16 +173,14 @@ def _fair(
         return positions
     if method == "scan":
         # one CHOLMOD factorization for now (the iterative path of ``solver`` serves "global" only)
-        scan = ScanFairingSolver(
+        return scan_denoise(
+            positions,
             triangles,
-            len(positions),
-            mu=SCAN_MU if mu is None else mu,
-            membrane=SCAN_MEMBRANE if membrane is None else membrane,
-            boundary_weight=measured_boundary_weight(positions, triangles)
-            if boundary_weight is None
-            else boundary_weight,
+            number_of_iterations=number_of_iterations,
+            mu=mu,
+            membrane=membrane,
+            boundary_weight=boundary_weight,
         )
-        return scan.solve(positions, number_of_iterations=number_of_iterations)
     topo = fairing_topology(triangles, len(positions), with_loops=smooth_boundary)
     curve = curve_operator(topo.loops)
     steps = _iterations(number_of_iterations, progress, f"constrained fairing ({method})")
@@ -230,56 +223,70 @@ def constrained_fairing(
     **Default** (``constrained_fairing(mesh)``, ``method="scan"``, one
     factorization, no parameter to set): made for raw range scans, whose
     noise is correlated along the scanlines and whose rim samples (grazing
-    angles) carry 2.5-4 times the interior's error. It minimizes the global
-    penalty form of eq. 5 with the boundary freed, the barycenters weighted
-    by their noise and a small membrane term, and then twices the result
-    (module :mod:`o3d_lsmesh.fairing.scan_fairing`)::
+    angles) carry 2.5-4 times the interior's error, and first as well on
+    independent noise. It minimizes the global penalty form of eq. 5 with
+    the boundary freed, the barycenters weighted by their noise and, on a
+    scan, a small membrane term, and then twices the result (module
+    :mod:`o3d_lsmesh.fairing.scan_fairing`)::
 
         E(X) = |K X|^2 + mu sum_t w_t |h_t (X - X0)|^2 + lambda sum_edges |x_i - x_j|^2,
         X1 = argmin E,   X = X1 + S (X0 - X1)   (S: the same minimization, kept factor)
 
-    with every referenced vertex unknown (a boundary vertex keeps its
-    one-sided Laplacian row), ``w_t = w`` for a triangle with a boundary
-    vertex and 1 otherwise, ``mu = 0.03`` and ``lambda = 0.45``
-    (``SCAN_MU``, ``SCAN_MEMBRANE``). ``w`` is the rim barycenters' inverse
-    noise variance relative to the interior's, measured from the input
-    (:func:`~o3d_lsmesh.fairing.scan_fairing.measured_boundary_weight`:
-    boundary-curve against interior Laplacian energy, times the coverage
-    ratio ``c ~ 2`` since a rim vertex lies in half as many barycenters,
-    clipped to ``[0.1, c]``): 0.10-0.13 on the raw scans' ragged
-    silhouettes, ``c`` on a clean outline carrying the interior's noise.
-    All weights are dimensionless, so the result
-    is equivariant under rigid motions and scaling. Measured on the ten raw
-    Stanford bunny scans against a reference surface
-    (benchmarks/results/realscans_denoise.md), each peer (Open3D
-    simple/Laplacian/Taubin, PyMeshLab HC/Laplacian/Taubin/two-step, trimesh
-    Taubin/Humphrey) at its best setting per scan: the default beats every
-    peer on 10 of 10 scans (error / best peer 0.90-0.999, mean 0.940), mean
-    distance 70.3 um against 75.0 um for the best single filter (Open3D
-    ``filter_smooth_simple`` at its best count), and moves the interior
-    inward by 4.4 um (Open3D simple: 17.9 um). Why not the paper's
-    operators: with the boundary held (``"local"``, ``"global"``) the rim
-    keeps its error (bun000: 246 um against Open3D's 154-159 um), ranking
-    8th-9th of 15 methods; the membrane term removes the mid-frequency
-    scanline noise that the thin-plate term ``|K X|^2`` keeps, and the
-    twicing step puts back most of the shrinkage the membrane causes.
+    with every referenced vertex unknown and ``w_t = w`` for a triangle with
+    a boundary vertex, 1 otherwise. Every weight is measured on the input
+    (:func:`~o3d_lsmesh.fairing.scan_fairing.scan_parameters`), never set
+    from a reference:
 
-    Limits of the default (measured, see benchmarks/results/denoise.md): it
-    still pulls a free boundary inward along the surface, 0.46-0.56 edge
-    lengths on a flat grid with i.i.d. noise (1.4 with the scan rim's weight
-    0.1), and the noisy open Venus's outline moves 0.76-0.83 edge lengths
-    (boundary vertex error); and on synthetic independent Gaussian noise it
-    smooths more than needed at noise 0.2 mean edge lengths (mean vertex
-    error 1.06-1.11 times the best peer's at its best setting on bunny,
-    screwdriver and feline, 1.29 on the open Venus; at noise 0.5: 0.99-1.04).
-    For such meshes use
-    ``method="global"`` or ``"local"`` (the better of the two at its best
-    setting is 0.97-1.003 times the best peer's in every synthetic case).
-    Closed-mesh volume change at noise 0.5: -0.07% (feline), -0.09% (horse),
-    -0.14% (screwdriver); at 0.2: -0.09% to -0.16%. Time: one sparse
-    Cholesky factorization of the bi-Laplacian-pattern matrix and two
+    * ``w``, the rim barycenters' inverse noise variance relative to the
+      interior's (:func:`~o3d_lsmesh.fairing.scan_fairing.measured_boundary_weight`:
+      boundary-curve against interior Laplacian energy, times the coverage
+      ratio ``c ~ 2``, clipped to ``[0.1, c]``): 0.10-0.13 on the raw scans'
+      ragged silhouettes, about ``c`` on an outline carrying the interior's noise.
+    * The *scan likeness* ``s`` in ``[0, 1]``: 1 when the unclipped rim
+      weight is at most 0.3 (a scanner's silhouette, sampled at grazing
+      angles, 2.5-4 times noisier than the interior) on a mesh with at least
+      3% boundary vertices; 0 from a rim weight of 0.6 up, on a closed mesh
+      or one with under 1% boundary vertices. A range scan (``s = 1``) gets
+      ``mu = 0.03``, ``lambda = 0.45`` (``SCAN_MU``, ``SCAN_MEMBRANE``) and
+      the twicing step: the membrane damps the scanline-correlated noise
+      that ``|K X|^2`` keeps, the twicing puts back most of its shrinkage.
+    * Independent noise (``s = 0``) gets the barycenter-only energy
+      (``lambda = 0``, no twicing) with ``mu = 0.8 (g / sigma)^2.5`` in
+      ``[0.003, 1]``, ``sigma`` the noise's and ``g`` the surface's own
+      umbrella along the normal, both measured from the 1- and 2-ring
+      umbrellas (:func:`~o3d_lsmesh.fairing.scan_fairing.measured_noise`):
+      the more the noise hides the detail, the stronger the smoothing. A rim
+      vertex's thin-plate row is then the Laplacian along its boundary
+      curve, which has no inward pull (a scan's rim keeps its one-sided row,
+      measured better there). In between, every weight moves with ``s``.
+
+    All measures are dimensionless, so the result is equivariant under rigid
+    motions and scaling. Measured on the ten raw Stanford bunny scans
+    against a reference surface (benchmarks/results/realscans_denoise.md),
+    each peer (Open3D simple/Laplacian/Taubin, PyMeshLab
+    HC/Laplacian/Taubin/two-step, trimesh Taubin/Humphrey) at its best
+    setting per scan: the default beats every peer on 10 of 10 scans (error
+    / best peer 0.90-0.999, mean 0.940), mean distance 70.3 um against 75.0
+    um for the best single filter (Open3D ``filter_smooth_simple`` at its
+    best count), and moves the interior inward by 4.4 um (Open3D simple:
+    17.9 um). On seeded Gaussian noise of 0.2 and 0.5 mean edge lengths
+    (benchmarks/results/denoise.md) it is first on bunny, Venus,
+    screwdriver and feline: mean vertex error 0.97-1.00 times the best
+    peer's at its best setting; closed-mesh volume change at noise 0.5
+    -0.12% (screwdriver) to +0.02%. Why not the paper's operators: with the
+    boundary held (``"local"``, ``"global"``) a scan's rim keeps its error
+    (bun000: 246 um against Open3D's 154-159 um), ranking 8th-9th of 15
+    methods.
+
+    Limits of the default (measured): on a range scan the membrane and the
+    rim's low weight collapse rim triangles (hundreds of slivers of quality
+    under 0.05 per scan, none in the raw scans; see
+    benchmarks/results/realscans_denoise.md); weakening the membrane at the
+    rim halves them but loses scans to the peers. Time: one sparse
+    Cholesky factorization of the bi-Laplacian-pattern matrix and one or two
     back-substitutions, about 10 times Open3D's ``filter_smooth_laplacian``
-    at 40k vertices (more on a loaded machine).
+    at its best count at 40k vertices, 7-19 times at 1.4M (the factorization
+    alone is about 6 times at 40k).
 
     The paper's operators minimize the uniform-Laplacian energy under the
     constraint that every triangle keeps its barycenter (eq. 5)::
@@ -358,13 +365,14 @@ def constrained_fairing(
         (the only method it applies to, and the default before ``"scan"``).
     mu : float or None
         Penalty weight of ``"global"`` and ``"scan"`` (``None``:
-        ``DEFAULT_MU`` = 0.03, ``SCAN_MU`` = 0.03). Must be ``None`` for
-        ``"local"``.
+        ``DEFAULT_MU`` = 0.03; for ``"scan"`` measured from the input, see
+        ``scan_parameters``). Must be ``None`` for ``"local"``.
     membrane : float or None
-        ``"scan"`` only: membrane weight ``lambda >= 0`` (``None``: 0.45).
+        ``"scan"`` only: membrane weight ``lambda >= 0`` (``None``: measured,
+        0.45 on a range scan, 0 with independent noise).
     boundary_weight : float or None
         ``"scan"`` only: barycenter weight ``w_t > 0`` of the triangles with a
-        boundary vertex (``None``: measured from the input, in ``[0.1, 1]``,
+        boundary vertex (``None``: measured from the input, in ``[0.1, c]``,
         see ``measured_boundary_weight``; 1 trusts the rim like the interior).
     smooth_boundary : bool
         Fair the boundary loops (True) or keep boundary vertices fixed

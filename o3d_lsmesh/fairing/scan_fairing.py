@@ -34,6 +34,7 @@ scaling; no parameter depends on the mesh's size.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 import scipy.sparse as sp
@@ -42,13 +43,25 @@ from .._solvers import SPDSolver
 from ..topology import unique_edges
 
 __all__ = [
+    "MU_RANGE",
+    "NOISE_MU_POWER",
+    "NOISE_MU_SCALE",
+    "SCAN_BOUNDARY_FRACTION",
     "SCAN_BOUNDARY_WEIGHT",
     "SCAN_MEMBRANE",
     "SCAN_MU",
+    "SCAN_RIM_RATIO",
     "SCAN_THIN_PLATE",
+    "NoiseEstimate",
     "ScanFairingSolver",
+    "ScanParameters",
     "ScanSystem",
     "measured_boundary_weight",
+    "measured_noise",
+    "rim_noise_ratio",
+    "scan_denoise",
+    "scan_likeness",
+    "scan_parameters",
     "scan_system",
 ]
 
@@ -66,6 +79,71 @@ SCAN_BOUNDARY_WEIGHT = 0.1
 # one variance: a curve vertex's (x_(i-1) + x_(i+1)) / 2 - x_i has variance 1.5 sigma^2, an interior
 # vertex of valence 6 has (1 + 1/6) sigma^2.
 _IID_BOUNDARY_RATIO = 1.5 / (1.0 + 1.0 / 6.0)
+#: Rim data weights (:func:`rim_noise_ratio`) at which :func:`scan_likeness` is 1 and 0.
+SCAN_RIM_RATIO = (0.3, 0.6)
+#: Boundary-vertex fractions at which :func:`scan_likeness` is 0 and 1.
+SCAN_BOUNDARY_FRACTION = (0.01, 0.03)
+#: ``mu = NOISE_MU_SCALE (g / sigma)^NOISE_MU_POWER`` for independent noise (:func:`scan_parameters`).
+NOISE_MU_SCALE = 0.8
+NOISE_MU_POWER = 2.5
+#: Range of that ``mu``.
+MU_RANGE = (3e-3, 1.0)
+
+
+class _Structure(NamedTuple):
+    edges: np.ndarray  # (e, 2) int64, lo < hi
+    counts: np.ndarray  # (e,) triangles on each edge
+    boundary: np.ndarray  # (n,) bool, on an edge of one triangle
+    valence: np.ndarray  # (n,) int64 edge neighbours
+
+
+def _structure(triangles: np.ndarray, n: int) -> _Structure:
+    edges, counts, _ = unique_edges(triangles, n)
+    boundary = np.zeros(n, dtype=bool)
+    boundary[edges[counts == 1].ravel()] = True
+    return _Structure(edges, counts, boundary, np.bincount(edges.ravel(), minlength=n))
+
+
+def _neighbour_mean(vertices: np.ndarray, pairs: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """``(k, 3)`` mean of the ``pairs``-neighbours of the ``mask`` vertices (bincount, not ``np.add.at``)."""
+    n = len(vertices)
+    lo, hi = pairs[:, 0], pairs[:, 1]
+    degree = np.bincount(pairs.ravel(), minlength=n)[mask].astype(np.float64)
+    total = np.empty((int(mask.sum()), 3))
+    for k in range(3):
+        total[:, k] = (
+            np.bincount(lo, vertices[hi, k], minlength=n) + np.bincount(hi, vertices[lo, k], minlength=n)
+        )[mask]
+    return total / degree[:, None]
+
+
+def rim_noise_ratio(
+    vertices: np.ndarray, triangles: np.ndarray, *, structure: _Structure | None = None
+) -> tuple[float, float]:
+    """The rim's data weight before clipping, ``c (9/7) E_int / E_bd``, and the coverage ratio ``c``.
+
+    See :func:`measured_boundary_weight` (which clips the first to
+    ``[SCAN_BOUNDARY_WEIGHT, c]``). Returns ``(inf, 1)`` for a mesh without a
+    boundary or without an interior vertex, ``(c, c)`` for a noiseless
+    straight rim.
+    """
+    n = len(vertices)
+    st = _structure(triangles, n) if structure is None else structure
+    on_curve = st.edges[st.counts == 1]
+    interior = (st.valence > 0) & ~st.boundary
+    if not len(on_curve) or not interior.any():
+        return float("inf"), 1.0
+    in_triangles = np.bincount(triangles.ravel(), minlength=n)
+    coverage = max(1.0, float(in_triangles[interior].mean() / in_triangles[st.boundary].mean()))
+
+    def mean_square_laplacian(pairs: np.ndarray, mask: np.ndarray) -> float:
+        lap = _neighbour_mean(vertices, pairs, mask) - vertices[mask]
+        return float((lap * lap).sum(axis=1).mean())
+
+    curve_energy = mean_square_laplacian(on_curve, st.boundary)
+    if curve_energy <= 0.0:
+        return coverage, coverage
+    return coverage * _IID_BOUNDARY_RATIO * mean_square_laplacian(st.edges, interior) / curve_energy, coverage
 
 
 def measured_boundary_weight(vertices: np.ndarray, triangles: np.ndarray) -> float:
@@ -109,33 +187,197 @@ def measured_boundary_weight(vertices: np.ndarray, triangles: np.ndarray) -> flo
     >>> measured_boundary_weight(ragged, F)  # a scan's silhouette: the rim 7 times noisier
     0.1
     """
-    n = len(vertices)
-    edges, counts, _ = unique_edges(triangles, n)
-    on_curve = edges[counts == 1]
-    if not len(on_curve):
+    ratio, coverage = rim_noise_ratio(vertices, triangles)
+    if not np.isfinite(ratio):
         return 1.0
-    boundary = np.zeros(n, dtype=bool)
-    boundary[on_curve.ravel()] = True
-    valence = np.bincount(edges.ravel(), minlength=n)
-    interior = (valence > 0) & ~boundary
-    if not interior.any():
-        return 1.0
-    in_triangles = np.bincount(triangles.ravel(), minlength=n)
-    coverage = max(1.0, float(in_triangles[interior].mean() / in_triangles[boundary].mean()))
-
-    def mean_square_laplacian(pairs, mask):
-        degree = np.bincount(pairs.ravel(), minlength=n).astype(np.float64)
-        total = np.zeros((n, 3))
-        np.add.at(total, pairs[:, 0], vertices[pairs[:, 1]])
-        np.add.at(total, pairs[:, 1], vertices[pairs[:, 0]])
-        lap = total[mask] / degree[mask, None] - vertices[mask]
-        return float((lap * lap).sum(axis=1).mean())
-
-    curve_energy = mean_square_laplacian(on_curve, boundary)
-    if curve_energy <= 0.0:
-        return coverage
-    ratio = coverage * _IID_BOUNDARY_RATIO * mean_square_laplacian(edges, interior) / curve_energy
     return float(np.clip(ratio, SCAN_BOUNDARY_WEIGHT, coverage))
+
+
+class NoiseEstimate(NamedTuple):
+    """Noise and surface detail along the normal, in edge lengths (:func:`measured_noise`)."""
+
+    noise: float
+    detail: float
+
+
+def measured_noise(
+    vertices: np.ndarray, triangles: np.ndarray, *, structure: _Structure | None = None
+) -> NoiseEstimate:
+    """The noise's deviation and the surface's own detail at the edge scale, both from the mesh.
+
+    Two umbrella vectors of each vertex ``i`` at least two rings from the rim,
+    along its normal ``n_i``: ``a1 = n_i . (mean of the 1-ring - x_i)`` and
+    ``a2 = n_i . (mean of the 2-ring - x_i)`` (the 2-ring: every vertex
+    within two edges). For i.i.d. noise of deviation ``sigma`` and a smooth
+    surface whose umbrella along the normal is ``g`` at the 1-ring,
+    ``E a1^2 = sigma^2 (1 + 1/d1) + g^2`` and
+    ``E a2^2 = sigma^2 (1 + 1/d2) + G g^2``, with ``G`` the growth of a
+    curvature term, ``(mean squared 2-ring distance / mean squared 1-ring
+    distance)^2`` (about 7): two equations for ``sigma^2`` and ``g^2``.
+    Normals (area-weighted) and distances are those of the mesh after one
+    umbrella step, and both results are divided by the root mean squared
+    1-ring distance ``h``. Measured with seeded Gaussian noise: ``sigma``
+    within 0.01-0.04 of the true value in edge lengths at 0.2 and 0.5; ``g``
+    0.05 on bunny, screwdriver, feline at any noise, 0.10 on the coarse
+    Venus (711 vertices). Dimensionless: invariant under rigid motions and
+    uniform scaling. ``(0, 0)`` when no vertex is two rings from the rim.
+
+    Examples
+    --------
+    >>> import numpy as np, open3d as o3d
+    >>> sphere = o3d.geometry.TriangleMesh.create_sphere(radius=1.0, resolution=40)
+    >>> V, F = np.asarray(sphere.vertices), np.asarray(sphere.triangles).astype(np.int64)
+    >>> h = np.linalg.norm(V[F[:, 0]] - V[F[:, 1]], axis=1).mean()
+    >>> estimate = measured_noise(V + np.random.default_rng(0).normal(0.0, 0.3 * h, V.shape), F)
+    >>> 0.25 < estimate.noise < 0.35
+    True
+    """
+    n = len(vertices)
+    st = _structure(triangles, n) if structure is None else structure
+    lo, hi = st.edges[:, 0], st.edges[:, 1]
+    ring = sp.csr_matrix((np.ones(2 * len(lo)), (np.r_[lo, hi], np.r_[hi, lo])), shape=(n, n))
+    inner = (st.valence > 0) & ~st.boundary
+    inner[ring[st.boundary].indices] = False  # two rings from the rim: full 1- and 2-rings
+    if not inner.any():
+        return NoiseEstimate(0.0, 0.0)
+    two = ring @ ring + ring
+    two.data[:] = 1.0
+    two.setdiag(0.0)
+    two.eliminate_zeros()
+    d1 = st.valence.astype(np.float64)
+    d2 = np.diff(two.indptr).astype(np.float64)
+    referenced = st.valence > 0
+    smooth = vertices.copy()
+    smooth[referenced] += (ring[referenced] @ vertices) / d1[referenced, None] - vertices[referenced]
+    sub = smooth[inner]
+    square = np.einsum("ij,ij->i", sub, sub)
+
+    def mean_square_distance(adjacency: sp.csr_matrix, degree: np.ndarray) -> float:
+        rows = adjacency[inner]
+        total = rows @ np.einsum("ij,ij->i", smooth, smooth) - 2.0 * np.einsum("ij,ij->i", rows @ smooth, sub)
+        return float(np.mean(total / degree[inner] + square))
+
+    a, b, c = (smooth[triangles[:, i]] for i in range(3))
+    face = np.cross(b - a, c - a)
+    normal = np.empty((n, 3))
+    for k in range(3):
+        normal[:, k] = sum(np.bincount(triangles[:, i], face[:, k], minlength=n) for i in range(3))
+    normal = normal[inner]
+    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), np.finfo(float).tiny)
+    x = vertices[inner]
+    a1 = np.einsum("ij,ij->i", ring[inner] @ vertices / d1[inner, None] - x, normal)
+    a2 = np.einsum("ij,ij->i", two[inner] @ vertices / d2[inner, None] - x, normal)
+    h2 = mean_square_distance(ring, d1)
+    if not h2 > 0.0:
+        return NoiseEstimate(0.0, 0.0)
+    growth = (mean_square_distance(two, d2) / h2) ** 2
+    k1, k2 = float(np.mean(1.0 + 1.0 / d1[inner])), float(np.mean(1.0 + 1.0 / d2[inner]))
+    e1, e2 = float(np.mean(a1 * a1)), float(np.mean(a2 * a2))
+    detail = max((e2 - e1 * k2 / k1) / (growth - k2 / k1), 0.0) if growth > k2 / k1 else 0.0
+    noise = max((e1 - detail) / k1, 0.0)
+    return NoiseEstimate(float(np.sqrt(noise / h2)), float(np.sqrt(detail / h2)))
+
+
+def scan_likeness(rim_ratio: float, boundary_fraction: float) -> float:
+    """How much the mesh looks like one raw range scan, from 0 (not at all) to 1 (``scan_parameters``).
+
+    The product of two ramps, each linear in the logarithm of its measure:
+    the rim's unclipped data weight (:func:`rim_noise_ratio`) from 1 at
+    ``SCAN_RIM_RATIO[0]`` to 0 at ``SCAN_RIM_RATIO[1]`` (a scanner's
+    silhouette, sampled at grazing angles, is 2.5-4 times noisier than the
+    interior: 0.07-0.13 on the bunny scans; i.i.d. noise gives about 2), and
+    the fraction of boundary vertices from 0 at ``SCAN_BOUNDARY_FRACTION[0]``
+    to 1 at ``SCAN_BOUNDARY_FRACTION[1]`` (a range scan's silhouette and
+    shadow holes: 7-13% of its vertices; too few rim vertices say nothing).
+    A closed mesh is not a single scan: 0.
+    """
+
+    def ramp(value: float, zero: float, one: float) -> float:
+        with np.errstate(divide="ignore"):
+            return float(np.clip(np.log(value / zero) / np.log(one / zero), 0.0, 1.0))
+
+    low, high = SCAN_RIM_RATIO
+    rim = ramp(rim_ratio, high, low)
+    fraction = ramp(boundary_fraction, *SCAN_BOUNDARY_FRACTION)
+    return rim * fraction
+
+
+@dataclass(frozen=True)
+class ScanParameters:
+    """The weights of the scan energy that :func:`scan_parameters` measured on a mesh.
+
+    Attributes
+    ----------
+    mu, membrane, boundary_weight : float
+        The energy's ``mu``, ``lambda`` and rim ``w_t``.
+    twicing : float
+        Weight ``t`` of the twicing step, ``X = X1 + t S (X0 - X1)``.
+    rim_curve : float
+        Weight of the boundary-curve Laplacian in a rim vertex's thin-plate
+        row (:func:`scan_system`).
+    scan_likeness : float
+        ``s`` of :func:`scan_likeness`.
+    noise, detail : float
+        ``sigma`` and ``g`` of :func:`measured_noise` (not measured, 0, when ``s = 1``).
+    """
+
+    mu: float
+    membrane: float
+    boundary_weight: float
+    twicing: float
+    rim_curve: float
+    scan_likeness: float
+    noise: float
+    detail: float
+
+
+def scan_parameters(
+    vertices: np.ndarray, triangles: np.ndarray, *, structure: _Structure | None = None
+) -> ScanParameters:
+    """Every weight of the default energy, measured on the mesh (never on a reference).
+
+    A raw range scan (``s = 1``, :func:`scan_likeness`) gets the energy
+    measured on the scans: ``mu = SCAN_MU``, ``lambda = SCAN_MEMBRANE``,
+    twicing ``t = 1``: the membrane damps the scanline-correlated noise that
+    the thin-plate term keeps. A mesh with independent noise (``s = 0``: a
+    closed mesh, or a rim as noisy as its interior) gets the barycenter-only
+    energy (``lambda = 0``, no twicing, nothing to undo) with a penalty set by
+    the measured noise level ``eta`` (:func:`measured_noise_level`):
+    ``mu = NOISE_MU_SCALE / eta^2`` in ``MU_RANGE``, a penalty that weakens
+    as the noise grows (the filter's pass band narrows as ``eta^-1``); the
+    constant was measured on bunny, screwdriver and feline at 0.2 and 0.5
+    mean-edge noise (benchmarks/results/denoise.md). Between the two, every
+    weight moves with ``s`` (``mu`` geometrically). ``w`` is
+    :func:`measured_boundary_weight` in both. All measures are
+    dimensionless: the parameters are invariant under rigid motions and
+    uniform scaling.
+
+    Examples
+    --------
+    >>> import numpy as np, open3d as o3d
+    >>> sphere = o3d.geometry.TriangleMesh.create_sphere(radius=1.0, resolution=40)
+    >>> V, F = np.asarray(sphere.vertices), np.asarray(sphere.triangles).astype(np.int64)
+    >>> p = scan_parameters(V + np.random.default_rng(0).normal(0.0, 0.01, V.shape), F)
+    >>> p.scan_likeness, p.membrane, p.twicing  # closed: independent noise
+    (0.0, 0.0, 0.0)
+    """
+    n = len(vertices)
+    st = _structure(triangles, n) if structure is None else structure
+    ratio, coverage = rim_noise_ratio(vertices, triangles, structure=st)
+    weight = 1.0 if not np.isfinite(ratio) else float(np.clip(ratio, SCAN_BOUNDARY_WEIGHT, coverage))
+    referenced = int(np.count_nonzero(st.valence))
+    fraction = float(np.count_nonzero(st.boundary)) / max(referenced, 1)
+    s = scan_likeness(ratio, fraction)
+    # a range scan's weights do not depend on the noise level: skip its measure (a fifth of the time)
+    estimate = NoiseEstimate(0.0, 0.0) if s == 1.0 else measured_noise(vertices, triangles, structure=st)
+    if estimate.noise <= 0.0:
+        independent = MU_RANGE[1]
+    else:
+        ratio_gn = estimate.detail / estimate.noise
+        with np.errstate(divide="ignore"):
+            independent = float(np.clip(NOISE_MU_SCALE * ratio_gn**NOISE_MU_POWER, *MU_RANGE))
+    mu = float(np.exp((1.0 - s) * np.log(independent) + s * np.log(SCAN_MU)))
+    return ScanParameters(mu, s * SCAN_MEMBRANE, weight, s, 1.0 - s, s, estimate.noise, estimate.detail)
 
 
 @dataclass(frozen=True)
@@ -184,6 +426,8 @@ def scan_system(
     membrane: float,
     boundary_weight: float,
     thin_plate: float = SCAN_THIN_PLATE,
+    structure: _Structure | None = None,
+    rim_curve: float = 0.0,
 ) -> ScanSystem:
     """The least-squares rows of the scan energy for ``(m, 3) int64`` triangles on ``n`` vertices.
 
@@ -193,12 +437,9 @@ def scan_system(
     ``O(n + m)``.
     """
     m = len(triangles)
-    edges, counts, _ = unique_edges(triangles, n)
+    edges, counts, boundary, valence = _structure(triangles, n) if structure is None else structure
     e = len(edges)
     lo, hi = edges[:, 0], edges[:, 1]
-    boundary = np.zeros(n, dtype=bool)
-    boundary[edges[counts == 1].ravel()] = True
-    valence = np.bincount(edges.ravel(), minlength=n)
     referenced = valence > 0
     unreferenced = np.flatnonzero(~referenced)
     inverse = np.zeros(n)
@@ -217,9 +458,22 @@ def scan_system(
     count = m + e + u
     if thin_plate > 0.0:
         plate = np.sqrt(thin_plate)
+        # a rim vertex's row mixes its one-sided Laplacian (weight 1 - t) with the Laplacian along its
+        # boundary curve (weight t = rim_curve): the one-sided row pulls a straight rim inward, the curve
+        # row does not
+        t = float(rim_curve)
+        row_weight = np.where(boundary, 1.0 - t, 1.0) * inverse
         row += [count + ref_rows, count + lo, count + hi]
         col += [ref_rows, hi, lo]
-        data += [np.full(len(ref_rows), plate), -plate * inverse[lo], -plate * inverse[hi]]
+        data += [np.full(len(ref_rows), plate), -plate * row_weight[lo], -plate * row_weight[hi]]
+        if t > 0.0:
+            curve = edges[counts == 1]
+            curve_inverse = np.zeros(n)
+            curve_valence = np.bincount(curve.ravel(), minlength=n)
+            np.divide(t, curve_valence, out=curve_inverse, where=curve_valence > 0)
+            row += [count + curve[:, 0], count + curve[:, 1]]
+            col += [curve[:, 1], curve[:, 0]]
+            data += [-plate * curve_inverse[curve[:, 0]], -plate * curve_inverse[curve[:, 1]]]
         count += n
     rows = sp.csr_matrix((np.concatenate(data), (np.concatenate(row), np.concatenate(col))), shape=(count, n))
     corners = np.arange(0, 3 * m + 1, 3)
@@ -260,6 +514,8 @@ class ScanFairingSolver:
         membrane: float,
         boundary_weight: float,
         thin_plate: float = SCAN_THIN_PLATE,
+        structure: _Structure | None = None,
+        rim_curve: float = 0.0,
     ) -> None:
         self.mu = float(mu)
         self.membrane = float(membrane)
@@ -270,7 +526,11 @@ class ScanFairingSolver:
             membrane=self.membrane,
             boundary_weight=boundary_weight,
             thin_plate=thin_plate,
+            structure=structure,
+            rim_curve=rim_curve,
         )
+        # AMD: as little fill as METIS at 40k vertices with a 3x faster analysis; at 1.4M vertices (the ten
+        # scans merged and subdivided) the whole default took 20 s with AMD and 29 s with METIS, interleaved
         self._solver = SPDSolver(product_of=self.system.rows.T.tocsc(), ordering="amd")
 
     def filter(self, positions0: np.ndarray) -> np.ndarray:
@@ -281,12 +541,56 @@ class ScanFairingSolver:
         return out
 
     def solve(
-        self, positions0: np.ndarray, *, number_of_iterations: int = 1, twice: bool = True
+        self, positions0: np.ndarray, *, number_of_iterations: int = 1, twice: bool | float = True
     ) -> np.ndarray:
-        """``number_of_iterations`` filter passes (targets re-taken each time), then the twicing step."""
+        """``number_of_iterations`` filter passes (targets re-taken each time), then the twicing step.
+
+        ``twice`` is the twicing weight ``t`` of ``X = X1 + t S (X0 - X1)``
+        (``True`` is 1, ``False`` 0: no second back-substitution).
+        """
         positions = np.array(positions0, dtype=np.float64)
         for _ in range(number_of_iterations):
             positions = self.filter(positions)
-        if twice and number_of_iterations:
-            positions = positions + self.filter(positions0 - positions)
+        weight = float(twice)
+        if weight and number_of_iterations:
+            positions = positions + weight * self.filter(positions0 - positions)
         return positions
+
+
+def scan_denoise(
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    *,
+    number_of_iterations: int = 1,
+    mu: float | None = None,
+    membrane: float | None = None,
+    boundary_weight: float | None = None,
+) -> np.ndarray:
+    """The default denoiser on arrays: :func:`scan_parameters`, one factorization, the twiced filter.
+
+    ``mu``, ``membrane`` and ``boundary_weight`` replace the measured values
+    when given (the twicing weight stays the measured one). One edge list
+    serves the measures and the system. Returns new ``(n, 3) float64``
+    positions.
+
+    Examples
+    --------
+    >>> import numpy as np, open3d as o3d
+    >>> box = o3d.geometry.TriangleMesh.create_box()
+    >>> V, F = np.asarray(box.vertices), np.asarray(box.triangles).astype(np.int64)
+    >>> scan_denoise(V, F).shape
+    (8, 3)
+    """
+    n = len(vertices)
+    structure = _structure(triangles, n)
+    measured = scan_parameters(vertices, triangles, structure=structure)
+    solver = ScanFairingSolver(
+        triangles,
+        n,
+        mu=measured.mu if mu is None else mu,
+        membrane=measured.membrane if membrane is None else membrane,
+        boundary_weight=measured.boundary_weight if boundary_weight is None else boundary_weight,
+        structure=structure,
+        rim_curve=measured.rim_curve,
+    )
+    return solver.solve(vertices, number_of_iterations=number_of_iterations, twice=measured.twicing)
