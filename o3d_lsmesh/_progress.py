@@ -12,6 +12,7 @@ even imported and the bar is a silent stand-in with the same methods.
 from __future__ import annotations
 
 import contextlib
+import sys
 from collections.abc import Callable, Iterable, Iterator, Sequence, Sized
 from typing import Any, TypeVar
 
@@ -105,6 +106,13 @@ def iterate(
     if total is None and isinstance(items, Sized):
         total = len(items)
     return iter(tqdm(items, total=total, desc=desc, unit=unit))
+
+
+def write(text: str) -> None:
+    """Print one line on stderr above any open bar (a plain print would land in the bar's line)."""
+    from tqdm.auto import tqdm
+
+    tqdm.write(text, file=sys.stderr)
 
 
 @contextlib.contextmanager

@@ -8,6 +8,7 @@ import os
 import re
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -965,3 +966,21 @@ def test_compare_render_bad_values_exit_2(tmp_path, capsys, clean):
     assert "--units" in run_error(
         capsys, ["compare", a, a, "--render", str(tmp_path / "x.png"), "--units", "inch"]
     )
+
+
+def test_a_warning_is_one_line_naming_the_program_not_a_source_line(tmp_path, capsys, monkeypatch, clean):
+    # without scikit-sparse the solver gateway warns; the CLI shows it as its own line, above the bar
+    import o3d_lsmesh._solvers as solvers
+
+    monkeypatch.setattr(solvers, "_cholmod", None)
+    monkeypatch.delenv(solvers.NO_CHOLMOD_ENV, raising=False)
+    source = _write(clean, tmp_path / "clean.ply")
+    with warnings.catch_warnings():
+        warnings.simplefilter("default")  # as in a shell (the suite turns warnings into errors)
+        code = main(["approximate", str(source), str(tmp_path / "o.ply"), "--count", "20"])
+    err = capsys.readouterr().err
+    assert code == 0, err
+    lines = [line for line in err.splitlines() if "warning" in line.lower()]
+    assert lines and all(line.startswith("o3d-lsmesh: warning: ") for line in lines), err
+    assert "O3D_LSMESH_NO_CHOLMOD=1" in lines[0]
+    assert ".py:" not in err  # no file:line of the package or of the console script

@@ -12,6 +12,7 @@ import re
 import sys
 import textwrap
 import traceback
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, Callable
@@ -254,12 +255,22 @@ def internal_error(error: BaseException) -> int:
     return fail(f"{PROG}: internal error (a bug in o3d-lsmesh, not in your input: please report it)", 1)
 
 
+def _show_warning(message: Warning | str, category: type[Warning], *_args: Any, **_kwargs: Any) -> None:
+    from .._progress import write
+
+    write(f"{PROG}: warning: {message}")
+
+
 def run_handler(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> int:
     """Parse ``argv``, run its subcommand and map what it raises to an exit code and a message."""
     args = None
     try:
-        args = parser.parse_args(argv)
-        return int(args.handler(args, Run(args)))
+        with warnings.catch_warnings():
+            # a warning is one line naming the program, printed above the bar, not a source line
+            # of the package or of the console script in the middle of it
+            warnings.showwarning = _show_warning
+            args = parser.parse_args(argv)
+            return int(args.handler(args, Run(args)))
     except CLIError as error:
         return fail(str(error), 2)
     except (ValueError, TypeError) as error:
