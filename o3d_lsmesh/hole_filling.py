@@ -173,17 +173,12 @@ def find_holes(vertices: np.ndarray, triangles: np.ndarray, *, _edge_info=None) 
     if not loops:
         return []
     edges = _edge_info[0][0]
-    # components over the edges already sorted (no second whole-mesh sort)
-    graph = sp.coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
+    # components over the edges already sorted (no second whole-mesh sort): they are the upper triangle
+    # of the adjacency in CSR order, so the graph is built without a conversion
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(np.bincount(edges[:, 0], minlength=n), out=indptr[1:])
+    graph = sp.csr_matrix((np.ones(len(edges)), edges[:, 1], indptr), shape=(n, n))
     _, label = csgraph.connected_components(graph, directed=False)
-    area = 0.5 * np.linalg.norm(
-        np.cross(
-            vertices[triangles[:, 1]] - vertices[triangles[:, 0]],
-            vertices[triangles[:, 2]] - vertices[triangles[:, 0]],
-        ),
-        axis=1,
-    )
-    component_area = np.bincount(label[triangles[:, 0]], weights=area, minlength=label.max() + 1)
     perimeters = np.array(
         [
             np.linalg.norm(np.roll(vertices[loop], -1, axis=0) - vertices[loop], axis=1).sum()
@@ -196,6 +191,20 @@ def find_holes(vertices: np.ndarray, triangles: np.ndarray, *, _edge_info=None) 
     first = np.ones(len(loops), dtype=bool)
     first[1:] = components[by_length][1:] != components[by_length][:-1]
     longest = by_length[first]
+    # areas only of the components whose longest loop is to be judged (a scan's many closed islands
+    # without a loop are not read)
+    judged = np.zeros(label.max() + 1, dtype=bool)
+    judged[components[longest]] = True
+    tri_label = label[triangles[:, 0]]
+    mine = judged[tri_label]
+    some = triangles if mine.all() else triangles[mine]
+    area = 0.5 * np.sqrt(
+        (
+            _cross(vertices[some[:, 1]] - vertices[some[:, 0]], vertices[some[:, 2]] - vertices[some[:, 0]])
+            ** 2
+        ).sum(axis=1)
+    )
+    component_area = np.bincount(tri_label[mine], weights=area, minlength=len(judged))
     border = np.zeros(len(loops), dtype=bool)
     border[longest] = perimeters[longest] ** 2 > BORDER_RATIO * component_area[components[longest]]
     out = [
@@ -1028,24 +1037,32 @@ def _tangential_relax(
     """
     out = vertices.copy()
     total = len(vertices)
-    e = np.concatenate([new_tris[:, [0, 1]], new_tris[:, [1, 2]], new_tris[:, [2, 0]]])
+    moving = np.arange(first_new, total)
+    # in a local numbering of the patches' vertices (increasing, so every sum runs in the same order as
+    # over the whole mesh): nothing here grows with the mesh
+    local = np.union1d(new_tris.ravel(), moving)
+    tris = np.searchsorted(local, new_tris)
+    mov = np.searchsorted(local, moving)
+    nl = len(local)
+    e = np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]])
     adjacency = sp.coo_matrix(
-        (np.ones(2 * len(e)), (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])), shape=(total, total)
+        (np.ones(2 * len(e)), (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])), shape=(nl, nl)
     ).tocsr()
     adjacency.data[:] = 1.0  # each edge appears in two triangles: count it once
-    moving = np.arange(first_new, total)
-    A = adjacency[moving]
+    A = adjacency[mov]
     degree = np.asarray(A.sum(axis=1)).ravel()
-    corner_rows = np.repeat(np.arange(len(new_tris)), 3)
+    corner_rows = np.repeat(np.arange(len(tris)), 3)
+    x = out[local]
     for _ in range(iterations):
-        p = out[new_tris]
+        p = x[tris]
         face_normal = _cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
-        normal = np.zeros((total, 3))
-        np.add.at(normal, new_tris.ravel(), face_normal[corner_rows])
-        normal, _ = _unit(normal[moving])
-        move = (A @ out) / np.maximum(degree, 1)[:, None] - out[moving]
+        normal = np.zeros((nl, 3))
+        np.add.at(normal, tris.ravel(), face_normal[corner_rows])
+        normal, _ = _unit(normal[mov])
+        move = (A @ x) / np.maximum(degree, 1)[:, None] - x[mov]
         move -= (move * normal).sum(axis=1, keepdims=True) * normal
-        out[moving] += 0.5 * move
+        x[mov] += 0.5 * move
+    out[moving] = x[mov]
     return out
 
 
