@@ -191,22 +191,29 @@ def find_holes(vertices: np.ndarray, triangles: np.ndarray, *, _edge_info=None) 
     first = np.ones(len(loops), dtype=bool)
     first[1:] = components[by_length][1:] != components[by_length][:-1]
     longest = by_length[first]
-    # areas only of the components whose longest loop is to be judged (a scan's many closed islands
-    # without a loop are not read)
+    # a longest loop is its component's border when perimeter**2 > BORDER_RATIO * area. Areas only of
+    # the components whose longest loop is judged (a scan's closed islands are not read), summed in
+    # blocks of triangles until every judgement is decided: a partial sum bounds the area from below,
+    # so a loop whose perimeter**2 is within it is no border, and a small hole in a large mesh reads
+    # one block instead of every triangle
     judged = np.zeros(label.max() + 1, dtype=bool)
     judged[components[longest]] = True
     tri_label = label[triangles[:, 0]]
     mine = judged[tri_label]
     some = triangles if mine.all() else triangles[mine]
-    area = 0.5 * np.sqrt(
-        (
-            _cross(vertices[some[:, 1]] - vertices[some[:, 0]], vertices[some[:, 2]] - vertices[some[:, 0]])
-            ** 2
-        ).sum(axis=1)
-    )
-    component_area = np.bincount(tri_label[mine], weights=area, minlength=len(judged))
+    some_label = tri_label[mine]
+    component_area = np.zeros(len(judged))
+    need = perimeters[longest] ** 2
+    block = 8192
+    for start in range(0, len(some), block):
+        t = some[start : start + block]
+        p = vertices[t]
+        area = 0.5 * np.sqrt((_cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]) ** 2).sum(axis=1))
+        component_area += np.bincount(some_label[start : start + block], weights=area, minlength=len(judged))
+        if (need <= BORDER_RATIO * component_area[components[longest]]).all():
+            break  # every longest loop is within its component's area so far: none is a border
     border = np.zeros(len(loops), dtype=bool)
-    border[longest] = perimeters[longest] ** 2 > BORDER_RATIO * component_area[components[longest]]
+    border[longest] = need > BORDER_RATIO * component_area[components[longest]]
     out = [
         Hole(
             loop,
