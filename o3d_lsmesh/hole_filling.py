@@ -453,33 +453,37 @@ def _relax(
             break
         c = tris[t1, (s1 + 2) % 3]
         d = tris[t2, (s2 + 2) % 3]
-        centre, radius = _circumsphere(points[a], points[b], points[c])
-        # a relative margin: near-co-circular quads (common on regular patches) are not flipped, so
-        # the result does not hinge on rounding (rigid motions give the same connectivity)
-        inside = np.linalg.norm(points[d] - centre, axis=1) < radius * (1.0 - 1e-6)
-        # and the other way round (in 3D the two tests differ: CGAL's relax flips when either holds)
-        centre2, radius2 = _circumsphere(points[b], points[a], points[d])
-        inside |= np.linalg.norm(points[c] - centre2, axis=1) < radius2 * (1.0 - 1e-6)
+        # the new edge must not exist yet (a cheap test first: every later one runs on the edges left)
         new_key = np.minimum(c, d) * nv + np.maximum(c, d)
         existing = np.union1d(key, fixed_keys)
         pos = np.minimum(np.searchsorted(existing, new_key), len(existing) - 1)
-        inside &= (existing[pos] != new_key) & (c != d)
+        open_ = np.flatnonzero((existing[pos] != new_key) & (c != d))
+        pa, pb, pc, pd = points[a[open_]], points[b[open_]], points[c[open_]], points[d[open_]]
+        centre, radius = _circumsphere(pa, pb, pc)
+        # a relative margin: near-co-circular quads (common on regular patches) are not flipped, so
+        # the result does not hinge on rounding (rigid motions give the same connectivity)
+        near = np.linalg.norm(pd - centre, axis=1) < radius * (1.0 - 1e-6)
+        # and the other way round (in 3D the two tests differ: CGAL's relax flips when either holds)
+        rest = np.flatnonzero(~near)
+        centre2, radius2 = _circumsphere(pb[rest], pa[rest], pd[rest])
+        near[rest] = np.linalg.norm(pc[rest] - centre2, axis=1) < radius2 * (1.0 - 1e-6)
+        inside = np.zeros(len(t1), dtype=bool)
+        inside[open_] = near
+        # the remaining tests run only on the edges still in (row-wise, so the same verdicts): on a large
+        # patch most edges are out after the sphere tests, and these were most of a pass's time
+        live = np.flatnonzero(inside)
+        pa, pb, pc, pd = points[a[live]], points[b[live]], points[c[live]], points[d[live]]
         # the new triangles (c, a, d) and (d, b, c) must not fold over
-        old = _cross(points[b] - points[a], points[c] - points[a]) + _cross(
-            points[a] - points[b], points[d] - points[b]
-        )
-        n1 = _cross(points[a] - points[c], points[d] - points[c])
-        n2 = _cross(points[b] - points[d], points[c] - points[d])
-        inside &= ((n1 * old).sum(1) > 0) & ((n2 * old).sum(1) > 0)
+        old = _cross(pb - pa, pc - pa) + _cross(pa - pb, pd - pb)
+        n1 = _cross(pa - pc, pd - pc)
+        n2 = _cross(pb - pd, pc - pd)
+        ok = ((n1 * old).sum(1) > 0) & ((n2 * old).sum(1) > 0)
         # and the smallest angle of the pair grows: the two sphere tests disagree in 3D, so without this
         # an edge could flip back and forth; with it every flip is progress and the passes end
-        before = np.minimum(
-            _min_angle(points[a], points[b], points[c]), _min_angle(points[b], points[a], points[d])
-        )
-        after = np.minimum(
-            _min_angle(points[c], points[a], points[d]), _min_angle(points[d], points[b], points[c])
-        )
-        inside &= after > before + 1e-9
+        before = np.minimum(_min_angle(pa, pb, pc), _min_angle(pb, pa, pd))
+        after = np.minimum(_min_angle(pc, pa, pd), _min_angle(pd, pb, pc))
+        ok &= after > before + 1e-9
+        inside[live] = ok
         cand = np.flatnonzero(inside)
         if len(cand) == 0:
             break
