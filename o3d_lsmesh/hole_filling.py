@@ -173,17 +173,12 @@ def find_holes(vertices: np.ndarray, triangles: np.ndarray, *, _edge_info=None) 
     if not loops:
         return []
     edges = _edge_info[0][0]
-    # components over the edges already sorted (no second whole-mesh sort)
-    graph = sp.coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
+    # components over the edges already sorted (no second whole-mesh sort): they are the upper triangle
+    # of the adjacency in CSR order, so the graph is built without a conversion
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(np.bincount(edges[:, 0], minlength=n), out=indptr[1:])
+    graph = sp.csr_matrix((np.ones(len(edges)), edges[:, 1], indptr), shape=(n, n))
     _, label = csgraph.connected_components(graph, directed=False)
-    area = 0.5 * np.linalg.norm(
-        np.cross(
-            vertices[triangles[:, 1]] - vertices[triangles[:, 0]],
-            vertices[triangles[:, 2]] - vertices[triangles[:, 0]],
-        ),
-        axis=1,
-    )
-    component_area = np.bincount(label[triangles[:, 0]], weights=area, minlength=label.max() + 1)
     perimeters = np.array(
         [
             np.linalg.norm(np.roll(vertices[loop], -1, axis=0) - vertices[loop], axis=1).sum()
@@ -196,8 +191,29 @@ def find_holes(vertices: np.ndarray, triangles: np.ndarray, *, _edge_info=None) 
     first = np.ones(len(loops), dtype=bool)
     first[1:] = components[by_length][1:] != components[by_length][:-1]
     longest = by_length[first]
+    # a longest loop is its component's border when perimeter**2 > BORDER_RATIO * area. Areas only of
+    # the components whose longest loop is judged (a scan's closed islands are not read), summed in
+    # blocks of triangles until every judgement is decided: a partial sum bounds the area from below,
+    # so a loop whose perimeter**2 is within it is no border, and a small hole in a large mesh reads
+    # one block instead of every triangle
+    judged = np.zeros(label.max() + 1, dtype=bool)
+    judged[components[longest]] = True
+    tri_label = label[triangles[:, 0]]
+    mine = judged[tri_label]
+    some = triangles if mine.all() else triangles[mine]
+    some_label = tri_label[mine]
+    component_area = np.zeros(len(judged))
+    need = perimeters[longest] ** 2
+    block = 8192
+    for start in range(0, len(some), block):
+        t = some[start : start + block]
+        p = vertices[t]
+        area = 0.5 * np.sqrt((_cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]) ** 2).sum(axis=1))
+        component_area += np.bincount(some_label[start : start + block], weights=area, minlength=len(judged))
+        if (need <= BORDER_RATIO * component_area[components[longest]]).all():
+            break  # every longest loop is within its component's area so far: none is a border
     border = np.zeros(len(loops), dtype=bool)
-    border[longest] = perimeters[longest] ** 2 > BORDER_RATIO * component_area[components[longest]]
+    border[longest] = need > BORDER_RATIO * component_area[components[longest]]
     out = [
         Hole(
             loop,
@@ -437,33 +453,37 @@ def _relax(
             break
         c = tris[t1, (s1 + 2) % 3]
         d = tris[t2, (s2 + 2) % 3]
-        centre, radius = _circumsphere(points[a], points[b], points[c])
-        # a relative margin: near-co-circular quads (common on regular patches) are not flipped, so
-        # the result does not hinge on rounding (rigid motions give the same connectivity)
-        inside = np.linalg.norm(points[d] - centre, axis=1) < radius * (1.0 - 1e-6)
-        # and the other way round (in 3D the two tests differ: CGAL's relax flips when either holds)
-        centre2, radius2 = _circumsphere(points[b], points[a], points[d])
-        inside |= np.linalg.norm(points[c] - centre2, axis=1) < radius2 * (1.0 - 1e-6)
+        # the new edge must not exist yet (a cheap test first: every later one runs on the edges left)
         new_key = np.minimum(c, d) * nv + np.maximum(c, d)
         existing = np.union1d(key, fixed_keys)
         pos = np.minimum(np.searchsorted(existing, new_key), len(existing) - 1)
-        inside &= (existing[pos] != new_key) & (c != d)
+        open_ = np.flatnonzero((existing[pos] != new_key) & (c != d))
+        pa, pb, pc, pd = points[a[open_]], points[b[open_]], points[c[open_]], points[d[open_]]
+        centre, radius = _circumsphere(pa, pb, pc)
+        # a relative margin: near-co-circular quads (common on regular patches) are not flipped, so
+        # the result does not hinge on rounding (rigid motions give the same connectivity)
+        near = np.linalg.norm(pd - centre, axis=1) < radius * (1.0 - 1e-6)
+        # and the other way round (in 3D the two tests differ: CGAL's relax flips when either holds)
+        rest = np.flatnonzero(~near)
+        centre2, radius2 = _circumsphere(pb[rest], pa[rest], pd[rest])
+        near[rest] = np.linalg.norm(pc[rest] - centre2, axis=1) < radius2 * (1.0 - 1e-6)
+        inside = np.zeros(len(t1), dtype=bool)
+        inside[open_] = near
+        # the remaining tests run only on the edges still in (row-wise, so the same verdicts): on a large
+        # patch most edges are out after the sphere tests, and these were most of a pass's time
+        live = np.flatnonzero(inside)
+        pa, pb, pc, pd = points[a[live]], points[b[live]], points[c[live]], points[d[live]]
         # the new triangles (c, a, d) and (d, b, c) must not fold over
-        old = _cross(points[b] - points[a], points[c] - points[a]) + _cross(
-            points[a] - points[b], points[d] - points[b]
-        )
-        n1 = _cross(points[a] - points[c], points[d] - points[c])
-        n2 = _cross(points[b] - points[d], points[c] - points[d])
-        inside &= ((n1 * old).sum(1) > 0) & ((n2 * old).sum(1) > 0)
+        old = _cross(pb - pa, pc - pa) + _cross(pa - pb, pd - pb)
+        n1 = _cross(pa - pc, pd - pc)
+        n2 = _cross(pb - pd, pc - pd)
+        ok = ((n1 * old).sum(1) > 0) & ((n2 * old).sum(1) > 0)
         # and the smallest angle of the pair grows: the two sphere tests disagree in 3D, so without this
         # an edge could flip back and forth; with it every flip is progress and the passes end
-        before = np.minimum(
-            _min_angle(points[a], points[b], points[c]), _min_angle(points[b], points[a], points[d])
-        )
-        after = np.minimum(
-            _min_angle(points[c], points[a], points[d]), _min_angle(points[d], points[b], points[c])
-        )
-        inside &= after > before + 1e-9
+        before = np.minimum(_min_angle(pa, pb, pc), _min_angle(pb, pa, pd))
+        after = np.minimum(_min_angle(pc, pa, pd), _min_angle(pd, pb, pc))
+        ok &= after > before + 1e-9
+        inside[live] = ok
         cand = np.flatnonzero(inside)
         if len(cand) == 0:
             break
@@ -1028,24 +1048,32 @@ def _tangential_relax(
     """
     out = vertices.copy()
     total = len(vertices)
-    e = np.concatenate([new_tris[:, [0, 1]], new_tris[:, [1, 2]], new_tris[:, [2, 0]]])
+    moving = np.arange(first_new, total)
+    # in a local numbering of the patches' vertices (increasing, so every sum runs in the same order as
+    # over the whole mesh): nothing here grows with the mesh
+    local = np.union1d(new_tris.ravel(), moving)
+    tris = np.searchsorted(local, new_tris)
+    mov = np.searchsorted(local, moving)
+    nl = len(local)
+    e = np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]])
     adjacency = sp.coo_matrix(
-        (np.ones(2 * len(e)), (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])), shape=(total, total)
+        (np.ones(2 * len(e)), (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])), shape=(nl, nl)
     ).tocsr()
     adjacency.data[:] = 1.0  # each edge appears in two triangles: count it once
-    moving = np.arange(first_new, total)
-    A = adjacency[moving]
+    A = adjacency[mov]
     degree = np.asarray(A.sum(axis=1)).ravel()
-    corner_rows = np.repeat(np.arange(len(new_tris)), 3)
+    corner_rows = np.repeat(np.arange(len(tris)), 3)
+    x = out[local]
     for _ in range(iterations):
-        p = out[new_tris]
+        p = x[tris]
         face_normal = _cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
-        normal = np.zeros((total, 3))
-        np.add.at(normal, new_tris.ravel(), face_normal[corner_rows])
-        normal, _ = _unit(normal[moving])
-        move = (A @ out) / np.maximum(degree, 1)[:, None] - out[moving]
+        normal = np.zeros((nl, 3))
+        np.add.at(normal, tris.ravel(), face_normal[corner_rows])
+        normal, _ = _unit(normal[mov])
+        move = (A @ x) / np.maximum(degree, 1)[:, None] - x[mov]
         move -= (move * normal).sum(axis=1, keepdims=True) * normal
-        out[moving] += 0.5 * move
+        x[mov] += 0.5 * move
+    out[moving] = x[mov]
     return out
 
 
