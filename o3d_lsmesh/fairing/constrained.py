@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .._o3d import new_mesh, read_mesh
-from .._progress import check_progress
+from .._progress import check_progress, iterate
 from .._validate import as_bool, as_choice, as_count, as_positive_float, mesh_arrays
 from .barycenter import DEFAULT_MU, GlobalSolver, fairing_topology, local_operator
 from .boundary_curve import curve_operator
@@ -94,14 +94,6 @@ def _check_options(
         )
     options = (number_of_iterations, method, mu, bool(smooth_boundary), reimpose_every, bool(progress))
     return options, {"membrane": membrane, "boundary_weight": boundary_weight}
-
-
-def _iterations(count: int, progress: bool, description: str):
-    if not progress:
-        return range(count)
-    from tqdm.auto import tqdm
-
-    return tqdm(range(count), desc=description)
 
 
 def constrained_fairing_arrays(
@@ -183,7 +175,7 @@ def _fair(
         )
     topo = fairing_topology(triangles, len(positions), with_loops=smooth_boundary)
     curve = curve_operator(topo.loops)
-    steps = _iterations(number_of_iterations, progress, f"constrained fairing ({method})")
+    steps = iterate(progress, range(number_of_iterations), desc=f"constrained fairing ({method})")
     if method == "local":
         op = local_operator(triangles, topo)
         del topo  # the edge structure is not needed once the operator holds its matrices
