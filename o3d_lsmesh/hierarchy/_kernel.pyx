@@ -7,7 +7,7 @@ import numpy as np
 
 from libc.math cimport INFINITY, fabs, sqrt
 from libc.stdint cimport int32_t, int64_t, uint8_t, uint64_t
-from libc.string cimport memcpy, memmove, memset
+from libc.string cimport memcpy, memset
 
 cdef enum:
     LOCKED = 1
@@ -118,8 +118,8 @@ def hierarchy(double[:, ::1] positions, const int64_t[:, ::1] triangles, uint8_t
                     if r > s and ring[r - 1] == pair[j]:
                         mult[r - 1] += mult[r - 1] < 255
                     else:
-                        memmove(&ring[r + 1], &ring[r], (s + deg - r) * sizeof(int32_t))
-                        memmove(&mult[r + 1], &mult[r], s + deg - r)
+                        for c in range(s + deg, r, -1):
+                            ring[c], mult[c] = ring[c - 1], mult[c - 1]
                         ring[r], mult[r], deg = pair[j], 1, deg + 1
                 for j in range(s, s + deg):
                     V[v].flags |= BOUNDARY if mult[j] == 1 else (LOCKED if mult[j] > 2 else 0)
@@ -166,6 +166,9 @@ def hierarchy(double[:, ::1] positions, const int64_t[:, ::1] triangles, uint8_t
                 prefetch(&V[x]); prefetch(&p[3 * x])
                 x = order[0, i + 8 if i + 8 < count else i]
                 prefetch(&ring[2 * V[x].start]); prefetch(&pair[2 * V[x].start])
+                x = order[0, i + 4 if i + 4 < count else i]  # its ring arrived: its neighbours' flags and positions
+                for j in range(2 * V[x].start, 2 * V[x].start + V[x].valence):
+                    prefetch(&V[ring[j]]); prefetch(&p[3 * ring[j]])
                 x, sx, sy, sz, best = order[0, i], 0.0, 0.0, 0.0, -1
                 if V[x].flags & TOUCHED:
                     continue  # the independence rule
