@@ -210,10 +210,9 @@ def hierarchy(double[:, ::1] positions, const int64_t[:, ::1] triangles, uint8_t
             for v in range(n):
                 if goal[v] >= 0:
                     removed[i], target[i] = v, goal[v]
-                    for e in range(V[v].valence):
-                        flat[total + e] = ring[2 * V[v].start + e]
-                    i, total = i + 1, total + V[v].valence
-                    offsets[i] = total
+                    for e in range(2 * V[v].start, 2 * V[v].start + V[v].valence):
+                        flat[total], total = ring[e], total + 1
+                    offsets[i + 1], i = total, i + 1
                 else:
                     parent[v], p[3 * j], p[3 * j + 1], p[3 * j + 2] = j, p[3 * v], p[3 * v + 1], p[3 * v + 2]
                     lock[j], kept[j], j = lock[v], kept[v], j + 1
@@ -221,11 +220,9 @@ def hierarchy(double[:, ::1] positions, const int64_t[:, ::1] triangles, uint8_t
                 parent[removed[i]] = parent[target[i]]
             for i in range(m):
                 out[alive, 0], out[alive, 1], out[alive, 2] = parent[T[i, 0]], parent[T[i, 1]], parent[T[i, 2]]
-                alive += (out[alive, 0] != out[alive, 1] and out[alive, 1] != out[alive, 2]
-                          and out[alive, 2] != out[alive, 0])
+                alive += out[alive, 0] != out[alive, 1] != out[alive, 2] != out[alive, 0]
         out = None  # let go of the buffer, then cut it to the triangles kept (pages never written cost nothing)
         level[5].resize((alive, 3), refcheck=False)
         n, T = n - selected, level[5]
         levels.append((*level, kept_a[:n].copy()))
-        if report is not None:
-            report(selected)
+        report(selected)
