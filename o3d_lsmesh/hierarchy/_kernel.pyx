@@ -169,6 +169,9 @@ def hierarchy(double[:, ::1] positions, const int64_t[:, ::1] triangles, uint8_t
                 x = order[0, i + 4 if i + 4 < count else i]  # its ring arrived: its neighbours' flags and positions
                 for j in range(2 * V[x].start, 2 * V[x].start + V[x].valence):
                     prefetch(&V[ring[j]]); prefetch(&p[3 * ring[j]])
+                x = order[0, i + 2 if i + 2 < count else i]  # the neighbours' rings, one of which the link check reads
+                for j in range(2 * V[x].start, 2 * V[x].start + V[x].valence):
+                    prefetch(&ring[2 * V[ring[j]].start])
                 x, sx, sy, sz, best = order[0, i], 0.0, 0.0, 0.0, -1
                 if V[x].flags & TOUCHED:
                     continue  # the independence rule
