@@ -17,5 +17,5 @@ def hierarchy(
     min_quality: float,
     max_tries: int,
     lock_fans: bool,
-    report: Callable[[int], Any] | None,
+    report: Callable[[int], Any],
 ) -> tuple[np.ndarray, list[tuple[np.ndarray, ...]]]: ...

@@ -31,7 +31,7 @@ cdef void _sort(int32_t* order, int32_t* spare, uint64_t* key, uint64_t* key2, P
         memset(hist, 0, sizeof(hist))
         for i in range(count):
             hist[(key[i] >> p) & 2047] += 1
-        if count and hist[(key[0] >> p) & 2047] < count:  # else every key has this digit
+        if hist[(key[0] >> p) & 2047] < count:  # else every key has this digit (key has a spare slot)
             total = 0
             for d in range(2048):
                 total, hist[d] = total + hist[d], total
@@ -46,10 +46,7 @@ cdef bint _legal(const double* P, const Vertex* V, const int32_t* pair, const in
                  int32_t x, int32_t e, double cos_sq, double min_quality) noexcept nogil:
     """Whether ``x`` may collapse into its ring slot ``e`` (the geometric rules, then the link condition)."""
     cdef int32_t k = ring[2 * V[x].start + e], i = 2 * V[x].start, l = 2 * V[k].start, j, c, common = 0
-    cdef double o[3]
-    cdef double n[3]
-    cdef double u[3]
-    cdef double w[3]
+    cdef double[3] o, n, u, w
     cdef double dot, new_sq
     for j in range(2 * V[x].start, 2 * (V[x].start + V[x].corners), 2):
         if pair[j] == k or pair[j + 1] == k:
@@ -82,8 +79,9 @@ def hierarchy(double[:, ::1] positions, const int64_t[:, ::1] triangles, uint8_t
     cdef Py_ssize_t n = positions.shape[0], m = triangles.shape[0], i, count, selected, alive, total
     if n >= 2 ** 31 - 1 or 6 * m >= 2 ** 31 - 1:
         raise ValueError(f"mesh must have fewer than 2**31 vertices and 2**31 / 6 triangles, got {n} and {m}")
-    vertex_a, pair_a, ring_a = np.zeros((n + 1, 4), np.int32), np.zeros(6 * m, np.int32), np.zeros(6 * m, np.int32)
-    mult_a, key_a, order_a = np.zeros(6 * m, np.uint8), np.zeros((2, n + 1), np.uint64), np.zeros((3, n + 1), np.int32)
+    # np.empty: every slot is written before it is read, and freed heap memory is reused without zeroing
+    vertex_a, pair_a, ring_a = np.empty((n + 1, 4), np.int32), np.empty(6 * m, np.int32), np.empty(6 * m, np.int32)
+    mult_a, key_a, order_a = np.empty(6 * m, np.uint8), np.zeros((2, n + 1), np.uint64), np.empty((3, n + 1), np.int32)
     kept_a = np.arange(n, dtype=np.int64)
     cdef int32_t[:, ::1] vertex = vertex_a, order = order_a  # order: candidates, sort spare, targets
     cdef int32_t[::1] pair = pair_a, ring = ring_a, root
@@ -113,19 +111,18 @@ def hierarchy(double[:, ::1] positions, const int64_t[:, ::1] triangles, uint8_t
             max_valence = 0
             for v in range(n):
                 s, deg, V[v].flags = 2 * V[v].start, 0, lock[v]
-                for j in range(s, s + 2 * V[v].corners):  # insertion sort: rings are short
-                    u, r = pair[j], j
-                    while r > s and ring[r - 1] > u:
-                        ring[r], r = ring[r - 1], r - 1
-                    ring[r] = u
-                j = s
-                while j < s + 2 * V[v].corners:
-                    r = j + 1
-                    while r < s + 2 * V[v].corners and ring[r] == ring[j]:
-                        r += 1
-                    ring[s + deg], mult[s + deg] = ring[j], min(r - j, 255)
-                    V[v].flags |= BOUNDARY if r - j == 1 else (LOCKED if r - j > 2 else 0)
-                    deg, j = deg + 1, r
+                for j in range(s, s + 2 * V[v].corners):  # insertion into the sorted unique ring: rings are short
+                    r = s + deg
+                    while r > s and ring[r - 1] > pair[j]:
+                        r -= 1
+                    if r > s and ring[r - 1] == pair[j]:
+                        mult[r - 1] += mult[r - 1] < 255
+                    else:
+                        for c in range(s + deg, r, -1):
+                            ring[c], mult[c] = ring[c - 1], mult[c - 1]
+                        ring[r], mult[r], deg = pair[j], 1, deg + 1
+                for j in range(s, s + deg):
+                    V[v].flags |= BOUNDARY if mult[j] == 1 else (LOCKED if mult[j] > 2 else 0)
                 V[v].valence, max_valence = deg, max(max_valence, deg)
         edge, root = np.zeros((3, max_valence)), np.zeros(max_valence, np.int32)
         if lock_fans and not levels:  # also lock unreferenced vertices and those whose corners form several fans
@@ -169,6 +166,12 @@ def hierarchy(double[:, ::1] positions, const int64_t[:, ::1] triangles, uint8_t
                 prefetch(&V[x]); prefetch(&p[3 * x])
                 x = order[0, i + 8 if i + 8 < count else i]
                 prefetch(&ring[2 * V[x].start]); prefetch(&pair[2 * V[x].start])
+                x = order[0, i + 4 if i + 4 < count else i]  # its ring arrived: its neighbours' flags and positions
+                for j in range(2 * V[x].start, 2 * V[x].start + V[x].valence):
+                    prefetch(&V[ring[j]]); prefetch(&p[3 * ring[j]])
+                x = order[0, i + 2 if i + 2 < count else i]  # the neighbours' rings, one of which the link check reads
+                for j in range(2 * V[x].start, 2 * V[x].start + V[x].valence):
+                    prefetch(&ring[2 * V[ring[j]].start])
                 x, sx, sy, sz, best = order[0, i], 0.0, 0.0, 0.0, -1
                 if V[x].flags & TOUCHED:
                     continue  # the independence rule
@@ -179,9 +182,7 @@ def hierarchy(double[:, ::1] positions, const int64_t[:, ::1] triangles, uint8_t
                     sx, sy, sz = sx + (dy * d - dz * hi), sy + (dz * lo - dx * d), sz + (dx * hi - dy * lo)
                 s, deg = 2 * V[x].start, V[x].valence
                 for e in range(deg):  # allowed edges with their cone volume |N_x . (x_k - x)| and length
-                    k = ring[s + e]
-                    # a boundary x goes along the boundary; an interior x has only 2-triangle edges (a 1 would make
-                    # it boundary, a 3 locks it); no isolated triangle or closed tetrahedron may remain
+                    k = ring[s + e]  # k unlocked; a boundary x along the boundary; no lone triangle or tetrahedron
                     edge[2, e] = not V[k].flags & LOCKED and (mult[s + e] == 1 or not V[x].flags & BOUNDARY) and not (
                         deg == (2 if V[x].flags & BOUNDARY else 3) == V[k].valence
                         and (V[k].flags & BOUNDARY) == (V[x].flags & BOUNDARY))
@@ -204,18 +205,17 @@ def hierarchy(double[:, ::1] positions, const int64_t[:, ::1] triangles, uint8_t
                         V[ring[j]].flags |= TOUCHED
         if selected == 0:
             return first, levels
-        level = [np.zeros(selected, np.int64), np.zeros(selected, np.int64), np.zeros(selected + 1, np.int64),
-                 np.zeros(total, np.int64), np.zeros(n, np.int64), np.empty((m, 3), np.int64)]
+        level = [np.empty(selected, np.int64), np.empty(selected, np.int64), np.empty(selected + 1, np.int64),
+                 np.empty(total, np.int64), np.empty(n, np.int64), np.empty((m, 3), np.int64)]
         removed, target, offsets, flat, parent, out = level
         with nogil:  # apply: the parent map, the removed 1-rings, the triangles with three distinct vertices
-            i = j = total = alive = 0
+            i = j = total = alive = offsets[0] = 0
             for v in range(n):
                 if goal[v] >= 0:
                     removed[i], target[i] = v, goal[v]
-                    for e in range(V[v].valence):
-                        flat[total + e] = ring[2 * V[v].start + e]
-                    i, total = i + 1, total + V[v].valence
-                    offsets[i] = total
+                    for e in range(2 * V[v].start, 2 * V[v].start + V[v].valence):
+                        flat[total], total = ring[e], total + 1
+                    offsets[i + 1], i = total, i + 1
                 else:
                     parent[v], p[3 * j], p[3 * j + 1], p[3 * j + 2] = j, p[3 * v], p[3 * v + 1], p[3 * v + 2]
                     lock[j], kept[j], j = lock[v], kept[v], j + 1
@@ -223,11 +223,9 @@ def hierarchy(double[:, ::1] positions, const int64_t[:, ::1] triangles, uint8_t
                 parent[removed[i]] = parent[target[i]]
             for i in range(m):
                 out[alive, 0], out[alive, 1], out[alive, 2] = parent[T[i, 0]], parent[T[i, 1]], parent[T[i, 2]]
-                alive += (out[alive, 0] != out[alive, 1] and out[alive, 1] != out[alive, 2]
-                          and out[alive, 2] != out[alive, 0])
+                alive += out[alive, 0] != out[alive, 1] != out[alive, 2] != out[alive, 0]
         out = None  # let go of the buffer, then cut it to the triangles kept (pages never written cost nothing)
         level[5].resize((alive, 3), refcheck=False)
         n, T = n - selected, level[5]
         levels.append((*level, kept_a[:n].copy()))
-        if report is not None:
-            report(selected)
+        report(selected)

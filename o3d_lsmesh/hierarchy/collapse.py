@@ -70,6 +70,6 @@ def collapse_levels(
     cos_sq = float(np.cos(np.deg2rad(max_normal_angle)) ** 2) if max_normal_angle < 90 else 0.0
     P, T = np.array(vertices, dtype=np.float64, order="C"), np.ascontiguousarray(triangles, dtype=np.int64)
     limit = len(P) + 1 if max_levels is None else max_levels
-    options = (alpha, beta, min_vertices, limit, cos_sq, min_quality, max_tries, lock_fans, report)
-    first, levels = hierarchy(P, T, lock.view(np.uint8), *options)
+    options = (alpha, beta, min_vertices, limit, cos_sq, min_quality, max_tries, lock_fans)
+    first, levels = hierarchy(P, T, lock.view(np.uint8), *options, report or (lambda _: None))
     return first, [LevelCollapse(*level) for level in levels]
