@@ -422,7 +422,7 @@ def test_one_edge_sort_per_fairing_call(monkeypatch, method):
         return wrapped
 
     monkeypatch.setattr(barycenter, "edge_structure", counting("edge_structure", topology.edge_structure))
-    monkeypatch.setattr(topology, "_edge_runs", counting("_edge_runs", topology._edge_runs))
+    monkeypatch.setattr(topology, "edge_runs", counting("edge_runs", topology.edge_runs))
     monkeypatch.setattr(topology, "directed_edges", counting("directed_edges", topology.directed_edges))
     V, F = grid(12, 12)
     V = V + np.random.default_rng(0).normal(scale=0.01, size=V.shape)
