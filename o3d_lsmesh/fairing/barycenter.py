@@ -238,19 +238,22 @@ class LocalOperator:
     scale: np.ndarray  # (n,) 1 / number of estimates
 
     def constant(self, positions0: np.ndarray) -> np.ndarray:
-        """``E3 @ X0``, the constraint part, ``(n, 3)``."""
+        """``E3 @ X0``, the constraint part, ``(n, 3)``.
+
+        One sparse product: the ``(n, k)`` matrix with ``u_a`` at ``(i_a, t)`` (three entries per
+        column, the corners in triangle order) times the ``(k, 3)`` sums ``C``, then the ``1/count``.
+        """
         n, corners = len(self.scale), self.corners
-        out = np.zeros((n, 3))
         k = len(corners)
         if k == 0:
-            return out
+            return np.zeros((n, 3))
         center = positions0[corners[:, 0]]
         center += positions0[corners[:, 1]]
         center += positions0[corners[:, 2]]
-        first = np.arange(k + 1, dtype=corners.dtype)
-        for a in range(3):
-            share = self.u[self.group, a] * self.scale[corners[:, a]]
-            out += sp.csc_matrix((share, corners[:, a], first), shape=(n, k)) @ center
+        starts = np.arange(0, 3 * k + 1, 3, dtype=corners.dtype)
+        share = sp.csc_matrix((self.u[self.group].reshape(-1), corners.reshape(-1), starts), shape=(n, k))
+        out = share @ center
+        out *= self.scale[:, None]
         return out
 
     def step(self, positions: np.ndarray, constant: np.ndarray) -> np.ndarray:
