@@ -36,6 +36,11 @@ from ..topology import (
     ring_pattern,
 )
 
+try:  # SciPy's sparse kernels (private, the same signature since SciPy 1.0): mat-vecs into a buffer
+    from scipy.sparse._sparsetools import csr_matvecs as _csr_matvecs
+except ImportError:  # pragma: no cover - a SciPy without it takes the public product
+    _csr_matvecs = None
+
 __all__ = [
     "DEFAULT_MU",
     "FairingTopology",
@@ -256,12 +261,51 @@ class LocalOperator:
         out *= self.scale[:, None]
         return out
 
-    def step(self, positions: np.ndarray, constant: np.ndarray) -> np.ndarray:
-        """``E1 @ (W @ X) + E2 @ X + constant``, ``(n, 3)``."""
-        out = self.e1 @ (self.adjacency @ positions)
-        out += self.e2 @ positions
-        out += constant
+    def step(
+        self,
+        positions: np.ndarray,
+        constant: np.ndarray,
+        *,
+        out: np.ndarray | None = None,
+        work: np.ndarray | None = None,
+    ) -> np.ndarray:
+        """``E1 @ (W @ X) + E2 @ X + constant``, ``(n, 3)``.
+
+        ``out`` and ``work`` (``(n, 3)`` float64, C-order, not ``positions``) are reused when
+        given: above about a million vertices an ``(n, 3)`` array exceeds the allocator's reuse
+        threshold, so every fresh temporary is mapped and faulted in anew at every iteration.
+        """
+        out = constant.copy() if out is None else out
+        if out is not constant:
+            np.copyto(out, constant)
+        work = np.empty_like(out) if work is None else work
+        work.fill(0.0)
+        _accumulate(self.adjacency, positions, work)
+        _accumulate(self.e2, positions, out)
+        _accumulate(self.e1, work, out)
         return out
+
+
+def _accumulate(matrix: sp.csr_matrix, x: np.ndarray, out: np.ndarray) -> None:
+    """``out += matrix @ x`` for ``(n, 3)`` float64 C-order arrays, without a temporary.
+
+    SciPy's kernel (``csr_matvecs``, what ``matrix @ x`` calls, accumulating into its output) when
+    it is there; else the public product.
+    """
+    usable = (
+        _csr_matvecs is not None
+        and x.dtype == out.dtype == matrix.dtype == np.float64
+        and x.flags.c_contiguous
+        and out.flags.c_contiguous
+        and matrix.indices.dtype == matrix.indptr.dtype
+    )
+    if not usable:
+        out += matrix @ x
+        return
+    rows, columns = matrix.shape
+    _csr_matvecs(
+        rows, columns, x.shape[1], matrix.indptr, matrix.indices, matrix.data, x.ravel(), out.ravel()
+    )
 
 
 def local_operator(triangles: np.ndarray, topo: FairingTopology) -> LocalOperator:
