@@ -7,7 +7,7 @@ which is much faster than ``np.unique`` on large keys.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
@@ -129,9 +129,19 @@ class EdgeStructure:
 
     edges: np.ndarray
     counts: np.ndarray
-    inverse: np.ndarray
     order: np.ndarray
     starts: np.ndarray
+    _inverse: np.ndarray | None = field(default=None, repr=False, compare=False)
+
+    @property
+    def inverse(self) -> np.ndarray:
+        """Edge index of each half-edge row, ``(3m,)``: formed on first use (local fairing never needs it)."""
+        if self._inverse is None:
+            inverse = np.empty(len(self.order), dtype=self.order.dtype)
+            inverse[self.order] = np.repeat(np.arange(len(self.edges), dtype=self.order.dtype), self.counts)
+            # a race recomputes the same array: harmless
+            object.__setattr__(self, "_inverse", inverse)
+        return self._inverse  # type: ignore[return-value]
 
     @property
     def runs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -164,7 +174,7 @@ def edge_structure(triangles: np.ndarray, n: int | None = None) -> EdgeStructure
     index = np.int32 if max(count, n) < np.iinfo(np.int32).max else np.int64
     if count == 0:
         empty = np.zeros(0, dtype=index)
-        return EdgeStructure(np.zeros((0, 2), dtype=index), empty, empty, empty, empty)
+        return EdgeStructure(np.zeros((0, 2), dtype=index), empty, empty, empty, _inverse=empty)
     tail = triangles.T
     head = triangles[:, [1, 2, 0]].T
     lo = np.minimum(tail, head).astype(index).reshape(-1)  # rows of halfedges() order
@@ -190,12 +200,8 @@ def edge_structure(triangles: np.ndarray, n: int | None = None) -> EdgeStructure
     edges = np.empty((len(starts), 2), dtype=index)
     edges[:, 0] = lo[order[starts]]
     edges[:, 1] = sorted_hi[starts]
-    del sorted_hi, lo, hi
-    rank = np.cumsum(first, dtype=index)
-    rank -= 1
-    inverse = np.empty(count, dtype=index)
-    inverse[order] = rank
-    return EdgeStructure(edges, counts, inverse, order, starts)
+    del sorted_hi, lo, hi, first
+    return EdgeStructure(edges, counts, order, starts)
 
 
 def unique_edges(triangles: np.ndarray, n: int | None = None):

@@ -429,3 +429,19 @@ def test_one_edge_sort_per_fairing_call(monkeypatch, method):
     out = constrained_fairing_arrays(V, F, 2, method=method)
     assert calls == ["edge_structure"]
     assert np.isfinite(out).all() and not np.allclose(out, V)
+
+
+def test_local_step_into_buffers_equals_the_sparse_products():
+    # the iteration accumulates into reused buffers through SciPy's kernel: it must equal the plain
+    # products E1 (W X) + E2 X + c, also on the fallback path (Fortran-order positions)
+    V, F = grid(9, 7)
+    V = V + np.random.default_rng(3).normal(scale=0.05, size=V.shape)
+    op = local_operator(F, fairing_topology(F, len(V), with_loops=False))
+    constant = op.constant(V)
+    expected = op.e1 @ (op.adjacency @ V) + op.e2 @ V + constant
+    out, work = np.full_like(V, np.nan), np.full_like(V, np.nan)
+    result = op.step(V, constant, out=out, work=work)
+    assert result is out
+    assert_allclose(result, expected, rtol=TIGHT, atol=TIGHT)
+    assert_allclose(op.step(np.asfortranarray(V), constant), expected, rtol=TIGHT, atol=TIGHT)
+    assert_allclose(op.step(V, constant), expected, rtol=TIGHT, atol=TIGHT)

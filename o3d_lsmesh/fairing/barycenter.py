@@ -36,6 +36,11 @@ from ..topology import (
     ring_pattern,
 )
 
+try:  # SciPy's sparse kernels (private, the same signature since SciPy 1.0): mat-vecs into a buffer
+    from scipy.sparse._sparsetools import csr_matvecs as _csr_matvecs
+except ImportError:  # pragma: no cover - a SciPy without it takes the public product
+    _csr_matvecs = None
+
 __all__ = [
     "DEFAULT_MU",
     "FairingTopology",
@@ -77,12 +82,16 @@ class FairingTopology:
 
     n: int
     edges: np.ndarray
-    inverse: np.ndarray
     valence: np.ndarray
     boundary: np.ndarray
     interior_triangles: np.ndarray
     loops: BoundaryCurves | list = field(default_factory=list)
     structure: EdgeStructure | None = None
+
+    @property
+    def inverse(self) -> np.ndarray:
+        """Edge of every half-edge (formed on first use from :attr:`structure`)."""
+        return self.structure.inverse if self.structure is not None else np.zeros(0, dtype=np.int64)
 
 
 def fairing_topology(
@@ -112,7 +121,7 @@ def fairing_topology(
     loops: BoundaryCurves | list = (
         boundary_curves(triangles, n, edges=es) if with_loops and boundary.any() else []
     )
-    return FairingTopology(n, es.edges, es.inverse, valence, boundary, interior_triangles, loops, es)
+    return FairingTopology(n, es.edges, valence, boundary, interior_triangles, loops, es)
 
 
 def triangle_coefficients(valences: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -234,102 +243,158 @@ class LocalOperator:
     scale: np.ndarray  # (n,) 1 / number of estimates
 
     def constant(self, positions0: np.ndarray) -> np.ndarray:
-        """``E3 @ X0``, the constraint part, ``(n, 3)``."""
+        """``E3 @ X0``, the constraint part, ``(n, 3)``.
+
+        One sparse product: the ``(n, k)`` matrix with ``u_a`` at ``(i_a, t)`` (three entries per
+        column, the corners in triangle order) times the ``(k, 3)`` sums ``C``, then the ``1/count``.
+        """
         n, corners = len(self.scale), self.corners
-        out = np.zeros((n, 3))
         k = len(corners)
         if k == 0:
-            return out
+            return np.zeros((n, 3))
         center = positions0[corners[:, 0]]
         center += positions0[corners[:, 1]]
         center += positions0[corners[:, 2]]
-        first = np.arange(k + 1, dtype=corners.dtype)
-        for a in range(3):
-            share = self.u[self.group, a] * self.scale[corners[:, a]]
-            out += sp.csc_matrix((share, corners[:, a], first), shape=(n, k)) @ center
+        starts = np.arange(0, 3 * k + 1, 3, dtype=corners.dtype)
+        share = sp.csc_matrix((self.u[self.group].reshape(-1), corners.reshape(-1), starts), shape=(n, k))
+        out = share @ center
+        out *= self.scale[:, None]
         return out
 
-    def step(self, positions: np.ndarray, constant: np.ndarray) -> np.ndarray:
-        """``E1 @ (W @ X) + E2 @ X + constant``, ``(n, 3)``."""
-        out = self.e1 @ (self.adjacency @ positions)
-        out += self.e2 @ positions
-        out += constant
+    def step(
+        self,
+        positions: np.ndarray,
+        constant: np.ndarray,
+        *,
+        out: np.ndarray | None = None,
+        work: np.ndarray | None = None,
+    ) -> np.ndarray:
+        """``E1 @ (W @ X) + E2 @ X + constant``, ``(n, 3)``.
+
+        ``out`` and ``work`` (``(n, 3)`` float64, C-order, not ``positions``) are reused when
+        given: above about a million vertices an ``(n, 3)`` array exceeds the allocator's reuse
+        threshold, so every fresh temporary is mapped and faulted in anew at every iteration.
+        """
+        out = constant.copy() if out is None else out
+        if out is not constant:
+            np.copyto(out, constant)
+        work = np.empty_like(out) if work is None else work
+        work.fill(0.0)
+        _accumulate(self.adjacency, positions, work)
+        _accumulate(self.e2, positions, out)
+        _accumulate(self.e1, work, out)
         return out
+
+
+def _accumulate(matrix: sp.csr_matrix, x: np.ndarray, out: np.ndarray) -> None:
+    """``out += matrix @ x`` for ``(n, 3)`` float64 C-order arrays, without a temporary.
+
+    SciPy's kernel (``csr_matvecs``, what ``matrix @ x`` calls, accumulating into its output) when
+    it is there; else the public product.
+    """
+    usable = (
+        _csr_matvecs is not None
+        and x.dtype == out.dtype == matrix.dtype == np.float64
+        and x.flags.c_contiguous
+        and out.flags.c_contiguous
+        and matrix.indices.dtype == matrix.indptr.dtype
+    )
+    if not usable:
+        out += matrix @ x
+        return
+    rows, columns = matrix.shape
+    _csr_matvecs(
+        rows, columns, x.shape[1], matrix.indptr, matrix.indices, matrix.data, x.ravel(), out.ravel()
+    )
 
 
 def local_operator(triangles: np.ndarray, topo: FairingTopology) -> LocalOperator:
     """Assemble the :class:`LocalOperator` of the interior triangles of ``triangles``.
 
-    Every coefficient depends only on a triangle's valence triple, so the
-    per-triangle work is gathers from small tables and ``bincount`` sums into
-    the diagonal (per vertex) and the two directions of every edge; no
-    ``(k, 3, 3)`` array is formed and nothing is sorted (the 1-ring pattern
-    comes from the edge structure of ``topo``).
+    Every coefficient depends only on a triangle's valence triple, a slot
+    and the slot's orientation, so it is read from a ``(6 g + 6, 4)`` table
+    (``g`` distinct triples, plus zero rows for the triangles that are not
+    interior). An interior triangle's edges all have two triangles (an edge
+    with one, or more than two, has boundary ends), so an edge's entries are
+    the sum of the two table rows of its two half-edges, read through the
+    half-edge grouping of the edge structure: gathers over the edges, no
+    scatter over the ``3k`` slots, nothing sorted (the 1-ring pattern comes
+    from the edge structure of ``topo``). The diagonal sums each corner's
+    entry onto its vertex in triangle order.
     """
-    n, edges, inverse = topo.n, topo.edges, topo.inverse
+    n, edges = topo.n, topo.edges
+    es = edge_structure(triangles, n) if topo.structure is None else topo.structure
     m = len(triangles)
     sel = topo.interior_triangles
     index = np.int32 if max(3 * m, n) < np.iinfo(np.int32).max else np.int64
     tri = triangles[sel].astype(index)  # (k, 3)
-    k = len(tri)
     group, table, M, u = _valence_tables(topo.valence[tri])
     group = group.astype(index)
+    g = len(table)
     alpha = M / table[:, None, :]  # (g, 3, 3): coefficient of S_{i_b} in P_a
     beta = alpha - alpha.sum(axis=2, keepdims=True)  # coefficient of x_{i_c}: -sum_{b != c} alpha_ab
 
-    # the 1-ring pattern first: its temporaries are gone before the per-slot arrays exist
+    # the 1-ring pattern first: its temporaries are gone before the per-edge arrays exist
     indptr, indices, diagonal, forward, backward = ring_pattern(edges, n)
-    nnz, e = len(indices), len(edges)
+    nnz = len(indices)
 
     corners = tri.reshape(-1)
     count = np.bincount(corners, minlength=n)  # estimates per vertex
     no_estimate = count == 0
     scale = 1.0 / np.maximum(count, 1)
     del count
-    # slot s of a triangle is its edge (i_s, i_{s+1}); halfedges() rows s*m + t
-    head = [1, 2, 0]
-    slot_edges = np.empty((k, 3), dtype=inverse.dtype)  # t-major like corners
-    for slot in range(3):
-        slot_edges[:, slot] = inverse[slot * m + sel]
-    slot_edge = slot_edges.reshape(-1)
-    del slot_edges
-    # row of every (triangle, slot) in the per-group tables below: which coefficient goes
-    # forward (row lo) and which backward depends on whether i_s < i_{s+1}
-    picks = np.empty((k, 3), dtype=index)
-    for slot in range(3):
-        np.multiply(group, 6, out=picks[:, slot])
-        picks[:, slot] += 2 * slot
-        picks[:, slot] += tri[:, slot] < tri[:, head[slot]]
-    pick = picks.reshape(-1)
-    del picks
-    # sums over the interior triangles as sparse products: every slot scattered onto its edge,
-    # every corner onto its vertex (one (3k,) coefficient column at a time)
-    unit = np.ones(3 * k)
-    first = np.arange(3 * k + 1, dtype=index)
-    onto_edges = sp.csc_matrix((unit, slot_edge, first), shape=(e, 3 * k))
-    onto_vertices = sp.csc_matrix((unit, corners, first), shape=(n, 3 * k))
-    del slot_edge
-    diag_pick = (group[:, None] * 3 + np.arange(3, dtype=index)).reshape(-1)
-    lo, hi = edges[:, 0], edges[:, 1]
+    # row group*6 + 2*slot + (tail < head) of the slot (i_s, i_{s+1}): columns alpha forward
+    # (row lo of the matrix), alpha backward (row hi), beta forward, beta backward
+    head, slots = [1, 2, 0], [0, 1, 2]
+    coefficient = np.zeros((g + 1, 3, 2, 4))  # group g: not an interior triangle, no estimate
+    for j, c in enumerate((alpha, beta)):
+        to_head, to_tail = c[:, slots, head], c[:, head, slots]  # (g, 3): (i_s, i_{s+1}), (i_{s+1}, i_s)
+        coefficient[:g, :, 1, 2 * j], coefficient[:g, :, 1, 2 * j + 1] = to_head, to_tail
+        coefficient[:g, :, 0, 2 * j], coefficient[:g, :, 0, 2 * j + 1] = to_tail, to_head
+    columns = coefficient.reshape(-1, 4).T.copy()  # (4, 6g + 6)
+    triangle_group = np.full(m, g, dtype=index)
+    triangle_group[sel] = group
+
+    inner = np.flatnonzero(es.counts == 2)
+    every = len(inner) == len(edges)  # a closed manifold mesh: no gathers of the edge arrays
+    lo = edges[:, 0] if every else edges[inner, 0]
+    flat = np.ascontiguousarray(triangles).reshape(-1)
+    picks = []
+    for side in (0, 1):
+        rows = es.order[es.starts + side] if every else es.order[es.starts[inner] + side]
+        slot = rows // m  # half-edge row slot * m + t (see halfedges())
+        t = rows - slot * m
+        del rows
+        pick = triangle_group[t]
+        pick *= 6
+        pick += 2 * slot
+        pick += flat[3 * t + slot] == lo  # the tail is the smaller end
+        picks.append(pick)
+        del slot, t
+    del triangle_group
+    ends = [
+        (forward if every else forward[inner], scale[lo]),
+        (backward if every else backward[inner], scale[edges[:, 1] if every else edges[inner, 1]]),
+    ]
+    diagonal_coefficient = np.stack([alpha[:, slots, slots], beta[:, slots, slots]])  # (2, g, 3)
 
     matrices = []
-    for coefficients in (alpha, beta):
-        # entry (i_a, i_c) of every interior triangle, summed and divided by the row's count
-        to_head = coefficients[:, [0, 1, 2], head]  # (g, 3): row i_s, column i_{s+1}
-        to_tail = coefficients[:, head, [0, 1, 2]]  # row i_{s+1}, column i_s
-        data = np.empty(nnz)
-        for positions, table_, ends in (
-            (forward, np.stack([to_tail, to_head], axis=2), lo),
-            (backward, np.stack([to_head, to_tail], axis=2), hi),
-        ):
-            summed = onto_edges @ table_.reshape(-1)[pick]
-            summed *= scale[ends]
+    for j in range(2):
+        data = np.zeros(nnz)
+        for direction, (positions, row_scale) in enumerate(ends):
+            column = columns[2 * j + direction]
+            summed = column[picks[0]]
+            summed += column[picks[1]]
+            summed *= row_scale
             data[positions] = summed
-        summed = onto_vertices @ coefficients[:, [0, 1, 2], [0, 1, 2]].reshape(-1)[diag_pick]
+        # corners in triangle order, as the reference sums them
+        weights = diagonal_coefficient[j][group].reshape(-1)
+        # float64 even without interior triangles (numpy returns int64 for empty weights)
+        summed = np.bincount(corners, weights=weights, minlength=n).astype(np.float64, copy=False)
         summed *= scale
         data[diagonal] = summed
         matrices.append(sp.csr_matrix((data, indices, indptr), shape=(n, n)))
-    del onto_edges, onto_vertices, unit, first, pick, diag_pick, forward, backward, data, summed
+    del picks, ends, forward, backward, data, summed, weights
     e1, e2 = matrices
     e2.data[diagonal[no_estimate]] = 1.0  # vertices without estimates stay put
     adjacency = np.ones(nnz)

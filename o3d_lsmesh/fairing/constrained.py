@@ -180,13 +180,16 @@ def _fair(
         op = local_operator(triangles, topo)
         del topo  # the edge structure is not needed once the operator holds its matrices
         constant, curve_target = op.constant(positions), curve.target(positions)
+        # three (n, 3) buffers for the whole run (``positions`` is a private copy): fresh ones per
+        # iteration cost page faults at scan sizes
+        spare, work = np.empty_like(positions), np.empty_like(positions)
         for iteration in steps:
             if reimpose_every is not None and iteration and iteration % reimpose_every == 0:
                 constant, curve_target = op.constant(positions), curve.target(positions)
-            relaxed = op.step(positions, constant)
+            relaxed = op.step(positions, constant, out=spare, work=work)
             if len(curve):
                 relaxed[curve.vertex] = curve.step(positions, curve_target)
-            positions = relaxed
+            positions, spare = relaxed, positions
         return positions
     system = GlobalSolver(triangles, topo, DEFAULT_MU if mu is None else mu, solver=solver, progress=progress)
     for _ in steps:
