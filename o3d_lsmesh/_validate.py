@@ -179,7 +179,7 @@ def as_vertex_array(value: Any, *, name: str = "mesh") -> np.ndarray:
         return np.zeros((0, 3))  # an empty mesh: check_mesh_arrays says so
     if array.ndim != 2 or array.shape[1] != 3:
         raise ValueError(f"{name} vertices must have shape (n, 3), got {array.shape}")
-    return np.array(array, dtype=np.float64)
+    return np.array(array, dtype=np.float64, order="C")  # C order: the compiled kernel reads rows
 
 
 def as_triangle_array(value: Any, n: int, *, name: str = "mesh") -> np.ndarray:
@@ -211,7 +211,7 @@ def as_triangle_array(value: Any, n: int, *, name: str = "mesh") -> np.ndarray:
         raise ValueError(
             f"{name} triangle indices must lie in [0, {n}), got {[int(i) for i in array[row]]} at triangle {row}"
         )
-    return array.astype(np.int64)
+    return array.astype(np.int64, order="C")
 
 
 @overload

@@ -44,7 +44,7 @@ from ._errors import O3DLSMeshWarning, SingularSystemError
 from ._o3d import new_mesh, read_mesh
 from ._progress import check_progress, progress_bar
 from ._solvers import SPDSolver
-from ._validate import as_bool, as_choice, as_count, as_positive_float
+from ._validate import as_bool, as_choice, as_count, as_positive_float, mesh_arrays
 from .topology import boundary_loops, unique_edges_and_runs
 
 if TYPE_CHECKING:
@@ -759,8 +759,7 @@ def fill_holes_arrays(
     weights = as_choice(weights, ("uniform", "cotangent"), name="weights")
     fill_border = bool(as_bool(fill_border, name="fill_border"))
     check_progress(progress)
-    vertices = np.asarray(vertices, dtype=np.float64)
-    triangles = np.asarray(triangles, dtype=np.int64)
+    vertices, triangles = mesh_arrays(vertices, triangles)
     n, m = len(vertices), len(triangles)
     holes: list[Hole] = []
     skipped: list[Hole] = []

@@ -9,6 +9,7 @@ import scipy.sparse as sp
 from scipy.sparse import csgraph
 
 from ._o3d import read_mesh
+from ._validate import mesh_arrays
 from .topology import (
     boundary_curves,
     boundary_rows,
@@ -36,8 +37,7 @@ def _bin_label(lo: int, hi: int | None) -> str:
 
 def topology_summary_arrays(vertices: np.ndarray, triangles: np.ndarray) -> dict:
     """Array core of :func:`topology_summary` (``(n, 3) float64`` vertices, ``(m, 3) int64`` triangles)."""
-    vertices = np.asarray(vertices, dtype=np.float64)
-    F = np.asarray(triangles, dtype=np.int64)
+    vertices, F = mesh_arrays(vertices, triangles)
     n, m = len(vertices), len(F)
     referenced = np.zeros(n, dtype=bool)
     referenced[F.ravel()] = True

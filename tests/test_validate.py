@@ -287,6 +287,10 @@ def test_weights_positions_and_vectors_never_accept_non_numbers(value):
 def test_mesh_arrays_is_the_one_check_of_array_functions_and_read_mesh():
     from o3d_lsmesh._validate import mesh_arrays
     from o3d_lsmesh.fairing import constrained_fairing_arrays
+    from o3d_lsmesh.fairing.boundary_curve import smooth_boundary_curves_arrays
+    from o3d_lsmesh.hierarchy.hierarchy import build_hierarchy_arrays
+    from o3d_lsmesh.hole_filling import fill_holes_arrays
+    from o3d_lsmesh.summary import topology_summary_arrays
 
     v, f = grid(3, 3)
     bad = {
@@ -303,11 +307,18 @@ def test_mesh_arrays_is_the_one_check_of_array_functions_and_read_mesh():
             (mesh_arrays, (vertices, triangles)),
             (read_mesh, ((vertices, triangles),)),
             (constrained_fairing_arrays, (vertices, triangles, 1)),
+            (smooth_boundary_curves_arrays, (vertices, triangles, 1)),
+            (build_hierarchy_arrays, (vertices, triangles)),
+            (fill_holes_arrays, (vertices, triangles)),
+            (topology_summary_arrays, (vertices, triangles)),
         ):
             with pytest.raises((TypeError, ValueError)) as info:
                 check(*args)
             errors.append((type(info.value), str(info.value)))
-        assert errors[0] == errors[1] == errors[2], case
+        assert all(error == errors[0] for error in errors), case
+    # C order whatever the caller's layout (the compiled hierarchy kernel reads rows)
+    fortran_v, fortran_f = mesh_arrays(np.asfortranarray(v), np.asfortranarray(f))
+    assert fortran_v.flags.c_contiguous and fortran_f.flags.c_contiguous
     # copies: the caller's arrays are never the results
     out_v, out_f = mesh_arrays(v, f)
     assert not np.shares_memory(out_v, v) and not np.shares_memory(out_f, f)

@@ -54,7 +54,7 @@ import scipy.sparse as sp
 
 from .._o3d import new_mesh, read_mesh
 from .._ranges import concatenated_ranges
-from .._validate import as_count
+from .._validate import as_count, mesh_arrays
 from ..topology import BoundaryCurves, boundary_curves
 
 if TYPE_CHECKING:
@@ -232,8 +232,7 @@ def smooth_boundary_curves_arrays(
 
     Works on any boundary, walked as :func:`~o3d_lsmesh.topology.boundary_curves`.
     """
-    vertices = np.array(vertices, dtype=np.float64)
-    triangles = np.asarray(triangles, dtype=np.int64)
+    vertices, triangles = mesh_arrays(vertices, triangles)
     number_of_iterations = as_count(number_of_iterations, name="number_of_iterations")
     if reimpose_every is not None:
         reimpose_every = as_count(reimpose_every, name="reimpose_every", minimum=1)

@@ -54,9 +54,7 @@ def _check_options(
     boundary_weight=None,
 ):
     method, number_of_iterations = resolved_options(method, number_of_iterations, reimpose_every)
-    method = as_choice(method, FAIRING_METHODS, name="method")
-    if number_of_iterations is None:
-        number_of_iterations = _DEFAULT_ITERATIONS[method]
+    method = as_choice(method, FAIRING_METHODS, name="method")  # valid: resolved_options filled the count
     number_of_iterations = as_count(number_of_iterations, name="number_of_iterations")
     for name, value in (("membrane", membrane), ("boundary_weight", boundary_weight)):
         if value is not None and method != "scan":

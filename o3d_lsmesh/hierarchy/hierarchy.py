@@ -17,7 +17,7 @@ import scipy.sparse as sp
 
 from .._o3d import MeshData, new_mesh, read_mesh, warn_dropped_attributes
 from .._progress import check_progress, progress_bar
-from .._validate import as_count, as_positions, as_positive_float
+from .._validate import as_count, as_positions, as_positive_float, mesh_arrays
 from ..topology import adjacency_matrix, boundary_halfedges
 from .collapse import collapse_levels
 
@@ -337,13 +337,19 @@ def build_hierarchy_arrays(
     mesh_kind: str = "arrays",
     tensor_format: tuple = (),
 ) -> MeshHierarchy:
-    """Array core of :func:`build_hierarchy` (inputs already validated by :func:`read_hierarchy_mesh`).
+    """Array core of :func:`build_hierarchy`: ``(n, 3) float64`` vertices, ``(m, 3) int64`` triangles.
 
-    The arrays are copied: changing them afterwards does not change the hierarchy.
+    The arrays are checked and copied (:func:`~o3d_lsmesh._validate.mesh_arrays`): changing them
+    afterwards does not change the hierarchy.
     """
     _warn_workers(workers)
-    vertices = np.array(vertices, dtype=np.float64, order="C", copy=True)
-    triangles = np.array(triangles, dtype=np.int64, order="C", copy=True)
+    alpha = as_positive_float(alpha, name="alpha", allow_zero=True)
+    beta = as_positive_float(beta, name="beta", allow_zero=True)
+    min_vertices = as_count(min_vertices, name="min_vertices")
+    if max_levels is not None:
+        max_levels = as_count(max_levels, name="max_levels")
+    progress = check_progress(progress)
+    vertices, triangles = mesh_arrays(vertices, triangles)
     n0 = len(vertices)
     total = max(n0 - min_vertices, 0)  # at most: a level may find no valid collapse before
     with progress_bar(progress, total=total, desc="mesh hierarchy", unit="vertex") as bar:
@@ -455,12 +461,6 @@ def build_hierarchy(
     >>> fine.shape
     (762, 3)
     """
-    alpha = as_positive_float(alpha, name="alpha", allow_zero=True)
-    beta = as_positive_float(beta, name="beta", allow_zero=True)
-    min_vertices = as_count(min_vertices, name="min_vertices")
-    if max_levels is not None:
-        max_levels = as_count(max_levels, name="max_levels")
-    progress = check_progress(progress)
     _warn_workers(workers)
     data = read_hierarchy_mesh(mesh)
     warn_dropped_attributes(data, "hierarchy levels have new connectivity")
@@ -471,7 +471,7 @@ def build_hierarchy(
         beta=beta,
         min_vertices=min_vertices,
         max_levels=max_levels,
-        progress=bool(progress),
+        progress=progress,
         mesh_kind=data.kind,
         tensor_format=tensor_format_of(data),
     )
