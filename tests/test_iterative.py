@@ -13,7 +13,12 @@ from conftest import grid, load_mesh
 
 from o3d_lsmesh import SPDSolver, constrained_fairing, ls_mesh, reconstruct_geometry
 from o3d_lsmesh._errors import ConvergenceError
-from o3d_lsmesh._solvers import DEFAULT_TOLERANCE, default_memory_budget, estimate_factor_bytes
+from o3d_lsmesh._solvers import (
+    DEFAULT_TOLERANCE,
+    cholmod_available,
+    default_memory_budget,
+    estimate_factor_bytes,
+)
 from o3d_lsmesh.lsmesh import LSMeshSolver
 
 MATCH = 1e-6  # the documented agreement with the direct solution, relative
@@ -126,6 +131,31 @@ def test_warm_start_needs_fewer_iterations_and_tolerance_is_honoured():
     matrix = system._solver.matrix
     residual = np.linalg.norm(rhs - matrix @ x, axis=0) / np.linalg.norm(rhs, axis=0)
     assert residual.max() <= DEFAULT_TOLERANCE * 1.0001
+
+
+def test_a_start_worse_than_zero_is_dropped_per_column():
+    V, F = grid(40, 40, z=lambda x, y: np.sin(4 * x) * y)
+    controls = np.arange(0, 1600, 37)
+    system = LSMeshSolver((V, F), controls, solver="iterative")
+    rhs = np.zeros((1600, 3))
+    rhs[controls] = V[controls]
+    cold = system._solver.solve(rhs)
+    cold_iterations = system._solver.iterations
+    far = np.full((1600, 3), 1e6)  # farther from the solution than zero, in every column
+    from_far = system._solver.solve(rhs, x0=far)
+    assert system._solver.iterations == cold_iterations
+    np.testing.assert_array_equal(from_far, cold)
+
+
+@pytest.mark.skipif(not cholmod_available(), reason="the reference is CHOLMOD's factor (scikit-sparse)")
+def test_iterative_matches_cholmod_at_a_hundred_thousand_vertices():
+    # the documented agreement at the default tolerance, on a real mesh of 134k vertices with 2% controls
+    mesh = load_mesh("igea.ply")
+    n = len(mesh.vertices)
+    controls = np.random.default_rng(1).choice(n, n // 50, replace=False)
+    direct = vertices(ls_mesh(mesh, controls, solver="cholmod"))
+    iterative = vertices(ls_mesh(mesh, controls, solver="iterative"))
+    assert relative(iterative, direct) < MATCH
 
 
 def test_progress_bar_shows_the_residual(monkeypatch):
