@@ -49,6 +49,7 @@ from ._batch_ops import (
     WRITABLE,
     BatchOp,
     Option,
+    new_record,
     output_path,
     parse_ops,
     register_op,
@@ -259,24 +260,7 @@ class _Window:
 
 
 def _failure(task: _Task, op: str, message: str, stage: str = "worker") -> dict:
-    return {
-        "input": task.path,
-        "output": None,
-        "status": "failed",
-        "error": message,
-        "stage": stage,
-        "op": op,
-        "key": task.key,
-        "seconds": None,
-        "cpu_seconds": None,
-        "worker": None,
-        "pid": None,
-        "vertices_before": None,
-        "triangles_before": None,
-        "vertices_after": None,
-        "triangles_after": None,
-        "metrics": {},
-    }
+    return new_record(input=task.path, error=message, stage=stage, op=op, key=task.key)
 
 
 def _run_dask(client: Any, tasks: list[_Task], job: dict, emit: Callable[[dict], bool], retries: int) -> None:

@@ -19,9 +19,9 @@ from typing import Any, Callable
 
 import numpy as np
 
+from .._batch_ops import WRITABLE
+
 PROG = "o3d-lsmesh"
-#: Extensions Open3D 0.20 writes back readably (its .glb writer produces files it cannot read back).
-WRITABLE = (".ply", ".obj", ".stl", ".off", ".gltf")
 
 
 class CLIError(Exception):

@@ -7,9 +7,10 @@ import time
 from pathlib import Path
 from typing import Any
 
+from .._batch_ops import change_metrics
 from ._common import WRITABLE, CLIError, Run, add_command, nonnegative_int, positive_int
 from ._files import check_output, read_input, write_output
-from .compare import change_report, draw
+from .compare import draw
 
 
 def add_parsers(sub: Any, common: argparse.ArgumentParser) -> None:
@@ -105,7 +106,7 @@ def denoise(args: argparse.Namespace, run: Run) -> int:
         )
     seconds = time.perf_counter() - start
     report = {"method": args.method, "iterations": args.iterations, "level": args.level, "seconds": seconds}
-    report.update(change_report(mesh, out))
+    report.update(change_metrics(mesh, out))
     write_output(args.output, out)
     change = report["volume_change_percent"]
     run.say(
