@@ -497,12 +497,13 @@ def _size(mesh: Any) -> tuple[int, int]:
 def run_task(
     path: str,
     relative: str,
+    key: str,
+    *,
     outdir: str,
     ops: Sequence[BatchOp],
     options: Sequence[dict],
     suffix: str,
     threads: int | None,
-    key: str,
 ) -> dict:
     """Read ``path``, run the pipeline, write the result; return the JSON record (never raises an Exception)."""
     start, cpu = time.perf_counter(), time.process_time()

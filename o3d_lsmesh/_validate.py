@@ -65,11 +65,7 @@ def _describe(value: Any) -> str:
 
 
 def check_mesh_arrays(
-    vertices: np.ndarray,
-    triangles: np.ndarray,
-    *,
-    name: str = "mesh",
-    allow_isolated: bool = True,
+    vertices: np.ndarray, triangles: np.ndarray, *, name: str = "mesh", allow_isolated: bool = True
 ) -> None:
     """Raise ``ValueError`` unless ``(vertices, triangles)`` is a usable mesh.
 
@@ -264,12 +260,7 @@ def isolated_vertices(triangles: np.ndarray, n: int) -> np.ndarray:
 
 
 def as_indices(
-    indices: Any,
-    n: int,
-    *,
-    name: str,
-    allow_empty: bool = False,
-    allow_repeats: bool = False,
+    indices: Any, n: int, *, name: str, allow_empty: bool = False, allow_repeats: bool = False
 ) -> np.ndarray:
     """Return ``indices`` as a unique ``(k,) int64`` array of vertex indices in ``[0, n)`` (repeats if allowed)."""
     if isinstance(indices, (str, bytes)) or indices is None:

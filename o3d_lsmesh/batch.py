@@ -59,15 +59,7 @@ from ._batch_ops import (
 from ._errors import O3DLSMeshWarning
 from ._progress import check_progress, progress_bar
 
-__all__ = [
-    "OPS",
-    "BatchOp",
-    "Option",
-    "collect_inputs",
-    "register_op",
-    "run",
-    "summarize",
-]
+__all__ = ["OPS", "BatchOp", "Option", "collect_inputs", "register_op", "run", "summarize"]
 
 _GLOB_CHARACTERS = set("*?[")
 
@@ -292,17 +284,13 @@ def _run_dask(client: Any, tasks: list[_Task], job: dict, emit: Callable[[dict],
             return
         keys = [f"o3d-lsmesh-batch-{token}-{task.index}" for task in chunk]
         futures = client.map(
-            _remote_task,
+            run_task,
             [t.path for t in chunk],
             [t.relative for t in chunk],
             [t.key for t in chunk],
             key=keys,
             pure=False,
-            outdir=job["outdir"],
-            ops=job["ops"],
-            options=job["options"],
-            suffix=job["suffix"],
-            threads=job["threads"],
+            **job,
         )
         for task, future in zip(chunk, futures):
             by_key[future.key] = task
@@ -341,20 +329,6 @@ def _run_dask(client: Any, tasks: list[_Task], job: dict, emit: Callable[[dict],
         remaining = list(getattr(queue, "futures", ()))
         if remaining:
             client.cancel(remaining)
-
-
-def _remote_task(
-    path: str,
-    relative: str,
-    key: str,
-    *,
-    outdir: str,
-    ops: Sequence[BatchOp],
-    options: Sequence[dict],
-    suffix: str,
-    threads: int | None,
-) -> dict:
-    return run_task(path, relative, outdir, ops, options, suffix, threads, key)
 
 
 # --------------------------------------------------------------------------- the API
@@ -647,9 +621,7 @@ def _dispatch(
 def _run_serial(todo: list[_Task], job: dict, emit: Callable[[dict], bool]) -> None:
     # Threads are left as the caller's process has them: this loop runs in the caller's process.
     for task in todo:
-        record = run_task(
-            task.path, task.relative, job["outdir"], job["ops"], job["options"], job["suffix"], None, task.key
-        )
+        record = run_task(task.path, task.relative, task.key, **{**job, "threads": None})
         if not emit(record):
             return
 
