@@ -35,7 +35,7 @@ import tempfile
 import time
 import uuid
 from collections.abc import Iterator, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
 
@@ -212,7 +212,7 @@ class TaskContext:
     input: str  # path of the input file
     relative: str  # its name relative to the INPUT it came from (used for the output and reference names)
     threads: int | None  # thread budget of this worker (None: not managed, e.g. in the serial loop)
-    extra: dict = field(default_factory=dict)
+    progress: bool = False  # tqdm bars (the single-file CLI commands; never in a batch)
 
 
 OPS: dict[str, BatchOp] = {}
@@ -575,14 +575,17 @@ def change_metrics(before: Any, after: Any) -> dict:
     return out
 
 
-def _denoise(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
-    level = options["level"]
+def denoise_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
+    """``--op denoise`` and ``o3d-lsmesh denoise``: fairing with the method and iterations that ran."""
+    level, progress = options["level"], context.progress
     if level:
         from .fairing.multiresolution import multiresolution_fairing
 
         iterations = 5 if options["iterations"] is None else options["iterations"]
         method = options["method"] or "local"
-        out = multiresolution_fairing(mesh, level, number_of_iterations=iterations, method=method)
+        out = multiresolution_fairing(
+            mesh, level, number_of_iterations=iterations, method=method, progress=progress
+        )
     else:
         from .fairing import constrained_fairing
         from .fairing.constrained import resolved_options
@@ -598,6 +601,7 @@ def _denoise(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]
             mu=options["mu"],
             smooth_boundary=not options["fixed_boundary"],
             reimpose_every=options["reimpose_every"],
+            progress=progress,
         )
     return out, {"method": method, "iterations": iterations, "level": level, **change_metrics(mesh, out)}
 
@@ -751,7 +755,7 @@ _METHODS = ("greedy", "random", "combined")
 register_op(
     BatchOp(
         "denoise",
-        _denoise,
+        denoise_op,
         help="barycenter-constrained (or multiresolution with --level) fairing",
         options=(
             Option(
