@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from .._batch_ops import normal_change, percent_change
-from ._common import PictureError, Run, add_command, int_at_least
+from ._common import PictureError, Run, add_command, bounded
 from ._files import check_output, read_input
 
 #: metrics.MAX_SAMPLE_POINTS (not imported here: --help must not load the numeric modules)
@@ -21,7 +21,7 @@ def add_parsers(sub: Any, common: argparse.ArgumentParser) -> None:
     p = add_command(sub, common, compare, {"a": "first mesh file (the reference)", "b": "second mesh file"})
     p.add_argument(
         "--points",
-        type=int_at_least(1, "positive", MAX_POINTS),
+        type=bounded(int, 1, "positive integer", MAX_POINTS),
         default=100_000,
         help="surface samples per mesh",
     )

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from ._common import Run, add_command, int_at_least
+from ._common import Run, add_command, bounded
 from ._files import check_output, read_input, write_output
 
 
@@ -16,7 +16,7 @@ def add_parsers(sub: Any, common: argparse.ArgumentParser) -> None:
     p = add_command(sub, common, fill, {"input": "mesh file", "output": "mesh file to write"})
     p.add_argument(
         "--max-hole-edges",
-        type=int_at_least(3, "3-or-more"),
+        type=bounded(int, 3, "3-or-more integer"),
         help="fill only holes of at most this many edges (default: no limit)",
     )
     p.add_argument(
