@@ -15,12 +15,9 @@ import textwrap
 import traceback
 import warnings
 from collections.abc import Sequence
-from pathlib import Path
 from typing import Any, Callable
 
-import numpy as np
-
-from .._batch_ops import WRITABLE
+from .._batch_ops import WRITABLE, jsonable
 
 PROG = "o3d-lsmesh"
 
@@ -144,16 +141,8 @@ class Run:
             }
             if mesh is not None:
                 report.update(vertices=len(mesh.vertices), triangles=len(mesh.triangles))
-            print(json.dumps({**report, **fields}, indent=2, default=_jsonable), flush=True)
+            print(json.dumps(jsonable({**report, **fields}), indent=2), flush=True)
         return 0
-
-
-def _jsonable(value: Any) -> Any:
-    if isinstance(value, (np.generic, np.ndarray)):
-        return value.tolist()
-    if isinstance(value, Path):
-        return str(value)
-    raise TypeError(f"not JSON serializable: {type(value).__name__}")
 
 
 # --------------------------------------------------------------------------- errors
