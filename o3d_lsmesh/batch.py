@@ -460,26 +460,21 @@ def run(
     outputs: dict[str, str] = {}
     for index, (path, relative) in enumerate(items):
         target = output_path(outdir, relative, ops[-1], suffix)
-        if target is not None:
-            if str(target) in outputs:
+        output = None if target is None else str(target)
+        if output is not None:
+            if output in outputs:
                 raise ValueError(
-                    f"INPUT files {outputs[str(target)]!r} and {path!r} would both write {str(target)!r}; "
+                    f"INPUT files {outputs[output]!r} and {path!r} would both write {output!r}; "
                     "pass their folder instead of a glob so that outputs keep the subfolders"
                 )
-            outputs[str(target)] = path
-            if not force and os.path.exists(target) and os.path.samefile(target, path):
+            outputs[output] = path
+            if not force and os.path.exists(output) and os.path.samefile(output, path):
                 raise ValueError(
                     f"OUTDIR {str(outdir)!r} would overwrite the input {path!r} (use another OUTDIR, "
                     "another --suffix, or --force)"
                 )
         tasks.append(
-            _Task(
-                index,
-                os.path.abspath(path),
-                relative,
-                None if target is None else str(target),
-                task_key(path, ops, values, suffix),
-            )
+            _Task(index, os.path.abspath(path), relative, output, task_key(path, ops, values, suffix))
         )
 
     records: list[dict | None] = [None] * len(tasks)
