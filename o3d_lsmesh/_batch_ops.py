@@ -607,17 +607,13 @@ def denoise_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dic
     return out, {"method": method, "iterations": iterations, "level": level, **change_metrics(mesh, out)}
 
 
-def _fill(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
+def fill_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
+    """``--op fill`` and ``o3d-lsmesh fill``: hole filling with the counts of new vertices and triangles."""
     from .hole_filling import fill_holes
 
-    out = fill_holes(
-        mesh,
-        max_hole_edges=options["max_hole_edges"],
-        max_hole_diameter=options["max_hole_diameter"],
-        continuity=int(options["continuity"]),
-        density=options["density"],
-        fill_border=options["fill_border"],
-    )
+    # the options are fill_holes' own (--continuity comes as the text of a choice)
+    options = {**options, "continuity": int(options["continuity"])}
+    out = fill_holes(mesh, **options, progress=context.progress)
     return out, {
         "new_vertices": len(out.vertices) - len(mesh.vertices),
         "new_triangles": len(out.triangles) - len(mesh.triangles),
@@ -786,7 +782,7 @@ register_op(
 register_op(
     BatchOp(
         "fill",
-        _fill,
+        fill_op,
         help="fill holes with faired patches (LS meshes)",
         options=(
             Option(
