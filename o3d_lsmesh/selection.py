@@ -88,11 +88,6 @@ def _random(vertices: np.ndarray, triangles: np.ndarray, count: int, rng: np.ran
     return np.concatenate([start, rest_in_order])[:count]
 
 
-def _squared_errors(solution: np.ndarray, original: np.ndarray) -> np.ndarray:
-    diff = solution - original
-    return np.einsum("ij,ij->i", diff, diff)
-
-
 def forbid_around(
     indptr: np.ndarray, neighbours: np.ndarray, errors: np.ndarray, forbidden: np.ndarray, vertex: int
 ) -> None:
@@ -153,7 +148,8 @@ def _select(
         done = len(start)
         bar.set_postfix_str("select")
         while done < count:
-            errors = _squared_errors(solver.solve(refine=False), vertices)
+            residual = solver.solve(refine=False) - vertices
+            errors = np.einsum("ij,ij->i", residual, residual)  # squared distance of each vertex
             forbidden = selected.copy()
             picks: list[int] = []
             size = min(batch, count - done)
