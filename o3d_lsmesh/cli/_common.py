@@ -99,6 +99,7 @@ def bounded(
 
 positive_int = bounded(int, 1, "positive integer")
 nonnegative_int = bounded(int, 0, "non-negative integer")
+nonnegative_float = bounded(float, 0, "non-negative finite number")
 
 
 def mesh_suffix(text: str) -> str:

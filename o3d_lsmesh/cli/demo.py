@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from ._common import Run, add_command, bounded
+from ._common import Run, add_command, bounded, nonnegative_float
 
 #: the demo's blob has 10 * 4**s + 2 vertices: 9 gives 2.6 million (about 3 GB to denoise), 12 would need 170 million
 MAX_SUBDIVISIONS = 9
@@ -21,12 +21,7 @@ def add_parsers(sub: Any, common: argparse.ArgumentParser) -> None:
         default=6,
         help="size of the built-in mesh: 10 * 4**s + 2 vertices (6: 40,962)",
     )
-    p.add_argument(
-        "--noise",
-        type=bounded(float, 0, "non-negative finite number"),
-        default=0.3,
-        help="noise sigma in mean edge lengths",
-    )
+    p.add_argument("--noise", type=nonnegative_float, default=0.3, help="noise sigma in mean edge lengths")
     p.add_argument("--seed", type=int, default=0, help="random seed of the noise")
 
 
