@@ -31,10 +31,11 @@ import io
 import os
 import shutil
 import sys
+import tempfile
 import time
 import uuid
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
 
@@ -60,24 +61,19 @@ READABLE = (".ply", ".obj", ".stl", ".off", ".gltf", ".glb")
 WRITABLE = (".ply", ".obj", ".stl", ".off", ".gltf")
 #: Names an operation option may not take: they are flags of ``o3d-lsmesh batch`` itself.
 RESERVED = frozenset(
-    {
-        "op",
-        "workers",
-        "threads_per_worker",
-        "scheduler",
-        "scheduler_file",
-        "resume",
-        "report",
-        "retries",
-        "fail_fast",
-        "suffix",
-        "set",
-        "quiet",
-        "json",
-        "force",
-        "help",
-    }
+    "op workers threads_per_worker scheduler scheduler_file resume report retries fail_fast suffix set "
+    "quiet json force help".split()
 )
+#: The fields of a report record, in the order they are written.
+RECORD_FIELDS = (
+    "input output status error stage op key seconds cpu_seconds worker pid "
+    "vertices_before triangles_before vertices_after triangles_after metrics"
+).split()
+
+
+def new_record(**fields: Any) -> dict:
+    """A report record: ``fields`` over a failed one with nothing else known (``None``, no metrics)."""
+    return {**dict.fromkeys(RECORD_FIELDS), "status": "failed", "metrics": {}, **fields}
 
 
 # --------------------------------------------------------------------------- option parsers
@@ -216,7 +212,7 @@ class TaskContext:
     input: str  # path of the input file
     relative: str  # its name relative to the INPUT it came from (used for the output and reference names)
     threads: int | None  # thread budget of this worker (None: not managed, e.g. in the serial loop)
-    extra: dict = field(default_factory=dict)
+    progress: bool = False  # tqdm bars (the single-file CLI commands; never in a batch)
 
 
 OPS: dict[str, BatchOp] = {}
@@ -319,24 +315,34 @@ def resolve_options(ops: Sequence[BatchOp], options: Mapping[str, Any] | None) -
 
 
 @contextlib.contextmanager
-def _quiet_native_output():
-    """Silence RPly/Assimp writing straight to file descriptors 1 and 2 while a file is read or written."""
+def captured_native_output() -> Iterator[list[str]]:
+    """Capture what C/C++ libraries write straight to file descriptors 1 and 2 (RPly, Assimp, Open3D).
+
+    Yields a list that holds the captured text once the block ends: it keeps
+    ``--json`` output clean and lets the CLI see the reader's complaints
+    (Open3D returns what it read so far from a truncated file and only says so
+    in a warning).
+    """
     sys.stdout.flush()
     sys.stderr.flush()
     saved = [os.dup(1), os.dup(2)]
-    devnull = os.open(os.devnull, os.O_WRONLY)
-    try:
-        os.dup2(devnull, 1)
-        os.dup2(devnull, 2)
-        yield
-    finally:
-        os.dup2(saved[0], 1)
-        os.dup2(saved[1], 2)
-        for fd in saved + [devnull]:
-            os.close(fd)
+    captured: list[str] = []
+    with tempfile.TemporaryFile() as sink:
+        try:
+            os.dup2(sink.fileno(), 1)
+            os.dup2(sink.fileno(), 2)
+            yield captured
+        finally:
+            os.dup2(saved[0], 1)
+            os.dup2(saved[1], 2)
+            for fd in saved:
+                os.close(fd)
+            sink.seek(0)
+            captured.append(sink.read().decode("utf-8", "replace"))
 
 
-def _open3d():
+def quiet_open3d() -> Any:
+    """The ``open3d`` module with its own messages off (ours are clearer and ``--json`` needs stdout clean)."""
     from ._o3d import open3d
 
     o3d = open3d()
@@ -349,12 +355,12 @@ def read_mesh_file(path: str) -> Any:
 
     Open3D returns an empty mesh instead of raising for a corrupt file, hence the checks.
     """
-    o3d = _open3d()
+    o3d = quiet_open3d()
     if not os.path.isfile(path):
         raise ValueError(f"INPUT {path!r} does not exist or is not a file")
     if os.path.getsize(path) == 0:
         raise ValueError(f"INPUT {path!r} is an empty file")
-    with _quiet_native_output():
+    with captured_native_output():
         mesh = o3d.io.read_triangle_mesh(path)
     if len(mesh.vertices) == 0:
         raise ValueError(
@@ -373,14 +379,14 @@ def _temporary(final: Path) -> Path:
     return final.with_name(f".{final.stem}.{uuid.uuid4().hex[:12]}.tmp{final.suffix}")
 
 
-def _write_mesh(mesh: Any, path: Path) -> None:
-    o3d = _open3d()
+def write_mesh(mesh: Any, path: Path) -> None:
+    """Write a mesh file; ``OSError`` when Open3D cannot (it returns False instead of raising)."""
+    o3d = quiet_open3d()
     if path.suffix.lower() == ".stl":
         mesh = o3d.geometry.TriangleMesh(mesh)
         mesh.compute_triangle_normals()  # Open3D's STL writer refuses a mesh without them
-    with _quiet_native_output():
+    with captured_native_output():
         written = o3d.io.write_triangle_mesh(str(path), mesh)
-    # Open3D returns False instead of raising when it cannot write.
     if not written or not path.exists() or path.stat().st_size == 0:
         raise OSError(f"Open3D could not write {str(path)!r}")
 
@@ -389,7 +395,7 @@ def _write_item(value: Any, path: Path) -> None:
     if isinstance(value, (bytes, bytearray)):
         path.write_bytes(bytes(value))
     else:
-        _write_mesh(value, path)
+        write_mesh(value, path)
 
 
 def write_atomic(value: Any, final: Path, *, kind: str, suffix: str) -> None:
@@ -453,7 +459,7 @@ def configure_threads(threads: int | None) -> None:
         return
     for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ[name] = str(threads)
-    o3d = _open3d()
+    o3d = quiet_open3d()
     if hasattr(o3d.utility, "set_max_threads"):
         o3d.utility.set_max_threads(threads)
     _THREADS_SET[:] = [threads]
@@ -468,13 +474,14 @@ def _worker_address() -> str:
         return "local"
 
 
-def _jsonable(value: Any) -> Any:
+def jsonable(value: Any) -> Any:
+    """``value`` with numpy values as Python ones, NaN and inf as None (JSON has neither) and the rest as text."""
     if isinstance(value, dict):
-        return {str(k): _jsonable(v) for k, v in value.items()}
+        return {str(k): jsonable(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
+        return [jsonable(v) for v in value]
     if isinstance(value, np.ndarray):
-        return _jsonable(value.tolist())
+        return jsonable(value.tolist())
     if isinstance(value, np.generic):
         value = value.item()
     if isinstance(value, float) and not np.isfinite(value):
@@ -491,33 +498,24 @@ def _size(mesh: Any) -> tuple[int, int]:
 def run_task(
     path: str,
     relative: str,
+    key: str,
+    *,
     outdir: str,
     ops: Sequence[BatchOp],
     options: Sequence[dict],
     suffix: str,
     threads: int | None,
-    key: str,
 ) -> dict:
     """Read ``path``, run the pipeline, write the result; return the JSON record (never raises an Exception)."""
     start, cpu = time.perf_counter(), time.process_time()
-    record: dict[str, Any] = {
-        "input": path,
-        "output": None,
-        "status": "failed",
-        "error": None,
-        "stage": "read",
-        "op": ",".join(op.name for op in ops),
-        "key": key,
-        "seconds": None,
-        "cpu_seconds": None,
-        "worker": _worker_address(),
-        "pid": os.getpid(),
-        "vertices_before": None,
-        "triangles_before": None,
-        "vertices_after": None,
-        "triangles_after": None,
-        "metrics": {},
-    }
+    record = new_record(
+        input=path,
+        stage="read",
+        op=",".join(op.name for op in ops),
+        key=key,
+        worker=_worker_address(),
+        pid=os.getpid(),
+    )
     try:
         configure_threads(threads)
         mesh = read_mesh_file(path)
@@ -543,34 +541,52 @@ def run_task(
         record["error"] = f"{type(error).__name__}: {error}"
     record["seconds"] = time.perf_counter() - start
     record["cpu_seconds"] = time.process_time() - cpu  # CPU time of this worker process (all its threads)
-    return _jsonable(record)
+    return jsonable(record)
 
 
 # --------------------------------------------------------------------------- the operations
 
 
-def _change(before: Any, after: Any) -> dict:
-    from .metrics import normal_deviation, signed_volume, vertex_error
+def percent_change(before: float, after: float) -> float | None:
+    # a flat or open mesh can enclose no volume: there is no relative change
+    return 100.0 * (after - before) / before if before != 0 else None
+
+
+def normal_change(a: Any, b: Any) -> float | None:
+    """Mean face-normal deviation of two meshes with the same triangles; None when no triangle has an area in both."""
+    from .metrics import normal_deviation
+
+    try:
+        return normal_deviation(a, b)
+    except ValueError:  # every triangle of zero area in a or b: the angle is undefined
+        return None
+
+
+def change_metrics(before: Any, after: Any) -> dict:
+    """How far the vertices moved, how much the volume and (with the same triangles) the face normals changed."""
+    from .metrics import signed_volume, vertex_error
 
     out: dict[str, Any] = {}
     if len(before.vertices) == len(after.vertices):
         moved = vertex_error(after, before)
         out["displacement_mean"], out["displacement_max"] = moved["mean"], moved["linf"]
         if np.array_equal(np.asarray(before.triangles), np.asarray(after.triangles)):
-            out["normal_change_deg"] = normal_deviation(after, before)
-    v0, v1 = signed_volume(before), signed_volume(after)
-    out["volume_change_percent"] = 100.0 * (v1 - v0) / v0 if v0 != 0 else None
+            out["normal_change_deg"] = normal_change(after, before)
+    out["volume_change_percent"] = percent_change(signed_volume(before), signed_volume(after))
     return out
 
 
-def _denoise(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
-    level = options["level"]
+def denoise_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
+    """``--op denoise`` and ``o3d-lsmesh denoise``: fairing with the method and iterations that ran."""
+    level, progress = options["level"], context.progress
     if level:
         from .fairing.multiresolution import multiresolution_fairing
 
         iterations = 5 if options["iterations"] is None else options["iterations"]
         method = options["method"] or "local"
-        out = multiresolution_fairing(mesh, level, number_of_iterations=iterations, method=method)
+        out = multiresolution_fairing(
+            mesh, level, number_of_iterations=iterations, method=method, progress=progress
+        )
     else:
         from .fairing import constrained_fairing
         from .fairing.constrained import resolved_options
@@ -586,35 +602,35 @@ def _denoise(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]
             mu=options["mu"],
             smooth_boundary=not options["fixed_boundary"],
             reimpose_every=options["reimpose_every"],
+            progress=progress,
         )
-    return out, {"method": method, "iterations": iterations, "level": level, **_change(mesh, out)}
+    return out, {"method": method, "iterations": iterations, "level": level, **change_metrics(mesh, out)}
 
 
-def _fill(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
+def fill_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
+    """``--op fill`` and ``o3d-lsmesh fill``: hole filling with the counts of new vertices and triangles."""
     from .hole_filling import fill_holes
 
-    out = fill_holes(
-        mesh,
-        max_hole_edges=options["max_hole_edges"],
-        max_hole_diameter=options["max_hole_diameter"],
-        continuity=int(options["continuity"]),
-        density=options["density"],
-        fill_border=options["fill_border"],
-    )
+    # the options are fill_holes' own (--continuity comes as the text of a choice)
+    options = {**options, "continuity": int(options["continuity"])}
+    out = fill_holes(mesh, **options, progress=context.progress)
     return out, {
         "new_vertices": len(out.vertices) - len(mesh.vertices),
         "new_triangles": len(out.triangles) - len(mesh.triangles),
     }
 
 
-def _parse_levels(spec: str, count: int) -> list[int]:
+def parse_levels(spec: str, count: int) -> list[int]:
+    """The levels ``spec`` names (``"all"`` or comma-separated numbers) in a hierarchy of ``count`` levels."""
     if spec == "all":
         return list(range(count))
-    levels = sorted({int(item) for item in spec.split(",") if item.strip()})
-    bad = [level for level in levels if not 0 <= level < count]
-    if bad or not levels:
+    try:
+        levels = sorted({int(item) for item in spec.split(",") if item.strip()})
+    except ValueError:
+        raise ValueError(f"--levels must be 'all' or comma-separated integers, got {spec!r}") from None
+    if not levels or not all(0 <= level < count for level in levels):
         raise ValueError(
-            f"--levels must be in 0..{count - 1} (this hierarchy has {count} levels), got {spec!r}"
+            f"--levels must be in 0..{count - 1} (the hierarchy has {count} levels), got {spec!r}"
         )
     return levels
 
@@ -636,7 +652,7 @@ def _hierarchy(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dic
     from .hierarchy import build_hierarchy
 
     hierarchy = build_hierarchy(mesh, min_vertices=options["min_vertices"], max_levels=options["max_levels"])
-    levels = _parse_levels(options["levels"], len(hierarchy))
+    levels = parse_levels(options["levels"], len(hierarchy))
     files: dict[str, Any] = {f"level_{level:02d}": hierarchy.level(level) for level in levels}
     if options["maps"]:
         buffer = io.BytesIO()
@@ -727,7 +743,7 @@ def _compare(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]
     }
     if len(mesh.vertices) == len(reference.vertices):
         metrics["vertex_error"] = vertex_error(mesh, reference)
-    metrics.update(_change(reference, mesh))
+    metrics.update(change_metrics(reference, mesh))
     return None, metrics
 
 
@@ -736,7 +752,7 @@ _METHODS = ("greedy", "random", "combined")
 register_op(
     BatchOp(
         "denoise",
-        _denoise,
+        denoise_op,
         help="barycenter-constrained (or multiresolution with --level) fairing",
         options=(
             Option(
@@ -766,7 +782,7 @@ register_op(
 register_op(
     BatchOp(
         "fill",
-        _fill,
+        fill_op,
         help="fill holes with faired patches (LS meshes)",
         options=(
             Option(

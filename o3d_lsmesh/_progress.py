@@ -52,24 +52,14 @@ class _Silent:
         pass
 
 
-def progress_bar(
-    progress: Any,
-    *,
-    total: int,
-    desc: str,
-    unit: str = "it",
-    initial: int = 0,
-    file: Any = None,
-    leave: bool = True,
-    dynamic_ncols: bool = False,
-) -> Any:
+def progress_bar(progress: Any, *, total: int, desc: str, **options: Any) -> Any:
     """A tqdm bar over ``total`` units (a silent stand-in when ``progress`` is False).
 
-    ``initial`` counts work done before the bar starts (the per-component seeds
-    of a selection, the files a resumed batch already did), so that the bar
-    still ends at ``total``. Writes to stderr (tqdm's default) unless ``file``
-    is given; ``leave=False`` erases it when it closes (an inner bar). Use as a
-    context manager, or call ``close()``.
+    ``options`` go to tqdm: ``unit``; ``initial``, the work done before the bar
+    starts (the per-component seeds of a selection, the files a resumed batch
+    already did), so that the bar still ends at ``total``; ``file`` (default
+    stderr); ``leave=False`` to erase it when it closes (an inner bar). Use as
+    a context manager, or call ``close()``.
 
     >>> with progress_bar(False, total=3, desc="work") as bar:
     ...     bar.update(3)
@@ -78,15 +68,7 @@ def progress_bar(
         return _Silent()
     from tqdm.auto import tqdm
 
-    return tqdm(
-        total=int(total),
-        initial=int(initial),
-        desc=desc,
-        unit=unit,
-        file=file,
-        leave=leave,
-        dynamic_ncols=dynamic_ncols,
-    )
+    return tqdm(total=int(total), desc=desc, **options)
 
 
 def iterate(

@@ -65,11 +65,7 @@ def _describe(value: Any) -> str:
 
 
 def check_mesh_arrays(
-    vertices: np.ndarray,
-    triangles: np.ndarray,
-    *,
-    name: str = "mesh",
-    allow_isolated: bool = True,
+    vertices: np.ndarray, triangles: np.ndarray, *, name: str = "mesh", allow_isolated: bool = True
 ) -> None:
     """Raise ``ValueError`` unless ``(vertices, triangles)`` is a usable mesh.
 
@@ -154,14 +150,19 @@ def _check_magnitude(array: np.ndarray, *, what: str, row: str) -> None:
         )
 
 
-def _real_array(value: Any, *, name: str, expected: str) -> np.ndarray:
-    """``np.asarray(value)`` if it holds real numbers, else ``TypeError`` (strings, bool, complex, objects)."""
+def _array(value: Any, *, name: str, expected: str) -> np.ndarray:
+    """``np.asarray(value)`` (an Open3D tensor converted first); ``TypeError`` for strings, None, ragged input."""
     if isinstance(value, (str, bytes)) or value is None:
         raise TypeError(f"{name} must be {expected}, got {_describe(value)}")
     try:
-        array = np.asarray(_open3d_tensor_to_numpy(value))
+        return np.asarray(_open3d_tensor_to_numpy(value))
     except Exception as error:  # ragged input and the like: a type problem
         raise TypeError(f"{name} must be {expected}, got {_describe(value)}") from error
+
+
+def _real_array(value: Any, *, name: str, expected: str) -> np.ndarray:
+    """:func:`_array` if it holds real numbers, else ``TypeError`` (bool, complex, strings, objects)."""
+    array = _array(value, name=name, expected=expected)
     if array.dtype.kind not in _REAL_KINDS:
         raise TypeError(f"{name} must be {expected} of real numbers, got dtype {array.dtype}")
     return array
@@ -191,14 +192,7 @@ def as_triangle_array(value: Any, n: int, *, name: str = "mesh") -> np.ndarray:
     unsigned index too large for int64 is not wrapped to a negative one).
     An empty array of any dtype means no triangles.
     """
-    if isinstance(value, (str, bytes)) or value is None:
-        raise TypeError(f"{name} triangles must be an (m, 3) integer array, got {_describe(value)}")
-    try:
-        array = np.asarray(value)
-    except Exception as error:
-        raise TypeError(
-            f"{name} triangles must be an (m, 3) integer array, got {_describe(value)}"
-        ) from error
+    array = _array(value, name=f"{name} triangles", expected="an (m, 3) integer array")
     if array.size == 0 and array.ndim <= 2 and (array.ndim < 2 or array.shape[1] in (0, 3)):
         return np.zeros((0, 3), dtype=np.int64)
     if array.dtype == bool or array.dtype.kind not in "iu":
@@ -264,22 +258,10 @@ def isolated_vertices(triangles: np.ndarray, n: int) -> np.ndarray:
 
 
 def as_indices(
-    indices: Any,
-    n: int,
-    *,
-    name: str,
-    allow_empty: bool = False,
-    allow_repeats: bool = False,
+    indices: Any, n: int, *, name: str, allow_empty: bool = False, allow_repeats: bool = False
 ) -> np.ndarray:
     """Return ``indices`` as a unique ``(k,) int64`` array of vertex indices in ``[0, n)`` (repeats if allowed)."""
-    if isinstance(indices, (str, bytes)) or indices is None:
-        raise TypeError(f"{name} must be a sequence of integer vertex indices, got {_describe(indices)}")
-    try:
-        array = np.asarray(_open3d_tensor_to_numpy(indices))
-    except Exception as error:  # ragged input and the like: report it as a type problem
-        raise TypeError(
-            f"{name} must be a sequence of integer vertex indices, got {_describe(indices)}"
-        ) from error
+    array = _array(indices, name=name, expected="a sequence of integer vertex indices")
     if array.ndim == 0:
         array = array.reshape(1)
     if array.ndim != 1:

@@ -49,6 +49,7 @@ from ._batch_ops import (
     WRITABLE,
     BatchOp,
     Option,
+    new_record,
     output_path,
     parse_ops,
     register_op,
@@ -58,15 +59,7 @@ from ._batch_ops import (
 from ._errors import O3DLSMeshWarning
 from ._progress import check_progress, progress_bar
 
-__all__ = [
-    "OPS",
-    "BatchOp",
-    "Option",
-    "collect_inputs",
-    "register_op",
-    "run",
-    "summarize",
-]
+__all__ = ["OPS", "BatchOp", "Option", "collect_inputs", "register_op", "run", "summarize"]
 
 _GLOB_CHARACTERS = set("*?[")
 
@@ -259,24 +252,7 @@ class _Window:
 
 
 def _failure(task: _Task, op: str, message: str, stage: str = "worker") -> dict:
-    return {
-        "input": task.path,
-        "output": None,
-        "status": "failed",
-        "error": message,
-        "stage": stage,
-        "op": op,
-        "key": task.key,
-        "seconds": None,
-        "cpu_seconds": None,
-        "worker": None,
-        "pid": None,
-        "vertices_before": None,
-        "triangles_before": None,
-        "vertices_after": None,
-        "triangles_after": None,
-        "metrics": {},
-    }
+    return new_record(input=task.path, error=message, stage=stage, op=op, key=task.key)
 
 
 def _run_dask(client: Any, tasks: list[_Task], job: dict, emit: Callable[[dict], bool], retries: int) -> None:
@@ -308,17 +284,13 @@ def _run_dask(client: Any, tasks: list[_Task], job: dict, emit: Callable[[dict],
             return
         keys = [f"o3d-lsmesh-batch-{token}-{task.index}" for task in chunk]
         futures = client.map(
-            _remote_task,
+            run_task,
             [t.path for t in chunk],
             [t.relative for t in chunk],
             [t.key for t in chunk],
             key=keys,
             pure=False,
-            outdir=job["outdir"],
-            ops=job["ops"],
-            options=job["options"],
-            suffix=job["suffix"],
-            threads=job["threads"],
+            **job,
         )
         for task, future in zip(chunk, futures):
             by_key[future.key] = task
@@ -357,20 +329,6 @@ def _run_dask(client: Any, tasks: list[_Task], job: dict, emit: Callable[[dict],
         remaining = list(getattr(queue, "futures", ()))
         if remaining:
             client.cancel(remaining)
-
-
-def _remote_task(
-    path: str,
-    relative: str,
-    key: str,
-    *,
-    outdir: str,
-    ops: Sequence[BatchOp],
-    options: Sequence[dict],
-    suffix: str,
-    threads: int | None,
-) -> dict:
-    return run_task(path, relative, outdir, ops, options, suffix, threads, key)
 
 
 # --------------------------------------------------------------------------- the API
@@ -502,26 +460,21 @@ def run(
     outputs: dict[str, str] = {}
     for index, (path, relative) in enumerate(items):
         target = output_path(outdir, relative, ops[-1], suffix)
-        if target is not None:
-            if str(target) in outputs:
+        output = None if target is None else str(target)
+        if output is not None:
+            if output in outputs:
                 raise ValueError(
-                    f"INPUT files {outputs[str(target)]!r} and {path!r} would both write {str(target)!r}; "
+                    f"INPUT files {outputs[output]!r} and {path!r} would both write {output!r}; "
                     "pass their folder instead of a glob so that outputs keep the subfolders"
                 )
-            outputs[str(target)] = path
-            if not force and os.path.exists(target) and os.path.samefile(target, path):
+            outputs[output] = path
+            if not force and os.path.exists(output) and os.path.samefile(output, path):
                 raise ValueError(
                     f"OUTDIR {str(outdir)!r} would overwrite the input {path!r} (use another OUTDIR, "
                     "another --suffix, or --force)"
                 )
         tasks.append(
-            _Task(
-                index,
-                os.path.abspath(path),
-                relative,
-                None if target is None else str(target),
-                task_key(path, ops, values, suffix),
-            )
+            _Task(index, os.path.abspath(path), relative, output, task_key(path, ops, values, suffix))
         )
 
     records: list[dict | None] = [None] * len(tasks)
@@ -663,9 +616,7 @@ def _dispatch(
 def _run_serial(todo: list[_Task], job: dict, emit: Callable[[dict], bool]) -> None:
     # Threads are left as the caller's process has them: this loop runs in the caller's process.
     for task in todo:
-        record = run_task(
-            task.path, task.relative, job["outdir"], job["ops"], job["options"], job["suffix"], None, task.key
-        )
+        record = run_task(task.path, task.relative, task.key, **{**job, "threads": None})
         if not emit(record):
             return
 

@@ -218,16 +218,12 @@ def run_demo(
         f"o3d-lsmesh demo: built-in blob, {len(clean.vertices)} vertices, {len(clean.triangles)} triangles, "
         f"Gaussian noise sigma = {noise} mean edge lengths (seed {seed})"
     )
-    rows = [
-        {
-            "key": "noisy",
-            "label": "noisy input",
-            "parameter": None,
-            "value": None,
-            "seconds": 0.0,
-            **_metrics(noisy, clean, number_of_points=points),
-        }
-    ]
+
+    def row(key: str, label: str, parameter: str | None, value: Any, seconds: float, result: Any) -> dict:
+        fields = {"key": key, "label": label, "parameter": parameter, "value": value, "seconds": seconds}
+        return fields | _metrics(result, clean, number_of_points=points)
+
+    rows = [row("noisy", "noisy input", None, None, 0.0, noisy)]
     results = {"noisy": noisy}
     sweeps = {}
     with progress_bar(progress and not quiet, total=len(METHODS), desc="demo", unit="method") as bar:
@@ -245,16 +241,7 @@ def run_demo(
             if reason:
                 rows.append({"key": key, "label": label, "skipped": reason})
                 continue
-            rows.append(
-                {
-                    "key": key,
-                    "label": label,
-                    "parameter": parameter,
-                    "value": value,
-                    "seconds": seconds,
-                    **_metrics(results[key], clean, number_of_points=points),
-                }
-            )
+            rows.append(row(key, label, parameter, value, seconds, results[key]))
 
     table = _format_table(rows, edge)
     say("")
@@ -290,23 +277,18 @@ def run_demo(
         if render:
             from .rendering import render as draw
 
-            panels = [results["noisy"]]
             done = [r for r in rows if "skipped" not in r and r["key"] != "noisy"]
             ours = [r for r in done if not r["key"].startswith("o3d_")]
             theirs = [r for r in done if r["key"].startswith("o3d_")]
-            for group in (ours, theirs):
-                if group:
-                    panels.append(results[min(group, key=lambda r: r["mean_vertex_error"])["key"]])
-            panels.append(clean)
+            best = [
+                min(group, key=lambda r: r["mean_vertex_error"])["key"] for group in (ours, theirs) if group
+            ]
+            names = ["noisy", *best, "clean"]
             picture = folder / "before_after.png"
             start = time.perf_counter()
+            panels = [noisy, *(results[key] for key in best), clean]
             draw(panels, picture, width=420, height=420, reference=clean, view_direction=(0.3, 0.4, 1.0))
             files.append(picture)
-            names = (
-                ["noisy"]
-                + [min(g, key=lambda r: r["mean_vertex_error"])["key"] for g in (ours, theirs) if g]
-                + ["clean"]
-            )
             say(
                 f"picture ({time.perf_counter() - start:.1f} s): {picture}  panels: {' | '.join(names)}, "
                 "colored by distance to the clean mesh"

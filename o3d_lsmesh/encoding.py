@@ -276,12 +276,6 @@ def _parse(data: Any, mesh_data: MeshData) -> tuple[np.ndarray, np.ndarray, floa
     return indices, dequantize(quantized, lower, upper, bits), float(omega)
 
 
-def _prefix(anchors: Any, k: int) -> int:
-    if anchors is None:
-        return k
-    return as_count(anchors, name="anchors", minimum=1, maximum=k)
-
-
 def decode_geometry(mesh: MeshT, data: Any, *, anchors: int | None = None, progress: bool = False) -> MeshT:
     """Reconstruct the geometry encoded by :func:`encode_geometry` on the connectivity of ``mesh``.
 
@@ -326,7 +320,8 @@ def decode_geometry(mesh: MeshT, data: Any, *, anchors: int | None = None, progr
     check_progress(progress)
     mesh_data = read_mesh(mesh, weld=True)
     indices, positions, omega = _parse(data, mesh_data)
-    m = _prefix(anchors, len(indices))
+    k = len(indices)
+    m = k if anchors is None else as_count(anchors, name="anchors", minimum=1, maximum=k)
     with stages(progress, "decode_geometry", ("factor", "solve")) as begin:
         begin("factor")
         # LSMeshSolver raises SingularSystemError if the prefix misses a component

@@ -88,44 +88,6 @@ def _random(vertices: np.ndarray, triangles: np.ndarray, count: int, rng: np.ran
     return np.concatenate([start, rest_in_order])[:count]
 
 
-def _squared_errors(solution: np.ndarray, original: np.ndarray) -> np.ndarray:
-    diff = solution - original
-    return np.einsum("ij,ij->i", diff, diff)
-
-
-def _greedy(
-    vertices: np.ndarray, triangles: np.ndarray, count: int, weight: float, *, progress: bool = False
-) -> tuple[np.ndarray, LSMeshSystem]:
-    """One-by-one greedy selection (LS meshes section 4, bases paper section IV).
-
-    Adds each anchor by a rank-1 update of the kept factor. Returns the
-    selection and the system holding all of it (for one last solve).
-    """
-    n = len(vertices)
-    start = start_vertices(vertices, triangles)
-    # the per-component seeds are control points too: the bar starts at them and ends at count
-    bar = progress_bar(progress, total=count, initial=len(start), desc="greedy selection", unit="point")
-    try:
-        bar.set_postfix_str("factor")
-        system = LSMeshSystem(vertices, triangles, start, weights=weight)
-        selected = np.zeros(n, dtype=bool)
-        selected[start] = True
-        order = np.empty(count, dtype=np.int64)
-        order[: len(start)] = start
-        bar.set_postfix_str("select")
-        for k in range(len(start), count):
-            errors = _squared_errors(system.solve(refine=False), vertices)
-            errors[selected] = -np.inf
-            best = int(np.argmax(errors))
-            order[k] = best
-            selected[best] = True
-            system.add_anchors(np.array([best]), weights=weight)
-            bar.update(1)
-    finally:
-        bar.close()
-    return order, system
-
-
 def forbid_around(
     indptr: np.ndarray, neighbours: np.ndarray, errors: np.ndarray, forbidden: np.ndarray, vertex: int
 ) -> None:
@@ -153,23 +115,32 @@ def forbid_around(
         frontier = reached
 
 
-def _combined(
+def _select(
     vertices: np.ndarray,
     triangles: np.ndarray,
     count: int,
     weight: float,
     batch: int,
     *,
+    desc: str,
     progress: bool = False,
 ) -> tuple[np.ndarray, LSMeshSystem]:
-    """Combined local-maxima selection (LS meshes section 4): one solve per ``batch`` picks."""
+    """Greedy (``batch=1``) or combined local-maxima selection (LS meshes section 4, bases paper section IV).
+
+    One solve per ``batch`` picks, whose anchors join the kept factor by one
+    rank-``batch`` update. Returns the selection and the system holding all of
+    it (for one last solve).
+    """
     n = len(vertices)
     start = start_vertices(vertices, triangles)
-    bar = progress_bar(progress, total=count, initial=len(start), desc="combined selection", unit="point")
+    # the per-component seeds are control points too: the bar starts at them and ends at count
+    bar = progress_bar(progress, total=count, initial=len(start), desc=desc, unit="point")
     try:
         bar.set_postfix_str("factor")
-        adjacency = adjacency_matrix(triangles, n)
-        indptr, neighbours = adjacency.indptr.astype(np.int64), adjacency.indices.astype(np.int64)
+        indptr = neighbours = np.zeros(0, dtype=np.int64)  # a batch of one forbids nothing
+        if batch > 1:
+            adjacency = adjacency_matrix(triangles, n)
+            indptr, neighbours = adjacency.indptr.astype(np.int64), adjacency.indices.astype(np.int64)
         solver = LSMeshSystem(vertices, triangles, start, weights=weight)
         selected = np.zeros(n, dtype=bool)
         selected[start] = True
@@ -177,16 +148,18 @@ def _combined(
         done = len(start)
         bar.set_postfix_str("select")
         while done < count:
-            errors = _squared_errors(solver.solve(refine=False), vertices)
+            residual = solver.solve(refine=False) - vertices
+            errors = np.einsum("ij,ij->i", residual, residual)  # squared distance of each vertex
             forbidden = selected.copy()
-            picks = []
-            for _ in range(min(batch, count - done)):
-                candidates = np.where(forbidden, -np.inf, errors)
-                best = int(np.argmax(candidates))
+            picks: list[int] = []
+            size = min(batch, count - done)
+            for _ in range(size):
+                best = int(np.argmax(np.where(forbidden, -np.inf, errors)))
                 if forbidden[best]:  # every vertex is selected or forbidden: solve again
                     break
                 picks.append(best)
-                forbid_around(indptr, neighbours, errors, forbidden, best)
+                if len(picks) < size:  # (the next solve starts afresh: the last pick forbids nothing)
+                    forbid_around(indptr, neighbours, errors, forbidden, best)
             chosen = np.asarray(picks, dtype=np.int64)
             selected[chosen] = True
             solver.add_anchors(chosen, weights=weight)
@@ -246,9 +219,10 @@ def control_point_selection(
     check_progress(progress)
     if method == "random":  # instant: no progress bar
         return _random(vertices, triangles, count, rng), None
-    if method == "greedy":
-        return _greedy(vertices, triangles, count, weight, progress=progress)
-    return _combined(vertices, triangles, count, weight, batch, progress=progress)
+    # greedy is the combined method with one pick per solve (batch is None for it)
+    return _select(
+        vertices, triangles, count, weight, batch or 1, desc=f"{method} selection", progress=progress
+    )
 
 
 def select_control_points(

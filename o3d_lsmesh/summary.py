@@ -10,13 +10,7 @@ from scipy.sparse import csgraph
 
 from ._o3d import read_mesh
 from ._validate import mesh_arrays
-from .topology import (
-    boundary_curves,
-    boundary_rows,
-    connected_components,
-    corner_fans,
-    edge_runs,
-)
+from .topology import boundary_curves, boundary_rows, connected_components, corner_fans, edge_runs
 
 if TYPE_CHECKING:
     from ._types import AnyMesh
@@ -57,14 +51,9 @@ def topology_summary_arrays(vertices: np.ndarray, triangles: np.ndarray) -> dict
     components = len(np.unique(labels[referenced]))
     # surface pieces: triangles joined through edges of exactly two triangles (a pinch or fin separates)
     pair = starts[counts == 2]
-    a, b = order[pair] % max(m, 1), order[pair + 1] % max(m, 1)
-    pieces = (
-        csgraph.connected_components(sp.coo_matrix((np.ones(len(a)), (a, b)), shape=(m, m)), directed=False)[
-            0
-        ]
-        if m
-        else 0
-    )
+    a, b = order[pair] % m, order[pair + 1] % m  # (mesh_arrays refuses a mesh without triangles)
+    graph = sp.coo_matrix((np.ones(len(a)), (a, b)), shape=(m, m))
+    pieces = csgraph.connected_components(graph, directed=False)[0]
     # a manifold edge run twice in the same direction: the two triangles disagree in orientation
     misoriented = int(np.count_nonzero(tail[order[pair]] == tail[order[pair + 1]]))
     # boundary
@@ -86,30 +75,17 @@ def topology_summary_arrays(vertices: np.ndarray, triangles: np.ndarray) -> dict
         boundary_components = 0
     # degenerate triangles: (near) zero area relative to the longest edge
     corners = vertices[F]
-    twice_area = np.linalg.norm(
-        np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1
-    )
-    longest = np.max(
-        np.stack(
-            [
-                np.einsum("ij,ij->i", d, d)
-                for d in (
-                    corners[:, 1] - corners[:, 0],
-                    corners[:, 2] - corners[:, 1],
-                    corners[:, 0] - corners[:, 2],
-                )
-            ]
-        ),
-        axis=0,
-    )
+    sides = corners[:, [1, 2, 0]] - corners
+    twice_area = np.linalg.norm(np.cross(sides[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
+    longest = np.einsum("ijk,ijk->ij", sides, sides).max(axis=1)
     degenerate = int(np.count_nonzero(twice_area <= DEGENERATE_TOLERANCE * longest))
     sorted_triangles = np.sort(F, axis=1)
-    if m and n**3 < 2**62:  # one packed key per triangle: a plain sort instead of a row-wise unique
+    if n**3 < 2**62:  # one packed key per triangle: a plain sort instead of a row-wise unique
         keys = (sorted_triangles[:, 0] * n + sorted_triangles[:, 1]) * n + sorted_triangles[:, 2]
         keys.sort()
         duplicate = int(np.count_nonzero(keys[1:] == keys[:-1]))
     else:
-        duplicate = m - len(np.unique(sorted_triangles, axis=0)) if m else 0
+        duplicate = m - len(np.unique(sorted_triangles, axis=0))
     chi = int(np.count_nonzero(referenced)) - edge_count + m
     edge_manifold = crowded_edges == 0
     vertex_manifold = edge_manifold and nonmanifold_vertex_count == 0

@@ -7,6 +7,7 @@ import contextlib
 import dis
 import inspect
 import json
+import math
 import os
 import re
 import sys
@@ -14,14 +15,11 @@ import textwrap
 import traceback
 import warnings
 from collections.abc import Sequence
-from pathlib import Path
 from typing import Any, Callable
 
-import numpy as np
+from .._batch_ops import WRITABLE, jsonable
 
 PROG = "o3d-lsmesh"
-#: Extensions Open3D 0.20 writes back readably (its .glb writer produces files it cannot read back).
-WRITABLE = (".ply", ".obj", ".stl", ".off", ".gltf")
 
 
 class CLIError(Exception):
@@ -80,16 +78,18 @@ def add_command(
     return parser
 
 
-def int_at_least(minimum: int, description: str, maximum: int | None = None) -> Callable[[str], int]:
-    """An argparse type for integers in ``[minimum, maximum]`` with a one-line error naming the rule."""
+def bounded(
+    kind: Callable[[str], Any], minimum: float, description: str, maximum: float | None = None
+) -> Callable[[str], Any]:
+    """An argparse type for finite ``kind`` numbers in ``[minimum, maximum]``, with a one-line error naming the rule."""
 
-    def parse(text: str) -> int:
+    def parse(text: str) -> Any:
         try:
-            value = int(text)
+            value = kind(text)
         except ValueError:
-            value = minimum - 1
-        if value < minimum:
-            raise argparse.ArgumentTypeError(f"must be a {description} integer, got {text!r}")
+            value = math.nan
+        if not minimum <= value < math.inf:  # (nan fails too)
+            raise argparse.ArgumentTypeError(f"must be a {description}, got {text!r}")
         if maximum is not None and value > maximum:
             raise argparse.ArgumentTypeError(f"must be at most {maximum:,}, got {text!r}")
         return value
@@ -97,19 +97,9 @@ def int_at_least(minimum: int, description: str, maximum: int | None = None) -> 
     return parse
 
 
-positive_int = int_at_least(1, "positive")
-nonnegative_int = int_at_least(0, "non-negative")
-
-
-def nonnegative_float(text: str) -> float:
-    """An argparse type for finite floats ``>= 0`` (``nan``, ``inf`` and negatives refused)."""
-    try:
-        value = float(text)
-    except ValueError:
-        value = float("nan")
-    if not np.isfinite(value) or value < 0:
-        raise argparse.ArgumentTypeError(f"must be a non-negative finite number, got {text!r}")
-    return value
+positive_int = bounded(int, 1, "positive integer")
+nonnegative_int = bounded(int, 0, "non-negative integer")
+nonnegative_float = bounded(float, 0, "non-negative finite number")
 
 
 def mesh_suffix(text: str) -> str:
@@ -152,16 +142,8 @@ class Run:
             }
             if mesh is not None:
                 report.update(vertices=len(mesh.vertices), triangles=len(mesh.triangles))
-            print(json.dumps({**report, **fields}, indent=2, default=_jsonable), flush=True)
+            print(json.dumps(jsonable({**report, **fields}), indent=2), flush=True)
         return 0
-
-
-def _jsonable(value: Any) -> Any:
-    if isinstance(value, (np.generic, np.ndarray)):
-        return value.tolist()
-    if isinstance(value, Path):
-        return str(value)
-    raise TypeError(f"not JSON serializable: {type(value).__name__}")
 
 
 # --------------------------------------------------------------------------- errors

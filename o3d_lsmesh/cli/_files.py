@@ -2,53 +2,14 @@
 
 from __future__ import annotations
 
-import contextlib
 import os
 import re
-import sys
-import tempfile
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from ._common import WRITABLE, CLIError, glb_hint
-
-
-def _o3d() -> Any:
-    from .._o3d import open3d
-
-    o3d = open3d()
-    # Open3D prints its own read/write warnings on stdout; ours are clearer and --json needs stdout clean.
-    o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
-    return o3d
-
-
-@contextlib.contextmanager
-def _captured_native_output() -> Iterator[list[str]]:
-    """Capture what C/C++ libraries write straight to file descriptors 1 and 2 (RPly, Assimp, Open3D).
-
-    Yields a list that holds the captured text once the block ends: it keeps
-    ``--json`` output clean and lets :func:`read_input` see the reader's
-    complaints (Open3D returns what it read so far from a truncated file and
-    only says so in a warning).
-    """
-    sys.stdout.flush()
-    sys.stderr.flush()
-    saved = [os.dup(1), os.dup(2)]
-    captured: list[str] = []
-    with tempfile.TemporaryFile() as sink:
-        try:
-            os.dup2(sink.fileno(), 1)
-            os.dup2(sink.fileno(), 2)
-            yield captured
-        finally:
-            os.dup2(saved[0], 1)
-            os.dup2(saved[1], 2)
-            for fd in saved:
-                os.close(fd)
-            sink.seek(0)
-            captured.append(sink.read().decode("utf-8", "replace"))
-
+from .._batch_ops import WRITABLE, captured_native_output, quiet_open3d, write_mesh
+from ._common import CLIError, glb_hint
 
 # Open3D's readers report a file they could not read to the end with these words (and return what they got)
 _READ_FAILURE = re.compile(
@@ -78,7 +39,7 @@ def _ply_header_counts(path: str) -> dict[str, int]:
 
 def read_input(path: str, *, what: str = "INPUT") -> Any:
     """Read a triangle mesh or raise :class:`CLIError` naming the problem (missing, unreadable, truncated, empty)."""
-    o3d = _o3d()
+    o3d = quiet_open3d()
     name = f"{what} {path!r}"
     if not os.path.exists(path):
         raise CLIError(f"{name} does not exist")
@@ -86,7 +47,7 @@ def read_input(path: str, *, what: str = "INPUT") -> Any:
         raise CLIError(f"{name} is a folder, not a mesh file")
     o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Warning)
     try:
-        with _captured_native_output() as captured:
+        with captured_native_output() as captured:
             mesh = o3d.io.read_triangle_mesh(path)
     finally:
         o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
@@ -146,12 +107,7 @@ def check_output(
 
 
 def write_output(path: str, mesh: Any) -> None:
-    o3d = _o3d()
-    if Path(path).suffix.lower() == ".stl":
-        # Open3D's STL writer needs triangle normals and refuses without them.
-        mesh = o3d.geometry.TriangleMesh(mesh)
-        mesh.compute_triangle_normals()
-    with _captured_native_output():
-        written = o3d.io.write_triangle_mesh(path, mesh)
-    if not written:
-        raise CLIError(f"could not write OUTPUT {path!r}")
+    try:
+        write_mesh(mesh, Path(path))
+    except OSError:
+        raise CLIError(f"could not write OUTPUT {path!r}") from None

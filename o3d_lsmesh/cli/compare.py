@@ -9,7 +9,8 @@ from typing import Any
 
 import numpy as np
 
-from ._common import PictureError, Run, add_command, int_at_least
+from .._batch_ops import normal_change, percent_change
+from ._common import PictureError, Run, add_command, bounded
 from ._files import check_output, read_input
 
 #: metrics.MAX_SAMPLE_POINTS (not imported here: --help must not load the numeric modules)
@@ -20,7 +21,7 @@ def add_parsers(sub: Any, common: argparse.ArgumentParser) -> None:
     p = add_command(sub, common, compare, {"a": "first mesh file (the reference)", "b": "second mesh file"})
     p.add_argument(
         "--points",
-        type=int_at_least(1, "positive", MAX_POINTS),
+        type=bounded(int, 1, "positive integer", MAX_POINTS),
         default=100_000,
         help="surface samples per mesh",
     )
@@ -36,37 +37,6 @@ def add_parsers(sub: Any, common: argparse.ArgumentParser) -> None:
 
 def mesh_size(mesh: Any) -> dict[str, int]:
     return {"vertices": len(mesh.vertices), "triangles": len(mesh.triangles)}
-
-
-def _percent_change(before: float, after: float) -> float | None:
-    # a flat or open mesh can enclose no volume: there is no relative change
-    return 100.0 * (after - before) / before if before != 0 else None
-
-
-def normal_deviation(a: Any, b: Any) -> float | None:
-    """Mean normal deviation, or None when no triangle has an area in both meshes (the angle is undefined)."""
-    from .._o3d import read_mesh
-    from ..metrics import face_normals
-    from ..metrics import normal_deviation as deviation
-
-    da, db = read_mesh(a), read_mesh(b)
-    has_area = (np.abs(face_normals(da.vertices, da.triangles)).sum(axis=1) > 0) & (
-        np.abs(face_normals(db.vertices, db.triangles)).sum(axis=1) > 0
-    )
-    return deviation(a, b) if has_area.any() else None
-
-
-def change_report(before: Any, after: Any) -> dict[str, Any]:
-    """How far fairing moved the vertices, how much the volume and the normals changed."""
-    from ..metrics import signed_volume, vertex_error
-
-    moved = vertex_error(after, before)
-    return {
-        "displacement_mean": moved["mean"],
-        "displacement_max": moved["linf"],
-        "volume_change_percent": _percent_change(signed_volume(before), signed_volume(after)),
-        "normal_change_deg": normal_deviation(after, before),
-    }
 
 
 def draw(
@@ -102,10 +72,10 @@ def compare(args: argparse.Namespace, run: Run) -> int:
     if len(a.vertices) == len(b.vertices):
         report["vertex_error"] = vertex_error(a, b)
         if np.array_equal(np.asarray(a.triangles), np.asarray(b.triangles)):
-            report["normal_deviation_deg"] = normal_deviation(a, b)
+            report["normal_deviation_deg"] = normal_change(a, b)
     va, vb = signed_volume(a), signed_volume(b)
     report["volume_a"], report["volume_b"] = va, vb
-    report["volume_change_percent"] = _percent_change(va, vb)
+    report["volume_change_percent"] = percent_change(va, vb)
     report["angles_a"], report["angles_b"] = triangle_angles(a), triangle_angles(b)
     report["topology_a"], report["topology_b"] = topology_summary(a), topology_summary(b)
     if not run.json:

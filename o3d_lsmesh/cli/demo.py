@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from ._common import Run, add_command, int_at_least, nonnegative_float
+from ._common import Run, add_command, bounded, nonnegative_float
 
 #: the demo's blob has 10 * 4**s + 2 vertices: 9 gives 2.6 million (about 3 GB to denoise), 12 would need 170 million
 MAX_SUBDIVISIONS = 9
@@ -17,7 +17,7 @@ def add_parsers(sub: Any, common: argparse.ArgumentParser) -> None:
     p.add_argument("--no-render", action="store_true", help="skip the picture")
     p.add_argument(
         "--subdivisions",
-        type=int_at_least(1, "positive", MAX_SUBDIVISIONS),
+        type=bounded(int, 1, "positive integer", MAX_SUBDIVISIONS),
         default=6,
         help="size of the built-in mesh: 10 * 4**s + 2 vertices (6: 40,962)",
     )

@@ -9,7 +9,7 @@ from typing import Any
 
 from ._common import WRITABLE, CLIError, Run, add_command, nonnegative_int, positive_int
 from ._files import check_output, read_input, write_output
-from .compare import change_report, draw
+from .compare import draw
 
 
 def add_parsers(sub: Any, common: argparse.ArgumentParser) -> None:
@@ -74,38 +74,21 @@ def denoise(args: argparse.Namespace, run: Run) -> int:
     if args.render:
         check_output(args.render, [args.input], force=args.force, suffixes=(".png",))
     mesh = read_input(args.input)
+    from .._batch_ops import TaskContext, denoise_op
+    from ..fairing.constrained import resolved_options
+
+    scan = resolved_options(args.method, args.iterations, args.reimpose_every)[0] == "scan"
+    if not args.level and args.fixed_boundary and scan:
+        raise CLIError(
+            "--fixed-boundary cannot be used with --method scan, the default (its boundary moves with "
+            "the surface): add --method local or --method global"
+        )
     start = time.perf_counter()
-    if args.level:
-        from ..fairing.multiresolution import multiresolution_fairing
-
-        args.iterations = 5 if args.iterations is None else args.iterations
-        args.method = args.method or "local"
-        out = multiresolution_fairing(
-            mesh, args.level, number_of_iterations=args.iterations, method=args.method, progress=run.progress
-        )
-    else:
-        from ..fairing import constrained_fairing
-        from ..fairing.constrained import resolved_options
-
-        # no flag: the API's defaults (method='scan'); the report names what ran
-        args.method, args.iterations = resolved_options(args.method, args.iterations, args.reimpose_every)
-        if args.fixed_boundary and args.method == "scan":
-            raise CLIError(
-                "--fixed-boundary cannot be used with --method scan, the default (its boundary moves with "
-                "the surface): add --method local or --method global"
-            )
-        out = constrained_fairing(
-            mesh,
-            args.iterations,
-            method=args.method,
-            mu=args.mu,
-            smooth_boundary=not args.fixed_boundary,
-            reimpose_every=args.reimpose_every,
-            progress=run.progress,
-        )
-    seconds = time.perf_counter() - start
-    report = {"method": args.method, "iterations": args.iterations, "level": args.level, "seconds": seconds}
-    report.update(change_report(mesh, out))
+    names = ("iterations", "method", "level", "mu", "reimpose_every", "fixed_boundary")
+    context = TaskContext(args.input, args.input, None, progress=run.progress)
+    out, report = denoise_op(mesh, {name: getattr(args, name) for name in names}, context)
+    seconds = report["seconds"] = time.perf_counter() - start
+    args.method, args.iterations = report["method"], report["iterations"]  # what ran, for the picture's title
     write_output(args.output, out)
     change = report["volume_change_percent"]
     run.say(

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from ._common import Run, add_command, int_at_least
+from ._common import Run, add_command, bounded
 from ._files import check_output, read_input, write_output
 
 
@@ -16,7 +16,7 @@ def add_parsers(sub: Any, common: argparse.ArgumentParser) -> None:
     p = add_command(sub, common, fill, {"input": "mesh file", "output": "mesh file to write"})
     p.add_argument(
         "--max-hole-edges",
-        type=int_at_least(3, "3-or-more"),
+        type=bounded(int, 3, "3-or-more integer"),
         help="fill only holes of at most this many edges (default: no limit)",
     )
     p.add_argument(
@@ -42,33 +42,26 @@ def fill(args: argparse.Namespace, run: Run) -> int:
     """
     check_output(args.output, [args.input], force=args.force)
     mesh = read_input(args.input)
-    from ..hole_filling import fill_holes, find_holes
+    from .._batch_ops import TaskContext, fill_op
+    from ..hole_filling import find_holes
 
     before = find_holes(np.asarray(mesh.vertices), np.asarray(mesh.triangles, dtype=np.int64))
     start = time.perf_counter()
-    out = fill_holes(
-        mesh,
-        max_hole_edges=args.max_hole_edges,
-        max_hole_diameter=args.max_hole_diameter,
-        continuity=args.continuity,
-        density=args.density,
-        fill_border=args.fill_border,
-        progress=run.progress,
-    )
+    names = ("max_hole_edges", "max_hole_diameter", "continuity", "density", "fill_border")
+    context = TaskContext(args.input, args.input, None, progress=run.progress)
+    out, report = fill_op(mesh, {name: getattr(args, name) for name in names}, context)
     seconds = time.perf_counter() - start
     write_output(args.output, out)
     after = find_holes(np.asarray(out.vertices), np.asarray(out.triangles, dtype=np.int64))
-    new_vertices = len(out.vertices) - len(mesh.vertices)
     run.say(
         f"filled {len(before) - len(after)} of {len(before)} holes of {args.input} in {seconds:.2f} s "
-        f"({new_vertices} new vertices) -> {args.output}; {len(after)} loops left open"
+        f"({report['new_vertices']} new vertices) -> {args.output}; {len(after)} loops left open"
     )
     return run.finish(
         mesh,
         holes_before=len(before),
         holes_after=len(after),
         borders_left_open=0 if args.fill_border else sum(hole.border for hole in before),
-        new_vertices=new_vertices,
-        new_triangles=len(out.triangles) - len(mesh.triangles),
+        **report,
         seconds=seconds,
     )

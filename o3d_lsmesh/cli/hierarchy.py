@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from .._batch_ops import parse_levels
 from ._common import CLIError, Run, add_command, mesh_suffix, positive_int
 from ._files import check_output, read_input, write_output
 
@@ -31,18 +32,6 @@ def add_parsers(sub: Any, common: argparse.ArgumentParser) -> None:
     )
 
 
-def _parse_levels(spec: str, count: int) -> list[int]:
-    if spec == "all":
-        return list(range(count))
-    try:
-        levels = sorted({int(item) for item in spec.split(",") if item.strip()})
-    except ValueError:
-        raise CLIError(f"--levels must be 'all' or comma-separated integers, got {spec!r}") from None
-    if not levels or not all(0 <= level < count for level in levels):
-        raise CLIError(f"--levels must be in 0..{count - 1} (the hierarchy has {count} levels), got {spec!r}")
-    return levels
-
-
 def hierarchy(args: argparse.Namespace, run: Run) -> int:
     """Write levels of the volume-cost collapse hierarchy.
 
@@ -62,7 +51,7 @@ def hierarchy(args: argparse.Namespace, run: Run) -> int:
         mesh, min_vertices=args.min_vertices, max_levels=args.max_levels, progress=run.progress
     )
     seconds = time.perf_counter() - start
-    chosen = _parse_levels(args.levels, len(built))
+    chosen = parse_levels(args.levels, len(built))
     outdir.mkdir(parents=True, exist_ok=True)
     files: list[str] = []
     maps: dict[str, Any] = {}  # level name -> vertex map
