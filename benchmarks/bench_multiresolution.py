@@ -184,7 +184,7 @@ def scale_tables():
                 "upper-spectrum energy of positions (the former measure) falls 0..6",
                 "it, level 0 / 6",
                 "normal roughness (full mesh) falls 0..6",
-                "max |volume change| %",
+                "max abs volume change %",
                 "mean distance to clean (edge lengths)",
                 "boundary length / clean, level 0 / 6",
             ],

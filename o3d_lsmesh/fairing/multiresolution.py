@@ -148,8 +148,9 @@ def multiresolution_fairing(
     horse and a blob, noise 0.3 and 0.1 edge lengths): the normal part of
     the energy in the upper half of the graph-Laplacian spectrum of
     2000-vertex copies falls at every level (bunny at 0.3: 2.1e-3 to
-    1.6e-4), so does the normal roughness of the full meshes, the volume
-    stays within 0.25% and the boundary length as at level 0. Details
+    1.6e-4), so does the normal roughness of the full meshes (but the blob's
+    at 0.1, which flattens at its sphere's own curvature), the volume stays
+    within 0.25% and the boundary length as at level 0. Details
     smaller than the vertex spacing of ``M_level`` are not restored, so a
     larger ``level`` removes larger details; the boundary curves are faired
     as at ``level=0`` whatever the level. ``level=0`` is plain constrained
