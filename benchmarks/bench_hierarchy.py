@@ -14,12 +14,9 @@
    thread's CPU time (the machine is shared), and the peak memory above the
    baseline of each call (RSS sampled every 2 ms). The bunny's whole hierarchy
    to 100 vertices is timed too.
-3. Multiresolution fairing by scale: levels 0..6 on the bunny, the horse and a
-   generated blob with Gaussian noise of 0.3 and 0.1 mean edge lengths:
-   roughness (normal component of the uniform Laplacian, squared, over the
-   squared mean edge length), the whole uniform-Laplacian energy, volume change
-   against the clean mesh, and mean distance to the clean vertices in edge
-   lengths; with and without the final fairing of ``M_0``.
+3. Multiresolution fairing by scale: the tables of ``bench_multiresolution.py``
+   (levels 0..6 on the bunny, the horse and a generated blob; read them with
+   the notes of ``benchmarks/results/multiresolution.md``).
 
 Run: ``.venv/bin/python benchmarks/bench_hierarchy.py [--quick] [--speed]`` (``--speed``: the speed table only,
 printed).
@@ -34,10 +31,8 @@ import time
 import fast_simplification
 import numpy as np
 import psutil
-import scipy.sparse as sp
 from _common import load_mesh, markdown_table, timed, write_markdown
 
-from o3d_lsmesh.fairing.multiresolution import multiresolution_fairing_arrays
 from o3d_lsmesh.hierarchy import build_hierarchy
 from o3d_lsmesh.hierarchy.collapse import collapse_levels
 from o3d_lsmesh.hierarchy.hierarchy import build_hierarchy_arrays
@@ -268,127 +263,11 @@ def speed():
 # ------------------------------------------------------------ multiresolution by scale
 
 
-def _blob():
-    import open3d as o3d
-
-    sphere = o3d.geometry.TriangleMesh.create_sphere(radius=1.0, resolution=60)
-    V = np.asarray(sphere.vertices)
-    u = V / np.linalg.norm(V, axis=1, keepdims=True)
-    r = 1 + 0.15 * np.sin(3 * u[:, 0]) * np.cos(2 * u[:, 1]) + 0.1 * u[:, 2] ** 2
-    return u * r[:, None], np.asarray(sphere.triangles).astype(np.int64)
-
-
-def _energies(P, F):
-    n = len(P)
-    edges = np.unique(np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1), axis=0)
-    A = sp.coo_matrix(
-        (np.ones(2 * len(edges)), (np.r_[edges[:, 0], edges[:, 1]], np.r_[edges[:, 1], edges[:, 0]])),
-        shape=(n, n),
-    ).tocsr()
-    laplacian = A @ P / np.asarray(A.sum(axis=1)) - P
-    normals = np.zeros_like(P)
-    face = np.cross(P[F[:, 1]] - P[F[:, 0]], P[F[:, 2]] - P[F[:, 0]])
-    for c in range(3):
-        np.add.at(normals, F[:, c], face)
-    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
-    h2 = np.linalg.norm(P[edges[:, 0]] - P[edges[:, 1]], axis=1).mean() ** 2
-    return (
-        np.mean(np.einsum("ij,ij->i", laplacian, normals) ** 2) / h2,
-        np.mean(np.sum(laplacian**2, axis=1)) / h2,
-    )
-
-
-def _upper_spectrum(V, F):
-    """A 2000-vertex copy (our coarsest level at 2000) and the upper half of its graph-Laplacian eigenbasis."""
-    h = build_hierarchy_arrays(V, F, min_vertices=2000)
-    V, F = h.level_arrays(len(h) - 1)
-    n = len(V)
-    edges = np.r_[F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]
-    A = np.zeros((n, n))
-    A[edges[:, 0], edges[:, 1]] = A[edges[:, 1], edges[:, 0]] = 1
-    return V, F, np.linalg.eigh(np.diag(A.sum(axis=1)) - A)[1][:, n // 2 :]
-
-
-VARIANTS = ((None, "rounds on M_0 (default)"), (5, "one final fairing (before)"), (0, "paper's loop only"))
-
-
 def scale():
-    meshes = [("blob", _blob())]
-    for name in ("bunny", "horse"):
-        mesh = load_mesh(name + ".ply")
-        if mesh is not None:
-            meshes.append(
-                (name, (np.asarray(mesh.vertices).copy(), np.asarray(mesh.triangles).astype(np.int64)))
-            )
-    rows, summary = [], []
-    for name, (V, F) in meshes:
-        small = _upper_spectrum(V, F)
-        for sigma in (0.3, 0.1):
-            for final, label in VARIANTS:
-                measures = []
-                for W, T, basis in ((V, F, None), small):
-                    spacing = np.linalg.norm(W[T[:, 0]] - W[T[:, 1]], axis=1).mean()
-                    volume = signed_volume((W, T))
-                    noisy = W + np.random.default_rng(0).normal(scale=sigma * spacing, size=W.shape)
-                    h = build_hierarchy_arrays(noisy, T, max_levels=6, min_vertices=4)
-                    for level in range(7):
-                        P = multiresolution_fairing_arrays(h, level, final_iterations=final)
-                        if basis is None:
-                            normal_energy, energy = _energies(P, T)
-                            measures.append(
-                                [
-                                    normal_energy,
-                                    energy,
-                                    100 * (signed_volume((P, T)) / volume - 1),
-                                    np.linalg.norm(P - W, axis=1).mean() / spacing,
-                                ]
-                            )
-                        else:
-                            Q = P - P.mean(axis=0)
-                            measures[level].append(np.sum((basis.T @ Q) ** 2) / len(P) / spacing**2)
-                m = np.array(measures)
-                for level in range(7):
-                    rows.append(
-                        [name, sigma, label, level]
-                        + [f"{m[level, 0]:.3g}", f"{m[level, 1]:.3g}", f"{m[level, 4]:.3g}"]
-                        + [f"{m[level, 2]:+.3f}", f"{m[level, 3]:.3f}"]
-                    )
-                falls = ["yes" if np.all(np.diff(m[:, c]) < 0) else "no" for c in (0, 1, 4)]
-                summary.append(
-                    [name, sigma, label, *falls]
-                    + [f"{m[0, 4]:.3g} / {m[6, 4]:.3g}", f"{np.abs(m[:, 2]).max():.2f}"]
-                    + [f"{m[:, 3].min():.2f}-{m[:, 3].max():.2f}"]
-                )
-    return (
-        markdown_table(
-            [
-                "mesh",
-                "noise (edge lengths)",
-                "M_0 fairing",
-                "normal roughness falls 0..6",
-                "uniform Laplacian energy falls 0..6",
-                "upper-spectrum energy falls 0..6",
-                "upper-spectrum energy level 0 / 6",
-                "max |volume change| %",
-                "mean distance to clean (edge lengths)",
-            ],
-            summary,
-        ),
-        markdown_table(
-            [
-                "mesh",
-                "noise",
-                "M_0 fairing",
-                "level",
-                "roughness (normal Laplacian)",
-                "uniform Laplacian energy",
-                "upper-spectrum energy (2000-vertex copy)",
-                "volume change %",
-                "mean distance to clean (edge lengths)",
-            ],
-            rows,
-        ),
-    )
+    """The tables of ``bench_multiresolution.py`` (its notes: benchmarks/results/multiresolution.md)."""
+    from bench_multiresolution import scale_tables
+
+    return scale_tables()
 
 
 def main():
@@ -438,15 +317,7 @@ def main():
         "is the signed volume against the input's. `manifold`: y = edge- and vertex-manifold, edge = edge-manifold "
         "only, n = neither. `euler/loops`: Euler characteristic / boundary loops (the input's must be kept). Our time "
         "is cumulative over the levels (the kernel's report after each level); fast-simplification's is one fresh run to "
-        "that count. Scale table: roughness = mean squared normal component of the uniform Laplacian over the squared "
-        "mean edge length (the tangential part measures the triangulation, not the surface); uniform Laplacian "
-        "energy = mean squared uniform Laplacian over the squared mean edge length; upper-spectrum energy = energy "
-        "of the centred positions in the upper half of the graph-Laplacian spectrum (dense eigh) of a 2000-vertex "
-        "copy (our coarsest level at 2000 vertices, noised and faired the same way), per vertex, over the squared "
-        "mean edge length; roughness, uniform energy, volume and distance are on the full mesh. M_0 fairing: "
-        "`rounds` is the default (number_of_iterations * (level + 1) iterations on M_0, barycenters re-imposed "
-        "every 5), `one final fairing` is final_iterations=5 (the default before), `paper's loop` is "
-        "final_iterations=0."
+        "that count. Scale tables: see `multiresolution.md` (`benchmarks/bench_multiresolution.py`) for how to read them."
     )
     write_markdown(
         "hierarchy.md",
