@@ -648,11 +648,15 @@ class ScanFairingSolver:
             (np.repeat(np.sqrt(self.mu * weight), 3), triangles.ravel(), corners), shape=(len(triangles), n)
         )
         self.referenced = st.valence > 0
-        # AMD: as little fill as METIS at 40k vertices with a 3x faster analysis; at 1.4M vertices (the ten
-        # scans merged and subdivided) the whole default took 20 s with AMD and 29 s with METIS, interleaved.
-        # The lower triangle of the assembled matrix, not the rows (``product_of``): half the entries to
-        # analyze, and the memory estimate of ``backend="auto"`` sees the true entry count (from the rows
-        # it guessed 3x too many and took the iterative path at 1.4M vertices, 4x slower)
+        # AMD: at 40k vertices (bun000) 0.87 GFlop against METIS's 0.63, but an analysis of 0.04 s against
+        # 0.3 s; at 1.4M vertices (the ten scans merged and subdivided) the whole default took 20 s with
+        # AMD and 29 s with METIS, interleaved. The lower triangle of the assembled matrix, not the rows
+        # (``product_of``, which CHOLMOD multiplies out as it factors: the same time at 40k): the memory
+        # estimate of ``backend="auto"`` then sees the true entry count; from the rows it guessed 3x too
+        # many and took the iterative path at 1.4M vertices (AMG-preconditioned CG, 4x slower). Also
+        # measured, slower: CG preconditioned by the factor of the 1-ring part of this matrix (its 2-ring
+        # entries lumped on the diagonal; 7.4x fewer factor flops but 8 + 10 iterations to 1e-8: 0.40 s
+        # against 0.33 s at 40k, 22.5 s against 20.5 s at 1.4M, CPU time, one thread)
         self._solver = SPDSolver(_lower_csc(normal), lower=True, ordering="amd")
 
     def normal_rhs(self, positions0: np.ndarray) -> np.ndarray:
