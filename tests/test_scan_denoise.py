@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import open3d as o3d
 import pytest
+import scipy.sparse as sp
 from conftest import DATA, REPO, grid
 from numpy.testing import assert_allclose
 
@@ -25,9 +26,11 @@ from o3d_lsmesh.fairing.scan_fairing import (
     SCAN_MU,
     SCAN_RIM_RATIO,
     ScanFairingSolver,
+    _lower_csc,
     measured_boundary_weight,
     measured_noise,
     scan_likeness,
+    scan_normal_matrix,
     scan_parameters,
     scan_system,
 )
@@ -261,6 +264,12 @@ def test_energy_and_solution_match_a_plain_loop_assembly(case, weights):
         F, len(V), mu=mu, membrane=membrane, boundary_weight=boundary_weight, rim_curve=rim_curve
     )
     assert_allclose(system.normal_matrix().toarray(), A, atol=TIGHT)
+    # what the solver factors: assembled from the edges, without the rows
+    assembled = scan_normal_matrix(
+        F, len(V), mu=mu, membrane=membrane, boundary_weight=boundary_weight, rim_curve=rim_curve
+    )
+    assert assembled.has_canonical_format
+    assert_allclose(assembled.toarray(), A, atol=TIGHT)
     referenced = system.referenced
     assert_allclose(system.normal_rhs(V)[referenced], b[referenced], atol=TIGHT)
     # the energy itself, at a random X: E(X) = |R X - T|^2 against the loop form's quadratic
@@ -473,6 +482,23 @@ def test_open3d_mesh_in_and_out_and_non_manifold_accepted():
         np.asarray(out.vertices), constrained_fairing_arrays(fin, F2, None, method=None), atol=1e-12
     )
     assert np.array_equal(np.asarray(mesh.vertices), fin)
+
+
+def test_normal_matrix_assembly_on_a_large_soup_and_a_degenerate_triangle():
+    # against the rows' product on a grid with a fin (an edge of three triangles), overlapping triangles
+    # and unreferenced vertices, every term on; a triangle repeating a vertex takes the rows' path
+    V, F = grid(30, 20)
+    F = np.vstack([F, [[0, 31, 45], [5, 6, 200], [40, 41, 42]]])
+    n = len(V) + 3  # three unreferenced vertices
+    kwargs = dict(mu=0.07, membrane=0.3, boundary_weight=0.2, rim_curve=0.6, thin_plate=1.7)
+    expected = scan_system(F, n, **kwargs).normal_matrix()
+    assembled = scan_normal_matrix(F, n, **kwargs)
+    assert abs(assembled - expected).max() <= 1e-13 * abs(expected).max()
+    lower = _lower_csc(assembled)
+    assert abs(lower - sp.tril(expected, format="csc")).max() <= 1e-13 * abs(expected).max()
+    degenerate = np.vstack([F, [[3, 3, 4]]])
+    expected = scan_system(degenerate, n, **kwargs).normal_matrix()
+    assert abs(scan_normal_matrix(degenerate, n, **kwargs) - expected).max() <= 1e-13 * abs(expected).max()
 
 
 def test_scan_options_raise():

@@ -40,7 +40,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._solvers import SPDSolver
-from ..topology import unique_edges
+from ..topology import edge_structure, ring_pattern
 
 __all__ = [
     "MU_RANGE",
@@ -61,6 +61,7 @@ __all__ = [
     "rim_noise_ratio",
     "scan_denoise",
     "scan_likeness",
+    "scan_normal_matrix",
     "scan_parameters",
     "scan_system",
 ]
@@ -91,17 +92,19 @@ MU_RANGE = (3e-3, 1.0)
 
 
 class _Structure(NamedTuple):
-    edges: np.ndarray  # (e, 2) int64, lo < hi
+    edges: np.ndarray  # (e, 2) int32 (int64 past 2**31 half-edges), lo < hi, sorted
     counts: np.ndarray  # (e,) triangles on each edge
     boundary: np.ndarray  # (n,) bool, on an edge of one triangle
     valence: np.ndarray  # (n,) int64 edge neighbours
+    halfedge_edge: np.ndarray  # (3m,) edge of half-edge ``a * m + t`` (triangle t, corners a, a + 1)
 
 
 def _structure(triangles: np.ndarray, n: int) -> _Structure:
-    edges, counts, _ = unique_edges(triangles, n)
+    # int32 indices where they fit: half the memory traffic of int64 at scan sizes
+    es = edge_structure(triangles, n)
     boundary = np.zeros(n, dtype=bool)
-    boundary[edges[counts == 1].ravel()] = True
-    return _Structure(edges, counts, boundary, np.bincount(edges.ravel(), minlength=n))
+    boundary[es.edges[es.counts == 1].ravel()] = True
+    return _Structure(es.edges, es.counts, boundary, np.bincount(es.edges.ravel(), minlength=n), es.inverse)
 
 
 def _neighbour_mean(vertices: np.ndarray, pairs: np.ndarray, mask: np.ndarray) -> np.ndarray:
@@ -437,7 +440,8 @@ def scan_system(
     ``O(n + m)``.
     """
     m = len(triangles)
-    edges, counts, boundary, valence = _structure(triangles, n) if structure is None else structure
+    edges, counts, boundary, valence, _ = _structure(triangles, n) if structure is None else structure
+    edges = edges.astype(np.int64)  # row numbers below pass 2**31 before the vertex indices do
     e = len(edges)
     lo, hi = edges[:, 0], edges[:, 1]
     referenced = valence > 0
@@ -481,6 +485,112 @@ def scan_system(
     return ScanSystem(rows, penalty, referenced, boundary, weight)
 
 
+def scan_normal_matrix(
+    triangles: np.ndarray,
+    n: int,
+    *,
+    mu: float,
+    membrane: float,
+    boundary_weight: float,
+    thin_plate: float = SCAN_THIN_PLATE,
+    structure: _Structure | None = None,
+    rim_curve: float = 0.0,
+) -> sp.csr_matrix:
+    """The normal matrix ``R^T R`` of :func:`scan_system`, assembled from the mesh's edges, ``(n, n)`` CSR.
+
+    ``R^T R = mu H^T W H + lambda G + kappa K^T K`` (plus a unit diagonal
+    entry per unreferenced vertex) without forming the rows ``R``: the first
+    two terms live on the 1-ring pattern, where ``(H^T W H)_ii`` sums ``w_t``
+    over the triangles at ``i`` and ``(H^T W H)_ij`` over the triangles on
+    edge ``ij``, so their values are scattered straight into CSR order
+    (:func:`~o3d_lsmesh.topology.ring_pattern`); only ``K^T K`` (the 2-ring)
+    is a sparse product, of the ``(n, n)`` operator ``K`` with 7 entries a
+    row instead of the ``(m + e + n, n)`` rows. Canonical CSR (sorted, no
+    duplicates); symmetric, so its arrays are also those of the CSC form.
+    Equal to ``scan_system(...).normal_matrix()`` to round-off. Triangles
+    must have three distinct corners (as :func:`~o3d_lsmesh._validate.mesh_arrays`
+    guarantees); a triangle repeating a vertex is left to :func:`scan_system`.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> F = np.array([[0, 1, 2], [0, 2, 3]])
+    >>> N = scan_normal_matrix(F, 5, mu=0.03, membrane=0.45, boundary_weight=0.1)
+    >>> S = scan_system(F, 5, mu=0.03, membrane=0.45, boundary_weight=0.1).normal_matrix()
+    >>> bool(abs(N - S).max() < 1e-15), N.shape
+    (True, (5, 5))
+    """
+    triangles = np.asarray(triangles)
+    m = len(triangles)
+    if m and (
+        (triangles[:, 0] == triangles[:, 1]).any()
+        or (triangles[:, 1] == triangles[:, 2]).any()
+        or (triangles[:, 2] == triangles[:, 0]).any()
+    ):
+        return (
+            scan_system(
+                triangles,
+                n,
+                mu=mu,
+                membrane=membrane,
+                boundary_weight=boundary_weight,
+                thin_plate=thin_plate,
+                structure=structure,
+                rim_curve=rim_curve,
+            )
+            .normal_matrix()
+            .tocsr()
+        )
+    st = _structure(triangles, n) if structure is None else structure
+    edges, counts, boundary, valence, halfedge_edge = st
+    lo, hi = edges[:, 0], edges[:, 1]
+    referenced = valence > 0
+    indptr, indices, diagonal, forward, backward = ring_pattern(edges, n)
+    weight = np.where(boundary[triangles].any(axis=1), float(boundary_weight), 1.0)  # (m,) w_t
+    # mu H^T W H + lambda G (+ 1 on an unreferenced vertex's diagonal), on the 1-ring pattern
+    data = np.empty(len(indices))
+    data[diagonal] = mu * np.bincount(triangles.ravel(), np.repeat(weight, 3), minlength=n)
+    data[diagonal] += membrane * valence
+    data[diagonal[~referenced]] = 1.0
+    # half-edge a * m + t is triangle t's edge from corner a: its weights are np.tile(w, 3)
+    on_edge = mu * np.bincount(halfedge_edge, np.tile(weight, 3), minlength=len(edges)) - membrane
+    data[forward] = on_edge
+    data[backward] = on_edge
+    matrix = sp.csr_matrix((data, indices, indptr), shape=(n, n))
+    if thin_plate > 0.0:
+        # K: row i is 1 at i and -(1 - t) / n_i - t / c_i at each neighbour (the second part only across
+        # boundary edges, c_i of them; t = rim_curve for a rim vertex, the one-sided row otherwise)
+        t = float(rim_curve)
+        inverse = np.zeros(n)
+        np.divide(np.where(boundary, 1.0 - t, 1.0), valence, out=inverse, where=referenced)
+        plate = np.empty(len(indices))
+        plate[diagonal] = referenced
+        plate[forward] = -inverse[lo]
+        plate[backward] = -inverse[hi]
+        if t > 0.0:
+            rim = counts == 1
+            curve_valence = np.bincount(edges[rim].ravel(), minlength=n)
+            curve_inverse = np.zeros(n)
+            np.divide(t, curve_valence, out=curve_inverse, where=curve_valence > 0)
+            plate[forward[rim]] -= curve_inverse[lo[rim]]
+            plate[backward[rim]] -= curve_inverse[hi[rim]]
+        plate *= np.sqrt(thin_plate)
+        operator = sp.csr_matrix((plate, indices, indptr), shape=(n, n))
+        matrix = matrix + operator.T.tocsr() @ operator
+    matrix.sum_duplicates()  # canonical: sorted indices (CHOLMOD and the lower-triangle cut need them)
+    return matrix
+
+
+def _lower_csc(symmetric: sp.csr_matrix) -> sp.csc_matrix:
+    """The lower triangle of a symmetric canonical CSR matrix as CSC: its upper CSR triangle, reinterpreted."""
+    n = symmetric.shape[0]
+    rows = np.repeat(np.arange(n, dtype=symmetric.indices.dtype), np.diff(symmetric.indptr))
+    keep = symmetric.indices >= rows
+    indptr = np.zeros(n + 1, dtype=symmetric.indptr.dtype)
+    np.cumsum(np.bincount(rows[keep], minlength=n), out=indptr[1:])
+    return sp.csc_matrix((symmetric.data[keep], symmetric.indices[keep], indptr), shape=(n, n))
+
+
 class ScanFairingSolver:
     """The scan energy factored once; :meth:`solve` faires positions with it.
 
@@ -498,9 +608,9 @@ class ScanFairingSolver:
     ``R^T R`` is positive definite: on each connected component the only
     null vector of ``K^T K`` and ``G`` is the constant, and
     ``1^T H^T W H 1 = 9 sum_t w_t > 0``; unreferenced vertices have their
-    unit rows. CHOLMOD factors ``R^T R`` from the rows without forming the
-    product (:class:`~o3d_lsmesh._solvers.SPDSolver` ``product_of``), with
-    the AMD ordering (on these meshes as little fill as METIS, found faster).
+    unit rows. CHOLMOD factors ``R^T R`` as assembled by
+    :func:`scan_normal_matrix` (its lower triangle) with the AMD ordering (on
+    these meshes as little fill as METIS, found faster).
     The object pickles (the solver refactors on load) and its solves are
     serialized by the solver's lock.
     """
@@ -519,24 +629,44 @@ class ScanFairingSolver:
     ) -> None:
         self.mu = float(mu)
         self.membrane = float(membrane)
-        self.system = scan_system(
+        triangles = np.asarray(triangles)
+        st = _structure(triangles, n) if structure is None else structure
+        normal = scan_normal_matrix(
             triangles,
             n,
             mu=self.mu,
             membrane=self.membrane,
             boundary_weight=boundary_weight,
             thin_plate=thin_plate,
-            structure=structure,
+            structure=st,
             rim_curve=rim_curve,
         )
-        # AMD: as little fill as METIS at 40k vertices with a 3x faster analysis; at 1.4M vertices (the ten
-        # scans merged and subdivided) the whole default took 20 s with AMD and 29 s with METIS, interleaved
-        self._solver = SPDSolver(product_of=self.system.rows.T.tocsc(), ordering="amd")
+        weight = np.where(st.boundary[triangles].any(axis=1), float(boundary_weight), 1.0)
+        corners = np.arange(0, 3 * len(triangles) + 1, 3)
+        #: ``sqrt(mu W) H``, ``(m, n)``: the rows that carry the targets
+        self.penalty = sp.csr_matrix(
+            (np.repeat(np.sqrt(self.mu * weight), 3), triangles.ravel(), corners), shape=(len(triangles), n)
+        )
+        self.referenced = st.valence > 0
+        # AMD: at 40k vertices (bun000) 0.87 GFlop against METIS's 0.63, but an analysis of 0.04 s against
+        # 0.3 s; at 1.4M vertices (the ten scans merged and subdivided) the whole default took 20 s with
+        # AMD and 29 s with METIS, interleaved. The lower triangle of the assembled matrix, not the rows
+        # (``product_of``, which CHOLMOD multiplies out as it factors: the same time at 40k): the memory
+        # estimate of ``backend="auto"`` then sees the true entry count; from the rows it guessed 3x too
+        # many and took the iterative path at 1.4M vertices (AMG-preconditioned CG, 4x slower). Also
+        # measured, slower: CG preconditioned by the factor of the 1-ring part of this matrix (its 2-ring
+        # entries lumped on the diagonal; 7.4x fewer factor flops but 8 + 10 iterations to 1e-8: 0.40 s
+        # against 0.33 s at 40k, 22.5 s against 20.5 s at 1.4M, CPU time, one thread)
+        self._solver = SPDSolver(_lower_csc(normal), lower=True, ordering="amd")
+
+    def normal_rhs(self, positions0: np.ndarray) -> np.ndarray:
+        """``mu H^T W H X0``, ``(n, 3)``."""
+        return self.penalty.T @ (self.penalty @ positions0)
 
     def filter(self, positions0: np.ndarray) -> np.ndarray:
         """``S X0``: the minimizer of the energy for targets ``X0``, ``(n, 3)`` (unreferenced rows kept)."""
-        out = self._solver.solve(self.system.normal_rhs(positions0))
-        unused = ~self.system.referenced
+        out = self._solver.solve(self.normal_rhs(positions0))
+        unused = ~self.referenced
         out[unused] = positions0[unused]
         return out
 
