@@ -55,6 +55,7 @@ __all__ = [
     "DP_MAX_EDGES",
     "FilledHoles",
     "Hole",
+    "HoleFiller",
     "fill_holes",
     "fill_holes_arrays",
     "find_holes",
@@ -271,23 +272,24 @@ def _minimum_weight_triangulation(
     area = np.zeros((k, k))
     split = np.full((k, k), -1, dtype=np.int64)
     normal = np.zeros((k, k, 3))  # unit normal of the triangle on chord (i, j) inside the sub-polygon i..j
+    known = np.zeros((k, k), dtype=bool)  # whether that normal is known (an unknown one does not constrain)
     idx = np.arange(k - 1)
     normal[idx, idx + 1] = outer_normals[:-1]
+    known[idx, idx + 1] = np.abs(outer_normals[:-1]).sum(-1) > 0
     tol = 1e-6  # angles this close tie, and the area decides (robust to rounding)
     for d in range(2, k):
         i = np.arange(k - d)[:, None]  # (r, 1)
         j = i + d
         mm = i + np.arange(1, d)[None, :]  # (r, d - 1)
-        a, b, c = points[j], points[mm], points[i]
-        cross = _cross(b - a, c - a)  # triangle (j, m, i)
-        tri_normal, twice_area = _unit(cross)
-        n1, n2 = normal[i, mm], normal[mm, j]  # (r, d-1, 3)
-        cos1 = np.einsum("...k,...k->...", tri_normal, n1)
-        cos2 = np.einsum("...k,...k->...", tri_normal, n2)
+        a = points[j]
+        u, v = points[mm] - a, points[i] - a
+        cross = _cross(u, v)  # triangle (j, m, i)
+        twice_area = np.sqrt(np.einsum("...k,...k->...", cross, cross))
+        tri_normal = cross / np.where(twice_area > 0, twice_area, 1.0)[..., None]
+        cos1 = np.einsum("...k,...k->...", tri_normal, normal[i, mm])
+        cos2 = np.einsum("...k,...k->...", tri_normal, normal[mm, j])
         # an unknown neighbour (zero normal) does not constrain the angle
-        cos1 = np.where(np.abs(n1).sum(-1) > 0, cos1, 1.0)
-        cos2 = np.where(np.abs(n2).sum(-1) > 0, cos2, 1.0)
-        worst = np.minimum(cos1, cos2)
+        worst = np.minimum(np.where(known[i, mm], cos1, 1.0), np.where(known[mm, j], cos2, 1.0))
         if d == k - 1:  # the triangle on the closing loop edge (k - 1, 0) meets the mesh there
             n3 = outer_normals[k - 1]
             if np.abs(n3).sum() > 0:
@@ -296,7 +298,7 @@ def _minimum_weight_triangulation(
         # a degenerate triangle (three collinear points: a chord's samples) is worse than any real one; its
         # rounding-noise normal must not count, nor its zero area win a tie (both sides of a chord would
         # then take the same sliver, wound both ways: a non-manifold edge)
-        longest = np.maximum(((b - a) ** 2).sum(-1), ((c - a) ** 2).sum(-1))
+        longest = np.maximum(np.einsum("...k,...k->...", u, u), np.einsum("...k,...k->...", v, v))
         theta = np.where(twice_area > 1e-9 * longest, theta, 2.0 * np.pi)
         total_angle = np.maximum(theta, np.maximum(angle[i, mm], angle[mm, j]))
         total_area = 0.5 * twice_area + area[i, mm] + area[mm, j]
@@ -304,8 +306,7 @@ def _minimum_weight_triangulation(
             blocked = forbidden[i, mm] | forbidden[mm, j]
             total_angle = np.where(blocked, np.inf, total_angle)
         best_angle = total_angle.min(axis=1, keepdims=True)
-        near = total_angle <= best_angle + tol
-        near_area = np.where(near, total_area, np.inf)
+        near_area = np.where(total_angle <= best_angle + tol, total_area, np.inf)
         best_area = near_area.min(axis=1, keepdims=True)
         # the first of the (near-)smallest areas: symmetric loops tie exactly, and rounding must not decide
         choice = np.argmax(near_area <= best_area * (1.0 + 1e-9), axis=1)
@@ -318,6 +319,7 @@ def _minimum_weight_triangulation(
         area[ii, jj] = total_area[rows, choice]
         split[ii, jj] = mm[rows, choice]
         normal[ii, jj] = tri_normal[rows, choice]
+        known[ii, jj] = twice_area[rows, choice] > 0
     if not np.isfinite(angle[0, k - 1]) and forbidden is not None:
         # no triangulation avoids every existing edge: accept one that does not
         return _minimum_weight_triangulation(points, outer_normals, None)
@@ -432,7 +434,11 @@ def _min_angle(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray) -> np.ndarray:
 
 
 def _relax(
-    points: np.ndarray, tris: np.ndarray, fixed_pairs: np.ndarray, max_passes: int = 100
+    points: np.ndarray,
+    tris: np.ndarray,
+    fixed_pairs: np.ndarray,
+    max_passes: int = 100,
+    dirty: np.ndarray | None = None,
 ) -> np.ndarray:
     """Delaunay edge flips (Liepa's relaxation) until none applies; batches of independent flips.
 
@@ -441,9 +447,15 @@ def _relax(
     ``(a, b, c)``, the edge ``(c, d)`` does not exist yet (in the patch or, in
     ``fixed_pairs``, around it), and both new triangles face the way the old
     pair did.
+
+    Only edges whose verdict can have changed are tested again: those of the triangles ``dirty``
+    (a boolean mask; every triangle if None) and, in later passes, of the triangles a flip rewrote or
+    a flip left waiting, and those whose flip was blocked by an edge a flip removed. Every other edge
+    failed the same test on the same geometry before.
     """
     nv = len(points)
     tris = tris.copy()
+    removed = np.zeros(0, dtype=np.int64)
     fixed_keys = np.minimum(fixed_pairs[:, 0], fixed_pairs[:, 1]) * nv + np.maximum(
         fixed_pairs[:, 0], fixed_pairs[:, 1]
     )
@@ -457,7 +469,10 @@ def _relax(
         new_key = np.minimum(c, d) * nv + np.maximum(c, d)
         existing = np.union1d(key, fixed_keys)
         pos = np.minimum(np.searchsorted(existing, new_key), len(existing) - 1)
-        open_ = np.flatnonzero((existing[pos] != new_key) & (c != d))
+        test = (existing[pos] != new_key) & (c != d)
+        if dirty is not None:
+            test &= dirty[t1] | dirty[t2] | np.isin(new_key, removed)
+        open_ = np.flatnonzero(test)
         pa, pb, pc, pd = points[a[open_]], points[b[open_]], points[c[open_]], points[d[open_]]
         centre, radius = _circumsphere(pa, pb, pc)
         # a relative margin: near-co-circular quads (common on regular patches) are not flipped, so
@@ -484,16 +499,21 @@ def _relax(
         after = np.minimum(_min_angle(pc, pa, pd), _min_angle(pd, pb, pc))
         ok &= after > before + 1e-9
         inside[live] = ok
-        cand = np.flatnonzero(inside)
-        if len(cand) == 0:
+        proposed = np.flatnonzero(inside)
+        if len(proposed) == 0:
             break
         # independent set: each triangle takes part in at most one flip of this pass
         owner = np.full(len(tris), len(t1), dtype=np.int64)
-        np.minimum.at(owner, t1[cand], cand)
-        np.minimum.at(owner, t2[cand], cand)
-        cand = cand[(owner[t1[cand]] == cand) & (owner[t2[cand]] == cand)]
+        np.minimum.at(owner, t1[proposed], proposed)
+        np.minimum.at(owner, t2[proposed], proposed)
+        cand = proposed[(owner[t1[proposed]] == proposed) & (owner[t2[proposed]] == proposed)]
         _, first = np.unique(new_key[cand], return_index=True)  # two flips must not make the same edge
         cand = cand[np.sort(first)]
+        # next pass: the triangles rewritten and those of flips left waiting; edges a flip removes
+        dirty = np.zeros(len(tris), dtype=bool)
+        dirty[t1[proposed]] = True
+        dirty[t2[proposed]] = True
+        removed = np.sort(np.minimum(a[cand], b[cand]) * nv + np.maximum(a[cand], b[cand]))
         tris[t1[cand]] = np.stack([c[cand], a[cand], d[cand]], axis=1)
         tris[t2[cand]] = np.stack([d[cand], b[cand], c[cand]], axis=1)
     return tris
@@ -522,6 +542,7 @@ def _refine(
     # no flips before the first split (as Liepa and CGAL): on a short loop the minimum-weight triangulation
     # is what decides whether a triangle is big enough to split, and Delaunay flips first made its triangles
     # slimmer, so that coarse holes got no new vertex at all (camel 2.5h: 0 where CGAL adds 3)
+    relaxed = False
     for _ in range(max_rounds):
         corners = points[tris]  # (t, 3, 3)
         centre = corners.mean(axis=1)
@@ -538,34 +559,54 @@ def _refine(
         a, b, c = tris[chosen, 0], tris[chosen, 1], tris[chosen, 2]
         tris[chosen] = np.stack([a, b, new], axis=1)
         tris = np.concatenate([tris, np.stack([b, c, new], axis=1), np.stack([c, a, new], axis=1)])
-        tris = _relax(points, tris, fixed_pairs)
+        # the relaxation before ended with no flip left: only edges of the split triangles can flip now
+        # (the first round tests every edge: the triangulation was not relaxed)
+        split_mask = np.ones(len(tris), dtype=bool)
+        if relaxed:
+            split_mask[: len(split_mask) - 2 * len(chosen)] = False
+            split_mask[chosen] = True
+        tris = _relax(points, tris, fixed_pairs, dirty=split_mask)
+        relaxed = True
     return points, tris, owner
 
 
 # --------------------------------------------------------------------------- fairing
 
 
-def _rings(triangles: np.ndarray, n: int, seeds: np.ndarray, count: int):
+def _gather(indptr: np.ndarray, data: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """``data[indptr[r]:indptr[r + 1]]`` for every ``r`` in ``rows``, concatenated (vectorized)."""
+    first, last = indptr[rows], indptr[rows + 1]
+    count = last - first
+    total = int(count.sum())
+    if total == 0:
+        return np.zeros(0, dtype=data.dtype)
+    offsets = np.repeat(first - np.concatenate([[0], np.cumsum(count)[:-1]]), count)
+    return data[np.arange(total) + offsets]
+
+
+def _rings(
+    triangles: np.ndarray, vertex_triangles: tuple[np.ndarray, np.ndarray], seeds: np.ndarray, count: int
+):
     """Triangles incident to ``count`` successive vertex rings around ``seeds`` (``seeds`` is ring 0).
 
-    Returns the triangle indices and the rings as a list of vertex arrays
-    (``count + 1`` of them; the last one is the outer, incomplete ring).
+    ``vertex_triangles`` is the CSR ``(indptr, triangle indices)`` of each vertex's triangles, so the
+    work is local to the rings (nothing grows with the mesh). Returns the triangle indices (sorted) and
+    the rings as a list of vertex arrays (``count + 1`` of them; the last one is the outer, incomplete
+    ring).
     """
-    seen = np.zeros(n, dtype=bool)
-    seen[seeds] = True
+    indptr, data = vertex_triangles
+    seen = np.unique(seeds)
     rings = [seeds]
-    taken = np.zeros(len(triangles), dtype=bool)
-    front = seen.copy()
+    taken = np.zeros(0, dtype=np.int64)
+    front = seen
     for _ in range(count):
-        touch = front[triangles].any(axis=1) & ~taken  # one vectorized pass over the triangles per ring
-        taken |= touch
-        verts = np.unique(triangles[touch])
-        new = verts[~seen[verts]]
-        seen[new] = True
+        touch = np.setdiff1d(_gather(indptr, data, front), taken)  # the ring's new triangles
+        taken = np.union1d(taken, touch)
+        new = np.setdiff1d(triangles[touch].ravel(), seen)
+        seen = np.union1d(seen, new)
         rings.append(new)
-        front = np.zeros(n, dtype=bool)
-        front[new] = True
-    return np.flatnonzero(taken), rings
+        front = new
+    return taken, rings
 
 
 def _uniform_operators(tris: np.ndarray, nv: int, vertices: np.ndarray | None = None, kind: str = "uniform"):
@@ -756,172 +797,250 @@ def fill_holes_arrays(
     max_hole_edges, max_hole_diameter, continuity, density = _check_options(
         max_hole_edges, max_hole_diameter, continuity, density
     )
-    weights = as_choice(weights, ("uniform", "cotangent"), name="weights")
-    fill_border = bool(as_bool(fill_border, name="fill_border"))
-    check_progress(progress)
-    vertices = np.asarray(vertices, dtype=np.float64)
-    triangles = np.asarray(triangles, dtype=np.int64)
-    n, m = len(vertices), len(triangles)
-    holes: list[Hole] = []
-    skipped: list[Hole] = []
-    edge_info = unique_edges_and_runs(triangles, n)  # the one whole-mesh sort
-    for hole in find_holes(vertices, triangles, _edge_info=edge_info):
-        too_big = (max_hole_edges is not None and hole.edges > max_hole_edges) or (
-            max_hole_diameter is not None and hole.diameter > max_hole_diameter
-        )
-        # a loop made of the three edges of one triangle is the rim of a flap (a triangle hanging by a
-        # vertex, common in raw scans), not a hole: "filling" it would add that triangle's reverse
-        flap = hole.edges == 3 and len(np.unique(np.asarray(hole.rows) % m)) == 1
-        (skipped if too_big or flap or (hole.border and not fill_border) else holes).append(hole)
-    if not holes:
-        return FilledHoles(
-            vertices.copy(), triangles.copy(), [], skipped, sp.csr_matrix((0, n)), np.zeros(0, dtype=np.int64)
-        )
-    edges = edge_info[0][0]
-    edge_keys = edges[:, 0] * n + edges[:, 1]  # sorted
-    # local edge scale of the loop vertices: mean length of their edges (Liepa's sigma); only edges at
-    # a loop vertex are measured
-    on_loop = np.zeros(n, dtype=bool)
-    on_loop[np.concatenate([hole.vertices for hole in holes])] = True
-    at_loop = edges[on_loop[edges].any(axis=1)]
-    length = np.linalg.norm(vertices[at_loop[:, 0]] - vertices[at_loop[:, 1]], axis=1)
-    degree = np.bincount(at_loop.ravel(), minlength=n)
-    sigma_all = np.bincount(at_loop.ravel(), weights=np.repeat(length, 2), minlength=n) / np.maximum(
-        degree, 1
+    return HoleFiller(vertices, triangles, _index=False).fill(
+        max_hole_edges=max_hole_edges,
+        max_hole_diameter=max_hole_diameter,
+        continuity=continuity,
+        density=density,
+        weights=weights,
+        fill_border=fill_border,
+        interpolation=interpolation,
+        progress=progress,
     )
-    # each piece (a loop; a loop through a vertex twice is cut into pieces) is triangulated on its own;
-    # then every piece is refined at once, in disjoint local index ranges
-    bar = progress_bar(progress, total=len(holes), desc="filling holes", unit="hole")
-    piece_hole, piece_loop, piece_points, piece_tris, piece_sigma, piece_fixed = [], [], [], [], [], []
-    for hole_index, hole in enumerate(holes):
-        bar.update()
-        for loop, rows in _simple_pieces(hole.vertices, hole.rows):
-            k = len(loop)
-            points = vertices[loop]
-            outer_tris = triangles[rows % m]  # the mesh triangle on each loop edge, for dihedral angles
-            outer, _ = _unit(
-                _cross(
-                    vertices[outer_tris[:, 1]] - vertices[outer_tris[:, 0]],
-                    vertices[outer_tris[:, 2]] - vertices[outer_tris[:, 0]],
+
+
+class HoleFiller:
+    """The whole-mesh analysis of a mesh's holes, done once; :meth:`fill` then does only per-hole work.
+
+    Like CGAL's prebuilt half-edge structure or potpourri3d's solver classes: the constructor sorts the
+    edges (finding the boundary loops, their components and whether each is an outer border, see
+    :func:`find_holes`), measures each vertex's mean edge length (Liepa's scale), lists the triangles
+    of each vertex (for the rings of fixed vertices around a patch) and indexes the triangles' bounding
+    spheres in k-d trees (for the crossing check, a query near the patch instead of a pass over the
+    mesh). :func:`fill_holes_arrays` is ``HoleFiller(vertices, triangles).fill(...)``.
+
+    The state is read-only numpy arrays (and k-d trees rebuilt from them on unpickling): it pickles, and
+    :meth:`fill` may run from several threads at once.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64
+    triangles : (m, 3) int64
+
+    Attributes
+    ----------
+    holes : list of Hole
+        Every boundary loop, as :func:`find_holes` gives them.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> square = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0.5, 0.5, 1]], float)
+    >>> filler = HoleFiller(square, np.array([[0, 1, 4], [1, 2, 4], [2, 3, 4], [3, 0, 4]]))
+    >>> [hole.edges for hole in filler.holes]
+    [4]
+    >>> len(filler.fill(fill_border=True).triangles)
+    6
+    """
+
+    def __init__(self, vertices: np.ndarray, triangles: np.ndarray, *, _index: bool = True) -> None:
+        vertices = np.array(vertices, dtype=np.float64)  # a copy: the state must not change under it
+        triangles = np.array(triangles, dtype=np.int64)
+        vertices.setflags(write=False)
+        triangles.setflags(write=False)
+        n = len(vertices)
+        self.vertices, self.triangles = vertices, triangles
+        edge_info = unique_edges_and_runs(triangles, n)  # the one whole-mesh sort
+        edges = edge_info[0][0]
+        self.edge_keys = edges[:, 0] * n + edges[:, 1]  # sorted
+        self.holes = find_holes(vertices, triangles, _edge_info=edge_info)
+        length = np.linalg.norm(vertices[edges[:, 0]] - vertices[edges[:, 1]], axis=1)
+        degree = np.bincount(edges.ravel(), minlength=n)
+        self.sigma = np.bincount(edges.ravel(), weights=np.repeat(length, 2), minlength=n) / np.maximum(
+            degree, 1
+        )
+        # the triangles of each vertex (CSR), by a transpose (linear, no sort)
+        m = len(triangles)
+        by_vertex = sp.csr_matrix(
+            (np.repeat(np.arange(m, dtype=np.int64), 3), triangles.ravel(), np.arange(0, 3 * m + 1, 3)),
+            shape=(m, n),
+        ).tocsc()
+        self.vertex_triangles = (by_vertex.indptr.astype(np.int64), by_vertex.data.astype(np.int64))
+        # the k-d trees pay off over several fills; a single fill (fill_holes_arrays) indexes only the
+        # triangles in the new triangles' box instead (index None)
+        self.index = _TriangleIndex(vertices, triangles) if _index else None
+
+    def fill(
+        self,
+        *,
+        max_hole_edges: int | None = None,
+        max_hole_diameter: float | None = None,
+        continuity: int = 2,
+        density: float = 1.0,
+        weights: str = "cotangent",
+        fill_border: bool = False,
+        interpolation: bool = False,
+        progress: bool = False,
+    ) -> FilledHoles:
+        """Fill the chosen holes: the options and result of :func:`fill_holes_arrays`."""
+        max_hole_edges, max_hole_diameter, continuity, density = _check_options(
+            max_hole_edges, max_hole_diameter, continuity, density
+        )
+        weights = as_choice(weights, ("uniform", "cotangent"), name="weights")
+        fill_border = bool(as_bool(fill_border, name="fill_border"))
+        check_progress(progress)
+        vertices, triangles = self.vertices, self.triangles
+        n, m = len(vertices), len(triangles)
+        holes: list[Hole] = []
+        skipped: list[Hole] = []
+        for hole in self.holes:
+            too_big = (max_hole_edges is not None and hole.edges > max_hole_edges) or (
+                max_hole_diameter is not None and hole.diameter > max_hole_diameter
+            )
+            # a loop made of the three edges of one triangle is the rim of a flap (a triangle hanging by a
+            # vertex, common in raw scans), not a hole: "filling" it would add that triangle's reverse
+            flap = hole.edges == 3 and len(np.unique(np.asarray(hole.rows) % m)) == 1
+            (skipped if too_big or flap or (hole.border and not fill_border) else holes).append(hole)
+        if not holes:
+            return FilledHoles(
+                vertices.copy(), triangles.copy(), [], skipped, sp.csr_matrix((0, n)), np.zeros(0, dtype=np.int64)
+            )
+        edge_keys = self.edge_keys
+        sigma_all = self.sigma  # Liepa's sigma: mean length of each vertex's edges
+        # each piece (a loop; a loop through a vertex twice is cut into pieces) is triangulated on its own;
+        # then every piece is refined at once, in disjoint local index ranges
+        bar = progress_bar(progress, total=len(holes), desc="filling holes", unit="hole")
+        piece_hole, piece_loop, piece_points, piece_tris, piece_sigma, piece_fixed = [], [], [], [], [], []
+        for hole_index, hole in enumerate(holes):
+            bar.update()
+            for loop, rows in _simple_pieces(hole.vertices, hole.rows):
+                k = len(loop)
+                points = vertices[loop]
+                outer_tris = triangles[rows % m]  # the mesh triangle on each loop edge, for dihedral angles
+                outer, _ = _unit(
+                    _cross(
+                        vertices[outer_tris[:, 1]] - vertices[outer_tris[:, 0]],
+                        vertices[outer_tris[:, 2]] - vertices[outer_tris[:, 0]],
+                    )
                 )
+                # chords that already are edges of the mesh (between loop vertices that are not neighbours)
+                a, b = np.meshgrid(loop, loop, indexing="ij")
+                key = np.minimum(a, b) * n + np.maximum(a, b)
+                pos = np.minimum(np.searchsorted(edge_keys, key), len(edge_keys) - 1)
+                forbidden = edge_keys[pos] == key
+                idx = np.arange(k)
+                forbidden[idx, (idx + 1) % k] = False
+                forbidden[(idx + 1) % k, idx] = False
+                spacing = float(np.mean(np.linalg.norm(np.roll(points, -1, 0) - points, axis=1)))
+                # chords are sampled at the spacing the refinement aims for (none without refinement)
+                extra, tris = _triangulate(
+                    points,
+                    outer,
+                    forbidden if forbidden.any() else None,
+                    spacing / density if density > 0 else 0.0,
+                )
+                piece_hole.append(hole_index)
+                piece_loop.append(loop)
+                piece_points.append(np.concatenate([points, extra]))
+                piece_tris.append(tris)
+                spread = spacing / density if density > 0 else 0.0
+                piece_sigma.append(
+                    np.concatenate([sigma_all[loop] / max(density, 1e-300), np.full(len(extra), spread)])
+                )
+                piece_fixed.append(np.argwhere(np.triu(forbidden)))  # mesh edges between loop vertices
+        bar.close()
+        sizes = np.array([len(x) for x in piece_points])
+        starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+        all_points = np.concatenate(piece_points)
+        all_tris = np.concatenate([t + start for t, start in zip(piece_tris, starts)])
+        point_piece = np.repeat(np.arange(len(sizes)), sizes)
+        if density > 0:
+            all_fixed = np.concatenate([f + start for f, start in zip(piece_fixed, starts)])
+            all_points, all_tris, point_piece = _refine(
+                all_points, np.concatenate(piece_sigma), all_tris, all_fixed, point_piece
             )
-            # chords that already are edges of the mesh (between loop vertices that are not neighbours)
-            a, b = np.meshgrid(loop, loop, indexing="ij")
-            key = np.minimum(a, b) * n + np.maximum(a, b)
-            pos = np.minimum(np.searchsorted(edge_keys, key), len(edge_keys) - 1)
-            forbidden = edge_keys[pos] == key
-            idx = np.arange(k)
-            forbidden[idx, (idx + 1) % k] = False
-            forbidden[(idx + 1) % k, idx] = False
-            spacing = float(np.mean(np.linalg.norm(np.roll(points, -1, 0) - points, axis=1)))
-            # chords are sampled at the spacing the refinement aims for (none without refinement)
-            extra, tris = _triangulate(
-                points,
-                outer,
-                forbidden if forbidden.any() else None,
-                spacing / density if density > 0 else 0.0,
+        # global numbering: loop points are mesh vertices; the others are new, numbered piece by piece
+        is_loop = np.zeros(len(all_points), dtype=bool)
+        loop_lengths = np.array([len(loop) for loop in piece_loop])
+        is_loop[np.concatenate([start + np.arange(k) for start, k in zip(starts, loop_lengths)])] = True
+        global_index = np.empty(len(all_points), dtype=np.int64)
+        global_index[is_loop] = np.concatenate(piece_loop)  # loop points come first in each piece, in order
+        fresh = np.flatnonzero(~is_loop)
+        fresh = fresh[np.argsort(point_piece[fresh], kind="stable")]
+        global_index[fresh] = n + np.arange(len(fresh))
+        new_points = all_points[fresh]
+        tri_piece = point_piece[all_tris[:, 0]]
+        tri_order = np.argsort(tri_piece, kind="stable")
+        new_tris = global_index[all_tris[tri_order]]
+        tri_owner = [np.asarray(piece_hole, dtype=np.int64)[tri_piece[tri_order]]]
+        interp_rows, interp_cols, interp_vals = [], [], []
+        if interpolation and len(fresh):
+            # harmonic weights of the new vertices over their loop's vertices (for colours and other
+            # attributes): one small dense solve per piece (a loop wide)
+            tri_bounds = np.searchsorted(tri_piece[tri_order], np.arange(len(sizes) + 1))
+            for piece in range(len(sizes)):
+                local = new_tris[tri_bounds[piece] : tri_bounds[piece + 1]]
+                loop = piece_loop[piece]
+                inner = np.unique(local[local >= n])
+                if len(inner) == 0:
+                    continue
+                numbering = np.concatenate([loop, inner])
+                by_index = np.argsort(numbering)
+                tris_local = by_index[np.searchsorted(numbering[by_index], local)]
+                k, nl = len(loop), len(numbering)
+                K, _, _ = _uniform_operators(tris_local, nl)
+                unknown = np.arange(k, nl)
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore", O3DLSMeshWarning)
+                    harmonic = SPDSolver(K[unknown][:, unknown].tocsc()).solve(-K[unknown][:, :k].toarray())
+                r, c = np.nonzero(np.abs(harmonic) > 1e-12)
+                interp_rows.append(inner[r] - n)
+                interp_cols.append(loop[c])
+                interp_vals.append(harmonic[r, c])
+        out_vertices = np.concatenate([vertices, new_points])
+        out_triangles = np.concatenate([triangles, new_tris])
+        p = len(new_points)
+        owner = np.concatenate(tri_owner)
+        if p:
+            out_vertices, used, stuck = _fair_all(
+                out_vertices, out_triangles, m, n, holes, continuity, weights, owner, self
             )
-            piece_hole.append(hole_index)
-            piece_loop.append(loop)
-            piece_points.append(np.concatenate([points, extra]))
-            piece_tris.append(tris)
-            spread = spacing / density if density > 0 else 0.0
-            piece_sigma.append(
-                np.concatenate([sigma_all[loop] / max(density, 1e-300), np.full(len(extra), spread)])
+        else:  # nothing to fair: the triangulations alone are checked
+            used = np.full(len(holes), -1, dtype=np.int64)
+            crossing = _crossings(out_vertices, out_triangles, m, self.index)
+            stuck = np.flatnonzero(np.bincount(owner, weights=crossing, minlength=len(holes)) > 0)
+        if interp_rows:
+            weights_matrix = sp.csr_matrix(
+                (np.concatenate(interp_vals), (np.concatenate(interp_rows), np.concatenate(interp_cols))),
+                shape=(p, n),
             )
-            piece_fixed.append(np.argwhere(np.triu(forbidden)))  # mesh edges between loop vertices
-    bar.close()
-    sizes = np.array([len(x) for x in piece_points])
-    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
-    all_points = np.concatenate(piece_points)
-    all_tris = np.concatenate([t + start for t, start in zip(piece_tris, starts)])
-    point_piece = np.repeat(np.arange(len(sizes)), sizes)
-    if density > 0:
-        all_fixed = np.concatenate([f + start for f, start in zip(piece_fixed, starts)])
-        all_points, all_tris, point_piece = _refine(
-            all_points, np.concatenate(piece_sigma), all_tris, all_fixed, point_piece
-        )
-    # global numbering: loop points are mesh vertices; the others are new, numbered piece by piece
-    is_loop = np.zeros(len(all_points), dtype=bool)
-    loop_lengths = np.array([len(loop) for loop in piece_loop])
-    is_loop[np.concatenate([start + np.arange(k) for start, k in zip(starts, loop_lengths)])] = True
-    global_index = np.empty(len(all_points), dtype=np.int64)
-    global_index[is_loop] = np.concatenate(piece_loop)  # loop points come first in each piece, in order
-    fresh = np.flatnonzero(~is_loop)
-    fresh = fresh[np.argsort(point_piece[fresh], kind="stable")]
-    global_index[fresh] = n + np.arange(len(fresh))
-    new_points = all_points[fresh]
-    tri_piece = point_piece[all_tris[:, 0]]
-    tri_order = np.argsort(tri_piece, kind="stable")
-    new_tris = global_index[all_tris[tri_order]]
-    tri_owner = [np.asarray(piece_hole, dtype=np.int64)[tri_piece[tri_order]]]
-    interp_rows, interp_cols, interp_vals = [], [], []
-    if interpolation and len(fresh):
-        # harmonic weights of the new vertices over their loop's vertices (for colours and other
-        # attributes): one small dense solve per piece (a loop wide)
-        tri_bounds = np.searchsorted(tri_piece[tri_order], np.arange(len(sizes) + 1))
-        for piece in range(len(sizes)):
-            local = new_tris[tri_bounds[piece] : tri_bounds[piece + 1]]
-            loop = piece_loop[piece]
-            inner = np.unique(local[local >= n])
-            if len(inner) == 0:
-                continue
-            numbering = np.concatenate([loop, inner])
-            by_index = np.argsort(numbering)
-            tris_local = by_index[np.searchsorted(numbering[by_index], local)]
-            k, nl = len(loop), len(numbering)
-            K, _, _ = _uniform_operators(tris_local, nl)
-            unknown = np.arange(k, nl)
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", O3DLSMeshWarning)
-                harmonic = SPDSolver(K[unknown][:, unknown].tocsc()).solve(-K[unknown][:, :k].toarray())
-            r, c = np.nonzero(np.abs(harmonic) > 1e-12)
-            interp_rows.append(inner[r] - n)
-            interp_cols.append(loop[c])
-            interp_vals.append(harmonic[r, c])
-    out_vertices = np.concatenate([vertices, new_points])
-    out_triangles = np.concatenate([triangles, new_tris])
-    p = len(new_points)
-    owner = np.concatenate(tri_owner)
-    if p:
-        out_vertices, used, stuck = _fair_all(
-            out_vertices, out_triangles, m, n, holes, continuity, weights, owner
-        )
-    else:  # nothing to fair: the triangulations alone are checked
-        used = np.full(len(holes), -1, dtype=np.int64)
-        crossing = _crossings(out_vertices, out_triangles, m)
-        stuck = np.flatnonzero(np.bincount(owner, weights=crossing, minlength=len(holes)) > 0)
-    if interp_rows:
-        weights_matrix = sp.csr_matrix(
-            (np.concatenate(interp_vals), (np.concatenate(interp_rows), np.concatenate(interp_cols))),
-            shape=(p, n),
-        )
-    else:
-        weights_matrix = sp.csr_matrix((p, n))
-    if len(stuck):
-        # every fill of these crosses the mesh (the scan is folded or overlaps itself next to them): a
-        # crossing patch would be a broken mesh, so they are left open, and said
-        warnings.warn(
-            f"fill_holes: the fills of {len(stuck)} hole(s) cross other triangles at every continuity "
-            "(folded or overlapping surface next to them): left open, see FilledHoles.skipped",
-            O3DLSMeshWarning,
-            stacklevel=3,
-        )
-        keep_tri = ~np.isin(owner, stuck)
-        vertex_owner = np.zeros(p, dtype=np.int64)
-        new_tris = out_triangles[m:]
-        inside = new_tris >= n
-        vertex_owner[new_tris[inside] - n] = np.broadcast_to(owner[:, None], new_tris.shape)[inside]
-        keep_vertex = ~np.isin(vertex_owner, stuck)
-        remap = np.concatenate([np.arange(n), n + np.cumsum(keep_vertex) - 1])
-        out_vertices = np.concatenate([vertices, out_vertices[n:][keep_vertex]])
-        out_triangles = np.concatenate([triangles, remap[new_tris[keep_tri]]])
-        weights_matrix = weights_matrix[np.flatnonzero(keep_vertex)]
-        left = set(stuck.tolist())
-        skipped = skipped + [hole for i, hole in enumerate(holes) if i in left]
-        used = used[[i not in left for i in range(len(holes))]]
-        holes = [hole for i, hole in enumerate(holes) if i not in left]
-    return FilledHoles(out_vertices, out_triangles, holes, skipped, weights_matrix, used)
+        else:
+            weights_matrix = sp.csr_matrix((p, n))
+        if len(stuck):
+            # every fill of these crosses the mesh (the scan is folded or overlaps itself next to them): a
+            # crossing patch would be a broken mesh, so they are left open, and said
+            warnings.warn(
+                f"fill_holes: the fills of {len(stuck)} hole(s) cross other triangles at every continuity "
+                "(folded or overlapping surface next to them): left open, see FilledHoles.skipped",
+                O3DLSMeshWarning,
+                stacklevel=3,
+            )
+            keep_tri = ~np.isin(owner, stuck)
+            vertex_owner = np.zeros(p, dtype=np.int64)
+            new_tris = out_triangles[m:]
+            inside = new_tris >= n
+            vertex_owner[new_tris[inside] - n] = np.broadcast_to(owner[:, None], new_tris.shape)[inside]
+            keep_vertex = ~np.isin(vertex_owner, stuck)
+            remap = np.concatenate([np.arange(n), n + np.cumsum(keep_vertex) - 1])
+            out_vertices = np.concatenate([vertices, out_vertices[n:][keep_vertex]])
+            out_triangles = np.concatenate([triangles, remap[new_tris[keep_tri]]])
+            weights_matrix = weights_matrix[np.flatnonzero(keep_vertex)]
+            left = set(stuck.tolist())
+            skipped = skipped + [hole for i, hole in enumerate(holes) if i in left]
+            used = used[[i not in left for i in range(len(holes))]]
+            holes = [hole for i, hole in enumerate(holes) if i not in left]
+        return FilledHoles(out_vertices, out_triangles, holes, skipped, weights_matrix, used)
+
 
 
 def _simple_pieces(loop: np.ndarray, rows: np.ndarray):
@@ -954,6 +1073,7 @@ def _fair_all(
     continuity: int,
     weights: str,
     tri_owner: np.ndarray,
+    state: HoleFiller,
 ):
     """Fair every new vertex at once: one local system over the patches and the rings around them.
 
@@ -967,7 +1087,7 @@ def _fair_all(
     loops = np.unique(np.concatenate([hole.vertices for hole in holes]))
     # triangles within `continuity` rings of the loops in the input, plus every new triangle
     old = triangles[:m]
-    ring_tris, rings = _rings(old, n, loops, continuity)
+    ring_tris, rings = _rings(old, state.vertex_triangles, loops, continuity)
     local_tris = np.concatenate([old[ring_tris], triangles[m:]])
     local_vertices = np.unique(local_tris)
     remap = np.full(total, -1, dtype=np.int64)
@@ -1023,7 +1143,7 @@ def _fair_all(
     tried = []
     for rank, (level, candidate) in enumerate(candidates()):
         tried.append((level, candidate))
-        crossing = _crossings(candidate, triangles, m)  # (q,) per new triangle
+        crossing = _crossings(candidate, triangles, m, state.index)  # (q,) per new triangle
         per_hole = np.bincount(tri_owner, weights=crossing, minlength=count)
         take = (chosen < 0) & (per_hole == 0)
         for hole_index in np.flatnonzero(take):
@@ -1077,12 +1197,62 @@ def _tangential_relax(
     return out
 
 
-def _crossings(vertices: np.ndarray, triangles: np.ndarray, first_new: int) -> np.ndarray:
+class _TriangleIndex:
+    """Bounding spheres (about the centroids) of a mesh's triangles in k-d trees, for crossing queries.
+
+    Two trees: the "small" spheres (radius at most 4 times the median) and the rest, each queried with
+    its own largest radius, so that a few long slivers do not make every query reach far. Holds the
+    arrays; the trees are rebuilt from them when unpickled (queries are thread-safe).
+    """
+
+    def __init__(self, vertices: np.ndarray, triangles: np.ndarray) -> None:
+        p = vertices[triangles]
+        self.centre = p.mean(axis=1)
+        self.radius = np.linalg.norm(p - self.centre[:, None, :], axis=2).max(axis=1)
+        cut = 4.0 * float(np.median(self.radius)) if len(self.radius) else 0.0
+        small = self.radius <= cut
+        self.groups = [np.flatnonzero(small), np.flatnonzero(~small)]
+        self._build()
+
+    def _build(self) -> None:
+        from scipy.spatial import cKDTree
+
+        self.trees = [(cKDTree(self.centre[g]), float(self.radius[g].max())) for g in self.groups if len(g)]
+        self.group_of_tree = [g for g in self.groups if len(g)]
+
+    def __getstate__(self) -> dict:
+        return {key: value for key, value in self.__dict__.items() if key not in ("trees", "group_of_tree")}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._build()
+
+    def near(self, centre: np.ndarray, radius: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Pairs ``(query, triangle)`` whose bounding spheres overlap."""
+        from scipy.spatial import cKDTree
+
+        if len(centre) == 0:
+            return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+        query = cKDTree(centre)
+        qs, ts = [np.zeros(0, dtype=np.int64)], [np.zeros(0, dtype=np.int64)]
+        for (tree, reach), group in zip(self.trees, self.group_of_tree):
+            found = query.sparse_distance_matrix(tree, float(radius.max()) + reach, output_type="ndarray")
+            qi, ti = found["i"].astype(np.int64), group[found["j"]]
+            close = found["v"] <= radius[qi] + self.radius[ti]
+            qs.append(qi[close])
+            ts.append(ti[close])
+        return np.concatenate(qs), np.concatenate(ts)
+
+
+def _crossings(
+    vertices: np.ndarray, triangles: np.ndarray, first_new: int, index: _TriangleIndex | None = None
+) -> np.ndarray:
     """For each new triangle, the triangles without a shared vertex it intersects (separating axes).
 
-    Candidates are pairs whose bounding spheres (about the centroids) overlap, among the triangles whose
-    boxes overlap the new triangles' box; each pair is tested on the 17 axes that separate two disjoint
-    triangles (two normals, nine edge-edge cross products, six in-plane edge normals for coplanar pairs).
+    Candidates are pairs whose bounding spheres (about the centroids) overlap: the input triangles from
+    ``index`` (a :class:`_TriangleIndex` of ``triangles[:first_new]``, built here if not given), the new
+    ones among themselves; each pair is tested on the 17 axes that separate two disjoint triangles (two
+    normals, nine edge-edge cross products, six in-plane edge normals for coplanar pairs).
     """
     from scipy.spatial import cKDTree
 
@@ -1093,56 +1263,27 @@ def _crossings(vertices: np.ndarray, triangles: np.ndarray, first_new: int) -> n
     p_new = vertices[triangles[new]]
     c_new = p_new.mean(axis=1)
     r_new = np.linalg.norm(p_new - c_new[:, None, :], axis=2).max(axis=1)
-    # candidates: triangles with a vertex in the new triangles' box grown by twice the largest of them
-    # (a per-vertex test: a pass over the vertices, not a copy of every triangle's corners)
-    pad = 2.0 * r_new.max()
-    low, high = p_new.reshape(-1, 3).min(0) - pad, p_new.reshape(-1, 3).max(0) + pad
-    in_box = ((vertices >= low) & (vertices <= high)).all(axis=1)
-    boxed = np.flatnonzero(in_box[triangles].any(axis=1))
-    p_box = vertices[triangles[boxed]]
-    centre = p_box.mean(axis=1)
-    radius = np.linalg.norm(p_box - centre[:, None, :], axis=2).max(axis=1)
-    # bounding spheres overlap: |c_a - c_b| <= r_a + r_b. Queried at two scales, so that a few long
-    # slivers do not make every query radius long: "small" spheres (at most 4 times the median) against
-    # small ones with the small bound, and each big one on its own.
-    cut = 4.0 * np.median(np.concatenate([radius, r_new]))
-    small_c, small_n = radius <= cut, r_new <= cut
-    a_parts, b_parts = [], []
-
-    def pairs(queries, tree_points, reach, owners_q, owners_t):
-        if len(queries) == 0 or len(tree_points) == 0:
-            return
-        found = cKDTree(tree_points).query_ball_point(queries, r=reach)
-        counts = np.array([len(x) for x in found])
-        if counts.sum():
-            a_parts.append(np.repeat(owners_q, counts))
-            b_parts.append(owners_t[np.concatenate([np.asarray(x, dtype=np.int64) for x in found if len(x)])])
-
-    idx_c, idx_n = np.arange(len(boxed)), np.arange(len(new))
-    sc = idx_c[small_c]
-    pairs(
-        c_new[small_n],
-        centre[sc],
-        r_new[small_n] + (radius[sc].max() if len(sc) else 0.0),
-        idx_n[small_n],
-        sc,
-    )
-    pairs(c_new[~small_n], centre, r_new[~small_n] + radius.max(), idx_n[~small_n], idx_c)
-    sn = idx_n[small_n]
-    if len(sn):
-        bc = idx_c[~small_c]
-        before = len(a_parts)
-        pairs(centre[bc], c_new[sn], radius[bc] + r_new[sn].max(), bc, sn)
-        if len(a_parts) > before:  # these came as (candidate, new): swap
-            a_parts[-1], b_parts[-1] = b_parts[-1], a_parts[-1]
-    if not a_parts:
-        return result
-    ia, ib = np.concatenate(a_parts), np.concatenate(b_parts)  # (new index, candidate index)
-    close = np.linalg.norm(c_new[ia] - centre[ib], axis=1) <= r_new[ia] + radius[ib]
-    a, b = new[ia[close]], boxed[ib[close]]
+    if index is None:
+        # the input triangles with a vertex in the new triangles' box grown by twice the largest of them
+        # (a per-vertex test: a pass over the vertices, not a copy of every triangle's corners)
+        pad = 2.0 * r_new.max()
+        low, high = p_new.reshape(-1, 3).min(0) - pad, p_new.reshape(-1, 3).max(0) + pad
+        in_box = ((vertices >= low) & (vertices <= high)).all(axis=1)
+        boxed = np.flatnonzero(in_box[triangles[:first_new]].any(axis=1))
+        ia, ib = _TriangleIndex(vertices, triangles[boxed]).near(c_new, r_new)
+        ib = boxed[ib]
+    else:
+        ia, ib = index.near(c_new, r_new)  # (new index, input triangle)
+    b_all = [ib]
+    a_all = [ia]
+    pairs = cKDTree(c_new).query_pairs(2.0 * float(r_new.max()), output_type="ndarray").astype(np.int64)
+    if len(pairs):
+        close = np.linalg.norm(c_new[pairs[:, 0]] - c_new[pairs[:, 1]], axis=1) <= r_new[pairs].sum(axis=1)
+        a_all.append(pairs[close, 0])
+        b_all.append(first_new + pairs[close, 1])
+    a, b = new[np.concatenate(a_all)], np.concatenate(b_all)
     shared = (triangles[a][:, :, None] == triangles[b][:, None, :]).any(axis=(1, 2))
-    keep = ~shared & ((b < first_new) | (a < b))  # each new-new pair once
-    a, b = a[keep], b[keep]
+    a, b = a[~shared], b[~shared]
     if len(a) == 0:
         return result
     P, Q = vertices[triangles[a]], vertices[triangles[b]]  # (k, 3, 3)
