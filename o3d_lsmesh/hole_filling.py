@@ -236,10 +236,13 @@ def find_holes(vertices: np.ndarray, triangles: np.ndarray, *, _edge_info=None) 
 
 def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     """``np.cross`` over the last axis of 3-vectors, without its axis juggling (it dominates small calls)."""
-    out = np.zeros(np.broadcast_shapes(u.shape, v.shape))
-    out[..., 0] = u[..., 1] * v[..., 2] - u[..., 2] * v[..., 1]
-    out[..., 1] = u[..., 2] * v[..., 0] - u[..., 0] * v[..., 2]
-    out[..., 2] = u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
+    shape = u.shape if u.shape == v.shape else np.broadcast_shapes(u.shape, v.shape)
+    out = np.empty(shape)
+    u0, u1, u2 = u[..., 0], u[..., 1], u[..., 2]
+    v0, v1, v2 = v[..., 0], v[..., 1], v[..., 2]
+    np.subtract(u1 * v2, u2 * v1, out=out[..., 0])
+    np.subtract(u2 * v0, u0 * v2, out=out[..., 1])
+    np.subtract(u0 * v1, u1 * v0, out=out[..., 2])
     return out
 
 
@@ -263,77 +266,98 @@ def _minimum_weight_triangulation(
     to the loop, like the mesh triangles on the other side of its edges.
 
     The inner minimum over the split vertex ``m`` is vectorized over a whole
-    diagonal ``j - i = d`` of the table at once.
+    diagonal ``j - i = d`` of the table at once (see :func:`_minimum_weight_triangulations`).
     """
-    k = len(points)
+    return _minimum_weight_triangulations(
+        points[None], outer_normals[None], None if forbidden is None else forbidden[None]
+    )[0]
+
+
+def _minimum_weight_triangulations(
+    points: np.ndarray, outer_normals: np.ndarray, forbidden: np.ndarray | None
+) -> np.ndarray:
+    """:func:`_minimum_weight_triangulation` of ``B`` loops of the same length at once: ``points (B, k, 3)``,
+    ``outer_normals (B, k, 3)``, ``forbidden (B, k, k)`` or None; triangles ``(B, k - 2, 3)``.
+
+    Each loop's table is independent: the batch is one more leading axis of every array, so many
+    short loops (a scan's small holes) cost one pass over the diagonals instead of one each.
+    """
+    count, k = points.shape[:2]
     if k == 3:
-        return np.array([[2, 1, 0]], dtype=np.int64)
-    angle = np.zeros((k, k))
-    area = np.zeros((k, k))
-    split = np.full((k, k), -1, dtype=np.int64)
-    normal = np.zeros((k, k, 3))  # unit normal of the triangle on chord (i, j) inside the sub-polygon i..j
-    known = np.zeros((k, k), dtype=bool)  # whether that normal is known (an unknown one does not constrain)
+        return np.tile(np.array([[[2, 1, 0]]], dtype=np.int64), (count, 1, 1))
+    angle = np.zeros((count, k, k))
+    area = np.zeros((count, k, k))
+    split = np.full((count, k, k), -1, dtype=np.int64)
+    normal = np.zeros((count, k, k, 3))  # unit normal of the triangle on chord (i, j) inside sub-polygon i..j
+    known = np.zeros((count, k, k), dtype=bool)  # whether that normal is known (an unknown one is no constraint)
     idx = np.arange(k - 1)
-    normal[idx, idx + 1] = outer_normals[:-1]
-    known[idx, idx + 1] = np.abs(outer_normals[:-1]).sum(-1) > 0
+    normal[:, idx, idx + 1] = outer_normals[:, :-1]
+    known[:, idx, idx + 1] = np.abs(outer_normals[:, :-1]).sum(-1) > 0
+    closing = outer_normals[:, k - 1]  # (B, 3)
+    closing_known = np.abs(closing).sum(-1) > 0
+    batch = np.arange(count)[:, None]
     tol = 1e-6  # angles this close tie, and the area decides (robust to rounding)
     for d in range(2, k):
         i = np.arange(k - d)[:, None]  # (r, 1)
         j = i + d
         mm = i + np.arange(1, d)[None, :]  # (r, d - 1)
-        a = points[j]
-        u, v = points[mm] - a, points[i] - a
+        a = points[:, j]  # (B, r, 1, 3)
+        u, v = points[:, mm] - a, points[:, i] - a  # (B, r, d - 1, 3)
         cross = _cross(u, v)  # triangle (j, m, i)
         twice_area = np.sqrt(np.einsum("...k,...k->...", cross, cross))
         tri_normal = cross / np.where(twice_area > 0, twice_area, 1.0)[..., None]
-        cos1 = np.einsum("...k,...k->...", tri_normal, normal[i, mm])
-        cos2 = np.einsum("...k,...k->...", tri_normal, normal[mm, j])
+        cos1 = np.einsum("...k,...k->...", tri_normal, normal[:, i, mm])
+        cos2 = np.einsum("...k,...k->...", tri_normal, normal[:, mm, j])
         # an unknown neighbour (zero normal) does not constrain the angle
-        worst = np.minimum(np.where(known[i, mm], cos1, 1.0), np.where(known[mm, j], cos2, 1.0))
+        worst = np.minimum(np.where(known[:, i, mm], cos1, 1.0), np.where(known[:, mm, j], cos2, 1.0))
         if d == k - 1:  # the triangle on the closing loop edge (k - 1, 0) meets the mesh there
-            n3 = outer_normals[k - 1]
-            if np.abs(n3).sum() > 0:
-                worst = np.minimum(worst, tri_normal @ n3)
+            cos3 = np.einsum("b...k,bk->b...", tri_normal, closing)
+            worst = np.where(closing_known[:, None, None], np.minimum(worst, cos3), worst)
         theta = np.arccos(np.clip(worst, -1.0, 1.0))
         # a degenerate triangle (three collinear points: a chord's samples) is worse than any real one; its
         # rounding-noise normal must not count, nor its zero area win a tie (both sides of a chord would
         # then take the same sliver, wound both ways: a non-manifold edge)
         longest = np.maximum(np.einsum("...k,...k->...", u, u), np.einsum("...k,...k->...", v, v))
         theta = np.where(twice_area > 1e-9 * longest, theta, 2.0 * np.pi)
-        total_angle = np.maximum(theta, np.maximum(angle[i, mm], angle[mm, j]))
-        total_area = 0.5 * twice_area + area[i, mm] + area[mm, j]
+        total_angle = np.maximum(theta, np.maximum(angle[:, i, mm], angle[:, mm, j]))
+        total_area = 0.5 * twice_area + area[:, i, mm] + area[:, mm, j]
         if forbidden is not None:
-            blocked = forbidden[i, mm] | forbidden[mm, j]
+            blocked = forbidden[:, i, mm] | forbidden[:, mm, j]
             total_angle = np.where(blocked, np.inf, total_angle)
-        best_angle = total_angle.min(axis=1, keepdims=True)
+        best_angle = total_angle.min(axis=2, keepdims=True)
         near_area = np.where(total_angle <= best_angle + tol, total_area, np.inf)
-        best_area = near_area.min(axis=1, keepdims=True)
+        best_area = near_area.min(axis=2, keepdims=True)
         # the first of the (near-)smallest areas: symmetric loops tie exactly, and rounding must not decide
-        choice = np.argmax(near_area <= best_area * (1.0 + 1e-9), axis=1)
-        rows = np.arange(len(choice))
+        choice = np.argmax(near_area <= best_area * (1.0 + 1e-9), axis=2)  # (B, r)
+        rows = np.arange(k - d)[None, :]
         ii, jj = i[:, 0], j[:, 0]
-        chosen_angle = total_angle[rows, choice]
+        chosen_angle = total_angle[batch, rows, choice]
         if forbidden is not None and d < k - 1:
-            chosen_angle = np.where(forbidden[ii, jj], np.inf, chosen_angle)
-        angle[ii, jj] = chosen_angle
-        area[ii, jj] = total_area[rows, choice]
-        split[ii, jj] = mm[rows, choice]
-        normal[ii, jj] = tri_normal[rows, choice]
-        known[ii, jj] = twice_area[rows, choice] > 0
-    if not np.isfinite(angle[0, k - 1]) and forbidden is not None:
-        # no triangulation avoids every existing edge: accept one that does not
-        return _minimum_weight_triangulation(points, outer_normals, None)
-    out: list[tuple[int, int, int]] = []
-    stack = [(0, k - 1)]
-    while stack:  # k - 2 triangles
-        lo, hi = stack.pop()
-        if hi - lo < 2:
+            chosen_angle = np.where(forbidden[:, ii, jj], np.inf, chosen_angle)
+        angle[:, ii, jj] = chosen_angle
+        area[:, ii, jj] = total_area[batch, rows, choice]
+        split[:, ii, jj] = mm[rows, choice]
+        normal[:, ii, jj] = tri_normal[batch, rows, choice]
+        known[:, ii, jj] = twice_area[batch, rows, choice] > 0
+    out = np.empty((count, k - 2, 3), dtype=np.int64)
+    for b in range(count):
+        if not np.isfinite(angle[b, 0, k - 1]) and forbidden is not None:
+            # no triangulation avoids every existing edge: accept one that does not
+            out[b] = _minimum_weight_triangulations(points[b : b + 1], outer_normals[b : b + 1], None)[0]
             continue
-        mid = int(split[lo, hi])
-        out.append((hi, mid, lo))
-        stack.append((lo, mid))
-        stack.append((mid, hi))
-    return np.array(out, dtype=np.int64)
+        table = split[b].tolist()
+        found: list[tuple[int, int, int]] = []
+        stack = [(0, k - 1)]
+        while stack:  # k - 2 triangles
+            lo, hi = stack.pop()
+            if hi - lo < 2:
+                continue
+            mid = table[lo][hi]
+            found.append((hi, mid, lo))
+            stack.append((lo, mid))
+            stack.append((mid, hi))
+        out[b] = found
+    return out
 
 
 def _triangulate(
@@ -399,7 +423,8 @@ def _triangulate(
 
 
 def _edge_table(tris: np.ndarray, nv: int):
-    """Interior edges of a consistently oriented patch: (triangle 1, slot 1, triangle 2, slot 2, a, b)."""
+    """Interior edges of a consistently oriented patch: (triangle 1, slot 1, triangle 2, slot 2, a, b), and
+    the sorted keys ``min * nv + max`` of every half-edge."""
     a = tris.reshape(-1)
     b = tris[:, [1, 2, 0]].reshape(-1)
     key = np.minimum(a, b) * nv + np.maximum(a, b)
@@ -407,7 +432,7 @@ def _edge_table(tris: np.ndarray, nv: int):
     ks = key[order]
     pair = np.flatnonzero(ks[1:] == ks[:-1])
     h1, h2 = order[pair], order[pair + 1]
-    return h1 // 3, h1 % 3, h2 // 3, h2 % 3, a[h1], b[h1], key
+    return h1 // 3, h1 % 3, h2 // 3, h2 % 3, a[h1], b[h1], ks
 
 
 def _circumsphere(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray):
@@ -456,23 +481,35 @@ def _relax(
     nv = len(points)
     tris = tris.copy()
     removed = np.zeros(0, dtype=np.int64)
-    fixed_keys = np.minimum(fixed_pairs[:, 0], fixed_pairs[:, 1]) * nv + np.maximum(
-        fixed_pairs[:, 0], fixed_pairs[:, 1]
+    fixed_keys = np.sort(
+        np.minimum(fixed_pairs[:, 0], fixed_pairs[:, 1]) * nv + np.maximum(fixed_pairs[:, 0], fixed_pairs[:, 1])
     )
+
+    def absent(sorted_keys: np.ndarray, keys: np.ndarray) -> np.ndarray:
+        if len(sorted_keys) == 0:
+            return np.ones(len(keys), dtype=bool)
+        pos = np.minimum(np.searchsorted(sorted_keys, keys), len(sorted_keys) - 1)
+        return sorted_keys[pos] != keys
+
     for _ in range(max_passes):
         t1, s1, t2, s2, a, b, key = _edge_table(tris, nv)
         if len(t1) == 0:
             break
+        # the edges to test: dirty ones (cheap index tests first; the geometry runs on the edges left)
+        if dirty is None:
+            open_ = np.arange(len(t1))
+        else:
+            mark = dirty[t1] | dirty[t2]
+            if len(removed):
+                c_all, d_all = tris[t1, (s1 + 2) % 3], tris[t2, (s2 + 2) % 3]
+                mark |= ~absent(removed, np.minimum(c_all, d_all) * nv + np.maximum(c_all, d_all))
+            open_ = np.flatnonzero(mark)
         c = tris[t1, (s1 + 2) % 3]
         d = tris[t2, (s2 + 2) % 3]
-        # the new edge must not exist yet (a cheap test first: every later one runs on the edges left)
+        # the new edge must not exist yet (in the patch, or around it)
         new_key = np.minimum(c, d) * nv + np.maximum(c, d)
-        existing = np.union1d(key, fixed_keys)
-        pos = np.minimum(np.searchsorted(existing, new_key), len(existing) - 1)
-        test = (existing[pos] != new_key) & (c != d)
-        if dirty is not None:
-            test &= dirty[t1] | dirty[t2] | np.isin(new_key, removed)
-        open_ = np.flatnonzero(test)
+        oc, od, ok_key = c[open_], d[open_], new_key[open_]
+        open_ = open_[absent(key, ok_key) & absent(fixed_keys, ok_key) & (oc != od)]
         pa, pb, pc, pd = points[a[open_]], points[b[open_]], points[c[open_]], points[d[open_]]
         centre, radius = _circumsphere(pa, pb, pc)
         # a relative margin: near-co-circular quads (common on regular patches) are not flipped, so
@@ -911,8 +948,8 @@ class HoleFiller:
         # then every piece is refined at once, in disjoint local index ranges
         bar = progress_bar(progress, total=len(holes), desc="filling holes", unit="hole")
         piece_hole, piece_loop, piece_points, piece_tris, piece_sigma, piece_fixed = [], [], [], [], [], []
+        piece_outer, piece_forbidden, piece_spacing = [], [], []
         for hole_index, hole in enumerate(holes):
-            bar.update()
             for loop, rows in _simple_pieces(hole.vertices, hole.rows):
                 k = len(loop)
                 points = vertices[loop]
@@ -931,24 +968,51 @@ class HoleFiller:
                 idx = np.arange(k)
                 forbidden[idx, (idx + 1) % k] = False
                 forbidden[(idx + 1) % k, idx] = False
-                spacing = float(np.mean(np.linalg.norm(np.roll(points, -1, 0) - points, axis=1)))
-                # chords are sampled at the spacing the refinement aims for (none without refinement)
-                extra, tris = _triangulate(
-                    points,
-                    outer,
-                    forbidden if forbidden.any() else None,
-                    spacing / density if density > 0 else 0.0,
-                )
                 piece_hole.append(hole_index)
                 piece_loop.append(loop)
-                piece_points.append(np.concatenate([points, extra]))
-                piece_tris.append(tris)
-                spread = spacing / density if density > 0 else 0.0
-                piece_sigma.append(
-                    np.concatenate([sigma_all[loop] / max(density, 1e-300), np.full(len(extra), spread)])
-                )
+                piece_points.append(points)
+                piece_outer.append(outer)
+                piece_forbidden.append(forbidden)
+                piece_spacing.append(float(np.mean(np.linalg.norm(np.roll(points, -1, 0) - points, axis=1))))
                 piece_fixed.append(np.argwhere(np.triu(forbidden)))  # mesh edges between loop vertices
+        # the dynamic programme: loops of one length in one batch, longer ones cut by chords first
+        piece_extra: list[np.ndarray] = [np.zeros((0, 3))] * len(piece_loop)
+        piece_tris = [np.zeros((0, 3), dtype=np.int64)] * len(piece_loop)
+        lengths = np.array([len(loop) for loop in piece_loop])
+        bar = progress_bar(progress, total=len(piece_loop), desc="filling holes", unit="loop")
+        for k in np.unique(lengths):
+            group = np.flatnonzero(lengths == k)
+            if k > DP_MAX_EDGES:
+                for piece in group:
+                    forbidden = piece_forbidden[piece]
+                    # chords are sampled at the spacing the refinement aims for (none without refinement)
+                    piece_extra[piece], piece_tris[piece] = _triangulate(
+                        piece_points[piece],
+                        piece_outer[piece],
+                        forbidden if forbidden.any() else None,
+                        piece_spacing[piece] / density if density > 0 else 0.0,
+                    )
+                    bar.update()
+                continue
+            # batches bound the DP tables' memory (about 60 k**2 floats a loop)
+            per_batch = max(1, 200_000 // int(k) ** 2)
+            for first in range(0, len(group), per_batch):
+                chunk = group[first : first + per_batch]
+                stacked = np.stack([piece_forbidden[piece] for piece in chunk])
+                found = _minimum_weight_triangulations(
+                    np.stack([piece_points[piece] for piece in chunk]),
+                    np.stack([piece_outer[piece] for piece in chunk]),
+                    stacked if stacked.any() else None,
+                )
+                for piece, tris in zip(chunk, found):
+                    piece_tris[piece] = tris
+                bar.update(len(chunk))
         bar.close()
+        for piece, loop in enumerate(piece_loop):
+            extra = piece_extra[piece]
+            piece_points[piece] = np.concatenate([piece_points[piece], extra])
+            spread = piece_spacing[piece] / density if density > 0 else 0.0
+            piece_sigma.append(np.concatenate([sigma_all[loop] / max(density, 1e-300), np.full(len(extra), spread)]))
         sizes = np.array([len(x) for x in piece_points])
         starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
         all_points = np.concatenate(piece_points)
@@ -1291,20 +1355,33 @@ def _crossings(
     eQ = Q[:, [1, 2, 0]] - Q
     nP = _cross(eP[:, 0], eP[:, 1])
     nQ = _cross(eQ[:, 0], eQ[:, 1])
-    axes = [nP, nQ]
-    axes += [_cross(eP[:, i], eQ[:, j]) for i in range(3) for j in range(3)]
-    axes += [_cross(nP, eP[:, i]) for i in range(3)] + [_cross(nQ, eQ[:, i]) for i in range(3)]
+    # every axis at once, (17, k, 3): the two normals, the nine edge-edge crosses, the six in-plane normals
+    axes = np.concatenate(
+        [
+            np.stack([nP, nQ]),
+            _cross(eP[None, :, :, :], eQ.transpose(1, 0, 2)[:, :, None, :]).transpose(0, 2, 1, 3).reshape(9, -1, 3),
+            _cross(nP[:, None, :], eP).transpose(1, 0, 2),
+            _cross(nQ[:, None, :], eQ).transpose(1, 0, 2),
+        ]
+    )
     scale = np.maximum(np.abs(P).max(axis=(1, 2)), np.abs(Q).max(axis=(1, 2))) + np.abs(eP).max(axis=(1, 2))
-    separated = np.zeros(len(a), dtype=bool)
-    for axis in axes:
-        length = np.linalg.norm(axis, axis=1)
-        usable = length > 1e-12 * scale**2
-        unit = axis / np.where(usable, length, 1.0)[:, None]
-        pp = np.einsum("kij,kj->ki", P, unit)
-        qq = np.einsum("kij,kj->ki", Q, unit)
-        gap = np.maximum(qq.min(1) - pp.max(1), pp.min(1) - qq.max(1))
-        # strictly apart: coplanar pairs project to one point on their common normal (gap 0)
-        separated |= usable & (gap > 1e-12 * scale)
+    ax, ay, az = axes[..., 0], axes[..., 1], axes[..., 2]
+    length = np.sqrt(ax * ax + ay * ay + az * az)
+    usable = length > 1e-12 * scale**2
+    inv = 1.0 / np.where(usable, length, 1.0)
+    ax, ay, az = ax * inv, ay * inv, az * inv
+
+    def extent(T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        # the projections of the three corners on every axis (elementwise: the size-3 reductions and
+        # einsum over these shapes were most of the check's time)
+        x = [ax * T[:, c, 0] + ay * T[:, c, 1] + az * T[:, c, 2] for c in range(3)]
+        return np.minimum(np.minimum(x[0], x[1]), x[2]), np.maximum(np.maximum(x[0], x[1]), x[2])
+
+    p_low, p_high = extent(P)
+    q_low, q_high = extent(Q)
+    gap = np.maximum(q_low - p_high, p_low - q_high)
+    # strictly apart: coplanar pairs project to one point on their common normal (gap 0)
+    separated = (usable & (gap > 1e-12 * scale)).any(axis=0)
     hit = ~separated
     np.add.at(result, a[hit] - first_new, 1.0)
     both_new = hit & (b >= first_new)
