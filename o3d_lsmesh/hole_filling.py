@@ -673,22 +673,25 @@ def _uniform_operators(tris: np.ndarray, nv: int, vertices: np.ndarray | None = 
             cot[:, c] = (u * v).sum(1) / np.maximum(cross, 1e-300)
         w = 0.5 * np.bincount(inverse, weights=cot.T.reshape(-1), minlength=len(i))
         w = np.maximum(w, 0.05 * np.abs(w).mean())
-    adjacency = sp.coo_matrix(
-        (np.concatenate([w, w]), (np.concatenate([i, j]), np.concatenate([j, i]))), shape=(nv, nv)
-    ).tocsr()
-    degree = np.asarray(adjacency.sum(axis=1)).ravel()
-    K = (sp.diags(degree) - adjacency).tocsr()
+    # K = D - W assembled at once (diagonal included), and L = S K with S a row scaling (1 / degree, or
+    # 1 / vertex area): the same pattern, so L is K with its rows' data scaled (no sparse algebra)
+    degree = np.bincount(i, weights=w, minlength=nv) + np.bincount(j, weights=w, minlength=nv)
+    diagonal = np.arange(nv)
+    K = sp.csr_matrix(
+        (np.concatenate([-w, -w, degree]), (np.concatenate([i, j, diagonal]), np.concatenate([j, i, diagonal]))),
+        shape=(nv, nv),
+    )
     if kind == "cotangent-area":
         assert vertices is not None
         p = vertices[tris]
         area = 0.5 * np.linalg.norm(_cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
         mass = np.bincount(tris.ravel(), weights=np.repeat(area / 3.0, 3), minlength=nv)
         mass = mass / mass[mass > 0].mean()
-        inv = np.divide(1.0, mass, out=np.zeros(nv), where=mass > 0)
-        L = (sp.diags(inv) @ K).tocsr()
+        scale = np.divide(1.0, mass, out=np.zeros(nv), where=mass > 0)
     else:
-        inv = np.divide(1.0, degree, out=np.zeros(nv), where=degree > 0)
-        L = (sp.diags((degree > 0).astype(float)) - sp.diags(inv) @ adjacency).tocsr()
+        scale = np.divide(1.0, degree, out=np.zeros(nv), where=degree > 0)
+    L = K.copy()
+    L.data = L.data * np.repeat(scale, np.diff(L.indptr))
     return K, L, np.stack([i, j], axis=1)
 
 
@@ -733,18 +736,21 @@ def _fair(
             valid[rings[1]] = True
             keep = (rows[edges[:, 0]] | rows[edges[:, 1]]) & valid[edges[:, 0]] & valid[edges[:, 1]]
             sel = edges[keep]
-            G = sp.coo_matrix(
-                (
-                    np.concatenate([np.ones(len(sel)), -np.ones(len(sel))]),
-                    (np.tile(np.arange(len(sel)), 2), np.concatenate([sel[:, 0], sel[:, 1]])),
-                ),
+            # the edge difference operator: row e is +1 at sel[e, 0] and -1 at sel[e, 1] (CSR, two a row)
+            G = sp.csr_matrix(
+                (np.tile([1.0, -1.0], len(sel)), sel.ravel(), np.arange(0, 2 * len(sel) + 1, 2)),
                 shape=(len(sel), nv),
-            ).tocsr()
+            )
             A_full = (G @ L).tocsc()
         A_full = A_full.tocsc()
-        A_u = A_full[:, unknown]
+        if len(unknown) and unknown[0] == nv - len(unknown) and (np.diff(unknown) == 1).all():
+            A_u = A_full[:, nv - len(unknown) :]  # the usual layout: the unknowns are the last columns
+        else:
+            A_u = A_full[:, unknown]
+        fixed = vertices.copy()
+        fixed[unknown] = 0.0  # A_known x_known, without slicing the known columns out
         normal = (A_u.T @ A_u).tocsc()
-        rhs = -(A_u.T @ (A_full[:, known] @ vertices[known]))
+        rhs = -(A_u.T @ (A_full @ fixed))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", O3DLSMeshWarning)  # the SciPy fallback warning: tiny systems
         solution = SPDSolver(normal, ordering="amd").solve(np.asarray(rhs))
