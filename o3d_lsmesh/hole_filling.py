@@ -289,7 +289,9 @@ def _minimum_weight_triangulations(
     area = np.zeros((count, k, k))
     split = np.full((count, k, k), -1, dtype=np.int64)
     normal = np.zeros((count, k, k, 3))  # unit normal of the triangle on chord (i, j) inside sub-polygon i..j
-    known = np.zeros((count, k, k), dtype=bool)  # whether that normal is known (an unknown one is no constraint)
+    known = np.zeros(
+        (count, k, k), dtype=bool
+    )  # whether that normal is known (an unknown one is no constraint)
     idx = np.arange(k - 1)
     normal[:, idx, idx + 1] = outer_normals[:, :-1]
     known[:, idx, idx + 1] = np.abs(outer_normals[:, :-1]).sum(-1) > 0
@@ -482,7 +484,8 @@ def _relax(
     tris = tris.copy()
     removed = np.zeros(0, dtype=np.int64)
     fixed_keys = np.sort(
-        np.minimum(fixed_pairs[:, 0], fixed_pairs[:, 1]) * nv + np.maximum(fixed_pairs[:, 0], fixed_pairs[:, 1])
+        np.minimum(fixed_pairs[:, 0], fixed_pairs[:, 1]) * nv
+        + np.maximum(fixed_pairs[:, 0], fixed_pairs[:, 1])
     )
 
     def absent(sorted_keys: np.ndarray, keys: np.ndarray) -> np.ndarray:
@@ -678,7 +681,10 @@ def _uniform_operators(tris: np.ndarray, nv: int, vertices: np.ndarray | None = 
     degree = np.bincount(i, weights=w, minlength=nv) + np.bincount(j, weights=w, minlength=nv)
     diagonal = np.arange(nv)
     K = sp.csr_matrix(
-        (np.concatenate([-w, -w, degree]), (np.concatenate([i, j, diagonal]), np.concatenate([j, i, diagonal]))),
+        (
+            np.concatenate([-w, -w, degree]),
+            (np.concatenate([i, j, diagonal]), np.concatenate([j, i, diagonal])),
+        ),
         shape=(nv, nv),
     )
     if kind == "cotangent-area":
@@ -946,7 +952,12 @@ class HoleFiller:
             (skipped if too_big or flap or (hole.border and not fill_border) else holes).append(hole)
         if not holes:
             return FilledHoles(
-                vertices.copy(), triangles.copy(), [], skipped, sp.csr_matrix((0, n)), np.zeros(0, dtype=np.int64)
+                vertices.copy(),
+                triangles.copy(),
+                [],
+                skipped,
+                sp.csr_matrix((0, n)),
+                np.zeros(0, dtype=np.int64),
             )
         edge_keys = self.edge_keys
         sigma_all = self.sigma  # Liepa's sigma: mean length of each vertex's edges
@@ -989,14 +1000,14 @@ class HoleFiller:
         for k in np.unique(lengths):
             group = np.flatnonzero(lengths == k)
             if k > DP_MAX_EDGES:
-                for piece in group:
-                    forbidden = piece_forbidden[piece]
+                for member in group.tolist():
+                    forbidden = piece_forbidden[member]
                     # chords are sampled at the spacing the refinement aims for (none without refinement)
-                    piece_extra[piece], piece_tris[piece] = _triangulate(
-                        piece_points[piece],
-                        piece_outer[piece],
+                    piece_extra[member], piece_tris[member] = _triangulate(
+                        piece_points[member],
+                        piece_outer[member],
                         forbidden if forbidden.any() else None,
-                        piece_spacing[piece] / density if density > 0 else 0.0,
+                        piece_spacing[member] / density if density > 0 else 0.0,
                     )
                     bar.update()
                 continue
@@ -1010,15 +1021,17 @@ class HoleFiller:
                     np.stack([piece_outer[piece] for piece in chunk]),
                     stacked if stacked.any() else None,
                 )
-                for piece, tris in zip(chunk, found):
-                    piece_tris[piece] = tris
+                for member, tris in zip(chunk.tolist(), found):
+                    piece_tris[member] = tris
                 bar.update(len(chunk))
         bar.close()
         for piece, loop in enumerate(piece_loop):
             extra = piece_extra[piece]
             piece_points[piece] = np.concatenate([piece_points[piece], extra])
             spread = piece_spacing[piece] / density if density > 0 else 0.0
-            piece_sigma.append(np.concatenate([sigma_all[loop] / max(density, 1e-300), np.full(len(extra), spread)]))
+            piece_sigma.append(
+                np.concatenate([sigma_all[loop] / max(density, 1e-300), np.full(len(extra), spread)])
+            )
         sizes = np.array([len(x) for x in piece_points])
         starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
         all_points = np.concatenate(piece_points)
@@ -1110,7 +1123,6 @@ class HoleFiller:
             used = used[[i not in left for i in range(len(holes))]]
             holes = [hole for i, hole in enumerate(holes) if i not in left]
         return FilledHoles(out_vertices, out_triangles, holes, skipped, weights_matrix, used)
-
 
 
 def _simple_pieces(loop: np.ndarray, rows: np.ndarray):
@@ -1259,7 +1271,9 @@ def _tangential_relax(
         face_normal = _cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
         normal, _ = _unit(incidence @ face_normal)
         area = np.sqrt((face_normal**2).sum(axis=1))
-        target = (incidence @ (area[:, None] * p.mean(axis=1))) / np.maximum(incidence @ area, 1e-300)[:, None]
+        target = (incidence @ (area[:, None] * p.mean(axis=1))) / np.maximum(incidence @ area, 1e-300)[
+            :, None
+        ]
         move = target - x[mov]
         move -= (move * normal).sum(axis=1, keepdims=True) * normal
         x[mov] += 0.5 * move
@@ -1365,7 +1379,9 @@ def _crossings(
     axes = np.concatenate(
         [
             np.stack([nP, nQ]),
-            _cross(eP[None, :, :, :], eQ.transpose(1, 0, 2)[:, :, None, :]).transpose(0, 2, 1, 3).reshape(9, -1, 3),
+            _cross(eP[None, :, :, :], eQ.transpose(1, 0, 2)[:, :, None, :])
+            .transpose(0, 2, 1, 3)
+            .reshape(9, -1, 3),
             _cross(nP[:, None, :], eP).transpose(1, 0, 2),
             _cross(nQ[:, None, :], eQ).transpose(1, 0, 2),
         ]
