@@ -23,6 +23,7 @@ from o3d_lsmesh.hole_filling import (
     DP_MAX_EDGES,
     HoleFiller,
     _crossings,
+    _min_angle,
     _minimum_weight_triangulation,
     _minimum_weight_triangulations,
     _rings,
@@ -325,6 +326,19 @@ def test_rings_are_the_plain_breadth_first_rings():
     assert [sorted(r.tolist()) for r in rings] == expected
     inner = set(expected[0]) | set(expected[1])
     assert tris.tolist() == [t for t, tri in enumerate(T.tolist()) if inner & set(tri)]
+
+
+def test_min_angle_is_the_smallest_corner_angle():
+    # the flips' progress test uses the angle opposite the shortest edge; reference: every corner's angle
+    rng = np.random.default_rng(0)
+    P = rng.normal(size=(3, 500, 3))
+    P[2, :50] = 0.5 * (P[0, :50] + P[1, :50])  # degenerate (collinear) triangles: 0
+    corners = []
+    for u, v, w in ((P[0], P[1], P[2]), (P[1], P[2], P[0]), (P[2], P[0], P[1])):
+        e1, e2 = v - u, w - u
+        cos = (e1 * e2).sum(1) / (np.linalg.norm(e1, axis=1) * np.linalg.norm(e2, axis=1))
+        corners.append(np.arccos(np.clip(cos, -1, 1)))
+    np.testing.assert_allclose(_min_angle(*P), np.min(corners, axis=0), atol=1e-7)
 
 
 def reference_crossings(V, T, first_new):
