@@ -24,10 +24,17 @@ A hole is a closed loop of boundary half-edges. Each chosen hole is
 4. checked: a patch whose new triangles cross the mesh is faired again with a
    lower continuity, and left open if every one crosses (see :func:`fill_holes`, Notes).
 
-The loops are those of :func:`o3d_lsmesh.topology.boundary_loops`. The only Python loop over holes
-is the dynamic programme (vectorized per diagonal of its table); every piece is then refined at
-once (disjoint index ranges, one flip pass per round for all), and all patches are faired in one
-sparse system and checked for crossings in one pass.
+The loops are those of :func:`o3d_lsmesh.topology.boundary_loops`. The dynamic programme runs once
+per loop length (loops of one length in one batch, vectorized per diagonal of its table); every
+piece is then refined at once (disjoint index ranges, one flip pass per round for all, each pass
+testing only the edges a flip can have changed), and all patches are faired in one sparse system
+and checked for crossings in one pass.
+
+:class:`HoleFiller` holds the whole-mesh analysis (edges, loops, components, each vertex's
+triangles and edge scale, k-d trees of the triangles): built once, its :meth:`HoleFiller.fill`
+does only work local to the holes (the rings of fixed vertices are gathered from the vertex-triangle
+lists, the crossing check queries the trees near the patch), as CGAL's calls on a prebuilt
+half-edge structure. :func:`fill_holes_arrays` builds one for a single call.
 """
 
 from __future__ import annotations
@@ -847,6 +854,12 @@ def fill_holes_arrays(
     -------
     FilledHoles
 
+    See Also
+    --------
+    HoleFiller : the same with the whole-mesh analysis done once (``HoleFiller(vertices,
+        triangles).fill(...)`` is this function, but for the k-d trees of the triangles, which a single
+        call replaces by a box query near the new triangles).
+
     Examples
     --------
     >>> import numpy as np
@@ -1524,6 +1537,7 @@ def fill_holes(
     See Also
     --------
     fill_holes_arrays : the array core, which also reports the holes found.
+    HoleFiller : the whole-mesh analysis done once, for several fills of one mesh.
     reconstruct_geometry : re-solve known connectivity instead of building it.
 
     Notes
