@@ -1116,7 +1116,7 @@ class HoleFiller:
             )
         else:  # nothing to fair: the triangulations alone are checked
             used = np.full(len(holes), -1, dtype=np.int64)
-            crossing = _crossings(out_vertices, out_triangles, m, self.index)
+            crossing = _crossings(out_vertices, out_triangles, m, self.index, owner)
             stuck = np.flatnonzero(np.bincount(owner, weights=crossing, minlength=len(holes)) > 0)
         if interp_rows:
             weights_matrix = sp.csr_matrix(
@@ -1251,7 +1251,7 @@ def _fair_all(
     tried = []
     for rank, (level, candidate) in enumerate(candidates()):
         tried.append((level, candidate))
-        crossing = _crossings(candidate, triangles, m, state.index)  # (q,) per new triangle
+        crossing = _crossings(candidate, triangles, m, state.index, tri_owner)  # (q,) per new triangle
         per_hole = np.bincount(tri_owner, weights=crossing, minlength=count)
         take = (chosen < 0) & (per_hole == 0)
         for hole_index in np.flatnonzero(take):
@@ -1337,31 +1337,56 @@ class _TriangleIndex:
         self.__dict__.update(state)
         self._build()
 
-    def near(self, centre: np.ndarray, radius: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Pairs ``(query, triangle)`` whose bounding spheres overlap."""
+    def near(
+        self, centre: np.ndarray, radius: np.ndarray, groups: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Pairs ``(query, triangle)`` whose bounding spheres overlap.
+
+        The queries come in ``groups`` (a label each: the patch of each new triangle): one ball query per
+        group and tree gathers the triangles near the group's bounding sphere, and the pairs are found
+        among those few with a small tree of them (thousands of ball queries into the whole mesh's tree
+        cost more than a few ball queries and a local pass).
+        """
         from scipy.spatial import cKDTree
 
+        empty = np.zeros(0, dtype=np.int64)
         if len(centre) == 0:
-            return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
-        query = cKDTree(centre)
-        qs, ts = [np.zeros(0, dtype=np.int64)], [np.zeros(0, dtype=np.int64)]
-        for (tree, reach), group in zip(self.trees, self.group_of_tree):
-            found = query.sparse_distance_matrix(tree, float(radius.max()) + reach, output_type="ndarray")
-            qi, ti = found["i"].astype(np.int64), group[found["j"]]
-            close = found["v"] <= radius[qi] + self.radius[ti]
-            qs.append(qi[close])
-            ts.append(ti[close])
-        return np.concatenate(qs), np.concatenate(ts)
+            return empty, empty
+        if groups is None:
+            groups = np.zeros(len(centre), dtype=np.int64)
+        found = [empty]
+        for label in np.unique(groups):
+            mine = groups == label
+            low = (centre[mine] - radius[mine, None]).min(axis=0)
+            high = (centre[mine] + radius[mine, None]).max(axis=0)
+            middle, half = 0.5 * (low + high), 0.5 * float(np.linalg.norm(high - low))
+            for (tree, reach), members in zip(self.trees, self.group_of_tree):
+                hits = tree.query_ball_point(middle, half + reach, return_sorted=False)
+                found.append(members[np.asarray(hits, dtype=np.int64)])
+        candidates = np.unique(np.concatenate(found))
+        if len(candidates) == 0:
+            return empty, empty
+        local = cKDTree(self.centre[candidates])
+        pairs = cKDTree(centre).sparse_distance_matrix(
+            local, float(radius.max() + self.radius[candidates].max()), output_type="ndarray"
+        )
+        qi, ti = pairs["i"].astype(np.int64), candidates[pairs["j"]]
+        close = pairs["v"] <= radius[qi] + self.radius[ti]
+        return qi[close], ti[close]
 
 
 def _crossings(
-    vertices: np.ndarray, triangles: np.ndarray, first_new: int, index: _TriangleIndex | None = None
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    first_new: int,
+    index: _TriangleIndex | None = None,
+    groups: np.ndarray | None = None,
 ) -> np.ndarray:
     """For each new triangle, the triangles without a shared vertex it intersects (separating axes).
 
     Candidates are pairs whose bounding spheres (about the centroids) overlap: the input triangles from
-    ``index`` (a :class:`_TriangleIndex` of ``triangles[:first_new]``, built here if not given), the new
-    ones among themselves; each pair is tested on the 17 axes that separate two disjoint triangles (two
+    ``index`` (a :class:`_TriangleIndex` of ``triangles[:first_new]``, built here if not given; queried
+    per patch when ``groups`` labels each new triangle's patch), the new ones among themselves; each pair is tested on the 17 axes that separate two disjoint triangles (two
     normals, nine edge-edge cross products, six in-plane edge normals for coplanar pairs).
     """
     from scipy.spatial import cKDTree
@@ -1380,10 +1405,10 @@ def _crossings(
         low, high = p_new.reshape(-1, 3).min(0) - pad, p_new.reshape(-1, 3).max(0) + pad
         in_box = ((vertices >= low) & (vertices <= high)).all(axis=1)
         boxed = np.flatnonzero(in_box[triangles[:first_new]].any(axis=1))
-        ia, ib = _TriangleIndex(vertices, triangles[boxed]).near(c_new, r_new)
+        ia, ib = _TriangleIndex(vertices, triangles[boxed]).near(c_new, r_new, groups)
         ib = boxed[ib]
     else:
-        ia, ib = index.near(c_new, r_new)  # (new index, input triangle)
+        ia, ib = index.near(c_new, r_new, groups)  # (new index, input triangle)
     b_all = [ib]
     a_all = [ia]
     pairs = cKDTree(c_new).query_pairs(2.0 * float(r_new.max()), output_type="ndarray").astype(np.int64)
@@ -1392,11 +1417,16 @@ def _crossings(
         a_all.append(pairs[close, 0])
         b_all.append(first_new + pairs[close, 1])
     a, b = new[np.concatenate(a_all)], np.concatenate(b_all)
-    shared = (triangles[a][:, :, None] == triangles[b][:, None, :]).any(axis=(1, 2))
+    ta, tb = triangles[a], triangles[b]
+    shared = (ta[:, :, None] == tb[:, None, :]).any(axis=(1, 2))
+    P, Q = vertices[ta[~shared]], vertices[tb[~shared]]  # (k, 3, 3)
     a, b = a[~shared], b[~shared]
+    # boxes overlap (the boxes' axes are three of the separating candidates, and the cheapest: most
+    # sphere-overlapping pairs stop here)
+    boxes = ((P.min(axis=1) <= Q.max(axis=1)) & (Q.min(axis=1) <= P.max(axis=1))).all(axis=1)
+    P, Q, a, b = P[boxes], Q[boxes], a[boxes], b[boxes]
     if len(a) == 0:
         return result
-    P, Q = vertices[triangles[a]], vertices[triangles[b]]  # (k, 3, 3)
     eP = P[:, [1, 2, 0]] - P
     eQ = Q[:, [1, 2, 0]] - Q
     nP = _cross(eP[:, 0], eP[:, 1])

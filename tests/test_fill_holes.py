@@ -381,6 +381,8 @@ def test_crossing_check_matches_plain_reference(seed):
     assert expected.sum() > 0
     assert np.array_equal(_crossings(V, T, 40), expected)
     assert np.array_equal(_crossings(V, T, 40, _TriangleIndex(V, T[:40])), expected)
+    patches = rng.integers(0, 3, len(T) - 40)  # queried patch by patch
+    assert np.array_equal(_crossings(V, T, 40, _TriangleIndex(V, T[:40]), patches), expected)
 
 
 def test_prebuilt_filler_equals_one_call_pickles_and_is_thread_safe():
