@@ -296,9 +296,8 @@ def _minimum_weight_triangulations(
     area = np.zeros((count, k, k))
     split = np.full((count, k, k), -1, dtype=np.int64)
     normal = np.zeros((count, k, k, 3))  # unit normal of the triangle on chord (i, j) inside sub-polygon i..j
-    known = np.zeros(
-        (count, k, k), dtype=bool
-    )  # whether that normal is known (an unknown one is no constraint)
+    # whether that normal is known (an unknown one is no constraint)
+    known = np.zeros((count, k, k), dtype=bool)
     idx = np.arange(k - 1)
     normal[:, idx, idx + 1] = outer_normals[:, :-1]
     known[:, idx, idx + 1] = np.abs(outer_normals[:, :-1]).sum(-1) > 0
