@@ -668,7 +668,21 @@ def _rings(
     return taken, rings
 
 
-def _uniform_operators(tris: np.ndarray, nv: int, vertices: np.ndarray | None = None, kind: str = "uniform"):
+def _unique_edges(tris: np.ndarray, nv: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Undirected edges ``i < j`` of a local mesh (sorted) and the edge of each of its ``3t`` half-edges."""
+    e = np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]])
+    e = np.sort(e, axis=1)
+    e_keys, inverse = np.unique(e[:, 0] * nv + e[:, 1], return_inverse=True)
+    return e_keys // nv, e_keys % nv, inverse
+
+
+def _uniform_operators(
+    tris: np.ndarray,
+    nv: int,
+    vertices: np.ndarray | None = None,
+    kind: str = "uniform",
+    edges: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+):
     """Stiffness ``K = D - W`` and normalized Laplacian ``L = I - D^-1 W`` (eq. 1 of LS meshes) of a local mesh.
 
     ``W`` is the adjacency (``kind="uniform"``) or, with ``vertices``, the cotangent weights
@@ -676,11 +690,7 @@ def _uniform_operators(tris: np.ndarray, nv: int, vertices: np.ndarray | None = 
     would make ``K`` indefinite) for ``kind="cotangent"``, normalized by the vertex areas for
     ``kind="cotangent-area"``.
     """
-    e = np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]])
-    e = np.sort(e, axis=1)
-    keys = e[:, 0] * nv + e[:, 1]
-    e_keys, inverse = np.unique(keys, return_inverse=True)
-    i, j = e_keys // nv, e_keys % nv
+    i, j, inverse = _unique_edges(tris, nv) if edges is None else edges  # (given: shared by several solves)
     w: np.ndarray
     if kind == "uniform":
         w = np.ones(len(i))
@@ -727,6 +737,7 @@ def _fair(
     rings: list[np.ndarray],
     continuity: int,
     kind: str = "uniform",
+    topology: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
 ) -> np.ndarray:
     """Positions of the ``unknown`` local vertices minimizing the continuity's energy, the others fixed.
 
@@ -739,10 +750,11 @@ def _fair(
 
     ``rings[0]`` are the loop vertices, ``rings[i]`` the i-th ring around them;
     the rows used only involve vertices whose one-rings are complete in
-    ``local_tris`` (``continuity`` rings of mesh triangles around the loop).
+    ``local_tris`` (``continuity`` rings of mesh triangles around the loop). ``topology`` is
+    :func:`_unique_edges` of ``local_tris`` when already known (the solves of one call share it).
     """
     nv = len(vertices)
-    K, L, edges = _uniform_operators(local_tris, nv, vertices, kind)
+    K, L, edges = _uniform_operators(local_tris, nv, vertices, kind, topology)
     is_unknown = np.zeros(nv, dtype=bool)
     is_unknown[unknown] = True
     known = np.flatnonzero(~is_unknown)
@@ -1210,11 +1222,14 @@ def _fair_all(
     chosen = np.full(count, -1)
     out = vertices.copy()
 
+    local = remap[local_tris]
+    local_edges = _unique_edges(local, len(local_vertices))  # one connectivity for every solve below
+
     def candidates():  # lazily: most calls stop at the first
         for level in range(continuity, -1, -1):
             try:
                 solution = _fair(
-                    vertices[local_vertices], remap[local_tris], unknown_local, local_rings, level
+                    vertices[local_vertices], local, unknown_local, local_rings, level, "uniform", local_edges
                 )
             except SingularSystemError:
                 continue
@@ -1228,11 +1243,12 @@ def _fair_all(
                 try:
                     again = _fair(
                         faired[local_vertices],
-                        remap[local_tris],
+                        local,
                         unknown_local,
                         local_rings,
                         level,
                         "cotangent-area",
+                        local_edges,
                     )
                 except SingularSystemError:
                     again = None
