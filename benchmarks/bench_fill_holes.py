@@ -449,14 +449,16 @@ NOTES = """\
 * Time: CGAL's clock starts on a built half-edge structure and runs only its hole calls. Ours is timed
   twice: ``fill_holes_arrays`` from arrays (including the whole-mesh analysis: one edge sort, the loops,
   components, each vertex's triangles) and ``HoleFiller(V, T).fill()`` with the filler built before the
-  clock, as CGAL's structure. The CPU-time ratio (prebuilt) is within the 2x target on the large horse
-  hole (1.9) and close on plane_holes' 27 holes (2.3); bunny's 5 holes 3.3, horse 6h 5.3 and the small
-  single holes 7-23 (CGAL takes 0.4-1.2 ms there, ours 9-20 ms): the per-hole work is tens of NumPy and
-  SciPy calls (the dynamic programme's diagonals, the refinement's flip passes, two sparse solves, the
-  crossing check), each ~10-100 us of overhead on tiny arrays. The prebuilt state cuts the small
-  holes' CPU time by 25-60% against the call from arrays. Wall-clock ratios follow the CPU ones but swing with the
-  load of the shared machine (load average 4-8 during this run: CGAL continuity 2 on horse 6h 8.8 ms
-  wall, 4.8 ms CPU).
+  clock, as CGAL's structure. The CPU-time ratio with the prebuilt filler is within the 2x target on
+  the large horse hole only (1.84; 1.88 in the run before this one); bunny's 5 holes 2.8 (3.3),
+  plane_holes' 27 holes 3.7 (2.3), horse 6h 4.4 (5.3) and the single small holes 10-24 (7-23): CGAL
+  takes 0.5-1 ms there and ours 10-32 ms, tens of NumPy and SciPy calls (the dynamic programme's
+  diagonals, the refinement's flip passes, two sparse solves, the crossing check) of ~10-100 us of
+  overhead each on tiny arrays. The prebuilt state cuts our CPU time by 8% (horse 15h, where the
+  per-hole work dominates) to 69% (horse 2.5h) against the call from arrays. Wall-clock and even
+  CPU-time ratios swing by up to 1.6x between runs with the load of the shared machine (load average
+  4-6 in this run; CGAL continuity 2 on horse 6h: 11.3 ms wall and 7.3 ms CPU here, 4.8 ms CPU in the
+  run before).
 """
 
 
