@@ -13,7 +13,7 @@ from ._solvers import SPDSolver
 from .encoding import decode_geometry, encode_geometry, iter_decode_geometry
 from .fairing import constrained_fairing, multiresolution_fairing, smooth_boundary_curves
 from .hierarchy import MeshHierarchy, build_hierarchy, from_fast_simplification
-from .hole_filling import fill_holes
+from .hole_filling import HoleFiller, fill_holes
 from .laplacian import laplacian
 from .lsmesh import LSMeshSolver, ls_mesh, reconstruct_geometry
 from .registration import register, unregister
@@ -24,6 +24,7 @@ from .summary import topology_summary
 
 __all__ = [
     "ConvergenceError",
+    "HoleFiller",
     "LSMeshSolver",
     "MeshHierarchy",
     "O3DLSMeshWarning",

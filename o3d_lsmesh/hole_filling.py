@@ -19,15 +19,22 @@ A hole is a closed loop of boundary half-edges. Each chosen hole is
    "the known vertices around the hole serve as control points, the geometry
    of the unknown vertices is reconstructed"): the new vertices are the only
    unknowns, and enough rings of the surrounding mesh are fixed anchors for the
-   chosen continuity; then a few tangential relaxation steps round the new
+   chosen continuity; then a few tangential (centroidal) relaxation steps round the new
    triangles without leaving the faired surface (to first order);
 4. checked: a patch whose new triangles cross the mesh is faired again with a
    lower continuity, and left open if every one crosses (see :func:`fill_holes`, Notes).
 
-The loops are those of :func:`o3d_lsmesh.topology.boundary_loops`. The only Python loop over holes
-is the dynamic programme (vectorized per diagonal of its table); every piece is then refined at
-once (disjoint index ranges, one flip pass per round for all), and all patches are faired in one
-sparse system and checked for crossings in one pass.
+The loops are those of :func:`o3d_lsmesh.topology.boundary_loops`. The dynamic programme runs once
+per loop length (loops of one length in one batch, vectorized per diagonal of its table); every
+piece is then refined at once (disjoint index ranges, one flip pass per round for all, each pass
+testing only the edges a flip can have changed), and all patches are faired in one sparse system
+and checked for crossings in one pass.
+
+:class:`HoleFiller` holds the whole-mesh analysis (edges, loops, components, each vertex's
+triangles and edge scale, k-d trees of the triangles): built once, its :meth:`HoleFiller.fill`
+does only work local to the holes (the rings of fixed vertices are gathered from the vertex-triangle
+lists, the crossing check queries the trees near the patch), as CGAL's calls on a prebuilt
+half-edge structure. :func:`fill_holes_arrays` builds one for a single call.
 """
 
 from __future__ import annotations
@@ -55,6 +62,7 @@ __all__ = [
     "DP_MAX_EDGES",
     "FilledHoles",
     "Hole",
+    "HoleFiller",
     "fill_holes",
     "fill_holes_arrays",
     "find_holes",
@@ -235,10 +243,13 @@ def find_holes(vertices: np.ndarray, triangles: np.ndarray, *, _edge_info=None) 
 
 def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     """``np.cross`` over the last axis of 3-vectors, without its axis juggling (it dominates small calls)."""
-    out = np.zeros(np.broadcast_shapes(u.shape, v.shape))
-    out[..., 0] = u[..., 1] * v[..., 2] - u[..., 2] * v[..., 1]
-    out[..., 1] = u[..., 2] * v[..., 0] - u[..., 0] * v[..., 2]
-    out[..., 2] = u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
+    shape = u.shape if u.shape == v.shape else np.broadcast_shapes(u.shape, v.shape)
+    out = np.empty(shape)
+    u0, u1, u2 = u[..., 0], u[..., 1], u[..., 2]
+    v0, v1, v2 = v[..., 0], v[..., 1], v[..., 2]
+    np.subtract(u1 * v2, u2 * v1, out=out[..., 0])
+    np.subtract(u2 * v0, u0 * v2, out=out[..., 1])
+    np.subtract(u0 * v1, u1 * v0, out=out[..., 2])
     return out
 
 
@@ -262,76 +273,99 @@ def _minimum_weight_triangulation(
     to the loop, like the mesh triangles on the other side of its edges.
 
     The inner minimum over the split vertex ``m`` is vectorized over a whole
-    diagonal ``j - i = d`` of the table at once.
+    diagonal ``j - i = d`` of the table at once (see :func:`_minimum_weight_triangulations`).
     """
-    k = len(points)
+    return _minimum_weight_triangulations(
+        points[None], outer_normals[None], None if forbidden is None else forbidden[None]
+    )[0]
+
+
+def _minimum_weight_triangulations(
+    points: np.ndarray, outer_normals: np.ndarray, forbidden: np.ndarray | None
+) -> np.ndarray:
+    """:func:`_minimum_weight_triangulation` of ``B`` loops of the same length at once: ``points (B, k, 3)``,
+    ``outer_normals (B, k, 3)``, ``forbidden (B, k, k)`` or None; triangles ``(B, k - 2, 3)``.
+
+    Each loop's table is independent: the batch is one more leading axis of every array, so many
+    short loops (a scan's small holes) cost one pass over the diagonals instead of one each.
+    """
+    count, k = points.shape[:2]
     if k == 3:
-        return np.array([[2, 1, 0]], dtype=np.int64)
-    angle = np.zeros((k, k))
-    area = np.zeros((k, k))
-    split = np.full((k, k), -1, dtype=np.int64)
-    normal = np.zeros((k, k, 3))  # unit normal of the triangle on chord (i, j) inside the sub-polygon i..j
+        return np.tile(np.array([[[2, 1, 0]]], dtype=np.int64), (count, 1, 1))
+    angle = np.zeros((count, k, k))
+    area = np.zeros((count, k, k))
+    split = np.full((count, k, k), -1, dtype=np.int64)
+    normal = np.zeros((count, k, k, 3))  # unit normal of the triangle on chord (i, j) inside sub-polygon i..j
+    # whether that normal is known (an unknown one is no constraint)
+    known = np.zeros((count, k, k), dtype=bool)
     idx = np.arange(k - 1)
-    normal[idx, idx + 1] = outer_normals[:-1]
+    normal[:, idx, idx + 1] = outer_normals[:, :-1]
+    known[:, idx, idx + 1] = np.abs(outer_normals[:, :-1]).sum(-1) > 0
+    closing = outer_normals[:, k - 1]  # (B, 3)
+    closing_known = np.abs(closing).sum(-1) > 0
+    batch = np.arange(count)[:, None]
     tol = 1e-6  # angles this close tie, and the area decides (robust to rounding)
     for d in range(2, k):
         i = np.arange(k - d)[:, None]  # (r, 1)
         j = i + d
         mm = i + np.arange(1, d)[None, :]  # (r, d - 1)
-        a, b, c = points[j], points[mm], points[i]
-        cross = _cross(b - a, c - a)  # triangle (j, m, i)
-        tri_normal, twice_area = _unit(cross)
-        n1, n2 = normal[i, mm], normal[mm, j]  # (r, d-1, 3)
-        cos1 = np.einsum("...k,...k->...", tri_normal, n1)
-        cos2 = np.einsum("...k,...k->...", tri_normal, n2)
+        a = points[:, j]  # (B, r, 1, 3)
+        u, v = points[:, mm] - a, points[:, i] - a  # (B, r, d - 1, 3)
+        cross = _cross(u, v)  # triangle (j, m, i)
+        twice_area = np.sqrt(np.einsum("...k,...k->...", cross, cross))
+        tri_normal = cross / np.where(twice_area > 0, twice_area, 1.0)[..., None]
+        cos1 = np.einsum("...k,...k->...", tri_normal, normal[:, i, mm])
+        cos2 = np.einsum("...k,...k->...", tri_normal, normal[:, mm, j])
         # an unknown neighbour (zero normal) does not constrain the angle
-        cos1 = np.where(np.abs(n1).sum(-1) > 0, cos1, 1.0)
-        cos2 = np.where(np.abs(n2).sum(-1) > 0, cos2, 1.0)
-        worst = np.minimum(cos1, cos2)
+        worst = np.minimum(np.where(known[:, i, mm], cos1, 1.0), np.where(known[:, mm, j], cos2, 1.0))
         if d == k - 1:  # the triangle on the closing loop edge (k - 1, 0) meets the mesh there
-            n3 = outer_normals[k - 1]
-            if np.abs(n3).sum() > 0:
-                worst = np.minimum(worst, tri_normal @ n3)
+            cos3 = np.einsum("b...k,bk->b...", tri_normal, closing)
+            worst = np.where(closing_known[:, None, None], np.minimum(worst, cos3), worst)
         theta = np.arccos(np.clip(worst, -1.0, 1.0))
         # a degenerate triangle (three collinear points: a chord's samples) is worse than any real one; its
         # rounding-noise normal must not count, nor its zero area win a tie (both sides of a chord would
         # then take the same sliver, wound both ways: a non-manifold edge)
-        longest = np.maximum(((b - a) ** 2).sum(-1), ((c - a) ** 2).sum(-1))
+        longest = np.maximum(np.einsum("...k,...k->...", u, u), np.einsum("...k,...k->...", v, v))
         theta = np.where(twice_area > 1e-9 * longest, theta, 2.0 * np.pi)
-        total_angle = np.maximum(theta, np.maximum(angle[i, mm], angle[mm, j]))
-        total_area = 0.5 * twice_area + area[i, mm] + area[mm, j]
+        total_angle = np.maximum(theta, np.maximum(angle[:, i, mm], angle[:, mm, j]))
+        total_area = 0.5 * twice_area + area[:, i, mm] + area[:, mm, j]
         if forbidden is not None:
-            blocked = forbidden[i, mm] | forbidden[mm, j]
+            blocked = forbidden[:, i, mm] | forbidden[:, mm, j]
             total_angle = np.where(blocked, np.inf, total_angle)
-        best_angle = total_angle.min(axis=1, keepdims=True)
-        near = total_angle <= best_angle + tol
-        near_area = np.where(near, total_area, np.inf)
-        best_area = near_area.min(axis=1, keepdims=True)
+        best_angle = total_angle.min(axis=2, keepdims=True)
+        near_area = np.where(total_angle <= best_angle + tol, total_area, np.inf)
+        best_area = near_area.min(axis=2, keepdims=True)
         # the first of the (near-)smallest areas: symmetric loops tie exactly, and rounding must not decide
-        choice = np.argmax(near_area <= best_area * (1.0 + 1e-9), axis=1)
-        rows = np.arange(len(choice))
+        choice = np.argmax(near_area <= best_area * (1.0 + 1e-9), axis=2)  # (B, r)
+        rows = np.arange(k - d)[None, :]
         ii, jj = i[:, 0], j[:, 0]
-        chosen_angle = total_angle[rows, choice]
+        chosen_angle = total_angle[batch, rows, choice]
         if forbidden is not None and d < k - 1:
-            chosen_angle = np.where(forbidden[ii, jj], np.inf, chosen_angle)
-        angle[ii, jj] = chosen_angle
-        area[ii, jj] = total_area[rows, choice]
-        split[ii, jj] = mm[rows, choice]
-        normal[ii, jj] = tri_normal[rows, choice]
-    if not np.isfinite(angle[0, k - 1]) and forbidden is not None:
-        # no triangulation avoids every existing edge: accept one that does not
-        return _minimum_weight_triangulation(points, outer_normals, None)
-    out: list[tuple[int, int, int]] = []
-    stack = [(0, k - 1)]
-    while stack:  # k - 2 triangles
-        lo, hi = stack.pop()
-        if hi - lo < 2:
+            chosen_angle = np.where(forbidden[:, ii, jj], np.inf, chosen_angle)
+        angle[:, ii, jj] = chosen_angle
+        area[:, ii, jj] = total_area[batch, rows, choice]
+        split[:, ii, jj] = mm[rows, choice]
+        normal[:, ii, jj] = tri_normal[batch, rows, choice]
+        known[:, ii, jj] = twice_area[batch, rows, choice] > 0
+    out = np.empty((count, k - 2, 3), dtype=np.int64)
+    for b in range(count):
+        if not np.isfinite(angle[b, 0, k - 1]) and forbidden is not None:
+            # no triangulation avoids every existing edge: accept one that does not
+            out[b] = _minimum_weight_triangulations(points[b : b + 1], outer_normals[b : b + 1], None)[0]
             continue
-        mid = int(split[lo, hi])
-        out.append((hi, mid, lo))
-        stack.append((lo, mid))
-        stack.append((mid, hi))
-    return np.array(out, dtype=np.int64)
+        table = split[b].tolist()
+        found: list[tuple[int, int, int]] = []
+        stack = [(0, k - 1)]
+        while stack:  # k - 2 triangles
+            lo, hi = stack.pop()
+            if hi - lo < 2:
+                continue
+            mid = table[lo][hi]
+            found.append((hi, mid, lo))
+            stack.append((lo, mid))
+            stack.append((mid, hi))
+        out[b] = found
+    return out
 
 
 def _triangulate(
@@ -397,7 +431,8 @@ def _triangulate(
 
 
 def _edge_table(tris: np.ndarray, nv: int):
-    """Interior edges of a consistently oriented patch: (triangle 1, slot 1, triangle 2, slot 2, a, b)."""
+    """Interior edges of a consistently oriented patch: (triangle 1, slot 1, triangle 2, slot 2, a, b), and
+    the sorted keys ``min * nv + max`` of every half-edge."""
     a = tris.reshape(-1)
     b = tris[:, [1, 2, 0]].reshape(-1)
     key = np.minimum(a, b) * nv + np.maximum(a, b)
@@ -405,7 +440,7 @@ def _edge_table(tris: np.ndarray, nv: int):
     ks = key[order]
     pair = np.flatnonzero(ks[1:] == ks[:-1])
     h1, h2 = order[pair], order[pair + 1]
-    return h1 // 3, h1 % 3, h2 // 3, h2 % 3, a[h1], b[h1], key
+    return h1 // 3, h1 % 3, h2 // 3, h2 % 3, a[h1], b[h1], ks
 
 
 def _circumsphere(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray):
@@ -423,16 +458,26 @@ def _circumsphere(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray):
 
 
 def _min_angle(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray) -> np.ndarray:
-    """Smallest interior angle (radians) of each triangle ``(p0, p1, p2)`` (rows)."""
-    best = np.full(len(p0), np.pi)
-    for u, v, w in ((p0, p1, p2), (p1, p2, p0), (p2, p0, p1)):
-        e1, e2 = v - u, w - u
-        best = np.minimum(best, np.arctan2(np.linalg.norm(_cross(e1, e2), axis=1), (e1 * e2).sum(1)))
-    return best
+    """Smallest interior angle (radians) of each triangle ``(p0, p1, p2)`` (rows).
+
+    It is the angle opposite the shortest edge (law of sines), at most 60 degrees, so
+    ``arcsin(2 area / (l_mid l_max))`` with the two longer edges' lengths: one cross product instead
+    of one per corner.
+    """
+    a, b, c = p1 - p0, p2 - p1, p0 - p2
+    lengths = np.sort(np.stack([(a * a).sum(1), (b * b).sum(1), (c * c).sum(1)]), axis=0)
+    twice_area = np.sqrt((_cross(a, c) ** 2).sum(1))
+    denominator = np.sqrt(lengths[1] * lengths[2])
+    ratio = np.divide(twice_area, denominator, out=np.zeros(len(p0)), where=denominator > 0)
+    return np.arcsin(np.minimum(ratio, 1.0))
 
 
 def _relax(
-    points: np.ndarray, tris: np.ndarray, fixed_pairs: np.ndarray, max_passes: int = 100
+    points: np.ndarray,
+    tris: np.ndarray,
+    fixed_pairs: np.ndarray,
+    max_passes: int = 100,
+    dirty: np.ndarray | None = None,
 ) -> np.ndarray:
     """Delaunay edge flips (Liepa's relaxation) until none applies; batches of independent flips.
 
@@ -441,23 +486,45 @@ def _relax(
     ``(a, b, c)``, the edge ``(c, d)`` does not exist yet (in the patch or, in
     ``fixed_pairs``, around it), and both new triangles face the way the old
     pair did.
+
+    Only edges whose verdict can have changed are tested again: those of the triangles ``dirty``
+    (a boolean mask; every triangle if None) and, in later passes, of the triangles a flip rewrote or
+    a flip left waiting, and those whose flip was blocked by an edge a flip removed. Every other edge
+    failed the same test on the same geometry before.
     """
     nv = len(points)
     tris = tris.copy()
-    fixed_keys = np.minimum(fixed_pairs[:, 0], fixed_pairs[:, 1]) * nv + np.maximum(
-        fixed_pairs[:, 0], fixed_pairs[:, 1]
+    removed = np.zeros(0, dtype=np.int64)
+    fixed_keys = np.sort(
+        np.minimum(fixed_pairs[:, 0], fixed_pairs[:, 1]) * nv
+        + np.maximum(fixed_pairs[:, 0], fixed_pairs[:, 1])
     )
+
+    def absent(sorted_keys: np.ndarray, keys: np.ndarray) -> np.ndarray:
+        if len(sorted_keys) == 0:
+            return np.ones(len(keys), dtype=bool)
+        pos = np.minimum(np.searchsorted(sorted_keys, keys), len(sorted_keys) - 1)
+        return sorted_keys[pos] != keys
+
     for _ in range(max_passes):
         t1, s1, t2, s2, a, b, key = _edge_table(tris, nv)
         if len(t1) == 0:
             break
+        # the edges to test: dirty ones (cheap index tests first; the geometry runs on the edges left)
+        if dirty is None:
+            open_ = np.arange(len(t1))
+        else:
+            mark = dirty[t1] | dirty[t2]
+            if len(removed):
+                c_all, d_all = tris[t1, (s1 + 2) % 3], tris[t2, (s2 + 2) % 3]
+                mark |= ~absent(removed, np.minimum(c_all, d_all) * nv + np.maximum(c_all, d_all))
+            open_ = np.flatnonzero(mark)
         c = tris[t1, (s1 + 2) % 3]
         d = tris[t2, (s2 + 2) % 3]
-        # the new edge must not exist yet (a cheap test first: every later one runs on the edges left)
+        # the new edge must not exist yet (in the patch, or around it)
         new_key = np.minimum(c, d) * nv + np.maximum(c, d)
-        existing = np.union1d(key, fixed_keys)
-        pos = np.minimum(np.searchsorted(existing, new_key), len(existing) - 1)
-        open_ = np.flatnonzero((existing[pos] != new_key) & (c != d))
+        oc, od, ok_key = c[open_], d[open_], new_key[open_]
+        open_ = open_[absent(key, ok_key) & absent(fixed_keys, ok_key) & (oc != od)]
         pa, pb, pc, pd = points[a[open_]], points[b[open_]], points[c[open_]], points[d[open_]]
         centre, radius = _circumsphere(pa, pb, pc)
         # a relative margin: near-co-circular quads (common on regular patches) are not flipped, so
@@ -480,20 +547,32 @@ def _relax(
         ok = ((n1 * old).sum(1) > 0) & ((n2 * old).sum(1) > 0)
         # and the smallest angle of the pair grows: the two sphere tests disagree in 3D, so without this
         # an edge could flip back and forth; with it every flip is progress and the passes end
-        before = np.minimum(_min_angle(pa, pb, pc), _min_angle(pb, pa, pd))
-        after = np.minimum(_min_angle(pc, pa, pd), _min_angle(pd, pb, pc))
+        # the four triangles' smallest angles in one call: (a, b, c), (b, a, d) before; (c, a, d), (d, b, c) after
+        angles = _min_angle(
+            np.concatenate([pa, pb, pc, pd]),
+            np.concatenate([pb, pa, pa, pb]),
+            np.concatenate([pc, pd, pd, pc]),
+        )
+        angles = angles.reshape(4, -1)
+        before = np.minimum(angles[0], angles[1])
+        after = np.minimum(angles[2], angles[3])
         ok &= after > before + 1e-9
         inside[live] = ok
-        cand = np.flatnonzero(inside)
-        if len(cand) == 0:
+        proposed = np.flatnonzero(inside)
+        if len(proposed) == 0:
             break
         # independent set: each triangle takes part in at most one flip of this pass
         owner = np.full(len(tris), len(t1), dtype=np.int64)
-        np.minimum.at(owner, t1[cand], cand)
-        np.minimum.at(owner, t2[cand], cand)
-        cand = cand[(owner[t1[cand]] == cand) & (owner[t2[cand]] == cand)]
+        np.minimum.at(owner, t1[proposed], proposed)
+        np.minimum.at(owner, t2[proposed], proposed)
+        cand = proposed[(owner[t1[proposed]] == proposed) & (owner[t2[proposed]] == proposed)]
         _, first = np.unique(new_key[cand], return_index=True)  # two flips must not make the same edge
         cand = cand[np.sort(first)]
+        # next pass: the triangles rewritten and those of flips left waiting; edges a flip removes
+        dirty = np.zeros(len(tris), dtype=bool)
+        dirty[t1[proposed]] = True
+        dirty[t2[proposed]] = True
+        removed = np.sort(np.minimum(a[cand], b[cand]) * nv + np.maximum(a[cand], b[cand]))
         tris[t1[cand]] = np.stack([c[cand], a[cand], d[cand]], axis=1)
         tris[t2[cand]] = np.stack([d[cand], b[cand], c[cand]], axis=1)
     return tris
@@ -522,6 +601,7 @@ def _refine(
     # no flips before the first split (as Liepa and CGAL): on a short loop the minimum-weight triangulation
     # is what decides whether a triangle is big enough to split, and Delaunay flips first made its triangles
     # slimmer, so that coarse holes got no new vertex at all (camel 2.5h: 0 where CGAL adds 3)
+    relaxed = False
     for _ in range(max_rounds):
         corners = points[tris]  # (t, 3, 3)
         centre = corners.mean(axis=1)
@@ -538,37 +618,71 @@ def _refine(
         a, b, c = tris[chosen, 0], tris[chosen, 1], tris[chosen, 2]
         tris[chosen] = np.stack([a, b, new], axis=1)
         tris = np.concatenate([tris, np.stack([b, c, new], axis=1), np.stack([c, a, new], axis=1)])
-        tris = _relax(points, tris, fixed_pairs)
+        # the relaxation before ended with no flip left: only edges of the split triangles can flip now
+        # (the first round tests every edge: the triangulation was not relaxed)
+        split_mask = np.ones(len(tris), dtype=bool)
+        if relaxed:
+            split_mask[: len(split_mask) - 2 * len(chosen)] = False
+            split_mask[chosen] = True
+        tris = _relax(points, tris, fixed_pairs, dirty=split_mask)
+        relaxed = True
     return points, tris, owner
 
 
 # --------------------------------------------------------------------------- fairing
 
 
-def _rings(triangles: np.ndarray, n: int, seeds: np.ndarray, count: int):
+def _gather(indptr: np.ndarray, data: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """``data[indptr[r]:indptr[r + 1]]`` for every ``r`` in ``rows``, concatenated (vectorized)."""
+    first, last = indptr[rows], indptr[rows + 1]
+    count = last - first
+    total = int(count.sum())
+    if total == 0:
+        return np.zeros(0, dtype=data.dtype)
+    offsets = np.repeat(first - np.concatenate([[0], np.cumsum(count)[:-1]]), count)
+    return data[np.arange(total) + offsets]
+
+
+def _rings(
+    triangles: np.ndarray, vertex_triangles: tuple[np.ndarray, np.ndarray], seeds: np.ndarray, count: int
+):
     """Triangles incident to ``count`` successive vertex rings around ``seeds`` (``seeds`` is ring 0).
 
-    Returns the triangle indices and the rings as a list of vertex arrays
-    (``count + 1`` of them; the last one is the outer, incomplete ring).
+    ``vertex_triangles`` is the CSR ``(indptr, triangle indices)`` of each vertex's triangles, so the
+    work is local to the rings (nothing grows with the mesh). Returns the triangle indices (sorted) and
+    the rings as a list of vertex arrays (``count + 1`` of them; the last one is the outer, incomplete
+    ring).
     """
-    seen = np.zeros(n, dtype=bool)
-    seen[seeds] = True
+    indptr, data = vertex_triangles
+    seen = np.unique(seeds)
     rings = [seeds]
-    taken = np.zeros(len(triangles), dtype=bool)
-    front = seen.copy()
+    taken = np.zeros(0, dtype=np.int64)
+    front = seen
     for _ in range(count):
-        touch = front[triangles].any(axis=1) & ~taken  # one vectorized pass over the triangles per ring
-        taken |= touch
-        verts = np.unique(triangles[touch])
-        new = verts[~seen[verts]]
-        seen[new] = True
+        touch = np.setdiff1d(_gather(indptr, data, front), taken)  # the ring's new triangles
+        taken = np.union1d(taken, touch)
+        new = np.setdiff1d(triangles[touch].ravel(), seen)
+        seen = np.union1d(seen, new)
         rings.append(new)
-        front = np.zeros(n, dtype=bool)
-        front[new] = True
-    return np.flatnonzero(taken), rings
+        front = new
+    return taken, rings
 
 
-def _uniform_operators(tris: np.ndarray, nv: int, vertices: np.ndarray | None = None, kind: str = "uniform"):
+def _unique_edges(tris: np.ndarray, nv: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Undirected edges ``i < j`` of a local mesh (sorted) and the edge of each of its ``3t`` half-edges."""
+    e = np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]])
+    e = np.sort(e, axis=1)
+    e_keys, inverse = np.unique(e[:, 0] * nv + e[:, 1], return_inverse=True)
+    return e_keys // nv, e_keys % nv, inverse
+
+
+def _uniform_operators(
+    tris: np.ndarray,
+    nv: int,
+    vertices: np.ndarray | None = None,
+    kind: str = "uniform",
+    edges: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+):
     """Stiffness ``K = D - W`` and normalized Laplacian ``L = I - D^-1 W`` (eq. 1 of LS meshes) of a local mesh.
 
     ``W`` is the adjacency (``kind="uniform"``) or, with ``vertices``, the cotangent weights
@@ -576,11 +690,7 @@ def _uniform_operators(tris: np.ndarray, nv: int, vertices: np.ndarray | None = 
     would make ``K`` indefinite) for ``kind="cotangent"``, normalized by the vertex areas for
     ``kind="cotangent-area"``.
     """
-    e = np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]])
-    e = np.sort(e, axis=1)
-    keys = e[:, 0] * nv + e[:, 1]
-    e_keys, inverse = np.unique(keys, return_inverse=True)
-    i, j = e_keys // nv, e_keys % nv
+    i, j, inverse = _unique_edges(tris, nv) if edges is None else edges  # (given: shared by several solves)
     w: np.ndarray
     if kind == "uniform":
         w = np.ones(len(i))
@@ -595,22 +705,28 @@ def _uniform_operators(tris: np.ndarray, nv: int, vertices: np.ndarray | None = 
             cot[:, c] = (u * v).sum(1) / np.maximum(cross, 1e-300)
         w = 0.5 * np.bincount(inverse, weights=cot.T.reshape(-1), minlength=len(i))
         w = np.maximum(w, 0.05 * np.abs(w).mean())
-    adjacency = sp.coo_matrix(
-        (np.concatenate([w, w]), (np.concatenate([i, j]), np.concatenate([j, i]))), shape=(nv, nv)
-    ).tocsr()
-    degree = np.asarray(adjacency.sum(axis=1)).ravel()
-    K = (sp.diags(degree) - adjacency).tocsr()
+    # K = D - W assembled at once (diagonal included), and L = S K with S a row scaling (1 / degree, or
+    # 1 / vertex area): the same pattern, so L is K with its rows' data scaled (no sparse algebra)
+    degree = np.bincount(i, weights=w, minlength=nv) + np.bincount(j, weights=w, minlength=nv)
+    diagonal = np.arange(nv)
+    K = sp.csr_matrix(
+        (
+            np.concatenate([-w, -w, degree]),
+            (np.concatenate([i, j, diagonal]), np.concatenate([j, i, diagonal])),
+        ),
+        shape=(nv, nv),
+    )
     if kind == "cotangent-area":
         assert vertices is not None
         p = vertices[tris]
         area = 0.5 * np.linalg.norm(_cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
         mass = np.bincount(tris.ravel(), weights=np.repeat(area / 3.0, 3), minlength=nv)
         mass = mass / mass[mass > 0].mean()
-        inv = np.divide(1.0, mass, out=np.zeros(nv), where=mass > 0)
-        L = (sp.diags(inv) @ K).tocsr()
+        scale = np.divide(1.0, mass, out=np.zeros(nv), where=mass > 0)
     else:
-        inv = np.divide(1.0, degree, out=np.zeros(nv), where=degree > 0)
-        L = (sp.diags((degree > 0).astype(float)) - sp.diags(inv) @ adjacency).tocsr()
+        scale = np.divide(1.0, degree, out=np.zeros(nv), where=degree > 0)
+    L = K.copy()
+    L.data = L.data * np.repeat(scale, np.diff(L.indptr))
     return K, L, np.stack([i, j], axis=1)
 
 
@@ -621,6 +737,7 @@ def _fair(
     rings: list[np.ndarray],
     continuity: int,
     kind: str = "uniform",
+    topology: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
 ) -> np.ndarray:
     """Positions of the ``unknown`` local vertices minimizing the continuity's energy, the others fixed.
 
@@ -633,10 +750,11 @@ def _fair(
 
     ``rings[0]`` are the loop vertices, ``rings[i]`` the i-th ring around them;
     the rows used only involve vertices whose one-rings are complete in
-    ``local_tris`` (``continuity`` rings of mesh triangles around the loop).
+    ``local_tris`` (``continuity`` rings of mesh triangles around the loop). ``topology`` is
+    :func:`_unique_edges` of ``local_tris`` when already known (the solves of one call share it).
     """
     nv = len(vertices)
-    K, L, edges = _uniform_operators(local_tris, nv, vertices, kind)
+    K, L, edges = _uniform_operators(local_tris, nv, vertices, kind, topology)
     is_unknown = np.zeros(nv, dtype=bool)
     is_unknown[unknown] = True
     known = np.flatnonzero(~is_unknown)
@@ -655,18 +773,21 @@ def _fair(
             valid[rings[1]] = True
             keep = (rows[edges[:, 0]] | rows[edges[:, 1]]) & valid[edges[:, 0]] & valid[edges[:, 1]]
             sel = edges[keep]
-            G = sp.coo_matrix(
-                (
-                    np.concatenate([np.ones(len(sel)), -np.ones(len(sel))]),
-                    (np.tile(np.arange(len(sel)), 2), np.concatenate([sel[:, 0], sel[:, 1]])),
-                ),
+            # the edge difference operator: row e is +1 at sel[e, 0] and -1 at sel[e, 1] (CSR, two a row)
+            G = sp.csr_matrix(
+                (np.tile([1.0, -1.0], len(sel)), sel.ravel(), np.arange(0, 2 * len(sel) + 1, 2)),
                 shape=(len(sel), nv),
-            ).tocsr()
+            )
             A_full = (G @ L).tocsc()
         A_full = A_full.tocsc()
-        A_u = A_full[:, unknown]
+        if len(unknown) and unknown[0] == nv - len(unknown) and (np.diff(unknown) == 1).all():
+            A_u = A_full[:, nv - len(unknown) :]  # the usual layout: the unknowns are the last columns
+        else:
+            A_u = A_full[:, unknown]
+        fixed = vertices.copy()
+        fixed[unknown] = 0.0  # A_known x_known, without slicing the known columns out
         normal = (A_u.T @ A_u).tocsc()
-        rhs = -(A_u.T @ (A_full[:, known] @ vertices[known]))
+        rhs = -(A_u.T @ (A_full @ fixed))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", O3DLSMeshWarning)  # the SciPy fallback warning: tiny systems
         solution = SPDSolver(normal, ordering="amd").solve(np.asarray(rhs))
@@ -744,6 +865,12 @@ def fill_holes_arrays(
     -------
     FilledHoles
 
+    See Also
+    --------
+    HoleFiller : the same with the whole-mesh analysis done once (``HoleFiller(vertices,
+        triangles).fill(...)`` is this function, but for the k-d trees of the triangles, which a single
+        call replaces by a box query near the new triangles).
+
     Examples
     --------
     >>> import numpy as np
@@ -756,171 +883,286 @@ def fill_holes_arrays(
     max_hole_edges, max_hole_diameter, continuity, density = _check_options(
         max_hole_edges, max_hole_diameter, continuity, density
     )
-    weights = as_choice(weights, ("uniform", "cotangent"), name="weights")
-    fill_border = bool(as_bool(fill_border, name="fill_border"))
-    check_progress(progress)
-    vertices, triangles = mesh_arrays(vertices, triangles)
-    n, m = len(vertices), len(triangles)
-    holes: list[Hole] = []
-    skipped: list[Hole] = []
-    edge_info = unique_edges_and_runs(triangles, n)  # the one whole-mesh sort
-    for hole in find_holes(vertices, triangles, _edge_info=edge_info):
-        too_big = (max_hole_edges is not None and hole.edges > max_hole_edges) or (
-            max_hole_diameter is not None and hole.diameter > max_hole_diameter
-        )
-        # a loop made of the three edges of one triangle is the rim of a flap (a triangle hanging by a
-        # vertex, common in raw scans), not a hole: "filling" it would add that triangle's reverse
-        flap = hole.edges == 3 and len(np.unique(np.asarray(hole.rows) % m)) == 1
-        (skipped if too_big or flap or (hole.border and not fill_border) else holes).append(hole)
-    if not holes:
-        return FilledHoles(
-            vertices.copy(), triangles.copy(), [], skipped, sp.csr_matrix((0, n)), np.zeros(0, dtype=np.int64)
-        )
-    edges = edge_info[0][0]
-    edge_keys = edges[:, 0] * n + edges[:, 1]  # sorted
-    # local edge scale of the loop vertices: mean length of their edges (Liepa's sigma); only edges at
-    # a loop vertex are measured
-    on_loop = np.zeros(n, dtype=bool)
-    on_loop[np.concatenate([hole.vertices for hole in holes])] = True
-    at_loop = edges[on_loop[edges].any(axis=1)]
-    length = np.linalg.norm(vertices[at_loop[:, 0]] - vertices[at_loop[:, 1]], axis=1)
-    degree = np.bincount(at_loop.ravel(), minlength=n)
-    sigma_all = np.bincount(at_loop.ravel(), weights=np.repeat(length, 2), minlength=n) / np.maximum(
-        degree, 1
+    return HoleFiller(vertices, triangles, index_triangles=False).fill(
+        max_hole_edges=max_hole_edges,
+        max_hole_diameter=max_hole_diameter,
+        continuity=continuity,
+        density=density,
+        weights=weights,
+        fill_border=fill_border,
+        interpolation=interpolation,
+        progress=progress,
     )
-    # each piece (a loop; a loop through a vertex twice is cut into pieces) is triangulated on its own;
-    # then every piece is refined at once, in disjoint local index ranges
-    bar = progress_bar(progress, total=len(holes), desc="filling holes", unit="hole")
-    piece_hole, piece_loop, piece_points, piece_tris, piece_sigma, piece_fixed = [], [], [], [], [], []
-    for hole_index, hole in enumerate(holes):
-        bar.update()
-        for loop, rows in _simple_pieces(hole.vertices, hole.rows):
-            k = len(loop)
-            points = vertices[loop]
-            outer_tris = triangles[rows % m]  # the mesh triangle on each loop edge, for dihedral angles
-            outer, _ = _unit(
-                _cross(
-                    vertices[outer_tris[:, 1]] - vertices[outer_tris[:, 0]],
-                    vertices[outer_tris[:, 2]] - vertices[outer_tris[:, 0]],
+
+
+class HoleFiller:
+    """The whole-mesh analysis of a mesh's holes, done once; :meth:`fill` then does only per-hole work.
+
+    Like CGAL's prebuilt half-edge structure or potpourri3d's solver classes: the constructor sorts the
+    edges (finding the boundary loops, their components and whether each is an outer border, see
+    :func:`find_holes`), measures each vertex's mean edge length (Liepa's scale), lists the triangles
+    of each vertex (for the rings of fixed vertices around a patch) and indexes the triangles' bounding
+    spheres in k-d trees (for the crossing check, a query near the patch instead of a pass over the
+    mesh). :func:`fill_holes_arrays` is ``HoleFiller(vertices, triangles, index_triangles=False).fill(...)``.
+
+    The state is read-only numpy arrays (and k-d trees rebuilt from them on unpickling): it pickles, and
+    :meth:`fill` may run from several threads at once.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64
+    triangles : (m, 3) int64
+    index_triangles : bool, keyword-only
+        Build the k-d trees (they pay off over several fills); ``False`` makes each fill query only
+        the triangles in the box of its new triangles, faster for a single fill.
+
+    Attributes
+    ----------
+    holes : list of Hole
+        Every boundary loop, as :func:`find_holes` gives them.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> square = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0.5, 0.5, 1]], float)
+    >>> filler = HoleFiller(square, np.array([[0, 1, 4], [1, 2, 4], [2, 3, 4], [3, 0, 4]]))
+    >>> [hole.edges for hole in filler.holes]
+    [4]
+    >>> len(filler.fill(fill_border=True).triangles)
+    6
+    """
+
+    def __init__(self, vertices: np.ndarray, triangles: np.ndarray, *, index_triangles: bool = True) -> None:
+        index_triangles = bool(as_bool(index_triangles, name="index_triangles"))
+        vertices, triangles = mesh_arrays(vertices, triangles)  # copies: the state must not change under it
+        vertices.setflags(write=False)
+        triangles.setflags(write=False)
+        n = len(vertices)
+        self.vertices, self.triangles = vertices, triangles
+        edge_info = unique_edges_and_runs(triangles, n)  # the one whole-mesh sort
+        edges = edge_info[0][0]
+        self.edge_keys = edges[:, 0] * n + edges[:, 1]  # sorted
+        self.holes = find_holes(vertices, triangles, _edge_info=edge_info)
+        length = np.linalg.norm(vertices[edges[:, 0]] - vertices[edges[:, 1]], axis=1)
+        degree = np.bincount(edges.ravel(), minlength=n)
+        self.sigma = np.bincount(edges.ravel(), weights=np.repeat(length, 2), minlength=n) / np.maximum(
+            degree, 1
+        )
+        # the triangles of each vertex (CSR), by a transpose (linear, no sort)
+        m = len(triangles)
+        by_vertex = sp.csr_matrix(
+            (np.repeat(np.arange(m, dtype=np.int64), 3), triangles.ravel(), np.arange(0, 3 * m + 1, 3)),
+            shape=(m, n),
+        ).tocsc()
+        self.vertex_triangles = (by_vertex.indptr.astype(np.int64), by_vertex.data.astype(np.int64))
+        # the k-d trees pay off over several fills; a single fill (fill_holes_arrays) indexes only the
+        # triangles in the new triangles' box instead (index None)
+        self.index = _TriangleIndex(vertices, triangles) if index_triangles else None
+
+    def fill(
+        self,
+        *,
+        max_hole_edges: int | None = None,
+        max_hole_diameter: float | None = None,
+        continuity: int = 2,
+        density: float = 1.0,
+        weights: str = "cotangent",
+        fill_border: bool = False,
+        interpolation: bool = False,
+        progress: bool = False,
+    ) -> FilledHoles:
+        """Fill the chosen holes: the options and result of :func:`fill_holes_arrays`."""
+        max_hole_edges, max_hole_diameter, continuity, density = _check_options(
+            max_hole_edges, max_hole_diameter, continuity, density
+        )
+        weights = as_choice(weights, ("uniform", "cotangent"), name="weights")
+        fill_border = bool(as_bool(fill_border, name="fill_border"))
+        check_progress(progress)
+        vertices, triangles = self.vertices, self.triangles
+        n, m = len(vertices), len(triangles)
+        holes: list[Hole] = []
+        skipped: list[Hole] = []
+        for hole in self.holes:
+            too_big = (max_hole_edges is not None and hole.edges > max_hole_edges) or (
+                max_hole_diameter is not None and hole.diameter > max_hole_diameter
+            )
+            # a loop made of the three edges of one triangle is the rim of a flap (a triangle hanging by a
+            # vertex, common in raw scans), not a hole: "filling" it would add that triangle's reverse
+            flap = hole.edges == 3 and len(np.unique(np.asarray(hole.rows) % m)) == 1
+            (skipped if too_big or flap or (hole.border and not fill_border) else holes).append(hole)
+        if not holes:
+            return FilledHoles(
+                vertices.copy(),
+                triangles.copy(),
+                [],
+                skipped,
+                sp.csr_matrix((0, n)),
+                np.zeros(0, dtype=np.int64),
+            )
+        edge_keys = self.edge_keys
+        sigma_all = self.sigma  # Liepa's sigma: mean length of each vertex's edges
+        # each piece (a loop; a loop through a vertex twice is cut into pieces) is triangulated on its own;
+        # then every piece is refined at once, in disjoint local index ranges
+        bar = progress_bar(progress, total=len(holes), desc="filling holes", unit="hole")
+        piece_hole, piece_loop, piece_points, piece_tris, piece_sigma, piece_fixed = [], [], [], [], [], []
+        piece_outer, piece_forbidden, piece_spacing = [], [], []
+        for hole_index, hole in enumerate(holes):
+            for loop, rows in _simple_pieces(hole.vertices, hole.rows):
+                k = len(loop)
+                points = vertices[loop]
+                outer_tris = triangles[rows % m]  # the mesh triangle on each loop edge, for dihedral angles
+                outer, _ = _unit(
+                    _cross(
+                        vertices[outer_tris[:, 1]] - vertices[outer_tris[:, 0]],
+                        vertices[outer_tris[:, 2]] - vertices[outer_tris[:, 0]],
+                    )
                 )
-            )
-            # chords that already are edges of the mesh (between loop vertices that are not neighbours)
-            a, b = np.meshgrid(loop, loop, indexing="ij")
-            key = np.minimum(a, b) * n + np.maximum(a, b)
-            pos = np.minimum(np.searchsorted(edge_keys, key), len(edge_keys) - 1)
-            forbidden = edge_keys[pos] == key
-            idx = np.arange(k)
-            forbidden[idx, (idx + 1) % k] = False
-            forbidden[(idx + 1) % k, idx] = False
-            spacing = float(np.mean(np.linalg.norm(np.roll(points, -1, 0) - points, axis=1)))
-            # chords are sampled at the spacing the refinement aims for (none without refinement)
-            extra, tris = _triangulate(
-                points,
-                outer,
-                forbidden if forbidden.any() else None,
-                spacing / density if density > 0 else 0.0,
-            )
-            piece_hole.append(hole_index)
-            piece_loop.append(loop)
-            piece_points.append(np.concatenate([points, extra]))
-            piece_tris.append(tris)
-            spread = spacing / density if density > 0 else 0.0
+                # chords that already are edges of the mesh (between loop vertices that are not neighbours)
+                a, b = np.meshgrid(loop, loop, indexing="ij")
+                key = np.minimum(a, b) * n + np.maximum(a, b)
+                pos = np.minimum(np.searchsorted(edge_keys, key), len(edge_keys) - 1)
+                forbidden = edge_keys[pos] == key
+                idx = np.arange(k)
+                forbidden[idx, (idx + 1) % k] = False
+                forbidden[(idx + 1) % k, idx] = False
+                piece_hole.append(hole_index)
+                piece_loop.append(loop)
+                piece_points.append(points)
+                piece_outer.append(outer)
+                piece_forbidden.append(forbidden)
+                piece_spacing.append(float(np.mean(np.linalg.norm(np.roll(points, -1, 0) - points, axis=1))))
+                piece_fixed.append(np.argwhere(np.triu(forbidden)))  # mesh edges between loop vertices
+        # the dynamic programme: loops of one length in one batch, longer ones cut by chords first
+        piece_extra: list[np.ndarray] = [np.zeros((0, 3))] * len(piece_loop)
+        piece_tris = [np.zeros((0, 3), dtype=np.int64)] * len(piece_loop)
+        lengths = np.array([len(loop) for loop in piece_loop])
+        bar = progress_bar(progress, total=len(piece_loop), desc="filling holes", unit="loop")
+        for k in np.unique(lengths):
+            group = np.flatnonzero(lengths == k)
+            if k > DP_MAX_EDGES:
+                for member in group.tolist():
+                    forbidden = piece_forbidden[member]
+                    # chords are sampled at the spacing the refinement aims for (none without refinement)
+                    piece_extra[member], piece_tris[member] = _triangulate(
+                        piece_points[member],
+                        piece_outer[member],
+                        forbidden if forbidden.any() else None,
+                        piece_spacing[member] / density if density > 0 else 0.0,
+                    )
+                    bar.update()
+                continue
+            # batches bound the DP tables' memory (about 60 k**2 floats a loop)
+            per_batch = max(1, 200_000 // int(k) ** 2)
+            for first in range(0, len(group), per_batch):
+                chunk = group[first : first + per_batch]
+                stacked = np.stack([piece_forbidden[piece] for piece in chunk])
+                found = _minimum_weight_triangulations(
+                    np.stack([piece_points[piece] for piece in chunk]),
+                    np.stack([piece_outer[piece] for piece in chunk]),
+                    stacked if stacked.any() else None,
+                )
+                for member, tris in zip(chunk.tolist(), found):
+                    piece_tris[member] = tris
+                bar.update(len(chunk))
+        bar.close()
+        for piece, loop in enumerate(piece_loop):
+            extra = piece_extra[piece]
+            piece_points[piece] = np.concatenate([piece_points[piece], extra])
+            spread = piece_spacing[piece] / density if density > 0 else 0.0
             piece_sigma.append(
                 np.concatenate([sigma_all[loop] / max(density, 1e-300), np.full(len(extra), spread)])
             )
-            piece_fixed.append(np.argwhere(np.triu(forbidden)))  # mesh edges between loop vertices
-    bar.close()
-    sizes = np.array([len(x) for x in piece_points])
-    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
-    all_points = np.concatenate(piece_points)
-    all_tris = np.concatenate([t + start for t, start in zip(piece_tris, starts)])
-    point_piece = np.repeat(np.arange(len(sizes)), sizes)
-    if density > 0:
-        all_fixed = np.concatenate([f + start for f, start in zip(piece_fixed, starts)])
-        all_points, all_tris, point_piece = _refine(
-            all_points, np.concatenate(piece_sigma), all_tris, all_fixed, point_piece
-        )
-    # global numbering: loop points are mesh vertices; the others are new, numbered piece by piece
-    is_loop = np.zeros(len(all_points), dtype=bool)
-    loop_lengths = np.array([len(loop) for loop in piece_loop])
-    is_loop[np.concatenate([start + np.arange(k) for start, k in zip(starts, loop_lengths)])] = True
-    global_index = np.empty(len(all_points), dtype=np.int64)
-    global_index[is_loop] = np.concatenate(piece_loop)  # loop points come first in each piece, in order
-    fresh = np.flatnonzero(~is_loop)
-    fresh = fresh[np.argsort(point_piece[fresh], kind="stable")]
-    global_index[fresh] = n + np.arange(len(fresh))
-    new_points = all_points[fresh]
-    tri_piece = point_piece[all_tris[:, 0]]
-    tri_order = np.argsort(tri_piece, kind="stable")
-    new_tris = global_index[all_tris[tri_order]]
-    tri_owner = [np.asarray(piece_hole, dtype=np.int64)[tri_piece[tri_order]]]
-    interp_rows, interp_cols, interp_vals = [], [], []
-    if interpolation and len(fresh):
-        # harmonic weights of the new vertices over their loop's vertices (for colours and other
-        # attributes): one small dense solve per piece (a loop wide)
-        tri_bounds = np.searchsorted(tri_piece[tri_order], np.arange(len(sizes) + 1))
-        for piece in range(len(sizes)):
-            local = new_tris[tri_bounds[piece] : tri_bounds[piece + 1]]
-            loop = piece_loop[piece]
-            inner = np.unique(local[local >= n])
-            if len(inner) == 0:
-                continue
-            numbering = np.concatenate([loop, inner])
-            by_index = np.argsort(numbering)
-            tris_local = by_index[np.searchsorted(numbering[by_index], local)]
-            k, nl = len(loop), len(numbering)
-            K, _, _ = _uniform_operators(tris_local, nl)
-            unknown = np.arange(k, nl)
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", O3DLSMeshWarning)
-                harmonic = SPDSolver(K[unknown][:, unknown].tocsc()).solve(-K[unknown][:, :k].toarray())
-            r, c = np.nonzero(np.abs(harmonic) > 1e-12)
-            interp_rows.append(inner[r] - n)
-            interp_cols.append(loop[c])
-            interp_vals.append(harmonic[r, c])
-    out_vertices = np.concatenate([vertices, new_points])
-    out_triangles = np.concatenate([triangles, new_tris])
-    p = len(new_points)
-    owner = np.concatenate(tri_owner)
-    if p:
-        out_vertices, used, stuck = _fair_all(
-            out_vertices, out_triangles, m, n, holes, continuity, weights, owner
-        )
-    else:  # nothing to fair: the triangulations alone are checked
-        used = np.full(len(holes), -1, dtype=np.int64)
-        crossing = _crossings(out_vertices, out_triangles, m)
-        stuck = np.flatnonzero(np.bincount(owner, weights=crossing, minlength=len(holes)) > 0)
-    if interp_rows:
-        weights_matrix = sp.csr_matrix(
-            (np.concatenate(interp_vals), (np.concatenate(interp_rows), np.concatenate(interp_cols))),
-            shape=(p, n),
-        )
-    else:
-        weights_matrix = sp.csr_matrix((p, n))
-    if len(stuck):
-        # every fill of these crosses the mesh (the scan is folded or overlaps itself next to them): a
-        # crossing patch would be a broken mesh, so they are left open, and said
-        warnings.warn(
-            f"fill_holes: the fills of {len(stuck)} hole(s) cross other triangles at every continuity "
-            "(folded or overlapping surface next to them): left open, see FilledHoles.skipped",
-            O3DLSMeshWarning,
-            stacklevel=3,
-        )
-        keep_tri = ~np.isin(owner, stuck)
-        vertex_owner = np.zeros(p, dtype=np.int64)
-        new_tris = out_triangles[m:]
-        inside = new_tris >= n
-        vertex_owner[new_tris[inside] - n] = np.broadcast_to(owner[:, None], new_tris.shape)[inside]
-        keep_vertex = ~np.isin(vertex_owner, stuck)
-        remap = np.concatenate([np.arange(n), n + np.cumsum(keep_vertex) - 1])
-        out_vertices = np.concatenate([vertices, out_vertices[n:][keep_vertex]])
-        out_triangles = np.concatenate([triangles, remap[new_tris[keep_tri]]])
-        weights_matrix = weights_matrix[np.flatnonzero(keep_vertex)]
-        left = set(stuck.tolist())
-        skipped = skipped + [hole for i, hole in enumerate(holes) if i in left]
-        used = used[[i not in left for i in range(len(holes))]]
-        holes = [hole for i, hole in enumerate(holes) if i not in left]
-    return FilledHoles(out_vertices, out_triangles, holes, skipped, weights_matrix, used)
+        sizes = np.array([len(x) for x in piece_points])
+        starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+        all_points = np.concatenate(piece_points)
+        all_tris = np.concatenate([t + start for t, start in zip(piece_tris, starts)])
+        point_piece = np.repeat(np.arange(len(sizes)), sizes)
+        if density > 0:
+            all_fixed = np.concatenate([f + start for f, start in zip(piece_fixed, starts)])
+            all_points, all_tris, point_piece = _refine(
+                all_points, np.concatenate(piece_sigma), all_tris, all_fixed, point_piece
+            )
+        # global numbering: loop points are mesh vertices; the others are new, numbered piece by piece
+        is_loop = np.zeros(len(all_points), dtype=bool)
+        loop_lengths = np.array([len(loop) for loop in piece_loop])
+        is_loop[np.concatenate([start + np.arange(k) for start, k in zip(starts, loop_lengths)])] = True
+        global_index = np.empty(len(all_points), dtype=np.int64)
+        global_index[is_loop] = np.concatenate(piece_loop)  # loop points come first in each piece, in order
+        fresh = np.flatnonzero(~is_loop)
+        fresh = fresh[np.argsort(point_piece[fresh], kind="stable")]
+        global_index[fresh] = n + np.arange(len(fresh))
+        new_points = all_points[fresh]
+        tri_piece = point_piece[all_tris[:, 0]]
+        tri_order = np.argsort(tri_piece, kind="stable")
+        new_tris = global_index[all_tris[tri_order]]
+        tri_owner = [np.asarray(piece_hole, dtype=np.int64)[tri_piece[tri_order]]]
+        interp_rows, interp_cols, interp_vals = [], [], []
+        if interpolation and len(fresh):
+            # harmonic weights of the new vertices over their loop's vertices (for colours and other
+            # attributes): one small dense solve per piece (a loop wide)
+            tri_bounds = np.searchsorted(tri_piece[tri_order], np.arange(len(sizes) + 1))
+            for piece in range(len(sizes)):
+                local = new_tris[tri_bounds[piece] : tri_bounds[piece + 1]]
+                loop = piece_loop[piece]
+                inner = np.unique(local[local >= n])
+                if len(inner) == 0:
+                    continue
+                numbering = np.concatenate([loop, inner])
+                by_index = np.argsort(numbering)
+                tris_local = by_index[np.searchsorted(numbering[by_index], local)]
+                k, nl = len(loop), len(numbering)
+                K, _, _ = _uniform_operators(tris_local, nl)
+                unknown = np.arange(k, nl)
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore", O3DLSMeshWarning)
+                    harmonic = SPDSolver(K[unknown][:, unknown].tocsc()).solve(-K[unknown][:, :k].toarray())
+                r, c = np.nonzero(np.abs(harmonic) > 1e-12)
+                interp_rows.append(inner[r] - n)
+                interp_cols.append(loop[c])
+                interp_vals.append(harmonic[r, c])
+        out_vertices = np.concatenate([vertices, new_points])
+        out_triangles = np.concatenate([triangles, new_tris])
+        p = len(new_points)
+        owner = np.concatenate(tri_owner)
+        if p:
+            out_vertices, used, stuck = _fair_all(
+                out_vertices, out_triangles, m, n, holes, continuity, weights, owner, self
+            )
+        else:  # nothing to fair: the triangulations alone are checked
+            used = np.full(len(holes), -1, dtype=np.int64)
+            crossing = _crossings(out_vertices, out_triangles, m, self.index, owner)
+            stuck = np.flatnonzero(np.bincount(owner, weights=crossing, minlength=len(holes)) > 0)
+        if interp_rows:
+            weights_matrix = sp.csr_matrix(
+                (np.concatenate(interp_vals), (np.concatenate(interp_rows), np.concatenate(interp_cols))),
+                shape=(p, n),
+            )
+        else:
+            weights_matrix = sp.csr_matrix((p, n))
+        if len(stuck):
+            # every fill of these crosses the mesh (the scan is folded or overlaps itself next to them): a
+            # crossing patch would be a broken mesh, so they are left open, and said
+            warnings.warn(
+                f"fill_holes: the fills of {len(stuck)} hole(s) cross other triangles at every continuity "
+                "(folded or overlapping surface next to them): left open, see FilledHoles.skipped",
+                O3DLSMeshWarning,
+                stacklevel=3,
+            )
+            keep_tri = ~np.isin(owner, stuck)
+            vertex_owner = np.zeros(p, dtype=np.int64)
+            new_tris = out_triangles[m:]
+            inside = new_tris >= n
+            vertex_owner[new_tris[inside] - n] = np.broadcast_to(owner[:, None], new_tris.shape)[inside]
+            keep_vertex = ~np.isin(vertex_owner, stuck)
+            remap = np.concatenate([np.arange(n), n + np.cumsum(keep_vertex) - 1])
+            out_vertices = np.concatenate([vertices, out_vertices[n:][keep_vertex]])
+            out_triangles = np.concatenate([triangles, remap[new_tris[keep_tri]]])
+            weights_matrix = weights_matrix[np.flatnonzero(keep_vertex)]
+            left = set(stuck.tolist())
+            skipped = skipped + [hole for i, hole in enumerate(holes) if i in left]
+            used = used[[i not in left for i in range(len(holes))]]
+            holes = [hole for i, hole in enumerate(holes) if i not in left]
+        return FilledHoles(out_vertices, out_triangles, holes, skipped, weights_matrix, used)
 
 
 def _simple_pieces(loop: np.ndarray, rows: np.ndarray):
@@ -953,6 +1195,7 @@ def _fair_all(
     continuity: int,
     weights: str,
     tri_owner: np.ndarray,
+    state: HoleFiller,
 ):
     """Fair every new vertex at once: one local system over the patches and the rings around them.
 
@@ -966,7 +1209,7 @@ def _fair_all(
     loops = np.unique(np.concatenate([hole.vertices for hole in holes]))
     # triangles within `continuity` rings of the loops in the input, plus every new triangle
     old = triangles[:m]
-    ring_tris, rings = _rings(old, n, loops, continuity)
+    ring_tris, rings = _rings(old, state.vertex_triangles, loops, continuity)
     local_tris = np.concatenate([old[ring_tris], triangles[m:]])
     local_vertices = np.unique(local_tris)
     remap = np.full(total, -1, dtype=np.int64)
@@ -982,11 +1225,14 @@ def _fair_all(
     chosen = np.full(count, -1)
     out = vertices.copy()
 
+    local = remap[local_tris]
+    local_edges = _unique_edges(local, len(local_vertices))  # one connectivity for every solve below
+
     def candidates():  # lazily: most calls stop at the first
         for level in range(continuity, -1, -1):
             try:
                 solution = _fair(
-                    vertices[local_vertices], remap[local_tris], unknown_local, local_rings, level
+                    vertices[local_vertices], local, unknown_local, local_rings, level, "uniform", local_edges
                 )
             except SingularSystemError:
                 continue
@@ -1000,11 +1246,12 @@ def _fair_all(
                 try:
                     again = _fair(
                         faired[local_vertices],
-                        remap[local_tris],
+                        local,
                         unknown_local,
                         local_rings,
                         level,
                         "cotangent-area",
+                        local_edges,
                     )
                 except SingularSystemError:
                     again = None
@@ -1022,7 +1269,7 @@ def _fair_all(
     tried = []
     for rank, (level, candidate) in enumerate(candidates()):
         tried.append((level, candidate))
-        crossing = _crossings(candidate, triangles, m)  # (q,) per new triangle
+        crossing = _crossings(candidate, triangles, m, state.index, tri_owner)  # (q,) per new triangle
         per_hole = np.bincount(tri_owner, weights=crossing, minlength=count)
         take = (chosen < 0) & (per_hole == 0)
         for hole_index in np.flatnonzero(take):
@@ -1038,12 +1285,16 @@ def _fair_all(
 def _tangential_relax(
     vertices: np.ndarray, new_tris: np.ndarray, first_new: int, iterations: int = 10
 ) -> np.ndarray:
-    """Move each new vertex towards the centroid of its neighbours within its tangent plane, a few times.
+    """Move each new vertex towards the area-weighted centroid of its triangles, in its tangent plane, a few times.
 
-    The faired surface is kept to first order (only the tangential part of the move is taken, about the
-    area-weighted normal of the vertex's triangles, all of them new) while the triangles become rounder:
-    the smallest angles next to the loop, where the refinement leaves slivers, grow (plane_holes: 14 to
-    24 degrees, bench_fill_holes.py). Vectorized over every new vertex at once (a sparse adjacency of the new triangles).
+    The target is the centroid of the vertex's star (the mean of its triangles' centroids weighted by
+    their areas, a step of centroidal Voronoi smoothing) rather than the mean of its neighbours: on
+    an irregular star the neighbours' mean sits towards the short edges and leaves a sliver there,
+    while the star's centroid rounds the triangles next to the loop (smallest angle on plane_holes
+    24.2 -> 25.6 degrees, horse 15h 22.0 -> 24.1, bench_fill_holes.py). The faired surface is kept to
+    first order: only the tangential part of the move is taken, about the area-weighted normal of the
+    vertex's triangles, all of them new. Vectorized over every new vertex at once (a sparse incidence
+    of the new triangles).
     """
     out = vertices.copy()
     total = len(vertices)
@@ -1054,34 +1305,107 @@ def _tangential_relax(
     tris = np.searchsorted(local, new_tris)
     mov = np.searchsorted(local, moving)
     nl = len(local)
-    e = np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]])
-    adjacency = sp.coo_matrix(
-        (np.ones(2 * len(e)), (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])), shape=(nl, nl)
-    ).tocsr()
-    adjacency.data[:] = 1.0  # each edge appears in two triangles: count it once
-    A = adjacency[mov]
-    degree = np.asarray(A.sum(axis=1)).ravel()
-    corner_rows = np.repeat(np.arange(len(tris)), 3)
+    # the triangles of each moving vertex (a sparse incidence: sums without np.add.at)
+    incidence = sp.csr_matrix(
+        (np.ones(3 * len(tris)), tris.ravel(), np.arange(0, 3 * len(tris) + 1, 3)), shape=(len(tris), nl)
+    ).T.tocsr()[mov]
     x = out[local]
     for _ in range(iterations):
         p = x[tris]
         face_normal = _cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
-        normal = np.zeros((nl, 3))
-        np.add.at(normal, tris.ravel(), face_normal[corner_rows])
-        normal, _ = _unit(normal[mov])
-        move = (A @ x) / np.maximum(degree, 1)[:, None] - x[mov]
+        normal, _ = _unit(incidence @ face_normal)
+        area = np.sqrt((face_normal**2).sum(axis=1))
+        target = (incidence @ (area[:, None] * p.mean(axis=1))) / np.maximum(incidence @ area, 1e-300)[
+            :, None
+        ]
+        move = target - x[mov]
         move -= (move * normal).sum(axis=1, keepdims=True) * normal
         x[mov] += 0.5 * move
     out[moving] = x[mov]
     return out
 
 
-def _crossings(vertices: np.ndarray, triangles: np.ndarray, first_new: int) -> np.ndarray:
+class _TriangleIndex:
+    """Bounding spheres (about the centroids) of a mesh's triangles in k-d trees, for crossing queries.
+
+    Two trees: the "small" spheres (radius at most 4 times the median) and the rest, each queried with
+    its own largest radius, so that a few long slivers do not make every query reach far. Holds the
+    arrays; the trees are rebuilt from them when unpickled (queries are thread-safe).
+    """
+
+    def __init__(self, vertices: np.ndarray, triangles: np.ndarray) -> None:
+        p = vertices[triangles]
+        self.centre = p.mean(axis=1)
+        self.radius = np.linalg.norm(p - self.centre[:, None, :], axis=2).max(axis=1)
+        cut = 4.0 * float(np.median(self.radius)) if len(self.radius) else 0.0
+        small = self.radius <= cut
+        self.groups = [np.flatnonzero(small), np.flatnonzero(~small)]
+        self._build()
+
+    def _build(self) -> None:
+        from scipy.spatial import cKDTree
+
+        self.trees = [(cKDTree(self.centre[g]), float(self.radius[g].max())) for g in self.groups if len(g)]
+        self.group_of_tree = [g for g in self.groups if len(g)]
+
+    def __getstate__(self) -> dict:
+        return {key: value for key, value in self.__dict__.items() if key not in ("trees", "group_of_tree")}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._build()
+
+    def near(
+        self, centre: np.ndarray, radius: np.ndarray, groups: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Pairs ``(query, triangle)`` whose bounding spheres overlap.
+
+        The queries come in ``groups`` (a label each: the patch of each new triangle): one ball query per
+        group and tree gathers the triangles near the group's bounding sphere, and the pairs are found
+        among those few with a small tree of them (thousands of ball queries into the whole mesh's tree
+        cost more than a few ball queries and a local pass).
+        """
+        from scipy.spatial import cKDTree
+
+        empty = np.zeros(0, dtype=np.int64)
+        if len(centre) == 0:
+            return empty, empty
+        if groups is None:
+            groups = np.zeros(len(centre), dtype=np.int64)
+        found = [empty]
+        for label in np.unique(groups):
+            mine = groups == label
+            low = (centre[mine] - radius[mine, None]).min(axis=0)
+            high = (centre[mine] + radius[mine, None]).max(axis=0)
+            middle, half = 0.5 * (low + high), 0.5 * float(np.linalg.norm(high - low))
+            for (tree, reach), members in zip(self.trees, self.group_of_tree):
+                hits = tree.query_ball_point(middle, half + reach, return_sorted=False)
+                found.append(members[np.asarray(hits, dtype=np.int64)])
+        candidates = np.unique(np.concatenate(found))
+        if len(candidates) == 0:
+            return empty, empty
+        local = cKDTree(self.centre[candidates])
+        pairs = cKDTree(centre).sparse_distance_matrix(
+            local, float(radius.max() + self.radius[candidates].max()), output_type="ndarray"
+        )
+        qi, ti = pairs["i"].astype(np.int64), candidates[pairs["j"]]
+        close = pairs["v"] <= radius[qi] + self.radius[ti]
+        return qi[close], ti[close]
+
+
+def _crossings(
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    first_new: int,
+    index: _TriangleIndex | None = None,
+    groups: np.ndarray | None = None,
+) -> np.ndarray:
     """For each new triangle, the triangles without a shared vertex it intersects (separating axes).
 
-    Candidates are pairs whose bounding spheres (about the centroids) overlap, among the triangles whose
-    boxes overlap the new triangles' box; each pair is tested on the 17 axes that separate two disjoint
-    triangles (two normals, nine edge-edge cross products, six in-plane edge normals for coplanar pairs).
+    Candidates are pairs whose bounding spheres (about the centroids) overlap: the input triangles from
+    ``index`` (a :class:`_TriangleIndex` of ``triangles[:first_new]``, built here if not given; queried
+    per patch when ``groups`` labels each new triangle's patch), the new ones among themselves; each pair is tested on the 17 axes that separate two disjoint triangles (two
+    normals, nine edge-edge cross products, six in-plane edge normals for coplanar pairs).
     """
     from scipy.spatial import cKDTree
 
@@ -1092,77 +1416,68 @@ def _crossings(vertices: np.ndarray, triangles: np.ndarray, first_new: int) -> n
     p_new = vertices[triangles[new]]
     c_new = p_new.mean(axis=1)
     r_new = np.linalg.norm(p_new - c_new[:, None, :], axis=2).max(axis=1)
-    # candidates: triangles with a vertex in the new triangles' box grown by twice the largest of them
-    # (a per-vertex test: a pass over the vertices, not a copy of every triangle's corners)
-    pad = 2.0 * r_new.max()
-    low, high = p_new.reshape(-1, 3).min(0) - pad, p_new.reshape(-1, 3).max(0) + pad
-    in_box = ((vertices >= low) & (vertices <= high)).all(axis=1)
-    boxed = np.flatnonzero(in_box[triangles].any(axis=1))
-    p_box = vertices[triangles[boxed]]
-    centre = p_box.mean(axis=1)
-    radius = np.linalg.norm(p_box - centre[:, None, :], axis=2).max(axis=1)
-    # bounding spheres overlap: |c_a - c_b| <= r_a + r_b. Queried at two scales, so that a few long
-    # slivers do not make every query radius long: "small" spheres (at most 4 times the median) against
-    # small ones with the small bound, and each big one on its own.
-    cut = 4.0 * np.median(np.concatenate([radius, r_new]))
-    small_c, small_n = radius <= cut, r_new <= cut
-    a_parts, b_parts = [], []
-
-    def pairs(queries, tree_points, reach, owners_q, owners_t):
-        if len(queries) == 0 or len(tree_points) == 0:
-            return
-        found = cKDTree(tree_points).query_ball_point(queries, r=reach)
-        counts = np.array([len(x) for x in found])
-        if counts.sum():
-            a_parts.append(np.repeat(owners_q, counts))
-            b_parts.append(owners_t[np.concatenate([np.asarray(x, dtype=np.int64) for x in found if len(x)])])
-
-    idx_c, idx_n = np.arange(len(boxed)), np.arange(len(new))
-    sc = idx_c[small_c]
-    pairs(
-        c_new[small_n],
-        centre[sc],
-        r_new[small_n] + (radius[sc].max() if len(sc) else 0.0),
-        idx_n[small_n],
-        sc,
-    )
-    pairs(c_new[~small_n], centre, r_new[~small_n] + radius.max(), idx_n[~small_n], idx_c)
-    sn = idx_n[small_n]
-    if len(sn):
-        bc = idx_c[~small_c]
-        before = len(a_parts)
-        pairs(centre[bc], c_new[sn], radius[bc] + r_new[sn].max(), bc, sn)
-        if len(a_parts) > before:  # these came as (candidate, new): swap
-            a_parts[-1], b_parts[-1] = b_parts[-1], a_parts[-1]
-    if not a_parts:
-        return result
-    ia, ib = np.concatenate(a_parts), np.concatenate(b_parts)  # (new index, candidate index)
-    close = np.linalg.norm(c_new[ia] - centre[ib], axis=1) <= r_new[ia] + radius[ib]
-    a, b = new[ia[close]], boxed[ib[close]]
-    shared = (triangles[a][:, :, None] == triangles[b][:, None, :]).any(axis=(1, 2))
-    keep = ~shared & ((b < first_new) | (a < b))  # each new-new pair once
-    a, b = a[keep], b[keep]
+    if index is None:
+        # the input triangles with a vertex in the new triangles' box grown by twice the largest of them
+        # (a per-vertex test: a pass over the vertices, not a copy of every triangle's corners)
+        pad = 2.0 * r_new.max()
+        low, high = p_new.reshape(-1, 3).min(0) - pad, p_new.reshape(-1, 3).max(0) + pad
+        in_box = ((vertices >= low) & (vertices <= high)).all(axis=1)
+        boxed = np.flatnonzero(in_box[triangles[:first_new]].any(axis=1))
+        ia, ib = _TriangleIndex(vertices, triangles[boxed]).near(c_new, r_new, groups)
+        ib = boxed[ib]
+    else:
+        ia, ib = index.near(c_new, r_new, groups)  # (new index, input triangle)
+    b_all = [ib]
+    a_all = [ia]
+    pairs = cKDTree(c_new).query_pairs(2.0 * float(r_new.max()), output_type="ndarray").astype(np.int64)
+    if len(pairs):
+        close = np.linalg.norm(c_new[pairs[:, 0]] - c_new[pairs[:, 1]], axis=1) <= r_new[pairs].sum(axis=1)
+        a_all.append(pairs[close, 0])
+        b_all.append(first_new + pairs[close, 1])
+    a, b = new[np.concatenate(a_all)], np.concatenate(b_all)
+    ta, tb = triangles[a], triangles[b]
+    shared = (ta[:, :, None] == tb[:, None, :]).any(axis=(1, 2))
+    P, Q = vertices[ta[~shared]], vertices[tb[~shared]]  # (k, 3, 3)
+    a, b = a[~shared], b[~shared]
+    # boxes overlap (the boxes' axes are three of the separating candidates, and the cheapest: most
+    # sphere-overlapping pairs stop here)
+    boxes = ((P.min(axis=1) <= Q.max(axis=1)) & (Q.min(axis=1) <= P.max(axis=1))).all(axis=1)
+    P, Q, a, b = P[boxes], Q[boxes], a[boxes], b[boxes]
     if len(a) == 0:
         return result
-    P, Q = vertices[triangles[a]], vertices[triangles[b]]  # (k, 3, 3)
     eP = P[:, [1, 2, 0]] - P
     eQ = Q[:, [1, 2, 0]] - Q
     nP = _cross(eP[:, 0], eP[:, 1])
     nQ = _cross(eQ[:, 0], eQ[:, 1])
-    axes = [nP, nQ]
-    axes += [_cross(eP[:, i], eQ[:, j]) for i in range(3) for j in range(3)]
-    axes += [_cross(nP, eP[:, i]) for i in range(3)] + [_cross(nQ, eQ[:, i]) for i in range(3)]
+    # every axis at once, (17, k, 3): the two normals, the nine edge-edge crosses, the six in-plane normals
+    axes = np.concatenate(
+        [
+            np.stack([nP, nQ]),
+            _cross(eP[None, :, :, :], eQ.transpose(1, 0, 2)[:, :, None, :])
+            .transpose(0, 2, 1, 3)
+            .reshape(9, -1, 3),
+            _cross(nP[:, None, :], eP).transpose(1, 0, 2),
+            _cross(nQ[:, None, :], eQ).transpose(1, 0, 2),
+        ]
+    )
     scale = np.maximum(np.abs(P).max(axis=(1, 2)), np.abs(Q).max(axis=(1, 2))) + np.abs(eP).max(axis=(1, 2))
-    separated = np.zeros(len(a), dtype=bool)
-    for axis in axes:
-        length = np.linalg.norm(axis, axis=1)
-        usable = length > 1e-12 * scale**2
-        unit = axis / np.where(usable, length, 1.0)[:, None]
-        pp = np.einsum("kij,kj->ki", P, unit)
-        qq = np.einsum("kij,kj->ki", Q, unit)
-        gap = np.maximum(qq.min(1) - pp.max(1), pp.min(1) - qq.max(1))
-        # strictly apart: coplanar pairs project to one point on their common normal (gap 0)
-        separated |= usable & (gap > 1e-12 * scale)
+    ax, ay, az = axes[..., 0], axes[..., 1], axes[..., 2]
+    length = np.sqrt(ax * ax + ay * ay + az * az)
+    usable = length > 1e-12 * scale**2
+    inv = 1.0 / np.where(usable, length, 1.0)
+    ax, ay, az = ax * inv, ay * inv, az * inv
+
+    def extent(T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        # the projections of the three corners on every axis (elementwise: the size-3 reductions and
+        # einsum over these shapes were most of the check's time)
+        x = [ax * T[:, c, 0] + ay * T[:, c, 1] + az * T[:, c, 2] for c in range(3)]
+        return np.minimum(np.minimum(x[0], x[1]), x[2]), np.maximum(np.maximum(x[0], x[1]), x[2])
+
+    p_low, p_high = extent(P)
+    q_low, q_high = extent(Q)
+    gap = np.maximum(q_low - p_high, p_low - q_high)
+    # strictly apart: coplanar pairs project to one point on their common normal (gap 0)
+    separated = (usable & (gap > 1e-12 * scale)).any(axis=0)
     hit = ~separated
     np.add.at(result, a[hit] - first_new, 1.0)
     both_new = hit & (b >= first_new)
@@ -1270,6 +1585,7 @@ def fill_holes(
     See Also
     --------
     fill_holes_arrays : the array core, which also reports the holes found.
+    HoleFiller : the whole-mesh analysis done once, for several fills of one mesh.
     reconstruct_geometry : re-solve known connectivity instead of building it.
 
     Notes

@@ -21,7 +21,13 @@ from scipy.sparse.csgraph import dijkstra
 from o3d_lsmesh import O3DLSMeshWarning, fill_holes
 from o3d_lsmesh.hole_filling import (
     DP_MAX_EDGES,
+    HoleFiller,
+    _crossings,
+    _min_angle,
     _minimum_weight_triangulation,
+    _minimum_weight_triangulations,
+    _rings,
+    _TriangleIndex,
     fill_holes_arrays,
     find_holes,
 )
@@ -278,6 +284,136 @@ def test_dynamic_programme_never_takes_collinear_chord_samples(seed):
     assert area.min() > 1e-3
 
 
+@pytest.mark.parametrize("seed", range(3))
+def test_batched_dynamic_programme_is_each_loop_alone(seed):
+    # loops of one length are triangulated in one batch (a leading axis on every table): each result
+    # must be the one of its loop alone, with and without forbidden chords in the batch
+    rng = np.random.default_rng(seed)
+    count, k = 5, 8
+    angle = np.sort(rng.uniform(0, 2 * np.pi, (count, k)), axis=1)
+    points = np.stack([np.cos(angle), np.sin(angle), 0.3 * rng.normal(size=(count, k))], axis=2)
+    outer = rng.normal(size=(count, k, 3)) + np.array([0, 0, -2.0])
+    outer /= np.linalg.norm(outer, axis=2, keepdims=True)
+    outer[1, 3] = 0.0  # an unknown neighbour
+    forbidden = np.zeros((count, k, k), dtype=bool)
+    forbidden[2, 0, 4] = forbidden[2, 4, 0] = True
+    for batch_forbidden in (None, forbidden):
+        batched = _minimum_weight_triangulations(points, outer, batch_forbidden)
+        for b in range(count):
+            alone = _minimum_weight_triangulation(
+                points[b], outer[b], None if batch_forbidden is None else batch_forbidden[b]
+            )
+            assert sorted(map(tuple, batched[b].tolist())) == sorted(map(tuple, alone.tolist()))
+
+
+def test_rings_are_the_plain_breadth_first_rings():
+    # reference: a plain breadth-first search over the edge graph, and the triangles touching rings 0..c-1
+    V, T = icosphere(2)
+    seeds = np.array([0, 5])
+    indptr = np.concatenate([[0], np.cumsum(np.bincount(T.ravel(), minlength=len(V)))])
+    order = np.argsort(T.ravel(), kind="stable")
+    tris, rings = _rings(T, (indptr, order // 3), seeds, 2)
+    neighbours = {v: set() for v in range(len(V))}
+    for a, b, c in T.tolist():
+        neighbours[a] |= {b, c}
+        neighbours[b] |= {a, c}
+        neighbours[c] |= {a, b}
+    seen, front, expected = set(seeds.tolist()), set(seeds.tolist()), [sorted(seeds.tolist())]
+    for _ in range(2):
+        front = {u for v in front for u in neighbours[v]} - seen
+        seen |= front
+        expected.append(sorted(front))
+    assert [sorted(r.tolist()) for r in rings] == expected
+    inner = set(expected[0]) | set(expected[1])
+    assert tris.tolist() == [t for t, tri in enumerate(T.tolist()) if inner & set(tri)]
+
+
+def test_min_angle_is_the_smallest_corner_angle():
+    # the flips' progress test uses the angle opposite the shortest edge; reference: every corner's angle
+    rng = np.random.default_rng(0)
+    P = rng.normal(size=(3, 500, 3))
+    P[2, :50] = 0.5 * (P[0, :50] + P[1, :50])  # degenerate (collinear) triangles: 0
+    corners = []
+    for u, v, w in ((P[0], P[1], P[2]), (P[1], P[2], P[0]), (P[2], P[0], P[1])):
+        e1, e2 = v - u, w - u
+        cos = (e1 * e2).sum(1) / (np.linalg.norm(e1, axis=1) * np.linalg.norm(e2, axis=1))
+        corners.append(np.arccos(np.clip(cos, -1, 1)))
+    np.testing.assert_allclose(_min_angle(*P), np.min(corners, axis=0), atol=1e-7)
+
+
+def reference_crossings(V, T, first_new):
+    """Plain loops: each new triangle against every triangle sharing no vertex, by exact segment-triangle
+    tests (two triangles without a shared vertex intersect iff an edge of one crosses the other)."""
+
+    def segment_hits(p, q, tri):
+        a, b, c = tri
+        n = np.cross(b - a, c - a)
+        dp, dq = np.dot(p - a, n), np.dot(q - a, n)
+        if dp * dq > 0 or dp == dq:
+            return False
+        x = p + (q - p) * (dp / (dp - dq))
+        signs = [np.dot(np.cross(v - u, x - u), n) for u, v in ((a, b), (b, c), (c, a))]
+        return all(s >= 0 for s in signs) or all(s <= 0 for s in signs)
+
+    out = np.zeros(len(T) - first_new)
+    for i in range(first_new, len(T)):
+        for j in range(len(T)):
+            if j == i or (j >= first_new and j < i) or set(T[i]) & set(T[j]):
+                continue
+            P, Q = V[T[i]], V[T[j]]
+            if any(segment_hits(P[e], P[(e + 1) % 3], Q) for e in range(3)) or any(
+                segment_hits(Q[e], Q[(e + 1) % 3], P) for e in range(3)
+            ):
+                out[i - first_new] += 1
+                if j >= first_new:
+                    out[j - first_new] += 1
+    return out
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_crossing_check_matches_plain_reference(seed):
+    # random (non-coplanar) triangle soups: the separating-axis check, with its k-d tree index of the input
+    # triangles (the prebuilt state's) or the box query (a single fill's), against plain segment tests
+    rng = np.random.default_rng(seed)
+    V = rng.random((45, 3))
+    T = np.array([rng.choice(45, 3, replace=False) for _ in range(60)])
+    expected = reference_crossings(V, T, 40)
+    assert expected.sum() > 0
+    assert np.array_equal(_crossings(V, T, 40), expected)
+    assert np.array_equal(_crossings(V, T, 40, _TriangleIndex(V, T[:40])), expected)
+    patches = rng.integers(0, 3, len(T) - 40)  # queried patch by patch
+    assert np.array_equal(_crossings(V, T, 40, _TriangleIndex(V, T[:40]), patches), expected)
+
+
+def test_prebuilt_filler_equals_one_call_pickles_and_is_thread_safe():
+    # HoleFiller does the whole-mesh analysis once; its fill is fill_holes_arrays' result, again and
+    # again, from a pickled copy and from several threads at once, and its input is not changed
+    import pickle
+    from concurrent.futures import ThreadPoolExecutor
+
+    V, T = icosphere(3)
+    h = mean_edge(V, T)
+    Vh, Th, _ = cut_disk(V, T, 0, 4 * h)
+    far = int(np.argmin(Vh[:, 2]))
+    Vh, Th, _ = cut_disk(Vh, Th, far, 2.5 * h)
+    V0, T0 = Vh.copy(), Th.copy()
+    expected = fill_holes_arrays(Vh, Th)
+    filler = HoleFiller(Vh, Th)
+    assert [hole.vertices.tolist() for hole in filler.holes] == [
+        hole.vertices.tolist() for hole in find_holes(Vh, Th)
+    ]
+    copy = pickle.loads(pickle.dumps(filler))
+    with ThreadPoolExecutor(4) as pool:
+        results = list(pool.map(lambda f: f.fill(), [filler, copy] * 4))
+    for out in [filler.fill(), *results]:
+        assert np.array_equal(out.triangles, expected.triangles)
+        assert np.allclose(out.vertices, expected.vertices, rtol=0, atol=1e-12)
+    small = filler.fill(max_hole_edges=min(hole.edges for hole in filler.holes))
+    assert len(small.holes) == 1 and len(small.skipped) == 1
+    assert np.array_equal(Vh, V0) and np.array_equal(Th, T0)
+    assert not filler.vertices.flags.writeable  # the state cannot be changed under its users
+
+
 # --------------------------------------------------------------------------- geometry of the fill
 
 
@@ -488,6 +624,25 @@ def test_large_hole_uses_the_chord_split_and_finishes(tmp_path):
     check_valid(out.vertices, out.triangles, len(T))
     np.testing.assert_allclose(out.vertices[len(V) :, 2], 0.0, atol=1e-9)
     assert seconds < 60  # measured 3-20 s on this 2-core machine shared by 7 jobs
+
+
+def test_long_and_short_loops_together():
+    # a loop above DP_MAX_EDGES (cut by chords) filled with two short ones of one length (one batch of
+    # the dynamic programme): each closed and valid, as each filled alone
+    V, T = icosphere(5)
+    h = mean_edge(V, T)
+    Vh, Th, _ = cut_disk(V, T, 0, 20 * h)
+    for target in ([0, 0, -1.0], [1.0, 0, 0]):
+        centre = int(np.argmin(np.linalg.norm(Vh - np.array(target), axis=1)))
+        Vh, Th, _ = cut_disk(Vh, Th, centre, 1.5 * h)
+    holes = find_holes(Vh, Th)
+    edges = sorted(hole.edges for hole in holes)
+    assert len(holes) == 3 and edges[-1] > DP_MAX_EDGES and edges[0] == edges[1]
+    out = fill_holes_arrays(Vh, Th)
+    assert len(out.holes) == 3 and boundary_edge_count(out.triangles, len(out.vertices)) == 0
+    check_valid(out.vertices, out.triangles, len(Th))
+    new = out.vertices[len(Vh) :]
+    assert np.abs(np.linalg.norm(new, axis=1) - 1.0).max() < 0.5  # faired towards the sphere, no stray vertex
 
 
 def test_outer_border_of_a_scan_stays_open():
