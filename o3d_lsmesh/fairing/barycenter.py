@@ -28,12 +28,15 @@ import scipy.sparse as sp
 
 from .._solvers import SPDSolver, check_constant_modes, check_finite, operator_scale, solver_backend
 from ..topology import (
+    RING_COLUMN_SLOT,
+    RING_ROW_SLOT,
     BoundaryCurves,
     EdgeStructure,
+    VertexRings,
     boundary_curves,
     edge_structure,
     group_keys,
-    ring_pattern,
+    vertex_rings,
 )
 
 try:  # SciPy's sparse kernels (private, the same signature since SciPy 1.0): mat-vecs into a buffer
@@ -308,106 +311,101 @@ def _accumulate(matrix: sp.csr_matrix, x: np.ndarray, out: np.ndarray) -> None:
     )
 
 
-def local_operator(triangles: np.ndarray, topo: FairingTopology) -> LocalOperator:
+def local_operator(triangles: np.ndarray, topo: FairingTopology | VertexRings) -> LocalOperator:
     """Assemble the :class:`LocalOperator` of the interior triangles of ``triangles``.
 
-    Every coefficient depends only on a triangle's valence triple, a slot
-    and the slot's orientation, so it is read from a ``(6 g + 6, 4)`` table
-    (``g`` distinct triples, plus zero rows for the triangles that are not
-    interior). An interior triangle's edges all have two triangles (an edge
-    with one, or more than two, has boundary ends), so an edge's entries are
-    the sum of the two table rows of its two half-edges, read through the
-    half-edge grouping of the edge structure: gathers over the edges, no
-    scatter over the ``3k`` slots, nothing sorted (the 1-ring pattern comes
-    from the edge structure of ``topo``). The diagonal sums each corner's
-    entry onto its vertex in triangle order.
+    ``topo``: the mesh's :class:`~o3d_lsmesh.topology.VertexRings` (what
+    local fairing builds), or a :class:`FairingTopology` (its rings are then
+    built here). Every coefficient depends only on a triangle's valence
+    triple and on the two corners of an entry, so it is read from a
+    ``(6 g + 6, 2)`` table (``g`` distinct triples, plus zero rows for the
+    triangles that are not interior). A slot ``(v, w)`` off the diagonal of a
+    vertex that is not on the boundary lies on an edge of exactly two
+    triangles (an edge with one, or more than two, has boundary ends), so its
+    coefficient is the sum of the table rows of the slot's two entries:
+    gathers over the ``nnz`` slots, no scatter, nothing sorted beyond the
+    rings' one sort. The diagonal sums each corner's entry onto its vertex in
+    triangle order.
     """
-    n, edges = topo.n, topo.edges
-    es = edge_structure(triangles, n) if topo.structure is None else topo.structure
+    rings = vertex_rings(triangles, topo.n) if isinstance(topo, FairingTopology) else topo
+    n = rings.n
     m = len(triangles)
-    sel = topo.interior_triangles
-    index = np.int32 if max(3 * m, n) < np.iinfo(np.int32).max else np.int64
+    index = rings.indices.dtype
+    sel = np.flatnonzero(~rings.boundary[triangles].any(axis=1))  # the interior triangles
     tri = triangles[sel].astype(index)  # (k, 3)
-    group, table, M, u = _valence_tables(topo.valence[tri])
+    group, table, M, u = _valence_tables(rings.valence[tri])
     group = group.astype(index)
     g = len(table)
     alpha = M / table[:, None, :]  # (g, 3, 3): coefficient of S_{i_b} in P_a
     beta = alpha - alpha.sum(axis=2, keepdims=True)  # coefficient of x_{i_c}: -sum_{b != c} alpha_ab
-
-    # the 1-ring pattern first: its temporaries are gone before the per-edge arrays exist
-    indptr, indices, diagonal, forward, backward = ring_pattern(edges, n)
-    nnz = len(indices)
+    del M
 
     corners = tri.reshape(-1)
     count = np.bincount(corners, minlength=n)  # estimates per vertex
     no_estimate = count == 0
     scale = 1.0 / np.maximum(count, 1)
     del count
-    # row group*6 + 2*slot + (tail < head) of the slot (i_s, i_{s+1}): columns alpha forward
-    # (row lo of the matrix), alpha backward (row hi), beta forward, beta backward
-    head, slots = [1, 2, 0], [0, 1, 2]
-    coefficient = np.zeros((g + 1, 3, 2, 4))  # group g: not an interior triangle, no estimate
-    for j, c in enumerate((alpha, beta)):
-        to_head, to_tail = c[:, slots, head], c[:, head, slots]  # (g, 3): (i_s, i_{s+1}), (i_{s+1}, i_s)
-        coefficient[:g, :, 1, 2 * j], coefficient[:g, :, 1, 2 * j + 1] = to_head, to_tail
-        coefficient[:g, :, 0, 2 * j], coefficient[:g, :, 0, 2 * j + 1] = to_tail, to_head
-    columns = coefficient.reshape(-1, 4).T.copy()  # (4, 6g + 6)
+    # row 6 * group + d: entry d of a triangle of that group (row corner RING_ROW_SLOT[d], column
+    # corner RING_COLUMN_SLOT[d]); group g (not an interior triangle, or the diagonal marker): zero
+    coefficient = np.zeros((2, g + 1, 6))
+    coefficient[0, :g] = alpha[:, RING_ROW_SLOT, RING_COLUMN_SLOT]
+    coefficient[1, :g] = beta[:, RING_ROW_SLOT, RING_COLUMN_SLOT]
+    columns = coefficient.reshape(2, -1)
     triangle_group = np.full(m, g, dtype=index)
     triangle_group[sel] = group
+    del sel
 
-    inner = np.flatnonzero(es.counts == 2)
-    every = len(inner) == len(edges)  # a closed manifold mesh: no gathers of the edge arrays
-    lo = edges[:, 0] if every else edges[inner, 0]
-    flat = np.ascontiguousarray(triangles).reshape(-1)
+    starts, entries = rings.entry_starts, rings.entries
     picks = []
     for side in (0, 1):
-        rows = es.order[es.starts + side] if every else es.order[es.starts[inner] + side]
-        slot = rows // m  # half-edge row slot * m + t (see halfedges())
-        t = rows - slot * m
-        del rows
-        pick = triangle_group[t]
+        # the slot's first and second entry (the second is another slot's on boundary rows, and
+        # those slots are zeroed below)
+        at = starts if side == 0 else np.minimum(starts + 1, len(entries) - 1)
+        pick = entries[at]
+        del at
+        d = pick // m
+        pick -= d * m  # the triangle
+        pick = triangle_group[pick]
         pick *= 6
-        pick += 2 * slot
-        pick += flat[3 * t + slot] == lo  # the tail is the smaller end
+        pick += d
+        pick[d >= 6] = 6 * g  # a diagonal marker: the zero row
+        del d
         picks.append(pick)
-        del slot, t
     del triangle_group
-    ends = [
-        (forward if every else forward[inner], scale[lo]),
-        (backward if every else backward[inner], scale[edges[:, 1] if every else edges[inner, 1]]),
-    ]
+    row_scale = scale[rings.rows()]
+    off_two = rings.multiplicity != 2  # boundary rows and the diagonal: no pair of estimates
+    diagonal = rings.diagonal
+    slots = [0, 1, 2]
     diagonal_coefficient = np.stack([alpha[:, slots, slots], beta[:, slots, slots]])  # (2, g, 3)
 
+    indptr, indices = rings.indptr, rings.indices
     matrices = []
     for j in range(2):
-        data = np.zeros(nnz)
-        for direction, (positions, row_scale) in enumerate(ends):
-            column = columns[2 * j + direction]
-            summed = column[picks[0]]
-            summed += column[picks[1]]
-            summed *= row_scale
-            data[positions] = summed
+        data = columns[j][picks[0]]
+        data += columns[j][picks[1]]
+        data *= row_scale
+        data[off_two] = 0.0
         # corners in triangle order, as the reference sums them
         weights = diagonal_coefficient[j][group].reshape(-1)
         # float64 even without interior triangles (numpy returns int64 for empty weights)
         summed = np.bincount(corners, weights=weights, minlength=n).astype(np.float64, copy=False)
         summed *= scale
         data[diagonal] = summed
-        matrices.append(sp.csr_matrix((data, indices, indptr), shape=(n, n)))
-    del picks, ends, forward, backward, data, summed, weights
+        matrices.append(_csr(data, indices, indptr, n))
+    del picks, row_scale, off_two, data, summed, weights
     e1, e2 = matrices
     e2.data[diagonal[no_estimate]] = 1.0  # vertices without estimates stay put
-    adjacency = np.ones(nnz)
+    adjacency = np.ones(len(indices))
     adjacency[diagonal] = 0.0
-    return LocalOperator(
-        sp.csr_matrix((adjacency, indices, indptr), shape=(n, n)),
-        e1,
-        e2,
-        tri,
-        group,
-        u,
-        scale,
-    )
+    return LocalOperator(_csr(adjacency, indices, indptr, n), e1, e2, tri, group, u, scale)
+
+
+def _csr(data: np.ndarray, indices: np.ndarray, indptr: np.ndarray, n: int) -> sp.csr_matrix:
+    """A canonical ``(n, n)`` CSR matrix on the given arrays (shared, not copied or re-checked)."""
+    matrix = sp.csr_matrix((n, n), dtype=np.float64)
+    matrix.data, matrix.indices, matrix.indptr = data, indices, indptr
+    matrix.has_canonical_format = True  # sorted columns, no duplicates: vertex_rings built it so
+    return matrix
 
 
 class GlobalSolver:

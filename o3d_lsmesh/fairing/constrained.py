@@ -17,6 +17,7 @@ import numpy as np
 from .._o3d import new_mesh, read_mesh
 from .._progress import check_progress, iterate
 from .._validate import as_bool, as_choice, as_count, as_positive_float, mesh_arrays
+from ..topology import boundary_curves, vertex_rings
 from .barycenter import DEFAULT_MU, GlobalSolver, fairing_topology, local_operator
 from .boundary_curve import curve_operator
 from .scan_fairing import scan_denoise
@@ -173,30 +174,46 @@ def _fair(
             membrane=membrane,
             boundary_weight=boundary_weight,
         )
+    if method == "local":
+        return _fair_local(positions, triangles, number_of_iterations, smooth_boundary, reimpose_every, progress)
     topo = fairing_topology(triangles, len(positions), with_loops=smooth_boundary)
     curve = curve_operator(topo.loops)
     steps = iterate(progress, range(number_of_iterations), desc=f"constrained fairing ({method})")
-    if method == "local":
-        op = local_operator(triangles, topo)
-        del topo  # the edge structure is not needed once the operator holds its matrices
-        constant, curve_target = op.constant(positions), curve.target(positions)
-        # three (n, 3) buffers for the whole run (``positions`` is a private copy): fresh ones per
-        # iteration cost page faults at scan sizes
-        spare, work = np.empty_like(positions), np.empty_like(positions)
-        for iteration in steps:
-            if reimpose_every is not None and iteration and iteration % reimpose_every == 0:
-                constant, curve_target = op.constant(positions), curve.target(positions)
-            relaxed = op.step(positions, constant, out=spare, work=work)
-            if len(curve):
-                relaxed[curve.vertex] = curve.step(positions, curve_target)
-            positions, spare = relaxed, positions
-        return positions
     system = GlobalSolver(triangles, topo, DEFAULT_MU if mu is None else mu, solver=solver, progress=progress)
     for _ in steps:
         known = positions.copy()
         if len(curve):
             known[curve.vertex] = curve.step(positions, curve.target(positions))
         positions = system.solve(known, positions)
+    return positions
+
+
+def _fair_local(positions, triangles, number_of_iterations, smooth_boundary, reimpose_every, progress):
+    # the paper's local operator (eq. 7): one sort of the directed half-edges gives the 1-ring
+    # pattern, the valences and the boundary; the edge list is formed only for a boundary walk
+    n = len(positions)
+    rings = vertex_rings(triangles, n)
+    curves = (
+        boundary_curves(triangles, n, edges=rings.edge_structure())
+        if smooth_boundary and rings.boundary.any()
+        else []
+    )
+    curve = curve_operator(curves)
+    del curves
+    op = local_operator(triangles, rings)
+    del rings  # the operator holds what it needs
+    constant, curve_target = op.constant(positions), curve.target(positions)
+    # three (n, 3) buffers for the whole run (``positions`` is a private copy): fresh ones per
+    # iteration cost page faults at scan sizes
+    spare, work = np.empty_like(positions), np.empty_like(positions)
+    steps = iterate(progress, range(number_of_iterations), desc="constrained fairing (local)")
+    for iteration in steps:
+        if reimpose_every is not None and iteration and iteration % reimpose_every == 0:
+            constant, curve_target = op.constant(positions), curve.target(positions)
+        relaxed = op.step(positions, constant, out=spare, work=work)
+        if len(curve):
+            relaxed[curve.vertex] = curve.step(positions, curve_target)
+        positions, spare = relaxed, positions
     return positions
 
 
@@ -440,4 +457,5 @@ def constrained_fairing(
         number_of_iterations, method, mu, smooth_boundary, reimpose_every, progress, membrane, boundary_weight
     )
     data = read_mesh(mesh, weld=True)
-    return new_mesh(data, _fair(data.vertices.copy(), data.triangles, *options, solver=solver, **extra))
+    # read_mesh's vertices are already a private copy: _fair may write to them
+    return new_mesh(data, _fair(data.vertices, data.triangles, *options, solver=solver, **extra))
