@@ -327,12 +327,15 @@ def vertex_rings(triangles: np.ndarray, n: int) -> VertexRings:
     m = len(triangles)
     count = 6 * m + n
     index = np.int32 if count + 1 < np.iinfo(np.int32).max else np.int64
+    # entries 0..3m-1 run tail -> head (corners 0, 1, 2 -> 1, 2, 0), 3m..6m-1 head -> tail
     rows = np.empty(count, dtype=index)
-    columns = np.empty(count, dtype=index)
-    for d, (a, b) in enumerate(zip(RING_ROW_SLOT, RING_COLUMN_SLOT)):
-        rows[d * m : (d + 1) * m] = triangles[:, a]
-        columns[d * m : (d + 1) * m] = triangles[:, b]
+    rows[: 3 * m].reshape(3, m)[...] = triangles.T
+    for d, source in ((3, 1), (4, 2), (5, 0)):
+        rows[d * m : (d + 1) * m] = rows[source * m : (source + 1) * m]
     rows[6 * m :] = np.arange(n, dtype=index)
+    columns = np.empty(count, dtype=index)
+    columns[: 3 * m] = rows[3 * m : 6 * m]
+    columns[3 * m : 6 * m] = rows[: 3 * m]
     columns[6 * m :] = rows[6 * m :]
     ids = np.arange(count, dtype=index)
     indptr = np.empty(n + 1, dtype=index)
@@ -341,29 +344,32 @@ def vertex_rings(triangles: np.ndarray, n: int) -> VertexRings:
     if _coo_tocsr is not None and _csr_sort_indices is not None:
         # by row, stably (a counting sort), then each row's columns in place
         _coo_tocsr(n, n, count, rows, columns, ids, indptr, sorted_columns, entries)
-        del rows, columns, ids
         _csr_sort_indices(n, indptr, sorted_columns, entries)
     else:  # pragma: no cover
         order = np.lexsort((columns, rows))
         sorted_columns[:], entries[:] = columns[order], ids[order]
         indptr[0] = 0
         np.cumsum(np.bincount(rows, minlength=n), out=indptr[1:])
-        del rows, columns, ids, order
-    # a slot starts at every new column and at every row (rows are never empty: the diagonal)
-    first = np.empty(count, dtype=bool)
+        del order
+    # The input arrays are dead now: their pages (already mapped) hold what follows, since fresh
+    # memory of this size costs a page fault per page. A slot starts at every new column and at
+    # every row (rows are never empty: the diagonal).
+    first = rows.view(np.bool_)[:count]
     first[:1] = True
     np.not_equal(sorted_columns[1:], sorted_columns[:-1], out=first[1:])
     first[indptr[:-1]] = True
-    entry_starts = np.flatnonzero(first).astype(index)
+    slots = int(np.count_nonzero(first))
+    entry_starts = np.compress(first, ids, out=columns[:slots])
     per_row = np.add.reduceat(first, indptr[:-1], dtype=index) if n else np.zeros(0, dtype=index)
-    del first
+    del first, rows
     indices = sorted_columns[entry_starts]
     del sorted_columns
     ring_indptr = np.zeros(n + 1, dtype=index)
     np.cumsum(per_row, out=ring_indptr[1:])
-    multiplicity = np.empty(len(entry_starts), dtype=index)
+    multiplicity = ids[:slots]
     np.subtract(entry_starts[1:], entry_starts[:-1], out=multiplicity[:-1])
     multiplicity[-1:] = count - entry_starts[-1:]
+    del ids
     # the diagonal entry of row v is its slot whose entry is 6m + v (a triangle never repeats a vertex)
     diagonal = np.flatnonzero(entries[entry_starts] >= 6 * m)
     valence = per_row.astype(np.int64)
