@@ -351,17 +351,16 @@ def vertex_rings(triangles: np.ndarray, n: int) -> VertexRings:
         indptr[0] = 0
         np.cumsum(np.bincount(rows, minlength=n), out=indptr[1:])
         del order
-    # The input arrays are dead now: their pages (already mapped) hold what follows, since fresh
-    # memory of this size costs a page fault per page. A slot starts at every new column and at
-    # every row (rows are never empty: the diagonal).
+    # The sort's inputs are dead now: their pages (already mapped; fresh memory of this size costs a
+    # page fault per page) hold what follows. A slot starts at every new column and at every row
+    # (rows are never empty: the diagonal).
     first = rows.view(np.bool_)[:count]
     first[:1] = True
     np.not_equal(sorted_columns[1:], sorted_columns[:-1], out=first[1:])
     first[indptr[:-1]] = True
-    slots = int(np.count_nonzero(first))
-    entry_starts = np.compress(first, ids, out=columns[:slots])
+    entry_starts = ids[first]
+    slots = len(entry_starts)
     per_row = np.add.reduceat(first, indptr[:-1], dtype=index) if n else np.zeros(0, dtype=index)
-    del first, rows
     indices = sorted_columns[entry_starts]
     del sorted_columns
     ring_indptr = np.zeros(n + 1, dtype=index)
@@ -371,7 +370,10 @@ def vertex_rings(triangles: np.ndarray, n: int) -> VertexRings:
     multiplicity[-1:] = count - entry_starts[-1:]
     del ids
     # the diagonal entry of row v is its slot whose entry is 6m + v (a triangle never repeats a vertex)
-    diagonal = np.flatnonzero(entries[entry_starts] >= 6 * m)
+    leading = np.take(entries, entry_starts, out=columns[:slots])
+    marker = np.greater_equal(leading, 6 * m, out=first[:slots])
+    diagonal = np.flatnonzero(marker)
+    del first, rows, columns, leading, marker
     valence = per_row.astype(np.int64)
     valence -= 1
     del per_row

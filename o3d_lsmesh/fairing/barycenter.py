@@ -255,9 +255,10 @@ class LocalOperator:
     e2: sp.csr_matrix
     e3: sp.csr_matrix
 
-    def constant(self, positions0: np.ndarray) -> np.ndarray:
-        """``E3 @ X0``, the constraint part, ``(n, 3)`` float64 (one sparse mat-vec)."""
-        out = np.zeros((self.e3.shape[0], 3))
+    def constant(self, positions0: np.ndarray, *, out: np.ndarray | None = None) -> np.ndarray:
+        """``E3 @ X0``, the constraint part, ``(n, 3)`` float64 (one sparse mat-vec; into ``out`` if given)."""
+        out = np.zeros((self.e3.shape[0], 3)) if out is None else out
+        out.fill(0.0)
         _accumulate(self.e3, np.asarray(positions0, dtype=np.float64), out)
         return out
 
@@ -329,10 +330,12 @@ def local_operator(triangles: np.ndarray, topo: FairingTopology | VertexRings) -
     n = rings.n
     m = len(triangles)
     indptr, indices, index = rings.indptr, rings.indices, rings.indices.dtype
-    tri = triangles.astype(index)
-    interior = ~rings.boundary[tri].any(axis=1) if rings.boundary.any() else None
-    group, table, M, u = _valence_tables(tri if interior is None else tri[interior], rings.valence)
-    del tri
+    if rings.boundary.any():
+        interior = ~rings.boundary[triangles].any(axis=1)
+        group, table, M, u = _valence_tables(triangles[interior], rings.valence)
+    else:  # a closed mesh: every triangle is interior
+        interior = None
+        group, table, M, u = _valence_tables(triangles, rings.valence)
     g = len(table)
     alpha = M / table[:, None, :]  # (g, 3, 3): coefficient of S_{i_b} in P_a
     beta = alpha - alpha.sum(axis=2, keepdims=True)  # coefficient of x_{i_c}: -sum_{b != c} alpha_ab
@@ -350,10 +353,10 @@ def local_operator(triangles: np.ndarray, topo: FairingTopology | VertexRings) -
         columns[:g, :, 3 + j] = c[:, rows, rows]
     columns[:g, :, 6] = 1.0
     columns = columns.reshape(-1, 7)
-    triangle_group = np.full(m, g, dtype=index)
     if interior is None:
-        triangle_group[:] = group
+        triangle_group = group.astype(index, copy=False)
     else:
+        triangle_group = np.full(m, g, dtype=index)
         triangle_group[interior] = group
     del interior, group
 

@@ -201,20 +201,34 @@ def _fair_local(positions, triangles, number_of_iterations, smooth_boundary, rei
     curve = curve_operator(curves)
     del curves
     op = local_operator(triangles, rings)
-    del rings  # the operator holds what it needs
-    constant, curve_target = op.constant(positions), curve.target(positions)
-    # three (n, 3) buffers for the whole run (``positions`` is a private copy): fresh ones per
-    # iteration cost page faults at scan sizes
-    spare, work = np.empty_like(positions), np.empty_like(positions)
+    # the rings' index arrays are dead now: their pages (already mapped, where fresh (n, 3) buffers
+    # would cost a page fault per page at scan sizes) hold the three buffers of the whole run
+    constant, spare, work = (
+        _reused(array, positions.shape) for array in (rings.entry_starts, rings.entries, rings.multiplicity)
+    )
+    del rings
+    constant = op.constant(positions, out=constant)
+    curve_target = curve.target(positions)
+    result = positions  # a plain array (the reused buffers are views of the rings' int arrays)
     steps = iterate(progress, range(number_of_iterations), desc="constrained fairing (local)")
     for iteration in steps:
         if reimpose_every is not None and iteration and iteration % reimpose_every == 0:
-            constant, curve_target = op.constant(positions), curve.target(positions)
+            constant, curve_target = op.constant(positions, out=constant), curve.target(positions)
         relaxed = op.step(positions, constant, out=spare, work=work)
         if len(curve):
             relaxed[curve.vertex] = curve.step(positions, curve_target)
         positions, spare = relaxed, positions
-    return positions
+    if positions is not result:  # an odd number of iterations
+        np.copyto(result, positions)
+    return result
+
+
+def _reused(array: np.ndarray, shape: tuple) -> np.ndarray:
+    """An uninitialized float64 array of ``shape`` on the memory of the dead contiguous ``array``, or a new one."""
+    size = int(np.prod(shape)) * 8
+    if array.flags.c_contiguous and array.nbytes >= size:
+        return array.reshape(-1).view(np.uint8)[:size].view(np.float64).reshape(shape)
+    return np.empty(shape)
 
 
 def constrained_fairing(
