@@ -303,6 +303,22 @@ class VertexRings:
         return EdgeStructure(edges, counts, order, starts)
 
 
+#: Elements per chunk of the passes that would otherwise need a temporary as large as the input: a few
+#: megabytes, which the allocator reuses instead of mapping (and faulting in) fresh pages every time.
+_CHUNK = 1 << 19
+
+
+def _flatnonzero_into(mask: np.ndarray, out: np.ndarray) -> np.ndarray:
+    """``np.flatnonzero(mask)`` written into ``out`` (of the mask's count, any integer dtype), by chunks."""
+    at = 0
+    for start in range(0, len(mask), _CHUNK):
+        found = np.flatnonzero(mask[start : start + _CHUNK])
+        found += start
+        out[at : at + len(found)] = found
+        at += len(found)
+    return out
+
+
 def vertex_rings(triangles: np.ndarray, n: int) -> VertexRings:
     """The :class:`VertexRings` of a mesh: its 1-ring CSR pattern from one counting sort of directed half-edges.
 
@@ -358,9 +374,10 @@ def vertex_rings(triangles: np.ndarray, n: int) -> VertexRings:
     first[:1] = True
     np.not_equal(sorted_columns[1:], sorted_columns[:-1], out=first[1:])
     first[indptr[:-1]] = True
-    entry_starts = ids[first]
-    slots = len(entry_starts)
+    slots = int(np.count_nonzero(first))
+    entry_starts = _flatnonzero_into(first, columns[:slots])
     per_row = np.add.reduceat(first, indptr[:-1], dtype=index) if n else np.zeros(0, dtype=index)
+    del first, rows
     indices = sorted_columns[entry_starts]
     del sorted_columns
     ring_indptr = np.zeros(n + 1, dtype=index)
@@ -368,12 +385,15 @@ def vertex_rings(triangles: np.ndarray, n: int) -> VertexRings:
     multiplicity = ids[:slots]
     np.subtract(entry_starts[1:], entry_starts[:-1], out=multiplicity[:-1])
     multiplicity[-1:] = count - entry_starts[-1:]
-    del ids
-    # the diagonal entry of row v is its slot whose entry is 6m + v (a triangle never repeats a vertex)
-    leading = np.take(entries, entry_starts, out=columns[:slots])
-    marker = np.greater_equal(leading, 6 * m, out=first[:slots])
-    diagonal = np.flatnonzero(marker)
-    del first, rows, columns, leading, marker
+    del ids, columns
+    # the diagonal slot of row v is the one whose entry is 6m + v (a triangle never repeats a vertex)
+    diagonal = np.concatenate(
+        [
+            np.flatnonzero(entries[entry_starts[s0 : s0 + _CHUNK]] >= 6 * m) + s0
+            for s0 in range(0, slots, _CHUNK)
+        ]
+        or [np.zeros(0, dtype=np.int64)]
+    )
     valence = per_row.astype(np.int64)
     valence -= 1
     del per_row
