@@ -253,10 +253,13 @@ class LocalOperator:
     adjacency: sp.csr_matrix
     e1: sp.csr_matrix
     e2: sp.csr_matrix
-    e3: sp.csr_matrix
+    e3: sp.csr_matrix | None  # None when built with keep_constraint=False
+    initial: np.ndarray | None = None  # E3 @ X0 of the positions0 given to local_operator
 
     def constant(self, positions0: np.ndarray, *, out: np.ndarray | None = None) -> np.ndarray:
         """``E3 @ X0``, the constraint part, ``(n, 3)`` float64 (one sparse mat-vec; into ``out`` if given)."""
+        if self.e3 is None:
+            raise ValueError("this LocalOperator was built with keep_constraint=False: it has no E3")
         out = np.zeros((self.e3.shape[0], 3)) if out is None else out
         out.fill(0.0)
         _accumulate(self.e3, np.asarray(positions0, dtype=np.float64), out)
@@ -309,8 +312,30 @@ def _accumulate(matrix: sp.csr_matrix, x: np.ndarray, out: np.ndarray) -> None:
     )
 
 
-def local_operator(triangles: np.ndarray, topo: FairingTopology | VertexRings) -> LocalOperator:
+def _accumulate_block(
+    indptr: np.ndarray, indices: np.ndarray, data: np.ndarray, x: np.ndarray, out: np.ndarray
+) -> None:
+    """``out += A @ x`` for the CSR rows ``(indptr, indices, data)`` of a block, ``x (n, 3)``, ``out (rows, 3)``."""
+    rows = len(indptr) - 1
+    if _csr_matvecs is not None and out.flags.c_contiguous and indices.dtype == indptr.dtype:
+        _csr_matvecs(rows, len(x), 3, indptr, indices, data, x.ravel(), out.ravel())
+    else:  # pragma: no cover - a SciPy without the kernel
+        out += sp.csr_matrix((data, indices, indptr), shape=(rows, len(x))) @ x
+
+
+def local_operator(
+    triangles: np.ndarray,
+    topo: FairingTopology | VertexRings,
+    *,
+    positions0: np.ndarray | None = None,
+    keep_constraint: bool = True,
+) -> LocalOperator:
     """Assemble the :class:`LocalOperator` of the interior triangles of ``triangles``.
+
+    With ``positions0 (n, 3)`` the constraint part ``E3 @ X0`` is computed
+    during the assembly, block by block, into :attr:`LocalOperator.initial`;
+    ``keep_constraint=False`` then drops ``E3`` (an ``nnz`` float64 array)
+    when no later :meth:`~LocalOperator.constant` call needs it.
 
     ``topo``: the mesh's :class:`~o3d_lsmesh.topology.VertexRings` (what
     local fairing builds), or a :class:`FairingTopology` (its rings are then
@@ -366,7 +391,10 @@ def local_operator(triangles: np.ndarray, topo: FairingTopology | VertexRings) -
     # slot's coefficient is the sum of its two entries' table rows, and half the row sum of the
     # diagonal columns (and of the estimate column) is the diagonal (and the estimate count).
     entries, starts, multiplicity, diagonal = rings.entries, rings.entry_starts, rings.multiplicity, rings.diagonal
-    data = [np.empty(len(indices)) for _ in range(4)]  # E1, E2, E3, W
+    data = [np.empty(len(indices)) for _ in range(4 if keep_constraint else 3)]  # E1, E2, W, E3
+    if positions0 is not None:
+        positions0 = np.ascontiguousarray(positions0, dtype=np.float64)
+        initial = np.zeros((n, 3))
     block = _BLOCK_ROWS  # rows per block
     for r0 in range(0, n, block):
         r1 = min(n, r0 + block)
@@ -386,19 +414,24 @@ def local_operator(triangles: np.ndarray, topo: FairingTopology | VertexRings) -
         row_scale = np.repeat(scale, np.diff(indptr[r0 : r1 + 1]))
         local_diagonal = diagonal[r0:r1] - s0
         for j in range(3):
-            block_data = data[j][s0:s1]
+            target = j if j < 2 else 3  # data holds E1, E2, W, E3
+            block_data = data[target][s0:s1] if target < len(data) else np.empty(s1 - s0)
             np.multiply(values[:, j], row_scale, out=block_data)
             diagonal_values = sums[:, j]
             diagonal_values *= scale
             block_data[local_diagonal] = diagonal_values
         # vertices without estimates stay put
         data[1][s0:s1][local_diagonal[count == 0]] = 1.0
-        adjacency = data[3][s0:s1]
+        adjacency = data[2][s0:s1]
         adjacency.fill(1.0)
         adjacency[local_diagonal] = 0.0
+        if positions0 is not None:  # the block's rows of E3 @ X0
+            block_indptr = indptr[r0 : r1 + 1] - indptr[r0]
+            _accumulate_block(block_indptr, indices[s0:s1], block_data, positions0, initial[r0:r1])
     del triangle_group
-    e1, e2, e3, adjacency = (_csr(values, indices, indptr, n) for values in data)
-    return LocalOperator(adjacency, e1, e2, e3)
+    e1, e2, adjacency = (_csr(values, indices, indptr, n) for values in data[:3])
+    e3 = _csr(data[3], indices, indptr, n) if keep_constraint else None
+    return LocalOperator(adjacency, e1, e2, e3, initial if positions0 is not None else None)
 
 
 def _entry_rows(entry: np.ndarray, triangle_group: np.ndarray, m: int, g: int) -> np.ndarray:

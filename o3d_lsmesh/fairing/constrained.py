@@ -200,14 +200,14 @@ def _fair_local(positions, triangles, number_of_iterations, smooth_boundary, rei
     )
     curve = curve_operator(curves)
     del curves
-    op = local_operator(triangles, rings)
+    # the constraint part E3 @ X0 is formed during the assembly; E3 itself is kept only when the
+    # targets are re-taken
+    op = local_operator(triangles, rings, positions0=positions, keep_constraint=reimpose_every is not None)
+    constant = op.initial
     # the rings' index arrays are dead now: their pages (already mapped, where fresh (n, 3) buffers
-    # would cost a page fault per page at scan sizes) hold the three buffers of the whole run
-    constant, spare, work = (
-        _reused(array, positions.shape) for array in (rings.entry_starts, rings.entries, rings.multiplicity)
-    )
+    # would cost a page fault per page at scan sizes) hold the two buffers of the whole run
+    spare, work = (_reused(array, positions.shape) for array in (rings.entries, rings.multiplicity))
     del rings
-    constant = op.constant(positions, out=constant)
     curve_target = curve.target(positions)
     result = positions  # a plain array (the reused buffers are views of the rings' int arrays)
     steps = iterate(progress, range(number_of_iterations), desc="constrained fairing (local)")
