@@ -13,13 +13,12 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse import csgraph
 
-from ._ranges import concatenated_ranges
 
 try:  # SciPy's sparse kernels (private, the same signatures since SciPy 1.0): sorts without a copy
-    from scipy.sparse._sparsetools import coo_tocsr as _coo_tocsr
     from scipy.sparse._sparsetools import csr_sort_indices as _csr_sort_indices
-except ImportError:  # pragma: no cover - a SciPy without them sorts through the public matrix classes
-    _coo_tocsr = _csr_sort_indices = None
+    from scipy.sparse._sparsetools import csr_tocsc as _csr_tocsc
+except ImportError:  # pragma: no cover - a SciPy without them sorts with numpy
+    _csr_tocsc = _csr_sort_indices = None
 
 __all__ = [
     "BoundaryCurves",
@@ -220,16 +219,20 @@ def edge_structure(triangles: np.ndarray, n: int | None = None) -> EdgeStructure
 RING_ROW_SLOT = (0, 1, 2, 1, 2, 0)
 RING_COLUMN_SLOT = (1, 2, 0, 0, 1, 2)
 
+#: Vertices per block of :func:`vertex_rings` (about 12 entries each): block temporaries of a few
+#: megabytes, which the allocator reuses instead of mapping (and faulting in) fresh pages.
+_RING_BLOCK = 1 << 14
+
 
 @dataclass(frozen=True)
 class VertexRings:
-    """The 1-ring CSR pattern of a mesh with the triangles behind every entry, from one sort.
+    """The 1-ring CSR pattern of a mesh, with the triangles behind every slot.
 
     Built by :func:`vertex_rings`. Row ``v`` of ``(indptr, indices)`` holds ``v`` itself and its
     distinct edge neighbours, in column order (canonical CSR). Every triangle ``t`` gives six
     *entries*: entry ``d * m + t`` (``d < 6``) sits in row ``triangles[t, RING_ROW_SLOT[d]]`` and
     column ``triangles[t, RING_COLUMN_SLOT[d]]``, so slot ``(v, w)`` collects one entry per triangle
-    on the edge ``{v, w}``; entry ``6 m + v`` is the diagonal of row ``v``.
+    on the edge ``{v, w}``.
 
     Attributes
     ----------
@@ -238,12 +241,9 @@ class VertexRings:
         The pattern: diagonal plus both directions of every edge, ``nnz = n + 2 e``.
     diagonal : (n,) int64
         Position of each row's diagonal in ``indices``.
-    multiplicity : (nnz,) int32
-        Triangles on the edge of each slot (1 on a boundary, 2 inside, more when non-manifold; 1 on
-        the diagonal).
-    entries : (6 m + n,) int32
-        Entry ids grouped by slot: slot ``s`` holds ``entries[entry_starts[s]:][:multiplicity[s]]``.
-    entry_starts : (nnz,) int32
+    pairs : (2, nnz) int32
+        Two entries of each slot: the two triangles of an edge of two; on an edge of one triangle
+        its entry twice, on an edge of more two of them; ``6 m`` on the diagonal.
     valence : (n,) int64
         Distinct edge neighbours of every vertex (0 for isolated vertices).
     boundary : (n,) bool
@@ -253,9 +253,7 @@ class VertexRings:
     indptr: np.ndarray
     indices: np.ndarray
     diagonal: np.ndarray
-    multiplicity: np.ndarray
-    entries: np.ndarray
-    entry_starts: np.ndarray
+    pairs: np.ndarray
     valence: np.ndarray
     boundary: np.ndarray
 
@@ -263,72 +261,19 @@ class VertexRings:
     def n(self) -> int:
         return len(self.indptr) - 1
 
-    def rows(self) -> np.ndarray:
-        """Row of every slot, ``(nnz,)``."""
-        return np.repeat(np.arange(self.n, dtype=self.indices.dtype), np.diff(self.indptr))
-
-    def edge_structure(self) -> EdgeStructure:
-        """The :class:`EdgeStructure` of the same mesh (equal to :func:`edge_structure`'s), without a sort.
-
-        The slots above the diagonal are the undirected edges in ``(lo, hi)`` order; the half-edge
-        row of entry ``k < 6 m`` is ``k mod 3 m``, and the rows of an edge are put in increasing
-        order (what :func:`edge_structure`'s stable sort gives).
-        """
-        index = self.indices.dtype
-        m = (len(self.entries) - self.n) // 6
-        rows = self.rows()
-        upper = np.flatnonzero(self.indices > rows)
-        edges = np.empty((len(upper), 2), dtype=index)
-        edges[:, 0] = rows[upper]
-        del rows
-        edges[:, 1] = self.indices[upper]
-        counts = self.multiplicity[upper].astype(index)
-        starts = np.zeros(len(upper), dtype=index)
-        np.cumsum(counts[:-1], out=starts[1:])
-        order = np.empty(3 * m, dtype=index)
-        slot_start = self.entry_starts[upper]
-        for i in range(int(counts.max()) if len(counts) else 0):
-            has = np.flatnonzero(counts > i)
-            order[starts[has] + i] = self.entries[slot_start[has] + i]
-        order %= 3 * m
-        # in-edge order as a stable sort by edge gives it: increasing half-edge row
-        pairs = starts[counts == 2]
-        swap = order[pairs] > order[pairs + 1]
-        order[pairs[swap]], order[pairs[swap] + 1] = order[pairs[swap] + 1], order[pairs[swap]]
-        crowded = np.flatnonzero(counts > 2)  # fins: a few rows each, sorted within their edge
-        if len(crowded):
-            at = concatenated_ranges(starts[crowded], counts[crowded])
-            edge_of = np.repeat(crowded, counts[crowded])
-            order[at] = order[at[np.lexsort((order[at], edge_of))]]
-        return EdgeStructure(edges, counts, order, starts)
-
-
-#: Elements per chunk of the passes that would otherwise need a temporary as large as the input: a few
-#: megabytes, which the allocator reuses instead of mapping (and faulting in) fresh pages every time.
-_CHUNK = 1 << 19
-
-
-def _flatnonzero_into(mask: np.ndarray, out: np.ndarray) -> np.ndarray:
-    """``np.flatnonzero(mask)`` written into ``out`` (of the mask's count, any integer dtype), by chunks."""
-    at = 0
-    for start in range(0, len(mask), _CHUNK):
-        found = np.flatnonzero(mask[start : start + _CHUNK])
-        found += start
-        out[at : at + len(found)] = found
-        at += len(found)
-    return out
-
 
 def vertex_rings(triangles: np.ndarray, n: int) -> VertexRings:
-    """The :class:`VertexRings` of a mesh: its 1-ring CSR pattern from one counting sort of directed half-edges.
+    """The :class:`VertexRings` of a mesh: its 1-ring CSR pattern, valences and boundary, in one pass.
 
-    The ``6 m`` directed entries (both directions of the three edges of every triangle) and ``n``
-    diagonal markers are grouped by row with one stable counting sort (SciPy's COO-to-CSR
-    conversion), and each row's few columns are then sorted in place (about 13 per row); equal
-    columns of a row are the triangles on one edge. Linear, with int32 arrays when the mesh fits.
-    What local fairing needs (pattern, valences, boundary) comes from this one pass, with no
-    undirected edge list; :meth:`VertexRings.edge_structure` gives the edge grouping when a
-    boundary walk needs it.
+    The ``3 m`` triangle corners are grouped by vertex with one stable counting sort (SciPy's
+    CSR-to-CSC transpose); then, block by block of vertices, every corner gives its two entries
+    (to the next and the previous corner of its triangle), each row's few columns are sorted in
+    place (about 12 per row), and equal columns of a row are the triangles of one edge. Only the
+    results are mesh-sized (int32 when the mesh fits): the per-block temporaries stay a few
+    megabytes, so that at scan sizes no memory is mapped and faulted in for the sort's sake.
+    Arrays sized by the bound ``6 m + n`` on the slots are allocated but only their used prefix
+    is touched. What local fairing needs (pattern, valences, boundary) comes from this pass, with
+    no undirected edge list.
 
     Examples
     --------
@@ -336,73 +281,96 @@ def vertex_rings(triangles: np.ndarray, n: int) -> VertexRings:
     >>> rings = vertex_rings(np.array([[0, 1, 2], [0, 2, 3]]), 4)
     >>> rings.indptr.tolist(), rings.indices.tolist()
     ([0, 4, 7, 11, 14], [0, 1, 2, 3, 0, 1, 2, 0, 1, 2, 3, 0, 2, 3])
-    >>> rings.valence.tolist(), rings.boundary.tolist(), rings.multiplicity[rings.indptr[0] : rings.indptr[1]].tolist()
-    ([3, 2, 3, 2], [True, True, True, True], [1, 1, 2, 1])
+    >>> rings.valence.tolist(), rings.boundary.tolist(), rings.pairs[:, rings.indptr[2] : rings.indptr[3]].tolist()
+    ([3, 2, 3, 2], [True, True, True, True], [[2, 1, 12, 5], [8, 1, 12, 5]])
     """
     triangles = np.asarray(triangles)
     m = len(triangles)
-    count = 6 * m + n
-    index = np.int32 if count + 1 < np.iinfo(np.int32).max else np.int64
-    # entries 0..3m-1 run tail -> head (corners 0, 1, 2 -> 1, 2, 0), 3m..6m-1 head -> tail
-    rows = np.empty(count, dtype=index)
-    rows[: 3 * m].reshape(3, m)[...] = triangles.T
-    for d, source in ((3, 1), (4, 2), (5, 0)):
-        rows[d * m : (d + 1) * m] = rows[source * m : (source + 1) * m]
-    rows[6 * m :] = np.arange(n, dtype=index)
-    columns = np.empty(count, dtype=index)
-    columns[: 3 * m] = rows[3 * m : 6 * m]
-    columns[3 * m : 6 * m] = rows[: 3 * m]
-    columns[6 * m :] = rows[6 * m :]
-    ids = np.arange(count, dtype=index)
-    indptr = np.empty(n + 1, dtype=index)
-    sorted_columns = np.empty(count, dtype=index)
-    entries = np.empty(count, dtype=index)
-    if _coo_tocsr is not None and _csr_sort_indices is not None:
-        # by row, stably (a counting sort), then each row's columns in place
-        _coo_tocsr(n, n, count, rows, columns, ids, indptr, sorted_columns, entries)
-        _csr_sort_indices(n, indptr, sorted_columns, entries)
+    corners = 3 * m
+    bound = 6 * m + n
+    index = np.int32 if bound + 1 < np.iinfo(np.int32).max else np.int64
+    corner_vertex = np.empty(corners, dtype=index)  # corner a * m + t holds triangles[t, a]
+    corner_vertex.reshape(3, m)[...] = triangles.T
+    # corners grouped by vertex, stably: a counting sort (the transpose of a one-entry-per-row CSR)
+    start = np.zeros(n + 1, dtype=index)
+    by_vertex = np.empty(corners, dtype=index)
+    if _csr_tocsc is not None:
+        _csr_tocsc(
+            corners,
+            n,
+            np.arange(corners + 1, dtype=index),
+            corner_vertex,
+            np.zeros(corners, dtype=np.bool_),
+            start,
+            by_vertex,
+            np.empty(corners, dtype=np.bool_),
+        )
     else:  # pragma: no cover
-        order = np.lexsort((columns, rows))
-        sorted_columns[:], entries[:] = columns[order], ids[order]
-        indptr[0] = 0
-        np.cumsum(np.bincount(rows, minlength=n), out=indptr[1:])
-        del order
-    # The sort's inputs are dead now: their pages (already mapped; fresh memory of this size costs a
-    # page fault per page) hold what follows. A slot starts at every new column and at every row
-    # (rows are never empty: the diagonal).
-    first = rows.view(np.bool_)[:count]
-    first[:1] = True
-    np.not_equal(sorted_columns[1:], sorted_columns[:-1], out=first[1:])
-    first[indptr[:-1]] = True
-    slots = int(np.count_nonzero(first))
-    entry_starts = _flatnonzero_into(first, columns[:slots])
-    per_row = np.add.reduceat(first, indptr[:-1], dtype=index) if n else np.zeros(0, dtype=index)
-    del first, rows
-    indices = sorted_columns[entry_starts]
-    del sorted_columns
-    ring_indptr = np.zeros(n + 1, dtype=index)
-    np.cumsum(per_row, out=ring_indptr[1:])
-    multiplicity = ids[:slots]
-    np.subtract(entry_starts[1:], entry_starts[:-1], out=multiplicity[:-1])
-    multiplicity[-1:] = count - entry_starts[-1:]
-    del ids, columns
-    # the diagonal slot of row v is the one whose entry is 6m + v (a triangle never repeats a vertex)
-    diagonal = np.concatenate(
-        [
-            np.flatnonzero(entries[entry_starts[s0 : s0 + _CHUNK]] >= 6 * m) + s0
-            for s0 in range(0, slots, _CHUNK)
-        ]
-        or [np.zeros(0, dtype=np.int64)]
-    )
-    valence = per_row.astype(np.int64)
-    valence -= 1
-    del per_row
+        by_vertex[:] = np.argsort(corner_vertex, kind="stable")
+        np.cumsum(np.bincount(corner_vertex, minlength=n), out=start[1:])
+    indices = np.empty(bound, dtype=index)  # only the used prefix (n + 2e) is ever touched
+    pairs = np.empty((2, bound), dtype=index)
+    diagonal = np.empty(n, dtype=np.int64)
+    valence = np.zeros(n, dtype=np.int64)
     boundary = np.zeros(n, dtype=bool)
-    # slot (v, w) and slot (w, v) count the same triangles: marking the columns marks both ends
-    off = multiplicity != 2
-    off[diagonal] = False
-    boundary[indices[off]] = True
-    return VertexRings(ring_indptr, indices, diagonal, multiplicity, entries, entry_starts, valence, boundary)
+    offset = 0
+    for v0 in range(0, n, _RING_BLOCK):
+        v1 = min(n, v0 + _RING_BLOCK)
+        rows = v1 - v0
+        corner = by_vertex[start[v0] : start[v1]]
+        slot = corner // m  # the corner's place in its triangle
+        # the corner's two entries: forward (its id a * m + t, to the next corner) and reverse
+        # (id d * m + t with d = 3 + (a - 1) % 3, to the previous corner)
+        following = corner + m
+        following[slot == 2] -= corners
+        preceding = corner - m
+        preceding[slot == 0] += corners
+        columns = np.empty(2 * len(corner), dtype=index)
+        entries = np.empty(2 * len(corner), dtype=index)
+        columns[0::2] = corner_vertex[following]
+        columns[1::2] = corner_vertex[preceding]
+        entries[0::2] = corner
+        reverse = entries[1::2]
+        np.add(corner, 2 * m, out=reverse)
+        reverse[slot == 0] += 3 * m
+        del following, preceding, slot, corner
+        degree = np.diff(start[v0 : v1 + 1])
+        local = (2 * (start[v0 : v1 + 1] - start[v0])).astype(index)
+        if _csr_sort_indices is not None:
+            _csr_sort_indices(rows, local, columns, entries)  # each row's columns in order
+        else:  # pragma: no cover
+            row_of = np.repeat(np.arange(rows), 2 * degree)
+            order = np.lexsort((columns, row_of))
+            columns, entries = columns[order], entries[order]
+        # a slot starts at every new column and at every non-empty row
+        first = np.empty(len(columns), dtype=bool)
+        first[:1] = True
+        np.not_equal(columns[1:], columns[:-1], out=first[1:])
+        first[local[:-1][degree > 0]] = True
+        at = np.flatnonzero(first)
+        multiplicity = np.diff(at, append=len(columns))
+        row = np.repeat(np.arange(rows), 2 * degree)[at]
+        column = columns[at]
+        per_row = np.bincount(row, minlength=rows)
+        valence[v0:v1] = per_row
+        boundary[v0 + row[multiplicity != 2]] = True
+        # global positions: each row's slots below its vertex, its diagonal, the slots above
+        row_start = np.cumsum(per_row + 1) - (per_row + 1) + offset
+        rank = np.arange(len(at)) - (np.cumsum(per_row) - per_row)[row]
+        vertex = np.arange(v0, v1)
+        above = column > vertex[row]
+        position = row_start[row] + rank + above
+        diagonal_position = row_start + np.bincount(row[~above], minlength=rows)
+        indices[position] = column
+        indices[diagonal_position] = vertex
+        pairs[0, position] = entries[at]
+        pairs[1, position] = entries[at + (multiplicity > 1)]
+        pairs[:, diagonal_position] = 6 * m  # a zero row for the operators
+        diagonal[v0:v1] = diagonal_position
+        offset += int(per_row.sum()) + rows
+    indptr = np.zeros(n + 1, dtype=index)
+    np.cumsum(valence + 1, out=indptr[1:])
+    return VertexRings(indptr, indices[:offset], diagonal, pairs[:, :offset], valence, boundary)
 
 
 def unique_edges(triangles: np.ndarray, n: int | None = None):

@@ -390,7 +390,7 @@ def local_operator(
     # on its edge, and every triangle on the row's vertex lies in exactly two of its slots; so a
     # slot's coefficient is the sum of its two entries' table rows, and half the row sum of the
     # diagonal columns (and of the estimate column) is the diagonal (and the estimate count).
-    entries, starts, multiplicity, diagonal = rings.entries, rings.entry_starts, rings.multiplicity, rings.diagonal
+    pairs, diagonal = rings.pairs, rings.diagonal
     data = [np.empty(len(indices)) for _ in range(4 if keep_constraint else 3)]  # E1, E2, W, E3
     if positions0 is not None:
         positions0 = np.ascontiguousarray(positions0, dtype=np.float64)
@@ -399,13 +399,10 @@ def local_operator(
     for r0 in range(0, n, block):
         r1 = min(n, r0 + block)
         s0, s1 = int(indptr[r0]), int(indptr[r1])
-        at = starts[s0:s1]
-        values = np.take(columns, _entry_rows(entries[at], triangle_group, m, g), axis=0)
-        # the second entry of a slot of two; a slot of one (a diagonal marker, or a boundary edge)
-        # and a slot of more (a fin, whose ends are on the boundary) lie in rows whose every
-        # entry reads zeros, so there the first is taken again
-        at = at + (multiplicity[s0:s1] > 1)
-        values += np.take(columns, _entry_rows(entries[at], triangle_group, m, g), axis=0)
+        # a slot of one (a diagonal, or a boundary edge) or of more (a fin, whose ends are on the
+        # boundary) holds its first entry twice: it lies in a row whose every entry reads zeros
+        values = np.take(columns, _entry_rows(pairs[0, s0:s1].copy(), triangle_group, m, g), axis=0)
+        values += np.take(columns, _entry_rows(pairs[1, s0:s1].copy(), triangle_group, m, g), axis=0)
         local_starts = indptr[r0:r1] - s0
         sums = np.add.reduceat(values[:, 3:], local_starts, axis=0)  # (rows, 4): 2x diagonal, 2x count
         sums *= 0.5  # exact

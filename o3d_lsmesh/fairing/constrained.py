@@ -17,7 +17,7 @@ import numpy as np
 from .._o3d import new_mesh, read_mesh
 from .._progress import check_progress, iterate
 from .._validate import as_bool, as_choice, as_count, as_positive_float, mesh_arrays
-from ..topology import boundary_curves, vertex_rings
+from ..topology import boundary_curves, edge_structure, vertex_rings
 from .barycenter import DEFAULT_MU, GlobalSolver, fairing_topology, local_operator
 from .boundary_curve import curve_operator
 from .scan_fairing import scan_denoise
@@ -189,12 +189,12 @@ def _fair(
 
 
 def _fair_local(positions, triangles, number_of_iterations, smooth_boundary, reimpose_every, progress):
-    # the paper's local operator (eq. 7): one sort of the directed half-edges gives the 1-ring
-    # pattern, the valences and the boundary; the edge list is formed only for a boundary walk
+    # the paper's local operator (eq. 7): one pass over the corners grouped by vertex gives the
+    # 1-ring pattern, the valences and the boundary; the edge list is sorted only for a boundary walk
     n = len(positions)
     rings = vertex_rings(triangles, n)
     curves = (
-        boundary_curves(triangles, n, edges=rings.edge_structure())
+        boundary_curves(triangles, n, edges=edge_structure(triangles, n))
         if smooth_boundary and rings.boundary.any()
         else []
     )
@@ -204,9 +204,9 @@ def _fair_local(positions, triangles, number_of_iterations, smooth_boundary, rei
     # targets are re-taken
     op = local_operator(triangles, rings, positions0=positions, keep_constraint=reimpose_every is not None)
     constant = op.initial
-    # the rings' index arrays are dead now: their pages (already mapped, where fresh (n, 3) buffers
+    # the rings' slot pairs are dead now: their pages (already mapped, where fresh (n, 3) buffers
     # would cost a page fault per page at scan sizes) hold the two buffers of the whole run
-    spare, work = (_reused(array, positions.shape) for array in (rings.entries, rings.multiplicity))
+    spare, work = (_reused(array, positions.shape) for array in rings.pairs)
     del rings
     curve_target = curve.target(positions)
     result = positions  # a plain array (the reused buffers are views of the rings' int arrays)
