@@ -282,7 +282,7 @@ def vertex_rings(triangles: np.ndarray, n: int) -> VertexRings:
     >>> rings.indptr.tolist(), rings.indices.tolist()
     ([0, 4, 7, 11, 14], [0, 1, 2, 3, 0, 1, 2, 0, 1, 2, 3, 0, 2, 3])
     >>> rings.valence.tolist(), rings.boundary.tolist(), rings.pairs[:, rings.indptr[2] : rings.indptr[3]].tolist()
-    ([3, 2, 3, 2], [True, True, True, True], [[2, 1, 12, 5], [8, 1, 12, 5]])
+    ([3, 2, 3, 2], [True, True, True, True], [[7, 8, 12, 3], [4, 8, 12, 3]])
     """
     triangles = np.asarray(triangles)
     m = len(triangles)
