@@ -13,7 +13,6 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse import csgraph
 
-
 try:  # SciPy's sparse kernels (private, the same signatures since SciPy 1.0): sorts without a copy
     from scipy.sparse._sparsetools import csr_sort_indices as _csr_sort_indices
     from scipy.sparse._sparsetools import csr_tocsc as _csr_tocsc
@@ -23,6 +22,7 @@ except ImportError:  # pragma: no cover - a SciPy without them sorts with numpy
 __all__ = [
     "BoundaryCurves",
     "EdgeStructure",
+    "VertexRings",
     "adjacency_matrix",
     "boundary_chains",
     "boundary_curves",
@@ -40,7 +40,6 @@ __all__ = [
     "unique_edges",
     "vertex_rings",
     "vertex_valences",
-    "VertexRings",
 ]
 
 

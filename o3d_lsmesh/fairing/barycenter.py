@@ -372,12 +372,12 @@ def local_operator(
     # Group g (not an interior triangle, or a diagonal marker) reads zeros.
     coefficients = (alpha, beta, share)
     rows, cols = list(RING_ROW_SLOT), list(RING_COLUMN_SLOT)
-    columns = np.zeros((g + 1, 6, 7))
+    by_entry = np.zeros((g + 1, 6, 7))
     for j, c in enumerate(coefficients):
-        columns[:g, :, j] = c[:, rows, cols]
-        columns[:g, :, 3 + j] = c[:, rows, rows]
-    columns[:g, :, 6] = 1.0
-    columns = columns.reshape(-1, 7)
+        by_entry[:g, :, j] = c[:, rows, cols]
+        by_entry[:g, :, 3 + j] = c[:, rows, rows]
+    by_entry[:g, :, 6] = 1.0
+    columns = by_entry.reshape(-1, 7)
     if interior is None:
         triangle_group = group.astype(index, copy=False)
     else:

@@ -175,7 +175,9 @@ def _fair(
             boundary_weight=boundary_weight,
         )
     if method == "local":
-        return _fair_local(positions, triangles, number_of_iterations, smooth_boundary, reimpose_every, progress)
+        return _fair_local(
+            positions, triangles, number_of_iterations, smooth_boundary, reimpose_every, progress
+        )
     topo = fairing_topology(triangles, len(positions), with_loops=smooth_boundary)
     curve = curve_operator(topo.loops)
     steps = iterate(progress, range(number_of_iterations), desc=f"constrained fairing ({method})")
