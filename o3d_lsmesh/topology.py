@@ -280,33 +280,37 @@ def vertex_rings(triangles: np.ndarray, n: int) -> VertexRings:
     >>> rings = vertex_rings(np.array([[0, 1, 2], [0, 2, 3]]), 4)
     >>> rings.indptr.tolist(), rings.indices.tolist()
     ([0, 4, 7, 11, 14], [0, 1, 2, 3, 0, 1, 2, 0, 1, 2, 3, 0, 2, 3])
-    >>> rings.valence.tolist(), rings.boundary.tolist(), rings.pairs[:, rings.indptr[2] : rings.indptr[3]].tolist()
-    ([3, 2, 3, 2], [True, True, True, True], [[7, 8, 12, 3], [4, 8, 12, 3]])
+    >>> rings.valence.tolist(), rings.boundary.tolist()
+    ([3, 2, 3, 2], [True, True, True, True])
+    >>> np.sort(rings.pairs[:, rings.indptr[2] : rings.indptr[3]], axis=0).tolist()  # row 2's slots
+    [[4, 8, 12, 3], [7, 8, 12, 3]]
     """
     triangles = np.asarray(triangles)
     m = len(triangles)
     corners = 3 * m
     bound = 6 * m + n
     index = np.int32 if bound + 1 < np.iinfo(np.int32).max else np.int64
-    corner_vertex = np.empty(corners, dtype=index)  # corner a * m + t holds triangles[t, a]
-    corner_vertex.reshape(3, m)[...] = triangles.T
-    # corners grouped by vertex, stably: a counting sort (the transpose of a one-entry-per-row CSR)
+    flat = np.ascontiguousarray(triangles, dtype=index).reshape(-1)  # corner (t, a) at 3 t + a
+    # corners grouped by vertex, stably: a counting sort, the transpose of the (m, n) CSR whose row
+    # t holds triangle t's corners (data: the corner's place a in its triangle)
     start = np.zeros(n + 1, dtype=index)
-    by_vertex = np.empty(corners, dtype=index)
+    by_vertex = np.empty(corners, dtype=index)  # the triangle of each corner
+    place = np.empty(corners, dtype=np.int8)  # its place in the triangle
     if _csr_tocsc is not None:
         _csr_tocsc(
-            corners,
+            m,
             n,
-            np.arange(corners + 1, dtype=index),
-            corner_vertex,
-            np.zeros(corners, dtype=np.bool_),
+            np.arange(0, corners + 1, 3, dtype=index),
+            flat,
+            np.tile(np.arange(3, dtype=np.int8), m),
             start,
             by_vertex,
-            np.empty(corners, dtype=np.bool_),
+            place,
         )
     else:  # pragma: no cover
-        by_vertex[:] = np.argsort(corner_vertex, kind="stable")
-        np.cumsum(np.bincount(corner_vertex, minlength=n), out=start[1:])
+        order = np.argsort(flat, kind="stable")
+        by_vertex[:], place[:] = order // 3, order % 3
+        np.cumsum(np.bincount(flat, minlength=n), out=start[1:])
     indices = np.empty(bound, dtype=index)  # only the used prefix (n + 2e) is ever touched
     pairs = np.empty((2, bound), dtype=index)
     diagonal = np.empty(n, dtype=np.int64)
@@ -316,23 +320,22 @@ def vertex_rings(triangles: np.ndarray, n: int) -> VertexRings:
     for v0 in range(0, n, _RING_BLOCK):
         v1 = min(n, v0 + _RING_BLOCK)
         rows = v1 - v0
-        corner = by_vertex[start[v0] : start[v1]]
-        slot = corner // m  # the corner's place in its triangle
-        # the corner's two entries: forward (its id a * m + t, to the next corner) and reverse
-        # (id d * m + t with d = 3 + (a - 1) % 3, to the previous corner)
-        following = corner + m
-        following[slot == 2] -= corners
-        preceding = corner - m
-        preceding[slot == 0] += corners
-        columns = np.empty(2 * len(corner), dtype=index)
-        entries = np.empty(2 * len(corner), dtype=index)
-        columns[0::2] = corner_vertex[following]
-        columns[1::2] = corner_vertex[preceding]
-        entries[0::2] = corner
+        triangle = by_vertex[start[v0] : start[v1]]
+        slot = place[start[v0] : start[v1]].astype(index)
+        at_corner = 3 * triangle
+        # the corner's two entries: forward (id a * m + t, to the next corner) and reverse (id
+        # d * m + t with d = 3 + (a - 1) % 3, to the previous corner)
+        columns = np.empty(2 * len(triangle), dtype=index)
+        entries = np.empty(2 * len(triangle), dtype=index)
+        columns[0::2] = flat[at_corner + (slot + 1) % 3]
+        columns[1::2] = flat[at_corner + (slot + 2) % 3]
+        forward = entries[0::2]
+        np.multiply(slot, m, out=forward)
+        forward += triangle
         reverse = entries[1::2]
-        np.add(corner, 2 * m, out=reverse)
+        np.add(forward, 2 * m, out=reverse)
         reverse[slot == 0] += 3 * m
-        del following, preceding, slot, corner
+        del triangle, slot, at_corner
         degree = np.diff(start[v0 : v1 + 1])
         local = (2 * (start[v0 : v1 + 1] - start[v0])).astype(index)
         if _csr_sort_indices is not None:
