@@ -536,3 +536,24 @@ def test_local_step_into_buffers_equals_the_sparse_products():
     assert_allclose(result, expected, rtol=TIGHT, atol=TIGHT)
     assert_allclose(op.step(np.asfortranarray(V), constant), expected, rtol=TIGHT, atol=TIGHT)
     assert_allclose(op.step(V, constant), expected, rtol=TIGHT, atol=TIGHT)
+
+
+def test_huge_page_advice_is_restored_after_local_fairing():
+    # local fairing turns numpy's transparent-huge-page advice off for its own allocations (cheaper
+    # page faults on a fragmented machine): the process-wide setting must come back, also when the
+    # call raises and when calls overlap in threads
+    from concurrent.futures import ThreadPoolExecutor
+
+    toggle = np._core.multiarray._set_madvise_hugepage
+    V, F = noisy_sphere(resolution=8)
+    for setting in (True, False):
+        previous = toggle(setting)
+        try:
+            constrained_fairing_arrays(V, F, 2, method="local")
+            with ThreadPoolExecutor(4) as pool:
+                list(pool.map(lambda _: constrained_fairing((V, F), 2, method="local"), range(8)))
+            with pytest.raises(ValueError):
+                constrained_fairing((V, np.full_like(F, len(V))), 2, method="local")
+            assert toggle(setting) is setting
+        finally:
+            toggle(previous)
