@@ -557,3 +557,22 @@ def test_huge_page_advice_is_restored_after_local_fairing():
             assert toggle(setting) is setting
         finally:
             toggle(previous)
+
+
+@pytest.mark.parametrize("seed", [0, 2])
+def test_local_assembly_in_small_blocks_equals_one_block(seed, monkeypatch):
+    # the operator and the rings are built block by block of rows: blocks of 3 rows (and of 2
+    # vertices) must give the very matrices and constant of one block
+    import o3d_lsmesh.fairing.barycenter as barycenter
+    import o3d_lsmesh.topology as topology
+
+    V, F = _soup(seed)
+    one = local_operator(F, topology.vertex_rings(F, len(V)), positions0=V)
+    monkeypatch.setattr(barycenter, "_BLOCK_ROWS", 3)
+    monkeypatch.setattr(topology, "_RING_BLOCK", 2)
+    small = local_operator(F, topology.vertex_rings(F, len(V)), positions0=V)
+    for name in ("adjacency", "e1", "e2", "e3"):
+        a, b = getattr(one, name), getattr(small, name)
+        assert np.array_equal(a.indptr, b.indptr) and np.array_equal(a.indices, b.indices)
+        assert np.array_equal(a.data, b.data), name
+    assert np.array_equal(one.initial, small.initial)
