@@ -325,13 +325,57 @@ def run_one(statement: str, n: int, limit_gb: float) -> dict | None:
     return json.loads(lines[-1])
 
 
-def peers(ops: list, sizes: list, limit_gb: float) -> list:
-    rows = []
+ROUNDS_HEADER = [
+    "operation",
+    "mesh vertices",
+    "round",
+    "ours CPU s",
+    "peer CPU s",
+    "CPU ratio",
+    "peak ratio",
+    "load",
+]
+
+
+def _median_run(runs: list) -> dict:
+    """The run of median CPU time among ``runs`` (an odd count gives a real run, its peak included)."""
+    return sorted(runs, key=lambda r: r["cpu"])[len(runs) // 2]
+
+
+def peers(ops: list, sizes: list, limit_gb: float, rounds: int = 1) -> tuple[list, list]:
+    """Each (operation, size) and its peer, ``rounds`` times interleaved (ours, peer, ours, peer...).
+
+    The row holds the median of the rounds (by CPU time); every round is also returned, for the
+    per-round table (the machine is shared: a round's ratio swings with the load).
+    """
+    rows, per_round = [], []
     for n in sizes:
         for op in ops:
             ours_statement, peer = PEER_OPS[op]
-            ours = run_one(ours_statement, n, limit_gb)
-            other = run_one(peer[1], n, limit_gb) if peer else None
+            our_runs, peer_runs = [], []
+            for r in range(rounds):
+                got = run_one(ours_statement, n, limit_gb)
+                other_got = run_one(peer[1], n, limit_gb) if peer else None
+                if got is None:
+                    break
+                our_runs.append(got)
+                if other_got:
+                    peer_runs.append(other_got)
+                    per_round.append(
+                        [
+                            ours_statement,
+                            got["n"],
+                            r + 1,
+                            got["cpu"],
+                            other_got["cpu"],
+                            got["cpu"] / other_got["cpu"],
+                            got["peak"] / other_got["peak"],
+                            round(os.getloadavg()[0], 1),
+                        ]
+                    )
+                    print(per_round[-1], flush=True)
+            ours = _median_run(our_runs) if our_runs and len(our_runs) == rounds else None
+            other = _median_run(peer_runs) if peer_runs else None
             if ours is None:
                 rows.append([ours_statement, n, "failed", "", "", peer[0] if peer else "-"] + [""] * 7)
                 continue
@@ -344,7 +388,7 @@ def peers(ops: list, sizes: list, limit_gb: float) -> list:
             row.append(round(os.getloadavg()[0], 1))
             rows.append(row)
             print(row, flush=True)
-    return rows
+    return rows, per_round
 
 
 def memory_table(n: int, limit_gb: float) -> list:
@@ -387,11 +431,20 @@ def main() -> None:
         "--memory", type=int, default=0, help="peak per vertex of every operation at this size"
     )
     parser.add_argument(
+        "--rounds",
+        type=int,
+        default=1,
+        help="with --peers: run ours and the peer this many times, interleaved; rows hold the median",
+    )
+    parser.add_argument(
         "--limit-gb", type=float, default=16.0, help="address-space limit of every subprocess"
     )
     args = parser.parse_args()
     if args.peers:
-        merged("scale_peers.jsonl", PEER_HEADER, peers(args.peers.split(","), args.sizes, args.limit_gb), 2)
+        rows, per_round = peers(args.peers.split(","), args.sizes, args.limit_gb, args.rounds)
+        merged("scale_peers.jsonl", PEER_HEADER, rows, 2)
+        if args.rounds > 1:
+            merged("scale_peers_rounds.jsonl", ROUNDS_HEADER, per_round, 3)
     if args.memory:
         merged("scale_memory.jsonl", MEMORY_HEADER, memory_table(args.memory, args.limit_gb), 2)
     if args.peers or args.memory:
@@ -458,6 +511,18 @@ def write_scale(limit_gb: float) -> None:
                 f"{limit_gb:g} GB (ulimit -v). 'CPU' is process time: the machine ({os.cpu_count()} cores) was "
                 "shared with other jobs (load in the last column), so wall-clock ratios swing with the load; "
                 "CPU ratios hold better.",
+            )
+        )
+    round_rows = merged("scale_peers_rounds.jsonl", ROUNDS_HEADER, [], 3)
+    if round_rows:
+        sections.append(
+            (
+                "Interleaved rounds against the peer",
+                markdown_table(ROUNDS_HEADER, round_rows)
+                + "\n\nEvery round runs ours and then the peer, each in a fresh subprocess (``--rounds``); the "
+                "rows of the table above hold the round of median CPU time. Fresh memory is expensive on "
+                "this virtual machine (a page fault can cost a host allocation): the system part of the "
+                "CPU time swings from round to round with the state of the host.",
             )
         )
     memory_rows = merged("scale_memory.jsonl", MEMORY_HEADER, [], 2)

@@ -13,9 +13,16 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse import csgraph
 
+try:  # SciPy's sparse kernels (private, the same signatures since SciPy 1.0): sorts without a copy
+    from scipy.sparse._sparsetools import csr_sort_indices as _csr_sort_indices
+    from scipy.sparse._sparsetools import csr_tocsc as _csr_tocsc
+except ImportError:  # pragma: no cover - a SciPy without them sorts with numpy
+    _csr_tocsc = _csr_sort_indices = None
+
 __all__ = [
     "BoundaryCurves",
     "EdgeStructure",
+    "VertexRings",
     "adjacency_matrix",
     "boundary_chains",
     "boundary_curves",
@@ -31,6 +38,7 @@ __all__ = [
     "nonmanifold_vertices",
     "ring_pattern",
     "unique_edges",
+    "vertex_rings",
     "vertex_valences",
 ]
 
@@ -202,6 +210,169 @@ def edge_structure(triangles: np.ndarray, n: int | None = None) -> EdgeStructure
     edges[:, 1] = sorted_hi[starts]
     del sorted_hi, lo, hi, first
     return EdgeStructure(edges, counts, order, starts)
+
+
+#: Corner slots of the six directed entries of a triangle in :func:`vertex_rings`: entry ``d * m + t``
+#: runs from corner ``RING_ROW_SLOT[d]`` of triangle ``t`` (its row) to corner ``RING_COLUMN_SLOT[d]``
+#: (its column); entries 0-2 are the half-edges of :func:`halfedges`, 3-5 the same edges reversed.
+RING_ROW_SLOT = (0, 1, 2, 1, 2, 0)
+RING_COLUMN_SLOT = (1, 2, 0, 0, 1, 2)
+
+#: Vertices per block of :func:`vertex_rings` (about 12 entries each): block temporaries of a few
+#: megabytes, which the allocator reuses instead of mapping (and faulting in) fresh pages.
+_RING_BLOCK = 1 << 14
+
+
+@dataclass(frozen=True)
+class VertexRings:
+    """The 1-ring CSR pattern of a mesh, with the triangles behind every slot.
+
+    Built by :func:`vertex_rings`. Row ``v`` of ``(indptr, indices)`` holds ``v`` itself and its
+    distinct edge neighbours, in column order (canonical CSR). Every triangle ``t`` gives six
+    *entries*: entry ``d * m + t`` (``d < 6``) sits in row ``triangles[t, RING_ROW_SLOT[d]]`` and
+    column ``triangles[t, RING_COLUMN_SLOT[d]]``, so slot ``(v, w)`` collects one entry per triangle
+    on the edge ``{v, w}``.
+
+    Attributes
+    ----------
+    indptr : (n + 1,) int32 (int64 beyond ``2**31`` entries)
+    indices : (nnz,) int32
+        The pattern: diagonal plus both directions of every edge, ``nnz = n + 2 e``.
+    diagonal : (n,) int64
+        Position of each row's diagonal in ``indices``.
+    pairs : (2, nnz) int32
+        Two entries of each slot: the two triangles of an edge of two; on an edge of one triangle
+        its entry twice, on an edge of more two of them; ``6 m`` on the diagonal.
+    valence : (n,) int64
+        Distinct edge neighbours of every vertex (0 for isolated vertices).
+    boundary : (n,) bool
+        Vertices on an edge of one triangle or of more than two.
+    """
+
+    indptr: np.ndarray
+    indices: np.ndarray
+    diagonal: np.ndarray
+    pairs: np.ndarray
+    valence: np.ndarray
+    boundary: np.ndarray
+
+    @property
+    def n(self) -> int:
+        return len(self.indptr) - 1
+
+
+def vertex_rings(triangles: np.ndarray, n: int) -> VertexRings:
+    """The :class:`VertexRings` of a mesh: its 1-ring CSR pattern, valences and boundary, in one pass.
+
+    The ``3 m`` triangle corners are grouped by vertex with one stable counting sort (SciPy's
+    CSR-to-CSC transpose); then, block by block of vertices, every corner gives its two entries
+    (to the next and the previous corner of its triangle), each row's few columns are sorted in
+    place (about 12 per row), and equal columns of a row are the triangles of one edge. Only the
+    results are mesh-sized (int32 when the mesh fits): the per-block temporaries stay a few
+    megabytes, so that at scan sizes no memory is mapped and faulted in for the sort's sake.
+    Arrays sized by the bound ``6 m + n`` on the slots are allocated but only their used prefix
+    is touched. What local fairing needs (pattern, valences, boundary) comes from this pass, with
+    no undirected edge list.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> rings = vertex_rings(np.array([[0, 1, 2], [0, 2, 3]]), 4)
+    >>> rings.indptr.tolist(), rings.indices.tolist()
+    ([0, 4, 7, 11, 14], [0, 1, 2, 3, 0, 1, 2, 0, 1, 2, 3, 0, 2, 3])
+    >>> rings.valence.tolist(), rings.boundary.tolist()
+    ([3, 2, 3, 2], [True, True, True, True])
+    >>> np.sort(rings.pairs[:, rings.indptr[2] : rings.indptr[3]], axis=0).tolist()  # row 2's slots
+    [[4, 8, 12, 3], [7, 8, 12, 3]]
+    """
+    triangles = np.asarray(triangles)
+    m = len(triangles)
+    corners = 3 * m
+    bound = 6 * m + n
+    index = np.int32 if bound + 1 < np.iinfo(np.int32).max else np.int64
+    flat = np.ascontiguousarray(triangles, dtype=index).reshape(-1)  # corner (t, a) at 3 t + a
+    # corners grouped by vertex, stably: a counting sort, the transpose of the (m, n) CSR whose row
+    # t holds triangle t's corners (data: the corner's place a in its triangle)
+    start = np.zeros(n + 1, dtype=index)
+    by_vertex = np.empty(corners, dtype=index)  # the triangle of each corner
+    place = np.empty(corners, dtype=np.int8)  # its place in the triangle
+    if _csr_tocsc is not None:
+        _csr_tocsc(
+            m,
+            n,
+            np.arange(0, corners + 1, 3, dtype=index),
+            flat,
+            np.tile(np.arange(3, dtype=np.int8), m),
+            start,
+            by_vertex,
+            place,
+        )
+    else:  # pragma: no cover
+        order = np.argsort(flat, kind="stable")
+        by_vertex[:], place[:] = order // 3, order % 3
+        np.cumsum(np.bincount(flat, minlength=n), out=start[1:])
+    indices = np.empty(bound, dtype=index)  # only the used prefix (n + 2e) is ever touched
+    pairs = np.empty((2, bound), dtype=index)
+    diagonal = np.empty(n, dtype=np.int64)
+    valence = np.zeros(n, dtype=np.int64)
+    boundary = np.zeros(n, dtype=bool)
+    offset = 0
+    for v0 in range(0, n, _RING_BLOCK):
+        v1 = min(n, v0 + _RING_BLOCK)
+        rows = v1 - v0
+        triangle = by_vertex[start[v0] : start[v1]]
+        slot = place[start[v0] : start[v1]].astype(index)
+        at_corner = 3 * triangle
+        # the corner's two entries: forward (id a * m + t, to the next corner) and reverse (id
+        # d * m + t with d = 3 + (a - 1) % 3, to the previous corner)
+        columns = np.empty(2 * len(triangle), dtype=index)
+        entries = np.empty(2 * len(triangle), dtype=index)
+        columns[0::2] = flat[at_corner + (slot + 1) % 3]
+        columns[1::2] = flat[at_corner + (slot + 2) % 3]
+        forward = entries[0::2]
+        np.multiply(slot, m, out=forward)
+        forward += triangle
+        reverse = entries[1::2]
+        np.add(forward, 2 * m, out=reverse)
+        reverse[slot == 0] += 3 * m
+        del triangle, slot, at_corner
+        degree = np.diff(start[v0 : v1 + 1])
+        local = (2 * (start[v0 : v1 + 1] - start[v0])).astype(index)
+        if _csr_sort_indices is not None:
+            _csr_sort_indices(rows, local, columns, entries)  # each row's columns in order
+        else:  # pragma: no cover
+            row_of = np.repeat(np.arange(rows), 2 * degree)
+            order = np.lexsort((columns, row_of))
+            columns, entries = columns[order], entries[order]
+        # a slot starts at every new column and at every non-empty row
+        first = np.empty(len(columns), dtype=bool)
+        first[:1] = True
+        np.not_equal(columns[1:], columns[:-1], out=first[1:])
+        first[local[:-1][degree > 0]] = True
+        at = np.flatnonzero(first)
+        multiplicity = np.diff(at, append=len(columns))
+        row = np.repeat(np.arange(rows), 2 * degree)[at]
+        column = columns[at]
+        per_row = np.bincount(row, minlength=rows)
+        valence[v0:v1] = per_row
+        boundary[v0 + row[multiplicity != 2]] = True
+        # global positions: each row's slots below its vertex, its diagonal, the slots above
+        row_start = np.cumsum(per_row + 1) - (per_row + 1) + offset
+        rank = np.arange(len(at)) - (np.cumsum(per_row) - per_row)[row]
+        vertex = np.arange(v0, v1)
+        above = column > vertex[row]
+        position = row_start[row] + rank + above
+        diagonal_position = row_start + np.bincount(row[~above], minlength=rows)
+        indices[position] = column
+        indices[diagonal_position] = vertex
+        pairs[0, position] = entries[at]
+        pairs[1, position] = entries[at + (multiplicity > 1)]
+        pairs[:, diagonal_position] = 6 * m  # a zero row for the operators
+        diagonal[v0:v1] = diagonal_position
+        offset += int(per_row.sum()) + rows
+    indptr = np.zeros(n + 1, dtype=index)
+    np.cumsum(valence + 1, out=indptr[1:])
+    return VertexRings(indptr, indices[:offset], diagonal, pairs[:, :offset], valence, boundary)
 
 
 def unique_edges(triangles: np.ndarray, n: int | None = None):

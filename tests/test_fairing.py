@@ -389,6 +389,87 @@ def test_edge_structure_equals_a_stable_sort_of_the_edge_keys(seed):
     assert (es.counts > 2).any() and (es.counts == 1).any()  # the soup has a fin and a boundary
 
 
+def _fin_and_isolated():
+    # four triangles on edge (0, 1), a separate triangle, an isolated vertex (8)
+    V = np.random.default_rng(5).normal(size=(9, 3))
+    return V, np.array([[0, 1, 2], [1, 0, 3], [0, 1, 4], [4, 1, 0], [2, 1, 5], [5, 6, 7]])
+
+
+@pytest.mark.parametrize("case", ["soup0", "soup1", "soup2", "sphere", "grid", "fin"])
+def test_vertex_rings_equal_plain_loops(case, monkeypatch):
+    # issue 16: local fairing's one pass over the corners against sets built triangle by triangle,
+    # in blocks of 2 vertices (so that rows meet block ends) and in one block
+    import o3d_lsmesh.topology as topology
+    from o3d_lsmesh.topology import RING_COLUMN_SLOT, RING_ROW_SLOT, vertex_rings
+
+    monkeypatch.setattr(topology, "_RING_BLOCK", 2 if case in ("soup1", "fin") else 1 << 14)
+
+    if case.startswith("soup"):
+        V, F = _soup(int(case[-1]))
+    else:
+        V, F = {"sphere": noisy_sphere(6), "grid": grid(5, 4), "fin": _fin_and_isolated()}[case]
+    n, m = len(V), len(F)
+    rings = vertex_rings(F, n)
+    ring = neighbours(F, n)
+    on_edge = {}
+    for t, tri in enumerate(F.tolist()):
+        for d, (a, b) in enumerate(zip(RING_ROW_SLOT, RING_COLUMN_SLOT)):
+            on_edge.setdefault((tri[a], tri[b]), []).append(d * m + t)
+    for v in range(n):
+        row = slice(rings.indptr[v], rings.indptr[v + 1])
+        assert rings.indices[row].tolist() == sorted(ring[v] | {v})
+        assert rings.indices[rings.diagonal[v]] == v and rings.valence[v] == len(ring[v])
+        for slot in range(row.start, row.stop):
+            w = int(rings.indices[slot])
+            pair = rings.pairs[:, slot].tolist()
+            if w == v:
+                assert pair == [6 * m, 6 * m]
+            elif len(on_edge[(v, w)]) == 2:
+                assert sorted(pair) == sorted(on_edge[(v, w)])
+            elif len(on_edge[(v, w)]) == 1:
+                assert pair == on_edge[(v, w)] * 2
+            else:
+                assert pair[0] != pair[1] and set(pair) <= set(on_edge[(v, w)])
+    counts = {}
+    for tri in F.tolist():
+        for a in range(3):
+            key = tuple(sorted((tri[a], tri[(a + 1) % 3])))
+            counts[key] = counts.get(key, 0) + 1
+    boundary = np.zeros(n, dtype=bool)
+    for (a, b), c in counts.items():
+        if c != 2:
+            boundary[[a, b]] = True
+    assert rings.boundary.tolist() == boundary.tolist()
+
+
+def test_local_operator_forms_the_constraint_part_during_assembly():
+    from o3d_lsmesh.topology import vertex_rings
+
+    V, F = _soup(1)
+    kept = local_operator(F, vertex_rings(F, len(V)), positions0=V)
+    assert_allclose(kept.initial, kept.e3 @ V, rtol=TIGHT, atol=TIGHT)
+    assert_allclose(kept.constant(V), kept.e3 @ V, rtol=TIGHT, atol=TIGHT)
+    dropped = local_operator(F, vertex_rings(F, len(V)), positions0=V, keep_constraint=False)
+    assert dropped.e3 is None and np.array_equal(dropped.initial, kept.initial)
+    with pytest.raises(ValueError, match="keep_constraint=False"):
+        dropped.constant(V)
+    for name in ("e1", "e2", "adjacency"):
+        assert np.array_equal(getattr(dropped, name).toarray(), getattr(kept, name).toarray())
+
+
+@pytest.mark.parametrize("iterations", [1, 2, 3])
+def test_local_result_is_a_plain_array_of_the_reference(iterations):
+    # the iterations run in buffers laid on the rings' dead index memory: the result must still be
+    # the caller's own float64 array, equal to the reference loop, for odd and even counts
+    V, F = noisy_sphere(resolution=5, seed=2)
+    X = V
+    for _ in range(iterations):
+        X = eq7_reference_step(X, V, F, lambda t: True)
+    out = constrained_fairing_arrays(V, F, iterations, method="local")
+    assert out.dtype == np.float64 and out.flags.owndata and out.flags.c_contiguous
+    assert_allclose(out, X, atol=TIGHT)
+
+
 def test_laplacian_from_the_edge_structure_equals_the_reference():
     from o3d_lsmesh.laplacian import uniform_laplacian
     from o3d_lsmesh.topology import edge_structure
@@ -408,8 +489,10 @@ def test_laplacian_from_the_edge_structure_equals_the_reference():
 
 @pytest.mark.parametrize("method", ["local", "global"])
 def test_one_edge_sort_per_fairing_call(monkeypatch, method):
-    # issue 18: the edges of an open mesh were sorted two or three times in one call
+    # issue 18: the edges of an open mesh were sorted two or three times in one call; local fairing
+    # (issue 16) groups the corners once (vertex_rings) and sorts the edges only for the boundary walk
     import o3d_lsmesh.fairing.barycenter as barycenter
+    import o3d_lsmesh.fairing.constrained as constrained
     import o3d_lsmesh.topology as topology
 
     calls = []
@@ -424,10 +507,18 @@ def test_one_edge_sort_per_fairing_call(monkeypatch, method):
     monkeypatch.setattr(barycenter, "edge_structure", counting("edge_structure", topology.edge_structure))
     monkeypatch.setattr(topology, "edge_runs", counting("edge_runs", topology.edge_runs))
     monkeypatch.setattr(topology, "directed_edges", counting("directed_edges", topology.directed_edges))
+    original = topology.edge_structure
+    monkeypatch.setattr(topology, "edge_structure", counting("edge_structure", original))
+    monkeypatch.setattr(constrained, "edge_structure", counting("edge_structure", original))
+    monkeypatch.setattr(constrained, "vertex_rings", counting("vertex_rings", topology.vertex_rings))
     V, F = grid(12, 12)
     V = V + np.random.default_rng(0).normal(scale=0.01, size=V.shape)
     out = constrained_fairing_arrays(V, F, 2, method=method)
-    assert calls == ["edge_structure"]
+    assert calls == (["vertex_rings", "edge_structure"] if method == "local" else ["edge_structure"])
+    closed_V, closed_F = noisy_sphere(resolution=6)
+    calls.clear()
+    constrained_fairing_arrays(closed_V, closed_F, 2, method=method)
+    assert calls == (["vertex_rings"] if method == "local" else ["edge_structure"])
     assert np.isfinite(out).all() and not np.allclose(out, V)
 
 
@@ -445,3 +536,43 @@ def test_local_step_into_buffers_equals_the_sparse_products():
     assert_allclose(result, expected, rtol=TIGHT, atol=TIGHT)
     assert_allclose(op.step(np.asfortranarray(V), constant), expected, rtol=TIGHT, atol=TIGHT)
     assert_allclose(op.step(V, constant), expected, rtol=TIGHT, atol=TIGHT)
+
+
+def test_huge_page_advice_is_restored_after_local_fairing():
+    # local fairing turns numpy's transparent-huge-page advice off for its own allocations (cheaper
+    # page faults on a fragmented machine): the process-wide setting must come back, also when the
+    # call raises and when calls overlap in threads
+    from concurrent.futures import ThreadPoolExecutor
+
+    toggle = np._core.multiarray._set_madvise_hugepage
+    V, F = noisy_sphere(resolution=8)
+    for setting in (True, False):
+        previous = toggle(setting)
+        try:
+            constrained_fairing_arrays(V, F, 2, method="local")
+            with ThreadPoolExecutor(4) as pool:
+                list(pool.map(lambda _: constrained_fairing((V, F), 2, method="local"), range(8)))
+            with pytest.raises(ValueError):
+                constrained_fairing((V, np.full_like(F, len(V))), 2, method="local")
+            assert toggle(setting) is setting
+        finally:
+            toggle(previous)
+
+
+@pytest.mark.parametrize("seed", [0, 2])
+def test_local_assembly_in_small_blocks_equals_one_block(seed, monkeypatch):
+    # the operator and the rings are built block by block of rows: blocks of 3 rows (and of 2
+    # vertices) must give the very matrices and constant of one block
+    import o3d_lsmesh.fairing.barycenter as barycenter
+    import o3d_lsmesh.topology as topology
+
+    V, F = _soup(seed)
+    one = local_operator(F, topology.vertex_rings(F, len(V)), positions0=V)
+    monkeypatch.setattr(barycenter, "_BLOCK_ROWS", 3)
+    monkeypatch.setattr(topology, "_RING_BLOCK", 2)
+    small = local_operator(F, topology.vertex_rings(F, len(V)), positions0=V)
+    for name in ("adjacency", "e1", "e2", "e3"):
+        a, b = getattr(one, name), getattr(small, name)
+        assert np.array_equal(a.indptr, b.indptr) and np.array_equal(a.indices, b.indices)
+        assert np.array_equal(a.data, b.data), name
+    assert np.array_equal(one.initial, small.initial)

@@ -28,12 +28,15 @@ import scipy.sparse as sp
 
 from .._solvers import SPDSolver, check_constant_modes, check_finite, operator_scale, solver_backend
 from ..topology import (
+    RING_COLUMN_SLOT,
+    RING_ROW_SLOT,
     BoundaryCurves,
     EdgeStructure,
+    VertexRings,
     boundary_curves,
     edge_structure,
     group_keys,
-    ring_pattern,
+    vertex_rings,
 )
 
 try:  # SciPy's sparse kernels (private, the same signature since SciPy 1.0): mat-vecs into a buffer
@@ -54,6 +57,10 @@ __all__ = [
 #: Default penalty weight of :class:`GlobalSolver`, chosen by measurement
 #: (see constrained_fairing's docstring and benchmarks/results/denoise.md).
 DEFAULT_MU = 0.03
+
+#: Rows per block of the local operator's assembly: temporaries of about four megabytes (7 doubles per slot,
+#: about 7 slots per row), below the allocator's reuse threshold and within the cache.
+_BLOCK_ROWS = 1 << 13
 
 
 @dataclass(frozen=True)
@@ -156,37 +163,47 @@ def triangle_coefficients(valences: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     return M[group], u[group]
 
 
-def _valence_tables(valences: np.ndarray):
+def _valence_tables(triangles: np.ndarray, valence: np.ndarray | None = None):
     """Eq. 7 once per distinct valence triple: ``group (k,)``, ``table (g, 3)``, ``M (g, 3, 3)``, ``u (g, 3)``.
 
-    Triangle ``t`` has valences ``table[group[t]]`` and coefficients
-    ``M[group[t]]``, ``u[group[t]]`` (see :func:`triangle_coefficients`).
+    ``triangles (k, 3)`` with ``valence (n,)`` per vertex, or (``valence=None``) the valences of
+    each triangle's corners themselves. Triangle ``t`` has valences ``table[group[t]]`` and
+    coefficients ``M[group[t]]``, ``u[group[t]]`` (see :func:`triangle_coefficients`).
     """
-    valences = np.asarray(valences, dtype=np.int64).reshape(-1, 3)
-    if len(valences) == 0:
+    triangles = np.asarray(triangles).reshape(-1, 3)
+    if valence is None:
+        valence = np.asarray(triangles, dtype=np.int64).ravel()
+        triangles = np.arange(len(valence)).reshape(-1, 3)
+    valence = np.asarray(valence, dtype=np.int64)
+    if len(triangles) == 0:
         return np.zeros(0, dtype=np.int64), np.ones((0, 3)), np.zeros((0, 3, 3)), np.zeros((0, 3))
     # key on the rank of each valence among the distinct ones (a few dozen even with a
     # pole of valence 1000): the triple keys then fit the dense look-up below
-    present_valence = np.zeros(int(valences.max()) + 1, dtype=bool)
-    present_valence[valences.ravel()] = True
+    present_valence = np.zeros(int(valence.max()) + 1, dtype=bool)
+    present_valence[valence] = True
     values = np.flatnonzero(present_valence)
-    rank = np.zeros(len(present_valence), dtype=np.int64)
-    rank[values] = np.arange(len(values))
-    ranked = rank[valences]
-    base = np.int64(len(values))
-    keys = (ranked[:, 0] * base + ranked[:, 1]) * base + ranked[:, 2]
-    del ranked
+    base = len(values)
+    key_type = np.int32 if base**3 < np.iinfo(np.int32).max else np.int64
+    rank = np.zeros(len(present_valence), dtype=key_type)
+    rank[values] = np.arange(base, dtype=key_type)
+    vertex_rank = rank[valence]  # per vertex, then gathered per corner
+    keys = vertex_rank[triangles[:, 0]]
+    keys *= key_type(base)
+    keys += vertex_rank[triangles[:, 1]]
+    keys *= key_type(base)
+    keys += vertex_rank[triangles[:, 2]]
+    del vertex_rank
     # group the (few hundred) distinct valence triples: a dense look-up when the
     # key range is small (the usual case), else sort-and-mask
     if base**3 <= 1 << 22:
         present = np.zeros(base**3, dtype=bool)
         present[keys] = True
         distinct = np.flatnonzero(present)
-        slot = np.zeros(base**3, dtype=np.int64)
-        slot[distinct] = np.arange(len(distinct))
+        slot = np.zeros(base**3, dtype=key_type)
+        slot[distinct] = np.arange(len(distinct), dtype=key_type)
         group = slot[keys]
     else:
-        distinct, group = _sorted_groups(keys)
+        distinct, group = _sorted_groups(keys.astype(np.int64))
     table = values[np.stack([distinct // (base * base), (distinct // base) % base, distinct % base], axis=1)]
     table = table.astype(np.float64)
     g = len(table)
@@ -219,46 +236,33 @@ class LocalOperator:
 
         X_new = E1 @ (W @ X) + E2 @ X + E3 @ X0,
 
-    where ``E1, E2`` have the pattern of the 1-ring (edges plus diagonal) and
-    already hold the ``1/count`` of the averaging; the three matrices share one
-    index array (int32 where it fits). ``E3 @ X0`` (the constraint part) is
-    computed once per set of targets by :meth:`constant`, from the interior
-    triangles' corners and their valence-triple group (``u_a / count`` of ``C``
-    handed to vertex ``i_a``), so no ``(n, k)`` matrix is kept. Vertices with
-    no interior triangle (boundary and isolated vertices, or interior vertices
-    whose every triangle touches the boundary) get an identity row in ``E2``
-    and a zero constant. One iteration costs three sparse mat-vecs on
-    ``(n, 3)`` over the 1-ring pattern (about 20 entries per vertex; the one
-    2-ring matrix ``E1 W + E2`` has about as many and would cost a sparse
-    product to set up). The object only holds arrays: it pickles and may be
-    shared between threads.
+    where ``E1, E2, E3`` have the pattern of the 1-ring (edges plus diagonal)
+    and already hold the ``1/count`` of the averaging (``E3[i_a, i_c]`` sums
+    the ``u_a`` of the triangles on ``i_a`` and ``i_c``); the four matrices
+    share one index array (int32 where it fits). ``E3 @ X0`` (the constraint
+    part) is computed once per set of targets by :meth:`constant`. Vertices
+    with no interior triangle (boundary and isolated vertices, or interior
+    vertices whose every triangle touches the boundary) get an identity row
+    in ``E2`` and zero rows in ``E1`` and ``E3``. One iteration costs three
+    sparse mat-vecs on ``(n, 3)`` over the 1-ring pattern (about 7 entries
+    per row; the one 2-ring matrix ``E1 W + E2`` has about 19 and would cost
+    a sparse product to set up). The object only holds arrays: it pickles and
+    may be shared between threads.
     """
 
     adjacency: sp.csr_matrix
     e1: sp.csr_matrix
     e2: sp.csr_matrix
-    corners: np.ndarray  # (k, 3) interior triangles (int32 where it fits)
-    group: np.ndarray  # (k,) valence-triple group of each
-    u: np.ndarray  # (g, 3) eq. 7's u per group
-    scale: np.ndarray  # (n,) 1 / number of estimates
+    e3: sp.csr_matrix | None  # None when built with keep_constraint=False
+    initial: np.ndarray | None = None  # E3 @ X0 of the positions0 given to local_operator
 
-    def constant(self, positions0: np.ndarray) -> np.ndarray:
-        """``E3 @ X0``, the constraint part, ``(n, 3)``.
-
-        One sparse product: the ``(n, k)`` matrix with ``u_a`` at ``(i_a, t)`` (three entries per
-        column, the corners in triangle order) times the ``(k, 3)`` sums ``C``, then the ``1/count``.
-        """
-        n, corners = len(self.scale), self.corners
-        k = len(corners)
-        if k == 0:
-            return np.zeros((n, 3))
-        center = positions0[corners[:, 0]]
-        center += positions0[corners[:, 1]]
-        center += positions0[corners[:, 2]]
-        starts = np.arange(0, 3 * k + 1, 3, dtype=corners.dtype)
-        share = sp.csc_matrix((self.u[self.group].reshape(-1), corners.reshape(-1), starts), shape=(n, k))
-        out = share @ center
-        out *= self.scale[:, None]
+    def constant(self, positions0: np.ndarray, *, out: np.ndarray | None = None) -> np.ndarray:
+        """``E3 @ X0``, the constraint part, ``(n, 3)`` float64 (one sparse mat-vec; into ``out`` if given)."""
+        if self.e3 is None:
+            raise ValueError("this LocalOperator was built with keep_constraint=False: it has no E3")
+        out = np.zeros((self.e3.shape[0], 3)) if out is None else out
+        out.fill(0.0)
+        _accumulate(self.e3, np.asarray(positions0, dtype=np.float64), out)
         return out
 
     def step(
@@ -308,106 +312,142 @@ def _accumulate(matrix: sp.csr_matrix, x: np.ndarray, out: np.ndarray) -> None:
     )
 
 
-def local_operator(triangles: np.ndarray, topo: FairingTopology) -> LocalOperator:
+def _accumulate_block(
+    indptr: np.ndarray, indices: np.ndarray, data: np.ndarray, x: np.ndarray, out: np.ndarray
+) -> None:
+    """``out += A @ x`` for the CSR rows ``(indptr, indices, data)`` of a block, ``x (n, 3)``, ``out (rows, 3)``."""
+    rows = len(indptr) - 1
+    if _csr_matvecs is not None and out.flags.c_contiguous and indices.dtype == indptr.dtype:
+        _csr_matvecs(rows, len(x), 3, indptr, indices, data, x.ravel(), out.ravel())
+    else:  # pragma: no cover - a SciPy without the kernel
+        out += sp.csr_matrix((data, indices, indptr), shape=(rows, len(x))) @ x
+
+
+def local_operator(
+    triangles: np.ndarray,
+    topo: FairingTopology | VertexRings,
+    *,
+    positions0: np.ndarray | None = None,
+    keep_constraint: bool = True,
+) -> LocalOperator:
     """Assemble the :class:`LocalOperator` of the interior triangles of ``triangles``.
 
-    Every coefficient depends only on a triangle's valence triple, a slot
-    and the slot's orientation, so it is read from a ``(6 g + 6, 4)`` table
-    (``g`` distinct triples, plus zero rows for the triangles that are not
-    interior). An interior triangle's edges all have two triangles (an edge
-    with one, or more than two, has boundary ends), so an edge's entries are
-    the sum of the two table rows of its two half-edges, read through the
-    half-edge grouping of the edge structure: gathers over the edges, no
-    scatter over the ``3k`` slots, nothing sorted (the 1-ring pattern comes
-    from the edge structure of ``topo``). The diagonal sums each corner's
-    entry onto its vertex in triangle order.
+    With ``positions0 (n, 3)`` the constraint part ``E3 @ X0`` is computed
+    during the assembly, block by block, into :attr:`LocalOperator.initial`;
+    ``keep_constraint=False`` then drops ``E3`` (an ``nnz`` float64 array)
+    when no later :meth:`~LocalOperator.constant` call needs it.
+
+    ``topo``: the mesh's :class:`~o3d_lsmesh.topology.VertexRings` (what
+    local fairing builds), or a :class:`FairingTopology` (its rings are then
+    built here). Every coefficient depends only on a triangle's valence
+    triple and on the two corners of an entry, so it is read from a
+    ``(6 g + 6,)`` table per matrix (``g`` distinct triples, plus zero rows
+    for the triangles that are not interior). A slot ``(v, w)`` off the
+    diagonal of a vertex that is not on the boundary lies on an edge of
+    exactly two triangles (an edge with one, or more than two, has boundary
+    ends), so its coefficient is the sum of the table rows of the slot's two
+    entries: gathers over the ``nnz`` slots, no scatter, nothing sorted
+    beyond the rings' one sort. The slots are filled in blocks of rows, so
+    that the temporaries stay a few megabytes at any size. The diagonal sums
+    each corner's entry onto its vertex.
     """
-    n, edges = topo.n, topo.edges
-    es = edge_structure(triangles, n) if topo.structure is None else topo.structure
+    rings = vertex_rings(triangles, topo.n) if isinstance(topo, FairingTopology) else topo
+    n = rings.n
     m = len(triangles)
-    sel = topo.interior_triangles
-    index = np.int32 if max(3 * m, n) < np.iinfo(np.int32).max else np.int64
-    tri = triangles[sel].astype(index)  # (k, 3)
-    group, table, M, u = _valence_tables(topo.valence[tri])
-    group = group.astype(index)
+    indptr, indices, index = rings.indptr, rings.indices, rings.indices.dtype
+    if rings.boundary.any():
+        interior = ~rings.boundary[triangles].any(axis=1)
+        group, table, M, u = _valence_tables(triangles[interior], rings.valence)
+    else:  # a closed mesh: every triangle is interior
+        interior = None
+        group, table, M, u = _valence_tables(triangles, rings.valence)
     g = len(table)
     alpha = M / table[:, None, :]  # (g, 3, 3): coefficient of S_{i_b} in P_a
     beta = alpha - alpha.sum(axis=2, keepdims=True)  # coefficient of x_{i_c}: -sum_{b != c} alpha_ab
+    share = np.repeat(u[:, :, None], 3, axis=2)  # (g, 3, 3): u_a, whatever the column's corner
+    del M
+    # Entry d of a triangle of group q reads row 6 q + d of the table (row corner a =
+    # RING_ROW_SLOT[d], column corner b = RING_COLUMN_SLOT[d]): the triangle's coefficient of
+    # column b in row a for E1, E2, E3, then the diagonal ones (a, a), then 1 (an estimate).
+    # Group g (not an interior triangle, or a diagonal marker) reads zeros.
+    coefficients = (alpha, beta, share)
+    rows, cols = list(RING_ROW_SLOT), list(RING_COLUMN_SLOT)
+    by_entry = np.zeros((g + 1, 6, 7))
+    for j, c in enumerate(coefficients):
+        by_entry[:g, :, j] = c[:, rows, cols]
+        by_entry[:g, :, 3 + j] = c[:, rows, rows]
+    by_entry[:g, :, 6] = 1.0
+    columns = by_entry.reshape(-1, 7)
+    if interior is None:
+        triangle_group = group.astype(index, copy=False)
+    else:
+        triangle_group = np.full(m, g, dtype=index)
+        triangle_group[interior] = group
+    del interior, group
 
-    # the 1-ring pattern first: its temporaries are gone before the per-edge arrays exist
-    indptr, indices, diagonal, forward, backward = ring_pattern(edges, n)
-    nnz = len(indices)
-
-    corners = tri.reshape(-1)
-    count = np.bincount(corners, minlength=n)  # estimates per vertex
-    no_estimate = count == 0
-    scale = 1.0 / np.maximum(count, 1)
-    del count
-    # row group*6 + 2*slot + (tail < head) of the slot (i_s, i_{s+1}): columns alpha forward
-    # (row lo of the matrix), alpha backward (row hi), beta forward, beta backward
-    head, slots = [1, 2, 0], [0, 1, 2]
-    coefficient = np.zeros((g + 1, 3, 2, 4))  # group g: not an interior triangle, no estimate
-    for j, c in enumerate((alpha, beta)):
-        to_head, to_tail = c[:, slots, head], c[:, head, slots]  # (g, 3): (i_s, i_{s+1}), (i_{s+1}, i_s)
-        coefficient[:g, :, 1, 2 * j], coefficient[:g, :, 1, 2 * j + 1] = to_head, to_tail
-        coefficient[:g, :, 0, 2 * j], coefficient[:g, :, 0, 2 * j + 1] = to_tail, to_head
-    columns = coefficient.reshape(-1, 4).T.copy()  # (4, 6g + 6)
-    triangle_group = np.full(m, g, dtype=index)
-    triangle_group[sel] = group
-
-    inner = np.flatnonzero(es.counts == 2)
-    every = len(inner) == len(edges)  # a closed manifold mesh: no gathers of the edge arrays
-    lo = edges[:, 0] if every else edges[inner, 0]
-    flat = np.ascontiguousarray(triangles).reshape(-1)
-    picks = []
-    for side in (0, 1):
-        rows = es.order[es.starts + side] if every else es.order[es.starts[inner] + side]
-        slot = rows // m  # half-edge row slot * m + t (see halfedges())
-        t = rows - slot * m
-        del rows
-        pick = triangle_group[t]
-        pick *= 6
-        pick += 2 * slot
-        pick += flat[3 * t + slot] == lo  # the tail is the smaller end
-        picks.append(pick)
-        del slot, t
+    # One pass over the slots, in blocks of rows (temporaries of a few megabytes at any size). Off
+    # the diagonal of a row that is not on the boundary, every slot holds exactly the two triangles
+    # on its edge, and every triangle on the row's vertex lies in exactly two of its slots; so a
+    # slot's coefficient is the sum of its two entries' table rows, and half the row sum of the
+    # diagonal columns (and of the estimate column) is the diagonal (and the estimate count).
+    pairs, diagonal = rings.pairs, rings.diagonal
+    data = [np.empty(len(indices)) for _ in range(4 if keep_constraint else 3)]  # E1, E2, W, E3
+    if positions0 is not None:
+        positions0 = np.ascontiguousarray(positions0, dtype=np.float64)
+        initial = np.zeros((n, 3))
+    block = _BLOCK_ROWS  # rows per block
+    for r0 in range(0, n, block):
+        r1 = min(n, r0 + block)
+        s0, s1 = int(indptr[r0]), int(indptr[r1])
+        # a slot of one (a diagonal, or a boundary edge) or of more (a fin, whose ends are on the
+        # boundary) holds its first entry twice: it lies in a row whose every entry reads zeros
+        values = np.take(columns, _entry_rows(pairs[0, s0:s1].copy(), triangle_group, m, g), axis=0)
+        values += np.take(columns, _entry_rows(pairs[1, s0:s1].copy(), triangle_group, m, g), axis=0)
+        local_starts = indptr[r0:r1] - s0
+        sums = np.add.reduceat(values[:, 3:], local_starts, axis=0)  # (rows, 4): 2x diagonal, 2x count
+        sums *= 0.5  # exact
+        count = sums[:, 3]
+        scale = 1.0 / np.maximum(count, 1.0)
+        row_scale = np.repeat(scale, np.diff(indptr[r0 : r1 + 1]))
+        local_diagonal = diagonal[r0:r1] - s0
+        for j in range(3):
+            target = j if j < 2 else 3  # data holds E1, E2, W, E3
+            block_data = data[target][s0:s1] if target < len(data) else np.empty(s1 - s0)
+            np.multiply(values[:, j], row_scale, out=block_data)
+            diagonal_values = sums[:, j]
+            diagonal_values *= scale
+            block_data[local_diagonal] = diagonal_values
+        # vertices without estimates stay put
+        data[1][s0:s1][local_diagonal[count == 0]] = 1.0
+        adjacency = data[2][s0:s1]
+        adjacency.fill(1.0)
+        adjacency[local_diagonal] = 0.0
+        if positions0 is not None:  # the block's rows of E3 @ X0
+            block_indptr = indptr[r0 : r1 + 1] - indptr[r0]
+            _accumulate_block(block_indptr, indices[s0:s1], block_data, positions0, initial[r0:r1])
     del triangle_group
-    ends = [
-        (forward if every else forward[inner], scale[lo]),
-        (backward if every else backward[inner], scale[edges[:, 1] if every else edges[inner, 1]]),
-    ]
-    diagonal_coefficient = np.stack([alpha[:, slots, slots], beta[:, slots, slots]])  # (2, g, 3)
+    e1, e2, adjacency = (_csr(values, indices, indptr, n) for values in data[:3])
+    e3 = _csr(data[3], indices, indptr, n) if keep_constraint else None
+    return LocalOperator(adjacency, e1, e2, e3, initial if positions0 is not None else None)
 
-    matrices = []
-    for j in range(2):
-        data = np.zeros(nnz)
-        for direction, (positions, row_scale) in enumerate(ends):
-            column = columns[2 * j + direction]
-            summed = column[picks[0]]
-            summed += column[picks[1]]
-            summed *= row_scale
-            data[positions] = summed
-        # corners in triangle order, as the reference sums them
-        weights = diagonal_coefficient[j][group].reshape(-1)
-        # float64 even without interior triangles (numpy returns int64 for empty weights)
-        summed = np.bincount(corners, weights=weights, minlength=n).astype(np.float64, copy=False)
-        summed *= scale
-        data[diagonal] = summed
-        matrices.append(sp.csr_matrix((data, indices, indptr), shape=(n, n)))
-    del picks, ends, forward, backward, data, summed, weights
-    e1, e2 = matrices
-    e2.data[diagonal[no_estimate]] = 1.0  # vertices without estimates stay put
-    adjacency = np.ones(nnz)
-    adjacency[diagonal] = 0.0
-    return LocalOperator(
-        sp.csr_matrix((adjacency, indices, indptr), shape=(n, n)),
-        e1,
-        e2,
-        tri,
-        group,
-        u,
-        scale,
-    )
+
+def _entry_rows(entry: np.ndarray, triangle_group: np.ndarray, m: int, g: int) -> np.ndarray:
+    """Table row ``6 * group + d`` of ring entries ``d * m + t`` (in place); diagonal markers read row ``6 g``."""
+    d = entry // m
+    entry -= d * m  # the triangle (of a marker: some triangle, overwritten below)
+    row = triangle_group[entry]
+    row *= 6
+    row += d
+    row[d >= 6] = 6 * g
+    return row
+
+
+def _csr(data: np.ndarray, indices: np.ndarray, indptr: np.ndarray, n: int) -> sp.csr_matrix:
+    """A canonical ``(n, n)`` CSR matrix on the given arrays (shared, not copied or re-checked)."""
+    matrix = sp.csr_matrix((n, n), dtype=np.float64)
+    matrix.data, matrix.indices, matrix.indptr = data, indices, indptr
+    matrix.has_canonical_format = True  # sorted columns, no duplicates: vertex_rings built it so
+    return matrix
 
 
 class GlobalSolver:
