@@ -294,7 +294,7 @@ def test_check_constant_modes_against_the_smallest_eigenvalue():
 # "Memory and scale" figures (benchmarks/results/scale_memory.md), which leaves room for allocator
 # and library-version noise but not for an extra (n, n) matrix or a dense (m, 3, 3) array
 MEMORY_BOUNDS = {
-    "constrained_fairing(mesh, 10, method='local')": 1500,
+    "constrained_fairing(mesh, 10, method='local')": 880,  # README: 440
     "ls_mesh(mesh, controls)": 6000,
     "laplacian(mesh)": 1000,
 }
