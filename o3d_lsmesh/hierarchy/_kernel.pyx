@@ -1,13 +1,12 @@
 # cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
-"""The volume-cost hierarchy as one sequential loop, shaped like OpenMesh's ``DecimaterT`` (rules:
-:mod:`o3d_lsmesh.hierarchy.collapse`). ``tests/_hierarchy_oracle.py`` does the same floating-point operations
-in the same order, so the levels are identical."""
+"""The volume-cost hierarchy as one sequential loop, like OpenMesh's ``DecimaterT`` (rules: ``collapse.py``);
+``tests/_hierarchy_oracle.py`` does the same floating-point operations in the same order: identical levels."""
 
 import numpy as np
 
 from libc.math cimport INFINITY, fabs, sqrt
 from libc.stdint cimport int32_t, int64_t, uint8_t, uint64_t
-from libc.string cimport memcpy, memset
+from libc.string cimport memset
 
 cdef enum: LOCKED = 1, BOUNDARY = 2, TOUCHED = 4  # TOUCHED: in the closed 1-ring of a vertex removed in this level
 
@@ -27,7 +26,8 @@ cdef inline void _edge(const double* p, int32_t a, int32_t c, double* out) noexc
     out[0], out[1], out[2] = p[3 * a] - p[3 * c], p[3 * a + 1] - p[3 * c + 1], p[3 * a + 2] - p[3 * c + 2]
 
 
-cdef inline void _cross(const double* p, int32_t a, int32_t b, int32_t c, double* u, double* w, double* out) noexcept nogil:
+cdef inline void _cross(const double* p, int32_t a, int32_t b, int32_t c, double* u, double* w,
+                        double* out) noexcept nogil:
     """``out = u x w`` with the edges ``u = p_a - p_c`` and ``w = p_b - p_c``."""
     _edge(p, a, c, u)
     _edge(p, b, c, w)
@@ -35,33 +35,30 @@ cdef inline void _cross(const double* p, int32_t a, int32_t b, int32_t c, double
 
 
 cdef void _sort(int32_t* order, int32_t* spare, uint64_t* key, uint64_t* spare_key, Py_ssize_t count) noexcept nogil:
-    """Stable LSD radix sort of ``order`` by ``key``, bits of non-negative doubles: ties stay in index order."""
+    """Stable LSD radix sort of ``order`` by ``key`` (bits of non-negative doubles), six passes of 11 bits
+    between the arrays and their spares, so that it ends in ``order``: ties stay in index order."""
     cdef Py_ssize_t hist[2048]
     cdef Py_ssize_t i, d, total
     cdef int shift
-    for shift in range(0, 64, 11):
+    for shift in range(0, 66, 11):
         memset(hist, 0, sizeof(hist))
         for i in range(count):
             hist[(key[i] >> shift) & 2047] += 1
-        if count == 0 or hist[(key[0] >> shift) & 2047] == count:
-            continue  # every key has this digit
         total = 0
         for d in range(2048):
             total, hist[d] = total + hist[d], total
         for i in range(count):
             d = (key[i] >> shift) & 2047
             spare[hist[d]], spare_key[hist[d]], hist[d] = order[i], key[i], hist[d] + 1
-        memcpy(order, spare, count * sizeof(int32_t))
-        memcpy(key, spare_key, count * sizeof(uint64_t))
+        order, spare, key, spare_key = spare, order, spare_key, key
 
 
 cdef bint _legal(const double* p, const Vertex* V, const int32_t* pair, const int32_t* ring, const uint8_t* mult,
                  int32_t x, int32_t e, double cos_sq, double min_quality) noexcept nogil:
     """Whether ``x`` may collapse into its ring slot ``e`` (the geometric rules, then the link condition)."""
-    cdef int32_t k = ring[2 * V[x].start + e], i = 2 * V[x].start, l = 2 * V[k].start, common = 0
+    cdef int32_t k = ring[2 * V[x].start + e], i = 2 * V[x].start, l = 2 * V[k].start, common = 0, j
     cdef double[3] old, new, u, w
     cdef double dot, squared
-    cdef int32_t j
     for j in range(2 * V[x].start, 2 * (V[x].start + V[x].corners), 2):
         if pair[j] == k or pair[j + 1] == k:
             continue  # the triangle collapses with the edge
@@ -88,13 +85,11 @@ def hierarchy(double[:, ::1] positions, const int64_t[:, ::1] triangles, uint8_t
     cdef Py_ssize_t n = positions.shape[0], m = triangles.shape[0], i, count, selected = 1, alive, total
     if n >= 2 ** 31 - 1 or 6 * m >= 2 ** 31 - 1:
         raise ValueError(f"mesh must have fewer than 2**31 vertices and 2**31 / 6 triangles, got {n} and {m}")
-    # np.empty: every slot is written before it is read, and pages never written cost nothing
-    cdef int32_t[:, ::1] vertex = np.empty((n + 1, 4), np.int32)
-    cdef int32_t[:, ::1] order = np.empty((3, n + 1), np.int32)  # candidates, sort spare (or fan roots), targets
+    # np.empty: every slot is written before it is read; order: candidates, sort spare (or fan roots), targets
+    cdef int32_t[:, ::1] vertex = np.empty((n + 1, 4), np.int32), order = np.empty((3, n + 1), np.int32)
     cdef int32_t[::1] pair = np.empty(6 * m, np.int32), ring = np.empty(6 * m, np.int32)
     cdef uint8_t[::1] mult = np.empty(6 * m, np.uint8)  # triangles on each ring edge (at most 255 counted)
-    cdef uint64_t[:, ::1] key = np.empty((2, n + 1), np.uint64)
-    cdef double[:, ::1] edge = np.empty((3, n + 1))  # of the visited vertex's ring slots: volume, length, allowed
+    cdef double[:, ::1] key = np.empty((2, n + 1)), edge = np.empty((3, n + 1))  # costs; the visited's edges
     cdef int64_t[::1] kept = np.arange(n, dtype=np.int64), removed, target, offsets, flat, parent
     cdef const int64_t[:, ::1] T = triangles
     cdef int64_t[:, ::1] out
@@ -133,15 +128,11 @@ def hierarchy(double[:, ::1] positions, const int64_t[:, ::1] triangles, uint8_t
                 for j in range(s, s + deg):
                     V[v].flags |= BOUNDARY if mult[j] == 1 else (LOCKED if mult[j] > 2 else 0)
                 V[v].valence = deg
-                if lock_fans and depth == 0:  # also lock unreferenced vertices and those whose corners form several fans
-                    for e in range(deg):
-                        root[e] = e
-                    for j in range(s, s + 2 * V[v].corners, 2):  # union-find of ring slots joined by a corner
-                        r, e = 0, 0
-                        while ring[s + r] != pair[j]:
-                            r += 1
-                        while ring[s + e] != pair[j + 1]:
-                            e += 1
+                if lock_fans and depth == 0:  # also lock unreferenced vertices and those with several fans
+                    for j in range(s, s + deg):
+                        root[ring[j]] = ring[j]
+                    for j in range(s, s + 2 * V[v].corners, 2):  # union-find of the neighbours joined by a corner
+                        r, e = pair[j], pair[j + 1]
                         while root[r] != r:
                             r = root[r]
                         while root[e] != e:
@@ -155,12 +146,10 @@ def hierarchy(double[:, ::1] positions, const int64_t[:, ::1] triangles, uint8_t
                         _edge(p, ring[j], v, a)
                         d = sqrt(_dot(a, a))
                         lo, hi = min(lo, d), max(hi, d)
-                    d = alpha * lo + beta * hi
-                    memcpy(&key[0, count], &d, sizeof(double))
-                    order[0, count], count = v, count + 1
+                    key[0, count], order[0, count], count = alpha * lo + beta * hi, v, count + 1
             if depth == max_levels or n <= min_vertices:
                 break
-            _sort(&order[0, 0], &order[1, 0], &key[0, 0], &key[1, 0], count)
+            _sort(&order[0, 0], &order[1, 0], <uint64_t*> &key[0, 0], <uint64_t*> &key[1, 0], count)
             selected = total = 0
             memset(&order[2, 0], -1, n * sizeof(int32_t))  # the targets
             for i in range(count):
@@ -170,12 +159,9 @@ def hierarchy(double[:, ::1] positions, const int64_t[:, ::1] triangles, uint8_t
                 prefetch(&V[x]); prefetch(&p[3 * x])
                 x = order[0, min(i + 8, count - 1)]
                 prefetch(&ring[2 * V[x].start]); prefetch(&pair[2 * V[x].start])
-                x = order[0, min(i + 4, count - 1)]  # unless touched already: its neighbours, then their rings
+                x = order[0, min(i + 4, count - 1)]  # unless touched already: its neighbours
                 for j in range(2 * V[x].start, 2 * V[x].start + V[x].valence * (not V[x].flags & TOUCHED)):
                     prefetch(&V[ring[j]]); prefetch(&p[3 * ring[j]])
-                x = order[0, min(i + 2, count - 1)]
-                for j in range(2 * V[x].start, 2 * V[x].start + V[x].valence * (not V[x].flags & TOUCHED)):
-                    prefetch(&ring[2 * V[ring[j]].start])
                 x, s, deg, best = order[0, i], 2 * V[order[0, i]].start, V[order[0, i]].valence, -1
                 if V[x].flags & TOUCHED:
                     continue  # the independence rule
