@@ -9,17 +9,16 @@ goes to the neighbour ``k`` of least cone volume ``|N_x . (x_k - x)|`` (``N_x`` 
 normals around ``x``; ties within a relative 1e-9 to the shortest edge, then the first in index order),
 trying at most ``max_tries`` of them, and a collapse is made when
 
-* ``k`` is not locked, and a boundary ``x`` moves along a boundary edge (an interior one has only edges of
-  two triangles: an edge of one would make it boundary, of three locks it);
-* no isolated triangle or closed tetrahedron would remain;
+* ``k`` is not locked, a boundary ``x`` moves along a boundary edge, and no isolated triangle or closed
+  tetrahedron would remain;
 * every surviving triangle of the star of ``x`` keeps its orientation, turns its normal by less than
   ``max_normal_angle`` and keeps ``2 * area / (sum of squared edge lengths)`` above ``min_quality``;
 * the link condition holds: ``x`` and ``k`` share only the opposite vertices of their edge (Euler
   characteristic and boundary loops stay).
 
-Locked is every vertex on an edge of more than two triangles (``lock_fans``: also unreferenced vertices
-and those whose triangles form several fans), so every other star is a disk or half-disk, and every level
-keeps the input's non-manifold vertices.
+Locked is every vertex on an edge of more than two triangles (``lock_fans``: also unreferenced vertices and
+those whose triangles form several fans), so every other star is a disk or half-disk, and every level keeps
+the input's non-manifold vertices.
 """
 
 from __future__ import annotations
