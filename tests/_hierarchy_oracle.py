@@ -49,7 +49,9 @@ def _geometry_ok(V, corners, x, k, cos_sq, min_quality):
         if dot * dot <= new_sq * cos_sq * old_sq:
             return False
         ex, ey, ez = bx - ax, by - ay, bz - az
-        squared = ax * ax + ay * ay + az * az + bx * bx + by * by + bz * bz + ex * ex + ey * ey + ez * ez
+        squared = ax * ax + ay * ay + az * az  # the squared edge lengths, each summed first
+        squared += bx * bx + by * by + bz * bz
+        squared += ex * ex + ey * ey + ez * ez
         squared *= min_quality
         if new_sq <= squared * squared:
             return False

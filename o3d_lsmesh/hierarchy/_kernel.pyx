@@ -1,193 +1,181 @@
 # cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
-"""The volume-cost hierarchy as one sequential loop, shaped like OpenMesh's ``DecimaterT`` (rules:
-:mod:`o3d_lsmesh.hierarchy.collapse`). ``tests/_hierarchy_oracle.py`` does the same floating-point operations
-in the same order, so the levels are identical."""
+"""The volume-cost hierarchy as one sequential loop, like OpenMesh's ``DecimaterT`` (rules: ``collapse.py``);
+``tests/_hierarchy_oracle.py`` does the same floating-point operations in the same order: identical levels."""
 
 import numpy as np
 
 from libc.math cimport INFINITY, fabs, sqrt
 from libc.stdint cimport int32_t, int64_t, uint8_t, uint64_t
-from libc.string cimport memcpy, memset
+from libc.string cimport memset
 
-cdef enum:
-    LOCKED = 1
-    BOUNDARY = 2
-    TOUCHED = 4  # in the closed 1-ring of a vertex removed in this level
+cdef enum: LOCKED = 1, BOUNDARY = 2, TOUCHED = 4  # TOUCHED: in the closed 1-ring of a vertex removed in this level
 
 cdef struct Vertex:  # together, so that a visit's random reads of a neighbour hit one cache line
-    int32_t start, corners, valence, flags  # corners start:start + corners; ring ring[2 * start:][:valence]
+    int32_t start, corners, valence, flags  # corners pair[2 * start:][:2 * corners]; ring ring[2 * start:][:valence]
 
 cdef extern from *:
     "#if defined(__GNUC__) || defined(__clang__)\n#define PREFETCH(p) __builtin_prefetch(p)\n#else\n#define PREFETCH(p) ((void)0)\n#endif"
     void prefetch "PREFETCH"(const void* p) noexcept nogil
 
 
-cdef void _sort(int32_t* order, int32_t* spare, uint64_t* key, uint64_t* key2, Py_ssize_t count) noexcept nogil:
-    """Stable LSD radix sort of ``order`` by ``key``, bits of non-negative doubles: ties stay in index order."""
+cdef inline double _dot(const double* a, const double* b) noexcept nogil:
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+cdef inline void _edge(const double* p, int32_t a, int32_t c, double* out) noexcept nogil:
+    out[0], out[1], out[2] = p[3 * a] - p[3 * c], p[3 * a + 1] - p[3 * c + 1], p[3 * a + 2] - p[3 * c + 2]
+
+
+cdef inline void _cross(const double* p, int32_t a, int32_t b, int32_t c, double* u, double* w,
+                        double* out) noexcept nogil:
+    """``out = u x w`` with the edges ``u = p_a - p_c`` and ``w = p_b - p_c``."""
+    _edge(p, a, c, u)
+    _edge(p, b, c, w)
+    out[0], out[1], out[2] = u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2], u[0] * w[1] - u[1] * w[0]
+
+
+cdef void _sort(int32_t* order, int32_t* spare, uint64_t* key, uint64_t* spare_key, Py_ssize_t count) noexcept nogil:
+    """Stable LSD radix sort of ``order`` by ``key`` (bits of non-negative doubles), six passes of 11 bits
+    between the arrays and their spares, so that it ends in ``order``: ties stay in index order."""
     cdef Py_ssize_t hist[2048]
     cdef Py_ssize_t i, d, total
-    cdef int p
-    for p in range(0, 66, 11):
+    cdef int shift
+    for shift in range(0, 66, 11):
         memset(hist, 0, sizeof(hist))
         for i in range(count):
-            hist[(key[i] >> p) & 2047] += 1
-        if hist[(key[0] >> p) & 2047] < count:  # else every key has this digit (key has a spare slot)
-            total = 0
-            for d in range(2048):
-                total, hist[d] = total + hist[d], total
-            for i in range(count):
-                d = (key[i] >> p) & 2047
-                spare[hist[d]], key2[hist[d]], hist[d] = order[i], key[i], hist[d] + 1
-            memcpy(order, spare, count * sizeof(int32_t))
-            memcpy(key, key2, count * sizeof(uint64_t))
+            hist[(key[i] >> shift) & 2047] += 1
+        total = 0
+        for d in range(2048):
+            total, hist[d] = total + hist[d], total
+        for i in range(count):
+            d = (key[i] >> shift) & 2047
+            spare[hist[d]], spare_key[hist[d]], hist[d] = order[i], key[i], hist[d] + 1
+        order, spare, key, spare_key = spare, order, spare_key, key
 
 
-cdef bint _legal(const double* P, const Vertex* V, const int32_t* pair, const int32_t* ring, const uint8_t* count,
+cdef bint _legal(const double* p, const Vertex* V, const int32_t* pair, const int32_t* ring, const uint8_t* mult,
                  int32_t x, int32_t e, double cos_sq, double min_quality) noexcept nogil:
     """Whether ``x`` may collapse into its ring slot ``e`` (the geometric rules, then the link condition)."""
-    cdef int32_t k = ring[2 * V[x].start + e], i = 2 * V[x].start, l = 2 * V[k].start, j, c, common = 0
-    cdef double[3] o, n, u, w
-    cdef double dot, new_sq
+    cdef int32_t k = ring[2 * V[x].start + e], i = 2 * V[x].start, l = 2 * V[k].start, common = 0, j
+    cdef double[3] old, new, u, w
+    cdef double dot, squared
     for j in range(2 * V[x].start, 2 * (V[x].start + V[x].corners), 2):
         if pair[j] == k or pair[j + 1] == k:
             continue  # the triangle collapses with the edge
-        for c in range(3):
-            u[c], w[c] = P[3 * pair[j] + c] - P[3 * x + c], P[3 * pair[j + 1] + c] - P[3 * x + c]
-        o[0], o[1], o[2] = u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2], u[0] * w[1] - u[1] * w[0]
-        for c in range(3):
-            u[c], w[c] = P[3 * pair[j] + c] - P[3 * k + c], P[3 * pair[j + 1] + c] - P[3 * k + c]
-        n[0], n[1], n[2] = u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2], u[0] * w[1] - u[1] * w[0]
-        dot, new_sq = n[0] * o[0] + n[1] * o[1] + n[2] * o[2], n[0] * n[0] + n[1] * n[1] + n[2] * n[2]
-        if dot <= 0.0 or dot * dot <= new_sq * cos_sq * (o[0] * o[0] + o[1] * o[1] + o[2] * o[2]):
+        _cross(p, pair[j], pair[j + 1], x, u, w, old)
+        _cross(p, pair[j], pair[j + 1], k, u, w, new)  # u, w: its edges from k
+        dot = _dot(new, old)
+        if dot <= 0.0 or dot * dot <= _dot(new, new) * cos_sq * _dot(old, old):
             return False  # flipped (or degenerate), or turned by max_normal_angle or more
-        o[0], o[1], o[2] = w[0] - u[0], w[1] - u[1], w[2] - u[2]
-        dot = (u[0] * u[0] + u[1] * u[1] + u[2] * u[2] + w[0] * w[0] + w[1] * w[1] + w[2] * w[2] + o[0] * o[0]
-               + o[1] * o[1] + o[2] * o[2]) * min_quality
-        if new_sq <= dot * dot:
+        old[0], old[1], old[2] = w[0] - u[0], w[1] - u[1], w[2] - u[2]  # its third edge
+        squared = (_dot(u, u) + _dot(w, w) + _dot(old, old)) * min_quality
+        if _dot(new, new) <= squared * squared:
             return False  # 2 * area / (sum of squared edge lengths) at most min_quality
     while i < 2 * V[x].start + V[x].valence and l < 2 * V[k].start + V[k].valence:  # merge the sorted rings
-        common, c = common + (ring[i] == ring[l]), ring[i] <= ring[l]
-        l += ring[l] <= ring[i]
-        i += c
-    return common == count[2 * V[x].start + e]  # link condition: only the edge's opposite vertices in common
+        common += ring[i] == ring[l]
+        i, l = i + (ring[i] <= ring[l]), l + (ring[l] <= ring[i])
+    return common == mult[2 * V[x].start + e]  # link condition: only the edge's opposite vertices in common
 
 
 def hierarchy(double[:, ::1] positions, const int64_t[:, ::1] triangles, uint8_t[::1] lock, double alpha,
               double beta, Py_ssize_t min_vertices, Py_ssize_t max_levels, double cos_sq, double min_quality,
               int max_tries, bint lock_fans, report):
-    """:func:`o3d_lsmesh.hierarchy.collapse.collapse_levels`; compacts ``positions`` and ``lock`` in place."""
-    cdef Py_ssize_t n = positions.shape[0], m = triangles.shape[0], i, count, selected, alive, total
+    """:func:`o3d_lsmesh.hierarchy.collapse.collapse_levels`: the levels; ``lock`` gets the fans (``lock_fans``)
+    and the vertices on an edge of more than two triangles, ``positions`` are compacted in place."""
+    cdef Py_ssize_t n = positions.shape[0], m = triangles.shape[0], i, count, selected = 1, alive, total
     if n >= 2 ** 31 - 1 or 6 * m >= 2 ** 31 - 1:
         raise ValueError(f"mesh must have fewer than 2**31 vertices and 2**31 / 6 triangles, got {n} and {m}")
-    # np.empty: every slot is written before it is read, and freed heap memory is reused without zeroing
-    vertex_a, pair_a, ring_a = np.empty((n + 1, 4), np.int32), np.empty(6 * m, np.int32), np.empty(6 * m, np.int32)
-    mult_a, key_a, order_a = np.empty(6 * m, np.uint8), np.zeros((2, n + 1), np.uint64), np.empty((3, n + 1), np.int32)
-    kept_a = np.arange(n, dtype=np.int64)
-    cdef int32_t[:, ::1] vertex = vertex_a, order = order_a  # order: candidates, sort spare, targets
-    cdef int32_t[::1] pair = pair_a, ring = ring_a, root
-    cdef uint8_t[::1] mult = mult_a  # triangles on each ring edge (at most 255 counted)
-    cdef int64_t[::1] kept = kept_a, removed, target, offsets, flat, parent
-    cdef uint64_t[:, ::1] key = key_a
+    # np.empty: every slot is written before it is read; order: candidates, sort spare (or fan roots), targets
+    cdef int32_t[:, ::1] vertex = np.empty((n + 1, 4), np.int32), order = np.empty((3, n + 1), np.int32)
+    cdef int32_t[::1] pair = np.empty(6 * m, np.int32), ring = np.empty(6 * m, np.int32)
+    cdef uint8_t[::1] mult = np.empty(6 * m, np.uint8)  # triangles on each ring edge (at most 255 counted)
+    cdef double[:, ::1] key = np.empty((2, n + 1)), edge = np.empty((3, n + 1))  # costs; the visited's edges
+    cdef int64_t[::1] kept = np.arange(n, dtype=np.int64), removed, target, offsets, flat, parent
     cdef const int64_t[:, ::1] T = triangles
     cdef int64_t[:, ::1] out
-    cdef double[:, ::1] edge  # volume, length, allowed of each ring edge of the visited vertex
     cdef Vertex* V = <Vertex*> &vertex[0, 0]
-    cdef int32_t* goal = &order[2, 0]
+    cdef int32_t* root = &order[1, 0]
     cdef double* p = &positions[0, 0] if n else NULL
-    cdef int32_t v, u, x, k, best, j, s, r, c, e, deg, attempt, max_valence
-    cdef double dx, dy, dz, d, lo, hi, sx, sy, sz, least
+    cdef int32_t v, x, k, best, j, s, r, c, e, deg, attempt
+    cdef double d, lo, hi, least
+    cdef double[3] normal, a, b, cross
     levels = []
-    while True:
-        m = T.shape[0]
-        with nogil:  # corners (next and previous vertex of each triangle of a vertex), sorted unique 1-rings
+    while selected:
+        m, depth = T.shape[0], len(levels)
+        with nogil:  # corners (next and previous vertex of each triangle of a vertex)
             memset(V, 0, n * sizeof(Vertex))
             for i in range(3 * m):
                 V[T[i // 3, i % 3]].corners += 1
             for v in range(1, n):
                 V[v].start = V[v - 1].start + V[v - 1].corners
             for i in range(3 * m):
-                v, c, j = T[i // 3, i % 3], i % 3, 2 * (V[T[i // 3, i % 3]].start + V[T[i // 3, i % 3]].valence)
-                pair[j], pair[j + 1], V[v].valence = T[i // 3, (c + 1) % 3], T[i // 3, (c + 2) % 3], V[v].valence + 1
-            max_valence = 0
-            for v in range(n):
-                s, deg, V[v].flags = 2 * V[v].start, 0, lock[v]
-                for j in range(s, s + 2 * V[v].corners):  # insertion into the sorted unique ring: rings are short
+                v, c = T[i // 3, i % 3], i % 3
+                j, V[v].valence = 2 * (V[v].start + V[v].valence), V[v].valence + 1  # valence: corners so far
+                pair[j], pair[j + 1] = T[i // 3, (c + 1) % 3], T[i // 3, (c + 2) % 3]
+            count = 0
+            for v in range(n):  # the sorted unique 1-ring, flags, the candidates by cost
+                s, deg, V[v].flags = 2 * V[v].start, 0, lock[kept[v]]
+                for j in range(s, s + 2 * V[v].corners):  # insertion: rings are short
                     r = s + deg
                     while r > s and ring[r - 1] > pair[j]:
                         r -= 1
                     if r > s and ring[r - 1] == pair[j]:
                         mult[r - 1] += mult[r - 1] < 255
-                    else:
-                        for c in range(s + deg, r, -1):
-                            ring[c], mult[c] = ring[c - 1], mult[c - 1]
-                        ring[r], mult[r], deg = pair[j], 1, deg + 1
+                        continue
+                    for c in range(s + deg, r, -1):
+                        ring[c], mult[c] = ring[c - 1], mult[c - 1]
+                    ring[r], mult[r], deg = pair[j], 1, deg + 1
                 for j in range(s, s + deg):
                     V[v].flags |= BOUNDARY if mult[j] == 1 else (LOCKED if mult[j] > 2 else 0)
-                V[v].valence, max_valence = deg, max(max_valence, deg)
-        edge, root = np.zeros((3, max_valence)), np.zeros(max_valence, np.int32)
-        if lock_fans and not levels:  # also lock unreferenced vertices and those whose corners form several fans
-            with nogil:
-                for v in range(n):
-                    s, deg = 2 * V[v].start, V[v].valence
-                    for e in range(deg):
-                        root[e] = e
-                    for j in range(s, s + 2 * V[v].corners, 2):  # union-find of ring slots joined by a corner
-                        r, e = 0, 0
-                        while ring[s + r] != pair[j]: r += 1
-                        while ring[s + e] != pair[j + 1]: e += 1
-                        while root[r] != r: r = root[r]
-                        while root[e] != e: e = root[e]
+                V[v].valence = deg
+                if lock_fans and depth == 0:  # also lock unreferenced vertices and those with several fans
+                    for j in range(s, s + deg):
+                        root[ring[j]] = ring[j]
+                    for j in range(s, s + 2 * V[v].corners, 2):  # union-find of the neighbours joined by a corner
+                        r, e = pair[j], pair[j + 1]
+                        while root[r] != r:
+                            r = root[r]
+                        while root[e] != e:
+                            e = root[e]
                         root[max(r, e)], deg = min(r, e), deg - (r != e)
                     if V[v].valence == 0 or deg > 1 or V[v].flags & LOCKED:
                         lock[v], V[v].flags = 1, V[v].flags | LOCKED
-        if not levels:
-            first = np.array(lock, dtype=bool)
-        if len(levels) == max_levels or n <= min_vertices:
-            return first, levels
-        with nogil:
-            count = selected = total = 0  # candidates: unlocked vertices with neighbours, by cost (section 4.1)
-            for v in range(n):
-                goal[v] = -1
-                if V[v].valence and not V[v].flags & LOCKED:
+                if V[v].valence and not V[v].flags & LOCKED:  # cost(v) (section 4.1)
                     lo, hi = INFINITY, 0.0
-                    for j in range(2 * V[v].start, 2 * V[v].start + V[v].valence):
-                        u = ring[j]
-                        dx, dy, dz = p[3 * u] - p[3 * v], p[3 * u + 1] - p[3 * v + 1], p[3 * u + 2] - p[3 * v + 2]
-                        d = sqrt(dx * dx + dy * dy + dz * dz)
+                    for j in range(s, s + V[v].valence):
+                        _edge(p, ring[j], v, a)
+                        d = sqrt(_dot(a, a))
                         lo, hi = min(lo, d), max(hi, d)
-                    d = alpha * lo + beta * hi
-                    memcpy(&key[0, count], &d, sizeof(double))
-                    order[0, count], count = v, count + 1
-            _sort(&order[0, 0], &order[1, 0], &key[0, 0], &key[1, 0], count)
+                    key[0, count], order[0, count], count = alpha * lo + beta * hi, v, count + 1
+            if depth == max_levels or n <= min_vertices:
+                break
+            _sort(&order[0, 0], &order[1, 0], <uint64_t*> &key[0, 0], <uint64_t*> &key[1, 0], count)
+            selected = total = 0
+            memset(&order[2, 0], -1, n * sizeof(int32_t))  # the targets
             for i in range(count):
                 if selected >= n - min_vertices:
                     break
-                x = order[0, i + 16 if i + 16 < count else i]  # the visit goes all over memory: ask early
+                x = order[0, min(i + 16, count - 1)]  # the visit goes all over memory: ask early, step by step
                 prefetch(&V[x]); prefetch(&p[3 * x])
-                x = order[0, i + 8 if i + 8 < count else i]
+                x = order[0, min(i + 8, count - 1)]
                 prefetch(&ring[2 * V[x].start]); prefetch(&pair[2 * V[x].start])
-                x = order[0, i + 4 if i + 4 < count else i]  # its ring arrived: its neighbours' flags and positions
-                for j in range(2 * V[x].start, 2 * V[x].start + V[x].valence):
+                x = order[0, min(i + 4, count - 1)]  # unless touched already: its neighbours
+                for j in range(2 * V[x].start, 2 * V[x].start + V[x].valence * (not V[x].flags & TOUCHED)):
                     prefetch(&V[ring[j]]); prefetch(&p[3 * ring[j]])
-                x = order[0, i + 2 if i + 2 < count else i]  # the neighbours' rings, one of which the link check reads
-                for j in range(2 * V[x].start, 2 * V[x].start + V[x].valence):
-                    prefetch(&ring[2 * V[ring[j]].start])
-                x, sx, sy, sz, best = order[0, i], 0.0, 0.0, 0.0, -1
+                x, s, deg, best = order[0, i], 2 * V[order[0, i]].start, V[order[0, i]].valence, -1
                 if V[x].flags & TOUCHED:
                     continue  # the independence rule
-                for j in range(2 * V[x].start, 2 * (V[x].start + V[x].corners), 2):  # N_x, summed normals
-                    u, v = pair[j], pair[j + 1]
-                    dx, dy, dz = p[3 * u] - p[3 * x], p[3 * u + 1] - p[3 * x + 1], p[3 * u + 2] - p[3 * x + 2]
-                    lo, hi, d = p[3 * v] - p[3 * x], p[3 * v + 1] - p[3 * x + 1], p[3 * v + 2] - p[3 * x + 2]
-                    sx, sy, sz = sx + (dy * d - dz * hi), sy + (dz * lo - dx * d), sz + (dx * hi - dy * lo)
-                s, deg = 2 * V[x].start, V[x].valence
-                for e in range(deg):  # allowed edges with their cone volume |N_x . (x_k - x)| and length
+                normal[0] = normal[1] = normal[2] = 0.0  # N_x, the summed doubled-area normals
+                for j in range(s, s + 2 * V[x].corners, 2):
+                    _cross(p, pair[j], pair[j + 1], x, a, b, cross)
+                    normal[0], normal[1], normal[2] = normal[0] + cross[0], normal[1] + cross[1], normal[2] + cross[2]
+                for e in range(deg):  # allowed edges, their cone volume |N_x . (x_k - x)| and length
                     k = ring[s + e]  # k unlocked; a boundary x along the boundary; no lone triangle or tetrahedron
-                    edge[2, e] = not V[k].flags & LOCKED and (mult[s + e] == 1 or not V[x].flags & BOUNDARY) and not (
-                        deg == (2 if V[x].flags & BOUNDARY else 3) == V[k].valence
-                        and (V[k].flags & BOUNDARY) == (V[x].flags & BOUNDARY))
-                    dx, dy, dz = p[3 * k] - p[3 * x], p[3 * k + 1] - p[3 * x + 1], p[3 * k + 2] - p[3 * x + 2]
-                    edge[1, e], edge[0, e] = sqrt(dx * dx + dy * dy + dz * dz), fabs(sx * dx + sy * dy + sz * dz)
+                    edge[2, e] = not (V[k].flags & LOCKED or (V[x].flags & BOUNDARY and mult[s + e] != 1) or (
+                        deg == V[k].valence == (2 if V[x].flags & BOUNDARY else 3)
+                        and (V[k].flags & BOUNDARY) == (V[x].flags & BOUNDARY)))
+                    _edge(p, k, x, a)
+                    edge[0, e], edge[1, e] = fabs(_dot(normal, a)), sqrt(_dot(a, a))
                 for attempt in range(max_tries):  # least volume (within 1e-9), then shortest, then first
                     best, least, d = -1, INFINITY, INFINITY
                     for e in range(deg):
@@ -200,32 +188,32 @@ def hierarchy(double[:, ::1] positions, const int64_t[:, ::1] triangles, uint8_t
                         break
                     edge[2, best], best = 0, -1
                 if best >= 0 and not V[ring[s + best]].flags & TOUCHED:  # its target, too, must be untouched
-                    goal[x], selected, total, V[x].flags = ring[s + best], selected + 1, total + deg, V[x].flags | TOUCHED
+                    order[2, x], selected, total = ring[s + best], selected + 1, total + deg
+                    V[x].flags |= TOUCHED
                     for j in range(s, s + deg):
                         V[ring[j]].flags |= TOUCHED
-        if selected == 0:
-            return first, levels
-        level = [np.empty(selected, np.int64), np.empty(selected, np.int64), np.empty(selected + 1, np.int64),
-                 np.empty(total, np.int64), np.empty(n, np.int64), np.empty((m, 3), np.int64)]
-        removed, target, offsets, flat, parent, out = level
-        with nogil:  # apply: the parent map, the removed 1-rings, the triangles with three distinct vertices
-            i = j = total = alive = offsets[0] = 0
-            for v in range(n):
-                if goal[v] >= 0:
-                    removed[i], target[i] = v, goal[v]
+        if selected:
+            level = [np.empty(size, np.int64) for size in (selected, selected, selected + 1, total, n, (m, 3))]
+            removed, target, offsets, flat, parent, out = level
+            with nogil:  # apply: the parent map, the removed 1-rings, the triangles with three distinct vertices
+                i = j = total = alive = offsets[0] = 0
+                for v in range(n):
+                    if order[2, v] < 0:
+                        parent[v], p[3 * j], p[3 * j + 1], p[3 * j + 2] = j, p[3 * v], p[3 * v + 1], p[3 * v + 2]
+                        kept[j], j = kept[v], j + 1
+                        continue
+                    removed[i], target[i] = v, order[2, v]
                     for e in range(2 * V[v].start, 2 * V[v].start + V[v].valence):
                         flat[total], total = ring[e], total + 1
                     offsets[i + 1], i = total, i + 1
-                else:
-                    parent[v], p[3 * j], p[3 * j + 1], p[3 * j + 2] = j, p[3 * v], p[3 * v + 1], p[3 * v + 2]
-                    lock[j], kept[j], j = lock[v], kept[v], j + 1
-            for i in range(selected):
-                parent[removed[i]] = parent[target[i]]
-            for i in range(m):
-                out[alive, 0], out[alive, 1], out[alive, 2] = parent[T[i, 0]], parent[T[i, 1]], parent[T[i, 2]]
-                alive += out[alive, 0] != out[alive, 1] != out[alive, 2] != out[alive, 0]
-        out = None  # let go of the buffer, then cut it to the triangles kept (pages never written cost nothing)
-        level[5].resize((alive, 3), refcheck=False)
-        n, T = n - selected, level[5]
-        levels.append((*level, kept_a[:n].copy()))
-        report(selected)
+                for i in range(selected):
+                    parent[removed[i]] = parent[target[i]]
+                for i in range(m):
+                    out[alive, 0], out[alive, 1], out[alive, 2] = parent[T[i, 0]], parent[T[i, 1]], parent[T[i, 2]]
+                    alive += out[alive, 0] != out[alive, 1] != out[alive, 2] != out[alive, 0]
+            out = None  # let go of the buffer, then cut it to the triangles kept
+            level[5].resize((alive, 3), refcheck=False)
+            n, T = n - selected, level[5]
+            levels.append((*level, np.array(kept[:n])))
+            report(selected)
+    return levels

@@ -9,17 +9,16 @@ goes to the neighbour ``k`` of least cone volume ``|N_x . (x_k - x)|`` (``N_x`` 
 normals around ``x``; ties within a relative 1e-9 to the shortest edge, then the first in index order),
 trying at most ``max_tries`` of them, and a collapse is made when
 
-* ``k`` is not locked, and a boundary ``x`` moves along a boundary edge (an interior one has only edges of
-  two triangles: an edge of one would make it boundary, of three locks it);
-* no isolated triangle or closed tetrahedron would remain;
+* ``k`` is not locked, a boundary ``x`` moves along a boundary edge, and no isolated triangle or closed
+  tetrahedron would remain;
 * every surviving triangle of the star of ``x`` keeps its orientation, turns its normal by less than
   ``max_normal_angle`` and keeps ``2 * area / (sum of squared edge lengths)`` above ``min_quality``;
 * the link condition holds: ``x`` and ``k`` share only the opposite vertices of their edge (Euler
   characteristic and boundary loops stay).
 
-Locked are the caller's vertices and every vertex on an edge of more than two triangles (``lock_fans``:
-also unreferenced vertices and those whose triangles form several fans), so every other star is a disk or
-half-disk, and every level keeps the input's non-manifold vertices.
+Locked is every vertex on an edge of more than two triangles (``lock_fans``: also unreferenced vertices and
+those whose triangles form several fans), so every other star is a disk or half-disk, and every level keeps
+the input's non-manifold vertices.
 """
 
 from __future__ import annotations
@@ -57,19 +56,17 @@ def collapse_levels(
     max_normal_angle: float = 60.0,
     min_quality: float = 1e-3,
     max_tries: int = 3,
-    locked: np.ndarray | None = None,
     lock_fans: bool = False,
     report: Callable[[int], Any] | None = None,
 ) -> tuple[np.ndarray, list[LevelCollapse]]:
-    """``(lock of level 0 (n,) bool, levels)``, a level removing at most ``n_i - min_vertices`` vertices,
-    until ``max_levels`` or no valid collapse; ``report(removed count)`` after each level."""
+    """``(locked vertices of level 0 (n,) bool, levels)``, a level removing at most ``n_i - min_vertices``
+    vertices, until ``max_levels`` or no valid collapse; ``report(removed count)`` after each level."""
     from ._kernel import hierarchy  # built by the package's build (``pip install .``, ``setup.py build_ext``)
 
-    lock = np.zeros(len(vertices), bool) if locked is None else np.array(locked, dtype=bool)
     # at 90 degrees or more only the flip test (a positive dot product of the normals) remains
     cos_sq = float(np.cos(np.deg2rad(max_normal_angle)) ** 2) if max_normal_angle < 90 else 0.0
     P, T = np.array(vertices, dtype=np.float64, order="C"), np.ascontiguousarray(triangles, dtype=np.int64)
-    limit = len(P) + 1 if max_levels is None else max_levels
+    limit, lock = len(P) + 1 if max_levels is None else max_levels, np.zeros(len(P), np.uint8)
     options = (alpha, beta, min_vertices, limit, cos_sq, min_quality, max_tries, lock_fans)
-    first, levels = hierarchy(P, T, lock.view(np.uint8), *options, report or (lambda _: None))
-    return first, [LevelCollapse(*level) for level in levels]
+    levels = hierarchy(P, T, lock, *options, report or (lambda _: None))
+    return lock.view(bool), [LevelCollapse(*level) for level in levels]
