@@ -309,6 +309,9 @@ def new_mesh(
             # sizes than building the vectors from arrays (the int64 -> int32 triangles above all)
             out = o3d.geometry.TriangleMesh(src)
             np.asarray(out.vertices)[...] = vertices
+            # the source's normals are stale; Open3D < 0.19 would build vertex normals from them
+            out.vertex_normals = o3d.utility.Vector3dVector()
+            out.triangle_normals = o3d.utility.Vector3dVector()
         else:
             out = o3d.geometry.TriangleMesh(
                 o3d.utility.Vector3dVector(vertices), o3d.utility.Vector3iVector(triangles.astype(np.int32))

@@ -11,7 +11,7 @@ range scans, :mod:`.scan_fairing`), and the paper's ``"local"`` (eq. 7) and
 from __future__ import annotations
 
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager, nullcontext
 from typing import TYPE_CHECKING
 
@@ -231,6 +231,12 @@ _PAGE_ADVICE_LOCK = threading.Lock()
 _PAGE_ADVICE_STATE = {"depth": 0, "previous": True}
 
 
+def huge_page_toggle() -> Callable[[bool], bool] | None:
+    """numpy's private switch of its huge-page advice (``np._core`` from numpy 2, ``np.core`` before)."""
+    core = getattr(np, "_core", None) or getattr(np, "core", None)
+    return getattr(getattr(core, "multiarray", None), "_set_madvise_hugepage", None)
+
+
 @contextmanager
 def _plain_pages() -> Iterator[None]:
     """Within the block, numpy does not ask the kernel for transparent huge pages on new arrays.
@@ -243,7 +249,7 @@ def _plain_pages() -> Iterator[None]:
     against 3.1-3.7 s with it, 7.7-8.4 s of CPU time in all against 9.6-10.7 s; a wash at 1M. The
     setting is process-wide: nested and concurrent calls share one save and restore.
     """
-    toggle = getattr(getattr(getattr(np, "_core", None), "multiarray", None), "_set_madvise_hugepage", None)
+    toggle = huge_page_toggle()
     if toggle is None:  # pragma: no cover - another numpy
         yield
         return
@@ -257,7 +263,7 @@ def _plain_pages() -> Iterator[None]:
         with _PAGE_ADVICE_LOCK:
             _PAGE_ADVICE_STATE["depth"] -= 1
             if _PAGE_ADVICE_STATE["depth"] == 0:
-                toggle(_PAGE_ADVICE_STATE["previous"])
+                toggle(bool(_PAGE_ADVICE_STATE["previous"]))
 
 
 def _reused(array: np.ndarray, shape: tuple) -> np.ndarray:
