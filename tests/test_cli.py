@@ -459,16 +459,7 @@ def test_console_script_is_installed():
         pytest.skip(f"console script not installed next to {sys.executable} (pip install -e . creates it)")
     done = subprocess.run([str(script), "--help"], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0
-    for command in (
-        "denoise",
-        "approximate",
-        "reconstruct",
-        "hierarchy",
-        "encode",
-        "decode",
-        "compare",
-        "demo",
-    ):
+    for command in [*COMMANDS, "demo"]:
         assert command in done.stdout
 
 

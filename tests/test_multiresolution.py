@@ -172,6 +172,16 @@ def test_bad_input_raises(rippled):
 # ----------------------------------------------------- smoothing by scale (issue 13)
 
 
+def _named_mesh(name):
+    """``"blob"`` (generated) or a mesh of the data folder, as arrays."""
+    from conftest import load_mesh
+
+    if name == "blob":
+        return _blob()
+    mesh = load_mesh(name)
+    return np.asarray(mesh.vertices), np.asarray(mesh.triangles).astype(np.int64)
+
+
 def _blob():
     sphere = o3d.geometry.TriangleMesh.create_sphere(radius=1.0, resolution=40)
     V = np.asarray(sphere.vertices)
@@ -207,13 +217,7 @@ def _signed_volume(P, F):
 
 @pytest.mark.parametrize("name", ["blob", "horse.ply", "bunny.ply"])
 def test_a_coarser_start_gives_a_smoother_result_that_keeps_the_volume(name):
-    from conftest import load_mesh
-
-    if name == "blob":
-        V, F = _blob()
-    else:
-        mesh = load_mesh(name)
-        V, F = np.asarray(mesh.vertices), np.asarray(mesh.triangles).astype(np.int64)
+    V, F = _named_mesh(name)
     spacing = np.linalg.norm(V[F[:, 0]] - V[F[:, 1]], axis=1).mean()
     noisy = V + np.random.default_rng(0).normal(scale=0.3 * spacing, size=V.shape)
     h = build_hierarchy((noisy, F), max_levels=6, min_vertices=4)
@@ -255,13 +259,7 @@ def _upper_spectrum_energies(P, F, upper, interior, spacing):
 
 def _small_copy(name):
     """The mesh's coarsest hierarchy level at 2000 vertices (small enough for a dense eigendecomposition)."""
-    from conftest import load_mesh
-
-    if name == "blob":
-        V, F = _blob()
-    else:
-        mesh = load_mesh(name)
-        V, F = np.asarray(mesh.vertices), np.asarray(mesh.triangles).astype(np.int64)
+    V, F = _named_mesh(name)
     coarse = build_hierarchy((V, F), min_vertices=2000)
     return coarse.level_arrays(len(coarse) - 1)
 

@@ -108,8 +108,8 @@ def reference_solution(V, F, mu, membrane, boundary_weight, rim_curve=0.0, twici
     return X1, X1 + twicing * np.linalg.solve(A2, b2)
 
 
-def reference_rim_ratio(V, F):
-    """Plain loops: the unclipped c (9/7) E_int / E_bd (inf without a boundary or an interior vertex)."""
+def reference_rings(F):
+    """Plain loops: each vertex's 1-ring and its boundary-curve neighbours (edges of one triangle)."""
     count = {}
     for t in F.tolist():
         for a, b in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0])):
@@ -122,6 +122,12 @@ def reference_rim_ratio(V, F):
         if c == 1:
             curve.setdefault(a, set()).add(b)
             curve.setdefault(b, set()).add(a)
+    return ring, curve
+
+
+def reference_rim_ratio(V, F):
+    """Plain loops: the unclipped c (9/7) E_int / E_bd (inf without a boundary or an interior vertex)."""
+    ring, curve = reference_rings(F)
     inner = [i for i in ring if i not in curve]
     if not curve or not inner:
         return np.inf, len(curve) / max(len(ring), 1)
@@ -138,15 +144,9 @@ def reference_rim_ratio(V, F):
 def reference_noise(V, F):
     """Plain loops: (sigma, g) from the 1- and 2-ring umbrellas along the normal (see measured_noise)."""
     n = len(V)
-    ring = [set() for _ in range(n)]
-    count = {}
-    for t in F.tolist():
-        for a, b in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0])):
-            ring[a].add(b)
-            ring[b].add(a)
-            key = (min(a, b), max(a, b))
-            count[key] = count.get(key, 0) + 1
-    rim = {i for key, c in count.items() if c == 1 for i in key}
+    rings, curve = reference_rings(F)
+    ring = [rings.get(i, set()) for i in range(n)]
+    rim = set(curve)
     near_rim = rim | {j for i in rim for j in ring[i]}
     inner = [i for i in range(n) if ring[i] and i not in near_rim]
     if not inner:
@@ -195,18 +195,7 @@ def reference_parameters(V, F):
 
 def reference_boundary_weight(V, F):
     """Plain loops: clip(c (9/7) mean_interior |L x|^2 / mean_boundary |L_curve x|^2, 0.1, c), c the coverage."""
-    count = {}
-    for t in F.tolist():
-        for a, b in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0])):
-            key = (min(a, b), max(a, b))
-            count[key] = count.get(key, 0) + 1
-    ring, curve = {}, {}
-    for (a, b), c in count.items():
-        ring.setdefault(a, set()).add(b)
-        ring.setdefault(b, set()).add(a)
-        if c == 1:
-            curve.setdefault(a, set()).add(b)
-            curve.setdefault(b, set()).add(a)
+    ring, curve = reference_rings(F)
     if not curve:
         return 1.0
     inner = [np.sum((np.mean([V[j] for j in ring[i]], axis=0) - V[i]) ** 2) for i in ring if i not in curve]
