@@ -56,9 +56,8 @@ def multiresolution_fairing_arrays(
     # outweighed the smoothing in the Laplacian spectrum. They are put where constrained fairing of the
     # input puts them (section 3.3, the input's midpoints: what level 0 gives) and held there.
     triangles = hierarchy.triangles[0]
-    positions[_boundary_vertices(triangles, len(positions))] = _input_boundary(
-        hierarchy.vertices, triangles, number_of_iterations, method
-    )
+    boundary, placed = _input_boundary(hierarchy.vertices, triangles, number_of_iterations, method)
+    positions[boundary] = placed
     while remaining > 0:
         step = min(remaining, number_of_iterations) if number_of_iterations else remaining
         positions = _fair_level(positions, triangles, step, method, smooth_boundary=False)
@@ -83,24 +82,23 @@ def _fair_level(
     )
 
 
-def _boundary_vertices(triangles: np.ndarray, n: int) -> np.ndarray:
-    return np.unique(boundary_halfedges(triangles, n))
-
-
-def _input_boundary(vertices: np.ndarray, triangles: np.ndarray, iterations: int, method: str) -> np.ndarray:
-    """Boundary positions ``(b, 3)`` (sorted vertex order) that ``_fair_level`` gives the input itself.
+def _input_boundary(
+    vertices: np.ndarray, triangles: np.ndarray, iterations: int, method: str
+) -> tuple[np.ndarray, np.ndarray]:
+    """The boundary vertices ``(b,)`` (sorted) and the positions ``(b, 3)`` ``_fair_level`` gives them on the input.
 
     Its boundary steps read boundary vertices only, so they run alone: the curve update of section 3.3
     with the input's midpoints (``"local"``), or re-taken from the current curve at every step
     (``"global"``); a pinched boundary is held.
     """
-    boundary = _boundary_vertices(triangles, len(vertices))
-    if not _simple_boundary(triangles, len(vertices)):
-        return vertices[boundary]
+    halfedges = boundary_halfedges(triangles, len(vertices))  # one pass serves both questions
+    boundary = np.unique(halfedges)
+    if not _is_simple(halfedges, len(vertices)):
+        return boundary, vertices[boundary]
     smoothed = smooth_boundary_curves_arrays(
         vertices, triangles, iterations, reimpose_every=1 if method == "global" else None
     )
-    return smoothed[boundary]
+    return boundary, smoothed[boundary]
 
 
 def _simple_boundary(triangles: np.ndarray, n: int) -> bool:
@@ -109,8 +107,11 @@ def _simple_boundary(triangles: np.ndarray, n: int) -> bool:
     Levels of a fast-simplification hierarchy can have pinched boundaries;
     their boundary is then held fixed instead of curve-faired.
     """
-    boundary = boundary_halfedges(triangles, n)
-    degree = np.bincount(boundary.ravel(), minlength=n)
+    return _is_simple(boundary_halfedges(triangles, n), n)
+
+
+def _is_simple(halfedges: np.ndarray, n: int) -> bool:
+    degree = np.bincount(halfedges.ravel(), minlength=n)
     return bool(np.all((degree == 0) | (degree == 2)))
 
 
