@@ -234,8 +234,10 @@ class LSMeshSystem:
             np.add.at(rhs, self._reduce(self._soft), (self._soft_weights**2)[:, None] * soft_pos)
         check_finite(rhs, name="constraint_vertex_positions", what="weights**2 * constraint_vertex_positions")
         # the iterative path starts from the mesh's own geometry, which an LS mesh of its own controls
-        # approximates (a fifth fewer CG iterations at 200k vertices; direct solvers ignore x0)
-        start = self._vertices if self._free is None else self._vertices[self._free]
+        # approximates (a fifth fewer CG iterations at 200k vertices); a direct solve needs no start
+        start = None
+        if self._solver.backend == "iterative":
+            start = self._vertices if self._free is None else self._vertices[self._free]
         solution = self._solver.solve(rhs, x0=start)
         if self._updated if refine is None else refine:
             reduced_soft = self._reduce(self._soft)
