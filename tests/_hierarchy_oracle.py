@@ -132,12 +132,14 @@ def collapse_level(
             near = [o for o in options if o[0] <= threshold]
             best = min(near, key=lambda o: o[1])  # min keeps the first of equal lengths
             k = best[2]
+            if touched[k]:
+                break  # a touched target ends the search
             common = len(set(ring[x]) & set(ring[k]))
             if _geometry_ok(P, corners[x], x, k, cos_sq, min_quality) and common == count[x][k]:
                 chosen = k
                 break
             options.remove(best)
-        if chosen is None or touched[chosen]:
+        if chosen is None:
             continue
         target[x] = chosen
         touched[x] = True

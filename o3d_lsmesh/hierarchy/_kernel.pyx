@@ -184,10 +184,12 @@ def hierarchy(double[:, ::1] positions, const int64_t[:, ::1] triangles, uint8_t
                     for e in range(deg):
                         if edge[2, e] and edge[0, e] <= least * (1.0 + 1e-9) and edge[1, e] < d:
                             d, best = edge[1, e], e
+                    if best >= 0 and V[ring[s + best]].flags & TOUCHED:
+                        best = -1  # a touched target ends the search: the independence rule
                     if best < 0 or _legal(p, V, &pair[0], &ring[0], &mult[0], x, best, cos_sq, min_quality):
                         break
                     edge[2, best], best = 0, -1
-                if best >= 0 and not V[ring[s + best]].flags & TOUCHED:  # its target, too, must be untouched
+                if best >= 0:
                     order[2, x], selected, total = ring[s + best], selected + 1, total + deg
                     V[x].flags |= TOUCHED
                     for j in range(s, s + deg):

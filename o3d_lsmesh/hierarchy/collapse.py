@@ -2,12 +2,13 @@
 
 The loop (``_kernel.pyx``; ``tests/_hierarchy_oracle.py`` is the same loop in plain Python) visits the
 unlocked vertices in increasing ``cost(x) = alpha * min_edge(x) + beta * max_edge(x)`` (ties by index) and
-skips ``x`` when ``x`` or its target is in the closed 1-ring of a vertex already removed in this level: a
-collapse reads the 1-rings of ``x`` and ``k`` and changes only those of ``N(x)``, so every collapse stays
-valid and the removed vertices are pairwise non-adjacent (:meth:`MeshHierarchy.refine` needs it). ``x``
-goes to the neighbour ``k`` of least cone volume ``|N_x . (x_k - x)|`` (``N_x`` the summed doubled-area
-normals around ``x``; ties within a relative 1e-9 to the shortest edge, then the first in index order),
-trying at most ``max_tries`` of them, and a collapse is made when
+skips ``x`` when ``x`` is in the closed 1-ring of a vertex already removed in this level. ``x`` tries its
+neighbours ``k`` in increasing cone volume ``|N_x . (x_k - x)|`` (``N_x`` the summed doubled-area normals
+around ``x``; ties within a relative 1e-9 to the shortest edge, then the first in index order), at most
+``max_tries`` of them; a ``k`` in such a closed 1-ring ends the search. A collapse reads the 1-rings of
+``x`` and ``k`` and changes only those of ``N(x)``, so every collapse stays valid and the removed vertices
+are pairwise non-adjacent (:meth:`MeshHierarchy.refine` needs it). ``x`` collapses into the first ``k``
+for which
 
 * ``k`` is not locked, a boundary ``x`` moves along a boundary edge, and no isolated triangle or closed
   tetrahedron would remain;
