@@ -100,7 +100,7 @@ def collapse_level(
             cost[v] = alpha * min(lengths) + beta * max(lengths)
     touched = [False] * n
     target = {}
-    for x in sorted(cost, key=lambda v: (cost[v], v)):
+    for x in sorted(cost, key=lambda v: (np.float32(cost[v]), v)):  # the kernel sorts float costs
         if len(target) >= max_removals:
             break
         if touched[x]:

@@ -5,7 +5,7 @@
 import numpy as np
 
 from libc.math cimport INFINITY, fabs, sqrt
-from libc.stdint cimport int32_t, int64_t, uint8_t, uint64_t
+from libc.stdint cimport int32_t, int64_t, uint8_t, uint32_t
 from libc.string cimport memset
 
 cdef enum: LOCKED = 1, BOUNDARY = 2, TOUCHED = 4  # TOUCHED: in the closed 1-ring of a vertex removed in this level
@@ -34,13 +34,13 @@ cdef inline void _cross(const double* p, int32_t a, int32_t b, int32_t c, double
     out[0], out[1], out[2] = u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2], u[0] * w[1] - u[1] * w[0]
 
 
-cdef void _sort(int32_t* order, int32_t* spare, uint64_t* key, uint64_t* spare_key, Py_ssize_t count) noexcept nogil:
-    """Stable LSD radix sort of ``order`` by ``key`` (bits of non-negative doubles), six passes of 11 bits
-    between the arrays and their spares, so that it ends in ``order``: ties stay in index order."""
+cdef void _sort(int32_t* order, int32_t* spare, uint32_t* key, uint32_t* spare_key, Py_ssize_t count) noexcept nogil:
+    """Stable LSD radix sort of ``order`` by ``key`` (bits of non-negative floats), three passes of 11 bits
+    between the arrays and their spares: it ends in ``spare``, ties in index order."""
     cdef Py_ssize_t hist[2048]
     cdef Py_ssize_t i, d, total
     cdef int shift
-    for shift in range(0, 66, 11):
+    for shift in range(0, 33, 11):
         memset(hist, 0, sizeof(hist))
         for i in range(count):
             hist[(key[i] >> shift) & 2047] += 1
@@ -85,11 +85,12 @@ def hierarchy(double[:, ::1] positions, const int64_t[:, ::1] triangles, uint8_t
     cdef Py_ssize_t n = positions.shape[0], m = triangles.shape[0], i, count, selected = 1, alive, total
     if n >= 2 ** 31 - 1 or 6 * m >= 2 ** 31 - 1:
         raise ValueError(f"mesh must have fewer than 2**31 vertices and 2**31 / 6 triangles, got {n} and {m}")
-    # np.empty: every slot is written before it is read; order: candidates, sort spare (or fan roots), targets
+    # np.empty: every slot is written before it is read; order: sorted candidates, fan roots, candidates then targets
     cdef int32_t[:, ::1] vertex = np.empty((n + 1, 4), np.int32), order = np.empty((3, n + 1), np.int32)
     cdef int32_t[::1] pair = np.empty(6 * m, np.int32), ring = np.empty(6 * m, np.int32)
     cdef uint8_t[::1] mult = np.empty(6 * m, np.uint8)  # triangles on each ring edge (at most 255 counted)
-    cdef double[:, ::1] key = np.empty((2, n + 1)), edge = np.empty((3, n + 1))  # costs; the visited's edges
+    cdef float[:, ::1] key = np.empty((2, n + 1), np.float32)  # costs, rounded to float: ties go by index
+    cdef double[:, ::1] edge = np.empty((3, n + 1))  # the visited vertex's edges
     cdef int64_t[::1] kept = np.arange(n, dtype=np.int64), removed, target, offsets, flat, parent
     cdef const int64_t[:, ::1] T = triangles
     cdef int64_t[:, ::1] out
@@ -146,10 +147,10 @@ def hierarchy(double[:, ::1] positions, const int64_t[:, ::1] triangles, uint8_t
                         _edge(p, ring[j], v, a)
                         d = sqrt(_dot(a, a))
                         lo, hi = min(lo, d), max(hi, d)
-                    key[0, count], order[0, count], count = alpha * lo + beta * hi, v, count + 1
+                    key[0, count], order[2, count], count = alpha * lo + beta * hi, v, count + 1
             if depth == max_levels or n <= min_vertices:
                 break
-            _sort(&order[0, 0], &order[1, 0], <uint64_t*> &key[0, 0], <uint64_t*> &key[1, 0], count)
+            _sort(&order[2, 0], &order[0, 0], <uint32_t*> &key[0, 0], <uint32_t*> &key[1, 0], count)
             selected = total = 0
             memset(&order[2, 0], -1, n * sizeof(int32_t))  # the targets
             for i in range(count):
