@@ -5,7 +5,7 @@
 import numpy as np
 
 from libc.math cimport INFINITY, fabs, sqrt
-from libc.stdint cimport int32_t, int64_t, uint8_t, uint32_t
+from libc.stdint cimport int32_t, int64_t, uint8_t, uint32_t, uint64_t
 from libc.string cimport memset
 
 cdef enum: LOCKED = 1, BOUNDARY = 2, TOUCHED = 4  # TOUCHED: in the closed 1-ring of a vertex removed in this level
@@ -32,25 +32,6 @@ cdef inline void _cross(const double* p, int32_t a, int32_t b, int32_t c, double
     _edge(p, a, c, u)
     _edge(p, b, c, w)
     out[0], out[1], out[2] = u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2], u[0] * w[1] - u[1] * w[0]
-
-
-cdef void _sort(int32_t* order, int32_t* spare, uint32_t* key, uint32_t* spare_key, Py_ssize_t count) noexcept nogil:
-    """Stable LSD radix sort of ``order`` by ``key`` (bits of non-negative floats), three passes of 11 bits
-    between the arrays and their spares: it ends in ``spare``, ties in index order."""
-    cdef Py_ssize_t hist[2048]
-    cdef Py_ssize_t i, d, total
-    cdef int shift
-    for shift in range(0, 33, 11):
-        memset(hist, 0, sizeof(hist))
-        for i in range(count):
-            hist[(key[i] >> shift) & 2047] += 1
-        total = 0
-        for d in range(2048):
-            total, hist[d] = total + hist[d], total
-        for i in range(count):
-            d = (key[i] >> shift) & 2047
-            spare[hist[d]], spare_key[hist[d]], hist[d] = order[i], key[i], hist[d] + 1
-        order, spare, key, spare_key = spare, order, spare_key, key
 
 
 cdef bint _legal(const double* p, const Vertex* V, const int32_t* pair, const int32_t* ring, const uint8_t* mult,
@@ -85,20 +66,22 @@ def hierarchy(double[:, ::1] positions, const int64_t[:, ::1] triangles, uint8_t
     cdef Py_ssize_t n = positions.shape[0], m = triangles.shape[0], i, count, selected = 1, alive, total
     if n >= 2 ** 31 - 1 or 6 * m >= 2 ** 31 - 1:
         raise ValueError(f"mesh must have fewer than 2**31 vertices and 2**31 / 6 triangles, got {n} and {m}")
-    # np.empty: every slot is written before it is read; order: sorted candidates, fan roots, candidates then targets
-    cdef int32_t[:, ::1] vertex = np.empty((n + 1, 4), np.int32), order = np.empty((3, n + 1), np.int32)
+    # np.empty: every slot is written before it is read; order: fan roots, targets
+    cdef int32_t[:, ::1] vertex = np.empty((n + 1, 4), np.int32), order = np.empty((2, n + 1), np.int32)
     cdef int32_t[::1] pair = np.empty(6 * m, np.int32), ring = np.empty(6 * m, np.int32)
     cdef uint8_t[::1] mult = np.empty(6 * m, np.uint8)  # triangles on each ring edge (at most 255 counted)
-    cdef float[:, ::1] key = np.empty((2, n + 1), np.float32)  # costs, rounded to float: ties go by index
+    keys = np.empty(n + 1, np.uint64)  # the candidates: cost rounded to float (its bits), then index
+    cdef uint64_t[::1] key = keys
     cdef double[:, ::1] edge = np.empty((3, n + 1))  # the visited vertex's edges
     cdef int64_t[::1] kept = np.arange(n, dtype=np.int64), removed, target, offsets, flat, parent
     cdef const int64_t[:, ::1] T = triangles
     cdef int64_t[:, ::1] out
     cdef Vertex* V = <Vertex*> &vertex[0, 0]
-    cdef int32_t* root = &order[1, 0]
+    cdef int32_t* root = &order[0, 0]
     cdef double* p = &positions[0, 0] if n else NULL
     cdef int32_t v, x, k, best, j, s, r, c, e, deg, attempt
     cdef double d, lo, hi, least
+    cdef float cost
     cdef double[3] normal, a, b, cross
     levels = []
     while selected:
@@ -147,23 +130,26 @@ def hierarchy(double[:, ::1] positions, const int64_t[:, ::1] triangles, uint8_t
                         _edge(p, ring[j], v, a)
                         d = sqrt(_dot(a, a))
                         lo, hi = min(lo, d), max(hi, d)
-                    key[0, count], order[2, count], count = alpha * lo + beta * hi, v, count + 1
-            if depth == max_levels or n <= min_vertices:
-                break
-            _sort(&order[2, 0], &order[0, 0], <uint32_t*> &key[0, 0], <uint32_t*> &key[1, 0], count)
+                    cost = alpha * lo + beta * hi
+                    key[count], count = (<uint64_t> (<uint32_t*> &cost)[0]) << 32 | v, count + 1
+        if depth == max_levels or n <= min_vertices:
+            break
+        keys[:count].sort()  # the visiting order; <int32_t> key[i] below is the vertex (the low bits)
+        with nogil:
             selected = total = 0
-            memset(&order[2, 0], -1, n * sizeof(int32_t))  # the targets
+            memset(&order[1, 0], -1, n * sizeof(int32_t))  # the targets
             for i in range(count):
                 if selected >= n - min_vertices:
                     break
-                x = order[0, min(i + 16, count - 1)]  # the visit goes all over memory: ask early, step by step
+                x = <int32_t> key[min(i + 16, count - 1)]  # the visit goes all over memory: ask early, step by step
                 prefetch(&V[x]); prefetch(&p[3 * x])
-                x = order[0, min(i + 8, count - 1)]
+                x = <int32_t> key[min(i + 8, count - 1)]
                 prefetch(&ring[2 * V[x].start]); prefetch(&pair[2 * V[x].start])
-                x = order[0, min(i + 4, count - 1)]  # unless touched already: its neighbours
+                x = <int32_t> key[min(i + 4, count - 1)]  # unless touched already: its neighbours
                 for j in range(2 * V[x].start, 2 * V[x].start + V[x].valence * (not V[x].flags & TOUCHED)):
                     prefetch(&V[ring[j]]); prefetch(&p[3 * ring[j]])
-                x, s, deg, best = order[0, i], 2 * V[order[0, i]].start, V[order[0, i]].valence, -1
+                x = <int32_t> key[i]
+                s, deg, best = 2 * V[x].start, V[x].valence, -1
                 if V[x].flags & TOUCHED:
                     continue  # the independence rule
                 normal[0] = normal[1] = normal[2] = 0.0  # N_x, the summed doubled-area normals
@@ -191,7 +177,7 @@ def hierarchy(double[:, ::1] positions, const int64_t[:, ::1] triangles, uint8_t
                         break
                     edge[2, best], best = 0, -1
                 if best >= 0:
-                    order[2, x], selected, total = ring[s + best], selected + 1, total + deg
+                    order[1, x], selected, total = ring[s + best], selected + 1, total + deg
                     V[x].flags |= TOUCHED
                     for j in range(s, s + deg):
                         V[ring[j]].flags |= TOUCHED
@@ -201,11 +187,11 @@ def hierarchy(double[:, ::1] positions, const int64_t[:, ::1] triangles, uint8_t
             with nogil:  # apply: the parent map, the removed 1-rings, the triangles with three distinct vertices
                 i = j = total = alive = offsets[0] = 0
                 for v in range(n):
-                    if order[2, v] < 0:
+                    if order[1, v] < 0:
                         parent[v], p[3 * j], p[3 * j + 1], p[3 * j + 2] = j, p[3 * v], p[3 * v + 1], p[3 * v + 2]
                         kept[j], j = kept[v], j + 1
                         continue
-                    removed[i], target[i] = v, order[2, v]
+                    removed[i], target[i] = v, order[1, v]
                     for e in range(2 * V[v].start, 2 * V[v].start + V[v].valence):
                         flat[total], total = ring[e], total + 1
                     offsets[i + 1], i = total, i + 1
