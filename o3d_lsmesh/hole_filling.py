@@ -1,40 +1,25 @@
 """Faired hole filling: Liepa's triangulate-refine-fair pipeline with least-squares-mesh fairing.
 
-A hole is a closed loop of boundary half-edges. Each chosen hole is
+Each chosen hole (a closed loop of boundary half-edges) is
 
-1. triangulated by Liepa's minimum-weight dynamic programme (P. Liepa,
-   *Filling Holes in Meshes*, SGP 2003, section 3): the triangulation of the
-   loop that minimizes, lexicographically, the largest dihedral angle between
-   adjacent triangles (the new ones and the mesh's around the loop) and then
-   the total area. The programme is O(k^3) in the loop length k; loops longer
-   than :data:`DP_MAX_EDGES` are first cut in two along the shortest chord
-   between vertices far apart on the loop (the chord is sampled at the loop's
-   edge length), recursively, so that every piece is small: the cost stays
-   O(k^2) for the chord search plus O(k * DP_MAX_EDGES^2) and cannot hang;
-2. refined to the density of the surrounding edges (Liepa, section 4):
-   centroid splits where a triangle is larger than the local edge-length scale,
-   each round followed by edge flips (either circumsphere test, as CGAL's
-   relax, and only where the pair's smallest angle grows, so flips end);
-3. faired as a least-squares mesh (Sorkine and Cohen-Or 2004, section 6:
-   "the known vertices around the hole serve as control points, the geometry
-   of the unknown vertices is reconstructed"): the new vertices are the only
-   unknowns, and enough rings of the surrounding mesh are fixed anchors for the
-   chosen continuity; then a few tangential (centroidal) relaxation steps round the new
-   triangles without leaving the faired surface (to first order);
-4. checked: a patch whose new triangles cross the mesh is faired again with a
-   lower continuity, and left open if every one crosses (see :func:`fill_holes`, Notes).
+1. triangulated by Liepa's minimum-weight dynamic programme (P. Liepa, *Filling Holes in Meshes*,
+   SGP 2003, section 3): lexicographically smallest largest dihedral angle, then total area. It is
+   O(k^3) in the loop length k, so loops longer than :data:`DP_MAX_EDGES` are first cut in two,
+   recursively, along the shortest chord between vertices far apart on the loop (sampled at the
+   loop's edge length): O(k^2 + k DP_MAX_EDGES^2), it cannot hang;
+2. refined to the density of the surrounding edges (section 4): centroid splits, each round followed
+   by edge flips (either circumsphere test, as CGAL's relax, and only where the pair's smallest angle
+   grows, so flips end);
+3. faired as a least-squares mesh (Sorkine and Cohen-Or 2004, section 6: "the known vertices around
+   the hole serve as control points"): the new vertices are the only unknowns, with enough rings of
+   the mesh fixed for the continuity; then a few tangential (centroidal) relaxation steps;
+4. checked: a patch whose new triangles cross the mesh is faired again with a lower continuity, and
+   left open if every one crosses (see :func:`fill_holes`, Notes).
 
-The loops are those of :func:`o3d_lsmesh.topology.boundary_loops`. The dynamic programme runs once
-per loop length (loops of one length in one batch, vectorized per diagonal of its table); every
-piece is then refined at once (disjoint index ranges, one flip pass per round for all, each pass
-testing only the edges a flip can have changed), and all patches are faired in one sparse system
-and checked for crossings in one pass.
-
-:class:`HoleFiller` holds the whole-mesh analysis (edges, loops, components, each vertex's
-triangles and edge scale, k-d trees of the triangles): built once, its :meth:`HoleFiller.fill`
-does only work local to the holes (the rings of fixed vertices are gathered from the vertex-triangle
-lists, the crossing check queries the trees near the patch), as CGAL's calls on a prebuilt
-half-edge structure. :func:`fill_holes_arrays` builds one for a single call.
+Loops of one length share one batched dynamic programme; every piece is refined at once (disjoint
+index ranges), and all patches are faired in one sparse system and checked in one pass.
+:class:`HoleFiller` holds the whole-mesh analysis, so that :meth:`HoleFiller.fill` does only work
+local to the holes, as CGAL's calls on a prebuilt half-edge structure.
 """
 
 from __future__ import annotations
@@ -50,6 +35,7 @@ from scipy.sparse import csgraph
 from ._errors import O3DLSMeshWarning, SingularSystemError
 from ._o3d import new_mesh, read_mesh
 from ._progress import check_progress, progress_bar
+from ._ranges import concatenated_ranges
 from ._solvers import SPDSolver
 from ._validate import as_bool, as_choice, as_count, as_positive_float, mesh_arrays
 from .topology import boundary_loops, unique_edges_and_runs
@@ -68,33 +54,27 @@ __all__ = [
     "find_holes",
 ]
 
-#: Loops with more edges than this are split by chords before the O(k^3) dynamic programme.
-#: Measured on this (2-core, heavily shared) machine: k = 50 takes 0.02 s, 100 0.15 s, 150 0.4 s,
-#: 200 0.85 s, 300 3.8 s. A face-on hole on a scan of spacing h has about 6 r / h edges for radius
-#: r, so holes up to ~16 h across are triangulated in one piece; longer loops are cut in pieces.
+#: Loops with more edges are split by chords before the O(k^3) dynamic programme (measured: k = 50
+#: takes 0.02 s, 100 0.15 s, 200 0.85 s, 300 3.8 s): a hole of radius r on a scan of spacing h has
+#: about 6 r / h edges, so holes up to ~16 h across are triangulated in one piece.
 DP_MAX_EDGES = 100
 
-#: A component's longest loop is its outer border (left open by default) when
-#: ``perimeter**2 > BORDER_RATIO * area`` of the component. An open hemisphere has ``perimeter**2 / area
-#: = 2 pi``, a flat round disk ``4 pi``, and a ragged scan silhouette much more; a round hole in a closed
-#: surface reaches 4 only when it covers about a quarter of the surface (``4 pi f / (1 - f) = 4``).
+#: A component's longest loop is its outer border (left open by default) when ``perimeter**2 >
+#: BORDER_RATIO * area`` of the component: an open hemisphere has ``perimeter**2 / area = 2 pi``, a
+#: disk ``4 pi``, a scan silhouette more; a round hole in a closed surface reaches 4 only when it
+#: covers about a quarter of it (``4 pi f / (1 - f) = 4``).
 BORDER_RATIO = 4.0
 
 _ALPHA = np.sqrt(2.0)  # Liepa's density factor (section 4)
 
 
-# --------------------------------------------------------------------------- boundary loops
+# --------------------------------------------------------------------------- choosing holes
 
 
-def _loop_rows(triangles: np.ndarray, n: int, edge_info: Any = None) -> list[tuple[np.ndarray, np.ndarray]]:
-    """The loops of :func:`o3d_lsmesh.topology.boundary_loops`, each with its half-edge rows (of
-    :func:`o3d_lsmesh.topology.halfedges`): the row of loop edge ``(loop[i], loop[i + 1])`` is the one
-    triangle's half-edge on it (a boundary edge has exactly one).
-
-    ``edge_info`` is ``o3d_lsmesh.topology.unique_edges_and_runs`` of the mesh, if already computed.
-    """
-    if edge_info is None:
-        edge_info = unique_edges_and_runs(triangles, n)
+def _loop_rows(triangles: np.ndarray, n: int, edge_info: Any) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The loops of :func:`o3d_lsmesh.topology.boundary_loops`, each with the row (of
+    :func:`o3d_lsmesh.topology.halfedges`) of the one half-edge on each loop edge ``(loop[i], loop[i + 1])``;
+    ``edge_info`` is :func:`o3d_lsmesh.topology.unique_edges_and_runs` of the mesh."""
     (edges, counts, inverse), runs = edge_info
     loops = boundary_loops(triangles, n, _runs=runs)
     if not loops:
@@ -107,9 +87,6 @@ def _loop_rows(triangles: np.ndarray, n: int, edge_info: Any = None) -> list[tup
     keys = np.minimum(tail, head) * n + np.maximum(tail, head)
     rows = row_of_edge[np.searchsorted(edges[:, 0] * n + edges[:, 1], keys)]
     return list(zip(loops, np.split(rows, np.cumsum([len(loop) for loop in loops])[:-1])))
-
-
-# --------------------------------------------------------------------------- choosing holes
 
 
 @dataclass(frozen=True)
@@ -175,35 +152,27 @@ def find_holes(vertices: np.ndarray, triangles: np.ndarray, *, _edge_info=None) 
     (3, True)
     """
     n = len(vertices)
-    if _edge_info is None:
-        _edge_info = unique_edges_and_runs(triangles, n)
+    _edge_info = unique_edges_and_runs(triangles, n) if _edge_info is None else _edge_info
     loops = _loop_rows(triangles, n, _edge_info)
     if not loops:
         return []
     edges = _edge_info[0][0]
-    # components over the edges already sorted (no second whole-mesh sort): they are the upper triangle
-    # of the adjacency in CSR order, so the graph is built without a conversion
+    # components over the sorted edges: the upper triangle of the adjacency in CSR order (no second sort)
     indptr = np.zeros(n + 1, dtype=np.int64)
     np.cumsum(np.bincount(edges[:, 0], minlength=n), out=indptr[1:])
-    graph = sp.csr_matrix((np.ones(len(edges)), edges[:, 1], indptr), shape=(n, n))
-    _, label = csgraph.connected_components(graph, directed=False)
+    _, label = csgraph.connected_components(
+        sp.csr_matrix((np.ones(len(edges)), edges[:, 1], indptr), shape=(n, n)), directed=False
+    )
     perimeters = np.array(
-        [
-            np.linalg.norm(np.roll(vertices[loop], -1, axis=0) - vertices[loop], axis=1).sum()
-            for loop, _ in loops
-        ]
+        [np.linalg.norm(np.roll(vertices[lp], -1, axis=0) - vertices[lp], axis=1).sum() for lp, _ in loops]
     )
     components = np.array([label[loop[0]] for loop, _ in loops], dtype=np.int64)
-    # the longest loop of each component (by perimeter)
-    by_length = np.lexsort((-perimeters, components))
+    by_length = np.lexsort((-perimeters, components))  # the longest loop of each component first
     first = np.ones(len(loops), dtype=bool)
     first[1:] = components[by_length][1:] != components[by_length][:-1]
     longest = by_length[first]
-    # a longest loop is its component's border when perimeter**2 > BORDER_RATIO * area. Areas only of
-    # the components whose longest loop is judged (a scan's closed islands are not read), summed in
-    # blocks of triangles until every judgement is decided: a partial sum bounds the area from below,
-    # so a loop whose perimeter**2 is within it is no border, and a small hole in a large mesh reads
-    # one block instead of every triangle
+    # the judged components' areas, summed in blocks until every judgement is decided (a partial sum
+    # bounds the area from below): a small hole in a large mesh reads one block, not every triangle
     judged = np.zeros(label.max() + 1, dtype=bool)
     judged[components[longest]] = True
     tri_label = label[triangles[:, 0]]
@@ -212,14 +181,12 @@ def find_holes(vertices: np.ndarray, triangles: np.ndarray, *, _edge_info=None) 
     some_label = tri_label[mine]
     component_area = np.zeros(len(judged))
     need = perimeters[longest] ** 2
-    block = 8192
-    for start in range(0, len(some), block):
-        t = some[start : start + block]
-        p = vertices[t]
+    for start in range(0, len(some), 8192):
+        p = vertices[some[start : start + 8192]]
         area = 0.5 * np.sqrt((_cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]) ** 2).sum(axis=1))
-        component_area += np.bincount(some_label[start : start + block], weights=area, minlength=len(judged))
+        component_area += np.bincount(some_label[start : start + 8192], weights=area, minlength=len(judged))
         if (need <= BORDER_RATIO * component_area[components[longest]]).all():
-            break  # every longest loop is within its component's area so far: none is a border
+            break
     border = np.zeros(len(loops), dtype=bool)
     border[longest] = need > BORDER_RATIO * component_area[components[longest]]
     out = [
@@ -259,35 +226,18 @@ def _unit(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return v / safe[..., None], norm
 
 
-def _minimum_weight_triangulation(
-    points: np.ndarray, outer_normals: np.ndarray, forbidden: np.ndarray | None
-) -> np.ndarray:
-    """Liepa's dynamic programme on a loop of ``k`` points, triangles ``(k - 2, 3)`` of local indices.
-
-    Minimizes, lexicographically, the largest dihedral angle (between new
-    triangles, and between a new triangle and the mesh triangle on a loop edge,
-    ``outer_normals[i]`` on edge ``(i, i + 1)``, zero where unknown) and then the
-    total area (Liepa 2003, section 3, the weight ``Omega = (max angle, area)``).
-    ``forbidden[i, j]`` marks chords that already are mesh edges (using one
-    would make a non-manifold edge). Triangles are wound ``(j, m, i)``: opposite
-    to the loop, like the mesh triangles on the other side of its edges.
-
-    The inner minimum over the split vertex ``m`` is vectorized over a whole
-    diagonal ``j - i = d`` of the table at once (see :func:`_minimum_weight_triangulations`).
-    """
-    return _minimum_weight_triangulations(
-        points[None], outer_normals[None], None if forbidden is None else forbidden[None]
-    )[0]
-
-
 def _minimum_weight_triangulations(
     points: np.ndarray, outer_normals: np.ndarray, forbidden: np.ndarray | None
 ) -> np.ndarray:
-    """:func:`_minimum_weight_triangulation` of ``B`` loops of the same length at once: ``points (B, k, 3)``,
-    ``outer_normals (B, k, 3)``, ``forbidden (B, k, k)`` or None; triangles ``(B, k - 2, 3)``.
+    """Liepa's dynamic programme on ``B`` loops of ``k`` points at once: triangles ``(B, k - 2, 3)``.
 
-    Each loop's table is independent: the batch is one more leading axis of every array, so many
-    short loops (a scan's small holes) cost one pass over the diagonals instead of one each.
+    Minimizes, lexicographically, the largest dihedral angle (between new triangles, and between a
+    new triangle and the mesh triangle on a loop edge, ``outer_normals[:, i]`` on edge ``(i, i + 1)``,
+    zero where unknown) and then the total area (Liepa 2003, section 3, the weight ``Omega = (max
+    angle, area)``). ``points (B, k, 3)``; ``forbidden (B, k, k)`` (or None) marks chords that are mesh
+    edges already (a non-manifold edge otherwise). Triangles are wound ``(j, m, i)``, opposite to the
+    loop like the mesh triangles across its edges. The minimum over the split vertex ``m`` is
+    vectorized over a whole diagonal ``j - i = d`` of the tables and over the batch.
     """
     count, k = points.shape[:2]
     if k == 3:
@@ -296,8 +246,7 @@ def _minimum_weight_triangulations(
     area = np.zeros((count, k, k))
     split = np.full((count, k, k), -1, dtype=np.int64)
     normal = np.zeros((count, k, k, 3))  # unit normal of the triangle on chord (i, j) inside sub-polygon i..j
-    # whether that normal is known (an unknown one is no constraint)
-    known = np.zeros((count, k, k), dtype=bool)
+    known = np.zeros((count, k, k), dtype=bool)  # an unknown normal is no constraint
     idx = np.arange(k - 1)
     normal[:, idx, idx + 1] = outer_normals[:, :-1]
     known[:, idx, idx + 1] = np.abs(outer_normals[:, :-1]).sum(-1) > 0
@@ -316,22 +265,19 @@ def _minimum_weight_triangulations(
         tri_normal = cross / np.where(twice_area > 0, twice_area, 1.0)[..., None]
         cos1 = np.einsum("...k,...k->...", tri_normal, normal[:, i, mm])
         cos2 = np.einsum("...k,...k->...", tri_normal, normal[:, mm, j])
-        # an unknown neighbour (zero normal) does not constrain the angle
         worst = np.minimum(np.where(known[:, i, mm], cos1, 1.0), np.where(known[:, mm, j], cos2, 1.0))
         if d == k - 1:  # the triangle on the closing loop edge (k - 1, 0) meets the mesh there
             cos3 = np.einsum("b...k,bk->b...", tri_normal, closing)
             worst = np.where(closing_known[:, None, None], np.minimum(worst, cos3), worst)
         theta = np.arccos(np.clip(worst, -1.0, 1.0))
-        # a degenerate triangle (three collinear points: a chord's samples) is worse than any real one; its
-        # rounding-noise normal must not count, nor its zero area win a tie (both sides of a chord would
-        # then take the same sliver, wound both ways: a non-manifold edge)
+        # a degenerate triangle (collinear chord samples) is worse than any real one: neither its noise
+        # normal nor its zero area may win (both sides of a chord taking it make a non-manifold edge)
         longest = np.maximum(np.einsum("...k,...k->...", u, u), np.einsum("...k,...k->...", v, v))
         theta = np.where(twice_area > 1e-9 * longest, theta, 2.0 * np.pi)
         total_angle = np.maximum(theta, np.maximum(angle[:, i, mm], angle[:, mm, j]))
         total_area = 0.5 * twice_area + area[:, i, mm] + area[:, mm, j]
         if forbidden is not None:
-            blocked = forbidden[:, i, mm] | forbidden[:, mm, j]
-            total_angle = np.where(blocked, np.inf, total_angle)
+            total_angle = np.where(forbidden[:, i, mm] | forbidden[:, mm, j], np.inf, total_angle)
         best_angle = total_angle.min(axis=2, keepdims=True)
         near_area = np.where(total_angle <= best_angle + tol, total_area, np.inf)
         best_area = near_area.min(axis=2, keepdims=True)
@@ -356,14 +302,12 @@ def _minimum_weight_triangulations(
         table = split[b].tolist()
         found: list[tuple[int, int, int]] = []
         stack = [(0, k - 1)]
-        while stack:  # k - 2 triangles
+        while stack:
             lo, hi = stack.pop()
-            if hi - lo < 2:
-                continue
-            mid = table[lo][hi]
-            found.append((hi, mid, lo))
-            stack.append((lo, mid))
-            stack.append((mid, hi))
+            if hi - lo >= 2:
+                mid = table[lo][hi]
+                found.append((hi, mid, lo))
+                stack += [(lo, mid), (mid, hi)]
         out[b] = found
     return out
 
@@ -373,57 +317,52 @@ def _triangulate(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Triangulate a loop, splitting it by chords while it is longer than :data:`DP_MAX_EDGES`.
 
-    Returns the extra points (on the chords) and triangles over the indices
-    ``[0, k)`` of the loop followed by the extra points.
+    Returns the extra points (on the chords) and triangles over the loop's indices ``[0, k)`` followed
+    by the extra points'.
     """
     k = len(points)
     if k <= DP_MAX_EDGES:
-        return np.zeros((0, 3)), _minimum_weight_triangulation(points, outer_normals, forbidden)
-    # the shortest chord between vertices 1/3 to 2/3 of the loop apart (a Python loop over chunks of rows)
+        return np.zeros((0, 3)), _minimum_weight_triangulations(
+            points[None], outer_normals[None], None if forbidden is None else forbidden[None]
+        )[0]
+    # the shortest chord between vertices 1/3 to 2/3 of the loop apart, in chunks of rows
     best = (np.inf, 0, k // 2)
-    low, high = k // 3, k - k // 3
+    gap = np.arange(k // 3, k - k // 3 + 1)[None, :]
     for start in range(0, k, 256):
         i = np.arange(start, min(k, start + 256))[:, None]
-        gap = np.arange(low, high + 1)[None, :]
         j = (i + gap) % k
         dist = np.linalg.norm(points[i] - points[j], axis=-1)
         if forbidden is not None:
             dist = np.where(forbidden[i, j], np.inf, dist)
-        flat = int(np.argmin(dist))
-        r, c = divmod(flat, dist.shape[1])
+        r, c = divmod(int(np.argmin(dist)), dist.shape[1])
         if dist[r, c] < best[0]:
             best = (float(dist[r, c]), int(i[r, 0]), int(j[r, c]))
-    _, a, b = best
-    a, b = min(a, b), max(a, b)
+    a, b = min(best[1:]), max(best[1:])
     count = max(0, round(best[0] / spacing) - 1) if spacing > 0 else 0
-    t = np.linspace(0.0, 1.0, count + 2)[1:-1, None]
-    chord = points[a] + t * (points[b] - points[a])  # from a towards b
+    chord = points[a] + np.linspace(0.0, 1.0, count + 2)[1:-1, None] * (points[b] - points[a])  # a -> b
     # piece one: a .. b along the loop, then back along the chord; piece two: b .. a, then the chord a -> b
     e = k + np.arange(count)
-    one = np.concatenate([np.arange(a, b + 1), e[::-1]])
-    two = np.concatenate([np.arange(b, k), np.arange(0, a + 1), e])
     all_points = np.concatenate([points, chord])
-    triangles = []
-    extra = [chord]
-    offset = k + count
-    for piece in (one, two):
-        loop_normals = np.zeros((len(piece), 3))
-        # outer normals on loop edges (piece[s], piece[s + 1]) that are edges of the original loop
+    triangles, extra, offset = [], [chord], k + count
+    for piece in (
+        np.concatenate([np.arange(a, b + 1), e[::-1]]),
+        np.concatenate([np.arange(b, k), np.arange(0, a + 1), e]),
+    ):
+        # outer normals on the piece's edges that are edges of the original loop
         nxt = np.roll(piece, -1)
         on_loop = (piece < k) & (nxt < k) & (nxt == (piece + 1) % k)
+        loop_normals = np.zeros((len(piece), 3))
         loop_normals[on_loop] = outer_normals[piece[on_loop]]
         sub_forbidden = None
         if forbidden is not None:
-            inside = piece < k
             sub_forbidden = np.zeros((len(piece), len(piece)), dtype=bool)
-            idx = np.flatnonzero(inside)
+            idx = np.flatnonzero(piece < k)
             sub_forbidden[np.ix_(idx, idx)] = forbidden[np.ix_(piece[idx], piece[idx])]
         sub_extra, sub_tris = _triangulate(all_points[piece], loop_normals, sub_forbidden, spacing)
-        # map the piece's local indices back: [0, len(piece)) -> piece, beyond -> new extra points
-        mapping = np.concatenate([piece, offset + np.arange(len(sub_extra))])
+        # the piece's local indices back: [0, len(piece)) -> piece, beyond -> its new extra points
+        triangles.append(np.concatenate([piece, offset + np.arange(len(sub_extra))])[sub_tris])
         offset += len(sub_extra)
         extra.append(sub_extra)
-        triangles.append(mapping[sub_tris])
     return np.concatenate(extra), np.concatenate(triangles)
 
 
@@ -431,8 +370,8 @@ def _triangulate(
 
 
 def _edge_table(tris: np.ndarray, nv: int):
-    """Interior edges of a consistently oriented patch: (triangle 1, slot 1, triangle 2, slot 2, a, b), and
-    the sorted keys ``min * nv + max`` of every half-edge."""
+    """Interior edges of an oriented patch, ``(triangle 1, slot 1, triangle 2, slot 2, a, b)``, and the
+    sorted keys ``min * nv + max`` of every half-edge."""
     a = tris.reshape(-1)
     b = tris[:, [1, 2, 0]].reshape(-1)
     key = np.minimum(a, b) * nv + np.maximum(a, b)
@@ -444,7 +383,7 @@ def _edge_table(tris: np.ndarray, nv: int):
 
 
 def _circumsphere(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray):
-    """Centres and radii of the circumcircles of triangles (the spheres Liepa's flip test uses)."""
+    """Centres and radii of the triangles' circumcircles (the spheres of Liepa's flip test)."""
     u, v = p1 - p0, p2 - p0
     w = _cross(u, v)
     ww = (w * w).sum(-1)
@@ -452,24 +391,30 @@ def _circumsphere(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray):
     centre = p0 + (_cross(w, u) * (v * v).sum(-1)[:, None] + _cross(v, w) * (u * u).sum(-1)[:, None]) / (
         2.0 * safe[:, None]
     )
-    radius = np.linalg.norm(centre - p0, axis=1)
-    radius = np.where(ww > 0, radius, np.inf)
-    return centre, radius
+    return centre, np.where(ww > 0, np.linalg.norm(centre - p0, axis=1), np.inf)
 
 
 def _min_angle(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray) -> np.ndarray:
-    """Smallest interior angle (radians) of each triangle ``(p0, p1, p2)`` (rows).
-
-    It is the angle opposite the shortest edge (law of sines), at most 60 degrees, so
-    ``arcsin(2 area / (l_mid l_max))`` with the two longer edges' lengths: one cross product instead
-    of one per corner.
-    """
+    """Smallest interior angle (radians) of each triangle ``(p0, p1, p2)``: the one opposite the shortest
+    edge (law of sines), ``arcsin(2 area / (l_mid l_max))``, one cross product for all three corners."""
     a, b, c = p1 - p0, p2 - p1, p0 - p2
     lengths = np.sort(np.stack([(a * a).sum(1), (b * b).sum(1), (c * c).sum(1)]), axis=0)
     twice_area = np.sqrt((_cross(a, c) ** 2).sum(1))
     denominator = np.sqrt(lengths[1] * lengths[2])
     ratio = np.divide(twice_area, denominator, out=np.zeros(len(p0)), where=denominator > 0)
     return np.arcsin(np.minimum(ratio, 1.0))
+
+
+def _keys(a: np.ndarray, b: np.ndarray, nv: int) -> np.ndarray:
+    """Undirected edge keys ``min * nv + max``."""
+    return np.minimum(a, b) * nv + np.maximum(a, b)
+
+
+def _absent(sorted_keys: np.ndarray, keys: np.ndarray) -> np.ndarray:
+    """Which ``keys`` are not in ``sorted_keys``."""
+    if len(sorted_keys) == 0:
+        return np.ones(len(keys), dtype=bool)
+    return sorted_keys[np.minimum(np.searchsorted(sorted_keys, keys), len(sorted_keys) - 1)] != keys
 
 
 def _relax(
@@ -479,84 +424,61 @@ def _relax(
     max_passes: int = 100,
     dirty: np.ndarray | None = None,
 ) -> np.ndarray:
-    """Delaunay edge flips (Liepa's relaxation) until none applies; batches of independent flips.
+    """Delaunay edge flips (Liepa's relaxation) until none applies, in batches of independent flips.
 
-    An interior edge ``(a, b)`` between triangles ``(a, b, c)`` and ``(b, a, d)`` is
-    flipped to ``(c, d)`` when ``d`` lies strictly inside the circumsphere of
-    ``(a, b, c)``, the edge ``(c, d)`` does not exist yet (in the patch or, in
-    ``fixed_pairs``, around it), and both new triangles face the way the old
-    pair did.
+    An interior edge ``(a, b)`` between triangles ``(a, b, c)`` and ``(b, a, d)`` flips to ``(c, d)``
+    when ``d`` is strictly inside the circumsphere of ``(a, b, c)`` (or ``c`` inside that of
+    ``(b, a, d)``), ``(c, d)`` is no edge yet (in the patch or in ``fixed_pairs`` around it), both new
+    triangles face as the old pair and the pair's smallest angle grows.
 
-    Only edges whose verdict can have changed are tested again: those of the triangles ``dirty``
-    (a boolean mask; every triangle if None) and, in later passes, of the triangles a flip rewrote or
-    a flip left waiting, and those whose flip was blocked by an edge a flip removed. Every other edge
-    failed the same test on the same geometry before.
+    Only edges whose verdict can have changed are tested: those of the ``dirty`` triangles (a mask;
+    all if None) and, in later passes, of the triangles a flip rewrote or left waiting, and those whose
+    flip was blocked by an edge a flip removed.
     """
     nv = len(points)
     tris = tris.copy()
     removed = np.zeros(0, dtype=np.int64)
-    fixed_keys = np.sort(
-        np.minimum(fixed_pairs[:, 0], fixed_pairs[:, 1]) * nv
-        + np.maximum(fixed_pairs[:, 0], fixed_pairs[:, 1])
-    )
-
-    def absent(sorted_keys: np.ndarray, keys: np.ndarray) -> np.ndarray:
-        if len(sorted_keys) == 0:
-            return np.ones(len(keys), dtype=bool)
-        pos = np.minimum(np.searchsorted(sorted_keys, keys), len(sorted_keys) - 1)
-        return sorted_keys[pos] != keys
-
+    fixed_keys = np.sort(_keys(fixed_pairs[:, 0], fixed_pairs[:, 1], nv))
     for _ in range(max_passes):
         t1, s1, t2, s2, a, b, key = _edge_table(tris, nv)
         if len(t1) == 0:
             break
-        # the edges to test: dirty ones (cheap index tests first; the geometry runs on the edges left)
+        c = tris[t1, (s1 + 2) % 3]
+        d = tris[t2, (s2 + 2) % 3]
+        new_key = _keys(c, d, nv)
         if dirty is None:
             open_ = np.arange(len(t1))
         else:
             mark = dirty[t1] | dirty[t2]
             if len(removed):
-                c_all, d_all = tris[t1, (s1 + 2) % 3], tris[t2, (s2 + 2) % 3]
-                mark |= ~absent(removed, np.minimum(c_all, d_all) * nv + np.maximum(c_all, d_all))
+                mark |= ~_absent(removed, new_key)
             open_ = np.flatnonzero(mark)
-        c = tris[t1, (s1 + 2) % 3]
-        d = tris[t2, (s2 + 2) % 3]
         # the new edge must not exist yet (in the patch, or around it)
-        new_key = np.minimum(c, d) * nv + np.maximum(c, d)
-        oc, od, ok_key = c[open_], d[open_], new_key[open_]
-        open_ = open_[absent(key, ok_key) & absent(fixed_keys, ok_key) & (oc != od)]
+        ok_key = new_key[open_]
+        open_ = open_[_absent(key, ok_key) & _absent(fixed_keys, ok_key) & (c[open_] != d[open_])]
         pa, pb, pc, pd = points[a[open_]], points[b[open_]], points[c[open_]], points[d[open_]]
-        centre, radius = _circumsphere(pa, pb, pc)
         # a relative margin: near-co-circular quads (common on regular patches) are not flipped, so
         # the result does not hinge on rounding (rigid motions give the same connectivity)
+        centre, radius = _circumsphere(pa, pb, pc)
         near = np.linalg.norm(pd - centre, axis=1) < radius * (1.0 - 1e-6)
-        # and the other way round (in 3D the two tests differ: CGAL's relax flips when either holds)
-        rest = np.flatnonzero(~near)
+        rest = np.flatnonzero(~near)  # and the other way round (in 3D the two tests differ)
         centre2, radius2 = _circumsphere(pb[rest], pa[rest], pd[rest])
         near[rest] = np.linalg.norm(pc[rest] - centre2, axis=1) < radius2 * (1.0 - 1e-6)
         inside = np.zeros(len(t1), dtype=bool)
         inside[open_] = near
-        # the remaining tests run only on the edges still in (row-wise, so the same verdicts): on a large
-        # patch most edges are out after the sphere tests, and these were most of a pass's time
-        live = np.flatnonzero(inside)
+        live = np.flatnonzero(inside)  # the other tests only on the edges still in
         pa, pb, pc, pd = points[a[live]], points[b[live]], points[c[live]], points[d[live]]
         # the new triangles (c, a, d) and (d, b, c) must not fold over
         old = _cross(pb - pa, pc - pa) + _cross(pa - pb, pd - pb)
-        n1 = _cross(pa - pc, pd - pc)
-        n2 = _cross(pb - pd, pc - pd)
-        ok = ((n1 * old).sum(1) > 0) & ((n2 * old).sum(1) > 0)
-        # and the smallest angle of the pair grows: the two sphere tests disagree in 3D, so without this
-        # an edge could flip back and forth; with it every flip is progress and the passes end
-        # the four triangles' smallest angles in one call: (a, b, c), (b, a, d) before; (c, a, d), (d, b, c) after
+        ok = ((_cross(pa - pc, pd - pc) * old).sum(1) > 0) & ((_cross(pb - pd, pc - pd) * old).sum(1) > 0)
+        # and the smallest angle grows (the two sphere tests disagree in 3D: without this an edge could
+        # flip back and forth): (a, b, c), (b, a, d) before; (c, a, d), (d, b, c) after
         angles = _min_angle(
             np.concatenate([pa, pb, pc, pd]),
             np.concatenate([pb, pa, pa, pb]),
             np.concatenate([pc, pd, pd, pc]),
-        )
-        angles = angles.reshape(4, -1)
-        before = np.minimum(angles[0], angles[1])
-        after = np.minimum(angles[2], angles[3])
-        ok &= after > before + 1e-9
+        ).reshape(4, -1)
+        ok &= np.minimum(angles[2], angles[3]) > np.minimum(angles[0], angles[1]) + 1e-9
         inside[live] = ok
         proposed = np.flatnonzero(inside)
         if len(proposed) == 0:
@@ -568,11 +490,10 @@ def _relax(
         cand = proposed[(owner[t1[proposed]] == proposed) & (owner[t2[proposed]] == proposed)]
         _, first = np.unique(new_key[cand], return_index=True)  # two flips must not make the same edge
         cand = cand[np.sort(first)]
-        # next pass: the triangles rewritten and those of flips left waiting; edges a flip removes
         dirty = np.zeros(len(tris), dtype=bool)
         dirty[t1[proposed]] = True
         dirty[t2[proposed]] = True
-        removed = np.sort(np.minimum(a[cand], b[cand]) * nv + np.maximum(a[cand], b[cand]))
+        removed = np.sort(_keys(a[cand], b[cand], nv))
         tris[t1[cand]] = np.stack([c[cand], a[cand], d[cand]], axis=1)
         tris[t2[cand]] = np.stack([d[cand], b[cand], c[cand]], axis=1)
     return tris
@@ -588,27 +509,21 @@ def _refine(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Liepa's refinement: centroid splits of triangles larger than the local scale, then relaxation.
 
-    A triangle ``(i, j, k)`` with centroid ``c`` and ``sigma_c`` the mean of its
-    corners' scales is split when ``alpha * |c - v_m| > max(sigma_c, sigma_m)``
-    for each of its corners (``alpha = sqrt(2)``); the new vertex takes scale
-    ``sigma_c``. Rounds of splits (all at once) and flips run until no
-    triangle splits. Several patches (disjoint index ranges) refine at once, each as if alone:
-    ``owner`` names each point's patch. Returns the points (the first ``len(points)`` unchanged), the
-    triangles and the owners of the points.
+    A triangle with centroid ``c`` and ``sigma_c`` the mean of its corners' scales is split when
+    ``alpha * |c - v_m| > max(sigma_c, sigma_m)`` for each corner ``m`` (``alpha = sqrt(2)``); the new
+    vertex takes scale ``sigma_c``. Rounds of splits and flips run until no triangle splits. Patches
+    in disjoint index ranges refine at once, ``owner`` naming each point's patch. Returns the points
+    (the first ``len(points)`` unchanged), the triangles and the points' owners.
     """
-    points = points.copy()
-    sigma = sigma.copy()
-    # no flips before the first split (as Liepa and CGAL): on a short loop the minimum-weight triangulation
-    # is what decides whether a triangle is big enough to split, and Delaunay flips first made its triangles
-    # slimmer, so that coarse holes got no new vertex at all (camel 2.5h: 0 where CGAL adds 3)
+    # no flips before the first split (as Liepa and CGAL): on a short loop Delaunay flips made the
+    # minimum-weight triangles slimmer, and coarse holes got no new vertex (camel 2.5h: 0, CGAL 3)
     relaxed = False
     for _ in range(max_rounds):
         corners = points[tris]  # (t, 3, 3)
         centre = corners.mean(axis=1)
         sigma_c = sigma[tris].mean(axis=1)
         dist = np.linalg.norm(centre[:, None, :] - corners, axis=2)
-        big = (_ALPHA * dist > np.maximum(sigma_c[:, None], sigma[tris])).all(axis=1)
-        chosen = np.flatnonzero(big)
+        chosen = np.flatnonzero((_ALPHA * dist > np.maximum(sigma_c[:, None], sigma[tris])).all(axis=1))
         if len(chosen) == 0:
             break
         new = len(points) + np.arange(len(chosen))
@@ -618,8 +533,7 @@ def _refine(
         a, b, c = tris[chosen, 0], tris[chosen, 1], tris[chosen, 2]
         tris[chosen] = np.stack([a, b, new], axis=1)
         tris = np.concatenate([tris, np.stack([b, c, new], axis=1), np.stack([c, a, new], axis=1)])
-        # the relaxation before ended with no flip left: only edges of the split triangles can flip now
-        # (the first round tests every edge: the triangulation was not relaxed)
+        # after a relaxation only edges of the split triangles can flip
         split_mask = np.ones(len(tris), dtype=bool)
         if relaxed:
             split_mask[: len(split_mask) - 2 * len(chosen)] = False
@@ -630,17 +544,6 @@ def _refine(
 
 
 # --------------------------------------------------------------------------- fairing
-
-
-def _gather(indptr: np.ndarray, data: np.ndarray, rows: np.ndarray) -> np.ndarray:
-    """``data[indptr[r]:indptr[r + 1]]`` for every ``r`` in ``rows``, concatenated (vectorized)."""
-    first, last = indptr[rows], indptr[rows + 1]
-    count = last - first
-    total = int(count.sum())
-    if total == 0:
-        return np.zeros(0, dtype=data.dtype)
-    offsets = np.repeat(first - np.concatenate([[0], np.cumsum(count)[:-1]]), count)
-    return data[np.arange(total) + offsets]
 
 
 def _rings(
@@ -659,7 +562,9 @@ def _rings(
     taken = np.zeros(0, dtype=np.int64)
     front = seen
     for _ in range(count):
-        touch = np.setdiff1d(_gather(indptr, data, front), taken)  # the ring's new triangles
+        touch = np.setdiff1d(
+            data[concatenated_ranges(indptr[front], indptr[front + 1] - indptr[front])], taken
+        )  # the ring's new triangles
         taken = np.union1d(taken, touch)
         new = np.setdiff1d(triangles[touch].ravel(), seen)
         seen = np.union1d(seen, new)
@@ -670,43 +575,36 @@ def _rings(
 
 def _unique_edges(tris: np.ndarray, nv: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Undirected edges ``i < j`` of a local mesh (sorted) and the edge of each of its ``3t`` half-edges."""
-    e = np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]])
-    e = np.sort(e, axis=1)
+    e = np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1)
     e_keys, inverse = np.unique(e[:, 0] * nv + e[:, 1], return_inverse=True)
     return e_keys // nv, e_keys % nv, inverse
 
 
-def _uniform_operators(
+def _operators(
     tris: np.ndarray,
     nv: int,
+    edges: tuple[np.ndarray, np.ndarray, np.ndarray],
     vertices: np.ndarray | None = None,
-    kind: str = "uniform",
-    edges: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
 ):
-    """Stiffness ``K = D - W`` and normalized Laplacian ``L = I - D^-1 W`` (eq. 1 of LS meshes) of a local mesh.
+    """Stiffness ``K = D - W`` and Laplacian ``L = S K`` of a local mesh, and its edges ``(e, 2)``.
 
-    ``W`` is the adjacency (``kind="uniform"``) or, with ``vertices``, the cotangent weights
-    ``(cot a + cot b) / 2`` clamped below at a small positive fraction of their mean (obtuse pairs
-    would make ``K`` indefinite) for ``kind="cotangent"``, normalized by the vertex areas for
-    ``kind="cotangent-area"``.
+    Uniform (``vertices`` None): ``W`` the adjacency and ``S = D^-1``, eq. 1 of LS meshes. Cotangent:
+    ``W`` the weights ``(cot a + cot b) / 2`` of ``vertices``, clamped below at 5% of their mean
+    (obtuse pairs would make ``K`` indefinite), and ``S`` the inverse vertex areas (normalized to
+    mean 1). ``edges`` is :func:`_unique_edges` of ``tris``.
     """
-    i, j, inverse = _unique_edges(tris, nv) if edges is None else edges  # (given: shared by several solves)
-    w: np.ndarray
-    if kind == "uniform":
+    i, j, inverse = edges
+    if vertices is None:
         w = np.ones(len(i))
     else:
-        assert vertices is not None  # the weighted kinds read the geometry
         p = vertices[tris]  # (t, 3, 3)
         cot = np.zeros((len(tris), 3))  # cotangent of the angle opposite edge (c, c + 1)
         for c in range(3):
             u = p[:, c] - p[:, (c + 2) % 3]
             v = p[:, (c + 1) % 3] - p[:, (c + 2) % 3]
-            cross = np.linalg.norm(_cross(u, v), axis=1)
-            cot[:, c] = (u * v).sum(1) / np.maximum(cross, 1e-300)
+            cot[:, c] = (u * v).sum(1) / np.maximum(np.linalg.norm(_cross(u, v), axis=1), 1e-300)
         w = 0.5 * np.bincount(inverse, weights=cot.T.reshape(-1), minlength=len(i))
         w = np.maximum(w, 0.05 * np.abs(w).mean())
-    # K = D - W assembled at once (diagonal included), and L = S K with S a row scaling (1 / degree, or
-    # 1 / vertex area): the same pattern, so L is K with its rows' data scaled (no sparse algebra)
     degree = np.bincount(i, weights=w, minlength=nv) + np.bincount(j, weights=w, minlength=nv)
     diagonal = np.arange(nv)
     K = sp.csr_matrix(
@@ -716,16 +614,14 @@ def _uniform_operators(
         ),
         shape=(nv, nv),
     )
-    if kind == "cotangent-area":
-        assert vertices is not None
-        p = vertices[tris]
+    if vertices is None:
+        scale = np.divide(1.0, degree, out=np.zeros(nv), where=degree > 0)
+    else:
         area = 0.5 * np.linalg.norm(_cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
         mass = np.bincount(tris.ravel(), weights=np.repeat(area / 3.0, 3), minlength=nv)
         mass = mass / mass[mass > 0].mean()
         scale = np.divide(1.0, mass, out=np.zeros(nv), where=mass > 0)
-    else:
-        scale = np.divide(1.0, degree, out=np.zeros(nv), where=degree > 0)
-    L = K.copy()
+    L = K.copy()  # L = S K: K's pattern with its rows scaled
     L.data = L.data * np.repeat(scale, np.diff(L.indptr))
     return K, L, np.stack([i, j], axis=1)
 
@@ -736,50 +632,45 @@ def _fair(
     unknown: np.ndarray,
     rings: list[np.ndarray],
     continuity: int,
-    kind: str = "uniform",
-    topology: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+    edges: tuple[np.ndarray, np.ndarray, np.ndarray],
+    cotangent: bool = False,
 ) -> np.ndarray:
     """Positions of the ``unknown`` local vertices minimizing the continuity's energy, the others fixed.
 
     * ``0``: ``x^T K x`` (membrane, harmonic: ``L x = 0`` at the unknowns);
-    * ``1``: ``sum_r |(L x)_r|^2`` over the rows touching an unknown: the LS-mesh
-      energy ``||L x||^2`` with interpolated anchors (eq. 3, section 6);
-    * ``2``: ``sum |(L x)_r - (L x)_s|^2`` over edges ``(r, s)`` touching such a
-      row: ``(L x)^T K (L x)``, the thin-plate-of-the-Laplacian (tri-Laplacian)
-      energy.
+    * ``1``: ``sum_r |(L x)_r|^2`` over the rows touching an unknown: the LS-mesh energy ``||L x||^2``
+      with interpolated anchors (eq. 3, section 6);
+    * ``2``: ``sum |(L x)_r - (L x)_s|^2`` over edges ``(r, s)`` touching such a row:
+      ``(L x)^T K (L x)``, the tri-Laplacian energy.
 
-    ``rings[0]`` are the loop vertices, ``rings[i]`` the i-th ring around them;
-    the rows used only involve vertices whose one-rings are complete in
-    ``local_tris`` (``continuity`` rings of mesh triangles around the loop). ``topology`` is
-    :func:`_unique_edges` of ``local_tris`` when already known (the solves of one call share it).
+    ``rings[0]`` are the loop vertices, ``rings[i]`` the i-th ring around them: the rows used involve
+    only vertices whose one-rings are complete in ``local_tris``. ``edges`` is :func:`_unique_edges`
+    of ``local_tris``; ``cotangent`` reads the weights of :func:`_operators` off ``vertices``.
     """
     nv = len(vertices)
-    K, L, edges = _uniform_operators(local_tris, nv, vertices, kind, topology)
-    is_unknown = np.zeros(nv, dtype=bool)
-    is_unknown[unknown] = True
-    known = np.flatnonzero(~is_unknown)
+    K, L, pairs = _operators(local_tris, nv, edges, vertices if cotangent else None)
     if continuity == 0:
-        A_full = None
+        known = np.ones(nv, dtype=bool)
+        known[unknown] = False
         normal = K[unknown][:, unknown]
-        rhs = -(K[unknown][:, known] @ vertices[known])
+        rhs = -(K[unknown][:, np.flatnonzero(known)] @ vertices[known])
     else:
         rows = np.zeros(nv, dtype=bool)
         rows[unknown] = True
         rows[rings[0]] = True  # rows whose Laplacian involves an unknown
         if continuity == 1:
-            A_full = L[np.flatnonzero(rows)]
+            A_full = L[np.flatnonzero(rows)].tocsc()
         else:
             valid = rows.copy()
             valid[rings[1]] = True
-            keep = (rows[edges[:, 0]] | rows[edges[:, 1]]) & valid[edges[:, 0]] & valid[edges[:, 1]]
-            sel = edges[keep]
-            # the edge difference operator: row e is +1 at sel[e, 0] and -1 at sel[e, 1] (CSR, two a row)
+            keep = (rows[pairs[:, 0]] | rows[pairs[:, 1]]) & valid[pairs[:, 0]] & valid[pairs[:, 1]]
+            sel = pairs[keep]
+            # the edge difference operator: row e is +1 at sel[e, 0] and -1 at sel[e, 1]
             G = sp.csr_matrix(
                 (np.tile([1.0, -1.0], len(sel)), sel.ravel(), np.arange(0, 2 * len(sel) + 1, 2)),
                 shape=(len(sel), nv),
             )
             A_full = (G @ L).tocsc()
-        A_full = A_full.tocsc()
         if len(unknown) and unknown[0] == nv - len(unknown) and (np.diff(unknown) == 1).all():
             A_u = A_full[:, nv - len(unknown) :]  # the usual layout: the unknowns are the last columns
         else:
@@ -790,8 +681,7 @@ def _fair(
         rhs = -(A_u.T @ (A_full @ fixed))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", O3DLSMeshWarning)  # the SciPy fallback warning: tiny systems
-        solution = SPDSolver(normal, ordering="amd").solve(np.asarray(rhs))
-    return solution
+        return SPDSolver(normal, ordering="amd").solve(np.asarray(rhs))
 
 
 # --------------------------------------------------------------------------- the pipeline
@@ -898,15 +788,13 @@ def fill_holes_arrays(
 class HoleFiller:
     """The whole-mesh analysis of a mesh's holes, done once; :meth:`fill` then does only per-hole work.
 
-    Like CGAL's prebuilt half-edge structure or potpourri3d's solver classes: the constructor sorts the
-    edges (finding the boundary loops, their components and whether each is an outer border, see
-    :func:`find_holes`), measures each vertex's mean edge length (Liepa's scale), lists the triangles
-    of each vertex (for the rings of fixed vertices around a patch) and indexes the triangles' bounding
-    spheres in k-d trees (for the crossing check, a query near the patch instead of a pass over the
-    mesh). :func:`fill_holes_arrays` is ``HoleFiller(vertices, triangles, index_triangles=False).fill(...)``.
-
-    The state is read-only numpy arrays (and k-d trees rebuilt from them on unpickling): it pickles, and
-    :meth:`fill` may run from several threads at once.
+    Like CGAL's prebuilt half-edge structure: the constructor sorts the edges once (the boundary loops,
+    their components and outer borders, see :func:`find_holes`), measures each vertex's mean edge
+    length (Liepa's scale), lists each vertex's triangles (for the rings of fixed vertices around a
+    patch) and indexes the triangles' bounding spheres in k-d trees (for the crossing check, a query
+    near the patch). :func:`fill_holes_arrays` is ``HoleFiller(vertices, triangles,
+    index_triangles=False).fill(...)``. The state is read-only numpy arrays (the trees are rebuilt on
+    unpickling): it pickles, and :meth:`fill` may run from several threads at once.
 
     Parameters
     ----------
@@ -937,27 +825,44 @@ class HoleFiller:
         vertices, triangles = mesh_arrays(vertices, triangles)  # copies: the state must not change under it
         vertices.setflags(write=False)
         triangles.setflags(write=False)
-        n = len(vertices)
+        n, m = len(vertices), len(triangles)
         self.vertices, self.triangles = vertices, triangles
         edge_info = unique_edges_and_runs(triangles, n)  # the one whole-mesh sort
         edges = edge_info[0][0]
         self.edge_keys = edges[:, 0] * n + edges[:, 1]  # sorted
         self.holes = find_holes(vertices, triangles, _edge_info=edge_info)
         length = np.linalg.norm(vertices[edges[:, 0]] - vertices[edges[:, 1]], axis=1)
-        degree = np.bincount(edges.ravel(), minlength=n)
-        self.sigma = np.bincount(edges.ravel(), weights=np.repeat(length, 2), minlength=n) / np.maximum(
-            degree, 1
-        )
+        degree = np.maximum(np.bincount(edges.ravel(), minlength=n), 1)
+        self.sigma = np.bincount(edges.ravel(), weights=np.repeat(length, 2), minlength=n) / degree
         # the triangles of each vertex (CSR), by a transpose (linear, no sort)
-        m = len(triangles)
         by_vertex = sp.csr_matrix(
             (np.repeat(np.arange(m, dtype=np.int64), 3), triangles.ravel(), np.arange(0, 3 * m + 1, 3)),
             shape=(m, n),
         ).tocsc()
         self.vertex_triangles = (by_vertex.indptr.astype(np.int64), by_vertex.data.astype(np.int64))
-        # the k-d trees pay off over several fills; a single fill (fill_holes_arrays) indexes only the
-        # triangles in the new triangles' box instead (index None)
         self.index = _TriangleIndex(vertices, triangles) if index_triangles else None
+
+    def _piece(self, loop: np.ndarray, rows: np.ndarray):
+        """A loop's points, the unit normals of the mesh triangles on its edges (for the dihedral angles),
+        the chords that already are mesh edges (``(k, k)`` bool) and its mean edge length."""
+        vertices, n, k = self.vertices, len(self.vertices), len(loop)
+        points = vertices[loop]
+        t = self.triangles[rows % len(self.triangles)]
+        outer, _ = _unit(_cross(vertices[t[:, 1]] - vertices[t[:, 0]], vertices[t[:, 2]] - vertices[t[:, 0]]))
+        a, b = np.meshgrid(loop, loop, indexing="ij")
+        key = _keys(a, b, n)
+        forbidden = (
+            self.edge_keys[np.minimum(np.searchsorted(self.edge_keys, key), len(self.edge_keys) - 1)] == key
+        )
+        idx = np.arange(k)
+        forbidden[idx, (idx + 1) % k] = False
+        forbidden[(idx + 1) % k, idx] = False
+        return (
+            points,
+            outer,
+            forbidden,
+            float(np.mean(np.linalg.norm(np.roll(points, -1, 0) - points, axis=1))),
+        )
 
     def fill(
         self,
@@ -986,8 +891,8 @@ class HoleFiller:
             too_big = (max_hole_edges is not None and hole.edges > max_hole_edges) or (
                 max_hole_diameter is not None and hole.diameter > max_hole_diameter
             )
-            # a loop made of the three edges of one triangle is the rim of a flap (a triangle hanging by a
-            # vertex, common in raw scans), not a hole: "filling" it would add that triangle's reverse
+            # the three edges of one triangle are the rim of a flap (a triangle hanging by a vertex,
+            # common in raw scans), not a hole: "filling" it would add that triangle's reverse
             flap = hole.edges == 3 and len(np.unique(np.asarray(hole.rows) % m)) == 1
             (skipped if too_big or flap or (hole.border and not fill_border) else holes).append(hole)
         if not holes:
@@ -999,131 +904,88 @@ class HoleFiller:
                 sp.csr_matrix((0, n)),
                 np.zeros(0, dtype=np.int64),
             )
-        edge_keys = self.edge_keys
-        sigma_all = self.sigma  # Liepa's sigma: mean length of each vertex's edges
-        # each piece (a loop; a loop through a vertex twice is cut into pieces) is triangulated on its own;
-        # then every piece is refined at once, in disjoint local index ranges
-        bar = progress_bar(progress, total=len(holes), desc="filling holes", unit="hole")
-        piece_hole, piece_loop, piece_points, piece_tris, piece_sigma, piece_fixed = [], [], [], [], [], []
-        piece_outer, piece_forbidden, piece_spacing = [], [], []
-        for hole_index, hole in enumerate(holes):
-            for loop, rows in _simple_pieces(hole.vertices, hole.rows):
-                k = len(loop)
-                points = vertices[loop]
-                outer_tris = triangles[rows % m]  # the mesh triangle on each loop edge, for dihedral angles
-                outer, _ = _unit(
-                    _cross(
-                        vertices[outer_tris[:, 1]] - vertices[outer_tris[:, 0]],
-                        vertices[outer_tris[:, 2]] - vertices[outer_tris[:, 0]],
-                    )
-                )
-                # chords that already are edges of the mesh (between loop vertices that are not neighbours)
-                a, b = np.meshgrid(loop, loop, indexing="ij")
-                key = np.minimum(a, b) * n + np.maximum(a, b)
-                pos = np.minimum(np.searchsorted(edge_keys, key), len(edge_keys) - 1)
-                forbidden = edge_keys[pos] == key
-                idx = np.arange(k)
-                forbidden[idx, (idx + 1) % k] = False
-                forbidden[(idx + 1) % k, idx] = False
-                piece_hole.append(hole_index)
-                piece_loop.append(loop)
-                piece_points.append(points)
-                piece_outer.append(outer)
-                piece_forbidden.append(forbidden)
-                piece_spacing.append(float(np.mean(np.linalg.norm(np.roll(points, -1, 0) - points, axis=1))))
-                piece_fixed.append(np.argwhere(np.triu(forbidden)))  # mesh edges between loop vertices
-        # the dynamic programme: loops of one length in one batch, longer ones cut by chords first
-        piece_extra: list[np.ndarray] = [np.zeros((0, 3))] * len(piece_loop)
-        piece_tris = [np.zeros((0, 3), dtype=np.int64)] * len(piece_loop)
+        # each piece (a loop; one through a vertex twice is cut in pieces) is triangulated on its own,
+        # loops of one length in one batch of the dynamic programme, longer ones cut by chords first
+        pieces = [
+            (h, *piece) for h, hole in enumerate(holes) for piece in _simple_pieces(hole.vertices, hole.rows)
+        ]
+        piece_hole = [h for h, _, _ in pieces]
+        piece_loop = [loop for _, loop, _ in pieces]
+        piece_points, piece_outer, piece_forbidden, piece_spacing = zip(
+            *[self._piece(l, r) for _, l, r in pieces]
+        )
+        count = len(piece_loop)
+        piece_extra = [np.zeros((0, 3))] * count
+        piece_tris = [np.zeros((0, 3), dtype=np.int64)] * count
         lengths = np.array([len(loop) for loop in piece_loop])
-        bar = progress_bar(progress, total=len(piece_loop), desc="filling holes", unit="loop")
-        for k in np.unique(lengths):
-            group = np.flatnonzero(lengths == k)
-            if k > DP_MAX_EDGES:
-                for member in group.tolist():
-                    forbidden = piece_forbidden[member]
-                    # chords are sampled at the spacing the refinement aims for (none without refinement)
-                    piece_extra[member], piece_tris[member] = _triangulate(
-                        piece_points[member],
-                        piece_outer[member],
-                        forbidden if forbidden.any() else None,
-                        piece_spacing[member] / density if density > 0 else 0.0,
+        with progress_bar(progress, total=count, desc="filling holes", unit="loop") as bar:
+            for k in np.unique(lengths):
+                group = np.flatnonzero(lengths == k)
+                if k > DP_MAX_EDGES:
+                    for member in group.tolist():
+                        forbidden = piece_forbidden[member]
+                        # chords are sampled at the spacing the refinement aims for (none without it)
+                        piece_extra[member], piece_tris[member] = _triangulate(
+                            piece_points[member],
+                            piece_outer[member],
+                            forbidden if forbidden.any() else None,
+                            piece_spacing[member] / density if density > 0 else 0.0,
+                        )
+                        bar.update()
+                    continue
+                per_batch = max(
+                    1, 200_000 // int(k) ** 2
+                )  # bounds the tables' memory (~60 k**2 floats a loop)
+                for first in range(0, len(group), per_batch):
+                    chunk = group[first : first + per_batch]
+                    stacked = np.stack([piece_forbidden[piece] for piece in chunk])
+                    found = _minimum_weight_triangulations(
+                        np.stack([piece_points[piece] for piece in chunk]),
+                        np.stack([piece_outer[piece] for piece in chunk]),
+                        stacked if stacked.any() else None,
                     )
-                    bar.update()
-                continue
-            # batches bound the DP tables' memory (about 60 k**2 floats a loop)
-            per_batch = max(1, 200_000 // int(k) ** 2)
-            for first in range(0, len(group), per_batch):
-                chunk = group[first : first + per_batch]
-                stacked = np.stack([piece_forbidden[piece] for piece in chunk])
-                found = _minimum_weight_triangulations(
-                    np.stack([piece_points[piece] for piece in chunk]),
-                    np.stack([piece_outer[piece] for piece in chunk]),
-                    stacked if stacked.any() else None,
-                )
-                for member, tris in zip(chunk.tolist(), found):
-                    piece_tris[member] = tris
-                bar.update(len(chunk))
-        bar.close()
-        for piece, loop in enumerate(piece_loop):
-            extra = piece_extra[piece]
-            piece_points[piece] = np.concatenate([piece_points[piece], extra])
-            spread = piece_spacing[piece] / density if density > 0 else 0.0
-            piece_sigma.append(
-                np.concatenate([sigma_all[loop] / max(density, 1e-300), np.full(len(extra), spread)])
-            )
-        sizes = np.array([len(x) for x in piece_points])
+                    for member, tris in zip(chunk.tolist(), found):
+                        piece_tris[member] = tris
+                    bar.update(len(chunk))
+        # every piece refined at once, in disjoint local index ranges
+        sizes = np.array([len(p) + len(e) for p, e in zip(piece_points, piece_extra)])
         starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
-        all_points = np.concatenate(piece_points)
+        all_points = np.concatenate([np.concatenate([p, e]) for p, e in zip(piece_points, piece_extra)])
         all_tris = np.concatenate([t + start for t, start in zip(piece_tris, starts)])
-        point_piece = np.repeat(np.arange(len(sizes)), sizes)
+        point_piece = np.repeat(np.arange(count), sizes)
         if density > 0:
-            all_fixed = np.concatenate([f + start for f, start in zip(piece_fixed, starts)])
+            sigma = [
+                np.concatenate(
+                    [self.sigma[loop] / max(density, 1e-300), np.full(len(extra), spacing / density)]
+                )
+                for loop, extra, spacing in zip(piece_loop, piece_extra, piece_spacing)
+            ]
+            # mesh edges between loop vertices: no flip may make them twice
+            fixed = [np.argwhere(np.triu(f)) + start for f, start in zip(piece_forbidden, starts)]
             all_points, all_tris, point_piece = _refine(
-                all_points, np.concatenate(piece_sigma), all_tris, all_fixed, point_piece
+                all_points, np.concatenate(sigma), all_tris, np.concatenate(fixed), point_piece
             )
-        # global numbering: loop points are mesh vertices; the others are new, numbered piece by piece
+        # global numbering: loop points (first in each piece, in order) are mesh vertices; the others
+        # are new, numbered piece by piece
         is_loop = np.zeros(len(all_points), dtype=bool)
-        loop_lengths = np.array([len(loop) for loop in piece_loop])
-        is_loop[np.concatenate([start + np.arange(k) for start, k in zip(starts, loop_lengths)])] = True
+        is_loop[concatenated_ranges(starts, lengths)] = True
         global_index = np.empty(len(all_points), dtype=np.int64)
-        global_index[is_loop] = np.concatenate(piece_loop)  # loop points come first in each piece, in order
+        global_index[is_loop] = np.concatenate(piece_loop)
         fresh = np.flatnonzero(~is_loop)
         fresh = fresh[np.argsort(point_piece[fresh], kind="stable")]
         global_index[fresh] = n + np.arange(len(fresh))
-        new_points = all_points[fresh]
         tri_piece = point_piece[all_tris[:, 0]]
         tri_order = np.argsort(tri_piece, kind="stable")
         new_tris = global_index[all_tris[tri_order]]
-        tri_owner = [np.asarray(piece_hole, dtype=np.int64)[tri_piece[tri_order]]]
-        interp_rows, interp_cols, interp_vals = [], [], []
-        if interpolation and len(fresh):
-            # harmonic weights of the new vertices over their loop's vertices (for colours and other
-            # attributes): one small dense solve per piece (a loop wide)
-            tri_bounds = np.searchsorted(tri_piece[tri_order], np.arange(len(sizes) + 1))
-            for piece in range(len(sizes)):
-                local = new_tris[tri_bounds[piece] : tri_bounds[piece + 1]]
-                loop = piece_loop[piece]
-                inner = np.unique(local[local >= n])
-                if len(inner) == 0:
-                    continue
-                numbering = np.concatenate([loop, inner])
-                by_index = np.argsort(numbering)
-                tris_local = by_index[np.searchsorted(numbering[by_index], local)]
-                k, nl = len(loop), len(numbering)
-                K, _, _ = _uniform_operators(tris_local, nl)
-                unknown = np.arange(k, nl)
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore", O3DLSMeshWarning)
-                    harmonic = SPDSolver(K[unknown][:, unknown].tocsc()).solve(-K[unknown][:, :k].toarray())
-                r, c = np.nonzero(np.abs(harmonic) > 1e-12)
-                interp_rows.append(inner[r] - n)
-                interp_cols.append(loop[c])
-                interp_vals.append(harmonic[r, c])
-        out_vertices = np.concatenate([vertices, new_points])
+        owner = np.asarray(piece_hole, dtype=np.int64)[tri_piece[tri_order]]  # the hole of each new triangle
+        p = len(fresh)
+        if interpolation and p:
+            bounds = np.searchsorted(tri_piece[tri_order], np.arange(count + 1))
+            weights_matrix = _interpolation(new_tris, bounds, piece_loop, n, p)
+        else:
+            weights_matrix = sp.csr_matrix((p, n))
+        out_vertices = np.concatenate([vertices, all_points[fresh]])
         out_triangles = np.concatenate([triangles, new_tris])
-        p = len(new_points)
-        owner = np.concatenate(tri_owner)
         if p:
             out_vertices, used, stuck = _fair_all(
                 out_vertices, out_triangles, m, n, holes, continuity, weights, owner, self
@@ -1132,36 +994,23 @@ class HoleFiller:
             used = np.full(len(holes), -1, dtype=np.int64)
             crossing = _crossings(out_vertices, out_triangles, m, self.index, owner)
             stuck = np.flatnonzero(np.bincount(owner, weights=crossing, minlength=len(holes)) > 0)
-        if interp_rows:
-            weights_matrix = sp.csr_matrix(
-                (np.concatenate(interp_vals), (np.concatenate(interp_rows), np.concatenate(interp_cols))),
-                shape=(p, n),
-            )
-        else:
-            weights_matrix = sp.csr_matrix((p, n))
         if len(stuck):
-            # every fill of these crosses the mesh (the scan is folded or overlaps itself next to them): a
-            # crossing patch would be a broken mesh, so they are left open, and said
+            # every fill of these crosses the mesh (folded or overlapping next to them): left open, and said
             warnings.warn(
                 f"fill_holes: the fills of {len(stuck)} hole(s) cross other triangles at every continuity "
                 "(folded or overlapping surface next to them): left open, see FilledHoles.skipped",
                 O3DLSMeshWarning,
                 stacklevel=3,
             )
-            keep_tri = ~np.isin(owner, stuck)
-            vertex_owner = np.zeros(p, dtype=np.int64)
-            new_tris = out_triangles[m:]
-            inside = new_tris >= n
-            vertex_owner[new_tris[inside] - n] = np.broadcast_to(owner[:, None], new_tris.shape)[inside]
-            keep_vertex = ~np.isin(vertex_owner, stuck)
+            keep_vertex = ~np.isin(_vertex_owner(new_tris, owner, n, p), stuck)
             remap = np.concatenate([np.arange(n), n + np.cumsum(keep_vertex) - 1])
             out_vertices = np.concatenate([vertices, out_vertices[n:][keep_vertex]])
-            out_triangles = np.concatenate([triangles, remap[new_tris[keep_tri]]])
+            out_triangles = np.concatenate([triangles, remap[new_tris[~np.isin(owner, stuck)]]])
             weights_matrix = weights_matrix[np.flatnonzero(keep_vertex)]
-            left = set(stuck.tolist())
-            skipped = skipped + [hole for i, hole in enumerate(holes) if i in left]
-            used = used[[i not in left for i in range(len(holes))]]
-            holes = [hole for i, hole in enumerate(holes) if i not in left]
+            left = np.isin(np.arange(len(holes)), stuck)
+            skipped = skipped + [hole for hole, out in zip(holes, left) if out]
+            used = used[~left]
+            holes = [hole for hole, out in zip(holes, left) if not out]
         return FilledHoles(out_vertices, out_triangles, holes, skipped, weights_matrix, used)
 
 
@@ -1186,6 +1035,42 @@ def _simple_pieces(loop: np.ndarray, rows: np.ndarray):
         stack.append((np.concatenate([loop[:p], loop[q:]]), np.concatenate([rows[:p], rows[q:]])))
 
 
+def _vertex_owner(new_tris: np.ndarray, owner: np.ndarray, n: int, p: int) -> np.ndarray:
+    """The hole of each of the ``p`` new vertices (numbered from ``n``), from that of each new triangle."""
+    vertex_owner = np.zeros(p, dtype=np.int64)
+    inside = new_tris >= n
+    vertex_owner[new_tris[inside] - n] = np.broadcast_to(owner[:, None], new_tris.shape)[inside]
+    return vertex_owner
+
+
+def _interpolation(
+    new_tris: np.ndarray, bounds: np.ndarray, piece_loop: list, n: int, p: int
+) -> sp.csr_matrix:
+    """Harmonic weights ``(p, n)`` of the new vertices over their loop's (for colours and other attributes):
+    one small solve per piece, whose new triangles are ``new_tris[bounds[i]:bounds[i + 1]]``."""
+    rows, cols, vals = [], [], []
+    for piece, loop in enumerate(piece_loop):
+        local = new_tris[bounds[piece] : bounds[piece + 1]]
+        inner = np.unique(local[local >= n])
+        if len(inner) == 0:
+            continue
+        numbering = np.concatenate([loop, inner])
+        by_index = np.argsort(numbering)
+        tris_local = by_index[np.searchsorted(numbering[by_index], local)]
+        k, nl = len(loop), len(numbering)
+        K, _, _ = _operators(tris_local, nl, _unique_edges(tris_local, nl))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", O3DLSMeshWarning)
+            harmonic = SPDSolver(K[k:][:, k:].tocsc()).solve(-K[k:][:, :k].toarray())
+        r, c = np.nonzero(np.abs(harmonic) > 1e-12)
+        rows.append(inner[r] - n)
+        cols.append(loop[c])
+        vals.append(harmonic[r, c])
+    if not rows:
+        return sp.csr_matrix((p, n))
+    return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(p, n))
+
+
 def _fair_all(
     vertices: np.ndarray,
     triangles: np.ndarray,
@@ -1208,58 +1093,42 @@ def _fair_all(
     unknown = np.arange(n, total)
     loops = np.unique(np.concatenate([hole.vertices for hole in holes]))
     # triangles within `continuity` rings of the loops in the input, plus every new triangle
-    old = triangles[:m]
+    old, new_tris = triangles[:m], triangles[m:]
     ring_tris, rings = _rings(old, state.vertex_triangles, loops, continuity)
-    local_tris = np.concatenate([old[ring_tris], triangles[m:]])
+    local_tris = np.concatenate([old[ring_tris], new_tris])
     local_vertices = np.unique(local_tris)
     remap = np.full(total, -1, dtype=np.int64)
     remap[local_vertices] = np.arange(len(local_vertices))
     local_rings = [remap[r] for r in rings]
     unknown_local = remap[unknown]
-    # the hole of each new vertex (a vertex belongs to the one patch that made it)
-    vertex_owner = np.zeros(total - n, dtype=np.int64)
-    new_tris = triangles[m:]
-    inside = new_tris >= n
-    vertex_owner[new_tris[inside] - n] = np.broadcast_to(tri_owner[:, None], new_tris.shape)[inside]
+    vertex_owner = _vertex_owner(new_tris, tri_owner, n, total - n)
     count = len(holes)
     chosen = np.full(count, -1)
     out = vertices.copy()
-
     local = remap[local_tris]
     local_edges = _unique_edges(local, len(local_vertices))  # one connectivity for every solve below
 
+    def solve(x: np.ndarray, level: int, cotangent: bool) -> np.ndarray | None:
+        try:
+            solution = _fair(
+                x[local_vertices], local, unknown_local, local_rings, level, local_edges, cotangent
+            )
+        except SingularSystemError:
+            return None
+        return solution if np.isfinite(solution).all() else None
+
     def candidates():  # lazily: most calls stop at the first
         for level in range(continuity, -1, -1):
-            try:
-                solution = _fair(
-                    vertices[local_vertices], local, unknown_local, local_rings, level, "uniform", local_edges
-                )
-            except SingularSystemError:
-                continue
-            if not np.isfinite(solution).all():
+            solution = solve(vertices, level, False)
+            if solution is None:
                 continue
             faired = vertices.copy()
             faired[unknown] = solution
             if weights == "cotangent" and level > 0:
-                # cotangent weights (clamped positive, vertex-area normalized) read off the uniform solution:
-                # a fair embedding, where weights from the flat refined patch diverged (camel, 15h: 87 h off)
-                try:
-                    again = _fair(
-                        faired[local_vertices],
-                        local,
-                        unknown_local,
-                        local_rings,
-                        level,
-                        "cotangent-area",
-                        local_edges,
-                    )
-                except SingularSystemError:
-                    again = None
-                if (
-                    again is not None
-                    and np.isfinite(again).all()
-                    and _no_fold(faired, again, unknown, new_tris)
-                ):
+                # cotangent weights (clamped, area-normalized) read off the uniform solution: a fair
+                # embedding, where weights from the flat refined patch diverged (camel 15h: 87 h off)
+                again = solve(faired, level, True)
+                if again is not None and _no_fold(faired, again, unknown, new_tris):
                     better = faired.copy()
                     better[unknown] = again
                     yield level, _tangential_relax(better, new_tris, n)
@@ -1268,17 +1137,16 @@ def _fair_all(
 
     tried = []
     for rank, (level, candidate) in enumerate(candidates()):
-        tried.append((level, candidate))
+        tried.append(level)
         crossing = _crossings(candidate, triangles, m, state.index, tri_owner)  # (q,) per new triangle
         per_hole = np.bincount(tri_owner, weights=crossing, minlength=count)
-        take = (chosen < 0) & (per_hole == 0)
-        for hole_index in np.flatnonzero(take):
+        for hole_index in np.flatnonzero((chosen < 0) & (per_hole == 0)):
             mine = vertex_owner == hole_index
             out[n:][mine] = candidate[n:][mine]
             chosen[hole_index] = rank
         if (chosen >= 0).all():
             break
-    used = np.array([tried[c][0] if c >= 0 else tried[0][0] for c in chosen], dtype=np.int64)
+    used = np.array([tried[c] if c >= 0 else tried[0] for c in chosen], dtype=np.int64)
     return out, used, np.flatnonzero(chosen < 0)
 
 

@@ -24,7 +24,6 @@ from o3d_lsmesh.hole_filling import (
     HoleFiller,
     _crossings,
     _min_angle,
-    _minimum_weight_triangulation,
     _minimum_weight_triangulations,
     _rings,
     _TriangleIndex,
@@ -32,6 +31,14 @@ from o3d_lsmesh.hole_filling import (
     find_holes,
 )
 from o3d_lsmesh.topology import boundary_loops
+
+
+def _minimum_weight_triangulation(points, outer, forbidden):
+    """One loop through the batched dynamic programme."""
+    return _minimum_weight_triangulations(
+        points[None], outer[None], None if forbidden is None else forbidden[None]
+    )[0]
+
 
 SCANS = Path(os.environ.get("O3D_LSMESH_SCANS", REPO.parent / "shared" / "data" / "scans"))
 
