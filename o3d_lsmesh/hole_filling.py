@@ -1153,29 +1153,22 @@ def _fair_all(
 def _tangential_relax(
     vertices: np.ndarray, new_tris: np.ndarray, first_new: int, iterations: int = 10
 ) -> np.ndarray:
-    """Move each new vertex towards the area-weighted centroid of its triangles, in its tangent plane, a few times.
+    """Move each new vertex half-way to the area-weighted centroid of its star, in its tangent plane.
 
-    The target is the centroid of the vertex's star (the mean of its triangles' centroids weighted by
-    their areas, a step of centroidal Voronoi smoothing) rather than the mean of its neighbours: on
-    an irregular star the neighbours' mean sits towards the short edges and leaves a sliver there,
-    while the star's centroid rounds the triangles next to the loop (smallest angle on plane_holes
-    24.2 -> 25.6 degrees, horse 15h 22.0 -> 24.1, bench_fill_holes.py). The faired surface is kept to
-    first order: only the tangential part of the move is taken, about the area-weighted normal of the
-    vertex's triangles, all of them new. Vectorized over every new vertex at once (a sparse incidence
-    of the new triangles).
+    The star's centroid (a step of centroidal Voronoi smoothing), not the neighbours' mean, which on
+    an irregular star sits towards the short edges and leaves a sliver (smallest angle on plane_holes
+    24.2 -> 25.6 degrees, horse 15h 22.0 -> 24.1). Only the move's part tangent to the area-weighted
+    normal of the vertex's (new) triangles is taken: the faired surface is kept to first order.
     """
     out = vertices.copy()
-    total = len(vertices)
-    moving = np.arange(first_new, total)
-    # in a local numbering of the patches' vertices (increasing, so every sum runs in the same order as
-    # over the whole mesh): nothing here grows with the mesh
+    moving = np.arange(first_new, len(vertices))
+    # a local, increasing numbering of the patches' vertices: nothing grows with the mesh
     local = np.union1d(new_tris.ravel(), moving)
     tris = np.searchsorted(local, new_tris)
     mov = np.searchsorted(local, moving)
-    nl = len(local)
-    # the triangles of each moving vertex (a sparse incidence: sums without np.add.at)
-    incidence = sp.csr_matrix(
-        (np.ones(3 * len(tris)), tris.ravel(), np.arange(0, 3 * len(tris) + 1, 3)), shape=(len(tris), nl)
+    incidence = sp.csr_matrix(  # the triangles of each moving vertex
+        (np.ones(3 * len(tris)), tris.ravel(), np.arange(0, 3 * len(tris) + 1, 3)),
+        shape=(len(tris), len(local)),
     ).T.tocsr()[mov]
     x = out[local]
     for _ in range(iterations):
@@ -1196,28 +1189,28 @@ def _tangential_relax(
 class _TriangleIndex:
     """Bounding spheres (about the centroids) of a mesh's triangles in k-d trees, for crossing queries.
 
-    Two trees: the "small" spheres (radius at most 4 times the median) and the rest, each queried with
-    its own largest radius, so that a few long slivers do not make every query reach far. Holds the
-    arrays; the trees are rebuilt from them when unpickled (queries are thread-safe).
+    Two trees, the spheres of radius at most 4 times the median and the rest, each queried with its own
+    largest radius, so that a few long slivers do not make every query reach far. The trees are
+    rebuilt from the arrays when unpickled (queries are thread-safe).
     """
 
     def __init__(self, vertices: np.ndarray, triangles: np.ndarray) -> None:
         p = vertices[triangles]
         self.centre = p.mean(axis=1)
         self.radius = np.linalg.norm(p - self.centre[:, None, :], axis=2).max(axis=1)
-        cut = 4.0 * float(np.median(self.radius)) if len(self.radius) else 0.0
-        small = self.radius <= cut
+        small = self.radius <= (4.0 * float(np.median(self.radius)) if len(self.radius) else 0.0)
         self.groups = [np.flatnonzero(small), np.flatnonzero(~small)]
         self._build()
 
     def _build(self) -> None:
         from scipy.spatial import cKDTree
 
-        self.trees = [(cKDTree(self.centre[g]), float(self.radius[g].max())) for g in self.groups if len(g)]
-        self.group_of_tree = [g for g in self.groups if len(g)]
+        self.trees = [
+            (cKDTree(self.centre[g]), float(self.radius[g].max()), g) for g in self.groups if len(g)
+        ]
 
     def __getstate__(self) -> dict:
-        return {key: value for key, value in self.__dict__.items() if key not in ("trees", "group_of_tree")}
+        return {key: value for key, value in self.__dict__.items() if key != "trees"}
 
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
@@ -1228,33 +1221,32 @@ class _TriangleIndex:
     ) -> tuple[np.ndarray, np.ndarray]:
         """Pairs ``(query, triangle)`` whose bounding spheres overlap.
 
-        The queries come in ``groups`` (a label each: the patch of each new triangle): one ball query per
-        group and tree gathers the triangles near the group's bounding sphere, and the pairs are found
-        among those few with a small tree of them (thousands of ball queries into the whole mesh's tree
-        cost more than a few ball queries and a local pass).
+        One ball query per group of queries (``groups`` labels them: the patch of each new triangle) and
+        tree gathers the triangles near the group's bounding sphere; the pairs are found among those
+        with a small tree of them (cheaper than thousands of ball queries into the whole mesh's tree).
         """
         from scipy.spatial import cKDTree
 
         empty = np.zeros(0, dtype=np.int64)
         if len(centre) == 0:
             return empty, empty
-        if groups is None:
-            groups = np.zeros(len(centre), dtype=np.int64)
+        groups = np.zeros(len(centre), dtype=np.int64) if groups is None else groups
         found = [empty]
         for label in np.unique(groups):
             mine = groups == label
             low = (centre[mine] - radius[mine, None]).min(axis=0)
             high = (centre[mine] + radius[mine, None]).max(axis=0)
             middle, half = 0.5 * (low + high), 0.5 * float(np.linalg.norm(high - low))
-            for (tree, reach), members in zip(self.trees, self.group_of_tree):
+            for tree, reach, members in self.trees:
                 hits = tree.query_ball_point(middle, half + reach, return_sorted=False)
                 found.append(members[np.asarray(hits, dtype=np.int64)])
         candidates = np.unique(np.concatenate(found))
         if len(candidates) == 0:
             return empty, empty
-        local = cKDTree(self.centre[candidates])
         pairs = cKDTree(centre).sparse_distance_matrix(
-            local, float(radius.max() + self.radius[candidates].max()), output_type="ndarray"
+            cKDTree(self.centre[candidates]),
+            float(radius.max() + self.radius[candidates].max()),
+            output_type="ndarray",
         )
         qi, ti = pairs["i"].astype(np.int64), candidates[pairs["j"]]
         close = pairs["v"] <= radius[qi] + self.radius[ti]
@@ -1268,12 +1260,13 @@ def _crossings(
     index: _TriangleIndex | None = None,
     groups: np.ndarray | None = None,
 ) -> np.ndarray:
-    """For each new triangle, the triangles without a shared vertex it intersects (separating axes).
+    """For each new triangle, the number of triangles without a shared vertex it intersects.
 
-    Candidates are pairs whose bounding spheres (about the centroids) overlap: the input triangles from
-    ``index`` (a :class:`_TriangleIndex` of ``triangles[:first_new]``, built here if not given; queried
-    per patch when ``groups`` labels each new triangle's patch), the new ones among themselves; each pair is tested on the 17 axes that separate two disjoint triangles (two
-    normals, nine edge-edge cross products, six in-plane edge normals for coplanar pairs).
+    Candidates are the pairs whose bounding spheres overlap: input triangles from ``index`` (a
+    :class:`_TriangleIndex` of ``triangles[:first_new]``; without one, of the input triangles in the
+    new triangles' box), queried per patch when ``groups`` labels each new triangle's patch, and the
+    new ones among themselves. Each pair is tested on the 17 axes that separate two disjoint triangles
+    (two normals, nine edge-edge cross products, six in-plane edge normals for coplanar pairs).
     """
     from scipy.spatial import cKDTree
 
@@ -1286,7 +1279,6 @@ def _crossings(
     r_new = np.linalg.norm(p_new - c_new[:, None, :], axis=2).max(axis=1)
     if index is None:
         # the input triangles with a vertex in the new triangles' box grown by twice the largest of them
-        # (a per-vertex test: a pass over the vertices, not a copy of every triangle's corners)
         pad = 2.0 * r_new.max()
         low, high = p_new.reshape(-1, 3).min(0) - pad, p_new.reshape(-1, 3).max(0) + pad
         in_box = ((vertices >= low) & (vertices <= high)).all(axis=1)
@@ -1295,20 +1287,14 @@ def _crossings(
         ib = boxed[ib]
     else:
         ia, ib = index.near(c_new, r_new, groups)  # (new index, input triangle)
-    b_all = [ib]
-    a_all = [ia]
     pairs = cKDTree(c_new).query_pairs(2.0 * float(r_new.max()), output_type="ndarray").astype(np.int64)
-    if len(pairs):
-        close = np.linalg.norm(c_new[pairs[:, 0]] - c_new[pairs[:, 1]], axis=1) <= r_new[pairs].sum(axis=1)
-        a_all.append(pairs[close, 0])
-        b_all.append(first_new + pairs[close, 1])
-    a, b = new[np.concatenate(a_all)], np.concatenate(b_all)
+    close = np.linalg.norm(c_new[pairs[:, 0]] - c_new[pairs[:, 1]], axis=1) <= r_new[pairs].sum(axis=1)
+    a = new[np.concatenate([ia, pairs[close, 0]])]
+    b = np.concatenate([ib, first_new + pairs[close, 1]])
     ta, tb = triangles[a], triangles[b]
-    shared = (ta[:, :, None] == tb[:, None, :]).any(axis=(1, 2))
-    P, Q = vertices[ta[~shared]], vertices[tb[~shared]]  # (k, 3, 3)
-    a, b = a[~shared], b[~shared]
-    # boxes overlap (the boxes' axes are three of the separating candidates, and the cheapest: most
-    # sphere-overlapping pairs stop here)
+    apart = ~(ta[:, :, None] == tb[:, None, :]).any(axis=(1, 2))
+    P, Q, a, b = vertices[ta[apart]], vertices[tb[apart]], a[apart], b[apart]  # (k, 3, 3)
+    # bounding boxes overlap: three of the axes, the cheapest, where most pairs stop
     boxes = ((P.min(axis=1) <= Q.max(axis=1)) & (Q.min(axis=1) <= P.max(axis=1))).all(axis=1)
     P, Q, a, b = P[boxes], Q[boxes], a[boxes], b[boxes]
     if len(a) == 0:
@@ -1317,8 +1303,7 @@ def _crossings(
     eQ = Q[:, [1, 2, 0]] - Q
     nP = _cross(eP[:, 0], eP[:, 1])
     nQ = _cross(eQ[:, 0], eQ[:, 1])
-    # every axis at once, (17, k, 3): the two normals, the nine edge-edge crosses, the six in-plane normals
-    axes = np.concatenate(
+    axes = np.concatenate(  # (17, k, 3)
         [
             np.stack([nP, nQ]),
             _cross(eP[None, :, :, :], eQ.transpose(1, 0, 2)[:, :, None, :])
@@ -1336,27 +1321,22 @@ def _crossings(
     ax, ay, az = ax * inv, ay * inv, az * inv
 
     def extent(T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        # the projections of the three corners on every axis (elementwise: the size-3 reductions and
-        # einsum over these shapes were most of the check's time)
+        # the corners' projections on every axis, elementwise (size-3 reductions and einsum were slower)
         x = [ax * T[:, c, 0] + ay * T[:, c, 1] + az * T[:, c, 2] for c in range(3)]
         return np.minimum(np.minimum(x[0], x[1]), x[2]), np.maximum(np.maximum(x[0], x[1]), x[2])
 
     p_low, p_high = extent(P)
     q_low, q_high = extent(Q)
-    gap = np.maximum(q_low - p_high, p_low - q_high)
     # strictly apart: coplanar pairs project to one point on their common normal (gap 0)
-    separated = (usable & (gap > 1e-12 * scale)).any(axis=0)
-    hit = ~separated
+    hit = ~(usable & (np.maximum(q_low - p_high, p_low - q_high) > 1e-12 * scale)).any(axis=0)
     np.add.at(result, a[hit] - first_new, 1.0)
-    both_new = hit & (b >= first_new)
-    np.add.at(result, b[both_new] - first_new, 1.0)
+    np.add.at(result, b[hit & (b >= first_new)] - first_new, 1.0)
     return result
 
 
 def _no_fold(uniform: np.ndarray, again: np.ndarray, unknown: np.ndarray, new_tris: np.ndarray) -> bool:
-    """Whether the re-weighted solution keeps every new triangle facing as in the uniform one, and stays
-    within the uniform patch's size of it (obtuse slivers can make cotangent weights ill-conditioned:
-    then the uniform solution is kept)."""
+    """Whether the re-weighted solution keeps every new triangle facing as in the uniform one and stays
+    within a tenth of the patch's size of it (obtuse slivers can make cotangent weights ill-conditioned)."""
     moved = uniform.copy()
     moved[unknown] = again
 
@@ -1383,64 +1363,54 @@ def fill_holes(
 ) -> MeshT:
     """Close the mesh's holes with patches faired as least-squares meshes; a new mesh.
 
-    Each chosen hole (a closed loop of boundary edges) is triangulated by
-    Liepa's minimum-weight dynamic programme (largest dihedral angle, then
-    area), refined to the density of the edges around it with Delaunay flips,
-    and its new vertices are placed by minimizing, with the surrounding mesh
+    Each chosen hole (a closed loop of boundary edges) is triangulated by Liepa's minimum-weight
+    dynamic programme (largest dihedral angle, then area), refined to the density of the edges around
+    it with Delaunay flips, and its new vertices are placed by minimizing, with the surrounding mesh
     fixed (Sorkine and Cohen-Or 2004, section 6, interpolated anchors):
 
     * ``continuity=0``: ``sum |x_i - x_j|^2`` over edges (harmonic, a membrane);
     * ``continuity=1``: ``||L x||^2``, the LS-mesh energy (eq. 3), bi-Laplacian;
-    * ``continuity=2``: ``(L x)^T K (L x)``, tri-Laplacian: the Laplacian
-      itself varies smoothly, so curvature continues across the loop,
+    * ``continuity=2``: ``(L x)^T K (L x)``, tri-Laplacian: the Laplacian itself varies smoothly, so
+      curvature continues across the loop,
 
-    with ``L = I - D^-1 A`` the uniform Laplacian of eq. 1 (sign: ``(L x)_i``
-    is ``x_i`` minus the mean of its neighbours) and ``K = D - A``. Only the new
-    vertices are unknowns: one sparse system the size of the patches, with
-    ``continuity + 1`` rings of the input fixed around each loop. With
-    ``weights="cotangent"`` (default) the uniform solution is followed by one
-    more solve with cotangent weights read off it (``K = D - W``,
-    ``L = M^-1 K``, ``M`` the vertex areas): closer to the true surface on
-    irregular meshes, and stable because the weights come from a fair
-    embedding, not from the flat patch.
+    with ``L = I - D^-1 A`` the uniform Laplacian of eq. 1 (``(L x)_i`` is ``x_i`` minus the mean of its
+    neighbours) and ``K = D - A``. Only the new vertices are unknowns: one sparse system the size of
+    the patches, ``continuity + 1`` rings of the input fixed around each loop. With
+    ``weights="cotangent"`` (default) one more solve follows, with cotangent weights read off the
+    uniform solution (``K = D - W``, ``L = M^-1 K``, ``M`` the vertex areas): closer to the true surface
+    on irregular meshes, and stable because the weights come from a fair embedding, not the flat patch.
 
     Parameters
     ----------
     mesh : open3d.geometry.TriangleMesh, open3d.t.geometry.TriangleMesh or (vertices, triangles)
-        Any triangle mesh: non-manifold edges and vertices, several
-        components, pinched boundaries and holes touching at a vertex are
-        handled (a loop through a vertex more than once is filled as separate
-        pieces).
+        Any triangle mesh: non-manifold edges and vertices, several components, pinched boundaries and
+        holes touching at a vertex are handled (a loop through a vertex twice is filled in pieces).
     max_hole_edges : int >= 3, optional
         Fill only holes with at most this many boundary edges.
     max_hole_diameter : float > 0, optional
-        Fill only holes whose diameter (largest distance between two loop
-        vertices) is at most this.
+        Fill only holes whose diameter (largest distance between two loop vertices) is at most this.
     continuity : {0, 1, 2}
         Smoothness across the loop, see above. Default 2.
     density : float >= 0
-        New vertices are spaced like the surrounding edges divided by
-        ``density``; ``0`` adds none (the minimum-weight triangulation alone).
+        New vertices are spaced like the surrounding edges divided by ``density``; ``0`` adds none
+        (the minimum-weight triangulation alone).
     weights : {"cotangent", "uniform"}
-        ``"uniform"``: the uniform solve alone; ``"cotangent"``: then one
-        re-weighted solve (see above). Default ``"cotangent"``.
+        ``"uniform"``: the uniform solve alone; ``"cotangent"``: then one re-weighted solve (see above).
     fill_border : bool
-        Also fill each open component's outer border (its longest loop when
-        ``perimeter**2 > 4 area`` of the component, see :data:`BORDER_RATIO`): a
-        scan's silhouette, a lone island's rim. Default ``False``: left open.
+        Also fill each open component's outer border (its longest loop when ``perimeter**2 > 4 area`` of
+        the component, see :data:`BORDER_RATIO`): a scan's silhouette, a lone island's rim. Default
+        ``False``: left open.
     progress : bool
         Show a tqdm bar over the holes.
 
     Returns
     -------
     Mesh of the kind given
-        The input's vertices and triangles unchanged and in order, followed by
-        the new ones. New triangles are wound like their neighbours. Vertex
-        colours are kept and interpolated harmonically for new vertices (for
-        tensor meshes, every float per-vertex attribute but normals); normals
-        are recomputed if the input had them; per-triangle and per-corner
-        attributes (triangle UVs, material ids, tensor triangle attributes) are
-        dropped with an :class:`O3DLSMeshWarning`.
+        The input's vertices and triangles unchanged and in order, then the new ones, wound like their
+        neighbours. Vertex colours are kept and interpolated harmonically for new vertices (for tensor
+        meshes, every float per-vertex attribute but normals); normals are recomputed if the input had
+        them; per-triangle and per-corner attributes (triangle UVs, material ids, tensor triangle
+        attributes) are dropped with an :class:`O3DLSMeshWarning`.
 
     Raises
     ------
@@ -1458,27 +1428,21 @@ def fill_holes(
 
     Notes
     -----
-    Loops of more than :data:`DP_MAX_EDGES` edges are cut by chords before the
-    O(k^3) dynamic programme. Every result is checked for new triangles that
-    cross the mesh (separating-axis tests against the triangles near them): a
-    hole whose patch crosses is faired again with the next lower continuity
-    (uniform weights, then continuity 1, 0, then left as refined), per hole;
-    :attr:`FilledHoles.continuity` says which one each hole got. If none is
-    free of crossings (the surface next to the hole is itself folded), the
-    hole is left open with an :class:`O3DLSMeshWarning` (a crossing patch
-    would be a broken mesh). A system that is
-    numerically singular is skipped the same way.
+    Loops of more than :data:`DP_MAX_EDGES` edges are cut by chords before the O(k^3) dynamic
+    programme. Every result is checked for new triangles that cross the mesh (separating-axis tests
+    against the triangles near them): a hole whose patch crosses is faired again, per hole, with uniform
+    weights, then each lower continuity, then left as refined (:attr:`FilledHoles.continuity` says which
+    one each hole got). If none is free of crossings (the surface next to the hole is itself folded),
+    or a system is numerically singular, the hole is left open with an :class:`O3DLSMeshWarning`.
 
-    The outer border of a component is never filled by default (a scan's
-    silhouette). A loop through a vertex twice (two holes touching at a
-    vertex: the boundary of the surface turns within each fan) is filled as
-    its simple pieces. Non-manifold edges and vertices elsewhere are left as
-    they are; a chord that already is a mesh edge is never used.
+    A component's outer border is not filled by default (a scan's silhouette). A loop through a vertex
+    twice (two holes touching at a vertex) is filled as its simple pieces. Non-manifold edges and
+    vertices elsewhere are left as they are; a chord that already is a mesh edge is never used.
 
     References
     ----------
-    P. Liepa, Filling Holes in Meshes, SGP 2003. O. Sorkine and D. Cohen-Or,
-    Least-squares Meshes, SMI 2004.
+    P. Liepa, Filling Holes in Meshes, SGP 2003. O. Sorkine and D. Cohen-Or, Least-squares Meshes,
+    SMI 2004.
 
     Examples
     --------
