@@ -30,6 +30,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.linalg import cho_factor, cho_solve
 from scipy.sparse import csgraph
 
 from ._errors import O3DLSMeshWarning, SingularSystemError
@@ -66,6 +67,9 @@ DP_MAX_EDGES = 100
 BORDER_RATIO = 4.0
 
 _ALPHA = np.sqrt(2.0)  # Liepa's density factor (section 4)
+#: Fairing systems with at most this many unknowns are solved dense (measured: below it the sparse
+#: path's assembly, analysis and factorization overheads cost more than the dense products).
+_DENSE_UNKNOWNS = 120
 
 
 # --------------------------------------------------------------------------- choosing holes
@@ -585,8 +589,10 @@ def _operators(
     nv: int,
     edges: tuple[np.ndarray, np.ndarray, np.ndarray],
     vertices: np.ndarray | None = None,
+    dense: bool = False,
 ):
-    """Stiffness ``K = D - W`` and Laplacian ``L = S K`` of a local mesh, and its edges ``(e, 2)``.
+    """Stiffness ``K = D - W`` and Laplacian ``L = S K`` of a local mesh (CSR, or arrays if ``dense``),
+    and its edges ``(e, 2)``.
 
     Uniform (``vertices`` None): ``W`` the adjacency and ``S = D^-1``, eq. 1 of LS meshes. Cotangent:
     ``W`` the weights ``(cot a + cot b) / 2`` of ``vertices``, clamped below at 5% of their mean
@@ -607,13 +613,6 @@ def _operators(
         w = np.maximum(w, 0.05 * np.abs(w).mean())
     degree = np.bincount(i, weights=w, minlength=nv) + np.bincount(j, weights=w, minlength=nv)
     diagonal = np.arange(nv)
-    K = sp.csr_matrix(
-        (
-            np.concatenate([-w, -w, degree]),
-            (np.concatenate([i, j, diagonal]), np.concatenate([j, i, diagonal])),
-        ),
-        shape=(nv, nv),
-    )
     if vertices is None:
         scale = np.divide(1.0, degree, out=np.zeros(nv), where=degree > 0)
     else:
@@ -621,9 +620,34 @@ def _operators(
         mass = np.bincount(tris.ravel(), weights=np.repeat(area / 3.0, 3), minlength=nv)
         mass = mass / mass[mass > 0].mean()
         scale = np.divide(1.0, mass, out=np.zeros(nv), where=mass > 0)
+    if dense:
+        K = np.zeros((nv, nv))
+        K[i, j] = K[j, i] = -w
+        K[diagonal, diagonal] = degree
+        return K, scale[:, None] * K, np.stack([i, j], axis=1)
+    K = sp.csr_matrix(
+        (
+            np.concatenate([-w, -w, degree]),
+            (np.concatenate([i, j, diagonal]), np.concatenate([j, i, diagonal])),
+        ),
+        shape=(nv, nv),
+    )
     L = K.copy()  # L = S K: K's pattern with its rows scaled
     L.data = L.data * np.repeat(scale, np.diff(L.indptr))
     return K, L, np.stack([i, j], axis=1)
+
+
+def _solve_spd(normal: Any, rhs: np.ndarray) -> np.ndarray:
+    """Solve the SPD system: a dense Cholesky for an array (a small patch, where the sparse gateway's
+    analysis and factorization overheads are most of the time), :class:`SPDSolver` for a sparse matrix."""
+    if sp.issparse(normal):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", O3DLSMeshWarning)  # the SciPy fallback warning: tiny systems
+            return SPDSolver(normal.tocsc(), ordering="amd").solve(np.asarray(rhs))
+    try:
+        return cho_solve(cho_factor(normal), rhs)
+    except np.linalg.LinAlgError as error:
+        raise SingularSystemError(f"the fairing system is singular: {error}") from error
 
 
 def _fair(
@@ -648,7 +672,8 @@ def _fair(
     of ``local_tris``; ``cotangent`` reads the weights of :func:`_operators` off ``vertices``.
     """
     nv = len(vertices)
-    K, L, pairs = _operators(local_tris, nv, edges, vertices if cotangent else None)
+    dense = len(unknown) <= _DENSE_UNKNOWNS
+    K, L, pairs = _operators(local_tris, nv, edges, vertices if cotangent else None, dense)
     if continuity == 0:
         known = np.ones(nv, dtype=bool)
         known[unknown] = False
@@ -659,29 +684,30 @@ def _fair(
         rows[unknown] = True
         rows[rings[0]] = True  # rows whose Laplacian involves an unknown
         if continuity == 1:
-            A_full = L[np.flatnonzero(rows)].tocsc()
+            A_full = L[np.flatnonzero(rows)]
         else:
             valid = rows.copy()
             valid[rings[1]] = True
             keep = (rows[pairs[:, 0]] | rows[pairs[:, 1]]) & valid[pairs[:, 0]] & valid[pairs[:, 1]]
             sel = pairs[keep]
-            # the edge difference operator: row e is +1 at sel[e, 0] and -1 at sel[e, 1]
-            G = sp.csr_matrix(
-                (np.tile([1.0, -1.0], len(sel)), sel.ravel(), np.arange(0, 2 * len(sel) + 1, 2)),
-                shape=(len(sel), nv),
-            )
-            A_full = (G @ L).tocsc()
+            if dense:
+                A_full = L[sel[:, 0]] - L[sel[:, 1]]
+            else:  # the edge difference operator: row e is +1 at sel[e, 0] and -1 at sel[e, 1]
+                G = sp.csr_matrix(
+                    (np.tile([1.0, -1.0], len(sel)), sel.ravel(), np.arange(0, 2 * len(sel) + 1, 2)),
+                    shape=(len(sel), nv),
+                )
+                A_full = G @ L
+        A_full = A_full if dense else A_full.tocsc()
         if len(unknown) and unknown[0] == nv - len(unknown) and (np.diff(unknown) == 1).all():
             A_u = A_full[:, nv - len(unknown) :]  # the usual layout: the unknowns are the last columns
         else:
             A_u = A_full[:, unknown]
         fixed = vertices.copy()
         fixed[unknown] = 0.0  # A_known x_known, without slicing the known columns out
-        normal = (A_u.T @ A_u).tocsc()
+        normal = A_u.T @ A_u
         rhs = -(A_u.T @ (A_full @ fixed))
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", O3DLSMeshWarning)  # the SciPy fallback warning: tiny systems
-        return SPDSolver(normal, ordering="amd").solve(np.asarray(rhs))
+    return _solve_spd(normal, rhs)
 
 
 # --------------------------------------------------------------------------- the pipeline
@@ -1166,19 +1192,23 @@ def _tangential_relax(
     local = np.union1d(new_tris.ravel(), moving)
     tris = np.searchsorted(local, new_tris)
     mov = np.searchsorted(local, moving)
-    incidence = sp.csr_matrix(  # the triangles of each moving vertex
+    # the triangles of each moving vertex, padded with a zero row (index len(tris)): sums over a star
+    # are then one gather and a sum over a short axis (a sparse product cost more on these sizes)
+    incidence = sp.csr_matrix(
         (np.ones(3 * len(tris)), tris.ravel(), np.arange(0, 3 * len(tris) + 1, 3)),
         shape=(len(tris), len(local)),
     ).T.tocsr()[mov]
+    count = np.diff(incidence.indptr)
+    star = np.full((len(mov), int(count.max(initial=0))), len(tris))
+    star[np.repeat(np.arange(len(mov)), count), concatenated_ranges(0, count)] = incidence.indices
     x = out[local]
     for _ in range(iterations):
         p = x[tris]
-        face_normal = _cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
-        normal, _ = _unit(incidence @ face_normal)
+        face_normal = np.concatenate([_cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), np.zeros((1, 3))])
+        normal, _ = _unit(face_normal[star].sum(axis=1))
         area = np.sqrt((face_normal**2).sum(axis=1))
-        target = (incidence @ (area[:, None] * p.mean(axis=1))) / np.maximum(incidence @ area, 1e-300)[
-            :, None
-        ]
+        moment = np.concatenate([area[:-1, None] * p.mean(axis=1), np.zeros((1, 3))])
+        target = moment[star].sum(axis=1) / np.maximum(area[star].sum(axis=1), 1e-300)[:, None]
         move = target - x[mov]
         move -= (move * normal).sum(axis=1, keepdims=True) * normal
         x[mov] += 0.5 * move
