@@ -72,9 +72,6 @@ _ALPHA = np.sqrt(2.0)  # Liepa's density factor (section 4)
 _DENSE_UNKNOWNS = 120
 
 
-# --------------------------------------------------------------------------- choosing holes
-
-
 def _loop_rows(triangles: np.ndarray, n: int, edge_info: Any) -> list[tuple[np.ndarray, np.ndarray]]:
     """The loops of :func:`o3d_lsmesh.topology.boundary_loops`, each with the row (of
     :func:`o3d_lsmesh.topology.halfedges`) of the one half-edge on each loop edge ``(loop[i], loop[i + 1])``;
@@ -193,23 +190,11 @@ def find_holes(vertices: np.ndarray, triangles: np.ndarray, *, _edge_info=None) 
             break
     border = np.zeros(len(loops), dtype=bool)
     border[longest] = need > BORDER_RATIO * component_area[components[longest]]
-    out = [
-        Hole(
-            loop,
-            len(loop),
-            float(perimeters[i]),
-            _diameter(vertices[loop]),
-            int(components[i]),
-            bool(border[i]),
-            rows,
-        )
+    diameters = [_diameter(vertices[loop]) for loop, _ in loops]  # loops come sorted by first vertex
+    return [
+        Hole(loop, len(loop), float(perimeters[i]), diameters[i], int(components[i]), bool(border[i]), rows)
         for i, (loop, rows) in enumerate(loops)
     ]
-    out.sort(key=lambda hole: int(hole.vertices[0]))
-    return out
-
-
-# --------------------------------------------------------------------------- triangulation
 
 
 def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -370,9 +355,6 @@ def _triangulate(
     return np.concatenate(extra), np.concatenate(triangles)
 
 
-# --------------------------------------------------------------------------- refinement
-
-
 def _edge_table(tris: np.ndarray, nv: int):
     """Interior edges of an oriented patch, ``(triangle 1, slot 1, triangle 2, slot 2, a, b)``, and the
     sorted keys ``min * nv + max`` of every half-edge."""
@@ -421,13 +403,7 @@ def _absent(sorted_keys: np.ndarray, keys: np.ndarray) -> np.ndarray:
     return sorted_keys[np.minimum(np.searchsorted(sorted_keys, keys), len(sorted_keys) - 1)] != keys
 
 
-def _relax(
-    points: np.ndarray,
-    tris: np.ndarray,
-    fixed_pairs: np.ndarray,
-    max_passes: int = 100,
-    dirty: np.ndarray | None = None,
-) -> np.ndarray:
+def _relax(points: np.ndarray, tris: np.ndarray, fixed_pairs: np.ndarray, dirty: np.ndarray) -> np.ndarray:
     """Delaunay edge flips (Liepa's relaxation) until none applies, in batches of independent flips.
 
     An interior edge ``(a, b)`` between triangles ``(a, b, c)`` and ``(b, a, d)`` flips to ``(c, d)``
@@ -435,28 +411,24 @@ def _relax(
     ``(b, a, d)``), ``(c, d)`` is no edge yet (in the patch or in ``fixed_pairs`` around it), both new
     triangles face as the old pair and the pair's smallest angle grows.
 
-    Only edges whose verdict can have changed are tested: those of the ``dirty`` triangles (a mask;
-    all if None) and, in later passes, of the triangles a flip rewrote or left waiting, and those whose
+    Only edges whose verdict can have changed are tested: those of the ``dirty`` triangles (a mask) and, in later passes, of the triangles a flip rewrote or left waiting, and those whose
     flip was blocked by an edge a flip removed.
     """
     nv = len(points)
     tris = tris.copy()
     removed = np.zeros(0, dtype=np.int64)
     fixed_keys = np.sort(_keys(fixed_pairs[:, 0], fixed_pairs[:, 1], nv))
-    for _ in range(max_passes):
+    for _ in range(100):
         t1, s1, t2, s2, a, b, key = _edge_table(tris, nv)
         if len(t1) == 0:
             break
         c = tris[t1, (s1 + 2) % 3]
         d = tris[t2, (s2 + 2) % 3]
         new_key = _keys(c, d, nv)
-        if dirty is None:
-            open_ = np.arange(len(t1))
-        else:
-            mark = dirty[t1] | dirty[t2]
-            if len(removed):
-                mark |= ~_absent(removed, new_key)
-            open_ = np.flatnonzero(mark)
+        mark = dirty[t1] | dirty[t2]
+        if len(removed):
+            mark |= ~_absent(removed, new_key)
+        open_ = np.flatnonzero(mark)
         # the new edge must not exist yet (in the patch, or around it)
         ok_key = new_key[open_]
         open_ = open_[_absent(key, ok_key) & _absent(fixed_keys, ok_key) & (c[open_] != d[open_])]
@@ -504,13 +476,8 @@ def _relax(
 
 
 def _refine(
-    points: np.ndarray,
-    sigma: np.ndarray,
-    tris: np.ndarray,
-    fixed_pairs: np.ndarray,
-    owner: np.ndarray,
-    max_rounds: int = 60,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    points: np.ndarray, sigma: np.ndarray, tris: np.ndarray, fixed_pairs: np.ndarray, owner: np.ndarray
+):
     """Liepa's refinement: centroid splits of triangles larger than the local scale, then relaxation.
 
     A triangle with centroid ``c`` and ``sigma_c`` the mean of its corners' scales is split when
@@ -522,7 +489,7 @@ def _refine(
     # no flips before the first split (as Liepa and CGAL): on a short loop Delaunay flips made the
     # minimum-weight triangles slimmer, and coarse holes got no new vertex (camel 2.5h: 0, CGAL 3)
     relaxed = False
-    for _ in range(max_rounds):
+    for _ in range(60):
         corners = points[tris]  # (t, 3, 3)
         centre = corners.mean(axis=1)
         sigma_c = sigma[tris].mean(axis=1)
@@ -542,12 +509,9 @@ def _refine(
         if relaxed:
             split_mask[: len(split_mask) - 2 * len(chosen)] = False
             split_mask[chosen] = True
-        tris = _relax(points, tris, fixed_pairs, dirty=split_mask)
+        tris = _relax(points, tris, fixed_pairs, split_mask)
         relaxed = True
     return points, tris, owner
-
-
-# --------------------------------------------------------------------------- fairing
 
 
 def _rings(
@@ -710,9 +674,6 @@ def _fair(
     return _solve_spd(normal, rhs)
 
 
-# --------------------------------------------------------------------------- the pipeline
-
-
 @dataclass(frozen=True)
 class FilledHoles:
     """The result of :func:`fill_holes_arrays`.
@@ -741,16 +702,6 @@ class FilledHoles:
     skipped: list
     interpolation: sp.csr_matrix = field(repr=False)
     continuity: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
-
-
-def _check_options(max_hole_edges: Any, max_hole_diameter: Any, continuity: Any, density: Any):
-    if max_hole_edges is not None:
-        max_hole_edges = as_count(max_hole_edges, name="max_hole_edges", minimum=3)
-    if max_hole_diameter is not None:
-        max_hole_diameter = as_positive_float(max_hole_diameter, name="max_hole_diameter")
-    continuity = as_count(continuity, name="continuity", minimum=0, maximum=2)
-    density = as_positive_float(density, name="density", allow_zero=True)
-    return max_hole_edges, max_hole_diameter, continuity, density
 
 
 def fill_holes_arrays(
@@ -783,9 +734,7 @@ def fill_holes_arrays(
 
     See Also
     --------
-    HoleFiller : the same with the whole-mesh analysis done once (``HoleFiller(vertices,
-        triangles).fill(...)`` is this function, but for the k-d trees of the triangles, which a single
-        call replaces by a box query near the new triangles).
+    HoleFiller : the whole-mesh analysis done once, for several fills.
 
     Examples
     --------
@@ -796,9 +745,6 @@ def fill_holes_arrays(
     >>> len(out.triangles) - len(tris), len(out.holes)
     (2, 1)
     """
-    max_hole_edges, max_hole_diameter, continuity, density = _check_options(
-        max_hole_edges, max_hole_diameter, continuity, density
-    )
     return HoleFiller(vertices, triangles, index_triangles=False).fill(
         max_hole_edges=max_hole_edges,
         max_hole_diameter=max_hole_diameter,
@@ -819,8 +765,8 @@ class HoleFiller:
     length (Liepa's scale), lists each vertex's triangles (for the rings of fixed vertices around a
     patch) and indexes the triangles' bounding spheres in k-d trees (for the crossing check, a query
     near the patch). :func:`fill_holes_arrays` is ``HoleFiller(vertices, triangles,
-    index_triangles=False).fill(...)``. The state is read-only numpy arrays (the trees are rebuilt on
-    unpickling): it pickles, and :meth:`fill` may run from several threads at once.
+    index_triangles=False).fill(...)``. The state is read-only: it pickles, and :meth:`fill` may run
+    from several threads at once.
 
     Parameters
     ----------
@@ -903,9 +849,12 @@ class HoleFiller:
         progress: bool = False,
     ) -> FilledHoles:
         """Fill the chosen holes: the options and result of :func:`fill_holes_arrays`."""
-        max_hole_edges, max_hole_diameter, continuity, density = _check_options(
-            max_hole_edges, max_hole_diameter, continuity, density
-        )
+        if max_hole_edges is not None:
+            max_hole_edges = as_count(max_hole_edges, name="max_hole_edges", minimum=3)
+        if max_hole_diameter is not None:
+            max_hole_diameter = as_positive_float(max_hole_diameter, name="max_hole_diameter")
+        continuity = as_count(continuity, name="continuity", minimum=0, maximum=2)
+        density = as_positive_float(density, name="density", allow_zero=True)
         weights = as_choice(weights, ("uniform", "cotangent"), name="weights")
         fill_border = bool(as_bool(fill_border, name="fill_border"))
         check_progress(progress)
@@ -941,37 +890,32 @@ class HoleFiller:
             *[self._piece(l, r) for _, l, r in pieces]
         )
         count = len(piece_loop)
-        piece_extra = [np.zeros((0, 3))] * count
-        piece_tris = [np.zeros((0, 3), dtype=np.int64)] * count
+        piece_extra, piece_tris = [np.zeros((0, 3))] * count, [np.zeros((0, 3), dtype=np.int64)] * count
         lengths = np.array([len(loop) for loop in piece_loop])
         with progress_bar(progress, total=count, desc="filling holes", unit="loop") as bar:
             for k in np.unique(lengths):
                 group = np.flatnonzero(lengths == k)
-                if k > DP_MAX_EDGES:
-                    for member in group.tolist():
-                        forbidden = piece_forbidden[member]
-                        # chords are sampled at the spacing the refinement aims for (none without it)
-                        piece_extra[member], piece_tris[member] = _triangulate(
-                            piece_points[member],
-                            piece_outer[member],
-                            forbidden if forbidden.any() else None,
-                            piece_spacing[member] / density if density > 0 else 0.0,
+                # batches bound the tables' memory (~60 k**2 floats a loop); longer loops go one by one
+                step = 1 if k > DP_MAX_EDGES else max(1, 200_000 // int(k) ** 2)
+                for chunk in np.split(group, np.arange(step, len(group), step)):
+                    forbidden = np.stack([piece_forbidden[i] for i in chunk])
+                    forbidden = forbidden if forbidden.any() else None
+                    if k > DP_MAX_EDGES:  # cut by chords sampled at the refinement's spacing (none without)
+                        i = int(chunk[0])
+                        piece_extra[i], piece_tris[i] = _triangulate(
+                            piece_points[i],
+                            piece_outer[i],
+                            None if forbidden is None else forbidden[0],
+                            piece_spacing[i] / density if density > 0 else 0.0,
                         )
-                        bar.update()
-                    continue
-                per_batch = max(
-                    1, 200_000 // int(k) ** 2
-                )  # bounds the tables' memory (~60 k**2 floats a loop)
-                for first in range(0, len(group), per_batch):
-                    chunk = group[first : first + per_batch]
-                    stacked = np.stack([piece_forbidden[piece] for piece in chunk])
-                    found = _minimum_weight_triangulations(
-                        np.stack([piece_points[piece] for piece in chunk]),
-                        np.stack([piece_outer[piece] for piece in chunk]),
-                        stacked if stacked.any() else None,
-                    )
-                    for member, tris in zip(chunk.tolist(), found):
-                        piece_tris[member] = tris
+                    else:
+                        found = _minimum_weight_triangulations(
+                            np.stack([piece_points[i] for i in chunk]),
+                            np.stack([piece_outer[i] for i in chunk]),
+                            forbidden,
+                        )
+                        for i, tris in zip(chunk.tolist(), found):
+                            piece_tris[i] = tris
                     bar.update(len(chunk))
         # every piece refined at once, in disjoint local index ranges
         sizes = np.array([len(p) + len(e) for p, e in zip(piece_points, piece_extra)])
@@ -1012,14 +956,9 @@ class HoleFiller:
             weights_matrix = sp.csr_matrix((p, n))
         out_vertices = np.concatenate([vertices, all_points[fresh]])
         out_triangles = np.concatenate([triangles, new_tris])
-        if p:
-            out_vertices, used, stuck = _fair_all(
-                out_vertices, out_triangles, m, n, holes, continuity, weights, owner, self
-            )
-        else:  # nothing to fair: the triangulations alone are checked
-            used = np.full(len(holes), -1, dtype=np.int64)
-            crossing = _crossings(out_vertices, out_triangles, m, self.index, owner)
-            stuck = np.flatnonzero(np.bincount(owner, weights=crossing, minlength=len(holes)) > 0)
+        out_vertices, used, stuck = self._fair_all(
+            out_vertices, out_triangles, holes, continuity, weights, owner
+        )
         if len(stuck):
             # every fill of these crosses the mesh (folded or overlapping next to them): left open, and said
             warnings.warn(
@@ -1039,24 +978,98 @@ class HoleFiller:
             holes = [hole for hole, out in zip(holes, left) if not out]
         return FilledHoles(out_vertices, out_triangles, holes, skipped, weights_matrix, used)
 
+    def _fair_all(
+        self,
+        vertices: np.ndarray,
+        triangles: np.ndarray,
+        holes: list,
+        continuity: int,
+        weights: str,
+        tri_owner: np.ndarray,
+    ):
+        """Fair every new vertex at once: one local system over the patches and the rings around them.
+
+        Candidates, best first: the asked continuity (after its cotangent pass if asked, then without), then
+        each lower continuity, then the refined patch unfaired. Each hole keeps the first candidate whose new
+        triangles cross no triangle of the mesh (a tri-Laplacian patch can overshoot into a thin part next to
+        the hole); the holes where none is are returned (the caller leaves them open).
+        """
+        total, m, n = len(vertices), len(self.triangles), len(self.vertices)
+        unknown = np.arange(n, total)
+        loops = np.unique(np.concatenate([hole.vertices for hole in holes]))
+        # triangles within `continuity` rings of the loops in the input, plus every new triangle
+        old, new_tris = triangles[:m], triangles[m:]
+        ring_tris, rings = _rings(old, self.vertex_triangles, loops, continuity)
+        local_tris = np.concatenate([old[ring_tris], new_tris])
+        local_vertices = np.unique(local_tris)
+        remap = np.full(total, -1, dtype=np.int64)
+        remap[local_vertices] = np.arange(len(local_vertices))
+        local_rings = [remap[r] for r in rings]
+        unknown_local = remap[unknown]
+        vertex_owner = _vertex_owner(new_tris, tri_owner, n, total - n)
+        count = len(holes)
+        chosen = np.full(count, -1)
+        out = vertices.copy()
+        local = remap[local_tris]
+        local_edges = _unique_edges(local, len(local_vertices))  # one connectivity for every solve below
+
+        def solve(x: np.ndarray, level: int, cotangent: bool) -> np.ndarray | None:
+            try:
+                solution = _fair(
+                    x[local_vertices], local, unknown_local, local_rings, level, local_edges, cotangent
+                )
+            except SingularSystemError:
+                return None
+            return solution if np.isfinite(solution).all() else None
+
+        def candidates():  # lazily: most calls stop at the first
+            for level in (
+                range(continuity, -1, -1) if len(unknown) else []
+            ):  # nothing to fair without new vertices
+                solution = solve(vertices, level, False)
+                if solution is None:
+                    continue
+                faired = vertices.copy()
+                faired[unknown] = solution
+                if weights == "cotangent" and level > 0:
+                    # cotangent weights (clamped, area-normalized) read off the uniform solution: a fair
+                    # embedding, where weights from the flat refined patch diverged (camel 15h: 87 h off)
+                    again = solve(faired, level, True)
+                    if again is not None and _no_fold(faired, again, unknown, new_tris):
+                        better = faired.copy()
+                        better[unknown] = again
+                        yield level, _tangential_relax(better, new_tris, n)
+                yield level, _tangential_relax(faired, new_tris, n)
+            yield -1, vertices  # the refined patch as triangulated
+
+        tried = []
+        for rank, (level, candidate) in enumerate(candidates()):
+            tried.append(level)
+            crossing = _crossings(candidate, triangles, m, self.index, tri_owner)  # (q,) per new triangle
+            per_hole = np.bincount(tri_owner, weights=crossing, minlength=count)
+            for hole_index in np.flatnonzero((chosen < 0) & (per_hole == 0)):
+                mine = vertex_owner == hole_index
+                out[n:][mine] = candidate[n:][mine]
+                chosen[hole_index] = rank
+            if (chosen >= 0).all():
+                break
+        used = np.array([tried[c] if c >= 0 else tried[0] for c in chosen], dtype=np.int64)
+        return out, used, np.flatnonzero(chosen < 0)
+
 
 def _simple_pieces(loop: np.ndarray, rows: np.ndarray):
     """Split a loop that passes a vertex more than once into loops that do not (each filled on its own)."""
     stack = [(loop, rows)]
     while stack:
         loop, rows = stack.pop()
-        seen: dict[int, int] = {}
-        cut = None
-        for position, v in enumerate(loop.tolist()):
-            if v in seen:
-                cut = (seen[v], position)
-                break
-            seen[v] = position
-        if cut is None:
+        first = np.zeros(len(loop), dtype=bool)
+        first[np.unique(loop, return_index=True)[1]] = True
+        if first.all():
             if len(loop) >= 3:
                 yield loop, rows
             continue
-        p, q = cut
+        q = int(np.argmin(first))  # the first second visit, and the first visit of that vertex
+        p = int(np.argmax(loop == loop[q]))
         stack.append((loop[p:q], rows[p:q]))
         stack.append((np.concatenate([loop[:p], loop[q:]]), np.concatenate([rows[:p], rows[q:]])))
 
@@ -1084,10 +1097,10 @@ def _interpolation(
         by_index = np.argsort(numbering)
         tris_local = by_index[np.searchsorted(numbering[by_index], local)]
         k, nl = len(loop), len(numbering)
-        K, _, _ = _operators(tris_local, nl, _unique_edges(tris_local, nl))
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", O3DLSMeshWarning)
-            harmonic = SPDSolver(K[k:][:, k:].tocsc()).solve(-K[k:][:, :k].toarray())
+        K, _, _ = _operators(tris_local, nl, _unique_edges(tris_local, nl), dense=nl - k <= _DENSE_UNKNOWNS)
+        harmonic = _solve_spd(
+            K[k:][:, k:], -K[k:][:, :k] if isinstance(K, np.ndarray) else -K[k:][:, :k].toarray()
+        )
         r, c = np.nonzero(np.abs(harmonic) > 1e-12)
         rows.append(inner[r] - n)
         cols.append(loop[c])
@@ -1097,89 +1110,8 @@ def _interpolation(
     return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(p, n))
 
 
-def _fair_all(
-    vertices: np.ndarray,
-    triangles: np.ndarray,
-    m: int,
-    n: int,
-    holes: list,
-    continuity: int,
-    weights: str,
-    tri_owner: np.ndarray,
-    state: HoleFiller,
-):
-    """Fair every new vertex at once: one local system over the patches and the rings around them.
-
-    Candidates, best first: the asked continuity (after its cotangent pass if asked, then without), then
-    each lower continuity, then the refined patch unfaired. Each hole keeps the first candidate whose new
-    triangles cross no triangle of the mesh (a tri-Laplacian patch can overshoot into a thin part next to
-    the hole); the holes where none is are returned (the caller leaves them open).
-    """
-    total = len(vertices)
-    unknown = np.arange(n, total)
-    loops = np.unique(np.concatenate([hole.vertices for hole in holes]))
-    # triangles within `continuity` rings of the loops in the input, plus every new triangle
-    old, new_tris = triangles[:m], triangles[m:]
-    ring_tris, rings = _rings(old, state.vertex_triangles, loops, continuity)
-    local_tris = np.concatenate([old[ring_tris], new_tris])
-    local_vertices = np.unique(local_tris)
-    remap = np.full(total, -1, dtype=np.int64)
-    remap[local_vertices] = np.arange(len(local_vertices))
-    local_rings = [remap[r] for r in rings]
-    unknown_local = remap[unknown]
-    vertex_owner = _vertex_owner(new_tris, tri_owner, n, total - n)
-    count = len(holes)
-    chosen = np.full(count, -1)
-    out = vertices.copy()
-    local = remap[local_tris]
-    local_edges = _unique_edges(local, len(local_vertices))  # one connectivity for every solve below
-
-    def solve(x: np.ndarray, level: int, cotangent: bool) -> np.ndarray | None:
-        try:
-            solution = _fair(
-                x[local_vertices], local, unknown_local, local_rings, level, local_edges, cotangent
-            )
-        except SingularSystemError:
-            return None
-        return solution if np.isfinite(solution).all() else None
-
-    def candidates():  # lazily: most calls stop at the first
-        for level in range(continuity, -1, -1):
-            solution = solve(vertices, level, False)
-            if solution is None:
-                continue
-            faired = vertices.copy()
-            faired[unknown] = solution
-            if weights == "cotangent" and level > 0:
-                # cotangent weights (clamped, area-normalized) read off the uniform solution: a fair
-                # embedding, where weights from the flat refined patch diverged (camel 15h: 87 h off)
-                again = solve(faired, level, True)
-                if again is not None and _no_fold(faired, again, unknown, new_tris):
-                    better = faired.copy()
-                    better[unknown] = again
-                    yield level, _tangential_relax(better, new_tris, n)
-            yield level, _tangential_relax(faired, new_tris, n)
-        yield -1, vertices  # the refined patch as triangulated
-
-    tried = []
-    for rank, (level, candidate) in enumerate(candidates()):
-        tried.append(level)
-        crossing = _crossings(candidate, triangles, m, state.index, tri_owner)  # (q,) per new triangle
-        per_hole = np.bincount(tri_owner, weights=crossing, minlength=count)
-        for hole_index in np.flatnonzero((chosen < 0) & (per_hole == 0)):
-            mine = vertex_owner == hole_index
-            out[n:][mine] = candidate[n:][mine]
-            chosen[hole_index] = rank
-        if (chosen >= 0).all():
-            break
-    used = np.array([tried[c] if c >= 0 else tried[0] for c in chosen], dtype=np.int64)
-    return out, used, np.flatnonzero(chosen < 0)
-
-
-def _tangential_relax(
-    vertices: np.ndarray, new_tris: np.ndarray, first_new: int, iterations: int = 10
-) -> np.ndarray:
-    """Move each new vertex half-way to the area-weighted centroid of its star, in its tangent plane.
+def _tangential_relax(vertices: np.ndarray, new_tris: np.ndarray, first_new: int) -> np.ndarray:
+    """Move each new vertex (ten times) half-way to the area-weighted centroid of its star, in its tangent plane.
 
     The star's centroid (a step of centroidal Voronoi smoothing), not the neighbours' mean, which on
     an irregular star sits towards the short edges and leaves a sliver (smallest angle on plane_holes
@@ -1202,7 +1134,7 @@ def _tangential_relax(
     star = np.full((len(mov), int(count.max(initial=0))), len(tris))
     star[np.repeat(np.arange(len(mov)), count), concatenated_ranges(0, count)] = incidence.indices
     x = out[local]
-    for _ in range(iterations):
+    for _ in range(10):
         p = x[tris]
         face_normal = np.concatenate([_cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), np.zeros((1, 3))])
         normal, _ = _unit(face_normal[star].sum(axis=1))
@@ -1220,31 +1152,19 @@ class _TriangleIndex:
     """Bounding spheres (about the centroids) of a mesh's triangles in k-d trees, for crossing queries.
 
     Two trees, the spheres of radius at most 4 times the median and the rest, each queried with its own
-    largest radius, so that a few long slivers do not make every query reach far. The trees are
-    rebuilt from the arrays when unpickled (queries are thread-safe).
+    largest radius, so that a few long slivers do not make every query reach far (queries are
+    thread-safe; the trees pickle).
     """
 
     def __init__(self, vertices: np.ndarray, triangles: np.ndarray) -> None:
+        from scipy.spatial import cKDTree
+
         p = vertices[triangles]
         self.centre = p.mean(axis=1)
         self.radius = np.linalg.norm(p - self.centre[:, None, :], axis=2).max(axis=1)
         small = self.radius <= (4.0 * float(np.median(self.radius)) if len(self.radius) else 0.0)
-        self.groups = [np.flatnonzero(small), np.flatnonzero(~small)]
-        self._build()
-
-    def _build(self) -> None:
-        from scipy.spatial import cKDTree
-
-        self.trees = [
-            (cKDTree(self.centre[g]), float(self.radius[g].max()), g) for g in self.groups if len(g)
-        ]
-
-    def __getstate__(self) -> dict:
-        return {key: value for key, value in self.__dict__.items() if key != "trees"}
-
-    def __setstate__(self, state: dict) -> None:
-        self.__dict__.update(state)
-        self._build()
+        groups = [g for g in (np.flatnonzero(small), np.flatnonzero(~small)) if len(g)]
+        self.trees = [(cKDTree(self.centre[g]), float(self.radius[g].max()), g) for g in groups]
 
     def near(
         self, centre: np.ndarray, radius: np.ndarray, groups: np.ndarray | None = None
@@ -1369,15 +1289,12 @@ def _no_fold(uniform: np.ndarray, again: np.ndarray, unknown: np.ndarray, new_tr
     within a tenth of the patch's size of it (obtuse slivers can make cotangent weights ill-conditioned)."""
     moved = uniform.copy()
     moved[unknown] = again
-
-    def normals(x):
-        p = x[new_tris]
-        return _cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
-
-    if ((normals(uniform) * normals(moved)).sum(axis=1) <= 0).any():
-        return False
+    p, q = uniform[new_tris], moved[new_tris]
+    facing = (
+        _cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]) * _cross(q[:, 1] - q[:, 0], q[:, 2] - q[:, 0])
+    ).sum(axis=1)
     size = np.linalg.norm(np.ptp(uniform[new_tris.ravel()], axis=0))
-    return float(np.abs(again - uniform[unknown]).max()) < 0.1 * size
+    return bool((facing > 0).all()) and float(np.abs(again - uniform[unknown]).max()) < 0.1 * size
 
 
 def fill_holes(
@@ -1504,9 +1421,7 @@ def _has_vertex_data(data: Any) -> bool:
     """Whether the mesh carries per-vertex data that new vertices interpolate (colours, tensor attributes)."""
     if data.kind == "legacy":
         return data.source.has_vertex_colors()
-    if data.kind == "tensor":
-        return any(key not in ("positions", "normals") for key in data.source.vertex)
-    return False
+    return data.kind == "tensor" and any(key not in ("positions", "normals") for key in data.source.vertex)
 
 
 def _rebuild(data: Any, result: FilledHoles) -> Any:
@@ -1518,9 +1433,7 @@ def _rebuild(data: Any, result: FilledHoles) -> Any:
         return out
     from ._o3d import open3d
 
-    o3d = open3d()
-    src = data.source
-    n = len(data.vertices)
+    o3d, src, n = open3d(), data.source, len(data.vertices)
 
     def extend(values: np.ndarray) -> np.ndarray:
         values = np.asarray(values, dtype=np.float64).reshape(n, -1)
@@ -1529,25 +1442,22 @@ def _rebuild(data: Any, result: FilledHoles) -> Any:
     dropped = []
     if data.kind == "legacy":
         if src.has_vertex_colors():
-            colors = np.clip(extend(np.asarray(src.vertex_colors)), 0.0, 1.0)
-            out.vertex_colors = o3d.utility.Vector3dVector(colors)
-        if src.has_triangle_uvs():
-            dropped.append("triangle_uvs")
-        if src.has_triangle_material_ids():
-            dropped.append("triangle_material_ids")
+            out.vertex_colors = o3d.utility.Vector3dVector(
+                np.clip(extend(np.asarray(src.vertex_colors)), 0.0, 1.0)
+            )
+        dropped = [
+            name for name in ("triangle_uvs", "triangle_material_ids") if getattr(src, f"has_{name}")()
+        ]
     else:
-        device = src.vertex.positions.device
         for key in src.vertex:
+            value = src.vertex[key]
             if key in ("positions", "normals"):
                 continue
-            value = src.vertex[key]
-            if value.dtype in (o3d.core.float32, o3d.core.float64):
-                arr = extend(value.cpu().numpy())
-                out.vertex[key] = o3d.core.Tensor(
-                    arr.reshape((-1,) + tuple(value.shape[1:])), device=device
-                ).to(value.dtype)
-            else:
+            if value.dtype not in (o3d.core.float32, o3d.core.float64):
                 dropped.append(f"vertex.{key}")
+                continue
+            arr = extend(value.cpu().numpy()).reshape((-1,) + tuple(value.shape[1:]))
+            out.vertex[key] = o3d.core.Tensor(arr, device=src.vertex.positions.device).to(value.dtype)
         dropped += [f"triangle.{key}" for key in src.triangle if key not in ("indices", "normals")]
     if dropped:
         warnings.warn(
