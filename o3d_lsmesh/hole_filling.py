@@ -2,24 +2,17 @@
 
 Each chosen hole (a closed loop of boundary half-edges) is
 
-1. triangulated by Liepa's minimum-weight dynamic programme (P. Liepa, *Filling Holes in Meshes*,
-   SGP 2003, section 3): lexicographically smallest largest dihedral angle, then total area. It is
-   O(k^3) in the loop length k, so loops longer than :data:`DP_MAX_EDGES` are first cut in two,
-   recursively, along the shortest chord between vertices far apart on the loop (sampled at the
-   loop's edge length): O(k^2 + k DP_MAX_EDGES^2), it cannot hang;
-2. refined to the density of the surrounding edges (section 4): centroid splits, each round followed
-   by edge flips (either circumsphere test, as CGAL's relax, and only where the pair's smallest angle
-   grows, so flips end);
-3. faired as a least-squares mesh (Sorkine and Cohen-Or 2004, section 6: "the known vertices around
-   the hole serve as control points"): the new vertices are the only unknowns, with enough rings of
-   the mesh fixed for the continuity; then a few tangential (centroidal) relaxation steps;
-4. checked: a patch whose new triangles cross the mesh is faired again with a lower continuity, and
-   left open if every one crosses (see :func:`fill_holes`, Notes).
+1. triangulated by Liepa's minimum-weight dynamic programme (*Filling Holes in Meshes*, SGP 2003,
+   section 3: smallest largest dihedral angle, then area), O(k^3) in the loop length k: longer loops
+   than :data:`DP_MAX_EDGES` are first cut, recursively, along their shortest chord between far-apart
+   vertices, so it cannot hang;
+2. refined to the density of the surrounding edges (section 4): centroid splits, then edge flips;
+3. faired as a least-squares mesh (Sorkine and Cohen-Or 2004, section 6): the new vertices are the only
+   unknowns, enough rings of the mesh fixed around them; then a tangential (centroidal) relaxation;
+4. checked: a patch crossing the mesh is faired again with a lower continuity, or left open.
 
-Loops of one length share one batched dynamic programme; every piece is refined at once (disjoint
-index ranges), and all patches are faired in one sparse system and checked in one pass.
-:class:`HoleFiller` holds the whole-mesh analysis, so that :meth:`HoleFiller.fill` does only work
-local to the holes, as CGAL's calls on a prebuilt half-edge structure.
+:class:`HoleFiller` holds the whole-mesh analysis, so that :meth:`HoleFiller.fill` does only work local
+to the holes (as CGAL's calls on a prebuilt half-edge structure), all holes batched in each step.
 """
 
 from __future__ import annotations
@@ -66,6 +59,7 @@ DP_MAX_EDGES = 100
 #: covers about a quarter of it (``4 pi f / (1 - f) = 4``).
 BORDER_RATIO = 4.0
 
+_Edges = tuple[np.ndarray, np.ndarray, np.ndarray]  # edges i < j of a local mesh, each half-edge's edge
 _ALPHA = np.sqrt(2.0)  # Liepa's density factor (section 4)
 #: Fairing systems with at most this many unknowns are solved dense (measured: below it the sparse
 #: path's assembly, analysis and factorization overheads cost more than the dense products).
@@ -130,10 +124,9 @@ def _diameter(points: np.ndarray) -> float:
 def find_holes(vertices: np.ndarray, triangles: np.ndarray, *, _edge_info=None) -> list[Hole]:
     """Every boundary loop of the mesh with its size and whether it is an outer border.
 
-    A component's outer border is its longest loop (by perimeter) when
-    ``perimeter**2 > BORDER_RATIO * area`` of the component: the silhouette of
-    a scan, the one loop of a small island. A closed surface with holes has no
-    outer border unless one hole is about a quarter of its area or more.
+    A component's outer border is its longest loop when ``perimeter**2 > BORDER_RATIO * area`` of the
+    component (a scan's silhouette, a small island's loop); a closed surface with holes has none unless
+    one hole is about a quarter of its area or more.
 
     Parameters
     ----------
@@ -411,8 +404,8 @@ def _relax(points: np.ndarray, tris: np.ndarray, fixed_pairs: np.ndarray, dirty:
     ``(b, a, d)``), ``(c, d)`` is no edge yet (in the patch or in ``fixed_pairs`` around it), both new
     triangles face as the old pair and the pair's smallest angle grows.
 
-    Only edges whose verdict can have changed are tested: those of the ``dirty`` triangles (a mask) and, in later passes, of the triangles a flip rewrote or left waiting, and those whose
-    flip was blocked by an edge a flip removed.
+    Only edges whose verdict can have changed are tested: those of the ``dirty`` triangles (a mask) and,
+    in later passes, of the triangles a flip rewrote or left waiting, and those a removed edge blocked.
     """
     nv = len(points)
     tris = tris.copy()
@@ -517,13 +510,8 @@ def _refine(
 def _rings(
     triangles: np.ndarray, vertex_triangles: tuple[np.ndarray, np.ndarray], seeds: np.ndarray, count: int
 ):
-    """Triangles incident to ``count`` successive vertex rings around ``seeds`` (``seeds`` is ring 0).
-
-    ``vertex_triangles`` is the CSR ``(indptr, triangle indices)`` of each vertex's triangles, so the
-    work is local to the rings (nothing grows with the mesh). Returns the triangle indices (sorted) and
-    the rings as a list of vertex arrays (``count + 1`` of them; the last one is the outer, incomplete
-    ring).
-    """
+    """The triangles (sorted) of ``count`` successive vertex rings around ``seeds`` (ring 0), and the
+    ``count + 1`` rings (the last incomplete), from each vertex's triangles ``vertex_triangles`` (CSR)."""
     indptr, data = vertex_triangles
     seen = np.unique(seeds)
     rings = [seeds]
@@ -541,7 +529,7 @@ def _rings(
     return taken, rings
 
 
-def _unique_edges(tris: np.ndarray, nv: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _unique_edges(tris: np.ndarray, nv: int) -> _Edges:
     """Undirected edges ``i < j`` of a local mesh (sorted) and the edge of each of its ``3t`` half-edges."""
     e = np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1)
     e_keys, inverse = np.unique(e[:, 0] * nv + e[:, 1], return_inverse=True)
@@ -549,11 +537,7 @@ def _unique_edges(tris: np.ndarray, nv: int) -> tuple[np.ndarray, np.ndarray, np
 
 
 def _operators(
-    tris: np.ndarray,
-    nv: int,
-    edges: tuple[np.ndarray, np.ndarray, np.ndarray],
-    vertices: np.ndarray | None = None,
-    dense: bool = False,
+    tris: np.ndarray, nv: int, edges: _Edges, vertices: np.ndarray | None = None, dense: bool = False
 ):
     """Stiffness ``K = D - W`` and Laplacian ``L = S K`` of a local mesh (CSR, or arrays if ``dense``),
     and its edges ``(e, 2)``.
@@ -615,15 +599,10 @@ def _solve_spd(normal: Any, rhs: np.ndarray) -> np.ndarray:
 
 
 def _fair(
-    vertices: np.ndarray,
-    local_tris: np.ndarray,
-    unknown: np.ndarray,
-    rings: list[np.ndarray],
-    continuity: int,
-    edges: tuple[np.ndarray, np.ndarray, np.ndarray],
-    cotangent: bool = False,
-) -> np.ndarray:
-    """Positions of the ``unknown`` local vertices minimizing the continuity's energy, the others fixed.
+    x: np.ndarray, tris: np.ndarray, unknown: np.ndarray, rings: list, level: int, edges: _Edges, cot: bool
+):
+    """Positions of the ``unknown`` local vertices minimizing continuity ``level``'s energy, the others
+    fixed at ``x``:
 
     * ``0``: ``x^T K x`` (membrane, harmonic: ``L x = 0`` at the unknowns);
     * ``1``: ``sum_r |(L x)_r|^2`` over the rows touching an unknown: the LS-mesh energy ``||L x||^2``
@@ -632,22 +611,22 @@ def _fair(
       ``(L x)^T K (L x)``, the tri-Laplacian energy.
 
     ``rings[0]`` are the loop vertices, ``rings[i]`` the i-th ring around them: the rows used involve
-    only vertices whose one-rings are complete in ``local_tris``. ``edges`` is :func:`_unique_edges`
-    of ``local_tris``; ``cotangent`` reads the weights of :func:`_operators` off ``vertices``.
+    only vertices whose one-rings are complete in ``tris``. ``edges`` is :func:`_unique_edges` of
+    ``tris``; ``cot`` reads the weights of :func:`_operators` off ``x``.
     """
-    nv = len(vertices)
+    nv = len(x)
     dense = len(unknown) <= _DENSE_UNKNOWNS
-    K, L, pairs = _operators(local_tris, nv, edges, vertices if cotangent else None, dense)
-    if continuity == 0:
+    K, L, pairs = _operators(tris, nv, edges, x if cot else None, dense)
+    if level == 0:
         known = np.ones(nv, dtype=bool)
         known[unknown] = False
         normal = K[unknown][:, unknown]
-        rhs = -(K[unknown][:, np.flatnonzero(known)] @ vertices[known])
+        rhs = -(K[unknown][:, np.flatnonzero(known)] @ x[known])
     else:
         rows = np.zeros(nv, dtype=bool)
         rows[unknown] = True
         rows[rings[0]] = True  # rows whose Laplacian involves an unknown
-        if continuity == 1:
+        if level == 1:
             A_full = L[np.flatnonzero(rows)]
         else:
             valid = rows.copy()
@@ -667,7 +646,7 @@ def _fair(
             A_u = A_full[:, nv - len(unknown) :]  # the usual layout: the unknowns are the last columns
         else:
             A_u = A_full[:, unknown]
-        fixed = vertices.copy()
+        fixed = x.copy()
         fixed[unknown] = 0.0  # A_known x_known, without slicing the known columns out
         normal = A_u.T @ A_u
         rhs = -(A_u.T @ (A_full @ fixed))
@@ -717,7 +696,7 @@ def fill_holes_arrays(
     interpolation: bool = False,
     progress: bool = False,
 ) -> FilledHoles:
-    """Fill the holes of ``(vertices, triangles)``: triangulate, refine and fair; the array core of :func:`fill_holes`.
+    """Fill the holes of ``(vertices, triangles)``: the array core of :func:`fill_holes`.
 
     Parameters
     ----------
@@ -760,13 +739,9 @@ def fill_holes_arrays(
 class HoleFiller:
     """The whole-mesh analysis of a mesh's holes, done once; :meth:`fill` then does only per-hole work.
 
-    Like CGAL's prebuilt half-edge structure: the constructor sorts the edges once (the boundary loops,
-    their components and outer borders, see :func:`find_holes`), measures each vertex's mean edge
-    length (Liepa's scale), lists each vertex's triangles (for the rings of fixed vertices around a
-    patch) and indexes the triangles' bounding spheres in k-d trees (for the crossing check, a query
-    near the patch). :func:`fill_holes_arrays` is ``HoleFiller(vertices, triangles,
-    index_triangles=False).fill(...)``. The state is read-only: it pickles, and :meth:`fill` may run
-    from several threads at once.
+    Like CGAL's prebuilt half-edge structure: the loops (:func:`find_holes`), each vertex's mean edge
+    length (Liepa's scale) and triangles, and k-d trees of the triangles' bounding spheres (for the
+    crossing check). The state is read-only: it pickles, and :meth:`fill` may run from several threads.
 
     Parameters
     ----------
@@ -1097,10 +1072,9 @@ def _interpolation(
         by_index = np.argsort(numbering)
         tris_local = by_index[np.searchsorted(numbering[by_index], local)]
         k, nl = len(loop), len(numbering)
-        K, _, _ = _operators(tris_local, nl, _unique_edges(tris_local, nl), dense=nl - k <= _DENSE_UNKNOWNS)
-        harmonic = _solve_spd(
-            K[k:][:, k:], -K[k:][:, :k] if isinstance(K, np.ndarray) else -K[k:][:, :k].toarray()
-        )
+        # the membrane (continuity 0) with the loop's unit vectors as the fixed "positions"
+        unit = np.eye(nl, k)
+        harmonic = _fair(unit, tris_local, np.arange(k, nl), [], 0, _unique_edges(tris_local, nl), False)
         r, c = np.nonzero(np.abs(harmonic) > 1e-12)
         rows.append(inner[r] - n)
         cols.append(loop[c])
@@ -1111,7 +1085,7 @@ def _interpolation(
 
 
 def _tangential_relax(vertices: np.ndarray, new_tris: np.ndarray, first_new: int) -> np.ndarray:
-    """Move each new vertex (ten times) half-way to the area-weighted centroid of its star, in its tangent plane.
+    """Move each new vertex ten times half-way to its star's area-weighted centroid, in its tangent plane.
 
     The star's centroid (a step of centroidal Voronoi smoothing), not the neighbours' mean, which on
     an irregular star sits towards the short edges and leaves a sliver (smallest angle on plane_holes
@@ -1320,12 +1294,10 @@ def fill_holes(
     * ``continuity=2``: ``(L x)^T K (L x)``, tri-Laplacian: the Laplacian itself varies smoothly, so
       curvature continues across the loop,
 
-    with ``L = I - D^-1 A`` the uniform Laplacian of eq. 1 (``(L x)_i`` is ``x_i`` minus the mean of its
-    neighbours) and ``K = D - A``. Only the new vertices are unknowns: one sparse system the size of
-    the patches, ``continuity + 1`` rings of the input fixed around each loop. With
-    ``weights="cotangent"`` (default) one more solve follows, with cotangent weights read off the
-    uniform solution (``K = D - W``, ``L = M^-1 K``, ``M`` the vertex areas): closer to the true surface
-    on irregular meshes, and stable because the weights come from a fair embedding, not the flat patch.
+    with ``L = I - D^-1 A`` the uniform Laplacian of eq. 1 and ``K = D - A``; only the new vertices are
+    unknowns, ``continuity + 1`` rings of the input fixed around each loop. ``weights="cotangent"``
+    then solves again with cotangent weights read off that fair solution (``K = D - W``, ``L = M^-1 K``,
+    ``M`` the vertex areas), closer to the true surface on irregular meshes.
 
     Parameters
     ----------
@@ -1344,9 +1316,8 @@ def fill_holes(
     weights : {"cotangent", "uniform"}
         ``"uniform"``: the uniform solve alone; ``"cotangent"``: then one re-weighted solve (see above).
     fill_border : bool
-        Also fill each open component's outer border (its longest loop when ``perimeter**2 > 4 area`` of
-        the component, see :data:`BORDER_RATIO`): a scan's silhouette, a lone island's rim. Default
-        ``False``: left open.
+        Also fill each open component's outer border (see :data:`BORDER_RATIO`): a scan's silhouette,
+        a lone island's rim. Default ``False``: left open.
     progress : bool
         Show a tqdm bar over the holes.
 
