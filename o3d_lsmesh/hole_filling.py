@@ -931,8 +931,8 @@ class HoleFiller:
             weights_matrix = sp.csr_matrix((p, n))
         out_vertices = np.concatenate([vertices, all_points[fresh]])
         out_triangles = np.concatenate([triangles, new_tris])
-        out_vertices, used, stuck = self._fair_all(
-            out_vertices, out_triangles, holes, continuity, weights, owner
+        used, stuck = self._fair_all(
+            out_vertices, out_triangles, holes, continuity, weights == "cotangent", owner
         )
         if len(stuck):
             # every fill of these crosses the mesh (folded or overlapping next to them): left open, and said
@@ -954,20 +954,16 @@ class HoleFiller:
         return FilledHoles(out_vertices, out_triangles, holes, skipped, weights_matrix, used)
 
     def _fair_all(
-        self,
-        vertices: np.ndarray,
-        triangles: np.ndarray,
-        holes: list,
-        continuity: int,
-        weights: str,
-        tri_owner: np.ndarray,
+        self, vertices: np.ndarray, triangles: np.ndarray, holes: list, continuity: int, cot: bool, owner
     ):
         """Fair every new vertex at once: one local system over the patches and the rings around them.
 
-        Candidates, best first: the asked continuity (after its cotangent pass if asked, then without), then
-        each lower continuity, then the refined patch unfaired. Each hole keeps the first candidate whose new
-        triangles cross no triangle of the mesh (a tri-Laplacian patch can overshoot into a thin part next to
-        the hole); the holes where none is are returned (the caller leaves them open).
+        ``vertices`` (the input's, then the refined patches' new ones) take the result in place.
+        Candidates, best first: the asked continuity (after its cotangent pass if ``cot``, then
+        without), then each lower continuity, then the refined patch unfaired. Each hole (``owner`` of
+        each new triangle) keeps the first candidate whose new triangles cross no triangle of the mesh
+        (a tri-Laplacian patch can overshoot into a thin part next to the hole); returns the continuity
+        each hole got and the holes where none is (the caller leaves them open).
         """
         total, m, n = len(vertices), len(self.triangles), len(self.vertices)
         unknown = np.arange(n, total)
@@ -980,56 +976,59 @@ class HoleFiller:
         remap = np.full(total, -1, dtype=np.int64)
         remap[local_vertices] = np.arange(len(local_vertices))
         local_rings = [remap[r] for r in rings]
-        unknown_local = remap[unknown]
-        vertex_owner = _vertex_owner(new_tris, tri_owner, n, total - n)
-        count = len(holes)
-        chosen = np.full(count, -1)
-        out = vertices.copy()
         local = remap[local_tris]
         local_edges = _unique_edges(local, len(local_vertices))  # one connectivity for every solve below
+        refined = vertices[n:].copy()
+        work = vertices  # its new rows hold the candidate being solved from or checked
 
-        def solve(x: np.ndarray, level: int, cotangent: bool) -> np.ndarray | None:
+        def solve(level: int, weighted: bool) -> np.ndarray | None:
             try:
-                solution = _fair(
-                    x[local_vertices], local, unknown_local, local_rings, level, local_edges, cotangent
+                x = _fair(
+                    work[local_vertices], local, remap[unknown], local_rings, level, local_edges, weighted
                 )
             except SingularSystemError:
                 return None
-            return solution if np.isfinite(solution).all() else None
+            return x if np.isfinite(x).all() else None
 
         def candidates():  # lazily: most calls stop at the first
             for level in (
                 range(continuity, -1, -1) if len(unknown) else []
             ):  # nothing to fair without new vertices
-                solution = solve(vertices, level, False)
+                solution = solve(level, False)
                 if solution is None:
                     continue
-                faired = vertices.copy()
-                faired[unknown] = solution
-                if weights == "cotangent" and level > 0:
+                work[n:] = solution
+                if cot and level > 0:
                     # cotangent weights (clamped, area-normalized) read off the uniform solution: a fair
                     # embedding, where weights from the flat refined patch diverged (camel 15h: 87 h off)
-                    again = solve(faired, level, True)
-                    if again is not None and _no_fold(faired, again, unknown, new_tris):
-                        better = faired.copy()
-                        better[unknown] = again
-                        yield level, _tangential_relax(better, new_tris, n)
-                yield level, _tangential_relax(faired, new_tris, n)
-            yield -1, vertices  # the refined patch as triangulated
+                    again = solve(level, True)
+                    if again is not None and _no_fold(work, again, new_tris):
+                        work[n:] = again
+                        yield level, _tangential_relax(work, new_tris, n)
+                        work[n:] = solution
+                yield level, _tangential_relax(work, new_tris, n)
+                work[n:] = refined
+            yield -1, refined  # the refined patch as triangulated
 
+        vertex_owner = _vertex_owner(new_tris, owner, n, total - n)
+        chosen = np.full(len(holes), -1)
+        out = refined.copy()
         tried = []
         for rank, (level, candidate) in enumerate(candidates()):
             tried.append(level)
-            crossing = _crossings(candidate, triangles, m, self.index, tri_owner)  # (q,) per new triangle
-            per_hole = np.bincount(tri_owner, weights=crossing, minlength=count)
+            work[n:] = candidate
+            crossing = _crossings(work, triangles, m, self.index, owner)  # (q,) per new triangle
+            per_hole = np.bincount(owner, weights=crossing, minlength=len(holes))
             for hole_index in np.flatnonzero((chosen < 0) & (per_hole == 0)):
                 mine = vertex_owner == hole_index
-                out[n:][mine] = candidate[n:][mine]
+                out[mine] = candidate[mine]
                 chosen[hole_index] = rank
             if (chosen >= 0).all():
                 break
-        used = np.array([tried[c] if c >= 0 else tried[0] for c in chosen], dtype=np.int64)
-        return out, used, np.flatnonzero(chosen < 0)
+        work[n:] = out
+        return np.array([tried[c] if c >= 0 else tried[0] for c in chosen], dtype=np.int64), np.flatnonzero(
+            chosen < 0
+        )
 
 
 def _simple_pieces(loop: np.ndarray, rows: np.ndarray):
@@ -1085,14 +1084,14 @@ def _interpolation(
 
 
 def _tangential_relax(vertices: np.ndarray, new_tris: np.ndarray, first_new: int) -> np.ndarray:
-    """Move each new vertex ten times half-way to its star's area-weighted centroid, in its tangent plane.
+    """Move each new vertex ten times half-way to its star's area-weighted centroid, in its tangent plane;
+    the new vertices' positions ``(len(vertices) - first_new, 3)``.
 
     The star's centroid (a step of centroidal Voronoi smoothing), not the neighbours' mean, which on
     an irregular star sits towards the short edges and leaves a sliver (smallest angle on plane_holes
     24.2 -> 25.6 degrees, horse 15h 22.0 -> 24.1). Only the move's part tangent to the area-weighted
     normal of the vertex's (new) triangles is taken: the faired surface is kept to first order.
     """
-    out = vertices.copy()
     moving = np.arange(first_new, len(vertices))
     # a local, increasing numbering of the patches' vertices: nothing grows with the mesh
     local = np.union1d(new_tris.ravel(), moving)
@@ -1107,7 +1106,7 @@ def _tangential_relax(vertices: np.ndarray, new_tris: np.ndarray, first_new: int
     count = np.diff(incidence.indptr)
     star = np.full((len(mov), int(count.max(initial=0))), len(tris))
     star[np.repeat(np.arange(len(mov)), count), concatenated_ranges(0, count)] = incidence.indices
-    x = out[local]
+    x = vertices[local]
     for _ in range(10):
         p = x[tris]
         face_normal = np.concatenate([_cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), np.zeros((1, 3))])
@@ -1118,8 +1117,7 @@ def _tangential_relax(vertices: np.ndarray, new_tris: np.ndarray, first_new: int
         move = target - x[mov]
         move -= (move * normal).sum(axis=1, keepdims=True) * normal
         x[mov] += 0.5 * move
-    out[moving] = x[mov]
-    return out
+    return x[mov]
 
 
 class _TriangleIndex:
@@ -1258,17 +1256,19 @@ def _crossings(
     return result
 
 
-def _no_fold(uniform: np.ndarray, again: np.ndarray, unknown: np.ndarray, new_tris: np.ndarray) -> bool:
-    """Whether the re-weighted solution keeps every new triangle facing as in the uniform one and stays
-    within a tenth of the patch's size of it (obtuse slivers can make cotangent weights ill-conditioned)."""
-    moved = uniform.copy()
-    moved[unknown] = again
-    p, q = uniform[new_tris], moved[new_tris]
+def _no_fold(x: np.ndarray, again: np.ndarray, new_tris: np.ndarray) -> bool:
+    """Whether ``again``, new positions of the last ``len(again)`` vertices of ``x``, keeps every new
+    triangle facing as in ``x`` and within a tenth of the patch's size (obtuse slivers can make
+    cotangent weights ill-conditioned)."""
+    p = x[new_tris]
+    q = p.copy()
+    moved = new_tris >= len(x) - len(again)
+    q[moved] = again[new_tris[moved] - (len(x) - len(again))]
     facing = (
         _cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]) * _cross(q[:, 1] - q[:, 0], q[:, 2] - q[:, 0])
     ).sum(axis=1)
-    size = np.linalg.norm(np.ptp(uniform[new_tris.ravel()], axis=0))
-    return bool((facing > 0).all()) and float(np.abs(again - uniform[unknown]).max()) < 0.1 * size
+    size = np.linalg.norm(np.ptp(p.reshape(-1, 3), axis=0))
+    return bool((facing > 0).all()) and float(np.abs(again - x[len(x) - len(again) :]).max()) < 0.1 * size
 
 
 def fill_holes(
