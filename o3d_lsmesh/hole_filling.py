@@ -1097,23 +1097,21 @@ def _tangential_relax(vertices: np.ndarray, new_tris: np.ndarray, first_new: int
     local = np.union1d(new_tris.ravel(), moving)
     tris = np.searchsorted(local, new_tris)
     mov = np.searchsorted(local, moving)
-    # the triangles of each moving vertex, padded with a zero row (index len(tris)): sums over a star
-    # are then one gather and a sum over a short axis (a sparse product cost more on these sizes)
-    incidence = sp.csr_matrix(
+    incidence: Any = sp.csr_matrix(  # the triangles of each moving vertex
         (np.ones(3 * len(tris)), tris.ravel(), np.arange(0, 3 * len(tris) + 1, 3)),
         shape=(len(tris), len(local)),
     ).T.tocsr()[mov]
-    count = np.diff(incidence.indptr)
-    star = np.full((len(mov), int(count.max(initial=0))), len(tris))
-    star[np.repeat(np.arange(len(mov)), count), concatenated_ranges(0, count)] = incidence.indices
+    if incidence.shape[0] * incidence.shape[1] <= 1 << 14:
+        incidence = incidence.toarray()  # a small patch: dense products cost less than sparse ones
     x = vertices[local]
     for _ in range(10):
         p = x[tris]
-        face_normal = np.concatenate([_cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), np.zeros((1, 3))])
-        normal, _ = _unit(face_normal[star].sum(axis=1))
+        face_normal = _cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+        normal, _ = _unit(incidence @ face_normal)
         area = np.sqrt((face_normal**2).sum(axis=1))
-        moment = np.concatenate([area[:-1, None] * p.mean(axis=1), np.zeros((1, 3))])
-        target = moment[star].sum(axis=1) / np.maximum(area[star].sum(axis=1), 1e-300)[:, None]
+        target = (incidence @ (area[:, None] * p.mean(axis=1))) / np.maximum(incidence @ area, 1e-300)[
+            :, None
+        ]
         move = target - x[mov]
         move -= (move * normal).sum(axis=1, keepdims=True) * normal
         x[mov] += 0.5 * move
