@@ -113,12 +113,10 @@ class Hole:
 
 
 def _diameter(points: np.ndarray) -> float:
-    best = 0.0
-    for start in range(0, len(points), 512):  # chunks bound memory at 512 * k distances
-        block = points[start : start + 512]
-        d2 = ((block[:, None, :] - points[None, :, :]) ** 2).sum(-1)
-        best = max(best, float(d2.max()))
-    return float(np.sqrt(best))
+    chunks = range(0, len(points), 512)  # bound memory at 512 * k distances
+    return float(
+        np.sqrt(max(float(((points[s : s + 512, None] - points[None]) ** 2).sum(-1).max()) for s in chunks))
+    )
 
 
 def find_holes(vertices: np.ndarray, triangles: np.ndarray, *, _edge_info=None) -> list[Hole]:
@@ -202,10 +200,9 @@ def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     return out
 
 
-def _unit(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _unit(v: np.ndarray) -> np.ndarray:
     norm = np.linalg.norm(v, axis=-1)
-    safe = np.where(norm > 0, norm, 1.0)
-    return v / safe[..., None], norm
+    return v / np.where(norm > 0, norm, 1.0)[..., None]
 
 
 def _minimum_weight_triangulations(
@@ -349,11 +346,9 @@ def _triangulate(
 
 
 def _edge_table(tris: np.ndarray, nv: int):
-    """Interior edges of an oriented patch, ``(triangle 1, slot 1, triangle 2, slot 2, a, b)``, and the
-    sorted keys ``min * nv + max`` of every half-edge."""
-    a = tris.reshape(-1)
-    b = tris[:, [1, 2, 0]].reshape(-1)
-    key = np.minimum(a, b) * nv + np.maximum(a, b)
+    """Interior edges ``(triangle 1, slot 1, triangle 2, slot 2, a, b)`` of an oriented patch; its sorted keys."""
+    a, b = tris.reshape(-1), tris[:, [1, 2, 0]].reshape(-1)
+    key = _keys(a, b, nv)
     order = np.argsort(key, kind="stable")
     ks = key[order]
     pair = np.flatnonzero(ks[1:] == ks[:-1])
@@ -367,9 +362,8 @@ def _circumsphere(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray):
     w = _cross(u, v)
     ww = (w * w).sum(-1)
     safe = np.where(ww > 0, ww, 1.0)
-    centre = p0 + (_cross(w, u) * (v * v).sum(-1)[:, None] + _cross(v, w) * (u * u).sum(-1)[:, None]) / (
-        2.0 * safe[:, None]
-    )
+    uu, vv = (u * u).sum(-1)[:, None], (v * v).sum(-1)[:, None]
+    centre = p0 + (_cross(w, u) * vv + _cross(v, w) * uu) / (2.0 * safe[:, None])
     return centre, np.where(ww > 0, np.linalg.norm(centre - p0, axis=1), np.inf)
 
 
@@ -513,19 +507,15 @@ def _rings(
     """The triangles (sorted) of ``count`` successive vertex rings around ``seeds`` (ring 0), and the
     ``count + 1`` rings (the last incomplete), from each vertex's triangles ``vertex_triangles`` (CSR)."""
     indptr, data = vertex_triangles
-    seen = np.unique(seeds)
-    rings = [seeds]
-    taken = np.zeros(0, dtype=np.int64)
-    front = seen
+    seen = front = np.unique(seeds)
+    rings, taken = [seeds], np.zeros(0, dtype=np.int64)
     for _ in range(count):
-        touch = np.setdiff1d(
-            data[concatenated_ranges(indptr[front], indptr[front + 1] - indptr[front])], taken
-        )  # the ring's new triangles
+        touch = data[concatenated_ranges(indptr[front], indptr[front + 1] - indptr[front])]
+        touch = np.setdiff1d(touch, taken)  # the ring's new triangles
         taken = np.union1d(taken, touch)
-        new = np.setdiff1d(triangles[touch].ravel(), seen)
-        seen = np.union1d(seen, new)
-        rings.append(new)
-        front = new
+        front = np.setdiff1d(triangles[touch].ravel(), seen)
+        seen = np.union1d(seen, front)
+        rings.append(front)
     return taken, rings
 
 
@@ -548,6 +538,7 @@ def _operators(
     mean 1). ``edges`` is :func:`_unique_edges` of ``tris``.
     """
     i, j, inverse = edges
+    w: np.ndarray
     if vertices is None:
         w = np.ones(len(i))
     else:
@@ -560,26 +551,20 @@ def _operators(
         w = 0.5 * np.bincount(inverse, weights=cot.T.reshape(-1), minlength=len(i))
         w = np.maximum(w, 0.05 * np.abs(w).mean())
     degree = np.bincount(i, weights=w, minlength=nv) + np.bincount(j, weights=w, minlength=nv)
-    diagonal = np.arange(nv)
-    if vertices is None:
-        scale = np.divide(1.0, degree, out=np.zeros(nv), where=degree > 0)
-    else:
+    mass = degree
+    if vertices is not None:
         area = 0.5 * np.linalg.norm(_cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
         mass = np.bincount(tris.ravel(), weights=np.repeat(area / 3.0, 3), minlength=nv)
         mass = mass / mass[mass > 0].mean()
-        scale = np.divide(1.0, mass, out=np.zeros(nv), where=mass > 0)
+    scale = np.divide(1.0, mass, out=np.zeros(nv), where=mass > 0)
+    diagonal = np.arange(nv)
+    rows, cols = np.concatenate([i, j, diagonal]), np.concatenate([j, i, diagonal])
+    values = np.concatenate([-w, -w, degree])
     if dense:
         K = np.zeros((nv, nv))
-        K[i, j] = K[j, i] = -w
-        K[diagonal, diagonal] = degree
+        K[rows, cols] = values
         return K, scale[:, None] * K, np.stack([i, j], axis=1)
-    K = sp.csr_matrix(
-        (
-            np.concatenate([-w, -w, degree]),
-            (np.concatenate([i, j, diagonal]), np.concatenate([j, i, diagonal])),
-        ),
-        shape=(nv, nv),
-    )
+    K = sp.csr_matrix((values, (rows, cols)), shape=(nv, nv))
     L = K.copy()  # L = S K: K's pattern with its rows scaled
     L.data = L.data * np.repeat(scale, np.diff(L.indptr))
     return K, L, np.stack([i, j], axis=1)
@@ -770,8 +755,8 @@ class HoleFiller:
     def __init__(self, vertices: np.ndarray, triangles: np.ndarray, *, index_triangles: bool = True) -> None:
         index_triangles = bool(as_bool(index_triangles, name="index_triangles"))
         vertices, triangles = mesh_arrays(vertices, triangles)  # copies: the state must not change under it
-        vertices.setflags(write=False)
-        triangles.setflags(write=False)
+        for array in (vertices, triangles):
+            array.setflags(write=False)
         n, m = len(vertices), len(triangles)
         self.vertices, self.triangles = vertices, triangles
         edge_info = unique_edges_and_runs(triangles, n)  # the one whole-mesh sort
@@ -795,21 +780,13 @@ class HoleFiller:
         vertices, n, k = self.vertices, len(self.vertices), len(loop)
         points = vertices[loop]
         t = self.triangles[rows % len(self.triangles)]
-        outer, _ = _unit(_cross(vertices[t[:, 1]] - vertices[t[:, 0]], vertices[t[:, 2]] - vertices[t[:, 0]]))
+        outer = _unit(_cross(vertices[t[:, 1]] - vertices[t[:, 0]], vertices[t[:, 2]] - vertices[t[:, 0]]))
         a, b = np.meshgrid(loop, loop, indexing="ij")
-        key = _keys(a, b, n)
-        forbidden = (
-            self.edge_keys[np.minimum(np.searchsorted(self.edge_keys, key), len(self.edge_keys) - 1)] == key
-        )
+        forbidden = ~_absent(self.edge_keys, _keys(a, b, n).ravel()).reshape(k, k)
         idx = np.arange(k)
-        forbidden[idx, (idx + 1) % k] = False
-        forbidden[(idx + 1) % k, idx] = False
-        return (
-            points,
-            outer,
-            forbidden,
-            float(np.mean(np.linalg.norm(np.roll(points, -1, 0) - points, axis=1))),
-        )
+        forbidden[idx, (idx + 1) % k] = forbidden[(idx + 1) % k, idx] = False
+        spacing = float(np.mean(np.linalg.norm(np.roll(points, -1, 0) - points, axis=1)))
+        return points, outer, forbidden, spacing
 
     def fill(
         self,
@@ -846,23 +823,14 @@ class HoleFiller:
             flap = hole.edges == 3 and len(np.unique(np.asarray(hole.rows) % m)) == 1
             (skipped if too_big or flap or (hole.border and not fill_border) else holes).append(hole)
         if not holes:
-            return FilledHoles(
-                vertices.copy(),
-                triangles.copy(),
-                [],
-                skipped,
-                sp.csr_matrix((0, n)),
-                np.zeros(0, dtype=np.int64),
-            )
+            empty = np.zeros(0, dtype=np.int64)
+            return FilledHoles(vertices.copy(), triangles.copy(), [], skipped, sp.csr_matrix((0, n)), empty)
         # each piece (a loop; one through a vertex twice is cut in pieces) is triangulated on its own,
         # loops of one length in one batch of the dynamic programme, longer ones cut by chords first
-        pieces = [
-            (h, *piece) for h, hole in enumerate(holes) for piece in _simple_pieces(hole.vertices, hole.rows)
-        ]
-        piece_hole = [h for h, _, _ in pieces]
-        piece_loop = [loop for _, loop, _ in pieces]
+        pieces = [(h, *p) for h, hole in enumerate(holes) for p in _simple_pieces(hole.vertices, hole.rows)]
+        piece_hole, piece_loop, piece_rows = zip(*pieces)
         piece_points, piece_outer, piece_forbidden, piece_spacing = zip(
-            *[self._piece(l, r) for _, l, r in pieces]
+            *map(self._piece, piece_loop, piece_rows)
         )
         count = len(piece_loop)
         piece_extra, piece_tris = [np.zeros((0, 3))] * count, [np.zeros((0, 3), dtype=np.int64)] * count
@@ -873,8 +841,8 @@ class HoleFiller:
                 # batches bound the tables' memory (~60 k**2 floats a loop); longer loops go one by one
                 step = 1 if k > DP_MAX_EDGES else max(1, 200_000 // int(k) ** 2)
                 for chunk in np.split(group, np.arange(step, len(group), step)):
-                    forbidden = np.stack([piece_forbidden[i] for i in chunk])
-                    forbidden = forbidden if forbidden.any() else None
+                    stacked = np.stack([piece_forbidden[i] for i in chunk])
+                    forbidden = stacked if stacked.any() else None
                     if k > DP_MAX_EDGES:  # cut by chords sampled at the refinement's spacing (none without)
                         i = int(chunk[0])
                         piece_extra[i], piece_tris[i] = _triangulate(
@@ -1057,7 +1025,7 @@ def _vertex_owner(new_tris: np.ndarray, owner: np.ndarray, n: int, p: int) -> np
 
 
 def _interpolation(
-    new_tris: np.ndarray, bounds: np.ndarray, piece_loop: list, n: int, p: int
+    new_tris: np.ndarray, bounds: np.ndarray, piece_loop: Any, n: int, p: int
 ) -> sp.csr_matrix:
     """Harmonic weights ``(p, n)`` of the new vertices over their loop's (for colours and other attributes):
     one small solve per piece, whose new triangles are ``new_tris[bounds[i]:bounds[i + 1]]``."""
@@ -1107,7 +1075,7 @@ def _tangential_relax(vertices: np.ndarray, new_tris: np.ndarray, first_new: int
     for _ in range(10):
         p = x[tris]
         face_normal = _cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
-        normal, _ = _unit(incidence @ face_normal)
+        normal = _unit(incidence @ face_normal)
         area = np.sqrt((face_normal**2).sum(axis=1))
         target = (incidence @ (area[:, None] * p.mean(axis=1))) / np.maximum(incidence @ area, 1e-300)[
             :, None
@@ -1174,17 +1142,13 @@ class _TriangleIndex:
 
 
 def _crossings(
-    vertices: np.ndarray,
-    triangles: np.ndarray,
-    first_new: int,
-    index: _TriangleIndex | None = None,
-    groups: np.ndarray | None = None,
+    vertices: np.ndarray, triangles: np.ndarray, first_new: int, index: Any, groups: Any
 ) -> np.ndarray:
     """For each new triangle, the number of triangles without a shared vertex it intersects.
 
     Candidates are the pairs whose bounding spheres overlap: input triangles from ``index`` (a
-    :class:`_TriangleIndex` of ``triangles[:first_new]``; without one, of the input triangles in the
-    new triangles' box), queried per patch when ``groups`` labels each new triangle's patch, and the
+    :class:`_TriangleIndex` of ``triangles[:first_new]``; if None, of the input triangles in the new
+    triangles' box), queried per patch when ``groups`` (or None) labels each new triangle's patch, and the
     new ones among themselves. Each pair is tested on the 17 axes that separate two disjoint triangles
     (two normals, nine edge-edge cross products, six in-plane edge normals for coplanar pairs).
     """
@@ -1380,17 +1344,12 @@ def fill_holes(
         density=density,
         weights=weights,
         fill_border=fill_border,
-        interpolation=_has_vertex_data(data),
+        # new vertices interpolate the per-vertex data: colours, float tensor attributes
+        interpolation=(data.kind == "legacy" and data.source.has_vertex_colors())
+        or (data.kind == "tensor" and any(key not in ("positions", "normals") for key in data.source.vertex)),
         progress=progress,
     )
     return _rebuild(data, result)
-
-
-def _has_vertex_data(data: Any) -> bool:
-    """Whether the mesh carries per-vertex data that new vertices interpolate (colours, tensor attributes)."""
-    if data.kind == "legacy":
-        return data.source.has_vertex_colors()
-    return data.kind == "tensor" and any(key not in ("positions", "normals") for key in data.source.vertex)
 
 
 def _rebuild(data: Any, result: FilledHoles) -> Any:

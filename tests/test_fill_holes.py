@@ -386,8 +386,8 @@ def test_crossing_check_matches_plain_reference(seed):
     T = np.array([rng.choice(45, 3, replace=False) for _ in range(60)])
     expected = reference_crossings(V, T, 40)
     assert expected.sum() > 0
-    assert np.array_equal(_crossings(V, T, 40), expected)
-    assert np.array_equal(_crossings(V, T, 40, _TriangleIndex(V, T[:40])), expected)
+    assert np.array_equal(_crossings(V, T, 40, None, None), expected)
+    assert np.array_equal(_crossings(V, T, 40, _TriangleIndex(V, T[:40]), None), expected)
     patches = rng.integers(0, 3, len(T) - 40)  # queried patch by patch
     assert np.array_equal(_crossings(V, T, 40, _TriangleIndex(V, T[:40]), patches), expected)
 
