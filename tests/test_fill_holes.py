@@ -440,6 +440,23 @@ def test_sphere_hole_close_to_the_sphere_and_continuity_order():
     assert errors[2] < 0.05
 
 
+@pytest.mark.parametrize("continuity", [0, 1, 2])
+def test_dense_fairing_solve_matches_the_sparse_gateway(monkeypatch, continuity):
+    # small patches are solved with a dense Cholesky; the sparse path (SPDSolver) is the reference
+    import o3d_lsmesh.hole_filling as hole_filling
+
+    V, T = icosphere(3)
+    h = mean_edge(V, T)
+    Vh, Th, _ = cut_disk(V, T, 0, 4 * h)
+    dense = fill_holes_arrays(Vh, Th, continuity=continuity, interpolation=True)
+    assert 0 < len(dense.vertices) - len(Vh) <= hole_filling._DENSE_UNKNOWNS
+    monkeypatch.setattr(hole_filling, "_DENSE_UNKNOWNS", -1)
+    sparse = fill_holes_arrays(Vh, Th, continuity=continuity, interpolation=True)
+    assert np.array_equal(dense.triangles, sparse.triangles)
+    assert np.allclose(dense.vertices, sparse.vertices, rtol=0, atol=1e-9)
+    assert np.allclose(dense.interpolation.toarray(), sparse.interpolation.toarray(), rtol=0, atol=1e-9)
+
+
 def test_holes_filled_together_as_each_alone():
     # all pieces are refined in one batch and faired in one system: far-apart holes must not interact.
     # Reference: the same mesh with only the small hole chosen (max_hole_edges).
