@@ -449,16 +449,21 @@ NOTES = """\
 * Time: CGAL's clock starts on a built half-edge structure and runs only its hole calls. Ours is timed
   twice: ``fill_holes_arrays`` from arrays (including the whole-mesh analysis: one edge sort, the loops,
   components, each vertex's triangles) and ``HoleFiller(V, T).fill()`` with the filler built before the
-  clock, as CGAL's structure. The CPU-time ratio with the prebuilt filler is within the 2x target on
-  the large horse hole only (1.84; 1.88 in the run before this one); bunny's 5 holes 2.8 (3.3),
-  plane_holes' 27 holes 3.7 (2.3), horse 6h 4.4 (5.3) and the single small holes 10-24 (7-23): CGAL
-  takes 0.5-1 ms there and ours 10-32 ms, tens of NumPy and SciPy calls (the dynamic programme's
-  diagonals, the refinement's flip passes, two sparse solves, the crossing check) of ~10-100 us of
-  overhead each on tiny arrays. The prebuilt state cuts our CPU time by 8% (horse 15h, where the
-  per-hole work dominates) to 69% (horse 2.5h) against the call from arrays. Wall-clock and even
-  CPU-time ratios swing by up to 1.6x between runs with the load of the shared machine (load average
-  4-6 in this run; CGAL continuity 2 on horse 6h: 11.3 ms wall and 7.3 ms CPU here, 4.8 ms CPU in the
-  run before).
+  clock, as CGAL's structure. This run had a load average of about 7 on the 2 cores (wall times 2-5x
+  the CPU times), so read the CPU columns. With the prebuilt filler the CPU-time ratio is within the 2x
+  target on the large horse hole only (1.42); bunny 3.4, plane_holes 2.2, horse 6h 3.9, and the single
+  small holes 11-19x: CGAL takes 0.5-1 ms there, ours 7-16 ms. Since the last run the fairing solves
+  systems of at most 120 unknowns with a dense Cholesky (no sparse assembly, no CHOLMOD analysis), the
+  fairing's candidates carry only the new vertices (one working copy of the mesh's vertices instead of
+  eight), and the tangential relaxation sums stars with a dense incidence on small patches. Measured
+  interleaved in one process against the previous code (CPU per hole, prebuilt, best of 12): horse 2.5h
+  11.7 -> 7.8 ms, camel 2.5h 12.0 -> 9.7, camel 6h 23.6 -> 19.8, camel 15h 14.4 -> 10.3, horse 15h
+  98.8 -> 83.1; bunny, plane_holes and horse 6h unchanged within the noise. What is left is flat: the
+  dynamic programme's diagonals (~20%; half of bunny's time, its 80-edge loop), the refinement's flip
+  passes (~25%), the crossing check (~12%), the relaxation (~12%), each tens of NumPy calls of 5-100 us
+  on tiny arrays; a coordinates-first layout of the programme was 13% faster at k = 80 but 35% slower
+  at k = 14 and was not kept. Closing the gap on small holes needs the programme and the flips as a
+  compiled kernel (sequential by nature), not more NumPy.
 """
 
 

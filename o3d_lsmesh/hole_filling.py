@@ -1,40 +1,18 @@
 """Faired hole filling: Liepa's triangulate-refine-fair pipeline with least-squares-mesh fairing.
 
-A hole is a closed loop of boundary half-edges. Each chosen hole is
+Each chosen hole (a closed loop of boundary half-edges) is
 
-1. triangulated by Liepa's minimum-weight dynamic programme (P. Liepa,
-   *Filling Holes in Meshes*, SGP 2003, section 3): the triangulation of the
-   loop that minimizes, lexicographically, the largest dihedral angle between
-   adjacent triangles (the new ones and the mesh's around the loop) and then
-   the total area. The programme is O(k^3) in the loop length k; loops longer
-   than :data:`DP_MAX_EDGES` are first cut in two along the shortest chord
-   between vertices far apart on the loop (the chord is sampled at the loop's
-   edge length), recursively, so that every piece is small: the cost stays
-   O(k^2) for the chord search plus O(k * DP_MAX_EDGES^2) and cannot hang;
-2. refined to the density of the surrounding edges (Liepa, section 4):
-   centroid splits where a triangle is larger than the local edge-length scale,
-   each round followed by edge flips (either circumsphere test, as CGAL's
-   relax, and only where the pair's smallest angle grows, so flips end);
-3. faired as a least-squares mesh (Sorkine and Cohen-Or 2004, section 6:
-   "the known vertices around the hole serve as control points, the geometry
-   of the unknown vertices is reconstructed"): the new vertices are the only
-   unknowns, and enough rings of the surrounding mesh are fixed anchors for the
-   chosen continuity; then a few tangential (centroidal) relaxation steps round the new
-   triangles without leaving the faired surface (to first order);
-4. checked: a patch whose new triangles cross the mesh is faired again with a
-   lower continuity, and left open if every one crosses (see :func:`fill_holes`, Notes).
+1. triangulated by Liepa's minimum-weight dynamic programme (*Filling Holes in Meshes*, SGP 2003,
+   section 3: smallest largest dihedral angle, then area), O(k^3) in the loop length k: longer loops
+   than :data:`DP_MAX_EDGES` are first cut, recursively, along their shortest chord between far-apart
+   vertices, so it cannot hang;
+2. refined to the density of the surrounding edges (section 4): centroid splits, then edge flips;
+3. faired as a least-squares mesh (Sorkine and Cohen-Or 2004, section 6): the new vertices are the only
+   unknowns, enough rings of the mesh fixed around them; then a tangential (centroidal) relaxation;
+4. checked: a patch crossing the mesh is faired again with a lower continuity, or left open.
 
-The loops are those of :func:`o3d_lsmesh.topology.boundary_loops`. The dynamic programme runs once
-per loop length (loops of one length in one batch, vectorized per diagonal of its table); every
-piece is then refined at once (disjoint index ranges, one flip pass per round for all, each pass
-testing only the edges a flip can have changed), and all patches are faired in one sparse system
-and checked for crossings in one pass.
-
-:class:`HoleFiller` holds the whole-mesh analysis (edges, loops, components, each vertex's
-triangles and edge scale, k-d trees of the triangles): built once, its :meth:`HoleFiller.fill`
-does only work local to the holes (the rings of fixed vertices are gathered from the vertex-triangle
-lists, the crossing check queries the trees near the patch), as CGAL's calls on a prebuilt
-half-edge structure. :func:`fill_holes_arrays` builds one for a single call.
+:class:`HoleFiller` holds the whole-mesh analysis, so that :meth:`HoleFiller.fill` does only work local
+to the holes (as CGAL's calls on a prebuilt half-edge structure), all holes batched in each step.
 """
 
 from __future__ import annotations
@@ -45,11 +23,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.linalg import cho_factor, cho_solve
 from scipy.sparse import csgraph
 
 from ._errors import O3DLSMeshWarning, SingularSystemError
 from ._o3d import new_mesh, read_mesh
 from ._progress import check_progress, progress_bar
+from ._ranges import concatenated_ranges
 from ._solvers import SPDSolver
 from ._validate import as_bool, as_choice, as_count, as_positive_float, mesh_arrays
 from .topology import boundary_loops, unique_edges_and_runs
@@ -68,33 +48,28 @@ __all__ = [
     "find_holes",
 ]
 
-#: Loops with more edges than this are split by chords before the O(k^3) dynamic programme.
-#: Measured on this (2-core, heavily shared) machine: k = 50 takes 0.02 s, 100 0.15 s, 150 0.4 s,
-#: 200 0.85 s, 300 3.8 s. A face-on hole on a scan of spacing h has about 6 r / h edges for radius
-#: r, so holes up to ~16 h across are triangulated in one piece; longer loops are cut in pieces.
+#: Loops with more edges are split by chords before the O(k^3) dynamic programme (measured: k = 50
+#: takes 0.02 s, 100 0.15 s, 200 0.85 s, 300 3.8 s): a hole of radius r on a scan of spacing h has
+#: about 6 r / h edges, so holes up to ~16 h across are triangulated in one piece.
 DP_MAX_EDGES = 100
 
-#: A component's longest loop is its outer border (left open by default) when
-#: ``perimeter**2 > BORDER_RATIO * area`` of the component. An open hemisphere has ``perimeter**2 / area
-#: = 2 pi``, a flat round disk ``4 pi``, and a ragged scan silhouette much more; a round hole in a closed
-#: surface reaches 4 only when it covers about a quarter of the surface (``4 pi f / (1 - f) = 4``).
+#: A component's longest loop is its outer border (left open by default) when ``perimeter**2 >
+#: BORDER_RATIO * area`` of the component: an open hemisphere has ``perimeter**2 / area = 2 pi``, a
+#: disk ``4 pi``, a scan silhouette more; a round hole in a closed surface reaches 4 only when it
+#: covers about a quarter of it (``4 pi f / (1 - f) = 4``).
 BORDER_RATIO = 4.0
 
+_Edges = tuple[np.ndarray, np.ndarray, np.ndarray]  # edges i < j of a local mesh, each half-edge's edge
 _ALPHA = np.sqrt(2.0)  # Liepa's density factor (section 4)
+#: Fairing systems with at most this many unknowns are solved dense (measured: below it the sparse
+#: path's assembly, analysis and factorization overheads cost more than the dense products).
+_DENSE_UNKNOWNS = 120
 
 
-# --------------------------------------------------------------------------- boundary loops
-
-
-def _loop_rows(triangles: np.ndarray, n: int, edge_info: Any = None) -> list[tuple[np.ndarray, np.ndarray]]:
-    """The loops of :func:`o3d_lsmesh.topology.boundary_loops`, each with its half-edge rows (of
-    :func:`o3d_lsmesh.topology.halfedges`): the row of loop edge ``(loop[i], loop[i + 1])`` is the one
-    triangle's half-edge on it (a boundary edge has exactly one).
-
-    ``edge_info`` is ``o3d_lsmesh.topology.unique_edges_and_runs`` of the mesh, if already computed.
-    """
-    if edge_info is None:
-        edge_info = unique_edges_and_runs(triangles, n)
+def _loop_rows(triangles: np.ndarray, n: int, edge_info: Any) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The loops of :func:`o3d_lsmesh.topology.boundary_loops`, each with the row (of
+    :func:`o3d_lsmesh.topology.halfedges`) of the one half-edge on each loop edge ``(loop[i], loop[i + 1])``;
+    ``edge_info`` is :func:`o3d_lsmesh.topology.unique_edges_and_runs` of the mesh."""
     (edges, counts, inverse), runs = edge_info
     loops = boundary_loops(triangles, n, _runs=runs)
     if not loops:
@@ -107,9 +82,6 @@ def _loop_rows(triangles: np.ndarray, n: int, edge_info: Any = None) -> list[tup
     keys = np.minimum(tail, head) * n + np.maximum(tail, head)
     rows = row_of_edge[np.searchsorted(edges[:, 0] * n + edges[:, 1], keys)]
     return list(zip(loops, np.split(rows, np.cumsum([len(loop) for loop in loops])[:-1])))
-
-
-# --------------------------------------------------------------------------- choosing holes
 
 
 @dataclass(frozen=True)
@@ -141,21 +113,18 @@ class Hole:
 
 
 def _diameter(points: np.ndarray) -> float:
-    best = 0.0
-    for start in range(0, len(points), 512):  # chunks bound memory at 512 * k distances
-        block = points[start : start + 512]
-        d2 = ((block[:, None, :] - points[None, :, :]) ** 2).sum(-1)
-        best = max(best, float(d2.max()))
-    return float(np.sqrt(best))
+    chunks = range(0, len(points), 512)  # bound memory at 512 * k distances
+    return float(
+        np.sqrt(max(float(((points[s : s + 512, None] - points[None]) ** 2).sum(-1).max()) for s in chunks))
+    )
 
 
 def find_holes(vertices: np.ndarray, triangles: np.ndarray, *, _edge_info=None) -> list[Hole]:
     """Every boundary loop of the mesh with its size and whether it is an outer border.
 
-    A component's outer border is its longest loop (by perimeter) when
-    ``perimeter**2 > BORDER_RATIO * area`` of the component: the silhouette of
-    a scan, the one loop of a small island. A closed surface with holes has no
-    outer border unless one hole is about a quarter of its area or more.
+    A component's outer border is its longest loop when ``perimeter**2 > BORDER_RATIO * area`` of the
+    component (a scan's silhouette, a small island's loop); a closed surface with holes has none unless
+    one hole is about a quarter of its area or more.
 
     Parameters
     ----------
@@ -175,35 +144,27 @@ def find_holes(vertices: np.ndarray, triangles: np.ndarray, *, _edge_info=None) 
     (3, True)
     """
     n = len(vertices)
-    if _edge_info is None:
-        _edge_info = unique_edges_and_runs(triangles, n)
+    _edge_info = unique_edges_and_runs(triangles, n) if _edge_info is None else _edge_info
     loops = _loop_rows(triangles, n, _edge_info)
     if not loops:
         return []
     edges = _edge_info[0][0]
-    # components over the edges already sorted (no second whole-mesh sort): they are the upper triangle
-    # of the adjacency in CSR order, so the graph is built without a conversion
+    # components over the sorted edges: the upper triangle of the adjacency in CSR order (no second sort)
     indptr = np.zeros(n + 1, dtype=np.int64)
     np.cumsum(np.bincount(edges[:, 0], minlength=n), out=indptr[1:])
-    graph = sp.csr_matrix((np.ones(len(edges)), edges[:, 1], indptr), shape=(n, n))
-    _, label = csgraph.connected_components(graph, directed=False)
+    _, label = csgraph.connected_components(
+        sp.csr_matrix((np.ones(len(edges)), edges[:, 1], indptr), shape=(n, n)), directed=False
+    )
     perimeters = np.array(
-        [
-            np.linalg.norm(np.roll(vertices[loop], -1, axis=0) - vertices[loop], axis=1).sum()
-            for loop, _ in loops
-        ]
+        [np.linalg.norm(np.roll(vertices[lp], -1, axis=0) - vertices[lp], axis=1).sum() for lp, _ in loops]
     )
     components = np.array([label[loop[0]] for loop, _ in loops], dtype=np.int64)
-    # the longest loop of each component (by perimeter)
-    by_length = np.lexsort((-perimeters, components))
+    by_length = np.lexsort((-perimeters, components))  # the longest loop of each component first
     first = np.ones(len(loops), dtype=bool)
     first[1:] = components[by_length][1:] != components[by_length][:-1]
     longest = by_length[first]
-    # a longest loop is its component's border when perimeter**2 > BORDER_RATIO * area. Areas only of
-    # the components whose longest loop is judged (a scan's closed islands are not read), summed in
-    # blocks of triangles until every judgement is decided: a partial sum bounds the area from below,
-    # so a loop whose perimeter**2 is within it is no border, and a small hole in a large mesh reads
-    # one block instead of every triangle
+    # the judged components' areas, summed in blocks until every judgement is decided (a partial sum
+    # bounds the area from below): a small hole in a large mesh reads one block, not every triangle
     judged = np.zeros(label.max() + 1, dtype=bool)
     judged[components[longest]] = True
     tri_label = label[triangles[:, 0]]
@@ -212,33 +173,19 @@ def find_holes(vertices: np.ndarray, triangles: np.ndarray, *, _edge_info=None) 
     some_label = tri_label[mine]
     component_area = np.zeros(len(judged))
     need = perimeters[longest] ** 2
-    block = 8192
-    for start in range(0, len(some), block):
-        t = some[start : start + block]
-        p = vertices[t]
+    for start in range(0, len(some), 8192):
+        p = vertices[some[start : start + 8192]]
         area = 0.5 * np.sqrt((_cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]) ** 2).sum(axis=1))
-        component_area += np.bincount(some_label[start : start + block], weights=area, minlength=len(judged))
+        component_area += np.bincount(some_label[start : start + 8192], weights=area, minlength=len(judged))
         if (need <= BORDER_RATIO * component_area[components[longest]]).all():
-            break  # every longest loop is within its component's area so far: none is a border
+            break
     border = np.zeros(len(loops), dtype=bool)
     border[longest] = need > BORDER_RATIO * component_area[components[longest]]
-    out = [
-        Hole(
-            loop,
-            len(loop),
-            float(perimeters[i]),
-            _diameter(vertices[loop]),
-            int(components[i]),
-            bool(border[i]),
-            rows,
-        )
+    diameters = [_diameter(vertices[loop]) for loop, _ in loops]  # loops come sorted by first vertex
+    return [
+        Hole(loop, len(loop), float(perimeters[i]), diameters[i], int(components[i]), bool(border[i]), rows)
         for i, (loop, rows) in enumerate(loops)
     ]
-    out.sort(key=lambda hole: int(hole.vertices[0]))
-    return out
-
-
-# --------------------------------------------------------------------------- triangulation
 
 
 def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -253,41 +200,23 @@ def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     return out
 
 
-def _unit(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _unit(v: np.ndarray) -> np.ndarray:
     norm = np.linalg.norm(v, axis=-1)
-    safe = np.where(norm > 0, norm, 1.0)
-    return v / safe[..., None], norm
-
-
-def _minimum_weight_triangulation(
-    points: np.ndarray, outer_normals: np.ndarray, forbidden: np.ndarray | None
-) -> np.ndarray:
-    """Liepa's dynamic programme on a loop of ``k`` points, triangles ``(k - 2, 3)`` of local indices.
-
-    Minimizes, lexicographically, the largest dihedral angle (between new
-    triangles, and between a new triangle and the mesh triangle on a loop edge,
-    ``outer_normals[i]`` on edge ``(i, i + 1)``, zero where unknown) and then the
-    total area (Liepa 2003, section 3, the weight ``Omega = (max angle, area)``).
-    ``forbidden[i, j]`` marks chords that already are mesh edges (using one
-    would make a non-manifold edge). Triangles are wound ``(j, m, i)``: opposite
-    to the loop, like the mesh triangles on the other side of its edges.
-
-    The inner minimum over the split vertex ``m`` is vectorized over a whole
-    diagonal ``j - i = d`` of the table at once (see :func:`_minimum_weight_triangulations`).
-    """
-    return _minimum_weight_triangulations(
-        points[None], outer_normals[None], None if forbidden is None else forbidden[None]
-    )[0]
+    return v / np.where(norm > 0, norm, 1.0)[..., None]
 
 
 def _minimum_weight_triangulations(
     points: np.ndarray, outer_normals: np.ndarray, forbidden: np.ndarray | None
 ) -> np.ndarray:
-    """:func:`_minimum_weight_triangulation` of ``B`` loops of the same length at once: ``points (B, k, 3)``,
-    ``outer_normals (B, k, 3)``, ``forbidden (B, k, k)`` or None; triangles ``(B, k - 2, 3)``.
+    """Liepa's dynamic programme on ``B`` loops of ``k`` points at once: triangles ``(B, k - 2, 3)``.
 
-    Each loop's table is independent: the batch is one more leading axis of every array, so many
-    short loops (a scan's small holes) cost one pass over the diagonals instead of one each.
+    Minimizes, lexicographically, the largest dihedral angle (between new triangles, and between a
+    new triangle and the mesh triangle on a loop edge, ``outer_normals[:, i]`` on edge ``(i, i + 1)``,
+    zero where unknown) and then the total area (Liepa 2003, section 3, the weight ``Omega = (max
+    angle, area)``). ``points (B, k, 3)``; ``forbidden (B, k, k)`` (or None) marks chords that are mesh
+    edges already (a non-manifold edge otherwise). Triangles are wound ``(j, m, i)``, opposite to the
+    loop like the mesh triangles across its edges. The minimum over the split vertex ``m`` is
+    vectorized over a whole diagonal ``j - i = d`` of the tables and over the batch.
     """
     count, k = points.shape[:2]
     if k == 3:
@@ -296,8 +225,7 @@ def _minimum_weight_triangulations(
     area = np.zeros((count, k, k))
     split = np.full((count, k, k), -1, dtype=np.int64)
     normal = np.zeros((count, k, k, 3))  # unit normal of the triangle on chord (i, j) inside sub-polygon i..j
-    # whether that normal is known (an unknown one is no constraint)
-    known = np.zeros((count, k, k), dtype=bool)
+    known = np.zeros((count, k, k), dtype=bool)  # an unknown normal is no constraint
     idx = np.arange(k - 1)
     normal[:, idx, idx + 1] = outer_normals[:, :-1]
     known[:, idx, idx + 1] = np.abs(outer_normals[:, :-1]).sum(-1) > 0
@@ -316,22 +244,19 @@ def _minimum_weight_triangulations(
         tri_normal = cross / np.where(twice_area > 0, twice_area, 1.0)[..., None]
         cos1 = np.einsum("...k,...k->...", tri_normal, normal[:, i, mm])
         cos2 = np.einsum("...k,...k->...", tri_normal, normal[:, mm, j])
-        # an unknown neighbour (zero normal) does not constrain the angle
         worst = np.minimum(np.where(known[:, i, mm], cos1, 1.0), np.where(known[:, mm, j], cos2, 1.0))
         if d == k - 1:  # the triangle on the closing loop edge (k - 1, 0) meets the mesh there
             cos3 = np.einsum("b...k,bk->b...", tri_normal, closing)
             worst = np.where(closing_known[:, None, None], np.minimum(worst, cos3), worst)
         theta = np.arccos(np.clip(worst, -1.0, 1.0))
-        # a degenerate triangle (three collinear points: a chord's samples) is worse than any real one; its
-        # rounding-noise normal must not count, nor its zero area win a tie (both sides of a chord would
-        # then take the same sliver, wound both ways: a non-manifold edge)
+        # a degenerate triangle (collinear chord samples) is worse than any real one: neither its noise
+        # normal nor its zero area may win (both sides of a chord taking it make a non-manifold edge)
         longest = np.maximum(np.einsum("...k,...k->...", u, u), np.einsum("...k,...k->...", v, v))
         theta = np.where(twice_area > 1e-9 * longest, theta, 2.0 * np.pi)
         total_angle = np.maximum(theta, np.maximum(angle[:, i, mm], angle[:, mm, j]))
         total_area = 0.5 * twice_area + area[:, i, mm] + area[:, mm, j]
         if forbidden is not None:
-            blocked = forbidden[:, i, mm] | forbidden[:, mm, j]
-            total_angle = np.where(blocked, np.inf, total_angle)
+            total_angle = np.where(forbidden[:, i, mm] | forbidden[:, mm, j], np.inf, total_angle)
         best_angle = total_angle.min(axis=2, keepdims=True)
         near_area = np.where(total_angle <= best_angle + tol, total_area, np.inf)
         best_area = near_area.min(axis=2, keepdims=True)
@@ -356,14 +281,12 @@ def _minimum_weight_triangulations(
         table = split[b].tolist()
         found: list[tuple[int, int, int]] = []
         stack = [(0, k - 1)]
-        while stack:  # k - 2 triangles
+        while stack:
             lo, hi = stack.pop()
-            if hi - lo < 2:
-                continue
-            mid = table[lo][hi]
-            found.append((hi, mid, lo))
-            stack.append((lo, mid))
-            stack.append((mid, hi))
+            if hi - lo >= 2:
+                mid = table[lo][hi]
+                found.append((hi, mid, lo))
+                stack += [(lo, mid), (mid, hi)]
         out[b] = found
     return out
 
@@ -373,69 +296,59 @@ def _triangulate(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Triangulate a loop, splitting it by chords while it is longer than :data:`DP_MAX_EDGES`.
 
-    Returns the extra points (on the chords) and triangles over the indices
-    ``[0, k)`` of the loop followed by the extra points.
+    Returns the extra points (on the chords) and triangles over the loop's indices ``[0, k)`` followed
+    by the extra points'.
     """
     k = len(points)
     if k <= DP_MAX_EDGES:
-        return np.zeros((0, 3)), _minimum_weight_triangulation(points, outer_normals, forbidden)
-    # the shortest chord between vertices 1/3 to 2/3 of the loop apart (a Python loop over chunks of rows)
+        return np.zeros((0, 3)), _minimum_weight_triangulations(
+            points[None], outer_normals[None], None if forbidden is None else forbidden[None]
+        )[0]
+    # the shortest chord between vertices 1/3 to 2/3 of the loop apart, in chunks of rows
     best = (np.inf, 0, k // 2)
-    low, high = k // 3, k - k // 3
+    gap = np.arange(k // 3, k - k // 3 + 1)[None, :]
     for start in range(0, k, 256):
         i = np.arange(start, min(k, start + 256))[:, None]
-        gap = np.arange(low, high + 1)[None, :]
         j = (i + gap) % k
         dist = np.linalg.norm(points[i] - points[j], axis=-1)
         if forbidden is not None:
             dist = np.where(forbidden[i, j], np.inf, dist)
-        flat = int(np.argmin(dist))
-        r, c = divmod(flat, dist.shape[1])
+        r, c = divmod(int(np.argmin(dist)), dist.shape[1])
         if dist[r, c] < best[0]:
             best = (float(dist[r, c]), int(i[r, 0]), int(j[r, c]))
-    _, a, b = best
-    a, b = min(a, b), max(a, b)
+    a, b = min(best[1:]), max(best[1:])
     count = max(0, round(best[0] / spacing) - 1) if spacing > 0 else 0
-    t = np.linspace(0.0, 1.0, count + 2)[1:-1, None]
-    chord = points[a] + t * (points[b] - points[a])  # from a towards b
+    chord = points[a] + np.linspace(0.0, 1.0, count + 2)[1:-1, None] * (points[b] - points[a])  # a -> b
     # piece one: a .. b along the loop, then back along the chord; piece two: b .. a, then the chord a -> b
     e = k + np.arange(count)
-    one = np.concatenate([np.arange(a, b + 1), e[::-1]])
-    two = np.concatenate([np.arange(b, k), np.arange(0, a + 1), e])
     all_points = np.concatenate([points, chord])
-    triangles = []
-    extra = [chord]
-    offset = k + count
-    for piece in (one, two):
-        loop_normals = np.zeros((len(piece), 3))
-        # outer normals on loop edges (piece[s], piece[s + 1]) that are edges of the original loop
+    triangles, extra, offset = [], [chord], k + count
+    for piece in (
+        np.concatenate([np.arange(a, b + 1), e[::-1]]),
+        np.concatenate([np.arange(b, k), np.arange(0, a + 1), e]),
+    ):
+        # outer normals on the piece's edges that are edges of the original loop
         nxt = np.roll(piece, -1)
         on_loop = (piece < k) & (nxt < k) & (nxt == (piece + 1) % k)
+        loop_normals = np.zeros((len(piece), 3))
         loop_normals[on_loop] = outer_normals[piece[on_loop]]
         sub_forbidden = None
         if forbidden is not None:
-            inside = piece < k
             sub_forbidden = np.zeros((len(piece), len(piece)), dtype=bool)
-            idx = np.flatnonzero(inside)
+            idx = np.flatnonzero(piece < k)
             sub_forbidden[np.ix_(idx, idx)] = forbidden[np.ix_(piece[idx], piece[idx])]
         sub_extra, sub_tris = _triangulate(all_points[piece], loop_normals, sub_forbidden, spacing)
-        # map the piece's local indices back: [0, len(piece)) -> piece, beyond -> new extra points
-        mapping = np.concatenate([piece, offset + np.arange(len(sub_extra))])
+        # the piece's local indices back: [0, len(piece)) -> piece, beyond -> its new extra points
+        triangles.append(np.concatenate([piece, offset + np.arange(len(sub_extra))])[sub_tris])
         offset += len(sub_extra)
         extra.append(sub_extra)
-        triangles.append(mapping[sub_tris])
     return np.concatenate(extra), np.concatenate(triangles)
 
 
-# --------------------------------------------------------------------------- refinement
-
-
 def _edge_table(tris: np.ndarray, nv: int):
-    """Interior edges of a consistently oriented patch: (triangle 1, slot 1, triangle 2, slot 2, a, b), and
-    the sorted keys ``min * nv + max`` of every half-edge."""
-    a = tris.reshape(-1)
-    b = tris[:, [1, 2, 0]].reshape(-1)
-    key = np.minimum(a, b) * nv + np.maximum(a, b)
+    """Interior edges ``(triangle 1, slot 1, triangle 2, slot 2, a, b)`` of an oriented patch; its sorted keys."""
+    a, b = tris.reshape(-1), tris[:, [1, 2, 0]].reshape(-1)
+    key = _keys(a, b, nv)
     order = np.argsort(key, kind="stable")
     ks = key[order]
     pair = np.flatnonzero(ks[1:] == ks[:-1])
@@ -444,26 +357,19 @@ def _edge_table(tris: np.ndarray, nv: int):
 
 
 def _circumsphere(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray):
-    """Centres and radii of the circumcircles of triangles (the spheres Liepa's flip test uses)."""
+    """Centres and radii of the triangles' circumcircles (the spheres of Liepa's flip test)."""
     u, v = p1 - p0, p2 - p0
     w = _cross(u, v)
     ww = (w * w).sum(-1)
     safe = np.where(ww > 0, ww, 1.0)
-    centre = p0 + (_cross(w, u) * (v * v).sum(-1)[:, None] + _cross(v, w) * (u * u).sum(-1)[:, None]) / (
-        2.0 * safe[:, None]
-    )
-    radius = np.linalg.norm(centre - p0, axis=1)
-    radius = np.where(ww > 0, radius, np.inf)
-    return centre, radius
+    uu, vv = (u * u).sum(-1)[:, None], (v * v).sum(-1)[:, None]
+    centre = p0 + (_cross(w, u) * vv + _cross(v, w) * uu) / (2.0 * safe[:, None])
+    return centre, np.where(ww > 0, np.linalg.norm(centre - p0, axis=1), np.inf)
 
 
 def _min_angle(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray) -> np.ndarray:
-    """Smallest interior angle (radians) of each triangle ``(p0, p1, p2)`` (rows).
-
-    It is the angle opposite the shortest edge (law of sines), at most 60 degrees, so
-    ``arcsin(2 area / (l_mid l_max))`` with the two longer edges' lengths: one cross product instead
-    of one per corner.
-    """
+    """Smallest interior angle (radians) of each triangle ``(p0, p1, p2)``: the one opposite the shortest
+    edge (law of sines), ``arcsin(2 area / (l_mid l_max))``, one cross product for all three corners."""
     a, b, c = p1 - p0, p2 - p1, p0 - p2
     lengths = np.sort(np.stack([(a * a).sum(1), (b * b).sum(1), (c * c).sum(1)]), axis=0)
     twice_area = np.sqrt((_cross(a, c) ** 2).sum(1))
@@ -472,91 +378,70 @@ def _min_angle(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray) -> np.ndarray:
     return np.arcsin(np.minimum(ratio, 1.0))
 
 
-def _relax(
-    points: np.ndarray,
-    tris: np.ndarray,
-    fixed_pairs: np.ndarray,
-    max_passes: int = 100,
-    dirty: np.ndarray | None = None,
-) -> np.ndarray:
-    """Delaunay edge flips (Liepa's relaxation) until none applies; batches of independent flips.
+def _keys(a: np.ndarray, b: np.ndarray, nv: int) -> np.ndarray:
+    """Undirected edge keys ``min * nv + max``."""
+    return np.minimum(a, b) * nv + np.maximum(a, b)
 
-    An interior edge ``(a, b)`` between triangles ``(a, b, c)`` and ``(b, a, d)`` is
-    flipped to ``(c, d)`` when ``d`` lies strictly inside the circumsphere of
-    ``(a, b, c)``, the edge ``(c, d)`` does not exist yet (in the patch or, in
-    ``fixed_pairs``, around it), and both new triangles face the way the old
-    pair did.
 
-    Only edges whose verdict can have changed are tested again: those of the triangles ``dirty``
-    (a boolean mask; every triangle if None) and, in later passes, of the triangles a flip rewrote or
-    a flip left waiting, and those whose flip was blocked by an edge a flip removed. Every other edge
-    failed the same test on the same geometry before.
+def _absent(sorted_keys: np.ndarray, keys: np.ndarray) -> np.ndarray:
+    """Which ``keys`` are not in ``sorted_keys``."""
+    if len(sorted_keys) == 0:
+        return np.ones(len(keys), dtype=bool)
+    return sorted_keys[np.minimum(np.searchsorted(sorted_keys, keys), len(sorted_keys) - 1)] != keys
+
+
+def _relax(points: np.ndarray, tris: np.ndarray, fixed_pairs: np.ndarray, dirty: np.ndarray) -> np.ndarray:
+    """Delaunay edge flips (Liepa's relaxation) until none applies, in batches of independent flips.
+
+    An interior edge ``(a, b)`` between triangles ``(a, b, c)`` and ``(b, a, d)`` flips to ``(c, d)``
+    when ``d`` is strictly inside the circumsphere of ``(a, b, c)`` (or ``c`` inside that of
+    ``(b, a, d)``), ``(c, d)`` is no edge yet (in the patch or in ``fixed_pairs`` around it), both new
+    triangles face as the old pair and the pair's smallest angle grows.
+
+    Only edges whose verdict can have changed are tested: those of the ``dirty`` triangles (a mask) and,
+    in later passes, of the triangles a flip rewrote or left waiting, and those a removed edge blocked.
     """
     nv = len(points)
     tris = tris.copy()
     removed = np.zeros(0, dtype=np.int64)
-    fixed_keys = np.sort(
-        np.minimum(fixed_pairs[:, 0], fixed_pairs[:, 1]) * nv
-        + np.maximum(fixed_pairs[:, 0], fixed_pairs[:, 1])
-    )
-
-    def absent(sorted_keys: np.ndarray, keys: np.ndarray) -> np.ndarray:
-        if len(sorted_keys) == 0:
-            return np.ones(len(keys), dtype=bool)
-        pos = np.minimum(np.searchsorted(sorted_keys, keys), len(sorted_keys) - 1)
-        return sorted_keys[pos] != keys
-
-    for _ in range(max_passes):
+    fixed_keys = np.sort(_keys(fixed_pairs[:, 0], fixed_pairs[:, 1], nv))
+    for _ in range(100):
         t1, s1, t2, s2, a, b, key = _edge_table(tris, nv)
         if len(t1) == 0:
             break
-        # the edges to test: dirty ones (cheap index tests first; the geometry runs on the edges left)
-        if dirty is None:
-            open_ = np.arange(len(t1))
-        else:
-            mark = dirty[t1] | dirty[t2]
-            if len(removed):
-                c_all, d_all = tris[t1, (s1 + 2) % 3], tris[t2, (s2 + 2) % 3]
-                mark |= ~absent(removed, np.minimum(c_all, d_all) * nv + np.maximum(c_all, d_all))
-            open_ = np.flatnonzero(mark)
         c = tris[t1, (s1 + 2) % 3]
         d = tris[t2, (s2 + 2) % 3]
+        new_key = _keys(c, d, nv)
+        mark = dirty[t1] | dirty[t2]
+        if len(removed):
+            mark |= ~_absent(removed, new_key)
+        open_ = np.flatnonzero(mark)
         # the new edge must not exist yet (in the patch, or around it)
-        new_key = np.minimum(c, d) * nv + np.maximum(c, d)
-        oc, od, ok_key = c[open_], d[open_], new_key[open_]
-        open_ = open_[absent(key, ok_key) & absent(fixed_keys, ok_key) & (oc != od)]
+        ok_key = new_key[open_]
+        open_ = open_[_absent(key, ok_key) & _absent(fixed_keys, ok_key) & (c[open_] != d[open_])]
         pa, pb, pc, pd = points[a[open_]], points[b[open_]], points[c[open_]], points[d[open_]]
-        centre, radius = _circumsphere(pa, pb, pc)
         # a relative margin: near-co-circular quads (common on regular patches) are not flipped, so
         # the result does not hinge on rounding (rigid motions give the same connectivity)
+        centre, radius = _circumsphere(pa, pb, pc)
         near = np.linalg.norm(pd - centre, axis=1) < radius * (1.0 - 1e-6)
-        # and the other way round (in 3D the two tests differ: CGAL's relax flips when either holds)
-        rest = np.flatnonzero(~near)
+        rest = np.flatnonzero(~near)  # and the other way round (in 3D the two tests differ)
         centre2, radius2 = _circumsphere(pb[rest], pa[rest], pd[rest])
         near[rest] = np.linalg.norm(pc[rest] - centre2, axis=1) < radius2 * (1.0 - 1e-6)
         inside = np.zeros(len(t1), dtype=bool)
         inside[open_] = near
-        # the remaining tests run only on the edges still in (row-wise, so the same verdicts): on a large
-        # patch most edges are out after the sphere tests, and these were most of a pass's time
-        live = np.flatnonzero(inside)
+        live = np.flatnonzero(inside)  # the other tests only on the edges still in
         pa, pb, pc, pd = points[a[live]], points[b[live]], points[c[live]], points[d[live]]
         # the new triangles (c, a, d) and (d, b, c) must not fold over
         old = _cross(pb - pa, pc - pa) + _cross(pa - pb, pd - pb)
-        n1 = _cross(pa - pc, pd - pc)
-        n2 = _cross(pb - pd, pc - pd)
-        ok = ((n1 * old).sum(1) > 0) & ((n2 * old).sum(1) > 0)
-        # and the smallest angle of the pair grows: the two sphere tests disagree in 3D, so without this
-        # an edge could flip back and forth; with it every flip is progress and the passes end
-        # the four triangles' smallest angles in one call: (a, b, c), (b, a, d) before; (c, a, d), (d, b, c) after
+        ok = ((_cross(pa - pc, pd - pc) * old).sum(1) > 0) & ((_cross(pb - pd, pc - pd) * old).sum(1) > 0)
+        # and the smallest angle grows (the two sphere tests disagree in 3D: without this an edge could
+        # flip back and forth): (a, b, c), (b, a, d) before; (c, a, d), (d, b, c) after
         angles = _min_angle(
             np.concatenate([pa, pb, pc, pd]),
             np.concatenate([pb, pa, pa, pb]),
             np.concatenate([pc, pd, pd, pc]),
-        )
-        angles = angles.reshape(4, -1)
-        before = np.minimum(angles[0], angles[1])
-        after = np.minimum(angles[2], angles[3])
-        ok &= after > before + 1e-9
+        ).reshape(4, -1)
+        ok &= np.minimum(angles[2], angles[3]) > np.minimum(angles[0], angles[1]) + 1e-9
         inside[live] = ok
         proposed = np.flatnonzero(inside)
         if len(proposed) == 0:
@@ -568,47 +453,35 @@ def _relax(
         cand = proposed[(owner[t1[proposed]] == proposed) & (owner[t2[proposed]] == proposed)]
         _, first = np.unique(new_key[cand], return_index=True)  # two flips must not make the same edge
         cand = cand[np.sort(first)]
-        # next pass: the triangles rewritten and those of flips left waiting; edges a flip removes
         dirty = np.zeros(len(tris), dtype=bool)
         dirty[t1[proposed]] = True
         dirty[t2[proposed]] = True
-        removed = np.sort(np.minimum(a[cand], b[cand]) * nv + np.maximum(a[cand], b[cand]))
+        removed = np.sort(_keys(a[cand], b[cand], nv))
         tris[t1[cand]] = np.stack([c[cand], a[cand], d[cand]], axis=1)
         tris[t2[cand]] = np.stack([d[cand], b[cand], c[cand]], axis=1)
     return tris
 
 
 def _refine(
-    points: np.ndarray,
-    sigma: np.ndarray,
-    tris: np.ndarray,
-    fixed_pairs: np.ndarray,
-    owner: np.ndarray,
-    max_rounds: int = 60,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    points: np.ndarray, sigma: np.ndarray, tris: np.ndarray, fixed_pairs: np.ndarray, owner: np.ndarray
+):
     """Liepa's refinement: centroid splits of triangles larger than the local scale, then relaxation.
 
-    A triangle ``(i, j, k)`` with centroid ``c`` and ``sigma_c`` the mean of its
-    corners' scales is split when ``alpha * |c - v_m| > max(sigma_c, sigma_m)``
-    for each of its corners (``alpha = sqrt(2)``); the new vertex takes scale
-    ``sigma_c``. Rounds of splits (all at once) and flips run until no
-    triangle splits. Several patches (disjoint index ranges) refine at once, each as if alone:
-    ``owner`` names each point's patch. Returns the points (the first ``len(points)`` unchanged), the
-    triangles and the owners of the points.
+    A triangle with centroid ``c`` and ``sigma_c`` the mean of its corners' scales is split when
+    ``alpha * |c - v_m| > max(sigma_c, sigma_m)`` for each corner ``m`` (``alpha = sqrt(2)``); the new
+    vertex takes scale ``sigma_c``. Rounds of splits and flips run until no triangle splits. Patches
+    in disjoint index ranges refine at once, ``owner`` naming each point's patch. Returns the points
+    (the first ``len(points)`` unchanged), the triangles and the points' owners.
     """
-    points = points.copy()
-    sigma = sigma.copy()
-    # no flips before the first split (as Liepa and CGAL): on a short loop the minimum-weight triangulation
-    # is what decides whether a triangle is big enough to split, and Delaunay flips first made its triangles
-    # slimmer, so that coarse holes got no new vertex at all (camel 2.5h: 0 where CGAL adds 3)
+    # no flips before the first split (as Liepa and CGAL): on a short loop Delaunay flips made the
+    # minimum-weight triangles slimmer, and coarse holes got no new vertex (camel 2.5h: 0, CGAL 3)
     relaxed = False
-    for _ in range(max_rounds):
+    for _ in range(60):
         corners = points[tris]  # (t, 3, 3)
         centre = corners.mean(axis=1)
         sigma_c = sigma[tris].mean(axis=1)
         dist = np.linalg.norm(centre[:, None, :] - corners, axis=2)
-        big = (_ALPHA * dist > np.maximum(sigma_c[:, None], sigma[tris])).all(axis=1)
-        chosen = np.flatnonzero(big)
+        chosen = np.flatnonzero((_ALPHA * dist > np.maximum(sigma_c[:, None], sigma[tris])).all(axis=1))
         if len(chosen) == 0:
             break
         new = len(points) + np.arange(len(chosen))
@@ -618,183 +491,151 @@ def _refine(
         a, b, c = tris[chosen, 0], tris[chosen, 1], tris[chosen, 2]
         tris[chosen] = np.stack([a, b, new], axis=1)
         tris = np.concatenate([tris, np.stack([b, c, new], axis=1), np.stack([c, a, new], axis=1)])
-        # the relaxation before ended with no flip left: only edges of the split triangles can flip now
-        # (the first round tests every edge: the triangulation was not relaxed)
+        # after a relaxation only edges of the split triangles can flip
         split_mask = np.ones(len(tris), dtype=bool)
         if relaxed:
             split_mask[: len(split_mask) - 2 * len(chosen)] = False
             split_mask[chosen] = True
-        tris = _relax(points, tris, fixed_pairs, dirty=split_mask)
+        tris = _relax(points, tris, fixed_pairs, split_mask)
         relaxed = True
     return points, tris, owner
-
-
-# --------------------------------------------------------------------------- fairing
-
-
-def _gather(indptr: np.ndarray, data: np.ndarray, rows: np.ndarray) -> np.ndarray:
-    """``data[indptr[r]:indptr[r + 1]]`` for every ``r`` in ``rows``, concatenated (vectorized)."""
-    first, last = indptr[rows], indptr[rows + 1]
-    count = last - first
-    total = int(count.sum())
-    if total == 0:
-        return np.zeros(0, dtype=data.dtype)
-    offsets = np.repeat(first - np.concatenate([[0], np.cumsum(count)[:-1]]), count)
-    return data[np.arange(total) + offsets]
 
 
 def _rings(
     triangles: np.ndarray, vertex_triangles: tuple[np.ndarray, np.ndarray], seeds: np.ndarray, count: int
 ):
-    """Triangles incident to ``count`` successive vertex rings around ``seeds`` (``seeds`` is ring 0).
-
-    ``vertex_triangles`` is the CSR ``(indptr, triangle indices)`` of each vertex's triangles, so the
-    work is local to the rings (nothing grows with the mesh). Returns the triangle indices (sorted) and
-    the rings as a list of vertex arrays (``count + 1`` of them; the last one is the outer, incomplete
-    ring).
-    """
+    """The triangles (sorted) of ``count`` successive vertex rings around ``seeds`` (ring 0), and the
+    ``count + 1`` rings (the last incomplete), from each vertex's triangles ``vertex_triangles`` (CSR)."""
     indptr, data = vertex_triangles
-    seen = np.unique(seeds)
-    rings = [seeds]
-    taken = np.zeros(0, dtype=np.int64)
-    front = seen
+    seen = front = np.unique(seeds)
+    rings, taken = [seeds], np.zeros(0, dtype=np.int64)
     for _ in range(count):
-        touch = np.setdiff1d(_gather(indptr, data, front), taken)  # the ring's new triangles
+        touch = data[concatenated_ranges(indptr[front], indptr[front + 1] - indptr[front])]
+        touch = np.setdiff1d(touch, taken)  # the ring's new triangles
         taken = np.union1d(taken, touch)
-        new = np.setdiff1d(triangles[touch].ravel(), seen)
-        seen = np.union1d(seen, new)
-        rings.append(new)
-        front = new
+        front = np.setdiff1d(triangles[touch].ravel(), seen)
+        seen = np.union1d(seen, front)
+        rings.append(front)
     return taken, rings
 
 
-def _unique_edges(tris: np.ndarray, nv: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _unique_edges(tris: np.ndarray, nv: int) -> _Edges:
     """Undirected edges ``i < j`` of a local mesh (sorted) and the edge of each of its ``3t`` half-edges."""
-    e = np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]])
-    e = np.sort(e, axis=1)
+    e = np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1)
     e_keys, inverse = np.unique(e[:, 0] * nv + e[:, 1], return_inverse=True)
     return e_keys // nv, e_keys % nv, inverse
 
 
-def _uniform_operators(
-    tris: np.ndarray,
-    nv: int,
-    vertices: np.ndarray | None = None,
-    kind: str = "uniform",
-    edges: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+def _operators(
+    tris: np.ndarray, nv: int, edges: _Edges, vertices: np.ndarray | None = None, dense: bool = False
 ):
-    """Stiffness ``K = D - W`` and normalized Laplacian ``L = I - D^-1 W`` (eq. 1 of LS meshes) of a local mesh.
+    """Stiffness ``K = D - W`` and Laplacian ``L = S K`` of a local mesh (CSR, or arrays if ``dense``),
+    and its edges ``(e, 2)``.
 
-    ``W`` is the adjacency (``kind="uniform"``) or, with ``vertices``, the cotangent weights
-    ``(cot a + cot b) / 2`` clamped below at a small positive fraction of their mean (obtuse pairs
-    would make ``K`` indefinite) for ``kind="cotangent"``, normalized by the vertex areas for
-    ``kind="cotangent-area"``.
+    Uniform (``vertices`` None): ``W`` the adjacency and ``S = D^-1``, eq. 1 of LS meshes. Cotangent:
+    ``W`` the weights ``(cot a + cot b) / 2`` of ``vertices``, clamped below at 5% of their mean
+    (obtuse pairs would make ``K`` indefinite), and ``S`` the inverse vertex areas (normalized to
+    mean 1). ``edges`` is :func:`_unique_edges` of ``tris``.
     """
-    i, j, inverse = _unique_edges(tris, nv) if edges is None else edges  # (given: shared by several solves)
+    i, j, inverse = edges
     w: np.ndarray
-    if kind == "uniform":
+    if vertices is None:
         w = np.ones(len(i))
     else:
-        assert vertices is not None  # the weighted kinds read the geometry
         p = vertices[tris]  # (t, 3, 3)
         cot = np.zeros((len(tris), 3))  # cotangent of the angle opposite edge (c, c + 1)
         for c in range(3):
             u = p[:, c] - p[:, (c + 2) % 3]
             v = p[:, (c + 1) % 3] - p[:, (c + 2) % 3]
-            cross = np.linalg.norm(_cross(u, v), axis=1)
-            cot[:, c] = (u * v).sum(1) / np.maximum(cross, 1e-300)
+            cot[:, c] = (u * v).sum(1) / np.maximum(np.linalg.norm(_cross(u, v), axis=1), 1e-300)
         w = 0.5 * np.bincount(inverse, weights=cot.T.reshape(-1), minlength=len(i))
         w = np.maximum(w, 0.05 * np.abs(w).mean())
-    # K = D - W assembled at once (diagonal included), and L = S K with S a row scaling (1 / degree, or
-    # 1 / vertex area): the same pattern, so L is K with its rows' data scaled (no sparse algebra)
     degree = np.bincount(i, weights=w, minlength=nv) + np.bincount(j, weights=w, minlength=nv)
-    diagonal = np.arange(nv)
-    K = sp.csr_matrix(
-        (
-            np.concatenate([-w, -w, degree]),
-            (np.concatenate([i, j, diagonal]), np.concatenate([j, i, diagonal])),
-        ),
-        shape=(nv, nv),
-    )
-    if kind == "cotangent-area":
-        assert vertices is not None
-        p = vertices[tris]
+    mass = degree
+    if vertices is not None:
         area = 0.5 * np.linalg.norm(_cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
         mass = np.bincount(tris.ravel(), weights=np.repeat(area / 3.0, 3), minlength=nv)
         mass = mass / mass[mass > 0].mean()
-        scale = np.divide(1.0, mass, out=np.zeros(nv), where=mass > 0)
-    else:
-        scale = np.divide(1.0, degree, out=np.zeros(nv), where=degree > 0)
-    L = K.copy()
+    scale = np.divide(1.0, mass, out=np.zeros(nv), where=mass > 0)
+    diagonal = np.arange(nv)
+    rows, cols = np.concatenate([i, j, diagonal]), np.concatenate([j, i, diagonal])
+    values = np.concatenate([-w, -w, degree])
+    if dense:
+        K = np.zeros((nv, nv))
+        K[rows, cols] = values
+        return K, scale[:, None] * K, np.stack([i, j], axis=1)
+    K = sp.csr_matrix((values, (rows, cols)), shape=(nv, nv))
+    L = K.copy()  # L = S K: K's pattern with its rows scaled
     L.data = L.data * np.repeat(scale, np.diff(L.indptr))
     return K, L, np.stack([i, j], axis=1)
 
 
+def _solve_spd(normal: Any, rhs: np.ndarray) -> np.ndarray:
+    """Solve the SPD system: a dense Cholesky for an array (a small patch, where the sparse gateway's
+    analysis and factorization overheads are most of the time), :class:`SPDSolver` for a sparse matrix."""
+    if sp.issparse(normal):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", O3DLSMeshWarning)  # the SciPy fallback warning: tiny systems
+            return SPDSolver(normal.tocsc(), ordering="amd").solve(np.asarray(rhs))
+    try:
+        return cho_solve(cho_factor(normal), rhs)
+    except np.linalg.LinAlgError as error:
+        raise SingularSystemError(f"the fairing system is singular: {error}") from error
+
+
 def _fair(
-    vertices: np.ndarray,
-    local_tris: np.ndarray,
-    unknown: np.ndarray,
-    rings: list[np.ndarray],
-    continuity: int,
-    kind: str = "uniform",
-    topology: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
-) -> np.ndarray:
-    """Positions of the ``unknown`` local vertices minimizing the continuity's energy, the others fixed.
+    x: np.ndarray, tris: np.ndarray, unknown: np.ndarray, rings: list, level: int, edges: _Edges, cot: bool
+):
+    """Positions of the ``unknown`` local vertices minimizing continuity ``level``'s energy, the others
+    fixed at ``x``:
 
     * ``0``: ``x^T K x`` (membrane, harmonic: ``L x = 0`` at the unknowns);
-    * ``1``: ``sum_r |(L x)_r|^2`` over the rows touching an unknown: the LS-mesh
-      energy ``||L x||^2`` with interpolated anchors (eq. 3, section 6);
-    * ``2``: ``sum |(L x)_r - (L x)_s|^2`` over edges ``(r, s)`` touching such a
-      row: ``(L x)^T K (L x)``, the thin-plate-of-the-Laplacian (tri-Laplacian)
-      energy.
+    * ``1``: ``sum_r |(L x)_r|^2`` over the rows touching an unknown: the LS-mesh energy ``||L x||^2``
+      with interpolated anchors (eq. 3, section 6);
+    * ``2``: ``sum |(L x)_r - (L x)_s|^2`` over edges ``(r, s)`` touching such a row:
+      ``(L x)^T K (L x)``, the tri-Laplacian energy.
 
-    ``rings[0]`` are the loop vertices, ``rings[i]`` the i-th ring around them;
-    the rows used only involve vertices whose one-rings are complete in
-    ``local_tris`` (``continuity`` rings of mesh triangles around the loop). ``topology`` is
-    :func:`_unique_edges` of ``local_tris`` when already known (the solves of one call share it).
+    ``rings[0]`` are the loop vertices, ``rings[i]`` the i-th ring around them: the rows used involve
+    only vertices whose one-rings are complete in ``tris``. ``edges`` is :func:`_unique_edges` of
+    ``tris``; ``cot`` reads the weights of :func:`_operators` off ``x``.
     """
-    nv = len(vertices)
-    K, L, edges = _uniform_operators(local_tris, nv, vertices, kind, topology)
-    is_unknown = np.zeros(nv, dtype=bool)
-    is_unknown[unknown] = True
-    known = np.flatnonzero(~is_unknown)
-    if continuity == 0:
-        A_full = None
+    nv = len(x)
+    dense = len(unknown) <= _DENSE_UNKNOWNS
+    K, L, pairs = _operators(tris, nv, edges, x if cot else None, dense)
+    if level == 0:
+        known = np.ones(nv, dtype=bool)
+        known[unknown] = False
         normal = K[unknown][:, unknown]
-        rhs = -(K[unknown][:, known] @ vertices[known])
+        rhs = -(K[unknown][:, np.flatnonzero(known)] @ x[known])
     else:
         rows = np.zeros(nv, dtype=bool)
         rows[unknown] = True
         rows[rings[0]] = True  # rows whose Laplacian involves an unknown
-        if continuity == 1:
+        if level == 1:
             A_full = L[np.flatnonzero(rows)]
         else:
             valid = rows.copy()
             valid[rings[1]] = True
-            keep = (rows[edges[:, 0]] | rows[edges[:, 1]]) & valid[edges[:, 0]] & valid[edges[:, 1]]
-            sel = edges[keep]
-            # the edge difference operator: row e is +1 at sel[e, 0] and -1 at sel[e, 1] (CSR, two a row)
-            G = sp.csr_matrix(
-                (np.tile([1.0, -1.0], len(sel)), sel.ravel(), np.arange(0, 2 * len(sel) + 1, 2)),
-                shape=(len(sel), nv),
-            )
-            A_full = (G @ L).tocsc()
-        A_full = A_full.tocsc()
+            keep = (rows[pairs[:, 0]] | rows[pairs[:, 1]]) & valid[pairs[:, 0]] & valid[pairs[:, 1]]
+            sel = pairs[keep]
+            if dense:
+                A_full = L[sel[:, 0]] - L[sel[:, 1]]
+            else:  # the edge difference operator: row e is +1 at sel[e, 0] and -1 at sel[e, 1]
+                G = sp.csr_matrix(
+                    (np.tile([1.0, -1.0], len(sel)), sel.ravel(), np.arange(0, 2 * len(sel) + 1, 2)),
+                    shape=(len(sel), nv),
+                )
+                A_full = G @ L
+        A_full = A_full if dense else A_full.tocsc()
         if len(unknown) and unknown[0] == nv - len(unknown) and (np.diff(unknown) == 1).all():
             A_u = A_full[:, nv - len(unknown) :]  # the usual layout: the unknowns are the last columns
         else:
             A_u = A_full[:, unknown]
-        fixed = vertices.copy()
+        fixed = x.copy()
         fixed[unknown] = 0.0  # A_known x_known, without slicing the known columns out
-        normal = (A_u.T @ A_u).tocsc()
+        normal = A_u.T @ A_u
         rhs = -(A_u.T @ (A_full @ fixed))
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", O3DLSMeshWarning)  # the SciPy fallback warning: tiny systems
-        solution = SPDSolver(normal, ordering="amd").solve(np.asarray(rhs))
-    return solution
-
-
-# --------------------------------------------------------------------------- the pipeline
+    return _solve_spd(normal, rhs)
 
 
 @dataclass(frozen=True)
@@ -827,16 +668,6 @@ class FilledHoles:
     continuity: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
 
 
-def _check_options(max_hole_edges: Any, max_hole_diameter: Any, continuity: Any, density: Any):
-    if max_hole_edges is not None:
-        max_hole_edges = as_count(max_hole_edges, name="max_hole_edges", minimum=3)
-    if max_hole_diameter is not None:
-        max_hole_diameter = as_positive_float(max_hole_diameter, name="max_hole_diameter")
-    continuity = as_count(continuity, name="continuity", minimum=0, maximum=2)
-    density = as_positive_float(density, name="density", allow_zero=True)
-    return max_hole_edges, max_hole_diameter, continuity, density
-
-
 def fill_holes_arrays(
     vertices: np.ndarray,
     triangles: np.ndarray,
@@ -850,7 +681,7 @@ def fill_holes_arrays(
     interpolation: bool = False,
     progress: bool = False,
 ) -> FilledHoles:
-    """Fill the holes of ``(vertices, triangles)``: triangulate, refine and fair; the array core of :func:`fill_holes`.
+    """Fill the holes of ``(vertices, triangles)``: the array core of :func:`fill_holes`.
 
     Parameters
     ----------
@@ -867,9 +698,7 @@ def fill_holes_arrays(
 
     See Also
     --------
-    HoleFiller : the same with the whole-mesh analysis done once (``HoleFiller(vertices,
-        triangles).fill(...)`` is this function, but for the k-d trees of the triangles, which a single
-        call replaces by a box query near the new triangles).
+    HoleFiller : the whole-mesh analysis done once, for several fills.
 
     Examples
     --------
@@ -880,9 +709,6 @@ def fill_holes_arrays(
     >>> len(out.triangles) - len(tris), len(out.holes)
     (2, 1)
     """
-    max_hole_edges, max_hole_diameter, continuity, density = _check_options(
-        max_hole_edges, max_hole_diameter, continuity, density
-    )
     return HoleFiller(vertices, triangles, index_triangles=False).fill(
         max_hole_edges=max_hole_edges,
         max_hole_diameter=max_hole_diameter,
@@ -898,15 +724,9 @@ def fill_holes_arrays(
 class HoleFiller:
     """The whole-mesh analysis of a mesh's holes, done once; :meth:`fill` then does only per-hole work.
 
-    Like CGAL's prebuilt half-edge structure or potpourri3d's solver classes: the constructor sorts the
-    edges (finding the boundary loops, their components and whether each is an outer border, see
-    :func:`find_holes`), measures each vertex's mean edge length (Liepa's scale), lists the triangles
-    of each vertex (for the rings of fixed vertices around a patch) and indexes the triangles' bounding
-    spheres in k-d trees (for the crossing check, a query near the patch instead of a pass over the
-    mesh). :func:`fill_holes_arrays` is ``HoleFiller(vertices, triangles, index_triangles=False).fill(...)``.
-
-    The state is read-only numpy arrays (and k-d trees rebuilt from them on unpickling): it pickles, and
-    :meth:`fill` may run from several threads at once.
+    Like CGAL's prebuilt half-edge structure: the loops (:func:`find_holes`), each vertex's mean edge
+    length (Liepa's scale) and triangles, and k-d trees of the triangles' bounding spheres (for the
+    crossing check). The state is read-only: it pickles, and :meth:`fill` may run from several threads.
 
     Parameters
     ----------
@@ -935,29 +755,38 @@ class HoleFiller:
     def __init__(self, vertices: np.ndarray, triangles: np.ndarray, *, index_triangles: bool = True) -> None:
         index_triangles = bool(as_bool(index_triangles, name="index_triangles"))
         vertices, triangles = mesh_arrays(vertices, triangles)  # copies: the state must not change under it
-        vertices.setflags(write=False)
-        triangles.setflags(write=False)
-        n = len(vertices)
+        for array in (vertices, triangles):
+            array.setflags(write=False)
+        n, m = len(vertices), len(triangles)
         self.vertices, self.triangles = vertices, triangles
         edge_info = unique_edges_and_runs(triangles, n)  # the one whole-mesh sort
         edges = edge_info[0][0]
         self.edge_keys = edges[:, 0] * n + edges[:, 1]  # sorted
         self.holes = find_holes(vertices, triangles, _edge_info=edge_info)
         length = np.linalg.norm(vertices[edges[:, 0]] - vertices[edges[:, 1]], axis=1)
-        degree = np.bincount(edges.ravel(), minlength=n)
-        self.sigma = np.bincount(edges.ravel(), weights=np.repeat(length, 2), minlength=n) / np.maximum(
-            degree, 1
-        )
+        degree = np.maximum(np.bincount(edges.ravel(), minlength=n), 1)
+        self.sigma = np.bincount(edges.ravel(), weights=np.repeat(length, 2), minlength=n) / degree
         # the triangles of each vertex (CSR), by a transpose (linear, no sort)
-        m = len(triangles)
         by_vertex = sp.csr_matrix(
             (np.repeat(np.arange(m, dtype=np.int64), 3), triangles.ravel(), np.arange(0, 3 * m + 1, 3)),
             shape=(m, n),
         ).tocsc()
         self.vertex_triangles = (by_vertex.indptr.astype(np.int64), by_vertex.data.astype(np.int64))
-        # the k-d trees pay off over several fills; a single fill (fill_holes_arrays) indexes only the
-        # triangles in the new triangles' box instead (index None)
         self.index = _TriangleIndex(vertices, triangles) if index_triangles else None
+
+    def _piece(self, loop: np.ndarray, rows: np.ndarray):
+        """A loop's points, the unit normals of the mesh triangles on its edges (for the dihedral angles),
+        the chords that already are mesh edges (``(k, k)`` bool) and its mean edge length."""
+        vertices, n, k = self.vertices, len(self.vertices), len(loop)
+        points = vertices[loop]
+        t = self.triangles[rows % len(self.triangles)]
+        outer = _unit(_cross(vertices[t[:, 1]] - vertices[t[:, 0]], vertices[t[:, 2]] - vertices[t[:, 0]]))
+        a, b = np.meshgrid(loop, loop, indexing="ij")
+        forbidden = ~_absent(self.edge_keys, _keys(a, b, n).ravel()).reshape(k, k)
+        idx = np.arange(k)
+        forbidden[idx, (idx + 1) % k] = forbidden[(idx + 1) % k, idx] = False
+        spacing = float(np.mean(np.linalg.norm(np.roll(points, -1, 0) - points, axis=1)))
+        return points, outer, forbidden, spacing
 
     def fill(
         self,
@@ -972,9 +801,12 @@ class HoleFiller:
         progress: bool = False,
     ) -> FilledHoles:
         """Fill the chosen holes: the options and result of :func:`fill_holes_arrays`."""
-        max_hole_edges, max_hole_diameter, continuity, density = _check_options(
-            max_hole_edges, max_hole_diameter, continuity, density
-        )
+        if max_hole_edges is not None:
+            max_hole_edges = as_count(max_hole_edges, name="max_hole_edges", minimum=3)
+        if max_hole_diameter is not None:
+            max_hole_diameter = as_positive_float(max_hole_diameter, name="max_hole_diameter")
+        continuity = as_count(continuity, name="continuity", minimum=0, maximum=2)
+        density = as_positive_float(density, name="density", allow_zero=True)
         weights = as_choice(weights, ("uniform", "cotangent"), name="weights")
         fill_border = bool(as_bool(fill_border, name="fill_border"))
         check_progress(progress)
@@ -986,183 +818,185 @@ class HoleFiller:
             too_big = (max_hole_edges is not None and hole.edges > max_hole_edges) or (
                 max_hole_diameter is not None and hole.diameter > max_hole_diameter
             )
-            # a loop made of the three edges of one triangle is the rim of a flap (a triangle hanging by a
-            # vertex, common in raw scans), not a hole: "filling" it would add that triangle's reverse
+            # the three edges of one triangle are the rim of a flap (a triangle hanging by a vertex,
+            # common in raw scans), not a hole: "filling" it would add that triangle's reverse
             flap = hole.edges == 3 and len(np.unique(np.asarray(hole.rows) % m)) == 1
             (skipped if too_big or flap or (hole.border and not fill_border) else holes).append(hole)
         if not holes:
-            return FilledHoles(
-                vertices.copy(),
-                triangles.copy(),
-                [],
-                skipped,
-                sp.csr_matrix((0, n)),
-                np.zeros(0, dtype=np.int64),
-            )
-        edge_keys = self.edge_keys
-        sigma_all = self.sigma  # Liepa's sigma: mean length of each vertex's edges
-        # each piece (a loop; a loop through a vertex twice is cut into pieces) is triangulated on its own;
-        # then every piece is refined at once, in disjoint local index ranges
-        bar = progress_bar(progress, total=len(holes), desc="filling holes", unit="hole")
-        piece_hole, piece_loop, piece_points, piece_tris, piece_sigma, piece_fixed = [], [], [], [], [], []
-        piece_outer, piece_forbidden, piece_spacing = [], [], []
-        for hole_index, hole in enumerate(holes):
-            for loop, rows in _simple_pieces(hole.vertices, hole.rows):
-                k = len(loop)
-                points = vertices[loop]
-                outer_tris = triangles[rows % m]  # the mesh triangle on each loop edge, for dihedral angles
-                outer, _ = _unit(
-                    _cross(
-                        vertices[outer_tris[:, 1]] - vertices[outer_tris[:, 0]],
-                        vertices[outer_tris[:, 2]] - vertices[outer_tris[:, 0]],
-                    )
-                )
-                # chords that already are edges of the mesh (between loop vertices that are not neighbours)
-                a, b = np.meshgrid(loop, loop, indexing="ij")
-                key = np.minimum(a, b) * n + np.maximum(a, b)
-                pos = np.minimum(np.searchsorted(edge_keys, key), len(edge_keys) - 1)
-                forbidden = edge_keys[pos] == key
-                idx = np.arange(k)
-                forbidden[idx, (idx + 1) % k] = False
-                forbidden[(idx + 1) % k, idx] = False
-                piece_hole.append(hole_index)
-                piece_loop.append(loop)
-                piece_points.append(points)
-                piece_outer.append(outer)
-                piece_forbidden.append(forbidden)
-                piece_spacing.append(float(np.mean(np.linalg.norm(np.roll(points, -1, 0) - points, axis=1))))
-                piece_fixed.append(np.argwhere(np.triu(forbidden)))  # mesh edges between loop vertices
-        # the dynamic programme: loops of one length in one batch, longer ones cut by chords first
-        piece_extra: list[np.ndarray] = [np.zeros((0, 3))] * len(piece_loop)
-        piece_tris = [np.zeros((0, 3), dtype=np.int64)] * len(piece_loop)
+            empty = np.zeros(0, dtype=np.int64)
+            return FilledHoles(vertices.copy(), triangles.copy(), [], skipped, sp.csr_matrix((0, n)), empty)
+        # each piece (a loop; one through a vertex twice is cut in pieces) is triangulated on its own,
+        # loops of one length in one batch of the dynamic programme, longer ones cut by chords first
+        pieces = [(h, *p) for h, hole in enumerate(holes) for p in _simple_pieces(hole.vertices, hole.rows)]
+        piece_hole, piece_loop, piece_rows = zip(*pieces)
+        piece_points, piece_outer, piece_forbidden, piece_spacing = zip(
+            *map(self._piece, piece_loop, piece_rows)
+        )
+        count = len(piece_loop)
+        piece_extra, piece_tris = [np.zeros((0, 3))] * count, [np.zeros((0, 3), dtype=np.int64)] * count
         lengths = np.array([len(loop) for loop in piece_loop])
-        bar = progress_bar(progress, total=len(piece_loop), desc="filling holes", unit="loop")
-        for k in np.unique(lengths):
-            group = np.flatnonzero(lengths == k)
-            if k > DP_MAX_EDGES:
-                for member in group.tolist():
-                    forbidden = piece_forbidden[member]
-                    # chords are sampled at the spacing the refinement aims for (none without refinement)
-                    piece_extra[member], piece_tris[member] = _triangulate(
-                        piece_points[member],
-                        piece_outer[member],
-                        forbidden if forbidden.any() else None,
-                        piece_spacing[member] / density if density > 0 else 0.0,
-                    )
-                    bar.update()
-                continue
-            # batches bound the DP tables' memory (about 60 k**2 floats a loop)
-            per_batch = max(1, 200_000 // int(k) ** 2)
-            for first in range(0, len(group), per_batch):
-                chunk = group[first : first + per_batch]
-                stacked = np.stack([piece_forbidden[piece] for piece in chunk])
-                found = _minimum_weight_triangulations(
-                    np.stack([piece_points[piece] for piece in chunk]),
-                    np.stack([piece_outer[piece] for piece in chunk]),
-                    stacked if stacked.any() else None,
-                )
-                for member, tris in zip(chunk.tolist(), found):
-                    piece_tris[member] = tris
-                bar.update(len(chunk))
-        bar.close()
-        for piece, loop in enumerate(piece_loop):
-            extra = piece_extra[piece]
-            piece_points[piece] = np.concatenate([piece_points[piece], extra])
-            spread = piece_spacing[piece] / density if density > 0 else 0.0
-            piece_sigma.append(
-                np.concatenate([sigma_all[loop] / max(density, 1e-300), np.full(len(extra), spread)])
-            )
-        sizes = np.array([len(x) for x in piece_points])
+        with progress_bar(progress, total=count, desc="filling holes", unit="loop") as bar:
+            for k in np.unique(lengths):
+                group = np.flatnonzero(lengths == k)
+                # batches bound the tables' memory (~60 k**2 floats a loop); longer loops go one by one
+                step = 1 if k > DP_MAX_EDGES else max(1, 200_000 // int(k) ** 2)
+                for chunk in np.split(group, np.arange(step, len(group), step)):
+                    stacked = np.stack([piece_forbidden[i] for i in chunk])
+                    forbidden = stacked if stacked.any() else None
+                    if k > DP_MAX_EDGES:  # cut by chords sampled at the refinement's spacing (none without)
+                        i = int(chunk[0])
+                        piece_extra[i], piece_tris[i] = _triangulate(
+                            piece_points[i],
+                            piece_outer[i],
+                            None if forbidden is None else forbidden[0],
+                            piece_spacing[i] / density if density > 0 else 0.0,
+                        )
+                    else:
+                        found = _minimum_weight_triangulations(
+                            np.stack([piece_points[i] for i in chunk]),
+                            np.stack([piece_outer[i] for i in chunk]),
+                            forbidden,
+                        )
+                        for i, tris in zip(chunk.tolist(), found):
+                            piece_tris[i] = tris
+                    bar.update(len(chunk))
+        # every piece refined at once, in disjoint local index ranges
+        sizes = np.array([len(p) + len(e) for p, e in zip(piece_points, piece_extra)])
         starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
-        all_points = np.concatenate(piece_points)
+        all_points = np.concatenate([np.concatenate([p, e]) for p, e in zip(piece_points, piece_extra)])
         all_tris = np.concatenate([t + start for t, start in zip(piece_tris, starts)])
-        point_piece = np.repeat(np.arange(len(sizes)), sizes)
+        point_piece = np.repeat(np.arange(count), sizes)
         if density > 0:
-            all_fixed = np.concatenate([f + start for f, start in zip(piece_fixed, starts)])
+            sigma = [
+                np.concatenate(
+                    [self.sigma[loop] / max(density, 1e-300), np.full(len(extra), spacing / density)]
+                )
+                for loop, extra, spacing in zip(piece_loop, piece_extra, piece_spacing)
+            ]
+            # mesh edges between loop vertices: no flip may make them twice
+            fixed = [np.argwhere(np.triu(f)) + start for f, start in zip(piece_forbidden, starts)]
             all_points, all_tris, point_piece = _refine(
-                all_points, np.concatenate(piece_sigma), all_tris, all_fixed, point_piece
+                all_points, np.concatenate(sigma), all_tris, np.concatenate(fixed), point_piece
             )
-        # global numbering: loop points are mesh vertices; the others are new, numbered piece by piece
+        # global numbering: loop points (first in each piece, in order) are mesh vertices; the others
+        # are new, numbered piece by piece
         is_loop = np.zeros(len(all_points), dtype=bool)
-        loop_lengths = np.array([len(loop) for loop in piece_loop])
-        is_loop[np.concatenate([start + np.arange(k) for start, k in zip(starts, loop_lengths)])] = True
+        is_loop[concatenated_ranges(starts, lengths)] = True
         global_index = np.empty(len(all_points), dtype=np.int64)
-        global_index[is_loop] = np.concatenate(piece_loop)  # loop points come first in each piece, in order
+        global_index[is_loop] = np.concatenate(piece_loop)
         fresh = np.flatnonzero(~is_loop)
         fresh = fresh[np.argsort(point_piece[fresh], kind="stable")]
         global_index[fresh] = n + np.arange(len(fresh))
-        new_points = all_points[fresh]
         tri_piece = point_piece[all_tris[:, 0]]
         tri_order = np.argsort(tri_piece, kind="stable")
         new_tris = global_index[all_tris[tri_order]]
-        tri_owner = [np.asarray(piece_hole, dtype=np.int64)[tri_piece[tri_order]]]
-        interp_rows, interp_cols, interp_vals = [], [], []
-        if interpolation and len(fresh):
-            # harmonic weights of the new vertices over their loop's vertices (for colours and other
-            # attributes): one small dense solve per piece (a loop wide)
-            tri_bounds = np.searchsorted(tri_piece[tri_order], np.arange(len(sizes) + 1))
-            for piece in range(len(sizes)):
-                local = new_tris[tri_bounds[piece] : tri_bounds[piece + 1]]
-                loop = piece_loop[piece]
-                inner = np.unique(local[local >= n])
-                if len(inner) == 0:
-                    continue
-                numbering = np.concatenate([loop, inner])
-                by_index = np.argsort(numbering)
-                tris_local = by_index[np.searchsorted(numbering[by_index], local)]
-                k, nl = len(loop), len(numbering)
-                K, _, _ = _uniform_operators(tris_local, nl)
-                unknown = np.arange(k, nl)
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore", O3DLSMeshWarning)
-                    harmonic = SPDSolver(K[unknown][:, unknown].tocsc()).solve(-K[unknown][:, :k].toarray())
-                r, c = np.nonzero(np.abs(harmonic) > 1e-12)
-                interp_rows.append(inner[r] - n)
-                interp_cols.append(loop[c])
-                interp_vals.append(harmonic[r, c])
-        out_vertices = np.concatenate([vertices, new_points])
-        out_triangles = np.concatenate([triangles, new_tris])
-        p = len(new_points)
-        owner = np.concatenate(tri_owner)
-        if p:
-            out_vertices, used, stuck = _fair_all(
-                out_vertices, out_triangles, m, n, holes, continuity, weights, owner, self
-            )
-        else:  # nothing to fair: the triangulations alone are checked
-            used = np.full(len(holes), -1, dtype=np.int64)
-            crossing = _crossings(out_vertices, out_triangles, m, self.index, owner)
-            stuck = np.flatnonzero(np.bincount(owner, weights=crossing, minlength=len(holes)) > 0)
-        if interp_rows:
-            weights_matrix = sp.csr_matrix(
-                (np.concatenate(interp_vals), (np.concatenate(interp_rows), np.concatenate(interp_cols))),
-                shape=(p, n),
-            )
+        owner = np.asarray(piece_hole, dtype=np.int64)[tri_piece[tri_order]]  # the hole of each new triangle
+        p = len(fresh)
+        if interpolation and p:
+            bounds = np.searchsorted(tri_piece[tri_order], np.arange(count + 1))
+            weights_matrix = _interpolation(new_tris, bounds, piece_loop, n, p)
         else:
             weights_matrix = sp.csr_matrix((p, n))
+        out_vertices = np.concatenate([vertices, all_points[fresh]])
+        out_triangles = np.concatenate([triangles, new_tris])
+        used, stuck = self._fair_all(
+            out_vertices, out_triangles, holes, continuity, weights == "cotangent", owner
+        )
         if len(stuck):
-            # every fill of these crosses the mesh (the scan is folded or overlaps itself next to them): a
-            # crossing patch would be a broken mesh, so they are left open, and said
+            # every fill of these crosses the mesh (folded or overlapping next to them): left open, and said
             warnings.warn(
                 f"fill_holes: the fills of {len(stuck)} hole(s) cross other triangles at every continuity "
                 "(folded or overlapping surface next to them): left open, see FilledHoles.skipped",
                 O3DLSMeshWarning,
                 stacklevel=3,
             )
-            keep_tri = ~np.isin(owner, stuck)
-            vertex_owner = np.zeros(p, dtype=np.int64)
-            new_tris = out_triangles[m:]
-            inside = new_tris >= n
-            vertex_owner[new_tris[inside] - n] = np.broadcast_to(owner[:, None], new_tris.shape)[inside]
-            keep_vertex = ~np.isin(vertex_owner, stuck)
+            keep_vertex = ~np.isin(_vertex_owner(new_tris, owner, n, p), stuck)
             remap = np.concatenate([np.arange(n), n + np.cumsum(keep_vertex) - 1])
             out_vertices = np.concatenate([vertices, out_vertices[n:][keep_vertex]])
-            out_triangles = np.concatenate([triangles, remap[new_tris[keep_tri]]])
+            out_triangles = np.concatenate([triangles, remap[new_tris[~np.isin(owner, stuck)]]])
             weights_matrix = weights_matrix[np.flatnonzero(keep_vertex)]
-            left = set(stuck.tolist())
-            skipped = skipped + [hole for i, hole in enumerate(holes) if i in left]
-            used = used[[i not in left for i in range(len(holes))]]
-            holes = [hole for i, hole in enumerate(holes) if i not in left]
+            left = np.isin(np.arange(len(holes)), stuck)
+            skipped = skipped + [hole for hole, out in zip(holes, left) if out]
+            used = used[~left]
+            holes = [hole for hole, out in zip(holes, left) if not out]
         return FilledHoles(out_vertices, out_triangles, holes, skipped, weights_matrix, used)
+
+    def _fair_all(
+        self, vertices: np.ndarray, triangles: np.ndarray, holes: list, continuity: int, cot: bool, owner
+    ):
+        """Fair every new vertex at once: one local system over the patches and the rings around them.
+
+        ``vertices`` (the input's, then the refined patches' new ones) take the result in place.
+        Candidates, best first: the asked continuity (after its cotangent pass if ``cot``, then
+        without), then each lower continuity, then the refined patch unfaired. Each hole (``owner`` of
+        each new triangle) keeps the first candidate whose new triangles cross no triangle of the mesh
+        (a tri-Laplacian patch can overshoot into a thin part next to the hole); returns the continuity
+        each hole got and the holes where none is (the caller leaves them open).
+        """
+        total, m, n = len(vertices), len(self.triangles), len(self.vertices)
+        unknown = np.arange(n, total)
+        loops = np.unique(np.concatenate([hole.vertices for hole in holes]))
+        # triangles within `continuity` rings of the loops in the input, plus every new triangle
+        old, new_tris = triangles[:m], triangles[m:]
+        ring_tris, rings = _rings(old, self.vertex_triangles, loops, continuity)
+        local_tris = np.concatenate([old[ring_tris], new_tris])
+        local_vertices = np.unique(local_tris)
+        remap = np.full(total, -1, dtype=np.int64)
+        remap[local_vertices] = np.arange(len(local_vertices))
+        local_rings = [remap[r] for r in rings]
+        local = remap[local_tris]
+        local_edges = _unique_edges(local, len(local_vertices))  # one connectivity for every solve below
+        refined = vertices[n:].copy()
+        work = vertices  # its new rows hold the candidate being solved from or checked
+
+        def solve(level: int, weighted: bool) -> np.ndarray | None:
+            try:
+                x = _fair(
+                    work[local_vertices], local, remap[unknown], local_rings, level, local_edges, weighted
+                )
+            except SingularSystemError:
+                return None
+            return x if np.isfinite(x).all() else None
+
+        def candidates():  # lazily: most calls stop at the first
+            for level in (
+                range(continuity, -1, -1) if len(unknown) else []
+            ):  # nothing to fair without new vertices
+                solution = solve(level, False)
+                if solution is None:
+                    continue
+                work[n:] = solution
+                if cot and level > 0:
+                    # cotangent weights (clamped, area-normalized) read off the uniform solution: a fair
+                    # embedding, where weights from the flat refined patch diverged (camel 15h: 87 h off)
+                    again = solve(level, True)
+                    if again is not None and _no_fold(work, again, new_tris):
+                        work[n:] = again
+                        yield level, _tangential_relax(work, new_tris, n)
+                        work[n:] = solution
+                yield level, _tangential_relax(work, new_tris, n)
+                work[n:] = refined
+            yield -1, refined  # the refined patch as triangulated
+
+        vertex_owner = _vertex_owner(new_tris, owner, n, total - n)
+        chosen = np.full(len(holes), -1)
+        out = refined.copy()
+        tried = []
+        for rank, (level, candidate) in enumerate(candidates()):
+            tried.append(level)
+            work[n:] = candidate
+            crossing = _crossings(work, triangles, m, self.index, owner)  # (q,) per new triangle
+            per_hole = np.bincount(owner, weights=crossing, minlength=len(holes))
+            for hole_index in np.flatnonzero((chosen < 0) & (per_hole == 0)):
+                mine = vertex_owner == hole_index
+                out[mine] = candidate[mine]
+                chosen[hole_index] = rank
+            if (chosen >= 0).all():
+                break
+        work[n:] = out
+        return np.array([tried[c] if c >= 0 else tried[0] for c in chosen], dtype=np.int64), np.flatnonzero(
+            chosen < 0
+        )
 
 
 def _simple_pieces(loop: np.ndarray, rows: np.ndarray):
@@ -1170,150 +1004,78 @@ def _simple_pieces(loop: np.ndarray, rows: np.ndarray):
     stack = [(loop, rows)]
     while stack:
         loop, rows = stack.pop()
-        seen: dict[int, int] = {}
-        cut = None
-        for position, v in enumerate(loop.tolist()):
-            if v in seen:
-                cut = (seen[v], position)
-                break
-            seen[v] = position
-        if cut is None:
+        first = np.zeros(len(loop), dtype=bool)
+        first[np.unique(loop, return_index=True)[1]] = True
+        if first.all():
             if len(loop) >= 3:
                 yield loop, rows
             continue
-        p, q = cut
+        q = int(np.argmin(first))  # the first second visit, and the first visit of that vertex
+        p = int(np.argmax(loop == loop[q]))
         stack.append((loop[p:q], rows[p:q]))
         stack.append((np.concatenate([loop[:p], loop[q:]]), np.concatenate([rows[:p], rows[q:]])))
 
 
-def _fair_all(
-    vertices: np.ndarray,
-    triangles: np.ndarray,
-    m: int,
-    n: int,
-    holes: list,
-    continuity: int,
-    weights: str,
-    tri_owner: np.ndarray,
-    state: HoleFiller,
-):
-    """Fair every new vertex at once: one local system over the patches and the rings around them.
-
-    Candidates, best first: the asked continuity (after its cotangent pass if asked, then without), then
-    each lower continuity, then the refined patch unfaired. Each hole keeps the first candidate whose new
-    triangles cross no triangle of the mesh (a tri-Laplacian patch can overshoot into a thin part next to
-    the hole); the holes where none is are returned (the caller leaves them open).
-    """
-    total = len(vertices)
-    unknown = np.arange(n, total)
-    loops = np.unique(np.concatenate([hole.vertices for hole in holes]))
-    # triangles within `continuity` rings of the loops in the input, plus every new triangle
-    old = triangles[:m]
-    ring_tris, rings = _rings(old, state.vertex_triangles, loops, continuity)
-    local_tris = np.concatenate([old[ring_tris], triangles[m:]])
-    local_vertices = np.unique(local_tris)
-    remap = np.full(total, -1, dtype=np.int64)
-    remap[local_vertices] = np.arange(len(local_vertices))
-    local_rings = [remap[r] for r in rings]
-    unknown_local = remap[unknown]
-    # the hole of each new vertex (a vertex belongs to the one patch that made it)
-    vertex_owner = np.zeros(total - n, dtype=np.int64)
-    new_tris = triangles[m:]
+def _vertex_owner(new_tris: np.ndarray, owner: np.ndarray, n: int, p: int) -> np.ndarray:
+    """The hole of each of the ``p`` new vertices (numbered from ``n``), from that of each new triangle."""
+    vertex_owner = np.zeros(p, dtype=np.int64)
     inside = new_tris >= n
-    vertex_owner[new_tris[inside] - n] = np.broadcast_to(tri_owner[:, None], new_tris.shape)[inside]
-    count = len(holes)
-    chosen = np.full(count, -1)
-    out = vertices.copy()
-
-    local = remap[local_tris]
-    local_edges = _unique_edges(local, len(local_vertices))  # one connectivity for every solve below
-
-    def candidates():  # lazily: most calls stop at the first
-        for level in range(continuity, -1, -1):
-            try:
-                solution = _fair(
-                    vertices[local_vertices], local, unknown_local, local_rings, level, "uniform", local_edges
-                )
-            except SingularSystemError:
-                continue
-            if not np.isfinite(solution).all():
-                continue
-            faired = vertices.copy()
-            faired[unknown] = solution
-            if weights == "cotangent" and level > 0:
-                # cotangent weights (clamped positive, vertex-area normalized) read off the uniform solution:
-                # a fair embedding, where weights from the flat refined patch diverged (camel, 15h: 87 h off)
-                try:
-                    again = _fair(
-                        faired[local_vertices],
-                        local,
-                        unknown_local,
-                        local_rings,
-                        level,
-                        "cotangent-area",
-                        local_edges,
-                    )
-                except SingularSystemError:
-                    again = None
-                if (
-                    again is not None
-                    and np.isfinite(again).all()
-                    and _no_fold(faired, again, unknown, new_tris)
-                ):
-                    better = faired.copy()
-                    better[unknown] = again
-                    yield level, _tangential_relax(better, new_tris, n)
-            yield level, _tangential_relax(faired, new_tris, n)
-        yield -1, vertices  # the refined patch as triangulated
-
-    tried = []
-    for rank, (level, candidate) in enumerate(candidates()):
-        tried.append((level, candidate))
-        crossing = _crossings(candidate, triangles, m, state.index, tri_owner)  # (q,) per new triangle
-        per_hole = np.bincount(tri_owner, weights=crossing, minlength=count)
-        take = (chosen < 0) & (per_hole == 0)
-        for hole_index in np.flatnonzero(take):
-            mine = vertex_owner == hole_index
-            out[n:][mine] = candidate[n:][mine]
-            chosen[hole_index] = rank
-        if (chosen >= 0).all():
-            break
-    used = np.array([tried[c][0] if c >= 0 else tried[0][0] for c in chosen], dtype=np.int64)
-    return out, used, np.flatnonzero(chosen < 0)
+    vertex_owner[new_tris[inside] - n] = np.broadcast_to(owner[:, None], new_tris.shape)[inside]
+    return vertex_owner
 
 
-def _tangential_relax(
-    vertices: np.ndarray, new_tris: np.ndarray, first_new: int, iterations: int = 10
-) -> np.ndarray:
-    """Move each new vertex towards the area-weighted centroid of its triangles, in its tangent plane, a few times.
+def _interpolation(
+    new_tris: np.ndarray, bounds: np.ndarray, piece_loop: Any, n: int, p: int
+) -> sp.csr_matrix:
+    """Harmonic weights ``(p, n)`` of the new vertices over their loop's (for colours and other attributes):
+    one small solve per piece, whose new triangles are ``new_tris[bounds[i]:bounds[i + 1]]``."""
+    rows, cols, vals = [], [], []
+    for piece, loop in enumerate(piece_loop):
+        local = new_tris[bounds[piece] : bounds[piece + 1]]
+        inner = np.unique(local[local >= n])
+        if len(inner) == 0:
+            continue
+        numbering = np.concatenate([loop, inner])
+        by_index = np.argsort(numbering)
+        tris_local = by_index[np.searchsorted(numbering[by_index], local)]
+        k, nl = len(loop), len(numbering)
+        # the membrane (continuity 0) with the loop's unit vectors as the fixed "positions"
+        unit = np.eye(nl, k)
+        harmonic = _fair(unit, tris_local, np.arange(k, nl), [], 0, _unique_edges(tris_local, nl), False)
+        r, c = np.nonzero(np.abs(harmonic) > 1e-12)
+        rows.append(inner[r] - n)
+        cols.append(loop[c])
+        vals.append(harmonic[r, c])
+    if not rows:
+        return sp.csr_matrix((p, n))
+    return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(p, n))
 
-    The target is the centroid of the vertex's star (the mean of its triangles' centroids weighted by
-    their areas, a step of centroidal Voronoi smoothing) rather than the mean of its neighbours: on
-    an irregular star the neighbours' mean sits towards the short edges and leaves a sliver there,
-    while the star's centroid rounds the triangles next to the loop (smallest angle on plane_holes
-    24.2 -> 25.6 degrees, horse 15h 22.0 -> 24.1, bench_fill_holes.py). The faired surface is kept to
-    first order: only the tangential part of the move is taken, about the area-weighted normal of the
-    vertex's triangles, all of them new. Vectorized over every new vertex at once (a sparse incidence
-    of the new triangles).
+
+def _tangential_relax(vertices: np.ndarray, new_tris: np.ndarray, first_new: int) -> np.ndarray:
+    """Move each new vertex ten times half-way to its star's area-weighted centroid, in its tangent plane;
+    the new vertices' positions ``(len(vertices) - first_new, 3)``.
+
+    The star's centroid (a step of centroidal Voronoi smoothing), not the neighbours' mean, which on
+    an irregular star sits towards the short edges and leaves a sliver (smallest angle on plane_holes
+    24.2 -> 25.6 degrees, horse 15h 22.0 -> 24.1). Only the move's part tangent to the area-weighted
+    normal of the vertex's (new) triangles is taken: the faired surface is kept to first order.
     """
-    out = vertices.copy()
-    total = len(vertices)
-    moving = np.arange(first_new, total)
-    # in a local numbering of the patches' vertices (increasing, so every sum runs in the same order as
-    # over the whole mesh): nothing here grows with the mesh
+    moving = np.arange(first_new, len(vertices))
+    # a local, increasing numbering of the patches' vertices: nothing grows with the mesh
     local = np.union1d(new_tris.ravel(), moving)
     tris = np.searchsorted(local, new_tris)
     mov = np.searchsorted(local, moving)
-    nl = len(local)
-    # the triangles of each moving vertex (a sparse incidence: sums without np.add.at)
-    incidence = sp.csr_matrix(
-        (np.ones(3 * len(tris)), tris.ravel(), np.arange(0, 3 * len(tris) + 1, 3)), shape=(len(tris), nl)
+    incidence: Any = sp.csr_matrix(  # the triangles of each moving vertex
+        (np.ones(3 * len(tris)), tris.ravel(), np.arange(0, 3 * len(tris) + 1, 3)),
+        shape=(len(tris), len(local)),
     ).T.tocsr()[mov]
-    x = out[local]
-    for _ in range(iterations):
+    if incidence.shape[0] * incidence.shape[1] <= 1 << 14:
+        incidence = incidence.toarray()  # a small patch: dense products cost less than sparse ones
+    x = vertices[local]
+    for _ in range(10):
         p = x[tris]
         face_normal = _cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
-        normal, _ = _unit(incidence @ face_normal)
+        normal = _unit(incidence @ face_normal)
         area = np.sqrt((face_normal**2).sum(axis=1))
         target = (incidence @ (area[:, None] * p.mean(axis=1))) / np.maximum(incidence @ area, 1e-300)[
             :, None
@@ -1321,72 +1083,58 @@ def _tangential_relax(
         move = target - x[mov]
         move -= (move * normal).sum(axis=1, keepdims=True) * normal
         x[mov] += 0.5 * move
-    out[moving] = x[mov]
-    return out
+    return x[mov]
 
 
 class _TriangleIndex:
     """Bounding spheres (about the centroids) of a mesh's triangles in k-d trees, for crossing queries.
 
-    Two trees: the "small" spheres (radius at most 4 times the median) and the rest, each queried with
-    its own largest radius, so that a few long slivers do not make every query reach far. Holds the
-    arrays; the trees are rebuilt from them when unpickled (queries are thread-safe).
+    Two trees, the spheres of radius at most 4 times the median and the rest, each queried with its own
+    largest radius, so that a few long slivers do not make every query reach far (queries are
+    thread-safe; the trees pickle).
     """
 
     def __init__(self, vertices: np.ndarray, triangles: np.ndarray) -> None:
+        from scipy.spatial import cKDTree
+
         p = vertices[triangles]
         self.centre = p.mean(axis=1)
         self.radius = np.linalg.norm(p - self.centre[:, None, :], axis=2).max(axis=1)
-        cut = 4.0 * float(np.median(self.radius)) if len(self.radius) else 0.0
-        small = self.radius <= cut
-        self.groups = [np.flatnonzero(small), np.flatnonzero(~small)]
-        self._build()
-
-    def _build(self) -> None:
-        from scipy.spatial import cKDTree
-
-        self.trees = [(cKDTree(self.centre[g]), float(self.radius[g].max())) for g in self.groups if len(g)]
-        self.group_of_tree = [g for g in self.groups if len(g)]
-
-    def __getstate__(self) -> dict:
-        return {key: value for key, value in self.__dict__.items() if key not in ("trees", "group_of_tree")}
-
-    def __setstate__(self, state: dict) -> None:
-        self.__dict__.update(state)
-        self._build()
+        small = self.radius <= (4.0 * float(np.median(self.radius)) if len(self.radius) else 0.0)
+        groups = [g for g in (np.flatnonzero(small), np.flatnonzero(~small)) if len(g)]
+        self.trees = [(cKDTree(self.centre[g]), float(self.radius[g].max()), g) for g in groups]
 
     def near(
         self, centre: np.ndarray, radius: np.ndarray, groups: np.ndarray | None = None
     ) -> tuple[np.ndarray, np.ndarray]:
         """Pairs ``(query, triangle)`` whose bounding spheres overlap.
 
-        The queries come in ``groups`` (a label each: the patch of each new triangle): one ball query per
-        group and tree gathers the triangles near the group's bounding sphere, and the pairs are found
-        among those few with a small tree of them (thousands of ball queries into the whole mesh's tree
-        cost more than a few ball queries and a local pass).
+        One ball query per group of queries (``groups`` labels them: the patch of each new triangle) and
+        tree gathers the triangles near the group's bounding sphere; the pairs are found among those
+        with a small tree of them (cheaper than thousands of ball queries into the whole mesh's tree).
         """
         from scipy.spatial import cKDTree
 
         empty = np.zeros(0, dtype=np.int64)
         if len(centre) == 0:
             return empty, empty
-        if groups is None:
-            groups = np.zeros(len(centre), dtype=np.int64)
+        groups = np.zeros(len(centre), dtype=np.int64) if groups is None else groups
         found = [empty]
         for label in np.unique(groups):
             mine = groups == label
             low = (centre[mine] - radius[mine, None]).min(axis=0)
             high = (centre[mine] + radius[mine, None]).max(axis=0)
             middle, half = 0.5 * (low + high), 0.5 * float(np.linalg.norm(high - low))
-            for (tree, reach), members in zip(self.trees, self.group_of_tree):
+            for tree, reach, members in self.trees:
                 hits = tree.query_ball_point(middle, half + reach, return_sorted=False)
                 found.append(members[np.asarray(hits, dtype=np.int64)])
         candidates = np.unique(np.concatenate(found))
         if len(candidates) == 0:
             return empty, empty
-        local = cKDTree(self.centre[candidates])
         pairs = cKDTree(centre).sparse_distance_matrix(
-            local, float(radius.max() + self.radius[candidates].max()), output_type="ndarray"
+            cKDTree(self.centre[candidates]),
+            float(radius.max() + self.radius[candidates].max()),
+            output_type="ndarray",
         )
         qi, ti = pairs["i"].astype(np.int64), candidates[pairs["j"]]
         close = pairs["v"] <= radius[qi] + self.radius[ti]
@@ -1394,18 +1142,15 @@ class _TriangleIndex:
 
 
 def _crossings(
-    vertices: np.ndarray,
-    triangles: np.ndarray,
-    first_new: int,
-    index: _TriangleIndex | None = None,
-    groups: np.ndarray | None = None,
+    vertices: np.ndarray, triangles: np.ndarray, first_new: int, index: Any, groups: Any
 ) -> np.ndarray:
-    """For each new triangle, the triangles without a shared vertex it intersects (separating axes).
+    """For each new triangle, the number of triangles without a shared vertex it intersects.
 
-    Candidates are pairs whose bounding spheres (about the centroids) overlap: the input triangles from
-    ``index`` (a :class:`_TriangleIndex` of ``triangles[:first_new]``, built here if not given; queried
-    per patch when ``groups`` labels each new triangle's patch), the new ones among themselves; each pair is tested on the 17 axes that separate two disjoint triangles (two
-    normals, nine edge-edge cross products, six in-plane edge normals for coplanar pairs).
+    Candidates are the pairs whose bounding spheres overlap: input triangles from ``index`` (a
+    :class:`_TriangleIndex` of ``triangles[:first_new]``; if None, of the input triangles in the new
+    triangles' box), queried per patch when ``groups`` (or None) labels each new triangle's patch, and the
+    new ones among themselves. Each pair is tested on the 17 axes that separate two disjoint triangles
+    (two normals, nine edge-edge cross products, six in-plane edge normals for coplanar pairs).
     """
     from scipy.spatial import cKDTree
 
@@ -1418,7 +1163,6 @@ def _crossings(
     r_new = np.linalg.norm(p_new - c_new[:, None, :], axis=2).max(axis=1)
     if index is None:
         # the input triangles with a vertex in the new triangles' box grown by twice the largest of them
-        # (a per-vertex test: a pass over the vertices, not a copy of every triangle's corners)
         pad = 2.0 * r_new.max()
         low, high = p_new.reshape(-1, 3).min(0) - pad, p_new.reshape(-1, 3).max(0) + pad
         in_box = ((vertices >= low) & (vertices <= high)).all(axis=1)
@@ -1427,20 +1171,14 @@ def _crossings(
         ib = boxed[ib]
     else:
         ia, ib = index.near(c_new, r_new, groups)  # (new index, input triangle)
-    b_all = [ib]
-    a_all = [ia]
     pairs = cKDTree(c_new).query_pairs(2.0 * float(r_new.max()), output_type="ndarray").astype(np.int64)
-    if len(pairs):
-        close = np.linalg.norm(c_new[pairs[:, 0]] - c_new[pairs[:, 1]], axis=1) <= r_new[pairs].sum(axis=1)
-        a_all.append(pairs[close, 0])
-        b_all.append(first_new + pairs[close, 1])
-    a, b = new[np.concatenate(a_all)], np.concatenate(b_all)
+    close = np.linalg.norm(c_new[pairs[:, 0]] - c_new[pairs[:, 1]], axis=1) <= r_new[pairs].sum(axis=1)
+    a = new[np.concatenate([ia, pairs[close, 0]])]
+    b = np.concatenate([ib, first_new + pairs[close, 1]])
     ta, tb = triangles[a], triangles[b]
-    shared = (ta[:, :, None] == tb[:, None, :]).any(axis=(1, 2))
-    P, Q = vertices[ta[~shared]], vertices[tb[~shared]]  # (k, 3, 3)
-    a, b = a[~shared], b[~shared]
-    # boxes overlap (the boxes' axes are three of the separating candidates, and the cheapest: most
-    # sphere-overlapping pairs stop here)
+    apart = ~(ta[:, :, None] == tb[:, None, :]).any(axis=(1, 2))
+    P, Q, a, b = vertices[ta[apart]], vertices[tb[apart]], a[apart], b[apart]  # (k, 3, 3)
+    # bounding boxes overlap: three of the axes, the cheapest, where most pairs stop
     boxes = ((P.min(axis=1) <= Q.max(axis=1)) & (Q.min(axis=1) <= P.max(axis=1))).all(axis=1)
     P, Q, a, b = P[boxes], Q[boxes], a[boxes], b[boxes]
     if len(a) == 0:
@@ -1449,8 +1187,7 @@ def _crossings(
     eQ = Q[:, [1, 2, 0]] - Q
     nP = _cross(eP[:, 0], eP[:, 1])
     nQ = _cross(eQ[:, 0], eQ[:, 1])
-    # every axis at once, (17, k, 3): the two normals, the nine edge-edge crosses, the six in-plane normals
-    axes = np.concatenate(
+    axes = np.concatenate(  # (17, k, 3)
         [
             np.stack([nP, nQ]),
             _cross(eP[None, :, :, :], eQ.transpose(1, 0, 2)[:, :, None, :])
@@ -1468,38 +1205,32 @@ def _crossings(
     ax, ay, az = ax * inv, ay * inv, az * inv
 
     def extent(T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        # the projections of the three corners on every axis (elementwise: the size-3 reductions and
-        # einsum over these shapes were most of the check's time)
+        # the corners' projections on every axis, elementwise (size-3 reductions and einsum were slower)
         x = [ax * T[:, c, 0] + ay * T[:, c, 1] + az * T[:, c, 2] for c in range(3)]
         return np.minimum(np.minimum(x[0], x[1]), x[2]), np.maximum(np.maximum(x[0], x[1]), x[2])
 
     p_low, p_high = extent(P)
     q_low, q_high = extent(Q)
-    gap = np.maximum(q_low - p_high, p_low - q_high)
     # strictly apart: coplanar pairs project to one point on their common normal (gap 0)
-    separated = (usable & (gap > 1e-12 * scale)).any(axis=0)
-    hit = ~separated
+    hit = ~(usable & (np.maximum(q_low - p_high, p_low - q_high) > 1e-12 * scale)).any(axis=0)
     np.add.at(result, a[hit] - first_new, 1.0)
-    both_new = hit & (b >= first_new)
-    np.add.at(result, b[both_new] - first_new, 1.0)
+    np.add.at(result, b[hit & (b >= first_new)] - first_new, 1.0)
     return result
 
 
-def _no_fold(uniform: np.ndarray, again: np.ndarray, unknown: np.ndarray, new_tris: np.ndarray) -> bool:
-    """Whether the re-weighted solution keeps every new triangle facing as in the uniform one, and stays
-    within the uniform patch's size of it (obtuse slivers can make cotangent weights ill-conditioned:
-    then the uniform solution is kept)."""
-    moved = uniform.copy()
-    moved[unknown] = again
-
-    def normals(x):
-        p = x[new_tris]
-        return _cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
-
-    if ((normals(uniform) * normals(moved)).sum(axis=1) <= 0).any():
-        return False
-    size = np.linalg.norm(np.ptp(uniform[new_tris.ravel()], axis=0))
-    return float(np.abs(again - uniform[unknown]).max()) < 0.1 * size
+def _no_fold(x: np.ndarray, again: np.ndarray, new_tris: np.ndarray) -> bool:
+    """Whether ``again``, new positions of the last ``len(again)`` vertices of ``x``, keeps every new
+    triangle facing as in ``x`` and within a tenth of the patch's size (obtuse slivers can make
+    cotangent weights ill-conditioned)."""
+    p = x[new_tris]
+    q = p.copy()
+    moved = new_tris >= len(x) - len(again)
+    q[moved] = again[new_tris[moved] - (len(x) - len(again))]
+    facing = (
+        _cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]) * _cross(q[:, 1] - q[:, 0], q[:, 2] - q[:, 0])
+    ).sum(axis=1)
+    size = np.linalg.norm(np.ptp(p.reshape(-1, 3), axis=0))
+    return bool((facing > 0).all()) and float(np.abs(again - x[len(x) - len(again) :]).max()) < 0.1 * size
 
 
 def fill_holes(
@@ -1515,64 +1246,51 @@ def fill_holes(
 ) -> MeshT:
     """Close the mesh's holes with patches faired as least-squares meshes; a new mesh.
 
-    Each chosen hole (a closed loop of boundary edges) is triangulated by
-    Liepa's minimum-weight dynamic programme (largest dihedral angle, then
-    area), refined to the density of the edges around it with Delaunay flips,
-    and its new vertices are placed by minimizing, with the surrounding mesh
+    Each chosen hole (a closed loop of boundary edges) is triangulated by Liepa's minimum-weight
+    dynamic programme (largest dihedral angle, then area), refined to the density of the edges around
+    it with Delaunay flips, and its new vertices are placed by minimizing, with the surrounding mesh
     fixed (Sorkine and Cohen-Or 2004, section 6, interpolated anchors):
 
     * ``continuity=0``: ``sum |x_i - x_j|^2`` over edges (harmonic, a membrane);
     * ``continuity=1``: ``||L x||^2``, the LS-mesh energy (eq. 3), bi-Laplacian;
-    * ``continuity=2``: ``(L x)^T K (L x)``, tri-Laplacian: the Laplacian
-      itself varies smoothly, so curvature continues across the loop,
+    * ``continuity=2``: ``(L x)^T K (L x)``, tri-Laplacian: the Laplacian itself varies smoothly, so
+      curvature continues across the loop,
 
-    with ``L = I - D^-1 A`` the uniform Laplacian of eq. 1 (sign: ``(L x)_i``
-    is ``x_i`` minus the mean of its neighbours) and ``K = D - A``. Only the new
-    vertices are unknowns: one sparse system the size of the patches, with
-    ``continuity + 1`` rings of the input fixed around each loop. With
-    ``weights="cotangent"`` (default) the uniform solution is followed by one
-    more solve with cotangent weights read off it (``K = D - W``,
-    ``L = M^-1 K``, ``M`` the vertex areas): closer to the true surface on
-    irregular meshes, and stable because the weights come from a fair
-    embedding, not from the flat patch.
+    with ``L = I - D^-1 A`` the uniform Laplacian of eq. 1 and ``K = D - A``; only the new vertices are
+    unknowns, ``continuity + 1`` rings of the input fixed around each loop. ``weights="cotangent"``
+    then solves again with cotangent weights read off that fair solution (``K = D - W``, ``L = M^-1 K``,
+    ``M`` the vertex areas), closer to the true surface on irregular meshes.
 
     Parameters
     ----------
     mesh : open3d.geometry.TriangleMesh, open3d.t.geometry.TriangleMesh or (vertices, triangles)
-        Any triangle mesh: non-manifold edges and vertices, several
-        components, pinched boundaries and holes touching at a vertex are
-        handled (a loop through a vertex more than once is filled as separate
-        pieces).
+        Any triangle mesh: non-manifold edges and vertices, several components, pinched boundaries and
+        holes touching at a vertex are handled (a loop through a vertex twice is filled in pieces).
     max_hole_edges : int >= 3, optional
         Fill only holes with at most this many boundary edges.
     max_hole_diameter : float > 0, optional
-        Fill only holes whose diameter (largest distance between two loop
-        vertices) is at most this.
+        Fill only holes whose diameter (largest distance between two loop vertices) is at most this.
     continuity : {0, 1, 2}
         Smoothness across the loop, see above. Default 2.
     density : float >= 0
-        New vertices are spaced like the surrounding edges divided by
-        ``density``; ``0`` adds none (the minimum-weight triangulation alone).
+        New vertices are spaced like the surrounding edges divided by ``density``; ``0`` adds none
+        (the minimum-weight triangulation alone).
     weights : {"cotangent", "uniform"}
-        ``"uniform"``: the uniform solve alone; ``"cotangent"``: then one
-        re-weighted solve (see above). Default ``"cotangent"``.
+        ``"uniform"``: the uniform solve alone; ``"cotangent"``: then one re-weighted solve (see above).
     fill_border : bool
-        Also fill each open component's outer border (its longest loop when
-        ``perimeter**2 > 4 area`` of the component, see :data:`BORDER_RATIO`): a
-        scan's silhouette, a lone island's rim. Default ``False``: left open.
+        Also fill each open component's outer border (see :data:`BORDER_RATIO`): a scan's silhouette,
+        a lone island's rim. Default ``False``: left open.
     progress : bool
         Show a tqdm bar over the holes.
 
     Returns
     -------
     Mesh of the kind given
-        The input's vertices and triangles unchanged and in order, followed by
-        the new ones. New triangles are wound like their neighbours. Vertex
-        colours are kept and interpolated harmonically for new vertices (for
-        tensor meshes, every float per-vertex attribute but normals); normals
-        are recomputed if the input had them; per-triangle and per-corner
-        attributes (triangle UVs, material ids, tensor triangle attributes) are
-        dropped with an :class:`O3DLSMeshWarning`.
+        The input's vertices and triangles unchanged and in order, then the new ones, wound like their
+        neighbours. Vertex colours are kept and interpolated harmonically for new vertices (for tensor
+        meshes, every float per-vertex attribute but normals); normals are recomputed if the input had
+        them; per-triangle and per-corner attributes (triangle UVs, material ids, tensor triangle
+        attributes) are dropped with an :class:`O3DLSMeshWarning`.
 
     Raises
     ------
@@ -1590,27 +1308,21 @@ def fill_holes(
 
     Notes
     -----
-    Loops of more than :data:`DP_MAX_EDGES` edges are cut by chords before the
-    O(k^3) dynamic programme. Every result is checked for new triangles that
-    cross the mesh (separating-axis tests against the triangles near them): a
-    hole whose patch crosses is faired again with the next lower continuity
-    (uniform weights, then continuity 1, 0, then left as refined), per hole;
-    :attr:`FilledHoles.continuity` says which one each hole got. If none is
-    free of crossings (the surface next to the hole is itself folded), the
-    hole is left open with an :class:`O3DLSMeshWarning` (a crossing patch
-    would be a broken mesh). A system that is
-    numerically singular is skipped the same way.
+    Loops of more than :data:`DP_MAX_EDGES` edges are cut by chords before the O(k^3) dynamic
+    programme. Every result is checked for new triangles that cross the mesh (separating-axis tests
+    against the triangles near them): a hole whose patch crosses is faired again, per hole, with uniform
+    weights, then each lower continuity, then left as refined (:attr:`FilledHoles.continuity` says which
+    one each hole got). If none is free of crossings (the surface next to the hole is itself folded),
+    or a system is numerically singular, the hole is left open with an :class:`O3DLSMeshWarning`.
 
-    The outer border of a component is never filled by default (a scan's
-    silhouette). A loop through a vertex twice (two holes touching at a
-    vertex: the boundary of the surface turns within each fan) is filled as
-    its simple pieces. Non-manifold edges and vertices elsewhere are left as
-    they are; a chord that already is a mesh edge is never used.
+    A component's outer border is not filled by default (a scan's silhouette). A loop through a vertex
+    twice (two holes touching at a vertex) is filled as its simple pieces. Non-manifold edges and
+    vertices elsewhere are left as they are; a chord that already is a mesh edge is never used.
 
     References
     ----------
-    P. Liepa, Filling Holes in Meshes, SGP 2003. O. Sorkine and D. Cohen-Or,
-    Least-squares Meshes, SMI 2004.
+    P. Liepa, Filling Holes in Meshes, SGP 2003. O. Sorkine and D. Cohen-Or, Least-squares Meshes,
+    SMI 2004.
 
     Examples
     --------
@@ -1632,19 +1344,12 @@ def fill_holes(
         density=density,
         weights=weights,
         fill_border=fill_border,
-        interpolation=_has_vertex_data(data),
+        # new vertices interpolate the per-vertex data: colours, float tensor attributes
+        interpolation=(data.kind == "legacy" and data.source.has_vertex_colors())
+        or (data.kind == "tensor" and any(key not in ("positions", "normals") for key in data.source.vertex)),
         progress=progress,
     )
     return _rebuild(data, result)
-
-
-def _has_vertex_data(data: Any) -> bool:
-    """Whether the mesh carries per-vertex data that new vertices interpolate (colours, tensor attributes)."""
-    if data.kind == "legacy":
-        return data.source.has_vertex_colors()
-    if data.kind == "tensor":
-        return any(key not in ("positions", "normals") for key in data.source.vertex)
-    return False
 
 
 def _rebuild(data: Any, result: FilledHoles) -> Any:
@@ -1656,9 +1361,7 @@ def _rebuild(data: Any, result: FilledHoles) -> Any:
         return out
     from ._o3d import open3d
 
-    o3d = open3d()
-    src = data.source
-    n = len(data.vertices)
+    o3d, src, n = open3d(), data.source, len(data.vertices)
 
     def extend(values: np.ndarray) -> np.ndarray:
         values = np.asarray(values, dtype=np.float64).reshape(n, -1)
@@ -1667,25 +1370,22 @@ def _rebuild(data: Any, result: FilledHoles) -> Any:
     dropped = []
     if data.kind == "legacy":
         if src.has_vertex_colors():
-            colors = np.clip(extend(np.asarray(src.vertex_colors)), 0.0, 1.0)
-            out.vertex_colors = o3d.utility.Vector3dVector(colors)
-        if src.has_triangle_uvs():
-            dropped.append("triangle_uvs")
-        if src.has_triangle_material_ids():
-            dropped.append("triangle_material_ids")
+            out.vertex_colors = o3d.utility.Vector3dVector(
+                np.clip(extend(np.asarray(src.vertex_colors)), 0.0, 1.0)
+            )
+        dropped = [
+            name for name in ("triangle_uvs", "triangle_material_ids") if getattr(src, f"has_{name}")()
+        ]
     else:
-        device = src.vertex.positions.device
         for key in src.vertex:
+            value = src.vertex[key]
             if key in ("positions", "normals"):
                 continue
-            value = src.vertex[key]
-            if value.dtype in (o3d.core.float32, o3d.core.float64):
-                arr = extend(value.cpu().numpy())
-                out.vertex[key] = o3d.core.Tensor(
-                    arr.reshape((-1,) + tuple(value.shape[1:])), device=device
-                ).to(value.dtype)
-            else:
+            if value.dtype not in (o3d.core.float32, o3d.core.float64):
                 dropped.append(f"vertex.{key}")
+                continue
+            arr = extend(value.cpu().numpy()).reshape((-1,) + tuple(value.shape[1:]))
+            out.vertex[key] = o3d.core.Tensor(arr, device=src.vertex.positions.device).to(value.dtype)
         dropped += [f"triangle.{key}" for key in src.triangle if key not in ("indices", "normals")]
     if dropped:
         warnings.warn(

@@ -24,7 +24,6 @@ from o3d_lsmesh.hole_filling import (
     HoleFiller,
     _crossings,
     _min_angle,
-    _minimum_weight_triangulation,
     _minimum_weight_triangulations,
     _rings,
     _TriangleIndex,
@@ -32,6 +31,14 @@ from o3d_lsmesh.hole_filling import (
     find_holes,
 )
 from o3d_lsmesh.topology import boundary_loops
+
+
+def _minimum_weight_triangulation(points, outer, forbidden):
+    """One loop through the batched dynamic programme."""
+    return _minimum_weight_triangulations(
+        points[None], outer[None], None if forbidden is None else forbidden[None]
+    )[0]
+
 
 SCANS = Path(os.environ.get("O3D_LSMESH_SCANS", REPO.parent / "shared" / "data" / "scans"))
 
@@ -379,8 +386,8 @@ def test_crossing_check_matches_plain_reference(seed):
     T = np.array([rng.choice(45, 3, replace=False) for _ in range(60)])
     expected = reference_crossings(V, T, 40)
     assert expected.sum() > 0
-    assert np.array_equal(_crossings(V, T, 40), expected)
-    assert np.array_equal(_crossings(V, T, 40, _TriangleIndex(V, T[:40])), expected)
+    assert np.array_equal(_crossings(V, T, 40, None, None), expected)
+    assert np.array_equal(_crossings(V, T, 40, _TriangleIndex(V, T[:40]), None), expected)
     patches = rng.integers(0, 3, len(T) - 40)  # queried patch by patch
     assert np.array_equal(_crossings(V, T, 40, _TriangleIndex(V, T[:40]), patches), expected)
 
@@ -431,6 +438,23 @@ def test_sphere_hole_close_to_the_sphere_and_continuity_order():
     # measured: 0.72, 0.084, 0.012 h (harmonic is flat; the tri-Laplacian keeps the curvature)
     assert errors[2] < errors[1] < errors[0]
     assert errors[2] < 0.05
+
+
+@pytest.mark.parametrize("continuity", [0, 1, 2])
+def test_dense_fairing_solve_matches_the_sparse_gateway(monkeypatch, continuity):
+    # small patches are solved with a dense Cholesky; the sparse path (SPDSolver) is the reference
+    import o3d_lsmesh.hole_filling as hole_filling
+
+    V, T = icosphere(3)
+    h = mean_edge(V, T)
+    Vh, Th, _ = cut_disk(V, T, 0, 4 * h)
+    dense = fill_holes_arrays(Vh, Th, continuity=continuity, interpolation=True)
+    assert 0 < len(dense.vertices) - len(Vh) <= hole_filling._DENSE_UNKNOWNS
+    monkeypatch.setattr(hole_filling, "_DENSE_UNKNOWNS", -1)
+    sparse = fill_holes_arrays(Vh, Th, continuity=continuity, interpolation=True)
+    assert np.array_equal(dense.triangles, sparse.triangles)
+    assert np.allclose(dense.vertices, sparse.vertices, rtol=0, atol=1e-9)
+    assert np.allclose(dense.interpolation.toarray(), sparse.interpolation.toarray(), rtol=0, atol=1e-9)
 
 
 def test_holes_filled_together_as_each_alone():
