@@ -215,19 +215,26 @@ class MeshHierarchy:
         removed = self.removed[i]
         if len(removed) == 0:
             return out
-        weights, transposed = _umbrella_weights(rings)
-        if self.independent:
-            out[removed] = weights[removed] @ out
+        weights, scale, on_boundary = _umbrella_weights(rings)
+        rows = weights[removed]  # the split vertices' rows
+        if self.independent:  # their neighbours are all kept
+            out[removed] = rows @ out
         else:
             kept = np.ones(len(out), dtype=bool)
             kept[removed] = False
             out[removed] = _harmonic_fill(weights, out, removed, kept)
-        umbrella = weights @ out - out
-        second = weights @ umbrella - umbrella
-        # nu - 1 = sum_j w_ij w_ji, slot by slot on the rings' pattern (sorted columns, as a sparse product sums)
-        transposed *= weights.data
-        nu = 1.0 + np.add.reduceat(transposed, rings.indptr[:-1])[removed]
-        out[removed] -= second[removed] / nu[:, None]
+        umbrella = weights @ out
+        umbrella -= out
+        second = rows @ umbrella
+        second -= umbrella[removed]
+        # nu - 1 = sum_j w_ij w_ji with w_ji = scale_j where it is not zero: inside, the 1-ring's interior
+        # vertices (a boundary vertex reads the curve only); on a boundary, the curve's two vertices
+        if on_boundary is None:
+            nu = rows @ scale
+        else:
+            nu = np.where(on_boundary[removed], rows @ scale, rows @ np.where(on_boundary, 0.0, scale))
+        nu += 1.0
+        out[removed] -= second / nu[:, None]
         return out
 
     # ---------------------------------------------------------------- internals
@@ -268,34 +275,30 @@ def _single_slots(rings: VertexRings) -> np.ndarray:
     return single
 
 
-def _umbrella_weights(rings: VertexRings) -> tuple[sp.csr_matrix, np.ndarray]:
+def _umbrella_weights(rings: VertexRings) -> tuple[sp.csr_matrix, np.ndarray, np.ndarray | None]:
     """Row-stochastic ``W`` of the umbrella operator on the rings' pattern (zero diagonal): the 1-ring
-    inside, the boundary neighbours (edges of one triangle) on a boundary; and ``W^T`` on the same slots.
-
-    Every row holds its diagonal, so row sums are ``reduceat`` over ``indptr``.
+    inside, the boundary neighbours (edges of one triangle) on a boundary; with each row's weight
+    ``(n,)`` and the boundary vertices ``(n,) bool`` (None on a mesh without edges of one triangle).
     """
-    n, indptr, indices = rings.n, rings.indptr, rings.indices
-    use = np.ones(len(indices), dtype=bool)
-    use[rings.diagonal] = False
+    n, indptr = rings.n, rings.indptr
     degree = rings.valence.astype(np.float64)
-    back = None  # where w_ji is non-zero for the slot (i, j): everywhere on a mesh without boundary
+    counts = np.diff(indptr)
+    on_boundary = None
     if rings.boundary.any():
         single = _single_slots(rings)
         boundary_count = np.add.reduceat(single, indptr[:-1], dtype=np.int64)
-        on_boundary = boundary_count > 0
-        np.copyto(use, single, where=np.repeat(on_boundary, np.diff(indptr)))
-        degree[on_boundary] = boundary_count[on_boundary]
-        back = np.where(on_boundary[indices], single, True)
+        if boundary_count.any():
+            on_boundary = boundary_count > 0
+            degree[on_boundary] = boundary_count[on_boundary]
     scale = np.divide(1.0, degree, out=np.zeros(n), where=degree > 0)
-    data = np.repeat(scale, np.diff(indptr))
-    data *= use
+    data = np.repeat(scale, counts)
+    data[rings.diagonal] = 0.0
+    if on_boundary is not None:  # a boundary vertex's row reads its curve neighbours only
+        np.copyto(data, 0.0, where=np.repeat(on_boundary, counts) & ~single)
     weights = sp.csr_matrix((n, n), dtype=np.float64)
-    weights.data, weights.indices, weights.indptr = data, indices, indptr
+    weights.data, weights.indices, weights.indptr = data, rings.indices, indptr
     weights.has_canonical_format = True  # the rings' pattern: sorted columns, no duplicates
-    transposed = scale[indices]
-    if back is not None:
-        transposed *= back
-    return weights, transposed
+    return weights, scale, on_boundary
 
 
 def _harmonic_fill(
