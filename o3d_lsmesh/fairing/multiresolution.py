@@ -12,7 +12,7 @@ from .._validate import as_choice, as_count
 from ..hierarchy.hierarchy import (
     MeshHierarchy,
     boundary_degree,
-    build_hierarchy_arrays,
+    collapse_hierarchy,
     read_hierarchy_mesh,
 )
 from ..topology import VertexRings, boundary_curves, vertex_rings
@@ -201,7 +201,7 @@ def multiresolution_fairing(
     method : {"local", "global"}, keyword-only
         Constrained fairing solver (see ``constrained_fairing``).
     progress : bool, keyword-only
-        Show a tqdm bar over the levels.
+        Show tqdm bars: the hierarchy build (when built here), then the levels.
 
     Returns
     -------
@@ -233,7 +233,15 @@ def multiresolution_fairing(
     # when the hierarchy is built here, on the welded surface
     data = read_hierarchy_mesh(mesh, weld=hierarchy is None)
     if hierarchy is None:
-        hierarchy = build_hierarchy_arrays(data.vertices, data.triangles, max_levels=level, min_vertices=4)
+        hierarchy = collapse_hierarchy(  # the arrays are read_mesh's checked copies
+            data.vertices,
+            data.triangles,
+            alpha=1.0,
+            beta=0.01,
+            min_vertices=4,
+            max_levels=level,
+            progress=bool(progress),
+        )
         if level >= len(hierarchy):
             raise ValueError(
                 f"level must be < {len(hierarchy)} (the levels build_hierarchy reaches for this mesh), got {level}"

@@ -380,6 +380,32 @@ def build_hierarchy_arrays(
         max_levels = as_count(max_levels, name="max_levels")
     progress = check_progress(progress)
     vertices, triangles = mesh_arrays(vertices, triangles)
+    return collapse_hierarchy(
+        vertices,
+        triangles,
+        alpha=alpha,
+        beta=beta,
+        min_vertices=min_vertices,
+        max_levels=max_levels,
+        progress=bool(progress),
+        mesh_kind=mesh_kind,
+        tensor_format=tensor_format,
+    )
+
+
+def collapse_hierarchy(
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    *,
+    alpha: float,
+    beta: float,
+    min_vertices: int,
+    max_levels: int | None,
+    progress: bool,
+    mesh_kind: str = "arrays",
+    tensor_format: tuple = (),
+) -> MeshHierarchy:
+    """:func:`build_hierarchy_arrays` of checked arrays and options (:func:`read_hierarchy_mesh`'s, kept)."""
     n0 = len(vertices)
     total = max(n0 - min_vertices, 0)  # at most: a level may find no valid collapse before
     with progress_bar(progress, total=total, desc="mesh hierarchy", unit="vertex") as bar:
