@@ -25,10 +25,11 @@ import numpy as np
 import scipy.sparse as sp
 from _common import load_mesh, markdown_table, write_markdown
 
-from o3d_lsmesh.fairing.multiresolution import _fair_level, multiresolution_fairing_arrays
+from o3d_lsmesh.fairing.constrained import constrained_fairing_arrays
+from o3d_lsmesh.fairing.multiresolution import _is_simple, multiresolution_fairing_arrays
 from o3d_lsmesh.hierarchy.hierarchy import build_hierarchy_arrays
 from o3d_lsmesh.metrics import signed_volume
-from o3d_lsmesh.topology import boundary_halfedges
+from o3d_lsmesh.topology import boundary_halfedges, vertex_rings
 
 LEVELS = range(7)
 ITERATIONS = 5  # number_of_iterations, the default
@@ -50,8 +51,12 @@ def _previous_default(h, level):
     if level == 0:
         return P
     remaining = ITERATIONS * (level + 1)
+    F = h.triangles[0]
+    simple = _is_simple(vertex_rings(F, len(P)))  # a pinched boundary is held
     while remaining > 0:
-        P = _fair_level(P, h.triangles[0], min(remaining, ITERATIONS), "local")
+        P = constrained_fairing_arrays(
+            P, F, min(remaining, ITERATIONS), method="local", smooth_boundary=simple
+        )
         remaining -= ITERATIONS
     return P
 

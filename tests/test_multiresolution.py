@@ -332,3 +332,94 @@ def test_holes_stay_where_constrained_fairing_of_the_input_puts_them(method):
     # split positions): the holes shrink, which the rounds on M_0 used to continue
     P, _ = multiresolution_fairing((noisy, F), 6, hierarchy=h, method=method, final_iterations=0)
     assert length(P) < 0.97 * length(plain), (length(P), length(plain), length(V))
+
+
+# ----------------------------------------------------- the whole method against plain pieces (issue 16)
+
+
+def _plain_rings(F, n):
+    """Per vertex, in plain loops: its 1-ring, and the vertices across its edges of one triangle (its rim)."""
+    count = {}
+    for t in F.tolist():
+        for a, b in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0])):
+            count[min(a, b), max(a, b)] = count.get((min(a, b), max(a, b)), 0) + 1
+    ring, rim = [set() for _ in range(n)], [set() for _ in range(n)]
+    for (a, b), k in count.items():
+        ring[a].add(b)
+        ring[b].add(a)
+        if k == 1:
+            rim[a].add(b)
+            rim[b].add(a)
+    return ring, rim
+
+
+def _plain_umbrella_neighbours(F, n):
+    """The vertices each vertex's umbrella averages: the 1-ring inside, the rim on a boundary."""
+    ring, rim = _plain_rings(F, n)
+    return [sorted(rim[v] or ring[v]) for v in range(n)]
+
+
+def _plain_refine(h, i, coarse):
+    """Section 4.2's split of level ``i`` in plain loops, the boundary rule included (an independent set):
+    each split vertex at the mean of its umbrella neighbours, then moved by ``-U^2(x) / nu`` with
+    ``nu = 1 + sum_j w_xj w_jx``."""
+    parent, removed = h.parents[i], h.removed[i].tolist()
+    near = _plain_umbrella_neighbours(h.triangles[i - 1], len(parent))
+    out = coarse[parent]
+    for x in removed:
+        out[x] = out[near[x]].mean(axis=0)
+    umbrella = np.array(
+        [out[near[v]].mean(axis=0) - out[v] if near[v] else np.zeros(3) for v in range(len(out))]
+    )
+    moved = out.copy()
+    for x in removed:
+        second = umbrella[near[x]].mean(axis=0) - umbrella[x]
+        nu = 1 + sum(1 / len(near[x]) / len(near[j]) for j in near[x] if x in near[j])
+        moved[x] = out[x] - second / nu
+    return moved
+
+
+def _plain_multiresolution(V, F, h, level, k, final, method):
+    """The method as its docstring states it, from public pieces: constrained fairing of every level (a fresh
+    operator per call) and the plain-loop split; then on ``M_0`` the boundary where constrained fairing of the
+    input puts it, and ``final`` iterations in rounds of ``k``, a fresh fairing (re-taken barycenters) per round."""
+    from o3d_lsmesh.fairing.constrained import constrained_fairing_arrays
+
+    P = V[h.representatives[level]]
+    for i in range(level, 0, -1):
+        P = constrained_fairing_arrays(P, h.triangles[i], k, method=method)
+        P = _plain_refine(h, i, P)
+    boundary = [v for v, rim in enumerate(_plain_rings(F, len(V))[1]) if rim]
+    P[boundary] = constrained_fairing_arrays(V, F, k, method=method)[boundary]
+    while final > 0:
+        P = constrained_fairing_arrays(P, F, min(final, k), method=method, smooth_boundary=False)
+        final -= k
+    return P
+
+
+@pytest.mark.parametrize(
+    ("mesh", "method", "k", "final"),
+    [
+        ("rippled", "local", 5, None),
+        ("open", "local", 5, None),
+        ("open", "local", 3, 7),
+        ("open", "global", 2, None),
+    ],
+)
+def test_equals_the_method_assembled_from_plain_pieces(rippled, mesh, method, k, final):
+    if mesh == "rippled":
+        (V, F), h = rippled
+    else:
+        V, F = _open_blob()
+        V = V + np.random.default_rng(4).normal(scale=0.01, size=V.shape)
+        h = build_hierarchy((V, F), max_levels=3, min_vertices=4)
+    level = 3
+    expected = _plain_multiresolution(V, F, h, level, k, k * (level + 1) if final is None else final, method)
+    out, _ = multiresolution_fairing(
+        (V, F), level, hierarchy=h, number_of_iterations=k, final_iterations=final, method=method
+    )
+    assert np.abs(out - V).max() > 1e-3  # it moved
+    if mesh == "open":  # the boundary moved too, as level 0 moves it
+        boundary = [v for v, rim in enumerate(_plain_rings(F, len(V))[1]) if rim]
+        assert len(boundary) > 20 and np.abs(out[boundary] - V[boundary]).max() > 1e-3
+    np.testing.assert_allclose(out, expected, rtol=0, atol=1e-12)

@@ -192,11 +192,14 @@ def _fair(
     return positions
 
 
-def _fair_local(positions, triangles, number_of_iterations, smooth_boundary, reimpose_every, progress):
+def _fair_local(
+    positions, triangles, number_of_iterations, smooth_boundary, reimpose_every, progress, rings=None
+):
     # the paper's local operator (eq. 7): one pass over the corners grouped by vertex gives the
-    # 1-ring pattern, the valences and the boundary; the edge list is sorted only for a boundary walk
+    # 1-ring pattern, the valences and the boundary; the edge list is sorted only for a boundary walk.
+    # ``rings``: the mesh's VertexRings when the caller has them (multiresolution fairing), spent here
     n = len(positions)
-    rings = vertex_rings(triangles, n)
+    rings = vertex_rings(triangles, n) if rings is None else rings
     curves = (
         boundary_curves(triangles, n, edges=edge_structure(triangles, n))
         if smooth_boundary and rings.boundary.any()

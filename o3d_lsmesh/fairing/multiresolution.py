@@ -11,12 +11,13 @@ from .._progress import check_progress, progress_bar
 from .._validate import as_choice, as_count
 from ..hierarchy.hierarchy import (
     MeshHierarchy,
-    build_hierarchy_arrays,
+    boundary_degree,
+    collapse_hierarchy,
     read_hierarchy_mesh,
 )
-from ..topology import boundary_halfedges
-from .boundary_curve import smooth_boundary_curves_arrays
-from .constrained import FAIRING_METHODS, constrained_fairing_arrays
+from ..topology import VertexRings, boundary_curves, vertex_rings
+from .boundary_curve import curve_operator, run_curve_iterations
+from .constrained import FAIRING_METHODS, _fair_local, _plain_pages, constrained_fairing_arrays
 
 if TYPE_CHECKING:
     from .._types import MeshT
@@ -33,15 +34,22 @@ def multiresolution_fairing_arrays(
     method: str = "local",
     progress: bool = False,
 ) -> np.ndarray:
-    """Array core of :func:`multiresolution_fairing`: faired ``(n_0, 3)`` positions of level 0."""
+    """Array core of :func:`multiresolution_fairing`: faired ``(n_0, 3)`` positions of level 0.
+
+    Every level's 1-ring pattern is built once (:func:`~o3d_lsmesh.topology.vertex_rings`) and serves
+    the split into that level, its fairing and, on ``M_0``, the boundary; the rounds on ``M_0`` run on
+    one fairing operator, their targets re-taken between rounds.
+    """
+    triangles = hierarchy.triangles
+    rings = vertex_rings(triangles[level], len(hierarchy.representatives[level]))
+    positions = hierarchy.vertices[hierarchy.representatives[level]]  # a copy: fairing writes to it
     if level == 0:
-        return _fair_level(hierarchy.vertices, hierarchy.triangles[0], number_of_iterations, method)
-    positions = hierarchy.level_arrays(level)[0]
+        return _fair_level(positions, triangles[0], rings, number_of_iterations, method)
     with progress_bar(progress, total=level, desc="multiresolution fairing", unit="level") as bar:
         for i in range(level, 0, -1):
-            positions = hierarchy.refine(
-                i, _fair_level(positions, hierarchy.triangles[i], number_of_iterations, method)
-            )
+            positions = _fair_level(positions, triangles[i], rings, number_of_iterations, method)
+            rings = vertex_rings(triangles[i - 1], len(hierarchy.representatives[i - 1]))
+            positions = hierarchy._refine(i, positions, rings)
             bar.update(1)
     # The splits leave the facets of the coarse triangulation on M_0, and one fairing of M_0 cannot remove
     # them: it holds the barycenters of its triangles where the splits put them (more iterations of it
@@ -55,35 +63,48 @@ def multiresolution_fairing_arrays(
     # clean one at level 6, its 2000-vertex copy's to 0.22), and the stretched triangles at the rim
     # outweighed the smoothing in the Laplacian spectrum. They are put where constrained fairing of the
     # input puts them (section 3.3, the input's midpoints: what level 0 gives) and held there.
-    triangles = hierarchy.triangles[0]
-    boundary, placed = _input_boundary(hierarchy.vertices, triangles, number_of_iterations, method)
+    boundary, placed = _input_boundary(hierarchy.vertices, triangles[0], rings, number_of_iterations, method)
     positions[boundary] = placed
-    while remaining > 0:
-        step = min(remaining, number_of_iterations) if number_of_iterations else remaining
-        positions = _fair_level(positions, triangles, step, method, smooth_boundary=False)
-        remaining -= step
-    return positions
+    # the connectivity is fixed: one operator for all rounds ("global" re-takes its targets at every solve)
+    rounds = method == "local" and 0 < number_of_iterations < remaining
+    return _fair_level(
+        positions,
+        triangles[0],
+        rings,
+        remaining,
+        method,
+        smooth_boundary=False,
+        reimpose_every=number_of_iterations if rounds else None,
+    )
 
 
 def _fair_level(
     positions: np.ndarray,
     triangles: np.ndarray,
+    rings: VertexRings,
     iterations: int,
     method: str,
     *,
     smooth_boundary: bool = True,
+    reimpose_every: int | None = None,
 ) -> np.ndarray:
-    return constrained_fairing_arrays(
-        positions,
-        triangles,
-        iterations,
-        method=method,
-        smooth_boundary=smooth_boundary and _simple_boundary(triangles, len(positions)),
-    )
+    """Constrained fairing of a level, ``positions (n, 3)`` overwritten; ``"local"`` spends the rings' slot pairs.
+
+    A pinched boundary (a level of a fast-simplification hierarchy can have one) is held fixed.
+    """
+    if iterations == 0:
+        return positions
+    smooth_boundary = smooth_boundary and _is_simple(rings)
+    if method == "global":
+        return constrained_fairing_arrays(
+            positions, triangles, iterations, method="global", smooth_boundary=smooth_boundary
+        )
+    with _plain_pages():
+        return _fair_local(positions, triangles, iterations, smooth_boundary, reimpose_every, False, rings)
 
 
 def _input_boundary(
-    vertices: np.ndarray, triangles: np.ndarray, iterations: int, method: str
+    vertices: np.ndarray, triangles: np.ndarray, rings: VertexRings, iterations: int, method: str
 ) -> tuple[np.ndarray, np.ndarray]:
     """The boundary vertices ``(b,)`` (sorted) and the positions ``(b, 3)`` ``_fair_level`` gives them on the input.
 
@@ -91,27 +112,24 @@ def _input_boundary(
     with the input's midpoints (``"local"``), or re-taken from the current curve at every step
     (``"global"``); a pinched boundary is held.
     """
-    halfedges = boundary_halfedges(triangles, len(vertices))  # one pass serves both questions
-    boundary = np.unique(halfedges)
-    if not _is_simple(halfedges, len(vertices)):
+    degree = boundary_degree(rings)
+    boundary = np.flatnonzero(degree)
+    if len(boundary) == 0 or not _is_simple(rings, degree):
         return boundary, vertices[boundary]
-    smoothed = smooth_boundary_curves_arrays(
-        vertices, triangles, iterations, reimpose_every=1 if method == "global" else None
+    smoothed = run_curve_iterations(
+        vertices,
+        curve_operator(boundary_curves(triangles, len(vertices))),
+        iterations,
+        reimpose_every=1 if method == "global" else None,
     )
     return boundary, smoothed[boundary]
 
 
-def _simple_boundary(triangles: np.ndarray, n: int) -> bool:
-    """Whether every boundary vertex has two boundary edges (always so on a volume-cost hierarchy level).
-
-    Levels of a fast-simplification hierarchy can have pinched boundaries;
-    their boundary is then held fixed instead of curve-faired.
-    """
-    return _is_simple(boundary_halfedges(triangles, n), n)
-
-
-def _is_simple(halfedges: np.ndarray, n: int) -> bool:
-    degree = np.bincount(halfedges.ravel(), minlength=n)
+def _is_simple(rings: VertexRings, degree: np.ndarray | None = None) -> bool:
+    """Whether every boundary vertex has two edges of one triangle (always so on a volume-cost hierarchy level)."""
+    if not rings.boundary.any():
+        return True
+    degree = boundary_degree(rings) if degree is None else degree
     return bool(np.all((degree == 0) | (degree == 2)))
 
 
@@ -183,7 +201,7 @@ def multiresolution_fairing(
     method : {"local", "global"}, keyword-only
         Constrained fairing solver (see ``constrained_fairing``).
     progress : bool, keyword-only
-        Show a tqdm bar over the levels.
+        Show tqdm bars: the hierarchy build (when built here), then the levels.
 
     Returns
     -------
@@ -215,7 +233,15 @@ def multiresolution_fairing(
     # when the hierarchy is built here, on the welded surface
     data = read_hierarchy_mesh(mesh, weld=hierarchy is None)
     if hierarchy is None:
-        hierarchy = build_hierarchy_arrays(data.vertices, data.triangles, max_levels=level, min_vertices=4)
+        hierarchy = collapse_hierarchy(  # the arrays are read_mesh's checked copies
+            data.vertices,
+            data.triangles,
+            alpha=1.0,
+            beta=0.01,
+            min_vertices=4,
+            max_levels=level,
+            progress=bool(progress),
+        )
         if level >= len(hierarchy):
             raise ValueError(
                 f"level must be < {len(hierarchy)} (the levels build_hierarchy reaches for this mesh), got {level}"

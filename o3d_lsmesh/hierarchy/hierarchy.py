@@ -18,7 +18,7 @@ import scipy.sparse as sp
 from .._o3d import MeshData, new_mesh, read_mesh, warn_dropped_attributes
 from .._progress import check_progress, progress_bar
 from .._validate import as_count, as_positions, as_positive_float, mesh_arrays
-from ..topology import adjacency_matrix, boundary_halfedges
+from ..topology import VertexRings, vertex_rings
 from .collapse import collapse_levels
 
 if TYPE_CHECKING:
@@ -206,24 +206,35 @@ class MeshHierarchy:
         """
         i = self._check_level(i, minimum=1)
         positions = as_positions(positions, len(self.representatives[i]), name="positions")
-        parent = self.parents[i]
+        return self._refine(i, positions, vertex_rings(self.triangles[i - 1], len(self.parents[i])))
+
+    def _refine(self, i: int, positions: np.ndarray, rings: VertexRings) -> np.ndarray:
+        """:meth:`refine` of checked positions, with the :class:`~o3d_lsmesh.topology.VertexRings` of level
+        ``i - 1`` (which the fairing of that level reuses: one ring pass per level)."""
+        out = positions[self.parents[i]]
         removed = self.removed[i]
-        out = positions[parent]
         if len(removed) == 0:
             return out
-        triangles = self.triangles[i - 1]
-        n = len(parent)
-        weights = _umbrella_weights(triangles, n)
-        kept = np.ones(n, dtype=bool)
-        kept[removed] = False
-        if self.independent:
-            out[removed] = weights[removed] @ out
+        weights, scale, on_boundary = _umbrella_weights(rings)
+        rows = weights[removed]  # the split vertices' rows
+        if self.independent:  # their neighbours are all kept
+            out[removed] = rows @ out
         else:
+            kept = np.ones(len(out), dtype=bool)
+            kept[removed] = False
             out[removed] = _harmonic_fill(weights, out, removed, kept)
-        umbrella = weights @ out - out
-        second = weights @ umbrella - umbrella
-        nu = 1.0 + np.asarray(weights.multiply(weights.T).sum(axis=1)).ravel()
-        out[removed] -= second[removed] / nu[removed, None]
+        umbrella = weights @ out
+        umbrella -= out
+        second = rows @ umbrella
+        second -= umbrella[removed]
+        # nu - 1 = sum_j w_ij w_ji with w_ji = scale_j where it is not zero: inside, the 1-ring's interior
+        # vertices (a boundary vertex reads the curve only); on a boundary, the curve's two vertices
+        if on_boundary is None:
+            nu = rows @ scale
+        else:
+            nu = np.where(on_boundary[removed], rows @ scale, rows @ np.where(on_boundary, 0.0, scale))
+        nu += 1.0
+        out[removed] -= second / nu[:, None]
         return out
 
     # ---------------------------------------------------------------- internals
@@ -250,25 +261,44 @@ class MeshHierarchy:
         return MeshData(empty_v, empty_t, source, "tensor")
 
 
-def _umbrella_weights(triangles: np.ndarray, n: int) -> sp.csr_matrix:
-    """Row-stochastic ``W`` of the umbrella operator: 1-ring inside, the two boundary neighbours on a boundary."""
-    adjacency = adjacency_matrix(triangles, n)
-    boundary = boundary_halfedges(triangles, n)
-    if len(boundary):
-        on_boundary = np.zeros(n, dtype=bool)
-        on_boundary[boundary.ravel()] = True
-        curve = sp.csr_matrix(
-            (
-                np.ones(2 * len(boundary)),
-                (np.r_[boundary[:, 0], boundary[:, 1]], np.r_[boundary[:, 1], boundary[:, 0]]),
-            ),
-            shape=(n, n),
-        )
-        inside = sp.diags((~on_boundary).astype(np.float64))
-        adjacency = (inside @ adjacency + sp.diags(on_boundary.astype(np.float64)) @ curve).tocsr()
-    degree = np.asarray(adjacency.sum(axis=1)).ravel()
-    inverse = np.divide(1.0, degree, out=np.zeros(n), where=degree > 0)
-    return (sp.diags(inverse) @ adjacency).tocsr()
+def boundary_degree(rings: VertexRings) -> np.ndarray:
+    """``(n,) int64``: the edges of one triangle at every vertex (0 inside, 2 on a simple boundary)."""
+    if not rings.boundary.any():  # no edge of one triangle (nor of more)
+        return np.zeros(rings.n, dtype=np.int64)
+    return np.add.reduceat(_single_slots(rings), rings.indptr[:-1], dtype=np.int64)
+
+
+def _single_slots(rings: VertexRings) -> np.ndarray:
+    # an edge of one triangle holds its one entry twice (so does the diagonal's marker)
+    single = rings.pairs[0] == rings.pairs[1]
+    single[rings.diagonal] = False
+    return single
+
+
+def _umbrella_weights(rings: VertexRings) -> tuple[sp.csr_matrix, np.ndarray, np.ndarray | None]:
+    """Row-stochastic ``W`` of the umbrella operator on the rings' pattern (zero diagonal): the 1-ring
+    inside, the boundary neighbours (edges of one triangle) on a boundary; with each row's weight
+    ``(n,)`` and the boundary vertices ``(n,) bool`` (None on a mesh without edges of one triangle).
+    """
+    n, indptr = rings.n, rings.indptr
+    degree = rings.valence.astype(np.float64)
+    counts = np.diff(indptr)
+    on_boundary = None
+    if rings.boundary.any():
+        single = _single_slots(rings)
+        boundary_count = np.add.reduceat(single, indptr[:-1], dtype=np.int64)
+        if boundary_count.any():
+            on_boundary = boundary_count > 0
+            degree[on_boundary] = boundary_count[on_boundary]
+    scale = np.divide(1.0, degree, out=np.zeros(n), where=degree > 0)
+    data = np.repeat(scale, counts)
+    data[rings.diagonal] = 0.0
+    if on_boundary is not None:  # a boundary vertex's row reads its curve neighbours only
+        np.copyto(data, 0.0, where=np.repeat(on_boundary, counts) & ~single)
+    weights = sp.csr_matrix((n, n), dtype=np.float64)
+    weights.data, weights.indices, weights.indptr = data, rings.indices, indptr
+    weights.has_canonical_format = True  # the rings' pattern: sorted columns, no duplicates
+    return weights, scale, on_boundary
 
 
 def _harmonic_fill(
@@ -350,6 +380,32 @@ def build_hierarchy_arrays(
         max_levels = as_count(max_levels, name="max_levels")
     progress = check_progress(progress)
     vertices, triangles = mesh_arrays(vertices, triangles)
+    return collapse_hierarchy(
+        vertices,
+        triangles,
+        alpha=alpha,
+        beta=beta,
+        min_vertices=min_vertices,
+        max_levels=max_levels,
+        progress=bool(progress),
+        mesh_kind=mesh_kind,
+        tensor_format=tensor_format,
+    )
+
+
+def collapse_hierarchy(
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    *,
+    alpha: float,
+    beta: float,
+    min_vertices: int,
+    max_levels: int | None,
+    progress: bool,
+    mesh_kind: str = "arrays",
+    tensor_format: tuple = (),
+) -> MeshHierarchy:
+    """:func:`build_hierarchy_arrays` of checked arrays and options (:func:`read_hierarchy_mesh`'s, kept)."""
     n0 = len(vertices)
     total = max(n0 - min_vertices, 0)  # at most: a level may find no valid collapse before
     with progress_bar(progress, total=total, desc="mesh hierarchy", unit="vertex") as bar:
