@@ -306,7 +306,8 @@ CG preconditioned by the factor of the 1-ring part (0.40 against 0.33 s), simpli
 slower). At 40k the floor is the factorization (0.76 GFlop, about 0.2 s on one core) and its analysis
 (0.05 s), while Open3D's 5 Laplacian iterations take 0.04-0.07 s of CPU: in this run the 40k ratio is
 5.3-7.3 in wall time and 5.3-5.9 in CPU time (one outlier 11.8), not within 5x; at 1.4M it is 3.0-4.6
-in wall time (within 5x) but 5.5-6.8 in CPU time (Open3D's filter runs on both cores)."""
+in wall time (within 5x) but 5.5-6.8 in CPU time (on the loaded machine Open3D's wall time is 2.5x its
+CPU time, ours 1.5-1.7x)."""
 
 
 def speed_rows(results):
