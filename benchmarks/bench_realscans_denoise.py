@@ -24,6 +24,7 @@ targets after a change of ours (``realscans_denoise_quick.md``);
 from __future__ import annotations
 
 import os
+import time
 from pathlib import Path
 
 import numpy as np
@@ -266,36 +267,47 @@ def multiresolution_rows(results, reference, levels=(1, 2, 3)):
     return rows
 
 
-#: the profile behind the speed table (cProfile, 2026-12-01, same machine, loaded by other jobs)
+#: where the time goes (per-step timings, 2026-12-01, same machine, loaded by other jobs: load 5-8 on 2 cores)
 SPEED_PROFILE = """\
 Ours is one sparse Cholesky factorization of the 2-ring (bi-Laplacian pattern) normal matrix and two
-back-substitutions; everything else is a few linear passes over the edges. Seconds:
+back-substitutions; everything else is a few linear passes over the edges. CPU seconds per step (40k:
+medians of 6-20 runs; 1.4M: one run each, interleaved), before and after the analysis from the 1-ring
+pattern with COLAMD:
 
 | step | before, 40k | after, 40k | before, 1.4M | after, 1.4M |
 |---|---|---|---|---|
-| parameters + edge structure | 0.02 | 0.02 | 1.2 | 1.5 |
-| assembly | 0.04 (rows R, COO) | 0.03 (K^T K + 1-ring terms, CSR) | 7.1 (rows) + 5.2 (R^T R for AMG) | 2.7-3.2 |
-| factorization (AMD) | 0.69 (CHOLMOD A A^T from the rows) | 0.24-0.5 (lower triangle of R^T R) | AMG setup 8.7 | analyze 3.1 + factor 11.4 |
-| solves | 0.15 | 0.04-0.08 | 70 (block CG, 2 x 34 iterations) | 1.6-1.7 |
-| total | 0.94 | 0.33-0.9 | 94 (load ~6) | 21-42 (load 7-10) |
+| validation + edge structure + parameters | 0.02 | 0.02 | 0.7 | 0.7 |
+| assembly (K^T K + 1-ring terms, lower triangle) | 0.03-0.04 | 0.03-0.04 | 2.1-3.1 | 2.1-3.1 |
+| analysis | 0.04-0.05 (AMD on the matrix) | 0.05-0.06 (COLAMD on the 1-ring) | 3.1 | 3.4 |
+| factor flops | 0.90 GFlop | 0.76 GFlop | 51.4 GFlop | 46.5 GFlop |
+| factorization, one BLAS thread | 0.21-0.23 | 0.19-0.21 | 15.1 | 13.7 |
+| factorization, two threads (wall) | | | 31.0 | 19.8 |
+| two solves | 0.04 | 0.04 | 1.5-2.1 | 1.5-2.1 |
 
-Before, the 1.4M system took the gateway's iterative path: `SPDSolver(product_of=R^T)` estimated the
-factor's memory from 3 nnz(R) (56 entries a row against the 18.5 of R^T R), 11.1 GB against a budget of
-half the available memory, and chose AMG-preconditioned CG (4x slower than the factor). Interleaved in
-one process on the loaded machine: 1.4M, old 140.8 s, new 32.9 s wall (CPU 49.5 s against 23.5 s); 40k,
-ten trials, medians old 1.22 s, new 0.87 s (Open3D 0.18 s). Results equal to round-off: max |new - old|
-at most 1e-14 of the bounding box on the ten scans and on bunny, screwdriver, feline and venus at 0.2
-and 0.5 edge-length noise (at most 5e-12 of the mean displacement); at 1.4M the old path's CG error
-(1.7e-5 of the mean displacement at worst) is gone.
+CHOLMOD analyzes K^T K from the pattern of K (the 1-ring, 7 entries a row against the matrix's 18.5;
+K^T K's pattern holds the whole matrix's) and factors the matrix with that analysis. Results equal to
+round-off: max |new - old| at most 3.7e-15 of the bounding box on the ten scans, 3.9e-15 at 1.4M; the
+quality figures below are unchanged. Interleaved whole runs on the loaded machine, 40k: CPU min 0.351 s
+against 0.375 s (ten trials); the wall ratio moves more with the load than with the change (40k: 7.5 before,
+5.7 in this run; 1.4M: 5.9 before, 3.6 in this run, where Open3D's OpenMP threads took 2.5x their CPU
+time in wall time).
 
-Measured and not taken: CG preconditioned by the factor of the 1-ring part of the matrix (its 2-ring
-entries lumped on the diagonal: 7.4x fewer factor flops, 8 + 10 iterations to a 1e-8 residual) took
-0.40 s against 0.33 s at 40k and 22.5 s against 20.5 s at 1.4M (CPU, one BLAS thread); METIS ordering:
-0.63 against AMD's 0.87 GFlop at 40k but a 0.3 s analysis against 0.04 s; simplicial factor: 2-3x
-slower; one BLAS thread instead of two: no clear difference under load (0.85 s against 0.87 s median at
-40k). At 40k the floor is the factorization (0.87 GFlop, 0.2 s on one idle core) plus 0.1 s of linear
-passes, while Open3D's 5 Laplacian iterations take 0.02-0.1 s: the 5x target is out of reach for a
-method that solves this system exactly."""
+Measured and not taken (40k unless said): METIS on the matrix, 0.665 GFlop but a 0.26-0.30 s analysis
+(1.4M: 35.2 GFlop, 15 s analysis); METIS or nested dissection of the 1-ring graph applied to the 2-ring
+matrix, 6.3 and 5.7 GFlop (one-layer separators leave the halves coupled through 2-ring entries);
+geometric nested dissection (coordinate bisection, two-layer separators, in numpy), 1.15 GFlop, and at
+1.4M a 72 s factorization (the merged scans overlap in space); the quasi-definite mixed system
+[[mu H^T W H + lambda G, K^T], [K, -I]] (1-ring blocks, 2n unknowns), 0.71 GFlop with AMD but only
+CHOLMOD's simplicial LDL^T takes an indefinite matrix: 0.44 s against 0.23 s; the whole matrix as one
+product [M^T, I] [M; Z] (no sum, no sort): 28 against 31 ms at 40k but 3.0 against 2.1 s at 1.4M (the
+concatenations); one BLAS thread: 40k median wall 0.86 against 0.88 s (CPU 0.32 against 0.49, load 7),
+1.4M factorization 29.5 against 19.8 s wall: the default thread count kept. Earlier (see git history):
+CG preconditioned by the factor of the 1-ring part (0.40 against 0.33 s), simplicial factor (2-3x
+slower). At 40k the floor is the factorization (0.76 GFlop, about 0.2 s on one core) and its analysis
+(0.05 s), while Open3D's 5 Laplacian iterations take 0.04-0.07 s of CPU: in this run the 40k ratio is
+5.3-7.3 in wall time and 5.3-5.9 in CPU time (one outlier 11.8), not within 5x; at 1.4M it is 3.0-4.6
+in wall time (within 5x) but 5.5-6.8 in CPU time (on the loaded machine Open3D's wall time is 2.5x its
+CPU time, ours 1.5-1.7x)."""
 
 
 def speed_rows(results):
@@ -322,13 +334,33 @@ def speed_rows(results):
     ]
     for label, V, F, k in cases:
         mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(V), o3d.utility.Vector3iVector(F))
-        ratios = []
-        for trial in range(5 if len(V) < 200_000 else 2):
-            _, t_o3d = timed(lambda mesh=mesh, k=k: mesh.filter_smooth_laplacian(number_of_iterations=k))
-            _, t_ours = timed(lambda V=V, F=F: ours(V, F))
-            ratios.append(t_ours / t_o3d)
-            rows.append([label, len(V), trial, k, t_o3d, t_ours, t_ours / t_o3d])
+        for trial in range(7 if len(V) < 200_000 else 3):
+            wall_o3d, cpu_o3d = _wall_and_cpu(lambda: mesh.filter_smooth_laplacian(number_of_iterations=k))
+            wall_ours, cpu_ours = _wall_and_cpu(lambda: ours(V, F))
+            rows.append(
+                [label, len(V), trial, k, wall_o3d, wall_ours, wall_ours / wall_o3d]
+                + [cpu_o3d, cpu_ours, cpu_ours / cpu_o3d]
+            )
     return rows
+
+
+def _wall_and_cpu(fn) -> tuple[float, float]:
+    """Wall and CPU (this process, every thread) seconds of one call."""
+    wall, cpu = time.perf_counter(), time.process_time()
+    fn()
+    return time.perf_counter() - wall, time.process_time() - cpu
+
+
+def speed_table(speed) -> str:
+    """The interleaved timings as a table, with the median ratios (wall, and CPU time) per mesh."""
+    header = ["mesh", "vertices", "trial", "o3d iterations", "o3d s", "ours s", "ratio"]
+    header += ["o3d CPU s", "ours CPU s", "CPU ratio"]
+    medians = "; ".join(
+        f"{label} ({n} vertices) {np.median([r[6] for r in speed if r[0] == label]):.2f} wall, "
+        f"{np.median([r[9] for r in speed if r[0] == label]):.2f} CPU"
+        for label, n in dict.fromkeys((row[0], row[1]) for row in speed)
+    )
+    return markdown_table(header, speed) + f"\n\nTarget: ratio <= 5. Median ratio: {medians}."
 
 
 def picture(result, reference, path):
@@ -384,7 +416,6 @@ def picture(result, reference, path):
 
 def main():
     import sys
-    import time
 
     start = time.perf_counter()
     names = scan_names()
@@ -407,18 +438,7 @@ def main():
             "realscans_denoise_speed.md",
             "Denoising raw range scans: time of the default against Open3D's Laplacian at its best count",
             [
-                (
-                    "Speed, interleaved",
-                    markdown_table(
-                        ["mesh", "vertices", "trial", "o3d iterations", "o3d s", "ours s", "ratio"], speed
-                    )
-                    + "\n\nTarget: ratio <= 5. Median ratio: "
-                    + "; ".join(
-                        f"{label} ({n} vertices) {np.median([row[-1] for row in speed if row[0] == label]):.2f}"
-                        for label, n in dict.fromkeys((row[0], row[1]) for row in speed)
-                    )
-                    + ".",
-                ),
+                ("Speed, interleaved", speed_table(speed)),
                 ("Where the time goes", SPEED_PROFILE),
             ],
         )
@@ -576,13 +596,7 @@ def main():
         ),
         (
             "Speed: ours (defaults) vs Open3D filter_smooth_laplacian at its best count, interleaved",
-            markdown_table(["mesh", "vertices", "trial", "o3d iterations", "o3d s", "ours s", "ratio"], speed)
-            + "\n\nTarget: ratio <= 5. Median ratio: "
-            + "; ".join(
-                f"{label} ({n} vertices) {np.median([row[-1] for row in speed if row[0] == label]):.2f}"
-                for label, n in dict.fromkeys((row[0], row[1]) for row in speed)
-            )
-            + ".",
+            speed_table(speed),
         ),
         ("Sweeps (mean um)", "```\n" + "\n".join(sweep_lines) + "\n```"),
     ]

@@ -371,6 +371,12 @@ class SPDSolver:
         a balanced elimination tree, the structure the geometry-aware bases
         paper's update bound assumes: rank-1 updates touch fewer entries, at
         the price of a slower factor and solve. Ignored by the other backends.
+    pattern_of : (n, k) scipy sparse matrix, optional, keyword-only
+        CHOLMOD analyzes the pattern of ``A A^T`` for this ``A`` instead of the
+        matrix's (which that pattern must hold), ordering with ``ordering``
+        (``"colamd"`` orders ``A`` itself, without forming ``A A^T``): a normal
+        matrix ``K^T K + ...`` analyzed from the sparser ``K^T``. Ignored by the
+        other backends.
     memory_budget : int, optional
         Bytes the direct factor may take under ``backend="auto"``; default
         :func:`default_memory_budget` (half the available memory, or
@@ -416,6 +422,7 @@ class SPDSolver:
         ordering: str = "default",
         lower: bool = False,
         product_of: Any = None,
+        pattern_of: Any = None,
         memory_budget: int | None = None,
         tol: float = DEFAULT_TOLERANCE,
         max_iterations: int = 5000,
@@ -491,6 +498,11 @@ class SPDSolver:
         else:
             self._product_of = given
         del given
+        self._pattern_of = (
+            None if pattern_of is None else _as_csc(pattern_of, name="pattern_of", square=False)
+        )
+        if self._pattern_of is not None and self._pattern_of.shape[0] != self.shape[0]:
+            raise ValueError(f"pattern_of must have {self.shape[0]} rows, got shape {self._pattern_of.shape}")
         self._pending: list[sp.csc_matrix] = []
         self._factor: Any = None
         self._factorize(analyze=True)
@@ -520,6 +532,7 @@ class SPDSolver:
                 self._product_of = sp.hstack([self._product_of, *self._pending], format="csc")
                 self._pending.clear()
                 return
+            self._pattern_of = None  # C C^T may reach outside it: later analyses take the matrix's own
             for c in self._pending:
                 product = c @ c.T
                 self._matrix = (self._matrix + (sp.tril(product) if self._lower else product)).tocsc()
@@ -537,7 +550,9 @@ class SPDSolver:
                     self._factor = _cholmod.analyze_AAt(self._product_of, ordering_method=self.ordering)
                 self._factor.cholesky_AAt_inplace(self._product_of)
             elif self.backend == "cholmod":
-                if analyze or self._factor is None:
+                if (analyze or self._factor is None) and self._pattern_of is not None:
+                    self._factor = _cholmod.analyze_AAt(self._pattern_of, ordering_method=self.ordering)
+                elif analyze or self._factor is None:
                     self._factor = _cholmod.analyze(self._matrix, ordering_method=self.ordering)
                 self._factor.cholesky_inplace(self._matrix)
             elif self._product_of is not None:
@@ -662,6 +677,7 @@ class SPDSolver:
                 "matrix": self._matrix,
                 "lower": self._lower,
                 "product_of": self._product_of,
+                "pattern_of": self._pattern_of,
                 "tol": self.tol,
                 "max_iterations": self.max_iterations,
                 "progress": self.progress,
@@ -686,6 +702,7 @@ class SPDSolver:
         self._matrix = None
         if self._product_of is None:
             self._matrix = _stored(state["matrix"], given_lower=was_lower, keep_lower=self._lower)
+        self._pattern_of = state.get("pattern_of")
         self._pending = []
         self._factor = None
         self._factorize(analyze=True)

@@ -14,6 +14,7 @@ import scipy.sparse as sp
 from conftest import DATA, REPO, grid
 from numpy.testing import assert_allclose
 
+from o3d_lsmesh._solvers import SPDSolver
 from o3d_lsmesh.fairing import constrained_fairing, constrained_fairing_arrays
 from o3d_lsmesh.fairing.constrained import DEFAULT_METHOD
 from o3d_lsmesh.fairing.scan_fairing import (
@@ -488,6 +489,16 @@ def test_normal_matrix_assembly_on_a_large_soup_and_a_degenerate_triangle():
     degenerate = np.vstack([F, [[3, 3, 4]]])
     expected = scan_system(degenerate, n, **kwargs).normal_matrix()
     assert abs(scan_normal_matrix(degenerate, n, **kwargs) - expected).max() <= 1e-13 * abs(expected).max()
+    # the factor, analyzed as K^T K from the 1-ring pattern, solves the rows' normal equations (their own
+    # product), and so does a pickled copy (which analyzes again); the rows' path (degenerate) as well
+    b = np.random.default_rng(2).normal(size=(n, 3))
+    for faces in (F, degenerate):
+        solver = ScanFairingSolver(faces, n, **kwargs)._solver
+        for copy in (solver, pickle.loads(pickle.dumps(solver))):
+            normal = scan_system(faces, n, **kwargs).normal_matrix()
+            assert_allclose(normal @ copy.solve(b), b, atol=1e-10)
+    with pytest.raises(ValueError, match=r"pattern_of must have 603 rows, got shape \(5, 5\)"):
+        SPDSolver(lower, lower=True, pattern_of=sp.identity(5, format="csc"))
 
 
 def test_scan_options_raise():

@@ -520,6 +520,31 @@ def scan_normal_matrix(
     >>> bool(abs(N - S).max() < 1e-15), N.shape
     (True, (5, 5))
     """
+    return _normal_matrix(
+        triangles,
+        n,
+        mu=mu,
+        membrane=membrane,
+        boundary_weight=boundary_weight,
+        thin_plate=thin_plate,
+        structure=structure,
+        rim_curve=rim_curve,
+    )[0]
+
+
+def _normal_matrix(
+    triangles: np.ndarray,
+    n: int,
+    *,
+    mu: float,
+    membrane: float,
+    boundary_weight: float,
+    thin_plate: float = SCAN_THIN_PLATE,
+    structure: _Structure | None = None,
+    rim_curve: float = 0.0,
+) -> tuple[sp.csr_matrix, sp.csc_matrix | None, np.ndarray]:
+    # scan_normal_matrix; the pattern of K (the 1-ring, diagonal included) when K^T K holds the matrix's;
+    # the (m,) triangle weights w_t
     triangles = np.asarray(triangles)
     m = len(triangles)
     if m and (
@@ -527,20 +552,17 @@ def scan_normal_matrix(
         or (triangles[:, 1] == triangles[:, 2]).any()
         or (triangles[:, 2] == triangles[:, 0]).any()
     ):
-        return (
-            scan_system(
-                triangles,
-                n,
-                mu=mu,
-                membrane=membrane,
-                boundary_weight=boundary_weight,
-                thin_plate=thin_plate,
-                structure=structure,
-                rim_curve=rim_curve,
-            )
-            .normal_matrix()
-            .tocsr()
+        rows = scan_system(
+            triangles,
+            n,
+            mu=mu,
+            membrane=membrane,
+            boundary_weight=boundary_weight,
+            thin_plate=thin_plate,
+            structure=structure,
+            rim_curve=rim_curve,
         )
+        return rows.normal_matrix().tocsr(), None, rows.triangle_weight
     st = _structure(triangles, n) if structure is None else structure
     edges, counts, boundary, valence, halfedge_edge = st
     lo, hi = edges[:, 0], edges[:, 1]
@@ -557,6 +579,7 @@ def scan_normal_matrix(
     data[forward] = on_edge
     data[backward] = on_edge
     matrix = sp.csr_matrix((data, indices, indptr), shape=(n, n))
+    ring = None
     if thin_plate > 0.0:
         # K: row i is 1 at i and -(1 - t) / n_i - t / c_i at each neighbour (the second part only across
         # boundary edges, c_i of them; t = rim_curve for a rim vertex, the one-sided row otherwise)
@@ -577,8 +600,9 @@ def scan_normal_matrix(
         plate *= np.sqrt(thin_plate)
         operator = sp.csr_matrix((plate, indices, indptr), shape=(n, n))
         matrix = matrix + operator.T.tocsr() @ operator
+        ring = sp.csc_matrix((np.ones(len(indices)), indices, indptr), shape=(n, n))
     matrix.sum_duplicates()  # canonical: sorted indices (CHOLMOD and the lower-triangle cut need them)
-    return matrix
+    return matrix, ring, weight
 
 
 def _lower_csc(symmetric: sp.csr_matrix) -> sp.csc_matrix:
@@ -609,8 +633,10 @@ class ScanFairingSolver:
     null vector of ``K^T K`` and ``G`` is the constant, and
     ``1^T H^T W H 1 = 9 sum_t w_t > 0``; unreferenced vertices have their
     unit rows. CHOLMOD factors ``R^T R`` as assembled by
-    :func:`scan_normal_matrix` (its lower triangle) with the AMD ordering (on
-    these meshes as little fill as METIS, found faster).
+    :func:`scan_normal_matrix` (its lower triangle), analyzed as ``K^T K``
+    from the 1-ring pattern with the COLAMD ordering (10-15% fewer factor
+    flops than AMD on the matrix, at the same analysis time; METIS's 30%
+    fewer cost an analysis longer than the factor).
     The object pickles (the solver refactors on load) and its solves are
     serialized by the solver's lock.
     """
@@ -631,7 +657,7 @@ class ScanFairingSolver:
         self.membrane = float(membrane)
         triangles = np.asarray(triangles)
         st = _structure(triangles, n) if structure is None else structure
-        normal = scan_normal_matrix(
+        normal, ring, weight = _normal_matrix(
             triangles,
             n,
             mu=self.mu,
@@ -641,23 +667,26 @@ class ScanFairingSolver:
             structure=st,
             rim_curve=rim_curve,
         )
-        weight = np.where(st.boundary[triangles].any(axis=1), float(boundary_weight), 1.0)
         corners = np.arange(0, 3 * len(triangles) + 1, 3)
         #: ``sqrt(mu W) H``, ``(m, n)``: the rows that carry the targets
         self.penalty = sp.csr_matrix(
             (np.repeat(np.sqrt(self.mu * weight), 3), triangles.ravel(), corners), shape=(len(triangles), n)
         )
         self.referenced = st.valence > 0
-        # AMD: at 40k vertices (bun000) 0.87 GFlop against METIS's 0.63, but an analysis of 0.04 s against
-        # 0.3 s; at 1.4M vertices (the ten scans merged and subdivided) the whole default took 20 s with
-        # AMD and 29 s with METIS, interleaved. The lower triangle of the assembled matrix, not the rows
-        # (``product_of``, which CHOLMOD multiplies out as it factors: the same time at 40k): the memory
-        # estimate of ``backend="auto"`` then sees the true entry count; from the rows it guessed 3x too
-        # many and took the iterative path at 1.4M vertices (AMG-preconditioned CG, 4x slower). Also
-        # measured, slower: CG preconditioned by the factor of the 1-ring part of this matrix (its 2-ring
-        # entries lumped on the diagonal; 7.4x fewer factor flops but 8 + 10 iterations to 1e-8: 0.40 s
-        # against 0.33 s at 40k, 22.5 s against 20.5 s at 1.4M, CPU time, one thread)
-        self._solver = SPDSolver(_lower_csc(normal), lower=True, ordering="amd")
+        # ordering: COLAMD on the pattern of K (the 1-ring), whose square K^T K holds the matrix's pattern:
+        # CHOLMOD analyzes K^T K without forming it and factors the matrix with that analysis. Factor flops
+        # at 40k vertices (bun000): 0.76 GFlop against 0.90 with AMD on the matrix (analysis 0.05 s either
+        # way; METIS 0.665 but a 0.3 s analysis); at 1.4M (the ten scans merged and subdivided) 46.5 against
+        # 51.4 GFlop (analysis 3.4 against 3.1 s CPU; METIS 35.2 but 15 s). The lower triangle of the
+        # assembled matrix, not the rows (``product_of``, which CHOLMOD multiplies out as it factors: the
+        # same time at 40k): the memory estimate of ``backend="auto"`` then sees the true entry count; from
+        # the rows it guessed 3x too many and took the iterative path at 1.4M vertices (AMG-preconditioned
+        # CG, 4x slower). Also measured, slower: CG preconditioned by the factor of the 1-ring part of this
+        # matrix (its 2-ring entries lumped on the diagonal; 7.4x fewer factor flops but 8 + 10 iterations
+        # to 1e-8: 0.40 s against 0.33 s at 40k, 22.5 s against 20.5 s at 1.4M, CPU time, one thread)
+        self._solver = SPDSolver(
+            _lower_csc(normal), lower=True, ordering="amd" if ring is None else "colamd", pattern_of=ring
+        )
 
     def normal_rhs(self, positions0: np.ndarray) -> np.ndarray:
         """``mu H^T W H X0``, ``(n, 3)``."""
