@@ -6,15 +6,8 @@ the mesh read from the file (or the previous operation's result in a
 pipeline), a dict of its parsed options and a :class:`TaskContext` (input
 path, relative name, thread budget), and returns the result and a small dict
 of JSON-able metrics. Its options are :class:`Option` entries; the CLI makes a
-flag of each (``--iterations``). Adding an operation, e.g. hole filling::
-
-    def _fill(mesh, options, context):
-        from .fill_holes import fill_holes
-        out = fill_holes(mesh, **options)
-        return out, {"triangles_added": len(out.triangles) - len(mesh.triangles)}
-
-    register_op(BatchOp("fill", _fill, options=(Option("max_hole_edges", int_at_least(1), None, "..."),),
-                        help="fill holes"))
+flag of each (``--iterations``); :func:`fill_op` and the ``register_op`` calls
+at the end of this module show how an operation is added.
 
 The task (:func:`run_task`) reads, runs and writes inside the worker and
 returns a small JSON record, so meshes never travel between processes. Every
@@ -83,12 +76,10 @@ def int_at_least(minimum: int) -> Callable[[Any], int]:
     """Parser of an integer ``>= minimum`` given as an int or a string."""
 
     def parse(value: Any) -> int:
-        if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer, str)):
-            raise ValueError(f"must be an integer >= {minimum}, got {value!r}")
-        try:
-            number = int(value)
-        except ValueError:
-            raise ValueError(f"must be an integer >= {minimum}, got {value!r}") from None
+        number = minimum - 1  # refused unless value is an int (not a bool) or its text
+        if isinstance(value, (int, np.integer, str)) and not isinstance(value, (bool, np.bool_)):
+            with contextlib.suppress(ValueError):
+                number = int(value)
         if number < minimum:
             raise ValueError(f"must be an integer >= {minimum}, got {value!r}")
         return number

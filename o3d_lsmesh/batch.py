@@ -17,12 +17,10 @@ once the parent has used CHOLMOD's OpenMP runtime. ``scheduler=``,
 cluster instead. Without Dask, the files run one after another in this process
 (never in a fork-based pool).
 
-Tasks are submitted through ``client.map`` in a window a few times the
-cluster's worker threads, refilled from ``as_completed``. The local cluster
-sets Dask's ``worker-saturation`` to 1, so the scheduler queues the window and
-hands every worker exactly the task it runs: a worker that dies takes no
-innocent task with it (Dask counts every task held by a dying worker as
-suspect), and the scheduler's memory does not grow with the number of files.
+Tasks are submitted in a window a few times the cluster's worker threads
+(:class:`_Window` says why), refilled from ``as_completed``: a worker that dies
+takes no innocent task with it, and the scheduler's memory does not grow with
+the number of files.
 """
 
 from __future__ import annotations
@@ -33,7 +31,6 @@ import hashlib
 import json
 import logging
 import os
-import sys
 import time
 import warnings
 from collections import Counter
@@ -58,6 +55,7 @@ from ._batch_ops import (
 )
 from ._errors import O3DLSMeshWarning
 from ._progress import check_progress, progress_bar
+from ._validate import as_workers
 
 __all__ = ["OPS", "BatchOp", "Option", "collect_inputs", "register_op", "run", "summarize"]
 
@@ -233,10 +231,10 @@ class _Window:
 
     Above ``2 x threads`` tasks, Dask treats the tasks as root tasks and queues them on the scheduler,
     handing each worker only ``worker-saturation x threads`` at a time (1 on :func:`local_cluster`): so a
-    worker that dies holds no innocent task, and a finished worker gets its next file from the scheduler
-    without a round trip through this client. A window of ``4 x threads + 4`` keeps that queue filled while
-    the scheduler's memory stays independent of the number of files. A batch of at most ``2 x threads``
-    files, which Dask would hand out all at once, gets a window of ``threads`` instead.
+    worker that dies holds no innocent task (Dask counts every task held by a dying worker as suspect),
+    and a finished worker gets its next file without a round trip through this client. A window of
+    ``4 x threads + 4`` keeps that queue filled; a batch of at most ``2 x threads`` files, which Dask
+    would hand out all at once, gets a window of ``threads`` instead.
     """
 
     def __init__(self, client: Any, total: int):
@@ -432,18 +430,14 @@ def run(
     ['ok']
     """
     ops = parse_ops(op)
+    pipeline = ",".join(o.name for o in ops)
     values = resolve_options(ops, options)
     if not isinstance(suffix, str) or suffix.lower() not in WRITABLE:
         raise ValueError(f"--suffix must be one of {', '.join(WRITABLE)}, got {suffix!r}")
     suffix = suffix.lower()
-    if (
-        isinstance(threads_per_worker, bool)
-        or not isinstance(threads_per_worker, int)
-        or threads_per_worker < 1
-    ):
-        raise ValueError(f"--threads-per-worker must be an integer >= 1, got {threads_per_worker!r}")
-    if isinstance(retries, bool) or not isinstance(retries, int) or retries < 0:
-        raise ValueError(f"--retries must be an integer >= 0, got {retries!r}")
+    for flag, value, minimum in (("threads-per-worker", threads_per_worker, 1), ("retries", retries, 0)):
+        if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
+            raise ValueError(f"--{flag} must be an integer >= {minimum}, got {value!r}")
     if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 0):
         raise ValueError(f"--workers must be an integer >= 0, got {workers!r}")
     if scheduler is not None and scheduler_file is not None:
@@ -510,9 +504,8 @@ def run(
         progress,
         total=len(tasks),
         initial=len(tasks) - len(todo),
-        desc=f"batch {','.join(o.name for o in ops)}",
+        desc=f"batch {pipeline}",
         unit="file",
-        file=sys.stderr,
         dynamic_ncols=True,
     )
     counts: Counter = Counter()
@@ -552,11 +545,10 @@ def run(
         bar.close()
         if handle is not None:
             handle.close()
-    op_name = ",".join(o.name for o in ops)
     return [
         record
         if record is not None
-        else _failure(task, op_name, "not run (--fail-fast stopped the batch)", stage="cancelled")
+        else _failure(task, pipeline, "not run (--fail-fast stopped the batch)", stage="cancelled")
         | {"status": "cancelled"}
         for task, record in zip(tasks, records)
     ]
@@ -606,8 +598,7 @@ def _dispatch(
         )
         with Client(**kwargs) as own:
             return _run_dask(own, todo, job, emit, retries)
-    cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    n = workers if workers is not None else max(1, cpus // threads_per_worker)
+    n = workers if workers is not None else max(1, as_workers(None) // threads_per_worker)
     n = min(n, len(todo))  # no worker that would never get a file
     with local_cluster(n, threads_per_worker, retries=retries) as cluster, Client(cluster) as own:
         return _run_dask(own, todo, job, emit, retries)
