@@ -403,34 +403,29 @@ def _write_item(value: Any, path: Path) -> None:
 def write_atomic(value: Any, final: Path, *, kind: str, suffix: str) -> None:
     """Write ``value`` to a temporary name beside ``final``, then move it into place in one step."""
     final.parent.mkdir(parents=True, exist_ok=True)
-    if kind == "files":
-        temporary = final.with_name(f".{final.name}.{uuid.uuid4().hex[:12]}.tmp")
-        temporary.mkdir()
-        try:
+    temporary, old = _temporary(final), None
+    try:
+        if kind == "files":
+            temporary.mkdir()
             for name, item in value.items():
                 _write_item(
                     item, temporary / (name if isinstance(item, (bytes, bytearray)) else name + suffix)
                 )
-            if final.exists():
-                # A folder cannot be replaced in one step: move the old one aside first.
+            if final.exists():  # a folder cannot be replaced in one step: move the old one aside first
                 old = final.with_name(f".{final.name}.{uuid.uuid4().hex[:12]}.old")
                 os.replace(final, old)
-                os.replace(temporary, final)
-                shutil.rmtree(old, ignore_errors=True)
-            else:
-                os.replace(temporary, final)
-        except BaseException:
-            shutil.rmtree(temporary, ignore_errors=True)
-            raise
-        return
-    temporary = _temporary(final)
-    try:
-        _write_item(value, temporary)
+        else:
+            _write_item(value, temporary)
         os.replace(temporary, final)
     except BaseException:
-        with contextlib.suppress(OSError):
-            temporary.unlink()
+        if temporary.is_dir():
+            shutil.rmtree(temporary, ignore_errors=True)
+        else:
+            with contextlib.suppress(OSError):
+                temporary.unlink()
         raise
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
 
 
 def output_path(outdir: Path, relative: str, op: BatchOp, suffix: str) -> Path | None:

@@ -12,10 +12,9 @@ Engine
 ``dask.distributed`` (``pip install 'o3d_lsmesh[dask]'``). Without a client
 or scheduler address, a ``LocalCluster(n_workers=N, threads_per_worker=1,
 processes=True)`` is started with *spawned* workers: a forked worker deadlocks
-once the parent has used CHOLMOD's OpenMP runtime. ``scheduler=``,
-``scheduler_file=`` or ``DASK_SCHEDULER_ADDRESS`` connect to an existing
-cluster instead. Without Dask, the files run one after another in this process
-(never in a fork-based pool).
+once the parent has used CHOLMOD's OpenMP runtime (:func:`run` says how to use
+an existing cluster). Without Dask, the files run one after another in this
+process (never in a fork-based pool).
 
 Tasks are submitted in a window a few times the cluster's worker threads
 (:class:`_Window` says why), refilled from ``as_completed``: a worker that dies

@@ -20,10 +20,7 @@ Two facts about ``OffscreenRenderer`` in open3d 0.20 shape this module
 * with post-processing (tone mapping, SSAO, anti-aliasing) on, llvmpipe is
   several times slower; it is switched off.
 
-``backend="raycast"`` draws the same layout with Open3D's Embree
-``RaycastingScene`` in-process (Lambert shading, no shadows): it needs no
-graphics driver at all, and ``backend="auto"`` falls back to it, with a
-warning, when Filament cannot start.
+``backend="raycast"`` (the fallback of ``"auto"``) needs no graphics driver: see :func:`render`.
 """
 
 from __future__ import annotations
@@ -603,9 +600,5 @@ def render(
             raise ValueError(f"path must be in an existing folder, got {path!r}")
         if not o3d.io.write_image(path, o3d.geometry.Image(image)):
             raise ValueError(f"path must name a writable .png file, got {path!r}")
-    return RenderedImage(
-        image,
-        error_max if reference is not None else None,
-        units if reference is not None else None,
-        edge_length,
-    )
+    scale = (error_max, units) if reference is not None else (None, None)  # no scale without a reference
+    return RenderedImage(image, *scale, edge_length)
