@@ -255,7 +255,7 @@ def _failure(task: _Task, op: str, message: str, stage: str = "worker") -> dict:
 def _run_dask(client: Any, tasks: list[_Task], job: dict, emit: Callable[[dict], bool], retries: int) -> None:
     from concurrent.futures import CancelledError
 
-    from distributed import as_completed
+    from distributed import KilledWorker, as_completed
 
     cancelled: tuple[type[BaseException], ...]
     try:
@@ -264,11 +264,6 @@ def _run_dask(client: Any, tasks: list[_Task], job: dict, emit: Callable[[dict],
         cancelled = (CancelledError, FutureCancelledError)
     except ImportError:  # pragma: no cover - distributed before 2024.8
         cancelled = (CancelledError,)
-
-    try:
-        from distributed import KilledWorker
-    except ImportError:  # pragma: no cover - older distributed
-        from distributed.scheduler import KilledWorker
 
     token = os.urandom(4).hex()
     pending = iter(tasks)
