@@ -600,5 +600,9 @@ def render(
             raise ValueError(f"path must be in an existing folder, got {path!r}")
         if not o3d.io.write_image(path, o3d.geometry.Image(image)):
             raise ValueError(f"path must name a writable .png file, got {path!r}")
-    scale = (error_max, units) if reference is not None else (None, None)  # no scale without a reference
-    return RenderedImage(image, *scale, edge_length)
+    return RenderedImage(
+        image,
+        error_max if reference is not None else None,
+        units if reference is not None else None,
+        edge_length,
+    )
