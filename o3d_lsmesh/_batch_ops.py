@@ -522,9 +522,8 @@ def run_task(
         for index, (op, values) in enumerate(zip(ops, options)):
             record["stage"] = op.name
             current, metrics = op.function(current, dict(values), context)
-            record["metrics"][op.name if op.name not in record["metrics"] else f"{op.name}#{index + 1}"] = (
-                metrics
-            )
+            slot = op.name if op.name not in record["metrics"] else f"{op.name}#{index + 1}"  # (op run twice)
+            record["metrics"][slot] = metrics
         last = ops[-1]
         if last.output == "mesh":
             record["vertices_after"], record["triangles_after"] = _size(current)

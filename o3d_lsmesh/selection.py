@@ -231,10 +231,8 @@ def select_control_points(
     position.
 
     * ``"random"``: a uniformly random order, reproducible with ``seed``.
-    * ``"greedy"``: one vertex at a time, the one with the largest error. The
-      LS system is factored once; every step adds the new anchor by a rank-1
-      update of the Cholesky factor (section III of the geometry-aware bases
-      paper) and back-substitutes once, so a step costs an update plus a solve.
+    * ``"greedy"``: one vertex at a time, the one with the largest error; a
+      step is a rank-1 update of the kept factor plus one back-substitution.
     * ``"combined"``: the local-maxima method. The LS mesh is solved once per
       ``batch`` picks; within a batch each pick is the largest error among the
       vertices not forbidden, after which the vertices reached from it by a
