@@ -75,44 +75,32 @@ def collect_inputs(inputs: str | os.PathLike | Iterable[str | os.PathLike]) -> l
     if isinstance(inputs, (str, os.PathLike)):
         inputs = [inputs]
     inputs = list(inputs)
-    items: list[tuple[str, str]] = []
-    seen: set[str] = set()
-
-    def add(path: Path, relative: str) -> None:
-        key = os.path.realpath(path)
-        if key not in seen:
-            seen.add(key)
-            items.append((str(path), relative))
-
-    def add_folder(folder: Path) -> None:
-        files = sorted(p for p in folder.rglob("*") if p.is_file() and p.suffix.lower() in READABLE)
-        for path in files:
-            add(path, str(path.relative_to(folder)))
-
+    found: dict[str, tuple[str, str]] = {}  # by real path: a path given twice is taken once
     for item in inputs:
         if not isinstance(item, (str, os.PathLike)):
             raise TypeError(f"inputs must be paths or glob patterns, got {type(item).__name__}")
         text = os.fspath(item)
-        if os.path.isdir(text):
-            add_folder(Path(text))
-        elif os.path.isfile(text):
-            add(Path(text), Path(text).name)
+        if os.path.isdir(text) or os.path.isfile(text):
+            matches = [text]
         elif _GLOB_CHARACTERS & set(text):
             matches = sorted(glob.glob(text, recursive=True))
             if not matches:
                 raise ValueError(f"INPUT {text!r} matches no file")
-            for match in matches:
-                if os.path.isdir(match):
-                    add_folder(Path(match))
-                else:
-                    add(Path(match), Path(match).name)
         else:
             raise ValueError(f"INPUT {text!r} does not exist (expected a file, a folder or a glob pattern)")
-    if not items:
+        for match in map(Path, matches):
+            if match.is_dir():
+                files = sorted(p for p in match.rglob("*") if p.is_file() and p.suffix.lower() in READABLE)
+                pairs = [(path, str(path.relative_to(match))) for path in files]
+            else:
+                pairs = [(match, match.name)]
+            for path, relative in pairs:
+                found.setdefault(os.path.realpath(path), (str(path), relative))
+    if not found:
         raise ValueError(
             f"INPUT must name at least one mesh file ({', '.join(READABLE)}), got none in {list(inputs)!r}"
         )
-    return items
+    return list(found.values())
 
 
 @dataclass(frozen=True)
