@@ -455,21 +455,19 @@ def run(
 
     records: list[dict | None] = [None] * len(tasks)
     report_path = None if report is None else Path(report)
-    todo = tasks
-    if resume and report_path is not None:  # resume without a report was refused above
-        previous = _read_report(report_path)
-        todo = []
-        for task in tasks:
-            old = previous.get(task.path)
-            if (
-                old is not None
-                and old.get("status") == "ok"
-                and old.get("key") == task.key
-                and (task.output is None or os.path.exists(task.output))
-            ):
-                records[task.index] = {**old, "status": "skipped"}
-            else:
-                todo.append(task)
+    # (resume without a report was refused above)
+    previous = _read_report(report_path) if resume and report_path is not None else {}
+    todo = []
+    for task in tasks:
+        old = previous.get(task.path, {})
+        if (
+            old.get("status") == "ok"
+            and old.get("key") == task.key
+            and (task.output is None or os.path.exists(task.output))
+        ):
+            records[task.index] = {**old, "status": "skipped"}
+        else:
+            todo.append(task)
     outdir.mkdir(parents=True, exist_ok=True)
     # The workers need the op functions, not the option parsers: without them (closures that only cloudpickle
     # can send) every task pickles in ~200 bytes with the standard pickle instead of ~3 kB.
