@@ -572,9 +572,7 @@ def reconstruct_geometry(
     data = read_mesh(mesh, weld=True)
     n = len(data.vertices)
     unknown = data.welded_indices(unknown_vertex_indices, name="unknown_vertex_indices", merge=True)
-    known_mask = np.ones(n, dtype=bool)
-    known_mask[unknown] = False
-    known = np.flatnonzero(known_mask)
+    known = np.setdiff1d(np.arange(n), unknown, assume_unique=True)  # in increasing order
     interpolate = as_bool(interpolate, name="interpolate")
     as_choice(laplacian, LAPLACIAN_KINDS, name="laplacian")
     # checked with either scheme (the interpolatory one does not use them): a bad value is a mistake either way
