@@ -6,15 +6,8 @@ the mesh read from the file (or the previous operation's result in a
 pipeline), a dict of its parsed options and a :class:`TaskContext` (input
 path, relative name, thread budget), and returns the result and a small dict
 of JSON-able metrics. Its options are :class:`Option` entries; the CLI makes a
-flag of each (``--iterations``). Adding an operation, e.g. hole filling::
-
-    def _fill(mesh, options, context):
-        from .fill_holes import fill_holes
-        out = fill_holes(mesh, **options)
-        return out, {"triangles_added": len(out.triangles) - len(mesh.triangles)}
-
-    register_op(BatchOp("fill", _fill, options=(Option("max_hole_edges", int_at_least(1), None, "..."),),
-                        help="fill holes"))
+flag of each (``--iterations``); :func:`fill_op` and the ``register_op`` calls
+at the end of this module show how an operation is added.
 
 The task (:func:`run_task`) reads, runs and writes inside the worker and
 returns a small JSON record, so meshes never travel between processes. Every
@@ -83,12 +76,10 @@ def int_at_least(minimum: int) -> Callable[[Any], int]:
     """Parser of an integer ``>= minimum`` given as an int or a string."""
 
     def parse(value: Any) -> int:
-        if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer, str)):
-            raise ValueError(f"must be an integer >= {minimum}, got {value!r}")
-        try:
-            number = int(value)
-        except ValueError:
-            raise ValueError(f"must be an integer >= {minimum}, got {value!r}") from None
+        number = minimum - 1  # refused unless value is an int (not a bool) or its text
+        if isinstance(value, (int, np.integer, str)) and not isinstance(value, (bool, np.bool_)):
+            with contextlib.suppress(ValueError):
+                number = int(value)
         if number < minimum:
             raise ValueError(f"must be an integer >= {minimum}, got {value!r}")
         return number
@@ -136,7 +127,7 @@ def flag(value: Any) -> bool:
 def count_or_percent(value: Any) -> int | float:
     """Parser of a vertex count: an integer >= 1, or a share of each mesh's vertices like ``"2%"``.
 
-    A share is returned as a float in (0, 1]; :func:`_resolve_count` turns it into a count per mesh,
+    A share is returned as a float in (0, 1]; :func:`resolve_count` turns it into a count per mesh,
     since one count rarely suits every file of a batch.
     """
     if isinstance(value, str) and value.strip().endswith("%"):
@@ -147,7 +138,7 @@ def count_or_percent(value: Any) -> int | float:
     return int_at_least(1)(value)
 
 
-def _resolve_count(value: int | float, n: int) -> int:
+def resolve_count(value: int | float, n: int) -> int:
     return max(1, int(np.ceil(value * n))) if isinstance(value, float) else int(value)
 
 
@@ -216,6 +207,7 @@ class TaskContext:
 
 
 OPS: dict[str, BatchOp] = {}
+OpFunction = Callable[[Any, dict, TaskContext], tuple[Any, dict]]
 
 
 def register_op(op: BatchOp) -> BatchOp:
@@ -224,6 +216,16 @@ def register_op(op: BatchOp) -> BatchOp:
         raise TypeError(f"op must be a BatchOp, got {type(op).__name__}")
     OPS[op.name] = op
     return op
+
+
+def operation(name: str, **fields: Any) -> Callable[[OpFunction], OpFunction]:
+    """Decorator: register the function as the batch operation ``name`` (``fields`` as in :class:`BatchOp`)."""
+
+    def add(function: OpFunction) -> OpFunction:
+        register_op(BatchOp(name, function, **fields))
+        return function
+
+    return add
 
 
 def parse_ops(op: Any) -> list[BatchOp]:
@@ -401,34 +403,29 @@ def _write_item(value: Any, path: Path) -> None:
 def write_atomic(value: Any, final: Path, *, kind: str, suffix: str) -> None:
     """Write ``value`` to a temporary name beside ``final``, then move it into place in one step."""
     final.parent.mkdir(parents=True, exist_ok=True)
-    if kind == "files":
-        temporary = final.with_name(f".{final.name}.{uuid.uuid4().hex[:12]}.tmp")
-        temporary.mkdir()
-        try:
+    temporary, old = _temporary(final), None
+    try:
+        if kind == "files":
+            temporary.mkdir()
             for name, item in value.items():
                 _write_item(
                     item, temporary / (name if isinstance(item, (bytes, bytearray)) else name + suffix)
                 )
-            if final.exists():
-                # A folder cannot be replaced in one step: move the old one aside first.
+            if final.exists():  # a folder cannot be replaced in one step: move the old one aside first
                 old = final.with_name(f".{final.name}.{uuid.uuid4().hex[:12]}.old")
                 os.replace(final, old)
-                os.replace(temporary, final)
-                shutil.rmtree(old, ignore_errors=True)
-            else:
-                os.replace(temporary, final)
-        except BaseException:
-            shutil.rmtree(temporary, ignore_errors=True)
-            raise
-        return
-    temporary = _temporary(final)
-    try:
-        _write_item(value, temporary)
+        else:
+            _write_item(value, temporary)
         os.replace(temporary, final)
     except BaseException:
-        with contextlib.suppress(OSError):
-            temporary.unlink()
+        if temporary.is_dir():
+            shutil.rmtree(temporary, ignore_errors=True)
+        else:
+            with contextlib.suppress(OSError):
+                temporary.unlink()
         raise
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
 
 
 def output_path(outdir: Path, relative: str, op: BatchOp, suffix: str) -> Path | None:
@@ -525,9 +522,8 @@ def run_task(
         for index, (op, values) in enumerate(zip(ops, options)):
             record["stage"] = op.name
             current, metrics = op.function(current, dict(values), context)
-            record["metrics"][op.name if op.name not in record["metrics"] else f"{op.name}#{index + 1}"] = (
-                metrics
-            )
+            slot = op.name if op.name not in record["metrics"] else f"{op.name}#{index + 1}"  # (op run twice)
+            record["metrics"][slot] = metrics
         last = ops[-1]
         if last.output == "mesh":
             record["vertices_after"], record["triangles_after"] = _size(current)
@@ -545,6 +541,9 @@ def run_task(
 
 
 # --------------------------------------------------------------------------- the operations
+
+
+_METHODS = ("greedy", "random", "combined")
 
 
 def percent_change(before: float, after: float) -> float | None:
@@ -576,6 +575,33 @@ def change_metrics(before: Any, after: Any) -> dict:
     return out
 
 
+@operation(
+    "denoise",
+    help="barycenter-constrained (or multiresolution with --level) fairing",
+    options=(
+        Option(
+            "iterations",
+            optional(int_at_least(0)),
+            None,
+            "number_of_iterations (default: the API's; with --level, 5 per level)",
+        ),
+        Option(
+            "method",
+            optional(choice("scan", "local", "global")),
+            None,
+            "fairing energy (default: scan, the API's; local with --level or --reimpose-every)",
+        ),
+        Option("level", int_at_least(0), 0, "multiresolution level (0: plain fairing)"),
+        Option("mu", optional(real), None, "barycenter penalty weight of --method global or scan"),
+        Option(
+            "reimpose_every",
+            optional(int_at_least(1)),
+            None,
+            "re-take the barycenters every k iterations",
+        ),
+        Option("fixed_boundary", flag, False, "keep boundary vertices fixed", is_flag=True),
+    ),
+)
 def denoise_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
     """``--op denoise`` and ``o3d-lsmesh denoise``: fairing with the method and iterations that ran."""
     level, progress = options["level"], context.progress
@@ -607,6 +633,22 @@ def denoise_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dic
     return out, {"method": method, "iterations": iterations, "level": level, **change_metrics(mesh, out)}
 
 
+@operation(
+    "fill",
+    help="fill holes with faired patches (LS meshes)",
+    options=(
+        Option(
+            "max_hole_edges",
+            optional(int_at_least(3)),
+            None,
+            "fill only holes of at most this many edges",
+        ),
+        Option("max_hole_diameter", optional(real), None, "fill only holes at most this wide (mesh units)"),
+        Option("continuity", choice("0", "1", "2"), "2", "0 harmonic, 1 LS mesh, 2 tri-Laplacian"),
+        Option("density", real, 1.0, "new vertex density relative to the surroundings"),
+        Option("fill_border", flag, False, "also fill the outer border of open components", is_flag=True),
+    ),
+)
 def fill_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
     """``--op fill`` and ``o3d-lsmesh fill``: hole filling with the counts of new vertices and triangles."""
     from .hole_filling import fill_holes
@@ -648,6 +690,17 @@ def _levels_spec(value: Any) -> str:
     return text
 
 
+@operation(
+    "hierarchy",
+    output="files",
+    help="levels of the volume-cost collapse hierarchy, written to OUTDIR/<name>/level_NN<suffix>",
+    options=(
+        Option("levels", _levels_spec, "all", "'all' or comma-separated level numbers (0 is the input)"),
+        Option("min_vertices", int_at_least(1), 100, "stop coarsening below this many vertices"),
+        Option("max_levels", optional(int_at_least(1)), None, "at most this many levels"),
+        Option("maps", flag, False, "also write vertex_maps.npz", is_flag=True),
+    ),
+)
 def _hierarchy(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
     from .hierarchy import build_hierarchy
 
@@ -668,11 +721,26 @@ def _hierarchy(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dic
     }
 
 
+@operation(
+    "approximate",
+    help="LS-mesh approximation from control points",
+    options=(
+        Option(
+            "count",
+            count_or_percent,
+            "2%",
+            "control points: a count, or a share of each mesh's vertices like 2%",
+        ),
+        Option("method", choice(*_METHODS), "greedy", "control point selection: greedy, random or combined"),
+        Option("interpolate", flag, False, "interpolate the control points exactly", is_flag=True),
+        Option("seed", int_at_least(0), 0, "seed of the random selections"),
+    ),
+)
 def _approximate(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
     from .metrics import vertex_error
     from .selection import approximate
 
-    count = _resolve_count(options["count"], len(mesh.vertices))
+    count = resolve_count(options["count"], len(mesh.vertices))
     out, indices = approximate(
         mesh, count, method=options["method"], interpolate=options["interpolate"], seed=options["seed"]
     )
@@ -685,12 +753,28 @@ def _approximate(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, d
     }
 
 
+@operation(
+    "encode",
+    output="bytes",
+    extension=".bin",
+    help="quantized LS-mesh anchors, written as OUTDIR/<name>.bin",
+    options=(
+        Option(
+            "count",
+            count_or_percent,
+            "2%",
+            "anchors: a count, or a share of each mesh's vertices like 2%",
+        ),
+        Option("bits", int_at_least(1), 12, "bits per quantized coordinate"),
+        Option("method", choice(*_METHODS), "greedy", "anchor selection: greedy, random or combined"),
+    ),
+)
 def _encode(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
     from .encoding import decode_geometry, encode_geometry
     from .metrics import vertex_error
 
     n = len(mesh.vertices)
-    count = _resolve_count(options["count"], n)
+    count = resolve_count(options["count"], n)
     data = encode_geometry(mesh, count, bits=options["bits"], method=options["method"])
     error = vertex_error(decode_geometry(mesh, data), mesh)
     return data, {
@@ -727,6 +811,20 @@ def _folder(value: Any) -> str:
     return os.path.abspath(text)
 
 
+@operation(
+    "compare",
+    output="none",
+    help="metrics against the matching file in --reference",
+    options=(
+        Option(
+            "reference",
+            optional(_folder),
+            None,
+            "folder holding a reference for every input (same name or stem)",
+        ),
+        Option("points", int_at_least(1), 100_000, "surface samples per mesh"),
+    ),
+)
 def _compare(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
     from .metrics import surface_distance, vertex_error
 
@@ -745,128 +843,3 @@ def _compare(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]
         metrics["vertex_error"] = vertex_error(mesh, reference)
     metrics.update(change_metrics(reference, mesh))
     return None, metrics
-
-
-_METHODS = ("greedy", "random", "combined")
-
-register_op(
-    BatchOp(
-        "denoise",
-        denoise_op,
-        help="barycenter-constrained (or multiresolution with --level) fairing",
-        options=(
-            Option(
-                "iterations",
-                optional(int_at_least(0)),
-                None,
-                "number_of_iterations (default: the API's; with --level, 5 per level)",
-            ),
-            Option(
-                "method",
-                optional(choice("scan", "local", "global")),
-                None,
-                "fairing energy (default: scan, the API's; local with --level or --reimpose-every)",
-            ),
-            Option("level", int_at_least(0), 0, "multiresolution level (0: plain fairing)"),
-            Option("mu", optional(real), None, "barycenter penalty weight of --method global or scan"),
-            Option(
-                "reimpose_every",
-                optional(int_at_least(1)),
-                None,
-                "re-take the barycenters every k iterations",
-            ),
-            Option("fixed_boundary", flag, False, "keep boundary vertices fixed", is_flag=True),
-        ),
-    )
-)
-register_op(
-    BatchOp(
-        "fill",
-        fill_op,
-        help="fill holes with faired patches (LS meshes)",
-        options=(
-            Option(
-                "max_hole_edges",
-                optional(int_at_least(3)),
-                None,
-                "fill only holes of at most this many edges",
-            ),
-            Option(
-                "max_hole_diameter", optional(real), None, "fill only holes at most this wide (mesh units)"
-            ),
-            Option("continuity", choice("0", "1", "2"), "2", "0 harmonic, 1 LS mesh, 2 tri-Laplacian"),
-            Option("density", real, 1.0, "new vertex density relative to the surroundings"),
-            Option("fill_border", flag, False, "also fill the outer border of open components", is_flag=True),
-        ),
-    )
-)
-register_op(
-    BatchOp(
-        "hierarchy",
-        _hierarchy,
-        output="files",
-        help="levels of the volume-cost collapse hierarchy, written to OUTDIR/<name>/level_NN<suffix>",
-        options=(
-            Option("levels", _levels_spec, "all", "'all' or comma-separated level numbers (0 is the input)"),
-            Option("min_vertices", int_at_least(1), 100, "stop coarsening below this many vertices"),
-            Option("max_levels", optional(int_at_least(1)), None, "at most this many levels"),
-            Option("maps", flag, False, "also write vertex_maps.npz", is_flag=True),
-        ),
-    )
-)
-register_op(
-    BatchOp(
-        "approximate",
-        _approximate,
-        help="LS-mesh approximation from control points",
-        options=(
-            Option(
-                "count",
-                count_or_percent,
-                "2%",
-                "control points: a count, or a share of each mesh's vertices like 2%",
-            ),
-            Option(
-                "method", choice(*_METHODS), "greedy", "control point selection: greedy, random or combined"
-            ),
-            Option("interpolate", flag, False, "interpolate the control points exactly", is_flag=True),
-            Option("seed", int_at_least(0), 0, "seed of the random selections"),
-        ),
-    )
-)
-register_op(
-    BatchOp(
-        "encode",
-        _encode,
-        output="bytes",
-        extension=".bin",
-        help="quantized LS-mesh anchors, written as OUTDIR/<name>.bin",
-        options=(
-            Option(
-                "count",
-                count_or_percent,
-                "2%",
-                "anchors: a count, or a share of each mesh's vertices like 2%",
-            ),
-            Option("bits", int_at_least(1), 12, "bits per quantized coordinate"),
-            Option("method", choice(*_METHODS), "greedy", "anchor selection: greedy, random or combined"),
-        ),
-    )
-)
-register_op(
-    BatchOp(
-        "compare",
-        _compare,
-        output="none",
-        help="metrics against the matching file in --reference",
-        options=(
-            Option(
-                "reference",
-                optional(_folder),
-                None,
-                "folder holding a reference for every input (same name or stem)",
-            ),
-            Option("points", int_at_least(1), 100_000, "surface samples per mesh"),
-        ),
-    )
-)

@@ -12,17 +12,14 @@ Engine
 ``dask.distributed`` (``pip install 'o3d_lsmesh[dask]'``). Without a client
 or scheduler address, a ``LocalCluster(n_workers=N, threads_per_worker=1,
 processes=True)`` is started with *spawned* workers: a forked worker deadlocks
-once the parent has used CHOLMOD's OpenMP runtime. ``scheduler=``,
-``scheduler_file=`` or ``DASK_SCHEDULER_ADDRESS`` connect to an existing
-cluster instead. Without Dask, the files run one after another in this process
-(never in a fork-based pool).
+once the parent has used CHOLMOD's OpenMP runtime (:func:`run` says how to use
+an existing cluster). Without Dask, the files run one after another in this
+process (never in a fork-based pool).
 
-Tasks are submitted through ``client.map`` in a window a few times the
-cluster's worker threads, refilled from ``as_completed``. The local cluster
-sets Dask's ``worker-saturation`` to 1, so the scheduler queues the window and
-hands every worker exactly the task it runs: a worker that dies takes no
-innocent task with it (Dask counts every task held by a dying worker as
-suspect), and the scheduler's memory does not grow with the number of files.
+Tasks are submitted in a window a few times the cluster's worker threads
+(:class:`_Window` says why), refilled from ``as_completed``: a worker that dies
+takes no innocent task with it, and the scheduler's memory does not grow with
+the number of files.
 """
 
 from __future__ import annotations
@@ -33,7 +30,6 @@ import hashlib
 import json
 import logging
 import os
-import sys
 import time
 import warnings
 from collections import Counter
@@ -58,6 +54,7 @@ from ._batch_ops import (
 )
 from ._errors import O3DLSMeshWarning
 from ._progress import check_progress, progress_bar
+from ._validate import as_workers
 
 __all__ = ["OPS", "BatchOp", "Option", "collect_inputs", "register_op", "run", "summarize"]
 
@@ -78,44 +75,32 @@ def collect_inputs(inputs: str | os.PathLike | Iterable[str | os.PathLike]) -> l
     if isinstance(inputs, (str, os.PathLike)):
         inputs = [inputs]
     inputs = list(inputs)
-    items: list[tuple[str, str]] = []
-    seen: set[str] = set()
-
-    def add(path: Path, relative: str) -> None:
-        key = os.path.realpath(path)
-        if key not in seen:
-            seen.add(key)
-            items.append((str(path), relative))
-
-    def add_folder(folder: Path) -> None:
-        files = sorted(p for p in folder.rglob("*") if p.is_file() and p.suffix.lower() in READABLE)
-        for path in files:
-            add(path, str(path.relative_to(folder)))
-
+    found: dict[str, tuple[str, str]] = {}  # by real path: a path given twice is taken once
     for item in inputs:
         if not isinstance(item, (str, os.PathLike)):
             raise TypeError(f"inputs must be paths or glob patterns, got {type(item).__name__}")
         text = os.fspath(item)
-        if os.path.isdir(text):
-            add_folder(Path(text))
-        elif os.path.isfile(text):
-            add(Path(text), Path(text).name)
+        if os.path.isdir(text) or os.path.isfile(text):
+            matches = [text]
         elif _GLOB_CHARACTERS & set(text):
             matches = sorted(glob.glob(text, recursive=True))
             if not matches:
                 raise ValueError(f"INPUT {text!r} matches no file")
-            for match in matches:
-                if os.path.isdir(match):
-                    add_folder(Path(match))
-                else:
-                    add(Path(match), Path(match).name)
         else:
             raise ValueError(f"INPUT {text!r} does not exist (expected a file, a folder or a glob pattern)")
-    if not items:
+        for match in map(Path, matches):
+            if match.is_dir():
+                files = sorted(p for p in match.rglob("*") if p.is_file() and p.suffix.lower() in READABLE)
+                pairs = [(path, str(path.relative_to(match))) for path in files]
+            else:
+                pairs = [(match, match.name)]
+            for path, relative in pairs:
+                found.setdefault(os.path.realpath(path), (str(path), relative))
+    if not found:
         raise ValueError(
             f"INPUT must name at least one mesh file ({', '.join(READABLE)}), got none in {list(inputs)!r}"
         )
-    return items
+    return list(found.values())
 
 
 @dataclass(frozen=True)
@@ -233,10 +218,10 @@ class _Window:
 
     Above ``2 x threads`` tasks, Dask treats the tasks as root tasks and queues them on the scheduler,
     handing each worker only ``worker-saturation x threads`` at a time (1 on :func:`local_cluster`): so a
-    worker that dies holds no innocent task, and a finished worker gets its next file from the scheduler
-    without a round trip through this client. A window of ``4 x threads + 4`` keeps that queue filled while
-    the scheduler's memory stays independent of the number of files. A batch of at most ``2 x threads``
-    files, which Dask would hand out all at once, gets a window of ``threads`` instead.
+    worker that dies holds no innocent task (Dask counts every task held by a dying worker as suspect),
+    and a finished worker gets its next file without a round trip through this client. A window of
+    ``4 x threads + 4`` keeps that queue filled; a batch of at most ``2 x threads`` files, which Dask
+    would hand out all at once, gets a window of ``threads`` instead.
     """
 
     def __init__(self, client: Any, total: int):
@@ -258,7 +243,7 @@ def _failure(task: _Task, op: str, message: str, stage: str = "worker") -> dict:
 def _run_dask(client: Any, tasks: list[_Task], job: dict, emit: Callable[[dict], bool], retries: int) -> None:
     from concurrent.futures import CancelledError
 
-    from distributed import as_completed
+    from distributed import KilledWorker, as_completed
 
     cancelled: tuple[type[BaseException], ...]
     try:
@@ -267,11 +252,6 @@ def _run_dask(client: Any, tasks: list[_Task], job: dict, emit: Callable[[dict],
         cancelled = (CancelledError, FutureCancelledError)
     except ImportError:  # pragma: no cover - distributed before 2024.8
         cancelled = (CancelledError,)
-
-    try:
-        from distributed import KilledWorker
-    except ImportError:  # pragma: no cover - older distributed
-        from distributed.scheduler import KilledWorker
 
     token = os.urandom(4).hex()
     pending = iter(tasks)
@@ -432,18 +412,14 @@ def run(
     ['ok']
     """
     ops = parse_ops(op)
+    pipeline = ",".join(o.name for o in ops)
     values = resolve_options(ops, options)
     if not isinstance(suffix, str) or suffix.lower() not in WRITABLE:
         raise ValueError(f"--suffix must be one of {', '.join(WRITABLE)}, got {suffix!r}")
     suffix = suffix.lower()
-    if (
-        isinstance(threads_per_worker, bool)
-        or not isinstance(threads_per_worker, int)
-        or threads_per_worker < 1
-    ):
-        raise ValueError(f"--threads-per-worker must be an integer >= 1, got {threads_per_worker!r}")
-    if isinstance(retries, bool) or not isinstance(retries, int) or retries < 0:
-        raise ValueError(f"--retries must be an integer >= 0, got {retries!r}")
+    for flag, value, minimum in (("threads-per-worker", threads_per_worker, 1), ("retries", retries, 0)):
+        if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
+            raise ValueError(f"--{flag} must be an integer >= {minimum}, got {value!r}")
     if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 0):
         raise ValueError(f"--workers must be an integer >= 0, got {workers!r}")
     if scheduler is not None and scheduler_file is not None:
@@ -479,21 +455,19 @@ def run(
 
     records: list[dict | None] = [None] * len(tasks)
     report_path = None if report is None else Path(report)
-    todo = tasks
-    if resume and report_path is not None:  # resume without a report was refused above
-        previous = _read_report(report_path)
-        todo = []
-        for task in tasks:
-            old = previous.get(task.path)
-            if (
-                old is not None
-                and old.get("status") == "ok"
-                and old.get("key") == task.key
-                and (task.output is None or os.path.exists(task.output))
-            ):
-                records[task.index] = {**old, "status": "skipped"}
-            else:
-                todo.append(task)
+    # (resume without a report was refused above)
+    previous = _read_report(report_path) if resume and report_path is not None else {}
+    todo = []
+    for task in tasks:
+        old = previous.get(task.path, {})
+        if (
+            old.get("status") == "ok"
+            and old.get("key") == task.key
+            and (task.output is None or os.path.exists(task.output))
+        ):
+            records[task.index] = {**old, "status": "skipped"}
+        else:
+            todo.append(task)
     outdir.mkdir(parents=True, exist_ok=True)
     # The workers need the op functions, not the option parsers: without them (closures that only cloudpickle
     # can send) every task pickles in ~200 bytes with the standard pickle instead of ~3 kB.
@@ -510,9 +484,8 @@ def run(
         progress,
         total=len(tasks),
         initial=len(tasks) - len(todo),
-        desc=f"batch {','.join(o.name for o in ops)}",
+        desc=f"batch {pipeline}",
         unit="file",
-        file=sys.stderr,
         dynamic_ncols=True,
     )
     counts: Counter = Counter()
@@ -552,11 +525,10 @@ def run(
         bar.close()
         if handle is not None:
             handle.close()
-    op_name = ",".join(o.name for o in ops)
     return [
         record
         if record is not None
-        else _failure(task, op_name, "not run (--fail-fast stopped the batch)", stage="cancelled")
+        else _failure(task, pipeline, "not run (--fail-fast stopped the batch)", stage="cancelled")
         | {"status": "cancelled"}
         for task, record in zip(tasks, records)
     ]
@@ -606,8 +578,7 @@ def _dispatch(
         )
         with Client(**kwargs) as own:
             return _run_dask(own, todo, job, emit, retries)
-    cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    n = workers if workers is not None else max(1, cpus // threads_per_worker)
+    n = workers if workers is not None else max(1, as_workers(None) // threads_per_worker)
     n = min(n, len(todo))  # no worker that would never get a file
     with local_cluster(n, threads_per_worker, retries=retries) as cluster, Client(cluster) as own:
         return _run_dask(own, todo, job, emit, retries)

@@ -130,6 +130,8 @@ class LSMeshSystem:
             free = np.ones(n, dtype=bool)
             free[indices] = False
             self._free: np.ndarray | None = np.flatnonzero(free)
+            # reduced index of every vertex (-1 for eliminated ones)
+            self._reduced: np.ndarray | None = np.where(free, np.cumsum(free) - 1, -1)
             L = L.tocsc()
             L_free = L[:, self._free]
             operator = L_free.tocsr()
@@ -143,7 +145,7 @@ class LSMeshSystem:
             columns = indices if self._hard_first is None else indices[first]
             self._rhs_hard = -(L_free.T @ L[:, columns]).tocsr()
         else:
-            self._free = None  # every vertex is unknown: no index arrays to hold
+            self._free = self._reduced = None  # every vertex is unknown: no index arrays to hold
             # L^T L + W^2 = A A^T for A = [L^T | W] (one weighted column per control vertex):
             # CHOLMOD factors it without it being formed, in less time and memory than L^T L
             controls = sp.csc_matrix((weights, indices, np.arange(len(indices) + 1)), shape=(n, len(indices)))
@@ -159,11 +161,6 @@ class LSMeshSystem:
         self._updated = False
         self._n = n
         self._unknowns = n if self._free is None else len(self._free)
-        # reduced index of every vertex (-1 for eliminated ones)
-        self._reduced = None
-        if self._free is not None:
-            self._reduced = np.full(n, -1, dtype=np.int64)
-            self._reduced[self._free] = np.arange(len(self._free))
         self._solver = SPDSolver(
             product_of=product,
             backend=backend,
@@ -575,9 +572,7 @@ def reconstruct_geometry(
     data = read_mesh(mesh, weld=True)
     n = len(data.vertices)
     unknown = data.welded_indices(unknown_vertex_indices, name="unknown_vertex_indices", merge=True)
-    known_mask = np.ones(n, dtype=bool)
-    known_mask[unknown] = False
-    known = np.flatnonzero(known_mask)
+    known = np.setdiff1d(np.arange(n), unknown, assume_unique=True)  # in increasing order
     interpolate = as_bool(interpolate, name="interpolate")
     as_choice(laplacian, LAPLACIAN_KINDS, name="laplacian")
     # checked with either scheme (the interpolatory one does not use them): a bad value is a mistake either way

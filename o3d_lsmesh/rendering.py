@@ -20,10 +20,7 @@ Two facts about ``OffscreenRenderer`` in open3d 0.20 shape this module
 * with post-processing (tone mapping, SSAO, anti-aliasing) on, llvmpipe is
   several times slower; it is switched off.
 
-``backend="raycast"`` draws the same layout with Open3D's Embree
-``RaycastingScene`` in-process (Lambert shading, no shadows): it needs no
-graphics driver at all, and ``backend="auto"`` falls back to it, with a
-warning, when Filament cannot start.
+``backend="raycast"`` (the fallback of ``"auto"``) needs no graphics driver: see :func:`render`.
 """
 
 from __future__ import annotations

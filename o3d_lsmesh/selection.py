@@ -83,9 +83,7 @@ def _random(vertices: np.ndarray, triangles: np.ndarray, count: int, rng: np.ran
     start = _first_per_label(labels, order, components)
     rest = np.ones(n, dtype=bool)
     rest[start] = False
-    # the rest keeps the random order of the permutation
-    rest_in_order = order[rest[order]]
-    return np.concatenate([start, rest_in_order])[:count]
+    return np.concatenate([start, order[rest[order]]])[:count]  # the rest in the permutation's order
 
 
 def forbid_around(
@@ -100,17 +98,10 @@ def forbid_around(
     forbidden[vertex] = True
     frontier = np.array([vertex], dtype=np.int64)
     while frontier.size:
-        begin, end = indptr[frontier], indptr[frontier + 1]
-        counts = end - begin
-        total = int(counts.sum())
-        if total == 0:
-            break
+        begin, counts = indptr[frontier], indptr[frontier + 1] - indptr[frontier]
         source = np.repeat(frontier, counts)
         target = neighbours[concatenated_ranges(begin, counts)]
-        keep = ~forbidden[target] & (errors[target] < errors[source])
-        reached = np.sort(target[keep])
-        if reached.size:
-            reached = reached[np.concatenate([[True], reached[1:] != reached[:-1]])]
+        reached = np.unique(target[~forbidden[target] & (errors[target] < errors[source])])
         forbidden[reached] = True
         frontier = reached
 
@@ -134,8 +125,7 @@ def _select(
     n = len(vertices)
     start = start_vertices(vertices, triangles)
     # the per-component seeds are control points too: the bar starts at them and ends at count
-    bar = progress_bar(progress, total=count, initial=len(start), desc=desc, unit="point")
-    try:
+    with progress_bar(progress, total=count, initial=len(start), desc=desc, unit="point") as bar:
         bar.set_postfix_str("factor")
         indptr = neighbours = np.zeros(0, dtype=np.int64)  # a batch of one forbids nothing
         if batch > 1:
@@ -166,8 +156,6 @@ def _select(
             order.append(chosen)
             done += len(chosen)
             bar.update(len(chosen))
-    finally:
-        bar.close()
     return np.concatenate(order), solver
 
 
@@ -243,10 +231,8 @@ def select_control_points(
     position.
 
     * ``"random"``: a uniformly random order, reproducible with ``seed``.
-    * ``"greedy"``: one vertex at a time, the one with the largest error. The
-      LS system is factored once; every step adds the new anchor by a rank-1
-      update of the Cholesky factor (section III of the geometry-aware bases
-      paper) and back-substitutes once, so a step costs an update plus a solve.
+    * ``"greedy"``: one vertex at a time, the one with the largest error; a
+      step is a rank-1 update of the kept factor plus one back-substitution.
     * ``"combined"``: the local-maxima method. The LS mesh is solved once per
       ``batch`` picks; within a batch each pick is the largest error among the
       vertices not forbidden, after which the vertices reached from it by a

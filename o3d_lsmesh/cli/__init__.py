@@ -14,9 +14,6 @@ or input the library's own checks reject (a ``ValueError``/``TypeError``
 raised by a ``raise`` statement in o3d_lsmesh); 1 when a picture could not be
 drawn, and 1 with the traceback for anything else (a bug: please report it).
 
-Each call imports Open3D and the numeric stack (about 2 s): for many files use
-``o3d-lsmesh batch``, which pays that once per worker.
-
 STL files store every triangle with its own three vertices; they are read
 with duplicated vertices merged, so the algorithms see one surface. Other
 formats keep the layout Open3D reads (OBJ and glTF split vertices at UV

@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from .._batch_ops import resolve_count
 from ._common import CLIError, Run, add_command, positive_int
 from ._files import check_output, read_input, write_output
 
@@ -205,7 +206,7 @@ def encode(args: argparse.Namespace, run: Run) -> int:
     check_output(args.output, [args.input], force=args.force, suffixes=None)
     mesh = read_input(args.input)
     n = len(mesh.vertices)
-    count = args.count if args.count is not None else max(1, int(np.ceil(0.02 * n)))
+    count = resolve_count(0.02 if args.count is None else args.count, n)  # batch's default: 2%
     from ..encoding import decode_geometry, encode_geometry
     from ..metrics import vertex_error
 
