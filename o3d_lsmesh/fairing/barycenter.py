@@ -35,6 +35,7 @@ from ..topology import (
     VertexRings,
     boundary_curves,
     edge_structure,
+    gather,
     group_keys,
     vertex_rings,
 )
@@ -187,12 +188,12 @@ def _valence_tables(triangles: np.ndarray, valence: np.ndarray | None = None):
     rank = np.zeros(len(present_valence), dtype=key_type)
     rank[values] = np.arange(base, dtype=key_type)
     vertex_rank = rank[valence]  # per vertex, then gathered per corner
-    keys = vertex_rank[triangles[:, 0]]
-    keys *= key_type(base)
-    keys += vertex_rank[triangles[:, 1]]
-    keys *= key_type(base)
-    keys += vertex_rank[triangles[:, 2]]
-    del vertex_rank
+    keys = gather(vertex_rank, triangles[:, 0])
+    corner_rank = np.empty_like(keys)
+    for corner in (1, 2):
+        keys *= key_type(base)
+        keys += gather(vertex_rank, triangles[:, corner], out=corner_rank)
+    del vertex_rank, corner_rank
     # group the (few hundred) distinct valence triples: a dense look-up when the
     # key range is small (the usual case), else sort-and-mask
     if base**3 <= 1 << 22:
@@ -201,7 +202,7 @@ def _valence_tables(triangles: np.ndarray, valence: np.ndarray | None = None):
         distinct = np.flatnonzero(present)
         slot = np.zeros(base**3, dtype=key_type)
         slot[distinct] = np.arange(len(distinct), dtype=key_type)
-        group = slot[keys]
+        group = gather(slot, keys)
     else:
         distinct, group = _sorted_groups(keys.astype(np.int64))
     table = values[np.stack([distinct // (base * base), (distinct // base) % base, distinct % base], axis=1)]
@@ -356,7 +357,12 @@ def local_operator(
     m = len(triangles)
     indptr, indices, index = rings.indptr, rings.indices, rings.indices.dtype
     if rings.boundary.any():
-        interior = ~rings.boundary[triangles].any(axis=1)
+        interior = gather(rings.boundary, triangles[:, 0])  # first: touches the boundary
+        corner_boundary = np.empty_like(interior)
+        for corner in (1, 2):
+            interior |= gather(rings.boundary, triangles[:, corner], out=corner_boundary)
+        np.logical_not(interior, out=interior)
+        del corner_boundary
         group, table, M, u = _valence_tables(triangles[interior], rings.valence)
     else:  # a closed mesh: every triangle is interior
         interior = None
@@ -377,7 +383,7 @@ def local_operator(
         by_entry[:g, :, j] = c[:, rows, cols]
         by_entry[:g, :, 3 + j] = c[:, rows, rows]
     by_entry[:g, :, 6] = 1.0
-    columns = by_entry.reshape(-1, 7)
+    columns = np.ascontiguousarray(by_entry.reshape(-1, 7).T)  # (7, 6 g + 6): a 1-D table per column
     if interior is None:
         triangle_group = group.astype(index, copy=False)
     else:
@@ -401,21 +407,31 @@ def local_operator(
         s0, s1 = int(indptr[r0]), int(indptr[r1])
         # a slot of one (a diagonal, or a boundary edge) or of more (a fin, whose ends are on the
         # boundary) holds its first entry twice: it lies in a row whose every entry reads zeros
-        values = np.take(columns, _entry_rows(pairs[0, s0:s1].copy(), triangle_group, m, g), axis=0)
-        values += np.take(columns, _entry_rows(pairs[1, s0:s1].copy(), triangle_group, m, g), axis=0)
+        first = _entry_rows(pairs[0, s0:s1].copy(), triangle_group, m, g)
+        second = _entry_rows(pairs[1, s0:s1].copy(), triangle_group, m, g)
         local_starts = indptr[r0:r1] - s0
-        sums = np.add.reduceat(values[:, 3:], local_starts, axis=0)  # (rows, 4): 2x diagonal, 2x count
-        sums *= 0.5  # exact
-        count = sums[:, 3]
+        spare = np.empty(s1 - s0)
+
+        def slot_sums(column: np.ndarray, out: np.ndarray) -> np.ndarray:
+            # one column's value at every slot of the block: its two entries' table values summed
+            gather(column, first, out=out)
+            out += gather(column, second, out=spare)
+            return out
+
+        # 1-D gathers from one small table per column (a 2-D gather of 7-value rows costs twice)
+        count = np.add.reduceat(slot_sums(columns[6], np.empty(s1 - s0)), local_starts)
+        count *= 0.5  # exact
         scale = 1.0 / np.maximum(count, 1.0)
         row_scale = np.repeat(scale, np.diff(indptr[r0 : r1 + 1]))
         local_diagonal = diagonal[r0:r1] - s0
         for j in range(3):
             target = j if j < 2 else 3  # data holds E1, E2, W, E3
-            block_data = data[target][s0:s1] if target < len(data) else np.empty(s1 - s0)
-            np.multiply(values[:, j], row_scale, out=block_data)
-            diagonal_values = sums[:, j]
+            diagonal_values = np.add.reduceat(slot_sums(columns[3 + j], np.empty(s1 - s0)), local_starts)
+            diagonal_values *= 0.5  # exact
             diagonal_values *= scale
+            block_data = data[target][s0:s1] if target < len(data) else np.empty(s1 - s0)
+            slot_sums(columns[j], block_data)
+            block_data *= row_scale
             block_data[local_diagonal] = diagonal_values
         # vertices without estimates stay put
         data[1][s0:s1][local_diagonal[count == 0]] = 1.0
@@ -435,7 +451,7 @@ def _entry_rows(entry: np.ndarray, triangle_group: np.ndarray, m: int, g: int) -
     """Table row ``6 * group + d`` of ring entries ``d * m + t`` (in place); diagonal markers read row ``6 g``."""
     d = entry // m
     entry -= d * m  # the triangle (of a marker: some triangle, overwritten below)
-    row = triangle_group[entry]
+    row = gather(triangle_group, entry)
     row *= 6
     row += d
     row[d >= 6] = 6 * g
