@@ -372,30 +372,34 @@ def local_operator(
     beta = alpha - alpha.sum(axis=2, keepdims=True)  # coefficient of x_{i_c}: -sum_{b != c} alpha_ab
     share = np.repeat(u[:, :, None], 3, axis=2)  # (g, 3, 3): u_a, whatever the column's corner
     del M
-    # Entry d of a triangle of group q reads row 6 q + d of the table (row corner a =
+    # Entry d of a triangle of group q reads row 6 q + d of the tables (row corner a =
     # RING_ROW_SLOT[d], column corner b = RING_COLUMN_SLOT[d]): the triangle's coefficient of
-    # column b in row a for E1, E2, E3, then the diagonal ones (a, a), then 1 (an estimate).
-    # Group g (not an interior triangle, or a diagonal marker) reads zeros.
-    coefficients = (alpha, beta, share)
+    # column b in row a for E1, E2, E3, then E1's diagonal one (a, a). Group g (not an interior
+    # triangle, or a diagonal marker) reads zeros.
     rows, cols = list(RING_ROW_SLOT), list(RING_COLUMN_SLOT)
-    by_entry = np.zeros((g + 1, 6, 7))
-    for j, c in enumerate(coefficients):
-        by_entry[:g, :, j] = c[:, rows, cols]
-        by_entry[:g, :, 3 + j] = c[:, rows, rows]
-    by_entry[:g, :, 6] = 1.0
-    columns = np.ascontiguousarray(by_entry.reshape(-1, 7).T)  # (7, 6 g + 6): a 1-D table per column
+    by_entry = np.zeros((4, g + 1, 6))
+    for j, c in enumerate((alpha, beta, share)):
+        by_entry[j, :g] = c[:, rows, cols]
+    by_entry[3, :g] = alpha[:, rows, rows]
+    columns = by_entry.reshape(4, -1)  # (4, 6 g + 6): a 1-D table per column
+    # estimates per vertex: its interior triangles (zero on the boundary, whose triangles all touch it)
+    count = np.bincount(triangles.reshape(-1), minlength=n)
     if interior is None:
         triangle_group = group.astype(index, copy=False)
     else:
+        count -= np.bincount(triangles[~interior].reshape(-1), minlength=n)
         triangle_group = np.full(m, g, dtype=index)
         triangle_group[interior] = group
     del interior, group
+    reciprocal = 1.0 / np.maximum(count, 1)
 
     # One pass over the slots, in blocks of rows (temporaries of a few megabytes at any size). Off
     # the diagonal of a row that is not on the boundary, every slot holds exactly the two triangles
     # on its edge, and every triangle on the row's vertex lies in exactly two of its slots; so a
-    # slot's coefficient is the sum of its two entries' table rows, and half the row sum of the
-    # diagonal columns (and of the estimate column) is the diagonal (and the estimate count).
+    # slot's coefficient is the sum of its two entries' table values, and half the row sum of an
+    # entry's diagonal coefficient (E1: alpha_aa) is the diagonal. The others need no gather of
+    # their own: E3's entries hold u_a for both the diagonal and the column, so its diagonal is half
+    # its row sum, and beta_aa = -(alpha_ab + alpha_ac) makes E2's diagonal minus E1's row sum.
     pairs, diagonal = rings.pairs, rings.diagonal
     data = [np.empty(len(indices)) for _ in range(4 if keep_constraint else 3)]  # E1, E2, W, E3
     if positions0 is not None:
@@ -418,29 +422,31 @@ def local_operator(
             out += gather(column, second, out=spare)
             return out
 
-        # 1-D gathers from one small table per column (a 2-D gather of 7-value rows costs twice)
-        count = np.add.reduceat(slot_sums(columns[6], np.empty(s1 - s0)), local_starts)
-        count *= 0.5  # exact
-        scale = 1.0 / np.maximum(count, 1.0)
+        def half_row_sums(values: np.ndarray) -> np.ndarray:
+            sums = np.add.reduceat(values, local_starts)
+            sums *= 0.5  # exact
+            return sums
+
+        scale = reciprocal[r0:r1]
         row_scale = np.repeat(scale, np.diff(indptr[r0 : r1 + 1]))
         local_diagonal = diagonal[r0:r1] - s0
-        for j in range(3):
-            target = j if j < 2 else 3  # data holds E1, E2, W, E3
-            diagonal_values = np.add.reduceat(slot_sums(columns[3 + j], np.empty(s1 - s0)), local_starts)
-            diagonal_values *= 0.5  # exact
-            diagonal_values *= scale
-            block_data = data[target][s0:s1] if target < len(data) else np.empty(s1 - s0)
-            slot_sums(columns[j], block_data)
+        e1 = slot_sums(columns[0], data[0][s0:s1])
+        diagonals = [half_row_sums(slot_sums(columns[3], np.empty(s1 - s0))), -np.add.reduceat(e1, local_starts)]
+        e3 = slot_sums(columns[2], data[3][s0:s1] if keep_constraint else np.empty(s1 - s0))
+        diagonals.append(half_row_sums(e3))
+        e2 = slot_sums(columns[1], data[1][s0:s1])
+        for block_data, diagonal_values in zip((e1, e2, e3), diagonals):
             block_data *= row_scale
+            diagonal_values *= scale
             block_data[local_diagonal] = diagonal_values
         # vertices without estimates stay put
-        data[1][s0:s1][local_diagonal[count == 0]] = 1.0
+        e2[local_diagonal[count[r0:r1] == 0]] = 1.0
         adjacency = data[2][s0:s1]
         adjacency.fill(1.0)
         adjacency[local_diagonal] = 0.0
         if positions0 is not None:  # the block's rows of E3 @ X0
             block_indptr = indptr[r0 : r1 + 1] - indptr[r0]
-            _accumulate_block(block_indptr, indices[s0:s1], block_data, positions0, initial[r0:r1])
+            _accumulate_block(block_indptr, indices[s0:s1], e3, positions0, initial[r0:r1])
     del triangle_group
     e1, e2, adjacency = (_csr(values, indices, indptr, n) for values in data[:3])
     e3 = _csr(data[3], indices, indptr, n) if keep_constraint else None
