@@ -141,7 +141,8 @@ def _may_have_duplicates(vertices: np.ndarray) -> bool:
     # a 2^20-bucket filter on the shared high halves picks the candidates in one pass over the keys
     bucket = np.zeros(1 << 20, dtype=bool)
     bucket[shared >> np.uint32(12)] = True
-    candidates = key[bucket[high >> np.uint32(12)]]
+    del high
+    candidates = key[bucket[(key >> np.uint64(44)).view(np.int64)]]  # (an intp index: no converted copy)
     candidates.sort()
     return bool(np.any(candidates[1:] == candidates[:-1]))
 

@@ -212,15 +212,24 @@ def edge_structure(triangles: np.ndarray, n: int | None = None) -> EdgeStructure
     return EdgeStructure(edges, counts, order, starts)
 
 
-def gather(values: np.ndarray, index: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-    """``values[index]`` for an ``index`` known to be in range, of any integer dtype (into ``out`` if given).
+#: Indices per call of :func:`gather` (numpy converts an index to intp first: a temporary this size).
+_GATHER_BLOCK = 1 << 16
 
-    ``np.take`` with ``mode="wrap"`` into a buffer: fancy indexing converts an int32 index to intp
-    first, and ``np.take``'s default mode buffers its output, each costing more than the gather.
+
+def gather(values: np.ndarray, index: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """``values[index]`` for a 1-D ``index`` known to be in range, of any integer dtype (into ``out`` if given).
+
+    ``np.take`` with ``mode="wrap"`` into a buffer (the default mode buffers its output, costing
+    more than the gather), in blocks when the index is not intp: numpy converts it to intp first,
+    and a mesh-sized converted copy is fresh memory, whose page faults cost more than the gather.
     """
     if out is None:
         out = np.empty(np.shape(index), dtype=values.dtype)
-    return np.take(values, index, out=out, mode="wrap")
+    if index.dtype == np.intp or len(index) <= _GATHER_BLOCK:
+        return np.take(values, index, out=out, mode="wrap")
+    for i in range(0, len(index), _GATHER_BLOCK):
+        np.take(values, index[i : i + _GATHER_BLOCK], out=out[i : i + _GATHER_BLOCK], mode="wrap")
+    return out
 
 
 #: Corner slots of the six directed entries of a triangle in :func:`vertex_rings`: entry ``d * m + t``

@@ -189,20 +189,21 @@ def _valence_tables(triangles: np.ndarray, valence: np.ndarray | None = None):
     rank[values] = np.arange(base, dtype=key_type)
     vertex_rank = rank[valence]  # per vertex, then gathered per corner
     keys = gather(vertex_rank, triangles[:, 0])
-    corner_rank = np.empty_like(keys)
+    spare = np.empty_like(keys)
     for corner in (1, 2):
         keys *= key_type(base)
-        keys += gather(vertex_rank, triangles[:, corner], out=corner_rank)
-    del vertex_rank, corner_rank
+        keys += gather(vertex_rank, triangles[:, corner], out=spare)
+    del vertex_rank
     # group the (few hundred) distinct valence triples: a dense look-up when the
     # key range is small (the usual case), else sort-and-mask
     if base**3 <= 1 << 22:
         present = np.zeros(base**3, dtype=bool)
-        present[keys] = True
+        for i in range(0, len(keys), 1 << 16):  # in blocks: the int32 keys are converted to intp
+            present[keys[i : i + (1 << 16)]] = True
         distinct = np.flatnonzero(present)
         slot = np.zeros(base**3, dtype=key_type)
         slot[distinct] = np.arange(len(distinct), dtype=key_type)
-        group = gather(slot, keys)
+        group = gather(slot, keys, out=spare)
     else:
         distinct, group = _sorted_groups(keys.astype(np.int64))
     table = values[np.stack([distinct // (base * base), (distinct // base) % base, distinct % base], axis=1)]
@@ -382,12 +383,14 @@ def local_operator(
         by_entry[j, :g] = c[:, rows, cols]
     by_entry[3, :g] = alpha[:, rows, rows]
     columns = by_entry.reshape(4, -1)  # (4, 6 g + 6): a 1-D table per column
-    # estimates per vertex: its interior triangles (zero on the boundary, whose triangles all touch it)
-    count = np.bincount(triangles.reshape(-1), minlength=n)
+    # estimates per vertex: its interior triangles. Off the boundary every edge has two triangles,
+    # so a vertex has as many triangles as neighbours; on it, every triangle touches the boundary.
+    count = rings.valence.copy()
     if interior is None:
         triangle_group = group.astype(index, copy=False)
     else:
         count -= np.bincount(triangles[~interior].reshape(-1), minlength=n)
+        count[rings.boundary] = 0
         triangle_group = np.full(m, g, dtype=index)
         triangle_group[interior] = group
     del interior, group
