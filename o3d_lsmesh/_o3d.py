@@ -315,10 +315,12 @@ def new_mesh(
     elif data.source is not None and warn:
         warn_dropped_attributes(data, "the result has new connectivity", stacklevel=4)
     vertices = np.ascontiguousarray(vertices, dtype=np.float64)
-    if not (same_topology and data.kind == "legacy"):  # (that path copies the source's own triangles)
-        triangles = np.ascontiguousarray(triangles, dtype=np.int64)
+    # (a legacy mesh of the same connectivity copies the source's own triangles: no int64 copy here)
+    faces = np.asarray(triangles)
+    if not (same_topology and data.kind == "legacy"):
+        faces = np.ascontiguousarray(faces, dtype=np.int64)
     if data.kind == "arrays":
-        return vertices.copy(), triangles.copy()
+        return vertices.copy(), faces.copy()
     o3d = open3d()
     src = data.source
     if data.kind == "legacy":
@@ -333,7 +335,7 @@ def new_mesh(
             out.triangle_normals = o3d.utility.Vector3dVector()
         else:
             out = o3d.geometry.TriangleMesh(
-                o3d.utility.Vector3dVector(vertices), o3d.utility.Vector3iVector(triangles.astype(np.int32))
+                o3d.utility.Vector3dVector(vertices), o3d.utility.Vector3iVector(faces.astype(np.int32))
             )
         if src.has_vertex_normals():
             out.compute_vertex_normals()
@@ -348,7 +350,7 @@ def new_mesh(
     index_dtype = src.triangle.indices.dtype if "indices" in src.triangle else o3d.core.int64
     out = o3d.t.geometry.TriangleMesh(device)
     out.vertex.positions = o3d.core.Tensor(vertices, device=device).to(position_dtype)
-    out.triangle.indices = o3d.core.Tensor(triangles, device=device).to(index_dtype)
+    out.triangle.indices = o3d.core.Tensor(faces, device=device).to(index_dtype)
     if same_topology:
         for key in src.vertex:
             if key not in ("positions",) + _NORMAL_KEYS:

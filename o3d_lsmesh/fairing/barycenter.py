@@ -418,42 +418,50 @@ def local_operator(
         second = _entry_rows(pairs[1, s0:s1].copy(), triangle_group, m, g)
         local_starts = indptr[r0:r1] - s0
         spare = np.empty(s1 - s0)
-
-        def slot_sums(column: np.ndarray, out: np.ndarray) -> np.ndarray:
-            # one column's value at every slot of the block: its two entries' table values summed
-            gather(column, first, out=out)
-            out += gather(column, second, out=spare)
-            return out
-
-        def half_row_sums(values: np.ndarray) -> np.ndarray:
-            sums = np.add.reduceat(values, local_starts)
-            sums *= 0.5  # exact
-            return sums
-
         scale = reciprocal[r0:r1]
         row_scale = np.repeat(scale, np.diff(indptr[r0 : r1 + 1]))
         local_diagonal = diagonal[r0:r1] - s0
-        e1 = slot_sums(columns[0], data[0][s0:s1])
-        diagonals = [half_row_sums(slot_sums(columns[3], np.empty(s1 - s0))), -np.add.reduceat(e1, local_starts)]
-        e3 = slot_sums(columns[2], data[3][s0:s1] if keep_constraint else np.empty(s1 - s0))
-        diagonals.append(half_row_sums(e3))
-        e2 = slot_sums(columns[1], data[1][s0:s1])
-        for block_data, diagonal_values in zip((e1, e2, e3), diagonals):
+        part = {}  # the block's slots of E1, E2, E3
+        part[0] = _slot_sums(columns[0], first, second, data[0][s0:s1], spare)
+        diagonals = [
+            _half_row_sums(_slot_sums(columns[3], first, second, np.empty(s1 - s0), spare), local_starts),
+            -np.add.reduceat(part[0], local_starts),
+        ]
+        part[2] = _slot_sums(columns[2], first, second, data[3][s0:s1] if keep_constraint else None, spare)
+        diagonals.append(_half_row_sums(part[2], local_starts))
+        part[1] = _slot_sums(columns[1], first, second, data[1][s0:s1], spare)
+        for block_data, diagonal_values in zip((part[0], part[1], part[2]), diagonals):
             block_data *= row_scale
             diagonal_values *= scale
             block_data[local_diagonal] = diagonal_values
         # vertices without estimates stay put
-        e2[local_diagonal[count[r0:r1] == 0]] = 1.0
+        part[1][local_diagonal[count[r0:r1] == 0]] = 1.0
         adjacency = data[2][s0:s1]
         adjacency.fill(1.0)
         adjacency[local_diagonal] = 0.0
         if positions0 is not None:  # the block's rows of E3 @ X0
             block_indptr = indptr[r0 : r1 + 1] - indptr[r0]
-            _accumulate_block(block_indptr, indices[s0:s1], e3, positions0, initial[r0:r1])
+            _accumulate_block(block_indptr, indices[s0:s1], part[2], positions0, initial[r0:r1])
     del triangle_group
     e1, e2, adjacency = (_csr(values, indices, indptr, n) for values in data[:3])
     e3 = _csr(data[3], indices, indptr, n) if keep_constraint else None
     return LocalOperator(adjacency, e1, e2, e3, initial if positions0 is not None else None)
+
+
+def _slot_sums(
+    column: np.ndarray, first: np.ndarray, second: np.ndarray, out: np.ndarray | None, spare: np.ndarray
+) -> np.ndarray:
+    """One table column's value at every slot: its two entries' (table rows ``first``, ``second``) summed."""
+    out = gather(column, first, out=out)
+    out += gather(column, second, out=spare)
+    return out
+
+
+def _half_row_sums(values: np.ndarray, starts: np.ndarray) -> np.ndarray:
+    """Half the sum of ``values`` over each row (rows starting at ``starts``)."""
+    sums = np.add.reduceat(values, starts)
+    sums *= 0.5  # exact
+    return sums
 
 
 def _entry_rows(entry: np.ndarray, triangle_group: np.ndarray, m: int, g: int) -> np.ndarray:
