@@ -343,7 +343,7 @@ def local_operator(
     local fairing builds), or a :class:`FairingTopology` (its rings are then
     built here). Every coefficient depends only on a triangle's valence
     triple and on the two corners of an entry, so it is read from a
-    ``(6 g + 6,)`` table per matrix (``g`` distinct triples, plus zero rows
+    ``(7 g + 7,)`` table per matrix (``g`` distinct triples, plus zero rows
     for the triangles that are not interior). A slot ``(v, w)`` off the
     diagonal of a vertex that is not on the boundary lies on an edge of
     exactly two triangles (an edge with one, or more than two, has boundary
@@ -373,16 +373,16 @@ def local_operator(
     beta = alpha - alpha.sum(axis=2, keepdims=True)  # coefficient of x_{i_c}: -sum_{b != c} alpha_ab
     share = np.repeat(u[:, :, None], 3, axis=2)  # (g, 3, 3): u_a, whatever the column's corner
     del M
-    # Entry d of a triangle of group q reads row 6 q + d of the tables (row corner a =
+    # Entry d of a triangle of group q reads row 7 q + d of the tables (row corner a =
     # RING_ROW_SLOT[d], column corner b = RING_COLUMN_SLOT[d]): the triangle's coefficient of
     # column b in row a for E1, E2, E3, then E1's diagonal one (a, a). Group g (not an interior
-    # triangle, or a diagonal marker) reads zeros.
+    # triangle) reads zeros, and so does entry 6 of every group (a diagonal marker 6 m: d = 6, t = 0).
     rows, cols = list(RING_ROW_SLOT), list(RING_COLUMN_SLOT)
-    by_entry = np.zeros((4, g + 1, 6))
+    by_entry = np.zeros((4, g + 1, 7))  # entry 6 of every group: zeros, what a diagonal marker reads
     for j, c in enumerate((alpha, beta, share)):
-        by_entry[j, :g] = c[:, rows, cols]
-    by_entry[3, :g] = alpha[:, rows, rows]
-    columns = by_entry.reshape(4, -1)  # (4, 6 g + 6): a 1-D table per column
+        by_entry[j, :g, :6] = c[:, rows, cols]
+    by_entry[3, :g, :6] = alpha[:, rows, rows]
+    columns = by_entry.reshape(4, -1)  # (4, 7 g + 7): a 1-D table per column
     # estimates per vertex: its interior triangles. Off the boundary every edge has two triangles,
     # so a vertex has as many triangles as neighbours; on it, every triangle touches the boundary.
     count = rings.valence.copy()
@@ -414,8 +414,8 @@ def local_operator(
         s0, s1 = int(indptr[r0]), int(indptr[r1])
         # a slot of one (a diagonal, or a boundary edge) or of more (a fin, whose ends are on the
         # boundary) holds its first entry twice: it lies in a row whose every entry reads zeros
-        first = _entry_rows(pairs[0, s0:s1].copy(), triangle_group, m, g)
-        second = _entry_rows(pairs[1, s0:s1].copy(), triangle_group, m, g)
+        first = _entry_rows(pairs[0, s0:s1].copy(), triangle_group, m)
+        second = _entry_rows(pairs[1, s0:s1].copy(), triangle_group, m)
         local_starts = indptr[r0:r1] - s0
         spare = np.empty(s1 - s0)
         scale = reciprocal[r0:r1]
@@ -464,14 +464,13 @@ def _half_row_sums(values: np.ndarray, starts: np.ndarray) -> np.ndarray:
     return sums
 
 
-def _entry_rows(entry: np.ndarray, triangle_group: np.ndarray, m: int, g: int) -> np.ndarray:
-    """Table row ``6 * group + d`` of ring entries ``d * m + t`` (in place); diagonal markers read row ``6 g``."""
+def _entry_rows(entry: np.ndarray, triangle_group: np.ndarray, m: int) -> np.ndarray:
+    """Table row ``7 * group + d`` of ring entries ``d * m + t`` (in place); a diagonal marker ``6 m`` reads a zero row."""
     d = entry // m
-    entry -= d * m  # the triangle (of a marker: some triangle, overwritten below)
+    entry -= d * m  # the triangle (of a marker: triangle 0)
     row = gather(triangle_group, entry)
-    row *= 6
+    row *= 7
     row += d
-    row[d >= 6] = 6 * g
     return row
 
 
