@@ -80,7 +80,7 @@ class MeshData:
     """
 
     vertices: np.ndarray  # (n, 3) float64
-    triangles: np.ndarray  # (m, 3) int64
+    triangles: np.ndarray  # (m, 3) int64 (int32 when read with narrow=True)
     source: Any
     kind: str  # "legacy", "tensor" or "arrays"
     split: np.ndarray | None = None  # (n_source,) int64 source vertex -> welded vertex
@@ -129,8 +129,22 @@ def _may_have_duplicates(vertices: np.ndarray) -> bool:
         key ^= column.view(np.uint64)
         key *= np.uint64(multiplier)
     del column
-    key.sort()
-    return bool(np.any(key[1:] == key[:-1]))
+    # the keys' high halves sort in half the time of the whole keys; only the rows whose high half
+    # another row shares (by chance about n^2 / 2^33 of them: a few thousand at 10M) have their whole
+    # keys compared
+    high = (key >> np.uint64(32)).astype(np.uint32)
+    ordered = np.sort(high)
+    shared = ordered[1:][ordered[1:] == ordered[:-1]]
+    del ordered
+    if not len(shared):
+        return False
+    # a 2^20-bucket filter on the shared high halves picks the candidates in one pass over the keys
+    bucket = np.zeros(1 << 20, dtype=bool)
+    bucket[shared >> np.uint32(12)] = True
+    del high
+    candidates = key[bucket[(key >> np.uint64(44)).view(np.int64)]]  # (an intp index: no converted copy)
+    candidates.sort()
+    return bool(np.any(candidates[1:] == candidates[:-1]))
 
 
 def weld_map(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray | None:
@@ -184,7 +198,9 @@ def _kind(mesh: Any, *, name: str = "mesh") -> str:
     )
 
 
-def read_mesh(mesh: Any, *, name: str = "mesh", allow_isolated: bool = True, weld: bool = False) -> MeshData:
+def read_mesh(
+    mesh: Any, *, name: str = "mesh", allow_isolated: bool = True, weld: bool = False, narrow: bool = False
+) -> MeshData:
     """Copy ``mesh`` into ``(n,3) float64`` vertices and ``(m,3) int64`` triangles and validate them.
 
     ``weld=True`` merges vertices at exactly equal coordinates (see
@@ -192,6 +208,8 @@ def read_mesh(mesh: Any, *, name: str = "mesh", allow_isolated: bool = True, wel
     layout. Functions whose arguments or results hold vertex indices map them
     with :meth:`MeshData.welded_indices` and :meth:`MeshData.source_indices`
     (an index given in the split layout would otherwise name another vertex).
+    ``narrow=True``: int32 triangles, shared with the source when it holds them so (a legacy Open3D
+    mesh), for callers that only read them (see :func:`~o3d_lsmesh._validate.as_triangle_array`).
 
     Every kind goes through the same checks (:func:`~o3d_lsmesh._validate.as_vertex_array`,
     :func:`~o3d_lsmesh._validate.as_triangle_array`): positions of a real
@@ -226,7 +244,7 @@ def read_mesh(mesh: Any, *, name: str = "mesh", allow_isolated: bool = True, wel
         )
     else:
         raw_v, raw_t = mesh
-    vertices, triangles = mesh_arrays(raw_v, raw_t, name=name, allow_isolated=allow_isolated)
+    vertices, triangles = mesh_arrays(raw_v, raw_t, name=name, allow_isolated=allow_isolated, narrow=narrow)
     split = weld_map(vertices, triangles) if weld else None
     if split is not None:
         welded = np.zeros((int(split.max()) + 1, 3))
@@ -297,9 +315,12 @@ def new_mesh(
     elif data.source is not None and warn:
         warn_dropped_attributes(data, "the result has new connectivity", stacklevel=4)
     vertices = np.ascontiguousarray(vertices, dtype=np.float64)
-    triangles = np.ascontiguousarray(triangles, dtype=np.int64)
+    # (a legacy mesh of the same connectivity copies the source's own triangles: no int64 copy here)
+    faces = np.asarray(triangles)
+    if not (same_topology and data.kind == "legacy"):
+        faces = np.ascontiguousarray(faces, dtype=np.int64)
     if data.kind == "arrays":
-        return vertices.copy(), triangles.copy()
+        return vertices.copy(), faces.copy()
     o3d = open3d()
     src = data.source
     if data.kind == "legacy":
@@ -314,7 +335,7 @@ def new_mesh(
             out.triangle_normals = o3d.utility.Vector3dVector()
         else:
             out = o3d.geometry.TriangleMesh(
-                o3d.utility.Vector3dVector(vertices), o3d.utility.Vector3iVector(triangles.astype(np.int32))
+                o3d.utility.Vector3dVector(vertices), o3d.utility.Vector3iVector(faces.astype(np.int32))
             )
         if src.has_vertex_normals():
             out.compute_vertex_normals()
@@ -329,7 +350,7 @@ def new_mesh(
     index_dtype = src.triangle.indices.dtype if "indices" in src.triangle else o3d.core.int64
     out = o3d.t.geometry.TriangleMesh(device)
     out.vertex.positions = o3d.core.Tensor(vertices, device=device).to(position_dtype)
-    out.triangle.indices = o3d.core.Tensor(triangles, device=device).to(index_dtype)
+    out.triangle.indices = o3d.core.Tensor(faces, device=device).to(index_dtype)
     if same_topology:
         for key in src.vertex:
             if key not in ("positions",) + _NORMAL_KEYS:

@@ -78,11 +78,15 @@ def check_mesh_arrays(
         raise ValueError(f"{name} must have vertices, got an empty mesh")
     if len(triangles) == 0:
         raise ValueError(f"{name} must have triangles, got {n} vertices and no triangles")
-    finite = np.isfinite(vertices).all(axis=1)
-    if not finite.all():
-        bad = int(np.flatnonzero(~finite)[0])
-        raise ValueError(f"{name} vertices must be finite, got {vertices[bad].tolist()} at vertex {bad}")
-    _check_magnitude(vertices, what=f"{name} vertices", row="vertex")
+    # two whole-array reductions (max and min carry NaN and inf) clear the usual mesh; rows are
+    # looked at only to name a bad one (an (n, 3) abs temporary and a row-wise max cost ten times more)
+    smallest, largest = float(vertices.min()), float(vertices.max())
+    if not (-COORDINATE_LIMIT <= smallest and largest <= COORDINATE_LIMIT):
+        finite = np.isfinite(vertices).all(axis=1)
+        if not finite.all():
+            bad = int(np.flatnonzero(~finite)[0])
+            raise ValueError(f"{name} vertices must be finite, got {vertices[bad].tolist()} at vertex {bad}")
+        _check_magnitude(vertices, what=f"{name} vertices", row="vertex")
     low, high = int(triangles.min()), int(triangles.max())
     if low < 0 or high >= n:
         row = int(np.flatnonzero(((triangles < 0) | (triangles >= n)).any(axis=1))[0])
@@ -107,13 +111,14 @@ def check_mesh_arrays(
 
 
 def mesh_arrays(
-    vertices: Any, triangles: Any, *, name: str = "mesh", allow_isolated: bool = True
+    vertices: Any, triangles: Any, *, name: str = "mesh", allow_isolated: bool = True, narrow: bool = False
 ) -> tuple[np.ndarray, np.ndarray]:
     """The one check of a mesh given as arrays: new ``(n, 3) float64`` vertices and ``(m, 3) int64`` triangles.
 
     Every array function and :func:`~o3d_lsmesh._o3d.read_mesh` (for every mesh kind) go through it:
     :func:`as_vertex_array`, :func:`as_triangle_array` and :func:`check_mesh_arrays`. The results are
-    copies: the caller's arrays are never modified.
+    copies: the caller's arrays are never modified (``narrow=True``: the triangles may be the given
+    array, int32, for callers that only read them; see :func:`as_triangle_array`).
 
     Raises
     ------
@@ -131,7 +136,7 @@ def mesh_arrays(
     (dtype('float64'), dtype('int64'), (1, 3))
     """
     vertices = as_vertex_array(vertices, name=name)
-    triangles = as_triangle_array(triangles, len(vertices), name=name)
+    triangles = as_triangle_array(triangles, len(vertices), name=name, narrow=narrow)
     check_mesh_arrays(vertices, triangles, name=name, allow_isolated=allow_isolated)
     return vertices, triangles
 
@@ -183,7 +188,7 @@ def as_vertex_array(value: Any, *, name: str = "mesh") -> np.ndarray:
     return np.array(array, dtype=np.float64, order="C")  # C order: the compiled kernel reads rows
 
 
-def as_triangle_array(value: Any, n: int, *, name: str = "mesh") -> np.ndarray:
+def as_triangle_array(value: Any, n: int, *, name: str = "mesh", narrow: bool = False) -> np.ndarray:
     """Triangle indices as a new ``(m, 3) int64`` array, checked against ``n`` vertices before any cast.
 
     Float, bool and other non-integer dtypes are a ``TypeError`` (a float index
@@ -191,6 +196,9 @@ def as_triangle_array(value: Any, n: int, *, name: str = "mesh") -> np.ndarray:
     outside ``[0, n)`` a ``ValueError`` reporting the value as given (an
     unsigned index too large for int64 is not wrapped to a negative one).
     An empty array of any dtype means no triangles.
+
+    ``narrow=True`` (for callers that only read the indices): int32 when ``n`` fits, and then the
+    given array itself when it is int32 in C order already (an Open3D mesh's triangles): no copy.
     """
     array = _array(value, name=f"{name} triangles", expected="an (m, 3) integer array")
     if array.size == 0 and array.ndim <= 2 and (array.ndim < 2 or array.shape[1] in (0, 3)):
@@ -199,12 +207,15 @@ def as_triangle_array(value: Any, n: int, *, name: str = "mesh") -> np.ndarray:
         raise TypeError(f"{name} triangles must be an (m, 3) integer array, got dtype {array.dtype}")
     if array.ndim != 2 or array.shape[1] != 3:
         raise ValueError(f"{name} triangles must have shape (m, 3), got {array.shape}")
-    bad = (array < 0) | (array >= n)  # compared in the given dtype: no wrap-around
-    if n > 0 and bad.any():  # (no vertices at all: check_mesh_arrays reports the empty mesh)
+    # compared in the given dtype (no wrap-around); the mask only to name a bad row
+    if n > 0 and (array.min() < 0 or array.max() >= n):  # (no vertices: check_mesh_arrays says so)
+        bad = (array < 0) | (array >= n)
         row = int(np.flatnonzero(bad.any(axis=1))[0])
         raise ValueError(
             f"{name} triangle indices must lie in [0, {n}), got {[int(i) for i in array[row]]} at triangle {row}"
         )
+    if narrow and n <= np.iinfo(np.int32).max:
+        return np.ascontiguousarray(array, dtype=np.int32)
     return array.astype(np.int64, order="C")
 
 

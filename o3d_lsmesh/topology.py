@@ -212,6 +212,26 @@ def edge_structure(triangles: np.ndarray, n: int | None = None) -> EdgeStructure
     return EdgeStructure(edges, counts, order, starts)
 
 
+#: Indices per call of :func:`gather` (numpy converts an index to intp first: a temporary this size).
+_GATHER_BLOCK = 1 << 16
+
+
+def gather(values: np.ndarray, index: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """``values[index]`` for a 1-D ``index`` known to be in range, of any integer dtype (into ``out`` if given).
+
+    ``np.take`` with ``mode="wrap"`` into a buffer (the default mode buffers its output, costing
+    more than the gather), in blocks when the index is not intp: numpy converts it to intp first,
+    and a mesh-sized converted copy is fresh memory, whose page faults cost more than the gather.
+    """
+    if out is None:
+        out = np.empty(np.shape(index), dtype=values.dtype)
+    if index.dtype == np.intp or len(index) <= _GATHER_BLOCK:
+        return np.take(values, index, out=out, mode="wrap")
+    for i in range(0, len(index), _GATHER_BLOCK):
+        np.take(values, index[i : i + _GATHER_BLOCK], out=out[i : i + _GATHER_BLOCK], mode="wrap")
+    return out
+
+
 #: Corner slots of the six directed entries of a triangle in :func:`vertex_rings`: entry ``d * m + t``
 #: runs from corner ``RING_ROW_SLOT[d]`` of triangle ``t`` (its row) to corner ``RING_COLUMN_SLOT[d]``
 #: (its column); entries 0-2 are the half-edges of :func:`halfedges`, 3-5 the same edges reversed.
@@ -327,8 +347,8 @@ def vertex_rings(triangles: np.ndarray, n: int) -> VertexRings:
         # d * m + t with d = 3 + (a - 1) % 3, to the previous corner)
         columns = np.empty(2 * len(triangle), dtype=index)
         entries = np.empty(2 * len(triangle), dtype=index)
-        columns[0::2] = flat[at_corner + (slot + 1) % 3]
-        columns[1::2] = flat[at_corner + (slot + 2) % 3]
+        columns[0::2] = gather(flat, at_corner + (slot + 1) % 3)
+        columns[1::2] = gather(flat, at_corner + (slot + 2) % 3)
         forward = entries[0::2]
         np.multiply(slot, m, out=forward)
         forward += triangle

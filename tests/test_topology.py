@@ -378,3 +378,18 @@ def test_empty_and_closed_meshes_have_no_curves(sphere):
     assert curves.loops == [] and curves.chains == [] and len(curves.junctions) == 0 and len(curves) == 0
     assert boundary_loops(np.zeros((0, 3), dtype=np.int64), 4) == []
     assert len(boundary_curves(np.zeros((0, 3), dtype=np.int64), 4)) == 0
+
+
+@pytest.mark.parametrize("dtype", [np.int32, np.int64, np.uint32])
+@pytest.mark.parametrize("length", [0, 5, (1 << 16) - 1, (1 << 16) + 1, 3 * (1 << 16) + 17])
+def test_gather_equals_fancy_indexing(dtype, length):
+    from o3d_lsmesh.topology import gather
+
+    rng = np.random.default_rng(length)
+    values = rng.random(1000)
+    index = rng.integers(0, len(values), size=(length, 2)).astype(dtype)
+    column = index[:, 1]  # a strided view, as the gathers of triangle columns take
+    np.testing.assert_array_equal(gather(values, column), values[column.astype(np.int64)])
+    out = np.full(length, np.nan)
+    assert gather(values, column, out=out) is out
+    np.testing.assert_array_equal(out, values[column.astype(np.int64)])

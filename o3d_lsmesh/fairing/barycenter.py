@@ -35,6 +35,7 @@ from ..topology import (
     VertexRings,
     boundary_curves,
     edge_structure,
+    gather,
     group_keys,
     vertex_rings,
 )
@@ -187,21 +188,22 @@ def _valence_tables(triangles: np.ndarray, valence: np.ndarray | None = None):
     rank = np.zeros(len(present_valence), dtype=key_type)
     rank[values] = np.arange(base, dtype=key_type)
     vertex_rank = rank[valence]  # per vertex, then gathered per corner
-    keys = vertex_rank[triangles[:, 0]]
-    keys *= key_type(base)
-    keys += vertex_rank[triangles[:, 1]]
-    keys *= key_type(base)
-    keys += vertex_rank[triangles[:, 2]]
+    keys = gather(vertex_rank, triangles[:, 0])
+    spare = np.empty_like(keys)
+    for corner in (1, 2):
+        keys *= key_type(base)
+        keys += gather(vertex_rank, triangles[:, corner], out=spare)
     del vertex_rank
     # group the (few hundred) distinct valence triples: a dense look-up when the
     # key range is small (the usual case), else sort-and-mask
     if base**3 <= 1 << 22:
         present = np.zeros(base**3, dtype=bool)
-        present[keys] = True
+        for i in range(0, len(keys), 1 << 16):  # in blocks: the int32 keys are converted to intp
+            present[keys[i : i + (1 << 16)]] = True
         distinct = np.flatnonzero(present)
         slot = np.zeros(base**3, dtype=key_type)
         slot[distinct] = np.arange(len(distinct), dtype=key_type)
-        group = slot[keys]
+        group = gather(slot, keys, out=spare)
     else:
         distinct, group = _sorted_groups(keys.astype(np.int64))
     table = values[np.stack([distinct // (base * base), (distinct // base) % base, distinct % base], axis=1)]
@@ -341,7 +343,7 @@ def local_operator(
     local fairing builds), or a :class:`FairingTopology` (its rings are then
     built here). Every coefficient depends only on a triangle's valence
     triple and on the two corners of an entry, so it is read from a
-    ``(6 g + 6,)`` table per matrix (``g`` distinct triples, plus zero rows
+    ``(7 g + 7,)`` table per matrix (``g`` distinct triples, plus zero rows
     for the triangles that are not interior). A slot ``(v, w)`` off the
     diagonal of a vertex that is not on the boundary lies on an edge of
     exactly two triangles (an edge with one, or more than two, has boundary
@@ -356,7 +358,12 @@ def local_operator(
     m = len(triangles)
     indptr, indices, index = rings.indptr, rings.indices, rings.indices.dtype
     if rings.boundary.any():
-        interior = ~rings.boundary[triangles].any(axis=1)
+        interior = gather(rings.boundary, triangles[:, 0])  # first: touches the boundary
+        corner_boundary = np.empty_like(interior)
+        for corner in (1, 2):
+            interior |= gather(rings.boundary, triangles[:, corner], out=corner_boundary)
+        np.logical_not(interior, out=interior)
+        del corner_boundary
         group, table, M, u = _valence_tables(triangles[interior], rings.valence)
     else:  # a closed mesh: every triangle is interior
         interior = None
@@ -366,30 +373,36 @@ def local_operator(
     beta = alpha - alpha.sum(axis=2, keepdims=True)  # coefficient of x_{i_c}: -sum_{b != c} alpha_ab
     share = np.repeat(u[:, :, None], 3, axis=2)  # (g, 3, 3): u_a, whatever the column's corner
     del M
-    # Entry d of a triangle of group q reads row 6 q + d of the table (row corner a =
+    # Entry d of a triangle of group q reads row 7 q + d of the tables (row corner a =
     # RING_ROW_SLOT[d], column corner b = RING_COLUMN_SLOT[d]): the triangle's coefficient of
-    # column b in row a for E1, E2, E3, then the diagonal ones (a, a), then 1 (an estimate).
-    # Group g (not an interior triangle, or a diagonal marker) reads zeros.
-    coefficients = (alpha, beta, share)
+    # column b in row a for E1, E2, E3, then E1's diagonal one (a, a). Group g (not an interior
+    # triangle) reads zeros, and so does entry 6 of every group (a diagonal marker 6 m: d = 6, t = 0).
     rows, cols = list(RING_ROW_SLOT), list(RING_COLUMN_SLOT)
-    by_entry = np.zeros((g + 1, 6, 7))
-    for j, c in enumerate(coefficients):
-        by_entry[:g, :, j] = c[:, rows, cols]
-        by_entry[:g, :, 3 + j] = c[:, rows, rows]
-    by_entry[:g, :, 6] = 1.0
-    columns = by_entry.reshape(-1, 7)
+    by_entry = np.zeros((4, g + 1, 7))  # entry 6 of every group: zeros, what a diagonal marker reads
+    for j, c in enumerate((alpha, beta, share)):
+        by_entry[j, :g, :6] = c[:, rows, cols]
+    by_entry[3, :g, :6] = alpha[:, rows, rows]
+    columns = by_entry.reshape(4, -1)  # (4, 7 g + 7): a 1-D table per column
+    # estimates per vertex: its interior triangles. Off the boundary every edge has two triangles,
+    # so a vertex has as many triangles as neighbours; on it, every triangle touches the boundary.
+    count = rings.valence.copy()
     if interior is None:
         triangle_group = group.astype(index, copy=False)
     else:
+        count -= np.bincount(triangles[~interior].reshape(-1), minlength=n)
+        count[rings.boundary] = 0
         triangle_group = np.full(m, g, dtype=index)
         triangle_group[interior] = group
     del interior, group
+    reciprocal = 1.0 / np.maximum(count, 1)
 
     # One pass over the slots, in blocks of rows (temporaries of a few megabytes at any size). Off
     # the diagonal of a row that is not on the boundary, every slot holds exactly the two triangles
     # on its edge, and every triangle on the row's vertex lies in exactly two of its slots; so a
-    # slot's coefficient is the sum of its two entries' table rows, and half the row sum of the
-    # diagonal columns (and of the estimate column) is the diagonal (and the estimate count).
+    # slot's coefficient is the sum of its two entries' table values, and half the row sum of an
+    # entry's diagonal coefficient (E1: alpha_aa) is the diagonal. The others need no gather of
+    # their own: E3's entries hold u_a for both the diagonal and the column, so its diagonal is half
+    # its row sum, and beta_aa = -(alpha_ab + alpha_ac) makes E2's diagonal minus E1's row sum.
     pairs, diagonal = rings.pairs, rings.diagonal
     data = [np.empty(len(indices)) for _ in range(4 if keep_constraint else 3)]  # E1, E2, W, E3
     if positions0 is not None:
@@ -401,44 +414,63 @@ def local_operator(
         s0, s1 = int(indptr[r0]), int(indptr[r1])
         # a slot of one (a diagonal, or a boundary edge) or of more (a fin, whose ends are on the
         # boundary) holds its first entry twice: it lies in a row whose every entry reads zeros
-        values = np.take(columns, _entry_rows(pairs[0, s0:s1].copy(), triangle_group, m, g), axis=0)
-        values += np.take(columns, _entry_rows(pairs[1, s0:s1].copy(), triangle_group, m, g), axis=0)
+        first = _entry_rows(pairs[0, s0:s1].copy(), triangle_group, m)
+        second = _entry_rows(pairs[1, s0:s1].copy(), triangle_group, m)
         local_starts = indptr[r0:r1] - s0
-        sums = np.add.reduceat(values[:, 3:], local_starts, axis=0)  # (rows, 4): 2x diagonal, 2x count
-        sums *= 0.5  # exact
-        count = sums[:, 3]
-        scale = 1.0 / np.maximum(count, 1.0)
+        spare = np.empty(s1 - s0)
+        scale = reciprocal[r0:r1]
         row_scale = np.repeat(scale, np.diff(indptr[r0 : r1 + 1]))
         local_diagonal = diagonal[r0:r1] - s0
-        for j in range(3):
-            target = j if j < 2 else 3  # data holds E1, E2, W, E3
-            block_data = data[target][s0:s1] if target < len(data) else np.empty(s1 - s0)
-            np.multiply(values[:, j], row_scale, out=block_data)
-            diagonal_values = sums[:, j]
+        part = {}  # the block's slots of E1, E2, E3
+        part[0] = _slot_sums(columns[0], first, second, data[0][s0:s1], spare)
+        diagonals = [
+            _half_row_sums(_slot_sums(columns[3], first, second, np.empty(s1 - s0), spare), local_starts),
+            -np.add.reduceat(part[0], local_starts),
+        ]
+        part[2] = _slot_sums(columns[2], first, second, data[3][s0:s1] if keep_constraint else None, spare)
+        diagonals.append(_half_row_sums(part[2], local_starts))
+        part[1] = _slot_sums(columns[1], first, second, data[1][s0:s1], spare)
+        for block_data, diagonal_values in zip((part[0], part[1], part[2]), diagonals):
+            block_data *= row_scale
             diagonal_values *= scale
             block_data[local_diagonal] = diagonal_values
         # vertices without estimates stay put
-        data[1][s0:s1][local_diagonal[count == 0]] = 1.0
+        part[1][local_diagonal[count[r0:r1] == 0]] = 1.0
         adjacency = data[2][s0:s1]
         adjacency.fill(1.0)
         adjacency[local_diagonal] = 0.0
         if positions0 is not None:  # the block's rows of E3 @ X0
             block_indptr = indptr[r0 : r1 + 1] - indptr[r0]
-            _accumulate_block(block_indptr, indices[s0:s1], block_data, positions0, initial[r0:r1])
+            _accumulate_block(block_indptr, indices[s0:s1], part[2], positions0, initial[r0:r1])
     del triangle_group
     e1, e2, adjacency = (_csr(values, indices, indptr, n) for values in data[:3])
     e3 = _csr(data[3], indices, indptr, n) if keep_constraint else None
     return LocalOperator(adjacency, e1, e2, e3, initial if positions0 is not None else None)
 
 
-def _entry_rows(entry: np.ndarray, triangle_group: np.ndarray, m: int, g: int) -> np.ndarray:
-    """Table row ``6 * group + d`` of ring entries ``d * m + t`` (in place); diagonal markers read row ``6 g``."""
+def _slot_sums(
+    column: np.ndarray, first: np.ndarray, second: np.ndarray, out: np.ndarray | None, spare: np.ndarray
+) -> np.ndarray:
+    """One table column's value at every slot: its two entries' (table rows ``first``, ``second``) summed."""
+    out = gather(column, first, out=out)
+    out += gather(column, second, out=spare)
+    return out
+
+
+def _half_row_sums(values: np.ndarray, starts: np.ndarray) -> np.ndarray:
+    """Half the sum of ``values`` over each row (rows starting at ``starts``)."""
+    sums = np.add.reduceat(values, starts)
+    sums *= 0.5  # exact
+    return sums
+
+
+def _entry_rows(entry: np.ndarray, triangle_group: np.ndarray, m: int) -> np.ndarray:
+    """Table row ``7 * group + d`` of ring entries ``d * m + t`` (in place); a diagonal marker ``6 m`` reads a zero row."""
     d = entry // m
-    entry -= d * m  # the triangle (of a marker: some triangle, overwritten below)
-    row = triangle_group[entry]
-    row *= 6
+    entry -= d * m  # the triangle (of a marker: triangle 0)
+    row = gather(triangle_group, entry)
+    row *= 7
     row += d
-    row[d >= 6] = 6 * g
     return row
 
 

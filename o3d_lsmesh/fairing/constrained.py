@@ -516,7 +516,9 @@ def constrained_fairing(
     options, extra = _check_options(
         number_of_iterations, method, mu, smooth_boundary, reimpose_every, progress, membrane, boundary_weight
     )
-    with _plain_pages() if options[1] == "local" else nullcontext():
-        data = read_mesh(mesh, weld=True)
-        # read_mesh's vertices are already a private copy: _fair may write to them
+    local = options[1] == "local"
+    with _plain_pages() if local else nullcontext():
+        # read_mesh's vertices are already a private copy: _fair may write to them; the local path
+        # only reads the triangles, so it takes Open3D's own int32 array (no int64 copy, no cast back)
+        data = read_mesh(mesh, weld=True, narrow=local)
         return new_mesh(data, _fair(data.vertices, data.triangles, *options, solver=solver, **extra))
