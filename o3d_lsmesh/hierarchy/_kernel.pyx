@@ -98,6 +98,9 @@ def hierarchy(double[:, ::1] positions, const int64_t[:, ::1] triangles, uint8_t
                 pair[j], pair[j + 1] = T[i // 3, (c + 1) % 3], T[i // 3, (c + 2) % 3]
             count = 0
             for v in range(n):  # the sorted unique 1-ring, flags, the candidates by cost
+                x = min(v + 8, n - 1)  # the cost reads the neighbours' positions: ask early
+                for j in range(2 * V[x].start, 2 * (V[x].start + V[x].corners), 2):
+                    prefetch(&p[3 * pair[j]])
                 s, deg, V[v].flags = 2 * V[v].start, 0, lock[kept[v]]
                 for j in range(s, s + 2 * V[v].corners):  # insertion: rings are short
                     r = s + deg
@@ -188,7 +191,7 @@ def hierarchy(double[:, ::1] positions, const int64_t[:, ::1] triangles, uint8_t
                 i = j = total = alive = offsets[0] = 0
                 for v in range(n):
                     if order[1, v] < 0:
-                        parent[v], p[3 * j], p[3 * j + 1], p[3 * j + 2] = j, p[3 * v], p[3 * v + 1], p[3 * v + 2]
+                        root[v], p[3 * j], p[3 * j + 1], p[3 * j + 2] = j, p[3 * v], p[3 * v + 1], p[3 * v + 2]
                         kept[j], j = kept[v], j + 1
                         continue
                     removed[i], target[i] = v, order[1, v]
@@ -196,9 +199,11 @@ def hierarchy(double[:, ::1] positions, const int64_t[:, ::1] triangles, uint8_t
                         flat[total], total = ring[e], total + 1
                     offsets[i + 1], i = total, i + 1
                 for i in range(selected):
-                    parent[removed[i]] = parent[target[i]]
+                    root[removed[i]] = root[target[i]]
+                for v in range(n):  # the map read below as int32: half the cache lines
+                    parent[v] = root[v]
                 for i in range(m):
-                    out[alive, 0], out[alive, 1], out[alive, 2] = parent[T[i, 0]], parent[T[i, 1]], parent[T[i, 2]]
+                    out[alive, 0], out[alive, 1], out[alive, 2] = root[T[i, 0]], root[T[i, 1]], root[T[i, 2]]
                     alive += out[alive, 0] != out[alive, 1] != out[alive, 2] != out[alive, 0]
             out = None  # let go of the buffer, then cut it to the triangles kept
             level[5].resize((alive, 3), refcheck=False)
