@@ -1,20 +1,11 @@
 """The CHOLMOD gateway: the only module that imports ``sksparse.cholmod``.
 
-:class:`SPDSolver` factors a sparse symmetric positive definite matrix once,
-solves ``(n,)`` or ``(n, k)`` right-hand sides in one call, refactors a matrix
-of the same pattern reusing the symbolic analysis (the fill-reducing ordering
-is about half of a large solve), and applies rank-k updates ``A + C C^T`` in
-place. Without scikit-sparse it falls back to SciPy's ``splu`` set for SPD
-matrices (symmetric ordering, no pivoting) with a warning, refactoring
-where CHOLMOD would update; ``O3D_LSMESH_NO_CHOLMOD=1`` chooses that path on
-purpose (no warning). Systems whose factor would not fit in a memory budget
-are solved by conjugate gradients preconditioned with smoothed-aggregation
-algebraic multigrid (``pyamg``), warm-started where the caller has a guess.
-
-The module also holds the checks that keep an ill-posed least-squares system
-from giving a wrong answer silently: :func:`check_constant_modes` (a
-penalty too weak against ``||L^T L||``) and :func:`check_finite`
-(overflow), which raise ``ValueError`` naming the caller's parameter.
+:class:`SPDSolver` factors a sparse SPD matrix once, solves ``(n, k)``
+right-hand sides in one call, refactors reusing the symbolic analysis and
+applies rank-k updates (SciPy's ``splu`` without scikit-sparse or with
+``O3D_LSMESH_NO_CHOLMOD=1``; AMG-preconditioned conjugate gradients above a
+memory budget). :func:`check_constant_modes` and :func:`check_finite` keep an
+ill-posed system from giving a wrong answer silently.
 """
 
 from __future__ import annotations
@@ -66,8 +57,6 @@ BUDGET_FRACTION = 0.5
 #: is not determined by the system in float64: round-off of size eps ||L^T L|| |x| moves it by
 #: more than 1e-6 of |x|.
 NEGLIGIBLE = 1e-10
-
-
 NO_CHOLMOD_ENV = "O3D_LSMESH_NO_CHOLMOD"
 
 
@@ -140,13 +129,9 @@ def default_memory_budget() -> int:
 def estimate_factor_bytes(n: int, nnz: int) -> float:
     """Measured model of the peak memory of a CHOLMOD factor of an ``(n, n)`` mesh system with ``nnz`` entries.
 
-    Fill-reducing orderings of mesh (near-planar) graphs give ``O(n log n)``
-    fill; the constant (11 factor entries per ``n log2 n``) is fitted to
-    CHOLMOD factors of LS-mesh normal matrices (``L^T L + W^2``, about 19
-    entries per row) from 20k to 500k vertices and is scaled by the entries
-    per row; 8 bytes per factor entry, times 1.5 for CHOLMOD's integer and
-    supernodal workspace and the matrix itself (measured peak at 200k: 440 MB
-    over the input, model 460 MB). About 2.6 GB at 1M vertices, 31 GB at 10M.
+    Mesh graphs give ``O(n log n)`` fill: :data:`_FILL_PER_ROW_LOG` factor entries per ``n log2 n``
+    at 19 entries a row (LS-mesh normal matrices), scaled by the entries per row; 8 bytes each,
+    times 1.5 for CHOLMOD's workspace (measured peak at 200k: 440 MB, model 460 MB).
     """
     if n <= 1:
         return float(nnz) * 16.0
@@ -202,14 +187,10 @@ def check_constant_modes(
 ) -> None:
     """Raise ``ValueError`` naming ``name`` if a penalty leaves a component's translation undetermined.
 
-    For a system ``N = L^T L + P`` where ``L`` annihilates the constant vector
-    ``1_c`` of each connected component ``c``, the smallest eigenvalue of ``N``
-    on ``c`` is at most the Rayleigh quotient ``q_c = 1_c^T N 1_c / n_c``,
-    which only the penalty ``P`` makes positive. Round-off perturbs the
-    factor by about ``eps ||L^T L||``, which moves the solution along ``1_c``
-    by ``eps ||L^T L|| / q_c`` of its size: the whole component drifts (a
-    translated sphere solved with ``weights=1e-8`` lands at the origin). This
-    raises when ``q_c < NEGLIGIBLE * scale``.
+    For ``N = L^T L + P`` with ``L 1_c = 0`` on each component ``c``, only ``P`` makes the
+    Rayleigh quotient ``q_c = 1_c^T N 1_c / n_c`` positive; round-off of ``eps ||L^T L||`` moves
+    the solution along ``1_c`` by ``eps ||L^T L|| / q_c`` (a translated sphere solved with
+    ``weights=1e-8`` lands at the origin). Raises when ``q_c < NEGLIGIBLE * scale``.
 
     Parameters
     ----------
@@ -312,10 +293,8 @@ def _stored(csc: sp.csc_matrix, *, given_lower: bool, keep_lower: bool) -> sp.cs
 def _splu_spd(matrix: sp.csc_matrix) -> Any:
     """SuperLU set for an SPD matrix: a symmetric ordering of ``A + A^T`` and diagonal pivots.
 
-    With partial pivoting (SciPy's default) SuperLU abandons the fill-reducing
-    ordering whenever an off-diagonal entry wins a pivot test, which on these
-    diagonally heavy matrices costs 30-40x the time for the same result; an SPD
-    matrix needs no pivoting at all (Cholesky is stable without it).
+    Partial pivoting (SciPy's default) abandons the fill-reducing ordering whenever an off-diagonal
+    entry wins a pivot test (30-40x the time here); an SPD matrix needs no pivoting.
     """
     return spla.splu(
         matrix, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True}
@@ -328,9 +307,7 @@ _PACKAGE_DIR = os.path.dirname(os.path.abspath(__file__))
 def user_stacklevel() -> int:
     """The ``stacklevel`` that makes a warning point at the first caller outside o3d_lsmesh.
 
-    A warning raised deep in the gateway (``ls_mesh`` -> ``LSMeshSolver`` ->
-    ``SPDSolver``) is about the user's call, so it should name the user's line;
-    a fixed ``stacklevel`` would be right for one call path only.
+    A fixed ``stacklevel`` would be right for one call path only (``ls_mesh`` -> ``LSMeshSolver`` -> ...).
     """
     frame: Any = sys._getframe(1)  # the caller of user_stacklevel, i.e. the function that warns
     level = 1
@@ -338,6 +315,10 @@ def user_stacklevel() -> int:
         frame = frame.f_back
         level += 1
     return level
+
+
+def _not_a(value: Any, types: tuple[type, ...]) -> bool:
+    return isinstance(value, bool) or not isinstance(value, types)
 
 
 class SPDSolver:
@@ -350,33 +331,24 @@ class SPDSolver:
         triangle with ``lower=True`` (which lets the caller free the whole one).
         ``None`` with ``product_of``.
     product_of : (n, k) scipy sparse matrix, optional, keyword-only
-        Factor ``A A^T`` for this ``A`` without forming the product (CHOLMOD
-        assembles it column by column while it factors): the normal matrix of a
-        least-squares problem ``min |A^T x - b|`` from the transposed rows, in
-        less memory and time than ``A @ A.T``. Updates append their columns to
-        ``A``.
+        Factor ``A A^T`` for this ``A`` without forming it (CHOLMOD assembles it
+        while it factors: less memory and time). Updates append their columns to ``A``.
     backend : {"auto", "cholmod", "scipy", "iterative"}
-        ``"auto"`` estimates the direct factor's memory
-        (:func:`estimate_factor_bytes`) and takes the iterative path above
-        ``memory_budget``; below it CHOLMOD when scikit-sparse imports, else
-        SciPy's ``splu`` (with an :class:`O3DLSMeshWarning` unless
-        ``O3D_LSMESH_NO_CHOLMOD=1`` chose it). ``"iterative"``: conjugate
-        gradients preconditioned by a smoothed-aggregation AMG V-cycle
-        (``pyamg``) on the matrix, to relative residual ``tol``.
+        ``"auto"``: the iterative path when :func:`estimate_factor_bytes` exceeds
+        ``memory_budget``, else CHOLMOD, else SciPy's ``splu`` (with an
+        :class:`O3DLSMeshWarning` unless ``O3D_LSMESH_NO_CHOLMOD=1`` chose it).
+        ``"iterative"``: conjugate gradients preconditioned by a smoothed-aggregation
+        AMG V-cycle (``pyamg``), to relative residual ``tol``.
     lower : bool
         ``matrix`` holds only its lower triangle.
     ordering : {"default", "nesdis", "metis", "amd", "colamd", "natural"}
-        CHOLMOD's fill-reducing ordering. ``"default"`` lets CHOLMOD pick the
-        least fill (usually AMD on meshes). ``"nesdis"`` (nested dissection) has
-        a balanced elimination tree, the structure the geometry-aware bases
-        paper's update bound assumes: rank-1 updates touch fewer entries, at
-        the price of a slower factor and solve. Ignored by the other backends.
+        CHOLMOD's fill-reducing ordering (``"default"``: CHOLMOD's least fill).
+        ``"nesdis"`` has the balanced elimination tree the geometry-aware bases
+        paper's update bound assumes (cheaper rank-1 updates, slower factor).
     pattern_of : (n, k) scipy sparse matrix, optional, keyword-only
-        CHOLMOD analyzes the pattern of ``A A^T`` for this ``A`` instead of the
-        matrix's (which that pattern must hold), ordering with ``ordering``
-        (``"colamd"`` orders ``A`` itself, without forming ``A A^T``): a normal
-        matrix ``K^T K + ...`` analyzed from the sparser ``K^T``. Ignored by the
-        other backends.
+        CHOLMOD analyzes the pattern of ``A A^T`` for this ``A`` (which must hold
+        the matrix's; ``"colamd"`` orders ``A`` itself): a normal matrix
+        ``K^T K + ...`` analyzed from the sparser ``K^T``. CHOLMOD only.
     memory_budget : int, optional
         Bytes the direct factor may take under ``backend="auto"``; default
         :func:`default_memory_budget` (half the available memory, or
@@ -402,9 +374,8 @@ class SPDSolver:
 
     Notes
     -----
-    Solves and updates hold a lock: CHOLMOD's common workspace is shared by
-    the factor, so one solver may be used from several threads but its calls
-    run one at a time. A solver pickles as its matrix and refactors on load.
+    Solves and updates hold a lock (CHOLMOD's workspace is shared by the factor):
+    a solver may be shared between threads. It pickles as its matrix and refactors on load.
 
     Examples
     --------
@@ -430,18 +401,12 @@ class SPDSolver:
     ) -> None:
         backend = as_choice(backend, BACKENDS, name="backend")
         self.ordering = as_choice(ordering, ORDERINGS, name="ordering")
-        if isinstance(tol, bool) or not isinstance(tol, (int, float, np.floating)) or not 0 < tol < 1:
+        if _not_a(tol, (int, float, np.floating)) or not 0 < tol < 1:
             raise ValueError(f"tol must be a number in (0, 1), got {tol!r}")
-        if (
-            isinstance(max_iterations, bool)
-            or not isinstance(max_iterations, (int, np.integer))
-            or max_iterations < 1
-        ):
+        if _not_a(max_iterations, (int, np.integer)) or max_iterations < 1:
             raise ValueError(f"max_iterations must be a positive integer, got {max_iterations!r}")
         if memory_budget is not None and (
-            isinstance(memory_budget, bool)
-            or not isinstance(memory_budget, (int, float, np.integer))
-            or memory_budget < 0
+            _not_a(memory_budget, (int, float, np.integer)) or memory_budget < 0
         ):
             raise ValueError(f"memory_budget must be a non-negative number of bytes, got {memory_budget!r}")
         self.tol = float(tol)
@@ -545,20 +510,20 @@ class SPDSolver:
             if self.backend == "iterative":
                 # the AMG hierarchy is built at the first solve: updates and refactors before it cost nothing
                 self._factor = None
-            elif self.backend == "cholmod" and self._product_of is not None:
-                if analyze or self._factor is None:
-                    self._factor = _cholmod.analyze_AAt(self._product_of, ordering_method=self.ordering)
-                self._factor.cholesky_AAt_inplace(self._product_of)
             elif self.backend == "cholmod":
-                if (analyze or self._factor is None) and self._pattern_of is not None:
-                    self._factor = _cholmod.analyze_AAt(self._pattern_of, ordering_method=self.ordering)
+                pattern = self._pattern_of if self._product_of is None else self._product_of
+                if (analyze or self._factor is None) and pattern is not None:
+                    self._factor = _cholmod.analyze_AAt(pattern, ordering_method=self.ordering)
                 elif analyze or self._factor is None:
                     self._factor = _cholmod.analyze(self._matrix, ordering_method=self.ordering)
-                self._factor.cholesky_inplace(self._matrix)
-            elif self._product_of is not None:
-                self._factor = _splu_spd(_product(self._product_of))
+                if self._product_of is not None:
+                    self._factor.cholesky_AAt_inplace(self._product_of)
+                else:
+                    self._factor.cholesky_inplace(self._matrix)
             else:
-                self._factor = _splu_spd(self._matrix)
+                self._factor = _splu_spd(
+                    self._matrix if self._product_of is None else _product(self._product_of)
+                )
         except Exception as error:
             if _cholmod is not None and isinstance(error, _cholmod.CholmodNotPositiveDefiniteError):
                 raise SingularSystemError(
@@ -645,12 +610,9 @@ class SPDSolver:
     def update(self, c: Any) -> None:
         """Replace ``A`` by ``A + C C^T`` (CHOLMOD rank-k update, no refactoring).
 
-        ``C`` is an ``(n, k)`` sparse matrix in the matrix's own row order:
-        CHOLMOD applies its fill-reducing permutation itself. SciPy's LU has
-        no update: the SciPy path refactors (a Woodbury update on the kept LU
-        was tried and lost the accuracy of the bases paper's ``w = 10 n``
-        anchors); the iterative path rebuilds its preconditioner at the next
-        solve.
+        ``C`` is ``(n, k)`` sparse in the matrix's own row order. The SciPy path refactors
+        (a Woodbury update on the LU lost the accuracy of the bases paper's ``w = 10 n``
+        anchors); the iterative path rebuilds its preconditioner at the next solve.
         """
         if not (sp.isspmatrix_csc(c) and c.dtype == np.float64):
             c = sp.csc_matrix(c, dtype=np.float64)
@@ -685,27 +647,20 @@ class SPDSolver:
             }
 
     def __setstate__(self, state: dict) -> None:
-        self.backend = state["backend"]
-        self.ordering = state.get("ordering", "default")
-        self.tol = state.get("tol", DEFAULT_TOLERANCE)
-        self.max_iterations = state.get("max_iterations", 5000)
-        self.progress = state.get("progress", False)
-        self.memory_budget = state.get("memory_budget")
-        self.iterations = 0
-        self.residual = 0.0
-        if self.backend == "cholmod" and _cholmod is None:
-            self.backend = "scipy"
-        self._lock = threading.RLock()
-        was_lower = state.get("lower", False)
-        self._lower = self.backend == "cholmod"
-        self._product_of = state.get("product_of")
-        self._matrix = None
-        if self._product_of is None:
-            self._matrix = _stored(state["matrix"], given_lower=was_lower, keep_lower=self._lower)
-        self._pattern_of = state.get("pattern_of")
-        self._pending = []
-        self._factor = None
-        self._factorize(analyze=True)
+        product_of = state.get("product_of")
+        SPDSolver.__init__(
+            self,
+            state["matrix"] if product_of is None else None,
+            backend="scipy" if state["backend"] == "cholmod" and _cholmod is None else state["backend"],
+            ordering=state.get("ordering", "default"),
+            lower=state.get("lower", False),
+            product_of=product_of,
+            pattern_of=state.get("pattern_of"),
+            memory_budget=state.get("memory_budget"),
+            tol=state.get("tol", DEFAULT_TOLERANCE),
+            max_iterations=state.get("max_iterations", 5000),
+            progress=state.get("progress", False),
+        )
 
 
 def _product(a: sp.csc_matrix) -> sp.csc_matrix:
@@ -717,10 +672,8 @@ def _product(a: sp.csc_matrix) -> sp.csc_matrix:
 def _amg_preconditioner(matrix: sp.spmatrix) -> Any:
     """One smoothed-aggregation AMG V-cycle per column of a block, as a function ``(n, k) -> (n, k)``.
 
-    Measured against AMG on the Laplacian alone (``G^{-1} D^2 G^{-1}`` for
-    ``L^T L = G D^{-2} G``) and against linear near-null-space candidates
-    (benchmarks/results/scale.md): smoothed aggregation on the system itself,
-    with the constant vector as its near-null space, took the least time.
+    On the system itself with the constant near-null space: faster than AMG on the Laplacian
+    alone or linear near-null-space candidates (benchmarks/results/scale.md).
     """
     try:
         import pyamg
@@ -739,11 +692,9 @@ def _amg_preconditioner(matrix: sp.spmatrix) -> Any:
         # a local (Gershgorin) bound for the prolongation smoother's step instead of pyamg's
         # default eigenvalue estimate, which took a fifth of the whole solve at 100k vertices
         smooth=("jacobi", {"weighting": "local"}),
-        # one forward Gauss-Seidel sweep before the coarse correction and one backward sweep after
-        # (the pair keeps the V-cycle symmetric, as CG needs) instead of pyamg's default symmetric
-        # block sweeps on both sides: 135 iterations against 102, but 10% less CPU time per solve
-        # (6.6 s against 7.3 s; LS mesh, 2% controls, 100k vertices, same residual and difference to
-        # CHOLMOD, 3e-9)
+        # forward Gauss-Seidel before the coarse correction, backward after (symmetric, as CG needs):
+        # 135 iterations against 102 with pyamg's default symmetric sweeps, but 10% less CPU time
+        # (LS mesh, 2% controls, 100k vertices, same residual)
         presmoother=("gauss_seidel", {"sweep": "forward"}),
         postsmoother=("gauss_seidel", {"sweep": "backward"}),
         max_coarse=500,
@@ -788,8 +739,7 @@ def _block_cg(
 ) -> tuple[np.ndarray, int, float]:
     """Preconditioned conjugate gradients on every column of ``b`` at once (one sparse product per step).
 
-    Each column keeps its own step lengths (these are independent CG runs
-    sharing the matrix passes), stops when ``||r_j|| <= tol ||b_j||``.
+    Independent CG runs sharing the matrix passes; column ``j`` stops when ``||r_j|| <= tol ||b_j||``.
     Returns the solution, the iteration count and the largest relative residual.
     """
     vector = b.ndim == 1
