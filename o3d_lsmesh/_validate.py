@@ -28,7 +28,6 @@ __all__ = [
     "as_vertex_array",
     "as_weights",
     "as_workers",
-    "check_mesh_arrays",
     "isolated_vertices",
     "mesh_arrays",
 ]
@@ -64,56 +63,14 @@ def _describe(value: Any) -> str:
     return text if len(text) < 60 else text[:57] + "..."
 
 
-def check_mesh_arrays(
-    vertices: np.ndarray, triangles: np.ndarray, *, name: str = "mesh", allow_isolated: bool = True
-) -> None:
-    """Raise ``ValueError`` unless ``(vertices, triangles)`` is a usable mesh.
-
-    Checks: at least one vertex and one triangle, finite coordinates, triangle
-    indices in ``[0, n)``, no triangle repeating a vertex and, unless
-    ``allow_isolated``, no vertex left unreferenced by every triangle.
-    """
-    n = len(vertices)
-    if n == 0:
-        raise ValueError(f"{name} must have vertices, got an empty mesh")
-    if len(triangles) == 0:
-        raise ValueError(f"{name} must have triangles, got {n} vertices and no triangles")
-    finite = np.isfinite(vertices).all(axis=1)
-    if not finite.all():
-        bad = int(np.flatnonzero(~finite)[0])
-        raise ValueError(f"{name} vertices must be finite, got {vertices[bad].tolist()} at vertex {bad}")
-    _check_magnitude(vertices, what=f"{name} vertices", row="vertex")
-    low, high = int(triangles.min()), int(triangles.max())
-    if low < 0 or high >= n:
-        row = int(np.flatnonzero(((triangles < 0) | (triangles >= n)).any(axis=1))[0])
-        raise ValueError(
-            f"{name} triangle indices must lie in [0, {n}), got {triangles[row].tolist()} at triangle {row}"
-        )
-    repeated = collapsed_triangles(triangles)
-    if repeated.any():
-        row = int(np.flatnonzero(repeated)[0])
-        raise ValueError(
-            f"{name} triangles must have three distinct vertices, got {triangles[row].tolist()} "
-            f"at triangle {row} ({int(repeated.sum())} such triangles; "
-            "remove_degenerate_triangles() drops them)"
-        )
-    if not allow_isolated:
-        isolated = isolated_vertices(triangles, n)
-        if len(isolated):
-            raise ValueError(
-                f"{name} must not have unreferenced vertices, got {len(isolated)} "
-                f"(first: vertex {int(isolated[0])}); remove_unreferenced_vertices() drops them"
-            )
-
-
 def mesh_arrays(
     vertices: Any, triangles: Any, *, name: str = "mesh", allow_isolated: bool = True
 ) -> tuple[np.ndarray, np.ndarray]:
     """The one check of a mesh given as arrays: new ``(n, 3) float64`` vertices and ``(m, 3) int64`` triangles.
 
     Every array function and :func:`~o3d_lsmesh._o3d.read_mesh` (for every mesh kind) go through it:
-    :func:`as_vertex_array`, :func:`as_triangle_array` and :func:`check_mesh_arrays`. The results are
-    copies: the caller's arrays are never modified.
+    :func:`as_vertex_array`, :func:`as_triangle_array` (indices in ``[0, n)``), then the checks
+    below. The results are copies: the caller's arrays are never modified.
 
     Raises
     ------
@@ -131,8 +88,32 @@ def mesh_arrays(
     (dtype('float64'), dtype('int64'), (1, 3))
     """
     vertices = as_vertex_array(vertices, name=name)
-    triangles = as_triangle_array(triangles, len(vertices), name=name)
-    check_mesh_arrays(vertices, triangles, name=name, allow_isolated=allow_isolated)
+    n = len(vertices)
+    triangles = as_triangle_array(triangles, n, name=name)
+    if n == 0:
+        raise ValueError(f"{name} must have vertices, got an empty mesh")
+    if len(triangles) == 0:
+        raise ValueError(f"{name} must have triangles, got {n} vertices and no triangles")
+    finite = np.isfinite(vertices).all(axis=1)
+    if not finite.all():
+        bad = int(np.flatnonzero(~finite)[0])
+        raise ValueError(f"{name} vertices must be finite, got {vertices[bad].tolist()} at vertex {bad}")
+    _check_magnitude(vertices, what=f"{name} vertices", row="vertex")
+    repeated = collapsed_triangles(triangles)
+    if repeated.any():
+        row = int(np.flatnonzero(repeated)[0])
+        raise ValueError(
+            f"{name} triangles must have three distinct vertices, got {triangles[row].tolist()} "
+            f"at triangle {row} ({int(repeated.sum())} such triangles; "
+            "remove_degenerate_triangles() drops them)"
+        )
+    if not allow_isolated:
+        isolated = isolated_vertices(triangles, n)
+        if len(isolated):
+            raise ValueError(
+                f"{name} must not have unreferenced vertices, got {len(isolated)} "
+                f"(first: vertex {int(isolated[0])}); remove_unreferenced_vertices() drops them"
+            )
     return vertices, triangles
 
 
@@ -177,7 +158,7 @@ def as_vertex_array(value: Any, *, name: str = "mesh") -> np.ndarray:
     """
     array = _real_array(value, name=f"{name} vertices", expected="an (n, 3) array")
     if array.size == 0 and array.ndim <= 2:
-        return np.zeros((0, 3))  # an empty mesh: check_mesh_arrays says so
+        return np.zeros((0, 3))  # an empty mesh: mesh_arrays says so
     if array.ndim != 2 or array.shape[1] != 3:
         raise ValueError(f"{name} vertices must have shape (n, 3), got {array.shape}")
     return np.array(array, dtype=np.float64, order="C")  # C order: the compiled kernel reads rows
@@ -200,7 +181,7 @@ def as_triangle_array(value: Any, n: int, *, name: str = "mesh") -> np.ndarray:
     if array.ndim != 2 or array.shape[1] != 3:
         raise ValueError(f"{name} triangles must have shape (m, 3), got {array.shape}")
     bad = (array < 0) | (array >= n)  # compared in the given dtype: no wrap-around
-    if n > 0 and bad.any():  # (no vertices at all: check_mesh_arrays reports the empty mesh)
+    if n > 0 and bad.any():  # (no vertices at all: mesh_arrays reports the empty mesh)
         row = int(np.flatnonzero(bad.any(axis=1))[0])
         raise ValueError(
             f"{name} triangle indices must lie in [0, {n}), got {[int(i) for i in array[row]]} at triangle {row}"
