@@ -46,10 +46,9 @@ ORDERINGS = ("default", "nesdis", "metis", "amd", "colamd", "natural")
 SOLVERS = ("auto", "cholmod", "iterative")
 #: What :class:`SPDSolver` takes as ``backend=``.
 BACKENDS = ("auto", "cholmod", "scipy", "iterative")
-#: Relative residual ``||b - A x|| / ||b||`` at which conjugate gradients stop, per column.
-#: Measured on LS meshes with 2% controls (noisy sphere, started from the mesh's own positions):
-#: 1e-9 gives solutions within 3e-8 of CHOLMOD's, relative, at 200k and 1M vertices (1e-10: 3e-9,
-#: 20% more iterations; 1e-8: 3e-7), well inside the documented 1e-6.
+#: Relative residual ``||b - A x|| / ||b||`` at which conjugate gradients stop, per column: within
+#: 3e-8 of CHOLMOD's solution at 200k and 1M vertices (LS meshes, 2% controls; 1e-10: 3e-9 for 20%
+#: more iterations; 1e-8: 3e-7), well inside the documented 1e-6.
 DEFAULT_TOLERANCE = 1e-9
 #: Fraction of the available memory that the factor may take under ``backend="auto"``.
 BUDGET_FRACTION = 0.5
@@ -140,9 +139,8 @@ def estimate_factor_bytes(n: int, nnz: int) -> float:
     return 1.5 * 8.0 * factor_entries
 
 
-# nnz(L) / (n log2 n) of CHOLMOD's factor (default ordering) of LS-mesh normal matrices, 2% controls, on
-# torus grids: 12.8 at 20k vertices, 10.1 at 80k, 10.5 at 245k, 10.8 at 500k (benchmarks/results/scale.md).
-# At 10M this predicts 31 GB, as measured growth from 2M (5.5 GB peak) suggests.
+# nnz(L) / (n log2 n) of CHOLMOD's factor of LS-mesh normal matrices on torus grids: 12.8 at 20k vertices,
+# 10.1 at 80k, 10.8 at 500k (benchmarks/results/scale.md); 2.6 GB at 1M, 31 GB at 10M.
 _FILL_PER_ROW_LOG = 11.0
 
 
@@ -161,8 +159,7 @@ def operator_scale(operator: sp.spmatrix) -> float:
 def check_finite(values: Any, *, name: str, what: str) -> None:
     """Raise ``ValueError`` naming ``name`` when ``values`` (something built from it) holds inf or NaN.
 
-    ``values`` may be a callable that computes them: it runs with overflow warnings off,
-    since the overflow is what this reports.
+    ``values`` may be a callable, run with overflow warnings off (the overflow is what this reports).
     """
     if callable(values):
         with np.errstate(over="ignore", invalid="ignore"):
@@ -225,9 +222,8 @@ def check_constant_modes(
 def check_weight_pins_components(operator: sp.spmatrix, weight: float, *, name: str) -> None:
     """Check a scalar weight ``w`` of ``||L x||^2 + w^2 sum_a |x_a - c_a|^2`` with one anchor per component at least.
 
-    The weakest case of :func:`check_constant_modes` (``q_c = w^2 / n_c``) for
-    callers that choose the anchors later (encoding, selection); also
-    rejects ``w`` whose square overflows.
+    The weakest case of :func:`check_constant_modes` (``q_c = w^2 / n_c``), for callers that
+    choose the anchors later; also rejects ``w`` whose square overflows.
     """
     from scipy.sparse import csgraph
 
@@ -434,18 +430,15 @@ class SPDSolver:
             if self.estimated_factor_bytes > budget:
                 backend = "iterative"
         if backend == "auto":
-            if _cholmod is None:
-                if not _cholmod_disabled():
-                    warnings.warn(
-                        "scikit-sparse is not importable; solving with scipy.sparse.linalg.splu, which "
-                        "refactors instead of updating (pip install 'o3d_lsmesh[cholmod]' for CHOLMOD, "
-                        f"or set {NO_CHOLMOD_ENV}=1 to choose SciPy and silence this warning)",
-                        O3DLSMeshWarning,
-                        stacklevel=user_stacklevel(),
-                    )
-                backend = "scipy"
-            else:
-                backend = "cholmod"
+            if _cholmod is None and not _cholmod_disabled():
+                warnings.warn(
+                    "scikit-sparse is not importable; solving with scipy.sparse.linalg.splu, which "
+                    "refactors instead of updating (pip install 'o3d_lsmesh[cholmod]' for CHOLMOD, "
+                    f"or set {NO_CHOLMOD_ENV}=1 to choose SciPy and silence this warning)",
+                    O3DLSMeshWarning,
+                    stacklevel=user_stacklevel(),
+                )
+            backend = "scipy" if _cholmod is None else "cholmod"
         self.backend = backend
         self.iterations = 0
         self.residual = 0.0
@@ -491,19 +484,17 @@ class SPDSolver:
             return _symmetric_from_lower(self._matrix)
 
     def _flush(self) -> None:
-        if self._pending:
-            if self._product_of is not None:
-                # A A^T + C C^T = [A C] [A C]^T
-                self._product_of = sp.hstack([self._product_of, *self._pending], format="csc")
-                self._pending.clear()
-                return
+        if self._pending and self._product_of is not None:
+            # A A^T + C C^T = [A C] [A C]^T
+            self._product_of = sp.hstack([self._product_of, *self._pending], format="csc")
+        elif self._pending:
             self._pattern_of = None  # C C^T may reach outside it: later analyses take the matrix's own
             for c in self._pending:
                 product = c @ c.T
                 self._matrix = (self._matrix + (sp.tril(product) if self._lower else product)).tocsc()
-            self._pending.clear()
             assert self._matrix is not None
             self._matrix.sort_indices()
+        self._pending.clear()
 
     def _factorize(self, *, analyze: bool) -> None:
         try:

@@ -108,9 +108,8 @@ def spectral_basis(
             f"(the Lanczos basis would exceed n * k = {SPECTRAL_MAX_WORK:.0e} doubles), got {k}"
         )
     check_progress(progress)
-    adjacency = adjacency_matrix(triangles, n)
     L = combinatorial_laplacian(triangles, n)
-    Z = null_space_basis(adjacency)  # (n, c)
+    Z = null_space_basis(L)  # (n, c): the components of L's graph are the mesh's
     c = Z.shape[1]
     if k <= c:  # only eigenvalue 0: the k largest components' indicators
         return np.zeros(k), Z[:, :k].toarray()

@@ -65,14 +65,9 @@ def topology_summary_arrays(vertices: np.ndarray, triangles: np.ndarray) -> dict
     for lo, hi in HOLE_SIZE_BINS:
         inside = (loop_edges >= lo) & (loop_edges <= (np.iinfo(np.int64).max if hi is None else hi))
         holes[_bin_label(lo, hi)] = int(np.count_nonzero(inside))
-    if boundary_edges:
-        graph = sp.coo_matrix((np.ones(boundary_edges), (tail[rows], head[rows])), shape=(n, n))
-        _, boundary_label = csgraph.connected_components(graph, directed=False)
-        on_boundary = np.zeros(n, dtype=bool)
-        on_boundary[tail[rows]] = True
-        boundary_components = len(np.unique(boundary_label[on_boundary]))
-    else:
-        boundary_components = 0
+    graph = sp.coo_matrix((np.ones(boundary_edges), (tail[rows], head[rows])), shape=(n, n))
+    boundary_label = csgraph.connected_components(graph, directed=False)[1]
+    boundary_components = len(np.unique(boundary_label[tail[rows]]))
     # degenerate triangles: (near) zero area relative to the longest edge
     corners = vertices[F]
     sides = corners[:, [1, 2, 0]] - corners

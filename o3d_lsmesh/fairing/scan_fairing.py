@@ -450,15 +450,19 @@ def scan_system(
         data += [np.full(len(ref_rows), plate), -plate * row_weight[lo], -plate * row_weight[hi]]
         if t > 0.0:
             curve = edges[counts == 1]
-            curve_inverse = np.zeros(n)
-            curve_valence = np.bincount(curve.ravel(), minlength=n)
-            np.divide(t, curve_valence, out=curve_inverse, where=curve_valence > 0)
+            curve_inverse = _curve_inverse(curve, n, t)
             row += [count + curve[:, 0], count + curve[:, 1]]
             col += [curve[:, 1], curve[:, 0]]
             data += [-plate * curve_inverse[curve[:, 0]], -plate * curve_inverse[curve[:, 1]]]
         count += n
     rows = sp.csr_matrix((np.concatenate(data), (np.concatenate(row), np.concatenate(col))), shape=(count, n))
     return ScanSystem(rows, _penalty(triangles, n, root), referenced, boundary, weight)
+
+
+def _curve_inverse(curve: np.ndarray, n: int, t: float) -> np.ndarray:
+    """``t / c_i`` for the ``c_i`` boundary-curve neighbours of each vertex (0 off the curve), ``(n,)``."""
+    valence = np.bincount(curve.ravel(), minlength=n)
+    return np.divide(t, valence, out=np.zeros(n), where=valence > 0)
 
 
 def _penalty(triangles: np.ndarray, n: int, root: np.ndarray) -> sp.csr_matrix:
@@ -569,9 +573,7 @@ def _normal_matrix(
         plate[backward] = -inverse[hi]
         if t > 0.0:
             rim = counts == 1
-            curve_valence = np.bincount(edges[rim].ravel(), minlength=n)
-            curve_inverse = np.zeros(n)
-            np.divide(t, curve_valence, out=curve_inverse, where=curve_valence > 0)
+            curve_inverse = _curve_inverse(edges[rim], n, t)
             plate[forward[rim]] -= curve_inverse[lo[rim]]
             plate[backward[rim]] -= curve_inverse[hi[rim]]
         plate *= np.sqrt(thin_plate)
