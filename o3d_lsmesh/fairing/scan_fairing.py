@@ -39,6 +39,7 @@ from typing import NamedTuple
 import numpy as np
 import scipy.sparse as sp
 
+from .._collapsed import collapsed_triangles
 from .._solvers import SPDSolver
 from ..topology import edge_structure, ring_pattern
 
@@ -51,7 +52,6 @@ __all__ = [
     "SCAN_MEMBRANE",
     "SCAN_MU",
     "SCAN_RIM_RATIO",
-    "SCAN_THIN_PLATE",
     "NoiseEstimate",
     "ScanFairingSolver",
     "ScanParameters",
@@ -71,8 +71,6 @@ __all__ = [
 SCAN_MU = 0.03
 #: Membrane weight ``lambda`` of the scan energy.
 SCAN_MEMBRANE = 0.45
-#: Weight ``kappa`` of the thin-plate term ``|K X|^2`` (Liu et al.'s energy).
-SCAN_THIN_PLATE = 1.0
 #: Lowest barycenter weight of triangles touching the boundary, relative to the
 #: interior's (a ragged scan silhouette: see :func:`measured_boundary_weight`).
 SCAN_BOUNDARY_WEIGHT = 0.1
@@ -366,10 +364,10 @@ class ScanSystem:
     """The scan energy as weighted least-squares equations, per coordinate.
 
     ``E(X) = |R X - T|^2`` with the stacked rows ``R = [sqrt(mu W) H;
-    sqrt(lambda) D; (unit rows); sqrt(kappa) K]`` (``D`` the ``(e, n)``
-    edge-difference matrix; the thin-plate rows only when ``kappa > 0``) and
+    sqrt(lambda) D; (unit rows); K]`` (``D`` the ``(e, n)``
+    edge-difference matrix) and
     targets ``T = [sqrt(mu W) H X0; 0; ...]``, so the normal matrix is
-    ``R^T R = mu H^T W H + lambda D^T D + kappa K^T K`` (``D^T D`` is the
+    ``R^T R = mu H^T W H + lambda D^T D + K^T K`` (``D^T D`` is the
     graph Laplacian ``G``). Unreferenced vertices get a unit row of their
     own, so the system is positive definite and leaves them in place.
 
@@ -406,7 +404,6 @@ def scan_system(
     mu: float,
     membrane: float,
     boundary_weight: float,
-    thin_plate: float = SCAN_THIN_PLATE,
     structure: _Structure | None = None,
     rim_curve: float = 0.0,
 ) -> ScanSystem:
@@ -431,31 +428,28 @@ def scan_system(
     membrane_root = np.sqrt(membrane)
     ref_rows = np.flatnonzero(referenced)
     # rows [0, m): sqrt(mu w_t) at t's corners; [m, m+e): sqrt(lambda) (x_lo - x_hi); a unit row per
-    # unreferenced vertex; then, with a thin-plate weight kappa, sqrt(kappa) K (row i: 1 at i, -1/n_i at
-    # each neighbour)
+    # unreferenced vertex; then K (row i: 1 at i, -1/n_i at each neighbour)
     u = len(unreferenced)
     row = [np.repeat(np.arange(m), 3), m + np.arange(e), m + np.arange(e), m + e + np.arange(u)]
     col = [triangles.ravel(), lo, hi, unreferenced]
     data = [np.repeat(root, 3), np.full(e, membrane_root), np.full(e, -membrane_root), np.ones(u)]
     count = m + e + u
-    if thin_plate > 0.0:
-        plate = np.sqrt(thin_plate)
-        # a rim vertex's row mixes its one-sided Laplacian (weight 1 - t) with the Laplacian along its
-        # boundary curve (weight t = rim_curve): the one-sided row pulls a straight rim inward, the curve
-        # row does not
-        t = float(rim_curve)
-        row_weight = np.where(boundary, 1.0 - t, 1.0) * inverse
-        row += [count + ref_rows, count + lo, count + hi]
-        col += [ref_rows, hi, lo]
-        data += [np.full(len(ref_rows), plate), -plate * row_weight[lo], -plate * row_weight[hi]]
-        if t > 0.0:
-            curve = edges[counts == 1]
-            curve_inverse = _curve_inverse(curve, n, t)
-            row += [count + curve[:, 0], count + curve[:, 1]]
-            col += [curve[:, 1], curve[:, 0]]
-            data += [-plate * curve_inverse[curve[:, 0]], -plate * curve_inverse[curve[:, 1]]]
-        count += n
-    rows = sp.csr_matrix((np.concatenate(data), (np.concatenate(row), np.concatenate(col))), shape=(count, n))
+    # a rim vertex's row mixes its one-sided Laplacian (weight 1 - t) with the Laplacian along its
+    # boundary curve (weight t = rim_curve): the one-sided row pulls a straight rim inward, the curve
+    # row does not
+    t = float(rim_curve)
+    row_weight = np.where(boundary, 1.0 - t, 1.0) * inverse
+    row += [count + ref_rows, count + lo, count + hi]
+    col += [ref_rows, hi, lo]
+    data += [np.ones(len(ref_rows)), -row_weight[lo], -row_weight[hi]]
+    if t > 0.0:
+        curve = edges[counts == 1]
+        curve_inverse = _curve_inverse(curve, n, t)
+        row += [count + curve[:, 0], count + curve[:, 1]]
+        col += [curve[:, 1], curve[:, 0]]
+        data += [-curve_inverse[curve[:, 0]], -curve_inverse[curve[:, 1]]]
+    shape = (count + n, n)
+    rows = sp.csr_matrix((np.concatenate(data), (np.concatenate(row), np.concatenate(col))), shape=shape)
     return ScanSystem(rows, _penalty(triangles, n, root), referenced, boundary, weight)
 
 
@@ -478,13 +472,12 @@ def scan_normal_matrix(
     mu: float,
     membrane: float,
     boundary_weight: float,
-    thin_plate: float = SCAN_THIN_PLATE,
     structure: _Structure | None = None,
     rim_curve: float = 0.0,
 ) -> sp.csr_matrix:
     """The normal matrix ``R^T R`` of :func:`scan_system`, assembled from the mesh's edges, ``(n, n)`` CSR.
 
-    ``R^T R = mu H^T W H + lambda G + kappa K^T K`` (plus a unit diagonal entry per unreferenced
+    ``R^T R = mu H^T W H + lambda G + K^T K`` (plus a unit diagonal entry per unreferenced
     vertex) without forming ``R``: ``(H^T W H)_ij`` sums ``w_t`` over the triangles on edge ``ij``
     (at ``i`` when ``i = j``), scattered straight into the 1-ring CSR pattern
     (:func:`~o3d_lsmesh.topology.ring_pattern`); only ``K^T K`` (the 2-ring) is a sparse product.
@@ -507,7 +500,6 @@ def scan_normal_matrix(
         mu=mu,
         membrane=membrane,
         boundary_weight=boundary_weight,
-        thin_plate=thin_plate,
         structure=structure,
         rim_curve=rim_curve,
     )[0]
@@ -520,26 +512,19 @@ def _normal_matrix(
     mu: float,
     membrane: float,
     boundary_weight: float,
-    thin_plate: float = SCAN_THIN_PLATE,
     structure: _Structure | None = None,
     rim_curve: float = 0.0,
 ) -> tuple[sp.csr_matrix, sp.csc_matrix | None, np.ndarray]:
     # scan_normal_matrix; the pattern of K (the 1-ring, diagonal included) when K^T K holds the matrix's;
     # the (m,) triangle weights w_t
     triangles = np.asarray(triangles)
-    m = len(triangles)
-    if m and (
-        (triangles[:, 0] == triangles[:, 1]).any()
-        or (triangles[:, 1] == triangles[:, 2]).any()
-        or (triangles[:, 2] == triangles[:, 0]).any()
-    ):
+    if collapsed_triangles(triangles).any():
         rows = scan_system(
             triangles,
             n,
             mu=mu,
             membrane=membrane,
             boundary_weight=boundary_weight,
-            thin_plate=thin_plate,
             structure=structure,
             rim_curve=rim_curve,
         )
@@ -560,26 +545,23 @@ def _normal_matrix(
     data[forward] = on_edge
     data[backward] = on_edge
     matrix = sp.csr_matrix((data, indices, indptr), shape=(n, n))
-    ring = None
-    if thin_plate > 0.0:
-        # K: row i is 1 at i and -(1 - t) / n_i - t / c_i at each neighbour (the second part only across
-        # boundary edges, c_i of them; t = rim_curve for a rim vertex, the one-sided row otherwise)
-        t = float(rim_curve)
-        inverse = np.zeros(n)
-        np.divide(np.where(boundary, 1.0 - t, 1.0), valence, out=inverse, where=referenced)
-        plate = np.empty(len(indices))
-        plate[diagonal] = referenced
-        plate[forward] = -inverse[lo]
-        plate[backward] = -inverse[hi]
-        if t > 0.0:
-            rim = counts == 1
-            curve_inverse = _curve_inverse(edges[rim], n, t)
-            plate[forward[rim]] -= curve_inverse[lo[rim]]
-            plate[backward[rim]] -= curve_inverse[hi[rim]]
-        plate *= np.sqrt(thin_plate)
-        operator = sp.csr_matrix((plate, indices, indptr), shape=(n, n))
-        matrix = matrix + operator.T.tocsr() @ operator
-        ring = sp.csc_matrix((np.ones(len(indices)), indices, indptr), shape=(n, n))
+    # K: row i is 1 at i and -(1 - t) / n_i - t / c_i at each neighbour (the second part only across
+    # boundary edges, c_i of them; t = rim_curve for a rim vertex, the one-sided row otherwise)
+    t = float(rim_curve)
+    inverse = np.zeros(n)
+    np.divide(np.where(boundary, 1.0 - t, 1.0), valence, out=inverse, where=referenced)
+    plate = np.empty(len(indices))
+    plate[diagonal] = referenced
+    plate[forward] = -inverse[lo]
+    plate[backward] = -inverse[hi]
+    if t > 0.0:
+        rim = counts == 1
+        curve_inverse = _curve_inverse(edges[rim], n, t)
+        plate[forward[rim]] -= curve_inverse[lo[rim]]
+        plate[backward[rim]] -= curve_inverse[hi[rim]]
+    operator = sp.csr_matrix((plate, indices, indptr), shape=(n, n))
+    matrix = matrix + operator.T.tocsr() @ operator
+    ring = sp.csc_matrix((np.ones(len(indices)), indices, indptr), shape=(n, n))
     matrix.sum_duplicates()  # canonical: sorted indices (CHOLMOD and the lower-triangle cut need them)
     return matrix, ring, weight
 
@@ -623,7 +605,6 @@ class ScanFairingSolver:
         mu: float,
         membrane: float,
         boundary_weight: float,
-        thin_plate: float = SCAN_THIN_PLATE,
         structure: _Structure | None = None,
         rim_curve: float = 0.0,
     ) -> None:
@@ -637,7 +618,6 @@ class ScanFairingSolver:
             mu=self.mu,
             membrane=self.membrane,
             boundary_weight=boundary_weight,
-            thin_plate=thin_plate,
             structure=st,
             rim_curve=rim_curve,
         )
