@@ -572,12 +572,6 @@ class SPDSolver:
             )
         return np.asarray(x)
 
-    def _preconditioner(self) -> Any:
-        if self._factor is None:
-            self._flush()
-            self._factor = _amg_preconditioner(self._matrix)
-        return self._factor
-
     def _solve_iterative(self, b: np.ndarray, x0: Any) -> np.ndarray:
         if x0 is not None:
             x0 = np.asarray(x0, dtype=np.float64)
@@ -585,13 +579,15 @@ class SPDSolver:
                 raise ValueError(f"x0 must have the shape of rhs {b.shape}, got {x0.shape}")
             if not np.isfinite(x0).all():
                 raise ValueError("x0 must be finite")
-        precondition = self._preconditioner()
+        if self._factor is None:  # the AMG preconditioner, built at the first solve
+            self._flush()
+            self._factor = _amg_preconditioner(self._matrix)
         assert self._matrix is not None  # the iterative path takes matrices only
         x, self.iterations, self.residual = _block_cg(
-            self._matrix.tocsr() if not sp.isspmatrix_csr(self._matrix) else self._matrix,
+            self._matrix.tocsr(),
             b,
             x0,
-            precondition,
+            self._factor,
             tol=self.tol,
             max_iterations=self.max_iterations,
             progress=self.progress,

@@ -494,21 +494,12 @@ def scan_normal_matrix(
     >>> bool(abs(N - S).max() < 1e-15), N.shape
     (True, (5, 5))
     """
-    return _normal_matrix(
-        triangles,
-        n,
-        mu=mu,
-        membrane=membrane,
-        boundary_weight=boundary_weight,
-        structure=structure,
-        rim_curve=rim_curve,
-    )[0]
+    return _normal_matrix(triangles, n, mu, membrane, boundary_weight, structure, rim_curve)[0]
 
 
 def _normal_matrix(
     triangles: np.ndarray,
     n: int,
-    *,
     mu: float,
     membrane: float,
     boundary_weight: float,
@@ -613,13 +604,7 @@ class ScanFairingSolver:
         triangles = np.asarray(triangles)
         st = _structure(triangles, n) if structure is None else structure
         normal, ring, weight = _normal_matrix(
-            triangles,
-            n,
-            mu=self.mu,
-            membrane=self.membrane,
-            boundary_weight=boundary_weight,
-            structure=st,
-            rim_curve=rim_curve,
+            triangles, n, self.mu, self.membrane, boundary_weight, st, rim_curve
         )
         #: ``sqrt(mu W) H``, ``(m, n)``: the rows that carry the targets
         self.penalty = _penalty(triangles, n, np.sqrt(self.mu * weight))
