@@ -105,8 +105,8 @@ def _structure(triangles: np.ndarray, n: int) -> _Structure:
     return _Structure(es.edges, es.counts, boundary, np.bincount(es.edges.ravel(), minlength=n), es.inverse)
 
 
-def _neighbour_mean(vertices: np.ndarray, pairs: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """``(k, 3)`` mean of the ``pairs``-neighbours of the ``mask`` vertices (bincount, not ``np.add.at``)."""
+def _mean_square_laplacian(vertices: np.ndarray, pairs: np.ndarray, mask: np.ndarray) -> float:
+    """Mean over the ``mask`` vertices of ``|mean of the pairs-neighbours - x_i|^2`` (bincount, not ``np.add.at``)."""
     n = len(vertices)
     lo, hi = pairs[:, 0], pairs[:, 1]
     degree = np.bincount(pairs.ravel(), minlength=n)[mask].astype(np.float64)
@@ -115,7 +115,8 @@ def _neighbour_mean(vertices: np.ndarray, pairs: np.ndarray, mask: np.ndarray) -
         total[:, k] = (
             np.bincount(lo, vertices[hi, k], minlength=n) + np.bincount(hi, vertices[lo, k], minlength=n)
         )[mask]
-    return total / degree[:, None]
+    lap = total / degree[:, None] - vertices[mask]
+    return float((lap * lap).sum(axis=1).mean())
 
 
 def rim_noise_ratio(
@@ -136,15 +137,11 @@ def rim_noise_ratio(
         return float("inf"), 1.0
     in_triangles = np.bincount(triangles.ravel(), minlength=n)
     coverage = max(1.0, float(in_triangles[interior].mean() / in_triangles[st.boundary].mean()))
-
-    def mean_square_laplacian(pairs: np.ndarray, mask: np.ndarray) -> float:
-        lap = _neighbour_mean(vertices, pairs, mask) - vertices[mask]
-        return float((lap * lap).sum(axis=1).mean())
-
-    curve_energy = mean_square_laplacian(on_curve, st.boundary)
+    curve_energy = _mean_square_laplacian(vertices, on_curve, st.boundary)
     if curve_energy <= 0.0:
         return coverage, coverage
-    return coverage * _IID_BOUNDARY_RATIO * mean_square_laplacian(st.edges, interior) / curve_energy, coverage
+    interior_energy = _mean_square_laplacian(vertices, st.edges, interior)
+    return coverage * _IID_BOUNDARY_RATIO * interior_energy / curve_energy, coverage
 
 
 def measured_boundary_weight(vertices: np.ndarray, triangles: np.ndarray) -> float:
