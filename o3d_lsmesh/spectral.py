@@ -159,11 +159,9 @@ def quantize_coefficients(coefficients: np.ndarray, bits: int) -> np.ndarray:
 def spectral_approximation(mesh: MeshT, k: int, *, bits: int | None = None, progress: bool = False) -> MeshT:
     """Project the geometry on the first ``k`` Laplacian eigenvectors (Karni and Gotsman's spectral compression).
 
-    With ``U (n, k)`` the eigenvectors of the ``k`` smallest eigenvalues of
-    ``L = D - A`` (orthonormal columns), the result is ``U (U^T X)`` for the
-    vertex positions ``X (n, 3)``: the best ``k``-term approximation in the
-    Laplacian-spectral basis of section II of the geometry-aware bases paper.
-    ``bits`` quantizes the ``3k`` coefficients first (Karni and Gotsman use 14).
+    ``U (U^T X)`` for positions ``X (n, 3)`` and ``U (n, k)`` the orthonormal eigenvectors of the
+    ``k`` smallest eigenvalues of ``L = D - A``: the best ``k``-term approximation in the basis of
+    section II of the bases paper. ``bits`` quantizes the ``3k`` coefficients first (Karni and Gotsman use 14).
 
     Parameters
     ----------
@@ -192,10 +190,9 @@ def spectral_approximation(mesh: MeshT, k: int, *, bits: int | None = None, prog
 
     Notes
     -----
-    The eigenvalue 0 has one eigenvector per connected component (its
-    normalized indicator), so with ``k`` below the number of components the
-    basis is not unique: the ``k`` largest components are kept, each projected
-    to its centroid, and the vertices of the others go to the origin.
+    With ``k`` below the number of components the basis of eigenvalue 0 (one indicator per
+    component) is not unique: the ``k`` largest components are kept, each projected to its
+    centroid, and the vertices of the others go to the origin.
 
     Examples
     --------

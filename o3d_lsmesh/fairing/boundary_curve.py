@@ -77,13 +77,10 @@ MIN_LOOP_LENGTH = 4
 class CurveOperator:
     """One averaged relaxation step of every boundary curve as two fixed sparse matrices.
 
-    ``vertex (b,) int64`` are the boundary vertices that move (each once) and
-    ``support (s,) int64`` the vertices their estimates read; row ``j`` of
-    ``moving (b, s)`` and ``targets (b, s)`` holds the average of vertex
-    ``vertex[j]``'s estimates, so that one step is
-    ``X[vertex] <- moving @ X[support] + targets @ X0[support]`` (independent
-    of the vertex count). Holds arrays only: it pickles and may be shared
-    between threads.
+    ``vertex (b,)`` are the boundary vertices that move and ``support (s,)`` those their
+    estimates read; row ``j`` of ``moving (b, s)`` and ``targets (b, s)`` averages the estimates
+    of ``vertex[j]``: one step is ``X[vertex] <- moving @ X[support] + targets @ X0[support]``.
+    Arrays only: it pickles and may be shared between threads.
     """
 
     vertex: np.ndarray
