@@ -3,10 +3,8 @@
 :func:`progress_bar` counts work the caller reports; :func:`iterate` wraps a
 loop; :func:`stages` names the steps of one operation.
 
-Every bar ends at its total when the work completes (tests check it), counts
-in units of the work itself (vertices, anchors, control points) or, for a
-single factorization, in named stages. With ``progress=False`` tqdm is not
-even imported and the bar is a silent stand-in with the same methods.
+Every bar ends at its total when the work completes (tests check it) and counts units of the
+work (vertices, anchors) or named stages. With ``progress=False`` tqdm is not even imported.
 """
 
 from __future__ import annotations
@@ -29,21 +27,12 @@ def check_progress(progress: Any) -> bool:
 
 
 class _Silent:
-    """Stand-in for a disabled bar: tqdm's methods, doing nothing."""
+    """Stand-in for a disabled bar: tqdm's methods (``update``, ``set_postfix_str``, ``close``...), doing nothing."""
 
     n = 0
 
-    def update(self, count: int = 1) -> None:
-        pass
-
-    def set_postfix_str(self, text: str = "", refresh: bool = True) -> None:
-        pass
-
-    def set_postfix(self, refresh: bool = True, **values: Any) -> None:
-        pass
-
-    def close(self) -> None:
-        pass
+    def __getattr__(self, name: str) -> Callable[..., None]:
+        return lambda *args, **kwargs: None
 
     def __enter__(self) -> _Silent:
         return self

@@ -1,20 +1,11 @@
 """The CHOLMOD gateway: the only module that imports ``sksparse.cholmod``.
 
-:class:`SPDSolver` factors a sparse symmetric positive definite matrix once,
-solves ``(n,)`` or ``(n, k)`` right-hand sides in one call, refactors a matrix
-of the same pattern reusing the symbolic analysis (the fill-reducing ordering
-is about half of a large solve), and applies rank-k updates ``A + C C^T`` in
-place. Without scikit-sparse it falls back to SciPy's ``splu`` set for SPD
-matrices (symmetric ordering, no pivoting) with a warning, refactoring
-where CHOLMOD would update; ``O3D_LSMESH_NO_CHOLMOD=1`` chooses that path on
-purpose (no warning). Systems whose factor would not fit in a memory budget
-are solved by conjugate gradients preconditioned with smoothed-aggregation
-algebraic multigrid (``pyamg``), warm-started where the caller has a guess.
-
-The module also holds the checks that keep an ill-posed least-squares system
-from giving a wrong answer silently: :func:`check_constant_modes` (a
-penalty too weak against ``||L^T L||``) and :func:`check_finite`
-(overflow), which raise ``ValueError`` naming the caller's parameter.
+:class:`SPDSolver` factors a sparse SPD matrix once, solves ``(n, k)``
+right-hand sides in one call, refactors reusing the symbolic analysis and
+applies rank-k updates (SciPy's ``splu`` without scikit-sparse or with
+``O3D_LSMESH_NO_CHOLMOD=1``; AMG-preconditioned conjugate gradients above a
+memory budget). :func:`check_constant_modes` and :func:`check_finite` keep an
+ill-posed system from giving a wrong answer silently.
 """
 
 from __future__ import annotations
@@ -55,10 +46,9 @@ ORDERINGS = ("default", "nesdis", "metis", "amd", "colamd", "natural")
 SOLVERS = ("auto", "cholmod", "iterative")
 #: What :class:`SPDSolver` takes as ``backend=``.
 BACKENDS = ("auto", "cholmod", "scipy", "iterative")
-#: Relative residual ``||b - A x|| / ||b||`` at which conjugate gradients stop, per column.
-#: Measured on LS meshes with 2% controls (noisy sphere, started from the mesh's own positions):
-#: 1e-9 gives solutions within 3e-8 of CHOLMOD's, relative, at 200k and 1M vertices (1e-10: 3e-9,
-#: 20% more iterations; 1e-8: 3e-7), well inside the documented 1e-6.
+#: Relative residual ``||b - A x|| / ||b||`` at which conjugate gradients stop, per column: within
+#: 3e-8 of CHOLMOD's solution at 200k and 1M vertices (LS meshes, 2% controls; 1e-10: 3e-9 for 20%
+#: more iterations; 1e-8: 3e-7), well inside the documented 1e-6.
 DEFAULT_TOLERANCE = 1e-9
 #: Fraction of the available memory that the factor may take under ``backend="auto"``.
 BUDGET_FRACTION = 0.5
@@ -66,8 +56,6 @@ BUDGET_FRACTION = 0.5
 #: is not determined by the system in float64: round-off of size eps ||L^T L|| |x| moves it by
 #: more than 1e-6 of |x|.
 NEGLIGIBLE = 1e-10
-
-
 NO_CHOLMOD_ENV = "O3D_LSMESH_NO_CHOLMOD"
 
 
@@ -140,13 +128,9 @@ def default_memory_budget() -> int:
 def estimate_factor_bytes(n: int, nnz: int) -> float:
     """Measured model of the peak memory of a CHOLMOD factor of an ``(n, n)`` mesh system with ``nnz`` entries.
 
-    Fill-reducing orderings of mesh (near-planar) graphs give ``O(n log n)``
-    fill; the constant (11 factor entries per ``n log2 n``) is fitted to
-    CHOLMOD factors of LS-mesh normal matrices (``L^T L + W^2``, about 19
-    entries per row) from 20k to 500k vertices and is scaled by the entries
-    per row; 8 bytes per factor entry, times 1.5 for CHOLMOD's integer and
-    supernodal workspace and the matrix itself (measured peak at 200k: 440 MB
-    over the input, model 460 MB). About 2.6 GB at 1M vertices, 31 GB at 10M.
+    Mesh graphs give ``O(n log n)`` fill: :data:`_FILL_PER_ROW_LOG` factor entries per ``n log2 n``
+    at 19 entries a row (LS-mesh normal matrices), scaled by the entries per row; 8 bytes each,
+    times 1.5 for CHOLMOD's workspace (measured peak at 200k: 440 MB, model 460 MB).
     """
     if n <= 1:
         return float(nnz) * 16.0
@@ -155,9 +139,8 @@ def estimate_factor_bytes(n: int, nnz: int) -> float:
     return 1.5 * 8.0 * factor_entries
 
 
-# nnz(L) / (n log2 n) of CHOLMOD's factor (default ordering) of LS-mesh normal matrices, 2% controls, on
-# torus grids: 12.8 at 20k vertices, 10.1 at 80k, 10.5 at 245k, 10.8 at 500k (benchmarks/results/scale.md).
-# At 10M this predicts 31 GB, as measured growth from 2M (5.5 GB peak) suggests.
+# nnz(L) / (n log2 n) of CHOLMOD's factor of LS-mesh normal matrices on torus grids: 12.8 at 20k vertices,
+# 10.1 at 80k, 10.8 at 500k (benchmarks/results/scale.md); 2.6 GB at 1M, 31 GB at 10M.
 _FILL_PER_ROW_LOG = 11.0
 
 
@@ -176,8 +159,7 @@ def operator_scale(operator: sp.spmatrix) -> float:
 def check_finite(values: Any, *, name: str, what: str) -> None:
     """Raise ``ValueError`` naming ``name`` when ``values`` (something built from it) holds inf or NaN.
 
-    ``values`` may be a callable that computes them: it runs with overflow warnings off,
-    since the overflow is what this reports.
+    ``values`` may be a callable, run with overflow warnings off (the overflow is what this reports).
     """
     if callable(values):
         with np.errstate(over="ignore", invalid="ignore"):
@@ -202,14 +184,10 @@ def check_constant_modes(
 ) -> None:
     """Raise ``ValueError`` naming ``name`` if a penalty leaves a component's translation undetermined.
 
-    For a system ``N = L^T L + P`` where ``L`` annihilates the constant vector
-    ``1_c`` of each connected component ``c``, the smallest eigenvalue of ``N``
-    on ``c`` is at most the Rayleigh quotient ``q_c = 1_c^T N 1_c / n_c``,
-    which only the penalty ``P`` makes positive. Round-off perturbs the
-    factor by about ``eps ||L^T L||``, which moves the solution along ``1_c``
-    by ``eps ||L^T L|| / q_c`` of its size: the whole component drifts (a
-    translated sphere solved with ``weights=1e-8`` lands at the origin). This
-    raises when ``q_c < NEGLIGIBLE * scale``.
+    For ``N = L^T L + P`` with ``L 1_c = 0`` on each component ``c``, only ``P`` makes the
+    Rayleigh quotient ``q_c = 1_c^T N 1_c / n_c`` positive; round-off of ``eps ||L^T L||`` moves
+    the solution along ``1_c`` by ``eps ||L^T L|| / q_c`` (a translated sphere solved with
+    ``weights=1e-8`` lands at the origin). Raises when ``q_c < NEGLIGIBLE * scale``.
 
     Parameters
     ----------
@@ -244,9 +222,8 @@ def check_constant_modes(
 def check_weight_pins_components(operator: sp.spmatrix, weight: float, *, name: str) -> None:
     """Check a scalar weight ``w`` of ``||L x||^2 + w^2 sum_a |x_a - c_a|^2`` with one anchor per component at least.
 
-    The weakest case of :func:`check_constant_modes` (``q_c = w^2 / n_c``) for
-    callers that choose the anchors later (encoding, selection); also
-    rejects ``w`` whose square overflows.
+    The weakest case of :func:`check_constant_modes` (``q_c = w^2 / n_c``), for callers that
+    choose the anchors later; also rejects ``w`` whose square overflows.
     """
     from scipy.sparse import csgraph
 
@@ -312,10 +289,8 @@ def _stored(csc: sp.csc_matrix, *, given_lower: bool, keep_lower: bool) -> sp.cs
 def _splu_spd(matrix: sp.csc_matrix) -> Any:
     """SuperLU set for an SPD matrix: a symmetric ordering of ``A + A^T`` and diagonal pivots.
 
-    With partial pivoting (SciPy's default) SuperLU abandons the fill-reducing
-    ordering whenever an off-diagonal entry wins a pivot test, which on these
-    diagonally heavy matrices costs 30-40x the time for the same result; an SPD
-    matrix needs no pivoting at all (Cholesky is stable without it).
+    Partial pivoting (SciPy's default) abandons the fill-reducing ordering whenever an off-diagonal
+    entry wins a pivot test (30-40x the time here); an SPD matrix needs no pivoting.
     """
     return spla.splu(
         matrix, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True}
@@ -328,9 +303,7 @@ _PACKAGE_DIR = os.path.dirname(os.path.abspath(__file__))
 def user_stacklevel() -> int:
     """The ``stacklevel`` that makes a warning point at the first caller outside o3d_lsmesh.
 
-    A warning raised deep in the gateway (``ls_mesh`` -> ``LSMeshSolver`` ->
-    ``SPDSolver``) is about the user's call, so it should name the user's line;
-    a fixed ``stacklevel`` would be right for one call path only.
+    A fixed ``stacklevel`` would be right for one call path only (``ls_mesh`` -> ``LSMeshSolver`` -> ...).
     """
     frame: Any = sys._getframe(1)  # the caller of user_stacklevel, i.e. the function that warns
     level = 1
@@ -338,6 +311,10 @@ def user_stacklevel() -> int:
         frame = frame.f_back
         level += 1
     return level
+
+
+def _not_a(value: Any, types: tuple[type, ...]) -> bool:
+    return isinstance(value, bool) or not isinstance(value, types)
 
 
 class SPDSolver:
@@ -350,33 +327,24 @@ class SPDSolver:
         triangle with ``lower=True`` (which lets the caller free the whole one).
         ``None`` with ``product_of``.
     product_of : (n, k) scipy sparse matrix, optional, keyword-only
-        Factor ``A A^T`` for this ``A`` without forming the product (CHOLMOD
-        assembles it column by column while it factors): the normal matrix of a
-        least-squares problem ``min |A^T x - b|`` from the transposed rows, in
-        less memory and time than ``A @ A.T``. Updates append their columns to
-        ``A``.
+        Factor ``A A^T`` for this ``A`` without forming it (CHOLMOD assembles it
+        while it factors: less memory and time). Updates append their columns to ``A``.
     backend : {"auto", "cholmod", "scipy", "iterative"}
-        ``"auto"`` estimates the direct factor's memory
-        (:func:`estimate_factor_bytes`) and takes the iterative path above
-        ``memory_budget``; below it CHOLMOD when scikit-sparse imports, else
-        SciPy's ``splu`` (with an :class:`O3DLSMeshWarning` unless
-        ``O3D_LSMESH_NO_CHOLMOD=1`` chose it). ``"iterative"``: conjugate
-        gradients preconditioned by a smoothed-aggregation AMG V-cycle
-        (``pyamg``) on the matrix, to relative residual ``tol``.
+        ``"auto"``: the iterative path when :func:`estimate_factor_bytes` exceeds
+        ``memory_budget``, else CHOLMOD, else SciPy's ``splu`` (with an
+        :class:`O3DLSMeshWarning` unless ``O3D_LSMESH_NO_CHOLMOD=1`` chose it).
+        ``"iterative"``: conjugate gradients preconditioned by a smoothed-aggregation
+        AMG V-cycle (``pyamg``), to relative residual ``tol``.
     lower : bool
         ``matrix`` holds only its lower triangle.
     ordering : {"default", "nesdis", "metis", "amd", "colamd", "natural"}
-        CHOLMOD's fill-reducing ordering. ``"default"`` lets CHOLMOD pick the
-        least fill (usually AMD on meshes). ``"nesdis"`` (nested dissection) has
-        a balanced elimination tree, the structure the geometry-aware bases
-        paper's update bound assumes: rank-1 updates touch fewer entries, at
-        the price of a slower factor and solve. Ignored by the other backends.
+        CHOLMOD's fill-reducing ordering (``"default"``: CHOLMOD's least fill).
+        ``"nesdis"`` has the balanced elimination tree the geometry-aware bases
+        paper's update bound assumes (cheaper rank-1 updates, slower factor).
     pattern_of : (n, k) scipy sparse matrix, optional, keyword-only
-        CHOLMOD analyzes the pattern of ``A A^T`` for this ``A`` instead of the
-        matrix's (which that pattern must hold), ordering with ``ordering``
-        (``"colamd"`` orders ``A`` itself, without forming ``A A^T``): a normal
-        matrix ``K^T K + ...`` analyzed from the sparser ``K^T``. Ignored by the
-        other backends.
+        CHOLMOD analyzes the pattern of ``A A^T`` for this ``A`` (which must hold
+        the matrix's; ``"colamd"`` orders ``A`` itself): a normal matrix
+        ``K^T K + ...`` analyzed from the sparser ``K^T``. CHOLMOD only.
     memory_budget : int, optional
         Bytes the direct factor may take under ``backend="auto"``; default
         :func:`default_memory_budget` (half the available memory, or
@@ -402,9 +370,8 @@ class SPDSolver:
 
     Notes
     -----
-    Solves and updates hold a lock: CHOLMOD's common workspace is shared by
-    the factor, so one solver may be used from several threads but its calls
-    run one at a time. A solver pickles as its matrix and refactors on load.
+    Solves and updates hold a lock (CHOLMOD's workspace is shared by the factor):
+    a solver may be shared between threads. It pickles as its matrix and refactors on load.
 
     Examples
     --------
@@ -430,18 +397,12 @@ class SPDSolver:
     ) -> None:
         backend = as_choice(backend, BACKENDS, name="backend")
         self.ordering = as_choice(ordering, ORDERINGS, name="ordering")
-        if isinstance(tol, bool) or not isinstance(tol, (int, float, np.floating)) or not 0 < tol < 1:
+        if _not_a(tol, (int, float, np.floating)) or not 0 < tol < 1:
             raise ValueError(f"tol must be a number in (0, 1), got {tol!r}")
-        if (
-            isinstance(max_iterations, bool)
-            or not isinstance(max_iterations, (int, np.integer))
-            or max_iterations < 1
-        ):
+        if _not_a(max_iterations, (int, np.integer)) or max_iterations < 1:
             raise ValueError(f"max_iterations must be a positive integer, got {max_iterations!r}")
         if memory_budget is not None and (
-            isinstance(memory_budget, bool)
-            or not isinstance(memory_budget, (int, float, np.integer))
-            or memory_budget < 0
+            _not_a(memory_budget, (int, float, np.integer)) or memory_budget < 0
         ):
             raise ValueError(f"memory_budget must be a non-negative number of bytes, got {memory_budget!r}")
         self.tol = float(tol)
@@ -469,18 +430,15 @@ class SPDSolver:
             if self.estimated_factor_bytes > budget:
                 backend = "iterative"
         if backend == "auto":
-            if _cholmod is None:
-                if not _cholmod_disabled():
-                    warnings.warn(
-                        "scikit-sparse is not importable; solving with scipy.sparse.linalg.splu, which "
-                        "refactors instead of updating (pip install 'o3d_lsmesh[cholmod]' for CHOLMOD, "
-                        f"or set {NO_CHOLMOD_ENV}=1 to choose SciPy and silence this warning)",
-                        O3DLSMeshWarning,
-                        stacklevel=user_stacklevel(),
-                    )
-                backend = "scipy"
-            else:
-                backend = "cholmod"
+            if _cholmod is None and not _cholmod_disabled():
+                warnings.warn(
+                    "scikit-sparse is not importable; solving with scipy.sparse.linalg.splu, which "
+                    "refactors instead of updating (pip install 'o3d_lsmesh[cholmod]' for CHOLMOD, "
+                    f"or set {NO_CHOLMOD_ENV}=1 to choose SciPy and silence this warning)",
+                    O3DLSMeshWarning,
+                    stacklevel=user_stacklevel(),
+                )
+            backend = "scipy" if _cholmod is None else "cholmod"
         self.backend = backend
         self.iterations = 0
         self.residual = 0.0
@@ -526,39 +484,37 @@ class SPDSolver:
             return _symmetric_from_lower(self._matrix)
 
     def _flush(self) -> None:
-        if self._pending:
-            if self._product_of is not None:
-                # A A^T + C C^T = [A C] [A C]^T
-                self._product_of = sp.hstack([self._product_of, *self._pending], format="csc")
-                self._pending.clear()
-                return
+        if self._pending and self._product_of is not None:
+            # A A^T + C C^T = [A C] [A C]^T
+            self._product_of = sp.hstack([self._product_of, *self._pending], format="csc")
+        elif self._pending:
             self._pattern_of = None  # C C^T may reach outside it: later analyses take the matrix's own
             for c in self._pending:
                 product = c @ c.T
                 self._matrix = (self._matrix + (sp.tril(product) if self._lower else product)).tocsc()
-            self._pending.clear()
             assert self._matrix is not None
             self._matrix.sort_indices()
+        self._pending.clear()
 
     def _factorize(self, *, analyze: bool) -> None:
         try:
             if self.backend == "iterative":
                 # the AMG hierarchy is built at the first solve: updates and refactors before it cost nothing
                 self._factor = None
-            elif self.backend == "cholmod" and self._product_of is not None:
-                if analyze or self._factor is None:
-                    self._factor = _cholmod.analyze_AAt(self._product_of, ordering_method=self.ordering)
-                self._factor.cholesky_AAt_inplace(self._product_of)
             elif self.backend == "cholmod":
-                if (analyze or self._factor is None) and self._pattern_of is not None:
-                    self._factor = _cholmod.analyze_AAt(self._pattern_of, ordering_method=self.ordering)
+                pattern = self._pattern_of if self._product_of is None else self._product_of
+                if (analyze or self._factor is None) and pattern is not None:
+                    self._factor = _cholmod.analyze_AAt(pattern, ordering_method=self.ordering)
                 elif analyze or self._factor is None:
                     self._factor = _cholmod.analyze(self._matrix, ordering_method=self.ordering)
-                self._factor.cholesky_inplace(self._matrix)
-            elif self._product_of is not None:
-                self._factor = _splu_spd(_product(self._product_of))
+                if self._product_of is not None:
+                    self._factor.cholesky_AAt_inplace(self._product_of)
+                else:
+                    self._factor.cholesky_inplace(self._matrix)
             else:
-                self._factor = _splu_spd(self._matrix)
+                self._factor = _splu_spd(
+                    self._matrix if self._product_of is None else _product(self._product_of)
+                )
         except Exception as error:
             if _cholmod is not None and isinstance(error, _cholmod.CholmodNotPositiveDefiniteError):
                 raise SingularSystemError(
@@ -616,12 +572,6 @@ class SPDSolver:
             )
         return np.asarray(x)
 
-    def _preconditioner(self) -> Any:
-        if self._factor is None:
-            self._flush()
-            self._factor = _amg_preconditioner(self._matrix)
-        return self._factor
-
     def _solve_iterative(self, b: np.ndarray, x0: Any) -> np.ndarray:
         if x0 is not None:
             x0 = np.asarray(x0, dtype=np.float64)
@@ -629,13 +579,15 @@ class SPDSolver:
                 raise ValueError(f"x0 must have the shape of rhs {b.shape}, got {x0.shape}")
             if not np.isfinite(x0).all():
                 raise ValueError("x0 must be finite")
-        precondition = self._preconditioner()
+        if self._factor is None:  # the AMG preconditioner, built at the first solve
+            self._flush()
+            self._factor = _amg_preconditioner(self._matrix)
         assert self._matrix is not None  # the iterative path takes matrices only
         x, self.iterations, self.residual = _block_cg(
-            self._matrix.tocsr() if not sp.isspmatrix_csr(self._matrix) else self._matrix,
+            self._matrix.tocsr(),
             b,
             x0,
-            precondition,
+            self._factor,
             tol=self.tol,
             max_iterations=self.max_iterations,
             progress=self.progress,
@@ -645,12 +597,9 @@ class SPDSolver:
     def update(self, c: Any) -> None:
         """Replace ``A`` by ``A + C C^T`` (CHOLMOD rank-k update, no refactoring).
 
-        ``C`` is an ``(n, k)`` sparse matrix in the matrix's own row order:
-        CHOLMOD applies its fill-reducing permutation itself. SciPy's LU has
-        no update: the SciPy path refactors (a Woodbury update on the kept LU
-        was tried and lost the accuracy of the bases paper's ``w = 10 n``
-        anchors); the iterative path rebuilds its preconditioner at the next
-        solve.
+        ``C`` is ``(n, k)`` sparse in the matrix's own row order. The SciPy path refactors
+        (a Woodbury update on the LU lost the accuracy of the bases paper's ``w = 10 n``
+        anchors); the iterative path rebuilds its preconditioner at the next solve.
         """
         if not (sp.isspmatrix_csc(c) and c.dtype == np.float64):
             c = sp.csc_matrix(c, dtype=np.float64)
@@ -685,27 +634,20 @@ class SPDSolver:
             }
 
     def __setstate__(self, state: dict) -> None:
-        self.backend = state["backend"]
-        self.ordering = state.get("ordering", "default")
-        self.tol = state.get("tol", DEFAULT_TOLERANCE)
-        self.max_iterations = state.get("max_iterations", 5000)
-        self.progress = state.get("progress", False)
-        self.memory_budget = state.get("memory_budget")
-        self.iterations = 0
-        self.residual = 0.0
-        if self.backend == "cholmod" and _cholmod is None:
-            self.backend = "scipy"
-        self._lock = threading.RLock()
-        was_lower = state.get("lower", False)
-        self._lower = self.backend == "cholmod"
-        self._product_of = state.get("product_of")
-        self._matrix = None
-        if self._product_of is None:
-            self._matrix = _stored(state["matrix"], given_lower=was_lower, keep_lower=self._lower)
-        self._pattern_of = state.get("pattern_of")
-        self._pending = []
-        self._factor = None
-        self._factorize(analyze=True)
+        product_of = state.get("product_of")
+        SPDSolver.__init__(
+            self,
+            state["matrix"] if product_of is None else None,
+            backend="scipy" if state["backend"] == "cholmod" and _cholmod is None else state["backend"],
+            ordering=state.get("ordering", "default"),
+            lower=state.get("lower", False),
+            product_of=product_of,
+            pattern_of=state.get("pattern_of"),
+            memory_budget=state.get("memory_budget"),
+            tol=state.get("tol", DEFAULT_TOLERANCE),
+            max_iterations=state.get("max_iterations", 5000),
+            progress=state.get("progress", False),
+        )
 
 
 def _product(a: sp.csc_matrix) -> sp.csc_matrix:
@@ -717,10 +659,8 @@ def _product(a: sp.csc_matrix) -> sp.csc_matrix:
 def _amg_preconditioner(matrix: sp.spmatrix) -> Any:
     """One smoothed-aggregation AMG V-cycle per column of a block, as a function ``(n, k) -> (n, k)``.
 
-    Measured against AMG on the Laplacian alone (``G^{-1} D^2 G^{-1}`` for
-    ``L^T L = G D^{-2} G``) and against linear near-null-space candidates
-    (benchmarks/results/scale.md): smoothed aggregation on the system itself,
-    with the constant vector as its near-null space, took the least time.
+    On the system itself with the constant near-null space: faster than AMG on the Laplacian
+    alone or linear near-null-space candidates (benchmarks/results/scale.md).
     """
     try:
         import pyamg
@@ -739,11 +679,9 @@ def _amg_preconditioner(matrix: sp.spmatrix) -> Any:
         # a local (Gershgorin) bound for the prolongation smoother's step instead of pyamg's
         # default eigenvalue estimate, which took a fifth of the whole solve at 100k vertices
         smooth=("jacobi", {"weighting": "local"}),
-        # one forward Gauss-Seidel sweep before the coarse correction and one backward sweep after
-        # (the pair keeps the V-cycle symmetric, as CG needs) instead of pyamg's default symmetric
-        # block sweeps on both sides: 135 iterations against 102, but 10% less CPU time per solve
-        # (6.6 s against 7.3 s; LS mesh, 2% controls, 100k vertices, same residual and difference to
-        # CHOLMOD, 3e-9)
+        # forward Gauss-Seidel before the coarse correction, backward after (symmetric, as CG needs):
+        # 135 iterations against 102 with pyamg's default symmetric sweeps, but 10% less CPU time
+        # (LS mesh, 2% controls, 100k vertices, same residual)
         presmoother=("gauss_seidel", {"sweep": "forward"}),
         postsmoother=("gauss_seidel", {"sweep": "backward"}),
         max_coarse=500,
@@ -788,8 +726,7 @@ def _block_cg(
 ) -> tuple[np.ndarray, int, float]:
     """Preconditioned conjugate gradients on every column of ``b`` at once (one sparse product per step).
 
-    Each column keeps its own step lengths (these are independent CG runs
-    sharing the matrix passes), stops when ``||r_j|| <= tol ||b_j||``.
+    Independent CG runs sharing the matrix passes; column ``j`` stops when ``||r_j|| <= tol ||b_j||``.
     Returns the solution, the iteration count and the largest relative residual.
     """
     vector = b.ndim == 1

@@ -28,7 +28,6 @@ __all__ = [
     "as_vertex_array",
     "as_weights",
     "as_workers",
-    "check_mesh_arrays",
     "isolated_vertices",
     "mesh_arrays",
 ]
@@ -64,61 +63,16 @@ def _describe(value: Any) -> str:
     return text if len(text) < 60 else text[:57] + "..."
 
 
-def check_mesh_arrays(
-    vertices: np.ndarray, triangles: np.ndarray, *, name: str = "mesh", allow_isolated: bool = True
-) -> None:
-    """Raise ``ValueError`` unless ``(vertices, triangles)`` is a usable mesh.
-
-    Checks: at least one vertex and one triangle, finite coordinates, triangle
-    indices in ``[0, n)``, no triangle repeating a vertex and, unless
-    ``allow_isolated``, no vertex left unreferenced by every triangle.
-    """
-    n = len(vertices)
-    if n == 0:
-        raise ValueError(f"{name} must have vertices, got an empty mesh")
-    if len(triangles) == 0:
-        raise ValueError(f"{name} must have triangles, got {n} vertices and no triangles")
-    # two whole-array reductions (max and min carry NaN and inf) clear the usual mesh; rows are
-    # looked at only to name a bad one (an (n, 3) abs temporary and a row-wise max cost ten times more)
-    smallest, largest = float(vertices.min()), float(vertices.max())
-    if not (-COORDINATE_LIMIT <= smallest and largest <= COORDINATE_LIMIT):
-        finite = np.isfinite(vertices).all(axis=1)
-        if not finite.all():
-            bad = int(np.flatnonzero(~finite)[0])
-            raise ValueError(f"{name} vertices must be finite, got {vertices[bad].tolist()} at vertex {bad}")
-        _check_magnitude(vertices, what=f"{name} vertices", row="vertex")
-    low, high = int(triangles.min()), int(triangles.max())
-    if low < 0 or high >= n:
-        row = int(np.flatnonzero(((triangles < 0) | (triangles >= n)).any(axis=1))[0])
-        raise ValueError(
-            f"{name} triangle indices must lie in [0, {n}), got {triangles[row].tolist()} at triangle {row}"
-        )
-    repeated = collapsed_triangles(triangles)
-    if repeated.any():
-        row = int(np.flatnonzero(repeated)[0])
-        raise ValueError(
-            f"{name} triangles must have three distinct vertices, got {triangles[row].tolist()} "
-            f"at triangle {row} ({int(repeated.sum())} such triangles; "
-            "remove_degenerate_triangles() drops them)"
-        )
-    if not allow_isolated:
-        isolated = isolated_vertices(triangles, n)
-        if len(isolated):
-            raise ValueError(
-                f"{name} must not have unreferenced vertices, got {len(isolated)} "
-                f"(first: vertex {int(isolated[0])}); remove_unreferenced_vertices() drops them"
-            )
-
-
 def mesh_arrays(
     vertices: Any, triangles: Any, *, name: str = "mesh", allow_isolated: bool = True, narrow: bool = False
 ) -> tuple[np.ndarray, np.ndarray]:
     """The one check of a mesh given as arrays: new ``(n, 3) float64`` vertices and ``(m, 3) int64`` triangles.
 
     Every array function and :func:`~o3d_lsmesh._o3d.read_mesh` (for every mesh kind) go through it:
-    :func:`as_vertex_array`, :func:`as_triangle_array` and :func:`check_mesh_arrays`. The results are
-    copies: the caller's arrays are never modified (``narrow=True``: the triangles may be the given
-    array, int32, for callers that only read them; see :func:`as_triangle_array`).
+    :func:`as_vertex_array`, :func:`as_triangle_array` (indices in ``[0, n)``), then the checks
+    below. The results are copies: the caller's arrays are never modified (``narrow=True``: the
+    triangles may be the given array, int32, for callers that only read them; see
+    :func:`as_triangle_array`).
 
     Raises
     ------
@@ -136,8 +90,36 @@ def mesh_arrays(
     (dtype('float64'), dtype('int64'), (1, 3))
     """
     vertices = as_vertex_array(vertices, name=name)
-    triangles = as_triangle_array(triangles, len(vertices), name=name, narrow=narrow)
-    check_mesh_arrays(vertices, triangles, name=name, allow_isolated=allow_isolated)
+    n = len(vertices)
+    triangles = as_triangle_array(triangles, n, name=name, narrow=narrow)
+    if n == 0:
+        raise ValueError(f"{name} must have vertices, got an empty mesh")
+    if len(triangles) == 0:
+        raise ValueError(f"{name} must have triangles, got {n} vertices and no triangles")
+    # two whole-array reductions (max and min carry NaN and inf) clear the usual mesh; rows are
+    # looked at only to name a bad one (an (n, 3) abs temporary and a row-wise max cost ten times more)
+    smallest, largest = float(vertices.min()), float(vertices.max())
+    if not (-COORDINATE_LIMIT <= smallest and largest <= COORDINATE_LIMIT):
+        finite = np.isfinite(vertices).all(axis=1)
+        if not finite.all():
+            bad = int(np.flatnonzero(~finite)[0])
+            raise ValueError(f"{name} vertices must be finite, got {vertices[bad].tolist()} at vertex {bad}")
+        _check_magnitude(vertices, what=f"{name} vertices", row="vertex")
+    repeated = collapsed_triangles(triangles)
+    if repeated.any():
+        row = int(np.flatnonzero(repeated)[0])
+        raise ValueError(
+            f"{name} triangles must have three distinct vertices, got {triangles[row].tolist()} "
+            f"at triangle {row} ({int(repeated.sum())} such triangles; "
+            "remove_degenerate_triangles() drops them)"
+        )
+    if not allow_isolated:
+        isolated = isolated_vertices(triangles, n)
+        if len(isolated):
+            raise ValueError(
+                f"{name} must not have unreferenced vertices, got {len(isolated)} "
+                f"(first: vertex {int(isolated[0])}); remove_unreferenced_vertices() drops them"
+            )
     return vertices, triangles
 
 
@@ -182,7 +164,7 @@ def as_vertex_array(value: Any, *, name: str = "mesh") -> np.ndarray:
     """
     array = _real_array(value, name=f"{name} vertices", expected="an (n, 3) array")
     if array.size == 0 and array.ndim <= 2:
-        return np.zeros((0, 3))  # an empty mesh: check_mesh_arrays says so
+        return np.zeros((0, 3))  # an empty mesh: mesh_arrays says so
     if array.ndim != 2 or array.shape[1] != 3:
         raise ValueError(f"{name} vertices must have shape (n, 3), got {array.shape}")
     return np.array(array, dtype=np.float64, order="C")  # C order: the compiled kernel reads rows
@@ -208,7 +190,7 @@ def as_triangle_array(value: Any, n: int, *, name: str = "mesh", narrow: bool = 
     if array.ndim != 2 or array.shape[1] != 3:
         raise ValueError(f"{name} triangles must have shape (m, 3), got {array.shape}")
     # compared in the given dtype (no wrap-around); the mask only to name a bad row
-    if n > 0 and (array.min() < 0 or array.max() >= n):  # (no vertices: check_mesh_arrays says so)
+    if n > 0 and (array.min() < 0 or array.max() >= n):  # (no vertices: mesh_arrays says so)
         bad = (array < 0) | (array >= n)
         row = int(np.flatnonzero(bad.any(axis=1))[0])
         raise ValueError(

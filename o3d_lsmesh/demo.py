@@ -55,8 +55,8 @@ def _o3d_taubin(mesh, n):
     return mesh.filter_smooth_taubin(number_of_iterations=n)
 
 
-#: (key, label, function(mesh, parameter), parameter name, sweep values, module it needs)
-METHODS: list[tuple[str, str, Callable, str, tuple, str | None]] = [
+#: (key, label, function(mesh, parameter), parameter name, sweep values)
+METHODS: list[tuple[str, str, Callable, str, tuple]] = [
     # With fixed targets the local operator converges in a few iterations; re-imposing
     # the barycenters every r iterations (the paper's "by turns") smooths further.
     (
@@ -65,47 +65,12 @@ METHODS: list[tuple[str, str, Callable, str, tuple, str | None]] = [
         _ours_local,
         "iter/reimp",
         ((10, None), (10, 2), (20, 2), (30, 3)),
-        "o3d_lsmesh.fairing",
     ),
-    (
-        "constrained_global",
-        "ours: constrained fairing, global",
-        _ours_global,
-        "iterations",
-        (1, 2, 4),
-        "o3d_lsmesh.fairing",
-    ),
-    (
-        "multiresolution",
-        "ours: multiresolution fairing",
-        _ours_multiresolution,
-        "level",
-        (1, 2, 3),
-        "o3d_lsmesh.fairing.multiresolution",
-    ),
-    (
-        "o3d_laplacian",
-        "Open3D filter_smooth_laplacian",
-        _o3d_laplacian,
-        "iterations",
-        (1, 2, 5, 10, 20),
-        None,
-    ),
-    ("o3d_taubin", "Open3D filter_smooth_taubin", _o3d_taubin, "iterations", (5, 10, 20, 50, 100), None),
+    ("constrained_global", "ours: constrained fairing, global", _ours_global, "iterations", (1, 2, 4)),
+    ("multiresolution", "ours: multiresolution fairing", _ours_multiresolution, "level", (1, 2, 3)),
+    ("o3d_laplacian", "Open3D filter_smooth_laplacian", _o3d_laplacian, "iterations", (1, 2, 5, 10, 20)),
+    ("o3d_taubin", "Open3D filter_smooth_taubin", _o3d_taubin, "iterations", (5, 10, 20, 50, 100)),
 ]
-
-
-def _available(module: str | None) -> str | None:
-    """``None`` if ``module`` imports, else the reason it does not (the demo then skips that method)."""
-    if module is None:
-        return None
-    import importlib
-
-    try:
-        importlib.import_module(module)
-    except ImportError as error:
-        return f"{module} is not available ({error})"
-    return None
 
 
 def _metrics(result: Any, clean: Any, *, number_of_points: int) -> dict:
@@ -227,21 +192,19 @@ def run_demo(
     results = {"noisy": noisy}
     sweeps = {}
     with progress_bar(progress and not quiet, total=len(METHODS), desc="demo", unit="method") as bar:
-        for key, label, function, parameter, values, module in METHODS:
+        for key, label, function, parameter, values in METHODS:
             bar.set_postfix_str(key)
-            reason = _available(module)
             try:
-                if reason is None:
-                    value, results[key], seconds, sweeps[key] = _best_of_sweep(
-                        key, function, values, noisy, clean
-                    )
-            except Exception as error:  # the demo reports a failing method and carries on
-                reason = f"failed: {type(error).__name__}: {error}"
+                value, results[key], seconds, sweeps[key] = _best_of_sweep(
+                    key, function, values, noisy, clean
+                )
+            except Exception as error:  # the demo reports a failing method (an import too) and carries on
+                rows.append(
+                    {"key": key, "label": label, "skipped": f"failed: {type(error).__name__}: {error}"}
+                )
+            else:
+                rows.append(row(key, label, parameter, value, seconds, results[key]))
             bar.update(1)
-            if reason:
-                rows.append({"key": key, "label": label, "skipped": reason})
-                continue
-            rows.append(row(key, label, parameter, value, seconds, results[key]))
 
     table = _format_table(rows, edge)
     say("")
@@ -259,9 +222,7 @@ def run_demo(
         o3d = open3d()
         folder = Path(out)
         folder.mkdir(parents=True, exist_ok=True)
-        o3d.io.write_triangle_mesh(str(folder / "clean.ply"), clean)
-        files.append(folder / "clean.ply")
-        for key, mesh in results.items():
+        for key, mesh in {"clean": clean, **results}.items():
             o3d.io.write_triangle_mesh(str(folder / f"{key}.ply"), mesh)
             files.append(folder / f"{key}.ply")
         payload = {
@@ -278,11 +239,8 @@ def run_demo(
             from .rendering import render as draw
 
             done = [r for r in rows if "skipped" not in r and r["key"] != "noisy"]
-            ours = [r for r in done if not r["key"].startswith("o3d_")]
-            theirs = [r for r in done if r["key"].startswith("o3d_")]
-            best = [
-                min(group, key=lambda r: r["mean_vertex_error"])["key"] for group in (ours, theirs) if group
-            ]
+            groups = ([r for r in done if r["key"].startswith("o3d_") == theirs] for theirs in (False, True))
+            best = [min(group, key=lambda r: r["mean_vertex_error"])["key"] for group in groups if group]
             names = ["noisy", *best, "clean"]
             picture = folder / "before_after.png"
             start = time.perf_counter()

@@ -9,7 +9,7 @@ import scipy.sparse as sp
 
 from ._o3d import read_mesh
 from ._validate import as_choice
-from .topology import adjacency_matrix, ring_pattern
+from .topology import adjacency_matrix, edge_structure, ring_pattern
 
 if TYPE_CHECKING:
     from ._types import AnyMesh
@@ -44,34 +44,16 @@ def uniform_laplacian(triangles: np.ndarray, n: int, *, edges: np.ndarray | None
     >>> L.toarray().tolist()
     [[1.0, -0.5, -0.5], [-0.5, 1.0, -0.5], [-0.5, -0.5, 1.0]]
     """
-    if edges is not None:
-        return _laplacian_from_edges(edges, n)
-    adjacency = adjacency_matrix(triangles, n)
-    indices = adjacency.indices
-    degree = np.diff(adjacency.indptr)
-    has_diagonal = degree > 0
-    row = np.repeat(np.arange(n), degree)
-    # the CSR arrays of A with each referenced row's diagonal slotted into its sorted place, written
-    # directly: cheaper than I - D^-1 A as sparse products or a COO->CSR pass that sorts again
-    indptr = np.zeros(n + 1, dtype=np.int64)
-    np.cumsum(degree + has_diagonal, out=indptr[1:])
-    earlier_diagonals = np.cumsum(has_diagonal) - has_diagonal
-    position = np.arange(len(indices)) + earlier_diagonals[row] + (indices > row)
-    diagonal = indptr[:-1] + np.bincount(row[indices < row], minlength=n)
-    referenced = np.flatnonzero(has_diagonal)
-    out_indices = np.empty(indptr[-1], dtype=indices.dtype)
-    data = np.empty(indptr[-1])
-    out_indices[position] = indices
-    data[position] = -1.0 / degree[row]
-    out_indices[diagonal[referenced]] = referenced
-    data[diagonal[referenced]] = 1.0
-    laplacian = sp.csr_matrix((data, out_indices, indptr.astype(indices.dtype)), shape=(n, n))
-    laplacian.has_canonical_format = True
-    return laplacian
+    if edges is None:
+        laplacian = _laplacian_from_edges(edge_structure(triangles, n).edges, n)
+        laplacian.eliminate_zeros()  # the explicit zeros on unreferenced vertices' diagonals
+        return laplacian
+    return _laplacian_from_edges(edges, n)
 
 
 def _laplacian_from_edges(edges: np.ndarray, n: int) -> sp.csr_matrix:
-    # rows of isolated vertices keep an explicit zero on the diagonal (same operator)
+    # written straight into the 1-ring CSR layout; rows of isolated vertices keep an explicit zero on the
+    # diagonal (same operator)
     indptr, indices, diagonal, forward, backward = ring_pattern(edges, n)
     degree = np.bincount(edges.ravel(), minlength=n)
     inv = np.zeros(n)

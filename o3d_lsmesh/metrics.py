@@ -18,9 +18,8 @@ from .summary import (
 if TYPE_CHECKING:
     from ._types import AnyMesh
 
-#: Largest ``number_of_points`` of :func:`surface_distance`: every sample costs about 100
-#: bytes on the way (positions, barycentric draws, the float32 copy Open3D reads, distances),
-#: so 1e7 samples per mesh stay near 2 GB; more would not change a distance estimate.
+#: Largest ``number_of_points`` of :func:`surface_distance`: about 100 bytes a sample, so 1e7
+#: samples per mesh stay near 2 GB; more would not change a distance estimate.
 MAX_SAMPLE_POINTS = 10_000_000
 
 __all__ = [
@@ -92,10 +91,8 @@ def distances_to_surface(points: np.ndarray, vertices: np.ndarray, triangles: np
 def surface_distance(a: AnyMesh, b: AnyMesh, *, number_of_points: int = 100_000, seed: int = 0) -> dict:
     """Two-sided sampled surface distance (Metro style) between two meshes.
 
-    Samples ``number_of_points`` points uniformly by area on each surface (plus
-    its vertices) and measures the distance to the other surface with Open3D's
-    ``RaycastingScene`` (single precision, so results below ~1e-7 of the model
-    size are noise).
+    ``number_of_points`` samples uniform by area on each surface, plus its vertices, measured to
+    the other surface by Open3D's ``RaycastingScene`` (float32: below ~1e-7 of the size is noise).
 
     Returns
     -------
@@ -117,9 +114,8 @@ def surface_distance(a: AnyMesh, b: AnyMesh, *, number_of_points: int = 100_000,
     )
     seed = as_count(seed, name="seed")
     da, db = read_mesh(a, name="a"), read_mesh(b, name="b")
-    # Distances are measured in single precision (RaycastingScene): in a frame centered on both
-    # meshes and scaled to unit size, they keep float32's relative precision whatever the
-    # coordinates' offset and never overflow; they are scaled back to model units.
+    # in a frame centered on both meshes at unit size, float32 distances keep their relative precision
+    # whatever the coordinates' offset and never overflow; scaled back to model units
     center, scale = _common_frame(da.vertices, db.vertices)
     va, vb = (da.vertices - center) / scale, (db.vertices - center) / scale
     rng = np.random.default_rng(seed)
@@ -153,9 +149,7 @@ def _unit_scale(vertices: np.ndarray) -> np.ndarray:
 def signed_volume(mesh: AnyMesh) -> float:
     """Signed volume enclosed by the mesh (divergence theorem); positive when wound outward.
 
-    Computed on the vertices scaled to unit size and scaled back by the cube of
-    the factor, so that neither huge nor tiny coordinates overflow or underflow
-    the triple products.
+    Computed at unit size and scaled back, so that no coordinate overflows or underflows the triple products.
 
     >>> import open3d as o3d
     >>> signed_volume(o3d.geometry.TriangleMesh.create_box(2.0, 1.0, 1.0))
@@ -178,8 +172,7 @@ def face_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
 def normal_deviation(a: AnyMesh, b: AnyMesh) -> float:
     """Mean angle in degrees between corresponding face normals of two meshes with the same triangles.
 
-    A triangle of zero area (in either mesh) has no normal: it is left out of
-    the mean rather than counted as 90 degrees.
+    A triangle of zero area (in either mesh) has no normal: it is left out of the mean.
 
     Raises
     ------

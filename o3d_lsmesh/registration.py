@@ -10,16 +10,10 @@ own methods, on legacy and tensor meshes alike::
                .filter_smooth_constrained(10)
                .simplify_quadric_decimation(5000))
 
-Every registered method returns a new mesh of the caller's kind and never
-modifies the caller (the attribute policy is that of ``o3d_lsmesh._o3d``:
-vertex colors kept while the connectivity is unchanged, normals recomputed if
-the input had them, a tensor mesh keeps its device and dtypes).
-
-Open3D's classes are pybind11 heap types, which accept new attributes set on
-the class (``setattr(TriangleMesh, name, function)``); a plain Python function
-set this way binds as a method like any other. Each function we set carries a
-marker attribute, so :func:`register` recognizes its own methods (idempotence)
-and refuses to replace a method Open3D itself defines under the same name.
+Every registered method returns a new mesh of the caller's kind (attributes as in
+``o3d_lsmesh._o3d``) and never modifies the caller. Open3D's pybind11 classes accept
+functions set with ``setattr``; each carries a marker attribute, so :func:`register` recognizes
+its own methods (idempotence) and refuses to replace one Open3D itself defines.
 """
 
 from __future__ import annotations
@@ -186,9 +180,8 @@ def register() -> tuple[str, ...]:
     ``fill_holes_faired(**kw)``                :func:`o3d_lsmesh.fill_holes`
     =========================================  ==================================================
 
-    Each returns a new mesh of the caller's kind. Explicit and idempotent:
-    importing o3d_lsmesh changes nothing, and a second call re-installs the
-    same methods.
+    Each returns a new mesh of the caller's kind. Importing o3d_lsmesh changes nothing;
+    a second call re-installs the same methods.
 
     Returns
     -------
@@ -239,9 +232,7 @@ def unregister() -> None:
 
 def registered_methods() -> dict[str, tuple[str, ...]]:
     """The o3d_lsmesh method names currently installed on each Open3D mesh class, keyed by class path."""
-    out = {}
-    for cls in _classes():
-        out[f"{cls.__module__}.{cls.__qualname__}"] = tuple(
-            name for name in _METHODS if _is_ours(cls.__dict__.get(name))
-        )
-    return out
+    return {
+        f"{cls.__module__}.{cls.__qualname__}": tuple(n for n in _METHODS if _is_ours(cls.__dict__.get(n)))
+        for cls in _classes()
+    }

@@ -30,10 +30,8 @@ if TYPE_CHECKING:
 
 __all__ = ["SPECTRAL_MAX_VERTICES", "combinatorial_laplacian", "null_space_basis", "spectral_approximation"]
 
-# Measured on 2 busy cores (eigsh, shift-invert through CHOLMOD): 100 eigenvectors take
-# 0.1 s at 3k vertices, 0.4 s at 10k, 1.8 s at 20k and 5 s at 50k; 300 at 10k take 3.6 s
-# and 600 at 3k about 10 to 50 s. Beyond 50k vertices a useful number of
-# eigenvectors (thousands) is out of reach, as the paper found at 11k with MATLAB.
+# 100 eigenvectors take 0.1 s at 3k vertices, 1.8 s at 20k and 5 s at 50k (2 busy cores); beyond 50k
+# a useful number (thousands) is out of reach, as the paper found at 11k with MATLAB.
 SPECTRAL_MAX_VERTICES = 50_000
 # Lanczos basis of 2k + 1 vectors of n doubles: n * k <= 2e7 keeps it near 300 MB.
 SPECTRAL_MAX_WORK = 20_000_000
@@ -53,9 +51,8 @@ def combinatorial_laplacian(triangles: np.ndarray, n: int) -> sp.csc_matrix:
 def _single_threaded_blas() -> Any:
     """BLAS limited to one thread while ARPACK runs, if threadpoolctl is installed.
 
-    ARPACK's work is level-2 BLAS on ``(n, 2k + 1)`` blocks, memory-bound: on
-    two busy cores OpenBLAS threads contend and made ``eigsh`` 10x slower
-    (camel, k = 100: 22.5 s with threads against 2.3 s with one).
+    ARPACK's memory-bound level-2 BLAS ran 10x slower with OpenBLAS threads on two busy cores
+    (camel, k = 100: 22.5 s against 2.3 s).
     """
     try:
         from threadpoolctl import threadpool_limits
@@ -85,19 +82,14 @@ def spectral_basis(
 ) -> tuple[np.ndarray, np.ndarray]:
     """The ``k`` smallest eigenpairs of ``D - A``: ``(eigenvalues (k,), eigenvectors (n, k))``, ascending.
 
-    The eigenvalue 0 has one eigenvector per connected component: these are
-    written down (:func:`null_space_basis`, largest components first), not
-    computed. The remaining ``k - c`` eigenpairs (when ``k`` exceeds the number
-    of components ``c``) come from ``scipy.sparse.linalg.eigsh`` on the
-    deflated shift-invert operator ``P (L - sigma I)^-1 P`` (``P`` the projector
-    off the null space, ``sigma = -1e-6``, the inverse applied by the CHOLMOD
-    gateway), whose largest eigenvalues ``1 / (lambda - sigma)`` are the
-    smallest nonzero ``lambda``: without the deflation the ``c``-fold eigenvalue
-    ``1 / -sigma = 1e6`` dwarfs the rest and ARPACK crawls (24 s for 100
-    eigenvectors of the one-component camel, 22-50 s for 20 on a raw scan of
-    50-100 components). Dense LAPACK ``eigh`` when ``k > n / 4`` on meshes up
-    to 5000 vertices. Raises ``ValueError`` beyond the measured practical
-    sizes (see module constants). ``progress`` shows a bar over the stages.
+    The ``c`` eigenvectors of eigenvalue 0 are written down (:func:`null_space_basis`, largest
+    components first). The other ``k - c`` come from ``eigsh`` on the deflated shift-invert
+    operator ``P (L - sigma I)^-1 P`` (``P`` the projector off the null space, ``sigma = -1e-6``,
+    solved by the CHOLMOD gateway), whose largest eigenvalues ``1 / (lambda - sigma)`` are the
+    smallest nonzero ``lambda``: undeflated, the ``c``-fold ``1 / -sigma`` dwarfs the rest and
+    ARPACK crawls (24 s for 100 eigenvectors of the camel). Dense LAPACK ``eigh`` when
+    ``k > n / 4`` up to 5000 vertices. ``ValueError`` beyond the practical sizes (module
+    constants). ``progress`` shows a bar over the stages.
     """
     if n > SPECTRAL_MAX_VERTICES:
         raise ValueError(
@@ -116,9 +108,8 @@ def spectral_basis(
             f"(the Lanczos basis would exceed n * k = {SPECTRAL_MAX_WORK:.0e} doubles), got {k}"
         )
     check_progress(progress)
-    adjacency = adjacency_matrix(triangles, n)
     L = combinatorial_laplacian(triangles, n)
-    Z = null_space_basis(adjacency)  # (n, c)
+    Z = null_space_basis(L)  # (n, c): the components of L's graph are the mesh's
     c = Z.shape[1]
     if k <= c:  # only eigenvalue 0: the k largest components' indicators
         return np.zeros(k), Z[:, :k].toarray()
@@ -168,11 +159,9 @@ def quantize_coefficients(coefficients: np.ndarray, bits: int) -> np.ndarray:
 def spectral_approximation(mesh: MeshT, k: int, *, bits: int | None = None, progress: bool = False) -> MeshT:
     """Project the geometry on the first ``k`` Laplacian eigenvectors (Karni and Gotsman's spectral compression).
 
-    With ``U (n, k)`` the eigenvectors of the ``k`` smallest eigenvalues of
-    ``L = D - A`` (orthonormal columns), the result is ``U (U^T X)`` for the
-    vertex positions ``X (n, 3)``: the best ``k``-term approximation in the
-    Laplacian-spectral basis of section II of the geometry-aware bases paper.
-    ``bits`` quantizes the ``3k`` coefficients first (Karni and Gotsman use 14).
+    ``U (U^T X)`` for positions ``X (n, 3)`` and ``U (n, k)`` the orthonormal eigenvectors of the
+    ``k`` smallest eigenvalues of ``L = D - A``: the best ``k``-term approximation in the basis of
+    section II of the bases paper. ``bits`` quantizes the ``3k`` coefficients first (Karni and Gotsman use 14).
 
     Parameters
     ----------
@@ -201,10 +190,9 @@ def spectral_approximation(mesh: MeshT, k: int, *, bits: int | None = None, prog
 
     Notes
     -----
-    The eigenvalue 0 has one eigenvector per connected component (its
-    normalized indicator), so with ``k`` below the number of components the
-    basis is not unique: the ``k`` largest components are kept, each projected
-    to its centroid, and the vertices of the others go to the origin.
+    With ``k`` below the number of components the basis of eigenvalue 0 (one indicator per
+    component) is not unique: the ``k`` largest components are kept, each projected to its
+    centroid, and the vertices of the others go to the origin.
 
     Examples
     --------

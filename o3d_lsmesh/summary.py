@@ -65,14 +65,9 @@ def topology_summary_arrays(vertices: np.ndarray, triangles: np.ndarray) -> dict
     for lo, hi in HOLE_SIZE_BINS:
         inside = (loop_edges >= lo) & (loop_edges <= (np.iinfo(np.int64).max if hi is None else hi))
         holes[_bin_label(lo, hi)] = int(np.count_nonzero(inside))
-    if boundary_edges:
-        graph = sp.coo_matrix((np.ones(boundary_edges), (tail[rows], head[rows])), shape=(n, n))
-        _, boundary_label = csgraph.connected_components(graph, directed=False)
-        on_boundary = np.zeros(n, dtype=bool)
-        on_boundary[tail[rows]] = True
-        boundary_components = len(np.unique(boundary_label[on_boundary]))
-    else:
-        boundary_components = 0
+    graph = sp.coo_matrix((np.ones(boundary_edges), (tail[rows], head[rows])), shape=(n, n))
+    boundary_label = csgraph.connected_components(graph, directed=False)[1]
+    boundary_components = len(np.unique(boundary_label[tail[rows]]))
     # degenerate triangles: (near) zero area relative to the longest edge
     corners = vertices[F]
     sides = corners[:, [1, 2, 0]] - corners
@@ -132,32 +127,21 @@ def topology_summary(mesh: AnyMesh) -> dict:
     Returns
     -------
     dict
-        ``vertices``, ``triangles``;
-        ``edge_manifold`` (no edge of more than two triangles) and
-        ``vertex_manifold`` (also every vertex's triangles form one fan);
-        ``components`` (connected over shared vertices, referenced vertices
-        only) and ``surface_pieces`` (triangles connected over edges of
-        exactly two triangles: pinches and fins separate them);
-        ``boundary_loops``: closed loops of boundary edges, continuing at a
-        pinch along the rim of the same fan (:func:`o3d_lsmesh.topology.boundary_loops`);
-        ``boundary_components``: connected pieces of the boundary graph
-        (loops touching at a pinch count once: an upper bound on hole count
-        a user might read off a picture, and what Open3D-based counts give);
-        ``boundary_edges``; ``open_boundary_chains`` (boundary paths ending at
-        a fin, on no closed loop); ``holes_by_size``: loops per edge-count bin
-        (:data:`HOLE_SIZE_BINS`, the outer rim of an open scan included) and
-        ``largest_hole_edges``;
-        ``nonmanifold_edges``, ``nonmanifold_vertices``,
-        ``unreferenced_vertices``, ``degenerate_triangles`` (twice the area at
-        most :data:`DEGENERATE_TOLERANCE` times the longest edge squared),
-        ``duplicate_triangles`` (same three vertices as an earlier one),
-        ``misoriented_edges`` (edges of two triangles that run them the same
-        way: flipped triangles);
-        ``euler`` (``V - E + F`` over referenced vertices), ``genus`` (when
-        connected and manifold, else ``None``) and ``total_genus`` (of the
-        surface with every non-manifold vertex split into its fans, when
-        edge-manifold and consistently oriented, else ``None``: ``0`` for a
-        range scan).
+        ``vertices``, ``triangles``; ``edge_manifold`` (no edge of more than two triangles) and
+        ``vertex_manifold`` (also every vertex's triangles form one fan); ``components`` (over
+        shared vertices, referenced vertices only) and ``surface_pieces`` (over edges of exactly two
+        triangles: pinches and fins separate them); ``boundary_loops`` (continuing at a pinch along
+        the rim of the same fan, :func:`o3d_lsmesh.topology.boundary_loops`); ``boundary_components``
+        (pieces of the boundary graph: loops touching at a pinch count once, as in Open3D-based
+        counts); ``boundary_edges``; ``open_boundary_chains`` (ending at a fin); ``holes_by_size``
+        (loops per :data:`HOLE_SIZE_BINS` bin, an open scan's outer rim included) and
+        ``largest_hole_edges``; ``nonmanifold_edges``, ``nonmanifold_vertices``,
+        ``unreferenced_vertices``, ``degenerate_triangles`` (twice the area at most
+        :data:`DEGENERATE_TOLERANCE` times the longest edge squared), ``duplicate_triangles`` (same
+        three vertices as an earlier one), ``misoriented_edges`` (run the same way by both
+        triangles); ``euler`` (``V - E + F`` over referenced vertices), ``genus`` (when connected
+        and manifold, else ``None``) and ``total_genus`` (with every non-manifold vertex split into
+        its fans, when edge-manifold and consistently oriented, else ``None``: 0 for a range scan).
 
     Examples
     --------

@@ -20,7 +20,7 @@ from o3d_lsmesh._validate import (
     as_vertex_array,
     as_weights,
     as_workers,
-    check_mesh_arrays,
+    mesh_arrays,
 )
 
 
@@ -325,10 +325,10 @@ def test_mesh_arrays_is_the_one_check_of_array_functions_and_read_mesh():
     np.testing.assert_array_equal(out_v, v)
 
 
-def test_check_mesh_arrays_refuses_each_defect_on_its_own():
-    # the array core's validator, called directly (read_mesh checks dtype and index range before it)
+def test_mesh_arrays_refuses_each_defect_on_its_own():
+    # the array core's validator, one defect at a time
     V, F = grid(3, 3)
-    assert check_mesh_arrays(V, F) is None
+    assert all(np.array_equal(a, b) for a, b in zip(mesh_arrays(V, F), (V, F)))
     cases = [
         (np.zeros((0, 3)), F[:0], {}, "mesh must have vertices, got an empty mesh"),
         (V, F[:0], {}, "mesh must have triangles, got 9 vertices and no triangles"),
@@ -361,5 +361,5 @@ def test_check_mesh_arrays_refuses_each_defect_on_its_own():
     ]
     for vertices, triangles, options, message in cases:
         with pytest.raises(ValueError, match=message):
-            check_mesh_arrays(vertices, triangles, **options)
-    check_mesh_arrays(np.vstack([V, [[5.0, 5, 5]]]), F)  # an unreferenced vertex is allowed by default
+            mesh_arrays(vertices, triangles, **options)
+    mesh_arrays(np.vstack([V, [[5.0, 5, 5]]]), F)  # an unreferenced vertex is allowed by default

@@ -38,10 +38,9 @@ fixed ends, :func:`o3d_lsmesh.topology.boundary_chains`)::
     global, pinches held         176.8          193.7                 266.0
     global, pinches move         155.9          170.1                 262.7
 
-(every scan agrees in sign; ``benchmarks/bench_realscans.py pinches``).
-Held pinches stay as noisy as the input and pin their neighbours to it. Where a fan ends at an edge of more than two
-triangles (a fin) the boundary is an open chain; its ends, and every vertex
-on such an edge, are held.
+(every scan agrees in sign; ``benchmarks/bench_realscans.py pinches``): held pinches stay as
+noisy as the input and pin their neighbours to it. Where a fan ends at an edge of more than two
+triangles (a fin) the boundary is an open chain; its ends and every vertex on such an edge are held.
 """
 
 from __future__ import annotations
@@ -68,12 +67,9 @@ __all__ = [
     "smooth_boundary_curves_arrays",
 ]
 
-#: Closed loops shorter than this are held fixed. The exact minimizer of the
-#: section 3.3 energy on a 3-loop is the input itself (three segment midpoints
-#: fix a triangle), but the per-segment relaxation degenerates there (the two
-#: outer neighbours of every segment are the same vertex) and would move each
-#: corner three quarters of the way to the centroid in one step, shrinking
-#: small holes instead of smoothing them.
+#: Closed loops shorter than this are held fixed: three segment midpoints fix a triangle, but the
+#: per-segment relaxation degenerates on a 3-loop (both outer neighbours are one vertex) and would
+#: shrink the hole, each corner moving three quarters of the way to the centroid in one step.
 MIN_LOOP_LENGTH = 4
 
 
@@ -81,13 +77,10 @@ MIN_LOOP_LENGTH = 4
 class CurveOperator:
     """One averaged relaxation step of every boundary curve as two fixed sparse matrices.
 
-    ``vertex (b,) int64`` are the boundary vertices that move (each once) and
-    ``support (s,) int64`` the vertices their estimates read; row ``j`` of
-    ``moving (b, s)`` and ``targets (b, s)`` holds the average of vertex
-    ``vertex[j]``'s estimates, so that one step is
-    ``X[vertex] <- moving @ X[support] + targets @ X0[support]`` (independent
-    of the vertex count). Holds arrays only: it pickles and may be shared
-    between threads.
+    ``vertex (b,)`` are the boundary vertices that move and ``support (s,)`` those their
+    estimates read; row ``j`` of ``moving (b, s)`` and ``targets (b, s)`` averages the estimates
+    of ``vertex[j]``: one step is ``X[vertex] <- moving @ X[support] + targets @ X0[support]``.
+    Arrays only: it pickles and may be shared between threads.
     """
 
     vertex: np.ndarray
@@ -110,14 +103,10 @@ class CurveOperator:
 def curve_operator(curves: BoundaryCurves | list) -> CurveOperator:
     """Build the :class:`CurveOperator` of boundary curves.
 
-    ``curves`` is either a :class:`~o3d_lsmesh.topology.BoundaryCurves`
-    (closed loops, and open chains; its ``junctions`` and the chains' end
-    vertices are held fixed) or a list of ordered closed loops (each an
-    ``(l,)`` vertex index array). A vertex visited several times, such as a
-    pinch on the loops of :func:`~o3d_lsmesh.topology.boundary_curves`,
-    averages all its estimates.
-    Loops with fewer than :data:`MIN_LOOP_LENGTH` vertices and chains with
-    fewer than :data:`MIN_LOOP_LENGTH` edges are held fixed.
+    ``curves`` is a :class:`~o3d_lsmesh.topology.BoundaryCurves` (loops and open chains; its
+    ``junctions`` and the chains' ends are held) or a list of ordered closed loops (``(l,)``
+    vertex indices). A vertex visited several times (a pinch) averages all its estimates. Loops
+    of fewer than :data:`MIN_LOOP_LENGTH` vertices and chains of fewer edges are held.
 
     Every segment ``(a, b)`` with outer neighbours ``a'`` (before ``a``) and
     ``b'`` (after ``b``) gives the section 3.3 estimates
@@ -260,17 +249,11 @@ def run_curve_iterations(
 def smooth_boundary_curves(mesh: MeshT, number_of_iterations: int = 10) -> MeshT:
     """Smooth every boundary loop of an open mesh with midpoint-constrained curve fairing.
 
-    Implements the local curve equation of Liu et al. 2001, section 3.3 (see
-    the module docstring): each boundary segment is relaxed with its midpoint
-    held at the input, and a point's two estimates are averaged. Interior
-    vertices do not move; a closed mesh comes back unchanged. Any boundary is
-    accepted: at a pinch (a vertex where holes touch, with four or more
-    boundary edges) each loop continues along the rim of its own fan and the
-    pinch averages its estimates from every passage (measured better than
-    holding it, see the module docstring); a fin's vertices (on an edge of more
-    than two triangles) and the ends of the open chains there are held, as are
-    loops of three vertices and chains of fewer than four edges
-    (:data:`MIN_LOOP_LENGTH`).
+    The local curve equation of Liu et al. 2001, section 3.3 (module docstring): each boundary
+    segment is relaxed with its midpoint held at the input and a point's estimates are averaged.
+    Interior vertices do not move; a closed mesh comes back unchanged. A pinch (holes touching at
+    a vertex) averages its estimates from every passage; a fin's vertices, the ends of the open
+    chains there, 3-loops and chains of fewer than four edges (:data:`MIN_LOOP_LENGTH`) are held.
 
     Parameters
     ----------

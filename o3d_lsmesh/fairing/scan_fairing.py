@@ -39,6 +39,7 @@ from typing import NamedTuple
 import numpy as np
 import scipy.sparse as sp
 
+from .._collapsed import collapsed_triangles
 from .._solvers import SPDSolver
 from ..topology import edge_structure, ring_pattern
 
@@ -51,7 +52,6 @@ __all__ = [
     "SCAN_MEMBRANE",
     "SCAN_MU",
     "SCAN_RIM_RATIO",
-    "SCAN_THIN_PLATE",
     "NoiseEstimate",
     "ScanFairingSolver",
     "ScanParameters",
@@ -71,8 +71,6 @@ __all__ = [
 SCAN_MU = 0.03
 #: Membrane weight ``lambda`` of the scan energy.
 SCAN_MEMBRANE = 0.45
-#: Weight ``kappa`` of the thin-plate term ``|K X|^2`` (Liu et al.'s energy).
-SCAN_THIN_PLATE = 1.0
 #: Lowest barycenter weight of triangles touching the boundary, relative to the
 #: interior's (a ragged scan silhouette: see :func:`measured_boundary_weight`).
 SCAN_BOUNDARY_WEIGHT = 0.1
@@ -107,8 +105,8 @@ def _structure(triangles: np.ndarray, n: int) -> _Structure:
     return _Structure(es.edges, es.counts, boundary, np.bincount(es.edges.ravel(), minlength=n), es.inverse)
 
 
-def _neighbour_mean(vertices: np.ndarray, pairs: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """``(k, 3)`` mean of the ``pairs``-neighbours of the ``mask`` vertices (bincount, not ``np.add.at``)."""
+def _mean_square_laplacian(vertices: np.ndarray, pairs: np.ndarray, mask: np.ndarray) -> float:
+    """Mean over the ``mask`` vertices of ``|mean of the pairs-neighbours - x_i|^2`` (bincount, not ``np.add.at``)."""
     n = len(vertices)
     lo, hi = pairs[:, 0], pairs[:, 1]
     degree = np.bincount(pairs.ravel(), minlength=n)[mask].astype(np.float64)
@@ -117,7 +115,8 @@ def _neighbour_mean(vertices: np.ndarray, pairs: np.ndarray, mask: np.ndarray) -
         total[:, k] = (
             np.bincount(lo, vertices[hi, k], minlength=n) + np.bincount(hi, vertices[lo, k], minlength=n)
         )[mask]
-    return total / degree[:, None]
+    lap = total / degree[:, None] - vertices[mask]
+    return float((lap * lap).sum(axis=1).mean())
 
 
 def rim_noise_ratio(
@@ -138,34 +137,23 @@ def rim_noise_ratio(
         return float("inf"), 1.0
     in_triangles = np.bincount(triangles.ravel(), minlength=n)
     coverage = max(1.0, float(in_triangles[interior].mean() / in_triangles[st.boundary].mean()))
-
-    def mean_square_laplacian(pairs: np.ndarray, mask: np.ndarray) -> float:
-        lap = _neighbour_mean(vertices, pairs, mask) - vertices[mask]
-        return float((lap * lap).sum(axis=1).mean())
-
-    curve_energy = mean_square_laplacian(on_curve, st.boundary)
+    curve_energy = _mean_square_laplacian(vertices, on_curve, st.boundary)
     if curve_energy <= 0.0:
         return coverage, coverage
-    return coverage * _IID_BOUNDARY_RATIO * mean_square_laplacian(st.edges, interior) / curve_energy, coverage
+    interior_energy = _mean_square_laplacian(vertices, st.edges, interior)
+    return coverage * _IID_BOUNDARY_RATIO * interior_energy / curve_energy, coverage
 
 
 def measured_boundary_weight(vertices: np.ndarray, triangles: np.ndarray) -> float:
     """The boundary triangles' barycenter weight ``w`` estimated from the noise of the input.
 
-    ``w = clip(c (9/7) E_int / E_bd, 0.1, c)``, with ``E_int`` the mean of
-    ``|L x_i|^2`` over interior vertices (``L`` the uniform Laplacian over
-    every edge), ``E_bd`` the mean over boundary vertices of the squared
-    uniform Laplacian *along the boundary curve* (neighbours across edges of
-    one triangle), and ``c >= 1`` the coverage ratio: the mean number of
-    triangles at an interior vertex over that at a boundary vertex (about 2).
-    For i.i.d. noise of one variance ``E_bd / E_int = 9/7`` (valence 6), so
-    ``(9/7) E_int / E_bd`` is the estimated inverse ratio of the boundary's
-    to the interior's noise variance; ``c`` gives a boundary vertex, which
-    lies in about half as many barycenters, the data weight of an interior
-    vertex when its noise is the interior's. Both energies are quadratic in
-    coordinate differences: ``w`` is invariant under rigid motions and
-    uniform scaling. Returns 1 when the mesh has no boundary, and ``c`` for
-    a straight noiseless one.
+    ``w = clip(c (9/7) E_int / E_bd, 0.1, c)``: ``E_int`` the mean of ``|L x_i|^2`` over interior
+    vertices (uniform Laplacian), ``E_bd`` the mean over boundary vertices of the squared uniform
+    Laplacian *along the boundary curve*, ``c >= 1`` the mean number of triangles at an interior
+    vertex over that at a boundary vertex (about 2). For i.i.d. noise ``E_bd / E_int = 9/7``, so
+    ``(9/7) E_int / E_bd`` estimates the interior's over the boundary's noise variance, and ``c``
+    gives a rim vertex (in half as many barycenters) an interior vertex's data weight. Invariant
+    under rigid motions and uniform scaling. 1 without a boundary, ``c`` for a straight noiseless one.
 
     Parameters
     ----------
@@ -211,19 +199,13 @@ def measured_noise(
     Two umbrella vectors of each vertex ``i`` at least two rings from the rim,
     along its normal ``n_i``: ``a1 = n_i . (mean of the 1-ring - x_i)`` and
     ``a2 = n_i . (mean of the 2-ring - x_i)`` (the 2-ring: every vertex
-    within two edges). For i.i.d. noise of deviation ``sigma`` and a smooth
-    surface whose umbrella along the normal is ``g`` at the 1-ring,
-    ``E a1^2 = sigma^2 (1 + 1/d1) + g^2`` and
-    ``E a2^2 = sigma^2 (1 + 1/d2) + G g^2``, with ``G`` the growth of a
-    curvature term, ``(mean squared 2-ring distance / mean squared 1-ring
-    distance)^2`` (about 7): two equations for ``sigma^2`` and ``g^2``.
-    Normals (area-weighted) and distances are those of the mesh after one
-    umbrella step, and both results are divided by the root mean squared
-    1-ring distance ``h``. Measured with seeded Gaussian noise: ``sigma``
-    within 0.01-0.04 of the true value in edge lengths at 0.2 and 0.5; ``g``
-    0.05 on bunny, screwdriver, feline at any noise, 0.10 on the coarse
-    Venus (711 vertices). Dimensionless: invariant under rigid motions and
-    uniform scaling. ``(0, 0)`` when no vertex is two rings from the rim.
+    within two edges). For i.i.d. noise ``sigma`` on a smooth surface of 1-ring umbrella ``g``,
+    ``E a1^2 = sigma^2 (1 + 1/d1) + g^2`` and ``E a2^2 = sigma^2 (1 + 1/d2) + G g^2``, ``G =
+    (mean squared 2-ring distance / mean squared 1-ring distance)^2`` (about 7): two equations
+    for ``sigma^2`` and ``g^2``. Normals (area-weighted) and distances are taken after one umbrella
+    step; both results are divided by the RMS 1-ring distance ``h``. Measured: ``sigma`` within
+    0.01-0.04 edge lengths at 0.2 and 0.5 noise; ``g`` 0.05 on bunny, screwdriver, feline, 0.10 on
+    the coarse Venus. Scale-free. ``(0, 0)`` when no vertex is two rings from the rim.
 
     Examples
     --------
@@ -284,15 +266,11 @@ def measured_noise(
 def scan_likeness(rim_ratio: float, boundary_fraction: float) -> float:
     """How much the mesh looks like one raw range scan, from 0 (not at all) to 1 (``scan_parameters``).
 
-    The product of two ramps, each linear in the logarithm of its measure:
-    the rim's unclipped data weight (:func:`rim_noise_ratio`) from 1 at
-    ``SCAN_RIM_RATIO[0]`` to 0 at ``SCAN_RIM_RATIO[1]`` (a scanner's
-    silhouette, sampled at grazing angles, is 2.5-4 times noisier than the
-    interior: 0.07-0.13 on the bunny scans; i.i.d. noise gives about 2), and
-    the fraction of boundary vertices from 0 at ``SCAN_BOUNDARY_FRACTION[0]``
-    to 1 at ``SCAN_BOUNDARY_FRACTION[1]`` (a range scan's silhouette and
-    shadow holes: 7-13% of its vertices; too few rim vertices say nothing).
-    A closed mesh is not a single scan: 0.
+    The product of two ramps, linear in the logarithm of their measure: the rim's unclipped data
+    weight (:func:`rim_noise_ratio`) from 1 at ``SCAN_RIM_RATIO[0]`` to 0 at ``SCAN_RIM_RATIO[1]``
+    (0.07-0.13 on the bunny scans, whose silhouettes are 2.5-4 times noisier; i.i.d. noise gives
+    about 2), and the fraction of boundary vertices from 0 at ``SCAN_BOUNDARY_FRACTION[0]`` to 1 at
+    ``SCAN_BOUNDARY_FRACTION[1]`` (7-13% on a range scan). A closed mesh gives 0.
     """
 
     def ramp(value: float, zero: float, one: float) -> float:
@@ -344,16 +322,11 @@ def scan_parameters(
     twicing ``t = 1``: the membrane damps the scanline-correlated noise that
     the thin-plate term keeps. A mesh with independent noise (``s = 0``: a
     closed mesh, or a rim as noisy as its interior) gets the barycenter-only
-    energy (``lambda = 0``, no twicing, nothing to undo) with a penalty set by
-    the measured noise level ``eta`` (:func:`measured_noise_level`):
-    ``mu = NOISE_MU_SCALE / eta^2`` in ``MU_RANGE``, a penalty that weakens
-    as the noise grows (the filter's pass band narrows as ``eta^-1``); the
-    constant was measured on bunny, screwdriver and feline at 0.2 and 0.5
-    mean-edge noise (benchmarks/results/denoise.md). Between the two, every
-    weight moves with ``s`` (``mu`` geometrically). ``w`` is
-    :func:`measured_boundary_weight` in both. All measures are
-    dimensionless: the parameters are invariant under rigid motions and
-    uniform scaling.
+    energy (``lambda = 0``, no twicing) with ``mu = NOISE_MU_SCALE (g / sigma)^NOISE_MU_POWER``
+    in ``MU_RANGE`` (:func:`measured_noise`; measured on bunny, screwdriver and feline at 0.2 and
+    0.5 mean-edge noise, benchmarks/results/denoise.md). Between the two every weight moves with
+    ``s`` (``mu`` geometrically). ``w`` is :func:`measured_boundary_weight`. All measures are
+    dimensionless: the parameters are invariant under rigid motions and uniform scaling.
 
     Examples
     --------
@@ -388,10 +361,10 @@ class ScanSystem:
     """The scan energy as weighted least-squares equations, per coordinate.
 
     ``E(X) = |R X - T|^2`` with the stacked rows ``R = [sqrt(mu W) H;
-    sqrt(lambda) D; (unit rows); sqrt(kappa) K]`` (``D`` the ``(e, n)``
-    edge-difference matrix; the thin-plate rows only when ``kappa > 0``) and
+    sqrt(lambda) D; (unit rows); K]`` (``D`` the ``(e, n)``
+    edge-difference matrix) and
     targets ``T = [sqrt(mu W) H X0; 0; ...]``, so the normal matrix is
-    ``R^T R = mu H^T W H + lambda D^T D + kappa K^T K`` (``D^T D`` is the
+    ``R^T R = mu H^T W H + lambda D^T D + K^T K`` (``D^T D`` is the
     graph Laplacian ``G``). Unreferenced vertices get a unit row of their
     own, so the system is positive definite and leaves them in place.
 
@@ -428,7 +401,6 @@ def scan_system(
     mu: float,
     membrane: float,
     boundary_weight: float,
-    thin_plate: float = SCAN_THIN_PLATE,
     structure: _Structure | None = None,
     rim_curve: float = 0.0,
 ) -> ScanSystem:
@@ -453,36 +425,41 @@ def scan_system(
     membrane_root = np.sqrt(membrane)
     ref_rows = np.flatnonzero(referenced)
     # rows [0, m): sqrt(mu w_t) at t's corners; [m, m+e): sqrt(lambda) (x_lo - x_hi); a unit row per
-    # unreferenced vertex; then, with a thin-plate weight kappa, sqrt(kappa) K (row i: 1 at i, -1/n_i at
-    # each neighbour)
+    # unreferenced vertex; then K (row i: 1 at i, -1/n_i at each neighbour)
     u = len(unreferenced)
     row = [np.repeat(np.arange(m), 3), m + np.arange(e), m + np.arange(e), m + e + np.arange(u)]
     col = [triangles.ravel(), lo, hi, unreferenced]
     data = [np.repeat(root, 3), np.full(e, membrane_root), np.full(e, -membrane_root), np.ones(u)]
     count = m + e + u
-    if thin_plate > 0.0:
-        plate = np.sqrt(thin_plate)
-        # a rim vertex's row mixes its one-sided Laplacian (weight 1 - t) with the Laplacian along its
-        # boundary curve (weight t = rim_curve): the one-sided row pulls a straight rim inward, the curve
-        # row does not
-        t = float(rim_curve)
-        row_weight = np.where(boundary, 1.0 - t, 1.0) * inverse
-        row += [count + ref_rows, count + lo, count + hi]
-        col += [ref_rows, hi, lo]
-        data += [np.full(len(ref_rows), plate), -plate * row_weight[lo], -plate * row_weight[hi]]
-        if t > 0.0:
-            curve = edges[counts == 1]
-            curve_inverse = np.zeros(n)
-            curve_valence = np.bincount(curve.ravel(), minlength=n)
-            np.divide(t, curve_valence, out=curve_inverse, where=curve_valence > 0)
-            row += [count + curve[:, 0], count + curve[:, 1]]
-            col += [curve[:, 1], curve[:, 0]]
-            data += [-plate * curve_inverse[curve[:, 0]], -plate * curve_inverse[curve[:, 1]]]
-        count += n
-    rows = sp.csr_matrix((np.concatenate(data), (np.concatenate(row), np.concatenate(col))), shape=(count, n))
-    corners = np.arange(0, 3 * m + 1, 3)
-    penalty = sp.csr_matrix((np.repeat(root, 3), triangles.ravel(), corners), shape=(m, n))
-    return ScanSystem(rows, penalty, referenced, boundary, weight)
+    # a rim vertex's row mixes its one-sided Laplacian (weight 1 - t) with the Laplacian along its
+    # boundary curve (weight t = rim_curve): the one-sided row pulls a straight rim inward, the curve
+    # row does not
+    t = float(rim_curve)
+    row_weight = np.where(boundary, 1.0 - t, 1.0) * inverse
+    row += [count + ref_rows, count + lo, count + hi]
+    col += [ref_rows, hi, lo]
+    data += [np.ones(len(ref_rows)), -row_weight[lo], -row_weight[hi]]
+    if t > 0.0:
+        curve = edges[counts == 1]
+        curve_inverse = _curve_inverse(curve, n, t)
+        row += [count + curve[:, 0], count + curve[:, 1]]
+        col += [curve[:, 1], curve[:, 0]]
+        data += [-curve_inverse[curve[:, 0]], -curve_inverse[curve[:, 1]]]
+    shape = (count + n, n)
+    rows = sp.csr_matrix((np.concatenate(data), (np.concatenate(row), np.concatenate(col))), shape=shape)
+    return ScanSystem(rows, _penalty(triangles, n, root), referenced, boundary, weight)
+
+
+def _curve_inverse(curve: np.ndarray, n: int, t: float) -> np.ndarray:
+    """``t / c_i`` for the ``c_i`` boundary-curve neighbours of each vertex (0 off the curve), ``(n,)``."""
+    valence = np.bincount(curve.ravel(), minlength=n)
+    return np.divide(t, valence, out=np.zeros(n), where=valence > 0)
+
+
+def _penalty(triangles: np.ndarray, n: int, root: np.ndarray) -> sp.csr_matrix:
+    """``sqrt(mu W) H`` for ``root = sqrt(mu w_t)``, ``(m, n)`` CSR."""
+    corners = np.arange(0, 3 * len(triangles) + 1, 3)
+    return sp.csr_matrix((np.repeat(root, 3), triangles.ravel(), corners), shape=(len(triangles), n))
 
 
 def scan_normal_matrix(
@@ -492,24 +469,18 @@ def scan_normal_matrix(
     mu: float,
     membrane: float,
     boundary_weight: float,
-    thin_plate: float = SCAN_THIN_PLATE,
     structure: _Structure | None = None,
     rim_curve: float = 0.0,
 ) -> sp.csr_matrix:
     """The normal matrix ``R^T R`` of :func:`scan_system`, assembled from the mesh's edges, ``(n, n)`` CSR.
 
-    ``R^T R = mu H^T W H + lambda G + kappa K^T K`` (plus a unit diagonal
-    entry per unreferenced vertex) without forming the rows ``R``: the first
-    two terms live on the 1-ring pattern, where ``(H^T W H)_ii`` sums ``w_t``
-    over the triangles at ``i`` and ``(H^T W H)_ij`` over the triangles on
-    edge ``ij``, so their values are scattered straight into CSR order
-    (:func:`~o3d_lsmesh.topology.ring_pattern`); only ``K^T K`` (the 2-ring)
-    is a sparse product, of the ``(n, n)`` operator ``K`` with 7 entries a
-    row instead of the ``(m + e + n, n)`` rows. Canonical CSR (sorted, no
-    duplicates); symmetric, so its arrays are also those of the CSC form.
-    Equal to ``scan_system(...).normal_matrix()`` to round-off. Triangles
-    must have three distinct corners (as :func:`~o3d_lsmesh._validate.mesh_arrays`
-    guarantees); a triangle repeating a vertex is left to :func:`scan_system`.
+    ``R^T R = mu H^T W H + lambda G + K^T K`` (plus a unit diagonal entry per unreferenced
+    vertex) without forming ``R``: ``(H^T W H)_ij`` sums ``w_t`` over the triangles on edge ``ij``
+    (at ``i`` when ``i = j``), scattered straight into the 1-ring CSR pattern
+    (:func:`~o3d_lsmesh.topology.ring_pattern`); only ``K^T K`` (the 2-ring) is a sparse product.
+    Canonical and symmetric (its arrays are also the CSC form's); equal to
+    ``scan_system(...).normal_matrix()`` to round-off. A triangle repeating a vertex is left to
+    :func:`scan_system`.
 
     Examples
     --------
@@ -520,45 +491,28 @@ def scan_normal_matrix(
     >>> bool(abs(N - S).max() < 1e-15), N.shape
     (True, (5, 5))
     """
-    return _normal_matrix(
-        triangles,
-        n,
-        mu=mu,
-        membrane=membrane,
-        boundary_weight=boundary_weight,
-        thin_plate=thin_plate,
-        structure=structure,
-        rim_curve=rim_curve,
-    )[0]
+    return _normal_matrix(triangles, n, mu, membrane, boundary_weight, structure, rim_curve)[0]
 
 
 def _normal_matrix(
     triangles: np.ndarray,
     n: int,
-    *,
     mu: float,
     membrane: float,
     boundary_weight: float,
-    thin_plate: float = SCAN_THIN_PLATE,
     structure: _Structure | None = None,
     rim_curve: float = 0.0,
 ) -> tuple[sp.csr_matrix, sp.csc_matrix | None, np.ndarray]:
     # scan_normal_matrix; the pattern of K (the 1-ring, diagonal included) when K^T K holds the matrix's;
     # the (m,) triangle weights w_t
     triangles = np.asarray(triangles)
-    m = len(triangles)
-    if m and (
-        (triangles[:, 0] == triangles[:, 1]).any()
-        or (triangles[:, 1] == triangles[:, 2]).any()
-        or (triangles[:, 2] == triangles[:, 0]).any()
-    ):
+    if collapsed_triangles(triangles).any():
         rows = scan_system(
             triangles,
             n,
             mu=mu,
             membrane=membrane,
             boundary_weight=boundary_weight,
-            thin_plate=thin_plate,
             structure=structure,
             rim_curve=rim_curve,
         )
@@ -579,28 +533,23 @@ def _normal_matrix(
     data[forward] = on_edge
     data[backward] = on_edge
     matrix = sp.csr_matrix((data, indices, indptr), shape=(n, n))
-    ring = None
-    if thin_plate > 0.0:
-        # K: row i is 1 at i and -(1 - t) / n_i - t / c_i at each neighbour (the second part only across
-        # boundary edges, c_i of them; t = rim_curve for a rim vertex, the one-sided row otherwise)
-        t = float(rim_curve)
-        inverse = np.zeros(n)
-        np.divide(np.where(boundary, 1.0 - t, 1.0), valence, out=inverse, where=referenced)
-        plate = np.empty(len(indices))
-        plate[diagonal] = referenced
-        plate[forward] = -inverse[lo]
-        plate[backward] = -inverse[hi]
-        if t > 0.0:
-            rim = counts == 1
-            curve_valence = np.bincount(edges[rim].ravel(), minlength=n)
-            curve_inverse = np.zeros(n)
-            np.divide(t, curve_valence, out=curve_inverse, where=curve_valence > 0)
-            plate[forward[rim]] -= curve_inverse[lo[rim]]
-            plate[backward[rim]] -= curve_inverse[hi[rim]]
-        plate *= np.sqrt(thin_plate)
-        operator = sp.csr_matrix((plate, indices, indptr), shape=(n, n))
-        matrix = matrix + operator.T.tocsr() @ operator
-        ring = sp.csc_matrix((np.ones(len(indices)), indices, indptr), shape=(n, n))
+    # K: row i is 1 at i and -(1 - t) / n_i - t / c_i at each neighbour (the second part only across
+    # boundary edges, c_i of them; t = rim_curve for a rim vertex, the one-sided row otherwise)
+    t = float(rim_curve)
+    inverse = np.zeros(n)
+    np.divide(np.where(boundary, 1.0 - t, 1.0), valence, out=inverse, where=referenced)
+    plate = np.empty(len(indices))
+    plate[diagonal] = referenced
+    plate[forward] = -inverse[lo]
+    plate[backward] = -inverse[hi]
+    if t > 0.0:
+        rim = counts == 1
+        curve_inverse = _curve_inverse(edges[rim], n, t)
+        plate[forward[rim]] -= curve_inverse[lo[rim]]
+        plate[backward[rim]] -= curve_inverse[hi[rim]]
+    operator = sp.csr_matrix((plate, indices, indptr), shape=(n, n))
+    matrix = matrix + operator.T.tocsr() @ operator
+    ring = sp.csc_matrix((np.ones(len(indices)), indices, indptr), shape=(n, n))
     matrix.sum_duplicates()  # canonical: sorted indices (CHOLMOD and the lower-triangle cut need them)
     return matrix, ring, weight
 
@@ -629,16 +578,11 @@ class ScanFairingSolver:
 
     Notes
     -----
-    ``R^T R`` is positive definite: on each connected component the only
-    null vector of ``K^T K`` and ``G`` is the constant, and
-    ``1^T H^T W H 1 = 9 sum_t w_t > 0``; unreferenced vertices have their
-    unit rows. CHOLMOD factors ``R^T R`` as assembled by
-    :func:`scan_normal_matrix` (its lower triangle), analyzed as ``K^T K``
-    from the 1-ring pattern with the COLAMD ordering (10-15% fewer factor
-    flops than AMD on the matrix, at the same analysis time; METIS's 30%
-    fewer cost an analysis longer than the factor).
-    The object pickles (the solver refactors on load) and its solves are
-    serialized by the solver's lock.
+    ``R^T R`` is positive definite: on each component the only null vector of ``K^T K`` and ``G``
+    is the constant, and ``1^T H^T W H 1 = 9 sum_t w_t > 0``. CHOLMOD factors the lower triangle
+    of :func:`scan_normal_matrix`, analyzed as ``K^T K`` from the 1-ring pattern with COLAMD
+    (10-15% fewer factor flops than AMD, same analysis time; METIS's 30% fewer cost an analysis
+    longer than the factor). The object pickles and its solves are serialized by a lock.
     """
 
     def __init__(
@@ -649,7 +593,6 @@ class ScanFairingSolver:
         mu: float,
         membrane: float,
         boundary_weight: float,
-        thin_plate: float = SCAN_THIN_PLATE,
         structure: _Structure | None = None,
         rim_curve: float = 0.0,
     ) -> None:
@@ -658,32 +601,15 @@ class ScanFairingSolver:
         triangles = np.asarray(triangles)
         st = _structure(triangles, n) if structure is None else structure
         normal, ring, weight = _normal_matrix(
-            triangles,
-            n,
-            mu=self.mu,
-            membrane=self.membrane,
-            boundary_weight=boundary_weight,
-            thin_plate=thin_plate,
-            structure=st,
-            rim_curve=rim_curve,
+            triangles, n, self.mu, self.membrane, boundary_weight, st, rim_curve
         )
-        corners = np.arange(0, 3 * len(triangles) + 1, 3)
         #: ``sqrt(mu W) H``, ``(m, n)``: the rows that carry the targets
-        self.penalty = sp.csr_matrix(
-            (np.repeat(np.sqrt(self.mu * weight), 3), triangles.ravel(), corners), shape=(len(triangles), n)
-        )
+        self.penalty = _penalty(triangles, n, np.sqrt(self.mu * weight))
         self.referenced = st.valence > 0
-        # ordering: COLAMD on the pattern of K (the 1-ring), whose square K^T K holds the matrix's pattern:
-        # CHOLMOD analyzes K^T K without forming it and factors the matrix with that analysis. Factor flops
-        # at 40k vertices (bun000): 0.76 GFlop against 0.90 with AMD on the matrix (analysis 0.05 s either
-        # way; METIS 0.665 but a 0.3 s analysis); at 1.4M (the ten scans merged and subdivided) 46.5 against
-        # 51.4 GFlop (analysis 3.4 against 3.1 s CPU; METIS 35.2 but 15 s). The lower triangle of the
-        # assembled matrix, not the rows (``product_of``, which CHOLMOD multiplies out as it factors: the
-        # same time at 40k): the memory estimate of ``backend="auto"`` then sees the true entry count; from
-        # the rows it guessed 3x too many and took the iterative path at 1.4M vertices (AMG-preconditioned
-        # CG, 4x slower). Also measured, slower: CG preconditioned by the factor of the 1-ring part of this
-        # matrix (its 2-ring entries lumped on the diagonal; 7.4x fewer factor flops but 8 + 10 iterations
-        # to 1e-8: 0.40 s against 0.33 s at 40k, 22.5 s against 20.5 s at 1.4M, CPU time, one thread)
+        # COLAMD on K's 1-ring pattern (see Notes): at 1.4M vertices 46.5 against 51.4 GFlop with AMD on the
+        # matrix (METIS 35.2 but a 15 s analysis). The assembled lower triangle, not ``product_of`` rows: from
+        # the rows the memory estimate of ``backend="auto"`` guessed 3x the entries and went iterative (4x
+        # slower). CG preconditioned by the factor of the 1-ring part alone was measured slower.
         self._solver = SPDSolver(
             _lower_csc(normal), lower=True, ordering="amd" if ring is None else "colamd", pattern_of=ring
         )
