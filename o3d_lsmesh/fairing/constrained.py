@@ -176,8 +176,8 @@ def _fair(
             boundary_weight=boundary_weight,
         )
     if method == "local":
-        with _plain_pages():
-            return _fair_local(
+        with plain_pages():
+            return fair_local(
                 positions, triangles, number_of_iterations, smooth_boundary, reimpose_every, progress
             )
     topo = fairing_topology(triangles, len(positions), with_loops=smooth_boundary)
@@ -192,7 +192,7 @@ def _fair(
     return positions
 
 
-def _fair_local(
+def fair_local(
     positions, triangles, number_of_iterations, smooth_boundary, reimpose_every, progress, rings=None
 ):
     # the paper's local operator (eq. 7): one pass over the corners grouped by vertex gives the
@@ -241,7 +241,7 @@ def huge_page_toggle() -> Callable[[bool], bool] | None:
 
 
 @contextmanager
-def _plain_pages() -> Iterator[None]:
+def plain_pages() -> Iterator[None]:
     """Within the block, numpy does not ask the kernel for transparent huge pages on new arrays.
 
     numpy advises huge pages (``madvise``) for arrays of 4 MB and more; where the kernel then
@@ -517,7 +517,7 @@ def constrained_fairing(
         number_of_iterations, method, mu, smooth_boundary, reimpose_every, progress, membrane, boundary_weight
     )
     local = options[1] == "local"
-    with _plain_pages() if local else nullcontext():
+    with plain_pages() if local else nullcontext():
         # read_mesh's vertices are already a private copy: _fair may write to them; the local path
         # only reads the triangles, so it takes Open3D's own int32 array (no int64 copy, no cast back)
         data = read_mesh(mesh, weld=True, narrow=local)

@@ -17,7 +17,7 @@ from ..hierarchy.hierarchy import (
 )
 from ..topology import VertexRings, boundary_curves, vertex_rings
 from .boundary_curve import curve_operator, run_curve_iterations
-from .constrained import FAIRING_METHODS, _fair_local, _plain_pages, constrained_fairing_arrays
+from .constrained import FAIRING_METHODS, constrained_fairing_arrays, fair_local, plain_pages
 
 if TYPE_CHECKING:
     from .._types import MeshT
@@ -49,7 +49,7 @@ def multiresolution_fairing_arrays(
         for i in range(level, 0, -1):
             positions = _fair_level(positions, triangles[i], rings, number_of_iterations, method)
             rings = vertex_rings(triangles[i - 1], len(hierarchy.representatives[i - 1]))
-            positions = hierarchy._refine(i, positions, rings)
+            positions = hierarchy.refine_with_rings(i, positions, rings)
             bar.update(1)
     # The splits leave the facets of the coarse triangulation on M_0, and one fairing of M_0 cannot remove
     # them: it holds the barycenters of its triangles where the splits put them (more iterations of it
@@ -99,8 +99,8 @@ def _fair_level(
         return constrained_fairing_arrays(
             positions, triangles, iterations, method="global", smooth_boundary=smooth_boundary
         )
-    with _plain_pages():
-        return _fair_local(positions, triangles, iterations, smooth_boundary, reimpose_every, False, rings)
+    with plain_pages():
+        return fair_local(positions, triangles, iterations, smooth_boundary, reimpose_every, False, rings)
 
 
 def _input_boundary(

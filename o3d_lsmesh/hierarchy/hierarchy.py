@@ -206,11 +206,12 @@ class MeshHierarchy:
         """
         i = self._check_level(i, minimum=1)
         positions = as_positions(positions, len(self.representatives[i]), name="positions")
-        return self._refine(i, positions, vertex_rings(self.triangles[i - 1], len(self.parents[i])))
+        return self.refine_with_rings(i, positions, vertex_rings(self.triangles[i - 1], len(self.parents[i])))
 
-    def _refine(self, i: int, positions: np.ndarray, rings: VertexRings) -> np.ndarray:
-        """:meth:`refine` of checked positions, with the :class:`~o3d_lsmesh.topology.VertexRings` of level
-        ``i - 1`` (which the fairing of that level reuses: one ring pass per level)."""
+    def refine_with_rings(self, i: int, positions: np.ndarray, rings: VertexRings) -> np.ndarray:
+        """:meth:`refine` of checked ``(n_i, 3) float64`` positions (not validated again), with the
+        :class:`~o3d_lsmesh.topology.VertexRings` of level ``i - 1``, which a caller fairing that level
+        reuses (multiresolution fairing: one ring pass per level)."""
         out = positions[self.parents[i]]
         removed = self.removed[i]
         if len(removed) == 0:
