@@ -267,7 +267,7 @@ def multiresolution_rows(results, reference, levels=(1, 2, 3)):
     return rows
 
 
-#: where the time goes (per-step timings, 2026-12-01, same machine, loaded by other jobs: load 5-8 on 2 cores)
+#: where the time goes (per-step timings 2026-12-01 at load 5-8 on 2 cores; the iterative solves and the last run 2026-12-02)
 SPEED_PROFILE = """\
 Ours is one sparse Cholesky factorization of the 2-ring (bi-Laplacian pattern) normal matrix and two
 back-substitutions; everything else is a few linear passes over the edges. CPU seconds per step (40k:
@@ -303,11 +303,19 @@ product [M^T, I] [M; Z] (no sum, no sort): 28 against 31 ms at 40k but 3.0 again
 concatenations); one BLAS thread: 40k median wall 0.86 against 0.88 s (CPU 0.32 against 0.49, load 7),
 1.4M factorization 29.5 against 19.8 s wall: the default thread count kept. Earlier (see git history):
 CG preconditioned by the factor of the 1-ring part (0.40 against 0.33 s), simplicial factor (2-3x
-slower). At 40k the floor is the factorization (0.76 GFlop, about 0.2 s on one core) and its analysis
-(0.05 s), while Open3D's 5 Laplacian iterations take 0.04-0.07 s of CPU: in this run the 40k ratio is
-5.3-7.3 in wall time and 5.3-5.9 in CPU time (one outlier 11.8), not within 5x; at 1.4M it is 3.0-4.6
-in wall time (within 5x) but 5.5-6.8 in CPU time (on the loaded machine Open3D's wall time is 2.5x its
-CPU time, ours 1.5-1.7x)."""
+slower). Measured 2026-12-02 (load 1-2), the system solved by block conjugate gradients started from
+the scan, on ``_block_cg`` of the solver gateway: with a Jacobi preconditioner 57 + 94 iterations to a
+relative residual of 1e-6 (0.76 s of CPU, max difference to the direct solve 2.0e-5 of the bounding
+box); with the gateway's smoothed-aggregation AMG V-cycle 10 + 15 iterations (0.63 s against CHOLMOD's
+0.69 s of CPU in the same process, 0.63 s against 0.43 s wall; max difference 2.0e-5), at 1.4M 12 + 20
+iterations, 24.7 s against 27.7 s of CPU but 30.7 s against 20.5 s wall: no faster than the
+factorization, and 1e-7 costs 25% more. At 40k the floor is the factorization (0.76 GFlop, about
+0.2 s on one core) and its analysis (0.05 s), while Open3D's 5 Laplacian iterations take 0.03-0.06 s
+of wall time on the idle machine (its OpenMP threads use both cores). The run above was on the idle
+machine (load 1-2): 40k wall ratio 5.2-15.6 (median 7.9), CPU ratio 4.6-14.3 (median 7.1); 1.4M wall
+4.7-7.4 (median 5.2), CPU 5.3-7.5 (median 5.5). The earlier runs on the loaded machine (load 5-8) gave
+5.7 and 3.6 in wall time, because there Open3D's wall time was 2.5x its CPU time and ours 1.5-1.7x:
+the lightly loaded machine is the fair measure, and the target (5x) is not met at either size."""
 
 
 def speed_rows(results):
