@@ -311,8 +311,7 @@ box); with the gateway's smoothed-aggregation AMG V-cycle 10 + 15 iterations (0.
 iterations, 24.7 s against 27.7 s of CPU but 30.7 s against 20.5 s wall: no faster than the
 factorization, and 1e-7 costs 25% more. At 40k the floor is the factorization (0.76 GFlop, about
 0.2 s on one core) and its analysis (0.05 s), while Open3D's 5 Laplacian iterations take 0.03-0.06 s
-of wall time on the idle machine (its OpenMP threads use both cores). The run above was on the idle
-machine (load 1-2): 40k wall ratio 5.2-15.6 (median 7.9), CPU ratio 4.6-14.3 (median 7.1); 1.4M wall
+of wall time at load 1-2 (its OpenMP threads use both cores). The run above was at load 1-2: 40k wall ratio 5.2-15.6 (median 7.9), CPU ratio 4.6-14.3 (median 7.1); 1.4M wall
 4.7-7.4 (median 5.2), CPU 5.3-7.5 (median 5.5). The earlier runs on the loaded machine (load 5-8) gave
 5.7 and 3.6 in wall time, because there Open3D's wall time was 2.5x its CPU time and ours 1.5-1.7x:
 the lightly loaded machine is the fair measure, and the target (5x) is not met at either size."""
