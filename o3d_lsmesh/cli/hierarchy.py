@@ -60,7 +60,7 @@ def hierarchy(args: argparse.Namespace, run: Run) -> int:
         write_output(path, built.level(level))
         files.append(path)
     if args.maps:  # each map composes the parents of every level above it: only when asked
-        maps = {f"level_{level:02d}": built.vertex_map(level) for level in chosen}
+        maps: dict[str, Any] = {f"level_{level:02d}": built.vertex_map(level) for level in chosen}
         np.savez_compressed(outdir / "vertex_maps.npz", **maps)
         files.append(str(outdir / "vertex_maps.npz"))
     counts = [int(built.vertex_count(i)) for i in range(len(built))]
