@@ -151,7 +151,8 @@ def main(argv: list[str] | None = None) -> int:
         ignore = shutil.ignore_patterns("__pycache__", "*.c")
         shutil.copytree(REPO / "o3d_lsmesh", root / "o3d_lsmesh", ignore=ignore)
         shutil.copytree(REPO / "tests", root / "tests", ignore=ignore)
-        shutil.copy(REPO / "pyproject.toml", root / "pyproject.toml")
+        for name in ("pyproject.toml", "README.md"):  # test_cli reads the README's help text
+            shutil.copy(REPO / name, root / name)
         env["PYTHONPATH"] = str(root)
 
         baseline = sorted({f for m in mutants for f in FIRST[m.path]} | set(WIDER))
