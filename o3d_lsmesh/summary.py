@@ -57,7 +57,7 @@ def topology_summary_arrays(vertices: np.ndarray, triangles: np.ndarray) -> dict
     # a manifold edge run twice in the same direction: the two triangles disagree in orientation
     misoriented = int(np.count_nonzero(tail[order[pair]] == tail[order[pair + 1]]))
     # boundary
-    rows, _, head, _, _ = boundary_rows(F, n, runs)
+    rows, _, head, _ = boundary_rows(F, n, runs)
     boundary_edges = len(rows)
     curves = boundary_curves(F, n)  # (recomputes the edge runs: cheap next to the fans)
     loop_edges = np.array([len(loop) for loop in curves.loops], dtype=np.int64)
