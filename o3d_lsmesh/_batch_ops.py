@@ -424,11 +424,6 @@ def read_mesh_file(path: str, *, what: str = "INPUT") -> Any:
     return mesh.remove_duplicated_vertices() if Path(path).suffix.lower() == ".stl" else mesh
 
 
-def _temporary(final: Path) -> Path:
-    # Same folder (so os.replace is atomic), same extension (Open3D picks the format from it), hidden name.
-    return final.with_name(f".{final.stem}.{uuid.uuid4().hex[:12]}.tmp{final.suffix}")
-
-
 def write_mesh(mesh: Any, path: Path) -> None:
     """Write a mesh file; ``OSError`` when Open3D cannot (it returns False instead of raising)."""
     o3d = quiet_open3d()
@@ -451,7 +446,8 @@ def _write_item(value: Any, path: Path) -> None:
 def write_atomic(value: Any, final: Path, *, kind: str, suffix: str) -> None:
     """Write ``value`` to a temporary name beside ``final``, then move it into place in one step."""
     final.parent.mkdir(parents=True, exist_ok=True)
-    temporary, old = _temporary(final), None
+    # same folder (so os.replace is atomic), same extension (Open3D picks the format from it), hidden name
+    temporary, old = final.with_name(f".{final.stem}.{uuid.uuid4().hex[:12]}.tmp{final.suffix}"), None
     try:
         if kind == "files":
             temporary.mkdir()
