@@ -25,10 +25,6 @@ HOLE_SIZE_BINS = ((3, 3), (4, 9), (10, 99), (100, 999), (1000, None))
 DEGENERATE_TOLERANCE = 1e-10
 
 
-def _bin_label(lo: int, hi: int | None) -> str:
-    return f"{lo}+" if hi is None else (str(lo) if lo == hi else f"{lo}-{hi}")
-
-
 def topology_summary_arrays(vertices: np.ndarray, triangles: np.ndarray) -> dict:
     """Array core of :func:`topology_summary` (``(n, 3) float64`` vertices, ``(m, 3) int64`` triangles)."""
     vertices, F = mesh_arrays(vertices, triangles)
@@ -64,7 +60,8 @@ def topology_summary_arrays(vertices: np.ndarray, triangles: np.ndarray) -> dict
     holes = {}
     for lo, hi in HOLE_SIZE_BINS:
         inside = (loop_edges >= lo) & (loop_edges <= (np.iinfo(np.int64).max if hi is None else hi))
-        holes[_bin_label(lo, hi)] = int(np.count_nonzero(inside))
+        label = f"{lo}+" if hi is None else (str(lo) if lo == hi else f"{lo}-{hi}")
+        holes[label] = int(np.count_nonzero(inside))
     graph = sp.coo_matrix((np.ones(boundary_edges), (tail[rows], head[rows])), shape=(n, n))
     boundary_label = csgraph.connected_components(graph, directed=False)[1]
     boundary_components = len(np.unique(boundary_label[tail[rows]]))

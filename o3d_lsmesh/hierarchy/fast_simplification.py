@@ -215,14 +215,15 @@ def from_fast_simplification(
         mapped = _drop_nonmanifold(_drop_duplicate_triangles(mapped[alive], n_new), n_new)
         adjacency = adjacency_matrix(tris[-1], n_prev)
         ring_offsets = np.r_[0, np.cumsum(np.diff(adjacency.indptr)[gone])].astype(np.int64)
-        ring = _csr_rows(adjacency, gone)
+        starts = adjacency.indptr[gone]
+        ring = adjacency.indices[concatenated_ranges(starts, adjacency.indptr[gone + 1] - starts)]
         tris.append(mapped)
         reps.append(reps[-1][keep])
         parents.append(parent)
         removed.append(gone)
         targets.append(np.flatnonzero(keep)[parent[gone]])
         offsets.append(ring_offsets)
-        rings.append(ring)
+        rings.append(ring.astype(np.int64))
     return MeshHierarchy(
         V,
         tuple(tris),
@@ -237,11 +238,6 @@ def from_fast_simplification(
         data.kind,
         tensor_format_of(data),
     )
-
-
-def _csr_rows(matrix, rows: np.ndarray) -> np.ndarray:
-    starts = matrix.indptr[rows]
-    return matrix.indices[concatenated_ranges(starts, matrix.indptr[rows + 1] - starts)].astype(np.int64)
 
 
 def _drop_duplicate_triangles(triangles: np.ndarray, n: int) -> np.ndarray:
