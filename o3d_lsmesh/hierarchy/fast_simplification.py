@@ -17,12 +17,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .._collapsed import collapsed_triangles
-from .._o3d import warn_dropped_attributes
+from .._o3d import read_mesh, warn_dropped_attributes
 from .._progress import check_progress, progress_bar
 from .._ranges import concatenated_ranges
 from .._validate import as_count
 from ..topology import adjacency_matrix, connected_components, unique_edges
-from .hierarchy import MeshHierarchy, read_hierarchy_mesh, tensor_format_of
+from .hierarchy import MeshHierarchy, tensor_format_of
 
 if TYPE_CHECKING:
     from .._types import AnyMesh
@@ -127,7 +127,7 @@ def from_fast_simplification(
     if not np.isfinite(agg) or agg < 0:
         raise ValueError(f"agg must be non-negative and finite, got {agg}")
     progress = check_progress(progress)
-    data = read_hierarchy_mesh(mesh)
+    data = read_mesh(mesh)
     warn_dropped_attributes(data, "hierarchy levels have new connectivity")
     V, F = data.vertices, data.triangles
     n0, m0 = len(V), len(F)
