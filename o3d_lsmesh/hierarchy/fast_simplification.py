@@ -20,7 +20,7 @@ from .._collapsed import collapsed_triangles
 from .._o3d import read_mesh, warn_dropped_attributes
 from .._progress import check_progress, progress_bar
 from .._ranges import concatenated_ranges
-from .._validate import as_count
+from .._validate import as_count, as_positive_float
 from ..topology import adjacency_matrix, connected_components, unique_edges
 from .hierarchy import MeshHierarchy, tensor_format_of
 
@@ -122,10 +122,7 @@ def from_fast_simplification(
     import fast_simplification
 
     min_vertices = as_count(min_vertices, name="min_vertices", minimum=4)
-    if isinstance(agg, (bool, np.bool_)) or not isinstance(agg, (int, float, np.floating, np.integer)):
-        raise TypeError(f"agg must be a number, got {agg!r}")
-    if not np.isfinite(agg) or agg < 0:
-        raise ValueError(f"agg must be non-negative and finite, got {agg}")
+    agg = as_positive_float(agg, name="agg", allow_zero=True)
     progress = check_progress(progress)
     data = read_mesh(mesh)
     warn_dropped_attributes(data, "hierarchy levels have new connectivity")
