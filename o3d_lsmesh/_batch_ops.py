@@ -22,6 +22,7 @@ from __future__ import annotations
 import contextlib
 import io
 import os
+import re
 import shutil
 import sys
 import tempfile
@@ -352,33 +353,75 @@ def quiet_open3d() -> Any:
     return o3d
 
 
-def read_mesh_file(path: str) -> Any:
-    """Read a triangle mesh; ``ValueError`` for a missing, empty, corrupt or triangle-less file.
+# Open3D's readers report a file they could not read to the end with these words (and return what they got)
+_READ_FAILURE = re.compile(
+    r"(?i)(read \w+ failed|rply: error|unable to read|error reading|unexpected end)[^\n]*"
+)
+_ANSI = re.compile(r"\x1b\[[0-9;]*m")
 
-    Open3D returns an empty mesh instead of raising for a corrupt file, hence the checks.
+
+def _ply_header_counts(path: str) -> dict[str, int]:
+    """Element counts of a PLY header (``{"vertex": n, "face": m}``); empty if the header is unreadable."""
+    counts = {}
+    try:
+        with open(path, "rb") as handle:
+            if handle.readline().strip() != b"ply":
+                return {}
+            for _ in range(10_000):
+                line = handle.readline()
+                if not line or line.strip() == b"end_header":
+                    break
+                parts = line.split()
+                if len(parts) == 3 and parts[0] == b"element":
+                    counts[parts[1].decode("ascii", "replace")] = int(parts[2])
+    except (OSError, ValueError):
+        return {}
+    return counts
+
+
+def read_mesh_file(path: str, *, what: str = "INPUT") -> Any:
+    """Read a triangle mesh; ``ValueError`` naming ``what`` and the file when it is missing, a folder,
+    empty, unreadable, truncated or corrupt, or has no triangles.
+
+    The one reader of the CLI and the batch workers. Open3D returns an empty or
+    partial mesh instead of raising for a corrupt or cut-off file, and only
+    says so in a warning: hence the checks on its output, its warnings and the
+    PLY header. STL files are welded (they store three vertices per triangle).
     """
     o3d = quiet_open3d()
-    if not os.path.isfile(path):
-        raise ValueError(f"INPUT {path!r} does not exist or is not a file")
+    name = f"{what} {path!r}"
+    if not os.path.exists(path):
+        raise ValueError(f"{name} does not exist")
+    if os.path.isdir(path):
+        raise ValueError(f"{name} is a folder, not a mesh file")
     if os.path.getsize(path) == 0:
-        raise ValueError(f"INPUT {path!r} is an empty file")
-    with captured_native_output():
-        mesh = o3d.io.read_triangle_mesh(path)
-    if len(mesh.vertices) == 0:
+        raise ValueError(f"{name} is an empty file")
+    o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Warning)
+    try:
+        with captured_native_output() as captured:
+            mesh = o3d.io.read_triangle_mesh(path)
+    finally:
+        o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
+    n, m = len(mesh.vertices), len(mesh.triangles)
+    failure = _READ_FAILURE.search(_ANSI.sub("", captured[0]))
+    if failure and n:
         raise ValueError(
-            f"INPUT {path!r} could not be read as a triangle mesh (corrupt or unsupported format)"
+            f"{name} is truncated or corrupt: Open3D read only part of it ({failure.group(0).strip()})"
         )
-    if len(mesh.triangles) == 0:
-        raise ValueError(f"INPUT {path!r} has {len(mesh.vertices)} vertices but no triangles")
-    if Path(path).suffix.lower() == ".stl":
-        # STL stores three vertices per triangle: merge them so the algorithms see one surface.
-        mesh = mesh.remove_duplicated_vertices()
-    return mesh
-
-
-def _temporary(final: Path) -> Path:
-    # Same folder (so os.replace is atomic), same extension (Open3D picks the format from it), hidden name.
-    return final.with_name(f".{final.stem}.{uuid.uuid4().hex[:12]}.tmp{final.suffix}")
+    header = _ply_header_counts(path) if Path(path).suffix.lower() == ".ply" and n else {}
+    # a polygon face gives at least one triangle: fewer triangles than faces means faces were lost
+    if header.get("vertex", n) != n or header.get("face", 0) > m:
+        raise ValueError(
+            f"{name} is truncated or corrupt: its header declares {header.get('vertex')} vertices "
+            f"and {header.get('face', 0)} faces, Open3D read {n} and {m} triangles"
+        )
+    if n == 0:
+        raise ValueError(
+            f"{name} could not be read as a triangle mesh (empty, corrupt or unsupported format)"
+        )
+    if m == 0:
+        raise ValueError(f"{name} has {n} vertices but no triangles")
+    return mesh.remove_duplicated_vertices() if Path(path).suffix.lower() == ".stl" else mesh
 
 
 def write_mesh(mesh: Any, path: Path) -> None:
@@ -403,7 +446,8 @@ def _write_item(value: Any, path: Path) -> None:
 def write_atomic(value: Any, final: Path, *, kind: str, suffix: str) -> None:
     """Write ``value`` to a temporary name beside ``final``, then move it into place in one step."""
     final.parent.mkdir(parents=True, exist_ok=True)
-    temporary, old = _temporary(final), None
+    # same folder (so os.replace is atomic), same extension (Open3D picks the format from it), hidden name
+    temporary, old = final.with_name(f".{final.stem}.{uuid.uuid4().hex[:12]}.tmp{final.suffix}"), None
     try:
         if kind == "files":
             temporary.mkdir()

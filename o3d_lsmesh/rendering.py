@@ -41,6 +41,7 @@ from ._errors import O3DLSMeshWarning
 from ._o3d import open3d, read_mesh
 from ._validate import as_choice, as_count, as_positive_float, as_real_vector
 from .metrics import distances_to_surface
+from .topology import unique_edges
 
 if TYPE_CHECKING:
     from ._types import AnyMesh
@@ -376,8 +377,8 @@ def _annotate(image, panel_width, titles, bar, background):
 
 
 def _mean_edge_length(vertices: np.ndarray, triangles: np.ndarray) -> float:
-    edges = np.sort(triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-    edges = np.unique(edges, axis=0)
+    """Mean length of the undirected edges (each counted once), the unit of ``units="edge"``."""
+    edges = unique_edges(triangles, len(vertices))[0]
     return float(np.linalg.norm(vertices[edges[:, 0]] - vertices[edges[:, 1]], axis=1).mean())
 
 

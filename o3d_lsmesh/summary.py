@@ -25,10 +25,6 @@ HOLE_SIZE_BINS = ((3, 3), (4, 9), (10, 99), (100, 999), (1000, None))
 DEGENERATE_TOLERANCE = 1e-10
 
 
-def _bin_label(lo: int, hi: int | None) -> str:
-    return f"{lo}+" if hi is None else (str(lo) if lo == hi else f"{lo}-{hi}")
-
-
 def topology_summary_arrays(vertices: np.ndarray, triangles: np.ndarray) -> dict:
     """Array core of :func:`topology_summary` (``(n, 3) float64`` vertices, ``(m, 3) int64`` triangles)."""
     vertices, F = mesh_arrays(vertices, triangles)
@@ -57,14 +53,15 @@ def topology_summary_arrays(vertices: np.ndarray, triangles: np.ndarray) -> dict
     # a manifold edge run twice in the same direction: the two triangles disagree in orientation
     misoriented = int(np.count_nonzero(tail[order[pair]] == tail[order[pair + 1]]))
     # boundary
-    rows, _, head, _, _ = boundary_rows(F, n, runs)
+    rows, _, head, _ = boundary_rows(F, n, runs)
     boundary_edges = len(rows)
     curves = boundary_curves(F, n)  # (recomputes the edge runs: cheap next to the fans)
     loop_edges = np.array([len(loop) for loop in curves.loops], dtype=np.int64)
     holes = {}
     for lo, hi in HOLE_SIZE_BINS:
         inside = (loop_edges >= lo) & (loop_edges <= (np.iinfo(np.int64).max if hi is None else hi))
-        holes[_bin_label(lo, hi)] = int(np.count_nonzero(inside))
+        label = f"{lo}+" if hi is None else (str(lo) if lo == hi else f"{lo}-{hi}")
+        holes[label] = int(np.count_nonzero(inside))
     graph = sp.coo_matrix((np.ones(boundary_edges), (tail[rows], head[rows])), shape=(n, n))
     boundary_label = csgraph.connected_components(graph, directed=False)[1]
     boundary_components = len(np.unique(boundary_label[tail[rows]]))

@@ -831,37 +831,33 @@ def boundary_curves(triangles: np.ndarray, n: int, *, edges: EdgeStructure | Non
         return BoundaryCurves([], [], np.zeros(0, dtype=np.int64))
     runs = edge_runs(triangles, n) if edges is None else edges.runs
     closed, open_ = _boundary_walk(triangles, n, split_at_junctions=False, runs=runs)
-    rows, tail, head, crowded, _ = boundary_rows(triangles, n, runs)
+    rows, tail, _, on_crowded = boundary_rows(triangles, n, runs)
     on_boundary = np.zeros(n, dtype=bool)
     on_boundary[tail[rows]] = True
-    on_crowded = np.zeros(n, dtype=bool)
-    on_crowded[tail[crowded]] = True
-    on_crowded[head[crowded]] = True
     return BoundaryCurves(closed, open_, np.flatnonzero(on_boundary & on_crowded))
 
 
 def boundary_rows(triangles: np.ndarray, n: int, runs):
-    """Rows of :func:`halfedges` on edges of exactly one triangle (no self-edges), and of non-manifold edges."""
+    """Rows of :func:`halfedges` on edges of exactly one triangle (no self-edges), the half-edges'
+    tails and heads, and the ``(n,) bool`` mask of the vertices on an edge of more than two triangles."""
     order, starts, counts = runs
     rows = order[starts[counts == 1]]
-    m = len(triangles)
     tail = triangles.T.reshape(-1)
     head = triangles[:, [1, 2, 0]].T.reshape(-1)
     rows = np.sort(rows[tail[rows] != head[rows]])  # a repeated vertex is not an edge
     crowded = order[starts[counts > 2]]
-    return rows, tail, head, crowded, m
+    on_crowded = np.zeros(n, dtype=bool)
+    on_crowded[tail[crowded]] = True
+    on_crowded[head[crowded]] = True
+    return rows, tail, head, on_crowded
 
 
 def _junctions(triangles: np.ndarray, n: int, runs=None):
     if runs is None:
         runs = edge_runs(triangles, n)
-    rows, tail, head, crowded, _ = boundary_rows(triangles, n, runs)
+    rows, tail, head, on_crowded = boundary_rows(triangles, n, runs)
     degree = np.bincount(tail[rows], minlength=n) + np.bincount(head[rows], minlength=n)
-    special = (degree > 0) & (degree != 2)
-    on_crowded = np.zeros(n, dtype=bool)
-    on_crowded[tail[crowded]] = True
-    on_crowded[head[crowded]] = True
-    special |= (degree > 0) & on_crowded
+    special = (degree > 0) & ((degree != 2) | on_crowded)
     return np.flatnonzero(special), special, rows, tail, head, runs
 
 

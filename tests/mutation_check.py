@@ -8,8 +8,9 @@ hand after changing a validation rule or the tests of one::
     python tests/mutation_check.py --only laplacian
 
 The mutants: the cotangent Laplacian's uniform fallback for rows it cannot
-normalize (``laplacian.py``), and every ``raise`` of ``_validate.py``, each
-replaced by ``pass``. Each runs against a copy of the package in a temporary
+normalize (``laplacian.py``), and every ``raise`` of ``_validate.py`` and of
+the adapter's mesh reader (``_o3d.py``: the mesh kind, a tensor mesh without
+positions), each replaced by ``pass``. Each runs against a copy of the package in a temporary
 folder, first on the test files that own the rule, then (if it survives) on a
 wider set. By default the real meshes are absent (``O3D_LSMESH_DATA`` and
 ``O3D_LSMESH_SCANS`` point nowhere), so a rule must be caught by the tests that
@@ -35,6 +36,7 @@ REPO = Path(__file__).resolve().parents[1]
 #: the test files that own each module's rules, then the wider net for a survivor
 FIRST = {
     "o3d_lsmesh/_validate.py": ["tests/test_validate.py", "tests/test_bad_input.py"],
+    "o3d_lsmesh/_o3d.py": ["tests/test_validate.py", "tests/test_bad_input.py"],
     "o3d_lsmesh/laplacian.py": ["tests/test_laplacian.py"],
 }
 WIDER = [
@@ -132,7 +134,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--skip-baseline", action="store_true", help="do not first run the unmutated tests")
     args = parser.parse_args(argv)
 
-    mutants = [cotangent_fallback_mutant(), *raise_mutants("o3d_lsmesh/_validate.py")]
+    mutants = [
+        cotangent_fallback_mutant(),
+        *raise_mutants("o3d_lsmesh/_validate.py"),
+        *raise_mutants("o3d_lsmesh/_o3d.py"),
+    ]
     mutants = [m for m in mutants if not args.only or any(text in m.name for text in args.only)]
     env = dict(os.environ, PYTHONDONTWRITEBYTECODE="1")
     env.pop("PYTHONPATH", None)
@@ -145,7 +151,8 @@ def main(argv: list[str] | None = None) -> int:
         ignore = shutil.ignore_patterns("__pycache__", "*.c")
         shutil.copytree(REPO / "o3d_lsmesh", root / "o3d_lsmesh", ignore=ignore)
         shutil.copytree(REPO / "tests", root / "tests", ignore=ignore)
-        shutil.copy(REPO / "pyproject.toml", root / "pyproject.toml")
+        for name in ("pyproject.toml", "README.md"):  # test_cli reads the README's help text
+            shutil.copy(REPO / name, root / name)
         env["PYTHONPATH"] = str(root)
 
         baseline = sorted({f for m in mutants for f in FIRST[m.path]} | set(WIDER))

@@ -476,6 +476,35 @@ def test_a_write_open3d_refuses_is_a_failure_record(data, tmp_path, monkeypatch)
     assert list((tmp_path / "out").iterdir()) == []  # neither the output nor a temporary file
 
 
+def test_batch_and_cli_refuse_a_bad_file_with_the_same_message(data, tmp_path, capsys):
+    # one reader for both: each defect is a "read" failure record holding the CLI's exact message
+    whole = data.good[0].read_bytes()
+    points = o3d.geometry.TriangleMesh()
+    points.vertices = o3d.utility.Vector3dVector(np.random.default_rng(0).random((5, 3)))
+    bad = tmp_path / "bad"
+    bad.mkdir()
+    o3d.io.write_triangle_mesh(str(bad / "points.ply"), points)
+    (bad / "empty.ply").write_bytes(b"")
+    (bad / "garbage.ply").write_bytes(b"\x00\x01 not a ply at all")
+    (bad / "cut.ply").write_bytes(whole[: len(whole) // 2])  # batch read half the mesh before
+    expected = {
+        "points.ply": "has 5 vertices but no triangles",
+        "empty.ply": "is an empty file",
+        "garbage.ply": "could not be read as a triangle mesh",
+        "cut.ply": "is truncated or corrupt",
+    }
+    records = _by_name(batch.run(bad, tmp_path / "out", workers=0, progress=False))
+    assert sorted(records) == sorted(expected)
+    for name, words in expected.items():
+        record = records[name]
+        assert (record["status"], record["stage"]) == ("failed", "read")
+        assert main(["denoise", str(bad / name), str(tmp_path / "o.ply")]) == 2
+        line = capsys.readouterr().err.strip().splitlines()[-1]
+        message = f"INPUT {str(bad / name)!r} "
+        assert line.startswith(f"o3d-lsmesh: error: {message}") and words in line
+        assert record["error"] == f"ValueError: {line.removeprefix('o3d-lsmesh: error: ')}"
+
+
 def test_fail_fast_stops_at_the_first_failure(data, tmp_path):
     records = _by_name(
         batch.run(

@@ -234,6 +234,32 @@ def test_hierarchy_writes_chosen_levels(tmp_path, capsys, clean):
     assert not (outdir / "level_01.obj").exists()
 
 
+def test_hierarchy_builds_vertex_maps_only_with_maps(tmp_path, capsys, clean, monkeypatch):
+    from o3d_lsmesh.hierarchy import MeshHierarchy
+
+    source = _write(clean, tmp_path / "clean.ply")
+    real_map, calls = MeshHierarchy.vertex_map, []
+
+    def spy(self, i):
+        calls.append(i)
+        return real_map(self, i)
+
+    monkeypatch.setattr(MeshHierarchy, "vertex_map", spy)
+    report = run_json(capsys, ["hierarchy", str(source), str(tmp_path / "plain"), "--levels", "0,3"])
+    assert calls == [] and not (tmp_path / "plain" / "vertex_maps.npz").exists()
+    assert len(report["written"]) == 2
+    report = run_json(capsys, ["hierarchy", str(source), str(tmp_path / "maps"), "--levels", "0,3", "--maps"])
+    assert sorted(calls) == [0, 3] and report["written"][-1].endswith("vertex_maps.npz")
+    with np.load(tmp_path / "maps" / "vertex_maps.npz") as maps:
+        assert sorted(maps.files) == ["level_00", "level_03"]
+        np.testing.assert_array_equal(maps["level_00"], np.arange(len(clean.vertices)))
+        level3 = maps["level_03"]
+    # every input vertex maps to a level-3 vertex, and each level-3 vertex represents itself and others
+    assert level3.dtype == np.int64 and len(level3) == len(clean.vertices)
+    count = report["vertex_counts"][3]
+    assert level3.min() == 0 and level3.max() == count - 1 and len(np.unique(level3)) == count
+
+
 def test_encode_then_decode(tmp_path, capsys, clean):
     from o3d_lsmesh.encoding import decode_geometry
 

@@ -54,14 +54,13 @@ def hierarchy(args: argparse.Namespace, run: Run) -> int:
     chosen = parse_levels(args.levels, len(built))
     outdir.mkdir(parents=True, exist_ok=True)
     files: list[str] = []
-    maps: dict[str, Any] = {}  # level name -> vertex map
     for level in chosen:
         path = str(outdir / f"level_{level:02d}{args.format}")
         check_output(path, [args.input], force=args.force, suffixes=None)
         write_output(path, built.level(level))
         files.append(path)
-        maps[f"level_{level:02d}"] = np.asarray(built.vertex_map(level), dtype=np.int64)
-    if args.maps:
+    if args.maps:  # each map composes the parents of every level above it: only when asked
+        maps: dict[str, Any] = {f"level_{level:02d}": built.vertex_map(level) for level in chosen}
         np.savez_compressed(outdir / "vertex_maps.npz", **maps)
         files.append(str(outdir / "vertex_maps.npz"))
     counts = [int(built.vertex_count(i)) for i in range(len(built))]

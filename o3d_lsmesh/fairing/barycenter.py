@@ -204,8 +204,10 @@ def _valence_tables(triangles: np.ndarray, valence: np.ndarray | None = None):
         slot = np.zeros(base**3, dtype=key_type)
         slot[distinct] = np.arange(len(distinct), dtype=key_type)
         group = gather(slot, keys, out=spare)
-    else:
-        distinct, group = _sorted_groups(keys.astype(np.int64))
+    else:  # sort-and-mask (the topology module's)
+        keys = keys.astype(np.int64)
+        order, starts, _, group = group_keys(keys, int(keys.max()) + 1)
+        distinct = keys[order[starts]]
     table = values[np.stack([distinct // (base * base), (distinct // base) % base, distinct % base], axis=1)]
     table = table.astype(np.float64)
     g = len(table)
@@ -219,12 +221,6 @@ def _valence_tables(triangles: np.ndarray, valence: np.ndarray | None = None):
     rhs[:, 3, 3] = 1.0
     solution = np.linalg.solve(kkt, rhs)  # (g, 4, 4): rows 0..2 are [M | u]
     return group, table, solution[:, :3, :3], solution[:, :3, 3]
-
-
-def _sorted_groups(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    # distinct keys (sorted) and the group of every key, by the topology module's sort-and-mask
-    order, starts, _, group = group_keys(keys, int(keys.max()) + 1)
-    return keys[order[starts]], group
 
 
 @dataclass(frozen=True)

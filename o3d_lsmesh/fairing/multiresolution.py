@@ -6,15 +6,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .._o3d import new_mesh
+from .._o3d import new_mesh, read_mesh
 from .._progress import check_progress, progress_bar
 from .._validate import as_choice, as_count
-from ..hierarchy.hierarchy import (
-    MeshHierarchy,
-    boundary_degree,
-    collapse_hierarchy,
-    read_hierarchy_mesh,
-)
+from ..hierarchy.hierarchy import MeshHierarchy, boundary_degree, collapse_hierarchy
 from ..topology import VertexRings, boundary_curves, vertex_rings
 from .boundary_curve import curve_operator, run_curve_iterations
 from .constrained import FAIRING_METHODS, constrained_fairing_arrays, fair_local, plain_pages
@@ -231,7 +226,7 @@ def multiresolution_fairing(
     progress = check_progress(progress)
     # a given hierarchy indexes the mesh's own vertices (build_hierarchy does not weld): weld only
     # when the hierarchy is built here, on the welded surface
-    data = read_hierarchy_mesh(mesh, weld=hierarchy is None)
+    data = read_mesh(mesh, weld=hierarchy is None)
     if hierarchy is None:
         hierarchy = collapse_hierarchy(  # the arrays are read_mesh's checked copies
             data.vertices,

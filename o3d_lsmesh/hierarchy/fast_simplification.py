@@ -17,12 +17,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .._collapsed import collapsed_triangles
-from .._o3d import warn_dropped_attributes
+from .._o3d import read_mesh, warn_dropped_attributes
 from .._progress import check_progress, progress_bar
 from .._ranges import concatenated_ranges
-from .._validate import as_count
+from .._validate import as_count, as_positive_float
 from ..topology import adjacency_matrix, connected_components, unique_edges
-from .hierarchy import MeshHierarchy, read_hierarchy_mesh, tensor_format_of
+from .hierarchy import MeshHierarchy, tensor_format_of
 
 if TYPE_CHECKING:
     from .._types import AnyMesh
@@ -122,12 +122,9 @@ def from_fast_simplification(
     import fast_simplification
 
     min_vertices = as_count(min_vertices, name="min_vertices", minimum=4)
-    if isinstance(agg, (bool, np.bool_)) or not isinstance(agg, (int, float, np.floating, np.integer)):
-        raise TypeError(f"agg must be a number, got {agg!r}")
-    if not np.isfinite(agg) or agg < 0:
-        raise ValueError(f"agg must be non-negative and finite, got {agg}")
+    agg = as_positive_float(agg, name="agg", allow_zero=True)
     progress = check_progress(progress)
-    data = read_hierarchy_mesh(mesh)
+    data = read_mesh(mesh)
     warn_dropped_attributes(data, "hierarchy levels have new connectivity")
     V, F = data.vertices, data.triangles
     n0, m0 = len(V), len(F)
@@ -215,14 +212,15 @@ def from_fast_simplification(
         mapped = _drop_nonmanifold(_drop_duplicate_triangles(mapped[alive], n_new), n_new)
         adjacency = adjacency_matrix(tris[-1], n_prev)
         ring_offsets = np.r_[0, np.cumsum(np.diff(adjacency.indptr)[gone])].astype(np.int64)
-        ring = _csr_rows(adjacency, gone)
+        starts = adjacency.indptr[gone]
+        ring = adjacency.indices[concatenated_ranges(starts, adjacency.indptr[gone + 1] - starts)]
         tris.append(mapped)
         reps.append(reps[-1][keep])
         parents.append(parent)
         removed.append(gone)
         targets.append(np.flatnonzero(keep)[parent[gone]])
         offsets.append(ring_offsets)
-        rings.append(ring)
+        rings.append(ring.astype(np.int64))
     return MeshHierarchy(
         V,
         tuple(tris),
@@ -237,11 +235,6 @@ def from_fast_simplification(
         data.kind,
         tensor_format_of(data),
     )
-
-
-def _csr_rows(matrix, rows: np.ndarray) -> np.ndarray:
-    starts = matrix.indptr[rows]
-    return matrix.indices[concatenated_ranges(starts, matrix.indptr[rows + 1] - starts)].astype(np.int64)
 
 
 def _drop_duplicate_triangles(triangles: np.ndarray, n: int) -> np.ndarray:

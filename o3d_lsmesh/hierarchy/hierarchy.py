@@ -29,7 +29,6 @@ __all__ = [
     "build_hierarchy",
     "build_hierarchy_arrays",
     "locked_vertices",
-    "read_hierarchy_mesh",
 ]
 
 
@@ -318,12 +317,6 @@ def _harmonic_fill(
     return np.asarray(solution).reshape(len(removed), 3)
 
 
-def read_hierarchy_mesh(mesh: AnyMesh, *, weld: bool = False) -> MeshData:
-    """Read ``mesh`` for a hierarchy: any mesh :func:`read_mesh` accepts (non-manifold, unreferenced
-    vertices); ``weld``: see :func:`~o3d_lsmesh._o3d.read_mesh`."""
-    return read_mesh(mesh, name="mesh", allow_isolated=True, weld=weld)
-
-
 def locked_vertices(triangles: np.ndarray, n: int) -> np.ndarray:
     """``(n,) bool``: the vertices a hierarchy keeps at every level, unmoved and never a collapse target.
 
@@ -406,7 +399,7 @@ def collapse_hierarchy(
     mesh_kind: str = "arrays",
     tensor_format: tuple = (),
 ) -> MeshHierarchy:
-    """:func:`build_hierarchy_arrays` of checked arrays and options (:func:`read_hierarchy_mesh`'s, kept)."""
+    """:func:`build_hierarchy_arrays` of checked arrays and options (:func:`read_mesh`'s, kept)."""
     n0 = len(vertices)
     total = max(n0 - min_vertices, 0)  # at most: a level may find no valid collapse before
     with progress_bar(progress, total=total, desc="mesh hierarchy", unit="vertex") as bar:
@@ -519,7 +512,7 @@ def build_hierarchy(
     (762, 3)
     """
     _warn_workers(workers)
-    data = read_hierarchy_mesh(mesh)
+    data = read_mesh(mesh)  # any mesh: non-manifold, unreferenced vertices
     warn_dropped_attributes(data, "hierarchy levels have new connectivity")
     return build_hierarchy_arrays(
         data.vertices,
