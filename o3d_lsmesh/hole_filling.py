@@ -26,6 +26,7 @@ import scipy.sparse as sp
 from scipy.linalg import cho_factor, cho_solve
 from scipy.sparse import csgraph
 
+from . import _fill_kernel
 from ._errors import O3DLSMeshWarning, SingularSystemError
 from ._o3d import new_mesh, read_mesh
 from ._progress import check_progress, progress_bar
@@ -205,92 +206,6 @@ def _unit(v: np.ndarray) -> np.ndarray:
     return v / np.where(norm > 0, norm, 1.0)[..., None]
 
 
-def _minimum_weight_triangulations(
-    points: np.ndarray, outer_normals: np.ndarray, forbidden: np.ndarray | None
-) -> np.ndarray:
-    """Liepa's dynamic programme on ``B`` loops of ``k`` points at once: triangles ``(B, k - 2, 3)``.
-
-    Minimizes, lexicographically, the largest dihedral angle (between new triangles, and between a
-    new triangle and the mesh triangle on a loop edge, ``outer_normals[:, i]`` on edge ``(i, i + 1)``,
-    zero where unknown) and then the total area (Liepa 2003, section 3, the weight ``Omega = (max
-    angle, area)``). ``points (B, k, 3)``; ``forbidden (B, k, k)`` (or None) marks chords that are mesh
-    edges already (a non-manifold edge otherwise). Triangles are wound ``(j, m, i)``, opposite to the
-    loop like the mesh triangles across its edges. The minimum over the split vertex ``m`` is
-    vectorized over a whole diagonal ``j - i = d`` of the tables and over the batch.
-    """
-    count, k = points.shape[:2]
-    if k == 3:
-        return np.tile(np.array([[[2, 1, 0]]], dtype=np.int64), (count, 1, 1))
-    angle = np.zeros((count, k, k))
-    area = np.zeros((count, k, k))
-    split = np.full((count, k, k), -1, dtype=np.int64)
-    normal = np.zeros((count, k, k, 3))  # unit normal of the triangle on chord (i, j) inside sub-polygon i..j
-    known = np.zeros((count, k, k), dtype=bool)  # an unknown normal is no constraint
-    idx = np.arange(k - 1)
-    normal[:, idx, idx + 1] = outer_normals[:, :-1]
-    known[:, idx, idx + 1] = np.abs(outer_normals[:, :-1]).sum(-1) > 0
-    closing = outer_normals[:, k - 1]  # (B, 3)
-    closing_known = np.abs(closing).sum(-1) > 0
-    batch = np.arange(count)[:, None]
-    tol = 1e-6  # angles this close tie, and the area decides (robust to rounding)
-    for d in range(2, k):
-        i = np.arange(k - d)[:, None]  # (r, 1)
-        j = i + d
-        mm = i + np.arange(1, d)[None, :]  # (r, d - 1)
-        a = points[:, j]  # (B, r, 1, 3)
-        u, v = points[:, mm] - a, points[:, i] - a  # (B, r, d - 1, 3)
-        cross = _cross(u, v)  # triangle (j, m, i)
-        twice_area = np.sqrt(np.einsum("...k,...k->...", cross, cross))
-        tri_normal = cross / np.where(twice_area > 0, twice_area, 1.0)[..., None]
-        cos1 = np.einsum("...k,...k->...", tri_normal, normal[:, i, mm])
-        cos2 = np.einsum("...k,...k->...", tri_normal, normal[:, mm, j])
-        worst = np.minimum(np.where(known[:, i, mm], cos1, 1.0), np.where(known[:, mm, j], cos2, 1.0))
-        if d == k - 1:  # the triangle on the closing loop edge (k - 1, 0) meets the mesh there
-            cos3 = np.einsum("b...k,bk->b...", tri_normal, closing)
-            worst = np.where(closing_known[:, None, None], np.minimum(worst, cos3), worst)
-        theta = np.arccos(np.clip(worst, -1.0, 1.0))
-        # a degenerate triangle (collinear chord samples) is worse than any real one: neither its noise
-        # normal nor its zero area may win (both sides of a chord taking it make a non-manifold edge)
-        longest = np.maximum(np.einsum("...k,...k->...", u, u), np.einsum("...k,...k->...", v, v))
-        theta = np.where(twice_area > 1e-9 * longest, theta, 2.0 * np.pi)
-        total_angle = np.maximum(theta, np.maximum(angle[:, i, mm], angle[:, mm, j]))
-        total_area = 0.5 * twice_area + area[:, i, mm] + area[:, mm, j]
-        if forbidden is not None:
-            total_angle = np.where(forbidden[:, i, mm] | forbidden[:, mm, j], np.inf, total_angle)
-        best_angle = total_angle.min(axis=2, keepdims=True)
-        near_area = np.where(total_angle <= best_angle + tol, total_area, np.inf)
-        best_area = near_area.min(axis=2, keepdims=True)
-        # the first of the (near-)smallest areas: symmetric loops tie exactly, and rounding must not decide
-        choice = np.argmax(near_area <= best_area * (1.0 + 1e-9), axis=2)  # (B, r)
-        rows = np.arange(k - d)[None, :]
-        ii, jj = i[:, 0], j[:, 0]
-        chosen_angle = total_angle[batch, rows, choice]
-        if forbidden is not None and d < k - 1:
-            chosen_angle = np.where(forbidden[:, ii, jj], np.inf, chosen_angle)
-        angle[:, ii, jj] = chosen_angle
-        area[:, ii, jj] = total_area[batch, rows, choice]
-        split[:, ii, jj] = mm[rows, choice]
-        normal[:, ii, jj] = tri_normal[batch, rows, choice]
-        known[:, ii, jj] = twice_area[batch, rows, choice] > 0
-    out = np.empty((count, k - 2, 3), dtype=np.int64)
-    for b in range(count):
-        if not np.isfinite(angle[b, 0, k - 1]) and forbidden is not None:
-            # no triangulation avoids every existing edge: accept one that does not
-            out[b] = _minimum_weight_triangulations(points[b : b + 1], outer_normals[b : b + 1], None)[0]
-            continue
-        table = split[b].tolist()
-        found: list[tuple[int, int, int]] = []
-        stack = [(0, k - 1)]
-        while stack:
-            lo, hi = stack.pop()
-            if hi - lo >= 2:
-                mid = table[lo][hi]
-                found.append((hi, mid, lo))
-                stack += [(lo, mid), (mid, hi)]
-        out[b] = found
-    return out
-
-
 def _triangulate(
     points: np.ndarray, outer_normals: np.ndarray, forbidden: np.ndarray | None, spacing: float
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -301,9 +216,11 @@ def _triangulate(
     """
     k = len(points)
     if k <= DP_MAX_EDGES:
-        return np.zeros((0, 3)), _minimum_weight_triangulations(
-            points[None], outer_normals[None], None if forbidden is None else forbidden[None]
-        )[0]
+        return np.zeros((0, 3)), _fill_kernel.minimum_weight_triangulation(
+            points,
+            outer_normals,
+            None if forbidden is None or not forbidden.any() else forbidden.view(np.uint8),
+        )
     # the shortest chord between vertices 1/3 to 2/3 of the loop apart, in chunks of rows
     best = (np.inf, 0, k // 2)
     gap = np.arange(k // 3, k - k // 3 + 1)[None, :]
@@ -345,39 +262,6 @@ def _triangulate(
     return np.concatenate(extra), np.concatenate(triangles)
 
 
-def _edge_table(tris: np.ndarray, nv: int):
-    """Interior edges ``(triangle 1, slot 1, triangle 2, slot 2, a, b)`` of an oriented patch; its sorted keys."""
-    a, b = tris.reshape(-1), tris[:, [1, 2, 0]].reshape(-1)
-    key = _keys(a, b, nv)
-    order = np.argsort(key, kind="stable")
-    ks = key[order]
-    pair = np.flatnonzero(ks[1:] == ks[:-1])
-    h1, h2 = order[pair], order[pair + 1]
-    return h1 // 3, h1 % 3, h2 // 3, h2 % 3, a[h1], b[h1], ks
-
-
-def _circumsphere(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray):
-    """Centres and radii of the triangles' circumcircles (the spheres of Liepa's flip test)."""
-    u, v = p1 - p0, p2 - p0
-    w = _cross(u, v)
-    ww = (w * w).sum(-1)
-    safe = np.where(ww > 0, ww, 1.0)
-    uu, vv = (u * u).sum(-1)[:, None], (v * v).sum(-1)[:, None]
-    centre = p0 + (_cross(w, u) * vv + _cross(v, w) * uu) / (2.0 * safe[:, None])
-    return centre, np.where(ww > 0, np.linalg.norm(centre - p0, axis=1), np.inf)
-
-
-def _min_angle(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray) -> np.ndarray:
-    """Smallest interior angle (radians) of each triangle ``(p0, p1, p2)``: the one opposite the shortest
-    edge (law of sines), ``arcsin(2 area / (l_mid l_max))``, one cross product for all three corners."""
-    a, b, c = p1 - p0, p2 - p1, p0 - p2
-    lengths = np.sort(np.stack([(a * a).sum(1), (b * b).sum(1), (c * c).sum(1)]), axis=0)
-    twice_area = np.sqrt((_cross(a, c) ** 2).sum(1))
-    denominator = np.sqrt(lengths[1] * lengths[2])
-    ratio = np.divide(twice_area, denominator, out=np.zeros(len(p0)), where=denominator > 0)
-    return np.arcsin(np.minimum(ratio, 1.0))
-
-
 def _keys(a: np.ndarray, b: np.ndarray, nv: int) -> np.ndarray:
     """Undirected edge keys ``min * nv + max``."""
     return np.minimum(a, b) * nv + np.maximum(a, b)
@@ -388,117 +272,6 @@ def _absent(sorted_keys: np.ndarray, keys: np.ndarray) -> np.ndarray:
     if len(sorted_keys) == 0:
         return np.ones(len(keys), dtype=bool)
     return sorted_keys[np.minimum(np.searchsorted(sorted_keys, keys), len(sorted_keys) - 1)] != keys
-
-
-def _relax(points: np.ndarray, tris: np.ndarray, fixed_pairs: np.ndarray, dirty: np.ndarray) -> np.ndarray:
-    """Delaunay edge flips (Liepa's relaxation) until none applies, in batches of independent flips.
-
-    An interior edge ``(a, b)`` between triangles ``(a, b, c)`` and ``(b, a, d)`` flips to ``(c, d)``
-    when ``d`` is strictly inside the circumsphere of ``(a, b, c)`` (or ``c`` inside that of
-    ``(b, a, d)``), ``(c, d)`` is no edge yet (in the patch or in ``fixed_pairs`` around it), both new
-    triangles face as the old pair and the pair's smallest angle grows.
-
-    Only edges whose verdict can have changed are tested: those of the ``dirty`` triangles (a mask) and,
-    in later passes, of the triangles a flip rewrote or left waiting, and those a removed edge blocked.
-    """
-    nv = len(points)
-    tris = tris.copy()
-    removed = np.zeros(0, dtype=np.int64)
-    fixed_keys = np.sort(_keys(fixed_pairs[:, 0], fixed_pairs[:, 1], nv))
-    for _ in range(100):
-        t1, s1, t2, s2, a, b, key = _edge_table(tris, nv)
-        if len(t1) == 0:
-            break
-        c = tris[t1, (s1 + 2) % 3]
-        d = tris[t2, (s2 + 2) % 3]
-        new_key = _keys(c, d, nv)
-        mark = dirty[t1] | dirty[t2]
-        if len(removed):
-            mark |= ~_absent(removed, new_key)
-        open_ = np.flatnonzero(mark)
-        # the new edge must not exist yet (in the patch, or around it)
-        ok_key = new_key[open_]
-        open_ = open_[_absent(key, ok_key) & _absent(fixed_keys, ok_key) & (c[open_] != d[open_])]
-        pa, pb, pc, pd = points[a[open_]], points[b[open_]], points[c[open_]], points[d[open_]]
-        # a relative margin: near-co-circular quads (common on regular patches) are not flipped, so
-        # the result does not hinge on rounding (rigid motions give the same connectivity)
-        centre, radius = _circumsphere(pa, pb, pc)
-        near = np.linalg.norm(pd - centre, axis=1) < radius * (1.0 - 1e-6)
-        rest = np.flatnonzero(~near)  # and the other way round (in 3D the two tests differ)
-        centre2, radius2 = _circumsphere(pb[rest], pa[rest], pd[rest])
-        near[rest] = np.linalg.norm(pc[rest] - centre2, axis=1) < radius2 * (1.0 - 1e-6)
-        inside = np.zeros(len(t1), dtype=bool)
-        inside[open_] = near
-        live = np.flatnonzero(inside)  # the other tests only on the edges still in
-        pa, pb, pc, pd = points[a[live]], points[b[live]], points[c[live]], points[d[live]]
-        # the new triangles (c, a, d) and (d, b, c) must not fold over
-        old = _cross(pb - pa, pc - pa) + _cross(pa - pb, pd - pb)
-        ok = ((_cross(pa - pc, pd - pc) * old).sum(1) > 0) & ((_cross(pb - pd, pc - pd) * old).sum(1) > 0)
-        # and the smallest angle grows (the two sphere tests disagree in 3D: without this an edge could
-        # flip back and forth): (a, b, c), (b, a, d) before; (c, a, d), (d, b, c) after
-        angles = _min_angle(
-            np.concatenate([pa, pb, pc, pd]),
-            np.concatenate([pb, pa, pa, pb]),
-            np.concatenate([pc, pd, pd, pc]),
-        ).reshape(4, -1)
-        ok &= np.minimum(angles[2], angles[3]) > np.minimum(angles[0], angles[1]) + 1e-9
-        inside[live] = ok
-        proposed = np.flatnonzero(inside)
-        if len(proposed) == 0:
-            break
-        # independent set: each triangle takes part in at most one flip of this pass
-        owner = np.full(len(tris), len(t1), dtype=np.int64)
-        np.minimum.at(owner, t1[proposed], proposed)
-        np.minimum.at(owner, t2[proposed], proposed)
-        cand = proposed[(owner[t1[proposed]] == proposed) & (owner[t2[proposed]] == proposed)]
-        _, first = np.unique(new_key[cand], return_index=True)  # two flips must not make the same edge
-        cand = cand[np.sort(first)]
-        dirty = np.zeros(len(tris), dtype=bool)
-        dirty[t1[proposed]] = True
-        dirty[t2[proposed]] = True
-        removed = np.sort(_keys(a[cand], b[cand], nv))
-        tris[t1[cand]] = np.stack([c[cand], a[cand], d[cand]], axis=1)
-        tris[t2[cand]] = np.stack([d[cand], b[cand], c[cand]], axis=1)
-    return tris
-
-
-def _refine(
-    points: np.ndarray, sigma: np.ndarray, tris: np.ndarray, fixed_pairs: np.ndarray, owner: np.ndarray
-):
-    """Liepa's refinement: centroid splits of triangles larger than the local scale, then relaxation.
-
-    A triangle with centroid ``c`` and ``sigma_c`` the mean of its corners' scales is split when
-    ``alpha * |c - v_m| > max(sigma_c, sigma_m)`` for each corner ``m`` (``alpha = sqrt(2)``); the new
-    vertex takes scale ``sigma_c``. Rounds of splits and flips run until no triangle splits. Patches
-    in disjoint index ranges refine at once, ``owner`` naming each point's patch. Returns the points
-    (the first ``len(points)`` unchanged), the triangles and the points' owners.
-    """
-    # no flips before the first split (as Liepa and CGAL): on a short loop Delaunay flips made the
-    # minimum-weight triangles slimmer, and coarse holes got no new vertex (camel 2.5h: 0, CGAL 3)
-    relaxed = False
-    for _ in range(60):
-        corners = points[tris]  # (t, 3, 3)
-        centre = corners.mean(axis=1)
-        sigma_c = sigma[tris].mean(axis=1)
-        dist = np.linalg.norm(centre[:, None, :] - corners, axis=2)
-        chosen = np.flatnonzero((_ALPHA * dist > np.maximum(sigma_c[:, None], sigma[tris])).all(axis=1))
-        if len(chosen) == 0:
-            break
-        new = len(points) + np.arange(len(chosen))
-        points = np.concatenate([points, centre[chosen]])
-        sigma = np.concatenate([sigma, sigma_c[chosen]])
-        owner = np.concatenate([owner, owner[tris[chosen, 0]]])
-        a, b, c = tris[chosen, 0], tris[chosen, 1], tris[chosen, 2]
-        tris[chosen] = np.stack([a, b, new], axis=1)
-        tris = np.concatenate([tris, np.stack([b, c, new], axis=1), np.stack([c, a, new], axis=1)])
-        # after a relaxation only edges of the split triangles can flip
-        split_mask = np.ones(len(tris), dtype=bool)
-        if relaxed:
-            split_mask[: len(split_mask) - 2 * len(chosen)] = False
-            split_mask[chosen] = True
-        tris = _relax(points, tris, fixed_pairs, split_mask)
-        relaxed = True
-    return points, tris, owner
 
 
 def _rings(
@@ -826,40 +599,25 @@ class HoleFiller:
             empty = np.zeros(0, dtype=np.int64)
             return FilledHoles(vertices.copy(), triangles.copy(), [], skipped, sp.csr_matrix((0, n)), empty)
         # each piece (a loop; one through a vertex twice is cut in pieces) is triangulated on its own,
-        # loops of one length in one batch of the dynamic programme, longer ones cut by chords first
+        # long ones cut by chords sampled at the refinement's spacing (none without) first
         pieces = [(h, *p) for h, hole in enumerate(holes) for p in _simple_pieces(hole.vertices, hole.rows)]
         piece_hole, piece_loop, piece_rows = zip(*pieces)
         piece_points, piece_outer, piece_forbidden, piece_spacing = zip(
             *map(self._piece, piece_loop, piece_rows)
         )
         count = len(piece_loop)
-        piece_extra, piece_tris = [np.zeros((0, 3))] * count, [np.zeros((0, 3), dtype=np.int64)] * count
-        lengths = np.array([len(loop) for loop in piece_loop])
+        piece_extra, piece_tris = [], []
         with progress_bar(progress, total=count, desc="filling holes", unit="loop") as bar:
-            for k in np.unique(lengths):
-                group = np.flatnonzero(lengths == k)
-                # batches bound the tables' memory (~60 k**2 floats a loop); longer loops go one by one
-                step = 1 if k > DP_MAX_EDGES else max(1, 200_000 // int(k) ** 2)
-                for chunk in np.split(group, np.arange(step, len(group), step)):
-                    stacked = np.stack([piece_forbidden[i] for i in chunk])
-                    forbidden = stacked if stacked.any() else None
-                    if k > DP_MAX_EDGES:  # cut by chords sampled at the refinement's spacing (none without)
-                        i = int(chunk[0])
-                        piece_extra[i], piece_tris[i] = _triangulate(
-                            piece_points[i],
-                            piece_outer[i],
-                            None if forbidden is None else forbidden[0],
-                            piece_spacing[i] / density if density > 0 else 0.0,
-                        )
-                    else:
-                        found = _minimum_weight_triangulations(
-                            np.stack([piece_points[i] for i in chunk]),
-                            np.stack([piece_outer[i] for i in chunk]),
-                            forbidden,
-                        )
-                        for i, tris in zip(chunk.tolist(), found):
-                            piece_tris[i] = tris
-                    bar.update(len(chunk))
+            for points, outer, forbidden, spacing in zip(
+                piece_points, piece_outer, piece_forbidden, piece_spacing
+            ):
+                extra, tris = _triangulate(
+                    points, outer, forbidden, spacing / density if density > 0 else 0.0
+                )
+                piece_extra.append(extra)
+                piece_tris.append(tris)
+                bar.update(1)
+        lengths = np.array([len(loop) for loop in piece_loop])
         # every piece refined at once, in disjoint local index ranges
         sizes = np.array([len(p) + len(e) for p, e in zip(piece_points, piece_extra)])
         starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
@@ -875,8 +633,8 @@ class HoleFiller:
             ]
             # mesh edges between loop vertices: no flip may make them twice
             fixed = [np.argwhere(np.triu(f)) + start for f, start in zip(piece_forbidden, starts)]
-            all_points, all_tris, point_piece = _refine(
-                all_points, np.concatenate(sigma), all_tris, np.concatenate(fixed), point_piece
+            all_points, all_tris, point_piece = _fill_kernel.refine(
+                all_points, np.concatenate(sigma), all_tris, np.concatenate(fixed), point_piece, _ALPHA
             )
         # global numbering: loop points (first in each piece, in order) are mesh vertices; the others
         # are new, numbered piece by piece
@@ -972,9 +730,9 @@ class HoleFiller:
                     again = solve(level, True)
                     if again is not None and _no_fold(work, again, new_tris):
                         work[n:] = again
-                        yield level, _tangential_relax(work, new_tris, n)
+                        yield level, _fill_kernel.tangential_relax(work, new_tris, n)
                         work[n:] = solution
-                yield level, _tangential_relax(work, new_tris, n)
+                yield level, _fill_kernel.tangential_relax(work, new_tris, n)
                 work[n:] = refined
             yield -1, refined  # the refined patch as triangulated
 
@@ -1049,41 +807,6 @@ def _interpolation(
     if not rows:
         return sp.csr_matrix((p, n))
     return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(p, n))
-
-
-def _tangential_relax(vertices: np.ndarray, new_tris: np.ndarray, first_new: int) -> np.ndarray:
-    """Move each new vertex ten times half-way to its star's area-weighted centroid, in its tangent plane;
-    the new vertices' positions ``(len(vertices) - first_new, 3)``.
-
-    The star's centroid (a step of centroidal Voronoi smoothing), not the neighbours' mean, which on
-    an irregular star sits towards the short edges and leaves a sliver (smallest angle on plane_holes
-    24.2 -> 25.6 degrees, horse 15h 22.0 -> 24.1). Only the move's part tangent to the area-weighted
-    normal of the vertex's (new) triangles is taken: the faired surface is kept to first order.
-    """
-    moving = np.arange(first_new, len(vertices))
-    # a local, increasing numbering of the patches' vertices: nothing grows with the mesh
-    local = np.union1d(new_tris.ravel(), moving)
-    tris = np.searchsorted(local, new_tris)
-    mov = np.searchsorted(local, moving)
-    incidence: Any = sp.csr_matrix(  # the triangles of each moving vertex
-        (np.ones(3 * len(tris)), tris.ravel(), np.arange(0, 3 * len(tris) + 1, 3)),
-        shape=(len(tris), len(local)),
-    ).T.tocsr()[mov]
-    if incidence.shape[0] * incidence.shape[1] <= 1 << 14:
-        incidence = incidence.toarray()  # a small patch: dense products cost less than sparse ones
-    x = vertices[local]
-    for _ in range(10):
-        p = x[tris]
-        face_normal = _cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
-        normal = _unit(incidence @ face_normal)
-        area = np.sqrt((face_normal**2).sum(axis=1))
-        target = (incidence @ (area[:, None] * p.mean(axis=1))) / np.maximum(incidence @ area, 1e-300)[
-            :, None
-        ]
-        move = target - x[mov]
-        move -= (move * normal).sum(axis=1, keepdims=True) * normal
-        x[mov] += 0.5 * move
-    return x[mov]
 
 
 class _TriangleIndex:
@@ -1175,47 +898,7 @@ def _crossings(
     close = np.linalg.norm(c_new[pairs[:, 0]] - c_new[pairs[:, 1]], axis=1) <= r_new[pairs].sum(axis=1)
     a = new[np.concatenate([ia, pairs[close, 0]])]
     b = np.concatenate([ib, first_new + pairs[close, 1]])
-    ta, tb = triangles[a], triangles[b]
-    apart = ~(ta[:, :, None] == tb[:, None, :]).any(axis=(1, 2))
-    P, Q, a, b = vertices[ta[apart]], vertices[tb[apart]], a[apart], b[apart]  # (k, 3, 3)
-    # bounding boxes overlap: three of the axes, the cheapest, where most pairs stop
-    boxes = ((P.min(axis=1) <= Q.max(axis=1)) & (Q.min(axis=1) <= P.max(axis=1))).all(axis=1)
-    P, Q, a, b = P[boxes], Q[boxes], a[boxes], b[boxes]
-    if len(a) == 0:
-        return result
-    eP = P[:, [1, 2, 0]] - P
-    eQ = Q[:, [1, 2, 0]] - Q
-    nP = _cross(eP[:, 0], eP[:, 1])
-    nQ = _cross(eQ[:, 0], eQ[:, 1])
-    axes = np.concatenate(  # (17, k, 3)
-        [
-            np.stack([nP, nQ]),
-            _cross(eP[None, :, :, :], eQ.transpose(1, 0, 2)[:, :, None, :])
-            .transpose(0, 2, 1, 3)
-            .reshape(9, -1, 3),
-            _cross(nP[:, None, :], eP).transpose(1, 0, 2),
-            _cross(nQ[:, None, :], eQ).transpose(1, 0, 2),
-        ]
-    )
-    scale = np.maximum(np.abs(P).max(axis=(1, 2)), np.abs(Q).max(axis=(1, 2))) + np.abs(eP).max(axis=(1, 2))
-    ax, ay, az = axes[..., 0], axes[..., 1], axes[..., 2]
-    length = np.sqrt(ax * ax + ay * ay + az * az)
-    usable = length > 1e-12 * scale**2
-    inv = 1.0 / np.where(usable, length, 1.0)
-    ax, ay, az = ax * inv, ay * inv, az * inv
-
-    def extent(T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        # the corners' projections on every axis, elementwise (size-3 reductions and einsum were slower)
-        x = [ax * T[:, c, 0] + ay * T[:, c, 1] + az * T[:, c, 2] for c in range(3)]
-        return np.minimum(np.minimum(x[0], x[1]), x[2]), np.maximum(np.maximum(x[0], x[1]), x[2])
-
-    p_low, p_high = extent(P)
-    q_low, q_high = extent(Q)
-    # strictly apart: coplanar pairs project to one point on their common normal (gap 0)
-    hit = ~(usable & (np.maximum(q_low - p_high, p_low - q_high) > 1e-12 * scale)).any(axis=0)
-    np.add.at(result, a[hit] - first_new, 1.0)
-    np.add.at(result, b[hit & (b >= first_new)] - first_new, 1.0)
-    return result
+    return _fill_kernel.count_crossings(vertices, triangles, a, b, first_new)
 
 
 def _no_fold(x: np.ndarray, again: np.ndarray, new_tris: np.ndarray) -> bool:

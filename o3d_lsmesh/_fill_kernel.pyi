@@ -1,0 +1,24 @@
+"""Type stub of the compiled hole-filling kernel (``_fill_kernel.pyx``)."""
+
+import numpy as np
+
+def minimum_weight_triangulation(
+    points: np.ndarray, outer_normals: np.ndarray, forbidden: np.ndarray | None = None
+) -> np.ndarray: ...
+def relax(
+    points: np.ndarray, triangles: np.ndarray, fixed_pairs: np.ndarray, dirty: np.ndarray
+) -> np.ndarray: ...
+def refine(
+    points: np.ndarray,
+    sigma: np.ndarray,
+    triangles: np.ndarray,
+    fixed_pairs: np.ndarray,
+    owner: np.ndarray,
+    alpha: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
+def tangential_relax(
+    vertices: np.ndarray, new_tris: np.ndarray, first_new: int, iterations: int = 10
+) -> np.ndarray: ...
+def count_crossings(
+    vertices: np.ndarray, triangles: np.ndarray, a: np.ndarray, b: np.ndarray, first_new: int
+) -> np.ndarray: ...
