@@ -23,15 +23,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.linalg import cho_factor, cho_solve
 from scipy.sparse import csgraph
 
-from . import _fill_kernel
+from . import _fill_kernel, _solvers
 from ._errors import O3DLSMeshWarning, SingularSystemError
 from ._o3d import new_mesh, read_mesh
 from ._progress import check_progress, progress_bar
 from ._ranges import concatenated_ranges
-from ._solvers import SPDSolver
 from ._validate import as_bool, as_choice, as_count, as_positive_float, mesh_arrays
 from .topology import boundary_loops, unique_edges_and_runs
 
@@ -62,9 +60,6 @@ BORDER_RATIO = 4.0
 
 _Edges = tuple[np.ndarray, np.ndarray, np.ndarray]  # edges i < j of a local mesh, each half-edge's edge
 _ALPHA = np.sqrt(2.0)  # Liepa's density factor (section 4)
-#: Fairing systems with at most this many unknowns are solved dense (measured: below it the sparse
-#: path's assembly, analysis and factorization overheads cost more than the dense products).
-_DENSE_UNKNOWNS = 120
 
 
 def _loop_rows(triangles: np.ndarray, n: int, edge_info: Any) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -343,19 +338,6 @@ def _operators(
     return K, L, np.stack([i, j], axis=1)
 
 
-def _solve_spd(normal: Any, rhs: np.ndarray) -> np.ndarray:
-    """Solve the SPD system: a dense Cholesky for an array (a small patch, where the sparse gateway's
-    analysis and factorization overheads are most of the time), :class:`SPDSolver` for a sparse matrix."""
-    if sp.issparse(normal):
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", O3DLSMeshWarning)  # the SciPy fallback warning: tiny systems
-            return SPDSolver(normal.tocsc(), ordering="amd").solve(np.asarray(rhs))
-    try:
-        return cho_solve(cho_factor(normal), rhs)
-    except np.linalg.LinAlgError as error:
-        raise SingularSystemError(f"the fairing system is singular: {error}") from error
-
-
 def _fair(
     x: np.ndarray, tris: np.ndarray, unknown: np.ndarray, rings: list, level: int, edges: _Edges, cot: bool
 ):
@@ -373,7 +355,7 @@ def _fair(
     ``tris``; ``cot`` reads the weights of :func:`_operators` off ``x``.
     """
     nv = len(x)
-    dense = len(unknown) <= _DENSE_UNKNOWNS
+    dense = len(unknown) <= _solvers.DENSE_UNKNOWNS  # operators as arrays for solve_spd's dense path
     K, L, pairs = _operators(tris, nv, edges, x if cot else None, dense)
     if level == 0:
         known = np.ones(nv, dtype=bool)
@@ -408,7 +390,7 @@ def _fair(
         fixed[unknown] = 0.0  # A_known x_known, without slicing the known columns out
         normal = A_u.T @ A_u
         rhs = -(A_u.T @ (A_full @ fixed))
-    return _solve_spd(normal, rhs)
+    return _solvers.solve_spd(normal, rhs)
 
 
 @dataclass(frozen=True)
