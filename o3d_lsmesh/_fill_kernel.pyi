@@ -22,3 +22,6 @@ def tangential_relax(
 def count_crossings(
     vertices: np.ndarray, triangles: np.ndarray, a: np.ndarray, b: np.ndarray, first_new: int
 ) -> np.ndarray: ...
+def rings(
+    triangles: np.ndarray, indptr: np.ndarray, data: np.ndarray, seeds: np.ndarray, count: int
+) -> tuple[np.ndarray, list[np.ndarray]]: ...

@@ -693,3 +693,64 @@ def count_crossings(const double[:, ::1] vertices, const int64_t[:, ::1] triangl
             if tb >= first_new:
                 result[tb - first_new] += 1.0
     return result_
+
+
+# ----------------------------------------------------------------------------------------------------------
+# the rings of fixed vertices around the holes
+
+
+def rings(const int64_t[:, ::1] triangles, const int64_t[::1] indptr, const int64_t[::1] data, seeds,
+          int count):
+    """Breadth-first vertex rings around ``seeds`` (ring 0) over each vertex's triangles (CSR ``indptr``,
+    ``data``): the triangles (sorted) touching rings ``0 .. count - 1`` and the ``count + 1`` rings,
+    each sorted (the last one incomplete: its vertices' other triangles are not taken).
+
+    Visited marks over the whole mesh are allocated zeroed (pages the walk does not touch cost nothing),
+    so the work grows with the rings, not with the mesh.
+    """
+    cdef int64_t n = indptr.shape[0] - 1, m = triangles.shape[0], i, j, v, t, c, size, found
+    front_ = np.unique(np.asarray(seeds, dtype=np.int64))
+    if len(front_) and (front_[0] < 0 or front_[-1] >= n):
+        raise ValueError("seeds outside the mesh")
+    seen_ = np.zeros(n, dtype=np.uint8)
+    took_ = np.zeros(m, dtype=np.uint8)
+    cdef uint8_t[::1] seen = seen_, took = took_
+    cdef int64_t[::1] front = front_, touch, fresh
+    out_rings, out_taken = [np.asarray(seeds)], []
+    for i in range(front.shape[0]):
+        seen[front[i]] = 1
+    for _ in range(count):
+        size = 0
+        for i in range(front.shape[0]):
+            size += indptr[front[i] + 1] - indptr[front[i]]
+        touch_ = np.empty(size, dtype=np.int64)
+        touch = touch_
+        found = 0
+        with nogil:
+            for i in range(front.shape[0]):  # the ring's triangles not taken before
+                v = front[i]
+                for j in range(indptr[v], indptr[v + 1]):
+                    t = data[j]
+                    if not took[t]:
+                        took[t] = 1
+                        touch[found] = t
+                        found += 1
+        touch_ = np.sort(touch_[:found])
+        touch = touch_
+        fresh_ = np.empty(3 * found, dtype=np.int64)
+        fresh = fresh_
+        size = 0
+        with nogil:
+            for i in range(found):  # their corners not seen before: the next ring
+                for c in range(3):
+                    v = triangles[touch[i], c]
+                    if not seen[v]:
+                        seen[v] = 1
+                        fresh[size] = v
+                        size += 1
+        front_ = np.sort(fresh_[:size])
+        front = front_
+        out_taken.append(touch_)
+        out_rings.append(front_)
+    taken = np.sort(np.concatenate(out_taken)) if out_taken else np.zeros(0, dtype=np.int64)
+    return taken, out_rings

@@ -269,24 +269,6 @@ def _absent(sorted_keys: np.ndarray, keys: np.ndarray) -> np.ndarray:
     return sorted_keys[np.minimum(np.searchsorted(sorted_keys, keys), len(sorted_keys) - 1)] != keys
 
 
-def _rings(
-    triangles: np.ndarray, vertex_triangles: tuple[np.ndarray, np.ndarray], seeds: np.ndarray, count: int
-):
-    """The triangles (sorted) of ``count`` successive vertex rings around ``seeds`` (ring 0), and the
-    ``count + 1`` rings (the last incomplete), from each vertex's triangles ``vertex_triangles`` (CSR)."""
-    indptr, data = vertex_triangles
-    seen = front = np.unique(seeds)
-    rings, taken = [seeds], np.zeros(0, dtype=np.int64)
-    for _ in range(count):
-        touch = data[concatenated_ranges(indptr[front], indptr[front + 1] - indptr[front])]
-        touch = np.setdiff1d(touch, taken)  # the ring's new triangles
-        taken = np.union1d(taken, touch)
-        front = np.setdiff1d(triangles[touch].ravel(), seen)
-        seen = np.union1d(seen, front)
-        rings.append(front)
-    return taken, rings
-
-
 def _unique_edges(tris: np.ndarray, nv: int) -> _Edges:
     """Undirected edges ``i < j`` of a local mesh (sorted) and the edge of each of its ``3t`` half-edges."""
     e = np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1)
@@ -678,7 +660,7 @@ class HoleFiller:
         loops = np.unique(np.concatenate([hole.vertices for hole in holes]))
         # triangles within `continuity` rings of the loops in the input, plus every new triangle
         old, new_tris = triangles[:m], triangles[m:]
-        ring_tris, rings = _rings(old, self.vertex_triangles, loops, continuity)
+        ring_tris, rings = _fill_kernel.rings(self.triangles, *self.vertex_triangles, loops, continuity)
         local_tris = np.concatenate([old[ring_tris], new_tris])
         local_vertices = np.unique(local_tris)
         remap = np.full(total, -1, dtype=np.int64)

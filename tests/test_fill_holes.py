@@ -25,7 +25,6 @@ from o3d_lsmesh.hole_filling import (
     DP_MAX_EDGES,
     HoleFiller,
     _crossings,
-    _rings,
     _TriangleIndex,
     fill_holes_arrays,
     find_holes,
@@ -300,7 +299,7 @@ def test_rings_are_the_plain_breadth_first_rings():
     seeds = np.array([0, 5])
     indptr = np.concatenate([[0], np.cumsum(np.bincount(T.ravel(), minlength=len(V)))])
     order = np.argsort(T.ravel(), kind="stable")
-    tris, rings = _rings(T, (indptr, order // 3), seeds, 2)
+    tris, rings = _fill_kernel.rings(T, indptr, order // 3, seeds, 2)
     neighbours = {v: set() for v in range(len(V))}
     for a, b, c in T.tolist():
         neighbours[a] |= {b, c}
