@@ -25,3 +25,6 @@ def count_crossings(
 def rings(
     triangles: np.ndarray, indptr: np.ndarray, data: np.ndarray, seeds: np.ndarray, count: int
 ) -> tuple[np.ndarray, list[np.ndarray]]: ...
+def sphere_pairs(
+    ca: np.ndarray, ra: np.ndarray, cb: np.ndarray | None = None, rb: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]: ...

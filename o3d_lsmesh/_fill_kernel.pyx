@@ -754,3 +754,106 @@ def rings(const int64_t[:, ::1] triangles, const int64_t[::1] indptr, const int6
         out_rings.append(front_)
     taken = np.sort(np.concatenate(out_taken)) if out_taken else np.zeros(0, dtype=np.int64)
     return taken, out_rings
+
+
+# ----------------------------------------------------------------------------------------------------------
+# overlapping bounding spheres: the candidates of the crossing test
+
+
+cdef inline bint _overlap(const double* c, double r, const double* d, double s) noexcept nogil:
+    cdef double d0 = c[0] - d[0], d1 = c[1] - d[1], d2 = c[2] - d[2]
+    return sqrt((d0 * d0 + d1 * d1) + d2 * d2) <= r + s
+
+
+cdef int64_t _sweep(const double* ca, const double* ra, int64_t na, const double* cb, const double* rb,
+                    bint same, int axis, const int64_t* order, int64_t total, int64_t* active,
+                    int64_t* out, int64_t capacity) noexcept nogil:
+    """Sweep and prune along ``axis``: the items (``a`` as ``0 .. na - 1``, ``b`` as ``na ..``; ``same``: ``b``
+    is ``a``) visited by the low ends ``x - r`` of their intervals (``order``); each is tested against the
+    active items of the other set (of its own, if ``same``: ``active`` holds one list of ``a`` and, from
+    ``na`` on, one of ``b``) whose intervals still reach it, and those that do not are dropped. Writes
+    the overlapping pairs ``(a, b)`` to ``out`` while they fit and returns how many there are."""
+    cdef int64_t found = 0, n_a = 0, n_b = 0, kept, i, j, item, other, n_other
+    cdef int64_t* mine
+    cdef int64_t* theirs
+    cdef const double* c
+    cdef const double* r
+    cdef const double* oc
+    cdef const double* orad
+    cdef double low
+    for i in range(total):
+        item = order[i]
+        if item < na:  # an a: meets the active b (or, if same, the active a)
+            c, r = ca + 3 * item, ra + item
+            theirs = active if same else active + na
+            oc, orad = (ca, ra) if same else (cb, rb)
+            n_other = n_a if same else n_b
+        else:
+            item = item - na
+            c, r = cb + 3 * item, rb + item
+            theirs = active
+            oc, orad = ca, ra
+            n_other = n_a
+        low = c[axis] - r[0]
+        kept = 0
+        for j in range(n_other):
+            other = theirs[j]
+            if oc[3 * other + axis] + orad[other] < low:
+                continue  # its interval ends before this one starts: no later item meets it either
+            theirs[kept] = other
+            kept += 1
+            if _overlap(c, r[0], oc + 3 * other, orad[other]):
+                if found < capacity:
+                    if order[i] < na:
+                        out[2 * found], out[2 * found + 1] = item, other
+                    else:
+                        out[2 * found], out[2 * found + 1] = other, item
+                found += 1
+        if same:
+            n_a = kept
+            active[n_a] = item
+            n_a += 1
+        elif order[i] < na:
+            n_b = kept
+            active[n_a] = item
+            n_a += 1
+        else:
+            n_a = kept
+            active[na + n_b] = item
+            n_b += 1
+    return found
+
+
+def sphere_pairs(const double[:, ::1] ca, const double[::1] ra, cb=None, rb=None):
+    """Pairs ``(i, j)`` of spheres (centres ``c``, radii ``r``) that overlap, ``|c_i - c_j| <= r_i + r_j``:
+    between set ``a`` and set ``b``, or within ``a`` (``i < j``) when ``b`` is None. Sweep and prune along
+    the axis of the largest extent: O((na + nb) log(na + nb)) plus the pairs whose intervals on it
+    overlap. Two ``(p,)`` int64 arrays."""
+    cdef bint same = cb is None
+    cdef const double[:, ::1] cb_ = ca if same else np.ascontiguousarray(cb, dtype=np.float64)
+    cdef const double[::1] rb_ = ra if same else np.ascontiguousarray(rb, dtype=np.float64)
+    cdef int64_t na = ca.shape[0], total = na if same else na + cb_.shape[0], capacity, found
+    if ra.shape[0] != na or rb_.shape[0] != cb_.shape[0] or ca.shape[1] != 3 or cb_.shape[1] != 3:
+        raise ValueError("centres must be (n, 3) and radii (n,)")
+    centres = np.concatenate([np.asarray(ca), np.asarray(cb_)]) if not same else np.asarray(ca)
+    radii = np.concatenate([np.asarray(ra), np.asarray(rb_)]) if not same else np.asarray(ra)
+    # along the axis of the largest extent: the fewest intervals overlap
+    cdef int axis = int(np.argmax(np.ptp(centres, axis=0))) if total else 0
+    order_ = np.argsort(centres[:, axis] - radii, kind="stable")
+    cdef int64_t[::1] order = order_, active = np.empty(max(total, 1), dtype=np.int64), out
+    cdef const double* pb = &cb_[0, 0] if cb_.shape[0] else NULL
+    cdef const double* qb = &rb_[0] if cb_.shape[0] else NULL
+    cdef const double* pa = &ca[0, 0] if na else NULL
+    cdef const double* qa = &ra[0] if na else NULL
+    capacity = 8 * total + 16
+    while True:
+        out_ = np.empty(2 * capacity, dtype=np.int64)
+        out = out_
+        with nogil:
+            found = _sweep(pa, qa, na, pb, qb, same, axis, &order[0], total, &active[0], &out[0], capacity)
+        if found <= capacity:
+            pairs = out_[: 2 * found].reshape(-1, 2)
+            if same:
+                pairs = np.sort(pairs, axis=1)
+            return pairs[:, 0].copy(), pairs[:, 1].copy()
+        capacity = found

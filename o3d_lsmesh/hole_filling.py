@@ -797,11 +797,9 @@ class _TriangleIndex:
         """Pairs ``(query, triangle)`` whose bounding spheres overlap.
 
         One ball query per group of queries (``groups`` labels them: the patch of each new triangle) and
-        tree gathers the triangles near the group's bounding sphere; the pairs are found among those
-        with a small tree of them (cheaper than thousands of ball queries into the whole mesh's tree).
+        tree gathers the triangles near the group's bounding sphere; the pairs are found among those by
+        a sweep along x (cheaper than thousands of ball queries into the whole mesh's tree).
         """
-        from scipy.spatial import cKDTree
-
         empty = np.zeros(0, dtype=np.int64)
         if len(centre) == 0:
             return empty, empty
@@ -816,16 +814,8 @@ class _TriangleIndex:
                 hits = tree.query_ball_point(middle, half + reach, return_sorted=False)
                 found.append(members[np.asarray(hits, dtype=np.int64)])
         candidates = np.unique(np.concatenate(found))
-        if len(candidates) == 0:
-            return empty, empty
-        pairs = cKDTree(centre).sparse_distance_matrix(
-            cKDTree(self.centre[candidates]),
-            float(radius.max() + self.radius[candidates].max()),
-            output_type="ndarray",
-        )
-        qi, ti = pairs["i"].astype(np.int64), candidates[pairs["j"]]
-        close = pairs["v"] <= radius[qi] + self.radius[ti]
-        return qi[close], ti[close]
+        qi, ti = _fill_kernel.sphere_pairs(centre, radius, self.centre[candidates], self.radius[candidates])
+        return qi, candidates[ti]
 
 
 def _crossings(
@@ -839,8 +829,6 @@ def _crossings(
     new ones among themselves. Each pair is tested on the 17 axes that separate two disjoint triangles
     (two normals, nine edge-edge cross products, six in-plane edge normals for coplanar pairs).
     """
-    from scipy.spatial import cKDTree
-
     new = np.arange(first_new, len(triangles))
     result = np.zeros(len(new))
     if len(new) == 0:
@@ -858,10 +846,9 @@ def _crossings(
         ib = boxed[ib]
     else:
         ia, ib = index.near(c_new, r_new, groups)  # (new index, input triangle)
-    pairs = cKDTree(c_new).query_pairs(2.0 * float(r_new.max()), output_type="ndarray").astype(np.int64)
-    close = np.linalg.norm(c_new[pairs[:, 0]] - c_new[pairs[:, 1]], axis=1) <= r_new[pairs].sum(axis=1)
-    a = new[np.concatenate([ia, pairs[close, 0]])]
-    b = np.concatenate([ib, first_new + pairs[close, 1]])
+    pa, pb = _fill_kernel.sphere_pairs(c_new, r_new)  # the new triangles among themselves
+    a = new[np.concatenate([ia, pa])]
+    b = np.concatenate([ib, first_new + pb])
     return _fill_kernel.count_crossings(vertices, triangles, a, b, first_new)
 
 

@@ -1126,3 +1126,18 @@ def test_kernel_rejects_bad_shapes():
         _fill_kernel.count_crossings(
             np.zeros((3, 3)), np.array([[0, 1, 2]]), np.zeros(2, np.int64), np.zeros(1, np.int64), 0
         )
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 60), st.integers(0, 60), st.integers(0, 2**32 - 1), st.floats(0.01, 0.3))
+def test_sphere_pairs_are_every_overlapping_pair(na, nb, seed, size):
+    # reference: every pair's distance against the sum of the radii (a set against another, and within one)
+    rng = np.random.default_rng(seed)
+    ca, cb = rng.random((na, 3)) * [1, 3, 2], rng.random((nb, 3))
+    ra, rb = size * rng.random(na), size * rng.random(nb)
+    i, j = _fill_kernel.sphere_pairs(ca, ra, cb, rb)
+    near = np.linalg.norm(ca[:, None] - cb[None], axis=2) <= ra[:, None] + rb[None]
+    assert sorted(zip(i.tolist(), j.tolist())) == sorted(zip(*(x.tolist() for x in np.nonzero(near))))
+    i, j = _fill_kernel.sphere_pairs(ca, ra)
+    near = np.triu(np.linalg.norm(ca[:, None] - ca[None], axis=2) <= ra[:, None] + ra[None], 1)
+    assert sorted(zip(i.tolist(), j.tolist())) == sorted(zip(*(x.tolist() for x in np.nonzero(near))))
