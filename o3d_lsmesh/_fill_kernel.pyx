@@ -857,3 +857,111 @@ def sphere_pairs(const double[:, ::1] ca, const double[::1] ra, cb=None, rb=None
                 pairs = np.sort(pairs, axis=1)
             return pairs[:, 0].copy(), pairs[:, 1].copy()
         capacity = found
+
+
+# ----------------------------------------------------------------------------------------------------------
+# the fairing's Laplacian weights
+
+
+cdef double _pairwise_sum(const double* a, int64_t n) noexcept nogil:
+    """NumPy's pairwise summation (``np.add.reduce`` on a contiguous array), so that a mean here equals
+    NumPy's to the last bit: eight running sums over blocks of at most 128, halves above."""
+    cdef double r[8]
+    cdef double res
+    cdef int64_t i, k, n2
+    if n < 8:
+        res = 0.0
+        for i in range(n):
+            res += a[i]
+        return res
+    if n <= 128:
+        for k in range(8):
+            r[k] = a[k]
+        for i in range(8, n - n % 8, 8):
+            for k in range(8):
+                r[k] += a[i + k]
+        res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+        for i in range(n - n % 8, n):
+            res += a[i]
+        return res
+    n2 = n // 2
+    n2 -= n2 % 8
+    return _pairwise_sum(a, n2) + _pairwise_sum(a + n2, n - n2)
+
+
+def pairwise_mean(const double[::1] values):
+    """The mean as NumPy computes it (for tests of :func:`_pairwise_sum`)."""
+    return _pairwise_sum(&values[0], values.shape[0]) / values.shape[0] if values.shape[0] else float("nan")
+
+
+def laplacian_weights(const int64_t[:, ::1] tris, int64_t nv, const int64_t[::1] i, const int64_t[::1] j,
+                      const int64_t[::1] inverse, vertices=None):
+    """Edge weights ``w`` (edges ``(i, j)``; ``inverse``: the edge of each half-edge ``(c, c + 1)`` of each
+    triangle, corner-major), vertex degrees ``sum w`` and the Laplacian's row scales of a local mesh.
+
+    Uniform (``vertices`` None): ``w = 1``, scale ``1 / degree`` (eq. 1 of LS meshes). Cotangent:
+    ``w = (cot a + cot b) / 2`` clamped below at 5% of the mean ``|w|`` (obtuse pairs would make the
+    stiffness indefinite), scale the inverse of the vertex areas (a third of each triangle's) normalized
+    to mean 1. A vertex without area (or degree) gets scale 0.
+    """
+    cdef int64_t t = tris.shape[0], e = i.shape[0], h, k, c, a, b, o, positive = 0
+    if inverse.shape[0] != 3 * t or j.shape[0] != e:
+        raise ValueError("inverse must have 3 t entries, i and j one length")
+    if t and (np.min(tris) < 0 or np.max(tris) >= nv):
+        raise ValueError("tris index outside the nv vertices")
+    cdef bint cot = vertices is not None
+    cdef const double[:, ::1] x = np.ascontiguousarray(vertices if cot else np.zeros((0, 3)), dtype=np.float64)
+    if cot and x.shape[0] < nv:
+        raise ValueError("vertices must have nv rows")
+    w_, degree_, scale_ = np.zeros(e), np.zeros(nv), np.zeros(nv)
+    by_i_, by_j_, mass_, scratch_ = np.zeros(nv), np.zeros(nv), np.zeros(nv), np.zeros(max(e, nv))
+    cdef double[::1] w = w_, degree = degree_, scale = scale_, by_i = by_i_, by_j = by_j_, mass = mass_
+    cdef double[::1] scratch = scratch_
+    cdef double u[3]
+    cdef double v[3]
+    cdef double n[3]
+    cdef double floor, mean, area
+    with nogil:
+        if cot:
+            for c in range(3):  # corner-major, as the half-edges: the angle at c + 2, opposite (c, c + 1)
+                for k in range(t):
+                    a, b, o = tris[k, c], tris[k, (c + 1) % 3], tris[k, (c + 2) % 3]
+                    _sub(&x[a, 0], &x[o, 0], u)
+                    _sub(&x[b, 0], &x[o, 0], v)
+                    _cross(u, v, n)
+                    w[inverse[c * t + k]] += _dot(u, v) / fmax(sqrt(_dot(n, n)), 1e-300)
+            for h in range(e):
+                w[h] = 0.5 * w[h]
+                scratch[h] = fabs(w[h])
+            floor = 0.05 * (_pairwise_sum(&scratch[0], e) / e) if e else 0.0
+            for h in range(e):
+                w[h] = fmax(w[h], floor)
+        else:
+            for h in range(e):
+                w[h] = 1.0
+        for h in range(e):  # two sums, then added: the rounding of NumPy's two bincounts
+            by_i[i[h]] += w[h]
+            by_j[j[h]] += w[h]
+        for k in range(nv):
+            degree[k] = by_i[k] + by_j[k]
+            mass[k] = degree[k]
+        if cot:
+            for k in range(nv):
+                mass[k] = 0.0
+            for k in range(t):
+                _sub(&x[tris[k, 1], 0], &x[tris[k, 0], 0], u)
+                _sub(&x[tris[k, 2], 0], &x[tris[k, 0], 0], v)
+                _cross(u, v, n)
+                area = 0.5 * sqrt(_dot(n, n))
+                for c in range(3):
+                    mass[tris[k, c]] += area / 3.0
+            for k in range(nv):
+                if mass[k] > 0:
+                    scratch[positive] = mass[k]
+                    positive += 1
+            mean = _pairwise_sum(&scratch[0], positive) / positive if positive else 1.0
+            for k in range(nv):
+                mass[k] = mass[k] / mean
+        for k in range(nv):
+            scale[k] = 1.0 / mass[k] if mass[k] > 0 else 0.0
+    return w_, degree_, scale_

@@ -288,25 +288,7 @@ def _operators(
     mean 1). ``edges`` is :func:`_unique_edges` of ``tris``.
     """
     i, j, inverse = edges
-    w: np.ndarray
-    if vertices is None:
-        w = np.ones(len(i))
-    else:
-        p = vertices[tris]  # (t, 3, 3)
-        cot = np.zeros((len(tris), 3))  # cotangent of the angle opposite edge (c, c + 1)
-        for c in range(3):
-            u = p[:, c] - p[:, (c + 2) % 3]
-            v = p[:, (c + 1) % 3] - p[:, (c + 2) % 3]
-            cot[:, c] = (u * v).sum(1) / np.maximum(np.linalg.norm(_cross(u, v), axis=1), 1e-300)
-        w = 0.5 * np.bincount(inverse, weights=cot.T.reshape(-1), minlength=len(i))
-        w = np.maximum(w, 0.05 * np.abs(w).mean())
-    degree = np.bincount(i, weights=w, minlength=nv) + np.bincount(j, weights=w, minlength=nv)
-    mass = degree
-    if vertices is not None:
-        area = 0.5 * np.linalg.norm(_cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
-        mass = np.bincount(tris.ravel(), weights=np.repeat(area / 3.0, 3), minlength=nv)
-        mass = mass / mass[mass > 0].mean()
-    scale = np.divide(1.0, mass, out=np.zeros(nv), where=mass > 0)
+    w, degree, scale = _fill_kernel.laplacian_weights(tris, nv, i, j, inverse, vertices)
     diagonal = np.arange(nv)
     rows, cols = np.concatenate([i, j, diagonal]), np.concatenate([j, i, diagonal])
     values = np.concatenate([-w, -w, degree])
