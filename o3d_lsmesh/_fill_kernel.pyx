@@ -824,6 +824,19 @@ cdef int64_t _sweep(const double* ca, const double* ra, int64_t na, const double
     return found
 
 
+ctypedef struct Low:  # an interval's low end on the sweep axis, and its item
+    double low
+    int64_t item
+
+
+cdef int _by_low(const void* x, const void* y) noexcept nogil:
+    cdef const Low* p = <const Low*>x
+    cdef const Low* q = <const Low*>y
+    if p.low != q.low:
+        return -1 if p.low < q.low else 1
+    return -1 if p.item < q.item else (1 if p.item > q.item else 0)
+
+
 def sphere_pairs(const double[:, ::1] ca, const double[::1] ra, cb=None, rb=None):
     """Pairs ``(i, j)`` of spheres (centres ``c``, radii ``r``) that overlap, ``|c_i - c_j| <= r_i + r_j``:
     between set ``a`` and set ``b``, or within ``a`` (``i < j``) when ``b`` is None. Sweep and prune along
@@ -832,31 +845,57 @@ def sphere_pairs(const double[:, ::1] ca, const double[::1] ra, cb=None, rb=None
     cdef bint same = cb is None
     cdef const double[:, ::1] cb_ = ca if same else np.ascontiguousarray(cb, dtype=np.float64)
     cdef const double[::1] rb_ = ra if same else np.ascontiguousarray(rb, dtype=np.float64)
-    cdef int64_t na = ca.shape[0], total = na if same else na + cb_.shape[0], capacity, found
-    if ra.shape[0] != na or rb_.shape[0] != cb_.shape[0] or ca.shape[1] != 3 or cb_.shape[1] != 3:
+    cdef int64_t na = ca.shape[0], nb = cb_.shape[0], total = na if same else na + nb, found, k, tmp
+    cdef int64_t capacity = 8 * total + 16
+    if ra.shape[0] != na or rb_.shape[0] != nb or ca.shape[1] != 3 or cb_.shape[1] != 3:
         raise ValueError("centres must be (n, 3) and radii (n,)")
-    centres = np.concatenate([np.asarray(ca), np.asarray(cb_)]) if not same else np.asarray(ca)
-    radii = np.concatenate([np.asarray(ra), np.asarray(rb_)]) if not same else np.asarray(ra)
-    # along the axis of the largest extent: the fewest intervals overlap
-    cdef int axis = int(np.argmax(np.ptp(centres, axis=0))) if total else 0
-    order_ = np.argsort(centres[:, axis] - radii, kind="stable")
-    cdef int64_t[::1] order = order_, active = np.empty(max(total, 1), dtype=np.int64), out
-    cdef const double* pb = &cb_[0, 0] if cb_.shape[0] else NULL
-    cdef const double* qb = &rb_[0] if cb_.shape[0] else NULL
     cdef const double* pa = &ca[0, 0] if na else NULL
     cdef const double* qa = &ra[0] if na else NULL
-    capacity = 8 * total + 16
+    cdef const double* pb = &cb_[0, 0] if nb else NULL
+    cdef const double* qb = &rb_[0] if nb else NULL
+    cdef Low* lows = <Low*>malloc(max(total, 1) * sizeof(Low))
+    cdef int64_t* order = <int64_t*>malloc(max(total, 1) * sizeof(int64_t))
+    cdef int64_t* active = <int64_t*>malloc(max(total, 1) * sizeof(int64_t))
+    cdef double lo[3]
+    cdef double hi[3]
+    cdef int axis = 0, c
+    cdef int64_t[:, ::1] out
+    if not (lows and order and active):
+        free(lows); free(order); free(active)
+        raise MemoryError
+    with nogil:
+        # the axis of the largest extent of the centres: the fewest intervals overlap on it
+        for c in range(3):
+            lo[c], hi[c] = INFINITY, -INFINITY
+        for k in range(total):
+            for c in range(3):
+                lo[c] = fmin(lo[c], pa[3 * k + c] if k < na else pb[3 * (k - na) + c])
+                hi[c] = fmax(hi[c], pa[3 * k + c] if k < na else pb[3 * (k - na) + c])
+        for c in range(1, 3):
+            if hi[c] - lo[c] > hi[axis] - lo[axis]:
+                axis = c
+        for k in range(total):
+            lows[k].item = k
+            lows[k].low = pa[3 * k + axis] - qa[k] if k < na else pb[3 * (k - na) + axis] - qb[k - na]
+        qsort(lows, total, sizeof(Low), _by_low)
+        for k in range(total):
+            order[k] = lows[k].item
     while True:
-        out_ = np.empty(2 * capacity, dtype=np.int64)
+        out_ = np.empty((capacity, 2), dtype=np.int64)
         out = out_
         with nogil:
-            found = _sweep(pa, qa, na, pb, qb, same, axis, &order[0], total, &active[0], &out[0], capacity)
+            found = _sweep(pa, qa, na, pb, qb, same, axis, order, total, active, &out[0, 0], capacity)
+            if found <= capacity and same:
+                for k in range(found):
+                    if out[k, 0] > out[k, 1]:
+                        tmp = out[k, 0]
+                        out[k, 0] = out[k, 1]
+                        out[k, 1] = tmp
         if found <= capacity:
-            pairs = out_[: 2 * found].reshape(-1, 2)
-            if same:
-                pairs = np.sort(pairs, axis=1)
-            return pairs[:, 0].copy(), pairs[:, 1].copy()
+            break
         capacity = found
+    free(lows); free(order); free(active)
+    return out_[:found, 0].copy(), out_[:found, 1].copy()
 
 
 # ----------------------------------------------------------------------------------------------------------
