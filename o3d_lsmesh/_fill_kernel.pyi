@@ -28,3 +28,15 @@ def rings(
 def sphere_pairs(
     ca: np.ndarray, ra: np.ndarray, cb: np.ndarray | None = None, rb: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray]: ...
+def pairwise_mean(values: np.ndarray) -> float: ...
+def laplacian_weights(
+    tris: np.ndarray,
+    nv: int,
+    i: np.ndarray,
+    j: np.ndarray,
+    inverse: np.ndarray,
+    vertices: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
+def loop_chords(
+    loop: np.ndarray, triangles: np.ndarray, indptr: np.ndarray, data: np.ndarray
+) -> np.ndarray: ...

@@ -1004,3 +1004,45 @@ def laplacian_weights(const int64_t[:, ::1] tris, int64_t nv, const int64_t[::1]
         for k in range(nv):
             scale[k] = 1.0 / mass[k] if mass[k] > 0 else 0.0
     return w_, degree_, scale_
+
+
+# ----------------------------------------------------------------------------------------------------------
+# chords of a loop that already are mesh edges
+
+
+def loop_chords(const int64_t[::1] loop, const int64_t[:, ::1] triangles, const int64_t[::1] indptr,
+                const int64_t[::1] data):
+    """``(k, k)`` uint8: which pairs of the loop's (distinct) vertices are joined by a mesh edge, its own
+    edges ``(i, i + 1)`` excepted: chords the triangulation must not use (a non-manifold edge otherwise).
+    Found from each loop vertex's triangles (CSR ``indptr``, ``data``), the loop's positions looked up by
+    binary search: the work grows with the loop's stars, not with the mesh."""
+    cdef int64_t k = loop.shape[0], n = indptr.shape[0] - 1, p, q, r, lo, hi, mid, w, c, t
+    if k and (np.min(loop) < 0 or np.max(loop) >= n):
+        raise ValueError("loop outside the mesh")
+    by_vertex_ = np.argsort(loop, kind="stable")
+    sorted_ = np.asarray(loop)[by_vertex_]
+    out_ = np.zeros((k, k), dtype=np.uint8)
+    cdef int64_t[::1] by_vertex = by_vertex_, ordered = sorted_
+    cdef uint8_t[:, ::1] out = out_
+    with nogil:
+        for p in range(k):
+            for r in range(indptr[loop[p]], indptr[loop[p] + 1]):
+                t = data[r]
+                for c in range(3):
+                    w = triangles[t, c]
+                    lo, hi = 0, k
+                    while lo < hi:
+                        mid = (lo + hi) >> 1
+                        if ordered[mid] < w:
+                            lo = mid + 1
+                        else:
+                            hi = mid
+                    if lo < k and ordered[lo] == w and w != loop[p]:
+                        q = by_vertex[lo]
+                        out[p, q] = 1
+                        out[q, p] = 1
+        for p in range(k):  # the loop's own edges
+            q = (p + 1) % k
+            out[p, q] = 0
+            out[q, p] = 0
+    return out_

@@ -257,18 +257,6 @@ def _triangulate(
     return np.concatenate(extra), np.concatenate(triangles)
 
 
-def _keys(a: np.ndarray, b: np.ndarray, nv: int) -> np.ndarray:
-    """Undirected edge keys ``min * nv + max``."""
-    return np.minimum(a, b) * nv + np.maximum(a, b)
-
-
-def _absent(sorted_keys: np.ndarray, keys: np.ndarray) -> np.ndarray:
-    """Which ``keys`` are not in ``sorted_keys``."""
-    if len(sorted_keys) == 0:
-        return np.ones(len(keys), dtype=bool)
-    return sorted_keys[np.minimum(np.searchsorted(sorted_keys, keys), len(sorted_keys) - 1)] != keys
-
-
 def _unique_edges(tris: np.ndarray, nv: int) -> _Edges:
     """Undirected edges ``i < j`` of a local mesh (sorted) and the edge of each of its ``3t`` half-edges."""
     e = np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1)
@@ -480,7 +468,6 @@ class HoleFiller:
         self.vertices, self.triangles = vertices, triangles
         edge_info = unique_edges_and_runs(triangles, n)  # the one whole-mesh sort
         edges = edge_info[0][0]
-        self.edge_keys = edges[:, 0] * n + edges[:, 1]  # sorted
         self.holes = find_holes(vertices, triangles, _edge_info=edge_info)
         length = np.linalg.norm(vertices[edges[:, 0]] - vertices[edges[:, 1]], axis=1)
         degree = np.maximum(np.bincount(edges.ravel(), minlength=n), 1)
@@ -496,14 +483,11 @@ class HoleFiller:
     def _piece(self, loop: np.ndarray, rows: np.ndarray):
         """A loop's points, the unit normals of the mesh triangles on its edges (for the dihedral angles),
         the chords that already are mesh edges (``(k, k)`` bool) and its mean edge length."""
-        vertices, n, k = self.vertices, len(self.vertices), len(loop)
+        vertices = self.vertices
         points = vertices[loop]
         t = self.triangles[rows % len(self.triangles)]
         outer = _unit(_cross(vertices[t[:, 1]] - vertices[t[:, 0]], vertices[t[:, 2]] - vertices[t[:, 0]]))
-        a, b = np.meshgrid(loop, loop, indexing="ij")
-        forbidden = ~_absent(self.edge_keys, _keys(a, b, n).ravel()).reshape(k, k)
-        idx = np.arange(k)
-        forbidden[idx, (idx + 1) % k] = forbidden[(idx + 1) % k, idx] = False
+        forbidden = _fill_kernel.loop_chords(loop, self.triangles, *self.vertex_triangles).view(bool)
         spacing = float(np.mean(np.linalg.norm(np.roll(points, -1, 0) - points, axis=1)))
         return points, outer, forbidden, spacing
 

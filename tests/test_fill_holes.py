@@ -1141,3 +1141,63 @@ def test_sphere_pairs_are_every_overlapping_pair(na, nb, seed, size):
     i, j = _fill_kernel.sphere_pairs(ca, ra)
     near = np.triu(np.linalg.norm(ca[:, None] - ca[None], axis=2) <= ra[:, None] + ra[None], 1)
     assert sorted(zip(i.tolist(), j.tolist())) == sorted(zip(*(x.tolist() for x in np.nonzero(near))))
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(3, 6))
+def test_loop_chords_are_the_mesh_edges_between_loop_vertices(seed, size):
+    # reference: the set of the mesh's edges; a loop of random distinct vertices, in random order
+    points, tris, rng = _random_patch(seed, size, 0.0)
+    n = len(points)
+    loop = rng.permutation(n)[: rng.integers(3, n + 1)]
+    order = np.argsort(tris.ravel(), kind="stable")
+    indptr = np.concatenate([[0], np.cumsum(np.bincount(tris.ravel(), minlength=n))])
+    got = _fill_kernel.loop_chords(loop, tris, indptr, order // 3)
+    edges = {frozenset((t[a], t[(a + 1) % 3])) for t in tris.tolist() for a in range(3)}
+    k = len(loop)
+    expected = np.zeros((k, k), dtype=np.uint8)
+    for p in range(k):
+        for q in range(k):
+            if frozenset((loop[p], loop[q])) in edges and q != (p + 1) % k and p != (q + 1) % k:
+                expected[p, q] = 1
+    assert np.array_equal(got, expected)
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(3, 6), st.booleans())
+def test_laplacian_weights_match_plain_loops(seed, size, cot):
+    # reference: per triangle corner, the cotangent from the angle itself (arccos of the normalized
+    # product); weights clamped at 5% of the mean |w|; vertex areas a third of each triangle's, mean 1
+    points, tris, _ = _random_patch(seed, size, 0.5)
+    n = len(points)
+    half = np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]])
+    keys, inverse = np.unique(np.sort(half, axis=1) @ [n, 1], return_inverse=True)
+    i, j = keys // n, keys % n
+    w, degree, scale = _fill_kernel.laplacian_weights(tris, n, i, j, inverse, points if cot else None)
+    edge = {(a, b): e for e, (a, b) in enumerate(zip(i.tolist(), j.tolist()))}
+    expected = np.zeros(len(i)) if cot else np.ones(len(i))
+    area = np.zeros(n)
+    for t in tris.tolist():
+        for c in range(3):
+            a, b, o = t[c], t[(c + 1) % 3], t[(c + 2) % 3]
+            u, v = points[a] - points[o], points[b] - points[o]
+            theta = np.arccos(u @ v / np.linalg.norm(u) / np.linalg.norm(v))
+            if cot:
+                expected[edge[min(a, b), max(a, b)]] += 0.5 / np.tan(theta)
+            area[a] += 0.5 * np.linalg.norm(np.cross(u, v)) / 3
+    if cot:
+        expected = np.maximum(expected, 0.05 * np.abs(expected).mean())
+    expected_degree = np.zeros(n)
+    for e, (a, b) in enumerate(zip(i.tolist(), j.tolist())):
+        expected_degree[a] += expected[e]
+        expected_degree[b] += expected[e]
+    np.testing.assert_allclose(w, expected, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(degree, expected_degree, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(scale, area.mean() / area if cot else 1 / expected_degree, rtol=1e-9)
+
+
+@given(st.lists(st.floats(-1e6, 1e6), min_size=1, max_size=600))
+def test_pairwise_mean_is_numpys(values):
+    # the compiled weights' means must round as NumPy's (pairwise summation), so that fills are unchanged
+    a = np.array(values)
+    assert _fill_kernel.pairwise_mean(a) == a.mean()
