@@ -1007,24 +1007,52 @@ def laplacian_weights(const int64_t[:, ::1] tris, int64_t nv, const int64_t[::1]
 
 
 # ----------------------------------------------------------------------------------------------------------
-# chords of a loop that already are mesh edges
+# what the triangulation needs of a loop
 
 
-def loop_chords(const int64_t[::1] loop, const int64_t[:, ::1] triangles, const int64_t[::1] indptr,
-                const int64_t[::1] data):
-    """``(k, k)`` uint8: which pairs of the loop's (distinct) vertices are joined by a mesh edge, its own
-    edges ``(i, i + 1)`` excepted: chords the triangulation must not use (a non-manifold edge otherwise).
-    Found from each loop vertex's triangles (CSR ``indptr``, ``data``), the loop's positions looked up by
-    binary search: the work grows with the loop's stars, not with the mesh."""
-    cdef int64_t k = loop.shape[0], n = indptr.shape[0] - 1, p, q, r, lo, hi, mid, w, c, t
+def loop_geometry(const int64_t[::1] loop, const int64_t[::1] rows, const double[:, ::1] vertices,
+                  const int64_t[:, ::1] triangles, const int64_t[::1] indptr, const int64_t[::1] data):
+    """A loop's points ``(k, 3)``, the unit normals ``(k, 3)`` of the mesh triangles on its edges (the
+    triangle of half-edge row ``rows[i]``, that is ``rows[i] % m``, on edge ``(i, i + 1)``), its chords
+    that already are mesh edges ``(k, k)`` bool (its own edges excepted: a chord the triangulation must
+    not use, a non-manifold edge otherwise) and its mean edge length.
+
+    The chords come from each loop vertex's triangles (CSR ``indptr``, ``data``), the loop's positions
+    looked up by binary search: the work grows with the loop's stars, not with the mesh.
+    """
+    cdef int64_t k = loop.shape[0], n = vertices.shape[0], m = triangles.shape[0], p, q, r, lo, hi, mid, w
+    cdef int64_t c, t
+    if rows.shape[0] != k or indptr.shape[0] != n + 1:
+        raise ValueError("rows must be (k,), indptr (n + 1,)")
     if k and (np.min(loop) < 0 or np.max(loop) >= n):
         raise ValueError("loop outside the mesh")
     by_vertex_ = np.argsort(loop, kind="stable")
     sorted_ = np.asarray(loop)[by_vertex_]
-    out_ = np.zeros((k, k), dtype=np.uint8)
+    points_ = np.empty((k, 3))
+    outer_ = np.empty((k, 3))
+    lengths_ = np.empty(k)
+    chords_ = np.zeros((k, k), dtype=np.uint8)
     cdef int64_t[::1] by_vertex = by_vertex_, ordered = sorted_
-    cdef uint8_t[:, ::1] out = out_
+    cdef uint8_t[:, ::1] out = chords_
+    cdef double[:, ::1] points = points_, outer = outer_
+    cdef double[::1] lengths = lengths_
+    cdef double u[3]
+    cdef double v[3]
+    cdef double norm
     with nogil:
+        for p in range(k):
+            for c in range(3):
+                points[p, c] = vertices[loop[p], c]
+        for p in range(k):
+            t = rows[p] % m
+            _sub(&vertices[triangles[t, 1], 0], &vertices[triangles[t, 0], 0], u)
+            _sub(&vertices[triangles[t, 2], 0], &vertices[triangles[t, 0], 0], v)
+            _cross(u, v, &outer[p, 0])
+            norm = sqrt(_dot(&outer[p, 0], &outer[p, 0]))
+            for c in range(3):
+                outer[p, c] = outer[p, c] / (norm if norm > 0 else 1.0)
+            _sub(&points[(p + 1) % k, 0], &points[p, 0], u)
+            lengths[p] = sqrt(_dot(u, u))
         for p in range(k):
             for r in range(indptr[loop[p]], indptr[loop[p] + 1]):
                 t = data[r]
@@ -1045,4 +1073,5 @@ def loop_chords(const int64_t[::1] loop, const int64_t[:, ::1] triangles, const 
             q = (p + 1) % k
             out[p, q] = 0
             out[q, p] = 0
-    return out_
+    spacing = _pairwise_sum(&lengths[0], k) / k if k else 0.0
+    return points_, outer_, chords_.view(bool), spacing

@@ -196,11 +196,6 @@ def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     return out
 
 
-def _unit(v: np.ndarray) -> np.ndarray:
-    norm = np.linalg.norm(v, axis=-1)
-    return v / np.where(norm > 0, norm, 1.0)[..., None]
-
-
 def _triangulate(
     points: np.ndarray, outer_normals: np.ndarray, forbidden: np.ndarray | None, spacing: float
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -480,17 +475,6 @@ class HoleFiller:
         self.vertex_triangles = (by_vertex.indptr.astype(np.int64), by_vertex.data.astype(np.int64))
         self.index = _TriangleIndex(vertices, triangles) if index_triangles else None
 
-    def _piece(self, loop: np.ndarray, rows: np.ndarray):
-        """A loop's points, the unit normals of the mesh triangles on its edges (for the dihedral angles),
-        the chords that already are mesh edges (``(k, k)`` bool) and its mean edge length."""
-        vertices = self.vertices
-        points = vertices[loop]
-        t = self.triangles[rows % len(self.triangles)]
-        outer = _unit(_cross(vertices[t[:, 1]] - vertices[t[:, 0]], vertices[t[:, 2]] - vertices[t[:, 0]]))
-        forbidden = _fill_kernel.loop_chords(loop, self.triangles, *self.vertex_triangles).view(bool)
-        spacing = float(np.mean(np.linalg.norm(np.roll(points, -1, 0) - points, axis=1)))
-        return points, outer, forbidden, spacing
-
     def fill(
         self,
         *,
@@ -532,8 +516,12 @@ class HoleFiller:
         # long ones cut by chords sampled at the refinement's spacing (none without) first
         pieces = [(h, *p) for h, hole in enumerate(holes) for p in _simple_pieces(hole.vertices, hole.rows)]
         piece_hole, piece_loop, piece_rows = zip(*pieces)
+        # each piece's points, the normals across its edges, its chords that are mesh edges, its spacing
         piece_points, piece_outer, piece_forbidden, piece_spacing = zip(
-            *map(self._piece, piece_loop, piece_rows)
+            *(
+                _fill_kernel.loop_geometry(loop, rows, vertices, triangles, *self.vertex_triangles)
+                for loop, rows in zip(piece_loop, piece_rows)
+            )
         )
         count = len(piece_loop)
         piece_extra, piece_tris = [], []

@@ -1145,21 +1145,30 @@ def test_sphere_pairs_are_every_overlapping_pair(na, nb, seed, size):
 
 @settings(max_examples=25, deadline=None)
 @given(st.integers(0, 2**32 - 1), st.integers(3, 6))
-def test_loop_chords_are_the_mesh_edges_between_loop_vertices(seed, size):
-    # reference: the set of the mesh's edges; a loop of random distinct vertices, in random order
-    points, tris, rng = _random_patch(seed, size, 0.0)
-    n = len(points)
+def test_loop_geometry_matches_plain_loops(seed, size):
+    # reference: the set of the mesh's edges, np.cross and np.linalg.norm; a loop of random distinct
+    # vertices in random order, each edge given a random triangle (its half-edge row, modulo m)
+    points, tris, rng = _random_patch(seed, size, 0.4)
+    n, m = len(points), len(tris)
     loop = rng.permutation(n)[: rng.integers(3, n + 1)]
+    rows = rng.integers(0, 3 * m, len(loop))
     order = np.argsort(tris.ravel(), kind="stable")
     indptr = np.concatenate([[0], np.cumsum(np.bincount(tris.ravel(), minlength=n))])
-    got = _fill_kernel.loop_chords(loop, tris, indptr, order // 3)
+    got_points, outer, got, spacing = _fill_kernel.loop_geometry(loop, rows, points, tris, indptr, order // 3)
+    assert np.array_equal(got_points, points[loop])
+    for i, row in enumerate(rows.tolist()):
+        a, b, c = points[tris[row % m]]
+        normal = np.cross(b - a, c - a)
+        np.testing.assert_allclose(outer[i], normal / np.linalg.norm(normal), rtol=0, atol=1e-12)
+    lengths = [np.linalg.norm(points[loop[(i + 1) % len(loop)]] - points[loop[i]]) for i in range(len(loop))]
+    assert np.isclose(spacing, np.mean(lengths), rtol=1e-14)
     edges = {frozenset((t[a], t[(a + 1) % 3])) for t in tris.tolist() for a in range(3)}
     k = len(loop)
-    expected = np.zeros((k, k), dtype=np.uint8)
+    expected = np.zeros((k, k), dtype=bool)
     for p in range(k):
         for q in range(k):
             if frozenset((loop[p], loop[q])) in edges and q != (p + 1) % k and p != (q + 1) % k:
-                expected[p, q] = 1
+                expected[p, q] = True
     assert np.array_equal(got, expected)
 
 
