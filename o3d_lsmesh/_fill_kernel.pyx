@@ -710,7 +710,7 @@ def rings(const int64_t[:, ::1] triangles, const int64_t[::1] indptr, const int6
     """
     cdef int64_t n = indptr.shape[0] - 1, m = triangles.shape[0], i, j, v, t, c, size, found
     front_ = np.unique(np.asarray(seeds, dtype=np.int64))
-    if len(front_) and (front_[0] < 0 or front_[-1] >= n):
+    if len(front_) and (front_[0] < 0 or front_.max() >= n):
         raise ValueError("seeds outside the mesh")
     seen_ = np.zeros(n, dtype=np.uint8)
     took_ = np.zeros(m, dtype=np.uint8)
@@ -1075,3 +1075,82 @@ def loop_geometry(const int64_t[::1] loop, const int64_t[::1] rows, const double
             out[q, p] = 0
     spacing = _pairwise_sum(&lengths[0], k) / k if k else 0.0
     return points_, outer_, chords_.view(bool), spacing
+
+
+# ----------------------------------------------------------------------------------------------------------
+# a local mesh's edges, and the check of a re-weighted solve
+
+
+def unique_edges(const int64_t[:, ::1] tris, int64_t nv):
+    """The undirected edges ``i < j`` of a local mesh, sorted, and the edge of each of its ``3 t``
+    half-edges ``(c, c + 1)``, corner-major (all ``(0, 1)`` first): ``(i, j, inverse)``."""
+    cdef int64_t t = tris.shape[0], nh = 3 * t, h, e = 0, a, b
+    if t and (np.min(tris) < 0 or np.max(tris) >= nv):
+        raise ValueError("tris index outside the nv vertices")
+    cdef Half* half = <Half*>malloc(max(nh, 1) * sizeof(Half))
+    if not half:
+        raise MemoryError
+    inverse_ = np.empty(nh, dtype=np.int64)
+    i_ = np.empty(nh, dtype=np.int64)
+    j_ = np.empty(nh, dtype=np.int64)
+    cdef int64_t[::1] inverse = inverse_, i = i_, j = j_
+    with nogil:
+        for h in range(nh):
+            a, b = tris[h % t, h // t], tris[h % t, (h // t + 1) % 3]
+            half[h].key = _key(a, b)
+            half[h].h = h
+        qsort(half, nh, sizeof(Half), _by_key)
+        for h in range(nh):
+            if h == 0 or half[h].key != half[h - 1].key:
+                i[e], j[e] = half[h].key >> 32, half[h].key - ((half[h].key >> 32) << 32)
+                e += 1
+            inverse[half[h].h] = e - 1
+    free(half)
+    return i_[:e].copy(), j_[:e].copy(), inverse_
+
+
+def keeps_facing(const double[:, ::1] x, const double[:, :] again, const int64_t[:, ::1] new_tris):
+    """Whether ``again``, new positions of the last ``len(again)`` vertices of ``x``, keeps every new
+    triangle facing as in ``x`` and moves no vertex by a tenth of the patch's size or more (obtuse slivers
+    can make cotangent weights ill-conditioned)."""
+    cdef int64_t n = x.shape[0], p = again.shape[0], first = n - p, q = new_tris.shape[0], r, c, v
+    if p > n or again.shape[1] != 3:
+        raise ValueError("again must be (p, 3) with p <= len(x)")
+    if q and (np.min(new_tris) < 0 or np.max(new_tris) >= n):
+        raise ValueError("new_tris index outside x")
+    cdef double lo[3]
+    cdef double hi[3]
+    cdef double P[3][3]
+    cdef double Q[3][3]
+    cdef double u[3]
+    cdef double w[3]
+    cdef double np_[3]
+    cdef double nq[3]
+    cdef double move = 0.0, size
+    cdef bint facing = True
+    cdef int k
+    with nogil:
+        for c in range(3):
+            lo[c], hi[c] = INFINITY, -INFINITY
+        for r in range(q):
+            for k in range(3):
+                v = new_tris[r, k]
+                for c in range(3):
+                    P[k][c] = x[v, c]
+                    Q[k][c] = again[v - first, c] if v >= first else x[v, c]
+                    lo[c], hi[c] = fmin(lo[c], P[k][c]), fmax(hi[c], P[k][c])
+            _sub(P[1], P[0], u)
+            _sub(P[2], P[0], w)
+            _cross(u, w, np_)
+            _sub(Q[1], Q[0], u)
+            _sub(Q[2], Q[0], w)
+            _cross(u, w, nq)
+            if not _dot(np_, nq) > 0:
+                facing = False
+        for r in range(p):
+            for c in range(3):
+                move = fmax(move, fabs(again[r, c] - x[first + r, c]))
+        for c in range(3):
+            u[c] = hi[c] - lo[c]
+        size = sqrt(_dot(u, u))
+    return bool(facing and move < 0.1 * size)

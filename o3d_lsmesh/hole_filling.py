@@ -252,13 +252,6 @@ def _triangulate(
     return np.concatenate(extra), np.concatenate(triangles)
 
 
-def _unique_edges(tris: np.ndarray, nv: int) -> _Edges:
-    """Undirected edges ``i < j`` of a local mesh (sorted) and the edge of each of its ``3t`` half-edges."""
-    e = np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1)
-    e_keys, inverse = np.unique(e[:, 0] * nv + e[:, 1], return_inverse=True)
-    return e_keys // nv, e_keys % nv, inverse
-
-
 def _operators(
     tris: np.ndarray, nv: int, edges: _Edges, vertices: np.ndarray | None = None, dense: bool = False
 ):
@@ -621,7 +614,9 @@ class HoleFiller:
         remap[local_vertices] = np.arange(len(local_vertices))
         local_rings = [remap[r] for r in rings]
         local = remap[local_tris]
-        local_edges = _unique_edges(local, len(local_vertices))  # one connectivity for every solve below
+        local_edges = _fill_kernel.unique_edges(
+            local, len(local_vertices)
+        )  # one connectivity for every solve below
         refined = vertices[n:].copy()
         work = vertices  # its new rows hold the candidate being solved from or checked
 
@@ -646,7 +641,7 @@ class HoleFiller:
                     # cotangent weights (clamped, area-normalized) read off the uniform solution: a fair
                     # embedding, where weights from the flat refined patch diverged (camel 15h: 87 h off)
                     again = solve(level, True)
-                    if again is not None and _no_fold(work, again, new_tris):
+                    if again is not None and _fill_kernel.keeps_facing(work, again, new_tris):
                         work[n:] = again
                         yield level, _fill_kernel.tangential_relax(work, new_tris, n)
                         work[n:] = solution
@@ -717,7 +712,9 @@ def _interpolation(
         k, nl = len(loop), len(numbering)
         # the membrane (continuity 0) with the loop's unit vectors as the fixed "positions"
         unit = np.eye(nl, k)
-        harmonic = _fair(unit, tris_local, np.arange(k, nl), [], 0, _unique_edges(tris_local, nl), False)
+        harmonic = _fair(
+            unit, tris_local, np.arange(k, nl), [], 0, _fill_kernel.unique_edges(tris_local, nl), False
+        )
         r, c = np.nonzero(np.abs(harmonic) > 1e-12)
         rows.append(inner[r] - n)
         cols.append(loop[c])
@@ -804,21 +801,6 @@ def _crossings(
     a = new[np.concatenate([ia, pa])]
     b = np.concatenate([ib, first_new + pb])
     return _fill_kernel.count_crossings(vertices, triangles, a, b, first_new)
-
-
-def _no_fold(x: np.ndarray, again: np.ndarray, new_tris: np.ndarray) -> bool:
-    """Whether ``again``, new positions of the last ``len(again)`` vertices of ``x``, keeps every new
-    triangle facing as in ``x`` and within a tenth of the patch's size (obtuse slivers can make
-    cotangent weights ill-conditioned)."""
-    p = x[new_tris]
-    q = p.copy()
-    moved = new_tris >= len(x) - len(again)
-    q[moved] = again[new_tris[moved] - (len(x) - len(again))]
-    facing = (
-        _cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]) * _cross(q[:, 1] - q[:, 0], q[:, 2] - q[:, 0])
-    ).sum(axis=1)
-    size = np.linalg.norm(np.ptp(p.reshape(-1, 3), axis=0))
-    return bool((facing > 0).all()) and float(np.abs(again - x[len(x) - len(again) :]).max()) < 0.1 * size
 
 
 def fill_holes(

@@ -1210,3 +1210,33 @@ def test_pairwise_mean_is_numpys(values):
     # the compiled weights' means must round as NumPy's (pairwise summation), so that fills are unchanged
     a = np.array(values)
     assert _fill_kernel.pairwise_mean(a) == a.mean()
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(2, 6))
+def test_unique_edges_match_a_sort(seed, size):
+    # reference: np.unique of the sorted half-edge pairs (corner-major: every (0, 1) first)
+    points, tris, rng = _random_patch(seed, size, 0.0)
+    tris = rng.permutation(len(points))[tris]  # any numbering
+    n = len(points)
+    i, j, inverse = _fill_kernel.unique_edges(tris, n)
+    half = np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1)
+    keys, expected_inverse = np.unique(half[:, 0] * n + half[:, 1], return_inverse=True)
+    assert np.array_equal(i, keys // n) and np.array_equal(j, keys % n)
+    assert np.array_equal(inverse, expected_inverse)
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_keeps_facing_matches_plain_loops(seed):
+    # reference: each triangle's normal before and after, and the largest coordinate move
+    points, tris, rng = _random_patch(seed, 4, 0.3)
+    x, p = points.copy(), 5
+    again = x[-p:] + rng.normal(scale=rng.choice([0.01, 0.2, 1.0]), size=(p, 3))
+    moved = x.copy()
+    moved[-p:] = again
+    flips = [
+        np.dot(np.cross(*(x[t[1:]] - x[t[0]])), np.cross(*(moved[t[1:]] - moved[t[0]]))) <= 0 for t in tris
+    ]
+    size = np.linalg.norm(x[np.unique(tris)].max(axis=0) - x[np.unique(tris)].min(axis=0))
+    expected = not any(flips) and np.abs(again - x[-p:]).max() < 0.1 * size
+    assert _fill_kernel.keeps_facing(x, again, tris) == expected
