@@ -42,3 +42,14 @@ def loop_chords(
 ) -> np.ndarray: ...
 def unique_edges(tris: np.ndarray, nv: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
 def keeps_facing(x: np.ndarray, again: np.ndarray, new_tris: np.ndarray) -> bool: ...
+def normal_equations(
+    x: np.ndarray,
+    i: np.ndarray,
+    j: np.ndarray,
+    w: np.ndarray,
+    degree: np.ndarray,
+    scale: np.ndarray,
+    plus: np.ndarray,
+    minus: np.ndarray,
+    unknown: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]: ...

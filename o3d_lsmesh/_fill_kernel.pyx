@@ -1154,3 +1154,100 @@ def keeps_facing(const double[:, ::1] x, const double[:, :] again, const int64_t
             u[c] = hi[c] - lo[c]
         size = sqrt(_dot(u, u))
     return bool(facing and move < 0.1 * size)
+
+
+# ----------------------------------------------------------------------------------------------------------
+# the fairing's normal equations on a small patch
+
+
+def normal_equations(const double[:, ::1] x, const int64_t[::1] i, const int64_t[::1] j, const double[::1] w,
+                     const double[::1] degree, const double[::1] scale, const int64_t[::1] plus,
+                     const int64_t[::1] minus, const int64_t[::1] unknown):
+    """The least-squares system of the rows ``A = L[plus] - L[minus]`` (``minus`` empty: ``L[plus]``) of
+    the Laplacian ``L = S K``, ``K = D - W`` (edges ``(i, j)`` of weight ``w``, ``D`` the ``degree``,
+    ``S`` the ``scale``), in the ``unknown`` columns, the others fixed at ``x``: the dense
+    ``A_u^T A_u (p, p)`` and ``-A_u^T A_k x_k (p, 3)``.
+
+    Each row of ``A`` has a handful of entries (a vertex and its neighbours, or two of them), so the
+    products are sums of sparse outer products: O(rows * entries^2), where dense products cost
+    O(rows * p^2). Entries are those of NumPy's dense rows (``scale * K``, then the difference).
+    """
+    cdef int64_t nv = x.shape[0], e = i.shape[0], rows = plus.shape[0], p = unknown.shape[0], r, k, s, c, v
+    cdef int64_t a, b, count, u1, u2, side
+    if minus.shape[0] not in (0, rows):
+        raise ValueError("minus must be empty or as long as plus")
+    if j.shape[0] != e or w.shape[0] != e or degree.shape[0] != nv or scale.shape[0] != nv:
+        raise ValueError("edges, weights, degree and scale must agree")
+    # each vertex's neighbours (CSR over the edges, both directions)
+    indptr_ = np.zeros(nv + 1, dtype=np.int64)
+    cdef int64_t[::1] indptr = indptr_
+    nbr_ = np.empty(2 * e, dtype=np.int64)
+    wt_ = np.empty(2 * e)
+    col_ = np.full(nv, -1, dtype=np.int64)
+    fixed_ = np.array(x, dtype=np.float64, order="C")
+    normal_ = np.zeros((p, p))
+    rhs_ = np.zeros((p, 3))
+    cdef int64_t[::1] nbr = nbr_, col = col_
+    cdef double[::1] wt = wt_
+    cdef double[:, ::1] fixed = fixed_, normal = normal_, rhs = rhs_
+    cdef int64_t* slot = <int64_t*>malloc(max(nv, 1) * sizeof(int64_t))
+    cdef int64_t* entry = <int64_t*>malloc(max(nv, 1) * sizeof(int64_t))
+    cdef double* value = <double*>malloc(max(nv, 1) * sizeof(double))
+    cdef double bx, by, bz, f
+    if not (slot and entry and value):
+        free(slot); free(entry); free(value)
+        raise MemoryError
+    with nogil:
+        for k in range(e):
+            indptr[i[k] + 1] += 1
+            indptr[j[k] + 1] += 1
+        for v in range(nv):
+            indptr[v + 1] += indptr[v]
+            slot[v] = indptr[v]
+        for k in range(e):
+            nbr[slot[i[k]]], wt[slot[i[k]]] = j[k], w[k]
+            slot[i[k]] += 1
+            nbr[slot[j[k]]], wt[slot[j[k]]] = i[k], w[k]
+            slot[j[k]] += 1
+        for k in range(p):
+            col[unknown[k]] = k
+            for c in range(3):
+                fixed[unknown[k], c] = 0.0  # A_k x_k as A x with the unknowns zeroed
+        for v in range(nv):
+            slot[v] = -1
+        for r in range(rows):
+            # the row's entries: L[plus[r]], then minus L[minus[r]] (a - 0, 0 - b and a - b as NumPy's)
+            count = 0
+            for side in range(2 if minus.shape[0] else 1):
+                a = plus[r] if side == 0 else minus[r]
+                for k in range(indptr[a] - 1, indptr[a + 1]):
+                    v = a if k < indptr[a] else nbr[k]
+                    f = scale[a] * (degree[a] if k < indptr[a] else -wt[k])
+                    if slot[v] < 0:
+                        slot[v] = count
+                        entry[count] = v
+                        value[count] = f if side == 0 else 0.0 - f
+                        count += 1
+                    else:
+                        value[slot[v]] = value[slot[v]] - f
+            bx = by = bz = 0.0
+            for k in range(count):
+                v = entry[k]
+                bx += value[k] * fixed[v, 0]
+                by += value[k] * fixed[v, 1]
+                bz += value[k] * fixed[v, 2]
+            for k in range(count):
+                u1 = col[entry[k]]
+                if u1 < 0:
+                    continue
+                rhs[u1, 0] -= value[k] * bx
+                rhs[u1, 1] -= value[k] * by
+                rhs[u1, 2] -= value[k] * bz
+                for s in range(count):
+                    u2 = col[entry[s]]
+                    if u2 >= 0:
+                        normal[u1, u2] += value[k] * value[s]
+            for k in range(count):
+                slot[entry[k]] = -1
+    free(slot); free(entry); free(value)
+    return normal_, rhs_

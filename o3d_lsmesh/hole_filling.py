@@ -253,29 +253,23 @@ def _triangulate(
 
 
 def _operators(
-    tris: np.ndarray, nv: int, edges: _Edges, vertices: np.ndarray | None = None, dense: bool = False
+    i: np.ndarray, j: np.ndarray, w: np.ndarray, degree: np.ndarray, scale: np.ndarray, dense: bool
 ):
-    """Stiffness ``K = D - W`` and Laplacian ``L = S K`` of a local mesh (CSR, or arrays if ``dense``),
-    and its edges ``(e, 2)``.
-
-    Uniform (``vertices`` None): ``W`` the adjacency and ``S = D^-1``, eq. 1 of LS meshes. Cotangent:
-    ``W`` the weights ``(cot a + cot b) / 2`` of ``vertices``, clamped below at 5% of their mean
-    (obtuse pairs would make ``K`` indefinite), and ``S`` the inverse vertex areas (normalized to
-    mean 1). ``edges`` is :func:`_unique_edges` of ``tris``.
-    """
-    i, j, inverse = edges
-    w, degree, scale = _fill_kernel.laplacian_weights(tris, nv, i, j, inverse, vertices)
+    """Stiffness ``K = D - W`` and Laplacian ``L = S K`` (CSR, or arrays if ``dense``) of a local mesh
+    with edges ``(i, j)`` of weight ``w``, ``D`` the ``degree`` and ``S`` the row ``scale`` of
+    :func:`o3d_lsmesh._fill_kernel.laplacian_weights`."""
+    nv = len(degree)
     diagonal = np.arange(nv)
     rows, cols = np.concatenate([i, j, diagonal]), np.concatenate([j, i, diagonal])
     values = np.concatenate([-w, -w, degree])
     if dense:
         K = np.zeros((nv, nv))
         K[rows, cols] = values
-        return K, scale[:, None] * K, np.stack([i, j], axis=1)
+        return K, scale[:, None] * K
     K = sp.csr_matrix((values, (rows, cols)), shape=(nv, nv))
     L = K.copy()  # L = S K: K's pattern with its rows scaled
     L.data = L.data * np.repeat(scale, np.diff(L.indptr))
-    return K, L, np.stack([i, j], axis=1)
+    return K, L
 
 
 def _fair(
@@ -288,49 +282,62 @@ def _fair(
     * ``1``: ``sum_r |(L x)_r|^2`` over the rows touching an unknown: the LS-mesh energy ``||L x||^2``
       with interpolated anchors (eq. 3, section 6);
     * ``2``: ``sum |(L x)_r - (L x)_s|^2`` over edges ``(r, s)`` touching such a row:
-      ``(L x)^T K (L x)``, the tri-Laplacian energy.
+      ``(L x)^T K (L x)``, the tri-Laplacian energy,
+
+    with ``K = D - W`` and ``L = S K``: uniform, ``W`` the adjacency and ``S = D^-1`` (eq. 1 of LS
+    meshes); or, if ``cot``, ``W`` the cotangent weights of ``x`` clamped below at 5% of their mean
+    (obtuse pairs would make ``K`` indefinite) and ``S`` the inverse vertex areas, normalized to mean 1
+    (:func:`o3d_lsmesh._fill_kernel.laplacian_weights`).
 
     ``rings[0]`` are the loop vertices, ``rings[i]`` the i-th ring around them: the rows used involve
-    only vertices whose one-rings are complete in ``tris``. ``edges`` is :func:`_unique_edges` of
-    ``tris``; ``cot`` reads the weights of :func:`_operators` off ``x``.
+    only vertices whose one-rings are complete in ``tris``. ``edges`` is
+    :func:`o3d_lsmesh._fill_kernel.unique_edges` of ``tris``. Small systems (at most
+    :data:`o3d_lsmesh._solvers.DENSE_UNKNOWNS` unknowns) are assembled by the compiled
+    :func:`o3d_lsmesh._fill_kernel.normal_equations` and solved dense; larger ones sparse.
     """
     nv = len(x)
-    dense = len(unknown) <= _solvers.DENSE_UNKNOWNS  # operators as arrays for solve_spd's dense path
-    K, L, pairs = _operators(tris, nv, edges, x if cot else None, dense)
+    i, j, inverse = edges
+    w, degree, scale = _fill_kernel.laplacian_weights(tris, nv, i, j, inverse, x if cot else None)
+    dense = len(unknown) <= _solvers.DENSE_UNKNOWNS
     if level == 0:
+        K, _ = _operators(i, j, w, degree, scale, dense)
         known = np.ones(nv, dtype=bool)
         known[unknown] = False
-        normal = K[unknown][:, unknown]
-        rhs = -(K[unknown][:, np.flatnonzero(known)] @ x[known])
+        return _solvers.solve_spd(K[unknown][:, unknown], -(K[unknown][:, np.flatnonzero(known)] @ x[known]))
+    rows = np.zeros(nv, dtype=bool)
+    rows[unknown] = True
+    rows[rings[0]] = True  # rows whose Laplacian involves an unknown
+    if level == 1:
+        plus, minus = np.flatnonzero(rows), np.zeros(0, dtype=np.int64)
     else:
-        rows = np.zeros(nv, dtype=bool)
-        rows[unknown] = True
-        rows[rings[0]] = True  # rows whose Laplacian involves an unknown
-        if level == 1:
-            A_full = L[np.flatnonzero(rows)]
-        else:
-            valid = rows.copy()
-            valid[rings[1]] = True
-            keep = (rows[pairs[:, 0]] | rows[pairs[:, 1]]) & valid[pairs[:, 0]] & valid[pairs[:, 1]]
-            sel = pairs[keep]
-            if dense:
-                A_full = L[sel[:, 0]] - L[sel[:, 1]]
-            else:  # the edge difference operator: row e is +1 at sel[e, 0] and -1 at sel[e, 1]
-                G = sp.csr_matrix(
-                    (np.tile([1.0, -1.0], len(sel)), sel.ravel(), np.arange(0, 2 * len(sel) + 1, 2)),
-                    shape=(len(sel), nv),
-                )
-                A_full = G @ L
-        A_full = A_full if dense else A_full.tocsc()
-        if len(unknown) and unknown[0] == nv - len(unknown) and (np.diff(unknown) == 1).all():
-            A_u = A_full[:, nv - len(unknown) :]  # the usual layout: the unknowns are the last columns
-        else:
-            A_u = A_full[:, unknown]
-        fixed = x.copy()
-        fixed[unknown] = 0.0  # A_known x_known, without slicing the known columns out
-        normal = A_u.T @ A_u
-        rhs = -(A_u.T @ (A_full @ fixed))
-    return _solvers.solve_spd(normal, rhs)
+        valid = rows.copy()
+        valid[rings[1]] = True
+        keep = (rows[i] | rows[j]) & valid[i] & valid[j]
+        plus, minus = i[keep], j[keep]
+    if dense:
+        normal, rhs = _fill_kernel.normal_equations(x, i, j, w, degree, scale, plus, minus, unknown)
+        return _solvers.solve_spd(normal, rhs)
+    _, L = _operators(i, j, w, degree, scale, False)
+    if level == 1:
+        A_full = L[plus]
+    else:  # the edge difference operator: row e is +1 at plus[e] and -1 at minus[e]
+        G = sp.csr_matrix(
+            (
+                np.tile([1.0, -1.0], len(plus)),
+                np.stack([plus, minus], axis=1).ravel(),
+                np.arange(0, 2 * len(plus) + 1, 2),
+            ),
+            shape=(len(plus), nv),
+        )
+        A_full = G @ L
+    A_full = A_full.tocsc()
+    if len(unknown) and unknown[0] == nv - len(unknown) and (np.diff(unknown) == 1).all():
+        A_u = A_full[:, nv - len(unknown) :]  # the usual layout: the unknowns are the last columns
+    else:
+        A_u = A_full[:, unknown]
+    fixed = x.copy()
+    fixed[unknown] = 0.0  # A_known x_known, without slicing the known columns out
+    return _solvers.solve_spd(A_u.T @ A_u, -(A_u.T @ (A_full @ fixed)))
 
 
 @dataclass(frozen=True)
@@ -749,22 +756,25 @@ class _TriangleIndex:
 
         One ball query per group of queries (``groups`` labels them: the patch of each new triangle) and
         tree gathers the triangles near the group's bounding sphere; the pairs are found among those by
-        a sweep along x (cheaper than thousands of ball queries into the whole mesh's tree).
+        a sweep and prune (cheaper than thousands of ball queries into the whole mesh's tree).
         """
         empty = np.zeros(0, dtype=np.int64)
         if len(centre) == 0:
             return empty, empty
-        groups = np.zeros(len(centre), dtype=np.int64) if groups is None else groups
+        if groups is None or (groups == groups[0]).all():
+            masks = [slice(None)]  # one patch (the usual call): no grouping, and no duplicate hits
+        else:
+            masks = [groups == label for label in np.unique(groups)]
         found = [empty]
-        for label in np.unique(groups):
-            mine = groups == label
+        for mine in masks:
             low = (centre[mine] - radius[mine, None]).min(axis=0)
             high = (centre[mine] + radius[mine, None]).max(axis=0)
             middle, half = 0.5 * (low + high), 0.5 * float(np.linalg.norm(high - low))
             for tree, reach, members in self.trees:
                 hits = tree.query_ball_point(middle, half + reach, return_sorted=False)
                 found.append(members[np.asarray(hits, dtype=np.int64)])
-        candidates = np.unique(np.concatenate(found))
+        # the two trees hold disjoint triangles: one patch's hits are distinct, several patches' may repeat
+        candidates = np.concatenate(found) if len(masks) == 1 else np.unique(np.concatenate(found))
         qi, ti = _fill_kernel.sphere_pairs(centre, radius, self.centre[candidates], self.radius[candidates])
         return qi, candidates[ti]
 

@@ -1240,3 +1240,33 @@ def test_keeps_facing_matches_plain_loops(seed):
     size = np.linalg.norm(x[np.unique(tris)].max(axis=0) - x[np.unique(tris)].min(axis=0))
     expected = not any(flips) and np.abs(again - x[-p:]).max() < 0.1 * size
     assert _fill_kernel.keeps_facing(x, again, tris) == expected
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(3, 6), st.booleans(), st.booleans())
+def test_normal_equations_match_dense_products(seed, size, cot, differences):
+    # reference: the dense Laplacian L = S K, its rows (or row differences over edges) A, and the
+    # products A_u^T A_u and -A_u^T A_k x_k with NumPy; unknowns anywhere in the numbering
+    points, tris, rng = _random_patch(seed, size, 0.5)
+    n = len(points)
+    i, j, inverse = _fill_kernel.unique_edges(tris, n)
+    w, degree, scale = _fill_kernel.laplacian_weights(tris, n, i, j, inverse, points if cot else None)
+    K = np.diag(degree)
+    K[i, j] = K[j, i] = -w
+    L = scale[:, None] * K
+    unknown = np.sort(rng.choice(n, rng.integers(1, n), replace=False))
+    if differences:
+        keep = rng.random(len(i)) < 0.7
+        plus, minus = i[keep], j[keep]
+        A = L[plus] - L[minus]
+    else:
+        plus, minus = np.sort(rng.choice(n, rng.integers(1, n + 1), replace=False)), np.zeros(0, np.int64)
+        A = L[plus]
+    fixed = points.copy()
+    fixed[unknown] = 0.0
+    normal, rhs = _fill_kernel.normal_equations(points, i, j, w, degree, scale, plus, minus, unknown)
+    A_u = A[:, unknown]
+    np.testing.assert_allclose(normal, A_u.T @ A_u, rtol=1e-12, atol=1e-12 * np.abs(A).max() ** 2)
+    np.testing.assert_allclose(
+        rhs, -(A_u.T @ (A @ fixed)), rtol=1e-12, atol=1e-12 * np.abs(A).max() ** 2 * size
+    )
