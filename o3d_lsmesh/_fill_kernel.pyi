@@ -37,9 +37,14 @@ def laplacian_weights(
     inverse: np.ndarray,
     vertices: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
-def loop_chords(
-    loop: np.ndarray, triangles: np.ndarray, indptr: np.ndarray, data: np.ndarray
-) -> np.ndarray: ...
+def loop_geometry(
+    loop: np.ndarray,
+    rows: np.ndarray,
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    indptr: np.ndarray,
+    data: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]: ...
 def unique_edges(tris: np.ndarray, nv: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
 def keeps_facing(x: np.ndarray, again: np.ndarray, new_tris: np.ndarray) -> bool: ...
 def normal_equations(

@@ -3,9 +3,14 @@
 
 Each function does the floating-point operations of the NumPy code it replaced in the same order (sums of
 three terms left to right; an ``einsum`` dot product as ``(x0 y0 + x2 y2) + x1 y1``, as NumPy's kernel
-adds them), so that its results are the same to the last bit, except where NumPy's own ``arccos`` and
-``arcsin`` round differently from the C library's (one unit in the last place, which only moves a
-decision that sits exactly on a tolerance).
+adds them; means by NumPy's pairwise summation), so that the fills are the ones of the NumPy code: the
+same triangles, and vertices within 1e-15 relative, where sums over a vertex's star and the normal
+equations' products are added in another order than BLAS did. NumPy's own ``arccos`` and ``arcsin`` may
+round one unit in the last place away from the C library's: that moves only a decision sitting exactly
+on a tolerance.
+
+Local meshes (a patch and the rings around it) index their vertices below 2^31: edge keys pack two
+indices in one int64.
 """
 
 import numpy as np
@@ -440,6 +445,8 @@ def relax(const double[:, ::1] points, triangles, fixed_pairs, dirty):
         raise ValueError("triangles must be (t, 3) and dirty (t,)")
     if len(out) and (out.min() < 0 or out.max() >= points.shape[0]):
         raise ValueError("triangles index outside points")
+    if points.shape[0] >= 2**31:
+        raise ValueError("a local mesh has fewer than 2^31 vertices")
     cdef int64_t[:, ::1] tris = out
     cdef uint8_t[::1] d = mask
     cdef int64_t[::1] fixed = _fixed_keys(fixed_pairs)
@@ -1087,6 +1094,8 @@ def unique_edges(const int64_t[:, ::1] tris, int64_t nv):
     cdef int64_t t = tris.shape[0], nh = 3 * t, h, e = 0, a, b
     if t and (np.min(tris) < 0 or np.max(tris) >= nv):
         raise ValueError("tris index outside the nv vertices")
+    if nv >= 2**31:
+        raise ValueError("a local mesh has fewer than 2^31 vertices")
     cdef Half* half = <Half*>malloc(max(nh, 1) * sizeof(Half))
     if not half:
         raise MemoryError
