@@ -1270,3 +1270,16 @@ def test_normal_equations_match_dense_products(seed, size, cot, differences):
     np.testing.assert_allclose(
         rhs, -(A_u.T @ (A @ fixed)), rtol=1e-12, atol=1e-12 * np.abs(A).max() ** 2 * size
     )
+
+
+def test_dynamic_programme_falls_back_when_every_chord_is_an_edge():
+    # a square loop whose two diagonals both are mesh edges: no triangulation avoids them, so the
+    # programme returns its unconstrained one (the fill then checks the result for crossings)
+    points = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0.2], [0, 1, 0.0]])
+    outer = np.tile([0, 0, 1.0], (4, 1))
+    forbidden = np.zeros((4, 4), dtype=bool)
+    forbidden[0, 2] = forbidden[2, 0] = forbidden[1, 3] = forbidden[3, 1] = True
+    expected = _minimum_weight_triangulation(points, outer, None)
+    assert np.array_equal(_minimum_weight_triangulation(points, outer, forbidden), expected)
+    half = {(a, b) for t in expected.tolist() for a, b in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0]))}
+    assert all(((i + 1) % 4, i) in half for i in range(4))
