@@ -616,21 +616,21 @@ class HoleFiller:
         old, new_tris = triangles[:m], triangles[m:]
         ring_tris, rings = _fill_kernel.rings(self.triangles, *self.vertex_triangles, loops, continuity)
         local_tris = np.concatenate([old[ring_tris], new_tris])
+        # a local numbering (nothing as long as the mesh): the new vertices, every one on a new triangle
+        # and numbered last, stay last
         local_vertices = np.unique(local_tris)
-        remap = np.full(total, -1, dtype=np.int64)
-        remap[local_vertices] = np.arange(len(local_vertices))
-        local_rings = [remap[r] for r in rings]
-        local = remap[local_tris]
-        local_edges = _fill_kernel.unique_edges(
-            local, len(local_vertices)
-        )  # one connectivity for every solve below
+        local_rings = [np.searchsorted(local_vertices, r) for r in rings]
+        local = np.searchsorted(local_vertices, local_tris)
+        local_unknown = np.arange(len(local_vertices) - len(unknown), len(local_vertices))
+        # one connectivity for every solve below
+        local_edges = _fill_kernel.unique_edges(local, len(local_vertices))
         refined = vertices[n:].copy()
         work = vertices  # its new rows hold the candidate being solved from or checked
 
         def solve(level: int, weighted: bool) -> np.ndarray | None:
             try:
                 x = _fair(
-                    work[local_vertices], local, remap[unknown], local_rings, level, local_edges, weighted
+                    work[local_vertices], local, local_unknown, local_rings, level, local_edges, weighted
                 )
             except SingularSystemError:
                 return None
