@@ -12,7 +12,10 @@ Each chosen hole (a closed loop of boundary half-edges) is
 4. checked: a patch crossing the mesh is faired again with a lower continuity, or left open.
 
 :class:`HoleFiller` holds the whole-mesh analysis, so that :meth:`HoleFiller.fill` does only work local
-to the holes (as CGAL's calls on a prebuilt half-edge structure), all holes batched in each step.
+to the holes (as CGAL's calls on a prebuilt half-edge structure), all holes batched in each step. The
+sequential loops of each step (the programme, the splits and flips, the rings, the Laplacian weights and
+small normal equations, the relaxation, the crossing test) are compiled in ``_fill_kernel.pyx``; this
+module holds the pipeline, the choices between candidates and the sparse path of large patches.
 """
 
 from __future__ import annotations
