@@ -1,4 +1,4 @@
-"""Build the compiled hierarchy kernel; everything else about the package is in setup.cfg."""
+"""Build the compiled kernels (hierarchy, hole filling); everything else about the package is in setup.cfg."""
 
 import sys
 
@@ -10,5 +10,7 @@ from setuptools import Extension, setup
 flags = [] if sys.platform == "win32" else ["-O3", "-ffp-contract=off"]
 extensions = [
     Extension("o3d_lsmesh.hierarchy._kernel", ["o3d_lsmesh/hierarchy/_kernel.pyx"], extra_compile_args=flags),
+    # hole filling's dynamic programme, refinement flips, relaxation and crossing test
+    Extension("o3d_lsmesh._fill_kernel", ["o3d_lsmesh/_fill_kernel.pyx"], extra_compile_args=flags),
 ]
 setup(ext_modules=cythonize(extensions, compiler_directives={"language_level": "3"}))

@@ -449,21 +449,22 @@ NOTES = """\
 * Time: CGAL's clock starts on a built half-edge structure and runs only its hole calls. Ours is timed
   twice: ``fill_holes_arrays`` from arrays (including the whole-mesh analysis: one edge sort, the loops,
   components, each vertex's triangles) and ``HoleFiller(V, T).fill()`` with the filler built before the
-  clock, as CGAL's structure. This run had a load average of about 7 on the 2 cores (wall times 2-5x
-  the CPU times), so read the CPU columns. With the prebuilt filler the CPU-time ratio is within the 2x
-  target on the large horse hole only (1.42); bunny 3.4, plane_holes 2.2, horse 6h 3.9, and the single
-  small holes 11-19x: CGAL takes 0.5-1 ms there, ours 7-16 ms. Since the last run the fairing solves
-  systems of at most 120 unknowns with a dense Cholesky (no sparse assembly, no CHOLMOD analysis), the
-  fairing's candidates carry only the new vertices (one working copy of the mesh's vertices instead of
-  eight), and the tangential relaxation sums stars with a dense incidence on small patches. Measured
-  interleaved in one process against the previous code (CPU per hole, prebuilt, best of 12): horse 2.5h
-  11.7 -> 7.8 ms, camel 2.5h 12.0 -> 9.7, camel 6h 23.6 -> 19.8, camel 15h 14.4 -> 10.3, horse 15h
-  98.8 -> 83.1; bunny, plane_holes and horse 6h unchanged within the noise. What is left is flat: the
-  dynamic programme's diagonals (~20%; half of bunny's time, its 80-edge loop), the refinement's flip
-  passes (~25%), the crossing check (~12%), the relaxation (~12%), each tens of NumPy calls of 5-100 us
-  on tiny arrays; a coordinates-first layout of the programme was 13% faster at k = 80 but 35% slower
-  at k = 14 and was not kept. Closing the gap on small holes needs the programme and the flips as a
-  compiled kernel (sequential by nature), not more NumPy.
+  clock, as CGAL's structure. Read the CPU columns: the wall clock of this shared machine swings with
+  the other jobs, and the CPU ratios still vary by up to 1.3x between runs (CGAL's camel 2.5h: 0.43-0.53
+  ms). The per-hole loops are compiled (``o3d_lsmesh/_fill_kernel.pyx``: the dynamic programme, the
+  refinement's splits and flips, the fixed rings, the Laplacian weights and the small normal
+  equations, the tangential relaxation, the crossing test's sphere sweep and separating axes). With the
+  prebuilt filler the CPU-time ratio is within the 2x target on horse 6h and 15h, bunny and plane_holes
+  (0.69-1.12), 2.1x on camel 6h and 2.6-4.8x on the single small holes (horse 2.5h, camel 2.5h and
+  15h), where CGAL takes 0.4-0.6 ms and ours 1.6-2.1 ms. Measured interleaved in one process against
+  the NumPy code the kernel replaced (CPU per hole, prebuilt, best of 3 rounds of 7): horse 2.5h 6.5 ->
+  1.7 ms, 6h 24.6 -> 4.6, 15h 73.6 -> 28.7, camel 2.5h 7.6 -> 1.6, 6h 16.9 -> 3.1, 15h 9.0 -> 1.6,
+  bunny 13.9 -> 4.3, plane_holes 1.4 -> 0.56, with the same fills (identical triangles on these cases
+  and generated spheres and tori under eight option sets; vertices within 3e-13 relative). What is
+  left on a small hole is about sixty NumPy and SciPy calls around the compiled steps (the crossing
+  check's k-d tree query, the two dense Cholesky solves, the pieces' bookkeeping); and the first fill
+  after building a filler, which this benchmark times, runs about 1.7x slower than a repeat (cold
+  caches after the whole-mesh analysis).
 """
 
 
@@ -584,7 +585,7 @@ def main() -> int:
                     ratios,
                 ),
             ),
-            ("Reading (from the run of 2026-12-01; check against the tables above after a rerun)", NOTES),
+            ("Reading (from the run of 2026-12-02; check against the tables above after a rerun)", NOTES),
         ],
     )
     return 0

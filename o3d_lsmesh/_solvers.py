@@ -787,3 +787,34 @@ def _block_cg(
     if not np.isfinite(X).all():
         raise SingularSystemError("conjugate gradients diverged: the matrix is not positive definite")
     return (X[:, 0] if vector else X), iteration, float(relative.max(initial=0.0))
+
+
+#: :func:`solve_spd` solves systems with at most this many unknowns with a dense Cholesky (measured on
+#: hole filling's patches: below it the sparse path's assembly, analysis and factorization overheads
+#: cost more than the dense products).
+DENSE_UNKNOWNS = 120
+
+
+def solve_spd(matrix: Any, rhs: np.ndarray) -> np.ndarray:
+    """Solve one SPD system once: a dense Cholesky for at most :data:`DENSE_UNKNOWNS` unknowns,
+    :class:`SPDSolver` (AMD ordering) otherwise; ``matrix`` (n, n) dense or sparse, ``rhs`` (n,) or (n, k).
+
+    For one-off small systems (a hole's patch), where analysing and factoring once for many solves does
+    not pay. Raises :class:`SingularSystemError` if the matrix is not numerically positive definite.
+
+    Examples
+    --------
+    >>> solve_spd(np.array([[4.0, 1.0], [1.0, 3.0]]), np.array([1.0, 2.0])).round(4)
+    array([0.0909, 0.6364])
+    """
+    from scipy.linalg import cho_factor, cho_solve
+
+    if matrix.shape[0] > DENSE_UNKNOWNS:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", O3DLSMeshWarning)  # the SciPy fallback's warning: small systems
+            return SPDSolver(sp.csc_matrix(matrix), ordering="amd").solve(np.asarray(rhs))
+    dense = matrix.toarray() if sp.issparse(matrix) else np.asarray(matrix, dtype=np.float64)
+    try:
+        return cho_solve(cho_factor(dense), rhs)
+    except np.linalg.LinAlgError as error:
+        raise SingularSystemError(f"the system is not positive definite: {error}") from error

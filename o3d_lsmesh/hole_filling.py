@@ -12,7 +12,10 @@ Each chosen hole (a closed loop of boundary half-edges) is
 4. checked: a patch crossing the mesh is faired again with a lower continuity, or left open.
 
 :class:`HoleFiller` holds the whole-mesh analysis, so that :meth:`HoleFiller.fill` does only work local
-to the holes (as CGAL's calls on a prebuilt half-edge structure), all holes batched in each step.
+to the holes (as CGAL's calls on a prebuilt half-edge structure), all holes batched in each step. The
+sequential loops of each step (the programme, the splits and flips, the rings, the Laplacian weights and
+small normal equations, the relaxation, the crossing test) are compiled in ``_fill_kernel.pyx``; this
+module holds the pipeline, the choices between candidates and the sparse path of large patches.
 """
 
 from __future__ import annotations
@@ -23,14 +26,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.linalg import cho_factor, cho_solve
 from scipy.sparse import csgraph
 
+from . import _fill_kernel, _solvers
 from ._errors import O3DLSMeshWarning, SingularSystemError
 from ._o3d import new_mesh, read_mesh
 from ._progress import check_progress, progress_bar
 from ._ranges import concatenated_ranges
-from ._solvers import SPDSolver
 from ._validate import as_bool, as_choice, as_count, as_positive_float, mesh_arrays
 from .topology import boundary_loops, unique_edges_and_runs
 
@@ -61,9 +63,6 @@ BORDER_RATIO = 4.0
 
 _Edges = tuple[np.ndarray, np.ndarray, np.ndarray]  # edges i < j of a local mesh, each half-edge's edge
 _ALPHA = np.sqrt(2.0)  # Liepa's density factor (section 4)
-#: Fairing systems with at most this many unknowns are solved dense (measured: below it the sparse
-#: path's assembly, analysis and factorization overheads cost more than the dense products).
-_DENSE_UNKNOWNS = 120
 
 
 def _loop_rows(triangles: np.ndarray, n: int, edge_info: Any) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -200,97 +199,6 @@ def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     return out
 
 
-def _unit(v: np.ndarray) -> np.ndarray:
-    norm = np.linalg.norm(v, axis=-1)
-    return v / np.where(norm > 0, norm, 1.0)[..., None]
-
-
-def _minimum_weight_triangulations(
-    points: np.ndarray, outer_normals: np.ndarray, forbidden: np.ndarray | None
-) -> np.ndarray:
-    """Liepa's dynamic programme on ``B`` loops of ``k`` points at once: triangles ``(B, k - 2, 3)``.
-
-    Minimizes, lexicographically, the largest dihedral angle (between new triangles, and between a
-    new triangle and the mesh triangle on a loop edge, ``outer_normals[:, i]`` on edge ``(i, i + 1)``,
-    zero where unknown) and then the total area (Liepa 2003, section 3, the weight ``Omega = (max
-    angle, area)``). ``points (B, k, 3)``; ``forbidden (B, k, k)`` (or None) marks chords that are mesh
-    edges already (a non-manifold edge otherwise). Triangles are wound ``(j, m, i)``, opposite to the
-    loop like the mesh triangles across its edges. The minimum over the split vertex ``m`` is
-    vectorized over a whole diagonal ``j - i = d`` of the tables and over the batch.
-    """
-    count, k = points.shape[:2]
-    if k == 3:
-        return np.tile(np.array([[[2, 1, 0]]], dtype=np.int64), (count, 1, 1))
-    angle = np.zeros((count, k, k))
-    area = np.zeros((count, k, k))
-    split = np.full((count, k, k), -1, dtype=np.int64)
-    normal = np.zeros((count, k, k, 3))  # unit normal of the triangle on chord (i, j) inside sub-polygon i..j
-    known = np.zeros((count, k, k), dtype=bool)  # an unknown normal is no constraint
-    idx = np.arange(k - 1)
-    normal[:, idx, idx + 1] = outer_normals[:, :-1]
-    known[:, idx, idx + 1] = np.abs(outer_normals[:, :-1]).sum(-1) > 0
-    closing = outer_normals[:, k - 1]  # (B, 3)
-    closing_known = np.abs(closing).sum(-1) > 0
-    batch = np.arange(count)[:, None]
-    tol = 1e-6  # angles this close tie, and the area decides (robust to rounding)
-    for d in range(2, k):
-        i = np.arange(k - d)[:, None]  # (r, 1)
-        j = i + d
-        mm = i + np.arange(1, d)[None, :]  # (r, d - 1)
-        a = points[:, j]  # (B, r, 1, 3)
-        u, v = points[:, mm] - a, points[:, i] - a  # (B, r, d - 1, 3)
-        cross = _cross(u, v)  # triangle (j, m, i)
-        twice_area = np.sqrt(np.einsum("...k,...k->...", cross, cross))
-        tri_normal = cross / np.where(twice_area > 0, twice_area, 1.0)[..., None]
-        cos1 = np.einsum("...k,...k->...", tri_normal, normal[:, i, mm])
-        cos2 = np.einsum("...k,...k->...", tri_normal, normal[:, mm, j])
-        worst = np.minimum(np.where(known[:, i, mm], cos1, 1.0), np.where(known[:, mm, j], cos2, 1.0))
-        if d == k - 1:  # the triangle on the closing loop edge (k - 1, 0) meets the mesh there
-            cos3 = np.einsum("b...k,bk->b...", tri_normal, closing)
-            worst = np.where(closing_known[:, None, None], np.minimum(worst, cos3), worst)
-        theta = np.arccos(np.clip(worst, -1.0, 1.0))
-        # a degenerate triangle (collinear chord samples) is worse than any real one: neither its noise
-        # normal nor its zero area may win (both sides of a chord taking it make a non-manifold edge)
-        longest = np.maximum(np.einsum("...k,...k->...", u, u), np.einsum("...k,...k->...", v, v))
-        theta = np.where(twice_area > 1e-9 * longest, theta, 2.0 * np.pi)
-        total_angle = np.maximum(theta, np.maximum(angle[:, i, mm], angle[:, mm, j]))
-        total_area = 0.5 * twice_area + area[:, i, mm] + area[:, mm, j]
-        if forbidden is not None:
-            total_angle = np.where(forbidden[:, i, mm] | forbidden[:, mm, j], np.inf, total_angle)
-        best_angle = total_angle.min(axis=2, keepdims=True)
-        near_area = np.where(total_angle <= best_angle + tol, total_area, np.inf)
-        best_area = near_area.min(axis=2, keepdims=True)
-        # the first of the (near-)smallest areas: symmetric loops tie exactly, and rounding must not decide
-        choice = np.argmax(near_area <= best_area * (1.0 + 1e-9), axis=2)  # (B, r)
-        rows = np.arange(k - d)[None, :]
-        ii, jj = i[:, 0], j[:, 0]
-        chosen_angle = total_angle[batch, rows, choice]
-        if forbidden is not None and d < k - 1:
-            chosen_angle = np.where(forbidden[:, ii, jj], np.inf, chosen_angle)
-        angle[:, ii, jj] = chosen_angle
-        area[:, ii, jj] = total_area[batch, rows, choice]
-        split[:, ii, jj] = mm[rows, choice]
-        normal[:, ii, jj] = tri_normal[batch, rows, choice]
-        known[:, ii, jj] = twice_area[batch, rows, choice] > 0
-    out = np.empty((count, k - 2, 3), dtype=np.int64)
-    for b in range(count):
-        if not np.isfinite(angle[b, 0, k - 1]) and forbidden is not None:
-            # no triangulation avoids every existing edge: accept one that does not
-            out[b] = _minimum_weight_triangulations(points[b : b + 1], outer_normals[b : b + 1], None)[0]
-            continue
-        table = split[b].tolist()
-        found: list[tuple[int, int, int]] = []
-        stack = [(0, k - 1)]
-        while stack:
-            lo, hi = stack.pop()
-            if hi - lo >= 2:
-                mid = table[lo][hi]
-                found.append((hi, mid, lo))
-                stack += [(lo, mid), (mid, hi)]
-        out[b] = found
-    return out
-
-
 def _triangulate(
     points: np.ndarray, outer_normals: np.ndarray, forbidden: np.ndarray | None, spacing: float
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -301,9 +209,11 @@ def _triangulate(
     """
     k = len(points)
     if k <= DP_MAX_EDGES:
-        return np.zeros((0, 3)), _minimum_weight_triangulations(
-            points[None], outer_normals[None], None if forbidden is None else forbidden[None]
-        )[0]
+        return np.zeros((0, 3)), _fill_kernel.minimum_weight_triangulation(
+            points,
+            outer_normals,
+            None if forbidden is None or not forbidden.any() else forbidden.view(np.uint8),
+        )
     # the shortest chord between vertices 1/3 to 2/3 of the loop apart, in chunks of rows
     best = (np.inf, 0, k // 2)
     gap = np.arange(k // 3, k - k // 3 + 1)[None, :]
@@ -345,242 +255,24 @@ def _triangulate(
     return np.concatenate(extra), np.concatenate(triangles)
 
 
-def _edge_table(tris: np.ndarray, nv: int):
-    """Interior edges ``(triangle 1, slot 1, triangle 2, slot 2, a, b)`` of an oriented patch; its sorted keys."""
-    a, b = tris.reshape(-1), tris[:, [1, 2, 0]].reshape(-1)
-    key = _keys(a, b, nv)
-    order = np.argsort(key, kind="stable")
-    ks = key[order]
-    pair = np.flatnonzero(ks[1:] == ks[:-1])
-    h1, h2 = order[pair], order[pair + 1]
-    return h1 // 3, h1 % 3, h2 // 3, h2 % 3, a[h1], b[h1], ks
-
-
-def _circumsphere(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray):
-    """Centres and radii of the triangles' circumcircles (the spheres of Liepa's flip test)."""
-    u, v = p1 - p0, p2 - p0
-    w = _cross(u, v)
-    ww = (w * w).sum(-1)
-    safe = np.where(ww > 0, ww, 1.0)
-    uu, vv = (u * u).sum(-1)[:, None], (v * v).sum(-1)[:, None]
-    centre = p0 + (_cross(w, u) * vv + _cross(v, w) * uu) / (2.0 * safe[:, None])
-    return centre, np.where(ww > 0, np.linalg.norm(centre - p0, axis=1), np.inf)
-
-
-def _min_angle(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray) -> np.ndarray:
-    """Smallest interior angle (radians) of each triangle ``(p0, p1, p2)``: the one opposite the shortest
-    edge (law of sines), ``arcsin(2 area / (l_mid l_max))``, one cross product for all three corners."""
-    a, b, c = p1 - p0, p2 - p1, p0 - p2
-    lengths = np.sort(np.stack([(a * a).sum(1), (b * b).sum(1), (c * c).sum(1)]), axis=0)
-    twice_area = np.sqrt((_cross(a, c) ** 2).sum(1))
-    denominator = np.sqrt(lengths[1] * lengths[2])
-    ratio = np.divide(twice_area, denominator, out=np.zeros(len(p0)), where=denominator > 0)
-    return np.arcsin(np.minimum(ratio, 1.0))
-
-
-def _keys(a: np.ndarray, b: np.ndarray, nv: int) -> np.ndarray:
-    """Undirected edge keys ``min * nv + max``."""
-    return np.minimum(a, b) * nv + np.maximum(a, b)
-
-
-def _absent(sorted_keys: np.ndarray, keys: np.ndarray) -> np.ndarray:
-    """Which ``keys`` are not in ``sorted_keys``."""
-    if len(sorted_keys) == 0:
-        return np.ones(len(keys), dtype=bool)
-    return sorted_keys[np.minimum(np.searchsorted(sorted_keys, keys), len(sorted_keys) - 1)] != keys
-
-
-def _relax(points: np.ndarray, tris: np.ndarray, fixed_pairs: np.ndarray, dirty: np.ndarray) -> np.ndarray:
-    """Delaunay edge flips (Liepa's relaxation) until none applies, in batches of independent flips.
-
-    An interior edge ``(a, b)`` between triangles ``(a, b, c)`` and ``(b, a, d)`` flips to ``(c, d)``
-    when ``d`` is strictly inside the circumsphere of ``(a, b, c)`` (or ``c`` inside that of
-    ``(b, a, d)``), ``(c, d)`` is no edge yet (in the patch or in ``fixed_pairs`` around it), both new
-    triangles face as the old pair and the pair's smallest angle grows.
-
-    Only edges whose verdict can have changed are tested: those of the ``dirty`` triangles (a mask) and,
-    in later passes, of the triangles a flip rewrote or left waiting, and those a removed edge blocked.
-    """
-    nv = len(points)
-    tris = tris.copy()
-    removed = np.zeros(0, dtype=np.int64)
-    fixed_keys = np.sort(_keys(fixed_pairs[:, 0], fixed_pairs[:, 1], nv))
-    for _ in range(100):
-        t1, s1, t2, s2, a, b, key = _edge_table(tris, nv)
-        if len(t1) == 0:
-            break
-        c = tris[t1, (s1 + 2) % 3]
-        d = tris[t2, (s2 + 2) % 3]
-        new_key = _keys(c, d, nv)
-        mark = dirty[t1] | dirty[t2]
-        if len(removed):
-            mark |= ~_absent(removed, new_key)
-        open_ = np.flatnonzero(mark)
-        # the new edge must not exist yet (in the patch, or around it)
-        ok_key = new_key[open_]
-        open_ = open_[_absent(key, ok_key) & _absent(fixed_keys, ok_key) & (c[open_] != d[open_])]
-        pa, pb, pc, pd = points[a[open_]], points[b[open_]], points[c[open_]], points[d[open_]]
-        # a relative margin: near-co-circular quads (common on regular patches) are not flipped, so
-        # the result does not hinge on rounding (rigid motions give the same connectivity)
-        centre, radius = _circumsphere(pa, pb, pc)
-        near = np.linalg.norm(pd - centre, axis=1) < radius * (1.0 - 1e-6)
-        rest = np.flatnonzero(~near)  # and the other way round (in 3D the two tests differ)
-        centre2, radius2 = _circumsphere(pb[rest], pa[rest], pd[rest])
-        near[rest] = np.linalg.norm(pc[rest] - centre2, axis=1) < radius2 * (1.0 - 1e-6)
-        inside = np.zeros(len(t1), dtype=bool)
-        inside[open_] = near
-        live = np.flatnonzero(inside)  # the other tests only on the edges still in
-        pa, pb, pc, pd = points[a[live]], points[b[live]], points[c[live]], points[d[live]]
-        # the new triangles (c, a, d) and (d, b, c) must not fold over
-        old = _cross(pb - pa, pc - pa) + _cross(pa - pb, pd - pb)
-        ok = ((_cross(pa - pc, pd - pc) * old).sum(1) > 0) & ((_cross(pb - pd, pc - pd) * old).sum(1) > 0)
-        # and the smallest angle grows (the two sphere tests disagree in 3D: without this an edge could
-        # flip back and forth): (a, b, c), (b, a, d) before; (c, a, d), (d, b, c) after
-        angles = _min_angle(
-            np.concatenate([pa, pb, pc, pd]),
-            np.concatenate([pb, pa, pa, pb]),
-            np.concatenate([pc, pd, pd, pc]),
-        ).reshape(4, -1)
-        ok &= np.minimum(angles[2], angles[3]) > np.minimum(angles[0], angles[1]) + 1e-9
-        inside[live] = ok
-        proposed = np.flatnonzero(inside)
-        if len(proposed) == 0:
-            break
-        # independent set: each triangle takes part in at most one flip of this pass
-        owner = np.full(len(tris), len(t1), dtype=np.int64)
-        np.minimum.at(owner, t1[proposed], proposed)
-        np.minimum.at(owner, t2[proposed], proposed)
-        cand = proposed[(owner[t1[proposed]] == proposed) & (owner[t2[proposed]] == proposed)]
-        _, first = np.unique(new_key[cand], return_index=True)  # two flips must not make the same edge
-        cand = cand[np.sort(first)]
-        dirty = np.zeros(len(tris), dtype=bool)
-        dirty[t1[proposed]] = True
-        dirty[t2[proposed]] = True
-        removed = np.sort(_keys(a[cand], b[cand], nv))
-        tris[t1[cand]] = np.stack([c[cand], a[cand], d[cand]], axis=1)
-        tris[t2[cand]] = np.stack([d[cand], b[cand], c[cand]], axis=1)
-    return tris
-
-
-def _refine(
-    points: np.ndarray, sigma: np.ndarray, tris: np.ndarray, fixed_pairs: np.ndarray, owner: np.ndarray
-):
-    """Liepa's refinement: centroid splits of triangles larger than the local scale, then relaxation.
-
-    A triangle with centroid ``c`` and ``sigma_c`` the mean of its corners' scales is split when
-    ``alpha * |c - v_m| > max(sigma_c, sigma_m)`` for each corner ``m`` (``alpha = sqrt(2)``); the new
-    vertex takes scale ``sigma_c``. Rounds of splits and flips run until no triangle splits. Patches
-    in disjoint index ranges refine at once, ``owner`` naming each point's patch. Returns the points
-    (the first ``len(points)`` unchanged), the triangles and the points' owners.
-    """
-    # no flips before the first split (as Liepa and CGAL): on a short loop Delaunay flips made the
-    # minimum-weight triangles slimmer, and coarse holes got no new vertex (camel 2.5h: 0, CGAL 3)
-    relaxed = False
-    for _ in range(60):
-        corners = points[tris]  # (t, 3, 3)
-        centre = corners.mean(axis=1)
-        sigma_c = sigma[tris].mean(axis=1)
-        dist = np.linalg.norm(centre[:, None, :] - corners, axis=2)
-        chosen = np.flatnonzero((_ALPHA * dist > np.maximum(sigma_c[:, None], sigma[tris])).all(axis=1))
-        if len(chosen) == 0:
-            break
-        new = len(points) + np.arange(len(chosen))
-        points = np.concatenate([points, centre[chosen]])
-        sigma = np.concatenate([sigma, sigma_c[chosen]])
-        owner = np.concatenate([owner, owner[tris[chosen, 0]]])
-        a, b, c = tris[chosen, 0], tris[chosen, 1], tris[chosen, 2]
-        tris[chosen] = np.stack([a, b, new], axis=1)
-        tris = np.concatenate([tris, np.stack([b, c, new], axis=1), np.stack([c, a, new], axis=1)])
-        # after a relaxation only edges of the split triangles can flip
-        split_mask = np.ones(len(tris), dtype=bool)
-        if relaxed:
-            split_mask[: len(split_mask) - 2 * len(chosen)] = False
-            split_mask[chosen] = True
-        tris = _relax(points, tris, fixed_pairs, split_mask)
-        relaxed = True
-    return points, tris, owner
-
-
-def _rings(
-    triangles: np.ndarray, vertex_triangles: tuple[np.ndarray, np.ndarray], seeds: np.ndarray, count: int
-):
-    """The triangles (sorted) of ``count`` successive vertex rings around ``seeds`` (ring 0), and the
-    ``count + 1`` rings (the last incomplete), from each vertex's triangles ``vertex_triangles`` (CSR)."""
-    indptr, data = vertex_triangles
-    seen = front = np.unique(seeds)
-    rings, taken = [seeds], np.zeros(0, dtype=np.int64)
-    for _ in range(count):
-        touch = data[concatenated_ranges(indptr[front], indptr[front + 1] - indptr[front])]
-        touch = np.setdiff1d(touch, taken)  # the ring's new triangles
-        taken = np.union1d(taken, touch)
-        front = np.setdiff1d(triangles[touch].ravel(), seen)
-        seen = np.union1d(seen, front)
-        rings.append(front)
-    return taken, rings
-
-
-def _unique_edges(tris: np.ndarray, nv: int) -> _Edges:
-    """Undirected edges ``i < j`` of a local mesh (sorted) and the edge of each of its ``3t`` half-edges."""
-    e = np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1)
-    e_keys, inverse = np.unique(e[:, 0] * nv + e[:, 1], return_inverse=True)
-    return e_keys // nv, e_keys % nv, inverse
-
-
 def _operators(
-    tris: np.ndarray, nv: int, edges: _Edges, vertices: np.ndarray | None = None, dense: bool = False
+    i: np.ndarray, j: np.ndarray, w: np.ndarray, degree: np.ndarray, scale: np.ndarray, dense: bool
 ):
-    """Stiffness ``K = D - W`` and Laplacian ``L = S K`` of a local mesh (CSR, or arrays if ``dense``),
-    and its edges ``(e, 2)``.
-
-    Uniform (``vertices`` None): ``W`` the adjacency and ``S = D^-1``, eq. 1 of LS meshes. Cotangent:
-    ``W`` the weights ``(cot a + cot b) / 2`` of ``vertices``, clamped below at 5% of their mean
-    (obtuse pairs would make ``K`` indefinite), and ``S`` the inverse vertex areas (normalized to
-    mean 1). ``edges`` is :func:`_unique_edges` of ``tris``.
-    """
-    i, j, inverse = edges
-    w: np.ndarray
-    if vertices is None:
-        w = np.ones(len(i))
-    else:
-        p = vertices[tris]  # (t, 3, 3)
-        cot = np.zeros((len(tris), 3))  # cotangent of the angle opposite edge (c, c + 1)
-        for c in range(3):
-            u = p[:, c] - p[:, (c + 2) % 3]
-            v = p[:, (c + 1) % 3] - p[:, (c + 2) % 3]
-            cot[:, c] = (u * v).sum(1) / np.maximum(np.linalg.norm(_cross(u, v), axis=1), 1e-300)
-        w = 0.5 * np.bincount(inverse, weights=cot.T.reshape(-1), minlength=len(i))
-        w = np.maximum(w, 0.05 * np.abs(w).mean())
-    degree = np.bincount(i, weights=w, minlength=nv) + np.bincount(j, weights=w, minlength=nv)
-    mass = degree
-    if vertices is not None:
-        area = 0.5 * np.linalg.norm(_cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
-        mass = np.bincount(tris.ravel(), weights=np.repeat(area / 3.0, 3), minlength=nv)
-        mass = mass / mass[mass > 0].mean()
-    scale = np.divide(1.0, mass, out=np.zeros(nv), where=mass > 0)
+    """Stiffness ``K = D - W`` and Laplacian ``L = S K`` (CSR, or arrays if ``dense``) of a local mesh
+    with edges ``(i, j)`` of weight ``w``, ``D`` the ``degree`` and ``S`` the row ``scale`` of
+    :func:`o3d_lsmesh._fill_kernel.laplacian_weights`."""
+    nv = len(degree)
     diagonal = np.arange(nv)
     rows, cols = np.concatenate([i, j, diagonal]), np.concatenate([j, i, diagonal])
     values = np.concatenate([-w, -w, degree])
     if dense:
         K = np.zeros((nv, nv))
         K[rows, cols] = values
-        return K, scale[:, None] * K, np.stack([i, j], axis=1)
+        return K, scale[:, None] * K
     K = sp.csr_matrix((values, (rows, cols)), shape=(nv, nv))
     L = K.copy()  # L = S K: K's pattern with its rows scaled
     L.data = L.data * np.repeat(scale, np.diff(L.indptr))
-    return K, L, np.stack([i, j], axis=1)
-
-
-def _solve_spd(normal: Any, rhs: np.ndarray) -> np.ndarray:
-    """Solve the SPD system: a dense Cholesky for an array (a small patch, where the sparse gateway's
-    analysis and factorization overheads are most of the time), :class:`SPDSolver` for a sparse matrix."""
-    if sp.issparse(normal):
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", O3DLSMeshWarning)  # the SciPy fallback warning: tiny systems
-            return SPDSolver(normal.tocsc(), ordering="amd").solve(np.asarray(rhs))
-    try:
-        return cho_solve(cho_factor(normal), rhs)
-    except np.linalg.LinAlgError as error:
-        raise SingularSystemError(f"the fairing system is singular: {error}") from error
+    return K, L
 
 
 def _fair(
@@ -593,49 +285,62 @@ def _fair(
     * ``1``: ``sum_r |(L x)_r|^2`` over the rows touching an unknown: the LS-mesh energy ``||L x||^2``
       with interpolated anchors (eq. 3, section 6);
     * ``2``: ``sum |(L x)_r - (L x)_s|^2`` over edges ``(r, s)`` touching such a row:
-      ``(L x)^T K (L x)``, the tri-Laplacian energy.
+      ``(L x)^T K (L x)``, the tri-Laplacian energy,
+
+    with ``K = D - W`` and ``L = S K``: uniform, ``W`` the adjacency and ``S = D^-1`` (eq. 1 of LS
+    meshes); or, if ``cot``, ``W`` the cotangent weights of ``x`` clamped below at 5% of their mean
+    (obtuse pairs would make ``K`` indefinite) and ``S`` the inverse vertex areas, normalized to mean 1
+    (:func:`o3d_lsmesh._fill_kernel.laplacian_weights`).
 
     ``rings[0]`` are the loop vertices, ``rings[i]`` the i-th ring around them: the rows used involve
-    only vertices whose one-rings are complete in ``tris``. ``edges`` is :func:`_unique_edges` of
-    ``tris``; ``cot`` reads the weights of :func:`_operators` off ``x``.
+    only vertices whose one-rings are complete in ``tris``. ``edges`` is
+    :func:`o3d_lsmesh._fill_kernel.unique_edges` of ``tris``. Small systems (at most
+    :data:`o3d_lsmesh._solvers.DENSE_UNKNOWNS` unknowns) are assembled by the compiled
+    :func:`o3d_lsmesh._fill_kernel.normal_equations` and solved dense; larger ones sparse.
     """
     nv = len(x)
-    dense = len(unknown) <= _DENSE_UNKNOWNS
-    K, L, pairs = _operators(tris, nv, edges, x if cot else None, dense)
+    i, j, inverse = edges
+    w, degree, scale = _fill_kernel.laplacian_weights(tris, nv, i, j, inverse, x if cot else None)
+    dense = len(unknown) <= _solvers.DENSE_UNKNOWNS
     if level == 0:
+        K, _ = _operators(i, j, w, degree, scale, dense)
         known = np.ones(nv, dtype=bool)
         known[unknown] = False
-        normal = K[unknown][:, unknown]
-        rhs = -(K[unknown][:, np.flatnonzero(known)] @ x[known])
+        return _solvers.solve_spd(K[unknown][:, unknown], -(K[unknown][:, np.flatnonzero(known)] @ x[known]))
+    rows = np.zeros(nv, dtype=bool)
+    rows[unknown] = True
+    rows[rings[0]] = True  # rows whose Laplacian involves an unknown
+    if level == 1:
+        plus, minus = np.flatnonzero(rows), np.zeros(0, dtype=np.int64)
     else:
-        rows = np.zeros(nv, dtype=bool)
-        rows[unknown] = True
-        rows[rings[0]] = True  # rows whose Laplacian involves an unknown
-        if level == 1:
-            A_full = L[np.flatnonzero(rows)]
-        else:
-            valid = rows.copy()
-            valid[rings[1]] = True
-            keep = (rows[pairs[:, 0]] | rows[pairs[:, 1]]) & valid[pairs[:, 0]] & valid[pairs[:, 1]]
-            sel = pairs[keep]
-            if dense:
-                A_full = L[sel[:, 0]] - L[sel[:, 1]]
-            else:  # the edge difference operator: row e is +1 at sel[e, 0] and -1 at sel[e, 1]
-                G = sp.csr_matrix(
-                    (np.tile([1.0, -1.0], len(sel)), sel.ravel(), np.arange(0, 2 * len(sel) + 1, 2)),
-                    shape=(len(sel), nv),
-                )
-                A_full = G @ L
-        A_full = A_full if dense else A_full.tocsc()
-        if len(unknown) and unknown[0] == nv - len(unknown) and (np.diff(unknown) == 1).all():
-            A_u = A_full[:, nv - len(unknown) :]  # the usual layout: the unknowns are the last columns
-        else:
-            A_u = A_full[:, unknown]
-        fixed = x.copy()
-        fixed[unknown] = 0.0  # A_known x_known, without slicing the known columns out
-        normal = A_u.T @ A_u
-        rhs = -(A_u.T @ (A_full @ fixed))
-    return _solve_spd(normal, rhs)
+        valid = rows.copy()
+        valid[rings[1]] = True
+        keep = (rows[i] | rows[j]) & valid[i] & valid[j]
+        plus, minus = i[keep], j[keep]
+    if dense:
+        normal, rhs = _fill_kernel.normal_equations(x, i, j, w, degree, scale, plus, minus, unknown)
+        return _solvers.solve_spd(normal, rhs)
+    _, L = _operators(i, j, w, degree, scale, False)
+    if level == 1:
+        A_full = L[plus]
+    else:  # the edge difference operator: row e is +1 at plus[e] and -1 at minus[e]
+        G = sp.csr_matrix(
+            (
+                np.tile([1.0, -1.0], len(plus)),
+                np.stack([plus, minus], axis=1).ravel(),
+                np.arange(0, 2 * len(plus) + 1, 2),
+            ),
+            shape=(len(plus), nv),
+        )
+        A_full = G @ L
+    A_full = A_full.tocsc()
+    if len(unknown) and unknown[0] == nv - len(unknown) and (np.diff(unknown) == 1).all():
+        A_u = A_full[:, nv - len(unknown) :]  # the usual layout: the unknowns are the last columns
+    else:
+        A_u = A_full[:, unknown]
+    fixed = x.copy()
+    fixed[unknown] = 0.0  # A_known x_known, without slicing the known columns out
+    return _solvers.solve_spd(A_u.T @ A_u, -(A_u.T @ (A_full @ fixed)))
 
 
 @dataclass(frozen=True)
@@ -761,7 +466,6 @@ class HoleFiller:
         self.vertices, self.triangles = vertices, triangles
         edge_info = unique_edges_and_runs(triangles, n)  # the one whole-mesh sort
         edges = edge_info[0][0]
-        self.edge_keys = edges[:, 0] * n + edges[:, 1]  # sorted
         self.holes = find_holes(vertices, triangles, _edge_info=edge_info)
         length = np.linalg.norm(vertices[edges[:, 0]] - vertices[edges[:, 1]], axis=1)
         degree = np.maximum(np.bincount(edges.ravel(), minlength=n), 1)
@@ -773,20 +477,6 @@ class HoleFiller:
         ).tocsc()
         self.vertex_triangles = (by_vertex.indptr.astype(np.int64), by_vertex.data.astype(np.int64))
         self.index = _TriangleIndex(vertices, triangles) if index_triangles else None
-
-    def _piece(self, loop: np.ndarray, rows: np.ndarray):
-        """A loop's points, the unit normals of the mesh triangles on its edges (for the dihedral angles),
-        the chords that already are mesh edges (``(k, k)`` bool) and its mean edge length."""
-        vertices, n, k = self.vertices, len(self.vertices), len(loop)
-        points = vertices[loop]
-        t = self.triangles[rows % len(self.triangles)]
-        outer = _unit(_cross(vertices[t[:, 1]] - vertices[t[:, 0]], vertices[t[:, 2]] - vertices[t[:, 0]]))
-        a, b = np.meshgrid(loop, loop, indexing="ij")
-        forbidden = ~_absent(self.edge_keys, _keys(a, b, n).ravel()).reshape(k, k)
-        idx = np.arange(k)
-        forbidden[idx, (idx + 1) % k] = forbidden[(idx + 1) % k, idx] = False
-        spacing = float(np.mean(np.linalg.norm(np.roll(points, -1, 0) - points, axis=1)))
-        return points, outer, forbidden, spacing
 
     def fill(
         self,
@@ -826,40 +516,29 @@ class HoleFiller:
             empty = np.zeros(0, dtype=np.int64)
             return FilledHoles(vertices.copy(), triangles.copy(), [], skipped, sp.csr_matrix((0, n)), empty)
         # each piece (a loop; one through a vertex twice is cut in pieces) is triangulated on its own,
-        # loops of one length in one batch of the dynamic programme, longer ones cut by chords first
+        # long ones cut by chords sampled at the refinement's spacing (none without) first
         pieces = [(h, *p) for h, hole in enumerate(holes) for p in _simple_pieces(hole.vertices, hole.rows)]
         piece_hole, piece_loop, piece_rows = zip(*pieces)
+        # each piece's points, the normals across its edges, its chords that are mesh edges, its spacing
         piece_points, piece_outer, piece_forbidden, piece_spacing = zip(
-            *map(self._piece, piece_loop, piece_rows)
+            *(
+                _fill_kernel.loop_geometry(loop, rows, vertices, triangles, *self.vertex_triangles)
+                for loop, rows in zip(piece_loop, piece_rows)
+            )
         )
         count = len(piece_loop)
-        piece_extra, piece_tris = [np.zeros((0, 3))] * count, [np.zeros((0, 3), dtype=np.int64)] * count
-        lengths = np.array([len(loop) for loop in piece_loop])
+        piece_extra, piece_tris = [], []
         with progress_bar(progress, total=count, desc="filling holes", unit="loop") as bar:
-            for k in np.unique(lengths):
-                group = np.flatnonzero(lengths == k)
-                # batches bound the tables' memory (~60 k**2 floats a loop); longer loops go one by one
-                step = 1 if k > DP_MAX_EDGES else max(1, 200_000 // int(k) ** 2)
-                for chunk in np.split(group, np.arange(step, len(group), step)):
-                    stacked = np.stack([piece_forbidden[i] for i in chunk])
-                    forbidden = stacked if stacked.any() else None
-                    if k > DP_MAX_EDGES:  # cut by chords sampled at the refinement's spacing (none without)
-                        i = int(chunk[0])
-                        piece_extra[i], piece_tris[i] = _triangulate(
-                            piece_points[i],
-                            piece_outer[i],
-                            None if forbidden is None else forbidden[0],
-                            piece_spacing[i] / density if density > 0 else 0.0,
-                        )
-                    else:
-                        found = _minimum_weight_triangulations(
-                            np.stack([piece_points[i] for i in chunk]),
-                            np.stack([piece_outer[i] for i in chunk]),
-                            forbidden,
-                        )
-                        for i, tris in zip(chunk.tolist(), found):
-                            piece_tris[i] = tris
-                    bar.update(len(chunk))
+            for points, outer, forbidden, spacing in zip(
+                piece_points, piece_outer, piece_forbidden, piece_spacing
+            ):
+                extra, tris = _triangulate(
+                    points, outer, forbidden, spacing / density if density > 0 else 0.0
+                )
+                piece_extra.append(extra)
+                piece_tris.append(tris)
+                bar.update(1)
+        lengths = np.array([len(loop) for loop in piece_loop])
         # every piece refined at once, in disjoint local index ranges
         sizes = np.array([len(p) + len(e) for p, e in zip(piece_points, piece_extra)])
         starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
@@ -875,8 +554,8 @@ class HoleFiller:
             ]
             # mesh edges between loop vertices: no flip may make them twice
             fixed = [np.argwhere(np.triu(f)) + start for f, start in zip(piece_forbidden, starts)]
-            all_points, all_tris, point_piece = _refine(
-                all_points, np.concatenate(sigma), all_tris, np.concatenate(fixed), point_piece
+            all_points, all_tris, point_piece = _fill_kernel.refine(
+                all_points, np.concatenate(sigma), all_tris, np.concatenate(fixed), point_piece, _ALPHA
             )
         # global numbering: loop points (first in each piece, in order) are mesh vertices; the others
         # are new, numbered piece by piece
@@ -938,21 +617,23 @@ class HoleFiller:
         loops = np.unique(np.concatenate([hole.vertices for hole in holes]))
         # triangles within `continuity` rings of the loops in the input, plus every new triangle
         old, new_tris = triangles[:m], triangles[m:]
-        ring_tris, rings = _rings(old, self.vertex_triangles, loops, continuity)
+        ring_tris, rings = _fill_kernel.rings(self.triangles, *self.vertex_triangles, loops, continuity)
         local_tris = np.concatenate([old[ring_tris], new_tris])
+        # a local numbering (nothing as long as the mesh): the new vertices, every one on a new triangle
+        # and numbered last, stay last
         local_vertices = np.unique(local_tris)
-        remap = np.full(total, -1, dtype=np.int64)
-        remap[local_vertices] = np.arange(len(local_vertices))
-        local_rings = [remap[r] for r in rings]
-        local = remap[local_tris]
-        local_edges = _unique_edges(local, len(local_vertices))  # one connectivity for every solve below
+        local_rings = [np.searchsorted(local_vertices, r) for r in rings]
+        local = np.searchsorted(local_vertices, local_tris)
+        local_unknown = np.arange(len(local_vertices) - len(unknown), len(local_vertices))
+        # one connectivity for every solve below
+        local_edges = _fill_kernel.unique_edges(local, len(local_vertices))
         refined = vertices[n:].copy()
         work = vertices  # its new rows hold the candidate being solved from or checked
 
         def solve(level: int, weighted: bool) -> np.ndarray | None:
             try:
                 x = _fair(
-                    work[local_vertices], local, remap[unknown], local_rings, level, local_edges, weighted
+                    work[local_vertices], local, local_unknown, local_rings, level, local_edges, weighted
                 )
             except SingularSystemError:
                 return None
@@ -970,11 +651,11 @@ class HoleFiller:
                     # cotangent weights (clamped, area-normalized) read off the uniform solution: a fair
                     # embedding, where weights from the flat refined patch diverged (camel 15h: 87 h off)
                     again = solve(level, True)
-                    if again is not None and _no_fold(work, again, new_tris):
+                    if again is not None and _fill_kernel.keeps_facing(work, again, new_tris):
                         work[n:] = again
-                        yield level, _tangential_relax(work, new_tris, n)
+                        yield level, _fill_kernel.tangential_relax(work, new_tris, n)
                         work[n:] = solution
-                yield level, _tangential_relax(work, new_tris, n)
+                yield level, _fill_kernel.tangential_relax(work, new_tris, n)
                 work[n:] = refined
             yield -1, refined  # the refined patch as triangulated
 
@@ -1041,7 +722,9 @@ def _interpolation(
         k, nl = len(loop), len(numbering)
         # the membrane (continuity 0) with the loop's unit vectors as the fixed "positions"
         unit = np.eye(nl, k)
-        harmonic = _fair(unit, tris_local, np.arange(k, nl), [], 0, _unique_edges(tris_local, nl), False)
+        harmonic = _fair(
+            unit, tris_local, np.arange(k, nl), [], 0, _fill_kernel.unique_edges(tris_local, nl), False
+        )
         r, c = np.nonzero(np.abs(harmonic) > 1e-12)
         rows.append(inner[r] - n)
         cols.append(loop[c])
@@ -1049,41 +732,6 @@ def _interpolation(
     if not rows:
         return sp.csr_matrix((p, n))
     return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(p, n))
-
-
-def _tangential_relax(vertices: np.ndarray, new_tris: np.ndarray, first_new: int) -> np.ndarray:
-    """Move each new vertex ten times half-way to its star's area-weighted centroid, in its tangent plane;
-    the new vertices' positions ``(len(vertices) - first_new, 3)``.
-
-    The star's centroid (a step of centroidal Voronoi smoothing), not the neighbours' mean, which on
-    an irregular star sits towards the short edges and leaves a sliver (smallest angle on plane_holes
-    24.2 -> 25.6 degrees, horse 15h 22.0 -> 24.1). Only the move's part tangent to the area-weighted
-    normal of the vertex's (new) triangles is taken: the faired surface is kept to first order.
-    """
-    moving = np.arange(first_new, len(vertices))
-    # a local, increasing numbering of the patches' vertices: nothing grows with the mesh
-    local = np.union1d(new_tris.ravel(), moving)
-    tris = np.searchsorted(local, new_tris)
-    mov = np.searchsorted(local, moving)
-    incidence: Any = sp.csr_matrix(  # the triangles of each moving vertex
-        (np.ones(3 * len(tris)), tris.ravel(), np.arange(0, 3 * len(tris) + 1, 3)),
-        shape=(len(tris), len(local)),
-    ).T.tocsr()[mov]
-    if incidence.shape[0] * incidence.shape[1] <= 1 << 14:
-        incidence = incidence.toarray()  # a small patch: dense products cost less than sparse ones
-    x = vertices[local]
-    for _ in range(10):
-        p = x[tris]
-        face_normal = _cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
-        normal = _unit(incidence @ face_normal)
-        area = np.sqrt((face_normal**2).sum(axis=1))
-        target = (incidence @ (area[:, None] * p.mean(axis=1))) / np.maximum(incidence @ area, 1e-300)[
-            :, None
-        ]
-        move = target - x[mov]
-        move -= (move * normal).sum(axis=1, keepdims=True) * normal
-        x[mov] += 0.5 * move
-    return x[mov]
 
 
 class _TriangleIndex:
@@ -1110,35 +758,28 @@ class _TriangleIndex:
         """Pairs ``(query, triangle)`` whose bounding spheres overlap.
 
         One ball query per group of queries (``groups`` labels them: the patch of each new triangle) and
-        tree gathers the triangles near the group's bounding sphere; the pairs are found among those
-        with a small tree of them (cheaper than thousands of ball queries into the whole mesh's tree).
+        tree gathers the triangles near the group's bounding sphere; the pairs are found among those by
+        a sweep and prune (cheaper than thousands of ball queries into the whole mesh's tree).
         """
-        from scipy.spatial import cKDTree
-
         empty = np.zeros(0, dtype=np.int64)
         if len(centre) == 0:
             return empty, empty
-        groups = np.zeros(len(centre), dtype=np.int64) if groups is None else groups
+        if groups is None or (groups == groups[0]).all():
+            masks = [slice(None)]  # one patch (the usual call): no grouping, and no duplicate hits
+        else:
+            masks = [groups == label for label in np.unique(groups)]
         found = [empty]
-        for label in np.unique(groups):
-            mine = groups == label
+        for mine in masks:
             low = (centre[mine] - radius[mine, None]).min(axis=0)
             high = (centre[mine] + radius[mine, None]).max(axis=0)
             middle, half = 0.5 * (low + high), 0.5 * float(np.linalg.norm(high - low))
             for tree, reach, members in self.trees:
                 hits = tree.query_ball_point(middle, half + reach, return_sorted=False)
                 found.append(members[np.asarray(hits, dtype=np.int64)])
-        candidates = np.unique(np.concatenate(found))
-        if len(candidates) == 0:
-            return empty, empty
-        pairs = cKDTree(centre).sparse_distance_matrix(
-            cKDTree(self.centre[candidates]),
-            float(radius.max() + self.radius[candidates].max()),
-            output_type="ndarray",
-        )
-        qi, ti = pairs["i"].astype(np.int64), candidates[pairs["j"]]
-        close = pairs["v"] <= radius[qi] + self.radius[ti]
-        return qi[close], ti[close]
+        # the two trees hold disjoint triangles: one patch's hits are distinct, several patches' may repeat
+        candidates = np.concatenate(found) if len(masks) == 1 else np.unique(np.concatenate(found))
+        qi, ti = _fill_kernel.sphere_pairs(centre, radius, self.centre[candidates], self.radius[candidates])
+        return qi, candidates[ti]
 
 
 def _crossings(
@@ -1152,8 +793,6 @@ def _crossings(
     new ones among themselves. Each pair is tested on the 17 axes that separate two disjoint triangles
     (two normals, nine edge-edge cross products, six in-plane edge normals for coplanar pairs).
     """
-    from scipy.spatial import cKDTree
-
     new = np.arange(first_new, len(triangles))
     result = np.zeros(len(new))
     if len(new) == 0:
@@ -1171,66 +810,10 @@ def _crossings(
         ib = boxed[ib]
     else:
         ia, ib = index.near(c_new, r_new, groups)  # (new index, input triangle)
-    pairs = cKDTree(c_new).query_pairs(2.0 * float(r_new.max()), output_type="ndarray").astype(np.int64)
-    close = np.linalg.norm(c_new[pairs[:, 0]] - c_new[pairs[:, 1]], axis=1) <= r_new[pairs].sum(axis=1)
-    a = new[np.concatenate([ia, pairs[close, 0]])]
-    b = np.concatenate([ib, first_new + pairs[close, 1]])
-    ta, tb = triangles[a], triangles[b]
-    apart = ~(ta[:, :, None] == tb[:, None, :]).any(axis=(1, 2))
-    P, Q, a, b = vertices[ta[apart]], vertices[tb[apart]], a[apart], b[apart]  # (k, 3, 3)
-    # bounding boxes overlap: three of the axes, the cheapest, where most pairs stop
-    boxes = ((P.min(axis=1) <= Q.max(axis=1)) & (Q.min(axis=1) <= P.max(axis=1))).all(axis=1)
-    P, Q, a, b = P[boxes], Q[boxes], a[boxes], b[boxes]
-    if len(a) == 0:
-        return result
-    eP = P[:, [1, 2, 0]] - P
-    eQ = Q[:, [1, 2, 0]] - Q
-    nP = _cross(eP[:, 0], eP[:, 1])
-    nQ = _cross(eQ[:, 0], eQ[:, 1])
-    axes = np.concatenate(  # (17, k, 3)
-        [
-            np.stack([nP, nQ]),
-            _cross(eP[None, :, :, :], eQ.transpose(1, 0, 2)[:, :, None, :])
-            .transpose(0, 2, 1, 3)
-            .reshape(9, -1, 3),
-            _cross(nP[:, None, :], eP).transpose(1, 0, 2),
-            _cross(nQ[:, None, :], eQ).transpose(1, 0, 2),
-        ]
-    )
-    scale = np.maximum(np.abs(P).max(axis=(1, 2)), np.abs(Q).max(axis=(1, 2))) + np.abs(eP).max(axis=(1, 2))
-    ax, ay, az = axes[..., 0], axes[..., 1], axes[..., 2]
-    length = np.sqrt(ax * ax + ay * ay + az * az)
-    usable = length > 1e-12 * scale**2
-    inv = 1.0 / np.where(usable, length, 1.0)
-    ax, ay, az = ax * inv, ay * inv, az * inv
-
-    def extent(T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        # the corners' projections on every axis, elementwise (size-3 reductions and einsum were slower)
-        x = [ax * T[:, c, 0] + ay * T[:, c, 1] + az * T[:, c, 2] for c in range(3)]
-        return np.minimum(np.minimum(x[0], x[1]), x[2]), np.maximum(np.maximum(x[0], x[1]), x[2])
-
-    p_low, p_high = extent(P)
-    q_low, q_high = extent(Q)
-    # strictly apart: coplanar pairs project to one point on their common normal (gap 0)
-    hit = ~(usable & (np.maximum(q_low - p_high, p_low - q_high) > 1e-12 * scale)).any(axis=0)
-    np.add.at(result, a[hit] - first_new, 1.0)
-    np.add.at(result, b[hit & (b >= first_new)] - first_new, 1.0)
-    return result
-
-
-def _no_fold(x: np.ndarray, again: np.ndarray, new_tris: np.ndarray) -> bool:
-    """Whether ``again``, new positions of the last ``len(again)`` vertices of ``x``, keeps every new
-    triangle facing as in ``x`` and within a tenth of the patch's size (obtuse slivers can make
-    cotangent weights ill-conditioned)."""
-    p = x[new_tris]
-    q = p.copy()
-    moved = new_tris >= len(x) - len(again)
-    q[moved] = again[new_tris[moved] - (len(x) - len(again))]
-    facing = (
-        _cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]) * _cross(q[:, 1] - q[:, 0], q[:, 2] - q[:, 0])
-    ).sum(axis=1)
-    size = np.linalg.norm(np.ptp(p.reshape(-1, 3), axis=0))
-    return bool((facing > 0).all()) and float(np.abs(again - x[len(x) - len(again) :]).max()) < 0.1 * size
+    pa, pb = _fill_kernel.sphere_pairs(c_new, r_new)  # the new triangles among themselves
+    a = new[np.concatenate([ia, pa])]
+    b = np.concatenate([ib, first_new + pb])
+    return _fill_kernel.count_crossings(vertices, triangles, a, b, first_new)
 
 
 def fill_holes(

@@ -15,17 +15,16 @@ import numpy as np
 import open3d as o3d
 import pytest
 from conftest import REPO, grid, load_mesh
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 
-from o3d_lsmesh import O3DLSMeshWarning, fill_holes
+from o3d_lsmesh import O3DLSMeshWarning, _fill_kernel, fill_holes
 from o3d_lsmesh.hole_filling import (
     DP_MAX_EDGES,
     HoleFiller,
     _crossings,
-    _min_angle,
-    _minimum_weight_triangulations,
-    _rings,
     _TriangleIndex,
     fill_holes_arrays,
     find_holes,
@@ -34,10 +33,12 @@ from o3d_lsmesh.topology import boundary_loops
 
 
 def _minimum_weight_triangulation(points, outer, forbidden):
-    """One loop through the batched dynamic programme."""
-    return _minimum_weight_triangulations(
-        points[None], outer[None], None if forbidden is None else forbidden[None]
-    )[0]
+    """The compiled dynamic programme on one loop (``forbidden`` a bool array or None)."""
+    return _fill_kernel.minimum_weight_triangulation(
+        np.ascontiguousarray(points, dtype=float),
+        np.ascontiguousarray(outer, dtype=float),
+        None if forbidden is None else np.ascontiguousarray(forbidden, dtype=np.uint8),
+    )
 
 
 SCANS = Path(os.environ.get("O3D_LSMESH_SCANS", REPO.parent / "shared" / "data" / "scans"))
@@ -222,8 +223,9 @@ def reference_triangulation(points, outer):
             a1, s1, n1, t1 = solve(i, m)
             a2, s2, n2, t2 = solve(m, j)
             n, area = normal(j, m, i)
-            cosines = [n @ n1, n @ n2] + ([n @ outer[k - 1]] if (i, j) == (0, k - 1) else [])
-            angle = max(np.arccos(np.clip(min(cosines), -1, 1)), a1, a2)
+            around = [n1, n2] + ([outer[k - 1]] if (i, j) == (0, k - 1) else [])
+            cosines = [n @ m for m in around if np.abs(m).sum() > 0]  # a zero normal: unknown, no constraint
+            angle = max(np.arccos(np.clip(min(cosines, default=1.0), -1, 1)), a1, a2)
             candidate = (angle, area + s1 + s2, n, t1 + t2 + [(j, m, i)])
             if (
                 best is None
@@ -291,35 +293,13 @@ def test_dynamic_programme_never_takes_collinear_chord_samples(seed):
     assert area.min() > 1e-3
 
 
-@pytest.mark.parametrize("seed", range(3))
-def test_batched_dynamic_programme_is_each_loop_alone(seed):
-    # loops of one length are triangulated in one batch (a leading axis on every table): each result
-    # must be the one of its loop alone, with and without forbidden chords in the batch
-    rng = np.random.default_rng(seed)
-    count, k = 5, 8
-    angle = np.sort(rng.uniform(0, 2 * np.pi, (count, k)), axis=1)
-    points = np.stack([np.cos(angle), np.sin(angle), 0.3 * rng.normal(size=(count, k))], axis=2)
-    outer = rng.normal(size=(count, k, 3)) + np.array([0, 0, -2.0])
-    outer /= np.linalg.norm(outer, axis=2, keepdims=True)
-    outer[1, 3] = 0.0  # an unknown neighbour
-    forbidden = np.zeros((count, k, k), dtype=bool)
-    forbidden[2, 0, 4] = forbidden[2, 4, 0] = True
-    for batch_forbidden in (None, forbidden):
-        batched = _minimum_weight_triangulations(points, outer, batch_forbidden)
-        for b in range(count):
-            alone = _minimum_weight_triangulation(
-                points[b], outer[b], None if batch_forbidden is None else batch_forbidden[b]
-            )
-            assert sorted(map(tuple, batched[b].tolist())) == sorted(map(tuple, alone.tolist()))
-
-
 def test_rings_are_the_plain_breadth_first_rings():
     # reference: a plain breadth-first search over the edge graph, and the triangles touching rings 0..c-1
     V, T = icosphere(2)
     seeds = np.array([0, 5])
     indptr = np.concatenate([[0], np.cumsum(np.bincount(T.ravel(), minlength=len(V)))])
     order = np.argsort(T.ravel(), kind="stable")
-    tris, rings = _rings(T, (indptr, order // 3), seeds, 2)
+    tris, rings = _fill_kernel.rings(T, indptr, order // 3, seeds, 2)
     neighbours = {v: set() for v in range(len(V))}
     for a, b, c in T.tolist():
         neighbours[a] |= {b, c}
@@ -333,19 +313,6 @@ def test_rings_are_the_plain_breadth_first_rings():
     assert [sorted(r.tolist()) for r in rings] == expected
     inner = set(expected[0]) | set(expected[1])
     assert tris.tolist() == [t for t, tri in enumerate(T.tolist()) if inner & set(tri)]
-
-
-def test_min_angle_is_the_smallest_corner_angle():
-    # the flips' progress test uses the angle opposite the shortest edge; reference: every corner's angle
-    rng = np.random.default_rng(0)
-    P = rng.normal(size=(3, 500, 3))
-    P[2, :50] = 0.5 * (P[0, :50] + P[1, :50])  # degenerate (collinear) triangles: 0
-    corners = []
-    for u, v, w in ((P[0], P[1], P[2]), (P[1], P[2], P[0]), (P[2], P[0], P[1])):
-        e1, e2 = v - u, w - u
-        cos = (e1 * e2).sum(1) / (np.linalg.norm(e1, axis=1) * np.linalg.norm(e2, axis=1))
-        corners.append(np.arccos(np.clip(cos, -1, 1)))
-    np.testing.assert_allclose(_min_angle(*P), np.min(corners, axis=0), atol=1e-7)
 
 
 def reference_crossings(V, T, first_new):
@@ -443,14 +410,14 @@ def test_sphere_hole_close_to_the_sphere_and_continuity_order():
 @pytest.mark.parametrize("continuity", [0, 1, 2])
 def test_dense_fairing_solve_matches_the_sparse_gateway(monkeypatch, continuity):
     # small patches are solved with a dense Cholesky; the sparse path (SPDSolver) is the reference
-    import o3d_lsmesh.hole_filling as hole_filling
+    from o3d_lsmesh import _solvers
 
     V, T = icosphere(3)
     h = mean_edge(V, T)
     Vh, Th, _ = cut_disk(V, T, 0, 4 * h)
     dense = fill_holes_arrays(Vh, Th, continuity=continuity, interpolation=True)
-    assert 0 < len(dense.vertices) - len(Vh) <= hole_filling._DENSE_UNKNOWNS
-    monkeypatch.setattr(hole_filling, "_DENSE_UNKNOWNS", -1)
+    assert 0 < len(dense.vertices) - len(Vh) <= _solvers.DENSE_UNKNOWNS
+    monkeypatch.setattr(_solvers, "DENSE_UNKNOWNS", -1)
     sparse = fill_holes_arrays(Vh, Th, continuity=continuity, interpolation=True)
     assert np.array_equal(dense.triangles, sparse.triangles)
     assert np.allclose(dense.vertices, sparse.vertices, rtol=0, atol=1e-9)
@@ -876,3 +843,443 @@ def test_a_flap_triangle_hanging_by_a_vertex_is_not_a_hole():
     out = fill_holes_arrays(V, T)
     np.testing.assert_array_equal(out.triangles, T)  # nothing added
     assert len(out.holes) == 0 and any(hole.edges == 3 for hole in out.skipped)
+
+
+# --------------------------------------------------------------------------- the compiled kernel, against plain loops
+
+
+def _dihedral_weight(points, outer, tris):
+    """The weight of a loop's triangulation, computed afresh: its largest angle between the normals of
+    two triangles sharing an edge, or of a triangle and the mesh's (``outer``, zero: none) on a loop
+    edge; and its total area."""
+    k = len(points)
+    normals, area = {}, 0.0
+    for t in tris.tolist():
+        n = np.cross(points[t[1]] - points[t[0]], points[t[2]] - points[t[0]])
+        area += 0.5 * np.linalg.norm(n)
+        for a, b in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0])):
+            normals.setdefault(frozenset((a, b)), []).append(n / np.linalg.norm(n))
+    for i in range(k):
+        if np.abs(outer[i]).sum() > 0:
+            normals[frozenset((i, (i + 1) % k))].append(outer[i])
+    worst = max(np.arccos(np.clip(ns[0] @ ns[1], -1, 1)) for ns in normals.values() if len(ns) == 2)
+    return worst, area
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    st.integers(4, 8),
+    st.integers(0, 2**32 - 1),
+    st.floats(0.0, 1.0),
+    st.lists(st.integers(0, 7), max_size=3),
+)
+def test_dynamic_programme_is_optimal_on_random_loops(k, seed, bump, unknown):
+    # reference: Liepa's recurrence as plain memoized recursion; the compiled programme's triangulation
+    # must reach its optimal largest dihedral angle (ties within the programme's 1e-6), and be a disk:
+    # each loop edge used once, in the loop's reverse direction, each chord twice
+    rng = np.random.default_rng(seed)
+    angle = np.sort(rng.uniform(0, 2 * np.pi, k))
+    assume(np.diff(np.concatenate([angle, [angle[0] + 2 * np.pi]])).min() > 0.2)
+    points = np.stack([np.cos(angle), np.sin(angle), bump * rng.normal(size=k)], axis=1)
+    outer = rng.normal(size=(k, 3)) + np.array([0, 0, -2.0])
+    outer /= np.linalg.norm(outer, axis=1, keepdims=True)
+    outer[[u for u in unknown if u < k]] = 0.0  # unknown neighbours: no constraint
+    tris = _minimum_weight_triangulation(points, outer, None)
+    assert tris.shape == (k - 2, 3)
+    best_angle, best_area = reference_triangulation(points, outer)[:2]
+    worst, area = _dihedral_weight(points, outer, tris)
+    assert worst <= best_angle + 1e-5
+    if worst >= best_angle - 1e-5:  # the same largest angle: the area decides
+        assert area <= best_area * (1 + 1e-6) or worst < best_angle - 1e-9
+    half = [(a, b) for t in tris.tolist() for a, b in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0]))]
+    assert len(set(half)) == len(half)
+    assert all(((i + 1) % k, i) in half for i in range(k))
+
+
+def reference_relax(points, tris, fixed_pairs, dirty):
+    """Liepa's relaxation as plain loops over lists: the rules of ``_fill_kernel.relax``'s docstring.
+
+    Passes: every interior edge (in the order of its vertex pair) of a dirty triangle, or whose flip a
+    removed edge blocked, is proposed if its flip makes a new edge, ``d`` is inside the circumsphere of
+    ``(a, b, c)`` or ``c`` inside that of ``(b, a, d)`` (relative margin 1e-6), the new triangles face
+    as the old and the smallest angle grows by 1e-9; each triangle flips with its first proposal only,
+    each new edge is made once; the proposals' triangles are the next pass's dirty ones.
+    """
+    import math
+
+    def sub(p, q):
+        return [p[0] - q[0], p[1] - q[1], p[2] - q[2]]
+
+    def dot(p, q):
+        return p[0] * q[0] + p[1] * q[1] + p[2] * q[2]
+
+    def cross(u, v):
+        return [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]]
+
+    def inside(p0, p1, p2, q):
+        u, v = sub(p1, p0), sub(p2, p0)
+        w = cross(u, v)
+        ww = dot(w, w)
+        if ww == 0:
+            return True
+        wu, vw = cross(w, u), cross(v, w)
+        centre = [p0[c] + (wu[c] * dot(v, v) + vw[c] * dot(u, u)) / (2 * ww) for c in range(3)]
+        return math.sqrt(dot(sub(q, centre), sub(q, centre))) < math.sqrt(
+            dot(sub(centre, p0), sub(centre, p0))
+        ) * (1 - 1e-6)
+
+    def min_angle(p0, p1, p2):
+        a, b, c = sub(p1, p0), sub(p2, p1), sub(p0, p2)
+        lengths = sorted([dot(a, a), dot(b, b), dot(c, c)])
+        n = cross(a, c)
+        den = math.sqrt(lengths[1] * lengths[2])
+        return math.asin(min(math.sqrt(dot(n, n)) / den, 1.0)) if den > 0 else 0.0
+
+    def flips(pa, pb, pc, pd):
+        if not (inside(pa, pb, pc, pd) or inside(pb, pa, pd, pc)):
+            return False
+        old = [x + y for x, y in zip(cross(sub(pb, pa), sub(pc, pa)), cross(sub(pa, pb), sub(pd, pb)))]
+        if dot(cross(sub(pa, pc), sub(pd, pc)), old) <= 0 or dot(cross(sub(pb, pd), sub(pc, pd)), old) <= 0:
+            return False
+        before = min(min_angle(pa, pb, pc), min_angle(pb, pa, pd))
+        return min(min_angle(pc, pa, pd), min_angle(pd, pb, pc)) > before + 1e-9
+
+    P = points.tolist()
+    tris = [list(t) for t in tris.tolist()]
+    dirty = list(map(bool, dirty))
+    fixed = {(min(a, b), max(a, b)) for a, b in fixed_pairs.tolist()}
+    removed = set()
+    for _ in range(100):
+        half = sorted(
+            ((min(t[s], t[(s + 1) % 3]), max(t[s], t[(s + 1) % 3])), 3 * i + s)
+            for i, t in enumerate(tris)
+            for s in range(3)
+        )
+        keys = {key for key, _ in half}
+        edges = [(half[i][1], half[i + 1][1]) for i in range(len(half) - 1) if half[i][0] == half[i + 1][0]]
+        if not edges:
+            break
+        corners = []
+        for h1, h2 in edges:
+            t1, s1, t2, s2 = h1 // 3, h1 % 3, h2 // 3, h2 % 3
+            a, b = tris[t1][s1], tris[t1][(s1 + 1) % 3]
+            corners.append((t1, t2, a, b, tris[t1][(s1 + 2) % 3], tris[t2][(s2 + 2) % 3]))
+        proposed = []
+        for e, (t1, t2, a, b, c, d) in enumerate(corners):
+            new = (min(c, d), max(c, d))
+            if not (dirty[t1] or dirty[t2] or new in removed) or c == d or new in keys or new in fixed:
+                continue
+            if flips(P[a], P[b], P[c], P[d]):
+                proposed.append(e)
+        if not proposed:
+            break
+        owner = {}
+        for e in proposed:
+            owner.setdefault(corners[e][0], e)
+            owner.setdefault(corners[e][1], e)
+        made, chosen = set(), []
+        for e in proposed:
+            t1, t2, a, b, c, d = corners[e]
+            if owner[t1] == e and owner[t2] == e and (min(c, d), max(c, d)) not in made:
+                made.add((min(c, d), max(c, d)))
+                chosen.append(e)
+        dirty = [False] * len(tris)
+        for e in proposed:
+            dirty[corners[e][0]] = dirty[corners[e][1]] = True
+        removed = {(min(corners[e][2], corners[e][3]), max(corners[e][2], corners[e][3])) for e in chosen}
+        for e in chosen:
+            t1, t2, a, b, c, d = corners[e]
+            tris[t1], tris[t2] = [c, a, d], [d, b, c]
+    return np.array(tris, dtype=np.int64).reshape(-1, 3)
+
+
+def _random_patch(seed, size, bump):
+    """A bumpy grid of ``size x size`` vertices, its quads cut along random diagonals, the grid jittered."""
+    rng = np.random.default_rng(seed)
+    x, y = np.meshgrid(np.arange(size, dtype=float), np.arange(size, dtype=float))
+    points = np.stack([x.ravel(), y.ravel(), np.zeros(size * size)], axis=1)
+    points[:, :2] += rng.uniform(-0.3, 0.3, (size * size, 2))
+    points[:, 2] = bump * np.sin(points[:, 0]) * np.cos(points[:, 1])
+    tris = []
+    for i in range(size - 1):
+        for j in range(size - 1):
+            a, b, c, d = i * size + j, i * size + j + 1, (i + 1) * size + j + 1, (i + 1) * size + j
+            tris += [(a, b, c), (a, c, d)] if rng.random() < 0.5 else [(a, b, d), (b, c, d)]
+    return points, np.array(tris, dtype=np.int64), rng
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(3, 7), st.floats(0.0, 0.5))
+def test_relax_matches_plain_flip_loop(seed, size, bump):
+    points, tris, rng = _random_patch(seed, size, bump)
+    dirty = rng.random(len(tris)) < 0.7
+    border = np.array([(i, i + 1) for i in range(size - 1)])  # edges around the patch: never made
+    fixed = np.concatenate([border, [[0, size + 1]]])  # and a chord (made by no flip)
+    got = _fill_kernel.relax(points, tris, fixed, dirty)
+    assert np.array_equal(got, reference_relax(points, tris, fixed, dirty))
+    # all dirty: no flip is left for a plain check of every edge
+    every = np.ones(len(tris), dtype=bool)
+    done = _fill_kernel.relax(points, tris, fixed, every)
+    assert np.array_equal(reference_relax(points, done, fixed, every), done)
+
+
+def reference_refine(points, sigma, tris, fixed, owner, alpha):
+    """Liepa's refinement as plain loops: rounds of centroid splits of every triangle with ``alpha |c - v_m|
+    > max(sigma_c, sigma_m)`` at each corner, then :func:`reference_relax` (all triangles dirty in the first
+    round, then the split ones)."""
+    points, sigma, owner, tris = list(points.tolist()), list(sigma), list(owner), [list(t) for t in tris]
+    for round_ in range(60):
+        chosen = []
+        for i, t in enumerate(tris):
+            centre = [(points[t[0]][c] + points[t[1]][c] + points[t[2]][c]) / 3 for c in range(3)]
+            sigma_c = (sigma[t[0]] + sigma[t[1]] + sigma[t[2]]) / 3
+            if all(
+                alpha * float(np.sqrt(sum((centre[c] - points[m][c]) ** 2 for c in range(3))))
+                > max(sigma_c, sigma[m])
+                for m in t
+            ):
+                chosen.append((i, centre, sigma_c))
+        if not chosen:
+            break
+        count, first = len(chosen), len(tris)
+        dirty = [round_ == 0] * first + [True] * (2 * count)
+        later = []
+        for i, centre, sigma_c in chosen:
+            a, b, c = tris[i]
+            p = len(points)
+            points.append(centre)
+            sigma.append(sigma_c)
+            owner.append(owner[a])
+            tris[i] = [a, b, p]
+            later.append(([b, c, p], [c, a, p]))
+            dirty[i] = True
+        tris += [u for u, _ in later] + [v for _, v in later]
+        tris = reference_relax(np.array(points), np.array(tris), fixed, dirty).tolist()
+    return np.array(points), np.array(tris, dtype=np.int64), np.array(owner)
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(3, 5), st.floats(0.3, 1.5))
+def test_refine_matches_plain_loops(seed, size, scale):
+    points, tris, rng = _random_patch(seed, size, 0.3)
+    sigma = scale * rng.uniform(0.5, 1.0, len(points))
+    owner = np.arange(len(points)) % 3
+    fixed = np.array([(i, i + 1) for i in range(size - 1)])
+    got = _fill_kernel.refine(points, sigma, tris, fixed, owner, np.sqrt(2.0))
+    expected = reference_refine(points, sigma, tris, fixed, owner, np.sqrt(2.0))
+    assert np.array_equal(got[1], expected[1]) and np.array_equal(got[2], expected[2])
+    np.testing.assert_allclose(got[0], expected[0], rtol=0, atol=1e-12)
+    assert np.array_equal(got[0][: len(points)], points)
+
+
+def test_tangential_relax_matches_plain_loop():
+    # reference: per iteration and new vertex, its star's area-weighted centroid and area-weighted normal
+    points, tris, _ = _random_patch(3, 6, 0.4)
+    order = np.argsort(np.isin(np.arange(len(points)), [7, 8, 9, 13, 14, 15, 20, 21]), kind="stable")
+    rank = np.argsort(order)  # renumber so that the eight inner vertices come last (the new ones)
+    V, T, first = points[order].copy(), rank[tris], len(points) - 8
+    got = _fill_kernel.tangential_relax(V, T, first)
+    x = V.copy()
+    for _ in range(10):
+        moves = {}
+        for v in range(first, len(x)):
+            star = [t for t in T.tolist() if v in t]
+            normals = [np.cross(x[t[1]] - x[t[0]], x[t[2]] - x[t[0]]) for t in star]
+            areas = [np.linalg.norm(n) for n in normals]
+            target = sum(a * x[t].mean(axis=0) for a, t in zip(areas, star)) / sum(areas)
+            normal = sum(normals) / np.linalg.norm(sum(normals))
+            move = target - x[v]
+            moves[v] = move - (move @ normal) * normal
+        for v, move in moves.items():
+            x[v] += 0.5 * move
+    np.testing.assert_allclose(got, x[first:], rtol=0, atol=1e-12)
+    assert np.abs(got - V[first:]).max() > 1e-3  # it did move them
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**32 - 1))
+def test_crossing_count_matches_plain_segment_tests(seed):
+    rng = np.random.default_rng(seed)
+    V = rng.random((20, 3))
+    T = np.array([rng.choice(20, 3, replace=False) for _ in range(16)], dtype=np.int64)
+    a, b = np.triu_indices(16, 1)
+    new = a >= 10  # every pair with a new triangle first
+    a, b = np.where(new, a, b)[(a >= 10) | (b >= 10)], np.where(new, b, a)[(a >= 10) | (b >= 10)]
+    got = _fill_kernel.count_crossings(V, T, a.astype(np.int64), b.astype(np.int64), 10)
+    assert np.array_equal(got, reference_crossings(V, T, 10))
+
+
+def test_kernel_rejects_bad_shapes():
+    with pytest.raises(ValueError, match="at least 3"):
+        _fill_kernel.minimum_weight_triangulation(np.zeros((2, 3)), np.zeros((2, 3)))
+    with pytest.raises(ValueError, match=r"\(k, 3\)"):
+        _fill_kernel.minimum_weight_triangulation(np.zeros((4, 3)), np.zeros((3, 3)))
+    with pytest.raises(ValueError, match=r"\(k, k\)"):
+        _fill_kernel.minimum_weight_triangulation(
+            np.zeros((4, 3)), np.zeros((4, 3)), np.zeros((3, 3), np.uint8)
+        )
+    with pytest.raises(ValueError, match="outside points"):
+        _fill_kernel.relax(np.zeros((3, 3)), np.array([[0, 1, 5]]), np.zeros((0, 2), np.int64), [True])
+    with pytest.raises(ValueError, match="first_new"):
+        _fill_kernel.tangential_relax(np.zeros((3, 3)), np.array([[0, 1, 2]]), 4)
+    with pytest.raises(ValueError, match="one length"):
+        _fill_kernel.count_crossings(
+            np.zeros((3, 3)), np.array([[0, 1, 2]]), np.zeros(2, np.int64), np.zeros(1, np.int64), 0
+        )
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 60), st.integers(0, 60), st.integers(0, 2**32 - 1), st.floats(0.01, 0.3))
+def test_sphere_pairs_are_every_overlapping_pair(na, nb, seed, size):
+    # reference: every pair's distance against the sum of the radii (a set against another, and within one)
+    rng = np.random.default_rng(seed)
+    ca, cb = rng.random((na, 3)) * [1, 3, 2], rng.random((nb, 3))
+    ra, rb = size * rng.random(na), size * rng.random(nb)
+    i, j = _fill_kernel.sphere_pairs(ca, ra, cb, rb)
+    near = np.linalg.norm(ca[:, None] - cb[None], axis=2) <= ra[:, None] + rb[None]
+    assert sorted(zip(i.tolist(), j.tolist())) == sorted(zip(*(x.tolist() for x in np.nonzero(near))))
+    i, j = _fill_kernel.sphere_pairs(ca, ra)
+    near = np.triu(np.linalg.norm(ca[:, None] - ca[None], axis=2) <= ra[:, None] + ra[None], 1)
+    assert sorted(zip(i.tolist(), j.tolist())) == sorted(zip(*(x.tolist() for x in np.nonzero(near))))
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(3, 6))
+def test_loop_geometry_matches_plain_loops(seed, size):
+    # reference: the set of the mesh's edges, np.cross and np.linalg.norm; a loop of random distinct
+    # vertices in random order, each edge given a random triangle (its half-edge row, modulo m)
+    points, tris, rng = _random_patch(seed, size, 0.4)
+    n, m = len(points), len(tris)
+    loop = rng.permutation(n)[: rng.integers(3, n + 1)]
+    rows = rng.integers(0, 3 * m, len(loop))
+    order = np.argsort(tris.ravel(), kind="stable")
+    indptr = np.concatenate([[0], np.cumsum(np.bincount(tris.ravel(), minlength=n))])
+    got_points, outer, got, spacing = _fill_kernel.loop_geometry(loop, rows, points, tris, indptr, order // 3)
+    assert np.array_equal(got_points, points[loop])
+    for i, row in enumerate(rows.tolist()):
+        a, b, c = points[tris[row % m]]
+        normal = np.cross(b - a, c - a)
+        np.testing.assert_allclose(outer[i], normal / np.linalg.norm(normal), rtol=0, atol=1e-12)
+    lengths = [np.linalg.norm(points[loop[(i + 1) % len(loop)]] - points[loop[i]]) for i in range(len(loop))]
+    assert np.isclose(spacing, np.mean(lengths), rtol=1e-14)
+    edges = {frozenset((t[a], t[(a + 1) % 3])) for t in tris.tolist() for a in range(3)}
+    k = len(loop)
+    expected = np.zeros((k, k), dtype=bool)
+    for p in range(k):
+        for q in range(k):
+            if frozenset((loop[p], loop[q])) in edges and q != (p + 1) % k and p != (q + 1) % k:
+                expected[p, q] = True
+    assert np.array_equal(got, expected)
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(3, 6), st.booleans())
+def test_laplacian_weights_match_plain_loops(seed, size, cot):
+    # reference: per triangle corner, the cotangent from the angle itself (arccos of the normalized
+    # product); weights clamped at 5% of the mean |w|; vertex areas a third of each triangle's, mean 1
+    points, tris, _ = _random_patch(seed, size, 0.5)
+    n = len(points)
+    half = np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]])
+    keys, inverse = np.unique(np.sort(half, axis=1) @ [n, 1], return_inverse=True)
+    i, j = keys // n, keys % n
+    w, degree, scale = _fill_kernel.laplacian_weights(tris, n, i, j, inverse, points if cot else None)
+    edge = {(a, b): e for e, (a, b) in enumerate(zip(i.tolist(), j.tolist()))}
+    expected = np.zeros(len(i)) if cot else np.ones(len(i))
+    area = np.zeros(n)
+    for t in tris.tolist():
+        for c in range(3):
+            a, b, o = t[c], t[(c + 1) % 3], t[(c + 2) % 3]
+            u, v = points[a] - points[o], points[b] - points[o]
+            theta = np.arccos(u @ v / np.linalg.norm(u) / np.linalg.norm(v))
+            if cot:
+                expected[edge[min(a, b), max(a, b)]] += 0.5 / np.tan(theta)
+            area[a] += 0.5 * np.linalg.norm(np.cross(u, v)) / 3
+    if cot:
+        expected = np.maximum(expected, 0.05 * np.abs(expected).mean())
+    expected_degree = np.zeros(n)
+    for e, (a, b) in enumerate(zip(i.tolist(), j.tolist())):
+        expected_degree[a] += expected[e]
+        expected_degree[b] += expected[e]
+    np.testing.assert_allclose(w, expected, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(degree, expected_degree, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(scale, area.mean() / area if cot else 1 / expected_degree, rtol=1e-9)
+
+
+@given(st.lists(st.floats(-1e6, 1e6), min_size=1, max_size=600))
+def test_pairwise_mean_is_numpys(values):
+    # the compiled weights' means must round as NumPy's (pairwise summation), so that fills are unchanged
+    a = np.array(values)
+    assert _fill_kernel.pairwise_mean(a) == a.mean()
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(2, 6))
+def test_unique_edges_match_a_sort(seed, size):
+    # reference: np.unique of the sorted half-edge pairs (corner-major: every (0, 1) first)
+    points, tris, rng = _random_patch(seed, size, 0.0)
+    tris = rng.permutation(len(points))[tris]  # any numbering
+    n = len(points)
+    i, j, inverse = _fill_kernel.unique_edges(tris, n)
+    half = np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1)
+    keys, expected_inverse = np.unique(half[:, 0] * n + half[:, 1], return_inverse=True)
+    assert np.array_equal(i, keys // n) and np.array_equal(j, keys % n)
+    assert np.array_equal(inverse, expected_inverse)
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_keeps_facing_matches_plain_loops(seed):
+    # reference: each triangle's normal before and after, and the largest coordinate move
+    points, tris, rng = _random_patch(seed, 4, 0.3)
+    x, p = points.copy(), 5
+    again = x[-p:] + rng.normal(scale=rng.choice([0.01, 0.2, 1.0]), size=(p, 3))
+    moved = x.copy()
+    moved[-p:] = again
+    flips = [
+        np.dot(np.cross(*(x[t[1:]] - x[t[0]])), np.cross(*(moved[t[1:]] - moved[t[0]]))) <= 0 for t in tris
+    ]
+    size = np.linalg.norm(x[np.unique(tris)].max(axis=0) - x[np.unique(tris)].min(axis=0))
+    expected = not any(flips) and np.abs(again - x[-p:]).max() < 0.1 * size
+    assert _fill_kernel.keeps_facing(x, again, tris) == expected
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(3, 6), st.booleans(), st.booleans())
+def test_normal_equations_match_dense_products(seed, size, cot, differences):
+    # reference: the dense Laplacian L = S K, its rows (or row differences over edges) A, and the
+    # products A_u^T A_u and -A_u^T A_k x_k with NumPy; unknowns anywhere in the numbering
+    points, tris, rng = _random_patch(seed, size, 0.5)
+    n = len(points)
+    i, j, inverse = _fill_kernel.unique_edges(tris, n)
+    w, degree, scale = _fill_kernel.laplacian_weights(tris, n, i, j, inverse, points if cot else None)
+    K = np.diag(degree)
+    K[i, j] = K[j, i] = -w
+    L = scale[:, None] * K
+    unknown = np.sort(rng.choice(n, rng.integers(1, n), replace=False))
+    if differences:
+        keep = rng.random(len(i)) < 0.7
+        plus, minus = i[keep], j[keep]
+        A = L[plus] - L[minus]
+    else:
+        plus, minus = np.sort(rng.choice(n, rng.integers(1, n + 1), replace=False)), np.zeros(0, np.int64)
+        A = L[plus]
+    fixed = points.copy()
+    fixed[unknown] = 0.0
+    normal, rhs = _fill_kernel.normal_equations(points, i, j, w, degree, scale, plus, minus, unknown)
+    A_u = A[:, unknown]
+    np.testing.assert_allclose(normal, A_u.T @ A_u, rtol=1e-12, atol=1e-12 * np.abs(A).max() ** 2)
+    np.testing.assert_allclose(
+        rhs, -(A_u.T @ (A @ fixed)), rtol=1e-12, atol=1e-12 * np.abs(A).max() ** 2 * size
+    )
+
+
+def test_dynamic_programme_falls_back_when_every_chord_is_an_edge():
+    # a square loop whose two diagonals both are mesh edges: no triangulation avoids them, so the
+    # programme returns its unconstrained one (the fill then checks the result for crossings)
+    points = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0.2], [0, 1, 0.0]])
+    outer = np.tile([0, 0, 1.0], (4, 1))
+    forbidden = np.zeros((4, 4), dtype=bool)
+    forbidden[0, 2] = forbidden[2, 0] = forbidden[1, 3] = forbidden[3, 1] = True
+    expected = _minimum_weight_triangulation(points, outer, None)
+    assert np.array_equal(_minimum_weight_triangulation(points, outer, forbidden), expected)
+    half = {(a, b) for t in expected.tolist() for a, b in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0]))}
+    assert all(((i + 1) % 4, i) in half for i in range(4))

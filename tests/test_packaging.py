@@ -41,6 +41,7 @@ SDIST_MUST_HOLD = [
     "pyproject.toml",
     "MANIFEST.in",
     "o3d_lsmesh/hierarchy/_kernel.pyx",
+    "o3d_lsmesh/_fill_kernel.pyx",
     "o3d_lsmesh/py.typed",
     "tests/conftest.py",
     "tests/test_packaging.py",
@@ -187,6 +188,7 @@ def test_wheel_metadata_licence_and_contents():
     assert any(re.fullmatch(r"o3d_lsmesh/hierarchy/_kernel\..*(so|pyd)", n) for n in names), (
         "no compiled kernel"
     )
+    assert any(re.fullmatch(r"o3d_lsmesh/_fill_kernel\..*(so|pyd)", n) for n in names), "no fill kernel"
     assert "o3d_lsmesh/py.typed" in names
     assert not [n for n in names if n.startswith(("tests/", "benchmarks/", "examples/", "docs/"))]
 

@@ -348,3 +348,24 @@ def test_peak_memory_per_vertex_at_200k(statement):
     assert proc.returncode == 0, proc.stderr[-2000:]
     per_vertex = float(proc.stdout.strip().splitlines()[-1])
     assert 0 < per_vertex <= MEMORY_BOUNDS[statement], (statement, per_vertex)
+
+
+@pytest.mark.parametrize("n", [5, 120, 121, 300])
+def test_solve_spd_dense_and_sparse_paths_equal_spsolve(n, monkeypatch):
+    # one-off systems: a dense Cholesky up to DENSE_UNKNOWNS unknowns, SPDSolver beyond; both paths on
+    # both kinds of input against SciPy's spsolve, and each path forced on the other's sizes
+    from o3d_lsmesh import _solvers
+
+    A, b = spd(n, seed=n)
+    expected = spla.spsolve(A.tocsc(), b)
+    for limit in (_solvers.DENSE_UNKNOWNS, -1, 10**6):
+        monkeypatch.setattr(_solvers, "DENSE_UNKNOWNS", limit)
+        for matrix in (A, A.toarray()):
+            np.testing.assert_allclose(_solvers.solve_spd(matrix, b), expected, rtol=1e-9, atol=1e-12)
+
+
+def test_solve_spd_dense_path_raises_on_an_indefinite_matrix():
+    from o3d_lsmesh._solvers import solve_spd
+
+    with pytest.raises(SingularSystemError, match="not positive definite"):
+        solve_spd(-np.identity(4), np.ones(4))

@@ -1,0 +1,60 @@
+"""Type stub of the compiled hole-filling kernel (``_fill_kernel.pyx``)."""
+
+import numpy as np
+
+def minimum_weight_triangulation(
+    points: np.ndarray, outer_normals: np.ndarray, forbidden: np.ndarray | None = None
+) -> np.ndarray: ...
+def relax(
+    points: np.ndarray, triangles: np.ndarray, fixed_pairs: np.ndarray, dirty: np.ndarray
+) -> np.ndarray: ...
+def refine(
+    points: np.ndarray,
+    sigma: np.ndarray,
+    triangles: np.ndarray,
+    fixed_pairs: np.ndarray,
+    owner: np.ndarray,
+    alpha: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
+def tangential_relax(
+    vertices: np.ndarray, new_tris: np.ndarray, first_new: int, iterations: int = 10
+) -> np.ndarray: ...
+def count_crossings(
+    vertices: np.ndarray, triangles: np.ndarray, a: np.ndarray, b: np.ndarray, first_new: int
+) -> np.ndarray: ...
+def rings(
+    triangles: np.ndarray, indptr: np.ndarray, data: np.ndarray, seeds: np.ndarray, count: int
+) -> tuple[np.ndarray, list[np.ndarray]]: ...
+def sphere_pairs(
+    ca: np.ndarray, ra: np.ndarray, cb: np.ndarray | None = None, rb: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]: ...
+def pairwise_mean(values: np.ndarray) -> float: ...
+def laplacian_weights(
+    tris: np.ndarray,
+    nv: int,
+    i: np.ndarray,
+    j: np.ndarray,
+    inverse: np.ndarray,
+    vertices: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
+def loop_geometry(
+    loop: np.ndarray,
+    rows: np.ndarray,
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    indptr: np.ndarray,
+    data: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]: ...
+def unique_edges(tris: np.ndarray, nv: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
+def keeps_facing(x: np.ndarray, again: np.ndarray, new_tris: np.ndarray) -> bool: ...
+def normal_equations(
+    x: np.ndarray,
+    i: np.ndarray,
+    j: np.ndarray,
+    w: np.ndarray,
+    degree: np.ndarray,
+    scale: np.ndarray,
+    plus: np.ndarray,
+    minus: np.ndarray,
+    unknown: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]: ...

@@ -1,0 +1,1263 @@
+# cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
+"""Hole filling's sequential loops (the rules and their reasons: ``hole_filling.py``), compiled.
+
+Each function does the floating-point operations of the NumPy code it replaced in the same order (sums of
+three terms left to right; an ``einsum`` dot product as ``(x0 y0 + x2 y2) + x1 y1``, as NumPy's kernel
+adds them; means by NumPy's pairwise summation), so that the fills are the ones of the NumPy code: the
+same triangles, and vertices within 3e-13 relative (measured), where sums over a vertex's star and the
+normal equations' products are added in another order than BLAS did (the tri-Laplacian system's
+conditioning magnifies that rounding). NumPy's own ``arccos`` and ``arcsin`` may
+round one unit in the last place away from the C library's: that moves only a decision sitting exactly
+on a tolerance.
+
+Local meshes (a patch and the rings around it) index their vertices below 2^31: edge keys pack two
+indices in one int64.
+"""
+
+import numpy as np
+
+from libc.math cimport INFINITY, acos, asin, fabs, fmax, fmin, sqrt
+from libc.stdint cimport int64_t, uint8_t
+from libc.stdlib cimport free, malloc, qsort
+
+cdef double _TIE = 1e-6  # dynamic programme: largest angles this close tie, and the area decides
+cdef double _COCIRCULAR = 1.0 - 1e-6  # flips: a point must be this far inside a circumsphere
+
+
+cdef inline double _dot(const double* a, const double* b) noexcept nogil:
+    """A dot product summed left to right (NumPy's ``(a * b).sum(-1)`` and ``np.linalg.norm``)."""
+    return (a[0] * b[0] + a[1] * b[1]) + a[2] * b[2]
+
+
+cdef inline double _edot(const double* a, const double* b) noexcept nogil:
+    """A dot product in the order of NumPy's ``einsum('...k,...k->...')`` on 3-vectors."""
+    return (a[0] * b[0] + a[2] * b[2]) + a[1] * b[1]
+
+
+cdef inline void _sub(const double* a, const double* b, double* out) noexcept nogil:
+    out[0] = a[0] - b[0]
+    out[1] = a[1] - b[1]
+    out[2] = a[2] - b[2]
+
+
+cdef inline void _cross(const double* u, const double* v, double* out) noexcept nogil:
+    out[0] = u[1] * v[2] - u[2] * v[1]
+    out[1] = u[2] * v[0] - u[0] * v[2]
+    out[2] = u[0] * v[1] - u[1] * v[0]
+
+
+# ----------------------------------------------------------------------------------------------------------
+# Liepa's minimum-weight triangulation (SGP 2003, section 3)
+
+
+cdef void _liepa(const double* P, const double* outer, const uint8_t* forbidden, int64_t k, double* angle,
+                 double* area, int64_t* split, double* normal, uint8_t* known, double* t_angle,
+                 double* t_area, double* t_twice, double* t_normal) noexcept nogil:
+    """Fill the tables of the programme: for each chord ``(i, j)``, the best triangulation of the polygon
+    ``i..j`` is its triangle ``(j, m, i)`` with the best ``m`` and the best ones of ``i..m`` and ``m..j``;
+    its weight is the lexicographic pair (largest dihedral angle, total area), where the angle is taken
+    between neighbouring triangles, and with the mesh triangle across a loop edge (``outer``, zero
+    where unknown: no constraint). ``normal[i, j]`` holds the unit normal of the triangle on chord
+    ``(i, j)``, which the next, larger polygon meets there. ``forbidden`` (or NULL) marks chords that
+    are mesh edges already (a non-manifold edge otherwise): infinitely bad."""
+    cdef int64_t i, j, m, d, c, r, choice
+    cdef double u[3]
+    cdef double v[3]
+    cdef double cr[3]
+    cdef double twice, cos1, cos2, worst, theta, longest, best_angle, best_area, near, uu, vv
+    cdef const double* a
+    cdef double* nm
+    cdef bint closing_known = fabs(outer[3 * (k - 1)]) + fabs(outer[3 * (k - 1) + 1]) + fabs(outer[3 * (k - 1) + 2]) > 0
+    for i in range(k * k):
+        angle[i] = 0.0
+        area[i] = 0.0
+        split[i] = -1
+        known[i] = 0
+    for i in range(3 * k * k):
+        normal[i] = 0.0
+    for i in range(k - 1):  # the loop's edges: the mesh triangles across them
+        for c in range(3):
+            normal[3 * (i * k + i + 1) + c] = outer[3 * i + c]
+        known[i * k + i + 1] = fabs(outer[3 * i]) + fabs(outer[3 * i + 1]) + fabs(outer[3 * i + 2]) > 0
+    for d in range(2, k):
+        for i in range(k - d):
+            j = i + d
+            a = P + 3 * j
+            for r in range(d - 1):
+                m = i + 1 + r
+                _sub(P + 3 * m, a, u)
+                _sub(P + 3 * i, a, v)
+                _cross(u, v, cr)  # triangle (j, m, i)
+                twice = sqrt(_edot(cr, cr))
+                nm = t_normal + 3 * r
+                for c in range(3):
+                    nm[c] = cr[c] / (twice if twice > 0 else 1.0)
+                cos1 = _edot(nm, normal + 3 * (i * k + m))
+                cos2 = _edot(nm, normal + 3 * (m * k + j))
+                worst = fmin(cos1 if known[i * k + m] else 1.0, cos2 if known[m * k + j] else 1.0)
+                if d == k - 1 and closing_known:  # the triangle on the closing loop edge (k - 1, 0)
+                    worst = fmin(worst, _edot(nm, outer + 3 * (k - 1)))
+                theta = acos(fmin(fmax(worst, -1.0), 1.0))
+                # a degenerate triangle (collinear chord samples) is worse than any real one: neither
+                # its noise normal nor its zero area may win (both sides of a chord taking it make a
+                # non-manifold edge)
+                uu = _edot(u, u)
+                vv = _edot(v, v)
+                longest = uu if uu >= vv else vv
+                if not twice > 1e-9 * longest:
+                    theta = 2.0 * 3.141592653589793
+                t_angle[r] = fmax(theta, fmax(angle[i * k + m], angle[m * k + j]))
+                t_area[r] = 0.5 * twice + area[i * k + m] + area[m * k + j]
+                t_twice[r] = twice
+                if forbidden != NULL and (forbidden[i * k + m] or forbidden[m * k + j]):
+                    t_angle[r] = INFINITY
+            best_angle = INFINITY
+            for r in range(d - 1):
+                best_angle = fmin(best_angle, t_angle[r])
+            best_area = INFINITY
+            for r in range(d - 1):
+                if t_angle[r] <= best_angle + _TIE:
+                    best_area = fmin(best_area, t_area[r])
+            # the first of the (near-)smallest areas: symmetric loops tie exactly, and rounding must not
+            # decide
+            choice = 0
+            for r in range(d - 1):
+                near = t_area[r] if t_angle[r] <= best_angle + _TIE else INFINITY
+                if near <= best_area * (1.0 + 1e-9):
+                    choice = r
+                    break
+            c = i * k + j
+            angle[c] = t_angle[choice]
+            if forbidden != NULL and d < k - 1 and forbidden[c]:
+                angle[c] = INFINITY
+            area[c] = t_area[choice]
+            split[c] = i + 1 + choice
+            for m in range(3):
+                normal[3 * c + m] = t_normal[3 * choice + m]
+            known[c] = t_twice[choice] > 0
+
+
+def minimum_weight_triangulation(const double[:, ::1] points, const double[:, ::1] outer_normals,
+                                 const uint8_t[:, ::1] forbidden=None):
+    """Liepa's dynamic programme on one loop of ``k >= 3`` points: its ``k - 2`` triangles ``(j, m, i)``.
+
+    ``outer_normals[i]``: the unit normal of the mesh triangle on loop edge ``(i, i + 1)`` (zero where
+    unknown); ``forbidden (k, k)`` (or None) marks chords that are mesh edges already. O(k^3) time,
+    O(k^2) memory. If no triangulation avoids every forbidden chord, the best one ignoring them.
+    """
+    cdef int64_t k = points.shape[0]
+    if outer_normals.shape[0] != k or points.shape[1] != 3 or outer_normals.shape[1] != 3:
+        raise ValueError("points and outer_normals must be (k, 3)")
+    if forbidden is not None and (forbidden.shape[0] != k or forbidden.shape[1] != k):
+        raise ValueError("forbidden must be (k, k)")
+    if k < 3:
+        raise ValueError(f"a loop needs at least 3 points, got {k}")
+    out = np.empty((k - 2, 3), dtype=np.int64)
+    cdef int64_t[:, ::1] tris = out
+    if k == 3:
+        tris[0, 0], tris[0, 1], tris[0, 2] = 2, 1, 0
+        return out
+    angle_ = np.empty(k * k)
+    area_ = np.empty(k * k)
+    split_ = np.empty(k * k, dtype=np.int64)
+    normal_ = np.empty(3 * k * k)
+    known_ = np.empty(k * k, dtype=np.uint8)
+    scratch = np.empty(6 * k)
+    cdef double[::1] angle = angle_, area = area_, normal = normal_, s = scratch
+    cdef int64_t[::1] split = split_
+    cdef uint8_t[::1] known = known_
+    cdef const uint8_t* f = NULL if forbidden is None else &forbidden[0, 0]
+    with nogil:
+        _liepa(&points[0, 0], &outer_normals[0, 0], f, k, &angle[0], &area[0], &split[0], &normal[0],
+               &known[0], &s[0], &s[k], &s[2 * k], &s[3 * k])
+    if f != NULL and not np.isfinite(angle_[k - 1]):
+        # no triangulation avoids every existing edge: accept one that does not
+        return minimum_weight_triangulation(points, outer_normals, None)
+    # the triangles from the split table, depth first from the whole polygon (0, k - 1)
+    cdef int64_t[::1] stack = np.empty(2 * k, dtype=np.int64)
+    cdef int64_t top = 2, lo, hi, mid, found = 0
+    stack[0], stack[1] = 0, k - 1
+    with nogil:
+        while top > 0:
+            top -= 2
+            lo, hi = stack[top], stack[top + 1]
+            if hi - lo >= 2:
+                mid = split[lo * k + hi]
+                tris[found, 0], tris[found, 1], tris[found, 2] = hi, mid, lo
+                found += 1
+                stack[top], stack[top + 1], stack[top + 2], stack[top + 3] = lo, mid, mid, hi
+                top += 4
+    return out
+
+
+# ----------------------------------------------------------------------------------------------------------
+# Liepa's refinement (section 4): centroid splits, then Delaunay edge flips
+
+
+ctypedef struct Half:  # a half-edge's undirected key and its index 3 t + s
+    int64_t key
+    int64_t h
+
+
+cdef int _by_key(const void* x, const void* y) noexcept nogil:
+    cdef const Half* p = <const Half*>x
+    cdef const Half* q = <const Half*>y
+    if p.key != q.key:
+        return -1 if p.key < q.key else 1
+    return -1 if p.h < q.h else (1 if p.h > q.h else 0)
+
+
+cdef int _by_value(const void* x, const void* y) noexcept nogil:
+    cdef int64_t p = (<const int64_t*>x)[0], q = (<const int64_t*>y)[0]
+    return -1 if p < q else (1 if p > q else 0)
+
+
+cdef inline int64_t _key(int64_t a, int64_t b) noexcept nogil:
+    """An undirected edge's key, ordered as ``(min, max)``."""
+    return (a << 32) | b if a < b else (b << 32) | a
+
+
+cdef bint _has_half(const Half* sorted_, int64_t n, int64_t key) noexcept nogil:
+    cdef int64_t lo = 0, hi = n, mid
+    while lo < hi:
+        mid = (lo + hi) >> 1
+        if sorted_[mid].key < key:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo < n and sorted_[lo].key == key
+
+
+cdef bint _has(const int64_t* sorted_, int64_t n, int64_t key) noexcept nogil:
+    cdef int64_t lo = 0, hi = n, mid
+    while lo < hi:
+        mid = (lo + hi) >> 1
+        if sorted_[mid] < key:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo < n and sorted_[lo] == key
+
+
+cdef bint _in_circumsphere(const double* p0, const double* p1, const double* p2, const double* q) noexcept nogil:
+    """Whether ``q`` is strictly inside the circumsphere of triangle ``(p0, p1, p2)`` by a relative margin
+    (near-co-circular quads, common on regular patches, are not flipped, so that the result does not
+    hinge on rounding: rigid motions give the same connectivity)."""
+    cdef double u[3]
+    cdef double v[3]
+    cdef double w[3]
+    cdef double wu[3]
+    cdef double vw[3]
+    cdef double centre[3]
+    cdef double e[3]
+    cdef double ww, safe, uu, vv, radius
+    cdef int c
+    _sub(p1, p0, u)
+    _sub(p2, p0, v)
+    _cross(u, v, w)
+    ww = _dot(w, w)
+    safe = ww if ww > 0 else 1.0
+    uu, vv = _dot(u, u), _dot(v, v)
+    _cross(w, u, wu)
+    _cross(v, w, vw)
+    for c in range(3):
+        centre[c] = p0[c] + (wu[c] * vv + vw[c] * uu) / (2.0 * safe)
+    _sub(centre, p0, e)
+    radius = sqrt(_dot(e, e)) if ww > 0 else INFINITY
+    _sub(q, centre, e)
+    return sqrt(_dot(e, e)) < radius * _COCIRCULAR
+
+
+cdef double _min_angle(const double* p0, const double* p1, const double* p2) noexcept nogil:
+    """The smallest interior angle, opposite the shortest edge (law of sines): ``arcsin(2 area / (l_mid
+    l_max))``."""
+    cdef double a[3]
+    cdef double b[3]
+    cdef double c[3]
+    cdef double n[3]
+    cdef double la, lb, lc, mid, top, denominator, ratio
+    _sub(p1, p0, a)
+    _sub(p2, p1, b)
+    _sub(p0, p2, c)
+    la, lb, lc = _dot(a, a), _dot(b, b), _dot(c, c)
+    top = fmax(la, fmax(lb, lc))
+    mid = fmax(fmin(la, lb), fmin(fmax(la, lb), lc))  # the median of three
+    _cross(a, c, n)
+    denominator = sqrt(mid * top)
+    ratio = sqrt(_dot(n, n)) / denominator if denominator > 0 else 0.0
+    return asin(fmin(ratio, 1.0))
+
+
+cdef bint _flip_improves(const double* pa, const double* pb, const double* pc, const double* pd) noexcept nogil:
+    """Whether edge ``(a, b)`` between ``(a, b, c)`` and ``(b, a, d)`` flips to ``(c, d)``: ``d`` inside the
+    circumsphere of ``(a, b, c)`` or ``c`` inside that of ``(b, a, d)`` (in 3D the two differ), the new
+    ``(c, a, d)`` and ``(d, b, c)`` facing as the old pair, and the pair's smallest angle growing
+    (without it an edge could flip back and forth, the two sphere tests disagreeing)."""
+    cdef double x[3]
+    cdef double y[3]
+    cdef double n1[3]
+    cdef double n2[3]
+    cdef double old[3]
+    cdef int c
+    if not (_in_circumsphere(pa, pb, pc, pd) or _in_circumsphere(pb, pa, pd, pc)):
+        return False
+    _sub(pb, pa, x)
+    _sub(pc, pa, y)
+    _cross(x, y, n1)
+    _sub(pa, pb, x)
+    _sub(pd, pb, y)
+    _cross(x, y, n2)
+    for c in range(3):
+        old[c] = n1[c] + n2[c]
+    _sub(pa, pc, x)
+    _sub(pd, pc, y)
+    _cross(x, y, n1)
+    if not _dot(n1, old) > 0:
+        return False
+    _sub(pb, pd, x)
+    _sub(pc, pd, y)
+    _cross(x, y, n1)
+    if not _dot(n1, old) > 0:
+        return False
+    return fmin(_min_angle(pc, pa, pd), _min_angle(pd, pb, pc)) > (
+        fmin(_min_angle(pa, pb, pc), _min_angle(pb, pa, pd)) + 1e-9
+    )
+
+
+cdef int _relax(const double* points, int64_t* tris, int64_t t, const int64_t* fixed, int64_t n_fixed,
+                uint8_t* dirty) noexcept nogil:
+    """Delaunay edge flips (Liepa's relaxation) until none applies, in passes of independent flips.
+
+    Each pass tests the interior edges whose verdict can have changed (an edge of a ``dirty`` triangle,
+    or one whose flip a removed edge blocked), then flips, in the edges' key order, those whose two
+    triangles no earlier proposed flip of the pass claimed; the triangles of every proposal are dirty
+    for the next pass. The new edge must not exist yet (in the patch, or in the ``fixed`` keys, sorted,
+    around it). Passes rather than flips one by one: the result does not depend on a visiting order.
+    Returns -1 if out of memory."""
+    cdef int64_t nh = 3 * t, ne, e, i, h1, h2, t1, t2, s1, s2, a, b, c, d, n_prop, n_cand, n_removed = 0
+    cdef int64_t key, n_new
+    cdef int pass_
+    cdef Half* half = <Half*>malloc(max(nh, 1) * sizeof(Half))
+    cdef int64_t* pairs = <int64_t*>malloc(max(nh, 1) * sizeof(int64_t))  # (h1, h2) of each interior edge
+    cdef int64_t* proposed = <int64_t*>malloc(max(nh, 1) * sizeof(int64_t))
+    cdef int64_t* owner = <int64_t*>malloc(max(t, 1) * sizeof(int64_t))
+    cdef int64_t* removed = <int64_t*>malloc(max(nh, 1) * sizeof(int64_t))
+    cdef Half* chosen = <Half*>malloc(max(nh, 1) * sizeof(Half))
+    cdef uint8_t* keep = <uint8_t*>malloc(max(nh, 1))
+    if not (half and pairs and proposed and owner and removed and chosen and keep):
+        free(half); free(pairs); free(proposed); free(owner); free(removed); free(chosen); free(keep)
+        return -1
+    for pass_ in range(100):
+        # the interior edges in key order: consecutive equal keys of the sorted half-edges
+        for i in range(nh):
+            half[i].key = _key(tris[i], tris[3 * (i // 3) + (i % 3 + 1) % 3])
+            half[i].h = i
+        qsort(half, nh, sizeof(Half), _by_key)
+        ne = 0
+        for i in range(nh - 1):
+            if half[i + 1].key == half[i].key:
+                pairs[2 * ne], pairs[2 * ne + 1] = half[i].h, half[i + 1].h
+                ne += 1
+        if ne == 0:
+            break
+        n_prop = 0
+        for e in range(ne):
+            h1, h2 = pairs[2 * e], pairs[2 * e + 1]
+            t1, s1, t2, s2 = h1 // 3, h1 % 3, h2 // 3, h2 % 3
+            a, b = tris[h1], tris[3 * t1 + (s1 + 1) % 3]
+            c, d = tris[3 * t1 + (s1 + 2) % 3], tris[3 * t2 + (s2 + 2) % 3]
+            key = _key(c, d)
+            if not (dirty[t1] or dirty[t2] or _has(removed, n_removed, key)):
+                continue
+            if c == d or _has_half(half, nh, key) or _has(fixed, n_fixed, key):
+                continue
+            if _flip_improves(points + 3 * a, points + 3 * b, points + 3 * c, points + 3 * d):
+                proposed[n_prop] = e
+                n_prop += 1
+        if n_prop == 0:
+            break
+        # independent set: each triangle takes part in at most one flip of this pass, the first proposed
+        for i in range(t):
+            owner[i] = -1
+        for i in range(n_prop):
+            e = proposed[i]
+            if owner[pairs[2 * e] // 3] < 0:
+                owner[pairs[2 * e] // 3] = e
+            if owner[pairs[2 * e + 1] // 3] < 0:
+                owner[pairs[2 * e + 1] // 3] = e
+        n_cand = 0
+        for i in range(n_prop):
+            e = proposed[i]
+            h1, h2 = pairs[2 * e], pairs[2 * e + 1]
+            if owner[h1 // 3] == e and owner[h2 // 3] == e:
+                t1, s1, t2, s2 = h1 // 3, h1 % 3, h2 // 3, h2 % 3
+                chosen[n_cand].key = _key(tris[3 * t1 + (s1 + 2) % 3], tris[3 * t2 + (s2 + 2) % 3])
+                chosen[n_cand].h = e
+                n_cand += 1
+        # two flips must not make the same edge: the first (in edge order) of each new key
+        qsort(chosen, n_cand, sizeof(Half), _by_key)
+        for i in range(n_cand):
+            keep[i] = i == 0 or chosen[i].key != chosen[i - 1].key
+        for i in range(t):
+            dirty[i] = 0
+        for i in range(n_prop):
+            e = proposed[i]
+            dirty[pairs[2 * e] // 3] = 1
+            dirty[pairs[2 * e + 1] // 3] = 1
+        n_removed = 0
+        for i in range(n_cand):
+            if not keep[i]:
+                continue
+            e = chosen[i].h
+            h1, h2 = pairs[2 * e], pairs[2 * e + 1]
+            t1, s1, t2, s2 = h1 // 3, h1 % 3, h2 // 3, h2 % 3
+            a, b = tris[h1], tris[3 * t1 + (s1 + 1) % 3]
+            c, d = tris[3 * t1 + (s1 + 2) % 3], tris[3 * t2 + (s2 + 2) % 3]
+            removed[n_removed] = _key(a, b)
+            n_removed += 1
+            tris[3 * t1], tris[3 * t1 + 1], tris[3 * t1 + 2] = c, a, d
+            tris[3 * t2], tris[3 * t2 + 1], tris[3 * t2 + 2] = d, b, c
+        qsort(removed, n_removed, sizeof(int64_t), _by_value)
+    free(half); free(pairs); free(proposed); free(owner); free(removed); free(chosen); free(keep)
+    return 0
+
+
+cdef int64_t[::1] _fixed_keys(fixed_pairs):
+    """The sorted keys of edges ``(f, 2)``."""
+    cdef const int64_t[:, ::1] pairs = np.ascontiguousarray(fixed_pairs, dtype=np.int64).reshape(-1, 2)
+    keys = np.empty(pairs.shape[0], dtype=np.int64)
+    cdef int64_t[::1] out = keys
+    cdef int64_t i
+    for i in range(pairs.shape[0]):
+        out[i] = _key(pairs[i, 0], pairs[i, 1])
+    keys.sort()
+    return out
+
+
+def relax(const double[:, ::1] points, triangles, fixed_pairs, dirty):
+    """Liepa's relaxation of a patch (see ``_relax``): the flipped triangles, a new ``(t, 3)`` array.
+
+    ``fixed_pairs (f, 2)``: edges around the patch that no flip may make; ``dirty (t,)`` bool: the
+    triangles whose edges are tested first.
+    """
+    out = np.array(triangles, dtype=np.int64, order="C", copy=True)
+    mask = np.array(dirty, dtype=np.uint8, copy=True)
+    if out.ndim != 2 or out.shape[1] != 3 or mask.shape != (len(out),):
+        raise ValueError("triangles must be (t, 3) and dirty (t,)")
+    if len(out) and (out.min() < 0 or out.max() >= points.shape[0]):
+        raise ValueError("triangles index outside points")
+    if points.shape[0] >= 2**31:
+        raise ValueError("a local mesh has fewer than 2^31 vertices")
+    cdef int64_t[:, ::1] tris = out
+    cdef uint8_t[::1] d = mask
+    cdef int64_t[::1] fixed = _fixed_keys(fixed_pairs)
+    cdef int64_t t = len(out)
+    cdef int status = 0
+    if t:
+        with nogil:
+            status = _relax(&points[0, 0], &tris[0, 0], t, &fixed[0] if fixed.shape[0] else NULL,
+                            fixed.shape[0], &d[0])
+    if status:
+        raise MemoryError
+    return out
+
+
+def refine(points, sigma, triangles, fixed_pairs, owner, double alpha):
+    """Liepa's refinement: rounds of centroid splits, each followed by a relaxation, until none splits.
+
+    A triangle with centroid ``c`` and ``sigma_c`` the mean of its corners' scales splits when ``alpha
+    |c - v_m| > max(sigma_c, sigma_m)`` for each corner ``m``; the new vertex takes ``sigma_c`` and the
+    ``owner`` (patch) of the triangle's first corner. No flips before the first split (as Liepa and
+    CGAL: on a short loop, Delaunay flips made the minimum-weight triangles slimmer, and coarse holes got
+    no new vertex); after a relaxation only edges of split triangles can flip. Returns the points (the
+    given ones first), the triangles and the points' owners.
+    """
+    cdef int64_t nv = len(points), t = len(triangles), cap_v, cap_t, i, j, m, count, a, b, c, p
+    cap_v, cap_t = 2 * nv + 16, 3 * t + 16
+    P_ = np.empty((cap_v, 3))
+    P_[:nv] = points
+    S_ = np.empty(cap_v)
+    S_[:nv] = sigma
+    O_ = np.empty(cap_v, dtype=np.int64)
+    O_[:nv] = owner
+    T_ = np.empty((cap_t, 3), dtype=np.int64)
+    T_[:t] = triangles
+    D_ = np.empty(cap_t, dtype=np.uint8)
+    C_ = np.empty(t, dtype=np.int64)
+    cdef double[:, ::1] P = P_
+    cdef double[::1] S = S_
+    cdef int64_t[::1] O = O_, chosen = C_
+    cdef int64_t[:, ::1] T = T_
+    cdef uint8_t[::1] D = D_
+    cdef int64_t[::1] fixed = _fixed_keys(fixed_pairs)
+    cdef double centre[3]
+    cdef double e[3]
+    cdef double sigma_c, dist
+    cdef bint split, relaxed = False
+    cdef int status = 0
+    for _ in range(60):
+        count = 0
+        with nogil:
+            for i in range(t):
+                for j in range(3):
+                    centre[j] = (P[T[i, 0], j] + P[T[i, 1], j] + P[T[i, 2], j]) / 3.0
+                sigma_c = (S[T[i, 0]] + S[T[i, 1]] + S[T[i, 2]]) / 3.0
+                split = True
+                for m in range(3):
+                    _sub(centre, &P[T[i, m], 0], e)
+                    dist = sqrt(_dot(e, e))
+                    if not alpha * dist > fmax(sigma_c, S[T[i, m]]):
+                        split = False
+                        break
+                if split:
+                    chosen[count] = i
+                    count += 1
+        if count == 0:
+            break
+        if nv + count > cap_v or t + 2 * count > cap_t:  # grow the buffers (amortized doubling)
+            cap_v, cap_t = max(2 * cap_v, nv + count), max(2 * cap_t, t + 2 * count)
+            P_ = np.resize(P_, (cap_v, 3))
+            S_ = np.resize(S_, cap_v)
+            O_ = np.resize(O_, cap_v)
+            T_ = np.resize(T_, (cap_t, 3))
+            D_ = np.resize(D_, cap_t)
+            P, S, O, T, D = P_, S_, O_, T_, D_
+        with nogil:
+            for i in range(count):  # the centroid splits (a, b, c) into (a, b, p), (b, c, p), (c, a, p)
+                j, p = chosen[i], nv + i
+                a, b, c = T[j, 0], T[j, 1], T[j, 2]
+                for m in range(3):
+                    P[p, m] = (P[a, m] + P[b, m] + P[c, m]) / 3.0
+                S[p] = (S[a] + S[b] + S[c]) / 3.0
+                O[p] = O[a]
+                T[j, 2] = p
+                T[t + i, 0], T[t + i, 1], T[t + i, 2] = b, c, p
+                T[t + count + i, 0], T[t + count + i, 1], T[t + count + i, 2] = c, a, p
+            for i in range(t + 2 * count):
+                D[i] = not relaxed or i >= t
+            for i in range(count):
+                D[chosen[i]] = 1
+            nv += count
+            t += 2 * count
+            status = _relax(&P[0, 0], &T[0, 0], t, &fixed[0] if fixed.shape[0] else NULL, fixed.shape[0],
+                            &D[0])
+        if status:
+            raise MemoryError
+        relaxed = True
+        if t > chosen.shape[0]:
+            C_ = np.empty(t, dtype=np.int64)
+            chosen = C_
+    return P_[:nv].copy(), T_[:t].copy(), O_[:nv].copy()
+
+
+# ----------------------------------------------------------------------------------------------------------
+# tangential relaxation and the crossing test
+
+
+def tangential_relax(const double[:, ::1] vertices, const int64_t[:, ::1] new_tris, int64_t first_new,
+                     int iterations=10):
+    """Move each new vertex (index ``>= first_new``) ``iterations`` times half-way to its star's
+    area-weighted centroid, the move's part along the star's area-weighted normal removed (all moves
+    from the same positions); the new vertices' positions ``(n - first_new, 3)``.
+
+    The star's centroid (a step of centroidal Voronoi smoothing), not the neighbours' mean, which on an
+    irregular star sits towards the short edges and leaves a sliver; tangential, so that the faired
+    surface is kept to first order.
+    """
+    cdef int64_t n = vertices.shape[0], p = n - first_new, q = new_tris.shape[0], i, r, v, c
+    if p < 0:
+        raise ValueError("first_new beyond the vertices")
+    out = np.array(vertices[first_new:], dtype=np.float64, order="C")
+    if p == 0:
+        return out
+    sums_ = np.empty((p, 7))  # per new vertex: normal sum, weighted centroid sum, area sum
+    cdef double[:, ::1] x = out, acc = sums_
+    cdef double pts[3][3]
+    cdef double u[3]
+    cdef double w[3]
+    cdef double fn[3]
+    cdef double move[3]
+    cdef double area, norm, along
+    cdef int it
+    with nogil:
+        for it in range(iterations):
+            for v in range(p):
+                for c in range(7):
+                    acc[v, c] = 0.0
+            for i in range(q):
+                for r in range(3):
+                    v = new_tris[i, r]
+                    for c in range(3):
+                        pts[r][c] = x[v - first_new, c] if v >= first_new else vertices[v, c]
+                _sub(pts[1], pts[0], u)
+                _sub(pts[2], pts[0], w)
+                _cross(u, w, fn)
+                area = sqrt(_dot(fn, fn))
+                for r in range(3):
+                    v = new_tris[i, r] - first_new
+                    if v < 0:
+                        continue
+                    for c in range(3):
+                        acc[v, c] += fn[c]
+                        acc[v, 3 + c] += area * ((pts[0][c] + pts[1][c] + pts[2][c]) / 3.0)
+                    acc[v, 6] += area
+            for v in range(p):
+                norm = sqrt(_dot(&acc[v, 0], &acc[v, 0]))
+                if norm > 0:
+                    for c in range(3):
+                        acc[v, c] = acc[v, c] / norm
+                for c in range(3):
+                    move[c] = acc[v, 3 + c] / fmax(acc[v, 6], 1e-300) - x[v, c]
+                along = _dot(move, &acc[v, 0])
+                for c in range(3):
+                    acc[v, 3 + c] = move[c] - along * acc[v, c]  # the move, kept until every one is known
+            for v in range(p):
+                for c in range(3):
+                    x[v, c] += 0.5 * acc[v, 3 + c]
+    return out
+
+
+cdef bint _cross_pair(const double* P, const double* Q) noexcept nogil:
+    """Whether triangles ``P`` and ``Q`` (3 x 3, row-major corners) intersect: no separating axis among
+    the 17 candidates (two normals, nine edge-edge cross products, six in-plane edge normals for coplanar
+    pairs). Axes too short to trust (parallel edges) are skipped; a gap must exceed a relative
+    ``1e-12`` (touching and coplanar pairs count as crossing)."""
+    cdef double eP[3][3]
+    cdef double eQ[3][3]
+    cdef double nP[3]
+    cdef double nQ[3]
+    cdef double axes[17][3]
+    cdef double scale = 0.0, spread = 0.0, length, inv, x, p_lo, p_hi, q_lo, q_hi
+    cdef int c, r, s
+    for c in range(3):
+        _sub(P + 3 * ((c + 1) % 3), P + 3 * c, eP[c])
+        _sub(Q + 3 * ((c + 1) % 3), Q + 3 * c, eQ[c])
+    _cross(eP[0], eP[1], nP)
+    _cross(eQ[0], eQ[1], nQ)
+    for c in range(3):
+        axes[0][c], axes[1][c] = nP[c], nQ[c]
+    for r in range(3):
+        for s in range(3):
+            _cross(eP[r], eQ[s], axes[2 + 3 * r + s])
+        _cross(nP, eP[r], axes[11 + r])
+        _cross(nQ, eQ[r], axes[14 + r])
+    for c in range(9):
+        scale = fmax(scale, fmax(fabs(P[c]), fabs(Q[c])))
+        spread = fmax(spread, fabs(eP[c // 3][c % 3]))
+    scale = scale + spread
+    for r in range(17):
+        length = sqrt((axes[r][0] * axes[r][0] + axes[r][1] * axes[r][1]) + axes[r][2] * axes[r][2])
+        if not length > 1e-12 * (scale * scale):
+            continue
+        inv = 1.0 / length
+        for c in range(3):
+            axes[r][c] = axes[r][c] * inv
+        p_lo, p_hi, q_lo, q_hi = INFINITY, -INFINITY, INFINITY, -INFINITY
+        for c in range(3):
+            x = (axes[r][0] * P[3 * c] + axes[r][1] * P[3 * c + 1]) + axes[r][2] * P[3 * c + 2]
+            p_lo, p_hi = fmin(p_lo, x), fmax(p_hi, x)
+            x = (axes[r][0] * Q[3 * c] + axes[r][1] * Q[3 * c + 1]) + axes[r][2] * Q[3 * c + 2]
+            q_lo, q_hi = fmin(q_lo, x), fmax(q_hi, x)
+        if fmax(q_lo - p_hi, p_lo - q_hi) > 1e-12 * scale:
+            return False
+    return True
+
+
+def count_crossings(const double[:, ::1] vertices, const int64_t[:, ::1] triangles, const int64_t[::1] a,
+                    const int64_t[::1] b, int64_t first_new):
+    """For candidate pairs ``(a[i], b[i])`` of triangles (``a`` new, i.e. ``>= first_new``), the number of
+    intersecting pairs each new triangle is in; pairs sharing a vertex are not counted. Cheap tests
+    first: shared corners, then the bounding boxes (where most pairs stop), then the separating axes."""
+    cdef int64_t q = triangles.shape[0] - first_new, n = a.shape[0], i, r, s, c, ta, tb
+    if b.shape[0] != n:
+        raise ValueError("a and b must have one length")
+    result_ = np.zeros(max(q, 0))
+    cdef double[::1] result = result_
+    cdef double P[9]
+    cdef double Q[9]
+    cdef bint shared, apart
+    with nogil:
+        for i in range(n):
+            ta, tb = a[i], b[i]
+            shared = False
+            for r in range(3):
+                for s in range(3):
+                    shared = shared or triangles[ta, r] == triangles[tb, s]
+            if shared:
+                continue
+            for r in range(3):
+                for c in range(3):
+                    P[3 * r + c] = vertices[triangles[ta, r], c]
+                    Q[3 * r + c] = vertices[triangles[tb, r], c]
+            apart = False
+            for c in range(3):
+                if fmin(fmin(P[c], P[3 + c]), P[6 + c]) > fmax(fmax(Q[c], Q[3 + c]), Q[6 + c]) or (
+                    fmin(fmin(Q[c], Q[3 + c]), Q[6 + c]) > fmax(fmax(P[c], P[3 + c]), P[6 + c])
+                ):
+                    apart = True
+            if apart or not _cross_pair(P, Q):
+                continue
+            result[ta - first_new] += 1.0
+            if tb >= first_new:
+                result[tb - first_new] += 1.0
+    return result_
+
+
+# ----------------------------------------------------------------------------------------------------------
+# the rings of fixed vertices around the holes
+
+
+def rings(const int64_t[:, ::1] triangles, const int64_t[::1] indptr, const int64_t[::1] data, seeds,
+          int count):
+    """Breadth-first vertex rings around ``seeds`` (ring 0) over each vertex's triangles (CSR ``indptr``,
+    ``data``): the triangles (sorted) touching rings ``0 .. count - 1`` and the ``count + 1`` rings,
+    each sorted (the last one incomplete: its vertices' other triangles are not taken).
+
+    Visited marks over the whole mesh are allocated zeroed (pages the walk does not touch cost nothing),
+    so the work grows with the rings, not with the mesh.
+    """
+    cdef int64_t n = indptr.shape[0] - 1, m = triangles.shape[0], i, j, v, t, c, size, found
+    front_ = np.unique(np.asarray(seeds, dtype=np.int64))
+    if len(front_) and (front_[0] < 0 or front_.max() >= n):
+        raise ValueError("seeds outside the mesh")
+    seen_ = np.zeros(n, dtype=np.uint8)
+    took_ = np.zeros(m, dtype=np.uint8)
+    cdef uint8_t[::1] seen = seen_, took = took_
+    cdef int64_t[::1] front = front_, touch, fresh
+    out_rings, out_taken = [np.asarray(seeds)], []
+    for i in range(front.shape[0]):
+        seen[front[i]] = 1
+    for _ in range(count):
+        size = 0
+        for i in range(front.shape[0]):
+            size += indptr[front[i] + 1] - indptr[front[i]]
+        touch_ = np.empty(size, dtype=np.int64)
+        touch = touch_
+        found = 0
+        with nogil:
+            for i in range(front.shape[0]):  # the ring's triangles not taken before
+                v = front[i]
+                for j in range(indptr[v], indptr[v + 1]):
+                    t = data[j]
+                    if not took[t]:
+                        took[t] = 1
+                        touch[found] = t
+                        found += 1
+        touch_ = np.sort(touch_[:found])
+        touch = touch_
+        fresh_ = np.empty(3 * found, dtype=np.int64)
+        fresh = fresh_
+        size = 0
+        with nogil:
+            for i in range(found):  # their corners not seen before: the next ring
+                for c in range(3):
+                    v = triangles[touch[i], c]
+                    if not seen[v]:
+                        seen[v] = 1
+                        fresh[size] = v
+                        size += 1
+        front_ = np.sort(fresh_[:size])
+        front = front_
+        out_taken.append(touch_)
+        out_rings.append(front_)
+    taken = np.sort(np.concatenate(out_taken)) if out_taken else np.zeros(0, dtype=np.int64)
+    return taken, out_rings
+
+
+# ----------------------------------------------------------------------------------------------------------
+# overlapping bounding spheres: the candidates of the crossing test
+
+
+cdef inline bint _overlap(const double* c, double r, const double* d, double s) noexcept nogil:
+    cdef double d0 = c[0] - d[0], d1 = c[1] - d[1], d2 = c[2] - d[2]
+    return sqrt((d0 * d0 + d1 * d1) + d2 * d2) <= r + s
+
+
+cdef int64_t _sweep(const double* ca, const double* ra, int64_t na, const double* cb, const double* rb,
+                    bint same, int axis, const int64_t* order, int64_t total, int64_t* active,
+                    int64_t* out, int64_t capacity) noexcept nogil:
+    """Sweep and prune along ``axis``: the items (``a`` as ``0 .. na - 1``, ``b`` as ``na ..``; ``same``: ``b``
+    is ``a``) visited by the low ends ``x - r`` of their intervals (``order``); each is tested against the
+    active items of the other set (of its own, if ``same``: ``active`` holds one list of ``a`` and, from
+    ``na`` on, one of ``b``) whose intervals still reach it, and those that do not are dropped. Writes
+    the overlapping pairs ``(a, b)`` to ``out`` while they fit and returns how many there are."""
+    cdef int64_t found = 0, n_a = 0, n_b = 0, kept, i, j, item, other, n_other
+    cdef int64_t* mine
+    cdef int64_t* theirs
+    cdef const double* c
+    cdef const double* r
+    cdef const double* oc
+    cdef const double* orad
+    cdef double low
+    for i in range(total):
+        item = order[i]
+        if item < na:  # an a: meets the active b (or, if same, the active a)
+            c, r = ca + 3 * item, ra + item
+            theirs = active if same else active + na
+            oc, orad = (ca, ra) if same else (cb, rb)
+            n_other = n_a if same else n_b
+        else:
+            item = item - na
+            c, r = cb + 3 * item, rb + item
+            theirs = active
+            oc, orad = ca, ra
+            n_other = n_a
+        low = c[axis] - r[0]
+        kept = 0
+        for j in range(n_other):
+            other = theirs[j]
+            if oc[3 * other + axis] + orad[other] < low:
+                continue  # its interval ends before this one starts: no later item meets it either
+            theirs[kept] = other
+            kept += 1
+            if _overlap(c, r[0], oc + 3 * other, orad[other]):
+                if found < capacity:
+                    if order[i] < na:
+                        out[2 * found], out[2 * found + 1] = item, other
+                    else:
+                        out[2 * found], out[2 * found + 1] = other, item
+                found += 1
+        if same:
+            n_a = kept
+            active[n_a] = item
+            n_a += 1
+        elif order[i] < na:
+            n_b = kept
+            active[n_a] = item
+            n_a += 1
+        else:
+            n_a = kept
+            active[na + n_b] = item
+            n_b += 1
+    return found
+
+
+ctypedef struct Low:  # an interval's low end on the sweep axis, and its item
+    double low
+    int64_t item
+
+
+cdef int _by_low(const void* x, const void* y) noexcept nogil:
+    cdef const Low* p = <const Low*>x
+    cdef const Low* q = <const Low*>y
+    if p.low != q.low:
+        return -1 if p.low < q.low else 1
+    return -1 if p.item < q.item else (1 if p.item > q.item else 0)
+
+
+def sphere_pairs(const double[:, ::1] ca, const double[::1] ra, cb=None, rb=None):
+    """Pairs ``(i, j)`` of spheres (centres ``c``, radii ``r``) that overlap, ``|c_i - c_j| <= r_i + r_j``:
+    between set ``a`` and set ``b``, or within ``a`` (``i < j``) when ``b`` is None. Sweep and prune along
+    the axis of the largest extent: O((na + nb) log(na + nb)) plus the pairs whose intervals on it
+    overlap. Two ``(p,)`` int64 arrays."""
+    cdef bint same = cb is None
+    cdef const double[:, ::1] cb_ = ca if same else np.ascontiguousarray(cb, dtype=np.float64)
+    cdef const double[::1] rb_ = ra if same else np.ascontiguousarray(rb, dtype=np.float64)
+    cdef int64_t na = ca.shape[0], nb = cb_.shape[0], total = na if same else na + nb, found, k, tmp
+    cdef int64_t capacity = 8 * total + 16
+    if ra.shape[0] != na or rb_.shape[0] != nb or ca.shape[1] != 3 or cb_.shape[1] != 3:
+        raise ValueError("centres must be (n, 3) and radii (n,)")
+    cdef const double* pa = &ca[0, 0] if na else NULL
+    cdef const double* qa = &ra[0] if na else NULL
+    cdef const double* pb = &cb_[0, 0] if nb else NULL
+    cdef const double* qb = &rb_[0] if nb else NULL
+    cdef Low* lows = <Low*>malloc(max(total, 1) * sizeof(Low))
+    cdef int64_t* order = <int64_t*>malloc(max(total, 1) * sizeof(int64_t))
+    cdef int64_t* active = <int64_t*>malloc(max(total, 1) * sizeof(int64_t))
+    cdef double lo[3]
+    cdef double hi[3]
+    cdef int axis = 0, c
+    cdef int64_t[:, ::1] out
+    if not (lows and order and active):
+        free(lows); free(order); free(active)
+        raise MemoryError
+    with nogil:
+        # the axis of the largest extent of the centres: the fewest intervals overlap on it
+        for c in range(3):
+            lo[c], hi[c] = INFINITY, -INFINITY
+        for k in range(total):
+            for c in range(3):
+                lo[c] = fmin(lo[c], pa[3 * k + c] if k < na else pb[3 * (k - na) + c])
+                hi[c] = fmax(hi[c], pa[3 * k + c] if k < na else pb[3 * (k - na) + c])
+        for c in range(1, 3):
+            if hi[c] - lo[c] > hi[axis] - lo[axis]:
+                axis = c
+        for k in range(total):
+            lows[k].item = k
+            lows[k].low = pa[3 * k + axis] - qa[k] if k < na else pb[3 * (k - na) + axis] - qb[k - na]
+        qsort(lows, total, sizeof(Low), _by_low)
+        for k in range(total):
+            order[k] = lows[k].item
+    while True:
+        out_ = np.empty((capacity, 2), dtype=np.int64)
+        out = out_
+        with nogil:
+            found = _sweep(pa, qa, na, pb, qb, same, axis, order, total, active, &out[0, 0], capacity)
+            if found <= capacity and same:
+                for k in range(found):
+                    if out[k, 0] > out[k, 1]:
+                        tmp = out[k, 0]
+                        out[k, 0] = out[k, 1]
+                        out[k, 1] = tmp
+        if found <= capacity:
+            break
+        capacity = found
+    free(lows); free(order); free(active)
+    return out_[:found, 0].copy(), out_[:found, 1].copy()
+
+
+# ----------------------------------------------------------------------------------------------------------
+# the fairing's Laplacian weights
+
+
+cdef double _pairwise_sum(const double* a, int64_t n) noexcept nogil:
+    """NumPy's pairwise summation (``np.add.reduce`` on a contiguous array), so that a mean here equals
+    NumPy's to the last bit: eight running sums over blocks of at most 128, halves above."""
+    cdef double r[8]
+    cdef double res
+    cdef int64_t i, k, n2
+    if n < 8:
+        res = 0.0
+        for i in range(n):
+            res += a[i]
+        return res
+    if n <= 128:
+        for k in range(8):
+            r[k] = a[k]
+        for i in range(8, n - n % 8, 8):
+            for k in range(8):
+                r[k] += a[i + k]
+        res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+        for i in range(n - n % 8, n):
+            res += a[i]
+        return res
+    n2 = n // 2
+    n2 -= n2 % 8
+    return _pairwise_sum(a, n2) + _pairwise_sum(a + n2, n - n2)
+
+
+def pairwise_mean(const double[::1] values):
+    """The mean as NumPy computes it (for tests of :func:`_pairwise_sum`)."""
+    return _pairwise_sum(&values[0], values.shape[0]) / values.shape[0] if values.shape[0] else float("nan")
+
+
+def laplacian_weights(const int64_t[:, ::1] tris, int64_t nv, const int64_t[::1] i, const int64_t[::1] j,
+                      const int64_t[::1] inverse, vertices=None):
+    """Edge weights ``w`` (edges ``(i, j)``; ``inverse``: the edge of each half-edge ``(c, c + 1)`` of each
+    triangle, corner-major), vertex degrees ``sum w`` and the Laplacian's row scales of a local mesh.
+
+    Uniform (``vertices`` None): ``w = 1``, scale ``1 / degree`` (eq. 1 of LS meshes). Cotangent:
+    ``w = (cot a + cot b) / 2`` clamped below at 5% of the mean ``|w|`` (obtuse pairs would make the
+    stiffness indefinite), scale the inverse of the vertex areas (a third of each triangle's) normalized
+    to mean 1. A vertex without area (or degree) gets scale 0.
+    """
+    cdef int64_t t = tris.shape[0], e = i.shape[0], h, k, c, a, b, o, positive = 0
+    if inverse.shape[0] != 3 * t or j.shape[0] != e:
+        raise ValueError("inverse must have 3 t entries, i and j one length")
+    if t and (np.min(tris) < 0 or np.max(tris) >= nv):
+        raise ValueError("tris index outside the nv vertices")
+    cdef bint cot = vertices is not None
+    cdef const double[:, ::1] x = np.ascontiguousarray(vertices if cot else np.zeros((0, 3)), dtype=np.float64)
+    if cot and x.shape[0] < nv:
+        raise ValueError("vertices must have nv rows")
+    w_, degree_, scale_ = np.zeros(e), np.zeros(nv), np.zeros(nv)
+    by_i_, by_j_, mass_, scratch_ = np.zeros(nv), np.zeros(nv), np.zeros(nv), np.zeros(max(e, nv))
+    cdef double[::1] w = w_, degree = degree_, scale = scale_, by_i = by_i_, by_j = by_j_, mass = mass_
+    cdef double[::1] scratch = scratch_
+    cdef double u[3]
+    cdef double v[3]
+    cdef double n[3]
+    cdef double floor, mean, area
+    with nogil:
+        if cot:
+            for c in range(3):  # corner-major, as the half-edges: the angle at c + 2, opposite (c, c + 1)
+                for k in range(t):
+                    a, b, o = tris[k, c], tris[k, (c + 1) % 3], tris[k, (c + 2) % 3]
+                    _sub(&x[a, 0], &x[o, 0], u)
+                    _sub(&x[b, 0], &x[o, 0], v)
+                    _cross(u, v, n)
+                    w[inverse[c * t + k]] += _dot(u, v) / fmax(sqrt(_dot(n, n)), 1e-300)
+            for h in range(e):
+                w[h] = 0.5 * w[h]
+                scratch[h] = fabs(w[h])
+            floor = 0.05 * (_pairwise_sum(&scratch[0], e) / e) if e else 0.0
+            for h in range(e):
+                w[h] = fmax(w[h], floor)
+        else:
+            for h in range(e):
+                w[h] = 1.0
+        for h in range(e):  # two sums, then added: the rounding of NumPy's two bincounts
+            by_i[i[h]] += w[h]
+            by_j[j[h]] += w[h]
+        for k in range(nv):
+            degree[k] = by_i[k] + by_j[k]
+            mass[k] = degree[k]
+        if cot:
+            for k in range(nv):
+                mass[k] = 0.0
+            for k in range(t):
+                _sub(&x[tris[k, 1], 0], &x[tris[k, 0], 0], u)
+                _sub(&x[tris[k, 2], 0], &x[tris[k, 0], 0], v)
+                _cross(u, v, n)
+                area = 0.5 * sqrt(_dot(n, n))
+                for c in range(3):
+                    mass[tris[k, c]] += area / 3.0
+            for k in range(nv):
+                if mass[k] > 0:
+                    scratch[positive] = mass[k]
+                    positive += 1
+            mean = _pairwise_sum(&scratch[0], positive) / positive if positive else 1.0
+            for k in range(nv):
+                mass[k] = mass[k] / mean
+        for k in range(nv):
+            scale[k] = 1.0 / mass[k] if mass[k] > 0 else 0.0
+    return w_, degree_, scale_
+
+
+# ----------------------------------------------------------------------------------------------------------
+# what the triangulation needs of a loop
+
+
+def loop_geometry(const int64_t[::1] loop, const int64_t[::1] rows, const double[:, ::1] vertices,
+                  const int64_t[:, ::1] triangles, const int64_t[::1] indptr, const int64_t[::1] data):
+    """A loop's points ``(k, 3)``, the unit normals ``(k, 3)`` of the mesh triangles on its edges (the
+    triangle of half-edge row ``rows[i]``, that is ``rows[i] % m``, on edge ``(i, i + 1)``), its chords
+    that already are mesh edges ``(k, k)`` bool (its own edges excepted: a chord the triangulation must
+    not use, a non-manifold edge otherwise) and its mean edge length.
+
+    The chords come from each loop vertex's triangles (CSR ``indptr``, ``data``), the loop's positions
+    looked up by binary search: the work grows with the loop's stars, not with the mesh.
+    """
+    cdef int64_t k = loop.shape[0], n = vertices.shape[0], m = triangles.shape[0], p, q, r, lo, hi, mid, w
+    cdef int64_t c, t
+    if rows.shape[0] != k or indptr.shape[0] != n + 1:
+        raise ValueError("rows must be (k,), indptr (n + 1,)")
+    if k and (np.min(loop) < 0 or np.max(loop) >= n):
+        raise ValueError("loop outside the mesh")
+    by_vertex_ = np.argsort(loop, kind="stable")
+    sorted_ = np.asarray(loop)[by_vertex_]
+    points_ = np.empty((k, 3))
+    outer_ = np.empty((k, 3))
+    lengths_ = np.empty(k)
+    chords_ = np.zeros((k, k), dtype=np.uint8)
+    cdef int64_t[::1] by_vertex = by_vertex_, ordered = sorted_
+    cdef uint8_t[:, ::1] out = chords_
+    cdef double[:, ::1] points = points_, outer = outer_
+    cdef double[::1] lengths = lengths_
+    cdef double u[3]
+    cdef double v[3]
+    cdef double norm
+    with nogil:
+        for p in range(k):
+            for c in range(3):
+                points[p, c] = vertices[loop[p], c]
+        for p in range(k):
+            t = rows[p] % m
+            _sub(&vertices[triangles[t, 1], 0], &vertices[triangles[t, 0], 0], u)
+            _sub(&vertices[triangles[t, 2], 0], &vertices[triangles[t, 0], 0], v)
+            _cross(u, v, &outer[p, 0])
+            norm = sqrt(_dot(&outer[p, 0], &outer[p, 0]))
+            for c in range(3):
+                outer[p, c] = outer[p, c] / (norm if norm > 0 else 1.0)
+            _sub(&points[(p + 1) % k, 0], &points[p, 0], u)
+            lengths[p] = sqrt(_dot(u, u))
+        for p in range(k):
+            for r in range(indptr[loop[p]], indptr[loop[p] + 1]):
+                t = data[r]
+                for c in range(3):
+                    w = triangles[t, c]
+                    lo, hi = 0, k
+                    while lo < hi:
+                        mid = (lo + hi) >> 1
+                        if ordered[mid] < w:
+                            lo = mid + 1
+                        else:
+                            hi = mid
+                    if lo < k and ordered[lo] == w and w != loop[p]:
+                        q = by_vertex[lo]
+                        out[p, q] = 1
+                        out[q, p] = 1
+        for p in range(k):  # the loop's own edges
+            q = (p + 1) % k
+            out[p, q] = 0
+            out[q, p] = 0
+    spacing = _pairwise_sum(&lengths[0], k) / k if k else 0.0
+    return points_, outer_, chords_.view(bool), spacing
+
+
+# ----------------------------------------------------------------------------------------------------------
+# a local mesh's edges, and the check of a re-weighted solve
+
+
+def unique_edges(const int64_t[:, ::1] tris, int64_t nv):
+    """The undirected edges ``i < j`` of a local mesh, sorted, and the edge of each of its ``3 t``
+    half-edges ``(c, c + 1)``, corner-major (all ``(0, 1)`` first): ``(i, j, inverse)``."""
+    cdef int64_t t = tris.shape[0], nh = 3 * t, h, e = 0, a, b
+    if t and (np.min(tris) < 0 or np.max(tris) >= nv):
+        raise ValueError("tris index outside the nv vertices")
+    if nv >= 2**31:
+        raise ValueError("a local mesh has fewer than 2^31 vertices")
+    cdef Half* half = <Half*>malloc(max(nh, 1) * sizeof(Half))
+    if not half:
+        raise MemoryError
+    inverse_ = np.empty(nh, dtype=np.int64)
+    i_ = np.empty(nh, dtype=np.int64)
+    j_ = np.empty(nh, dtype=np.int64)
+    cdef int64_t[::1] inverse = inverse_, i = i_, j = j_
+    with nogil:
+        for h in range(nh):
+            a, b = tris[h % t, h // t], tris[h % t, (h // t + 1) % 3]
+            half[h].key = _key(a, b)
+            half[h].h = h
+        qsort(half, nh, sizeof(Half), _by_key)
+        for h in range(nh):
+            if h == 0 or half[h].key != half[h - 1].key:
+                i[e], j[e] = half[h].key >> 32, half[h].key - ((half[h].key >> 32) << 32)
+                e += 1
+            inverse[half[h].h] = e - 1
+    free(half)
+    return i_[:e].copy(), j_[:e].copy(), inverse_
+
+
+def keeps_facing(const double[:, ::1] x, const double[:, :] again, const int64_t[:, ::1] new_tris):
+    """Whether ``again``, new positions of the last ``len(again)`` vertices of ``x``, keeps every new
+    triangle facing as in ``x`` and moves no vertex by a tenth of the patch's size or more (obtuse slivers
+    can make cotangent weights ill-conditioned)."""
+    cdef int64_t n = x.shape[0], p = again.shape[0], first = n - p, q = new_tris.shape[0], r, c, v
+    if p > n or again.shape[1] != 3:
+        raise ValueError("again must be (p, 3) with p <= len(x)")
+    if q and (np.min(new_tris) < 0 or np.max(new_tris) >= n):
+        raise ValueError("new_tris index outside x")
+    cdef double lo[3]
+    cdef double hi[3]
+    cdef double P[3][3]
+    cdef double Q[3][3]
+    cdef double u[3]
+    cdef double w[3]
+    cdef double np_[3]
+    cdef double nq[3]
+    cdef double move = 0.0, size
+    cdef bint facing = True
+    cdef int k
+    with nogil:
+        for c in range(3):
+            lo[c], hi[c] = INFINITY, -INFINITY
+        for r in range(q):
+            for k in range(3):
+                v = new_tris[r, k]
+                for c in range(3):
+                    P[k][c] = x[v, c]
+                    Q[k][c] = again[v - first, c] if v >= first else x[v, c]
+                    lo[c], hi[c] = fmin(lo[c], P[k][c]), fmax(hi[c], P[k][c])
+            _sub(P[1], P[0], u)
+            _sub(P[2], P[0], w)
+            _cross(u, w, np_)
+            _sub(Q[1], Q[0], u)
+            _sub(Q[2], Q[0], w)
+            _cross(u, w, nq)
+            if not _dot(np_, nq) > 0:
+                facing = False
+        for r in range(p):
+            for c in range(3):
+                move = fmax(move, fabs(again[r, c] - x[first + r, c]))
+        for c in range(3):
+            u[c] = hi[c] - lo[c]
+        size = sqrt(_dot(u, u))
+    return bool(facing and move < 0.1 * size)
+
+
+# ----------------------------------------------------------------------------------------------------------
+# the fairing's normal equations on a small patch
+
+
+def normal_equations(const double[:, ::1] x, const int64_t[::1] i, const int64_t[::1] j, const double[::1] w,
+                     const double[::1] degree, const double[::1] scale, const int64_t[::1] plus,
+                     const int64_t[::1] minus, const int64_t[::1] unknown):
+    """The least-squares system of the rows ``A = L[plus] - L[minus]`` (``minus`` empty: ``L[plus]``) of
+    the Laplacian ``L = S K``, ``K = D - W`` (edges ``(i, j)`` of weight ``w``, ``D`` the ``degree``,
+    ``S`` the ``scale``), in the ``unknown`` columns, the others fixed at ``x``: the dense
+    ``A_u^T A_u (p, p)`` and ``-A_u^T A_k x_k (p, 3)``.
+
+    Each row of ``A`` has a handful of entries (a vertex and its neighbours, or two of them), so the
+    products are sums of sparse outer products: O(rows * entries^2), where dense products cost
+    O(rows * p^2). Entries are those of NumPy's dense rows (``scale * K``, then the difference).
+    """
+    cdef int64_t nv = x.shape[0], e = i.shape[0], rows = plus.shape[0], p = unknown.shape[0], r, k, s, c, v
+    cdef int64_t a, b, count, u1, u2, side
+    if minus.shape[0] not in (0, rows):
+        raise ValueError("minus must be empty or as long as plus")
+    if j.shape[0] != e or w.shape[0] != e or degree.shape[0] != nv or scale.shape[0] != nv:
+        raise ValueError("edges, weights, degree and scale must agree")
+    # each vertex's neighbours (CSR over the edges, both directions)
+    indptr_ = np.zeros(nv + 1, dtype=np.int64)
+    cdef int64_t[::1] indptr = indptr_
+    nbr_ = np.empty(2 * e, dtype=np.int64)
+    wt_ = np.empty(2 * e)
+    col_ = np.full(nv, -1, dtype=np.int64)
+    fixed_ = np.array(x, dtype=np.float64, order="C")
+    normal_ = np.zeros((p, p))
+    rhs_ = np.zeros((p, 3))
+    cdef int64_t[::1] nbr = nbr_, col = col_
+    cdef double[::1] wt = wt_
+    cdef double[:, ::1] fixed = fixed_, normal = normal_, rhs = rhs_
+    cdef int64_t* slot = <int64_t*>malloc(max(nv, 1) * sizeof(int64_t))
+    cdef int64_t* entry = <int64_t*>malloc(max(nv, 1) * sizeof(int64_t))
+    cdef double* value = <double*>malloc(max(nv, 1) * sizeof(double))
+    cdef double bx, by, bz, f
+    if not (slot and entry and value):
+        free(slot); free(entry); free(value)
+        raise MemoryError
+    with nogil:
+        for k in range(e):
+            indptr[i[k] + 1] += 1
+            indptr[j[k] + 1] += 1
+        for v in range(nv):
+            indptr[v + 1] += indptr[v]
+            slot[v] = indptr[v]
+        for k in range(e):
+            nbr[slot[i[k]]], wt[slot[i[k]]] = j[k], w[k]
+            slot[i[k]] += 1
+            nbr[slot[j[k]]], wt[slot[j[k]]] = i[k], w[k]
+            slot[j[k]] += 1
+        for k in range(p):
+            col[unknown[k]] = k
+            for c in range(3):
+                fixed[unknown[k], c] = 0.0  # A_k x_k as A x with the unknowns zeroed
+        for v in range(nv):
+            slot[v] = -1
+        for r in range(rows):
+            # the row's entries: L[plus[r]], then minus L[minus[r]] (a - 0, 0 - b and a - b as NumPy's)
+            count = 0
+            for side in range(2 if minus.shape[0] else 1):
+                a = plus[r] if side == 0 else minus[r]
+                for k in range(indptr[a] - 1, indptr[a + 1]):
+                    v = a if k < indptr[a] else nbr[k]
+                    f = scale[a] * (degree[a] if k < indptr[a] else -wt[k])
+                    if slot[v] < 0:
+                        slot[v] = count
+                        entry[count] = v
+                        value[count] = f if side == 0 else 0.0 - f
+                        count += 1
+                    else:
+                        value[slot[v]] = value[slot[v]] - f
+            bx = by = bz = 0.0
+            for k in range(count):
+                v = entry[k]
+                bx += value[k] * fixed[v, 0]
+                by += value[k] * fixed[v, 1]
+                bz += value[k] * fixed[v, 2]
+            for k in range(count):
+                u1 = col[entry[k]]
+                if u1 < 0:
+                    continue
+                rhs[u1, 0] -= value[k] * bx
+                rhs[u1, 1] -= value[k] * by
+                rhs[u1, 2] -= value[k] * bz
+                for s in range(count):
+                    u2 = col[entry[s]]
+                    if u2 >= 0:
+                        normal[u1, u2] += value[k] * value[s]
+            for k in range(count):
+                slot[entry[k]] = -1
+    free(slot); free(entry); free(value)
+    return normal_, rhs_
