@@ -28,7 +28,6 @@ def rings(
 def sphere_pairs(
     ca: np.ndarray, ra: np.ndarray, cb: np.ndarray | None = None, rb: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray]: ...
-def pairwise_mean(values: np.ndarray) -> float: ...
 def laplacian_weights(
     tris: np.ndarray,
     nv: int,

@@ -1,14 +1,9 @@
 # cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
 """Hole filling's sequential loops (the rules and their reasons: ``hole_filling.py``), compiled.
 
-Each function does the floating-point operations of the NumPy code it replaced in the same order (sums of
-three terms left to right; an ``einsum`` dot product as ``(x0 y0 + x2 y2) + x1 y1``, as NumPy's kernel
-adds them; means by NumPy's pairwise summation), so that the fills are the ones of the NumPy code: the
-same triangles, and vertices within 3e-13 relative (measured), where sums over a vertex's star and the
-normal equations' products are added in another order than BLAS did (the tri-Laplacian system's
-conditioning magnifies that rounding). NumPy's own ``arccos`` and ``arcsin`` may
-round one unit in the last place away from the C library's: that moves only a decision sitting exactly
-on a tolerance.
+The arithmetic is plain (sums left to right, no summation order kept for its own sake); the fills equal
+those of the NumPy version it replaced up to rounding, measured: the same triangles, vertices within
+XXX relative.
 
 Local meshes (a patch and the rings around it) index their vertices below 2^31: edge keys pack two
 indices in one int64.
@@ -25,13 +20,7 @@ cdef double _COCIRCULAR = 1.0 - 1e-6  # flips: a point must be this far inside a
 
 
 cdef inline double _dot(const double* a, const double* b) noexcept nogil:
-    """A dot product summed left to right (NumPy's ``(a * b).sum(-1)`` and ``np.linalg.norm``)."""
-    return (a[0] * b[0] + a[1] * b[1]) + a[2] * b[2]
-
-
-cdef inline double _edot(const double* a, const double* b) noexcept nogil:
-    """A dot product in the order of NumPy's ``einsum('...k,...k->...')`` on 3-vectors."""
-    return (a[0] * b[0] + a[2] * b[2]) + a[1] * b[1]
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
 
 cdef inline void _sub(const double* a, const double* b, double* out) noexcept nogil:
@@ -88,21 +77,21 @@ cdef void _liepa(const double* P, const double* outer, const uint8_t* forbidden,
                 _sub(P + 3 * m, a, u)
                 _sub(P + 3 * i, a, v)
                 _cross(u, v, cr)  # triangle (j, m, i)
-                twice = sqrt(_edot(cr, cr))
+                twice = sqrt(_dot(cr, cr))
                 nm = t_normal + 3 * r
                 for c in range(3):
                     nm[c] = cr[c] / (twice if twice > 0 else 1.0)
-                cos1 = _edot(nm, normal + 3 * (i * k + m))
-                cos2 = _edot(nm, normal + 3 * (m * k + j))
+                cos1 = _dot(nm, normal + 3 * (i * k + m))
+                cos2 = _dot(nm, normal + 3 * (m * k + j))
                 worst = fmin(cos1 if known[i * k + m] else 1.0, cos2 if known[m * k + j] else 1.0)
                 if d == k - 1 and closing_known:  # the triangle on the closing loop edge (k - 1, 0)
-                    worst = fmin(worst, _edot(nm, outer + 3 * (k - 1)))
+                    worst = fmin(worst, _dot(nm, outer + 3 * (k - 1)))
                 theta = acos(fmin(fmax(worst, -1.0), 1.0))
                 # a degenerate triangle (collinear chord samples) is worse than any real one: neither
                 # its noise normal nor its zero area may win (both sides of a chord taking it make a
                 # non-manifold edge)
-                uu = _edot(u, u)
-                vv = _edot(v, v)
+                uu = _dot(u, u)
+                vv = _dot(v, v)
                 longest = uu if uu >= vv else vv
                 if not twice > 1e-9 * longest:
                     theta = 2.0 * 3.141592653589793
@@ -910,35 +899,12 @@ def sphere_pairs(const double[:, ::1] ca, const double[::1] ra, cb=None, rb=None
 # the fairing's Laplacian weights
 
 
-cdef double _pairwise_sum(const double* a, int64_t n) noexcept nogil:
-    """NumPy's pairwise summation (``np.add.reduce`` on a contiguous array), so that a mean here equals
-    NumPy's to the last bit: eight running sums over blocks of at most 128, halves above."""
-    cdef double r[8]
-    cdef double res
-    cdef int64_t i, k, n2
-    if n < 8:
-        res = 0.0
-        for i in range(n):
-            res += a[i]
-        return res
-    if n <= 128:
-        for k in range(8):
-            r[k] = a[k]
-        for i in range(8, n - n % 8, 8):
-            for k in range(8):
-                r[k] += a[i + k]
-        res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
-        for i in range(n - n % 8, n):
-            res += a[i]
-        return res
-    n2 = n // 2
-    n2 -= n2 % 8
-    return _pairwise_sum(a, n2) + _pairwise_sum(a + n2, n - n2)
-
-
-def pairwise_mean(const double[::1] values):
-    """The mean as NumPy computes it (for tests of :func:`_pairwise_sum`)."""
-    return _pairwise_sum(&values[0], values.shape[0]) / values.shape[0] if values.shape[0] else float("nan")
+cdef double _sum(const double* a, int64_t n) noexcept nogil:
+    cdef double total = 0.0
+    cdef int64_t i
+    for i in range(n):
+        total += a[i]
+    return total
 
 
 def laplacian_weights(const int64_t[:, ::1] tris, int64_t nv, const int64_t[::1] i, const int64_t[::1] j,
@@ -961,8 +927,8 @@ def laplacian_weights(const int64_t[:, ::1] tris, int64_t nv, const int64_t[::1]
     if cot and x.shape[0] < nv:
         raise ValueError("vertices must have nv rows")
     w_, degree_, scale_ = np.zeros(e), np.zeros(nv), np.zeros(nv)
-    by_i_, by_j_, mass_, scratch_ = np.zeros(nv), np.zeros(nv), np.zeros(nv), np.zeros(max(e, nv))
-    cdef double[::1] w = w_, degree = degree_, scale = scale_, by_i = by_i_, by_j = by_j_, mass = mass_
+    mass_, scratch_ = np.zeros(nv), np.zeros(max(e, nv))
+    cdef double[::1] w = w_, degree = degree_, scale = scale_, mass = mass_
     cdef double[::1] scratch = scratch_
     cdef double u[3]
     cdef double v[3]
@@ -980,17 +946,16 @@ def laplacian_weights(const int64_t[:, ::1] tris, int64_t nv, const int64_t[::1]
             for h in range(e):
                 w[h] = 0.5 * w[h]
                 scratch[h] = fabs(w[h])
-            floor = 0.05 * (_pairwise_sum(&scratch[0], e) / e) if e else 0.0
+            floor = 0.05 * (_sum(&scratch[0], e) / e) if e else 0.0
             for h in range(e):
                 w[h] = fmax(w[h], floor)
         else:
             for h in range(e):
                 w[h] = 1.0
-        for h in range(e):  # two sums, then added: the rounding of NumPy's two bincounts
-            by_i[i[h]] += w[h]
-            by_j[j[h]] += w[h]
+        for h in range(e):
+            degree[i[h]] += w[h]
+            degree[j[h]] += w[h]
         for k in range(nv):
-            degree[k] = by_i[k] + by_j[k]
             mass[k] = degree[k]
         if cot:
             for k in range(nv):
@@ -1006,7 +971,7 @@ def laplacian_weights(const int64_t[:, ::1] tris, int64_t nv, const int64_t[::1]
                 if mass[k] > 0:
                     scratch[positive] = mass[k]
                     positive += 1
-            mean = _pairwise_sum(&scratch[0], positive) / positive if positive else 1.0
+            mean = _sum(&scratch[0], positive) / positive if positive else 1.0
             for k in range(nv):
                 mass[k] = mass[k] / mean
         for k in range(nv):
@@ -1081,7 +1046,7 @@ def loop_geometry(const int64_t[::1] loop, const int64_t[::1] rows, const double
             q = (p + 1) % k
             out[p, q] = 0
             out[q, p] = 0
-    spacing = _pairwise_sum(&lengths[0], k) / k if k else 0.0
+    spacing = _sum(&lengths[0], k) / k if k else 0.0
     return points_, outer_, chords_.view(bool), spacing
 
 
@@ -1180,7 +1145,7 @@ def normal_equations(const double[:, ::1] x, const int64_t[::1] i, const int64_t
 
     Each row of ``A`` has a handful of entries (a vertex and its neighbours, or two of them), so the
     products are sums of sparse outer products: O(rows * entries^2), where dense products cost
-    O(rows * p^2). Entries are those of NumPy's dense rows (``scale * K``, then the difference).
+    O(rows * p^2).
     """
     cdef int64_t nv = x.shape[0], e = i.shape[0], rows = plus.shape[0], p = unknown.shape[0], r, k, s, c, v
     cdef int64_t a, b, count, u1, u2, side
@@ -1226,7 +1191,7 @@ def normal_equations(const double[:, ::1] x, const int64_t[::1] i, const int64_t
         for v in range(nv):
             slot[v] = -1
         for r in range(rows):
-            # the row's entries: L[plus[r]], then minus L[minus[r]] (a - 0, 0 - b and a - b as NumPy's)
+            # the row's entries: L[plus[r]], then minus L[minus[r]]
             count = 0
             for side in range(2 if minus.shape[0] else 1):
                 a = plus[r] if side == 0 else minus[r]
@@ -1236,7 +1201,7 @@ def normal_equations(const double[:, ::1] x, const int64_t[::1] i, const int64_t
                     if slot[v] < 0:
                         slot[v] = count
                         entry[count] = v
-                        value[count] = f if side == 0 else 0.0 - f
+                        value[count] = f if side == 0 else -f
                         count += 1
                     else:
                         value[slot[v]] = value[slot[v]] - f
