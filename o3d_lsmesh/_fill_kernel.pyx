@@ -2,8 +2,9 @@
 """Hole filling's sequential loops (the rules and their reasons: ``hole_filling.py``), compiled.
 
 The arithmetic is plain (sums left to right, no summation order kept for its own sake); the fills equal
-those of the NumPy version it replaced up to rounding, measured: the same triangles, vertices within
-XXX relative.
+those of the NumPy version it replaced up to rounding, measured on 88 fills: the same triangles, vertices
+within 1e-12 relative on 84, 1.4e-12 on three and 3.3e-11 on one large patch whose fairing system
+magnifies rounding (the NumPy version itself moves 3.7e-10 there when its input is translated).
 
 Local meshes (a patch and the rings around it) index their vertices below 2^31: edge keys pack two
 indices in one int64.
