@@ -460,7 +460,7 @@ NOTES = """\
   the NumPy code the kernel replaced (CPU per hole, prebuilt, best of 3 rounds of 7): horse 2.5h 6.5 ->
   1.7 ms, 6h 24.6 -> 4.6, 15h 73.6 -> 28.7, camel 2.5h 7.6 -> 1.6, 6h 16.9 -> 3.1, 15h 9.0 -> 1.6,
   bunny 13.9 -> 4.3, plane_holes 1.4 -> 0.56, with the same fills (identical triangles on these cases
-  and generated spheres and tori under eight option sets; vertices within 3e-13 relative). What is
+  and generated spheres and tori under eight option sets; vertices within 3.3e-11 relative). What is
   left on a small hole is about sixty NumPy and SciPy calls around the compiled steps (the crossing
   check's k-d tree query, the two dense Cholesky solves, the pieces' bookkeeping); and the first fill
   after building a filler, which this benchmark times, runs about 1.7x slower than a repeat (cold
