@@ -18,10 +18,9 @@ For each raw scan in ``O3D_LSMESH_SCANS`` (default ``../shared/data/scans``) and
   :mod:`o3d_lsmesh.fairing.boundary_curve`: distance of the boundary vertices to the
   reference surface ``bunny.ply`` after ``constrained_fairing`` with the pinches
   moving (default) or held (the boundary cut into chains at the pinches).
-* ``denoise`` (optional): the denoising-quality section of
-  ``benchmarks/bench_realscans_denoise.py`` when that file exists; it must define
-  ``section(scans) -> list[(heading, markdown)]`` with ``scans`` a list of
-  ``(name, path)``.
+
+Denoising quality against the peers is ``benchmarks/bench_realscans_denoise.py``'s
+(``results/realscans_denoise.md``).
 
 Run: ``.venv/bin/python benchmarks/bench_realscans.py [section ...]`` (all sections
 by default; a few minutes on 2 cores). Writes ``benchmarks/results/realscans.md``.
@@ -30,7 +29,6 @@ by default; a few minutes on 2 cores). Writes ``benchmarks/results/realscans.md`
 from __future__ import annotations
 
 import dataclasses
-import importlib
 import os
 import sys
 import time
@@ -45,7 +43,7 @@ from o3d_lsmesh.selection import start_vertices
 from o3d_lsmesh.topology import boundary_chains, boundary_halfedges, connected_components
 
 SCANS = Path(os.environ.get("O3D_LSMESH_SCANS", REPO.parent / "shared" / "data" / "scans"))
-SECTIONS = ("timing", "topology", "pinches", "denoise")
+SECTIONS = ("timing", "topology", "pinches")
 
 
 def scan_list() -> list[tuple[str, Path]]:
@@ -312,16 +310,6 @@ def pinches(scans):
     ]
 
 
-def denoise(scans):
-    """The denoising-quality section of bench_realscans_denoise.py, when that script exists."""
-    try:
-        module = importlib.import_module("bench_realscans_denoise")
-    except ImportError:
-        print("bench_realscans_denoise.py not present: no denoising section")
-        return []
-    return list(module.section(scans))
-
-
 def main(sections=SECTIONS) -> Path:
     unknown = [s for s in sections if s not in SECTIONS]
     if unknown:
@@ -335,8 +323,6 @@ def main(sections=SECTIONS) -> Path:
         )
     if "pinches" in sections:
         out += pinches(scans)
-    if "denoise" in sections:
-        out += denoise(scans)
     out.append(
         (
             "Run",
