@@ -28,7 +28,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse import csgraph
 
-from . import _fill_kernel, _solvers
+from . import _solvers
 from ._errors import O3DLSMeshWarning, SingularSystemError
 from ._o3d import new_mesh, read_mesh
 from ._progress import check_progress, progress_bar
@@ -49,6 +49,15 @@ __all__ = [
     "fill_holes_arrays",
     "find_holes",
 ]
+
+
+def _kernel() -> Any:
+    """The compiled loops (``_fill_kernel.pyx``), imported at first use like the hierarchy's kernel, so
+    that the package imports from a source tree whose extensions are not built."""
+    from . import _fill_kernel
+
+    return _fill_kernel
+
 
 #: Loops with more edges are split by chords before the O(k^3) dynamic programme (measured: k = 50
 #: takes 0.02 s, 100 0.15 s, 200 0.85 s, 300 3.8 s): a hole of radius r on a scan of spacing h has
@@ -209,7 +218,7 @@ def _triangulate(
     """
     k = len(points)
     if k <= DP_MAX_EDGES:
-        return np.zeros((0, 3)), _fill_kernel.minimum_weight_triangulation(
+        return np.zeros((0, 3)), _kernel().minimum_weight_triangulation(
             points,
             outer_normals,
             None if forbidden is None or not forbidden.any() else forbidden.view(np.uint8),
@@ -300,7 +309,7 @@ def _fair(
     """
     nv = len(x)
     i, j, inverse = edges
-    w, degree, scale = _fill_kernel.laplacian_weights(tris, nv, i, j, inverse, x if cot else None)
+    w, degree, scale = _kernel().laplacian_weights(tris, nv, i, j, inverse, x if cot else None)
     dense = len(unknown) <= _solvers.DENSE_UNKNOWNS
     if level == 0:
         K, _ = _operators(i, j, w, degree, scale, dense)
@@ -318,7 +327,7 @@ def _fair(
         keep = (rows[i] | rows[j]) & valid[i] & valid[j]
         plus, minus = i[keep], j[keep]
     if dense:
-        normal, rhs = _fill_kernel.normal_equations(x, i, j, w, degree, scale, plus, minus, unknown)
+        normal, rhs = _kernel().normal_equations(x, i, j, w, degree, scale, plus, minus, unknown)
         return _solvers.solve_spd(normal, rhs)
     _, L = _operators(i, j, w, degree, scale, False)
     if level == 1:
@@ -522,7 +531,7 @@ class HoleFiller:
         # each piece's points, the normals across its edges, its chords that are mesh edges, its spacing
         piece_points, piece_outer, piece_forbidden, piece_spacing = zip(
             *(
-                _fill_kernel.loop_geometry(loop, rows, vertices, triangles, *self.vertex_triangles)
+                _kernel().loop_geometry(loop, rows, vertices, triangles, *self.vertex_triangles)
                 for loop, rows in zip(piece_loop, piece_rows)
             )
         )
@@ -554,7 +563,7 @@ class HoleFiller:
             ]
             # mesh edges between loop vertices: no flip may make them twice
             fixed = [np.argwhere(np.triu(f)) + start for f, start in zip(piece_forbidden, starts)]
-            all_points, all_tris, point_piece = _fill_kernel.refine(
+            all_points, all_tris, point_piece = _kernel().refine(
                 all_points, np.concatenate(sigma), all_tris, np.concatenate(fixed), point_piece, _ALPHA
             )
         # global numbering: loop points (first in each piece, in order) are mesh vertices; the others
@@ -617,7 +626,7 @@ class HoleFiller:
         loops = np.unique(np.concatenate([hole.vertices for hole in holes]))
         # triangles within `continuity` rings of the loops in the input, plus every new triangle
         old, new_tris = triangles[:m], triangles[m:]
-        ring_tris, rings = _fill_kernel.rings(self.triangles, *self.vertex_triangles, loops, continuity)
+        ring_tris, rings = _kernel().rings(self.triangles, *self.vertex_triangles, loops, continuity)
         local_tris = np.concatenate([old[ring_tris], new_tris])
         # a local numbering (nothing as long as the mesh): the new vertices, every one on a new triangle
         # and numbered last, stay last
@@ -626,7 +635,7 @@ class HoleFiller:
         local = np.searchsorted(local_vertices, local_tris)
         local_unknown = np.arange(len(local_vertices) - len(unknown), len(local_vertices))
         # one connectivity for every solve below
-        local_edges = _fill_kernel.unique_edges(local, len(local_vertices))
+        local_edges = _kernel().unique_edges(local, len(local_vertices))
         refined = vertices[n:].copy()
         work = vertices  # its new rows hold the candidate being solved from or checked
 
@@ -651,11 +660,11 @@ class HoleFiller:
                     # cotangent weights (clamped, area-normalized) read off the uniform solution: a fair
                     # embedding, where weights from the flat refined patch diverged (camel 15h: 87 h off)
                     again = solve(level, True)
-                    if again is not None and _fill_kernel.keeps_facing(work, again, new_tris):
+                    if again is not None and _kernel().keeps_facing(work, again, new_tris):
                         work[n:] = again
-                        yield level, _fill_kernel.tangential_relax(work, new_tris, n)
+                        yield level, _kernel().tangential_relax(work, new_tris, n)
                         work[n:] = solution
-                yield level, _fill_kernel.tangential_relax(work, new_tris, n)
+                yield level, _kernel().tangential_relax(work, new_tris, n)
                 work[n:] = refined
             yield -1, refined  # the refined patch as triangulated
 
@@ -723,7 +732,7 @@ def _interpolation(
         # the membrane (continuity 0) with the loop's unit vectors as the fixed "positions"
         unit = np.eye(nl, k)
         harmonic = _fair(
-            unit, tris_local, np.arange(k, nl), [], 0, _fill_kernel.unique_edges(tris_local, nl), False
+            unit, tris_local, np.arange(k, nl), [], 0, _kernel().unique_edges(tris_local, nl), False
         )
         r, c = np.nonzero(np.abs(harmonic) > 1e-12)
         rows.append(inner[r] - n)
@@ -778,7 +787,7 @@ class _TriangleIndex:
                 found.append(members[np.asarray(hits, dtype=np.int64)])
         # the two trees hold disjoint triangles: one patch's hits are distinct, several patches' may repeat
         candidates = np.concatenate(found) if len(masks) == 1 else np.unique(np.concatenate(found))
-        qi, ti = _fill_kernel.sphere_pairs(centre, radius, self.centre[candidates], self.radius[candidates])
+        qi, ti = _kernel().sphere_pairs(centre, radius, self.centre[candidates], self.radius[candidates])
         return qi, candidates[ti]
 
 
@@ -810,10 +819,10 @@ def _crossings(
         ib = boxed[ib]
     else:
         ia, ib = index.near(c_new, r_new, groups)  # (new index, input triangle)
-    pa, pb = _fill_kernel.sphere_pairs(c_new, r_new)  # the new triangles among themselves
+    pa, pb = _kernel().sphere_pairs(c_new, r_new)  # the new triangles among themselves
     a = new[np.concatenate([ia, pa])]
     b = np.concatenate([ib, first_new + pb])
-    return _fill_kernel.count_crossings(vertices, triangles, a, b, first_new)
+    return _kernel().count_crossings(vertices, triangles, a, b, first_new)
 
 
 def fill_holes(

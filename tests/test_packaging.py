@@ -251,3 +251,21 @@ def test_readme_states_the_tested_versions_and_every_system_package():
     for variable in ("APT_PACKAGES", "DOCS_APT_PACKAGES"):
         for package in _make_variable(variable).split():
             assert re.search(rf"(?<![\w.-]){re.escape(package)}(?![\w.-])", set_up), package
+
+
+def test_the_package_imports_from_a_source_tree_without_its_built_extensions(tmp_path):
+    # a source checkout (or an unpacked sdist) first on sys.path shadows the installed wheel: the compiled
+    # kernels are imported at first use, so everything but the hierarchy and hole filling still imports
+    shutil.copytree(
+        REPO / "o3d_lsmesh", tmp_path / "o3d_lsmesh", ignore=shutil.ignore_patterns("*.so", "*.pyd", "*.c")
+    )
+    # without an editable install's finder, which would map the extensions to the checkout's builds
+    code = (
+        "import sys; sys.meta_path[:] = [f for f in sys.meta_path if '__editable__' not in getattr(f, "
+        "'__module__', '')]; import o3d_lsmesh, o3d_lsmesh.cli, o3d_lsmesh.hole_filling; "
+        "assert o3d_lsmesh.__file__.startswith(sys.argv[1]), o3d_lsmesh.__file__"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code, str(tmp_path)], cwd=tmp_path, capture_output=True, text=True
+    )
+    assert done.returncode == 0, done.stderr
