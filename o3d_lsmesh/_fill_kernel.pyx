@@ -1057,7 +1057,11 @@ def loop_geometry(const int64_t[::1] loop, const int64_t[::1] rows, const double
 
 def unique_edges(const int64_t[:, ::1] tris, int64_t nv):
     """The undirected edges ``i < j`` of a local mesh, sorted, and the edge of each of its ``3 t``
-    half-edges ``(c, c + 1)``, corner-major (all ``(0, 1)`` first): ``(i, j, inverse)``."""
+    half-edges ``(c, c + 1)``, corner-major (all ``(0, 1)`` first): ``(i, j, inverse)``.
+
+    The edges and ``inverse`` of :func:`o3d_lsmesh.topology.unique_edges`, for the tiny local meshes of
+    one hole (called twice per hole): 30 against 176 us at 60 triangles, where that function's counting
+    sorts over whole-mesh arrays cost more than the sort itself."""
     cdef int64_t t = tris.shape[0], nh = 3 * t, h, e = 0, a, b
     if t and (np.min(tris) < 0 or np.max(tris) >= nv):
         raise ValueError("tris index outside the nv vertices")
