@@ -9,7 +9,9 @@ from setuptools import Extension, setup
 # of the reference loop in tests/_hierarchy_oracle.py (identical levels on every platform)
 flags = [] if sys.platform == "win32" else ["-O3", "-ffp-contract=off"]
 extensions = [
-    Extension("o3d_lsmesh.hierarchy._kernel", ["o3d_lsmesh/hierarchy/_kernel.pyx"], extra_compile_args=flags),
+    Extension(
+        "o3d_lsmesh.hierarchy.collapse", ["o3d_lsmesh/hierarchy/collapse.pyx"], extra_compile_args=flags
+    ),
     # hole filling's dynamic programme, refinement flips, relaxation and crossing test
     Extension("o3d_lsmesh._fill_kernel", ["o3d_lsmesh/_fill_kernel.pyx"], extra_compile_args=flags),
 ]

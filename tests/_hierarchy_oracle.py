@@ -1,6 +1,6 @@
 """The volume-cost hierarchy level (Liu et al. 2001, section 4.1) as a plain-Python loop: the tests' oracle.
 
-Written from the rules in the docstring of ``o3d_lsmesh.hierarchy.collapse``
+Written from the rules in the docstring of ``o3d_lsmesh/hierarchy/collapse.pyx``
 with lists, dicts and floats only, and the same floating-point operations in
 the same order as the compiled kernel, so that every level must be equal.
 About 100 times slower than the kernel: for meshes of a few thousand vertices.

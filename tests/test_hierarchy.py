@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import pickle
 import threading
+from collections import namedtuple
 
 import _hierarchy_oracle as oracle
 import numpy as np
@@ -45,11 +46,14 @@ def grid_h():
     return (V, F), build_hierarchy((V, F), min_vertices=20)
 
 
+Level = namedtuple("Level", "removed targets ring_offsets ring parent triangles kept")
+
+
 def collapse_level(V, F, *, max_removals=None, **options):
     """One level of the compiled loop, with at most ``max_removals`` collapses (None when there are none)."""
     limit = len(V) if max_removals is None else max_removals
     levels = collapse_levels(V, F, min_vertices=len(V) - limit, max_levels=1, **options)[1]
-    return levels[0] if levels else None
+    return Level(*levels[0]) if levels else None
 
 
 def _triangle_set(F):
@@ -592,10 +596,7 @@ def test_options_reach_the_kernel_like_the_oracle(options):
     locked = np.zeros(len(V), dtype=bool)
     level = collapse_level(V, F, **options)
     expected = oracle.collapse_level(V, F, locked, **options)
-    for got, want in zip(
-        (level.removed, level.targets, level.ring_offsets, level.ring, level.parent, level.triangles),
-        expected,
-    ):
+    for got, want in zip(level[:6], expected):
         assert np.array_equal(got, want)
 
 

@@ -40,7 +40,7 @@ SDIST_MUST_HOLD = [
     "setup.py",
     "pyproject.toml",
     "MANIFEST.in",
-    "o3d_lsmesh/hierarchy/_kernel.pyx",
+    "o3d_lsmesh/hierarchy/collapse.pyx",
     "o3d_lsmesh/_fill_kernel.pyx",
     "o3d_lsmesh/py.typed",
     "tests/conftest.py",
@@ -185,7 +185,7 @@ def test_wheel_metadata_licence_and_contents():
         assert licences, f"no licence file in {wheel.name}"
         assert archive.read(licences[0]).decode().startswith("MIT License")
     _check_metadata(metadata, wheel.name, requires_dist=True)
-    assert any(re.fullmatch(r"o3d_lsmesh/hierarchy/_kernel\..*(so|pyd)", n) for n in names), (
+    assert any(re.fullmatch(r"o3d_lsmesh/hierarchy/collapse\..*(so|pyd)", n) for n in names), (
         "no compiled kernel"
     )
     assert any(re.fullmatch(r"o3d_lsmesh/_fill_kernel\..*(so|pyd)", n) for n in names), "no fill kernel"

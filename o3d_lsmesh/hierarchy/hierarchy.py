@@ -19,7 +19,6 @@ from .._o3d import MeshData, new_mesh, read_mesh, warn_dropped_attributes
 from .._progress import check_progress, progress_bar
 from .._validate import as_count, as_positions, as_positive_float, mesh_arrays
 from ..topology import VertexRings, vertex_rings
-from .collapse import collapse_levels
 
 if TYPE_CHECKING:
     from .._types import AnyMesh
@@ -327,7 +326,9 @@ def locked_vertices(triangles: np.ndarray, n: int) -> np.ndarray:
     triangles = np.ascontiguousarray(triangles, dtype=np.int64)
     if len(triangles) and (triangles.min() < 0 or triangles.max() >= n):
         raise ValueError(f"triangles must index vertices in [0, {n}), got indices up to {triangles.max()}")
-    return collapse_levels(np.zeros((n, 3)), triangles, max_levels=0, lock_fans=True)[0]
+    from .collapse import collapse_levels  # compiled by the package's build: imported where used
+
+    return collapse_levels(np.zeros((n, 3)), triangles, max_levels=0)[0]
 
 
 def tensor_format_of(data: MeshData) -> tuple:
@@ -403,6 +404,8 @@ def collapse_hierarchy(
     n0 = len(vertices)
     total = max(n0 - min_vertices, 0)  # at most: a level may find no valid collapse before
     with progress_bar(progress, total=total, desc="mesh hierarchy", unit="vertex") as bar:
+        from .collapse import collapse_levels
+
         _, levels = collapse_levels(
             vertices,
             triangles,
@@ -410,27 +413,21 @@ def collapse_hierarchy(
             beta=beta,
             min_vertices=min_vertices,
             max_levels=max_levels,
-            lock_fans=True,
             report=bar.update,
         )
         bar.update(total - bar.n)  # done: the bar ends at its total
-    empty = np.zeros(0, dtype=np.int64)
-    tris = [triangles] + [level.triangles for level in levels]
-    reps = [np.arange(n0, dtype=np.int64)] + [level.kept for level in levels]
-    parents, removed, targets = (
-        [empty] + [getattr(lv, name) for lv in levels] for name in ("parent", "removed", "targets")
-    )
-    offsets = [np.zeros(1, dtype=np.int64)] + [level.ring_offsets for level in levels]
-    rings = [empty] + [level.ring for level in levels]
+    empty, no_ring = np.zeros(0, dtype=np.int64), np.zeros(1, dtype=np.int64)
+    first = (empty, empty, no_ring, empty, empty, triangles, np.arange(n0, dtype=np.int64))  # level 0
+    removed, targets, offsets, rings, parents, tris, reps = zip(first, *levels)
     return MeshHierarchy(
         vertices,
-        tuple(tris),
-        tuple(reps),
-        tuple(parents),
-        tuple(removed),
-        tuple(targets),
-        tuple(offsets),
-        tuple(rings),
+        tris,
+        reps,
+        parents,
+        removed,
+        targets,
+        offsets,
+        rings,
         True,
         "volume",
         mesh_kind,
@@ -457,7 +454,7 @@ def build_hierarchy(
     pass the link condition, keep boundary vertices on the boundary, and
     neither flip nor degenerate a triangle are made, so every level keeps the
     input's Euler characteristic, components and boundary loops. One compiled
-    sequential loop per level (:mod:`o3d_lsmesh.hierarchy.collapse` states
+    sequential loop per level (``o3d_lsmesh/hierarchy/collapse.pyx`` states
     its rules).
 
     Any mesh is accepted, as scanners produce them: a vertex whose triangles

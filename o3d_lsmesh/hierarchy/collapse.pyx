@@ -1,6 +1,24 @@
 # cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
-"""The volume-cost hierarchy as one sequential loop, like OpenMesh's ``DecimaterT`` (rules: ``collapse.py``);
-``tests/_hierarchy_oracle.py`` does the same floating-point operations in the same order: identical levels."""
+"""Levels of the volume-cost hierarchy (Liu et al. 2001, section 4.1): one sequential loop, like OpenMesh's
+``DecimaterT``; ``tests/_hierarchy_oracle.py`` is this loop in plain Python (same arithmetic, same levels).
+
+The loop visits the unlocked vertices in increasing ``cost(x) = alpha * min_edge(x) + beta * max_edge(x)`` (ties
+by index), skipping ``x`` in the closed 1-ring of a vertex removed in this level. ``x`` tries its neighbours ``k``
+in increasing cone volume ``|N_x . (x_k - x)|`` (``N_x``: the summed doubled-area normals around ``x``; ties
+within a relative 1e-9 to the shortest edge, then the first by index), at most ``max_tries``; a ``k`` in such a
+closed 1-ring ends the search. A collapse reads the 1-rings of ``x`` and ``k`` and changes only those of
+``N(x)``: every collapse stays valid and the removed vertices are pairwise non-adjacent (as
+:meth:`MeshHierarchy.refine` needs). ``x`` collapses into the first ``k`` for which
+
+* ``k`` is not locked, a boundary ``x`` moves along a boundary edge, no lone triangle or tetrahedron remains;
+* every surviving triangle around ``x`` keeps its orientation, turns its normal by less than ``max_normal_angle``
+  and keeps ``2 * area / (sum of squared edge lengths)`` above ``min_quality``;
+* the link condition holds: ``x`` and ``k`` share only the edge's opposite vertices (Euler characteristic and
+  boundary loops stay).
+
+Locked (never removed, never a target): vertices on an edge of more than two triangles, unreferenced vertices and
+several-fan vertices; every other star is a disk or half-disk, and every level keeps the non-manifold vertices.
+"""
 
 import numpy as np
 
@@ -13,38 +31,28 @@ cdef enum: LOCKED = 1, BOUNDARY = 2, TOUCHED = 4  # TOUCHED: in the closed 1-rin
 cdef struct Vertex:  # together, so that a visit's random reads of a neighbour hit one cache line
     int32_t start, corners, valence, flags  # corners pair[2 * start:][:2 * corners]; ring ring[2 * start:][:valence]
 
-cdef extern from *:
-    "#if defined(__GNUC__) || defined(__clang__)\n#define PREFETCH(p) __builtin_prefetch(p)\n#else\n#define PREFETCH(p) ((void)0)\n#endif"
+cdef extern from *:  # PLAIN: madvise from the first whole 4 KiB page (an aligned start); NumPy advises on Linux only
+    "#if defined(__GNUC__) || defined(__clang__)\n#define PREFETCH(p) __builtin_prefetch(p)\n#else\n#define PREFETCH(p) ((void)0)\n#endif\n#ifdef __linux__\n#include <sys/mman.h>\n#define PLAIN(p, n, s) ((n) > (s) ? madvise((p) + (s), (n) - (s), MADV_NOHUGEPAGE) : 0)\n#else\n#define PLAIN(p, n, s) 0\n#endif"
     void prefetch "PREFETCH"(const void* p) noexcept nogil
-
-cdef extern from *:  # madvise from the first whole 4 KiB page (it wants an aligned start); NumPy advises on Linux only
-    "#ifdef __linux__\n#include <sys/mman.h>\n#define PLAIN(p, n, s) ((n) > (s) ? madvise((p) + (s), (n) - (s), MADV_NOHUGEPAGE) : 0)\n#else\n#define PLAIN(p, n, s) 0\n#endif"
     int plain_pages "PLAIN"(char* p, size_t n, size_t skip) noexcept nogil
 
-
 def _empty(shape, dtype):
-    """``np.empty`` on 4 KiB pages. NumPy advises huge pages for large arrays; with them this loop, which writes its
-    scratch and outputs once, took a quarter more time at 1.27M and 4M vertices (each huge page zeroed whole)."""
+    """``np.empty`` on 4 KiB pages: on NumPy's huge pages (zeroed whole) this loop took a quarter longer at 1M-4M."""
     a = np.empty(shape, dtype)
     plain_pages(<char*> <size_t> a.ctypes.data, a.nbytes, -a.ctypes.data % 4096)
     return a
 
-
 cdef inline double _dot(const double* a, const double* b) noexcept nogil:
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-
 
 cdef inline void _edge(const double* p, int32_t a, int32_t c, double* out) noexcept nogil:
     out[0], out[1], out[2] = p[3 * a] - p[3 * c], p[3 * a + 1] - p[3 * c + 1], p[3 * a + 2] - p[3 * c + 2]
 
-
 cdef inline void _cross(const double* p, int32_t a, int32_t b, int32_t c, double* u, double* w,
-                        double* out) noexcept nogil:
-    """``out = u x w`` with the edges ``u = p_a - p_c`` and ``w = p_b - p_c``."""
+                        double* out) noexcept nogil:  # out = u x w, the edges u = p_a - p_c and w = p_b - p_c
     _edge(p, a, c, u)
     _edge(p, b, c, w)
     out[0], out[1], out[2] = u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2], u[0] * w[1] - u[1] * w[0]
-
 
 cdef bint _legal(const double* p, const Vertex* V, const int32_t* pair, const int32_t* ring, const uint8_t* mult,
                  int32_t x, int32_t e, double cos_sq, double min_quality) noexcept nogil:
@@ -69,13 +77,21 @@ cdef bint _legal(const double* p, const Vertex* V, const int32_t* pair, const in
         i, l = i + (ring[i] <= ring[l]), l + (ring[l] <= ring[i])
     return common == mult[2 * V[x].start + e]  # link condition: only the edge's opposite vertices in common
 
-
-def hierarchy(double[:, ::1] positions, const int64_t[:, ::1] triangles, uint8_t[::1] lock, double alpha,
-              double beta, Py_ssize_t min_vertices, Py_ssize_t max_levels, double cos_sq, double min_quality,
-              int max_tries, bint lock_fans, report):
-    """:func:`o3d_lsmesh.hierarchy.collapse.collapse_levels`: the levels; ``lock`` gets the fans (``lock_fans``)
-    and the vertices on an edge of more than two triangles, ``positions`` are compacted in place."""
-    cdef Py_ssize_t n = positions.shape[0], m = triangles.shape[0], i, count, selected = 1, alive, total
+def collapse_levels(vertices, triangles, *, double alpha=1.0, double beta=0.01, Py_ssize_t min_vertices=0,
+                    max_levels=None, double max_normal_angle=60.0, double min_quality=1e-3, int max_tries=3,
+                    report=None):
+    """``(locked vertices (n,) bool, levels)``: levels of at most ``n_i - min_vertices`` removals until ``max_levels``
+    or no valid collapse, ``report(removals)`` after each. A level (int64, level ``i - 1`` indices): ``(removed,
+    targets, ring_offsets, ring, parent, triangles, kept)``: the removed vertices, their targets and sorted 1-rings
+    (CSR), the index at level ``i``, the triangles (mapped in order, collapsed ones dropped), the input indices."""
+    # at 90 degrees or more only the flip test (a positive dot product of the normals) remains
+    cdef double cos_sq = float(np.cos(np.deg2rad(max_normal_angle)) ** 2) if max_normal_angle < 90 else 0.0
+    cdef double[:, ::1] positions = np.array(vertices, dtype=np.float64, order="C")  # compacted in place
+    locked = np.zeros(len(positions), np.uint8)
+    cdef uint8_t[::1] lock = locked
+    cdef const int64_t[:, ::1] T = np.ascontiguousarray(triangles, dtype=np.int64)
+    cdef Py_ssize_t n = positions.shape[0], m = T.shape[0], i, count, selected = 1, alive, total
+    max_levels, report = n + 1 if max_levels is None else max_levels, report or (lambda _: None)
     if n >= 2 ** 31 - 1 or 6 * m >= 2 ** 31 - 1:
         raise ValueError(f"mesh must have fewer than 2**31 vertices and 2**31 / 6 triangles, got {n} and {m}")
     # np.empty: every slot is written before it is read; order: fan roots, targets
@@ -86,15 +102,13 @@ def hierarchy(double[:, ::1] positions, const int64_t[:, ::1] triangles, uint8_t
     cdef uint64_t[::1] key = keys
     cdef double[:, ::1] edge = np.empty((3, n + 1))  # the visited vertex's edges
     cdef int64_t[::1] kept = np.arange(n, dtype=np.int64), removed, target, offsets, flat, parent
-    cdef const int64_t[:, ::1] T = triangles
     cdef int64_t[:, ::1] out
     cdef Vertex* V = <Vertex*> &vertex[0, 0]
     cdef int32_t* root = &order[0, 0]
     cdef double* p = &positions[0, 0] if n else NULL
     cdef int32_t v, x, k, best, j, s, r, c, e, deg, attempt
-    cdef double d, lo, hi, least
+    cdef double d, lo, hi, least, normal[3], a[3], b[3], cross[3]
     cdef float cost
-    cdef double[3] normal, a, b, cross
     levels = []
     while selected:
         m, depth = T.shape[0], len(levels)
@@ -127,7 +141,7 @@ def hierarchy(double[:, ::1] positions, const int64_t[:, ::1] triangles, uint8_t
                 for j in range(s, s + deg):
                     V[v].flags |= BOUNDARY if mult[j] == 1 else (LOCKED if mult[j] > 2 else 0)
                 V[v].valence = deg
-                if lock_fans and depth == 0:  # also lock unreferenced vertices and those with several fans
+                if depth == 0:  # also lock unreferenced vertices and those with several fans
                     for j in range(s, s + deg):
                         root[ring[j]] = ring[j]
                     for j in range(s, s + 2 * V[v].corners, 2):  # union-find of the neighbours joined by a corner
@@ -220,8 +234,6 @@ def hierarchy(double[:, ::1] positions, const int64_t[:, ::1] triangles, uint8_t
             out = None  # let go of the buffer, then cut it to the triangles kept
             level[5].resize((alive, 3), refcheck=False)
             n, T = n - selected, level[5]
-            kept_copy = _empty(n, np.int64)
-            kept_copy[:] = kept[:n]
-            levels.append((*level, kept_copy))
+            levels.append((*level, np.array(kept[:n])))
             report(selected)
-    return levels
+    return locked.view(bool), levels
