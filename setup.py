@@ -14,5 +14,7 @@ extensions = [
     ),
     # hole filling's dynamic programme, refinement flips, relaxation and crossing test
     Extension("o3d_lsmesh._fill_kernel", ["o3d_lsmesh/_fill_kernel.pyx"], extra_compile_args=flags),
+    # the iterative solver's block products and Gauss-Seidel sweeps
+    Extension("o3d_lsmesh._block_kernel", ["o3d_lsmesh/_block_kernel.pyx"], extra_compile_args=flags),
 ]
 setup(ext_modules=cythonize(extensions, compiler_directives={"language_level": "3"}))

@@ -42,6 +42,7 @@ SDIST_MUST_HOLD = [
     "MANIFEST.in",
     "o3d_lsmesh/hierarchy/collapse.pyx",
     "o3d_lsmesh/_fill_kernel.pyx",
+    "o3d_lsmesh/_block_kernel.pyx",
     "o3d_lsmesh/py.typed",
     "tests/conftest.py",
     "tests/test_packaging.py",
@@ -189,6 +190,7 @@ def test_wheel_metadata_licence_and_contents():
         "no compiled kernel"
     )
     assert any(re.fullmatch(r"o3d_lsmesh/_fill_kernel\..*(so|pyd)", n) for n in names), "no fill kernel"
+    assert any(re.fullmatch(r"o3d_lsmesh/_block_kernel\..*(so|pyd)", n) for n in names), "no block kernel"
     assert "o3d_lsmesh/py.typed" in names
     assert not [n for n in names if n.startswith(("tests/", "benchmarks/", "examples/", "docs/"))]
 

@@ -514,43 +514,56 @@ class GlobalSolver:
         self.free = np.flatnonzero(free)
         self.known = np.flatnonzero(~free)
         self.mu = float(mu)
-        K = uniform_laplacian(triangles, n, edges=topo.edges)[self.free]  # rows of the interior vertices
-        K_F = K[:, self.free].tocsc()
-        self._K_B = K[:, self.known].tocsc()
+        K = uniform_laplacian(triangles, n, edges=topo.edges)
+        if len(self.free) < n:  # the rows of the interior vertices, their columns (none to cut when closed)
+            K = K[self.free]
+        K_F = K if len(self.free) == n else K[:, self.free]
+        # the known vertices' pull on the free ones, K_F^T K_B (nonzero only next to the boundary)
+        self._pull = (K_F.T @ K[:, self.known]).tocsr() if len(self.known) else None
         tri = triangles[topo.interior_triangles]
         k = len(tri)
         # reduced column of each free vertex; interior triangles only touch free vertices
-        reduced = np.full(n, -1, dtype=np.int64)
-        reduced[self.free] = np.arange(len(self.free))
-        H = sp.csr_matrix(
-            (np.ones(3 * k), (np.repeat(np.arange(k), 3), reduced[tri].ravel())), shape=(k, len(self.free))
+        index = K_F.indices.dtype  # one index type for both blocks: a mixed stack goes to int64
+        reduced = np.full(n, -1, dtype=index)
+        reduced[self.free] = np.arange(len(self.free), dtype=index)
+        self._H = sp.csr_matrix(
+            (np.ones(3 * k), reduced[tri].ravel(), np.arange(0, 3 * k + 1, 3, dtype=index)),
+            shape=(k, len(self.free)),
         )
-        self._HtH = (H.T @ H).tocsc()
-        self._K_F = K_F
-        check_finite(lambda: self.mu * self._HtH.data, name="mu", what="mu * H^T H")
-        self._normal = (K_F.T @ K_F + self.mu * self._HtH).tocsc()
+        # H^T H's largest entry is the most triangles at a free vertex
+        most = np.bincount(self._H.indices).max(initial=0)
+        check_finite(lambda: np.array([self.mu * most]), name="mu", what="mu * H^T H")
+        # K_F^T K_F + mu H^T H as one product of the stacked rows (no sum of two 2-ring matrices); it is
+        # symmetric, so the product's CSR arrays are its CSC arrays too
+        rows = sp.vstack([K_F, np.sqrt(self.mu) * self._H], format="csr")
+        product = rows.T.tocsr() @ rows
+        scale = operator_scale(K_F)
+        del rows, K, K_F
+        normal = sp.csc_matrix((product.data, product.indices, product.indptr), shape=product.shape)
+        normal.sort_indices()  # in place: canonical, so the solver keeps it without a copy
+        del product
         if len(self.free):
             # a closed component is held in place only by mu |H 1|^2: a tiny mu lets it drift
-            labels = csgraph.connected_components(self._normal, directed=False)[1]
+            labels = csgraph.connected_components(normal.T, directed=False)[1]  # CSR view: no copy
             check_constant_modes(
-                self._normal @ np.ones(len(self.free)),
+                normal @ np.ones(len(self.free)),
                 labels,
-                scale=operator_scale(K_F),
+                scale=scale,
                 name="mu",
                 value=mu,
                 what="the barycenter penalty",
             )
         backend = solver_backend(solver)
-        self._solver = SPDSolver(self._normal, backend=backend, progress=progress) if len(self.free) else None
+        self._solver = SPDSolver(normal, backend=backend, progress=progress) if len(self.free) else None
 
     def solve(self, positions: np.ndarray, positions0: np.ndarray) -> np.ndarray:
         """New ``(n, 3)`` positions: free vertices solved with targets ``positions0``, known ones from ``positions``."""
         out = np.array(positions, dtype=np.float64)
         if self._solver is None:
             return out
-        rhs = self.mu * (self._HtH @ positions0[self.free])
-        if len(self.known):
-            rhs -= self._K_F.T @ (self._K_B @ out[self.known])
+        rhs = self.mu * (self._H.T @ (self._H @ positions0[self.free]))
+        if self._pull is not None:
+            rhs -= self._pull @ out[self.known]
         # the iterative path starts from the current positions (direct solvers ignore x0)
         out[self.free] = self._solver.solve(rhs, x0=out[self.free])
         return out

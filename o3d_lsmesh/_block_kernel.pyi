@@ -1,0 +1,11 @@
+"""Type stub of the compiled block kernel (``_block_kernel.pyx``)."""
+
+import numpy as np
+
+def block_product(
+    indptr: np.ndarray, indices: np.ndarray, data: np.ndarray, x: np.ndarray, out: np.ndarray
+) -> None: ...
+def gauss_seidel(
+    indptr: np.ndarray, indices: np.ndarray, data: np.ndarray, x: np.ndarray, b: np.ndarray, forward: bool
+) -> None: ...
+def cg_step(x: np.ndarray, r: np.ndarray, p: np.ndarray, q: np.ndarray, alpha: np.ndarray) -> np.ndarray: ...

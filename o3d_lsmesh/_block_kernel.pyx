@@ -1,0 +1,101 @@
+# cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
+"""Sparse products and Gauss-Seidel sweeps on ``(n, k)`` blocks: the iterative solver's inner loops.
+
+SciPy multiplies a CSR matrix by an ``(n, 3)`` block at 2.3 times the time of three single-column
+products, and pyamg's Gauss-Seidel takes one column at a time; both stream the matrix once per column.
+These stream it once for all ``k`` columns (row-major blocks: a row's ``k`` values share a cache line).
+A Gauss-Seidel sweep is sequential by nature; each column gets the arithmetic of pyamg's
+``gauss_seidel`` (same products in the same order), so the preconditioner is the one it replaces.
+"""
+
+import numpy as np
+
+from libc.stdint cimport int32_t, int64_t
+
+ctypedef fused index_t:
+    int32_t
+    int64_t
+
+
+def block_product(const index_t[::1] indptr, const index_t[::1] indices, const double[::1] data,
+                  const double[:, ::1] x, double[:, ::1] out):
+    """``out = A @ x`` for CSR ``A`` (``(m, n)``), ``x`` ``(n, k)``, ``out`` ``(m, k)``."""
+    cdef Py_ssize_t m = out.shape[0], k = x.shape[1], i, c
+    cdef index_t jj, j
+    cdef double a, s0, s1, s2
+    with nogil:
+        if k == 3:  # the coordinates: sums in registers
+            for i in range(m):
+                s0 = s1 = s2 = 0.0
+                for jj in range(indptr[i], indptr[i + 1]):
+                    j, a = indices[jj], data[jj]
+                    s0, s1, s2 = s0 + a * x[j, 0], s1 + a * x[j, 1], s2 + a * x[j, 2]
+                out[i, 0], out[i, 1], out[i, 2] = s0, s1, s2
+        else:
+            for i in range(m):
+                for c in range(k):
+                    out[i, c] = 0.0
+                for jj in range(indptr[i], indptr[i + 1]):
+                    j, a = indices[jj], data[jj]
+                    for c in range(k):
+                        out[i, c] += a * x[j, c]
+
+
+def gauss_seidel(const index_t[::1] indptr, const index_t[::1] indices, const double[::1] data,
+                 double[:, ::1] x, const double[:, ::1] b, bint forward):
+    """One Gauss-Seidel sweep of ``A x = b`` over the rows in order (``forward``) or in reverse, in place.
+
+    Row ``i``: ``x_i = (b_i - sum_(j != i) a_ij x_j) / a_ii``, skipped where ``a_ii = 0`` (as pyamg).
+    """
+    cdef Py_ssize_t n = x.shape[0], k = x.shape[1], step, i, c, r
+    cdef index_t jj, j
+    cdef double a, diagonal, s0, s1, s2
+    cdef double[16] rest
+    if k > 16:
+        raise ValueError(f"x must have at most 16 columns, got {k}")
+    with nogil:
+        if k == 3:  # the coordinates: sums in registers
+            for r in range(n):
+                i = r if forward else n - 1 - r
+                diagonal = s0 = s1 = s2 = 0.0
+                for jj in range(indptr[i], indptr[i + 1]):
+                    j, a = indices[jj], data[jj]
+                    if j == i:
+                        diagonal = a
+                    else:
+                        s0, s1, s2 = s0 + a * x[j, 0], s1 + a * x[j, 1], s2 + a * x[j, 2]
+                if diagonal != 0.0:
+                    x[i, 0], x[i, 1], x[i, 2] = (b[i, 0] - s0) / diagonal, (b[i, 1] - s1) / diagonal, (
+                        b[i, 2] - s2) / diagonal
+        else:
+            for r in range(n):
+                i = r if forward else n - 1 - r
+                diagonal = 0.0
+                for c in range(k):
+                    rest[c] = 0.0
+                for jj in range(indptr[i], indptr[i + 1]):
+                    j, a = indices[jj], data[jj]
+                    if j == i:
+                        diagonal = a
+                    else:
+                        for c in range(k):
+                            rest[c] += a * x[j, c]
+                if diagonal != 0.0:
+                    for c in range(k):
+                        x[i, c] = (b[i, c] - rest[c]) / diagonal
+
+
+def cg_step(double[:, ::1] x, double[:, ::1] r, const double[:, ::1] p, const double[:, ::1] q,
+            const double[::1] alpha):
+    """Conjugate gradients' update ``x += alpha p``, ``r -= alpha q`` (per column) in one pass; returns the
+    columns' ``|r|^2`` after it, ``(k,)``."""
+    cdef Py_ssize_t n = x.shape[0], k = x.shape[1], i, c
+    squares = np.zeros(k)
+    cdef double[::1] sq = squares
+    with nogil:
+        for i in range(n):
+            for c in range(k):
+                x[i, c] += alpha[c] * p[i, c]
+                r[i, c] -= alpha[c] * q[i, c]
+                sq[c] += r[i, c] * r[i, c]
+    return squares
