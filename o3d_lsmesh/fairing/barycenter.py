@@ -544,7 +544,15 @@ class GlobalSolver:
         del product
         if len(self.free):
             # a closed component is held in place only by mu |H 1|^2: a tiny mu lets it drift
-            labels = csgraph.connected_components(normal.T, directed=False)[1]  # CSR view: no copy
+            # the system couples two free vertices exactly when a path of free-free mesh edges joins them
+            # (a row of K_F spans a free vertex and its neighbours): components of that graph, not of the
+            # 2-ring matrix (whose undirected search transposes it)
+            both = free[topo.edges[:, 0]] & free[topo.edges[:, 1]]
+            coupled = reduced[topo.edges[both]]
+            graph = sp.csr_matrix(
+                (np.ones(len(coupled), dtype=np.int8), (coupled[:, 0], coupled[:, 1])), shape=normal.shape
+            )
+            labels = csgraph.connected_components(graph, directed=True, connection="weak")[1]
             check_constant_modes(
                 normal @ np.ones(len(self.free)),
                 labels,
