@@ -691,10 +691,10 @@ def _aggregation_levels(A: sp.csr_matrix, *, max_levels: int = 10, omega: float 
         raise ImportError("the iterative solver path needs pyamg: pip install pyamg") from error
     from . import _block_kernel  # compiled by the package's build: imported where used
 
-    candidate, zero = np.ones((A.shape[0], 1)), np.zeros((A.shape[0], 1))
+    candidate, zero, finest = np.ones((A.shape[0], 1)), np.zeros((A.shape[0], 1)), _csr_parts(A)
     for _ in range(4):
-        _block_kernel.gauss_seidel(*_csr_parts(A), candidate, zero, True)
-        _block_kernel.gauss_seidel(*_csr_parts(A), candidate, zero, False)
+        _block_kernel.gauss_seidel(*finest, candidate, zero, True)
+        _block_kernel.gauss_seidel(*finest, candidate, zero, False)
     levels: list[tuple[sp.csr_matrix, sp.csr_matrix, sp.csr_matrix]] = []
     while len(levels) + 1 < max_levels and A.shape[0] > COARSE_UNKNOWNS:
         tentative, candidate = fit_candidates(standard_aggregation(A)[0], candidate)
