@@ -180,6 +180,7 @@ def check_constant_modes(
     name: str,
     value: Any,
     what: str = "the constraints",
+    vertex_of: np.ndarray | None = None,
 ) -> None:
     """Raise ``ValueError`` naming ``name`` if a penalty leaves a component's translation undetermined.
 
@@ -199,6 +200,8 @@ def check_constant_modes(
         so that huge weights (a near-interpolatory system, well posed) pass.
     name, value
         The caller's parameter and its value, for the message.
+    vertex_of : (u,) int array, optional
+        The mesh vertex of each unknown (when some vertices are known), for the message.
     """
     labels = np.asarray(labels)
     if labels.size == 0 or not scale > 0:
@@ -210,6 +213,7 @@ def check_constant_modes(
     if weak.any():
         worst = int(np.argmin(np.where(sizes > 0, quotient, np.inf)))
         vertex = int(np.flatnonzero(labels == worst)[0])
+        vertex = vertex if vertex_of is None else int(vertex_of[vertex])
         raise ValueError(
             f"{name} is too small: {what} must pin every connected component, got {name}={_short(value)}, "
             f"which leaves {int(weak.sum())} component(s) (the first with vertex {vertex}) held with strength "

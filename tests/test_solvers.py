@@ -251,6 +251,12 @@ def test_global_fairing_mu_checked():
     V, F = grid(8, 8, z=lambda x, y: x * y)
     V, _ = constrained_fairing((V, F), 1, method="global", mu=1e-300)
     assert np.isfinite(V).all()
+    # a closed component beside an open one in the same mesh: only the closed one is loose, and it is
+    # found as a component of its own (averaged with the pinned grid it would pass)
+    sphere_v, sphere_f = (np.asarray(a) for a in (moved.vertices, moved.triangles))
+    both_v, both_f = np.vstack([V, sphere_v]), np.vstack([F, sphere_f + len(V)])
+    with pytest.raises(ValueError, match=rf"mu is too small.*\(the first with vertex {len(V)}\)"):
+        constrained_fairing((both_v, both_f), 1, method="global", mu=1e-12)
 
 
 def test_non_finite_inputs_to_the_gateway_raise():

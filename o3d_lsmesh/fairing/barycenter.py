@@ -561,6 +561,7 @@ class GlobalSolver:
                 name="mu",
                 value=mu,
                 what="the barycenter penalty",
+                vertex_of=self.free,
             )
         backend = solver_backend(solver)
         self._solver = SPDSolver(normal, backend=backend, progress=progress) if len(self.free) else None
