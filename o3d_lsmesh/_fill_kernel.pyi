@@ -57,3 +57,16 @@ def normal_equations(
     minus: np.ndarray,
     unknown: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]: ...
+def cholesky_solve(matrix: np.ndarray, rhs: np.ndarray) -> np.ndarray | None: ...
+def grid_near(
+    centre: np.ndarray,
+    radius: np.ndarray,
+    origin: np.ndarray,
+    cell: float,
+    dims: np.ndarray,
+    indptr: np.ndarray,
+    members: np.ndarray,
+    tri_centre: np.ndarray,
+    tri_radius: np.ndarray,
+    reach: float,
+) -> np.ndarray: ...

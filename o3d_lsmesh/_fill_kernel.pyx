@@ -1231,3 +1231,118 @@ def normal_equations(const double[:, ::1] x, const int64_t[::1] i, const int64_t
                 slot[entry[k]] = -1
     free(slot); free(entry); free(value)
     return normal_, rhs_
+
+
+# ---------------------------------------------------------------------------------------------------
+# small dense SPD solves without SciPy's per-call wrapping (LAPACK's own routines, reached through the
+# function pointers SciPy exports: the same code ``scipy.linalg.cho_factor`` and ``cho_solve`` run)
+
+ctypedef void (*_potrf_t)(char*, int*, double*, int*, int*) noexcept nogil
+ctypedef void (*_potrs_t)(char*, int*, int*, double*, int*, double*, int*, int*) noexcept nogil
+cdef _potrf_t _potrf = NULL
+cdef _potrs_t _potrs = NULL
+
+from cpython.pycapsule cimport PyCapsule_GetName, PyCapsule_GetPointer
+
+
+cdef int _load_lapack() except -1:
+    global _potrf, _potrs
+    if _potrf is NULL:
+        from scipy.linalg import cython_lapack
+        capi = cython_lapack.__pyx_capi__
+        _potrs = <_potrs_t>PyCapsule_GetPointer(capi["dpotrs"], PyCapsule_GetName(capi["dpotrs"]))
+        _potrf = <_potrf_t>PyCapsule_GetPointer(capi["dpotrf"], PyCapsule_GetName(capi["dpotrf"]))
+    return 0
+
+
+def cholesky_solve(double[:, ::1] matrix, const double[:, ::1] rhs):
+    """Solve ``matrix x = rhs`` for a symmetric positive definite ``(p, p)`` matrix and ``(p, c)`` right-hand
+    sides, as ``cho_solve(cho_factor(matrix), rhs)`` (upper factor, LAPACK ``dpotrf`` and ``dpotrs``);
+    ``matrix`` is overwritten. Returns ``(p, c)``, or None if the matrix is not numerically positive
+    definite or holds a non-finite value."""
+    cdef int p = matrix.shape[0], c = rhs.shape[1], info = 0, r, s
+    if matrix.shape[1] != p or rhs.shape[0] != p:
+        raise ValueError("matrix must be (p, p) and rhs (p, c)")
+    _load_lapack()
+    out_ = np.empty((c, p))  # Fortran (p, c): the layout LAPACK reads
+    cdef double[:, ::1] out = out_
+    cdef char uplo = b"U"
+    cdef bint finite = True
+    if p == 0:
+        return np.zeros((0, c))
+    with nogil:
+        for r in range(p):
+            for s in range(p):
+                if not (fabs(matrix[r, s]) < INFINITY):
+                    finite = False
+        for r in range(p):
+            for s in range(c):
+                out[s, r] = rhs[r, s]
+                if not (fabs(rhs[r, s]) < INFINITY):
+                    finite = False
+        if finite:
+            # a symmetric C-ordered matrix is its own Fortran-ordered transpose: LAPACK reads it in place
+            _potrf(&uplo, &p, &matrix[0, 0], &p, &info)
+            if info == 0:
+                _potrs(&uplo, &p, &c, &matrix[0, 0], &p, &out[0, 0], &p, &info)
+    if not finite or info != 0:
+        return None
+    return out_.T
+
+
+# ---------------------------------------------------------------------------------------------------
+# the crossing test's candidates: a uniform grid of triangle centres
+
+
+def grid_near(const double[:, ::1] centre, const double[::1] radius, const double[::1] origin, double cell,
+              const int64_t[::1] dims, const int64_t[::1] indptr, const int64_t[::1] members,
+              const double[:, ::1] tri_centre, const double[::1] tri_radius, double reach):
+    """The triangles (``members`` of the grid cells, ``indptr`` over the cells ``(x * dims[1] + y) *
+    dims[2] + z`` of side ``cell`` from ``origin``) whose bounding sphere (``tri_centre``, ``tri_radius``,
+    at most ``reach``) meets the box of the query spheres (``centre``, ``radius``): a superset of those
+    overlapping a query sphere, without repeats. ``(p,)`` int64."""
+    cdef int64_t nq = centre.shape[0], k, t, x, y, z, count = 0, capacity
+    cdef int64_t lo_cell[3]
+    cdef int64_t hi_cell[3]
+    cdef double lo[3]
+    cdef double hi[3]
+    cdef double d, gap, g
+    cdef int c
+    if nq == 0 or members.shape[0] == 0:
+        return np.zeros(0, dtype=np.int64)
+    with nogil:
+        for c in range(3):
+            lo[c], hi[c] = INFINITY, -INFINITY
+        for k in range(nq):
+            for c in range(3):
+                lo[c] = fmin(lo[c], centre[k, c] - radius[k])
+                hi[c] = fmax(hi[c], centre[k, c] + radius[k])
+        for c in range(3):
+            # cells holding a centre within `reach` of the box (clamped to the grid; floor of a double)
+            d = (lo[c] - reach - origin[c]) / cell
+            lo_cell[c] = <int64_t>d if d >= 0 else 0
+            d = (hi[c] + reach - origin[c]) / cell
+            hi_cell[c] = min(<int64_t>d, dims[c] - 1) if d >= 0 else -1
+        capacity = 0
+        for x in range(lo_cell[0], hi_cell[0] + 1):
+            for y in range(lo_cell[1], hi_cell[1] + 1):
+                capacity += indptr[(x * dims[1] + y) * dims[2] + hi_cell[2] + 1] - indptr[
+                    (x * dims[1] + y) * dims[2] + lo_cell[2]] if hi_cell[2] >= lo_cell[2] else 0
+    out_ = np.empty(capacity, dtype=np.int64)
+    cdef int64_t[::1] out = out_
+    with nogil:
+        for x in range(lo_cell[0], hi_cell[0] + 1):
+            for y in range(lo_cell[1], hi_cell[1] + 1):
+                if hi_cell[2] < lo_cell[2]:
+                    continue
+                for k in range(indptr[(x * dims[1] + y) * dims[2] + lo_cell[2]],
+                               indptr[(x * dims[1] + y) * dims[2] + hi_cell[2] + 1]):
+                    t = members[k]
+                    gap = 0.0  # squared distance from the sphere's centre to the box
+                    for c in range(3):
+                        g = fmax(fmax(lo[c] - tri_centre[t, c], tri_centre[t, c] - hi[c]), 0.0)
+                        gap += g * g
+                    if gap <= tri_radius[t] * tri_radius[t] * (1.0 + 1e-9):  # slack: a superset
+                        out[count] = t
+                        count += 1
+    return out_[:count]

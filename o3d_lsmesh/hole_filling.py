@@ -328,7 +328,10 @@ def _fair(
         plus, minus = i[keep], j[keep]
     if dense:
         normal, rhs = _kernel().normal_equations(x, i, j, w, degree, scale, plus, minus, unknown)
-        return _solvers.solve_spd(normal, rhs)
+        solution = _kernel().cholesky_solve(normal, rhs)  # solve_spd's dense path, without its wrapping
+        if solution is None:
+            raise SingularSystemError("the fairing system is not positive definite")
+        return solution
     _, L = _operators(i, j, w, degree, scale, False)
     if level == 1:
         A_full = L[plus]
@@ -744,50 +747,67 @@ def _interpolation(
 
 
 class _TriangleIndex:
-    """Bounding spheres (about the centroids) of a mesh's triangles in k-d trees, for crossing queries.
+    """Bounding spheres (about the centroids) of a mesh's triangles in uniform grids, for crossing queries.
 
-    Two trees, the spheres of radius at most 4 times the median and the rest, each queried with its own
-    largest radius, so that a few long slivers do not make every query reach far (queries are
-    thread-safe; the trees pickle).
+    Two grids, the spheres of radius at most 4 times the median and the rest, each queried with its own
+    largest radius, so that a few long slivers do not make every query reach far. Each grid (cells of
+    about that radius, at most ``4 m`` of them) lists its triangles cell by cell (one stable sort):
+    a small patch's query reads a few cells in the compiled :func:`o3d_lsmesh._fill_kernel.grid_near`,
+    where a k-d tree's ball query cost SciPy's per-call overhead (queries are thread-safe; the grids
+    pickle).
     """
 
     def __init__(self, vertices: np.ndarray, triangles: np.ndarray) -> None:
-        from scipy.spatial import cKDTree
-
         p = vertices[triangles]
         self.centre = p.mean(axis=1)
         self.radius = np.linalg.norm(p - self.centre[:, None, :], axis=2).max(axis=1)
         small = self.radius <= (4.0 * float(np.median(self.radius)) if len(self.radius) else 0.0)
-        groups = [g for g in (np.flatnonzero(small), np.flatnonzero(~small)) if len(g)]
-        self.trees = [(cKDTree(self.centre[g]), float(self.radius[g].max()), g) for g in groups]
+        self.grids = [self._grid(g) for g in (np.flatnonzero(small), np.flatnonzero(~small)) if len(g)]
+
+    def _grid(self, members: np.ndarray) -> tuple:
+        centre = self.centre[members]
+        reach = float(self.radius[members].max())
+        origin = centre.min(axis=0)
+        extent = centre.max(axis=0) - origin
+        cell = reach if reach > 0 else max(float(extent.max()), 1.0)
+        budget = 4 * len(members) + 64
+        while np.prod(np.floor(extent / cell) + 1) > budget:  # the grid stays linear in the triangles
+            cell *= 1.5
+        dims = (np.floor(extent / cell) + 1).astype(np.int64)
+        xyz = np.minimum(np.floor((centre - origin) / cell).astype(np.int64), dims - 1)
+        key = (xyz[:, 0] * dims[1] + xyz[:, 1]) * dims[2] + xyz[:, 2]
+        order = np.argsort(key, kind="stable")
+        indptr = np.zeros(int(np.prod(dims)) + 1, dtype=np.int64)
+        np.cumsum(np.bincount(key, minlength=len(indptr) - 1), out=indptr[1:])
+        return origin, cell, dims, indptr, members[order], reach
 
     def near(
         self, centre: np.ndarray, radius: np.ndarray, groups: np.ndarray | None = None
     ) -> tuple[np.ndarray, np.ndarray]:
         """Pairs ``(query, triangle)`` whose bounding spheres overlap.
 
-        One ball query per group of queries (``groups`` labels them: the patch of each new triangle) and
-        tree gathers the triangles near the group's bounding sphere; the pairs are found among those by
-        a sweep and prune (cheaper than thousands of ball queries into the whole mesh's tree).
+        One grid query per group of queries (``groups`` labels them: the patch of each new triangle) and
+        grid gathers the triangles whose spheres meet the group's box; the pairs are found among those
+        by a sweep and prune.
         """
         empty = np.zeros(0, dtype=np.int64)
         if len(centre) == 0:
             return empty, empty
+        kernel = _kernel()
         if groups is None or (groups == groups[0]).all():
-            masks = [slice(None)]  # one patch (the usual call): no grouping, and no duplicate hits
+            masks: list[Any] = [None]  # one patch (the usual call): no grouping, and no duplicate hits
         else:
             masks = [groups == label for label in np.unique(groups)]
         found = [empty]
         for mine in masks:
-            low = (centre[mine] - radius[mine, None]).min(axis=0)
-            high = (centre[mine] + radius[mine, None]).max(axis=0)
-            middle, half = 0.5 * (low + high), 0.5 * float(np.linalg.norm(high - low))
-            for tree, reach, members in self.trees:
-                hits = tree.query_ball_point(middle, half + reach, return_sorted=False)
-                found.append(members[np.asarray(hits, dtype=np.int64)])
-        # the two trees hold disjoint triangles: one patch's hits are distinct, several patches' may repeat
+            c, r = (centre, radius) if mine is None else (centre[mine], radius[mine])
+            for origin, cell, dims, indptr, members, reach in self.grids:
+                found.append(
+                    kernel.grid_near(c, r, origin, cell, dims, indptr, members, self.centre, self.radius, reach)
+                )
+        # the two grids hold disjoint triangles: one patch's hits are distinct, several patches' may repeat
         candidates = np.concatenate(found) if len(masks) == 1 else np.unique(np.concatenate(found))
-        qi, ti = _kernel().sphere_pairs(centre, radius, self.centre[candidates], self.radius[candidates])
+        qi, ti = kernel.sphere_pairs(centre, radius, self.centre[candidates], self.radius[candidates])
         return qi, candidates[ti]
 
 
