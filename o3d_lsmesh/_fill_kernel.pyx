@@ -989,13 +989,14 @@ def loop_geometry(const int64_t[::1] loop, const int64_t[::1] rows, const double
     """A loop's points ``(k, 3)``, the unit normals ``(k, 3)`` of the mesh triangles on its edges (the
     triangle of half-edge row ``rows[i]``, that is ``rows[i] % m``, on edge ``(i, i + 1)``), its chords
     that already are mesh edges ``(k, k)`` bool (its own edges excepted: a chord the triangulation must
-    not use, a non-manifold edge otherwise) and its mean edge length.
+    not use, a non-manifold edge otherwise), its mean edge length, and those chords as pairs ``(c, 2)``,
+    ``i < j`` row by row.
 
     The chords come from each loop vertex's triangles (CSR ``indptr``, ``data``), the loop's positions
     looked up by binary search: the work grows with the loop's stars, not with the mesh.
     """
     cdef int64_t k = loop.shape[0], n = vertices.shape[0], m = triangles.shape[0], p, q, r, lo, hi, mid, w
-    cdef int64_t c, t
+    cdef int64_t c, t, count
     if rows.shape[0] != k or indptr.shape[0] != n + 1:
         raise ValueError("rows must be (k,), indptr (n + 1,)")
     if k and (np.min(loop) < 0 or np.max(loop) >= n):
@@ -1048,7 +1049,19 @@ def loop_geometry(const int64_t[::1] loop, const int64_t[::1] rows, const double
             out[p, q] = 0
             out[q, p] = 0
     spacing = _sum(&lengths[0], k) / k if k else 0.0
-    return points_, outer_, chords_.view(bool), spacing
+    count = 0
+    for p in range(k):
+        for q in range(p + 1, k):
+            count += out[p, q]
+    pairs_ = np.empty((count, 2), dtype=np.int64)
+    cdef int64_t[:, ::1] pairs = pairs_
+    count = 0
+    for p in range(k):  # row by row, as np.argwhere(np.triu(chords))
+        for q in range(p + 1, k):
+            if out[p, q]:
+                pairs[count, 0], pairs[count, 1] = p, q
+                count += 1
+    return points_, outer_, chords_.view(bool), spacing, pairs_
 
 
 # ----------------------------------------------------------------------------------------------------------

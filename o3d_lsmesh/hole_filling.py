@@ -51,12 +51,18 @@ __all__ = [
 ]
 
 
+_KERNEL: Any = None
+
+
 def _kernel() -> Any:
     """The compiled loops (``_fill_kernel.pyx``), imported at first use like the hierarchy's kernel, so
     that the package imports from a source tree whose extensions are not built."""
-    from . import _fill_kernel
+    global _KERNEL
+    if _KERNEL is None:
+        from . import _fill_kernel
 
-    return _fill_kernel
+        _KERNEL = _fill_kernel
+    return _KERNEL
 
 
 #: Loops with more edges are split by chords before the O(k^3) dynamic programme (measured: k = 50
@@ -526,13 +532,13 @@ class HoleFiller:
             (skipped if too_big or flap or (hole.border and not fill_border) else holes).append(hole)
         if not holes:
             empty = np.zeros(0, dtype=np.int64)
-            return FilledHoles(vertices.copy(), triangles.copy(), [], skipped, sp.csr_matrix((0, n)), empty)
+            return FilledHoles(vertices.copy(), triangles.copy(), [], skipped, _empty_csr(0, n), empty)
         # each piece (a loop; one through a vertex twice is cut in pieces) is triangulated on its own,
         # long ones cut by chords sampled at the refinement's spacing (none without) first
         pieces = [(h, *p) for h, hole in enumerate(holes) for p in _simple_pieces(hole.vertices, hole.rows)]
         piece_hole, piece_loop, piece_rows = zip(*pieces)
         # each piece's points, the normals across its edges, its chords that are mesh edges, its spacing
-        piece_points, piece_outer, piece_forbidden, piece_spacing = zip(
+        piece_points, piece_outer, piece_forbidden, piece_spacing, piece_pairs = zip(
             *(
                 _kernel().loop_geometry(loop, rows, vertices, triangles, *self.vertex_triangles)
                 for loop, rows in zip(piece_loop, piece_rows)
@@ -565,30 +571,43 @@ class HoleFiller:
                 for loop, extra, spacing in zip(piece_loop, piece_extra, piece_spacing)
             ]
             # mesh edges between loop vertices: no flip may make them twice
-            fixed = [np.argwhere(np.triu(f)) + start for f, start in zip(piece_forbidden, starts)]
+            fixed = [pairs + start for pairs, start in zip(piece_pairs, starts)]
             all_points, all_tris, point_piece = _kernel().refine(
-                all_points, np.concatenate(sigma), all_tris, np.concatenate(fixed), point_piece, _ALPHA
+                all_points,
+                sigma[0] if count == 1 else np.concatenate(sigma),
+                all_tris,
+                fixed[0] if count == 1 else np.concatenate(fixed),
+                point_piece,
+                _ALPHA,
             )
         # global numbering: loop points (first in each piece, in order) are mesh vertices; the others
         # are new, numbered piece by piece
-        is_loop = np.zeros(len(all_points), dtype=bool)
-        is_loop[concatenated_ranges(starts, lengths)] = True
-        global_index = np.empty(len(all_points), dtype=np.int64)
-        global_index[is_loop] = np.concatenate(piece_loop)
-        fresh = np.flatnonzero(~is_loop)
-        fresh = fresh[np.argsort(point_piece[fresh], kind="stable")]
-        global_index[fresh] = n + np.arange(len(fresh))
-        tri_piece = point_piece[all_tris[:, 0]]
-        tri_order = np.argsort(tri_piece, kind="stable")
-        new_tris = global_index[all_tris[tri_order]]
-        owner = np.asarray(piece_hole, dtype=np.int64)[tri_piece[tri_order]]  # the hole of each new triangle
-        p = len(fresh)
+        if count == 1:  # the usual fill, one simple loop: its points first, then the new ones in order
+            fresh_points = all_points[lengths[0] :]
+            new_tris = np.concatenate([piece_loop[0], n + np.arange(len(fresh_points))])[all_tris]
+            owner = np.zeros(len(new_tris), dtype=np.int64)
+            tri_piece = owner
+        else:
+            is_loop = np.zeros(len(all_points), dtype=bool)
+            is_loop[concatenated_ranges(starts, lengths)] = True
+            global_index = np.empty(len(all_points), dtype=np.int64)
+            global_index[is_loop] = np.concatenate(piece_loop)
+            fresh = np.flatnonzero(~is_loop)
+            fresh = fresh[np.argsort(point_piece[fresh], kind="stable")]
+            global_index[fresh] = n + np.arange(len(fresh))
+            fresh_points = all_points[fresh]
+            tri_piece = point_piece[all_tris[:, 0]]
+            tri_order = np.argsort(tri_piece, kind="stable")
+            tri_piece = tri_piece[tri_order]
+            new_tris = global_index[all_tris[tri_order]]
+            owner = np.asarray(piece_hole, dtype=np.int64)[tri_piece]  # the hole of each new triangle
+        p = len(fresh_points)
         if interpolation and p:
-            bounds = np.searchsorted(tri_piece[tri_order], np.arange(count + 1))
+            bounds = np.searchsorted(tri_piece, np.arange(count + 1))
             weights_matrix = _interpolation(new_tris, bounds, piece_loop, n, p)
         else:
-            weights_matrix = sp.csr_matrix((p, n))
-        out_vertices = np.concatenate([vertices, all_points[fresh]])
+            weights_matrix = _empty_csr(p, n)
+        out_vertices = np.concatenate([vertices, fresh_points])
         out_triangles = np.concatenate([triangles, new_tris])
         used, stuck = self._fair_all(
             out_vertices, out_triangles, holes, continuity, weights == "cotangent", owner
@@ -694,6 +713,10 @@ class HoleFiller:
 
 def _simple_pieces(loop: np.ndarray, rows: np.ndarray):
     """Split a loop that passes a vertex more than once into loops that do not (each filled on its own)."""
+    if len(set(loop.tolist())) == len(loop):  # the usual loop: simple (a set is quicker than np.unique here)
+        if len(loop) >= 3:
+            yield loop, rows
+        return
     stack = [(loop, rows)]
     while stack:
         loop, rows = stack.pop()
@@ -707,6 +730,15 @@ def _simple_pieces(loop: np.ndarray, rows: np.ndarray):
         p = int(np.argmax(loop == loop[q]))
         stack.append((loop[p:q], rows[p:q]))
         stack.append((np.concatenate([loop[:p], loop[q:]]), np.concatenate([rows[:p], rows[q:]])))
+
+
+def _empty_csr(rows: int, cols: int) -> sp.csr_matrix:
+    """An all-zero ``(rows, cols)`` CSR matrix, from its arrays (SciPy's shape-only form costs more)."""
+    return sp.csr_matrix(
+        (np.zeros(0), np.zeros(0, dtype=np.int32), np.zeros(rows + 1, dtype=np.int32)),
+        shape=(rows, cols),
+        copy=False,
+    )
 
 
 def _vertex_owner(new_tris: np.ndarray, owner: np.ndarray, n: int, p: int) -> np.ndarray:
