@@ -70,3 +70,11 @@ def grid_near(
     tri_radius: np.ndarray,
     reach: float,
 ) -> np.ndarray: ...
+def patch_crossings(
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    first_new: int,
+    grids: list[tuple[np.ndarray, float, np.ndarray, np.ndarray, np.ndarray, float]],
+    tri_centre: np.ndarray,
+    tri_radius: np.ndarray,
+) -> np.ndarray: ...

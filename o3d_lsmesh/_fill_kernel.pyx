@@ -653,39 +653,44 @@ cdef bint _cross_pair(const double* P, const double* Q) noexcept nogil:
     return True
 
 
+cdef bint _pair_crosses(const double* V, const int64_t* T, int64_t ta, int64_t tb) noexcept nogil:
+    """Whether triangles ``ta`` and ``tb`` (rows of ``T`` over the points ``V``) without a shared vertex
+    intersect: shared corners first, then the bounding boxes (where most pairs stop), then the axes."""
+    cdef double P[9]
+    cdef double Q[9]
+    cdef int r, s, c
+    for r in range(3):
+        for s in range(3):
+            if T[3 * ta + r] == T[3 * tb + s]:
+                return False
+    for r in range(3):
+        for c in range(3):
+            P[3 * r + c] = V[3 * T[3 * ta + r] + c]
+            Q[3 * r + c] = V[3 * T[3 * tb + r] + c]
+    for c in range(3):
+        if fmin(fmin(P[c], P[3 + c]), P[6 + c]) > fmax(fmax(Q[c], Q[3 + c]), Q[6 + c]) or (
+            fmin(fmin(Q[c], Q[3 + c]), Q[6 + c]) > fmax(fmax(P[c], P[3 + c]), P[6 + c])
+        ):
+            return False
+    return _cross_pair(P, Q)
+
+
 def count_crossings(const double[:, ::1] vertices, const int64_t[:, ::1] triangles, const int64_t[::1] a,
                     const int64_t[::1] b, int64_t first_new):
     """For candidate pairs ``(a[i], b[i])`` of triangles (``a`` new, i.e. ``>= first_new``), the number of
     intersecting pairs each new triangle is in; pairs sharing a vertex are not counted. Cheap tests
     first: shared corners, then the bounding boxes (where most pairs stop), then the separating axes."""
-    cdef int64_t q = triangles.shape[0] - first_new, n = a.shape[0], i, r, s, c, ta, tb
+    cdef int64_t q = triangles.shape[0] - first_new, n = a.shape[0], i, ta, tb
     if b.shape[0] != n:
         raise ValueError("a and b must have one length")
     result_ = np.zeros(max(q, 0))
     cdef double[::1] result = result_
-    cdef double P[9]
-    cdef double Q[9]
-    cdef bint shared, apart
+    if n == 0:
+        return result_
     with nogil:
         for i in range(n):
             ta, tb = a[i], b[i]
-            shared = False
-            for r in range(3):
-                for s in range(3):
-                    shared = shared or triangles[ta, r] == triangles[tb, s]
-            if shared:
-                continue
-            for r in range(3):
-                for c in range(3):
-                    P[3 * r + c] = vertices[triangles[ta, r], c]
-                    Q[3 * r + c] = vertices[triangles[tb, r], c]
-            apart = False
-            for c in range(3):
-                if fmin(fmin(P[c], P[3 + c]), P[6 + c]) > fmax(fmax(Q[c], Q[3 + c]), Q[6 + c]) or (
-                    fmin(fmin(Q[c], Q[3 + c]), Q[6 + c]) > fmax(fmax(P[c], P[3 + c]), P[6 + c])
-                ):
-                    apart = True
-            if apart or not _cross_pair(P, Q):
+            if not _pair_crosses(&vertices[0, 0], &triangles[0, 0], ta, tb):
                 continue
             result[ta - first_new] += 1.0
             if tb >= first_new:
@@ -1359,3 +1364,114 @@ def grid_near(const double[:, ::1] centre, const double[::1] radius, const doubl
                         out[count] = t
                         count += 1
     return out_[:count]
+
+
+def patch_crossings(const double[:, ::1] vertices, const int64_t[:, ::1] triangles, int64_t first_new,
+                    grids, const double[:, ::1] tri_centre, const double[::1] tri_radius):
+    """:func:`count_crossings` of one small patch (the triangles from ``first_new`` on) against the input
+    triangles of ``grids`` (those of :func:`grid_near`: ``(origin, cell, dims, indptr, members, reach)``
+    each) and against itself, the candidates all in one call: each new triangle's bounding sphere
+    (about its centroid, as NumPy's ``mean`` and ``norm`` compute them) tested against every candidate's,
+    which beats the sweep of :func:`sphere_pairs` on a few dozen triangles."""
+    cdef int64_t q = triangles.shape[0] - first_new, i, k, t, x, y, start, stop, n_cand = 0, capacity = 0
+    cdef int64_t lo_cell[3]
+    cdef int64_t hi_cell[3]
+    cdef double lo[3]
+    cdef double hi[3]
+    cdef double d, g, gap, r, reach, cell
+    cdef int c, v
+    result_ = np.zeros(max(q, 0))
+    if q <= 0:
+        return result_
+    centre_ = np.empty((q, 3))
+    radius_ = np.empty(q)
+    cdef double[::1] result = result_, radius = radius_
+    cdef double[:, ::1] centre = centre_
+    cdef const double* V = &vertices[0, 0]
+    cdef const int64_t* T = &triangles[0, 0]
+    cdef const double[::1] origin
+    cdef const int64_t[::1] dims, indptr, members
+    with nogil:
+        for i in range(q):
+            t = first_new + i
+            for c in range(3):
+                centre[i, c] = ((V[3 * T[3 * t] + c] + V[3 * T[3 * t + 1] + c]) + V[3 * T[3 * t + 2] + c]) / 3.0
+            radius[i] = 0.0
+            for v in range(3):
+                gap = 0.0
+                for c in range(3):
+                    d = V[3 * T[3 * t + v] + c] - centre[i, c]
+                    gap = gap + d * d
+                radius[i] = fmax(radius[i], sqrt(gap))
+        for c in range(3):
+            lo[c], hi[c] = INFINITY, -INFINITY
+        for i in range(q):
+            for c in range(3):
+                lo[c] = fmin(lo[c], centre[i, c] - radius[i])
+                hi[c] = fmax(hi[c], centre[i, c] + radius[i])
+    # the candidates of each grid (its cells near the patch's box, spheres meeting the box)
+    found = []
+    for origin_, cell, dims_, indptr_, members_, reach in grids:
+        origin, dims, indptr, members = origin_, dims_, indptr_, members_
+        if members.shape[0] == 0:
+            continue
+        with nogil:
+            for c in range(3):
+                d = (lo[c] - reach - origin[c]) / cell
+                lo_cell[c] = <int64_t>d if d >= 0 else 0
+                d = (hi[c] + reach - origin[c]) / cell
+                hi_cell[c] = min(<int64_t>d, dims[c] - 1) if d >= 0 else -1
+            capacity = 0
+            if hi_cell[2] >= lo_cell[2]:
+                for x in range(lo_cell[0], hi_cell[0] + 1):
+                    for y in range(lo_cell[1], hi_cell[1] + 1):
+                        capacity += indptr[(x * dims[1] + y) * dims[2] + hi_cell[2] + 1] - indptr[
+                            (x * dims[1] + y) * dims[2] + lo_cell[2]]
+        out_ = np.empty(capacity, dtype=np.int64)
+        n_cand = _gather(&lo[0], &hi[0], lo_cell, hi_cell, &dims[0], &indptr[0], &members[0],
+                         &tri_centre[0, 0], &tri_radius[0], out_)
+        found.append(out_[:n_cand])
+    cand_ = np.concatenate(found) if found else np.zeros(0, dtype=np.int64)
+    cdef const int64_t[::1] cand = cand_
+    n_cand = cand.shape[0]
+    with nogil:
+        for i in range(q):
+            for k in range(n_cand):
+                t = cand[k]
+                if _overlap(&centre[i, 0], radius[i], &tri_centre[t, 0], tri_radius[t]) and _pair_crosses(
+                    V, T, first_new + i, t
+                ):
+                    result[i] += 1.0
+            for k in range(i + 1, q):
+                if _overlap(&centre[i, 0], radius[i], &centre[k, 0], radius[k]) and _pair_crosses(
+                    V, T, first_new + i, first_new + k
+                ):
+                    result[i] += 1.0
+                    result[k] += 1.0
+    return result_
+
+
+cdef int64_t _gather(const double* lo, const double* hi, const int64_t* lo_cell, const int64_t* hi_cell,
+                     const int64_t* dims, const int64_t* indptr, const int64_t* members,
+                     const double* tc, const double* tr, int64_t[::1] out):
+    """The members of the cells ``lo_cell .. hi_cell`` whose spheres meet the box ``lo .. hi``, into
+    ``out``; returns how many."""
+    cdef int64_t x, y, k, t, count = 0
+    cdef double gap, g
+    cdef int c
+    if hi_cell[2] < lo_cell[2]:
+        return 0
+    with nogil:
+        for x in range(lo_cell[0], hi_cell[0] + 1):
+            for y in range(lo_cell[1], hi_cell[1] + 1):
+                for k in range(indptr[(x * dims[1] + y) * dims[2] + lo_cell[2]],
+                               indptr[(x * dims[1] + y) * dims[2] + hi_cell[2] + 1]):
+                    t = members[k]
+                    gap = 0.0
+                    for c in range(3):
+                        g = fmax(fmax(lo[c] - tc[3 * t + c], tc[3 * t + c] - hi[c]), 0.0)
+                        gap += g * g
+                    if gap <= tr[t] * tr[t] * (1.0 + 1e-9):
+                        out[count] = t
+                        count += 1
+    return count

@@ -843,6 +843,11 @@ class _TriangleIndex:
         return qi, candidates[ti]
 
 
+#: Patches of at most this many new triangles test each against every candidate near the patch
+#: (:func:`o3d_lsmesh._fill_kernel.patch_crossings`); larger ones sweep (:meth:`_TriangleIndex.near`).
+_SMALL_PATCH = 64
+
+
 def _crossings(
     vertices: np.ndarray, triangles: np.ndarray, first_new: int, index: Any, groups: Any
 ) -> np.ndarray:
@@ -854,6 +859,10 @@ def _crossings(
     new ones among themselves. Each pair is tested on the 17 axes that separate two disjoint triangles
     (two normals, nine edge-edge cross products, six in-plane edge normals for coplanar pairs).
     """
+    q = len(triangles) - first_new
+    if index is not None and 0 < q <= _SMALL_PATCH and (groups is None or not groups.any()):
+        # one small patch (``groups`` all 0): candidates and tests in one compiled call
+        return _kernel().patch_crossings(vertices, triangles, first_new, index.grids, index.centre, index.radius)
     new = np.arange(first_new, len(triangles))
     result = np.zeros(len(new))
     if len(new) == 0:
