@@ -387,8 +387,16 @@ class FilledHoles:
     triangles: np.ndarray
     holes: list
     skipped: list
-    interpolation: sp.csr_matrix = field(repr=False)
+    # the matrix, or the (p, n) shape of an all-zero one, built when first read: SciPy's constructor
+    # costs about a third of a small hole's fill when the caches are cold
+    _interpolation: Any = field(repr=False)
     continuity: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+
+    @property
+    def interpolation(self) -> sp.csr_matrix:
+        if isinstance(self._interpolation, tuple):
+            object.__setattr__(self, "_interpolation", _empty_csr(*self._interpolation))
+        return self._interpolation
 
 
 def fill_holes_arrays(
@@ -532,7 +540,7 @@ class HoleFiller:
             (skipped if too_big or flap or (hole.border and not fill_border) else holes).append(hole)
         if not holes:
             empty = np.zeros(0, dtype=np.int64)
-            return FilledHoles(vertices.copy(), triangles.copy(), [], skipped, _empty_csr(0, n), empty)
+            return FilledHoles(vertices.copy(), triangles.copy(), [], skipped, (0, n), empty)
         # each piece (a loop; one through a vertex twice is cut in pieces) is triangulated on its own,
         # long ones cut by chords sampled at the refinement's spacing (none without) first
         pieces = [(h, *p) for h, hole in enumerate(holes) for p in _simple_pieces(hole.vertices, hole.rows)]
@@ -602,11 +610,12 @@ class HoleFiller:
             new_tris = global_index[all_tris[tri_order]]
             owner = np.asarray(piece_hole, dtype=np.int64)[tri_piece]  # the hole of each new triangle
         p = len(fresh_points)
+        weights_matrix: Any
         if interpolation and p:
             bounds = np.searchsorted(tri_piece, np.arange(count + 1))
             weights_matrix = _interpolation(new_tris, bounds, piece_loop, n, p)
         else:
-            weights_matrix = _empty_csr(p, n)
+            weights_matrix = (p, n)
         out_vertices = np.concatenate([vertices, fresh_points])
         out_triangles = np.concatenate([triangles, new_tris])
         used, stuck = self._fair_all(
@@ -624,7 +633,11 @@ class HoleFiller:
             remap = np.concatenate([np.arange(n), n + np.cumsum(keep_vertex) - 1])
             out_vertices = np.concatenate([vertices, out_vertices[n:][keep_vertex]])
             out_triangles = np.concatenate([triangles, remap[new_tris[~np.isin(owner, stuck)]]])
-            weights_matrix = weights_matrix[np.flatnonzero(keep_vertex)]
+            weights_matrix = (
+                (int(keep_vertex.sum()), n)
+                if isinstance(weights_matrix, tuple)
+                else weights_matrix[np.flatnonzero(keep_vertex)]
+            )
             left = np.isin(np.arange(len(holes)), stuck)
             skipped = skipped + [hole for hole, out in zip(holes, left) if out]
             used = used[~left]
