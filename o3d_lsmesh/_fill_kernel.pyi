@@ -78,3 +78,18 @@ def patch_crossings(
     tri_centre: np.ndarray,
     tri_radius: np.ndarray,
 ) -> np.ndarray: ...
+def local_mesh(
+    triangles: np.ndarray, first_new: int, ring_tris: np.ndarray, rings: list[np.ndarray], nv: int
+) -> tuple[np.ndarray, np.ndarray, list[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]]: ...
+def fair_dense(
+    x: np.ndarray,
+    tris: np.ndarray,
+    i: np.ndarray,
+    j: np.ndarray,
+    inverse: np.ndarray,
+    unknown: np.ndarray,
+    ring0: np.ndarray,
+    ring1: np.ndarray,
+    level: int,
+    cot: bool,
+) -> np.ndarray | None: ...

@@ -1475,3 +1475,112 @@ cdef int64_t _gather(const double* lo, const double* hi, const int64_t* lo_cell,
                         out[count] = t
                         count += 1
     return count
+
+
+# ---------------------------------------------------------------------------------------------------
+# a small patch's local mesh and its dense fairing solve, each in one call
+
+
+def local_mesh(const int64_t[:, ::1] triangles, int64_t first_new, const int64_t[::1] ring_tris, rings,
+               int64_t nv):
+    """The local mesh of the fairing: the triangles ``ring_tris`` of the input (rows of ``triangles``
+    before ``first_new``) and every new one (from ``first_new`` on), over their vertices renumbered in
+    increasing order (as ``np.unique`` and ``np.searchsorted`` would): the vertices ``(l,)``, the local
+    triangles ``(t, 3)``, ``rings`` (arrays of vertices of the ``nv``) renumbered, and
+    :func:`unique_edges` of the local triangles."""
+    cdef int64_t r = ring_tris.shape[0], q = triangles.shape[0] - first_new, t = r + q, k, c, v, count = 0
+    cdef bint bad = False
+    local_ = np.empty((t, 3), dtype=np.int64)
+    number_ = np.zeros(nv, dtype=np.int64)  # 1 + the local number (0: not local); untouched pages cost nothing
+    cdef int64_t[:, ::1] local = local_
+    cdef int64_t[::1] number = number_, ring, out
+    vertices_ = np.empty(3 * t, dtype=np.int64)
+    out = vertices_
+    with nogil:
+        for k in range(t):
+            for c in range(3):
+                v = triangles[ring_tris[k] if k < r else first_new + k - r, c]
+                if v < 0 or v >= nv:
+                    bad = True
+                    continue
+                local[k, c] = v
+                if number[v] == 0:
+                    number[v] = 1
+                    out[count] = v
+                    count += 1
+    if bad:
+        raise ValueError("a triangle outside the nv vertices")
+    with nogil:
+        qsort(&out[0], count, sizeof(int64_t), _by_value)  # increasing, as np.unique
+        for k in range(count):
+            number[out[k]] = k + 1
+        for k in range(t):
+            for c in range(3):
+                local[k, c] = number[local[k, c]] - 1
+    vertices_ = vertices_[:count].copy()
+    local_rings = []
+    for ring_ in rings:
+        ring = np.asarray(ring_, dtype=np.int64)
+        mapped_ = np.empty(ring.shape[0], dtype=np.int64)
+        out = mapped_
+        for k in range(ring.shape[0]):
+            out[k] = number[ring[k]] - 1
+        local_rings.append(mapped_)
+    return vertices_, local_, local_rings, unique_edges(local_, count)
+
+
+def fair_dense(const double[:, ::1] x, const int64_t[:, ::1] tris, const int64_t[::1] i,
+               const int64_t[::1] j, const int64_t[::1] inverse, const int64_t[::1] unknown,
+               const int64_t[::1] ring0, const int64_t[::1] ring1, int level, bint cot):
+    """The dense fairing solve of ``hole_filling._fair`` at continuity ``level`` 1 or 2: the Laplacian
+    weights (:func:`laplacian_weights`, cotangent if ``cot``), the rows touching an unknown (the
+    ``unknown`` and ``ring0``; for 2, the edges between them and ``ring1`` with one end among them, in
+    edge order), :func:`normal_equations` and :func:`cholesky_solve`. ``(p, 3)``, or None if the system
+    is not numerically positive definite or the solution not finite."""
+    cdef int64_t nv = x.shape[0], e = i.shape[0], k, count = 0
+    if level not in (1, 2):
+        raise ValueError("level must be 1 or 2")
+    w, degree, scale = laplacian_weights(tris, nv, i, j, inverse, np.asarray(x) if cot else None)
+    rows_ = np.zeros(nv, dtype=np.uint8)
+    valid_ = np.zeros(nv, dtype=np.uint8)
+    cdef uint8_t[::1] rows = rows_, valid = valid_
+    for k in range(unknown.shape[0]):
+        rows[unknown[k]] = 1
+    for k in range(ring0.shape[0]):
+        rows[ring0[k]] = 1
+    if level == 1:
+        for k in range(nv):
+            count += rows[k]
+        plus_ = np.empty(count, dtype=np.int64)
+        minus_ = np.zeros(0, dtype=np.int64)
+        count = 0
+        for k in range(nv):
+            if rows[k]:
+                plus_[count] = k
+                count += 1
+    else:
+        for k in range(nv):
+            valid[k] = rows[k]
+        for k in range(ring1.shape[0]):
+            valid[ring1[k]] = 1
+        for k in range(e):
+            count += (rows[i[k]] or rows[j[k]]) and valid[i[k]] and valid[j[k]]
+        plus_ = np.empty(count, dtype=np.int64)
+        minus_ = np.empty(count, dtype=np.int64)
+        count = 0
+        for k in range(e):
+            if (rows[i[k]] or rows[j[k]]) and valid[i[k]] and valid[j[k]]:
+                plus_[count] = i[k]
+                minus_[count] = j[k]
+                count += 1
+    normal, rhs = normal_equations(x, i, j, w, degree, scale, plus_, minus_, unknown)
+    solution = cholesky_solve(normal, rhs)
+    if solution is None:
+        return None
+    cdef const double[:, :] s = solution
+    cdef int64_t a, b
+    for a in range(s.shape[0]):
+        for b in range(s.shape[1]):
+            if not (fabs(s[a, b]) < INFINITY):
+                return None
+    return solution

@@ -315,8 +315,15 @@ def _fair(
     """
     nv = len(x)
     i, j, inverse = edges
-    w, degree, scale = _kernel().laplacian_weights(tris, nv, i, j, inverse, x if cot else None)
     dense = len(unknown) <= _solvers.DENSE_UNKNOWNS
+    if dense and level > 0:  # the small patch's solve in one compiled call
+        solution = _kernel().fair_dense(
+            x, tris, i, j, inverse, unknown, rings[0], rings[1] if level > 1 else rings[0], level, cot
+        )
+        if solution is None:
+            raise SingularSystemError("the fairing system is not positive definite")
+        return solution
+    w, degree, scale = _kernel().laplacian_weights(tris, nv, i, j, inverse, x if cot else None)
     if level == 0:
         K, _ = _operators(i, j, w, degree, scale, dense)
         known = np.ones(nv, dtype=bool)
@@ -658,19 +665,16 @@ class HoleFiller:
         """
         total, m, n = len(vertices), len(self.triangles), len(self.vertices)
         unknown = np.arange(n, total)
-        loops = np.unique(np.concatenate([hole.vertices for hole in holes]))
-        # triangles within `continuity` rings of the loops in the input, plus every new triangle
-        old, new_tris = triangles[:m], triangles[m:]
+        loops = holes[0].vertices if len(holes) == 1 else np.concatenate([hole.vertices for hole in holes])
+        # triangles within `continuity` rings of the loops in the input, plus every new triangle; a local
+        # numbering (nothing as long as the mesh): the new vertices, every one on a new triangle and
+        # numbered last, stay last; one connectivity for every solve below
+        new_tris = triangles[m:]
         ring_tris, rings = _kernel().rings(self.triangles, *self.vertex_triangles, loops, continuity)
-        local_tris = np.concatenate([old[ring_tris], new_tris])
-        # a local numbering (nothing as long as the mesh): the new vertices, every one on a new triangle
-        # and numbered last, stay last
-        local_vertices = np.unique(local_tris)
-        local_rings = [np.searchsorted(local_vertices, r) for r in rings]
-        local = np.searchsorted(local_vertices, local_tris)
+        local_vertices, local, local_rings, local_edges = _kernel().local_mesh(
+            triangles, m, ring_tris, rings, total
+        )
         local_unknown = np.arange(len(local_vertices) - len(unknown), len(local_vertices))
-        # one connectivity for every solve below
-        local_edges = _kernel().unique_edges(local, len(local_vertices))
         refined = vertices[n:].copy()
         work = vertices  # its new rows hold the candidate being solved from or checked
 
