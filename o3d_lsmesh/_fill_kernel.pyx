@@ -20,6 +20,15 @@ cdef double _TIE = 1e-6  # dynamic programme: largest angles this close tie, and
 cdef double _COCIRCULAR = 1.0 - 1e-6  # flips: a point must be this far inside a circumsphere
 
 
+cdef bint _outside(const int64_t* a, int64_t count, int64_t n) noexcept nogil:
+    """Whether an index of ``a`` is outside ``[0, n)`` (the arguments' check, without NumPy's reductions)."""
+    cdef int64_t k
+    for k in range(count):
+        if a[k] < 0 or a[k] >= n:
+            return True
+    return False
+
+
 cdef inline double _dot(const double* a, const double* b) noexcept nogil:
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
@@ -702,26 +711,42 @@ def count_crossings(const double[:, ::1] vertices, const int64_t[:, ::1] triangl
 # the rings of fixed vertices around the holes
 
 
+cdef object _sorted(int64_t[::1] a, int64_t count):
+    """The first ``count`` values of ``a``, sorted in place (``qsort``), as an array view."""
+    if count > 1:
+        qsort(&a[0], count, sizeof(int64_t), _by_value)
+    return a.base[:count] if a.base is not None else np.asarray(a)[:count]
+
+
 def rings(const int64_t[:, ::1] triangles, const int64_t[::1] indptr, const int64_t[::1] data, seeds,
           int count):
     """Breadth-first vertex rings around ``seeds`` (ring 0) over each vertex's triangles (CSR ``indptr``,
     ``data``): the triangles (sorted) touching rings ``0 .. count - 1`` and the ``count + 1`` rings,
-    each sorted (the last one incomplete: its vertices' other triangles are not taken).
+    each sorted (the last one incomplete: its vertices' other triangles are not taken); ring 0 is
+    ``seeds`` as given.
 
     Visited marks over the whole mesh are allocated zeroed (pages the walk does not touch cost nothing),
     so the work grows with the rings, not with the mesh.
     """
-    cdef int64_t n = indptr.shape[0] - 1, m = triangles.shape[0], i, j, v, t, c, size, found
-    front_ = np.unique(np.asarray(seeds, dtype=np.int64))
-    if len(front_) and (front_[0] < 0 or front_.max() >= n):
+    cdef int64_t n = indptr.shape[0] - 1, m = triangles.shape[0], i, j, v, t, c, size, found, total = 0
+    seeds_ = np.ascontiguousarray(seeds, dtype=np.int64)
+    cdef const int64_t[::1] given = seeds_
+    if given.shape[0] and _outside(&given[0], given.shape[0], n):
         raise ValueError("seeds outside the mesh")
     seen_ = np.zeros(n, dtype=np.uint8)
     took_ = np.zeros(m, dtype=np.uint8)
     cdef uint8_t[::1] seen = seen_, took = took_
-    cdef int64_t[::1] front = front_, touch, fresh
+    cdef int64_t[::1] front, touch, fresh
+    front_ = np.empty(given.shape[0], dtype=np.int64)
+    front = front_
+    size = 0
+    for i in range(given.shape[0]):  # the distinct seeds (np.unique's set; the order does not matter)
+        if not seen[given[i]]:
+            seen[given[i]] = 1
+            front[size] = given[i]
+            size += 1
+    front = front_[:size]
     out_rings, out_taken = [np.asarray(seeds)], []
-    for i in range(front.shape[0]):
-        seen[front[i]] = 1
     for _ in range(count):
         size = 0
         for i in range(front.shape[0]):
@@ -738,8 +763,9 @@ def rings(const int64_t[:, ::1] triangles, const int64_t[::1] indptr, const int6
                         took[t] = 1
                         touch[found] = t
                         found += 1
-        touch_ = np.sort(touch_[:found])
+        touch_ = _sorted(touch, found)
         touch = touch_
+        total += found
         fresh_ = np.empty(3 * found, dtype=np.int64)
         fresh = fresh_
         size = 0
@@ -751,12 +777,19 @@ def rings(const int64_t[:, ::1] triangles, const int64_t[::1] indptr, const int6
                         seen[v] = 1
                         fresh[size] = v
                         size += 1
-        front_ = np.sort(fresh_[:size])
+        front_ = _sorted(fresh, size)
         front = front_
         out_taken.append(touch_)
         out_rings.append(front_)
-    taken = np.sort(np.concatenate(out_taken)) if out_taken else np.zeros(0, dtype=np.int64)
-    return taken, out_rings
+    taken_ = np.empty(total, dtype=np.int64)
+    cdef int64_t[::1] taken = taken_
+    size = 0
+    for touch_ in out_taken:
+        touch = touch_
+        for i in range(touch.shape[0]):
+            taken[size] = touch[i]
+            size += 1
+    return _sorted(taken, total), out_rings
 
 
 # ----------------------------------------------------------------------------------------------------------
@@ -926,7 +959,7 @@ def laplacian_weights(const int64_t[:, ::1] tris, int64_t nv, const int64_t[::1]
     cdef int64_t t = tris.shape[0], e = i.shape[0], h, k, c, a, b, o, positive = 0
     if inverse.shape[0] != 3 * t or j.shape[0] != e:
         raise ValueError("inverse must have 3 t entries, i and j one length")
-    if t and (np.min(tris) < 0 or np.max(tris) >= nv):
+    if t and _outside(&tris[0, 0], 3 * t, nv):
         raise ValueError("tris index outside the nv vertices")
     cdef bint cot = vertices is not None
     cdef const double[:, ::1] x = np.ascontiguousarray(vertices if cot else np.zeros((0, 3)), dtype=np.float64)
@@ -1004,10 +1037,10 @@ def loop_geometry(const int64_t[::1] loop, const int64_t[::1] rows, const double
     cdef int64_t c, t, count
     if rows.shape[0] != k or indptr.shape[0] != n + 1:
         raise ValueError("rows must be (k,), indptr (n + 1,)")
-    if k and (np.min(loop) < 0 or np.max(loop) >= n):
+    if k and _outside(&loop[0], k, n):
         raise ValueError("loop outside the mesh")
-    by_vertex_ = np.argsort(loop, kind="stable")
-    sorted_ = np.asarray(loop)[by_vertex_]
+    by_vertex_ = np.empty(k, dtype=np.int64)
+    sorted_ = np.empty(k, dtype=np.int64)
     points_ = np.empty((k, 3))
     outer_ = np.empty((k, 3))
     lengths_ = np.empty(k)
@@ -1019,7 +1052,16 @@ def loop_geometry(const int64_t[::1] loop, const int64_t[::1] rows, const double
     cdef double u[3]
     cdef double v[3]
     cdef double norm
+    cdef Half* order = <Half*>malloc(max(k, 1) * sizeof(Half))
+    if not order:
+        raise MemoryError
     with nogil:
+        for p in range(k):  # the loop sorted by vertex, ties by position: a stable argsort
+            order[p].key, order[p].h = loop[p], p
+        qsort(order, k, sizeof(Half), _by_key)
+        for p in range(k):
+            ordered[p], by_vertex[p] = order[p].key, order[p].h
+        free(order)
         for p in range(k):
             for c in range(3):
                 points[p, c] = vertices[loop[p], c]
@@ -1081,7 +1123,7 @@ def unique_edges(const int64_t[:, ::1] tris, int64_t nv):
     one hole (called twice per hole): 30 against 176 us at 60 triangles, where that function's counting
     sorts over whole-mesh arrays cost more than the sort itself."""
     cdef int64_t t = tris.shape[0], nh = 3 * t, h, e = 0, a, b
-    if t and (np.min(tris) < 0 or np.max(tris) >= nv):
+    if t and _outside(&tris[0, 0], 3 * t, nv):
         raise ValueError("tris index outside the nv vertices")
     if nv >= 2**31:
         raise ValueError("a local mesh has fewer than 2^31 vertices")
@@ -1114,7 +1156,7 @@ def keeps_facing(const double[:, ::1] x, const double[:, :] again, const int64_t
     cdef int64_t n = x.shape[0], p = again.shape[0], first = n - p, q = new_tris.shape[0], r, c, v
     if p > n or again.shape[1] != 3:
         raise ValueError("again must be (p, 3) with p <= len(x)")
-    if q and (np.min(new_tris) < 0 or np.max(new_tris) >= n):
+    if q and _outside(&new_tris[0, 0], 3 * q, n):
         raise ValueError("new_tris index outside x")
     cdef double lo[3]
     cdef double hi[3]

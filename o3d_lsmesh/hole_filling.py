@@ -707,10 +707,18 @@ class HoleFiller:
                 work[n:] = refined
             yield -1, refined  # the refined patch as triangulated
 
+        tried = []
+        if len(holes) == 1:  # the first candidate free of crossings, without the per-hole bookkeeping
+            for rank, (level, candidate) in enumerate(candidates()):
+                tried.append(level)
+                work[n:] = candidate
+                if not _crossings(work, triangles, m, self.index, None).any():
+                    return np.array([level], dtype=np.int64), np.zeros(0, dtype=np.int64)
+            work[n:] = refined
+            return np.array([tried[0]], dtype=np.int64), np.zeros(1, dtype=np.int64)
         vertex_owner = _vertex_owner(new_tris, owner, n, total - n)
         chosen = np.full(len(holes), -1)
         out = refined.copy()
-        tried = []
         for rank, (level, candidate) in enumerate(candidates()):
             tried.append(level)
             work[n:] = candidate
