@@ -870,7 +870,7 @@ class _TriangleIndex:
 
 #: Patches of at most this many new triangles test each against every candidate near the patch
 #: (:func:`o3d_lsmesh._fill_kernel.patch_crossings`); larger ones sweep (:meth:`_TriangleIndex.near`).
-_SMALL_PATCH = 64
+_SMALL_PATCH = 256
 
 
 def _crossings(
