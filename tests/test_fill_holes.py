@@ -1154,7 +1154,9 @@ def test_loop_geometry_matches_plain_loops(seed, size):
     rows = rng.integers(0, 3 * m, len(loop))
     order = np.argsort(tris.ravel(), kind="stable")
     indptr = np.concatenate([[0], np.cumsum(np.bincount(tris.ravel(), minlength=n))])
-    got_points, outer, got, spacing = _fill_kernel.loop_geometry(loop, rows, points, tris, indptr, order // 3)
+    got_points, outer, got, spacing, pairs = _fill_kernel.loop_geometry(
+        loop, rows, points, tris, indptr, order // 3
+    )
     assert np.array_equal(got_points, points[loop])
     for i, row in enumerate(rows.tolist()):
         a, b, c = points[tris[row % m]]
@@ -1171,6 +1173,7 @@ def test_loop_geometry_matches_plain_loops(seed, size):
             if frozenset((loop[p], loop[q])) in edges and q != (p + 1) % k and p != (q + 1) % k:
                 expected[p, q] = True
     assert np.array_equal(got, expected)
+    assert pairs.tolist() == [[p, q] for p in range(k) for q in range(p + 1, k) if expected[p, q]]
 
 
 @settings(max_examples=25, deadline=None)
