@@ -860,7 +860,9 @@ class _TriangleIndex:
             c, r = (centre, radius) if mine is None else (centre[mine], radius[mine])
             for origin, cell, dims, indptr, members, reach in self.grids:
                 found.append(
-                    kernel.grid_near(c, r, origin, cell, dims, indptr, members, self.centre, self.radius, reach)
+                    kernel.grid_near(
+                        c, r, origin, cell, dims, indptr, members, self.centre, self.radius, reach
+                    )
                 )
         # the two grids hold disjoint triangles: one patch's hits are distinct, several patches' may repeat
         candidates = np.concatenate(found) if len(masks) == 1 else np.unique(np.concatenate(found))
@@ -887,7 +889,9 @@ def _crossings(
     q = len(triangles) - first_new
     if index is not None and 0 < q <= _SMALL_PATCH and (groups is None or not groups.any()):
         # one small patch (``groups`` all 0): candidates and tests in one compiled call
-        return _kernel().patch_crossings(vertices, triangles, first_new, index.grids, index.centre, index.radius)
+        return _kernel().patch_crossings(
+            vertices, triangles, first_new, index.grids, index.centre, index.radius
+        )
     new = np.arange(first_new, len(triangles))
     result = np.zeros(len(new))
     if len(new) == 0:

@@ -1280,3 +1280,127 @@ def test_dynamic_programme_falls_back_when_every_chord_is_an_edge():
     assert np.array_equal(_minimum_weight_triangulation(points, outer, forbidden), expected)
     half = {(a, b) for t in expected.tolist() for a, b in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0]))}
     assert all(((i + 1) % 4, i) in half for i in range(4))
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 30), st.integers(1, 3), st.booleans())
+def test_cholesky_solve_is_scipys_cho_solve(seed, p, c, singular):
+    # reference: SciPy's cho_factor and cho_solve, the same LAPACK routines: equal to the last bit
+    from scipy.linalg import cho_factor, cho_solve
+
+    rng = np.random.default_rng(seed)
+    A = rng.normal(size=(p + 3, p))
+    matrix = A.T @ A + 1e-3 * np.eye(p)
+    matrix = 0.5 * (matrix + matrix.T)  # exactly symmetric, as the normal equations are
+    rhs = rng.normal(size=(p, c))
+    if singular:
+        matrix[p - 1, p - 1] = -1.0
+        assert _fill_kernel.cholesky_solve(matrix.copy(), rhs) is None
+        return
+    got = _fill_kernel.cholesky_solve(matrix.copy(), rhs)
+    assert np.array_equal(got, cho_solve(cho_factor(matrix), rhs))
+    bad = matrix.copy()
+    bad[0, 0] = np.nan
+    assert _fill_kernel.cholesky_solve(bad, rhs) is None
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 40), st.floats(0.01, 0.5))
+def test_grid_queries_find_every_overlapping_sphere(seed, queries, size):
+    # reference: every triangle's bounding sphere against every query sphere, by distances; the grids
+    # (of :class:`_TriangleIndex`) must return a superset, and the pairs after the exact test be those
+    rng = np.random.default_rng(seed)
+    corners = rng.random((200, 1, 3)) * [3, 1, 2] + rng.normal(scale=0.03, size=(200, 3, 3))
+    corners[:6, 2] += rng.normal(scale=1.0, size=(6, 3))  # a few long slivers: the second grid
+    V, T = corners.reshape(-1, 3), np.arange(600, dtype=np.int64).reshape(200, 3)
+    index = _TriangleIndex(V, T)
+    centre, radius = rng.random((queries, 3)) * [3, 1, 2], size * rng.random(queries)
+    near = (
+        np.linalg.norm(centre[:, None] - index.centre[None], axis=2) <= radius[:, None] + index.radius[None]
+    )
+    found = set()
+    for origin, cell, dims, indptr, members, reach in index.grids:
+        hits = _fill_kernel.grid_near(
+            centre, radius, origin, cell, dims, indptr, members, index.centre, index.radius, reach
+        )
+        assert len(set(hits.tolist())) == len(hits)
+        found |= set(hits.tolist())
+    assert set(np.flatnonzero(near.any(axis=0)).tolist()) <= found
+    qi, ti = index.near(centre, radius)
+    assert sorted(zip(qi.tolist(), ti.tolist())) == sorted(zip(*(x.tolist() for x in np.nonzero(near))))
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 12))
+def test_patch_crossings_match_plain_segment_tests(seed, q):
+    # reference: the plain segment-triangle tests of every new triangle against every other one
+    rng = np.random.default_rng(seed)
+    V = rng.random((40, 3))
+    T = np.array([rng.choice(40, 3, replace=False) for _ in range(30 + q)], dtype=np.int64)
+    index = _TriangleIndex(V, T[:30])
+    got = _fill_kernel.patch_crossings(V, T, 30, index.grids, index.centre, index.radius)
+    assert np.array_equal(got, reference_crossings(V, T, 30))
+    assert np.array_equal(_crossings(V, T, 30, index, None), got)
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(3, 7))
+def test_local_mesh_is_the_unique_numbering(seed, size):
+    # reference: np.unique of the local triangles and np.searchsorted into it; the edges of unique_edges
+    points, tris, rng = _random_patch(seed, size, 0.3)
+    n, m = len(points), len(tris)
+    first_new = int(rng.integers(0, m))
+    ring_tris = np.sort(rng.choice(first_new, rng.integers(0, first_new + 1), replace=False)).astype(np.int64)
+    local_tris = np.concatenate([tris[ring_tris], tris[first_new:]])
+    vertices = np.unique(local_tris)
+    rings = [vertices[rng.random(len(vertices)) < 0.5] for _ in range(2)]
+    got_vertices, local, got_rings, edges = _fill_kernel.local_mesh(tris, first_new, ring_tris, rings, n)
+    assert np.array_equal(got_vertices, vertices)
+    assert np.array_equal(local, np.searchsorted(vertices, local_tris))
+    for got, ring in zip(got_rings, rings):
+        assert np.array_equal(got, np.searchsorted(vertices, ring))
+    for got, expected in zip(edges, _fill_kernel.unique_edges(local, len(vertices))):
+        assert np.array_equal(got, expected)
+    with pytest.raises(ValueError, match="outside"):
+        _fill_kernel.local_mesh(tris, first_new, ring_tris, rings, int(local_tris.max()))
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(4, 7), st.integers(1, 2), st.booleans())
+def test_fair_dense_matches_the_sparse_solve(seed, size, level, cot):
+    # reference: the sparse path of _fair (CSR operators, SciPy's products, solve_spd's sparse solver)
+    from o3d_lsmesh import hole_filling
+
+    points, tris, rng = _random_patch(seed, size, 0.4)
+    n = len(points)
+    border = np.unique(
+        np.concatenate(
+            [np.arange(size), np.arange(n - size, n), np.arange(0, n, size), np.arange(size - 1, n, size)]
+        )
+    )
+    inner = np.setdiff1d(np.arange(n), border)
+    assume(len(inner) > 0)
+    edges = _fill_kernel.unique_edges(tris, n)
+    ring0 = np.intersect1d(border, np.unique(tris[np.isin(tris, inner).any(axis=1)]))
+    rings = [ring0, np.setdiff1d(border, ring0)]
+    got = _fill_kernel.fair_dense(points, tris, *edges, inner, rings[0], rings[1], level, cot)
+    dense = hole_filling._solvers.DENSE_UNKNOWNS
+    try:
+        hole_filling._solvers.DENSE_UNKNOWNS = -1  # every solve sparse
+        expected = hole_filling._fair(points, tris, inner, rings, level, edges, cot)
+    finally:
+        hole_filling._solvers.DENSE_UNKNOWNS = dense
+    np.testing.assert_allclose(got, expected, rtol=1e-8, atol=1e-8)
+    with pytest.raises(ValueError, match="level"):
+        _fill_kernel.fair_dense(points, tris, *edges, inner, rings[0], rings[1], 0, cot)
+
+
+def test_empty_interpolation_is_built_when_read():
+    # the all-zero interpolation matrix of a fill without interpolation: its shape, and it pickles
+    import pickle
+
+    V, T = icosphere(2)
+    out = fill_holes_arrays(V, T[3:])
+    assert out.interpolation.shape == (len(out.vertices) - len(V), len(V))
+    assert out.interpolation.nnz == 0
+    assert pickle.loads(pickle.dumps(out)).interpolation.shape == out.interpolation.shape
