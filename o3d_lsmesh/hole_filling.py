@@ -709,7 +709,7 @@ class HoleFiller:
 
         tried = []
         if len(holes) == 1:  # the first candidate free of crossings, without the per-hole bookkeeping
-            for rank, (level, candidate) in enumerate(candidates()):
+            for level, candidate in candidates():
                 tried.append(level)
                 work[n:] = candidate
                 if not _crossings(work, triangles, m, self.index, None).any():

@@ -1371,7 +1371,7 @@ def test_fair_dense_matches_the_sparse_solve(seed, size, level, cot):
     # reference: the sparse path of _fair (CSR operators, SciPy's products, solve_spd's sparse solver)
     from o3d_lsmesh import hole_filling
 
-    points, tris, rng = _random_patch(seed, size, 0.4)
+    points, tris, _ = _random_patch(seed, size, 0.4)
     n = len(points)
     border = np.unique(
         np.concatenate(
