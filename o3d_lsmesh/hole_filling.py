@@ -571,34 +571,43 @@ class HoleFiller:
                 piece_extra.append(extra)
                 piece_tris.append(tris)
                 bar.update(1)
-        lengths = np.array([len(loop) for loop in piece_loop])
-        # every piece refined at once, in disjoint local index ranges
-        sizes = np.array([len(p) + len(e) for p, e in zip(piece_points, piece_extra)])
-        starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
-        all_points = np.concatenate([np.concatenate([p, e]) for p, e in zip(piece_points, piece_extra)])
-        all_tris = np.concatenate([t + start for t, start in zip(piece_tris, starts)])
-        point_piece = np.repeat(np.arange(count), sizes)
+        if count == 1:  # one simple loop, the usual fill: nothing to offset or gather
+            extra = piece_extra[0]
+            all_points = np.concatenate([piece_points[0], extra]) if len(extra) else piece_points[0]
+            all_tris = piece_tris[0]
+            point_piece = np.zeros(len(all_points), dtype=np.int64)
+        else:  # every piece refined at once, in disjoint local index ranges
+            lengths = np.array([len(loop) for loop in piece_loop])
+            sizes = np.array([len(p) + len(e) for p, e in zip(piece_points, piece_extra)])
+            starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+            all_points = np.concatenate([np.concatenate([p, e]) for p, e in zip(piece_points, piece_extra)])
+            all_tris = np.concatenate([t + start for t, start in zip(piece_tris, starts)])
+            point_piece = np.repeat(np.arange(count), sizes)
         if density > 0:
+            # Liepa's scale: each loop vertex's mean edge length, the chords' spacing on their points
             sigma = [
                 np.concatenate(
                     [self.sigma[loop] / max(density, 1e-300), np.full(len(extra), spacing / density)]
                 )
+                if len(extra)
+                else self.sigma[loop] / max(density, 1e-300)
                 for loop, extra, spacing in zip(piece_loop, piece_extra, piece_spacing)
             ]
             # mesh edges between loop vertices: no flip may make them twice
-            fixed = [pairs + start for pairs, start in zip(piece_pairs, starts)]
             all_points, all_tris, point_piece = _kernel().refine(
                 all_points,
                 sigma[0] if count == 1 else np.concatenate(sigma),
                 all_tris,
-                fixed[0] if count == 1 else np.concatenate(fixed),
+                piece_pairs[0]
+                if count == 1
+                else np.concatenate([f + s for f, s in zip(piece_pairs, starts)]),
                 point_piece,
                 _ALPHA,
             )
         # global numbering: loop points (first in each piece, in order) are mesh vertices; the others
         # are new, numbered piece by piece
         if count == 1:  # the usual fill, one simple loop: its points first, then the new ones in order
-            fresh_points = all_points[lengths[0] :]
+            fresh_points = all_points[len(piece_loop[0]) :]
             new_tris = np.concatenate([piece_loop[0], n + np.arange(len(fresh_points))])[all_tris]
             owner = np.zeros(len(new_tris), dtype=np.int64)
             tri_piece = owner
