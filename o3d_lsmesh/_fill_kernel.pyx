@@ -946,7 +946,7 @@ cdef double _sum(const double* a, int64_t n) noexcept nogil:
     return total
 
 
-def laplacian_weights(const int64_t[:, ::1] tris, int64_t nv, const int64_t[::1] i, const int64_t[::1] j,
+cpdef laplacian_weights(const int64_t[:, ::1] tris, int64_t nv, const int64_t[::1] i, const int64_t[::1] j,
                       const int64_t[::1] inverse, vertices=None):
     """Edge weights ``w`` (edges ``(i, j)``; ``inverse``: the edge of each half-edge ``(c, c + 1)`` of each
     triangle, corner-major), vertex degrees ``sum w`` and the Laplacian's row scales of a local mesh.
@@ -1200,7 +1200,7 @@ def keeps_facing(const double[:, ::1] x, const double[:, :] again, const int64_t
 # the fairing's normal equations on a small patch
 
 
-def normal_equations(const double[:, ::1] x, const int64_t[::1] i, const int64_t[::1] j, const double[::1] w,
+cpdef normal_equations(const double[:, ::1] x, const int64_t[::1] i, const int64_t[::1] j, const double[::1] w,
                      const double[::1] degree, const double[::1] scale, const int64_t[::1] plus,
                      const int64_t[::1] minus, const int64_t[::1] unknown):
     """The least-squares system of the rows ``A = L[plus] - L[minus]`` (``minus`` empty: ``L[plus]``) of
@@ -1315,7 +1315,7 @@ cdef int _load_lapack() except -1:
     return 0
 
 
-def cholesky_solve(double[:, ::1] matrix, const double[:, ::1] rhs):
+cpdef cholesky_solve(double[:, ::1] matrix, const double[:, ::1] rhs):
     """Solve ``matrix x = rhs`` for a symmetric positive definite ``(p, p)`` matrix and ``(p, c)`` right-hand
     sides, as ``cho_solve(cho_factor(matrix), rhs)`` (upper factor, LAPACK ``dpotrf`` and ``dpotrs``);
     ``matrix`` is overwritten. Returns ``(p, c)``, or None if the matrix is not numerically positive
@@ -1582,7 +1582,7 @@ def fair_dense(const double[:, ::1] x, const int64_t[:, ::1] tris, const int64_t
     cdef int64_t nv = x.shape[0], e = i.shape[0], k, count = 0
     if level not in (1, 2):
         raise ValueError("level must be 1 or 2")
-    w, degree, scale = laplacian_weights(tris, nv, i, j, inverse, np.asarray(x) if cot else None)
+    w, degree, scale = laplacian_weights(tris, nv, i, j, inverse, x.base if cot else None)
     rows_ = np.zeros(nv, dtype=np.uint8)
     valid_ = np.zeros(nv, dtype=np.uint8)
     cdef uint8_t[::1] rows = rows_, valid = valid_
