@@ -93,3 +93,14 @@ def fair_dense(
     level: int,
     cot: bool,
 ) -> np.ndarray | None: ...
+def fill_loop(
+    loop: np.ndarray,
+    rows: np.ndarray,
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    indptr: np.ndarray,
+    data: np.ndarray,
+    vertex_sigma: np.ndarray,
+    density: float,
+    alpha: float,
+) -> tuple[np.ndarray, np.ndarray]: ...

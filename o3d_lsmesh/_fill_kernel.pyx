@@ -1626,3 +1626,35 @@ def fair_dense(const double[:, ::1] x, const int64_t[:, ::1] tris, const int64_t
             if not (fabs(s[a, b]) < INFINITY):
                 return None
     return solution
+
+
+def fill_loop(const int64_t[::1] loop, const int64_t[::1] rows, const double[:, ::1] vertices,
+              const int64_t[:, ::1] triangles, const int64_t[::1] indptr, const int64_t[::1] data,
+              const double[::1] vertex_sigma, double density, double alpha):
+    """One simple loop triangulated and refined in one call (``hole_filling``'s usual fill, a loop short
+    enough for the programme): :func:`loop_geometry`, :func:`minimum_weight_triangulation` (its chords
+    that are mesh edges forbidden) and, if ``density > 0``, :func:`refine` with the loop vertices'
+    scales ``vertex_sigma / density``. Returns the new points ``(p, 3)`` and the triangles ``(t, 3)`` in
+    the mesh's numbering, the new points numbered from ``len(vertices)`` in order."""
+    cdef int64_t k = loop.shape[0], n = vertices.shape[0], p, c
+    points, outer, chords, spacing, pairs = loop_geometry(loop, rows, vertices, triangles, indptr, data)
+    cdef const uint8_t[:, ::1] f = chords.view(np.uint8)
+    cdef bint any_chord = False
+    for p in range(k * k):
+        if f[p // k, p % k]:
+            any_chord = True
+            break
+    tris = minimum_weight_triangulation(points, outer, chords.view(np.uint8) if any_chord else None)
+    if density > 0:
+        sigma_ = np.empty(k)
+        for p in range(k):
+            sigma_[p] = vertex_sigma[loop[p]] / fmax(density, 1e-300)
+        points, tris, _ = refine(points, sigma_, tris, pairs, np.zeros(k, dtype=np.int64), alpha)
+    cdef const int64_t[:, ::1] local = tris
+    cdef int64_t t = local.shape[0]
+    out_ = np.empty((t, 3), dtype=np.int64)
+    cdef int64_t[:, ::1] out = out_
+    for p in range(t):
+        for c in range(3):
+            out[p, c] = loop[local[p, c]] if local[p, c] < k else n + local[p, c] - k
+    return points[k:], out_
