@@ -1415,12 +1415,12 @@ def patch_crossings(const double[:, ::1] vertices, const int64_t[:, ::1] triangl
     each) and against itself, the candidates all in one call: each new triangle's bounding sphere
     (about its centroid, as NumPy's ``mean`` and ``norm`` compute them) tested against every candidate's,
     which beats the sweep of :func:`sphere_pairs` on a few dozen triangles."""
-    cdef int64_t q = triangles.shape[0] - first_new, i, k, t, x, y, start, stop, n_cand = 0, capacity = 0
+    cdef int64_t q = triangles.shape[0] - first_new, i, k, t, x, y, n_cand = 0, capacity = 0
     cdef int64_t lo_cell[3]
     cdef int64_t hi_cell[3]
     cdef double lo[3]
     cdef double hi[3]
-    cdef double d, g, gap, r, reach, cell
+    cdef double d, gap, reach, cell
     cdef int c, v
     result_ = np.zeros(max(q, 0))
     if q <= 0:

@@ -311,7 +311,9 @@ def _fair(
     only vertices whose one-rings are complete in ``tris``. ``edges`` is
     :func:`o3d_lsmesh._fill_kernel.unique_edges` of ``tris``. Small systems (at most
     :data:`o3d_lsmesh._solvers.DENSE_UNKNOWNS` unknowns) are assembled by the compiled
-    :func:`o3d_lsmesh._fill_kernel.normal_equations` and solved dense; larger ones sparse.
+    :func:`o3d_lsmesh._fill_kernel.normal_equations` and solved by LAPACK's dense Cholesky, at
+    continuity 1 and 2 in one call (:func:`o3d_lsmesh._fill_kernel.fair_dense`: on a hole of a few
+    vertices the NumPy glue between the steps cost more than the steps); larger ones sparse.
     """
     nv = len(x)
     i, j, inverse = edges
@@ -911,7 +913,9 @@ def _crossings(
     :class:`_TriangleIndex` of ``triangles[:first_new]``; if None, of the input triangles in the new
     triangles' box), queried per patch when ``groups`` (or None) labels each new triangle's patch, and the
     new ones among themselves. Each pair is tested on the 17 axes that separate two disjoint triangles
-    (two normals, nine edge-edge cross products, six in-plane edge normals for coplanar pairs).
+    (two normals, nine edge-edge cross products, six in-plane edge normals for coplanar pairs). One patch
+    of at most :data:`_SMALL_PATCH` triangles with an ``index`` is checked in one compiled call, each new
+    triangle against every candidate of the grids (:func:`o3d_lsmesh._fill_kernel.patch_crossings`).
     """
     q = len(triangles) - first_new
     if index is not None and 0 < q <= _SMALL_PATCH and (groups is None or not groups.any()):
