@@ -104,3 +104,23 @@ def fill_loop(
     density: float,
     alpha: float,
 ) -> tuple[np.ndarray, np.ndarray]: ...
+def fair_dense_twice(
+    x: np.ndarray,
+    tris: np.ndarray,
+    i: np.ndarray,
+    j: np.ndarray,
+    inverse: np.ndarray,
+    unknown: np.ndarray,
+    ring0: np.ndarray,
+    ring1: np.ndarray,
+    level: int,
+) -> tuple[np.ndarray | None, np.ndarray | None]: ...
+def ring_mesh(
+    triangles: np.ndarray,
+    indptr: np.ndarray,
+    data: np.ndarray,
+    seeds: np.ndarray,
+    count: int,
+    all_triangles: np.ndarray,
+    nv: int,
+) -> tuple[np.ndarray, np.ndarray, list[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]]: ...

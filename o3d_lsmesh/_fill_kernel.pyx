@@ -1571,7 +1571,7 @@ def local_mesh(const int64_t[:, ::1] triangles, int64_t first_new, const int64_t
     return vertices_, local_, local_rings, unique_edges(local_, count)
 
 
-def fair_dense(const double[:, ::1] x, const int64_t[:, ::1] tris, const int64_t[::1] i,
+cpdef fair_dense(const double[:, ::1] x, const int64_t[:, ::1] tris, const int64_t[::1] i,
                const int64_t[::1] j, const int64_t[::1] inverse, const int64_t[::1] unknown,
                const int64_t[::1] ring0, const int64_t[::1] ring1, int level, bint cot):
     """The dense fairing solve of ``hole_filling._fair`` at continuity ``level`` 1 or 2: the Laplacian
@@ -1658,3 +1658,31 @@ def fill_loop(const int64_t[::1] loop, const int64_t[::1] rows, const double[:, 
         for c in range(3):
             out[p, c] = loop[local[p, c]] if local[p, c] < k else n + local[p, c] - k
     return points[k:], out_
+
+
+def fair_dense_twice(const double[:, ::1] x, const int64_t[:, ::1] tris, const int64_t[::1] i,
+                     const int64_t[::1] j, const int64_t[::1] inverse, const int64_t[::1] unknown,
+                     const int64_t[::1] ring0, const int64_t[::1] ring1, int level):
+    """:func:`fair_dense` with uniform weights, then again with cotangent weights read off that solution
+    (``x`` with the ``unknown`` rows replaced by it): ``(uniform, cotangent)``, either None where its
+    system fails (the cotangent one is not tried when the uniform one fails)."""
+    cdef int64_t r, c
+    uniform = fair_dense(x, tris, i, j, inverse, unknown, ring0, ring1, level, False)
+    if uniform is None:
+        return None, None
+    embedded_ = np.array(x, dtype=np.float64, order="C")
+    cdef double[:, ::1] embedded = embedded_
+    cdef const double[:, :] u = uniform
+    for r in range(unknown.shape[0]):
+        for c in range(3):
+            embedded[unknown[r], c] = u[r, c]
+    return uniform, fair_dense(embedded, tris, i, j, inverse, unknown, ring0, ring1, level, True)
+
+
+def ring_mesh(const int64_t[:, ::1] triangles, const int64_t[::1] indptr, const int64_t[::1] data, seeds,
+              int count, const int64_t[:, ::1] all_triangles, int64_t nv):
+    """:func:`rings` around ``seeds`` in the input ``triangles``, then :func:`local_mesh` of their
+    triangles and the new ones (``all_triangles`` from ``len(triangles)`` on) over the ``nv`` vertices,
+    in one call."""
+    ring_tris, found = rings(triangles, indptr, data, seeds, count)
+    return local_mesh(all_triangles, triangles.shape[0], ring_tris, found, nv)

@@ -699,9 +699,8 @@ class HoleFiller:
         # numbering (nothing as long as the mesh): the new vertices, every one on a new triangle and
         # numbered last, stay last; one connectivity for every solve below
         new_tris = triangles[m:]
-        ring_tris, rings = _kernel().rings(self.triangles, *self.vertex_triangles, loops, continuity)
-        local_vertices, local, local_rings, local_edges = _kernel().local_mesh(
-            triangles, m, ring_tris, rings, total
+        local_vertices, local, local_rings, local_edges = _kernel().ring_mesh(
+            self.triangles, *self.vertex_triangles, loops, continuity, triangles, total
         )
         local_unknown = np.arange(len(local_vertices) - len(unknown), len(local_vertices))
         refined = vertices[n:].copy()
@@ -716,18 +715,27 @@ class HoleFiller:
                 return None
             return x if np.isfinite(x).all() else None
 
+        def solve_twice(level: int) -> tuple[np.ndarray | None, np.ndarray | None]:
+            """The uniform solve, then the cotangent one from it, in one compiled call (a small patch)."""
+            ring = local_rings[1] if level > 1 else local_rings[0]
+            return _kernel().fair_dense_twice(
+                work[local_vertices], local, *local_edges, local_unknown, local_rings[0], ring, level
+            )
+
         def candidates():  # lazily: most calls stop at the first
+            dense = len(unknown) <= _solvers.DENSE_UNKNOWNS
             for level in (
                 range(continuity, -1, -1) if len(unknown) else []
             ):  # nothing to fair without new vertices
-                solution = solve(level, False)
+                twice = cot and level > 0 and dense
+                solution, again = solve_twice(level) if twice else (solve(level, False), None)
                 if solution is None:
                     continue
                 work[n:] = solution
                 if cot and level > 0:
                     # cotangent weights (clamped, area-normalized) read off the uniform solution: a fair
                     # embedding, where weights from the flat refined patch diverged (camel 15h: 87 h off)
-                    again = solve(level, True)
+                    again = again if twice else solve(level, True)
                     if again is not None and _kernel().keeps_facing(work, again, new_tris):
                         work[n:] = again
                         yield level, _kernel().tangential_relax(work, new_tris, n)

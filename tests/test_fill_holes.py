@@ -1404,3 +1404,45 @@ def test_empty_interpolation_is_built_when_read():
     assert out.interpolation.shape == (len(out.vertices) - len(V), len(V))
     assert out.interpolation.nnz == 0
     assert pickle.loads(pickle.dumps(out)).interpolation.shape == out.interpolation.shape
+
+
+@settings(max_examples=20, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(4, 7), st.integers(1, 2))
+def test_fused_calls_equal_their_steps(seed, size, level):
+    # fair_dense_twice: the uniform solve, then the cotangent one from the embedding it gives; ring_mesh:
+    # rings then local_mesh (references: the separate calls, equal to the last bit)
+    points, tris, _ = _random_patch(seed, size, 0.4)
+    n = len(points)
+    inner = np.array([v for v in range(n) if 0 < v % size < size - 1 and size <= v < n - size])
+    assume(len(inner) > 0)
+    edges = _fill_kernel.unique_edges(tris, n)
+    ring0 = np.setdiff1d(np.unique(tris[np.isin(tris, inner).any(axis=1)]), inner)
+    ring1 = np.setdiff1d(np.arange(n), np.concatenate([inner, ring0]))
+    uniform, again = _fill_kernel.fair_dense_twice(points, tris, *edges, inner, ring0, ring1, level)
+    first = _fill_kernel.fair_dense(points, tris, *edges, inner, ring0, ring1, level, False)
+    embedded = points.copy()
+    embedded[inner] = first
+    second = _fill_kernel.fair_dense(embedded, tris, *edges, inner, ring0, ring1, level, True)
+    assert np.array_equal(uniform, first)
+    assert np.array_equal(again, second)
+    m = len(tris) - 2
+    got = _fill_kernel.ring_mesh(
+        tris[:m], indptr_of(tris[:m], n), data_of(tris[:m], n), inner[:1], level, tris, n
+    )
+    ring_tris, found = _fill_kernel.rings(
+        tris[:m], indptr_of(tris[:m], n), data_of(tris[:m], n), inner[:1], level
+    )
+    expected = _fill_kernel.local_mesh(tris, m, ring_tris, found, n)
+    assert np.array_equal(got[0], expected[0]) and np.array_equal(got[1], expected[1])
+    assert all(np.array_equal(a, b) for a, b in zip(got[2], expected[2]))
+    assert all(np.array_equal(a, b) for a, b in zip(got[3], expected[3]))
+
+
+def indptr_of(tris, n):
+    """Each vertex's triangles, CSR row pointers (as HoleFiller's ``vertex_triangles``)."""
+    return np.concatenate([[0], np.cumsum(np.bincount(tris.ravel(), minlength=n))]).astype(np.int64)
+
+
+def data_of(tris, n):
+    """Each vertex's triangles, CSR column indices."""
+    return (np.argsort(tris.ravel(), kind="stable") // 3).astype(np.int64)
