@@ -451,20 +451,21 @@ NOTES = """\
   components, each vertex's triangles) and ``HoleFiller(V, T).fill()`` with the filler built before the
   clock, as CGAL's structure. Read the CPU columns: the wall clock of this shared machine swings with
   the other jobs, and the CPU ratios still vary by up to 1.3x between runs (CGAL's camel 2.5h: 0.43 ms
-  in the previous run, 0.58 in this one, the machine more loaded). The per-hole work is compiled
+  in an earlier run, 0.55-0.58 in the last two). The per-hole work is compiled
   (``o3d_lsmesh/_fill_kernel.pyx``), and a small hole's steps are each one call: the loop's
   triangulation and refinement (``fill_loop``: the loop's geometry, the dynamic programme, the splits and
-  flips), the fixed rings and the local mesh, each dense fairing solve (``fair_dense``: weights, normal
-  equations, LAPACK's Cholesky reached directly), the tangential relaxation, and the crossing test
-  (``patch_crossings``: the triangles near the patch from uniform grids built with the filler, every
-  new triangle against each, the separating axes). With the prebuilt filler the CPU-time ratio is
-  within the 2x target on every case: 1.37 (horse 2.5h), 1.84 (camel 2.5h), 1.47 (camel 15h), 1.18
-  (camel 6h), 0.54-0.96 on the others. Measured interleaved in one process against the code before
-  this change (CPU per hole, prebuilt, best of 15 rounds, the machine loaded: about 1.4x the quiet
-  times): horse 2.5h 2.54 -> 1.16 ms, 6h 5.49 -> 3.84, 15h 40.8 -> 36.6 (5 rounds), camel 2.5h 2.41 ->
-  1.08, 6h 3.32 -> 2.22, 15h 1.67 -> 0.73, bunny 4.50 -> 3.78, plane_holes 0.58 -> 0.47, with
-  bit-identical fills (triangles and vertices, on these cases and generated spheres and tori with one,
-  three and a 3-edge hole, under eight option sets, prebuilt and from arrays). What is left on a small
+  flips), the fixed rings with the local mesh (``ring_mesh``), the uniform and cotangent fairing solves
+  (``fair_dense_twice``: weights, normal equations, LAPACK's Cholesky reached directly), the tangential
+  relaxation, and the crossing test (``patch_crossings``: the triangles near the patch from uniform
+  grids built with the filler, every new triangle against each, the separating axes). With the
+  prebuilt filler the CPU-time ratio is within the 2x target on every case: 1.33 (horse 2.5h), 1.84
+  (camel 2.5h), 1.13 (camel 15h), 1.29 (camel 6h), 0.53-1.04 on the others (1.37, 1.84, 1.47, 1.18 in
+  the run before). Measured interleaved in one process against the code before this change (CPU per
+  hole, prebuilt, best of 15 rounds): horse 2.5h 1.89 -> 0.83 ms, 6h 3.79 -> 2.55, 15h 36.5 -> 36.0 (5
+  rounds), camel 2.5h 1.67 -> 0.71, 6h 3.46 -> 2.27, 15h 2.07 -> 0.88, bunny 4.55 -> 3.96, plane_holes
+  0.59 -> 0.48, with bit-identical fills (triangles and vertices, on these cases and generated spheres
+  and tori with one, three and a 3-edge hole, under eight option sets, prebuilt and from arrays). The
+  time from arrays (15-38x CGAL on the small holes) is the whole-mesh analysis. What is left on a small
   hole is mostly the first touch of code and data after building a filler (each compiled call costs
   2-3x its repeat; a fill right after the build runs about 1.5x slower than a second one), the copy of
   the whole mesh into the result (about a sixth of camel 2.5h's fill: CGAL edits its structure in
