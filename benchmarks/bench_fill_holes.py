@@ -450,21 +450,26 @@ NOTES = """\
   twice: ``fill_holes_arrays`` from arrays (including the whole-mesh analysis: one edge sort, the loops,
   components, each vertex's triangles) and ``HoleFiller(V, T).fill()`` with the filler built before the
   clock, as CGAL's structure. Read the CPU columns: the wall clock of this shared machine swings with
-  the other jobs, and the CPU ratios still vary by up to 1.3x between runs (CGAL's camel 2.5h: 0.43-0.53
-  ms). The per-hole loops are compiled (``o3d_lsmesh/_fill_kernel.pyx``: the dynamic programme, the
-  refinement's splits and flips, the fixed rings, the Laplacian weights and the small normal
-  equations, the tangential relaxation, the crossing test's sphere sweep and separating axes). With the
-  prebuilt filler the CPU-time ratio is within the 2x target on horse 6h and 15h, bunny and plane_holes
-  (0.69-1.12), 2.1x on camel 6h and 2.6-4.8x on the single small holes (horse 2.5h, camel 2.5h and
-  15h), where CGAL takes 0.4-0.6 ms and ours 1.6-2.1 ms. Measured interleaved in one process against
-  the NumPy code the kernel replaced (CPU per hole, prebuilt, best of 3 rounds of 7): horse 2.5h 6.5 ->
-  1.7 ms, 6h 24.6 -> 4.6, 15h 73.6 -> 28.7, camel 2.5h 7.6 -> 1.6, 6h 16.9 -> 3.1, 15h 9.0 -> 1.6,
-  bunny 13.9 -> 4.3, plane_holes 1.4 -> 0.56, with the same fills (identical triangles on these cases
-  and generated spheres and tori under eight option sets; vertices within 3.3e-11 relative). What is
-  left on a small hole is about sixty NumPy and SciPy calls around the compiled steps (the crossing
-  check's k-d tree query, the two dense Cholesky solves, the pieces' bookkeeping); and the first fill
-  after building a filler, which this benchmark times, runs about 1.7x slower than a repeat (cold
-  caches after the whole-mesh analysis).
+  the other jobs, and the CPU ratios still vary by up to 1.3x between runs (CGAL's camel 2.5h: 0.43 ms
+  in an earlier run, 0.55-0.58 in the last two). The per-hole work is compiled
+  (``o3d_lsmesh/_fill_kernel.pyx``), and a small hole's steps are each one call: the loop's
+  triangulation and refinement (``fill_loop``: the loop's geometry, the dynamic programme, the splits and
+  flips), the fixed rings with the local mesh (``ring_mesh``), the uniform and cotangent fairing solves
+  (``fair_dense_twice``: weights, normal equations, LAPACK's Cholesky reached directly), the tangential
+  relaxation, and the crossing test (``patch_crossings``: the triangles near the patch from uniform
+  grids built with the filler, every new triangle against each, the separating axes). With the
+  prebuilt filler the CPU-time ratio is within the 2x target on every case: 1.33 (horse 2.5h), 1.84
+  (camel 2.5h), 1.13 (camel 15h), 1.29 (camel 6h), 0.53-1.04 on the others (1.37, 1.84, 1.47, 1.18 in
+  the run before). Measured interleaved in one process against the code before this change (CPU per
+  hole, prebuilt, best of 15 rounds): horse 2.5h 1.89 -> 0.83 ms, 6h 3.79 -> 2.55, 15h 36.5 -> 36.0 (5
+  rounds), camel 2.5h 1.67 -> 0.71, 6h 3.46 -> 2.27, 15h 2.07 -> 0.88, bunny 4.55 -> 3.96, plane_holes
+  0.59 -> 0.48, with bit-identical fills (triangles and vertices, on these cases and generated spheres
+  and tori with one, three and a 3-edge hole, under eight option sets, prebuilt and from arrays). The
+  time from arrays (15-38x CGAL on the small holes) is the whole-mesh analysis. What is left on a small
+  hole is mostly the first touch of code and data after building a filler (each compiled call costs
+  2-3x its repeat; a fill right after the build runs about 1.5x slower than a second one), the copy of
+  the whole mesh into the result (about a sixth of camel 2.5h's fill: CGAL edits its structure in
+  place), and the O(k^3) dynamic programme on longer loops (about a third of camel 6h's fill).
 """
 
 

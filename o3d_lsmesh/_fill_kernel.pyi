@@ -43,7 +43,7 @@ def loop_geometry(
     triangles: np.ndarray,
     indptr: np.ndarray,
     data: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]: ...
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, np.ndarray]: ...
 def unique_edges(tris: np.ndarray, nv: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
 def keeps_facing(x: np.ndarray, again: np.ndarray, new_tris: np.ndarray) -> bool: ...
 def normal_equations(
@@ -57,3 +57,70 @@ def normal_equations(
     minus: np.ndarray,
     unknown: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]: ...
+def cholesky_solve(matrix: np.ndarray, rhs: np.ndarray) -> np.ndarray | None: ...
+def grid_near(
+    centre: np.ndarray,
+    radius: np.ndarray,
+    origin: np.ndarray,
+    cell: float,
+    dims: np.ndarray,
+    indptr: np.ndarray,
+    members: np.ndarray,
+    tri_centre: np.ndarray,
+    tri_radius: np.ndarray,
+    reach: float,
+) -> np.ndarray: ...
+def patch_crossings(
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    first_new: int,
+    grids: list[tuple[np.ndarray, float, np.ndarray, np.ndarray, np.ndarray, float]],
+    tri_centre: np.ndarray,
+    tri_radius: np.ndarray,
+) -> np.ndarray: ...
+def local_mesh(
+    triangles: np.ndarray, first_new: int, ring_tris: np.ndarray, rings: list[np.ndarray], nv: int
+) -> tuple[np.ndarray, np.ndarray, list[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]]: ...
+def fair_dense(
+    x: np.ndarray,
+    tris: np.ndarray,
+    i: np.ndarray,
+    j: np.ndarray,
+    inverse: np.ndarray,
+    unknown: np.ndarray,
+    ring0: np.ndarray,
+    ring1: np.ndarray,
+    level: int,
+    cot: bool,
+) -> np.ndarray | None: ...
+def fill_loop(
+    loop: np.ndarray,
+    rows: np.ndarray,
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    indptr: np.ndarray,
+    data: np.ndarray,
+    vertex_sigma: np.ndarray,
+    density: float,
+    alpha: float,
+) -> tuple[np.ndarray, np.ndarray]: ...
+def fair_dense_twice(
+    x: np.ndarray,
+    tris: np.ndarray,
+    i: np.ndarray,
+    j: np.ndarray,
+    inverse: np.ndarray,
+    unknown: np.ndarray,
+    ring0: np.ndarray,
+    ring1: np.ndarray,
+    level: int,
+) -> tuple[np.ndarray | None, np.ndarray | None]: ...
+def ring_mesh(
+    triangles: np.ndarray,
+    indptr: np.ndarray,
+    data: np.ndarray,
+    seeds: np.ndarray,
+    count: int,
+    all_triangles: np.ndarray,
+    nv: int,
+) -> tuple[np.ndarray, np.ndarray, list[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]]: ...

@@ -20,6 +20,15 @@ cdef double _TIE = 1e-6  # dynamic programme: largest angles this close tie, and
 cdef double _COCIRCULAR = 1.0 - 1e-6  # flips: a point must be this far inside a circumsphere
 
 
+cdef bint _outside(const int64_t* a, int64_t count, int64_t n) noexcept nogil:
+    """Whether an index of ``a`` is outside ``[0, n)`` (the arguments' check, without NumPy's reductions)."""
+    cdef int64_t k
+    for k in range(count):
+        if a[k] < 0 or a[k] >= n:
+            return True
+    return False
+
+
 cdef inline double _dot(const double* a, const double* b) noexcept nogil:
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
@@ -653,39 +662,44 @@ cdef bint _cross_pair(const double* P, const double* Q) noexcept nogil:
     return True
 
 
+cdef bint _pair_crosses(const double* V, const int64_t* T, int64_t ta, int64_t tb) noexcept nogil:
+    """Whether triangles ``ta`` and ``tb`` (rows of ``T`` over the points ``V``) without a shared vertex
+    intersect: shared corners first, then the bounding boxes (where most pairs stop), then the axes."""
+    cdef double P[9]
+    cdef double Q[9]
+    cdef int r, s, c
+    for r in range(3):
+        for s in range(3):
+            if T[3 * ta + r] == T[3 * tb + s]:
+                return False
+    for r in range(3):
+        for c in range(3):
+            P[3 * r + c] = V[3 * T[3 * ta + r] + c]
+            Q[3 * r + c] = V[3 * T[3 * tb + r] + c]
+    for c in range(3):
+        if fmin(fmin(P[c], P[3 + c]), P[6 + c]) > fmax(fmax(Q[c], Q[3 + c]), Q[6 + c]) or (
+            fmin(fmin(Q[c], Q[3 + c]), Q[6 + c]) > fmax(fmax(P[c], P[3 + c]), P[6 + c])
+        ):
+            return False
+    return _cross_pair(P, Q)
+
+
 def count_crossings(const double[:, ::1] vertices, const int64_t[:, ::1] triangles, const int64_t[::1] a,
                     const int64_t[::1] b, int64_t first_new):
     """For candidate pairs ``(a[i], b[i])`` of triangles (``a`` new, i.e. ``>= first_new``), the number of
     intersecting pairs each new triangle is in; pairs sharing a vertex are not counted. Cheap tests
     first: shared corners, then the bounding boxes (where most pairs stop), then the separating axes."""
-    cdef int64_t q = triangles.shape[0] - first_new, n = a.shape[0], i, r, s, c, ta, tb
+    cdef int64_t q = triangles.shape[0] - first_new, n = a.shape[0], i, ta, tb
     if b.shape[0] != n:
         raise ValueError("a and b must have one length")
     result_ = np.zeros(max(q, 0))
     cdef double[::1] result = result_
-    cdef double P[9]
-    cdef double Q[9]
-    cdef bint shared, apart
+    if n == 0:
+        return result_
     with nogil:
         for i in range(n):
             ta, tb = a[i], b[i]
-            shared = False
-            for r in range(3):
-                for s in range(3):
-                    shared = shared or triangles[ta, r] == triangles[tb, s]
-            if shared:
-                continue
-            for r in range(3):
-                for c in range(3):
-                    P[3 * r + c] = vertices[triangles[ta, r], c]
-                    Q[3 * r + c] = vertices[triangles[tb, r], c]
-            apart = False
-            for c in range(3):
-                if fmin(fmin(P[c], P[3 + c]), P[6 + c]) > fmax(fmax(Q[c], Q[3 + c]), Q[6 + c]) or (
-                    fmin(fmin(Q[c], Q[3 + c]), Q[6 + c]) > fmax(fmax(P[c], P[3 + c]), P[6 + c])
-                ):
-                    apart = True
-            if apart or not _cross_pair(P, Q):
+            if not _pair_crosses(&vertices[0, 0], &triangles[0, 0], ta, tb):
                 continue
             result[ta - first_new] += 1.0
             if tb >= first_new:
@@ -697,26 +711,42 @@ def count_crossings(const double[:, ::1] vertices, const int64_t[:, ::1] triangl
 # the rings of fixed vertices around the holes
 
 
+cdef object _sorted(int64_t[::1] a, int64_t count):
+    """The first ``count`` values of ``a``, sorted in place (``qsort``), as an array view."""
+    if count > 1:
+        qsort(&a[0], count, sizeof(int64_t), _by_value)
+    return a.base[:count] if a.base is not None else np.asarray(a)[:count]
+
+
 def rings(const int64_t[:, ::1] triangles, const int64_t[::1] indptr, const int64_t[::1] data, seeds,
           int count):
     """Breadth-first vertex rings around ``seeds`` (ring 0) over each vertex's triangles (CSR ``indptr``,
     ``data``): the triangles (sorted) touching rings ``0 .. count - 1`` and the ``count + 1`` rings,
-    each sorted (the last one incomplete: its vertices' other triangles are not taken).
+    each sorted (the last one incomplete: its vertices' other triangles are not taken); ring 0 is
+    ``seeds`` as given.
 
     Visited marks over the whole mesh are allocated zeroed (pages the walk does not touch cost nothing),
     so the work grows with the rings, not with the mesh.
     """
-    cdef int64_t n = indptr.shape[0] - 1, m = triangles.shape[0], i, j, v, t, c, size, found
-    front_ = np.unique(np.asarray(seeds, dtype=np.int64))
-    if len(front_) and (front_[0] < 0 or front_.max() >= n):
+    cdef int64_t n = indptr.shape[0] - 1, m = triangles.shape[0], i, j, v, t, c, size, found, total = 0
+    seeds_ = np.ascontiguousarray(seeds, dtype=np.int64)
+    cdef const int64_t[::1] given = seeds_
+    if given.shape[0] and _outside(&given[0], given.shape[0], n):
         raise ValueError("seeds outside the mesh")
     seen_ = np.zeros(n, dtype=np.uint8)
     took_ = np.zeros(m, dtype=np.uint8)
     cdef uint8_t[::1] seen = seen_, took = took_
-    cdef int64_t[::1] front = front_, touch, fresh
+    cdef int64_t[::1] front, touch, fresh
+    front_ = np.empty(given.shape[0], dtype=np.int64)
+    front = front_
+    size = 0
+    for i in range(given.shape[0]):  # the distinct seeds (np.unique's set; the order does not matter)
+        if not seen[given[i]]:
+            seen[given[i]] = 1
+            front[size] = given[i]
+            size += 1
+    front = front_[:size]
     out_rings, out_taken = [np.asarray(seeds)], []
-    for i in range(front.shape[0]):
-        seen[front[i]] = 1
     for _ in range(count):
         size = 0
         for i in range(front.shape[0]):
@@ -733,8 +763,9 @@ def rings(const int64_t[:, ::1] triangles, const int64_t[::1] indptr, const int6
                         took[t] = 1
                         touch[found] = t
                         found += 1
-        touch_ = np.sort(touch_[:found])
+        touch_ = _sorted(touch, found)
         touch = touch_
+        total += found
         fresh_ = np.empty(3 * found, dtype=np.int64)
         fresh = fresh_
         size = 0
@@ -746,12 +777,19 @@ def rings(const int64_t[:, ::1] triangles, const int64_t[::1] indptr, const int6
                         seen[v] = 1
                         fresh[size] = v
                         size += 1
-        front_ = np.sort(fresh_[:size])
+        front_ = _sorted(fresh, size)
         front = front_
         out_taken.append(touch_)
         out_rings.append(front_)
-    taken = np.sort(np.concatenate(out_taken)) if out_taken else np.zeros(0, dtype=np.int64)
-    return taken, out_rings
+    taken_ = np.empty(total, dtype=np.int64)
+    cdef int64_t[::1] taken = taken_
+    size = 0
+    for touch_ in out_taken:
+        touch = touch_
+        for i in range(touch.shape[0]):
+            taken[size] = touch[i]
+            size += 1
+    return _sorted(taken, total), out_rings
 
 
 # ----------------------------------------------------------------------------------------------------------
@@ -908,7 +946,7 @@ cdef double _sum(const double* a, int64_t n) noexcept nogil:
     return total
 
 
-def laplacian_weights(const int64_t[:, ::1] tris, int64_t nv, const int64_t[::1] i, const int64_t[::1] j,
+cpdef laplacian_weights(const int64_t[:, ::1] tris, int64_t nv, const int64_t[::1] i, const int64_t[::1] j,
                       const int64_t[::1] inverse, vertices=None):
     """Edge weights ``w`` (edges ``(i, j)``; ``inverse``: the edge of each half-edge ``(c, c + 1)`` of each
     triangle, corner-major), vertex degrees ``sum w`` and the Laplacian's row scales of a local mesh.
@@ -921,7 +959,7 @@ def laplacian_weights(const int64_t[:, ::1] tris, int64_t nv, const int64_t[::1]
     cdef int64_t t = tris.shape[0], e = i.shape[0], h, k, c, a, b, o, positive = 0
     if inverse.shape[0] != 3 * t or j.shape[0] != e:
         raise ValueError("inverse must have 3 t entries, i and j one length")
-    if t and (np.min(tris) < 0 or np.max(tris) >= nv):
+    if t and _outside(&tris[0, 0], 3 * t, nv):
         raise ValueError("tris index outside the nv vertices")
     cdef bint cot = vertices is not None
     cdef const double[:, ::1] x = np.ascontiguousarray(vertices if cot else np.zeros((0, 3)), dtype=np.float64)
@@ -989,19 +1027,20 @@ def loop_geometry(const int64_t[::1] loop, const int64_t[::1] rows, const double
     """A loop's points ``(k, 3)``, the unit normals ``(k, 3)`` of the mesh triangles on its edges (the
     triangle of half-edge row ``rows[i]``, that is ``rows[i] % m``, on edge ``(i, i + 1)``), its chords
     that already are mesh edges ``(k, k)`` bool (its own edges excepted: a chord the triangulation must
-    not use, a non-manifold edge otherwise) and its mean edge length.
+    not use, a non-manifold edge otherwise), its mean edge length, and those chords as pairs ``(c, 2)``,
+    ``i < j`` row by row.
 
     The chords come from each loop vertex's triangles (CSR ``indptr``, ``data``), the loop's positions
     looked up by binary search: the work grows with the loop's stars, not with the mesh.
     """
     cdef int64_t k = loop.shape[0], n = vertices.shape[0], m = triangles.shape[0], p, q, r, lo, hi, mid, w
-    cdef int64_t c, t
+    cdef int64_t c, t, count
     if rows.shape[0] != k or indptr.shape[0] != n + 1:
         raise ValueError("rows must be (k,), indptr (n + 1,)")
-    if k and (np.min(loop) < 0 or np.max(loop) >= n):
+    if k and _outside(&loop[0], k, n):
         raise ValueError("loop outside the mesh")
-    by_vertex_ = np.argsort(loop, kind="stable")
-    sorted_ = np.asarray(loop)[by_vertex_]
+    by_vertex_ = np.empty(k, dtype=np.int64)
+    sorted_ = np.empty(k, dtype=np.int64)
     points_ = np.empty((k, 3))
     outer_ = np.empty((k, 3))
     lengths_ = np.empty(k)
@@ -1013,7 +1052,16 @@ def loop_geometry(const int64_t[::1] loop, const int64_t[::1] rows, const double
     cdef double u[3]
     cdef double v[3]
     cdef double norm
+    cdef Half* order = <Half*>malloc(max(k, 1) * sizeof(Half))
+    if not order:
+        raise MemoryError
     with nogil:
+        for p in range(k):  # the loop sorted by vertex, ties by position: a stable argsort
+            order[p].key, order[p].h = loop[p], p
+        qsort(order, k, sizeof(Half), _by_key)
+        for p in range(k):
+            ordered[p], by_vertex[p] = order[p].key, order[p].h
+        free(order)
         for p in range(k):
             for c in range(3):
                 points[p, c] = vertices[loop[p], c]
@@ -1048,7 +1096,19 @@ def loop_geometry(const int64_t[::1] loop, const int64_t[::1] rows, const double
             out[p, q] = 0
             out[q, p] = 0
     spacing = _sum(&lengths[0], k) / k if k else 0.0
-    return points_, outer_, chords_.view(bool), spacing
+    count = 0
+    for p in range(k):
+        for q in range(p + 1, k):
+            count += out[p, q]
+    pairs_ = np.empty((count, 2), dtype=np.int64)
+    cdef int64_t[:, ::1] pairs = pairs_
+    count = 0
+    for p in range(k):  # row by row, as np.argwhere(np.triu(chords))
+        for q in range(p + 1, k):
+            if out[p, q]:
+                pairs[count, 0], pairs[count, 1] = p, q
+                count += 1
+    return points_, outer_, chords_.view(bool), spacing, pairs_
 
 
 # ----------------------------------------------------------------------------------------------------------
@@ -1063,7 +1123,7 @@ def unique_edges(const int64_t[:, ::1] tris, int64_t nv):
     one hole (called twice per hole): 30 against 176 us at 60 triangles, where that function's counting
     sorts over whole-mesh arrays cost more than the sort itself."""
     cdef int64_t t = tris.shape[0], nh = 3 * t, h, e = 0, a, b
-    if t and (np.min(tris) < 0 or np.max(tris) >= nv):
+    if t and _outside(&tris[0, 0], 3 * t, nv):
         raise ValueError("tris index outside the nv vertices")
     if nv >= 2**31:
         raise ValueError("a local mesh has fewer than 2^31 vertices")
@@ -1096,7 +1156,7 @@ def keeps_facing(const double[:, ::1] x, const double[:, :] again, const int64_t
     cdef int64_t n = x.shape[0], p = again.shape[0], first = n - p, q = new_tris.shape[0], r, c, v
     if p > n or again.shape[1] != 3:
         raise ValueError("again must be (p, 3) with p <= len(x)")
-    if q and (np.min(new_tris) < 0 or np.max(new_tris) >= n):
+    if q and _outside(&new_tris[0, 0], 3 * q, n):
         raise ValueError("new_tris index outside x")
     cdef double lo[3]
     cdef double hi[3]
@@ -1140,7 +1200,7 @@ def keeps_facing(const double[:, ::1] x, const double[:, :] again, const int64_t
 # the fairing's normal equations on a small patch
 
 
-def normal_equations(const double[:, ::1] x, const int64_t[::1] i, const int64_t[::1] j, const double[::1] w,
+cpdef normal_equations(const double[:, ::1] x, const int64_t[::1] i, const int64_t[::1] j, const double[::1] w,
                      const double[::1] degree, const double[::1] scale, const int64_t[::1] plus,
                      const int64_t[::1] minus, const int64_t[::1] unknown):
     """The least-squares system of the rows ``A = L[plus] - L[minus]`` (``minus`` empty: ``L[plus]``) of
@@ -1231,3 +1291,398 @@ def normal_equations(const double[:, ::1] x, const int64_t[::1] i, const int64_t
                 slot[entry[k]] = -1
     free(slot); free(entry); free(value)
     return normal_, rhs_
+
+
+# ---------------------------------------------------------------------------------------------------
+# small dense SPD solves without SciPy's per-call wrapping (LAPACK's own routines, reached through the
+# function pointers SciPy exports: the same code ``scipy.linalg.cho_factor`` and ``cho_solve`` run)
+
+ctypedef void (*_potrf_t)(char*, int*, double*, int*, int*) noexcept nogil
+ctypedef void (*_potrs_t)(char*, int*, int*, double*, int*, double*, int*, int*) noexcept nogil
+cdef _potrf_t _potrf = NULL
+cdef _potrs_t _potrs = NULL
+
+from cpython.pycapsule cimport PyCapsule_GetName, PyCapsule_GetPointer
+
+
+cdef int _load_lapack() except -1:
+    global _potrf, _potrs
+    if _potrf is NULL:
+        from scipy.linalg import cython_lapack
+        capi = cython_lapack.__pyx_capi__
+        _potrs = <_potrs_t>PyCapsule_GetPointer(capi["dpotrs"], PyCapsule_GetName(capi["dpotrs"]))
+        _potrf = <_potrf_t>PyCapsule_GetPointer(capi["dpotrf"], PyCapsule_GetName(capi["dpotrf"]))
+    return 0
+
+
+cpdef cholesky_solve(double[:, ::1] matrix, const double[:, ::1] rhs):
+    """Solve ``matrix x = rhs`` for a symmetric positive definite ``(p, p)`` matrix and ``(p, c)`` right-hand
+    sides, as ``cho_solve(cho_factor(matrix), rhs)`` (upper factor, LAPACK ``dpotrf`` and ``dpotrs``);
+    ``matrix`` is overwritten. Returns ``(p, c)``, or None if the matrix is not numerically positive
+    definite or holds a non-finite value."""
+    cdef int p = matrix.shape[0], c = rhs.shape[1], info = 0, r, s
+    if matrix.shape[1] != p or rhs.shape[0] != p:
+        raise ValueError("matrix must be (p, p) and rhs (p, c)")
+    _load_lapack()
+    out_ = np.empty((c, p))  # Fortran (p, c): the layout LAPACK reads
+    cdef double[:, ::1] out = out_
+    cdef char uplo = b"U"
+    cdef bint finite = True
+    if p == 0:
+        return np.zeros((0, c))
+    with nogil:
+        for r in range(p):
+            for s in range(p):
+                if not (fabs(matrix[r, s]) < INFINITY):
+                    finite = False
+        for r in range(p):
+            for s in range(c):
+                out[s, r] = rhs[r, s]
+                if not (fabs(rhs[r, s]) < INFINITY):
+                    finite = False
+        if finite:
+            # a symmetric C-ordered matrix is its own Fortran-ordered transpose: LAPACK reads it in place
+            _potrf(&uplo, &p, &matrix[0, 0], &p, &info)
+            if info == 0:
+                _potrs(&uplo, &p, &c, &matrix[0, 0], &p, &out[0, 0], &p, &info)
+    if not finite or info != 0:
+        return None
+    return out_.T
+
+
+# ---------------------------------------------------------------------------------------------------
+# the crossing test's candidates: a uniform grid of triangle centres
+
+
+def grid_near(const double[:, ::1] centre, const double[::1] radius, const double[::1] origin, double cell,
+              const int64_t[::1] dims, const int64_t[::1] indptr, const int64_t[::1] members,
+              const double[:, ::1] tri_centre, const double[::1] tri_radius, double reach):
+    """The triangles (``members`` of the grid cells, ``indptr`` over the cells ``(x * dims[1] + y) *
+    dims[2] + z`` of side ``cell`` from ``origin``) whose bounding sphere (``tri_centre``, ``tri_radius``,
+    at most ``reach``) meets the box of the query spheres (``centre``, ``radius``): a superset of those
+    overlapping a query sphere, without repeats. ``(p,)`` int64."""
+    cdef int64_t nq = centre.shape[0], k, t, x, y, z, count = 0, capacity
+    cdef int64_t lo_cell[3]
+    cdef int64_t hi_cell[3]
+    cdef double lo[3]
+    cdef double hi[3]
+    cdef double d, gap, g
+    cdef int c
+    if nq == 0 or members.shape[0] == 0:
+        return np.zeros(0, dtype=np.int64)
+    with nogil:
+        for c in range(3):
+            lo[c], hi[c] = INFINITY, -INFINITY
+        for k in range(nq):
+            for c in range(3):
+                lo[c] = fmin(lo[c], centre[k, c] - radius[k])
+                hi[c] = fmax(hi[c], centre[k, c] + radius[k])
+        for c in range(3):
+            # cells holding a centre within `reach` of the box (clamped to the grid; floor of a double)
+            d = (lo[c] - reach - origin[c]) / cell
+            lo_cell[c] = <int64_t>d if d >= 0 else 0
+            d = (hi[c] + reach - origin[c]) / cell
+            hi_cell[c] = min(<int64_t>d, dims[c] - 1) if d >= 0 else -1
+        capacity = 0
+        for x in range(lo_cell[0], hi_cell[0] + 1):
+            for y in range(lo_cell[1], hi_cell[1] + 1):
+                capacity += indptr[(x * dims[1] + y) * dims[2] + hi_cell[2] + 1] - indptr[
+                    (x * dims[1] + y) * dims[2] + lo_cell[2]] if hi_cell[2] >= lo_cell[2] else 0
+    out_ = np.empty(capacity, dtype=np.int64)
+    cdef int64_t[::1] out = out_
+    with nogil:
+        for x in range(lo_cell[0], hi_cell[0] + 1):
+            for y in range(lo_cell[1], hi_cell[1] + 1):
+                if hi_cell[2] < lo_cell[2]:
+                    continue
+                for k in range(indptr[(x * dims[1] + y) * dims[2] + lo_cell[2]],
+                               indptr[(x * dims[1] + y) * dims[2] + hi_cell[2] + 1]):
+                    t = members[k]
+                    gap = 0.0  # squared distance from the sphere's centre to the box
+                    for c in range(3):
+                        g = fmax(fmax(lo[c] - tri_centre[t, c], tri_centre[t, c] - hi[c]), 0.0)
+                        gap += g * g
+                    if gap <= tri_radius[t] * tri_radius[t] * (1.0 + 1e-9):  # slack: a superset
+                        out[count] = t
+                        count += 1
+    return out_[:count]
+
+
+def patch_crossings(const double[:, ::1] vertices, const int64_t[:, ::1] triangles, int64_t first_new,
+                    grids, const double[:, ::1] tri_centre, const double[::1] tri_radius):
+    """:func:`count_crossings` of one small patch (the triangles from ``first_new`` on) against the input
+    triangles of ``grids`` (those of :func:`grid_near`: ``(origin, cell, dims, indptr, members, reach)``
+    each) and against itself, the candidates all in one call: each new triangle's bounding sphere
+    (about its centroid, as NumPy's ``mean`` and ``norm`` compute them) tested against every candidate's,
+    which beats the sweep of :func:`sphere_pairs` on a few dozen triangles."""
+    cdef int64_t q = triangles.shape[0] - first_new, i, k, t, x, y, n_cand = 0, capacity = 0
+    cdef int64_t lo_cell[3]
+    cdef int64_t hi_cell[3]
+    cdef double lo[3]
+    cdef double hi[3]
+    cdef double d, gap, reach, cell
+    cdef int c, v
+    result_ = np.zeros(max(q, 0))
+    if q <= 0:
+        return result_
+    centre_ = np.empty((q, 3))
+    radius_ = np.empty(q)
+    cdef double[::1] result = result_, radius = radius_
+    cdef double[:, ::1] centre = centre_
+    cdef const double* V = &vertices[0, 0]
+    cdef const int64_t* T = &triangles[0, 0]
+    cdef const double[::1] origin
+    cdef const int64_t[::1] dims, indptr, members
+    with nogil:
+        for i in range(q):
+            t = first_new + i
+            for c in range(3):
+                centre[i, c] = ((V[3 * T[3 * t] + c] + V[3 * T[3 * t + 1] + c]) + V[3 * T[3 * t + 2] + c]) / 3.0
+            radius[i] = 0.0
+            for v in range(3):
+                gap = 0.0
+                for c in range(3):
+                    d = V[3 * T[3 * t + v] + c] - centre[i, c]
+                    gap = gap + d * d
+                radius[i] = fmax(radius[i], sqrt(gap))
+        for c in range(3):
+            lo[c], hi[c] = INFINITY, -INFINITY
+        for i in range(q):
+            for c in range(3):
+                lo[c] = fmin(lo[c], centre[i, c] - radius[i])
+                hi[c] = fmax(hi[c], centre[i, c] + radius[i])
+    # the candidates of each grid (its cells near the patch's box, spheres meeting the box)
+    found = []
+    for origin_, cell, dims_, indptr_, members_, reach in grids:
+        origin, dims, indptr, members = origin_, dims_, indptr_, members_
+        if members.shape[0] == 0:
+            continue
+        with nogil:
+            for c in range(3):
+                d = (lo[c] - reach - origin[c]) / cell
+                lo_cell[c] = <int64_t>d if d >= 0 else 0
+                d = (hi[c] + reach - origin[c]) / cell
+                hi_cell[c] = min(<int64_t>d, dims[c] - 1) if d >= 0 else -1
+            capacity = 0
+            if hi_cell[2] >= lo_cell[2]:
+                for x in range(lo_cell[0], hi_cell[0] + 1):
+                    for y in range(lo_cell[1], hi_cell[1] + 1):
+                        capacity += indptr[(x * dims[1] + y) * dims[2] + hi_cell[2] + 1] - indptr[
+                            (x * dims[1] + y) * dims[2] + lo_cell[2]]
+        out_ = np.empty(capacity, dtype=np.int64)
+        n_cand = _gather(&lo[0], &hi[0], lo_cell, hi_cell, &dims[0], &indptr[0], &members[0],
+                         &tri_centre[0, 0], &tri_radius[0], out_)
+        found.append(out_[:n_cand])
+    cand_ = np.concatenate(found) if found else np.zeros(0, dtype=np.int64)
+    cdef const int64_t[::1] cand = cand_
+    n_cand = cand.shape[0]
+    with nogil:
+        for i in range(q):
+            for k in range(n_cand):
+                t = cand[k]
+                if _overlap(&centre[i, 0], radius[i], &tri_centre[t, 0], tri_radius[t]) and _pair_crosses(
+                    V, T, first_new + i, t
+                ):
+                    result[i] += 1.0
+            for k in range(i + 1, q):
+                if _overlap(&centre[i, 0], radius[i], &centre[k, 0], radius[k]) and _pair_crosses(
+                    V, T, first_new + i, first_new + k
+                ):
+                    result[i] += 1.0
+                    result[k] += 1.0
+    return result_
+
+
+cdef int64_t _gather(const double* lo, const double* hi, const int64_t* lo_cell, const int64_t* hi_cell,
+                     const int64_t* dims, const int64_t* indptr, const int64_t* members,
+                     const double* tc, const double* tr, int64_t[::1] out):
+    """The members of the cells ``lo_cell .. hi_cell`` whose spheres meet the box ``lo .. hi``, into
+    ``out``; returns how many."""
+    cdef int64_t x, y, k, t, count = 0
+    cdef double gap, g
+    cdef int c
+    if hi_cell[2] < lo_cell[2]:
+        return 0
+    with nogil:
+        for x in range(lo_cell[0], hi_cell[0] + 1):
+            for y in range(lo_cell[1], hi_cell[1] + 1):
+                for k in range(indptr[(x * dims[1] + y) * dims[2] + lo_cell[2]],
+                               indptr[(x * dims[1] + y) * dims[2] + hi_cell[2] + 1]):
+                    t = members[k]
+                    gap = 0.0
+                    for c in range(3):
+                        g = fmax(fmax(lo[c] - tc[3 * t + c], tc[3 * t + c] - hi[c]), 0.0)
+                        gap += g * g
+                    if gap <= tr[t] * tr[t] * (1.0 + 1e-9):
+                        out[count] = t
+                        count += 1
+    return count
+
+
+# ---------------------------------------------------------------------------------------------------
+# a small patch's local mesh and its dense fairing solve, each in one call
+
+
+def local_mesh(const int64_t[:, ::1] triangles, int64_t first_new, const int64_t[::1] ring_tris, rings,
+               int64_t nv):
+    """The local mesh of the fairing: the triangles ``ring_tris`` of the input (rows of ``triangles``
+    before ``first_new``) and every new one (from ``first_new`` on), over their vertices renumbered in
+    increasing order (as ``np.unique`` and ``np.searchsorted`` would): the vertices ``(l,)``, the local
+    triangles ``(t, 3)``, ``rings`` (arrays of vertices of the ``nv``) renumbered, and
+    :func:`unique_edges` of the local triangles."""
+    cdef int64_t r = ring_tris.shape[0], q = triangles.shape[0] - first_new, t = r + q, k, c, v, count = 0
+    cdef bint bad = False
+    local_ = np.empty((t, 3), dtype=np.int64)
+    number_ = np.zeros(nv, dtype=np.int64)  # 1 + the local number (0: not local); untouched pages cost nothing
+    cdef int64_t[:, ::1] local = local_
+    cdef int64_t[::1] number = number_, ring, out
+    vertices_ = np.empty(3 * t, dtype=np.int64)
+    out = vertices_
+    with nogil:
+        for k in range(t):
+            for c in range(3):
+                v = triangles[ring_tris[k] if k < r else first_new + k - r, c]
+                if v < 0 or v >= nv:
+                    bad = True
+                    continue
+                local[k, c] = v
+                if number[v] == 0:
+                    number[v] = 1
+                    out[count] = v
+                    count += 1
+    if bad:
+        raise ValueError("a triangle outside the nv vertices")
+    with nogil:
+        qsort(&out[0], count, sizeof(int64_t), _by_value)  # increasing, as np.unique
+        for k in range(count):
+            number[out[k]] = k + 1
+        for k in range(t):
+            for c in range(3):
+                local[k, c] = number[local[k, c]] - 1
+    vertices_ = vertices_[:count].copy()
+    local_rings = []
+    for ring_ in rings:
+        ring = np.asarray(ring_, dtype=np.int64)
+        mapped_ = np.empty(ring.shape[0], dtype=np.int64)
+        out = mapped_
+        for k in range(ring.shape[0]):
+            out[k] = number[ring[k]] - 1
+        local_rings.append(mapped_)
+    return vertices_, local_, local_rings, unique_edges(local_, count)
+
+
+cpdef fair_dense(const double[:, ::1] x, const int64_t[:, ::1] tris, const int64_t[::1] i,
+               const int64_t[::1] j, const int64_t[::1] inverse, const int64_t[::1] unknown,
+               const int64_t[::1] ring0, const int64_t[::1] ring1, int level, bint cot):
+    """The dense fairing solve of ``hole_filling._fair`` at continuity ``level`` 1 or 2: the Laplacian
+    weights (:func:`laplacian_weights`, cotangent if ``cot``), the rows touching an unknown (the
+    ``unknown`` and ``ring0``; for 2, the edges between them and ``ring1`` with one end among them, in
+    edge order), :func:`normal_equations` and :func:`cholesky_solve`. ``(p, 3)``, or None if the system
+    is not numerically positive definite or the solution not finite."""
+    cdef int64_t nv = x.shape[0], e = i.shape[0], k, count = 0
+    if level not in (1, 2):
+        raise ValueError("level must be 1 or 2")
+    w, degree, scale = laplacian_weights(tris, nv, i, j, inverse, x.base if cot else None)
+    rows_ = np.zeros(nv, dtype=np.uint8)
+    valid_ = np.zeros(nv, dtype=np.uint8)
+    cdef uint8_t[::1] rows = rows_, valid = valid_
+    for k in range(unknown.shape[0]):
+        rows[unknown[k]] = 1
+    for k in range(ring0.shape[0]):
+        rows[ring0[k]] = 1
+    if level == 1:
+        for k in range(nv):
+            count += rows[k]
+        plus_ = np.empty(count, dtype=np.int64)
+        minus_ = np.zeros(0, dtype=np.int64)
+        count = 0
+        for k in range(nv):
+            if rows[k]:
+                plus_[count] = k
+                count += 1
+    else:
+        for k in range(nv):
+            valid[k] = rows[k]
+        for k in range(ring1.shape[0]):
+            valid[ring1[k]] = 1
+        for k in range(e):
+            count += (rows[i[k]] or rows[j[k]]) and valid[i[k]] and valid[j[k]]
+        plus_ = np.empty(count, dtype=np.int64)
+        minus_ = np.empty(count, dtype=np.int64)
+        count = 0
+        for k in range(e):
+            if (rows[i[k]] or rows[j[k]]) and valid[i[k]] and valid[j[k]]:
+                plus_[count] = i[k]
+                minus_[count] = j[k]
+                count += 1
+    normal, rhs = normal_equations(x, i, j, w, degree, scale, plus_, minus_, unknown)
+    solution = cholesky_solve(normal, rhs)
+    if solution is None:
+        return None
+    cdef const double[:, :] s = solution
+    cdef int64_t a, b
+    for a in range(s.shape[0]):
+        for b in range(s.shape[1]):
+            if not (fabs(s[a, b]) < INFINITY):
+                return None
+    return solution
+
+
+def fill_loop(const int64_t[::1] loop, const int64_t[::1] rows, const double[:, ::1] vertices,
+              const int64_t[:, ::1] triangles, const int64_t[::1] indptr, const int64_t[::1] data,
+              const double[::1] vertex_sigma, double density, double alpha):
+    """One simple loop triangulated and refined in one call (``hole_filling``'s usual fill, a loop short
+    enough for the programme): :func:`loop_geometry`, :func:`minimum_weight_triangulation` (its chords
+    that are mesh edges forbidden) and, if ``density > 0``, :func:`refine` with the loop vertices'
+    scales ``vertex_sigma / density``. Returns the new points ``(p, 3)`` and the triangles ``(t, 3)`` in
+    the mesh's numbering, the new points numbered from ``len(vertices)`` in order."""
+    cdef int64_t k = loop.shape[0], n = vertices.shape[0], p, c
+    points, outer, chords, spacing, pairs = loop_geometry(loop, rows, vertices, triangles, indptr, data)
+    cdef const uint8_t[:, ::1] f = chords.view(np.uint8)
+    cdef bint any_chord = False
+    for p in range(k * k):
+        if f[p // k, p % k]:
+            any_chord = True
+            break
+    tris = minimum_weight_triangulation(points, outer, chords.view(np.uint8) if any_chord else None)
+    if density > 0:
+        sigma_ = np.empty(k)
+        for p in range(k):
+            sigma_[p] = vertex_sigma[loop[p]] / fmax(density, 1e-300)
+        points, tris, _ = refine(points, sigma_, tris, pairs, np.zeros(k, dtype=np.int64), alpha)
+    cdef const int64_t[:, ::1] local = tris
+    cdef int64_t t = local.shape[0]
+    out_ = np.empty((t, 3), dtype=np.int64)
+    cdef int64_t[:, ::1] out = out_
+    for p in range(t):
+        for c in range(3):
+            out[p, c] = loop[local[p, c]] if local[p, c] < k else n + local[p, c] - k
+    return points[k:], out_
+
+
+def fair_dense_twice(const double[:, ::1] x, const int64_t[:, ::1] tris, const int64_t[::1] i,
+                     const int64_t[::1] j, const int64_t[::1] inverse, const int64_t[::1] unknown,
+                     const int64_t[::1] ring0, const int64_t[::1] ring1, int level):
+    """:func:`fair_dense` with uniform weights, then again with cotangent weights read off that solution
+    (``x`` with the ``unknown`` rows replaced by it): ``(uniform, cotangent)``, either None where its
+    system fails (the cotangent one is not tried when the uniform one fails)."""
+    cdef int64_t r, c
+    uniform = fair_dense(x, tris, i, j, inverse, unknown, ring0, ring1, level, False)
+    if uniform is None:
+        return None, None
+    embedded_ = np.array(x, dtype=np.float64, order="C")
+    cdef double[:, ::1] embedded = embedded_
+    cdef const double[:, :] u = uniform
+    for r in range(unknown.shape[0]):
+        for c in range(3):
+            embedded[unknown[r], c] = u[r, c]
+    return uniform, fair_dense(embedded, tris, i, j, inverse, unknown, ring0, ring1, level, True)
+
+
+def ring_mesh(const int64_t[:, ::1] triangles, const int64_t[::1] indptr, const int64_t[::1] data, seeds,
+              int count, const int64_t[:, ::1] all_triangles, int64_t nv):
+    """:func:`rings` around ``seeds`` in the input ``triangles``, then :func:`local_mesh` of their
+    triangles and the new ones (``all_triangles`` from ``len(triangles)`` on) over the ``nv`` vertices,
+    in one call."""
+    ring_tris, found = rings(triangles, indptr, data, seeds, count)
+    return local_mesh(all_triangles, triangles.shape[0], ring_tris, found, nv)

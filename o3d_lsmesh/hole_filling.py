@@ -51,12 +51,18 @@ __all__ = [
 ]
 
 
+_KERNEL: Any = None
+
+
 def _kernel() -> Any:
     """The compiled loops (``_fill_kernel.pyx``), imported at first use like the hierarchy's kernel, so
     that the package imports from a source tree whose extensions are not built."""
-    from . import _fill_kernel
+    global _KERNEL
+    if _KERNEL is None:
+        from . import _fill_kernel
 
-    return _fill_kernel
+        _KERNEL = _fill_kernel
+    return _KERNEL
 
 
 #: Loops with more edges are split by chords before the O(k^3) dynamic programme (measured: k = 50
@@ -305,12 +311,21 @@ def _fair(
     only vertices whose one-rings are complete in ``tris``. ``edges`` is
     :func:`o3d_lsmesh._fill_kernel.unique_edges` of ``tris``. Small systems (at most
     :data:`o3d_lsmesh._solvers.DENSE_UNKNOWNS` unknowns) are assembled by the compiled
-    :func:`o3d_lsmesh._fill_kernel.normal_equations` and solved dense; larger ones sparse.
+    :func:`o3d_lsmesh._fill_kernel.normal_equations` and solved by LAPACK's dense Cholesky, at
+    continuity 1 and 2 in one call (:func:`o3d_lsmesh._fill_kernel.fair_dense`: on a hole of a few
+    vertices the NumPy glue between the steps cost more than the steps); larger ones sparse.
     """
     nv = len(x)
     i, j, inverse = edges
-    w, degree, scale = _kernel().laplacian_weights(tris, nv, i, j, inverse, x if cot else None)
     dense = len(unknown) <= _solvers.DENSE_UNKNOWNS
+    if dense and level > 0:  # the small patch's solve in one compiled call
+        solution = _kernel().fair_dense(
+            x, tris, i, j, inverse, unknown, rings[0], rings[1] if level > 1 else rings[0], level, cot
+        )
+        if solution is None:
+            raise SingularSystemError("the fairing system is not positive definite")
+        return solution
+    w, degree, scale = _kernel().laplacian_weights(tris, nv, i, j, inverse, x if cot else None)
     if level == 0:
         K, _ = _operators(i, j, w, degree, scale, dense)
         known = np.ones(nv, dtype=bool)
@@ -328,7 +343,10 @@ def _fair(
         plus, minus = i[keep], j[keep]
     if dense:
         normal, rhs = _kernel().normal_equations(x, i, j, w, degree, scale, plus, minus, unknown)
-        return _solvers.solve_spd(normal, rhs)
+        solution = _kernel().cholesky_solve(normal, rhs)  # solve_spd's dense path, without its wrapping
+        if solution is None:
+            raise SingularSystemError("the fairing system is not positive definite")
+        return solution
     _, L = _operators(i, j, w, degree, scale, False)
     if level == 1:
         A_full = L[plus]
@@ -378,8 +396,16 @@ class FilledHoles:
     triangles: np.ndarray
     holes: list
     skipped: list
-    interpolation: sp.csr_matrix = field(repr=False)
+    # the matrix, or the (p, n) shape of an all-zero one, built when first read: SciPy's constructor
+    # costs about a third of a small hole's fill when the caches are cold
+    _interpolation: Any = field(repr=False)
     continuity: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+
+    @property
+    def interpolation(self) -> sp.csr_matrix:
+        if isinstance(self._interpolation, tuple):
+            object.__setattr__(self, "_interpolation", _empty_csr(*self._interpolation))
+        return self._interpolation
 
 
 def fill_holes_arrays(
@@ -523,69 +549,110 @@ class HoleFiller:
             (skipped if too_big or flap or (hole.border and not fill_border) else holes).append(hole)
         if not holes:
             empty = np.zeros(0, dtype=np.int64)
-            return FilledHoles(vertices.copy(), triangles.copy(), [], skipped, sp.csr_matrix((0, n)), empty)
+            return FilledHoles(vertices.copy(), triangles.copy(), [], skipped, (0, n), empty)
         # each piece (a loop; one through a vertex twice is cut in pieces) is triangulated on its own,
         # long ones cut by chords sampled at the refinement's spacing (none without) first
         pieces = [(h, *p) for h, hole in enumerate(holes) for p in _simple_pieces(hole.vertices, hole.rows)]
         piece_hole, piece_loop, piece_rows = zip(*pieces)
-        # each piece's points, the normals across its edges, its chords that are mesh edges, its spacing
-        piece_points, piece_outer, piece_forbidden, piece_spacing = zip(
-            *(
-                _kernel().loop_geometry(loop, rows, vertices, triangles, *self.vertex_triangles)
-                for loop, rows in zip(piece_loop, piece_rows)
-            )
-        )
         count = len(piece_loop)
-        piece_extra, piece_tris = [], []
-        with progress_bar(progress, total=count, desc="filling holes", unit="loop") as bar:
-            for points, outer, forbidden, spacing in zip(
-                piece_points, piece_outer, piece_forbidden, piece_spacing
-            ):
-                extra, tris = _triangulate(
-                    points, outer, forbidden, spacing / density if density > 0 else 0.0
+        if count == 1 and len(piece_loop[0]) <= DP_MAX_EDGES:
+            # one simple loop short enough for the programme (the usual fill): one compiled call
+            with progress_bar(progress, total=1, desc="filling holes", unit="loop") as bar:
+                fresh_points, new_tris = _kernel().fill_loop(
+                    piece_loop[0],
+                    piece_rows[0],
+                    vertices,
+                    triangles,
+                    *self.vertex_triangles,
+                    self.sigma,
+                    density,
+                    _ALPHA,
                 )
-                piece_extra.append(extra)
-                piece_tris.append(tris)
                 bar.update(1)
-        lengths = np.array([len(loop) for loop in piece_loop])
-        # every piece refined at once, in disjoint local index ranges
-        sizes = np.array([len(p) + len(e) for p, e in zip(piece_points, piece_extra)])
-        starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
-        all_points = np.concatenate([np.concatenate([p, e]) for p, e in zip(piece_points, piece_extra)])
-        all_tris = np.concatenate([t + start for t, start in zip(piece_tris, starts)])
-        point_piece = np.repeat(np.arange(count), sizes)
-        if density > 0:
-            sigma = [
-                np.concatenate(
-                    [self.sigma[loop] / max(density, 1e-300), np.full(len(extra), spacing / density)]
+            owner = tri_piece = np.zeros(len(new_tris), dtype=np.int64)
+        else:
+            # each piece's points, the normals across its edges, its chords that are mesh edges, its spacing
+            piece_points, piece_outer, piece_forbidden, piece_spacing, piece_pairs = zip(
+                *(
+                    _kernel().loop_geometry(loop, rows, vertices, triangles, *self.vertex_triangles)
+                    for loop, rows in zip(piece_loop, piece_rows)
                 )
-                for loop, extra, spacing in zip(piece_loop, piece_extra, piece_spacing)
-            ]
-            # mesh edges between loop vertices: no flip may make them twice
-            fixed = [np.argwhere(np.triu(f)) + start for f, start in zip(piece_forbidden, starts)]
-            all_points, all_tris, point_piece = _kernel().refine(
-                all_points, np.concatenate(sigma), all_tris, np.concatenate(fixed), point_piece, _ALPHA
             )
-        # global numbering: loop points (first in each piece, in order) are mesh vertices; the others
-        # are new, numbered piece by piece
-        is_loop = np.zeros(len(all_points), dtype=bool)
-        is_loop[concatenated_ranges(starts, lengths)] = True
-        global_index = np.empty(len(all_points), dtype=np.int64)
-        global_index[is_loop] = np.concatenate(piece_loop)
-        fresh = np.flatnonzero(~is_loop)
-        fresh = fresh[np.argsort(point_piece[fresh], kind="stable")]
-        global_index[fresh] = n + np.arange(len(fresh))
-        tri_piece = point_piece[all_tris[:, 0]]
-        tri_order = np.argsort(tri_piece, kind="stable")
-        new_tris = global_index[all_tris[tri_order]]
-        owner = np.asarray(piece_hole, dtype=np.int64)[tri_piece[tri_order]]  # the hole of each new triangle
-        p = len(fresh)
+            piece_extra, piece_tris = [], []
+            with progress_bar(progress, total=count, desc="filling holes", unit="loop") as bar:
+                for points, outer, forbidden, spacing in zip(
+                    piece_points, piece_outer, piece_forbidden, piece_spacing
+                ):
+                    extra, tris = _triangulate(
+                        points, outer, forbidden, spacing / density if density > 0 else 0.0
+                    )
+                    piece_extra.append(extra)
+                    piece_tris.append(tris)
+                    bar.update(1)
+            if count == 1:  # one simple loop, the usual fill: nothing to offset or gather
+                extra = piece_extra[0]
+                all_points = np.concatenate([piece_points[0], extra]) if len(extra) else piece_points[0]
+                all_tris = piece_tris[0]
+                point_piece = np.zeros(len(all_points), dtype=np.int64)
+            else:  # every piece refined at once, in disjoint local index ranges
+                lengths = np.array([len(loop) for loop in piece_loop])
+                sizes = np.array([len(p) + len(e) for p, e in zip(piece_points, piece_extra)])
+                starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+                all_points = np.concatenate(
+                    [np.concatenate([p, e]) for p, e in zip(piece_points, piece_extra)]
+                )
+                all_tris = np.concatenate([t + start for t, start in zip(piece_tris, starts)])
+                point_piece = np.repeat(np.arange(count), sizes)
+            if density > 0:
+                # Liepa's scale: each loop vertex's mean edge length, the chords' spacing on their points
+                sigma = [
+                    np.concatenate(
+                        [self.sigma[loop] / max(density, 1e-300), np.full(len(extra), spacing / density)]
+                    )
+                    if len(extra)
+                    else self.sigma[loop] / max(density, 1e-300)
+                    for loop, extra, spacing in zip(piece_loop, piece_extra, piece_spacing)
+                ]
+                # mesh edges between loop vertices: no flip may make them twice
+                all_points, all_tris, point_piece = _kernel().refine(
+                    all_points,
+                    sigma[0] if count == 1 else np.concatenate(sigma),
+                    all_tris,
+                    piece_pairs[0]
+                    if count == 1
+                    else np.concatenate([f + s for f, s in zip(piece_pairs, starts)]),
+                    point_piece,
+                    _ALPHA,
+                )
+            # global numbering: loop points (first in each piece, in order) are mesh vertices; the others
+            # are new, numbered piece by piece
+            if count == 1:  # the usual fill, one simple loop: its points first, then the new ones in order
+                fresh_points = all_points[len(piece_loop[0]) :]
+                new_tris = np.concatenate([piece_loop[0], n + np.arange(len(fresh_points))])[all_tris]
+                owner = np.zeros(len(new_tris), dtype=np.int64)
+                tri_piece = owner
+            else:
+                is_loop = np.zeros(len(all_points), dtype=bool)
+                is_loop[concatenated_ranges(starts, lengths)] = True
+                global_index = np.empty(len(all_points), dtype=np.int64)
+                global_index[is_loop] = np.concatenate(piece_loop)
+                fresh = np.flatnonzero(~is_loop)
+                fresh = fresh[np.argsort(point_piece[fresh], kind="stable")]
+                global_index[fresh] = n + np.arange(len(fresh))
+                fresh_points = all_points[fresh]
+                tri_piece = point_piece[all_tris[:, 0]]
+                tri_order = np.argsort(tri_piece, kind="stable")
+                tri_piece = tri_piece[tri_order]
+                new_tris = global_index[all_tris[tri_order]]
+                owner = np.asarray(piece_hole, dtype=np.int64)[tri_piece]  # the hole of each new triangle
+        p = len(fresh_points)
+        weights_matrix: Any
         if interpolation and p:
-            bounds = np.searchsorted(tri_piece[tri_order], np.arange(count + 1))
+            bounds = np.searchsorted(tri_piece, np.arange(count + 1))
             weights_matrix = _interpolation(new_tris, bounds, piece_loop, n, p)
         else:
-            weights_matrix = sp.csr_matrix((p, n))
-        out_vertices = np.concatenate([vertices, all_points[fresh]])
+            weights_matrix = (p, n)
+        out_vertices = np.concatenate([vertices, fresh_points])
         out_triangles = np.concatenate([triangles, new_tris])
         used, stuck = self._fair_all(
             out_vertices, out_triangles, holes, continuity, weights == "cotangent", owner
@@ -602,7 +669,11 @@ class HoleFiller:
             remap = np.concatenate([np.arange(n), n + np.cumsum(keep_vertex) - 1])
             out_vertices = np.concatenate([vertices, out_vertices[n:][keep_vertex]])
             out_triangles = np.concatenate([triangles, remap[new_tris[~np.isin(owner, stuck)]]])
-            weights_matrix = weights_matrix[np.flatnonzero(keep_vertex)]
+            weights_matrix = (
+                (int(keep_vertex.sum()), n)
+                if isinstance(weights_matrix, tuple)
+                else weights_matrix[np.flatnonzero(keep_vertex)]
+            )
             left = np.isin(np.arange(len(holes)), stuck)
             skipped = skipped + [hole for hole, out in zip(holes, left) if out]
             used = used[~left]
@@ -623,19 +694,15 @@ class HoleFiller:
         """
         total, m, n = len(vertices), len(self.triangles), len(self.vertices)
         unknown = np.arange(n, total)
-        loops = np.unique(np.concatenate([hole.vertices for hole in holes]))
-        # triangles within `continuity` rings of the loops in the input, plus every new triangle
-        old, new_tris = triangles[:m], triangles[m:]
-        ring_tris, rings = _kernel().rings(self.triangles, *self.vertex_triangles, loops, continuity)
-        local_tris = np.concatenate([old[ring_tris], new_tris])
-        # a local numbering (nothing as long as the mesh): the new vertices, every one on a new triangle
-        # and numbered last, stay last
-        local_vertices = np.unique(local_tris)
-        local_rings = [np.searchsorted(local_vertices, r) for r in rings]
-        local = np.searchsorted(local_vertices, local_tris)
+        loops = holes[0].vertices if len(holes) == 1 else np.concatenate([hole.vertices for hole in holes])
+        # triangles within `continuity` rings of the loops in the input, plus every new triangle; a local
+        # numbering (nothing as long as the mesh): the new vertices, every one on a new triangle and
+        # numbered last, stay last; one connectivity for every solve below
+        new_tris = triangles[m:]
+        local_vertices, local, local_rings, local_edges = _kernel().ring_mesh(
+            self.triangles, *self.vertex_triangles, loops, continuity, triangles, total
+        )
         local_unknown = np.arange(len(local_vertices) - len(unknown), len(local_vertices))
-        # one connectivity for every solve below
-        local_edges = _kernel().unique_edges(local, len(local_vertices))
         refined = vertices[n:].copy()
         work = vertices  # its new rows hold the candidate being solved from or checked
 
@@ -648,18 +715,27 @@ class HoleFiller:
                 return None
             return x if np.isfinite(x).all() else None
 
+        def solve_twice(level: int) -> tuple[np.ndarray | None, np.ndarray | None]:
+            """The uniform solve, then the cotangent one from it, in one compiled call (a small patch)."""
+            ring = local_rings[1] if level > 1 else local_rings[0]
+            return _kernel().fair_dense_twice(
+                work[local_vertices], local, *local_edges, local_unknown, local_rings[0], ring, level
+            )
+
         def candidates():  # lazily: most calls stop at the first
+            dense = len(unknown) <= _solvers.DENSE_UNKNOWNS
             for level in (
                 range(continuity, -1, -1) if len(unknown) else []
             ):  # nothing to fair without new vertices
-                solution = solve(level, False)
+                twice = cot and level > 0 and dense
+                solution, again = solve_twice(level) if twice else (solve(level, False), None)
                 if solution is None:
                     continue
                 work[n:] = solution
                 if cot and level > 0:
                     # cotangent weights (clamped, area-normalized) read off the uniform solution: a fair
                     # embedding, where weights from the flat refined patch diverged (camel 15h: 87 h off)
-                    again = solve(level, True)
+                    again = again if twice else solve(level, True)
                     if again is not None and _kernel().keeps_facing(work, again, new_tris):
                         work[n:] = again
                         yield level, _kernel().tangential_relax(work, new_tris, n)
@@ -668,10 +744,18 @@ class HoleFiller:
                 work[n:] = refined
             yield -1, refined  # the refined patch as triangulated
 
+        tried = []
+        if len(holes) == 1:  # the first candidate free of crossings, without the per-hole bookkeeping
+            for level, candidate in candidates():
+                tried.append(level)
+                work[n:] = candidate
+                if not _crossings(work, triangles, m, self.index, None).any():
+                    return np.array([level], dtype=np.int64), np.zeros(0, dtype=np.int64)
+            work[n:] = refined
+            return np.array([tried[0]], dtype=np.int64), np.zeros(1, dtype=np.int64)
         vertex_owner = _vertex_owner(new_tris, owner, n, total - n)
         chosen = np.full(len(holes), -1)
         out = refined.copy()
-        tried = []
         for rank, (level, candidate) in enumerate(candidates()):
             tried.append(level)
             work[n:] = candidate
@@ -691,6 +775,10 @@ class HoleFiller:
 
 def _simple_pieces(loop: np.ndarray, rows: np.ndarray):
     """Split a loop that passes a vertex more than once into loops that do not (each filled on its own)."""
+    if len(set(loop.tolist())) == len(loop):  # the usual loop: simple (a set is quicker than np.unique here)
+        if len(loop) >= 3:
+            yield loop, rows
+        return
     stack = [(loop, rows)]
     while stack:
         loop, rows = stack.pop()
@@ -704,6 +792,15 @@ def _simple_pieces(loop: np.ndarray, rows: np.ndarray):
         p = int(np.argmax(loop == loop[q]))
         stack.append((loop[p:q], rows[p:q]))
         stack.append((np.concatenate([loop[:p], loop[q:]]), np.concatenate([rows[:p], rows[q:]])))
+
+
+def _empty_csr(rows: int, cols: int) -> sp.csr_matrix:
+    """An all-zero ``(rows, cols)`` CSR matrix, from its arrays (SciPy's shape-only form costs more)."""
+    return sp.csr_matrix(
+        (np.zeros(0), np.zeros(0, dtype=np.int32), np.zeros(rows + 1, dtype=np.int32)),
+        shape=(rows, cols),
+        copy=False,
+    )
 
 
 def _vertex_owner(new_tris: np.ndarray, owner: np.ndarray, n: int, p: int) -> np.ndarray:
@@ -744,51 +841,75 @@ def _interpolation(
 
 
 class _TriangleIndex:
-    """Bounding spheres (about the centroids) of a mesh's triangles in k-d trees, for crossing queries.
+    """Bounding spheres (about the centroids) of a mesh's triangles in uniform grids, for crossing queries.
 
-    Two trees, the spheres of radius at most 4 times the median and the rest, each queried with its own
-    largest radius, so that a few long slivers do not make every query reach far (queries are
-    thread-safe; the trees pickle).
+    Two grids, the spheres of radius at most 4 times the median and the rest, each queried with its own
+    largest radius, so that a few long slivers do not make every query reach far. Each grid (cells of
+    about that radius, at most ``4 m`` of them) lists its triangles cell by cell (one stable sort):
+    a small patch's query reads a few cells in the compiled :func:`o3d_lsmesh._fill_kernel.grid_near`,
+    where a k-d tree's ball query cost SciPy's per-call overhead (queries are thread-safe; the grids
+    pickle).
     """
 
     def __init__(self, vertices: np.ndarray, triangles: np.ndarray) -> None:
-        from scipy.spatial import cKDTree
-
         p = vertices[triangles]
         self.centre = p.mean(axis=1)
         self.radius = np.linalg.norm(p - self.centre[:, None, :], axis=2).max(axis=1)
         small = self.radius <= (4.0 * float(np.median(self.radius)) if len(self.radius) else 0.0)
-        groups = [g for g in (np.flatnonzero(small), np.flatnonzero(~small)) if len(g)]
-        self.trees = [(cKDTree(self.centre[g]), float(self.radius[g].max()), g) for g in groups]
+        self.grids = [self._grid(g) for g in (np.flatnonzero(small), np.flatnonzero(~small)) if len(g)]
+
+    def _grid(self, members: np.ndarray) -> tuple:
+        centre = self.centre[members]
+        reach = float(self.radius[members].max())
+        origin = centre.min(axis=0)
+        extent = centre.max(axis=0) - origin
+        cell = reach if reach > 0 else max(float(extent.max()), 1.0)
+        budget = 4 * len(members) + 64
+        while np.prod(np.floor(extent / cell) + 1) > budget:  # the grid stays linear in the triangles
+            cell *= 1.5
+        dims = (np.floor(extent / cell) + 1).astype(np.int64)
+        xyz = np.minimum(np.floor((centre - origin) / cell).astype(np.int64), dims - 1)
+        key = (xyz[:, 0] * dims[1] + xyz[:, 1]) * dims[2] + xyz[:, 2]
+        order = np.argsort(key, kind="stable")
+        indptr = np.zeros(int(np.prod(dims)) + 1, dtype=np.int64)
+        np.cumsum(np.bincount(key, minlength=len(indptr) - 1), out=indptr[1:])
+        return origin, cell, dims, indptr, members[order], reach
 
     def near(
         self, centre: np.ndarray, radius: np.ndarray, groups: np.ndarray | None = None
     ) -> tuple[np.ndarray, np.ndarray]:
         """Pairs ``(query, triangle)`` whose bounding spheres overlap.
 
-        One ball query per group of queries (``groups`` labels them: the patch of each new triangle) and
-        tree gathers the triangles near the group's bounding sphere; the pairs are found among those by
-        a sweep and prune (cheaper than thousands of ball queries into the whole mesh's tree).
+        One grid query per group of queries (``groups`` labels them: the patch of each new triangle) and
+        grid gathers the triangles whose spheres meet the group's box; the pairs are found among those
+        by a sweep and prune.
         """
         empty = np.zeros(0, dtype=np.int64)
         if len(centre) == 0:
             return empty, empty
+        kernel = _kernel()
         if groups is None or (groups == groups[0]).all():
-            masks = [slice(None)]  # one patch (the usual call): no grouping, and no duplicate hits
+            masks: list[Any] = [None]  # one patch (the usual call): no grouping, and no duplicate hits
         else:
             masks = [groups == label for label in np.unique(groups)]
         found = [empty]
         for mine in masks:
-            low = (centre[mine] - radius[mine, None]).min(axis=0)
-            high = (centre[mine] + radius[mine, None]).max(axis=0)
-            middle, half = 0.5 * (low + high), 0.5 * float(np.linalg.norm(high - low))
-            for tree, reach, members in self.trees:
-                hits = tree.query_ball_point(middle, half + reach, return_sorted=False)
-                found.append(members[np.asarray(hits, dtype=np.int64)])
-        # the two trees hold disjoint triangles: one patch's hits are distinct, several patches' may repeat
+            c, r = (centre, radius) if mine is None else (centre[mine], radius[mine])
+            for origin, cell, dims, indptr, members, reach in self.grids:
+                found.append(
+                    kernel.grid_near(
+                        c, r, origin, cell, dims, indptr, members, self.centre, self.radius, reach
+                    )
+                )
+        # the two grids hold disjoint triangles: one patch's hits are distinct, several patches' may repeat
         candidates = np.concatenate(found) if len(masks) == 1 else np.unique(np.concatenate(found))
-        qi, ti = _kernel().sphere_pairs(centre, radius, self.centre[candidates], self.radius[candidates])
+        qi, ti = kernel.sphere_pairs(centre, radius, self.centre[candidates], self.radius[candidates])
         return qi, candidates[ti]
+
+
+#: Patches of at most this many new triangles test each against every candidate near the patch
+#: (:func:`o3d_lsmesh._fill_kernel.patch_crossings`); larger ones sweep (:meth:`_TriangleIndex.near`).
+_SMALL_PATCH = 256
 
 
 def _crossings(
@@ -800,8 +921,16 @@ def _crossings(
     :class:`_TriangleIndex` of ``triangles[:first_new]``; if None, of the input triangles in the new
     triangles' box), queried per patch when ``groups`` (or None) labels each new triangle's patch, and the
     new ones among themselves. Each pair is tested on the 17 axes that separate two disjoint triangles
-    (two normals, nine edge-edge cross products, six in-plane edge normals for coplanar pairs).
+    (two normals, nine edge-edge cross products, six in-plane edge normals for coplanar pairs). One patch
+    of at most :data:`_SMALL_PATCH` triangles with an ``index`` is checked in one compiled call, each new
+    triangle against every candidate of the grids (:func:`o3d_lsmesh._fill_kernel.patch_crossings`).
     """
+    q = len(triangles) - first_new
+    if index is not None and 0 < q <= _SMALL_PATCH and (groups is None or not groups.any()):
+        # one small patch (``groups`` all 0): candidates and tests in one compiled call
+        return _kernel().patch_crossings(
+            vertices, triangles, first_new, index.grids, index.centre, index.radius
+        )
     new = np.arange(first_new, len(triangles))
     result = np.zeros(len(new))
     if len(new) == 0:

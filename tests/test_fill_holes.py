@@ -1154,7 +1154,9 @@ def test_loop_geometry_matches_plain_loops(seed, size):
     rows = rng.integers(0, 3 * m, len(loop))
     order = np.argsort(tris.ravel(), kind="stable")
     indptr = np.concatenate([[0], np.cumsum(np.bincount(tris.ravel(), minlength=n))])
-    got_points, outer, got, spacing = _fill_kernel.loop_geometry(loop, rows, points, tris, indptr, order // 3)
+    got_points, outer, got, spacing, pairs = _fill_kernel.loop_geometry(
+        loop, rows, points, tris, indptr, order // 3
+    )
     assert np.array_equal(got_points, points[loop])
     for i, row in enumerate(rows.tolist()):
         a, b, c = points[tris[row % m]]
@@ -1171,6 +1173,7 @@ def test_loop_geometry_matches_plain_loops(seed, size):
             if frozenset((loop[p], loop[q])) in edges and q != (p + 1) % k and p != (q + 1) % k:
                 expected[p, q] = True
     assert np.array_equal(got, expected)
+    assert pairs.tolist() == [[p, q] for p in range(k) for q in range(p + 1, k) if expected[p, q]]
 
 
 @settings(max_examples=25, deadline=None)
@@ -1277,3 +1280,169 @@ def test_dynamic_programme_falls_back_when_every_chord_is_an_edge():
     assert np.array_equal(_minimum_weight_triangulation(points, outer, forbidden), expected)
     half = {(a, b) for t in expected.tolist() for a, b in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0]))}
     assert all(((i + 1) % 4, i) in half for i in range(4))
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 30), st.integers(1, 3), st.booleans())
+def test_cholesky_solve_is_scipys_cho_solve(seed, p, c, singular):
+    # reference: SciPy's cho_factor and cho_solve, the same LAPACK routines: equal to the last bit
+    from scipy.linalg import cho_factor, cho_solve
+
+    rng = np.random.default_rng(seed)
+    A = rng.normal(size=(p + 3, p))
+    matrix = A.T @ A + 1e-3 * np.eye(p)
+    matrix = 0.5 * (matrix + matrix.T)  # exactly symmetric, as the normal equations are
+    rhs = rng.normal(size=(p, c))
+    if singular:
+        matrix[p - 1, p - 1] = -1.0
+        assert _fill_kernel.cholesky_solve(matrix.copy(), rhs) is None
+        return
+    got = _fill_kernel.cholesky_solve(matrix.copy(), rhs)
+    assert np.array_equal(got, cho_solve(cho_factor(matrix), rhs))
+    bad = matrix.copy()
+    bad[0, 0] = np.nan
+    assert _fill_kernel.cholesky_solve(bad, rhs) is None
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 40), st.floats(0.01, 0.5))
+def test_grid_queries_find_every_overlapping_sphere(seed, queries, size):
+    # reference: every triangle's bounding sphere against every query sphere, by distances; the grids
+    # (of :class:`_TriangleIndex`) must return a superset, and the pairs after the exact test be those
+    rng = np.random.default_rng(seed)
+    corners = rng.random((200, 1, 3)) * [3, 1, 2] + rng.normal(scale=0.03, size=(200, 3, 3))
+    corners[:6, 2] += rng.normal(scale=1.0, size=(6, 3))  # a few long slivers: the second grid
+    V, T = corners.reshape(-1, 3), np.arange(600, dtype=np.int64).reshape(200, 3)
+    index = _TriangleIndex(V, T)
+    centre, radius = rng.random((queries, 3)) * [3, 1, 2], size * rng.random(queries)
+    near = (
+        np.linalg.norm(centre[:, None] - index.centre[None], axis=2) <= radius[:, None] + index.radius[None]
+    )
+    found = set()
+    for origin, cell, dims, indptr, members, reach in index.grids:
+        hits = _fill_kernel.grid_near(
+            centre, radius, origin, cell, dims, indptr, members, index.centre, index.radius, reach
+        )
+        assert len(set(hits.tolist())) == len(hits)
+        found |= set(hits.tolist())
+    assert set(np.flatnonzero(near.any(axis=0)).tolist()) <= found
+    qi, ti = index.near(centre, radius)
+    assert sorted(zip(qi.tolist(), ti.tolist())) == sorted(zip(*(x.tolist() for x in np.nonzero(near))))
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 12))
+def test_patch_crossings_match_plain_segment_tests(seed, q):
+    # reference: the plain segment-triangle tests of every new triangle against every other one
+    rng = np.random.default_rng(seed)
+    V = rng.random((40, 3))
+    T = np.array([rng.choice(40, 3, replace=False) for _ in range(30 + q)], dtype=np.int64)
+    index = _TriangleIndex(V, T[:30])
+    got = _fill_kernel.patch_crossings(V, T, 30, index.grids, index.centre, index.radius)
+    assert np.array_equal(got, reference_crossings(V, T, 30))
+    assert np.array_equal(_crossings(V, T, 30, index, None), got)
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(3, 7))
+def test_local_mesh_is_the_unique_numbering(seed, size):
+    # reference: np.unique of the local triangles and np.searchsorted into it; the edges of unique_edges
+    points, tris, rng = _random_patch(seed, size, 0.3)
+    n, m = len(points), len(tris)
+    first_new = int(rng.integers(0, m))
+    ring_tris = np.sort(rng.choice(first_new, rng.integers(0, first_new + 1), replace=False)).astype(np.int64)
+    local_tris = np.concatenate([tris[ring_tris], tris[first_new:]])
+    vertices = np.unique(local_tris)
+    rings = [vertices[rng.random(len(vertices)) < 0.5] for _ in range(2)]
+    got_vertices, local, got_rings, edges = _fill_kernel.local_mesh(tris, first_new, ring_tris, rings, n)
+    assert np.array_equal(got_vertices, vertices)
+    assert np.array_equal(local, np.searchsorted(vertices, local_tris))
+    for got, ring in zip(got_rings, rings):
+        assert np.array_equal(got, np.searchsorted(vertices, ring))
+    for got, expected in zip(edges, _fill_kernel.unique_edges(local, len(vertices))):
+        assert np.array_equal(got, expected)
+    with pytest.raises(ValueError, match="outside"):
+        _fill_kernel.local_mesh(tris, first_new, ring_tris, rings, int(local_tris.max()))
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(4, 7), st.integers(1, 2), st.booleans())
+def test_fair_dense_matches_the_sparse_solve(seed, size, level, cot):
+    # reference: the sparse path of _fair (CSR operators, SciPy's products, solve_spd's sparse solver)
+    from o3d_lsmesh import hole_filling
+
+    points, tris, _ = _random_patch(seed, size, 0.4)
+    n = len(points)
+    border = np.unique(
+        np.concatenate(
+            [np.arange(size), np.arange(n - size, n), np.arange(0, n, size), np.arange(size - 1, n, size)]
+        )
+    )
+    inner = np.setdiff1d(np.arange(n), border)
+    assume(len(inner) > 0)
+    edges = _fill_kernel.unique_edges(tris, n)
+    ring0 = np.intersect1d(border, np.unique(tris[np.isin(tris, inner).any(axis=1)]))
+    rings = [ring0, np.setdiff1d(border, ring0)]
+    got = _fill_kernel.fair_dense(points, tris, *edges, inner, rings[0], rings[1], level, cot)
+    dense = hole_filling._solvers.DENSE_UNKNOWNS
+    try:
+        hole_filling._solvers.DENSE_UNKNOWNS = -1  # every solve sparse
+        expected = hole_filling._fair(points, tris, inner, rings, level, edges, cot)
+    finally:
+        hole_filling._solvers.DENSE_UNKNOWNS = dense
+    np.testing.assert_allclose(got, expected, rtol=1e-8, atol=1e-8)
+    with pytest.raises(ValueError, match="level"):
+        _fill_kernel.fair_dense(points, tris, *edges, inner, rings[0], rings[1], 0, cot)
+
+
+def test_empty_interpolation_is_built_when_read():
+    # the all-zero interpolation matrix of a fill without interpolation: its shape, and it pickles
+    import pickle
+
+    V, T = icosphere(2)
+    out = fill_holes_arrays(V, T[3:])
+    assert out.interpolation.shape == (len(out.vertices) - len(V), len(V))
+    assert out.interpolation.nnz == 0
+    assert pickle.loads(pickle.dumps(out)).interpolation.shape == out.interpolation.shape
+
+
+@settings(max_examples=20, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(4, 7), st.integers(1, 2))
+def test_fused_calls_equal_their_steps(seed, size, level):
+    # fair_dense_twice: the uniform solve, then the cotangent one from the embedding it gives; ring_mesh:
+    # rings then local_mesh (references: the separate calls, equal to the last bit)
+    points, tris, _ = _random_patch(seed, size, 0.4)
+    n = len(points)
+    inner = np.array([v for v in range(n) if 0 < v % size < size - 1 and size <= v < n - size])
+    assume(len(inner) > 0)
+    edges = _fill_kernel.unique_edges(tris, n)
+    ring0 = np.setdiff1d(np.unique(tris[np.isin(tris, inner).any(axis=1)]), inner)
+    ring1 = np.setdiff1d(np.arange(n), np.concatenate([inner, ring0]))
+    uniform, again = _fill_kernel.fair_dense_twice(points, tris, *edges, inner, ring0, ring1, level)
+    first = _fill_kernel.fair_dense(points, tris, *edges, inner, ring0, ring1, level, False)
+    embedded = points.copy()
+    embedded[inner] = first
+    second = _fill_kernel.fair_dense(embedded, tris, *edges, inner, ring0, ring1, level, True)
+    assert np.array_equal(uniform, first)
+    assert np.array_equal(again, second)
+    m = len(tris) - 2
+    got = _fill_kernel.ring_mesh(
+        tris[:m], indptr_of(tris[:m], n), data_of(tris[:m], n), inner[:1], level, tris, n
+    )
+    ring_tris, found = _fill_kernel.rings(
+        tris[:m], indptr_of(tris[:m], n), data_of(tris[:m], n), inner[:1], level
+    )
+    expected = _fill_kernel.local_mesh(tris, m, ring_tris, found, n)
+    assert np.array_equal(got[0], expected[0]) and np.array_equal(got[1], expected[1])
+    assert all(np.array_equal(a, b) for a, b in zip(got[2], expected[2]))
+    assert all(np.array_equal(a, b) for a, b in zip(got[3], expected[3]))
+
+
+def indptr_of(tris, n):
+    """Each vertex's triangles, CSR row pointers (as HoleFiller's ``vertex_triangles``)."""
+    return np.concatenate([[0], np.cumsum(np.bincount(tris.ravel(), minlength=n))]).astype(np.int64)
+
+
+def data_of(tris, n):
+    """Each vertex's triangles, CSR column indices."""
+    return (np.argsort(tris.ravel(), kind="stable") // 3).astype(np.int64)
