@@ -589,20 +589,14 @@ class HoleFiller:
                     piece_extra.append(extra)
                     piece_tris.append(tris)
                     bar.update(1)
-            if count == 1:  # one simple loop, the usual fill: nothing to offset or gather
-                extra = piece_extra[0]
-                all_points = np.concatenate([piece_points[0], extra]) if len(extra) else piece_points[0]
-                all_tris = piece_tris[0]
-                point_piece = np.zeros(len(all_points), dtype=np.int64)
-            else:  # every piece refined at once, in disjoint local index ranges
-                lengths = np.array([len(loop) for loop in piece_loop])
-                sizes = np.array([len(p) + len(e) for p, e in zip(piece_points, piece_extra)])
-                starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
-                all_points = np.concatenate(
-                    [np.concatenate([p, e]) for p, e in zip(piece_points, piece_extra)]
-                )
-                all_tris = np.concatenate([t + start for t, start in zip(piece_tris, starts)])
-                point_piece = np.repeat(np.arange(count), sizes)
+            # every piece refined at once, in disjoint local index ranges (a single short loop took the
+            # compiled path above)
+            lengths = np.array([len(loop) for loop in piece_loop])
+            sizes = np.array([len(p) + len(e) for p, e in zip(piece_points, piece_extra)])
+            starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+            all_points = np.concatenate([np.concatenate([p, e]) for p, e in zip(piece_points, piece_extra)])
+            all_tris = np.concatenate([t + start for t, start in zip(piece_tris, starts)])
+            point_piece = np.repeat(np.arange(count), sizes)
             if density > 0:
                 # Liepa's scale: each loop vertex's mean edge length, the chords' spacing on their points
                 sigma = [
@@ -616,35 +610,27 @@ class HoleFiller:
                 # mesh edges between loop vertices: no flip may make them twice
                 all_points, all_tris, point_piece = _kernel().refine(
                     all_points,
-                    sigma[0] if count == 1 else np.concatenate(sigma),
+                    np.concatenate(sigma),
                     all_tris,
-                    piece_pairs[0]
-                    if count == 1
-                    else np.concatenate([f + s for f, s in zip(piece_pairs, starts)]),
+                    np.concatenate([f + s for f, s in zip(piece_pairs, starts)]),
                     point_piece,
                     _ALPHA,
                 )
             # global numbering: loop points (first in each piece, in order) are mesh vertices; the others
             # are new, numbered piece by piece
-            if count == 1:  # the usual fill, one simple loop: its points first, then the new ones in order
-                fresh_points = all_points[len(piece_loop[0]) :]
-                new_tris = np.concatenate([piece_loop[0], n + np.arange(len(fresh_points))])[all_tris]
-                owner = np.zeros(len(new_tris), dtype=np.int64)
-                tri_piece = owner
-            else:
-                is_loop = np.zeros(len(all_points), dtype=bool)
-                is_loop[concatenated_ranges(starts, lengths)] = True
-                global_index = np.empty(len(all_points), dtype=np.int64)
-                global_index[is_loop] = np.concatenate(piece_loop)
-                fresh = np.flatnonzero(~is_loop)
-                fresh = fresh[np.argsort(point_piece[fresh], kind="stable")]
-                global_index[fresh] = n + np.arange(len(fresh))
-                fresh_points = all_points[fresh]
-                tri_piece = point_piece[all_tris[:, 0]]
-                tri_order = np.argsort(tri_piece, kind="stable")
-                tri_piece = tri_piece[tri_order]
-                new_tris = global_index[all_tris[tri_order]]
-                owner = np.asarray(piece_hole, dtype=np.int64)[tri_piece]  # the hole of each new triangle
+            is_loop = np.zeros(len(all_points), dtype=bool)
+            is_loop[concatenated_ranges(starts, lengths)] = True
+            global_index = np.empty(len(all_points), dtype=np.int64)
+            global_index[is_loop] = np.concatenate(piece_loop)
+            fresh = np.flatnonzero(~is_loop)
+            fresh = fresh[np.argsort(point_piece[fresh], kind="stable")]
+            global_index[fresh] = n + np.arange(len(fresh))
+            fresh_points = all_points[fresh]
+            tri_piece = point_piece[all_tris[:, 0]]
+            tri_order = np.argsort(tri_piece, kind="stable")
+            tri_piece = tri_piece[tri_order]
+            new_tris = global_index[all_tris[tri_order]]
+            owner = np.asarray(piece_hole, dtype=np.int64)[tri_piece]  # the hole of each new triangle
         p = len(fresh_points)
         weights_matrix: Any
         if interpolation and p:
