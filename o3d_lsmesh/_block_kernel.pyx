@@ -10,6 +10,7 @@ A Gauss-Seidel sweep is sequential by nature; each column gets the arithmetic of
 
 import numpy as np
 
+from libc.math cimport sqrt
 from libc.stdint cimport int32_t, int64_t
 
 ctypedef fused index_t:
@@ -99,3 +100,48 @@ def cg_step(double[:, ::1] x, double[:, ::1] r, const double[:, ::1] p, const do
                 r[i, c] -= alpha[c] * q[i, c]
                 sq[c] += r[i, c] * r[i, c]
     return squares
+
+
+def strong_part(const index_t[::1] indptr, const index_t[::1] indices, const double[::1] data, double theta):
+    """The strong entries of a symmetric CSR matrix, its weak ones lumped onto the diagonal.
+
+    Entry ``a_ij`` (``i != j``) is strong where ``|a_ij| >= theta sqrt(|a_ii a_jj|)`` (pyamg's symmetric
+    strength of connection); each row's weak entries are summed into its diagonal entry, so the row
+    sums (and a constant null space) survive. Returns ``(indptr, indices, data)`` of the filtered
+    matrix, rows in the input's order. Every row must store its diagonal.
+    """
+    cdef Py_ssize_t n = indptr.shape[0] - 1, i, count = 0
+    cdef index_t jj, j, out
+    cdef double[::1] diagonal = np.zeros(n)
+    for i in range(n):
+        for jj in range(indptr[i], indptr[i + 1]):
+            if indices[jj] == i:
+                diagonal[i] = abs(data[jj])
+    for i in range(n):
+        for jj in range(indptr[i], indptr[i + 1]):
+            j = indices[jj]
+            if j == i or abs(data[jj]) >= theta * sqrt(diagonal[i] * diagonal[j]):
+                count += 1
+    dtype = np.int32 if index_t is int32_t else np.int64
+    strong_indptr, strong_indices, strong_data = np.empty(n + 1, dtype), np.empty(count, dtype), np.empty(count)
+    cdef index_t[::1] sp = strong_indptr, si = strong_indices
+    cdef double[::1] sd = strong_data
+    cdef double weak
+    cdef index_t place
+    out = 0
+    sp[0] = 0
+    for i in range(n):
+        weak, place = 0.0, -1
+        for jj in range(indptr[i], indptr[i + 1]):
+            j = indices[jj]
+            if j == i or abs(data[jj]) >= theta * sqrt(diagonal[i] * diagonal[j]):
+                if j == i:
+                    place = out
+                si[out], sd[out] = j, data[jj]
+                out += 1
+            else:
+                weak += data[jj]
+        if place >= 0:
+            sd[place] += weak
+        sp[i + 1] = out
+    return strong_indptr, strong_indices, strong_data

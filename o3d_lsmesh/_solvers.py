@@ -675,18 +675,27 @@ def _amg_preconditioner(matrix: sp.spmatrix) -> Any:
 
 #: The AMG hierarchy stops coarsening at this many unknowns and solves them with a sparse LU.
 COARSE_UNKNOWNS = 500
+#: Strength threshold of the AMG's aggregation and prolongator smoothing: keeps an LS mesh normal
+#: matrix's 1-ring entries (about 0.24 of the diagonal) and drops its 2-ring ones (below 0.05);
+#: 0.05 and 0.2 took 33 and 32 CG iterations at 200k vertices, as 0.1 did; 0.3 drops the 1-ring (263).
+STRENGTH = 0.1
 
 
-def _aggregation_levels(A: sp.csr_matrix, *, max_levels: int = 10, omega: float = 4.0 / 3.0) -> tuple:
+def _aggregation_levels(
+    A: sp.csr_matrix, *, max_levels: int = 10, omega: float = 4.0 / 3.0, theta: float = STRENGTH
+) -> tuple:
     """Smoothed-aggregation levels ``[(A, R, P), ...]`` and the coarsest level's LU.
 
-    pyamg's ``smoothed_aggregation_solver`` with the constant as near-null space, aggregates on the
-    matrix's own pattern (its strength test with theta = 0 keeps every entry), the candidate improved
-    by four symmetric Gauss-Seidel sweeps on ``A x = 0`` on the finest level, and the Jacobi-smoothed
-    prolongator ``P = (I - omega D^-1 A) T`` with ``D`` the rows' absolute sums (a local Gershgorin
-    bound: pyamg's default eigenvalue estimate took a fifth of the solve at 100k vertices). Built here
-    from pyamg's aggregation and tentative prolongator to hold one scaled copy of the matrix's values
-    (pyamg's smoother copies the whole matrix three times, the peak of a solve at 10M vertices).
+    pyamg's smoothed aggregation with the constant as near-null space, from its aggregation and
+    tentative prolongator: the candidate is improved by four symmetric Gauss-Seidel sweeps on ``A x = 0``
+    on the finest level; each level keeps ``A``'s strong entries (``|a_ij| >= theta sqrt(|a_ii a_jj|)``,
+    the weak ones lumped onto the diagonal: ``A_F``), aggregates on their graph and smooths the
+    tentative prolongator with them, ``P = (I - omega D^-1 A_F) T`` with ``D`` the rows' absolute sums
+    (a local Gershgorin bound: pyamg's eigenvalue estimate took a fifth of the solve at 100k vertices).
+    On the normal matrix of an LS mesh (a 2-ring stencil) the strong entries are the 1-ring: aggregates
+    and prolongator on the whole stencil took 79 CG iterations at 1M vertices, on its strong part 31
+    (benchmarks/results/scale.md). Only the filtered copy's values are scaled (pyamg's smoother copies
+    the whole matrix three times, the peak of a solve at 10M vertices).
     """
     try:
         from pyamg.aggregation.aggregate import standard_aggregation
@@ -701,19 +710,17 @@ def _aggregation_levels(A: sp.csr_matrix, *, max_levels: int = 10, omega: float 
         _block_kernel.gauss_seidel(*finest, candidate, zero, False)
     levels: list[tuple[sp.csr_matrix, sp.csr_matrix, sp.csr_matrix]] = []
     while len(levels) + 1 < max_levels and A.shape[0] > COARSE_UNKNOWNS:
-        tentative, candidate = fit_candidates(standard_aggregation(A)[0], candidate)
-        indptr, indices, data = _csr_parts(A)
+        indptr, indices, data = _block_kernel.strong_part(*_csr_parts(A), theta)
+        strong = sp.csr_matrix((data, indices, indptr), shape=A.shape)
+        tentative, candidate = fit_candidates(standard_aggregation(strong)[0], candidate)
         counts = np.diff(indptr)
-        magnitude = np.abs(data)
-        absolute = np.add.reduceat(magnitude, np.minimum(indptr[:-1], max(len(data) - 1, 0)))
-        del magnitude
+        absolute = np.add.reduceat(np.abs(data), np.minimum(indptr[:-1], max(len(data) - 1, 0)))
         absolute[counts == 0] = 0.0
         step = np.divide(omega, absolute, out=np.zeros(len(absolute)), where=absolute != 0)
-        scaled = np.repeat(step, counts)
-        scaled *= data  # omega D^-1 A on A's own index arrays
+        strong.data = np.repeat(step, counts) * data  # omega D^-1 A_F
         tentative = sp.csr_matrix(tentative)
-        P = (tentative - sp.csr_matrix((scaled, indices, indptr), shape=A.shape) @ tentative).tocsr()
-        del scaled
+        P = (tentative - strong @ tentative).tocsr()
+        del strong, data, indices, indptr
         R = P.T.tocsr()
         coarse = (R @ (A @ P)).tocsr()
         coarse.sort_indices()

@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from pyamg.relaxation.relaxation import gauss_seidel as pyamg_gauss_seidel
 
 from o3d_lsmesh import _block_kernel
-from o3d_lsmesh._solvers import COARSE_UNKNOWNS, _aggregation_levels, _block_times, _vcycle
+from o3d_lsmesh._solvers import COARSE_UNKNOWNS, STRENGTH, _aggregation_levels, _block_times, _vcycle
 
 
 def _random_csr(rows, cols, density, seed, index=np.int32):
@@ -78,28 +78,102 @@ def test_cg_step_is_the_numpy_update():
 
 def test_aggregation_vcycle_is_pyamgs_smoothed_aggregation_vcycle():
     pyamg = pytest.importorskip("pyamg")
+    from pyamg.multilevel import MultilevelSolver
+    from pyamg.relaxation.smoothing import change_smoothers
+
     grid = pyamg.gallery.poisson((200, 200), format="csr")  # 40000 unknowns: four levels
     reference = pyamg.smoothed_aggregation_solver(
         grid,
         B=np.ones((grid.shape[0], 1)),
         symmetry="symmetric",
-        strength=None,
+        strength=("symmetric", {"theta": STRENGTH}),
         smooth=("jacobi", {"weighting": "local"}),
-        presmoother=("gauss_seidel", {"sweep": "forward"}),
-        postsmoother=("gauss_seidel", {"sweep": "backward"}),
         max_coarse=COARSE_UNKNOWNS,
         coarse_solver="splu",
     )
     levels, coarse = _aggregation_levels(grid)
-    sizes = [A.shape[0] for A, _, _ in levels] + [coarse.shape[0]]
-    assert sizes == [level.A.shape[0] for level in reference.levels] and len(sizes) == 4
-    for (_, R, P), level in zip(levels, reference.levels):
-        assert abs(P - level.P).max() < 1e-12 and abs(R - level.R).max() < 1e-12
+    # every entry of the grid is strong: the finest level has nothing to lump and is pyamg's
+    (_, R, P), level = levels[0], reference.levels[0]
+    assert abs(P - level.P).max() < 1e-12 and abs(R - level.R).max() < 1e-12
+    assert len(levels) == 3 and levels[1][0].shape == reference.levels[1].A.shape
+    # the V-cycle on our levels is pyamg's: forward Gauss-Seidel before, backward after, LU at the bottom
+    ours = []
+    for A, R, P in levels:
+        ours.append(MultilevelSolver.Level())
+        ours[-1].A, ours[-1].R, ours[-1].P = A, R, P
+    ours.append(MultilevelSolver.Level())
+    ours[-1].A = levels[-1][1] @ levels[-1][0] @ levels[-1][2]
+    assert ours[-1].A.shape == coarse.shape
+    ml = MultilevelSolver(ours, coarse_solver="splu")
+    change_smoothers(ml, ("gauss_seidel", {"sweep": "forward"}), ("gauss_seidel", {"sweep": "backward"}))
     b = np.random.default_rng(4).standard_normal((grid.shape[0], 3))
     got = _vcycle(levels, coarse)(b)
-    # pyamg's own V-cycle from a zero guess, one cycle, column by column
-    want = np.column_stack([reference.solve(b[:, c], maxiter=1, tol=1e-300, cycle="V") for c in range(3)])
+    want = np.column_stack([ml.solve(b[:, c], maxiter=1, tol=1e-300, cycle="V") for c in range(3)])
     assert np.allclose(got, want, rtol=1e-10, atol=1e-10 * np.abs(want).max())
+
+
+def test_aggregation_smooths_the_prolongator_with_the_strong_part():
+    # an LS mesh's normal matrix L^T L + W^2 (uniform L on a triangulated grid): a 1-ring of strong
+    # entries and a 2-ring of weak ones, which must neither join the aggregates' graph nor widen P
+    from o3d_lsmesh.laplacian import laplacian_matrix
+
+    side = 60
+    u, v = np.meshgrid(np.arange(side, dtype=float), np.arange(side, dtype=float))
+    vertices = np.column_stack([u.ravel(), v.ravel(), np.zeros(side * side)])
+    corner = (np.arange(side - 1)[:, None] * side + np.arange(side - 1)[None, :]).ravel()
+    triangles = np.concatenate(
+        [
+            np.column_stack([corner, corner + 1, corner + side + 1]),
+            np.column_stack([corner, corner + side + 1, corner + side]),
+        ]
+    )
+    L = laplacian_matrix(vertices, triangles, "uniform").tocsr()
+    N = (L.T @ L + sp.diags(np.where(np.arange(side * side) % 50 == 0, 1.0, 0.0))).tocsr()
+    N.sort_indices()
+    indptr, indices, data = _block_kernel.strong_part(N.indptr, N.indices, N.data, STRENGTH)
+    strong = sp.csr_matrix((data, indices, indptr), shape=N.shape)
+    mesh_graph = (abs(L) > 0).astype(int)
+    # the strong part is the 1-ring (and a few second-ring entries at the grid's corners)
+    assert (mesh_graph - mesh_graph.multiply(strong != 0)).nnz == 0 and strong.nnz <= 1.01 * mesh_graph.nnz
+    mesh_graph = (strong != 0).astype(int)
+    from pyamg.aggregation.aggregate import standard_aggregation
+
+    P = _aggregation_levels(N)[0][0][2]
+    aggregates = standard_aggregation(mesh_graph.tocsr())[0]  # the strong graph's aggregates, by pyamg
+    assert P.shape == aggregates.shape
+    identity = sp.eye(len(vertices), dtype=int, format="csr")
+    reach_strong = (((identity + mesh_graph) @ aggregates) != 0).astype(int)
+    reach_whole = (((identity + (abs(N) > 0).astype(int)) @ aggregates) != 0).astype(int)
+    pattern = (P != 0).astype(int)
+    # P = (I - omega D^-1 A_F) T reaches one strong step from each aggregate, and fills that reach
+    assert (pattern - pattern.multiply(reach_strong)).nnz == 0
+    assert pattern.nnz >= 0.95 * reach_strong.nnz
+    assert reach_whole.nnz > 1.3 * reach_strong.nnz  # smoothing with the whole stencil would reach farther
+
+
+@pytest.mark.parametrize("index", [np.int32, np.int64])
+def test_strong_part_is_pyamgs_symmetric_strength_with_the_weak_entries_lumped(index):
+    pyamg = pytest.importorskip("pyamg")
+    rng = np.random.default_rng(8)
+    A = _random_csr(200, 200, 0.05, 9)
+    A = (A + A.T + sp.diags(rng.uniform(0.5, 3.0, 200))).tocsr()  # mixed signs, every diagonal stored
+    A.sort_indices()
+    parts = (A.indptr.astype(index), A.indices.astype(index), A.data)
+    indptr, indices, data = _block_kernel.strong_part(*parts, 0.25)
+    assert indptr.dtype == indices.dtype == index
+    # a plain loop over the entries with the definition |a_ij| >= theta sqrt(|a_ii a_jj|)
+    dense, diagonal = A.toarray(), np.abs(A.diagonal())
+    want = np.zeros_like(dense)
+    for i, j in zip(*np.nonzero(dense)):
+        strong = i == j or abs(dense[i, j]) >= 0.25 * np.sqrt(diagonal[i] * diagonal[j])
+        want[i, j if strong else i] += dense[i, j]
+    got = sp.csr_matrix((data, indices, indptr), shape=A.shape)
+    assert np.allclose(got.toarray(), want, rtol=0, atol=1e-14)
+    assert 0 < got.nnz < A.nnz  # the threshold splits this matrix
+    # the pattern is pyamg's symmetric strength of connection
+    Sp, Sj, Sx = np.empty_like(A.indptr), np.empty_like(A.indices), np.empty_like(A.data)
+    pyamg.amg_core.symmetric_strength_of_connection(200, 0.25, A.indptr, A.indices, A.data, Sp, Sj, Sx)
+    assert np.array_equal(indptr, Sp) and np.array_equal(indices, Sj[: Sp[-1]])
 
 
 def test_block_times_takes_csc_and_vectors():
