@@ -6,7 +6,13 @@ def block_product(
     indptr: np.ndarray, indices: np.ndarray, data: np.ndarray, x: np.ndarray, out: np.ndarray
 ) -> None: ...
 def gauss_seidel(
-    indptr: np.ndarray, indices: np.ndarray, data: np.ndarray, x: np.ndarray, b: np.ndarray, forward: bool
+    indptr: np.ndarray,
+    indices: np.ndarray,
+    data: np.ndarray,
+    x: np.ndarray,
+    b: np.ndarray,
+    forward: bool,
+    blocks: int = 1,
 ) -> None: ...
 def cg_step(x: np.ndarray, r: np.ndarray, p: np.ndarray, q: np.ndarray, alpha: np.ndarray) -> np.ndarray: ...
 def strong_part(

@@ -3,13 +3,16 @@
 
 SciPy multiplies a CSR matrix by an ``(n, 3)`` block at 2.3 times the time of three single-column
 products, and pyamg's Gauss-Seidel takes one column at a time; both stream the matrix once per column.
-These stream it once for all ``k`` columns (row-major blocks: a row's ``k`` values share a cache line).
-A Gauss-Seidel sweep is sequential by nature; each column gets the arithmetic of pyamg's
-``gauss_seidel`` (same products in the same order), so the preconditioner is the one it replaces.
+These stream it once for all ``k`` columns (row-major blocks: a row's ``k`` values share a cache line),
+on every core (OpenMP; ``OMP_NUM_THREADS`` sets how many). A Gauss-Seidel sweep is sequential by
+nature: each column gets the arithmetic of pyamg's ``gauss_seidel`` (same products in the same order),
+and for several cores the rows are cut into a fixed number of blocks swept side by side (hybrid
+Gauss-Seidel), a count set by the matrix's size alone, so results never depend on the thread count.
 """
 
 import numpy as np
 
+from cython.parallel cimport prange
 from libc.math cimport sqrt
 from libc.stdint cimport int32_t, int64_t
 
@@ -26,14 +29,14 @@ def block_product(const index_t[::1] indptr, const index_t[::1] indices, const d
     cdef double a, s0, s1, s2
     with nogil:
         if k == 3:  # the coordinates: sums in registers
-            for i in range(m):
+            for i in prange(m, schedule="static"):
                 s0 = s1 = s2 = 0.0
                 for jj in range(indptr[i], indptr[i + 1]):
                     j, a = indices[jj], data[jj]
                     s0, s1, s2 = s0 + a * x[j, 0], s1 + a * x[j, 1], s2 + a * x[j, 2]
                 out[i, 0], out[i, 1], out[i, 2] = s0, s1, s2
         else:
-            for i in range(m):
+            for i in prange(m, schedule="static"):
                 for c in range(k):
                     out[i, c] = 0.0
                 for jj in range(indptr[i], indptr[i + 1]):
@@ -43,47 +46,69 @@ def block_product(const index_t[::1] indptr, const index_t[::1] indices, const d
 
 
 def gauss_seidel(const index_t[::1] indptr, const index_t[::1] indices, const double[::1] data,
-                 double[:, ::1] x, const double[:, ::1] b, bint forward):
+                 double[:, ::1] x, const double[:, ::1] b, bint forward, Py_ssize_t blocks=1):
     """One Gauss-Seidel sweep of ``A x = b`` over the rows in order (``forward``) or in reverse, in place.
 
     Row ``i``: ``x_i = (b_i - sum_(j != i) a_ij x_j) / a_ii``, skipped where ``a_ii = 0`` (as pyamg).
+    With ``blocks > 1`` the rows are cut into that many contiguous blocks, swept in parallel (OpenMP):
+    inside a block each row sees its block's updated values, across blocks the values from before the
+    sweep (hybrid Gauss-Seidel, as hypre's). The result depends on ``blocks``, not on the thread count,
+    and a forward sweep followed by a backward one with the same blocks is symmetric.
     """
-    cdef Py_ssize_t n = x.shape[0], k = x.shape[1], step, i, c, r
+    cdef Py_ssize_t n = x.shape[0], k = x.shape[1], block, start, stop
+    if k > 16:
+        raise ValueError(f"x must have at most 16 columns, got {k}")
+    blocks = max(1, min(blocks, n))
+    if blocks == 1:
+        _sweep(indptr, indices, data, x, x, b, forward, 0, n)
+        return
+    cdef double[:, ::1] before = np.array(x, copy=True)
+    for block in prange(blocks, nogil=True, schedule="dynamic"):
+        start = block * n // blocks
+        stop = (block + 1) * n // blocks
+        _sweep(indptr, indices, data, x, before, b, forward, start, stop)
+
+
+cdef void _sweep(const index_t[::1] indptr, const index_t[::1] indices, const double[::1] data,
+                 double[:, ::1] x, const double[:, ::1] before, const double[:, ::1] b, bint forward,
+                 Py_ssize_t start, Py_ssize_t stop) noexcept nogil:
+    """Gauss-Seidel over rows ``start:stop``: columns inside the range read ``x``, outside ``before``."""
+    cdef Py_ssize_t k = x.shape[1], i, c, r
     cdef index_t jj, j
     cdef double a, diagonal, s0, s1, s2
     cdef double[16] rest
-    if k > 16:
-        raise ValueError(f"x must have at most 16 columns, got {k}")
-    with nogil:
+    for r in range(stop - start):
+        i = start + r if forward else stop - 1 - r
+        diagonal = 0.0
         if k == 3:  # the coordinates: sums in registers
-            for r in range(n):
-                i = r if forward else n - 1 - r
-                diagonal = s0 = s1 = s2 = 0.0
-                for jj in range(indptr[i], indptr[i + 1]):
-                    j, a = indices[jj], data[jj]
-                    if j == i:
-                        diagonal = a
-                    else:
-                        s0, s1, s2 = s0 + a * x[j, 0], s1 + a * x[j, 1], s2 + a * x[j, 2]
-                if diagonal != 0.0:
-                    x[i, 0], x[i, 1], x[i, 2] = (b[i, 0] - s0) / diagonal, (b[i, 1] - s1) / diagonal, (
-                        b[i, 2] - s2) / diagonal
+            s0 = s1 = s2 = 0.0
+            for jj in range(indptr[i], indptr[i + 1]):
+                j, a = indices[jj], data[jj]
+                if j == i:
+                    diagonal = a
+                elif start <= j < stop:
+                    s0, s1, s2 = s0 + a * x[j, 0], s1 + a * x[j, 1], s2 + a * x[j, 2]
+                else:
+                    s0, s1, s2 = s0 + a * before[j, 0], s1 + a * before[j, 1], s2 + a * before[j, 2]
+            if diagonal != 0.0:
+                x[i, 0], x[i, 1], x[i, 2] = (b[i, 0] - s0) / diagonal, (b[i, 1] - s1) / diagonal, (
+                    b[i, 2] - s2) / diagonal
         else:
-            for r in range(n):
-                i = r if forward else n - 1 - r
-                diagonal = 0.0
-                for c in range(k):
-                    rest[c] = 0.0
-                for jj in range(indptr[i], indptr[i + 1]):
-                    j, a = indices[jj], data[jj]
-                    if j == i:
-                        diagonal = a
-                    else:
-                        for c in range(k):
-                            rest[c] += a * x[j, c]
-                if diagonal != 0.0:
+            for c in range(k):
+                rest[c] = 0.0
+            for jj in range(indptr[i], indptr[i + 1]):
+                j, a = indices[jj], data[jj]
+                if j == i:
+                    diagonal = a
+                elif start <= j < stop:
                     for c in range(k):
-                        x[i, c] = (b[i, c] - rest[c]) / diagonal
+                        rest[c] += a * x[j, c]
+                else:
+                    for c in range(k):
+                        rest[c] += a * before[j, c]
+            if diagonal != 0.0:
+                for c in range(k):
+                    x[i, c] = (b[i, c] - rest[c]) / diagonal
 
 
 def cg_step(double[:, ::1] x, double[:, ::1] r, const double[:, ::1] p, const double[:, ::1] q,
@@ -91,14 +116,28 @@ def cg_step(double[:, ::1] x, double[:, ::1] r, const double[:, ::1] p, const do
     """Conjugate gradients' update ``x += alpha p``, ``r -= alpha q`` (per column) in one pass; returns the
     columns' ``|r|^2`` after it, ``(k,)``."""
     cdef Py_ssize_t n = x.shape[0], k = x.shape[1], i, c
+    cdef double q0 = 0.0, q1 = 0.0, q2 = 0.0
     squares = np.zeros(k)
     cdef double[::1] sq = squares
     with nogil:
-        for i in range(n):
-            for c in range(k):
-                x[i, c] += alpha[c] * p[i, c]
-                r[i, c] -= alpha[c] * q[i, c]
-                sq[c] += r[i, c] * r[i, c]
+        if k == 3:  # the coordinates: parallel, the sums as OpenMP reductions
+            for i in prange(n, schedule="static"):
+                x[i, 0] += alpha[0] * p[i, 0]
+                x[i, 1] += alpha[1] * p[i, 1]
+                x[i, 2] += alpha[2] * p[i, 2]
+                r[i, 0] -= alpha[0] * q[i, 0]
+                r[i, 1] -= alpha[1] * q[i, 1]
+                r[i, 2] -= alpha[2] * q[i, 2]
+                q0 += r[i, 0] * r[i, 0]
+                q1 += r[i, 1] * r[i, 1]
+                q2 += r[i, 2] * r[i, 2]
+            sq[0], sq[1], sq[2] = q0, q1, q2
+        else:
+            for i in range(n):
+                for c in range(k):
+                    x[i, c] += alpha[c] * p[i, c]
+                    r[i, c] -= alpha[c] * q[i, c]
+                    sq[c] += r[i, c] * r[i, c]
     return squares
 
 

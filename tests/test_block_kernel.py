@@ -60,6 +60,47 @@ def test_gauss_seidel_is_pyamgs_sweep_on_each_column(k, forward):
     assert np.array_equal(got[:3], x[:3])  # a row without a diagonal is left alone
 
 
+@pytest.mark.parametrize("k", [1, 3, 5])
+@pytest.mark.parametrize("forward", [True, False])
+@pytest.mark.parametrize("blocks", [2, 5, 1000])
+def test_blocked_gauss_seidel_is_the_hybrid_sweep_of_a_plain_loop(k, forward, blocks):
+    n = 61
+    A = _random_csr(n, n, 0.1, 7)
+    A = (A + A.T + sp.diags(np.r_[np.zeros(2), np.full(n - 2, 4.0)])).tocsr()
+    A.sort_indices()
+    rng = np.random.default_rng(3)
+    b, x = rng.standard_normal((n, k)), rng.standard_normal((n, k))
+    dense, want, parts = A.toarray(), x.copy(), min(blocks, n)
+    for block in range(parts):  # each block in turn, reading the other blocks' values from before
+        start, stop = block * n // parts, (block + 1) * n // parts
+        for i in range(start, stop) if forward else range(stop - 1, start - 1, -1):
+            if dense[i, i] == 0:
+                continue
+            inside = [j for j in range(start, stop) if j != i]
+            outside = [j for j in range(n) if not start <= j < stop]
+            total = dense[i, inside] @ want[inside] + dense[i, outside] @ x[outside]
+            want[i] = (b[i] - total) / dense[i, i]
+    got = x.copy()
+    _block_kernel.gauss_seidel(A.indptr, A.indices, A.data, got, b, forward, blocks)
+    assert np.allclose(got, want, rtol=1e-12, atol=1e-12)
+    single = x.copy()
+    _block_kernel.gauss_seidel(A.indptr, A.indices, A.data, single, b, forward, 1)
+    assert not np.allclose(got, single, rtol=1e-6)  # the blocks change the sweep
+
+
+def test_blocked_vcycle_is_symmetric(monkeypatch):
+    # forward blocked sweeps before the coarse correction, backward ones after: CG needs M^-1 symmetric
+    import o3d_lsmesh._solvers as solvers
+
+    pyamg = pytest.importorskip("pyamg")
+    monkeypatch.setattr(solvers, "ROWS_PER_SWEEP_BLOCK", 700)
+    grid = pyamg.gallery.poisson((70, 70), format="csr")
+    assert solvers._sweep_blocks(grid) == 7
+    cycle = _vcycle(*_aggregation_levels(grid))
+    u, v = np.random.default_rng(5).standard_normal((2, grid.shape[0], 3))
+    assert np.allclose(np.einsum("ij,ij->j", u, cycle(v)), np.einsum("ij,ij->j", v, cycle(u)), rtol=1e-10)
+
+
 def test_gauss_seidel_rejects_more_than_sixteen_columns():
     A = sp.identity(3, format="csr")
     with pytest.raises(ValueError, match="x must have at most 16 columns, got 17"):
