@@ -140,7 +140,7 @@ def _study_worker(n: int, variant: str, queue) -> None:
     import pyamg
     import scipy.sparse as sp
 
-    from o3d_lsmesh._solvers import _amg_preconditioner, _block_cg, _vcycle
+    from o3d_lsmesh._solvers import _aggregation_levels, _amg_preconditioner, _block_cg, _splu_spd, _vcycle
     from o3d_lsmesh.laplacian import laplacian_matrix
 
     V, F = noisy_sphere(n)
@@ -150,19 +150,27 @@ def _study_worker(n: int, variant: str, queue) -> None:
     w2[controls(n)] = 1.0
     N = (L.T @ L + sp.diags(w2)).tocsr()
     b = w2[:, None] * V
+
+    def levels_of(ml):  # a pyamg hierarchy as the block V-cycle's levels
+        return [(level.A, level.R, level.P) for level in ml.levels[:-1]], _splu_spd(ml.levels[-1].A.tocsc())
+
     start = time.perf_counter()
-    if variant == "SA on N, B = 1 (ours)":
+    if variant == "SA on N's strong part, B = 1 (ours)":
         apply = _amg_preconditioner(N)
+    elif variant == "SA on N's whole stencil, B = 1":
+        apply = _vcycle(*_aggregation_levels(N, theta=0.0))  # theta 0: every entry strong
     else:
         if variant == "SA on N, B = [1, x, y, z]":
             apply = _vcycle(
-                pyamg.smoothed_aggregation_solver(
-                    N,
-                    B=np.column_stack([np.ones(n), V - V.mean(axis=0)]),
-                    symmetry="symmetric",
-                    max_coarse=500,
-                    smooth=("jacobi", {"weighting": "local"}),
-                    coarse_solver="splu",
+                *levels_of(
+                    pyamg.smoothed_aggregation_solver(
+                        N,
+                        B=np.column_stack([np.ones(n), V - V.mean(axis=0)]),
+                        symmetry="symmetric",
+                        max_coarse=500,
+                        smooth=("jacobi", {"weighting": "local"}),
+                        coarse_solver="splu",
+                    )
                 )
             )
         else:  # AMG on the graph Laplacian G (L = D^-1 G): L^T L = G D^-2 G ~ G^-1 D^2 G^-1 inverted
@@ -170,12 +178,14 @@ def _study_worker(n: int, variant: str, queue) -> None:
             G = (sp.diags(degree) @ L).tocsr()
             Gs = (G + sp.diags(np.sqrt(w2) * degree * 1e-3 + 1e-8 * degree)).tocsr()
             cycle = _vcycle(
-                pyamg.smoothed_aggregation_solver(
-                    Gs,
-                    symmetry="symmetric",
-                    max_coarse=500,
-                    smooth=("jacobi", {"weighting": "local"}),
-                    coarse_solver="splu",
+                *levels_of(
+                    pyamg.smoothed_aggregation_solver(
+                        Gs,
+                        symmetry="symmetric",
+                        max_coarse=500,
+                        smooth=("jacobi", {"weighting": "local"}),
+                        coarse_solver="splu",
+                    )
                 )
             )
 
@@ -190,9 +200,17 @@ def _study_worker(n: int, variant: str, queue) -> None:
     queue.put((n, setup, time.perf_counter() - start, iterations, residual))
 
 
-def study(n: int) -> str:
+STUDY_VARIANTS = (
+    "SA on N's strong part, B = 1 (ours)",
+    "SA on N's whole stencil, B = 1",
+    "SA on N, B = [1, x, y, z]",
+    "AMG on G: G^-1 D^2 G^-1",
+)
+
+
+def study(n: int, variants: tuple[str, ...] = STUDY_VARIANTS) -> list:
     rows = []
-    for variant in ("SA on N, B = 1 (ours)", "SA on N, B = [1, x, y, z]", "AMG on G: G^-1 D^2 G^-1"):
+    for variant in variants:
         ctx = mp.get_context("spawn")
         queue = ctx.Queue()
         proc = ctx.Process(target=_study_worker, args=(n, variant, queue))
@@ -426,6 +444,11 @@ def main() -> None:
         default=0,
         help="also compare preconditioners on an LS-mesh system of this many vertices",
     )
+    parser.add_argument(
+        "--study-variants",
+        default=",".join(str(i) for i in range(len(STUDY_VARIANTS))),
+        help="which preconditioners the study runs, by index: " + "; ".join(STUDY_VARIANTS),
+    )
     parser.add_argument("--peers", default="", help="operations against their peers: " + ",".join(PEER_OPS))
     parser.add_argument(
         "--memory", type=int, default=0, help="peak per vertex of every operation at this size"
@@ -450,7 +473,8 @@ def main() -> None:
     if args.peers or args.memory:
         write_scale(args.limit_gb)
         return
-    study_rows = study(args.study) if args.study else []
+    chosen = tuple(STUDY_VARIANTS[int(i)] for i in args.study_variants.split(","))
+    study_rows = study(args.study, chosen) if args.study else []
     rows = []
     tmp = tempfile.mkdtemp(prefix="bench_scale_")
     for n in args.sizes:

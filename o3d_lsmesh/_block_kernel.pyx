@@ -13,8 +13,19 @@ Gauss-Seidel), a count set by the matrix's size alone, so results never depend o
 import numpy as np
 
 from cython.parallel cimport prange
+from openmp cimport omp_get_max_threads
 from libc.math cimport sqrt
 from libc.stdint cimport int32_t, int64_t
+
+#: Loops over fewer rows stay on one thread: a parallel region costs a few microseconds on an idle
+#: machine, but a time slice (milliseconds) whenever another job holds a core the team waits for.
+cdef enum:
+    PARALLEL_ROWS = 100000
+
+
+cdef inline int _threads(Py_ssize_t rows) noexcept nogil:
+    return omp_get_max_threads() if rows >= PARALLEL_ROWS else 1
+
 
 ctypedef fused index_t:
     int32_t
@@ -29,14 +40,14 @@ def block_product(const index_t[::1] indptr, const index_t[::1] indices, const d
     cdef double a, s0, s1, s2
     with nogil:
         if k == 3:  # the coordinates: sums in registers
-            for i in prange(m, schedule="static"):
+            for i in prange(m, schedule="static", num_threads=_threads(m)):
                 s0 = s1 = s2 = 0.0
                 for jj in range(indptr[i], indptr[i + 1]):
                     j, a = indices[jj], data[jj]
                     s0, s1, s2 = s0 + a * x[j, 0], s1 + a * x[j, 1], s2 + a * x[j, 2]
                 out[i, 0], out[i, 1], out[i, 2] = s0, s1, s2
         else:
-            for i in prange(m, schedule="static"):
+            for i in prange(m, schedule="static", num_threads=_threads(m)):
                 for c in range(k):
                     out[i, c] = 0.0
                 for jj in range(indptr[i], indptr[i + 1]):
@@ -63,7 +74,7 @@ def gauss_seidel(const index_t[::1] indptr, const index_t[::1] indices, const do
         _sweep(indptr, indices, data, x, x, b, forward, 0, n)
         return
     cdef double[:, ::1] before = np.array(x, copy=True)
-    for block in prange(blocks, nogil=True, schedule="dynamic"):
+    for block in prange(blocks, nogil=True, schedule="dynamic", num_threads=_threads(n)):
         start = block * n // blocks
         stop = (block + 1) * n // blocks
         _sweep(indptr, indices, data, x, before, b, forward, start, stop)
@@ -121,7 +132,7 @@ def cg_step(double[:, ::1] x, double[:, ::1] r, const double[:, ::1] p, const do
     cdef double[::1] sq = squares
     with nogil:
         if k == 3:  # the coordinates: parallel, the sums as OpenMP reductions
-            for i in prange(n, schedule="static"):
+            for i in prange(n, schedule="static", num_threads=_threads(n)):
                 x[i, 0] += alpha[0] * p[i, 0]
                 x[i, 1] += alpha[1] * p[i, 1]
                 x[i, 2] += alpha[2] * p[i, 2]
