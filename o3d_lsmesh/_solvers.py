@@ -710,17 +710,17 @@ def _aggregation_levels(
         _block_kernel.gauss_seidel(*finest, candidate, zero, False, _sweep_blocks(A))
     levels: list[tuple[sp.csr_matrix, sp.csr_matrix, sp.csr_matrix]] = []
     while len(levels) + 1 < max_levels and A.shape[0] > COARSE_UNKNOWNS:
-        indptr, indices, data = _block_kernel.strong_part(*_csr_parts(A), theta)
-        strong = sp.csr_matrix((data, indices, indptr), shape=A.shape)
+        strong = sp.csr_matrix(_block_kernel.strong_part(*_csr_parts(A), theta)[::-1], shape=A.shape)
         tentative, candidate = fit_candidates(standard_aggregation(strong)[0], candidate)
-        counts = np.diff(indptr)
-        absolute = np.add.reduceat(np.abs(data), np.minimum(indptr[:-1], max(len(data) - 1, 0)))
+        counts = np.diff(strong.indptr)
+        first = np.minimum(strong.indptr[:-1], max(strong.nnz - 1, 0))
+        absolute = np.add.reduceat(np.abs(strong.data), first)
         absolute[counts == 0] = 0.0
         step = np.divide(omega, absolute, out=np.zeros(len(absolute)), where=absolute != 0)
-        strong.data = np.repeat(step, counts) * data  # omega D^-1 A_F
+        strong.data *= np.repeat(step, counts)  # omega D^-1 A_F, in the filtered copy's own values
         tentative = sp.csr_matrix(tentative)
         P = (tentative - strong @ tentative).tocsr()
-        del strong, data, indices, indptr
+        del strong
         R = P.T.tocsr()
         coarse = (R @ (A @ P)).tocsr()
         coarse.sort_indices()
