@@ -3,8 +3,16 @@
 import numpy as np
 
 def block_product(
-    indptr: np.ndarray, indices: np.ndarray, data: np.ndarray, x: np.ndarray, out: np.ndarray
+    indptr: np.ndarray,
+    indices: np.ndarray,
+    data: np.ndarray,
+    x: np.ndarray,
+    out: np.ndarray,
+    scale: float = 1.0,
+    offset: np.ndarray | None = None,
 ) -> None: ...
+def column_dots(a: np.ndarray, b: np.ndarray) -> np.ndarray: ...
+def cg_direction(p: np.ndarray, z: np.ndarray, beta: np.ndarray) -> None: ...
 def gauss_seidel(
     indptr: np.ndarray,
     indices: np.ndarray,

@@ -33,11 +33,17 @@ ctypedef fused index_t:
 
 
 def block_product(const index_t[::1] indptr, const index_t[::1] indices, const double[::1] data,
-                  const double[:, ::1] x, double[:, ::1] out):
-    """``out = A @ x`` for CSR ``A`` (``(m, n)``), ``x`` ``(n, k)``, ``out`` ``(m, k)``."""
+                  const double[:, ::1] x, double[:, ::1] out, double scale=1.0,
+                  const double[:, ::1] offset=None):
+    """``out = offset + scale A @ x`` for CSR ``A`` (``(m, n)``), ``x`` ``(n, k)``, ``out`` and ``offset``
+    ``(m, k)`` (no ``offset``: zero). ``offset`` may be ``out`` itself (accumulate) or ``b`` with
+    ``scale=-1`` (a residual): each row reads its offset before writing, in the same pass."""
     cdef Py_ssize_t m = out.shape[0], k = x.shape[1], i, c
     cdef index_t jj, j
     cdef double a, s0, s1, s2
+    cdef bint shifted = offset is not None
+    if shifted and (offset.shape[0] != m or offset.shape[1] != k):
+        raise ValueError(f"offset must have the shape of out {(m, k)}, got {(offset.shape[0], offset.shape[1])}")
     with nogil:
         if k == 3:  # the coordinates: sums in registers
             for i in prange(m, schedule="static", num_threads=_threads(m)):
@@ -45,15 +51,18 @@ def block_product(const index_t[::1] indptr, const index_t[::1] indices, const d
                 for jj in range(indptr[i], indptr[i + 1]):
                     j, a = indices[jj], data[jj]
                     s0, s1, s2 = s0 + a * x[j, 0], s1 + a * x[j, 1], s2 + a * x[j, 2]
-                out[i, 0], out[i, 1], out[i, 2] = s0, s1, s2
-        else:
+                if shifted:
+                    out[i, 0], out[i, 1], out[i, 2] = (offset[i, 0] + scale * s0, offset[i, 1] + scale * s1,
+                                                       offset[i, 2] + scale * s2)
+                else:
+                    out[i, 0], out[i, 1], out[i, 2] = scale * s0, scale * s1, scale * s2
+        else:  # a column at a time: the row's entries are in cache after the first
             for i in prange(m, schedule="static", num_threads=_threads(m)):
                 for c in range(k):
-                    out[i, c] = 0.0
-                for jj in range(indptr[i], indptr[i + 1]):
-                    j, a = indices[jj], data[jj]
-                    for c in range(k):
-                        out[i, c] += a * x[j, c]
+                    s0 = 0.0
+                    for jj in range(indptr[i], indptr[i + 1]):
+                        s0 = s0 + data[jj] * x[indices[jj], c]
+                    out[i, c] = offset[i, c] + scale * s0 if shifted else scale * s0
 
 
 def gauss_seidel(const index_t[::1] indptr, const index_t[::1] indices, const double[::1] data,
@@ -150,6 +159,35 @@ def cg_step(double[:, ::1] x, double[:, ::1] r, const double[:, ::1] p, const do
                     r[i, c] -= alpha[c] * q[i, c]
                     sq[c] += r[i, c] * r[i, c]
     return squares
+
+
+def column_dots(const double[:, ::1] a, const double[:, ::1] b):
+    """``(k,)`` dot products of the columns of ``a`` and ``b`` (both ``(n, k)``), on every core."""
+    cdef Py_ssize_t n = a.shape[0], k = a.shape[1], i, c
+    cdef double d0 = 0.0, d1 = 0.0, d2 = 0.0
+    dots = np.zeros(k)
+    cdef double[::1] d = dots
+    with nogil:
+        if k == 3:
+            for i in prange(n, schedule="static", num_threads=_threads(n)):
+                d0 += a[i, 0] * b[i, 0]
+                d1 += a[i, 1] * b[i, 1]
+                d2 += a[i, 2] * b[i, 2]
+            d[0], d[1], d[2] = d0, d1, d2
+        else:
+            for i in range(n):
+                for c in range(k):
+                    d[c] += a[i, c] * b[i, c]
+    return dots
+
+
+def cg_direction(double[:, ::1] p, const double[:, ::1] z, const double[::1] beta):
+    """Conjugate gradients' new direction ``p = z + beta p`` (per column), in place, in one pass."""
+    cdef Py_ssize_t n = p.shape[0], k = p.shape[1], i, c
+    with nogil:
+        for i in prange(n, schedule="static", num_threads=_threads(n)):
+            for c in range(k):
+                p[i, c] = z[i, c] + beta[c] * p[i, c]
 
 
 def strong_part(const index_t[::1] indptr, const index_t[::1] indices, const double[::1] data, double theta):

@@ -757,16 +757,19 @@ def _vcycle(levels: list, coarse: Any) -> Any:
     :func:`_sweep_blocks` blocks; the same iteration counts at 1M vertices as one sequential sweep)."""
     from . import _block_kernel  # compiled by the package's build: imported where used
 
-    operators = [(_csr_parts(A), _sweep_blocks(A), _block_times(R), _block_times(P)) for A, R, P in levels]
+    operators = [(_csr_parts(A), _sweep_blocks(A), _csr_parts(R), _csr_parts(P)) for A, R, P in levels]
 
     def cycle(depth: int, b: np.ndarray) -> np.ndarray:
         if depth == len(operators):
             return np.ascontiguousarray(coarse.solve(np.asfortranarray(b)))
-        A, blocks, restrict, prolong = operators[depth]
+        A, blocks, R, P = operators[depth]
         x = np.zeros_like(b)
         _block_kernel.gauss_seidel(*A, x, b, True, blocks)
-        residual = b - _block_times_parts(A, x)
-        x += prolong(cycle(depth + 1, restrict(residual)))
+        residual = np.empty_like(b)
+        _block_kernel.block_product(*A, x, residual, -1.0, b)  # b - A x in one pass
+        correction = cycle(depth + 1, _block_times_parts(R, residual))
+        del residual
+        _block_kernel.block_product(*P, correction, x, 1.0, x)  # x += P correction in one pass
         _block_kernel.gauss_seidel(*A, x, b, False, blocks)
         return x
 
@@ -828,9 +831,9 @@ def _block_cg(
     # the residual shows in the bar; its total (the iteration cap) shrinks to the count reached on success
     bar = progress_bar(progress, total=max_iterations, desc="conjugate gradients")
     converged = False
-    Z = precondition(R)
+    Z = np.ascontiguousarray(precondition(R))
     P = Z.copy()
-    rz = np.einsum("ij,ij->j", R, Z)
+    rz = _block_kernel.column_dots(R, Z)
     iteration = 0
     try:
         while relative.max(initial=0.0) > tol:
@@ -840,7 +843,7 @@ def _block_cg(
                     f"iterations, tolerance {tol:g}: raise max_iterations or tol, or use solver='cholmod'"
                 )
             Q = times(P)
-            pq = np.einsum("ij,ij->j", P, Q)
+            pq = _block_kernel.column_dots(P, Q)
             active = relative > tol
             if (pq[active] <= 0).any():
                 raise SingularSystemError(
@@ -853,11 +856,10 @@ def _block_cg(
             iteration += 1
             bar.update(1)
             bar.set_postfix_str(f"residual={relative.max():.2e}", refresh=False)
-            Z = precondition(R)
-            rz_new = np.einsum("ij,ij->j", R, Z)
+            Z = np.ascontiguousarray(precondition(R))
+            rz_new = _block_kernel.column_dots(R, Z)
             beta = np.where(active, rz_new / np.where(rz != 0, rz, 1.0), 0.0)
-            P *= beta
-            P += Z
+            _block_kernel.cg_direction(P, Z, beta)
             rz = rz_new
         converged = True
     finally:

@@ -38,6 +38,38 @@ def test_block_product_is_scipys_product(rows, cols, k, seed, index):
     assert np.array_equal(out, want)
 
 
+@pytest.mark.parametrize("k", [1, 3, 5])
+def test_block_product_residual_and_accumulation(k):
+    A = _random_csr(30, 20, 0.3, 11)
+    A.indptr[5:8] = A.indptr[5]  # ...with empty rows
+    A = sp.csr_matrix((A.data[: A.indptr[-1]], A.indices[: A.indptr[-1]], A.indptr), shape=A.shape)
+    rng = np.random.default_rng(12)
+    x, b = rng.standard_normal((20, k)), rng.standard_normal((30, k))
+    product = np.column_stack([A @ x[:, c] for c in range(k)])
+    residual = np.full((30, k), np.nan)
+    _block_kernel.block_product(A.indptr, A.indices, A.data, x, residual, -1.0, b)
+    assert np.array_equal(residual, b - product)  # the same sums, then one subtraction
+    total = b.copy()
+    _block_kernel.block_product(A.indptr, A.indices, A.data, x, total, 1.0, total)  # out is its own offset
+    assert np.array_equal(total, b + product)
+    scaled = np.empty((30, k))
+    _block_kernel.block_product(A.indptr, A.indices, A.data, x, scaled, 2.5)
+    assert np.array_equal(scaled, 2.5 * product)
+    with pytest.raises(ValueError, match=rf"offset must have the shape of out \(30, {k}\), got \(29, {k}\)"):
+        _block_kernel.block_product(A.indptr, A.indices, A.data, x, scaled, 1.0, b[:29])
+
+
+@pytest.mark.parametrize("k", [1, 3, 5])
+def test_column_dots_and_cg_direction_are_numpys(k):
+    rng = np.random.default_rng(13)
+    a, b = rng.standard_normal((2, 300_000 if k == 3 else 50, k))  # k = 3 at this size runs threaded
+    assert np.allclose(_block_kernel.column_dots(a, b), np.einsum("ij,ij->j", a, b), rtol=1e-12)
+    beta = rng.standard_normal(k)
+    p, want = a.copy(), b + beta * a
+    _block_kernel.cg_direction(p, b, beta)
+    assert np.array_equal(p, want)
+
+
 @pytest.mark.parametrize("k", [1, 3, 4])
 @pytest.mark.parametrize("forward", [True, False])
 def test_gauss_seidel_is_pyamgs_sweep_on_each_column(k, forward):
@@ -107,14 +139,15 @@ def test_gauss_seidel_rejects_more_than_sixteen_columns():
         _block_kernel.gauss_seidel(A.indptr, A.indices, A.data, np.zeros((3, 17)), np.zeros((3, 17)), True)
 
 
-def test_cg_step_is_the_numpy_update():
+@pytest.mark.parametrize("n", [50, 300_000])  # one thread, and every core
+def test_cg_step_is_the_numpy_update(n):
     rng = np.random.default_rng(2)
-    x, r, p, q = (rng.standard_normal((50, 3)) for _ in range(4))
+    x, r, p, q = (rng.standard_normal((n, 3)) for _ in range(4))
     alpha = rng.standard_normal(3)
     x_want, r_want = x + alpha * p, r - alpha * q
     squares = _block_kernel.cg_step(x, r, p, q, alpha)
     assert np.array_equal(x, x_want) and np.array_equal(r, r_want)
-    assert np.allclose(squares, (r_want**2).sum(axis=0), rtol=1e-14)
+    assert np.allclose(squares, (r_want**2).sum(axis=0), rtol=1e-12)
 
 
 def test_aggregation_vcycle_is_pyamgs_smoothed_aggregation_vcycle():
