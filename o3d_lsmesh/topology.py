@@ -39,7 +39,6 @@ __all__ = [
     "ring_pattern",
     "unique_edges",
     "vertex_rings",
-    "vertex_valences",
 ]
 
 
@@ -84,32 +83,31 @@ def group_keys(keys: np.ndarray, bound: int, *, inverse: bool = True):
 
 def _runs(sorted_keys: np.ndarray):
     """Runs of equal values in sorted ``keys``: (first-of-run mask, run starts, run lengths)."""
-    count = len(sorted_keys)
-    first = np.empty(count, dtype=bool)
-    first[:1] = True
-    np.not_equal(sorted_keys[1:], sorted_keys[:-1], out=first[1:])
+    first = _run_heads(sorted_keys)
     starts = np.flatnonzero(first)
-    # lengths written in place (np.diff with append copies ``starts`` first)
-    lengths = np.empty(len(starts), dtype=np.int64)
+    return first, starts, _run_lengths(starts, len(sorted_keys))
+
+
+def _run_heads(values: np.ndarray) -> np.ndarray:
+    """``(k,) bool``: True where ``values`` differs from the value before it (and at the first)."""
+    first = np.empty(len(values), dtype=bool)
+    first[:1] = True
+    np.not_equal(values[1:], values[:-1], out=first[1:])
+    return first
+
+
+def _run_lengths(starts: np.ndarray, count: int) -> np.ndarray:
+    """Lengths of the runs starting at ``starts`` in ``count`` items, in ``starts``' dtype."""
+    # written in place (np.diff with append copies ``starts`` first)
+    lengths = np.empty(len(starts), dtype=starts.dtype)
     np.subtract(starts[1:], starts[:-1], out=lengths[:-1])
     lengths[-1:] = count - starts[-1:]
-    return first, starts, lengths
-
-
-def _edge_keys(triangles: np.ndarray, n: int) -> np.ndarray:
-    # undirected key lo * n + hi of every half-edge, in the row order of halfedges()
-    m = len(triangles)
-    tail = triangles.T
-    head = triangles[:, [1, 2, 0]].T
-    keys = np.minimum(tail, head, out=np.empty((3, m), dtype=np.int64))
-    keys *= np.int64(n)
-    keys += np.maximum(tail, head)
-    return keys.reshape(-1)
+    return lengths
 
 
 def edge_runs(triangles: np.ndarray, n: int):
     # half-edge rows of halfedges() grouped by undirected edge: (order, starts, counts)
-    return group_keys(_edge_keys(triangles, n), n * n, inverse=False)[:3]
+    return edge_structure(triangles, n).runs
 
 
 @dataclass(frozen=True)
@@ -197,14 +195,10 @@ def edge_structure(triangles: np.ndarray, n: int | None = None) -> EdgeStructure
     lo_start = by_lo.indptr
     del by_lo
     sorted_hi = hi[order]
-    first = np.empty(count, dtype=bool)
-    first[0] = True
-    np.not_equal(sorted_hi[1:], sorted_hi[:-1], out=first[1:])
+    first = _run_heads(sorted_hi)
     first[lo_start[:-1][lo_start[:-1] < lo_start[1:]]] = True  # a new lo starts a new edge
     starts = np.flatnonzero(first).astype(index)
-    counts = np.empty(len(starts), dtype=index)
-    np.subtract(starts[1:], starts[:-1], out=counts[:-1])
-    counts[-1] = count - starts[-1]
+    counts = _run_lengths(starts, count)
     edges = np.empty((len(starts), 2), dtype=index)
     edges[:, 0] = lo[order[starts]]
     edges[:, 1] = sorted_hi[starts]
@@ -365,9 +359,7 @@ def vertex_rings(triangles: np.ndarray, n: int) -> VertexRings:
             order = np.lexsort((columns, row_of))
             columns, entries = columns[order], entries[order]
         # a slot starts at every new column and at every non-empty row
-        first = np.empty(len(columns), dtype=bool)
-        first[:1] = True
-        np.not_equal(columns[1:], columns[:-1], out=first[1:])
+        first = _run_heads(columns)
         first[local[:-1][degree > 0]] = True
         at = np.flatnonzero(first)
         multiplicity = np.diff(at, append=len(columns))
@@ -407,8 +399,7 @@ def unique_edges(triangles: np.ndarray, n: int | None = None):
     inverse : (3m,) int64
         Edge index of each half-edge of :func:`halfedges`.
     """
-    es = edge_structure(triangles, n)
-    return es.edges.astype(np.int64), es.counts.astype(np.int64), es.inverse.astype(np.int64)
+    return unique_edges_and_runs(triangles, n)[0]
 
 
 def unique_edges_and_runs(triangles: np.ndarray, n: int | None = None):
@@ -557,12 +548,6 @@ def adjacency_matrix(triangles: np.ndarray, n: int) -> sp.csr_matrix:
     )
     adjacency.has_canonical_format = True  # sorted, no duplicates
     return adjacency
-
-
-def vertex_valences(triangles: np.ndarray, n: int) -> np.ndarray:
-    """Number of edge neighbours of every vertex, ``(n,) int64`` (0 for isolated vertices)."""
-    edges, _, _ = unique_edges(triangles, n)
-    return np.bincount(edges.ravel(), minlength=n).astype(np.int64)
 
 
 def connected_components(triangles: np.ndarray, n: int):
