@@ -58,7 +58,8 @@ __all__ = [
     "weld_map",
 ]
 
-_NORMAL_KEYS = ("normals",)
+#: A tensor mesh's attributes that are not carried over as they are (rebuilt or recomputed).
+_OWN_KEYS = {"vertex": ("positions", "normals"), "triangle": ("indices", "normals")}
 
 
 def open3d():
@@ -157,9 +158,7 @@ def weld_map(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray | None:
     occurrence, so a mesh without duplicates keeps its numbering.
     """
     n = len(vertices)
-    if n == 0:
-        return None
-    if not _may_have_duplicates(vertices):
+    if n == 0 or not _may_have_duplicates(vertices):
         return None
     # rows sorted by (x, y, z): equal rows become neighbours (a stable sort keeps each group in
     # index order, so its first row is its first occurrence); -0.0 and 0.0 compare equal
@@ -266,11 +265,12 @@ def _dropped(data: MeshData) -> list[str]:
             ("textures", src.has_textures()),
         )
         return [label for label, present in checks if present]
-    dropped = [f"vertex attribute {key!r}" for key in src.vertex if key not in ("positions",) + _NORMAL_KEYS]
-    dropped += [
-        f"triangle attribute {key!r}" for key in src.triangle if key not in ("indices",) + _NORMAL_KEYS
+    return [
+        f"{group} attribute {key!r}"
+        for group, own in _OWN_KEYS.items()
+        for key in getattr(src, group)
+        if key not in own
     ]
-    return dropped
 
 
 def warn_dropped_attributes(data: MeshData, reason: str, *, stacklevel: int = 3) -> bool:
@@ -351,13 +351,11 @@ def new_mesh(
     out = o3d.t.geometry.TriangleMesh(device)
     out.vertex.positions = o3d.core.Tensor(vertices, device=device).to(position_dtype)
     out.triangle.indices = o3d.core.Tensor(faces, device=device).to(index_dtype)
-    if same_topology:
-        for key in src.vertex:
-            if key not in ("positions",) + _NORMAL_KEYS:
-                out.vertex[key] = src.vertex[key].clone()
-        for key in src.triangle:
-            if key not in ("indices",) + _NORMAL_KEYS:
-                out.triangle[key] = src.triangle[key].clone()
+    for group, own in _OWN_KEYS.items() if same_topology else ():
+        source, target = getattr(src, group), getattr(out, group)
+        for key in source:
+            if key not in own:
+                target[key] = source[key].clone()
     if src.has_valid_material():
         # a copy: the caller's material must not change when the result's is edited
         out.material = o3d.visualization.Material(src.material)
@@ -399,13 +397,11 @@ def mesh_state(data: MeshData) -> dict:
         state["triangle_normals"] = bool(src.has_triangle_normals())
     elif data.kind == "tensor":
         state["device"] = str(src.vertex.positions.device)
-        state["vertex"] = {
-            key: (src.vertex[key].cpu().numpy().copy(), str(src.vertex[key].dtype)) for key in src.vertex
-        }
-        state["triangle"] = {
-            key: (src.triangle[key].cpu().numpy().copy(), str(src.triangle[key].dtype))
-            for key in src.triangle
-        }
+        for group in ("vertex", "triangle"):
+            attributes = getattr(src, group)
+            state[group] = {
+                key: (attributes[key].cpu().numpy().copy(), str(attributes[key].dtype)) for key in attributes
+            }
         state["material"] = _material_state(src.material) if src.has_valid_material() else None
     return state
 
@@ -430,11 +426,6 @@ def _material_from_state(state: dict) -> Any:
     for key, value in state["textures"].items():
         material.texture_maps[key] = o3d.t.geometry.Image(o3d.core.Tensor(value))
     return material
-
-
-def _o3d_dtype(name: str) -> Any:
-    o3d = open3d()
-    return getattr(o3d.core, name.lower())
 
 
 def mesh_from_state(state: dict) -> MeshData:
@@ -468,10 +459,10 @@ def mesh_from_state(state: dict) -> MeshData:
         return MeshData(vertices, triangles, source, kind, split, split_triangles)
     device = o3d.core.Device(state["device"])
     source = o3d.t.geometry.TriangleMesh(device)
-    for group, attributes in (("vertex", state["vertex"]), ("triangle", state["triangle"])):
+    for group in ("vertex", "triangle"):
         target = getattr(source, group)
-        for key, (array, dtype) in attributes.items():
-            target[key] = o3d.core.Tensor(array, device=device).to(_o3d_dtype(dtype))
+        for key, (array, dtype) in state[group].items():
+            target[key] = o3d.core.Tensor(array, device=device).to(getattr(o3d.core, dtype.lower()))
     if state["material"] is not None:
         source.material = _material_from_state(state["material"])
     return MeshData(vertices, triangles, source, kind, split, split_triangles)
