@@ -83,12 +83,12 @@ def group_keys(keys: np.ndarray, bound: int, *, inverse: bool = True):
 
 def _runs(sorted_keys: np.ndarray):
     """Runs of equal values in sorted ``keys``: (first-of-run mask, run starts, run lengths)."""
-    first = _run_heads(sorted_keys)
+    first = run_heads(sorted_keys)
     starts = np.flatnonzero(first)
     return first, starts, _run_lengths(starts, len(sorted_keys))
 
 
-def _run_heads(values: np.ndarray) -> np.ndarray:
+def run_heads(values: np.ndarray) -> np.ndarray:
     """``(k,) bool``: True where ``values`` differs from the value before it (and at the first)."""
     first = np.empty(len(values), dtype=bool)
     first[:1] = True
@@ -195,7 +195,7 @@ def edge_structure(triangles: np.ndarray, n: int | None = None) -> EdgeStructure
     lo_start = by_lo.indptr
     del by_lo
     sorted_hi = hi[order]
-    first = _run_heads(sorted_hi)
+    first = run_heads(sorted_hi)
     first[lo_start[:-1][lo_start[:-1] < lo_start[1:]]] = True  # a new lo starts a new edge
     starts = np.flatnonzero(first).astype(index)
     counts = _run_lengths(starts, count)
@@ -359,7 +359,7 @@ def vertex_rings(triangles: np.ndarray, n: int) -> VertexRings:
             order = np.lexsort((columns, row_of))
             columns, entries = columns[order], entries[order]
         # a slot starts at every new column and at every non-empty row
-        first = _run_heads(columns)
+        first = run_heads(columns)
         first[local[:-1][degree > 0]] = True
         at = np.flatnonzero(first)
         multiplicity = np.diff(at, append=len(columns))
