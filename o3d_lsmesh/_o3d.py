@@ -209,29 +209,16 @@ def read_mesh(
     (an index given in the split layout would otherwise name another vertex).
     ``narrow=True``: int32 triangles, shared with the source when it holds them so (a legacy Open3D
     mesh), for callers that only read them (see :func:`~o3d_lsmesh._validate.as_triangle_array`).
-
-    Every kind goes through the same checks (:func:`~o3d_lsmesh._validate.as_vertex_array`,
-    :func:`~o3d_lsmesh._validate.as_triangle_array`): positions of a real
-    dtype (integers are converted exactly) and indices of an integer dtype,
-    each of shape ``(k, 3)`` exactly (never reshaped), indices range-checked
-    before any cast.
+    Every kind goes through the same checks, :func:`~o3d_lsmesh._validate.mesh_arrays`.
 
     Raises
     ------
     TypeError
-        ``mesh`` is not a supported mesh kind; positions that are not real
-        numbers (bool, complex, strings, objects); indices that are not
-        integers (a float index would be truncated).
+        ``mesh`` is not a supported mesh kind; see :func:`~o3d_lsmesh._validate.mesh_arrays`.
     ValueError
-        Positions or indices not of shape ``(k, 3)``; empty mesh, no
-        triangles, non-finite coordinates, coordinates beyond
-        :data:`~o3d_lsmesh._validate.COORDINATE_LIMIT` (``1e30``), out-of-range
-        indices, triangles repeating a vertex, or unreferenced vertices when
-        not allowed.
+        A tensor mesh without positions; see :func:`~o3d_lsmesh._validate.mesh_arrays`.
     """
     kind = _kind(mesh, name=name)
-    # every kind goes through the same two checks: real-number (n, 3) positions and
-    # integer (m, 3) indices in range, checked before any cast (never reshaped or truncated)
     if kind == "legacy":
         raw_v, raw_t = np.asarray(mesh.vertices), np.asarray(mesh.triangles)
     elif kind == "tensor":

@@ -77,11 +77,12 @@ def mesh_arrays(
     Raises
     ------
     TypeError
-        Positions that are not real numbers or indices that are not integers.
+        Positions that are not real numbers (bool, complex, strings, objects; integers are
+        converted exactly) or indices that are not integers (a float index would be truncated).
     ValueError
-        Arrays not of shape ``(k, 3)``; an empty mesh, no triangles, non-finite or too large
-        coordinates, out-of-range indices, triangles repeating a vertex, or unreferenced vertices
-        when ``allow_isolated`` is False.
+        Arrays not of shape ``(k, 3)`` (never reshaped); an empty mesh, no triangles, non-finite
+        coordinates or beyond :data:`COORDINATE_LIMIT`, out-of-range indices (checked before any
+        cast), triangles repeating a vertex, or unreferenced vertices when ``allow_isolated`` is False.
 
     Examples
     --------
