@@ -444,10 +444,7 @@ def ring_pattern(edges: np.ndarray, n: int):
     del first_forward, n_forward
     # backward: edges by (hi, lo), a stable counting sort of the edge list by hi (a CSC transpose)
     by_hi = (
-        sp.csr_matrix(
-            (np.arange(e, dtype=index), hi, np.arange(e + 1, dtype=np.int64)),
-            shape=(e, max(n, 1)),
-        )
+        sp.csr_matrix((np.arange(e, dtype=index), hi, np.arange(e + 1, dtype=np.int64)), shape=(e, max(n, 1)))
         .tocsc()
         .data
     )
