@@ -462,7 +462,7 @@ def ring_pattern(edges: np.ndarray, n: int):
     return indptr, indices, diagonal, forward, backward
 
 
-def directed_edges(triangles: np.ndarray, n: int, *, executor=None):
+def directed_edges(triangles: np.ndarray, n: int):
     """Both directions of every edge, sorted by ``(source, target)``, with their triangle counts.
 
     Returns
@@ -477,35 +477,12 @@ def directed_edges(triangles: np.ndarray, n: int, *, executor=None):
     Each triangle gives the key ``src << bits | dst`` of each direction of its
     three edges once; one sort of the plain int64 keys (numpy's SIMD sort, far
     faster than argsort, ``np.unique`` or a COO-to-CSR merge) groups them.
-    With a thread pool ``executor``, each half of the triangles is sorted in
-    its own thread, and the two sorted halves are merged as two pairs of runs
-    split at one key, again in two threads (same result).
     """
     bits = max(1, int(n - 1).bit_length())
     if 2 * bits > 62:  # beyond 2^31 vertices: keys by multiplication do not fit either
         raise ValueError(f"n must be below 2**31, got {n}")
     shift = np.int64(bits)
     triangles = np.asarray(triangles, dtype=np.int64)
-    m = len(triangles)
-    if executor is None or m < 1 << 16:
-        return _unique_keys(_sorted_keys(triangles, shift), shift)
-    half = m // 2
-    low, high = executor.map(
-        lambda rows: _sorted_keys(triangles[rows], shift), (slice(0, half), slice(half, m))
-    )
-    pivot = high[len(high) // 2]
-    cut_low, cut_high = np.searchsorted(low, pivot), np.searchsorted(high, pivot)
-    parts = list(
-        executor.map(
-            lambda pair: _unique_keys(_merged(*pair), shift),
-            ((low[:cut_low], high[:cut_high]), (low[cut_low:], high[cut_high:])),
-        )
-    )
-    del low, high
-    return tuple(np.concatenate([part[i] for part in parts]) for i in range(3))
-
-
-def _sorted_keys(triangles: np.ndarray, shift: np.int64) -> np.ndarray:
     m = len(triangles)
     corners = triangles.T  # a view: columns read in place
     # written in place: on large meshes fresh temporaries cost as much as the sort
@@ -516,16 +493,6 @@ def _sorted_keys(triangles: np.ndarray, shift: np.int64) -> np.ndarray:
     for row, head in enumerate((1, 2, 0, 2, 0, 1)):
         rows[row] |= corners[head]
     keys.sort()
-    return keys
-
-
-def _merged(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    keys = np.concatenate([a, b])
-    keys.sort(kind="stable")  # two sorted runs: one merge
-    return keys
-
-
-def _unique_keys(keys: np.ndarray, shift: np.int64):
     _, at, triangle_count = _runs(keys)
     keys = keys[at]
     src = keys >> shift

@@ -168,23 +168,6 @@ def test_directed_edges_and_adjacency_match_a_plain_count(case):
     assert np.array_equal(A.toarray(), dense) and A.has_canonical_format
 
 
-@pytest.mark.parametrize("n", [40, 5000, 200_000])
-def test_directed_edges_on_threads_match_one_sort(n):
-    # the threaded path sorts two halves of the triangles and merges them split at one key: every
-    # key must land on one side of the split, also when it repeats many times (small n)
-    from concurrent.futures import ThreadPoolExecutor
-
-    rng = np.random.default_rng(n)
-    F = rng.integers(0, n, size=(80_000, 3))
-    F = F[(F[:, 0] != F[:, 1]) & (F[:, 1] != F[:, 2]) & (F[:, 2] != F[:, 0])]
-    assert len(F) >= 1 << 16  # the size from which the threads are used
-    expected = directed_edges(F, n)
-    with ThreadPoolExecutor(2) as executor:
-        got = directed_edges(F, n, executor=executor)
-    for a, b in zip(got, expected):
-        assert a.dtype == b.dtype and np.array_equal(a, b)
-
-
 def test_directed_edges_refuses_vertex_counts_its_keys_cannot_hold():
     with pytest.raises(ValueError, match=r"n must be below 2\*\*31"):
         directed_edges(np.array([[0, 1, 2]]), 2**40)
