@@ -251,9 +251,7 @@ def isolated_vertices(triangles: np.ndarray, n: int) -> np.ndarray:
     return np.flatnonzero(~used)
 
 
-def as_indices(
-    indices: Any, n: int, *, name: str, allow_empty: bool = False, allow_repeats: bool = False
-) -> np.ndarray:
+def as_indices(indices: Any, n: int, *, name: str, allow_repeats: bool = False) -> np.ndarray:
     """Return ``indices`` as a unique ``(k,) int64`` array of vertex indices in ``[0, n)`` (repeats if allowed)."""
     array = _array(indices, name=name, expected="a sequence of integer vertex indices")
     if array.ndim == 0:
@@ -261,8 +259,6 @@ def as_indices(
     if array.ndim != 1:
         raise ValueError(f"{name} must be one-dimensional, got shape {array.shape}")
     if array.size == 0:
-        if allow_empty:
-            return np.zeros(0, dtype=np.int64)
         raise ValueError(f"{name} must hold at least one vertex index, got none")
     if array.dtype == bool or not np.issubdtype(array.dtype, np.integer):
         if (

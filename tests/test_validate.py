@@ -115,7 +115,8 @@ def test_small_validators():
     with pytest.raises(TypeError, match="positions must be an array"):
         as_positions([["a", "b", "c"]], 1, name="positions")
     assert as_indices(o3d.utility.IntVector([1, 2]), 5, name="idx").tolist() == [1, 2]
-    assert as_indices([], 5, name="idx", allow_empty=True).shape == (0,)
+    with pytest.raises(ValueError, match="idx must hold at least one vertex index, got none"):
+        as_indices([], 5, name="idx")
     assert as_positions(o3d.utility.Vector3dVector(np.ones((2, 3))), 2, name="p").shape == (2, 3)
 
 
