@@ -197,9 +197,7 @@ def _kind(mesh: Any, *, name: str = "mesh") -> str:
     )
 
 
-def read_mesh(
-    mesh: Any, *, name: str = "mesh", allow_isolated: bool = True, weld: bool = False, narrow: bool = False
-) -> MeshData:
+def read_mesh(mesh: Any, *, name: str = "mesh", weld: bool = False, narrow: bool = False) -> MeshData:
     """Copy ``mesh`` into ``(n,3) float64`` vertices and ``(m,3) int64`` triangles and validate them.
 
     ``weld=True`` merges vertices at exactly equal coordinates (see
@@ -230,7 +228,7 @@ def read_mesh(
         )
     else:
         raw_v, raw_t = mesh
-    vertices, triangles = mesh_arrays(raw_v, raw_t, name=name, allow_isolated=allow_isolated, narrow=narrow)
+    vertices, triangles = mesh_arrays(raw_v, raw_t, name=name, narrow=narrow)
     split = weld_map(vertices, triangles) if weld else None
     if split is not None:
         welded = np.zeros((int(split.max()) + 1, 3))

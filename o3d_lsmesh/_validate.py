@@ -28,7 +28,6 @@ __all__ = [
     "as_vertex_array",
     "as_weights",
     "as_workers",
-    "isolated_vertices",
     "mesh_arrays",
 ]
 
@@ -64,7 +63,7 @@ def _describe(value: Any) -> str:
 
 
 def mesh_arrays(
-    vertices: Any, triangles: Any, *, name: str = "mesh", allow_isolated: bool = True, narrow: bool = False
+    vertices: Any, triangles: Any, *, name: str = "mesh", narrow: bool = False
 ) -> tuple[np.ndarray, np.ndarray]:
     """The one check of a mesh given as arrays: new ``(n, 3) float64`` vertices and ``(m, 3) int64`` triangles.
 
@@ -82,7 +81,7 @@ def mesh_arrays(
     ValueError
         Arrays not of shape ``(k, 3)`` (never reshaped); an empty mesh, no triangles, non-finite
         coordinates or beyond :data:`COORDINATE_LIMIT`, out-of-range indices (checked before any
-        cast), triangles repeating a vertex, or unreferenced vertices when ``allow_isolated`` is False.
+        cast), or triangles repeating a vertex (unreferenced vertices are fine).
 
     Examples
     --------
@@ -114,13 +113,6 @@ def mesh_arrays(
             f"at triangle {row} ({int(repeated.sum())} such triangles; "
             "remove_degenerate_triangles() drops them)"
         )
-    if not allow_isolated:
-        isolated = isolated_vertices(triangles, n)
-        if len(isolated):
-            raise ValueError(
-                f"{name} must not have unreferenced vertices, got {len(isolated)} "
-                f"(first: vertex {int(isolated[0])}); remove_unreferenced_vertices() drops them"
-            )
     return vertices, triangles
 
 
@@ -242,13 +234,6 @@ def as_real_vector(
         rule = "finite" if low is None and high is None else f"in [{low:g}, {high:g}]"
         raise ValueError(f"{name} must have {length} entries {rule}, got {array.tolist()}")
     return array
-
-
-def isolated_vertices(triangles: np.ndarray, n: int) -> np.ndarray:
-    """Indices of the vertices that no triangle references, ``(k,) int64``."""
-    used = np.zeros(n, dtype=bool)
-    used[triangles.ravel()] = True
-    return np.flatnonzero(~used)
 
 
 def as_indices(indices: Any, n: int, *, name: str, allow_repeats: bool = False) -> np.ndarray:
