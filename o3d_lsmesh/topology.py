@@ -28,11 +28,9 @@ __all__ = [
     "boundary_curves",
     "boundary_halfedges",
     "boundary_loops",
-    "check_manifold",
     "connected_components",
     "directed_edges",
     "edge_structure",
-    "euler_characteristic",
     "halfedges",
     "nonmanifold_edges",
     "nonmanifold_vertices",
@@ -520,14 +518,6 @@ def connected_components(triangles: np.ndarray, n: int):
     return int(count), labels.astype(np.int64)
 
 
-def euler_characteristic(triangles: np.ndarray, n_referenced: int | None = None) -> int:
-    """``V - E + F`` over the referenced vertices."""
-    edges, _, _ = unique_edges(triangles)
-    if n_referenced is None:
-        n_referenced = len(np.unique(triangles))
-    return int(n_referenced - len(edges) + len(triangles))
-
-
 def boundary_halfedges(triangles: np.ndarray, n: int | None = None) -> np.ndarray:
     """Half-edges ``(b, 2)`` on edges used by exactly one triangle, oriented as in that triangle."""
     _, counts, inverse = unique_edges(triangles, n)
@@ -540,7 +530,7 @@ def nonmanifold_edges(triangles: np.ndarray, n: int | None = None) -> np.ndarray
     return edges[counts > 2]
 
 
-def nonmanifold_vertices(triangles: np.ndarray, n: int, *, _runs=None) -> np.ndarray:
+def nonmanifold_vertices(triangles: np.ndarray, n: int) -> np.ndarray:
     """Vertices whose triangles do not form a single fan (bow-ties and the like), sorted.
 
     The corners ``(t, v)`` of the triangles around a vertex are linked when two
@@ -548,7 +538,7 @@ def nonmanifold_vertices(triangles: np.ndarray, n: int, *, _runs=None) -> np.nda
     its corners fall into more than one linked group.
     """
     tail = triangles.T.reshape(-1)
-    fan_count, fan = corner_fans(triangles, n, edge_runs(triangles, n) if _runs is None else _runs)
+    fan_count, fan = corner_fans(triangles, n, edge_runs(triangles, n))
     # links only join corners of one vertex, so every fan belongs to exactly one vertex
     vertex_of_fan = np.zeros(fan_count, dtype=np.int64)
     vertex_of_fan[fan] = tail
@@ -622,26 +612,6 @@ def corner_fans(triangles: np.ndarray, n: int, runs, *, only: np.ndarray | None 
     label = np.full(3 * m, -1, dtype=np.int64)
     label[selected] = fan
     return int(fan_count), label
-
-
-def check_manifold(triangles: np.ndarray, n: int, *, name: str = "mesh") -> None:
-    """Raise ``ValueError`` naming the first non-manifold edge or vertex of the mesh."""
-    runs = edge_runs(triangles, n)
-    order, starts, counts = runs
-    bad = np.flatnonzero(counts > 2)
-    if len(bad):
-        row = order[starts[bad[0]]]
-        e = np.sort(halfedges(triangles)[row])
-        raise ValueError(
-            f"{name} must be edge-manifold, got edge ({int(e[0])}, {int(e[1])}) shared by more than two "
-            f"triangles ({len(bad)} such edges)"
-        )
-    bad_vertices = nonmanifold_vertices(triangles, n, _runs=runs)
-    if len(bad_vertices):
-        raise ValueError(
-            f"{name} must be vertex-manifold, got vertex {int(bad_vertices[0])} joining separate fans of "
-            f"triangles ({len(bad_vertices)} such vertices)"
-        )
 
 
 @dataclass(frozen=True)

@@ -21,10 +21,15 @@ from o3d_lsmesh.topology import (
     adjacency_matrix,
     boundary_halfedges,
     boundary_loops,
-    euler_characteristic,
     nonmanifold_edges,
     nonmanifold_vertices,
 )
+
+
+def euler_characteristic(F, n_vertices):
+    """``V - E + F`` with ``V = n_vertices``, the edges counted by a row-wise unique of the sorted pairs."""
+    pairs = np.sort(np.asarray(F)[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    return n_vertices - len(np.unique(pairs, axis=0)) + len(F)
 
 
 def _noisy_sphere(resolution=16, seed=0):
