@@ -23,7 +23,7 @@ from ..topology import VertexRings, vertex_rings
 if TYPE_CHECKING:
     from .._types import AnyMesh
 
-__all__ = ["MeshHierarchy", "build_hierarchy", "build_hierarchy_arrays", "locked_vertices"]
+__all__ = ["MeshHierarchy", "build_hierarchy", "build_hierarchy_arrays"]
 
 
 def _frozen(array: np.ndarray) -> np.ndarray:
@@ -307,21 +307,6 @@ def _harmonic_fill(
     rhs = w_rk @ out[kept] + 1e-9 * out[removed]
     solution = spla.spsolve(system, rhs)
     return np.asarray(solution).reshape(len(removed), 3)
-
-
-def locked_vertices(triangles: np.ndarray, n: int) -> np.ndarray:
-    """``(n,) bool``: the vertices a hierarchy keeps at every level, unmoved and never a collapse target.
-
-    Vertices whose triangles form several fans (as
-    :func:`~o3d_lsmesh.topology.nonmanifold_vertices`), vertices on an edge of
-    more than two triangles, and vertices no triangle references.
-    """
-    triangles = np.ascontiguousarray(triangles, dtype=np.int64)
-    if len(triangles) and (triangles.min() < 0 or triangles.max() >= n):
-        raise ValueError(f"triangles must index vertices in [0, {n}), got indices up to {triangles.max()}")
-    from .collapse import collapse_levels  # compiled by the package's build: imported where used
-
-    return collapse_levels(np.zeros((n, 3)), triangles, max_levels=0)[0]
 
 
 def tensor_format_of(data: MeshData) -> tuple:
