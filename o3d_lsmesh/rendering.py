@@ -38,7 +38,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ._errors import O3DLSMeshWarning
-from ._o3d import open3d, read_mesh
+from ._o3d import MeshData, open3d, read_mesh
 from ._validate import as_choice, as_count, as_positive_float, as_real_vector
 from .metrics import common_frame, distances_to_surface, raycasting_scene
 from .topology import unique_edges
@@ -83,13 +83,11 @@ def error_colors(values: np.ndarray, vmax: float) -> np.ndarray:
     return np.stack([np.interp(t, grid, VIRIDIS[:, c]) for c in range(3)], axis=1)
 
 
-def _vertex_colors(mesh: Any) -> np.ndarray | None:
-    if isinstance(mesh, tuple):
-        return None
-    o3d = open3d()
-    if isinstance(mesh, o3d.geometry.TriangleMesh):
+def _vertex_colors(data: MeshData) -> np.ndarray | None:
+    mesh = data.source
+    if data.kind == "legacy":
         return np.asarray(mesh.vertex_colors, dtype=np.float64).copy() if mesh.has_vertex_colors() else None
-    if "colors" in mesh.vertex:
+    if data.kind == "tensor" and "colors" in mesh.vertex:
         return mesh.vertex.colors.cpu().numpy().astype(np.float64).reshape(-1, 3)
     return None
 
@@ -545,8 +543,8 @@ def render(
         colors = [error_colors(d, error_max) for d in distances]
     else:
         colors = []
-        for mesh, (vertices, _) in zip(items, arrays):
-            own = _vertex_colors(mesh)
+        for data, (vertices, _) in zip(datas, arrays):
+            own = _vertex_colors(data)
             colors.append(
                 own
                 if own is not None and len(own) == len(vertices)
