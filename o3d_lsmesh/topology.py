@@ -561,10 +561,10 @@ def corner_fans(triangles: np.ndarray, n: int, runs, *, only: np.ndarray | None 
     a, b = order[interior], order[interior + 1]
     del interior
     same_direction = tail[a] == tail[b]
-    end_a = a + m
-    end_a[end_a >= corners] -= corners
-    end_b = b + m
-    end_b[end_b >= corners] -= corners
+    # (a + m) mod 3m, without passing 4m: int32 runs hold up to 3m < 2**31
+    end_a, end_b = a - 2 * m, b - 2 * m
+    end_a[end_a < 0] += corners
+    end_b[end_b < 0] += corners
     # every corner has at most two links, one through the half-edge it starts and one through the
     # one it ends, so the graph is written as CSR directly (a self-link where there is none)
     index = np.int32 if 2 * corners < np.iinfo(np.int32).max else np.int64
