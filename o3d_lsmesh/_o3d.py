@@ -60,6 +60,12 @@ __all__ = [
 
 #: A tensor mesh's attributes that are not carried over as they are (rebuilt or recomputed).
 _OWN_KEYS = {"vertex": ("positions", "normals"), "triangle": ("indices", "normals")}
+#: A legacy mesh's per-vertex and per-triangle arrays and their ``open3d.utility`` vector types.
+_LEGACY_ARRAYS = (
+    ("vertex_colors", "Vector3dVector"),
+    ("triangle_uvs", "Vector2dVector"),
+    ("triangle_material_ids", "IntVector"),
+)
 
 
 def open3d():
@@ -370,11 +376,8 @@ def mesh_state(data: MeshData) -> dict:
     }
     src = data.source
     if data.kind == "legacy":
-        state["vertex_colors"] = np.asarray(src.vertex_colors).copy() if src.has_vertex_colors() else None
-        state["triangle_uvs"] = np.asarray(src.triangle_uvs).copy() if src.has_triangle_uvs() else None
-        state["triangle_material_ids"] = (
-            np.asarray(src.triangle_material_ids).copy() if src.has_triangle_material_ids() else None
-        )
+        for key, _ in _LEGACY_ARRAYS:
+            state[key] = np.asarray(getattr(src, key)).copy() if getattr(src, f"has_{key}")() else None
         # as new_mesh copies them: only when the mesh has textures (readers may leave empty images)
         textures = src.textures if src.has_textures() else []
         state["textures"] = [None if t.is_empty() else np.asarray(t).copy() for t in textures]
@@ -427,12 +430,9 @@ def mesh_from_state(state: dict) -> MeshData:
         source = o3d.geometry.TriangleMesh(
             o3d.utility.Vector3dVector(source_v), o3d.utility.Vector3iVector(source_t.astype(np.int32))
         )
-        if state["vertex_colors"] is not None:
-            source.vertex_colors = o3d.utility.Vector3dVector(state["vertex_colors"])
-        if state["triangle_uvs"] is not None:
-            source.triangle_uvs = o3d.utility.Vector2dVector(state["triangle_uvs"])
-        if state["triangle_material_ids"] is not None:
-            source.triangle_material_ids = o3d.utility.IntVector(state["triangle_material_ids"])
+        for key, vector in _LEGACY_ARRAYS:
+            if state[key] is not None:
+                setattr(source, key, getattr(o3d.utility, vector)(state[key]))
         source.textures = [
             o3d.geometry.Image() if texture is None else o3d.geometry.Image(texture)
             for texture in state["textures"]
