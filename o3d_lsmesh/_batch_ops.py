@@ -638,10 +638,7 @@ def change_metrics(before: Any, after: Any) -> dict:
         Option("level", int_at_least(0), 0, "multiresolution level (0: plain fairing)"),
         Option("mu", optional(real), None, "barycenter penalty weight of --method global or scan"),
         Option(
-            "reimpose_every",
-            optional(int_at_least(1)),
-            None,
-            "re-take the barycenters every k iterations",
+            "reimpose_every", optional(int_at_least(1)), None, "re-take the barycenters every k iterations"
         ),
         Option("fixed_boundary", flag, False, "keep boundary vertices fixed", is_flag=True),
     ),
@@ -682,10 +679,7 @@ def denoise_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dic
     help="fill holes with faired patches (LS meshes)",
     options=(
         Option(
-            "max_hole_edges",
-            optional(int_at_least(3)),
-            None,
-            "fill only holes of at most this many edges",
+            "max_hole_edges", optional(int_at_least(3)), None, "fill only holes of at most this many edges"
         ),
         Option("max_hole_diameter", optional(real), None, "fill only holes at most this wide (mesh units)"),
         Option("continuity", choice("0", "1", "2"), "2", "0 harmonic, 1 LS mesh, 2 tri-Laplacian"),
@@ -804,10 +798,7 @@ def _approximate(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, d
     help="quantized LS-mesh anchors, written as OUTDIR/<name>.bin",
     options=(
         Option(
-            "count",
-            count_or_percent,
-            "2%",
-            "anchors: a count, or a share of each mesh's vertices like 2%",
+            "count", count_or_percent, "2%", "anchors: a count, or a share of each mesh's vertices like 2%"
         ),
         Option("bits", int_at_least(1), 12, "bits per quantized coordinate"),
         Option("method", choice(*_METHODS), "greedy", "anchor selection: greedy, random or combined"),

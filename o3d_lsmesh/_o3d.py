@@ -58,7 +58,14 @@ __all__ = [
     "weld_map",
 ]
 
-_NORMAL_KEYS = ("normals",)
+#: A tensor mesh's attributes that are not carried over as they are (rebuilt or recomputed).
+_OWN_KEYS = {"vertex": ("positions", "normals"), "triangle": ("indices", "normals")}
+#: A legacy mesh's per-vertex and per-triangle arrays and their ``open3d.utility`` vector types.
+_LEGACY_ARRAYS = (
+    ("vertex_colors", "Vector3dVector"),
+    ("triangle_uvs", "Vector2dVector"),
+    ("triangle_material_ids", "IntVector"),
+)
 
 
 def open3d():
@@ -157,9 +164,7 @@ def weld_map(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray | None:
     occurrence, so a mesh without duplicates keeps its numbering.
     """
     n = len(vertices)
-    if n == 0:
-        return None
-    if not _may_have_duplicates(vertices):
+    if n == 0 or not _may_have_duplicates(vertices):
         return None
     # rows sorted by (x, y, z): equal rows become neighbours (a stable sort keeps each group in
     # index order, so its first row is its first occurrence); -0.0 and 0.0 compare equal
@@ -198,9 +203,7 @@ def _kind(mesh: Any, *, name: str = "mesh") -> str:
     )
 
 
-def read_mesh(
-    mesh: Any, *, name: str = "mesh", allow_isolated: bool = True, weld: bool = False, narrow: bool = False
-) -> MeshData:
+def read_mesh(mesh: Any, *, name: str = "mesh", weld: bool = False, narrow: bool = False) -> MeshData:
     """Copy ``mesh`` into ``(n,3) float64`` vertices and ``(m,3) int64`` triangles and validate them.
 
     ``weld=True`` merges vertices at exactly equal coordinates (see
@@ -210,29 +213,16 @@ def read_mesh(
     (an index given in the split layout would otherwise name another vertex).
     ``narrow=True``: int32 triangles, shared with the source when it holds them so (a legacy Open3D
     mesh), for callers that only read them (see :func:`~o3d_lsmesh._validate.as_triangle_array`).
-
-    Every kind goes through the same checks (:func:`~o3d_lsmesh._validate.as_vertex_array`,
-    :func:`~o3d_lsmesh._validate.as_triangle_array`): positions of a real
-    dtype (integers are converted exactly) and indices of an integer dtype,
-    each of shape ``(k, 3)`` exactly (never reshaped), indices range-checked
-    before any cast.
+    Every kind goes through the same checks, :func:`~o3d_lsmesh._validate.mesh_arrays`.
 
     Raises
     ------
     TypeError
-        ``mesh`` is not a supported mesh kind; positions that are not real
-        numbers (bool, complex, strings, objects); indices that are not
-        integers (a float index would be truncated).
+        ``mesh`` is not a supported mesh kind; see :func:`~o3d_lsmesh._validate.mesh_arrays`.
     ValueError
-        Positions or indices not of shape ``(k, 3)``; empty mesh, no
-        triangles, non-finite coordinates, coordinates beyond
-        :data:`~o3d_lsmesh._validate.COORDINATE_LIMIT` (``1e30``), out-of-range
-        indices, triangles repeating a vertex, or unreferenced vertices when
-        not allowed.
+        A tensor mesh without positions; see :func:`~o3d_lsmesh._validate.mesh_arrays`.
     """
     kind = _kind(mesh, name=name)
-    # every kind goes through the same two checks: real-number (n, 3) positions and
-    # integer (m, 3) indices in range, checked before any cast (never reshaped or truncated)
     if kind == "legacy":
         raw_v, raw_t = np.asarray(mesh.vertices), np.asarray(mesh.triangles)
     elif kind == "tensor":
@@ -244,7 +234,7 @@ def read_mesh(
         )
     else:
         raw_v, raw_t = mesh
-    vertices, triangles = mesh_arrays(raw_v, raw_t, name=name, allow_isolated=allow_isolated, narrow=narrow)
+    vertices, triangles = mesh_arrays(raw_v, raw_t, name=name, narrow=narrow)
     split = weld_map(vertices, triangles) if weld else None
     if split is not None:
         welded = np.zeros((int(split.max()) + 1, 3))
@@ -266,11 +256,12 @@ def _dropped(data: MeshData) -> list[str]:
             ("textures", src.has_textures()),
         )
         return [label for label, present in checks if present]
-    dropped = [f"vertex attribute {key!r}" for key in src.vertex if key not in ("positions",) + _NORMAL_KEYS]
-    dropped += [
-        f"triangle attribute {key!r}" for key in src.triangle if key not in ("indices",) + _NORMAL_KEYS
+    return [
+        f"{group} attribute {key!r}"
+        for group, own in _OWN_KEYS.items()
+        for key in getattr(src, group)
+        if key not in own
     ]
-    return dropped
 
 
 def warn_dropped_attributes(data: MeshData, reason: str, *, stacklevel: int = 3) -> bool:
@@ -351,13 +342,11 @@ def new_mesh(
     out = o3d.t.geometry.TriangleMesh(device)
     out.vertex.positions = o3d.core.Tensor(vertices, device=device).to(position_dtype)
     out.triangle.indices = o3d.core.Tensor(faces, device=device).to(index_dtype)
-    if same_topology:
-        for key in src.vertex:
-            if key not in ("positions",) + _NORMAL_KEYS:
-                out.vertex[key] = src.vertex[key].clone()
-        for key in src.triangle:
-            if key not in ("indices",) + _NORMAL_KEYS:
-                out.triangle[key] = src.triangle[key].clone()
+    for group, own in _OWN_KEYS.items() if same_topology else ():
+        source, target = getattr(src, group), getattr(out, group)
+        for key in source:
+            if key not in own:
+                target[key] = source[key].clone()
     if src.has_valid_material():
         # a copy: the caller's material must not change when the result's is edited
         out.material = o3d.visualization.Material(src.material)
@@ -387,11 +376,8 @@ def mesh_state(data: MeshData) -> dict:
     }
     src = data.source
     if data.kind == "legacy":
-        state["vertex_colors"] = np.asarray(src.vertex_colors).copy() if src.has_vertex_colors() else None
-        state["triangle_uvs"] = np.asarray(src.triangle_uvs).copy() if src.has_triangle_uvs() else None
-        state["triangle_material_ids"] = (
-            np.asarray(src.triangle_material_ids).copy() if src.has_triangle_material_ids() else None
-        )
+        for key, _ in _LEGACY_ARRAYS:
+            state[key] = np.asarray(getattr(src, key)).copy() if getattr(src, f"has_{key}")() else None
         # as new_mesh copies them: only when the mesh has textures (readers may leave empty images)
         textures = src.textures if src.has_textures() else []
         state["textures"] = [None if t.is_empty() else np.asarray(t).copy() for t in textures]
@@ -399,13 +385,11 @@ def mesh_state(data: MeshData) -> dict:
         state["triangle_normals"] = bool(src.has_triangle_normals())
     elif data.kind == "tensor":
         state["device"] = str(src.vertex.positions.device)
-        state["vertex"] = {
-            key: (src.vertex[key].cpu().numpy().copy(), str(src.vertex[key].dtype)) for key in src.vertex
-        }
-        state["triangle"] = {
-            key: (src.triangle[key].cpu().numpy().copy(), str(src.triangle[key].dtype))
-            for key in src.triangle
-        }
+        for group in ("vertex", "triangle"):
+            attributes = getattr(src, group)
+            state[group] = {
+                key: (attributes[key].cpu().numpy().copy(), str(attributes[key].dtype)) for key in attributes
+            }
         state["material"] = _material_state(src.material) if src.has_valid_material() else None
     return state
 
@@ -432,11 +416,6 @@ def _material_from_state(state: dict) -> Any:
     return material
 
 
-def _o3d_dtype(name: str) -> Any:
-    o3d = open3d()
-    return getattr(o3d.core, name.lower())
-
-
 def mesh_from_state(state: dict) -> MeshData:
     """Rebuild the :class:`MeshData` described by :func:`mesh_state`, with a source mesh of the same kind."""
     vertices, triangles, kind = state["vertices"], state["triangles"], state["kind"]
@@ -451,12 +430,9 @@ def mesh_from_state(state: dict) -> MeshData:
         source = o3d.geometry.TriangleMesh(
             o3d.utility.Vector3dVector(source_v), o3d.utility.Vector3iVector(source_t.astype(np.int32))
         )
-        if state["vertex_colors"] is not None:
-            source.vertex_colors = o3d.utility.Vector3dVector(state["vertex_colors"])
-        if state["triangle_uvs"] is not None:
-            source.triangle_uvs = o3d.utility.Vector2dVector(state["triangle_uvs"])
-        if state["triangle_material_ids"] is not None:
-            source.triangle_material_ids = o3d.utility.IntVector(state["triangle_material_ids"])
+        for key, vector in _LEGACY_ARRAYS:
+            if state[key] is not None:
+                setattr(source, key, getattr(o3d.utility, vector)(state[key]))
         source.textures = [
             o3d.geometry.Image() if texture is None else o3d.geometry.Image(texture)
             for texture in state["textures"]
@@ -468,10 +444,10 @@ def mesh_from_state(state: dict) -> MeshData:
         return MeshData(vertices, triangles, source, kind, split, split_triangles)
     device = o3d.core.Device(state["device"])
     source = o3d.t.geometry.TriangleMesh(device)
-    for group, attributes in (("vertex", state["vertex"]), ("triangle", state["triangle"])):
+    for group in ("vertex", "triangle"):
         target = getattr(source, group)
-        for key, (array, dtype) in attributes.items():
-            target[key] = o3d.core.Tensor(array, device=device).to(_o3d_dtype(dtype))
+        for key, (array, dtype) in state[group].items():
+            target[key] = o3d.core.Tensor(array, device=device).to(getattr(o3d.core, dtype.lower()))
     if state["material"] is not None:
         source.material = _material_from_state(state["material"])
     return MeshData(vertices, triangles, source, kind, split, split_triangles)

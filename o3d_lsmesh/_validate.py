@@ -28,7 +28,6 @@ __all__ = [
     "as_vertex_array",
     "as_weights",
     "as_workers",
-    "isolated_vertices",
     "mesh_arrays",
 ]
 
@@ -64,7 +63,7 @@ def _describe(value: Any) -> str:
 
 
 def mesh_arrays(
-    vertices: Any, triangles: Any, *, name: str = "mesh", allow_isolated: bool = True, narrow: bool = False
+    vertices: Any, triangles: Any, *, name: str = "mesh", narrow: bool = False
 ) -> tuple[np.ndarray, np.ndarray]:
     """The one check of a mesh given as arrays: new ``(n, 3) float64`` vertices and ``(m, 3) int64`` triangles.
 
@@ -77,11 +76,12 @@ def mesh_arrays(
     Raises
     ------
     TypeError
-        Positions that are not real numbers or indices that are not integers.
+        Positions that are not real numbers (bool, complex, strings, objects; integers are
+        converted exactly) or indices that are not integers (a float index would be truncated).
     ValueError
-        Arrays not of shape ``(k, 3)``; an empty mesh, no triangles, non-finite or too large
-        coordinates, out-of-range indices, triangles repeating a vertex, or unreferenced vertices
-        when ``allow_isolated`` is False.
+        Arrays not of shape ``(k, 3)`` (never reshaped); an empty mesh, no triangles, non-finite
+        coordinates or beyond :data:`COORDINATE_LIMIT`, out-of-range indices (checked before any
+        cast), or triangles repeating a vertex (unreferenced vertices are fine).
 
     Examples
     --------
@@ -113,13 +113,6 @@ def mesh_arrays(
             f"at triangle {row} ({int(repeated.sum())} such triangles; "
             "remove_degenerate_triangles() drops them)"
         )
-    if not allow_isolated:
-        isolated = isolated_vertices(triangles, n)
-        if len(isolated):
-            raise ValueError(
-                f"{name} must not have unreferenced vertices, got {len(isolated)} "
-                f"(first: vertex {int(isolated[0])}); remove_unreferenced_vertices() drops them"
-            )
     return vertices, triangles
 
 
@@ -243,16 +236,7 @@ def as_real_vector(
     return array
 
 
-def isolated_vertices(triangles: np.ndarray, n: int) -> np.ndarray:
-    """Indices of the vertices that no triangle references, ``(k,) int64``."""
-    used = np.zeros(n, dtype=bool)
-    used[triangles.ravel()] = True
-    return np.flatnonzero(~used)
-
-
-def as_indices(
-    indices: Any, n: int, *, name: str, allow_empty: bool = False, allow_repeats: bool = False
-) -> np.ndarray:
+def as_indices(indices: Any, n: int, *, name: str, allow_repeats: bool = False) -> np.ndarray:
     """Return ``indices`` as a unique ``(k,) int64`` array of vertex indices in ``[0, n)`` (repeats if allowed)."""
     array = _array(indices, name=name, expected="a sequence of integer vertex indices")
     if array.ndim == 0:
@@ -260,8 +244,6 @@ def as_indices(
     if array.ndim != 1:
         raise ValueError(f"{name} must be one-dimensional, got shape {array.shape}")
     if array.size == 0:
-        if allow_empty:
-            return np.zeros(0, dtype=np.int64)
         raise ValueError(f"{name} must hold at least one vertex index, got none")
     if array.dtype == bool or not np.issubdtype(array.dtype, np.integer):
         if (

@@ -115,13 +115,6 @@ def assemble_stream(
     return body + _CRC.pack(zlib.crc32(body) & 0xFFFFFFFF)
 
 
-def quantization_bound(lower: np.ndarray, upper: np.ndarray, bits: int) -> np.ndarray:
-    """Largest quantization error per coordinate, ``(3,)``: half a quantization step."""
-    return (np.asarray(upper, dtype=np.float64) - np.asarray(lower, dtype=np.float64)) / (
-        2 * ((1 << bits) - 1)
-    )
-
-
 def encode_geometry(
     mesh: AnyMesh,
     count: int,

@@ -5,7 +5,7 @@ All functions accept Open3D meshes (legacy or tensor) or ``(vertices, triangles)
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -80,12 +80,20 @@ def distances_to_surface(points: np.ndarray, vertices: np.ndarray, triangles: np
     in a frame of unit size (see :func:`surface_distance`) and scale back.
     """
     o3d = open3d()
+    result = raycasting_scene(vertices, triangles).compute_distance(
+        o3d.core.Tensor(points.astype(np.float32))
+    )
+    return result.numpy().astype(np.float64)
+
+
+def raycasting_scene(vertices: np.ndarray, triangles: np.ndarray) -> Any:
+    """Open3D's ``RaycastingScene`` (single precision) holding the surface ``(vertices, triangles)``."""
+    o3d = open3d()
     scene = o3d.t.geometry.RaycastingScene()
     scene.add_triangles(
         o3d.core.Tensor(vertices.astype(np.float32)), o3d.core.Tensor(triangles.astype(np.uint32))
     )
-    result = scene.compute_distance(o3d.core.Tensor(points.astype(np.float32)))
-    return result.numpy().astype(np.float64)
+    return scene
 
 
 def surface_distance(a: AnyMesh, b: AnyMesh, *, number_of_points: int = 100_000, seed: int = 0) -> dict:
@@ -116,7 +124,7 @@ def surface_distance(a: AnyMesh, b: AnyMesh, *, number_of_points: int = 100_000,
     da, db = read_mesh(a, name="a"), read_mesh(b, name="b")
     # in a frame centered on both meshes at unit size, float32 distances keep their relative precision
     # whatever the coordinates' offset and never overflow; scaled back to model units
-    center, scale = _common_frame(da.vertices, db.vertices)
+    center, scale = common_frame(da.vertices, db.vertices)
     va, vb = (da.vertices - center) / scale, (db.vertices - center) / scale
     rng = np.random.default_rng(seed)
     pa = _sample_surface(va, da.triangles, number_of_points, rng)
@@ -131,7 +139,7 @@ def surface_distance(a: AnyMesh, b: AnyMesh, *, number_of_points: int = 100_000,
     }
 
 
-def _common_frame(*vertex_arrays: np.ndarray) -> tuple[np.ndarray, float]:
+def common_frame(*vertex_arrays: np.ndarray) -> tuple[np.ndarray, float]:
     """Center (of the joint bounding box) and half extent of the arrays, for scale-free computations."""
     low = np.min([v.min(axis=0) for v in vertex_arrays], axis=0)
     high = np.max([v.max(axis=0) for v in vertex_arrays], axis=0)

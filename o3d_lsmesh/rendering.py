@@ -38,9 +38,9 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ._errors import O3DLSMeshWarning
-from ._o3d import open3d, read_mesh
+from ._o3d import MeshData, open3d, read_mesh
 from ._validate import as_choice, as_count, as_positive_float, as_real_vector
-from .metrics import distances_to_surface
+from .metrics import common_frame, distances_to_surface, raycasting_scene
 from .topology import unique_edges
 
 if TYPE_CHECKING:
@@ -83,13 +83,11 @@ def error_colors(values: np.ndarray, vmax: float) -> np.ndarray:
     return np.stack([np.interp(t, grid, VIRIDIS[:, c]) for c in range(3)], axis=1)
 
 
-def _vertex_colors(mesh: Any) -> np.ndarray | None:
-    if isinstance(mesh, tuple):
-        return None
-    o3d = open3d()
-    if isinstance(mesh, o3d.geometry.TriangleMesh):
+def _vertex_colors(data: MeshData) -> np.ndarray | None:
+    mesh = data.source
+    if data.kind == "legacy":
         return np.asarray(mesh.vertex_colors, dtype=np.float64).copy() if mesh.has_vertex_colors() else None
-    if "colors" in mesh.vertex:
+    if data.kind == "tensor" and "colors" in mesh.vertex:
         return mesh.vertex.colors.cpu().numpy().astype(np.float64).reshape(-1, 3)
     return None
 
@@ -119,9 +117,7 @@ def _layout(arrays, view_direction, up, width, height, margin, align):
     right /= np.linalg.norm(right)
     true_up = np.cross(back, right)
     if align == "common":
-        low = np.min([v.min(axis=0) for v, _ in arrays], axis=0)
-        high = np.max([v.max(axis=0) for v, _ in arrays], axis=0)
-        centers = [0.5 * (low + high)] * len(arrays)
+        centers = [common_frame(*(v for v, _ in arrays))[0]] * len(arrays)
     else:
         centers = [0.5 * (v.min(axis=0) + v.max(axis=0)) for v, _ in arrays]
     extents = np.array(
@@ -173,10 +169,7 @@ def _vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
 
 def _raycast(vertices, triangles, colors, camera, width, height, background) -> np.ndarray:
     o3d = open3d()
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(
-        o3d.core.Tensor(vertices.astype(np.float32)), o3d.core.Tensor(triangles.astype(np.uint32))
-    )
+    scene = raycasting_scene(vertices, triangles)
     right, up, back = (np.array(camera[k]) for k in ("right", "up", "back"))
     xs = camera["left"] + (np.arange(width) + 0.5) / width * (camera["right_edge"] - camera["left"])
     ys = camera["top"] - (np.arange(height) + 0.5) / height * (camera["top"] - camera["bottom"])
@@ -315,9 +308,8 @@ class RenderedImage(np.ndarray):
         return obj
 
     def __array_finalize__(self, obj) -> None:
-        self.error_max = getattr(obj, "error_max", None)
-        self.units = getattr(obj, "units", None)
-        self.edge_length = getattr(obj, "edge_length", None)
+        for name in ("error_max", "units", "edge_length"):
+            setattr(self, name, getattr(obj, name, None))
 
 
 def _matplotlib():
@@ -551,8 +543,8 @@ def render(
         colors = [error_colors(d, error_max) for d in distances]
     else:
         colors = []
-        for mesh, (vertices, _) in zip(items, arrays):
-            own = _vertex_colors(mesh)
+        for data, (vertices, _) in zip(datas, arrays):
+            own = _vertex_colors(data)
             colors.append(
                 own
                 if own is not None and len(own) == len(vertices)
@@ -601,9 +593,6 @@ def render(
             raise ValueError(f"path must be in an existing folder, got {path!r}")
         if not o3d.io.write_image(path, o3d.geometry.Image(image)):
             raise ValueError(f"path must name a writable .png file, got {path!r}")
-    return RenderedImage(
-        image,
-        error_max if reference is not None else None,
-        units if reference is not None else None,
-        edge_length,
-    )
+    if reference is None:
+        return RenderedImage(image)
+    return RenderedImage(image, error_max, units, edge_length)

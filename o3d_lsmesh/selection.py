@@ -290,15 +290,9 @@ def select_control_points(
     True
     """
     data = read_mesh(mesh, weld=True)
+    V, F = data.vertices, data.triangles
     indices, _ = control_point_selection(
-        data.vertices,
-        data.triangles,
-        count,
-        method=method,
-        batch=batch,
-        weights=weights,
-        seed=seed,
-        progress=progress,
+        V, F, count, method=method, batch=batch, weights=weights, seed=seed, progress=progress
     )
     return data.source_indices(indices)
 

@@ -28,18 +28,15 @@ __all__ = [
     "boundary_curves",
     "boundary_halfedges",
     "boundary_loops",
-    "check_manifold",
     "connected_components",
     "directed_edges",
     "edge_structure",
-    "euler_characteristic",
     "halfedges",
     "nonmanifold_edges",
     "nonmanifold_vertices",
     "ring_pattern",
     "unique_edges",
     "vertex_rings",
-    "vertex_valences",
 ]
 
 
@@ -49,10 +46,8 @@ def halfedges(triangles: np.ndarray) -> np.ndarray:
     return np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]], axis=0)
 
 
-def group_keys(keys: np.ndarray, bound: int, *, inverse: bool = True):
+def group_keys(keys: np.ndarray, bound: int):
     """Sort-and-mask grouping of integer ``keys`` in ``[0, bound)``: (order, starts, counts, inverse).
-
-    ``inverse=False`` returns ``None`` in its place (it costs a third of the grouping).
 
     When key and position fit in 64 bits together they are packed and sorted as
     one ``uint64`` array (numpy sorts plain integers several times faster than
@@ -73,43 +68,40 @@ def group_keys(keys: np.ndarray, bound: int, *, inverse: bool = True):
         order = np.argsort(keys, kind="stable")
         sorted_keys = keys[order]
     first, starts, counts = _runs(sorted_keys)
-    if not inverse:
-        return order, starts, counts, None
     rank = np.cumsum(first, dtype=np.int64)
     rank -= 1
-    inverse_ = np.empty(count, dtype=np.int64)
-    inverse_[order] = rank
-    return order, starts, counts, inverse_
+    inverse = np.empty(count, dtype=np.int64)
+    inverse[order] = rank
+    return order, starts, counts, inverse
 
 
 def _runs(sorted_keys: np.ndarray):
     """Runs of equal values in sorted ``keys``: (first-of-run mask, run starts, run lengths)."""
-    count = len(sorted_keys)
-    first = np.empty(count, dtype=bool)
-    first[:1] = True
-    np.not_equal(sorted_keys[1:], sorted_keys[:-1], out=first[1:])
+    first = run_heads(sorted_keys)
     starts = np.flatnonzero(first)
-    # lengths written in place (np.diff with append copies ``starts`` first)
-    lengths = np.empty(len(starts), dtype=np.int64)
+    return first, starts, _run_lengths(starts, len(sorted_keys))
+
+
+def run_heads(values: np.ndarray) -> np.ndarray:
+    """``(k,) bool``: True where ``values`` differs from the value before it (and at the first)."""
+    first = np.empty(len(values), dtype=bool)
+    first[:1] = True
+    np.not_equal(values[1:], values[:-1], out=first[1:])
+    return first
+
+
+def _run_lengths(starts: np.ndarray, count: int) -> np.ndarray:
+    """Lengths of the runs starting at ``starts`` in ``count`` items, in ``starts``' dtype."""
+    # written in place (np.diff with append copies ``starts`` first)
+    lengths = np.empty(len(starts), dtype=starts.dtype)
     np.subtract(starts[1:], starts[:-1], out=lengths[:-1])
     lengths[-1:] = count - starts[-1:]
-    return first, starts, lengths
-
-
-def _edge_keys(triangles: np.ndarray, n: int) -> np.ndarray:
-    # undirected key lo * n + hi of every half-edge, in the row order of halfedges()
-    m = len(triangles)
-    tail = triangles.T
-    head = triangles[:, [1, 2, 0]].T
-    keys = np.minimum(tail, head, out=np.empty((3, m), dtype=np.int64))
-    keys *= np.int64(n)
-    keys += np.maximum(tail, head)
-    return keys.reshape(-1)
+    return lengths
 
 
 def edge_runs(triangles: np.ndarray, n: int):
     # half-edge rows of halfedges() grouped by undirected edge: (order, starts, counts)
-    return group_keys(_edge_keys(triangles, n), n * n, inverse=False)[:3]
+    return edge_structure(triangles, n).runs
 
 
 @dataclass(frozen=True)
@@ -197,14 +189,10 @@ def edge_structure(triangles: np.ndarray, n: int | None = None) -> EdgeStructure
     lo_start = by_lo.indptr
     del by_lo
     sorted_hi = hi[order]
-    first = np.empty(count, dtype=bool)
-    first[0] = True
-    np.not_equal(sorted_hi[1:], sorted_hi[:-1], out=first[1:])
+    first = run_heads(sorted_hi)
     first[lo_start[:-1][lo_start[:-1] < lo_start[1:]]] = True  # a new lo starts a new edge
     starts = np.flatnonzero(first).astype(index)
-    counts = np.empty(len(starts), dtype=index)
-    np.subtract(starts[1:], starts[:-1], out=counts[:-1])
-    counts[-1] = count - starts[-1]
+    counts = _run_lengths(starts, count)
     edges = np.empty((len(starts), 2), dtype=index)
     edges[:, 0] = lo[order[starts]]
     edges[:, 1] = sorted_hi[starts]
@@ -365,9 +353,7 @@ def vertex_rings(triangles: np.ndarray, n: int) -> VertexRings:
             order = np.lexsort((columns, row_of))
             columns, entries = columns[order], entries[order]
         # a slot starts at every new column and at every non-empty row
-        first = np.empty(len(columns), dtype=bool)
-        first[:1] = True
-        np.not_equal(columns[1:], columns[:-1], out=first[1:])
+        first = run_heads(columns)
         first[local[:-1][degree > 0]] = True
         at = np.flatnonzero(first)
         multiplicity = np.diff(at, append=len(columns))
@@ -407,8 +393,7 @@ def unique_edges(triangles: np.ndarray, n: int | None = None):
     inverse : (3m,) int64
         Edge index of each half-edge of :func:`halfedges`.
     """
-    es = edge_structure(triangles, n)
-    return es.edges.astype(np.int64), es.counts.astype(np.int64), es.inverse.astype(np.int64)
+    return unique_edges_and_runs(triangles, n)[0]
 
 
 def unique_edges_and_runs(triangles: np.ndarray, n: int | None = None):
@@ -453,10 +438,7 @@ def ring_pattern(edges: np.ndarray, n: int):
     del first_forward, n_forward
     # backward: edges by (hi, lo), a stable counting sort of the edge list by hi (a CSC transpose)
     by_hi = (
-        sp.csr_matrix(
-            (np.arange(e, dtype=index), hi, np.arange(e + 1, dtype=np.int64)),
-            shape=(e, max(n, 1)),
-        )
+        sp.csr_matrix((np.arange(e, dtype=index), hi, np.arange(e + 1, dtype=np.int64)), shape=(e, max(n, 1)))
         .tocsc()
         .data
     )
@@ -474,7 +456,7 @@ def ring_pattern(edges: np.ndarray, n: int):
     return indptr, indices, diagonal, forward, backward
 
 
-def directed_edges(triangles: np.ndarray, n: int, *, executor=None):
+def directed_edges(triangles: np.ndarray, n: int):
     """Both directions of every edge, sorted by ``(source, target)``, with their triangle counts.
 
     Returns
@@ -489,35 +471,12 @@ def directed_edges(triangles: np.ndarray, n: int, *, executor=None):
     Each triangle gives the key ``src << bits | dst`` of each direction of its
     three edges once; one sort of the plain int64 keys (numpy's SIMD sort, far
     faster than argsort, ``np.unique`` or a COO-to-CSR merge) groups them.
-    With a thread pool ``executor``, each half of the triangles is sorted in
-    its own thread, and the two sorted halves are merged as two pairs of runs
-    split at one key, again in two threads (same result).
     """
     bits = max(1, int(n - 1).bit_length())
     if 2 * bits > 62:  # beyond 2^31 vertices: keys by multiplication do not fit either
         raise ValueError(f"n must be below 2**31, got {n}")
     shift = np.int64(bits)
     triangles = np.asarray(triangles, dtype=np.int64)
-    m = len(triangles)
-    if executor is None or m < 1 << 16:
-        return _unique_keys(_sorted_keys(triangles, shift), shift)
-    half = m // 2
-    low, high = executor.map(
-        lambda rows: _sorted_keys(triangles[rows], shift), (slice(0, half), slice(half, m))
-    )
-    pivot = high[len(high) // 2]
-    cut_low, cut_high = np.searchsorted(low, pivot), np.searchsorted(high, pivot)
-    parts = list(
-        executor.map(
-            lambda pair: _unique_keys(_merged(*pair), shift),
-            ((low[:cut_low], high[:cut_high]), (low[cut_low:], high[cut_high:])),
-        )
-    )
-    del low, high
-    return tuple(np.concatenate([part[i] for part in parts]) for i in range(3))
-
-
-def _sorted_keys(triangles: np.ndarray, shift: np.int64) -> np.ndarray:
     m = len(triangles)
     corners = triangles.T  # a view: columns read in place
     # written in place: on large meshes fresh temporaries cost as much as the sort
@@ -528,16 +487,6 @@ def _sorted_keys(triangles: np.ndarray, shift: np.int64) -> np.ndarray:
     for row, head in enumerate((1, 2, 0, 2, 0, 1)):
         rows[row] |= corners[head]
     keys.sort()
-    return keys
-
-
-def _merged(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    keys = np.concatenate([a, b])
-    keys.sort(kind="stable")  # two sorted runs: one merge
-    return keys
-
-
-def _unique_keys(keys: np.ndarray, shift: np.int64):
     _, at, triangle_count = _runs(keys)
     keys = keys[at]
     src = keys >> shift
@@ -559,24 +508,10 @@ def adjacency_matrix(triangles: np.ndarray, n: int) -> sp.csr_matrix:
     return adjacency
 
 
-def vertex_valences(triangles: np.ndarray, n: int) -> np.ndarray:
-    """Number of edge neighbours of every vertex, ``(n,) int64`` (0 for isolated vertices)."""
-    edges, _, _ = unique_edges(triangles, n)
-    return np.bincount(edges.ravel(), minlength=n).astype(np.int64)
-
-
 def connected_components(triangles: np.ndarray, n: int):
     """Connected components over edges: ``(count, labels (n,) int64)``; isolated vertices are their own."""
     count, labels = csgraph.connected_components(adjacency_matrix(triangles, n), directed=False)
     return int(count), labels.astype(np.int64)
-
-
-def euler_characteristic(triangles: np.ndarray, n_referenced: int | None = None) -> int:
-    """``V - E + F`` over the referenced vertices."""
-    edges, _, _ = unique_edges(triangles)
-    if n_referenced is None:
-        n_referenced = len(np.unique(triangles))
-    return int(n_referenced - len(edges) + len(triangles))
 
 
 def boundary_halfedges(triangles: np.ndarray, n: int | None = None) -> np.ndarray:
@@ -591,7 +526,7 @@ def nonmanifold_edges(triangles: np.ndarray, n: int | None = None) -> np.ndarray
     return edges[counts > 2]
 
 
-def nonmanifold_vertices(triangles: np.ndarray, n: int, *, _runs=None) -> np.ndarray:
+def nonmanifold_vertices(triangles: np.ndarray, n: int) -> np.ndarray:
     """Vertices whose triangles do not form a single fan (bow-ties and the like), sorted.
 
     The corners ``(t, v)`` of the triangles around a vertex are linked when two
@@ -599,7 +534,7 @@ def nonmanifold_vertices(triangles: np.ndarray, n: int, *, _runs=None) -> np.nda
     its corners fall into more than one linked group.
     """
     tail = triangles.T.reshape(-1)
-    fan_count, fan = corner_fans(triangles, n, edge_runs(triangles, n) if _runs is None else _runs)
+    fan_count, fan = corner_fans(triangles, n, edge_runs(triangles, n))
     # links only join corners of one vertex, so every fan belongs to exactly one vertex
     vertex_of_fan = np.zeros(fan_count, dtype=np.int64)
     vertex_of_fan[fan] = tail
@@ -626,10 +561,10 @@ def corner_fans(triangles: np.ndarray, n: int, runs, *, only: np.ndarray | None 
     a, b = order[interior], order[interior + 1]
     del interior
     same_direction = tail[a] == tail[b]
-    end_a = a + m
-    end_a[end_a >= corners] -= corners
-    end_b = b + m
-    end_b[end_b >= corners] -= corners
+    # (a + m) mod 3m, without passing 4m: int32 runs hold up to 3m < 2**31
+    end_a, end_b = a - 2 * m, b - 2 * m
+    end_a[end_a < 0] += corners
+    end_b[end_b < 0] += corners
     # every corner has at most two links, one through the half-edge it starts and one through the
     # one it ends, so the graph is written as CSR directly (a self-link where there is none)
     index = np.int32 if 2 * corners < np.iinfo(np.int32).max else np.int64
@@ -673,26 +608,6 @@ def corner_fans(triangles: np.ndarray, n: int, runs, *, only: np.ndarray | None 
     label = np.full(3 * m, -1, dtype=np.int64)
     label[selected] = fan
     return int(fan_count), label
-
-
-def check_manifold(triangles: np.ndarray, n: int, *, name: str = "mesh") -> None:
-    """Raise ``ValueError`` naming the first non-manifold edge or vertex of the mesh."""
-    runs = edge_runs(triangles, n)
-    order, starts, counts = runs
-    bad = np.flatnonzero(counts > 2)
-    if len(bad):
-        row = order[starts[bad[0]]]
-        e = np.sort(halfedges(triangles)[row])
-        raise ValueError(
-            f"{name} must be edge-manifold, got edge ({int(e[0])}, {int(e[1])}) shared by more than two "
-            f"triangles ({len(bad)} such edges)"
-        )
-    bad_vertices = nonmanifold_vertices(triangles, n, _runs=runs)
-    if len(bad_vertices):
-        raise ValueError(
-            f"{name} must be vertex-manifold, got vertex {int(bad_vertices[0])} joining separate fans of "
-            f"triangles ({len(bad_vertices)} such vertices)"
-        )
 
 
 @dataclass(frozen=True)

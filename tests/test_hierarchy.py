@@ -16,15 +16,20 @@ from hypothesis import strategies as st
 
 from o3d_lsmesh.hierarchy import build_hierarchy, from_fast_simplification
 from o3d_lsmesh.hierarchy.collapse import collapse_levels
-from o3d_lsmesh.hierarchy.hierarchy import build_hierarchy_arrays, locked_vertices
+from o3d_lsmesh.hierarchy.hierarchy import build_hierarchy_arrays
 from o3d_lsmesh.topology import (
     adjacency_matrix,
     boundary_halfedges,
     boundary_loops,
-    euler_characteristic,
     nonmanifold_edges,
     nonmanifold_vertices,
 )
+
+
+def euler_characteristic(F, n_vertices):
+    """``V - E + F`` with ``V = n_vertices``, the edges counted by a row-wise unique of the sorted pairs."""
+    pairs = np.sort(np.asarray(F)[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    return n_vertices - len(np.unique(pairs, axis=0)) + len(F)
 
 
 def _noisy_sphere(resolution=16, seed=0):
@@ -714,6 +719,11 @@ def _bowtie_and_fin():
     )
     F = np.vstack([F, [[inner[0], inner[1], n]], [[n + 1, n + 2, n + 3]]])
     return V, F.astype(np.int64)
+
+
+def locked_vertices(F, n):
+    """The kernel's locked vertices (never moved, never a collapse target): its answer at zero levels."""
+    return collapse_levels(np.zeros((n, 3)), np.ascontiguousarray(F, dtype=np.int64), max_levels=0)[0]
 
 
 def test_locked_vertices_match_the_topology_module():

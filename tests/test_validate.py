@@ -76,9 +76,7 @@ def test_read_mesh_errors():
     pc.vertex.positions = o3d.core.Tensor(np.zeros((3, 3)))
     with pytest.raises(ValueError, match="must have triangles"):
         read_mesh(pc)
-    V, F = grid(3, 3)
-    with pytest.raises(ValueError, match="unreferenced vertices, got 1"):
-        read_mesh((np.concatenate([V, [[9, 9, 9]]]), F), allow_isolated=False)
+    F = grid(3, 3)[1]
     with pytest.raises(TypeError, match="vertices must be an"):
         read_mesh((object(), F))
 
@@ -115,7 +113,8 @@ def test_small_validators():
     with pytest.raises(TypeError, match="positions must be an array"):
         as_positions([["a", "b", "c"]], 1, name="positions")
     assert as_indices(o3d.utility.IntVector([1, 2]), 5, name="idx").tolist() == [1, 2]
-    assert as_indices([], 5, name="idx", allow_empty=True).shape == (0,)
+    with pytest.raises(ValueError, match="idx must hold at least one vertex index, got none"):
+        as_indices([], 5, name="idx")
     assert as_positions(o3d.utility.Vector3dVector(np.ones((2, 3))), 2, name="p").shape == (2, 3)
 
 
@@ -352,14 +351,8 @@ def test_mesh_arrays_refuses_each_defect_on_its_own():
             r"indices must lie in \[0, 9\), got \[0, -1, 2\] at triangle 8",
         ),
         (V, np.vstack([F, [[3, 5, 3]]]), {}, r"three distinct vertices, got \[3, 5, 3\] at triangle 8"),
-        (
-            np.vstack([V, [[5.0, 5, 5]]]),
-            F,
-            {"allow_isolated": False},
-            "unreferenced vertices, got 1 .*vertex 9",
-        ),
     ]
     for vertices, triangles, options, message in cases:
         with pytest.raises(ValueError, match=message):
             mesh_arrays(vertices, triangles, **options)
-    mesh_arrays(np.vstack([V, [[5.0, 5, 5]]]), F)  # an unreferenced vertex is allowed by default
+    mesh_arrays(np.vstack([V, [[5.0, 5, 5]]]), F)  # an unreferenced vertex is allowed

@@ -46,16 +46,8 @@ def add_parsers(sub: Any, common: argparse.ArgumentParser) -> None:
     p.add_argument("--bits", type=positive_int, default=12, help="quantization bits per coordinate")
     p.add_argument("--method", choices=_SELECTION, default="greedy", help="how the anchors are chosen")
 
-    p = add_command(
-        sub,
-        common,
-        decode,
-        {
-            "mesh": "mesh file the data was encoded on",
-            "data": "file written by encode",
-            "output": files["output"],
-        },
-    )
+    positionals = {"mesh": "mesh file the data was encoded on", "data": "file written by encode"}
+    p = add_command(sub, common, decode, {**positionals, "output": files["output"]})
     p.add_argument("--anchors", type=positive_int, help="use only the first K anchors (default: all)")
 
 

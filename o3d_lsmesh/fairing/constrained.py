@@ -305,32 +305,17 @@ def constrained_fairing(
         X1 = argmin E,   X = X1 + S (X0 - X1)   (S: the same minimization, kept factor)
 
     with every referenced vertex unknown and ``w_t = w`` for a triangle with
-    a boundary vertex, 1 otherwise. Every weight is measured on the input
-    (:func:`~o3d_lsmesh.fairing.scan_fairing.scan_parameters`), never set
-    from a reference:
-
-    * ``w``, the rim barycenters' inverse noise variance relative to the
-      interior's (:func:`~o3d_lsmesh.fairing.scan_fairing.measured_boundary_weight`:
-      boundary-curve against interior Laplacian energy, times the coverage
-      ratio ``c ~ 2``, clipped to ``[0.1, c]``): 0.10-0.13 on the raw scans'
-      ragged silhouettes, about ``c`` on an outline carrying the interior's noise.
-    * The *scan likeness* ``s`` in ``[0, 1]``: 1 when the unclipped rim
-      weight is at most 0.3 (a scanner's silhouette, sampled at grazing
-      angles, 2.5-4 times noisier than the interior) on a mesh with at least
-      3% boundary vertices; 0 from a rim weight of 0.6 up, on a closed mesh
-      or one with under 1% boundary vertices. A range scan (``s = 1``) gets
-      ``mu = 0.03``, ``lambda = 0.45`` (``SCAN_MU``, ``SCAN_MEMBRANE``) and
-      the twicing step: the membrane damps the scanline-correlated noise
-      that ``|K X|^2`` keeps, the twicing puts back most of its shrinkage.
-    * Independent noise (``s = 0``) gets the barycenter-only energy
-      (``lambda = 0``, no twicing) with ``mu = 0.8 (g / sigma)^2.5`` in
-      ``[0.003, 1]``, ``sigma`` the noise's and ``g`` the surface's own
-      umbrella along the normal, both measured from the 1- and 2-ring
-      umbrellas (:func:`~o3d_lsmesh.fairing.scan_fairing.measured_noise`):
-      the more the noise hides the detail, the stronger the smoothing. A rim
-      vertex's thin-plate row is then the Laplacian along its boundary
-      curve, which has no inward pull (a scan's rim keeps its one-sided row,
-      measured better there). In between, every weight moves with ``s``.
+    a boundary vertex, 1 otherwise. Every weight is measured on the input,
+    never set from a reference
+    (:func:`~o3d_lsmesh.fairing.scan_fairing.scan_parameters` says how): ``w``
+    from the rim's noise against the interior's (0.10-0.13 on the raw scans'
+    ragged silhouettes); a range scan gets ``mu = 0.03``, ``lambda = 0.45``
+    and the twicing step (the membrane damps the scanline-correlated noise
+    that ``|K X|^2`` keeps, the twicing puts back most of its shrinkage);
+    independent noise gets the barycenter-only energy with ``mu`` from the
+    measured noise and surface detail, and a rim vertex's thin-plate row
+    along its boundary curve, which has no inward pull; in between, every
+    weight moves with the measured *scan likeness*.
 
     All measures are dimensionless, so the result is equivariant under rigid
     motions and scaling. Measured on the ten raw Stanford bunny scans
@@ -360,16 +345,11 @@ def constrained_fairing(
     at its best count at 40k vertices, 7-19 times at 1.4M (the factorization
     alone is about 6 times at 40k).
 
-    The paper's operators minimize the uniform-Laplacian energy under the
-    constraint that every triangle keeps its barycenter (eq. 5)::
-
-        min  X^T K^T K X   subject to   H (X - X0) = 0,
-
-    where ``K = I - D^-1 W`` (``w_ij = 1/n_i`` for the ``n_i`` edge
-    neighbours of vertex ``i``, eq. 3) and ``H`` is the ``(m, n)``
-    triangle-vertex incidence matrix (one row per triangle, ones at its three
-    vertices). Holding the barycenters is a "skeleton" that stops the
-    shrinkage and drift of plain Laplacian smoothing.
+    The paper's operators minimize the uniform-Laplacian energy ``|K X|^2``
+    under the constraint that every triangle keeps its barycenter,
+    ``H (X - X0) = 0`` (eq. 5; :mod:`o3d_lsmesh.fairing.barycenter` defines
+    ``K`` and ``H``): a "skeleton" that stops the shrinkage and drift of plain
+    Laplacian smoothing.
 
     ``method="local"`` (the paper's operator, section 3.2): for every
     triangle, its three vertices minimize their local Laplacian energy

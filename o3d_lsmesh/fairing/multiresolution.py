@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -46,18 +47,13 @@ def multiresolution_fairing_arrays(
             rings = vertex_rings(triangles[i - 1], len(hierarchy.representatives[i - 1]))
             positions = hierarchy.refine_with_rings(i, positions, rings)
             bar.update(1)
-    # The splits leave the facets of the coarse triangulation on M_0, and one fairing of M_0 cannot remove
-    # them: it holds the barycenters of its triangles where the splits put them (more iterations of it
-    # change nothing, measured). Fairing M_0 in rounds of number_of_iterations, the barycenters re-imposed
-    # after each, one round more per level, does: the coarser the start, the smoother the result.
+    # M_0 in rounds, barycenters re-imposed after each (the docstring says why): one fairing of M_0 holds
+    # the barycenters where the splits put them, and more iterations of it change nothing (measured)
     remaining = number_of_iterations * (level + 1) if final_iterations is None else final_iterations
     if remaining == 0:
         return positions
-    # The boundary curves are not faired in these rounds: re-taking their midpoint constraints round after
-    # round is a curve-shortening flow that closes holes (the bunny's five: perimeter down to 0.82 of the
-    # clean one at level 6, its 2000-vertex copy's to 0.22), and the stretched triangles at the rim
-    # outweighed the smoothing in the Laplacian spectrum. They are put where constrained fairing of the
-    # input puts them (section 3.3, the input's midpoints: what level 0 gives) and held there.
+    # the boundary curves are put where level 0 puts them and held: re-faired round after round, their
+    # midpoint constraints are a curve-shortening flow that closes holes (measured in the docstring)
     boundary, placed = _input_boundary(hierarchy.vertices, triangles[0], rings, number_of_iterations, method)
     positions[boundary] = placed
     # the connectivity is fixed: one operator for all rounds ("global" re-takes its targets at every solve)
@@ -255,20 +251,7 @@ def multiresolution_fairing(
             raise ValueError(f"level must be < len(hierarchy) = {len(hierarchy)}, got {level}")
         if not np.array_equal(hierarchy.vertices, data.vertices):
             # same connectivity, new positions: the coarse levels take their positions from this mesh
-            hierarchy = MeshHierarchy(
-                data.vertices,
-                hierarchy.triangles,
-                hierarchy.representatives,
-                hierarchy.parents,
-                hierarchy.removed,
-                hierarchy.targets,
-                hierarchy.ring_offsets,
-                hierarchy.rings,
-                hierarchy.independent,
-                hierarchy.method,
-                hierarchy.mesh_kind,
-                hierarchy.tensor_format,
-            )
+            hierarchy = dataclasses.replace(hierarchy, vertices=data.vertices)
     positions = multiresolution_fairing_arrays(
         hierarchy,
         level,

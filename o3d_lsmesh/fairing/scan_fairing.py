@@ -178,10 +178,12 @@ def measured_boundary_weight(vertices: np.ndarray, triangles: np.ndarray) -> flo
     >>> measured_boundary_weight(ragged, F)  # a scan's silhouette: the rim 7 times noisier
     0.1
     """
-    ratio, coverage = rim_noise_ratio(vertices, triangles)
-    if not np.isfinite(ratio):
-        return 1.0
-    return float(np.clip(ratio, SCAN_BOUNDARY_WEIGHT, coverage))
+    return _clipped_weight(*rim_noise_ratio(vertices, triangles))
+
+
+def _clipped_weight(ratio: float, coverage: float) -> float:
+    # the rim weight of measured_boundary_weight from rim_noise_ratio's (ratio, coverage)
+    return 1.0 if not np.isfinite(ratio) else float(np.clip(ratio, SCAN_BOUNDARY_WEIGHT, coverage))
 
 
 class NoiseEstimate(NamedTuple):
@@ -340,7 +342,7 @@ def scan_parameters(
     n = len(vertices)
     st = _structure(triangles, n) if structure is None else structure
     ratio, coverage = rim_noise_ratio(vertices, triangles, structure=st)
-    weight = 1.0 if not np.isfinite(ratio) else float(np.clip(ratio, SCAN_BOUNDARY_WEIGHT, coverage))
+    weight = _clipped_weight(ratio, coverage)
     referenced = int(np.count_nonzero(st.valence))
     fraction = float(np.count_nonzero(st.boundary)) / max(referenced, 1)
     s = scan_likeness(ratio, fraction)
@@ -356,8 +358,16 @@ def scan_parameters(
     return ScanParameters(mu, s * SCAN_MEMBRANE, weight, s, 1.0 - s, s, estimate.noise, estimate.detail)
 
 
+class _Penalized:
+    penalty: sp.csr_matrix  # (m, n) sqrt(mu W) H: the rows that carry the targets
+
+    def normal_rhs(self, positions0: np.ndarray) -> np.ndarray:
+        """``R^T T = mu H^T W H X0``, ``(n, 3)``."""
+        return self.penalty.T @ (self.penalty @ positions0)
+
+
 @dataclass(frozen=True)
-class ScanSystem:
+class ScanSystem(_Penalized):
     """The scan energy as weighted least-squares equations, per coordinate.
 
     ``E(X) = |R X - T|^2`` with the stacked rows ``R = [sqrt(mu W) H;
@@ -388,10 +398,6 @@ class ScanSystem:
     def normal_matrix(self) -> sp.csc_matrix:
         """``R^T R``, ``(n, n)`` CSC (what the solver factors, formed here only for checks)."""
         return (self.rows.T @ self.rows).tocsc()
-
-    def normal_rhs(self, positions0: np.ndarray) -> np.ndarray:
-        """``R^T T = mu H^T W H X0``, ``(n, 3)``."""
-        return self.penalty.T @ (self.penalty @ positions0)
 
 
 def scan_system(
@@ -564,7 +570,7 @@ def _lower_csc(symmetric: sp.csr_matrix) -> sp.csc_matrix:
     return sp.csc_matrix((symmetric.data[keep], symmetric.indices[keep], indptr), shape=(n, n))
 
 
-class ScanFairingSolver:
+class ScanFairingSolver(_Penalized):
     """The scan energy factored once; :meth:`solve` faires positions with it.
 
     Parameters
@@ -603,7 +609,6 @@ class ScanFairingSolver:
         normal, ring, weight = _normal_matrix(
             triangles, n, self.mu, self.membrane, boundary_weight, st, rim_curve
         )
-        #: ``sqrt(mu W) H``, ``(m, n)``: the rows that carry the targets
         self.penalty = _penalty(triangles, n, np.sqrt(self.mu * weight))
         self.referenced = st.valence > 0
         # COLAMD on K's 1-ring pattern (see Notes): at 1.4M vertices 46.5 against 51.4 GFlop with AMD on the
@@ -613,10 +618,6 @@ class ScanFairingSolver:
         self._solver = SPDSolver(
             _lower_csc(normal), lower=True, ordering="amd" if ring is None else "colamd", pattern_of=ring
         )
-
-    def normal_rhs(self, positions0: np.ndarray) -> np.ndarray:
-        """``mu H^T W H X0``, ``(n, 3)``."""
-        return self.penalty.T @ (self.penalty @ positions0)
 
     def filter(self, positions0: np.ndarray) -> np.ndarray:
         """``S X0``: the minimizer of the energy for targets ``X0``, ``(n, 3)`` (unreferenced rows kept)."""

@@ -21,7 +21,7 @@ from .._o3d import read_mesh, warn_dropped_attributes
 from .._progress import check_progress, progress_bar
 from .._ranges import concatenated_ranges
 from .._validate import as_count, as_positive_float
-from ..topology import adjacency_matrix, connected_components, unique_edges
+from ..topology import adjacency_matrix, connected_components, run_heads, unique_edges
 from .hierarchy import MeshHierarchy, tensor_format_of
 
 if TYPE_CHECKING:
@@ -57,8 +57,7 @@ def _level_counts(levels: Any, n: int, min_vertices: int) -> np.ndarray:
             raise ValueError(
                 f"levels must be strictly decreasing vertex counts in [4, {n}), got {counts.tolist()}"
             )
-    counts = counts[np.r_[True, np.diff(counts) < 0]]
-    return counts
+    return counts[np.r_[True, np.diff(counts) < 0]]
 
 
 def from_fast_simplification(
@@ -163,41 +162,28 @@ def from_fast_simplification(
     collapses = referenced[collapses] if len(collapses) else collapses.astype(np.int64)
 
     n_components, component = connected_components(F, n0)
-    tris = [F]
-    reps = [np.arange(n0, dtype=np.int64)]
     empty = np.zeros(0, dtype=np.int64)
-    parents, removed, targets, offsets, rings = (
-        [empty],
-        [empty],
-        [empty],
-        [np.zeros(1, dtype=np.int64)],
-        [empty],
-    )
+    # per level: triangles, representatives, parents, removed, targets, ring offsets, rings
+    built: list[tuple[np.ndarray, ...]] = [
+        (F, np.arange(n0, dtype=np.int64), empty, empty, empty, np.zeros(1, dtype=np.int64), empty)
+    ]
     for prefix, mapping in mappings:
-        n_prev = len(reps[-1])
-        # nesting by construction: a level-(i-1) vertex goes where its input representative goes
-        raw_parent = mapping[reps[-1]]
+        previous, reps = built[-1][:2]
+        n_prev = len(reps)
+        # nesting by construction: a level-(i-1) vertex goes where its input representative goes;
         # a component whose triangles all collapsed is mapped anywhere by the replay: merges stay
-        # within the input's components (else split vertices land on another component)
-        raw_parent = np.unique(
-            raw_parent * np.int64(n_components) + component[reps[-1]], return_inverse=True
-        )[1]
-        raw_parent = raw_parent.reshape(-1).astype(np.int64)
-        used = np.zeros(int(raw_parent.max()) + 1, dtype=bool)
-        used[raw_parent] = True
-        compact = np.cumsum(used) - 1
-        parent = compact[raw_parent]
+        # within the input's components (else split vertices land on another component). The
+        # inverse of np.unique numbers the level-i vertices 0..n_new-1.
+        key = mapping[reps] * np.int64(n_components) + component[reps]
+        parent = np.unique(key, return_inverse=True)[1].reshape(-1).astype(np.int64)
         n_new = int(parent.max()) + 1
         if n_new >= n_prev:
             continue
         # the kept child of each level-i vertex: one never collapsed in this prefix, else the first
         collapsed = np.zeros(n0, dtype=bool)
         collapsed[collapses[:prefix, 1]] = True
-        root = ~collapsed[reps[-1]]
-        child = np.arange(n_prev)
-        order = np.lexsort((child, ~root, parent))
-        first = np.ones(n_prev, dtype=bool)
-        first[1:] = parent[order[1:]] != parent[order[:-1]]
+        order = np.lexsort((np.arange(n_prev), collapsed[reps], parent))
+        first = run_heads(parent[order])
         kept_child = np.empty(n_new, dtype=np.int64)
         kept_child[parent[order[first]]] = order[first]
         keep = np.zeros(n_prev, dtype=bool)
@@ -207,29 +193,27 @@ def from_fast_simplification(
         renumber[parent[np.flatnonzero(keep)]] = np.arange(n_new)
         parent = renumber[parent]
         gone = np.flatnonzero(~keep)
-        mapped = parent[tris[-1]]
-        alive = ~collapsed_triangles(mapped)
-        mapped = _drop_nonmanifold(_drop_duplicate_triangles(mapped[alive], n_new), n_new)
-        adjacency = adjacency_matrix(tris[-1], n_prev)
-        ring_offsets = np.r_[0, np.cumsum(np.diff(adjacency.indptr)[gone])].astype(np.int64)
-        starts = adjacency.indptr[gone]
-        ring = adjacency.indices[concatenated_ranges(starts, adjacency.indptr[gone + 1] - starts)]
-        tris.append(mapped)
-        reps.append(reps[-1][keep])
-        parents.append(parent)
-        removed.append(gone)
-        targets.append(np.flatnonzero(keep)[parent[gone]])
-        offsets.append(ring_offsets)
-        rings.append(ring.astype(np.int64))
+        mapped = parent[previous]
+        mapped = _drop_nonmanifold(
+            _drop_duplicate_triangles(mapped[~collapsed_triangles(mapped)], n_new), n_new
+        )
+        adjacency = adjacency_matrix(previous, n_prev)
+        starts, sizes = adjacency.indptr[gone], np.diff(adjacency.indptr)[gone]
+        ring = adjacency.indices[concatenated_ranges(starts, sizes)].astype(np.int64)
+        ring_offsets = np.r_[0, np.cumsum(sizes)].astype(np.int64)
+        built.append(
+            (mapped, reps[keep], parent, gone, np.flatnonzero(keep)[parent[gone]], ring_offsets, ring)
+        )
+    tris, representatives, parents, removed, targets, offsets, rings = zip(*built)
     return MeshHierarchy(
         V,
-        tuple(tris),
-        tuple(reps),
-        tuple(parents),
-        tuple(removed),
-        tuple(targets),
-        tuple(offsets),
-        tuple(rings),
+        tris,
+        representatives,
+        parents,
+        removed,
+        targets,
+        offsets,
+        rings,
         False,
         "fast_simplification",
         data.kind,
@@ -244,8 +228,7 @@ def _drop_duplicate_triangles(triangles: np.ndarray, n: int) -> np.ndarray:
     s = np.sort(triangles, axis=1)
     keys = (s[:, 0] * np.int64(n) + s[:, 1]) * np.int64(n) + s[:, 2]
     order = np.argsort(keys, kind="stable")
-    first = np.ones(len(keys), dtype=bool)
-    first[1:] = keys[order[1:]] != keys[order[:-1]]
+    first = run_heads(keys[order])
     return np.ascontiguousarray(triangles[np.sort(order[first])], dtype=np.int64)
 
 
@@ -261,9 +244,7 @@ def _drop_nonmanifold(triangles: np.ndarray, n: int) -> np.ndarray:
     m = len(triangles)
     tri = np.tile(np.arange(m), 3)
     order = np.lexsort((tri, inverse))
-    grouped = inverse[order]
-    start = np.ones(len(order), dtype=bool)
-    start[1:] = grouped[1:] != grouped[:-1]
+    start = run_heads(inverse[order])
     position = np.arange(len(order)) - np.maximum.accumulate(np.where(start, np.arange(len(order)), 0))
     drop = np.zeros(m, dtype=bool)
     drop[tri[order[position >= 2]]] = True

@@ -23,12 +23,7 @@ from ..topology import VertexRings, vertex_rings
 if TYPE_CHECKING:
     from .._types import AnyMesh
 
-__all__ = [
-    "MeshHierarchy",
-    "build_hierarchy",
-    "build_hierarchy_arrays",
-    "locked_vertices",
-]
+__all__ = ["MeshHierarchy", "build_hierarchy", "build_hierarchy_arrays"]
 
 
 def _frozen(array: np.ndarray) -> np.ndarray:
@@ -85,7 +80,6 @@ class MeshHierarchy:
     tensor_format: tuple = ()
 
     def __post_init__(self) -> None:
-        freeze = lambda seq: tuple(_frozen(a) for a in seq)
         object.__setattr__(self, "vertices", _frozen(self.vertices))
         for name in (
             "triangles",
@@ -96,7 +90,7 @@ class MeshHierarchy:
             "ring_offsets",
             "rings",
         ):
-            object.__setattr__(self, name, freeze(getattr(self, name)))
+            object.__setattr__(self, name, tuple(_frozen(a) for a in getattr(self, name)))
 
     def __setstate__(self, state: dict) -> None:
         # pickle restores the arrays writeable: freeze them again, as construction does
@@ -248,14 +242,13 @@ class MeshHierarchy:
         if self.mesh_kind == "legacy":
             return MeshData(empty_v, empty_t, o3d.geometry.TriangleMesh(), "legacy")
         device, position_dtype, index_dtype = self.tensor_format
-        source = o3d.t.geometry.TriangleMesh(o3d.core.Device(device))
+        device = o3d.core.Device(device)
+        source = o3d.t.geometry.TriangleMesh(device)
         source.vertex.positions = o3d.core.Tensor(
-            np.zeros((0, 3)), dtype=getattr(o3d.core, position_dtype.lower()), device=o3d.core.Device(device)
+            empty_v, dtype=getattr(o3d.core, position_dtype.lower()), device=device
         )
         source.triangle.indices = o3d.core.Tensor(
-            np.zeros((0, 3), dtype=np.int64),
-            dtype=getattr(o3d.core, index_dtype.lower()),
-            device=o3d.core.Device(device),
+            empty_t, dtype=getattr(o3d.core, index_dtype.lower()), device=device
         )
         return MeshData(empty_v, empty_t, source, "tensor")
 
@@ -314,21 +307,6 @@ def _harmonic_fill(
     rhs = w_rk @ out[kept] + 1e-9 * out[removed]
     solution = spla.spsolve(system, rhs)
     return np.asarray(solution).reshape(len(removed), 3)
-
-
-def locked_vertices(triangles: np.ndarray, n: int) -> np.ndarray:
-    """``(n,) bool``: the vertices a hierarchy keeps at every level, unmoved and never a collapse target.
-
-    Vertices whose triangles form several fans (as
-    :func:`~o3d_lsmesh.topology.nonmanifold_vertices`), vertices on an edge of
-    more than two triangles, and vertices no triangle references.
-    """
-    triangles = np.ascontiguousarray(triangles, dtype=np.int64)
-    if len(triangles) and (triangles.min() < 0 or triangles.max() >= n):
-        raise ValueError(f"triangles must index vertices in [0, {n}), got indices up to {triangles.max()}")
-    from .collapse import collapse_levels  # compiled by the package's build: imported where used
-
-    return collapse_levels(np.zeros((n, 3)), triangles, max_levels=0)[0]
 
 
 def tensor_format_of(data: MeshData) -> tuple:
