@@ -466,6 +466,8 @@ class SPDSolver:
             raise ValueError(f"pattern_of must have {self.shape[0]} rows, got shape {self._pattern_of.shape}")
         self._pending: list[sp.csc_matrix] = []
         self._factor: Any = None
+        #: the iterative path's renumbering of the unknowns (``_matrix`` is then stored renumbered)
+        self._order: np.ndarray | None = None
         self._factorize(analyze=True)
 
     @property
@@ -482,6 +484,8 @@ class SPDSolver:
             self._flush()
             if self._product_of is not None:
                 return _product(self._product_of)
+            if self._order is not None:
+                return _renumbered(self._matrix, np.argsort(self._order))
             if not self._lower:
                 return self._matrix
             return _symmetric_from_lower(self._matrix)
@@ -493,6 +497,8 @@ class SPDSolver:
         elif self._pending:
             self._pattern_of = None  # C C^T may reach outside it: later analyses take the matrix's own
             for c in self._pending:
+                if self._order is not None:
+                    c = c[self._order]  # C's rows in the matrix's stored numbering
                 product = c @ c.T
                 self._matrix = (self._matrix + (sp.tril(product) if self._lower else product)).tocsc()
             assert self._matrix is not None
@@ -542,6 +548,7 @@ class SPDSolver:
             raise ValueError(f"matrix must have shape {self._matrix.shape}, got {csc.shape}")
         with self._lock:
             self._matrix = _stored(csc, given_lower=lower, keep_lower=self._lower)
+            self._order = None
             self._pending.clear()
             self._factorize(analyze=False)
 
@@ -584,18 +591,27 @@ class SPDSolver:
                 raise ValueError("x0 must be finite")
         if self._factor is None:  # the AMG preconditioner, built at the first solve
             self._flush()
+            assert self._matrix is not None  # the iterative path takes matrices only
+            if self._order is None:
+                self._order = _locality_order(self._matrix)
+                if self._order is not None:
+                    self._matrix = _renumbered(self._matrix, self._order)
             self._factor = _amg_preconditioner(self._matrix)
-        assert self._matrix is not None  # the iterative path takes matrices only
+        order = self._order
         x, self.iterations, self.residual = _block_cg(
             _csr_view(self._matrix),
-            b,
-            x0,
+            b if order is None else b[order],
+            x0 if order is None or x0 is None else x0[order],
             self._factor,
             tol=self.tol,
             max_iterations=self.max_iterations,
             progress=self.progress,
         )
-        return x
+        if order is None:
+            return x
+        out = np.empty_like(x)
+        out[order] = x
+        return out
 
     def update(self, c: Any) -> None:
         """Replace ``A`` by ``A + C C^T`` (CHOLMOD rank-k update, no refactoring).
@@ -626,7 +642,7 @@ class SPDSolver:
             return {
                 "backend": self.backend,
                 "ordering": self.ordering,
-                "matrix": self._matrix,
+                "matrix": self._matrix if self._order is None else self.matrix,
                 "lower": self._lower,
                 "product_of": self._product_of,
                 "pattern_of": self._pattern_of,
@@ -693,7 +709,7 @@ def _aggregation_levels(
     tentative prolongator with them, ``P = (I - omega D^-1 A_F) T`` with ``D`` the rows' absolute sums
     (a local Gershgorin bound: pyamg's eigenvalue estimate took a fifth of the solve at 100k vertices).
     On the normal matrix of an LS mesh (a 2-ring stencil) the strong entries are the 1-ring: aggregates
-    and prolongator on the whole stencil took 79 CG iterations at 1M vertices, on its strong part 31
+    and prolongator on the whole stencil took 79 CG iterations at 1M vertices, on its strong part 30
     (benchmarks/results/scale.md). Only the filtered copy's values are scaled (pyamg's smoother copies
     the whole matrix three times, the peak of a solve at 10M vertices).
     """
@@ -711,7 +727,10 @@ def _aggregation_levels(
     levels: list[tuple[sp.csr_matrix, sp.csr_matrix, sp.csr_matrix]] = []
     while len(levels) + 1 < max_levels and A.shape[0] > COARSE_UNKNOWNS:
         strong = sp.csr_matrix(_block_kernel.strong_part(*_csr_parts(A), theta)[::-1], shape=A.shape)
-        tentative, candidate = fit_candidates(standard_aggregation(strong)[0], candidate)
+        aggregates = standard_aggregation(strong)[0]
+        if aggregates.nnz == 0:  # no entry off the diagonal is strong: this level is the coarsest
+            break
+        tentative, candidate = fit_candidates(aggregates, candidate)
         counts = np.diff(strong.indptr)
         first = np.minimum(strong.indptr[:-1], max(strong.nnz - 1, 0))
         absolute = np.add.reduceat(np.abs(strong.data), first)
@@ -727,6 +746,39 @@ def _aggregation_levels(
         levels.append((A, R, P))
         A = coarse
     return levels, _splu_spd(A.tocsc())
+
+
+#: The iterative path renumbers the unknowns by reverse Cuthill-McKee when a matrix row reaches farther
+#: than this many rows on average (16384 rows of ``(n, 3)`` positions are 384 KiB, within the L2 cache
+#: a core reads them from): on a 3.2M-vertex midpoint-subdivided mesh (new vertices numbered after the
+#: old) the LS mesh's rows reached 522k rows, its products ran 3x slower and CG took 59 iterations;
+#: renumbered (4.7k), 35, and the whole solve 62 -> 27 s. Seams of scans and of merged or subdivided
+#: meshes number neighbours far apart; a UV sphere's rows reach 2.7k at 3M vertices and are kept.
+LOCAL_SPAN = 16384
+
+
+def _locality_order(symmetric: sp.spmatrix) -> np.ndarray | None:
+    """A renumbering of a symmetric matrix's unknowns that keeps rows' entries close, or None when they
+    are close already (:data:`LOCAL_SPAN`)."""
+    from scipy.sparse.csgraph import reverse_cuthill_mckee
+
+    from . import _block_kernel  # compiled by the package's build: imported where used
+
+    csr = _csr_view(symmetric)
+    if csr.nnz >= np.iinfo(np.int32).max or _block_kernel.row_span(*_csr_parts(csr)[:2]) <= LOCAL_SPAN:
+        return None  # SciPy's reverse Cuthill-McKee numbers entries in int32
+    return reverse_cuthill_mckee(csr, symmetric_mode=True).astype(np.int64)
+
+
+def _renumbered(symmetric: sp.spmatrix, order: np.ndarray) -> sp.csc_matrix:
+    """``B[r, s] = A[order[r], order[s]]`` for a symmetric ``A``, CSC (one copy, sorted indices)."""
+    from . import _block_kernel  # compiled by the package's build: imported where used
+
+    indptr, indices, data = _block_kernel.permuted(*_csr_parts(_csr_view(symmetric)), order)
+    # a symmetric matrix's CSR arrays are also its CSC arrays
+    renumbered = sp.csc_matrix((data, indices, indptr), shape=symmetric.shape)
+    renumbered.has_sorted_indices = True
+    return renumbered
 
 
 def _csr_view(symmetric: sp.spmatrix) -> sp.csr_matrix:

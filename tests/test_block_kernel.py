@@ -254,3 +254,24 @@ def test_block_times_takes_csc_and_vectors():
     A = _random_csr(30, 30, 0.2, 5).tocsc()
     x = np.random.default_rng(6).standard_normal((30, 2))
     assert np.allclose(_block_times(A)(x), A @ x, rtol=1e-14, atol=1e-14)
+
+
+@pytest.mark.parametrize("index", [np.int32, np.int64])
+def test_permuted_is_scipys_fancy_indexing_and_row_span_a_plain_mean(index):
+    A = _random_csr(400, 400, 0.03, 14)
+    A = (A + A.T + sp.eye(400)).tocsr()
+    A.sort_indices()
+    order = np.random.default_rng(15).permutation(400).astype(np.int64)
+    indptr, indices, data = _block_kernel.permuted(
+        A.indptr.astype(index), A.indices.astype(index), A.data, order
+    )
+    B = sp.csr_matrix((data, indices, indptr), shape=A.shape)
+    assert abs(B - A[order][:, order]).max() == 0
+    assert all((np.diff(indices[indptr[r] : indptr[r + 1]]) > 0).all() for r in range(400))
+    rows = np.repeat(np.arange(400), np.diff(A.indptr))
+    span = _block_kernel.row_span(A.indptr.astype(index), A.indices.astype(index))
+    assert span == pytest.approx(np.abs(A.indices - rows).mean(), rel=1e-12)
+    with pytest.raises(ValueError, match="order must be a permutation of the rows"):
+        _block_kernel.permuted(A.indptr, A.indices, A.data, np.zeros(400, dtype=np.int64))
+    with pytest.raises(ValueError, match=r"order must have one entry per row \(400\), got 3"):
+        _block_kernel.permuted(A.indptr, A.indices, A.data, np.arange(3, dtype=np.int64))

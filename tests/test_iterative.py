@@ -204,3 +204,56 @@ def _cholmod():
     from o3d_lsmesh._solvers import cholmod_available
 
     return cholmod_available()
+
+
+def _scrambled_system(n_side=60, seed=0):
+    # a grid's LS-mesh-like normal matrix (L^T L + controls) with its unknowns numbered at random
+    from o3d_lsmesh.laplacian import laplacian_matrix
+
+    V, F = grid(n_side, n_side)
+    order = np.random.default_rng(seed).permutation(len(V))
+    inverse = np.argsort(order)
+    V, F = V[order], inverse[F]
+    L = laplacian_matrix(V, F).tocsr()
+    weights = np.zeros(len(V))
+    weights[::37] = 1.0
+    return (L.T @ L + sp.diags(weights)).tocsc(), V, weights
+
+
+def test_scattered_numbering_is_renumbered_and_solutions_keep_the_callers_order(monkeypatch):
+    import o3d_lsmesh._solvers as solvers
+
+    N, V, weights = _scrambled_system()
+    span = np.abs(N.indices - np.repeat(np.arange(N.shape[0]), np.diff(N.indptr))).mean()  # plain measure
+    monkeypatch.setattr(solvers, "LOCAL_SPAN", int(span / 4))  # this small system counts as scattered
+    b = weights[:, None] * V
+    direct = SPDSolver(N, backend="scipy").solve(b)
+    solver = SPDSolver(N, backend="iterative")
+    x = solver.solve(b, x0=V)
+    assert solver._order is not None and sorted(solver._order) == list(range(N.shape[0]))
+    stored = solver._matrix
+    stored_span = np.abs(stored.indices - np.repeat(np.arange(N.shape[0]), np.diff(stored.indptr))).mean()
+    assert stored_span < span / 4  # reverse Cuthill-McKee brought the entries close
+    assert relative(x, direct) < MATCH
+    # the caller sees the matrix in its own numbering; updates and pickles keep working
+    assert abs(solver.matrix - N).max() == 0
+    c = sp.csc_matrix((np.full(3, 2.0), ([5, 900, 2000], [0, 1, 2])), shape=(N.shape[0], 3))
+    updated = (N + c @ c.T).tocsc()
+    solver.update(c)
+    assert relative(solver.solve(b), SPDSolver(updated, backend="scipy").solve(b)) < MATCH
+    clone = pickle.loads(pickle.dumps(solver))
+    assert abs(clone.matrix - updated).max() < 1e-15
+    assert relative(clone.solve(b), solver.solve(b)) < MATCH
+    solver.refactor(N)  # a new matrix in the caller's numbering: renumbered afresh at the next solve
+    assert solver._order is None
+    assert relative(solver.solve(b), direct) < MATCH
+
+
+def test_local_numbering_is_kept():
+    N, V, weights = _scrambled_system()
+    ordered = SPDSolver(sp.csc_matrix(sp.diags(np.arange(1.0, 4001.0))), backend="iterative")
+    ordered.solve(np.ones(4000))
+    assert ordered._order is None  # a diagonal reaches nowhere
+    scrambled = SPDSolver(N, backend="iterative")
+    scrambled.solve(weights[:, None] * V)
+    assert scrambled._order is None  # 3600 unknowns cannot reach farther than LOCAL_SPAN
