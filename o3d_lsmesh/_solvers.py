@@ -752,8 +752,8 @@ def _aggregation_levels(
 #: than this many rows on average (16384 rows of ``(n, 3)`` positions are 384 KiB, within the L2 cache
 #: a core reads them from): on a 3.2M-vertex midpoint-subdivided mesh (new vertices numbered after the
 #: old) the LS mesh's rows reached 522k rows, its products ran 3x slower and CG took 59 iterations;
-#: renumbered (4.7k), 35, and the whole solve 62 -> 27 s. Seams of scans and of merged or subdivided
-#: meshes number neighbours far apart; a UV sphere's rows reach 2.7k at 3M vertices and are kept.
+#: renumbered (4.7k), 37, and the whole LS mesh 62 -> 36-40 s. Merged or subdivided meshes number
+#: neighbours far apart; a UV sphere's rows reach 2.7k at 3M vertices and are kept.
 LOCAL_SPAN = 16384
 
 
