@@ -1361,14 +1361,11 @@ def grid_near(const double[:, ::1] centre, const double[::1] radius, const doubl
     dims[2] + z`` of side ``cell`` from ``origin``) whose bounding sphere (``tri_centre``, ``tri_radius``,
     at most ``reach``) meets the box of the query spheres (``centre``, ``radius``): a superset of those
     overlapping a query sphere, without repeats. ``(p,)`` int64."""
-    cdef int64_t nq = centre.shape[0], k, t, x, y, z, count = 0, capacity
-    cdef int64_t lo_cell[3]
-    cdef int64_t hi_cell[3]
+    cdef int64_t nq = centre.shape[0], k
     cdef double lo[3]
     cdef double hi[3]
-    cdef double d, gap, g
     cdef int c
-    if nq == 0 or members.shape[0] == 0:
+    if nq == 0:
         return np.zeros(0, dtype=np.int64)
     with nogil:
         for c in range(3):
@@ -1377,35 +1374,7 @@ def grid_near(const double[:, ::1] centre, const double[::1] radius, const doubl
             for c in range(3):
                 lo[c] = fmin(lo[c], centre[k, c] - radius[k])
                 hi[c] = fmax(hi[c], centre[k, c] + radius[k])
-        for c in range(3):
-            # cells holding a centre within `reach` of the box (clamped to the grid; floor of a double)
-            d = (lo[c] - reach - origin[c]) / cell
-            lo_cell[c] = <int64_t>d if d >= 0 else 0
-            d = (hi[c] + reach - origin[c]) / cell
-            hi_cell[c] = min(<int64_t>d, dims[c] - 1) if d >= 0 else -1
-        capacity = 0
-        for x in range(lo_cell[0], hi_cell[0] + 1):
-            for y in range(lo_cell[1], hi_cell[1] + 1):
-                capacity += indptr[(x * dims[1] + y) * dims[2] + hi_cell[2] + 1] - indptr[
-                    (x * dims[1] + y) * dims[2] + lo_cell[2]] if hi_cell[2] >= lo_cell[2] else 0
-    out_ = np.empty(capacity, dtype=np.int64)
-    cdef int64_t[::1] out = out_
-    with nogil:
-        for x in range(lo_cell[0], hi_cell[0] + 1):
-            for y in range(lo_cell[1], hi_cell[1] + 1):
-                if hi_cell[2] < lo_cell[2]:
-                    continue
-                for k in range(indptr[(x * dims[1] + y) * dims[2] + lo_cell[2]],
-                               indptr[(x * dims[1] + y) * dims[2] + hi_cell[2] + 1]):
-                    t = members[k]
-                    gap = 0.0  # squared distance from the sphere's centre to the box
-                    for c in range(3):
-                        g = fmax(fmax(lo[c] - tri_centre[t, c], tri_centre[t, c] - hi[c]), 0.0)
-                        gap += g * g
-                    if gap <= tri_radius[t] * tri_radius[t] * (1.0 + 1e-9):  # slack: a superset
-                        out[count] = t
-                        count += 1
-    return out_[:count]
+    return _near_box(lo, hi, origin, cell, dims, indptr, members, tri_centre, tri_radius, reach)
 
 
 def patch_crossings(const double[:, ::1] vertices, const int64_t[:, ::1] triangles, int64_t first_new,
@@ -1415,12 +1384,10 @@ def patch_crossings(const double[:, ::1] vertices, const int64_t[:, ::1] triangl
     each) and against itself, the candidates all in one call: each new triangle's bounding sphere
     (about its centroid, as NumPy's ``mean`` and ``norm`` compute them) tested against every candidate's,
     which beats the sweep of :func:`sphere_pairs` on a few dozen triangles."""
-    cdef int64_t q = triangles.shape[0] - first_new, i, k, t, x, y, n_cand = 0, capacity = 0
-    cdef int64_t lo_cell[3]
-    cdef int64_t hi_cell[3]
+    cdef int64_t q = triangles.shape[0] - first_new, i, k, t, n_cand = 0
     cdef double lo[3]
     cdef double hi[3]
-    cdef double d, gap, reach, cell
+    cdef double d, gap
     cdef int c, v
     result_ = np.zeros(max(q, 0))
     if q <= 0:
@@ -1431,8 +1398,6 @@ def patch_crossings(const double[:, ::1] vertices, const int64_t[:, ::1] triangl
     cdef double[:, ::1] centre = centre_
     cdef const double* V = &vertices[0, 0]
     cdef const int64_t* T = &triangles[0, 0]
-    cdef const double[::1] origin
-    cdef const int64_t[::1] dims, indptr, members
     with nogil:
         for i in range(q):
             t = first_new + i
@@ -1453,26 +1418,8 @@ def patch_crossings(const double[:, ::1] vertices, const int64_t[:, ::1] triangl
                 hi[c] = fmax(hi[c], centre[i, c] + radius[i])
     # the candidates of each grid (its cells near the patch's box, spheres meeting the box)
     found = []
-    for origin_, cell, dims_, indptr_, members_, reach in grids:
-        origin, dims, indptr, members = origin_, dims_, indptr_, members_
-        if members.shape[0] == 0:
-            continue
-        with nogil:
-            for c in range(3):
-                d = (lo[c] - reach - origin[c]) / cell
-                lo_cell[c] = <int64_t>d if d >= 0 else 0
-                d = (hi[c] + reach - origin[c]) / cell
-                hi_cell[c] = min(<int64_t>d, dims[c] - 1) if d >= 0 else -1
-            capacity = 0
-            if hi_cell[2] >= lo_cell[2]:
-                for x in range(lo_cell[0], hi_cell[0] + 1):
-                    for y in range(lo_cell[1], hi_cell[1] + 1):
-                        capacity += indptr[(x * dims[1] + y) * dims[2] + hi_cell[2] + 1] - indptr[
-                            (x * dims[1] + y) * dims[2] + lo_cell[2]]
-        out_ = np.empty(capacity, dtype=np.int64)
-        n_cand = _gather(&lo[0], &hi[0], lo_cell, hi_cell, &dims[0], &indptr[0], &members[0],
-                         &tri_centre[0, 0], &tri_radius[0], out_)
-        found.append(out_[:n_cand])
+    for origin, cell, dims, indptr, members, reach in grids:
+        found.append(_near_box(lo, hi, origin, cell, dims, indptr, members, tri_centre, tri_radius, reach))
     cand_ = np.concatenate(found) if found else np.zeros(0, dtype=np.int64)
     cdef const int64_t[::1] cand = cand_
     n_cand = cand.shape[0]
@@ -1491,6 +1438,35 @@ def patch_crossings(const double[:, ::1] vertices, const int64_t[:, ::1] triangl
                     result[i] += 1.0
                     result[k] += 1.0
     return result_
+
+
+cdef _near_box(const double* lo, const double* hi, const double[::1] origin, double cell,
+               const int64_t[::1] dims, const int64_t[::1] indptr, const int64_t[::1] members,
+               const double[:, ::1] tri_centre, const double[::1] tri_radius, double reach):
+    """The members of one grid's cells within ``reach`` of the box ``lo .. hi`` (clamped to the grid; floor
+    of a double) whose spheres meet the box: ``(p,)`` int64, a superset of those meeting a query sphere."""
+    cdef int64_t lo_cell[3]
+    cdef int64_t hi_cell[3]
+    cdef int64_t x, y, capacity = 0
+    cdef double d
+    cdef int c
+    if members.shape[0] == 0:
+        return np.zeros(0, dtype=np.int64)
+    with nogil:
+        for c in range(3):
+            d = (lo[c] - reach - origin[c]) / cell
+            lo_cell[c] = <int64_t>d if d >= 0 else 0
+            d = (hi[c] + reach - origin[c]) / cell
+            hi_cell[c] = min(<int64_t>d, dims[c] - 1) if d >= 0 else -1
+        if hi_cell[2] >= lo_cell[2]:
+            for x in range(lo_cell[0], hi_cell[0] + 1):
+                for y in range(lo_cell[1], hi_cell[1] + 1):
+                    capacity += indptr[(x * dims[1] + y) * dims[2] + hi_cell[2] + 1] - indptr[
+                        (x * dims[1] + y) * dims[2] + lo_cell[2]]
+    out_ = np.empty(capacity, dtype=np.int64)
+    count = _gather(lo, hi, lo_cell, hi_cell, &dims[0], &indptr[0], &members[0], &tri_centre[0, 0],
+                    &tri_radius[0], out_)
+    return out_[:count]
 
 
 cdef int64_t _gather(const double* lo, const double* hi, const int64_t* lo_cell, const int64_t* hi_cell,
