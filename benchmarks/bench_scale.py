@@ -230,8 +230,9 @@ def study(n: int, variants: tuple[str, ...] = STUDY_VARIANTS) -> list:
 
 
 PEER_HEADER = [
-    "operation",
+    "mesh",
     "mesh vertices",
+    "operation",
     "ours s",
     "ours CPU s",
     "ours peak GB",
@@ -272,8 +273,9 @@ MEMORY_OPS = {
 }
 
 
-def _one(statement: str, n: int, out) -> None:
-    """Run one statement on a fresh noisy sphere; print a JSON line with times and peaks (child process)."""
+def _one(statement: str, n: int, kind: str, out) -> None:
+    """Run one statement on a fresh mesh of ``kind`` (:func:`make_mesh`); print a JSON line with times and
+    peaks (child process)."""
     import json
     import sys
 
@@ -290,7 +292,7 @@ def _one(statement: str, n: int, out) -> None:
         smooth_boundary_curves,
     )
 
-    V, F = noisy_sphere(n)
+    V, F = make_mesh(kind, n)
     mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(V), o3d.utility.Vector3iVector(F))
     F32 = F.astype(np.int32)
     n = len(V)
@@ -320,7 +322,7 @@ def _one(statement: str, n: int, out) -> None:
     out.flush()
 
 
-def run_one(statement: str, n: int, limit_gb: float) -> dict | None:
+def run_one(statement: str, n: int, limit_gb: float, kind: str = "noisy sphere") -> dict | None:
     """``statement`` in a fresh interpreter under ``ulimit -v`` of ``limit_gb``; None if it failed."""
     import json
     import resource
@@ -333,7 +335,7 @@ def run_one(statement: str, n: int, limit_gb: float) -> dict | None:
         resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
 
     here = os.path.dirname(os.path.abspath(__file__))
-    code = f"import sys; sys.path.insert(0, {here!r}); import bench_scale; bench_scale._one({statement!r}, {n}, sys.stdout)"
+    code = f"import sys; sys.path.insert(0, {here!r}); import bench_scale; bench_scale._one({statement!r}, {n}, {kind!r}, sys.stdout)"
     proc = subprocess.run(
         [sys.executable, "-c", code], capture_output=True, text=True, preexec_fn=cap, timeout=1800
     )
@@ -345,8 +347,9 @@ def run_one(statement: str, n: int, limit_gb: float) -> dict | None:
 
 
 ROUNDS_HEADER = [
-    "operation",
+    "mesh",
     "mesh vertices",
+    "operation",
     "round",
     "ours CPU s",
     "peer CPU s",
@@ -361,52 +364,52 @@ def _median_run(runs: list) -> dict:
     return sorted(runs, key=lambda r: r["cpu"])[len(runs) // 2]
 
 
-def peers(ops: list, sizes: list, limit_gb: float, rounds: int = 1) -> tuple[list, list]:
-    """Each (operation, size) and its peer, ``rounds`` times interleaved (ours, peer, ours, peer...).
+def peers(ops: list, sizes: list, limit_gb: float, rounds: int = 1, kinds: tuple = ("noisy sphere",)):
+    """Each (mesh kind, size, operation) and its peer, ``rounds`` times interleaved (ours, peer, ours, peer...).
 
     The row holds the median of the rounds (by CPU time); every round is also returned, for the
     per-round table (the machine is shared: a round's ratio swings with the load).
     """
     rows, per_round = [], []
-    for n in sizes:
-        for op in ops:
-            ours_statement, peer = PEER_OPS[op]
-            our_runs, peer_runs = [], []
-            for r in range(rounds):
-                got = run_one(ours_statement, n, limit_gb)
-                other_got = run_one(peer[1], n, limit_gb) if peer else None
-                if got is None:
-                    break
-                our_runs.append(got)
-                if other_got:
-                    peer_runs.append(other_got)
-                    per_round.append(
-                        [
-                            ours_statement,
-                            got["n"],
-                            r + 1,
-                            got["cpu"],
-                            other_got["cpu"],
-                            got["cpu"] / other_got["cpu"],
-                            got["peak"] / other_got["peak"],
-                            round(os.getloadavg()[0], 1),
-                        ]
-                    )
-                    print(per_round[-1], flush=True)
-            ours = _median_run(our_runs) if our_runs and len(our_runs) == rounds else None
-            other = _median_run(peer_runs) if peer_runs else None
-            if ours is None:
-                rows.append([ours_statement, n, "failed", "", "", peer[0] if peer else "-"] + [""] * 7)
-                continue
-            row = [ours_statement, ours["n"], ours["s"], ours["cpu"], ours["peak"] / 1024]
-            if other:
-                row += [peer[0], other["s"], other["cpu"], other["peak"] / 1024]
-                row += [ours["s"] / other["s"], ours["cpu"] / other["cpu"], ours["peak"] / other["peak"]]
-            else:
-                row += [peer[0] if peer else "-", "", "", "", "", "", ""]
-            row.append(round(os.getloadavg()[0], 1))
-            rows.append(row)
-            print(row, flush=True)
+    for kind, n, op in ((kind, n, op) for kind in kinds for n in sizes for op in ops):
+        ours_statement, peer = PEER_OPS[op]
+        our_runs, peer_runs = [], []
+        for r in range(rounds):
+            got = run_one(ours_statement, n, limit_gb, kind)
+            other_got = run_one(peer[1], n, limit_gb, kind) if peer else None
+            if got is None:
+                break
+            our_runs.append(got)
+            if other_got:
+                peer_runs.append(other_got)
+                per_round.append(
+                    [
+                        kind,
+                        got["n"],
+                        ours_statement,
+                        r + 1,
+                        got["cpu"],
+                        other_got["cpu"],
+                        got["cpu"] / other_got["cpu"],
+                        got["peak"] / other_got["peak"],
+                        round(os.getloadavg()[0], 1),
+                    ]
+                )
+                print(per_round[-1], flush=True)
+        ours = _median_run(our_runs) if our_runs and len(our_runs) == rounds else None
+        other = _median_run(peer_runs) if peer_runs else None
+        if ours is None:
+            rows.append([kind, n, ours_statement, "failed", "", "", peer[0] if peer else "-"] + [""] * 7)
+            continue
+        row = [kind, ours["n"], ours_statement, ours["s"], ours["cpu"], ours["peak"] / 1024]
+        if other:
+            row += [peer[0], other["s"], other["cpu"], other["peak"] / 1024]
+            row += [ours["s"] / other["s"], ours["cpu"] / other["cpu"], ours["peak"] / other["peak"]]
+        else:
+            row += [peer[0] if peer else "-", "", "", "", "", "", ""]
+        row.append(round(os.getloadavg()[0], 1))
+        rows.append(row)
+        print(row, flush=True)
     return rows, per_round
 
 
@@ -469,10 +472,12 @@ def main() -> None:
     )
     args = parser.parse_args()
     if args.peers:
-        rows, per_round = peers(args.peers.split(","), args.sizes, args.limit_gb, args.rounds)
-        merged("scale_peers.jsonl", PEER_HEADER, rows, 2)
+        rows, per_round = peers(
+            args.peers.split(","), args.sizes, args.limit_gb, args.rounds, tuple(args.kinds.split(","))
+        )
+        merged("scale_peers.jsonl", PEER_HEADER, rows, 3)
         if args.rounds > 1:
-            merged("scale_peers_rounds.jsonl", ROUNDS_HEADER, per_round, 3)
+            merged("scale_peers_rounds.jsonl", ROUNDS_HEADER, per_round, 4)
     if args.memory:
         merged("scale_memory.jsonl", MEMORY_HEADER, memory_table(args.memory, args.limit_gb), 2)
     if args.peers or args.memory:
@@ -529,11 +534,11 @@ def main() -> None:
 def write_scale(limit_gb: float) -> None:
     """``results/scale.md`` from every measurement so far (results/scale*.jsonl): peers, memory, solvers."""
     sections = []
-    peers_rows = merged("scale_peers.jsonl", PEER_HEADER, [], 2)
+    peers_rows = merged("scale_peers.jsonl", PEER_HEADER, [], 3)
     if peers_rows:
         sections.append(
             (
-                "Every operation against its peer (noisy UV sphere, one subprocess per run)",
+                "Every operation against its peer (a noisy UV sphere and a midpoint-subdivided real mesh, one subprocess per run)",
                 markdown_table(PEER_HEADER, peers_rows)
                 + "\n\nEach cell is its own subprocess (peak = ru_maxrss, including the mesh generated in "
                 "it, the same for both columns) under an address-space limit of "
@@ -542,7 +547,7 @@ def write_scale(limit_gb: float) -> None:
                 "CPU ratios hold better.",
             )
         )
-    round_rows = merged("scale_peers_rounds.jsonl", ROUNDS_HEADER, [], 3)
+    round_rows = merged("scale_peers_rounds.jsonl", ROUNDS_HEADER, [], 4)
     if round_rows:
         sections.append(
             (

@@ -127,15 +127,22 @@ def _may_have_duplicates(vertices: np.ndarray) -> bool:
     sort on large scans; a shared hash only sends the caller to the exact check.
     """
     # one column at a time (two (n,) temporaries, not an (n, 3) copy); adding 0.0 maps -0.0 to 0.0,
-    # so equal coordinates have equal bits
-    key = np.add(vertices[:, 0], 0.0).view(np.uint64)
-    key *= np.uint64(0x9E3779B97F4A7C15)
+    # so equal coordinates have equal bits. Each column is mixed in by MurmurHash3's finalizer (a
+    # bijection of 64 bits whose shifts carry the high bits down): a bare multiply-and-xor let a
+    # midpoint-subdivided mesh's coordinates (few low mantissa bits) collide, and sent 10M distinct
+    # vertices to the exact row sort (7 s)
+    key = np.zeros(len(vertices), dtype=np.uint64)
     column = np.empty(len(vertices))
-    for c, multiplier in ((1, 0xC2B2AE3D27D4EB4F), (2, 0x165667B19E3779F9)):
+    shifted = np.empty(len(vertices), dtype=np.uint64)
+    for c in range(3):
         np.add(vertices[:, c], 0.0, out=column)
         key ^= column.view(np.uint64)
-        key *= np.uint64(multiplier)
-    del column
+        for multiplier in (0xFF51AFD7ED558CCD, 0xC4CEB9FE1A85EC53, None):
+            np.right_shift(key, np.uint64(33), out=shifted)
+            key ^= shifted
+            if multiplier is not None:
+                key *= np.uint64(multiplier)
+    del column, shifted
     # the keys' high halves sort in half the time of the whole keys; only the rows whose high half
     # another row shares (by chance about n^2 / 2^33 of them: a few thousand at 10M) have their whole
     # keys compared

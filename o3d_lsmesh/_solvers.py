@@ -348,6 +348,12 @@ class SPDSolver:
         CHOLMOD analyzes the pattern of ``A A^T`` for this ``A`` (which must hold
         the matrix's; ``"colamd"`` orders ``A`` itself): a normal matrix
         ``K^T K + ...`` analyzed from the sparser ``K^T``. CHOLMOD only.
+    locality_of : (n, n) scipy sparse matrix, optional, keyword-only
+        A symmetric matrix whose graph has the matrix's neighbourhoods, sparser
+        (a mesh's Laplacian for its normal matrix): the iterative path numbers
+        scattered unknowns (:data:`LOCAL_SPAN`) by its reverse Cuthill-McKee order
+        instead of the matrix's, and renumbers ``product_of``'s rows before forming
+        the product. Iterative path only.
     memory_budget : int, optional
         Bytes the direct factor may take under ``backend="auto"``; default
         :func:`default_memory_budget` (half the available memory, or
@@ -393,6 +399,7 @@ class SPDSolver:
         lower: bool = False,
         product_of: Any = None,
         pattern_of: Any = None,
+        locality_of: Any = None,
         memory_budget: int | None = None,
         tol: float = DEFAULT_TOLERANCE,
         max_iterations: int = 5000,
@@ -451,10 +458,27 @@ class SPDSolver:
         self._lower = self.backend == "cholmod"
         self._matrix: sp.csc_matrix | None = None
         self._product_of: sp.csc_matrix | None = None
+        #: the iterative path's renumbering of the unknowns (``_matrix`` is then stored renumbered), and
+        #: whether it was chosen (it is at the first solve, unless ``locality_of`` chose it here)
+        self._order: np.ndarray | None = None
+        self._ordered = False
+        if self.backend == "iterative" and locality_of is not None:
+            graph = _as_csc(locality_of, name="locality_of")
+            if graph.shape[0] != given.shape[0]:
+                raise ValueError(f"locality_of must have shape {(given.shape[0],) * 2}, got {graph.shape}")
+            self._order, self._ordered = _locality_order(graph), True
+            del graph
         if product_of is None:
             self._matrix = _stored(given, given_lower=bool(lower), keep_lower=self._lower)
+            if self._order is not None:
+                self._matrix = _renumbered(self._matrix, self._order)
         elif self.backend == "iterative":
-            # CG multiplies by the matrix and AMG coarsens it: form A A^T once
+            # CG multiplies by the matrix and AMG coarsens it: form A A^T once, from A's rows renumbered
+            # (no renumbered copy of the product: 6 s at 10M vertices)
+            if self._order is not None:
+                inverse = np.empty_like(self._order)
+                inverse[self._order] = np.arange(len(inverse))
+                given = sp.csc_matrix((given.data, inverse[given.indices], given.indptr), shape=given.shape)
             self._matrix = _product(given)
         else:
             self._product_of = given
@@ -466,8 +490,6 @@ class SPDSolver:
             raise ValueError(f"pattern_of must have {self.shape[0]} rows, got shape {self._pattern_of.shape}")
         self._pending: list[sp.csc_matrix] = []
         self._factor: Any = None
-        #: the iterative path's renumbering of the unknowns (``_matrix`` is then stored renumbered)
-        self._order: np.ndarray | None = None
         self._factorize(analyze=True)
 
     @property
@@ -548,7 +570,7 @@ class SPDSolver:
             raise ValueError(f"matrix must have shape {self._matrix.shape}, got {csc.shape}")
         with self._lock:
             self._matrix = _stored(csc, given_lower=lower, keep_lower=self._lower)
-            self._order = None
+            self._order, self._ordered = None, False
             self._pending.clear()
             self._factorize(analyze=False)
 
@@ -592,8 +614,8 @@ class SPDSolver:
         if self._factor is None:  # the AMG preconditioner, built at the first solve
             self._flush()
             assert self._matrix is not None  # the iterative path takes matrices only
-            if self._order is None:
-                self._order = _locality_order(self._matrix)
+            if not self._ordered:
+                self._order, self._ordered = _locality_order(self._matrix), True
                 if self._order is not None:
                     self._matrix = _renumbered(self._matrix, self._order)
             self._factor = _amg_preconditioner(self._matrix)
@@ -670,8 +692,23 @@ class SPDSolver:
 
 
 def _product(a: sp.csc_matrix) -> sp.csc_matrix:
-    product = (a @ a.T).tocsc()
-    product.sort_indices()
+    """``A A^T`` for a CSC ``A``, sorted (``_block_kernel.gram``: exactly symmetric, on every core)."""
+    from . import _block_kernel  # compiled by the package's build: imported where used
+
+    rows = a.tocsr()
+    index = np.result_type(rows.indptr, rows.indices, a.indptr, a.indices)
+    indptr, indices, data = _block_kernel.gram(
+        rows.indptr.astype(index, copy=False),
+        rows.indices.astype(index, copy=False),
+        rows.data,
+        a.indptr.astype(index, copy=False),
+        a.indices.astype(index, copy=False),
+        a.data,
+    )
+    del rows
+    # a symmetric matrix's CSR arrays are also its CSC arrays
+    product = sp.csc_matrix((data, indices, indptr), shape=(a.shape[0],) * 2)
+    product.has_sorted_indices = True
     return product
 
 
@@ -758,16 +795,15 @@ LOCAL_SPAN = 16384
 
 
 def _locality_order(symmetric: sp.spmatrix) -> np.ndarray | None:
-    """A renumbering of a symmetric matrix's unknowns that keeps rows' entries close, or None when they
-    are close already (:data:`LOCAL_SPAN`)."""
-    from scipy.sparse.csgraph import reverse_cuthill_mckee
-
+    """A renumbering of a symmetric matrix's unknowns that keeps rows' entries close
+    (:func:`~o3d_lsmesh._block_kernel.level_order`, reverse Cuthill-McKee), or None when they are close
+    already (:data:`LOCAL_SPAN`)."""
     from . import _block_kernel  # compiled by the package's build: imported where used
 
-    csr = _csr_view(symmetric)
-    if csr.nnz >= np.iinfo(np.int32).max or _block_kernel.row_span(*_csr_parts(csr)[:2]) <= LOCAL_SPAN:
-        return None  # SciPy's reverse Cuthill-McKee numbers entries in int32
-    return reverse_cuthill_mckee(csr, symmetric_mode=True).astype(np.int64)
+    indptr, indices, _ = _csr_parts(_csr_view(symmetric))
+    if _block_kernel.row_span(indptr, indices) <= LOCAL_SPAN:
+        return None
+    return _block_kernel.level_order(indptr, indices)
 
 
 def _renumbered(symmetric: sp.spmatrix, order: np.ndarray) -> sp.csc_matrix:
@@ -786,13 +822,6 @@ def _csr_view(symmetric: sp.spmatrix) -> sp.csr_matrix:
     return symmetric.T if sp.isspmatrix_csc(symmetric) else sp.csr_matrix(symmetric)
 
 
-def _block_times(matrix: sp.spmatrix) -> Any:
-    """``x -> matrix @ x`` for ``(n, k)`` blocks, streaming the matrix once for all ``k`` columns
-    (``_block_kernel``: SciPy's ``(n, 3)`` product took 2.3 times three single-column products)."""
-    parts = _csr_parts(matrix)
-    return lambda x: _block_times_parts(parts, np.ascontiguousarray(x, dtype=np.float64))
-
-
 def _csr_parts(matrix: sp.spmatrix) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(indptr, indices, data)`` of ``matrix`` as CSR (no copy when it is one), one index type."""
     csr = sp.csr_matrix(matrix, dtype=np.float64)
@@ -800,32 +829,61 @@ def _csr_parts(matrix: sp.spmatrix) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     return csr.indptr.astype(index, copy=False), csr.indices.astype(index, copy=False), csr.data
 
 
-def _vcycle(levels: list, coarse: Any) -> Any:
-    """The V-cycle of :func:`_aggregation_levels` on a whole ``(n, k)`` block: a forward Gauss-Seidel
-    sweep before the coarse correction and a backward one after (symmetric, as CG needs; 135 CG
-    iterations against 102 with symmetric sweeps on both sides, but 10% less time, LS mesh with 2%
-    controls at 100k vertices), each column with pyamg's arithmetic (``_block_kernel``); every sweep
-    and product streams its level's matrix once for all columns, on every core (the sweeps in
-    :func:`_sweep_blocks` blocks; the same iteration counts at 1M vertices as one sequential sweep)."""
-    from . import _block_kernel  # compiled by the package's build: imported where used
+def _vcycle(levels: list, coarse: Any) -> _VCycle:
+    """The V-cycle of :func:`_aggregation_levels`' ``levels`` and ``coarse`` LU (see :class:`_VCycle`)."""
+    return _VCycle(levels, coarse)
 
-    operators = [(_csr_parts(A), _sweep_blocks(A), _csr_parts(R), _csr_parts(P)) for A, R, P in levels]
 
-    def cycle(depth: int, b: np.ndarray) -> np.ndarray:
-        if depth == len(operators):
-            return np.ascontiguousarray(coarse.solve(np.asfortranarray(b)))
-        A, blocks, R, P = operators[depth]
-        x = np.zeros_like(b)
-        _block_kernel.gauss_seidel(*A, x, b, True, blocks)
-        residual = np.empty_like(b)
-        _block_kernel.block_product(*A, x, residual, -1.0, b)  # b - A x in one pass
-        correction = cycle(depth + 1, _block_times_parts(R, residual))
-        del residual
-        _block_kernel.block_product(*P, correction, x, 1.0, x)  # x += P correction in one pass
-        _block_kernel.gauss_seidel(*A, x, b, False, blocks)
-        return x
+class _VCycle:
+    """One V-cycle on a whole ``(n, k)`` block: a forward Gauss-Seidel sweep before the coarse correction
+    and a backward one after (symmetric, as CG needs; 135 CG iterations against 102 with symmetric sweeps
+    on both sides, but 10% less time, LS mesh with 2% controls at 100k vertices), each column with
+    pyamg's arithmetic (``_block_kernel``); every sweep and product streams its level's matrix once for
+    all columns, on every core (the sweeps in :func:`_sweep_blocks` blocks; the same iteration counts at
+    1M vertices as one sequential sweep).
 
-    return lambda r: cycle(0, np.ascontiguousarray(r, dtype=np.float64))
+    ``cycle(r)`` returns a new block; :meth:`bound` gives ``apply(r, out)`` with the levels' work blocks
+    allocated once, for a solve's every iteration: fresh blocks cost a page fault per page on every
+    cycle (at 3.2M vertices a third of the LS mesh's time went to the kernel, before). The object holds
+    no block itself: threads may share it.
+    """
+
+    def __init__(self, levels: list, coarse: Any) -> None:
+        self._operators = [
+            (_csr_parts(A), _sweep_blocks(A), _csr_parts(R), _csr_parts(P)) for A, R, P in levels
+        ]
+        self._coarse = coarse
+
+    def __call__(self, r: np.ndarray) -> np.ndarray:
+        r = np.ascontiguousarray(r, dtype=np.float64)
+        out = np.empty_like(r)
+        self.bound(r.shape[1])(r, out)
+        return out
+
+    def bound(self, k: int) -> Any:
+        """``apply(r, out)``: one cycle of C-ordered ``(n, k)`` ``r`` into ``out``, reusing its work blocks."""
+        from . import _block_kernel  # compiled by the package's build: imported where used
+
+        # per level: its residual, the next level's right-hand side and solution
+        work = [
+            (np.empty((len(A[0]) - 1, k)), np.empty((len(R[0]) - 1, k)), np.empty((len(R[0]) - 1, k)))
+            for A, _, R, _ in self._operators
+        ]
+
+        def cycle(depth: int, b: np.ndarray, x: np.ndarray) -> None:
+            if depth == len(self._operators):
+                x[...] = self._coarse.solve(np.asfortranarray(b))
+                return
+            (A, blocks, R, P), (residual, coarse_b, coarse_x) = self._operators[depth], work[depth]
+            x.fill(0.0)
+            _block_kernel.gauss_seidel(*A, x, b, True, blocks)
+            _block_kernel.block_product(*A, x, residual, -1.0, b)  # b - A x in one pass
+            _block_kernel.block_product(*R, residual, coarse_b)
+            cycle(depth + 1, coarse_b, coarse_x)
+            _block_kernel.block_product(*P, coarse_x, x, 1.0, x)  # x += P correction in one pass
+            _block_kernel.gauss_seidel(*A, x, b, False, blocks)
+
+        return lambda r, out: cycle(0, r, out)
 
 
 #: Rows per block of the parallel (hybrid) Gauss-Seidel sweeps; at most :data:`SWEEP_BLOCKS` blocks. The
@@ -836,15 +894,6 @@ SWEEP_BLOCKS = 32
 
 def _sweep_blocks(A: sp.spmatrix) -> int:
     return int(np.clip(A.shape[0] // ROWS_PER_SWEEP_BLOCK, 1, SWEEP_BLOCKS))
-
-
-def _block_times_parts(parts: tuple[np.ndarray, np.ndarray, np.ndarray], x: np.ndarray) -> np.ndarray:
-    """``A @ x`` for ``A``'s CSR ``parts`` and a C-ordered ``(n, k)`` float64 ``x``."""
-    from . import _block_kernel  # compiled by the package's build: imported where used
-
-    out = np.empty((len(parts[0]) - 1, x.shape[1]))
-    _block_kernel.block_product(*parts, x, out)
-    return out
 
 
 def _block_cg(
@@ -869,8 +918,10 @@ def _block_cg(
     X = np.zeros_like(B) if x0 is None else np.array(x0, dtype=np.float64, order="C").reshape(B.shape)
     norms = np.linalg.norm(B, axis=0)
     scale = np.where(norms > 0, norms, 1.0)
-    times = _block_times(matrix)
-    R = B - times(X) if x0 is not None else B.copy()
+    parts = _csr_parts(matrix)
+    R = B.copy()
+    if x0 is not None:
+        _block_kernel.block_product(*parts, X, R, -1.0, B)  # B - A X in one pass
     if x0 is not None:
         # a start farther from the solution than zero (e.g. controls moved far from the mesh) is dropped
         worse = np.linalg.norm(R, axis=0) > norms
@@ -883,7 +934,13 @@ def _block_cg(
     # the residual shows in the bar; its total (the iteration cap) shrinks to the count reached on success
     bar = progress_bar(progress, total=max_iterations, desc="conjugate gradients")
     converged = False
-    Z = np.ascontiguousarray(precondition(R))
+    # the work blocks, allocated once for the solve (see _VCycle)
+    if hasattr(precondition, "bound"):
+        apply = precondition.bound(B.shape[1])
+    else:
+        apply = lambda r, out: np.copyto(out, precondition(r))
+    Z, Q = np.empty_like(B), np.empty_like(B)
+    apply(R, Z)
     P = Z.copy()
     rz = _block_kernel.column_dots(R, Z)
     iteration = 0
@@ -894,7 +951,7 @@ def _block_cg(
                     f"conjugate gradients reached relative residual {relative.max():.3g} after {iteration} "
                     f"iterations, tolerance {tol:g}: raise max_iterations or tol, or use solver='cholmod'"
                 )
-            Q = times(P)
+            _block_kernel.block_product(*parts, P, Q)
             pq = _block_kernel.column_dots(P, Q)
             active = relative > tol
             if (pq[active] <= 0).any():
@@ -908,7 +965,7 @@ def _block_cg(
             iteration += 1
             bar.update(1)
             bar.set_postfix_str(f"residual={relative.max():.2e}", refresh=False)
-            Z = np.ascontiguousarray(precondition(R))
+            apply(R, Z)
             rz_new = _block_kernel.column_dots(R, Z)
             beta = np.where(active, rz_new / np.where(rz != 0, rz, 1.0), 0.0)
             _block_kernel.cg_direction(P, Z, beta)

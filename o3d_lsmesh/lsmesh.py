@@ -157,7 +157,6 @@ class LSMeshSystem:
         # the Laplacian (of the free columns) serves the residual of iterative refinement:
         # L^T (L x) needs a third of the memory of L^T L
         self._operator = operator
-        del L
         self._updated = False
         self._n = n
         self._unknowns = n if self._free is None else len(self._free)
@@ -167,7 +166,10 @@ class LSMeshSystem:
             ordering=ordering,
             progress=progress,
             tol=DEFAULT_TOLERANCE if tol is None else tol,
+            # the iterative path renumbers scattered unknowns by the 1-ring, not the normal matrix's 2-ring
+            locality_of=None if self.interpolate else L.T,  # L's pattern is symmetric: a CSC view
         )
+        del L
 
     def _reduce(self, indices: np.ndarray) -> np.ndarray:
         # row of each (free) vertex in the reduced system

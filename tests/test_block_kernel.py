@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from pyamg.relaxation.relaxation import gauss_seidel as pyamg_gauss_seidel
 
 from o3d_lsmesh import _block_kernel
-from o3d_lsmesh._solvers import COARSE_UNKNOWNS, STRENGTH, _aggregation_levels, _block_times, _vcycle
+from o3d_lsmesh._solvers import COARSE_UNKNOWNS, STRENGTH, _aggregation_levels, _csr_parts, _vcycle
 
 
 def _random_csr(rows, cols, density, seed, index=np.int32):
@@ -250,10 +250,12 @@ def test_strong_part_is_pyamgs_symmetric_strength_with_the_weak_entries_lumped(i
     assert np.array_equal(indptr, Sp) and np.array_equal(indices, Sj[: Sp[-1]])
 
 
-def test_block_times_takes_csc_and_vectors():
+def test_block_product_takes_csc_through_csr_parts():
     A = _random_csr(30, 30, 0.2, 5).tocsc()
     x = np.random.default_rng(6).standard_normal((30, 2))
-    assert np.allclose(_block_times(A)(x), A @ x, rtol=1e-14, atol=1e-14)
+    out = np.empty((30, 2))
+    _block_kernel.block_product(*_csr_parts(A), x, out)
+    assert np.allclose(out, A @ x, rtol=1e-14, atol=1e-14)
 
 
 @pytest.mark.parametrize("index", [np.int32, np.int64])
@@ -275,3 +277,55 @@ def test_permuted_is_scipys_fancy_indexing_and_row_span_a_plain_mean(index):
         _block_kernel.permuted(A.indptr, A.indices, A.data, np.zeros(400, dtype=np.int64))
     with pytest.raises(ValueError, match=r"order must have one entry per row \(400\), got 3"):
         _block_kernel.permuted(A.indptr, A.indices, A.data, np.arange(3, dtype=np.int64))
+
+
+def _reference_rcm(A: sp.csr_matrix) -> list:
+    """Reverse Cuthill-McKee as plain loops: per component (in order of its lowest vertex ``s``), a
+    breadth-first search (new neighbours by increasing degree, ties in row order) from its vertex of
+    least degree (ties: the first that such a search from ``s`` reaches), then the whole order reversed."""
+    degree, order = np.diff(A.indptr), []
+
+    def search(start: int) -> list:
+        level, seen = [start], {start}
+        for v in level:
+            new = [w for w in A.indices[A.indptr[v] : A.indptr[v + 1]] if w not in seen]
+            seen.update(new)
+            level.extend(sorted(new, key=lambda w: degree[w]))  # stable: ties keep row order
+        return level
+
+    for s in range(A.shape[0]):
+        if s not in order:
+            reached = search(s)
+            order.extend(search(min(reached, key=lambda v: (degree[v], reached.index(v)))))
+    return [int(v) for v in order[::-1]]
+
+
+@pytest.mark.parametrize("index", [np.int32, np.int64])
+@settings(max_examples=25, deadline=None)
+@given(n=st.integers(1, 60), density=st.floats(0.0, 0.2), seed=st.integers(0, 10**6))
+def test_level_order_is_reverse_cuthill_mckee_as_a_plain_loop(index, n, density, seed):
+    A = sp.random(n, n, density=density, random_state=seed, format="csr")
+    A = (A + A.T + sp.identity(n)).tocsr()
+    A.sort_indices()
+    got = _block_kernel.level_order(A.indptr.astype(index), A.indices.astype(index))
+    assert got.tolist() == _reference_rcm(A)
+
+
+@pytest.mark.parametrize("index", [np.int32, np.int64])
+@settings(max_examples=25, deadline=None)
+@given(n=st.integers(1, 40), k=st.integers(1, 50), density=st.floats(0.0, 0.3), seed=st.integers(0, 10**6))
+def test_gram_is_a_sorted_exactly_symmetric_a_at(index, n, k, density, seed):
+    A = sp.random(n, k, density=density, random_state=seed, format="csc")
+    rows = A.tocsr()
+    indptr, indices, data = _block_kernel.gram(
+        rows.indptr.astype(index), rows.indices.astype(index), rows.data,
+        A.indptr.astype(index), A.indices.astype(index), A.data,
+    )  # fmt: skip
+    got = sp.csr_matrix((data, indices, indptr), shape=(n, n))
+    want = A.toarray() @ A.toarray().T  # dense reference
+    assert np.allclose(got.toarray(), want, rtol=1e-14, atol=1e-14)
+    assert (got != got.T).nnz == 0  # bit for bit
+    assert all((np.diff(indices[indptr[i] : indptr[i + 1]]) > 0).all() for i in range(n))
+    # the pattern is exactly the structural product's (no stored zeros beyond it, none missing)
+    pattern = (abs(A) @ abs(A).T).tocsr()
+    assert got.nnz == pattern.nnz

@@ -426,6 +426,18 @@ def test_duplicate_check_at_scale_agrees_with_a_row_sort():
     assert _may_have_duplicates(signed)
 
 
+def test_duplicate_check_has_no_false_alarm_on_midpoint_coordinates():
+    # midpoints of midpoints (few low mantissa bits): a multiply-and-xor hash made whole keys collide
+    # here and sent every such mesh to the exact row sort; the finalizer-mixed keys must not
+    from o3d_lsmesh._o3d import _may_have_duplicates
+
+    grid = np.stack(np.meshgrid(*(np.arange(70) / 64.0,) * 3, indexing="ij"), axis=-1).reshape(-1, 3)
+    vertices = np.concatenate([grid, (grid[:-1] + grid[1:]) / 2.0, (grid[:-7] + grid[7:]) / 4.0 + 0.3])
+    distinct = np.unique(vertices, axis=0)
+    assert not _may_have_duplicates(distinct)
+    assert _may_have_duplicates(vertices) == (len(distinct) < len(vertices))
+
+
 def test_read_mesh_narrow_shares_open3d_int32_triangles_and_still_checks_them():
     sphere = o3d.geometry.TriangleMesh.create_sphere(radius=1.0, resolution=8)
     wide, narrow = read_mesh(sphere), read_mesh(sphere, narrow=True)

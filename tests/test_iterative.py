@@ -249,6 +249,33 @@ def test_scattered_numbering_is_renumbered_and_solutions_keep_the_callers_order(
     assert relative(solver.solve(b), direct) < MATCH
 
 
+def test_locality_of_orders_by_the_sparser_graph_before_the_product(monkeypatch):
+    import o3d_lsmesh._solvers as solvers
+
+    N, V, weights = _scrambled_system()
+    span = np.abs(N.indices - np.repeat(np.arange(N.shape[0]), np.diff(N.indptr))).mean()
+    monkeypatch.setattr(solvers, "LOCAL_SPAN", int(span / 4))
+    from o3d_lsmesh import _block_kernel
+    from o3d_lsmesh.laplacian import laplacian_matrix
+
+    _, F = grid(60, 60)
+    inverse = np.argsort(np.random.default_rng(0).permutation(len(V)))  # _scrambled_system's numbering
+    L = laplacian_matrix(V, inverse[F]).tocsr()
+    A = sp.hstack([L.T, sp.diags(np.sqrt(weights))], format="csc")  # N = A A^T
+    b = weights[:, None] * V
+    direct = SPDSolver(N, backend="scipy").solve(b)
+    solver = SPDSolver(product_of=A, backend="iterative", locality_of=L)
+    # ordered at construction by the 1-ring's reverse Cuthill-McKee, the product formed renumbered
+    assert solver._order is not None
+    assert solver._order.tolist() == _block_kernel.level_order(L.indptr, L.indices).tolist()
+    assert abs(solver.matrix - N).max() < 1e-12 * abs(N).max()
+    assert relative(solver.solve(b), direct) < MATCH
+    with pytest.raises(ValueError, match=r"locality_of must have shape \(3600, 3600\), got \(3, 3\)"):
+        SPDSolver(N, backend="iterative", locality_of=sp.identity(3, format="csr"))
+    with pytest.raises(TypeError, match="locality_of must be a scipy sparse matrix, got ndarray"):
+        SPDSolver(N, backend="iterative", locality_of=np.eye(3))
+
+
 def test_local_numbering_is_kept():
     N, V, weights = _scrambled_system()
     ordered = SPDSolver(sp.csc_matrix(sp.diags(np.arange(1.0, 4001.0))), backend="iterative")
