@@ -37,6 +37,7 @@ __all__ = [
     "cholmod_available",
     "default_memory_budget",
     "estimate_factor_bytes",
+    "gram_matrix",
     "operator_scale",
     "solver_backend",
 ]
@@ -479,7 +480,7 @@ class SPDSolver:
                 inverse = np.empty_like(self._order)
                 inverse[self._order] = np.arange(len(inverse))
                 given = sp.csc_matrix((given.data, inverse[given.indices], given.indptr), shape=given.shape)
-            self._matrix = _product(given)
+            self._matrix = gram_matrix(given)
         else:
             self._product_of = given
         del given
@@ -505,7 +506,7 @@ class SPDSolver:
         with self._lock:
             self._flush()
             if self._product_of is not None:
-                return _product(self._product_of)
+                return gram_matrix(self._product_of)
             if self._order is not None:
                 return _renumbered(self._matrix, np.argsort(self._order))
             if not self._lower:
@@ -544,7 +545,7 @@ class SPDSolver:
                     self._factor.cholesky_inplace(self._matrix)
             else:
                 self._factor = _splu_spd(
-                    self._matrix if self._product_of is None else _product(self._product_of)
+                    self._matrix if self._product_of is None else gram_matrix(self._product_of)
                 )
         except Exception as error:
             if _cholmod is not None and isinstance(error, _cholmod.CholmodNotPositiveDefiniteError):
@@ -691,8 +692,9 @@ class SPDSolver:
         )
 
 
-def _product(a: sp.csc_matrix) -> sp.csc_matrix:
-    """``A A^T`` for a CSC ``A``, sorted (``_block_kernel.gram``: exactly symmetric, on every core)."""
+def gram_matrix(a: sp.csc_matrix) -> sp.csc_matrix:
+    """``A A^T`` for a CSC ``A`` (a normal matrix from its stacked rows' transpose), sorted CSC
+    (``_block_kernel.gram``: exactly symmetric, on every core)."""
     from . import _block_kernel  # compiled by the package's build: imported where used
 
     rows = a.tocsr()

@@ -26,7 +26,14 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from .._solvers import SPDSolver, check_constant_modes, check_finite, operator_scale, solver_backend
+from .._solvers import (
+    SPDSolver,
+    check_constant_modes,
+    check_finite,
+    gram_matrix,
+    operator_scale,
+    solver_backend,
+)
 from ..topology import (
     RING_COLUMN_SLOT,
     RING_ROW_SLOT,
@@ -39,11 +46,6 @@ from ..topology import (
     group_keys,
     vertex_rings,
 )
-
-try:  # SciPy's sparse kernels (private, the same signature since SciPy 1.0): mat-vecs into a buffer
-    from scipy.sparse._sparsetools import csr_matvecs as _csr_matvecs
-except ImportError:  # pragma: no cover - a SciPy without it takes the public product
-    _csr_matvecs = None
 
 __all__ = [
     "DEFAULT_MU",
@@ -289,36 +291,27 @@ class LocalOperator:
 
 
 def _accumulate(matrix: sp.csr_matrix, x: np.ndarray, out: np.ndarray) -> None:
-    """``out += matrix @ x`` for ``(n, 3)`` float64 C-order arrays, without a temporary.
-
-    SciPy's kernel (``csr_matvecs``, what ``matrix @ x`` calls, accumulating into its output) when
-    it is there; else the public product.
-    """
-    usable = (
-        _csr_matvecs is not None
-        and x.dtype == out.dtype == matrix.dtype == np.float64
-        and x.flags.c_contiguous
-        and out.flags.c_contiguous
-        and matrix.indices.dtype == matrix.indptr.dtype
-    )
-    if not usable:
-        out += matrix @ x
-        return
-    rows, columns = matrix.shape
-    _csr_matvecs(
-        rows, columns, x.shape[1], matrix.indptr, matrix.indices, matrix.data, x.ravel(), out.ravel()
-    )
+    """``out += matrix @ x`` for ``(n, 3)`` float64 C-order arrays, without a temporary, on every core."""
+    _accumulate_block(matrix.indptr, matrix.indices, matrix.data, x, out)
 
 
 def _accumulate_block(
     indptr: np.ndarray, indices: np.ndarray, data: np.ndarray, x: np.ndarray, out: np.ndarray
 ) -> None:
-    """``out += A @ x`` for the CSR rows ``(indptr, indices, data)`` of a block, ``x (n, 3)``, ``out (rows, 3)``."""
-    rows = len(indptr) - 1
-    if _csr_matvecs is not None and out.flags.c_contiguous and indices.dtype == indptr.dtype:
-        _csr_matvecs(rows, len(x), 3, indptr, indices, data, x.ravel(), out.ravel())
-    else:  # pragma: no cover - a SciPy without the kernel
-        out += sp.csr_matrix((data, indices, indptr), shape=(rows, len(x))) @ x
+    """``out += A @ x`` for the CSR rows ``(indptr, indices, data)`` of a block, ``x (n, 3)``, ``out (rows, 3)``
+    C-ordered: ``_block_kernel.block_product`` with ``out`` as its own offset (SciPy's ``csr_matvecs``, the
+    same sums in the same order, runs on one core: Open3D's Laplacian filter runs on every one)."""
+    from .. import _block_kernel  # compiled by the package's build: imported where used
+
+    _block_kernel.block_product(
+        indptr.astype(indices.dtype, copy=False),
+        indices,
+        data.astype(np.float64, copy=False),
+        np.ascontiguousarray(x, dtype=np.float64),
+        out,
+        1.0,
+        out,
+    )
 
 
 def local_operator(
@@ -534,15 +527,12 @@ class GlobalSolver:
         # H^T H's largest entry is the most triangles at a free vertex
         most = np.bincount(self._H.indices, minlength=1).max()
         check_finite(lambda: np.array([self.mu * most]), name="mu", what="mu * H^T H")
-        # K_F^T K_F + mu H^T H as one product of the stacked rows (no sum of two 2-ring matrices); it is
-        # symmetric, so the product's CSR arrays are its CSC arrays too
+        # K_F^T K_F + mu H^T H as one product of the stacked rows (no sum of two 2-ring matrices), sorted:
+        # canonical, so the solver keeps it without a copy
         rows = sp.vstack([K_F, self._H], format="csr")
-        product = rows.T.tocsr() @ rows
+        normal = gram_matrix(rows.T)
         scale = operator_scale(K_F)
         del rows, K, K_F
-        normal = sp.csc_matrix((product.data, product.indices, product.indptr), shape=product.shape)
-        normal.sort_indices()  # in place: canonical, so the solver keeps it without a copy
-        del product
         if len(self.free):
             # a closed component is held in place only by mu |H 1|^2: a tiny mu lets it drift
             # the system couples two free vertices exactly when a path of free-free mesh edges joins them
