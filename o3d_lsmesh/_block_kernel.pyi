@@ -39,3 +39,13 @@ def gram(
     col_rows: np.ndarray,
     col_data: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
+def pair_product(
+    indptr: np.ndarray,
+    indices: np.ndarray,
+    a: np.ndarray,
+    xa: np.ndarray,
+    b: np.ndarray,
+    xb: np.ndarray,
+    offset: np.ndarray,
+    out: np.ndarray,
+) -> None: ...

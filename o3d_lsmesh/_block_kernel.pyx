@@ -402,3 +402,28 @@ def gram(const index_t[::1] row_ptr, const index_t[::1] row_cols, const double[:
                     b = b - 1
                 indices[b + 1], data[b + 1] = column, value
     return indptr_array, indices_array, data_array
+
+
+def pair_product(const index_t[::1] indptr, const index_t[::1] indices, const double[::1] a,
+                 const double[:, ::1] xa, const double[::1] b, const double[:, ::1] xb,
+                 const double[:, ::1] offset, double[:, ::1] out):
+    """``out = offset + A @ xa + B @ xb`` for CSR ``A`` and ``B`` on one pattern ``(indptr, indices)``
+    (values ``a`` and ``b``), every block ``(n, 3)``: one pass over the pattern instead of two, on every
+    core (local fairing's ``E2 X + E1 (W X)``)."""
+    cdef Py_ssize_t m = out.shape[0], i
+    cdef index_t jj, j
+    cdef double va, vb, s0, s1, s2
+    for name, block in (("xa", xa), ("xb", xb), ("offset", offset), ("out", out)):
+        if block.shape[1] != 3:
+            raise ValueError(f"{name} must have 3 columns, got {block.shape[1]}")
+    if offset.shape[0] != m:
+        raise ValueError(f"offset must have the shape of out {(m, 3)}, got {(offset.shape[0], 3)}")
+    with nogil:
+        for i in prange(m, schedule="static", num_threads=_threads(m)):
+            s0, s1, s2 = offset[i, 0], offset[i, 1], offset[i, 2]
+            for jj in range(indptr[i], indptr[i + 1]):
+                j, va, vb = indices[jj], a[jj], b[jj]
+                s0 = s0 + va * xa[j, 0] + vb * xb[j, 0]
+                s1 = s1 + va * xa[j, 1] + vb * xb[j, 1]
+                s2 = s2 + va * xa[j, 2] + vb * xb[j, 2]
+            out[i, 0], out[i, 1], out[i, 2] = s0, s1, s2

@@ -279,14 +279,17 @@ class LocalOperator:
         given: above about a million vertices an ``(n, 3)`` array exceeds the allocator's reuse
         threshold, so every fresh temporary is mapped and faulted in anew at every iteration.
         """
-        out = constant.copy() if out is None else out
-        if out is not constant:
-            np.copyto(out, constant)
+        from .. import _block_kernel  # compiled by the package's build: imported where used
+
+        positions = np.ascontiguousarray(positions, dtype=np.float64)
+        out = np.empty_like(constant) if out is None else out
         work = np.empty_like(out) if work is None else work
-        work.fill(0.0)
-        _accumulate(self.adjacency, positions, work)
-        _accumulate(self.e2, positions, out)
-        _accumulate(self.e1, work, out)
+        indptr = self.e1.indptr.astype(self.e1.indices.dtype, copy=False)  # the four share one pattern
+        _block_kernel.block_product(indptr, self.e1.indices, self.adjacency.data, positions, work)
+        # E2 X and E1 (W X) in one pass over the pattern, on top of the constant
+        _block_kernel.pair_product(
+            indptr, self.e1.indices, self.e2.data, positions, self.e1.data, work, constant, out
+        )
         return out
 
 
