@@ -329,3 +329,28 @@ def test_gram_is_a_sorted_exactly_symmetric_a_at(index, n, k, density, seed):
     # the pattern is exactly the structural product's (no stored zeros beyond it, none missing)
     pattern = (abs(A) @ abs(A).T).tocsr()
     assert got.nnz == pattern.nnz
+
+
+@pytest.mark.parametrize("n", [40, 150_000])  # one thread, and every core
+def test_pair_product_is_offset_plus_two_scipy_products_on_one_pattern(n):
+    rng = np.random.default_rng(9)
+    indices = np.sort(rng.integers(0, n, (n, 7)), axis=1).ravel().astype(np.int32)  # 7 entries a row
+    A = sp.csr_matrix(
+        (rng.standard_normal(7 * n), indices, np.arange(0, 7 * n + 1, 7, dtype=np.int32)), (n, n)
+    )
+    B = A.copy()
+    B.data = np.random.default_rng(10).standard_normal(B.nnz)
+    xa, xb, offset = np.random.default_rng(11).standard_normal((3, n, 3))
+    out = np.empty((n, 3))
+    _block_kernel.pair_product(A.indptr, A.indices, A.data, xa, B.data, xb, offset, out)
+    want = offset + A @ xa + B @ xb
+    assert np.allclose(out, want, rtol=1e-13, atol=1e-13 * np.abs(want).max())
+    _block_kernel.pair_product(A.indptr, A.indices, A.data, xa, B.data, xb, offset, offset)  # in place
+    assert np.array_equal(offset, out)
+    with pytest.raises(ValueError, match="xa must have 3 columns, got 2"):
+        _block_kernel.pair_product(A.indptr, A.indices, A.data, xa[:, :2].copy(), B.data, xb, out, out)
+    short = offset[: n - 1].copy()
+    with pytest.raises(
+        ValueError, match=rf"offset must have the shape of out \({n}, 3\), got \({n - 1}, 3\)"
+    ):
+        _block_kernel.pair_product(A.indptr, A.indices, A.data, xa, B.data, xb, short, out)
