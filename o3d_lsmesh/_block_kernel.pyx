@@ -248,13 +248,26 @@ def row_span(const index_t[::1] indptr, const index_t[::1] indices):
     return total / max(<Py_ssize_t>indptr[n], 1)
 
 
+cdef inline void _sort_row(index_t[::1] indices, double[::1] data, Py_ssize_t start,
+                           Py_ssize_t stop) noexcept nogil:
+    """Sort one CSR row's entries ``start:stop`` by column, values alongside (insertion sort: rows are short)."""
+    cdef Py_ssize_t a, b
+    cdef index_t column
+    cdef double value
+    for a in range(start + 1, stop):
+        column, value, b = indices[a], data[a], a - 1
+        while b >= start and indices[b] > column:
+            indices[b + 1], data[b + 1] = indices[b], data[b]
+            b = b - 1
+        indices[b + 1], data[b + 1] = column, value
+
+
 def permuted(const index_t[::1] indptr, const index_t[::1] indices, const double[::1] data,
              const int64_t[::1] order):
     """A square CSR matrix renumbered, ``B[r, s] = A[order[r], order[s]]``: ``(indptr, indices, data)``,
     each row's columns sorted. One pass, one copy (fancy indexing makes two)."""
-    cdef Py_ssize_t n = indptr.shape[0] - 1, r, a, b, t
-    cdef index_t jj, start, column
-    cdef double value
+    cdef Py_ssize_t n = indptr.shape[0] - 1, r, t
+    cdef index_t jj, start
     if order.shape[0] != n:
         raise ValueError(f"order must have one entry per row ({n}), got {order.shape[0]}")
     dtype = np.int32 if index_t is int32_t else np.int64
@@ -277,12 +290,7 @@ def permuted(const index_t[::1] indptr, const index_t[::1] indices, const double
             for jj in range(indptr[order[r]], indptr[order[r] + 1]):
                 t = start + jj - indptr[order[r]]
                 ix[t], dx[t] = inverse[indices[jj]], data[jj]
-            for a in range(start + 1, ip[r + 1]):  # insertion sort: rows are short
-                column, value, b = ix[a], dx[a], a - 1
-                while b >= start and ix[b] > column:
-                    ix[b + 1], dx[b + 1] = ix[b], dx[b]
-                    b = b - 1
-                ix[b + 1], dx[b + 1] = column, value
+            _sort_row(ix, dx, start, ip[r + 1])
     return new_indptr, new_indices, new_data
 
 
@@ -354,10 +362,10 @@ def gram(const index_t[::1] row_ptr, const index_t[::1] row_cols, const double[:
     columns in increasing ``c``, as ``(j, i)`` does: the product is exactly symmetric. SciPy's product
     (one thread, then a transpose to sort it) took 13 s for a 10M-vertex LS mesh's normal matrix.
     """
-    cdef Py_ssize_t n = row_ptr.shape[0] - 1, i, a, b, t, threads = _threads(n)
-    cdef index_t cc, jj, j, column
+    cdef Py_ssize_t n = row_ptr.shape[0] - 1, i, threads = _threads(n)
+    cdef index_t cc, jj, j
     cdef int64_t start, next_, tid
-    cdef double weight, value
+    cdef double weight
     dtype = np.int32 if index_t is int32_t else np.int64
     marker_array = np.full((threads, max(n, 1)), -1, dtype=np.int64)
     cdef int64_t[:, ::1] marker = marker_array
@@ -395,12 +403,7 @@ def gram(const index_t[::1] row_ptr, const index_t[::1] row_cols, const double[:
                         next_ = next_ + 1
                     else:
                         data[marker[tid, j]] += weight * col_data[jj]
-            for a in range(start + 1, next_):  # insertion sort: rows are short
-                column, value, b = indices[a], data[a], a - 1
-                while b >= start and indices[b] > column:
-                    indices[b + 1], data[b + 1] = indices[b], data[b]
-                    b = b - 1
-                indices[b + 1], data[b + 1] = column, value
+            _sort_row(indices, data, start, next_)
     return indptr_array, indices_array, data_array
 
 
