@@ -692,6 +692,10 @@ class SPDSolver:
         )
 
 
+#: Entries a 32-bit index array can address.
+INT32_ENTRIES = int(np.iinfo(np.int32).max)
+
+
 def gram_matrix(a: sp.csc_matrix) -> sp.csc_matrix:
     """``A A^T`` for a CSC ``A`` (a normal matrix from its stacked rows' transpose), sorted CSC
     (``_block_kernel.gram``: exactly symmetric, on every core)."""
@@ -699,6 +703,10 @@ def gram_matrix(a: sp.csc_matrix) -> sp.csc_matrix:
 
     rows = a.tocsr()
     index = np.result_type(rows.indptr, rows.indices, a.indptr, a.indices)
+    # the product's entries are at most the sum of the columns' squared lengths: 64-bit indices where
+    # 32 bits might not hold them
+    if np.sum(np.diff(a.indptr).astype(np.int64) ** 2) >= INT32_ENTRIES:
+        index = np.dtype(np.int64)
     indptr, indices, data = _block_kernel.gram(
         rows.indptr.astype(index, copy=False),
         rows.indices.astype(index, copy=False),

@@ -284,3 +284,18 @@ def test_local_numbering_is_kept():
     scrambled = SPDSolver(N, backend="iterative")
     scrambled.solve(weights[:, None] * V)
     assert scrambled._order is None  # 3600 unknowns cannot reach farther than LOCAL_SPAN
+
+
+def test_gram_matrix_takes_64_bit_indices_where_32_might_not_hold_the_product(monkeypatch):
+    import o3d_lsmesh._solvers as solvers
+    from o3d_lsmesh import _block_kernel
+
+    A = sp.random(30, 40, density=0.2, random_state=1, format="csc")
+    seen = []
+    gram = _block_kernel.gram
+    monkeypatch.setattr(_block_kernel, "gram", lambda *parts: seen.append(parts[0].dtype) or gram(*parts))
+    small = solvers.gram_matrix(A)
+    assert seen[-1] == np.int32 and abs(small - A @ A.T).max() < 1e-14
+    monkeypatch.setattr(solvers, "INT32_ENTRIES", 10)  # as if 32 bits held ten entries
+    wide = solvers.gram_matrix(A)
+    assert seen[-1] == np.int64 and abs(wide - A @ A.T).max() < 1e-14
