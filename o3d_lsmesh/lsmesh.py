@@ -157,6 +157,15 @@ class LSMeshSystem:
         # the Laplacian (of the free columns) serves the residual of iterative refinement:
         # L^T (L x) needs a third of the memory of L^T L
         self._operator = operator
+        del L  # not held while CHOLMOD factors
+        # the iterative path renumbers scattered unknowns by the 1-ring, not the normal matrix's 2-ring:
+        # L^T is the product's first n columns (a view of its arrays; L's pattern is symmetric)
+        locality = None
+        if not self.interpolate:
+            end = product.indptr[n]
+            locality = sp.csc_matrix(
+                (product.data[:end], product.indices[:end], product.indptr[: n + 1]), (n, n)
+            )
         self._updated = False
         self._n = n
         self._unknowns = n if self._free is None else len(self._free)
@@ -166,10 +175,8 @@ class LSMeshSystem:
             ordering=ordering,
             progress=progress,
             tol=DEFAULT_TOLERANCE if tol is None else tol,
-            # the iterative path renumbers scattered unknowns by the 1-ring, not the normal matrix's 2-ring
-            locality_of=None if self.interpolate else L.T,  # L's pattern is symmetric: a CSC view
+            locality_of=locality,
         )
-        del L
 
     def _reduce(self, indices: np.ndarray) -> np.ndarray:
         # row of each (free) vertex in the reduced system
