@@ -1,12 +1,14 @@
 import pickle
 import sys
 import threading
+from pathlib import Path
 
 import numpy as np
 import pytest
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+import o3d_lsmesh
 from o3d_lsmesh import SingularSystemError, SPDSolver
 from o3d_lsmesh._solvers import cholmod_available
 
@@ -343,12 +345,16 @@ def test_peak_memory_per_vertex_at_200k(statement):
     import os
     import subprocess
 
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([os.getcwd(), os.environ.get("PYTHONPATH", "")])}
+    # the package this suite imports (the installed wheel in `make matrix`, whose compiled kernels a
+    # source tree lacks; the checkout otherwise)
+    home = str(Path(o3d_lsmesh.__file__).resolve().parents[1])
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([home, os.environ.get("PYTHONPATH", "")])}
     proc = subprocess.run(
         [sys.executable, "-c", _MEMORY_SCRIPT, statement],
         capture_output=True,
         text=True,
         env=env,
+        cwd=home,  # `python -c` puts its working directory first on the path
         timeout=900,
     )
     assert proc.returncode == 0, proc.stderr[-2000:]
