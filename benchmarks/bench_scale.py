@@ -257,6 +257,10 @@ PEER_OPS = {
         ("fast-simplification to n/100", "fast_simplification.simplify(V, F32, target_count=len(F) // 100)"),
     ),
     "multires": ("multiresolution_fairing(mesh, level=4)", None),
+    "denoise": (
+        "constrained_fairing(mesh)",  # the default, method="scan"
+        ("Open3D filter_smooth_laplacian(10)", "mesh.filter_smooth_laplacian(10)"),
+    ),
     "lsmesh": ("ls_mesh(mesh, controls(n), solver='auto')", None),
     "global": ("constrained_fairing(mesh, 2, method='global')", None),
 }
