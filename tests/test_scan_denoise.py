@@ -15,7 +15,7 @@ from conftest import DATA, REPO, grid
 from numpy.testing import assert_allclose
 
 from o3d_lsmesh._solvers import SPDSolver
-from o3d_lsmesh.fairing import constrained_fairing, constrained_fairing_arrays
+from o3d_lsmesh.fairing import constrained_fairing, constrained_fairing_arrays, scan_fairing
 from o3d_lsmesh.fairing.constrained import DEFAULT_METHOD
 from o3d_lsmesh.fairing.scan_fairing import (
     MU_RANGE,
@@ -287,6 +287,18 @@ def test_energy_and_solution_match_a_plain_loop_assembly(case, weights):
     )
     assert_allclose(solver.filter(V), X1, atol=1e-9)
     assert_allclose(solver.solve(V), twiced, atol=1e-9)
+    # conjugate gradients (AMG V-cycle) to the gateway's relative residual of 1e-9
+    iterative = ScanFairingSolver(
+        F,
+        len(V),
+        mu=mu,
+        membrane=membrane,
+        boundary_weight=boundary_weight,
+        rim_curve=rim_curve,
+        solver="iterative",
+    )
+    assert iterative.backend == "iterative"
+    assert_allclose(iterative.solve(V), twiced, atol=1e-7 * np.ptp(V))
     if weights[0] == SCAN_MU:
         # the default: every weight measured by scan_parameters, checked against plain loops
         mu0, membrane0, weight0, curve0, twicing0 = reference_parameters(V, F)
@@ -527,6 +539,39 @@ def test_scan_options_raise():
         with pytest.raises(error, match=message):
             constrained_fairing_arrays(V, F, None, **{"method": None, **kwargs})
     assert_allclose(constrained_fairing_arrays(V, F, 0, method=None), V, atol=0)
+
+
+def test_auto_solves_large_meshes_by_conjugate_gradients_and_equals_the_factor(monkeypatch):
+    # two noisy components and an unreferenced vertex: auto factors below SCAN_ITERATIVE_VERTICES and runs
+    # CG from there (or above the factor's memory budget); both solve the same energy
+    V1, F1 = grid(40, 30, z=lambda x, y: 0.2 * np.sin(3 * x) * np.cos(2 * y))
+    V2, F2 = grid(12, 9)
+    V = np.vstack([V1, V2 + [3.0, 0.0, 0.0], [[9.0, 9.0, 9.0]]])
+    V = V + np.random.default_rng(8).normal(0, 0.01, V.shape)
+    F = np.vstack([F1, F2 + len(V1)])
+    n = len(V)
+    weights = dict(mu=SCAN_MU, membrane=SCAN_MEMBRANE, boundary_weight=SCAN_BOUNDARY_WEIGHT)
+    direct = constrained_fairing_arrays(V, F, None, method=None)
+    assert ScanFairingSolver(F, n, **weights).backend == "cholmod"
+    assert ScanFairingSolver(F, n, solver="iterative", **weights).backend == "iterative"
+    monkeypatch.setattr(scan_fairing, "SCAN_ITERATIVE_VERTICES", n)
+    assert ScanFairingSolver(F, n, **weights).backend == "iterative"
+    assert ScanFairingSolver(F, n, solver="cholmod", **weights).backend == "cholmod"
+    auto = constrained_fairing_arrays(V, F, None, method=None)
+    assert_allclose(auto, direct, atol=1e-8 * np.ptp(V))
+    assert np.array_equal(auto[-1], V[-1])
+    monkeypatch.setattr(scan_fairing, "SCAN_ITERATIVE_VERTICES", n + 1)
+    monkeypatch.setenv("O3D_LSMESH_MEMORY_BUDGET", "1")
+    assert ScanFairingSolver(F, n, **weights).backend == "iterative"
+
+
+def test_solver_option_raises():
+    V, F = grid(4, 4)
+    for method in ("scan", "local", "global"):
+        with pytest.raises(ValueError, match=r"solver must be one of .*, got 'fast'"):
+            constrained_fairing((V, F), method=method, solver="fast")
+        with pytest.raises(TypeError, match=r"solver must be one of .*, got 1"):
+            constrained_fairing_arrays(V, F, None, method=method, solver=1)
 
 
 def scan_files():

@@ -19,6 +19,7 @@ import numpy as np
 
 from .._o3d import new_mesh, read_mesh
 from .._progress import check_progress, iterate
+from .._solvers import SOLVERS
 from .._validate import as_bool, as_choice, as_count, as_positive_float, mesh_arrays
 from ..topology import boundary_curves, edge_structure, vertex_rings
 from .barycenter import DEFAULT_MU, GlobalSolver, fairing_topology, local_operator
@@ -163,10 +164,10 @@ def _fair(
     solver="auto",
 ):
     # validated arrays in, new (n, 3) positions out (``positions`` is a private copy)
+    solver = as_choice(solver, SOLVERS, name="solver")  # checked for every method ("local" solves none)
     if number_of_iterations == 0:
         return positions
     if method == "scan":
-        # one CHOLMOD factorization for now (the iterative path of ``solver`` serves "global" only)
         return scan_denoise(
             positions,
             triangles,
@@ -174,6 +175,8 @@ def _fair(
             mu=mu,
             membrane=membrane,
             boundary_weight=boundary_weight,
+            solver=solver,
+            progress=progress,
         )
     if method == "local":
         with plain_pages():
@@ -436,10 +439,12 @@ def constrained_fairing(
     progress : bool
         Show a tqdm progress bar over the iterations.
     solver : {"auto", "cholmod", "iterative"}
-        ``method="global"`` only: how the system is solved (see
+        ``"scan"`` and ``"global"``: how the system is solved (see
         :class:`~o3d_lsmesh.SPDSolver`); ``"auto"`` factors it unless the factor
-        would exceed the memory budget, then runs conjugate gradients with an
-        AMG preconditioner, warm-started from the current positions.
+        would exceed the memory budget (``"scan"``: or the mesh has 100,000
+        vertices or more, where conjugate gradients are faster than its factor),
+        then runs conjugate gradients with an AMG preconditioner, warm-started
+        from the current positions. ``"local"`` solves no system.
 
     Returns
     -------

@@ -40,7 +40,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._collapsed import collapsed_triangles
-from .._solvers import SPDSolver
+from .._solvers import SPDSolver, solver_backend
 from ..topology import edge_structure, ring_pattern
 
 __all__ = [
@@ -49,6 +49,7 @@ __all__ = [
     "NOISE_MU_SCALE",
     "SCAN_BOUNDARY_FRACTION",
     "SCAN_BOUNDARY_WEIGHT",
+    "SCAN_ITERATIVE_VERTICES",
     "SCAN_MEMBRANE",
     "SCAN_MU",
     "SCAN_RIM_RATIO",
@@ -87,6 +88,9 @@ NOISE_MU_SCALE = 0.8
 NOISE_MU_POWER = 2.5
 #: Range of that ``mu``.
 MU_RANGE = (3e-3, 1.0)
+#: Vertex count from which ``solver="auto"`` solves the scan energy by conjugate gradients instead of
+#: a factorization (measured crossover: benchmarks/results/realscans_denoise_speed.md).
+SCAN_ITERATIVE_VERTICES = 100_000
 
 
 class _Structure(NamedTuple):
@@ -581,6 +585,12 @@ class ScanFairingSolver(_Penalized):
     mu, membrane, boundary_weight : float
         ``mu``, ``lambda`` and the boundary triangles' ``w_t`` of the energy
         (see the module docstring).
+    solver : {"auto", "cholmod", "iterative"}
+        ``"auto"``: CHOLMOD below :data:`SCAN_ITERATIVE_VERTICES` vertices (and
+        while its factor fits the memory budget), block conjugate gradients with
+        the gateway's AMG V-cycle above, warm-started from the scan.
+    progress : bool
+        Show the iterative solves' residual in a tqdm bar.
 
     Notes
     -----
@@ -588,7 +598,11 @@ class ScanFairingSolver(_Penalized):
     is the constant, and ``1^T H^T W H 1 = 9 sum_t w_t > 0``. CHOLMOD factors the lower triangle
     of :func:`scan_normal_matrix`, analyzed as ``K^T K`` from the 1-ring pattern with COLAMD
     (10-15% fewer factor flops than AMD, same analysis time; METIS's 30% fewer cost an analysis
-    longer than the factor). The object pickles and its solves are serialized by a lock.
+    longer than the factor). The factor's flops grow like ``n^1.5`` and its two solves serve one
+    call, so above :data:`SCAN_ITERATIVE_VERTICES` the iterative path (linear, to the gateway's
+    relative residual of 1e-9) is faster: 10 scans merged and subdivided, 1.4M vertices, 13 s
+    against 39 s (benchmarks/results/realscans_denoise_speed.md). The object pickles and its
+    solves are serialized by a lock.
     """
 
     def __init__(
@@ -601,9 +615,12 @@ class ScanFairingSolver(_Penalized):
         boundary_weight: float,
         structure: _Structure | None = None,
         rim_curve: float = 0.0,
+        solver: str = "auto",
+        progress: bool = False,
     ) -> None:
         self.mu = float(mu)
         self.membrane = float(membrane)
+        backend = solver_backend(solver)
         triangles = np.asarray(triangles)
         st = _structure(triangles, n) if structure is None else structure
         normal, ring, weight = _normal_matrix(
@@ -611,17 +628,38 @@ class ScanFairingSolver(_Penalized):
         )
         self.penalty = _penalty(triangles, n, np.sqrt(self.mu * weight))
         self.referenced = st.valence > 0
+        if backend == "auto" and n >= SCAN_ITERATIVE_VERTICES:
+            backend = "iterative"
+        if backend == "iterative":
+            # symmetric and canonical: its CSR arrays are its CSC form (no copy); CG runs on the whole
+            # matrix, numbered by the 1-ring's reverse Cuthill-McKee order (a scan's is scattered)
+            whole = sp.csc_matrix((normal.data, normal.indices, normal.indptr), shape=normal.shape)
+            del normal
+            self._solver = SPDSolver(whole, backend=backend, locality_of=ring, progress=progress)
+            return
         # COLAMD on K's 1-ring pattern (see Notes): at 1.4M vertices 46.5 against 51.4 GFlop with AMD on the
         # matrix (METIS 35.2 but a 15 s analysis). The assembled lower triangle, not ``product_of`` rows: from
         # the rows the memory estimate of ``backend="auto"`` guessed 3x the entries and went iterative (4x
         # slower). CG preconditioned by the factor of the 1-ring part alone was measured slower.
         self._solver = SPDSolver(
-            _lower_csc(normal), lower=True, ordering="amd" if ring is None else "colamd", pattern_of=ring
+            _lower_csc(normal),
+            lower=True,
+            backend=backend,
+            ordering="amd" if ring is None else "colamd",
+            pattern_of=ring,
+            progress=progress,
         )
+
+    @property
+    def backend(self) -> str:
+        """The solver that runs: ``"cholmod"``, ``"scipy"`` or ``"iterative"``."""
+        return self._solver.backend
 
     def filter(self, positions0: np.ndarray) -> np.ndarray:
         """``S X0``: the minimizer of the energy for targets ``X0``, ``(n, 3)`` (unreferenced rows kept)."""
-        out = self._solver.solve(self.normal_rhs(positions0))
+        # the iterative path starts from the targets (the scan, close to its faired self); a start
+        # worse than zero is dropped per column by the gateway; direct solvers ignore it
+        out = self._solver.solve(self.normal_rhs(positions0), x0=positions0)
         unused = ~self.referenced
         out[unused] = positions0[unused]
         return out
@@ -651,13 +689,15 @@ def scan_denoise(
     mu: float | None = None,
     membrane: float | None = None,
     boundary_weight: float | None = None,
+    solver: str = "auto",
+    progress: bool = False,
 ) -> np.ndarray:
-    """The default denoiser on arrays: :func:`scan_parameters`, one factorization, the twiced filter.
+    """The default denoiser on arrays: :func:`scan_parameters`, one system, the twiced filter.
 
     ``mu``, ``membrane`` and ``boundary_weight`` replace the measured values
     when given (the twicing weight stays the measured one). One edge list
-    serves the measures and the system. Returns new ``(n, 3) float64``
-    positions.
+    serves the measures and the system; ``solver`` and ``progress`` as in
+    :class:`ScanFairingSolver`. Returns new ``(n, 3) float64`` positions.
 
     Examples
     --------
@@ -670,7 +710,7 @@ def scan_denoise(
     n = len(vertices)
     structure = _structure(triangles, n)
     measured = scan_parameters(vertices, triangles, structure=structure)
-    solver = ScanFairingSolver(
+    system = ScanFairingSolver(
         triangles,
         n,
         mu=measured.mu if mu is None else mu,
@@ -678,5 +718,7 @@ def scan_denoise(
         boundary_weight=measured.boundary_weight if boundary_weight is None else boundary_weight,
         structure=structure,
         rim_curve=measured.rim_curve,
+        solver=solver,
+        progress=progress,
     )
-    return solver.solve(vertices, number_of_iterations=number_of_iterations, twice=measured.twicing)
+    return system.solve(vertices, number_of_iterations=number_of_iterations, twice=measured.twicing)
