@@ -298,7 +298,8 @@ def test_energy_and_solution_match_a_plain_loop_assembly(case, weights):
         solver="iterative",
     )
     assert iterative.backend == "iterative"
-    assert_allclose(iterative.solve(V), twiced, atol=1e-7 * np.ptp(V))
+    for copy in (iterative, pickle.loads(pickle.dumps(iterative))):
+        assert_allclose(copy.solve(V), twiced, atol=1e-7 * np.ptp(V))
     if weights[0] == SCAN_MU:
         # the default: every weight measured by scan_parameters, checked against plain loops
         mu0, membrane0, weight0, curve0, twicing0 = reference_parameters(V, F)

@@ -296,7 +296,7 @@ def constrained_fairing(
     """Remove noise from a mesh while holding its triangle barycenters (Liu et al. 2001).
 
     **Default** (``constrained_fairing(mesh)``, ``method="scan"``, one
-    factorization, no parameter to set): made for raw range scans, whose
+    linear system, no parameter to set): made for raw range scans, whose
     noise is correlated along the scanlines and whose rim samples (grazing
     angles) carry 2.5-4 times the interior's error, and first as well on
     independent noise. It minimizes the global penalty form of eq. 5 with
@@ -305,7 +305,7 @@ def constrained_fairing(
     :mod:`o3d_lsmesh.fairing.scan_fairing`)::
 
         E(X) = |K X|^2 + mu sum_t w_t |h_t (X - X0)|^2 + lambda sum_edges |x_i - x_j|^2,
-        X1 = argmin E,   X = X1 + S (X0 - X1)   (S: the same minimization, kept factor)
+        X1 = argmin E,   X = X1 + S (X0 - X1)   (S: the same minimization, same system)
 
     with every referenced vertex unknown and ``w_t = w`` for a triangle with
     a boundary vertex, 1 otherwise. Every weight is measured on the input,
@@ -342,11 +342,13 @@ def constrained_fairing(
     rim's low weight collapse rim triangles (hundreds of slivers of quality
     under 0.05 per scan, none in the raw scans; see
     benchmarks/results/realscans_denoise.md); weakening the membrane at the
-    rim halves them but loses scans to the peers. Time: one sparse
-    Cholesky factorization of the bi-Laplacian-pattern matrix and one or two
-    back-substitutions, about 10 times Open3D's ``filter_smooth_laplacian``
-    at its best count at 40k vertices, 7-19 times at 1.4M (the factorization
-    alone is about 6 times at 40k).
+    rim halves them but loses scans to the peers. Time: below 100,000
+    vertices one sparse Cholesky factorization of the bi-Laplacian-pattern
+    matrix and two back-substitutions, about 7 times Open3D's
+    ``filter_smooth_laplacian`` at its best count at 40k vertices (the
+    factorization alone is 4-10 times); from 100,000 vertices conjugate
+    gradients with an AMG V-cycle, about 3 times at 1.4M
+    (benchmarks/results/realscans_denoise_speed.md).
 
     The paper's operators minimize the uniform-Laplacian energy ``|K X|^2``
     under the constraint that every triangle keeps its barycenter,

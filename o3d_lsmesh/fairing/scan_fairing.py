@@ -2,7 +2,7 @@
 
 The global penalty form of Liu et al.'s eq. 5 with the boundary freed, the
 barycenters weighted by their noise, a small membrane term and one twicing
-step (Tukey's bias correction), all with one factorization::
+step (Tukey's bias correction), all with one linear system::
 
     E(X) = |K X|^2 + mu sum_t w_t |h_t (X - X0)|^2 + lambda sum_(i,j) |x_i - x_j|^2
 
@@ -23,7 +23,7 @@ step (Tukey's bias correction), all with one factorization::
 Minimizing gives the linear filter ``X1 = S X0`` with
 ``S = (K^T K + mu H^T W H + lambda G)^-1 mu H^T W H`` (``G`` the graph
 Laplacian); the result is the twiced filter ``X = X1 + S (X0 - X1)`` (one
-more back-substitution with the same factor), which puts back the
+more solve of the same system), which puts back the
 low-frequency part of what ``S`` removed, i.e. the shrinkage of the membrane.
 
 Every term is quadratic in coordinate differences with dimensionless
