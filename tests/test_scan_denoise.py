@@ -543,8 +543,9 @@ def test_scan_options_raise():
 
 
 def test_auto_solves_large_meshes_by_conjugate_gradients_and_equals_the_factor(monkeypatch):
-    # two noisy components and an unreferenced vertex: auto factors below SCAN_ITERATIVE_VERTICES and runs
-    # CG from there (or above the factor's memory budget); both solve the same energy
+    # two noisy components and an unreferenced vertex: auto factors below SCAN_ITERATIVE_VERTICES vertices
+    # or a component below SCAN_ITERATIVE_COMPONENT and runs CG from there (or above the factor's memory
+    # budget); both solve the same energy
     V1, F1 = grid(40, 30, z=lambda x, y: 0.2 * np.sin(3 * x) * np.cos(2 * y))
     V2, F2 = grid(12, 9)
     V = np.vstack([V1, V2 + [3.0, 0.0, 0.0], [[9.0, 9.0, 9.0]]])
@@ -556,6 +557,10 @@ def test_auto_solves_large_meshes_by_conjugate_gradients_and_equals_the_factor(m
     assert ScanFairingSolver(F, n, **weights).backend == "cholmod"
     assert ScanFairingSolver(F, n, solver="iterative", **weights).backend == "iterative"
     monkeypatch.setattr(scan_fairing, "SCAN_ITERATIVE_VERTICES", n)
+    # the largest component has len(V1) vertices: CG from that size, the factor above it
+    monkeypatch.setattr(scan_fairing, "SCAN_ITERATIVE_COMPONENT", len(V1) + 1)
+    assert ScanFairingSolver(F, n, **weights).backend == "cholmod"
+    monkeypatch.setattr(scan_fairing, "SCAN_ITERATIVE_COMPONENT", len(V1))
     assert ScanFairingSolver(F, n, **weights).backend == "iterative"
     assert ScanFairingSolver(F, n, solver="cholmod", **weights).backend == "cholmod"
     auto = constrained_fairing_arrays(V, F, None, method=None)

@@ -38,6 +38,7 @@ from typing import NamedTuple
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.sparse import csgraph
 
 from .._collapsed import collapsed_triangles
 from .._solvers import SPDSolver, gram_matrix, solver_backend
@@ -49,6 +50,7 @@ __all__ = [
     "NOISE_MU_SCALE",
     "SCAN_BOUNDARY_FRACTION",
     "SCAN_BOUNDARY_WEIGHT",
+    "SCAN_ITERATIVE_COMPONENT",
     "SCAN_ITERATIVE_VERTICES",
     "SCAN_MEMBRANE",
     "SCAN_MU",
@@ -88,9 +90,13 @@ NOISE_MU_SCALE = 0.8
 NOISE_MU_POWER = 2.5
 #: Range of that ``mu``.
 MU_RANGE = (3e-3, 1.0)
-#: Vertex count from which ``solver="auto"`` solves the scan energy by conjugate gradients instead of
-#: a factorization (measured crossover: benchmarks/results/realscans_denoise_speed.md).
+#: Vertex count from which ``solver="auto"`` solves the scan energy by conjugate gradients instead of a
+#: factorization, when a connected component has ``SCAN_ITERATIVE_COMPONENT`` vertices or more: the
+#: factor's cost grows like each component's size to the power 1.5, CG's like the vertex count (measured
+#: crossovers: one 30k-40k scan level, three merged 0.9x, ten merged and subdivided 0.57x; a soup of
+#: 500-vertex pieces at 150k vertices 2.8x slower by CG; benchmarks/results/realscans_denoise_speed.md).
 SCAN_ITERATIVE_VERTICES = 100_000
+SCAN_ITERATIVE_COMPONENT = 30_000
 
 
 class _Structure(NamedTuple):
@@ -568,6 +574,12 @@ def _normal_matrix(
     return matrix, ring, weight
 
 
+def _largest_component(pattern: sp.spmatrix) -> int:
+    """Vertices in the largest connected component of a symmetric matrix's graph."""
+    labels = csgraph.connected_components(pattern, directed=False)[1]
+    return int(np.bincount(labels).max())
+
+
 def _lower_csc(symmetric: sp.csr_matrix) -> sp.csc_matrix:
     """The lower triangle of a symmetric canonical CSR matrix as CSC: its upper CSR triangle, reinterpreted."""
     n = symmetric.shape[0]
@@ -590,9 +602,11 @@ class ScanFairingSolver(_Penalized):
         ``mu``, ``lambda`` and the boundary triangles' ``w_t`` of the energy
         (see the module docstring).
     solver : {"auto", "cholmod", "iterative"}
-        ``"auto"``: CHOLMOD below :data:`SCAN_ITERATIVE_VERTICES` vertices (and
-        while its factor fits the memory budget), block conjugate gradients with
-        the gateway's AMG V-cycle above, warm-started from the scan.
+        ``"auto"``: block conjugate gradients with the gateway's AMG V-cycle,
+        warm-started from the scan, from :data:`SCAN_ITERATIVE_VERTICES`
+        vertices when a connected component has :data:`SCAN_ITERATIVE_COMPONENT`
+        or more (or where the factor would not fit the memory budget); CHOLMOD
+        otherwise.
     progress : bool
         Show the iterative solves' residual in a tqdm bar.
 
@@ -602,10 +616,10 @@ class ScanFairingSolver(_Penalized):
     is the constant, and ``1^T H^T W H 1 = 9 sum_t w_t > 0``. CHOLMOD factors the lower triangle
     of :func:`scan_normal_matrix`, analyzed as ``K^T K`` from the 1-ring pattern with COLAMD
     (10-15% fewer factor flops than AMD, same analysis time; METIS's 30% fewer cost an analysis
-    longer than the factor). The factor's flops grow like ``n^1.5`` and its two solves serve one
-    call, so above :data:`SCAN_ITERATIVE_VERTICES` the iterative path (linear, to the gateway's
-    relative residual of 1e-9) is faster: 10 scans merged and subdivided, 1.4M vertices, 13 s
-    against 39 s (benchmarks/results/realscans_denoise_speed.md). The object pickles and its
+    longer than the factor). The factor's flops grow like a component's size to the power 1.5
+    and its two solves serve one call, so on large components the iterative path (linear, to the
+    gateway's relative residual of 1e-9) is faster: 10 scans merged and subdivided, 1.4M
+    vertices, 9.5 s against 16.7 s (benchmarks/results/realscans_denoise_speed.md). The object pickles and its
     solves are serialized by a lock.
     """
 
@@ -633,7 +647,10 @@ class ScanFairingSolver(_Penalized):
         self.penalty = _penalty(triangles, n, np.sqrt(self.mu * weight))
         self.referenced = st.valence > 0
         if backend == "auto" and n >= SCAN_ITERATIVE_VERTICES:
-            backend = "iterative"
+            # the factor's cost grows like each component's size to the power 1.5: a soup of small
+            # components (scan fragments) factors faster than CG solves it
+            if _largest_component(normal if ring is None else ring) >= SCAN_ITERATIVE_COMPONENT:
+                backend = "iterative"
         if backend == "iterative":
             # symmetric and canonical: its CSR arrays are its CSC form (no copy); CG runs on the whole
             # matrix, numbered by the 1-ring's reverse Cuthill-McKee order (a scan's is scattered)
