@@ -475,10 +475,16 @@ def main() -> None:
         "--limit-gb", type=float, default=16.0, help="address-space limit of every subprocess"
     )
     args = parser.parse_args()
+    kinds = []
+    for kind in args.kinds.split(","):
+        if kind != "noisy sphere" and not kind.startswith("subdivided "):
+            parser.error(f"--kinds: expected 'noisy sphere' or 'subdivided <mesh>', got {kind!r}")
+        if kind != "noisy sphere" and not (DATA / (kind.split()[-1] + ".ply")).exists():
+            print(f"skipping {kind!r}: {kind.split()[-1]}.ply not in {DATA} (set O3D_LSMESH_DATA)")
+            continue
+        kinds.append(kind)
     if args.peers:
-        rows, per_round = peers(
-            args.peers.split(","), args.sizes, args.limit_gb, args.rounds, tuple(args.kinds.split(","))
-        )
+        rows, per_round = peers(args.peers.split(","), args.sizes, args.limit_gb, args.rounds, tuple(kinds))
         merged("scale_peers.jsonl", PEER_HEADER, rows, 3)
         if args.rounds > 1:
             merged("scale_peers_rounds.jsonl", ROUNDS_HEADER, per_round, 4)
@@ -492,7 +498,7 @@ def main() -> None:
     rows = []
     tmp = tempfile.mkdtemp(prefix="bench_scale_")
     for n in args.sizes:
-        for kind in args.kinds.split(","):
+        for kind in kinds:
             for op in args.ops.split(","):
                 solvers = ["iterative"] if n > args.iterative_only_above else args.solvers.split(",")
                 result = {}
