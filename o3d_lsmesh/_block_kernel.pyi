@@ -49,3 +49,11 @@ def pair_product(
     offset: np.ndarray,
     out: np.ndarray,
 ) -> None: ...
+def add_subset(
+    indptr: np.ndarray,
+    indices: np.ndarray,
+    data: np.ndarray,
+    sub_indptr: np.ndarray,
+    sub_indices: np.ndarray,
+    sub_data: np.ndarray,
+) -> int: ...

@@ -430,3 +430,26 @@ def pair_product(const index_t[::1] indptr, const index_t[::1] indices, const do
                 s1 = s1 + va * xa[j, 1] + vb * xb[j, 1]
                 s2 = s2 + va * xa[j, 2] + vb * xb[j, 2]
             out[i, 0], out[i, 1], out[i, 2] = s0, s1, s2
+
+
+def add_subset(const index_t[::1] indptr, const index_t[::1] indices, double[::1] data,
+               const index_t[::1] sub_indptr, const index_t[::1] sub_indices, const double[::1] sub_data):
+    """``A += B`` in place, for CSR ``A`` and ``B`` of one shape with sorted rows and ``B``'s pattern within
+    ``A``'s (a 1-ring term added to a 2-ring matrix without a third matrix); on every core. Returns the
+    number of ``B``'s entries not in ``A``'s pattern (left out; 0 when the pattern holds them all)."""
+    cdef Py_ssize_t n = indptr.shape[0] - 1, i
+    cdef index_t p, end, q
+    cdef Py_ssize_t missing = 0
+    if sub_indptr.shape[0] != indptr.shape[0]:
+        raise ValueError(f"sub_indptr must have {indptr.shape[0]} entries, got {sub_indptr.shape[0]}")
+    with nogil:
+        for i in prange(n, schedule="static", num_threads=_threads(n)):
+            p, end = indptr[i], indptr[i + 1]
+            for q in range(sub_indptr[i], sub_indptr[i + 1]):
+                while p < end and indices[p] < sub_indices[q]:
+                    p = p + 1
+                if p < end and indices[p] == sub_indices[q]:
+                    data[p] += sub_data[q]
+                else:
+                    missing += 1
+    return missing

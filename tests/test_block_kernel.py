@@ -354,3 +354,46 @@ def test_pair_product_is_offset_plus_two_scipy_products_on_one_pattern(n):
         ValueError, match=rf"offset must have the shape of out \({n}, 3\), got \({n - 1}, 3\)"
     ):
         _block_kernel.pair_product(A.indptr, A.indices, A.data, xa, B.data, xb, short, out)
+
+
+@pytest.mark.parametrize("n", [50, 150_000])
+@pytest.mark.parametrize("index", [np.int32, np.int64])
+def test_add_subset_equals_the_scipy_sum_where_the_pattern_holds_the_term(n, index):
+    rng = np.random.default_rng(n)
+    big = sp.random(n, n, density=min(8.0 / n, 0.5), format="csr", random_state=rng) + sp.identity(n)
+    big.sort_indices()
+    # the term: a random subset of big's entries, with values of its own
+    keep = rng.random(big.nnz) < 0.4
+    rows = np.repeat(np.arange(n), np.diff(big.indptr))
+    term = sp.csr_matrix((rng.normal(size=keep.sum()), (rows[keep], big.indices[keep])), shape=(n, n))
+    term.sort_indices()
+    expected = (big + term).toarray() if n < 1000 else None
+    data = big.data.copy()
+    missing = _block_kernel.add_subset(
+        big.indptr.astype(index),
+        big.indices.astype(index),
+        data,
+        term.indptr.astype(index),
+        term.indices.astype(index),
+        term.data,
+    )
+    assert missing == 0
+    got = sp.csr_matrix((data, big.indices, big.indptr), shape=(n, n))
+    if expected is not None:
+        np.testing.assert_array_equal(got.toarray(), expected)
+    else:
+        assert abs(got - (big + term)).max() == 0.0
+    # an entry outside the pattern is counted and left out; the rest is still added
+    row0 = set(big.indices[big.indptr[0] : big.indptr[1]].tolist())
+    column = next(c for c in range(n) if c not in row0)
+    outside = sp.csr_matrix(([5.0, 1.0], ([0, 1], [column, 1])), shape=(n, n))
+    data = big.data.copy()
+    parts = (big.indptr.astype(index), big.indices.astype(index), data)
+    missing = _block_kernel.add_subset(
+        *parts, outside.indptr.astype(index), outside.indices.astype(index), outside.data
+    )
+    assert missing == 1
+    got = sp.csr_matrix((data, big.indices, big.indptr), shape=(n, n))
+    assert got[1, 1] == big[1, 1] + 1.0 and abs(got - big).sum() == 1.0
+    with pytest.raises(ValueError, match=rf"sub_indptr must have {n + 1} entries, got 3"):
+        _block_kernel.add_subset(*parts, np.zeros(3, dtype=index), big.indices.astype(index), big.data)

@@ -237,42 +237,81 @@ def measured_noise(
     inner[ring[st.boundary].indices] = False  # two rings from the rim: full 1- and 2-rings
     if not inner.any():
         return NoiseEstimate(0.0, 0.0)
-    two = ring @ ring + ring
-    two.data[:] = 1.0
-    two.setdiag(0.0)
-    two.eliminate_zeros()
     d1 = st.valence.astype(np.float64)
-    d2 = np.diff(two.indptr).astype(np.float64)
     referenced = st.valence > 0
+    ring_sum = ring @ vertices
     smooth = vertices.copy()
-    smooth[referenced] += (ring[referenced] @ vertices) / d1[referenced, None] - vertices[referenced]
-    sub = smooth[inner]
+    smooth[referenced] += ring_sum[referenced] / d1[referenced, None] - vertices[referenced]
+    smooth_square = np.einsum("ij,ij->i", smooth, smooth)
+    normal = _vertex_normals(smooth, triangles)
+    inner_rows = np.flatnonzero(inner)
+    # per inner vertex: 1-ring umbrella along the normal, and the 1-ring's mean squared distance
+    sub, x = smooth[inner_rows], vertices[inner_rows]
+    nrm = normal[inner_rows]
+    nrm /= np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), np.finfo(float).tiny)
+    di = d1[inner_rows]
+    a1 = np.einsum("ij,ij->i", ring_sum[inner_rows] / di[:, None] - x, nrm)
     square = np.einsum("ij,ij->i", sub, sub)
-
-    def mean_square_distance(adjacency: sp.csr_matrix, degree: np.ndarray) -> float:
-        rows = adjacency[inner]
-        total = rows @ np.einsum("ij,ij->i", smooth, smooth) - 2.0 * np.einsum("ij,ij->i", rows @ smooth, sub)
-        return float(np.mean(total / degree[inner] + square))
-
-    a, b, c = (smooth[triangles[:, i]] for i in range(3))
-    face = np.cross(b - a, c - a)
-    normal = np.empty((n, 3))
-    for k in range(3):
-        normal[:, k] = sum(np.bincount(triangles[:, i], face[:, k], minlength=n) for i in range(3))
-    normal = normal[inner]
-    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), np.finfo(float).tiny)
-    x = vertices[inner]
-    a1 = np.einsum("ij,ij->i", ring[inner] @ vertices / d1[inner, None] - x, normal)
-    a2 = np.einsum("ij,ij->i", two[inner] @ vertices / d2[inner, None] - x, normal)
-    h2 = mean_square_distance(ring, d1)
+    h2 = float(
+        np.mean(
+            (
+                (ring @ smooth_square)[inner_rows]
+                - 2.0 * np.einsum("ij,ij->i", (ring @ smooth)[inner_rows], sub)
+            )
+            / di
+            + square
+        )
+    )
     if not h2 > 0.0:
         return NoiseEstimate(0.0, 0.0)
-    growth = (mean_square_distance(two, d2) / h2) ** 2
-    k1, k2 = float(np.mean(1.0 + 1.0 / d1[inner])), float(np.mean(1.0 + 1.0 / d2[inner]))
-    e1, e2 = float(np.mean(a1 * a1)), float(np.mean(a2 * a2))
+    del ring_sum, sub, x, square
+    # the same over the 2-ring (every vertex within two edges), a block of rows at a time: the whole
+    # 2-ring pattern (about 19 entries a row, with its product and sum) took 800 bytes a vertex
+    sum_a2, sum_k2, sum_h2 = 0.0, 0.0, 0.0
+    for start in range(0, len(inner_rows), _NOISE_BLOCK):
+        rows = inner_rows[start : start + _NOISE_BLOCK]
+        block = ring[rows]
+        two = block @ ring + block
+        two.data[:] = 1.0
+        own = np.repeat(rows, np.diff(two.indptr)) == two.indices  # the vertex itself is not its neighbour
+        two.data[own] = 0.0
+        two.eliminate_zeros()
+        d2 = np.diff(two.indptr).astype(np.float64)
+        a2 = np.einsum(
+            "ij,ij->i", two @ vertices / d2[:, None] - vertices[rows], nrm[start : start + len(rows)]
+        )
+        sub = smooth[rows]
+        sum_a2 += float(a2 @ a2)
+        sum_k2 += float(np.sum(1.0 + 1.0 / d2))
+        sum_h2 += float(
+            np.sum(
+                (two @ smooth_square - 2.0 * np.einsum("ij,ij->i", two @ smooth, sub)) / d2
+                + np.einsum("ij,ij->i", sub, sub)
+            )
+        )
+    count = len(inner_rows)
+    growth = (sum_h2 / count / h2) ** 2
+    k1, k2 = float(np.mean(1.0 + 1.0 / di)), sum_k2 / count
+    e1, e2 = float(np.mean(a1 * a1)), sum_a2 / count
     detail = max((e2 - e1 * k2 / k1) / (growth - k2 / k1), 0.0) if growth > k2 / k1 else 0.0
     noise = max((e1 - detail) / k1, 0.0)
     return NoiseEstimate(float(np.sqrt(noise / h2)), float(np.sqrt(detail / h2)))
+
+
+#: Rows of the 2-ring pattern that :func:`measured_noise` forms at a time.
+_NOISE_BLOCK = 1 << 16
+
+
+def _vertex_normals(positions: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Area-weighted vertex normals (unnormalized), ``(n, 3)``."""
+    n = len(positions)
+    p0 = positions[triangles[:, 0]]
+    face = np.cross(positions[triangles[:, 1]] - p0, positions[triangles[:, 2]] - p0)
+    del p0
+    normal = np.empty((n, 3))
+    for k in range(3):
+        normal[:, k] = sum(np.bincount(triangles[:, i], face[:, k], minlength=n) for i in range(3))
+    return normal
 
 
 def scan_likeness(rim_ratio: float, boundary_fraction: float) -> float:
@@ -564,14 +603,27 @@ def _normal_matrix(
         plate[forward[rim]] -= curve_inverse[lo[rim]]
         plate[backward[rim]] -= curve_inverse[hi[rim]]
     # K's CSR arrays are K^T's CSC: K^T K by the compiled product on every core (SciPy's took 2 s at
-    # 1.4M); symmetric, so its CSC arrays are its CSR ones (a CSC term would be converted by the sum)
-    plate_square = gram_matrix(sp.csc_matrix((plate, indices, indptr), shape=(n, n)))
-    matrix = matrix + sp.csr_matrix(
-        (plate_square.data, plate_square.indices, plate_square.indptr), shape=(n, n)
+    # 1.4M); symmetric, so its CSC arrays are its CSR ones. Its pattern holds the 1-ring (K_ii K_ij), so
+    # the 1-ring terms are added into it in place (a sum would make a third 2-ring matrix)
+    from .. import _block_kernel  # compiled by the package's build: imported where used
+
+    square = gram_matrix(sp.csc_matrix((plate, indices, indptr), shape=(n, n)))
+    del plate
+    index = square.indices.dtype
+    missing = _block_kernel.add_subset(
+        square.indptr,
+        square.indices,
+        square.data,
+        matrix.indptr.astype(index, copy=False),
+        matrix.indices.astype(index, copy=False),
+        matrix.data,
     )
+    assert missing == 0, "the 1-ring lies within K^T K's pattern"
+    del matrix
     ring = sp.csc_matrix((np.ones(len(indices)), indices, indptr), shape=(n, n))
-    matrix.sum_duplicates()  # canonical: sorted indices (CHOLMOD and the lower-triangle cut need them)
-    return matrix, ring, weight
+    normal = sp.csr_matrix((square.data, square.indices, square.indptr), shape=(n, n))
+    normal.has_sorted_indices = True  # canonical: CHOLMOD and the lower-triangle cut need it
+    return normal, ring, weight
 
 
 def _largest_component(pattern: sp.spmatrix) -> int:
