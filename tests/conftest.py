@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib.util
 import os
 from pathlib import Path
 
@@ -15,6 +16,10 @@ except ImportError:
     os.environ.setdefault("O3D_LSMESH_NO_CHOLMOD", "1")
 
 REPO = Path(__file__).resolve().parents[1]
+#: The directory holding the package this suite imports: the installed wheel's in `make matrix` (whose
+#: compiled kernels a source tree lacks), the checkout otherwise. Subprocesses that run the package put it
+#: first on their path, and run there (`python -c` and `-m` put the working directory first).
+PACKAGE_HOME = str(Path(importlib.util.find_spec("o3d_lsmesh").origin).resolve().parents[1])
 DATA = Path(os.environ.get("O3D_LSMESH_DATA", REPO.parent / "shared" / "data" / "meshes"))
 
 

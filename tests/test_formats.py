@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 
 o3d = pytest.importorskip("open3d")
 
-from conftest import REPO  # noqa: E402
+from conftest import PACKAGE_HOME  # noqa: E402
 
 import o3d_lsmesh  # noqa: E402
 from o3d_lsmesh import O3DLSMeshWarning  # noqa: E402
@@ -141,7 +141,8 @@ def test_obj_seams_stay_closed_cli(tmp_path):
         capture_output=True,
         text=True,
         check=False,
-        env=dict(os.environ, PYTHONPATH=str(REPO)),
+        env=dict(os.environ, PYTHONPATH=PACKAGE_HOME),
+        cwd=PACKAGE_HOME,  # the installed package in `make matrix` (the default's kernels are compiled)
         timeout=300,
     )
     assert run.returncode == 0, run.stderr

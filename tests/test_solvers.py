@@ -1,14 +1,13 @@
 import pickle
 import sys
 import threading
-from pathlib import Path
 
 import numpy as np
 import pytest
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
+from conftest import PACKAGE_HOME
 
-import o3d_lsmesh
 from o3d_lsmesh import SingularSystemError, SPDSolver
 from o3d_lsmesh._solvers import cholmod_available
 
@@ -345,9 +344,7 @@ def test_peak_memory_per_vertex_at_200k(statement):
     import os
     import subprocess
 
-    # the package this suite imports (the installed wheel in `make matrix`, whose compiled kernels a
-    # source tree lacks; the checkout otherwise)
-    home = str(Path(o3d_lsmesh.__file__).resolve().parents[1])
+    home = PACKAGE_HOME  # the package this suite imports, with its compiled kernels
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([home, os.environ.get("PYTHONPATH", "")])}
     proc = subprocess.run(
         [sys.executable, "-c", _MEMORY_SCRIPT, statement],
