@@ -268,8 +268,10 @@ def measured_noise(
     # the same over the 2-ring (every vertex within two edges), a block of rows at a time: the whole
     # 2-ring pattern (about 19 entries a row, with its product and sum) took 800 bytes a vertex
     sum_a2, sum_k2, sum_h2 = 0.0, 0.0, 0.0
-    for start in range(0, len(inner_rows), _NOISE_BLOCK):
-        rows = inner_rows[start : start + _NOISE_BLOCK]
+    # a few blocks, not blocks of a fixed size: each product clears a work array as long as the mesh
+    block_rows = max(_NOISE_BLOCK, -(-len(inner_rows) // _NOISE_BLOCKS))
+    for start in range(0, len(inner_rows), block_rows):
+        rows = inner_rows[start : start + block_rows]
         block = ring[rows]
         two = block @ ring + block
         two.data[:] = 1.0
@@ -298,7 +300,9 @@ def measured_noise(
     return NoiseEstimate(float(np.sqrt(noise / h2)), float(np.sqrt(detail / h2)))
 
 
-#: Rows of the 2-ring pattern that :func:`measured_noise` forms at a time.
+#: :func:`measured_noise` forms the 2-ring pattern in this many blocks of rows (a 16th of it at a time),
+#: of at least ``_NOISE_BLOCK`` rows.
+_NOISE_BLOCKS = 16
 _NOISE_BLOCK = 1 << 16
 
 
