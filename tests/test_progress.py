@@ -11,6 +11,7 @@ from conftest import grid
 
 from o3d_lsmesh._progress import check_progress, iterate, progress_bar, stages
 from o3d_lsmesh.encoding import decode_geometry, encode_geometry, iter_decode_geometry
+from o3d_lsmesh.fairing import constrained_fairing
 from o3d_lsmesh.lsmesh import ls_mesh, reconstruct_geometry
 from o3d_lsmesh.selection import approximate, select_control_points
 from o3d_lsmesh.spectral import spectral_approximation
@@ -131,6 +132,20 @@ def test_ls_mesh_reconstruct_spectral_bars(bars):
         "spectral basis",
     ]
     assert_complete(made, stream)
+
+
+def test_default_denoiser_bar_names_its_stages_and_cg_shows_its_residual(bars):
+    made, stream = bars
+    V, F = pieces()
+    V = V + np.random.default_rng(0).normal(0, 0.01, V.shape)
+    constrained_fairing((V, F), progress=True)  # factored: one bar, over its three stages
+    assert [bar.desc for bar in made] == ["constrained fairing (scan)"]
+    assert_complete(made, stream, count=3)
+    assert "solve" in stream.getvalue()
+    constrained_fairing((V, F), progress=True, solver="iterative")
+    assert [bar.desc for bar in made[1:]] == ["constrained fairing (scan)", "conjugate gradients"]
+    assert_complete(made, stream)
+    assert "residual=" in stream.getvalue()
 
 
 def test_every_function_rejects_a_non_bool_progress():

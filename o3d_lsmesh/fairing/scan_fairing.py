@@ -41,6 +41,7 @@ import scipy.sparse as sp
 from scipy.sparse import csgraph
 
 from .._collapsed import collapsed_triangles
+from .._progress import stages
 from .._solvers import SPDSolver, gram_matrix, solver_backend
 from ..topology import edge_structure, ring_pattern
 
@@ -785,17 +786,22 @@ def scan_denoise(
     (8, 3)
     """
     n = len(vertices)
-    structure = _structure(triangles, n)
-    measured = scan_parameters(vertices, triangles, structure=structure)
-    system = ScanFairingSolver(
-        triangles,
-        n,
-        mu=measured.mu if mu is None else mu,
-        membrane=measured.membrane if membrane is None else membrane,
-        boundary_weight=measured.boundary_weight if boundary_weight is None else boundary_weight,
-        structure=structure,
-        rim_curve=measured.rim_curve,
-        solver=solver,
-        progress=progress,
-    )
-    return system.solve(vertices, number_of_iterations=number_of_iterations, twice=measured.twicing)
+    # at 10M vertices the measures and the assembly take tens of seconds before CG shows its residual
+    with stages(progress, "constrained fairing (scan)", ("measure", "assemble", "solve")) as begin:
+        begin("measure")
+        structure = _structure(triangles, n)
+        measured = scan_parameters(vertices, triangles, structure=structure)
+        begin("assemble")
+        system = ScanFairingSolver(
+            triangles,
+            n,
+            mu=measured.mu if mu is None else mu,
+            membrane=measured.membrane if membrane is None else membrane,
+            boundary_weight=measured.boundary_weight if boundary_weight is None else boundary_weight,
+            structure=structure,
+            rim_curve=measured.rim_curve,
+            solver=solver,
+            progress=progress,
+        )
+        begin("solve")
+        return system.solve(vertices, number_of_iterations=number_of_iterations, twice=measured.twicing)
