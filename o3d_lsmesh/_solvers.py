@@ -733,7 +733,7 @@ def _amg_preconditioner(matrix: sp.spmatrix) -> Any:
         # too small for a hierarchy: the exact inverse is the best preconditioner
         dense = _splu_spd(csr.tocsc())
         return lambda r: dense.solve(np.asfortranarray(r))
-    return _vcycle(*_aggregation_levels(csr))
+    return _VCycle(*_aggregation_levels(csr))
 
 
 #: The AMG hierarchy stops coarsening at this many unknowns and solves them with a sparse LU.
@@ -839,13 +839,8 @@ def _csr_parts(matrix: sp.spmatrix) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     return csr.indptr.astype(index, copy=False), csr.indices.astype(index, copy=False), csr.data
 
 
-def _vcycle(levels: list, coarse: Any) -> _VCycle:
-    """The V-cycle of :func:`_aggregation_levels`' ``levels`` and ``coarse`` LU (see :class:`_VCycle`)."""
-    return _VCycle(levels, coarse)
-
-
 class _VCycle:
-    """One V-cycle on a whole ``(n, k)`` block: a forward Gauss-Seidel sweep before the coarse correction
+    """One V-cycle of :func:`_aggregation_levels`' levels and coarse LU on a whole ``(n, k)`` block: a forward Gauss-Seidel sweep before the coarse correction
     and a backward one after (symmetric, as CG needs; 135 CG iterations against 102 with symmetric sweeps
     on both sides, but 10% less time, LS mesh with 2% controls at 100k vertices), each column with
     pyamg's arithmetic (``_block_kernel``); every sweep and product streams its level's matrix once for
@@ -932,7 +927,6 @@ def _block_cg(
     R = B.copy()
     if x0 is not None:
         _block_kernel.block_product(*parts, X, R, -1.0, B)  # B - A X in one pass
-    if x0 is not None:
         # a start farther from the solution than zero (e.g. controls moved far from the mesh) is dropped
         worse = np.linalg.norm(R, axis=0) > norms
         X[:, worse] = 0.0

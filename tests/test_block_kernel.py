@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from pyamg.relaxation.relaxation import gauss_seidel as pyamg_gauss_seidel
 
 from o3d_lsmesh import _block_kernel
-from o3d_lsmesh._solvers import COARSE_UNKNOWNS, STRENGTH, _aggregation_levels, _csr_parts, _vcycle
+from o3d_lsmesh._solvers import COARSE_UNKNOWNS, STRENGTH, _aggregation_levels, _csr_parts, _VCycle
 
 
 def _random_csr(rows, cols, density, seed, index=np.int32):
@@ -128,7 +128,7 @@ def test_blocked_vcycle_is_symmetric(monkeypatch):
     monkeypatch.setattr(solvers, "ROWS_PER_SWEEP_BLOCK", 700)
     grid = pyamg.gallery.poisson((70, 70), format="csr")
     assert solvers._sweep_blocks(grid) == 7
-    cycle = _vcycle(*_aggregation_levels(grid))
+    cycle = _VCycle(*_aggregation_levels(grid))
     u, v = np.random.default_rng(5).standard_normal((2, grid.shape[0], 3))
     assert np.allclose(np.einsum("ij,ij->j", u, cycle(v)), np.einsum("ij,ij->j", v, cycle(u)), rtol=1e-10)
 
@@ -181,7 +181,7 @@ def test_aggregation_vcycle_is_pyamgs_smoothed_aggregation_vcycle():
     ml = MultilevelSolver(ours, coarse_solver="splu")
     change_smoothers(ml, ("gauss_seidel", {"sweep": "forward"}), ("gauss_seidel", {"sweep": "backward"}))
     b = np.random.default_rng(4).standard_normal((grid.shape[0], 3))
-    got = _vcycle(levels, coarse)(b)
+    got = _VCycle(levels, coarse)(b)
     want = np.column_stack([ml.solve(b[:, c], maxiter=1, tol=1e-300, cycle="V") for c in range(3)])
     assert np.allclose(got, want, rtol=1e-10, atol=1e-10 * np.abs(want).max())
 

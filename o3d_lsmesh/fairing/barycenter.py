@@ -262,7 +262,7 @@ class LocalOperator:
             raise ValueError("this LocalOperator was built with keep_constraint=False: it has no E3")
         out = np.zeros((self.e3.shape[0], 3)) if out is None else out
         out.fill(0.0)
-        _accumulate(self.e3, np.asarray(positions0, dtype=np.float64), out)
+        _accumulate_block(self.e3.indptr, self.e3.indices, self.e3.data, positions0, out)
         return out
 
     def step(
@@ -291,11 +291,6 @@ class LocalOperator:
             indptr, self.e1.indices, self.e2.data, positions, self.e1.data, work, constant, out
         )
         return out
-
-
-def _accumulate(matrix: sp.csr_matrix, x: np.ndarray, out: np.ndarray) -> None:
-    """``out += matrix @ x`` for ``(n, 3)`` float64 C-order arrays, without a temporary, on every core."""
-    _accumulate_block(matrix.indptr, matrix.indices, matrix.data, x, out)
 
 
 def _accumulate_block(
