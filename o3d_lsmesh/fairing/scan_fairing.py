@@ -252,20 +252,14 @@ def measured_noise(
     nrm /= np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), np.finfo(float).tiny)
     di = d1[inner_rows]
     a1 = np.einsum("ij,ij->i", ring_sum[inner_rows] / di[:, None] - x, nrm)
-    square = np.einsum("ij,ij->i", sub, sub)
     h2 = float(
         np.mean(
-            (
-                (ring @ smooth_square)[inner_rows]
-                - 2.0 * np.einsum("ij,ij->i", (ring @ smooth)[inner_rows], sub)
-            )
-            / di
-            + square
+            _mean_square_distances((ring @ smooth_square)[inner_rows], (ring @ smooth)[inner_rows], sub, di)
         )
     )
     if not h2 > 0.0:
         return NoiseEstimate(0.0, 0.0)
-    del ring_sum, sub, x, square
+    del ring_sum, sub, x
     # the same over the 2-ring (every vertex within two edges), a block of rows at a time: the whole
     # 2-ring pattern (about 19 entries a row, with its product and sum) took 800 bytes a vertex
     sum_a2, sum_k2, sum_h2 = 0.0, 0.0, 0.0
@@ -283,15 +277,9 @@ def measured_noise(
         a2 = np.einsum(
             "ij,ij->i", two @ vertices / d2[:, None] - vertices[rows], nrm[start : start + len(rows)]
         )
-        sub = smooth[rows]
         sum_a2 += float(a2 @ a2)
         sum_k2 += float(np.sum(1.0 + 1.0 / d2))
-        sum_h2 += float(
-            np.sum(
-                (two @ smooth_square - 2.0 * np.einsum("ij,ij->i", two @ smooth, sub)) / d2
-                + np.einsum("ij,ij->i", sub, sub)
-            )
-        )
+        sum_h2 += float(np.sum(_mean_square_distances(two @ smooth_square, two @ smooth, smooth[rows], d2)))
     count = len(inner_rows)
     growth = (sum_h2 / count / h2) ** 2
     k1, k2 = float(np.mean(1.0 + 1.0 / di)), sum_k2 / count
@@ -299,6 +287,16 @@ def measured_noise(
     detail = max((e2 - e1 * k2 / k1) / (growth - k2 / k1), 0.0) if growth > k2 / k1 else 0.0
     noise = max((e1 - detail) / k1, 0.0)
     return NoiseEstimate(float(np.sqrt(noise / h2)), float(np.sqrt(detail / h2)))
+
+
+def _mean_square_distances(
+    square_sums: np.ndarray, sums: np.ndarray, points: np.ndarray, counts: np.ndarray
+) -> np.ndarray:
+    """Mean of ``|y_j - p|^2`` over each point's neighbours ``y_j``, from the neighbours' sums of
+    ``|y|^2`` and of ``y`` and their counts: ``(sum |y|^2 - 2 p . sum y) / count + |p|^2``, ``(k,)``."""
+    return (square_sums - 2.0 * np.einsum("ij,ij->i", sums, points)) / counts + np.einsum(
+        "ij,ij->i", points, points
+    )
 
 
 #: :func:`measured_noise` forms the 2-ring pattern in this many blocks of rows (a 16th of it at a time),
