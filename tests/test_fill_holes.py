@@ -617,12 +617,31 @@ def test_large_hole_uses_the_chord_split_and_finishes(tmp_path):
     assert seconds < 60  # measured 3-20 s on this 2-core machine shared by 7 jobs
 
 
+def test_loops_up_to_dp_max_edges_take_one_programme():
+    # a 150-edge hole (above the earlier switch at 100) is triangulated by one programme over the whole
+    # loop, not cut by a chord: with density 0 (no refinement, nothing to fair) the new triangles are the
+    # programme's on the loop's points with the unit normals of the triangles on its edges
+    V, T = icosphere(6)
+    h = mean_edge(V, T)
+    Vh, Th, _ = cut_disk(V, T, 0, 25 * h)
+    (hole,) = find_holes(Vh, Th)
+    assert 100 < hole.edges <= DP_MAX_EDGES
+    triangle = Th[hole.rows % len(Th)]
+    normal = np.cross(Vh[triangle[:, 1]] - Vh[triangle[:, 0]], Vh[triangle[:, 2]] - Vh[triangle[:, 0]])
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    expected = hole.vertices[_minimum_weight_triangulation(Vh[hole.vertices], normal, None)]
+    out = fill_holes_arrays(Vh, Th, density=0)
+    assert len(out.vertices) == len(Vh) and boundary_edge_count(out.triangles, len(Vh)) == 0
+    key = lambda tris: sorted(map(tuple, np.sort(tris, axis=1).tolist()))
+    assert key(out.triangles[len(Th) :]) == key(expected)
+
+
 def test_long_and_short_loops_together():
     # a loop above DP_MAX_EDGES (cut by chords) filled with two short ones of one length (one batch of
     # the dynamic programme): each closed and valid, as each filled alone
-    V, T = icosphere(5)
+    V, T = icosphere(6)
     h = mean_edge(V, T)
-    Vh, Th, _ = cut_disk(V, T, 0, 20 * h)
+    Vh, Th, _ = cut_disk(V, T, 0, 40 * h)
     for target in ([0, 0, -1.0], [1.0, 0, 0]):
         centre = int(np.argmin(np.linalg.norm(Vh - np.array(target), axis=1)))
         Vh, Th, _ = cut_disk(Vh, Th, centre, 1.5 * h)
