@@ -38,6 +38,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ._errors import O3DLSMeshWarning
+from ._normals import area_weighted_normals
 from ._o3d import MeshData, open3d, read_mesh
 from ._validate import as_choice, as_count, as_positive_float, as_real_vector
 from .metrics import common_frame, distances_to_surface, raycasting_scene
@@ -154,19 +155,6 @@ def _layout(arrays, view_direction, up, width, height, margin, align):
     return np.concatenate(all_vertices), np.concatenate(all_triangles), camera
 
 
-def _vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
-    corners = vertices[triangles]
-    face = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-    # Area-weighted: the cross product's length is twice the triangle area.
-    corner_of = triangles.ravel()
-    face3 = np.repeat(face, 3, axis=0)
-    normals = np.stack(
-        [np.bincount(corner_of, weights=face3[:, c], minlength=len(vertices)) for c in range(3)], axis=1
-    )
-    length = np.linalg.norm(normals, axis=1, keepdims=True)
-    return normals / np.where(length > 0, length, 1.0)
-
-
 def _raycast(vertices, triangles, colors, camera, width, height, background) -> np.ndarray:
     o3d = open3d()
     scene = raycasting_scene(vertices, triangles)
@@ -183,7 +171,8 @@ def _raycast(vertices, triangles, colors, camera, width, height, background) -> 
     uv = hit["primitive_uvs"].numpy()[found].astype(np.float64)
     bary = np.stack([1.0 - uv[:, 0] - uv[:, 1], uv[:, 0], uv[:, 1]], axis=1)
     corners = triangles[ids]
-    normals = _vertex_normals(vertices, triangles)
+    normals = area_weighted_normals(vertices, triangles)
+    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), np.finfo(float).tiny)
     normal = np.einsum("pk,pkc->pc", bary, normals[corners])
     normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
     color = np.einsum("pk,pkc->pc", bary, colors[corners])

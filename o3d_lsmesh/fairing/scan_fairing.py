@@ -41,6 +41,7 @@ import scipy.sparse as sp
 from scipy.sparse import csgraph
 
 from .._collapsed import collapsed_triangles
+from .._normals import area_weighted_normals
 from .._progress import stages
 from .._solvers import SPDSolver, gram_matrix, solver_backend
 from ..topology import edge_structure, ring_pattern
@@ -244,7 +245,7 @@ def measured_noise(
     smooth = vertices.copy()
     smooth[referenced] += ring_sum[referenced] / d1[referenced, None] - vertices[referenced]
     smooth_square = np.einsum("ij,ij->i", smooth, smooth)
-    normal = _vertex_normals(smooth, triangles)
+    normal = area_weighted_normals(smooth, triangles)
     inner_rows = np.flatnonzero(inner)
     # per inner vertex: 1-ring umbrella along the normal, and the 1-ring's mean squared distance
     sub, x = smooth[inner_rows], vertices[inner_rows]
@@ -303,18 +304,6 @@ def _mean_square_distances(
 #: of at least ``_NOISE_BLOCK`` rows.
 _NOISE_BLOCKS = 16
 _NOISE_BLOCK = 1 << 16
-
-
-def _vertex_normals(positions: np.ndarray, triangles: np.ndarray) -> np.ndarray:
-    """Area-weighted vertex normals (unnormalized), ``(n, 3)``."""
-    n = len(positions)
-    p0 = positions[triangles[:, 0]]
-    face = np.cross(positions[triangles[:, 1]] - p0, positions[triangles[:, 2]] - p0)
-    del p0
-    normal = np.empty((n, 3))
-    for k in range(3):
-        normal[:, k] = sum(np.bincount(triangles[:, i], face[:, k], minlength=n) for i in range(3))
-    return normal
 
 
 def scan_likeness(rim_ratio: float, boundary_fraction: float) -> float:
