@@ -511,7 +511,12 @@ NOTES = """\
   distance in h, horse / camel): the triangulation alone, ours (``density=0``) 0.99 / 0.53 against
   CGAL's ``triangulate_hole`` 1.20 / 0.61; CGAL refined 1.18 / 0.61, faired 0.355 / 0.432; ours faired
   0.366 / 0.470. Our programme is the closer start; the gap is in the refinement and fairing, hole by
-  hole in both directions (horse 15h #2: ours 0.39, CGAL 0.85; #6: 0.63 against 0.37).
+  hole in both directions (horse 15h #2: ours 0.39, CGAL 0.85; #6: 0.63 against 0.37). The better of
+  our two continuity-2 solves (uniform, cotangent) per hole would give 0.339 / 0.469 on the 15h holes
+  (horse 0.96x CGAL), but no cheap choice found it: freeing the loop vertices as well (rings shifted
+  by one, same patch) and keeping the weights that predict them better picks the cotangent solve
+  nearly always (whole error; horse 15h stays 0.366) or, by the error along the surface normal,
+  picks worse than always cotangent (horse 15h 0.414, camel 0.472).
 * Quality: ours is closer to the truth than CGAL continuity 2 on the horse at every size (ratios about
   0.85 / 0.95 / 0.62) and on camel 15h (0.80), but not on camel 2.5h (1.73) and 6h (1.21). Both the
   weights and the refined patch matter (next point): our fairing on CGAL's own patch (its
