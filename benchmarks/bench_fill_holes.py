@@ -501,7 +501,7 @@ NOTES = """\
   (CGAL's crossing fills are closer on camel 15h #9: 0.57 h with 158 crossing pairs against our 0.90
   without): camel 6h 0.82, camel 15h 1.01. Loops above ``DP_MAX_EDGES`` are cut by a
   straight chord that the surface does not follow: with the switch at 100 edges the horse's 15h holes
-  (105-126 edges) were 1.56x (0.554 h against 0.355), one programme over the whole loop (switch at 200)
+  (88-126 edges, six above 100) were 1.56x (0.554 h against 0.355), one programme over the whole loop (switch at 200)
   1.03x. Sweeps on those 20 large holes (density 0.8 / 1.25, continuity 1, uniform weights) move the
   horse and the camel in opposite directions (horse 1.17 / 1.07 / 1.32 / 1.50, camel 1.01 / 0.97 /
   1.08 / 1.11): the default stays. The one hole ours leaves open (camel 2.5h #8) lies where
