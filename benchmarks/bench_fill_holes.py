@@ -184,19 +184,19 @@ class Clock:
         self._sum_wall = self._sum_cpu = 0.0
 
 
-def ours(V, T):
+def ours(V, T, repeat=REPEAT):
     clock = Clock()
-    for _ in range(REPEAT):
+    for _ in range(repeat):
         with clock:
             out = fill_holes_arrays(V, T)
         clock.lap()
     return (out.vertices, out.triangles), clock
 
 
-def ours_prebuilt(V, T):
+def ours_prebuilt(V, T, repeat=REPEAT):
     """Timed like CGAL: the whole-mesh analysis (HoleFiller, as CGAL's Polyhedron_3) is built before the clock."""
     clock = Clock()
-    for _ in range(REPEAT):
+    for _ in range(repeat):
         filler = HoleFiller(V, T)
         with clock:
             out = filler.fill()
@@ -205,7 +205,7 @@ def ours_prebuilt(V, T):
 
 
 def cgal(continuity):
-    def run(V, T):
+    def run(V, T, repeat=REPEAT):
         from CGAL import CGAL_Polygon_mesh_processing as pmp
         from CGAL.CGAL_Polyhedron_3 import Polyhedron_3
 
@@ -213,7 +213,7 @@ def cgal(continuity):
         with tempfile.TemporaryDirectory() as folder:
             path = os.path.join(folder, "in.off")
             write_off(path, V, T)
-            for _ in range(REPEAT):  # a fresh polyhedron each time (its build is not timed)
+            for _ in range(repeat):  # a fresh polyhedron each time (its build is not timed)
                 P = Polyhedron_3(path)
                 with quiet_stderr():
                     for _ in range(10_000):
@@ -441,54 +441,49 @@ def cases():
 
 def several_holes(tools):
     """Mean distance, smallest angle and validity of ours and CGAL on ``STUDY_HOLES`` seeded holes per size."""
-    global REPEAT
-    repeat, REPEAT = REPEAT, 1  # quality only: one fill each
     per_hole, summary = [], []
-    try:
-        groups = {}
-        for k, case in disk_cases(STUDY_SEED, STUDY_HOLES):
-            row = {label: measure(case, tool(*case["holed"])[0], 0.0, 1) for label, tool in tools}
-            groups.setdefault(case["name"], []).append(row)
-            per_hole.append(
-                [f"{case['name']} #{k}"]
-                + [row[t][key] for t, _ in tools for key in ("mean dist (h)", "min angle (deg)")]
-                + [row[tools[0][0]]["boundary edges"], row[tools[0][0]]["self-int. pairs"]]
-                + [row[tools[1][0]]["self-int. pairs"]]
-            )
-            print(" | ".join(str(x if not isinstance(x, float) else f"{x:.4g}") for x in per_hole[-1]))
-        for group, rows in groups.items():
-            ours_rows = [r[tools[0][0]] for r in rows]
-            peer_rows = [r[tools[1][0]] for r in rows]
-            closed = [r["boundary edges"] == 0 for r in ours_rows]
-            filled = [c for c in range(len(rows)) if closed[c]]
-            a = np.array([ours_rows[c]["mean dist (h)"] for c in filled])
-            b = np.array([peer_rows[c]["mean dist (h)"] for c in filled])
-            angle_a = np.array([ours_rows[c]["min angle (deg)"] for c in filled])
-            angle_b = np.array([peer_rows[c]["min angle (deg)"] for c in filled])
-            # a fill that crosses the mesh is not a valid fill: the like-for-like ratio is over the
-            # holes both tools fill without crossings
-            valid = [
-                i
-                for i, c in enumerate(filled)
-                if ours_rows[c]["self-int. pairs"] == 0 and peer_rows[c]["self-int. pairs"] == 0
+    groups = {}
+    for k, case in disk_cases(STUDY_SEED, STUDY_HOLES):
+        # quality only: one fill each
+        row = {label: measure(case, tool(*case["holed"], repeat=1)[0], 0.0, 1) for label, tool in tools}
+        groups.setdefault(case["name"], []).append(row)
+        per_hole.append(
+            [f"{case['name']} #{k}"]
+            + [row[t][key] for t, _ in tools for key in ("mean dist (h)", "min angle (deg)")]
+            + [row[tools[0][0]]["boundary edges"], row[tools[0][0]]["self-int. pairs"]]
+            + [row[tools[1][0]]["self-int. pairs"]]
+        )
+        print(" | ".join(str(x if not isinstance(x, float) else f"{x:.4g}") for x in per_hole[-1]))
+    for group, rows in groups.items():
+        ours_rows = [r[tools[0][0]] for r in rows]
+        peer_rows = [r[tools[1][0]] for r in rows]
+        filled = [c for c, r in enumerate(ours_rows) if r["boundary edges"] == 0]
+        a = np.array([ours_rows[c]["mean dist (h)"] for c in filled])
+        b = np.array([peer_rows[c]["mean dist (h)"] for c in filled])
+        angle_a = np.array([ours_rows[c]["min angle (deg)"] for c in filled])
+        angle_b = np.array([peer_rows[c]["min angle (deg)"] for c in filled])
+        # a fill that crosses the mesh is not a valid fill: the like-for-like ratio is over the
+        # holes both tools fill without crossings
+        valid = [
+            i
+            for i, c in enumerate(filled)
+            if ours_rows[c]["self-int. pairs"] == 0 and peer_rows[c]["self-int. pairs"] == 0
+        ]
+        summary.append(
+            [
+                group,
+                f"{len(filled)} / {len(rows)}",
+                float(a.mean()),
+                float(b.mean()),
+                float(a.mean() / b.mean()),
+                float(np.median(a / b)),
+                f"{a[valid].mean() / b[valid].mean():.4g} ({len(valid)})",
+                f"{int((a <= b).sum())} / {len(a)}",
+                f"{int((angle_a >= angle_b).sum())} / {len(a)}",
+                sum(r["self-int. pairs"] > 0 for r in ours_rows),
+                sum(r["self-int. pairs"] > 0 for r in peer_rows),
             ]
-            summary.append(
-                [
-                    group,
-                    f"{sum(closed)} / {len(rows)}",
-                    float(a.mean()),
-                    float(b.mean()),
-                    float(a.mean() / b.mean()),
-                    float(np.median(a / b)),
-                    f"{a[valid].mean() / b[valid].mean():.4g} ({len(valid)})",
-                    f"{int((a <= b).sum())} / {len(a)}",
-                    f"{int((angle_a >= angle_b).sum())} / {len(a)}",
-                    sum(r["self-int. pairs"] > 0 for r in ours_rows),
-                    sum(r["self-int. pairs"] > 0 for r in peer_rows),
-                ]
-            )
-    finally:
-        REPEAT = repeat
+        )
     return per_hole, summary
 
 
@@ -499,24 +494,24 @@ NOTES = """\
   means 0.80 / 0.93 horse, 0.93 / 0.04 camel, the last from one CGAL fill 55 h off; medians 0.77-0.98)
   and 1.03x / 1.09x on the 15h holes (medians 1.07 / 1.04). Over the holes both fill without crossings
   (CGAL's crossing fills are closer on camel 15h #9: 0.57 h with 158 crossing pairs against our 0.90
-  without): camel 6h 0.82, camel 15h 1.01. Loops above ``DP_MAX_EDGES`` are cut by a
-  straight chord that the surface does not follow: with the switch at 100 edges the horse's 15h holes
-  (88-126 edges, six above 100) were 1.56x (0.554 h against 0.355), one programme over the whole loop (switch at 200)
+  without): camel 6h 0.82, camel 15h 1.01. Loops above ``DP_MAX_EDGES`` are cut by a straight chord that
+  the surface does not follow: with the switch at 100 edges the horse's 15h holes (88-126 edges, six
+  above 100) were 1.56x (0.554 h against 0.355), one programme over the whole loop (switch at 200)
   1.03x. Sweeps on those 20 large holes (density 0.8 / 1.25, continuity 1, uniform weights) move the
-  horse and the camel in opposite directions (horse 1.17 / 1.07 / 1.32 / 1.50, camel 1.01 / 0.97 /
-  1.08 / 1.11): the default stays. The one hole ours leaves open (camel 2.5h #8) lies where
-  ``camel.ply`` itself self-intersects (20 crossing pairs, 2.7 h from the hole's centre): every
-  candidate fill crosses the mesh there, and CGAL's adds 5 crossing pairs. CGAL's fills add crossings
-  on 6 of the 60 holes, ours on none. Where the large holes' gap comes from (the 20 15h holes, mean
-  distance in h, horse / camel): the triangulation alone, ours (``density=0``) 0.99 / 0.53 against
-  CGAL's ``triangulate_hole`` 1.20 / 0.61; CGAL refined 1.18 / 0.61, faired 0.355 / 0.432; ours faired
-  0.366 / 0.470. Our programme is the closer start; the gap is in the refinement and fairing, hole by
-  hole in both directions (horse 15h #2: ours 0.39, CGAL 0.85; #6: 0.63 against 0.37). The better of
-  our two continuity-2 solves (uniform, cotangent) per hole would give 0.339 / 0.469 on the 15h holes
-  (horse 0.96x CGAL), but no cheap choice found it: freeing the loop vertices as well (rings shifted
-  by one, same patch) and keeping the weights that predict them better picks the cotangent solve
-  nearly always (whole error; horse 15h stays 0.366) or, by the error along the surface normal,
-  picks worse than always cotangent (horse 15h 0.414, camel 0.472).
+  horse and the camel in opposite directions (horse 1.17 / 1.07 / 1.32 / 1.50, camel 1.01 / 0.97 / 1.08
+  / 1.11): the default stays. The one hole ours leaves open (camel 2.5h #8) lies where ``camel.ply``
+  itself self-intersects (20 crossing pairs, 2.7 h from the hole's centre): every candidate fill crosses
+  the mesh there, and CGAL's adds 5 crossing pairs. CGAL's fills add crossings on 6 of the 60 holes,
+  ours on none. Where the large holes' gap comes from (the 20 15h holes, mean distance in h, horse /
+  camel): the triangulation alone, ours (``density=0``) 0.99 / 0.53 against CGAL's ``triangulate_hole``
+  1.20 / 0.61; CGAL refined 1.18 / 0.61, faired 0.355 / 0.432; ours faired 0.366 / 0.470. Our programme
+  is the closer start; the gap is in the refinement and fairing, hole by hole in both directions (horse
+  15h #2: ours 0.39, CGAL 0.85; #6: 0.63 against 0.37). The better of our two continuity-2 solves
+  (uniform, cotangent) per hole would give 0.339 / 0.469 on the 15h holes (horse 0.96x CGAL), but no
+  cheap choice found it: freeing the loop vertices as well (rings shifted by one, same patch) and
+  keeping the weights that predict them better picks the cotangent solve nearly always (whole error;
+  horse 15h stays 0.366) or, by the error along the surface normal, picks worse than always cotangent
+  (horse 15h 0.414, camel 0.472).
 * Quality: ours is closer to the truth than CGAL continuity 2 on the horse at every size (ratios about
   0.85 / 0.95 / 0.62) and on camel 15h (0.80), but not on camel 2.5h (1.73) and 6h (1.21). Both the
   weights and the refined patch matter (next point): our fairing on CGAL's own patch (its
