@@ -840,12 +840,12 @@ def _csr_parts(matrix: sp.spmatrix) -> tuple[np.ndarray, np.ndarray, np.ndarray]
 
 
 class _VCycle:
-    """One V-cycle of :func:`_aggregation_levels`' levels and coarse LU on a whole ``(n, k)`` block: a forward Gauss-Seidel sweep before the coarse correction
-    and a backward one after (symmetric, as CG needs; 135 CG iterations against 102 with symmetric sweeps
-    on both sides, but 10% less time, LS mesh with 2% controls at 100k vertices), each column with
-    pyamg's arithmetic (``_block_kernel``); every sweep and product streams its level's matrix once for
-    all columns, on every core (the sweeps in :func:`_sweep_blocks` blocks; the same iteration counts at
-    1M vertices as one sequential sweep).
+    """One V-cycle of :func:`_aggregation_levels`' levels and coarse LU on a whole ``(n, k)`` block: a
+    forward Gauss-Seidel sweep before the coarse correction and a backward one after (symmetric, as CG
+    needs; 135 CG iterations against 102 with symmetric sweeps on both sides, but 10% less time, LS mesh
+    with 2% controls at 100k vertices), each column with pyamg's arithmetic (``_block_kernel``); every
+    sweep and product streams its level's matrix once for all columns, on every core (the sweeps in
+    :func:`_sweep_blocks` blocks; the same iteration counts at 1M vertices as one sequential sweep).
 
     ``cycle(r)`` returns a new block; :meth:`bound` gives ``apply(r, out)`` with the levels' work blocks
     allocated once, for a solve's every iteration: fresh blocks cost a page fault per page on every

@@ -205,6 +205,12 @@ class NoiseEstimate(NamedTuple):
     detail: float
 
 
+#: :func:`measured_noise` forms the 2-ring pattern in this many blocks of rows (a 16th of it at a time),
+#: of at least ``_NOISE_BLOCK`` rows.
+_NOISE_BLOCKS = 16
+_NOISE_BLOCK = 1 << 16
+
+
 def measured_noise(
     vertices: np.ndarray, triangles: np.ndarray, *, structure: _Structure | None = None
 ) -> NoiseEstimate:
@@ -298,12 +304,6 @@ def _mean_square_distances(
     return (square_sums - 2.0 * np.einsum("ij,ij->i", sums, points)) / counts + np.einsum(
         "ij,ij->i", points, points
     )
-
-
-#: :func:`measured_noise` forms the 2-ring pattern in this many blocks of rows (a 16th of it at a time),
-#: of at least ``_NOISE_BLOCK`` rows.
-_NOISE_BLOCKS = 16
-_NOISE_BLOCK = 1 << 16
 
 
 def scan_likeness(rim_ratio: float, boundary_fraction: float) -> float:
