@@ -575,16 +575,35 @@ class SPDSolver:
             self._pending.clear()
             self._factorize(analyze=False)
 
-    def solve(self, rhs: Any, *, x0: Any = None) -> np.ndarray:
+    def solve(self, rhs: Any, *, x0: Any = None, atol: Any = None) -> np.ndarray:
         """Solve ``A x = rhs`` for an ``(n,)`` or ``(n, k)`` right-hand side, all columns at once.
 
         ``x0`` (same shape) is a starting guess for the iterative backend (current
         positions when fairing, a prolongated coarse solution); direct backends ignore it.
+        ``atol`` (a number or one per column) lets the iterative backend stop a column
+        at an absolute residual as well, ``||b_j - A x_j|| <= max(tol ||b_j||, atol_j)``
+        (SciPy's ``cg`` rule): a correction solved to the accuracy of the solve it
+        corrects. Direct backends ignore it.
         """
         b = np.asarray(rhs, dtype=np.float64)
         n = self.shape[0]
         if b.shape[:1] != (n,) or b.ndim > 2:
             raise ValueError(f"rhs must have shape ({n},) or ({n}, k), got {b.shape}")
+        columns = 1 if b.ndim == 1 else b.shape[1]
+        if atol is not None:
+            given = np.asarray(atol)
+            if given.dtype.kind not in "iuf":
+                raise TypeError(f"atol must be a number or an array of numbers, got {atol!r}")
+            if (
+                given.ndim > 1
+                or given.size not in (1, columns)
+                or not (np.isfinite(given) & (given >= 0)).all()
+            ):
+                raise ValueError(
+                    f"atol must be one non-negative finite number or {columns} of them (one per column), "
+                    f"got {atol!r}"
+                )
+            atol = np.broadcast_to(given.astype(np.float64).ravel(), (columns,))
         if not np.isfinite(b).all():
             first = int(np.flatnonzero(~np.isfinite(b).ravel())[0])
             raise ValueError(
@@ -593,7 +612,7 @@ class SPDSolver:
             )
         with self._lock:
             if self.backend == "iterative":
-                x = self._solve_iterative(b, x0)
+                x = self._solve_iterative(b, x0, atol)
             elif self.backend == "cholmod":
                 x = self._factor(b)
             else:
@@ -605,7 +624,7 @@ class SPDSolver:
             )
         return np.asarray(x)
 
-    def _solve_iterative(self, b: np.ndarray, x0: Any) -> np.ndarray:
+    def _solve_iterative(self, b: np.ndarray, x0: Any, atol: np.ndarray | None) -> np.ndarray:
         if x0 is not None:
             x0 = np.asarray(x0, dtype=np.float64)
             if x0.shape != b.shape:
@@ -627,6 +646,7 @@ class SPDSolver:
             x0 if order is None or x0 is None else x0[order],
             self._factor,
             tol=self.tol,
+            atol=atol,
             max_iterations=self.max_iterations,
             progress=self.progress,
         )
@@ -910,10 +930,12 @@ def _block_cg(
     tol: float,
     max_iterations: int,
     progress: bool,
+    atol: np.ndarray | None = None,
 ) -> tuple[np.ndarray, int, float]:
     """Preconditioned conjugate gradients on every column of ``b`` at once (one sparse product per step).
 
-    Independent CG runs sharing the matrix passes; column ``j`` stops when ``||r_j|| <= tol ||b_j||``.
+    Independent CG runs sharing the matrix passes; column ``j`` stops when
+    ``||r_j|| <= max(tol ||b_j||, atol_j)`` (``atol`` (k,), default none).
     Returns the solution, the iteration count and the largest relative residual.
     """
     from . import _block_kernel  # compiled by the package's build: imported where used
@@ -933,6 +955,8 @@ def _block_cg(
         R[:, worse] = B[:, worse]
     relative = np.linalg.norm(R, axis=0) / scale
     relative[norms == 0] = 0.0
+    # each column's stopping point as a relative residual
+    limit = np.full(B.shape[1], tol) if atol is None else np.maximum(tol, np.asarray(atol) / scale)
     if norms.size and not (norms > 0).any():
         return (np.zeros_like(b), 0, 0.0)
     # the residual shows in the bar; its total (the iteration cap) shrinks to the count reached on success
@@ -949,7 +973,7 @@ def _block_cg(
     rz = _block_kernel.column_dots(R, Z)
     iteration = 0
     try:
-        while relative.max(initial=0.0) > tol:
+        while (relative > limit).any():
             if iteration >= max_iterations:
                 raise ConvergenceError(
                     f"conjugate gradients reached relative residual {relative.max():.3g} after {iteration} "
@@ -957,7 +981,7 @@ def _block_cg(
                 )
             _block_kernel.block_product(*parts, P, Q)
             pq = _block_kernel.column_dots(P, Q)
-            active = relative > tol
+            active = relative > limit
             if (pq[active] <= 0).any():
                 raise SingularSystemError(
                     "matrix must be positive definite: conjugate gradients met a direction of non-positive "

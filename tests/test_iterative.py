@@ -133,6 +133,37 @@ def test_warm_start_needs_fewer_iterations_and_tolerance_is_honoured():
     assert residual.max() <= DEFAULT_TOLERANCE * 1.0001
 
 
+def test_an_absolute_tolerance_stops_each_column_at_its_own_residual():
+    # SciPy's cg rule ||b_j - A x_j|| <= max(tol ||b_j||, atol_j), checked with the matrix itself
+    V, F = grid(60, 60, z=lambda x, y: np.sin(4 * x) * y)
+    controls = np.arange(0, 3600, 53)
+    system = LSMeshSolver((V, F), controls, solver="iterative")
+    solver, matrix = system._solver, system._solver.matrix
+    rhs = np.zeros((3600, 3))
+    rhs[controls] = V[controls]
+    solver.solve(rhs)
+    full = solver.iterations
+    atol = np.array([1e-4, 1e-6, 0.0]) * np.linalg.norm(rhs, axis=0)
+    x = solver.solve(rhs, atol=atol)
+    residual = np.linalg.norm(rhs - matrix @ x, axis=0)
+    assert (residual <= np.maximum(DEFAULT_TOLERANCE * np.linalg.norm(rhs, axis=0), atol) * 1.0001).all()
+    assert residual[2] <= DEFAULT_TOLERANCE * np.linalg.norm(rhs[:, 2]) * 1.0001  # atol 0: tol alone
+    loose = solver.solve(rhs, atol=1e-4 * np.linalg.norm(rhs, axis=0).max())  # one number for all
+    assert solver.iterations < full
+    assert (np.linalg.norm(rhs - matrix @ loose, axis=0) <= 1e-4 * np.linalg.norm(rhs, axis=0).max()).all()
+    # direct backends solve exactly and ignore it
+    direct = SPDSolver(matrix, backend="scipy")
+    np.testing.assert_array_equal(direct.solve(rhs, atol=1.0), direct.solve(rhs))
+    with pytest.raises(ValueError, match=r"atol must be one non-negative finite number or 3 of them"):
+        solver.solve(rhs, atol=[1.0, 2.0])
+    with pytest.raises(ValueError, match=r"atol must be one non-negative finite number"):
+        solver.solve(rhs, atol=-1.0)
+    with pytest.raises(ValueError, match=r"atol must be one non-negative finite number"):
+        solver.solve(rhs, atol=[np.nan, 0.0, 0.0])
+    with pytest.raises(TypeError, match=r"atol must be a number or an array of numbers, got 'loose'"):
+        solver.solve(rhs, atol="loose")
+
+
 def test_a_start_worse_than_zero_is_dropped_per_column():
     V, F = grid(40, 40, z=lambda x, y: np.sin(4 * x) * y)
     controls = np.arange(0, 1600, 37)

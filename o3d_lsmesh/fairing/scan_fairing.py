@@ -722,9 +722,12 @@ class ScanFairingSolver(_Penalized):
 
     def filter(self, positions0: np.ndarray) -> np.ndarray:
         """``S X0``: the minimizer of the energy for targets ``X0``, ``(n, 3)`` (unreferenced rows kept)."""
+        return self._filter(self.normal_rhs(positions0), positions0)
+
+    def _filter(self, rhs: np.ndarray, positions0: np.ndarray, atol: np.ndarray | None = None) -> np.ndarray:
         # the iterative path starts from the targets (the scan, close to its faired self); a start
         # worse than zero is dropped per column by the gateway; direct solvers ignore it
-        out = self._solver.solve(self.normal_rhs(positions0), x0=positions0)
+        out = self._solver.solve(rhs, x0=positions0, atol=atol)
         unused = ~self.referenced
         out[unused] = positions0[unused]
         return out
@@ -735,14 +738,24 @@ class ScanFairingSolver(_Penalized):
         """``number_of_iterations`` filter passes (targets re-taken each time), then the twicing step.
 
         ``twice`` is the twicing weight ``t`` of ``X = X1 + t S (X0 - X1)``
-        (``True`` is 1, ``False`` 0: no second back-substitution).
+        (``True`` is 1, ``False`` 0: no second back-substitution). On the
+        iterative path the twicing solve stops at the absolute residual the
+        last filter pass reached (``tol ||b||`` of its right-hand side): its
+        right-hand side is some 1000 times smaller, and solving the correction
+        to a finer accuracy than the filter it corrects buys nothing (1.4M
+        vertices: 14 against 10 CG iterations, the result within 1e-7 of the
+        bounding box).
         """
         positions = np.array(positions0, dtype=np.float64)
+        accuracy = None
         for _ in range(number_of_iterations):
-            positions = self.filter(positions)
+            rhs = self.normal_rhs(positions)
+            accuracy = self._solver.tol * np.linalg.norm(rhs, axis=0)
+            positions = self._filter(rhs, positions)
         weight = float(twice)
         if weight and number_of_iterations:
-            positions = positions + weight * self.filter(positions0 - positions)
+            rest = positions0 - positions
+            positions = positions + weight * self._filter(self.normal_rhs(rest), rest, accuracy)
         return positions
 
 
