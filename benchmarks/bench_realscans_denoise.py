@@ -344,9 +344,10 @@ of wall time at load 1-2 (its OpenMP threads use both cores). The run before CG 
 the lightly loaded machine is the fair measure, and the target (5x) was not met at either size
 then. With CG from 100k vertices the 1.4M ratio depends on the machine more than on the code:
 3.2-3.7 in the first runs (load 1-2), 5.29 and 5.27 on an idle machine on 2026-12-02, and on
-2026-12-03 (another machine, Open3D 2.6-3.0 s there against 1.6-2.0 s) 5.04 before the twicing
-solve's absolute stop and 4.51 after (table at the top; CPU 5.9 and 5.3): at the 5x line, not
-clearly under it; not met at 40k."""
+2026-12-03 (another machine, Open3D 2.0-3.2 s there against 1.6-2.0 s) 5.04 before the twicing
+solve's absolute stop and 4.51, 5.16 and 4.95 after in three runs (CPU 5.9 before; 5.3, 5.9 and 5.7
+after; the last is the table at the top): at the 5x line, not clearly under it; not met at 40k
+(7.1-8.9 wall, 6.2-7.5 CPU)."""
 
 
 def speed_rows(results):

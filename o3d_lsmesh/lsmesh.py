@@ -230,8 +230,15 @@ class LSMeshSystem:
             positions = as_positions(
                 constraint_vertex_positions, k, name="constraint_vertex_positions", limit=True
             )
+        if self._hard_first is not None:
+            self._fixed_positions(positions[: len(self._hard)])  # rows naming one vertex must agree
+        # solved about the controls' centroid (an LS mesh moves with its controls: L 1 = 0): the iterative
+        # path's relative residual then measures the shape, not the distance to the origin (a scan in
+        # world coordinates, 1e6 sizes away, lost 1% of its size)
+        centre = positions.mean(axis=0) if len(positions) else np.zeros(3)
+        original, positions = positions, positions - centre
         hard_pos, soft_pos = positions[: len(self._hard)], positions[len(self._hard) :]
-        fixed = hard_pos if self._hard_first is None else self._fixed_positions(hard_pos)
+        fixed = hard_pos if self._hard_first is None else hard_pos[self._hard_first]
         rhs = np.zeros((self._unknowns, 3))
         if self.interpolate:
             rhs += self._rhs_hard @ fixed
@@ -243,7 +250,7 @@ class LSMeshSystem:
         # approximates (a fifth fewer CG iterations at 200k vertices); a direct solve needs no start
         start = None
         if self._solver.backend == "iterative":
-            start = self._vertices if self._free is None else self._vertices[self._free]
+            start = (self._vertices if self._free is None else self._vertices[self._free]) - centre
         solution = self._solver.solve(rhs, x0=start)
         if self._updated if refine is None else refine:
             reduced_soft = self._reduce(self._soft)
@@ -256,11 +263,12 @@ class LSMeshSystem:
                 residual, reduced_soft, (self._soft_weights**2)[:, None] * (soft_pos - solution[reduced_soft])
             )
             solution = solution + self._solver.solve(residual)
+        solution += centre
         if not self.interpolate:
             return solution
         result = np.zeros((self._n, 3))
         result[self._free] = solution
-        result[self._hard] = hard_pos
+        result[self._hard] = original[: len(self._hard)]  # the given positions, not shifted and back
         return result
 
     def _fixed_positions(self, hard_pos: np.ndarray) -> np.ndarray:
@@ -609,11 +617,13 @@ def reconstruct_geometry(
         A = L_unknown[rows]
         B = L[rows][:, known]
         normal = (A.T @ A).tocsc()
-        rhs = -(A.T @ (B @ data.vertices[known]))
+        # about the known vertices' centroid, as in LSMeshSystem.solve (the relative residual of CG)
+        centre = data.vertices[known].mean(axis=0) if len(known) else np.zeros(3)
+        rhs = -(A.T @ (B @ (data.vertices[known] - centre)))
         factor = SPDSolver(
             normal, backend=solver_backend(solver), tol=DEFAULT_TOLERANCE if tol is None else tol
         )
         begin("solve")
         vertices = data.vertices.copy()
-        vertices[unknown] = factor.solve(rhs)
+        vertices[unknown] = factor.solve(rhs) + centre
     return new_mesh(data, vertices)

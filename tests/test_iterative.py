@@ -164,6 +164,37 @@ def test_an_absolute_tolerance_stops_each_column_at_its_own_residual():
         solver.solve(rhs, atol="loose")
 
 
+@pytest.mark.parametrize("offset", [1e4, 1e6])
+def test_a_mesh_far_from_the_origin_is_solved_as_accurately_as_at_it(offset):
+    # a scan in world coordinates: every solve is translation-equivariant, so the iterative result of
+    # the moved mesh, moved back, must equal the direct solve of the mesh at the origin (the reference:
+    # a factorization, whose accuracy does not depend on a residual criterion)
+    V, F = grid(50, 40, z=lambda x, y: 0.2 * np.sin(3 * x) * np.cos(2 * y))
+    V = V + np.random.default_rng(8).normal(0, 0.01, V.shape)
+    bound = 1e-8 * np.ptp(V)
+    far = V + offset
+
+    def coordinates(result):  # array input gives (vertices, triangles) back
+        return np.asarray(result[0])
+
+    def moved_back(result):
+        return coordinates(result) - offset
+
+    for method in ("scan", "global"):
+        direct = coordinates(constrained_fairing((V, F), method=method))
+        iterative = moved_back(constrained_fairing((far, F), method=method, solver="iterative"))
+        np.testing.assert_allclose(iterative, direct, atol=bound, err_msg=method)
+    controls = np.arange(0, len(V), 17)
+    for interpolate in (False, True):
+        direct = coordinates(ls_mesh((V, F), controls, interpolate=interpolate))
+        iterative = moved_back(ls_mesh((far, F), controls, interpolate=interpolate, solver="iterative"))
+        np.testing.assert_allclose(iterative, direct, atol=bound, err_msg=f"interpolate={interpolate}")
+    unknown = np.arange(0, len(V), 5)
+    direct = coordinates(reconstruct_geometry((V, F), unknown))
+    iterative = moved_back(reconstruct_geometry((far, F), unknown, solver="iterative"))
+    np.testing.assert_allclose(iterative, direct, atol=bound)
+
+
 def test_a_start_worse_than_zero_is_dropped_per_column():
     V, F = grid(40, 40, z=lambda x, y: np.sin(4 * x) * y)
     controls = np.arange(0, 1600, 37)

@@ -559,9 +559,12 @@ class GlobalSolver:
         out = np.array(positions, dtype=np.float64)
         if self._solver is None:
             return out
-        rhs = self._H.T @ (self._H @ positions0[self.free])  # mu H^T H X0
+        # solved about the targets' centroid (the energy is translation-invariant): the iterative path's
+        # relative residual then measures the shape, not the distance to the origin
+        centre = positions0[self.free].mean(axis=0)
+        rhs = self._H.T @ (self._H @ (positions0[self.free] - centre))  # mu H^T H X0
         if self._pull is not None:
-            rhs -= self._pull @ out[self.known]
+            rhs -= self._pull @ (out[self.known] - centre)
         # the iterative path starts from the current positions (direct solvers ignore x0)
-        out[self.free] = self._solver.solve(rhs, x0=out[self.free])
+        out[self.free] = self._solver.solve(rhs, x0=out[self.free] - centre) + centre
         return out
