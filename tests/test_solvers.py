@@ -217,9 +217,15 @@ def test_overflowing_weights_raise_naming_weights():
         ValueError, match="constraint_vertex_positions must have coordinates of magnitude at most"
     ):
         solver.solve(np.full((3, 3), 1e300))
-    # within the limit, the weighted right-hand side (weights**2 * positions) overflows: named too
+    # within the limit, the weighted right-hand side (weights**2 * positions, about the controls'
+    # centroid) overflows: named too
     with pytest.raises(ValueError, match="constraint_vertex_positions must be small enough"):
-        solver.solve(np.full((3, 3), 1e29))
+        solver.solve(1e29 * np.eye(3))
+    # controls all at one point are that point's translation: the LS mesh is the point itself (L 1 = 0),
+    # whatever the weights, with nothing to overflow
+    np.testing.assert_array_equal(
+        solver.solve(np.full((3, 3), 1e29)), np.full((len(moved.vertices), 3), 1e29)
+    )
 
 
 def test_encoding_weight_checked():
