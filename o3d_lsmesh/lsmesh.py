@@ -230,15 +230,18 @@ class LSMeshSystem:
             positions = as_positions(
                 constraint_vertex_positions, k, name="constraint_vertex_positions", limit=True
             )
-        if self._hard_first is not None:
-            self._fixed_positions(positions[: len(self._hard)])  # rows naming one vertex must agree
         # solved about the controls' centroid (an LS mesh moves with its controls: L 1 = 0): the iterative
         # path's relative residual then measures the shape, not the distance to the origin (a scan in
         # world coordinates, 1e6 sizes away, lost 1% of its size)
         centre = positions.mean(axis=0) if len(positions) else np.zeros(3)
         original, positions = positions, positions - centre
         hard_pos, soft_pos = positions[: len(self._hard)], positions[len(self._hard) :]
-        fixed = hard_pos if self._hard_first is None else hard_pos[self._hard_first]
+        # checked on the given rows, so that a disagreement is reported in the caller's coordinates
+        fixed = (
+            hard_pos
+            if self._hard_first is None
+            else self._fixed_positions(original[: len(self._hard)]) - centre
+        )
         rhs = np.zeros((self._unknowns, 3))
         if self.interpolate:
             rhs += self._rhs_hard @ fixed

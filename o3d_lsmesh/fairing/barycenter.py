@@ -561,8 +561,9 @@ class GlobalSolver:
             return out
         # solved about the targets' centroid (the energy is translation-invariant): the iterative path's
         # relative residual then measures the shape, not the distance to the origin
-        centre = positions0[self.free].mean(axis=0)
-        rhs = self._H.T @ (self._H @ (positions0[self.free] - centre))  # mu H^T H X0
+        targets = positions0[self.free]
+        centre = targets.mean(axis=0)
+        rhs = self._H.T @ (self._H @ (targets - centre))  # mu H^T H X0
         if self._pull is not None:
             rhs -= self._pull @ (out[self.known] - centre)
         # the iterative path starts from the current positions (direct solvers ignore x0)
