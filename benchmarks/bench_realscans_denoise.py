@@ -267,87 +267,61 @@ def multiresolution_rows(results, reference, levels=(1, 2, 3)):
     return rows
 
 
-#: where the time goes (per-step timings 2026-12-01 at load 5-8 on 2 cores; the iterative solves and the last run 2026-12-02)
+#: where the time goes (2026-12-03, idle 2-core machine; the history below it from 2026-12-01 and -02)
 SPEED_PROFILE = """\
-Since 2026-12-02 the default solves meshes of 100k vertices and more by block
-conjugate gradients through the solver gateway (its smoothed-aggregation AMG V-cycle, the 1-ring's
-reverse Cuthill-McKee numbering, the first solve started from the scan) and factors below. Whole calls,
-wall / CPU seconds, medians, idle machine:
+Since 2026-12-03 the default solves meshes of 5k vertices and more by block conjugate gradients
+preconditioned by the matrix's zero-fill incomplete Cholesky factor (IC(0), compiled,
+``SPDSolver(preconditioner="ic0")``), started from the scan, each of its two solves stopped at 1e-4 of
+its starting residual (``SPDSolver(reduction=)``, ``SCAN_REDUCTION``); below 5k, and with
+``solver="cholmod"``, one sparse Cholesky factorization. The system's data term sits on every vertex,
+so its condition number does not grow with the size: 6-11 iterations a solve from a few hundred
+vertices to 1.4M. On the ten scans the result is within 5e-5 to 1.3e-4 mean edge lengths RMS (at most
+6e-3 at a vertex) of the factor's, and every quality figure of realscans_denoise.md is the factor's
+(mean distances within 0.001 um; degenerate rim triangles 213-374 against 216-380).
 
-| mesh | vertices | Open3D (5 its) | factor (CHOLMOD) | CG to 1e-9 | max difference / bbox |
+Earlier runs of this section on 2026-12-03 (medians of interleaved trials, wall / CPU ratio to
+Open3D's Laplacian at its best count; the table above is a later run): 40k 3.55 / 4.23, 3.26 / 3.84,
+3.39 / 4.03 and, in a slower hour (Open3D 0.068-0.083 s against 0.054-0.061 s), 3.99 / 5.01; 1.4M
+2.69 / 2.57, 2.59 / 2.50, 2.76 / 2.63, 2.56 / 2.43. Our CPU time exceeds our wall time: the block
+kernel's products and CG updates run on both cores from 20k rows, the triangular solves on one.
+
+Whole calls, medians of 5-7, milliseconds (seconds at 1.4M), factor against IC(0)-CG:
+
+| mesh | vertices | factor ms | IC(0)-CG ms | CG / factor | CG iterations, first solve |
 |---|---|---|---|---|---|
-| decimated bun000 | 2,954 | | 0.019 | 0.023 | |
-| decimated bun000 | 11,099 | | 0.074 | 0.074 | |
-| decimated bun000 | 21,276 | | 0.176 | 0.213 | |
-| the ten scans, 30k-40k each | 30,144-39,977 | | 0.19-0.41 | 0.22-0.44 (CG / factor 0.78-1.36, median 1.03) | |
-| bun000 | 39,977 | 0.021 / 0.026 | 0.298 / 0.469 | 0.258 / 0.355 | 6.2e-9 |
-| 3 scans merged | 109,922 | 0.082 / 0.118 | 0.799 / 1.27 | 0.721 / 1.27 | 3.3e-8 |
-| 10 scans merged | 359,556 | 0.281 / 0.390 | 2.81 / 4.19 | 2.30 / 3.80 | 5.9e-8 |
-| 10 scans merged, subdivided | 1,404,335 | 2.70 / 3.51 | 16.7 / 25.6 | 9.53 / 14.1 | 6.6e-8 |
-| 300 defect soups (tests/defect_meshes.py), 500-vertex pieces | 150,300 | | 0.49 | 1.22 | 7.3e-9 |
+| decimated bun000 | 752 | 7 | 6 | 0.84 | 3 |
+| decimated bun000 | 3,597 | 31 | 17 | 0.57 | 3 |
+| decimated bun000 | 6,893 | 57 | 33 | 0.58 | 3 |
+| decimated bun000 | 13,149 | 120 | 61 | 0.51 | 3 |
+| the ten scans | 30,144-39,977 | 254-449 | 137-196 | 0.41-0.54 | 7-11 |
+| 300 defect soups (tests/defect_meshes.py), 500-vertex pieces | 150,300 | 478 | 564 | 1.18 | 7 |
+| 10 scans merged, subdivided | 1,404,335 | 21.5 s | 8.0-8.1 s (AMG V-cycle: 12.3-12.8 s) | 0.37 | |
 
-At 1.4M: 11 + 14 CG iterations (11 + 10 since 2026-12-03: the twicing solve stops at the absolute
-residual the first reached, 1.0-1.3 s less, the result within 9.1e-8 of the bounding box of the
-1e-9 solve's); structure and parameters 1.3 s, assembly 2.4 s (K^T K by the gateway's
-compiled product on both cores: 0.3 s less than SciPy's), AMG levels 2.1 s, CG 6 s. Before the solver
-work of issue #16 (renumbering, compiled products, work blocks kept per solve) CG was slower than the
-factor at every size (the measurements at the end of this section). Below about 100k the two are level
-and the factor, exact, is kept; so it is where no connected component reaches 30k vertices (the
-factor's cost grows like each component's size to the power 1.5: a soup of small pieces factors fast).
+A soup of small pieces is the one case where the factor stays faster (its cost grows like each
+component's size to the power 1.5); the rule that sent such soups to it (a component of 30k or more)
+was dropped with the AMG path: 18% on an artificial soup against one more pass over the mesh on
+every call.
 
-Ours below 100k is one sparse Cholesky factorization of the 2-ring (bi-Laplacian pattern) normal matrix and two
-back-substitutions; everything else is a few linear passes over the edges. CPU seconds per step (40k:
-medians of 6-20 runs; 1.4M: one run each, interleaved), before and after the analysis from the 1-ring
-pattern with COLAMD:
+Measured on the way (40k, bun000, one solve from the scan to 1e-3 of its start unless said):
+Jacobi-preconditioned CG 36 iterations (0.17 s), symmetric Gauss-Seidel 15 (0.14 s), the AMG V-cycle
+4 iterations but a 0.10 s set-up (0.22 s with pyamg's import), IC(0) 5-6 (0.06-0.07 s, set-up 0.02 s);
+the triangular solves with the mirrored values (both passes read rows, sums in registers) 1.3-1.9 ms
+against 4.0 ms for the scatter form of the backward pass. Stopping rule, ten scans, IC(0): 1e-2 of the
+start moves the mean distance by up to 0.45 um, 3e-3 by 0.11, 1e-3 by 0.03, 1e-4 by 0.007 (the RMS
+difference to the factor 2e-4 to 6e-4 mean edge lengths). At 1.4M the AMG V-cycle with the same
+stopping rule took 12.3-12.8 s against IC(0)'s 8.0-8.1 s (Open3D 3.0-3.2 s in those runs). The block
+kernel's loops run on both cores from 20k rows (was 100k): 40k 0.26 -> 0.22-0.24 s.
 
-| step | before, 40k | after, 40k | before, 1.4M | after, 1.4M |
-|---|---|---|---|---|
-| validation + edge structure + parameters | 0.02 | 0.02 | 0.7 | 0.7 |
-| assembly (K^T K + 1-ring terms, lower triangle) | 0.03-0.04 | 0.03-0.04 | 2.1-3.1 | 2.1-3.1 |
-| analysis | 0.04-0.05 (AMD on the matrix) | 0.05-0.06 (COLAMD on the 1-ring) | 3.1 | 3.4 |
-| factor flops | 0.90 GFlop | 0.76 GFlop | 51.4 GFlop | 46.5 GFlop |
-| factorization, one BLAS thread | 0.21-0.23 | 0.19-0.21 | 15.1 | 13.7 |
-| factorization, two threads (wall) | | | 31.0 | 19.8 |
-| two solves | 0.04 | 0.04 | 1.5-2.1 | 1.5-2.1 |
-
-CHOLMOD analyzes K^T K from the pattern of K (the 1-ring, 7 entries a row against the matrix's 18.5;
-K^T K's pattern holds the whole matrix's) and factors the matrix with that analysis. Results equal to
-round-off: max |new - old| at most 3.7e-15 of the bounding box on the ten scans, 3.9e-15 at 1.4M; the
-quality figures below are unchanged. Interleaved whole runs on the loaded machine, 40k: CPU min 0.351 s
-against 0.375 s (ten trials); the wall ratio moves more with the load than with the change (40k: 7.5 before,
-5.7 in this run; 1.4M: 5.9 before, 3.6 in this run, where Open3D's OpenMP threads took 2.5x their CPU
-time in wall time).
-
-Measured and not taken (40k unless said): METIS on the matrix, 0.665 GFlop but a 0.26-0.30 s analysis
-(1.4M: 35.2 GFlop, 15 s analysis); METIS or nested dissection of the 1-ring graph applied to the 2-ring
-matrix, 6.3 and 5.7 GFlop (one-layer separators leave the halves coupled through 2-ring entries);
-geometric nested dissection (coordinate bisection, two-layer separators, in numpy), 1.15 GFlop, and at
-1.4M a 72 s factorization (the merged scans overlap in space); the quasi-definite mixed system
-[[mu H^T W H + lambda G, K^T], [K, -I]] (1-ring blocks, 2n unknowns), 0.71 GFlop with AMD but only
-CHOLMOD's simplicial LDL^T takes an indefinite matrix: 0.44 s against 0.23 s; the whole matrix as one
-product [M^T, I] [M; Z] (no sum, no sort): 28 against 31 ms at 40k but 3.0 against 2.1 s at 1.4M (the
-concatenations); one BLAS thread: 40k median wall 0.86 against 0.88 s (CPU 0.32 against 0.49, load 7),
-1.4M factorization 29.5 against 19.8 s wall: the default thread count kept. Earlier (see git history):
-CG preconditioned by the factor of the 1-ring part (0.40 against 0.33 s), simplicial factor (2-3x
-slower). Measured 2026-12-02 (load 1-2), the system solved by block conjugate gradients started from
-the scan, on ``_block_cg`` of the solver gateway: with a Jacobi preconditioner 57 + 94 iterations to a
-relative residual of 1e-6 (0.76 s of CPU, max difference to the direct solve 2.0e-5 of the bounding
-box); with the gateway's smoothed-aggregation AMG V-cycle 10 + 15 iterations (0.63 s against CHOLMOD's
-0.69 s of CPU in the same process, 0.63 s against 0.43 s wall; max difference 2.0e-5), at 1.4M 12 + 20
-iterations, 24.7 s against 27.7 s of CPU but 30.7 s against 20.5 s wall: no faster than the
-factorization, and 1e-7 costs 25% more. At 40k the floor is the factorization (0.76 GFlop, about
-0.2 s on one core) and its analysis (0.05 s), while Open3D's 5 Laplacian iterations take 0.03-0.06 s
-of wall time at load 1-2 (its OpenMP threads use both cores). The run before CG took over, at load 1-2:
-40k wall ratio 5.2-15.6 (median 7.9), CPU ratio 4.6-14.3 (median 7.1); 1.4M wall
-4.7-7.4 (median 5.2), CPU 5.3-7.5 (median 5.5). The earlier runs on the loaded machine (load 5-8) gave
-5.7 and 3.6 in wall time, because there Open3D's wall time was 2.5x its CPU time and ours 1.5-1.7x:
-the lightly loaded machine is the fair measure, and the target (5x) was not met at either size
-then. With CG from 100k vertices the 1.4M ratio depends on the machine more than on the code:
-3.2-3.7 in the first runs (load 1-2), 5.29 and 5.27 on an idle machine on 2026-12-02, and on
-2026-12-03 (another machine, Open3D 2.0-3.2 s there against 1.6-2.0 s) 5.04 before the twicing
-solve's absolute stop and 4.51, 5.16 and 4.95 after in three runs (CPU 5.9 before; 5.3, 5.9 and 5.7
-after; the last is the table at the top): at the 5x line, not clearly under it; not met at 40k
-(7.1-8.9 wall, 6.2-7.5 CPU)."""
+History. Until 2026-12-02 the default factored below 100k vertices (a component of 30k or more) and
+ran CG with the AMG V-cycle to a relative residual of 1e-9 above. At 40k the factorization (0.76
+GFlop after COLAMD on the 1-ring pattern, about 0.2 s on one core) and its analysis (0.05 s) were the
+floor: 7.1-8.9x Open3D's five Laplacian iterations in wall time (6.2-7.5x CPU), and 4.5-5.2x at 1.4M
+(21 V-cycles of ~0.2 s, AMG set-up 2.7 s). Measured then and not taken: METIS on the matrix (0.665
+GFlop but a 0.26-0.30 s analysis), METIS or nested dissection of the 1-ring graph applied to the
+2-ring matrix (6.3 and 5.7 GFlop), geometric nested dissection (1.15 GFlop; 72 s at 1.4M), the
+quasi-definite mixed system [[mu H^T W H + lambda G, K^T], [K, -I]] (simplicial LDL^T 0.44 s against
+0.23 s), one BLAS thread, CG preconditioned by the factor of the 1-ring part (0.40 against 0.33 s),
+fewer candidate sweeps in the AMG set-up (no iteration change)."""
 
 
 def speed_rows(results):

@@ -3,9 +3,10 @@
 :class:`SPDSolver` factors a sparse SPD matrix once, solves ``(n, k)``
 right-hand sides in one call, refactors reusing the symbolic analysis and
 applies rank-k updates (SciPy's ``splu`` without scikit-sparse or with
-``O3D_LSMESH_NO_CHOLMOD=1``; AMG-preconditioned conjugate gradients above a
-memory budget). :func:`check_constant_modes` and :func:`check_finite` keep an
-ill-posed system from giving a wrong answer silently.
+``O3D_LSMESH_NO_CHOLMOD=1``; conjugate gradients preconditioned by an AMG
+V-cycle or an incomplete Cholesky factor above a memory budget).
+:func:`check_constant_modes` and :func:`check_finite` keep an ill-posed system
+from giving a wrong answer silently.
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ __all__ = [
     "BACKENDS",
     "DEFAULT_TOLERANCE",
     "ORDERINGS",
+    "PRECONDITIONERS",
     "SOLVERS",
     "SPDSolver",
     "check_constant_modes",
@@ -47,6 +49,8 @@ ORDERINGS = ("default", "nesdis", "metis", "amd", "colamd", "natural")
 SOLVERS = ("auto", "cholmod", "iterative")
 #: What :class:`SPDSolver` takes as ``backend=``.
 BACKENDS = ("auto", "cholmod", "scipy", "iterative")
+#: What :class:`SPDSolver` takes as ``preconditioner=`` for its iterative path.
+PRECONDITIONERS = ("amg", "ic0")
 #: Relative residual ``||b - A x|| / ||b||`` at which conjugate gradients stop, per column: within
 #: 3e-8 of CHOLMOD's solution at 200k and 1M vertices (LS meshes, 2% controls; 1e-10: 3e-9 for 20%
 #: more iterations; 1e-8: 3e-7), well inside the documented 1e-6.
@@ -337,8 +341,15 @@ class SPDSolver:
         ``"auto"``: the iterative path when :func:`estimate_factor_bytes` exceeds
         ``memory_budget``, else CHOLMOD, else SciPy's ``splu`` (with an
         :class:`O3DLSMeshWarning` unless ``O3D_LSMESH_NO_CHOLMOD=1`` chose it).
-        ``"iterative"``: conjugate gradients preconditioned by a smoothed-aggregation
-        AMG V-cycle (``pyamg``), to relative residual ``tol``.
+        ``"iterative"``: conjugate gradients, to relative residual ``tol``.
+    preconditioner : {"amg", "ic0"}
+        The iterative path's: a smoothed-aggregation AMG V-cycle (``pyamg``'s
+        aggregation; iterations independent of the size on Laplacian-like
+        systems), or the zero-fill incomplete Cholesky factor (set up in one
+        pass, no hierarchy: cheaper where the system is well conditioned
+        whatever its size, e.g. a data term on every vertex). Where rows of
+        thousands of entries would make that pass superlinear (a UV sphere's
+        poles), ``"ic0"`` runs the V-cycle (:data:`IC_WORK`).
     lower : bool
         ``matrix`` holds only its lower triangle.
     ordering : {"default", "nesdis", "metis", "amd", "colamd", "natural"}
@@ -363,6 +374,11 @@ class SPDSolver:
         Relative residual ``||b - A x|| / ||b||`` per column at which the
         iterative path stops (default :data:`DEFAULT_TOLERANCE`, which matches
         CHOLMOD to about 3e-8 relative at 1M vertices).
+    reduction : float, optional
+        The iterative path also stops a column once its residual is this
+        fraction of the residual at its start ``x0``, ``||b - A x|| <=
+        reduction ||b - A x0||``: the accuracy of a correction to ``x0`` (a
+        filter's displacement of the positions it starts from), not of ``x``.
     max_iterations : int
         Conjugate-gradient iterations before :class:`ConvergenceError`.
     progress : bool
@@ -396,6 +412,7 @@ class SPDSolver:
         matrix: Any = None,
         *,
         backend: str = "auto",
+        preconditioner: str = "amg",
         ordering: str = "default",
         lower: bool = False,
         product_of: Any = None,
@@ -403,13 +420,19 @@ class SPDSolver:
         locality_of: Any = None,
         memory_budget: int | None = None,
         tol: float = DEFAULT_TOLERANCE,
+        reduction: float | None = None,
         max_iterations: int = 5000,
         progress: bool = False,
     ) -> None:
         backend = as_choice(backend, BACKENDS, name="backend")
+        self.preconditioner = as_choice(preconditioner, PRECONDITIONERS, name="preconditioner")
         self.ordering = as_choice(ordering, ORDERINGS, name="ordering")
         if _not_a(tol, (int, float, np.floating)) or not 0 < tol < 1:
             raise ValueError(f"tol must be a number in (0, 1), got {tol!r}")
+        if reduction is not None and _not_a(reduction, (int, float, np.floating)):
+            raise TypeError(f"reduction must be None or a number in (0, 1), got {reduction!r}")
+        if reduction is not None and not 0 < reduction < 1:
+            raise ValueError(f"reduction must be None or a number in (0, 1), got {reduction!r}")
         if _not_a(max_iterations, (int, np.integer)) or max_iterations < 1:
             raise ValueError(f"max_iterations must be a positive integer, got {max_iterations!r}")
         if memory_budget is not None and (
@@ -417,6 +440,7 @@ class SPDSolver:
         ):
             raise ValueError(f"memory_budget must be a non-negative number of bytes, got {memory_budget!r}")
         self.tol = float(tol)
+        self.reduction = None if reduction is None else float(reduction)
         self.max_iterations = int(max_iterations)
         self.progress = bool(progress)
         self.memory_budget = memory_budget
@@ -575,35 +599,16 @@ class SPDSolver:
             self._pending.clear()
             self._factorize(analyze=False)
 
-    def solve(self, rhs: Any, *, x0: Any = None, atol: Any = None) -> np.ndarray:
+    def solve(self, rhs: Any, *, x0: Any = None) -> np.ndarray:
         """Solve ``A x = rhs`` for an ``(n,)`` or ``(n, k)`` right-hand side, all columns at once.
 
         ``x0`` (same shape) is a starting guess for the iterative backend (current
         positions when fairing, a prolongated coarse solution); direct backends ignore it.
-        ``atol`` (a number or one per column) lets the iterative backend stop a column
-        at an absolute residual as well, ``||b_j - A x_j|| <= max(tol ||b_j||, atol_j)``
-        (SciPy's ``cg`` rule): a correction solved to the accuracy of the solve it
-        corrects. Direct backends ignore it.
         """
         b = np.asarray(rhs, dtype=np.float64)
         n = self.shape[0]
         if b.shape[:1] != (n,) or b.ndim > 2:
             raise ValueError(f"rhs must have shape ({n},) or ({n}, k), got {b.shape}")
-        columns = 1 if b.ndim == 1 else b.shape[1]
-        if atol is not None:
-            given = np.asarray(atol)
-            if given.dtype.kind not in "iuf":
-                raise TypeError(f"atol must be a number or an array of numbers, got {atol!r}")
-            if (
-                given.ndim > 1
-                or given.size not in (1, columns)
-                or not (np.isfinite(given) & (given >= 0)).all()
-            ):
-                raise ValueError(
-                    f"atol must be one non-negative finite number or {columns} of them (one per column), "
-                    f"got {atol!r}"
-                )
-            atol = np.broadcast_to(given.astype(np.float64).ravel(), (columns,))
         if not np.isfinite(b).all():
             first = int(np.flatnonzero(~np.isfinite(b).ravel())[0])
             raise ValueError(
@@ -612,7 +617,7 @@ class SPDSolver:
             )
         with self._lock:
             if self.backend == "iterative":
-                x = self._solve_iterative(b, x0, atol)
+                x = self._solve_iterative(b, x0)
             elif self.backend == "cholmod":
                 x = self._factor(b)
             else:
@@ -624,21 +629,24 @@ class SPDSolver:
             )
         return np.asarray(x)
 
-    def _solve_iterative(self, b: np.ndarray, x0: Any, atol: np.ndarray | None) -> np.ndarray:
+    def _solve_iterative(self, b: np.ndarray, x0: Any) -> np.ndarray:
         if x0 is not None:
             x0 = np.asarray(x0, dtype=np.float64)
             if x0.shape != b.shape:
                 raise ValueError(f"x0 must have the shape of rhs {b.shape}, got {x0.shape}")
             if not np.isfinite(x0).all():
                 raise ValueError("x0 must be finite")
-        if self._factor is None:  # the AMG preconditioner, built at the first solve
+        if self._factor is None:  # the preconditioner, built at the first solve
             self._flush()
             assert self._matrix is not None  # the iterative path takes matrices only
             if not self._ordered:
                 self._order, self._ordered = _locality_order(self._matrix), True
                 if self._order is not None:
                     self._matrix = _renumbered(self._matrix, self._order)
-            self._factor = _amg_preconditioner(self._matrix)
+            if self.preconditioner == "ic0" and _incomplete_cholesky_is_linear(self._matrix):
+                self._factor = _IncompleteCholesky(self._matrix)
+            else:
+                self._factor = _amg_preconditioner(self._matrix)
         order = self._order
         x, self.iterations, self.residual = _block_cg(
             _csr_view(self._matrix),
@@ -646,7 +654,7 @@ class SPDSolver:
             x0 if order is None or x0 is None else x0[order],
             self._factor,
             tol=self.tol,
-            atol=atol,
+            reduction=self.reduction,
             max_iterations=self.max_iterations,
             progress=self.progress,
         )
@@ -684,12 +692,14 @@ class SPDSolver:
             self._flush()
             return {
                 "backend": self.backend,
+                "preconditioner": self.preconditioner,
                 "ordering": self.ordering,
                 "matrix": self._matrix if self._order is None else self.matrix,
                 "lower": self._lower,
                 "product_of": self._product_of,
                 "pattern_of": self._pattern_of,
                 "tol": self.tol,
+                "reduction": self.reduction,
                 "max_iterations": self.max_iterations,
                 "progress": self.progress,
                 "memory_budget": self.memory_budget,
@@ -701,12 +711,14 @@ class SPDSolver:
             self,
             state["matrix"] if product_of is None else None,
             backend="scipy" if state["backend"] == "cholmod" and _cholmod is None else state["backend"],
+            preconditioner=state.get("preconditioner", "amg"),
             ordering=state.get("ordering", "default"),
             lower=state.get("lower", False),
             product_of=product_of,
             pattern_of=state.get("pattern_of"),
             memory_budget=state.get("memory_budget"),
             tol=state.get("tol", DEFAULT_TOLERANCE),
+            reduction=state.get("reduction"),
             max_iterations=state.get("max_iterations", 5000),
             progress=state.get("progress", False),
         )
@@ -754,6 +766,68 @@ def _amg_preconditioner(matrix: sp.spmatrix) -> Any:
         dense = _splu_spd(csr.tocsc())
         return lambda r: dense.solve(np.asfortranarray(r))
     return _VCycle(*_aggregation_levels(csr))
+
+
+#: ``preconditioner="ic0"`` factors only where IC(0)'s set-up, at most ``sum_i (row i's entries)^2 / 4``
+#: multiply-adds, is within this many times the matrix's entries (4.7-4.9 on the scans and the
+#: subdivided camel and feline); past it (a UV sphere's poles: 32 at 200k vertices, 66 at 1M, rows of
+#: 1265 and 2829 entries) it grows like the largest valence cubed (1.0 s of set-up at 200k, the whole
+#: default 105 s against the V-cycle's 41 s at 4M) and the AMG V-cycle runs.
+IC_WORK = 16
+
+
+def _incomplete_cholesky_is_linear(matrix: sp.spmatrix) -> bool:
+    # row i's lower part times its upper part bounds the products its column takes part in
+    lengths = np.diff(_csr_view(matrix).indptr).astype(np.float64)
+    return float(np.dot(lengths, lengths)) / 4.0 <= IC_WORK * max(matrix.nnz, 1)
+
+
+#: IC(0) retries a breakdown with the diagonal scaled by ``1 + shift``, the shift starting here and
+#: doubling (nine of the ten raw scans' systems factor unshifted; ear_back's takes 1e-3).
+FIRST_SHIFT = 1e-3
+#: Shifts tried after the first breakdown (the last scales the diagonal by about 500: far past
+#: diagonal dominance, where IC(0) cannot break down).
+MAX_SHIFTS = 20
+
+
+class _IncompleteCholesky:
+    """``r -> (L L^T)^-1 r`` for the zero-fill incomplete Cholesky factor ``L`` of a symmetric matrix.
+
+    One linear pass to set up (the compiled :func:`~o3d_lsmesh._block_kernel.incomplete_cholesky`),
+    two triangular passes a solve, every column at once. A breakdown (a non-positive pivot, which
+    IC(0) may meet on an SPD matrix that is not an M-matrix, e.g. a thin-plate normal matrix) is
+    retried on the diagonal scaled by ``1 + shift`` (Manteuffel 1980), the shift doubling from
+    :data:`FIRST_SHIFT`. Holds arrays only: threads may share it.
+    """
+
+    def __init__(self, matrix: sp.spmatrix) -> None:
+        from . import _block_kernel  # compiled by the package's build: imported where used
+
+        self._parts = _csr_parts(_csr_view(matrix))
+        shifts = [0.0] + [FIRST_SHIFT * 2.0**i for i in range(MAX_SHIFTS)]
+        try:
+            for shift in shifts:
+                values, diagonal, failed = _block_kernel.incomplete_cholesky(*self._parts, shift)
+                if values is not None:
+                    break
+        except ValueError as error:  # no diagonal entry, or an unsymmetric pattern
+            raise SingularSystemError(f"matrix must be symmetric positive definite: {error}") from error
+        if values is None or diagonal is None:
+            raise SingularSystemError(
+                f"matrix must be positive definite: its incomplete Cholesky factor breaks down at row {failed} "
+                f"with the diagonal scaled by {1.0 + shift:.3g}"
+            )
+        self.shift = shift
+        self._values, self._diagonal = values, diagonal
+
+    def bound(self, k: int) -> Any:
+        """``apply(r, out)`` on C-ordered ``(n, k)`` blocks (no work block to keep)."""
+        from . import _block_kernel  # compiled by the package's build: imported where used
+
+        indptr, indices, _ = self._parts
+        return lambda r, out: _block_kernel.incomplete_cholesky_solve(
+            indptr, indices, self._values, self._diagonal, r, out
+        )
 
 
 #: The AMG hierarchy stops coarsening at this many unknowns and solves them with a sparse LU.
@@ -930,12 +1004,13 @@ def _block_cg(
     tol: float,
     max_iterations: int,
     progress: bool,
-    atol: np.ndarray | None = None,
+    reduction: float | None = None,
 ) -> tuple[np.ndarray, int, float]:
     """Preconditioned conjugate gradients on every column of ``b`` at once (one sparse product per step).
 
     Independent CG runs sharing the matrix passes; column ``j`` stops when
-    ``||r_j|| <= max(tol ||b_j||, atol_j)`` (``atol`` (k,), default none).
+    ``||r_j|| <= max(tol ||b_j||, reduction ||r_j^0||)`` (``r^0`` at the start, ``reduction``
+    default none).
     Returns the solution, the iteration count and the largest relative residual.
     """
     from . import _block_kernel  # compiled by the package's build: imported where used
@@ -956,7 +1031,7 @@ def _block_cg(
     relative = np.linalg.norm(R, axis=0) / scale
     relative[norms == 0] = 0.0
     # each column's stopping point as a relative residual
-    limit = np.full(B.shape[1], tol) if atol is None else np.maximum(tol, np.asarray(atol) / scale)
+    limit = np.full(B.shape[1], tol) if reduction is None else np.maximum(tol, reduction * relative)
     if norms.size and not (norms > 0).any():
         return (np.zeros_like(b), 0, 0.0)
     # the residual shows in the bar; its total (the iteration cap) shrinks to the count reached on success

@@ -397,3 +397,88 @@ def test_add_subset_equals_the_scipy_sum_where_the_pattern_holds_the_term(n, ind
     assert got[1, 1] == big[1, 1] + 1.0 and abs(got - big).sum() == 1.0
     with pytest.raises(ValueError, match=rf"sub_indptr must have {n + 1} entries, got 3"):
         _block_kernel.add_subset(*parts, np.zeros(3, dtype=index), big.indices.astype(index), big.data)
+
+
+def _grid_laplacian_plus_mass(nx, ny, seed, index):
+    # an SPD matrix with a 2D mesh's pattern and fill outside it under Cholesky: random positive edge
+    # weights w_ij, A = sum_ij w_ij (e_i - e_j)(e_i - e_j)^T + diag(c), c > 0
+    rng = np.random.default_rng(seed)
+    ids = np.arange(nx * ny).reshape(ny, nx)
+    pairs = np.vstack(
+        [
+            np.c_[ids[:, :-1].ravel(), ids[:, 1:].ravel()],
+            np.c_[ids[:-1, :].ravel(), ids[1:, :].ravel()],
+            np.c_[ids[:-1, :-1].ravel(), ids[1:, 1:].ravel()],
+        ]
+    )
+    w = rng.uniform(0.5, 2.0, len(pairs))
+    n = nx * ny
+    off = sp.coo_matrix((-w, (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+    off = off + off.T
+    A = (off - sp.diags(np.asarray(off.sum(axis=1)).ravel()) + sp.diags(rng.uniform(0.1, 1.0, n))).tocsr()
+    A.sort_indices()
+    A.indices, A.indptr = A.indices.astype(index), A.indptr.astype(index)
+    return A
+
+
+@pytest.mark.parametrize("index", [np.int32, np.int64])
+@pytest.mark.parametrize("shift", [0.0, 0.25])
+def test_incomplete_cholesky_reproduces_the_matrix_on_its_pattern(index, shift):
+    # IC(0)'s defining property, checked densely: L lower triangular on A's pattern, (L L^T)_ij = a_ij on
+    # the pattern (the diagonal times 1 + shift); the value at (j, i) is l_ij's mirror
+    A = _grid_laplacian_plus_mass(7, 6, seed=3, index=index)
+    values, diagonal, failed = _block_kernel.incomplete_cholesky(A.indptr, A.indices, A.data, shift)
+    assert failed == -1
+    n = A.shape[0]
+    rows = np.repeat(np.arange(n), np.diff(A.indptr))
+    lower = A.indices <= rows
+    L = np.zeros((n, n))
+    L[rows[lower], A.indices[lower]] = values[lower]
+    mirrored = np.zeros((n, n))
+    mirrored[A.indices[~lower], rows[~lower]] = values[~lower]
+    np.testing.assert_array_equal(mirrored, np.tril(L, -1))
+    np.testing.assert_array_equal(A.indices[diagonal], np.arange(n))
+    dense = A.toarray() + shift * np.diag(A.diagonal())
+    product = L @ L.T
+    on = A.toarray() != 0
+    np.testing.assert_allclose(product[on], dense[on], rtol=1e-12, atol=1e-12)
+    assert np.abs(product[~on]).max() > 1e-3  # the fill IC(0) drops: L L^T is not A
+
+
+def test_incomplete_cholesky_of_a_tridiagonal_matrix_is_its_cholesky_factor():
+    n = 30
+    rng = np.random.default_rng(5)
+    off = -rng.uniform(0.1, 1.0, n - 1)
+    dense = np.diag(off, 1) + np.diag(off, -1) + np.diag(2.5 + rng.uniform(0, 1, n))
+    A = sp.csr_matrix(dense)
+    values, diagonal, _ = _block_kernel.incomplete_cholesky(A.indptr, A.indices, A.data, 0.0)
+    want = np.linalg.cholesky(dense)
+    np.testing.assert_allclose(values[diagonal], np.diag(want), rtol=1e-13)
+    np.testing.assert_allclose(values[diagonal[1:] - 1], np.diag(want, -1), rtol=1e-13)
+
+
+@pytest.mark.parametrize("k", [1, 2, 3])
+def test_incomplete_cholesky_solve_is_two_dense_triangular_solves(k):
+    from scipy.linalg import solve_triangular
+
+    A = _grid_laplacian_plus_mass(6, 5, seed=1, index=np.int32)
+    values, diagonal, _ = _block_kernel.incomplete_cholesky(A.indptr, A.indices, A.data, 0.0)
+    n = A.shape[0]
+    rows = np.repeat(np.arange(n), np.diff(A.indptr))
+    lower = A.indices <= rows
+    L = np.zeros((n, n))
+    L[rows[lower], A.indices[lower]] = values[lower]
+    r = np.random.default_rng(k).standard_normal((n, k))
+    z = np.full((n, k), np.nan)
+    _block_kernel.incomplete_cholesky_solve(A.indptr, A.indices, values, diagonal, r, z)
+    want = solve_triangular(L.T, solve_triangular(L, r, lower=True), lower=False)
+    np.testing.assert_allclose(z, want, rtol=1e-12, atol=1e-12)
+
+
+def test_incomplete_cholesky_refuses_a_missing_diagonal_and_an_unsymmetric_pattern():
+    A = sp.csr_matrix(np.array([[2.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]))
+    with pytest.raises(ValueError, match="matrix must store every diagonal entry, row 1 has none"):
+        _block_kernel.incomplete_cholesky(A.indptr, A.indices, A.data, 0.0)
+    B = sp.csr_matrix(np.array([[2.0, 0.0, 0.0], [1.0, 2.0, 0.0], [0.0, 0.0, 1.0]]))
+    with pytest.raises(ValueError, match="matrix must have a symmetric pattern, row 1"):
+        _block_kernel.incomplete_cholesky(B.indptr, B.indices, B.data, 0.0)

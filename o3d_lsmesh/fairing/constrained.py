@@ -342,13 +342,13 @@ def constrained_fairing(
     rim's low weight collapse rim triangles (hundreds of slivers of quality
     under 0.05 per scan, none in the raw scans; see
     benchmarks/results/realscans_denoise.md); weakening the membrane at the
-    rim halves them but loses scans to the peers. Time: below 100,000
-    vertices one sparse Cholesky factorization of the bi-Laplacian-pattern
-    matrix and two back-substitutions, about 7 times Open3D's
-    ``filter_smooth_laplacian`` at its best count at 40k vertices (the
-    factorization alone is 4-10 times); from 100,000 vertices conjugate
-    gradients with an AMG V-cycle, about 3 times at 1.4M
-    (benchmarks/results/realscans_denoise_speed.md).
+    rim halves them but loses scans to the peers. Time: from 5,000 vertices
+    conjugate gradients preconditioned by the system's incomplete Cholesky
+    factor, each solve stopped at 1e-4 of its starting residual (within
+    1.3e-4 mean edge lengths RMS of the exact minimizer on the raw scans),
+    3.3-4.0 times Open3D's ``filter_smooth_laplacian`` at its best count at
+    40k vertices and 2.5-2.8 times at 1.4M; below, one sparse Cholesky
+    factorization (benchmarks/results/realscans_denoise_speed.md).
 
     The paper's operators minimize the uniform-Laplacian energy ``|K X|^2``
     under the constraint that every triangle keeps its barycenter,
@@ -443,10 +443,12 @@ def constrained_fairing(
     solver : {"auto", "cholmod", "iterative"}
         ``"scan"`` and ``"global"``: how the system is solved (see
         :class:`~o3d_lsmesh.SPDSolver`); ``"auto"`` factors it unless the factor
-        would exceed the memory budget (``"scan"``: or the mesh has 100,000
-        vertices or more, where conjugate gradients are faster than its factor),
-        then runs conjugate gradients with an AMG preconditioner, warm-started
-        from the current positions. ``"local"`` solves no system.
+        would exceed the memory budget, then runs conjugate gradients with an
+        AMG preconditioner, warm-started from the current positions.
+        ``"scan"``: from 5,000 vertices (and with ``"iterative"``) conjugate
+        gradients with the incomplete Cholesky factor, to 1e-4 of the starting
+        residual (:class:`~o3d_lsmesh.fairing.scan_fairing.ScanFairingSolver`).
+        ``"local"`` solves no system.
 
     Returns
     -------

@@ -38,7 +38,6 @@ from typing import NamedTuple
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse import csgraph
 
 from .._collapsed import collapsed_triangles
 from .._normals import area_weighted_normals
@@ -52,10 +51,10 @@ __all__ = [
     "NOISE_MU_SCALE",
     "SCAN_BOUNDARY_FRACTION",
     "SCAN_BOUNDARY_WEIGHT",
-    "SCAN_ITERATIVE_COMPONENT",
     "SCAN_ITERATIVE_VERTICES",
     "SCAN_MEMBRANE",
     "SCAN_MU",
+    "SCAN_REDUCTION",
     "SCAN_RIM_RATIO",
     "NoiseEstimate",
     "ScanFairingSolver",
@@ -92,13 +91,20 @@ NOISE_MU_SCALE = 0.8
 NOISE_MU_POWER = 2.5
 #: Range of that ``mu``.
 MU_RANGE = (3e-3, 1.0)
-#: Vertex count from which ``solver="auto"`` solves the scan energy by conjugate gradients instead of a
-#: factorization, when a connected component has ``SCAN_ITERATIVE_COMPONENT`` vertices or more: the
-#: factor's cost grows like each component's size to the power 1.5, CG's like the vertex count (measured
-#: crossovers: one 30k-40k scan level, three merged 0.9x, ten merged and subdivided 0.57x; a soup of
-#: 500-vertex pieces at 150k vertices 2.8x slower by CG; benchmarks/results/realscans_denoise_speed.md).
-SCAN_ITERATIVE_VERTICES = 100_000
-SCAN_ITERATIVE_COMPONENT = 30_000
+#: Vertex count from which ``solver="auto"`` solves the scan energy by conjugate gradients preconditioned
+#: by the matrix's incomplete Cholesky factor (IC(0)) instead of factoring it. The matrix's data term sits
+#: on every vertex, so its condition number does not grow with the mesh: 6-11 iterations a solve from a
+#: few hundred vertices to 1.4M, linear work. Measured (whole calls, medians): faster than the factor
+#: at every size, 0.65-0.86x below 7k vertices, 0.47x at 13k, 0.45-0.6x on the ten 30k-40k scans,
+#: 0.37x at 1.4M, level on a soup of 500-vertex pieces (150k); below this count the gain is a few
+#: milliseconds and the factor, exact, is kept (benchmarks/results/realscans_denoise_speed.md).
+SCAN_ITERATIVE_VERTICES = 5_000
+#: The iterative path stops each solve when its residual is this fraction of its residual at the start
+#: (the scan): the displacement is then within 5e-5 to 1.3e-4 mean edge lengths RMS of the exact
+#: minimizer's (at most 6e-3 at a vertex) on the ten raw scans, a thousand times below the noise it
+#: removes, and the mean distance to the reference within 0.001 um of the factor's (1e-3: 2e-3 to
+#: 5e-3 RMS, 0.2 at a vertex, 0.03 um).
+SCAN_REDUCTION = 1e-4
 
 
 class _Structure(NamedTuple):
@@ -618,12 +624,6 @@ def _normal_matrix(
     return normal, ring, weight
 
 
-def _largest_component(pattern: sp.spmatrix) -> int:
-    """Vertices in the largest connected component of a symmetric matrix's graph."""
-    labels = csgraph.connected_components(pattern, directed=False)[1]
-    return int(np.bincount(labels).max())
-
-
 def _lower_csc(symmetric: sp.csr_matrix) -> sp.csc_matrix:
     """The lower triangle of a symmetric canonical CSR matrix as CSC: its upper CSR triangle, reinterpreted."""
     n = symmetric.shape[0]
@@ -646,11 +646,10 @@ class ScanFairingSolver(_Penalized):
         ``mu``, ``lambda`` and the boundary triangles' ``w_t`` of the energy
         (see the module docstring).
     solver : {"auto", "cholmod", "iterative"}
-        ``"auto"``: block conjugate gradients with the gateway's AMG V-cycle,
-        warm-started from the scan, from :data:`SCAN_ITERATIVE_VERTICES`
-        vertices when a connected component has :data:`SCAN_ITERATIVE_COMPONENT`
-        or more (or where the factor would not fit the memory budget); CHOLMOD
-        otherwise.
+        ``"iterative"``: block conjugate gradients preconditioned by the
+        matrix's incomplete Cholesky factor, started from the scan, each solve
+        to :data:`SCAN_REDUCTION` of its starting residual. ``"auto"``: that
+        from :data:`SCAN_ITERATIVE_VERTICES` vertices, CHOLMOD (exact) below.
     progress : bool
         Show the iterative solves' residual in a tqdm bar.
 
@@ -661,10 +660,13 @@ class ScanFairingSolver(_Penalized):
     of :func:`scan_normal_matrix`, analyzed as ``K^T K`` from the 1-ring pattern with COLAMD
     (10-15% fewer factor flops than AMD, same analysis time; METIS's 30% fewer cost an analysis
     longer than the factor). The factor's flops grow like a component's size to the power 1.5
-    and its two solves serve one call, so on large components the iterative path (linear, to the
-    gateway's relative residual of 1e-9) is faster: 10 scans merged and subdivided, 1.4M
-    vertices, 9.5 s against 16.7 s (benchmarks/results/realscans_denoise_speed.md). The object pickles and its
-    solves are serialized by a lock.
+    and its two solves serve one call, while the data term on every vertex keeps the matrix's
+    condition number independent of the size: IC(0)-preconditioned CG takes 6-11 iterations a
+    solve at every size (linear work) and stops where its error is far below the noise removed
+    (:data:`SCAN_REDUCTION`). 40k-vertex scans: 0.14-0.27 s against 0.31-0.57 s by the factor;
+    1.4M vertices: 8.0 s against 21.5 s (the AMG V-cycle: 12.3 s)
+    (benchmarks/results/realscans_denoise_speed.md). The object pickles and its solves are
+    serialized by a lock.
     """
 
     def __init__(
@@ -691,16 +693,20 @@ class ScanFairingSolver(_Penalized):
         self.penalty = _penalty(triangles, n, np.sqrt(self.mu * weight))
         self.referenced = st.valence > 0
         if backend == "auto" and n >= SCAN_ITERATIVE_VERTICES:
-            # the factor's cost grows like each component's size to the power 1.5: a soup of small
-            # components (scan fragments) factors faster than CG solves it
-            if _largest_component(normal if ring is None else ring) >= SCAN_ITERATIVE_COMPONENT:
-                backend = "iterative"
+            backend = "iterative"
         if backend == "iterative":
             # symmetric and canonical: its CSR arrays are its CSC form (no copy); CG runs on the whole
             # matrix, numbered by the 1-ring's reverse Cuthill-McKee order (a scan's is scattered)
             whole = sp.csc_matrix((normal.data, normal.indices, normal.indptr), shape=normal.shape)
             del normal
-            self._solver = SPDSolver(whole, backend=backend, locality_of=ring, progress=progress)
+            self._solver = SPDSolver(
+                whole,
+                backend=backend,
+                preconditioner="ic0",
+                reduction=SCAN_REDUCTION,
+                locality_of=ring,
+                progress=progress,
+            )
             return
         # COLAMD on K's 1-ring pattern (see Notes): at 1.4M vertices 46.5 against 51.4 GFlop with AMD on the
         # matrix (METIS 35.2 but a 15 s analysis). The assembled lower triangle, not ``product_of`` rows: from
@@ -724,10 +730,11 @@ class ScanFairingSolver(_Penalized):
         """``S X0``: the minimizer of the energy for targets ``X0``, ``(n, 3)`` (unreferenced rows kept)."""
         return self.solve(positions0, twice=False)
 
-    def _filter(self, rhs: np.ndarray, positions0: np.ndarray, atol: np.ndarray | None = None) -> np.ndarray:
-        # the iterative path starts from the targets (the scan, close to its faired self); a start
-        # worse than zero is dropped per column by the gateway; direct solvers ignore it
-        return self._solver.solve(rhs, x0=positions0, atol=atol)
+    def _filter(self, rhs: np.ndarray, positions0: np.ndarray) -> np.ndarray:
+        # the iterative path starts from the targets (the scan, close to its faired self) and solves
+        # the displacement from them to SCAN_REDUCTION; a start worse than zero is dropped per column by
+        # the gateway; direct solvers ignore it
+        return self._solver.solve(rhs, x0=positions0)
 
     def solve(
         self, positions0: np.ndarray, *, number_of_iterations: int = 1, twice: bool | float = True
@@ -735,13 +742,7 @@ class ScanFairingSolver(_Penalized):
         """``number_of_iterations`` filter passes (targets re-taken each time), then the twicing step.
 
         ``twice`` is the twicing weight ``t`` of ``X = X1 + t S (X0 - X1)``
-        (``True`` is 1, ``False`` 0: no second back-substitution). On the
-        iterative path the twicing solve stops at the absolute residual the
-        last filter pass reached (``tol ||b||`` of its right-hand side): its
-        right-hand side is some 1000 times smaller, and solving the correction
-        to a finer accuracy than the filter it corrects buys nothing (1.4M
-        vertices: 14 against 10 CG iterations, the result within 1e-7 of the
-        bounding box).
+        (``True`` is 1, ``False`` 0: no second back-substitution).
         """
         given = np.asarray(positions0, dtype=np.float64)
         # solved about the centroid (``K 1 = 0``, the other terms are differences: ``S`` commutes with
@@ -750,15 +751,12 @@ class ScanFairingSolver(_Penalized):
         centre = given[self.referenced].mean(axis=0) if self.referenced.any() else np.zeros(3)
         targets = given - centre
         positions = targets
-        accuracy = None
         for _ in range(number_of_iterations):
-            rhs = self.normal_rhs(positions)
-            accuracy = self._solver.tol * np.linalg.norm(rhs, axis=0)
-            positions = self._filter(rhs, positions)
+            positions = self._filter(self.normal_rhs(positions), positions)
         weight = float(twice)
         if weight and number_of_iterations:
             rest = targets - positions
-            positions = positions + weight * self._filter(self.normal_rhs(rest), rest, accuracy)
+            positions = positions + weight * self._filter(self.normal_rhs(rest), rest)
         out = positions + centre
         unused = ~self.referenced
         out[unused] = given[unused]  # exactly where they were
