@@ -480,8 +480,6 @@ def ratio_interval(a, b):
     """The 95% interval of ``mean(a) / mean(b)`` over holes resampled in pairs: how far ten holes can move
     the ratio (each hole's two distances drawn together, as the same cut was filled by both)."""
     a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
-    keep = np.isfinite(a) & np.isfinite(b)
-    a, b = a[keep], b[keep]
     if len(a) < 2:
         return "-"
     pick = np.random.default_rng(STUDY_SEED).integers(0, len(a), size=(BOOTSTRAP, len(a)))
