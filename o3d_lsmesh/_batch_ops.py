@@ -20,6 +20,7 @@ killed batch never leaves a half-written output under the final name.
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import io
 import os
 import re
@@ -61,7 +62,7 @@ RESERVED = frozenset(
 #: The fields of a report record, in the order they are written.
 RECORD_FIELDS = (
     "input output status error stage op key seconds cpu_seconds worker pid "
-    "vertices_before triangles_before vertices_after triangles_after metrics"
+    "vertices_before triangles_before vertices_after triangles_after metrics files"
 ).split()
 
 
@@ -443,45 +444,77 @@ def _write_item(value: Any, path: Path) -> None:
         write_mesh(value, path)
 
 
-def write_atomic(value: Any, final: Path, *, kind: str, suffix: str) -> None:
-    """Write ``value`` to a temporary name beside ``final``, then move it into place in one step."""
+def _digest(path: Path) -> dict:
+    """Size and sha256 of a written file: what ``--resume`` checks an output against."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return {"bytes": path.stat().st_size, "sha256": digest.hexdigest()}
+
+
+def inside(path: str | os.PathLike, root: str | os.PathLike) -> bool:
+    """Whether ``path`` resolves (symbolic links followed) to a place strictly below ``root``."""
+    real, base = Path(os.path.realpath(path)), Path(os.path.realpath(root))
+    return base in real.parents
+
+
+def write_atomic(value: Any, final: Path, *, kind: str, suffix: str, root: Path) -> dict[str, dict]:
+    """Write ``value`` as ``final`` (strictly inside ``root``); return ``{path below root: size and sha256}``.
+
+    Everything is written into a hidden temporary folder beside ``final`` (the only thing this
+    removes: it holds nothing else), then moved into place file by file with ``os.replace``, so a
+    killed batch never leaves a half-written file under a final name, and a mesh format with
+    companion files (OBJ: its ``.mtl`` and textures) names them after ``final``. A new folder
+    output moves into place whole; into an existing folder, file by file: nothing already there is
+    removed, be it another run's or the user's.
+    """
+    if not inside(final, root):
+        raise ValueError(f"output {str(final)!r} does not resolve to a place inside OUTDIR {str(root)!r}")
     final.parent.mkdir(parents=True, exist_ok=True)
-    # same folder (so os.replace is atomic), same extension (Open3D picks the format from it), hidden name
-    temporary, old = final.with_name(f".{final.stem}.{uuid.uuid4().hex[:12]}.tmp{final.suffix}"), None
+    temporary = final.with_name(f".{final.name}.{uuid.uuid4().hex[:12]}.tmp")
+    temporary.mkdir()
     try:
         if kind == "files":
-            temporary.mkdir()
             for name, item in value.items():
                 _write_item(
                     item, temporary / (name if isinstance(item, (bytes, bytearray)) else name + suffix)
                 )
-            if final.exists():  # a folder cannot be replaced in one step: move the old one aside first
-                old = final.with_name(f".{final.name}.{uuid.uuid4().hex[:12]}.old")
-                os.replace(final, old)
         else:
-            _write_item(value, temporary)
-        os.replace(temporary, final)
-    except BaseException:
-        if temporary.is_dir():
-            shutil.rmtree(temporary, ignore_errors=True)
+            _write_item(value, temporary / final.name)
+        where = final if kind == "files" else final.parent
+        base = Path(os.path.relpath(where, root))
+        files = {(base / p.name).as_posix(): _digest(p) for p in sorted(temporary.iterdir())}
+        if kind == "files" and not os.path.lexists(final):
+            os.replace(temporary, final)
         else:
-            with contextlib.suppress(OSError):
-                temporary.unlink()
-        raise
-    if old is not None:
-        shutil.rmtree(old, ignore_errors=True)
+            for path in sorted(temporary.iterdir()):
+                os.replace(path, where / path.name)
+    finally:
+        shutil.rmtree(temporary, ignore_errors=True)
+    return files
+
+
+def _safe_name(part: str) -> str:
+    # '', '.' and '..' would name OUTDIR itself or its parent (#40: a file '..ply'): a visible fixed name
+    return {"": "_", ".": "_dot", "..": "_dotdot"}.get(part, part)
 
 
 def output_path(outdir: Path, relative: str, op: BatchOp, suffix: str) -> Path | None:
-    """Where the result of ``op`` on the input named ``relative`` goes (None for metrics-only ops)."""
-    stem = Path(relative).with_suffix("")
+    """Where the result of ``op`` on the input named ``relative`` goes (None for metrics-only ops).
+
+    The stem (``relative`` without its extension) names the output; a folder or stem that is
+    empty, ``.`` or ``..`` (the file ``..ply``) becomes ``_``, ``_dot`` or ``_dotdot``, so every
+    output lies strictly inside ``outdir``.
+    """
     if op.output == "none":
         return None
-    if op.output == "mesh":
-        return outdir / stem.with_name(stem.name + suffix)
-    if op.output == "bytes":
-        return outdir / stem.with_name(stem.name + op.extension)
-    return outdir / stem
+    path = Path(relative)
+    parts = [
+        _safe_name(part) for part in (*path.parent.parts, path.name[: len(path.name) - len(path.suffix)])
+    ]
+    ending = {"mesh": suffix, "bytes": op.extension}.get(op.output, "")
+    return outdir.joinpath(*parts[:-1], parts[-1] + ending)
 
 
 # --------------------------------------------------------------------------- worker set-up and the task
@@ -574,7 +607,9 @@ def run_task(
         target = output_path(Path(outdir), relative, last, suffix)
         if target is not None:
             record["stage"] = "write"
-            write_atomic(current, target, kind=last.output, suffix=suffix)
+            record["files"] = write_atomic(
+                current, target, kind=last.output, suffix=suffix, root=Path(outdir)
+            )
             record["output"] = str(target)
         record["status"], record["stage"] = "ok", None
     except Exception as error:

@@ -45,6 +45,7 @@ from ._batch_ops import (
     WRITABLE,
     BatchOp,
     Option,
+    inside,
     new_record,
     output_path,
     parse_ops,
@@ -434,10 +435,17 @@ def run(
         raise ValueError(f"OUTDIR {str(outdir)!r} exists and is not a folder")
     tasks: list[_Task] = []
     outputs: dict[str, str] = {}
+    refused: list[dict] = []
     for index, (path, relative) in enumerate(items):
         target = output_path(outdir, relative, ops[-1], suffix)
         output = None if target is None else str(target)
-        if output is not None:
+        key = task_key(path, ops, values, suffix)
+        if output is not None and not inside(output, outdir):  # a symbolic link inside OUTDIR leads out
+            message = f"output {output!r} resolves to {os.path.realpath(output)!r}, outside OUTDIR"
+            refused.append(
+                new_record(input=os.path.abspath(path), error=message, stage="write", op=pipeline, key=key)
+            )
+        elif output is not None:
             if output in outputs:
                 raise ValueError(
                     f"INPUT files {outputs[output]!r} and {path!r} would both write {output!r}; "
@@ -449,16 +457,17 @@ def run(
                     f"OUTDIR {str(outdir)!r} would overwrite the input {path!r} (use another OUTDIR, "
                     "another --suffix, or --force)"
                 )
-        tasks.append(
-            _Task(index, os.path.abspath(path), relative, output, task_key(path, ops, values, suffix))
-        )
+        tasks.append(_Task(index, os.path.abspath(path), relative, output, key))
 
-    records: list[dict | None] = [None] * len(tasks)
     report_path = None if report is None else Path(report)
     # (resume without a report was refused above)
     previous = _read_report(report_path) if resume and report_path is not None else {}
+    records: list[dict | None] = [None] * len(tasks)
     todo = []
+    not_run = {record["input"] for record in refused}
     for task in tasks:
+        if task.path in not_run:
+            continue
         old = previous.get(task.path, {})
         if (
             old.get("status") == "ok"
@@ -483,7 +492,7 @@ def run(
     bar = progress_bar(
         progress,
         total=len(tasks),
-        initial=len(tasks) - len(todo),
+        initial=len(tasks) - len(todo) - len(refused),
         desc=f"batch {pipeline}",
         unit="file",
         dynamic_ncols=True,
@@ -509,7 +518,7 @@ def run(
         return not (fail_fast and record["status"] == "failed")
 
     try:
-        if todo:
+        if all(emit(record) for record in refused) and todo:
             _dispatch(
                 todo,
                 job,
