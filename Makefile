@@ -12,7 +12,7 @@ DOCS_APT_PACKAGES := chromium
 DOCS_STAMP := $(VENV)/.docs-installed
 DOCS_BUILD := docs/_build/html
 
-.PHONY: demo test bench system venv clean docs docs-check docs-system sdist matrix matrix-lowest matrix-newest
+.PHONY: demo test bench system venv clean docs docs-check docs-system sdist matrix matrix-lowest matrix-newest wheel
 
 demo: $(STAMP)
 	$(PY) -m o3d_lsmesh.cli demo
@@ -79,6 +79,25 @@ matrix-newest: sdist
 	$(MATRIX)/newest/bin/python -m pip install -q --no-deps --force-reinstall $(MATRIX)/dist/*.whl
 	$(MATRIX)/newest/bin/python -c "import sksparse.cholmod"
 	cd $(MATRIX)/src && $(MATRIX_ENV) ../newest/bin/pytest $(MATRIX_PYTEST) $(MATRIX_TESTS)
+
+# The Linux wheel as a package index takes it and a user gets it (CONTRIBUTING.md, Release): the sdist,
+# the wheel built from it, `auditwheel repair` (a manylinux tag, libgomp vendored; it needs patchelf),
+# installed in a fresh venv whose PATH holds that venv alone (no compiler), where a short tour runs.
+# Not in CI (a few minutes). cibuildwheel (pyproject.toml) builds every platform's wheels where a
+# container engine (Linux) or the OS (macOS, Windows) is at hand.
+WHEEL := build/wheel
+WHEEL_APT_PACKAGES := patchelf
+wheel: $(STAMP)
+	@$(MAKE) --no-print-directory system APT_PACKAGES="$(WHEEL_APT_PACKAGES)"
+	$(PY) -m pip install -q auditwheel
+	rm -rf $(WHEEL)
+	$(PY) -m build --outdir $(WHEEL)/dist .
+	$(PY) -m auditwheel repair -w $(WHEEL)/repaired $(WHEEL)/dist/*.whl
+	ls $(WHEEL)/repaired/*-manylinux_*.whl
+	$(PY) -m zipfile -l $(WHEEL)/repaired/*.whl | grep 'o3d_lsmesh.libs/libgomp'
+	$(PYTHON) -m venv $(WHEEL)/venv
+	$(WHEEL)/venv/bin/python -m pip install -q $(WHEEL)/repaired/*.whl
+	cd $(WHEEL) && env PATH=$(abspath $(WHEEL)/venv/bin) venv/bin/python $(abspath tests/wheel_tour.py) --no-compiler
 
 # Sphinx with warnings as errors; -E rereads every source so no warning hides in a cached page.
 # The gallery shows the committed docs/images pictures and does not run the examples.

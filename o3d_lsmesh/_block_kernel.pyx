@@ -13,9 +13,20 @@ Gauss-Seidel), a count set by the matrix's size alone, so results never depend o
 import numpy as np
 
 from cython.parallel cimport prange, threadid
-from openmp cimport omp_get_max_threads
 from libc.math cimport sqrt
 from libc.stdint cimport int32_t, int64_t
+
+cdef extern from *:
+    # OpenMP's thread count where the build has OpenMP (setup.py's probe), one thread otherwise: prange
+    # and threadid() fall back to serial loops by themselves, omp.h may not exist (Apple's clang)
+    """
+    #ifdef _OPENMP
+    #include <omp.h>
+    #else
+    static int omp_get_max_threads(void) { return 1; }
+    #endif
+    """
+    int omp_get_max_threads() noexcept nogil
 
 #: Loops over fewer rows stay on one thread: a parallel region costs a few microseconds on an idle
 #: machine, but a time slice (milliseconds) whenever another job holds a core the team waits for.
