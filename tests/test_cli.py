@@ -446,10 +446,10 @@ def test_render_failure_exits_1(tmp_path, capsys, clean, monkeypatch):
 # ----------------------------------------------------------------- real processes
 
 
-def _python(*args, cwd):
+def _python(*args, cwd, module="o3d_lsmesh.cli"):
     env = dict(os.environ, PYTHONPATH=str(REPO))
     return subprocess.run(
-        [sys.executable, "-m", "o3d_lsmesh.cli", *args],
+        [sys.executable, "-m", module, *args],
         capture_output=True,
         text=True,
         cwd=cwd,
@@ -458,8 +458,9 @@ def _python(*args, cwd):
     )
 
 
-def test_module_entry_point_error_is_one_line(tmp_path):
-    done = _python("denoise", "missing.ply", "out.ply", cwd=tmp_path)
+@pytest.mark.parametrize("module", ["o3d_lsmesh.cli", "o3d_lsmesh"])
+def test_module_entry_point_error_is_one_line(tmp_path, module):
+    done = _python("denoise", "missing.ply", "out.ply", cwd=tmp_path, module=module)
     assert done.returncode == 2
     assert done.stderr.strip() == "o3d-lsmesh: error: INPUT 'missing.ply' does not exist"
     assert done.stdout == ""

@@ -1,0 +1,7 @@
+"""``python -m o3d_lsmesh``: the ``o3d-lsmesh`` command line."""
+
+import sys
+
+from .cli import main
+
+sys.exit(main())
