@@ -641,8 +641,9 @@ def normal_change(a: Any, b: Any) -> float | None:
 
 
 def change_metrics(before: Any, after: Any) -> dict:
-    """How far the vertices moved, how much the volume and (with the same triangles) the face normals changed."""
-    from .metrics import signed_volume, vertex_error
+    """How far the vertices moved, the shape change (:func:`~o3d_lsmesh.metrics.shape_change`: volume when closed,
+    inward shift when open) and, with the same triangles, how much the face normals turned."""
+    from .metrics import shape_change, vertex_error
 
     out: dict[str, Any] = {}
     if len(before.vertices) == len(after.vertices):
@@ -650,7 +651,7 @@ def change_metrics(before: Any, after: Any) -> dict:
         out["displacement_mean"], out["displacement_max"] = moved["mean"], moved["linf"]
         if np.array_equal(np.asarray(before.triangles), np.asarray(after.triangles)):
             out["normal_change_deg"] = normal_change(after, before)
-    out["volume_change_percent"] = percent_change(signed_volume(before), signed_volume(after))
+    out.update(shape_change(before, after))
     return out
 
 

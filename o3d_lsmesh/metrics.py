@@ -25,6 +25,7 @@ MAX_SAMPLE_POINTS = 10_000_000
 __all__ = [
     "MAX_SAMPLE_POINTS",
     "normal_deviation",
+    "shape_change",
     "signed_volume",
     "surface_distance",
     "topology_summary",
@@ -167,6 +168,82 @@ def signed_volume(mesh: AnyMesh) -> float:
     top = float(np.abs(data.vertices).max()) or 1.0
     c = data.vertices[data.triangles] / top
     return float(np.einsum("ij,ij->i", c[:, 0], np.cross(c[:, 1], c[:, 2])).sum() / 6.0) * top**3
+
+
+#: Vertices within this many edges of the boundary are the rim of :func:`shape_change`.
+RIM_RINGS = 2
+
+
+def shape_change(before: AnyMesh, after: AnyMesh) -> dict:
+    """How a filter changed a mesh's shape: the volume change of a closed mesh, the inward shift of an open one.
+
+    An open surface encloses no volume: its signed volume is taken about the origin and changes with it.
+    A mesh is closed when every edge has as many triangles along it in one direction as in the other
+    (then the signed volume does not depend on the origin). For an open mesh with the vertices of
+    ``before`` (same count), the inward shift of vertex ``i`` is ``-(a_i - b_i) . n_i``, ``n_i`` the
+    unit area-weighted normal of ``before`` (oriented by the triangles' winding: positive = moved
+    against the normal); its mean over every vertex with a normal, over the rim (boundary vertices and
+    :data:`RIM_RINGS` rings around them), and over the interior (the rest). A region without vertices,
+    or meshes without correspondence, give None.
+
+    Returns
+    -------
+    dict
+        Closed: ``closed=True``, ``volume_before``, ``volume_after``, ``volume_change_percent`` (None for a
+        zero volume). Open: ``closed=False``, ``inward_shift_mean``, ``inward_shift_rim``,
+        ``inward_shift_interior`` (model units).
+
+    Examples
+    --------
+    >>> import open3d as o3d
+    >>> box = o3d.geometry.TriangleMesh.create_box()
+    >>> shape_change(box, o3d.geometry.TriangleMesh(box).scale(0.5, center=(0, 0, 0)))["volume_change_percent"]
+    -87.5
+    >>> square = np.array([[0.0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]]), np.array([[0, 1, 2], [0, 2, 3]])
+    >>> shape_change(square, (square[0] + [0, 0, 0.25], square[1]))["inward_shift_mean"]  # out along +z
+    -0.25
+    """
+    from ._normals import area_weighted_normals
+    from .topology import adjacency_matrix, halfedges, unique_edges
+
+    a, b = read_mesh(before, name="before"), read_mesh(after, name="after")
+    n, triangles = len(a.vertices), a.triangles
+    edges, counts, inverse = unique_edges(triangles, n)
+    half = halfedges(triangles)
+    direction = np.where(half[:, 0] < half[:, 1], 1.0, -1.0)
+    unmatched = np.bincount(inverse, weights=direction, minlength=len(edges)) != 0
+    if not unmatched.any():
+        volume_before, volume_after = (
+            signed_volume((a.vertices, triangles)),
+            signed_volume((b.vertices, b.triangles)),
+        )
+        change = 100.0 * (volume_after - volume_before) / volume_before if volume_before != 0 else None
+        return {
+            "closed": True,
+            "volume_before": volume_before,
+            "volume_after": volume_after,
+            "volume_change_percent": change,
+        }
+    out: dict[str, Any] = {
+        "closed": False,
+        "inward_shift_mean": None,
+        "inward_shift_rim": None,
+        "inward_shift_interior": None,
+    }
+    if len(b.vertices) != n:
+        return out
+    normals = area_weighted_normals(_unit_scale(a.vertices), triangles)
+    length = np.linalg.norm(normals, axis=1)
+    has = length > 0
+    shift = -np.einsum("ij,ij->i", b.vertices - a.vertices, normals) / np.where(has, length, 1.0)
+    rim = np.zeros(n, dtype=bool)
+    rim[edges[counts == 1].ravel()] = True
+    adjacency = adjacency_matrix(triangles, n)
+    for _ in range(RIM_RINGS):
+        rim |= adjacency @ rim.astype(np.float64) > 0
+    for key, region in (("mean", has), ("rim", has & rim), ("interior", has & ~rim)):
+        out[f"inward_shift_{key}"] = float(shift[region].mean()) if region.any() else None
+    return out
 
 
 def face_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:

@@ -133,7 +133,7 @@ def test_compare_identical_and_different_meshes(tmp_path, capsys, clean, noisy):
     report = run_json(capsys, ["compare", str(a), str(a), "--points", "5000"])
     assert report["vertex_error"]["linf"] == 0.0 and report["normal_deviation_deg"] < 1e-5  # arccos near 1
     assert report["surface_distance"]["hausdorff"] < 1e-6
-    assert report["topology_a"]["genus"] == 0 and report["volume_change_percent"] == 0.0
+    assert report["topology_a"]["genus"] == 0 and report["shape_change"]["volume_change_percent"] == 0.0
     b = _write(noisy, tmp_path / "b.obj")
     report = run_json(capsys, ["compare", str(a), str(b), "--points", "5000"])
     expected = np.linalg.norm(np.asarray(clean.vertices) - np.asarray(_read(b).vertices), axis=1).max()
@@ -493,22 +493,29 @@ def test_console_script_is_installed():
 # --------------------------------------------------------------------------- issue 12 class 3 and issue 19
 
 
-def test_flat_mesh_denoise_reports_no_volume_change(tmp_path, capsys):
-    # a flat grid encloses no volume: the relative change is undefined, not a crash after writing
+def test_open_mesh_reports_the_inward_shift_and_no_volume(tmp_path, capsys):
+    # an open surface encloses no volume (its signed volume is about the origin): denoise, --json and compare
+    # report the inward shift along the normals, rim and interior, of metrics.shape_change
     from conftest import grid
 
-    vertices, triangles = grid(9, 9, z=lambda x, y: 0.02 * np.sin(9 * x) * 0)
+    from o3d_lsmesh.metrics import shape_change
+
+    vertices, triangles = grid(12, 12, z=lambda x, y: 0.1 * np.sin(5 * x) * np.cos(4 * y))
     mesh = o3d.geometry.TriangleMesh(
-        o3d.utility.Vector3dVector(vertices), o3d.utility.Vector3iVector(triangles)
+        o3d.utility.Vector3dVector(vertices + 5.0), o3d.utility.Vector3iVector(triangles)
     )
-    source = _write(mesh, tmp_path / "flat.ply")
-    assert signed_volume(_read(source)) == 0.0
+    source = _write(mesh, tmp_path / "open.ply")
     code = main(["denoise", str(source), str(tmp_path / "out.ply")])
     out = capsys.readouterr()
     assert code == 0, out.err
-    assert "volume change n/a (input volume 0)" in out.out
+    assert "inward shift along the normals" in out.out and "volume" not in out.out.replace("(no volume", "")
     report = run_json(capsys, ["denoise", str(source), str(tmp_path / "out2.ply")])
-    assert report["volume_change_percent"] is None
+    want = shape_change(_read(source), _read(tmp_path / "out2.ply"))
+    assert "volume_change_percent" not in report and report["closed"] is False
+    for key in ("mean", "rim", "interior"):
+        assert report[f"inward_shift_{key}"] == pytest.approx(want[f"inward_shift_{key}"], rel=1e-9)
+    compared = run_json(capsys, ["compare", str(source), str(tmp_path / "out2.ply"), "--points", "1000"])
+    assert compared["shape_change"] == pytest.approx(want)
 
 
 @pytest.mark.parametrize("keep", [0.3, 0.6, 0.97])

@@ -102,6 +102,21 @@ nonnegative_int = bounded(int, 0, "non-negative integer")
 nonnegative_float = bounded(float, 0, "non-negative finite number")
 
 
+def shape_change_text(change: dict) -> str:
+    """One line for :func:`~o3d_lsmesh.metrics.shape_change`: a closed mesh's volume change, an open one's inward
+    shift along the normals (its volume about the origin means nothing)."""
+    if change["closed"]:
+        percent = change["volume_change_percent"]
+        return "volume change " + ("n/a (input volume 0)" if percent is None else f"{percent:+.3f}%")
+    if change["inward_shift_mean"] is None:
+        return "open surface (no volume; no vertex correspondence for a shift)"
+    rim, interior = (change[f"inward_shift_{key}"] for key in ("rim", "interior"))
+    return (
+        f"open surface (no volume): inward shift along the normals {change['inward_shift_mean']:.4g} "
+        f"(rim {'n/a' if rim is None else f'{rim:.4g}'}, interior {'n/a' if interior is None else f'{interior:.4g}'})"
+    )
+
+
 def mesh_suffix(text: str) -> str:
     """An argparse type for an output format (``ply`` or ``.ply``); ``.glb`` is refused with the way out."""
     suffix = "." + text.lstrip(".").lower()

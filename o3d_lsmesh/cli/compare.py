@@ -9,8 +9,8 @@ from typing import Any
 
 import numpy as np
 
-from .._batch_ops import normal_change, percent_change
-from ._common import PictureError, Run, add_command, bounded
+from .._batch_ops import normal_change
+from ._common import PictureError, Run, add_command, bounded, shape_change_text
 from ._files import check_output, read_input
 
 #: metrics.MAX_SAMPLE_POINTS (not imported here: --help must not load the numeric modules)
@@ -58,14 +58,15 @@ def compare(args: argparse.Namespace, run: Run) -> int:
     """Metrics between two meshes.
 
     Surface distance (sampled, both ways), vertex error and normal deviation when the meshes
-    correspond, volume, triangle angles and topology of both; with --render, a distance map.
+    correspond, the volume change (closed A) or the inward shift along A's
+    normals (open A), triangle angles and topology of both; with --render, a distance map.
 
     example: clean.ply smooth.ply --json --render distance.png
     """
     if args.render:
         check_output(args.render, [args.a, args.b], force=args.force, suffixes=(".png",))
     a, b = read_input(args.a, what="A"), read_input(args.b, what="B")
-    from ..metrics import signed_volume, surface_distance, topology_summary, triangle_angles, vertex_error
+    from ..metrics import shape_change, surface_distance, topology_summary, triangle_angles, vertex_error
 
     report: dict[str, Any] = {"a": args.a, "b": args.b, "size_a": mesh_size(a), "size_b": mesh_size(b)}
     report["surface_distance"] = surface_distance(a, b, number_of_points=args.points)
@@ -73,9 +74,7 @@ def compare(args: argparse.Namespace, run: Run) -> int:
         report["vertex_error"] = vertex_error(a, b)
         if np.array_equal(np.asarray(a.triangles), np.asarray(b.triangles)):
             report["normal_deviation_deg"] = normal_change(a, b)
-    va, vb = signed_volume(a), signed_volume(b)
-    report["volume_a"], report["volume_b"] = va, vb
-    report["volume_change_percent"] = percent_change(va, vb)
+    report["shape_change"] = shape_change(a, b)
     report["angles_a"], report["angles_b"] = triangle_angles(a), triangle_angles(b)
     report["topology_a"], report["topology_b"] = topology_summary(a), topology_summary(b)
     if not run.json:
@@ -109,11 +108,9 @@ def _lines(report: dict[str, Any]) -> list[str]:
         lines.append(f"vertex error: L-inf {ve['linf']:.6g}, RMS {ve['rms']:.6g}, mean {ve['mean']:.6g}")
     if report.get("normal_deviation_deg") is not None:
         lines.append(f"face normal deviation: {report['normal_deviation_deg']:.4f} degrees")
-    change = report["volume_change_percent"]
-    lines.append(
-        f"volume: A {report['volume_a']:.6g}, B {report['volume_b']:.6g}"
-        + (f" ({change:+.4f}%)" if change is not None else "")
-    )
+    change = report["shape_change"]
+    volumes = f": A {change['volume_before']:.6g}, B {change['volume_after']:.6g}" if change["closed"] else ""
+    lines.append(f"B against A: {shape_change_text(change)}{volumes}")
     for key in ("a", "b"):
         angles, topo = report[f"angles_{key}"], report[f"topology_{key}"]
         holes = ", ".join(f"{size}: {count}" for size, count in topo["holes_by_size"].items())

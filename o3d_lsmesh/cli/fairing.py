@@ -7,7 +7,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from ._common import WRITABLE, CLIError, Run, add_command, nonnegative_int, positive_int
+from ._common import WRITABLE, CLIError, Run, add_command, nonnegative_int, positive_int, shape_change_text
 from ._files import check_output, read_input, write_output
 from .compare import draw
 
@@ -90,11 +90,9 @@ def denoise(args: argparse.Namespace, run: Run) -> int:
     seconds = report["seconds"] = time.perf_counter() - start
     args.method, args.iterations = report["method"], report["iterations"]  # what ran, for the picture's title
     write_output(args.output, out)
-    change = report["volume_change_percent"]
     run.say(
         f"denoised {args.input} ({len(mesh.vertices)} vertices) in {seconds:.2f} s -> {args.output}; "
-        f"mean displacement {report['displacement_mean']:.4g}, volume change "
-        + ("n/a (input volume 0)" if change is None else f"{change:.3f}%")
+        f"mean displacement {report['displacement_mean']:.4g}, {shape_change_text(report)}"
     )
     if args.render:
         method = f"{args.method} fairing" + (f", mu {args.mu:g}" if args.mu is not None else "")
