@@ -75,7 +75,7 @@ matrix-lowest: sdist
 matrix-newest: sdist
 	test -x $(MATRIX)/newest/bin/python || $(MATRIX_PYTHON) -m venv $(MATRIX)/newest
 	$(MATRIX)/newest/bin/python -m pip install -q --upgrade --upgrade-strategy eager \
-	  "$$(ls $(MATRIX)/dist/*.whl)[cholmod]" matplotlib $(MATRIX_TOOLS)
+	  "$$(ls $(MATRIX)/dist/*.whl)[cholmod,simplify]" matplotlib $(MATRIX_TOOLS)
 	$(MATRIX)/newest/bin/python -m pip install -q --no-deps --force-reinstall $(MATRIX)/dist/*.whl
 	$(MATRIX)/newest/bin/python -c "import sksparse.cholmod"
 	cd $(MATRIX)/src && $(MATRIX_ENV) ../newest/bin/pytest $(MATRIX_PYTEST) $(MATRIX_TESTS)

@@ -60,8 +60,11 @@ def _setup_cfg() -> configparser.ConfigParser:
     return config
 
 
-def _requirements() -> list[Requirement]:
-    lines = _setup_cfg()["options"]["install_requires"].strip().splitlines()
+def _requirements(*extras: str) -> list[Requirement]:
+    """install_requires, then the named extras' requirements."""
+    config = _setup_cfg()
+    lines = [config["options"]["install_requires"], *(config["options.extras_require"][e] for e in extras)]
+    lines = "\n".join(lines).strip().splitlines()
     return [Requirement(line.strip()) for line in lines if line.strip() and not line.strip().startswith("#")]
 
 
@@ -164,9 +167,10 @@ def _check_metadata(metadata: Message, where: str, *, requires_dist: bool) -> No
         return
     cholmod = [r for r in requires if r.name == "scikit-sparse" and r.marker and "cholmod" in str(r.marker)]
     assert [r.specifier for r in cholmod] == [SpecifierSet(">=0.4.16,<0.5")], where
-    assert not [r for r in requires if r.name == "scikit-sparse" and r.marker is None], (
-        f"{where}: scikit-sparse must stay optional"
-    )
+    for optional in ("scikit-sparse", "fast-simplification"):
+        assert not [r for r in requires if r.name == optional and r.marker is None], (
+            f"{where}: {optional} must stay optional"
+        )
 
 
 def test_sdist_metadata_is_complete(sdist):
@@ -201,10 +205,10 @@ def test_licence_file_is_the_declared_licence():
 
 
 def test_lower_bounds_are_the_versions_the_matrix_tests():
-    """Every dependency's lower bound is what ``make matrix`` pins in its oldest venv (same minor
-    release, inside the bound), so no bound claims more than was tested."""
+    """Every dependency's lower bound (and the extras' the oldest venv installs) is what ``make matrix``
+    pins there (same minor release, inside the bound), so no bound claims more than was tested."""
     pins = dict(pin.split("==") for pin in _make_variable("MATRIX_LOWEST").split())
-    for requirement in _requirements():
+    for requirement in _requirements("simplify", "render"):
         assert requirement.name in pins, f"{requirement.name} not pinned in MATRIX_LOWEST"
         pinned = Version(pins[requirement.name])
         assert pinned in requirement.specifier, f"{requirement.name}=={pinned} outside {requirement}"
@@ -213,6 +217,20 @@ def test_lower_bounds_are_the_versions_the_matrix_tests():
         assert pinned.release[: len(bound.release)] == bound.release, (
             f"{requirement}: the matrix tests {pinned}"
         )
+
+
+def test_fast_simplification_is_an_extra_named_where_it_is_missing(monkeypatch):
+    """Only from_fast_simplification needs it: without it the package and the default hierarchy work,
+    and that function says which extra to install."""
+    import o3d_lsmesh
+
+    monkeypatch.setitem(sys.modules, "fast_simplification", None)  # import fails as if not installed
+    from o3d_lsmesh.shapes import demo_mesh
+
+    sphere = demo_mesh(3)
+    assert len(o3d_lsmesh.build_hierarchy(sphere)) > 1
+    with pytest.raises(ImportError, match=re.escape('pip install "o3d_lsmesh[simplify]"')):
+        o3d_lsmesh.from_fast_simplification(sphere)
 
 
 def test_the_venv_has_the_pinned_releases():

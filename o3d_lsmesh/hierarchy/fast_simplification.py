@@ -118,7 +118,12 @@ def from_fast_simplification(
     >>> [h.vertex_count(i) for i in range(len(h))]
     [762, 400, 200, 100]
     """
-    import fast_simplification
+    try:  # an extra: only this function uses it
+        import fast_simplification
+    except ImportError as error:
+        raise ImportError(
+            'from_fast_simplification needs fast-simplification: pip install "o3d_lsmesh[simplify]"'
+        ) from error
 
     min_vertices = as_count(min_vertices, name="min_vertices", minimum=4)
     agg = as_positive_float(agg, name="agg", allow_zero=True)
