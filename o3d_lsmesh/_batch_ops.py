@@ -444,19 +444,24 @@ def _write_item(value: Any, path: Path) -> None:
         write_mesh(value, path)
 
 
-def _digest(path: Path) -> dict:
+def digest(path: Path) -> dict:
     """Size and sha256 of a written file: what ``--resume`` checks an output against."""
-    digest = hashlib.sha256()
+    hasher = hashlib.sha256()
     with open(path, "rb") as handle:
         for block in iter(lambda: handle.read(1 << 20), b""):
-            digest.update(block)
-    return {"bytes": path.stat().st_size, "sha256": digest.hexdigest()}
+            hasher.update(block)
+    return {"bytes": path.stat().st_size, "sha256": hasher.hexdigest()}
 
 
 def inside(path: str | os.PathLike, root: str | os.PathLike) -> bool:
     """Whether ``path`` resolves (symbolic links followed) to a place strictly below ``root``."""
     real, base = Path(os.path.realpath(path)), Path(os.path.realpath(root))
     return base in real.parents
+
+
+#: Hidden temporary names of :func:`write_atomic` (and of the versions before it: ``.<stem>.<hex>.tmp.<ext>``
+#: files and ``.<name>.<hex>.old`` folders): what a killed batch may leave; never taken as inputs.
+TEMPORARY = re.compile(r"\..*\.[0-9a-f]{12}\.(tmp|old)(\.[^.]+)?")
 
 
 def write_atomic(value: Any, final: Path, *, kind: str, suffix: str, root: Path) -> dict[str, dict]:
@@ -484,7 +489,7 @@ def write_atomic(value: Any, final: Path, *, kind: str, suffix: str, root: Path)
             _write_item(value, temporary / final.name)
         where = final if kind == "files" else final.parent
         base = Path(os.path.relpath(where, root))
-        files = {(base / p.name).as_posix(): _digest(p) for p in sorted(temporary.iterdir())}
+        files = {(base / p.name).as_posix(): digest(p) for p in sorted(temporary.iterdir())}
         if kind == "files" and not os.path.lexists(final):
             os.replace(temporary, final)
         else:

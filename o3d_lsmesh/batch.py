@@ -42,9 +42,11 @@ from typing import Any, Callable
 from ._batch_ops import (
     OPS,
     READABLE,
+    TEMPORARY,
     WRITABLE,
     BatchOp,
     Option,
+    digest,
     inside,
     new_record,
     output_path,
@@ -65,17 +67,24 @@ _GLOB_CHARACTERS = set("*?[")
 # --------------------------------------------------------------------------- inputs
 
 
-def collect_inputs(inputs: str | os.PathLike | Iterable[str | os.PathLike]) -> list[tuple[str, str]]:
+def collect_inputs(
+    inputs: str | os.PathLike | Iterable[str | os.PathLike], *, exclude: str | os.PathLike | None = None
+) -> list[tuple[str, str]]:
     """Expand files, folders and glob patterns into ``(path, relative name)`` pairs, in a stable order.
 
     A folder is searched recursively for files ending in one of
     ``.ply .obj .stl .off .gltf .glb`` and each keeps its path below the folder
     as its relative name (so outputs mirror the folder tree); a file or glob
-    match keeps its base name. A path given twice is taken once.
+    match keeps its base name. A path given twice is taken once. Folder searches
+    and glob matches leave out the folder ``exclude`` (the batch's OUTDIR: a
+    batch never reads its own outputs) and the hidden temporary names a killed
+    batch may leave (:data:`~o3d_lsmesh._batch_ops.TEMPORARY`); a folder that is
+    ``exclude`` or lies inside it is refused.
     """
     if isinstance(inputs, (str, os.PathLike)):
         inputs = [inputs]
     inputs = list(inputs)
+    skip = None if exclude is None else os.path.realpath(exclude)
     found: dict[str, tuple[str, str]] = {}  # by real path: a path given twice is taken once
     for item in inputs:
         if not isinstance(item, (str, os.PathLike)):
@@ -87,12 +96,18 @@ def collect_inputs(inputs: str | os.PathLike | Iterable[str | os.PathLike]) -> l
             matches = sorted(glob.glob(text, recursive=True))
             if not matches:
                 raise ValueError(f"INPUT {text!r} matches no file")
+            matches = [m for m in matches if skip is None or not inside(m, skip)]
+            matches = [m for m in matches if not TEMPORARY.fullmatch(os.path.basename(m))]
         else:
             raise ValueError(f"INPUT {text!r} does not exist (expected a file, a folder or a glob pattern)")
         for match in map(Path, matches):
             if match.is_dir():
-                files = sorted(p for p in match.rglob("*") if p.is_file() and p.suffix.lower() in READABLE)
-                pairs = [(path, str(path.relative_to(match))) for path in files]
+                if skip is not None and (os.path.realpath(match) == skip or inside(match, skip)):
+                    raise ValueError(
+                        f"INPUT folder {str(match)!r} lies inside OUTDIR {str(exclude)!r} (or is it): "
+                        "the outputs would be read as inputs; use an OUTDIR outside it"
+                    )
+                pairs = [(path, str(path.relative_to(match))) for path in _search(match, skip)]
             else:
                 pairs = [(match, match.name)]
             for path, relative in pairs:
@@ -102,6 +117,24 @@ def collect_inputs(inputs: str | os.PathLike | Iterable[str | os.PathLike]) -> l
             f"INPUT must name at least one mesh file ({', '.join(READABLE)}), got none in {list(inputs)!r}"
         )
     return list(found.values())
+
+
+def _search(folder: Path, skip: str | None) -> list[Path]:
+    """Mesh files below ``folder`` (symbolic links to folders not followed), without the folder
+    ``skip`` and the hidden temporary names of a killed batch."""
+    files = []
+    for root, folders, names in os.walk(folder):
+        folders[:] = [
+            name
+            for name in folders
+            if not TEMPORARY.fullmatch(name) and os.path.realpath(os.path.join(root, name)) != skip
+        ]
+        files += [
+            Path(root, name)
+            for name in names
+            if Path(name).suffix.lower() in READABLE and not TEMPORARY.fullmatch(name)
+        ]
+    return sorted(path for path in files if path.is_file())
 
 
 @dataclass(frozen=True)
@@ -131,19 +164,48 @@ def task_key(path: str, ops: Sequence[BatchOp], options: Sequence[dict], suffix:
 
 
 def _read_report(path: Path) -> dict[str, dict]:
-    """Last record per input of an existing report (lines that do not parse, e.g. a torn last line, are skipped)."""
+    """Last record per input of an existing report; a damaged line (not a JSON record in UTF-8, e.g. the
+    torn last line of a killed run) is skipped with a warning naming it."""
     last: dict[str, dict] = {}
     if not path.exists():
         return last
-    with open(path, encoding="utf-8") as handle:
-        for line in handle:
+    damaged = []
+    with open(path, "rb") as handle:
+        for number, line in enumerate(handle, 1):
             try:
-                record = json.loads(line)
-            except json.JSONDecodeError:
-                continue
-            if isinstance(record, dict) and "input" in record:
+                record = json.loads(line.decode("utf-8"))
+            except ValueError:  # UnicodeDecodeError and JSONDecodeError both are
+                record = None
+            if isinstance(record, dict) and isinstance(record.get("input"), str):
                 last[record["input"]] = record
+            elif line.strip():
+                damaged.append(number)
+    if damaged:
+        shown = ", ".join(map(str, damaged[:10])) + (", ..." if len(damaged) > 10 else "")
+        warnings.warn(
+            f"report {str(path)!r}: lines {shown} are damaged (not a JSON record in UTF-8) and were "
+            "skipped; their files run again",
+            O3DLSMeshWarning,
+            stacklevel=3,
+        )
     return last
+
+
+def _intact(outdir: Path, files: Any) -> bool:
+    """Whether every file a report record lists is in ``outdir`` with the recorded size and sha256."""
+    if not isinstance(files, dict) or not files:
+        return False  # a record of an older version, or damaged: run the file again
+    for name, expected in files.items():
+        path = outdir / name
+        if (
+            not isinstance(expected, dict)
+            or not path.is_file()
+            or path.stat().st_size != expected.get("bytes")
+        ):
+            return False
+        if digest(path) != expected:
+            return False
+    return True
 
 
 # --------------------------------------------------------------------------- engines
@@ -167,6 +229,20 @@ def _scheduler_address() -> str | None:
         return dask.config.get("scheduler-address", None)
     except ImportError:
         return None
+
+
+def _check_scheduler_file(path: str | os.PathLike) -> None:
+    """Refuse a scheduler file that is missing or holds no address (Dask's client would wait for it forever)."""
+    expected = "scheduler_file must be the JSON file a running Dask scheduler wrote"
+    if not os.path.isfile(path):
+        raise ValueError(f"{expected}, got {os.fspath(path)!r}, which does not exist")
+    try:
+        with open(path, encoding="utf-8") as handle:
+            address = json.load(handle).get("address")
+    except (ValueError, AttributeError):
+        address = None
+    if not isinstance(address, str):
+        raise ValueError(f"{expected}, got {os.fspath(path)!r}, which holds no JSON 'address'")
 
 
 def _start_method() -> str:
@@ -340,7 +416,8 @@ def run(
     Parameters
     ----------
     inputs : path, glob pattern, or a list of them
-        Files, folders (searched recursively for ``.ply .obj .stl .off .gltf .glb``) and globs.
+        Files, folders (searched recursively for ``.ply .obj .stl .off .gltf .glb``) and globs;
+        folder searches and globs leave out ``outdir`` and a killed batch's hidden temporary names.
     outdir : path
         Output folder (created). The result of ``a/b.ply`` from a folder INPUT
         is ``outdir/a/b<suffix>``; ``encode`` writes ``<name>.bin``,
@@ -365,8 +442,9 @@ def run(
         Threads of each worker and its BLAS/OpenMP/Open3D thread cap.
     resume : bool, keyword-only
         Skip inputs whose last ``report`` entry is ``ok`` for the same key
-        (pipeline, options, suffix, input size and mtime) and whose output
-        still exists; they come back with status ``skipped``.
+        (pipeline, options, suffix, input size and mtime) and output, and
+        whose output files are all there with the recorded size and sha256;
+        they come back with status ``skipped``.
     report : path, keyword-only
         JSON-lines file getting one record per result as it arrives (appended
         to with ``resume``, else overwritten).
@@ -425,12 +503,14 @@ def run(
         raise ValueError(f"--workers must be an integer >= 0, got {workers!r}")
     if scheduler is not None and scheduler_file is not None:
         raise ValueError("give --scheduler or --scheduler-file, not both")
+    if scheduler_file is not None:
+        _check_scheduler_file(scheduler_file)
     progress = check_progress(progress)
     if resume and report is None:
         raise ValueError("--resume needs --report (the file that says which inputs are done)")
 
-    items = collect_inputs(inputs)
     outdir = Path(outdir).absolute()
+    items = collect_inputs(inputs, exclude=outdir)
     if outdir.exists() and not outdir.is_dir():
         raise ValueError(f"OUTDIR {str(outdir)!r} exists and is not a folder")
     tasks: list[_Task] = []
@@ -472,7 +552,8 @@ def run(
         if (
             old.get("status") == "ok"
             and old.get("key") == task.key
-            and (task.output is None or os.path.exists(task.output))
+            and old.get("output") == task.output
+            and (task.output is None or _intact(outdir, old.get("files")))
         ):
             records[task.index] = {**old, "status": "skipped"}
         else:
@@ -502,14 +583,18 @@ def run(
     handle = None
     if report_path is not None:
         report_path.parent.mkdir(parents=True, exist_ok=True)
-        handle = open(report_path, "a" if resume else "w", encoding="utf-8")
+        handle = open(report_path, "a+b" if resume else "wb")
+        if handle.tell():
+            handle.seek(-1, os.SEEK_END)
+            if handle.read(1) != b"\n":
+                handle.write(b"\n")  # a killed run's torn last line: the next record starts a line of its own
 
     def emit(record: dict) -> bool:
         """Store, report and show one result; False asks the engine to stop (--fail-fast)."""
         records[index_of[record["input"]]] = record
         counts[record["status"]] += 1
         if handle is not None:
-            handle.write(json.dumps(record) + "\n")
+            handle.write(json.dumps(record).encode() + b"\n")
             handle.flush()
         bar.update(1)
         bar.set_postfix(ok=counts["ok"], failed=counts["failed"], refresh=False)

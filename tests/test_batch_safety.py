@@ -8,11 +8,14 @@ from __future__ import annotations
 
 import hashlib
 import json
+import threading
 from pathlib import Path
 
 import open3d as o3d
+import pytest
 
 from o3d_lsmesh import batch
+from o3d_lsmesh._errors import O3DLSMeshWarning
 from o3d_lsmesh.cli import main
 
 
@@ -62,7 +65,9 @@ def test_an_existing_folder_is_never_removed_by_an_output(tmp_path):
     mine = tmp_path / "out" / "b" / "notes.txt"
     mine.parent.mkdir(parents=True)
     mine.write_text("mine")
-    (record,) = batch.run(source, tmp_path / "out", op="hierarchy", options={"levels": "0"}, workers=0)
+    (record,) = batch.run(
+        source, tmp_path / "out", op="hierarchy", options={"levels": "0"}, workers=0, progress=False
+    )
     assert record["status"] == "ok" and (tmp_path / "out" / "b" / "level_00.ply").is_file()
     assert mine.read_text() == "mine"
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["b"]  # no temporary left
@@ -79,3 +84,122 @@ def test_an_output_behind_a_symbolic_link_out_of_outdir_is_refused_per_file(tmp_
     assert records["y.ply"]["status"] == "ok"
     assert (records["x.ply"]["status"], records["x.ply"]["stage"]) == ("failed", "write")
     assert "outside OUTDIR" in records["x.ply"]["error"] and list(elsewhere.iterdir()) == []
+
+
+def test_outdir_inside_an_input_folder_and_leftover_temporaries_are_never_inputs(tmp_path):
+    folder = tmp_path / "in"
+    _sphere(folder / "a.ply")
+    _sphere(folder / "sub" / "b.ply")
+    # what a killed batch leaves: temporary files and folders of this version and the one before
+    _sphere(folder / ".c.0123456789ab.tmp.ply")
+    _sphere(folder / ".d.ply.0123456789ab.tmp" / "d.ply")
+    _sphere(folder / "sub" / ".e.0123456789ab.old" / "level_00.ply")
+    out = folder / "results"
+    for _ in range(2):  # the second run must not take the first one's outputs as inputs
+        records = batch.run(folder, out, op="hierarchy", options={"levels": "0"}, workers=0, progress=False)
+        assert sorted(Path(r["input"]).relative_to(folder).as_posix() for r in records) == [
+            "a.ply",
+            "sub/b.ply",
+        ]
+    assert sorted(p.relative_to(out).as_posix() for p in out.rglob("*.ply")) == [
+        "a/level_00.ply",
+        "sub/b/level_00.ply",
+    ]
+    with pytest.raises(ValueError, match="lies inside OUTDIR"):
+        batch.run(out, folder, workers=0)
+    with pytest.raises(ValueError, match="lies inside OUTDIR"):
+        batch.run(folder, folder, workers=0)
+
+
+def test_resume_reruns_outputs_that_are_damaged_or_missing(tmp_path):
+    folder, out, report = tmp_path / "in", tmp_path / "out", tmp_path / "report.jsonl"
+    for name in "abcde":
+        _sphere(folder / f"{name}.ply")
+    first = batch.run(
+        folder, out, op="hierarchy", options={"levels": "0"}, workers=0, report=report, progress=False
+    )
+    for record in first:  # the record holds each written file's size and hash, as on disk
+        (path,) = Path(record["output"]).iterdir()
+        assert record["files"] == {
+            f"{path.parent.name}/{path.name}": {
+                "bytes": path.stat().st_size,
+                "sha256": hashlib.sha256(path.read_bytes()).hexdigest(),
+            }
+        }
+    whole = (out / "a" / "level_00.ply").read_bytes()
+    (out / "a" / "level_00.ply").write_bytes(b"")  # emptied
+    (out / "b" / "level_00.ply").write_bytes(whole[:-10])  # truncated
+    (out / "c" / "level_00.ply").write_bytes(whole[:-1] + bytes([whole[-1] ^ 1]))  # same size, one bit
+    (out / "d" / "level_00.ply").unlink()  # gone
+    again = batch.run(
+        folder,
+        out,
+        op="hierarchy",
+        options={"levels": "0"},
+        workers=0,
+        report=report,
+        resume=True,
+        progress=False,
+    )
+    assert {Path(r["input"]).name: r["status"] for r in again} == {
+        "a.ply": "ok",
+        "b.ply": "ok",
+        "c.ply": "ok",
+        "d.ply": "ok",
+        "e.ply": "skipped",
+    }
+    for name in "abcd":
+        assert (out / name / "level_00.ply").read_bytes() == whole
+
+
+def test_resume_reports_and_skips_damaged_report_lines(tmp_path):
+    folder, out, report = tmp_path / "in", tmp_path / "out", tmp_path / "report.jsonl"
+    for name in "abc":
+        _sphere(folder / f"{name}.ply")
+    batch.run(folder, out, workers=0, report=report, progress=False, options={"iterations": 1})
+    lines = report.read_bytes().splitlines(keepends=True)
+    # line 2 (b's record) gets non-UTF-8 bytes; a killed run left a torn line 4 without its newline
+    report.write_bytes(lines[0] + b"\xff\xfe" + lines[1][2:] + lines[2] + lines[0][:20])
+    with pytest.warns(O3DLSMeshWarning, match=r"report .* lines 2, 4 .*damaged.* skipped"):
+        again = batch.run(
+            folder, out, workers=0, report=report, resume=True, progress=False, options={"iterations": 1}
+        )
+    assert {Path(r["input"]).name: r["status"] for r in again} == {
+        "a.ply": "skipped",
+        "b.ply": "ok",
+        "c.ply": "skipped",
+    }
+    tail = report.read_bytes().splitlines()[4:]  # what this run appended starts on a line of its own
+    assert [Path(json.loads(line)["input"]).name for line in tail] == ["b.ply"]
+
+
+def test_a_missing_or_unreadable_scheduler_file_is_an_error_not_a_hang(tmp_path, capsys):
+    source = _sphere(tmp_path / "a.ply")
+    (tmp_path / "bad.json").write_text("{not json")
+    errors: list[BaseException] = []
+
+    def attempt(name):
+        try:
+            batch.run(source, tmp_path / "out", scheduler_file=tmp_path / name, progress=False)
+        except BaseException as error:  # the test inspects what came
+            errors.append(error)
+
+    for name in ("missing.json", "bad.json"):
+        thread = threading.Thread(target=attempt, args=(name,), daemon=True)
+        thread.start()
+        thread.join(30)  # Dask's client waits for the file to appear, forever
+        assert not thread.is_alive(), f"batch.run waited for {name}"
+    assert [type(e) for e in errors] == [ValueError, ValueError]
+    assert "scheduler_file must" in str(errors[0]) and "does not exist" in str(errors[0])
+    assert "scheduler_file must" in str(errors[1]) and "address" in str(errors[1])
+    argv = [
+        "batch",
+        str(source),
+        str(tmp_path / "out"),
+        "--op",
+        "denoise",
+        "--scheduler-file",
+        str(tmp_path / "missing.json"),
+    ]
+    assert main(argv) == 2
+    assert "--scheduler-file must" in capsys.readouterr().err
