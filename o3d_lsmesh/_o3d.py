@@ -11,7 +11,20 @@ result with :func:`new_mesh`, so the attribute policy lives here alone:
   triangle UVs, triangle material ids and textures of legacy meshes; every
   per-vertex and per-triangle attribute except normals, and the material, of
   tensor meshes;
-* where the connectivity changes (hierarchy levels, hole filling), per-triangle
+* where new vertices and triangles are appended after the input's (hole
+  filling: ``new_mesh(..., appended=True)``), every attribute is kept on the old
+  elements and extended to the new ones: per-vertex values (colors, any tensor
+  vertex attribute) are harmonic in the new vertices (cotangent weights, so
+  affine data on a flat patch stays affine; integer ones rounded); per-corner
+  UVs (legacy ``triangle_uvs``, tensor ``triangle.texture_uvs``) likewise, where
+  the chart is continuous around the patch (each loop vertex has one UV in the
+  loop's triangles), else every new corner takes the UV of one loop corner of a
+  neighbouring triangle (a texel next to the hole); material ids and other
+  per-triangle values are those of that neighbouring triangle; textures and the
+  material stay. With a welded mesh, the result has the source's split layout
+  with the new vertices after it, and a new triangle uses the copy of a seam
+  vertex that its loop's triangle uses;
+* where the connectivity changes otherwise (hierarchy levels), per-triangle
   and per-corner data (UVs, material ids, textures, tensor triangle attributes)
   and per-vertex colors no longer match the new triangles and are dropped, with
   one :class:`~o3d_lsmesh.O3DLSMeshWarning` per call naming what was dropped (a
@@ -45,13 +58,17 @@ import numpy as np
 
 from ._collapsed import collapsed_triangles
 from ._errors import O3DLSMeshWarning
+from ._solvers import solve_spd
 from ._validate import as_indices, mesh_arrays
+from .topology import connected_components
 
 __all__ = [
     "MeshData",
+    "has_textures",
     "mesh_from_state",
     "mesh_state",
     "new_mesh",
+    "obj_writable",
     "open3d",
     "read_mesh",
     "warn_dropped_attributes",
@@ -250,6 +267,12 @@ def read_mesh(mesh: Any, *, name: str = "mesh", weld: bool = False, narrow: bool
     return MeshData(vertices, triangles, mesh, kind)
 
 
+def has_textures(mesh: Any) -> bool:
+    """Whether a legacy mesh holds a texture image (Open3D's ``has_textures`` is False when one of them
+    is empty, as the empty first slot its OBJ reader adds for faces without a material)."""
+    return any(not texture.is_empty() for texture in mesh.textures)
+
+
 def _dropped(data: MeshData) -> list[str]:
     """Names of the source's attributes that a result with new connectivity cannot keep."""
     src = data.source
@@ -260,7 +283,7 @@ def _dropped(data: MeshData) -> list[str]:
             ("vertex colors", src.has_vertex_colors()),
             ("triangle UVs", src.has_triangle_uvs()),
             ("triangle material ids", src.has_triangle_material_ids()),
-            ("textures", src.has_textures()),
+            ("textures", has_textures(src)),
         )
         return [label for label, present in checks if present]
     return [
@@ -290,8 +313,97 @@ def warn_dropped_attributes(data: MeshData, reason: str, *, stacklevel: int = 3)
     return bool(dropped)
 
 
+class _Appended:
+    """A result whose vertices and triangles are ``data``'s, then new ones (welded numbering): its arrays
+    in the source's layout and each kind of attribute extended to the new elements (module docstring)."""
+
+    def __init__(self, data: MeshData, vertices: np.ndarray, triangles: np.ndarray) -> None:
+        nw, m, total = len(data.vertices), len(data.triangles), len(vertices)
+        old, new = data.triangles, np.asarray(triangles[m:], dtype=np.int64)
+        source_triangles = old if data.split_triangles is None else data.split_triangles
+        n_source = nw if data.split is None else len(data.split)
+        # the loop corners: both ends of each old triangle's edge that a new triangle shares (only
+        # triangles with two corners on new triangles can have one: no sort of the whole mesh's edges)
+        touched = np.zeros(total, dtype=bool)
+        touched[new] = True
+        near = np.flatnonzero(touched[old].sum(axis=1) >= 2)
+        row, corner = np.nonzero(np.isin(_edge_keys(old[near], total), _edge_keys(new, total)))
+        self.tri = np.concatenate([near[row], near[row]])
+        self.corner = np.concatenate([corner, (corner + 1) % 3])
+        self.vertex = old[self.tri, self.corner]
+        self.loop, self.first = np.unique(self.vertex, return_index=True)
+        # each new patch (vertex-connected new triangles: a hole, or holes touching at a vertex) takes
+        # its per-triangle defaults from the triangle of its first loop corner
+        self.patch = connected_components(new, total)[1]
+        reference = np.zeros(total, dtype=np.int64)
+        labels, first_corner = np.unique(self.patch[self.vertex], return_index=True)
+        reference[labels] = first_corner
+        self.owner = reference[self.patch[new[:, 0]]]  # (q,) the reference loop corner of each new triangle
+        # an old vertex of a new triangle is the copy its loop triangle uses: the hole's side of a seam
+        self.copy = np.asarray(data.source_indices(np.arange(nw)), dtype=np.int64).copy()
+        self.copy[self.loop] = source_triangles[self.tri[self.first], self.corner[self.first]]
+        to_source = np.concatenate([self.copy, np.arange(n_source, n_source + total - nw)])
+        self.vertices = np.concatenate([data.source_positions(vertices[:nw]), vertices[nw:]])
+        self.triangles = np.concatenate([source_triangles, to_source[new]])
+        self.new, self.nw, self.inner = new, nw, None
+        if total > nw:
+            # harmonic values of the new vertices, L_uu x_u = -L_ub x_b with the cotangent Laplacian of
+            # the new triangles (a new vertex has no other): linear precision, so affine data on a flat
+            # patch stays affine. L is not symmetric (rows scaled by 1/D): its normal equations
+            from .laplacian import cotangent_laplacian  # (laplacian reads meshes through this module)
+
+            laplacian = cotangent_laplacian(np.asarray(vertices, dtype=np.float64), new)
+            self.inner = laplacian[nw:, nw:]
+            self.coupling = laplacian[nw:, :nw]
+            self.normal = (self.inner.T @ self.inner).tocsc()
+
+    def harmonic(self, values: np.ndarray) -> np.ndarray:
+        """Values ``(nw, k)`` of the welded vertices extended harmonically to the new ones, ``(p, k)``."""
+        if self.inner is None:
+            return np.zeros((0, values.shape[1]))
+        solution = solve_spd(self.normal, self.inner.T @ -(self.coupling @ values))
+        return np.asarray(solution).reshape(-1, values.shape[1])
+
+    def per_vertex(self, values: np.ndarray) -> np.ndarray:
+        """Per-vertex values ``(n_source, ...)`` followed by the new vertices' (clipped to the input's range;
+        integers rounded)."""
+        flat = values.reshape(len(values), -1).astype(np.float64)
+        extra = np.clip(self.harmonic(flat[self.copy]), flat.min(axis=0), flat.max(axis=0))
+        if not np.issubdtype(values.dtype, np.floating):
+            extra = np.rint(extra)
+        return np.concatenate([values, extra.reshape((-1,) + values.shape[1:]).astype(values.dtype)])
+
+    def per_triangle(self, values: np.ndarray) -> np.ndarray:
+        """Per-triangle values ``(m, ...)`` followed by the new triangles': their reference triangle's."""
+        return np.concatenate([values, values[self.tri[self.owner]]])
+
+    def per_corner(self, values: np.ndarray) -> np.ndarray:
+        """Per-corner values ``(m, 3, d)`` (UVs) followed by the new triangles'."""
+        at_corner = values[self.tri, self.corner].astype(np.float64)  # (c, d) the loop corners'
+        at = np.zeros((self.nw, values.shape[2]))
+        at[self.loop] = at_corner[self.first]
+        # a chart is continuous around a patch when every loop vertex has one value in its loop triangles
+        torn = np.zeros(len(self.patch), dtype=bool)
+        torn[self.patch[self.vertex[(at_corner != at[self.vertex]).any(axis=1)]]] = True
+        extended = np.concatenate([at, self.harmonic(at)])[self.new]  # (q, 3, d)
+        fallback = torn[self.patch[self.new[:, 0]]]
+        extended[fallback] = at_corner[self.owner[fallback]][:, None]
+        return np.concatenate([values, extended.astype(values.dtype)])
+
+
+def _edge_keys(triangles: np.ndarray, n: int) -> np.ndarray:
+    """One integer per triangle edge ``(m, 3)``, edge ``c`` from corner ``c`` to ``c + 1``, either way round."""
+    nxt = np.roll(triangles, -1, axis=1)
+    return np.minimum(triangles, nxt) * n + np.maximum(triangles, nxt)
+
+
 def new_mesh(
-    data: MeshData, vertices: np.ndarray, triangles: np.ndarray | None = None, *, warn: bool = True
+    data: MeshData,
+    vertices: np.ndarray,
+    triangles: np.ndarray | None = None,
+    *,
+    warn: bool = True,
+    appended: bool = False,
 ) -> Any:
     """Build a new mesh of ``data``'s kind with ``vertices`` (and ``triangles``, if they changed).
 
@@ -299,18 +411,25 @@ def new_mesh(
     its per-vertex and per-triangle attributes and its material (see the module
     docstring). If ``data`` was welded, ``vertices`` are the welded vertices
     and the result has the source's split layout, each duplicate at its welded
-    vertex's position. New ``triangles`` (in ``data``'s numbering) drop what
-    no longer matches them, with one :class:`~o3d_lsmesh.O3DLSMeshWarning`
-    (``warn=False``: the caller carries over what it can and warns itself).
+    vertex's position. ``appended=True``: ``vertices`` and ``triangles`` are
+    ``data``'s (welded, unchanged and in order) then new ones; every attribute
+    is kept and extended to the new elements (module docstring). Other new
+    ``triangles`` (in ``data``'s numbering) drop what no longer matches them,
+    with one :class:`~o3d_lsmesh.O3DLSMeshWarning` (``warn=False``: the caller
+    warns itself).
     """
     same_topology = triangles is None
-    if same_topology and data.split is not None:
+    extension = None
+    if appended and triangles is not None:
+        extension = _Appended(data, np.asarray(vertices, dtype=np.float64), np.asarray(triangles))
+        vertices, triangles = extension.vertices, extension.triangles
+    elif same_topology and data.split is not None:
         # back to the source's split layout: every duplicate gets its welded vertex's position
         vertices = data.source_positions(np.asarray(vertices, dtype=np.float64))
         triangles = data.split_triangles
     elif triangles is None:
         triangles = data.triangles
-    elif data.source is not None and warn:
+    elif data.source is not None and warn and extension is None:
         warn_dropped_attributes(data, "the result has new connectivity", stacklevel=4)
     vertices = np.ascontiguousarray(vertices, dtype=np.float64)
     # (a legacy mesh of the same connectivity copies the source's own triangles: no int64 copy here)
@@ -335,6 +454,18 @@ def new_mesh(
             out = o3d.geometry.TriangleMesh(
                 o3d.utility.Vector3dVector(vertices), o3d.utility.Vector3iVector(faces.astype(np.int32))
             )
+        if extension is not None:
+            if src.has_vertex_colors():
+                out.vertex_colors = o3d.utility.Vector3dVector(
+                    extension.per_vertex(np.asarray(src.vertex_colors))
+                )
+            if src.has_triangle_uvs():
+                uvs = np.asarray(src.triangle_uvs).reshape(-1, 3, 2)
+                out.triangle_uvs = o3d.utility.Vector2dVector(extension.per_corner(uvs).reshape(-1, 2))
+            if src.has_triangle_material_ids():
+                ids = np.asarray(src.triangle_material_ids)
+                out.triangle_material_ids = o3d.utility.IntVector(extension.per_triangle(ids))
+            out.textures = [o3d.geometry.Image(texture) for texture in src.textures]
         if src.has_vertex_normals():
             out.compute_vertex_normals()
         if src.has_triangle_normals():
@@ -349,11 +480,22 @@ def new_mesh(
     out = o3d.t.geometry.TriangleMesh(device)
     out.vertex.positions = o3d.core.Tensor(vertices, device=device).to(position_dtype)
     out.triangle.indices = o3d.core.Tensor(faces, device=device).to(index_dtype)
-    for group, own in _OWN_KEYS.items() if same_topology else ():
+    for group, own in _OWN_KEYS.items() if same_topology or extension is not None else ():
         source, target = getattr(src, group), getattr(out, group)
         for key in source:
-            if key not in own:
+            if key in own:
+                continue
+            if extension is None:
                 target[key] = source[key].clone()
+                continue
+            value = source[key].cpu().numpy()
+            if group == "vertex":
+                value = extension.per_vertex(value)
+            elif key == "texture_uvs" and value.ndim == 3 and value.shape[1] == 3:
+                value = extension.per_corner(value)
+            else:
+                value = extension.per_triangle(value)
+            target[key] = o3d.core.Tensor(value, device=device).to(source[key].dtype)
     if src.has_valid_material():
         # a copy: the caller's material must not change when the result's is edited
         out.material = o3d.visualization.Material(src.material)
@@ -363,6 +505,38 @@ def new_mesh(
         out.compute_vertex_normals() if had_vertex_normals else out.compute_triangle_normals()
         if had_vertex_normals and not had_triangle_normals and "normals" in out.triangle:
             del out.triangle["normals"]
+    return out
+
+
+def obj_writable(mesh: Any) -> Any:
+    """A legacy mesh that Open3D's OBJ writer writes with every texture (``mesh`` itself if it already is).
+
+    The writer names material ``i`` ``<stem>_i`` and its image ``<stem>_i.png``, and stops at the
+    first empty texture slot, leaving the ``.mtl`` without the rest and saying so only in a native
+    warning; its own OBJ reader puts an empty slot first (for faces without a material), so a read
+    OBJ is written back without its texture. The copy drops the empty slots no triangle uses
+    (material ids renumbered) and gives those in use a 1x1 white image (untextured white).
+    """
+    textures = list(mesh.textures)
+    empty = np.array([texture.is_empty() for texture in textures], dtype=bool)
+    if not empty.any() or not mesh.has_triangle_uvs():  # (without UVs the writer writes no material)
+        return mesh
+    o3d = open3d()
+    ids = (
+        np.asarray(mesh.triangle_material_ids) if mesh.has_triangle_material_ids() else np.zeros(1, np.int32)
+    )
+    used = np.zeros(len(textures) + 1, dtype=bool)  # (the last: ids past the textures)
+    used[np.clip(ids[ids >= 0], 0, len(textures))] = True
+    keep = used[:-1] | ~empty
+    out = o3d.geometry.TriangleMesh(mesh)
+    white = o3d.geometry.Image(np.full((1, 1, 3), 255, dtype=np.uint8))
+    out.textures = [white if empty[i] else textures[i] for i in np.flatnonzero(keep)]
+    if mesh.has_triangle_material_ids():
+        dropped_before = np.concatenate([[0], np.cumsum(~keep)])  # slots dropped before each id
+        renumbered = ids - dropped_before[np.clip(ids, 0, len(textures))]
+        out.triangle_material_ids = o3d.utility.IntVector(
+            np.where(ids >= 0, renumbered, ids).astype(np.int32)
+        )
     return out
 
 
@@ -385,8 +559,8 @@ def mesh_state(data: MeshData) -> dict:
     if data.kind == "legacy":
         for key, _ in _LEGACY_ARRAYS:
             state[key] = np.asarray(getattr(src, key)).copy() if getattr(src, f"has_{key}")() else None
-        # as new_mesh copies them: only when the mesh has textures (readers may leave empty images)
-        textures = src.textures if src.has_textures() else []
+        # as new_mesh copies them: only when the mesh has a texture (readers may leave empty images)
+        textures = src.textures if has_textures(src) else []
         state["textures"] = [None if t.is_empty() else np.asarray(t).copy() for t in textures]
         state["vertex_normals"] = bool(src.has_vertex_normals())
         state["triangle_normals"] = bool(src.has_triangle_normals())

@@ -997,10 +997,13 @@ def fill_holes(
     -------
     Mesh of the kind given
         The input's vertices and triangles unchanged and in order, then the new ones, wound like their
-        neighbours. Vertex colours are kept and interpolated harmonically for new vertices (for tensor
-        meshes, every float per-vertex attribute but normals); normals are recomputed if the input had
-        them; per-triangle and per-corner attributes (triangle UVs, material ids, tensor triangle
-        attributes) are dropped with an :class:`O3DLSMeshWarning`.
+        neighbours. Holes are those of the welded surface (vertices at equal coordinates merged), so a
+        UV seam is not a hole; a new triangle uses the copy of a seam vertex on its hole's side. Every
+        attribute stays on the input's elements (UVs, material ids, textures, material, tensor
+        attributes) and is extended to the new ones: per-vertex values and UVs harmonically (cotangent
+        weights) where the UV chart is continuous around the hole, else the UV of a loop corner of a
+        neighbouring triangle; material ids and other per-triangle values of that triangle (see
+        :mod:`o3d_lsmesh._o3d`). Normals are recomputed if the input had them.
 
     Raises
     ------
@@ -1044,7 +1047,7 @@ def fill_holes(
     >>> out.is_watertight(), len(out.triangles) >= len(holed.triangles)
     (True, True)
     """
-    data = read_mesh(mesh)
+    data = read_mesh(mesh, weld=True)  # the welded surface's holes: a UV seam is not one
     result = fill_holes_arrays(
         data.vertices,
         data.triangles,
@@ -1054,53 +1057,6 @@ def fill_holes(
         density=density,
         weights=weights,
         fill_border=fill_border,
-        # new vertices interpolate the per-vertex data: colours, float tensor attributes
-        interpolation=(data.kind == "legacy" and data.source.has_vertex_colors())
-        or (data.kind == "tensor" and any(key not in ("positions", "normals") for key in data.source.vertex)),
         progress=progress,
     )
-    return _rebuild(data, result)
-
-
-def _rebuild(data: Any, result: FilledHoles) -> Any:
-    """The output mesh of ``data``'s kind, carrying over what the attribute policy allows."""
-    if not result.holes:
-        return new_mesh(data, result.vertices)
-    out = new_mesh(data, result.vertices, result.triangles, warn=False)  # colours follow below
-    if data.kind == "arrays":
-        return out
-    from ._o3d import open3d
-
-    o3d, src, n = open3d(), data.source, len(data.vertices)
-
-    def extend(values: np.ndarray) -> np.ndarray:
-        values = np.asarray(values, dtype=np.float64).reshape(n, -1)
-        return np.concatenate([values, result.interpolation @ values])
-
-    dropped = []
-    if data.kind == "legacy":
-        if src.has_vertex_colors():
-            out.vertex_colors = o3d.utility.Vector3dVector(
-                np.clip(extend(np.asarray(src.vertex_colors)), 0.0, 1.0)
-            )
-        dropped = [
-            name for name in ("triangle_uvs", "triangle_material_ids") if getattr(src, f"has_{name}")()
-        ]
-    else:
-        for key in src.vertex:
-            value = src.vertex[key]
-            if key in ("positions", "normals"):
-                continue
-            if value.dtype not in (o3d.core.float32, o3d.core.float64):
-                dropped.append(f"vertex.{key}")
-                continue
-            arr = extend(value.cpu().numpy()).reshape((-1,) + tuple(value.shape[1:]))
-            out.vertex[key] = o3d.core.Tensor(arr, device=src.vertex.positions.device).to(value.dtype)
-        dropped += [f"triangle.{key}" for key in src.triangle if key not in ("indices", "normals")]
-    if dropped:
-        warnings.warn(
-            f"fill_holes changes the connectivity: dropped {', '.join(dropped)}",
-            O3DLSMeshWarning,
-            stacklevel=3,
-        )
-    return out
+    return new_mesh(data, result.vertices, result.triangles if result.holes else None, appended=True)

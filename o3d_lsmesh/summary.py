@@ -8,9 +8,16 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse import csgraph
 
-from ._o3d import read_mesh
+from ._o3d import read_mesh, weld_map
 from ._validate import mesh_arrays
-from .topology import boundary_curves, boundary_rows, connected_components, corner_fans, edge_runs
+from .topology import (
+    boundary_curves,
+    boundary_halfedges,
+    boundary_rows,
+    connected_components,
+    corner_fans,
+    edge_runs,
+)
 
 if TYPE_CHECKING:
     from ._types import AnyMesh
@@ -65,6 +72,10 @@ def topology_summary_arrays(vertices: np.ndarray, triangles: np.ndarray) -> dict
     graph = sp.coo_matrix((np.ones(boundary_edges), (tail[rows], head[rows])), shape=(n, n))
     boundary_label = csgraph.connected_components(graph, directed=False)[1]
     boundary_components = len(np.unique(boundary_label[tail[rows]]))
+    # UV seams and normal creases as Open3D's readers split them: boundary edges that vertices at equal
+    # coordinates close (fill_holes and the fairing functions work on that welded surface)
+    split = weld_map(vertices, F)
+    seam_edges = 0 if split is None else boundary_edges - len(boundary_halfedges(split[F], n))
     # degenerate triangles: (near) zero area relative to the longest edge
     corners = vertices[F]
     sides = corners[:, [1, 2, 0]] - corners
@@ -99,6 +110,7 @@ def topology_summary_arrays(vertices: np.ndarray, triangles: np.ndarray) -> dict
         "boundary_loops": loops,
         "boundary_components": boundary_components,
         "boundary_edges": boundary_edges,
+        "seam_edges": seam_edges,
         "open_boundary_chains": len(curves.chains),
         "holes_by_size": holes,
         "largest_hole_edges": int(loop_edges.max()) if len(loop_edges) else 0,
@@ -130,8 +142,12 @@ def topology_summary(mesh: AnyMesh) -> dict:
         triangles: pinches and fins separate them); ``boundary_loops`` (continuing at a pinch along
         the rim of the same fan, :func:`o3d_lsmesh.topology.boundary_loops`); ``boundary_components``
         (pieces of the boundary graph: loops touching at a pinch count once, as in Open3D-based
-        counts); ``boundary_edges``; ``open_boundary_chains`` (ending at a fin); ``holes_by_size``
-        (loops per :data:`HOLE_SIZE_BINS` bin, an open scan's outer rim included) and
+        counts); ``boundary_edges``; ``seam_edges``: how many of them are a UV seam or normal crease
+        that Open3D's readers split (both sides at exactly equal coordinates: the counts here are of
+        the mesh as given, as Open3D counts them, while :func:`~o3d_lsmesh.fill_holes` and the fairing
+        functions work on the welded surface, where a seam is no boundary);
+        ``open_boundary_chains`` (ending at a fin); ``holes_by_size`` (loops per
+        :data:`HOLE_SIZE_BINS` bin, an open scan's outer rim and seams included) and
         ``largest_hole_edges``; ``nonmanifold_edges``, ``nonmanifold_vertices``,
         ``unreferenced_vertices``, ``degenerate_triangles`` (twice the area at most
         :data:`DEGENERATE_TOLERANCE` times the longest edge squared), ``duplicate_triangles`` (same

@@ -20,7 +20,7 @@ from hypothesis import strategies as st
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 
-from o3d_lsmesh import O3DLSMeshWarning, _fill_kernel, fill_holes
+from o3d_lsmesh import _fill_kernel, fill_holes
 from o3d_lsmesh.hole_filling import (
     DP_MAX_EDGES,
     HoleFiller,
@@ -769,13 +769,16 @@ def test_input_untouched_colours_interpolated_and_tensor_kind():
     np.testing.assert_allclose(arrays[0], np.asarray(out.vertices))
 
 
-def test_dropped_attributes_warn():
+def test_triangle_attributes_kept_without_warning():
+    # (the attribute policy's own tests are in test_attributes.py)
     V, T = icosphere(2)
     Vh, Th, _ = cut_disk(V, T, 0, 0.4)
     tensor = o3d.t.geometry.TriangleMesh(o3d.core.Tensor(Vh), o3d.core.Tensor(Th))
     tensor.triangle.labels = o3d.core.Tensor(np.arange(len(Th), dtype=np.int32))
-    with pytest.warns(O3DLSMeshWarning, match="triangle.labels"):
-        fill_holes(tensor)
+    out = fill_holes(tensor)
+    labels = out.triangle.labels.numpy()
+    np.testing.assert_array_equal(labels[: len(Th)], np.arange(len(Th)))
+    assert len(labels) == len(out.triangle.indices) > len(Th) and labels.dtype == np.int32
 
 
 def test_closed_mesh_returns_a_copy():

@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import os
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 from .._batch_ops import WRITABLE, read_mesh_file, write_mesh
-from .._o3d import read_mesh
+from .._errors import O3DLSMeshWarning
+from .._o3d import has_textures, obj_writable, open3d, read_mesh
 from ._common import CLIError, glb_hint
 
 
@@ -51,7 +53,27 @@ def check_output(
 
 
 def write_output(path: str, mesh: Any) -> None:
+    """Write a mesh; an OBJ with its ``.mtl`` and texture images beside it (:func:`~o3d_lsmesh._o3d.obj_writable`),
+    other formats with a warning when they cannot hold the mesh's UVs and textures."""
+    target, suffix = Path(path), Path(path).suffix.lower()
+    legacy = isinstance(mesh, open3d().geometry.TriangleMesh)
+    uvs = legacy and mesh.has_triangle_uvs()  # (Open3D's OBJ writer writes a material only with UVs)
+    if uvs and suffix == ".obj":
+        mesh = obj_writable(mesh)
+    elif legacy and (uvs or has_textures(mesh)):
+        warnings.warn(  # (Open3D's PLY, STL, OFF and glTF writers write neither)
+            f"OUTPUT {path!r}: the {suffix} output has no texture coordinates or textures; the input's "
+            "are not written (write .obj to keep them)",
+            O3DLSMeshWarning,
+            stacklevel=2,
+        )
     try:
-        write_mesh(mesh, Path(path))
+        write_mesh(mesh, target)
     except OSError:
         raise CLIError(f"could not write OUTPUT {path!r}") from None
+    if uvs and suffix == ".obj":  # Open3D says it failed only in a native warning
+        expected = [target.with_suffix(".mtl")]
+        expected += [target.with_name(f"{target.stem}_{i}.png") for i in range(len(mesh.textures))]
+        missing = [file.name for file in expected if not file.exists()]
+        if missing:
+            raise CLIError(f"wrote OUTPUT {path!r} but not its material and textures {', '.join(missing)}")

@@ -6,8 +6,6 @@ import argparse
 import time
 from typing import Any
 
-import numpy as np
-
 from ._common import Run, add_command, bounded
 from ._files import check_output, read_input, write_output
 
@@ -43,16 +41,21 @@ def fill(args: argparse.Namespace, run: Run) -> int:
     check_output(args.output, [args.input], force=args.force)
     mesh = read_input(args.input)
     from .._batch_ops import TaskContext, fill_op
+    from .._o3d import read_mesh
     from ..hole_filling import find_holes
 
-    before = find_holes(np.asarray(mesh.vertices), np.asarray(mesh.triangles, dtype=np.int64))
+    def holes(mesh: Any) -> list:  # of the welded surface, as fill_holes sees it: a UV seam is no hole
+        welded = read_mesh(mesh, weld=True)
+        return find_holes(welded.vertices, welded.triangles)
+
+    before = holes(mesh)
     start = time.perf_counter()
     names = ("max_hole_edges", "max_hole_diameter", "continuity", "density", "fill_border")
     context = TaskContext(args.input, args.input, None, progress=run.progress)
     out, report = fill_op(mesh, {name: getattr(args, name) for name in names}, context)
     seconds = time.perf_counter() - start
     write_output(args.output, out)
-    after = find_holes(np.asarray(out.vertices), np.asarray(out.triangles, dtype=np.int64))
+    after = holes(out)
     run.say(
         f"filled {len(before) - len(after)} of {len(before)} holes of {args.input} in {seconds:.2f} s "
         f"({report['new_vertices']} new vertices) -> {args.output}; {len(after)} loops left open"

@@ -1,0 +1,281 @@
+"""No data lost by fill_holes and by writing OBJ: UVs, material ids, textures kept; a seam is not a hole."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+o3d = pytest.importorskip("open3d")
+
+from conftest import grid  # noqa: E402
+
+import o3d_lsmesh  # noqa: E402
+from o3d_lsmesh._o3d import obj_writable  # noqa: E402
+from o3d_lsmesh.cli import main  # noqa: E402
+
+#: UV = position @ AFFINE + OFFSET: on a flat patch, harmonic (cotangent) values of it stay on it
+AFFINE = np.array([[0.7, 0.2], [-0.1, 0.6], [0.0, 0.0]])
+OFFSET = np.array([0.1, 0.15])
+TEXTURE = (np.arange(8 * 8 * 3).reshape(8, 8, 3) * 5 % 256).astype(np.uint8)
+
+
+def _affine(points):
+    return points @ AFFINE + OFFSET
+
+
+def _holed_grid():
+    """A flat 12x12 grid with a round hole away from its border, ``(vertices, triangles)``."""
+    V, T = grid(12, 12)
+    centre = V[T].mean(axis=1)[:, :2]
+    return V, T[np.linalg.norm(centre - [0.5, 0.47], axis=1) > 0.22]
+
+
+def _textured(V, T, ids):
+    mesh = o3d.geometry.TriangleMesh(
+        o3d.utility.Vector3dVector(V), o3d.utility.Vector3iVector(T.astype(np.int32))
+    )
+    mesh.triangle_uvs = o3d.utility.Vector2dVector(_affine(V[T]).reshape(-1, 2))
+    mesh.triangle_material_ids = o3d.utility.IntVector(ids.astype(np.int32))
+    mesh.vertex_colors = o3d.utility.Vector3dVector(np.clip(_affine(V) @ [[1, 0, 0.5], [0, 1, 0.5]], 0, 1))
+    mesh.textures = [o3d.geometry.Image(TEXTURE), o3d.geometry.Image(TEXTURE[::-1].copy())]
+    return mesh
+
+
+def _loop_triangles(T, new):
+    """Indices of the triangles of ``T`` sharing an edge with a triangle of ``new`` (plain sets)."""
+    new_edges = {frozenset(e) for t in new.tolist() for e in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0]))}
+    return [
+        i
+        for i, t in enumerate(T.tolist())
+        if any(frozenset(e) in new_edges for e in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0])))
+    ]
+
+
+def test_legacy_fill_keeps_uvs_ids_textures_and_new_uvs_are_the_affine_map():
+    V, T = _holed_grid()
+    ids = np.arange(len(T)) % 2
+    mesh = _textured(V, T, ids)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # nothing is dropped: no warning
+        out = o3d_lsmesh.fill_holes(mesh)
+    W, F = np.asarray(out.vertices), np.asarray(out.triangles)
+    m = len(T)
+    assert len(F) > m and len(W) > len(V)
+    np.testing.assert_array_equal(F[:m], T)
+    uvs = np.asarray(out.triangle_uvs).reshape(-1, 3, 2)
+    np.testing.assert_array_equal(uvs[:m], np.asarray(mesh.triangle_uvs).reshape(-1, 3, 2))
+    # the chart is continuous around the hole: new corners carry the affine map at their positions
+    np.testing.assert_allclose(uvs[m:], _affine(W[F[m:]]), rtol=0, atol=1e-9)
+    colours = np.asarray(out.vertex_colors)
+    np.testing.assert_array_equal(colours[: len(V)], np.asarray(mesh.vertex_colors))
+    np.testing.assert_allclose(
+        colours[len(V) :],
+        np.asarray(mesh.vertex_colors)[:1] * 0
+        + np.clip(_affine(W[len(V) :]) @ [[1, 0, 0.5], [0, 1, 0.5]], 0, 1),
+        rtol=0,
+        atol=1e-9,
+    )
+    out_ids = np.asarray(out.triangle_material_ids)
+    np.testing.assert_array_equal(out_ids[:m], ids)
+    # the new triangles take the material of one triangle along the loop
+    assert len(set(out_ids[m:].tolist())) == 1
+    assert out_ids[m] in set(ids[_loop_triangles(T, F[m:])].tolist())
+    assert len(out.textures) == 2
+    for got, expected in zip(out.textures, mesh.textures, strict=True):
+        np.testing.assert_array_equal(np.asarray(got), np.asarray(expected))
+
+
+def test_legacy_fill_without_new_vertices_keeps_uvs():
+    V, T = _holed_grid()
+    mesh = _textured(V, T, np.zeros(len(T)))
+    out = o3d_lsmesh.fill_holes(mesh, density=0.0)
+    W, F = np.asarray(out.vertices), np.asarray(out.triangles)
+    assert len(W) == len(V) and len(F) > len(T)
+    np.testing.assert_allclose(
+        np.asarray(out.triangle_uvs).reshape(-1, 3, 2), _affine(W[F]), rtol=0, atol=1e-12
+    )
+
+
+def test_tensor_fill_keeps_every_attribute_and_extends_them():
+    V, T = _holed_grid()
+    m, n = len(T), len(V)
+    mesh = o3d.t.geometry.TriangleMesh(o3d.core.Tensor(V), o3d.core.Tensor(T))
+    mesh.vertex.colors = o3d.core.Tensor(np.c_[_affine(V), V[:, :1]].astype(np.float32))
+    mesh.vertex.labels = o3d.core.Tensor(np.full((n, 1), 7, dtype=np.int32))
+    mesh.triangle.texture_uvs = o3d.core.Tensor(_affine(V[T]).astype(np.float32))
+    mesh.triangle.ids = o3d.core.Tensor(np.arange(m, dtype=np.int64))
+    mesh.material.set_default_properties()
+    mesh.material.texture_maps["albedo"] = o3d.t.geometry.Image(o3d.core.Tensor(TEXTURE))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        out = o3d_lsmesh.fill_holes(mesh)
+    W, F = out.vertex.positions.numpy().astype(np.float64), out.triangle.indices.numpy()
+    assert len(F) > m and len(W) > n
+    np.testing.assert_array_equal(F[:m], T)
+    colours = out.vertex.colors.numpy()
+    assert colours.dtype == np.float32
+    np.testing.assert_array_equal(colours[:n], mesh.vertex.colors.numpy())
+    np.testing.assert_allclose(colours[n:], np.c_[_affine(W[n:]), W[n:, :1]], rtol=0, atol=1e-6)
+    np.testing.assert_array_equal(out.vertex.labels.numpy(), np.full((len(W), 1), 7))
+    uvs = out.triangle.texture_uvs.numpy()
+    np.testing.assert_array_equal(uvs[:m], mesh.triangle.texture_uvs.numpy())
+    np.testing.assert_allclose(uvs[m:], _affine(W[F[m:]]), rtol=0, atol=1e-6)
+    ids = out.triangle.ids.numpy()
+    np.testing.assert_array_equal(ids[:m], np.arange(m))
+    assert set(ids[m:].tolist()) <= set(_loop_triangles(T, F[m:]))
+    np.testing.assert_array_equal(out.material.texture_maps["albedo"].as_tensor().numpy(), TEXTURE)
+
+
+def _split_sphere_with_holes(tmp_path):
+    """A UV sphere read from OBJ (split at its seam) with one hole across the seam and one away from it;
+    the holes' centres."""
+    sphere = o3d.geometry.TriangleMesh.create_sphere(radius=1.0, resolution=20, create_uv_map=True)
+    assert o3d.io.write_triangle_mesh(str(tmp_path / "sphere.obj"), sphere)
+    mesh = o3d.io.read_triangle_mesh(str(tmp_path / "sphere.obj"), enable_post_processing=False)
+    V, T = np.asarray(mesh.vertices), np.asarray(mesh.triangles)
+    uvs = np.asarray(mesh.triangle_uvs).reshape(-1, 3, 2)
+    groups: dict = {}
+    for i, p in enumerate(V.tolist()):
+        groups.setdefault(tuple(p), []).append(i)
+    seam = [g for g in groups.values() if len(g) == 2]
+    on_seam = V[seam[len(seam) // 2][0]]
+    away = on_seam * [-1, -1, 1]  # the same latitude, half way round
+    centres = V[T].mean(axis=1)
+    cut = (np.linalg.norm(centres - on_seam, axis=1) < 0.3) | (np.linalg.norm(centres - away, axis=1) < 0.3)
+    holed = o3d.geometry.TriangleMesh(mesh)
+    holed.triangles = o3d.utility.Vector3iVector(T[~cut].astype(np.int32))
+    holed.triangle_uvs = o3d.utility.Vector2dVector(uvs[~cut].reshape(-1, 2))
+    holed.triangle_material_ids = o3d.utility.IntVector(np.asarray(mesh.triangle_material_ids)[~cut])
+    return holed, on_seam, away
+
+
+def _plain_weld(V):
+    index: dict = {}
+    split = np.array([index.setdefault(tuple(p), len(index)) for p in V.tolist()])
+    welded = np.zeros((len(index), 3))
+    welded[split] = V
+    return welded, split
+
+
+def _boundary_edges(T):
+    count: dict = {}
+    for t in T.tolist():
+        for e in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0])):
+            count[frozenset(e)] = count.get(frozenset(e), 0) + 1
+    return sum(c == 1 for c in count.values())
+
+
+def test_seams_are_not_holes_and_uvs_follow_the_chart(tmp_path):
+    mesh, on_seam, away = _split_sphere_with_holes(tmp_path)
+    V, T = np.asarray(mesh.vertices), np.asarray(mesh.triangles)
+    n, m = len(V), len(T)
+    welded, split = _plain_weld(V)
+    # what Open3D's counts see (the seam is a boundary) and what fill_holes must see (two holes)
+    summary = o3d_lsmesh.topology_summary(mesh)
+    assert summary["boundary_edges"] == _boundary_edges(T)
+    assert summary["seam_edges"] == _boundary_edges(T) - _boundary_edges(split[T]) > 0
+    out = o3d_lsmesh.fill_holes(mesh)
+    W, F = np.asarray(out.vertices), np.asarray(out.triangles)
+    np.testing.assert_array_equal(W[:n], V)
+    np.testing.assert_array_equal(F[:m], T)
+    # the fill of the split mesh is the fill of the welded mesh (plain weld), in the split layout
+    ref_v, ref_t = o3d_lsmesh.fill_holes((welded, split[T]))
+    np.testing.assert_allclose(W[n:], ref_v[len(welded) :], rtol=0, atol=1e-12)
+    to_welded = np.concatenate([split, np.arange(len(welded), len(ref_v))])
+    np.testing.assert_array_equal(to_welded[F], ref_t)
+    assert _boundary_edges(to_welded[F]) == 0  # closed: both holes filled, the seam untouched
+    # (the patch across the seam meets the loop's two sides through one copy of each seam vertex)
+    assert o3d_lsmesh.topology_summary(out)["seam_edges"] >= summary["seam_edges"]
+    # UVs: the old triangles' unchanged; the hole away from the seam continues its chart (each loop
+    # corner has the UV its vertex has), the hole across the seam takes one UV of a loop corner
+    uvs = np.asarray(out.triangle_uvs).reshape(-1, 3, 2)
+    np.testing.assert_array_equal(uvs[:m], np.asarray(mesh.triangle_uvs).reshape(-1, 3, 2))
+    uv_of = {}
+    for t, corners in zip(T.tolist(), uvs[:m].tolist(), strict=True):
+        for v, uv in zip(t, corners, strict=True):
+            uv_of.setdefault(v, uv)
+    centres = W[F[m:]].mean(axis=1)
+    near_away = np.linalg.norm(centres - away, axis=1) < np.linalg.norm(centres - on_seam, axis=1)
+    assert near_away.any() and (~near_away).any()
+    new_uvs, new_tris = uvs[m:], F[m:]
+    loop_uvs = [uv_of[v] for v in np.unique(new_tris[near_away]) if v < n]
+    for t, corners in zip(new_tris[near_away].tolist(), new_uvs[near_away].tolist(), strict=True):
+        for v, uv in zip(t, corners, strict=True):
+            if v < n:
+                assert uv == uv_of[v]
+            else:  # inside the loop's UV box
+                assert np.all(uv >= np.min(loop_uvs, axis=0) - 1e-12) and np.all(
+                    uv <= np.max(loop_uvs, axis=0) + 1e-12
+                )
+    torn = new_uvs[~near_away].reshape(-1, 2)
+    assert (torn == torn[0]).all()
+    seam_loop = {
+        tuple(uv)
+        for t, c in zip(T.tolist(), uvs[:m].tolist(), strict=True)
+        for v, uv in zip(t, c, strict=True)
+        if v in set(new_tris[~near_away].ravel().tolist())
+    }
+    assert tuple(torn[0]) in seam_loop
+
+
+def test_textured_obj_filled_and_written_back_keeps_its_texture(tmp_path, capsys):
+    """#37's acceptance: the output OBJ's UVs, material and texture are there, through the command line."""
+    V, T = _holed_grid()
+    mesh = _textured(V, T, np.zeros(len(T)))
+    mesh.textures = [o3d.geometry.Image(TEXTURE)]
+    mesh.vertex_colors = o3d.utility.Vector3dVector()
+    assert o3d.io.write_triangle_mesh(str(tmp_path / "in.obj"), mesh)
+    given = o3d.io.read_triangle_mesh(str(tmp_path / "in.obj"), enable_post_processing=False)
+    assert main(["fill", str(tmp_path / "in.obj"), str(tmp_path / "out.obj"), "--quiet"]) == 0, (
+        capsys.readouterr().err
+    )
+    assert "map_Kd out_0.png" in (tmp_path / "out.mtl").read_text()
+    out = o3d.io.read_triangle_mesh(str(tmp_path / "out.obj"), enable_post_processing=False)
+    W, F = np.asarray(out.vertices), np.asarray(out.triangles)
+    m = len(T)
+    assert len(F) > m
+    # (Open3D writes faces grouped by material: one material here, so in order)
+    np.testing.assert_array_equal(F[:m], np.asarray(given.triangles))
+    uvs = np.asarray(out.triangle_uvs).reshape(-1, 3, 2)
+    np.testing.assert_array_equal(uvs[:m], np.asarray(given.triangle_uvs).reshape(-1, 3, 2))
+    np.testing.assert_allclose(uvs[m:], _affine(W[F[m:]]), rtol=0, atol=1e-5)  # (6 digits in OBJ)
+    np.testing.assert_array_equal(
+        np.asarray(out.triangle_material_ids), np.asarray(given.triangle_material_ids)[0]
+    )
+    images = [np.asarray(t) for t in out.textures if not t.is_empty()]
+    assert len(images) == 1
+    np.testing.assert_array_equal(images[0], TEXTURE)
+    # a format that cannot hold them says so
+    capsys.readouterr()
+    with warnings.catch_warnings():
+        warnings.simplefilter("default")  # as in a shell (the suite turns warnings into errors)
+        assert main(["fill", str(tmp_path / "in.obj"), str(tmp_path / "out.ply"), "--quiet"]) == 0
+    assert "out.ply': the .ply output has no texture coordinates or textures" in capsys.readouterr().err
+
+
+def test_obj_writable_fills_or_drops_empty_texture_slots(tmp_path):
+    V, T = grid(3, 3)
+    mesh = _textured(V, T, np.array([1, 1, 3, 3, 1, 3, 1, 1]))
+    mesh.textures = [
+        o3d.geometry.Image(),
+        o3d.geometry.Image(TEXTURE),
+        o3d.geometry.Image(),
+        o3d.geometry.Image(TEXTURE[1:]),
+    ]
+    fixed = obj_writable(mesh)
+    # slot 0 unused and empty: dropped; slot 2 empty and unused: dropped; ids renumbered 1 -> 0, 3 -> 1
+    np.testing.assert_array_equal(np.asarray(fixed.triangle_material_ids), [0, 0, 1, 1, 0, 1, 0, 0])
+    assert [np.asarray(t).shape for t in fixed.textures] == [TEXTURE.shape, TEXTURE[1:].shape]
+    mesh.triangle_material_ids = o3d.utility.IntVector([0, 1, 3, 3, 1, 3, 1, 2])
+    fixed = obj_writable(mesh)  # every slot in use: the empty ones become white
+    np.testing.assert_array_equal(
+        np.asarray(fixed.triangle_material_ids), np.asarray(mesh.triangle_material_ids)
+    )
+    assert [np.asarray(t).tolist() for t in fixed.textures[::2]] == [[[[255, 255, 255]]]] * 2
+    assert mesh.textures[0].is_empty()  # the input is left alone
+    assert o3d.io.write_triangle_mesh(str(tmp_path / "w.obj"), fixed)
+    assert sorted(p.name for p in tmp_path.glob("w_*.png")) == [f"w_{i}.png" for i in range(4)]
+    full = _textured(V, T, np.zeros(len(T)))
+    assert obj_writable(full) is full  # nothing to fix
