@@ -348,27 +348,29 @@ class _Appended:
         self.new, self.nw, self.inner = new, nw, None
         if total > nw:
             # harmonic values of the new vertices, L_uu x_u = -L_ub x_b with the cotangent Laplacian of
-            # the new triangles (a new vertex has no other): linear precision, so affine data on a flat
-            # patch stays affine. L is not symmetric (rows scaled by 1/D): its normal equations
+            # the new triangles (a new vertex has no other; numbered among their vertices alone, the new
+            # ones last): linear precision, so affine data on a flat patch stays affine. L is not
+            # symmetric (rows scaled by 1/D): its normal equations
             from .laplacian import cotangent_laplacian  # (laplacian reads meshes through this module)
 
-            laplacian = cotangent_laplacian(np.asarray(vertices, dtype=np.float64), new)
-            self.inner = laplacian[nw:, nw:]
-            self.coupling = laplacian[nw:, :nw]
+            local, local_triangles = np.unique(new, return_inverse=True)
+            k = int(np.searchsorted(local, nw))
+            laplacian = cotangent_laplacian(vertices[local], local_triangles.reshape(-1, 3))
+            self.around, self.inner, self.coupling = local[:k], laplacian[k:, k:], laplacian[k:, :k]
             self.normal = (self.inner.T @ self.inner).tocsc()
 
     def harmonic(self, values: np.ndarray) -> np.ndarray:
         """Values ``(nw, k)`` of the welded vertices extended harmonically to the new ones, ``(p, k)``."""
         if self.inner is None:
             return np.zeros((0, values.shape[1]))
-        solution = solve_spd(self.normal, self.inner.T @ -(self.coupling @ values))
+        solution = solve_spd(self.normal, self.inner.T @ -(self.coupling @ values[self.around]))
         return np.asarray(solution).reshape(-1, values.shape[1])
 
     def per_vertex(self, values: np.ndarray) -> np.ndarray:
         """Per-vertex values ``(n_source, ...)`` followed by the new vertices' (clipped to the input's range;
         integers rounded)."""
-        flat = values.reshape(len(values), -1).astype(np.float64)
-        extra = np.clip(self.harmonic(flat[self.copy]), flat.min(axis=0), flat.max(axis=0))
+        flat = values.reshape(len(values), -1)
+        extra = np.clip(self.harmonic(flat[self.copy].astype(np.float64)), flat.min(axis=0), flat.max(axis=0))
         if not np.issubdtype(values.dtype, np.floating):
             extra = np.rint(extra)
         return np.concatenate([values, extra.reshape((-1,) + values.shape[1:]).astype(values.dtype)])
