@@ -25,11 +25,14 @@ def _affine(points):
     return points @ AFFINE + OFFSET
 
 
-def _holed_grid():
-    """A flat 12x12 grid with a round hole away from its border, ``(vertices, triangles)``."""
-    V, T = grid(12, 12)
-    centre = V[T].mean(axis=1)[:, :2]
-    return V, T[np.linalg.norm(centre - [0.5, 0.47], axis=1) > 0.22]
+def _holed_box():
+    """A closed unit box (midpoint-subdivided: flat faces) with a round hole in its top face, ``(vertices,
+    triangles)``: closed, so that fill_holes has no outer border to leave open."""
+    box = o3d.geometry.TriangleMesh.create_box().subdivide_midpoint(4)
+    V, T = np.asarray(box.vertices), np.asarray(box.triangles).astype(np.int64)
+    centre = V[T].mean(axis=1)
+    top = np.abs(centre[:, 2] - 1.0) < 1e-12
+    return V, T[~(top & (np.linalg.norm(centre[:, :2] - [0.5, 0.47], axis=1) < 0.2))]
 
 
 def _textured(V, T, ids):
@@ -54,7 +57,7 @@ def _loop_triangles(T, new):
 
 
 def test_legacy_fill_keeps_uvs_ids_textures_and_new_uvs_are_the_affine_map():
-    V, T = _holed_grid()
+    V, T = _holed_box()
     ids = np.arange(len(T)) % 2
     mesh = _textured(V, T, ids)
     with warnings.catch_warnings():
@@ -88,7 +91,7 @@ def test_legacy_fill_keeps_uvs_ids_textures_and_new_uvs_are_the_affine_map():
 
 
 def test_legacy_fill_without_new_vertices_keeps_uvs():
-    V, T = _holed_grid()
+    V, T = _holed_box()
     mesh = _textured(V, T, np.zeros(len(T)))
     out = o3d_lsmesh.fill_holes(mesh, density=0.0)
     W, F = np.asarray(out.vertices), np.asarray(out.triangles)
@@ -99,7 +102,7 @@ def test_legacy_fill_without_new_vertices_keeps_uvs():
 
 
 def test_tensor_fill_keeps_every_attribute_and_extends_them():
-    V, T = _holed_grid()
+    V, T = _holed_box()
     m, n = len(T), len(V)
     mesh = o3d.t.geometry.TriangleMesh(o3d.core.Tensor(V), o3d.core.Tensor(T))
     mesh.vertex.colors = o3d.core.Tensor(np.c_[_affine(V), V[:, :1]].astype(np.float32))
@@ -222,7 +225,7 @@ def test_seams_are_not_holes_and_uvs_follow_the_chart(tmp_path):
 
 def test_textured_obj_filled_and_written_back_keeps_its_texture(tmp_path, capsys):
     """#37's acceptance: the output OBJ's UVs, material and texture are there, through the command line."""
-    V, T = _holed_grid()
+    V, T = _holed_box()
     mesh = _textured(V, T, np.zeros(len(T)))
     mesh.textures = [o3d.geometry.Image(TEXTURE)]
     mesh.vertex_colors = o3d.utility.Vector3dVector()
