@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import warnings
 
 import numpy as np
@@ -170,7 +171,7 @@ def _boundary_edges(T):
     return sum(c == 1 for c in count.values())
 
 
-def test_seams_are_not_holes_and_uvs_follow_the_chart(tmp_path):
+def test_seams_are_not_holes_and_uvs_follow_the_chart(tmp_path, capsys):
     mesh, on_seam, away = _split_sphere_with_holes(tmp_path)
     V, T = np.asarray(mesh.vertices), np.asarray(mesh.triangles)
     n, m = len(V), len(T)
@@ -221,6 +222,12 @@ def test_seams_are_not_holes_and_uvs_follow_the_chart(tmp_path):
         if v in set(new_tris[~near_away].ravel().tolist())
     }
     assert tuple(torn[0]) in seam_loop
+    # the command line counts the holes fill_holes sees
+    assert o3d.io.write_triangle_mesh(str(tmp_path / "holed.obj"), mesh)
+    capsys.readouterr()  # (Open3D's own messages)
+    assert main(["fill", str(tmp_path / "holed.obj"), str(tmp_path / "out.obj"), "--json", "--quiet"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert (report["holes_before"], report["holes_after"]) == (2, 0)
 
 
 def test_textured_obj_filled_and_written_back_keeps_its_texture(tmp_path, capsys):
