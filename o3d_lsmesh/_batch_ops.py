@@ -27,10 +27,12 @@ import re
 import shutil
 import sys
 import tempfile
+import threading
 import time
 import uuid
+import warnings
 from collections.abc import Iterator, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
@@ -57,12 +59,13 @@ WRITABLE = (".ply", ".obj", ".stl", ".off", ".gltf")
 #: Names an operation option may not take: they are flags of ``o3d-lsmesh batch`` itself.
 RESERVED = frozenset(
     "op workers threads_per_worker scheduler scheduler_file resume report retries fail_fast suffix set "
+    "task_timeout "
     "quiet json force help".split()
 )
 #: The fields of a report record, in the order they are written.
 RECORD_FIELDS = (
     "input output status error stage op key seconds cpu_seconds worker pid "
-    "vertices_before triangles_before vertices_after triangles_after metrics files"
+    "vertices_before triangles_before vertices_after triangles_after metrics files warnings"
 ).split()
 
 
@@ -426,11 +429,16 @@ def read_mesh_file(path: str, *, what: str = "INPUT") -> Any:
 
 
 def write_mesh(mesh: Any, path: Path) -> None:
-    """Write a mesh file; ``OSError`` when Open3D cannot (it returns False instead of raising)."""
+    """Write a mesh file (an OBJ with its ``.mtl`` and textures, :func:`~o3d_lsmesh._o3d.obj_writable`);
+    ``OSError`` when Open3D cannot (it returns False instead of raising)."""
     o3d = quiet_open3d()
     if path.suffix.lower() == ".stl":
         mesh = o3d.geometry.TriangleMesh(mesh)
         mesh.compute_triangle_normals()  # Open3D's STL writer refuses a mesh without them
+    if path.suffix.lower() == ".obj" and mesh.has_triangle_uvs():
+        from ._o3d import obj_writable
+
+        mesh = obj_writable(mesh)
     with captured_native_output():
         written = o3d.io.write_triangle_mesh(str(path), mesh)
     if not written or not path.exists() or path.stat().st_size == 0:
@@ -574,6 +582,48 @@ def _size(mesh: Any) -> tuple[int, int]:
     return len(mesh.vertices), len(mesh.triangles)
 
 
+_LOCAL = threading.local()  # .warnings: the list the task running in this thread collects its warnings in
+_SHOW: list[Callable[..., Any]] = []  # the warnings.showwarning that _route_warning replaced
+
+
+def _route_warning(message: Any, category: type[Warning], *args: Any, **kwargs: Any) -> None:
+    caught = getattr(_LOCAL, "warnings", None)
+    if caught is None:
+        _SHOW[0](message, category, *args, **kwargs)
+    else:
+        caught.append(f"{category.__name__}: {message}")
+
+
+def capture_warnings() -> None:
+    """Route each warning raised in a task's thread into that task's record (once per process).
+
+    Every warning is taken (``always``): a file's warning must not be hidden because another
+    file of this process raised it first. A worker keeps this; the serial loop restores the
+    caller's warning state when it ends.
+    """
+    if warnings.showwarning is not _route_warning:
+        _SHOW[:] = [warnings.showwarning]
+        warnings.showwarning = _route_warning
+        warnings.simplefilter("always")
+
+
+def _summary(caught: list[str], limit: int = 20) -> list[str]:
+    counts = dict.fromkeys(caught, 0)
+    for text in caught:
+        counts[text] += 1
+    lines = [text if n == 1 else f"{text} ({n} times)" for text, n in counts.items()]
+    return lines[:limit] + ([f"... and {len(lines) - limit} more"] if len(lines) > limit else [])
+
+
+@dataclass
+class _Gate:
+    """Stops an abandoned (timed-out) task from writing: the write and the abandonment exclude each other."""
+
+    lock: threading.Lock = field(default_factory=threading.Lock)
+    abandoned: bool = False
+    written: bool = False
+
+
 def run_task(
     path: str,
     relative: str,
@@ -584,8 +634,14 @@ def run_task(
     options: Sequence[dict],
     suffix: str,
     threads: int | None,
+    timeout: float | None = None,
 ) -> dict:
-    """Read ``path``, run the pipeline, write the result; return the JSON record (never raises an Exception)."""
+    """Read ``path``, run the pipeline, write the result; return the JSON record (never raises an Exception).
+
+    The pipeline runs in a thread of its own, given ``timeout`` seconds: past them the record
+    says ``TaskTimeout`` and the task is abandoned (it can no longer write; Python cannot stop a
+    thread, so it runs on until it ends, unless its process is restarted, as the Dask engine does).
+    """
     start, cpu = time.perf_counter(), time.process_time()
     record = new_record(
         input=path,
@@ -594,7 +650,44 @@ def run_task(
         key=key,
         worker=_worker_address(),
         pid=os.getpid(),
+        warnings=[],
     )
+    capture_warnings()
+    gate = _Gate()
+    task = threading.Thread(
+        target=_run_pipeline,
+        args=(record, gate, path, relative, outdir, ops, options, suffix, threads),
+        name=f"o3d-lsmesh task {relative}",
+        daemon=True,  # an abandoned task must not keep the process alive
+    )
+    task.start()
+    task.join(timeout)
+    if task.is_alive():
+        with gate.lock:  # (waits for a write under way: a written output is reported as such)
+            gate.abandoned = not gate.written
+    if gate.abandoned:
+        record = {**record, "metrics": dict(record["metrics"]), "warnings": list(record["warnings"])}
+        record["error"] = f"TaskTimeout: still running after {timeout:g} s (task_timeout), abandoned"
+    else:
+        task.join()
+    record["warnings"] = _summary(record["warnings"])
+    record["seconds"] = time.perf_counter() - start
+    record["cpu_seconds"] = time.process_time() - cpu  # CPU time of this worker process (all its threads)
+    return jsonable(record)
+
+
+def _run_pipeline(
+    record: dict,
+    gate: _Gate,
+    path: str,
+    relative: str,
+    outdir: str,
+    ops: Sequence[BatchOp],
+    options: Sequence[dict],
+    suffix: str,
+    threads: int | None,
+) -> None:
+    _LOCAL.warnings = record["warnings"]
     try:
         configure_threads(threads)
         mesh = read_mesh_file(path)
@@ -610,18 +703,21 @@ def run_task(
         if last.output == "mesh":
             record["vertices_after"], record["triangles_after"] = _size(current)
         target = output_path(Path(outdir), relative, last, suffix)
-        if target is not None:
-            record["stage"] = "write"
-            record["files"] = write_atomic(
-                current, target, kind=last.output, suffix=suffix, root=Path(outdir)
-            )
-            record["output"] = str(target)
+        with gate.lock:
+            if gate.abandoned:
+                return
+            if target is not None:
+                record["stage"] = "write"
+                record["files"] = write_atomic(
+                    current, target, kind=last.output, suffix=suffix, root=Path(outdir)
+                )
+                record["output"] = str(target)
+            gate.written = True
         record["status"], record["stage"] = "ok", None
     except Exception as error:
         record["error"] = f"{type(error).__name__}: {error}"
-    record["seconds"] = time.perf_counter() - start
-    record["cpu_seconds"] = time.process_time() - cpu  # CPU time of this worker process (all its threads)
-    return jsonable(record)
+    finally:
+        _LOCAL.warnings = None
 
 
 # --------------------------------------------------------------------------- the operations

@@ -376,6 +376,8 @@ def _run_dask(client: Any, tasks: list[_Task], job: dict, emit: Callable[[dict],
             except Exception as error:
                 record = _failure(task, op_name, f"{type(error).__name__}: {error}")
             future.release()
+            if str(record.get("error")).startswith("TaskTimeout"):
+                record["error"] += _restart(client, record.get("worker"))
             if not emit(record):
                 break
             size, held = window(), queue.count()
@@ -386,6 +388,17 @@ def _run_dask(client: Any, tasks: list[_Task], job: dict, emit: Callable[[dict],
         remaining = list(getattr(queue, "futures", ()))
         if remaining:
             client.cancel(remaining)
+
+
+def _restart(client: Any, worker: Any) -> str:
+    """Restart the worker running an abandoned task (only a nanny can: else it runs on there)."""
+    try:
+        status = client.restart_workers([worker], raise_for_error=False).get(worker)
+    except Exception as error:  # whatever it is, the record says so
+        status = f"{type(error).__name__}: {error}"
+    if status == "OK":
+        return "; its worker was restarted"
+    return f"; its worker could not be restarted ({status}), so it runs on there"
 
 
 # --------------------------------------------------------------------------- the API
@@ -410,6 +423,7 @@ def run(
     force: bool = False,
     progress: bool = True,
     on_record: Callable[[dict], None] | None = None,
+    task_timeout: float | None = 3600.0,
 ) -> list[dict]:
     """Run ``op`` on every mesh file of ``inputs`` and write the results into ``outdir``.
 
@@ -462,6 +476,12 @@ def run(
         Show a tqdm bar with done/failed counts and an ETA.
     on_record : callable, keyword-only
         Called with each record as it arrives; an exception it raises stops the batch.
+    task_timeout : float or None, keyword-only
+        Seconds a file may take (``None`` or 0: no limit). Past them its record says
+        ``TaskTimeout`` and the task can no longer write; on Dask its worker process is
+        restarted (a nanny's worker; else it runs on there). In the serial loop
+        (``workers=0``) Python cannot stop it: it runs on in a background thread of this
+        process until it ends, taking a core, while the next files run.
 
     Returns
     -------
@@ -470,7 +490,9 @@ def run(
         ``status`` (``ok``, ``failed``, ``skipped`` or ``cancelled``),
         ``error``, ``stage`` (where it failed: ``read``, an op name, ``write``
         or ``worker``), ``seconds`` and ``cpu_seconds`` of the task, ``vertices_before/after``,
-        ``triangles_before/after``, ``metrics`` (per op), ``key``, ``worker``.
+        ``triangles_before/after``, ``metrics`` (per op), ``key``, ``worker``,
+        ``files`` (each written file's ``bytes`` and ``sha256``) and ``warnings``
+        (what the task warned, also re-issued here with the file name).
 
     Raises
     ------
@@ -505,6 +527,14 @@ def run(
         raise ValueError("give --scheduler or --scheduler-file, not both")
     if scheduler_file is not None:
         _check_scheduler_file(scheduler_file)
+    if task_timeout is not None and (
+        isinstance(task_timeout, bool)
+        or not isinstance(task_timeout, (int, float))
+        or not 0 <= task_timeout < float("inf")
+    ):
+        raise ValueError(
+            f"task_timeout must be a number of seconds >= 0 (0: no limit) or None, got {task_timeout!r}"
+        )
     progress = check_progress(progress)
     if resume and report is None:
         raise ValueError("--resume needs --report (the file that says which inputs are done)")
@@ -568,6 +598,7 @@ def run(
         "options": values,
         "suffix": suffix,
         "threads": threads_per_worker,
+        "timeout": task_timeout or None,
     }
 
     bar = progress_bar(
@@ -593,6 +624,8 @@ def run(
         """Store, report and show one result; False asks the engine to stop (--fail-fast)."""
         records[index_of[record["input"]]] = record
         counts[record["status"]] += 1
+        for text in record.get("warnings") or ():
+            warnings.warn(f"{record['input']}: {text}", O3DLSMeshWarning, stacklevel=2)
         if handle is not None:
             handle.write(json.dumps(record).encode() + b"\n")
             handle.flush()
@@ -679,11 +712,13 @@ def _dispatch(
 
 
 def _run_serial(todo: list[_Task], job: dict, emit: Callable[[dict], bool]) -> None:
-    # Threads are left as the caller's process has them: this loop runs in the caller's process.
-    for task in todo:
-        record = run_task(task.path, task.relative, task.key, **{**job, "threads": None})
-        if not emit(record):
-            return
+    # Threads are left as the caller's process has them: this loop runs in the caller's process, whose
+    # warning state is restored at the end (the tasks route their warnings into their records).
+    with warnings.catch_warnings():
+        for task in todo:
+            record = run_task(task.path, task.relative, task.key, **{**job, "threads": None})
+            if not emit(record):
+                return
 
 
 def summarize(records: Sequence[dict], seconds: float | None = None) -> str:

@@ -9,12 +9,16 @@ from __future__ import annotations
 import hashlib
 import json
 import threading
+import time
+import warnings
 from pathlib import Path
 
+import numpy as np
 import open3d as o3d
 import pytest
 
 from o3d_lsmesh import batch
+from o3d_lsmesh._batch_ops import OPS, BatchOp
 from o3d_lsmesh._errors import O3DLSMeshWarning
 from o3d_lsmesh.cli import main
 
@@ -203,3 +207,106 @@ def test_a_missing_or_unreadable_scheduler_file_is_an_error_not_a_hang(tmp_path,
     ]
     assert main(argv) == 2
     assert "--scheduler-file must" in capsys.readouterr().err
+
+
+_RELEASE = threading.Event()
+
+
+def _slow_or_copy(mesh, options, context):
+    """Test-only op: files named slow* wait (for the test's release, at most a minute), warn* warn
+    twice, the rest copy."""
+    name = Path(context.relative).name
+    if name.startswith("slow"):
+        _RELEASE.wait(60) if context.threads is None else time.sleep(60)  # serial: this process's event
+    for _ in range(2 if name.startswith("warn") else 0):
+        warnings.warn("odd mesh", O3DLSMeshWarning, stacklevel=1)
+    return o3d.geometry.TriangleMesh(mesh), {}
+
+
+@pytest.fixture
+def slow_op():
+    batch.register_op(BatchOp("_test_slow", _slow_or_copy))
+    yield "_test_slow"
+    OPS.pop("_test_slow")
+
+
+def test_a_task_over_its_time_limit_is_a_failure_that_never_writes(tmp_path, slow_op):
+    folder, out = tmp_path / "in", tmp_path / "out"
+    for name in ("fast.ply", "slow.ply", "zfast.ply"):
+        _sphere(folder / name)
+    _RELEASE.clear()
+    records = {
+        Path(r["input"]).name: r
+        for r in batch.run(folder, out, op=slow_op, workers=0, task_timeout=0.5, progress=False)
+    }
+    _RELEASE.set()  # the abandoned task goes on to its end, and must not write
+    for thread in threading.enumerate():
+        if thread.name.startswith("o3d-lsmesh task"):
+            thread.join(30)
+    assert records["fast.ply"]["status"] == records["zfast.ply"]["status"] == "ok"
+    slow = records["slow.ply"]
+    assert (slow["status"], slow["stage"]) == ("failed", slow_op)
+    assert slow["error"].startswith("TaskTimeout: still running after 0.5 s")
+    assert sorted(p.name for p in out.iterdir()) == ["fast.ply", "zfast.ply"]  # no output, no temporary
+    for bad in (-1, float("nan"), "1", True):
+        with pytest.raises((ValueError, TypeError), match="task_timeout must"):
+            batch.run(folder, out, workers=0, task_timeout=bad)
+
+
+def test_on_dask_a_task_over_its_time_limit_fails_and_its_worker_is_restarted(tmp_path, slow_op):
+    pytest.importorskip("distributed")
+    folder, out = tmp_path / "in", tmp_path / "out"
+    for name in ("fast.ply", "slow.ply"):
+        _sphere(folder / name)
+    records = {
+        Path(r["input"]).name: r
+        for r in batch.run(folder, out, op=slow_op, workers=1, task_timeout=1, progress=False)
+    }
+    assert records["fast.ply"]["status"] == "ok"
+    slow = records["slow.ply"]
+    assert slow["status"] == "failed" and slow["error"].startswith("TaskTimeout: still running after 1 s")
+    assert "worker was restarted" in slow["error"]
+    assert sorted(p.name for p in out.iterdir()) == ["fast.ply"]
+
+
+@pytest.mark.parametrize("workers", [0, 1])
+def test_each_file_warnings_go_to_its_record_and_are_shown_with_its_name(tmp_path, slow_op, workers):
+    if workers:
+        pytest.importorskip("distributed")
+    folder = tmp_path / "in"
+    for name in ("warn1.ply", "quiet.ply", "warn2.ply"):
+        _sphere(folder / name)
+    with pytest.warns(O3DLSMeshWarning) as caught:
+        records = batch.run(folder, tmp_path / "out", op=slow_op, workers=workers, progress=False)
+    by_name = {Path(r["input"]).name: r["warnings"] for r in records}
+    assert by_name == {  # the same warning from the same line, once per file and counted (one process)
+        "quiet.ply": [],
+        "warn1.ply": ["O3DLSMeshWarning: odd mesh (2 times)"],
+        "warn2.ply": ["O3DLSMeshWarning: odd mesh (2 times)"],
+    }
+    shown = sorted(str(w.message) for w in caught)
+    assert shown == [
+        f"{folder / n}: O3DLSMeshWarning: odd mesh (2 times)" for n in ("warn1.ply", "warn2.ply")
+    ]
+
+
+def test_obj_outputs_name_their_material_and_texture_after_the_output_and_leave_no_temporary(
+    tmp_path, slow_op
+):
+    mesh = o3d.geometry.TriangleMesh.create_sphere(resolution=4)
+    mesh.triangle_uvs = o3d.utility.Vector2dVector(np.tile([[0.1, 0.2]], (3 * len(mesh.triangles), 1)))
+    mesh.textures = [o3d.geometry.Image(np.full((4, 4, 3), 200, np.uint8))]
+    mesh.triangle_material_ids = o3d.utility.IntVector([0] * len(mesh.triangles))
+    folder = tmp_path / "in"
+    folder.mkdir()
+    assert o3d.io.write_triangle_mesh(str(folder / "tex.obj"), mesh)
+    out = tmp_path / "out"
+    (record,) = batch.run(folder / "tex.obj", out, op=slow_op, suffix=".obj", workers=0, progress=False)
+    assert record["status"] == "ok"
+    assert sorted(p.name for p in out.iterdir()) == ["tex.mtl", "tex.obj", "tex_0.png"]  # nothing hidden
+    assert "mtllib tex.mtl" in (out / "tex.obj").read_text().splitlines()
+    assert "map_Kd tex_0.png" in (out / "tex.mtl").read_text().splitlines()
+    assert sorted(record["files"]) == ["tex.mtl", "tex.obj", "tex_0.png"]
+    back = o3d.io.read_triangle_mesh(str(out / "tex.obj"))
+    # (Open3D's reader puts an empty slot first)
+    assert [np.asarray(t).mean() for t in back.textures if not t.is_empty()] == [200]

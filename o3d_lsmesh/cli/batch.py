@@ -47,6 +47,13 @@ def add_parsers(sub: Any, common: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--retries", type=int, default=1, help="runs of a task whose worker died before it fails")
     p.add_argument("--fail-fast", action="store_true", help="stop at the first failure")
+    p.add_argument(
+        "--task-timeout",
+        type=float,
+        default=3600.0,
+        metavar="SECONDS",
+        help="a file still running after this long fails (TaskTimeout; 0: no limit; default: 3600)",
+    )
     p.add_argument("--suffix", default=".ply", help="output mesh format (.ply .obj .stl .off .gltf)")
     _option_flags(p)
 
@@ -115,6 +122,7 @@ def batch(args: argparse.Namespace, run: Run) -> int:
             suffix=args.suffix,
             force=args.force,
             progress=run.progress,
+            task_timeout=args.task_timeout,
         )
     except ImportError as error:  # --scheduler without dask installed
         raise CLIError(str(error)) from None
