@@ -348,6 +348,11 @@ def test_unreadable_and_empty_meshes(tmp_path, capsys, clean):
         (["denoise", "{src}", "{out}", "--method", "spline"], "invalid choice: 'spline'"),
         (["approximate", "{src}", "{out}"], "the following arguments are required: --count"),
         (["approximate", "{src}", "{out}", "--count", "zero"], "--count: must be a positive integer"),
+        (
+            ["fill", "{src}", "{out}", "--max-hole-edges", "2"],
+            "--max-hole-edges: must be an integer >= 3, got '2'",
+        ),
+        (["demo", "--force"], "unrecognized arguments: --force"),  # demo reads no file to protect
         (["reconstruct", "{src}", "{out}", "--unknown", "4:x"], "--unknown must be an existing index file"),
         (["hierarchy", "{src}", "{dir}", "--levels", "99"], "--levels must be in 0.."),
         (["hierarchy", "{src}", "{dir}", "--levels", "one"], "--levels must be 'all' or comma-separated"),
@@ -979,6 +984,11 @@ def test_denoise_render_titles_name_the_method(tmp_path, capsys, noisy, raycast_
         ],
     )
     assert raycast_render[0]["titles"] == ["input: scan.ply", "global fairing, 3 iterations"]
+    out, picture = str(tmp_path / "o.ply"), str(tmp_path / "p.png")
+    local = ["--method", "local", "--iterations", "1"]
+    for options, title in [([], "scan fairing"), (local, "local fairing, 1 iteration")]:
+        main(["denoise", str(src), out, "--render", picture, "--quiet", *options])
+        assert raycast_render[-1]["titles"][1] == title  # the scan denoiser is one solve, not "1 iterations"
     image = np.asarray(o3d.io.read_image(str(tmp_path / "p.png")))
     assert image.shape[0] > 160 and _ink(image[:15]).sum() > 20
 

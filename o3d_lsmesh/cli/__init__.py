@@ -3,9 +3,10 @@
 Reads and writes every triangle-mesh format Open3D reads and writes (PLY, OBJ,
 STL, OFF, glTF; ``.glb`` is read but not written: Open3D cannot read back the
 ``.glb`` files it writes). Every subcommand takes ``--quiet`` (no progress, no
-report), ``--json`` (the metrics as one JSON object on stdout, nothing else
-goes there) and ``--force`` (allow OUTPUT to be an input file), and its
-``--help`` shows a description, every default and an example.
+report) and ``--json`` (the metrics as one JSON object on stdout, nothing else
+goes there), each that writes next to its inputs ``--force`` (allow OUTPUT to
+be an input file), and its ``--help`` shows a description, every default and
+an example.
 
 Exit codes: 0 success; 2 for a user error, with one line on stderr naming the
 CLI flag or the file: a missing, unreadable, truncated or empty mesh file, an
@@ -51,10 +52,12 @@ def build_parser() -> argparse.ArgumentParser:
     common = argparse.ArgumentParser(add_help=False)
     common.add_argument("--quiet", action="store_true", help="no progress bars and no report")
     common.add_argument("--json", action="store_true", help="print the metrics as one JSON object on stdout")
-    common.add_argument("--force", action="store_true", help="allow overwriting an input file")
+    writing = argparse.ArgumentParser(add_help=False, parents=[common])
+    writing.add_argument("--force", action="store_true", help="allow overwriting an input file")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser, required=True)
-    for family in (fairing, fill, lsmesh, hierarchy, compare, batch, demo):
-        family.add_parsers(sub, common)
+    for family in (fairing, fill, lsmesh, hierarchy, compare, batch):
+        family.add_parsers(sub, writing)
+    demo.add_parsers(sub, common)  # it reads no file: --force would mean nothing there
     return parser
 
 

@@ -89,7 +89,8 @@ def bounded(
         except ValueError:
             value = math.nan
         if not minimum <= value < math.inf:  # (nan fails too)
-            raise argparse.ArgumentTypeError(f"must be a {description}, got {text!r}")
+            article = "an" if description[0] in "aeiou" else "a"
+            raise argparse.ArgumentTypeError(f"must be {article} {description}, got {text!r}")
         if maximum is not None and value > maximum:
             raise argparse.ArgumentTypeError(f"must be at most {maximum:,}, got {text!r}")
         return value

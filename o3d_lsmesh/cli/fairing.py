@@ -97,7 +97,9 @@ def denoise(args: argparse.Namespace, run: Run) -> int:
     if args.render:
         method = f"{args.method} fairing" + (f", mu {args.mu:g}" if args.mu is not None else "")
         if args.level:
-            method = f"multiresolution fairing, level {args.level}"
-        titles = [f"input: {Path(args.input).name}", f"{method}, {args.iterations} iterations"]
+            method = f"multiresolution fairing, level {args.level}, {args.iterations} iterations per level"
+        elif args.method != "scan":  # the scan denoiser is one linear solve: no iteration count
+            method += f", {args.iterations} iteration{'s' if args.iterations != 1 else ''}"
+        titles = [f"input: {Path(args.input).name}", method]
         report["render"] = draw([mesh, out], args.render, run, titles=titles)
     return run.finish(mesh, **report)

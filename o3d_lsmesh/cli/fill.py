@@ -14,7 +14,7 @@ def add_parsers(sub: Any, common: argparse.ArgumentParser) -> None:
     p = add_command(sub, common, fill, {"input": "mesh file", "output": "mesh file to write"})
     p.add_argument(
         "--max-hole-edges",
-        type=bounded(int, 3, "3-or-more integer"),
+        type=bounded(int, 3, "integer >= 3"),
         help="fill only holes of at most this many edges (default: no limit)",
     )
     p.add_argument(
