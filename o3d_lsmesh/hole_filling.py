@@ -1002,8 +1002,8 @@ def fill_holes(
         attribute stays on the input's elements (UVs, material ids, textures, material, tensor
         attributes) and is extended to the new ones: per-vertex values and UVs harmonically (cotangent
         weights) where the UV chart is continuous around the hole, else the UV of a loop corner of a
-        neighbouring triangle; material ids and other per-triangle values of that triangle (see
-        :mod:`o3d_lsmesh._o3d`). Normals are recomputed if the input had them.
+        neighbouring triangle; material ids and other per-triangle values of that triangle. Normals
+        are recomputed if the input had them.
 
     Raises
     ------
