@@ -228,6 +228,14 @@ def test_seams_are_not_holes_and_uvs_follow_the_chart(tmp_path, capsys):
     assert main(["fill", str(tmp_path / "holed.obj"), str(tmp_path / "out.obj"), "--json", "--quiet"]) == 0
     report = json.loads(capsys.readouterr().out)
     assert (report["holes_before"], report["holes_after"]) == (2, 0)
+    # a tensor mesh read from it (split at the seam too) gets the same fill
+    tensor = o3d.t.io.read_triangle_mesh(str(tmp_path / "holed.obj"))
+    out_t = o3d_lsmesh.fill_holes(tensor)
+    n_t, m_t = len(tensor.vertex.positions), len(tensor.triangle.indices)
+    assert (len(out_t.vertex.positions) - n_t, len(out_t.triangle.indices) - m_t) == (len(W) - n, len(F) - m)
+    np.testing.assert_array_equal(
+        out_t.triangle.texture_uvs.numpy()[:m_t], tensor.triangle.texture_uvs.numpy()
+    )
 
 
 def test_textured_obj_filled_and_written_back_keeps_its_texture(tmp_path, capsys):
