@@ -99,9 +99,9 @@ wheel: $(STAMP)
 	cd $(WHEEL) && env PATH=$(abspath $(WHEEL)/venv/bin) venv/bin/python $(abspath tests/wheel_tour.py) --no-compiler
 
 # Sphinx with warnings as errors; -E rereads every source so no warning hides in a cached page.
-# The gallery shows the committed docs/images pictures and does not run the examples.
+# The gallery runs every example (docs/_gallery.py hands each --out and collects its pictures).
 docs: $(DOCS_STAMP)
-	rm -rf docs/auto_examples docs/api docs/benchmarks
+	rm -rf docs/auto_examples docs/api docs/benchmarks docs/cli.rst
 	$(PY) -m sphinx -E -W --keep-going -q -b html docs $(DOCS_BUILD)
 
 # Open the built site in headless Chromium: every public name's page and every image renders.
@@ -137,4 +137,4 @@ $(STAMP): setup.cfg setup.py pyproject.toml o3d_lsmesh/hierarchy/collapse.pyx o3
 	touch $(STAMP)
 
 clean:
-	rm -rf $(VENV) build dist demo_out *.egg-info docs/_build docs/auto_examples docs/api docs/benchmarks docs/sg_execution_times.rst
+	rm -rf $(VENV) build dist demo_out *.egg-info docs/_build docs/auto_examples docs/api docs/benchmarks docs/cli.rst docs/sg_execution_times.rst

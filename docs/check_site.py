@@ -11,7 +11,9 @@ Asserts, on the DOM as the browser built it:
 * every equation (``.math``) on these pages was typeset by MathJax, without
   a TeX error;
 * every ``<img>`` on these pages was decoded by the browser (``complete`` and
-  ``naturalWidth > 0``) and its file exists in the build.
+  ``naturalWidth > 0``) and its file exists in the build;
+* every link on these pages to a page of the site names a file that exists in
+  the build (the user guide, the CLI reference, the benchmark reports included).
 
 The pages are served over a local HTTP server (one origin, so a check page can
 read the pages it loads in iframes: one browser start for the whole site).
@@ -56,12 +58,14 @@ window.addEventListener("load", async () => {
     }
     out.push({
       page: frame.getAttribute("src"),
+      url: frame.contentWindow ? frame.contentWindow.location.href : "",
       loaded: doc !== null && doc.readyState === "complete" && doc.body !== null,
       title: doc ? doc.title : "",
       ids: doc ? [...doc.querySelectorAll("[id]")].map(e => e.id).filter(i => i.startsWith("o3d_lsmesh")) : [],
       images: doc ? [...doc.images].map(img => ({
         src: img.getAttribute("src"), url: img.src, ok: img.complete && img.naturalWidth > 0,
         width: img.naturalWidth})) : [],
+      links: doc ? [...doc.querySelectorAll("a[href]")].map(a => a.href) : [],
       math: doc ? doc.querySelectorAll("span.math, div.math").length : 0,
       typeset: doc ? doc.querySelectorAll("mjx-container").length : 0,
       mathErrors: doc ? doc.querySelectorAll("mjx-merror").length : 0,
@@ -110,8 +114,13 @@ def expected_pages(build: Path) -> dict[str, dict]:
         pages[f"auto_examples/{path.stem}.html"] = {"ids": [], "min_images": 1}
     for path in sorted((HERE / "algorithms").glob("*.rst")):
         pages[f"algorithms/{path.stem}.html"] = {"ids": [], "min_images": 1}
-    for page in ("index.html", "choosing.html", "api/index.html"):
+    for page in ("index.html", "choosing.html", "api/index.html", "install.html", "cli.html", "batch.html"):
         pages[page] = {"ids": [], "min_images": 0}
+    for page in ("limits.html", "citing.html", "benchmarks_summary.html"):
+        pages[page] = {"ids": [], "min_images": 0}
+    pages["tour.html"] = {"ids": [], "min_images": 2}
+    for path in sorted((HERE / "benchmarks").glob("*.md")):
+        pages[f"benchmarks/{path.stem}.html"] = {"ids": [], "min_images": 0}
     missing = [p for p in pages if not (build / p).is_file()]
     if missing:
         raise SystemExit("check_site: pages missing from the build: " + ", ".join(missing))
@@ -195,13 +204,20 @@ def check(
             path = urllib.parse.urlparse(image["url"]).path
             if not (build / urllib.parse.unquote(path).lstrip("/")).is_file():
                 failures.append(f"{page}: image file {image['src']} missing from the build")
+        for link in got.get("links", []):
+            url = urllib.parse.urlparse(link)
+            if url.scheme not in ("http", "https") or url.netloc != urllib.parse.urlparse(got["url"]).netloc:
+                continue  # another site (none is reached from here) or a mailto
+            target = urllib.parse.unquote(url.path).lstrip("/")
+            if not (build / target).is_file() and not (build / target / "index.html").is_file():
+                failures.append(f"{page}: broken link to {target}")
     n_images = sum(len(r["images"]) for r in results)
     n_math = sum(r["typeset"] for r in results)
     return failures, len(pages), n_images, n_math
 
 
 def self_test() -> None:
-    """The checker catches what it claims to: a missing anchor, an undecodable and a missing image."""
+    """The checker catches what it claims to: a missing anchor, an undecodable and a missing image, a broken link."""
     with tempfile.TemporaryDirectory(prefix="o3d_lsmesh_site_") as tmp:
         site = Path(tmp)
         shutil.copyfile(HERE / "images" / "01_denoise_scan.png", site / "good.png")
@@ -211,7 +227,8 @@ def self_test() -> None:
         )
         (site / "bad.html").write_text(
             '<html><body><dl><dt id="o3d_lsmesh.other">other</dt></dl>'
-            '<img src="corrupt.png"><img src="gone.png"></body></html>'
+            '<img src="corrupt.png"><img src="gone.png"><a href="ok.html">fine</a>'
+            '<a href="missing.html#x">broken</a></body></html>'
         )
         pages = {
             "ok.html": {"ids": ["o3d_lsmesh.good"], "min_images": 1},
@@ -224,6 +241,7 @@ def self_test() -> None:
         "bad.html: image corrupt.png did not render",
         "bad.html: image gone.png did not render",
         "bad.html: image file gone.png missing from the build",
+        "bad.html: broken link to missing.html",
     ]
     if sorted(failures) != sorted(expected) or (n_pages, n_images) != (2, 3):
         raise SystemExit(
@@ -236,7 +254,9 @@ def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     if argv[:1] == ["--self-test"]:
         self_test()
-        print("check_site: self-test passed (missing anchor, corrupt and missing images are caught)")
+        print(
+            "check_site: self-test passed (missing anchor, corrupt and missing images, broken link are caught)"
+        )
         return 0
     build = Path(argv[0] if argv else HERE / "_build" / "html").resolve()
     failures, n_pages, n_images, n_math = check(build)

@@ -1,14 +1,19 @@
-"""Sphinx configuration: API reference from ``o3d_lsmesh.__all__``, gallery from ``examples/``.
+"""Sphinx configuration: API reference from ``o3d_lsmesh.__all__``, CLI reference from its parser,
+an executed gallery from ``examples/``.
 
-Built by ``make docs`` with warnings as errors. The gallery does not run the
-examples (``plot_gallery = False``): each example's picture is the committed
-``docs/images/NN_*.png`` that ``python examples/NN_*.py --out docs/images``
-writes, used as its thumbnail and shown in its docstring.
+Built by ``make docs`` with warnings as errors. The gallery runs every example
+(``plot_gallery = True``) with ``--out``, and their pictures become the pages'
+figures (``docs/_gallery.py``). The committed ``docs/images/NN_*.png`` (written by
+``python examples/NN_*.py --out docs/images``) are for the README and the
+algorithm pages.
 """
 
 from __future__ import annotations
 
+import contextlib
 import inspect
+import io
+import re
 import shutil
 import sys
 from pathlib import Path
@@ -16,6 +21,7 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
 sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(HERE))
 
 import o3d_lsmesh
 
@@ -37,6 +43,8 @@ source_suffix = {".rst": "restructuredtext", ".md": "markdown"}
 exclude_patterns = ["_build", "auto_examples/*.ipynb", "auto_examples/*.py", "**/*.codeobj.json"]
 html_theme = "furo"
 html_title = f"o3d_lsmesh {release}"
+html_static_path = ["_static"]
+html_css_files = ["wide_tables.css"]
 # Offline: no intersphinx, MathJax served from the build (the CI browser check has no CDN).
 
 autodoc_default_options = {"members": True, "inherited-members": False, "show-inheritance": True}
@@ -53,7 +61,9 @@ sphinx_gallery_conf = {
     "examples_dirs": str(REPO / "examples"),
     "gallery_dirs": "auto_examples",
     "filename_pattern": r"/\d\d_",
-    "plot_gallery": False,
+    "plot_gallery": "True",
+    "reset_argv": "_gallery.reset_argv",
+    "image_scrapers": ("_gallery.png_scraper",),
     "download_all_examples": False,
     "line_numbers": False,
     "remove_config_comments": True,
@@ -117,13 +127,44 @@ def _api_pages() -> None:
 
 
 def _benchmark_pages() -> None:
-    """Copy ``benchmarks/results/*.md`` to ``benchmarks/`` so the reports are pages."""
+    """Copy ``benchmarks/results/*.md`` (and their pictures) to ``benchmarks/`` so the reports are pages."""
     out = HERE / "benchmarks"
     shutil.rmtree(out, ignore_errors=True)
     out.mkdir()
-    for md in sorted((REPO / "benchmarks" / "results").glob("*.md")):
-        shutil.copyfile(md, out / md.name)
+    for path in sorted((REPO / "benchmarks" / "results").glob("*")):
+        if path.suffix in (".md", ".png"):
+            shutil.copyfile(path, out / path.name)
+
+
+def _cli_page() -> None:
+    """``cli.rst``: every subcommand's ``--help`` as the parser prints it (the one declaration of its options)."""
+    import os
+
+    from o3d_lsmesh.cli import build_parser
+
+    os.environ["COLUMNS"] = "100"  # argparse wraps to the terminal: one width for the page
+    parser = build_parser()
+    # the subcommands as the top-level help lists them, one per line under COMMAND
+    listing = parser.format_help().split("COMMAND\n", 1)[1].split("\n\n", 1)[0]
+    names = re.findall(r"^    ([a-z][\w-]*)", listing, flags=re.M)
+    lines = [
+        "Command line and batch reference",
+        "================================",
+        "",
+        ".. include:: cli_intro.md",
+        "   :parser: myst_parser.sphinx_",
+        "",
+    ]
+    for name in names:
+        out = io.StringIO()
+        with contextlib.redirect_stdout(out), contextlib.suppress(SystemExit):
+            build_parser().parse_args([name, "--help"])
+        lines += [name, "-" * len(name), "", ".. code-block:: text", ""]
+        lines += ["   " + line if line else "" for line in out.getvalue().splitlines()]
+        lines.append("")
+    (HERE / "cli.rst").write_text("\n".join(lines) + "\n")
 
 
 _api_pages()
 _benchmark_pages()
+_cli_page()

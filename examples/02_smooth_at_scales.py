@@ -9,17 +9,11 @@ details that go, while the connectivity of the result is the input's.
 
     python examples/02_smooth_at_scales.py                  # built-in bumpy blob
     python examples/02_smooth_at_scales.py mesh.ply --out pictures
-
-.. image:: /images/02_smooth_at_scales.png
-   :alt: the picture this script writes with --out
 """
-
-# sphinx_gallery_thumbnail_path = "images/02_smooth_at_scales.png"
 
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from pathlib import Path
 
@@ -35,7 +29,7 @@ from o3d_lsmesh.shapes import add_noise, demo_mesh, mean_edge_length
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=(__doc__ or "").split("\n")[0])
     parser.add_argument("mesh", nargs="?", help="a triangle mesh file (default: built-in bumpy blob)")
     parser.add_argument("--out", help="folder for the picture")
     parser.add_argument("--levels", default="0,3,6,9,12", help="comma-separated hierarchy levels")
@@ -77,10 +71,18 @@ def main(argv=None) -> int:
     if args.out:
         Path(args.out).mkdir(parents=True, exist_ok=True)
         path = Path(args.out) / "02_smooth_at_scales.png"
-        render([mesh] + results, path, width=320, height=320, view_direction=(0.3, 0.4, 1.0))
+        render(
+            [mesh] + results,
+            path,
+            width=320,
+            height=320,
+            view_direction=(0.3, 0.4, 1.0),
+            titles=["input"]
+            + [f"level {level} ({hierarchy.vertex_count(level):,} vertices)" for level in levels],
+        )
         print(f"picture: {path} (input | levels {', '.join(map(str, levels))})")
     return 0
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    main()  # (no sys.exit: the docs gallery runs this file in its own process)

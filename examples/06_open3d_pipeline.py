@@ -9,17 +9,11 @@ nothing). Each returns a new mesh, so they chain with Open3D's methods:
 
     python examples/06_open3d_pipeline.py
     python examples/06_open3d_pipeline.py scan.ply --out pictures
-
-.. image:: /images/06_open3d_pipeline.png
-   :alt: the picture this script writes with --out
 """
-
-# sphinx_gallery_thumbnail_path = "images/06_open3d_pipeline.png"
 
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from pathlib import Path
 
@@ -33,7 +27,7 @@ from o3d_lsmesh.shapes import add_noise, demo_mesh, mean_edge_length
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=(__doc__ or "").split("\n")[0])
     parser.add_argument("mesh", nargs="?", help="a triangle mesh file (default: built-in noisy blob)")
     parser.add_argument("--out", help="folder for the picture")
     args = parser.parse_args(argv)
@@ -91,10 +85,17 @@ def main(argv=None) -> int:
     if args.out:
         Path(args.out).mkdir(parents=True, exist_ok=True)
         path = Path(args.out) / "06_open3d_pipeline.png"
-        render([mesh, legacy, tensor_out], path, width=360, height=360, view_direction=(0.3, 0.4, 1.0))
+        render(
+            [mesh, legacy, tensor_out],
+            path,
+            width=360,
+            height=360,
+            view_direction=(0.3, 0.4, 1.0),
+            titles=["input", "legacy pipeline", "tensor pipeline"],
+        )
         print(f"picture: {path} (input | legacy pipeline | tensor pipeline)")
     return 0
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    main()  # (no sys.exit: the docs gallery runs this file in its own process)

@@ -17,7 +17,7 @@ import numpy as np
 
 from ._o3d import open3d
 
-__all__ = ["add_noise", "demo_mesh", "mean_edge_length"]
+__all__ = ["add_noise", "demo_mesh", "mean_edge_length", "simulated_range_scan"]
 
 
 def demo_mesh(subdivisions: int = 6, *, seed: int = 7) -> Any:
@@ -77,3 +77,85 @@ def add_noise(mesh: Any, sigma: float, *, seed: int = 0) -> Any:
     return o3d.geometry.TriangleMesh(
         o3d.utility.Vector3dVector(noisy), o3d.geometry.TriangleMesh(mesh).triangles
     )
+
+
+def simulated_range_scan(
+    resolution: int = 200, *, noise: float = 0.3, seed: int = 0, subdivisions: int = 6
+) -> tuple[Any, Any]:
+    """A raw range scan of :func:`demo_mesh` from one view, and the surface it was scanned from.
+
+    The blob is sampled on a scanner's ``resolution x resolution`` grid of
+    parallel rays, and the grid is triangulated as range scans are (two
+    triangles per cell whose four corners hit, no triangle across a depth
+    jump), so the scan has what raw scans have and clean meshes do not:
+
+    * noise along the rays of ``noise`` grid spacings, growing at grazing angles
+      (as ``cos**-1.5``: off the surface, the silhouette is the noisiest part) and correlated
+      along each scanline (a per-line offset and a smooth drift beside white noise);
+    * a ragged boundary: returns at grazing angles drop out at random;
+    * small islands and holes: isolated returns near the silhouette and a few
+      patches of lost returns inside (specular dropouts).
+
+    Returns ``(scan, surface)``, both legacy ``open3d.geometry.TriangleMesh``:
+    the scan's vertices are the noisy returns (unreferenced ones removed),
+    ``surface`` the clean blob to measure a denoiser against.
+
+    Examples
+    --------
+    >>> scan, surface = simulated_range_scan(60)
+    >>> len(scan.vertices) > 1000, scan.is_watertight(), surface.is_watertight()
+    (True, False, True)
+    """
+    o3d = open3d()
+    surface = demo_mesh(subdivisions)
+    vertices = np.asarray(surface.vertices)
+    triangles = np.asarray(surface.triangles)
+    rng = np.random.default_rng(seed)
+    # Rays along -z on a square grid a little wider than the blob's silhouette.
+    half = 1.05 * np.abs(vertices[:, :2]).max()
+    spacing = 2.0 * half / (resolution - 1)
+    u = np.linspace(-half, half, resolution)
+    x, y = np.meshgrid(u, u)  # row i is a scanline: y fixed, x running
+    origins = np.stack([x, y, np.full_like(x, 10.0)], axis=-1).reshape(-1, 3)
+    directions = np.broadcast_to([0.0, 0.0, -1.0], origins.shape)
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(
+        o3d.core.Tensor(vertices.astype(np.float32)), o3d.core.Tensor(triangles.astype(np.uint32))
+    )
+    rays = o3d.core.Tensor(np.hstack([origins, directions]).astype(np.float32))
+    answer = scene.cast_rays(rays)
+    depth = answer["t_hit"].numpy().astype(np.float64)
+    cosine = np.abs(answer["primitive_normals"].numpy()[:, 2].astype(np.float64))
+    hit = np.isfinite(depth) & (cosine > 0.1)
+    # Grazing returns drop out at random: the ragged silhouette (and its islands) of a real scan.
+    hit &= rng.random(hit.shape) > np.clip((0.35 - cosine) / 0.5, 0.0, 1.0)
+    # A few patches of lost returns inside the view (specular dropouts): holes with ragged rims.
+    for _ in range(4):
+        centre, radius = rng.uniform(-0.5 * half, 0.5 * half, 2), rng.uniform(2.0, 5.0) * spacing
+        inside = (origins[:, 0] - centre[0]) ** 2 + (origins[:, 1] - centre[1]) ** 2 < radius**2
+        hit &= ~(inside & (rng.random(hit.shape) < 0.9))
+    # Range noise: white, plus a per-scanline offset and a drift along each line, larger at grazing angles.
+    white = rng.normal(size=(resolution, resolution))
+    offset = rng.normal(size=(resolution, 1))
+    # a drift along each line: white noise averaged over 9 samples (a cumulative sum's differences)
+    walk = np.cumsum(np.pad(rng.normal(size=(resolution, resolution + 8)), ((0, 0), (1, 0))), axis=1)
+    drift = (walk[:, 9:] - walk[:, :-9]) / 3.0
+    correlated = 0.7 * white + 0.5 * offset + 0.5 * drift
+    sigma = noise * spacing / np.maximum(cosine, 0.1) ** 1.5
+    depth_noisy = np.where(hit, depth + sigma * correlated.ravel(), np.nan)
+    points = origins + depth_noisy[:, None] * directions
+    # Two triangles per grid cell whose corners all hit and whose depths do not jump (range-scan meshing).
+    index = np.arange(resolution * resolution).reshape(resolution, resolution)
+    a, b = index[:-1, :-1].ravel(), index[:-1, 1:].ravel()
+    c, d = index[1:, :-1].ravel(), index[1:, 1:].ravel()
+    cells = np.concatenate([np.stack([a, b, c], axis=1), np.stack([b, d, c], axis=1)])
+    keep = hit[cells].all(axis=1)
+    cells = cells[keep]
+    jump = np.ptp(depth[cells], axis=1) < 4.0 * spacing
+    cells = cells[jump]
+    used, inverse = np.unique(cells, return_inverse=True)
+    scan = o3d.geometry.TriangleMesh(
+        o3d.utility.Vector3dVector(points[used]),
+        o3d.utility.Vector3iVector(inverse.reshape(-1, 3).astype(np.int32)),
+    )
+    return scan, surface

@@ -53,10 +53,11 @@ def test_example_claims_hold():
     gap = float(re.search(r"one-shot decode: max difference (\S+)", text).group(1))
     assert gap < 1e-8
     text = run(REPO / "examples" / "01_denoise_scan.py").stdout
-    ours = re.search(r"constrained fairing \(ours\)\s+(\S+)\s+\S+\s+(\S+)", text)
-    theirs = re.search(r"Open3D filter_smooth_laplacian\s+(\S+)\s+\S+\s+(\S+)", text)
-    assert abs(float(ours.group(1))) < 0.5 < abs(float(theirs.group(1)))  # volume change %
-    assert float(ours.group(2)) < float(theirs.group(2))  # mean error to the clean surface
+    raw = re.search(r"raw scan\s+\S+\s+(\S+)\s+(\S+)", text)
+    ours = re.search(r"constrained fairing \(ours\)\s+\S+\s+(\S+)\s+(\S+)", text)
+    theirs = re.search(r"Open3D filter_smooth_laplacian\(\d+\)\s+\S+\s+(\S+)\s+(\S+)", text)
+    assert float(ours.group(1)) < 0.6 * float(raw.group(1))  # mean error to the true surface
+    assert abs(float(ours.group(2))) < abs(float(theirs.group(2)))  # mean signed offset: no shrinkage
 
 
 def test_example_on_a_mesh_file_writes_a_picture(tmp_path):
@@ -72,6 +73,6 @@ def test_example_on_a_mesh_file_writes_a_picture(tmp_path):
     assert f"input: {len(mesh.vertices)} vertices" in done.stdout
     picture = tmp_path / "pictures" / "04_reconstruct_region.png"
     image = np.asarray(o3d.io.read_image(str(picture)))
-    # two 360-pixel panels (original | reconstructed) above the labelled color bar of the distance map
-    assert image.shape[1:] == (720, 3) and 360 < image.shape[0] < 480
+    # two 360-pixel panels (original | reconstructed) under their titles, above the labelled color bar
+    assert image.shape[1:] == (720, 3) and 400 < image.shape[0] < 520
     assert image.std() > 5

@@ -1,4 +1,4 @@
-"""``o3d-lsmesh demo``: denoise a built-in noisy mesh and compare with Open3D's filters (``make demo``)."""
+"""``o3d-lsmesh demo``: denoise a simulated raw range scan and compare with Open3D's filters (``make demo``)."""
 
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ from typing import Any
 
 from ._common import Run, add_command, bounded, nonnegative_float
 
-#: the demo's blob has 10 * 4**s + 2 vertices: 9 gives 2.6 million (about 3 GB to denoise), 12 would need 170 million
-MAX_SUBDIVISIONS = 9
+#: the scan has up to about 0.55 * resolution**2 vertices: 2000 gives about 2.2 million (about 3 GB to denoise)
+MAX_RESOLUTION = 2000
 
 
 def add_parsers(sub: Any, common: argparse.ArgumentParser) -> None:
@@ -16,28 +16,35 @@ def add_parsers(sub: Any, common: argparse.ArgumentParser) -> None:
     p.add_argument("--out", default="demo_out", help="output folder")
     p.add_argument("--no-render", action="store_true", help="skip the picture")
     p.add_argument(
-        "--subdivisions",
-        type=bounded(int, 1, "positive integer", MAX_SUBDIVISIONS),
-        default=6,
-        help="size of the built-in mesh: 10 * 4**s + 2 vertices (6: 40,962)",
+        "--resolution",
+        type=bounded(int, 20, "grid size of at least 20 rays", MAX_RESOLUTION),
+        default=200,
+        help="the scanner's grid of R x R rays (200: about 22,000 vertices)",
     )
-    p.add_argument("--noise", type=nonnegative_float, default=0.3, help="noise sigma in mean edge lengths")
-    p.add_argument("--seed", type=int, default=0, help="random seed of the noise")
+    p.add_argument(
+        "--noise",
+        type=nonnegative_float,
+        default=0.3,
+        help="range noise in grid spacings where the surface faces the scanner",
+    )
+    p.add_argument("--seed", type=int, default=0, help="random seed of the noise and dropouts")
 
 
 def demo(args: argparse.Namespace, run: Run) -> int:
-    """Denoise a built-in mesh and compare with Open3D's filters.
+    """Denoise a simulated raw range scan and compare with Open3D's filters.
 
-    Add noise to a built-in blob, denoise it with every method of this package and Open3D's
-    filters, each at the best value of a small sweep, and print a table of errors (and a picture).
+    Scan a built-in blob from one view on a scanner's grid (noise along the rays, correlated along
+    the scanlines and larger at grazing angles, a ragged silhouette, islands and dropout holes),
+    denoise it with this package's defaults and with Open3D's filters, each of those at the best
+    count of a small sweep, and print the distances to the true surface (and a picture).
 
-    example: --out demo_out --subdivisions 5
+    example: --out demo_out --resolution 150
     """
     from ..demo import run_demo
 
     result = run_demo(
         args.out,
-        subdivisions=args.subdivisions,
+        resolution=args.resolution,
         noise=args.noise,
         seed=args.seed,
         render=not args.no_render,
