@@ -320,6 +320,16 @@ def as_count(value: Any, *, name: str, minimum: int = 0, maximum: int | None = N
     return value
 
 
+#: Most iterations a fairing call takes (every method, boundary curves, each level of multiresolution fairing,
+#: the CLI and batch): the paper's operators settle within tens; a mistyped 10**9 would run for days.
+MAX_ITERATIONS = 10_000
+
+
+def as_iterations(value: Any, *, name: str = "number_of_iterations") -> int:
+    """Return an iteration count in ``[0, MAX_ITERATIONS]`` (:func:`as_count`), the bound named when exceeded."""
+    return as_count(value, name=name, maximum=MAX_ITERATIONS)
+
+
 def as_workers(value: Any, *, name: str = "workers") -> int:
     """Return a thread count: ``None`` means every CPU this process may run on, else an int >= 1."""
     if value is None:

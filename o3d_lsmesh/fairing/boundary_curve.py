@@ -53,7 +53,7 @@ import scipy.sparse as sp
 
 from .._o3d import new_mesh, read_mesh
 from .._ranges import concatenated_ranges
-from .._validate import as_count, mesh_arrays
+from .._validate import as_count, as_iterations, mesh_arrays
 from ..topology import BoundaryCurves, boundary_curves
 
 if TYPE_CHECKING:
@@ -222,7 +222,7 @@ def smooth_boundary_curves_arrays(
     Works on any boundary, walked as :func:`~o3d_lsmesh.topology.boundary_curves`.
     """
     vertices, triangles = mesh_arrays(vertices, triangles)
-    number_of_iterations = as_count(number_of_iterations, name="number_of_iterations")
+    number_of_iterations = as_iterations(number_of_iterations)
     if reimpose_every is not None:
         reimpose_every = as_count(reimpose_every, name="reimpose_every", minimum=1)
     if number_of_iterations == 0:
@@ -288,6 +288,6 @@ def smooth_boundary_curves(mesh: MeshT, number_of_iterations: int = 10) -> MeshT
     >>> len(out.vertices) == len(box.vertices)
     True
     """
-    number_of_iterations = as_count(number_of_iterations, name="number_of_iterations")
+    number_of_iterations = as_iterations(number_of_iterations)
     data = read_mesh(mesh, weld=True)
     return new_mesh(data, smooth_boundary_curves_arrays(data.vertices, data.triangles, number_of_iterations))

@@ -20,7 +20,7 @@ import numpy as np
 from .._o3d import new_mesh, read_mesh
 from .._progress import check_progress, iterate
 from .._solvers import SOLVERS
-from .._validate import as_bool, as_choice, as_count, as_positive_float, mesh_arrays
+from .._validate import as_bool, as_choice, as_count, as_iterations, as_positive_float, mesh_arrays
 from ..topology import boundary_curves, edge_structure, vertex_rings
 from .barycenter import DEFAULT_MU, GlobalSolver, fairing_topology, local_operator
 from .boundary_curve import curve_operator
@@ -40,9 +40,9 @@ _DEFAULT_ITERATIONS = {"scan": 1, "local": 10, "global": 10}
 def resolved_options(method: str | None, number_of_iterations: int | None, reimpose_every: int | None):
     """The method and iteration count that ``None`` stands for (unchecked values pass through)."""
     if method is None:
-        # reimpose_every only means something for the paper's local operator: a call written for the
-        # former default (method="local") keeps its meaning
-        method = "local" if reimpose_every is not None else DEFAULT_METHOD
+        # an iteration count and reimpose_every only mean something for the paper's local operator (the scan
+        # energy is one solve): a call written for the former default (method="local") keeps its meaning
+        method = "local" if reimpose_every is not None or number_of_iterations is not None else DEFAULT_METHOD
     if number_of_iterations is None and isinstance(method, str) and method in _DEFAULT_ITERATIONS:
         number_of_iterations = _DEFAULT_ITERATIONS[method]
     return method, number_of_iterations
@@ -60,7 +60,14 @@ def _check_options(
 ):
     method, number_of_iterations = resolved_options(method, number_of_iterations, reimpose_every)
     method = as_choice(method, FAIRING_METHODS, name="method")  # valid: resolved_options filled the count
-    number_of_iterations = as_count(number_of_iterations, name="number_of_iterations")
+    number_of_iterations = as_iterations(number_of_iterations)
+    if method == "scan" and number_of_iterations > 1:
+        # re-taken solves shrink the scan (10: 4x the time, 3x the inward move) without the smoothing of
+        # iterations: the scan energy is one solve
+        raise ValueError(
+            "number_of_iterations must be None, 0 or 1 for method='scan' (its energy is one solve; for "
+            f"smoothing by iterations use method='local'), got {number_of_iterations}"
+        )
     for name, value in (("membrane", membrane), ("boundary_weight", boundary_weight)):
         if value is not None and method != "scan":
             raise ValueError(
@@ -414,12 +421,15 @@ def constrained_fairing(
         isolated vertices (kept where they are), zero-area triangles and
         low-valence vertices are fine.
     number_of_iterations : int or None
-        Local iterations, or global solves (``"scan"``: solves with re-taken
-        targets before the twicing step). 0 returns an unchanged copy.
-        ``None``: 1 for ``"scan"``, 10 for ``"local"`` and ``"global"``.
+        Local iterations, or global solves, at most
+        :data:`~o3d_lsmesh._validate.MAX_ITERATIONS`; 0 returns an unchanged
+        copy. ``"scan"`` is one solve: None, 0 or 1 (re-taken solves would
+        only shrink the scan). ``None``: 1 for ``"scan"``, 10 for ``"local"``
+        and ``"global"``.
     method : {"scan", "local", "global"} or None
-        ``None``: ``"scan"``, or ``"local"`` when ``reimpose_every`` is given
-        (the only method it applies to, and the default before ``"scan"``).
+        ``None``: ``"scan"``, or ``"local"`` when ``number_of_iterations`` or
+        ``reimpose_every`` is given (options of the iterative operator only;
+        it was the default before ``"scan"``).
     mu : float or None
         Penalty weight of ``"global"`` and ``"scan"`` (``None``:
         ``DEFAULT_MU`` = 0.03; for ``"scan"`` measured from the input, see
@@ -466,7 +476,8 @@ def constrained_fairing(
         number; ``method`` not a string;
         ``smooth_boundary`` or ``progress`` not a bool.
     ValueError
-        Negative ``number_of_iterations``; ``reimpose_every < 1``; unknown
+        ``number_of_iterations`` negative, above ``MAX_ITERATIONS``, or above 1
+        with ``"scan"``; ``reimpose_every < 1``; unknown
         ``method``; ``mu <= 0``; ``membrane < 0``; ``boundary_weight <= 0``;
         ``mu`` with ``"local"``, ``membrane`` or ``boundary_weight`` with other
         than ``"scan"``, ``reimpose_every`` with other than ``"local"``,

@@ -9,7 +9,7 @@ import numpy as np
 
 from .._o3d import new_mesh, read_mesh
 from .._progress import check_progress, progress_bar
-from .._validate import as_choice, as_count
+from .._validate import as_choice, as_count, as_iterations
 from ..hierarchy.hierarchy import MeshHierarchy, boundary_degree, collapse_hierarchy
 from ..topology import VertexRings, boundary_curves, vertex_rings
 from .boundary_curve import curve_operator, run_curve_iterations
@@ -215,9 +215,9 @@ def multiresolution_fairing(
     True
     """
     level = as_count(level, name="level")
-    number_of_iterations = as_count(number_of_iterations, name="number_of_iterations")
+    number_of_iterations = as_iterations(number_of_iterations)
     if final_iterations is not None:
-        final_iterations = as_count(final_iterations, name="final_iterations")
+        final_iterations = as_iterations(final_iterations, name="final_iterations")
     method = as_choice(method, FAIRING_METHODS, name="method")
     progress = check_progress(progress)
     # a given hierarchy indexes the mesh's own vertices (build_hierarchy does not weld): weld only
