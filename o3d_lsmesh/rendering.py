@@ -402,7 +402,8 @@ def render(
         (viridis, dark = 0, yellow = ``error_max``), and add a color bar below
         the panels, with numbers, its units and a title (a band of about
         five font heights). Without it, a mesh's own vertex colors are used,
-        or else ``color``.
+        or else ``color``; so is ``reference`` itself when it is one of
+        ``meshes`` (the same object): its distance to itself is zero.
     error_max : float, optional
         Top of the error scale, in ``units``; distances above it get the top
         color (the bar ends in an arrow). Defaults to the 99th percentile of
@@ -519,26 +520,30 @@ def render(
         [float(np.abs(d.vertices).max()) for d in datas + ([ref] if ref is not None else [])] + [1e-300]
     )
     arrays = [(d.vertices / scale, d.triangles) for d in datas]
+    colors = []
+    for data, (vertices, _) in zip(datas, arrays):
+        own = _vertex_colors(data)
+        colors.append(
+            own if own is not None and len(own) == len(vertices) else np.tile(base_color, (len(vertices), 1))
+        )
     edge_length = None
     if ref is not None:
-        distances = [scale * distances_to_surface(v, ref.vertices / scale, ref.triangles) for v, _ in arrays]
+        # the reference itself, drawn beside what is compared with it, keeps its own colors: its distance
+        # to itself is zero everywhere (a uniformly dark panel, and zeros pulling the scale down)
+        measured = [k for k, mesh in enumerate(items) if mesh is not reference]
+        distances = [
+            scale * distances_to_surface(arrays[k][0], ref.vertices / scale, ref.triangles) for k in measured
+        ]
         edge_length = _mean_edge_length(ref.vertices, ref.triangles)
         if units == "edge":
             distances = [d / edge_length for d in distances]
         if error_max is None:
-            error_max = float(np.percentile(np.concatenate(distances), 99.0))
+            pooled = np.concatenate([np.zeros(0), *distances])
+            error_max = float(np.percentile(pooled, 99.0)) if pooled.size else 1.0
             if error_max <= 0:
                 error_max = 1.0
-        colors = [error_colors(d, error_max) for d in distances]
-    else:
-        colors = []
-        for data, (vertices, _) in zip(datas, arrays):
-            own = _vertex_colors(data)
-            colors.append(
-                own
-                if own is not None and len(own) == len(vertices)
-                else np.tile(base_color, (len(vertices), 1))
-            )
+        for k, d in zip(measured, distances):
+            colors[k] = error_colors(d, error_max)
 
     vertices, triangles, camera = _layout(arrays, view_direction, up, width, height, margin, align)
     all_colors = np.concatenate(colors)

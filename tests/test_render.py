@@ -178,9 +178,8 @@ def test_returned_scale_matches_distances_and_units():
     # independent reference: the vertex distances to the sphere of radius 1 (its mesh lies inside by at most
     # the sagitta of a facet), and the mean edge length by a plain loop over triangles
     distances = np.abs(np.linalg.norm(np.asarray(bumped.vertices), axis=1) - 1.0)
-    assert model.error_max == pytest.approx(
-        np.percentile(np.concatenate([np.zeros(len(distances)), distances]), 99), abs=0.01
-    )
+    # the reference's own distances (zero) do not count
+    assert model.error_max == pytest.approx(np.percentile(distances, 99), abs=0.01)
     edges = set()
     for tri in np.asarray(sphere.triangles).tolist():
         for i, j in ((tri[0], tri[1]), (tri[1], tri[2]), (tri[2], tri[0])):
@@ -190,6 +189,18 @@ def test_returned_scale_matches_distances_and_units():
     assert edge.edge_length == pytest.approx(mean_edge, rel=1e-9)
     assert edge.error_max == pytest.approx(model.error_max / mean_edge, rel=1e-6)
     assert edge.units == "edge"
+
+
+def test_the_reference_beside_the_others_keeps_its_own_colors():
+    # a fine sphere as the reference and a coarse one 10% larger: colored by its distance to itself, the
+    # reference's panel would be uniformly dark (and its zeros would pull the scale down)
+    fine = o3d.geometry.TriangleMesh.create_sphere(radius=1.0, resolution=36)
+    coarse = o3d.geometry.TriangleMesh.create_sphere(radius=1.1, resolution=6)
+    image = render([fine, coarse], None, width=W, height=H, backend="raycast", reference=fine)
+    plain = render([fine, coarse], None, width=W, height=H, backend="raycast")
+    assert np.array_equal(_panels(image[:H], 2)[0], _panels(plain, 2)[0])
+    # every coarse vertex lies 0.1 straight above a fine one (resolution 36 refines 6's grid)
+    assert image.error_max == pytest.approx(0.1, rel=1e-6)
 
 
 def test_filament_exposure_keeps_highlights():
