@@ -7,13 +7,21 @@ returns a new mesh of the same kind; the input is never modified.
 
 __version__ = "0.2.0"
 
+import os
+
+# OpenMP threads that wait at a barrier sleep instead of spinning: libgomp spins 300k rounds by default, so
+# beside other busy processes a team whose partner was descheduled burnt its time slices in every CG
+# iteration (benchmarks/results/under_load.md). libgomp reads this once, when it loads (CHOLMOD's import
+# below, or the compiled kernels'): a value the user set is kept.
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
 from . import metrics
 from ._errors import ConvergenceError, O3DLSMeshWarning, SingularSystemError
 from ._solvers import SPDSolver
 from .encoding import decode_geometry, encode_geometry, iter_decode_geometry
 from .fairing import constrained_fairing, multiresolution_fairing, smooth_boundary_curves
 from .hierarchy import MeshHierarchy, build_hierarchy, from_fast_simplification
-from .hole_filling import HoleFiller, fill_holes
+from .hole_filling import FillReport, HoleFiller, HoleOutcome, fill_holes
 from .laplacian import laplacian
 from .lsmesh import LSMeshSolver, ls_mesh, reconstruct_geometry
 from .registration import register, unregister

@@ -40,6 +40,12 @@ cdef inline int _threads(Py_ssize_t rows) noexcept nogil:
     return omp_get_max_threads() if rows >= PARALLEL_ROWS else 1
 
 
+def threads(Py_ssize_t rows):
+    """Threads a parallel loop over ``rows`` rows runs on: OpenMP's limit in the calling thread
+    (``OMP_NUM_THREADS``, threadpoolctl's ``threadpool_limits``) from :data:`PARALLEL_ROWS` rows, else 1."""
+    return _threads(rows)
+
+
 ctypedef fused index_t:
     int32_t
     int64_t

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -482,3 +484,29 @@ def test_incomplete_cholesky_refuses_a_missing_diagonal_and_an_unsymmetric_patte
     B = sp.csr_matrix(np.array([[2.0, 0.0, 0.0], [1.0, 2.0, 0.0], [0.0, 0.0, 1.0]]))
     with pytest.raises(ValueError, match="matrix must have a symmetric pattern, row 1"):
         _block_kernel.incomplete_cholesky(B.indptr, B.indices, B.data, 0.0)
+
+
+def test_threadpool_limits_make_the_kernels_serial():
+    from threadpoolctl import threadpool_limits
+
+    rows = 10**9  # far above the size where the loops go parallel
+    with threadpool_limits(limits=2, user_api="openmp"):
+        assert _block_kernel.threads(rows) == 2
+        assert _block_kernel.threads(1) == 1  # small loops stay on one thread
+    with threadpool_limits(limits=1, user_api="openmp"):
+        assert _block_kernel.threads(rows) == 1
+
+
+def test_openmp_threads_sleep_at_barriers_instead_of_spinning():
+    # libgomp reads its wait policy when it loads: checked in a fresh interpreter, through OpenMP's own report
+    import subprocess
+    import sys
+
+    code = "import ctypes, o3d_lsmesh; ctypes.CDLL('libgomp.so.1').omp_display_env(1)"
+    environ = {k: v for k, v in os.environ.items() if k not in ("OMP_WAIT_POLICY", "GOMP_SPINCOUNT")}
+    report = subprocess.run([sys.executable, "-c", code], env=environ, capture_output=True, text=True).stderr
+    assert "GOMP_SPINCOUNT = '0'" in report, report
+    # a policy the user chose is kept
+    environ["OMP_WAIT_POLICY"] = "ACTIVE"
+    report = subprocess.run([sys.executable, "-c", code], env=environ, capture_output=True, text=True).stderr
+    assert "OMP_WAIT_POLICY = 'ACTIVE'" in report, report

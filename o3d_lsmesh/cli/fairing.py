@@ -27,7 +27,8 @@ def add_parsers(sub: Any, common: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--method",
         choices=("scan", "local", "global"),
-        help="fairing energy (default: scan, the API's default; local with --level or --reimpose-every)",
+        help="fairing energy (default: scan, the API's default; local with --level, --iterations or "
+        "--reimpose-every)",
     )
     p.add_argument(
         "--level", type=nonnegative_int, default=0, help="multiresolution level (0: plain fairing)"
