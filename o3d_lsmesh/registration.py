@@ -18,12 +18,11 @@ its own methods (idempotence) and refuses to replace one Open3D itself defines.
 
 from __future__ import annotations
 
-import functools
+import importlib
+import inspect
+import textwrap
 import threading
-from typing import TYPE_CHECKING, Any, Callable
-
-if TYPE_CHECKING:
-    from ._types import Open3DMesh
+from typing import Any, Callable
 
 __all__ = ["METHOD_NAMES", "register", "registered_methods", "unregister"]
 
@@ -31,106 +30,52 @@ _MARKER = "__o3d_lsmesh_method__"
 _LOCK = threading.Lock()
 
 
-def _filter_smooth_constrained(
-    self: Open3DMesh, number_of_iterations: int | None = None, **kwargs: Any
-) -> Open3DMesh:
-    """Barycenter-constrained fairing (Liu et al. 2001, eq. 5-7); see :func:`o3d_lsmesh.fairing.constrained_fairing`.
-
-    Keyword options: ``method="scan"|"local"|"global"``, ``mu``, ``smooth_boundary``,
-    ``reimpose_every``, ``progress``. Returns a new mesh.
-    """
-    from .fairing import constrained_fairing
-
-    return constrained_fairing(self, number_of_iterations, **kwargs)
-
-
-def _filter_smooth_multiresolution(self: Open3DMesh, level: int, **kwargs: Any) -> Open3DMesh:
-    """Multiresolution fairing at hierarchy ``level`` (Liu et al. 2001, section 4); see :func:`o3d_lsmesh.fairing.multiresolution_fairing`.
-
-    Keyword options: ``hierarchy``, ``number_of_iterations``, ``method``,
-    ``progress``. Returns a new mesh with the caller's connectivity.
-    """
-    from .fairing.multiresolution import multiresolution_fairing
-
-    return multiresolution_fairing(self, level, **kwargs)
-
-
-def _filter_smooth_boundary_curves(self: Open3DMesh, number_of_iterations: int = 10) -> Open3DMesh:
-    """Smooth only the boundary loops with the curve operator of Liu et al. 2001, section 3.3.
-
-    See :func:`o3d_lsmesh.fairing.smooth_boundary_curves`. Returns a new mesh.
-    """
-    from .fairing import smooth_boundary_curves
-
-    return smooth_boundary_curves(self, number_of_iterations)
-
-
-def _ls_mesh(
-    self: Open3DMesh, constraint_vertex_indices: Any, constraint_vertex_positions: Any = None, **kwargs: Any
-) -> Open3DMesh:
-    """Least-squares mesh of this connectivity near the control vertices (Sorkine and Cohen-Or 2004, eq. 3).
-
-    See :func:`o3d_lsmesh.ls_mesh`; keyword options ``weights``,
-    ``interpolate``, ``laplacian``. Returns a new mesh.
-    """
-    from .lsmesh import ls_mesh
-
-    return ls_mesh(self, constraint_vertex_indices, constraint_vertex_positions, **kwargs)
-
-
-def _reconstruct_geometry(self: Open3DMesh, unknown_vertex_indices: Any, **kwargs: Any) -> Open3DMesh:
-    """Rebuild the positions of the vertices in ``unknown_vertex_indices`` from the rest (LS meshes, figures 5 and 8).
-
-    See :func:`o3d_lsmesh.reconstruct_geometry`. Returns a new mesh.
-    """
-    from .lsmesh import reconstruct_geometry
-
-    return reconstruct_geometry(self, unknown_vertex_indices, **kwargs)
-
-
-def _approximate_ls(self: Open3DMesh, count: int, **kwargs: Any) -> Open3DMesh:
-    """LS-mesh approximation from ``count`` selected control points; see :func:`o3d_lsmesh.approximate`.
-
-    Returns only the new mesh so that calls chain; call
-    :func:`o3d_lsmesh.approximate` to get the selected indices too.
-    """
+def _approximate_mesh(mesh: Any, count: int, **kwargs: Any) -> Any:
+    """:func:`o3d_lsmesh.approximate`'s mesh alone, so that calls chain."""
     from .selection import approximate
 
-    mesh, _ = approximate(self, count, **kwargs)
-    return mesh
+    return approximate(mesh, count, **kwargs)[0]
 
 
-def _decode_geometry(self: Open3DMesh, data: Any, **kwargs: Any) -> Open3DMesh:
-    """Geometry decoded from ``data`` (bytes of :func:`o3d_lsmesh.encode_geometry`) on this connectivity.
-
-    See :func:`o3d_lsmesh.decode_geometry`; keyword option ``anchors`` for
-    progressive decoding. Returns a new mesh.
-    """
-    from .encoding import decode_geometry
-
-    return decode_geometry(self, data, **kwargs)
-
-
-def _fill_holes_faired(self: Open3DMesh, **kwargs: Any) -> Open3DMesh:
-    """Close holes with triangulated, refined patches faired as LS meshes; see :func:`o3d_lsmesh.fill_holes`.
-
-    Keyword options: ``max_hole_edges``, ``max_hole_diameter``, ``continuity``,
-    ``density``, ``fill_border``, ``progress``. Returns a new mesh.
-    """
-    from .hole_filling import fill_holes
-
-    return fill_holes(self, **kwargs)
-
-
-_METHODS: dict[str, Callable[..., Any]] = {
-    "filter_smooth_constrained": _filter_smooth_constrained,
-    "filter_smooth_multiresolution": _filter_smooth_multiresolution,
-    "filter_smooth_boundary_curves": _filter_smooth_boundary_curves,
-    "ls_mesh": _ls_mesh,
-    "reconstruct_geometry": _reconstruct_geometry,
-    "approximate_ls": _approximate_ls,
-    "decode_geometry": _decode_geometry,
-    "fill_holes_faired": _fill_holes_faired,
+#: method name: (the public function of o3d_lsmesh it calls, the method's summary). Each method has
+#: that function's signature with ``self`` for its ``mesh`` (help() and completion show the options).
+_METHODS: dict[str, tuple[str, str]] = {
+    "filter_smooth_constrained": (
+        "constrained_fairing",
+        "Barycenter-constrained fairing (Liu et al. 2001, eq. 5-7). ``mu`` here is the weight of the "
+        'barycenter penalty (method="global" or "scan"), not the Taubin factor of Open3D\'s '
+        "``filter_smooth_taubin(mu=)``.",
+    ),
+    "filter_smooth_multiresolution": (
+        "multiresolution_fairing",
+        "Multiresolution fairing at hierarchy ``level`` (Liu et al. 2001, section 4), with the caller's "
+        "connectivity.",
+    ),
+    "filter_smooth_boundary_curves": (
+        "smooth_boundary_curves",
+        "Smooth only the boundary loops with the curve operator of Liu et al. 2001, section 3.3.",
+    ),
+    "ls_mesh": (
+        "ls_mesh",
+        "Least-squares mesh of this connectivity near the control vertices (Sorkine and Cohen-Or 2004, eq. 3).",
+    ),
+    "reconstruct_geometry": (
+        "reconstruct_geometry",
+        "Rebuild the positions of the vertices in ``unknown_vertex_indices`` from the rest (LS meshes).",
+    ),
+    "approximate_ls": (
+        "approximate",
+        "LS-mesh approximation from ``count`` selected control points: the mesh only, so that calls chain "
+        "(:func:`o3d_lsmesh.approximate` returns the selected indices too).",
+    ),
+    "decode_geometry": (
+        "decode_geometry",
+        "Geometry decoded from ``data`` (bytes of :func:`o3d_lsmesh.encode_geometry`) on this connectivity.",
+    ),
+    "fill_holes_faired": (
+        "fill_holes",
+        "Close holes with triangulated, refined patches faired as LS meshes.",
+    ),
 }
 
 #: Names that :func:`register` adds to both mesh classes.
@@ -148,17 +93,31 @@ def _is_ours(value: Any) -> bool:
     return getattr(value, _MARKER, False) is True
 
 
-def _method(name: str, function: Callable[..., Any], cls: type) -> Callable[..., Any]:
+def _method(name: str, cls: type) -> Callable[..., Any]:
     # A fresh function object per class so that __qualname__ and the marker
     # describe where it lives, and unregister() can tell it apart.
+    public, summary = _METHODS[name]
+    target = getattr(importlib.import_module(__package__), public)
+    function = _approximate_mesh if name == "approximate_ls" else target
+
     def method(self: Any, *args: Any, **kwargs: Any) -> Any:
         return function(self, *args, **kwargs)
 
     method.__name__ = name
     method.__qualname__ = f"{cls.__qualname__}.{name}"
     method.__module__ = __name__
-    # the docstring, and __wrapped__ so that inspect.signature() shows the real parameters
-    functools.update_wrapper(method, function, assigned=("__doc__",), updated=())
+    method.__doc__ = textwrap.fill(summary, 79) + textwrap.fill(
+        f"Options and errors as :func:`o3d_lsmesh.{public}` (``self`` is its ``mesh``); returns a new "
+        "mesh of the caller's kind.",
+        79,
+        initial_indent="\n\n",
+    )
+    signature = inspect.signature(target)
+    first, *rest = signature.parameters.values()
+    returns = "MeshT" if name == "approximate_ls" else signature.return_annotation
+    method.__signature__ = signature.replace(  # type: ignore[attr-defined]
+        parameters=[first.replace(name="self"), *rest], return_annotation=returns
+    )
     setattr(method, _MARKER, True)
     return method
 
@@ -170,7 +129,7 @@ def register() -> tuple[str, ...]:
     ``open3d.t.geometry.TriangleMesh``:
 
     =========================================  ==================================================
-    ``filter_smooth_constrained(n=10, **kw)``  :func:`o3d_lsmesh.fairing.constrained_fairing`
+    ``filter_smooth_constrained(n, **kw)``     :func:`o3d_lsmesh.fairing.constrained_fairing`
     ``filter_smooth_multiresolution(level)``   :func:`o3d_lsmesh.fairing.multiresolution_fairing`
     ``filter_smooth_boundary_curves(n=10)``    :func:`o3d_lsmesh.fairing.smooth_boundary_curves`
     ``ls_mesh(indices, positions=None)``       :func:`o3d_lsmesh.ls_mesh`
@@ -180,7 +139,8 @@ def register() -> tuple[str, ...]:
     ``fill_holes_faired(**kw)``                :func:`o3d_lsmesh.fill_holes`
     =========================================  ==================================================
 
-    Each returns a new mesh of the caller's kind. Importing o3d_lsmesh changes nothing;
+    Each has its function's signature (``self`` for ``mesh``) and returns a new mesh of the
+    caller's kind. Importing o3d_lsmesh changes nothing;
     a second call re-installs the same methods.
 
     Returns
@@ -216,8 +176,8 @@ def register() -> tuple[str, ...]:
                         "o3d_lsmesh.register() will not replace an Open3D method"
                     )
         for cls in classes:
-            for name, function in _METHODS.items():
-                setattr(cls, name, _method(name, function, cls))
+            for name in _METHODS:
+                setattr(cls, name, _method(name, cls))
     return METHOD_NAMES
 
 

@@ -184,6 +184,18 @@ def test_multiresolution_and_boundary_methods(registered):
 def test_methods_carry_docs_and_signatures(registered):
     import inspect
 
+    import o3d_lsmesh
+
     method = o3d.geometry.TriangleMesh.filter_smooth_constrained
     assert "Liu et al. 2001" in method.__doc__
-    assert "number_of_iterations" in inspect.signature(method).parameters
+    assert "not the Taubin factor" in " ".join(method.__doc__.split())  # its mu is not filter_smooth_taubin's
+    # each method shows its function's options (help(), completion), self in place of the mesh
+    functions = ["constrained_fairing", "multiresolution_fairing", "smooth_boundary_curves", "ls_mesh"]
+    functions += ["reconstruct_geometry", "approximate", "decode_geometry", "fill_holes"]
+    for cls in CLASSES:
+        for name, function in zip(METHOD_NAMES, functions):
+            shown = list(inspect.signature(getattr(cls, name)).parameters.values())
+            expected = list(inspect.signature(getattr(o3d_lsmesh, function)).parameters.values())
+            assert shown[0].name == "self" and shown[1:] == expected[1:], name
+            assert f"o3d_lsmesh.{function}`" in " ".join(getattr(cls, name).__doc__.split())
+    assert "mu" in inspect.signature(method).parameters
