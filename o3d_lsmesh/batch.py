@@ -713,12 +713,12 @@ def _dispatch(
 
 def _run_serial(todo: list[_Task], job: dict, emit: Callable[[dict], bool]) -> None:
     # Threads are left as the caller's process has them: this loop runs in the caller's process, whose
-    # warning state is restored at the end (the tasks route their warnings into their records).
-    with warnings.catch_warnings():
-        for task in todo:
+    # warning state each task restores (a task routes its warnings into its record; emit re-issues them).
+    for task in todo:
+        with warnings.catch_warnings():
             record = run_task(task.path, task.relative, task.key, **{**job, "threads": None})
-            if not emit(record):
-                return
+        if not emit(record):
+            return
 
 
 def summarize(records: Sequence[dict], seconds: float | None = None) -> str:

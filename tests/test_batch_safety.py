@@ -8,6 +8,10 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
+import subprocess
+import sys
+import tempfile
 import threading
 import time
 import warnings
@@ -16,6 +20,8 @@ from pathlib import Path
 import numpy as np
 import open3d as o3d
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from o3d_lsmesh import batch
 from o3d_lsmesh._batch_ops import OPS, BatchOp
@@ -23,9 +29,10 @@ from o3d_lsmesh._errors import O3DLSMeshWarning
 from o3d_lsmesh.cli import main
 
 
-def _sphere(path: Path) -> Path:
+def _sphere(path: Path, resolution: int = 4, shift: float = 0.0) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
-    assert o3d.io.write_triangle_mesh(str(path), o3d.geometry.TriangleMesh.create_sphere(resolution=4))
+    sphere = o3d.geometry.TriangleMesh.create_sphere(resolution=resolution)
+    assert o3d.io.write_triangle_mesh(str(path), sphere.translate((shift, 0.0, 0.0)))
     return path
 
 
@@ -310,3 +317,122 @@ def test_obj_outputs_name_their_material_and_texture_after_the_output_and_leave_
     back = o3d.io.read_triangle_mesh(str(out / "tex.obj"))
     # (Open3D's reader puts an empty slot first)
     assert [np.asarray(t).mean() for t in back.textures if not t.is_empty()] == [200]
+
+
+# --------------------------------------------------------------------------- acceptance fuzz (#40)
+
+_STEMS = ["..", ".", "...", "-x", "-", "a b", " ", "ü", "名前", "x", ".hidden", "_dot"]
+_FOLDERS = ["", "-d", "é è", ".h", "sub/deeper"]
+
+
+@st.composite
+def _layouts(draw):
+    """Input files (folder, stem, extension), OUTDIR inside the input folder or beside it, and the op."""
+    files = draw(
+        st.lists(
+            st.tuples(
+                st.sampled_from(_FOLDERS), st.sampled_from(_STEMS), st.sampled_from([".ply", ".obj", ".off"])
+            ),
+            min_size=1,
+            max_size=5,
+            unique_by=lambda f: (f[0], f[1]),
+        )
+    )
+    outdir = draw(st.sampled_from(["out", "in/out", "in/-d/out", "in/.h/o u t"]))
+    return files, outdir, draw(st.sampled_from(["hierarchy", "denoise"]))
+
+
+@settings(max_examples=8, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(_layouts())
+def test_fuzz_names_and_layouts_touch_nothing_outside_outdir_and_outputs_are_never_inputs(layout):
+    files, outdir_name, op = layout
+    options = {"levels": "0"} if op == "hierarchy" else {"iterations": 1}
+    with tempfile.TemporaryDirectory() as name:
+        root = Path(name)
+        for folder, stem, extension in files:
+            _sphere(root / "in" / folder / (stem + extension))
+        (root / "in" / "keep.txt").write_text("the user's")
+        outdir = root / outdir_name
+        # (OUTDIR, what is in it and the folders made to hold it)
+        outside = lambda tree: {
+            k: v
+            for k, v in tree.items()
+            if not ((root / k).is_relative_to(outdir) or outdir.is_relative_to(root / k))
+        }
+        before = _tree(root)
+        for _ in range(2):  # a second run over the first one's outputs
+            try:
+                with warnings.catch_warnings():  # (an OBJ's material ids do not follow a hierarchy)
+                    warnings.simplefilter("ignore", O3DLSMeshWarning)
+                    records = batch.run(
+                        root / "in", outdir, op=op, options=options, workers=0, progress=False
+                    )
+            except ValueError as error:  # e.g. '_dot.ply' beside '..ply': refused as a whole, nothing written
+                assert "would both write" in str(error)
+                assert _tree(root) == before
+                return
+            assert outside(_tree(root)) == outside(before)
+            found = sorted(r["input"] for r in records)  # outputs never become inputs
+            assert found == sorted(str(root / "in" / f / (s + e)) for f, s, e in files)
+            assert all(r["status"] == "ok" for r in records)
+            outputs = [Path(r["output"]) for r in records]
+            assert len(set(outputs)) == len(outputs)
+            assert all(
+                os.path.realpath(outdir) in map(str, Path(os.path.realpath(p)).parents) for p in outputs
+            )
+
+
+_HIERARCHY = {"op": "hierarchy", "options": {"levels": "all"}, "workers": 0, "progress": False}
+
+
+@pytest.fixture(scope="module")
+def six_files(tmp_path_factory):
+    """Six distinct meshes and the outputs of a clean run over them."""
+    root = tmp_path_factory.mktemp("six")
+    for i in range(6):
+        _sphere(root / "in" / f"m{i}.ply", resolution=8, shift=i)
+    batch.run(root / "in", root / "reference", **_HIERARCHY)
+    return root
+
+
+@settings(max_examples=4, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.integers(0, 6), st.sampled_from([0.0, 0.001, 0.005, 0.02]), st.integers(0, 5))
+def test_fuzz_resume_after_sigkill_neither_loses_nor_duplicates_and_reruns_damaged(
+    six_files, stop_after, delay, pick
+):
+    with tempfile.TemporaryDirectory() as name:
+        out = Path(name) / "out"
+        report = out / "batch_report.jsonl"
+        options = ["--op", "hierarchy", "--levels", "all", "--workers", "0", "--quiet"]
+        argv = [sys.executable, "-m", "o3d_lsmesh.cli", "batch", str(six_files / "in"), str(out), *options]
+        process = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        # SIGKILL a moment after the report holds stop_after records: before any, between, during a write
+        while (
+            process.poll() is None
+            and (report.read_bytes().count(b"\n") if report.exists() else 0) < stop_after
+        ):
+            time.sleep(0.002)
+        time.sleep(delay)
+        process.kill()
+        process.wait()
+        done = sorted(out.glob("m*/level_00.ply"))
+        if done:  # damage one output the killed run completed
+            victim = done[pick % len(done)]
+            victim.write_bytes(victim.read_bytes()[:-7])
+        with warnings.catch_warnings():  # (a torn last report line is reported)
+            warnings.simplefilter("ignore", O3DLSMeshWarning)
+            records = batch.run(six_files / "in", out, report=report, resume=True, **_HIERARCHY)
+        assert all(r["status"] in ("ok", "skipped") for r in records)
+        if done:
+            assert {Path(r["input"]).stem: r["status"] for r in records}[victim.parent.name] == "ok"
+        visible = sorted(
+            p.relative_to(out)
+            for p in out.rglob("*")
+            if p.is_file() and not str(p.relative_to(out)).startswith(".")
+        )
+        visible.remove(Path("batch_report.jsonl"))
+        # neither lost nor duplicated: a clean run's files, byte for byte (hidden leftovers of the kill aside)
+        reference = six_files / "reference"
+        assert visible == sorted(p.relative_to(reference) for p in reference.rglob("*") if p.is_file())
+        for path in visible:
+            assert (out / path).read_bytes() == (reference / path).read_bytes()
