@@ -17,10 +17,8 @@ DOCS_BUILD := docs/_build/html
 demo: $(STAMP)
 	$(PY) -m o3d_lsmesh.cli demo
 
-# second pass: the solver-facing tests again on the SciPy fallback (as without scikit-sparse); the one
-# that decodes a real mesh anchor batch by anchor batch refactors per batch there (minutes): first pass only
+# second pass: the solver-facing tests again on the SciPy fallback (as without scikit-sparse)
 FALLBACK_TESTS := tests/test_solvers.py tests/test_fallback.py tests/test_lsmesh.py tests/test_encoding.py tests/test_selection.py
-FALLBACK_SKIP := not progressive_decoding_stays_accurate_at_omega_10n
 
 # lint, format and types first: they take seconds and fail on any finding; then the docstring examples
 test: $(STAMP)
@@ -29,7 +27,7 @@ test: $(STAMP)
 	$(PY) -m mypy
 	$(PY) -m pytest -p no:dash -q --doctest-modules o3d_lsmesh
 	$(PY) -m pytest -p no:dash -q
-	O3D_LSMESH_NO_CHOLMOD=1 $(PY) -m pytest -p no:dash -q $(FALLBACK_TESTS) -k "$(FALLBACK_SKIP)"
+	O3D_LSMESH_NO_CHOLMOD=1 $(PY) -m pytest -p no:dash -q $(FALLBACK_TESTS)
 	$(MAKE) docs-check
 
 # Version matrix and sdist check (CI runs it after `make test`): the sdist is built and unpacked, the

@@ -2,8 +2,8 @@
 
 :class:`SPDSolver` factors a sparse SPD matrix once, solves ``(n, k)``
 right-hand sides in one call, refactors reusing the symbolic analysis and
-applies rank-k updates (SciPy's ``splu`` without scikit-sparse or with
-``O3D_LSMESH_NO_CHOLMOD=1``; conjugate gradients preconditioned by an AMG
+applies rank-k updates (SciPy's ``splu`` and a low-rank correction without
+scikit-sparse or with ``O3D_LSMESH_NO_CHOLMOD=1``; conjugate gradients preconditioned by an AMG
 V-cycle or an incomplete Cholesky factor above a memory budget).
 :func:`check_constant_modes` and :func:`check_finite` keep an ill-posed system
 from giving a wrong answer silently.
@@ -260,6 +260,8 @@ def _as_csc(matrix: Any, *, name: str = "matrix", square: bool = True) -> sp.csc
         raise TypeError(f"{name} must be a scipy sparse matrix, got {type(matrix).__name__}")
     if square and matrix.shape[0] != matrix.shape[1]:
         raise ValueError(f"{name} must be square, got shape {matrix.shape}")
+    if matrix.dtype.kind not in "biuf":
+        raise TypeError(f"{name} must have real entries, got {matrix.dtype}")
     csc = sp.csc_matrix(matrix, dtype=np.float64)
     if not np.isfinite(csc.data).all():
         first = int(np.flatnonzero(~np.isfinite(csc.data))[0])
@@ -275,6 +277,31 @@ def _as_csc(matrix: Any, *, name: str = "matrix", square: bool = True) -> sp.csc
             (csc.data, csc.indices.astype(np.int32), csc.indptr.astype(np.int32)), shape=csc.shape
         )
     return csc
+
+
+#: Largest ``|a_ij - a_ji|``, relative to the largest entry, that :class:`SPDSolver` takes as symmetric: an
+#: assembled normal matrix's round-off (1e-16 of its entries) passes, a wrong entry does not.
+SYMMETRY_TOLERANCE = 1e-10
+
+
+def _check_symmetric(csc: sp.csc_matrix, *, lower: bool, name: str = "matrix") -> None:
+    """Raise ``ValueError`` naming ``name`` unless the canonical ``csc`` is symmetric within
+    :data:`SYMMETRY_TOLERANCE` (with ``lower``: has no entry above the diagonal). CHOLMOD reads one
+    triangle, SciPy's LU and CG the whole: an unsymmetric matrix gave each a different wrong answer."""
+    from . import _block_kernel  # compiled by the package's build: imported where used
+
+    gap, i, j, above = _block_kernel.symmetry_gap(*_csr_parts(csc.T))  # CSC arrays, read in place
+    if lower and above:
+        raise ValueError(
+            f"{name} must hold only its lower triangle with lower=True, got {above} entries above the diagonal"
+        )
+    largest = max(csc.data.max(initial=0.0), -csc.data.min(initial=0.0))
+    if not lower and gap > SYMMETRY_TOLERANCE * largest:
+        i, j = min(i, j), max(i, j)
+        raise ValueError(
+            f"{name} must be symmetric, got a[{i}, {j}] = {csc[i, j]:g} against a[{j}, {i}] = {csc[j, i]:g} "
+            "(pass only its lower triangle with lower=True if that is what it means)"
+        )
 
 
 def _symmetric_from_lower(lower: sp.csc_matrix) -> sp.csc_matrix:
@@ -305,6 +332,94 @@ def _splu_spd(matrix: sp.csc_matrix) -> Any:
     )
 
 
+class _Woodbury:
+    """A kept ``splu`` of ``B`` solving ``B + C C^T`` (the SciPy path's rank-k updates; Woodbury's identity)::
+
+        (B + C C^T)^-1 b = y + Z (I + C^T Z)^-1 (d - C^T y),   y = B^-1 (b - C d),   Z = B^-1 C
+
+    exact for any ``d``: ``d`` is the least-norm one making ``b - C d`` zero on each column's largest
+    entry's row (all of it for one-entry columns: anchors), so that ``y`` does not carry an anchor's
+    ``w^2 c`` (with ``y = B^-1 b`` the terms of that size cancel: 2e-4 of the camel's size off at the
+    bases paper's ``w = 10 n``, against 1e-14 this way; columns with large entries on several rows keep
+    a backward error of about 1e-9 at entries 1e4 times the matrix's). The capacitance
+    ``I + C^T Z`` (SPD) is held by its Cholesky factor, extended by a block per update; an update's
+    columns are base-solved along with the next right-hand side (one SuperLU call). :attr:`work`
+    counts the multiply-adds the correction has cost (its columns' base solves, the products with
+    ``Z``), :attr:`factor_work` those of the factorization (``sum_j |L_j|^2``): the owner refactors
+    once the first reaches the second, at most twice the cost of the best fixed refactoring period.
+    """
+
+    def __init__(self, lu: Any) -> None:
+        from scipy.linalg import cho_solve, solve_triangular
+
+        self._lu, self._cho_solve, self._triangular = lu, cho_solve, solve_triangular
+        self.factor_work = self._solve_work = 0.0  # counted at the first update (reading L copies it)
+        n = lu.shape[0]
+        self._columns = sp.csc_matrix((n, 0))
+        self._pivots, self._entries, self._shares = np.zeros(0, dtype=np.int64), np.zeros(0), np.zeros(0)
+        self._z = np.empty((n, 0), order="F")  # capacity doubles: Z is its leading columns
+        self._rank = 0  # columns with their Z and capacitance rows
+        self._cholesky = np.empty((0, 0))
+        self.work = 0.0
+
+    def affords(self, columns: int) -> bool:
+        """Whether ``columns`` more columns keep the correction's work below a refactorization's."""
+        if not self.factor_work:
+            lower = self._lu.L
+            self.factor_work = float(np.sum(np.diff(lower.indptr).astype(np.float64) ** 2))
+            self._solve_work = float(lower.nnz + self._lu.U.nnz)
+        return self.work + columns * self._solve_work < self.factor_work
+
+    def add(self, c: sp.csc_matrix) -> None:
+        rows = np.asarray(abs(c).argmax(axis=0)).ravel()
+        self._pivots = np.concatenate([self._pivots, rows])
+        self._entries = np.concatenate([self._entries, np.asarray(c[rows, np.arange(c.shape[1])]).ravel()])
+        # d_j = e_j b_r / sum of e^2 over the columns pivoting on row r (entries e_j at their pivot rows)
+        squares = np.bincount(self._pivots, weights=self._entries**2)[self._pivots]
+        self._shares = np.divide(self._entries, squares, out=np.zeros_like(squares), where=squares > 0)
+        self._columns = sp.hstack([self._columns, c], format="csc")
+        self.work += c.shape[1] * self._solve_work
+
+    def solve(self, b: np.ndarray) -> np.ndarray:
+        """``(B + C C^T)^-1 b`` for an ``(n,)`` or ``(n, m)`` ``b``; ``numpy.linalg.LinAlgError`` if the
+        capacitance is not numerically SPD (the owner refactors)."""
+        vector = b.ndim == 1
+        b = b[:, None] if vector else b
+        k, m, C = self._rank, b.shape[1], self._columns
+        d = self._shares[:, None] * b[self._pivots]
+        new = C[:, k:]
+        rhs = np.empty((len(b), m + new.shape[1]), order="F")
+        rhs[:, :m] = b - C @ d
+        rhs[:, m:] = new.toarray()
+        y = self._lu.solve(rhs)
+        if new.shape[1]:
+            self._extend(new, y[:, m:])
+            y = y[:, :m]
+        if self._rank:
+            self.work += m * self._rank * (y.shape[0] + self._rank)
+            y = y + self._z[:, : self._rank] @ self._cho_solve((self._cholesky, True), d - C.T @ y)
+        return y[:, 0] if vector else y
+
+    def _extend(self, new: sp.csc_matrix, z: np.ndarray) -> None:
+        k, a = self._rank, new.shape[1]
+        corner = np.eye(a) + new.T @ z
+        corner = (corner + corner.T) / 2.0
+        block = np.zeros((k + a, k + a))
+        block[:k, :k] = self._cholesky
+        if k:
+            # [[L, 0], [M, N]] with L M^T = C_old^T Z_new and N N^T = corner - M M^T
+            below = self._triangular(self._cholesky, self._columns[:, :k].T @ z, lower=True).T
+            corner -= below @ below.T
+            block[k:, :k] = below
+        block[k:, k:] = np.linalg.cholesky(corner)
+        if k + a > self._z.shape[1]:
+            grown = np.empty((len(z), max(2 * self._z.shape[1], k + a)), order="F")
+            grown[:, :k] = self._z[:, :k]
+            self._z = grown
+        self._z[:, k : k + a] = z
+        self._cholesky, self._rank = block, k + a
+
+
 _PACKAGE_DIR = os.path.dirname(os.path.abspath(__file__))
 
 
@@ -319,6 +434,23 @@ def user_stacklevel() -> int:
         frame = frame.f_back
         level += 1
     return level
+
+
+#: Whether this process has shown the SciPy fallback's warning (each solver would repeat it otherwise).
+_fallback_warned = False
+
+
+def _warn_fallback_once() -> None:
+    global _fallback_warned
+    if not _fallback_warned:
+        _fallback_warned = True
+        warnings.warn(
+            "scikit-sparse is not importable; solving with scipy.sparse.linalg.splu, slower than CHOLMOD "
+            f"(pip install 'o3d_lsmesh[cholmod]' for CHOLMOD, or set {NO_CHOLMOD_ENV}=1 to choose SciPy "
+            "and silence this warning; shown once)",
+            O3DLSMeshWarning,
+            stacklevel=user_stacklevel(),
+        )
 
 
 def _not_a(value: Any, types: tuple[type, ...]) -> bool:
@@ -454,6 +586,7 @@ class SPDSolver:
             raise TypeError("pass exactly one of matrix and product_of")
         if product_of is None:
             given = _as_csc(matrix)
+            _check_symmetric(given, lower=bool(lower))
         else:
             given = _as_csc(product_of, name="product_of", square=False)
         if backend == "auto":
@@ -466,13 +599,7 @@ class SPDSolver:
                 backend = "iterative"
         if backend == "auto":
             if _cholmod is None and not _cholmod_disabled():
-                warnings.warn(
-                    "scikit-sparse is not importable; solving with scipy.sparse.linalg.splu, which "
-                    "refactors instead of updating (pip install 'o3d_lsmesh[cholmod]' for CHOLMOD, "
-                    f"or set {NO_CHOLMOD_ENV}=1 to choose SciPy and silence this warning)",
-                    O3DLSMeshWarning,
-                    stacklevel=user_stacklevel(),
-                )
+                _warn_fallback_once()
             backend = "scipy" if _cholmod is None else "cholmod"
         self.backend = backend
         self.iterations = 0
@@ -568,8 +695,8 @@ class SPDSolver:
                 else:
                     self._factor.cholesky_inplace(self._matrix)
             else:
-                self._factor = _splu_spd(
-                    self._matrix if self._product_of is None else gram_matrix(self._product_of)
+                self._factor = _Woodbury(
+                    _splu_spd(self._matrix if self._product_of is None else gram_matrix(self._product_of))
                 )
         except Exception as error:
             if _cholmod is not None and isinstance(error, _cholmod.CholmodNotPositiveDefiniteError):
@@ -590,6 +717,7 @@ class SPDSolver:
                 "refactor takes a matrix, and this solver factors a product: build a new SPDSolver"
             )
         csc = _as_csc(matrix)
+        _check_symmetric(csc, lower=lower)
         assert self._matrix is not None  # a product solver raised above
         if csc.shape != self._matrix.shape:
             raise ValueError(f"matrix must have shape {self._matrix.shape}, got {csc.shape}")
@@ -605,7 +733,10 @@ class SPDSolver:
         ``x0`` (same shape) is a starting guess for the iterative backend (current
         positions when fairing, a prolongated coarse solution); direct backends ignore it.
         """
-        b = np.asarray(rhs, dtype=np.float64)
+        try:
+            b = np.asarray(rhs, dtype=np.float64)
+        except (TypeError, ValueError) as error:
+            raise TypeError(f"rhs must be an array of real numbers, got {type(rhs).__name__}") from error
         n = self.shape[0]
         if b.shape[:1] != (n,) or b.ndim > 2:
             raise ValueError(f"rhs must have shape ({n},) or ({n}, k), got {b.shape}")
@@ -621,7 +752,12 @@ class SPDSolver:
             elif self.backend == "cholmod":
                 x = self._factor(b)
             else:
-                x = self._factor.solve(np.asfortranarray(b))
+                try:
+                    x = self._factor.solve(b)
+                except np.linalg.LinAlgError:  # the updates' capacitance lost definiteness: factor them in
+                    self._flush()
+                    self._factorize(analyze=True)
+                    x = self._factor.solve(b)
         if not np.all(np.isfinite(x)):
             raise SingularSystemError(
                 "the factored matrix is numerically singular: the solve of a finite right-hand side "
@@ -667,12 +803,18 @@ class SPDSolver:
     def update(self, c: Any) -> None:
         """Replace ``A`` by ``A + C C^T`` (CHOLMOD rank-k update, no refactoring).
 
-        ``C`` is ``(n, k)`` sparse in the matrix's own row order. The SciPy path refactors
-        (a Woodbury update on the LU lost the accuracy of the bases paper's ``w = 10 n``
-        anchors); the iterative path rebuilds its preconditioner at the next solve.
+        ``C`` is ``(n, k)`` sparse in the matrix's own row order. The SciPy path keeps its LU and
+        corrects the solves by Woodbury's identity (:class:`_Woodbury`), refactoring once the
+        correction has cost as much as a factorization; the iterative path rebuilds its
+        preconditioner at the next solve.
         """
         if not (sp.isspmatrix_csc(c) and c.dtype == np.float64):
-            c = sp.csc_matrix(c, dtype=np.float64)
+            try:
+                c = sp.csc_matrix(c, dtype=np.float64)
+            except (TypeError, ValueError) as error:
+                raise TypeError(
+                    f"C must be a sparse matrix or an array of real numbers, got {type(c).__name__}"
+                ) from error
         if c.shape[0] != self.shape[0]:
             raise ValueError(f"C must have {self.shape[0]} rows, got shape {c.shape}")
         if not np.isfinite(c.data).all():
@@ -683,6 +825,9 @@ class SPDSolver:
             self._pending.append(c)
             if self.backend == "cholmod":
                 self._factor.update_inplace(c)
+                return
+            if self.backend == "scipy" and self._factor.affords(c.shape[1]):
+                self._factor.add(c)
                 return
             self._flush()
             self._factorize(analyze=True)
@@ -1103,9 +1248,9 @@ def solve_spd(matrix: Any, rhs: np.ndarray) -> np.ndarray:
     from scipy.linalg import cho_factor, cho_solve
 
     if matrix.shape[0] > DENSE_UNKNOWNS:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", O3DLSMeshWarning)  # the SciPy fallback's warning: small systems
-            return SPDSolver(sp.csc_matrix(matrix), ordering="amd").solve(np.asarray(rhs))
+        # small systems: SciPy without its warning when CHOLMOD is missing
+        backend = "auto" if cholmod_available() else "scipy"
+        return SPDSolver(sp.csc_matrix(matrix), ordering="amd", backend=backend).solve(np.asarray(rhs))
     dense = matrix.toarray() if sp.issparse(matrix) else np.asarray(matrix, dtype=np.float64)
     try:
         return cho_solve(cho_factor(dense), rhs)

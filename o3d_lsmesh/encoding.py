@@ -331,8 +331,10 @@ def iter_decode_geometry(
 
     The first mesh uses the first ``step`` anchors (a factorization); every
     following one adds the next ``step`` anchors by a rank-``step`` update of
-    the kept factor and back-substitutes, never refactoring. The last mesh
-    uses every anchor and equals :func:`decode_geometry` up to round-off.
+    the kept factor and back-substitutes (CHOLMOD's update; without
+    scikit-sparse a low-rank correction of SciPy's LU, refactored only once the
+    correction has cost as much as a factorization). The last mesh uses every
+    anchor and equals :func:`decode_geometry` up to round-off.
 
     Updates that add ``omega^2 = (10 n)^2`` to the diagonal lose accuracy (3.6e-6 of the model size on
     the camel with 300 anchors), so every refinement does one step of iterative refinement with the same

@@ -5,7 +5,8 @@ Implements section 4 of Sorkine and Cohen-Or, *Least-squares Meshes* (SMI
 greedy anchor selection of section IV of Sorkine et al., *Geometry-aware Bases
 for Shape Approximation*, where every greedy step adds one relaxed anchor by a
 rank-1 update of the kept Cholesky factor (section III) instead of a new
-factorization.
+factorization (without scikit-sparse, a low-rank correction of SciPy's LU:
+:meth:`~o3d_lsmesh._solvers.SPDSolver.update`).
 
 Start set
 ---------

@@ -10,22 +10,44 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from conftest import REPO, grid
 
+import o3d_lsmesh
 import o3d_lsmesh._solvers as solvers
 from o3d_lsmesh import O3DLSMeshWarning, ls_mesh
 
 
-def test_fallback_warning_points_at_the_users_call(monkeypatch):
+def test_fallback_warning_points_at_the_users_call_once_per_process(monkeypatch):
     monkeypatch.setattr(solvers, "_cholmod", None)
+    monkeypatch.setattr(solvers, "_fallback_warned", False)  # as in a fresh process
     monkeypatch.delenv(solvers.NO_CHOLMOD_ENV, raising=False)
     V, F = grid(6, 6)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         line = sys._getframe().f_lineno + 1  # the call's own line, the next one
         ls_mesh((V, F), [0, 7])
+        # further solvers, from other lines and other functions, each of which factors: no repeat
+        ls_mesh((V, F), [0, 9])
+        encoded = o3d_lsmesh.encode_geometry((V, F), 6)
+        list(o3d_lsmesh.iter_decode_geometry((V, F), encoded, step=2))
+        o3d_lsmesh.approximate((V, F), 5, interpolate=True)
     ours = [w for w in caught if issubclass(w.category, O3DLSMeshWarning)]
     assert len(ours) == 1
     assert ours[0].filename == __file__ and ours[0].lineno == line
     assert "O3D_LSMESH_NO_CHOLMOD=1" in str(ours[0].message)
+
+
+def test_fallback_warns_once_in_a_fresh_process_running_several_operations():
+    code = (
+        "import sys, warnings; sys.modules['sksparse'] = None\n"
+        "import o3d_lsmesh\n"
+        "from o3d_lsmesh.shapes import demo_mesh\n"
+        "mesh = demo_mesh(2)\n"
+        "o3d_lsmesh.approximate(mesh, 30)\n"
+        "list(o3d_lsmesh.iter_decode_geometry(mesh, o3d_lsmesh.encode_geometry(mesh, 30), step=10))\n"
+        "o3d_lsmesh.fill_holes(mesh)\n"
+    )
+    env = {"PYTHONPATH": str(REPO), "PATH": "/usr/bin:/bin"}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+    assert out.stderr.count("scikit-sparse is not importable") == 1, out.stderr
 
 
 def test_the_environment_variable_chooses_scipy_without_warning(monkeypatch):

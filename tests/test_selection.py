@@ -256,14 +256,15 @@ def test_greedy_factors_once_and_updates_per_anchor(monkeypatch):
     monkeypatch.setattr(SPDSolver, "update", counting_update)
     V, F = noisy_sphere(8)
     select_control_points((V, F), 20, method="greedy")
-    # CHOLMOD updates its factor; SciPy's LU has no update and refactors on each one
-    refactors = 0 if cholmod_available() else 1
-    assert calls["factorize"] == 1 + refactors * 19 and calls["ranks"] == [1] * 19
+    # CHOLMOD updates its factor; SciPy's LU is corrected by the updates (Woodbury) and refactored
+    # only once the correction has cost as much as a factorization
+    assert calls["ranks"] == [1] * 19
+    assert calls["factorize"] == 1 if cholmod_available() else 1 < calls["factorize"] <= 1 + 19 // 4
     calls.update(factorize=0, ranks=[])
     select_control_points((V, F), 20, method="combined", batch=8)
     # one factorization, then one update of rank <= 8 per batch (batches end early on
     # this small sphere once every vertex is forbidden)
-    assert calls["factorize"] == 1 + refactors * len(calls["ranks"])
+    assert calls["factorize"] == 1 if cholmod_available() else calls["factorize"] < 1 + len(calls["ranks"])
     assert sum(calls["ranks"]) == 19 and max(calls["ranks"]) == 8 and len(calls["ranks"]) >= 3
 
 

@@ -7,6 +7,8 @@ import pytest
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from conftest import PACKAGE_HOME
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from o3d_lsmesh import SingularSystemError, SPDSolver
 from o3d_lsmesh._solvers import cholmod_available
@@ -40,6 +42,68 @@ def test_update_equals_fresh_factor(backend):
     fresh = SPDSolver(A + C @ C.T, backend=backend)
     np.testing.assert_allclose(solver.solve(b), fresh.solve(b), rtol=1e-10)
     assert abs(solver.matrix - (A + C @ C.T)).max() < 1e-12
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+@settings(max_examples=25, deadline=None)
+@given(
+    seed=st.integers(0, 2**16),
+    blocks=st.lists(st.tuples(st.integers(1, 4), st.integers(1, 3)), min_size=1, max_size=5),
+    scale=st.sampled_from([1.0, 1e4]),
+)
+def test_updates_equal_a_dense_solve(backend, seed, blocks, scale):
+    # blocks of columns with one to three entries (rows may repeat across columns), solves between
+    # them: the SciPy path's Woodbury correction against numpy's dense solve of the updated matrix;
+    # large entries (an anchor's w = 10 n) one per column, as LSMeshSystem.add_anchors makes them
+    A, _ = spd(40, seed % 7)
+    rng = np.random.default_rng(seed)
+    solver, dense = SPDSolver(A, backend=backend), A.toarray()
+    for columns, entries in blocks:
+        entries = 1 if scale > 1 else entries
+        rows = rng.integers(0, 40, size=(entries, columns)).ravel()
+        values = scale * rng.uniform(0.5, 2.0, size=entries * columns)
+        C = sp.csc_matrix((values, (rows, np.tile(np.arange(columns), entries))), shape=(40, columns))
+        solver.update(C)
+        dense += (C @ C.T).toarray()
+        b = rng.normal(size=(40, 2)) + dense @ rng.normal(size=(40, 2))  # large entries where C is
+        x = solver.solve(b)
+        # backward error (a stable solver's): the residual against the matrix's and the solution's size
+        scale_ = np.abs(dense).sum(axis=1).max() * np.abs(x).max() + np.abs(b).max()
+        assert np.abs(b - dense @ x).max() <= 1e-13 * scale_
+        # forward error within what the conditioning allows
+        expected = np.linalg.solve(dense, b)
+        tolerance = 1e-14 * np.linalg.cond(dense) * np.abs(expected).max()
+        np.testing.assert_allclose(x, expected, rtol=0, atol=tolerance)
+        np.testing.assert_allclose(solver.solve(b[:, 0]), x[:, 0], rtol=0, atol=tolerance)
+
+
+def test_scipy_updates_keep_the_lu_until_the_correction_costs_a_factorization():
+    A, b = spd()
+    solver, ranks, lus = SPDSolver(A, backend="scipy"), [], []
+    for row in range(0, 60, 6):
+        solver.update(sp.csc_matrix(([2.0], ([row], [0])), shape=(60, 1)))
+        np.testing.assert_allclose(solver.solve(b), spla.spsolve(solver.matrix, b), rtol=1e-10)
+        ranks.append(solver._factor._rank)
+        lus.append(solver._factor._lu)
+    refactors = sum(a is not b for a, b in zip(lus, lus[1:]))
+    assert max(ranks) > 1 and 0 < refactors < len(ranks) - 1, (ranks, refactors)
+    assert all(r == 0 or r == p + 1 for p, r in zip(ranks, ranks[1:]))  # grows by one, or a fresh LU
+
+
+def test_scipy_update_refactors_when_the_correction_fails(monkeypatch):
+    import o3d_lsmesh._solvers as solvers
+
+    A, b = spd()
+    C = sp.csc_matrix((np.array([3.0]), (np.array([4]), np.array([0]))), shape=(A.shape[0], 1))
+    solver = SPDSolver(A, backend="scipy")
+    solver.update(C)
+
+    def fail(self, new, z):
+        raise np.linalg.LinAlgError("not positive definite")
+
+    monkeypatch.setattr(solvers._Woodbury, "_extend", fail)
+    np.testing.assert_allclose(solver.solve(b), spla.spsolve(A + C @ C.T, b), rtol=1e-10)
+    assert solver._factor._rank == 0  # a fresh factor of A + C C^T, no correction
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
@@ -98,6 +162,7 @@ def test_fallback_warns_without_scikit_sparse(monkeypatch):
     from o3d_lsmesh import O3DLSMeshWarning
 
     monkeypatch.setattr(solvers, "_cholmod", None)
+    monkeypatch.setattr(solvers, "_fallback_warned", False)  # as in a fresh process
     monkeypatch.delenv(solvers.NO_CHOLMOD_ENV, raising=False)
     A, _b = spd()
     with pytest.warns(O3DLSMeshWarning, match="scikit-sparse is not importable"):
@@ -384,3 +449,34 @@ def test_solve_spd_dense_path_raises_on_an_indefinite_matrix():
 
     with pytest.raises(SingularSystemError, match="not positive definite"):
         solve_spd(-np.identity(4), np.ones(4))
+
+
+@pytest.mark.parametrize("backend", [*BACKENDS, "iterative"])
+def test_spd_solver_refuses_what_is_not_a_real_symmetric_matrix(backend):
+    # CHOLMOD reads one triangle: an unsymmetric matrix gave the solution of another matrix without a word
+    unsymmetric = sp.csc_matrix(np.array([[4.0, 1.0, 0.0], [0.5, 3.0, 0.0], [0.0, 0.0, 2.0]]))
+    with pytest.raises(
+        ValueError, match=r"matrix must be symmetric, got a\[0, 1\] = 1 against a\[1, 0\] = 0.5"
+    ):
+        SPDSolver(unsymmetric, backend=backend)
+    other_pattern = sp.csc_matrix(np.array([[4.0, 1.0], [0.0, 3.0]]))
+    with pytest.raises(
+        ValueError, match=r"matrix must be symmetric, got a\[0, 1\] = 1 against a\[1, 0\] = 0"
+    ):
+        SPDSolver(other_pattern, backend=backend)
+    with pytest.raises(ValueError, match="matrix must be symmetric"):
+        SPDSolver(sp.identity(3, format="csc"), backend=backend).refactor(unsymmetric)
+    # round-off asymmetry of an assembled product passes, and so does a lower triangle with lower=True
+    A, b = spd(6)
+    nearly = sp.csc_matrix(A.toarray() * (1.0 + 1e-14 * np.triu(np.ones(A.shape), 1)))
+    np.testing.assert_allclose(SPDSolver(nearly, backend=backend).solve(b), SPDSolver(A).solve(b), rtol=1e-8)
+    with pytest.raises(
+        ValueError, match=r"matrix must hold only its lower triangle with lower=True, got \d+ entries above"
+    ):
+        SPDSolver(A, backend=backend, lower=True)
+    with pytest.raises(TypeError, match="matrix must have real entries, got complex128"):
+        SPDSolver(sp.csc_matrix(np.array([[4.0, 1j], [-1j, 3.0]])), backend=backend)
+    with pytest.raises(TypeError, match="rhs must be an array of real numbers, got list"):
+        SPDSolver(A, backend=backend).solve(["a"] * A.shape[0])
+    with pytest.raises(TypeError, match="C must be a sparse matrix or an array of real numbers, got str"):
+        SPDSolver(A, backend=backend).update("x")
