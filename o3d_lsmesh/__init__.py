@@ -20,6 +20,7 @@ from ._errors import ConvergenceError, O3DLSMeshWarning, SingularSystemError
 from ._solvers import SPDSolver
 from .encoding import decode_geometry, encode_geometry, iter_decode_geometry
 from .fairing import constrained_fairing, multiresolution_fairing, smooth_boundary_curves
+from .fairing.features import detect_creases
 from .hierarchy import MeshHierarchy, build_hierarchy, from_fast_simplification
 from .hole_filling import FillReport, HoleFiller, HoleOutcome, fill_holes
 from .laplacian import laplacian
@@ -42,6 +43,7 @@ __all__ = [
     "build_hierarchy",
     "constrained_fairing",
     "decode_geometry",
+    "detect_creases",
     "encode_geometry",
     "fill_holes",
     "from_fast_simplification",

@@ -24,6 +24,7 @@ from .._validate import as_bool, as_choice, as_count, as_iterations, as_positive
 from ..topology import boundary_curves, edge_structure, vertex_rings
 from .barycenter import DEFAULT_MU, GlobalSolver, fairing_topology, local_operator
 from .boundary_curve import curve_operator
+from .features import feature_denoise
 from .scan_fairing import scan_denoise
 
 if TYPE_CHECKING:
@@ -31,7 +32,7 @@ if TYPE_CHECKING:
 
 __all__ = ["DEFAULT_METHOD", "FAIRING_METHODS", "constrained_fairing", "constrained_fairing_arrays"]
 
-FAIRING_METHODS = ("scan", "local", "global")
+FAIRING_METHODS = ("scan", "local", "global", "features")
 #: The energy of ``constrained_fairing(mesh)`` (see its docstring for the measurements).
 DEFAULT_METHOD = "scan"
 _DEFAULT_ITERATIONS = {"scan": 1, "local": 10, "global": 10}
@@ -60,7 +61,8 @@ def _check_options(
 ):
     method, number_of_iterations = resolved_options(method, number_of_iterations, reimpose_every)
     method = as_choice(method, FAIRING_METHODS, name="method")  # valid: resolved_options filled the count
-    number_of_iterations = as_iterations(number_of_iterations)
+    if method != "features" or number_of_iterations is not None:  # features: None is a measured count
+        number_of_iterations = as_iterations(number_of_iterations)
     if method == "scan" and number_of_iterations > 1:
         # re-taken solves shrink the scan (10: 4x the time, 3x the inward move) without the smoothing of
         # iterations: the scan energy is one solve
@@ -77,16 +79,16 @@ def _check_options(
         membrane = as_positive_float(membrane, name="membrane", allow_zero=True)
     if boundary_weight is not None:
         boundary_weight = as_positive_float(boundary_weight, name="boundary_weight")
-    if method == "scan" and reimpose_every is not None:
+    if method in ("scan", "features") and reimpose_every is not None:
         raise ValueError(
-            f"reimpose_every must be None for method='scan' (it is a local-operator option), got "
+            f"reimpose_every must be None for method={method!r} (it is a local-operator option), got "
             f"{reimpose_every}"
         )
     if mu is not None:
         mu = as_positive_float(mu, name="mu")
-        if method == "local":
+        if method in ("local", "features"):
             raise ValueError(
-                f"mu must be None for method='local' (it weighs the penalty of method='global'), got {mu}"
+                f"mu must be None for method={method!r} (it weighs the penalty of method='global'), got {mu}"
             )
     if reimpose_every is not None:
         reimpose_every = as_count(reimpose_every, name="reimpose_every", minimum=1)
@@ -97,9 +99,9 @@ def _check_options(
             )
     smooth_boundary = as_bool(smooth_boundary, name="smooth_boundary")
     progress = check_progress(progress)
-    if method == "scan" and not smooth_boundary:
+    if method in ("scan", "features") and not smooth_boundary:
         raise ValueError(
-            "smooth_boundary must be True for method='scan' (its boundary moves with the surface; "
+            f"smooth_boundary must be True for method={method!r} (its boundary moves with the surface; "
             "hold it fixed with method='global' or 'local'), got False"
         )
     options = (number_of_iterations, method, mu, bool(smooth_boundary), reimpose_every, bool(progress))
@@ -185,6 +187,8 @@ def _fair(
             solver=solver,
             progress=progress,
         )
+    if method == "features":
+        return feature_denoise(positions, triangles, passes=number_of_iterations, progress=progress)
     if method == "local":
         with plain_pages():
             return fair_local(
@@ -377,6 +381,13 @@ def constrained_fairing(
     iterations, the paper's "imposing and relaxing the center constraints by
     turns", for stronger smoothing.
 
+    ``method="features"`` keeps sharp creases (CAD parts, mechanical
+    scans): guided normal filtering (Zhang et al. 2015) alternated with Sun
+    et al.'s vertex update, ``number_of_iterations`` passes (``None``:
+    measured from the noise); see :mod:`o3d_lsmesh.fairing.features` and
+    :func:`~o3d_lsmesh.detect_creases`. Its figures are in
+    benchmarks/results/features_denoise.md.
+
     ``method="global"``: the penalty form of eq. 5,
     ``min X^T K^T K X + mu (X - X0)^T H^T H (X - X0)``, factored once by
     CHOLMOD. The hard-constrained form is degenerate for a closed mesh: it has
@@ -425,8 +436,9 @@ def constrained_fairing(
         :data:`~o3d_lsmesh._validate.MAX_ITERATIONS`; 0 returns an unchanged
         copy. ``"scan"`` is one solve: None, 0 or 1 (re-taken solves would
         only shrink the scan). ``None``: 1 for ``"scan"``, 10 for ``"local"``
-        and ``"global"``.
-    method : {"scan", "local", "global"} or None
+        and ``"global"``, measured from the noise for ``"features"`` (its
+        filter passes).
+    method : {"scan", "local", "global", "features"} or None
         ``None``: ``"scan"``, or ``"local"`` when ``number_of_iterations`` or
         ``reimpose_every`` is given (options of the iterative operator only;
         it was the default before ``"scan"``).
