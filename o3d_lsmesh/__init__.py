@@ -33,7 +33,9 @@ from .summary import topology_summary
 
 __all__ = [
     "ConvergenceError",
+    "FillReport",
     "HoleFiller",
+    "HoleOutcome",
     "LSMeshSolver",
     "MeshHierarchy",
     "O3DLSMeshWarning",

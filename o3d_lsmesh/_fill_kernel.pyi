@@ -19,15 +19,9 @@ def refine(
 def tangential_relax(
     vertices: np.ndarray, new_tris: np.ndarray, first_new: int, iterations: int = 10
 ) -> np.ndarray: ...
-def count_crossings(
-    vertices: np.ndarray, triangles: np.ndarray, a: np.ndarray, b: np.ndarray, first_new: int
-) -> np.ndarray: ...
 def rings(
     triangles: np.ndarray, indptr: np.ndarray, data: np.ndarray, seeds: np.ndarray, count: int
 ) -> tuple[np.ndarray, list[np.ndarray]]: ...
-def sphere_pairs(
-    ca: np.ndarray, ra: np.ndarray, cb: np.ndarray | None = None, rb: np.ndarray | None = None
-) -> tuple[np.ndarray, np.ndarray]: ...
 def laplacian_weights(
     tris: np.ndarray,
     nv: int,
@@ -58,18 +52,6 @@ def normal_equations(
     unknown: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]: ...
 def cholesky_solve(matrix: np.ndarray, rhs: np.ndarray) -> np.ndarray | None: ...
-def grid_near(
-    centre: np.ndarray,
-    radius: np.ndarray,
-    origin: np.ndarray,
-    cell: float,
-    dims: np.ndarray,
-    indptr: np.ndarray,
-    members: np.ndarray,
-    tri_centre: np.ndarray,
-    tri_radius: np.ndarray,
-    reach: float,
-) -> np.ndarray: ...
 def patch_crossings(
     vertices: np.ndarray,
     triangles: np.ndarray,
@@ -77,6 +59,9 @@ def patch_crossings(
     grids: list[tuple[np.ndarray, float, np.ndarray, np.ndarray, np.ndarray, float]],
     tri_centre: np.ndarray,
     tri_radius: np.ndarray,
+    new_grids: list[tuple[np.ndarray, float, np.ndarray, np.ndarray, np.ndarray, float]],
+    new_centre: np.ndarray,
+    new_radius: np.ndarray,
 ) -> np.ndarray: ...
 def local_mesh(
     triangles: np.ndarray, first_new: int, ring_tris: np.ndarray, rings: list[np.ndarray], nv: int

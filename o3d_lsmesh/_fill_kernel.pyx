@@ -617,15 +617,16 @@ def tangential_relax(const double[:, ::1] vertices, const int64_t[:, ::1] new_tr
 
 
 cdef bint _cross_pair(const double* P, const double* Q) noexcept nogil:
-    """Whether triangles ``P`` and ``Q`` (3 x 3, row-major corners) intersect: no separating axis among
-    the 17 candidates (two normals, nine edge-edge cross products, six in-plane edge normals for coplanar
-    pairs). Axes too short to trust (parallel edges) are skipped; a gap must exceed a relative
-    ``1e-12`` (touching and coplanar pairs count as crossing)."""
+    """Whether triangles ``P`` and ``Q`` (3 x 3, row-major corners; a segment is a triangle with its last
+    two corners equal) intersect: no separating axis among the 23 candidates (two normals, nine edge-edge
+    cross products, twelve in-plane edge normals, each triangle's edges in both planes, for coplanar
+    pairs and segments). Axes too short to trust (parallel edges, a segment's normal) are skipped; a gap
+    must exceed a relative ``1e-12`` (touching and coplanar pairs count as crossing)."""
     cdef double eP[3][3]
     cdef double eQ[3][3]
     cdef double nP[3]
     cdef double nQ[3]
-    cdef double axes[17][3]
+    cdef double axes[23][3]
     cdef double scale = 0.0, spread = 0.0, length, inv, x, p_lo, p_hi, q_lo, q_hi
     cdef int c, r, s
     for c in range(3):
@@ -640,11 +641,13 @@ cdef bint _cross_pair(const double* P, const double* Q) noexcept nogil:
             _cross(eP[r], eQ[s], axes[2 + 3 * r + s])
         _cross(nP, eP[r], axes[11 + r])
         _cross(nQ, eQ[r], axes[14 + r])
+        _cross(nQ, eP[r], axes[17 + r])
+        _cross(nP, eQ[r], axes[20 + r])
     for c in range(9):
         scale = fmax(scale, fmax(fabs(P[c]), fabs(Q[c])))
-        spread = fmax(spread, fabs(eP[c // 3][c % 3]))
+        spread = fmax(spread, fmax(fabs(eP[c // 3][c % 3]), fabs(eQ[c // 3][c % 3])))
     scale = scale + spread
-    for r in range(17):
+    for r in range(23):
         length = sqrt((axes[r][0] * axes[r][0] + axes[r][1] * axes[r][1]) + axes[r][2] * axes[r][2])
         if not length > 1e-12 * (scale * scale):
             continue
@@ -662,49 +665,72 @@ cdef bint _cross_pair(const double* P, const double* Q) noexcept nogil:
     return True
 
 
+cdef bint _folded(const double* u, const double* w, const double* a, const double* b) noexcept nogil:
+    """Whether triangles ``(u, w, a)`` and ``(u, w, b)``, which share the edge ``u w``, overlap beyond it:
+    ``a`` and ``b`` on one side of the edge and their half-planes within ``1e-9`` radians (folded flat
+    onto each other). Otherwise they meet only on the edge."""
+    cdef double e[3]
+    cdef double da[3]
+    cdef double db[3]
+    cdef double na[3]
+    cdef double nb[3]
+    cdef double both[3]
+    _sub(w, u, e)
+    _sub(a, u, da)
+    _sub(b, u, db)
+    _cross(e, da, na)
+    _cross(e, db, nb)
+    _cross(na, nb, both)
+    return _dot(na, nb) > 0 and sqrt(_dot(both, both)) <= 1e-9 * sqrt(_dot(na, na) * _dot(nb, nb))
+
+
 cdef bint _pair_crosses(const double* V, const int64_t* T, int64_t ta, int64_t tb) noexcept nogil:
-    """Whether triangles ``ta`` and ``tb`` (rows of ``T`` over the points ``V``) without a shared vertex
-    intersect: shared corners first, then the bounding boxes (where most pairs stop), then the axes."""
+    """Whether triangles ``ta`` and ``tb`` (rows of ``T`` over the points ``V``) meet anywhere but at the
+    corners and edge they share. No shared corner: the bounding boxes (where most pairs stop), then the
+    axes of :func:`_cross_pair`. One shared corner: they meet elsewhere iff the edge opposite it in one
+    meets the other triangle (their intersection is convex and holds the corner; its far end lies on
+    such an edge). A shared edge: iff they fold onto each other (:func:`_folded`). Three: one triangle
+    twice."""
     cdef double P[9]
     cdef double Q[9]
-    cdef int r, s, c
+    cdef double S[9]
+    cdef int r, s, c, shared = 0, ra = 0, rb = 0
+    cdef int in_a[3]
+    cdef int in_b[3]
+    for r in range(3):
+        in_a[r], in_b[r] = 0, 0
     for r in range(3):
         for s in range(3):
             if T[3 * ta + r] == T[3 * tb + s]:
-                return False
+                shared += 1
+                in_a[r], in_b[s] = 1, 1
+    if shared == 3:
+        return True
     for r in range(3):
         for c in range(3):
             P[3 * r + c] = V[3 * T[3 * ta + r] + c]
             Q[3 * r + c] = V[3 * T[3 * tb + r] + c]
+    if shared == 0:
+        for c in range(3):
+            if fmin(fmin(P[c], P[3 + c]), P[6 + c]) > fmax(fmax(Q[c], Q[3 + c]), Q[6 + c]) or (
+                fmin(fmin(Q[c], Q[3 + c]), Q[6 + c]) > fmax(fmax(P[c], P[3 + c]), P[6 + c])
+            ):
+                return False
+        return _cross_pair(P, Q)
+    for r in range(3):
+        if in_a[r] == (shared == 1):  # one corner: the shared one; an edge: the unshared one
+            ra = r
+        if in_b[r] == (shared == 1):
+            rb = r
+    if shared == 2:
+        return _folded(P + 3 * ((ra + 1) % 3), P + 3 * ((ra + 2) % 3), P + 3 * ra, Q + 3 * rb)
+    for c in range(3):  # the edge opposite the shared corner, as a degenerate triangle
+        S[c], S[3 + c], S[6 + c] = P[3 * ((ra + 1) % 3) + c], P[3 * ((ra + 2) % 3) + c], P[3 * ((ra + 2) % 3) + c]
+    if _cross_pair(S, Q):
+        return True
     for c in range(3):
-        if fmin(fmin(P[c], P[3 + c]), P[6 + c]) > fmax(fmax(Q[c], Q[3 + c]), Q[6 + c]) or (
-            fmin(fmin(Q[c], Q[3 + c]), Q[6 + c]) > fmax(fmax(P[c], P[3 + c]), P[6 + c])
-        ):
-            return False
-    return _cross_pair(P, Q)
-
-
-def count_crossings(const double[:, ::1] vertices, const int64_t[:, ::1] triangles, const int64_t[::1] a,
-                    const int64_t[::1] b, int64_t first_new):
-    """For candidate pairs ``(a[i], b[i])`` of triangles (``a`` new, i.e. ``>= first_new``), the number of
-    intersecting pairs each new triangle is in; pairs sharing a vertex are not counted. Cheap tests
-    first: shared corners, then the bounding boxes (where most pairs stop), then the separating axes."""
-    cdef int64_t q = triangles.shape[0] - first_new, n = a.shape[0], i, ta, tb
-    if b.shape[0] != n:
-        raise ValueError("a and b must have one length")
-    result_ = np.zeros(max(q, 0))
-    cdef double[::1] result = result_
-    if n == 0:
-        return result_
-    with nogil:
-        for i in range(n):
-            ta, tb = a[i], b[i]
-            if not _pair_crosses(&vertices[0, 0], &triangles[0, 0], ta, tb):
-                continue
-            result[ta - first_new] += 1.0
-            if tb >= first_new:
-                result[tb - first_new] += 1.0
-    return result_
+        S[c], S[3 + c], S[6 + c] = Q[3 * ((rb + 1) % 3) + c], Q[3 * ((rb + 2) % 3) + c], Q[3 * ((rb + 2) % 3) + c]
+    return _cross_pair(S, P)
 
 
 # ----------------------------------------------------------------------------------------------------------
@@ -790,148 +816,6 @@ def rings(const int64_t[:, ::1] triangles, const int64_t[::1] indptr, const int6
             taken[size] = touch[i]
             size += 1
     return _sorted(taken, total), out_rings
-
-
-# ----------------------------------------------------------------------------------------------------------
-# overlapping bounding spheres: the candidates of the crossing test
-
-
-cdef inline bint _overlap(const double* c, double r, const double* d, double s) noexcept nogil:
-    cdef double d0 = c[0] - d[0], d1 = c[1] - d[1], d2 = c[2] - d[2]
-    return sqrt((d0 * d0 + d1 * d1) + d2 * d2) <= r + s
-
-
-cdef int64_t _sweep(const double* ca, const double* ra, int64_t na, const double* cb, const double* rb,
-                    bint same, int axis, const int64_t* order, int64_t total, int64_t* active,
-                    int64_t* out, int64_t capacity) noexcept nogil:
-    """Sweep and prune along ``axis``: the items (``a`` as ``0 .. na - 1``, ``b`` as ``na ..``; ``same``: ``b``
-    is ``a``) visited by the low ends ``x - r`` of their intervals (``order``); each is tested against the
-    active items of the other set (of its own, if ``same``: ``active`` holds one list of ``a`` and, from
-    ``na`` on, one of ``b``) whose intervals still reach it, and those that do not are dropped. Writes
-    the overlapping pairs ``(a, b)`` to ``out`` while they fit and returns how many there are."""
-    cdef int64_t found = 0, n_a = 0, n_b = 0, kept, i, j, item, other, n_other
-    cdef int64_t* mine
-    cdef int64_t* theirs
-    cdef const double* c
-    cdef const double* r
-    cdef const double* oc
-    cdef const double* orad
-    cdef double low
-    for i in range(total):
-        item = order[i]
-        if item < na:  # an a: meets the active b (or, if same, the active a)
-            c, r = ca + 3 * item, ra + item
-            theirs = active if same else active + na
-            oc, orad = (ca, ra) if same else (cb, rb)
-            n_other = n_a if same else n_b
-        else:
-            item = item - na
-            c, r = cb + 3 * item, rb + item
-            theirs = active
-            oc, orad = ca, ra
-            n_other = n_a
-        low = c[axis] - r[0]
-        kept = 0
-        for j in range(n_other):
-            other = theirs[j]
-            if oc[3 * other + axis] + orad[other] < low:
-                continue  # its interval ends before this one starts: no later item meets it either
-            theirs[kept] = other
-            kept += 1
-            if _overlap(c, r[0], oc + 3 * other, orad[other]):
-                if found < capacity:
-                    if order[i] < na:
-                        out[2 * found], out[2 * found + 1] = item, other
-                    else:
-                        out[2 * found], out[2 * found + 1] = other, item
-                found += 1
-        if same:
-            n_a = kept
-            active[n_a] = item
-            n_a += 1
-        elif order[i] < na:
-            n_b = kept
-            active[n_a] = item
-            n_a += 1
-        else:
-            n_a = kept
-            active[na + n_b] = item
-            n_b += 1
-    return found
-
-
-ctypedef struct Low:  # an interval's low end on the sweep axis, and its item
-    double low
-    int64_t item
-
-
-cdef int _by_low(const void* x, const void* y) noexcept nogil:
-    cdef const Low* p = <const Low*>x
-    cdef const Low* q = <const Low*>y
-    if p.low != q.low:
-        return -1 if p.low < q.low else 1
-    return -1 if p.item < q.item else (1 if p.item > q.item else 0)
-
-
-def sphere_pairs(const double[:, ::1] ca, const double[::1] ra, cb=None, rb=None):
-    """Pairs ``(i, j)`` of spheres (centres ``c``, radii ``r``) that overlap, ``|c_i - c_j| <= r_i + r_j``:
-    between set ``a`` and set ``b``, or within ``a`` (``i < j``) when ``b`` is None. Sweep and prune along
-    the axis of the largest extent: O((na + nb) log(na + nb)) plus the pairs whose intervals on it
-    overlap. Two ``(p,)`` int64 arrays."""
-    cdef bint same = cb is None
-    cdef const double[:, ::1] cb_ = ca if same else np.ascontiguousarray(cb, dtype=np.float64)
-    cdef const double[::1] rb_ = ra if same else np.ascontiguousarray(rb, dtype=np.float64)
-    cdef int64_t na = ca.shape[0], nb = cb_.shape[0], total = na if same else na + nb, found, k, tmp
-    cdef int64_t capacity = 8 * total + 16
-    if ra.shape[0] != na or rb_.shape[0] != nb or ca.shape[1] != 3 or cb_.shape[1] != 3:
-        raise ValueError("centres must be (n, 3) and radii (n,)")
-    cdef const double* pa = &ca[0, 0] if na else NULL
-    cdef const double* qa = &ra[0] if na else NULL
-    cdef const double* pb = &cb_[0, 0] if nb else NULL
-    cdef const double* qb = &rb_[0] if nb else NULL
-    cdef Low* lows = <Low*>malloc(max(total, 1) * sizeof(Low))
-    cdef int64_t* order = <int64_t*>malloc(max(total, 1) * sizeof(int64_t))
-    cdef int64_t* active = <int64_t*>malloc(max(total, 1) * sizeof(int64_t))
-    cdef double lo[3]
-    cdef double hi[3]
-    cdef int axis = 0, c
-    cdef int64_t[:, ::1] out
-    if not (lows and order and active):
-        free(lows); free(order); free(active)
-        raise MemoryError
-    with nogil:
-        # the axis of the largest extent of the centres: the fewest intervals overlap on it
-        for c in range(3):
-            lo[c], hi[c] = INFINITY, -INFINITY
-        for k in range(total):
-            for c in range(3):
-                lo[c] = fmin(lo[c], pa[3 * k + c] if k < na else pb[3 * (k - na) + c])
-                hi[c] = fmax(hi[c], pa[3 * k + c] if k < na else pb[3 * (k - na) + c])
-        for c in range(1, 3):
-            if hi[c] - lo[c] > hi[axis] - lo[axis]:
-                axis = c
-        for k in range(total):
-            lows[k].item = k
-            lows[k].low = pa[3 * k + axis] - qa[k] if k < na else pb[3 * (k - na) + axis] - qb[k - na]
-        qsort(lows, total, sizeof(Low), _by_low)
-        for k in range(total):
-            order[k] = lows[k].item
-    while True:
-        out_ = np.empty((capacity, 2), dtype=np.int64)
-        out = out_
-        with nogil:
-            found = _sweep(pa, qa, na, pb, qb, same, axis, order, total, active, &out[0, 0], capacity)
-            if found <= capacity and same:
-                for k in range(found):
-                    if out[k, 0] > out[k, 1]:
-                        tmp = out[k, 0]
-                        out[k, 0] = out[k, 1]
-                        out[k, 1] = tmp
-        if found <= capacity:
-            break
-        capacity = found
-    free(lows); free(order); free(active)
-    return out_[:found, 0].copy(), out_[:found, 1].copy()
 
 
 # ----------------------------------------------------------------------------------------------------------
@@ -1351,127 +1235,112 @@ cpdef cholesky_solve(double[:, ::1] matrix, const double[:, ::1] rhs):
 
 
 # ---------------------------------------------------------------------------------------------------
-# the crossing test's candidates: a uniform grid of triangle centres
+# the crossing test: candidates from a uniform grid of triangle centres
 
 
-def grid_near(const double[:, ::1] centre, const double[::1] radius, const double[::1] origin, double cell,
-              const int64_t[::1] dims, const int64_t[::1] indptr, const int64_t[::1] members,
-              const double[:, ::1] tri_centre, const double[::1] tri_radius, double reach):
-    """The triangles (``members`` of the grid cells, ``indptr`` over the cells ``(x * dims[1] + y) *
-    dims[2] + z`` of side ``cell`` from ``origin``) whose bounding sphere (``tri_centre``, ``tri_radius``,
-    at most ``reach``) meets the box of the query spheres (``centre``, ``radius``): a superset of those
-    overlapping a query sphere, without repeats. ``(p,)`` int64."""
-    cdef int64_t nq = centre.shape[0], k
-    cdef double lo[3]
-    cdef double hi[3]
-    cdef int c
-    if nq == 0:
-        return np.zeros(0, dtype=np.int64)
-    with nogil:
-        for c in range(3):
-            lo[c], hi[c] = INFINITY, -INFINITY
-        for k in range(nq):
-            for c in range(3):
-                lo[c] = fmin(lo[c], centre[k, c] - radius[k])
-                hi[c] = fmax(hi[c], centre[k, c] + radius[k])
-    return _near_box(lo, hi, origin, cell, dims, indptr, members, tri_centre, tri_radius, reach)
+cdef inline bint _overlap(const double* c, double r, const double* d, double s) noexcept nogil:
+    cdef double d0 = c[0] - d[0], d1 = c[1] - d[1], d2 = c[2] - d[2]
+    return sqrt((d0 * d0 + d1 * d1) + d2 * d2) <= r + s
 
 
 def patch_crossings(const double[:, ::1] vertices, const int64_t[:, ::1] triangles, int64_t first_new,
-                    grids, const double[:, ::1] tri_centre, const double[::1] tri_radius):
-    """:func:`count_crossings` of one small patch (the triangles from ``first_new`` on) against the input
-    triangles of ``grids`` (those of :func:`grid_near`: ``(origin, cell, dims, indptr, members, reach)``
-    each) and against itself, the candidates all in one call: each new triangle's bounding sphere
-    (about its centroid, as NumPy's ``mean`` and ``norm`` compute them) tested against every candidate's,
-    which beats the sweep of :func:`sphere_pairs` on a few dozen triangles."""
-    cdef int64_t q = triangles.shape[0] - first_new, i, k, t, n_cand = 0
-    cdef double lo[3]
-    cdef double hi[3]
-    cdef double d, gap
-    cdef int c, v
+                    grids, const double[:, ::1] tri_centre, const double[::1] tri_radius,
+                    new_grids, const double[:, ::1] new_centre, const double[::1] new_radius):
+    """For each new triangle (from ``first_new`` on), the number of triangles it meets beyond the corners
+    and edge they share (:func:`_pair_crosses`): the crossing test of every fill. Each new triangle's
+    bounding sphere (``new_centre``, ``new_radius``) is queried in the grids of the input triangles
+    (``grids``: ``(origin, cell, dims, indptr, members, reach)`` each, the cells of side ``cell`` from
+    ``origin``, ``indptr`` over the cells ``(x * dims[1] + y) * dims[2] + z``; their spheres
+    ``tri_centre``, ``tri_radius``) and in those of the new ones (``new_grids``, numbered from 0), and
+    tested against each triangle whose sphere overlaps it (each pair of new triangles once). Linear in
+    the new triangles times the triangles near each. ``(q,)`` float."""
+    cdef int64_t q = triangles.shape[0] - first_new
     result_ = np.zeros(max(q, 0))
     if q <= 0:
         return result_
-    centre_ = np.empty((q, 3))
-    radius_ = np.empty(q)
-    cdef double[::1] result = result_, radius = radius_
-    cdef double[:, ::1] centre = centre_
-    cdef const double* V = &vertices[0, 0]
-    cdef const int64_t* T = &triangles[0, 0]
-    with nogil:
-        for i in range(q):
-            t = first_new + i
-            for c in range(3):
-                centre[i, c] = ((V[3 * T[3 * t] + c] + V[3 * T[3 * t + 1] + c]) + V[3 * T[3 * t + 2] + c]) / 3.0
-            radius[i] = 0.0
-            for v in range(3):
-                gap = 0.0
-                for c in range(3):
-                    d = V[3 * T[3 * t + v] + c] - centre[i, c]
-                    gap = gap + d * d
-                radius[i] = fmax(radius[i], sqrt(gap))
-        for c in range(3):
-            lo[c], hi[c] = INFINITY, -INFINITY
-        for i in range(q):
-            for c in range(3):
-                lo[c] = fmin(lo[c], centre[i, c] - radius[i])
-                hi[c] = fmax(hi[c], centre[i, c] + radius[i])
-    # the candidates of each grid (its cells near the patch's box, spheres meeting the box)
-    found = []
-    for origin, cell, dims, indptr, members, reach in grids:
-        found.append(_near_box(lo, hi, origin, cell, dims, indptr, members, tri_centre, tri_radius, reach))
-    cand_ = np.concatenate(found) if found else np.zeros(0, dtype=np.int64)
-    cdef const int64_t[::1] cand = cand_
-    n_cand = cand.shape[0]
-    with nogil:
-        for i in range(q):
-            for k in range(n_cand):
-                t = cand[k]
-                if _overlap(&centre[i, 0], radius[i], &tri_centre[t, 0], tri_radius[t]) and _pair_crosses(
-                    V, T, first_new + i, t
-                ):
-                    result[i] += 1.0
-            for k in range(i + 1, q):
-                if _overlap(&centre[i, 0], radius[i], &centre[k, 0], radius[k]) and _pair_crosses(
-                    V, T, first_new + i, first_new + k
-                ):
-                    result[i] += 1.0
-                    result[k] += 1.0
+    if new_centre.shape[0] != q or new_radius.shape[0] != q:
+        raise ValueError("new_centre and new_radius must have one row per new triangle")
+    for grid in grids:
+        _grid_crossings(vertices, triangles, first_new, new_centre, new_radius, grid, tri_centre, tri_radius,
+                        False, result_)
+    for grid in new_grids:
+        _grid_crossings(vertices, triangles, first_new, new_centre, new_radius, grid, new_centre, new_radius,
+                        True, result_)
     return result_
 
 
-cdef _near_box(const double* lo, const double* hi, const double[::1] origin, double cell,
-               const int64_t[::1] dims, const int64_t[::1] indptr, const int64_t[::1] members,
-               const double[:, ::1] tri_centre, const double[::1] tri_radius, double reach):
-    """The members of one grid's cells within ``reach`` of the box ``lo .. hi`` (clamped to the grid; floor
-    of a double) whose spheres meet the box: ``(p,)`` int64, a superset of those meeting a query sphere."""
+cdef _grid_crossings(const double[:, ::1] vertices, const int64_t[:, ::1] triangles, int64_t first_new,
+                     const double[:, ::1] centre, const double[::1] radius, grid, const double[:, ::1] tc,
+                     const double[::1] tr, bint among_new, double[::1] result):
+    """:func:`patch_crossings` against one grid's triangles (the new ones if ``among_new``: then indices
+    from ``first_new`` on, and each pair once), into ``result``; the candidates gathered in a buffer
+    grown between runs of queries."""
+    origin_, cell_, dims_, indptr_, members_, reach_ = grid
+    cdef double cell = cell_, reach = reach_
+    cdef const double[::1] origin = origin_
+    cdef const int64_t[::1] dims = dims_, indptr = indptr_, members = members_
+    cdef int64_t q = centre.shape[0], i = 0, k, t, count, capacity, other
     cdef int64_t lo_cell[3]
     cdef int64_t hi_cell[3]
+    cdef double lo[3]
+    cdef double hi[3]
+    cdef int c
+    cdef const double* V = &vertices[0, 0]
+    cdef const int64_t* T = &triangles[0, 0]
+    if members.shape[0] == 0:
+        return
+    buffer_ = np.empty(min(members.shape[0], 4096), dtype=np.int64)
+    cdef int64_t[::1] buffer = buffer_
+    while i < q:
+        with nogil:
+            while i < q:
+                for c in range(3):
+                    lo[c], hi[c] = centre[i, c] - radius[i], centre[i, c] + radius[i]
+                capacity = _cells(lo, hi, &origin[0], cell, &dims[0], &indptr[0], reach, lo_cell, hi_cell)
+                if capacity > buffer.shape[0]:
+                    break
+                count = _gather(lo, hi, lo_cell, hi_cell, &dims[0], &indptr[0], &members[0], &tc[0, 0], &tr[0],
+                                &buffer[0])
+                for k in range(count):
+                    t = buffer[k]
+                    if among_new and t <= i:
+                        continue
+                    other = first_new + t if among_new else t
+                    if _overlap(&centre[i, 0], radius[i], &tc[t, 0], tr[t]) and _pair_crosses(
+                        V, T, first_new + i, other
+                    ):
+                        result[i] += 1.0
+                        if among_new:
+                            result[t] += 1.0
+                i += 1
+        if i < q:
+            buffer_ = np.empty(2 * capacity, dtype=np.int64)
+            buffer = buffer_
+
+
+cdef int64_t _cells(const double* lo, const double* hi, const double* origin, double cell, const int64_t* dims,
+                    const int64_t* indptr, double reach, int64_t* lo_cell, int64_t* hi_cell) noexcept nogil:
+    """The cells of one grid within ``reach`` of the box ``lo .. hi`` (clamped to the grid; floor of a
+    double) into ``lo_cell``, ``hi_cell``; returns how many triangles they hold."""
     cdef int64_t x, y, capacity = 0
     cdef double d
     cdef int c
-    if members.shape[0] == 0:
-        return np.zeros(0, dtype=np.int64)
-    with nogil:
-        for c in range(3):
-            d = (lo[c] - reach - origin[c]) / cell
-            lo_cell[c] = <int64_t>d if d >= 0 else 0
-            d = (hi[c] + reach - origin[c]) / cell
-            hi_cell[c] = min(<int64_t>d, dims[c] - 1) if d >= 0 else -1
-        if hi_cell[2] >= lo_cell[2]:
-            for x in range(lo_cell[0], hi_cell[0] + 1):
-                for y in range(lo_cell[1], hi_cell[1] + 1):
-                    capacity += indptr[(x * dims[1] + y) * dims[2] + hi_cell[2] + 1] - indptr[
-                        (x * dims[1] + y) * dims[2] + lo_cell[2]]
-    out_ = np.empty(capacity, dtype=np.int64)
-    count = _gather(lo, hi, lo_cell, hi_cell, &dims[0], &indptr[0], &members[0], &tri_centre[0, 0],
-                    &tri_radius[0], out_)
-    return out_[:count]
+    for c in range(3):
+        d = (lo[c] - reach - origin[c]) / cell
+        lo_cell[c] = <int64_t>d if d >= 0 else 0
+        d = (hi[c] + reach - origin[c]) / cell
+        hi_cell[c] = min(<int64_t>d, dims[c] - 1) if d >= 0 else -1
+    if hi_cell[2] >= lo_cell[2]:
+        for x in range(lo_cell[0], hi_cell[0] + 1):
+            for y in range(lo_cell[1], hi_cell[1] + 1):
+                capacity += indptr[(x * dims[1] + y) * dims[2] + hi_cell[2] + 1] - indptr[
+                    (x * dims[1] + y) * dims[2] + lo_cell[2]]
+    return capacity
 
 
 cdef int64_t _gather(const double* lo, const double* hi, const int64_t* lo_cell, const int64_t* hi_cell,
                      const int64_t* dims, const int64_t* indptr, const int64_t* members,
-                     const double* tc, const double* tr, int64_t[::1] out):
+                     const double* tc, const double* tr, int64_t* out) noexcept nogil:
     """The members of the cells ``lo_cell .. hi_cell`` whose spheres meet the box ``lo .. hi``, into
     ``out``; returns how many."""
     cdef int64_t x, y, k, t, count = 0
@@ -1479,19 +1348,18 @@ cdef int64_t _gather(const double* lo, const double* hi, const int64_t* lo_cell,
     cdef int c
     if hi_cell[2] < lo_cell[2]:
         return 0
-    with nogil:
-        for x in range(lo_cell[0], hi_cell[0] + 1):
-            for y in range(lo_cell[1], hi_cell[1] + 1):
-                for k in range(indptr[(x * dims[1] + y) * dims[2] + lo_cell[2]],
-                               indptr[(x * dims[1] + y) * dims[2] + hi_cell[2] + 1]):
-                    t = members[k]
-                    gap = 0.0
-                    for c in range(3):
-                        g = fmax(fmax(lo[c] - tc[3 * t + c], tc[3 * t + c] - hi[c]), 0.0)
-                        gap += g * g
-                    if gap <= tr[t] * tr[t] * (1.0 + 1e-9):
-                        out[count] = t
-                        count += 1
+    for x in range(lo_cell[0], hi_cell[0] + 1):
+        for y in range(lo_cell[1], hi_cell[1] + 1):
+            for k in range(indptr[(x * dims[1] + y) * dims[2] + lo_cell[2]],
+                           indptr[(x * dims[1] + y) * dims[2] + hi_cell[2] + 1]):
+                t = members[k]
+                gap = 0.0
+                for c in range(3):
+                    g = fmax(fmax(lo[c] - tc[3 * t + c], tc[3 * t + c] - hi[c]), 0.0)
+                    gap += g * g
+                if gap <= tr[t] * tr[t] * (1.0 + 1e-9):
+                    out[count] = t
+                    count += 1
     return count
 
 

@@ -42,9 +42,11 @@ if TYPE_CHECKING:
 __all__ = [
     "BORDER_RATIO",
     "DP_MAX_EDGES",
+    "FillReport",
     "FilledHoles",
     "Hole",
     "HoleFiller",
+    "HoleOutcome",
     "fill_holes",
     "fill_holes_arrays",
     "find_holes",
@@ -333,7 +335,7 @@ def _fair(
         K, _ = _operators(i, j, w, degree, scale, dense)
         known = np.ones(nv, dtype=bool)
         known[unknown] = False
-        return _solvers.solve_spd(K[unknown][:, unknown], -(K[unknown][:, np.flatnonzero(known)] @ x[known]))
+        return _solve_blocks(K[unknown][:, unknown], -(K[unknown][:, np.flatnonzero(known)] @ x[known]))
     rows = np.zeros(nv, dtype=bool)
     rows[unknown] = True
     rows[rings[0]] = True  # rows whose Laplacian involves an unknown
@@ -370,7 +372,96 @@ def _fair(
         A_u = A_full[:, unknown]
     fixed = x.copy()
     fixed[unknown] = 0.0  # A_known x_known, without slicing the known columns out
-    return _solvers.solve_spd(A_u.T @ A_u, -(A_u.T @ (A_full @ fixed)))
+    return _solve_blocks(A_u.T @ A_u, -(A_u.T @ (A_full @ fixed)))
+
+
+def _solve_blocks(matrix: Any, rhs: np.ndarray) -> np.ndarray:
+    """:func:`o3d_lsmesh._solvers.solve_spd` of a fairing system, whose blocks are the patches (and
+    patches sharing rings): a block with a non-finite entry (cotangent weights of a degenerate
+    triangle) is left NaN, for the caller to fall back on that patch alone, and the others solved."""
+    matrix = sp.csr_matrix(matrix)
+    bad = ~np.isfinite(rhs).all(axis=1)
+    bad[np.repeat(np.arange(matrix.shape[0]), np.diff(matrix.indptr))[~np.isfinite(matrix.data)]] = True
+    if not bad.any():
+        return _solvers.solve_spd(matrix, rhs)
+    _, label = csgraph.connected_components(matrix, directed=False)
+    ok = ~np.isin(label, label[bad])
+    x = np.full(rhs.shape, np.nan)
+    if ok.any():
+        x[ok] = _solvers.solve_spd(matrix[ok][:, ok], rhs[ok])
+    return x
+
+
+@dataclass(frozen=True)
+class HoleOutcome:
+    """What :func:`fill_holes` did with one boundary loop.
+
+    Attributes
+    ----------
+    id : int
+        The loop's index in :func:`find_holes` (and :attr:`HoleFiller.holes`) of the input.
+    edges : int
+        Its number of boundary edges.
+    diameter : float
+        Largest distance between two of its vertices.
+    filled : bool
+        Whether it was closed.
+    how : str
+        How it was filled (``"continuity 2"`` ... ``"continuity 0"``, ``"refined, unfaired"``,
+        ``"minimum-weight triangulation"``: each a simpler retry where the one before crossed the
+        surface), or why it was left open.
+    """
+
+    id: int
+    edges: int
+    diameter: float
+    filled: bool
+    how: str
+
+
+@dataclass(frozen=True)
+class FillReport:
+    """Every boundary loop :func:`fill_holes` filled or left open, and how or why
+    (``fill_holes(..., return_report=True)``; :attr:`FilledHoles.report`).
+
+    Attributes
+    ----------
+    holes : tuple of HoleOutcome
+        One per loop, by id.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from o3d_lsmesh import FillReport, fill_holes
+    >>> square = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0.5, 0.5, 1]], float)
+    >>> pyramid = (square, np.array([[0, 1, 4], [1, 2, 4], [2, 3, 4], [3, 0, 4]]))
+    >>> (V, T), report = fill_holes(pyramid, fill_border=True, return_report=True)
+    >>> [(hole.id, hole.edges, hole.filled, hole.how) for hole in report.holes]
+    [(0, 4, True, 'minimum-weight triangulation')]
+    """
+
+    holes: tuple[HoleOutcome, ...]
+
+    @property
+    def filled(self) -> list[HoleOutcome]:
+        return [hole for hole in self.holes if hole.filled]
+
+    @property
+    def skipped(self) -> list[HoleOutcome]:
+        return [hole for hole in self.holes if not hole.filled]
+
+    def describe(self, limit: int | None = None) -> str:
+        """The loops left open, one clause each (the first ``limit`` of them)."""
+        left = self.skipped
+        shown = "; ".join(
+            f"loop {h.id} ({h.edges} edges, diameter {h.diameter:.4g}): {h.how}" for h in left[:limit]
+        )
+        return shown + (f"; and {len(left) - limit} more" if limit is not None and len(left) > limit else "")
+
+
+def _how(level: int) -> str:
+    """:attr:`HoleOutcome.how` of a hole filled at ``level`` (:attr:`FilledHoles.continuity`)."""
+    return {-1: "refined, unfaired", -2: "minimum-weight triangulation"}.get(level, f"continuity {level}")
 
 
 @dataclass(frozen=True)
@@ -392,7 +483,10 @@ class FilledHoles:
         ``interpolation @ colors`` gives the new vertices' colours (empty unless asked for).
     continuity : (len(holes),) int64
         The continuity each hole was faired with: the asked one, or a lower one where the asked one
-        made the patch cross the mesh (-1: left as refined, unfaired).
+        made the patch cross the mesh (-1: left as refined, unfaired; -2: the minimum-weight
+        triangulation alone, no new vertex).
+    report : FillReport
+        Every loop, filled or left open, and how or why.
     """
 
     vertices: np.ndarray
@@ -403,6 +497,7 @@ class FilledHoles:
     # costs about a third of a small hole's fill when the caches are cold
     _interpolation: Any = field(repr=False)
     continuity: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    report: FillReport = field(default_factory=lambda: FillReport(()))
 
     @property
     def interpolation(self) -> sp.csr_matrix:
@@ -538,21 +633,79 @@ class HoleFiller:
         weights = as_choice(weights, ("uniform", "cotangent"), name="weights")
         fill_border = bool(as_bool(fill_border, name="fill_border"))
         check_progress(progress)
-        vertices, triangles = self.vertices, self.triangles
-        n, m = len(vertices), len(triangles)
+        m = len(self.triangles)
         holes: list[Hole] = []
-        skipped: list[Hole] = []
+        why: dict[int, str] = {}  # id(hole) -> why it is left open
         for hole in self.holes:
-            too_big = (max_hole_edges is not None and hole.edges > max_hole_edges) or (
-                max_hole_diameter is not None and hole.diameter > max_hole_diameter
-            )
             # the three edges of one triangle are the rim of a flap (a triangle hanging by a vertex,
             # common in raw scans), not a hole: "filling" it would add that triangle's reverse
-            flap = hole.edges == 3 and len(np.unique(np.asarray(hole.rows) % m)) == 1
-            (skipped if too_big or flap or (hole.border and not fill_border) else holes).append(hole)
+            if hole.edges == 3 and len(np.unique(np.asarray(hole.rows) % m)) == 1:
+                why[id(hole)] = "the rim of one triangle hanging by a vertex (a flap, not a hole)"
+            elif max_hole_edges is not None and hole.edges > max_hole_edges:
+                why[id(hole)] = f"more than max_hole_edges={max_hole_edges} edges"
+            elif max_hole_diameter is not None and hole.diameter > max_hole_diameter:
+                why[id(hole)] = f"wider than max_hole_diameter={max_hole_diameter:g}"
+            elif hole.border and not fill_border:
+                why[id(hole)] = "taken as the outer border of an open surface (fill_border=False)"
+            else:
+                holes.append(hole)
+        out = self._fill_pass(holes, continuity, density, weights == "cotangent", interpolation, progress)
+        vertices, triangles, filled, stuck, used, weights_matrix, _ = out
+        if stuck and density > 0:
+            # simpler forms: the bare minimum-weight triangulation (no new vertex), checked against the
+            # fills kept so far too; what still crosses is given up
+            retry = self._fill_pass(stuck, continuity, 0.0, False, False, False)
+            again = np.concatenate([triangles, retry[1][m:]])
+            crossing = _crossings(vertices, again, len(triangles), self.index)
+            bad = np.bincount(retry[6], weights=crossing, minlength=len(retry[2])) > 0
+            keep = ~bad[retry[6]]
+            triangles = np.concatenate([triangles, retry[1][m:][keep]])
+            filled = filled + [hole for hole, b in zip(retry[2], bad) if not b]
+            used = np.concatenate([used, np.full(int((~bad).sum()), -2, dtype=np.int64)])
+            stuck = retry[3] + [hole for hole, b in zip(retry[2], bad) if b]
+        for hole in stuck:
+            why[id(hole)] = "every fill crosses the surface (folded or overlapping triangles next to it)"
+        index = {id(hole): i for i, hole in enumerate(self.holes)}
+        level = {id(hole): int(c) for hole, c in zip(filled, used)}
+        report = FillReport(
+            tuple(
+                HoleOutcome(
+                    i,
+                    hole.edges,
+                    hole.diameter,
+                    id(hole) in level,
+                    _how(level[id(hole)]) if id(hole) in level else why[id(hole)],
+                )
+                for i, hole in enumerate(self.holes)
+                if id(hole) in level or id(hole) in why
+            )
+        )
+        # said: every loop left open but those the size limits exclude and flaps (no holes)
+        said = FillReport(tuple(h for h in report.skipped if h.how.startswith(("every", "taken"))))
+        if said.holes:
+            warnings.warn(
+                f"fill_holes left {len(said.holes)} of {len(self.holes)} loops open: {said.describe(10)}"
+                " (every loop, filled or not: fill_holes(..., return_report=True), a FillReport)",
+                O3DLSMeshWarning,
+                stacklevel=3,
+            )
+        order = np.argsort([index[id(hole)] for hole in filled], kind="stable").astype(np.int64)
+        skipped = [hole for hole in self.holes if id(hole) in why]
+        return FilledHoles(
+            vertices, triangles, [filled[i] for i in order], skipped, weights_matrix, used[order], report
+        )
+
+    def _fill_pass(
+        self, holes: list, continuity: int, density: float, cot: bool, interpolation: bool, progress: bool
+    ) -> tuple:
+        """Fill ``holes``: the vertices and triangles (the input's, then the new ones), the holes filled,
+        those whose every fill crosses (left open), the continuity of each filled one, the
+        interpolation (or its shape) and the filled hole (index in the list) of each new triangle."""
+        vertices, triangles = self.vertices, self.triangles
+        n = len(vertices)
+        empty = np.zeros(0, dtype=np.int64)
         if not holes:
-            empty = np.zeros(0, dtype=np.int64)
-            return FilledHoles(vertices.copy(), triangles.copy(), [], skipped, (0, n), empty)
+            return vertices.copy(), triangles.copy(), [], [], empty, (0, n), empty
         # each piece (a loop; one through a vertex twice is cut in pieces) is triangulated on its own,
         # long ones cut by chords sampled at the refinement's spacing (none without) first
         pieces = [(h, *p) for h, hole in enumerate(holes) for p in _simple_pieces(hole.vertices, hole.rows)]
@@ -643,18 +796,11 @@ class HoleFiller:
             weights_matrix = (p, n)
         out_vertices = np.concatenate([vertices, fresh_points])
         out_triangles = np.concatenate([triangles, new_tris])
-        used, stuck = self._fair_all(
-            out_vertices, out_triangles, holes, continuity, weights == "cotangent", owner
-        )
+        used, stuck = self._fair_all(out_vertices, out_triangles, holes, continuity, cot, owner)
+        vertex_owner = _vertex_owner(new_tris, owner, n, p)
+        used[np.bincount(vertex_owner, minlength=len(holes)) == 0] = -2  # no new vertex: the bare programme
         if len(stuck):
-            # every fill of these crosses the mesh (folded or overlapping next to them): left open, and said
-            warnings.warn(
-                f"fill_holes: the fills of {len(stuck)} hole(s) cross other triangles at every continuity "
-                "(folded or overlapping surface next to them): left open, see FilledHoles.skipped",
-                O3DLSMeshWarning,
-                stacklevel=3,
-            )
-            keep_vertex = ~np.isin(_vertex_owner(new_tris, owner, n, p), stuck)
+            keep_vertex = ~np.isin(vertex_owner, stuck)
             remap = np.concatenate([np.arange(n), n + np.cumsum(keep_vertex) - 1])
             out_vertices = np.concatenate([vertices, out_vertices[n:][keep_vertex]])
             out_triangles = np.concatenate([triangles, remap[new_tris[~np.isin(owner, stuck)]]])
@@ -664,10 +810,17 @@ class HoleFiller:
                 else weights_matrix[np.flatnonzero(keep_vertex)]
             )
             left = np.isin(np.arange(len(holes)), stuck)
-            skipped = skipped + [hole for hole, out in zip(holes, left) if out]
-            used = used[~left]
-            holes = [hole for hole, out in zip(holes, left) if not out]
-        return FilledHoles(out_vertices, out_triangles, holes, skipped, weights_matrix, used)
+            owner = (np.cumsum(~left) - 1)[owner[~np.isin(owner, stuck)]]
+            return (
+                out_vertices,
+                out_triangles,
+                [hole for hole, out in zip(holes, left) if not out],
+                [hole for hole, out in zip(holes, left) if out],
+                used[~left],
+                weights_matrix,
+                owner,
+            )
+        return out_vertices, out_triangles, list(holes), [], used, weights_matrix, owner
 
     def _fair_all(
         self, vertices: np.ndarray, triangles: np.ndarray, holes: list, continuity: int, cot: bool, owner
@@ -702,7 +855,7 @@ class HoleFiller:
                 )
             except SingularSystemError:
                 return None
-            return x if np.isfinite(x).all() else None
+            return x if np.isfinite(x).any() else None  # a patch whose system is not finite: NaN rows
 
         def solve_twice(level: int) -> tuple[np.ndarray | None, np.ndarray | None]:
             """The uniform solve, then the cotangent one from it, in one compiled call (a small patch)."""
@@ -725,6 +878,8 @@ class HoleFiller:
                     # cotangent weights (clamped, area-normalized) read off the uniform solution: a fair
                     # embedding, where weights from the flat refined patch diverged (camel 15h: 87 h off)
                     again = again if twice else solve(level, True)
+                    if again is not None:  # a patch whose cotangent system is not finite keeps uniform
+                        again = np.where(np.isfinite(again).all(axis=1)[:, None], again, solution)
                     if again is not None and _kernel().keeps_facing(work, again, new_tris):
                         work[n:] = again
                         yield level, _kernel().tangential_relax(work, new_tris, n)
@@ -738,7 +893,7 @@ class HoleFiller:
             for level, candidate in candidates():
                 tried.append(level)
                 work[n:] = candidate
-                if not _crossings(work, triangles, m, self.index, None).any():
+                if np.isfinite(candidate).all() and not _crossings(work, triangles, m, self.index).any():
                     return np.array([level], dtype=np.int64), np.zeros(0, dtype=np.int64)
             work[n:] = refined
             return np.array([tried[0]], dtype=np.int64), np.zeros(1, dtype=np.int64)
@@ -747,9 +902,12 @@ class HoleFiller:
         out = refined.copy()
         for rank, (level, candidate) in enumerate(candidates()):
             tried.append(level)
-            work[n:] = candidate
-            crossing = _crossings(work, triangles, m, self.index, owner)  # (q,) per new triangle
+            # a patch left NaN (its system not finite) is checked as refined and fails this candidate
+            broken = ~np.isfinite(candidate).all(axis=1)
+            work[n:] = np.where(broken[:, None], refined, candidate)
+            crossing = _crossings(work, triangles, m, self.index)  # (q,) per new triangle
             per_hole = np.bincount(owner, weights=crossing, minlength=len(holes))
+            per_hole += np.bincount(vertex_owner, weights=broken, minlength=len(holes))
             for hole_index in np.flatnonzero((chosen < 0) & (per_hole == 0)):
                 mine = vertex_owner == hole_index
                 out[mine] = candidate[mine]
@@ -835,7 +993,7 @@ class _TriangleIndex:
     Two grids, the spheres of radius at most 4 times the median and the rest, each queried with its own
     largest radius, so that a few long slivers do not make every query reach far. Each grid (cells of
     about that radius, at most ``4 m`` of them) lists its triangles cell by cell (one stable sort):
-    a small patch's query reads a few cells in the compiled :func:`o3d_lsmesh._fill_kernel.grid_near`,
+    a patch's query reads a few cells in the compiled :func:`o3d_lsmesh._fill_kernel.patch_crossings`,
     where a k-d tree's ball query cost SciPy's per-call overhead (queries are thread-safe; the grids
     pickle).
     """
@@ -864,83 +1022,37 @@ class _TriangleIndex:
         np.cumsum(np.bincount(key, minlength=len(indptr) - 1), out=indptr[1:])
         return origin, cell, dims, indptr, members[order], reach
 
-    def near(
-        self, centre: np.ndarray, radius: np.ndarray, groups: np.ndarray | None = None
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """Pairs ``(query, triangle)`` whose bounding spheres overlap.
 
-        One grid query per group of queries (``groups`` labels them: the patch of each new triangle) and
-        grid gathers the triangles whose spheres meet the group's box; the pairs are found among those
-        by a sweep and prune.
-        """
-        empty = np.zeros(0, dtype=np.int64)
-        if len(centre) == 0:
-            return empty, empty
-        kernel = _kernel()
-        if groups is None or (groups == groups[0]).all():
-            masks: list[Any] = [None]  # one patch (the usual call): no grouping, and no duplicate hits
-        else:
-            masks = [groups == label for label in np.unique(groups)]
-        found = [empty]
-        for mine in masks:
-            c, r = (centre, radius) if mine is None else (centre[mine], radius[mine])
-            for origin, cell, dims, indptr, members, reach in self.grids:
-                found.append(
-                    kernel.grid_near(
-                        c, r, origin, cell, dims, indptr, members, self.centre, self.radius, reach
-                    )
-                )
-        # the two grids hold disjoint triangles: one patch's hits are distinct, several patches' may repeat
-        candidates = np.concatenate(found) if len(masks) == 1 else np.unique(np.concatenate(found))
-        qi, ti = kernel.sphere_pairs(centre, radius, self.centre[candidates], self.radius[candidates])
-        return qi, candidates[ti]
+def _crossings(vertices: np.ndarray, triangles: np.ndarray, first_new: int, index: Any) -> np.ndarray:
+    """For each new triangle (from ``first_new`` on), the number of triangles it meets beyond the corners
+    and edge they share: crossings, and folds flat onto a neighbour.
 
-
-#: Patches of at most this many new triangles test each against every candidate near the patch
-#: (:func:`o3d_lsmesh._fill_kernel.patch_crossings`); larger ones sweep (:meth:`_TriangleIndex.near`).
-_SMALL_PATCH = 256
-
-
-def _crossings(
-    vertices: np.ndarray, triangles: np.ndarray, first_new: int, index: Any, groups: Any
-) -> np.ndarray:
-    """For each new triangle, the number of triangles without a shared vertex it intersects.
-
-    Candidates are the pairs whose bounding spheres overlap: input triangles from ``index`` (a
-    :class:`_TriangleIndex` of ``triangles[:first_new]``; if None, of the input triangles in the new
-    triangles' box), queried per patch when ``groups`` (or None) labels each new triangle's patch, and the
-    new ones among themselves. Each pair is tested on the 17 axes that separate two disjoint triangles
-    (two normals, nine edge-edge cross products, six in-plane edge normals for coplanar pairs). One patch
-    of at most :data:`_SMALL_PATCH` triangles with an ``index`` is checked in one compiled call, each new
-    triangle against every candidate of the grids (:func:`o3d_lsmesh._fill_kernel.patch_crossings`).
+    One compiled test (:func:`o3d_lsmesh._fill_kernel.patch_crossings`): each new triangle against the
+    input triangles of ``index`` (a :class:`_TriangleIndex` of ``triangles[:first_new]``; if None, one
+    is built of the input triangles in the new triangles' box) and the new ones, near it.
     """
-    q = len(triangles) - first_new
-    if index is not None and 0 < q <= _SMALL_PATCH and (groups is None or not groups.any()):
-        # one small patch (``groups`` all 0): candidates and tests in one compiled call
-        return _kernel().patch_crossings(
-            vertices, triangles, first_new, index.grids, index.centre, index.radius
-        )
-    new = np.arange(first_new, len(triangles))
-    result = np.zeros(len(new))
-    if len(new) == 0:
-        return result
-    p_new = vertices[triangles[new]]
-    c_new = p_new.mean(axis=1)
-    r_new = np.linalg.norm(p_new - c_new[:, None, :], axis=2).max(axis=1)
+    if len(triangles) == first_new:
+        return np.zeros(0)
+    new = _TriangleIndex(vertices, triangles[first_new:])
     if index is None:
         # the input triangles with a vertex in the new triangles' box grown by twice the largest of them
-        pad = 2.0 * r_new.max()
-        low, high = p_new.reshape(-1, 3).min(0) - pad, p_new.reshape(-1, 3).max(0) + pad
+        p_new = vertices[triangles[first_new:]].reshape(-1, 3)
+        low, high = p_new.min(0) - 2.0 * new.radius.max(), p_new.max(0) + 2.0 * new.radius.max()
         in_box = ((vertices >= low) & (vertices <= high)).all(axis=1)
         boxed = np.flatnonzero(in_box[triangles[:first_new]].any(axis=1))
-        ia, ib = _TriangleIndex(vertices, triangles[boxed]).near(c_new, r_new, groups)
-        ib = boxed[ib]
-    else:
-        ia, ib = index.near(c_new, r_new, groups)  # (new index, input triangle)
-    pa, pb = _kernel().sphere_pairs(c_new, r_new)  # the new triangles among themselves
-    a = new[np.concatenate([ia, pa])]
-    b = np.concatenate([ib, first_new + pb])
-    return _kernel().count_crossings(vertices, triangles, a, b, first_new)
+        index = _TriangleIndex(vertices, triangles[boxed])
+        triangles, first_new = np.concatenate([triangles[boxed], triangles[first_new:]]), len(boxed)
+    return _kernel().patch_crossings(
+        vertices,
+        triangles,
+        first_new,
+        index.grids,
+        index.centre,
+        index.radius,
+        new.grids,
+        new.centre,
+        new.radius,
+    )
 
 
 def fill_holes(
@@ -953,7 +1065,8 @@ def fill_holes(
     weights: str = "cotangent",
     fill_border: bool = False,
     progress: bool = False,
-) -> MeshT:
+    return_report: bool = False,
+) -> Any:
     """Close the mesh's holes with patches faired as least-squares meshes; a new mesh.
 
     Each chosen hole (a closed loop of boundary edges) is triangulated by Liepa's minimum-weight
@@ -992,10 +1105,12 @@ def fill_holes(
         a lone island's rim. Default ``False``: left open.
     progress : bool
         Show a tqdm bar over the holes.
+    return_report : bool
+        Also return the :class:`FillReport`: every loop filled or left open, how or why.
 
     Returns
     -------
-    Mesh of the kind given
+    Mesh of the kind given, or ``(mesh, FillReport)`` if ``return_report``
         The input's vertices and triangles unchanged and in order, then the new ones, wound like their
         neighbours. Holes are those of the welded surface (vertices at equal coordinates merged), so a
         UV seam is not a hole; a new triangle uses the copy of a seam vertex on its hole's side. Every
@@ -1059,4 +1174,5 @@ def fill_holes(
         fill_border=fill_border,
         progress=progress,
     )
-    return new_mesh(data, result.vertices, result.triangles if result.holes else None, appended=True)
+    out = new_mesh(data, result.vertices, result.triangles if result.holes else None, appended=True)
+    return (out, result.report) if as_bool(return_report, name="return_report") else out

@@ -20,7 +20,7 @@ from hypothesis import strategies as st
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 
-from o3d_lsmesh import _fill_kernel, fill_holes
+from o3d_lsmesh import O3DLSMeshWarning, _fill_kernel, fill_holes
 from o3d_lsmesh.hole_filling import (
     DP_MAX_EDGES,
     HoleFiller,
@@ -316,8 +316,9 @@ def test_rings_are_the_plain_breadth_first_rings():
 
 
 def reference_crossings(V, T, first_new):
-    """Plain loops: each new triangle against every triangle sharing no vertex, by exact segment-triangle
-    tests (two triangles without a shared vertex intersect iff an edge of one crosses the other)."""
+    """Plain loops: each new triangle against every other triangle, by exact segment-triangle tests (two
+    triangles meet beyond what they share iff an edge of one crosses the other, an edge opposite a shared
+    corner if there is one) and, for a shared edge, a fold (the far corners coplanar and on one side)."""
 
     def segment_hits(p, q, tri):
         a, b, c = tri
@@ -329,34 +330,46 @@ def reference_crossings(V, T, first_new):
         signs = [np.dot(np.cross(v - u, x - u), n) for u, v in ((a, b), (b, c), (c, a))]
         return all(s >= 0 for s in signs) or all(s <= 0 for s in signs)
 
+    def meet(ti, tj):
+        shared = set(ti) & set(tj)
+        P, Q = V[ti], V[tj]
+        if len(shared) == 3:
+            return True
+        if len(shared) == 2:
+            u, w = (V[v] for v in shared)
+            a, b = V[(set(ti) - shared).pop()], V[(set(tj) - shared).pop()]
+            na, nb = np.cross(w - u, a - u), np.cross(w - u, b - u)
+            return np.dot(np.cross(w - u, a - u), b - u) == 0 and np.dot(na, nb) > 0
+        if len(shared) == 1:
+            v = shared.pop()
+            p, q = V[[x for x in ti if x != v]], V[[x for x in tj if x != v]]
+            return segment_hits(*p, Q) or segment_hits(*q, P)
+        return any(segment_hits(P[e], P[(e + 1) % 3], Q) for e in range(3)) or any(
+            segment_hits(Q[e], Q[(e + 1) % 3], P) for e in range(3)
+        )
+
     out = np.zeros(len(T) - first_new)
     for i in range(first_new, len(T)):
         for j in range(len(T)):
-            if j == i or (j >= first_new and j < i) or set(T[i]) & set(T[j]):
+            if j == i or (j >= first_new and j < i) or not meet(T[i], T[j]):
                 continue
-            P, Q = V[T[i]], V[T[j]]
-            if any(segment_hits(P[e], P[(e + 1) % 3], Q) for e in range(3)) or any(
-                segment_hits(Q[e], Q[(e + 1) % 3], P) for e in range(3)
-            ):
-                out[i - first_new] += 1
-                if j >= first_new:
-                    out[j - first_new] += 1
+            out[i - first_new] += 1
+            if j >= first_new:
+                out[j - first_new] += 1
     return out
 
 
 @pytest.mark.parametrize("seed", range(3))
 def test_crossing_check_matches_plain_reference(seed):
-    # random (non-coplanar) triangle soups: the separating-axis check, with its k-d tree index of the input
+    # random (non-coplanar) triangle soups: the separating-axis check, with its grid index of the input
     # triangles (the prebuilt state's) or the box query (a single fill's), against plain segment tests
     rng = np.random.default_rng(seed)
     V = rng.random((45, 3))
     T = np.array([rng.choice(45, 3, replace=False) for _ in range(60)])
     expected = reference_crossings(V, T, 40)
     assert expected.sum() > 0
-    assert np.array_equal(_crossings(V, T, 40, None, None), expected)
-    assert np.array_equal(_crossings(V, T, 40, _TriangleIndex(V, T[:40]), None), expected)
-    patches = rng.integers(0, 3, len(T) - 40)  # queried patch by patch
-    assert np.array_equal(_crossings(V, T, 40, _TriangleIndex(V, T[:40]), patches), expected)
+    assert np.array_equal(_crossings(V, T, 40, None), expected)
+    assert np.array_equal(_crossings(V, T, 40, _TriangleIndex(V, T[:40])), expected)
 
 
 def test_prebuilt_filler_equals_one_call_pickles_and_is_thread_safe():
@@ -507,7 +520,8 @@ def test_real_mesh_hole_within_bound_of_truth(name, bound):
 def test_planar_hole_fills_planar():
     V, T = grid(21, 21)
     holed = T[np.linalg.norm(V[T].mean(1)[:, :2] - 0.5, axis=1) > 0.25]
-    out = fill_holes_arrays(V, holed)
+    with pytest.warns(O3DLSMeshWarning, match=r"loop 0 \(80 edges.*taken as the outer border"):
+        out = fill_holes_arrays(V, holed)
     assert len(out.holes) == 1 and len(out.skipped) == 1  # the square's rim is the outer border
     assert len(out.vertices) > len(V)
     np.testing.assert_allclose(out.vertices[len(V) :, 2], 0.0, atol=1e-12)
@@ -608,7 +622,8 @@ def test_large_hole_uses_the_chord_split_and_finishes(tmp_path):
     import time
 
     start = time.perf_counter()
-    out = fill_holes_arrays(V, T, density=0.03)  # ~400 new vertices instead of ~400,000
+    with pytest.warns(O3DLSMeshWarning, match="taken as the outer border"):
+        out = fill_holes_arrays(V, T, density=0.03)  # ~400 new vertices instead of ~400,000
     seconds = time.perf_counter() - start
     assert len(out.holes) == 1 and out.holes[0].edges == k
     assert boundary_edge_count(out.triangles, len(out.vertices)) == k  # only the outer rim is left
@@ -671,11 +686,9 @@ def test_outer_border_of_a_scan_stays_open():
         warnings.simplefilter("always")
         out = fill_holes(mesh, max_hole_edges=200)
         result = fill_holes_arrays(V, T, max_hole_edges=200)
-    # a few fills meet folded scan geometry at every continuity: left open, said, not hidden (measured: 4)
-    assert all(
-        "cross other triangles at every continuity" in str(w.message) and "left open" in str(w.message)
-        for w in caught
-    )
+    # the border and a few fills that meet folded scan geometry in every form: left open, said, not hidden
+    assert len(caught) == 2 and all("loops open" in str(w.message) for w in caught)
+    assert "taken as the outer border" in str(caught[0].message)
     W, G = np.asarray(out.vertices), np.asarray(out.triangles).astype(np.int64)
     np.testing.assert_array_equal(W, result.vertices)
     np.testing.assert_array_equal(G, result.triangles)
@@ -689,7 +702,10 @@ def test_outer_border_of_a_scan_stays_open():
     filled = {tuple(sorted(hole.vertices.tolist())) for hole in result.holes}
     left = {tuple(sorted(hole.vertices.tolist())) for hole in result.skipped} & wanted
     assert filled and filled | left == wanted and not filled & left
-    assert len(left) <= 5 and (len(left) > 0) == (len(caught) > 0)
+    assert len(left) <= 10  # measured: 6
+    assert {h.id for h in result.report.skipped if h.how.startswith("every fill crosses")} == {
+        i for i, h in enumerate(holes) if tuple(sorted(h.vertices.tolist())) in left
+    }
     assert not filled & kept and left <= kept  # the filled ones are closed, the ones left open are open
     check_valid_edges(W, G, len(T))  # what the fills add is manifold, oriented and crosses nothing
     # the scan is non-manifold elsewhere: the filled mesh is not worse than the input
@@ -1118,19 +1134,6 @@ def test_tangential_relax_matches_plain_loop():
     assert np.abs(got - V[first:]).max() > 1e-3  # it did move them
 
 
-@settings(max_examples=30, deadline=None)
-@given(st.integers(0, 2**32 - 1))
-def test_crossing_count_matches_plain_segment_tests(seed):
-    rng = np.random.default_rng(seed)
-    V = rng.random((20, 3))
-    T = np.array([rng.choice(20, 3, replace=False) for _ in range(16)], dtype=np.int64)
-    a, b = np.triu_indices(16, 1)
-    new = a >= 10  # every pair with a new triangle first
-    a, b = np.where(new, a, b)[(a >= 10) | (b >= 10)], np.where(new, b, a)[(a >= 10) | (b >= 10)]
-    got = _fill_kernel.count_crossings(V, T, a.astype(np.int64), b.astype(np.int64), 10)
-    assert np.array_equal(got, reference_crossings(V, T, 10))
-
-
 def test_kernel_rejects_bad_shapes():
     with pytest.raises(ValueError, match="at least 3"):
         _fill_kernel.minimum_weight_triangulation(np.zeros((2, 3)), np.zeros((2, 3)))
@@ -1144,25 +1147,18 @@ def test_kernel_rejects_bad_shapes():
         _fill_kernel.relax(np.zeros((3, 3)), np.array([[0, 1, 5]]), np.zeros((0, 2), np.int64), [True])
     with pytest.raises(ValueError, match="first_new"):
         _fill_kernel.tangential_relax(np.zeros((3, 3)), np.array([[0, 1, 2]]), 4)
-    with pytest.raises(ValueError, match="one length"):
-        _fill_kernel.count_crossings(
-            np.zeros((3, 3)), np.array([[0, 1, 2]]), np.zeros(2, np.int64), np.zeros(1, np.int64), 0
+    with pytest.raises(ValueError, match="one row per new triangle"):
+        _fill_kernel.patch_crossings(
+            np.eye(3),
+            np.array([[0, 1, 2]]),
+            0,
+            [],
+            np.zeros((0, 3)),
+            np.zeros(0),
+            [],
+            np.zeros((2, 3)),
+            np.zeros(2),
         )
-
-
-@settings(max_examples=40, deadline=None)
-@given(st.integers(0, 60), st.integers(0, 60), st.integers(0, 2**32 - 1), st.floats(0.01, 0.3))
-def test_sphere_pairs_are_every_overlapping_pair(na, nb, seed, size):
-    # reference: every pair's distance against the sum of the radii (a set against another, and within one)
-    rng = np.random.default_rng(seed)
-    ca, cb = rng.random((na, 3)) * [1, 3, 2], rng.random((nb, 3))
-    ra, rb = size * rng.random(na), size * rng.random(nb)
-    i, j = _fill_kernel.sphere_pairs(ca, ra, cb, rb)
-    near = np.linalg.norm(ca[:, None] - cb[None], axis=2) <= ra[:, None] + rb[None]
-    assert sorted(zip(i.tolist(), j.tolist())) == sorted(zip(*(x.tolist() for x in np.nonzero(near))))
-    i, j = _fill_kernel.sphere_pairs(ca, ra)
-    near = np.triu(np.linalg.norm(ca[:, None] - ca[None], axis=2) <= ra[:, None] + ra[None], 1)
-    assert sorted(zip(i.tolist(), j.tolist())) == sorted(zip(*(x.tolist() for x in np.nonzero(near))))
 
 
 @settings(max_examples=25, deadline=None)
@@ -1326,43 +1322,19 @@ def test_cholesky_solve_is_scipys_cho_solve(seed, p, c, singular):
     assert _fill_kernel.cholesky_solve(bad, rhs) is None
 
 
-@settings(max_examples=30, deadline=None)
-@given(st.integers(0, 2**32 - 1), st.integers(1, 40), st.floats(0.01, 0.5))
-def test_grid_queries_find_every_overlapping_sphere(seed, queries, size):
-    # reference: every triangle's bounding sphere against every query sphere, by distances; the grids
-    # (of :class:`_TriangleIndex`) must return a superset, and the pairs after the exact test be those
-    rng = np.random.default_rng(seed)
-    corners = rng.random((200, 1, 3)) * [3, 1, 2] + rng.normal(scale=0.03, size=(200, 3, 3))
-    corners[:6, 2] += rng.normal(scale=1.0, size=(6, 3))  # a few long slivers: the second grid
-    V, T = corners.reshape(-1, 3), np.arange(600, dtype=np.int64).reshape(200, 3)
-    index = _TriangleIndex(V, T)
-    centre, radius = rng.random((queries, 3)) * [3, 1, 2], size * rng.random(queries)
-    near = (
-        np.linalg.norm(centre[:, None] - index.centre[None], axis=2) <= radius[:, None] + index.radius[None]
-    )
-    found = set()
-    for origin, cell, dims, indptr, members, reach in index.grids:
-        hits = _fill_kernel.grid_near(
-            centre, radius, origin, cell, dims, indptr, members, index.centre, index.radius, reach
-        )
-        assert len(set(hits.tolist())) == len(hits)
-        found |= set(hits.tolist())
-    assert set(np.flatnonzero(near.any(axis=0)).tolist()) <= found
-    qi, ti = index.near(centre, radius)
-    assert sorted(zip(qi.tolist(), ti.tolist())) == sorted(zip(*(x.tolist() for x in np.nonzero(near))))
-
-
-@settings(max_examples=30, deadline=None)
+@settings(max_examples=10, deadline=None)
 @given(st.integers(0, 2**32 - 1), st.integers(1, 12))
-def test_patch_crossings_match_plain_segment_tests(seed, q):
-    # reference: the plain segment-triangle tests of every new triangle against every other one
+def test_crossings_in_spread_soup_with_slivers(seed, q):
+    # small triangles spread out, a few long slivers (the index's second grid) and new triangles over
+    # them: the grid's candidates must not miss a crossing pair (plain reference over every pair)
     rng = np.random.default_rng(seed)
-    V = rng.random((40, 3))
-    T = np.array([rng.choice(40, 3, replace=False) for _ in range(30 + q)], dtype=np.int64)
-    index = _TriangleIndex(V, T[:30])
-    got = _fill_kernel.patch_crossings(V, T, 30, index.grids, index.centre, index.radius)
-    assert np.array_equal(got, reference_crossings(V, T, 30))
-    assert np.array_equal(_crossings(V, T, 30, index, None), got)
+    corners = rng.random((120, 1, 3)) * [3, 1, 2] + rng.normal(scale=0.1, size=(120, 3, 3))
+    corners[:6, 2] += rng.normal(scale=1.0, size=(6, 3))
+    V, T = corners.reshape(-1, 3), np.arange(360, dtype=np.int64).reshape(120, 3)
+    T = np.concatenate([T, rng.integers(0, 360, (q, 3))])
+    T = T[(T[:, 0] != T[:, 1]) & (T[:, 1] != T[:, 2]) & (T[:, 0] != T[:, 2])]
+    index = _TriangleIndex(V, T[:120])
+    assert np.array_equal(_crossings(V, T, 120, index), reference_crossings(V, T, 120))
 
 
 @settings(max_examples=30, deadline=None)
