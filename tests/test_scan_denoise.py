@@ -21,16 +21,20 @@ from o3d_lsmesh.fairing.scan_fairing import (
     MU_RANGE,
     NOISE_MU_POWER,
     NOISE_MU_SCALE,
+    RIM_RINGS,
     SCAN_BOUNDARY_FRACTION,
     SCAN_BOUNDARY_WEIGHT,
     SCAN_MEMBRANE,
     SCAN_MU,
     SCAN_REDUCTION,
+    SCAN_RIM_MU,
     SCAN_RIM_RATIO,
+    SLIVER_QUALITY,
     ScanFairingSolver,
     _lower_csc,
     measured_boundary_weight,
     measured_noise,
+    relax_rim,
     scan_likeness,
     scan_normal_matrix,
     scan_parameters,
@@ -127,6 +131,56 @@ def reference_rings(F):
     return ring, curve
 
 
+def reference_relax_rim(scan, P, F, strength):
+    """Plain loops: relax_rim's tangential sweeps on the rim band, then its quarter-steps back at slivers."""
+    ring, curve = reference_rings(F)
+    normal = np.zeros_like(P)
+    for t in F.tolist():
+        face = np.cross(P[t[1]] - P[t[0]], P[t[2]] - P[t[0]])
+        for i in t:
+            normal[i] += face
+    for i in ring:
+        own = np.zeros(3)
+        for t in F.tolist():
+            if i in t:
+                own += np.cross(scan[t[1]] - scan[t[0]], scan[t[2]] - scan[t[0]])
+        if np.linalg.norm(normal[i]) <= np.sqrt(np.finfo(float).eps) * np.linalg.norm(own):
+            normal[i] = own  # a fan shrunk to a point: the scan's normal
+    unit = {i: normal[i] / np.linalg.norm(normal[i]) for i in ring if np.linalg.norm(normal[i]) > 0}
+    distance = dict.fromkeys(curve, 0)
+    for step in range(1, RIM_RINGS + 1):
+        for i in [i for i in distance if distance[i] == step - 1]:
+            for j in ring[i]:
+                distance.setdefault(j, step)
+    X = P.copy()
+    for _ in range(RIM_RINGS):
+        Y = X.copy()
+        for i in distance:
+            if i in unit:
+                move = np.mean([X[j] for j in curve.get(i, ring[i])], axis=0) - X[i]
+                Y[i] = X[i] + 0.5 * strength * (move - np.dot(move, unit[i]) * unit[i])
+        X = Y
+    quality = lambda Q, t: (
+        4
+        * np.sqrt(3)
+        * 0.5
+        * np.linalg.norm(np.cross(Q[t[1]] - Q[t[0]], Q[t[2]] - Q[t[0]]))
+        / max(
+            sum(np.sum((Q[t[a]] - Q[t[b]]) ** 2) for a, b in ((0, 1), (1, 2), (2, 0))), np.finfo(float).tiny
+        )
+    )
+    back = {i: 0 for i in unit if i in distance}  # the band's vertices
+    while True:
+        bad = {i for t in F.tolist() if quality(X, t) < min(SLIVER_QUALITY, quality(scan, t)) for i in t}
+        bad = [i for i in bad if back.get(i, 4) < 4]
+        if not bad:
+            return X
+        for i in bad:
+            back[i] += 1
+            drift = P[i] - scan[i]
+            X[i] = P[i] - back[i] / 4 * (drift - np.dot(drift, unit[i]) * unit[i])
+
+
 def reference_rim_ratio(V, F):
     """Plain loops: the unclipped c (9/7) E_int / E_bd (inf without a boundary or an interior vertex)."""
     ring, curve = reference_rings(F)
@@ -188,11 +242,17 @@ def reference_parameters(V, F):
         )
     s = float(rim * np.clip(part, 0, 1))
     sigma, g = reference_noise(V, F)
-    independent = (
-        MU_RANGE[1] if sigma == 0 else np.clip(NOISE_MU_SCALE * (g / sigma) ** NOISE_MU_POWER, *MU_RANGE)
+    independent, scan = (
+        (MU_RANGE[1], MU_RANGE[1])
+        if sigma == 0
+        else (
+            np.clip(NOISE_MU_SCALE * (g / sigma) ** NOISE_MU_POWER, *MU_RANGE),
+            np.clip(SCAN_MU * (g / sigma) ** 2, *MU_RANGE),
+        )
     )
-    mu = np.exp((1 - s) * np.log(independent) + s * np.log(SCAN_MU))
-    return mu, s * SCAN_MEMBRANE, reference_boundary_weight(V, F), 1 - s, s
+    mu = np.exp((1 - s) * np.log(independent) + s * np.log(scan))
+    rim = reference_boundary_weight(V, F) * (SCAN_RIM_MU / scan) ** s
+    return mu, s * SCAN_MEMBRANE, rim, 1 - s, s
 
 
 def reference_boundary_weight(V, F):
@@ -325,7 +385,15 @@ def test_energy_and_solution_match_a_plain_loop_assembly(case, weights):
             (mu0, membrane0, weight0), rel=1e-9
         )
         assert (measured.rim_curve, measured.twicing) == pytest.approx((curve0, twicing0), rel=1e-9)
-        default = reference_solution(V, F, mu0, membrane0, weight0, curve0, twicing0)[1]
+        faired = ScanFairingSolver(
+            F, len(V), mu=mu0, membrane=membrane0, boundary_weight=weight0, rim_curve=curve0
+        ).solve(V, twice=twicing0)
+        assert_allclose(
+            faired, reference_solution(V, F, mu0, membrane0, weight0, curve0, twicing0)[1], atol=1e-9
+        )
+        # then the rim relaxation, from the same solve (a triangle the solve shrinks to a point, as the soup's
+        # lone one, has a normal set by round-off)
+        default = reference_relax_rim(V, faired, F, measured.scan_likeness)
         assert_allclose(constrained_fairing_arrays(V, F, None, method=None), default, atol=1e-9)
     copy = pickle.loads(pickle.dumps(solver))
     assert_allclose(copy.solve(V), twiced, atol=1e-9)
@@ -409,7 +477,7 @@ def test_scan_likeness_tells_a_range_scan_from_independent_noise(rng):
     scan = scan_parameters(ragged, T)
     assert scan.scan_likeness == 1.0
     assert (scan.mu, scan.membrane, scan.twicing, scan.rim_curve) == (
-        pytest.approx(SCAN_MU),
+        pytest.approx(np.clip(SCAN_MU * (scan.detail / scan.noise) ** 2, *MU_RANGE)),
         SCAN_MEMBRANE,
         1.0,
         0.0,
@@ -445,6 +513,92 @@ def test_rigid_motion_and_scale_equivariance(rng):
     scale, shift = 250.0, np.array([3.0, -7.0, 1e3])
     moved = constrained_fairing_arrays(scale * V @ q.T + shift, F, None, method=None)
     assert_allclose(moved, scale * out @ q.T + shift, atol=1e-8 * scale)
+
+
+def ragged_scan(seed, nx=40):
+    """A range scan of the unit sphere seen along z: the grid's cells inside a jagged silhouette, noise along
+    the line of sight growing towards grazing angles and three times larger on the rim."""
+    rng = np.random.default_rng(seed)
+    G, T = grid(nx, nx)
+    xy = 2 * G[:, :2] - 1
+    r = np.linalg.norm(xy, axis=1)
+    keep = (r < 0.95 + 0.04 * rng.standard_normal(len(r)))[T].all(axis=1)
+    used, T = np.unique(T[keep], return_inverse=True)
+    T = T.reshape(-1, 3)
+    V = np.c_[xy, np.sqrt(np.clip(1 - r**2, 0, 1))][used]
+    _, curve = reference_rings(T)
+    rim = np.isin(np.arange(len(V)), list(curve))
+    V[:, 2] += rng.normal(0, 0.3 / (nx - 1), len(V)) / np.maximum(V[:, 2], 0.1) * np.where(rim, 3.0, 1.0)
+    return V, T
+
+
+def faired_by_the_solve(V, F):
+    """The default's solve alone (its measured weights), without the rim relaxation."""
+    p = scan_parameters(V, F)
+    solver = ScanFairingSolver(
+        F, len(V), mu=p.mu, membrane=p.membrane, boundary_weight=p.boundary_weight, rim_curve=p.rim_curve
+    )
+    return solver.solve(V, twice=p.twicing), p
+
+
+def squeezed_grid():
+    """A flat 6 x 6 grid as the scan, and its first rim row pulled onto the second (ten slivers)."""
+    V, F = grid(6, 6)
+    squeezed = V.copy()
+    squeezed[:6, 1] = 0.99 * squeezed[6, 1]
+    return V, squeezed, F
+
+
+@pytest.mark.parametrize("case", ["ragged scan", "ragged scan, weaker", "squeezed, no sweeps"])
+def test_relax_rim_against_a_plain_loop_and_within_the_tangent_planes(case):
+    if case.startswith("ragged"):
+        V, F = ragged_scan(1, nx=14)
+        faired, _ = faired_by_the_solve(V, F)
+        strength = 1.0 if case == "ragged scan" else 0.6
+    else:
+        V, faired, F = squeezed_grid()
+        strength = 0.0  # the sweeps off: the slivers are undone by giving back the tangential drift
+    out = relax_rim(V, faired, F, strength=strength)
+    assert_allclose(out, reference_relax_rim(V, faired, F, strength), rtol=0, atol=1e-12)
+    # every vertex moved within its tangent plane (the faired surface's unit normal), to round-off
+    normal = np.zeros_like(faired)
+    for t in F.tolist():
+        face = np.cross(faired[t[1]] - faired[t[0]], faired[t[2]] - faired[t[0]])
+        normal[t] += face
+    assert (np.linalg.norm(normal, axis=1) > 0).all()
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    move = out - faired
+    h = np.linalg.norm(V[F[:, 0]] - V[F[:, 1]], axis=1).mean()
+    assert np.abs(move).max() > 0.05 * h
+    assert np.abs(np.einsum("ij,ij->i", move, normal)).max() < 1e-13 * np.abs(faired).max()
+    if case.startswith("squeezed"):
+        quality = scan_fairing.triangle_quality
+        assert (quality(faired, F) < SLIVER_QUALITY).sum() == 10
+        assert (quality(out, F) >= SLIVER_QUALITY).all()
+        # Heron's formula, one triangle at a time
+        for t, q in zip(F.tolist(), quality(faired, F)):
+            a, b, c = (np.linalg.norm(faired[t[i]] - faired[t[j]]) for i, j in ((0, 1), (1, 2), (2, 0)))
+            half = (a + b + c) / 2
+            area = np.sqrt(max(half * (half - a) * (half - b) * (half - c), 0.0))
+            assert q == pytest.approx(4 * np.sqrt(3) * area / (a * a + b * b + c * c), abs=1e-9)
+
+
+@pytest.mark.parametrize("seed", [0, 3])
+def test_default_adds_no_slivers_to_a_ragged_scan_and_is_equivariant(seed, rng):
+    V, F = ragged_scan(seed)
+    faired, measured = faired_by_the_solve(V, F)
+    assert measured.scan_likeness == 1.0
+
+    def slivers(X):
+        return int((scan_fairing.triangle_quality(X, F) < SLIVER_QUALITY).sum())
+
+    assert slivers(faired) > slivers(V)  # the solve alone squeezes the rim into slivers
+    out = constrained_fairing_arrays(V, F, None, method=None)
+    assert slivers(out) <= slivers(V)
+    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    scale, shift = 0.01, np.array([3.0, -7.0, 1e2])
+    moved = constrained_fairing_arrays(scale * V @ q.T + shift, F, None, method=None)
+    assert_allclose(moved, scale * out @ q.T + shift, atol=1e-9)
 
 
 def test_flat_noisy_grid_gets_flatter_and_keeps_its_boundary_shape(rng):
