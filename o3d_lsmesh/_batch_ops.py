@@ -825,15 +825,19 @@ def denoise_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dic
     ),
 )
 def fill_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
-    """``--op fill`` and ``o3d-lsmesh fill``: hole filling with the counts of new vertices and triangles."""
+    """``--op fill`` and ``o3d-lsmesh fill``: hole filling with the counts of new vertices and triangles,
+    of the loops filled and left open, and why the first ten were left open."""
     from .hole_filling import fill_holes
 
     # the options are fill_holes' own (--continuity comes as the text of a choice)
     options = {**options, "continuity": int(options["continuity"])}
-    out = fill_holes(mesh, **options, progress=context.progress)
+    out, report = fill_holes(mesh, **options, progress=context.progress, return_report=True)
     return out, {
         "new_vertices": len(out.vertices) - len(mesh.vertices),
         "new_triangles": len(out.triangles) - len(mesh.triangles),
+        "holes_filled": len(report.filled),
+        "holes_skipped": len(report.skipped),
+        "left_open": report.describe(10),
     }
 
 

@@ -624,13 +624,15 @@ def run(
         """Store, report and show one result; False asks the engine to stop (--fail-fast)."""
         records[index_of[record["input"]]] = record
         counts[record["status"]] += 1
-        for text in record.get("warnings") or ():
-            warnings.warn(f"{record['input']}: {text}", O3DLSMeshWarning, stacklevel=2)
         if handle is not None:
             handle.write(json.dumps(record).encode() + b"\n")
             handle.flush()
         bar.update(1)
         bar.set_postfix(ok=counts["ok"], failed=counts["failed"], refresh=False)
+        for text in (
+            record.get("warnings") or ()
+        ):  # (after the report: a warning filtered to an error stops here)
+            warnings.warn(f"{record['input']}: {text}", O3DLSMeshWarning, stacklevel=2)
         if on_record is not None:
             on_record(record)
         return not (fail_fast and record["status"] == "failed")

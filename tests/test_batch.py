@@ -639,6 +639,14 @@ def test_fill_op_and_a_fill_denoise_pipeline_match_the_library(data, tmp_path):
     np.testing.assert_array_equal(filled, np.asarray(expected.triangles))
     np.testing.assert_allclose(vertices, np.asarray(expected.vertices), rtol=0, atol=1e-12)
     assert record["metrics"]["fill"]["new_triangles"] == len(filled) - len(holed.triangles) > 0
+    assert (record["metrics"]["fill"]["holes_filled"], record["metrics"]["fill"]["holes_skipped"]) == (1, 0)
+    (record,) = batch.run(
+        source, tmp_path / "f3", op="fill", options={"max_hole_edges": 3}, workers=0, progress=False
+    )
+    fill = record["metrics"]["fill"]
+    ring = len(np.unique(triangles[(triangles == 0).any(1)])) - 1  # the hole's edges: vertex 0's neighbours
+    assert (fill["holes_filled"], fill["holes_skipped"], fill["new_triangles"]) == (0, 1, 0)
+    assert fill["left_open"].startswith(f"loop 0 ({ring} edges")
 
     (record,) = batch.run(
         source,
