@@ -13,7 +13,7 @@ Gauss-Seidel), a count set by the matrix's size alone, so results never depend o
 import numpy as np
 
 from cython.parallel cimport prange, threadid
-from libc.math cimport sqrt
+from libc.math cimport fabs, sqrt
 from libc.stdint cimport int32_t, int64_t
 
 cdef extern from *:
@@ -207,6 +207,36 @@ def cg_direction(double[:, ::1] p, const double[:, ::1] z, const double[::1] bet
         for i in prange(n, schedule="static", num_threads=_threads(n)):
             for c in range(k):
                 p[i, c] = z[i, c] + beta[c] * p[i, c]
+
+
+def symmetry_gap(const index_t[::1] indptr, const index_t[::1] indices, const double[::1] data):
+    """How far a square CSC (or CSR) matrix with sorted indices is from symmetric, without a copy.
+
+    Returns ``(gap, i, j, above)``: the largest ``|a_ij - a_ji|`` (a missing mirror counts as zero) at
+    its entry ``(i, j)`` (row, column), and how many entries lie above the diagonal. One pass, a
+    binary search per entry for its mirror.
+    """
+    cdef Py_ssize_t n = indptr.shape[0] - 1, j, lo, hi, mid, wi = 0, wj = 0, above = 0
+    cdef index_t k, i
+    cdef double mirror, gap, largest = 0.0
+    with nogil:
+        for j in range(n):
+            for k in range(indptr[j], indptr[j + 1]):
+                i = indices[k]
+                if i < j:
+                    above += 1
+                lo, hi = indptr[i], indptr[i + 1]
+                while lo < hi:  # row j of column i
+                    mid = (lo + hi) // 2
+                    if indices[mid] < j:
+                        lo = mid + 1
+                    else:
+                        hi = mid
+                mirror = data[lo] if lo < indptr[i + 1] and indices[lo] == j else 0.0
+                gap = fabs(data[k] - mirror)
+                if gap > largest:
+                    largest, wi, wj = gap, i, j
+    return largest, wi, wj, above
 
 
 def incomplete_cholesky(const index_t[::1] indptr, const index_t[::1] indices, const double[::1] data,

@@ -465,6 +465,9 @@ class SPDSolver:
     matrix : (n, n) scipy sparse matrix or None
         Symmetric positive definite: the whole matrix, or only its lower
         triangle with ``lower=True`` (which lets the caller free the whole one).
+        ``ValueError`` for a matrix farther from symmetric than
+        :data:`SYMMETRY_TOLERANCE` of its largest entry, or with entries above
+        the diagonal under ``lower=True``; ``TypeError`` for complex entries.
         ``None`` with ``product_of``.
     product_of : (n, k) scipy sparse matrix, optional, keyword-only
         Factor ``A A^T`` for this ``A`` without forming it (CHOLMOD assembles it

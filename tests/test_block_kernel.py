@@ -510,3 +510,15 @@ def test_openmp_threads_sleep_at_barriers_instead_of_spinning():
     environ["OMP_WAIT_POLICY"] = "ACTIVE"
     report = subprocess.run([sys.executable, "-c", code], env=environ, capture_output=True, text=True).stderr
     assert "OMP_WAIT_POLICY = 'ACTIVE'" in report, report
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_symmetry_gap_is_the_dense_largest_difference_to_the_transpose(seed):
+    A = sp.random(30, 30, density=0.15, random_state=seed, format="csc")
+    A = (A + A.T * (seed % 2)).tocsc()  # odd seeds nearly symmetric in pattern, even ones not
+    A.sort_indices()
+    dense = A.toarray()
+    gap, i, j, above = _block_kernel.symmetry_gap(A.indptr, A.indices, A.data)
+    difference = np.abs(dense - dense.T)
+    assert gap == difference.max() and (gap == 0 or (difference[i, j] == gap and dense[i, j] != 0))
+    assert above == np.count_nonzero(np.triu(dense, 1))
