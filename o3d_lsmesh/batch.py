@@ -96,7 +96,9 @@ def collect_inputs(
             matches = sorted(glob.glob(text, recursive=True))
             if not matches:
                 raise ValueError(f"INPUT {text!r} matches no file")
-            matches = [m for m in matches if skip is None or not inside(m, skip)]
+            matches = [
+                m for m in matches if skip is None or not (os.path.realpath(m) == skip or inside(m, skip))
+            ]
             matches = [m for m in matches if not TEMPORARY.fullmatch(os.path.basename(m))]
         else:
             raise ValueError(f"INPUT {text!r} does not exist (expected a file, a folder or a glob pattern)")
@@ -435,7 +437,10 @@ def run(
     outdir : path
         Output folder (created). The result of ``a/b.ply`` from a folder INPUT
         is ``outdir/a/b<suffix>``; ``encode`` writes ``<name>.bin``,
-        ``hierarchy`` a folder ``<name>/``, ``compare`` nothing.
+        ``hierarchy`` a folder ``<name>/``, ``compare`` nothing. A stem ``.`` or
+        ``..`` (the file ``..ply``) is written as ``_dot`` or ``_dotdot``. Nothing
+        is written outside ``outdir`` and nothing this call did not write is
+        removed (an existing output folder is updated file by file).
     op : str, keyword-only
         An operation of :data:`OPS` (``denoise``, ``hierarchy``,
         ``approximate``, ``encode``, ``compare``, ...) or a pipeline run in

@@ -116,6 +116,11 @@ def test_outdir_inside_an_input_folder_and_leftover_temporaries_are_never_inputs
         "a/level_00.ply",
         "sub/b/level_00.ply",
     ]
+    # a glob matching OUTDIR among the input folders leaves it out
+    records = batch.run(
+        str(folder / "*"), out, op="hierarchy", options={"levels": "0"}, workers=0, progress=False
+    )
+    assert sorted(Path(r["input"]).name for r in records) == ["a.ply", "b.ply"]
     with pytest.raises(ValueError, match="lies inside OUTDIR"):
         batch.run(out, folder, workers=0)
     with pytest.raises(ValueError, match="lies inside OUTDIR"):
