@@ -1,0 +1,218 @@
+"""method="features" and detect_creases: the filter and the vertex update against plain references."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import grid
+from defect_meshes import DEFECTS, all_defects
+
+from o3d_lsmesh import constrained_fairing, detect_creases
+from o3d_lsmesh.fairing import constrained_fairing_arrays
+from o3d_lsmesh.fairing import features as fe
+from o3d_lsmesh.topology import edge_structure
+
+
+def cube(level=3):
+    """The unit cube, midpoint-subdivided ``level`` times (2^level segments on each of its 12 edges)."""
+    import open3d as o3d
+
+    box = o3d.geometry.TriangleMesh.create_box().subdivide_midpoint(number_of_iterations=level)
+    return np.asarray(box.vertices).copy(), np.asarray(box.triangles).astype(np.int64)
+
+
+def unit(v):
+    return v / np.linalg.norm(v)
+
+
+def reference_filter(V, F, sigma_r, guided):
+    """One filter pass as a plain loop over faces, from the definitions in the docstrings."""
+    m = len(F)
+    normals, area, centre = [], [], []
+    for f in F:
+        cross = np.cross(V[f[1]] - V[f[0]], V[f[2]] - V[f[0]])
+        normals.append(unit(cross))
+        area.append(np.linalg.norm(cross) / 2)
+        centre.append(V[f].mean(axis=0))
+    ring = [sorted(j for j in range(m) if set(F[i]) & set(F[j])) for i in range(m)]
+    spacing = np.mean([np.linalg.norm(centre[i] - centre[j]) for i in range(m) for j in ring[i] if j != i])
+    guide = normals
+    if guided:
+        adjacent = [(i, j) for i in range(m) for j in range(i + 1, m) if len(set(F[i]) & set(F[j])) == 2]
+        mean, score = [], []
+        for j in range(m):
+            mean.append(unit(sum(area[k] * normals[k] for k in ring[j])))
+            spread = max(np.linalg.norm(normals[k] - mean[j]) for k in ring[j])
+            jumps = [
+                np.linalg.norm(normals[a] - normals[b]) for a, b in adjacent if a in ring[j] and b in ring[j]
+            ]
+            score.append(spread * (max(jumps) / (1e-9 + sum(jumps)) if jumps else 0.0))
+        guide = [mean[min(ring[i], key=lambda j: (score[j], j))] for i in range(m)]
+    out = []
+    for i in range(m):
+        total = np.zeros(3)
+        for j in ring[i]:
+            spatial = np.exp(-np.sum((centre[i] - centre[j]) ** 2) / (2 * spacing**2))
+            rang = np.exp(-np.sum((guide[i] - guide[j]) ** 2) / (2 * sigma_r**2))
+            total += area[j] * spatial * rang * normals[j]
+        out.append(unit(total))
+    return np.array(out)
+
+
+@pytest.mark.parametrize("guided", [True, False])
+def test_filter_pass_matches_a_loop_over_faces(guided):
+    V, F = cube(1)
+    V = V + np.random.default_rng(3).normal(0.0, 0.03, V.shape)
+    adjacency = fe.face_adjacency(F, len(V))
+    ours = fe.filter_pass(V, F, adjacency, fe._patch_edges(adjacency) if guided else None, guided=guided)
+    np.testing.assert_allclose(ours, reference_filter(V, F, fe.SIGMA_R, guided), atol=1e-12)
+
+
+def test_normal_steps_match_a_loop_and_converge_to_the_least_squares_solution():
+    V, F = cube(0)
+    rng = np.random.default_rng(4)
+    V = V + rng.normal(0.0, 0.05, V.shape)
+    normals = fe.face_normals(V + rng.normal(0.0, 0.05, V.shape), F)[0]  # any unit normals
+    n = len(V)
+    # one step as a loop over faces
+    step = np.zeros_like(V)
+    count = np.zeros(n)
+    for f, normal in zip(F, normals):
+        for i in f:
+            step[i] += normal * (normal @ (V[f].mean(axis=0) - V[i]))
+            count[i] += 1
+    np.testing.assert_allclose(
+        fe.normal_steps(V, F, normals, iterations=1), V + step / count[:, None], atol=1e-14
+    )
+    # the steps are preconditioned gradient steps on |A x|^2 (rows n_f . (c_f - x_i)): they end at the
+    # minimizer closest to the start in the count-weighted norm, min |A (x0 + D^-1/2 z)| of least |z|
+    A = np.zeros((3 * len(F), 3 * n))
+    for t, (f, normal) in enumerate(zip(F, normals)):
+        for a, i in enumerate(f):
+            for j in f:
+                A[3 * t + a, 3 * j : 3 * j + 3] += normal / 3
+            A[3 * t + a, 3 * i : 3 * i + 3] -= normal
+    scale = 1 / np.sqrt(np.repeat(count, 3))
+    z = np.linalg.lstsq(A * scale, -A @ V.ravel(), rcond=None)[0]
+    expected = (V.ravel() + scale * z).reshape(n, 3)
+    np.testing.assert_allclose(fe.normal_steps(V, F, normals, iterations=8000), expected, atol=1e-9)
+
+
+def dihedral(X, F, edges_of):
+    normals = fe.face_normals(X, F)[0]
+    a, b = edges_of
+    return np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", normals[a], normals[b]), -1.0, 1.0)))
+
+
+def test_noisy_cube_keeps_its_creases():
+    V, F = cube(3)  # 8 segments an edge, spacing 1/8
+    es = edge_structure(F, len(V))
+    halves = (es.order[es.starts] % len(F), es.order[es.starts + 1] % len(F))
+    crease = dihedral(V, F, halves) > 45.0
+    noisy = V + np.random.default_rng(0).normal(0.0, 0.1 / 8, V.shape)
+    out = constrained_fairing_arrays(noisy, F, None, method="features")
+    angle = dihedral(out, F, halves)
+    midpoint = V[es.edges].mean(axis=1)
+    # away from the corners (the corner segments have no one-sided patch: the documented limit)
+    inner = np.linalg.norm(midpoint - np.round(midpoint), axis=1) > 0.13
+    assert crease.sum() == 96 and (crease & inner).sum() == 72
+    assert np.abs(angle[crease & inner] - 90.0).max() < 5.0
+    assert np.abs(angle[crease & inner] - 90.0).mean() < 2.0
+    assert np.abs(dihedral(noisy, F, halves)[~crease]).mean() > 3 * np.abs(angle[~crease]).mean()
+
+
+def test_detect_creases_on_cubes():
+    import open3d as o3d
+
+    edges = detect_creases(o3d.geometry.TriangleMesh.create_box())
+    assert edges.shape == (12, 2) and edges.dtype == np.int64
+    V = np.asarray(o3d.geometry.TriangleMesh.create_box().vertices)
+    assert sorted(np.count_nonzero(V[a] != V[b]) for a, b in edges) == [1] * 12  # along one axis each
+    V, F = cube(3)
+    es = edge_structure(F, len(V))
+    halves = (es.order[es.starts] % len(F), es.order[es.starts + 1] % len(F))
+    crease = dihedral(V, F, halves) > 45.0
+    midpoint = V[es.edges].mean(axis=1)
+    # off the corners (their first segments round: the documented limit), found exactly
+    away = {tuple(e) for e in es.edges[np.linalg.norm(midpoint - np.round(midpoint), axis=1) > 0.13].tolist()}
+    truth = {tuple(e) for e in es.edges[crease].tolist()} & away
+    for X in (V, V + np.random.default_rng(1).normal(0.0, 0.05 / 8, V.shape)):
+        found = {tuple(e) for e in fe.detect_creases_arrays(X, F).tolist()}
+        assert found & away == truth and len(truth) == 72
+    np.testing.assert_array_equal(fe.detect_creases_arrays(V, F, passes=0), es.edges[crease])
+
+
+def test_rigid_motion_and_scale_equivariance():
+    V, F = cube(2)
+    V = V + np.random.default_rng(2).normal(0.0, 0.02, V.shape)
+    q, _ = np.linalg.qr(np.random.default_rng(5).normal(size=(3, 3)))
+    moved = 7.5 * V @ q.T + np.array([1e4, -3e3, 2e4])
+    out = constrained_fairing_arrays(V, F, None, method="features")
+    out_moved = constrained_fairing_arrays(moved, F, None, method="features")
+    assert fe.feature_passes(V, F) == fe.feature_passes(moved, F) > 0
+    np.testing.assert_allclose(out_moved, 7.5 * out @ q.T + np.array([1e4, -3e3, 2e4]), atol=1e-8 * 7.5e4)
+
+
+@pytest.mark.parametrize("name", sorted(DEFECTS))
+def test_raw_scan_defects_are_accepted(name):
+    V, F, _ = DEFECTS[name](0)
+    out = constrained_fairing_arrays(V, F, 3, method="features")
+    assert out.shape == V.shape and np.isfinite(out).all()
+    unused = np.setdiff1d(np.arange(len(V)), F)
+    np.testing.assert_array_equal(out[unused], V[unused])
+
+
+def test_all_defects_with_duplicates_and_isolated_vertices():
+    V, F, _ = all_defects(0)
+    V = np.vstack([V, V[:5], [[9.0, 9.0, 9.0]]])  # exact duplicates (welded by the wrapper), one isolated
+    F = np.vstack([F, [[len(V) - 6, len(V) - 5, len(V) - 4]]])  # a triangle on the copies
+    out = np.asarray(constrained_fairing((V, F), method="features")[0])
+    assert out.shape == V.shape and np.isfinite(out).all()
+    assert out[-1].tolist() == [9.0, 9.0, 9.0]
+    edges = detect_creases((V, F))
+    assert edges.shape[1] == 2 and edges.dtype == np.int64 and (edges[:, 0] < edges[:, 1]).all()
+
+
+def test_noiseless_plane_is_left_alone():
+    V, F = grid(12, 12)
+    assert fe.feature_passes(V, F) == 0  # no noise measured: no pass
+    np.testing.assert_array_equal(constrained_fairing_arrays(V, F, None, method="features"), V)
+    np.testing.assert_array_equal(constrained_fairing_arrays(*cube(2), 0, method="features"), cube(2)[0])
+
+
+@pytest.mark.parametrize(
+    ("error", "message", "kwargs"),
+    [
+        (ValueError, "mu must be None for method='features'", dict(mu=0.1)),
+        (ValueError, "reimpose_every must be None for method='features'", dict(reimpose_every=2)),
+        (ValueError, "smooth_boundary must be True for method='features'", dict(smooth_boundary=False)),
+        (ValueError, "membrane must be None for method='features'", dict(membrane=0.1)),
+        (ValueError, "number_of_iterations must be >= 0", dict(number_of_iterations=-1)),
+        (TypeError, "number_of_iterations must be an integer", dict(number_of_iterations=2.5)),
+    ],
+)
+def test_options_raise(error, message, kwargs):
+    V, F = cube(1)
+    iterations = kwargs.pop("number_of_iterations", None)
+    with pytest.raises(error, match=message):
+        constrained_fairing((V, F), iterations, method="features", **kwargs)
+
+
+@pytest.mark.parametrize(
+    ("error", "message", "kwargs"),
+    [
+        (ValueError, "angle must be positive", dict(angle=0.0)),
+        (ValueError, "angle must be below 180 degrees, got 180", dict(angle=180.0)),
+        (TypeError, "angle must be a number", dict(angle="sharp")),
+        (ValueError, "passes must be >= 0", dict(passes=-2)),
+        (TypeError, "passes must be an integer", dict(passes=1.5)),
+    ],
+)
+def test_detect_creases_raises(error, message, kwargs):
+    with pytest.raises(error, match=message):
+        detect_creases(cube(1), **kwargs)
+
+
+def test_detect_creases_rejects_a_non_mesh():
+    with pytest.raises(TypeError, match="mesh"):
+        detect_creases("cube.ply")
