@@ -684,9 +684,14 @@ cdef bint _folded(const double* u, const double* w, const double* a, const doubl
     return _dot(na, nb) > 0 and sqrt(_dot(both, both)) <= 1e-9 * sqrt(_dot(na, na) * _dot(nb, nb))
 
 
+cdef inline bint _same_point(const double* V, int64_t a, int64_t b) noexcept nogil:
+    """One vertex, or two at the same position (a duplicated vertex: the triangles share that corner)."""
+    return a == b or (V[3 * a] == V[3 * b] and V[3 * a + 1] == V[3 * b + 1] and V[3 * a + 2] == V[3 * b + 2])
+
+
 cdef bint _pair_crosses(const double* V, const int64_t* T, int64_t ta, int64_t tb) noexcept nogil:
     """Whether triangles ``ta`` and ``tb`` (rows of ``T`` over the points ``V``) meet anywhere but at the
-    corners and edge they share. No shared corner: the bounding boxes (where most pairs stop), then the
+    corners and edge they share (by index or position, :func:`_same_point`). No shared corner: the bounding boxes (where most pairs stop), then the
     axes of :func:`_cross_pair`. One shared corner: they meet elsewhere iff the edge opposite it in one
     meets the other triangle (their intersection is convex and holds the corner; its far end lies on
     such an edge). A shared edge: iff they fold onto each other (:func:`_folded`). Three: one triangle
@@ -701,9 +706,10 @@ cdef bint _pair_crosses(const double* V, const int64_t* T, int64_t ta, int64_t t
         in_a[r], in_b[r] = 0, 0
     for r in range(3):
         for s in range(3):
-            if T[3 * ta + r] == T[3 * tb + s]:
+            if _same_point(V, T[3 * ta + r], T[3 * tb + s]) and not in_b[s]:
                 shared += 1
                 in_a[r], in_b[s] = 1, 1
+                break
     if shared == 3:
         return True
     for r in range(3):

@@ -656,7 +656,7 @@ class HoleFiller:
             # fills kept so far too; what still crosses is given up
             retry = self._fill_pass(stuck, continuity, 0.0, False, False, False)
             again = np.concatenate([triangles, retry[1][m:]])
-            crossing = _crossings(vertices, again, len(triangles), self.index)
+            crossing = _crossings(vertices, again, m, self.index)[len(triangles) - m :]
             bad = np.bincount(retry[6], weights=crossing, minlength=len(retry[2])) > 0
             keep = ~bad[retry[6]]
             triangles = np.concatenate([triangles, retry[1][m:][keep]])
@@ -708,7 +708,11 @@ class HoleFiller:
             return vertices.copy(), triangles.copy(), [], [], empty, (0, n), empty
         # each piece (a loop; one through a vertex twice is cut in pieces) is triangulated on its own,
         # long ones cut by chords sampled at the refinement's spacing (none without) first
-        pieces = [(h, *p) for h, hole in enumerate(holes) for p in _simple_pieces(hole.vertices, hole.rows)]
+        pieces = [
+            (h, *p)
+            for h, hole in enumerate(holes)
+            for p in _simple_pieces(hole.vertices, hole.rows, vertices[hole.vertices])
+        ]
         piece_hole, piece_loop, piece_rows = zip(*pieces)
         count = len(piece_loop)
         if count == 1 and len(piece_loop[0]) <= DP_MAX_EDGES:
@@ -920,25 +924,33 @@ class HoleFiller:
         )
 
 
-def _simple_pieces(loop: np.ndarray, rows: np.ndarray):
-    """Split a loop that passes a vertex more than once into loops that do not (each filled on its own)."""
-    if len(set(loop.tolist())) == len(loop):  # the usual loop: simple (a set is quicker than np.unique here)
+def _simple_pieces(loop: np.ndarray, rows: np.ndarray, points: np.ndarray):
+    """Split a loop that passes a vertex (or a position: duplicated vertices, ``points`` of the loop)
+    more than once into loops that do not, each filled on its own: a patch across the pinch would cross
+    the surface there."""
+    key = loop
+    if len(set(map(tuple, points.tolist()))) < len(loop):
+        key = np.unique(points, axis=0, return_inverse=True)[1].ravel()
+    elif len(set(loop.tolist())) == len(
+        loop
+    ):  # the usual loop: simple (a set is quicker than np.unique here)
         if len(loop) >= 3:
             yield loop, rows
         return
-    stack = [(loop, rows)]
+    stack = [(loop, rows, key)]
     while stack:
-        loop, rows = stack.pop()
+        loop, rows, key = stack.pop()
         first = np.zeros(len(loop), dtype=bool)
-        first[np.unique(loop, return_index=True)[1]] = True
+        first[np.unique(key, return_index=True)[1]] = True
         if first.all():
             if len(loop) >= 3:
                 yield loop, rows
             continue
         q = int(np.argmin(first))  # the first second visit, and the first visit of that vertex
-        p = int(np.argmax(loop == loop[q]))
-        stack.append((loop[p:q], rows[p:q]))
-        stack.append((np.concatenate([loop[:p], loop[q:]]), np.concatenate([rows[:p], rows[q:]])))
+        p = int(np.argmax(key == key[q]))
+        stack.append((loop[p:q], rows[p:q], key[p:q]))
+        rest = np.r_[0:p, q : len(loop)]
+        stack.append((loop[rest], rows[rest], key[rest]))
 
 
 def _empty_csr(rows: int, cols: int) -> sp.csr_matrix:

@@ -41,7 +41,8 @@ def _segments_cross(p, q, a, b, c):
 
 
 def meeting_pairs(V, T, A, B):
-    """For pairs of triangles ``(A[i], B[i])``, whether they meet beyond the corners and edge they share:
+    """For pairs of triangles ``(A[i], B[i])`` (rows of ``T`` over ``V``), whether they meet beyond the corners
+    and edge they share:
     an edge of one crossing the other (the edges opposite a shared corner, if any), or, sharing an edge,
     the far corners on one side of it in one plane (a fold)."""
     ta, tb = T[A], T[B]
@@ -113,7 +114,9 @@ def added_crossings(V, T, first_new: int) -> int:
     A = np.repeat(new, [len(x) for x in near])
     B = np.concatenate([np.asarray(x, dtype=np.int64) for x in near])
     keep = A != B
-    hit = meeting_pairs(V, T, A[keep], B[keep])
+    # duplicated vertices (equal positions, as in dragon.ply) are one point: corners they share are shared
+    points, canonical = np.unique(V, axis=0, return_inverse=True)
+    hit = meeting_pairs(points, canonical.ravel()[T], A[keep], B[keep])
     return len(np.unique(A[keep][hit]))
 
 
@@ -160,3 +163,69 @@ def test_raw_scan_fill_adds_no_crossing(name):
     before = meshlab_self_intersecting(V, T)
     if before is not None:
         assert meshlab_self_intersecting(out.vertices, out.triangles) == before
+
+
+# --------------------------------------------------------------------------- 3. a non-finite system, per hole
+
+
+def _two_holes():
+    mesh = o3d.geometry.TriangleMesh.create_icosahedron(radius=1.0).subdivide_loop(4)
+    V = np.asarray(mesh.vertices)
+    V = V / np.linalg.norm(V, axis=1, keepdims=True)
+    T = np.asarray(mesh.triangles).astype(np.int64)
+    poles = np.array([[0, 0, 1.0], [0, 0, -1.0]])
+    gone = (np.linalg.norm(V[T].mean(1)[:, None] - poles[None], axis=2) < 0.45).any(axis=1)
+    return V, T[~gone]
+
+
+def test_solve_blocks_leaves_only_the_non_finite_block():
+    from o3d_lsmesh.hole_filling import _solve_blocks
+
+    rng = np.random.default_rng(0)
+    blocks = [rng.random((3, 3)) for _ in range(3)]
+    blocks = [b @ b.T + 3 * np.eye(3) for b in blocks]
+    rhs = rng.random((9, 3))
+    matrix = np.zeros((9, 9))
+    for k, b in enumerate(blocks):
+        matrix[3 * k : 3 * k + 3, 3 * k : 3 * k + 3] = b
+    matrix[4, 5] = matrix[5, 4] = np.inf  # the middle block
+    x = _solve_blocks(matrix, rhs)
+    assert np.isnan(x[3:6]).all()
+    for k in (0, 2):
+        np.testing.assert_allclose(x[3 * k : 3 * k + 3], np.linalg.solve(blocks[k], rhs[3 * k : 3 * k + 3]))
+
+
+def test_non_finite_cotangent_system_falls_back_for_its_hole_alone(monkeypatch):
+    # dragon.ply: one hole's cotangent system was not finite and the whole call raised "matrix must have
+    # finite entries", blaming the input. Here one hole's cotangent weights are made infinite: that hole
+    # gets the uniform fill, the other the cotangent one, each as when filled alone; no error.
+    from o3d_lsmesh import hole_filling
+
+    V, T = _two_holes()
+    kernel = hole_filling._kernel()
+    original = kernel.laplacian_weights
+
+    class Poisoned:
+        def __getattr__(self, name):
+            return getattr(kernel, name)
+
+        @staticmethod
+        def laplacian_weights(tris, nv, i, j, inverse, vertices=None):
+            w, degree, scale = original(tris, nv, i, j, inverse, vertices)
+            if vertices is not None:  # the cotangent pass: infinite on the south hole's edges
+                w = np.where(vertices[i, 2] < -0.5, np.inf, w)
+            return w, degree, scale
+
+    both = fill_quietly(V, T)
+    monkeypatch.setattr(hole_filling, "_KERNEL", Poisoned())
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no warning either: both holes are filled
+        poisoned = fill_holes_arrays(V, T)
+    monkeypatch.undo()
+    uniform = fill_quietly(V, T, weights="uniform")
+    assert len(poisoned.holes) == 2 and len(poisoned.vertices) == len(both.vertices) > len(V) + 120
+    new = poisoned.vertices[len(V) :]
+    north = new[:, 2] > 0
+    np.testing.assert_allclose(new[north], both.vertices[len(V) :][north], atol=1e-12)
+    np.testing.assert_allclose(new[~north], uniform.vertices[len(V) :][~north], atol=1e-12)
+    assert np.abs(new[~north] - both.vertices[len(V) :][~north]).max() > 1e-6  # it did differ
