@@ -32,10 +32,11 @@ def main() -> int:
         o3d.utility.Vector3dVector(vertices), o3d.utility.Vector3iVector(triangles[keep])
     )
     cut = cut.remove_unreferenced_vertices()
-    plain = constrained_fairing(cut, number_of_iterations=20, smooth_boundary=False)
-    faired = constrained_fairing(cut, number_of_iterations=20, smooth_boundary=True)
+    plain = constrained_fairing(cut, 20, method="local", smooth_boundary=False)
+    faired = constrained_fairing(cut, 20, method="local", smooth_boundary=True)
     OUT.parent.mkdir(parents=True, exist_ok=True)
-    render([cut, plain, faired], OUT, width=360, height=360, view_direction=(0.0, -1.0, 0.35))
+    titles = ["open noisy input", "local fairing, boundary held", "with boundary curves faired"]
+    render([cut, plain, faired], OUT, width=360, height=360, view_direction=(0.0, -1.0, 0.35), titles=titles)
     print(f"picture: {OUT} (open noisy input | fairing, boundary held | fairing with boundary curves)")
     return 0
 
