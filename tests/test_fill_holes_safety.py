@@ -13,11 +13,12 @@ from pathlib import Path
 import numpy as np
 import open3d as o3d
 import pytest
-from conftest import REPO
+from conftest import REPO, load_mesh
 from scipy.spatial import cKDTree
+from test_fill_holes import cut_disk
 
 from o3d_lsmesh import O3DLSMeshWarning
-from o3d_lsmesh.hole_filling import _crossings, fill_holes_arrays
+from o3d_lsmesh.hole_filling import _crossings, fill_holes_arrays, find_holes
 
 SCANS = Path(os.environ.get("O3D_LSMESH_SCANS", REPO.parent / "shared" / "data" / "scans"))
 
@@ -229,3 +230,94 @@ def test_non_finite_cotangent_system_falls_back_for_its_hole_alone(monkeypatch):
     np.testing.assert_allclose(new[north], both.vertices[len(V) :][north], atol=1e-12)
     np.testing.assert_allclose(new[~north], uniform.vertices[len(V) :][~north], atol=1e-12)
     assert np.abs(new[~north] - both.vertices[len(V) :][~north]).max() > 1e-6  # it did differ
+
+
+# --------------------------------------------------------------------------- 4. the outer-border rule
+
+
+def holed_plate(nx=24, ny=10, thickness=0.5, holes=((3, 3), (8, 3), (13, 3), (18, 3)), size=3):
+    """A closed plate of unit cells with square through-holes (genus ``len(holes)``): top, bottom, walls."""
+    keep = np.ones((nx, ny), bool)
+    for hx, hy in holes:
+        keep[hx : hx + size, hy : hy + size] = False
+
+    def vid(i, j, top):
+        return 2 * (i * (ny + 1) + j) + (0 if top else 1)
+
+    grid = np.stack(np.meshgrid(np.arange(nx + 1), np.arange(ny + 1), indexing="ij"), -1).reshape(-1, 2)
+    V = np.repeat(grid, 2, axis=0).astype(float)
+    V = np.column_stack([V, np.tile([thickness, -thickness], len(grid))])
+    T = []
+    for i, j in zip(*np.nonzero(keep)):
+        corners = [(i, j), (i + 1, j), (i + 1, j + 1), (i, j + 1)]
+        t = [vid(*x, True) for x in corners]
+        b = [vid(*x, False) for x in corners]
+        T += [[t[0], t[1], t[2]], [t[0], t[2], t[3]], [b[0], b[2], b[1]], [b[0], b[3], b[2]]]
+        for k, (di, dj) in enumerate(((0, -1), (1, 0), (0, 1), (-1, 0))):  # walls facing a gap
+            ii, jj = i + di, j + dj
+            if 0 <= ii < nx and 0 <= jj < ny and keep[ii, jj]:
+                continue
+            p, q = corners[k], corners[(k + 1) % 4]
+            T += [
+                [vid(*q, True), vid(*p, True), vid(*p, False)],
+                [vid(*q, True), vid(*p, False), vid(*q, False)],
+            ]
+    T = np.array(T, dtype=np.int64)
+    used, T = np.unique(T, return_inverse=True)
+    return V[used], T.reshape(-1, 3)
+
+
+def area(V, T):
+    return 0.5 * np.linalg.norm(np.cross(V[T[:, 1]] - V[T[:, 0]], V[T[:, 2]] - V[T[:, 0]]), axis=1).sum()
+
+
+def test_large_hole_in_a_closed_genus_four_plate_is_a_hole_and_filled():
+    # a closed genus-4 model with a long hole of 11% of its area was taken for a scan's silhouette (its
+    # perimeter squared above 4 times the area left) and left open without a word
+    V, T = holed_plate()
+    chi = (
+        len(V)
+        - len(np.unique(np.sort(np.concatenate([T[:, [0, 1]], T[:, [1, 2]], T[:, [2, 0]]]), 1), axis=0))
+        + len(T)
+    )
+    assert chi == 2 - 2 * 4
+    centre = V[T].mean(1)
+    slot = (centre[:, 2] > 0.4) & (np.abs(centre[:, 0] - 12) < 10) & (centre[:, 1] > 7)  # 20 x 3 cells on top
+    cut = T[~slot]
+    fraction = 1 - area(V, cut) / area(V, T)
+    assert 0.08 < fraction < 0.2
+    holes = find_holes(V, cut)
+    assert len(holes) == 1 and not holes[0].border
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        out = fill_holes_arrays(V, cut)
+    assert [h.filled for h in out.report.holes] == [True]
+    assert added_crossings(out.vertices, out.triangles, len(cut)) == 0
+
+
+def test_a_hole_in_eight_is_not_its_border():
+    # genus 2, closed: a 6h geodesic hole was taken for the outer border
+    mesh = load_mesh("eight.ply")
+    V, T = np.asarray(mesh.vertices), np.asarray(mesh.triangles).astype(np.int64)
+    _, cut, _ = cut_disk(V, T, 0, 6 * np.linalg.norm(V[T[:, 0]] - V[T[:, 1]], axis=1).mean())
+    holes = find_holes(V, cut)
+    assert len(holes) == 1 and not holes[0].border
+
+
+def test_every_raw_scan_silhouette_stays_the_border():
+    scans = sorted(SCANS.glob("*.ply"))
+    if not scans:
+        pytest.skip(f"no raw scans in {SCANS} (set O3D_LSMESH_SCANS)")
+    for path in scans:
+        mesh = o3d.io.read_triangle_mesh(str(path))
+        V, T = np.asarray(mesh.vertices), np.asarray(mesh.triangles).astype(np.int64)
+        holes = find_holes(V, T)
+        longest = max(holes, key=lambda hole: hole.perimeter)
+        assert longest.border, path.name
+        # each large component (a tenth of the area or more) keeps its silhouette open
+        sizes = np.bincount([h.component for h in holes], weights=[h.perimeter for h in holes])
+        for hole in holes:
+            if sizes[hole.component] > 0.1 * sizes.max() and hole.perimeter == max(
+                h.perimeter for h in holes if h.component == hole.component
+            ):
+                assert hole.border, (path.name, hole.component)
