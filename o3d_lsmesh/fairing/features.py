@@ -104,6 +104,10 @@ class FaceAdjacency(NamedTuple):
         Row and column of each entry of ``ring``.
     pairs : (p, 2) int64
         Faces sharing an edge (an edge of ``k > 2`` faces gives ``k - 1`` pairs).
+    edges : (e, 2)
+        The mesh's edges (:func:`~o3d_lsmesh.topology.edge_structure`), ``lo < hi``, sorted.
+    pair_edge : (p,) int64
+        The edge each pair shares.
     """
 
     incidence: sp.csr_matrix
@@ -111,6 +115,8 @@ class FaceAdjacency(NamedTuple):
     rows: np.ndarray
     cols: np.ndarray
     pairs: np.ndarray
+    edges: np.ndarray
+    pair_edge: np.ndarray
 
 
 def face_adjacency(triangles: np.ndarray, n: int) -> FaceAdjacency:
@@ -127,7 +133,7 @@ def face_adjacency(triangles: np.ndarray, n: int) -> FaceAdjacency:
     follows = np.flatnonzero(~run_heads(group))
     half = es.order.astype(np.int64)
     pairs = np.stack([half[follows - 1] % m, half[follows] % m], axis=1)
-    return FaceAdjacency(incidence, ring, rows, ring.indices.astype(np.intp), pairs)
+    return FaceAdjacency(incidence, ring, rows, ring.indices.astype(np.intp), pairs, es.edges, group[follows])
 
 
 def face_normals(vertices: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -288,12 +294,19 @@ def feature_denoise(
     """
     n = len(vertices)
     passes = feature_passes(vertices, triangles) if passes is None else passes
+    if passes == 0:
+        return np.array(vertices, dtype=np.float64)
     adjacency = face_adjacency(triangles, n)
     patch_edges = _patch_edges(adjacency) if guided else None
-    x = np.array(vertices, dtype=np.float64)
+    # about the centroid: the planes' offsets n_f . c_f do not carry the distance to the origin
+    used = np.bincount(triangles.ravel(), minlength=n) > 0
+    centre = vertices[used].mean(axis=0)
+    x = vertices - centre
     for _ in iterate(progress, range(passes), desc="constrained fairing (features)"):
         normals = filter_pass(x, triangles, adjacency, patch_edges, sigma_r=sigma_r, guided=guided)
         x = normal_steps(x, triangles, normals, incidence=adjacency.incidence)
+    x += centre
+    x[~used] = vertices[~used]  # exactly where they were
     return x
 
 
@@ -321,14 +334,11 @@ def detect_creases_arrays(
     if passes is not None:
         passes = as_count(passes, name="passes")
     normals = face_normals(feature_denoise(vertices, triangles, passes=passes), triangles)[0]
-    m = len(triangles)
-    es = edge_structure(triangles, len(vertices))
-    group = np.repeat(np.arange(len(es.counts)), es.counts)
-    follows = np.flatnonzero(~run_heads(group))
-    half = es.order.astype(np.int64)
-    cosine = np.einsum("ij,ij->i", normals[half[follows - 1] % m], normals[half[follows] % m])
-    sharp = np.unique(group[follows[cosine < np.cos(np.radians(angle))]])
-    return es.edges[sharp].astype(np.int64)
+    adjacency = face_adjacency(triangles, len(vertices))
+    pairs = adjacency.pairs
+    cosine = np.einsum("ij,ij->i", normals[pairs[:, 0]], normals[pairs[:, 1]])
+    sharp = np.unique(adjacency.pair_edge[cosine < np.cos(np.radians(angle))])
+    return adjacency.edges[sharp].astype(np.int64)
 
 
 def detect_creases(mesh: MeshT, *, angle: float = CREASE_ANGLE, passes: int | None = None) -> np.ndarray:
