@@ -40,6 +40,7 @@ from o3d_lsmesh.fairing.scan_fairing import (
     scan_parameters,
     scan_system,
 )
+from o3d_lsmesh.topology import boundary_halfedges
 
 SCANS = Path(os.environ.get("O3D_LSMESH_SCANS", REPO.parent / "shared" / "data" / "scans"))
 TIGHT = 1e-9
@@ -778,3 +779,42 @@ def test_every_raw_scan_gets_closer_to_the_reference_surface():
         raw = mean_distance(V[used])
         ours = mean_distance(constrained_fairing_arrays(V, F, None, method=None)[used])
         assert ours < SCAN_IMPROVEMENT * raw, f"{path.name}: {ours * 1e6:.1f} um vs raw {raw * 1e6:.1f} um"
+
+
+SCANS_DRAGON = Path(
+    os.environ.get("O3D_LSMESH_SCANS_DRAGON", REPO.parent / "shared" / "data" / "scans-dragon")
+)
+
+
+def test_a_dragon_scan_keeps_its_fine_detail_and_gets_no_slivers():
+    # the dragon's detail is finer against the scanner's sampling than the bunny's: one of its 16 scans, whose
+    # interior the default of 2026-12-03 left further from the truth than the scan (117.9 vs 116.6 um), with
+    # 216 slivers
+    path, reference = SCANS_DRAGON / "dragonUpRight_288.ply", DATA / "dragon.ply"
+    if not path.exists() or not reference.exists():
+        pytest.skip(
+            f"{path.name} not in {SCANS_DRAGON} (set O3D_LSMESH_SCANS_DRAGON) or dragon.ply not in {DATA}"
+        )
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.t.geometry.TriangleMesh.from_legacy(o3d.io.read_triangle_mesh(str(reference))))
+
+    def distance(points):
+        return scene.compute_distance(o3d.core.Tensor(points.astype(np.float32))).numpy().mean()
+
+    V, F = arrays(o3d.io.read_triangle_mesh(str(path)))
+    n = len(V)
+    ring = sp.csr_matrix((np.ones(F.size), (F.ravel(), np.roll(F, 1, axis=1).ravel())), shape=(n, n))
+    near = np.zeros(n, dtype=bool)
+    near[boundary_halfedges(F, n).ravel()] = True
+    for _ in range(2):
+        near |= (ring + ring.T) @ near.astype(float) > 0
+    interior = np.isin(np.arange(n), F) & ~near  # three or more edges from the rim
+    out = constrained_fairing_arrays(V, F, None, method=None)
+    used = np.unique(F)
+    assert distance(out[used]) < 0.9 * distance(V[used])  # measured 0.84
+    assert distance(out[interior]) <= distance(V[interior])
+
+    def slivers(X):
+        return int((scan_fairing.triangle_quality(X, F) < SLIVER_QUALITY).sum())
+
+    assert slivers(out) <= max(25, slivers(V))
