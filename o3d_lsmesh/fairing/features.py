@@ -84,7 +84,7 @@ __all__ = [
 SIGMA_R = 0.35
 #: Filter passes per unit of measured noise (in mean edge lengths), rounded (chosen on the sharp
 #: benchmark meshes, scored leave-one-mesh-out: benchmarks/results/features_denoise.md).
-PASSES_PER_NOISE = 40.0
+PASSES_PER_NOISE = 60.0
 #: Vertex steps after each filter pass (the reference implementation's count).
 VERTEX_STEPS = 10
 #: Angle (degrees) between the denoised normals of two faces on an edge above which it is a crease.
