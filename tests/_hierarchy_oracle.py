@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 
+from o3d_lsmesh.hierarchy.collapse import FAR, TIE
 from o3d_lsmesh.topology import nonmanifold_edges, nonmanifold_vertices
 
 
@@ -69,9 +70,15 @@ def collapse_level(
     max_normal_angle=60.0,
     min_quality=1e-3,
     max_tries=3,
+    first=None,
 ):
-    """``(removed, targets, ring_offsets, ring, parent, triangles)`` of one level, or ``None``."""
+    """``(removed, targets, ring_offsets, ring, parent, triangles)`` of one level, or ``None``. ``first``: a dict
+    holding the first level's mean candidate edge length and centroid (``"scale"``, ``"centre"``), filled
+    from this level when empty."""
     n = len(V)
+    first = {} if first is None else first
+    first.setdefault("centre", np.asarray(V, dtype=float).mean(axis=0))
+    centre = first["centre"]
     cos_sq = float(np.cos(np.deg2rad(max_normal_angle)) ** 2) if max_normal_angle < 90 else 0.0
     max_removals = n if max_removals is None else max_removals
     P = np.asarray(V, dtype=float).tolist()
@@ -93,14 +100,36 @@ def collapse_level(
         dx, dy, dz = P[u][0] - P[v][0], P[u][1] - P[v][1], P[u][2] - P[v][2]
         return math.sqrt(dx * dx + dy * dy + dz * dz)
 
-    cost = {}
+    cost, spread, total, summed = {}, {}, 0.0, 0
     for v in range(n):
         if ring[v] and not lock[v]:
             lengths = [length(v, u) for u in ring[v]]
             cost[v] = alpha * min(lengths) + beta * max(lengths)
+            spread[v] = 0.0
+            for u in ring[v]:
+                dx, dy, dz = P[u][0] - P[v][0], P[u][1] - P[v][1], P[u][2] - P[v][2]
+                spread[v] += dx * dx + dy * dy + dz * dz
+            for d in lengths:
+                total, summed = total + d, summed + 1
+    scale = first.setdefault("scale", total / summed if summed else 0.0)
+    unit, square = scale * TIE, scale * scale * TIE
+    candidates = sorted(cost)
+    offset = np.asarray(V, dtype=float)[candidates] - centre
+    far = dict(zip(candidates, (offset * offset).sum(axis=1).tolist()))
+    # by cost, ring spread and distance to the centroid in TIE units, then index: the geometry's order
+    order = sorted(
+        candidates,
+        key=lambda v: (
+            round(cost[v] / unit),
+            round(spread[v] / square),
+            round(far[v] / (scale * scale * FAR)),
+            v,
+        ),
+    )
+    rank = {v: i for i, v in enumerate(order)}
     touched = [False] * n
     target = {}
-    for x in sorted(cost, key=lambda v: (np.float32(cost[v]), v)):  # the kernel sorts float costs
+    for x in order:
         if len(target) >= max_removals:
             break
         if touched[x]:
@@ -112,7 +141,9 @@ def collapse_level(
             sx += ay * bz - az * by
             sy += az * bx - ax * bz
             sz += ax * by - ay * bx
-        options = []  # (volume, length, k) of the allowed edges, in ring order
+        height = math.sqrt(sx * sx + sy * sy + sz * sz) * unit
+        height = height if height > 0.0 else 1.0
+        options = []  # (volume, length, k) of the allowed edges in units, in ring order
         for k in ring[x]:
             c = count[x][k]
             if lock[k]:
@@ -123,14 +154,13 @@ def collapse_level(
             elif c != 2 or (len(ring[x]) == 3 and len(ring[k]) == 3 and not boundary[k]):
                 continue  # only along an interior edge; not a closed tetrahedron
             dx, dy, dz = P[k][0] - P[x][0], P[k][1] - P[x][1], P[k][2] - P[x][2]
-            options.append((abs(sx * dx + sy * dy + sz * dz), length(x, k), k))
+            options.append((round(abs(sx * dx + sy * dy + sz * dz) / height), round(length(x, k) / unit), k))
         chosen = None
         for _ in range(max_tries):
             if not options:
                 break
-            threshold = min(o[0] for o in options) * (1.0 + 1e-9)
-            near = [o for o in options if o[0] <= threshold]
-            best = min(near, key=lambda o: o[1])  # min keeps the first of equal lengths
+            least = min(o[0] for o in options)
+            best = min((o for o in options if o[0] == least), key=lambda o: (o[1], rank[o[2]]))
             k = best[2]
             if touched[k]:
                 break  # a touched target ends the search
@@ -180,10 +210,10 @@ def hierarchy(V, F, *, min_vertices=100, max_levels=None, **options):
     locked = locked_vertices(F, len(V))
     reps = np.arange(len(V))
     levels = []
-    triangles = F
+    triangles, first = F, {}
     while (max_levels is None or len(levels) < max_levels) and len(reps) > min_vertices:
         level = collapse_level(
-            V[reps], triangles, locked[reps], max_removals=len(reps) - min_vertices, **options
+            V[reps], triangles, locked[reps], max_removals=len(reps) - min_vertices, first=first, **options
         )
         if level is None:
             break

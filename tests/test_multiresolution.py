@@ -6,6 +6,7 @@ import numpy as np
 import open3d as o3d
 import pytest
 import scipy.linalg
+import scipy.spatial.transform
 from conftest import grid
 
 from o3d_lsmesh.fairing.multiresolution import multiresolution_fairing
@@ -423,3 +424,21 @@ def test_equals_the_method_assembled_from_plain_pieces(rippled, mesh, method, k,
         boundary = [v for v, rim in enumerate(_plain_rings(F, len(V))[1]) if rim]
         assert len(boundary) > 20 and np.abs(out[boundary] - V[boundary]).max() > 1e-3
     np.testing.assert_allclose(out, expected, rtol=0, atol=1e-12)
+
+
+def test_result_is_equivariant_under_reordering_and_rigid_motion():
+    # a range scan's grid: rows of identical rings and coordinates in fixed decimals tie the collapse order
+    # exactly (before: 0.14% of the size moved by a reordering or a rigid motion here, 0.35% on bun000)
+    V, F = grid(30, 30, z=lambda x, y: 0.2 * np.sin(3 * x) * np.cos(2 * y))
+    V = np.round(V, 4)
+    size = np.linalg.norm(V.max(axis=0) - V.min(axis=0))
+    base = np.asarray(multiresolution_fairing((V, F), 2)[0])
+    order = np.random.default_rng(1).permutation(len(V))
+    inverse = np.argsort(order)
+    shuffled = inverse[F][np.random.default_rng(2).permutation(len(F))]
+    reordered = np.asarray(multiresolution_fairing((V[order], shuffled), 2)[0])[inverse]
+    rotation = scipy.spatial.transform.Rotation.from_euler("xyz", [0.3, -0.7, 1.1]).as_matrix()
+    shift = np.array([3.0, -2.0, 5.0])
+    moved = (np.asarray(multiresolution_fairing((V @ rotation.T + shift, F), 2)[0]) - shift) @ rotation
+    assert np.abs(reordered - base).max() < 1e-12 * size
+    assert np.abs(moved - base).max() < 1e-12 * size

@@ -2,10 +2,11 @@
 """Levels of the volume-cost hierarchy (Liu et al. 2001, section 4.1): one sequential loop, like OpenMesh's
 ``DecimaterT``; ``tests/_hierarchy_oracle.py`` is this loop in plain Python (same arithmetic, same levels).
 
-The loop visits the unlocked vertices in increasing ``cost(x) = alpha * min_edge(x) + beta * max_edge(x)`` (ties
-by index), skipping ``x`` in the closed 1-ring of a vertex removed in this level. ``x`` tries its neighbours ``k``
-in increasing cone volume ``|N_x . (x_k - x)|`` (``N_x``: the summed doubled-area normals around ``x``; ties
-within a relative 1e-9 to the shortest edge, then the first by index), at most ``max_tries``; a ``k`` in such a
+The loop visits the unlocked vertices in increasing ``cost(x) = alpha * min_edge(x) + beta * max_edge(x)``, ties
+by ring spread, then index (:func:`visiting_order`), skipping ``x`` in the closed 1-ring of a vertex removed in
+this level. ``x`` tries its neighbours ``k`` in increasing cone volume ``|N_x . (x_k - x)|`` (``N_x``: the summed
+doubled-area normals around ``x``; compared as heights over x's plane in :data:`TIE` units, ties to the shortest
+edge in those units, then the first visited), at most ``max_tries``; a ``k`` in such a
 closed 1-ring ends the search. A collapse reads the 1-rings of ``x`` and ``k`` and changes only those of
 ``N(x)``: every collapse stays valid and the removed vertices are pairwise non-adjacent (as
 :meth:`MeshHierarchy.refine` needs). ``x`` collapses into the first ``k`` for which
@@ -22,8 +23,8 @@ several-fan vertices; every other star is a disk or half-disk, and every level k
 
 import numpy as np
 
-from libc.math cimport INFINITY, fabs, sqrt
-from libc.stdint cimport int32_t, int64_t, uint8_t, uint32_t, uint64_t
+from libc.math cimport INFINITY, fabs, rint, sqrt
+from libc.stdint cimport int32_t, int64_t, uint8_t
 from libc.string cimport memset
 
 cdef enum: LOCKED = 1, BOUNDARY = 2, TOUCHED = 4  # TOUCHED: in the closed 1-ring of a vertex removed in this level
@@ -77,6 +78,50 @@ cdef bint _legal(const double* p, const Vertex* V, const int32_t* pair, const in
         i, l = i + (ring[i] <= ring[l]), l + (ring[l] <= ring[i])
     return common == mult[2 * V[x].start + e]  # link condition: only the edge's opposite vertices in common
 
+#: Lengths are compared in units of this fraction of the input's mean edge length ``h``, squared lengths in
+#: ``TIE h^2``: values the mesh's own rounding makes equal (a scan's coordinates in fixed decimals: a fifth of
+#: its costs tied exactly, rows of identical rings) stay equal after a rigid motion (about 1e-12 of an edge).
+TIE = 2.0 ** -20
+#: Squared distances to the centroid (a last tie-break, between copies of one ring along a scanline: an edge or
+#: more apart) in units of this fraction of ``h^2``: 10M-vertex meshes' fit in one word with their runs.
+FAR = 2.0 ** -8
+
+
+def _far(positions, vertices, centre):
+    offset = np.asarray(positions)[vertices] - centre
+    return (offset * offset).sum(axis=1)
+
+
+def visiting_order(costs, spreads, candidates, positions, centre, double h):
+    """The candidates' visiting order (indices into them): by cost, then ring spread (the sum of squared edge
+    lengths), in :data:`TIE` units of the mean edge length ``h``, then squared distance to the input's
+    centroid ``centre`` (rows of identical rings; :data:`FAR` units), then index: a rule of the geometry alone,
+    which reordering and rigid motions keep (up to ties in all four, or a value within 1e-12 of an edge of a
+    unit's boundary)."""
+    q = h * h * TIE
+    cost, spread = np.rint(costs / (h * TIE)), np.rint(spreads / q)
+    if cost.size == 0 or max(cost.max(), spread.max()) >= 2.0**32:  # past 4096 mean edges: the general sort
+        return np.lexsort((candidates, np.rint(_far(positions, candidates, centre) / (h * h * FAR)), spread, cost))
+    key = cost.astype(np.uint64) << np.uint64(32) | spread.astype(np.uint64)  # both in one word: one fast sort
+    order = np.argsort(key, kind="stable")  # the candidates ascend: ties by index
+    key = key[order]
+    same = key[1:] == key[:-1]
+    if same.any():  # rows of identical rings: their members re-sorted within their run by distance, then index
+        tied = np.zeros(len(key), dtype=bool)
+        tied[1:] = same
+        tied[:-1] |= same
+        members = np.flatnonzero(tied)
+        sub = order[members]
+        run = np.cumsum(np.r_[True, key[members][1:] != key[members][:-1]]).astype(np.uint64)
+        distance = np.rint(_far(positions, candidates[sub], centre) / (h * h * FAR))
+        if distance.max() < 2.0 ** (64 - int(run[-1]).bit_length()):  # run and distance in one word: one sort
+            run = run << np.uint64(64 - int(run[-1]).bit_length()) | distance.astype(np.uint64)
+            order[members] = sub[np.argsort(run, kind="stable")]
+        else:
+            order[members] = sub[np.lexsort((sub, distance, run))]
+    return order
+
+
 def collapse_levels(vertices, triangles, *, double alpha=1.0, double beta=0.01, Py_ssize_t min_vertices=0,
                     max_levels=None, double max_normal_angle=60.0, double min_quality=1e-3, int max_tries=3,
                     report=None):
@@ -98,8 +143,14 @@ def collapse_levels(vertices, triangles, *, double alpha=1.0, double beta=0.01, 
     cdef int32_t[:, ::1] vertex = _empty((n + 1, 4), np.int32), order = _empty((2, n + 1), np.int32)
     cdef int32_t[::1] pair = _empty(6 * m, np.int32), ring = _empty(6 * m, np.int32)
     cdef uint8_t[::1] mult = _empty(6 * m, np.uint8)  # triangles on each ring edge (at most 255 counted)
-    keys = _empty(n + 1, np.uint64)  # the candidates: cost rounded to float (its bits), then index
-    cdef uint64_t[::1] key = keys
+    # the candidates, their costs and ring spreads (sums of squared edge lengths), their visiting ranks
+    costs, spreads, candidates = _empty(n + 1, np.float64), _empty(n + 1, np.float64), _empty(n + 1, np.int32)
+    ranks = _empty(n + 1, np.int32)
+    cdef double[::1] cost = costs, spread = spreads
+    cdef int32_t[::1] candidate = candidates, key, rank = ranks
+    cdef double scale = 0.0, unit = 1.0  # the mean edge length (at the first level), its TIE
+    centre = np.asarray(positions).mean(axis=0) if n else np.zeros(3)  # the input's centroid
+    cdef Py_ssize_t summed = 0
     cdef double[:, ::1] edge = np.empty((3, n + 1))  # the visited vertex's edges
     cdef int64_t[::1] kept = np.arange(n, dtype=np.int64), removed, target, offsets, flat, parent
     cdef int64_t[:, ::1] out
@@ -107,8 +158,7 @@ def collapse_levels(vertices, triangles, *, double alpha=1.0, double beta=0.01, 
     cdef int32_t* root = &order[0, 0]
     cdef double* p = &positions[0, 0] if n else NULL
     cdef int32_t v, x, k, best, j, s, r, c, e, deg, attempt
-    cdef double d, lo, hi, least, normal[3], a[3], b[3], cross[3]
-    cdef float cost
+    cdef double d, lo, hi, least, height, normal[3], a[3], b[3], cross[3]
     levels = []
     while selected:
         m, depth = T.shape[0], len(levels)
@@ -154,30 +204,36 @@ def collapse_levels(vertices, triangles, *, double alpha=1.0, double beta=0.01, 
                     if V[v].valence == 0 or deg > 1 or V[v].flags & LOCKED:
                         lock[v], V[v].flags = 1, V[v].flags | LOCKED
                 if V[v].valence and not V[v].flags & LOCKED:  # cost(v) (section 4.1)
-                    lo, hi = INFINITY, 0.0
+                    lo, hi, spread[count] = INFINITY, 0.0, 0.0
                     for j in range(s, s + V[v].valence):
                         _edge(p, ring[j], v, a)
+                        spread[count] += _dot(a, a)
                         d = sqrt(_dot(a, a))
                         lo, hi = min(lo, d), max(hi, d)
-                    cost = alpha * lo + beta * hi
-                    key[count], count = (<uint64_t> (<uint32_t*> &cost)[0]) << 32 | v, count + 1
+                        if depth == 0:
+                            scale, summed = scale + d, summed + 1
+                    cost[count], candidate[count], count = alpha * lo + beta * hi, v, count + 1
         if depth == max_levels or n <= min_vertices:
             break
-        keys[:count].sort()  # the visiting order; <int32_t> key[i] below is the vertex (the low bits)
+        if depth == 0 and summed:  # the mean edge length around the candidates: a scale rigid motions keep
+            scale /= summed
+            unit = scale * TIE
+        key = candidates[visiting_order(costs[:count], spreads[:count], candidates[:count], positions, centre, scale)]
+        ranks[key] = np.arange(count, dtype=np.int32)
         with nogil:
             selected = total = 0
             memset(&order[1, 0], -1, n * sizeof(int32_t))  # the targets
             for i in range(count):
                 if selected >= n - min_vertices:
                     break
-                x = <int32_t> key[min(i + 16, count - 1)]  # the visit goes all over memory: ask early, step by step
+                x = key[min(i + 16, count - 1)]  # the visit goes all over memory: ask early, step by step
                 prefetch(&V[x]); prefetch(&p[3 * x])
-                x = <int32_t> key[min(i + 8, count - 1)]
+                x = key[min(i + 8, count - 1)]
                 prefetch(&ring[2 * V[x].start]); prefetch(&pair[2 * V[x].start])
-                x = <int32_t> key[min(i + 4, count - 1)]  # unless touched already: its neighbours
+                x = key[min(i + 4, count - 1)]  # unless touched already: its neighbours
                 for j in range(2 * V[x].start, 2 * V[x].start + V[x].valence * (not V[x].flags & TOUCHED)):
                     prefetch(&V[ring[j]]); prefetch(&p[3 * ring[j]])
-                x = <int32_t> key[i]
+                x = key[i]
                 s, deg, best = 2 * V[x].start, V[x].valence, -1
                 if V[x].flags & TOUCHED:
                     continue  # the independence rule
@@ -185,20 +241,23 @@ def collapse_levels(vertices, triangles, *, double alpha=1.0, double beta=0.01, 
                 for j in range(s, s + 2 * V[x].corners, 2):
                     _cross(p, pair[j], pair[j + 1], x, a, b, cross)
                     normal[0], normal[1], normal[2] = normal[0] + cross[0], normal[1] + cross[1], normal[2] + cross[2]
+                height = sqrt(_dot(normal, normal)) * unit  # cone volumes as heights over x's plane, in units
+                height = height if height > 0.0 else 1.0
                 for e in range(deg):  # allowed edges, their cone volume |N_x . (x_k - x)| and length
                     k = ring[s + e]  # k unlocked; a boundary x along the boundary; no lone triangle or tetrahedron
                     edge[2, e] = not (V[k].flags & LOCKED or (V[x].flags & BOUNDARY and mult[s + e] != 1) or (
                         deg == V[k].valence == (2 if V[x].flags & BOUNDARY else 3)
                         and (V[k].flags & BOUNDARY) == (V[x].flags & BOUNDARY)))
                     _edge(p, k, x, a)
-                    edge[0, e], edge[1, e] = fabs(_dot(normal, a)), sqrt(_dot(a, a))
-                for attempt in range(max_tries):  # least volume (within 1e-9), then shortest, then first
+                    edge[0, e], edge[1, e] = rint(fabs(_dot(normal, a)) / height), rint(sqrt(_dot(a, a)) / unit)
+                for attempt in range(max_tries):  # least volume, then shortest (both in units), then first visited
                     best, least, d = -1, INFINITY, INFINITY
                     for e in range(deg):
                         if edge[2, e] and edge[0, e] < least:
                             least = edge[0, e]
                     for e in range(deg):
-                        if edge[2, e] and edge[0, e] <= least * (1.0 + 1e-9) and edge[1, e] < d:
+                        if edge[2, e] and edge[0, e] == least and (edge[1, e] < d or (
+                                edge[1, e] == d and rank[ring[s + e]] < rank[ring[s + best]])):
                             d, best = edge[1, e], e
                     if best >= 0 and V[ring[s + best]].flags & TOUCHED:
                         best = -1  # a touched target ends the search: the independence rule
