@@ -273,13 +273,16 @@ def has_textures(mesh: Any) -> bool:
     return any(not texture.is_empty() for texture in mesh.textures)
 
 
-def _dropped(data: MeshData) -> list[str]:
-    """Names of the source's attributes that a result with new connectivity cannot keep."""
+def _dropped(data: MeshData, *, normals: bool = False) -> list[str]:
+    """Names of the source's attributes that a result with new connectivity cannot keep (``normals``: its
+    normals too, for results that do not recompute them)."""
     src = data.source
     if src is None or data.kind == "arrays":
         return []
     if data.kind == "legacy":
         checks = (
+            ("vertex normals", normals and src.has_vertex_normals()),
+            ("triangle normals", normals and src.has_triangle_normals()),
             ("vertex colors", src.has_vertex_colors()),
             ("triangle UVs", src.has_triangle_uvs()),
             ("triangle material ids", src.has_triangle_material_ids()),
@@ -287,23 +290,26 @@ def _dropped(data: MeshData) -> list[str]:
         )
         return [label for label, present in checks if present]
     return [
-        f"{group} attribute {key!r}"
+        f"{group} normals" if key == "normals" else f"{group} attribute {key!r}"
         for group, own in _OWN_KEYS.items()
         for key in getattr(src, group)
-        if key not in own
+        if key not in own or (normals and key == "normals")
     ]
 
 
-def warn_dropped_attributes(data: MeshData, reason: str, *, stacklevel: int = 3) -> bool:
+def warn_dropped_attributes(
+    data: MeshData, reason: str, *, stacklevel: int = 3, normals: bool = False
+) -> bool:
     """Warn once (:class:`~o3d_lsmesh.O3DLSMeshWarning`) if ``data``'s source has attributes a new connectivity drops.
 
     For functions whose results have new triangles but are not built by
     :func:`new_mesh` from ``data`` (hierarchy levels): call it once per call
     with the reason, e.g. ``"hierarchy levels have new connectivity"``.
     Returns whether it warned. ``stacklevel=3`` points at the caller of the
-    public function that calls this.
+    public function that calls this. ``normals=True``: the results carry no
+    normals (they are not recomputed), so the source's are named as well.
     """
-    dropped = _dropped(data)
+    dropped = _dropped(data, normals=normals)
     if dropped:
         warnings.warn(
             f"{reason}: {', '.join(dropped)} of the input cannot follow it and were dropped",

@@ -761,3 +761,29 @@ def test_triangle_soups_keep_their_topology_and_equal_the_oracle(soup, seed):
     for i in range(len(h)):
         assert oracle.topology(h.triangles[i], h.vertex_count(i), h.representatives[i]) == expected
     _assert_levels_equal(h, oracle.hierarchy(V, F, min_vertices=0))
+
+
+@pytest.mark.parametrize("kind", ["legacy", "tensor"])
+@pytest.mark.parametrize("builder", ["volume", "fast"])
+def test_levels_warn_that_the_input_normals_are_dropped(kind, builder):
+    import warnings
+
+    from o3d_lsmesh import O3DLSMeshWarning
+
+    if builder == "fast":
+        pytest.importorskip("fast_simplification")
+    sphere = o3d.geometry.TriangleMesh.create_sphere(resolution=12)
+    build = (
+        (lambda m: build_hierarchy(m, min_vertices=30)) if builder == "volume" else from_fast_simplification
+    )
+    plain = sphere if kind == "legacy" else o3d.t.geometry.TriangleMesh.from_legacy(sphere)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", O3DLSMeshWarning)  # no normals: nothing to say
+        build(plain)
+    with_normals = o3d.geometry.TriangleMesh(sphere).compute_vertex_normals()
+    if kind == "tensor":
+        with_normals = o3d.t.geometry.TriangleMesh.from_legacy(with_normals)
+    with pytest.warns(O3DLSMeshWarning, match="hierarchy levels have new connectivity: vertex normals"):
+        levels = build(with_normals)
+    coarse = levels.level(len(levels) - 1)
+    assert not (coarse.has_vertex_normals() if kind == "legacy" else "normals" in coarse.vertex)

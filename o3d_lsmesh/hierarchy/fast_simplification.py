@@ -129,7 +129,7 @@ def from_fast_simplification(
     agg = as_positive_float(agg, name="agg", allow_zero=True)
     progress = check_progress(progress)
     data = read_mesh(mesh)
-    warn_dropped_attributes(data, "hierarchy levels have new connectivity")
+    warn_dropped_attributes(data, "hierarchy levels have new connectivity", normals=True)
     V, F = data.vertices, data.triangles
     n0, m0 = len(V), len(F)
     if n0 < 5:

@@ -488,7 +488,7 @@ def build_hierarchy(
     """
     _warn_workers(workers)
     data = read_mesh(mesh)  # any mesh: non-manifold, unreferenced vertices
-    warn_dropped_attributes(data, "hierarchy levels have new connectivity")
+    warn_dropped_attributes(data, "hierarchy levels have new connectivity", normals=True)
     return build_hierarchy_arrays(
         data.vertices,
         data.triangles,
