@@ -11,6 +11,7 @@ from giving a wrong answer silently.
 
 from __future__ import annotations
 
+import contextlib
 import importlib
 import os
 import sys
@@ -332,6 +333,30 @@ def _splu_spd(matrix: sp.csc_matrix) -> Any:
     )
 
 
+#: Columns per SuperLU solve: its time per column on bunny_scan's normal matrix (40k unknowns) is 14 ms
+#: for one column, 6.6 ms each for four, 19-57 ms each for 6 to 32 (benchmarks/results/no_cholmod.md).
+SOLVE_COLUMNS = 4
+#: A right-hand side within this relative distance of the span of those solved before is solved from
+#: their solutions (a direct solve's own error is of the order of the condition number times 1e-16).
+RECYCLE_TOLERANCE = 1e-13
+#: Solved right-hand sides kept: greedy selection's span four (the controls' x, y and z about their
+#: centroid, which moves as anchors arrive), so its solves after the first two are recycled.
+RECYCLED = 8
+
+
+def single_threaded_blas() -> Any:
+    """BLAS limited to one thread in a ``with`` block, if threadpoolctl is installed.
+
+    Memory-bound level-2 BLAS ran 10x slower with OpenBLAS threads on two busy cores (ARPACK, camel,
+    k = 100: 22.5 s against 2.3 s); :class:`_Woodbury`'s solves took twice the CPU time (bunny_scan).
+    """
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:  # optional: without it the BLAS keeps its own thread count
+        return contextlib.nullcontext()
+    return threadpool_limits(limits=1, user_api="blas")
+
+
 class _Woodbury:
     """A kept ``splu`` of ``B`` solving ``B + C C^T`` (the SciPy path's rank-k updates; Woodbury's identity)::
 
@@ -343,7 +368,8 @@ class _Woodbury:
     bases paper's ``w = 10 n``, against 1e-14 this way; columns with large entries on several rows keep
     a backward error of about 1e-9 at entries 1e4 times the matrix's). The capacitance
     ``I + C^T Z`` (SPD) is held by its Cholesky factor, extended by a block per update; an update's
-    columns are base-solved along with the next right-hand side (one SuperLU call). :attr:`work`
+    columns are base-solved along with the next right-hand side, of which only the part outside the
+    span of those solved before is solved (:meth:`_recycle`; one SuperLU call). :attr:`work`
     counts the multiply-adds the correction has cost (its columns' base solves, the products with
     ``Z``), :attr:`factor_work` those of the factorization (``sum_j |L_j|^2``): the owner refactors
     once the first reaches the second, at most twice the cost of the best fixed refactoring period.
@@ -360,6 +386,7 @@ class _Woodbury:
         self._z = np.empty((n, 0), order="F")  # capacity doubles: Z is its leading columns
         self._rank = 0  # columns with their Z and capacitance rows
         self._cholesky = np.empty((0, 0))
+        self._basis, self._solved = np.zeros((n, 0)), np.zeros((n, 0))  # see _recycle
         self.work = 0.0
 
     def affords(self, columns: int) -> bool:
@@ -383,22 +410,50 @@ class _Woodbury:
     def solve(self, b: np.ndarray) -> np.ndarray:
         """``(B + C C^T)^-1 b`` for an ``(n,)`` or ``(n, m)`` ``b``; ``numpy.linalg.LinAlgError`` if the
         capacitance is not numerically SPD (the owner refactors)."""
+        with single_threaded_blas():  # SuperLU's small supernodal BLAS calls, Z's thin products
+            return self._solve(b)
+
+    def _solve(self, b: np.ndarray) -> np.ndarray:
         vector = b.ndim == 1
         b = b[:, None] if vector else b
         k, m, C = self._rank, b.shape[1], self._columns
         d = self._shares[:, None] * b[self._pivots]
-        new = C[:, k:]
-        rhs = np.empty((len(b), m + new.shape[1]), order="F")
-        rhs[:, :m] = b - C @ d
-        rhs[:, m:] = new.toarray()
-        y = self._lu.solve(rhs)
+        rest = b - C @ d
+        # only the part of rest outside the span of the right-hand sides solved before needs a solve
+        coefficients = self._basis.T @ rest
+        residual = rest - self._basis @ coefficients
+        fresh = np.linalg.norm(residual, axis=0) > RECYCLE_TOLERANCE * np.linalg.norm(rest, axis=0)
+        new, f = C[:, k:], int(fresh.sum())
+        rhs = np.empty((len(b), f + new.shape[1]), order="F")
+        rhs[:, :f] = residual[:, fresh]
+        rhs[:, f:] = new.toarray()
+        solved = np.empty_like(rhs)
+        for begin in range(0, rhs.shape[1], SOLVE_COLUMNS):
+            solved[:, begin : begin + SOLVE_COLUMNS] = self._lu.solve(rhs[:, begin : begin + SOLVE_COLUMNS])
+        y = self._solved @ coefficients
+        y[:, fresh] += solved[:, :f]
+        self._recycle(rhs[:, :f], solved[:, :f])
         if new.shape[1]:
-            self._extend(new, y[:, m:])
-            y = y[:, :m]
+            self._extend(new, solved[:, f:])
         if self._rank:
             self.work += m * self._rank * (y.shape[0] + self._rank)
             y = y + self._z[:, : self._rank] @ self._cho_solve((self._cholesky, True), d - C.T @ y)
         return y[:, 0] if vector else y
+
+    def _recycle(self, residual: np.ndarray, solved: np.ndarray) -> None:
+        """Extend the orthonormal basis of solved right-hand sides (and their solutions) by ``residual``'s
+        columns, orthogonalized again, each only if at least half of it is new (the solution of what is
+        left after a cancellation would lose the digits it cancelled); a full basis starts afresh."""
+        for r, x in zip(residual.T, solved.T):
+            if self._basis.shape[1] >= RECYCLED:
+                self._basis, self._solved = self._basis[:, :0], self._solved[:, :0]
+            projection = self._basis.T @ r
+            length = np.linalg.norm(r)
+            r, x = r - self._basis @ projection, x - self._solved @ projection
+            norm = np.linalg.norm(r)
+            if norm > 0 and norm >= 0.5 * length:
+                self._basis = np.column_stack([self._basis, r / norm])
+                self._solved = np.column_stack([self._solved, x / norm])
 
     def _extend(self, new: sp.csc_matrix, z: np.ndarray) -> None:
         k, a = self._rank, new.shape[1]

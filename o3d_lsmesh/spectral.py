@@ -9,8 +9,7 @@ practical: the eigenvectors cost ``O(n k)`` memory and about ``O(n k^2)`` time.
 
 from __future__ import annotations
 
-import contextlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.linalg as sla
@@ -21,7 +20,7 @@ from scipy.sparse import csgraph
 from ._o3d import new_mesh, read_mesh
 from ._progress import check_progress, stages
 from ._quantization import dequantize, quantize
-from ._solvers import SPDSolver
+from ._solvers import SPDSolver, single_threaded_blas
 from ._validate import as_count
 from .topology import adjacency_matrix
 
@@ -46,19 +45,6 @@ def combinatorial_laplacian(triangles: np.ndarray, n: int) -> sp.csc_matrix:
     adjacency = adjacency_matrix(triangles, n)
     degree = np.asarray(adjacency.sum(axis=1)).ravel()
     return (sp.diags(degree) - adjacency).tocsc()
-
-
-def _single_threaded_blas() -> Any:
-    """BLAS limited to one thread while ARPACK runs, if threadpoolctl is installed.
-
-    ARPACK's memory-bound level-2 BLAS ran 10x slower with OpenBLAS threads on two busy cores
-    (camel, k = 100: 22.5 s against 2.3 s).
-    """
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:  # optional: without it the BLAS keeps its own thread count
-        return contextlib.nullcontext()
-    return threadpool_limits(limits=1, user_api="blas")
 
 
 def null_space_basis(adjacency: sp.spmatrix) -> sp.csc_matrix:
@@ -138,7 +124,7 @@ def spectral_basis(
             operator = spla.LinearOperator((n, n), matvec=apply, dtype=np.float64)
             start = deflate(np.random.default_rng(0).standard_normal(n))  # reproducible Lanczos start
             begin("eigensolve")
-            with _single_threaded_blas():
+            with single_threaded_blas():
                 inverse_values, vectors = spla.eigsh(operator, k=m, which="LA", v0=start)
             values = _SHIFT + 1.0 / inverse_values
             order = np.argsort(values)

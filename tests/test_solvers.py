@@ -90,6 +90,31 @@ def test_scipy_updates_keep_the_lu_until_the_correction_costs_a_factorization():
     assert all(r == 0 or r == p + 1 for p, r in zip(ranks, ranks[1:]))  # grows by one, or a fresh LU
 
 
+def test_scipy_solves_recycle_the_span_of_earlier_right_hand_sides():
+    A, b = spd()
+
+    class Counting:  # SuperLU's solve, counting the columns it is given
+        def __init__(self, lu):
+            self.lu, self.columns = lu, 0
+
+        def solve(self, rhs):
+            self.columns += rhs.shape[1]
+            return self.lu.solve(rhs)
+
+    solver = SPDSolver(A, backend="scipy")
+    lu = solver._factor._lu = Counting(solver._factor._lu)
+    solver.solve(b)
+    assert lu.columns == 3
+    within = b @ np.array([[2.0, -1.0], [0.5, 0.0], [0.0, 3.0]])  # in the span: no solve
+    np.testing.assert_allclose(solver.solve(within), spla.spsolve(A, within), rtol=1e-10)
+    assert lu.columns == 3
+    beside = b[:, :2] + 1e-3 * np.random.default_rng(1).normal(size=(60, 2))  # a new direction: solved
+    np.testing.assert_allclose(solver.solve(beside), spla.spsolve(A, beside), rtol=1e-10)
+    assert lu.columns == 5
+    np.testing.assert_allclose(solver.solve(beside[:, 0]), spla.spsolve(A, beside[:, 0]), rtol=1e-10)
+    assert lu.columns == 5
+
+
 def test_scipy_update_refactors_when_the_correction_fails(monkeypatch):
     import o3d_lsmesh._solvers as solvers
 
