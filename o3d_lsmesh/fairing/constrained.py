@@ -323,9 +323,12 @@ def constrained_fairing(
     never set from a reference
     (:func:`~o3d_lsmesh.fairing.scan_fairing.scan_parameters` says how): ``w``
     from the rim's noise against the interior's (0.10-0.13 on the raw scans'
-    ragged silhouettes); a range scan gets ``mu = 0.03``, ``lambda = 0.45``
-    and the twicing step (the membrane damps the scanline-correlated noise
-    that ``|K X|^2`` keeps, the twicing puts back most of its shrinkage);
+    ragged silhouettes); a range scan gets ``mu = SCAN_MU (g / sigma)^2``
+    from its measured detail-to-noise ratio (fine detail above the noise is
+    held), a rim weight ``mu w = SCAN_RIM_MU w``, ``lambda = 0.45`` and the
+    twicing step (the membrane damps the scanline-correlated noise that
+    ``|K X|^2`` keeps, the twicing puts back most of its shrinkage), then a
+    tangential relaxation of its rim's triangles (no slivers);
     independent noise gets the barycenter-only energy with ``mu`` from the
     measured noise and surface detail, and a rim vertex's thin-plate row
     along its boundary curve, which has no inward pull; in between, every

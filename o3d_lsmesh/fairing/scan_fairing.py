@@ -28,7 +28,10 @@ low-frequency part of what ``S`` removed, i.e. the shrinkage of the membrane.
 
 Every term is quadratic in coordinate differences with dimensionless
 weights, so the result is equivariant under rigid motions and uniform
-scaling; no parameter depends on the mesh's size.
+scaling; no parameter depends on the mesh's size. The weights are measured
+on the mesh (:func:`scan_parameters`: ``mu`` from its detail-to-noise ratio),
+and the default finishes with :func:`relax_rim`, a tangential relaxation of
+the triangles the solve squeezes at a scan's rim.
 """
 
 from __future__ import annotations
