@@ -333,9 +333,6 @@ def _splu_spd(matrix: sp.csc_matrix) -> Any:
     )
 
 
-#: Columns per SuperLU solve: its time per column on bunny_scan's normal matrix (40k unknowns) is 14 ms
-#: for one column, 6.6 ms each for four, 19-57 ms each for 6 to 32 (benchmarks/results/no_cholmod.md).
-SOLVE_COLUMNS = 4
 #: A right-hand side within this relative distance of the span of those solved before is solved from
 #: their solutions (a direct solve's own error is of the order of the condition number times 1e-16).
 RECYCLE_TOLERANCE = 1e-13
@@ -348,7 +345,8 @@ def single_threaded_blas() -> Any:
     """BLAS limited to one thread in a ``with`` block, if threadpoolctl is installed.
 
     Memory-bound level-2 BLAS ran 10x slower with OpenBLAS threads on two busy cores (ARPACK, camel,
-    k = 100: 22.5 s against 2.3 s); :class:`_Woodbury`'s solves took twice the CPU time (bunny_scan).
+    k = 100: 22.5 s against 2.3 s); SuperLU's solves of more than 4 columns took 3x the time per column
+    with them and 0.3-0.8x without (bunny_scan, igea: benchmarks/results/no_cholmod.md).
     """
     try:
         from threadpoolctl import threadpool_limits
@@ -427,9 +425,7 @@ class _Woodbury:
         rhs = np.empty((len(b), f + new.shape[1]), order="F")
         rhs[:, :f] = residual[:, fresh]
         rhs[:, f:] = new.toarray()
-        solved = np.empty_like(rhs)
-        for begin in range(0, rhs.shape[1], SOLVE_COLUMNS):
-            solved[:, begin : begin + SOLVE_COLUMNS] = self._lu.solve(rhs[:, begin : begin + SOLVE_COLUMNS])
+        solved = self._lu.solve(rhs)
         y = self._solved @ coefficients
         y[:, fresh] += solved[:, :f]
         self._recycle(rhs[:, :f], solved[:, :f])
