@@ -15,7 +15,9 @@ def refine(
     fixed_pairs: np.ndarray,
     owner: np.ndarray,
     alpha: float,
+    max_points: int = -1,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
+def refine_budget(points: np.ndarray, triangles: np.ndarray, sigma: np.ndarray) -> int: ...
 def tangential_relax(
     vertices: np.ndarray, new_tris: np.ndarray, first_new: int, iterations: int = 10
 ) -> np.ndarray: ...

@@ -18,6 +18,7 @@ from libc.stdlib cimport free, malloc, qsort
 
 cdef double _TIE = 1e-6  # dynamic programme: largest angles this close tie, and the area decides
 cdef double _COCIRCULAR = 1.0 - 1e-6  # flips: a point must be this far inside a circumsphere
+cdef int64_t _MAX_FAN = 64  # refinement: no split at a corner of this many triangles
 
 
 cdef bint _outside(const int64_t* a, int64_t count, int64_t n) noexcept nogil:
@@ -461,8 +462,9 @@ def relax(const double[:, ::1] points, triangles, fixed_pairs, dirty):
     return out
 
 
-def refine(points, sigma, triangles, fixed_pairs, owner, double alpha):
-    """Liepa's refinement: rounds of centroid splits, each followed by a relaxation, until none splits.
+def refine(points, sigma, triangles, fixed_pairs, owner, double alpha, int64_t max_points=-1):
+    """Liepa's refinement: rounds of centroid splits, each followed by a relaxation, until none splits or
+    a round would pass ``max_points`` points (if not negative: a bound on the work).
 
     A triangle with centroid ``c`` and ``sigma_c`` the mean of its corners' scales splits when ``alpha
     |c - v_m| > max(sigma_c, sigma_m)`` for each corner ``m``; the new vertex takes ``sigma_c`` and the
@@ -494,24 +496,33 @@ def refine(points, sigma, triangles, fixed_pairs, owner, double alpha):
     cdef double sigma_c, dist
     cdef bint split, relaxed = False
     cdef int status = 0
+    cdef int64_t[::1] fan
     for _ in range(60):
         count = 0
+        fan_ = np.zeros(nv, dtype=np.int64)
+        fan = fan_
         with nogil:
+            for i in range(t):
+                for m in range(3):
+                    fan[T[i, m]] += 1
             for i in range(t):
                 for j in range(3):
                     centre[j] = (P[T[i, 0], j] + P[T[i, 1], j] + P[T[i, 2], j]) / 3.0
                 sigma_c = (S[T[i, 0]] + S[T[i, 1]] + S[T[i, 2]]) / 3.0
-                split = True
+                # a split adds a triangle at each corner: none at a corner of _MAX_FAN triangles, where
+                # flips could not keep up (folded pieces of a long loop grew fans of thousands)
+                split = fan[T[i, 0]] < _MAX_FAN and fan[T[i, 1]] < _MAX_FAN and fan[T[i, 2]] < _MAX_FAN
                 for m in range(3):
+                    if not split:
+                        break
                     _sub(centre, &P[T[i, m], 0], e)
                     dist = sqrt(_dot(e, e))
                     if not alpha * dist > fmax(sigma_c, S[T[i, m]]):
                         split = False
-                        break
                 if split:
                     chosen[count] = i
                     count += 1
-        if count == 0:
+        if count == 0 or (max_points >= 0 and nv + count > max_points):
             break
         if nv + count > cap_v or t + 2 * count > cap_t:  # grow the buffers (amortized doubling)
             cap_v, cap_t = max(2 * cap_v, nv + count), max(2 * cap_t, t + 2 * count)
@@ -1478,6 +1489,17 @@ cpdef fair_dense(const double[:, ::1] x, const int64_t[:, ::1] tris, const int64
     return solution
 
 
+def refine_budget(points, triangles, sigma):
+    """The most new points :func:`refine` may add to a patch (``triangles`` over ``points``) whose loop
+    has the scales ``sigma`` (density 1): ``4 A / mean(sigma)^2``, ``A`` its area, about what density 2
+    adds to a patch of even scale (an equilateral mesh of spacing ``s`` has ``2 / (sqrt(3) s^2)``
+    vertices per unit area). Uneven scales (short loop edges next to long ones) would add more."""
+    p = np.asarray(points)[np.asarray(triangles)]
+    area = 0.5 * np.sqrt((np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]) ** 2).sum(axis=1)).sum()
+    mean = float(np.mean(sigma))
+    return int(min(4.0 * area / mean**2, 2.0**62)) if mean > 0 else 0
+
+
 def fill_loop(const int64_t[::1] loop, const int64_t[::1] rows, const double[:, ::1] vertices,
               const int64_t[:, ::1] triangles, const int64_t[::1] indptr, const int64_t[::1] data,
               const double[::1] vertex_sigma, double density, double alpha):
@@ -1499,7 +1521,8 @@ def fill_loop(const int64_t[::1] loop, const int64_t[::1] rows, const double[:, 
         sigma_ = np.empty(k)
         for p in range(k):
             sigma_[p] = vertex_sigma[loop[p]] / fmax(density, 1e-300)
-        points, tris, _ = refine(points, sigma_, tris, pairs, np.zeros(k, dtype=np.int64), alpha)
+        points, tris, _ = refine(points, sigma_, tris, pairs, np.zeros(k, dtype=np.int64), alpha,
+                                 k + refine_budget(points, tris, np.asarray(vertex_sigma)[loop]))
     cdef const int64_t[:, ::1] local = tris
     cdef int64_t t = local.shape[0]
     out_ = np.empty((t, 3), dtype=np.int64)

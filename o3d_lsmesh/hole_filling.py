@@ -41,6 +41,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "BORDER_FACING_AWAY",
+    "DENSITY_MAX",
     "DP_MAX_EDGES",
     "FillReport",
     "FilledHoles",
@@ -82,6 +83,11 @@ DP_MAX_EDGES = 200
 #: it (a sphere missing a cap of a fraction ``f`` of its area has ``(1 - 2 f) / (2 (1 - f))`` facing
 #: away: 1/4 at ``f = 1/3``; 38-52% on holes cut in the closed meshes).
 BORDER_FACING_AWAY = 0.25
+
+#: The largest ``density`` :func:`fill_holes` takes: new edges a quarter of the surrounding ones. The
+#: refinement adds at most about what density 2 adds to a patch of even scale
+#: (:func:`o3d_lsmesh._fill_kernel.refine_budget`), so more buys nothing but work.
+DENSITY_MAX = 4.0
 
 _Edges = tuple[np.ndarray, np.ndarray, np.ndarray]  # edges i < j of a local mesh, each half-edge's edge
 _ALPHA = np.sqrt(2.0)  # Liepa's density factor (section 4)
@@ -252,7 +258,9 @@ def _triangulate(
         if dist[r, c] < best[0]:
             best = (float(dist[r, c]), int(i[r, 0]), int(j[r, c]))
     a, b = min(best[1:]), max(best[1:])
-    count = max(0, round(best[0] / spacing) - 1) if spacing > 0 else 0
+    # points along the chord at the spacing, at most k / 6 of them: each piece has at most 5 k / 6
+    # points, so the splits end after O(log k) levels and O(k) programmes of at most DP_MAX_EDGES
+    count = min(max(0, round(best[0] / spacing) - 1), k // 6) if spacing > 0 else 0
     chord = points[a] + np.linspace(0.0, 1.0, count + 2)[1:-1, None] * (points[b] - points[a])  # a -> b
     # piece one: a .. b along the loop, then back along the chord; piece two: b .. a, then the chord a -> b
     e = k + np.arange(count)
@@ -635,6 +643,8 @@ class HoleFiller:
             max_hole_diameter = as_positive_float(max_hole_diameter, name="max_hole_diameter")
         continuity = as_count(continuity, name="continuity", minimum=0, maximum=2)
         density = as_positive_float(density, name="density", allow_zero=True)
+        if density > DENSITY_MAX:
+            raise ValueError(f"density must be at most {DENSITY_MAX:g} (DENSITY_MAX), got {density:g}")
         weights = as_choice(weights, ("uniform", "cotangent"), name="weights")
         fill_border = bool(as_bool(fill_border, name="fill_border"))
         check_progress(progress)
@@ -780,6 +790,8 @@ class HoleFiller:
                     np.concatenate([f + s for f, s in zip(piece_pairs, starts)]),
                     point_piece,
                     _ALPHA,
+                    len(all_points)
+                    + _kernel().refine_budget(all_points, all_tris, self.sigma[np.concatenate(piece_loop)]),
                 )
             # global numbering: loop points (first in each piece, in order) are mesh vertices; the others
             # are new, numbered piece by piece
@@ -1112,9 +1124,10 @@ def fill_holes(
         Fill only holes whose diameter (largest distance between two loop vertices) is at most this.
     continuity : {0, 1, 2}
         Smoothness across the loop, see above. Default 2.
-    density : float >= 0
+    density : float in [0, DENSITY_MAX]
         New vertices are spaced like the surrounding edges divided by ``density``; ``0`` adds none
-        (the minimum-weight triangulation alone).
+        (the minimum-weight triangulation alone). The work is bounded: at most about what density 2
+        adds to a patch of even scale, and no split at a corner of 64 triangles.
     weights : {"cotangent", "uniform"}
         ``"uniform"``: the uniform solve alone; ``"cotangent"``: then one re-weighted solve (see above).
     fill_border : bool
@@ -1143,7 +1156,7 @@ def fill_holes(
         ``mesh`` not a mesh; an option of the wrong type.
     ValueError
         An empty or invalid mesh; ``max_hole_edges < 3``; ``max_hole_diameter <= 0``;
-        ``continuity`` not 0, 1 or 2; ``density < 0``; ``weights`` not a choice.
+        ``continuity`` not 0, 1 or 2; ``density`` outside ``[0, DENSITY_MAX]``; ``weights`` not a choice.
 
     See Also
     --------
@@ -1154,15 +1167,19 @@ def fill_holes(
     Notes
     -----
     Loops of more than :data:`DP_MAX_EDGES` edges are cut by chords before the O(k^3) dynamic
-    programme. Every result is checked for new triangles that cross the mesh (separating-axis tests
-    against the triangles near them): a hole whose patch crosses is faired again, per hole, with uniform
-    weights, then each lower continuity, then left as refined (:attr:`FilledHoles.continuity` says which
-    one each hole got). If none is free of crossings (the surface next to the hole is itself folded),
-    or a system is numerically singular, the hole is left open with an :class:`O3DLSMeshWarning`.
+    programme. Every result is checked for new triangles that meet the mesh anywhere but at the corners
+    and edges they share (crossings, and folds flat onto a neighbour; separating-axis tests against the
+    triangles near them): a hole whose patch does is faired again, per hole, with uniform weights, then
+    each lower continuity, then left as refined, then filled by the bare minimum-weight triangulation
+    (:attr:`HoleOutcome.how` says which). A patch whose fairing system is not finite falls back the same
+    way, alone. What still crosses (the surface next to the hole is itself folded) is left open.
 
-    A component's outer border is not filled by default (a scan's silhouette). A loop through a vertex
-    twice (two holes touching at a vertex) is filled as its simple pieces. Non-manifold edges and
-    vertices elsewhere are left as they are; a chord that already is a mesh edge is never used.
+    No loop is left open silently: an :class:`O3DLSMeshWarning` names each one left open by a crossing
+    or taken as an outer border, and ``return_report=True`` gives every loop, filled or not, how or why.
+    A component's outer border is not filled by default (a scan's silhouette; see
+    :data:`BORDER_FACING_AWAY`). A loop through a vertex (or a position) twice is filled as its simple
+    pieces. Non-manifold edges and vertices elsewhere are left as they are; a chord that already is a
+    mesh edge is never used.
 
     References
     ----------

@@ -321,3 +321,64 @@ def test_every_raw_scan_silhouette_stays_the_border():
                 h.perimeter for h in holes if h.component == hole.component
             ):
                 assert hole.border, (path.name, hole.component)
+
+
+# --------------------------------------------------------------------------- 5. bounded work
+
+
+def test_density_is_bounded():
+    V, T = _two_holes()
+    with pytest.raises(ValueError, match=r"density must be at most 4 \(DENSITY_MAX\), got 4.5"):
+        fill_holes_arrays(V, T, density=4.5)
+
+
+def test_refinement_stops_at_its_budget():
+    from o3d_lsmesh import _fill_kernel
+
+    # a large flat triangle with tiny scales: unbounded, it splits for many rounds
+    points = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], float)
+    tris = np.array([[0, 1, 2]])
+    args = (points, np.full(3, 0.01), tris, np.zeros((0, 2), np.int64), np.zeros(3, np.int64), np.sqrt(2))
+    free = _fill_kernel.refine(*args)[0]
+    capped = _fill_kernel.refine(*args, 200)[0]
+    assert len(free) > 1000 and 3 < len(capped) <= 200
+    # the budget: 4 A / mean(sigma)^2, about twice an even mesh at that spacing
+    assert _fill_kernel.refine_budget(points, tris, np.full(3, 0.01)) == pytest.approx(
+        4 * 0.5 / 1e-4, rel=1e-9
+    )
+
+
+def test_fill_border_on_a_raw_scan_is_bounded():
+    # fill_border=True on top3 ran over 150 s above 2 GB: refinement grew one new vertex a fan of 6,590
+    # triangles (folded pieces of the 1,950-edge silhouette), a dense block in the fairing system
+    V, T = load_scan("top3.ply")
+    out = fill_quietly(V, T, fill_border=True)
+    new = out.triangles[len(T) :]
+    fan = np.bincount(new[new >= len(V)] - len(V))
+    assert fan.max(initial=0) <= 2 * 64
+    assert added_crossings(out.vertices, out.triangles, len(T)) == 0
+    assert {h.id for h in out.report.holes} == set(range(len(find_holes(V, T))))
+
+
+def test_cli_fill_lists_every_loop_left_open(tmp_path, capsys):
+    import json
+
+    from o3d_lsmesh.cli import main
+
+    V, T = _two_holes()
+    path = tmp_path / "holed.ply"
+    mesh = o3d.geometry.TriangleMesh(
+        o3d.utility.Vector3dVector(V), o3d.utility.Vector3iVector(T.astype(np.int32))
+    )
+    o3d.io.write_triangle_mesh(str(path), mesh)
+    holes = find_holes(V, T)
+    argv = ["fill", str(path), str(tmp_path / "out.ply"), "--max-hole-edges", str(holes[0].edges - 1)]
+    assert main([*argv, "--json", "--quiet"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert [(h["id"], h["edges"], h["filled"]) for h in report["skipped"]] == [
+        (i, h.edges, False) for i, h in enumerate(holes)
+    ]
+    assert all("max_hole_edges" in h["how"] for h in report["skipped"])
+    assert main([*argv, "--force"]) == 0
+    said = capsys.readouterr().out
+    assert all(f"left open: loop {i} ({h.edges} edges" in said for i, h in enumerate(holes))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import time
 from typing import Any
 
@@ -24,7 +25,7 @@ def add_parsers(sub: Any, common: argparse.ArgumentParser) -> None:
         "--continuity", type=int, choices=(0, 1, 2), default=2, help="0 harmonic, 1 LS mesh, 2 tri-Laplacian"
     )
     p.add_argument(
-        "--density", type=float, default=1.0, help="new vertex density relative to the surroundings"
+        "--density", type=float, default=1.0, help="new vertex density relative to the surroundings (0 to 4)"
     )
     p.add_argument("--fill-border", action="store_true", help="also fill the outer border of open components")
 
@@ -35,14 +36,14 @@ def fill(args: argparse.Namespace, run: Run) -> int:
     Close holes: minimum-weight triangulation (Liepa 2003), refinement to the surrounding edge
     density, then LS-mesh fairing of the new vertices with the hole's rings as anchors. Each open
     component's outer border stays open unless --fill-border. --max-hole-diameter is in model units.
+    Every loop left open is listed with why (outer border, size limits, every fill crossing the mesh).
 
     example: scan.ply filled.ply --max-hole-edges 200
     """
     check_output(args.output, [args.input], force=args.force)
     mesh = read_input(args.input)
-    from .._batch_ops import TaskContext, fill_op
     from .._o3d import read_mesh
-    from ..hole_filling import find_holes
+    from ..hole_filling import fill_holes, find_holes
 
     def holes(mesh: Any) -> list:  # of the welded surface, as fill_holes sees it: a UV seam is no hole
         welded = read_mesh(mesh, weld=True)
@@ -51,20 +52,27 @@ def fill(args: argparse.Namespace, run: Run) -> int:
     before = holes(mesh)
     start = time.perf_counter()
     names = ("max_hole_edges", "max_hole_diameter", "continuity", "density", "fill_border")
-    context = TaskContext(args.input, args.input, None, progress=run.progress)
-    out, report = fill_op(mesh, {name: getattr(args, name) for name in names}, context)
+    out, report = fill_holes(
+        mesh, **{name: getattr(args, name) for name in names}, progress=run.progress, return_report=True
+    )
     seconds = time.perf_counter() - start
     write_output(args.output, out)
     after = holes(out)
+    new_vertices = len(out.vertices) - len(mesh.vertices)
     run.say(
-        f"filled {len(before) - len(after)} of {len(before)} holes of {args.input} in {seconds:.2f} s "
-        f"({report['new_vertices']} new vertices) -> {args.output}; {len(after)} loops left open"
+        f"filled {len(report.filled)} of {len(report.holes)} holes of {args.input} in {seconds:.2f} s "
+        f"({new_vertices} new vertices) -> {args.output}; {len(after)} loops left open"
     )
+    for hole in report.skipped:  # every loop left open, and why
+        run.say(f"  left open: loop {hole.id} ({hole.edges} edges, diameter {hole.diameter:.4g}): {hole.how}")
     return run.finish(
         mesh,
         holes_before=len(before),
         holes_after=len(after),
         borders_left_open=0 if args.fill_border else sum(hole.border for hole in before),
-        **report,
+        new_vertices=new_vertices,
+        new_triangles=len(out.triangles) - len(mesh.triangles),
+        holes_filled=len(report.filled),
+        skipped=[dataclasses.asdict(hole) for hole in report.skipped],
         seconds=seconds,
     )
