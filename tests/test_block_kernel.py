@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import sys
 
 import numpy as np
 import pytest
@@ -497,10 +498,10 @@ def test_threadpool_limits_make_the_kernels_serial():
         assert _block_kernel.threads(rows) == 1
 
 
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the kernels link GCC's libgomp on Linux")
 def test_openmp_threads_sleep_at_barriers_instead_of_spinning():
     # libgomp reads its wait policy when it loads: checked in a fresh interpreter, through OpenMP's own report
     import subprocess
-    import sys
 
     code = "import ctypes, o3d_lsmesh; ctypes.CDLL('libgomp.so.1').omp_display_env(1)"
     environ = {k: v for k, v in os.environ.items() if k not in ("OMP_WAIT_POLICY", "GOMP_SPINCOUNT")}
