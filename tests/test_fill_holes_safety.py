@@ -14,6 +14,8 @@ import numpy as np
 import open3d as o3d
 import pytest
 from conftest import REPO, load_mesh
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
 from scipy.spatial import cKDTree
 from test_fill_holes import cut_disk
 
@@ -382,3 +384,52 @@ def test_cli_fill_lists_every_loop_left_open(tmp_path, capsys):
     assert main([*argv, "--force"]) == 0
     said = capsys.readouterr().out
     assert all(f"left open: loop {i} ({h.edges} edges" in said for i, h in enumerate(holes))
+
+
+# --------------------------------------------------------------------------- 6. fuzz
+
+
+def _mesh_case(kind: str, name: str, seed: int, size: float):
+    """A raw scan cropped to a ball about a random vertex, or a shared mesh with a geodesic hole of
+    ``size`` mean edge lengths about a random vertex."""
+    rng = np.random.default_rng(seed)
+    if kind == "scan":
+        V, T = load_scan(name)
+        centre = V[rng.integers(len(V))]
+        near = (np.linalg.norm(V[T] - centre, axis=2) < 0.012 * size).all(axis=1)
+        used, T = np.unique(T[near], return_inverse=True)
+        return V[used].copy(), T.reshape(-1, 3)
+    mesh = load_mesh(name)
+    V, T = np.asarray(mesh.vertices), np.asarray(mesh.triangles).astype(np.int64)
+    h = np.linalg.norm(V[T[:, 0]] - V[T[:, 1]], axis=1).mean()
+    V, T, _ = cut_disk(V, T, int(rng.integers(len(V))), size * h)
+    return V, T
+
+
+@settings(max_examples=12, deadline=None)
+@given(
+    st.sampled_from(
+        [("scan", "bun000.ply"), ("scan", "top3.ply"), ("scan", "ear_back.ply")]
+        + [("mesh", n) for n in ("bunny.ply", "eight.ply", "pig.ply", "horse.ply", "camel.ply")]
+    ),
+    st.integers(0, 2**16),
+    st.floats(2.0, 15.0),
+)
+def test_fuzz_fills_add_no_crossing_and_report_every_loop(case, seed, size):
+    V, T = _mesh_case(*case, seed, size)
+    assume(len(T) > 20)
+    holes = find_holes(V, T)
+    out = fill_quietly(V, T)
+    assert added_crossings(out.vertices, out.triangles, len(T)) == 0
+    report = out.report
+    assert [h.id for h in report.holes] == list(range(len(holes)))
+    assert [h.edges for h in report.holes] == [h.edges for h in holes]
+    for outcome, hole in zip(report.holes, holes):  # every loop filled, or left open for a stated reason
+        assert outcome.filled or outcome.how.startswith(
+            ("every fill crosses", "taken as the outer", "the rim of")
+        )
+        assert not (outcome.filled and hole.border)
+    # the filled loops are closed, the others still open
+    left = {tuple(sorted(h.vertices.tolist())) for h in find_holes(out.vertices, out.triangles)}
+    for outcome, hole in zip(report.holes, holes):
+        assert (tuple(sorted(hole.vertices.tolist())) in left) != outcome.filled
