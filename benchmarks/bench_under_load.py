@@ -83,6 +83,49 @@ def measure(path: Path, method: str, repeat: int) -> dict[str, dict[int, list[fl
     return times
 
 
+def crossover(repeat: int) -> str:
+    """One CG iteration's parallel loops (a 19-entry band, as a scan's 2-ring: product, two dot products, the update,
+    the direction) on one thread and on two (threadpoolctl), from ``PARALLEL_ROWS`` rows up, quiet and beside
+    two busy processes: where threads pay (the kernels stay serial below ``PARALLEL_ROWS``)."""
+    import numpy as np
+    import scipy.sparse as sp
+    from threadpoolctl import threadpool_limits
+
+    from o3d_lsmesh import _block_kernel
+
+    rows = []
+    for busy in (0, 2):
+        spinners = [subprocess.Popen([sys.executable, "-c", "while 1: pass"]) for _ in range(busy)]
+        try:
+            for n in (20_000, 40_000, 80_000, 160_000, 320_000, 1_280_000):
+                band = sp.diags(
+                    [np.full(n - abs(o), 20.0 if o == 0 else 1.0) for o in range(-9, 10)], range(-9, 10)
+                )
+                A = sp.csr_matrix(band)
+                p, x, r = (np.random.default_rng(k).random((n, 3)) for k in range(3))
+                q, step = np.empty((n, 3)), np.full(3, 1e-3)
+                best = {1: [], 2: []}
+                for _ in range(repeat):
+                    for threads in (1, 2):  # alternating: the machine's other work weighs on both
+                        with threadpool_limits(threads, user_api="openmp"):
+                            start = time.perf_counter()
+                            for _ in range(max(3, 1_000_000 // n)):
+                                _block_kernel.block_product(A.indptr, A.indices, A.data, p, q)
+                                _block_kernel.column_dots(p, q)
+                                _block_kernel.cg_step(x, r, p, q, step)
+                                _block_kernel.column_dots(r, q)
+                                _block_kernel.cg_direction(p, q, step)
+                            best[threads].append((time.perf_counter() - start) / max(3, 1_000_000 // n))
+                one, two = statistics.median(best[1]), statistics.median(best[2])
+                rows.append([busy, n, f"{1e3 * one:.3f}", f"{1e3 * two:.3f}", f"{two / one:.2f}"])
+                print(rows[-1], flush=True)
+        finally:
+            for spinner in spinners:
+                spinner.kill()
+                spinner.wait()
+    return markdown_table(["busy processes", "rows", "1 thread (ms)", "2 threads (ms)", "2 / 1"], rows)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=7)
@@ -121,7 +164,11 @@ def main() -> None:
                 table
                 + f"\n\nTarget: loaded within 2x of quiet. The machine's other work was not stopped (load average "
                 f"{load:.1f} at the start): configurations alternate within each round, so it weighs on all alike.",
-            )
+            ),
+            (
+                "Where threads pay: one CG iteration's loops, median of " + str(args.repeat),
+                crossover(args.repeat),
+            ),
         ],
     )
 
