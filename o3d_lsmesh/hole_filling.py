@@ -9,7 +9,9 @@ Each chosen hole (a closed loop of boundary half-edges) is
 2. refined to the density of the surrounding edges (section 4): centroid splits, then edge flips;
 3. faired as a least-squares mesh (Sorkine and Cohen-Or 2004, section 6): the new vertices are the only
    unknowns, enough rings of the mesh fixed around them; then a tangential (centroidal) relaxation;
-4. checked: a patch crossing the mesh is faired again with a lower continuity, or left open.
+4. checked: a patch that meets the mesh beyond the loop (crossing it, or folded flat onto a neighbour)
+   is faired again with a lower continuity, then left unfaired, then replaced by the bare programme's
+   triangulation; what still crosses is left open and reported (:class:`FillReport`).
 
 :class:`HoleFiller` holds the whole-mesh analysis, so that :meth:`HoleFiller.fill` does only work local
 to the holes (as CGAL's calls on a prebuilt half-edge structure), all holes batched in each step. The
@@ -576,7 +578,7 @@ class HoleFiller:
     """The whole-mesh analysis of a mesh's holes, done once; :meth:`fill` then does only per-hole work.
 
     Like CGAL's prebuilt half-edge structure: the loops (:func:`find_holes`), each vertex's mean edge
-    length (Liepa's scale) and triangles, and k-d trees of the triangles' bounding spheres (for the
+    length (Liepa's scale) and triangles, and grids of the triangles' bounding spheres (for the
     crossing check). The state is read-only: it pickles, and :meth:`fill` may run from several threads.
 
     Parameters
@@ -584,7 +586,7 @@ class HoleFiller:
     vertices : (n, 3) float64
     triangles : (m, 3) int64
     index_triangles : bool, keyword-only
-        Build the k-d trees (they pay off over several fills); ``False`` makes each fill query only
+        Build the grids (they pay off over several fills); ``False`` makes each fill query only
         the triangles in the box of its new triangles, faster for a single fill.
 
     Attributes
@@ -664,14 +666,20 @@ class HoleFiller:
                 why[id(hole)] = "taken as the outer border of an open surface (fill_border=False)"
             else:
                 holes.append(hole)
-        out = self._fill_pass(holes, continuity, density, weights == "cotangent", interpolation, progress)
+        # the crossing checks' grids: prebuilt, or built once here for several holes (a single one queries
+        # the triangles in the box of its patch)
+        index = self.index
+        if index is None and len(holes) > 1:
+            index = _TriangleIndex(self.vertices, self.triangles)
+        cot = weights == "cotangent"
+        out = self._fill_pass(holes, continuity, density, cot, interpolation, progress, index)
         vertices, triangles, filled, stuck, used, weights_matrix, _ = out
         if stuck and density > 0:
             # simpler forms: the bare minimum-weight triangulation (no new vertex), checked against the
             # fills kept so far too; what still crosses is given up
-            retry = self._fill_pass(stuck, continuity, 0.0, False, False, False)
+            retry = self._fill_pass(stuck, continuity, 0.0, False, False, False, index)
             again = np.concatenate([triangles, retry[1][m:]])
-            crossing = _crossings(vertices, again, m, self.index)[len(triangles) - m :]
+            crossing = _crossings(vertices, again, m, index)[len(triangles) - m :]
             bad = np.bincount(retry[6], weights=crossing, minlength=len(retry[2])) > 0
             keep = ~bad[retry[6]]
             triangles = np.concatenate([triangles, retry[1][m:][keep]])
@@ -680,7 +688,7 @@ class HoleFiller:
             stuck = retry[3] + [hole for hole, b in zip(retry[2], bad) if b]
         for hole in stuck:
             why[id(hole)] = "every fill crosses the surface (folded or overlapping triangles next to it)"
-        index = {id(hole): i for i, hole in enumerate(self.holes)}
+        number = {id(hole): i for i, hole in enumerate(self.holes)}
         level = {id(hole): int(c) for hole, c in zip(filled, used)}
         report = FillReport(
             tuple(
@@ -704,18 +712,26 @@ class HoleFiller:
                 O3DLSMeshWarning,
                 stacklevel=3,
             )
-        order = np.argsort([index[id(hole)] for hole in filled], kind="stable").astype(np.int64)
+        order = np.argsort([number[id(hole)] for hole in filled], kind="stable").astype(np.int64)
         skipped = [hole for hole in self.holes if id(hole) in why]
         return FilledHoles(
             vertices, triangles, [filled[i] for i in order], skipped, weights_matrix, used[order], report
         )
 
     def _fill_pass(
-        self, holes: list, continuity: int, density: float, cot: bool, interpolation: bool, progress: bool
+        self,
+        holes: list,
+        continuity: int,
+        density: float,
+        cot: bool,
+        interpolation: bool,
+        progress: bool,
+        index: Any,
     ) -> tuple:
         """Fill ``holes``: the vertices and triangles (the input's, then the new ones), the holes filled,
         those whose every fill crosses (left open), the continuity of each filled one, the
-        interpolation (or its shape) and the filled hole (index in the list) of each new triangle."""
+        interpolation (or its shape) and the filled hole (index in the list) of each new triangle.
+        ``index``: the crossing checks' (:func:`_crossings`)."""
         vertices, triangles = self.vertices, self.triangles
         n = len(vertices)
         empty = np.zeros(0, dtype=np.int64)
@@ -817,7 +833,7 @@ class HoleFiller:
             weights_matrix = (p, n)
         out_vertices = np.concatenate([vertices, fresh_points])
         out_triangles = np.concatenate([triangles, new_tris])
-        used, stuck = self._fair_all(out_vertices, out_triangles, holes, continuity, cot, owner)
+        used, stuck = self._fair_all(out_vertices, out_triangles, holes, continuity, cot, owner, index)
         vertex_owner = _vertex_owner(new_tris, owner, n, p)
         used[np.bincount(vertex_owner, minlength=len(holes)) == 0] = -2  # no new vertex: the bare programme
         if len(stuck):
@@ -844,7 +860,14 @@ class HoleFiller:
         return out_vertices, out_triangles, list(holes), [], used, weights_matrix, owner
 
     def _fair_all(
-        self, vertices: np.ndarray, triangles: np.ndarray, holes: list, continuity: int, cot: bool, owner
+        self,
+        vertices: np.ndarray,
+        triangles: np.ndarray,
+        holes: list,
+        continuity: int,
+        cot: bool,
+        owner: np.ndarray,
+        index: Any,
     ):
         """Fair every new vertex at once: one local system over the patches and the rings around them.
 
@@ -914,7 +937,7 @@ class HoleFiller:
             for level, candidate in candidates():
                 tried.append(level)
                 work[n:] = candidate
-                if np.isfinite(candidate).all() and not _crossings(work, triangles, m, self.index).any():
+                if np.isfinite(candidate).all() and not _crossings(work, triangles, m, index).any():
                     return np.array([level], dtype=np.int64), np.zeros(0, dtype=np.int64)
             work[n:] = refined
             return np.array([tried[0]], dtype=np.int64), np.zeros(1, dtype=np.int64)
@@ -926,7 +949,7 @@ class HoleFiller:
             # a patch left NaN (its system not finite) is checked as refined and fails this candidate
             broken = ~np.isfinite(candidate).all(axis=1)
             work[n:] = np.where(broken[:, None], refined, candidate)
-            crossing = _crossings(work, triangles, m, self.index)  # (q,) per new triangle
+            crossing = _crossings(work, triangles, m, index)  # (q,) per new triangle
             per_hole = np.bincount(owner, weights=crossing, minlength=len(holes))
             per_hole += np.bincount(vertex_owner, weights=broken, minlength=len(holes))
             for hole_index in np.flatnonzero((chosen < 0) & (per_hole == 0)):
