@@ -213,6 +213,13 @@ def test_detect_creases_raises(error, message, kwargs):
         detect_creases(cube(1), **kwargs)
 
 
+def test_multiresolution_refuses_the_feature_mode():
+    from o3d_lsmesh import multiresolution_fairing
+
+    with pytest.raises(ValueError, match="method must be one of .*, got 'features'"):
+        multiresolution_fairing(cube(1), 2, method="features")
+
+
 def test_detect_creases_rejects_a_non_mesh():
     with pytest.raises(TypeError, match="mesh"):
         detect_creases("cube.ply")

@@ -218,7 +218,8 @@ def multiresolution_fairing(
     number_of_iterations = as_iterations(number_of_iterations)
     if final_iterations is not None:
         final_iterations = as_iterations(final_iterations, name="final_iterations")
-    method = as_choice(method, FAIRING_METHODS, name="method")
+    # the feature mode is not a per-level fairing: refused, not run as the local operator
+    method = as_choice(method, tuple(m for m in FAIRING_METHODS if m != "features"), name="method")
     progress = check_progress(progress)
     # a given hierarchy indexes the mesh's own vertices (build_hierarchy does not weld): weld only
     # when the hierarchy is built here, on the welded surface
