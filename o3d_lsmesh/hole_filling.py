@@ -80,10 +80,11 @@ DP_MAX_EDGES = 200
 
 #: A component's longest loop is its outer border (left open by default) when less than this fraction of
 #: the component's area faces away from the loop's vector area ``1/2 sum p_i x p_(i+1)`` (its mean
-#: normal): a range scan sees only surfaces facing the scanner, so its silhouette has none facing away
-#: (at most 4% on the 16 raw bunny and dragon scans), whereas a closed surface with a hole wraps around
-#: it (a sphere missing a cap of a fraction ``f`` of its area has ``(1 - 2 f) / (2 (1 - f))`` facing
-#: away: 1/4 at ``f = 1/3``; 38-52% on holes cut in the closed meshes).
+#: normal): a range scan sees only surfaces facing the scanner, so its silhouette has almost none facing
+#: away, whereas a closed surface with a hole wraps around it (a sphere missing a cap of a fraction ``f``
+#: of its area has ``(1 - 2 f) / (2 (1 - f))`` facing away: 1/4 at ``f = 1/3``). Not fitted; measured
+#: (benchmarks/results/border.md): at most 3.9% on the silhouettes of 26 raw scans, 34-52% on 71 holes
+#: cut in the closed shared meshes.
 BORDER_FACING_AWAY = 0.25
 
 #: The largest ``density`` :func:`fill_holes` takes: new edges a quarter of the surrounding ones. The
