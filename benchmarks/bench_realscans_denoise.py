@@ -1,46 +1,60 @@
 """Denoising raw range scans: ``constrained_fairing(mesh)`` with its defaults against every peer's best setting.
 
-Every scan of ``O3D_LSMESH_SCANS`` (the ten Stanford bunny range scans, see
-their MANIFEST) is denoised by each peer at every setting of its sweep
-(iteration counts; the best per scan is kept, so each peer is scored at the
-setting that a user who knew the answer would pick) and by ours with the
-defaults, no sweep. Also measured: multiresolution fairing on the scans with
-their non-manifold vertices' triangles removed (it refuses non-manifold
-input), and the time of the default against Open3D's
-``filter_smooth_laplacian`` at its best iteration count, interleaved, at 40k
-and about 1.4M vertices (the ten scans as one mesh, midpoint-subdivided once).
+Two objects: the ten Stanford bunny range scans of ``O3D_LSMESH_SCANS`` (reference ``bunny.ply``) and the
+sixteen dragon range scans of ``O3D_LSMESH_SCANS_DRAGON`` (reference ``dragon.ply``: much finer detail
+against the scanner's sampling; see both MANIFESTs). Each scan is denoised by every peer at every setting
+of its sweep (the best per scan is kept: each peer is scored at the setting a user who knew the answer
+would pick) and by ours with the defaults, no sweep. Peers: Open3D's simple, Laplacian and Taubin filters,
+MeshLab HC when pymeshlab is installed, and bilateral normal filtering (Zheng et al. 2011, alternated with
+Sun et al.'s vertex update: ``o3d_lsmesh.fairing.features`` with ``guided=False``) over its range width
+and pass count.
 
-Error of a denoised scan = distance from each of its vertices to the
-reference surface (``bunny.ply``, Open3D's ``RaycastingScene``), split into
-interior and boundary vertices; the signed distance is measured along the
-reference's normal at the closest point (positive outside), so that an
-inward move (shrinkage) shows as a drop of the signed mean.
+Error of a denoised scan = distance from each of its vertices to the reference surface (Open3D's
+``RaycastingScene``), per region: the rim (boundary vertices), rings 1-2 (one or two edges from the rim)
+and the interior (three or more); the signed offset is along the reference's normal at the closest point
+(positive outside), and the interior's inward move is the drop of its signed mean. Slivers: triangles of
+quality ``4 sqrt(3) area / sum of squared edges`` below 0.05.
 
-``--quick``: the best three peers only (minutes, not 40), to re-check the
-targets after a change of ours (``realscans_denoise_quick.md``);
+Cross-validation: each constant of the scan energy is fitted on one object alone (a grid, the others at
+their defaults, by the object's mean error) and scored on the other.
+
+``--quick``: every third scan and a short cross-validation grid (``realscans_denoise_quick.md``);
 ``--speed-only``: the timing section alone (``realscans_denoise_speed.md``).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import os
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
 import open3d as o3d
+import scipy.sparse as sp
 from _common import DATA, REPO, markdown_table, timed, write_markdown
 
+from o3d_lsmesh.fairing.scan_fairing import SLIVER_QUALITY, triangle_quality
+
 SCANS = Path(os.environ.get("O3D_LSMESH_SCANS", REPO.parent / "shared" / "data" / "scans"))
+SCANS_DRAGON = Path(
+    os.environ.get("O3D_LSMESH_SCANS_DRAGON", REPO.parent / "shared" / "data" / "scans-dragon")
+)
+#: object -> (scan folder, its environment variable, reference mesh in DATA)
+OBJECTS = {
+    "bunny": (SCANS, "O3D_LSMESH_SCANS", "bunny.ply"),
+    "dragon": (SCANS_DRAGON, "O3D_LSMESH_SCANS_DRAGON", "dragon.ply"),
+}
 REFERENCE = "bunny.ply"
 
 
-def scan_names() -> list[str]:
-    return sorted(p.name for p in SCANS.glob("*.ply")) if SCANS.is_dir() else []
+def scan_names(folder: Path = SCANS) -> list[str]:
+    return sorted(p.name for p in folder.glob("*.ply")) if folder.is_dir() else []
 
 
-def load_scan(name: str):
-    mesh = o3d.io.read_triangle_mesh(str(SCANS / name))
+def load_scan(name: str, folder: Path = SCANS):
+    mesh = o3d.io.read_triangle_mesh(str(folder / name))
     return np.asarray(mesh.vertices).copy(), np.asarray(mesh.triangles).astype(np.int64)
 
 
@@ -67,52 +81,40 @@ def boundary_vertices(triangles: np.ndarray, n: int) -> np.ndarray:
     return mask
 
 
-def vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
-    a, b, c = (vertices[triangles[:, i]] for i in range(3))
-    face = np.cross(b - a, c - a)
-    normals = np.zeros_like(vertices)
-    for i in range(3):
-        np.add.at(normals, triangles[:, i], face)
-    length = np.linalg.norm(normals, axis=1, keepdims=True)
-    return normals / np.maximum(length, 1e-300)
+def rim_distance(triangles: np.ndarray, n: int) -> np.ndarray:
+    """Edges from each vertex to the rim, capped at 3: 0 on the rim, 1-2 near it, 3 the interior."""
+    rows = np.r_[triangles[:, 0], triangles[:, 1], triangles[:, 2]]
+    cols = np.r_[triangles[:, 1], triangles[:, 2], triangles[:, 0]]
+    ring = sp.csr_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n))
+    ring = ring + ring.T
+    reached = boundary_vertices(triangles, n)
+    distance = np.where(reached, 0, 3)
+    for step in (1, 2):
+        reached = reached | (ring @ reached.astype(np.float64) > 0)
+        distance[reached & (distance == 3)] = step
+    return distance
 
 
-#: a triangle is degenerate (near-zero area or a sliver) when 4 sqrt(3) area / (sum of squared edges) is
-#: below this (1 for an equilateral triangle; 0.05 is a 1:20 isosceles sliver or a flattened triangle)
-DEGENERATE_QUALITY = 0.05
+REGIONS = {"rim": lambda d: d == 0, "rings 1-2": lambda d: (d == 1) | (d == 2), "interior": lambda d: d == 3}
 
 
-def degenerate_rim_triangles(vertices: np.ndarray, triangles: np.ndarray, boundary: np.ndarray) -> int:
-    """Triangles with a boundary vertex whose quality is below ``DEGENERATE_QUALITY``."""
-    a, b, c = (vertices[triangles[:, i]] for i in range(3))
-    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
-    squares = ((b - c) ** 2).sum(1) + ((c - a) ** 2).sum(1) + ((a - b) ** 2).sum(1)
-    quality = 4.0 * np.sqrt(3.0) * area / np.maximum(squares, np.finfo(float).tiny)
-    return int(((quality < DEGENERATE_QUALITY) & boundary[triangles].any(axis=1)).sum())
-
-
-def score(vertices: np.ndarray, triangles: np.ndarray, reference: Reference, boundary: np.ndarray) -> dict:
-    """Distances (in micrometres) of the scan's referenced vertices to the reference surface."""
+def score(vertices: np.ndarray, triangles: np.ndarray, reference: Reference, distance: np.ndarray) -> dict:
+    """Distances (micrometres) of the scan's referenced vertices to the reference surface, per region;
+    slivers (quality below the package's SLIVER_QUALITY, 0.05)."""
     used = np.zeros(len(vertices), dtype=bool)
     used[triangles.ravel()] = True
     closest, normals = reference.closest(vertices[used])
     offset = vertices[used] - closest
-    distance = np.linalg.norm(offset, axis=1) * 1e6
+    length = np.linalg.norm(offset, axis=1) * 1e6
     signed = np.einsum("ij,ij->i", offset, normals) * 1e6
-    rim = boundary[used]
-    ours = vertex_normals(vertices, triangles)[used]
-    angle = np.degrees(np.arccos(np.clip(np.abs(np.einsum("ij,ij->i", ours, normals)), 0.0, 1.0)))
-    return {
-        "mean": float(distance.mean()),
-        "p90": float(np.percentile(distance, 90)),
-        "interior": float(distance[~rim].mean()),
-        "boundary": float(distance[rim].mean()) if rim.any() else float("nan"),
-        "signed": float(signed.mean()),
-        "signed_interior": float(signed[~rim].mean()),
-        "angle": float(angle.mean()),
-        "degenerate": degenerate_rim_triangles(vertices, triangles, boundary),
-        "distance": distance,
-    }
+    d = distance[used]
+    out = {"mean": float(length.mean()), "signed": float(signed.mean())}
+    for region, mask in REGIONS.items():
+        inside = mask(d)
+        out[region] = float(length[inside].mean()) if inside.any() else float("nan")
+        out[f"signed {region}"] = float(signed[inside].mean()) if inside.any() else float("nan")
+    out["slivers"] = int((triangle_quality(vertices, triangles) < SLIVER_QUALITY).sum())
+    return out
 
 
 # ----------------------------------------------------------------------------------------------- peers
@@ -179,8 +181,38 @@ PEERS = {
     "trimesh Taubin": (_trimesh("taubin"), [5, 10, 20, 50, 100, 200, 500]),
     "trimesh Humphrey": (_trimesh("humphrey"), [2, 5, 10, 20, 50]),
 }
-#: the peers of ``--quick``: the best three on these scans in the full run
-QUICK_PEERS = ("Open3D simple", "Open3D Laplacian", "MeshLab HC")
+
+
+#: the peers run on the scans (the other entries of PEERS serve bench_denoise; none was best on the
+#: bunny scans in the full run of 2026-12-03), then bilateral normal filtering
+SCAN_PEERS = ("Open3D simple", "Open3D Laplacian", "Open3D Taubin", "MeshLab HC")
+#: bilateral normal filtering's sweep: range widths sigma_r, and the pass counts at which it is scored
+BNF_SIGMAS = (0.2, 0.35, 0.5, 0.8)
+BNF_PASSES = (1, 2, 3, 5, 8)
+
+
+def available(module: str) -> bool:
+    import importlib.util
+
+    return importlib.util.find_spec(module) is not None
+
+
+def bilateral_sweep(V, F, reference, distance):
+    """Bilateral normal filtering (Zheng et al. 2011) at every (sigma_r, passes): [(setting, score, seconds)]."""
+    from o3d_lsmesh.fairing.features import face_adjacency, filter_pass, normal_steps
+
+    adjacency = face_adjacency(F, len(V))
+    entries = []
+    for sigma in BNF_SIGMAS:
+        x, start = V.copy(), time.perf_counter()
+        for k in range(1, max(BNF_PASSES) + 1):
+            normals = filter_pass(x, F, adjacency, None, sigma_r=sigma, guided=False)
+            x = normal_steps(x, F, normals, incidence=adjacency.incidence)
+            if k in BNF_PASSES:
+                entries.append(
+                    (f"{sigma:g}/{k}", score(x, F, reference, distance), time.perf_counter() - start)
+                )
+    return entries
 
 
 # ------------------------------------------------------------------------------------------------ ours
@@ -192,40 +224,38 @@ def ours(vertices, triangles):
     return constrained_fairing_arrays(vertices, triangles, None, method=None)  # = constrained_fairing(mesh)
 
 
-COLUMNS = ["mean", "p90", "interior", "boundary", "signed", "angle", "degenerate"]
-
-
-def run_scan(name, reference, sweep_lines):
-    V, F = load_scan(name)
-    boundary = boundary_vertices(F, len(V))
-    raw = score(V, F, reference, boundary)
+def run_scan(name, folder, reference, sweep_lines):
+    V, F = load_scan(name, folder)
+    distance = rim_distance(F, len(V))
     peers = {}
-    for label, (fn, sweep) in PEERS.items():
+    for label in SCAN_PEERS:
+        if label.startswith("MeshLab") and not available("pymeshlab"):
+            continue
+        fn, sweep = PEERS[label]
         entries = []
         for k in sweep:
-            try:
-                out, seconds = timed(lambda fn=fn, k=k: fn(V, F, k))
-            except Exception as error:
-                sweep_lines.append(f"{name} {label} {k}: failed ({error})")
-                continue
-            entries.append((k, score(out, F, reference, boundary), seconds))
-        sweep_lines.append(f"{name} {label}: " + ", ".join(f"{k}: {s['mean']:.1f}" for k, s, _ in entries))
+            out, seconds = timed(lambda fn=fn, k=k: fn(V, F, k))
+            entries.append((k, score(out, F, reference, distance), seconds))
         peers[label] = min(entries, key=lambda e: e[1]["mean"])
+        sweep_lines.append(f"{name} {label}: " + ", ".join(f"{k}: {s['mean']:.1f}" for k, s, _ in entries))
+    entries = bilateral_sweep(V, F, reference, distance)
+    peers["bilateral normal filtering"] = min(entries, key=lambda e: e[1]["mean"])
+    sweep_lines.append(
+        f"{name} bilateral (sigma_r/passes): " + ", ".join(f"{k}: {s['mean']:.1f}" for k, s, _ in entries)
+    )
     out, seconds = timed(lambda: ours(V, F))
-    mine = score(out, F, reference, boundary)
-    best_peer = min(peers.items(), key=lambda p: p[1][1]["mean"])
     return {
-        "name": name,
+        "name": name.removesuffix(".ply"),
         "n": len(V),
-        "raw": raw,
+        "raw": score(V, F, reference, distance),
         "peers": peers,
-        "ours": mine,
+        "ours": score(out, F, reference, distance),
         "ours_seconds": seconds,
         "ours_vertices": out,
-        "best_peer": best_peer,
+        "best_peer": min(peers.items(), key=lambda p: p[1][1]["mean"]),
         "V": V,
         "F": F,
-        "boundary": boundary,
+        "distance": distance,
     }
 
 
@@ -247,12 +277,12 @@ def multiresolution_rows(results, reference, levels=(1, 2, 3)):
             removed += int(len(Fk) - keep.sum())
             used, Fk = np.unique(Fk[keep], return_inverse=True)
             Fk, Vk = Fk.reshape(-1, 3), Vk[used]
-        boundary = boundary_vertices(Fk, len(Vk))
+        distance = rim_distance(Fk, len(Vk))
         row = [
             r["name"],
             removed,
-            score(Vk, Fk, reference, boundary)["mean"],
-            score(constrained_fairing_arrays(Vk, Fk, None, method=None), Fk, reference, boundary)["mean"],
+            score(Vk, Fk, reference, distance)["mean"],
+            score(constrained_fairing_arrays(Vk, Fk, None, method=None), Fk, reference, distance)["mean"],
         ]
         for level in levels:
             try:
@@ -260,7 +290,7 @@ def multiresolution_rows(results, reference, levels=(1, 2, 3)):
                     o3d.utility.Vector3dVector(Vk), o3d.utility.Vector3iVector(Fk)
                 )
                 out = np.asarray(multiresolution_fairing(mesh, level).vertices)
-                row.append(score(out, Fk, reference, boundary)["mean"])
+                row.append(score(out, Fk, reference, distance)["mean"])
             except ValueError as error:
                 row.append(f"refused: {str(error)[:60]}")
         rows.append(row)
@@ -268,6 +298,8 @@ def multiresolution_rows(results, reference, levels=(1, 2, 3)):
 
 
 #: where the time goes (2026-12-03, idle 2-core machine; the history below it from 2026-12-01 and -02)
+
+
 SPEED_PROFILE = """\
 Since 2026-12-03 the default solves meshes of 5k vertices and more by block conjugate gradients
 preconditioned by the matrix's zero-fill incomplete Cholesky factor (IC(0), compiled,
@@ -428,198 +460,292 @@ def picture(result, reference, path):
     plt.close(fig)
 
 
-def main():
-    import sys
+# ------------------------------------------------------------------------------------- cross-validation
 
+#: each constant of the scan energy and the grid it is fitted on (one at a time, the others at their
+#: defaults); "off" for SCAN_RIM_MU couples the rim to the interior's mu (rim weight mu w, as before #38)
+CV_GRID = {
+    "SCAN_MU": (0.015, 0.03, 0.06, 0.12, 0.24),
+    "SCAN_RIM_MU": (0.01, 0.02, 0.03, 0.05, "off"),
+    "SCAN_MEMBRANE": (0.15, 0.3, 0.45, 0.7),
+    "RIM_RINGS": (0, 1, 2, 3, 5),
+}
+CV_QUICK = {
+    "SCAN_MU": (0.03, 0.06, 0.12),
+    "SCAN_RIM_MU": (0.02, 0.03, "off"),
+    "SCAN_MEMBRANE": (0.3, 0.45),
+    "RIM_RINGS": (0, 3),
+}
+
+
+def with_constant(name, value, fn):
+    """``fn()`` with the scan energy's constant ``name`` set to ``value``."""
+    from o3d_lsmesh.fairing import scan_fairing as sf
+
+    saved = getattr(sf, name)
+    coupled = value == "off"
+    setattr(sf, name, saved if coupled else value)
+    parameters = sf.scan_parameters
+    if coupled:  # the rim's weight follows mu: SCAN_RIM_MU / scan = 1 in scan_parameters
+
+        def coupled_parameters(V, F, *, structure=None):
+            p = parameters(V, F, structure=structure)
+            ratio = p.detail / p.noise if p.noise > 0 else np.inf
+            scan = float(np.clip(sf.SCAN_MU * ratio**2, *sf.MU_RANGE))
+            rim = p.boundary_weight * (scan / sf.SCAN_RIM_MU) ** p.scan_likeness
+            return dataclasses.replace(p, boundary_weight=rim)
+
+        sf.scan_parameters = coupled_parameters
+    try:
+        return fn()
+    finally:
+        setattr(sf, name, saved)
+        sf.scan_parameters = parameters
+
+
+def cross_validation(objects, grid):
+    """Per constant and value, each object's mean error (and interior-worse-than-raw count) over its scans."""
+    table = {}
+    for name, values in grid.items():
+        for value in values:
+            for obj, (results, reference) in objects.items():
+                errors, worse = [], 0
+                for r in results:
+                    out = with_constant(name, value, lambda r=r: ours(r["V"], r["F"]))
+                    s = score(out, r["F"], reference, r["distance"])
+                    errors.append(s["mean"])
+                    worse += s["interior"] > r["raw"]["interior"]
+                table[name, value, obj] = (float(np.mean(errors)), worse)
+            print(
+                f"cv {name}={value}: " + ", ".join(f"{o} {table[name, value, o][0]:.2f}" for o in objects),
+                flush=True,
+            )
+    return table
+
+
+def cv_tables(table, grid, objects):
+    """Fitted on one object, scored on the other: one markdown table per direction."""
+    from o3d_lsmesh.fairing import scan_fairing as sf
+
+    out = []
+    for fit, other in ((objects[0], objects[1]), (objects[1], objects[0])):
+        rows = []
+        for name, values in grid.items():
+            best = min(values, key=lambda v: table[name, v, fit][0])
+            default = getattr(sf, name)
+            rows.append(
+                [name, default, best, table[name, best, fit][0], table[name, default, fit][0]]
+                + [table[name, best, other][0], table[name, default, other][0]]
+                + [table[name, best, other][0] / table[name, default, other][0], table[name, best, other][1]]
+                + [" ".join(f"{v}: {table[name, v, other][0]:.1f}" for v in values)]
+            )
+        header = [
+            "constant",
+            "default",
+            f"fitted on {fit}",
+            f"{fit} mean um at fit",
+            f"{fit} at default",
+            f"{other} mean um with {fit}'s fit",
+            f"{other} at default",
+            "ratio",
+            f"{other} scans interior worse than raw",
+            f"{other} over the grid",
+        ]
+        out.append((f"Constants fitted on the {fit}, scored on the {other}", markdown_table(header, rows)))
+    return out
+
+
+# ----------------------------------------------------------------------------------------------- report
+
+
+def region_table(results):
+    """Per scan: ours against the best peer (by mean) in every region, slivers, interior inward move."""
+    rows = []
+    for r in results:
+        label, (k, best, _) = r["best_peer"]
+        simple = r["peers"]["Open3D simple"][1]
+        row = [r["name"], r["raw"]["mean"], f"{label} ({k})"]
+        for region in ("mean", "rim", "rings 1-2", "interior"):
+            row += [f"{r['ours'][region]:.1f} / {best[region]:.1f} / {r['raw'][region]:.1f}"]
+        row += [f"{r['ours']['slivers']} / {best['slivers']} / {r['raw']['slivers']}"]
+        inward = r["raw"]["signed interior"] - r["ours"]["signed interior"]
+        inward_simple = r["raw"]["signed interior"] - simple["signed interior"]
+        row += [f"{inward:.1f} / {inward_simple:.1f}", f"{r['ours']['signed']:.1f} / {best['signed']:.1f}"]
+        row += [r["ours"]["mean"] / best["mean"], r["ours_seconds"]]
+        rows.append(row)
+    header = [
+        "scan",
+        "raw um",
+        "best peer (setting)",
+        "overall: ours / peer / raw",
+        "rim",
+        "rings 1-2",
+        "interior",
+        "slivers: ours / peer / raw",
+        "interior inward um: ours / Open3D simple",
+        "signed mean um: ours / peer",
+        "ours / best peer",
+        "ours s",
+    ]
+    return markdown_table(header, rows)
+
+
+def peer_table(results):
+    labels = list(results[0]["peers"])
+    rows = [
+        [r["name"], r["raw"]["mean"]]
+        + [f"{r['peers'][p][1]['mean']:.1f} ({r['peers'][p][0]})" for p in labels]
+        + [r["ours"]["mean"], r["ours"]["mean"] / r["best_peer"][1][1]["mean"]]
+        for r in results
+    ]
+    return markdown_table(["scan", "raw um"] + labels + ["ours (defaults)", "ours / best peer"], rows)
+
+
+def targets(results):
+    """The targets of issue #38, checked on these scans."""
+    n = len(results)
+    ratio = np.array([r["ours"]["mean"] / r["best_peer"][1][1]["mean"] for r in results])
+    interior = [r["ours"]["interior"] <= r["raw"]["interior"] for r in results]
+    inward = np.array([r["raw"]["signed interior"] - r["ours"]["signed interior"] for r in results])
+    simple = np.array(
+        [r["raw"]["signed interior"] - r["peers"]["Open3D simple"][1]["signed interior"] for r in results]
+    )
+    slivers = [r["ours"]["slivers"] <= max(25, r["raw"]["slivers"]) for r in results]
+    per_peer = {p: float(np.mean([r["peers"][p][1]["mean"] for r in results])) for p in results[0]["peers"]}
+    best_filter = min(per_peer, key=per_peer.get)
+    mean = float(np.mean([r["ours"]["mean"] for r in results]))
+    return [
+        f"- Below every peer's best setting: {int((ratio < 1).sum())}/{n} scans (ours / best peer: min "
+        f"{ratio.min():.3f}, mean {ratio.mean():.3f}, max {ratio.max():.3f}).",
+        f"- Interior (3+ rings) no worse than the raw scan's: {sum(interior)}/{n} scans.",
+        f"- Interior inward move at most half of Open3D simple's at its best count: "
+        f"{int((inward <= simple / 2).sum())}/{n} scans (ours {inward.min():.1f} to {inward.max():.1f} um, "
+        f"simple {simple.min():.1f} to {simple.max():.1f}).",
+        f"- At most 25 slivers (or the raw scan's count): {sum(slivers)}/{n} scans (ours "
+        f"{min(r['ours']['slivers'] for r in results)}-{max(r['ours']['slivers'] for r in results)}).",
+        f"- Mean error over the scans: ours {mean:.1f} um, best single peer ({best_filter}) "
+        f"{per_peer[best_filter]:.1f} um: ratio {mean / per_peer[best_filter]:.3f} (target <= 0.95).",
+    ]
+
+
+def measured_constants(results):
+    """What the default measured on each scan (no reference): detail/noise, mu, rim weight, likeness."""
+    from o3d_lsmesh.fairing.scan_fairing import scan_parameters
+
+    rows = []
+    for r in results:
+        p = scan_parameters(r["V"], r["F"])
+        rows.append(
+            [
+                r["name"],
+                p.noise,
+                p.detail,
+                p.detail / p.noise,
+                p.mu,
+                p.mu * p.boundary_weight,
+                p.scan_likeness,
+            ]
+        )
+    return markdown_table(["scan", "sigma (edges)", "g (edges)", "g / sigma", "mu", "rim mu w", "s"], rows)
+
+
+def main():
     start = time.perf_counter()
-    names = scan_names()
-    if not names or not (DATA / REFERENCE).exists():
-        print(f"skipping: no scans in {SCANS} (set O3D_LSMESH_SCANS) or no {REFERENCE} in {DATA}")
-        return
-    if "--speed-only" in sys.argv:
+    present = {
+        obj: (folder, variable, ref)
+        for obj, (folder, variable, ref) in OBJECTS.items()
+        if scan_names(folder) and (DATA / ref).exists()
+    }
+    for obj in OBJECTS.keys() - present.keys():
+        folder, variable, ref = OBJECTS[obj]
+        print(f"skipping the {obj}: no scans in {folder} (set {variable}) or no {ref} in {DATA}")
+    if "--speed-only" in sys.argv and "bunny" in present:
         # only the timing section: Open3D Laplacian's best count per scan from its own sweep, then the
-        # interleaved timings (for re-measuring speed on a loaded machine without the 40-minute sweeps)
-        reference = Reference()
+        # interleaved timings (for re-measuring speed on a loaded machine without the sweeps)
+        reference = Reference(DATA / "bunny.ply")
         results = []
-        for name in names:
-            V, F = load_scan(name)
-            boundary = boundary_vertices(F, len(V))
+        for name in scan_names(SCANS):
+            V, F = load_scan(name, SCANS)
+            distance = rim_distance(F, len(V))
             fn, sweep = PEERS["Open3D Laplacian"]
-            best = min(sweep, key=lambda k: score(fn(V, F, k), F, reference, boundary)["mean"])
+            best = min(sweep, key=lambda k: score(fn(V, F, k), F, reference, distance)["mean"])
             results.append({"name": name, "V": V, "F": F, "peers": {"Open3D Laplacian": (best, None, None)}})
         speed = speed_rows(results)
         write_markdown(
             "realscans_denoise_speed.md",
             "Denoising raw range scans: time of the default against Open3D's Laplacian at its best count",
-            [
-                ("Speed, interleaved", speed_table(speed)),
-                ("Where the time goes", SPEED_PROFILE),
-            ],
+            [("Speed, interleaved", speed_table(speed)), ("Where the time goes", SPEED_PROFILE)],
         )
         return
     quick = "--quick" in sys.argv
-    if quick:
-        # the peers that were best on these scans in the full run (Open3D simple first, then MeshLab HC and
-        # Open3D Laplacian), with their sweeps: every target re-checked in minutes instead of 40 (the other
-        # peers' best settings are in realscans_denoise.md and do not change)
-        for label in list(PEERS):
-            if label not in QUICK_PEERS:
-                del PEERS[label]
-    reference = Reference()
-    sweep_lines: list[str] = []
-    results = []
-    for name in names:
-        results.append(run_scan(name, reference, sweep_lines))
-        r = results[-1]
-        print(
-            f"{name}: raw {r['raw']['mean']:.1f} um, best peer {r['best_peer'][0]} {r['best_peer'][1][1]['mean']:.1f}, "
-            f"ours {r['ours']['mean']:.1f} ({r['ours_seconds']:.2f} s)",
-            flush=True,
-        )
-
-    header = ["scan", "raw um"] + list(PEERS) + ["ours (defaults)", "ours / best peer"]
-    table = []
-    for r in results:
-        best = r["best_peer"][1][1]["mean"]
-        table.append(
-            [r["name"].removesuffix(".ply"), r["raw"]["mean"]]
-            + [f"{p[1]['mean']:.1f} ({p[0]})" for p in r["peers"].values()]
-            + [r["ours"]["mean"], r["ours"]["mean"] / best]
-        )
-    detail_header = [
-        "scan",
-        "method",
-        "setting",
-        "mean um",
-        "p90 um",
-        "interior um",
-        "boundary um",
-        "signed um",
-        "normal deg",
-        "degenerate rim tris",
-        "s",
-        "/ best peer",
-    ]
-    detail = []
-    for r in results:
-        best = r["best_peer"][1][1]["mean"]
-        detail.append(
-            [r["name"].removesuffix(".ply"), "raw", "-"]
-            + [r["raw"][c] for c in COLUMNS]
-            + ["-", r["raw"]["mean"] / best]
-        )
-        for label, (k, s, seconds) in r["peers"].items():
-            detail.append(
-                [r["name"].removesuffix(".ply"), label, k]
-                + [s[c] for c in COLUMNS]
-                + [seconds, s["mean"] / best]
-            )
-        detail.append(
-            [r["name"].removesuffix(".ply"), "ours", "defaults"]
-            + [r["ours"][c] for c in COLUMNS]
-            + [r["ours_seconds"], r["ours"]["mean"] / best]
-        )
-
-    ratios = np.array([r["ours"]["mean"] / r["best_peer"][1][1]["mean"] for r in results])
-    # "best conventional filter" over the scans: the one peer whose best settings give the lowest mean error
-    per_peer = {label: np.mean([r["peers"][label][1]["mean"] for r in results]) for label in PEERS}
-    best_filter = min(per_peer, key=per_peer.get)
-    ours_mean = float(np.mean([r["ours"]["mean"] for r in results]))
-    best_each = float(np.mean([r["best_peer"][1][1]["mean"] for r in results]))
-    shift_ours = np.array([r["raw"]["signed_interior"] - r["ours"]["signed_interior"] for r in results])
-    shift_simple = np.array(
-        [r["raw"]["signed_interior"] - r["peers"]["Open3D simple"][1]["signed_interior"] for r in results]
-    )
-    targets = [
-        (
-            f"- Beats every peer's best setting: {int((ratios < 1).sum())}/{len(ratios)} scans "
-            f"(ours / best peer per scan: min {ratios.min():.3f}, mean {ratios.mean():.3f}, max {ratios.max():.3f})."
-        ),
-        (
-            f"- Mean error over the scans: ours {ours_mean:.1f} um; best single conventional filter ({best_filter}, "
-            f"best setting per scan) {per_peer[best_filter]:.1f} um: ratio {ours_mean / per_peer[best_filter]:.3f} "
-            f"(target <= 0.97); against the best peer picked per scan {best_each:.1f} um: {ours_mean / best_each:.3f}."
-        ),
-        (
-            f"- Interior inward shift (raw signed interior mean - result's, um): ours mean {shift_ours.mean():.1f} "
-            f"(per scan {shift_ours.min():.1f} to {shift_ours.max():.1f}); Open3D simple at its best "
-            f"{shift_simple.mean():.1f} ({shift_simple.min():.1f} to {shift_simple.max():.1f}); ours <= half of simple's on "
-            f"{int((shift_ours <= shift_simple / 2).sum())}/{len(results)} scans."
-        ),
-    ]
-    degenerate = {
-        "raw": [r["raw"]["degenerate"] for r in results],
-        "best peer": [r["best_peer"][1][1]["degenerate"] for r in results],
-        "Open3D simple": [r["peers"]["Open3D simple"][1]["degenerate"] for r in results],
-        "ours": [r["ours"]["degenerate"] for r in results],
-    }
-    targets.append(
-        f"- Degenerate rim triangles (quality 4 sqrt(3) area / sum of squared edges < {DEGENERATE_QUALITY}, "
-        "per scan, min-max): " + "; ".join(f"{k} {min(v)}-{max(v)}" for k, v in degenerate.items()) + "."
-    )
-    print("\n".join(targets), flush=True)
-    if quick:
-        write_markdown(
-            "realscans_denoise_quick.md",
-            "Denoising raw range scans, quick check: defaults against the best peers' best settings",
-            [
-                (
-                    "Setup",
-                    "`bench_realscans_denoise.py --quick`: as the full run (realscans_denoise.md) with the peers "
-                    f"{', '.join(PEERS)} only (the best ones there); 'best peer' below is the best of these.",
-                ),
-                (
-                    "Per scan: mean distance (um), each peer at its best setting (iterations)",
-                    markdown_table(header, table),
-                ),
-                ("Targets", "\n".join(targets)),
-                ("Per scan, every measure", markdown_table(detail_header, detail)),
-            ],
-        )
-        print(f"total {time.perf_counter() - start:.0f} s", file=sys.stderr)
-        return
-    multires = multiresolution_rows(results, reference)
-    print("multiresolution done", flush=True)
-    speed = speed_rows(results)
-    print("speed done", flush=True)
     sections = [
         (
             "Setup",
-            (
-                "Distances in micrometres from each scan vertex to the reference `bunny.ply` (Open3D "
-                "RaycastingScene); 'signed' is along the reference normal at the closest point (outside "
-                "positive); 'normal deg' is the mean angle between our vertex normals and the reference's. Peers "
-                "run every setting of their sweep (iteration counts, listed below) and are shown at their best "
-                "per scan; ours runs `constrained_fairing(mesh)` with no argument. Interior/boundary: vertices "
-                "off/on an edge with one triangle. Times are wall seconds on a shared 2-core machine."
-            ),
-        ),
-        (
-            "Per scan: mean distance (um), each peer at its best setting (iterations)",
-            markdown_table(header, table),
-        ),
-        ("Targets", "\n".join(targets)),
-        ("Per scan, every measure", markdown_table(detail_header, detail)),
-        (
-            "Multiresolution fairing on the scans (non-manifold vertices' triangles removed; mean um)",
-            markdown_table(
-                ["scan", "triangles removed", "raw", "ours (defaults)"]
-                + [f"multires level {lv}" for lv in (1, 2, 3)],
-                multires,
-            ),
-        ),
-        (
-            "Speed: ours (defaults) vs Open3D filter_smooth_laplacian at its best count, interleaved",
-            speed_table(speed),
-        ),
-        ("Sweeps (mean um)", "```\n" + "\n".join(sweep_lines) + "\n```"),
+            "Distances in micrometres from each scan vertex to the object's reference (Open3D RaycastingScene); "
+            "regions: rim (boundary vertices), rings 1-2, interior (3+ rings from the rim); 'signed' along the "
+            "reference normal at the closest point (outside positive); the interior's inward move is the drop "
+            "of its signed mean. Slivers: triangles of quality 4 sqrt(3) area / sum of squared edges < 0.05. "
+            "Peers run every setting of their sweep and are shown at their best per scan (by overall mean): "
+            f"{', '.join(SCAN_PEERS)} (MeshLab only with pymeshlab: {'present' if available('pymeshlab') else 'absent in this run'}), "
+            f"bilateral normal filtering (sigma_r {BNF_SIGMAS}, passes {BNF_PASSES}; setting 'sigma_r/passes'). "
+            "Ours: `constrained_fairing(mesh)` with no argument. Times are wall seconds on a shared 2-core machine."
+            + (" Quick run: every third scan of each object." if quick else ""),
+        )
     ]
+    objects = {}
+    for obj, (folder, _, ref) in present.items():
+        reference = Reference(DATA / ref)
+        names = scan_names(folder)[:: 3 if quick else 1]
+        sweep_lines: list[str] = []
+        results = []
+        for name in names:
+            results.append(run_scan(name, folder, reference, sweep_lines))
+            r = results[-1]
+            print(
+                f"{obj} {r['name']}: raw {r['raw']['mean']:.1f}, best peer {r['best_peer'][0]} "
+                f"{r['best_peer'][1][1]['mean']:.1f}, ours {r['ours']['mean']:.1f} (interior {r['ours']['interior']:.1f}"
+                f" raw {r['raw']['interior']:.1f}, slivers {r['ours']['slivers']}, {r['ours_seconds']:.2f} s)",
+                flush=True,
+            )
+        objects[obj] = (results, reference)
+        print("\n".join(targets(results)), flush=True)
+        sections += [
+            (f"{obj}: targets", "\n".join(targets(results))),
+            (f"{obj}: per scan, ours against the best peer by region (um)", region_table(results)),
+            (f"{obj}: per scan, each peer at its best setting (mean um)", peer_table(results)),
+            (f"{obj}: what the default measured (no reference)", measured_constants(results)),
+            (f"{obj}: sweeps (mean um)", "```\n" + "\n".join(sweep_lines) + "\n```"),
+        ]
+    if len(objects) == 2:
+        grid = CV_QUICK if quick else CV_GRID
+        table = cross_validation(objects, grid)
+        sections += cv_tables(table, grid, list(objects))
+    if quick:
+        write_markdown(
+            "realscans_denoise_quick.md",
+            "Denoising raw range scans, quick check: defaults against every peer's best",
+            sections,
+        )
+        print(f"total {time.perf_counter() - start:.0f} s", file=sys.stderr)
+        return
+    if "bunny" in objects:
+        results, reference = objects["bunny"]
+        multires = multiresolution_rows(results, reference)
+        sections.append(
+            (
+                "bunny: multiresolution fairing (non-manifold vertices' triangles removed; mean um)",
+                markdown_table(
+                    ["scan", "triangles removed", "raw", "ours (defaults)"]
+                    + [f"multires level {lv}" for lv in (1, 2, 3)],
+                    multires,
+                ),
+            )
+        )
+        picture_result = min(results, key=lambda r: r["ours"]["mean"] / r["best_peer"][1][1]["mean"])
+        picture(picture_result, reference, REPO / "docs" / "images" / "07_realscan_denoise.png")
     write_markdown(
         "realscans_denoise.md", "Denoising raw range scans: defaults against every peer's best", sections
     )
-    # the scan where ours gains most on the best peer
-    picture_result = min(results, key=lambda r: r["ours"]["mean"] / r["best_peer"][1][1]["mean"])
-    picture(picture_result, reference, REPO / "docs" / "images" / "07_realscan_denoise.png")
     print(f"total {time.perf_counter() - start:.0f} s", file=sys.stderr)
 
 
