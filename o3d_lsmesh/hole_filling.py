@@ -79,13 +79,14 @@ def _kernel() -> Any:
 DP_MAX_EDGES = 200
 
 #: A component's longest loop is its outer border (left open by default) when less than this fraction of
-#: the component's area faces away from the loop's vector area ``1/2 sum p_i x p_(i+1)`` (its mean
-#: normal): a range scan sees only surfaces facing the scanner, so its silhouette has almost none facing
-#: away, whereas a closed surface with a hole wraps around it (a sphere missing a cap of a fraction ``f``
-#: of its area has ``(1 - 2 f) / (2 (1 - f))`` facing away: 1/4 at ``f = 1/3``). Not fitted; measured
-#: (benchmarks/results/border.md): at most 3.9% on the silhouettes of 26 raw scans, 34-52% on 71 holes
-#: cut in the closed shared meshes.
+#: the component's area faces away from, or sideways to, the loop's mean normal (its vector area
+#: ``1/2 sum p_i x p_(i+1)``; sideways: within 78 degrees of perpendicular, cosine below 0.2): a range
+#: scan sees only surfaces facing the scanner, so its silhouette has almost none, whereas a closed
+#: surface with a hole wraps around it (a box with a hole in its top: 83%). Not fitted; measured
+#: (benchmarks/results/border.md): at most 9.3% on the silhouettes of 26 raw scans, 46% or more on
+#: holes cut in the closed shared meshes.
 BORDER_FACING_AWAY = 0.25
+_SIDEWAYS = 0.2
 
 #: The largest ``density`` :func:`fill_holes` takes: new edges a quarter of the surrounding ones. The
 #: refinement adds at most about what density 2 adds to a patch of even scale
@@ -153,8 +154,8 @@ def find_holes(vertices: np.ndarray, triangles: np.ndarray, *, _edge_info=None) 
     """Every boundary loop of the mesh with its size and whether it is an outer border.
 
     A component's outer border is its longest loop when less than :data:`BORDER_FACING_AWAY` of the
-    component's area faces away from the loop (a scan's silhouette, a small island's rim); on a closed
-    surface with holes, none is.
+    component's area faces away from or sideways to the loop (a scan's silhouette, a small island's
+    rim); on a closed surface with holes, none is.
 
     Parameters
     ----------
@@ -201,7 +202,8 @@ def find_holes(vertices: np.ndarray, triangles: np.ndarray, *, _edge_info=None) 
     loop_vector = np.zeros((len(loops), 3))
     for i in longest:
         p = vertices[loops[i][0]] - vertices[loops[i][0][0]]
-        loop_vector[i] = 0.5 * _cross(p, np.roll(p, -1, axis=0)).sum(axis=0)
+        loop_vector[i] = _cross(p, np.roll(p, -1, axis=0)).sum(axis=0)
+        loop_vector[i] /= max(float(np.sqrt((loop_vector[i] ** 2).sum())), 1e-300)
     facing_away = np.zeros(len(loops))
     total = np.zeros(len(loops))
     for start in range(0, len(mine), 65536):  # bounded memory on large meshes
@@ -209,7 +211,7 @@ def find_holes(vertices: np.ndarray, triangles: np.ndarray, *, _edge_info=None) 
         p = vertices[triangles[rows]]
         vector = 0.5 * _cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
         size = np.sqrt((vector**2).sum(axis=1))
-        away = (vector * loop_vector[tri_loop[rows]]).sum(axis=1) < 0
+        away = (vector * loop_vector[tri_loop[rows]]).sum(axis=1) < _SIDEWAYS * size
         total += np.bincount(tri_loop[rows], weights=size, minlength=len(loops))
         facing_away += np.bincount(tri_loop[rows], weights=np.where(away, size, 0.0), minlength=len(loops))
     border = np.zeros(len(loops), dtype=bool)
@@ -708,7 +710,7 @@ class HoleFiller:
         said = FillReport(tuple(h for h in report.skipped if h.how.startswith(("every", "taken"))))
         if said.holes:
             warnings.warn(
-                f"fill_holes left {len(said.holes)} of {len(self.holes)} loops open: {said.describe(10)}"
+                f"fill_holes: {len(said.holes)} of {len(self.holes)} loops left open: {said.describe(10)}"
                 " (every loop, filled or not: fill_holes(..., return_report=True), a FillReport)",
                 O3DLSMeshWarning,
                 stacklevel=3,

@@ -306,6 +306,16 @@ def test_a_hole_in_eight_is_not_its_border():
     assert len(holes) == 1 and not holes[0].border
 
 
+def test_a_hole_in_the_top_of_a_box_is_not_its_border():
+    # its sides face sideways to the hole: only the top (15% of the area) faces away from it
+    box = o3d.geometry.TriangleMesh.create_box().subdivide_midpoint(3)
+    V, T = np.asarray(box.vertices), np.asarray(box.triangles).astype(np.int64)
+    centre = V[T].mean(axis=1)
+    top = (np.abs(centre[:, 2] - 1) < 1e-12) & (np.linalg.norm(centre[:, :2] - 0.5, axis=1) < 0.2)
+    holes = find_holes(V, T[~top])
+    assert len(holes) == 1 and not holes[0].border
+
+
 def test_every_raw_scan_silhouette_stays_the_border():
     scans = sorted(SCANS.glob("*.ply"))
     if not scans:
