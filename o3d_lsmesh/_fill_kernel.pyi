@@ -64,6 +64,7 @@ def patch_crossings(
     new_grids: list[tuple[np.ndarray, float, np.ndarray, np.ndarray, np.ndarray, float]],
     new_centre: np.ndarray,
     new_radius: np.ndarray,
+    owner: np.ndarray | None = None,
 ) -> np.ndarray: ...
 def local_mesh(
     triangles: np.ndarray, first_new: int, ring_tris: np.ndarray, rings: list[np.ndarray], nv: int

@@ -1262,7 +1262,7 @@ cdef inline bint _overlap(const double* c, double r, const double* d, double s) 
 
 def patch_crossings(const double[:, ::1] vertices, const int64_t[:, ::1] triangles, int64_t first_new,
                     grids, const double[:, ::1] tri_centre, const double[::1] tri_radius,
-                    new_grids, const double[:, ::1] new_centre, const double[::1] new_radius):
+                    new_grids, const double[:, ::1] new_centre, const double[::1] new_radius, owner=None):
     """For each new triangle (from ``first_new`` on), the number of triangles it meets beyond the corners
     and edge they share (:func:`_pair_crosses`): the crossing test of every fill. Each new triangle's
     bounding sphere (``new_centre``, ``new_radius``) is queried in the grids of the input triangles
@@ -1270,28 +1270,37 @@ def patch_crossings(const double[:, ::1] vertices, const int64_t[:, ::1] triangl
     ``origin``, ``indptr`` over the cells ``(x * dims[1] + y) * dims[2] + z``; their spheres
     ``tri_centre``, ``tri_radius``) and in those of the new ones (``new_grids``, numbered from 0), and
     tested against each triangle whose sphere overlaps it (each pair of new triangles once). Linear in
-    the new triangles times the triangles near each. ``(q,)`` float."""
+    the new triangles times the triangles near each. ``(q,)`` float. With ``owner`` (the patch of each
+    new triangle, ``(q,)`` int64), a patch's triangles are not tested once one of them crosses: the
+    counts then only say which patches cross."""
     cdef int64_t q = triangles.shape[0] - first_new
     result_ = np.zeros(max(q, 0))
     if q <= 0:
         return result_
     if new_centre.shape[0] != q or new_radius.shape[0] != q:
         raise ValueError("new_centre and new_radius must have one row per new triangle")
+    owner_ = np.zeros(q, dtype=np.int64) if owner is None else np.ascontiguousarray(owner, dtype=np.int64)
+    if owner_.shape[0] != q or (q and (owner_.min() < 0 or owner_.max() >= q)):
+        raise ValueError("owner must hold one patch in [0, q) per new triangle")
+    crossed_ = np.zeros(q, dtype=np.uint8)
     for grid in grids:
         _grid_crossings(vertices, triangles, first_new, new_centre, new_radius, grid, tri_centre, tri_radius,
-                        False, result_)
+                        False, result_, owner_, crossed_, owner is not None)
     for grid in new_grids:
         _grid_crossings(vertices, triangles, first_new, new_centre, new_radius, grid, new_centre, new_radius,
-                        True, result_)
+                        True, result_, owner_, crossed_, owner is not None)
     return result_
 
 
 cdef _grid_crossings(const double[:, ::1] vertices, const int64_t[:, ::1] triangles, int64_t first_new,
                      const double[:, ::1] centre, const double[::1] radius, grid, const double[:, ::1] tc,
-                     const double[::1] tr, bint among_new, double[::1] result):
+                     const double[::1] tr, bint among_new, double[::1] result, const int64_t[::1] owner,
+                     uint8_t[::1] crossed, bint stop):
     """:func:`patch_crossings` against one grid's triangles (the new ones if ``among_new``: then indices
     from ``first_new`` on, and each pair once), into ``result``; the candidates gathered in a buffer
-    grown between runs of queries."""
+    grown between runs of queries. A crossing marks its patches ``crossed``; if ``stop``, a marked
+    patch's triangles are not tested against the input, nor pairs of new ones whose patches are both
+    marked."""
     origin_, cell_, dims_, indptr_, members_, reach_ = grid
     cdef double cell = cell_, reach = reach_
     cdef const double[::1] origin = origin_
@@ -1311,6 +1320,9 @@ cdef _grid_crossings(const double[:, ::1] vertices, const int64_t[:, ::1] triang
     while i < q:
         with nogil:
             while i < q:
+                if stop and crossed[owner[i]] and not among_new:  # a pair of new ones may mark the other
+                    i += 1
+                    continue
                 for c in range(3):
                     lo[c], hi[c] = centre[i, c] - radius[i], centre[i, c] + radius[i]
                 capacity = _cells(lo, hi, &origin[0], cell, &dims[0], &indptr[0], reach, lo_cell, hi_cell)
@@ -1320,15 +1332,19 @@ cdef _grid_crossings(const double[:, ::1] vertices, const int64_t[:, ::1] triang
                                 &buffer[0])
                 for k in range(count):
                     t = buffer[k]
-                    if among_new and t <= i:
+                    if among_new and (t <= i or (stop and crossed[owner[i]] and crossed[owner[t]])):
                         continue
                     other = first_new + t if among_new else t
                     if _overlap(&centre[i, 0], radius[i], &tc[t, 0], tr[t]) and _pair_crosses(
                         V, T, first_new + i, other
                     ):
                         result[i] += 1.0
+                        crossed[owner[i]] = 1
                         if among_new:
                             result[t] += 1.0
+                            crossed[owner[t]] = 1
+                        if stop and not among_new:
+                            break
                 i += 1
         if i < q:
             buffer_ = np.empty(2 * capacity, dtype=np.int64)

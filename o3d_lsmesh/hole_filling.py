@@ -676,13 +676,14 @@ class HoleFiller:
             index = _TriangleIndex(self.vertices, self.triangles)
         cot = weights == "cotangent"
         out = self._fill_pass(holes, continuity, density, cot, interpolation, progress, index)
-        vertices, triangles, filled, stuck, used, weights_matrix, _ = out
+        vertices, triangles, filled, stuck, used, weights_matrix, own = out
         if stuck and density > 0:
             # simpler forms: the bare minimum-weight triangulation (no new vertex), checked against the
             # fills kept so far too; what still crosses is given up
             retry = self._fill_pass(stuck, continuity, 0.0, False, False, False, index)
             again = np.concatenate([triangles, retry[1][m:]])
-            crossing = _crossings(vertices, again, m, index)[len(triangles) - m :]
+            crossing = _crossings(vertices, again, m, index, np.concatenate([own, len(filled) + retry[6]]))
+            crossing = crossing[len(triangles) - m :]
             bad = np.bincount(retry[6], weights=crossing, minlength=len(retry[2])) > 0
             keep = ~bad[retry[6]]
             triangles = np.concatenate([triangles, retry[1][m:][keep]])
@@ -940,7 +941,7 @@ class HoleFiller:
             for level, candidate in candidates():
                 tried.append(level)
                 work[n:] = candidate
-                if np.isfinite(candidate).all() and not _crossings(work, triangles, m, index).any():
+                if np.isfinite(candidate).all() and not _crossings(work, triangles, m, index, owner).any():
                     return np.array([level], dtype=np.int64), np.zeros(0, dtype=np.int64)
             work[n:] = refined
             return np.array([tried[0]], dtype=np.int64), np.zeros(1, dtype=np.int64)
@@ -952,7 +953,7 @@ class HoleFiller:
             # a patch left NaN (its system not finite) is checked as refined and fails this candidate
             broken = ~np.isfinite(candidate).all(axis=1)
             work[n:] = np.where(broken[:, None], refined, candidate)
-            crossing = _crossings(work, triangles, m, index)  # (q,) per new triangle
+            crossing = _crossings(work, triangles, m, index, owner)  # (q,) nonzero on crossing holes
             per_hole = np.bincount(owner, weights=crossing, minlength=len(holes))
             per_hole += np.bincount(vertex_owner, weights=broken, minlength=len(holes))
             for hole_index in np.flatnonzero((chosen < 0) & (per_hole == 0)):
@@ -1078,9 +1079,12 @@ class _TriangleIndex:
         return origin, cell, dims, indptr, members[order], reach
 
 
-def _crossings(vertices: np.ndarray, triangles: np.ndarray, first_new: int, index: Any) -> np.ndarray:
+def _crossings(
+    vertices: np.ndarray, triangles: np.ndarray, first_new: int, index: Any, owner: Any = None
+) -> np.ndarray:
     """For each new triangle (from ``first_new`` on), the number of triangles it meets beyond the corners
-    and edge they share: crossings, and folds flat onto a neighbour.
+    and edge they share: crossings, and folds flat onto a neighbour. With ``owner`` (each new triangle's
+    hole), a hole's triangles are not tested once one crosses: nonzero counts then only mark the holes.
 
     One compiled test (:func:`o3d_lsmesh._fill_kernel.patch_crossings`): each new triangle against the
     input triangles of ``index`` (a :class:`_TriangleIndex` of ``triangles[:first_new]``; if None, one
@@ -1107,6 +1111,7 @@ def _crossings(vertices: np.ndarray, triangles: np.ndarray, first_new: int, inde
         new.grids,
         new.centre,
         new.radius,
+        owner,
     )
 
 

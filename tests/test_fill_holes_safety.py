@@ -443,3 +443,19 @@ def test_fuzz_fills_add_no_crossing_and_report_every_loop(case, seed, size):
     left = {tuple(sorted(h.vertices.tolist())) for h in find_holes(out.vertices, out.triangles)}
     for outcome, hole in zip(report.holes, holes):
         assert (tuple(sorted(hole.vertices.tolist())) in left) != outcome.filled
+
+
+def test_crossings_by_hole_mark_the_same_holes():
+    # with each new triangle's hole, a hole's triangles stop being tested once one crosses: the holes
+    # marked are those of the plain counts (random soups, three "holes")
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        V = rng.random((40, 3))
+        T = np.array([rng.choice(40, 3, replace=False) for _ in range(45)])
+        owner = np.sort(rng.integers(0, 3, 15))
+        full = _crossings(V, T, 30, None)
+        marked = _crossings(V, T, 30, None, owner)
+        assert np.array_equal(
+            np.bincount(owner, weights=full, minlength=3) > 0,
+            np.bincount(owner, weights=marked, minlength=3) > 0,
+        )
