@@ -2,8 +2,12 @@
 
 import numpy as np
 
+def delaunay_triangles(points: np.ndarray) -> np.ndarray | None: ...
 def minimum_weight_triangulation(
-    points: np.ndarray, outer_normals: np.ndarray, forbidden: np.ndarray | None = None
+    points: np.ndarray,
+    outer_normals: np.ndarray,
+    forbidden: np.ndarray | None = None,
+    allowed: np.ndarray | None = None,
 ) -> np.ndarray: ...
 def relax(
     points: np.ndarray, triangles: np.ndarray, fixed_pairs: np.ndarray, dirty: np.ndarray

@@ -50,7 +50,8 @@ cdef inline void _cross(const double* u, const double* v, double* out) noexcept 
 # Liepa's minimum-weight triangulation (SGP 2003, section 3)
 
 
-cdef void _liepa(const double* P, const double* outer, const uint8_t* forbidden, int64_t k, double* angle,
+cdef void _liepa(const double* P, const double* outer, const uint8_t* forbidden, const uint8_t* allowed,
+                 int64_t k, double* angle,
                  double* area, int64_t* split, double* normal, uint8_t* known, double* t_angle,
                  double* t_area, double* t_twice, double* t_normal) noexcept nogil:
     """Fill the tables of the programme: for each chord ``(i, j)``, the best triangulation of the polygon
@@ -59,7 +60,8 @@ cdef void _liepa(const double* P, const double* outer, const uint8_t* forbidden,
     between neighbouring triangles, and with the mesh triangle across a loop edge (``outer``, zero
     where unknown: no constraint). ``normal[i, j]`` holds the unit normal of the triangle on chord
     ``(i, j)``, which the next, larger polygon meets there. ``forbidden`` (or NULL) marks chords that
-    are mesh edges already (a non-manifold edge otherwise): infinitely bad."""
+    are mesh edges already (a non-manifold edge otherwise): infinitely bad; ``allowed`` (or NULL), the
+    triangles ``i < m < j`` at ``(i k + m) k + j`` that may be used, the others infinitely bad."""
     cdef int64_t i, j, m, d, c, r, choice
     cdef double u[3]
     cdef double v[3]
@@ -111,6 +113,8 @@ cdef void _liepa(const double* P, const double* outer, const uint8_t* forbidden,
                 t_twice[r] = twice
                 if forbidden != NULL and (forbidden[i * k + m] or forbidden[m * k + j]):
                     t_angle[r] = INFINITY
+                if allowed != NULL and not allowed[(i * k + m) * k + j]:
+                    t_angle[r] = INFINITY
             best_angle = INFINITY
             for r in range(d - 1):
                 best_angle = fmin(best_angle, t_angle[r])
@@ -137,19 +141,68 @@ cdef void _liepa(const double* P, const double* outer, const uint8_t* forbidden,
             known[c] = t_twice[choice] > 0
 
 
+cdef double _COSPHERICAL = 1e-9  # Delaunay: a point this near (relative) a circumsphere is on it
+
+
+def delaunay_triangles(points):
+    """The triangles of the 3D Delaunay tetrahedralization of a loop's ``k`` points, as the ``allowed``
+    of :func:`minimum_weight_triangulation` (``(k^3,)`` uint8), or None where it restricts nothing
+    (``k < 5``), does not exist (Qhull refuses coplanar points) or is not unique (cospherical points).
+
+    Liepa's weight over every triangle of the loop lets a loop that winds around a curved part (a hole
+    across a tube) take triangles spanning the part, which fairing keeps; the Delaunay faces join only
+    near neighbours (Zou, Hu, Gu, Li, Sun: *An algorithm for triangulating multiple 3D polygons*, SGP
+    2013, section 4; CGAL's ``triangulate_hole`` does the same by default).
+    """
+    from scipy.spatial import Delaunay, QhullError
+
+    cdef int64_t k = len(points)
+    if k < 5:
+        return None
+    points = np.asarray(points, dtype=np.float64)
+    try:
+        tets = Delaunay(points).simplices.astype(np.int64)
+    except (QhullError, ValueError):
+        return None
+    # a point on (within rounding of) a tetrahedron's circumsphere makes the tetrahedralization one of
+    # several (a loop on a sphere or a cylinder), chosen by rounding: not the same after a rigid motion
+    p = points[tets]
+    with np.errstate(all="ignore"):
+        try:
+            centre = p[:, 0] + np.linalg.solve(
+                2.0 * (p[:, 1:] - p[:, :1]), ((p[:, 1:] - p[:, :1]) ** 2).sum(axis=2)[..., None]
+            )[..., 0]
+        except np.linalg.LinAlgError:  # a flat tetrahedron (Qhull's triangulated output): not unique
+            return None
+        radius = np.linalg.norm(p[:, 0] - centre, axis=1)
+        gap = np.abs(np.linalg.norm(points[None] - centre[:, None], axis=2) - radius[:, None])
+    gap[np.arange(len(tets))[:, None], tets] = np.inf
+    if not (gap > _COSPHERICAL * radius[:, None]).all():
+        return None
+    faces = np.sort(np.concatenate([tets[:, [0, 1, 2]], tets[:, [0, 1, 3]], tets[:, [0, 2, 3]], tets[:, [1, 2, 3]]]),
+                    axis=1)
+    allowed = np.zeros(k * k * k, dtype=np.uint8)
+    allowed[(faces[:, 0] * k + faces[:, 1]) * k + faces[:, 2]] = 1
+    return allowed
+
+
 def minimum_weight_triangulation(const double[:, ::1] points, const double[:, ::1] outer_normals,
-                                 const uint8_t[:, ::1] forbidden=None):
+                                 const uint8_t[:, ::1] forbidden=None, const uint8_t[::1] allowed=None):
     """Liepa's dynamic programme on one loop of ``k >= 3`` points: its ``k - 2`` triangles ``(j, m, i)``.
 
     ``outer_normals[i]``: the unit normal of the mesh triangle on loop edge ``(i, i + 1)`` (zero where
-    unknown); ``forbidden (k, k)`` (or None) marks chords that are mesh edges already. O(k^3) time,
-    O(k^2) memory. If no triangulation avoids every forbidden chord, the best one ignoring them.
+    unknown); ``forbidden (k, k)`` (or None) marks chords that are mesh edges already; ``allowed`` (or
+    None: every triangle), the triangles that may be used (:func:`delaunay_triangles`). O(k^3) time,
+    O(k^2) memory (``allowed``: k^3 bytes). If no triangulation uses only allowed triangles, the best
+    over every triangle; if none avoids every forbidden chord, the best one ignoring them.
     """
     cdef int64_t k = points.shape[0]
     if outer_normals.shape[0] != k or points.shape[1] != 3 or outer_normals.shape[1] != 3:
         raise ValueError("points and outer_normals must be (k, 3)")
     if forbidden is not None and (forbidden.shape[0] != k or forbidden.shape[1] != k):
         raise ValueError("forbidden must be (k, k)")
+    if allowed is not None and allowed.shape[0] != k * k * k:
+        raise ValueError("allowed must be (k**3,)")
     if k < 3:
         raise ValueError(f"a loop needs at least 3 points, got {k}")
     out = np.empty((k - 2, 3), dtype=np.int64)
@@ -168,8 +221,10 @@ def minimum_weight_triangulation(const double[:, ::1] points, const double[:, ::
     cdef uint8_t[::1] known = known_
     cdef const uint8_t* f = NULL if forbidden is None else &forbidden[0, 0]
     with nogil:
-        _liepa(&points[0, 0], &outer_normals[0, 0], f, k, &angle[0], &area[0], &split[0], &normal[0],
-               &known[0], &s[0], &s[k], &s[2 * k], &s[3 * k])
+        _liepa(&points[0, 0], &outer_normals[0, 0], f, NULL if allowed is None else &allowed[0], k, &angle[0],
+               &area[0], &split[0], &normal[0], &known[0], &s[0], &s[k], &s[2 * k], &s[3 * k])
+    if allowed is not None and not np.isfinite(angle_[k - 1]):  # no triangulation within ``allowed``
+        return minimum_weight_triangulation(points, outer_normals, forbidden)
     if f != NULL and not np.isfinite(angle_[k - 1]):
         # no triangulation avoids every existing edge: accept one that does not
         return minimum_weight_triangulation(points, outer_normals, None)
@@ -1520,7 +1575,8 @@ def fill_loop(const int64_t[::1] loop, const int64_t[::1] rows, const double[:, 
               const int64_t[:, ::1] triangles, const int64_t[::1] indptr, const int64_t[::1] data,
               const double[::1] vertex_sigma, double density, double alpha):
     """One simple loop triangulated and refined in one call (``hole_filling``'s usual fill, a loop short
-    enough for the programme): :func:`loop_geometry`, :func:`minimum_weight_triangulation` (its chords
+    enough for the programme): :func:`loop_geometry`, :func:`minimum_weight_triangulation` (within
+    :func:`delaunay_triangles`; its chords
     that are mesh edges forbidden) and, if ``density > 0``, :func:`refine` with the loop vertices'
     scales ``vertex_sigma / density``. Returns the new points ``(p, 3)`` and the triangles ``(t, 3)`` in
     the mesh's numbering, the new points numbered from ``len(vertices)`` in order."""
@@ -1532,7 +1588,9 @@ def fill_loop(const int64_t[::1] loop, const int64_t[::1] rows, const double[:, 
         if f[p // k, p % k]:
             any_chord = True
             break
-    tris = minimum_weight_triangulation(points, outer, chords.view(np.uint8) if any_chord else None)
+    tris = minimum_weight_triangulation(
+        points, outer, chords.view(np.uint8) if any_chord else None, delaunay_triangles(points)
+    )
     if density > 0:
         sigma_ = np.empty(k)
         for p in range(k):

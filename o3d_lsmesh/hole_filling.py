@@ -3,7 +3,9 @@
 Each chosen hole (a closed loop of boundary half-edges) is
 
 1. triangulated by Liepa's minimum-weight dynamic programme (*Filling Holes in Meshes*, SGP 2003,
-   section 3: smallest largest dihedral angle, then area), O(k^3) in the loop length k: longer loops
+   section 3: smallest largest dihedral angle, then area) over the triangles of the 3D Delaunay
+   tetrahedralization of the loop's points where a triangulation lies within them (Zou et al. 2013, as
+   CGAL), O(k^3) in the loop length k: longer loops
    than :data:`DP_MAX_EDGES` are first cut, recursively, along their shortest chord between far-apart
    vertices, so it cannot hang;
 2. refined to the density of the surrounding edges (section 4): centroid splits, then edge flips;
@@ -249,6 +251,7 @@ def _triangulate(
             points,
             outer_normals,
             None if forbidden is None or not forbidden.any() else forbidden.view(np.uint8),
+            _kernel().delaunay_triangles(points),
         )
     # the shortest chord between vertices 1/3 to 2/3 of the loop apart, in chunks of rows
     best = (np.inf, 0, k // 2)

@@ -198,12 +198,14 @@ def test_loops_of_a_lone_triangle_and_closed_mesh():
 # --------------------------------------------------------------------------- the dynamic programme
 
 
-def reference_triangulation(points, outer):
+def reference_triangulation(points, outer, allowed=None):
     """Liepa's recurrence (section 3) as plain memoized recursion over sub-polygons ``i..j``.
 
     ``W(i, j) = min over m of (max(angle(i, m, j), W(i, m).angle, W(m, j).angle), area sum)`` where the
     angle of triangle ``(j, m, i)`` is its largest dihedral angle with the triangles chosen for ``(i, m)``
-    and ``(m, j)`` (the mesh's on loop edges) and, for ``(0, k - 1)``, the mesh's on the closing edge.
+    and ``(m, j)`` (the mesh's on loop edges) and, for ``(0, k - 1)``, the mesh's on the closing edge;
+    ``m`` only where the triangle ``(i, m, j)`` is in the set ``allowed`` (if given). None: no
+    triangulation of ``i..j`` within it.
     """
     k = len(points)
 
@@ -220,8 +222,12 @@ def reference_triangulation(points, outer):
             return memo[i, j]
         best = None
         for m in range(i + 1, j):
-            a1, s1, n1, t1 = solve(i, m)
-            a2, s2, n2, t2 = solve(m, j)
+            if allowed is not None and (i, m, j) not in allowed:
+                continue
+            left, right = solve(i, m), solve(m, j)
+            if left is None or right is None:
+                continue
+            (a1, s1, n1, t1), (a2, s2, n2, t2) = left, right
             n, area = normal(j, m, i)
             around = [n1, n2] + ([outer[k - 1]] if (i, j) == (0, k - 1) else [])
             cosines = [n @ m for m in around if np.abs(m).sum() > 0]  # a zero normal: unknown, no constraint
@@ -253,6 +259,51 @@ def test_dynamic_programme_matches_plain_recursion(seed):
     # each loop edge (i + 1, i) and the closing edge (0, k - 1) is used once, as the mesh needs
     half = {(a, b) for t in tris.tolist() for a, b in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0]))}
     assert all(((i + 1) % k, i) in half for i in range(k))
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(5, 9), st.integers(0, 2**32 - 1), st.floats(0.1, 1.5))
+def test_dynamic_programme_within_delaunay_triangles(k, seed, bump):
+    # allowed: the faces of scipy's Delaunay tetrahedralization of the loop points, decoded; the
+    # programme's triangulation uses only those and reaches the plain recursion's optimum over them, or
+    # is the unrestricted programme's where no triangulation lies within them
+    from scipy.spatial import Delaunay
+
+    rng = np.random.default_rng(seed)
+    angle = np.sort(rng.uniform(0, 2 * np.pi, k))
+    assume(np.diff(np.concatenate([angle, [angle[0] + 2 * np.pi]])).min() > 0.2)
+    points = np.stack([np.cos(angle), np.sin(angle), bump * rng.normal(size=k)], axis=1)
+    outer = rng.normal(size=(k, 3)) + np.array([0, 0, -2.0])
+    outer /= np.linalg.norm(outer, axis=1, keepdims=True)
+    faces = {
+        tuple(sorted(f)) for t in Delaunay(points).simplices.tolist() for f in itertools.combinations(t, 3)
+    }
+    allowed = _fill_kernel.delaunay_triangles(points)
+    assume(allowed is not None)  # near-cospherical points: not restricted (the test below)
+    assert {tuple(np.unravel_index(c, (k, k, k))) for c in np.flatnonzero(allowed)} == faces
+    tris = _fill_kernel.minimum_weight_triangulation(points, outer, None, allowed)
+    best = reference_triangulation(points, outer, faces)
+    if best is None:
+        assert np.array_equal(tris, _minimum_weight_triangulation(points, outer, None))
+        return
+    assert all(tuple(sorted(t)) in faces for t in tris.tolist())
+    worst, area = _dihedral_weight(points, outer, tris)
+    assert worst <= best[0] + 1e-5
+    if worst >= best[0] - 1e-5:  # the same largest angle: the area decides
+        assert area <= best[1] * (1 + 1e-6)
+
+
+def test_delaunay_triangles_of_coplanar_short_or_cospherical_loops_restrict_nothing():
+    square = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0.0]])
+    circle = np.stack([np.cos(np.arange(8)), np.sin(np.arange(8)), np.zeros(8)], axis=1)
+    assert _fill_kernel.delaunay_triangles(square) is None  # four points: one tetrahedron at most
+    assert _fill_kernel.delaunay_triangles(circle) is None  # Qhull refuses a flat set
+    # a zigzag loop on a sphere: every tetrahedralization of its hull is Delaunay, none is chosen
+    t, z = np.arange(10) * 2 * np.pi / 10, 0.3 * (-1.0) ** np.arange(10)
+    sphere = np.stack([np.sqrt(1 - z**2) * np.cos(t), np.sqrt(1 - z**2) * np.sin(t), z], axis=1)
+    assert _fill_kernel.delaunay_triangles(sphere) is None
+    moved = sphere + 0.01 * np.random.default_rng(0).normal(size=sphere.shape)
+    assert _fill_kernel.delaunay_triangles(moved) is not None  # moved off the sphere: one
 
 
 def test_dynamic_programme_avoids_existing_edges():
