@@ -82,7 +82,8 @@ __all__ = [
 #: is held (fitted on each object, scored on the other: benchmarks/results/realscans_denoise.md).
 SCAN_MU = 0.06
 #: Barycenter weight ``mu w_t`` of a range scan's rim triangles over their measured relative weight ``w``
-#: (:func:`measured_boundary_weight`): the rim is smoothed as strongly whatever the interior's detail.
+#: (:func:`measured_boundary_weight`): the rim is smoothed as strongly whatever the interior's detail;
+#: also the least weight of the interior's barycenters (they are never trusted less than the rim's).
 SCAN_RIM_MU = 0.02
 #: A triangle whose quality ``4 sqrt(3) area / (sum of squared edges)`` (1 equilateral) falls below this
 #: is a sliver (a 1:20 isosceles needle or a flattened cap): :func:`relax_rim` keeps none of its own making.
@@ -386,9 +387,9 @@ def scan_parameters(
     """Every weight of the default energy, measured on the mesh (never on a reference).
 
     A raw range scan (``s = 1``, :func:`scan_likeness`) gets the energy
-    measured on the scans: ``mu = SCAN_MU (g / sigma)^2`` (in ``MU_RANGE``; ``g / sigma`` the
-    detail-to-noise ratio of :func:`measured_noise`, so a scan of finer detail than its noise is
-    held closer to its samples), the rim triangles' ``mu w_t = SCAN_RIM_MU w``,
+    measured on the scans: ``mu = SCAN_MU (g / sigma)^2`` (at least ``SCAN_RIM_MU``, at most 1;
+    ``g / sigma`` the detail-to-noise ratio of :func:`measured_noise`, so a scan of finer detail than
+    its noise is held closer to its samples), the rim triangles' ``mu w_t = SCAN_RIM_MU w``,
     ``lambda = SCAN_MEMBRANE``, twicing ``t = 1``: the membrane damps the scanline-correlated
     noise that the thin-plate term keeps. A mesh with independent noise (``s = 0``: a
     closed mesh, or a rim as noisy as its interior) gets the barycenter-only
@@ -417,7 +418,10 @@ def scan_parameters(
     estimate = measured_noise(vertices, triangles, structure=st)
     ratio_gn = estimate.detail / estimate.noise if estimate.noise > 0.0 else np.inf
     independent = float(np.clip(NOISE_MU_SCALE * ratio_gn**NOISE_MU_POWER, *MU_RANGE))
-    scan = float(np.clip(SCAN_MU * ratio_gn**2, *MU_RANGE))
+    # never below the rim's weight: the interior's samples are at least as trustworthy as the ragged rim's,
+    # and a weaker pull lets the membrane shrink a smooth, coarsely sampled scan (a ball scanned at 60 x 60
+    # rays moved 0.24 grid spacings inward at mu = 0.003, 0.015 at SCAN_RIM_MU)
+    scan = float(np.clip(SCAN_MU * ratio_gn**2, SCAN_RIM_MU, MU_RANGE[1]))
     mu = float(np.exp((1.0 - s) * np.log(independent) + s * np.log(scan)))
     # a scan's rim triangles keep the weight SCAN_RIM_MU w whatever the interior's mu
     rim = weight * (SCAN_RIM_MU / scan) ** s
