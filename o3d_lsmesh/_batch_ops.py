@@ -768,9 +768,10 @@ def change_metrics(before: Any, after: Any) -> dict:
         ),
         Option(
             "method",
-            optional(choice("scan", "local", "global")),
+            optional(choice("scan", "local", "global", "features")),
             None,
-            "fairing energy (default: scan, the API's; local with --level or --reimpose-every)",
+            "fairing energy (default: scan, the API's; local with --level or --reimpose-every; features keeps "
+            "sharp creases)",
         ),
         Option("level", int_at_least(0), 0, "multiresolution level (0: plain fairing)"),
         Option("mu", optional(real), None, "barycenter penalty weight of --method global or scan"),

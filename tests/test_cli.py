@@ -1050,3 +1050,14 @@ def test_a_warning_is_one_line_naming_the_program_not_a_source_line(tmp_path, ca
     assert lines and all(line.startswith("o3d-lsmesh: warning: ") for line in lines), err
     assert "O3D_LSMESH_NO_CHOLMOD=1" in lines[0]
     assert ".py:" not in err  # no file:line of the package or of the console script
+
+
+def test_denoise_features_method_says_which_mode_ran(tmp_path, capsys):
+    box = o3d.geometry.TriangleMesh.create_box().subdivide_midpoint(3)
+    source = _write(box, tmp_path / "box.ply")
+    report = run_json(capsys, ["denoise", str(source), str(tmp_path / "out.ply"), "--method", "features"])
+    assert report["method"] == "features"
+    out = np.asarray(o3d.io.read_triangle_mesh(str(tmp_path / "out.ply")).vertices)
+    # the same as the API call: the CLI adds nothing to the method
+    expected = np.asarray(constrained_fairing(box, method="features").vertices)
+    np.testing.assert_allclose(out, expected, atol=1e-6)

@@ -26,9 +26,9 @@ def add_parsers(sub: Any, common: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--method",
-        choices=("scan", "local", "global"),
+        choices=("scan", "local", "global", "features"),
         help="fairing energy (default: scan, the API's default; local with --level, --iterations or "
-        "--reimpose-every)",
+        "--reimpose-every); features keeps sharp creases (guided normal filtering)",
     )
     p.add_argument(
         "--level", type=nonnegative_int, default=0, help="multiresolution level (0: plain fairing)"
@@ -92,14 +92,15 @@ def denoise(args: argparse.Namespace, run: Run) -> int:
     args.method, args.iterations = report["method"], report["iterations"]  # what ran, for the picture's title
     write_output(args.output, out)
     run.say(
-        f"denoised {args.input} ({len(mesh.vertices)} vertices) in {seconds:.2f} s -> {args.output}; "
+        f"denoised {args.input} ({len(mesh.vertices)} vertices) by {report['method']} fairing in {seconds:.2f} s "
+        f"-> {args.output}; "
         f"mean displacement {report['displacement_mean']:.4g}, {shape_change_text(report)}"
     )
     if args.render:
         method = f"{args.method} fairing" + (f", mu {args.mu:g}" if args.mu is not None else "")
         if args.level:
             method = f"multiresolution fairing, level {args.level}, {args.iterations} iterations per level"
-        elif args.method != "scan":  # the scan denoiser is one linear solve: no iteration count
+        elif args.method not in ("scan", "features"):  # one solve / a measured pass count: no iteration count
             method += f", {args.iterations} iteration{'s' if args.iterations != 1 else ''}"
         titles = [f"input: {Path(args.input).name}", method]
         report["render"] = draw([mesh, out], args.render, run, titles=titles)
