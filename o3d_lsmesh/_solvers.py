@@ -345,8 +345,8 @@ def single_threaded_blas() -> Any:
     """BLAS limited to one thread in a ``with`` block, if threadpoolctl is installed.
 
     Memory-bound level-2 BLAS ran 10x slower with OpenBLAS threads on two busy cores (ARPACK, camel,
-    k = 100: 22.5 s against 2.3 s); SuperLU's solves of more than 4 columns took 3x the time per column
-    with them and 0.3-0.8x without (bunny_scan, igea: benchmarks/results/no_cholmod.md).
+    k = 100: 22.5 s against 2.3 s); SuperLU's solves of several columns took up to 3.4x a single column's
+    time per column with them, 0.35-0.8x without (bunny_scan, igea: benchmarks/results/no_cholmod.md).
     """
     try:
         from threadpoolctl import threadpool_limits
