@@ -6,7 +6,7 @@ mesh's geometry as a few anchors: their indices and quantized positions. The
 receiver, who has the connectivity, solves a least-squares mesh through them.
 Anchors arrive in the order they were chosen (greedy: largest error first),
 so every prefix of the stream is already a good mesh, and each refinement is
-a rank-k update of the kept Cholesky factor, not a new factorization.
+a rank-k update of the kept factor, not a new factorization.
 
     python examples/05_progressive_decoding.py
     python examples/05_progressive_decoding.py mesh.ply --count 500 --out pictures
