@@ -726,11 +726,6 @@ def _run_pipeline(
 _METHODS = ("greedy", "random", "combined")
 
 
-def percent_change(before: float, after: float) -> float | None:
-    # a flat or open mesh can enclose no volume: there is no relative change
-    return 100.0 * (after - before) / before if before != 0 else None
-
-
 def normal_change(a: Any, b: Any) -> float | None:
     """Mean face-normal deviation of two meshes with the same triangles; None when no triangle has an area in both."""
     from .metrics import normal_deviation
