@@ -269,12 +269,7 @@ def test_dynamic_programme_within_delaunay_triangles(k, seed, bump):
     # is the unrestricted programme's where no triangulation lies within them
     from scipy.spatial import Delaunay
 
-    rng = np.random.default_rng(seed)
-    angle = np.sort(rng.uniform(0, 2 * np.pi, k))
-    assume(np.diff(np.concatenate([angle, [angle[0] + 2 * np.pi]])).min() > 0.2)
-    points = np.stack([np.cos(angle), np.sin(angle), bump * rng.normal(size=k)], axis=1)
-    outer = rng.normal(size=(k, 3)) + np.array([0, 0, -2.0])
-    outer /= np.linalg.norm(outer, axis=1, keepdims=True)
+    points, outer = random_loop(k, seed, bump)
     faces = {
         tuple(sorted(f)) for t in Delaunay(points).simplices.tolist() for f in itertools.combinations(t, 3)
     }
@@ -955,6 +950,17 @@ def _dihedral_weight(points, outer, tris):
     return worst, area
 
 
+def random_loop(k, seed, bump):
+    """A seeded loop of ``k`` points around the unit circle, heights ``bump`` apart, with outer-triangle
+    normals pointing down (hypothesis drops loops whose points crowd within 0.2 rad)."""
+    rng = np.random.default_rng(seed)
+    angle = np.sort(rng.uniform(0, 2 * np.pi, k))
+    assume(np.diff(np.concatenate([angle, [angle[0] + 2 * np.pi]])).min() > 0.2)
+    points = np.stack([np.cos(angle), np.sin(angle), bump * rng.normal(size=k)], axis=1)
+    outer = rng.normal(size=(k, 3)) + np.array([0, 0, -2.0])
+    return points, outer / np.linalg.norm(outer, axis=1, keepdims=True)
+
+
 @settings(max_examples=60, deadline=None)
 @given(
     st.integers(4, 8),
@@ -966,12 +972,7 @@ def test_dynamic_programme_is_optimal_on_random_loops(k, seed, bump, unknown):
     # reference: Liepa's recurrence as plain memoized recursion; the compiled programme's triangulation
     # must reach its optimal largest dihedral angle (ties within the programme's 1e-6), and be a disk:
     # each loop edge used once, in the loop's reverse direction, each chord twice
-    rng = np.random.default_rng(seed)
-    angle = np.sort(rng.uniform(0, 2 * np.pi, k))
-    assume(np.diff(np.concatenate([angle, [angle[0] + 2 * np.pi]])).min() > 0.2)
-    points = np.stack([np.cos(angle), np.sin(angle), bump * rng.normal(size=k)], axis=1)
-    outer = rng.normal(size=(k, 3)) + np.array([0, 0, -2.0])
-    outer /= np.linalg.norm(outer, axis=1, keepdims=True)
+    points, outer = random_loop(k, seed, bump)
     outer[[u for u in unknown if u < k]] = 0.0  # unknown neighbours: no constraint
     tris = _minimum_weight_triangulation(points, outer, None)
     assert tris.shape == (k - 2, 3)
