@@ -21,6 +21,7 @@ REPO = Path(__file__).resolve().parents[1]
 #: first on their path, and run there (`python -c` and `-m` put the working directory first).
 PACKAGE_HOME = str(Path(importlib.util.find_spec("o3d_lsmesh").origin).resolve().parents[1])
 DATA = Path(os.environ.get("O3D_LSMESH_DATA", REPO.parent / "shared" / "data" / "meshes"))
+SCANS = Path(os.environ.get("O3D_LSMESH_SCANS", REPO.parent / "shared" / "data" / "scans"))
 
 
 def load_mesh(name: str):
@@ -72,3 +73,14 @@ def triangle_soups(max_vertices: int = 12, max_triangles: int = 25):
             st.lists(st.permutations(range(n)).map(lambda p: p[:3]), min_size=1, max_size=max_triangles),
         )
     )
+
+
+def load_scan(name: str):
+    """``(vertices, triangles)`` of the raw scan ``name`` in ``SCANS``, or skip the test with the reason."""
+    path = SCANS / name
+    if not path.exists():
+        pytest.skip(f"raw scan {name} not found in {SCANS} (set O3D_LSMESH_SCANS to the scans folder)")
+    import open3d as o3d
+
+    mesh = o3d.io.read_triangle_mesh(str(path))
+    return np.asarray(mesh.vertices).copy(), np.asarray(mesh.triangles).astype(np.int64)

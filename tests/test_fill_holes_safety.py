@@ -6,14 +6,12 @@ sharing an edge), independent of the module's separating-axis test; MeshLab's ch
 
 from __future__ import annotations
 
-import os
 import warnings
-from pathlib import Path
 
 import numpy as np
 import open3d as o3d
 import pytest
-from conftest import REPO, load_mesh
+from conftest import SCANS, load_mesh, load_scan
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 from scipy.spatial import cKDTree
@@ -21,16 +19,6 @@ from test_fill_holes import cut_disk
 
 from o3d_lsmesh import O3DLSMeshWarning
 from o3d_lsmesh.hole_filling import _crossings, fill_holes_arrays, find_holes
-
-SCANS = Path(os.environ.get("O3D_LSMESH_SCANS", REPO.parent / "shared" / "data" / "scans"))
-
-
-def load_scan(name: str):
-    path = SCANS / name
-    if not path.exists():
-        pytest.skip(f"raw scan {name} not found in {SCANS} (set O3D_LSMESH_SCANS to the scans folder)")
-    mesh = o3d.io.read_triangle_mesh(str(path))
-    return np.asarray(mesh.vertices).copy(), np.asarray(mesh.triangles).astype(np.int64)
 
 
 def _segments_cross(p, q, a, b, c):

@@ -17,12 +17,11 @@ import json
 import os
 import re
 import warnings
-from pathlib import Path
 
 import numpy as np
 import open3d as o3d
 import pytest
-from conftest import DATA, REPO
+from conftest import DATA, SCANS
 from defect_meshes import DEFECTS, all_defects
 
 import o3d_lsmesh
@@ -32,7 +31,6 @@ from o3d_lsmesh.cli import main
 from o3d_lsmesh.selection import start_vertices
 from o3d_lsmesh.topology import boundary_halfedges, connected_components
 
-SCANS = Path(os.environ.get("O3D_LSMESH_SCANS", REPO.parent / "shared" / "data" / "scans"))
 FULL = os.environ.get("O3D_LSMESH_FULL") == "1"
 SCAN_NAMES = sorted(p.stem for p in SCANS.glob("*.ply")) if SCANS.is_dir() else ["(no scans)"]
 LIGHT_SCANS = [name for name in ("bun090", "chin") if name in SCAN_NAMES] or SCAN_NAMES[

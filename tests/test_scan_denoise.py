@@ -11,7 +11,7 @@ import numpy as np
 import open3d as o3d
 import pytest
 import scipy.sparse as sp
-from conftest import DATA, REPO, grid
+from conftest import DATA, REPO, SCANS, grid
 from numpy.testing import assert_allclose
 
 from o3d_lsmesh._solvers import SPDSolver
@@ -42,7 +42,6 @@ from o3d_lsmesh.fairing.scan_fairing import (
 )
 from o3d_lsmesh.topology import boundary_halfedges
 
-SCANS = Path(os.environ.get("O3D_LSMESH_SCANS", REPO.parent / "shared" / "data" / "scans"))
 TIGHT = 1e-9
 #: every raw scan's mean distance to the reference must drop at least this much (fraction of raw);
 #: measured 0.66-0.74 x raw in benchmarks/results/realscans_denoise.md
