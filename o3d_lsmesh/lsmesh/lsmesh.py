@@ -15,10 +15,10 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse import csgraph
 
-from ._errors import SingularSystemError
-from ._o3d import mesh_from_state, mesh_state, new_mesh, read_mesh
-from ._progress import check_progress, stages
-from ._solvers import (
+from .._errors import SingularSystemError
+from .._o3d import mesh_from_state, mesh_state, new_mesh, read_mesh
+from .._progress import check_progress, stages
+from .._solvers import (
     DEFAULT_TOLERANCE,
     SPDSolver,
     check_constant_modes,
@@ -26,11 +26,11 @@ from ._solvers import (
     operator_scale,
     solver_backend,
 )
-from ._validate import as_bool, as_choice, as_indices, as_positions, as_weights
-from .laplacian import LAPLACIAN_KINDS, laplacian_matrix
+from .._validate import as_bool, as_choice, as_indices, as_positions, as_weights
+from ..laplacian import LAPLACIAN_KINDS, laplacian_matrix
 
 if TYPE_CHECKING:
-    from ._types import AnyMesh, MeshT
+    from .._types import AnyMesh, MeshT
 
 __all__ = ["LSMeshSolver", "LSMeshSystem", "check_components_constrained", "ls_mesh", "reconstruct_geometry"]
 
