@@ -1,0 +1,81 @@
+"""Exception and warning classes of o3d_lsmesh, and :func:`warn`.
+
+Every error a caller's input causes is an :class:`InputError` (a ``ValueError``) naming the Python
+parameter it is about in ``param``; the command line maps it to its flag by class, never by message.
+"""
+
+from __future__ import annotations
+
+import inspect
+import os
+import sys
+import warnings
+
+__all__ = [
+    "ConvergenceError",
+    "InputError",
+    "InputTypeError",
+    "O3DLSMeshWarning",
+    "SingularSystemError",
+    "warn",
+]
+
+
+class InputError(ValueError):
+    """A bad argument: ``param`` is the Python parameter it is about (or None when none is to blame alone).
+
+    >>> error = InputError("count must be >= 1, got 0", param="count")
+    >>> isinstance(error, ValueError), error.param
+    (True, 'count')
+    """
+
+    def __init__(self, message: str = "", *, param: str | None = None) -> None:
+        super().__init__(message)
+        self.param = param
+
+
+class InputTypeError(InputError, TypeError):
+    """An argument of the wrong type: both an :class:`InputError` and a ``TypeError``."""
+
+
+class SingularSystemError(InputError):
+    """The linear system cannot be solved as posed.
+
+    Raised before factoring when it is cheap to see (a connected component
+    without any constraint), otherwise translated from the factorization.
+    """
+
+
+class O3DLSMeshWarning(UserWarning):
+    """A warning about a fallback or about data that was dropped."""
+
+
+class ConvergenceError(RuntimeError):
+    """An iterative solve did not reach its tolerance within its iteration limit."""
+
+
+#: The package's folder (with its separator): frames of files under it are skipped by :func:`warn`.
+_PACKAGE = os.path.dirname(os.path.dirname(os.path.abspath(__file__))) + os.sep
+
+
+def warn(message: str, category: type[Warning] = O3DLSMeshWarning) -> None:
+    """``warnings.warn`` pointing at the first caller outside o3d_lsmesh, whatever the call path.
+
+    >>> with warnings.catch_warnings(record=True) as caught:
+    ...     warnings.simplefilter("always")
+    ...     warn("careful")
+    >>> caught[0].category.__name__, str(caught[0].message)
+    ('O3DLSMeshWarning', 'careful')
+    """
+    if sys.version_info >= (3, 12):
+        warnings.warn(message, category, skip_file_prefixes=(_PACKAGE,))  # type: ignore[call-arg]
+        return
+    frame = inspect.currentframe()  # this function's frame: stacklevel 1
+    level = 1
+    try:
+        while frame is not None and os.path.abspath(frame.f_code.co_filename).startswith(_PACKAGE):
+            frame = frame.f_back
+            level += 1
+    finally:
+        del frame
+    warnings.warn(message, category, stacklevel=level)

@@ -1,0 +1,196 @@
+"""Progress bars of every long operation (``progress=True`` in the API): the package's only tqdm import.
+
+:class:`Progress` makes every bar: a count of work units (:meth:`~Progress.bar`), a loop
+(:meth:`~Progress.over`), the named stages of one operation (:meth:`~Progress.stages`) and the decades
+an iterative solve's residual falls (:meth:`~Progress.decades`). Every bar ends at its total when the
+work completes. The open bars are tracked here: :func:`close_all` ends them (the command line does
+before it prints an error). With ``progress=False`` tqdm is not even imported.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import sys
+import weakref
+from collections.abc import Callable, Iterable, Iterator, Sequence, Sized
+from typing import Any, TypeVar
+
+from .validate import as_bool
+
+__all__ = [
+    "Progress",
+    "check_progress",
+    "close_all",
+    "decades_bar",
+    "iterate",
+    "progress_bar",
+    "stages",
+    "write",
+]
+
+T = TypeVar("T")
+
+#: The bars made by :class:`Progress` and not yet garbage (closed ones included: closing twice is harmless).
+_OPEN: weakref.WeakSet[Any] = weakref.WeakSet()
+
+
+def check_progress(progress: Any) -> bool:
+    """``progress`` as a bool; ``InputTypeError`` naming ``progress`` for anything else (1, "yes", None)."""
+    return bool(as_bool(progress, name="progress"))
+
+
+def close_all() -> None:
+    """Close every open bar (each ends its line), so that a message printed next starts on its own line."""
+    for bar in list(_OPEN):
+        with contextlib.suppress(Exception):
+            bar.close()
+
+
+def write(text: str) -> None:
+    """Print one line on stderr above any open bar (a plain print would land in the bar's line)."""
+    from tqdm.auto import tqdm
+
+    tqdm.write(text, file=sys.stderr)
+
+
+class _Silent:
+    """Stand-in for a disabled bar: tqdm's methods (``update``, ``set_postfix_str``, ``close``...), doing nothing."""
+
+    n = 0
+
+    def __getattr__(self, name: str) -> Callable[..., None]:
+        return lambda *args, **kwargs: None
+
+    def __enter__(self) -> _Silent:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        pass
+
+
+class _Decades:
+    """:meth:`Progress.decades`' bar: ``reached(to_go)`` sets it to the decades fallen since the start."""
+
+    def __init__(self, bar: Any, to_go: float) -> None:
+        self.bar, self.start = bar, to_go
+
+    def reached(self, to_go: float, postfix: str = "") -> None:
+        fallen = math.log10(self.start / to_go) if to_go > 0 else math.inf
+        self.bar.update(min(self.bar.total, max(0, math.floor(fallen))) - self.bar.n)
+        self.bar.set_postfix_str(postfix, refresh=False)
+
+    def finish(self) -> None:
+        self.bar.update(self.bar.total - self.bar.n)
+
+    def close(self) -> None:
+        self.bar.close()
+
+    def __enter__(self) -> _Decades:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+class Progress:
+    """The bars of one operation named ``desc``, shown when ``enabled`` (a bool, checked) is True.
+
+    >>> progress = Progress(False, "levels")
+    >>> list(progress.over(range(3)))
+    [0, 1, 2]
+    """
+
+    def __init__(self, enabled: Any, desc: str) -> None:
+        self.enabled, self.desc = check_progress(enabled), desc
+
+    def _tqdm(self, *args: Any, **options: Any) -> Any:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(*args, desc=self.desc, **options)
+        _OPEN.add(bar)
+        return bar
+
+    def bar(self, total: int, **options: Any) -> Any:
+        """A bar over ``total`` units (a silent stand-in when disabled); a context manager, or ``close()`` it.
+
+        ``options`` go to tqdm: ``unit``; ``initial`` (work done before the bar starts, so that it still
+        ends at ``total``); ``file`` (default stderr); ``leave=False`` to erase it when it closes.
+        """
+        return self._tqdm(total=int(total), **options) if self.enabled else _Silent()
+
+    def over(self, items: Iterable[T], *, unit: str = "it", total: int | None = None) -> Iterator[T]:
+        """``items`` with a bar that advances as each is taken; ``total`` defaults to ``len(items)``."""
+        if not self.enabled:
+            return iter(items)
+        if total is None and isinstance(items, Sized):
+            total = len(items)
+        return iter(self._tqdm(items, total=total, unit=unit))
+
+    @contextlib.contextmanager
+    def stages(self, names: Sequence[str]) -> Iterator[Callable[[str], None]]:
+        """A bar over the named stages of one operation; yields ``begin(name)``, called as each starts.
+
+        ``begin`` completes the previous stage; a normal exit completes the last (the bar ends at
+        ``len(names)``), an error leaves the bar where it happened.
+        """
+        bar = self.bar(len(names), unit="stage")
+        started = 0
+
+        def begin(name: str) -> None:
+            nonlocal started
+            if started:
+                bar.update(1)
+            started += 1
+            bar.set_postfix_str(name)
+
+        try:
+            yield begin
+            if started:
+                bar.update(1)
+        finally:
+            bar.close()
+
+    def decades(self, to_go: float) -> Any:
+        """A bar over the decades an iterative solve's residual has to fall, ``to_go`` times in all.
+
+        The iterations a solve takes are not known before it ends, the residual's way to its target is.
+        ``reached(to_go, postfix)`` with what is left moves it, ``finish()`` completes it at convergence.
+        """
+        if not self.enabled:
+            return _Silent()
+        decades = max(1, math.ceil(math.log10(to_go))) if math.isfinite(to_go) and to_go > 1 else 1
+        return _Decades(self.bar(decades, unit="decade"), to_go)
+
+
+def progress_bar(progress: Any, *, total: int, desc: str, **options: Any) -> Any:
+    """``Progress(progress, desc).bar(total, **options)``.
+
+    >>> with progress_bar(False, total=3, desc="work") as bar:
+    ...     bar.update(3)
+    """
+    return Progress(progress, desc).bar(total, **options)
+
+
+def decades_bar(progress: Any, *, to_go: float, desc: str) -> Any:
+    """``Progress(progress, desc).decades(to_go)``."""
+    return Progress(progress, desc).decades(to_go)
+
+
+def iterate(
+    progress: Any, items: Iterable[T], *, desc: str, unit: str = "it", total: int | None = None
+) -> Iterator[T]:
+    """``Progress(progress, desc).over(items, unit=unit, total=total)``."""
+    return Progress(progress, desc).over(items, unit=unit, total=total)
+
+
+def stages(
+    progress: Any, desc: str, names: Sequence[str]
+) -> contextlib.AbstractContextManager[Callable[[str], None]]:
+    """``Progress(progress, desc).stages(names)``.
+
+    >>> with stages(False, "ls_mesh", ("factor", "solve")) as begin:
+    ...     begin("factor")
+    ...     begin("solve")
+    """
+    return Progress(progress, desc).stages(names)
