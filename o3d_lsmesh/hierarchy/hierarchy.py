@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import scipy.sparse as sp
 
-from .._o3d import MeshData, new_mesh, read_mesh, warn_dropped_attributes
+from .._o3d import MeshData, new_mesh, read_mesh, template, warn_dropped_attributes
 from .._progress import check_progress, progress_bar
 from .._validate import as_count, as_positions, as_positive_float, mesh_arrays
 from ..topology import VertexRings, vertex_rings
@@ -233,24 +233,7 @@ class MeshHierarchy:
     # ---------------------------------------------------------------- internals
     def _template(self) -> MeshData:
         """A stand-in for the input mesh so that :func:`new_mesh` builds the input's kind."""
-        empty_v, empty_t = np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)
-        if self.mesh_kind == "arrays":
-            return MeshData(empty_v, empty_t, None, "arrays")
-        from .._o3d import open3d
-
-        o3d = open3d()
-        if self.mesh_kind == "legacy":
-            return MeshData(empty_v, empty_t, o3d.geometry.TriangleMesh(), "legacy")
-        device, position_dtype, index_dtype = self.tensor_format
-        device = o3d.core.Device(device)
-        source = o3d.t.geometry.TriangleMesh(device)
-        source.vertex.positions = o3d.core.Tensor(
-            empty_v, dtype=getattr(o3d.core, position_dtype.lower()), device=device
-        )
-        source.triangle.indices = o3d.core.Tensor(
-            empty_t, dtype=getattr(o3d.core, index_dtype.lower()), device=device
-        )
-        return MeshData(empty_v, empty_t, source, "tensor")
+        return template(self.mesh_kind, self.tensor_format)
 
 
 def boundary_degree(rings: VertexRings) -> np.ndarray:

@@ -1,0 +1,277 @@
+"""Open3D beyond mesh conversion: mesh files, images, raycasting, primitives and its thread cap.
+
+The only module besides the renderer that calls Open3D for the application (``app/``): files are
+read with every defect named (Open3D returns a partial mesh from a cut-off file and says so only in
+a native warning), OBJ files are written with their ``.mtl`` and textures.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import re
+import sys
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = [
+    "cap_threads",
+    "captured_native_output",
+    "cast_rays",
+    "distances_to_surface",
+    "icosphere",
+    "legacy_mesh",
+    "mesh_classes",
+    "obj_writable",
+    "open3d",
+    "quiet_open3d",
+    "raycasting_scene",
+    "read_mesh_file",
+    "signed_distances",
+    "write_image",
+    "write_mesh_file",
+]
+
+
+def open3d() -> Any:
+    """Import and return the ``open3d`` module (lazily: the array core works without it)."""
+    import open3d as o3d  # noqa: TID251 (the adapter)
+
+    return o3d
+
+
+def quiet_open3d() -> Any:
+    """The ``open3d`` module with its own messages off (ours are clearer and ``--json`` needs stdout clean)."""
+    o3d = open3d()
+    o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
+    return o3d
+
+
+def mesh_classes() -> tuple[type, type]:
+    """Open3D's legacy and tensor triangle-mesh classes."""
+    o3d = open3d()
+    return o3d.geometry.TriangleMesh, o3d.t.geometry.TriangleMesh
+
+
+def cap_threads(threads: int) -> None:
+    """Cap Open3D's own worker threads at ``threads`` (Open3D versions without the setting: nothing)."""
+    o3d = quiet_open3d()
+    if hasattr(o3d.utility, "set_max_threads"):
+        o3d.utility.set_max_threads(threads)
+
+
+@contextlib.contextmanager
+def captured_native_output() -> Iterator[list[str]]:
+    """Capture what C/C++ libraries write straight to file descriptors 1 and 2 (RPly, Assimp, Open3D).
+
+    Yields a list that holds the captured text once the block ends.
+    """
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = [os.dup(1), os.dup(2)]
+    captured: list[str] = []
+    with tempfile.TemporaryFile() as sink:
+        try:
+            os.dup2(sink.fileno(), 1)
+            os.dup2(sink.fileno(), 2)
+            yield captured
+        finally:
+            os.dup2(saved[0], 1)
+            os.dup2(saved[1], 2)
+            for fd in saved:
+                os.close(fd)
+            sink.seek(0)
+            captured.append(sink.read().decode("utf-8", "replace"))
+
+
+# Open3D's readers report a file they could not read to the end with these words (and return what they got)
+_READ_FAILURE = re.compile(
+    r"(?i)(read \w+ failed|rply: error|unable to read|error reading|unexpected end)[^\n]*"
+)
+_ANSI = re.compile(r"\x1b\[[0-9;]*m")
+
+
+def ply_header_counts(path: str | os.PathLike) -> dict[str, int]:
+    """Element counts of a PLY header (``{"vertex": n, "face": m}``); empty if the header is unreadable."""
+    counts = {}
+    try:
+        with open(path, "rb") as handle:
+            if handle.readline().strip() != b"ply":
+                return {}
+            for _ in range(10_000):
+                line = handle.readline()
+                if not line or line.strip() == b"end_header":
+                    break
+                parts = line.split()
+                if len(parts) == 3 and parts[0] == b"element":
+                    counts[parts[1].decode("ascii", "replace")] = int(parts[2])
+    except (OSError, ValueError):
+        return {}
+    return counts
+
+
+def read_mesh_file(path: str, *, what: str = "INPUT") -> Any:
+    """Read a triangle mesh file as a legacy Open3D mesh (STL files welded: three vertices a triangle).
+
+    Raises
+    ------
+    ValueError
+        Naming ``what`` and the file: missing, a folder, empty, unreadable, truncated or corrupt
+        (Open3D's warnings and the PLY header's counts), or without triangles.
+    """
+    o3d = quiet_open3d()
+    name = f"{what} {path!r}"
+    if not os.path.exists(path):
+        raise ValueError(f"{name} does not exist")
+    if os.path.isdir(path):
+        raise ValueError(f"{name} is a folder, not a mesh file")
+    if os.path.getsize(path) == 0:
+        raise ValueError(f"{name} is an empty file")
+    o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Warning)
+    try:
+        with captured_native_output() as captured:
+            mesh = o3d.io.read_triangle_mesh(path)
+    finally:
+        o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
+    n, m = len(mesh.vertices), len(mesh.triangles)
+    failure = _READ_FAILURE.search(_ANSI.sub("", captured[0]))
+    if failure and n:
+        raise ValueError(
+            f"{name} is truncated or corrupt: Open3D read only part of it ({failure.group(0).strip()})"
+        )
+    header = ply_header_counts(path) if Path(path).suffix.lower() == ".ply" and n else {}
+    # a polygon face gives at least one triangle: fewer triangles than faces means faces were lost
+    if header.get("vertex", n) != n or header.get("face", 0) > m:
+        raise ValueError(
+            f"{name} is truncated or corrupt: its header declares {header.get('vertex')} vertices "
+            f"and {header.get('face', 0)} faces, Open3D read {n} and {m} triangles"
+        )
+    if n == 0:
+        raise ValueError(
+            f"{name} could not be read as a triangle mesh (empty, corrupt or unsupported format)"
+        )
+    if m == 0:
+        raise ValueError(f"{name} has {n} vertices but no triangles")
+    return mesh.remove_duplicated_vertices() if Path(path).suffix.lower() == ".stl" else mesh
+
+
+def write_mesh_file(mesh: Any, path: str | os.PathLike) -> list[str]:
+    """Write a mesh file; an OBJ with UVs gets its ``.mtl`` and texture images (:func:`obj_writable`).
+
+    Returns the names of the ``.mtl`` and images Open3D did not write (it says so only in a native
+    warning); empty when all are there or none were due.
+
+    Raises
+    ------
+    OSError
+        Open3D could not write the mesh file (it returns False instead of raising).
+    """
+    o3d = quiet_open3d()
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix == ".stl":
+        mesh = o3d.geometry.TriangleMesh(mesh)
+        mesh.compute_triangle_normals()  # Open3D's STL writer refuses a mesh without them
+    textured = suffix == ".obj" and isinstance(mesh, o3d.geometry.TriangleMesh) and mesh.has_triangle_uvs()
+    if textured:
+        mesh = obj_writable(mesh)
+    with captured_native_output():
+        written = o3d.io.write_triangle_mesh(str(path), mesh)
+    if not written or not path.exists() or path.stat().st_size == 0:
+        raise OSError(f"Open3D could not write {str(path)!r}")
+    if not textured:
+        return []
+    expected = [path.with_suffix(".mtl")]
+    expected += [path.with_name(f"{path.stem}_{i}.png") for i in range(len(mesh.textures))]
+    return [file.name for file in expected if not file.exists()]
+
+
+def obj_writable(mesh: Any) -> Any:
+    """A legacy mesh that Open3D's OBJ writer writes with every texture (``mesh`` itself if it already is).
+
+    The writer stops at the first empty texture slot, and its own OBJ reader puts an empty slot
+    first (faces without a material): the copy drops the empty slots no triangle uses (material
+    ids renumbered) and gives those in use a 1x1 white image (untextured white).
+    """
+    textures = list(mesh.textures)
+    empty = np.array([texture.is_empty() for texture in textures], dtype=bool)
+    if not empty.any() or not mesh.has_triangle_uvs():  # (without UVs the writer writes no material)
+        return mesh
+    o3d = open3d()
+    ids = (
+        np.asarray(mesh.triangle_material_ids) if mesh.has_triangle_material_ids() else np.zeros(1, np.int32)
+    )
+    used = np.zeros(len(textures) + 1, dtype=bool)  # (the last: ids past the textures)
+    used[np.clip(ids[ids >= 0], 0, len(textures))] = True
+    keep = used[:-1] | ~empty
+    out = o3d.geometry.TriangleMesh(mesh)
+    white = o3d.geometry.Image(np.full((1, 1, 3), 255, dtype=np.uint8))
+    out.textures = [white if empty[i] else textures[i] for i in np.flatnonzero(keep)]
+    if mesh.has_triangle_material_ids():
+        dropped_before = np.concatenate([[0], np.cumsum(~keep)])  # slots dropped before each id
+        renumbered = ids - dropped_before[np.clip(ids, 0, len(textures))]
+        out.triangle_material_ids = o3d.utility.IntVector(
+            np.where(ids >= 0, renumbered, ids).astype(np.int32)
+        )
+    return out
+
+
+def write_image(path: str, image: np.ndarray) -> bool:
+    """Write an ``(h, w, 3) uint8`` picture (PNG by the name); whether Open3D wrote it."""
+    o3d = quiet_open3d()
+    return bool(o3d.io.write_image(path, o3d.geometry.Image(np.ascontiguousarray(image))))
+
+
+def legacy_mesh(vertices: np.ndarray, triangles: np.ndarray) -> Any:
+    """A legacy ``open3d.geometry.TriangleMesh`` of ``(n, 3)`` vertices and ``(m, 3)`` triangles."""
+    o3d = open3d()
+    return o3d.geometry.TriangleMesh(
+        o3d.utility.Vector3dVector(np.asarray(vertices, dtype=np.float64)),
+        o3d.utility.Vector3iVector(np.asarray(triangles).astype(np.int32)),
+    )
+
+
+def icosphere(subdivisions: int) -> tuple[np.ndarray, np.ndarray]:
+    """Open3D's unit icosahedron midpoint-subdivided ``subdivisions`` times: ``(n, 3)`` vertices, ``(m, 3)`` triangles."""
+    mesh = open3d().geometry.TriangleMesh.create_icosahedron(radius=1.0)
+    if subdivisions:
+        mesh = mesh.subdivide_midpoint(number_of_iterations=int(subdivisions))
+    return np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.triangles)
+
+
+def raycasting_scene(vertices: np.ndarray, triangles: np.ndarray) -> Any:
+    """Open3D's ``RaycastingScene`` (single precision) holding the surface ``(vertices, triangles)``."""
+    o3d = open3d()
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(
+        o3d.core.Tensor(vertices.astype(np.float32)), o3d.core.Tensor(triangles.astype(np.uint32))
+    )
+    return scene
+
+
+def cast_rays(scene: Any, rays: np.ndarray) -> dict[str, np.ndarray]:
+    """Rays ``(..., 6)`` (origin, direction) cast into ``scene``: ``t_hit``, ``primitive_ids``, ``primitive_uvs``,
+    ``primitive_normals`` as arrays (``t_hit`` inf where nothing is hit)."""
+    answer = scene.cast_rays(open3d().core.Tensor(np.asarray(rays, dtype=np.float32)))
+    return {
+        key: answer[key].numpy() for key in ("t_hit", "primitive_ids", "primitive_uvs", "primitive_normals")
+    }
+
+
+def signed_distances(scene: Any, points: np.ndarray) -> np.ndarray:
+    """Signed distance ``(p,)`` float64 of each of ``points (p, 3)`` to the surface in ``scene`` (negative inside)."""
+    tensor = open3d().core.Tensor(points.astype(np.float32))
+    return scene.compute_signed_distance(tensor).numpy().astype(np.float64)
+
+
+def distances_to_surface(points: np.ndarray, vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Distance ``(p,)`` from each of ``points (p, 3)`` to the nearest point of the surface ``(vertices, triangles)``.
+
+    Single precision: callers pass coordinates in a frame of unit size and scale back.
+    """
+    tensor = open3d().core.Tensor(points.astype(np.float32))
+    return raycasting_scene(vertices, triangles).compute_distance(tensor).numpy().astype(np.float64)
