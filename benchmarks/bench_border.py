@@ -22,7 +22,7 @@ from _common import DATA, load_mesh, markdown_table, write_markdown
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components, dijkstra
 
-from o3d_lsmesh.hole_filling import BORDER_FACING_AWAY, find_holes
+from o3d_lsmesh.holes import BORDER_FACING_AWAY, find_holes
 
 SCANS = [Path(os.environ.get("O3D_LSMESH_SCANS", DATA.parent / "scans")), DATA.parent / "scans-dragon"]
 

@@ -51,7 +51,7 @@ from _common import load_mesh, markdown_table, write_markdown
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 
-from o3d_lsmesh.hole_filling import HoleFiller, fill_holes_arrays
+from o3d_lsmesh.holes import HoleFiller, fill_holes_arrays
 
 RADII = [2.5, 6.0, 15.0]
 SEED = 15

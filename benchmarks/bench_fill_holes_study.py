@@ -6,7 +6,7 @@ folder (``$O3D_LSMESH_DATA``), geodesic disks of 2.5h, 6h and 15h (h: the mean e
 ``HOLES`` seeded centres each (a centre is re-drawn until the cut leaves one hole), and every hole filled
 by
 
-* ours: :func:`o3d_lsmesh.hole_filling.fill_holes_arrays` with its defaults, and each candidate setting
+* ours: :func:`o3d_lsmesh.holes.fill_holes_arrays` with its defaults, and each candidate setting
   of the leave-one-mesh-out table (continuity 1 / 2, cotangent / uniform weights, density 0.7 / 1 / 1.4);
 * CGAL ``triangulate_refine_and_fair_hole``, continuity 1 and 2 (density sqrt(2), CGAL's default);
 * MeshLib ``fillHoleNicely`` (its defaults).
@@ -49,7 +49,7 @@ from bench_fill_holes import (
     ratio_interval,
 )
 
-from o3d_lsmesh.hole_filling import HoleFiller
+from o3d_lsmesh.holes import HoleFiller
 
 RADII = (2.5, 6.0, 15.0)
 HOLES = 10

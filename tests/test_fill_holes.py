@@ -21,14 +21,8 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 
 from o3d_lsmesh import O3DLSMeshWarning, _fill_kernel, fill_holes
-from o3d_lsmesh.hole_filling import (
-    DP_MAX_EDGES,
-    HoleFiller,
-    _crossings,
-    _TriangleIndex,
-    fill_holes_arrays,
-    find_holes,
-)
+from o3d_lsmesh.holes import DP_MAX_EDGES, HoleFiller, fill_holes_arrays, find_holes
+from o3d_lsmesh.holes.crossings import _crossings, _TriangleIndex
 from o3d_lsmesh.topology import boundary_loops
 
 
@@ -1415,7 +1409,7 @@ def test_local_mesh_is_the_unique_numbering(seed, size):
 @given(st.integers(0, 2**32 - 1), st.integers(4, 7), st.integers(1, 2), st.booleans())
 def test_fair_dense_matches_the_sparse_solve(seed, size, level, cot):
     # reference: the sparse path of _fair (CSR operators, SciPy's products, solve_spd's sparse solver)
-    from o3d_lsmesh import hole_filling
+    from o3d_lsmesh.holes import fair as hole_filling
 
     points, tris, _ = _random_patch(seed, size, 0.4)
     n = len(points)

@@ -18,7 +18,8 @@ from scipy.spatial import cKDTree
 from test_fill_holes import cut_disk
 
 from o3d_lsmesh import O3DLSMeshWarning
-from o3d_lsmesh.hole_filling import _crossings, fill_holes_arrays, find_holes
+from o3d_lsmesh.holes import fill_holes_arrays, find_holes
+from o3d_lsmesh.holes.crossings import _crossings
 
 
 def _segments_cross(p, q, a, b, c):
@@ -170,7 +171,7 @@ def _two_holes():
 
 
 def test_solve_blocks_leaves_only_the_non_finite_block():
-    from o3d_lsmesh.hole_filling import _solve_blocks
+    from o3d_lsmesh.holes.fair import _solve_blocks
 
     rng = np.random.default_rng(0)
     blocks = [rng.random((3, 3)) for _ in range(3)]
@@ -190,7 +191,7 @@ def test_non_finite_cotangent_system_falls_back_for_its_hole_alone(monkeypatch):
     # dragon.ply: one hole's cotangent system was not finite and the whole call raised "matrix must have
     # finite entries", blaming the input. Here one hole's cotangent weights are made infinite: that hole
     # gets the uniform fill, the other the cotangent one, each as when filled alone; no error.
-    from o3d_lsmesh import hole_filling
+    from o3d_lsmesh.holes import triangulate as hole_filling
 
     V, T = _two_holes()
     kernel = hole_filling._kernel()

@@ -1,0 +1,277 @@
+"""Fairing the patches: the new vertices minimize a continuity-0/1/2 energy, the rings around them fixed.
+
+O. Sorkine and D. Cohen-Or, Least-squares Meshes, SMI 2004, eq. 1, 3 and section 6; the choice among
+candidates (a lower continuity where a patch crosses the mesh) is in docs/algorithms/hole_filling.rst.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse import csgraph
+
+from .. import _solvers
+from .._errors import SingularSystemError
+from .crossings import _crossings
+from .triangulate import _kernel
+
+_Edges = tuple[np.ndarray, np.ndarray, np.ndarray]  # edges i < j of a local mesh, each half-edge's edge
+
+
+def _operators(
+    i: np.ndarray, j: np.ndarray, w: np.ndarray, degree: np.ndarray, scale: np.ndarray, dense: bool
+):
+    """Stiffness ``K = D - W`` and Laplacian ``L = S K`` (CSR, or arrays if ``dense``) of a local mesh
+    with edges ``(i, j)`` of weight ``w``, ``D`` the ``degree`` and ``S`` the row ``scale`` of
+    :func:`o3d_lsmesh._fill_kernel.laplacian_weights`."""
+    nv = len(degree)
+    diagonal = np.arange(nv)
+    rows, cols = np.concatenate([i, j, diagonal]), np.concatenate([j, i, diagonal])
+    values = np.concatenate([-w, -w, degree])
+    if dense:
+        K = np.zeros((nv, nv))
+        K[rows, cols] = values
+        return K, scale[:, None] * K
+    K = sp.csr_matrix((values, (rows, cols)), shape=(nv, nv))
+    L = K.copy()  # L = S K: K's pattern with its rows scaled
+    L.data = L.data * np.repeat(scale, np.diff(L.indptr))
+    return K, L
+
+
+def _fair(
+    x: np.ndarray, tris: np.ndarray, unknown: np.ndarray, rings: list, level: int, edges: _Edges, cot: bool
+):
+    """Positions of the ``unknown`` local vertices minimizing continuity ``level``'s energy, the others
+    fixed at ``x``:
+
+    * ``0``: ``x^T K x`` (membrane, harmonic: ``L x = 0`` at the unknowns);
+    * ``1``: ``sum_r |(L x)_r|^2`` over the rows touching an unknown: the LS-mesh energy ``||L x||^2``
+      with interpolated anchors (eq. 3, section 6);
+    * ``2``: ``sum |(L x)_r - (L x)_s|^2`` over edges ``(r, s)`` touching such a row:
+      ``(L x)^T K (L x)``, the tri-Laplacian energy,
+
+    with ``K = D - W`` and ``L = S K``: uniform, ``W`` the adjacency and ``S = D^-1`` (eq. 1 of LS
+    meshes); or, if ``cot``, ``W`` the cotangent weights of ``x`` clamped below at 5% of their mean
+    (obtuse pairs would make ``K`` indefinite) and ``S`` the inverse vertex areas, normalized to mean 1
+    (:func:`o3d_lsmesh._fill_kernel.laplacian_weights`).
+
+    ``rings[0]`` are the loop vertices, ``rings[i]`` the i-th ring around them: the rows used involve
+    only vertices whose one-rings are complete in ``tris``. ``edges`` is
+    :func:`o3d_lsmesh._fill_kernel.unique_edges` of ``tris``. Small systems (at most
+    :data:`o3d_lsmesh._solvers.DENSE_UNKNOWNS` unknowns) are assembled by the compiled
+    :func:`o3d_lsmesh._fill_kernel.normal_equations` and solved by LAPACK's dense Cholesky, at
+    continuity 1 and 2 in one call (:func:`o3d_lsmesh._fill_kernel.fair_dense`: on a hole of a few
+    vertices the NumPy glue between the steps cost more than the steps); larger ones sparse.
+    """
+    nv = len(x)
+    i, j, inverse = edges
+    dense = len(unknown) <= _solvers.DENSE_UNKNOWNS
+    if dense and level > 0:  # the small patch's solve in one compiled call
+        solution = _kernel().fair_dense(
+            x, tris, i, j, inverse, unknown, rings[0], rings[1] if level > 1 else rings[0], level, cot
+        )
+        if solution is None:
+            raise SingularSystemError("the fairing system is not positive definite")
+        return solution
+    w, degree, scale = _kernel().laplacian_weights(tris, nv, i, j, inverse, x if cot else None)
+    if level == 0:
+        K, _ = _operators(i, j, w, degree, scale, dense)
+        known = np.ones(nv, dtype=bool)
+        known[unknown] = False
+        return _solve_blocks(K[unknown][:, unknown], -(K[unknown][:, np.flatnonzero(known)] @ x[known]))
+    rows = np.zeros(nv, dtype=bool)
+    rows[unknown] = True
+    rows[rings[0]] = True  # rows whose Laplacian involves an unknown
+    if level == 1:
+        plus, minus = np.flatnonzero(rows), np.zeros(0, dtype=np.int64)
+    else:
+        valid = rows.copy()
+        valid[rings[1]] = True
+        keep = (rows[i] | rows[j]) & valid[i] & valid[j]
+        plus, minus = i[keep], j[keep]
+    if dense:
+        normal, rhs = _kernel().normal_equations(x, i, j, w, degree, scale, plus, minus, unknown)
+        solution = _kernel().cholesky_solve(normal, rhs)  # solve_spd's dense path, without its wrapping
+        if solution is None:
+            raise SingularSystemError("the fairing system is not positive definite")
+        return solution
+    _, L = _operators(i, j, w, degree, scale, False)
+    if level == 1:
+        A_full = L[plus]
+    else:  # the edge difference operator: row e is +1 at plus[e] and -1 at minus[e]
+        G = sp.csr_matrix(
+            (
+                np.tile([1.0, -1.0], len(plus)),
+                np.stack([plus, minus], axis=1).ravel(),
+                np.arange(0, 2 * len(plus) + 1, 2),
+            ),
+            shape=(len(plus), nv),
+        )
+        A_full = G @ L
+    A_full = A_full.tocsc()
+    if len(unknown) and unknown[0] == nv - len(unknown) and (np.diff(unknown) == 1).all():
+        A_u = A_full[:, nv - len(unknown) :]  # the usual layout: the unknowns are the last columns
+    else:
+        A_u = A_full[:, unknown]
+    fixed = x.copy()
+    fixed[unknown] = 0.0  # A_known x_known, without slicing the known columns out
+    return _solve_blocks(A_u.T @ A_u, -(A_u.T @ (A_full @ fixed)))
+
+
+def _solve_blocks(matrix: Any, rhs: np.ndarray) -> np.ndarray:
+    """:func:`o3d_lsmesh._solvers.solve_spd` of a fairing system, whose blocks are the patches (and
+    patches sharing rings): a block with a non-finite entry (cotangent weights of a degenerate
+    triangle) is left NaN, for the caller to fall back on that patch alone, and the others solved."""
+    matrix = sp.csr_matrix(matrix)
+    bad = ~np.isfinite(rhs).all(axis=1)
+    bad[np.repeat(np.arange(matrix.shape[0]), np.diff(matrix.indptr))[~np.isfinite(matrix.data)]] = True
+    if not bad.any():
+        return _solvers.solve_spd(matrix, rhs)
+    _, label = csgraph.connected_components(matrix, directed=False)
+    ok = ~np.isin(label, label[bad])
+    x = np.full(rhs.shape, np.nan)
+    if ok.any():
+        x[ok] = _solvers.solve_spd(matrix[ok][:, ok], rhs[ok])
+    return x
+
+
+def _vertex_owner(new_tris: np.ndarray, owner: np.ndarray, n: int, p: int) -> np.ndarray:
+    """The hole of each of the ``p`` new vertices (numbered from ``n``), from that of each new triangle."""
+    vertex_owner = np.zeros(p, dtype=np.int64)
+    inside = new_tris >= n
+    vertex_owner[new_tris[inside] - n] = np.broadcast_to(owner[:, None], new_tris.shape)[inside]
+    return vertex_owner
+
+
+def _interpolation(
+    new_tris: np.ndarray, bounds: np.ndarray, piece_loop: Any, n: int, p: int
+) -> sp.csr_matrix:
+    """Harmonic weights ``(p, n)`` of the new vertices over their loop's (for colours and other attributes):
+    one small solve per piece, whose new triangles are ``new_tris[bounds[i]:bounds[i + 1]]``."""
+    rows, cols, vals = [], [], []
+    for piece, loop in enumerate(piece_loop):
+        local = new_tris[bounds[piece] : bounds[piece + 1]]
+        inner = np.unique(local[local >= n])
+        if len(inner) == 0:
+            continue
+        numbering = np.concatenate([loop, inner])
+        by_index = np.argsort(numbering)
+        tris_local = by_index[np.searchsorted(numbering[by_index], local)]
+        k, nl = len(loop), len(numbering)
+        # the membrane (continuity 0) with the loop's unit vectors as the fixed "positions"
+        unit = np.eye(nl, k)
+        harmonic = _fair(
+            unit, tris_local, np.arange(k, nl), [], 0, _kernel().unique_edges(tris_local, nl), False
+        )
+        r, c = np.nonzero(np.abs(harmonic) > 1e-12)
+        rows.append(inner[r] - n)
+        cols.append(loop[c])
+        vals.append(harmonic[r, c])
+    if not rows:
+        return sp.csr_matrix((p, n))
+    return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(p, n))
+
+
+def fair_patches(
+    filler: Any,
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    holes: list,
+    continuity: int,
+    cot: bool,
+    owner: np.ndarray,
+    index: Any,
+):
+    """Fair every new vertex at once: one local system over the patches and the rings around them.
+
+    ``vertices`` (the input's, then the refined patches' new ones) take the result in place.
+    Candidates, best first: the asked continuity (after its cotangent pass if ``cot``, then
+    without), then each lower continuity, then the refined patch unfaired. Each hole (``owner`` of
+    each new triangle) keeps the first candidate whose new triangles cross no triangle of the mesh
+    (a tri-Laplacian patch can overshoot into a thin part next to the hole); returns the continuity
+    each hole got and the holes where none is (the caller leaves them open).
+    """
+    total, m, n = len(vertices), len(filler.triangles), len(filler.vertices)
+    unknown = np.arange(n, total)
+    loops = holes[0].vertices if len(holes) == 1 else np.concatenate([hole.vertices for hole in holes])
+    # triangles within `continuity` rings of the loops in the input, plus every new triangle; a local
+    # numbering (nothing as long as the mesh): the new vertices, every one on a new triangle and
+    # numbered last, stay last; one connectivity for every solve below
+    new_tris = triangles[m:]
+    local_vertices, local, local_rings, local_edges = _kernel().ring_mesh(
+        filler.triangles, *filler.vertex_triangles, loops, continuity, triangles, total
+    )
+    local_unknown = np.arange(len(local_vertices) - len(unknown), len(local_vertices))
+    refined = vertices[n:].copy()
+    work = vertices  # its new rows hold the candidate being solved from or checked
+
+    def solve(level: int, weighted: bool) -> np.ndarray | None:
+        try:
+            x = _fair(work[local_vertices], local, local_unknown, local_rings, level, local_edges, weighted)
+        except SingularSystemError:
+            return None
+        return x if np.isfinite(x).any() else None  # a patch whose system is not finite: NaN rows
+
+    def solve_twice(level: int) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """The uniform solve, then the cotangent one from it, in one compiled call (a small patch)."""
+        ring = local_rings[1] if level > 1 else local_rings[0]
+        return _kernel().fair_dense_twice(
+            work[local_vertices], local, *local_edges, local_unknown, local_rings[0], ring, level
+        )
+
+    def candidates():  # lazily: most calls stop at the first
+        dense = len(unknown) <= _solvers.DENSE_UNKNOWNS
+        for level in (
+            range(continuity, -1, -1) if len(unknown) else []
+        ):  # nothing to fair without new vertices
+            twice = cot and level > 0 and dense
+            solution, again = solve_twice(level) if twice else (solve(level, False), None)
+            if solution is None:
+                continue
+            work[n:] = solution
+            if cot and level > 0:
+                # cotangent weights (clamped, area-normalized) read off the uniform solution: a fair
+                # embedding, where weights from the flat refined patch diverged (camel 15h: 87 h off)
+                again = again if twice else solve(level, True)
+                if again is not None:  # a patch whose cotangent system is not finite keeps uniform
+                    again = np.where(np.isfinite(again).all(axis=1)[:, None], again, solution)
+                if again is not None and _kernel().keeps_facing(work, again, new_tris):
+                    work[n:] = again
+                    yield level, _kernel().tangential_relax(work, new_tris, n)
+                    work[n:] = solution
+            yield level, _kernel().tangential_relax(work, new_tris, n)
+            work[n:] = refined
+        yield -1, refined  # the refined patch as triangulated
+
+    tried = []
+    if len(holes) == 1:  # the first candidate free of crossings, without the per-hole bookkeeping
+        for level, candidate in candidates():
+            tried.append(level)
+            work[n:] = candidate
+            if np.isfinite(candidate).all() and not _crossings(work, triangles, m, index, owner).any():
+                return np.array([level], dtype=np.int64), np.zeros(0, dtype=np.int64)
+        work[n:] = refined
+        return np.array([tried[0]], dtype=np.int64), np.zeros(1, dtype=np.int64)
+    vertex_owner = _vertex_owner(new_tris, owner, n, total - n)
+    chosen = np.full(len(holes), -1)
+    out = refined.copy()
+    for rank, (level, candidate) in enumerate(candidates()):
+        tried.append(level)
+        # a patch left NaN (its system not finite) is checked as refined and fails this candidate
+        broken = ~np.isfinite(candidate).all(axis=1)
+        work[n:] = np.where(broken[:, None], refined, candidate)
+        crossing = _crossings(work, triangles, m, index, owner)  # (q,) nonzero on crossing holes
+        per_hole = np.bincount(owner, weights=crossing, minlength=len(holes))
+        per_hole += np.bincount(vertex_owner, weights=broken, minlength=len(holes))
+        for hole_index in np.flatnonzero((chosen < 0) & (per_hole == 0)):
+            mine = vertex_owner == hole_index
+            out[mine] = candidate[mine]
+            chosen[hole_index] = rank
+        if (chosen >= 0).all():
+            break
+    work[n:] = out
+    return np.array([tried[c] if c >= 0 else tried[0] for c in chosen], dtype=np.int64), np.flatnonzero(
+        chosen < 0
+    )

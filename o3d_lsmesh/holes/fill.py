@@ -1,0 +1,529 @@
+"""Faired hole filling: Liepa's triangulate-refine-fair pipeline with least-squares-mesh fairing.
+
+Each chosen hole is found (:mod:`.find`), triangulated and refined (:mod:`.triangulate`), faired
+(:mod:`.fair`) and checked for crossings (:mod:`.crossings`); what still crosses is left open and
+reported (:class:`FillReport`). P. Liepa, Filling Holes in Meshes, SGP 2003; O. Sorkine and D. Cohen-Or,
+Least-squares Meshes, SMI 2004. See docs/algorithms/hole_filling.rst.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import scipy.sparse as sp
+
+from .._errors import O3DLSMeshWarning
+from .._o3d import new_mesh, read_mesh
+from .._progress import check_progress
+from .._validate import as_bool, as_choice, as_count, as_positive_float, mesh_arrays
+from ..topology import unique_edges_and_runs
+from .crossings import _crossings, _TriangleIndex
+from .fair import _interpolation, _vertex_owner, fair_patches
+from .find import Hole, find_holes
+from .triangulate import triangulate_holes
+from .tuning import DENSITY_MAX
+
+if TYPE_CHECKING:
+    from .._types import MeshT
+
+__all__ = ["FillReport", "FilledHoles", "HoleFiller", "HoleOutcome", "fill_holes", "fill_holes_arrays"]
+
+
+@dataclass(frozen=True)
+class HoleOutcome:
+    """What :func:`fill_holes` did with one boundary loop.
+
+    Attributes
+    ----------
+    id : int
+        The loop's index in :func:`find_holes` (and :attr:`HoleFiller.holes`) of the input.
+    edges : int
+        Its number of boundary edges.
+    diameter : float
+        Largest distance between two of its vertices.
+    filled : bool
+        Whether it was closed.
+    how : str
+        How it was filled (``"continuity 2"`` ... ``"continuity 0"``, ``"refined, unfaired"``,
+        ``"minimum-weight triangulation"``: each a simpler retry where the one before crossed the
+        surface), or why it was left open.
+    """
+
+    id: int
+    edges: int
+    diameter: float
+    filled: bool
+    how: str
+
+
+@dataclass(frozen=True)
+class FillReport:
+    """Every boundary loop :func:`fill_holes` filled or left open, and how or why
+    (``fill_holes(..., return_report=True)``; :attr:`FilledHoles.report`).
+
+    Attributes
+    ----------
+    holes : tuple of HoleOutcome
+        One per loop, by id.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from o3d_lsmesh import FillReport, fill_holes
+    >>> square = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0.5, 0.5, 1]], float)
+    >>> pyramid = (square, np.array([[0, 1, 4], [1, 2, 4], [2, 3, 4], [3, 0, 4]]))
+    >>> (V, T), report = fill_holes(pyramid, fill_border=True, return_report=True)
+    >>> [(hole.id, hole.edges, hole.filled, hole.how) for hole in report.holes]
+    [(0, 4, True, 'minimum-weight triangulation')]
+    """
+
+    holes: tuple[HoleOutcome, ...]
+
+    @property
+    def filled(self) -> list[HoleOutcome]:
+        return [hole for hole in self.holes if hole.filled]
+
+    @property
+    def skipped(self) -> list[HoleOutcome]:
+        return [hole for hole in self.holes if not hole.filled]
+
+    def describe(self, limit: int | None = None) -> str:
+        """The loops left open, one clause each (the first ``limit`` of them)."""
+        left = self.skipped
+        shown = "; ".join(
+            f"loop {h.id} ({h.edges} edges, diameter {h.diameter:.4g}): {h.how}" for h in left[:limit]
+        )
+        return shown + (f"; and {len(left) - limit} more" if limit is not None and len(left) > limit else "")
+
+
+def _how(level: int) -> str:
+    """:attr:`HoleOutcome.how` of a hole filled at ``level`` (:attr:`FilledHoles.continuity`)."""
+    return {-1: "refined, unfaired", -2: "minimum-weight triangulation"}.get(level, f"continuity {level}")
+
+
+@dataclass(frozen=True)
+class FilledHoles:
+    """The result of :func:`fill_holes_arrays`.
+
+    Attributes
+    ----------
+    vertices : (n + p, 3) float64
+        The input vertices, unchanged, then the ``p`` new ones.
+    triangles : (m + q, 3) int64
+        The input triangles, unchanged and in order, then the ``q`` new ones.
+    holes : list of Hole
+        The holes that were filled.
+    skipped : list of Hole
+        Loops left open (outer borders, beyond the size limits, or every fill crossing the mesh).
+    interpolation : (p, n) scipy.sparse.csr_matrix
+        Harmonic weights of the new vertices over the input's (rows sum to 1):
+        ``interpolation @ colors`` gives the new vertices' colours (empty unless asked for).
+    continuity : (len(holes),) int64
+        The continuity each hole was faired with: the asked one, or a lower one where the asked one
+        made the patch cross the mesh (-1: left as refined, unfaired; -2: the minimum-weight
+        triangulation alone, no new vertex).
+    report : FillReport
+        Every loop, filled or left open, and how or why.
+    """
+
+    vertices: np.ndarray
+    triangles: np.ndarray
+    holes: list
+    skipped: list
+    # the matrix, or the (p, n) shape of an all-zero one, built when first read: SciPy's constructor
+    # costs about a third of a small hole's fill when the caches are cold
+    _interpolation: Any = field(repr=False)
+    continuity: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    report: FillReport = field(default_factory=lambda: FillReport(()))
+
+    @property
+    def interpolation(self) -> sp.csr_matrix:
+        if isinstance(self._interpolation, tuple):
+            object.__setattr__(self, "_interpolation", _empty_csr(*self._interpolation))
+        return self._interpolation
+
+
+def _empty_csr(rows: int, cols: int) -> sp.csr_matrix:
+    """An all-zero ``(rows, cols)`` CSR matrix, from its arrays (SciPy's shape-only form costs more)."""
+    return sp.csr_matrix(
+        (np.zeros(0), np.zeros(0, dtype=np.int32), np.zeros(rows + 1, dtype=np.int32)),
+        shape=(rows, cols),
+        copy=False,
+    )
+
+
+def fill_holes_arrays(
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    *,
+    max_hole_edges: int | None = None,
+    max_hole_diameter: float | None = None,
+    continuity: int = 2,
+    density: float = 1.0,
+    weights: str = "cotangent",
+    fill_border: bool = False,
+    interpolation: bool = False,
+    progress: bool = False,
+) -> FilledHoles:
+    """Fill the holes of ``(vertices, triangles)``: the array core of :func:`fill_holes`.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64
+    triangles : (m, 3) int64
+    max_hole_edges, max_hole_diameter, continuity, density, weights, fill_border, progress
+        As in :func:`fill_holes`.
+    interpolation : bool
+        Also compute :attr:`FilledHoles.interpolation` (else an empty matrix).
+
+    Returns
+    -------
+    FilledHoles
+
+    See Also
+    --------
+    HoleFiller : the whole-mesh analysis done once, for several fills.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> square = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0.5, 0.5, 1]], float)
+    >>> tris = np.array([[0, 1, 4], [1, 2, 4], [2, 3, 4], [3, 0, 4]])  # a pyramid without its base
+    >>> out = fill_holes_arrays(square, tris, fill_border=True)
+    >>> len(out.triangles) - len(tris), len(out.holes)
+    (2, 1)
+    """
+    return HoleFiller(vertices, triangles, index_triangles=False).fill(
+        max_hole_edges=max_hole_edges,
+        max_hole_diameter=max_hole_diameter,
+        continuity=continuity,
+        density=density,
+        weights=weights,
+        fill_border=fill_border,
+        interpolation=interpolation,
+        progress=progress,
+    )
+
+
+class HoleFiller:
+    """The whole-mesh analysis of a mesh's holes, done once; :meth:`fill` then does only per-hole work.
+
+    Like CGAL's prebuilt half-edge structure: the loops (:func:`find_holes`), each vertex's mean edge
+    length (Liepa's scale) and triangles, and grids of the triangles' bounding spheres (for the
+    crossing check). The state is read-only: it pickles, and :meth:`fill` may run from several threads.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64
+    triangles : (m, 3) int64
+    index_triangles : bool, keyword-only
+        Build the grids (they pay off over several fills); ``False`` makes each fill query only
+        the triangles in the box of its new triangles, faster for a single fill.
+
+    Attributes
+    ----------
+    holes : list of Hole
+        Every boundary loop, as :func:`find_holes` gives them.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> square = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0.5, 0.5, 1]], float)
+    >>> filler = HoleFiller(square, np.array([[0, 1, 4], [1, 2, 4], [2, 3, 4], [3, 0, 4]]))
+    >>> [hole.edges for hole in filler.holes]
+    [4]
+    >>> len(filler.fill(fill_border=True).triangles)
+    6
+    """
+
+    def __init__(self, vertices: np.ndarray, triangles: np.ndarray, *, index_triangles: bool = True) -> None:
+        index_triangles = bool(as_bool(index_triangles, name="index_triangles"))
+        vertices, triangles = mesh_arrays(vertices, triangles)  # copies: the state must not change under it
+        for array in (vertices, triangles):
+            array.setflags(write=False)
+        n, m = len(vertices), len(triangles)
+        self.vertices, self.triangles = vertices, triangles
+        edge_info = unique_edges_and_runs(triangles, n)  # the one whole-mesh sort
+        edges = edge_info[0][0]
+        self.holes = find_holes(vertices, triangles, _edge_info=edge_info)
+        length = np.linalg.norm(vertices[edges[:, 0]] - vertices[edges[:, 1]], axis=1)
+        degree = np.maximum(np.bincount(edges.ravel(), minlength=n), 1)
+        self.sigma = np.bincount(edges.ravel(), weights=np.repeat(length, 2), minlength=n) / degree
+        # the triangles of each vertex (CSR), by a transpose (linear, no sort)
+        by_vertex = sp.csr_matrix(
+            (np.repeat(np.arange(m, dtype=np.int64), 3), triangles.ravel(), np.arange(0, 3 * m + 1, 3)),
+            shape=(m, n),
+        ).tocsc()
+        self.vertex_triangles = (by_vertex.indptr.astype(np.int64), by_vertex.data.astype(np.int64))
+        self.index = _TriangleIndex(vertices, triangles) if index_triangles else None
+
+    def fill(
+        self,
+        *,
+        max_hole_edges: int | None = None,
+        max_hole_diameter: float | None = None,
+        continuity: int = 2,
+        density: float = 1.0,
+        weights: str = "cotangent",
+        fill_border: bool = False,
+        interpolation: bool = False,
+        progress: bool = False,
+    ) -> FilledHoles:
+        """Fill the chosen holes: the options and result of :func:`fill_holes_arrays`."""
+        if max_hole_edges is not None:
+            max_hole_edges = as_count(max_hole_edges, name="max_hole_edges", minimum=3)
+        if max_hole_diameter is not None:
+            max_hole_diameter = as_positive_float(max_hole_diameter, name="max_hole_diameter")
+        continuity = as_count(continuity, name="continuity", minimum=0, maximum=2)
+        density = as_positive_float(density, name="density", allow_zero=True)
+        if density > DENSITY_MAX:
+            raise ValueError(f"density must be at most {DENSITY_MAX:g} (DENSITY_MAX), got {density:g}")
+        weights = as_choice(weights, ("uniform", "cotangent"), name="weights")
+        fill_border = bool(as_bool(fill_border, name="fill_border"))
+        check_progress(progress)
+        m = len(self.triangles)
+        holes: list[Hole] = []
+        why: dict[int, str] = {}  # id(hole) -> why it is left open
+        for hole in self.holes:
+            # the three edges of one triangle are the rim of a flap (a triangle hanging by a vertex,
+            # common in raw scans), not a hole: "filling" it would add that triangle's reverse
+            if hole.edges == 3 and len(np.unique(np.asarray(hole.rows) % m)) == 1:
+                why[id(hole)] = "the rim of one triangle hanging by a vertex (a flap, not a hole)"
+            elif max_hole_edges is not None and hole.edges > max_hole_edges:
+                why[id(hole)] = f"more than max_hole_edges={max_hole_edges} edges"
+            elif max_hole_diameter is not None and hole.diameter > max_hole_diameter:
+                why[id(hole)] = f"wider than max_hole_diameter={max_hole_diameter:g}"
+            elif hole.border and not fill_border:
+                why[id(hole)] = "taken as the outer border of an open surface (fill_border=False)"
+            else:
+                holes.append(hole)
+        # the crossing checks' grids: prebuilt, or built once here for several holes (a single one queries
+        # the triangles in the box of its patch)
+        index = self.index
+        if index is None and len(holes) > 1:
+            index = _TriangleIndex(self.vertices, self.triangles)
+        cot = weights == "cotangent"
+        out = self._fill_pass(holes, continuity, density, cot, interpolation, progress, index)
+        vertices, triangles, filled, stuck, used, weights_matrix, own = out
+        if stuck and density > 0:
+            # simpler forms: the bare minimum-weight triangulation (no new vertex), checked against the
+            # fills kept so far too; what still crosses is given up
+            retry = self._fill_pass(stuck, continuity, 0.0, False, False, False, index)
+            again = np.concatenate([triangles, retry[1][m:]])
+            crossing = _crossings(vertices, again, m, index, np.concatenate([own, len(filled) + retry[6]]))
+            crossing = crossing[len(triangles) - m :]
+            bad = np.bincount(retry[6], weights=crossing, minlength=len(retry[2])) > 0
+            keep = ~bad[retry[6]]
+            triangles = np.concatenate([triangles, retry[1][m:][keep]])
+            filled = filled + [hole for hole, b in zip(retry[2], bad) if not b]
+            used = np.concatenate([used, np.full(int((~bad).sum()), -2, dtype=np.int64)])
+            stuck = retry[3] + [hole for hole, b in zip(retry[2], bad) if b]
+        for hole in stuck:
+            why[id(hole)] = "every fill crosses the surface (folded or overlapping triangles next to it)"
+        number = {id(hole): i for i, hole in enumerate(self.holes)}
+        level = {id(hole): int(c) for hole, c in zip(filled, used)}
+        report = FillReport(
+            tuple(
+                HoleOutcome(
+                    i,
+                    hole.edges,
+                    hole.diameter,
+                    id(hole) in level,
+                    _how(level[id(hole)]) if id(hole) in level else why[id(hole)],
+                )
+                for i, hole in enumerate(self.holes)
+                if id(hole) in level or id(hole) in why
+            )
+        )
+        # said: every loop left open but those the size limits exclude and flaps (no holes)
+        said = FillReport(tuple(h for h in report.skipped if h.how.startswith(("every", "taken"))))
+        if said.holes:
+            warnings.warn(
+                f"fill_holes: {len(said.holes)} of {len(self.holes)} loops left open: {said.describe(10)}"
+                " (every loop, filled or not: fill_holes(..., return_report=True), a FillReport)",
+                O3DLSMeshWarning,
+                stacklevel=3,
+            )
+        order = np.argsort([number[id(hole)] for hole in filled], kind="stable").astype(np.int64)
+        skipped = [hole for hole in self.holes if id(hole) in why]
+        return FilledHoles(
+            vertices, triangles, [filled[i] for i in order], skipped, weights_matrix, used[order], report
+        )
+
+    def _fill_pass(
+        self,
+        holes: list,
+        continuity: int,
+        density: float,
+        cot: bool,
+        interpolation: bool,
+        progress: bool,
+        index: Any,
+    ) -> tuple:
+        """Fill ``holes``: the vertices and triangles (the input's, then the new ones), the holes filled,
+        those whose every fill crosses (left open), the continuity of each filled one, the
+        interpolation (or its shape) and the filled hole (index in the list) of each new triangle.
+        ``index``: the crossing checks' (:func:`_crossings`)."""
+        vertices, triangles = self.vertices, self.triangles
+        n = len(vertices)
+        empty = np.zeros(0, dtype=np.int64)
+        if not holes:
+            return vertices.copy(), triangles.copy(), [], [], empty, (0, n), empty
+        fresh_points, new_tris, owner, tri_piece, piece_loop = triangulate_holes(
+            self, holes, density, progress
+        )
+        count = len(piece_loop)
+        p = len(fresh_points)
+        weights_matrix: Any
+        if interpolation and p:
+            bounds = np.searchsorted(tri_piece, np.arange(count + 1))
+            weights_matrix = _interpolation(new_tris, bounds, piece_loop, n, p)
+        else:
+            weights_matrix = (p, n)
+        out_vertices = np.concatenate([vertices, fresh_points])
+        out_triangles = np.concatenate([triangles, new_tris])
+        used, stuck = fair_patches(self, out_vertices, out_triangles, holes, continuity, cot, owner, index)
+        vertex_owner = _vertex_owner(new_tris, owner, n, p)
+        used[np.bincount(vertex_owner, minlength=len(holes)) == 0] = -2  # no new vertex: the bare programme
+        if len(stuck):
+            keep_vertex = ~np.isin(vertex_owner, stuck)
+            remap = np.concatenate([np.arange(n), n + np.cumsum(keep_vertex) - 1])
+            out_vertices = np.concatenate([vertices, out_vertices[n:][keep_vertex]])
+            out_triangles = np.concatenate([triangles, remap[new_tris[~np.isin(owner, stuck)]]])
+            weights_matrix = (
+                (int(keep_vertex.sum()), n)
+                if isinstance(weights_matrix, tuple)
+                else weights_matrix[np.flatnonzero(keep_vertex)]
+            )
+            left = np.isin(np.arange(len(holes)), stuck)
+            owner = (np.cumsum(~left) - 1)[owner[~np.isin(owner, stuck)]]
+            return (
+                out_vertices,
+                out_triangles,
+                [hole for hole, out in zip(holes, left) if not out],
+                [hole for hole, out in zip(holes, left) if out],
+                used[~left],
+                weights_matrix,
+                owner,
+            )
+        return out_vertices, out_triangles, list(holes), [], used, weights_matrix, owner
+
+
+def fill_holes(
+    mesh: MeshT,
+    *,
+    max_hole_edges: int | None = None,
+    max_hole_diameter: float | None = None,
+    continuity: int = 2,
+    density: float = 1.0,
+    weights: str = "cotangent",
+    fill_border: bool = False,
+    progress: bool = False,
+    return_report: bool = False,
+) -> Any:
+    """Close the mesh's holes with patches faired as least-squares meshes; a new mesh.
+
+    Each chosen hole (a closed loop of boundary edges) is triangulated by Liepa's minimum-weight
+    dynamic programme (largest dihedral angle, then area), refined to the density of the edges around
+    it with Delaunay flips, and its new vertices are placed by minimizing, with the surrounding mesh
+    fixed (Sorkine and Cohen-Or 2004, section 6, interpolated anchors):
+
+    * ``continuity=0``: ``sum |x_i - x_j|^2`` over edges (harmonic, a membrane);
+    * ``continuity=1``: ``||L x||^2``, the LS-mesh energy (eq. 3), bi-Laplacian;
+    * ``continuity=2``: ``(L x)^T K (L x)``, tri-Laplacian: the Laplacian itself varies smoothly, so
+      curvature continues across the loop,
+
+    with ``L = I - D^-1 A`` the uniform Laplacian of eq. 1 and ``K = D - A``; only the new vertices are
+    unknowns, ``continuity + 1`` rings of the input fixed around each loop. ``weights="cotangent"``
+    then solves again with cotangent weights read off that fair solution (``K = D - W``, ``L = M^-1 K``,
+    ``M`` the vertex areas), closer to the true surface on irregular meshes.
+
+    Parameters
+    ----------
+    mesh : open3d.geometry.TriangleMesh, open3d.t.geometry.TriangleMesh or (vertices, triangles)
+        Any triangle mesh: non-manifold edges and vertices, several components, pinched boundaries and
+        holes touching at a vertex are handled (a loop through a vertex twice is filled in pieces).
+    max_hole_edges : int >= 3, optional
+        Fill only holes with at most this many boundary edges.
+    max_hole_diameter : float > 0, optional
+        Fill only holes whose diameter (largest distance between two loop vertices) is at most this.
+    continuity : {0, 1, 2}
+        Smoothness across the loop, see above. Default 2.
+    density : float in [0, DENSITY_MAX]
+        New vertices are spaced like the surrounding edges divided by ``density``; ``0`` adds none
+        (the minimum-weight triangulation alone). The work is bounded: at most about what density 2
+        adds to a patch of even scale, and no split at a corner of 64 triangles.
+    weights : {"cotangent", "uniform"}
+        ``"uniform"``: the uniform solve alone; ``"cotangent"``: then one re-weighted solve (see above).
+    fill_border : bool
+        Also fill each open component's outer border (see :data:`BORDER_FACING_AWAY`): a scan's silhouette,
+        a lone island's rim. Default ``False``: left open.
+    progress : bool
+        Show a tqdm bar over the holes.
+    return_report : bool
+        Also return the :class:`FillReport`: every loop filled or left open, how or why.
+
+    Returns
+    -------
+    Mesh of the kind given, or ``(mesh, FillReport)`` if ``return_report``
+        The input's vertices and triangles unchanged and in order, then the new ones, wound like their
+        neighbours. Holes are those of the welded surface (vertices at equal coordinates merged), so a
+        UV seam is not a hole; a new triangle uses the copy of a seam vertex on its hole's side. Every
+        attribute stays on the input's elements (UVs, material ids, textures, material, tensor
+        attributes) and is extended to the new ones: per-vertex values and UVs harmonically (cotangent
+        weights) where the UV chart is continuous around the hole, else the UV of a loop corner of a
+        neighbouring triangle; material ids and other per-triangle values of that triangle. Normals
+        are recomputed if the input had them.
+
+    Raises
+    ------
+    TypeError
+        ``mesh`` not a mesh; an option of the wrong type.
+    ValueError
+        An empty or invalid mesh; ``max_hole_edges < 3``; ``max_hole_diameter <= 0``;
+        ``continuity`` not 0, 1 or 2; ``density`` outside ``[0, DENSITY_MAX]``; ``weights`` not a choice.
+
+    See Also
+    --------
+    fill_holes_arrays : the array core, which also reports the holes found.
+    HoleFiller : the whole-mesh analysis done once, for several fills of one mesh.
+    reconstruct_geometry : re-solve known connectivity instead of building it.
+
+    Notes
+    -----
+    A patch that crosses the mesh is faired again with simpler settings, then filled by the bare
+    triangulation; what still crosses is left open, and every loop left open is named in an
+    :class:`O3DLSMeshWarning` (the rules: docs/algorithms/hole_filling.rst).
+
+    References
+    ----------
+    P. Liepa, Filling Holes in Meshes, SGP 2003. O. Sorkine and D. Cohen-Or, Least-squares Meshes,
+    SMI 2004.
+
+    Examples
+    --------
+    >>> import open3d as o3d, numpy as np
+    >>> sphere = o3d.geometry.TriangleMesh.create_sphere(resolution=20)
+    >>> holed = o3d.geometry.TriangleMesh(sphere)
+    >>> holed.remove_triangles_by_index(list(range(30)))
+    >>> out = fill_holes(holed)
+    >>> out.is_watertight(), len(out.triangles) >= len(holed.triangles)
+    (True, True)
+    """
+    data = read_mesh(mesh, weld=True)  # the welded surface's holes: a UV seam is not one
+    result = fill_holes_arrays(
+        data.vertices,
+        data.triangles,
+        max_hole_edges=max_hole_edges,
+        max_hole_diameter=max_hole_diameter,
+        continuity=continuity,
+        density=density,
+        weights=weights,
+        fill_border=fill_border,
+        progress=progress,
+    )
+    out = new_mesh(data, result.vertices, result.triangles if result.holes else None, appended=True)
+    return (out, result.report) if as_bool(return_report, name="return_report") else out

@@ -1,0 +1,211 @@
+"""Triangulating holes: Liepa's minimum-weight programme (chords first on long loops), then refinement.
+
+P. Liepa, Filling Holes in Meshes, SGP 2003, sections 3-4; see docs/algorithms/hole_filling.rst.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from .._progress import progress_bar
+from .._ranges import concatenated_ranges
+from .tuning import ALPHA, DP_MAX_EDGES
+
+_KERNEL: Any = None
+
+
+def _kernel() -> Any:
+    """The compiled loops (``_fill_kernel.pyx``), imported at first use, so that the package imports from
+    a source tree whose extensions are not built."""
+    global _KERNEL
+    if _KERNEL is None:
+        from .. import _fill_kernel
+
+        _KERNEL = _fill_kernel
+    return _KERNEL
+
+
+def _triangulate(
+    points: np.ndarray, outer_normals: np.ndarray, forbidden: np.ndarray | None, spacing: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Triangulate a loop, splitting it by chords while it is longer than :data:`DP_MAX_EDGES`.
+
+    Returns the extra points (on the chords) and triangles over the loop's indices ``[0, k)`` followed
+    by the extra points'.
+    """
+    k = len(points)
+    if k <= DP_MAX_EDGES:
+        return np.zeros((0, 3)), _kernel().minimum_weight_triangulation(
+            points,
+            outer_normals,
+            None if forbidden is None or not forbidden.any() else forbidden.view(np.uint8),
+            _kernel().delaunay_triangles(points),
+        )
+    # the shortest chord between vertices 1/3 to 2/3 of the loop apart, in chunks of rows
+    best = (np.inf, 0, k // 2)
+    gap = np.arange(k // 3, k - k // 3 + 1)[None, :]
+    for start in range(0, k, 256):
+        i = np.arange(start, min(k, start + 256))[:, None]
+        j = (i + gap) % k
+        dist = np.linalg.norm(points[i] - points[j], axis=-1)
+        if forbidden is not None:
+            dist = np.where(forbidden[i, j], np.inf, dist)
+        r, c = divmod(int(np.argmin(dist)), dist.shape[1])
+        if dist[r, c] < best[0]:
+            best = (float(dist[r, c]), int(i[r, 0]), int(j[r, c]))
+    a, b = min(best[1:]), max(best[1:])
+    # points along the chord at the spacing, at most k / 6 of them: each piece has at most 5 k / 6
+    # points, so the splits end after O(log k) levels and O(k) programmes of at most DP_MAX_EDGES
+    count = min(max(0, round(best[0] / spacing) - 1), k // 6) if spacing > 0 else 0
+    chord = points[a] + np.linspace(0.0, 1.0, count + 2)[1:-1, None] * (points[b] - points[a])  # a -> b
+    # piece one: a .. b along the loop, then back along the chord; piece two: b .. a, then the chord a -> b
+    e = k + np.arange(count)
+    all_points = np.concatenate([points, chord])
+    triangles, extra, offset = [], [chord], k + count
+    for piece in (
+        np.concatenate([np.arange(a, b + 1), e[::-1]]),
+        np.concatenate([np.arange(b, k), np.arange(0, a + 1), e]),
+    ):
+        # outer normals on the piece's edges that are edges of the original loop
+        nxt = np.roll(piece, -1)
+        on_loop = (piece < k) & (nxt < k) & (nxt == (piece + 1) % k)
+        loop_normals = np.zeros((len(piece), 3))
+        loop_normals[on_loop] = outer_normals[piece[on_loop]]
+        sub_forbidden = None
+        if forbidden is not None:
+            sub_forbidden = np.zeros((len(piece), len(piece)), dtype=bool)
+            idx = np.flatnonzero(piece < k)
+            sub_forbidden[np.ix_(idx, idx)] = forbidden[np.ix_(piece[idx], piece[idx])]
+        sub_extra, sub_tris = _triangulate(all_points[piece], loop_normals, sub_forbidden, spacing)
+        # the piece's local indices back: [0, len(piece)) -> piece, beyond -> its new extra points
+        triangles.append(np.concatenate([piece, offset + np.arange(len(sub_extra))])[sub_tris])
+        offset += len(sub_extra)
+        extra.append(sub_extra)
+    return np.concatenate(extra), np.concatenate(triangles)
+
+
+def _simple_pieces(loop: np.ndarray, rows: np.ndarray, points: np.ndarray):
+    """Split a loop that passes a vertex (or a position: duplicated vertices, ``points`` of the loop)
+    more than once into loops that do not, each filled on its own: a patch across the pinch would cross
+    the surface there."""
+    key = loop
+    if len(set(map(tuple, points.tolist()))) < len(loop):
+        key = np.unique(points, axis=0, return_inverse=True)[1].ravel()
+    elif len(set(loop.tolist())) == len(
+        loop
+    ):  # the usual loop: simple (a set is quicker than np.unique here)
+        if len(loop) >= 3:
+            yield loop, rows
+        return
+    stack = [(loop, rows, key)]
+    while stack:
+        loop, rows, key = stack.pop()
+        first = np.zeros(len(loop), dtype=bool)
+        first[np.unique(key, return_index=True)[1]] = True
+        if first.all():
+            if len(loop) >= 3:
+                yield loop, rows
+            continue
+        q = int(np.argmin(first))  # the first second visit, and the first visit of that vertex
+        p = int(np.argmax(key == key[q]))
+        stack.append((loop[p:q], rows[p:q], key[p:q]))
+        rest = np.r_[0:p, q : len(loop)]
+        stack.append((loop[rest], rows[rest], key[rest]))
+
+
+def triangulate_holes(filler: Any, holes: list, density: float, progress: bool) -> tuple:
+    """Triangulate and refine every piece of ``holes`` (loops of ``filler``, a :class:`HoleFiller`): the new
+    points ``(p, 3)`` (numbered from ``n`` piece by piece), the new triangles ``(q, 3)`` in the mesh's
+    numbering, the hole and the piece of each new triangle, and each piece's loop."""
+    vertices, triangles = filler.vertices, filler.triangles
+    n = len(vertices)
+    # each piece (a loop; one through a vertex twice is cut in pieces) is triangulated on its own,
+    # long ones cut by chords sampled at the refinement's spacing (none without) first
+    pieces = [
+        (h, *p)
+        for h, hole in enumerate(holes)
+        for p in _simple_pieces(hole.vertices, hole.rows, vertices[hole.vertices])
+    ]
+    piece_hole, piece_loop, piece_rows = zip(*pieces)
+    count = len(piece_loop)
+    if count == 1 and len(piece_loop[0]) <= DP_MAX_EDGES:
+        # one simple loop short enough for the programme (the usual fill): one compiled call
+        with progress_bar(progress, total=1, desc="filling holes", unit="loop") as bar:
+            fresh_points, new_tris = _kernel().fill_loop(
+                piece_loop[0],
+                piece_rows[0],
+                vertices,
+                triangles,
+                *filler.vertex_triangles,
+                filler.sigma,
+                density,
+                ALPHA,
+            )
+            bar.update(1)
+        owner = tri_piece = np.zeros(len(new_tris), dtype=np.int64)
+    else:
+        # each piece's points, the normals across its edges, its chords that are mesh edges, its spacing
+        piece_points, piece_outer, piece_forbidden, piece_spacing, piece_pairs = zip(
+            *(
+                _kernel().loop_geometry(loop, rows, vertices, triangles, *filler.vertex_triangles)
+                for loop, rows in zip(piece_loop, piece_rows)
+            )
+        )
+        piece_extra, piece_tris = [], []
+        with progress_bar(progress, total=count, desc="filling holes", unit="loop") as bar:
+            for points, outer, forbidden, spacing in zip(
+                piece_points, piece_outer, piece_forbidden, piece_spacing
+            ):
+                extra, tris = _triangulate(
+                    points, outer, forbidden, spacing / density if density > 0 else 0.0
+                )
+                piece_extra.append(extra)
+                piece_tris.append(tris)
+                bar.update(1)
+        # every piece refined at once, in disjoint local index ranges (a single short loop took the
+        # compiled path above)
+        lengths = np.array([len(loop) for loop in piece_loop])
+        sizes = np.array([len(p) + len(e) for p, e in zip(piece_points, piece_extra)])
+        starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+        all_points = np.concatenate([np.concatenate([p, e]) for p, e in zip(piece_points, piece_extra)])
+        all_tris = np.concatenate([t + start for t, start in zip(piece_tris, starts)])
+        point_piece = np.repeat(np.arange(count), sizes)
+        if density > 0:
+            # Liepa's scale: each loop vertex's mean edge length, the chords' spacing on their points
+            sigma = [
+                np.concatenate(
+                    [filler.sigma[loop] / max(density, 1e-300), np.full(len(extra), spacing / density)]
+                )
+                if len(extra)
+                else filler.sigma[loop] / max(density, 1e-300)
+                for loop, extra, spacing in zip(piece_loop, piece_extra, piece_spacing)
+            ]
+            # mesh edges between loop vertices: no flip may make them twice
+            all_points, all_tris, point_piece = _kernel().refine(
+                all_points,
+                np.concatenate(sigma),
+                all_tris,
+                np.concatenate([f + s for f, s in zip(piece_pairs, starts)]),
+                point_piece,
+                ALPHA,
+                len(all_points)
+                + _kernel().refine_budget(all_points, all_tris, filler.sigma[np.concatenate(piece_loop)]),
+            )
+        # global numbering: loop points (first in each piece, in order) are mesh vertices; the others
+        # are new, numbered piece by piece
+        is_loop = np.zeros(len(all_points), dtype=bool)
+        is_loop[concatenated_ranges(starts, lengths)] = True
+        global_index = np.empty(len(all_points), dtype=np.int64)
+        global_index[is_loop] = np.concatenate(piece_loop)
+        fresh = np.flatnonzero(~is_loop)
+        fresh = fresh[np.argsort(point_piece[fresh], kind="stable")]
+        global_index[fresh] = n + np.arange(len(fresh))
+        fresh_points = all_points[fresh]
+        tri_piece = point_piece[all_tris[:, 0]]
+        tri_order = np.argsort(tri_piece, kind="stable")
+        tri_piece = tri_piece[tri_order]
+        new_tris = global_index[all_tris[tri_order]]
+        owner = np.asarray(piece_hole, dtype=np.int64)[tri_piece]  # the hole of each new triangle
+    return fresh_points, new_tris, owner, tri_piece, piece_loop

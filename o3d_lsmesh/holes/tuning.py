@@ -1,0 +1,14 @@
+"""Tuned constants of hole filling, each with the benchmark result that set it (docs: algorithms/hole_filling)."""
+
+import numpy as np
+
+# loops with more edges are cut by chords before the O(k^3) programme: benchmarks/results/fill_holes.md
+DP_MAX_EDGES = 200
+# outer border: less than this fraction of the component's area faces away: benchmarks/results/border.md
+BORDER_FACING_AWAY = 0.25
+# "sideways" to the loop: cosine below this (a box with a hole in its top): benchmarks/results/border.md
+SIDEWAYS = 0.2
+# the largest density (the refinement's budget caps the work near density 2): benchmarks/results/fill_holes.md
+DENSITY_MAX = 4.0
+# Liepa's density factor (SGP 2003, section 4), as CGAL's default: benchmarks/results/fill_holes.md
+ALPHA = float(np.sqrt(2.0))
