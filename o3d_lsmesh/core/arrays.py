@@ -1,0 +1,69 @@
+"""Array helpers of the core: concatenated ranges, quantization, face and vertex normals."""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+__all__ = ["area_weighted_normals", "concatenated_ranges", "dequantize", "face_normals", "quantize"]
+
+
+def concatenated_ranges(starts: ArrayLike, counts: ArrayLike) -> np.ndarray:
+    """``concatenate([arange(s, s + c) for s, c in zip(starts, counts)])`` in one pass, ``(sum(counts),) int64``.
+
+    ``starts`` may be a scalar (``0`` gives each element's position within its run).
+
+    >>> concatenated_ranges([10, 0, 5], [2, 0, 3]).tolist()
+    [10, 11, 5, 6, 7]
+    """
+    counts = np.asarray(counts, dtype=np.int64)
+    starts = np.broadcast_to(np.asarray(starts, dtype=np.int64), counts.shape)
+    first = np.cumsum(counts) - counts  # where each range begins in the output
+    return np.arange(int(counts.sum()), dtype=np.int64) + np.repeat(starts - first, counts)
+
+
+def quantize(values: np.ndarray, lower: np.ndarray, upper: np.ndarray, bits: int) -> np.ndarray:
+    """``round((x - lower) / (upper - lower) * (2^bits - 1))`` per column as int64 codes; zero extent gives 0.
+
+    >>> quantize(np.array([[0.0], [1.0], [0.5]]), np.array([0.0]), np.array([1.0]), 2).ravel().tolist()
+    [0, 3, 2]
+    """
+    levels = (1 << bits) - 1
+    extent = np.asarray(upper, dtype=np.float64) - lower
+    scale = np.divide(levels, extent, out=np.zeros_like(extent), where=extent > 0)
+    return np.clip(np.rint((values - lower) * scale), 0, levels).astype(np.int64)
+
+
+def dequantize(codes: np.ndarray, lower: np.ndarray, upper: np.ndarray, bits: int) -> np.ndarray:
+    """The values that :func:`quantize` codes stand for: ``lower + codes * (upper - lower) / (2^bits - 1)``."""
+    levels = (1 << bits) - 1
+    return lower + codes * ((np.asarray(upper, dtype=np.float64) - lower) / levels)
+
+
+def face_normals(vertices: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unit face normals ``(m, 3)`` (zero on a degenerate face) and face areas ``(m,)``.
+
+    >>> face_normals(np.eye(3), np.array([[0, 1, 2]]))[1].round(4).tolist()
+    [0.866]
+    """
+    p0 = vertices[triangles[:, 0]]
+    cross = np.cross(vertices[triangles[:, 1]] - p0, vertices[triangles[:, 2]] - p0)
+    length = np.linalg.norm(cross, axis=1)
+    return cross / np.maximum(length, np.finfo(float).tiny)[:, None], 0.5 * length
+
+
+def area_weighted_normals(positions: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Unnormalized vertex normals ``(n, 3)``: the sum of the cross products of each vertex's triangles.
+
+    >>> V = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
+    >>> area_weighted_normals(V, np.array([[0, 1, 2]])).tolist()
+    [[0.0, 0.0, 1.0], [0.0, 0.0, 1.0], [0.0, 0.0, 1.0], [0.0, 0.0, 0.0]]
+    """
+    n = len(positions)
+    p0 = positions[triangles[:, 0]]
+    face = np.cross(positions[triangles[:, 1]] - p0, positions[triangles[:, 2]] - p0)
+    del p0  # each (m, 3) temporary is mesh-sized
+    normal = np.empty((n, 3))
+    for k in range(3):
+        normal[:, k] = sum(np.bincount(triangles[:, i], face[:, k], minlength=n) for i in range(3))
+    return normal

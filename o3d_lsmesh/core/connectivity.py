@@ -1,0 +1,664 @@
+"""One connectivity object per mesh: edges, half-edges, rings, face adjacency, components, k-rings.
+
+:class:`Connectivity` is built once per operation from ``triangles (m, 3)`` and the vertex count
+``n`` and passed down; each part is computed on first use and kept. The builders behind it work on
+integer arrays and group by counting sorts (CSR transposes) instead of ``np.unique``.
+Boundary loops and chains live in :mod:`o3d_lsmesh.core.boundary`; docs page: ``docs/algorithms/architecture.rst``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, Callable, NamedTuple
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse import csgraph
+
+__all__ = [
+    "Connectivity",
+    "EdgeStructure",
+    "FaceAdjacency",
+    "VertexRings",
+    "adjacency_matrix",
+    "connected_components",
+    "directed_edges",
+    "edge_structure",
+    "halfedges",
+    "ring_pattern",
+    "unique_edges",
+    "vertex_rings",
+]
+
+
+if TYPE_CHECKING:
+    from functools import cached_property as _cached
+else:
+
+    class _cached:
+        """``functools.cached_property`` without its lock (Python < 3.12 holds one per class): a race
+        computes the same value twice, harmless."""
+
+        def __init__(self, function: Callable[[Any], Any]):
+            self.function = function
+            self.name = function.__name__
+            self.__doc__ = function.__doc__
+
+        def __get__(self, instance, owner=None):
+            if instance is None:
+                return self
+            value = instance.__dict__[self.name] = self.function(instance)
+            return value
+
+
+class FaceAdjacency(NamedTuple):
+    """Face neighbourhoods (:attr:`Connectivity.face_adjacency`).
+
+    Attributes
+    ----------
+    incidence : (m, n) CSR
+        Triangle-vertex incidence (three ones a row).
+    ring : (m, m) CSR
+        Faces sharing a vertex with each face, itself included, sorted columns, data 1.
+    rows, cols : (r,) intp
+        Row and column of each entry of ``ring``.
+    pairs : (p, 2) int64
+        Faces sharing an edge (an edge of ``k > 2`` faces gives ``k - 1`` consecutive pairs).
+    edges : (e, 2)
+        The mesh's edges, ``lo < hi``, sorted.
+    pair_edge : (p,) int64
+        The edge each pair shares.
+    """
+
+    incidence: sp.csr_matrix
+    ring: sp.csr_matrix
+    rows: np.ndarray
+    cols: np.ndarray
+    pairs: np.ndarray
+    edges: np.ndarray
+    pair_edge: np.ndarray
+
+
+class Connectivity:
+    """The connectivity of ``triangles (m, 3)`` on ``n`` vertices, each part computed once on first use.
+
+    Holds numpy arrays (and SciPy matrices built from them) only, pickles, and is safe to read from
+    several threads (a race computes a part twice, with the same result).
+    Index arrays are int32 when the mesh fits, int64 beyond.
+
+    Attributes
+    ----------
+    triangles : (m, 3) int64
+    n : int
+    edge_structure : EdgeStructure
+        The undirected edges and the grouping of the ``3 m`` half-edges (rows of :func:`halfedges`).
+    edges : (e, 2)
+        ``lo < hi``, sorted lexicographically.
+    edge_triangles : (e,)
+        Triangles on each edge (1 on the boundary, 2 inside, more when non-manifold).
+    halfedge_edge : (3m,)
+        Edge of each half-edge row.
+    boundary_edges, nonmanifold_edges : (e,) bool
+    rings : VertexRings
+        1-ring CSR pattern with diagonal slots, the triangles behind every slot, valence, boundary.
+    valence : (n,) int64
+    ring_pattern : tuple
+        ``(indptr, indices, diagonal, forward, backward)`` of :func:`ring_pattern` (from the edges).
+    adjacency : (n, n) CSR
+        Binary vertex adjacency, canonical.
+    vertex_triangles : tuple
+        ``(indptr (n + 1,), triangle (3m,))``: the triangles of vertex ``v`` in increasing order are
+        ``triangle[indptr[v]:indptr[v + 1]]`` (once per corner).
+    face_adjacency : FaceAdjacency
+    components : tuple
+        ``(count, labels (n,) int64)`` over edges; an isolated vertex is its own component.
+
+    Examples
+    --------
+    >>> c = Connectivity(np.array([[0, 1, 2], [0, 2, 3]]), 5)
+    >>> c.edges.tolist(), c.edge_triangles.tolist(), c.valence.tolist(), c.components[0]
+    ([[0, 1], [0, 2], [0, 3], [1, 2], [2, 3]], [1, 2, 1, 1, 1], [3, 2, 3, 2, 0], 2)
+    """
+
+    def __init__(self, triangles: np.ndarray, n: int | None = None):
+        triangles = np.asarray(triangles)
+        if triangles.ndim != 2 or triangles.shape[1] != 3:
+            raise ValueError(f"triangles must have shape (m, 3), got {triangles.shape}")
+        self.triangles = triangles.astype(np.int64, copy=False)
+        self.n = int(n) if n is not None else (int(triangles.max()) + 1 if len(triangles) else 0)
+
+    def __repr__(self) -> str:
+        return f"Connectivity(m={len(self.triangles)}, n={self.n})"
+
+    @property
+    def m(self) -> int:
+        return len(self.triangles)
+
+    @_cached
+    def edge_structure(self) -> EdgeStructure:
+        return edge_structure(self.triangles, self.n)
+
+    @property
+    def edges(self) -> np.ndarray:
+        return self.edge_structure.edges
+
+    @property
+    def edge_triangles(self) -> np.ndarray:
+        return self.edge_structure.counts
+
+    @property
+    def halfedge_edge(self) -> np.ndarray:
+        return self.edge_structure.inverse
+
+    @property
+    def boundary_edges(self) -> np.ndarray:
+        return self.edge_structure.counts == 1
+
+    @property
+    def nonmanifold_edges(self) -> np.ndarray:
+        return self.edge_structure.counts > 2
+
+    @_cached
+    def rings(self) -> VertexRings:
+        return vertex_rings(self.triangles, self.n)
+
+    @property
+    def valence(self) -> np.ndarray:
+        return self.rings.valence
+
+    @_cached
+    def ring_pattern(self) -> tuple:
+        return ring_pattern(self.edges, self.n)
+
+    @_cached
+    def adjacency(self) -> sp.csr_matrix:
+        return adjacency_matrix(self.triangles, self.n)
+
+    @_cached
+    def vertex_triangles(self) -> tuple[np.ndarray, np.ndarray]:
+        m = len(self.triangles)
+        incidence = sp.csr_matrix(
+            (np.ones(3 * m, dtype=np.int8), self.triangles.reshape(-1), np.arange(0, 3 * m + 1, 3)),
+            shape=(m, self.n),
+        ).tocsc()  # a stable counting sort of the corners by vertex
+        return incidence.indptr, incidence.indices
+
+    @_cached
+    def face_adjacency(self) -> FaceAdjacency:
+        triangles, n, m = self.triangles, self.n, len(self.triangles)
+        incidence = sp.csr_matrix(
+            (np.ones(3 * m), triangles.ravel(), np.arange(0, 3 * m + 1, 3)), shape=(m, n)
+        )
+        ring = (incidence @ incidence.T).tocsr()
+        ring.sort_indices()
+        ring.data[:] = 1.0
+        rows = np.repeat(np.arange(m, dtype=np.intp), np.diff(ring.indptr))
+        # edge-adjacent faces: consecutive half-edges of one edge group (half-edge a * m + t is in triangle t)
+        es = self.edge_structure
+        group = np.repeat(np.arange(len(es.counts)), es.counts)
+        follows = np.flatnonzero(~run_heads(group))
+        half = es.order.astype(np.int64)
+        pairs = np.stack([half[follows - 1] % m, half[follows] % m], axis=1)
+        return FaceAdjacency(
+            incidence, ring, rows, ring.indices.astype(np.intp), pairs, es.edges, group[follows]
+        )
+
+    @_cached
+    def components(self) -> tuple[int, np.ndarray]:
+        count, labels = csgraph.connected_components(self.adjacency, directed=False)
+        return int(count), labels.astype(np.int64)
+
+    def k_rings(self, seeds: np.ndarray, k: int) -> np.ndarray:
+        """Sorted vertices within ``k`` edges of any of ``seeds`` (the seeds included), ``(q,) int64``.
+
+        >>> Connectivity(np.array([[0, 1, 2], [2, 3, 4]])).k_rings([0], 1).tolist()
+        [0, 1, 2]
+        """
+        inside = np.zeros(self.n, dtype=bool)
+        inside[np.asarray(seeds, dtype=np.int64)] = True
+        adjacency = self.adjacency
+        for _ in range(int(k)):
+            grown = inside | (adjacency @ inside.astype(np.int8) > 0)
+            if np.array_equal(grown, inside):
+                break
+            inside = grown
+        return np.flatnonzero(inside)
+
+    def submesh(self, triangle_ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The triangles ``triangle_ids`` on their own vertices: ``(local (s, 3) int64, vertices (q,) int64)``.
+
+        ``vertices`` are the sorted original indices; ``vertices[local]`` equals
+        ``triangles[triangle_ids]``.
+
+        >>> local, vertices = Connectivity(np.array([[0, 1, 2], [2, 3, 4]])).submesh([1])
+        >>> local.tolist(), vertices.tolist()
+        ([[0, 1, 2]], [2, 3, 4])
+        """
+        part = self.triangles[np.asarray(triangle_ids, dtype=np.int64)]
+        used = np.zeros(self.n, dtype=bool)
+        used[part.reshape(-1)] = True
+        vertices = np.flatnonzero(used)
+        renumber = np.cumsum(used, dtype=np.int64) - 1
+        return renumber[part], vertices
+
+
+def halfedges(triangles: np.ndarray) -> np.ndarray:
+    """Directed edges ``(3m, 2)`` in triangle order: rows ``t``, ``m + t``, ``2m + t`` are
+    ``(a, b)``, ``(b, c)``, ``(c, a)`` of triangle ``t = (a, b, c)``."""
+    return np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]], axis=0)
+
+
+def group_keys(keys: np.ndarray, bound: int):
+    """Sort-and-mask grouping of integer ``keys`` in ``[0, bound)``: (order, starts, counts, inverse).
+
+    Key and position packed into one ``uint64`` when they fit (a plain sort, not an argsort); ties
+    keep their input order.
+    """
+    count = len(keys)
+    index_bits = max(1, int(count - 1).bit_length())
+    if max(1, int(bound - 1).bit_length()) + index_bits <= 64:
+        packed = keys.astype(np.uint64)
+        packed <<= np.uint64(index_bits)
+        packed |= np.arange(count, dtype=np.uint64)
+        packed.sort()
+        order = np.bitwise_and(packed, np.uint64((1 << index_bits) - 1)).view(np.int64)
+        packed >>= np.uint64(index_bits)
+        sorted_keys = packed.view(np.int64)
+    else:
+        order = np.argsort(keys, kind="stable")
+        sorted_keys = keys[order]
+    first, starts, counts = _runs(sorted_keys)
+    rank = np.cumsum(first, dtype=np.int64)
+    rank -= 1
+    inverse = np.empty(count, dtype=np.int64)
+    inverse[order] = rank
+    return order, starts, counts, inverse
+
+
+def _runs(sorted_keys: np.ndarray):
+    """Runs of equal values in sorted ``keys``: (first-of-run mask, run starts, run lengths)."""
+    first = run_heads(sorted_keys)
+    starts = np.flatnonzero(first)
+    return first, starts, _run_lengths(starts, len(sorted_keys))
+
+
+def run_heads(values: np.ndarray) -> np.ndarray:
+    """``(k,) bool``: True where ``values`` differs from the value before it (and at the first)."""
+    first = np.empty(len(values), dtype=bool)
+    first[:1] = True
+    np.not_equal(values[1:], values[:-1], out=first[1:])
+    return first
+
+
+def _run_lengths(starts: np.ndarray, count: int) -> np.ndarray:
+    """Lengths of the runs starting at ``starts`` in ``count`` items, in ``starts``' dtype."""
+    # written in place (np.diff with append copies ``starts`` first)
+    lengths = np.empty(len(starts), dtype=starts.dtype)
+    np.subtract(starts[1:], starts[:-1], out=lengths[:-1])
+    lengths[-1:] = count - starts[-1:]
+    return lengths
+
+
+def edge_runs(triangles: np.ndarray, n: int):
+    # half-edge rows of halfedges() grouped by undirected edge: (order, starts, counts)
+    return edge_structure(triangles, n).runs
+
+
+@dataclass(frozen=True)
+class EdgeStructure:
+    """The undirected edges of a mesh and the grouping of its half-edges (:func:`edge_structure`).
+
+    Attributes
+    ----------
+    edges : (e, 2) int32 (int64 beyond 2**31 half-edges)
+        ``lo < hi``, sorted lexicographically.
+    counts : (e,) int32
+        Triangles sharing each edge.
+    inverse : (3m,) int32
+        Edge of each half-edge row of :func:`halfedges` (formed on first use).
+    order, starts : (3m,), (e,) int32
+        Half-edge rows grouped by edge: edge ``k``'s are ``order[starts[k]:starts[k] + counts[k]]``.
+    """
+
+    edges: np.ndarray
+    counts: np.ndarray
+    order: np.ndarray
+    starts: np.ndarray
+    _inverse: np.ndarray | None = field(default=None, repr=False, compare=False)
+
+    @property
+    def inverse(self) -> np.ndarray:
+        """Edge index of each half-edge row, ``(3m,)``: formed on first use (local fairing never needs it)."""
+        if self._inverse is None:
+            inverse = np.empty(len(self.order), dtype=self.order.dtype)
+            inverse[self.order] = np.repeat(np.arange(len(self.edges), dtype=self.order.dtype), self.counts)
+            # a race recomputes the same array: harmless
+            object.__setattr__(self, "_inverse", inverse)
+        return self._inverse  # type: ignore[return-value]
+
+    @property
+    def runs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(order, starts, counts)``: the half-edge grouping that boundary walks take."""
+        return self.order, self.starts, self.counts
+
+
+def edge_structure(triangles: np.ndarray, n: int | None = None) -> EdgeStructure:
+    """The :class:`EdgeStructure` of a mesh: its half-edges grouped by undirected edge.
+
+    Two stable counting sorts (CSR-to-CSC transposes) by ``hi`` then ``lo``: the result equals a
+    stable sort of the keys ``lo * n + hi``.
+
+    >>> edge_structure(np.array([[0, 1, 2], [0, 2, 3]]), 4).counts.tolist()
+    [1, 2, 1, 1, 1]
+    """
+    triangles = np.asarray(triangles)
+    if n is None:
+        n = int(triangles.max()) + 1 if len(triangles) else 0
+    m = len(triangles)
+    count = 3 * m
+    index = np.int32 if max(count, n) < np.iinfo(np.int32).max else np.int64
+    if count == 0:
+        empty = np.zeros(0, dtype=index)
+        return EdgeStructure(np.zeros((0, 2), dtype=index), empty, empty, empty, _inverse=empty)
+    tail = triangles.T
+    head = triangles[:, [1, 2, 0]].T
+    lo = np.minimum(tail, head).astype(index).reshape(-1)  # rows of halfedges() order
+    hi = np.maximum(tail, head).astype(index).reshape(-1)
+    del tail, head
+    rows = np.arange(count + 1, dtype=np.int64)
+    # pass 1: half-edges by hi; pass 2: that order, stably by lo
+    by_hi = sp.csr_matrix((rows[:-1].astype(index), hi, rows), shape=(count, n)).tocsc().data
+    by_lo = sp.csr_matrix((by_hi, lo[by_hi], rows), shape=(count, n)).tocsc()
+    del by_hi, rows
+    order = by_lo.data
+    lo_start = by_lo.indptr
+    del by_lo
+    sorted_hi = hi[order]
+    first = run_heads(sorted_hi)
+    first[lo_start[:-1][lo_start[:-1] < lo_start[1:]]] = True  # a new lo starts a new edge
+    starts = np.flatnonzero(first).astype(index)
+    counts = _run_lengths(starts, count)
+    edges = np.empty((len(starts), 2), dtype=index)
+    edges[:, 0] = lo[order[starts]]
+    edges[:, 1] = sorted_hi[starts]
+    del sorted_hi, lo, hi, first
+    return EdgeStructure(edges, counts, order, starts)
+
+
+#: Indices per call of :func:`gather` (numpy converts an index to intp first: a temporary this size).
+_GATHER_BLOCK = 1 << 16
+
+
+def gather(values: np.ndarray, index: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """``values[index]`` for a 1-D in-range ``index`` of any integer dtype (into ``out`` if given).
+
+    ``np.take(mode="wrap")`` in blocks when the index is not intp, so that numpy's intp copy of
+    the index stays small.
+    """
+    if out is None:
+        out = np.empty(np.shape(index), dtype=values.dtype)
+    if index.dtype == np.intp or len(index) <= _GATHER_BLOCK:
+        return np.take(values, index, out=out, mode="wrap")
+    for i in range(0, len(index), _GATHER_BLOCK):
+        np.take(values, index[i : i + _GATHER_BLOCK], out=out[i : i + _GATHER_BLOCK], mode="wrap")
+    return out
+
+
+#: Corner slots of the six directed entries of a triangle in :func:`vertex_rings`: entry ``d * m + t``
+#: runs from corner ``RING_ROW_SLOT[d]`` of triangle ``t`` (its row) to corner ``RING_COLUMN_SLOT[d]``
+#: (its column); entries 0-2 are the half-edges of :func:`halfedges`, 3-5 the same edges reversed.
+RING_ROW_SLOT = (0, 1, 2, 1, 2, 0)
+RING_COLUMN_SLOT = (1, 2, 0, 0, 1, 2)
+
+#: Vertices per block of :func:`vertex_rings` (about 12 entries each): block temporaries of a few
+#: megabytes, which the allocator reuses instead of mapping (and faulting in) fresh pages.
+_RING_BLOCK = 1 << 14
+
+
+@dataclass(frozen=True)
+class VertexRings:
+    """The 1-ring CSR pattern of a mesh with the triangles behind every slot (:func:`vertex_rings`).
+
+    Triangle ``t`` gives six entries: entry ``d * m + t`` sits in row ``triangles[t, RING_ROW_SLOT[d]]``
+    and column ``triangles[t, RING_COLUMN_SLOT[d]]``.
+
+    Attributes
+    ----------
+    indptr, indices : (n + 1,), (n + 2e,) int32 (int64 beyond ``2**31`` entries)
+        Diagonal plus both directions of every edge, canonical CSR.
+    diagonal : (n,) int64
+        Position of each row's diagonal.
+    pairs : (2, n + 2e) int32
+        Two entries of each slot (one triangle: its entry twice); ``6 m`` on the diagonal.
+    valence : (n,) int64
+    boundary : (n,) bool
+        Vertices on an edge of one triangle or of more than two.
+    """
+
+    indptr: np.ndarray
+    indices: np.ndarray
+    diagonal: np.ndarray
+    pairs: np.ndarray
+    valence: np.ndarray
+    boundary: np.ndarray
+
+    @property
+    def n(self) -> int:
+        return len(self.indptr) - 1
+
+
+def vertex_rings(triangles: np.ndarray, n: int, *, block: int = _RING_BLOCK) -> VertexRings:
+    """The :class:`VertexRings` of a mesh in one pass over its corners, ``block`` vertices at a time.
+
+    Corners are grouped by vertex by a stable counting sort; each row's few columns are then sorted
+    and equal columns of a row are the triangles of one edge. Block temporaries stay small.
+
+    >>> rings = vertex_rings(np.array([[0, 1, 2], [0, 2, 3]]), 4)
+    >>> rings.indices.tolist(), rings.valence.tolist()
+    ([0, 1, 2, 3, 0, 1, 2, 0, 1, 2, 3, 0, 2, 3], [3, 2, 3, 2])
+    """
+    triangles = np.asarray(triangles)
+    m = len(triangles)
+    corners = 3 * m
+    bound = 6 * m + n
+    index = np.int32 if bound + 1 < np.iinfo(np.int32).max else np.int64
+    flat = np.ascontiguousarray(triangles, dtype=index).reshape(-1)  # corner (t, a) at 3 t + a
+    # corners grouped by vertex, stably: a counting sort, the transpose of the (m, n) CSR whose row
+    # t holds triangle t's corners (data: the corner's place a in its triangle)
+    by_corner = sp.csr_matrix(
+        (np.tile(np.arange(3, dtype=np.int8), m), flat, np.arange(0, corners + 1, 3, dtype=index)),
+        shape=(m, n),
+    ).tocsc()
+    start, by_vertex, place = by_corner.indptr, by_corner.indices, by_corner.data  # triangle, place in it
+    del by_corner
+    indices = np.empty(bound, dtype=index)  # only the used prefix (n + 2e) is ever touched
+    pairs = np.empty((2, bound), dtype=index)
+    diagonal = np.empty(n, dtype=np.int64)
+    valence = np.zeros(n, dtype=np.int64)
+    boundary = np.zeros(n, dtype=bool)
+    offset = 0
+    for v0 in range(0, n, block):
+        v1 = min(n, v0 + block)
+        rows = v1 - v0
+        triangle = by_vertex[start[v0] : start[v1]]
+        slot = place[start[v0] : start[v1]].astype(index)
+        at_corner = 3 * triangle
+        # the corner's two entries: forward (id a * m + t, to the next corner) and reverse (id
+        # d * m + t with d = 3 + (a - 1) % 3, to the previous corner)
+        columns = np.empty(2 * len(triangle), dtype=index)
+        entries = np.empty(2 * len(triangle), dtype=index)
+        columns[0::2] = gather(flat, at_corner + (slot + 1) % 3)
+        columns[1::2] = gather(flat, at_corner + (slot + 2) % 3)
+        forward = entries[0::2]
+        np.multiply(slot, m, out=forward)
+        forward += triangle
+        reverse = entries[1::2]
+        np.add(forward, 2 * m, out=reverse)
+        reverse[slot == 0] += 3 * m
+        del triangle, slot, at_corner
+        degree = np.diff(start[v0 : v1 + 1])
+        local = (2 * (start[v0 : v1 + 1] - start[v0])).astype(index)
+        part = sp.csr_matrix((entries, columns, local), shape=(rows, n))
+        part.sort_indices()  # each row's columns in order (about 12 a row)
+        columns, entries = part.indices, part.data
+        del part
+        # a slot starts at every new column and at every non-empty row
+        first = run_heads(columns)
+        first[local[:-1][degree > 0]] = True
+        at = np.flatnonzero(first)
+        multiplicity = np.diff(at, append=len(columns))
+        row = np.repeat(np.arange(rows), 2 * degree)[at]
+        column = columns[at]
+        per_row = np.bincount(row, minlength=rows)
+        valence[v0:v1] = per_row
+        boundary[v0 + row[multiplicity != 2]] = True
+        # global positions: each row's slots below its vertex, its diagonal, the slots above
+        row_start = np.cumsum(per_row + 1) - (per_row + 1) + offset
+        rank = np.arange(len(at)) - (np.cumsum(per_row) - per_row)[row]
+        vertex = np.arange(v0, v1)
+        above = column > vertex[row]
+        position = row_start[row] + rank + above
+        diagonal_position = row_start + np.bincount(row[~above], minlength=rows)
+        indices[position] = column
+        indices[diagonal_position] = vertex
+        pairs[0, position] = entries[at]
+        pairs[1, position] = entries[at + (multiplicity > 1)]
+        pairs[:, diagonal_position] = 6 * m  # a zero row for the operators
+        diagonal[v0:v1] = diagonal_position
+        offset += int(per_row.sum()) + rows
+    indptr = np.zeros(n + 1, dtype=index)
+    np.cumsum(valence + 1, out=indptr[1:])
+    return VertexRings(indptr, indices[:offset], diagonal, pairs[:, :offset], valence, boundary)
+
+
+def unique_edges(triangles: np.ndarray, n: int | None = None):
+    """Undirected edges with the number of triangles on each.
+
+    Returns
+    -------
+    edges : (k, 2) int64
+        ``edges[:, 0] < edges[:, 1]``, sorted lexicographically.
+    counts : (k,) int64
+        Triangles sharing each edge (1 on a boundary, 2 inside, >2 non-manifold).
+    inverse : (3m,) int64
+        Edge index of each half-edge of :func:`halfedges`.
+    """
+    return unique_edges_and_runs(triangles, n)[0]
+
+
+def unique_edges_and_runs(triangles: np.ndarray, n: int | None = None):
+    """:func:`unique_edges` and the half-edge runs of :func:`boundary_loops` (``_runs``) from one edge structure."""
+    es = edge_structure(triangles, n)
+    return (es.edges.astype(np.int64), es.counts.astype(np.int64), es.inverse.astype(np.int64)), es.runs
+
+
+def ring_pattern(edges: np.ndarray, n: int):
+    """CSR layout of the 1-ring pattern (diagonal plus both directions of every edge), without a sort.
+
+    ``edges (e, 2)`` as in :class:`EdgeStructure` (``lo < hi``, sorted). Row
+    ``v`` holds, in column order, the edges where ``v`` is the larger end
+    (backward, columns ``< v``), its diagonal, and the edges where ``v`` is the
+    smaller end (forward, columns ``> v``): canonical CSR. Returns ``indptr
+    (n+1,)``, ``indices (nnz,)`` and the CSR positions (all int32 when they fit) of
+    the diagonal ``(n,)``, of each edge forward ``(e,)`` and backward ``(e,)``,
+    so that data can be scattered straight into CSR order.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> indptr, indices, diagonal, forward, backward = ring_pattern(np.array([[0, 1], [0, 2], [1, 2]]), 3)
+    >>> indptr.tolist(), indices.tolist(), forward.tolist(), backward.tolist()
+    ([0, 3, 6, 9], [0, 1, 2, 0, 1, 2, 0, 1, 2], [1, 2, 5], [3, 6, 7])
+    """
+    lo, hi = edges[:, 0], edges[:, 1]
+    e = len(edges)
+    index = np.int32 if 2 * e + n < np.iinfo(np.int32).max else np.int64
+    n_forward = np.bincount(lo, minlength=n)
+    n_backward = np.bincount(hi, minlength=n)
+    indptr = np.zeros(n + 1, dtype=index)
+    np.cumsum(n_forward, out=indptr[1:])
+    indptr[1:] += n_backward.cumsum()
+    indptr[1:] += np.arange(1, n + 1, dtype=index)
+    diagonal = indptr[:-1] + n_backward.astype(index)
+    # edges are sorted by (lo, hi), so the forward edges of a row are contiguous
+    first_forward = np.zeros(n, dtype=index)
+    np.cumsum(n_forward[:-1], out=first_forward[1:])
+    forward = np.arange(e, dtype=index)
+    forward += (diagonal + 1 - first_forward)[lo]
+    del first_forward, n_forward
+    # backward: edges by (hi, lo), a stable counting sort of the edge list by hi (a CSC transpose)
+    by_hi = (
+        sp.csr_matrix((np.arange(e, dtype=index), hi, np.arange(e + 1, dtype=np.int64)), shape=(e, max(n, 1)))
+        .tocsc()
+        .data
+    )
+    first_backward = np.zeros(n, dtype=index)
+    np.cumsum(n_backward[:-1], out=first_backward[1:])
+    backward = np.empty(e, dtype=index)
+    rank = np.arange(e, dtype=index)
+    rank += (indptr[:-1] - first_backward)[hi[by_hi]]
+    backward[by_hi] = rank
+    del rank, by_hi, first_backward
+    indices = np.empty(int(indptr[-1]), dtype=index)
+    indices[diagonal] = np.arange(n, dtype=index)
+    indices[forward] = hi
+    indices[backward] = lo
+    return indptr, indices, diagonal, forward, backward
+
+
+def directed_edges(triangles: np.ndarray, n: int):
+    """Both directions of every edge, sorted by ``(source, target)``, with their triangle counts.
+
+    Returns
+    -------
+    src, dst : (2e,) int64
+        Edge ``src[k] -> dst[k]``; ``src`` is sorted, so these are the CSR
+        arrays of the adjacency (``dst`` the column indices).
+    triangle_count : (2e,) int64
+        Triangles on each edge (1 on a boundary, 2 inside, more when
+        non-manifold), whatever the orientation of the triangles.
+
+    Each triangle gives the key ``src << bits | dst`` of each direction of its
+    three edges once; one sort of the plain int64 keys (numpy's SIMD sort, far
+    faster than argsort, ``np.unique`` or a COO-to-CSR merge) groups them.
+    """
+    bits = max(1, int(n - 1).bit_length())
+    if 2 * bits > 62:  # beyond 2^31 vertices: keys by multiplication do not fit either
+        raise ValueError(f"n must be below 2**31, got {n}")
+    shift = np.int64(bits)
+    triangles = np.asarray(triangles, dtype=np.int64)
+    m = len(triangles)
+    corners = triangles.T  # a view: columns read in place
+    # written in place: on large meshes fresh temporaries cost as much as the sort
+    keys = np.empty(6 * m, dtype=np.int64)
+    rows = keys.reshape(6, m)
+    np.left_shift(corners, shift, out=rows[:3])
+    rows[3:] = rows[:3]
+    for row, head in enumerate((1, 2, 0, 2, 0, 1)):
+        rows[row] |= corners[head]
+    keys.sort()
+    _, at, triangle_count = _runs(keys)
+    keys = keys[at]
+    src = keys >> shift
+    keys &= np.int64((1 << int(shift)) - 1)
+    return src, keys, triangle_count
+
+
+def adjacency_matrix(triangles: np.ndarray, n: int) -> sp.csr_matrix:
+    """Symmetric binary vertex adjacency ``(n, n)`` CSR (1 where an edge joins two vertices), sorted indices."""
+    src, dst, _ = directed_edges(triangles, n)
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(np.bincount(src, minlength=n), out=indptr[1:])
+    # SciPy keeps 32-bit indices when they fit; giving them so avoids a copy
+    index_dtype = np.int32 if len(dst) < np.iinfo(np.int32).max and n < np.iinfo(np.int32).max else np.int64
+    adjacency = sp.csr_matrix(
+        (np.ones(len(dst)), dst.astype(index_dtype), indptr.astype(index_dtype)), shape=(n, n)
+    )
+    adjacency.has_canonical_format = True  # sorted, no duplicates
+    return adjacency
+
+
+def connected_components(triangles: np.ndarray, n: int):
+    """Connected components over edges: ``(count, labels (n,) int64)``; isolated vertices are their own."""
+    count, labels = csgraph.connected_components(adjacency_matrix(triangles, n), directed=False)
+    return int(count), labels.astype(np.int64)

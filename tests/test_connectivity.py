@@ -1,0 +1,126 @@
+"""Connectivity against plain walks over triangles and edges (hypothesis soups and hand meshes)."""
+
+from __future__ import annotations
+
+import pickle
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+from conftest import grid, triangle_soups
+from hypothesis import given, settings
+
+from o3d_lsmesh.core.connectivity import Connectivity
+
+
+def plain_edges(triangles):
+    """{(lo, hi): [half-edge rows]} walking triangle by triangle (row q * m + t is edge q of t)."""
+    m = len(triangles)
+    edges = {}
+    for t, tri in enumerate(triangles):
+        for q in range(3):
+            a, b = tri[q], tri[(q + 1) % 3]
+            edges.setdefault((min(a, b), max(a, b)), []).append(q * m + t)
+    return edges
+
+
+def plain_neighbours(triangles, n):
+    ring = [set() for _ in range(n)]
+    for tri in triangles:
+        for a in tri:
+            ring[a] |= {b for b in tri if b != a}
+    return ring
+
+
+@settings(max_examples=100, deadline=None)
+@given(triangle_soups())
+def test_edges_valence_and_incidence_match_plain_walks(soup):
+    n, triangles = soup
+    c = Connectivity(np.array(triangles, dtype=np.int64), n)
+    edges = plain_edges(triangles)
+    keys = sorted(edges)
+    assert c.edges.tolist() == [list(k) for k in keys]
+    assert c.edge_triangles.tolist() == [len(edges[k]) for k in keys]
+    for k, key in enumerate(keys):
+        assert all(c.halfedge_edge[row] == k for row in edges[key])
+    assert c.boundary_edges.tolist() == [len(edges[k]) == 1 for k in keys]
+    assert c.nonmanifold_edges.tolist() == [len(edges[k]) > 2 for k in keys]
+    ring = plain_neighbours(triangles, n)
+    assert c.valence.tolist() == [len(r) for r in ring]
+    indptr, triangle = c.vertex_triangles
+    for v in range(n):
+        corners = [t for t, tri in enumerate(triangles) for a in tri if a == v]
+        assert triangle[indptr[v] : indptr[v + 1]].tolist() == corners
+    assert [set(c.adjacency[v].indices.tolist()) for v in range(n)] == ring
+    rpi, rpx = c.ring_pattern[:2]
+    assert [rpx[rpi[v] : rpi[v + 1]].tolist() for v in range(n)] == [
+        sorted(r | {v}) for v, r in enumerate(ring)
+    ]
+
+
+@settings(max_examples=100, deadline=None)
+@given(triangle_soups())
+def test_components_and_k_rings_match_a_breadth_first_walk(soup):
+    n, triangles = soup
+    c = Connectivity(np.array(triangles, dtype=np.int64), n)
+    ring = plain_neighbours(triangles, n)
+    label = [-1] * n
+    count = 0
+    for s in range(n):
+        if label[s] < 0:
+            stack, label[s] = [s], count
+            while stack:
+                for w in ring[stack.pop()]:
+                    if label[w] < 0:
+                        label[w] = count
+                        stack.append(w)
+            count += 1
+    got_count, got = c.components
+    assert got_count == count
+    assert len({(a, b) for a, b in zip(label, got.tolist())}) == count  # the same partition
+    for k in (0, 1, 2):
+        reached = {0} if n else set()
+        for _ in range(k):
+            reached |= {w for v in reached for w in ring[v]}
+        assert c.k_rings([0] if n else [], k).tolist() == sorted(reached)
+
+
+@settings(max_examples=60, deadline=None)
+@given(triangle_soups())
+def test_face_adjacency_pairs_the_triangles_of_every_edge(soup):
+    n, triangles = soup
+    c = Connectivity(np.array(triangles, dtype=np.int64), n)
+    fa = c.face_adjacency
+    m = len(triangles)
+    expected = []
+    for k, rows in enumerate(plain_edges(triangles)[key] for key in sorted(plain_edges(triangles))):
+        faces = sorted(rows)
+        expected += [(faces[i] % m, faces[i + 1] % m, k) for i in range(len(faces) - 1)]
+    got = [(a, b, e) for (a, b), e in zip(fa.pairs.tolist(), fa.pair_edge.tolist())]
+    assert got == expected
+    for t in range(m):
+        share = sorted(u for u in range(m) if set(triangles[t]) & set(triangles[u]))
+        assert fa.ring[t].indices.tolist() == share
+
+
+def test_submesh_renumbers_the_chosen_triangles():
+    V, F = grid(5, 5)
+    c = Connectivity(F, len(V))
+    chosen = np.array([3, 7, 8, 20])
+    local, vertices = c.submesh(chosen)
+    assert np.array_equal(vertices[local], F[chosen])
+    assert vertices.tolist() == sorted(set(F[chosen].ravel().tolist()))
+
+
+def test_pickles_and_reads_from_threads():
+    V, F = grid(30, 30)
+    c = Connectivity(F, len(V))
+    with ThreadPoolExecutor(4) as pool:
+        valences = list(pool.map(lambda _: c.valence, range(8)))
+    assert all(np.array_equal(v, valences[0]) for v in valences)
+    back = pickle.loads(pickle.dumps(c))
+    assert np.array_equal(back.valence, c.valence) and np.array_equal(back.edges, c.edges) and back.n == c.n
+
+
+def test_empty_mesh():
+    c = Connectivity(np.zeros((0, 3), dtype=np.int64), 3)
+    assert len(c.edges) == 0 and c.valence.tolist() == [0, 0, 0] and c.components[0] == 3
