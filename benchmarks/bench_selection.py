@@ -8,20 +8,17 @@ Writes benchmarks/results/selection.md.
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 
 import numpy as np
-from _common import REPO, RESULTS, load_mesh, markdown_table, timed, write_markdown
+import scipy.sparse as sp
+from _common import RESULTS, load_mesh, markdown_table, timed, write_markdown
 
-from o3d_lsmesh import ls_mesh
+from o3d_lsmesh import LSMeshSolver, SPDSolver, ls_mesh
 from o3d_lsmesh._o3d import read_mesh
-from o3d_lsmesh.lsmesh import LSMeshSolver
+from o3d_lsmesh.laplacian import uniform_laplacian
+from o3d_lsmesh.lsmesh.selection import select_control_points, start_vertices
 from o3d_lsmesh.metrics import surface_distance, vertex_error
-from o3d_lsmesh.selection import select_control_points, start_vertices
-
-sys.path.insert(0, str(REPO / "tests"))  # the refactoring reference lives with the tests that use it
-from selection_reference import RefactoringSystem
 
 # Table I of the geometry-aware bases paper (2.4 GHz Pentium 4, TAUCS): factor, solve (one
 # coordinate), average update by one relaxed anchor, worst update; seconds.
@@ -29,6 +26,27 @@ PAPER = {
     "camel (39k)": dict(n=39074, factor=2.096, solve=0.073, update=0.0021, worst=0.0034),
     "igea (134k)": dict(n=134345, factor=11.826, solve=0.444, update=0.0200, worst=0.0215),
 }
+
+
+class RefactoringSystem:
+    """The relaxed LS system of ``start`` at weight ``weight``, refactored (not updated) by :meth:`add_anchors`."""
+
+    def __init__(self, V: np.ndarray, F: np.ndarray, start: np.ndarray, weight: float, ordering: str) -> None:
+        L = uniform_laplacian(F, len(V)).tocsc()
+        self._ltl, self._weight, self._vertices = (L.T @ L).tocsc(), weight, V
+        self._diagonal = np.zeros(len(V))
+        self._diagonal[start] = weight**2
+        self._solver = SPDSolver(self._normal(), ordering=ordering)
+
+    def _normal(self) -> sp.csc_matrix:
+        return (self._ltl + sp.diags(self._diagonal, format="csc")).tocsc()
+
+    def add_anchors(self, indices: np.ndarray) -> None:
+        self._diagonal[indices] = self._weight**2
+        self._solver.refactor(self._normal())
+
+    def solve(self) -> np.ndarray:
+        return self._solver.solve(self._diagonal[:, None] * self._vertices)
 
 
 def figure6(count: int, surface_points: int) -> str:

@@ -27,7 +27,7 @@ from _common import DATA, REPO, markdown_table, timed, write_markdown
 from scipy.sparse import csgraph
 
 from o3d_lsmesh._solvers import SPDSolver
-from o3d_lsmesh.spectral import _SHIFT, combinatorial_laplacian, spectral_basis
+from o3d_lsmesh.lsmesh.spectral import _SHIFT, combinatorial_laplacian, spectral_basis
 
 SCANS = Path(os.environ.get("O3D_LSMESH_SCANS", REPO.parent / "shared" / "data" / "scans"))
 

@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from o3d_lsmesh import SingularSystemError, ls_mesh
-from o3d_lsmesh.encoding import (
+from o3d_lsmesh.lsmesh.encoding import (
     HEADER,
     assemble_stream,
     connectivity_checksum,
@@ -20,7 +20,7 @@ from o3d_lsmesh.encoding import (
     iter_decode_geometry,
     to_bits,
 )
-from o3d_lsmesh.selection import select_control_points
+from o3d_lsmesh.lsmesh.selection import select_control_points
 
 
 def noisy_torus(seed=0):
@@ -135,8 +135,8 @@ def test_progressive_decoding_equals_a_dense_solve(backend, anchors, step, weigh
     import o3d_lsmesh._solvers as solvers
     from o3d_lsmesh._o3d import read_mesh
     from o3d_lsmesh._quantization import quantize
-    from o3d_lsmesh.encoding import _parse
     from o3d_lsmesh.laplacian import laplacian_matrix
+    from o3d_lsmesh.lsmesh.encoding import _parse
 
     if backend == "cholmod" and not solvers.cholmod_available():
         pytest.skip("scikit-sparse is not installed")
@@ -375,7 +375,7 @@ def test_argument_errors(torus, stream):
 
 def test_too_many_vertices_raises(monkeypatch):
     # a mesh of 2**32 vertices cannot be built here: fake its size at the read
-    import o3d_lsmesh.encoding as encoding
+    import o3d_lsmesh.lsmesh.encoding as encoding
 
     class Huge:
         vertices = np.zeros((1, 3))

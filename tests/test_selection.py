@@ -6,10 +6,10 @@ import pytest
 from conftest import grid, load_mesh
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from selection_reference import greedy_by_refactoring
+from selection_reference import greedy_dense
 
 from o3d_lsmesh import ls_mesh
-from o3d_lsmesh.selection import (
+from o3d_lsmesh.lsmesh.selection import (
     approximate,
     forbid_around,
     select_control_points,
@@ -96,17 +96,17 @@ def test_greedy_picks_the_true_maximum_at_each_step():
         assert top2[1] - top2[0] > 1e-9
 
 
-def test_greedy_with_updates_equals_greedy_with_refactoring():
+def test_greedy_equals_a_plain_loop_of_dense_solves():
     V, F = noisy_sphere(12, seed=3)
     updated = select_control_points((V, F), 80, method="greedy", weights=1.0)
-    np.testing.assert_array_equal(updated, greedy_by_refactoring(V, F, 80, 1.0))
+    np.testing.assert_array_equal(updated, greedy_dense(V, F, 80, 1.0))
 
 
-def test_greedy_with_updates_equals_refactoring_at_the_encoding_weight():
+def test_greedy_equals_dense_solves_at_the_encoding_weight():
     V, F = noisy_sphere(10, seed=4)
     omega = 10.0 * len(V)
     updated = select_control_points((V, F), 50, method="greedy", weights=omega)
-    np.testing.assert_array_equal(updated, greedy_by_refactoring(V, F, 50, omega))
+    np.testing.assert_array_equal(updated, greedy_dense(V, F, 50, omega))
 
 
 @pytest.mark.parametrize("batch", [1, 5, 31])

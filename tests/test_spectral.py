@@ -4,8 +4,8 @@ import pytest
 import scipy.linalg as sla
 from conftest import grid
 
-import o3d_lsmesh.spectral as spectral
-from o3d_lsmesh.spectral import (
+import o3d_lsmesh.lsmesh.spectral as spectral
+from o3d_lsmesh.lsmesh.spectral import (
     combinatorial_laplacian,
     quantize_coefficients,
     spectral_approximation,

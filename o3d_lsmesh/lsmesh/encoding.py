@@ -46,18 +46,18 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ._o3d import MeshData, new_mesh, read_mesh
-from ._progress import check_progress, progress_bar, stages
-from ._quantization import dequantize, quantize
-from ._solvers import check_weight_pins_components
-from ._validate import as_choice, as_count, as_positive_float
-from .laplacian import laplacian_matrix
+from .._o3d import MeshData, new_mesh, read_mesh
+from .._progress import check_progress, progress_bar, stages
+from .._quantization import dequantize, quantize
+from .._solvers import check_weight_pins_components
+from .._validate import as_choice, as_count, as_positive_float
+from ..laplacian import laplacian_matrix
+from ..topology import connected_components, unique_edges
 from .lsmesh import LSMeshSystem
 from .selection import SELECTION_METHODS, control_point_selection
-from .topology import connected_components, unique_edges
 
 if TYPE_CHECKING:
-    from ._types import AnyMesh, MeshT
+    from .._types import AnyMesh, MeshT
 
 __all__ = ["decode_geometry", "encode_geometry", "iter_decode_geometry"]
 

@@ -28,15 +28,15 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ._o3d import new_mesh, read_mesh
-from ._progress import check_progress, progress_bar, stages
-from ._ranges import concatenated_ranges
-from ._validate import as_bool, as_choice, as_count, as_positive_float
+from .._o3d import new_mesh, read_mesh
+from .._progress import check_progress, progress_bar, stages
+from .._ranges import concatenated_ranges
+from .._validate import as_bool, as_choice, as_count, as_positive_float
+from ..topology import adjacency_matrix, connected_components
 from .lsmesh import LSMeshSystem
-from .topology import adjacency_matrix, connected_components
 
 if TYPE_CHECKING:
-    from ._types import AnyMesh, MeshT
+    from .._types import AnyMesh, MeshT
 
 __all__ = ["SELECTION_METHODS", "approximate", "control_point_selection", "select_control_points"]
 

@@ -17,15 +17,15 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from scipy.sparse import csgraph
 
-from ._o3d import new_mesh, read_mesh
-from ._progress import check_progress, stages
-from ._quantization import dequantize, quantize
-from ._solvers import SPDSolver, single_threaded_blas
-from ._validate import as_count
-from .topology import adjacency_matrix
+from .._o3d import new_mesh, read_mesh
+from .._progress import check_progress, stages
+from .._quantization import dequantize, quantize
+from .._solvers import SPDSolver, single_threaded_blas
+from .._validate import as_count
+from ..topology import adjacency_matrix
 
 if TYPE_CHECKING:
-    from ._types import MeshT
+    from .._types import MeshT
 
 __all__ = ["SPECTRAL_MAX_VERTICES", "combinatorial_laplacian", "null_space_basis", "spectral_approximation"]
 
