@@ -6,7 +6,7 @@ import numpy as np
 import open3d as o3d
 from conftest import grid
 
-from o3d_lsmesh.metrics import shape_change, signed_volume
+from o3d_lsmesh.app.metrics import shape_change, signed_volume
 
 
 def _plain_shift(before_v, triangles, after_v):

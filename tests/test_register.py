@@ -12,8 +12,8 @@ import pytest
 from conftest import REPO, grid
 
 from o3d_lsmesh import ls_mesh, reconstruct_geometry
+from o3d_lsmesh.app.registration import METHOD_NAMES, register, registered_methods, unregister
 from o3d_lsmesh.fairing import constrained_fairing, smooth_boundary_curves
-from o3d_lsmesh.registration import METHOD_NAMES, register, registered_methods, unregister
 
 CLASSES = (o3d.geometry.TriangleMesh, o3d.t.geometry.TriangleMesh)
 
@@ -40,7 +40,7 @@ def test_importing_the_package_patches_nothing():
         import open3d as o3d
         classes = (o3d.geometry.TriangleMesh, o3d.t.geometry.TriangleMesh)
         before = [set(vars(c)) for c in classes]
-        import o3d_lsmesh, o3d_lsmesh.registration, o3d_lsmesh.rendering, o3d_lsmesh.cli, o3d_lsmesh.demo
+        import o3d_lsmesh, o3d_lsmesh.app.registration, o3d_lsmesh.app.render, o3d_lsmesh.cli, o3d_lsmesh.app.demo
         import o3d_lsmesh.fairing, o3d_lsmesh.hierarchy
         added = [sorted(set(vars(c)) - b) for c, b in zip(classes, before)]
         print(added)

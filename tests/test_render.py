@@ -9,10 +9,10 @@ import numpy as np
 import open3d as o3d
 import pytest
 
-from o3d_lsmesh._errors import O3DLSMeshWarning
+from o3d_lsmesh.core.errors import O3DLSMeshWarning
 
 # The module, not the function of the same name that the package may export.
-render_module = importlib.import_module("o3d_lsmesh.rendering")
+render_module = importlib.import_module("o3d_lsmesh.app.render")
 render = render_module.render
 
 W = H = 96
@@ -356,7 +356,7 @@ def test_bad_meshes_and_paths_raise(tmp_path):
 
 
 def test_absurd_picture_sizes_are_refused_before_drawing():
-    from o3d_lsmesh.rendering import MAX_PIXELS
+    from o3d_lsmesh.app.render import MAX_PIXELS
 
     meshes = [_sphere()] * 20
     assert 8192 * 8192 * 20 > MAX_PIXELS

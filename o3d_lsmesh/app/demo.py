@@ -22,15 +22,15 @@ from typing import Any, Callable
 
 import numpy as np
 
-from ._o3d import open3d
-from ._progress import progress_bar
+from .._o3d import open3d
+from .._progress import progress_bar
 from .shapes import simulated_range_scan
 
 __all__ = ["METHODS", "run_demo"]
 
 
 def _ours(mesh: Any, _: Any) -> Any:
-    from .fairing import constrained_fairing
+    from ..fairing import constrained_fairing
 
     return constrained_fairing(mesh)
 
@@ -59,7 +59,7 @@ SLIVER_QUALITY = 0.05
 
 def _rim(triangles: np.ndarray, n: int, rings: int = 2) -> np.ndarray:
     """Vertices on the boundary or within ``rings`` edges of it (the scan's rim)."""
-    from .topology import adjacency_matrix, boundary_halfedges
+    from ..topology import adjacency_matrix, boundary_halfedges
 
     rim = np.zeros(n, dtype=bool)
     rim[boundary_halfedges(triangles, n).ravel()] = True
@@ -227,7 +227,7 @@ def run_demo(
         (folder / "metrics.md").write_text("```\n" + table + "\n```\n")
         files += [folder / "metrics.json", folder / "metrics.md"]
         if render:
-            from .rendering import render as draw
+            from .render import render as draw
 
             theirs = [r for r in rows if r["key"].startswith("o3d_") and "skipped" not in r]
             keys = ["scan"] + (["ours"] if "ours" in results else [])

@@ -9,14 +9,14 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ._o3d import open3d, read_mesh
-from ._validate import as_count
-from .summary import (
+from .._o3d import open3d, read_mesh
+from .._validate import as_count
+from ..summary import (
     topology_summary,  # re-exported: metrics.topology_summary is the historical name
 )
 
 if TYPE_CHECKING:
-    from ._types import AnyMesh
+    from .._types import AnyMesh
 
 #: Largest ``number_of_points`` of :func:`surface_distance`: about 100 bytes a sample, so 1e7
 #: samples per mesh stay near 2 GB; more would not change a distance estimate.
@@ -203,8 +203,8 @@ def shape_change(before: AnyMesh, after: AnyMesh) -> dict:
     >>> shape_change(square, (square[0] + [0, 0, 0.25], square[1]))["inward_shift_mean"]  # out along +z
     -0.25
     """
-    from ._normals import area_weighted_normals
-    from .topology import adjacency_matrix, halfedges, unique_edges
+    from .._normals import area_weighted_normals
+    from ..topology import adjacency_matrix, halfedges, unique_edges
 
     a, b = read_mesh(before, name="before"), read_mesh(after, name="after")
     n, triangles = len(a.vertices), a.triangles

@@ -32,7 +32,7 @@ _LOCK = threading.Lock()
 
 def _approximate_mesh(mesh: Any, count: int, **kwargs: Any) -> Any:
     """:func:`o3d_lsmesh.approximate`'s mesh alone, so that calls chain."""
-    from .selection import approximate
+    from ..lsmesh.selection import approximate
 
     return approximate(mesh, count, **kwargs)[0]
 
@@ -83,7 +83,7 @@ METHOD_NAMES: tuple[str, ...] = tuple(_METHODS)
 
 
 def _classes() -> tuple[type, type]:
-    from ._o3d import open3d
+    from .._o3d import open3d
 
     o3d = open3d()
     return o3d.geometry.TriangleMesh, o3d.t.geometry.TriangleMesh
@@ -97,7 +97,7 @@ def _method(name: str, cls: type) -> Callable[..., Any]:
     # A fresh function object per class so that __qualname__ and the marker
     # describe where it lives, and unregister() can tell it apart.
     public, summary = _METHODS[name]
-    target = getattr(importlib.import_module(__package__), public)
+    target = getattr(importlib.import_module("o3d_lsmesh"), public)
     function = _approximate_mesh if name == "approximate_ls" else target
 
     def method(self: Any, *args: Any, **kwargs: Any) -> Any:

@@ -37,15 +37,15 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ._errors import O3DLSMeshWarning
-from ._normals import area_weighted_normals
-from ._o3d import MeshData, open3d, read_mesh
-from ._validate import as_choice, as_count, as_positive_float, as_real_vector
+from .._errors import O3DLSMeshWarning
+from .._normals import area_weighted_normals
+from .._o3d import MeshData, open3d, read_mesh
+from .._validate import as_choice, as_count, as_positive_float, as_real_vector
+from ..topology import unique_edges
 from .metrics import common_frame, distances_to_surface, raycasting_scene
-from .topology import unique_edges
 
 if TYPE_CHECKING:
-    from ._types import AnyMesh
+    from .._types import AnyMesh
 
 __all__ = ["VIRIDIS", "RenderedImage", "error_colors", "render"]
 
@@ -248,7 +248,7 @@ def _filament(vertices, triangles, colors, camera, width, height, background, ti
         package_parent = str(Path(__file__).resolve().parents[1])
         env = dict(os.environ)
         env["PYTHONPATH"] = package_parent + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
-        code = "import sys; from o3d_lsmesh.rendering import _filament_worker; _filament_worker(sys.argv[1], sys.argv[2])"
+        code = "import sys; from o3d_lsmesh.app.render import _filament_worker; _filament_worker(sys.argv[1], sys.argv[2])"
         try:
             done = subprocess.run(
                 [sys.executable, "-c", code, spec_path, image_path],

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from ._o3d import open3d
+from .._o3d import open3d
 
 __all__ = ["add_noise", "demo_mesh", "mean_edge_length", "simulated_range_scan"]
 
