@@ -30,7 +30,7 @@ from _common import load_mesh, markdown_table, timed, write_markdown
 from bench_realscans_denoise import PEERS
 
 from o3d_lsmesh.fairing import constrained_fairing
-from o3d_lsmesh.fairing.scan_fairing import scan_parameters
+from o3d_lsmesh.fairing.scan_measure import scan_parameters
 from o3d_lsmesh.metrics import normal_deviation, signed_volume, vertex_error
 
 MESHES = ["bunny.ply", "venus.ply", "screwdriver.ply", "feline.ply"]

@@ -41,7 +41,7 @@ from bench_realscans_denoise import PEERS
 from o3d_lsmesh._solvers import SPDSolver
 from o3d_lsmesh.fairing import constrained_fairing_arrays
 from o3d_lsmesh.fairing import features as fe
-from o3d_lsmesh.fairing.scan_fairing import measured_noise
+from o3d_lsmesh.fairing.scan_measure import measured_noise
 
 DATA = Path(os.environ.get("O3D_LSMESH_DENOISE", REPO.parent / "shared" / "data" / "denoise-benchmark"))
 # (label, noisy, truth, sharp features, GCN-Denoiser's released result)

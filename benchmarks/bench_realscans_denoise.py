@@ -35,7 +35,8 @@ import open3d as o3d
 import scipy.sparse as sp
 from _common import DATA, REPO, markdown_table, timed, write_markdown
 
-from o3d_lsmesh.fairing.scan_fairing import SLIVER_QUALITY, triangle_quality
+from o3d_lsmesh.fairing.scan_fairing import triangle_quality
+from o3d_lsmesh.fairing.tuning import SLIVER_QUALITY
 
 SCANS = Path(os.environ.get("O3D_LSMESH_SCANS", REPO.parent / "shared" / "data" / "scans"))
 SCANS_DRAGON = Path(
@@ -481,10 +482,13 @@ CV_QUICK = {
 def with_constant(name, value, fn):
     """``fn()`` with the scan energy's constant ``name`` set to ``value``."""
     from o3d_lsmesh.fairing import scan_fairing as sf
+    from o3d_lsmesh.fairing import scan_measure as sm
 
+    modules = [module for module in (sf, sm) if hasattr(module, name)]  # where the constant is read
     saved = getattr(sf, name)
     coupled = value == "off"
-    setattr(sf, name, saved if coupled else value)
+    for module in modules:
+        setattr(module, name, saved if coupled else value)
     parameters = sf.scan_parameters
     if coupled:  # the rim's weight follows mu: SCAN_RIM_MU / scan = 1 in scan_parameters
 
@@ -499,7 +503,8 @@ def with_constant(name, value, fn):
     try:
         return fn()
     finally:
-        setattr(sf, name, saved)
+        for module in modules:
+            setattr(module, name, saved)
         sf.scan_parameters = parameters
 
 
@@ -630,7 +635,7 @@ def targets(results):
 
 def measured_constants(results):
     """What the default measured on each scan (no reference): detail/noise, mu, rim weight, likeness."""
-    from o3d_lsmesh.fairing.scan_fairing import scan_parameters
+    from o3d_lsmesh.fairing.scan_measure import scan_parameters
 
     rows = []
     for r in results:

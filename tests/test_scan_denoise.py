@@ -15,7 +15,7 @@ from conftest import DATA, REPO, SCANS, grid
 from numpy.testing import assert_allclose
 
 from o3d_lsmesh._solvers import SPDSolver
-from o3d_lsmesh.fairing import constrained_fairing, constrained_fairing_arrays, scan_fairing
+from o3d_lsmesh.fairing import constrained_fairing, constrained_fairing_arrays, scan_fairing, scan_measure
 from o3d_lsmesh.fairing.constrained import DEFAULT_METHOD
 from o3d_lsmesh.fairing.scan_fairing import (
     MU_RANGE,
@@ -452,9 +452,9 @@ def test_measured_noise_against_loops_the_added_noise_and_the_curvature(rng, mon
     for _, V, F in [*small_meshes(), ("sphere", S + rng.normal(0, 0.02, S.shape), T)]:
         assert measured_noise(V, F) == pytest.approx(reference_noise(V, F), rel=1e-9, abs=1e-12)
         with monkeypatch.context() as patch:
-            patch.setattr(scan_fairing, "_NOISE_BLOCK", 7)  # the 2-ring formed a few rows at a time
+            patch.setattr(scan_measure, "NOISE_BLOCK", 7)  # the 2-ring formed a few rows at a time
             assert measured_noise(V, F) == pytest.approx(reference_noise(V, F), rel=1e-9, abs=1e-12)
-            patch.setattr(scan_fairing, "_NOISE_ROWS", 5)  # every k-th vertex, at most five of them
+            patch.setattr(scan_measure, "NOISE_ROWS", 5)  # every k-th vertex, at most five of them
             assert measured_noise(V, F) == pytest.approx(reference_noise(V, F, 5), rel=1e-9, abs=1e-12)
     # on a fine sphere: sigma recovers the deviation we added (in root-mean-square edge lengths), and g the
     # sphere's own umbrella h^2 / (2 R) per unit h (the mean of the 1-ring lies (mean |x_j - x_i|^2) / 2R

@@ -46,6 +46,7 @@ from ..topology import (
     group_keys,
     vertex_rings,
 )
+from .tuning import BLOCK_ROWS, DEFAULT_MU
 
 __all__ = [
     "DEFAULT_MU",
@@ -56,14 +57,6 @@ __all__ = [
     "local_operator",
     "triangle_coefficients",
 ]
-
-#: Default penalty weight of :class:`GlobalSolver`, chosen by measurement
-#: (see constrained_fairing's docstring and benchmarks/results/denoise.md).
-DEFAULT_MU = 0.03
-
-#: Rows per block of the local operator's assembly: temporaries of about four megabytes (7 doubles per slot,
-#: about 7 slots per row), below the allocator's reuse threshold and within the cache.
-_BLOCK_ROWS = 1 << 13
 
 
 @dataclass(frozen=True)
@@ -395,7 +388,7 @@ def local_operator(
     if positions0 is not None:
         positions0 = np.ascontiguousarray(positions0, dtype=np.float64)
         initial = np.zeros((n, 3))
-    block = _BLOCK_ROWS  # rows per block
+    block = BLOCK_ROWS  # rows per block
     for r0 in range(0, n, block):
         r1 = min(n, r0 + block)
         s0, s1 = int(indptr[r0]), int(indptr[r1])

@@ -58,7 +58,8 @@ from .._o3d import read_mesh
 from .._progress import iterate
 from .._validate import as_count, as_positive_float, mesh_arrays
 from ..topology import edge_structure, run_heads
-from .scan_fairing import measured_noise
+from .scan_measure import measured_noise
+from .tuning import CREASE_ANGLE, PASSES_PER_NOISE, SIGMA_R, VERTEX_STEPS
 
 if TYPE_CHECKING:
     from .._types import MeshT
@@ -78,17 +79,6 @@ __all__ = [
     "filter_pass",
     "normal_steps",
 ]
-
-#: Width of the range kernel on unit-normal differences ``|g_i - g_j|`` (Zhang et al.'s default; 0.5
-#: rounds the creases of a generated cube three times as much, 3.6 against 1.2 degrees).
-SIGMA_R = 0.35
-#: Filter passes per unit of measured noise (in mean edge lengths), rounded (chosen on the sharp
-#: benchmark meshes, scored leave-one-mesh-out: benchmarks/results/features_denoise.md).
-PASSES_PER_NOISE = 60.0
-#: Vertex steps after each filter pass (the reference implementation's count).
-VERTEX_STEPS = 10
-#: Angle (degrees) between the denoised normals of two faces on an edge above which it is a crease.
-CREASE_ANGLE = 30.0
 
 
 class FaceAdjacency(NamedTuple):

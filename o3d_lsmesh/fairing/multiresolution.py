@@ -13,7 +13,7 @@ from .._validate import as_choice, as_count, as_iterations
 from ..hierarchy.hierarchy import MeshHierarchy, boundary_degree, collapse_hierarchy
 from ..topology import VertexRings, boundary_curves, vertex_rings
 from .boundary_curve import curve_operator, run_curve_iterations
-from .constrained import FAIRING_METHODS, constrained_fairing_arrays, fair_local, plain_pages
+from .constrained import FAIRING_METHODS, constrained_fairing_arrays, fair_local
 
 if TYPE_CHECKING:
     from .._types import MeshT
@@ -90,8 +90,7 @@ def _fair_level(
         return constrained_fairing_arrays(
             positions, triangles, iterations, method="global", smooth_boundary=smooth_boundary
         )
-    with plain_pages():
-        return fair_local(positions, triangles, iterations, smooth_boundary, reimpose_every, False, rings)
+    return fair_local(positions, triangles, iterations, smooth_boundary, reimpose_every, False, rings)
 
 
 def _input_boundary(

@@ -1,43 +1,15 @@
-"""Barycenter-constrained fairing for raw range scans: the default energy of ``constrained_fairing``.
+"""The scan default of ``constrained_fairing``: Liu et al.'s eq. 5 in penalty form, boundary freed.
 
-The global penalty form of Liu et al.'s eq. 5 with the boundary freed, the
-barycenters weighted by their noise, a small membrane term and one twicing
-step (Tukey's bias correction), all with one linear system::
-
-    E(X) = |K X|^2 + mu sum_t w_t |h_t (X - X0)|^2 + lambda sum_(i,j) |x_i - x_j|^2
-
-* ``K`` is the uniform Laplacian of *every* referenced vertex (eq. 3; a
-  boundary vertex keeps its one-sided row), so the boundary moves with the
-  surface instead of being held at its noisy scanned position.
-* ``h_t`` is triangle ``t``'s row of the triangle-vertex incidence (``h_t X``
-  is three times its barycenter); every triangle is penalised, with weight
-  ``w_t = 1`` inside and ``w_t = boundary_weight`` for a triangle with a
-  boundary vertex. A barycenter is a measurement and its weight is its
-  inverse noise variance: a scanner's samples at the silhouette (grazing
-  angles) carry 2.5-4 times the interior's error, so their barycenters are
-  trusted about ten times less.
-* The membrane term (uniform weights, one per edge) damps the mid-frequency,
-  scanline-correlated noise of a range scanner that the thin-plate term
-  ``|K X|^2`` leaves in place.
-
-Minimizing gives the linear filter ``X1 = S X0`` with
-``S = (K^T K + mu H^T W H + lambda G)^-1 mu H^T W H`` (``G`` the graph
-Laplacian); the result is the twiced filter ``X = X1 + S (X0 - X1)`` (one
-more solve of the same system), which puts back the
-low-frequency part of what ``S`` removed, i.e. the shrinkage of the membrane.
-
-Every term is quadratic in coordinate differences with dimensionless
-weights, so the result is equivariant under rigid motions and uniform
-scaling; no parameter depends on the mesh's size. The weights are measured
-on the mesh (:func:`scan_parameters`: ``mu`` from its detail-to-noise ratio),
-and the default finishes with :func:`relax_rim`, a tangential relaxation of
-the triangles the solve squeezes at a scan's rim.
+``E(X) = |K X|^2 + mu sum_t w_t |h_t (X - X0)|^2 + lambda sum_(i,j) |x_i - x_j|^2`` (``K`` the
+uniform Laplacian of every referenced vertex, ``h_t`` triangle ``t``'s row of the incidence ``H``,
+``w_t`` lower at the rim), minimized by one linear system, then twiced (Tukey):
+``X = X1 + S (X0 - X1)``; :func:`relax_rim` then evens out the rim's triangles. The weights are
+measured on the mesh (:mod:`.scan_measure`). Docs page: ``docs/algorithms/scan_denoiser.rst``.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import NamedTuple
 
 import numpy as np
 import scipy.sparse as sp
@@ -46,12 +18,39 @@ from .._collapsed import collapsed_triangles
 from .._normals import area_weighted_normals
 from .._progress import stages
 from .._solvers import SPDSolver, gram_matrix, solver_backend
-from ..topology import edge_structure, ring_pattern
+from ..topology import ring_pattern
+from .scan_measure import (
+    NoiseEstimate,
+    ScanParameters,
+    _Structure,
+    _structure,
+    measured_boundary_weight,
+    measured_noise,
+    rim_noise_ratio,
+    scan_likeness,
+    scan_parameters,
+)
+from .tuning import (
+    MU_RANGE,
+    NOISE_MU_POWER,
+    NOISE_MU_SCALE,
+    RIM_RINGS,
+    SCAN_BOUNDARY_FRACTION,
+    SCAN_BOUNDARY_WEIGHT,
+    SCAN_ITERATIVE_VERTICES,
+    SCAN_MEMBRANE,
+    SCAN_MU,
+    SCAN_REDUCTION,
+    SCAN_RIM_MU,
+    SCAN_RIM_RATIO,
+    SLIVER_QUALITY,
+)
 
 __all__ = [
     "MU_RANGE",
     "NOISE_MU_POWER",
     "NOISE_MU_SCALE",
+    "RIM_RINGS",
     "SCAN_BOUNDARY_FRACTION",
     "SCAN_BOUNDARY_WEIGHT",
     "SCAN_ITERATIVE_VERTICES",
@@ -76,356 +75,6 @@ __all__ = [
     "scan_system",
     "triangle_quality",
 ]
-
-#: Scale of a range scan's interior barycenter weight, ``mu = SCAN_MU (g / sigma)^2``: the Wiener weight
-#: of a signal of detail ``g`` in noise ``sigma`` (:func:`measured_noise`), so that detail above the noise
-#: is held (fitted on each object, scored on the other: benchmarks/results/realscans_denoise.md).
-SCAN_MU = 0.06
-#: Barycenter weight ``mu w_t`` of a range scan's rim triangles over their measured relative weight ``w``
-#: (:func:`measured_boundary_weight`): the rim is smoothed as strongly whatever the interior's detail;
-#: also the least weight of the interior's barycenters (they are never trusted less than the rim's).
-SCAN_RIM_MU = 0.02
-#: A triangle whose quality ``4 sqrt(3) area / (sum of squared edges)`` (1 equilateral) falls below this
-#: is a sliver (a 1:20 isosceles needle or a flattened cap): :func:`relax_rim` keeps none of its own making.
-SLIVER_QUALITY = 0.05
-#: Membrane weight ``lambda`` of the scan energy.
-SCAN_MEMBRANE = 0.45
-#: Lowest barycenter weight of triangles touching the boundary, relative to the
-#: interior's (a ragged scan silhouette: see :func:`measured_boundary_weight`).
-SCAN_BOUNDARY_WEIGHT = 0.1
-# Expected ratio (boundary curve / interior) of the mean squared uniform Laplacian for i.i.d. noise of
-# one variance: a curve vertex's (x_(i-1) + x_(i+1)) / 2 - x_i has variance 1.5 sigma^2, an interior
-# vertex of valence 6 has (1 + 1/6) sigma^2.
-_IID_BOUNDARY_RATIO = 1.5 / (1.0 + 1.0 / 6.0)
-#: Rim data weights (:func:`rim_noise_ratio`) at which :func:`scan_likeness` is 1 and 0.
-SCAN_RIM_RATIO = (0.3, 0.6)
-#: Boundary-vertex fractions at which :func:`scan_likeness` is 0 and 1.
-SCAN_BOUNDARY_FRACTION = (0.01, 0.03)
-#: ``mu = NOISE_MU_SCALE (g / sigma)^NOISE_MU_POWER`` for independent noise (:func:`scan_parameters`).
-NOISE_MU_SCALE = 0.8
-NOISE_MU_POWER = 2.5
-#: Range of that ``mu``.
-MU_RANGE = (3e-3, 1.0)
-#: Vertex count from which ``solver="auto"`` solves the scan energy by conjugate gradients preconditioned
-#: by the matrix's incomplete Cholesky factor (IC(0)) instead of factoring it. The matrix's data term sits
-#: on every vertex, so its condition number does not grow with the mesh: 6-11 iterations a solve from a
-#: few hundred vertices to 1.4M, linear work. Measured (whole calls, medians): faster than the factor
-#: at every size, 0.65-0.86x below 7k vertices, 0.47x at 13k, 0.45-0.6x on the ten 30k-40k scans,
-#: 0.37x at 1.4M, level on a soup of 500-vertex pieces (150k); below this count the gain is a few
-#: milliseconds and the factor, exact, is kept (benchmarks/results/realscans_denoise_speed.md).
-SCAN_ITERATIVE_VERTICES = 5_000
-#: The iterative path stops each solve when its residual is this fraction of its residual at the start
-#: (the scan): the displacement is then within 5e-5 to 1.3e-4 mean edge lengths RMS of the exact
-#: minimizer's (at most 6e-3 at a vertex) on the ten raw scans, a thousand times below the noise it
-#: removes, and the mean distance to the reference within 0.001 um of the factor's (1e-3: 2e-3 to
-#: 5e-3 RMS, 0.2 at a vertex, 0.03 um).
-SCAN_REDUCTION = 1e-4
-
-
-class _Structure(NamedTuple):
-    edges: np.ndarray  # (e, 2) int32 (int64 past 2**31 half-edges), lo < hi, sorted
-    counts: np.ndarray  # (e,) triangles on each edge
-    boundary: np.ndarray  # (n,) bool, on an edge of one triangle
-    valence: np.ndarray  # (n,) int64 edge neighbours
-    halfedge_edge: np.ndarray  # (3m,) edge of half-edge ``a * m + t`` (triangle t, corners a, a + 1)
-
-
-def _structure(triangles: np.ndarray, n: int) -> _Structure:
-    # int32 indices where they fit: half the memory traffic of int64 at scan sizes
-    es = edge_structure(triangles, n)
-    boundary = np.zeros(n, dtype=bool)
-    boundary[es.edges[es.counts == 1].ravel()] = True
-    return _Structure(es.edges, es.counts, boundary, np.bincount(es.edges.ravel(), minlength=n), es.inverse)
-
-
-def _mean_square_laplacian(vertices: np.ndarray, pairs: np.ndarray, mask: np.ndarray) -> float:
-    """Mean over the ``mask`` vertices of ``|mean of the pairs-neighbours - x_i|^2`` (bincount, not ``np.add.at``)."""
-    n = len(vertices)
-    lo, hi = pairs[:, 0], pairs[:, 1]
-    degree = np.bincount(pairs.ravel(), minlength=n)[mask].astype(np.float64)
-    total = np.empty((int(mask.sum()), 3))
-    for k in range(3):
-        total[:, k] = (
-            np.bincount(lo, vertices[hi, k], minlength=n) + np.bincount(hi, vertices[lo, k], minlength=n)
-        )[mask]
-    lap = total / degree[:, None] - vertices[mask]
-    return float((lap * lap).sum(axis=1).mean())
-
-
-def rim_noise_ratio(
-    vertices: np.ndarray, triangles: np.ndarray, *, structure: _Structure | None = None
-) -> tuple[float, float]:
-    """The rim's data weight before clipping, ``c (9/7) E_int / E_bd``, and the coverage ratio ``c``.
-
-    See :func:`measured_boundary_weight` (which clips the first to
-    ``[SCAN_BOUNDARY_WEIGHT, c]``). Returns ``(inf, 1)`` for a mesh without a
-    boundary or without an interior vertex, ``(c, c)`` for a noiseless
-    straight rim.
-    """
-    n = len(vertices)
-    st = _structure(triangles, n) if structure is None else structure
-    on_curve = st.edges[st.counts == 1]
-    interior = (st.valence > 0) & ~st.boundary
-    if not len(on_curve) or not interior.any():
-        return float("inf"), 1.0
-    in_triangles = np.bincount(triangles.ravel(), minlength=n)
-    coverage = max(1.0, float(in_triangles[interior].mean() / in_triangles[st.boundary].mean()))
-    curve_energy = _mean_square_laplacian(vertices, on_curve, st.boundary)
-    if curve_energy <= 0.0:
-        return coverage, coverage
-    interior_energy = _mean_square_laplacian(vertices, st.edges, interior)
-    return coverage * _IID_BOUNDARY_RATIO * interior_energy / curve_energy, coverage
-
-
-def measured_boundary_weight(vertices: np.ndarray, triangles: np.ndarray) -> float:
-    """The boundary triangles' barycenter weight ``w`` estimated from the noise of the input.
-
-    ``w = clip(c (9/7) E_int / E_bd, 0.1, c)``: ``E_int`` the mean of ``|L x_i|^2`` over interior
-    vertices (uniform Laplacian), ``E_bd`` the mean over boundary vertices of the squared uniform
-    Laplacian *along the boundary curve*, ``c >= 1`` the mean number of triangles at an interior
-    vertex over that at a boundary vertex (about 2). For i.i.d. noise ``E_bd / E_int = 9/7``, so
-    ``(9/7) E_int / E_bd`` estimates the interior's over the boundary's noise variance, and ``c``
-    gives a rim vertex (in half as many barycenters) an interior vertex's data weight. Invariant
-    under rigid motions and uniform scaling. 1 without a boundary, ``c`` for a straight noiseless one.
-
-    Parameters
-    ----------
-    vertices : (n, 3) float64
-    triangles : (m, 3) int64
-
-    Returns
-    -------
-    float in ``[SCAN_BOUNDARY_WEIGHT, c]``.
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> g = np.stack(np.meshgrid(np.arange(30.0), np.arange(30.0), indexing="ij"), -1).reshape(-1, 2)
-    >>> F = np.array([[i * 30 + j, i * 30 + j + 30, i * 30 + j + 1] for i in range(29) for j in range(29)]
-    ...              + [[i * 30 + j + 1, i * 30 + j + 30, i * 30 + j + 31] for i in range(29) for j in range(29)])
-    >>> V = np.c_[g, np.zeros(900)] + np.random.default_rng(0).normal(0.0, 0.3, (900, 3))
-    >>> measured_boundary_weight(V, F) > 1.5  # i.i.d. noise: a rim vertex weighs like an interior one
-    True
-    >>> ragged = V.copy(); rim = (g == 0).any(1) | (g == 29).any(1)
-    >>> ragged[rim] += np.random.default_rng(1).normal(0.0, 2.0, (rim.sum(), 3))
-    >>> measured_boundary_weight(ragged, F)  # a scan's silhouette: the rim 7 times noisier
-    0.1
-    """
-    return _clipped_weight(*rim_noise_ratio(vertices, triangles))
-
-
-def _clipped_weight(ratio: float, coverage: float) -> float:
-    # the rim weight of measured_boundary_weight from rim_noise_ratio's (ratio, coverage)
-    return 1.0 if not np.isfinite(ratio) else float(np.clip(ratio, SCAN_BOUNDARY_WEIGHT, coverage))
-
-
-class NoiseEstimate(NamedTuple):
-    """Noise and surface detail along the normal, in edge lengths (:func:`measured_noise`)."""
-
-    noise: float
-    detail: float
-
-
-#: :func:`measured_noise` forms the 2-ring pattern in this many blocks of rows (a 16th of it at a time),
-#: of at least ``_NOISE_BLOCK`` rows.
-_NOISE_BLOCKS = 16
-_NOISE_BLOCK = 1 << 16
-#: :func:`measured_noise` averages over every k-th vertex of those two rings from the rim, k the least
-#: that leaves at most this many (a mean of 2**14 vertices is within a percent of all of them)
-_NOISE_ROWS = 1 << 14
-
-
-def measured_noise(
-    vertices: np.ndarray, triangles: np.ndarray, *, structure: _Structure | None = None
-) -> NoiseEstimate:
-    """The noise's deviation and the surface's own detail at the edge scale, both from the mesh.
-
-    Two umbrella vectors of each vertex ``i`` at least two rings from the rim,
-    along its normal ``n_i``: ``a1 = n_i . (mean of the 1-ring - x_i)`` and
-    ``a2 = n_i . (mean of the 2-ring - x_i)`` (the 2-ring: every vertex
-    within two edges). For i.i.d. noise ``sigma`` on a smooth surface of 1-ring umbrella ``g``,
-    ``E a1^2 = sigma^2 (1 + 1/d1) + g^2`` and ``E a2^2 = sigma^2 (1 + 1/d2) + G g^2``, ``G =
-    (mean squared 2-ring distance / mean squared 1-ring distance)^2`` (about 7): two equations
-    for ``sigma^2`` and ``g^2``. Normals (area-weighted) and distances are taken after one umbrella
-    step; both results are divided by the RMS 1-ring distance ``h``. Measured: ``sigma`` within
-    0.01-0.04 edge lengths at 0.2 and 0.5 noise; ``g`` 0.05 on bunny, screwdriver, feline, 0.10 on
-    the coarse Venus. Scale-free. ``(0, 0)`` when no vertex is two rings from the rim. The means run
-    over every k-th of those vertices, at most ``2**14`` of them.
-
-    Examples
-    --------
-    >>> import numpy as np, open3d as o3d
-    >>> sphere = o3d.geometry.TriangleMesh.create_sphere(radius=1.0, resolution=40)
-    >>> V, F = np.asarray(sphere.vertices), np.asarray(sphere.triangles).astype(np.int64)
-    >>> h = np.linalg.norm(V[F[:, 0]] - V[F[:, 1]], axis=1).mean()
-    >>> estimate = measured_noise(V + np.random.default_rng(0).normal(0.0, 0.3 * h, V.shape), F)
-    >>> 0.25 < estimate.noise < 0.35
-    True
-    """
-    n = len(vertices)
-    st = _structure(triangles, n) if structure is None else structure
-    lo, hi = st.edges[:, 0], st.edges[:, 1]
-    ring = sp.csr_matrix((np.ones(2 * len(lo)), (np.r_[lo, hi], np.r_[hi, lo])), shape=(n, n))
-    inner = (st.valence > 0) & ~st.boundary
-    inner[ring[st.boundary].indices] = False  # two rings from the rim: full 1- and 2-rings
-    if not inner.any():
-        return NoiseEstimate(0.0, 0.0)
-    d1 = st.valence.astype(np.float64)
-    referenced = st.valence > 0
-    ring_sum = ring @ vertices
-    smooth = vertices.copy()
-    smooth[referenced] += ring_sum[referenced] / d1[referenced, None] - vertices[referenced]
-    smooth_square = np.einsum("ij,ij->i", smooth, smooth)
-    normal = area_weighted_normals(smooth, triangles)
-    inner_rows = np.flatnonzero(inner)
-    inner_rows = inner_rows[:: -(-len(inner_rows) // _NOISE_ROWS)]
-    # per inner vertex: 1-ring umbrella along the normal, and the 1-ring's mean squared distance
-    sub, x = smooth[inner_rows], vertices[inner_rows]
-    nrm = normal[inner_rows]
-    nrm /= np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), np.finfo(float).tiny)
-    di = d1[inner_rows]
-    a1 = np.einsum("ij,ij->i", ring_sum[inner_rows] / di[:, None] - x, nrm)
-    h2 = float(
-        np.mean(
-            _mean_square_distances((ring @ smooth_square)[inner_rows], (ring @ smooth)[inner_rows], sub, di)
-        )
-    )
-    if not h2 > 0.0:
-        return NoiseEstimate(0.0, 0.0)
-    del ring_sum, sub, x
-    # the same over the 2-ring (every vertex within two edges), a block of rows at a time: the whole
-    # 2-ring pattern (about 19 entries a row, with its product and sum) took 800 bytes a vertex
-    sum_a2, sum_k2, sum_h2 = 0.0, 0.0, 0.0
-    # a few blocks, not blocks of a fixed size: each product clears a work array as long as the mesh
-    block_rows = max(_NOISE_BLOCK, -(-len(inner_rows) // _NOISE_BLOCKS))
-    for start in range(0, len(inner_rows), block_rows):
-        rows = inner_rows[start : start + block_rows]
-        block = ring[rows]
-        two = block @ ring + block
-        two.data[:] = 1.0
-        own = np.repeat(rows, np.diff(two.indptr)) == two.indices  # the vertex itself is not its neighbour
-        two.data[own] = 0.0
-        two.eliminate_zeros()
-        d2 = np.diff(two.indptr).astype(np.float64)
-        a2 = np.einsum(
-            "ij,ij->i", two @ vertices / d2[:, None] - vertices[rows], nrm[start : start + len(rows)]
-        )
-        sum_a2 += float(a2 @ a2)
-        sum_k2 += float(np.sum(1.0 + 1.0 / d2))
-        sum_h2 += float(np.sum(_mean_square_distances(two @ smooth_square, two @ smooth, smooth[rows], d2)))
-    count = len(inner_rows)
-    growth = (sum_h2 / count / h2) ** 2
-    k1, k2 = float(np.mean(1.0 + 1.0 / di)), sum_k2 / count
-    e1, e2 = float(np.mean(a1 * a1)), sum_a2 / count
-    detail = max((e2 - e1 * k2 / k1) / (growth - k2 / k1), 0.0) if growth > k2 / k1 else 0.0
-    noise = max((e1 - detail) / k1, 0.0)
-    return NoiseEstimate(float(np.sqrt(noise / h2)), float(np.sqrt(detail / h2)))
-
-
-def _mean_square_distances(
-    square_sums: np.ndarray, sums: np.ndarray, points: np.ndarray, counts: np.ndarray
-) -> np.ndarray:
-    """Mean of ``|y_j - p|^2`` over each point's neighbours ``y_j``, from the neighbours' sums of
-    ``|y|^2`` and of ``y`` and their counts: ``(sum |y|^2 - 2 p . sum y) / count + |p|^2``, ``(k,)``."""
-    return (square_sums - 2.0 * np.einsum("ij,ij->i", sums, points)) / counts + np.einsum(
-        "ij,ij->i", points, points
-    )
-
-
-def scan_likeness(rim_ratio: float, boundary_fraction: float) -> float:
-    """How much the mesh looks like one raw range scan, from 0 (not at all) to 1 (``scan_parameters``).
-
-    The product of two ramps, linear in the logarithm of their measure: the rim's unclipped data
-    weight (:func:`rim_noise_ratio`) from 1 at ``SCAN_RIM_RATIO[0]`` to 0 at ``SCAN_RIM_RATIO[1]``
-    (0.07-0.13 on the bunny scans, whose silhouettes are 2.5-4 times noisier; i.i.d. noise gives
-    about 2), and the fraction of boundary vertices from 0 at ``SCAN_BOUNDARY_FRACTION[0]`` to 1 at
-    ``SCAN_BOUNDARY_FRACTION[1]`` (7-13% on a range scan). A closed mesh gives 0.
-    """
-
-    def ramp(value: float, zero: float, one: float) -> float:
-        with np.errstate(divide="ignore"):
-            return float(np.clip(np.log(value / zero) / np.log(one / zero), 0.0, 1.0))
-
-    low, high = SCAN_RIM_RATIO
-    rim = ramp(rim_ratio, high, low)
-    fraction = ramp(boundary_fraction, *SCAN_BOUNDARY_FRACTION)
-    return rim * fraction
-
-
-@dataclass(frozen=True)
-class ScanParameters:
-    """The weights of the scan energy that :func:`scan_parameters` measured on a mesh.
-
-    Attributes
-    ----------
-    mu, membrane, boundary_weight : float
-        The energy's ``mu``, ``lambda`` and rim ``w_t``.
-    twicing : float
-        Weight ``t`` of the twicing step, ``X = X1 + t S (X0 - X1)``.
-    rim_curve : float
-        Weight of the boundary-curve Laplacian in a rim vertex's thin-plate
-        row (:func:`scan_system`).
-    scan_likeness : float
-        ``s`` of :func:`scan_likeness`.
-    noise, detail : float
-        ``sigma`` and ``g`` of :func:`measured_noise`.
-    """
-
-    mu: float
-    membrane: float
-    boundary_weight: float
-    twicing: float
-    rim_curve: float
-    scan_likeness: float
-    noise: float
-    detail: float
-
-
-def scan_parameters(
-    vertices: np.ndarray, triangles: np.ndarray, *, structure: _Structure | None = None
-) -> ScanParameters:
-    """Every weight of the default energy, measured on the mesh (never on a reference).
-
-    A raw range scan (``s = 1``, :func:`scan_likeness`) gets the energy
-    measured on the scans: ``mu = SCAN_MU (g / sigma)^2`` (at least ``SCAN_RIM_MU``, at most 1;
-    ``g / sigma`` the detail-to-noise ratio of :func:`measured_noise`, so a scan of finer detail than
-    its noise is held closer to its samples), the rim triangles' ``mu w_t = SCAN_RIM_MU w``,
-    ``lambda = SCAN_MEMBRANE``, twicing ``t = 1``: the membrane damps the scanline-correlated
-    noise that the thin-plate term keeps. A mesh with independent noise (``s = 0``: a
-    closed mesh, or a rim as noisy as its interior) gets the barycenter-only
-    energy (``lambda = 0``, no twicing) with ``mu = NOISE_MU_SCALE (g / sigma)^NOISE_MU_POWER``
-    in ``MU_RANGE`` (:func:`measured_noise`; measured on bunny, screwdriver and feline at 0.2 and
-    0.5 mean-edge noise, benchmarks/results/denoise.md). Between the two every weight moves with
-    ``s`` (``mu`` and the rim's weight geometrically). ``w`` is :func:`measured_boundary_weight`. All measures are
-    dimensionless: the parameters are invariant under rigid motions and uniform scaling.
-
-    Examples
-    --------
-    >>> import numpy as np, open3d as o3d
-    >>> sphere = o3d.geometry.TriangleMesh.create_sphere(radius=1.0, resolution=40)
-    >>> V, F = np.asarray(sphere.vertices), np.asarray(sphere.triangles).astype(np.int64)
-    >>> p = scan_parameters(V + np.random.default_rng(0).normal(0.0, 0.01, V.shape), F)
-    >>> p.scan_likeness, p.membrane, p.twicing  # closed: independent noise
-    (0.0, 0.0, 0.0)
-    """
-    n = len(vertices)
-    st = _structure(triangles, n) if structure is None else structure
-    ratio, coverage = rim_noise_ratio(vertices, triangles, structure=st)
-    weight = _clipped_weight(ratio, coverage)
-    referenced = int(np.count_nonzero(st.valence))
-    fraction = float(np.count_nonzero(st.boundary)) / max(referenced, 1)
-    s = scan_likeness(ratio, fraction)
-    estimate = measured_noise(vertices, triangles, structure=st)
-    ratio_gn = estimate.detail / estimate.noise if estimate.noise > 0.0 else np.inf
-    independent = float(np.clip(NOISE_MU_SCALE * ratio_gn**NOISE_MU_POWER, *MU_RANGE))
-    # never below the rim's weight: the interior's samples are at least as trustworthy as the ragged rim's,
-    # and a weaker pull lets the membrane shrink a smooth, coarsely sampled scan (a ball scanned at 60 x 60
-    # rays moved 0.24 grid spacings inward at mu = 0.003, 0.015 at SCAN_RIM_MU)
-    scan = float(np.clip(SCAN_MU * ratio_gn**2, SCAN_RIM_MU, MU_RANGE[1]))
-    mu = float(np.exp((1.0 - s) * np.log(independent) + s * np.log(scan)))
-    # a scan's rim triangles keep the weight SCAN_RIM_MU w whatever the interior's mu
-    rim = weight * (SCAN_RIM_MU / scan) ** s
-    return ScanParameters(mu, s * SCAN_MEMBRANE, rim, s, 1.0 - s, s, estimate.noise, estimate.detail)
 
 
 class _Penalized:
@@ -834,11 +483,6 @@ def scan_denoise(
         out = system.solve(vertices, number_of_iterations=number_of_iterations, twice=measured.twicing)
         # a rim as noisy as the interior (s = 0) is not pulled in: its sweeps are off
         return relax_rim(vertices, out, triangles, structure=structure, strength=measured.scan_likeness)
-
-
-#: :func:`relax_rim` relaxes the vertices up to this many edges from the rim, by as many sweeps (one
-#: sweep reaches one ring further).
-RIM_RINGS = 3
 
 
 def triangle_quality(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
