@@ -1,0 +1,217 @@
+"""Every builder of core.operators against an independent reference: plain loops over triangles or edges."""
+
+import numpy as np
+import open3d as o3d
+import pytest
+import scipy.sparse as sp
+from conftest import grid, triangle_soups
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from o3d_lsmesh import laplacian
+from o3d_lsmesh.core import operators as ops
+from o3d_lsmesh.core.connectivity import Connectivity
+
+
+def uniform_laplacian(triangles, n):
+    return ops.uniform_laplacian(Connectivity(triangles, n))
+
+
+def cotangent_laplacian(vertices, triangles):
+    return ops.cotangent_laplacian(vertices, Connectivity(triangles, len(vertices)))
+
+
+def plain_neighbours(triangles, n):
+    neighbours = [set() for _ in range(n)]
+    for tri in np.asarray(triangles).tolist():
+        for a in tri:
+            neighbours[a] |= {b for b in tri if b != a}
+    return neighbours
+
+
+def reference_uniform(triangles, n):
+    neighbours = [set() for _ in range(n)]
+    for a, b, c in triangles.tolist():
+        for i, j in ((a, b), (b, c), (c, a)):
+            neighbours[i].add(j)
+            neighbours[j].add(i)
+    L = np.zeros((n, n))
+    for i, ring in enumerate(neighbours):
+        if ring:
+            L[i, i] = 1.0
+            for j in ring:
+                L[i, j] = -1.0 / len(ring)
+    return L
+
+
+def test_uniform_matches_plain_loop_and_eq1(sphere):
+    V, F = np.asarray(sphere.vertices), np.asarray(sphere.triangles)
+    L = laplacian(sphere)
+    assert sp.isspmatrix_csr(L)
+    np.testing.assert_allclose(L.toarray(), reference_uniform(F, len(V)), atol=1e-15)
+    np.testing.assert_allclose(L @ np.ones(len(V)), 0, atol=1e-14)
+
+
+def test_sign_convention_vertex_minus_average():
+    V, F = grid(3, 3)
+    V[4, 2] = 1.0  # lift the centre of the grid
+    L = uniform_laplacian(F, len(V))
+    assert (L @ V)[4, 2] == pytest.approx(1.0)
+
+
+def test_isolated_vertex_row_is_zero():
+    V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [5, 5, 5.0]])
+    L = uniform_laplacian(np.array([[0, 1, 2]]), 4)
+    assert np.all(L.toarray()[3] == 0)
+    # an isolated vertex is a fixed point of smoothing: its Laplacian is zero wherever it sits
+    assert np.all((L @ V)[3] == 0) and np.any((L @ V)[:3] != 0)
+
+
+def test_cotangent_reproduces_linear_functions_inside_flat_grid():
+    V, F = grid(7, 7)
+    rng = np.random.default_rng(0)
+    V[:, :2] += rng.normal(scale=0.02, size=(len(V), 2))
+    L = laplacian((V, F), kind="cotangent")
+    interior = np.flatnonzero((np.abs(V[:, 0] - 0.5) < 0.4) & (np.abs(V[:, 1] - 0.5) < 0.4))
+    # cotangent weights have linear precision on flat meshes; uniform weights do not
+    np.testing.assert_allclose((L @ V)[interior], 0, atol=1e-12)
+    assert np.abs((laplacian((V, F)) @ V)[interior]).max() > 1e-4
+    np.testing.assert_allclose(L @ np.ones(len(V)), 0, atol=1e-12)
+
+
+def test_cotangent_degenerate_triangle_stays_finite():
+    V = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [1, 1, 0.0]])
+    F = np.array([[0, 1, 3], [1, 2, 3], [0, 2, 1]])
+    L = cotangent_laplacian(V, F)
+    assert np.all(np.isfinite(L.toarray()))
+
+
+def test_cotangent_rows_it_cannot_normalize_take_uniform_weights():
+    # a collinear sliver beside a grid: at its end vertices the clamped cotangents (+1e4 for the zero
+    # angle, -1e4 for the straight one) cancel, a row with no weight to normalize by
+    G, FG = grid(4, 4)
+    sliver = np.array([[0, 0, 4.0], [1, 0, 4], [2, 0, 4]])
+    V = np.vstack([G, sliver])
+    F = np.vstack([FG, [[16, 17, 18]]])
+    L = cotangent_laplacian(V, F).toarray()
+    uniform = reference_uniform(F, len(V))
+    for i in (16, 18):  # both ends: the average of their two neighbours, as the uniform Laplacian
+        np.testing.assert_allclose(L[i], uniform[i], atol=1e-15)
+    # every referenced vertex keeps a row that averages its neighbours: 1 on the diagonal, rows sum to 0
+    np.testing.assert_allclose(np.diag(L), 1.0, atol=1e-15)
+    np.testing.assert_allclose(L.sum(axis=1), 0.0, atol=1e-12)
+    # the rest is the grid's own cotangent Laplacian, untouched by the fallback
+    np.testing.assert_allclose(L[:16, :16], cotangent_laplacian(G, FG).toarray(), atol=1e-15)
+
+
+def test_kind_is_validated(sphere):
+    with pytest.raises(ValueError, match="kind must be one of"):
+        laplacian(sphere, kind="robust")
+    with pytest.raises(TypeError, match="mesh must be"):
+        laplacian(np.zeros((3, 3)))
+
+
+def test_tensor_mesh_gives_same_operator(sphere):
+    tmesh = o3d.t.geometry.TriangleMesh.from_legacy(sphere)
+    assert abs(laplacian(tmesh) - laplacian(sphere)).max() < 1e-12
+
+
+@settings(max_examples=60, deadline=None)
+@given(triangle_soups())
+def test_uniform_is_canonical_and_matches_loop_on_any_triangle_soup(case):
+    # non-manifold edges, mixed orientations, repeated triangles and unreferenced vertices included
+    n, triangles = case
+    F = np.array(triangles, dtype=np.int64)
+    L = uniform_laplacian(F, n)
+    np.testing.assert_allclose(L.toarray(), reference_uniform(F, n), atol=1e-15)
+    canonical = L.copy()
+    canonical.sum_duplicates()
+    canonical.sort_indices()
+    assert np.array_equal(L.indices, canonical.indices) and np.array_equal(L.indptr, canonical.indptr)
+
+
+@settings(max_examples=60, deadline=None)
+@given(triangle_soups(), st.integers(0, 2**32 - 1))
+def test_cotangent_matches_a_loop_over_triangles(case, seed):
+    n, triangles = case
+    F = np.array(triangles, dtype=np.int64)
+    V = np.random.default_rng(seed).normal(size=(n, 3))
+    W = np.zeros((n, n))
+    for tri in triangles:
+        for p in range(3):  # the angle at corner p weighs the opposite edge
+            a, b = V[tri[(p + 1) % 3]] - V[tri[p]], V[tri[(p + 2) % 3]] - V[tri[p]]
+            cot = np.clip(np.dot(a, b) / np.linalg.norm(np.cross(a, b)), -1e4, 1e4)
+            i, j = tri[(p + 1) % 3], tri[(p + 2) % 3]
+            W[i, j] += 0.5 * cot
+            W[j, i] += 0.5 * cot
+    expected = np.zeros((n, n))
+    for i, ring in enumerate(plain_neighbours(F, n)):
+        row = (
+            W[i] if W[i].sum() > 1e-12 * max(1.0, np.abs(W).sum() / n) else np.isin(np.arange(n), list(ring))
+        )
+        if row.sum() > 0:
+            expected[i] = -row / row.sum()
+            expected[i, i] += 1.0
+    np.testing.assert_allclose(cotangent_laplacian(V, F).toarray(), expected, atol=1e-9)
+
+
+@settings(max_examples=40, deadline=None)
+@given(triangle_soups())
+def test_graph_laplacian_is_degree_minus_adjacency(case):
+    n, triangles = case
+    expected = np.zeros((n, n))
+    for i, ring in enumerate(plain_neighbours(triangles, n)):
+        expected[i, i] = len(ring)
+        expected[i, list(ring)] = -1.0
+    L = ops.graph_laplacian(Connectivity(np.array(triangles), n))
+    assert sp.isspmatrix_csc(L) and np.array_equal(L.toarray(), expected)
+
+
+@settings(max_examples=40, deadline=None)
+@given(triangle_soups(), st.integers(0, 2**32 - 1))
+def test_umbrellas_match_plain_means_of_the_rings(case, seed):
+    n, triangles = case
+    F = np.array(triangles, dtype=np.int64)
+    V = np.random.default_rng(seed).normal(size=(n, 3))
+    c = Connectivity(F, n)
+    ring = plain_neighbours(F, n)
+    mask = np.array([len(r) > 0 for r in ring])
+    expected = [V[sorted(ring[i])].mean(axis=0) - V[i] for i in np.flatnonzero(mask)]
+    np.testing.assert_allclose(ops.umbrella(V, c.edges, mask), np.reshape(expected, (-1, 3)), atol=1e-12)
+    rows = np.flatnonzero(mask)
+    two = ops.two_ring_rows(c.adjacency, rows)
+    for k, i in enumerate(rows):
+        reach = set(ring[i]) | {w for v in ring[i] for w in ring[v]}
+        assert sorted(two[k].indices.tolist()) == sorted(reach - {i}) and np.all(two[k].data == 1.0)
+
+
+@settings(max_examples=40, deadline=None)
+@given(triangle_soups())
+def test_umbrella_weights_average_the_rim_on_the_rim_and_the_ring_inside(case):
+    n, triangles = case
+    F = np.array(triangles, dtype=np.int64)
+    c = Connectivity(F, n)
+    count = {}
+    for tri in triangles:
+        for q in range(3):
+            key = tuple(sorted((tri[q], tri[(q + 1) % 3])))
+            count[key] = count.get(key, 0) + 1
+    rim = [
+        {b for (a, b) in count if a == v and count[(a, b)] == 1}
+        | {a for (a, b) in count if b == v and count[(a, b)] == 1}
+        for v in range(n)
+    ]
+    W, _, on_boundary = ops.umbrella_weights(c.rings)
+    expected = np.zeros((n, n))
+    for v, ring in enumerate(plain_neighbours(F, n)):
+        chosen = rim[v] if rim[v] else ring
+        expected[v, list(chosen)] = 1.0 / len(chosen) if chosen else 0.0
+    np.testing.assert_allclose(W.toarray(), expected, atol=1e-15)
+    assert (on_boundary is None) == (not any(rim)) and (
+        on_boundary is None or on_boundary.tolist() == [bool(r) for r in rim]
+    )
+    movable = np.arange(n) % 2 == 0
+    N = ops.rim_neighbours(c, movable).toarray()
+    for v in range(n):
+        expected_row = (rim[v] if rim[v] else plain_neighbours(F, n)[v]) if movable[v] else set()
+        assert set(np.flatnonzero(N[v]).tolist()) == expected_row
