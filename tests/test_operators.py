@@ -215,3 +215,96 @@ def test_umbrella_weights_average_the_rim_on_the_rim_and_the_ring_inside(case):
     for v in range(n):
         expected_row = (rim[v] if rim[v] else plain_neighbours(F, n)[v]) if movable[v] else set()
         assert set(np.flatnonzero(N[v]).tolist()) == expected_row
+
+
+def _local_reference(F, n, X, X0):
+    """One step of Liu's local operator written per triangle: eq. 6 solved as a least-squares problem
+    on the constraint's null space, then each vertex averages its interior triangles' estimates."""
+    ring = plain_neighbours(F, n)
+    edge_count = {}
+    for tri in F.tolist():
+        for q in range(3):
+            key = frozenset((tri[q], tri[(q + 1) % 3]))
+            edge_count[key] = edge_count.get(key, 0) + 1
+    boundary = {v for key, c in edge_count.items() if c != 2 for v in key}
+    sums, counts = np.zeros((n, 3)), np.zeros(n)
+    basis = np.array([[1.0, 0.0], [-1.0, 1.0], [0.0, -1.0]])  # B basis = 0 for B = [1, 1, 1]
+    for tri in F.tolist():
+        if boundary & set(tri):
+            continue
+        A = np.zeros((3, 3))
+        Q = np.zeros((3, 3))
+        for a in range(3):
+            v = tri[a]
+            A[a, a] = 1.0
+            for b in range(3):
+                if b != a:
+                    A[a, b] = -1.0 / len(ring[v])
+            others = [w for w in ring[v] if w not in tri]
+            Q[a] = X[others].sum(axis=0) / len(ring[v])
+        C = X0[tri].sum(axis=0)
+        P0 = np.repeat(C[None] / 3.0, 3, axis=0)
+        z = np.linalg.lstsq(A @ basis, Q - A @ P0, rcond=None)[0]
+        P = P0 + basis @ z
+        for a in range(3):
+            sums[tri[a]] += P[a]
+            counts[tri[a]] += 1
+    out = X.copy()
+    out[counts > 0] = sums[counts > 0] / counts[counts > 0, None]
+    return out
+
+
+LOCAL_CASES = {
+    "octahedron": (
+        6,
+        [[0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4], [2, 0, 5], [1, 2, 5], [3, 1, 5], [0, 3, 5]],
+    ),
+    "grid": (36, grid(6, 6)[1].tolist()),
+}
+
+
+@pytest.mark.parametrize("case", sorted(LOCAL_CASES))
+def test_local_operator_is_one_eq7_step_per_triangle_averaged(case):
+    n, triangles = LOCAL_CASES[case]
+    F = np.array(triangles, dtype=np.int64)
+    rng = np.random.default_rng(1)
+    X, X0 = rng.normal(size=(n, 3)), rng.normal(size=(n, 3))
+    local = ops.local_operator(Connectivity(F, n), positions0=X0, block_rows=5)
+    step = local.e1 @ (local.adjacency @ X) + local.e2 @ X + local.e3 @ X0
+    np.testing.assert_allclose(step, _local_reference(F, n, X, X0), atol=1e-10)
+    np.testing.assert_allclose(local.initial, local.e3 @ X0, atol=1e-13)
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.lists(st.integers(1, 40), min_size=3, max_size=3))
+def test_triangle_coefficients_solve_the_constrained_least_squares(valences):
+    M, u = ops.triangle_coefficients(np.array([valences]))
+    A = np.eye(3) - (1.0 - np.eye(3)) / np.array(valences, dtype=float)[:, None]
+    Q, C = np.random.default_rng(sum(valences)).normal(size=(2, 3))
+    basis = np.array([[1.0, 0.0], [-1.0, 1.0], [0.0, -1.0]])
+    P = C[0] / 3.0 + basis @ np.linalg.lstsq(A @ basis, Q - A @ np.full(3, C[0] / 3.0), rcond=None)[0]
+    np.testing.assert_allclose(M[0] @ Q + u[0] * C[0], P, atol=1e-9)
+
+
+@pytest.mark.parametrize("case", sorted(LOCAL_CASES))
+def test_penalty_matrix_is_the_eq5_energy_on_the_free_vertices(case):
+    n, triangles = LOCAL_CASES[case]
+    F = np.array(triangles, dtype=np.int64)
+    mu = 0.3
+    p = ops.penalty_matrix(Connectivity(F, n), mu)
+    K = reference_uniform(F, n)
+    ring = plain_neighbours(F, n)
+    edge_count = {}
+    for tri in triangles:
+        for q in range(3):
+            key = frozenset((tri[q], tri[(q + 1) % 3]))
+            edge_count[key] = edge_count.get(key, 0) + 1
+    boundary = {v for key, c in edge_count.items() if c != 2 for v in key}
+    free = [v for v in range(n) if ring[v] and v not in boundary]
+    known = [v for v in range(n) if v not in free]
+    H = np.array([[1.0 if v in tri else 0.0 for v in free] for tri in triangles if not boundary & set(tri)])
+    K_F, K_B = K[np.ix_(free, free)], K[np.ix_(free, known)]
+    assert p.free.tolist() == free and p.known.tolist() == known
+    np.testing.assert_allclose(p.normal.toarray(), K_F.T @ K_F + mu * H.T @ H, atol=1e-13)
+    if known:
+        np.testing.assert_allclose(p.pull.toarray(), K_F.T @ K_B, atol=1e-13)
