@@ -2,10 +2,6 @@
 
 from .app.metrics import (
     MAX_SAMPLE_POINTS,
-    RIM_RINGS,
-    common_frame,
-    distances_to_surface,
-    face_normals,
     normal_deviation,
     raycasting_scene,
     shape_change,
@@ -18,10 +14,6 @@ from .app.metrics import (
 
 __all__ = [
     "MAX_SAMPLE_POINTS",
-    "RIM_RINGS",
-    "common_frame",
-    "distances_to_surface",
-    "face_normals",
     "normal_deviation",
     "raycasting_scene",
     "shape_change",

@@ -22,8 +22,11 @@ from typing import Any, Callable
 
 import numpy as np
 
-from .._o3d import open3d
-from .._progress import progress_bar
+from .._o3d.io import raycasting_scene, signed_distances, write_mesh_file
+from ..core.connectivity import Connectivity
+from ..core.progress import progress_bar
+from ..fairing.scan_fairing import SLIVER_QUALITY, triangle_quality
+from .metrics import rim_mask
 from .shapes import simulated_range_scan
 
 __all__ = ["METHODS", "run_demo"]
@@ -53,35 +56,13 @@ METHODS: list[tuple[str, str, Callable, tuple]] = [
     ),
 ]
 
-#: Triangles below this quality ``4 sqrt(3) area / sum of squared edges`` (1 for an equilateral one) are slivers.
-SLIVER_QUALITY = 0.05
-
-
-def _rim(triangles: np.ndarray, n: int, rings: int = 2) -> np.ndarray:
-    """Vertices on the boundary or within ``rings`` edges of it (the scan's rim)."""
-    from ..topology import adjacency_matrix, boundary_halfedges
-
-    rim = np.zeros(n, dtype=bool)
-    rim[boundary_halfedges(triangles, n).ravel()] = True
-    adjacency = adjacency_matrix(triangles, n)
-    for _ in range(rings):
-        rim |= adjacency @ rim > 0
-    return rim
-
 
 def _metrics(result: Any, surface_scene: Any, rim: np.ndarray, spacing: float) -> dict:
     """Distances of the vertices to the true surface (in grid spacings), split rim / interior, and slivers."""
-    o3d = open3d()
     vertices = np.asarray(result.vertices)
-    triangles = np.asarray(result.triangles)
-    points = o3d.core.Tensor(vertices.astype(np.float32))
-    signed = surface_scene.compute_signed_distance(points).numpy().astype(np.float64) / spacing
+    signed = signed_distances(surface_scene, vertices) / spacing
     distance = np.abs(signed)
-    corners = vertices[triangles]
-    edges = corners[:, [1, 2, 0]] - corners
-    area = 0.5 * np.linalg.norm(np.cross(edges[:, 0], -edges[:, 2]), axis=1)
-    squares = (edges**2).sum(axis=(1, 2))
-    quality = 4.0 * np.sqrt(3.0) * area / np.maximum(squares, 1e-300)
+    quality = triangle_quality(vertices, np.asarray(result.triangles))
     return {
         "mean_distance": float(distance.mean()),
         "rim_distance": float(distance[rim].mean()),
@@ -149,8 +130,6 @@ def run_demo(
     ``h``: ``rim`` the boundary and the two rings inside it, ``offset`` the
     mean signed distance (negative: moved inward).
     """
-    from .metrics import raycasting_scene
-
     stream = sys.stdout if stream is None else stream
     say = (lambda *a: None) if quiet else (lambda *a: print(*a, file=stream, flush=True))
     scan, surface = simulated_range_scan(resolution, noise=noise, seed=seed)
@@ -158,7 +137,7 @@ def run_demo(
     extent = np.ptp(np.asarray(surface.vertices)[:, :2], axis=0).max()
     spacing = 1.05 * extent / (resolution - 1)
     triangles = np.asarray(scan.triangles)
-    rim = _rim(triangles, len(scan.vertices))
+    rim = rim_mask(Connectivity(triangles, len(scan.vertices)), 2)
     components = len(np.asarray(scan.cluster_connected_triangles()[1]))
     say(
         f"o3d-lsmesh demo: a simulated raw range scan of the built-in blob, {len(scan.vertices)} vertices, "
@@ -210,11 +189,10 @@ def run_demo(
 
     files: list[Path] = []
     if out is not None:
-        o3d = open3d()
         folder = Path(out)
         folder.mkdir(parents=True, exist_ok=True)
         for key, mesh in {"surface": surface, **results}.items():
-            o3d.io.write_triangle_mesh(str(folder / f"{key}.ply"), mesh)
+            write_mesh_file(mesh, folder / f"{key}.ply")
             files.append(folder / f"{key}.ply")
         payload = {
             "spacing": spacing,

@@ -1,4 +1,4 @@
-"""Error and quality measures between meshes, used by the tests and every benchmark.
+"""Error and quality measures between meshes, used by the tests, the CLI's ``compare`` and every benchmark.
 
 All functions accept Open3D meshes (legacy or tensor) or ``(vertices, triangles)`` tuples.
 """
@@ -9,11 +9,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .._o3d import open3d, read_mesh
-from .._validate import as_count
-from ..summary import (
-    topology_summary,  # re-exported: metrics.topology_summary is the historical name
-)
+from .._o3d import read_mesh
+from .._o3d.io import distances_to_surface, raycasting_scene
+from ..core.arrays import area_weighted_normals, face_normals
+from ..core.connectivity import Connectivity, halfedges
+from ..core.errors import InputError
+from ..core.validate import as_count
+from ..summary import topology_summary  # re-exported: metrics.topology_summary is the historical name
 
 if TYPE_CHECKING:
     from .._types import AnyMesh
@@ -25,6 +27,7 @@ MAX_SAMPLE_POINTS = 10_000_000
 __all__ = [
     "MAX_SAMPLE_POINTS",
     "normal_deviation",
+    "raycasting_scene",
     "shape_change",
     "signed_volume",
     "surface_distance",
@@ -49,7 +52,7 @@ def vertex_error(a: AnyMesh, b: AnyMesh) -> dict:
     """
     va, vb = read_mesh(a, name="a").vertices, read_mesh(b, name="b").vertices
     if va.shape != vb.shape:
-        raise ValueError(f"b must have the vertex count of a ({len(va)}), got {len(vb)}")
+        raise InputError(f"b must have the vertex count of a ({len(va)}), got {len(vb)}", param="b")
     d = np.linalg.norm(va - vb, axis=1)
     return {"linf": float(d.max()), "rms": float(np.sqrt(np.mean(d**2))), "mean": float(d.mean())}
 
@@ -74,34 +77,12 @@ def _sample_surface(
     )
 
 
-def distances_to_surface(points: np.ndarray, vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
-    """Distance ``(p,)`` from each of ``points (p, 3)`` to the nearest point of the surface ``(vertices, triangles)``.
-
-    Open3D's ``RaycastingScene`` in single precision: callers pass coordinates
-    in a frame of unit size (see :func:`surface_distance`) and scale back.
-    """
-    o3d = open3d()
-    result = raycasting_scene(vertices, triangles).compute_distance(
-        o3d.core.Tensor(points.astype(np.float32))
-    )
-    return result.numpy().astype(np.float64)
-
-
-def raycasting_scene(vertices: np.ndarray, triangles: np.ndarray) -> Any:
-    """Open3D's ``RaycastingScene`` (single precision) holding the surface ``(vertices, triangles)``."""
-    o3d = open3d()
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(
-        o3d.core.Tensor(vertices.astype(np.float32)), o3d.core.Tensor(triangles.astype(np.uint32))
-    )
-    return scene
-
-
 def surface_distance(a: AnyMesh, b: AnyMesh, *, number_of_points: int = 100_000, seed: int = 0) -> dict:
     """Two-sided sampled surface distance (Metro style) between two meshes.
 
     ``number_of_points`` samples uniform by area on each surface, plus its vertices, measured to
     the other surface by Open3D's ``RaycastingScene`` (float32: below ~1e-7 of the size is noise).
+    Measured in a frame centered on both meshes at unit size, scaled back to model units.
 
     Returns
     -------
@@ -123,8 +104,6 @@ def surface_distance(a: AnyMesh, b: AnyMesh, *, number_of_points: int = 100_000,
     )
     seed = as_count(seed, name="seed")
     da, db = read_mesh(a, name="a"), read_mesh(b, name="b")
-    # in a frame centered on both meshes at unit size, float32 distances keep their relative precision
-    # whatever the coordinates' offset and never overflow; scaled back to model units
     center, scale = common_frame(da.vertices, db.vertices)
     va, vb = (da.vertices - center) / scale, (db.vertices - center) / scale
     rng = np.random.default_rng(seed)
@@ -203,15 +182,12 @@ def shape_change(before: AnyMesh, after: AnyMesh) -> dict:
     >>> shape_change(square, (square[0] + [0, 0, 0.25], square[1]))["inward_shift_mean"]  # out along +z
     -0.25
     """
-    from .._normals import area_weighted_normals
-    from ..topology import adjacency_matrix, halfedges, unique_edges
-
     a, b = read_mesh(before, name="before"), read_mesh(after, name="after")
     n, triangles = len(a.vertices), a.triangles
-    edges, counts, inverse = unique_edges(triangles, n)
+    conn = Connectivity(triangles, n)
     half = halfedges(triangles)
     direction = np.where(half[:, 0] < half[:, 1], 1.0, -1.0)
-    unmatched = np.bincount(inverse, weights=direction, minlength=len(edges)) != 0
+    unmatched = np.bincount(conn.halfedge_edge, weights=direction, minlength=len(conn.edges)) != 0
     if not unmatched.any():
         volume_before, volume_after = (
             signed_volume((a.vertices, triangles)),
@@ -236,22 +212,17 @@ def shape_change(before: AnyMesh, after: AnyMesh) -> dict:
     length = np.linalg.norm(normals, axis=1)
     has = length > 0
     shift = -np.einsum("ij,ij->i", b.vertices - a.vertices, normals) / np.where(has, length, 1.0)
-    rim = np.zeros(n, dtype=bool)
-    rim[edges[counts == 1].ravel()] = True
-    adjacency = adjacency_matrix(triangles, n)
-    for _ in range(RIM_RINGS):
-        rim |= adjacency @ rim.astype(np.float64) > 0
+    rim = rim_mask(conn, RIM_RINGS)
     for key, region in (("mean", has), ("rim", has & rim), ("interior", has & ~rim)):
         out[f"inward_shift_{key}"] = float(shift[region].mean()) if region.any() else None
     return out
 
 
-def face_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
-    """Unit face normals ``(m, 3)``; zero rows for triangles of zero area."""
-    c = _unit_scale(vertices)[triangles]
-    normal = np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])
-    length = np.linalg.norm(normal, axis=1, keepdims=True)
-    return np.divide(normal, length, out=np.zeros_like(normal), where=length > 0)
+def rim_mask(conn: Connectivity, rings: int) -> np.ndarray:
+    """``(n,) bool``: the boundary vertices and those within ``rings`` edges of them."""
+    rim = np.zeros(conn.n, dtype=bool)
+    rim[conn.k_rings(np.unique(conn.edges[conn.boundary_edges]), rings)] = True
+    return rim
 
 
 def normal_deviation(a: AnyMesh, b: AnyMesh) -> float:
@@ -261,7 +232,7 @@ def normal_deviation(a: AnyMesh, b: AnyMesh) -> float:
 
     Raises
     ------
-    ValueError
+    InputError
         Different triangles, or no triangle with non-zero area in both meshes.
 
     Examples
@@ -274,13 +245,15 @@ def normal_deviation(a: AnyMesh, b: AnyMesh) -> float:
     """
     da, db = read_mesh(a, name="a"), read_mesh(b, name="b")
     if da.triangles.shape != db.triangles.shape or not np.array_equal(da.triangles, db.triangles):
-        raise ValueError("b must have the same triangles as a")
-    na, nb = face_normals(da.vertices, da.triangles), face_normals(db.vertices, db.triangles)
+        raise InputError("b must have the same triangles as a", param="b")
+    na = face_normals(_unit_scale(da.vertices), da.triangles)[0]
+    nb = face_normals(_unit_scale(db.vertices), db.triangles)[0]
     defined = (np.abs(na).sum(axis=1) > 0) & (np.abs(nb).sum(axis=1) > 0)
     if not defined.any():
-        raise ValueError(
+        raise InputError(
             f"a and b must share a triangle of non-zero area to compare normals, got {len(na)} triangles "
-            "all of zero area in a or b"
+            "all of zero area in a or b",
+            param="b",
         )
     na, nb = na[defined], nb[defined]
     # atan2(|a x b|, a . b): accurate for small angles, where arccos(a . b) turns round-off

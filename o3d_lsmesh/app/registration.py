@@ -24,6 +24,8 @@ import textwrap
 import threading
 from typing import Any, Callable
 
+from .._o3d.io import mesh_classes
+
 __all__ = ["METHOD_NAMES", "register", "registered_methods", "unregister"]
 
 _MARKER = "__o3d_lsmesh_method__"
@@ -80,13 +82,6 @@ _METHODS: dict[str, tuple[str, str]] = {
 
 #: Names that :func:`register` adds to both mesh classes.
 METHOD_NAMES: tuple[str, ...] = tuple(_METHODS)
-
-
-def _classes() -> tuple[type, type]:
-    from .._o3d import open3d
-
-    o3d = open3d()
-    return o3d.geometry.TriangleMesh, o3d.t.geometry.TriangleMesh
 
 
 def _is_ours(value: Any) -> bool:
@@ -166,7 +161,7 @@ def register() -> tuple[str, ...]:
     >>> unregister()
     """
     with _LOCK:
-        classes = _classes()
+        classes = mesh_classes()
         for cls in classes:
             for name in _METHODS:
                 existing = cls.__dict__.get(name)
@@ -184,7 +179,7 @@ def register() -> tuple[str, ...]:
 def unregister() -> None:
     """Remove the methods :func:`register` added (and nothing else). Harmless if none are there."""
     with _LOCK:
-        for cls in _classes():
+        for cls in mesh_classes():
             for name in _METHODS:
                 if _is_ours(cls.__dict__.get(name)):
                     delattr(cls, name)
@@ -194,5 +189,5 @@ def registered_methods() -> dict[str, tuple[str, ...]]:
     """The o3d_lsmesh method names currently installed on each Open3D mesh class, keyed by class path."""
     return {
         f"{cls.__module__}.{cls.__qualname__}": tuple(n for n in _METHODS if _is_ours(cls.__dict__.get(n)))
-        for cls in _classes()
+        for cls in mesh_classes()
     }

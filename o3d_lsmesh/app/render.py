@@ -37,12 +37,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .._errors import O3DLSMeshWarning
-from .._normals import area_weighted_normals
-from .._o3d import MeshData, open3d, read_mesh
-from .._validate import as_choice, as_count, as_positive_float, as_real_vector
-from ..topology import unique_edges
-from .metrics import common_frame, distances_to_surface, raycasting_scene
+from .._o3d import MeshData, read_mesh
+from .._o3d.io import distances_to_surface, open3d, raycasting_scene, write_image
+from ..core.arrays import area_weighted_normals
+from ..core.connectivity import unique_edges
+from ..core.errors import InputError, InputTypeError, O3DLSMeshWarning
+from ..core.validate import as_choice, as_count, as_positive_float, as_real_vector
+from .metrics import common_frame
 
 if TYPE_CHECKING:
     from .._types import AnyMesh
@@ -96,7 +97,7 @@ def _vertex_colors(data: MeshData) -> np.ndarray | None:
 def _unit(vector: Any, *, name: str) -> np.ndarray:
     v = as_real_vector(vector, 3, name=name)
     if np.abs(v).max() == 0:
-        raise ValueError(f"{name} must be a non-zero finite 3-vector, got {vector!r}")
+        raise InputError(f"{name} must be a non-zero finite 3-vector, got {vector!r}", param=name)
     return v / np.linalg.norm(v)
 
 
@@ -112,8 +113,9 @@ def _layout(arrays, view_direction, up, width, height, margin, align):
     up = _unit(up, name="up")
     right = np.cross(up, back)
     if np.linalg.norm(right) < 1e-9:
-        raise ValueError(
-            f"up must not be parallel to view_direction, got up={up.tolist()}, view_direction={back.tolist()}"
+        raise InputError(
+            f"up must not be parallel to view_direction, got up={up.tolist()}, view_direction={back.tolist()}",
+            param="up",
         )
     right /= np.linalg.norm(right)
     true_up = np.cross(back, right)
@@ -481,7 +483,7 @@ def render(
     else:
         items = [meshes]
     if not items:
-        raise ValueError("meshes must hold at least one mesh, got an empty sequence")
+        raise InputError("meshes must hold at least one mesh, got an empty sequence", param="meshes")
     width = as_count(width, name="width", minimum=8, maximum=8192)
     height = as_count(height, name="height", minimum=8, maximum=8192)
     backend = as_choice(backend, _BACKENDS, name="backend")
@@ -494,22 +496,30 @@ def render(
     units = as_choice(units, _UNITS, name="units")
     if titles is not None:
         if isinstance(titles, str) or not isinstance(titles, Sequence):
-            raise TypeError(
-                f"titles must be a sequence of strings (one per mesh), got {type(titles).__name__}"
+            raise InputTypeError(
+                f"titles must be a sequence of strings (one per mesh), got {type(titles).__name__}",
+                param="titles",
             )
         if len(titles) != len(items):
-            raise ValueError(f"titles must hold one title per mesh ({len(items)}), got {len(titles)}")
+            raise InputError(
+                f"titles must hold one title per mesh ({len(items)}), got {len(titles)}", param="titles"
+            )
         if not all(isinstance(t, str) for t in titles):
-            raise TypeError("titles must be a sequence of strings (one per mesh), got a non-string item")
+            raise InputTypeError(
+                "titles must be a sequence of strings (one per mesh), got a non-string item", param="titles"
+            )
     if colorbar_title is not None and not isinstance(colorbar_title, str):
-        raise TypeError(f"colorbar_title must be a string, got {type(colorbar_title).__name__}")
+        raise InputTypeError(
+            f"colorbar_title must be a string, got {type(colorbar_title).__name__}", param="colorbar_title"
+        )
     base_color = as_real_vector(color, 3, name="color", low=0.0, high=1.0)
 
     if width * height * len(items) > MAX_PIXELS:
         # each panel is checked alone above; many panels multiply the picture (and its ray buffers)
-        raise ValueError(
+        raise InputError(
             f"width * height * len(meshes) must be at most {MAX_PIXELS:,} pixels, got {width} * {height} * "
-            f"{len(items)} = {width * height * len(items):,}"
+            f"{len(items)} = {width * height * len(items):,}",
+            param="width",
         )
     datas = [read_mesh(mesh, name=f"meshes[{k}]") for k, mesh in enumerate(items)]
     ref = read_mesh(reference, name="reference") if reference is not None else None
@@ -581,12 +591,11 @@ def render(
                 _colorbar(image, max(3, height // 40))
     if path is not None:
         path = os.fspath(path)
-        o3d = open3d()
         folder = os.path.dirname(os.path.abspath(path))
         if not os.path.isdir(folder):
-            raise ValueError(f"path must be in an existing folder, got {path!r}")
-        if not o3d.io.write_image(path, o3d.geometry.Image(image)):
-            raise ValueError(f"path must name a writable .png file, got {path!r}")
+            raise InputError(f"path must be in an existing folder, got {path!r}", param="path")
+        if not write_image(path, image):
+            raise InputError(f"path must name a writable .png file, got {path!r}", param="path")
     if reference is None:
         return RenderedImage(image)
     return RenderedImage(image, error_max, units, edge_length)

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from .._o3d import open3d
+from .._o3d.io import cast_rays, icosphere, legacy_mesh, raycasting_scene
 
 __all__ = ["add_noise", "demo_mesh", "mean_edge_length", "simulated_range_scan"]
 
@@ -35,11 +35,7 @@ def demo_mesh(subdivisions: int = 6, *, seed: int = 7) -> Any:
     >>> len(mesh.vertices), mesh.is_watertight()
     (642, True)
     """
-    o3d = open3d()
-    mesh = o3d.geometry.TriangleMesh.create_icosahedron(radius=1.0)
-    if subdivisions:
-        mesh = mesh.subdivide_midpoint(number_of_iterations=int(subdivisions))
-    directions = np.asarray(mesh.vertices, dtype=np.float64)
+    directions, triangles = icosphere(subdivisions)
     directions /= np.linalg.norm(directions, axis=1, keepdims=True)
     x, y, z = directions.T
     radius = 1.0 + 0.12 * np.sin(2.0 * x + 1.0) * np.cos(3.0 * y) + 0.10 * z**2
@@ -51,10 +47,7 @@ def demo_mesh(subdivisions: int = 6, *, seed: int = 7) -> Any:
     # A band of creases around the equator: |sin| has kinks, the sharp features a scan would hold.
     band = np.exp(-0.5 * (z / 0.18) ** 2)
     radius += 0.05 * band * (1.0 - np.abs(np.sin(6.0 * np.arctan2(y, x))))
-    out = o3d.geometry.TriangleMesh(
-        o3d.utility.Vector3dVector(directions * radius[:, None]), o3d.geometry.TriangleMesh(mesh).triangles
-    )
-    return out
+    return legacy_mesh(directions * radius[:, None], triangles)
 
 
 def mean_edge_length(mesh: Any) -> float:
@@ -71,12 +64,9 @@ def mean_edge_length(mesh: Any) -> float:
 
 def add_noise(mesh: Any, sigma: float, *, seed: int = 0) -> Any:
     """A copy of ``mesh`` with seeded isotropic Gaussian noise of standard deviation ``sigma`` on every vertex."""
-    o3d = open3d()
     vertices = np.asarray(mesh.vertices, dtype=np.float64)
     noisy = vertices + np.random.default_rng(seed).normal(scale=sigma, size=vertices.shape)
-    return o3d.geometry.TriangleMesh(
-        o3d.utility.Vector3dVector(noisy), o3d.geometry.TriangleMesh(mesh).triangles
-    )
+    return legacy_mesh(noisy, np.asarray(mesh.triangles))
 
 
 def simulated_range_scan(
@@ -106,7 +96,6 @@ def simulated_range_scan(
     >>> len(scan.vertices) > 1000, scan.is_watertight(), surface.is_watertight()
     (True, False, True)
     """
-    o3d = open3d()
     surface = demo_mesh(subdivisions)
     vertices = np.asarray(surface.vertices)
     triangles = np.asarray(surface.triangles)
@@ -118,14 +107,9 @@ def simulated_range_scan(
     x, y = np.meshgrid(u, u)  # row i is a scanline: y fixed, x running
     origins = np.stack([x, y, np.full_like(x, 10.0)], axis=-1).reshape(-1, 3)
     directions = np.broadcast_to([0.0, 0.0, -1.0], origins.shape)
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(
-        o3d.core.Tensor(vertices.astype(np.float32)), o3d.core.Tensor(triangles.astype(np.uint32))
-    )
-    rays = o3d.core.Tensor(np.hstack([origins, directions]).astype(np.float32))
-    answer = scene.cast_rays(rays)
-    depth = answer["t_hit"].numpy().astype(np.float64)
-    cosine = np.abs(answer["primitive_normals"].numpy()[:, 2].astype(np.float64))
+    answer = cast_rays(raycasting_scene(vertices, triangles), np.hstack([origins, directions]))
+    depth = answer["t_hit"].astype(np.float64)
+    cosine = np.abs(answer["primitive_normals"][:, 2].astype(np.float64))
     hit = np.isfinite(depth) & (cosine > 0.1)
     # Grazing returns drop out at random: the ragged silhouette (and its islands) of a real scan.
     hit &= rng.random(hit.shape) > np.clip((0.35 - cosine) / 0.5, 0.0, 1.0)
@@ -154,8 +138,4 @@ def simulated_range_scan(
     jump = np.ptp(depth[cells], axis=1) < 4.0 * spacing
     cells = cells[jump]
     used, inverse = np.unique(cells, return_inverse=True)
-    scan = o3d.geometry.TriangleMesh(
-        o3d.utility.Vector3dVector(points[used]),
-        o3d.utility.Vector3iVector(inverse.reshape(-1, 3).astype(np.int32)),
-    )
-    return scan, surface
+    return legacy_mesh(points[used], inverse.reshape(-1, 3)), surface
