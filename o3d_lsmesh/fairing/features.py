@@ -1,50 +1,9 @@
-"""Feature-preserving denoising: guided normal filtering and Sun et al.'s vertex update, alternated.
+"""Feature-preserving denoising (``method="features"``): guided normal filtering alternated with Sun's update.
 
-``constrained_fairing(mesh, method="features")`` runs :func:`feature_denoise`:
-``k`` passes, each
-
-1. one pass of **guided normal filtering** (Zhang et al. 2015) over
-   the face normals of the current mesh: every face takes as guidance the
-   mean normal of the most consistent patch containing it (the faces sharing
-   a vertex with a neighbour), then a joint bilateral filter averages the
-   normals of the faces sharing a vertex with it, with the guidance in the
-   range kernel. With the normals themselves as guidance it is bilateral
-   normal filtering (Zheng et al. 2011), kept as ``guided=False``
-   because the benchmark runs it as a peer;
-2. ten steps of **Sun et al. 2007's vertex update**, which moves each
-   vertex towards the planes of its faces through their centroids with the
-   filtered normals (preconditioned gradient steps on
-   ``sum_f sum_(i in f) (n_f . (c_f - x_i))^2``: edges orthogonal to the normals).
-
-The passes alternate as in the paper's reference implementation (normals
-re-taken from the updated mesh). One sparse least-squares solve of the same
-edge term with a data term (``|X - X0|^2`` or Liu's barycenters) was measured
-in their place: worse theta on curved meshes and 3-10 times slower
-(benchmarks/results/features_denoise.md), so it is not here.
-
-Parameters, measured: the spatial kernel's width is the mean distance between
-the centroids of neighbouring faces, the range kernel's ``SIGMA_R`` is on unit
-normal differences, and the pass count is ``PASSES_PER_NOISE`` times the noise
-in mean edge lengths (:func:`~o3d_lsmesh.fairing.scan_fairing.measured_noise`).
-All are dimensionless: the result is equivariant under rigid motions and
-uniform scaling.
-
-Limit: a face with every vertex on a crease (at a corner of a coarse CAD
-mesh) has no patch on one side of the crease, so its guidance mixes the
-sides and the corner rounds (the crease segments at each corner of a generated
-cube, tests/test_features.py).
-
-No manifold condition: the face neighbourhoods come from the triangle-vertex
-incidence and the edge grouping of :func:`~o3d_lsmesh.topology.edge_structure`.
-
-References
-----------
-Y. Zheng, H. Fu, O. K.-C. Au, C.-L. Tai, "Bilateral Normal Filtering for Mesh
-Denoising", IEEE TVCG 17(10), 2011.
-W. Zhang, B. Deng, J. Zhang, S. Bouaziz, L. Liu, "Guided Mesh Normal Filtering",
-Computer Graphics Forum 34(7), 2015.
-X. Sun, P. L. Rosin, R. Martin, F. Langbein, "Fast and Effective
-Feature-Preserving Mesh Denoising", IEEE TVCG 13(5), 2007.
+Each of ``k`` passes filters the face normals once (Zhang et al. 2015, guided; ``guided=False``:
+Zheng et al. 2011, bilateral) and takes ``VERTEX_STEPS`` of Sun et al. 2007's vertex update
+towards the planes of the faces. ``k = PASSES_PER_NOISE`` times the measured noise; all weights
+are dimensionless. Docs page: ``docs/algorithms/features.rst``.
 """
 
 from __future__ import annotations

@@ -87,25 +87,11 @@ class _Penalized:
 
 @dataclass(frozen=True)
 class ScanSystem(_Penalized):
-    """The scan energy as weighted least-squares equations, per coordinate.
+    """The scan energy as least-squares rows: ``E(X) = |R X - T|^2``, ``R^T R = mu H^T W H + lambda G + K^T K``.
 
-    ``E(X) = |R X - T|^2`` with the stacked rows ``R = [sqrt(mu W) H;
-    sqrt(lambda) D; (unit rows); K]`` (``D`` the ``(e, n)``
-    edge-difference matrix) and
-    targets ``T = [sqrt(mu W) H X0; 0; ...]``, so the normal matrix is
-    ``R^T R = mu H^T W H + lambda D^T D + K^T K`` (``D^T D`` is the
-    graph Laplacian ``G``). Unreferenced vertices get a unit row of their
-    own, so the system is positive definite and leaves them in place.
-
-    Attributes
-    ----------
-    rows : (m + e + u [+ n], n) CSR
-        ``R`` (``u`` unreferenced vertices); its first ``m`` rows are ``penalty``.
-    penalty : (m, n) CSR
-        ``sqrt(mu W) H``, the rows that carry the targets.
-    referenced, boundary : (n,) bool
-    triangle_weight : (m,) float64
-        ``w_t``.
+    ``rows``: ``R = [sqrt(mu W) H; sqrt(lambda) D; unit rows of the u unreferenced vertices; K]``;
+    ``penalty``: its first ``m`` rows; ``referenced``, ``boundary`` ``(n,)`` bool; ``triangle_weight``
+    ``(m,)`` ``w_t``.
     """
 
     rows: sp.csr_matrix
@@ -197,24 +183,13 @@ def scan_normal_matrix(
     structure: _Structure | None = None,
     rim_curve: float = 0.0,
 ) -> sp.csr_matrix:
-    """The normal matrix ``R^T R`` of :func:`scan_system`, assembled from the mesh's edges, ``(n, n)`` CSR.
+    """The normal matrix ``R^T R`` of :func:`scan_system` from the mesh's edges, ``(n, n)`` canonical CSR.
 
-    ``R^T R = mu H^T W H + lambda G + K^T K`` (plus a unit diagonal entry per unreferenced
-    vertex) without forming ``R``: ``(H^T W H)_ij`` sums ``w_t`` over the triangles on edge ``ij``
-    (at ``i`` when ``i = j``), scattered straight into the 1-ring CSR pattern
-    (:func:`~o3d_lsmesh.topology.ring_pattern`); only ``K^T K`` (the 2-ring) is a sparse product.
-    Canonical and symmetric (its arrays are also the CSC form's); equal to
-    ``scan_system(...).normal_matrix()`` to round-off. A triangle repeating a vertex is left to
-    :func:`scan_system`.
+    ``(H^T W H)_ij`` sums ``w_t`` over the triangles on edge ``ij``, scattered into the 1-ring
+    pattern; only ``K^T K`` is a sparse product.
 
-    Examples
-    --------
-    >>> import numpy as np
-    >>> F = np.array([[0, 1, 2], [0, 2, 3]])
-    >>> N = scan_normal_matrix(F, 5, mu=0.03, membrane=0.45, boundary_weight=0.1)
-    >>> S = scan_system(F, 5, mu=0.03, membrane=0.45, boundary_weight=0.1).normal_matrix()
-    >>> bool(abs(N - S).max() < 1e-15), N.shape
-    (True, (5, 5))
+    >>> scan_normal_matrix(np.array([[0, 1, 2], [0, 2, 3]]), 5, mu=0.03, membrane=0.45, boundary_weight=0.1).shape
+    (5, 5)
     """
     return _normal_matrix(triangles, n, mu, membrane, boundary_weight, structure, rim_curve)[0]
 
@@ -272,8 +247,8 @@ def _normal_matrix(
         curve_inverse = _curve_inverse(edges[rim], n, t)
         plate[forward[rim]] -= curve_inverse[lo[rim]]
         plate[backward[rim]] -= curve_inverse[hi[rim]]
-    # K's CSR arrays are K^T's CSC: K^T K by the compiled product on every core (SciPy's took 2 s at
-    # 1.4M); symmetric, so its CSC arrays are its CSR ones. Its pattern holds the 1-ring (K_ii K_ij), so
+    # K's CSR arrays are K^T's CSC: K^T K by the compiled product on every core; symmetric, so its
+    # CSC arrays are its CSR ones. Its pattern holds the 1-ring (K_ii K_ij), so
     # the 1-ring terms are added into it in place (a sum would make a third 2-ring matrix)
     from .. import _block_kernel  # compiled by the package's build: imported where used
 
@@ -307,7 +282,7 @@ def _lower_csc(symmetric: sp.csr_matrix) -> sp.csc_matrix:
 
 
 class ScanFairingSolver(_Penalized):
-    """The scan energy factored once; :meth:`solve` faires positions with it.
+    """The scan energy assembled once; :meth:`solve` faires positions with it.
 
     Parameters
     ----------
@@ -315,30 +290,18 @@ class ScanFairingSolver(_Penalized):
     n : int
         Vertex count (unreferenced vertices stay where they are).
     mu, membrane, boundary_weight : float
-        ``mu``, ``lambda`` and the boundary triangles' ``w_t`` of the energy
-        (see the module docstring).
+        ``mu``, ``lambda`` and the rim triangles' ``w_t`` of the energy.
     solver : {"auto", "cholmod", "iterative"}
-        ``"iterative"``: block conjugate gradients preconditioned by the
-        matrix's incomplete Cholesky factor, started from the scan, each solve
-        to :data:`SCAN_REDUCTION` of its starting residual. ``"auto"``: that
-        from :data:`SCAN_ITERATIVE_VERTICES` vertices, CHOLMOD (exact) below.
+        ``"iterative"``: IC(0)-preconditioned block CG from the scan, to ``SCAN_REDUCTION`` of each
+        solve's starting residual; ``"auto"``: that from ``SCAN_ITERATIVE_VERTICES`` vertices, CHOLMOD below.
     progress : bool
-        Show the iterative solves' residual in a tqdm bar.
+        Show the iterative solves' residual.
 
     Notes
     -----
-    ``R^T R`` is positive definite: on each component the only null vector of ``K^T K`` and ``G``
-    is the constant, and ``1^T H^T W H 1 = 9 sum_t w_t > 0``. CHOLMOD factors the lower triangle
-    of :func:`scan_normal_matrix`, analyzed as ``K^T K`` from the 1-ring pattern with COLAMD
-    (10-15% fewer factor flops than AMD, same analysis time; METIS's 30% fewer cost an analysis
-    longer than the factor). The factor's flops grow like a component's size to the power 1.5
-    and its two solves serve one call, while the data term on every vertex keeps the matrix's
-    condition number independent of the size: IC(0)-preconditioned CG takes 6-11 iterations a
-    solve at every size (linear work) and stops where its error is far below the noise removed
-    (:data:`SCAN_REDUCTION`). 40k-vertex scans: 0.14-0.27 s against 0.31-0.57 s by the factor;
-    1.4M vertices: 8.0 s against 21.5 s (the AMG V-cycle: 12.3 s)
-    (benchmarks/results/realscans_denoise_speed.md). The object pickles and its solves are
-    serialized by a lock.
+    ``R^T R`` is positive definite (``1^T H^T W H 1 = 9 sum_t w_t > 0`` on each component). The
+    factor is analyzed as ``K^T K`` from the 1-ring pattern (COLAMD); why CG from 5,000 vertices:
+    ``docs/algorithms/scan_denoiser.rst``. The object pickles.
     """
 
     def __init__(
@@ -380,10 +343,8 @@ class ScanFairingSolver(_Penalized):
                 progress=progress,
             )
             return
-        # COLAMD on K's 1-ring pattern (see Notes): at 1.4M vertices 46.5 against 51.4 GFlop with AMD on the
-        # matrix (METIS 35.2 but a 15 s analysis). The assembled lower triangle, not ``product_of`` rows: from
-        # the rows the memory estimate of ``backend="auto"`` guessed 3x the entries and went iterative (4x
-        # slower). CG preconditioned by the factor of the 1-ring part alone was measured slower.
+        # COLAMD on K's 1-ring pattern; the assembled lower triangle, not product rows (whose memory
+        # estimate sent backend="auto" to the slower iterative path)
         self._solver = SPDSolver(
             _lower_csc(normal),
             lower=True,
@@ -446,19 +407,14 @@ def scan_denoise(
     solver: str = "auto",
     progress: bool = False,
 ) -> np.ndarray:
-    """The default denoiser on arrays: :func:`scan_parameters`, one system, the twiced filter.
+    """The default denoiser on arrays: :func:`scan_parameters`, one system, the twiced filter, :func:`relax_rim`.
 
-    ``mu``, ``membrane`` and ``boundary_weight`` replace the measured values
-    when given (the twicing weight stays the measured one). One edge list
-    serves the measures and the system; ``solver`` and ``progress`` as in
-    :class:`ScanFairingSolver`. Returns new ``(n, 3) float64`` positions.
+    ``mu``, ``membrane``, ``boundary_weight`` replace the measured values when given; ``solver`` and
+    ``progress`` as in :class:`ScanFairingSolver`. Returns new ``(n, 3) float64`` positions.
 
-    Examples
-    --------
-    >>> import numpy as np, open3d as o3d
+    >>> import open3d as o3d
     >>> box = o3d.geometry.TriangleMesh.create_box()
-    >>> V, F = np.asarray(box.vertices), np.asarray(box.triangles).astype(np.int64)
-    >>> scan_denoise(V, F).shape
+    >>> scan_denoise(np.asarray(box.vertices), np.asarray(box.triangles).astype(np.int64)).shape
     (8, 3)
     """
     n = len(vertices)
@@ -509,36 +465,11 @@ def relax_rim(
 ) -> np.ndarray:
     """Even out the triangles near the rim of a faired scan, moving each vertex in its tangent plane only.
 
-    The scan energy pulls a ragged silhouette in along the surface by one to three edge lengths (most
-    of its gain at the rim), which squeezes the rim's triangles into slivers. With ``n_i`` the unit
-    (area-weighted) normal of ``positions`` at each vertex, held fixed:
-
-    1. :data:`RIM_RINGS` damped Jacobi sweeps ``x_i += (a/2) P_i (mean of the neighbours - x_i)``
-       (``a = strength`` in ``[0, 1]``; :func:`scan_denoise` gives the scan likeness),
-       ``P_i = I - n_i n_i^T``, on the vertices within :data:`RIM_RINGS` edges of the rim; a rim
-       vertex's neighbours are its boundary-curve neighbours (it slides along the rim, which its
-       1-ring would pull inward).
-    2. While a triangle's quality (:func:`triangle_quality`) is below ``min(SLIVER_QUALITY, its
-       quality in the scan)``, each of its vertices in that band gives back a further quarter of the tangential
-       part of its move from the scan ``s_i``: ``x_i = p_i - (k/4) P_i (p_i - s_i)``, ``k <= 4``
-       (at ``k = 4`` it keeps only its fairing along ``n_i``).
-
-    Every vertex's move from ``positions`` lies in its tangent plane (``n_i . (x_i - p_i) = 0``), so
-    no vertex leaves the faired surface's tangent plane (where the fairing shrank a vertex's triangles
-    to a point, below ``sqrt(eps)`` of their area in the scan, ``n_i`` is the scan's normal there; a
-    vertex with neither stays). Equivariant under rigid motions and uniform
-    scaling. ``scan``, ``positions``: ``(n, 3)`` float64; returns new ``(n, 3)`` positions.
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> g = np.stack(np.meshgrid(np.arange(6.0), np.arange(6.0), indexing="ij"), -1).reshape(-1, 2)
-    >>> F = np.array([[i * 6 + j, i * 6 + j + 6, i * 6 + j + 1] for i in range(5) for j in range(5)]
-    ...              + [[i * 6 + j + 1, i * 6 + j + 6, i * 6 + j + 7] for i in range(5) for j in range(5)])
-    >>> scan = np.c_[g, np.zeros(36)]
-    >>> squeezed = scan.copy(); squeezed[:6, 0] = 0.99  # the first rim row pulled onto the second
-    >>> int((triangle_quality(squeezed, F) < SLIVER_QUALITY).sum()), int((triangle_quality(relax_rim(scan, squeezed, F), F) < SLIVER_QUALITY).sum())
-    (10, 0)
+    ``RIM_RINGS`` damped tangential Jacobi sweeps (weight ``strength / 2``) on the vertices within
+    ``RIM_RINGS`` edges of the rim (a rim vertex averages its boundary-curve neighbours), then each
+    vertex of a triangle of quality under ``min(SLIVER_QUALITY, its quality in the scan)`` gives back
+    a quarter of its tangential drift from the scan at a time. ``scan``, ``positions``: ``(n, 3)``;
+    returns new ``(n, 3)`` positions. The steps in full: ``docs/algorithms/scan_denoiser.rst``.
     """
     n = len(positions)
     st = _structure(triangles, n) if structure is None else structure
@@ -583,7 +514,7 @@ def relax_rim(
     for _ in range(RIM_RINGS):
         out[moved] += tangential(share * (neighbours @ out) - 0.5 * strength * out[moved], moved)
     # where a triangle still degenerates, its vertices give back their tangential drift from the scan, a
-    # quarter at a time (all of it at once left five bunny scans 1.3 um further from the truth on average)
+    # quarter at a time (all of it at once was measured worse)
     given_back = np.where(movable, 0, 4)
     candidates = near
     while True:

@@ -82,10 +82,7 @@ def rim_noise_ratio(
 ) -> tuple[float, float]:
     """The rim's data weight before clipping, ``c (9/7) E_int / E_bd``, and the coverage ratio ``c``.
 
-    See :func:`measured_boundary_weight` (which clips the first to
-    ``[SCAN_BOUNDARY_WEIGHT, c]``). Returns ``(inf, 1)`` for a mesh without a
-    boundary or without an interior vertex, ``(c, c)`` for a noiseless
-    straight rim.
+    ``(inf, 1)`` without a boundary or an interior vertex, ``(c, c)`` for a noiseless straight rim.
     """
     n = len(vertices)
     st = _structure(triangles, n) if structure is None else structure
@@ -103,38 +100,16 @@ def rim_noise_ratio(
 
 
 def measured_boundary_weight(vertices: np.ndarray, triangles: np.ndarray) -> float:
-    """The boundary triangles' barycenter weight ``w`` estimated from the noise of the input.
+    """The rim triangles' barycenter weight ``w = clip(c (9/7) E_int / E_bd, SCAN_BOUNDARY_WEIGHT, c)``.
 
-    ``w = clip(c (9/7) E_int / E_bd, 0.1, c)``: ``E_int`` the mean of ``|L x_i|^2`` over interior
-    vertices (uniform Laplacian), ``E_bd`` the mean over boundary vertices of the squared uniform
-    Laplacian *along the boundary curve*, ``c >= 1`` the mean number of triangles at an interior
-    vertex over that at a boundary vertex (about 2). For i.i.d. noise ``E_bd / E_int = 9/7``, so
-    ``(9/7) E_int / E_bd`` estimates the interior's over the boundary's noise variance, and ``c``
-    gives a rim vertex (in half as many barycenters) an interior vertex's data weight. Invariant
-    under rigid motions and uniform scaling. 1 without a boundary, ``c`` for a straight noiseless one.
+    ``E_int``, ``E_bd``: mean squared uniform Laplacian of the interior vertices and, along the
+    boundary curve, of the rim's; ``c`` the interior's triangles per vertex over the rim's. 1
+    without a boundary. ``vertices (n, 3)``, ``triangles (m, 3)``; returns a float.
 
-    Parameters
-    ----------
-    vertices : (n, 3) float64
-    triangles : (m, 3) int64
-
-    Returns
-    -------
-    float in ``[SCAN_BOUNDARY_WEIGHT, c]``.
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> g = np.stack(np.meshgrid(np.arange(30.0), np.arange(30.0), indexing="ij"), -1).reshape(-1, 2)
-    >>> F = np.array([[i * 30 + j, i * 30 + j + 30, i * 30 + j + 1] for i in range(29) for j in range(29)]
-    ...              + [[i * 30 + j + 1, i * 30 + j + 30, i * 30 + j + 31] for i in range(29) for j in range(29)])
-    >>> V = np.c_[g, np.zeros(900)] + np.random.default_rng(0).normal(0.0, 0.3, (900, 3))
-    >>> measured_boundary_weight(V, F) > 1.5  # i.i.d. noise: a rim vertex weighs like an interior one
-    True
-    >>> ragged = V.copy(); rim = (g == 0).any(1) | (g == 29).any(1)
-    >>> ragged[rim] += np.random.default_rng(1).normal(0.0, 2.0, (rim.sum(), 3))
-    >>> measured_boundary_weight(ragged, F)  # a scan's silhouette: the rim 7 times noisier
-    0.1
+    >>> import open3d as o3d
+    >>> box = o3d.geometry.TriangleMesh.create_box()
+    >>> measured_boundary_weight(np.asarray(box.vertices), np.asarray(box.triangles))
+    1.0
     """
     return _clipped_weight(*rim_noise_ratio(vertices, triangles))
 
@@ -154,29 +129,17 @@ class NoiseEstimate(NamedTuple):
 def measured_noise(
     vertices: np.ndarray, triangles: np.ndarray, *, structure: _Structure | None = None
 ) -> NoiseEstimate:
-    """The noise's deviation and the surface's own detail at the edge scale, both from the mesh.
+    """The noise ``sigma`` and the surface's detail ``g`` along the normal, in RMS edge lengths.
 
-    Two umbrella vectors of each vertex ``i`` at least two rings from the rim,
-    along its normal ``n_i``: ``a1 = n_i . (mean of the 1-ring - x_i)`` and
-    ``a2 = n_i . (mean of the 2-ring - x_i)`` (the 2-ring: every vertex
-    within two edges). For i.i.d. noise ``sigma`` on a smooth surface of 1-ring umbrella ``g``,
-    ``E a1^2 = sigma^2 (1 + 1/d1) + g^2`` and ``E a2^2 = sigma^2 (1 + 1/d2) + G g^2``, ``G =
-    (mean squared 2-ring distance / mean squared 1-ring distance)^2`` (about 7): two equations
-    for ``sigma^2`` and ``g^2``. Normals (area-weighted) and distances are taken after one umbrella
-    step; both results are divided by the RMS 1-ring distance ``h``. Measured: ``sigma`` within
-    0.01-0.04 edge lengths at 0.2 and 0.5 noise; ``g`` 0.05 on bunny, screwdriver, feline, 0.10 on
-    the coarse Venus. Scale-free. ``(0, 0)`` when no vertex is two rings from the rim. The means run
-    over every k-th of those vertices, at most ``2**14`` of them.
+    From the mean squared 1- and 2-ring umbrellas of the vertices two rings from the rim (at most
+    ``NOISE_ROWS`` of them), two equations in ``sigma^2`` and ``g^2``; ``(0, 0)`` when no vertex is
+    two rings from the rim. The derivation: ``docs/algorithms/scan_denoiser.rst``.
 
-    Examples
-    --------
-    >>> import numpy as np, open3d as o3d
-    >>> sphere = o3d.geometry.TriangleMesh.create_sphere(radius=1.0, resolution=40)
-    >>> V, F = np.asarray(sphere.vertices), np.asarray(sphere.triangles).astype(np.int64)
-    >>> h = np.linalg.norm(V[F[:, 0]] - V[F[:, 1]], axis=1).mean()
-    >>> estimate = measured_noise(V + np.random.default_rng(0).normal(0.0, 0.3 * h, V.shape), F)
-    >>> 0.25 < estimate.noise < 0.35
-    True
+    >>> import open3d as o3d
+    >>> s = o3d.geometry.TriangleMesh.create_sphere(radius=1.0, resolution=30)
+    >>> V = np.asarray(s.vertices) + np.random.default_rng(0).normal(0.0, 0.02, (len(s.vertices), 3))
+    >>> round(measured_noise(V, np.asarray(s.triangles)).noise, 2)
+    0.19
     """
     n = len(vertices)
     st = _structure(triangles, n) if structure is None else structure
@@ -249,13 +212,11 @@ def _mean_square_distances(
 
 
 def scan_likeness(rim_ratio: float, boundary_fraction: float) -> float:
-    """How much the mesh looks like one raw range scan, from 0 (not at all) to 1 (``scan_parameters``).
+    """How much the mesh looks like one raw range scan, from 0 to 1 (a closed mesh: 0).
 
-    The product of two ramps, linear in the logarithm of their measure: the rim's unclipped data
-    weight (:func:`rim_noise_ratio`) from 1 at ``SCAN_RIM_RATIO[0]`` to 0 at ``SCAN_RIM_RATIO[1]``
-    (0.07-0.13 on the bunny scans, whose silhouettes are 2.5-4 times noisier; i.i.d. noise gives
-    about 2), and the fraction of boundary vertices from 0 at ``SCAN_BOUNDARY_FRACTION[0]`` to 1 at
-    ``SCAN_BOUNDARY_FRACTION[1]`` (7-13% on a range scan). A closed mesh gives 0.
+    The product of two ramps, linear in the logarithm of their measure, between the ends of
+    ``SCAN_RIM_RATIO`` (the rim's unclipped data weight, :func:`rim_noise_ratio`) and of
+    ``SCAN_BOUNDARY_FRACTION`` (the fraction of boundary vertices).
     """
 
     def ramp(value: float, zero: float, one: float) -> float:
@@ -302,27 +263,15 @@ def scan_parameters(
 ) -> ScanParameters:
     """Every weight of the default energy, measured on the mesh (never on a reference).
 
-    A raw range scan (``s = 1``, :func:`scan_likeness`) gets the energy
-    measured on the scans: ``mu = SCAN_MU (g / sigma)^2`` (at least ``SCAN_RIM_MU``, at most 1;
-    ``g / sigma`` the detail-to-noise ratio of :func:`measured_noise`, so a scan of finer detail than
-    its noise is held closer to its samples), the rim triangles' ``mu w_t = SCAN_RIM_MU w``,
-    ``lambda = SCAN_MEMBRANE``, twicing ``t = 1``: the membrane damps the scanline-correlated
-    noise that the thin-plate term keeps. A mesh with independent noise (``s = 0``: a
-    closed mesh, or a rim as noisy as its interior) gets the barycenter-only
-    energy (``lambda = 0``, no twicing) with ``mu = NOISE_MU_SCALE (g / sigma)^NOISE_MU_POWER``
-    in ``MU_RANGE`` (:func:`measured_noise`; measured on bunny, screwdriver and feline at 0.2 and
-    0.5 mean-edge noise, benchmarks/results/denoise.md). Between the two every weight moves with
-    ``s`` (``mu`` and the rim's weight geometrically). ``w`` is :func:`measured_boundary_weight`. All measures are
-    dimensionless: the parameters are invariant under rigid motions and uniform scaling.
+    A raw range scan (scan likeness ``s = 1``) gets ``mu = SCAN_MU (g / sigma)^2``, rim weight
+    ``SCAN_RIM_MU w``, ``lambda = SCAN_MEMBRANE`` and twicing; independent noise (``s = 0``) the
+    barycenter-only energy with ``mu = NOISE_MU_SCALE (g / sigma)^NOISE_MU_POWER`` in ``MU_RANGE``;
+    in between every weight moves with ``s``. Invariant under rigid motions and uniform scaling.
 
-    Examples
-    --------
-    >>> import numpy as np, open3d as o3d
-    >>> sphere = o3d.geometry.TriangleMesh.create_sphere(radius=1.0, resolution=40)
-    >>> V, F = np.asarray(sphere.vertices), np.asarray(sphere.triangles).astype(np.int64)
-    >>> p = scan_parameters(V + np.random.default_rng(0).normal(0.0, 0.01, V.shape), F)
-    >>> p.scan_likeness, p.membrane, p.twicing  # closed: independent noise
-    (0.0, 0.0, 0.0)
+    >>> import open3d as o3d
+    >>> sphere = o3d.geometry.TriangleMesh.create_sphere(radius=1.0, resolution=20)
+    >>> scan_parameters(np.asarray(sphere.vertices), np.asarray(sphere.triangles)).scan_likeness
+    0.0
     """
     n = len(vertices)
     st = _structure(triangles, n) if structure is None else structure
@@ -335,8 +284,7 @@ def scan_parameters(
     ratio_gn = estimate.detail / estimate.noise if estimate.noise > 0.0 else np.inf
     independent = float(np.clip(NOISE_MU_SCALE * ratio_gn**NOISE_MU_POWER, *MU_RANGE))
     # never below the rim's weight: the interior's samples are at least as trustworthy as the ragged rim's,
-    # and a weaker pull lets the membrane shrink a smooth, coarsely sampled scan (a ball scanned at 60 x 60
-    # rays moved 0.24 grid spacings inward at mu = 0.003, 0.015 at SCAN_RIM_MU)
+    # and a weaker pull lets the membrane shrink a smooth, coarsely sampled scan
     scan = float(np.clip(SCAN_MU * ratio_gn**2, SCAN_RIM_MU, MU_RANGE[1]))
     mu = float(np.exp((1.0 - s) * np.log(independent) + s * np.log(scan)))
     # a scan's rim triangles keep the weight SCAN_RIM_MU w whatever the interior's mu
