@@ -35,6 +35,7 @@ import psutil
 from _common import load_mesh, markdown_table, timed, write_markdown
 
 from o3d_lsmesh.hierarchy import build_hierarchy
+from o3d_lsmesh.hierarchy import hierarchy as tuning
 from o3d_lsmesh.hierarchy.collapse import collapse_levels
 from o3d_lsmesh.hierarchy.hierarchy import build_hierarchy_arrays
 from o3d_lsmesh.metrics import (
@@ -55,6 +56,11 @@ def level_times(V, F, min_vertices=100):
     collapse_levels(
         V,
         F,
+        alpha=tuning.ALPHA,
+        beta=tuning.BETA,
+        max_normal_angle=tuning.MAX_NORMAL_ANGLE,
+        min_quality=tuning.MIN_QUALITY,
+        max_tries=tuning.MAX_TRIES,
         min_vertices=min_vertices,
         report=lambda _: times.append(time.perf_counter() - start),
     )

@@ -13,6 +13,7 @@ import math
 import numpy as np
 
 from o3d_lsmesh.hierarchy.collapse import FAR, TIE
+from o3d_lsmesh.hierarchy.hierarchy import ALPHA, BETA, MAX_NORMAL_ANGLE, MAX_TRIES, MIN_QUALITY
 from o3d_lsmesh.topology import nonmanifold_edges, nonmanifold_vertices
 
 
@@ -64,12 +65,12 @@ def collapse_level(
     F,
     locked,
     *,
-    alpha=1.0,
-    beta=0.01,
+    alpha=ALPHA,
+    beta=BETA,
     max_removals=None,
-    max_normal_angle=60.0,
-    min_quality=1e-3,
-    max_tries=3,
+    max_normal_angle=MAX_NORMAL_ANGLE,
+    min_quality=MIN_QUALITY,
+    max_tries=MAX_TRIES,
     first=None,
 ):
     """``(removed, targets, ring_offsets, ring, parent, triangles)`` of one level, or ``None``. ``first``: a dict

@@ -15,6 +15,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from o3d_lsmesh.hierarchy import build_hierarchy, from_fast_simplification
+from o3d_lsmesh.hierarchy import hierarchy as tuning
 from o3d_lsmesh.hierarchy.collapse import collapse_levels
 from o3d_lsmesh.hierarchy.hierarchy import build_hierarchy_arrays
 from o3d_lsmesh.topology import (
@@ -51,12 +52,21 @@ def grid_h():
     return (V, F), build_hierarchy((V, F), min_vertices=20)
 
 
+# the kernel's tuned options, as build_hierarchy passes them
+TUNED = dict(
+    alpha=tuning.ALPHA,
+    beta=tuning.BETA,
+    max_normal_angle=tuning.MAX_NORMAL_ANGLE,
+    min_quality=tuning.MIN_QUALITY,
+    max_tries=tuning.MAX_TRIES,
+)
 Level = namedtuple("Level", "removed targets ring_offsets ring parent triangles kept")
 
 
 def collapse_level(V, F, *, max_removals=None, **options):
     """One level of the compiled loop, with at most ``max_removals`` collapses (None when there are none)."""
     limit = len(V) if max_removals is None else max_removals
+    options = {**TUNED, **options}
     levels = collapse_levels(V, F, min_vertices=len(V) - limit, max_levels=1, **options)[1]
     return Level(*levels[0]) if levels else None
 
@@ -723,7 +733,9 @@ def _bowtie_and_fin():
 
 def locked_vertices(F, n):
     """The kernel's locked vertices (never moved, never a collapse target): its answer at zero levels."""
-    return collapse_levels(np.zeros((n, 3)), np.ascontiguousarray(F, dtype=np.int64), max_levels=0)[0]
+    return collapse_levels(np.zeros((n, 3)), np.ascontiguousarray(F, dtype=np.int64), max_levels=0, **TUNED)[
+        0
+    ]
 
 
 def test_locked_vertices_match_the_topology_module():

@@ -122,13 +122,13 @@ def visiting_order(costs, spreads, candidates, positions, centre, double h):
     return order
 
 
-def collapse_levels(vertices, triangles, *, double alpha=1.0, double beta=0.01, Py_ssize_t min_vertices=0,
-                    max_levels=None, double max_normal_angle=60.0, double min_quality=1e-3, int max_tries=3,
-                    report=None):
+def collapse_levels(vertices, triangles, *, double alpha, double beta, double max_normal_angle, double min_quality,
+                    int max_tries, Py_ssize_t min_vertices=0, max_levels=None, report=None):
     """``(locked vertices (n,) bool, levels)``: levels of at most ``n_i - min_vertices`` removals until ``max_levels``
-    or no valid collapse, ``report(removals)`` after each. A level (int64, level ``i - 1`` indices): ``(removed,
-    targets, ring_offsets, ring, parent, triangles, kept)``: the removed vertices, their targets and sorted 1-rings
-    (CSR), the index at level ``i``, the triangles (mapped in order, collapsed ones dropped), the input indices."""
+    or no valid collapse, ``report(removals)`` after each; the tuned options come from ``hierarchy.py``'s head. A level
+    (int64, level ``i - 1`` indices): ``(removed, targets, ring_offsets, ring, parent, triangles, kept)``: the removed
+    vertices, their targets and sorted 1-rings (CSR), the index at level ``i``, the triangles (mapped in order,
+    collapsed ones dropped), the input indices."""
     # at 90 degrees or more only the flip test (a positive dot product of the normals) remains
     cdef double cos_sq = float(np.cos(np.deg2rad(max_normal_angle)) ** 2) if max_normal_angle < 90 else 0.0
     cdef double[:, ::1] positions = np.array(vertices, dtype=np.float64, order="C")  # compacted in place

@@ -17,6 +17,7 @@ import scipy.sparse as sp
 
 from .._o3d import MeshData, new_mesh, read_mesh, template, warn_dropped_attributes
 from .._progress import check_progress, progress_bar
+from .._solvers import solve_spd
 from .._validate import as_count, as_positions, as_positive_float, mesh_arrays
 from ..topology import VertexRings, vertex_rings
 
@@ -24,6 +25,19 @@ if TYPE_CHECKING:
     from .._types import AnyMesh
 
 __all__ = ["MeshHierarchy", "build_hierarchy", "build_hierarchy_arrays"]
+
+# Tuned constants of the volume-cost collapses (section 4.1), passed to the compiled loop; the levels'
+# topology, volume, distances and time they give: benchmarks/results/hierarchy.md.
+ALPHA = 1.0  # cost weight of the shortest incident edge (the paper's): hierarchy.md, per-level cross-check
+BETA = 0.01  # cost weight of the longest incident edge: hierarchy.md, per-level cross-check
+MAX_NORMAL_ANGLE = 60.0  # degrees a surviving triangle's normal may turn: hierarchy.md, per-level cross-check
+MIN_QUALITY = (
+    1e-3  # least 2 area / sum of squared edges of a moved triangle: hierarchy.md, per-level cross-check
+)
+MAX_TRIES = 3  # targets tried per vertex, least cone volume first: hierarchy.md, whole-hierarchy speed table
+FILL_TIE = (
+    1e-9  # split vertices' weak tie to their placeholders: a regularization far below round-off, not tuned
+)
 
 
 def _frozen(array: np.ndarray) -> np.ndarray:
@@ -213,9 +227,7 @@ class MeshHierarchy:
         if self.independent:  # their neighbours are all kept
             out[removed] = rows @ out
         else:
-            kept = np.ones(len(out), dtype=bool)
-            kept[removed] = False
-            out[removed] = _harmonic_fill(weights, out, removed, kept)
+            out[removed] = _harmonic_fill(weights, out, removed, on_boundary)
         umbrella = weights @ out
         umbrella -= out
         second = rows @ umbrella
@@ -277,19 +289,32 @@ def _umbrella_weights(rings: VertexRings) -> tuple[sp.csr_matrix, np.ndarray, np
 
 
 def _harmonic_fill(
-    weights: sp.csr_matrix, out: np.ndarray, removed: np.ndarray, kept: np.ndarray
+    weights: sp.csr_matrix, out: np.ndarray, removed: np.ndarray, on_boundary: np.ndarray | None
 ) -> np.ndarray:
-    """Positions of ``removed`` that equal the ``weights`` average of their neighbours, kept vertices fixed."""
-    import scipy.sparse.linalg as spla
+    """Positions of ``removed`` equal to the ``weights`` average of their neighbours, the others fixed.
 
-    w_rr = weights[removed][:, removed]
-    w_rk = weights[removed][:, np.flatnonzero(kept)]
-    # a vertex whose neighbours are all split too and never reach a kept one
-    # would make the system singular: tie it weakly to its placeholder position
-    system = (sp.identity(len(removed)) * (1.0 + 1e-9) - w_rr).tocsc()
-    rhs = w_rk @ out[kept] + 1e-9 * out[removed]
-    solution = spla.spsolve(system, rhs)
-    return np.asarray(solution).reshape(len(removed), 3)
+    Row ``i`` times its degree ``d_i`` is ``(1 + FILL_TIE) d_i x_i - sum_j a_ij x_j = FILL_TIE d_i x0_i``
+    (``a`` the rows' 0/1 pattern, ``x0`` the placeholders), symmetric positive definite within the
+    boundary rows (which read their curve only) and within the inner ones: boundary first, two SPD solves.
+    """
+    x = out.copy()
+    groups = (
+        [removed] if on_boundary is None else [removed[on_boundary[removed]], removed[~on_boundary[removed]]]
+    )
+    for rows in groups:
+        if len(rows) == 0:
+            continue
+        pattern = weights[rows]
+        pattern.data = (pattern.data != 0).astype(np.float64)
+        pattern.eliminate_zeros()
+        degree = np.diff(pattern.indptr).astype(np.float64)
+        degree[degree == 0] = 1.0  # (a vertex without neighbours keeps its placeholder, scaled as before)
+        inside = np.zeros(len(x), dtype=bool)
+        inside[rows] = True
+        system = sp.diags(degree * (1.0 + FILL_TIE)) - pattern[:, rows]
+        rhs = pattern[:, np.flatnonzero(~inside)] @ x[~inside] + (FILL_TIE * degree)[:, None] * x[rows]
+        x[rows] = solve_spd(system.tocsc(), rhs)
+    return x[removed]
 
 
 def tensor_format_of(data: MeshData) -> tuple:
@@ -314,8 +339,8 @@ def build_hierarchy_arrays(
     vertices: np.ndarray,
     triangles: np.ndarray,
     *,
-    alpha: float = 1.0,
-    beta: float = 0.01,
+    alpha: float = ALPHA,
+    beta: float = BETA,
     min_vertices: int = 100,
     max_levels: int | None = None,
     progress: bool = False,
@@ -372,6 +397,9 @@ def collapse_hierarchy(
             triangles,
             alpha=alpha,
             beta=beta,
+            max_normal_angle=MAX_NORMAL_ANGLE,
+            min_quality=MIN_QUALITY,
+            max_tries=MAX_TRIES,
             min_vertices=min_vertices,
             max_levels=max_levels,
             report=bar.update,
@@ -399,8 +427,8 @@ def collapse_hierarchy(
 def build_hierarchy(
     mesh: AnyMesh,
     *,
-    alpha: float = 1.0,
-    beta: float = 0.01,
+    alpha: float = ALPHA,
+    beta: float = BETA,
     min_vertices: int = 100,
     max_levels: int | None = None,
     progress: bool = False,
