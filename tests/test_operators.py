@@ -308,3 +308,51 @@ def test_penalty_matrix_is_the_eq5_energy_on_the_free_vertices(case):
     np.testing.assert_allclose(p.normal.toarray(), K_F.T @ K_F + mu * H.T @ H, atol=1e-13)
     if known:
         np.testing.assert_allclose(p.pull.toarray(), K_F.T @ K_B, atol=1e-13)
+
+
+@settings(max_examples=40, deadline=None)
+@given(triangle_soups(), st.sampled_from([0.0, 0.4]))
+def test_scan_normal_matrix_is_the_sum_of_its_energy_rows(case, t):
+    # E(X) = mu sum_t w_t |H_t X|^2 + lambda sum_edges |x_i - x_j|^2 + sum_i |K_i X|^2: the matrix is
+    # the sum of the outer products of its rows, written here as plain loops
+    n, triangles = case
+    mu, membrane, rim_weight = 0.03, 0.45, 0.1
+    edges = {}
+    for tri in triangles:
+        for q in range(3):
+            key = tuple(sorted((tri[q], tri[(q + 1) % 3])))
+            edges[key] = edges.get(key, 0) + 1
+    ring = plain_neighbours(triangles, n)
+    rim = [
+        {b for (a, b), c in edges.items() if c == 1 and a == v}
+        | {a for (a, b), c in edges.items() if c == 1 and b == v}
+        for v in range(n)
+    ]
+    expected = np.zeros((n, n))
+
+    def add(row, weight=1.0):
+        expected[:, :] += weight * np.outer(row, row)
+
+    for tri in triangles:
+        row = np.zeros(n)
+        row[tri] = 1.0
+        add(row, mu * (rim_weight if any(rim[v] for v in tri) else 1.0))
+    for a, b in edges:
+        row = np.zeros(n)
+        row[a], row[b] = 1.0, -1.0
+        add(row, membrane)
+    for v in range(n):
+        row = np.zeros(n)
+        if not ring[v]:
+            expected[v, v] += 1.0
+            continue
+        row[v] = 1.0
+        for w in ring[v]:
+            row[w] -= (1.0 - t if rim[v] else 1.0) / len(ring[v])
+        for w in rim[v]:
+            row[w] -= t / len(rim[v])
+        add(row)
+    N, _, w = ops.scan_normal_matrix(Connectivity(np.array(triangles), n), mu, membrane, rim_weight, t)
+    np.testing.assert_allclose(N.toarray(), expected, atol=1e-12)
+    assert N.has_sorted_indices and np.array_equal(ops.lower_csc(N).toarray(), np.tril(N.toarray()))
+    assert w.tolist() == [rim_weight if any(rim[v] for v in tri) else 1.0 for tri in triangles]

@@ -31,8 +31,10 @@ __all__ = [
     "cotangent_laplacian",
     "graph_laplacian",
     "local_operator",
+    "lower_csc",
     "penalty_matrix",
     "rim_neighbours",
+    "scan_normal_matrix",
     "single_slots",
     "triangle_coefficients",
     "two_ring_rows",
@@ -499,3 +501,96 @@ def penalty_matrix(conn: Connectivity, mu: float) -> Penalty:
     # one product of the stacked rows (no sum of two 2-ring matrices), sorted
     normal = gram_matrix(sp.vstack([K_F, H], format="csr").T)
     return Penalty(normal, K_F, pull, H, free_ids, known)
+
+
+# ---------------------------------------------------------------------------------- the scan energy
+
+
+def scan_normal_matrix(
+    conn: Connectivity, mu: float, membrane: float, boundary_weight: float, rim_curve: float = 0.0
+) -> tuple[sp.csr_matrix, sp.csc_matrix, np.ndarray]:
+    """``K^T K + mu H^T W H + lambda G`` ``(n, n)`` CSR (canonical, symmetric), the 1-ring pattern, ``w (m,)``.
+
+    ``H`` the triangle-vertex incidence weighted by ``w_t`` (``boundary_weight`` on a triangle with a
+    vertex on an edge of one triangle, else 1), ``G`` the graph Laplacian (``lambda = membrane``),
+    ``K`` the uniform Laplacian whose rim rows mix in, with weight ``t = rim_curve``, the Laplacian
+    along the boundary curve; an unreferenced vertex gets a unit diagonal. ``H^T W H + G`` is
+    scattered into the 1-ring pattern, only ``K^T K`` (the 2-ring) is a sparse product.
+
+    >>> N, _, w = scan_normal_matrix(Connectivity(np.array([[0, 1, 2], [0, 2, 3]]), 5), 0.03, 0.45, 0.1)
+    >>> N.shape, w.tolist()
+    ((5, 5), [0.1, 0.1])
+    """
+    from ._iterative import gram_matrix
+
+    triangles, n = conn.triangles, conn.n
+    if len(triangles) and (
+        (triangles[:, 0] == triangles[:, 1]).any()
+        | (triangles[:, 1] == triangles[:, 2]).any()
+        | (triangles[:, 2] == triangles[:, 0]).any()
+    ):
+        raise ValueError("scan_normal_matrix takes triangles of three distinct vertices")
+    edges, counts, halfedge_edge = conn.edges, conn.edge_triangles, conn.halfedge_edge
+    boundary = np.zeros(n, dtype=bool)
+    boundary[edges[counts == 1].ravel()] = True
+    valence = np.bincount(edges.ravel(), minlength=n)
+    lo, hi = edges[:, 0], edges[:, 1]
+    referenced = valence > 0
+    indptr, indices, diagonal, forward, backward = conn.ring_pattern
+    weight = np.where(boundary[triangles].any(axis=1), float(boundary_weight), 1.0)  # (m,) w_t
+    # mu H^T W H + lambda G (+ 1 on an unreferenced vertex's diagonal), on the 1-ring pattern
+    data = np.empty(len(indices))
+    data[diagonal] = mu * np.bincount(triangles.ravel(), np.repeat(weight, 3), minlength=n)
+    data[diagonal] += membrane * valence
+    data[diagonal[~referenced]] = 1.0
+    # half-edge a * m + t is triangle t's edge from corner a: its weights are np.tile(w, 3)
+    on_edge = mu * np.bincount(halfedge_edge, np.tile(weight, 3), minlength=len(edges)) - membrane
+    data[forward] = on_edge
+    data[backward] = on_edge
+    matrix = sp.csr_matrix((data, indices, indptr), shape=(n, n))
+    # K: row i is 1 at i and -(1 - t) / n_i - t / c_i at each neighbour (the second part only across
+    # boundary edges, c_i of them; t = rim_curve for a rim vertex, the one-sided row otherwise)
+    t = float(rim_curve)
+    inverse = np.zeros(n)
+    np.divide(np.where(boundary, 1.0 - t, 1.0), valence, out=inverse, where=referenced)
+    plate = np.empty(len(indices))
+    plate[diagonal] = referenced
+    plate[forward] = -inverse[lo]
+    plate[backward] = -inverse[hi]
+    if t > 0.0:
+        rim = counts == 1
+        curve_valence = np.bincount(edges[rim].ravel(), minlength=n)
+        curve_inverse = np.divide(t, curve_valence, out=np.zeros(n), where=curve_valence > 0)
+        plate[forward[rim]] -= curve_inverse[lo[rim]]
+        plate[backward[rim]] -= curve_inverse[hi[rim]]
+    # K's CSR arrays are K^T's CSC: K^T K by the compiled product; symmetric, so its CSC arrays are its
+    # CSR ones. Its pattern holds the 1-ring (K_ii K_ij): the 1-ring terms are added into it in place
+    from .. import _block_kernel  # compiled by the package's build: imported where used
+
+    square = gram_matrix(sp.csc_matrix((plate, indices, indptr), shape=(n, n)))
+    del plate
+    index = square.indices.dtype
+    missing = _block_kernel.add_subset(
+        square.indptr,
+        square.indices,
+        square.data,
+        matrix.indptr.astype(index, copy=False),
+        matrix.indices.astype(index, copy=False),
+        matrix.data,
+    )
+    assert missing == 0, "the 1-ring lies within K^T K's pattern"
+    del matrix
+    ring = sp.csc_matrix((np.ones(len(indices)), indices, indptr), shape=(n, n))
+    normal = sp.csr_matrix((square.data, square.indices, square.indptr), shape=(n, n))
+    normal.has_sorted_indices = True  # canonical: CHOLMOD and the lower-triangle cut need it
+    return normal, ring, weight
+
+
+def lower_csc(symmetric: sp.csr_matrix) -> sp.csc_matrix:
+    """The lower triangle of a symmetric canonical CSR matrix as CSC: its upper CSR triangle, reinterpreted."""
+    n = symmetric.shape[0]
+    rows = np.repeat(np.arange(n, dtype=symmetric.indices.dtype), np.diff(symmetric.indptr))
+    keep = symmetric.indices >= rows
+    indptr = np.zeros(n + 1, dtype=symmetric.indptr.dtype)
+    np.cumsum(np.bincount(rows[keep], minlength=n), out=indptr[1:])
+    return sp.csc_matrix((symmetric.data[keep], symmetric.indices[keep], indptr), shape=(n, n))
