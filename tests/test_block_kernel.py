@@ -13,7 +13,8 @@ from hypothesis import strategies as st
 from pyamg.relaxation.relaxation import gauss_seidel as pyamg_gauss_seidel
 
 from o3d_lsmesh import _block_kernel
-from o3d_lsmesh._solvers import COARSE_UNKNOWNS, STRENGTH, _aggregation_levels, _csr_parts, _VCycle
+from o3d_lsmesh.core._iterative import VCycle, aggregation_levels, csr_parts, sweep_blocks
+from o3d_lsmesh.core.tuning import COARSE_UNKNOWNS, STRENGTH
 
 
 def _random_csr(rows, cols, density, seed, index=np.int32):
@@ -125,13 +126,13 @@ def test_blocked_gauss_seidel_is_the_hybrid_sweep_of_a_plain_loop(k, forward, bl
 
 def test_blocked_vcycle_is_symmetric(monkeypatch):
     # forward blocked sweeps before the coarse correction, backward ones after: CG needs M^-1 symmetric
-    import o3d_lsmesh._solvers as solvers
+    from o3d_lsmesh.core import tuning
 
     pyamg = pytest.importorskip("pyamg")
-    monkeypatch.setattr(solvers, "ROWS_PER_SWEEP_BLOCK", 700)
+    monkeypatch.setattr(tuning, "ROWS_PER_SWEEP_BLOCK", 700)
     grid = pyamg.gallery.poisson((70, 70), format="csr")
-    assert solvers._sweep_blocks(grid) == 7
-    cycle = _VCycle(*_aggregation_levels(grid))
+    assert sweep_blocks(grid) == 7
+    cycle = VCycle(*aggregation_levels(grid))
     u, v = np.random.default_rng(5).standard_normal((2, grid.shape[0], 3))
     assert np.allclose(np.einsum("ij,ij->j", u, cycle(v)), np.einsum("ij,ij->j", v, cycle(u)), rtol=1e-10)
 
@@ -168,7 +169,7 @@ def test_aggregation_vcycle_is_pyamgs_smoothed_aggregation_vcycle():
         max_coarse=COARSE_UNKNOWNS,
         coarse_solver="splu",
     )
-    levels, coarse = _aggregation_levels(grid)
+    levels, coarse = aggregation_levels(grid)
     # every entry of the grid is strong: the finest level has nothing to lump and is pyamg's
     (_, R, P), level = levels[0], reference.levels[0]
     assert abs(P - level.P).max() < 1e-12 and abs(R - level.R).max() < 1e-12
@@ -184,7 +185,7 @@ def test_aggregation_vcycle_is_pyamgs_smoothed_aggregation_vcycle():
     ml = MultilevelSolver(ours, coarse_solver="splu")
     change_smoothers(ml, ("gauss_seidel", {"sweep": "forward"}), ("gauss_seidel", {"sweep": "backward"}))
     b = np.random.default_rng(4).standard_normal((grid.shape[0], 3))
-    got = _VCycle(levels, coarse)(b)
+    got = VCycle(levels, coarse)(b)
     want = np.column_stack([ml.solve(b[:, c], maxiter=1, tol=1e-300, cycle="V") for c in range(3)])
     assert np.allclose(got, want, rtol=1e-10, atol=1e-10 * np.abs(want).max())
 
@@ -215,7 +216,7 @@ def test_aggregation_smooths_the_prolongator_with_the_strong_part():
     mesh_graph = (strong != 0).astype(int)
     from pyamg.aggregation.aggregate import standard_aggregation
 
-    P = _aggregation_levels(N)[0][0][2]
+    P = aggregation_levels(N)[0][0][2]
     aggregates = standard_aggregation(mesh_graph.tocsr())[0]  # the strong graph's aggregates, by pyamg
     assert P.shape == aggregates.shape
     identity = sp.eye(len(vertices), dtype=int, format="csr")
@@ -257,7 +258,7 @@ def test_block_product_takes_csc_through_csr_parts():
     A = _random_csr(30, 30, 0.2, 5).tocsc()
     x = np.random.default_rng(6).standard_normal((30, 2))
     out = np.empty((30, 2))
-    _block_kernel.block_product(*_csr_parts(A), x, out)
+    _block_kernel.block_product(*csr_parts(A), x, out)
     assert np.allclose(out, A @ x, rtol=1e-14, atol=1e-14)
 
 

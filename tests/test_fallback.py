@@ -11,8 +11,9 @@ import scipy.sparse.linalg as spla
 from conftest import PACKAGE_HOME, REPO, grid
 
 import o3d_lsmesh
-import o3d_lsmesh._solvers as solvers
+import o3d_lsmesh.core.solve as solvers
 from o3d_lsmesh import O3DLSMeshWarning, ls_mesh
+from o3d_lsmesh.core._iterative import splu_spd
 
 
 def test_fallback_warning_points_at_the_users_call_once_per_process(monkeypatch):
@@ -74,7 +75,7 @@ def test_environment_values(monkeypatch, value, disabled):
 
 
 def test_the_variable_is_read_at_import():
-    code = "import o3d_lsmesh._solvers as s; print(s.cholmod_available())"
+    code = "import o3d_lsmesh.core.solve as s; print(s.cholmod_available())"
     env = {"O3D_LSMESH_NO_CHOLMOD": "1", "PYTHONPATH": str(REPO), "PATH": "/usr/bin:/bin"}
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
@@ -89,7 +90,7 @@ def test_spd_superlu_equals_partial_pivoting_and_does_not_pivot():
     W = sp.diags(np.where(np.arange(len(V)) % 29 == 0, 1.0, 0.0))
     N = (L.T @ L + W).tocsc()
     b = W @ V
-    fast = solvers._splu_spd(N)
+    fast = splu_spd(N)
     reference = spla.splu(N, permc_spec="MMD_AT_PLUS_A").solve(b)
     np.testing.assert_allclose(fast.solve(b), reference, rtol=1e-9, atol=1e-12)
     # symmetric ordering without pivoting: rows and columns get the same permutation

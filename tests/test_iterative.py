@@ -13,16 +13,11 @@ import scipy.sparse as sp
 from conftest import grid, load_mesh
 
 from o3d_lsmesh import SPDSolver, _block_kernel, constrained_fairing, ls_mesh, reconstruct_geometry
-from o3d_lsmesh._errors import ConvergenceError, SingularSystemError
-from o3d_lsmesh._solvers import (
-    DEFAULT_TOLERANCE,
-    IC_WORK,
-    _IncompleteCholesky,
-    _VCycle,
-    cholmod_available,
-    default_memory_budget,
-    estimate_factor_bytes,
-)
+from o3d_lsmesh.core import _iterative, tuning
+from o3d_lsmesh.core._iterative import IncompleteCholesky, VCycle
+from o3d_lsmesh.core.errors import ConvergenceError, SingularSystemError
+from o3d_lsmesh.core.solve import Plan, cholmod_available, default_memory_budget, estimate_factor_bytes
+from o3d_lsmesh.core.tuning import DEFAULT_TOLERANCE, IC_WORK
 from o3d_lsmesh.lsmesh import LSMeshSolver
 
 MATCH = 1e-6  # the documented agreement with the direct solution, relative
@@ -93,8 +88,8 @@ def test_auto_picks_direct_below_the_budget_and_iterative_above():
     assert tiny.backend != "iterative"
     A = sp.random(2000, 2000, density=0.002, random_state=0)
     matrix = (A @ A.T + sp.identity(2000)).tocsc()
-    assert SPDSolver(matrix, memory_budget=10**12).backend in ("cholmod", "scipy")
-    small_budget = SPDSolver(matrix, memory_budget=1000)
+    assert SPDSolver(matrix, _plan=Plan(memory_budget=10**12)).backend in ("cholmod", "scipy")
+    small_budget = SPDSolver(matrix, _plan=Plan(memory_budget=1000))
     assert small_budget.backend == "iterative"
     assert small_budget.estimated_factor_bytes > 1000
     b = np.random.default_rng(1).normal(size=(2000, 3))
@@ -149,9 +144,9 @@ def test_a_reduction_stops_each_column_at_a_fraction_of_its_starting_residual(pr
     exact = SPDSolver(matrix, backend="scipy").solve(rhs)
     x0 = exact + np.random.default_rng(0).normal(0, 1.0, exact.shape) * [1.0, 1e-3, 0.0]
     start = np.linalg.norm(rhs - matrix @ x0, axis=0)
-    plain = SPDSolver(matrix, backend="iterative", preconditioner=preconditioner)
+    plain = SPDSolver(matrix, backend="iterative", _plan=Plan(preconditioner=preconditioner))
     plain.solve(rhs, x0=x0)
-    solver = SPDSolver(matrix, backend="iterative", preconditioner=preconditioner, reduction=1e-3)
+    solver = SPDSolver(matrix, backend="iterative", _plan=Plan(preconditioner=preconditioner, reduction=1e-3))
     x = solver.solve(rhs, x0=x0)
     residual = np.linalg.norm(rhs - matrix @ x, axis=0)
     limit = np.maximum(DEFAULT_TOLERANCE * np.linalg.norm(rhs, axis=0), 1e-3 * start)
@@ -164,15 +159,15 @@ def test_a_reduction_stops_each_column_at_a_fraction_of_its_starting_residual(pr
     assert (copy.reduction, copy.preconditioner) == (1e-3, preconditioner)
     np.testing.assert_array_equal(copy.solve(rhs, x0=x0), x)
     # direct backends solve exactly and ignore it
-    direct = SPDSolver(matrix, backend="scipy", reduction=0.5)
+    direct = SPDSolver(matrix, backend="scipy", _plan=Plan(reduction=0.5))
     np.testing.assert_array_equal(direct.solve(rhs, x0=x0), exact)
     for bad in (0, 1, -0.1, 2.0, np.nan):
         with pytest.raises(ValueError, match=r"reduction must be None or a number in \(0, 1\)"):
-            SPDSolver(matrix, backend="iterative", reduction=bad)
+            SPDSolver(matrix, backend="iterative", _plan=Plan(reduction=bad))
     with pytest.raises(TypeError, match=r"reduction must be None or a number in \(0, 1\), got 'loose'"):
-        SPDSolver(matrix, backend="iterative", reduction="loose")
+        SPDSolver(matrix, backend="iterative", _plan=Plan(reduction="loose"))
     with pytest.raises(ValueError, match=r"preconditioner must be one of \['amg', 'ic0'\], got 'ilu'"):
-        SPDSolver(matrix, backend="iterative", preconditioner="ilu")
+        SPDSolver(matrix, backend="iterative", _plan=Plan(preconditioner="ilu"))
 
 
 def test_incomplete_cholesky_preconditioner_solves_to_the_tolerance_and_survives_a_breakdown():
@@ -184,7 +179,7 @@ def test_incomplete_cholesky_preconditioner_solves_to_the_tolerance_and_survives
     values, _, failed = _block_kernel.incomplete_cholesky(A.indptr, A.indices, A.data, 0.0)
     assert values is None and failed >= 0
     rhs = np.arange(12.0).reshape(4, 3)
-    solver = SPDSolver(A, backend="iterative", preconditioner="ic0")
+    solver = SPDSolver(A, backend="iterative", _plan=Plan(preconditioner="ic0"))
     np.testing.assert_allclose(solver.solve(rhs), np.linalg.solve(kershaw, rhs), rtol=0, atol=1e-8 * 33)
     assert solver._factor.shift > 0
     # a larger mesh system: the same solution as the factor, in fewer iterations than the AMG V-cycle
@@ -192,36 +187,36 @@ def test_incomplete_cholesky_preconditioner_solves_to_the_tolerance_and_survives
     V, F = grid(40, 40, z=lambda x, y: np.sin(3 * x) * y)
     matrix = LSMeshSolver((V, F), np.arange(0, 1600, 7), solver="iterative")._solver.matrix
     rhs = np.random.default_rng(1).normal(size=(1600, 3))
-    ic = SPDSolver(matrix, backend="iterative", preconditioner="ic0")
+    ic = SPDSolver(matrix, backend="iterative", _plan=Plan(preconditioner="ic0"))
     np.testing.assert_allclose(
         ic.solve(rhs), SPDSolver(matrix, backend="scipy").solve(rhs), rtol=0, atol=1e-6
     )
     assert ic._factor.shift == 0.0
-    assert isinstance(ic._factor, _IncompleteCholesky)
+    assert isinstance(ic._factor, IncompleteCholesky)
     # a UV sphere's poles (valence 300): IC(0)'s set-up would grow like the valence cubed, the V-cycle runs
     sphere = o3d.geometry.TriangleMesh.create_sphere(resolution=150)
     V, F = np.asarray(sphere.vertices), np.asarray(sphere.triangles)
     matrix = LSMeshSolver((V, F), np.arange(0, len(V), 7), solver="iterative")._solver.matrix
     lengths = np.diff(matrix.indptr).astype(float)
     assert (lengths**2).sum() / 4 > IC_WORK * matrix.nnz
-    poles = SPDSolver(matrix, backend="iterative", preconditioner="ic0")
+    poles = SPDSolver(matrix, backend="iterative", _plan=Plan(preconditioner="ic0"))
     rhs = np.random.default_rng(2).normal(size=(len(V), 3))
     np.testing.assert_allclose(
         poles.solve(rhs), SPDSolver(matrix, backend="scipy").solve(rhs), rtol=0, atol=1e-6
     )
-    assert isinstance(poles._factor, _VCycle)
+    assert isinstance(poles._factor, VCycle)
     with pytest.raises(
         SingularSystemError, match="matrix must be symmetric positive definite: .*row 1 has none"
     ):
-        SPDSolver(sp.csr_matrix([[1.0, 0.0], [0.0, 0.0]]), backend="iterative", preconditioner="ic0").solve(
-            np.ones(2)
-        )
+        SPDSolver(
+            sp.csr_matrix([[1.0, 0.0], [0.0, 0.0]]), backend="iterative", _plan=Plan(preconditioner="ic0")
+        ).solve(np.ones(2))
     with pytest.raises(
         SingularSystemError, match="matrix must be positive definite: its incomplete Cholesky"
     ):
-        SPDSolver(sp.csr_matrix([[1.0, 2.0], [2.0, -1.0]]), backend="iterative", preconditioner="ic0").solve(
-            np.ones(2)
-        )
+        SPDSolver(
+            sp.csr_matrix([[1.0, 2.0], [2.0, -1.0]]), backend="iterative", _plan=Plan(preconditioner="ic0")
+        ).solve(np.ones(2))
 
 
 @pytest.mark.parametrize("offset", [1e4, 1e6])
@@ -321,14 +316,12 @@ def test_update_refactor_pickle_and_errors():
     with pytest.raises(ValueError, match="max_iterations must be a positive"):
         SPDSolver(matrix, max_iterations=0)
     with pytest.raises(ValueError, match="memory_budget must be"):
-        SPDSolver(matrix, memory_budget=-1)
+        SPDSolver(matrix, _plan=Plan(memory_budget=-1))
     with pytest.raises(ValueError, match="solver must be one of"):
         ls_mesh(load_mesh("camel.ply"), [0], solver="magic")
 
 
 def _cholmod():
-    from o3d_lsmesh._solvers import cholmod_available
-
     return cholmod_available()
 
 
@@ -347,11 +340,9 @@ def _scrambled_system(n_side=60, seed=0):
 
 
 def test_scattered_numbering_is_renumbered_and_solutions_keep_the_callers_order(monkeypatch):
-    import o3d_lsmesh._solvers as solvers
-
     N, V, weights = _scrambled_system()
     span = np.abs(N.indices - np.repeat(np.arange(N.shape[0]), np.diff(N.indptr))).mean()  # plain measure
-    monkeypatch.setattr(solvers, "LOCAL_SPAN", int(span / 4))  # this small system counts as scattered
+    monkeypatch.setattr(tuning, "LOCAL_SPAN", int(span / 4))  # this small system counts as scattered
     b = weights[:, None] * V
     direct = SPDSolver(N, backend="scipy").solve(b)
     solver = SPDSolver(N, backend="iterative")
@@ -376,11 +367,9 @@ def test_scattered_numbering_is_renumbered_and_solutions_keep_the_callers_order(
 
 
 def test_locality_of_orders_by_the_sparser_graph_before_the_product(monkeypatch):
-    import o3d_lsmesh._solvers as solvers
-
     N, V, weights = _scrambled_system()
     span = np.abs(N.indices - np.repeat(np.arange(N.shape[0]), np.diff(N.indptr))).mean()
-    monkeypatch.setattr(solvers, "LOCAL_SPAN", int(span / 4))
+    monkeypatch.setattr(tuning, "LOCAL_SPAN", int(span / 4))
     from o3d_lsmesh import _block_kernel
     from o3d_lsmesh.laplacian import laplacian_matrix
 
@@ -390,16 +379,16 @@ def test_locality_of_orders_by_the_sparser_graph_before_the_product(monkeypatch)
     A = sp.hstack([L.T, sp.diags(np.sqrt(weights))], format="csc")  # N = A A^T
     b = weights[:, None] * V
     direct = SPDSolver(N, backend="scipy").solve(b)
-    solver = SPDSolver(product_of=A, backend="iterative", locality_of=L)
+    solver = SPDSolver(backend="iterative", _plan=Plan(product_of=A, locality_of=L))
     # ordered at construction by the 1-ring's reverse Cuthill-McKee, the product formed renumbered
     assert solver._order is not None
     assert solver._order.tolist() == _block_kernel.level_order(L.indptr, L.indices).tolist()
     assert abs(solver.matrix - N).max() < 1e-12 * abs(N).max()
     assert relative(solver.solve(b), direct) < MATCH
     with pytest.raises(ValueError, match=r"locality_of must have shape \(3600, 3600\), got \(3, 3\)"):
-        SPDSolver(N, backend="iterative", locality_of=sp.identity(3, format="csr"))
+        SPDSolver(N, backend="iterative", _plan=Plan(locality_of=sp.identity(3, format="csr")))
     with pytest.raises(TypeError, match="locality_of must be a scipy sparse matrix, got ndarray"):
-        SPDSolver(N, backend="iterative", locality_of=np.eye(3))
+        SPDSolver(N, backend="iterative", _plan=Plan(locality_of=np.eye(3)))
 
 
 def test_local_numbering_is_kept():
@@ -413,15 +402,14 @@ def test_local_numbering_is_kept():
 
 
 def test_gram_matrix_takes_64_bit_indices_where_32_might_not_hold_the_product(monkeypatch):
-    import o3d_lsmesh._solvers as solvers
     from o3d_lsmesh import _block_kernel
 
     A = sp.random(30, 40, density=0.2, random_state=1, format="csc")
     seen = []
     gram = _block_kernel.gram
     monkeypatch.setattr(_block_kernel, "gram", lambda *parts: seen.append(parts[0].dtype) or gram(*parts))
-    small = solvers.gram_matrix(A)
+    small = _iterative.gram_matrix(A)
     assert seen[-1] == np.int32 and abs(small - A @ A.T).max() < 1e-14
-    monkeypatch.setattr(solvers, "INT32_ENTRIES", 10)  # as if 32 bits held ten entries
-    wide = solvers.gram_matrix(A)
+    monkeypatch.setattr(_iterative, "INT32_ENTRIES", 10)  # as if 32 bits held ten entries
+    wide = _iterative.gram_matrix(A)
     assert seen[-1] == np.int64 and abs(wide - A @ A.T).max() < 1e-14

@@ -11,7 +11,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from o3d_lsmesh import SingularSystemError, SPDSolver
-from o3d_lsmesh._solvers import cholmod_available
+from o3d_lsmesh.core import _direct, tuning
+from o3d_lsmesh.core import solve as solvers
+from o3d_lsmesh.core.solve import Plan, cholmod_available
 
 
 def spd(n=60, seed=0):
@@ -116,7 +118,6 @@ def test_scipy_solves_recycle_the_span_of_earlier_right_hand_sides():
 
 
 def test_scipy_update_refactors_when_the_correction_fails(monkeypatch):
-    import o3d_lsmesh._solvers as solvers
 
     A, b = spd()
     C = sp.csc_matrix((np.array([3.0]), (np.array([4]), np.array([0]))), shape=(A.shape[0], 1))
@@ -126,7 +127,7 @@ def test_scipy_update_refactors_when_the_correction_fails(monkeypatch):
     def fail(self, new, z):
         raise np.linalg.LinAlgError("not positive definite")
 
-    monkeypatch.setattr(solvers._Woodbury, "_extend", fail)
+    monkeypatch.setattr(_direct.Woodbury, "_extend", fail)
     np.testing.assert_allclose(solver.solve(b), spla.spsolve(A + C @ C.T, b), rtol=1e-10)
     assert solver._factor._rank == 0  # a fresh factor of A + C C^T, no correction
 
@@ -183,7 +184,6 @@ def test_bad_arguments():
 
 
 def test_fallback_warns_without_scikit_sparse(monkeypatch):
-    import o3d_lsmesh._solvers as solvers
     from o3d_lsmesh import O3DLSMeshWarning
 
     monkeypatch.setattr(solvers, "_cholmod", None)
@@ -236,7 +236,7 @@ def test_product_mode_factors_a_at_without_forming_it(backend):
     A = sp.csc_matrix((A.data[::-1], (A.row[::-1], A.col[::-1])), shape=(n, k))
     b = rng.normal(size=(n, 3))
     normal = (A @ A.T).tocsc()
-    solver = SPDSolver(product_of=A, backend=backend)
+    solver = SPDSolver(backend=backend, _plan=Plan(product_of=A))
     np.testing.assert_allclose(solver.solve(b), spla.spsolve(normal, b), rtol=1e-9, atol=1e-12)
     assert solver.shape == (n, n) and abs(solver.matrix - normal).max() < 1e-12
     C = sp.csc_matrix((np.array([2.0, 0.5]), (np.array([1, 30]), np.array([0, 1]))), shape=(n, 2))
@@ -253,13 +253,13 @@ def test_product_mode_factors_a_at_without_forming_it(backend):
 def test_product_mode_raises():
     A, _ = spd()
     with pytest.raises(TypeError, match="exactly one of matrix and product_of"):
-        SPDSolver(A, product_of=A)
+        SPDSolver(A, _plan=Plan(product_of=A))
     with pytest.raises(TypeError, match="exactly one of matrix and product_of"):
         SPDSolver()
     with pytest.raises(TypeError, match="product_of must be a scipy sparse matrix, got ndarray"):
-        SPDSolver(product_of=np.eye(3))
+        SPDSolver(_plan=Plan(product_of=np.eye(3)))
     with pytest.raises(SingularSystemError):
-        SPDSolver(product_of=sp.csc_matrix(np.array([[1.0, 0.0], [0.0, 0.0]]))).solve(np.ones(2))
+        SPDSolver(_plan=Plan(product_of=sp.csc_matrix(np.array([[1.0, 0.0], [0.0, 0.0]])))).solve(np.ones(2))
 
 
 # --- issue 12, classes 1 and 4: negligible or overflowing penalties raise, naming the parameter
@@ -374,7 +374,8 @@ def test_check_constant_modes_against_the_smallest_eigenvalue():
     # the quotient bounds the smallest eigenvalue from above: a system it rejects is truly near-singular
     from conftest import grid
 
-    from o3d_lsmesh._solvers import NEGLIGIBLE, check_constant_modes, operator_scale
+    from o3d_lsmesh.core.solve import check_constant_modes, operator_scale
+    from o3d_lsmesh.core.tuning import NEGLIGIBLE
     from o3d_lsmesh.laplacian import laplacian_matrix
 
     V, F = grid(6, 6)
@@ -459,18 +460,17 @@ def test_peak_memory_per_vertex_at_200k(statement):
 def test_solve_spd_dense_and_sparse_paths_equal_spsolve(n, monkeypatch):
     # one-off systems: a dense Cholesky up to DENSE_UNKNOWNS unknowns, SPDSolver beyond; both paths on
     # both kinds of input against SciPy's spsolve, and each path forced on the other's sizes
-    from o3d_lsmesh import _solvers
 
     A, b = spd(n, seed=n)
     expected = spla.spsolve(A.tocsc(), b)
-    for limit in (_solvers.DENSE_UNKNOWNS, -1, 10**6):
-        monkeypatch.setattr(_solvers, "DENSE_UNKNOWNS", limit)
+    for limit in (tuning.DENSE_UNKNOWNS, -1, 10**6):
+        monkeypatch.setattr(tuning, "DENSE_UNKNOWNS", limit)
         for matrix in (A, A.toarray()):
-            np.testing.assert_allclose(_solvers.solve_spd(matrix, b), expected, rtol=1e-9, atol=1e-12)
+            np.testing.assert_allclose(solvers.solve_spd(matrix, b), expected, rtol=1e-9, atol=1e-12)
 
 
 def test_solve_spd_dense_path_raises_on_an_indefinite_matrix():
-    from o3d_lsmesh._solvers import solve_spd
+    from o3d_lsmesh.core.solve import solve_spd
 
     with pytest.raises(SingularSystemError, match="not positive definite"):
         solve_spd(-np.identity(4), np.ones(4))

@@ -17,6 +17,7 @@ __all__ = [
     "InputTypeError",
     "O3DLSMeshWarning",
     "SingularSystemError",
+    "called_from_outside",
     "warn",
 ]
 
@@ -79,3 +80,15 @@ def warn(message: str, category: type[Warning] = O3DLSMeshWarning) -> None:
     finally:
         del frame
     warnings.warn(message, category, stacklevel=level)
+
+
+def called_from_outside(depth: int = 1) -> bool:
+    """Whether the function ``depth`` calls above the caller of this one was called from outside the package
+    (``depth=1``: the caller's own caller), e.g. to warn about a deprecated keyword only to users."""
+    frame = inspect.currentframe()
+    try:
+        for _ in range(depth + 1):
+            frame = frame.f_back if frame is not None else None
+        return frame is None or not os.path.abspath(frame.f_code.co_filename).startswith(_PACKAGE)
+    finally:
+        del frame
