@@ -356,3 +356,141 @@ def test_scan_normal_matrix_is_the_sum_of_its_energy_rows(case, t):
     np.testing.assert_allclose(N.toarray(), expected, atol=1e-12)
     assert N.has_sorted_indices and np.array_equal(ops.lower_csc(N).toarray(), np.tril(N.toarray()))
     assert w.tolist() == [rim_weight if any(rim[v] for v in tri) else 1.0 for tri in triangles]
+
+
+def _curve_step_reference(curves, X, X0, min_length=4):
+    """Section 3.3 written per segment: estimates of both ends, held ends fixed, averaged per vertex."""
+    from o3d_lsmesh.core.boundary import BoundaryCurves
+
+    if isinstance(curves, BoundaryCurves):
+        loops, chains, held = curves.loops, curves.chains, set(curves.junctions.tolist())
+    else:
+        loops, chains, held = curves, [], set()
+    loops = [list(map(int, c)) for c in loops if len(c) >= min_length]
+    chains = [list(map(int, c)) for c in chains if len(c) > min_length]
+    held |= {c[0] for c in chains} | {c[-1] for c in chains}
+    estimates = {}
+    segments = []
+    for c in loops:
+        k = len(c)
+        segments += [(c[i], c[(i + 1) % k], c[i - 1], c[(i + 2) % k]) for i in range(k)]
+    for c in chains:
+        k = len(c)
+        segments += [
+            (c[i], c[i + 1], c[i - 1] if i > 0 else -1, c[i + 2] if i + 2 < k else -1) for i in range(k - 1)
+        ]
+    for a, b, oa, ob in segments:
+        mid = 0.5 * (X0[a] + X0[b])
+        if a not in held and b not in held:
+            estimates.setdefault(a, []).append((X[oa] - X[ob]) / 6 + mid)
+            estimates.setdefault(b, []).append((X[ob] - X[oa]) / 6 + mid)
+        elif a in held and b not in held:
+            estimates.setdefault(b, []).append(X0[a] + X0[b] - X[a])
+        elif b in held and a not in held:
+            estimates.setdefault(a, []).append(X0[a] + X0[b] - X[b])
+    return {v: np.mean(e, axis=0) for v, e in estimates.items()}
+
+
+@pytest.mark.parametrize("case", ["loops", "fin", "pinch"])
+def test_curve_laplacian_step_matches_per_segment_estimates(case):
+    from o3d_lsmesh.core.boundary import boundary_curves
+
+    if case == "loops":
+        curves = [np.array([5, 6, 7, 8, 9]), np.array([0, 1, 2]), np.array([10, 11, 12, 13])]
+    else:
+        F = grid(6, 6)[1]
+        if case == "fin":  # a flap on an inner edge: chains ending at the fin's ends
+            F = np.vstack([F, [[14, 15, 36]]])
+        else:  # two grids sharing one corner vertex
+            F = np.vstack([F, F + 35])
+        curves = boundary_curves(F, int(F.max()) + 1)
+    rng = np.random.default_rng(0)
+    X, X0 = rng.normal(size=(80, 3)), rng.normal(size=(80, 3))
+    op = ops.curve_laplacian(curves)
+    new = op.step(X, op.target(X0))
+    expected = _curve_step_reference(curves, X, X0)
+    assert sorted(expected) == op.vertex.tolist()
+    np.testing.assert_allclose(new, np.array([expected[v] for v in op.vertex.tolist()]), atol=1e-13)
+
+
+def _plain_patch_weights(x, triangles, nv, cotangent):
+    weight = {}
+    for tri in triangles.tolist():
+        for c in range(3):
+            a, b, o = tri[c], tri[(c + 1) % 3], tri[(c + 2) % 3]
+            u, v = x[a] - x[o], x[b] - x[o]
+            key = (min(a, b), max(a, b))
+            weight[key] = weight.get(key, 0.0) + (
+                np.dot(u, v) / np.linalg.norm(np.cross(u, v)) if cotangent else 0.0
+            )
+    keys = sorted(weight)
+    w = np.array([0.5 * weight[k] for k in keys]) if cotangent else np.ones(len(keys))
+    if cotangent:
+        w = np.maximum(w, 0.05 * np.abs(w).mean())
+    degree = np.zeros(nv)
+    for (a, b), wk in zip(keys, w):
+        degree[a] += wk
+        degree[b] += wk
+    mass = degree.copy()
+    if cotangent:
+        mass[:] = 0.0
+        for tri in triangles.tolist():
+            area = 0.5 * np.linalg.norm(np.cross(x[tri[1]] - x[tri[0]], x[tri[2]] - x[tri[0]]))
+            for v in tri:
+                mass[v] += area / 3.0
+        mass /= mass[mass > 0].mean()
+    return keys, w, degree, np.array([1.0 / m if m > 0 else 0.0 for m in mass])
+
+
+@pytest.mark.parametrize("level", [0, 1, 2])
+@pytest.mark.parametrize("cotangent", [False, True])
+@pytest.mark.parametrize("last", [True, False])
+def test_patch_system_minimizes_plain_loop_energy(level, cotangent, last):
+    V, F = grid(8, 8, z=lambda x, y: 0.3 * np.sin(3 * x) * np.cos(2 * y))
+    V = V + np.random.default_rng(level).normal(0.0, 0.01, V.shape)
+    nv = len(V)
+    ring = plain_neighbours(F, nv)
+    border = {v for v in range(nv) if V[v, 0] in (0.0, 1.0) or V[v, 1] in (0.0, 1.0)}
+    grid_index = np.arange(nv).reshape(8, 8)
+    unknown = grid_index[3:5, 2:6].ravel()
+    if last:  # renumber so that the unknowns are the last vertices
+        order = np.r_[np.setdiff1d(np.arange(nv), unknown), unknown]
+        new = np.empty(nv, dtype=np.int64)
+        new[order] = np.arange(nv)
+        V, F, unknown = V[order], new[F], np.arange(nv - len(unknown), nv)
+        ring = plain_neighbours(F, nv)
+        border = {int(new[b]) for b in border}
+    u = set(unknown.tolist())
+    ring0 = sorted({w for v in u for w in ring[v]} - u)
+    ring1 = sorted({w for v in ring0 for w in ring[v]} - u - set(ring0))
+    keys, w, degree, scale = _plain_patch_weights(V, F, nv, cotangent)
+    conn = Connectivity(F, nv)
+    for got, expected in zip(ops.patch_weights(V, conn, cotangent), (w, degree, scale)):
+        np.testing.assert_allclose(got, expected, rtol=1e-12)
+    A, b = ops.patch_system(V, conn, unknown, [np.array(ring0), np.array(ring1)], level, cotangent=cotangent)
+    # the energy's rows, each a function of all vertices; minimized over the unknowns by dense least squares
+    lap = []
+    for r in range(nv):
+        row = np.zeros(nv)
+        row[r] = degree[r]
+        for (a, c), wk in zip(keys, w):
+            if r in (a, c):
+                row[c if r == a else a] -= wk
+        lap.append(scale[r] * row)
+    rows_used = sorted(u | set(ring0))
+    if level == 0:
+        energy = [np.sqrt(wk) * (np.eye(nv)[a] - np.eye(nv)[c]) for (a, c), wk in zip(keys, w)]
+    elif level == 1:
+        energy = [lap[r] for r in rows_used]
+    else:
+        valid = set(rows_used) | set(ring1)
+        energy = [
+            lap[a] - lap[c]
+            for a, c in keys
+            if (a in rows_used or c in rows_used) and a in valid and c in valid
+        ]
+    E = np.array(energy)
+    known = np.setdiff1d(np.arange(nv), unknown)
+    reference = np.linalg.lstsq(E[:, unknown], -E[:, known] @ V[known], rcond=None)[0]
+    np.testing.assert_allclose(np.linalg.solve(A.toarray(), b), reference, atol=1e-9)
+    assert not border & u

@@ -9,11 +9,14 @@ Docs: ``docs/algorithms/`` (one page per method).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
 import scipy.sparse as sp
 
+from .arrays import concatenated_ranges
+from .boundary import BoundaryCurves
 from .connectivity import (
     RING_COLUMN_SLOT,
     RING_ROW_SLOT,
@@ -25,13 +28,17 @@ from .connectivity import (
 )
 
 __all__ = [
+    "CurveOperator",
     "LocalMatrices",
     "Penalty",
     "accumulate_block",
     "cotangent_laplacian",
+    "curve_laplacian",
     "graph_laplacian",
     "local_operator",
     "lower_csc",
+    "patch_system",
+    "patch_weights",
     "penalty_matrix",
     "rim_neighbours",
     "scan_normal_matrix",
@@ -594,3 +601,229 @@ def lower_csc(symmetric: sp.csr_matrix) -> sp.csc_matrix:
     indptr = np.zeros(n + 1, dtype=symmetric.indptr.dtype)
     np.cumsum(np.bincount(rows[keep], minlength=n), out=indptr[1:])
     return sp.csc_matrix((symmetric.data[keep], symmetric.indices[keep], indptr), shape=(n, n))
+
+
+# ---------------------------------------------------------------------------------- Liu et al. section 3.3
+
+
+@dataclass(frozen=True)
+class CurveOperator:
+    """One averaged relaxation step of every boundary curve: ``X[vertex] <- moving @ X[support] + targets @ X0[support]``.
+
+    ``vertex (b,)`` the boundary vertices that move, ``support (s,)`` those their estimates read;
+    ``moving`` and ``targets`` ``(b, s)`` CSR. Arrays only: pickles, shared between threads.
+    """
+
+    vertex: np.ndarray
+    support: np.ndarray
+    moving: sp.csr_matrix
+    targets: sp.csr_matrix
+
+    def __len__(self) -> int:
+        return len(self.vertex)
+
+    def target(self, positions0: np.ndarray) -> np.ndarray:
+        """The constant part of the step (the segment midpoints' share), ``(b, 3)``."""
+        return self.targets @ positions0[self.support]
+
+    def step(self, positions: np.ndarray, target: np.ndarray) -> np.ndarray:
+        """New positions ``(b, 3)`` of :attr:`vertex` after one averaged relaxation of every segment."""
+        return self.moving @ positions[self.support] + target
+
+
+def curve_laplacian(curves: BoundaryCurves | list, min_length: int = 4) -> CurveOperator:
+    """The :class:`CurveOperator` of boundary curves (Liu et al. section 3.3).
+
+    ``curves``: a :class:`~.boundary.BoundaryCurves` (its junctions and chain ends held) or a list of
+    closed loops. Segment ``(a, b)`` with outer neighbours ``a'``, ``b'`` estimates
+    ``a <- (a' - b') / 6 + (a0 + b0) / 2`` (and ``b`` alike); with ``a`` held, ``b <- (a0 + b0) - a``.
+    A vertex averages its estimates. Loops under ``min_length`` vertices and chains under
+    ``min_length`` edges are held.
+
+    >>> op = curve_laplacian([np.array([5, 6, 7, 8])])
+    >>> op.vertex.tolist(), (op.moving.toarray()[0] * 12).round().tolist()  # (p6 + p8 - 2 p7) / 12
+    ([5, 6, 7, 8], [0.0, 1.0, -2.0, 1.0])
+    """
+    if isinstance(curves, BoundaryCurves):
+        loops, chains, held = list(curves.loops), list(curves.chains), curves.junctions
+    else:
+        loops, chains, held = list(curves), [], np.zeros(0, dtype=np.int64)
+    loops = [np.asarray(loop, dtype=np.int64) for loop in loops if len(loop) >= min_length]
+    # a chain of k edges has k + 1 vertices; like a short loop, a short chain would only shrink
+    chains = [np.asarray(chain, dtype=np.int64) for chain in chains if len(chain) > min_length]
+    ends = [chain[[0, -1]] for chain in chains]
+    held = np.unique(np.concatenate([np.asarray(held, dtype=np.int64).ravel(), *ends]))
+    a, b, outer_a, outer_b = _segments(loops, closed=True)
+    ca, cb, couter_a, couter_b = _segments(chains, closed=False)
+    a, b = np.concatenate([a, ca]), np.concatenate([b, cb])
+    outer_a, outer_b = np.concatenate([outer_a, couter_a]), np.concatenate([outer_b, couter_b])
+    a_held, b_held = np.isin(a, held), np.isin(b, held)
+    # every estimate: (vertex, [(column, weight)] of the moving part, [(column, weight)] of the target part)
+    blocks = []
+    inner = ~a_held & ~b_held  # both ends free (then both have outer neighbours)
+    ia, ib, oa, ob = a[inner], b[inner], outer_a[inner], outer_b[inner]
+    blocks.append((ia, [(oa, 1 / 6), (ob, -1 / 6)], [(ia, 0.5), (ib, 0.5)]))
+    blocks.append((ib, [(ob, 1 / 6), (oa, -1 / 6)], [(ia, 0.5), (ib, 0.5)]))
+    start = a_held & ~b_held  # a is held: the midpoint constraint alone gives b
+    blocks.append((b[start], [(a[start], -1.0)], [(a[start], 1.0), (b[start], 1.0)]))
+    end = ~a_held & b_held
+    blocks.append((a[end], [(b[end], -1.0)], [(a[end], 1.0), (b[end], 1.0)]))
+    vertex_all = np.concatenate([block[0] for block in blocks])
+    vertex, row = np.unique(vertex_all, return_inverse=True)
+    scale = 1.0 / np.maximum(np.bincount(row, minlength=len(vertex)), 1)  # average the estimates
+    columns_all = np.concatenate([column for block in blocks for part in (1, 2) for column, _ in block[part]])
+    support = np.unique(columns_all)
+
+    def matrix(part: int) -> sp.csr_matrix:
+        rows = np.concatenate([np.searchsorted(vertex, block[0]) for block in blocks for _ in block[part]])
+        columns = np.searchsorted(
+            support, np.concatenate([column for block in blocks for column, _ in block[part]])
+        )
+        weights = np.concatenate(
+            [np.full(len(column), weight) for block in blocks for column, weight in block[part]]
+        )
+        out = sp.csr_matrix((weights * scale[rows], (rows, columns)), shape=(len(vertex), len(support)))
+        out.sum_duplicates()
+        return out
+
+    return CurveOperator(vertex, support, matrix(1), matrix(2))
+
+
+def _segments(curves: list, *, closed: bool):
+    # segments (a, b) of every curve with their outer neighbours (a', b') (-1 past a chain end)
+    if not curves:
+        empty = np.zeros(0, dtype=np.int64)
+        return empty, empty, empty, empty
+    lengths = np.array([len(c) for c in curves], dtype=np.int64)
+    vertex = np.concatenate(curves)
+    position = concatenated_ranges(0, lengths)  # within its curve
+    start = np.arange(len(vertex)) - position
+    length = np.repeat(lengths, lengths)
+    if closed:  # loop [5, 6, 7, 8]: segment (5, 6) has outer neighbours (8, 7)
+
+        def at(by):
+            return vertex[start + (position + by) % length]
+
+        return vertex, at(1), at(-1), at(2)
+    # a chain of k + 1 vertices has k segments: drop the last vertex as a segment start
+    keep = position < length - 1
+    a = vertex[keep]
+    b = vertex[np.flatnonzero(keep) + 1]
+    pos, size, first = position[keep], length[keep], start[keep]
+    outer_a = np.where(pos > 0, vertex[np.maximum(first + pos - 1, 0)], -1)
+    outer_b = np.where(pos + 2 < size, vertex[np.minimum(first + pos + 2, len(vertex) - 1)], -1)
+    return a, b, outer_a, outer_b
+
+
+# ---------------------------------------------------------------------------------- the hole patch
+
+
+def patch_weights(
+    vertices: np.ndarray, conn: Connectivity, cotangent: bool
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Edge weights ``w (e,)``, degrees ``sum w (nv,)`` and Laplacian row scales ``(nv,)`` of a local mesh.
+
+    Uniform: ``w = 1``, scale ``1 / degree`` (eq. 1). Cotangent: ``w = (cot a + cot b) / 2`` clamped
+    below at 5% of the mean ``|w|`` (obtuse pairs would make ``K`` indefinite), scale the inverse
+    vertex areas (a third of each triangle's) normalized to mean 1. No area or degree: scale 0.
+    """
+    tris, nv, x = conn.triangles, conn.n, vertices
+    i, j = conn.edges[:, 0], conn.edges[:, 1]
+    e = len(i)
+    if cotangent:  # corner-major, as the half-edges: the angle at c + 2, opposite (c, c + 1)
+        cot = []
+        for c in range(3):
+            o = x[tris[:, (c + 2) % 3]]
+            u, v = x[tris[:, c]] - o, x[tris[:, (c + 1) % 3]] - o
+            cot.append(_dot(u, v) / np.fmax(np.sqrt(_dot(*[np.cross(u, v)] * 2)), 1e-300))
+        w = 0.5 * np.bincount(conn.halfedge_edge, np.concatenate(cot), minlength=e)
+        floor = 0.05 * (_sequential_sum(np.abs(w)) / e) if e else 0.0
+        w = np.fmax(w, floor)
+    else:
+        w = np.ones(e)
+    # summed edge by edge, both ends in turn (the order of the sums is part of the result)
+    degree = np.bincount(np.stack([i, j], axis=1).ravel(), np.repeat(w, 2), minlength=nv)
+    mass: np.ndarray = degree
+    if cotangent:
+        cross = np.cross(x[tris[:, 1]] - x[tris[:, 0]], x[tris[:, 2]] - x[tris[:, 0]])
+        mass = np.bincount(tris.ravel(), np.repeat(0.5 * np.sqrt(_dot(cross, cross)) / 3.0, 3), minlength=nv)
+        positive = mass[mass > 0]
+        mass = mass / (_sequential_sum(positive) / len(positive) if len(positive) else 1.0)
+    scale = np.divide(1.0, mass, out=np.zeros(nv), where=mass > 0)
+    return w, degree, scale
+
+
+def _dot(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    return u[:, 0] * v[:, 0] + u[:, 1] * v[:, 1] + u[:, 2] * v[:, 2]
+
+
+def _sequential_sum(values: np.ndarray) -> float:
+    return float(np.cumsum(values)[-1]) if len(values) else 0.0
+
+
+def patch_system(
+    vertices: np.ndarray,
+    conn: Connectivity,
+    unknown: np.ndarray,
+    rings: list,
+    level: int,
+    *,
+    cotangent: bool = False,
+) -> tuple[sp.csr_matrix, np.ndarray]:
+    """The SPD system ``(A (u, u), b (u, 3))`` whose solution places the ``unknown`` local vertices.
+
+    ``K = D - W``, ``L = S K`` of :func:`patch_weights`; the energy at continuity ``level``:
+    0 ``x^T K x`` (harmonic); 1 ``sum |(L x)_r|^2`` over the rows touching an unknown (LS meshes eq. 3);
+    2 ``sum |(L x)_r - (L x)_s|^2`` over the edges touching such a row (``rings[0]`` the loop
+    vertices, ``rings[1]`` the next ring: rows only where one-rings are complete). Others fixed at
+    ``vertices``.
+
+    >>> conn = Connectivity(np.array([[0, 1, 3], [1, 2, 3], [2, 0, 3]]))
+    >>> A, b = patch_system(np.eye(4)[:, :3], conn, np.array([3]), [np.arange(3)], 0)
+    >>> (np.linalg.solve(A.toarray(), b) * 3).round(6).tolist()
+    [[1.0, 1.0, 1.0]]
+    """
+    x, nv = vertices, conn.n
+    i, j = conn.edges[:, 0], conn.edges[:, 1]
+    w, degree, scale = patch_weights(x, conn, cotangent)
+    diagonal = np.arange(nv)
+    K = sp.csr_matrix(
+        (
+            np.concatenate([-w, -w, degree]),
+            (np.concatenate([i, j, diagonal]), np.concatenate([j, i, diagonal])),
+        ),
+        shape=(nv, nv),
+    )
+    if level == 0:
+        known = np.ones(nv, dtype=bool)
+        known[unknown] = False
+        return K[unknown][:, unknown], -(K[unknown][:, np.flatnonzero(known)] @ x[known])
+    L = K.copy()  # L = S K: K's pattern with its rows scaled
+    L.data = L.data * np.repeat(scale, np.diff(L.indptr))
+    rows = np.zeros(nv, dtype=bool)
+    rows[unknown] = True
+    rows[rings[0]] = True  # rows whose Laplacian involves an unknown
+    if level == 1:
+        A_full = L[np.flatnonzero(rows)]
+    else:  # the edge difference operator: row e is +1 at plus[e] and -1 at minus[e]
+        valid = rows.copy()
+        valid[rings[1]] = True
+        keep = (rows[i] | rows[j]) & valid[i] & valid[j]
+        plus, minus = i[keep], j[keep]
+        G = sp.csr_matrix(
+            (
+                np.tile([1.0, -1.0], len(plus)),
+                np.stack([plus, minus], axis=1).ravel(),
+                np.arange(0, 2 * len(plus) + 1, 2),
+            ),
+            shape=(len(plus), nv),
+        )
+        A_full = G @ L
+    A_full = A_full.tocsc()
+    if len(unknown) and unknown[0] == nv - len(unknown) and (np.diff(unknown) == 1).all():
+        A_u = A_full[:, nv - len(unknown) :]  # the usual layout: the unknowns are the last columns
+    else:
+        A_u = A_full[:, unknown]
+    fixed = x.copy()
+    fixed[unknown] = 0.0  # A_known x_known, without slicing the known columns out
+    return A_u.T @ A_u, -(A_u.T @ (A_full @ fixed))
