@@ -1,39 +1,10 @@
 """Compact geometry encoding with geometry-aware bases (Sorkine et al., section V).
 
-The geometry of a mesh whose connectivity the decoder already has is stored as
-the indices of ``k`` anchors, in greedy selection order, and their positions:
-the coefficients of the relaxed geometry-aware basis (section II.C, ``c_i =
-x_{a_i}``). The decoder solves the relaxed least-squares system (eq. 1)::
-
-    min_x ||L x||^2 + sum_i omega^2 |x_{a_i} - c_i|^2
-
-with ``omega = 10 n`` by default, which makes the reconstruction practically
-interpolatory at the anchors while keeping the rank-1 updates of section III
-for progressive decoding.
-
-Stream layout (little-endian), version 1::
-
-    offset size field
-    0      4    magic b"LSMG"
-    4      1    version (1)
-    5      1    bits: quantization bits per coordinate, 1..31
-    6      1    index_bits: ceil(log2 n), at least 1
-    7      1    reserved, 0
-    8      4    n: vertex count (uint32)
-    12     4    k: anchor count (uint32), 1..n
-    16     4    connectivity checksum: CRC-32 of the sorted unique edges (int64)
-    20     8    omega (float64), positive
-    28     24   bounding box minimum of the anchors (3 float64)
-    52     24   bounding box maximum of the anchors (3 float64)
-    76     ...  payload: k indices of index_bits bits, then 3k coordinates of
-                bits bits (x, y, z per anchor), MSB first, zero-padded to a byte
-    end-4  4    CRC-32 of everything before it
-
-A coordinate ``x`` in ``[lo, hi]`` is stored as ``round((x - lo) / (hi - lo) *
-(2^bits - 1))``, so the quantization error is at most ``(hi - lo) / (2
-(2^bits - 1))`` per coordinate. Decoding checks the length, magic, version,
-checksum and every field: truncated, corrupted or foreign bytes raise
-``ValueError`` and never give a mesh.
+A mesh's geometry, for a decoder that has its connectivity, is the indices of ``k`` anchors in greedy
+selection order and their quantized positions (the relaxed basis' coefficients, section II.C). The
+decoder solves eq. 1, ``min ||L x||^2 + sum_i omega^2 |x_{a_i} - c_i|^2`` with ``omega = 10 n`` by
+default; progressive decoding adds anchors by rank-k updates (section III). The stream layout and its
+checks: ``docs/algorithms/encoding.rst``.
 """
 
 from __future__ import annotations
@@ -47,13 +18,13 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .._o3d import MeshData, new_mesh, read_mesh
-from .._progress import check_progress, progress_bar, stages
-from .._quantization import dequantize, quantize
 from .._solvers import check_weight_pins_components
-from .._validate import as_choice, as_count, as_positive_float
-from ..laplacian import laplacian_matrix
-from ..topology import connected_components, unique_edges
-from .lsmesh import LSMeshSystem
+from ..core.arrays import dequantize, quantize
+from ..core.connectivity import connected_components, unique_edges
+from ..core.errors import InputError, InputTypeError
+from ..core.progress import check_progress, progress_bar, stages
+from ..core.validate import as_choice, as_count, as_positive_float
+from .lsmesh import LSMeshSystem, laplacian_matrix
 from .selection import SELECTION_METHODS, control_point_selection
 
 if TYPE_CHECKING:
@@ -126,13 +97,9 @@ def encode_geometry(
 ) -> bytes:
     """Encode the geometry of ``mesh`` as ``count`` quantized anchors (geometry-aware bases, section V).
 
-    The anchors are chosen by :func:`~o3d_lsmesh.select_control_points` with
-    the decoder's weight, so that greedy selection minimizes the maximum error
-    of exactly the reconstruction the decoder computes (section IV). The
-    stream holds the anchor indices at ``ceil(log2 n)`` bits each and their
-    coordinates uniformly quantized to ``bits`` bits in the anchors' bounding
-    box: about ``count * (log2 n + 3 bits)`` bits plus an 80-byte header and
-    checksum (see the module docstring for the layout).
+    The anchors come from :func:`~o3d_lsmesh.select_control_points` at the decoder's weight (so greedy
+    selection minimizes the error of the decoder's reconstruction, section IV): about
+    ``count * (log2 n + 3 bits)`` bits plus an 80-byte header and checksum.
 
     Parameters
     ----------
@@ -146,8 +113,7 @@ def encode_geometry(
     weight : float, optional
         Anchor weight ``omega``; default ``10 n`` as in the paper.
     progress : bool
-        Show a tqdm bar over the anchors selected (the per-component seeds
-        first, then one per greedy step, ending at ``count``).
+        Show a bar over the anchors selected.
 
     Returns
     -------
@@ -155,30 +121,27 @@ def encode_geometry(
 
     Raises
     ------
-    ValueError
-        ``count`` or ``bits`` out of range, more than ``2**32 - 1`` vertices,
-        non-positive ``weight`` or an invalid mesh.
+    InputError
+        ``count``, ``bits`` or ``weight`` out of range, more than ``2**32 - 1`` vertices, an invalid mesh.
 
     Examples
     --------
     >>> import open3d as o3d
     >>> sphere = o3d.geometry.TriangleMesh.create_sphere(resolution=10)
-    >>> data = encode_geometry(sphere, 20, bits=10)
-    >>> len(data)  # 76-byte header + 20 * (8 + 3 * 10) bits + 4-byte CRC
+    >>> len(encode_geometry(sphere, 20, bits=10))  # 76-byte header + 20 * (8 + 3 * 10) bits + 4-byte CRC
     175
-    >>> decoded = decode_geometry(sphere, data)
-    >>> len(decoded.vertices) == len(sphere.vertices)
-    True
     """
     data = read_mesh(mesh, weld=True)
     n = len(data.vertices)
     if n > 0xFFFFFFFF:
-        raise ValueError(f"mesh must have fewer than 2**32 vertices to be encoded, got {n}")
+        raise InputError(f"mesh must have fewer than 2**32 vertices to be encoded, got {n}", param="mesh")
     bits = as_count(bits, name="bits", minimum=1, maximum=MAX_BITS)
     method = as_choice(method, SELECTION_METHODS, name="method")
     omega = 10.0 * n if weight is None else as_positive_float(weight, name="weight")
     if weight is not None:  # a weight too small to pin the anchors decodes to a drifted mesh
-        check_weight_pins_components(laplacian_matrix(data.vertices, data.triangles), omega, name="weight")
+        check_weight_pins_components(
+            laplacian_matrix(data.vertices, data.triangles, "uniform"), omega, name="weight"
+        )
     indices, _ = control_point_selection(
         data.vertices, data.triangles, count, method=method, weights=omega, seed=0, progress=progress
     )
@@ -197,118 +160,120 @@ def encode_geometry(
     )
 
 
+def _bad(message: str) -> InputError:
+    return InputError(message, param="data")
+
+
 def _parse(data: Any, mesh_data: MeshData) -> tuple[np.ndarray, np.ndarray, float]:
     """Validate ``data`` against the mesh; return ``(indices, positions, omega)``."""
     if not isinstance(data, (bytes, bytearray, memoryview)):
-        raise TypeError(f"data must be bytes from encode_geometry, got {type(data).__name__}")
+        raise InputTypeError(
+            f"data must be bytes from encode_geometry, got {type(data).__name__}", param="data"
+        )
     raw = bytes(data)
     if raw[: len(MAGIC)] != MAGIC:
-        raise ValueError(
+        raise _bad(
             f"data must start with the magic {MAGIC!r} of an o3d_lsmesh geometry stream, got {raw[: len(MAGIC)]!r}"
         )
     if len(raw) < HEADER.size + _CRC.size:
-        raise ValueError(
+        raise _bad(
             f"data must hold at least {HEADER.size + _CRC.size} bytes (header and checksum), got {len(raw)}: truncated stream"
         )
     (_magic, version, bits, index_bits, reserved, n, k, edges_crc, omega, *box) = HEADER.unpack_from(raw)
     if version != VERSION:
-        raise ValueError(f"data must be a version {VERSION} stream, got version {version}")
+        raise _bad(f"data must be a version {VERSION} stream, got version {version}")
     body, (crc,) = raw[: -_CRC.size], _CRC.unpack_from(raw, len(raw) - _CRC.size)
     if not 1 <= bits <= MAX_BITS:
-        raise ValueError(f"data header bits must lie in [1, {MAX_BITS}], got {bits}: corrupted stream")
+        raise _bad(f"data header bits must lie in [1, {MAX_BITS}], got {bits}: corrupted stream")
     payload_bytes = (k * (index_bits + 3 * bits) + 7) // 8
     expected = HEADER.size + payload_bytes + _CRC.size
     if len(raw) != expected:
-        raise ValueError(
+        raise _bad(
             f"data must be {expected} bytes long for {k} anchors, got {len(raw)}: truncated or padded stream"
         )
     actual = zlib.crc32(body) & 0xFFFFFFFF
     if crc != actual:
-        raise ValueError(
+        raise _bad(
             f"data checksum must match its content, got {crc:#010x} stored and {actual:#010x} computed: corrupted stream"
         )
     # from here on the stream is intact: errors are streams written inconsistently, or the wrong mesh
     if reserved != 0:
-        raise ValueError(f"data header reserved byte must be 0, got {reserved}")
+        raise _bad(f"data header reserved byte must be 0, got {reserved}")
     if n < 1 or index_bits != index_width(n):
-        raise ValueError(
+        raise _bad(
             f"data header index_bits must be ceil(log2 n) = {index_width(max(n, 1))} for n = {n}, got {index_bits}"
         )
     if not 1 <= k <= n:
-        raise ValueError(f"data header anchor count must lie in [1, {n}], got {k}")
+        raise _bad(f"data header anchor count must lie in [1, {n}], got {k}")
     lower, upper = np.array(box[:3]), np.array(box[3:])
     if not (np.isfinite(omega) and omega > 0):
-        raise ValueError(f"data header omega must be positive and finite, got {omega}")
+        raise _bad(f"data header omega must be positive and finite, got {omega}")
     if not (np.isfinite(lower).all() and np.isfinite(upper).all() and (lower <= upper).all()):
-        raise ValueError(
+        raise _bad(
             f"data header bounding box must be finite with min <= max, got {lower.tolist()} and {upper.tolist()}"
         )
     vertex_count = len(mesh_data.vertices)
     if vertex_count != n:
-        raise ValueError(f"mesh must have the {n} vertices the stream was encoded for, got {vertex_count}")
+        raise InputError(
+            f"mesh must have the {n} vertices the stream was encoded for, got {vertex_count}", param="mesh"
+        )
     if connectivity_checksum(mesh_data.triangles, n) != edges_crc:
-        raise ValueError(
+        raise InputError(
             "mesh must have the connectivity the stream was encoded for, got a mesh whose edges differ "
-            "(connectivity checksum mismatch)"
+            "(connectivity checksum mismatch)",
+            param="mesh",
         )
     bit_stream = np.unpackbits(np.frombuffer(raw, dtype=np.uint8, offset=HEADER.size, count=payload_bytes))
     used = k * (index_bits + 3 * bits)
     if bit_stream[used:].any():
-        raise ValueError("data padding bits must be zero, got non-zero padding")
+        raise _bad("data padding bits must be zero, got non-zero padding")
     indices = from_bits(bit_stream[: k * index_bits], index_bits)
     quantized = from_bits(bit_stream[k * index_bits : used], bits).reshape(k, 3)
     if (indices >= n).any():
         bad = int(np.flatnonzero(indices >= n)[0])
-        raise ValueError(f"data anchor indices must lie in [0, {n}), got {int(indices[bad])} at anchor {bad}")
+        raise _bad(f"data anchor indices must lie in [0, {n}), got {int(indices[bad])} at anchor {bad}")
     ordered = np.sort(indices)
     repeated = ordered[1:] == ordered[:-1]
     if repeated.any():
-        raise ValueError(
-            f"data anchor indices must not repeat, got {int(ordered[1:][repeated][0])} more than once"
-        )
+        raise _bad(f"data anchor indices must not repeat, got {int(ordered[1:][repeated][0])} more than once")
     return indices, dequantize(quantized, lower, upper, bits), float(omega)
 
 
 def decode_geometry(mesh: MeshT, data: Any, *, anchors: int | None = None, progress: bool = False) -> MeshT:
     """Reconstruct the geometry encoded by :func:`encode_geometry` on the connectivity of ``mesh``.
 
-    Solves eq. 1 of the geometry-aware bases paper (relaxed anchors of weight
-    ``omega`` from the stream, uniform Laplacian) with the decoded anchor
-    positions as coefficients. With ``anchors`` only the first ``anchors``
-    anchors are used: the progressive decoding of section III.
+    Solves eq. 1 of the geometry-aware bases paper (relaxed anchors of the stream's weight ``omega``,
+    uniform Laplacian) with the decoded anchor positions; ``anchors`` uses the first ones only (the
+    progressive decoding of section III).
 
     Parameters
     ----------
     mesh : open3d.geometry.TriangleMesh, open3d.t.geometry.TriangleMesh or (vertices, triangles)
-        Supplies the connectivity; its vertex positions are ignored.
+        Supplies the connectivity; its positions are ignored.
     data : bytes
         A stream written by :func:`encode_geometry` for this connectivity.
     anchors : int, optional
         Number of leading anchors to use, ``1..k``; default all.
     progress : bool
-        Show a tqdm bar over the stages (factor, solve).
+        Show a bar over the stages (factor, solve).
 
     Returns
     -------
     TriangleMesh
-        A new mesh of ``mesh``'s kind with the decoded vertex positions.
+        A new mesh of ``mesh``'s kind with the decoded positions.
 
     Raises
     ------
-    ValueError
-        Truncated, padded, corrupted or foreign ``data``; a stream for another
-        vertex count or connectivity; ``anchors`` out of range; a prefix that
-        leaves a connected component without an anchor (``SingularSystemError``).
-    TypeError
-        ``data`` is not bytes-like, or ``progress`` is not a bool.
+    InputError
+        Truncated, padded, corrupted or foreign ``data`` (``InputTypeError`` if not bytes); a stream for
+        another connectivity; ``anchors`` out of range; a prefix missing a component (``SingularSystemError``).
 
     Examples
     --------
-    >>> import open3d as o3d, numpy as np
+    >>> import open3d as o3d
     >>> box = o3d.geometry.TriangleMesh.create_box()
-    >>> decoded = decode_geometry(box, encode_geometry(box, 8))
-    >>> float(np.abs(np.asarray(decoded.vertices) - np.asarray(box.vertices)).max()) < 1e-3
-    True
+    >>> len(decode_geometry(box, encode_geometry(box, 8)).vertices)
+    8
     """
     check_progress(progress)
     mesh_data = read_mesh(mesh, weld=True)
@@ -329,28 +294,18 @@ def iter_decode_geometry(
 ) -> Iterator[MeshT]:
     """Yield successively refined reconstructions as anchors arrive (progressive scheme, section III).
 
-    The first mesh uses the first ``step`` anchors (a factorization); every
-    following one adds the next ``step`` anchors by a rank-``step`` update of
-    the kept factor and back-substitutes (CHOLMOD's update; without
-    scikit-sparse a low-rank correction of SciPy's LU, refactored only once the
-    correction has cost as much as a factorization). The last mesh uses every
-    anchor and equals :func:`decode_geometry` up to round-off.
-
-    Updates that add ``omega^2 = (10 n)^2`` to the diagonal lose accuracy (3.6e-6 of the model size on
-    the camel with 300 anchors), so every refinement does one step of iterative refinement with the same
-    factor, which brings it back to ~1e-14 (see :meth:`~o3d_lsmesh.lsmesh.LSMeshSystem.solve`).
+    The first mesh uses the first ``step`` anchors (a factorization); each following one adds the next
+    ``step`` by a rank-``step`` update of the kept factor and one step of iterative refinement. The last
+    mesh uses every anchor and equals :func:`decode_geometry` up to round-off.
 
     Parameters
     ----------
     mesh, data
         As :func:`decode_geometry`.
     step : int, optional
-        Anchors per refinement; default ``ceil(k / 10)`` (ten meshes), or the
-        number of connected components when that is larger, so that the first
-        mesh has an anchor in each.
+        Anchors per refinement; default ``ceil(k / 10)``, or the number of connected components if larger.
     progress : bool
-        Show a tqdm bar over the anchors decoded, ending at ``k`` with the
-        last mesh (the first factorization happens at the call, before it).
+        Show a bar over the anchors decoded.
 
     Yields
     ------
@@ -359,19 +314,15 @@ def iter_decode_geometry(
 
     Raises
     ------
-    ValueError
-        As :func:`decode_geometry`, or ``step`` below 1 or smaller than the
-        number of connected components (the first mesh needs an anchor in each).
-        Raised by the call itself, before any mesh is yielded.
-    TypeError
-        ``data`` is not bytes-like, or ``progress`` is not a bool.
+    InputError
+        As :func:`decode_geometry`, or ``step`` below 1 or below the number of components; raised by the
+        call itself, before any mesh is yielded.
 
     Examples
     --------
     >>> import open3d as o3d
     >>> sphere = o3d.geometry.TriangleMesh.create_sphere(resolution=10)
-    >>> stream = encode_geometry(sphere, 30)
-    >>> len(list(iter_decode_geometry(sphere, stream, step=10)))
+    >>> len(list(iter_decode_geometry(sphere, encode_geometry(sphere, 30), step=10)))
     3
     """
     progress = check_progress(progress)

@@ -1,9 +1,8 @@
 """Least-squares meshes: geometry from connectivity and a few control points.
 
-Implements Sorkine and Cohen-Or, *Least-squares Meshes* (SMI 2004), eq. 3 and
-its weighted form of section 6, the interpolatory scheme and the progressive
-relaxed-anchor update of Sorkine et al., *Geometry-aware Bases for Shape
-Approximation* (sections II.A, II.B and III).
+Sorkine and Cohen-Or, *Least-squares Meshes* (SMI 2004), eq. 3 and its weighted form of section 6; the
+interpolatory scheme and the relaxed-anchor updates of Sorkine et al., *Geometry-aware Bases for Shape
+Approximation* (sections II.A, II.B, III). Docs: ``docs/algorithms/least_squares_meshes.rst``.
 """
 
 from __future__ import annotations
@@ -15,9 +14,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse import csgraph
 
-from .._errors import SingularSystemError
 from .._o3d import mesh_from_state, mesh_state, new_mesh, read_mesh
-from .._progress import check_progress, stages
 from .._solvers import (
     DEFAULT_TOLERANCE,
     SPDSolver,
@@ -26,22 +23,31 @@ from .._solvers import (
     operator_scale,
     solver_backend,
 )
-from .._validate import as_bool, as_choice, as_indices, as_positions, as_weights
-from ..laplacian import LAPLACIAN_KINDS, laplacian_matrix
+from ..core import operators
+from ..core.connectivity import Connectivity
+from ..core.errors import InputError, SingularSystemError
+from ..core.progress import check_progress, stages
+from ..core.validate import as_bool, as_choice, as_indices, as_positions, as_weights
 
 if TYPE_CHECKING:
     from .._types import AnyMesh, MeshT
 
 __all__ = ["LSMeshSolver", "LSMeshSystem", "check_components_constrained", "ls_mesh", "reconstruct_geometry"]
 
+LAPLACIAN_KINDS = ("uniform", "cotangent")
+
+
+def laplacian_matrix(vertices: np.ndarray, triangles: np.ndarray, kind: str) -> sp.csr_matrix:
+    """The ``(n, n)`` uniform or cotangent Laplacian of eq. 1 (:mod:`o3d_lsmesh.core.operators`)."""
+    conn = Connectivity(triangles, len(vertices))
+    if kind == "uniform":
+        return operators.uniform_laplacian(conn)
+    return operators.cotangent_laplacian(vertices, conn)
+
 
 def check_components_constrained(graph: sp.spmatrix, constrained: np.ndarray, *, what: str) -> np.ndarray:
-    """Raise :class:`SingularSystemError` if some connected component holds no constrained vertex.
-
-    ``graph`` is any ``(n, n)`` matrix with the mesh's edge pattern (the Laplacian
-    serves); ``constrained`` is an index array. Unreferenced vertices count as
-    components of their own.
-    """
+    """Component labels ``(n,)`` of ``graph`` (an ``(n, n)`` matrix of the edge pattern), or
+    :class:`SingularSystemError` if a component (an unreferenced vertex is one) has no ``constrained`` index."""
     count, labels = csgraph.connected_components(graph, directed=False)
     has = np.zeros(count, dtype=bool)
     has[labels[constrained]] = True
@@ -56,20 +62,15 @@ def check_components_constrained(graph: sp.spmatrix, constrained: np.ndarray, *,
 
 
 class LSMeshSystem:
-    """The array core of :class:`LSMeshSolver`: the least-squares mesh system on validated arrays.
+    """The array core of :class:`LSMeshSolver` on validated arrays (the options and methods are its own).
 
-    ``vertices (n, 3) float64`` and ``triangles (m, 3) int64`` as
-    :func:`~o3d_lsmesh._validate.mesh_arrays` returns them (not checked again
-    here: the callers read them once), ``constraint_vertex_indices`` in their
-    numbering; the options and the methods are :class:`LSMeshSolver`'s, which
-    adds meshes, welding and the input's layout on top. :meth:`solve` returns
-    ``(n, 3)`` positions. Holds references to the arrays (for iterative
-    refinement and the default anchor positions), not copies: do not modify them.
+    ``vertices (n, 3) float64`` and ``triangles (m, 3) int64`` as :func:`~o3d_lsmesh.core.validate.mesh_arrays`
+    returns them (not checked again; held, not copied: do not modify them), ``constraint_vertex_indices`` in
+    their numbering. :meth:`solve` returns ``(n, 3)`` positions.
 
     Examples
     --------
-    >>> import numpy as np
-    >>> from o3d_lsmesh._validate import mesh_arrays
+    >>> from o3d_lsmesh.core.validate import mesh_arrays
     >>> V, F = mesh_arrays([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 1]], [[0, 1, 2], [1, 3, 2]])
     >>> LSMeshSystem(V, F, [0, 3], interpolate=True).solve().shape
     (4, 3)
@@ -205,18 +206,10 @@ class LSMeshSystem:
         Parameters
         ----------
         constraint_vertex_positions : (k, 3) array-like, optional
-            One row per entry of :attr:`constraint_vertex_indices`; defaults to
-            the positions given so far (the mesh's own, or those passed to
-            :meth:`add_anchors`).
+            One row per entry of :attr:`constraint_vertex_indices`; default the positions given so far.
         refine : bool, optional
-            One step of iterative refinement: a second back-substitution on the
-            residual. By default it runs only after :meth:`add_anchors`: updates
-            that add large ``w^2`` (the bases paper's ``omega = 10 n``) to the
-            diagonal lose the small ``L^T L`` entries of those rows to round-off
-            (measured on the 9.8k camel with 300 anchors: 4e-6 of the model size,
-            against 1e-14 for a fresh factor), and one refinement step restores
-            full accuracy. The residual ``b - L^T L x - w^2 x_a`` is formed as
-            ``w^2 (c - x_a) - L^T L x`` so that it has no cancellation.
+            One step of iterative refinement (a second back-substitution on the residual); by default only
+            after :meth:`add_anchors`, whose large ``w^2`` cost accuracy (see the docs page).
         """
         refine = as_bool(refine, name="refine", allow_none=True)
         with self._lock:
@@ -231,8 +224,7 @@ class LSMeshSystem:
                 constraint_vertex_positions, k, name="constraint_vertex_positions", limit=True
             )
         # solved about the controls' centroid (an LS mesh moves with its controls: L 1 = 0): the iterative
-        # path's relative residual then measures the shape, not the distance to the origin (a scan in
-        # world coordinates, 1e6 sizes away, lost 1% of its size)
+        # path's relative residual then measures the shape, not the distance to the origin
         centre = positions.mean(axis=0) if len(positions) else np.zeros(3)
         original, positions = positions, positions - centre
         hard_pos, soft_pos = positions[: len(self._hard)], positions[len(self._hard) :]
@@ -250,7 +242,7 @@ class LSMeshSystem:
             np.add.at(rhs, self._reduce(self._soft), (self._soft_weights**2)[:, None] * soft_pos)
         check_finite(rhs, name="constraint_vertex_positions", what="weights**2 * constraint_vertex_positions")
         # the iterative path starts from the mesh's own geometry, which an LS mesh of its own controls
-        # approximates (a fifth fewer CG iterations at 200k vertices); a direct solve needs no start
+        # approximates; a direct solve needs no start
         start = None
         if self._solver.backend == "iterative":
             start = (self._vertices if self._free is None else self._vertices[self._free]) - centre
@@ -280,26 +272,26 @@ class LSMeshSystem:
         differ = (fixed[self._hard_groups] != hard_pos).any(axis=1)
         if differ.any():
             row = int(np.flatnonzero(differ)[0])
-            raise ValueError(
+            raise InputError(
                 "constraint_vertex_positions must agree where constraint_vertex_indices name one vertex "
                 f"twice (copies of a welded vertex) with interpolate=True, got {hard_pos[row].tolist()} at "
-                f"row {row} and {fixed[self._hard_groups[row]].tolist()}"
+                f"row {row} and {fixed[self._hard_groups[row]].tolist()}",
+                param="constraint_vertex_positions",
             )
         return fixed
 
     def add_anchors(self, indices: Any, positions: Any = None, *, weights: Any = 1.0) -> None:
-        """Add relaxed anchors by a CHOLMOD rank-k update of the kept factor (no refactoring).
+        """Add relaxed anchors by a rank-k update of the kept factor (bases paper, section III).
 
-        Adds ``w^2`` to the diagonal of the normal matrix at each new anchor
-        (bases paper, section III); in interpolatory mode the anchors are added
-        as relaxed constraints on free vertices, as the paper suggests.
+        Adds ``w^2`` to the normal matrix's diagonal at each new anchor (relaxed constraints on free
+        vertices in interpolatory mode).
 
         Parameters
         ----------
         indices : (a,) int array-like
             New anchors; none may already be a control vertex.
         positions : (a, 3) array-like, optional
-            Their positions; default: the mesh's own.
+            Their positions; default the mesh's own.
         weights : float or (a,) array-like
             Positive anchor weights.
         """
@@ -314,8 +306,9 @@ class LSMeshSystem:
         if existing[new].any():
             at = int(np.flatnonzero(existing[new])[0])
             # the position names it in the caller's list too when LSMeshSolver welded the mesh
-            raise ValueError(
-                f"indices must not already be control vertices, got {int(new[at])} at position {at}"
+            raise InputError(
+                f"indices must not already be control vertices, got {int(new[at])} at position {at}",
+                param="indices",
             )
         w = as_weights(weights, len(new), name="weights")
         if positions is None:
@@ -344,73 +337,53 @@ class LSMeshSystem:
 class LSMeshSolver(LSMeshSystem):
     """A least-squares mesh system with its Cholesky factor kept for editing.
 
-    Minimizes, separately for x, y and z (eq. 3 and section 6 of LS meshes)::
-
-        ||L X||^2 + sum_s w_s^2 |X_s - C_s|^2
-
-    over the vertex positions ``X (n, 3)`` for the control vertices ``s`` with
-    positions ``C_s`` and weights ``w_s``. The normal matrix ``L^T L + W^2`` is
-    analyzed and factored once, as the product ``A A^T`` of ``A = [L^T | W]``
-    (CHOLMOD assembles it while it factors, so it is never formed: less time
-    and memory than ``L^T L``); :meth:`solve` with new control positions is a
-    back-substitution (the editing use of section 6) and :meth:`add_anchors`
-    adds relaxed anchors by a rank-k update of the kept factor (section III of
-    the geometry-aware bases paper).
+    Minimizes ``||L X||^2 + sum_s w_s^2 |X_s - C_s|^2`` separately for x, y and z (eq. 3 and section 6)
+    over the positions ``X (n, 3)``, control vertices ``s`` at ``C_s`` with weights ``w_s``. The normal
+    matrix is factored once; :meth:`solve` with new control positions is a back-substitution and
+    :meth:`add_anchors` a rank-k update (docs: ``docs/algorithms/least_squares_meshes.rst``).
 
     Parameters
     ----------
     mesh : open3d.geometry.TriangleMesh, open3d.t.geometry.TriangleMesh or (vertices, triangles)
-        Only its connectivity matters, and its positions as default control positions.
-        Vertices at exactly equal coordinates (the copies a file reader makes
-        at UV seams) are welded into one; indices stay in the mesh's own
-        layout, an index to any copy naming the welded vertex, and
-        :meth:`solve` and :meth:`mesh` give every copy its position.
+        Its connectivity, and its positions as default control positions. Vertices at equal coordinates
+        (UV seams) are welded; indices stay in the mesh's own layout.
     constraint_vertex_indices : (k,) int array-like
-        Control vertices, unique, in ``[0, n)``. Two copies of a split vertex
-        name it twice: two terms of the energy (with ``interpolate``, their
-        positions must agree).
+        Control vertices in ``[0, n)``; two copies of a split vertex are two terms (with ``interpolate``,
+        their positions must agree).
     weights : float or (k,) array-like
         Positive weights ``w_s`` of the soft constraints (ignored when ``interpolate``).
     interpolate : bool
-        Interpolatory scheme (bases paper II.B): the control vertices are
-        eliminated from the unknowns and hit exactly; the system is
-        ``min ||L[:, free] x_free + L[:, ctrl] c||^2``.
+        Interpolatory scheme (bases paper II.B): the control vertices are hit exactly.
     laplacian : {"uniform", "cotangent"}
         The smoothness operator; the paper's is ``"uniform"``.
     backend : {"auto", "cholmod", "scipy"}
-        Passed to the solver gateway.
+        Direct backend of the solver gateway.
     ordering : str
-        CHOLMOD's fill-reducing ordering, passed to :class:`~o3d_lsmesh.SPDSolver`;
-        ``"nesdis"`` makes :meth:`add_anchors` cheaper and factor/solve dearer.
+        CHOLMOD's fill-reducing ordering (:class:`~o3d_lsmesh.SPDSolver`).
     solver : {"auto", "cholmod", "iterative"}
-        ``"auto"`` (default) factors the system unless the factor would exceed
-        the memory budget (half the available memory), then solves by
-        conjugate gradients with an AMG preconditioner; ``"iterative"`` forces
-        that path (``"auto"`` leaves the choice of direct backend to ``backend``).
+        ``"auto"`` factors unless the factor would exceed the memory budget, then solves by conjugate
+        gradients with an AMG preconditioner; ``"iterative"`` forces that path.
     tol : float, optional
-        Relative residual of the iterative path (default
-        :data:`o3d_lsmesh._solvers.DEFAULT_TOLERANCE`, CHOLMOD's result to about 3e-8).
+        Relative residual of the iterative path (default ``DEFAULT_TOLERANCE`` of the gateway).
+    progress : bool
+        Show a progress bar.
 
     Raises
     ------
     SingularSystemError
-        A connected component (or unreferenced vertex) has no control vertex.
-
-    Examples
-    --------
-    >>> import open3d as o3d, numpy as np
-    >>> sphere = o3d.geometry.TriangleMesh.create_sphere(resolution=10)
-    >>> solver = LSMeshSolver(sphere, [0, 5, 40, 90])
-    >>> solver.solve().shape == (len(sphere.vertices), 3)
-    True
+        A connected component (or unreferenced vertex) without a control vertex.
 
     Notes
     -----
-    Thread-safe: :meth:`solve`, :meth:`mesh`, :meth:`add_anchors` and the
-    properties hold one lock, so a solve on one thread sees the system before
-    or after an update on another, never half of it. Pickles with its
-    factor's matrix (refactored on load) and returns meshes of the input's
-    kind after unpickling.
+    Thread-safe (one lock: a solve sees the system before or after an update, never half of it).
+    Pickles with its factor's matrix (refactored on load).
+
+    Examples
+    --------
+    >>> import open3d as o3d
+    >>> sphere = o3d.geometry.TriangleMesh.create_sphere(resolution=10)
+    >>> LSMeshSolver(sphere, [0, 5, 40, 90]).solve().shape == (len(sphere.vertices), 3)
+    True
     """
 
     def __init__(
@@ -486,32 +459,30 @@ def ls_mesh(
 ) -> MeshT:
     """Least-squares mesh: the fairest geometry for ``mesh``'s connectivity near the control points.
 
-    Minimizes ``||L X||^2 + sum_s w_s^2 |X_s - C_s|^2`` (eq. 3 of Least-squares
-    Meshes with the weights of section 6), or, with ``interpolate=True``,
-    ``||L X||^2`` with the control vertices fixed (bases paper II.B).
+    Minimizes ``||L X||^2 + sum_s w_s^2 |X_s - C_s|^2`` (eq. 3 with the weights of section 6), or, with
+    ``interpolate=True``, ``||L X||^2`` with the control vertices fixed (bases paper II.B).
 
     Parameters
     ----------
     mesh : open3d.geometry.TriangleMesh, open3d.t.geometry.TriangleMesh or (vertices, triangles)
-        Split vertices (UV seams) are welded, indices given in its own layout (see :class:`LSMeshSolver`).
+        Split vertices (UV seams) are welded, indices given in its own layout.
     constraint_vertex_indices : (k,) int array-like
     constraint_vertex_positions : (k, 3) array-like, optional
-        Defaults to the mesh's own positions at those indices (approximation).
+        Default the mesh's own positions at those indices (approximation).
     weights, interpolate, laplacian, solver, tol
         See :class:`LSMeshSolver`.
     progress : bool
-        Show a tqdm bar over the stages (factor, solve); the iterative path also shows its residual.
+        Show a bar over the stages (factor, solve).
 
     Returns
     -------
     TriangleMesh
-        A new mesh of the input's kind with the same triangles and vertex
-        colors; normals are recomputed if the input had them.
+        A new mesh of the input's kind, same triangles and colors (normals recomputed if it had them).
 
     Raises
     ------
-    ValueError
-        Invalid mesh, indices, positions or weights.
+    InputError
+        Invalid mesh, indices, positions or weights (a ``ValueError``).
     SingularSystemError
         A connected component without a control vertex.
 
@@ -519,8 +490,7 @@ def ls_mesh(
     --------
     >>> import open3d as o3d
     >>> sphere = o3d.geometry.TriangleMesh.create_sphere(resolution=10)
-    >>> out = ls_mesh(sphere, [0, 5, 40, 90], weights=10.0)
-    >>> len(out.vertices) == len(sphere.vertices)
+    >>> len(ls_mesh(sphere, [0, 5, 40, 90], weights=10.0).vertices) == len(sphere.vertices)
     True
     """
     data = read_mesh(mesh, weld=True)
@@ -557,24 +527,20 @@ def reconstruct_geometry(
 ) -> MeshT:
     """Rebuild the positions of vertices whose geometry is missing (figures 5 and 8 of LS meshes).
 
-    With ``interpolate=True`` the result equals the interpolatory LS mesh with
-    every known vertex as an anchor, but only the rows of ``L`` that touch an
-    unknown vertex are kept (the rows of known vertices alone are constants),
-    so the solve is the size of the unknown region. Known vertices stay
-    bit-identical. With ``interpolate=False`` every known vertex becomes a soft
-    control point of weight ``weights`` and the whole mesh is re-solved.
+    With ``interpolate=True``: the interpolatory LS mesh with every known vertex as an anchor, solved on
+    the rows of ``L`` that touch an unknown vertex only; known vertices stay bit-identical. With
+    ``interpolate=False`` every known vertex is a soft control point of weight ``weights``.
 
     Parameters
     ----------
     mesh : open3d.geometry.TriangleMesh, open3d.t.geometry.TriangleMesh or (vertices, triangles)
-        The positions of the unknown vertices are ignored. Split vertices (UV
-        seams) are welded, as in :class:`LSMeshSolver`.
+        The unknown vertices' positions are ignored; split vertices are welded.
     unknown_vertex_indices : (u,) int array-like
-        In the mesh's own layout; any copy of a split vertex makes the welded vertex unknown.
-    progress : bool
-        Show a tqdm bar over the stages (factor, solve).
-    solver, tol
+        In the mesh's own layout (any copy of a split vertex makes it unknown).
+    interpolate, weights, laplacian, solver, tol
         See :class:`LSMeshSolver`.
+    progress : bool
+        Show a bar over the stages (factor, solve).
 
     Raises
     ------
@@ -585,8 +551,7 @@ def reconstruct_geometry(
     --------
     >>> import open3d as o3d, numpy as np
     >>> sphere = o3d.geometry.TriangleMesh.create_sphere(resolution=10)
-    >>> out = reconstruct_geometry(sphere, np.arange(0, 20))
-    >>> np.asarray(out.vertices).shape == (len(sphere.vertices), 3)
+    >>> np.asarray(reconstruct_geometry(sphere, np.arange(20)).vertices).shape == (len(sphere.vertices), 3)
     True
     """
     data = read_mesh(mesh, weld=True)

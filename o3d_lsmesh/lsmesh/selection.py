@@ -1,24 +1,9 @@
 """Control-point selection for least-squares meshes and geometry-aware approximation.
 
-Implements section 4 of Sorkine and Cohen-Or, *Least-squares Meshes* (SMI
-2004): random, one-by-one greedy and combined local-maxima selection, and the
-greedy anchor selection of section IV of Sorkine et al., *Geometry-aware Bases
-for Shape Approximation*, where every greedy step adds one relaxed anchor by a
-rank-1 update of the kept Cholesky factor (section III) instead of a new
-factorization (without scikit-sparse, a low-rank correction of SciPy's LU:
-:meth:`~o3d_lsmesh._solvers.SPDSolver.update`).
-
-Start set
----------
-An LS mesh needs a control point in every connected component (otherwise the
-normal matrix ``L^T L + W^2`` is singular), so every selection starts with one
-vertex per component, in increasing component order; unreferenced vertices
-are components of their own. The greedy and combined methods start each
-component at its vertex farthest from the component's centroid: with a single
-anchor the LS mesh of a component collapses onto that anchor (``L 1 = 0``), so
-this is the greedy choice for an "empty" selection that sits at the centroid,
-and it is deterministic. The random method starts each component at a random
-vertex drawn with ``seed``.
+Section 4 of Sorkine and Cohen-Or, *Least-squares Meshes* (SMI 2004): random, one-by-one greedy and
+combined local-maxima selection; the greedy anchors of section IV of Sorkine et al., *Geometry-aware Bases
+for Shape Approximation*, each added by a rank-1 update of the kept factor (section III). Every selection
+starts with one vertex per connected component (the start set; docs: ``docs/algorithms/least_squares_meshes.rst``).
 """
 
 from __future__ import annotations
@@ -29,10 +14,11 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .._o3d import new_mesh, read_mesh
-from .._progress import check_progress, progress_bar, stages
-from .._ranges import concatenated_ranges
-from .._validate import as_bool, as_choice, as_count, as_positive_float
-from ..topology import adjacency_matrix, connected_components
+from ..core.arrays import concatenated_ranges
+from ..core.connectivity import adjacency_matrix, connected_components
+from ..core.errors import InputError, InputTypeError
+from ..core.progress import check_progress, progress_bar, stages
+from ..core.validate import as_bool, as_choice, as_count, as_positive_float
 from .lsmesh import LSMeshSystem
 
 if TYPE_CHECKING:
@@ -41,16 +27,18 @@ if TYPE_CHECKING:
 __all__ = ["SELECTION_METHODS", "approximate", "control_point_selection", "select_control_points"]
 
 SELECTION_METHODS = ("random", "greedy", "combined")
-DEFAULT_BATCH = 31  # figure 6 of LS meshes: 31 solves of 31 picks for 1000 control points
+DEFAULT_BATCH = 31  # picks per solve of "combined": LS meshes figure 6 (benchmarks/results/selection.md)
 
 
 def _rng(seed: Any) -> np.random.Generator:
     if seed is None or isinstance(seed, np.random.Generator):
         return np.random.default_rng(seed)
     if isinstance(seed, bool) or not isinstance(seed, numbers.Integral):
-        raise TypeError(f"seed must be None, an int or a numpy Generator, got {type(seed).__name__}")
+        raise InputTypeError(
+            f"seed must be None, an int or a numpy Generator, got {type(seed).__name__}", param="seed"
+        )
     if int(seed) < 0:
-        raise ValueError(f"seed must be non-negative, got {int(seed)}")
+        raise InputError(f"seed must be non-negative, got {int(seed)}", param="seed")
     return np.random.default_rng(int(seed))
 
 
@@ -62,10 +50,7 @@ def _first_per_label(labels: np.ndarray, order: np.ndarray, count: int) -> np.nd
 
 
 def start_vertices(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
-    """One vertex per connected component: the one farthest from its component's centroid.
-
-    Returns ``(c,) int64`` in component order (see the module docstring).
-    """
+    """``(c,) int64``: per connected component, in component order, its vertex farthest from its centroid."""
     n = len(vertices)
     count, labels = connected_components(triangles, n)
     size = np.bincount(labels, minlength=count).astype(np.float64)
@@ -90,12 +75,8 @@ def _random(vertices: np.ndarray, triangles: np.ndarray, count: int, rng: np.ran
 def forbid_around(
     indptr: np.ndarray, neighbours: np.ndarray, errors: np.ndarray, forbidden: np.ndarray, vertex: int
 ) -> None:
-    """Mark ``vertex`` and the region reached from it by a breadth-first walk while the error decreases.
-
-    A vertex joins when it is adjacent to a vertex already reached by this walk
-    and has a strictly smaller error than it; vertices already forbidden stop
-    the walk. Expands a whole BFS layer per numpy step.
-    """
+    """Forbid ``vertex`` and the region a breadth-first walk reaches from it while the error strictly
+    decreases (already forbidden vertices stop it); one BFS layer per numpy step."""
     forbidden[vertex] = True
     frontier = np.array([vertex], dtype=np.int64)
     while frontier.size:
@@ -117,12 +98,8 @@ def _select(
     desc: str,
     progress: bool = False,
 ) -> tuple[np.ndarray, LSMeshSystem]:
-    """Greedy (``batch=1``) or combined local-maxima selection (LS meshes section 4, bases paper section IV).
-
-    One solve per ``batch`` picks, whose anchors join the kept factor by one
-    rank-``batch`` update. Returns the selection and the system holding all of
-    it (for one last solve).
-    """
+    """Greedy (``batch=1``) or combined selection: one solve per ``batch`` picks, which join the kept factor
+    by one rank-``batch`` update; the selection and the system holding all of it."""
     n = len(vertices)
     start = start_vertices(vertices, triangles)
     # the per-component seeds are control points too: the bar starts at them and ends at count
@@ -173,20 +150,14 @@ def control_point_selection(
 ) -> tuple[np.ndarray, LSMeshSystem | None]:
     """Array core of :func:`select_control_points` on validated arrays: the indices and their system.
 
-    ``vertices (n, 3) float64`` and ``triangles (m, 3) int64`` as
-    :func:`~o3d_lsmesh._validate.mesh_arrays` returns them (the callers read
-    them once); the options are checked here. Returns the ``(count,) int64``
-    selection and, for ``"greedy"`` and ``"combined"``, the
-    :class:`~o3d_lsmesh.lsmesh.LSMeshSystem` whose factor holds every
-    selected control point at weight ``weights`` (None for ``"random"``).
+    Returns the ``(count,) int64`` selection and, for ``"greedy"`` and ``"combined"``, the
+    :class:`~o3d_lsmesh.lsmesh.LSMeshSystem` holding every selected point at weight ``weights``
+    (None for ``"random"``).
 
-    Examples
-    --------
-    >>> from o3d_lsmesh._validate import mesh_arrays
+    >>> from o3d_lsmesh.core.validate import mesh_arrays
     >>> V, F = mesh_arrays([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 1]], [[0, 1, 2], [1, 3, 2]])
-    >>> indices, system = control_point_selection(V, F, 2)
-    >>> indices.shape, system.solve().shape
-    ((2,), (4, 3))
+    >>> control_point_selection(V, F, 2)[0].shape
+    (2,)
     """
     n = len(vertices)
     method = as_choice(method, SELECTION_METHODS, name="method")
@@ -194,15 +165,17 @@ def control_point_selection(
     weight = as_positive_float(weights, name="weights")
     components, _ = connected_components(triangles, n)
     if count < components:
-        raise ValueError(
+        raise InputError(
             f"count must be at least the number of connected components ({components}, "
-            f"unreferenced vertices included) so that every component gets a control point, got {count}"
+            f"unreferenced vertices included) so that every component gets a control point, got {count}",
+            param="count",
         )
     if method == "combined":
         batch = DEFAULT_BATCH if batch is None else as_count(batch, name="batch", minimum=1)
     elif batch is not None:
-        raise ValueError(
-            f"batch applies only to method='combined', got batch={batch!r} with method={method!r}"
+        raise InputError(
+            f"batch applies only to method='combined', got batch={batch!r} with method={method!r}",
+            param="batch",
         )
     rng = _rng(seed)
     check_progress(progress)
@@ -226,45 +199,27 @@ def select_control_points(
 ) -> np.ndarray:
     """Choose ``count`` control points that make the LS mesh close to ``mesh`` (LS meshes section 4).
 
-    The error of a vertex is the 3D distance between its position in the LS
-    mesh of the current selection (eq. 3 of Least-squares Meshes with soft
-    constraints of weight ``weights``, uniform Laplacian) and its original
-    position.
-
-    * ``"random"``: a uniformly random order, reproducible with ``seed``.
-    * ``"greedy"``: one vertex at a time, the one with the largest error; a
-      step is a rank-1 update of the kept factor plus one back-substitution.
-    * ``"combined"``: the local-maxima method. The LS mesh is solved once per
-      ``batch`` picks; within a batch each pick is the largest error among the
-      vertices not forbidden, after which the vertices reached from it by a
-      breadth-first walk along which the error strictly decreases are forbidden
-      until the next solve. The picks of a batch join the factor by one rank-``batch``
-      update.
-
-    Every selection starts with one vertex per connected component so that the
-    system is never singular (see the module docstring for which one).
+    A vertex's error is the distance between its position in the LS mesh of the current selection (soft
+    constraints of weight ``weights``, uniform Laplacian) and its own. ``"random"``: a random order
+    (``seed``); ``"greedy"``: one vertex of largest error at a time (a rank-1 update and a solve);
+    ``"combined"``: the local maxima, ``batch`` picks per solve, each forbidding the region around it
+    along which the error decreases. Methods and start set: ``docs/algorithms/least_squares_meshes.rst``.
 
     Parameters
     ----------
     mesh : open3d.geometry.TriangleMesh, open3d.t.geometry.TriangleMesh or (vertices, triangles)
-        Vertices at exactly equal coordinates (the copies a file reader makes
-        at UV seams) are welded and selected once; the indices returned are
-        in the mesh's own layout (the first copy of a split vertex).
+        Split vertices (UV seams) are welded and selected once; indices are returned in the mesh's layout.
     count : int
-        Number of control points, from the number of connected components to
-        ``n`` (``n`` counts a split vertex once).
+        Number of control points, from the number of connected components to ``n``.
     method : {"greedy", "combined", "random"}
     batch : int, optional
-        Picks per solve for ``"combined"`` (default 31, as in figure 6 of the
-        paper); must be None for the other methods.
+        Picks per solve of ``"combined"`` (default 31, figure 6 of the paper); None for the others.
     weights : float
         Positive weight of every soft control point while selecting.
     seed : int or numpy.random.Generator, optional
-        Random state of ``"random"``; the other methods are deterministic.
+        Random state of ``"random"``.
     progress : bool
-        Show a tqdm bar over the control points, ending at ``count``: it
-        starts at the per-component seeds and shows the first factorization
-        as its ``factor`` stage. ``"random"`` shows none (instant).
+        Show a bar over the control points (``"random"`` shows none).
 
     Returns
     -------
@@ -273,22 +228,14 @@ def select_control_points(
 
     Raises
     ------
-    ValueError
-        ``count`` outside ``[components, n]``, unknown ``method``, ``batch`` not
-        positive or given for a method other than ``"combined"``, non-positive
-        ``weights``, negative ``seed``, or an invalid mesh.
-    TypeError
-        ``count``, ``batch``, ``weights``, ``seed`` or ``progress`` of the wrong type.
+    InputError
+        An option out of range or of the wrong type (``InputTypeError``), or an invalid mesh.
 
     Examples
     --------
     >>> import open3d as o3d
-    >>> box = o3d.geometry.TriangleMesh.create_box()
-    >>> select_control_points(box, 8, method="greedy").shape
+    >>> select_control_points(o3d.geometry.TriangleMesh.create_box(), 8).shape
     (8,)
-    >>> a = select_control_points(box, 5, method="random", seed=1)
-    >>> bool((a == select_control_points(box, 5, method="random", seed=1)).all())
-    True
     """
     data = read_mesh(mesh, weld=True)
     V, F = data.vertices, data.triangles
@@ -309,25 +256,17 @@ def approximate(
     seed: Any = None,
     progress: bool = False,
 ) -> tuple[MeshT, np.ndarray]:
-    """Approximate ``mesh`` by the LS mesh of ``count`` selected control points.
+    """Approximate ``mesh`` by the LS mesh of ``count`` control points from :func:`select_control_points`.
 
-    Selects the control points with :func:`select_control_points` and returns
-    the LS mesh (eq. 3 of Least-squares Meshes, weights of section 6) through
-    them at their original positions; ``interpolate=True`` gives the
-    interpolatory scheme (geometry-aware bases II.B) instead. For the greedy and
-    combined methods without ``interpolate`` the factor kept by the selection
-    already holds every control point, so the result costs one more
-    back-substitution.
+    The LS mesh (eq. 3, weights of section 6) through the selection at its original positions, or with
+    ``interpolate=True`` the interpolatory one (bases paper II.B). Greedy and combined selections without
+    ``interpolate`` cost one more back-substitution (their kept factor holds every point).
 
     Parameters
     ----------
     mesh : open3d.geometry.TriangleMesh, open3d.t.geometry.TriangleMesh or (vertices, triangles)
-        Split vertices are welded as in :func:`select_control_points`; the
-        result has the mesh's own layout, each copy at its vertex's position.
     count, method, weights, batch, seed, progress
-        See :func:`select_control_points`. When the result needs a new
-        factorization (``interpolate`` or ``"random"``), ``progress`` also
-        shows its stages (factor, solve).
+        See :func:`select_control_points`.
     interpolate : bool
         Hit the control points exactly.
 
@@ -340,16 +279,15 @@ def approximate(
 
     Raises
     ------
-    ValueError, TypeError
+    InputError
         As :func:`select_control_points`.
 
     Examples
     --------
-    >>> import open3d as o3d, numpy as np
-    >>> torus = o3d.geometry.TriangleMesh.create_torus()
-    >>> approx, idx = approximate(torus, 60)
-    >>> np.asarray(approx.vertices).shape == np.asarray(torus.vertices).shape
-    True
+    >>> import open3d as o3d
+    >>> approx, idx = approximate(o3d.geometry.TriangleMesh.create_torus(), 60)
+    >>> idx.shape
+    (60,)
     """
     interpolate = as_bool(interpolate, name="interpolate")
     data = read_mesh(mesh, weld=True)

@@ -1,10 +1,8 @@
 """Spectral mesh compression baseline (Karni and Gotsman, 2000), as compared in the geometry-aware bases paper.
 
-The geometry is projected on the first ``k`` eigenvectors of the symmetric
-combinatorial Laplacian ``L = D - A`` (section II of Sorkine et al.,
-*Geometry-aware Bases for Shape Approximation*; ``D`` the valences, ``A`` the
-adjacency), the smoothest orthonormal mesh functions. Only small meshes are
-practical: the eigenvectors cost ``O(n k)`` memory and about ``O(n k^2)`` time.
+The geometry is projected on the first ``k`` eigenvectors of the combinatorial Laplacian ``D - A``
+(section II of Sorkine et al., *Geometry-aware Bases for Shape Approximation*), the smoothest orthonormal
+mesh functions; only small meshes are practical. Docs: ``docs/algorithms/least_squares_meshes.rst``.
 """
 
 from __future__ import annotations
@@ -18,43 +16,34 @@ import scipy.sparse.linalg as spla
 from scipy.sparse import csgraph
 
 from .._o3d import new_mesh, read_mesh
-from .._progress import check_progress, stages
-from .._quantization import dequantize, quantize
 from .._solvers import SPDSolver, single_threaded_blas
-from .._validate import as_count
-from ..topology import adjacency_matrix
+from ..core.arrays import dequantize, quantize
+from ..core.connectivity import Connectivity
+from ..core.errors import InputError
+from ..core.operators import graph_laplacian
+from ..core.progress import check_progress, stages
+from ..core.validate import as_count
 
 if TYPE_CHECKING:
     from .._types import MeshT
 
 __all__ = ["SPECTRAL_MAX_VERTICES", "combinatorial_laplacian", "null_space_basis", "spectral_approximation"]
 
-# 100 eigenvectors take 0.1 s at 3k vertices, 1.8 s at 20k and 5 s at 50k (2 busy cores); beyond 50k
-# a useful number (thousands) is out of reach, as the paper found at 11k with MATLAB.
-SPECTRAL_MAX_VERTICES = 50_000
-# Lanczos basis of 2k + 1 vectors of n doubles: n * k <= 2e7 keeps it near 300 MB.
-SPECTRAL_MAX_WORK = 20_000_000
-# Above k > n / 4, LAPACK's dense eigh beats ARPACK (1.7 s against 170 s for 1500 of
-# 3000 eigenvectors); a dense n x n matrix is 200 MB at n = 5000.
-DENSE_MAX_VERTICES = 5_000
+# Practical sizes (time and memory of the eigenvectors): benchmarks/results/spectral.md
+SPECTRAL_MAX_VERTICES = 50_000  # beyond, a useful k is out of reach: spectral.md, eigensolve times
+SPECTRAL_MAX_WORK = 20_000_000  # n * k of the Lanczos basis (about 300 MB): spectral.md, eigensolve times
+DENSE_MAX_VERTICES = 5_000  # dense eigh for k > n / 4 up to this n: spectral.md, dense against ARPACK
 _SHIFT = -1e-6  # L - sigma I is positive definite for sigma < 0; 0 is an eigenvalue
 
 
 def combinatorial_laplacian(triangles: np.ndarray, n: int) -> sp.csc_matrix:
     """Symmetric combinatorial Laplacian ``L = D - A`` ``(n, n)`` CSC (bases paper, section II)."""
-    adjacency = adjacency_matrix(triangles, n)
-    degree = np.asarray(adjacency.sum(axis=1)).ravel()
-    return (sp.diags(degree) - adjacency).tocsc()
+    return graph_laplacian(Connectivity(triangles, n))
 
 
 def null_space_basis(adjacency: sp.spmatrix) -> sp.csc_matrix:
-    """Orthonormal basis of the null space of ``D - A``: one normalized indicator per connected component.
-
-    ``(n, c)`` CSC, column ``j`` equal to ``1 / sqrt(size)`` on the ``j``-th
-    largest component (ties to the component of the smaller first vertex) and 0
-    elsewhere; an isolated vertex is a component of its own. These are exact
-    eigenvectors of eigenvalue 0, so no eigensolver has to find them.
-    """
+    """Orthonormal null space of ``D - A``, ``(n, c)`` CSC: column ``j`` is ``1 / sqrt(size)`` on the ``j``-th
+    largest component (ties to the smaller first vertex; an isolated vertex is one), exact eigenvectors of 0."""
     n = adjacency.shape[0]
     count, labels = csgraph.connected_components(adjacency, directed=False)
     size = np.bincount(labels, minlength=count)
@@ -68,30 +57,29 @@ def spectral_basis(
 ) -> tuple[np.ndarray, np.ndarray]:
     """The ``k`` smallest eigenpairs of ``D - A``: ``(eigenvalues (k,), eigenvectors (n, k))``, ascending.
 
-    The ``c`` eigenvectors of eigenvalue 0 are written down (:func:`null_space_basis`, largest
-    components first). The other ``k - c`` come from ``eigsh`` on the deflated shift-invert
-    operator ``P (L - sigma I)^-1 P`` (``P`` the projector off the null space, ``sigma = -1e-6``,
-    solved by the CHOLMOD gateway), whose largest eigenvalues ``1 / (lambda - sigma)`` are the
-    smallest nonzero ``lambda``: undeflated, the ``c``-fold ``1 / -sigma`` dwarfs the rest and
-    ARPACK crawls (24 s for 100 eigenvectors of the camel). Dense LAPACK ``eigh`` when
-    ``k > n / 4`` up to 5000 vertices. ``ValueError`` beyond the practical sizes (module
-    constants). ``progress`` shows a bar over the stages.
+    The ``c`` eigenvectors of 0 are written down (:func:`null_space_basis`); the others come from ``eigsh``
+    on the deflated shift-invert operator ``P (L - sigma I)^-1 P`` (solves by the gateway), or dense
+    LAPACK ``eigh`` when ``k > n / 4`` up to ``DENSE_MAX_VERTICES``. ``InputError`` beyond the practical
+    sizes (module constants).
     """
     if n > SPECTRAL_MAX_VERTICES:
-        raise ValueError(
+        raise InputError(
             f"mesh must have at most {SPECTRAL_MAX_VERTICES} vertices for the spectral baseline "
-            f"(eigenvectors cost O(n k) memory and O(n k^2) time), got {n}; use encode_geometry or approximate"
+            f"(eigenvectors cost O(n k) memory and O(n k^2) time), got {n}; use encode_geometry or approximate",
+            param="mesh",
         )
     dense = k > n // 4
     if dense and n > DENSE_MAX_VERTICES:
-        raise ValueError(
+        raise InputError(
             f"k must be at most n / 4 = {n // 4} on meshes above {DENSE_MAX_VERTICES} vertices "
-            f"(more eigenvectors need a dense eigensolver), got k = {k} with n = {n}"
+            f"(more eigenvectors need a dense eigensolver), got k = {k} with n = {n}",
+            param="k",
         )
     if not dense and n * k > SPECTRAL_MAX_WORK:
-        raise ValueError(
+        raise InputError(
             f"k must be at most {SPECTRAL_MAX_WORK // n} for a mesh of {n} vertices "
-            f"(the Lanczos basis would exceed n * k = {SPECTRAL_MAX_WORK:.0e} doubles), got {k}"
+            f"(the Lanczos basis would exceed n * k = {SPECTRAL_MAX_WORK:.0e} doubles), got {k}",
+            param="k",
         )
     check_progress(progress)
     L = combinatorial_laplacian(triangles, n)
@@ -133,11 +121,8 @@ def spectral_basis(
 
 
 def quantize_coefficients(coefficients: np.ndarray, bits: int) -> np.ndarray:
-    """Uniformly quantize each column to ``bits`` bits in its ``[min, max]`` and return the dequantized values.
-
-    The quantizer of the geometry stream (:func:`o3d_lsmesh._quantization.quantize`), so that the two
-    compression methods are compared at the same quantization.
-    """
+    """Each column quantized to ``bits`` bits in its ``[min, max]`` and dequantized (the geometry stream's
+    quantizer, so that both compression methods are compared at the same quantization)."""
     lower, upper = coefficients.min(axis=0), coefficients.max(axis=0)
     return dequantize(quantize(coefficients, lower, upper, bits), lower, upper, bits)
 
@@ -145,9 +130,9 @@ def quantize_coefficients(coefficients: np.ndarray, bits: int) -> np.ndarray:
 def spectral_approximation(mesh: MeshT, k: int, *, bits: int | None = None, progress: bool = False) -> MeshT:
     """Project the geometry on the first ``k`` Laplacian eigenvectors (Karni and Gotsman's spectral compression).
 
-    ``U (U^T X)`` for positions ``X (n, 3)`` and ``U (n, k)`` the orthonormal eigenvectors of the
-    ``k`` smallest eigenvalues of ``L = D - A``: the best ``k``-term approximation in the basis of
-    section II of the bases paper. ``bits`` quantizes the ``3k`` coefficients first (Karni and Gotsman use 14).
+    ``U (U^T X)`` for positions ``X (n, 3)`` and ``U (n, k)`` the orthonormal eigenvectors of the ``k``
+    smallest eigenvalues of ``L = D - A`` (section II of the bases paper); ``bits`` quantizes the ``3k``
+    coefficients first (Karni and Gotsman use 14).
 
     Parameters
     ----------
@@ -156,9 +141,9 @@ def spectral_approximation(mesh: MeshT, k: int, *, bits: int | None = None, prog
     k : int
         Number of basis functions, ``1..n``.
     bits : int, optional
-        Quantization bits per coefficient, 1 to 31; default no quantization.
+        Quantization bits per coefficient, 1 to 31; default none.
     progress : bool
-        Show a tqdm bar over the stages (factor, eigensolve).
+        Show a bar over the stages (factor, eigensolve).
 
     Returns
     -------
@@ -167,25 +152,20 @@ def spectral_approximation(mesh: MeshT, k: int, *, bits: int | None = None, prog
 
     Raises
     ------
-    ValueError
-        ``k`` out of range, ``bits`` out of range, or a mesh or ``k`` beyond the
-        practical sizes: more than 50,000 vertices, ``n * k > 2e7``, or
-        ``k > n / 4`` above 5,000 vertices.
-    TypeError
-        ``progress`` is not a bool.
+    InputError
+        ``k`` or ``bits`` out of range, or beyond the practical sizes (more than 50,000 vertices,
+        ``n * k > 2e7``, or ``k > n / 4`` above 5,000 vertices); ``InputTypeError`` for ``progress``.
 
     Notes
     -----
-    With ``k`` below the number of components the basis of eigenvalue 0 (one indicator per
-    component) is not unique: the ``k`` largest components are kept, each projected to its
-    centroid, and the vertices of the others go to the origin.
+    With ``k`` below the number of components, the ``k`` largest components are kept (each projected to
+    its centroid) and the vertices of the others go to the origin.
 
     Examples
     --------
     >>> import open3d as o3d, numpy as np
     >>> sphere = o3d.geometry.TriangleMesh.create_sphere(resolution=10)
-    >>> n = len(sphere.vertices)
-    >>> full = spectral_approximation(sphere, n)
+    >>> full = spectral_approximation(sphere, len(sphere.vertices))
     >>> bool(np.allclose(np.asarray(full.vertices), np.asarray(sphere.vertices)))
     True
     """
