@@ -1,11 +1,12 @@
-"""area_weighted_normals against a plain loop over triangles and against Open3D's vertex normals."""
+"""Face and area-weighted vertex normals against plain loops over triangles and against Open3D's vertex normals."""
 
 from __future__ import annotations
 
 import numpy as np
 import open3d as o3d
+import pytest
 
-from o3d_lsmesh._normals import area_weighted_normals
+from o3d_lsmesh.core.arrays import area_weighted_normals, face_normals
 
 
 def test_area_weighted_normals_match_a_plain_loop_and_open3d():
@@ -27,3 +28,15 @@ def test_area_weighted_normals_match_a_plain_loop_and_open3d():
     reference.compute_vertex_normals()
     unit = got[:-1] / np.linalg.norm(got[:-1], axis=1, keepdims=True)
     np.testing.assert_allclose(unit, np.asarray(reference.vertex_normals), atol=1e-9)
+
+
+def test_face_normals_and_areas_match_a_plain_loop():
+    rng = np.random.default_rng(4)
+    V = rng.normal(size=(8, 3))
+    T = np.array([[0, 1, 2], [2, 3, 4], [5, 6, 7], [1, 1, 3]])  # the last one degenerate
+    normals, areas = face_normals(V, T)
+    for t, (a, b, c) in enumerate(T):
+        cross = np.cross(V[b] - V[a], V[c] - V[a])
+        length = np.linalg.norm(cross)
+        assert areas[t] == pytest.approx(0.5 * length, rel=1e-14)
+        np.testing.assert_allclose(normals[t], cross / length if length > 0 else 0.0, atol=1e-15)

@@ -3,17 +3,14 @@ import pytest
 from conftest import grid, load_mesh, triangle_soups
 from hypothesis import given, settings
 
-from o3d_lsmesh.topology import (
-    adjacency_matrix,
+from o3d_lsmesh.core.boundary import (
     boundary_chains,
     boundary_curves,
     boundary_halfedges,
     boundary_loops,
-    connected_components,
-    directed_edges,
     nonmanifold_vertices,
-    unique_edges,
 )
+from o3d_lsmesh.core.connectivity import adjacency_matrix, connected_components, directed_edges, unique_edges
 
 
 def grid_with_holes():
@@ -360,7 +357,7 @@ def test_empty_and_closed_meshes_have_no_curves(sphere):
 @pytest.mark.parametrize("dtype", [np.int32, np.int64, np.uint32])
 @pytest.mark.parametrize("length", [0, 5, (1 << 16) - 1, (1 << 16) + 1, 3 * (1 << 16) + 17])
 def test_gather_equals_fancy_indexing(dtype, length):
-    from o3d_lsmesh.topology import gather
+    from o3d_lsmesh.core.connectivity import gather
 
     rng = np.random.default_rng(length)
     values = rng.random(1000)
