@@ -9,15 +9,9 @@ import scipy.sparse as sp
 from scipy.sparse import csgraph
 
 from ._o3d import read_mesh, weld_map
-from ._validate import mesh_arrays
-from .topology import (
-    boundary_curves,
-    boundary_halfedges,
-    boundary_rows,
-    connected_components,
-    corner_fans,
-    edge_runs,
-)
+from .core.boundary import boundary_curves, boundary_halfedges, boundary_rows, corner_fans
+from .core.connectivity import Connectivity
+from .core.validate import mesh_arrays
 
 if TYPE_CHECKING:
     from ._types import AnyMesh
@@ -38,7 +32,8 @@ def topology_summary_arrays(vertices: np.ndarray, triangles: np.ndarray) -> dict
     n, m = len(vertices), len(F)
     referenced = np.zeros(n, dtype=bool)
     referenced[F.ravel()] = True
-    runs = edge_runs(F, n)
+    conn = Connectivity(F, n)
+    runs = conn.edge_structure.runs
     order, starts, counts = runs
     edge_count = len(counts)
     crowded_edges = int(np.count_nonzero(counts > 2))
@@ -50,7 +45,7 @@ def topology_summary_arrays(vertices: np.ndarray, triangles: np.ndarray) -> dict
     fans_per_vertex = np.bincount(vertex_of_fan, minlength=n)
     nonmanifold_vertex_count = int(np.count_nonzero(fans_per_vertex > 1))
     # components over vertices (what Open3D's cluster_connected_triangles would join at a shared vertex)
-    _, labels = connected_components(F, n)
+    _, labels = conn.components
     components = len(np.unique(labels[referenced]))
     # surface pieces: triangles joined through edges of exactly two triangles (a pinch or fin separates)
     pair = starts[counts == 2]
@@ -62,7 +57,7 @@ def topology_summary_arrays(vertices: np.ndarray, triangles: np.ndarray) -> dict
     # boundary
     rows, _, head, _ = boundary_rows(F, n, runs)
     boundary_edges = len(rows)
-    curves = boundary_curves(F, n)  # (recomputes the edge runs: cheap next to the fans)
+    curves = boundary_curves(F, n, edges=conn.edge_structure)
     loop_edges = np.array([len(loop) for loop in curves.loops], dtype=np.int64)
     holes = {}
     for lo, hi in HOLE_SIZE_BINS:
@@ -83,12 +78,13 @@ def topology_summary_arrays(vertices: np.ndarray, triangles: np.ndarray) -> dict
     longest = np.einsum("ijk,ijk->ij", sides, sides).max(axis=1)
     degenerate = int(np.count_nonzero(twice_area <= DEGENERATE_TOLERANCE * longest))
     sorted_triangles = np.sort(F, axis=1)
-    if n**3 < 2**62:  # one packed key per triangle: a plain sort instead of a row-wise unique
+    if n**3 < 2**62:  # one packed key per triangle: a plain sort
         keys = (sorted_triangles[:, 0] * n + sorted_triangles[:, 1]) * n + sorted_triangles[:, 2]
         keys.sort()
         duplicate = int(np.count_nonzero(keys[1:] == keys[:-1]))
-    else:
-        duplicate = m - len(np.unique(sorted_triangles, axis=0))
+    else:  # rows in lexicographic order, equal neighbours
+        sorted_triangles = sorted_triangles[np.lexsort(sorted_triangles.T[::-1])]
+        duplicate = int(np.count_nonzero((sorted_triangles[1:] == sorted_triangles[:-1]).all(axis=1)))
     chi = int(np.count_nonzero(referenced)) - edge_count + m
     edge_manifold = crowded_edges == 0
     vertex_manifold = edge_manifold and nonmanifold_vertex_count == 0
@@ -140,7 +136,7 @@ def topology_summary(mesh: AnyMesh) -> dict:
         ``vertex_manifold`` (also every vertex's triangles form one fan); ``components`` (over
         shared vertices, referenced vertices only) and ``surface_pieces`` (over edges of exactly two
         triangles: pinches and fins separate them); ``boundary_loops`` (continuing at a pinch along
-        the rim of the same fan, :func:`o3d_lsmesh.topology.boundary_loops`); ``boundary_components``
+        the rim of the same fan, :func:`o3d_lsmesh.core.boundary.boundary_loops`); ``boundary_components``
         (pieces of the boundary graph: loops touching at a pinch count once, as in Open3D-based
         counts); ``boundary_edges``; ``seam_edges``: how many of them are a UV seam or normal crease
         that Open3D's readers split (both sides at exactly equal coordinates: the counts here are of
