@@ -57,7 +57,7 @@ ONE_THREAD = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THRE
 
 _SERIAL_CHILD = """
 import json, resource, sys, time
-from o3d_lsmesh import batch
+from o3d_lsmesh.app import batch
 import open3d, o3d_lsmesh.fairing  # the imports the workers do before the clock starts
 from o3d_lsmesh._solvers import cholmod_available
 cholmod_available()
@@ -129,7 +129,7 @@ def _cpu() -> float:
 def run_cluster(folder: Path, out: Path, method: str, iterations: int, workers: int) -> dict:
     from distributed import Client
 
-    from o3d_lsmesh import batch
+    from o3d_lsmesh.app import batch
 
     start = time.perf_counter()
     with batch.local_cluster(workers, 1) as cluster, Client(cluster) as client:

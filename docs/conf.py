@@ -140,7 +140,7 @@ def _cli_page() -> None:
     """``cli.rst``: every subcommand's ``--help`` as the parser prints it (the one declaration of its options)."""
     import os
 
-    from o3d_lsmesh.cli import build_parser
+    from o3d_lsmesh.app.cli import build_parser
 
     os.environ["COLUMNS"] = "100"  # argparse wraps to the terminal: one width for the page
     parser = build_parser()

@@ -299,12 +299,17 @@ def test_obj_writable_fills_or_drops_empty_texture_slots(tmp_path):
     assert obj_writable(full) is full  # nothing to fix
 
 
+def _write_text(path, text):
+    with open(path, "w") as handle:
+        return bool(handle.write(text))
+
+
 def test_textures_not_written_is_an_error(tmp_path, capsys, monkeypatch):
     V, T = _holed_box()
     mesh = _textured(V, T, np.zeros(len(T)))
     assert o3d.io.write_triangle_mesh(str(tmp_path / "in.obj"), mesh)
     # a writer that writes the OBJ alone (as Open3D does when it cannot write an image)
-    monkeypatch.setattr("o3d_lsmesh.cli._files.write_mesh", lambda mesh, path: path.write_text("v 0 0 0\n"))
+    monkeypatch.setattr(o3d.io, "write_triangle_mesh", lambda path, mesh, **_: _write_text(path, "v 0 0 0\n"))
     capsys.readouterr()
     assert main(["fill", str(tmp_path / "in.obj"), str(tmp_path / "out.obj"), "--quiet"]) == 2
     err = capsys.readouterr().err

@@ -23,10 +23,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from o3d_lsmesh import batch
-from o3d_lsmesh._batch_ops import OPS, BatchOp
-from o3d_lsmesh._errors import O3DLSMeshWarning
-from o3d_lsmesh.cli import main
+from o3d_lsmesh.app import batch
+from o3d_lsmesh.app.cli import main
+from o3d_lsmesh.app.ops import OPS, BatchOp
+from o3d_lsmesh.core.errors import O3DLSMeshWarning
 
 
 def _sphere(path: Path, resolution: int = 4, shift: float = 0.0) -> Path:
@@ -205,7 +205,7 @@ def test_a_missing_or_unreadable_scheduler_file_is_an_error_not_a_hang(tmp_path,
         thread.start()
         thread.join(30)  # Dask's client waits for the file to appear, forever
         assert not thread.is_alive(), f"batch.run waited for {name}"
-    assert [type(e) for e in errors] == [ValueError, ValueError]
+    assert [isinstance(e, ValueError) for e in errors] == [True, True]
     assert "scheduler_file must" in str(errors[0]) and "does not exist" in str(errors[0])
     assert "scheduler_file must" in str(errors[1]) and "address" in str(errors[1])
     argv = [

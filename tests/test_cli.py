@@ -16,7 +16,9 @@ import open3d as o3d
 import pytest
 from conftest import REPO, load_mesh
 
-from o3d_lsmesh.cli import CLIError, build_parser, main, parse_index_spec
+from o3d_lsmesh.app import batch
+from o3d_lsmesh.app.cli import CLIError, build_parser, main
+from o3d_lsmesh.app.commands import parse_index_spec
 from o3d_lsmesh.fairing import constrained_fairing
 from o3d_lsmesh.metrics import signed_volume
 from o3d_lsmesh.shapes import add_noise, demo_mesh, mean_edge_length
@@ -385,7 +387,7 @@ def test_unreadable_and_empty_meshes(tmp_path, capsys, clean):
         (["demo", "--force"], "unrecognized arguments: --force"),  # demo reads no file to protect
         (["reconstruct", "{src}", "{out}", "--unknown", "4:x"], "--unknown must be an existing index file"),
         (["hierarchy", "{src}", "{dir}", "--levels", "99"], "--levels must be in 0.."),
-        (["hierarchy", "{src}", "{dir}", "--levels", "one"], "--levels must be 'all' or comma-separated"),
+        (["hierarchy", "{src}", "{dir}", "--levels", "one"], "--levels: must be 'all' or comma-separated"),
         (["hierarchy", "{src}", "{dir}", "--format", "xyz"], "--format: must be one of .ply, .obj"),
         (
             ["hierarchy", "{src}", "{dir}", "--format", "glb"],
@@ -415,11 +417,11 @@ def test_unreadable_and_empty_meshes(tmp_path, capsys, clean):
         ),
         (
             ["denoise", "{src}", "{out}", "--iterations", "1", "--method", "global", "--reimpose-every", "2"],
-            "--reimpose-every cannot be used with --method global",
+            "--reimpose-every must be None for --method global",
         ),
         (
             ["denoise", "{src}", "{out}", "--method", "local", "--mu", "1"],
-            "--mu cannot be used with --method local",
+            "--mu must be None for --method local",
         ),
         (["denoise", "{src}", "{out}", "--method", "global", "--mu", "-1"], "--mu must be"),
     ],
@@ -648,17 +650,16 @@ def test_library_checks_are_user_errors_naming_flags(tmp_path, capsys, clean):
 def test_error_during_a_bar_starts_its_own_line(tmp_path, capsys, clean, monkeypatch):
     import importlib
 
-    from tqdm.auto import tqdm
-
-    from o3d_lsmesh._validate import as_count
+    from o3d_lsmesh.core.progress import progress_bar
+    from o3d_lsmesh.core.validate import as_count
 
     def failing(mesh, iterations, **kwargs):
-        bar = tqdm(total=10, desc="fairing")  # left open, as a bar is when an exception leaves its loop
+        bar = progress_bar(True, total=10, desc="fairing")  # left open, as when an exception leaves its loop
         bar.update(3)
         as_count(-1, name="number_of_iterations")  # a check of ours fails mid-bar
 
     def crashing(mesh, iterations, **kwargs):
-        bar = tqdm(total=10, desc="fairing")
+        bar = progress_bar(True, total=10, desc="fairing")
         bar.update(3)
         return np.zeros(3) + np.zeros(2)  # a bug mid-bar: the traceback too starts on its own line
 
@@ -796,19 +797,19 @@ def test_top_level_help_states_the_start_up_cost_and_points_to_batch(capsys):
         ),
         (
             ["denoise", "{src}", "{out}", "--method", "local", "--mu", "2"],
-            "--mu cannot be used with --method local",
+            "--mu must be None for --method local",
         ),
         (
             ["denoise", "{src}", "{out}", "--method", "scan", "--reimpose-every", "2"],
-            "--reimpose-every cannot",
+            "--reimpose-every must be None for --method scan",
         ),
         (["denoise", "{src}", "{out}", "--method", "global", "--mu", "0"], "--mu must be positive"),
         (["denoise", "{src}", "{out}", "--level", "50"], "--level must be <"),
         (["fill", "{src}", "{out}", "--max-hole-diameter", "-1"], "--max-hole-diameter must be positive"),
-        (["fill", "{src}", "{out}", "--density", "nan"], "--density must be"),
+        (["fill", "{src}", "{out}", "--density", "nan"], "--density: must be a finite number"),
         (
             ["approximate", "{src}", "{out}", "--count", "10", "--method", "random", "--seed", "-1"],
-            "--seed must",
+            "--seed: must be a non-negative integer",
         ),
         (["encode", "{src}", "{dir}/x.bin", "--bits", "64"], "--bits must be <= "),
         (
@@ -825,6 +826,7 @@ def test_errors_name_cli_flags_not_api_parameters(tmp_path, capsys, clean, argv,
     line = run_error(capsys, [a.format(**names) for a in argv])
     assert expected in line
     words = re.sub(r"'[^']*'", "", line)  # file names may hold anything
+    words = words.replace("build_hierarchy", "")  # multiresolution_fairing's own wording of --level (library)
     # no Python identifier (number_of_iterations, smooth_boundary, build_hierarchy) and no keyword=value
     assert not re.search(r"\b[a-z]+_[a-z_]+\b|\w=", words), line
 
@@ -896,27 +898,27 @@ def test_out_of_memory_is_a_user_error(tmp_path, capsys, clean, monkeypatch):
     )
 
 
-def test_flag_names_replace_api_names_in_library_messages():
-    from o3d_lsmesh._validate import as_count
-    from o3d_lsmesh.cli._common import cli_words
-
-    def message(call):
-        with pytest.raises((ValueError, TypeError)) as error:
-            call()
-        return str(error.value)
+def test_input_errors_are_mapped_to_flags_by_param_not_by_words():
+    from o3d_lsmesh.app.cli import user_message
+    from o3d_lsmesh.core.errors import InputError
 
     args = build_parser().parse_args(["reconstruct", "scan.ply", "out.ply", "--unknown", "0"])
-    text = message(lambda: as_count(-1, name="unknown_vertex_indices"))
-    assert cli_words(text, args) == "--unknown must be >= 0, got -1"
-    # a parameter name inside a longer word is left alone; the flag map is the subcommand's own
-    assert cli_words("my_unknown_vertex_indices must be x", args) == "my_unknown_vertex_indices must be x"
-    assert cli_words("count must be >= 1", args) == "count must be >= 1"
-    # the fairing's advice for a boundary it cannot smooth names the CLI flag
-    assert cli_words("boundary ... (pass smooth_boundary=False to keep it fixed)", None).endswith(
-        "(pass --fixed-boundary to keep it fixed)"
+    error = InputError("unknown_vertex_indices must be >= 0, got -1", param="unknown_vertex_indices")
+    assert user_message(error, args) == "--unknown must be >= 0, got -1"
+    # the parameter is the error's, not a word of the message
+    assert user_message(InputError("count must be >= 1", param=None), args) == "count must be >= 1"
+    assert (
+        user_message(InputError("it must be one", param="mesh"), args) == "INPUT 'scan.ply': it must be one"
     )
-    # "mesh" starting a message is the file the user named
-    assert cli_words("mesh must be a triangle mesh", args) == "INPUT 'scan.ply' must be a triangle mesh"
+    assert (
+        user_message(InputError("mesh must be a mesh", param="mesh"), args)
+        == "INPUT 'scan.ply' must be a mesh"
+    )
+    args = build_parser().parse_args(["denoise", "a.ply", "b.ply", "--iterations", "3"])
+    error = InputError("mu must be None for method='local', got 1", param="mu")
+    assert user_message(error, args) == "--mu must be None for --method local, got 1"
+    error = InputError("number_of_iterations must be >= 0", param="number_of_iterations")
+    assert user_message(error, args) == "--iterations must be >= 0"
 
 
 def test_invalid_mesh_files_are_named_in_the_error(tmp_path, capsys, clean):
@@ -1036,7 +1038,7 @@ def test_compare_render_bad_values_exit_2(tmp_path, capsys, clean):
 
 def test_a_warning_is_one_line_naming_the_program_not_a_source_line(tmp_path, capsys, monkeypatch, clean):
     # without scikit-sparse the solver gateway warns; the CLI shows it as its own line, above the bar
-    import o3d_lsmesh._solvers as solvers
+    import o3d_lsmesh.core.solve as solvers
 
     monkeypatch.setattr(solvers, "_cholmod", None)
     monkeypatch.delenv(solvers.NO_CHOLMOD_ENV, raising=False)
@@ -1061,3 +1063,72 @@ def test_denoise_features_method_says_which_mode_ran(tmp_path, capsys):
     # the same as the API call: the CLI adds nothing to the method
     expected = np.asarray(constrained_fairing(box, method="features").vertices)
     np.testing.assert_allclose(out, expected, atol=1e-6)
+
+
+# ----------------------------------------------------------------- options declared once (ops.py)
+
+
+def _subparsers():
+    parser = build_parser()
+    (sub,) = (a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    return sub.choices
+
+
+def _options():
+    from o3d_lsmesh.app.ops import OPS
+
+    return [(op, option) for op in OPS.values() for option in op.options]
+
+
+@pytest.mark.parametrize("op, option", _options(), ids=lambda x: getattr(x, "name", ""))
+def test_each_option_is_a_flag_of_its_command_and_of_batch_with_its_default(op, option):
+    from o3d_lsmesh.app.ops import resolve_options
+
+    commands = _subparsers()
+    if option.cli:  # the subcommand of the same name has the flag, with the table's default and help
+        action = commands[op.name]._option_string_actions[option.cli_flag]
+        assert action.dest == option.name and action.help == option.help.replace("%", "%%")
+        assert action.required or action.default == option.default
+    batch_flag = commands["batch"]._option_string_actions[option.cli_flag]
+    assert op.name in batch_flag.help or option.help.replace("%", "%%") in batch_flag.help
+    # batch.run parses the same option from the same table: the same default
+    assert resolve_options([op], {})[0][option.name] == option.default
+
+
+@pytest.mark.parametrize(
+    "op, option", [(op, o) for op, o in _options() if not o.is_flag], ids=lambda x: getattr(x, "name", "")
+)
+def test_a_bad_option_value_names_its_flag_on_the_cli_and_its_name_in_python(tmp_path, capsys, op, option):
+    from o3d_lsmesh.core.errors import InputError
+
+    with pytest.raises(InputError) as error:  # Python callers: the option's name, never a flag
+        batch.run(tmp_path / "none.ply", tmp_path / "out", op=op.name, options={option.name: "x"}, workers=0)
+    assert error.value.param == option.name and "--" not in str(error.value)
+    argv = ["batch", str(tmp_path / "none.ply"), str(tmp_path / "out"), "--op", op.name, option.cli_flag, "x"]
+    assert option.cli_flag in run_error(capsys, argv)
+    if option.cli:
+        argv = [op.name, str(tmp_path / "a.ply"), str(tmp_path / "b"), option.cli_flag, "x"]
+        assert option.cli_flag in run_error(capsys, argv)
+
+
+@pytest.mark.parametrize(
+    "options, flag",
+    [
+        ({"suffix": ".xyz"}, "--suffix"),
+        ({"workers": -1}, "--workers"),
+        ({"threads_per_worker": 0}, "--threads-per-worker"),
+        ({"retries": -1}, "--retries"),
+        ({"task_timeout": -1.0}, "--task-timeout"),
+        ({"scheduler_file": "missing.json"}, "--scheduler-file"),
+    ],
+)
+def test_batch_run_errors_name_the_parameter_and_the_cli_adds_the_dashes(tmp_path, options, flag):
+    from o3d_lsmesh.app.cli import user_message
+    from o3d_lsmesh.core.errors import InputError
+
+    with pytest.raises(InputError) as error:
+        batch.run(tmp_path / "none.ply", tmp_path / "out", op="denoise", **options)
+    (param,) = options
+    assert error.value.param == param and not str(error.value).startswith("--")
+    args = build_parser().parse_args(["batch", "in.ply", "out", "--op", "denoise"])
+    assert user_message(error.value, args).startswith(flag)

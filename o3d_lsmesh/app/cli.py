@@ -1,0 +1,282 @@
+"""The ``o3d-lsmesh`` command line: subcommands generated from :data:`~o3d_lsmesh.app.ops.OPS`.
+
+Every operation's flags come from its option table (``ops.py``); the commands with a flow of their
+own are in :mod:`o3d_lsmesh.app.commands`. Exit codes: 0 success; 2 a user error, one line on
+stderr naming the flag or the file (an :class:`~o3d_lsmesh.core.errors.InputError` is mapped to
+its flag by ``param``); 1 a picture that could not be drawn, or any other error with its traceback
+(a bug); 130 an interrupt. Docs: ``docs/cli.rst`` (generated from ``--help``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import inspect
+import json
+import os
+import sys
+import textwrap
+import traceback
+import warnings
+from collections.abc import Sequence
+from typing import Any, Callable
+
+from ..core.errors import InputError
+from .files import CLIError
+from .ops import OPS, BatchOp, Option
+from .tasks import jsonable
+
+__all__ = ["CLIError", "PictureError", "Run", "build_parser", "main"]
+
+PROG = "o3d-lsmesh"
+
+
+class PictureError(Exception):
+    """A picture that could not be drawn (no working renderer): one line on stderr, exit code 1."""
+
+
+class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescriptionHelpFormatter):
+    """``--help`` shows every option's default and keeps the examples' line breaks."""
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        # a required option has no default; one resolved later (None: the API's choice) says so itself
+        if action.required or (action.help and "(default:" in action.help):
+            return action.help
+        return super()._get_help_string(action)
+
+
+class Parser(argparse.ArgumentParser):
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("formatter_class", HelpFormatter)  # subparsers are made with this class too
+        super().__init__(*args, **kwargs)
+
+    def error(self, message: str) -> Any:  # one line, no usage block
+        raise CLIError(f"{self.prog}: error: {message} (see {self.prog} --help)")
+
+
+def _argparse_type(parse: Callable[[Any], Any]) -> Callable[[str], Any]:
+    def convert(text: str) -> Any:
+        try:
+            return parse(text)
+        except ValueError as error:
+            raise argparse.ArgumentTypeError(str(error)) from None
+
+    return convert
+
+
+def add_option(parser: Any, option: Option, **overrides: Any) -> None:
+    """The flag of ``option`` (a switch, a choice, or a value its parser checks)."""
+    kwargs: dict[str, Any] = {"help": option.help.replace("%", "%%"), "default": option.default}
+    if option.is_flag:
+        kwargs["action"] = "store_true"
+    elif getattr(option.parse, "choices", None):
+        choices = option.parse.choices  # type: ignore[attr-defined]
+        kwargs.update(choices=choices, type=type(choices[0]))
+    else:
+        kwargs["type"] = _argparse_type(option.parse)
+    if option.required:
+        kwargs.update(required=True, default=None)
+    parser.add_argument(option.cli_flag, dest=option.name, **{**kwargs, **overrides})
+
+
+def add_command(
+    sub: Any, common: argparse.ArgumentParser, handler: Callable[..., int], arguments: dict[str, str]
+) -> argparse.ArgumentParser:
+    """Add the subcommand ``handler.__name__`` with its positional ``arguments`` (name: help) and,
+    when it names an operation of :data:`OPS`, that operation's flags.
+
+    ``--help`` is the handler's docstring: its first line the summary, its last paragraph
+    (``example: ...``) the example, the paragraphs between the description.
+    """
+    name = handler.__name__
+    summary, *body, example = inspect.cleandoc(handler.__doc__ or "").split("\n\n")
+    parser = sub.add_parser(
+        name,
+        parents=[common],
+        help=summary.rstrip("."),
+        description="\n\n".join(textwrap.fill(" ".join(p.split()), 79) for p in body),
+        epilog=f"example:\n  {PROG} {name} {example.removeprefix('example: ')}",
+    )
+    for argument, text in arguments.items():
+        parser.add_argument(argument, metavar=argument.upper(), help=text)
+    options = [option for option in OPS[name].options if option.cli] if name in OPS else []
+    for option in options:
+        add_option(parser, option)
+    flags = {option.api_param: option.cli_flag for option in options}
+    parser.set_defaults(handler=handler, positionals=tuple(arguments), flags=flags)
+    return parser
+
+
+def op_options(args: argparse.Namespace, op: BatchOp) -> dict[str, Any]:
+    """The values of ``op``'s options on the command line (parsed by argparse, or the defaults)."""
+    return {option.name: getattr(args, option.name, option.default) for option in op.options}
+
+
+# --------------------------------------------------------------------------- output
+
+
+class Run:
+    """Output policy of one invocation: progress bars, human report, JSON."""
+
+    def __init__(self, args: argparse.Namespace):
+        self.args = args
+        self.quiet, self.json = args.quiet, args.json
+        self.progress = not self.quiet
+        # with --json, stdout carries only the JSON object: the report goes to stderr
+        self.stream = sys.stderr if self.json else sys.stdout
+
+    def say(self, text: str) -> None:
+        if not self.quiet:
+            print(text, file=self.stream, flush=True)
+
+    def finish(self, mesh: Any = None, **fields: Any) -> int:
+        """With ``--json``, print the report: the command, its files, the mesh's size, then ``fields``."""
+        if self.json:
+            report = {
+                "command": self.args.command,
+                **{n: getattr(self.args, n) for n in self.args.positionals},
+            }
+            if mesh is not None:
+                report.update(vertices=len(mesh.vertices), triangles=len(mesh.triangles))
+            print(json.dumps(jsonable({**report, **fields}), indent=2), flush=True)
+        return 0
+
+
+# --------------------------------------------------------------------------- errors
+
+
+def _spell(param: str, args: argparse.Namespace | None) -> str:
+    """The words of the command line for the Python parameter ``param``: its flag or the file named."""
+    flags = getattr(args, "flags", {})
+    positionals = getattr(args, "positionals", ())
+    if param in flags:
+        return flags[param]
+    name = "input" if param == "mesh" and "input" in positionals else param
+    if name in positionals:
+        return f"{name.upper()} {getattr(args, name)!r}"
+    return "--" + param.replace("_", "-") if hasattr(args, param) else param
+
+
+def user_message(error: Exception, args: argparse.Namespace | None) -> str:
+    """An input error in the words of the command line, by its ``param`` and the command's option table."""
+    text, param = str(error), getattr(error, "param", None)
+    if param is None and not isinstance(error, InputError):  # not an InputError yet: "<param> must ..."
+        head = text.split(" ", 1)[0]
+        param = head if head in getattr(args, "flags", {}) or hasattr(args, head) else None
+    for name, flag in getattr(args, "flags", {}).items():
+        option = _option(args, name)
+        for value in getattr(getattr(option, "parse", None), "choices", None) or ():
+            text = text.replace(f"{name}={value!r}", f"{flag} {value}")
+        renamed = "_" in name and flag != "--" + name.replace(
+            "_", "-"
+        )  # an API name (identifier) of the flag
+        if renamed and not (option and option.is_flag):  # (a switch may mean the parameter's negation)
+            text = text.replace(name, flag)
+    if param:
+        word = _spell(param, args)
+        if text.startswith(param + " "):
+            text = word + text[len(param) :]
+        elif word != param and not text.startswith(word):
+            text = f"{word}: {text}"
+    return text
+
+
+def _option(args: argparse.Namespace | None, param: str) -> Option | None:
+    op = OPS.get(getattr(args, "command", None) or "")
+    return next((o for o in op.options if o.api_param == param), None) if op else None
+
+
+def _from_library(error: BaseException) -> bool:
+    """Whether ``error`` was raised in o3d_lsmesh (its innermost frame), not in numpy, Open3D or the caller.
+
+    Transitional, until every check of the library raises :class:`InputError`.
+    """
+    frames = traceback.extract_tb(error.__traceback__)
+    package = os.path.dirname(os.path.dirname(os.path.abspath(__file__))) + os.sep
+    return bool(frames) and os.path.abspath(frames[-1].filename).startswith(package)
+
+
+def fail(text: str, code: int) -> int:
+    from ..core.progress import close_all
+
+    close_all()
+    sys.stdout.flush()
+    print(text if text.startswith(PROG) else f"{PROG}: error: {text}", file=sys.stderr, flush=True)
+    return code
+
+
+def internal_error(error: BaseException) -> int:
+    from ..core.progress import close_all
+
+    close_all()
+    traceback.print_exception(type(error), error, error.__traceback__, file=sys.stderr)
+    return fail(f"{PROG}: internal error (a bug in o3d-lsmesh, not in your input: please report it)", 1)
+
+
+def _show_warning(message: Warning | str, category: type[Warning], *_args: Any, **_kwargs: Any) -> None:
+    from ..core.progress import write
+
+    write(f"{PROG}: warning: {message}")
+
+
+# --------------------------------------------------------------------------- the parser and main
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from . import commands
+
+    parser = Parser(
+        prog=PROG,
+        description=textwrap.fill(
+            "Least-squares meshes and constrained fairing for Open3D meshes. Reads and writes every "
+            "triangle-mesh format Open3D does (PLY, OBJ, STL, OFF, glTF). Each call imports Open3D "
+            f"(about 2 s): for many files use '{PROG} batch', which pays that once per worker.",
+            79,
+        ),
+        epilog=f"example:\n  {PROG} denoise scan.ply smooth.ply\n  {PROG} denoise --help",
+    )
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        parser.add_argument("--version", action="version", version=f"{PROG} {version('o3d_lsmesh')}")
+    except PackageNotFoundError:  # pragma: no cover - a source tree that was never installed
+        pass
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument("--quiet", action="store_true", help="no progress bars and no report")
+    common.add_argument("--json", action="store_true", help="print the metrics as one JSON object on stdout")
+    writing = argparse.ArgumentParser(add_help=False, parents=[common])
+    writing.add_argument("--force", action="store_true", help="allow overwriting an input file")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser, required=True)
+    commands.add_parsers(sub, writing, common)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run ``o3d-lsmesh`` with ``argv`` (default ``sys.argv[1:]``); return the exit code.
+
+    Exit codes: 0 success, 2 a user error (one line on stderr), 1 a picture that could not be
+    drawn or an internal error (with its traceback), 130 an interrupt.
+    """
+    args = None
+    try:
+        with warnings.catch_warnings():
+            # a warning is one line naming the program, printed above the bar, not a source line
+            warnings.showwarning = _show_warning
+            args = build_parser().parse_args(argv)
+            return int(args.handler(args, Run(args)))
+    except CLIError as error:
+        return fail(str(error), 2)
+    except InputError as error:
+        return fail(user_message(error, args), 2)
+    except (ValueError, TypeError) as error:
+        # until every library check raises InputError: one raised in o3d_lsmesh is the user's
+        return fail(user_message(error, args), 2) if _from_library(error) else internal_error(error)
+    except MemoryError:
+        return fail("not enough memory for this request: try a smaller mesh or smaller options", 2)
+    except OSError as error:
+        return fail(f"{error.strerror or error}: {error.filename or ''}".rstrip(": "), 2)
+    except PictureError as error:
+        return fail(str(error), 1)
+    except KeyboardInterrupt:
+        return fail(f"{PROG}: interrupted", 130)
+    except Exception as error:
+        return internal_error(error)

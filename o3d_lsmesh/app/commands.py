@@ -1,0 +1,630 @@
+"""The subcommands of ``o3d-lsmesh``: each reads its files, runs its operation and reports.
+
+The flags of an operation's subcommand (denoise, fill, approximate, hierarchy, encode, and batch's
+operation options) come from the option tables of :mod:`o3d_lsmesh.app.ops`; the handlers here add
+what a single file needs (output checks, pictures, the human report). Docs: ``docs/cli.rst``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+import os
+import textwrap
+import time
+from collections import Counter
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from .cli import PictureError, Run, add_command, op_options
+from .files import WRITABLE, CLIError, check_output, mesh_suffix, read_input, write_output
+from .ops import OPS, Option, TaskContext
+
+__all__ = ["add_parsers", "parse_index_spec"]
+
+#: the demo scan has up to about 0.55 * resolution**2 vertices: 2000 gives about 2.2 million
+MAX_RESOLUTION = 2000
+_FILES = {"input": "mesh file", "output": "mesh file to write"}
+
+
+def bounded(
+    kind: Callable[[str], Any], minimum: float, rule: str, maximum: float | None = None
+) -> Callable[[str], Any]:
+    """An argparse type for finite ``kind`` numbers in ``[minimum, maximum]`` (the demo's own flags)."""
+
+    def parse(text: str) -> Any:
+        try:
+            value = kind(text)
+        except ValueError:
+            value = math.nan
+        if not minimum <= value < math.inf:  # (nan fails too)
+            raise argparse.ArgumentTypeError(f"must be {rule}, got {text!r}")
+        if maximum is not None and value > maximum:
+            raise argparse.ArgumentTypeError(f"must be at most {maximum:,}, got {text!r}")
+        return value
+
+    return parse
+
+
+def add_parsers(sub: Any, writing: argparse.ArgumentParser, common: argparse.ArgumentParser) -> None:
+    """Add every subcommand; ``writing`` adds ``--force`` to ``common`` (not for the demo: it reads no file)."""
+    files = {"input": "mesh file to denoise", "output": f"mesh file to write ({', '.join(WRITABLE)})"}
+    p = add_command(sub, writing, denoise, files)
+    p.add_argument("--render", metavar="PNG", help="write a before/after picture (default: none)")
+    add_command(sub, writing, fill, _FILES)
+    p = add_command(sub, writing, approximate, _FILES)
+    help = "also write the control indices, .npy or .txt (default: not written)"
+    p.add_argument("--indices", metavar="FILE", help=help)
+    p = add_command(sub, writing, reconstruct, _FILES)
+    help = "index file (.npy or text) or list of indices and a:b ranges, e.g. '0:100,250'"
+    p.add_argument("--unknown", required=True, metavar="SPEC", help=help)
+    help = "known vertices as soft constraints (whole mesh re-solved)"
+    p.add_argument("--soft", action="store_true", help=help)
+    p.set_defaults(flags={"unknown_vertex_indices": "--unknown"})
+    p = add_command(
+        sub,
+        writing,
+        hierarchy,
+        {"input": "mesh file", "outdir": "folder for level_NN files (created if needed)"},
+    )
+    p.add_argument(
+        "--format", type=mesh_suffix, default=".ply", help="file format of the levels (.ply .obj ...)"
+    )
+    add_command(sub, writing, encode, {"input": "mesh file", "output": "file for the encoded bytes"})
+    names = {
+        "mesh": "mesh file the data was encoded on",
+        "data": "file written by encode",
+        "output": _FILES["output"],
+    }
+    p = add_command(sub, writing, decode, names)
+    p.add_argument("--anchors", type=int, help="use only the first K anchors (default: all)")
+    p.set_defaults(flags={"anchors": "--anchors"})
+    p = add_command(sub, writing, compare, {"a": "first mesh file (the reference)", "b": "second mesh file"})
+    help = "write a distance map: A and B side by side, colored by distance to A (default: none)"
+    p.add_argument("--render", metavar="PNG", help=help)
+    p.add_argument(
+        "--units", choices=("model", "edge"), default="model", help="model units or mean edge lengths of A"
+    )
+    _add_batch(add_command(sub, writing, batch, {}))
+    p = add_command(sub, common, demo, {})
+    p.add_argument("--out", default="demo_out", help="output folder")
+    p.add_argument("--no-render", action="store_true", help="skip the picture")
+    resolution = bounded(int, 20, "a grid size of at least 20 rays", MAX_RESOLUTION)
+    help = "the scanner's grid of R x R rays (200: about 22,000 vertices)"
+    p.add_argument("--resolution", type=resolution, default=200, help=help)
+    noise = bounded(float, 0, "a non-negative finite number")
+    help = "range noise in grid spacings where the surface faces the scanner"
+    p.add_argument("--noise", type=noise, default=0.3, help=help)
+    p.add_argument("--seed", type=int, default=0, help="random seed of the noise and dropouts")
+
+
+def _add_batch(p: argparse.ArgumentParser) -> None:
+    """``batch``: its own flags (:func:`~o3d_lsmesh.app.batch.run`'s parameters) and every op's options."""
+    p.add_argument(
+        "inputs", nargs="+", metavar="INPUT", help="files, folders (searched recursively) or globs"
+    )
+    p.add_argument("outdir", metavar="OUTDIR", help="folder for the outputs and the report")
+    operations = ", ".join(f"{name} ({op.help})" for name, op in OPS.items())
+    p.description = f"{p.description}\n\n" + textwrap.fill(f"Operations: {operations}.", 79)
+    help = "an operation or a pipeline in order, e.g. denoise or denoise,compare"
+    p.add_argument("--op", required=True, help=help)
+    p.add_argument("--set", action="append", default=[], metavar="OP.NAME=VALUE", help="an option of one op")
+    p.add_argument("--workers", type=int, help="local worker processes (default: CPUs; 0: this process)")
+    p.add_argument("--threads-per-worker", type=int, default=1, help="threads of each worker")
+    where = p.add_mutually_exclusive_group()
+    help = "existing Dask scheduler, e.g. tcp://host:8786 (default: $DASK_SCHEDULER_ADDRESS)"
+    where.add_argument("--scheduler", metavar="ADDRESS", help=help)
+    where.add_argument(
+        "--scheduler-file", metavar="FILE", help="existing scheduler's JSON file (default: none)"
+    )
+    help = "skip inputs the report lists as ok with the same key"
+    p.add_argument("--resume", action="store_true", help=help)
+    help = "JSON-lines report, one record per file (default: OUTDIR/batch_report.jsonl)"
+    p.add_argument("--report", metavar="FILE", help=help)
+    p.add_argument("--retries", type=int, default=1, help="runs of a task whose worker died before it fails")
+    p.add_argument("--fail-fast", action="store_true", help="stop at the first failure")
+    help = "a file still running after this long fails (TaskTimeout; 0: no limit; default: 3600)"
+    p.add_argument("--task-timeout", type=float, default=3600.0, metavar="SECONDS", help=help)
+    p.add_argument("--suffix", default=".ply", help="output mesh format (.ply .obj .stl .off .gltf)")
+    group = p.add_argument_group(
+        "operation options (each applies to every op of the pipeline that has it; "
+        "--set OP.NAME=VALUE for one op)"
+    )
+    owners: dict[str, list[tuple[str, Option]]] = {}
+    for op in OPS.values():
+        for option in op.options:
+            owners.setdefault(option.name, []).append((op.name, option))
+    for name, pairs in owners.items():
+        option = pairs[0][1]
+        helps = {o.help for _, o in pairs}
+        text = (
+            f"{option.help} [{', '.join(n for n, _ in pairs)}]"
+            if len(helps) == 1
+            else "; ".join(f"{n}: {o.help}" for n, o in pairs)
+        )
+        # SUPPRESS: an option not given is left to each op's default (and --help shows none); values are
+        # parsed per op by batch.run, from the same table
+        kwargs: dict[str, Any] = {"action": "store_true"} if option.is_flag else {"metavar": "VALUE"}
+        text = text.replace("%", "%%").replace("(default:", "(op default:")
+        group.add_argument(
+            option.cli_flag, dest=f"opt_{name}", default=argparse.SUPPRESS, help=text, **kwargs
+        )
+    flags = {name: "--" + name.replace("_", "-") for name in owners}
+    names = "op workers threads_per_worker scheduler scheduler_file resume report retries suffix task_timeout"
+    flags.update({name: "--" + name.replace("_", "-") for name in names.split()})
+    p.set_defaults(positionals=("inputs", "outdir"), flags=flags)
+
+
+def shape_change_text(change: dict) -> str:
+    """One line for :func:`~o3d_lsmesh.metrics.shape_change`: a closed mesh's volume change, an open one's
+    inward shift along the normals (its volume about the origin means nothing)."""
+    if change["closed"]:
+        percent = change["volume_change_percent"]
+        return "volume change " + ("n/a (input volume 0)" if percent is None else f"{percent:+.3f}%")
+    if change["inward_shift_mean"] is None:
+        return "open surface (no volume; no vertex correspondence for a shift)"
+    rim, interior = (change[f"inward_shift_{key}"] for key in ("rim", "interior"))
+    return (
+        f"open surface (no volume): inward shift along the normals {change['inward_shift_mean']:.4g} "
+        f"(rim {'n/a' if rim is None else f'{rim:.4g}'}, "
+        f"interior {'n/a' if interior is None else f'{interior:.4g}'})"
+    )
+
+
+def draw(
+    meshes: list[Any], path: str, run: Run, *, what: str = "left: input, right: result", **options: Any
+) -> str:
+    """Draw ``meshes`` side by side into ``path``; :class:`PictureError` when no renderer works."""
+    from ..rendering import render
+
+    start = time.perf_counter()
+    try:
+        render(meshes, path, **options)
+    except RuntimeError as error:  # Filament and the raycasting fallback both failed: not the input's fault
+        raise PictureError(str(error)) from error
+    run.say(f"picture ({time.perf_counter() - start:.1f} s): {path}  ({what})")
+    return path
+
+
+def _run_op(
+    name: str, mesh: Any, args: argparse.Namespace, run: Run, **options: Any
+) -> tuple[Any, dict, float]:
+    """Run the operation ``name`` on ``mesh`` with the command line's options; the result, metrics, seconds."""
+    context = TaskContext(args.input, args.input, None, progress=run.progress)
+    start = time.perf_counter()
+    out, metrics = OPS[name].function(mesh, {**op_options(args, OPS[name]), **options}, context)
+    return out, metrics, time.perf_counter() - start
+
+
+# --------------------------------------------------------------------------- the operations' commands
+
+
+def denoise(args: argparse.Namespace, run: Run) -> int:
+    """Barycenter-constrained (or multiresolution) fairing.
+
+    Remove noise with barycenter-constrained fairing (Liu et al. 2001, section 3): the membrane
+    energy is minimized while every triangle keeps its barycenter. With --level L, multiresolution
+    fairing (section 4.2): fair a coarse level of the volume-cost hierarchy, then split back up
+    (--mu, --reimpose-every and --fixed-boundary are refused with it).
+
+    example: scan.ply smooth.ply --iterations 20 --render before_after.png
+    """
+    options = {
+        "--mu": args.mu,
+        "--reimpose-every": args.reimpose_every,
+        "--fixed-boundary": args.fixed_boundary or None,
+    }
+    given = [flag for flag, value in options.items() if value is not None]
+    if args.level and given:  # multiresolution fairing fairs every level with its own defaults
+        raise CLIError(
+            f"{', '.join(given)} cannot be combined with --level (multiresolution fairing does not take "
+            f"{'them' if len(given) > 1 else 'it'}), got --level {args.level}"
+        )
+    check_output(args.output, [args.input], force=args.force)
+    if args.render:
+        check_output(args.render, [args.input], force=args.force, suffixes=(".png",))
+    mesh = read_input(args.input)
+    from ..fairing.constrained import resolved_options
+
+    scan = resolved_options(args.method, args.iterations, args.reimpose_every)[0] == "scan"
+    if not args.level and args.fixed_boundary and scan:
+        raise CLIError(
+            "--fixed-boundary cannot be used with --method scan, the default (its boundary moves with "
+            "the surface): add --method local or --method global"
+        )
+    out, report, seconds = _run_op("denoise", mesh, args, run)
+    report["seconds"] = seconds
+    write_output(args.output, out)
+    run.say(
+        f"denoised {args.input} ({len(mesh.vertices)} vertices) by {report['method']} fairing in {seconds:.2f} s "
+        f"-> {args.output}; mean displacement {report['displacement_mean']:.4g}, {shape_change_text(report)}"
+    )
+    if args.render:
+        method, iterations = report["method"], report["iterations"]  # what ran
+        title = f"{method} fairing" + (f", mu {args.mu:g}" if args.mu is not None else "")
+        if args.level:
+            title = f"multiresolution fairing, level {args.level}, {iterations} iterations per level"
+        elif method not in ("scan", "features"):  # one solve / a measured pass count: no iteration count
+            title += f", {iterations} iteration{'s' if iterations != 1 else ''}"
+        report["render"] = draw(
+            [mesh, out], args.render, run, titles=[f"input: {Path(args.input).name}", title]
+        )
+    return run.finish(mesh, **report)
+
+
+def fill(args: argparse.Namespace, run: Run) -> int:
+    """Fill holes with faired patches (LS meshes).
+
+    Close holes: minimum-weight triangulation (Liepa 2003), refinement to the surrounding edge
+    density, then LS-mesh fairing of the new vertices with the hole's rings as anchors. Each open
+    component's outer border stays open unless --fill-border. --max-hole-diameter is in model units.
+    Every loop left open is listed with why (outer border, size limits, every fill crossing the mesh).
+
+    example: scan.ply filled.ply --max-hole-edges 200
+    """
+    check_output(args.output, [args.input], force=args.force)
+    mesh = read_input(args.input)
+    from .._o3d import read_mesh
+    from ..hole_filling import find_holes
+
+    def holes(mesh: Any) -> list:  # of the welded surface, as fill_holes sees it: a UV seam is no hole
+        welded = read_mesh(mesh, weld=True)
+        return find_holes(welded.vertices, welded.triangles)
+
+    before = holes(mesh)
+    out, metrics, seconds = _run_op("fill", mesh, args, run)
+    report = metrics["_report"]
+    write_output(args.output, out)
+    after = holes(out)
+    run.say(
+        f"filled {len(report.filled)} of {len(report.holes)} holes of {args.input} in {seconds:.2f} s "
+        f"({metrics['new_vertices']} new vertices) -> {args.output}; {len(after)} loops left open"
+    )
+    for hole in report.skipped:  # every loop left open, and why
+        run.say(f"  left open: loop {hole.id} ({hole.edges} edges, diameter {hole.diameter:.4g}): {hole.how}")
+    return run.finish(
+        mesh,
+        holes_before=len(before),
+        holes_after=len(after),
+        borders_left_open=0 if args.fill_border else sum(hole.border for hole in before),
+        new_vertices=metrics["new_vertices"],
+        new_triangles=metrics["new_triangles"],
+        holes_filled=len(report.filled),
+        skipped=[dataclasses.asdict(hole) for hole in report.skipped],
+        seconds=seconds,
+    )
+
+
+def approximate(args: argparse.Namespace, run: Run) -> int:
+    """LS-mesh approximation from N control points.
+
+    Rebuild the geometry from the connectivity and N control points chosen on the mesh
+    (least-squares meshes, Sorkine and Cohen-Or 2004).
+
+    example: bunny.ply approx.ply --count 400 --indices controls.npy
+    """
+    check_output(args.output, [args.input], force=args.force)
+    if args.indices:
+        check_output(args.indices, [args.input], force=args.force, suffixes=(".npy", ".txt"))
+    mesh = read_input(args.input)
+    out, metrics, seconds = _run_op("approximate", mesh, args, run)
+    write_output(args.output, out)
+    indices = metrics.pop("_indices")
+    if args.indices:
+        np.save(args.indices, indices) if args.indices.endswith(".npy") else np.savetxt(
+            args.indices, indices, fmt="%d"
+        )
+    run.say(
+        f"approximated {args.input} from {len(indices)} control points in {seconds:.2f} s -> {args.output}; "
+        f"L-inf error {metrics['error_linf']:.4g}, RMS {metrics['error_rms']:.4g}"
+    )
+    return run.finish(mesh, **metrics, seconds=seconds)
+
+
+def hierarchy(args: argparse.Namespace, run: Run) -> int:
+    """Write levels of the volume-cost collapse hierarchy.
+
+    Build the volume-cost edge-collapse hierarchy (Liu et al. 2001, section 4.1) and write the
+    chosen levels as mesh files, level_00 being the input.
+
+    example: bunny.ply levels/ --levels 0,2,4 --maps
+    """
+    mesh = read_input(args.input)
+    outdir = Path(args.outdir)
+    if outdir.exists() and not outdir.is_dir():
+        raise CLIError(f"OUTDIR {args.outdir!r} exists and is not a folder")
+    built, metrics, seconds = _run_op("hierarchy", mesh, args, run)
+    outdir.mkdir(parents=True, exist_ok=True)
+    written: list[str] = []
+    for name, item in built.items():
+        path = str(outdir / (name if isinstance(item, bytes) else name + args.format))
+        if isinstance(item, bytes):
+            Path(path).write_bytes(item)
+        else:
+            check_output(path, [args.input], force=args.force, suffixes=None)
+            write_output(path, item)
+        written.append(path)
+    counts = metrics["vertex_counts"]
+    run.say(
+        f"hierarchy of {args.input}: {len(counts)} levels ({counts[0]} -> {counts[-1]} vertices) "
+        f"in {seconds:.2f} s; wrote {len(written)} files to {outdir}/"
+    )
+    return run.finish(mesh, levels=len(counts), vertex_counts=counts, written=written, seconds=seconds)
+
+
+def encode(args: argparse.Namespace, run: Run) -> int:
+    """Encode the geometry as quantized LS-mesh anchors.
+
+    Store the geometry as the quantized positions of a few anchors; decode rebuilds it from the
+    connectivity (geometry-aware bases, Sorkine et al.).
+
+    example: bunny.ply bunny.lsm --count 500 --bits 12
+    """
+    check_output(args.output, [args.input], force=args.force, suffixes=None)
+    mesh = read_input(args.input)
+    data, metrics, seconds = _run_op("encode", mesh, args, run)
+    Path(args.output).write_bytes(data)
+    run.say(
+        f"encoded {args.input}: {metrics['anchors']} anchors at {args.bits} bits -> {len(data)} bytes "
+        f"({metrics['bits_per_vertex']:.3f} bits/vertex) in {seconds:.2f} s; "
+        f"decoded L-inf error {metrics['decoded_error_linf']:.4g}"
+    )
+    return run.finish(mesh, **metrics, seconds=seconds)
+
+
+# --------------------------------------------------------------------------- commands with a flow of their own
+
+
+def parse_index_spec(spec: str, n: int) -> np.ndarray:
+    """Vertex indices from a file (``.npy``, or integers separated by spaces, commas or newlines) or a
+    list like ``0:100,250,300:310`` (``a:b`` half-open; the union of the items).
+
+    >>> parse_index_spec("0:3,5,2", 10)
+    array([0, 1, 2, 5])
+    """
+    if os.path.exists(spec):
+        return _index_file(spec, n)
+    parts = []
+    for item in filter(None, (item.strip() for item in spec.split(","))):
+        try:
+            start_text, colon, stop_text = item.partition(":")
+            start = int(start_text) if start_text or not colon else 0
+            stop = (int(stop_text) if stop_text else n) if colon else start + 1
+        except ValueError:
+            raise CLIError(
+                f"--unknown must be an existing index file or a list like '0:100,250', got {spec!r}"
+            ) from None
+        if (
+            start < 0 or stop > n or stop < start
+        ):  # before any array: '0:99999999999' must not allocate 800 GB
+            what = f"range {item!r}" if colon else f"index {item!r}"
+            raise CLIError(
+                f"--unknown must name vertices in 0..{n - 1} (the mesh has {n} vertices), got {what}"
+            )
+        parts.append(np.arange(start, stop, dtype=np.int64))
+    if not parts:
+        raise CLIError(f"--unknown must name at least one vertex, got {spec!r}")
+    return np.unique(np.concatenate(parts))
+
+
+def _index_file(path: str, n: int) -> np.ndarray:
+    name = f"--unknown file {path!r} must"
+    try:
+        if path.endswith(".npy"):
+            values = np.asarray(np.load(path, allow_pickle=False)).ravel()
+        else:
+            values = np.array(
+                [int(t) for t in Path(path).read_text().replace(",", " ").split()], dtype=np.int64
+            )
+    except (ValueError, OSError) as error:
+        raise CLIError(f"{name} hold integer vertex indices ({error})") from None
+    if values.size and not np.issubdtype(values.dtype, np.integer):
+        raise CLIError(f"{name} hold integer vertex indices, got dtype {values.dtype}")
+    if values.size == 0:
+        raise CLIError(f"{name} name at least one vertex, got none")
+    bad = (values < 0) | (values >= n)
+    if bad.any():
+        raise CLIError(
+            f"{name} hold vertex indices in 0..{n - 1} (the mesh has {n} vertices), got {int(values[bad][0])}"
+        )
+    return np.unique(values.astype(np.int64))
+
+
+def reconstruct(args: argparse.Namespace, run: Run) -> int:
+    """Rebuild the geometry of unknown vertices.
+
+    Replace the positions of the --unknown vertices by the least-squares mesh of the known ones
+    (LS meshes, figures 5 and 8); known vertices stay as they are unless --soft.
+
+    example: scan.ply filled.ply --unknown 0:100,250
+    """
+    check_output(args.output, [args.input], force=args.force)
+    mesh = read_input(args.input)
+    unknown = parse_index_spec(args.unknown, len(mesh.vertices))
+    from ..lsmesh import reconstruct_geometry
+
+    start = time.perf_counter()
+    out = reconstruct_geometry(mesh, unknown, interpolate=not args.soft, progress=run.progress)
+    seconds = time.perf_counter() - start
+    write_output(args.output, out)
+    moved = np.linalg.norm(np.asarray(out.vertices)[unknown] - np.asarray(mesh.vertices)[unknown], axis=1)
+    run.say(
+        f"reconstructed {len(unknown)} vertices of {args.input} in {seconds:.2f} s -> {args.output}; "
+        f"mean distance to the file's positions {moved.mean():.4g}"
+    )
+    return run.finish(
+        mesh,
+        unknown=len(unknown),
+        seconds=seconds,
+        distance_to_input_mean=float(moved.mean()),
+        distance_to_input_max=float(moved.max()),
+    )
+
+
+def decode(args: argparse.Namespace, run: Run) -> int:
+    """Decode geometry onto a mesh's connectivity.
+
+    Rebuild the geometry stored by encode on the connectivity of MESH, from all its anchors or
+    the first K (progressive decoding).
+
+    example: bunny.ply bunny.lsm decoded.ply --anchors 200
+    """
+    check_output(args.output, [args.mesh, args.data], force=args.force)
+    mesh = read_input(args.mesh, what="MESH")
+    if not os.path.exists(args.data):
+        raise CLIError(f"DATA {args.data!r} does not exist")
+    from ..encoding import decode_geometry
+
+    start = time.perf_counter()
+    out = decode_geometry(mesh, Path(args.data).read_bytes(), anchors=args.anchors, progress=run.progress)
+    seconds = time.perf_counter() - start
+    write_output(args.output, out)
+    run.say(f"decoded {args.data} on the connectivity of {args.mesh} in {seconds:.2f} s -> {args.output}")
+    return run.finish(mesh, anchors=args.anchors, seconds=seconds)
+
+
+def compare(args: argparse.Namespace, run: Run) -> int:
+    """Metrics between two meshes.
+
+    Surface distance (sampled, both ways), vertex error and normal deviation when the meshes
+    correspond, the volume change (closed A) or the inward shift along A's
+    normals (open A), triangle angles and topology of both; with --render, a distance map.
+
+    example: clean.ply smooth.ply --json --render distance.png
+    """
+    if args.render:
+        check_output(args.render, [args.a, args.b], force=args.force, suffixes=(".png",))
+    a, b = read_input(args.a, what="A"), read_input(args.b, what="B")
+    from ..metrics import shape_change, surface_distance, topology_summary, triangle_angles, vertex_error
+    from .ops import normal_change
+
+    size = {
+        key: {"vertices": len(m.vertices), "triangles": len(m.triangles)} for key, m in (("a", a), ("b", b))
+    }
+    report: dict[str, Any] = {"a": args.a, "b": args.b, "size_a": size["a"], "size_b": size["b"]}
+    report["surface_distance"] = surface_distance(a, b, number_of_points=args.points)
+    if len(a.vertices) == len(b.vertices):
+        report["vertex_error"] = vertex_error(a, b)
+        if np.array_equal(np.asarray(a.triangles), np.asarray(b.triangles)):
+            report["normal_deviation_deg"] = normal_change(a, b)
+    report["shape_change"] = shape_change(a, b)
+    report["angles_a"], report["angles_b"] = triangle_angles(a), triangle_angles(b)
+    report["topology_a"], report["topology_b"] = topology_summary(a), topology_summary(b)
+    if not run.json:
+        for line in _lines(report):
+            run.say(line)
+    if args.render:
+        units = "mean edge lengths of A" if args.units == "edge" else "model units"
+        report["render"] = draw(
+            [a, b],
+            args.render,
+            run,
+            reference=a,
+            units=args.units,
+            what=f"B colored by distance to A, in {units}",
+            titles=[f"A: {Path(args.a).name} (reference)", f"B: {Path(args.b).name}"],
+            colorbar_title="distance to A",
+        )
+    return run.finish(**report)
+
+
+def _lines(report: dict[str, Any]) -> list[str]:
+    """The human report of :func:`compare`."""
+    sd, size_a, size_b = report["surface_distance"], report["size_a"], report["size_b"]
+    lines = [
+        f"A {report['a']}: {size_a['vertices']} vertices, B {report['b']}: {size_b['vertices']} vertices",
+        f"surface distance: Hausdorff {sd['hausdorff']:.6g}, mean {sd['mean']:.6g}, RMS {sd['rms']:.6g}",
+    ]
+    if "vertex_error" in report:
+        ve = report["vertex_error"]
+        lines.append(f"vertex error: L-inf {ve['linf']:.6g}, RMS {ve['rms']:.6g}, mean {ve['mean']:.6g}")
+    if report.get("normal_deviation_deg") is not None:
+        lines.append(f"face normal deviation: {report['normal_deviation_deg']:.4f} degrees")
+    change = report["shape_change"]
+    volumes = f": A {change['volume_before']:.6g}, B {change['volume_after']:.6g}" if change["closed"] else ""
+    lines.append(f"B against A: {shape_change_text(change)}{volumes}")
+    for key in ("a", "b"):
+        angles, topo = report[f"angles_{key}"], report[f"topology_{key}"]
+        holes = ", ".join(f"{size}: {count}" for size, count in topo["holes_by_size"].items())
+        lines += [
+            f"{key.upper()}: min angle {angles['min_angle']:.2f} deg, {100 * angles['share_under_10']:.2f}% "
+            f"under 10 deg, components {topo['components']}, boundary loops {topo['boundary_loops']}, "
+            f"genus {topo['genus']}, edge-manifold {topo['edge_manifold']}",
+            f"{key.upper()}: surface pieces {topo['surface_pieces']}, boundary edges {topo['boundary_edges']} "
+            f"in {topo['boundary_components']} connected pieces, holes by edge count ({holes}), "
+            f"non-manifold vertices {topo['nonmanifold_vertices']}, non-manifold edges "
+            f"{topo['nonmanifold_edges']}, unreferenced vertices {topo['unreferenced_vertices']}, "
+            f"degenerate triangles {topo['degenerate_triangles']}",
+        ]
+    return lines
+
+
+def batch(args: argparse.Namespace, run: Run) -> int:
+    """Run an operation over many files (Dask cluster or local).
+
+    Run an operation, or a pipeline of them, over many mesh files, each as one task on a local Dask
+    cluster (default), an existing one (--scheduler), or in this process without Dask: Open3D is
+    imported once per worker, not once per file. Exit code 0 when every file succeeded, 2 when
+    any failed (the report lists why).
+
+    example: scans/ out/ --op fill,denoise --workers 2
+    """
+    from .batch import run as run_batch
+    from .batch import summarize
+
+    options: dict[str, Any] = {k[4:]: v for k, v in vars(args).items() if k.startswith("opt_")}
+    for item in args.set:
+        name, equals, value = item.partition("=")
+        if not equals or "." not in name:
+            raise CLIError(f"--set must look like OP.NAME=VALUE, got {item!r}")
+        options[name] = value
+    report = args.report if args.report is not None else os.path.join(args.outdir, "batch_report.jsonl")
+    names = "workers threads_per_worker scheduler scheduler_file resume retries fail_fast suffix force task_timeout"
+    start = time.perf_counter()
+    try:
+        records = run_batch(
+            args.inputs,
+            args.outdir,
+            op=args.op,
+            options=options,
+            report=report,
+            progress=run.progress,
+            **{name: getattr(args, name) for name in names.split()},
+        )
+    except ImportError as error:  # --scheduler without dask installed
+        raise CLIError(str(error)) from None
+    seconds = time.perf_counter() - start
+    counts = Counter(record["status"] for record in records)
+    run.say(summarize(records, seconds))
+    run.say(f"report: {report}")
+    failed = [r["input"] for r in records if r["status"] == "failed"]
+    run.finish(op=args.op, report=report, seconds=seconds, counts=dict(counts), failed=failed)
+    return 0 if counts["failed"] == 0 and counts["cancelled"] == 0 else 2
+
+
+def demo(args: argparse.Namespace, run: Run) -> int:
+    """Denoise a simulated raw range scan and compare with Open3D's filters.
+
+    Scan a built-in blob from one view on a scanner's grid (noise along the rays, correlated along
+    the scanlines and larger at grazing angles, a ragged silhouette, islands and dropout holes),
+    denoise it with this package's defaults and with Open3D's filters, each of those at the best
+    count of a small sweep, and print the distances to the true surface (and a picture).
+
+    example: --out demo_out --resolution 150
+    """
+    from ..demo import run_demo
+
+    result = run_demo(
+        args.out,
+        resolution=args.resolution,
+        noise=args.noise,
+        seed=args.seed,
+        render=not args.no_render,
+        quiet=run.quiet,
+        progress=run.progress,
+        stream=run.stream,
+    )
+    return run.finish(**result)

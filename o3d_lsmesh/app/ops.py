@@ -1,0 +1,638 @@
+"""The operations of the command line and the batch, each with its options declared once.
+
+An :class:`Option` names one option (the CLI flag is ``--`` + its name with ``-``), its parser,
+default, help and the Python parameter it maps to; a :class:`BatchOp` is an operation's function
+``function(mesh, options, context) -> (output, metrics)`` with its options. The CLI's subcommands
+(:mod:`o3d_lsmesh.app.cli`) and :func:`o3d_lsmesh.app.batch.run` are both generated from :data:`OPS`.
+Docs: ``docs/cli.rst`` and ``docs/batch.md``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from ..core.errors import InputError, InputTypeError
+
+__all__ = [
+    "OPS",
+    "RESERVED",
+    "BatchOp",
+    "Option",
+    "TaskContext",
+    "parse_ops",
+    "register_op",
+    "resolve_options",
+]
+
+#: Names an operation option may not take: they are flags of ``o3d-lsmesh batch`` itself.
+RESERVED = frozenset(
+    "op workers threads_per_worker scheduler scheduler_file resume report retries fail_fast suffix set "
+    "task_timeout quiet json force help".split()
+)
+#: Surface samples at most (metrics.MAX_SAMPLE_POINTS; not imported: --help must not load numerics).
+MAX_POINTS = 10_000_000
+
+# --------------------------------------------------------------------------- parsers: value -> value or ValueError
+
+
+def int_at_least(minimum: int, maximum: int | None = None) -> Callable[[Any], int]:
+    """Parser of an integer in ``[minimum, maximum]`` given as an int or its text."""
+    rule = {0: "a non-negative integer", 1: "a positive integer"}.get(minimum, f"an integer >= {minimum}")
+
+    def parse(value: Any) -> int:
+        number = minimum - 1  # refused unless value is an int (not a bool) or its text
+        if isinstance(value, (int, np.integer, str)) and not isinstance(value, (bool, np.bool_)):
+            with contextlib.suppress(ValueError):
+                number = int(value)
+        if number < minimum:
+            raise ValueError(f"must be {rule}, got {value!r}")
+        if maximum is not None and number > maximum:
+            raise ValueError(f"must be at most {maximum:,}, got {value!r}")
+        return number
+
+    return parse
+
+
+def optional(parse: Callable[[Any], Any]) -> Callable[[Any], Any]:
+    """Parser accepting ``None`` as well (a choice keeps its ``choices``)."""
+
+    def parse_optional(value: Any) -> Any:
+        return None if value is None else parse(value)
+
+    parse_optional.choices = getattr(parse, "choices", None)  # type: ignore[attr-defined]
+    return parse_optional
+
+
+def real(value: Any) -> float:
+    """Parser of a finite float."""
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"must be a number, got {value!r}") from None
+    if not np.isfinite(number):
+        raise ValueError(f"must be a finite number, got {value!r}")
+    return number
+
+
+def choice(*choices: Any) -> Callable[[Any], Any]:
+    """Parser of one of ``choices`` (given as itself or its text)."""
+
+    def parse(value: Any) -> Any:
+        for item in choices:
+            if value == item or (isinstance(value, str) and value == str(item)):
+                return item
+        raise ValueError(f"must be one of {', '.join(map(str, choices))}, got {value!r}")
+
+    parse.choices = choices  # type: ignore[attr-defined]
+    return parse
+
+
+def flag(value: Any) -> bool:
+    """Parser of a boolean (``True``/``False`` or the strings true/false/1/0/yes/no)."""
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    text = str(value).strip().lower()
+    if text in ("1", "true", "yes", "on", "0", "false", "no", "off"):
+        return text in ("1", "true", "yes", "on")
+    raise ValueError(f"must be true or false, got {value!r}")
+
+
+def count_or_percent(value: Any) -> int | float:
+    """A vertex count >= 1, or a share of each mesh's vertices like ``"2%"`` (a float in (0, 1])."""
+    if isinstance(value, str) and value.strip().endswith("%"):
+        share = real(value.strip()[:-1])
+        if not 0 < share <= 100:
+            raise ValueError(f"must be a percentage in (0, 100], got {value!r}")
+        return share / 100.0
+    return int_at_least(1)(value)
+
+
+def resolve_count(value: int | float, n: int) -> int:
+    """The count ``value`` stands for in a mesh of ``n`` vertices."""
+    return max(1, int(np.ceil(value * n))) if isinstance(value, float) else int(value)
+
+
+def levels_spec(value: Any) -> str:
+    """Parser of ``'all'`` or comma-separated level numbers >= 0 (checked against the hierarchy later)."""
+    text = str(value).strip()
+    with contextlib.suppress(ValueError):
+        levels = [int(item) for item in text.split(",") if item.strip()] if text != "all" else [0]
+        if levels and min(levels) >= 0:
+            return text
+    raise ValueError(f"must be 'all' or comma-separated level numbers >= 0, got {value!r}")
+
+
+def folder(value: Any) -> str:
+    """Parser of an existing folder (returned absolute)."""
+    if not os.path.isdir(str(value)):
+        raise ValueError(f"must be an existing folder, got {value!r}")
+    return os.path.abspath(str(value))
+
+
+# --------------------------------------------------------------------------- the table
+
+
+@dataclass(frozen=True)
+class Option:
+    """One option of an operation: its flag is ``--`` + ``name`` with ``-`` for ``_``.
+
+    ``parse`` takes the value as given (text from the command line or any Python value) and returns
+    it parsed or raises ``ValueError`` saying what it must be; ``is_flag`` makes the flag a switch;
+    ``param`` is the Python API parameter it maps to (default: ``name``); ``cli`` whether the
+    subcommand of the same name has the flag (else batch only); ``required`` on the command line.
+    """
+
+    name: str
+    parse: Callable[[Any], Any]
+    default: Any = None
+    help: str = ""
+    is_flag: bool = False
+    param: str = ""
+    cli: bool = True
+    required: bool = False
+
+    @property
+    def cli_flag(self) -> str:
+        return "--" + self.name.replace("_", "-")
+
+    @property
+    def api_param(self) -> str:
+        return self.param or self.name
+
+
+@dataclass(frozen=True)
+class BatchOp:
+    """A registered operation.
+
+    ``output`` is what ``function`` returns first: ``"mesh"`` (written as ``<name><suffix>``),
+    ``"bytes"`` (``<name><extension>``), ``"files"`` (a dict ``{file name: mesh or bytes}`` written
+    into the folder ``<name>/``; meshes get ``<suffix>``) or ``"none"`` (metrics only). Only
+    ``"mesh"`` operations can feed a later operation of a pipeline.
+    """
+
+    name: str
+    function: Callable[[Any, dict, TaskContext], tuple[Any, dict]]
+    options: tuple[Option, ...] = ()
+    output: str = "mesh"
+    extension: str = ""
+    help: str = ""
+
+    def __post_init__(self) -> None:
+        if self.output not in ("mesh", "bytes", "files", "none"):
+            raise ValueError(f"output must be one of mesh, bytes, files, none, got {self.output!r}")
+        if self.output == "bytes" and not self.extension.startswith("."):
+            raise ValueError(f"extension must start with '.' for a bytes output, got {self.extension!r}")
+        for option in self.options:
+            if option.name in RESERVED:
+                raise ValueError(
+                    f"option name {option.name!r} of op {self.name!r} is a flag of the batch itself"
+                )
+
+
+@dataclass(frozen=True)
+class TaskContext:
+    """What an operation knows about the file it runs on."""
+
+    input: str  # path of the input file
+    relative: str  # its name relative to the INPUT it came from (output and reference names)
+    threads: int | None  # thread budget of this worker (None: not managed, e.g. in the serial loop)
+    progress: bool = False  # progress bars (the single-file CLI commands; never in a batch)
+
+
+OPS: dict[str, BatchOp] = {}
+OpFunction = Callable[[Any, dict, TaskContext], tuple[Any, dict]]
+
+
+def register_op(op: BatchOp) -> BatchOp:
+    """Add ``op`` to :data:`OPS` (replacing an op of the same name) and return it."""
+    if not isinstance(op, BatchOp):
+        raise InputTypeError(f"op must be a BatchOp, got {type(op).__name__}", param="op")
+    OPS[op.name] = op
+    return op
+
+
+def operation(name: str, **fields: Any) -> Callable[[OpFunction], OpFunction]:
+    """Decorator: register the function as the operation ``name`` (``fields`` as in :class:`BatchOp`)."""
+
+    def add(function: OpFunction) -> OpFunction:
+        register_op(BatchOp(name, function, **fields))
+        return function
+
+    return add
+
+
+def parse_ops(op: Any) -> list[BatchOp]:
+    """``"fill,denoise"``, ``["fill", "denoise"]`` or BatchOp objects -> the pipeline, checked."""
+    if isinstance(op, (str, BatchOp)):
+        items: list[Any] = op.split(",") if isinstance(op, str) else [op]
+    elif isinstance(op, Sequence):
+        items = list(op)
+    else:
+        raise InputTypeError(
+            f"op must be a name, a comma-separated pipeline or a list of names, got {type(op).__name__}",
+            param="op",
+        )
+    ops = []
+    for item in items:
+        name = item.name if isinstance(item, BatchOp) else str(item).strip()
+        if not isinstance(item, BatchOp) and name not in OPS:
+            raise InputError(
+                f"op must be one of {', '.join(sorted(OPS))} or a pipeline like 'denoise,compare', got {name!r}",
+                param="op",
+            )
+        ops.append(item if isinstance(item, BatchOp) else OPS[name])
+    if not ops:
+        raise InputError(f"op must name at least one operation, got {op!r}", param="op")
+    for first in ops[:-1]:
+        if first.output != "mesh":
+            raise InputError(
+                f"op {first.name!r} writes {first.output}, not a mesh, so it must be last in a pipeline",
+                param="op",
+            )
+    return ops
+
+
+def parse_option(op: BatchOp, option: Option, value: Any) -> Any:
+    """``option.parse(value)``; ``InputError`` naming the option (``param``) and its op."""
+    try:
+        return option.parse(value)
+    except ValueError as error:
+        raise InputError(f"{option.name} {error} (an option of op {op.name})", param=option.name) from None
+
+
+def resolve_options(ops: Sequence[BatchOp], options: Mapping[str, Any] | None) -> list[dict]:
+    """Parse ``options`` for each op of a pipeline; return one ``{name: value}`` dict per op.
+
+    A key ``"name"`` applies to every op of the pipeline that has that option; a key
+    ``"op.name"`` (or a nested ``{"op": {"name": value}}``) to that op only. Unknown names and bad
+    values raise :class:`~o3d_lsmesh.core.errors.InputError` naming the option.
+    """
+    shared: dict[str, Any] = {}
+    specific: dict[tuple[str, str], Any] = {}
+    names = {op.name for op in ops}
+    for key, value in dict(options or {}).items():
+        if isinstance(value, Mapping) and key in names:
+            specific.update({(key, str(k).replace("-", "_")): v for k, v in value.items()})
+        elif "." in key and key.split(".", 1)[0] in names:
+            op_name, name = key.split(".", 1)
+            specific[(op_name, name.replace("-", "_"))] = value
+        else:
+            shared[key.replace("-", "_")] = value
+    known = {option.name for op in ops for option in op.options}
+    pipeline = ",".join(op.name for op in ops)
+    for name in shared:
+        if name not in known:
+            raise InputError(
+                f"{name} is not an option of op {pipeline} (its options: {', '.join(sorted(known)) or 'none'})",
+                param=name,
+            )
+    for op_name, name in specific:
+        op = next(op for op in ops if op.name == op_name)
+        if name not in {option.name for option in op.options}:
+            raise InputError(
+                f"options: {op_name} has no option {name!r} (its options: "
+                f"{', '.join(o.name for o in op.options) or 'none'})",
+                param="options",
+            )
+    resolved = []
+    for op in ops:
+        values = {}
+        for option in op.options:
+            pair = (op.name, option.name)
+            if pair in specific or option.name in shared:
+                given = specific[pair] if pair in specific else shared[option.name]
+                values[option.name] = parse_option(op, option, given)
+            else:
+                values[option.name] = option.default
+        resolved.append(values)
+    return resolved
+
+
+# --------------------------------------------------------------------------- the operations
+
+_SELECTIONS = ("greedy", "random", "combined")
+_DENOISE_METHODS = ("scan", "local", "global", "features")
+
+
+def normal_change(a: Any, b: Any) -> float | None:
+    """Mean face-normal deviation of two meshes with the same triangles; None when no triangle has an area in both."""
+    from ..metrics import normal_deviation
+
+    try:
+        return normal_deviation(a, b)
+    except ValueError:  # every triangle of zero area in a or b: the angle is undefined
+        return None
+
+
+def change_metrics(before: Any, after: Any) -> dict:
+    """Vertex displacement, shape change and (same triangles) normal change, on arrays read once."""
+    from .._o3d import read_mesh
+    from ..metrics import shape_change, vertex_error
+
+    a, b = read_mesh(before, name="before"), read_mesh(after, name="after")
+    a_mesh, b_mesh = (a.vertices, a.triangles), (b.vertices, b.triangles)
+    out: dict[str, Any] = {}
+    if len(a.vertices) == len(b.vertices):
+        moved = vertex_error(b_mesh, a_mesh)
+        out["displacement_mean"], out["displacement_max"] = moved["mean"], moved["linf"]
+        if np.array_equal(a.triangles, b.triangles):
+            out["normal_change_deg"] = normal_change(b_mesh, a_mesh)
+    out.update(shape_change(a_mesh, b_mesh))
+    return out
+
+
+@operation(
+    "denoise",
+    help="barycenter-constrained (or multiresolution with --level) fairing",
+    options=(
+        Option(
+            "iterations",
+            optional(int_at_least(0)),
+            None,
+            "number of fairing iterations (default: the API's, 10 for local; with --level, 5 per level)",
+            param="number_of_iterations",
+        ),
+        Option(
+            "method",
+            optional(choice(*_DENOISE_METHODS)),
+            None,
+            "fairing energy (default: scan, the API's default; local with --level, --iterations or "
+            "--reimpose-every); features keeps sharp creases (guided normal filtering)",
+        ),
+        Option("level", int_at_least(0), 0, "multiresolution level (0: plain fairing)"),
+        Option(
+            "mu",
+            optional(real),
+            None,
+            "barycenter penalty weight of --method global or scan (default: the API's)",
+        ),
+        Option(
+            "reimpose_every",
+            optional(int_at_least(1)),
+            None,
+            "re-take the barycenters every k iterations (default: never)",
+        ),
+        Option(
+            "fixed_boundary",
+            flag,
+            False,
+            "keep boundary vertices fixed (default: smooth the boundary curves)",
+            is_flag=True,
+            param="smooth_boundary",
+        ),
+    ),
+)
+def denoise_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
+    """``--op denoise`` and ``o3d-lsmesh denoise``: fairing with the method and iterations that ran."""
+    level, progress = options["level"], context.progress
+    if level:
+        from ..fairing.multiresolution import multiresolution_fairing
+
+        iterations = 5 if options["iterations"] is None else options["iterations"]
+        method = options["method"] or "local"
+        out = multiresolution_fairing(
+            mesh, level, number_of_iterations=iterations, method=method, progress=progress
+        )
+    else:
+        from ..fairing import constrained_fairing
+        from ..fairing.constrained import resolved_options
+
+        # no flag: the API's defaults (method='scan'); the record names what ran
+        method, iterations = resolved_options(
+            options["method"], options["iterations"], options["reimpose_every"]
+        )
+        out = constrained_fairing(
+            mesh,
+            iterations,
+            method=method,
+            mu=options["mu"],
+            smooth_boundary=not options["fixed_boundary"],
+            reimpose_every=options["reimpose_every"],
+            progress=progress,
+        )
+    return out, {"method": method, "iterations": iterations, "level": level, **change_metrics(mesh, out)}
+
+
+@operation(
+    "fill",
+    help="fill holes with faired patches (LS meshes)",
+    options=(
+        Option(
+            "max_hole_edges",
+            optional(int_at_least(3)),
+            None,
+            "fill only holes of at most this many edges (default: no limit)",
+        ),
+        Option(
+            "max_hole_diameter", optional(real), None, "fill only holes at most this wide (default: no limit)"
+        ),
+        Option("continuity", choice(0, 1, 2), 2, "0 harmonic, 1 LS mesh, 2 tri-Laplacian"),
+        Option("density", real, 1.0, "new vertex density relative to the surroundings (0 to 4)"),
+        Option("fill_border", flag, False, "also fill the outer border of open components", is_flag=True),
+    ),
+)
+def fill_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
+    """``--op fill`` and ``o3d-lsmesh fill``: counts of new elements and of the loops filled and left open."""
+    from ..hole_filling import fill_holes
+
+    out, report = fill_holes(mesh, **options, progress=context.progress, return_report=True)
+    return out, {
+        "new_vertices": len(out.vertices) - len(mesh.vertices),
+        "new_triangles": len(out.triangles) - len(mesh.triangles),
+        "holes_filled": len(report.filled),
+        "holes_skipped": len(report.skipped),
+        "left_open": report.describe(10),
+        "_report": report,  # (the CLI lists every loop left open; records drop "_" keys)
+    }
+
+
+def parse_levels(spec: str, count: int) -> list[int]:
+    """The levels ``spec`` names (``"all"`` or comma-separated numbers) in a hierarchy of ``count`` levels."""
+    if spec == "all":
+        return list(range(count))
+    levels = sorted({int(item) for item in levels_spec(spec).split(",") if item.strip()})
+    if not all(0 <= level < count for level in levels):
+        raise InputError(
+            f"levels must be in 0..{count - 1} (the hierarchy has {count} levels), got {spec!r}",
+            param="levels",
+        )
+    return levels
+
+
+@operation(
+    "hierarchy",
+    output="files",
+    help="levels of the volume-cost collapse hierarchy, written to OUTDIR/<name>/level_NN<suffix>",
+    options=(
+        Option("levels", levels_spec, "all", "'all' or comma-separated level numbers (0 is the input)"),
+        Option("min_vertices", int_at_least(1), 100, "stop at this many vertices"),
+        Option(
+            "max_levels", optional(int_at_least(1)), None, "stop after this many levels (default: no limit)"
+        ),
+        Option(
+            "maps", flag, False, "also write vertex_maps.npz (input vertex -> level vertex)", is_flag=True
+        ),
+    ),
+)
+def hierarchy_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
+    """``--op hierarchy`` and ``o3d-lsmesh hierarchy``: ``{level_NN: mesh, vertex_maps.npz: bytes}``."""
+    from ..hierarchy import build_hierarchy
+
+    built = build_hierarchy(
+        mesh,
+        min_vertices=options["min_vertices"],
+        max_levels=options["max_levels"],
+        progress=context.progress,
+    )
+    levels = parse_levels(options["levels"], len(built))
+    files: dict[str, Any] = {f"level_{level:02d}": built.level(level) for level in levels}
+    if options["maps"]:  # each map composes the parents of every level above it: only when asked
+        buffer = io.BytesIO()
+        maps = {f"level_{level:02d}": np.asarray(built.vertex_map(level), dtype=np.int64) for level in levels}
+        np.savez_compressed(buffer, **maps)  # type: ignore[arg-type]
+        files["vertex_maps.npz"] = buffer.getvalue()
+    counts = [int(built.vertex_count(i)) for i in range(len(built))]
+    return files, {"levels": len(built), "written_levels": levels, "vertex_counts": counts}
+
+
+@operation(
+    "approximate",
+    help="LS-mesh approximation from control points",
+    options=(
+        Option(
+            "count",
+            count_or_percent,
+            "2%",
+            "control points: a count, or a share of each mesh's vertices like 2%",
+            required=True,
+        ),
+        Option("method", choice(*_SELECTIONS), "greedy", "how the control points are chosen"),
+        Option("interpolate", flag, False, "interpolate the control points exactly", is_flag=True),
+        Option("seed", int_at_least(0), 0, "random seed of --method random/combined"),
+    ),
+)
+def approximate_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
+    """``--op approximate`` and ``o3d-lsmesh approximate``: the result, its control indices and errors."""
+    from ..metrics import vertex_error
+    from ..selection import approximate
+
+    count = resolve_count(options["count"], len(mesh.vertices))
+    out, indices = approximate(
+        mesh,
+        count,
+        method=options["method"],
+        interpolate=options["interpolate"],
+        seed=options["seed"],
+        progress=context.progress,
+    )
+    error = vertex_error(out, mesh)
+    return out, {
+        "count": len(indices),
+        "method": options["method"],
+        "error_linf": error["linf"],
+        "error_rms": error["rms"],
+        "_indices": np.asarray(indices, dtype=np.int64),  # (the CLI writes them with --indices)
+    }
+
+
+@operation(
+    "encode",
+    output="bytes",
+    extension=".bin",
+    help="quantized LS-mesh anchors, written as OUTDIR/<name>.bin",
+    options=(
+        Option(
+            "count", count_or_percent, "2%", "anchors: a count, or a share of each mesh's vertices like 2%"
+        ),
+        Option("bits", int_at_least(1), 12, "quantization bits per coordinate"),
+        Option("method", choice(*_SELECTIONS), "greedy", "how the anchors are chosen"),
+    ),
+)
+def encode_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
+    """``--op encode`` and ``o3d-lsmesh encode``: the bytes, their size and the decoded error."""
+    from ..encoding import decode_geometry, encode_geometry
+    from ..metrics import vertex_error
+
+    n = len(mesh.vertices)
+    count = resolve_count(options["count"], n)
+    progress = context.progress
+    data = encode_geometry(mesh, count, bits=options["bits"], method=options["method"], progress=progress)
+    error = vertex_error(decode_geometry(mesh, data, progress=progress), mesh)
+    return data, {
+        "anchors": count,
+        "bits": options["bits"],
+        "bytes": len(data),
+        "bits_per_vertex": 8.0 * len(data) / n,
+        "decoded_error_linf": error["linf"],
+        "decoded_error_rms": error["rms"],
+    }
+
+
+def find_reference(base: str, relative: str) -> str:
+    """The reference for the input named ``relative``: same relative path, else same stem with any mesh extension."""
+    from .files import READABLE
+
+    exact = Path(base) / relative
+    if exact.is_file():
+        return str(exact)
+    stem = Path(relative).with_suffix("")
+    for extension in READABLE:
+        candidate = Path(base) / stem.with_name(stem.name + extension)
+        if candidate.is_file():
+            return str(candidate)
+    raise InputError(
+        f"reference {base!r} has no file matching {relative!r} (same name, or same stem with one of "
+        f"{', '.join(READABLE)})",
+        param="reference",
+    )
+
+
+@operation(
+    "compare",
+    output="none",
+    help="metrics against the matching file in --reference",
+    options=(
+        Option(
+            "reference",
+            optional(folder),
+            None,
+            "folder holding a reference for every input (same name or stem)",
+            cli=False,
+        ),
+        Option(
+            "points",
+            int_at_least(1, MAX_POINTS),
+            100_000,
+            "surface samples per mesh",
+            param="number_of_points",
+        ),
+    ),
+)
+def compare_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
+    """``--op compare``: metrics against the matching file of ``reference``."""
+    from ..metrics import surface_distance, vertex_error
+    from .files import read_mesh_file
+
+    if options["reference"] is None:
+        raise InputError(
+            "reference is required by op compare (the folder of the files compared with)", param="reference"
+        )
+    reference_path = find_reference(options["reference"], context.relative)
+    reference = read_mesh_file(reference_path)
+    metrics: dict[str, Any] = {
+        "reference": reference_path,
+        "vertices_reference": len(reference.vertices),
+        "surface_distance": surface_distance(mesh, reference, number_of_points=options["points"]),
+    }
+    if len(mesh.vertices) == len(reference.vertices):
+        metrics["vertex_error"] = vertex_error(mesh, reference)
+    metrics.update(change_metrics(reference, mesh))
+    return None, metrics
