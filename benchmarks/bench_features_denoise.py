@@ -39,6 +39,7 @@ from _common import REPO, markdown_table, write_markdown
 from bench_realscans_denoise import PEERS
 
 from o3d_lsmesh._solvers import SPDSolver
+from o3d_lsmesh.core.connectivity import Connectivity
 from o3d_lsmesh.fairing import constrained_fairing_arrays
 from o3d_lsmesh.fairing import features as fe
 from o3d_lsmesh.fairing.scan_measure import measured_noise
@@ -82,7 +83,7 @@ def scores(vertices, triangles, truth, h):
 
 def series(V, F, truth, *, sigma_r, guided, passes):
     """theta after each of ``passes`` passes (index 0: the input), and the positions at each."""
-    adjacency = fe.face_adjacency(F, len(V))
+    adjacency = Connectivity(F, len(V)).face_adjacency
     patch_edges = fe._patch_edges(adjacency) if guided else None
     x, out, positions = V.copy(), [theta(V, F, truth)], [V]
     for _ in range(passes):
@@ -111,7 +112,7 @@ def least_squares_update(V, F, normals, mu):
 
 
 def with_least_squares(V, F, passes, mu):
-    adjacency = fe.face_adjacency(F, len(V))
+    adjacency = Connectivity(F, len(V)).face_adjacency
     patch_edges = fe._patch_edges(adjacency)
     x = V.copy()
     for _ in range(passes):

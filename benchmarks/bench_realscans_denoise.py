@@ -200,9 +200,10 @@ def available(module: str) -> bool:
 
 def bilateral_sweep(V, F, reference, distance):
     """Bilateral normal filtering (Zheng et al. 2011) at every (sigma_r, passes): [(setting, score, seconds)]."""
-    from o3d_lsmesh.fairing.features import face_adjacency, filter_pass, normal_steps
+    from o3d_lsmesh.core.connectivity import Connectivity
+    from o3d_lsmesh.fairing.features import filter_pass, normal_steps
 
-    adjacency = face_adjacency(F, len(V))
+    adjacency = Connectivity(F, len(V)).face_adjacency
     entries = []
     for sigma in BNF_SIGMAS:
         x, start = V.copy(), time.perf_counter()
@@ -492,8 +493,8 @@ def with_constant(name, value, fn):
     parameters = sf.scan_parameters
     if coupled:  # the rim's weight follows mu: SCAN_RIM_MU / scan = 1 in scan_parameters
 
-        def coupled_parameters(V, F, *, structure=None):
-            p = parameters(V, F, structure=structure)
+        def coupled_parameters(V, F, *, conn=None):
+            p = parameters(V, F, conn=conn)
             ratio = p.detail / p.noise if p.noise > 0 else np.inf
             scan = float(np.clip(sf.SCAN_MU * ratio**2, *sf.MU_RANGE))
             rim = p.boundary_weight * (scan / sf.SCAN_RIM_MU) ** p.scan_likeness

@@ -12,10 +12,11 @@ import scipy.sparse.linalg as spla
 from conftest import grid, load_mesh
 from numpy.testing import assert_allclose
 
+from o3d_lsmesh.core.boundary import boundary_halfedges
+from o3d_lsmesh.core.connectivity import Connectivity
 from o3d_lsmesh.fairing import constrained_fairing, constrained_fairing_arrays, smooth_boundary_curves_arrays
-from o3d_lsmesh.fairing.barycenter import fairing_topology, local_operator, triangle_coefficients
+from o3d_lsmesh.fairing.barycenter import local_operator, triangle_coefficients
 from o3d_lsmesh.metrics import signed_volume, surface_distance
-from o3d_lsmesh.topology import boundary_halfedges
 
 TIGHT = 1e-12
 
@@ -307,7 +308,7 @@ def test_input_is_not_modified_and_colors_are_kept(sphere):
 
 def test_local_operator_pickles():
     V, F = noisy_sphere(resolution=5)
-    op = local_operator(F, fairing_topology(F, len(V), with_loops=False))
+    op = local_operator(Connectivity(F, len(V)))
     copy = pickle.loads(pickle.dumps(op))
     assert_allclose(copy.step(V, copy.constant(V)), op.step(V, op.constant(V)), atol=0)
 
@@ -371,7 +372,7 @@ def _soup(seed):
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_edge_structure_equals_a_stable_sort_of_the_edge_keys(seed):
-    from o3d_lsmesh.topology import edge_structure, halfedges
+    from o3d_lsmesh.core.connectivity import edge_structure, halfedges
 
     V, F = _soup(seed)
     n = len(V)
@@ -396,20 +397,17 @@ def _fin_and_isolated():
 
 
 @pytest.mark.parametrize("case", ["soup0", "soup1", "soup2", "sphere", "grid", "fin"])
-def test_vertex_rings_equal_plain_loops(case, monkeypatch):
+def test_vertex_rings_equal_plain_loops(case):
     # issue 16: local fairing's one pass over the corners against sets built triangle by triangle,
     # in blocks of 2 vertices (so that rows meet block ends) and in one block
-    import o3d_lsmesh.topology as topology
-    from o3d_lsmesh.topology import RING_COLUMN_SLOT, RING_ROW_SLOT, vertex_rings
-
-    monkeypatch.setattr(topology, "_RING_BLOCK", 2 if case in ("soup1", "fin") else 1 << 14)
+    from o3d_lsmesh.core.connectivity import RING_COLUMN_SLOT, RING_ROW_SLOT, vertex_rings
 
     if case.startswith("soup"):
         V, F = _soup(int(case[-1]))
     else:
         V, F = {"sphere": noisy_sphere(6), "grid": grid(5, 4), "fin": _fin_and_isolated()}[case]
     n, m = len(V), len(F)
-    rings = vertex_rings(F, n)
+    rings = vertex_rings(F, n, block=2 if case in ("soup1", "fin") else 1 << 14)
     ring = neighbours(F, n)
     on_edge = {}
     for t, tri in enumerate(F.tolist()):
@@ -443,13 +441,11 @@ def test_vertex_rings_equal_plain_loops(case, monkeypatch):
 
 
 def test_local_operator_forms_the_constraint_part_during_assembly():
-    from o3d_lsmesh.topology import vertex_rings
-
     V, F = _soup(1)
-    kept = local_operator(F, vertex_rings(F, len(V)), positions0=V)
+    kept = local_operator(Connectivity(F, len(V)), positions0=V)
     assert_allclose(kept.initial, kept.e3 @ V, rtol=TIGHT, atol=TIGHT)
     assert_allclose(kept.constant(V), kept.e3 @ V, rtol=TIGHT, atol=TIGHT)
-    dropped = local_operator(F, vertex_rings(F, len(V)), positions0=V, keep_constraint=False)
+    dropped = local_operator(Connectivity(F, len(V)), positions0=V, keep_constraint=False)
     assert dropped.e3 is None and np.array_equal(dropped.initial, kept.initial)
     with pytest.raises(ValueError, match="keep_constraint=False"):
         dropped.constant(V)
@@ -459,8 +455,8 @@ def test_local_operator_forms_the_constraint_part_during_assembly():
 
 @pytest.mark.parametrize("iterations", [1, 2, 3])
 def test_local_result_is_a_plain_array_of_the_reference(iterations):
-    # the iterations run in buffers laid on the rings' dead index memory: the result must still be
-    # the caller's own float64 array, equal to the reference loop, for odd and even counts
+    # the iterations swap two buffers: the result must still be the caller's own float64 array, equal
+    # to the reference loop, for odd and even counts
     V, F = noisy_sphere(resolution=5, seed=2)
     X = V
     for _ in range(iterations):
@@ -471,8 +467,8 @@ def test_local_result_is_a_plain_array_of_the_reference(iterations):
 
 
 def test_laplacian_from_the_edge_structure_equals_the_reference():
+    from o3d_lsmesh.core.connectivity import edge_structure
     from o3d_lsmesh.laplacian import uniform_laplacian
-    from o3d_lsmesh.topology import edge_structure
 
     V, F = _soup(3)
     n = len(V) + 2  # two unreferenced vertices: zero rows
@@ -487,13 +483,11 @@ def test_laplacian_from_the_edge_structure_equals_the_reference():
     assert L.has_canonical_format and (np.diff(L.indices[L.indptr[0] : L.indptr[1]]) > 0).all()
 
 
-@pytest.mark.parametrize("method", ["local", "global"])
-def test_one_edge_sort_per_fairing_call(monkeypatch, method):
-    # issue 18: the edges of an open mesh were sorted two or three times in one call; local fairing
-    # (issue 16) groups the corners once (vertex_rings) and sorts the edges only for the boundary walk
-    import o3d_lsmesh.fairing.barycenter as barycenter
-    import o3d_lsmesh.fairing.constrained as constrained
-    import o3d_lsmesh.topology as topology
+@pytest.mark.parametrize("method", ["scan", "local", "global", "features"])
+def test_one_connectivity_per_fairing_call(monkeypatch, method):
+    # every entry point builds the mesh's Connectivity once and passes it down: one object, its edges
+    # grouped at most once and its rings at most once, open or closed, arrays or wrapper
+    import o3d_lsmesh.core.connectivity as connectivity
 
     calls = []
 
@@ -504,19 +498,16 @@ def test_one_edge_sort_per_fairing_call(monkeypatch, method):
 
         return wrapped
 
-    monkeypatch.setattr(barycenter, "edge_structure", counting("edge_structure", topology.edge_structure))
-    monkeypatch.setattr(topology, "edge_runs", counting("edge_runs", topology.edge_runs))
-    monkeypatch.setattr(topology, "directed_edges", counting("directed_edges", topology.directed_edges))
-    original = topology.edge_structure
-    monkeypatch.setattr(topology, "edge_structure", counting("edge_structure", original))
-    monkeypatch.setattr(constrained, "edge_structure", counting("edge_structure", original))
-    monkeypatch.setattr(constrained, "vertex_rings", counting("vertex_rings", topology.vertex_rings))
+    init = connectivity.Connectivity.__init__
+    monkeypatch.setattr(connectivity.Connectivity, "__init__", counting("Connectivity", init))
+    monkeypatch.setattr(connectivity, "edge_structure", counting("edges", connectivity.edge_structure))
+    monkeypatch.setattr(connectivity, "vertex_rings", counting("rings", connectivity.vertex_rings))
     V, F = grid(12, 12)
-    V = V + np.random.default_rng(0).normal(scale=0.01, size=V.shape)
-    out = constrained_fairing_arrays(V, F, 2, method=method)
-    assert calls == (["vertex_rings", "edge_structure"] if method == "local" else ["edge_structure"])
-    closed_V, closed_F = noisy_sphere(resolution=6)
-    calls.clear()
-    constrained_fairing_arrays(closed_V, closed_F, 2, method=method)
-    assert calls == (["vertex_rings"] if method == "local" else ["edge_structure"])
-    assert np.isfinite(out).all() and not np.allclose(out, V)
+    open_ = (V + np.random.default_rng(0).normal(scale=0.01, size=V.shape), F)
+    for mesh in (open_, noisy_sphere(resolution=6)):
+        for call in (constrained_fairing_arrays, lambda V, F, *a, **k: constrained_fairing((V, F), *a, **k)):
+            calls.clear()
+            out = call(*mesh, 2 if method != "scan" else 1, method=method)
+            assert calls.count("Connectivity") == 1, calls
+            assert calls.count("edges") <= 1 and calls.count("rings") <= 1, calls
+            assert np.isfinite(np.asarray(out if isinstance(out, np.ndarray) else out[0])).all()

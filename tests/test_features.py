@@ -8,9 +8,9 @@ from conftest import grid
 from defect_meshes import DEFECTS, all_defects
 
 from o3d_lsmesh import constrained_fairing, detect_creases
+from o3d_lsmesh.core.connectivity import Connectivity, edge_structure
 from o3d_lsmesh.fairing import constrained_fairing_arrays
 from o3d_lsmesh.fairing import features as fe
-from o3d_lsmesh.topology import edge_structure
 
 
 def cube(level=3):
@@ -63,7 +63,7 @@ def reference_filter(V, F, sigma_r, guided):
 def test_filter_pass_matches_a_loop_over_faces(guided):
     V, F = cube(1)
     V = V + np.random.default_rng(3).normal(0.0, 0.03, V.shape)
-    adjacency = fe.face_adjacency(F, len(V))
+    adjacency = Connectivity(F, len(V)).face_adjacency
     ours = fe.filter_pass(V, F, adjacency, fe._patch_edges(adjacency) if guided else None, guided=guided)
     np.testing.assert_allclose(ours, reference_filter(V, F, fe.SIGMA_R, guided), atol=1e-12)
 

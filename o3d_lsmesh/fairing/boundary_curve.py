@@ -1,46 +1,10 @@
 """Boundary-curve fairing with segment-midpoint constraints (Liu et al. 2001, section 3.3).
 
-Every boundary loop of an open mesh is a closed polygon ``p_0 .. p_{l-1}``.
-For each segment ``(p_{i-1}, p_i)`` the paper minimizes the curve Laplacian
-energy ``|L(p_{i-1})|^2 + |L(p_i)|^2`` (weights 1/2) with the segment's
-midpoint held at its position in the constraint curve ``p^0``; the closed form
-is the section 3.3 local equation::
-
-    [p_{i-1}]   [2/3 1/3] [p_{i-2}]   [d]
-    [p_i    ] = [1/3 2/3] [p_{i+1}] + [d],
-    d = ((p^0_{i-1} + p^0_i) - (p_{i-2} + p_{i+1})) / 2.
-
-Every point lies on two segments and so gets two estimates; their average is
-
-    p_i <- (p_{i-1} + p_{i+1} - p_{i-2} - p_{i+2}) / 12 + (p^0_{i-1} + 2 p^0_i + p^0_{i+1}) / 4,
-
-a fixed linear map of the current curve and of ``p^0``, assembled once as two
-sparse matrices (:class:`CurveOperator`), so an iteration is two mat-vecs.
-
-Real scans have pinched boundaries: two holes (or two parts of one hole)
-touching at a vertex, which then has four or more boundary edges. There a
-loop continues with the boundary edge *of the same fan* (the rim of one piece
-of surface; :func:`o3d_lsmesh.topology.boundary_curves`), so every boundary
-vertex, pinches included, has a previous and a next vertex on every loop
-that passes through it, and a pinch vertex averages the estimates of all its
-passages (four at a vertex joining two fans).
-
-Pinch vertices move. Measured on the ten raw bunny scans against the
-reference reconstruction ``bunny.ply`` (``constrained_fairing`` with its
-defaults; mean distance to the reference over the 549 pinch vertices, the
-alternative being to cut the boundary at the pinches into chains with
-fixed ends, :func:`o3d_lsmesh.topology.boundary_chains`)::
-
-                                 pinch   their chain neighbours   all boundary
-    input                        176.8          223.1                 283.4  um
-    local, pinches held          176.8          213.0                 273.9
-    local, pinches move          163.1          193.5                 272.5
-    global, pinches held         176.8          193.7                 266.0
-    global, pinches move         155.9          170.1                 262.7
-
-(every scan agrees in sign; ``benchmarks/bench_realscans.py pinches``): held pinches stay as
-noisy as the input and pin their neighbours to it. Where a fan ends at an edge of more than two
-triangles (a fin) the boundary is an open chain; its ends and every vertex on such an edge are held.
+For each boundary segment the curve Laplacian energy is minimized with the segment's midpoint
+held (the section's local closed form); every point averages its two estimates, a fixed linear
+map of the current curve and the constraint curve assembled once (:class:`CurveOperator`).
+Loops pass through pinch vertices fan by fan; chains end at fins, whose vertices are held.
+Docs page: ``docs/algorithms/boundary_curves.rst``.
 """
 
 from __future__ import annotations
@@ -52,9 +16,9 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._o3d import new_mesh, read_mesh
-from .._ranges import concatenated_ranges
-from .._validate import as_count, as_iterations, mesh_arrays
-from ..topology import BoundaryCurves, boundary_curves
+from ..core.arrays import concatenated_ranges
+from ..core.boundary import BoundaryCurves, boundary_curves
+from ..core.validate import as_count, as_iterations, mesh_arrays
 
 if TYPE_CHECKING:
     from .._types import MeshT

@@ -15,6 +15,8 @@ import numpy as np
 
 from .._o3d import new_mesh, read_mesh
 from .._solvers import SOLVERS
+from ..core.boundary import boundary_curves
+from ..core.connectivity import Connectivity
 from ..core.errors import InputError
 from ..core.progress import check_progress, iterate
 from ..core.validate import (
@@ -27,9 +29,8 @@ from ..core.validate import (
     check_options,
     mesh_arrays,
 )
-from ..topology import boundary_curves, edge_structure, vertex_rings
-from .barycenter import GlobalSolver, fairing_topology, local_operator
-from .boundary_curve import curve_operator
+from .barycenter import GlobalSolver, local_operator
+from .boundary_curve import CurveOperator, curve_operator
 from .features import feature_denoise
 from .scan_fairing import scan_denoise
 from .tuning import DEFAULT_MU
@@ -160,7 +161,7 @@ def constrained_fairing_arrays(
     """
     method, options = _check_options(method, _given(locals()))
     vertices, triangles = mesh_arrays(vertices, triangles)  # copies: _fair may write to its positions
-    return _fair(vertices, triangles, method, options, solver)
+    return _fair(vertices, Connectivity(triangles, len(vertices)), method, options, solver)
 
 
 def _given(arguments: dict[str, Any]) -> dict[str, Any]:
@@ -168,28 +169,32 @@ def _given(arguments: dict[str, Any]) -> dict[str, Any]:
     return {name: arguments[name] for name in (*names, "progress")}
 
 
-def _fair(positions, triangles, method, options, solver="auto"):
-    # validated arrays and options in, new (n, 3) positions out (``positions`` is a private copy)
+def _fair(positions, conn, method, options, solver="auto"):
+    # validated positions (a private copy) and the mesh's one Connectivity in, new (n, 3) positions out
     solver = as_choice(solver, SOLVERS, name="solver")  # checked for every method ("local" solves none)
     iterations, progress = options["number_of_iterations"], options["progress"]
     if iterations == 0:
         return positions
+    triangles = conn.triangles
     if method == "scan":
         weights = {key: options[key] for key in ("mu", "membrane", "boundary_weight")}
         return scan_denoise(
-            positions, triangles, number_of_iterations=iterations, solver=solver, progress=progress, **weights
+            positions,
+            triangles,
+            number_of_iterations=iterations,
+            solver=solver,
+            progress=progress,
+            conn=conn,
+            **weights,
         )
     if method == "features":
-        return feature_denoise(positions, triangles, passes=iterations, progress=progress)
+        return feature_denoise(positions, triangles, passes=iterations, progress=progress, conn=conn)
     smooth_boundary = options["smooth_boundary"]
     if method == "local":
-        return fair_local(
-            positions, triangles, iterations, smooth_boundary, options["reimpose_every"], progress
-        )
-    topo = fairing_topology(triangles, len(positions), with_loops=smooth_boundary)
-    curve = curve_operator(topo.loops)
+        return fair_local(positions, conn, iterations, smooth_boundary, options["reimpose_every"], progress)
+    curve = _curve(conn, smooth_boundary and bool((conn.edge_triangles != 2).any()))
     steps = iterate(progress, range(iterations), desc=f"constrained fairing ({method})")
-    system = GlobalSolver(triangles, topo, options["mu"], solver=solver, progress=progress)
+    system = GlobalSolver(conn, options["mu"], solver=solver, progress=progress)
     for _ in steps:
         known = positions.copy()
         if len(curve):
@@ -198,22 +203,16 @@ def _fair(positions, triangles, method, options, solver="auto"):
     return positions
 
 
-def fair_local(
-    positions, triangles, number_of_iterations, smooth_boundary, reimpose_every, progress, rings=None
-):
-    # the paper's local operator (eq. 7); ``rings``: the mesh's VertexRings when the caller has them
-    n = len(positions)
-    rings = vertex_rings(triangles, n) if rings is None else rings
-    curves = (
-        boundary_curves(triangles, n, edges=edge_structure(triangles, n))
-        if smooth_boundary and rings.boundary.any()
-        else []
-    )
-    curve = curve_operator(curves)
-    del curves
+def _curve(conn: Connectivity, walk: bool) -> CurveOperator:
+    # the boundary curves' operator, or an empty one
+    return curve_operator(boundary_curves(conn.triangles, conn.n, edges=conn.edge_structure) if walk else [])
+
+
+def fair_local(positions, conn, number_of_iterations, smooth_boundary, reimpose_every, progress):
+    # the paper's local operator (eq. 7) on the mesh's Connectivity (its rings: the 1-ring pattern)
+    curve = _curve(conn, smooth_boundary and bool(conn.rings.boundary.any()))
     # E3 @ X0 is formed during the assembly; E3 itself is kept only when the targets are re-taken
-    op = local_operator(triangles, rings, positions0=positions, keep_constraint=reimpose_every is not None)
-    del rings
+    op = local_operator(conn, positions0=positions, keep_constraint=reimpose_every is not None)
     constant = op.initial
     spare, work = np.empty(positions.shape), np.empty(positions.shape)
     result = positions
@@ -302,4 +301,5 @@ def constrained_fairing(
     # read_mesh's vertices are a private copy: _fair may write to them; the local path only reads the
     # triangles, so it takes Open3D's own int32 array (no int64 copy, no cast back)
     data = read_mesh(mesh, weld=True, narrow=method == "local")
-    return new_mesh(data, _fair(data.vertices, data.triangles, method, options, solver))
+    conn = Connectivity(data.triangles, len(data.vertices))
+    return new_mesh(data, _fair(data.vertices, conn, method, options, solver))

@@ -8,15 +8,17 @@ are dimensionless. Docs page: ``docs/algorithms/features.rst``.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, NamedTuple
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.sparse as sp
 
 from .._o3d import read_mesh
-from .._progress import iterate
-from .._validate import as_count, as_positive_float, mesh_arrays
-from ..topology import edge_structure, run_heads
+from ..core.arrays import face_normals
+from ..core.connectivity import Connectivity, FaceAdjacency, run_heads
+from ..core.errors import InputError
+from ..core.progress import iterate
+from ..core.validate import as_count, as_positive_float, mesh_arrays
 from .scan_measure import measured_noise
 from .tuning import CREASE_ANGLE, PASSES_PER_NOISE, SIGMA_R, VERTEX_STEPS
 
@@ -28,69 +30,13 @@ __all__ = [
     "PASSES_PER_NOISE",
     "SIGMA_R",
     "VERTEX_STEPS",
-    "FaceAdjacency",
     "detect_creases",
     "detect_creases_arrays",
-    "face_adjacency",
-    "face_normals",
     "feature_denoise",
     "feature_passes",
     "filter_pass",
     "normal_steps",
 ]
-
-
-class FaceAdjacency(NamedTuple):
-    """The face neighbourhoods the filter runs on (:func:`face_adjacency`).
-
-    Attributes
-    ----------
-    incidence : (m, n) CSR
-        Triangle-vertex incidence ``H`` (three ones a row).
-    ring : (m, m) CSR
-        Faces sharing a vertex with each face, itself included, sorted columns.
-    rows, cols : (r,) intp
-        Row and column of each entry of ``ring``.
-    pairs : (p, 2) int64
-        Faces sharing an edge (an edge of ``k > 2`` faces gives ``k - 1`` pairs).
-    edges : (e, 2)
-        The mesh's edges (:func:`~o3d_lsmesh.topology.edge_structure`), ``lo < hi``, sorted.
-    pair_edge : (p,) int64
-        The edge each pair shares.
-    """
-
-    incidence: sp.csr_matrix
-    ring: sp.csr_matrix
-    rows: np.ndarray
-    cols: np.ndarray
-    pairs: np.ndarray
-    edges: np.ndarray
-    pair_edge: np.ndarray
-
-
-def face_adjacency(triangles: np.ndarray, n: int) -> FaceAdjacency:
-    """The sparse face neighbourhoods of ``(m, 3)`` triangles on ``n`` vertices (no manifold condition)."""
-    m = len(triangles)
-    incidence = sp.csr_matrix((np.ones(3 * m), triangles.ravel(), np.arange(0, 3 * m + 1, 3)), shape=(m, n))
-    ring = (incidence @ incidence.T).tocsr()
-    ring.sort_indices()
-    ring.data[:] = 1.0
-    rows = np.repeat(np.arange(m, dtype=np.intp), np.diff(ring.indptr))
-    # edge-adjacent faces: consecutive half-edges of one edge group (half-edge a * m + t is in triangle t)
-    es = edge_structure(triangles, n)
-    group = np.repeat(np.arange(len(es.counts)), es.counts)
-    follows = np.flatnonzero(~run_heads(group))
-    half = es.order.astype(np.int64)
-    pairs = np.stack([half[follows - 1] % m, half[follows] % m], axis=1)
-    return FaceAdjacency(incidence, ring, rows, ring.indices.astype(np.intp), pairs, es.edges, group[follows])
-
-
-def face_normals(vertices: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Unit face normals ``(m, 3)`` (zero on a degenerate face) and face areas ``(m,)``."""
-    p0 = vertices[triangles[:, 0]]
-    cross = np.cross(vertices[triangles[:, 1]] - p0, vertices[triangles[:, 2]] - p0)
-    length = np.linalg.norm(cross, axis=1)
-    return cross / np.maximum(length, np.finfo(float).tiny)[:, None], 0.5 * length
 
 
 def _unit(vectors: np.ndarray) -> np.ndarray:
@@ -201,7 +147,7 @@ def normal_steps(
     """
     n = len(vertices)
     if incidence is None:
-        incidence = face_adjacency(triangles, n).incidence
+        incidence = Connectivity(triangles, n).face_adjacency.incidence
     count = np.maximum(np.bincount(triangles.ravel(), minlength=n), 1)[:, None]
     outer = (incidence.T @ (normals[:, :, None] * normals[:, None, :]).reshape(-1, 9)).reshape(n, 3, 3)
     x = np.array(vertices, dtype=np.float64)
@@ -211,10 +157,10 @@ def normal_steps(
     return x
 
 
-def feature_passes(vertices: np.ndarray, triangles: np.ndarray) -> int:
+def feature_passes(vertices: np.ndarray, triangles: np.ndarray, *, conn: Connectivity | None = None) -> int:
     """The pass count of :func:`feature_denoise`: ``round(PASSES_PER_NOISE * sigma)``, ``sigma`` the
     measured noise in mean edge lengths (0 on a noiseless mesh: it is left as it is)."""
-    return round(PASSES_PER_NOISE * measured_noise(vertices, triangles).noise)
+    return round(PASSES_PER_NOISE * measured_noise(vertices, triangles, conn=conn).noise)
 
 
 def feature_denoise(
@@ -225,11 +171,13 @@ def feature_denoise(
     sigma_r: float = SIGMA_R,
     guided: bool = True,
     progress: bool = False,
+    conn: Connectivity | None = None,
 ) -> np.ndarray:
     """The feature mode on validated arrays: new ``(n, 3) float64`` positions.
 
     ``passes`` filter passes (``None``: :func:`feature_passes`), each followed by
-    :data:`VERTEX_STEPS` vertex steps (:func:`filter_pass`, :func:`normal_steps`).
+    :data:`VERTEX_STEPS` vertex steps (:func:`filter_pass`, :func:`normal_steps`); ``conn``: the
+    mesh's connectivity when the caller has it.
 
     Examples
     --------
@@ -242,10 +190,11 @@ def feature_denoise(
     True
     """
     n = len(vertices)
-    passes = feature_passes(vertices, triangles) if passes is None else passes
+    conn = Connectivity(triangles, n) if conn is None else conn
+    passes = feature_passes(vertices, triangles, conn=conn) if passes is None else passes
     if passes == 0:
         return np.array(vertices, dtype=np.float64)
-    adjacency = face_adjacency(triangles, n)
+    adjacency = conn.face_adjacency
     patch_edges = _patch_edges(adjacency) if guided else None
     # about the centroid: the planes' offsets n_f . c_f do not carry the distance to the origin
     used = np.bincount(triangles.ravel(), minlength=n) > 0
@@ -278,12 +227,13 @@ def detect_creases_arrays(
     """
     angle = as_positive_float(angle, name="angle")
     if angle >= 180.0:
-        raise ValueError(f"angle must be below 180 degrees, got {angle}")
+        raise InputError(f"angle must be below 180 degrees, got {angle}", param="angle")
     vertices, triangles = mesh_arrays(vertices, triangles)
     if passes is not None:
         passes = as_count(passes, name="passes")
-    normals = face_normals(feature_denoise(vertices, triangles, passes=passes), triangles)[0]
-    adjacency = face_adjacency(triangles, len(vertices))
+    conn = Connectivity(triangles, len(vertices))
+    normals = face_normals(feature_denoise(vertices, triangles, passes=passes, conn=conn), triangles)[0]
+    adjacency = conn.face_adjacency
     pairs = adjacency.pairs
     cosine = np.einsum("ij,ij->i", normals[pairs[:, 0]], normals[pairs[:, 1]])
     sharp = np.unique(adjacency.pair_edge[cosine < np.cos(np.radians(angle))])

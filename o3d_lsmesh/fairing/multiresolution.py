@@ -8,12 +8,14 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .._o3d import new_mesh, read_mesh
-from .._progress import check_progress, progress_bar
-from .._validate import as_choice, as_count, as_iterations
+from ..core.boundary import boundary_curves
+from ..core.connectivity import Connectivity, VertexRings
+from ..core.progress import check_progress, progress_bar
+from ..core.validate import as_choice, as_count, as_iterations
 from ..hierarchy.hierarchy import MeshHierarchy, boundary_degree, collapse_hierarchy
-from ..topology import VertexRings, boundary_curves, vertex_rings
 from .boundary_curve import curve_operator, run_curve_iterations
-from .constrained import FAIRING_METHODS, constrained_fairing_arrays, fair_local
+from .constrained import FAIRING_METHODS, _fair, fair_local
+from .tuning import DEFAULT_MU
 
 if TYPE_CHECKING:
     from .._types import MeshT
@@ -32,20 +34,20 @@ def multiresolution_fairing_arrays(
 ) -> np.ndarray:
     """Array core of :func:`multiresolution_fairing`: faired ``(n_0, 3)`` positions of level 0.
 
-    Every level's 1-ring pattern is built once (:func:`~o3d_lsmesh.topology.vertex_rings`) and serves
-    the split into that level, its fairing and, on ``M_0``, the boundary; the rounds on ``M_0`` run on
+    Every level's :class:`~o3d_lsmesh.core.connectivity.Connectivity` is built once and serves the
+    split into that level, its fairing and, on ``M_0``, the boundary; the rounds on ``M_0`` run on
     one fairing operator, their targets re-taken between rounds.
     """
     triangles = hierarchy.triangles
-    rings = vertex_rings(triangles[level], len(hierarchy.representatives[level]))
+    conn = Connectivity(triangles[level], len(hierarchy.representatives[level]))
     positions = hierarchy.vertices[hierarchy.representatives[level]]  # a copy: fairing writes to it
     if level == 0:
-        return _fair_level(positions, triangles[0], rings, number_of_iterations, method)
+        return _fair_level(positions, conn, number_of_iterations, method)
     with progress_bar(progress, total=level, desc="multiresolution fairing", unit="level") as bar:
         for i in range(level, 0, -1):
-            positions = _fair_level(positions, triangles[i], rings, number_of_iterations, method)
-            rings = vertex_rings(triangles[i - 1], len(hierarchy.representatives[i - 1]))
-            positions = hierarchy.refine_with_rings(i, positions, rings)
+            positions = _fair_level(positions, conn, number_of_iterations, method)
+            conn = Connectivity(triangles[i - 1], len(hierarchy.representatives[i - 1]))
+            positions = hierarchy.refine_with_rings(i, positions, conn.rings)
             bar.update(1)
     # M_0 in rounds, barycenters re-imposed after each (the docstring says why): one fairing of M_0 holds
     # the barycenters where the splits put them, and more iterations of it change nothing (measured)
@@ -54,14 +56,13 @@ def multiresolution_fairing_arrays(
         return positions
     # the boundary curves are put where level 0 puts them and held: re-faired round after round, their
     # midpoint constraints are a curve-shortening flow that closes holes (measured in the docstring)
-    boundary, placed = _input_boundary(hierarchy.vertices, triangles[0], rings, number_of_iterations, method)
+    boundary, placed = _input_boundary(hierarchy.vertices, conn, number_of_iterations, method)
     positions[boundary] = placed
     # the connectivity is fixed: one operator for all rounds ("global" re-takes its targets at every solve)
     rounds = method == "local" and 0 < number_of_iterations < remaining
     return _fair_level(
         positions,
-        triangles[0],
-        rings,
+        conn,
         remaining,
         method,
         smooth_boundary=False,
@@ -71,30 +72,28 @@ def multiresolution_fairing_arrays(
 
 def _fair_level(
     positions: np.ndarray,
-    triangles: np.ndarray,
-    rings: VertexRings,
+    conn: Connectivity,
     iterations: int,
     method: str,
     *,
     smooth_boundary: bool = True,
     reimpose_every: int | None = None,
 ) -> np.ndarray:
-    """Constrained fairing of a level, ``positions (n, 3)`` overwritten; ``"local"`` spends the rings' slot pairs.
+    """Constrained fairing of a level, ``positions (n, 3)`` overwritten.
 
     A pinched boundary (a level of a fast-simplification hierarchy can have one) is held fixed.
     """
     if iterations == 0:
         return positions
-    smooth_boundary = smooth_boundary and _is_simple(rings)
+    smooth_boundary = smooth_boundary and _is_simple(conn.rings)
     if method == "global":
-        return constrained_fairing_arrays(
-            positions, triangles, iterations, method="global", smooth_boundary=smooth_boundary
-        )
-    return fair_local(positions, triangles, iterations, smooth_boundary, reimpose_every, False, rings)
+        options = {"number_of_iterations": iterations, "mu": DEFAULT_MU, "smooth_boundary": smooth_boundary}
+        return _fair(positions, conn, "global", {**options, "progress": False})
+    return fair_local(positions, conn, iterations, smooth_boundary, reimpose_every, False)
 
 
 def _input_boundary(
-    vertices: np.ndarray, triangles: np.ndarray, rings: VertexRings, iterations: int, method: str
+    vertices: np.ndarray, conn: Connectivity, iterations: int, method: str
 ) -> tuple[np.ndarray, np.ndarray]:
     """The boundary vertices ``(b,)`` (sorted) and the positions ``(b, 3)`` ``_fair_level`` gives them on the input.
 
@@ -102,13 +101,13 @@ def _input_boundary(
     with the input's midpoints (``"local"``), or re-taken from the current curve at every step
     (``"global"``); a pinched boundary is held.
     """
-    degree = boundary_degree(rings)
+    degree = boundary_degree(conn.rings)
     boundary = np.flatnonzero(degree)
-    if len(boundary) == 0 or not _is_simple(rings, degree):
+    if len(boundary) == 0 or not _is_simple(conn.rings, degree):
         return boundary, vertices[boundary]
     smoothed = run_curve_iterations(
         vertices,
-        curve_operator(boundary_curves(triangles, len(vertices))),
+        curve_operator(boundary_curves(conn.triangles, len(vertices), edges=conn.edge_structure)),
         iterations,
         reimpose_every=1 if method == "global" else None,
     )

@@ -18,12 +18,12 @@ from .._collapsed import collapsed_triangles
 from .._normals import area_weighted_normals
 from .._progress import stages
 from .._solvers import SPDSolver, gram_matrix, solver_backend
-from ..topology import ring_pattern
+from ..core.connectivity import Connectivity
+from ..core.operators import rim_neighbours
 from .scan_measure import (
     NoiseEstimate,
     ScanParameters,
-    _Structure,
-    _structure,
+    _rim,
     measured_boundary_weight,
     measured_noise,
     rim_noise_ratio,
@@ -112,7 +112,7 @@ def scan_system(
     mu: float,
     membrane: float,
     boundary_weight: float,
-    structure: _Structure | None = None,
+    conn: Connectivity | None = None,
     rim_curve: float = 0.0,
 ) -> ScanSystem:
     """The least-squares rows of the scan energy for ``(m, 3) int64`` triangles on ``n`` vertices.
@@ -123,8 +123,10 @@ def scan_system(
     ``O(n + m)``.
     """
     m = len(triangles)
-    edges, counts, boundary, valence, _ = _structure(triangles, n) if structure is None else structure
-    edges = edges.astype(np.int64)  # row numbers below pass 2**31 before the vertex indices do
+    conn = Connectivity(triangles, n) if conn is None else conn
+    boundary, valence = _rim(conn)
+    counts = conn.edge_triangles
+    edges = conn.edges.astype(np.int64)  # row numbers below pass 2**31 before the vertex indices do
     e = len(edges)
     lo, hi = edges[:, 0], edges[:, 1]
     referenced = valence > 0
@@ -180,7 +182,7 @@ def scan_normal_matrix(
     mu: float,
     membrane: float,
     boundary_weight: float,
-    structure: _Structure | None = None,
+    conn: Connectivity | None = None,
     rim_curve: float = 0.0,
 ) -> sp.csr_matrix:
     """The normal matrix ``R^T R`` of :func:`scan_system` from the mesh's edges, ``(n, n)`` canonical CSR.
@@ -191,7 +193,7 @@ def scan_normal_matrix(
     >>> scan_normal_matrix(np.array([[0, 1, 2], [0, 2, 3]]), 5, mu=0.03, membrane=0.45, boundary_weight=0.1).shape
     (5, 5)
     """
-    return _normal_matrix(triangles, n, mu, membrane, boundary_weight, structure, rim_curve)[0]
+    return _normal_matrix(triangles, n, mu, membrane, boundary_weight, conn, rim_curve)[0]
 
 
 def _normal_matrix(
@@ -200,7 +202,7 @@ def _normal_matrix(
     mu: float,
     membrane: float,
     boundary_weight: float,
-    structure: _Structure | None = None,
+    conn: Connectivity | None = None,
     rim_curve: float = 0.0,
 ) -> tuple[sp.csr_matrix, sp.csc_matrix | None, np.ndarray]:
     # scan_normal_matrix; the pattern of K (the 1-ring, diagonal included) when K^T K holds the matrix's;
@@ -213,15 +215,16 @@ def _normal_matrix(
             mu=mu,
             membrane=membrane,
             boundary_weight=boundary_weight,
-            structure=structure,
+            conn=conn,
             rim_curve=rim_curve,
         )
         return rows.normal_matrix().tocsr(), None, rows.triangle_weight
-    st = _structure(triangles, n) if structure is None else structure
-    edges, counts, boundary, valence, halfedge_edge = st
+    conn = Connectivity(triangles, n) if conn is None else conn
+    edges, counts, halfedge_edge = conn.edges, conn.edge_triangles, conn.halfedge_edge
+    boundary, valence = _rim(conn)
     lo, hi = edges[:, 0], edges[:, 1]
     referenced = valence > 0
-    indptr, indices, diagonal, forward, backward = ring_pattern(edges, n)
+    indptr, indices, diagonal, forward, backward = conn.ring_pattern
     weight = np.where(boundary[triangles].any(axis=1), float(boundary_weight), 1.0)  # (m,) w_t
     # mu H^T W H + lambda G (+ 1 on an unreferenced vertex's diagonal), on the 1-ring pattern
     data = np.empty(len(indices))
@@ -312,7 +315,7 @@ class ScanFairingSolver(_Penalized):
         mu: float,
         membrane: float,
         boundary_weight: float,
-        structure: _Structure | None = None,
+        conn: Connectivity | None = None,
         rim_curve: float = 0.0,
         solver: str = "auto",
         progress: bool = False,
@@ -321,12 +324,12 @@ class ScanFairingSolver(_Penalized):
         self.membrane = float(membrane)
         backend = solver_backend(solver)
         triangles = np.asarray(triangles)
-        st = _structure(triangles, n) if structure is None else structure
+        conn = Connectivity(triangles, n) if conn is None else conn
         normal, ring, weight = _normal_matrix(
-            triangles, n, self.mu, self.membrane, boundary_weight, st, rim_curve
+            triangles, n, self.mu, self.membrane, boundary_weight, conn, rim_curve
         )
         self.penalty = _penalty(triangles, n, np.sqrt(self.mu * weight))
-        self.referenced = st.valence > 0
+        self.referenced = _rim(conn)[1] > 0
         if backend == "auto" and n >= SCAN_ITERATIVE_VERTICES:
             backend = "iterative"
         if backend == "iterative":
@@ -406,11 +409,12 @@ def scan_denoise(
     boundary_weight: float | None = None,
     solver: str = "auto",
     progress: bool = False,
+    conn: Connectivity | None = None,
 ) -> np.ndarray:
     """The default denoiser on arrays: :func:`scan_parameters`, one system, the twiced filter, :func:`relax_rim`.
 
     ``mu``, ``membrane``, ``boundary_weight`` replace the measured values when given; ``solver`` and
-    ``progress`` as in :class:`ScanFairingSolver`. Returns new ``(n, 3) float64`` positions.
+    ``progress`` as in :class:`ScanFairingSolver`; ``conn``: the mesh's connectivity when the caller has it. Returns new ``(n, 3) float64`` positions.
 
     >>> import open3d as o3d
     >>> box = o3d.geometry.TriangleMesh.create_box()
@@ -421,8 +425,8 @@ def scan_denoise(
     # at 10M vertices the measures and the assembly take tens of seconds before CG shows its residual
     with stages(progress, "constrained fairing (scan)", ("measure", "assemble", "solve")) as begin:
         begin("measure")
-        structure = _structure(triangles, n)
-        measured = scan_parameters(vertices, triangles, structure=structure)
+        conn = Connectivity(triangles, n) if conn is None else conn
+        measured = scan_parameters(vertices, triangles, conn=conn)
         begin("assemble")
         system = ScanFairingSolver(
             triangles,
@@ -430,7 +434,7 @@ def scan_denoise(
             mu=measured.mu if mu is None else mu,
             membrane=measured.membrane if membrane is None else membrane,
             boundary_weight=measured.boundary_weight if boundary_weight is None else boundary_weight,
-            structure=structure,
+            conn=conn,
             rim_curve=measured.rim_curve,
             solver=solver,
             progress=progress,
@@ -438,7 +442,7 @@ def scan_denoise(
         begin("solve")
         out = system.solve(vertices, number_of_iterations=number_of_iterations, twice=measured.twicing)
         # a rim as noisy as the interior (s = 0) is not pulled in: its sweeps are off
-        return relax_rim(vertices, out, triangles, structure=structure, strength=measured.scan_likeness)
+        return relax_rim(vertices, out, triangles, conn=conn, strength=measured.scan_likeness)
 
 
 def triangle_quality(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
@@ -461,7 +465,7 @@ def relax_rim(
     triangles: np.ndarray,
     *,
     strength: float = 1.0,
-    structure: _Structure | None = None,
+    conn: Connectivity | None = None,
 ) -> np.ndarray:
     """Even out the triangles near the rim of a faired scan, moving each vertex in its tangent plane only.
 
@@ -472,9 +476,10 @@ def relax_rim(
     returns new ``(n, 3)`` positions. The steps in full: ``docs/algorithms/scan_denoiser.rst``.
     """
     n = len(positions)
-    st = _structure(triangles, n) if structure is None else structure
+    conn = Connectivity(triangles, n) if conn is None else conn
+    boundary = _rim(conn)[0]
     out = np.array(positions, dtype=np.float64)
-    if not st.boundary.any():
+    if not boundary.any():
         return out
 
     # the band: vertices within RIM_RINGS edges of the rim; only its vertices move, so only the triangles
@@ -482,7 +487,7 @@ def relax_rim(
     def at(mask: np.ndarray, faces: np.ndarray) -> np.ndarray:  # faces with a vertex in the mask
         return mask[faces[:, 0]] | mask[faces[:, 1]] | mask[faces[:, 2]]
 
-    band = st.boundary.copy()
+    band = boundary.copy()
     for _ in range(RIM_RINGS):
         band[triangles[at(band, triangles)]] = True
     near = triangles[at(band, triangles)]
@@ -502,11 +507,7 @@ def relax_rim(
         return move - np.einsum("ij,ij->i", move, normal[rows])[:, None] * normal[rows]
 
     # a rim vertex averages its neighbours along the rim, any other vertex its 1-ring
-    lo, hi = st.edges[:, 0].astype(np.int64), st.edges[:, 1].astype(np.int64)
-    on_curve = np.tile(st.counts == 1, 2)
-    rows, cols = np.r_[lo, hi], np.r_[hi, lo]
-    keep = movable[rows] & (~st.boundary[rows] | on_curve)
-    neighbours = sp.csr_matrix((np.ones(int(keep.sum())), (rows[keep], cols[keep])), shape=(n, n))
+    neighbours = rim_neighbours(conn, movable)
     count = np.diff(neighbours.indptr)
     moved = np.flatnonzero(count)
     neighbours = neighbours[moved]

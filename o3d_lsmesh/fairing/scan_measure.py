@@ -15,7 +15,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._normals import area_weighted_normals
-from ..topology import edge_structure
+from ..core.connectivity import Connectivity
+from ..core.operators import two_ring_rows, umbrella
 from .tuning import (
     MU_RANGE,
     NOISE_BLOCK,
@@ -47,55 +48,39 @@ __all__ = [
 _IID_BOUNDARY_RATIO = 1.5 / (1.0 + 1.0 / 6.0)
 
 
-class _Structure(NamedTuple):
-    edges: np.ndarray  # (e, 2) int32 (int64 past 2**31 half-edges), lo < hi, sorted
-    counts: np.ndarray  # (e,) triangles on each edge
-    boundary: np.ndarray  # (n,) bool, on an edge of one triangle
-    valence: np.ndarray  # (n,) int64 edge neighbours
-    halfedge_edge: np.ndarray  # (3m,) edge of half-edge ``a * m + t`` (triangle t, corners a, a + 1)
-
-
-def _structure(triangles: np.ndarray, n: int) -> _Structure:
-    # int32 indices where they fit: half the memory traffic of int64 at scan sizes
-    es = edge_structure(triangles, n)
-    boundary = np.zeros(n, dtype=bool)
-    boundary[es.edges[es.counts == 1].ravel()] = True
-    return _Structure(es.edges, es.counts, boundary, np.bincount(es.edges.ravel(), minlength=n), es.inverse)
+def _rim(conn: Connectivity) -> tuple[np.ndarray, np.ndarray]:
+    """``(boundary, valence)``, ``(n,)`` each: on an edge of one triangle; edge neighbours (int64)."""
+    boundary = np.zeros(conn.n, dtype=bool)
+    boundary[conn.edges[conn.boundary_edges].ravel()] = True
+    return boundary, np.bincount(conn.edges.ravel(), minlength=conn.n)
 
 
 def _mean_square_laplacian(vertices: np.ndarray, pairs: np.ndarray, mask: np.ndarray) -> float:
-    """Mean over the ``mask`` vertices of ``|mean of the pairs-neighbours - x_i|^2`` (bincount, not ``np.add.at``)."""
-    n = len(vertices)
-    lo, hi = pairs[:, 0], pairs[:, 1]
-    degree = np.bincount(pairs.ravel(), minlength=n)[mask].astype(np.float64)
-    total = np.empty((int(mask.sum()), 3))
-    for k in range(3):
-        total[:, k] = (
-            np.bincount(lo, vertices[hi, k], minlength=n) + np.bincount(hi, vertices[lo, k], minlength=n)
-        )[mask]
-    lap = total / degree[:, None] - vertices[mask]
+    """Mean over the ``mask`` vertices of ``|mean of the pairs-neighbours - x_i|^2``."""
+    lap = umbrella(vertices, pairs, mask)
     return float((lap * lap).sum(axis=1).mean())
 
 
 def rim_noise_ratio(
-    vertices: np.ndarray, triangles: np.ndarray, *, structure: _Structure | None = None
+    vertices: np.ndarray, triangles: np.ndarray, *, conn: Connectivity | None = None
 ) -> tuple[float, float]:
     """The rim's data weight before clipping, ``c (9/7) E_int / E_bd``, and the coverage ratio ``c``.
 
     ``(inf, 1)`` without a boundary or an interior vertex, ``(c, c)`` for a noiseless straight rim.
     """
     n = len(vertices)
-    st = _structure(triangles, n) if structure is None else structure
-    on_curve = st.edges[st.counts == 1]
-    interior = (st.valence > 0) & ~st.boundary
+    conn = Connectivity(triangles, n) if conn is None else conn
+    boundary, valence = _rim(conn)
+    on_curve = conn.edges[conn.boundary_edges]
+    interior = (valence > 0) & ~boundary
     if not len(on_curve) or not interior.any():
         return float("inf"), 1.0
     in_triangles = np.bincount(triangles.ravel(), minlength=n)
-    coverage = max(1.0, float(in_triangles[interior].mean() / in_triangles[st.boundary].mean()))
-    curve_energy = _mean_square_laplacian(vertices, on_curve, st.boundary)
+    coverage = max(1.0, float(in_triangles[interior].mean() / in_triangles[boundary].mean()))
+    curve_energy = _mean_square_laplacian(vertices, on_curve, boundary)
     if curve_energy <= 0.0:
         return coverage, coverage
-    interior_energy = _mean_square_laplacian(vertices, st.edges, interior)
+    interior_energy = _mean_square_laplacian(vertices, conn.edges, interior)
     return coverage * _IID_BOUNDARY_RATIO * interior_energy / curve_energy, coverage
 
 
@@ -127,7 +112,7 @@ class NoiseEstimate(NamedTuple):
 
 
 def measured_noise(
-    vertices: np.ndarray, triangles: np.ndarray, *, structure: _Structure | None = None
+    vertices: np.ndarray, triangles: np.ndarray, *, conn: Connectivity | None = None
 ) -> NoiseEstimate:
     """The noise ``sigma`` and the surface's detail ``g`` along the normal, in RMS edge lengths.
 
@@ -142,15 +127,16 @@ def measured_noise(
     0.19
     """
     n = len(vertices)
-    st = _structure(triangles, n) if structure is None else structure
-    lo, hi = st.edges[:, 0], st.edges[:, 1]
+    conn = Connectivity(triangles, n) if conn is None else conn
+    boundary, valence = _rim(conn)
+    lo, hi = conn.edges[:, 0], conn.edges[:, 1]
     ring = sp.csr_matrix((np.ones(2 * len(lo)), (np.r_[lo, hi], np.r_[hi, lo])), shape=(n, n))
-    inner = (st.valence > 0) & ~st.boundary
-    inner[ring[st.boundary].indices] = False  # two rings from the rim: full 1- and 2-rings
+    inner = (valence > 0) & ~boundary
+    inner[ring[boundary].indices] = False  # two rings from the rim: full 1- and 2-rings
     if not inner.any():
         return NoiseEstimate(0.0, 0.0)
-    d1 = st.valence.astype(np.float64)
-    referenced = st.valence > 0
+    d1 = valence.astype(np.float64)
+    referenced = valence > 0
     ring_sum = ring @ vertices
     smooth = vertices.copy()
     smooth[referenced] += ring_sum[referenced] / d1[referenced, None] - vertices[referenced]
@@ -179,12 +165,7 @@ def measured_noise(
     block_rows = max(NOISE_BLOCK, -(-len(inner_rows) // NOISE_BLOCKS))
     for start in range(0, len(inner_rows), block_rows):
         rows = inner_rows[start : start + block_rows]
-        block = ring[rows]
-        two = block @ ring + block
-        two.data[:] = 1.0
-        own = np.repeat(rows, np.diff(two.indptr)) == two.indices  # the vertex itself is not its neighbour
-        two.data[own] = 0.0
-        two.eliminate_zeros()
+        two = two_ring_rows(ring, rows)
         d2 = np.diff(two.indptr).astype(np.float64)
         a2 = np.einsum(
             "ij,ij->i", two @ vertices / d2[:, None] - vertices[rows], nrm[start : start + len(rows)]
@@ -259,7 +240,7 @@ class ScanParameters:
 
 
 def scan_parameters(
-    vertices: np.ndarray, triangles: np.ndarray, *, structure: _Structure | None = None
+    vertices: np.ndarray, triangles: np.ndarray, *, conn: Connectivity | None = None
 ) -> ScanParameters:
     """Every weight of the default energy, measured on the mesh (never on a reference).
 
@@ -274,13 +255,14 @@ def scan_parameters(
     0.0
     """
     n = len(vertices)
-    st = _structure(triangles, n) if structure is None else structure
-    ratio, coverage = rim_noise_ratio(vertices, triangles, structure=st)
+    conn = Connectivity(triangles, n) if conn is None else conn
+    boundary, valence = _rim(conn)
+    ratio, coverage = rim_noise_ratio(vertices, triangles, conn=conn)
     weight = _clipped_weight(ratio, coverage)
-    referenced = int(np.count_nonzero(st.valence))
-    fraction = float(np.count_nonzero(st.boundary)) / max(referenced, 1)
+    referenced = int(np.count_nonzero(valence))
+    fraction = float(np.count_nonzero(boundary)) / max(referenced, 1)
     s = scan_likeness(ratio, fraction)
-    estimate = measured_noise(vertices, triangles, structure=st)
+    estimate = measured_noise(vertices, triangles, conn=conn)
     ratio_gn = estimate.detail / estimate.noise if estimate.noise > 0.0 else np.inf
     independent = float(np.clip(NOISE_MU_SCALE * ratio_gn**NOISE_MU_POWER, *MU_RANGE))
     # never below the rim's weight: the interior's samples are at least as trustworthy as the ragged rim's,
