@@ -2,23 +2,12 @@
 """Levels of the volume-cost hierarchy (Liu et al. 2001, section 4.1): one sequential loop, like OpenMesh's
 ``DecimaterT``; ``tests/_hierarchy_oracle.py`` is this loop in plain Python (same arithmetic, same levels).
 
-The loop visits the unlocked vertices in increasing ``cost(x) = alpha * min_edge(x) + beta * max_edge(x)``, ties
-by ring spread, then index (:func:`visiting_order`), skipping ``x`` in the closed 1-ring of a vertex removed in
-this level. ``x`` tries its neighbours ``k`` in increasing cone volume ``|N_x . (x_k - x)|`` (``N_x``: the summed
-doubled-area normals around ``x``; compared as heights over x's plane in :data:`TIE` units, ties to the shortest
-edge in those units, then the first visited), at most ``max_tries``; a ``k`` in such a
-closed 1-ring ends the search. A collapse reads the 1-rings of ``x`` and ``k`` and changes only those of
-``N(x)``: every collapse stays valid and the removed vertices are pairwise non-adjacent (as
-:meth:`MeshHierarchy.refine` needs). ``x`` collapses into the first ``k`` for which
-
-* ``k`` is not locked, a boundary ``x`` moves along a boundary edge, no lone triangle or tetrahedron remains;
-* every surviving triangle around ``x`` keeps its orientation, turns its normal by less than ``max_normal_angle``
-  and keeps ``2 * area / (sum of squared edge lengths)`` above ``min_quality``;
-* the link condition holds: ``x`` and ``k`` share only the edge's opposite vertices (Euler characteristic and
-  boundary loops stay).
-
-Locked (never removed, never a target): vertices on an edge of more than two triangles, unreferenced vertices and
-several-fan vertices; every other star is a disk or half-disk, and every level keeps the non-manifold vertices.
+The unlocked vertices are visited in increasing ``alpha * min_edge(x) + beta * max_edge(x)`` (ties:
+:func:`visiting_order`); each collapses into the first of at most ``max_tries`` neighbours in increasing
+cone volume that keeps the boundary, every surviving triangle's orientation, normal (``max_normal_angle``)
+and quality (``min_quality``), and the link condition; the removed vertices of a level are independent.
+Locked: vertices on an edge of more than two triangles, unreferenced and several-fan vertices. The rules
+in full: ``docs/algorithms/mesh_hierarchy.rst``.
 """
 
 import numpy as np
@@ -38,7 +27,7 @@ cdef extern from *:  # PLAIN: madvise from the first whole 4 KiB page (an aligne
     int plain_pages "PLAIN"(char* p, size_t n, size_t skip) noexcept nogil
 
 def _empty(shape, dtype):
-    """``np.empty`` on 4 KiB pages: on NumPy's huge pages (zeroed whole) this loop took a quarter longer at 1M-4M."""
+    """``np.empty`` on 4 KiB pages (not NumPy's huge pages, zeroed whole; see docs/algorithms/mesh_hierarchy.rst)."""
     a = np.empty(shape, dtype)
     plain_pages(<char*> <size_t> a.ctypes.data, a.nbytes, -a.ctypes.data % 4096)
     return a
@@ -79,8 +68,8 @@ cdef bint _legal(const double* p, const Vertex* V, const int32_t* pair, const in
     return common == mult[2 * V[x].start + e]  # link condition: only the edge's opposite vertices in common
 
 #: Lengths are compared in units of this fraction of the input's mean edge length ``h``, squared lengths in
-#: ``TIE h^2``: values the mesh's own rounding makes equal (a scan's coordinates in fixed decimals: a fifth of
-#: its costs tied exactly, rows of identical rings) stay equal after a rigid motion (about 1e-12 of an edge).
+#: ``TIE h^2``: values the mesh's own rounding makes equal (a scan's fixed decimals, rows of identical rings)
+#: stay equal after a rigid motion.
 TIE = 2.0 ** -20
 #: Squared distances to the centroid (a last tie-break, between copies of one ring along a scanline: an edge or
 #: more apart) in units of this fraction of ``h^2``: 10M-vertex meshes' fit in one word with their runs.

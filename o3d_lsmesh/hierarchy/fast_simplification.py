@@ -1,11 +1,9 @@
 """A :class:`MeshHierarchy` from fast-simplification's QEM edge collapses.
 
-``fast_simplification.simplify(..., return_collapses=True)`` decimates once to
-the coarsest level and returns its collapse sequence; each level is the
-``replay_simplification`` of a prefix of that sequence, whose vertex mapping
-(unlike the raw list) also accounts for the vertices it merges afterwards.
-Both functions keep module-global state in the extension, so every call goes
-through one lock.
+``fast_simplification.simplify(..., return_collapses=True)`` decimates once to the coarsest level; each
+level is the ``replay_simplification`` of a prefix of its collapses (whose vertex mapping accounts for
+later merges too). The extension keeps module-global state: every call goes through one lock.
+Docs: ``docs/algorithms/mesh_hierarchy.rst``.
 """
 
 from __future__ import annotations
@@ -16,12 +14,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .._collapsed import collapsed_triangles
 from .._o3d import read_mesh, warn_dropped_attributes
-from .._progress import check_progress, progress_bar
-from .._ranges import concatenated_ranges
-from .._validate import as_count, as_positive_float
-from ..topology import adjacency_matrix, connected_components, run_heads, unique_edges
+from ..core.arrays import concatenated_ranges
+from ..core.connectivity import Connectivity, run_heads
+from ..core.errors import InputError, InputTypeError
+from ..core.progress import check_progress, progress_bar
+from ..core.validate import as_count, as_positive_float, collapsed_triangles
 from .hierarchy import MeshHierarchy, tensor_format_of
 
 if TYPE_CHECKING:
@@ -34,7 +32,9 @@ _LOCK = threading.Lock()
 
 def _level_counts(levels: Any, n: int, min_vertices: int) -> np.ndarray:
     if isinstance(levels, (bool, np.bool_)):
-        raise TypeError(f"levels must be an integer or a sequence of vertex counts, got {levels!r}")
+        raise InputTypeError(
+            f"levels must be an integer or a sequence of vertex counts, got {levels!r}", param="levels"
+        )
     if isinstance(levels, (int, np.integer)):
         # more levels than vertices could not be distinct: the limit also keeps the request's memory bounded
         count = as_count(levels, name="levels", minimum=1, maximum=max(n, 1))
@@ -45,17 +45,19 @@ def _level_counts(levels: Any, n: int, min_vertices: int) -> np.ndarray:
         try:
             counts = np.asarray(levels)
         except Exception as error:  # ragged input
-            raise TypeError(
-                f"levels must be an integer or a sequence of vertex counts, got {levels!r}"
+            raise InputTypeError(
+                f"levels must be an integer or a sequence of vertex counts, got {levels!r}", param="levels"
             ) from error
         if counts.ndim != 1 or counts.size == 0 or not np.issubdtype(counts.dtype, np.integer):
-            raise TypeError(
-                f"levels must be an integer or a sequence of integer vertex counts, got {levels!r}"
+            raise InputTypeError(
+                f"levels must be an integer or a sequence of integer vertex counts, got {levels!r}",
+                param="levels",
             )
         counts = counts.astype(np.int64)
         if np.any(counts < 4) or np.any(counts >= n) or np.any(np.diff(counts) >= 0):
-            raise ValueError(
-                f"levels must be strictly decreasing vertex counts in [4, {n}), got {counts.tolist()}"
+            raise InputError(
+                f"levels must be strictly decreasing vertex counts in [4, {n}), got {counts.tolist()}",
+                param="levels",
             )
     return counts[np.r_[True, np.diff(counts) < 0]]
 
@@ -70,53 +72,37 @@ def from_fast_simplification(
 ) -> MeshHierarchy:
     """Build a :class:`MeshHierarchy` from fast-simplification's quadric-error collapses.
 
-    The same structure as :func:`build_hierarchy` (level meshes at input
-    positions, fine-to-coarse maps, collapse records, :meth:`~MeshHierarchy.refine`),
-    so that multiresolution fairing can run on either. The QEM collapses are
-    neither independent nor checked for topology: a level's removed vertices
-    may be adjacent (refinement then solves for them together) and, unlike
-    :func:`build_hierarchy`, a level may change the topology (non-manifold
-    input is accepted, but fast-simplification cannot be told to keep its
-    non-manifold vertices). Unreferenced vertices are left out of the QEM run
-    and kept at every level.
-
-    Level ``i``'s triangles are those of level ``i - 1`` mapped by
-    ``parents[i]``, in order, without (1) the collapsed ones, (2) repeats of a
-    vertex set already taken and (3) every triangle beyond the first two on an
-    edge: QEM collapses can fold a third triangle onto an edge (on the
-    bunny, 1 to 3 triangles at 3 of 8 levels), and constrained fairing needs
-    edge-manifold levels. So a level is the image of the input triangles under
-    :meth:`~MeshHierarchy.vertex_map` except for the triangles rule (3) dropped
-    at this level or above.
+    The structure of :func:`build_hierarchy` (so that multiresolution fairing runs on either), but the
+    QEM collapses are neither independent (refinement then solves split vertices together) nor checked
+    for topology. Unreferenced vertices are kept at every level. A level's triangles are the level
+    above's mapped by ``parents[i]``, in order, without collapsed ones, repeated vertex sets and every
+    triangle beyond the first two on an edge (edge-manifold levels).
 
     Parameters
     ----------
     mesh : open3d.geometry.TriangleMesh, open3d.t.geometry.TriangleMesh or (vertices, triangles)
-        Any mesh (non-manifold ones too; unreferenced vertices are kept at every level); not modified.
+        Any mesh; not modified.
     levels : int or sequence of int, keyword-only
-        Number of levels below the input, at geometrically decreasing vertex
-        counts down to ``min_vertices``; or the strictly decreasing target
-        vertex counts themselves (e.g. those of a :func:`build_hierarchy`).
+        Number of levels at geometrically decreasing vertex counts down to ``min_vertices``, or the
+        strictly decreasing target vertex counts.
     min_vertices : int, keyword-only
         Coarsest vertex count when ``levels`` is an integer.
     agg : float, keyword-only
         fast-simplification's aggressiveness.
     progress : bool, keyword-only
-        Show a tqdm bar over the levels.
+        Show a bar over the levels.
 
     Returns
     -------
     MeshHierarchy
-        ``method == "fast_simplification"``. A level whose target cannot be
-        reached (fast-simplification stopped early) is left out.
+        ``method == "fast_simplification"``; a level whose target is not reached is left out.
 
     Examples
     --------
     >>> import open3d as o3d
-    >>> sphere = o3d.geometry.TriangleMesh.create_sphere(resolution=20)
-    >>> h = from_fast_simplification(sphere, levels=[400, 200, 100])
+    >>> h = from_fast_simplification(o3d.geometry.TriangleMesh.create_sphere(resolution=20), levels=[400, 200])
     >>> [h.vertex_count(i) for i in range(len(h))]
-    [762, 400, 200, 100]
+    [762, 400, 200]
     """
     try:  # an extra: only this function uses it
         import fast_simplification
@@ -134,7 +120,7 @@ def from_fast_simplification(
     n0, m0 = len(V), len(F)
     if n0 < 5:
         # levels are vertex counts in [4, n): a mesh of four or fewer vertices has no coarser level
-        raise ValueError(f"mesh must have at least 5 vertices to be simplified, got {n0}")
+        raise InputError(f"mesh must have at least 5 vertices to be simplified, got {n0}", param="mesh")
     counts = _level_counts(levels, n0, min_vertices)
 
     target_triangles = max(int(m0 * counts[-1] / n0 * 0.95), 4)
@@ -166,7 +152,7 @@ def from_fast_simplification(
                 mappings.append((prefix, full))
     collapses = referenced[collapses] if len(collapses) else collapses.astype(np.int64)
 
-    n_components, component = connected_components(F, n0)
+    n_components, component = Connectivity(F, n0).components
     empty = np.zeros(0, dtype=np.int64)
     # per level: triangles, representatives, parents, removed, targets, ring offsets, rings
     built: list[tuple[np.ndarray, ...]] = [
@@ -202,7 +188,7 @@ def from_fast_simplification(
         mapped = _drop_nonmanifold(
             _drop_duplicate_triangles(mapped[~collapsed_triangles(mapped)], n_new), n_new
         )
-        adjacency = adjacency_matrix(previous, n_prev)
+        adjacency = Connectivity(previous, n_prev).adjacency
         starts, sizes = adjacency.indptr[gone], np.diff(adjacency.indptr)[gone]
         ring = adjacency.indices[concatenated_ranges(starts, sizes)].astype(np.int64)
         ring_offsets = np.r_[0, np.cumsum(sizes)].astype(np.int64)
@@ -238,14 +224,11 @@ def _drop_duplicate_triangles(triangles: np.ndarray, n: int) -> np.ndarray:
 
 
 def _drop_nonmanifold(triangles: np.ndarray, n: int) -> np.ndarray:
-    """Drop every triangle beyond the first two on an edge, so that the level stays edge-manifold.
-
-    QEM collapses do not check the link condition and can fold three
-    triangles onto one edge; constrained fairing needs an edge-manifold mesh.
-    """
-    _edges, counts, inverse = unique_edges(triangles, n)
-    if not np.any(counts > 2):
+    """Drop every triangle beyond the first two on an edge (QEM collapses can fold three onto one)."""
+    conn = Connectivity(triangles, n)
+    if not np.any(conn.edge_triangles > 2):
         return triangles
+    inverse = conn.halfedge_edge
     m = len(triangles)
     tri = np.tile(np.arange(m), 3)
     order = np.lexsort((tri, inverse))

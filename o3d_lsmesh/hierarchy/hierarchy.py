@@ -1,9 +1,9 @@
 """The mesh hierarchy of Liu et al. 2001 (section 4): levels, fine-to-coarse maps, vertex splits.
 
-A :class:`MeshHierarchy` holds plain numpy arrays only (it pickles, and its
-arrays are read-only, so concurrent reads are safe). Level ``0`` is the input;
-level ``i`` is level ``i - 1`` after one batch of half-edge collapses, so every
-vertex of level ``i`` is a vertex of the input and sits at its input position.
+Level ``0`` is the input; level ``i`` is level ``i - 1`` after one batch of half-edge collapses (section
+4.1, the compiled loop of ``collapse.pyx``), so every vertex of a level sits at its input position;
+:meth:`MeshHierarchy.refine` splits vertices back in by Kobbelt's step (section 4.2).
+Docs: ``docs/algorithms/mesh_hierarchy.rst``.
 """
 
 from __future__ import annotations
@@ -16,10 +16,11 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._o3d import MeshData, new_mesh, read_mesh, template, warn_dropped_attributes
-from .._progress import check_progress, progress_bar
 from .._solvers import solve_spd
-from .._validate import as_count, as_positions, as_positive_float, mesh_arrays
-from ..topology import VertexRings, vertex_rings
+from ..core.connectivity import VertexRings, vertex_rings
+from ..core.operators import single_slots, umbrella_weights
+from ..core.progress import check_progress, progress_bar
+from ..core.validate import as_count, as_positions, as_positive_float, mesh_arrays
 
 if TYPE_CHECKING:
     from .._types import AnyMesh
@@ -28,16 +29,12 @@ __all__ = ["MeshHierarchy", "build_hierarchy", "build_hierarchy_arrays"]
 
 # Tuned constants of the volume-cost collapses (section 4.1), passed to the compiled loop; the levels'
 # topology, volume, distances and time they give: benchmarks/results/hierarchy.md.
-ALPHA = 1.0  # cost weight of the shortest incident edge (the paper's): hierarchy.md, per-level cross-check
-BETA = 0.01  # cost weight of the longest incident edge: hierarchy.md, per-level cross-check
-MAX_NORMAL_ANGLE = 60.0  # degrees a surviving triangle's normal may turn: hierarchy.md, per-level cross-check
-MIN_QUALITY = (
-    1e-3  # least 2 area / sum of squared edges of a moved triangle: hierarchy.md, per-level cross-check
-)
-MAX_TRIES = 3  # targets tried per vertex, least cone volume first: hierarchy.md, whole-hierarchy speed table
-FILL_TIE = (
-    1e-9  # split vertices' weak tie to their placeholders: a regularization far below round-off, not tuned
-)
+ALPHA = 1.0  # weight of the shortest incident edge in the cost: hierarchy.md, per-level cross-check
+BETA = 0.01  # weight of the longest incident edge in the cost: hierarchy.md, per-level cross-check
+MAX_NORMAL_ANGLE = 60.0  # degrees a surviving triangle may turn: hierarchy.md, per-level cross-check
+MIN_QUALITY = 1e-3  # least 2 area / sum of squared edges after a move: hierarchy.md, per-level cross-check
+MAX_TRIES = 3  # targets tried per vertex, least volume first: hierarchy.md, whole-hierarchy speed table
+FILL_TIE = 1e-9  # split vertices' tie to their placeholders in the harmonic fill: a regularization, not tuned
 
 
 def _frozen(array: np.ndarray) -> np.ndarray:
@@ -52,7 +49,8 @@ class MeshHierarchy:
     """Levels ``M_0, M_1, ..., M_L`` of decreasing size with the collapses between them.
 
     Build it with :func:`build_hierarchy` (volume-cost collapses) or
-    :func:`~o3d_lsmesh.hierarchy.from_fast_simplification` (QEM collapses).
+    :func:`~o3d_lsmesh.hierarchy.from_fast_simplification` (QEM collapses). Plain read-only numpy arrays:
+    it pickles, and concurrent reads are safe.
 
     Attributes
     ----------
@@ -61,17 +59,15 @@ class MeshHierarchy:
     triangles : tuple of (m_i, 3) int64
         Triangles of each level, in that level's vertex indices.
     representatives : tuple of (n_i,) int64
-        Input index of every vertex of each level (level 0: ``arange(n_0)``).
+        Input index of every vertex of each level.
     parents : tuple of (n_{i-1},) int64
         ``parents[i]`` maps level ``i - 1`` vertices to level ``i`` (``parents[0]`` is empty).
     removed, targets : tuple of (r_i,) int64
-        Level-``i - 1`` indices of the vertices removed at level ``i`` and of the
-        vertex each was merged into (empty for level 0).
+        Level-``i - 1`` indices of the vertices removed at level ``i`` and of their targets.
     ring_offsets, rings : tuple of int64 arrays
         CSR 1-ring (level ``i - 1`` indices) of each removed vertex.
     independent : bool
-        Whether every level's removed vertices are pairwise non-adjacent (true for
-        :func:`build_hierarchy`); :meth:`refine` then splits them in closed form.
+        Whether every level's removed vertices are pairwise non-adjacent (:func:`build_hierarchy`).
     method : str
         ``"volume"`` or ``"fast_simplification"``.
     mesh_kind : str
@@ -95,15 +91,7 @@ class MeshHierarchy:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "vertices", _frozen(self.vertices))
-        for name in (
-            "triangles",
-            "representatives",
-            "parents",
-            "removed",
-            "targets",
-            "ring_offsets",
-            "rings",
-        ):
+        for name in [f.name for f in fields(self)][1:8]:  # the tuples of arrays
             object.__setattr__(self, name, tuple(_frozen(a) for a in getattr(self, name)))
 
     def __setstate__(self, state: dict) -> None:
@@ -111,7 +99,6 @@ class MeshHierarchy:
         self.__dict__.update(state)
         self.__post_init__()
 
-    # ------------------------------------------------------------------ queries
     def __len__(self) -> int:
         return len(self.triangles)
 
@@ -145,15 +132,7 @@ class MeshHierarchy:
         return self.vertices[self.representatives[i]], self.triangles[i].copy()
 
     def level(self, i: int) -> AnyMesh:
-        """Level ``i`` as a mesh of the input's kind; positions are the input positions of its vertices.
-
-        Examples
-        --------
-        >>> import open3d as o3d
-        >>> h = build_hierarchy(o3d.geometry.TriangleMesh.create_sphere(resolution=10), min_vertices=20)
-        >>> len(h.level(1).vertices) == h.vertex_count(1)
-        True
-        """
+        """Level ``i`` as a mesh of the input's kind; positions are the input positions of its vertices."""
         vertices, triangles = self.level_arrays(i)
         return new_mesh(self._template(), vertices, triangles)
 
@@ -166,11 +145,8 @@ class MeshHierarchy:
         return mapping
 
     def collapses(self, i: int) -> dict[str, np.ndarray]:
-        """Collapse records of level ``i >= 1`` in level ``i - 1`` indices.
-
-        Returns a dict with ``removed (r,)``, ``targets (r,)``, ``ring_offsets (r + 1,)``
-        and ``ring`` (the 1-ring of ``removed[j]`` is ``ring[ring_offsets[j]:ring_offsets[j + 1]]``).
-        """
+        """Collapse records of level ``i >= 1`` in level ``i - 1`` indices: ``removed (r,)``, ``targets (r,)``,
+        ``ring_offsets (r + 1,)``, ``ring`` (``removed[j]``'s 1-ring is ``ring[ring_offsets[j]:ring_offsets[j + 1]]``)."""
         i = self._check_level(i, minimum=1)
         return {
             "removed": self.removed[i],
@@ -179,25 +155,14 @@ class MeshHierarchy:
             "ring": self.rings[i],
         }
 
-    # --------------------------------------------------------------- refinement
     def refine(self, i: int, positions: Any) -> np.ndarray:
-        """Split the vertices removed at level ``i`` back in: positions of level ``i - 1``.
+        """Split the vertices removed at level ``i`` back in: positions ``(n_{i-1}, 3) float64`` of level ``i - 1``.
 
-        Vertices kept from level ``i`` keep their positions exactly. Each split
-        vertex is first put at the average of its 1-ring at level ``i - 1``
-        (for an independent set the 1-ring holds kept vertices only; otherwise
-        the split vertices solve these averages together, a discrete harmonic
-        fill), then moved once by Kobbelt's step (section 4.2)::
-
-            x <- x - U^2(x) / nu,   nu = 1 + (1/n_i) sum_j 1/n_ij,
-
-        with the uniform umbrella ``U(x) = mean of neighbours - x`` of level
-        ``i - 1``. ``U^2`` is evaluated with all level ``i - 1`` positions after
-        the averaging and every split vertex moves at once (a Jacobi step, so
-        the result does not depend on an order). Split vertices on the
-        boundary use the boundary curve instead: their two boundary
-        neighbours, for both the average and ``U`` (so ``nu = 3/2``), which keeps
-        an open boundary from being pulled inwards.
+        Kept vertices keep their positions exactly. Each split vertex goes to the average of its 1-ring
+        at level ``i - 1`` (a discrete harmonic fill when split vertices are adjacent), then moves once
+        by Kobbelt's step ``x <- x - U^2(x) / nu`` (section 4.2), every split vertex at once (a Jacobi
+        step). Split boundary vertices read their two boundary neighbours only. Details:
+        ``docs/algorithms/mesh_hierarchy.rst``.
 
         Parameters
         ----------
@@ -205,24 +170,19 @@ class MeshHierarchy:
             Level to refine from, ``1 <= i < len(self)``.
         positions : (n_i, 3) array-like of float
             Positions of level ``i``'s vertices.
-
-        Returns
-        -------
-        (n_{i-1}, 3) float64 ndarray
         """
         i = self._check_level(i, minimum=1)
         positions = as_positions(positions, len(self.representatives[i]), name="positions")
         return self.refine_with_rings(i, positions, vertex_rings(self.triangles[i - 1], len(self.parents[i])))
 
     def refine_with_rings(self, i: int, positions: np.ndarray, rings: VertexRings) -> np.ndarray:
-        """:meth:`refine` of checked ``(n_i, 3) float64`` positions (not validated again), with the
-        :class:`~o3d_lsmesh.topology.VertexRings` of level ``i - 1``, which a caller fairing that level
-        reuses (multiresolution fairing: one ring pass per level)."""
+        """:meth:`refine` of checked positions with the :class:`~o3d_lsmesh.core.connectivity.VertexRings` of
+        level ``i - 1`` (which multiresolution fairing reuses)."""
         out = positions[self.parents[i]]
         removed = self.removed[i]
         if len(removed) == 0:
             return out
-        weights, scale, on_boundary = _umbrella_weights(rings)
+        weights, scale, on_boundary = umbrella_weights(rings)
         rows = weights[removed]  # the split vertices' rows
         if self.independent:  # their neighbours are all kept
             out[removed] = rows @ out
@@ -242,9 +202,7 @@ class MeshHierarchy:
         out[removed] -= second / nu[:, None]
         return out
 
-    # ---------------------------------------------------------------- internals
     def _template(self) -> MeshData:
-        """A stand-in for the input mesh so that :func:`new_mesh` builds the input's kind."""
         return template(self.mesh_kind, self.tensor_format)
 
 
@@ -252,40 +210,7 @@ def boundary_degree(rings: VertexRings) -> np.ndarray:
     """``(n,) int64``: the edges of one triangle at every vertex (0 inside, 2 on a simple boundary)."""
     if not rings.boundary.any():  # no edge of one triangle (nor of more)
         return np.zeros(rings.n, dtype=np.int64)
-    return np.add.reduceat(_single_slots(rings), rings.indptr[:-1], dtype=np.int64)
-
-
-def _single_slots(rings: VertexRings) -> np.ndarray:
-    # an edge of one triangle holds its one entry twice (so does the diagonal's marker)
-    single = rings.pairs[0] == rings.pairs[1]
-    single[rings.diagonal] = False
-    return single
-
-
-def _umbrella_weights(rings: VertexRings) -> tuple[sp.csr_matrix, np.ndarray, np.ndarray | None]:
-    """Row-stochastic ``W`` of the umbrella operator on the rings' pattern (zero diagonal): the 1-ring
-    inside, the boundary neighbours (edges of one triangle) on a boundary; with each row's weight
-    ``(n,)`` and the boundary vertices ``(n,) bool`` (None on a mesh without edges of one triangle).
-    """
-    n, indptr = rings.n, rings.indptr
-    degree = rings.valence.astype(np.float64)
-    counts = np.diff(indptr)
-    on_boundary = None
-    if rings.boundary.any():
-        single = _single_slots(rings)
-        boundary_count = np.add.reduceat(single, indptr[:-1], dtype=np.int64)
-        if boundary_count.any():
-            on_boundary = boundary_count > 0
-            degree[on_boundary] = boundary_count[on_boundary]
-    scale = np.divide(1.0, degree, out=np.zeros(n), where=degree > 0)
-    data = np.repeat(scale, counts)
-    data[rings.diagonal] = 0.0
-    if on_boundary is not None:  # a boundary vertex's row reads its curve neighbours only
-        np.copyto(data, 0.0, where=np.repeat(on_boundary, counts) & ~single)
-    weights = sp.csr_matrix((n, n), dtype=np.float64)
-    weights.data, weights.indices, weights.indptr = data, rings.indices, indptr
-    weights.has_canonical_format = True  # the rings' pattern: sorted columns, no duplicates
-    return weights, scale, on_boundary
+    return np.add.reduceat(single_slots(rings), rings.indptr[:-1], dtype=np.int64)
 
 
 def _harmonic_fill(
@@ -348,11 +273,7 @@ def build_hierarchy_arrays(
     mesh_kind: str = "arrays",
     tensor_format: tuple = (),
 ) -> MeshHierarchy:
-    """Array core of :func:`build_hierarchy`: ``(n, 3) float64`` vertices, ``(m, 3) int64`` triangles.
-
-    The arrays are checked and copied (:func:`~o3d_lsmesh._validate.mesh_arrays`): changing them
-    afterwards does not change the hierarchy.
-    """
+    """Array core of :func:`build_hierarchy` on ``(n, 3)`` vertices and ``(m, 3)`` triangles (checked and copied)."""
     _warn_workers(workers)
     alpha = as_positive_float(alpha, name="alpha", allow_zero=True)
     beta = as_positive_float(beta, name="beta", allow_zero=True)
@@ -436,22 +357,10 @@ def build_hierarchy(
 ) -> MeshHierarchy:
     """Build the multiresolution hierarchy of Liu et al. 2001, section 4.1, by volume-cost half-edge collapses.
 
-    Each level removes an independent set of vertices, taken in increasing
-    ``cost(x) = alpha * min_edge(x) + beta * max_edge(x)``; each is merged into
-    the 1-ring neighbour ``x_k`` of least cone volume
-    ``|sum_j (x_j - x_k) x (x_{j+1} - x_k) . (x - x_k)|``. Only collapses that
-    pass the link condition, keep boundary vertices on the boundary, and
-    neither flip nor degenerate a triangle are made, so every level keeps the
-    input's Euler characteristic, components and boundary loops. One compiled
-    sequential loop per level (``o3d_lsmesh/hierarchy/collapse.pyx`` states
-    its rules).
-
-    Any mesh is accepted, as scanners produce them: a vertex whose triangles
-    form several fans, or that lies on an edge of more than two triangles, is
-    locked (never removed, never a collapse target), and so is every
-    unreferenced vertex (kept at every level, mapped to itself); everything
-    else simplifies as on a manifold mesh, so every level has the input's set
-    of non-manifold vertices and edges.
+    Each level removes an independent set of vertices in increasing ``alpha * min_edge + beta * max_edge``,
+    each merged into its neighbour of least cone volume, by collapses that keep the Euler characteristic,
+    components, boundary loops and triangle orientation. Any mesh is accepted: non-manifold and
+    unreferenced vertices are locked (kept at every level). Rules: ``docs/algorithms/mesh_hierarchy.rst``.
 
     Parameters
     ----------
@@ -464,38 +373,27 @@ def build_hierarchy(
     max_levels : int, optional, keyword-only
         Stop after this many levels below the input.
     progress : bool, keyword-only
-        Show a tqdm bar.
+        Show a progress bar.
     workers : int, optional, keyword-only
-        Deprecated and ignored (a ``FutureWarning``): the levels are one
-        sequential compiled loop, which releases the GIL, so several
-        hierarchies can be built on threads at once.
+        Deprecated and ignored (a ``FutureWarning``).
 
     Returns
     -------
     MeshHierarchy
-        Level 0 is the input; it stops when no valid collapse remains. Levels
-        hold positions and triangles only: the input's vertex colors, UVs,
-        material ids and other attributes cannot follow the new connectivity
-        and are dropped, with one ``O3DLSMeshWarning`` naming them.
+        Level 0 is the input; it stops when no valid collapse remains. Levels hold positions and
+        triangles only (other attributes are dropped with one ``O3DLSMeshWarning``).
 
     Raises
     ------
-    TypeError
-        ``mesh`` is not a mesh, or an option has the wrong type.
-    ValueError
-        Invalid mesh arrays (non-finite, out-of-range or repeated indices), negative options.
+    InputError
+        Invalid mesh arrays, negative options, or an option of the wrong type (``InputTypeError``).
 
     Examples
     --------
     >>> import open3d as o3d
-    >>> sphere = o3d.geometry.TriangleMesh.create_sphere(resolution=20)
-    >>> h = build_hierarchy(sphere, min_vertices=50)
-    >>> h.vertex_count(0), h.vertex_count(len(h) - 1) >= 50
-    (762, True)
-    >>> coarse = h.level(len(h) - 1)
-    >>> fine = h.refine(1, h.level_arrays(1)[0])
-    >>> fine.shape
-    (762, 3)
+    >>> h = build_hierarchy(o3d.geometry.TriangleMesh.create_sphere(resolution=20), min_vertices=50)
+    >>> h.vertex_count(0), h.refine(1, h.level_arrays(1)[0]).shape
+    (762, (762, 3))
     """
     _warn_workers(workers)
     data = read_mesh(mesh)  # any mesh: non-manifold, unreferenced vertices
