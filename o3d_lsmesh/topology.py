@@ -1,5 +1,6 @@
 """Moved to :mod:`o3d_lsmesh.core.connectivity` and :mod:`o3d_lsmesh.core.boundary` (silent re-export)."""
 
+from .core.arrays import gather, group_keys, run_heads
 from .core.boundary import (
     BoundaryCurves,
     boundary_chains,
@@ -23,11 +24,8 @@ from .core.connectivity import (
     directed_edges,
     edge_runs,
     edge_structure,
-    gather,
-    group_keys,
     halfedges,
     ring_pattern,
-    run_heads,
     unique_edges,
     unique_edges_and_runs,
     vertex_rings,

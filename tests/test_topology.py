@@ -357,7 +357,7 @@ def test_empty_and_closed_meshes_have_no_curves(sphere):
 @pytest.mark.parametrize("dtype", [np.int32, np.int64, np.uint32])
 @pytest.mark.parametrize("length", [0, 5, (1 << 16) - 1, (1 << 16) + 1, 3 * (1 << 16) + 17])
 def test_gather_equals_fancy_indexing(dtype, length):
-    from o3d_lsmesh.core.connectivity import gather
+    from o3d_lsmesh.core.arrays import gather
 
     rng = np.random.default_rng(length)
     values = rng.random(1000)

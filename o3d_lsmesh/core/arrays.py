@@ -1,11 +1,20 @@
-"""Array helpers of the core: concatenated ranges, quantization, face and vertex normals."""
+"""Array helpers of the core: ranges, runs and sort-and-mask grouping, gathers, quantization, normals."""
 
 from __future__ import annotations
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-__all__ = ["area_weighted_normals", "concatenated_ranges", "dequantize", "face_normals", "quantize"]
+__all__ = [
+    "area_weighted_normals",
+    "concatenated_ranges",
+    "dequantize",
+    "face_normals",
+    "gather",
+    "group_keys",
+    "quantize",
+    "run_heads",
+]
 
 
 def concatenated_ranges(starts: ArrayLike, counts: ArrayLike) -> np.ndarray:
@@ -67,3 +76,73 @@ def area_weighted_normals(positions: np.ndarray, triangles: np.ndarray) -> np.nd
     for k in range(3):
         normal[:, k] = sum(np.bincount(triangles[:, i], face[:, k], minlength=n) for i in range(3))
     return normal
+
+
+def group_keys(keys: np.ndarray, bound: int):
+    """Sort-and-mask grouping of integer ``keys`` in ``[0, bound)``: (order, starts, counts, inverse).
+
+    Key and position packed into one ``uint64`` when they fit (a plain sort, not an argsort); ties
+    keep their input order.
+    """
+    count = len(keys)
+    index_bits = max(1, int(count - 1).bit_length())
+    if max(1, int(bound - 1).bit_length()) + index_bits <= 64:
+        packed = keys.astype(np.uint64)
+        packed <<= np.uint64(index_bits)
+        packed |= np.arange(count, dtype=np.uint64)
+        packed.sort()
+        order = np.bitwise_and(packed, np.uint64((1 << index_bits) - 1)).view(np.int64)
+        packed >>= np.uint64(index_bits)
+        sorted_keys = packed.view(np.int64)
+    else:
+        order = np.argsort(keys, kind="stable")
+        sorted_keys = keys[order]
+    first, starts, counts = _runs(sorted_keys)
+    rank = np.cumsum(first, dtype=np.int64)
+    rank -= 1
+    inverse = np.empty(count, dtype=np.int64)
+    inverse[order] = rank
+    return order, starts, counts, inverse
+
+
+def _runs(sorted_keys: np.ndarray):
+    """Runs of equal values in sorted ``keys``: (first-of-run mask, run starts, run lengths)."""
+    first = run_heads(sorted_keys)
+    starts = np.flatnonzero(first)
+    return first, starts, _run_lengths(starts, len(sorted_keys))
+
+
+def run_heads(values: np.ndarray) -> np.ndarray:
+    """``(k,) bool``: True where ``values`` differs from the value before it (and at the first)."""
+    first = np.empty(len(values), dtype=bool)
+    first[:1] = True
+    np.not_equal(values[1:], values[:-1], out=first[1:])
+    return first
+
+
+def _run_lengths(starts: np.ndarray, count: int) -> np.ndarray:
+    """Lengths of the runs starting at ``starts`` in ``count`` items, in ``starts``' dtype."""
+    # written in place (np.diff with append copies ``starts`` first)
+    lengths = np.empty(len(starts), dtype=starts.dtype)
+    np.subtract(starts[1:], starts[:-1], out=lengths[:-1])
+    lengths[-1:] = count - starts[-1:]
+    return lengths
+
+
+#: Indices per call of :func:`gather` (numpy converts an index to intp first: a temporary this size).
+_GATHER_BLOCK = 1 << 16
+
+
+def gather(values: np.ndarray, index: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """``values[index]`` for a 1-D in-range ``index`` of any integer dtype (into ``out`` if given).
+
+    ``np.take(mode="wrap")`` in blocks when the index is not intp, so that numpy's intp copy of
+    the index stays small.
+    """
+    if out is None:
+        out = np.empty(np.shape(index), dtype=values.dtype)
+    if index.dtype == np.intp or len(index) <= _GATHER_BLOCK:
+        return np.take(values, index, out=out, mode="wrap")
+    for i in range(0, len(index), _GATHER_BLOCK):
+        np.take(values, index[i : i + _GATHER_BLOCK], out=out[i : i + _GATHER_BLOCK], mode="wrap")
+    return out

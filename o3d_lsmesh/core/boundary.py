@@ -1,8 +1,8 @@
 """Boundary of a triangle mesh: boundary half-edges, loops, chains between junctions, corner fans.
 
-Functions of ``triangles (m, 3)`` and ``n``, taking the half-edge grouping of a
-:class:`~o3d_lsmesh.core.connectivity.Connectivity` (its ``edge_structure.runs``) when the
-caller has one, so that the edge sort runs once per operation.
+Functions of ``triangles (m, 3)`` and ``n`` that take the half-edge grouping of a
+:class:`~o3d_lsmesh.core.connectivity.Connectivity` when the caller has one (one edge sort per
+operation). Pinches, fins and the walk: ``docs/algorithms/connectivity.rst``.
 """
 
 from __future__ import annotations
@@ -13,7 +13,8 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse import csgraph
 
-from .connectivity import EdgeStructure, _runs, edge_runs, halfedges, unique_edges
+from .arrays import _runs
+from .connectivity import EdgeStructure, edge_runs, halfedges, unique_edges
 
 __all__ = [
     "BoundaryCurves",
@@ -41,12 +42,7 @@ def nonmanifold_edges(triangles: np.ndarray, n: int | None = None) -> np.ndarray
 
 
 def nonmanifold_vertices(triangles: np.ndarray, n: int) -> np.ndarray:
-    """Vertices whose triangles do not form a single fan (bow-ties and the like), sorted.
-
-    The corners ``(t, v)`` of the triangles around a vertex are linked when two
-    triangles share a manifold edge through ``v``; a vertex is non-manifold when
-    its corners fall into more than one linked group.
-    """
+    """Vertices whose triangles do not form a single fan (linked through manifold edges), sorted."""
     tail = triangles.T.reshape(-1)
     fan_count, fan = corner_fans(triangles, n, edge_runs(triangles, n))
     # links only join corners of one vertex, so every fan belongs to exactly one vertex
@@ -56,14 +52,10 @@ def nonmanifold_vertices(triangles: np.ndarray, n: int) -> np.ndarray:
 
 
 def corner_fans(triangles: np.ndarray, n: int, runs, *, only: np.ndarray | None = None):
-    """Fans of triangle corners: ``(count, label)``, corners linked across manifold edges.
+    """Fans of triangle corners: ``(count, label (3m,))``, corners linked across edges of two triangles.
 
-    Corner ``p*m + t`` holds ``triangles[t, p]``. Two corners of one vertex are
-    linked when their triangles share an edge through it that has exactly two
-    triangles; a fan is a linked group (a path or a cycle of triangles around
-    the vertex). With a boolean vertex mask ``only``, ``label`` has ``-1`` for
-    the corners of other vertices and the graph is built on the selected
-    corners alone (links never leave a vertex, so the fans are the same).
+    Corner ``p*m + t`` holds ``triangles[t, p]``; ``runs`` the edge structure's half-edge grouping.
+    With a vertex mask ``only`` the other vertices' corners are labelled ``-1``.
     """
     m = len(triangles)
     corners = 3 * m
@@ -131,21 +123,14 @@ class BoundaryCurves:
     Attributes
     ----------
     loops : list of (l,) int64
-        Closed simple loops through no junction: ``loop[-1]`` joins ``loop[0]``.
+        Closed loops (``loop[-1]`` joins ``loop[0]``), starting at their smallest vertex.
     chains : list of (k + 1,) int64
-        Open chains of ``k >= 1`` boundary edges whose two ends (``chain[0]``
-        and ``chain[-1]``, possibly the same vertex) are junctions and whose
-        inner vertices are not.
+        Open chains of ``k >= 1`` boundary edges from junction to junction.
     junctions : (j,) int64
-        Sorted boundary vertices where the boundary is not a simple curve: on
-        other than two boundary edges (a pinch, where two holes or two parts of
-        one hole touch, or the end of a fin), or on an edge of more than two
-        triangles.
+        Sorted boundary vertices where the boundary is not a simple curve.
 
-    Every boundary edge lies on exactly one loop or chain; each curve follows
-    the orientation of the majority of its edges' triangles and starts at its
-    smallest vertex (loops) or at a junction (chains); curves are sorted by
-    their first vertex.
+    Every boundary edge lies on one curve, oriented as most of its edges' triangles; curves are
+    sorted by their first vertex.
     """
 
     loops: list
@@ -157,47 +142,12 @@ class BoundaryCurves:
 
 
 def boundary_loops(triangles: np.ndarray, n: int, *, _runs=None) -> list[np.ndarray]:
-    """Every closed boundary loop as an ordered ``(l,) int64`` array of vertex indices, on any mesh.
+    """Every closed boundary loop as an ordered ``(l,) int64`` array of vertices, on any mesh.
 
-    A loop is a closed cycle of boundary half-edges (edges of exactly one
-    triangle). At a vertex with one incoming and one outgoing boundary edge
-    the loop goes straight on. At a pinch (several holes, or two parts of one
-    hole, touching at a vertex) each incoming boundary edge continues with the
-    outgoing one *of the same fan*: the one reached by walking around the
-    vertex through the triangles that share its manifold edges, so a loop
-    runs along the rim of one piece of surface and may visit a pinch vertex
-    more than once. These are the boundary components of the surface with
-    every non-manifold vertex split into its fans, so the Euler
-    characteristic holds: ``bunny_scan.ply`` has 131 loops on 54 disk-like
-    pieces (``2 * 54 - (chi + 51 split vertices) = 131``), while its 2,898
-    boundary edges form 109 *connected* pieces of the boundary graph, loops
-    touching at 22 of the 51 pinches counting once. A fan whose triangles
-    disagree in orientation still pairs its two boundary edges; the loop then
-    follows the majority of its edges' orientation. A boundary edge whose fan
-    ends at an edge of more than two triangles (a fin) belongs to no closed
-    loop; see :func:`boundary_curves` and :func:`boundary_chains`, which cover
-    every boundary edge.
+    At a pinch a loop continues along the rim of the same fan; a boundary edge whose fan ends at a
+    fin is on no closed loop (:func:`boundary_curves` covers those).
 
-    A loop follows the orientation of its triangles and starts at its
-    smallest vertex index (its first visit there); loops are sorted by that
-    start. Vectorized: one sort pairs the boundary edges, connected
-    components split the pairs into loops and pointer jumping orders them.
-
-    Parameters
-    ----------
-    triangles : (m, 3) int64
-    n : int
-        Vertex count.
-
-    Returns
-    -------
-    list of (l,) int64
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> bowtie = np.array([[0, 1, 2], [0, 3, 4]])  # two triangles touching at vertex 0
-    >>> [loop.tolist() for loop in boundary_loops(bowtie, 5)]
+    >>> [loop.tolist() for loop in boundary_loops(np.array([[0, 1, 2], [0, 3, 4]]), 5)]  # a bow-tie
     [[0, 1, 2], [0, 3, 4]]
     """
     closed, _ = _boundary_walk(np.asarray(triangles, dtype=np.int64), n, split_at_junctions=False, runs=_runs)
@@ -205,30 +155,9 @@ def boundary_loops(triangles: np.ndarray, n: int, *, _runs=None) -> list[np.ndar
 
 
 def boundary_chains(triangles: np.ndarray, n: int) -> BoundaryCurves:
-    """Cut the boundary into simple closed loops and open chains between junction vertices.
+    """The boundary cut into closed loops through no junction and open chains between junctions.
 
-    The boundary graph (edges of exactly one triangle) is split at its
-    junctions (vertices on other than two boundary edges, or on an edge of
-    more than two triangles; see :class:`BoundaryCurves`). What remains are
-    simple curves: closed loops that meet no junction and open chains whose
-    ends are junctions. This is the input of the boundary-curve fairing
-    (:mod:`o3d_lsmesh.fairing.boundary_curve`), which needs a simple curve
-    around every moving vertex.
-
-    Parameters
-    ----------
-    triangles : (m, 3) int64
-    n : int
-
-    Returns
-    -------
-    BoundaryCurves
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> bowtie = np.array([[0, 1, 2], [0, 3, 4]])
-    >>> curves = boundary_chains(bowtie, 5)
+    >>> curves = boundary_chains(np.array([[0, 1, 2], [0, 3, 4]]), 5)
     >>> [c.tolist() for c in curves.chains], curves.loops, curves.junctions.tolist()
     ([[0, 1, 2, 0], [0, 3, 4, 0]], [], [0])
     """
@@ -238,20 +167,11 @@ def boundary_chains(triangles: np.ndarray, n: int) -> BoundaryCurves:
 
 
 def boundary_curves(triangles: np.ndarray, n: int, *, edges: EdgeStructure | None = None) -> BoundaryCurves:
-    """The boundary as the curves that the boundary-curve fairing walks, on any mesh.
+    """The loops of :func:`boundary_loops`, the open paths ending at fins, and the fins' boundary vertices.
 
-    ``loops`` are the closed loops of :func:`boundary_loops` (which pass
-    *through* pinch vertices, pairing boundary edges by fan), ``chains`` the
-    open boundary paths that end where a fan stops at an edge of more than two
-    triangles (fins), and ``junctions`` the boundary vertices on such edges.
-    Every boundary edge lies on exactly one loop or chain. ``edges``: the
-    mesh's :class:`EdgeStructure` when the caller has it (saves the edge sort).
+    ``edges``: the mesh's :class:`~.connectivity.EdgeStructure` when the caller has it.
 
-    Examples
-    --------
-    >>> import numpy as np
-    >>> fin = np.array([[0, 1, 2], [1, 0, 3], [0, 1, 4]])  # three triangles on edge (0, 1)
-    >>> curves = boundary_curves(fin, 5)
+    >>> curves = boundary_curves(np.array([[0, 1, 2], [1, 0, 3], [0, 1, 4]]), 5)  # a fin on (0, 1)
     >>> curves.loops, [c.tolist() for c in curves.chains], curves.junctions.tolist()
     ([], [[0, 3, 1], [1, 2, 0], [1, 4, 0]], [0, 1])
     """
@@ -267,8 +187,7 @@ def boundary_curves(triangles: np.ndarray, n: int, *, edges: EdgeStructure | Non
 
 
 def boundary_rows(triangles: np.ndarray, n: int, runs):
-    """Rows of :func:`halfedges` on edges of exactly one triangle (no self-edges), the half-edges'
-    tails and heads, and the ``(n,) bool`` mask of the vertices on an edge of more than two triangles."""
+    """Boundary half-edge rows (no self-edges), half-edge tails and heads, ``(n,) bool`` vertices on fins."""
     order, starts, counts = runs
     rows = order[starts[counts == 1]]
     tail = triangles.T.reshape(-1)
@@ -291,16 +210,10 @@ def _junctions(triangles: np.ndarray, n: int, runs=None):
 
 
 def _boundary_walk(triangles: np.ndarray, n: int, *, split_at_junctions: bool, runs=None):
-    """Closed and open boundary curves: ``(closed, open)``, each a sorted list of vertex arrays.
+    """Closed and open boundary curves, each a sorted list (see ``docs/algorithms/connectivity.rst``).
 
-    Boundary edge ``i`` (half-edge row ``rows[i]``) has two ends: ``2i`` at its
-    tail, ``2i + 1`` at its head. Ends are paired at every vertex: the two of a
-    plain boundary vertex, and at a junction the two of each fan (or none when
-    ``split_at_junctions``). A walk enters an edge at one end and leaves at
-    the other: state ``2i`` runs edge ``i`` forward, ``2i + 1`` backward, and
-    the next state is the partner of the end it leaves, ``partner[s ^ 1]``.
-    Every curve is two chains of states (one per direction); the one with more
-    forward states is kept.
+    State ``2i`` runs boundary edge ``i`` forward, ``2i + 1`` backward; the next state is the
+    partner of the end it leaves, ``partner[s ^ 1]``.
     """
     empty: tuple[list, list] = ([], [])
     if len(triangles) == 0:

@@ -1,9 +1,8 @@
 """One connectivity object per mesh: edges, half-edges, rings, face adjacency, components, k-rings.
 
-:class:`Connectivity` is built once per operation from ``triangles (m, 3)`` and the vertex count
-``n`` and passed down; each part is computed on first use and kept. The builders behind it work on
-integer arrays and group by counting sorts (CSR transposes) instead of ``np.unique``.
-Boundary loops and chains live in :mod:`o3d_lsmesh.core.boundary`; docs page: ``docs/algorithms/architecture.rst``.
+:class:`Connectivity` is built once per operation from ``triangles (m, 3)`` and ``n`` and passed
+down; each part is computed on first use. The builders group by counting sorts (CSR transposes),
+not ``np.unique``. Boundaries: :mod:`o3d_lsmesh.core.boundary`. Docs: ``docs/algorithms/connectivity.rst``.
 """
 
 from __future__ import annotations
@@ -14,6 +13,8 @@ from typing import TYPE_CHECKING, Any, Callable, NamedTuple
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse import csgraph
+
+from .arrays import _run_lengths, _runs, gather, run_heads
 
 __all__ = [
     "Connectivity",
@@ -52,63 +53,43 @@ else:
 
 
 class FaceAdjacency(NamedTuple):
-    """Face neighbourhoods (:attr:`Connectivity.face_adjacency`).
+    """Face neighbourhoods (:attr:`Connectivity.face_adjacency`)."""
 
-    Attributes
-    ----------
-    incidence : (m, n) CSR
-        Triangle-vertex incidence (three ones a row).
-    ring : (m, m) CSR
-        Faces sharing a vertex with each face, itself included, sorted columns, data 1.
-    rows, cols : (r,) intp
-        Row and column of each entry of ``ring``.
-    pairs : (p, 2) int64
-        Faces sharing an edge (an edge of ``k > 2`` faces gives ``k - 1`` consecutive pairs).
-    edges : (e, 2)
-        The mesh's edges, ``lo < hi``, sorted.
-    pair_edge : (p,) int64
-        The edge each pair shares.
-    """
-
-    incidence: sp.csr_matrix
-    ring: sp.csr_matrix
-    rows: np.ndarray
-    cols: np.ndarray
-    pairs: np.ndarray
-    edges: np.ndarray
-    pair_edge: np.ndarray
+    incidence: sp.csr_matrix  # (m, n) triangle-vertex incidence, three ones a row
+    ring: sp.csr_matrix  # (m, m) faces sharing a vertex with each face (itself included), sorted, data 1
+    rows: np.ndarray  # (r,) intp row of each entry of ring
+    cols: np.ndarray  # (r,) intp column of each entry of ring
+    pairs: np.ndarray  # (p, 2) int64 faces sharing an edge (k - 1 consecutive pairs on an edge of k)
+    edges: np.ndarray  # (e, 2) the mesh's edges
+    pair_edge: np.ndarray  # (p,) int64 the edge each pair shares
 
 
 class Connectivity:
     """The connectivity of ``triangles (m, 3)`` on ``n`` vertices, each part computed once on first use.
 
-    Holds numpy arrays (and SciPy matrices built from them) only, pickles, and is safe to read from
-    several threads (a race computes a part twice, with the same result).
-    Index arrays are int32 when the mesh fits, int64 beyond.
+    Numpy arrays (and SciPy matrices) only; pickles; safe to read from several threads (a race
+    computes a part twice, with the same result). Index arrays are int32 when the mesh fits.
 
     Attributes
     ----------
     triangles : (m, 3) int64
     n : int
     edge_structure : EdgeStructure
-        The undirected edges and the grouping of the ``3 m`` half-edges (rows of :func:`halfedges`).
+        Edges and the grouping of the ``3 m`` half-edges (rows of :func:`halfedges`).
     edges : (e, 2)
-        ``lo < hi``, sorted lexicographically.
+        ``lo < hi``, sorted.
     edge_triangles : (e,)
-        Triangles on each edge (1 on the boundary, 2 inside, more when non-manifold).
+        Triangles on each edge; ``boundary_edges`` (one), ``nonmanifold_edges`` (more than two) ``(e,) bool``.
     halfedge_edge : (3m,)
         Edge of each half-edge row.
-    boundary_edges, nonmanifold_edges : (e,) bool
     rings : VertexRings
-        1-ring CSR pattern with diagonal slots, the triangles behind every slot, valence, boundary.
-    valence : (n,) int64
+        1-ring CSR with diagonal slots and the triangles behind every slot; ``valence (n,) int64``.
     ring_pattern : tuple
-        ``(indptr, indices, diagonal, forward, backward)`` of :func:`ring_pattern` (from the edges).
+        ``(indptr, indices, diagonal, forward, backward)`` of :func:`ring_pattern`.
     adjacency : (n, n) CSR
         Binary vertex adjacency, canonical.
     vertex_triangles : tuple
-        ``(indptr (n + 1,), triangle (3m,))``: the triangles of vertex ``v`` in increasing order are
-        ``triangle[indptr[v]:indptr[v + 1]]`` (once per corner).
+        ``(indptr (n + 1,), triangle (3m,))``: vertex ``v``'s triangles, increasing, once per corner.
     face_adjacency : FaceAdjacency
     components : tuple
         ``(count, labels (n,) int64)`` over edges; an isolated vertex is its own component.
@@ -116,8 +97,8 @@ class Connectivity:
     Examples
     --------
     >>> c = Connectivity(np.array([[0, 1, 2], [0, 2, 3]]), 5)
-    >>> c.edges.tolist(), c.edge_triangles.tolist(), c.valence.tolist(), c.components[0]
-    ([[0, 1], [0, 2], [0, 3], [1, 2], [2, 3]], [1, 2, 1, 1, 1], [3, 2, 3, 2, 0], 2)
+    >>> c.edge_triangles.tolist(), c.valence.tolist(), c.components[0]
+    ([1, 2, 1, 1, 1], [3, 2, 3, 2, 0], 2)
     """
 
     def __init__(self, triangles: np.ndarray, n: int | None = None):
@@ -138,33 +119,16 @@ class Connectivity:
     def edge_structure(self) -> EdgeStructure:
         return edge_structure(self.triangles, self.n)
 
-    @property
-    def edges(self) -> np.ndarray:
-        return self.edge_structure.edges
-
-    @property
-    def edge_triangles(self) -> np.ndarray:
-        return self.edge_structure.counts
-
-    @property
-    def halfedge_edge(self) -> np.ndarray:
-        return self.edge_structure.inverse
-
-    @property
-    def boundary_edges(self) -> np.ndarray:
-        return self.edge_structure.counts == 1
-
-    @property
-    def nonmanifold_edges(self) -> np.ndarray:
-        return self.edge_structure.counts > 2
+    edges = property(lambda self: self.edge_structure.edges)
+    edge_triangles = property(lambda self: self.edge_structure.counts)
+    halfedge_edge = property(lambda self: self.edge_structure.inverse)
+    boundary_edges = property(lambda self: self.edge_structure.counts == 1)
+    nonmanifold_edges = property(lambda self: self.edge_structure.counts > 2)
+    valence = property(lambda self: self.rings.valence)
 
     @_cached
     def rings(self) -> VertexRings:
         return vertex_rings(self.triangles, self.n)
-
-    @property
-    def valence(self) -> np.ndarray:
-        return self.rings.valence
 
     @_cached
     def ring_pattern(self) -> tuple:
@@ -246,57 +210,6 @@ def halfedges(triangles: np.ndarray) -> np.ndarray:
     """Directed edges ``(3m, 2)`` in triangle order: rows ``t``, ``m + t``, ``2m + t`` are
     ``(a, b)``, ``(b, c)``, ``(c, a)`` of triangle ``t = (a, b, c)``."""
     return np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]], axis=0)
-
-
-def group_keys(keys: np.ndarray, bound: int):
-    """Sort-and-mask grouping of integer ``keys`` in ``[0, bound)``: (order, starts, counts, inverse).
-
-    Key and position packed into one ``uint64`` when they fit (a plain sort, not an argsort); ties
-    keep their input order.
-    """
-    count = len(keys)
-    index_bits = max(1, int(count - 1).bit_length())
-    if max(1, int(bound - 1).bit_length()) + index_bits <= 64:
-        packed = keys.astype(np.uint64)
-        packed <<= np.uint64(index_bits)
-        packed |= np.arange(count, dtype=np.uint64)
-        packed.sort()
-        order = np.bitwise_and(packed, np.uint64((1 << index_bits) - 1)).view(np.int64)
-        packed >>= np.uint64(index_bits)
-        sorted_keys = packed.view(np.int64)
-    else:
-        order = np.argsort(keys, kind="stable")
-        sorted_keys = keys[order]
-    first, starts, counts = _runs(sorted_keys)
-    rank = np.cumsum(first, dtype=np.int64)
-    rank -= 1
-    inverse = np.empty(count, dtype=np.int64)
-    inverse[order] = rank
-    return order, starts, counts, inverse
-
-
-def _runs(sorted_keys: np.ndarray):
-    """Runs of equal values in sorted ``keys``: (first-of-run mask, run starts, run lengths)."""
-    first = run_heads(sorted_keys)
-    starts = np.flatnonzero(first)
-    return first, starts, _run_lengths(starts, len(sorted_keys))
-
-
-def run_heads(values: np.ndarray) -> np.ndarray:
-    """``(k,) bool``: True where ``values`` differs from the value before it (and at the first)."""
-    first = np.empty(len(values), dtype=bool)
-    first[:1] = True
-    np.not_equal(values[1:], values[:-1], out=first[1:])
-    return first
-
-
-def _run_lengths(starts: np.ndarray, count: int) -> np.ndarray:
-    """Lengths of the runs starting at ``starts`` in ``count`` items, in ``starts``' dtype."""
-    # written in place (np.diff with append copies ``starts`` first)
-    lengths = np.empty(len(starts), dtype=starts.dtype)
-    np.subtract(starts[1:], starts[:-1], out=lengths[:-1])
-    lengths[-1:] = count - starts[-1:]
-    return lengths
 
 
 def edge_runs(triangles: np.ndarray, n: int):
@@ -383,25 +296,6 @@ def edge_structure(triangles: np.ndarray, n: int | None = None) -> EdgeStructure
     edges[:, 1] = sorted_hi[starts]
     del sorted_hi, lo, hi, first
     return EdgeStructure(edges, counts, order, starts)
-
-
-#: Indices per call of :func:`gather` (numpy converts an index to intp first: a temporary this size).
-_GATHER_BLOCK = 1 << 16
-
-
-def gather(values: np.ndarray, index: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-    """``values[index]`` for a 1-D in-range ``index`` of any integer dtype (into ``out`` if given).
-
-    ``np.take(mode="wrap")`` in blocks when the index is not intp, so that numpy's intp copy of
-    the index stays small.
-    """
-    if out is None:
-        out = np.empty(np.shape(index), dtype=values.dtype)
-    if index.dtype == np.intp or len(index) <= _GATHER_BLOCK:
-        return np.take(values, index, out=out, mode="wrap")
-    for i in range(0, len(index), _GATHER_BLOCK):
-        np.take(values, index[i : i + _GATHER_BLOCK], out=out[i : i + _GATHER_BLOCK], mode="wrap")
-    return out
 
 
 #: Corner slots of the six directed entries of a triangle in :func:`vertex_rings`: entry ``d * m + t``
@@ -532,17 +426,8 @@ def vertex_rings(triangles: np.ndarray, n: int, *, block: int = _RING_BLOCK) -> 
 
 
 def unique_edges(triangles: np.ndarray, n: int | None = None):
-    """Undirected edges with the number of triangles on each.
-
-    Returns
-    -------
-    edges : (k, 2) int64
-        ``edges[:, 0] < edges[:, 1]``, sorted lexicographically.
-    counts : (k,) int64
-        Triangles sharing each edge (1 on a boundary, 2 inside, >2 non-manifold).
-    inverse : (3m,) int64
-        Edge index of each half-edge of :func:`halfedges`.
-    """
+    """``(edges (k, 2), counts (k,), inverse (3m,))`` int64: edges ``lo < hi`` sorted, triangles per edge,
+    edge of each half-edge of :func:`halfedges`."""
     return unique_edges_and_runs(triangles, n)[0]
 
 
@@ -555,20 +440,12 @@ def unique_edges_and_runs(triangles: np.ndarray, n: int | None = None):
 def ring_pattern(edges: np.ndarray, n: int):
     """CSR layout of the 1-ring pattern (diagonal plus both directions of every edge), without a sort.
 
-    ``edges (e, 2)`` as in :class:`EdgeStructure` (``lo < hi``, sorted). Row
-    ``v`` holds, in column order, the edges where ``v`` is the larger end
-    (backward, columns ``< v``), its diagonal, and the edges where ``v`` is the
-    smaller end (forward, columns ``> v``): canonical CSR. Returns ``indptr
-    (n+1,)``, ``indices (nnz,)`` and the CSR positions (all int32 when they fit) of
-    the diagonal ``(n,)``, of each edge forward ``(e,)`` and backward ``(e,)``,
-    so that data can be scattered straight into CSR order.
+    ``edges (e, 2)`` sorted, ``lo < hi``. Returns ``indptr (n+1,)``, ``indices`` and the CSR
+    positions of the diagonal ``(n,)``, of each edge forward (row ``lo``) and backward (row ``hi``),
+    all int32 when they fit, so that data can be scattered straight into CSR order.
 
-    Examples
-    --------
-    >>> import numpy as np
-    >>> indptr, indices, diagonal, forward, backward = ring_pattern(np.array([[0, 1], [0, 2], [1, 2]]), 3)
-    >>> indptr.tolist(), indices.tolist(), forward.tolist(), backward.tolist()
-    ([0, 3, 6, 9], [0, 1, 2, 0, 1, 2, 0, 1, 2], [1, 2, 5], [3, 6, 7])
+    >>> ring_pattern(np.array([[0, 1], [0, 2], [1, 2]]), 3)[3:]  # forward, backward
+    (array([1, 2, 5], dtype=int32), array([3, 6, 7], dtype=int32))
     """
     lo, hi = edges[:, 0], edges[:, 1]
     e = len(edges)
@@ -607,20 +484,9 @@ def ring_pattern(edges: np.ndarray, n: int):
 
 
 def directed_edges(triangles: np.ndarray, n: int):
-    """Both directions of every edge, sorted by ``(source, target)``, with their triangle counts.
+    """Both directions of every edge sorted by ``(source, target)``: ``src, dst, triangle_count (2e,) int64``.
 
-    Returns
-    -------
-    src, dst : (2e,) int64
-        Edge ``src[k] -> dst[k]``; ``src`` is sorted, so these are the CSR
-        arrays of the adjacency (``dst`` the column indices).
-    triangle_count : (2e,) int64
-        Triangles on each edge (1 on a boundary, 2 inside, more when
-        non-manifold), whatever the orientation of the triangles.
-
-    Each triangle gives the key ``src << bits | dst`` of each direction of its
-    three edges once; one sort of the plain int64 keys (numpy's SIMD sort, far
-    faster than argsort, ``np.unique`` or a COO-to-CSR merge) groups them.
+    One sort of the plain int64 keys ``src << bits | dst`` (``src`` sorted: the CSR of the adjacency).
     """
     bits = max(1, int(n - 1).bit_length())
     if 2 * bits > 62:  # beyond 2^31 vertices: keys by multiplication do not fit either

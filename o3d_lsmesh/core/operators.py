@@ -15,15 +15,13 @@ from typing import NamedTuple
 import numpy as np
 import scipy.sparse as sp
 
-from .arrays import concatenated_ranges
+from .arrays import concatenated_ranges, gather, group_keys
 from .boundary import BoundaryCurves
 from .connectivity import (
     RING_COLUMN_SLOT,
     RING_ROW_SLOT,
     Connectivity,
     VertexRings,
-    gather,
-    group_keys,
     ring_pattern,
 )
 
