@@ -16,10 +16,10 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._o3d import MeshData, new_mesh, read_mesh, template, warn_dropped_attributes
-from .._solvers import solve_spd
 from ..core.connectivity import VertexRings, vertex_rings
 from ..core.operators import single_slots, umbrella_weights
 from ..core.progress import check_progress, progress_bar
+from ..core.solve import solve_spd
 from ..core.validate import as_count, as_positions, as_positive_float, mesh_arrays
 
 if TYPE_CHECKING:

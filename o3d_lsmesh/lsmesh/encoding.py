@@ -18,11 +18,11 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .._o3d import MeshData, new_mesh, read_mesh
-from .._solvers import check_weight_pins_components
 from ..core.arrays import dequantize, quantize
 from ..core.connectivity import connected_components, unique_edges
 from ..core.errors import InputError, InputTypeError
 from ..core.progress import check_progress, progress_bar, stages
+from ..core.solve import check_weight_pins_components
 from ..core.validate import as_choice, as_count, as_positive_float
 from .lsmesh import LSMeshSystem, laplacian_matrix
 from .selection import SELECTION_METHODS, control_point_selection

@@ -15,18 +15,12 @@ import scipy.sparse as sp
 from scipy.sparse import csgraph
 
 from .._o3d import mesh_from_state, mesh_state, new_mesh, read_mesh
-from .._solvers import (
-    DEFAULT_TOLERANCE,
-    SPDSolver,
-    check_constant_modes,
-    check_finite,
-    operator_scale,
-    solver_backend,
-)
 from ..core import operators
 from ..core.connectivity import Connectivity
 from ..core.errors import InputError, SingularSystemError
 from ..core.progress import check_progress, stages
+from ..core.solve import Plan, SPDSolver, check_constant_modes, check_finite, operator_scale, solver_backend
+from ..core.tuning import DEFAULT_TOLERANCE
 from ..core.validate import as_bool, as_choice, as_indices, as_positions, as_weights
 
 if TYPE_CHECKING:
@@ -171,12 +165,11 @@ class LSMeshSystem:
         self._n = n
         self._unknowns = n if self._free is None else len(self._free)
         self._solver = SPDSolver(
-            product_of=product,
             backend=backend,
             ordering=ordering,
             progress=progress,
             tol=DEFAULT_TOLERANCE if tol is None else tol,
-            locality_of=locality,
+            _plan=Plan(product_of=product, locality_of=locality),
         )
 
     def _reduce(self, indices: np.ndarray) -> np.ndarray:

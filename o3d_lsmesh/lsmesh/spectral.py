@@ -16,12 +16,12 @@ import scipy.sparse.linalg as spla
 from scipy.sparse import csgraph
 
 from .._o3d import new_mesh, read_mesh
-from .._solvers import SPDSolver, single_threaded_blas
 from ..core.arrays import dequantize, quantize
 from ..core.connectivity import Connectivity
 from ..core.errors import InputError
 from ..core.operators import graph_laplacian
 from ..core.progress import check_progress, stages
+from ..core.solve import SPDSolver, single_threaded_blas
 from ..core.validate import as_count
 
 if TYPE_CHECKING:
