@@ -37,13 +37,10 @@ if TYPE_CHECKING:
 else:
 
     class _cached:
-        """``functools.cached_property`` without its lock (Python < 3.12 holds one per class): a race
-        computes the same value twice, harmless."""
-
+        # functools.cached_property without its lock (one per class before Python 3.12): a race
+        # computes the same value twice, harmless
         def __init__(self, function: Callable[[Any], Any]):
-            self.function = function
-            self.name = function.__name__
-            self.__doc__ = function.__doc__
+            self.function, self.name, self.__doc__ = function, function.__name__, function.__doc__
 
         def __get__(self, instance, owner=None):
             if instance is None:
@@ -57,8 +54,8 @@ class FaceAdjacency(NamedTuple):
 
     incidence: sp.csr_matrix  # (m, n) triangle-vertex incidence, three ones a row
     ring: sp.csr_matrix  # (m, m) faces sharing a vertex with each face (itself included), sorted, data 1
-    rows: np.ndarray  # (r,) intp row of each entry of ring
-    cols: np.ndarray  # (r,) intp column of each entry of ring
+    rows: np.ndarray  # (r,) intp row of each entry of ring (cols: its column)
+    cols: np.ndarray
     pairs: np.ndarray  # (p, 2) int64 faces sharing an edge (k - 1 consecutive pairs on an edge of k)
     edges: np.ndarray  # (e, 2) the mesh's edges
     pair_edge: np.ndarray  # (p,) int64 the edge each pair shares
@@ -111,9 +108,7 @@ class Connectivity:
     def __repr__(self) -> str:
         return f"Connectivity(m={len(self.triangles)}, n={self.n})"
 
-    @property
-    def m(self) -> int:
-        return len(self.triangles)
+    m = property(lambda self: len(self.triangles))
 
     @_cached
     def edge_structure(self) -> EdgeStructure:
@@ -212,8 +207,7 @@ def halfedges(triangles: np.ndarray) -> np.ndarray:
     return np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]], axis=0)
 
 
-def edge_runs(triangles: np.ndarray, n: int):
-    # half-edge rows of halfedges() grouped by undirected edge: (order, starts, counts)
+def edge_runs(triangles: np.ndarray, n: int):  # (order, starts, counts) of edge_structure
     return edge_structure(triangles, n).runs
 
 
@@ -221,31 +215,21 @@ def edge_runs(triangles: np.ndarray, n: int):
 class EdgeStructure:
     """The undirected edges of a mesh and the grouping of its half-edges (:func:`edge_structure`).
 
-    Attributes
-    ----------
-    edges : (e, 2) int32 (int64 beyond 2**31 half-edges)
-        ``lo < hi``, sorted lexicographically.
-    counts : (e,) int32
-        Triangles sharing each edge.
-    inverse : (3m,) int32
-        Edge of each half-edge row of :func:`halfedges` (formed on first use).
-    order, starts : (3m,), (e,) int32
-        Half-edge rows grouped by edge: edge ``k``'s are ``order[starts[k]:starts[k] + counts[k]]``.
+    Index arrays int32 (int64 beyond ``2**31`` half-edges); ``inverse`` formed on first use.
     """
 
-    edges: np.ndarray
-    counts: np.ndarray
-    order: np.ndarray
-    starts: np.ndarray
+    edges: np.ndarray  # (e, 2) lo < hi, sorted lexicographically
+    counts: np.ndarray  # (e,) triangles sharing each edge
+    order: np.ndarray  # (3m,) half-edge rows by edge: edge k's are order[starts[k]:starts[k] + counts[k]]
+    starts: np.ndarray  # (e,)
     _inverse: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     @property
     def inverse(self) -> np.ndarray:
-        """Edge index of each half-edge row, ``(3m,)``: formed on first use (local fairing never needs it)."""
+        """Edge of each half-edge row of :func:`halfedges`, ``(3m,)``."""
         if self._inverse is None:
             inverse = np.empty(len(self.order), dtype=self.order.dtype)
             inverse[self.order] = np.repeat(np.arange(len(self.edges), dtype=self.order.dtype), self.counts)
-            # a race recomputes the same array: harmless
             object.__setattr__(self, "_inverse", inverse)
         return self._inverse  # type: ignore[return-value]
 
@@ -298,43 +282,29 @@ def edge_structure(triangles: np.ndarray, n: int | None = None) -> EdgeStructure
     return EdgeStructure(edges, counts, order, starts)
 
 
-#: Corner slots of the six directed entries of a triangle in :func:`vertex_rings`: entry ``d * m + t``
-#: runs from corner ``RING_ROW_SLOT[d]`` of triangle ``t`` (its row) to corner ``RING_COLUMN_SLOT[d]``
-#: (its column); entries 0-2 are the half-edges of :func:`halfedges`, 3-5 the same edges reversed.
+#: Corners (row, column) of the six entries ``d * m + t`` of a triangle in :func:`vertex_rings`:
+#: entries 0-2 are the half-edges of :func:`halfedges`, 3-5 the same edges reversed.
 RING_ROW_SLOT = (0, 1, 2, 1, 2, 0)
 RING_COLUMN_SLOT = (1, 2, 0, 0, 1, 2)
 
-#: Vertices per block of :func:`vertex_rings` (about 12 entries each): block temporaries of a few
-#: megabytes, which the allocator reuses instead of mapping (and faulting in) fresh pages.
+#: Vertices per block of :func:`vertex_rings`: temporaries of a few megabytes, reused by the allocator.
 _RING_BLOCK = 1 << 14
 
 
 @dataclass(frozen=True)
 class VertexRings:
-    """The 1-ring CSR pattern of a mesh with the triangles behind every slot (:func:`vertex_rings`).
+    """The 1-ring CSR pattern with the triangles behind every slot (:func:`vertex_rings`).
 
     Triangle ``t`` gives six entries: entry ``d * m + t`` sits in row ``triangles[t, RING_ROW_SLOT[d]]``
-    and column ``triangles[t, RING_COLUMN_SLOT[d]]``.
-
-    Attributes
-    ----------
-    indptr, indices : (n + 1,), (n + 2e,) int32 (int64 beyond ``2**31`` entries)
-        Diagonal plus both directions of every edge, canonical CSR.
-    diagonal : (n,) int64
-        Position of each row's diagonal.
-    pairs : (2, n + 2e) int32
-        Two entries of each slot (one triangle: its entry twice); ``6 m`` on the diagonal.
-    valence : (n,) int64
-    boundary : (n,) bool
-        Vertices on an edge of one triangle or of more than two.
+    and column ``triangles[t, RING_COLUMN_SLOT[d]]``. Index arrays int32 (int64 beyond ``2**31``).
     """
 
-    indptr: np.ndarray
-    indices: np.ndarray
-    diagonal: np.ndarray
-    pairs: np.ndarray
-    valence: np.ndarray
-    boundary: np.ndarray
+    indptr: np.ndarray  # (n + 1,)
+    indices: np.ndarray  # (n + 2e,) diagonal plus both directions of every edge, canonical
+    diagonal: np.ndarray  # (n,) int64 position of each row's diagonal
+    pairs: np.ndarray  # (2, n + 2e) two entries of each slot (one triangle: twice); 6 m on the diagonal
+    valence: np.ndarray  # (n,) int64
+    boundary: np.ndarray  # (n,) bool: on an edge of one triangle or of more than two
 
     @property
     def n(self) -> int:
@@ -344,8 +314,8 @@ class VertexRings:
 def vertex_rings(triangles: np.ndarray, n: int, *, block: int = _RING_BLOCK) -> VertexRings:
     """The :class:`VertexRings` of a mesh in one pass over its corners, ``block`` vertices at a time.
 
-    Corners are grouped by vertex by a stable counting sort; each row's few columns are then sorted
-    and equal columns of a row are the triangles of one edge. Block temporaries stay small.
+    Corners grouped by vertex (a stable counting sort), each row's columns sorted: equal columns of a
+    row are the triangles of one edge.
 
     >>> rings = vertex_rings(np.array([[0, 1, 2], [0, 2, 3]]), 4)
     >>> rings.indices.tolist(), rings.valence.tolist()
