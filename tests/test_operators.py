@@ -494,3 +494,16 @@ def test_patch_system_minimizes_plain_loop_energy(level, cotangent, last):
     reference = np.linalg.lstsq(E[:, unknown], -E[:, known] @ V[known], rcond=None)[0]
     np.testing.assert_allclose(np.linalg.solve(A.toarray(), b), reference, atol=1e-9)
     assert not border & u
+
+
+def test_triangle_coefficients_with_hundreds_of_distinct_valences():
+    # more distinct valences than the dense look-up of valence triples holds
+    valences = np.stack([np.arange(3, 303), np.arange(303, 3, -1), np.full(300, 7)], axis=1)
+    M, u = ops.triangle_coefficients(valences)
+    basis = np.array([[1.0, 0.0], [-1.0, 1.0], [0.0, -1.0]])
+    rng = np.random.default_rng(0)
+    for k in (0, 150, 299):
+        A = np.eye(3) - (1.0 - np.eye(3)) / valences[k].astype(float)[:, None]
+        Q, C = rng.normal(size=3), rng.normal()
+        P = C / 3.0 + basis @ np.linalg.lstsq(A @ basis, Q - A @ np.full(3, C / 3.0), rcond=None)[0]
+        np.testing.assert_allclose(M[k] @ Q + u[k] * C, P, atol=1e-9)

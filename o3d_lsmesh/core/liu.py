@@ -13,7 +13,7 @@ from typing import NamedTuple
 import numpy as np
 import scipy.sparse as sp
 
-from .arrays import concatenated_ranges, gather, group_keys
+from .arrays import concatenated_ranges, gather
 from .boundary import BoundaryCurves
 from .connectivity import RING_COLUMN_SLOT, RING_ROW_SLOT, Connectivity
 
@@ -84,10 +84,8 @@ def valence_tables(triangles: np.ndarray, valence: np.ndarray | None = None):
         slot = np.zeros(base**3, dtype=key_type)
         slot[distinct] = np.arange(len(distinct), dtype=key_type)
         group = gather(slot, keys, out=spare)
-    else:
-        keys = keys.astype(np.int64)
-        order, starts, _, group = group_keys(keys, int(keys.max()) + 1)
-        distinct = keys[order[starts]]
+    else:  # more than 161 distinct valences
+        distinct, group = np.unique(keys.astype(np.int64), return_inverse=True)
     table = values[np.stack([distinct // (base * base), (distinct // base) % base, distinct % base], axis=1)]
     table = table.astype(np.float64)
     g = len(table)
