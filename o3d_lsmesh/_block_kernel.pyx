@@ -1,9 +1,8 @@
 # cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
 """Sparse products and Gauss-Seidel sweeps on ``(n, k)`` blocks: the iterative solver's inner loops.
 
-SciPy multiplies a CSR matrix by an ``(n, 3)`` block at 2.3 times the time of three single-column
-products, and pyamg's Gauss-Seidel takes one column at a time; both stream the matrix once per column.
-These stream it once for all ``k`` columns (row-major blocks: a row's ``k`` values share a cache line),
+SciPy's block product and pyamg's Gauss-Seidel stream the matrix once per column; these stream it
+once for all ``k`` columns (row-major blocks: a row's ``k`` values share a cache line),
 on every core (OpenMP; ``OMP_NUM_THREADS`` sets how many). A Gauss-Seidel sweep is sequential by
 nature: each column gets the arithmetic of pyamg's ``gauss_seidel`` (same products in the same order),
 and for several cores the rows are cut into a fixed number of blocks swept side by side (hybrid
@@ -28,10 +27,9 @@ cdef extern from *:
     """
     int omp_get_max_threads() noexcept nogil
 
-#: Loops over fewer rows stay on one thread: a parallel region costs a few microseconds on an idle
-#: machine, but a time slice (milliseconds) whenever another job holds a core the team waits for.
-#: From 20k rows the products pay for it (the scan default at 40k vertices: 0.26 -> 0.22-0.24 s on
-#: two cores, 100k before); results do not depend on the thread count.
+#: Loops over fewer rows stay on one thread: a parallel region costs a time slice whenever another job
+#: holds a core the team waits for (benchmarks/results/realscans_denoise_speed.md); results do not
+#: depend on the thread count.
 cdef enum:
     PARALLEL_ROWS = 20000
 
@@ -487,7 +485,7 @@ def level_order(const index_t[::1] indptr, const index_t[::1] indices):
     Reverse Cuthill-McKee, as SciPy's ``reverse_cuthill_mckee``: per component, a breadth-first
     search from its vertex of least degree, each vertex's new neighbours by increasing degree, and the
     whole order reversed. Linear (a first search finds the component, a second orders it); SciPy's
-    sorts every vertex by degree first and took 6 s on a 10M-vertex mesh's 2-ring.
+    sorts every vertex by degree first.
     """
     cdef Py_ssize_t n = indptr.shape[0] - 1, done = 0, reached, s = 0, i
     order_array = np.empty(n, dtype=np.int64)
@@ -518,8 +516,8 @@ def gram(const index_t[::1] row_ptr, const index_t[::1] row_cols, const double[:
 
     Row ``i`` is ``sum_(c in row i) a_ic A[:, c]^T``, gathered with a per-thread marker (Gustavson's
     algorithm): a counting pass, then a filling one. Entry ``(i, j)`` sums ``a_ic a_jc`` over the common
-    columns in increasing ``c``, as ``(j, i)`` does: the product is exactly symmetric. SciPy's product
-    (one thread, then a transpose to sort it) took 13 s for a 10M-vertex LS mesh's normal matrix.
+    columns in increasing ``c``, as ``(j, i)`` does: the product is exactly symmetric (SciPy's runs on
+    one thread, then transposes to sort).
     """
     cdef Py_ssize_t n = row_ptr.shape[0] - 1, i, threads = _threads(n)
     cdef index_t cc, jj, j
