@@ -17,9 +17,8 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from .._collapsed import collapsed_triangles
-from .._errors import O3DLSMeshWarning
-from .._validate import as_indices, mesh_arrays
+from ..core.errors import InputError, InputTypeError, O3DLSMeshWarning
+from ..core.validate import as_indices, collapsed_triangles, mesh_arrays
 from .io import obj_writable, open3d
 
 __all__ = [
@@ -79,14 +78,7 @@ _PER_ELEMENT = ("vertex", "triangle", "corner")
 
 @dataclass(frozen=True)
 class MeshData:
-    """Arrays copied out of a mesh, plus the mesh itself to rebuild its kind.
-
-    When the mesh was welded (``read_mesh(..., weld=True)`` found exact
-    duplicates), ``vertices`` and ``triangles`` are the welded surface,
-    ``split`` maps each of the source's vertices to its welded vertex
-    ``(n_source,)`` and ``split_triangles`` are the source's triangles
-    ``(m, 3)`` (what :func:`new_mesh` gives back); otherwise both are None.
-    """
+    """Arrays copied out of a mesh, plus the mesh itself to rebuild its kind (``split``: when welded)."""
 
     vertices: np.ndarray  # (n, 3) float64
     triangles: np.ndarray  # (m, 3) int64 (int32 when read with narrow=True)
@@ -98,11 +90,8 @@ class MeshData:
     def welded_indices(self, indices: Any, *, name: str, merge: bool = False) -> np.ndarray:
         """Check vertex indices given in the source's layout and return the welded vertices', ``(k,) int64``.
 
-        An index to any copy of a split vertex means the welded vertex. Indices
-        must lie in ``[0, n_source)`` without repetition (:func:`~o3d_lsmesh._validate.as_indices`);
-        two copies of one vertex give it twice (a list aligned with per-index data
-        such as positions keeps its length), or once with ``merge=True`` (a set
-        of vertices, e.g. the unknown ones; sorted).
+        Any copy of a split vertex means the welded vertex; two copies give it twice (aligned with
+        per-index data), or once, sorted, with ``merge=True`` (a set of vertices).
         """
         if self.split is None:
             return as_indices(indices, len(self.vertices), name=name)
@@ -122,17 +111,10 @@ class MeshData:
 
 
 def _may_have_duplicates(vertices: np.ndarray) -> bool:
-    """False when no two rows of ``vertices`` are equal (exact): a sort of one 64-bit hash per row.
-
-    Equal rows have equal hashes, so distinct hashes prove there is nothing to
-    weld at the cost of one plain integer sort, a tenth of ``np.unique``'s row
-    sort on large scans; a shared hash only sends the caller to the exact check.
-    """
-    # one column at a time (two (n,) temporaries, not an (n, 3) copy); adding 0.0 maps -0.0 to 0.0,
-    # so equal coordinates have equal bits. Each column is mixed in by MurmurHash3's finalizer (a
-    # bijection of 64 bits whose shifts carry the high bits down): a bare multiply-and-xor let a
-    # midpoint-subdivided mesh's coordinates (few low mantissa bits) collide, and sent 10M distinct
-    # vertices to the exact row sort (7 s)
+    """False when no two rows of ``vertices`` are equal (exact): a sort of one 64-bit hash per row,
+    cheaper than the exact row sort; a shared hash only sends the caller to the exact check."""
+    # column by column (+0.0 maps -0.0 to 0.0), each mixed in by MurmurHash3's finalizer: its shifts
+    # carry the high bits down, so coordinates with few low mantissa bits do not collide
     key = np.zeros(len(vertices), dtype=np.uint64)
     column = np.empty(len(vertices))
     shifted = np.empty(len(vertices), dtype=np.uint64)
@@ -145,9 +127,7 @@ def _may_have_duplicates(vertices: np.ndarray) -> bool:
             if multiplier is not None:
                 key *= np.uint64(multiplier)
     del column, shifted
-    # the keys' high halves sort in half the time of the whole keys; only the rows whose high half
-    # another row shares (by chance about n^2 / 2^33 of them: a few thousand at 10M) have their whole
-    # keys compared
+    # sort the high halves; only rows whose high half another shares have their whole keys compared
     high = (key >> np.uint64(32)).astype(np.uint32)
     ordered = np.sort(high)
     shared = ordered[1:][ordered[1:] == ordered[:-1]]
@@ -166,17 +146,13 @@ def _may_have_duplicates(vertices: np.ndarray) -> bool:
 def weld_map(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray | None:
     """Map each vertex to the first vertex at exactly the same coordinates, ``(n,)`` int64, or None.
 
-    None when no two vertices coincide, or when merging them would make a
-    triangle repeat a vertex (a triangle with two coincident corners: welding
-    it would need removing it, which changes connectivity; such a mesh is
-    processed as it is). Welded vertices are numbered in order of first
-    occurrence, so a mesh without duplicates keeps its numbering.
+    None when no two vertices coincide, or when a triangle would repeat a vertex (such a mesh is
+    processed as it is). Welded vertices are numbered in order of first occurrence.
     """
     n = len(vertices)
     if n == 0 or not _may_have_duplicates(vertices):
         return None
-    # rows sorted by (x, y, z): equal rows become neighbours (a stable sort keeps each group in
-    # index order, so its first row is its first occurrence); -0.0 and 0.0 compare equal
+    # a stable sort by (x, y, z): equal rows become neighbours, each group's first row first
     order = np.lexsort(vertices.T[::-1])
     ordered = vertices[order]
     starts = np.ones(n, dtype=bool)
@@ -186,7 +162,6 @@ def weld_map(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray | None:
     group = np.empty(n, dtype=np.int64)
     group[order] = np.cumsum(starts) - 1  # group of each vertex, groups in sorted order
     first = order[starts]  # first occurrence of each group
-    # renumber the groups by first occurrence
     rank = np.empty(len(first), dtype=np.int64)
     rank[np.argsort(first, kind="stable")] = np.arange(len(first))
     split = rank[group]
@@ -206,31 +181,27 @@ def _kind(mesh: Any, *, name: str = "mesh") -> str:
             return "legacy"
         if isinstance(mesh, o3d.t.geometry.TriangleMesh):
             return "tensor"
-    raise TypeError(
+    raise InputTypeError(
         f"{name} must be an open3d.geometry.TriangleMesh, an open3d.t.geometry.TriangleMesh "
-        f"or a (vertices, triangles) tuple, got {type(mesh).__name__}"
+        f"or a (vertices, triangles) tuple, got {type(mesh).__name__}",
+        param=name,
     )
 
 
 def read_mesh(mesh: Any, *, name: str = "mesh", weld: bool = False, narrow: bool = False) -> MeshData:
     """Copy ``mesh`` into ``(n,3) float64`` vertices and ``(m,3) int64`` triangles and validate them.
 
-    ``weld=True`` merges vertices at exactly equal coordinates (see
-    :func:`weld_map`); :func:`new_mesh` then restores the source's split
-    layout. Functions whose arguments or results hold vertex indices map them
-    with :meth:`MeshData.welded_indices` and :meth:`MeshData.source_indices`
-    (an index given in the split layout would otherwise name another vertex).
-    ``narrow=True``: int32 triangles, shared with the source when it holds them so (a legacy Open3D
-    mesh), for callers that only read them (see :func:`~o3d_lsmesh._validate.as_triangle_array`).
-    Every kind goes through the same checks, :func:`~o3d_lsmesh._validate.mesh_arrays`. A
-    :class:`MeshData` is returned as it is (validated when it was read).
+    ``weld=True`` merges vertices at exactly equal coordinates (:func:`weld_map`; indices map with
+    :meth:`MeshData.welded_indices` / :meth:`MeshData.source_indices`). ``narrow=True``: int32
+    triangles, shared with a legacy source, for callers that only read them. Every kind goes
+    through :func:`~o3d_lsmesh.core.validate.mesh_arrays`; a :class:`MeshData` is returned as it is.
 
     Raises
     ------
-    TypeError
-        ``mesh`` is not a supported mesh kind; see :func:`~o3d_lsmesh._validate.mesh_arrays`.
-    ValueError
-        A tensor mesh without positions; see :func:`~o3d_lsmesh._validate.mesh_arrays`.
+    InputTypeError
+        ``mesh`` is not a supported mesh kind.
+    InputError
+        A tensor mesh without positions; see :func:`~o3d_lsmesh.core.validate.mesh_arrays`.
     """
     if isinstance(mesh, MeshData):
         return mesh  # read and validated once already (the application's pipeline)
@@ -239,7 +210,7 @@ def read_mesh(mesh: Any, *, name: str = "mesh", weld: bool = False, narrow: bool
         raw_v, raw_t = np.asarray(mesh.vertices), np.asarray(mesh.triangles)
     elif kind == "tensor":
         if "positions" not in mesh.vertex:
-            raise ValueError(f"{name} must have vertex positions, got an empty mesh")
+            raise InputError(f"{name} must have vertex positions, got an empty mesh", param=name)
         raw_v = mesh.vertex.positions.cpu().numpy()
         raw_t = (
             mesh.triangle.indices.cpu().numpy() if "indices" in mesh.triangle else np.zeros((0, 3), np.int64)

@@ -1,26 +1,9 @@
-"""Pictures of meshes side by side, drawn headless on the CPU.
+"""Pictures of meshes side by side, drawn headless on the CPU (docs/algorithms/rendering.rst).
 
-:func:`render` lays several meshes out in a row under one orthographic camera
-(so equal sizes look equal) and draws them with Open3D's Filament
-``OffscreenRenderer``. On a machine without a GPU, Filament runs on Mesa's
-software Vulkan driver (llvmpipe): Debian's ``libvulkan1`` and
-``mesa-vulkan-drivers`` are all it needs, no X server, no environment variable.
-
-Two facts about ``OffscreenRenderer`` in open3d 0.20 shape this module
-(both measured here):
-
-* a second ``OffscreenRenderer`` in the same process hangs in its first
-  ``render_to_image`` (100% CPU, never returns), even after the first one was
-  deleted; and Filament prints its start-up banner on the process's stdout,
-  which would corrupt ``o3d-lsmesh --json`` output.
-
-  So every Filament picture is drawn in a short-lived child process
-  (about 1-3 s of start-up), which also means a driver crash cannot take the
-  caller down.
-* with post-processing (tone mapping, SSAO, anti-aliasing) on, llvmpipe is
-  several times slower; it is switched off.
-
-``backend="raycast"`` (the fallback of ``"auto"``) needs no graphics driver: see :func:`render`.
+:func:`render` lays meshes out in a row under one orthographic camera and draws them with Open3D's
+Filament ``OffscreenRenderer`` (Mesa's llvmpipe Vulkan driver without a GPU), post-processing off,
+in a short-lived child process: a second renderer in one process hangs, and Filament's banner on
+stdout would corrupt ``--json`` output. ``backend="raycast"`` needs no graphics driver.
 """
 
 from __future__ import annotations
@@ -71,9 +54,8 @@ _DEFAULT_COLOR = (0.72, 0.74, 0.78)
 #: Largest picture: 64 megapixels, whose rays and image buffers take about 5 GB on the raycast path.
 MAX_PIXELS = 64 * 1024 * 1024
 _BACKENDS = ("auto", "filament", "raycast")
-#: Sun and image-based (ambient) light for Filament, with tone mapping off: a surface facing the
-#: light comes out at about 0.95 of its color, so not even a white mesh clips to white
-#: (measured: Open3D's 50000 + 30000 turned a third of a light-grey sphere pure white).
+#: Sun and image-based (ambient) light for Filament, tone mapping off: a surface facing the light
+#: comes out at about 0.95 of its color, so not even a white mesh clips to white.
 _SUN_LUX, _AMBIENT = 36000.0, 18000.0
 _UNITS = ("model", "edge")
 
@@ -104,10 +86,7 @@ def _unit(vector: Any, *, name: str) -> np.ndarray:
 def _layout(arrays, view_direction, up, width, height, margin, align):
     """Offset each mesh into its own panel along the camera's right axis; return the scene and camera.
 
-    ``align="common"``: one center for all meshes (of their joint bounding
-    box), so a point lands on the same pixel of every panel and the panels
-    differ exactly where the meshes do. ``align="each"``: every mesh centered
-    by its own bounding box.
+    ``align="common"``: one center for all meshes (their joint bounding box); ``"each"``: their own.
     """
     back = _unit(view_direction, name="view_direction")
     up = _unit(up, name="up")
@@ -387,10 +366,8 @@ def render(
 ) -> RenderedImage:
     """Draw one or several meshes side by side and write the picture as a PNG.
 
-    Every mesh gets its own ``width x height`` panel, left to right, all under
-    one orthographic camera looking along ``-view_direction``, so equal sizes
-    look equal across panels. By default all meshes share one center, so the
-    panels of two versions of a surface differ exactly where the surfaces do.
+    Every mesh gets its own ``width x height`` panel, left to right, under one orthographic camera
+    looking along ``-view_direction``: equal sizes look equal across panels.
 
     Parameters
     ----------
@@ -398,68 +375,47 @@ def render(
     path : str or path-like, optional
         PNG file to write; ``None`` only returns the image.
     width, height : int
-        Size of one panel in pixels; the picture is ``(height, width * len(meshes))``.
+        Size of one panel in pixels.
     reference : mesh, optional
-        Color every vertex by its distance to the surface of ``reference``
-        (viridis, dark = 0, yellow = ``error_max``), and add a color bar below
-        the panels, with numbers, its units and a title (a band of about
-        five font heights). Without it, a mesh's own vertex colors are used,
-        or else ``color``; so is ``reference`` itself when it is one of
-        ``meshes`` (the same object): its distance to itself is zero.
+        Color every vertex by its distance to ``reference`` (viridis, dark = 0, yellow = ``error_max``)
+        and add a labelled color bar below. Without it: a mesh's own vertex colors, else ``color``
+        (also for ``reference`` itself when it is one of ``meshes``).
     error_max : float, optional
-        Top of the error scale, in ``units``; distances above it get the top
-        color (the bar ends in an arrow). Defaults to the 99th percentile of
-        the distances over all meshes (noise outliers would otherwise wash it
-        out). The scale used is returned as ``image.error_max``.
+        Top of the error scale, in ``units``; default the 99th percentile of all distances.
     titles : sequence of str, optional
-        One title per panel (say, the method and its parameters), drawn in a
-        band above the panels. ``None``: no band, the picture is exactly the
-        panels.
+        One title per panel, in a band above the panels.
     units : {"model", "edge"}
-        Units of the distances: model units, or mean edge lengths of
-        ``reference`` (a scale that does not depend on the model's size).
+        Distances in model units or in mean edge lengths of ``reference``.
     colorbar_title : str, optional
-        Title of the color bar; defaults to "distance to reference" and the
-        units.
+        Title of the color bar; default "distance to reference" and the units.
     color, background : RGB triples in [0, 1]
     view_direction, up : 3-vectors
         From the scene towards the camera, and the camera's up direction.
     margin : float
         Empty border around the largest mesh, as a fraction of its half size.
     align : {"common", "each"}
-        ``"common"``: one center (of all meshes' joint bounding box) for every
-        panel, for comparing versions of one surface. ``"each"``: every mesh
-        centered by its own bounding box, for different objects.
+        One center for every panel (versions of one surface), or each mesh centered on its own.
     backend : {"auto", "filament", "raycast"}
-        ``"filament"``: Open3D's ``OffscreenRenderer`` (CPU via Mesa's
-        llvmpipe Vulkan driver), in a child process; raises ``RuntimeError``
-        if it cannot render. ``"raycast"``: Open3D's ``RaycastingScene`` with
-        Lambert shading, in-process, needs no graphics driver. ``"auto"``:
-        Filament, falling back to raycasting with an ``O3DLSMeshWarning``.
+        Filament in a child process; Open3D's ``RaycastingScene`` with Lambert shading, in-process;
+        ``"auto"``: Filament, else raycasting with an ``O3DLSMeshWarning``.
     timeout : float
         Seconds to wait for the Filament child process.
 
     Returns
     -------
     RenderedImage
-        The picture that was written: a ``(H, width * len(meshes), 3)`` uint8
-        ndarray (a subclass, so code that used the plain array of earlier
-        versions keeps working), ``H = height`` plus the title band and the
-        color bar when drawn. ``image.error_max`` is the scale it used (in
-        ``image.units``), None without a reference.
+        ``(H, width * len(meshes), 3)`` uint8, ``H = height`` plus the title band and color bar;
+        ``image.error_max`` is the scale used (in ``image.units``), None without a reference.
 
     Notes
     -----
-    Titles and the labelled color bar are drawn with matplotlib when it is
-    installed (``pip install matplotlib``; it is not a requirement of the
-    package). Without it, titles are left out and the color bar is an
-    unlabelled strip over the bottom rows of the panels, with an
-    ``O3DLSMeshWarning``.
+    Titles and the labelled bar need matplotlib (optional); without it titles are left out and
+    the bar is an unlabelled strip, with an ``O3DLSMeshWarning``.
 
     Raises
     ------
-    TypeError, ValueError
-        A mesh or option is invalid (message names the parameter).
+    InputError
+        A mesh or option is invalid (``InputTypeError`` for a wrong type).
     RuntimeError
         ``backend="filament"`` and the offscreen renderer failed or timed out.
 
@@ -467,14 +423,8 @@ def render(
     --------
     >>> import open3d as o3d
     >>> sphere = o3d.geometry.TriangleMesh.create_sphere(resolution=20)
-    >>> box = o3d.geometry.TriangleMesh.create_box()
-    >>> image = render([sphere, box], None, width=64, height=64, backend="raycast")
-    >>> image.shape
+    >>> render([sphere, o3d.geometry.TriangleMesh.create_box()], None, width=64, height=64, backend="raycast").shape
     (64, 128, 3)
-    >>> image = render([sphere, sphere], None, width=64, height=64, backend="raycast", reference=sphere,
-    ...                error_max=0.1)
-    >>> image.error_max
-    0.1
     """
     if isinstance(meshes, (list, tuple)) and not (
         isinstance(meshes, tuple) and len(meshes) == 2 and isinstance(meshes[0], np.ndarray)
