@@ -1,5 +1,7 @@
 """Type stub of the compiled hole-filling kernel (``_fill_kernel.pyx``)."""
 
+from typing import Any
+
 import numpy as np
 
 def delaunay_triangles(points: np.ndarray) -> np.ndarray | None: ...
@@ -46,18 +48,19 @@ def loop_geometry(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, np.ndarray]: ...
 def unique_edges(tris: np.ndarray, nv: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
 def keeps_facing(x: np.ndarray, again: np.ndarray, new_tris: np.ndarray) -> bool: ...
-def normal_equations(
+def patch_system(
     x: np.ndarray,
+    tris: np.ndarray,
     i: np.ndarray,
     j: np.ndarray,
-    w: np.ndarray,
-    degree: np.ndarray,
-    scale: np.ndarray,
-    plus: np.ndarray,
-    minus: np.ndarray,
+    inverse: np.ndarray,
     unknown: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray]: ...
-def cholesky_solve(matrix: np.ndarray, rhs: np.ndarray) -> np.ndarray | None: ...
+    ring0: np.ndarray,
+    ring1: np.ndarray,
+    level: int,
+    cot: bool,
+    dense: bool,
+) -> tuple[Any, np.ndarray]: ...
 def patch_crossings(
     vertices: np.ndarray,
     triangles: np.ndarray,
@@ -73,40 +76,6 @@ def patch_crossings(
 def local_mesh(
     triangles: np.ndarray, first_new: int, ring_tris: np.ndarray, rings: list[np.ndarray], nv: int
 ) -> tuple[np.ndarray, np.ndarray, list[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]]: ...
-def fair_dense(
-    x: np.ndarray,
-    tris: np.ndarray,
-    i: np.ndarray,
-    j: np.ndarray,
-    inverse: np.ndarray,
-    unknown: np.ndarray,
-    ring0: np.ndarray,
-    ring1: np.ndarray,
-    level: int,
-    cot: bool,
-) -> np.ndarray | None: ...
-def fill_loop(
-    loop: np.ndarray,
-    rows: np.ndarray,
-    vertices: np.ndarray,
-    triangles: np.ndarray,
-    indptr: np.ndarray,
-    data: np.ndarray,
-    vertex_sigma: np.ndarray,
-    density: float,
-    alpha: float,
-) -> tuple[np.ndarray, np.ndarray]: ...
-def fair_dense_twice(
-    x: np.ndarray,
-    tris: np.ndarray,
-    i: np.ndarray,
-    j: np.ndarray,
-    inverse: np.ndarray,
-    unknown: np.ndarray,
-    ring0: np.ndarray,
-    ring1: np.ndarray,
-    level: int,
-) -> tuple[np.ndarray | None, np.ndarray | None]: ...
 def ring_mesh(
     triangles: np.ndarray,
     indptr: np.ndarray,

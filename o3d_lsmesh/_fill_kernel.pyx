@@ -1,5 +1,5 @@
 # cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
-"""Hole filling's sequential loops (the rules and their reasons: ``hole_filling.py``), compiled.
+"""Hole filling's sequential loops (the rules and their reasons: ``o3d_lsmesh.holes``), compiled.
 
 The arithmetic is plain (sums left to right, no summation order kept for its own sake); the fills equal
 those of the NumPy version it replaced up to rounding, measured on 88 fills: the same triangles, vertices
@@ -1156,24 +1156,48 @@ def keeps_facing(const double[:, ::1] x, const double[:, :] again, const int64_t
 # the fairing's normal equations on a small patch
 
 
-cpdef normal_equations(const double[:, ::1] x, const int64_t[::1] i, const int64_t[::1] j, const double[::1] w,
-                     const double[::1] degree, const double[::1] scale, const int64_t[::1] plus,
-                     const int64_t[::1] minus, const int64_t[::1] unknown):
-    """The least-squares system of the rows ``A = L[plus] - L[minus]`` (``minus`` empty: ``L[plus]``) of
-    the Laplacian ``L = S K``, ``K = D - W`` (edges ``(i, j)`` of weight ``w``, ``D`` the ``degree``,
-    ``S`` the ``scale``), in the ``unknown`` columns, the others fixed at ``x``: the dense
-    ``A_u^T A_u (p, p)`` and ``-A_u^T A_k x_k (p, 3)``.
+def patch_system(const double[:, ::1] x, const int64_t[:, ::1] tris, const int64_t[::1] i,
+                 const int64_t[::1] j, const int64_t[::1] inverse, const int64_t[::1] unknown,
+                 const int64_t[::1] ring0, const int64_t[::1] ring1, int level, bint cot, bint dense):
+    """The fairing system of the ``unknown`` local vertices at continuity ``level``, the others fixed at
+    ``x``. Weights of :func:`laplacian_weights` (cotangent if ``cot``) on the edges ``(i, j)``
+    (``inverse``: the edge of each half-edge).
 
-    Each row of ``A`` has a handful of entries (a vertex and its neighbours, or two of them), so the
-    products are sums of sparse outer products: O(rows * entries^2), where dense products cost
-    O(rows * p^2).
+    Level 0: ``K_uu`` and ``-K_uk x_k``, ``K = D - W``. Levels 1 and 2: the least squares of the rows
+    ``A = L[plus] - L[minus]`` of ``L = S K``: for 1 every row touching an unknown (the ``unknown`` and
+    ``ring0``); for 2 the edges between those rows and ``ring1`` with one end among them. If ``dense``:
+    the normal matrix ``(p, p)`` and right-hand side ``(p, 3)``. Else CSR ``(indptr, indices, data)`` of
+    ``M`` over the unknowns and ``b``: level 0 ``M = K_uu``, ``b = -K_uk x_k``; levels 1 and 2
+    ``M = A_u``, ``b = A_k x_k`` (the system ``M^T M = -M^T b``).
     """
-    cdef int64_t nv = x.shape[0], e = i.shape[0], rows = plus.shape[0], p = unknown.shape[0], r, k, s, c, v
-    cdef int64_t a, b, count, u1, u2, side
-    if minus.shape[0] not in (0, rows):
-        raise ValueError("minus must be empty or as long as plus")
-    if j.shape[0] != e or w.shape[0] != e or degree.shape[0] != nv or scale.shape[0] != nv:
-        raise ValueError("edges, weights, degree and scale must agree")
+    cdef int64_t nv = x.shape[0], e = i.shape[0], p = unknown.shape[0], rows, r, k, s, c, v
+    cdef int64_t a, count, u1, u2, side, size = 0, capacity = 0
+    if level not in (0, 1, 2):
+        raise ValueError("level must be 0, 1 or 2")
+    if p and _outside(&unknown[0], p, nv):
+        raise ValueError("unknown outside the vertices of x")
+    w_, degree_, scale_ = laplacian_weights(tris, nv, i, j, inverse, x.base if cot else None)
+    cdef const double[::1] w = w_, degree = degree_, scale = scale_
+    mark_ = np.zeros(nv, dtype=np.uint8)
+    valid_ = np.zeros(nv, dtype=np.uint8)
+    keep_ = np.zeros(e, dtype=np.uint8)
+    cdef uint8_t[::1] mark = mark_, valid = valid_, keep = keep_
+    for k in range(p):
+        mark[unknown[k]] = 1
+    for k in range(ring0.shape[0]):
+        mark[ring0[k]] = 1
+    if level == 1:
+        plus_, minus_ = np.flatnonzero(mark_), np.zeros(0, dtype=np.int64)
+    else:  # level 2 (level 0 reads none)
+        for k in range(nv):
+            valid[k] = mark[k]
+        for k in range(ring1.shape[0]):
+            valid[ring1[k]] = 1
+        for k in range(e):
+            keep[k] = (mark[i[k]] or mark[j[k]]) and valid[i[k]] and valid[j[k]]
+        plus_, minus_ = np.asarray(i)[keep_.view(bool)], np.asarray(j)[keep_.view(bool)]
+    cdef const int64_t[::1] plus = plus_, minus = minus_
+    rows = plus.shape[0] if level else p
     # each vertex's neighbours (CSR over the edges, both directions)
     indptr_ = np.zeros(nv + 1, dtype=np.int64)
     cdef int64_t[::1] indptr = indptr_
@@ -1181,11 +1205,29 @@ cpdef normal_equations(const double[:, ::1] x, const int64_t[::1] i, const int64
     wt_ = np.empty(2 * e)
     col_ = np.full(nv, -1, dtype=np.int64)
     fixed_ = np.array(x, dtype=np.float64, order="C")
-    normal_ = np.zeros((p, p))
-    rhs_ = np.zeros((p, 3))
     cdef int64_t[::1] nbr = nbr_, col = col_
     cdef double[::1] wt = wt_
-    cdef double[:, ::1] fixed = fixed_, normal = normal_, rhs = rhs_
+    cdef double[:, ::1] fixed = fixed_
+    for k in range(e):
+        indptr[i[k] + 1] += 1
+        indptr[j[k] + 1] += 1
+    for v in range(nv):
+        indptr[v + 1] += indptr[v]
+    if level == 0:
+        capacity = p + 2 * e
+    else:
+        for r in range(rows):  # each row's entries at most
+            capacity += indptr[plus[r] + 1] - indptr[plus[r]] + 1
+            if minus.shape[0]:
+                capacity += indptr[minus[r] + 1] - indptr[minus[r]] + 1
+    normal_ = np.zeros((p, p)) if dense else np.zeros((0, 0))
+    rhs_ = np.zeros((p, 3)) if dense or level == 0 else np.zeros((rows, 3))
+    out_indptr_ = np.zeros(0 if dense else rows + 1, dtype=np.int64)
+    out_indices_ = np.empty(0 if dense else capacity, dtype=np.int64)
+    out_data_ = np.empty(0 if dense else capacity)
+    cdef double[:, ::1] normal = normal_, rhs = rhs_
+    cdef int64_t[::1] out_indptr = out_indptr_, out_indices = out_indices_
+    cdef double[::1] out_data = out_data_
     cdef int64_t* slot = <int64_t*>malloc(max(nv, 1) * sizeof(int64_t))
     cdef int64_t* entry = <int64_t*>malloc(max(nv, 1) * sizeof(int64_t))
     cdef double* value = <double*>malloc(max(nv, 1) * sizeof(double))
@@ -1194,11 +1236,7 @@ cpdef normal_equations(const double[:, ::1] x, const int64_t[::1] i, const int64
         free(slot); free(entry); free(value)
         raise MemoryError
     with nogil:
-        for k in range(e):
-            indptr[i[k] + 1] += 1
-            indptr[j[k] + 1] += 1
         for v in range(nv):
-            indptr[v + 1] += indptr[v]
             slot[v] = indptr[v]
         for k in range(e):
             nbr[slot[i[k]]], wt[slot[i[k]]] = j[k], w[k]
@@ -1212,98 +1250,63 @@ cpdef normal_equations(const double[:, ::1] x, const int64_t[::1] i, const int64
         for v in range(nv):
             slot[v] = -1
         for r in range(rows):
-            # the row's entries: L[plus[r]], then minus L[minus[r]]
             count = 0
-            for side in range(2 if minus.shape[0] else 1):
-                a = plus[r] if side == 0 else minus[r]
+            if level == 0:  # row r of K: the unknown's degree, minus its edges' weights
+                a = unknown[r]
                 for k in range(indptr[a] - 1, indptr[a + 1]):
-                    v = a if k < indptr[a] else nbr[k]
-                    f = scale[a] * (degree[a] if k < indptr[a] else -wt[k])
-                    if slot[v] < 0:
-                        slot[v] = count
-                        entry[count] = v
-                        value[count] = f if side == 0 else -f
-                        count += 1
-                    else:
-                        value[slot[v]] = value[slot[v]] - f
+                    entry[count] = a if k < indptr[a] else nbr[k]
+                    value[count] = degree[a] if k < indptr[a] else -wt[k]
+                    count += 1
+            else:  # the row's entries: L[plus[r]], then minus L[minus[r]]
+                for side in range(2 if minus.shape[0] else 1):
+                    a = plus[r] if side == 0 else minus[r]
+                    for k in range(indptr[a] - 1, indptr[a + 1]):
+                        v = a if k < indptr[a] else nbr[k]
+                        f = scale[a] * (degree[a] if k < indptr[a] else -wt[k])
+                        if slot[v] < 0:
+                            slot[v] = count
+                            entry[count] = v
+                            value[count] = f if side == 0 else -f
+                            count += 1
+                        else:
+                            value[slot[v]] = value[slot[v]] - f
+                for k in range(count):
+                    slot[entry[k]] = -1
             bx = by = bz = 0.0
             for k in range(count):
                 v = entry[k]
                 bx += value[k] * fixed[v, 0]
                 by += value[k] * fixed[v, 1]
                 bz += value[k] * fixed[v, 2]
-            for k in range(count):
-                u1 = col[entry[k]]
-                if u1 < 0:
-                    continue
-                rhs[u1, 0] -= value[k] * bx
-                rhs[u1, 1] -= value[k] * by
-                rhs[u1, 2] -= value[k] * bz
-                for s in range(count):
-                    u2 = col[entry[s]]
-                    if u2 >= 0:
-                        normal[u1, u2] += value[k] * value[s]
-            for k in range(count):
-                slot[entry[k]] = -1
+            if not dense:  # the row's unknown entries and its fixed part
+                for k in range(count):
+                    if col[entry[k]] >= 0:
+                        out_indices[size], out_data[size] = col[entry[k]], value[k]
+                        size += 1
+                out_indptr[r + 1] = size
+                f = -1.0 if level == 0 else 1.0
+                rhs[r, 0], rhs[r, 1], rhs[r, 2] = f * bx, f * by, f * bz
+            elif level == 0:
+                for k in range(count):
+                    if col[entry[k]] >= 0:
+                        normal[r, col[entry[k]]] += value[k]
+                rhs[r, 0], rhs[r, 1], rhs[r, 2] = -bx, -by, -bz
+            else:
+                for k in range(count):
+                    u1 = col[entry[k]]
+                    if u1 < 0:
+                        continue
+                    rhs[u1, 0] -= value[k] * bx
+                    rhs[u1, 1] -= value[k] * by
+                    rhs[u1, 2] -= value[k] * bz
+                    for s in range(count):
+                        u2 = col[entry[s]]
+                        if u2 >= 0:
+                            normal[u1, u2] += value[k] * value[s]
     free(slot); free(entry); free(value)
-    return normal_, rhs_
-
-
-# ---------------------------------------------------------------------------------------------------
-# small dense SPD solves without SciPy's per-call wrapping (LAPACK's own routines, reached through the
-# function pointers SciPy exports: the same code ``scipy.linalg.cho_factor`` and ``cho_solve`` run)
-
-ctypedef void (*_potrf_t)(char*, int*, double*, int*, int*) noexcept nogil
-ctypedef void (*_potrs_t)(char*, int*, int*, double*, int*, double*, int*, int*) noexcept nogil
-cdef _potrf_t _potrf = NULL
-cdef _potrs_t _potrs = NULL
-
-from cpython.pycapsule cimport PyCapsule_GetName, PyCapsule_GetPointer
-
-
-cdef int _load_lapack() except -1:
-    global _potrf, _potrs
-    if _potrf is NULL:
-        from scipy.linalg import cython_lapack
-        capi = cython_lapack.__pyx_capi__
-        _potrs = <_potrs_t>PyCapsule_GetPointer(capi["dpotrs"], PyCapsule_GetName(capi["dpotrs"]))
-        _potrf = <_potrf_t>PyCapsule_GetPointer(capi["dpotrf"], PyCapsule_GetName(capi["dpotrf"]))
-    return 0
-
-
-cpdef cholesky_solve(double[:, ::1] matrix, const double[:, ::1] rhs):
-    """Solve ``matrix x = rhs`` for a symmetric positive definite ``(p, p)`` matrix and ``(p, c)`` right-hand
-    sides, as ``cho_solve(cho_factor(matrix), rhs)`` (upper factor, LAPACK ``dpotrf`` and ``dpotrs``);
-    ``matrix`` is overwritten. Returns ``(p, c)``, or None if the matrix is not numerically positive
-    definite or holds a non-finite value."""
-    cdef int p = matrix.shape[0], c = rhs.shape[1], info = 0, r, s
-    if matrix.shape[1] != p or rhs.shape[0] != p:
-        raise ValueError("matrix must be (p, p) and rhs (p, c)")
-    _load_lapack()
-    out_ = np.empty((c, p))  # Fortran (p, c): the layout LAPACK reads
-    cdef double[:, ::1] out = out_
-    cdef char uplo = b"U"
-    cdef bint finite = True
-    if p == 0:
-        return np.zeros((0, c))
-    with nogil:
-        for r in range(p):
-            for s in range(p):
-                if not (fabs(matrix[r, s]) < INFINITY):
-                    finite = False
-        for r in range(p):
-            for s in range(c):
-                out[s, r] = rhs[r, s]
-                if not (fabs(rhs[r, s]) < INFINITY):
-                    finite = False
-        if finite:
-            # a symmetric C-ordered matrix is its own Fortran-ordered transpose: LAPACK reads it in place
-            _potrf(&uplo, &p, &matrix[0, 0], &p, &info)
-            if info == 0:
-                _potrs(&uplo, &p, &c, &matrix[0, 0], &p, &out[0, 0], &p, &info)
-    if not finite or info != 0:
-        return None
-    return out_.T
+    if dense:
+        return normal_, rhs_
+    return (out_indptr_, out_indices_[:size], out_data_[:size]), rhs_
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -1503,63 +1506,6 @@ def local_mesh(const int64_t[:, ::1] triangles, int64_t first_new, const int64_t
     return vertices_, local_, local_rings, unique_edges(local_, count)
 
 
-cpdef fair_dense(const double[:, ::1] x, const int64_t[:, ::1] tris, const int64_t[::1] i,
-               const int64_t[::1] j, const int64_t[::1] inverse, const int64_t[::1] unknown,
-               const int64_t[::1] ring0, const int64_t[::1] ring1, int level, bint cot):
-    """The dense fairing solve of ``hole_filling._fair`` at continuity ``level`` 1 or 2: the Laplacian
-    weights (:func:`laplacian_weights`, cotangent if ``cot``), the rows touching an unknown (the
-    ``unknown`` and ``ring0``; for 2, the edges between them and ``ring1`` with one end among them, in
-    edge order), :func:`normal_equations` and :func:`cholesky_solve`. ``(p, 3)``, or None if the system
-    is not numerically positive definite or the solution not finite."""
-    cdef int64_t nv = x.shape[0], e = i.shape[0], k, count = 0
-    if level not in (1, 2):
-        raise ValueError("level must be 1 or 2")
-    w, degree, scale = laplacian_weights(tris, nv, i, j, inverse, x.base if cot else None)
-    rows_ = np.zeros(nv, dtype=np.uint8)
-    valid_ = np.zeros(nv, dtype=np.uint8)
-    cdef uint8_t[::1] rows = rows_, valid = valid_
-    for k in range(unknown.shape[0]):
-        rows[unknown[k]] = 1
-    for k in range(ring0.shape[0]):
-        rows[ring0[k]] = 1
-    if level == 1:
-        for k in range(nv):
-            count += rows[k]
-        plus_ = np.empty(count, dtype=np.int64)
-        minus_ = np.zeros(0, dtype=np.int64)
-        count = 0
-        for k in range(nv):
-            if rows[k]:
-                plus_[count] = k
-                count += 1
-    else:
-        for k in range(nv):
-            valid[k] = rows[k]
-        for k in range(ring1.shape[0]):
-            valid[ring1[k]] = 1
-        for k in range(e):
-            count += (rows[i[k]] or rows[j[k]]) and valid[i[k]] and valid[j[k]]
-        plus_ = np.empty(count, dtype=np.int64)
-        minus_ = np.empty(count, dtype=np.int64)
-        count = 0
-        for k in range(e):
-            if (rows[i[k]] or rows[j[k]]) and valid[i[k]] and valid[j[k]]:
-                plus_[count] = i[k]
-                minus_[count] = j[k]
-                count += 1
-    normal, rhs = normal_equations(x, i, j, w, degree, scale, plus_, minus_, unknown)
-    solution = cholesky_solve(normal, rhs)
-    if solution is None:
-        return None
-    cdef const double[:, :] s = solution
-    cdef int64_t a, b
-    for a in range(s.shape[0]):
-        for b in range(s.shape[1]):
-            if not (fabs(s[a, b]) < INFINITY):
-                return None
-    return solution
-
-
 def refine_budget(points, triangles, sigma):
     """The most new points :func:`refine` may add to a patch (``triangles`` over ``points``) whose loop
     has the scales ``sigma`` (density 1): ``4 A / mean(sigma)^2``, ``A`` its area, about what density 2
@@ -1569,61 +1515,6 @@ def refine_budget(points, triangles, sigma):
     area = 0.5 * np.sqrt((np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]) ** 2).sum(axis=1)).sum()
     mean = float(np.mean(sigma))
     return int(min(4.0 * area / mean**2, 2.0**62)) if mean > 0 else 0
-
-
-def fill_loop(const int64_t[::1] loop, const int64_t[::1] rows, const double[:, ::1] vertices,
-              const int64_t[:, ::1] triangles, const int64_t[::1] indptr, const int64_t[::1] data,
-              const double[::1] vertex_sigma, double density, double alpha):
-    """One simple loop triangulated and refined in one call (``hole_filling``'s usual fill, a loop short
-    enough for the programme): :func:`loop_geometry`, :func:`minimum_weight_triangulation` (within
-    :func:`delaunay_triangles`; its chords
-    that are mesh edges forbidden) and, if ``density > 0``, :func:`refine` with the loop vertices'
-    scales ``vertex_sigma / density``. Returns the new points ``(p, 3)`` and the triangles ``(t, 3)`` in
-    the mesh's numbering, the new points numbered from ``len(vertices)`` in order."""
-    cdef int64_t k = loop.shape[0], n = vertices.shape[0], p, c
-    points, outer, chords, spacing, pairs = loop_geometry(loop, rows, vertices, triangles, indptr, data)
-    cdef const uint8_t[:, ::1] f = chords.view(np.uint8)
-    cdef bint any_chord = False
-    for p in range(k * k):
-        if f[p // k, p % k]:
-            any_chord = True
-            break
-    tris = minimum_weight_triangulation(
-        points, outer, chords.view(np.uint8) if any_chord else None, delaunay_triangles(points)
-    )
-    if density > 0:
-        sigma_ = np.empty(k)
-        for p in range(k):
-            sigma_[p] = vertex_sigma[loop[p]] / fmax(density, 1e-300)
-        points, tris, _ = refine(points, sigma_, tris, pairs, np.zeros(k, dtype=np.int64), alpha,
-                                 k + refine_budget(points, tris, np.asarray(vertex_sigma)[loop]))
-    cdef const int64_t[:, ::1] local = tris
-    cdef int64_t t = local.shape[0]
-    out_ = np.empty((t, 3), dtype=np.int64)
-    cdef int64_t[:, ::1] out = out_
-    for p in range(t):
-        for c in range(3):
-            out[p, c] = loop[local[p, c]] if local[p, c] < k else n + local[p, c] - k
-    return points[k:], out_
-
-
-def fair_dense_twice(const double[:, ::1] x, const int64_t[:, ::1] tris, const int64_t[::1] i,
-                     const int64_t[::1] j, const int64_t[::1] inverse, const int64_t[::1] unknown,
-                     const int64_t[::1] ring0, const int64_t[::1] ring1, int level):
-    """:func:`fair_dense` with uniform weights, then again with cotangent weights read off that solution
-    (``x`` with the ``unknown`` rows replaced by it): ``(uniform, cotangent)``, either None where its
-    system fails (the cotangent one is not tried when the uniform one fails)."""
-    cdef int64_t r, c
-    uniform = fair_dense(x, tris, i, j, inverse, unknown, ring0, ring1, level, False)
-    if uniform is None:
-        return None, None
-    embedded_ = np.array(x, dtype=np.float64, order="C")
-    cdef double[:, ::1] embedded = embedded_
-    cdef const double[:, :] u = uniform
-    for r in range(unknown.shape[0]):
-        for c in range(3):
-            embedded[unknown[r], c] = u[r, c]
-    return uniform, fair_dense(embedded, tris, i, j, inverse, unknown, ring0, ring1, level, True)
 
 
 def ring_mesh(const int64_t[:, ::1] triangles, const int64_t[::1] indptr, const int64_t[::1] data, seeds,

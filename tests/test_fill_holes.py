@@ -460,23 +460,6 @@ def test_sphere_hole_close_to_the_sphere_and_continuity_order():
     assert errors[2] < 0.05
 
 
-@pytest.mark.parametrize("continuity", [0, 1, 2])
-def test_dense_fairing_solve_matches_the_sparse_gateway(monkeypatch, continuity):
-    # small patches are solved with a dense Cholesky; the sparse path (SPDSolver) is the reference
-    from o3d_lsmesh import _solvers
-
-    V, T = icosphere(3)
-    h = mean_edge(V, T)
-    Vh, Th, _ = cut_disk(V, T, 0, 4 * h)
-    dense = fill_holes_arrays(Vh, Th, continuity=continuity, interpolation=True)
-    assert 0 < len(dense.vertices) - len(Vh) <= _solvers.DENSE_UNKNOWNS
-    monkeypatch.setattr(_solvers, "DENSE_UNKNOWNS", -1)
-    sparse = fill_holes_arrays(Vh, Th, continuity=continuity, interpolation=True)
-    assert np.array_equal(dense.triangles, sparse.triangles)
-    assert np.allclose(dense.vertices, sparse.vertices, rtol=0, atol=1e-9)
-    assert np.allclose(dense.interpolation.toarray(), sparse.interpolation.toarray(), rtol=0, atol=1e-9)
-
-
 def test_holes_filled_together_as_each_alone():
     # all pieces are refined in one batch and faired in one system: far-apart holes must not interact.
     # Reference: the same mesh with only the small hole chosen (max_hole_edges).
@@ -1241,39 +1224,6 @@ def test_loop_geometry_matches_plain_loops(seed, size):
 
 
 @settings(max_examples=25, deadline=None)
-@given(st.integers(0, 2**32 - 1), st.integers(3, 6), st.booleans())
-def test_laplacian_weights_match_plain_loops(seed, size, cot):
-    # reference: per triangle corner, the cotangent from the angle itself (arccos of the normalized
-    # product); weights clamped at 5% of the mean |w|; vertex areas a third of each triangle's, mean 1
-    points, tris, _ = _random_patch(seed, size, 0.5)
-    n = len(points)
-    half = np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]])
-    keys, inverse = np.unique(np.sort(half, axis=1) @ [n, 1], return_inverse=True)
-    i, j = keys // n, keys % n
-    w, degree, scale = _fill_kernel.laplacian_weights(tris, n, i, j, inverse, points if cot else None)
-    edge = {(a, b): e for e, (a, b) in enumerate(zip(i.tolist(), j.tolist()))}
-    expected = np.zeros(len(i)) if cot else np.ones(len(i))
-    area = np.zeros(n)
-    for t in tris.tolist():
-        for c in range(3):
-            a, b, o = t[c], t[(c + 1) % 3], t[(c + 2) % 3]
-            u, v = points[a] - points[o], points[b] - points[o]
-            theta = np.arccos(u @ v / np.linalg.norm(u) / np.linalg.norm(v))
-            if cot:
-                expected[edge[min(a, b), max(a, b)]] += 0.5 / np.tan(theta)
-            area[a] += 0.5 * np.linalg.norm(np.cross(u, v)) / 3
-    if cot:
-        expected = np.maximum(expected, 0.05 * np.abs(expected).mean())
-    expected_degree = np.zeros(n)
-    for e, (a, b) in enumerate(zip(i.tolist(), j.tolist())):
-        expected_degree[a] += expected[e]
-        expected_degree[b] += expected[e]
-    np.testing.assert_allclose(w, expected, rtol=1e-9, atol=1e-12)
-    np.testing.assert_allclose(degree, expected_degree, rtol=1e-9, atol=1e-12)
-    np.testing.assert_allclose(scale, area.mean() / area if cot else 1 / expected_degree, rtol=1e-9)
-
-
-@settings(max_examples=25, deadline=None)
 @given(st.integers(0, 2**32 - 1), st.integers(2, 6))
 def test_unique_edges_match_a_sort(seed, size):
     # reference: np.unique of the sorted half-edge pairs (corner-major: every (0, 1) first)
@@ -1303,34 +1253,73 @@ def test_keeps_facing_matches_plain_loops(seed):
     assert _fill_kernel.keeps_facing(x, again, tris) == expected
 
 
+def _plain_weights(points, tris, i, j, cot):
+    """Edge weights, degrees and row scales as plain loops: per triangle corner the cotangent from the
+    angle itself (arccos of the normalized product), clamped at 5% of the mean |w|; vertex areas a third
+    of each triangle's, normalized to mean 1 (uniform: w = 1, scale 1 / degree)."""
+    n = len(points)
+    edge = {(a, b): e for e, (a, b) in enumerate(zip(i.tolist(), j.tolist()))}
+    w = np.zeros(len(i)) if cot else np.ones(len(i))
+    area = np.zeros(n)
+    for t in tris.tolist():
+        for c in range(3):
+            a, b, o = t[c], t[(c + 1) % 3], t[(c + 2) % 3]
+            u, v = points[a] - points[o], points[b] - points[o]
+            if cot:
+                w[edge[min(a, b), max(a, b)]] += 0.5 / np.tan(
+                    np.arccos(u @ v / np.linalg.norm(u) / np.linalg.norm(v))
+                )
+            area[a] += 0.5 * np.linalg.norm(np.cross(u, v)) / 3
+    if cot:
+        w = np.maximum(w, 0.05 * np.abs(w).mean())
+    degree = np.zeros(n)
+    for e, (a, b) in enumerate(zip(i.tolist(), j.tolist())):
+        degree[a] += w[e]
+        degree[b] += w[e]
+    return w, degree, area.mean() / area if cot else 1 / degree
+
+
 @settings(max_examples=30, deadline=None)
-@given(st.integers(0, 2**32 - 1), st.integers(3, 6), st.booleans(), st.booleans())
-def test_normal_equations_match_dense_products(seed, size, cot, differences):
-    # reference: the dense Laplacian L = S K, its rows (or row differences over edges) A, and the
-    # products A_u^T A_u and -A_u^T A_k x_k with NumPy; unknowns anywhere in the numbering
+@given(st.integers(0, 2**32 - 1), st.integers(3, 6), st.integers(0, 2), st.booleans(), st.booleans())
+def test_patch_system_is_the_plain_loop_energy(seed, size, level, cot, dense):
+    # reference: the weights as plain loops, the dense K = D - W and L = S K, the rows A of the energy
+    # (level 0: K itself; 1: the rows of L touching an unknown; 2: their differences over edges) and
+    # the normal equations with NumPy; unknowns anywhere in the numbering
     points, tris, rng = _random_patch(seed, size, 0.5)
     n = len(points)
-    i, j, inverse = _fill_kernel.unique_edges(tris, n)
-    w, degree, scale = _fill_kernel.laplacian_weights(tris, n, i, j, inverse, points if cot else None)
+    half = np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1)
+    keys, inverse = np.unique(half[:, 0] * n + half[:, 1], return_inverse=True)
+    i, j = keys // n, keys % n
+    w, degree, scale = _plain_weights(points, tris, i, j, cot)
     K = np.diag(degree)
     K[i, j] = K[j, i] = -w
     L = scale[:, None] * K
     unknown = np.sort(rng.choice(n, rng.integers(1, n), replace=False))
-    if differences:
-        keep = rng.random(len(i)) < 0.7
-        plus, minus = i[keep], j[keep]
-        A = L[plus] - L[minus]
+    ring0 = np.setdiff1d(np.unique(tris[np.isin(tris, unknown).any(axis=1)]), unknown)
+    ring1 = np.setdiff1d(np.unique(tris[np.isin(tris, ring0).any(axis=1)]), np.union1d(unknown, ring0))
+    touched = np.union1d(unknown, ring0)
+    known = np.setdiff1d(np.arange(n), unknown)
+    if level == 0:
+        normal, rhs = K[np.ix_(unknown, unknown)], -K[np.ix_(unknown, known)] @ points[known]
     else:
-        plus, minus = np.sort(rng.choice(n, rng.integers(1, n + 1), replace=False)), np.zeros(0, np.int64)
-        A = L[plus]
-    fixed = points.copy()
-    fixed[unknown] = 0.0
-    normal, rhs = _fill_kernel.normal_equations(points, i, j, w, degree, scale, plus, minus, unknown)
-    A_u = A[:, unknown]
-    np.testing.assert_allclose(normal, A_u.T @ A_u, rtol=1e-12, atol=1e-12 * np.abs(A).max() ** 2)
-    np.testing.assert_allclose(
-        rhs, -(A_u.T @ (A @ fixed)), rtol=1e-12, atol=1e-12 * np.abs(A).max() ** 2 * size
+        if level == 1:
+            A = L[touched]
+        else:
+            rows = np.isin(i, touched) | np.isin(j, touched)
+            valid = np.isin(i, np.union1d(touched, ring1)) & np.isin(j, np.union1d(touched, ring1))
+            A = L[i[rows & valid]] - L[j[rows & valid]]
+        normal, rhs = A[:, unknown].T @ A[:, unknown], -A[:, unknown].T @ (A[:, known] @ points[known])
+    got, got_rhs = _fill_kernel.patch_system(
+        points, tris, i, j, inverse, unknown, ring0, ring1, level, cot, dense
     )
+    if not dense:
+        indptr, indices, data = got
+        M = np.zeros((len(indptr) - 1, len(unknown)))
+        np.add.at(M, (np.repeat(np.arange(len(indptr) - 1), np.diff(indptr)), indices), data)
+        got, got_rhs = (M, got_rhs) if level == 0 else (M.T @ M, -M.T @ got_rhs)
+    big = np.abs(K).max() ** 2 * max(1.0, np.abs(scale).max()) ** 2
+    np.testing.assert_allclose(got, normal, rtol=1e-9, atol=1e-10 * big)
+    np.testing.assert_allclose(got_rhs, rhs, rtol=1e-9, atol=1e-10 * big * size)
 
 
 def test_dynamic_programme_falls_back_when_every_chord_is_an_edge():
@@ -1344,28 +1333,6 @@ def test_dynamic_programme_falls_back_when_every_chord_is_an_edge():
     assert np.array_equal(_minimum_weight_triangulation(points, outer, forbidden), expected)
     half = {(a, b) for t in expected.tolist() for a, b in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0]))}
     assert all(((i + 1) % 4, i) in half for i in range(4))
-
-
-@settings(max_examples=30, deadline=None)
-@given(st.integers(0, 2**32 - 1), st.integers(1, 30), st.integers(1, 3), st.booleans())
-def test_cholesky_solve_is_scipys_cho_solve(seed, p, c, singular):
-    # reference: SciPy's cho_factor and cho_solve, the same LAPACK routines: equal to the last bit
-    from scipy.linalg import cho_factor, cho_solve
-
-    rng = np.random.default_rng(seed)
-    A = rng.normal(size=(p + 3, p))
-    matrix = A.T @ A + 1e-3 * np.eye(p)
-    matrix = 0.5 * (matrix + matrix.T)  # exactly symmetric, as the normal equations are
-    rhs = rng.normal(size=(p, c))
-    if singular:
-        matrix[p - 1, p - 1] = -1.0
-        assert _fill_kernel.cholesky_solve(matrix.copy(), rhs) is None
-        return
-    got = _fill_kernel.cholesky_solve(matrix.copy(), rhs)
-    assert np.array_equal(got, cho_solve(cho_factor(matrix), rhs))
-    bad = matrix.copy()
-    bad[0, 0] = np.nan
-    assert _fill_kernel.cholesky_solve(bad, rhs) is None
 
 
 @settings(max_examples=10, deadline=None)
@@ -1405,36 +1372,6 @@ def test_local_mesh_is_the_unique_numbering(seed, size):
         _fill_kernel.local_mesh(tris, first_new, ring_tris, rings, int(local_tris.max()))
 
 
-@settings(max_examples=30, deadline=None)
-@given(st.integers(0, 2**32 - 1), st.integers(4, 7), st.integers(1, 2), st.booleans())
-def test_fair_dense_matches_the_sparse_solve(seed, size, level, cot):
-    # reference: the sparse path of _fair (CSR operators, SciPy's products, solve_spd's sparse solver)
-    from o3d_lsmesh.holes import fair as hole_filling
-
-    points, tris, _ = _random_patch(seed, size, 0.4)
-    n = len(points)
-    border = np.unique(
-        np.concatenate(
-            [np.arange(size), np.arange(n - size, n), np.arange(0, n, size), np.arange(size - 1, n, size)]
-        )
-    )
-    inner = np.setdiff1d(np.arange(n), border)
-    assume(len(inner) > 0)
-    edges = _fill_kernel.unique_edges(tris, n)
-    ring0 = np.intersect1d(border, np.unique(tris[np.isin(tris, inner).any(axis=1)]))
-    rings = [ring0, np.setdiff1d(border, ring0)]
-    got = _fill_kernel.fair_dense(points, tris, *edges, inner, rings[0], rings[1], level, cot)
-    dense = hole_filling._solvers.DENSE_UNKNOWNS
-    try:
-        hole_filling._solvers.DENSE_UNKNOWNS = -1  # every solve sparse
-        expected = hole_filling._fair(points, tris, inner, rings, level, edges, cot)
-    finally:
-        hole_filling._solvers.DENSE_UNKNOWNS = dense
-    np.testing.assert_allclose(got, expected, rtol=1e-8, atol=1e-8)
-    with pytest.raises(ValueError, match="level"):
-        _fill_kernel.fair_dense(points, tris, *edges, inner, rings[0], rings[1], 0, cot)
-
-
 def test_empty_interpolation_is_built_when_read():
     # the all-zero interpolation matrix of a fill without interpolation: its shape, and it pickles
     import pickle
@@ -1444,38 +1381,6 @@ def test_empty_interpolation_is_built_when_read():
     assert out.interpolation.shape == (len(out.vertices) - len(V), len(V))
     assert out.interpolation.nnz == 0
     assert pickle.loads(pickle.dumps(out)).interpolation.shape == out.interpolation.shape
-
-
-@settings(max_examples=20, deadline=None)
-@given(st.integers(0, 2**32 - 1), st.integers(4, 7), st.integers(1, 2))
-def test_fused_calls_equal_their_steps(seed, size, level):
-    # fair_dense_twice: the uniform solve, then the cotangent one from the embedding it gives; ring_mesh:
-    # rings then local_mesh (references: the separate calls, equal to the last bit)
-    points, tris, _ = _random_patch(seed, size, 0.4)
-    n = len(points)
-    inner = np.array([v for v in range(n) if 0 < v % size < size - 1 and size <= v < n - size])
-    assume(len(inner) > 0)
-    edges = _fill_kernel.unique_edges(tris, n)
-    ring0 = np.setdiff1d(np.unique(tris[np.isin(tris, inner).any(axis=1)]), inner)
-    ring1 = np.setdiff1d(np.arange(n), np.concatenate([inner, ring0]))
-    uniform, again = _fill_kernel.fair_dense_twice(points, tris, *edges, inner, ring0, ring1, level)
-    first = _fill_kernel.fair_dense(points, tris, *edges, inner, ring0, ring1, level, False)
-    embedded = points.copy()
-    embedded[inner] = first
-    second = _fill_kernel.fair_dense(embedded, tris, *edges, inner, ring0, ring1, level, True)
-    assert np.array_equal(uniform, first)
-    assert np.array_equal(again, second)
-    m = len(tris) - 2
-    got = _fill_kernel.ring_mesh(
-        tris[:m], indptr_of(tris[:m], n), data_of(tris[:m], n), inner[:1], level, tris, n
-    )
-    ring_tris, found = _fill_kernel.rings(
-        tris[:m], indptr_of(tris[:m], n), data_of(tris[:m], n), inner[:1], level
-    )
-    expected = _fill_kernel.local_mesh(tris, m, ring_tris, found, n)
-    assert np.array_equal(got[0], expected[0]) and np.array_equal(got[1], expected[1])
-    assert all(np.array_equal(a, b) for a, b in zip(got[2], expected[2]))
-    assert all(np.array_equal(a, b) for a, b in zip(got[3], expected[3]))
 
 
 def indptr_of(tris, n):

@@ -195,18 +195,23 @@ def test_non_finite_cotangent_system_falls_back_for_its_hole_alone(monkeypatch):
 
     V, T = _two_holes()
     kernel = hole_filling._kernel()
-    original = kernel.laplacian_weights
 
     class Poisoned:
         def __getattr__(self, name):
             return getattr(kernel, name)
 
         @staticmethod
-        def laplacian_weights(tris, nv, i, j, inverse, vertices=None):
-            w, degree, scale = original(tris, nv, i, j, inverse, vertices)
-            if vertices is not None:  # the cotangent pass: infinite on the south hole's edges
-                w = np.where(vertices[i, 2] < -0.5, np.inf, w)
-            return w, degree, scale
+        def patch_system(x, tris, i, j, inverse, unknown, ring0, ring1, level, cot, dense):
+            normal, rhs = kernel.patch_system(
+                x, tris, i, j, inverse, unknown, ring0, ring1, level, cot, dense
+            )
+            if cot:  # the cotangent pass: infinite on the south hole's unknowns
+                south = x[unknown, 2] < -0.5
+                rhs = np.where(south[:, None], np.inf, rhs) if dense or level == 0 else rhs
+                if not dense and level > 0:  # rows of the least squares touching a southern unknown
+                    indptr, indices, data = normal
+                    normal = (indptr, indices, np.where(south[indices], np.inf, data))
+            return normal, rhs
 
     both = fill_quietly(V, T)
     monkeypatch.setattr(hole_filling, "_KERNEL", Poisoned())

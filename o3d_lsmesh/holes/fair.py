@@ -20,112 +20,44 @@ from .triangulate import _kernel
 _Edges = tuple[np.ndarray, np.ndarray, np.ndarray]  # edges i < j of a local mesh, each half-edge's edge
 
 
-def _operators(
-    i: np.ndarray, j: np.ndarray, w: np.ndarray, degree: np.ndarray, scale: np.ndarray, dense: bool
-):
-    """Stiffness ``K = D - W`` and Laplacian ``L = S K`` (CSR, or arrays if ``dense``) of a local mesh
-    with edges ``(i, j)`` of weight ``w``, ``D`` the ``degree`` and ``S`` the row ``scale`` of
-    :func:`o3d_lsmesh._fill_kernel.laplacian_weights`."""
-    nv = len(degree)
-    diagonal = np.arange(nv)
-    rows, cols = np.concatenate([i, j, diagonal]), np.concatenate([j, i, diagonal])
-    values = np.concatenate([-w, -w, degree])
-    if dense:
-        K = np.zeros((nv, nv))
-        K[rows, cols] = values
-        return K, scale[:, None] * K
-    K = sp.csr_matrix((values, (rows, cols)), shape=(nv, nv))
-    L = K.copy()  # L = S K: K's pattern with its rows scaled
-    L.data = L.data * np.repeat(scale, np.diff(L.indptr))
-    return K, L
-
-
 def _fair(
     x: np.ndarray, tris: np.ndarray, unknown: np.ndarray, rings: list, level: int, edges: _Edges, cot: bool
 ):
-    """Positions of the ``unknown`` local vertices minimizing continuity ``level``'s energy, the others
-    fixed at ``x``:
+    """Positions ``(p, 3)`` of the ``unknown`` local vertices minimizing continuity ``level``'s energy,
+    the others fixed at ``x``:
 
     * ``0``: ``x^T K x`` (membrane, harmonic: ``L x = 0`` at the unknowns);
     * ``1``: ``sum_r |(L x)_r|^2`` over the rows touching an unknown: the LS-mesh energy ``||L x||^2``
       with interpolated anchors (eq. 3, section 6);
-    * ``2``: ``sum |(L x)_r - (L x)_s|^2`` over edges ``(r, s)`` touching such a row:
-      ``(L x)^T K (L x)``, the tri-Laplacian energy,
+    * ``2``: ``sum |(L x)_r - (L x)_s|^2`` over edges ``(r, s)`` touching such a row: the tri-Laplacian,
 
-    with ``K = D - W`` and ``L = S K``: uniform, ``W`` the adjacency and ``S = D^-1`` (eq. 1 of LS
-    meshes); or, if ``cot``, ``W`` the cotangent weights of ``x`` clamped below at 5% of their mean
-    (obtuse pairs would make ``K`` indefinite) and ``S`` the inverse vertex areas, normalized to mean 1
-    (:func:`o3d_lsmesh._fill_kernel.laplacian_weights`).
-
-    ``rings[0]`` are the loop vertices, ``rings[i]`` the i-th ring around them: the rows used involve
-    only vertices whose one-rings are complete in ``tris``. ``edges`` is
-    :func:`o3d_lsmesh._fill_kernel.unique_edges` of ``tris``. Small systems (at most
-    :data:`o3d_lsmesh._solvers.DENSE_UNKNOWNS` unknowns) are assembled by the compiled
-    :func:`o3d_lsmesh._fill_kernel.normal_equations` and solved by LAPACK's dense Cholesky, at
-    continuity 1 and 2 in one call (:func:`o3d_lsmesh._fill_kernel.fair_dense`: on a hole of a few
-    vertices the NumPy glue between the steps cost more than the steps); larger ones sparse.
+    with ``K = D - W`` and ``L = S K``: uniform (``S = D^-1``, eq. 1), or cotangent weights of ``x`` if
+    ``cot`` (the system: :func:`o3d_lsmesh._fill_kernel.patch_system`). ``rings[0]`` are the loop
+    vertices, ``rings[1]`` the ring around them; ``edges`` is :func:`o3d_lsmesh._fill_kernel.unique_edges`
+    of ``tris``. Solved by the gateway; a block whose system is not finite is left NaN.
     """
-    nv = len(x)
-    i, j, inverse = edges
     dense = len(unknown) <= _solvers.DENSE_UNKNOWNS
-    if dense and level > 0:  # the small patch's solve in one compiled call
-        solution = _kernel().fair_dense(
-            x, tris, i, j, inverse, unknown, rings[0], rings[1] if level > 1 else rings[0], level, cot
-        )
-        if solution is None:
-            raise SingularSystemError("the fairing system is not positive definite")
-        return solution
-    w, degree, scale = _kernel().laplacian_weights(tris, nv, i, j, inverse, x if cot else None)
-    if level == 0:
-        K, _ = _operators(i, j, w, degree, scale, dense)
-        known = np.ones(nv, dtype=bool)
-        known[unknown] = False
-        return _solve_blocks(K[unknown][:, unknown], -(K[unknown][:, np.flatnonzero(known)] @ x[known]))
-    rows = np.zeros(nv, dtype=bool)
-    rows[unknown] = True
-    rows[rings[0]] = True  # rows whose Laplacian involves an unknown
-    if level == 1:
-        plus, minus = np.flatnonzero(rows), np.zeros(0, dtype=np.int64)
-    else:
-        valid = rows.copy()
-        valid[rings[1]] = True
-        keep = (rows[i] | rows[j]) & valid[i] & valid[j]
-        plus, minus = i[keep], j[keep]
-    if dense:
-        normal, rhs = _kernel().normal_equations(x, i, j, w, degree, scale, plus, minus, unknown)
-        solution = _kernel().cholesky_solve(normal, rhs)  # solve_spd's dense path, without its wrapping
-        if solution is None:
-            raise SingularSystemError("the fairing system is not positive definite")
-        return solution
-    _, L = _operators(i, j, w, degree, scale, False)
-    if level == 1:
-        A_full = L[plus]
-    else:  # the edge difference operator: row e is +1 at plus[e] and -1 at minus[e]
-        G = sp.csr_matrix(
-            (
-                np.tile([1.0, -1.0], len(plus)),
-                np.stack([plus, minus], axis=1).ravel(),
-                np.arange(0, 2 * len(plus) + 1, 2),
-            ),
-            shape=(len(plus), nv),
-        )
-        A_full = G @ L
-    A_full = A_full.tocsc()
-    if len(unknown) and unknown[0] == nv - len(unknown) and (np.diff(unknown) == 1).all():
-        A_u = A_full[:, nv - len(unknown) :]  # the usual layout: the unknowns are the last columns
-    else:
-        A_u = A_full[:, unknown]
-    fixed = x.copy()
-    fixed[unknown] = 0.0  # A_known x_known, without slicing the known columns out
-    return _solve_blocks(A_u.T @ A_u, -(A_u.T @ (A_full @ fixed)))
+    ring0 = rings[0] if rings else np.zeros(0, dtype=np.int64)
+    ring1 = rings[1] if level > 1 else ring0
+    normal, rhs = _kernel().patch_system(x, tris, *edges, unknown, ring0, ring1, level, cot, dense)
+    if not dense:  # K_uu, or the rows A_u of the least squares
+        indptr, indices, data = normal
+        normal = sp.csr_matrix((data, indices, indptr), shape=(len(indptr) - 1, len(unknown)))
+        if level > 0:
+            normal, rhs = (normal.T @ normal).tocsr(), -(normal.T @ rhs)
+    return _solve_blocks(normal, rhs)
 
 
 def _solve_blocks(matrix: Any, rhs: np.ndarray) -> np.ndarray:
-    """:func:`o3d_lsmesh._solvers.solve_spd` of a fairing system, whose blocks are the patches (and
-    patches sharing rings): a block with a non-finite entry (cotangent weights of a degenerate
-    triangle) is left NaN, for the caller to fall back on that patch alone, and the others solved."""
-    matrix = sp.csr_matrix(matrix)
+    """:func:`o3d_lsmesh._solvers.solve_spd` of a fairing system (dense or sparse), whose blocks are the
+    patches (and patches sharing rings): a block with a non-finite entry (cotangent weights of a
+    degenerate triangle) is left NaN, for the caller to fall back on that patch alone; the others solved."""
     bad = ~np.isfinite(rhs).all(axis=1)
+    if not sp.issparse(matrix):
+        bad |= ~np.isfinite(matrix).all(axis=1)
+        if not bad.any():
+            return _solvers.solve_spd(matrix, rhs)
+    matrix = sp.csr_matrix(matrix)
     bad[np.repeat(np.arange(matrix.shape[0]), np.diff(matrix.indptr))[~np.isfinite(matrix.data)]] = True
     if not bad.any():
         return _solvers.solve_spd(matrix, rhs)
@@ -214,27 +146,18 @@ def fair_patches(
             return None
         return x if np.isfinite(x).any() else None  # a patch whose system is not finite: NaN rows
 
-    def solve_twice(level: int) -> tuple[np.ndarray | None, np.ndarray | None]:
-        """The uniform solve, then the cotangent one from it, in one compiled call (a small patch)."""
-        ring = local_rings[1] if level > 1 else local_rings[0]
-        return _kernel().fair_dense_twice(
-            work[local_vertices], local, *local_edges, local_unknown, local_rings[0], ring, level
-        )
-
     def candidates():  # lazily: most calls stop at the first
-        dense = len(unknown) <= _solvers.DENSE_UNKNOWNS
         for level in (
             range(continuity, -1, -1) if len(unknown) else []
         ):  # nothing to fair without new vertices
-            twice = cot and level > 0 and dense
-            solution, again = solve_twice(level) if twice else (solve(level, False), None)
+            solution = solve(level, False)
             if solution is None:
                 continue
             work[n:] = solution
             if cot and level > 0:
                 # cotangent weights (clamped, area-normalized) read off the uniform solution: a fair
                 # embedding, where weights from the flat refined patch diverged (camel 15h: 87 h off)
-                again = again if twice else solve(level, True)
+                again = solve(level, True)
                 if again is not None:  # a patch whose cotangent system is not finite keeps uniform
                     again = np.where(np.isfinite(again).all(axis=1)[:, None], again, solution)
                 if again is not None and _kernel().keeps_facing(work, again, new_tris):

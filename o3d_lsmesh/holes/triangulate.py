@@ -130,82 +130,63 @@ def triangulate_holes(filler: Any, holes: list, density: float, progress: bool) 
     ]
     piece_hole, piece_loop, piece_rows = zip(*pieces)
     count = len(piece_loop)
-    if count == 1 and len(piece_loop[0]) <= DP_MAX_EDGES:
-        # one simple loop short enough for the programme (the usual fill): one compiled call
-        with progress_bar(progress, total=1, desc="filling holes", unit="loop") as bar:
-            fresh_points, new_tris = _kernel().fill_loop(
-                piece_loop[0],
-                piece_rows[0],
-                vertices,
-                triangles,
-                *filler.vertex_triangles,
-                filler.sigma,
-                density,
-                ALPHA,
-            )
-            bar.update(1)
-        owner = tri_piece = np.zeros(len(new_tris), dtype=np.int64)
-    else:
-        # each piece's points, the normals across its edges, its chords that are mesh edges, its spacing
-        piece_points, piece_outer, piece_forbidden, piece_spacing, piece_pairs = zip(
-            *(
-                _kernel().loop_geometry(loop, rows, vertices, triangles, *filler.vertex_triangles)
-                for loop, rows in zip(piece_loop, piece_rows)
-            )
+    # each piece's points, the normals across its edges, its chords that are mesh edges, its spacing
+    piece_points, piece_outer, piece_forbidden, piece_spacing, piece_pairs = zip(
+        *(
+            _kernel().loop_geometry(loop, rows, vertices, triangles, *filler.vertex_triangles)
+            for loop, rows in zip(piece_loop, piece_rows)
         )
-        piece_extra, piece_tris = [], []
-        with progress_bar(progress, total=count, desc="filling holes", unit="loop") as bar:
-            for points, outer, forbidden, spacing in zip(
-                piece_points, piece_outer, piece_forbidden, piece_spacing
-            ):
-                extra, tris = _triangulate(
-                    points, outer, forbidden, spacing / density if density > 0 else 0.0
-                )
-                piece_extra.append(extra)
-                piece_tris.append(tris)
-                bar.update(1)
-        # every piece refined at once, in disjoint local index ranges (a single short loop took the
-        # compiled path above)
-        lengths = np.array([len(loop) for loop in piece_loop])
-        sizes = np.array([len(p) + len(e) for p, e in zip(piece_points, piece_extra)])
-        starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
-        all_points = np.concatenate([np.concatenate([p, e]) for p, e in zip(piece_points, piece_extra)])
-        all_tris = np.concatenate([t + start for t, start in zip(piece_tris, starts)])
-        point_piece = np.repeat(np.arange(count), sizes)
-        if density > 0:
-            # Liepa's scale: each loop vertex's mean edge length, the chords' spacing on their points
-            sigma = [
-                np.concatenate(
-                    [filler.sigma[loop] / max(density, 1e-300), np.full(len(extra), spacing / density)]
-                )
-                if len(extra)
-                else filler.sigma[loop] / max(density, 1e-300)
-                for loop, extra, spacing in zip(piece_loop, piece_extra, piece_spacing)
-            ]
-            # mesh edges between loop vertices: no flip may make them twice
-            all_points, all_tris, point_piece = _kernel().refine(
-                all_points,
-                np.concatenate(sigma),
-                all_tris,
-                np.concatenate([f + s for f, s in zip(piece_pairs, starts)]),
-                point_piece,
-                ALPHA,
-                len(all_points)
-                + _kernel().refine_budget(all_points, all_tris, filler.sigma[np.concatenate(piece_loop)]),
+    )
+    piece_extra, piece_tris = [], []
+    with progress_bar(progress, total=count, desc="filling holes", unit="loop") as bar:
+        for points, outer, forbidden, spacing in zip(
+            piece_points, piece_outer, piece_forbidden, piece_spacing
+        ):
+            extra, tris = _triangulate(points, outer, forbidden, spacing / density if density > 0 else 0.0)
+            piece_extra.append(extra)
+            piece_tris.append(tris)
+            bar.update(1)
+    # every piece refined at once, in disjoint local index ranges
+    lengths = np.array([len(loop) for loop in piece_loop])
+    sizes = np.array([len(p) + len(e) for p, e in zip(piece_points, piece_extra)])
+    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    all_points = np.concatenate([np.concatenate([p, e]) for p, e in zip(piece_points, piece_extra)])
+    all_tris = np.concatenate([t + start for t, start in zip(piece_tris, starts)])
+    point_piece = np.repeat(np.arange(count), sizes)
+    if density > 0:
+        # Liepa's scale: each loop vertex's mean edge length, the chords' spacing on their points
+        sigma = [
+            np.concatenate(
+                [filler.sigma[loop] / max(density, 1e-300), np.full(len(extra), spacing / density)]
             )
-        # global numbering: loop points (first in each piece, in order) are mesh vertices; the others
-        # are new, numbered piece by piece
-        is_loop = np.zeros(len(all_points), dtype=bool)
-        is_loop[concatenated_ranges(starts, lengths)] = True
-        global_index = np.empty(len(all_points), dtype=np.int64)
-        global_index[is_loop] = np.concatenate(piece_loop)
-        fresh = np.flatnonzero(~is_loop)
-        fresh = fresh[np.argsort(point_piece[fresh], kind="stable")]
-        global_index[fresh] = n + np.arange(len(fresh))
-        fresh_points = all_points[fresh]
-        tri_piece = point_piece[all_tris[:, 0]]
-        tri_order = np.argsort(tri_piece, kind="stable")
-        tri_piece = tri_piece[tri_order]
-        new_tris = global_index[all_tris[tri_order]]
-        owner = np.asarray(piece_hole, dtype=np.int64)[tri_piece]  # the hole of each new triangle
+            if len(extra)
+            else filler.sigma[loop] / max(density, 1e-300)
+            for loop, extra, spacing in zip(piece_loop, piece_extra, piece_spacing)
+        ]
+        # mesh edges between loop vertices: no flip may make them twice
+        all_points, all_tris, point_piece = _kernel().refine(
+            all_points,
+            np.concatenate(sigma),
+            all_tris,
+            np.concatenate([f + s for f, s in zip(piece_pairs, starts)]),
+            point_piece,
+            ALPHA,
+            len(all_points)
+            + _kernel().refine_budget(all_points, all_tris, filler.sigma[np.concatenate(piece_loop)]),
+        )
+    # global numbering: loop points (first in each piece, in order) are mesh vertices; the others
+    # are new, numbered piece by piece
+    is_loop = np.zeros(len(all_points), dtype=bool)
+    is_loop[concatenated_ranges(starts, lengths)] = True
+    global_index = np.empty(len(all_points), dtype=np.int64)
+    global_index[is_loop] = np.concatenate(piece_loop)
+    fresh = np.flatnonzero(~is_loop)
+    fresh = fresh[np.argsort(point_piece[fresh], kind="stable")]
+    global_index[fresh] = n + np.arange(len(fresh))
+    fresh_points = all_points[fresh]
+    tri_piece = point_piece[all_tris[:, 0]]
+    tri_order = np.argsort(tri_piece, kind="stable")
+    tri_piece = tri_piece[tri_order]
+    new_tris = global_index[all_tris[tri_order]]
+    owner = np.asarray(piece_hole, dtype=np.int64)[tri_piece]  # the hole of each new triangle
     return fresh_points, new_tris, owner, tri_piece, piece_loop
