@@ -71,7 +71,7 @@ def score(out, clean, boundary):
 
 
 def boundary_mask(mesh):
-    from o3d_lsmesh.topology import boundary_halfedges
+    from o3d_lsmesh.core.boundary import boundary_halfedges
 
     F = np.asarray(mesh.triangles).astype(np.int64)
     mask = np.zeros(len(mesh.vertices), dtype=bool)

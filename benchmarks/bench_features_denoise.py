@@ -38,8 +38,8 @@ import scipy.sparse as sp
 from _common import REPO, markdown_table, write_markdown
 from bench_realscans_denoise import PEERS
 
-from o3d_lsmesh._solvers import SPDSolver
 from o3d_lsmesh.core.connectivity import Connectivity
+from o3d_lsmesh.core.solve import SPDSolver
 from o3d_lsmesh.fairing import constrained_fairing_arrays
 from o3d_lsmesh.fairing import features as fe
 from o3d_lsmesh.fairing.scan_measure import measured_noise

@@ -25,11 +25,12 @@ import numpy as np
 import scipy.sparse as sp
 from _common import load_mesh, markdown_table, write_markdown
 
+from o3d_lsmesh.core.boundary import boundary_halfedges
+from o3d_lsmesh.core.connectivity import vertex_rings
 from o3d_lsmesh.fairing.constrained import constrained_fairing_arrays
 from o3d_lsmesh.fairing.multiresolution import _is_simple, multiresolution_fairing_arrays
 from o3d_lsmesh.hierarchy.hierarchy import build_hierarchy_arrays
 from o3d_lsmesh.metrics import signed_volume
-from o3d_lsmesh.topology import boundary_halfedges, vertex_rings
 
 LEVELS = range(7)
 ITERATIONS = 5  # number_of_iterations, the default

@@ -75,7 +75,7 @@ class Reference:
 
 
 def boundary_vertices(triangles: np.ndarray, n: int) -> np.ndarray:
-    from o3d_lsmesh.topology import boundary_halfedges
+    from o3d_lsmesh.core.boundary import boundary_halfedges
 
     mask = np.zeros(n, dtype=bool)
     mask[boundary_halfedges(triangles, n).ravel()] = True
@@ -263,8 +263,8 @@ def run_scan(name, folder, reference, sweep_lines):
 
 def multiresolution_rows(results, reference, levels=(1, 2, 3)):
     """Multiresolution fairing on each scan with the triangles of its non-manifold vertices removed."""
+    from o3d_lsmesh.core.boundary import nonmanifold_vertices
     from o3d_lsmesh.fairing import constrained_fairing_arrays, multiresolution_fairing
-    from o3d_lsmesh.topology import nonmanifold_vertices
 
     rows = []
     for r in results:

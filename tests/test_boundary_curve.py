@@ -8,15 +8,15 @@ import pytest
 from conftest import grid, load_mesh
 from numpy.testing import assert_allclose
 
-from o3d_lsmesh.fairing import smooth_boundary_curves, smooth_boundary_curves_arrays
-from o3d_lsmesh.fairing.boundary_curve import curve_operator
-from o3d_lsmesh.topology import (
+from o3d_lsmesh.core.boundary import (
     BoundaryCurves,
     boundary_chains,
     boundary_curves,
     boundary_halfedges,
     boundary_loops,
 )
+from o3d_lsmesh.fairing import smooth_boundary_curves, smooth_boundary_curves_arrays
+from o3d_lsmesh.fairing.boundary_curve import curve_operator
 
 TIGHT = 1e-12
 

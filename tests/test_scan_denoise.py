@@ -14,10 +14,19 @@ import scipy.sparse as sp
 from conftest import DATA, REPO, SCANS, grid
 from numpy.testing import assert_allclose
 
-from o3d_lsmesh._solvers import SPDSolver
+from o3d_lsmesh.core.boundary import boundary_halfedges
+from o3d_lsmesh.core.connectivity import Connectivity
+from o3d_lsmesh.core.operators import scan_normal_matrix
 from o3d_lsmesh.fairing import constrained_fairing, constrained_fairing_arrays, scan_fairing, scan_measure
 from o3d_lsmesh.fairing.constrained import DEFAULT_METHOD
-from o3d_lsmesh.fairing.scan_fairing import (
+from o3d_lsmesh.fairing.scan_fairing import ScanFairingSolver, relax_rim, scan_denoise
+from o3d_lsmesh.fairing.scan_measure import (
+    measured_boundary_weight,
+    measured_noise,
+    scan_likeness,
+    scan_parameters,
+)
+from o3d_lsmesh.fairing.tuning import (
     MU_RANGE,
     NOISE_MU_POWER,
     NOISE_MU_SCALE,
@@ -30,17 +39,7 @@ from o3d_lsmesh.fairing.scan_fairing import (
     SCAN_RIM_MU,
     SCAN_RIM_RATIO,
     SLIVER_QUALITY,
-    ScanFairingSolver,
-    _lower_csc,
-    measured_boundary_weight,
-    measured_noise,
-    relax_rim,
-    scan_likeness,
-    scan_normal_matrix,
-    scan_parameters,
-    scan_system,
 )
-from o3d_lsmesh.topology import boundary_halfedges
 
 TIGHT = 1e-9
 #: every raw scan's mean distance to the reference must drop at least this much (fraction of raw);
@@ -313,37 +312,10 @@ def test_energy_and_solution_match_a_plain_loop_assembly(case, weights):
     _, V, F = case
     mu, membrane, boundary_weight, rim_curve = weights
     A, b = reference_energy_matrices(V, F, mu, membrane, boundary_weight, rim_curve)
-    system = scan_system(
-        F, len(V), mu=mu, membrane=membrane, boundary_weight=boundary_weight, rim_curve=rim_curve
-    )
-    assert_allclose(system.normal_matrix().toarray(), A, atol=TIGHT)
-    # what the solver factors: assembled from the edges, without the rows
-    assembled = scan_normal_matrix(
-        F, len(V), mu=mu, membrane=membrane, boundary_weight=boundary_weight, rim_curve=rim_curve
-    )
+    # what the solver factors, assembled from the edges, against the loops' matrix
+    assembled = scan_normal_matrix(Connectivity(F, len(V)), mu, membrane, boundary_weight, rim_curve)[0]
     assert assembled.has_canonical_format
     assert_allclose(assembled.toarray(), A, atol=TIGHT)
-    referenced = system.referenced
-    assert_allclose(system.normal_rhs(V)[referenced], b[referenced], atol=TIGHT)
-    # the energy itself, at a random X: E(X) = |R X - T|^2 against the loop form's quadratic
-    X = V + np.random.default_rng(1).normal(0, 0.1, V.shape)
-    T = np.zeros((system.rows.shape[0], 3))
-    T[: len(F)] = system.penalty @ V
-    # rows: barycenters (m), edges (e), a unit row per unreferenced vertex (left out: not part of E), thin plate
-    first_unit = len(F) + len(edges_of(F))
-    unit_rows = np.zeros(system.rows.shape[0], dtype=bool)
-    unit_rows[first_unit : first_unit + np.count_nonzero(~referenced)] = True
-    energy = ((system.rows @ X - T)[~unit_rows] ** 2).sum()
-    used = np.ix_(referenced, referenced)
-    Xr = X[referenced]
-    constant = mu * sum(
-        (boundary_weight if w < 1 else 1.0) * ((V[t].sum(0)) ** 2).sum()
-        for t, w in zip(F.tolist(), system.triangle_weight)
-    )
-    loop_energy = (
-        np.einsum("ij,ij->", Xr, A[used] @ Xr) - 2 * np.einsum("ij,ij->", Xr, b[referenced]) + constant
-    )
-    assert_allclose(energy, loop_energy, rtol=1e-9)
     X1, twiced = reference_solution(V, F, mu, membrane, boundary_weight, rim_curve)
     solver = ScanFairingSolver(
         F, len(V), mu=mu, membrane=membrane, boundary_weight=boundary_weight, rim_curve=rim_curve
@@ -397,6 +369,8 @@ def test_energy_and_solution_match_a_plain_loop_assembly(case, weights):
         # lone one, has a normal set by round-off)
         default = reference_relax_rim(V, faired, F, measured.scan_likeness)
         assert_allclose(constrained_fairing_arrays(V, F, None, method=None), default, atol=1e-9)
+    referenced = solver.referenced
+    assert_allclose(solver.normal_rhs(V)[referenced], b[referenced], atol=TIGHT)
     copy = pickle.loads(pickle.dumps(solver))
     assert_allclose(copy.solve(V), twiced, atol=1e-9)
 
@@ -665,31 +639,26 @@ def test_open3d_mesh_in_and_out_and_non_manifold_accepted():
     assert np.array_equal(np.asarray(mesh.vertices), fin)
 
 
-def test_normal_matrix_assembly_on_a_large_soup_and_a_degenerate_triangle():
-    # against the rows' product on a grid with a fin (an edge of three triangles), overlapping triangles
-    # and unreferenced vertices, every term on; a triangle repeating a vertex takes the rows' path
-    V, F = grid(30, 20)
-    F = np.vstack([F, [[0, 31, 45], [5, 6, 200], [40, 41, 42]]])
-    n = len(V) + 3  # three unreferenced vertices
+def test_a_collapsed_triangle_is_left_out_and_the_factor_solves_the_normal_equations():
+    # a triangle repeating a vertex has no surface: the scan energy is that of the other triangles (the
+    # loops' matrix of those), a vertex only it references stays; on a soup with a fin, overlapping
+    # triangles and unreferenced vertices the factor (and a pickled copy, analyzed again) solves it
+    V, F = grid(12, 10)
+    F = np.vstack([F, [[0, 13, 25], [5, 6, 100], [40, 41, 42]]])
+    V = np.vstack([V, np.random.default_rng(3).normal(size=(3, 3))])
+    collapsed = np.vstack([F, [[3, 3, 4], [121, 121, 121]]])
+    n = len(V)
     kwargs = dict(mu=0.07, membrane=0.3, boundary_weight=0.2, rim_curve=0.6)
-    expected = scan_system(F, n, **kwargs).normal_matrix()
-    assembled = scan_normal_matrix(F, n, **kwargs)
-    assert abs(assembled - expected).max() <= 1e-13 * abs(expected).max()
-    lower = _lower_csc(assembled)
-    assert abs(lower - sp.tril(expected, format="csc")).max() <= 1e-13 * abs(expected).max()
-    degenerate = np.vstack([F, [[3, 3, 4]]])
-    expected = scan_system(degenerate, n, **kwargs).normal_matrix()
-    assert abs(scan_normal_matrix(degenerate, n, **kwargs) - expected).max() <= 1e-13 * abs(expected).max()
-    # the factor, analyzed as K^T K from the 1-ring pattern, solves the rows' normal equations (their own
-    # product), and so does a pickled copy (which analyzes again); the rows' path (degenerate) as well
+    A, _ = reference_energy_matrices(V, F, **kwargs)
     b = np.random.default_rng(2).normal(size=(n, 3))
-    for faces in (F, degenerate):
-        solver = ScanFairingSolver(faces, n, **kwargs)._solver
-        for copy in (solver, pickle.loads(pickle.dumps(solver))):
-            normal = scan_system(faces, n, **kwargs).normal_matrix()
-            assert_allclose(normal @ copy.solve(b), b, atol=1e-10)
-    with pytest.raises(ValueError, match=r"pattern_of must have 603 rows, got shape \(5, 5\)"):
-        SPDSolver(lower, lower=True, pattern_of=sp.identity(5, format="csc"))
+    for faces in (F, collapsed):
+        solver = ScanFairingSolver(faces, n, **kwargs)
+        for copy in (solver._solver, pickle.loads(pickle.dumps(solver._solver))):
+            assert_allclose(A @ copy.solve(b), b, atol=1e-9)
+    X1 = np.linalg.solve(A, reference_energy_matrices(V, F, **kwargs)[1])
+    assert_allclose(ScanFairingSolver(collapsed, n, **kwargs).filter(V), X1, atol=1e-9)
+    default = scan_denoise(V, collapsed)  # (the public entry points refuse collapsed triangles)
+    assert np.array_equal(default, scan_denoise(V, F)) and np.array_equal(default[121], V[121])
 
 
 def test_scan_options_raise():

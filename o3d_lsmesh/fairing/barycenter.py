@@ -15,10 +15,10 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from .._solvers import SPDSolver, check_constant_modes, check_finite, operator_scale, solver_backend
 from ..core.connectivity import Connectivity
 from ..core.operators import accumulate_block, penalty_matrix, triangle_coefficients
 from ..core.operators import local_operator as local_matrices
+from ..core.solve import SPDSolver, check_constant_modes, check_finite, operator_scale, solver_backend
 from .tuning import BLOCK_ROWS, DEFAULT_MU
 
 __all__ = ["DEFAULT_MU", "GlobalSolver", "LocalOperator", "local_operator", "triangle_coefficients"]

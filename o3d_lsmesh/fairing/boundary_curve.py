@@ -9,15 +9,13 @@ Docs page: ``docs/algorithms/boundary_curves.rst``.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
-import scipy.sparse as sp
 
 from .._o3d import new_mesh, read_mesh
-from ..core.arrays import concatenated_ranges
 from ..core.boundary import BoundaryCurves, boundary_curves
+from ..core.operators import CurveOperator, curve_laplacian
 from ..core.validate import as_count, as_iterations, mesh_arrays
 
 if TYPE_CHECKING:
@@ -37,131 +35,16 @@ __all__ = [
 MIN_LOOP_LENGTH = 4
 
 
-@dataclass(frozen=True)
-class CurveOperator:
-    """One averaged relaxation step of every boundary curve as two fixed sparse matrices.
-
-    ``vertex (b,)`` are the boundary vertices that move and ``support (s,)`` those their
-    estimates read; row ``j`` of ``moving (b, s)`` and ``targets (b, s)`` averages the estimates
-    of ``vertex[j]``: one step is ``X[vertex] <- moving @ X[support] + targets @ X0[support]``.
-    Arrays only: it pickles and may be shared between threads.
-    """
-
-    vertex: np.ndarray
-    support: np.ndarray
-    moving: sp.csr_matrix
-    targets: sp.csr_matrix
-
-    def __len__(self) -> int:
-        return len(self.vertex)
-
-    def target(self, positions0: np.ndarray) -> np.ndarray:
-        """The constant part of the step (the segment midpoints' share), ``(b, 3)``."""
-        return self.targets @ positions0[self.support]
-
-    def step(self, positions: np.ndarray, target: np.ndarray) -> np.ndarray:
-        """New positions ``(b, 3)`` of :attr:`vertex` after one averaged relaxation of every segment."""
-        return self.moving @ positions[self.support] + target
-
-
 def curve_operator(curves: BoundaryCurves | list) -> CurveOperator:
-    """Build the :class:`CurveOperator` of boundary curves.
+    """The :class:`~o3d_lsmesh.core.operators.CurveOperator` of boundary curves (loops or ``BoundaryCurves``).
 
-    ``curves`` is a :class:`~o3d_lsmesh.topology.BoundaryCurves` (loops and open chains; its
-    ``junctions`` and the chains' ends are held) or a list of ordered closed loops (``(l,)``
-    vertex indices). A vertex visited several times (a pinch) averages all its estimates. Loops
-    of fewer than :data:`MIN_LOOP_LENGTH` vertices and chains of fewer edges are held.
+    Loops of fewer than :data:`MIN_LOOP_LENGTH` vertices and chains of fewer edges are held
+    (:func:`o3d_lsmesh.core.operators.curve_laplacian`).
 
-    Every segment ``(a, b)`` with outer neighbours ``a'`` (before ``a``) and
-    ``b'`` (after ``b``) gives the section 3.3 estimates
-    ``a <- (a' - b') / 6 + (a0 + b0) / 2`` and ``b <- (b' - a') / 6 + (a0 + b0) / 2``.
-    A segment with a held end ``a`` keeps its midpoint by
-    ``b <- (a0 + b0) - a`` (the constraint alone determines ``b``; the energy
-    term of the held end is a constant).
-
-    Parameters
-    ----------
-    curves : BoundaryCurves or list of (l,) int64
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> op = curve_operator([np.array([5, 6, 7, 8])])
-    >>> op.vertex.tolist(), (op.moving.toarray()[0] * 12).round().tolist()  # (p6 + p8 - 2 p7) / 12
-    ([5, 6, 7, 8], [0.0, 1.0, -2.0, 1.0])
+    >>> curve_operator([np.array([5, 6, 7, 8])]).vertex.tolist()
+    [5, 6, 7, 8]
     """
-    if isinstance(curves, BoundaryCurves):
-        loops, chains, held = list(curves.loops), list(curves.chains), curves.junctions
-    else:
-        loops, chains, held = list(curves), [], np.zeros(0, dtype=np.int64)
-    loops = [np.asarray(loop, dtype=np.int64) for loop in loops if len(loop) >= MIN_LOOP_LENGTH]
-    # a chain of k edges has k + 1 vertices; like a short loop, a chain of fewer than MIN_LOOP_LENGTH edges
-    # (such as a triangular hole through a pinch, whose two ends are the same vertex) would only shrink
-    chains = [np.asarray(chain, dtype=np.int64) for chain in chains if len(chain) > MIN_LOOP_LENGTH]
-    ends = [chain[[0, -1]] for chain in chains]
-    held = np.unique(np.concatenate([np.asarray(held, dtype=np.int64).ravel(), *ends]))
-    a, b, outer_a, outer_b = _segments(loops, closed=True)
-    ca, cb, couter_a, couter_b = _segments(chains, closed=False)
-    a, b = np.concatenate([a, ca]), np.concatenate([b, cb])
-    outer_a, outer_b = np.concatenate([outer_a, couter_a]), np.concatenate([outer_b, couter_b])
-    a_held, b_held = np.isin(a, held), np.isin(b, held)
-    # every estimate: (vertex, [(column, weight)] of the moving part, [(column, weight)] of the target part)
-    blocks = []
-    # both ends free (then both have outer neighbours: only held chain ends lack one)
-    inner = ~a_held & ~b_held
-    ia, ib, oa, ob = a[inner], b[inner], outer_a[inner], outer_b[inner]
-    blocks.append((ia, [(oa, 1 / 6), (ob, -1 / 6)], [(ia, 0.5), (ib, 0.5)]))
-    blocks.append((ib, [(ob, 1 / 6), (oa, -1 / 6)], [(ia, 0.5), (ib, 0.5)]))
-    start = a_held & ~b_held  # a is held: the midpoint constraint alone gives b
-    blocks.append((b[start], [(a[start], -1.0)], [(a[start], 1.0), (b[start], 1.0)]))
-    end = ~a_held & b_held
-    blocks.append((a[end], [(b[end], -1.0)], [(a[end], 1.0), (b[end], 1.0)]))
-
-    vertex_all = np.concatenate([block[0] for block in blocks])
-    vertex, row = np.unique(vertex_all, return_inverse=True)
-    scale = 1.0 / np.maximum(np.bincount(row, minlength=len(vertex)), 1)  # average the estimates
-    columns_all = np.concatenate([column for block in blocks for part in (1, 2) for column, _ in block[part]])
-    support = np.unique(columns_all)
-
-    def matrix(part: int) -> sp.csr_matrix:
-        rows = np.concatenate([np.searchsorted(vertex, block[0]) for block in blocks for _ in block[part]])
-        columns = np.searchsorted(
-            support, np.concatenate([column for block in blocks for column, _ in block[part]])
-        )
-        weights = np.concatenate(
-            [np.full(len(column), weight) for block in blocks for column, weight in block[part]]
-        )
-        out = sp.csr_matrix((weights * scale[rows], (rows, columns)), shape=(len(vertex), len(support)))
-        out.sum_duplicates()
-        return out
-
-    return CurveOperator(vertex, support, matrix(1), matrix(2))
-
-
-def _segments(curves: list, *, closed: bool):
-    """Segments ``(a, b)`` of every curve with their outer neighbours ``(a', b')`` (``-1`` past a chain end)."""
-    if not curves:
-        empty = np.zeros(0, dtype=np.int64)
-        return empty, empty, empty, empty
-    lengths = np.array([len(c) for c in curves], dtype=np.int64)
-    vertex = np.concatenate(curves)
-    position = concatenated_ranges(0, lengths)  # within its curve
-    start = np.arange(len(vertex)) - position
-    length = np.repeat(lengths, lengths)
-    if closed:
-        # e.g. loop [5, 6, 7, 8]: segment (5, 6) has outer neighbours (8, 7)
-        def at(by):
-            return vertex[start + (position + by) % length]
-
-        return vertex, at(1), at(-1), at(2)
-    # a chain of k + 1 vertices has k segments: drop the last vertex as a segment start
-    keep = position < length - 1
-    a = vertex[keep]
-    b = vertex[np.flatnonzero(keep) + 1]
-    pos, size, first = position[keep], length[keep], start[keep]
-    outer_a = np.where(pos > 0, vertex[np.maximum(first + pos - 1, 0)], -1)
-    outer_b = np.where(pos + 2 < size, vertex[np.minimum(first + pos + 2, len(vertex) - 1)], -1)
-    return a, b, outer_a, outer_b
+    return curve_laplacian(curves, MIN_LOOP_LENGTH)
 
 
 def smooth_boundary_curves_arrays(

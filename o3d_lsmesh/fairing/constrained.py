@@ -14,11 +14,11 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .._o3d import new_mesh, read_mesh
-from .._solvers import SOLVERS
 from ..core.boundary import boundary_curves
 from ..core.connectivity import Connectivity
 from ..core.errors import InputError
 from ..core.progress import check_progress, iterate
+from ..core.solve import SOLVERS
 from ..core.validate import (
     Option,
     as_bool,

@@ -9,17 +9,15 @@ measured on the mesh (:mod:`.scan_measure`). Docs page: ``docs/algorithms/scan_d
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 import scipy.sparse as sp
 
-from .._collapsed import collapsed_triangles
-from .._normals import area_weighted_normals
-from .._progress import stages
-from .._solvers import SPDSolver, gram_matrix, solver_backend
+from ..core.arrays import area_weighted_normals
 from ..core.connectivity import Connectivity
-from ..core.operators import rim_neighbours
+from ..core.operators import lower_csc, rim_neighbours, scan_normal_matrix
+from ..core.progress import stages
+from ..core.solve import Plan, SPDSolver, solver_backend
+from ..core.validate import collapsed_triangles
 from .scan_measure import (
     NoiseEstimate,
     ScanParameters,
@@ -63,228 +61,33 @@ __all__ = [
     "NoiseEstimate",
     "ScanFairingSolver",
     "ScanParameters",
-    "ScanSystem",
     "measured_boundary_weight",
     "measured_noise",
     "relax_rim",
     "rim_noise_ratio",
     "scan_denoise",
     "scan_likeness",
-    "scan_normal_matrix",
     "scan_parameters",
-    "scan_system",
     "triangle_quality",
 ]
 
 
-class _Penalized:
-    penalty: sp.csr_matrix  # (m, n) sqrt(mu W) H: the rows that carry the targets
-
-    def normal_rhs(self, positions0: np.ndarray) -> np.ndarray:
-        """``R^T T = mu H^T W H X0``, ``(n, 3)``."""
-        return self.penalty.T @ (self.penalty @ positions0)
-
-
-@dataclass(frozen=True)
-class ScanSystem(_Penalized):
-    """The scan energy as least-squares rows: ``E(X) = |R X - T|^2``, ``R^T R = mu H^T W H + lambda G + K^T K``.
-
-    ``rows``: ``R = [sqrt(mu W) H; sqrt(lambda) D; unit rows of the u unreferenced vertices; K]``;
-    ``penalty``: its first ``m`` rows; ``referenced``, ``boundary`` ``(n,)`` bool; ``triangle_weight``
-    ``(m,)`` ``w_t``.
-    """
-
-    rows: sp.csr_matrix
-    penalty: sp.csr_matrix
-    referenced: np.ndarray
-    boundary: np.ndarray
-    triangle_weight: np.ndarray
-
-    def normal_matrix(self) -> sp.csc_matrix:
-        """``R^T R``, ``(n, n)`` CSC (what the solver factors, formed here only for checks)."""
-        return (self.rows.T @ self.rows).tocsc()
-
-
-def scan_system(
-    triangles: np.ndarray,
-    n: int,
-    *,
-    mu: float,
-    membrane: float,
-    boundary_weight: float,
-    conn: Connectivity | None = None,
-    rim_curve: float = 0.0,
-) -> ScanSystem:
-    """The least-squares rows of the scan energy for ``(m, 3) int64`` triangles on ``n`` vertices.
-
-    No manifold condition: an edge of three or more triangles is an interior
-    edge (it is not on the boundary), a vertex joining several fans has the
-    union of their neighbours as its 1-ring. Built from one edge list, in
-    ``O(n + m)``.
-    """
-    m = len(triangles)
-    conn = Connectivity(triangles, n) if conn is None else conn
-    boundary, valence = _rim(conn)
-    counts = conn.edge_triangles
-    edges = conn.edges.astype(np.int64)  # row numbers below pass 2**31 before the vertex indices do
-    e = len(edges)
-    lo, hi = edges[:, 0], edges[:, 1]
-    referenced = valence > 0
-    unreferenced = np.flatnonzero(~referenced)
-    inverse = np.zeros(n)
-    np.divide(1.0, valence, out=inverse, where=referenced)
-    weight = np.where(boundary[triangles].any(axis=1), float(boundary_weight), 1.0)  # (m,) w_t
-    root = np.sqrt(mu * weight)
-    membrane_root = np.sqrt(membrane)
-    ref_rows = np.flatnonzero(referenced)
-    # rows [0, m): sqrt(mu w_t) at t's corners; [m, m+e): sqrt(lambda) (x_lo - x_hi); a unit row per
-    # unreferenced vertex; then K (row i: 1 at i, -1/n_i at each neighbour)
-    u = len(unreferenced)
-    row = [np.repeat(np.arange(m), 3), m + np.arange(e), m + np.arange(e), m + e + np.arange(u)]
-    col = [triangles.ravel(), lo, hi, unreferenced]
-    data = [np.repeat(root, 3), np.full(e, membrane_root), np.full(e, -membrane_root), np.ones(u)]
-    count = m + e + u
-    # a rim vertex's row mixes its one-sided Laplacian (weight 1 - t) with the Laplacian along its
-    # boundary curve (weight t = rim_curve): the one-sided row pulls a straight rim inward, the curve
-    # row does not
-    t = float(rim_curve)
-    row_weight = np.where(boundary, 1.0 - t, 1.0) * inverse
-    row += [count + ref_rows, count + lo, count + hi]
-    col += [ref_rows, hi, lo]
-    data += [np.ones(len(ref_rows)), -row_weight[lo], -row_weight[hi]]
-    if t > 0.0:
-        curve = edges[counts == 1]
-        curve_inverse = _curve_inverse(curve, n, t)
-        row += [count + curve[:, 0], count + curve[:, 1]]
-        col += [curve[:, 1], curve[:, 0]]
-        data += [-curve_inverse[curve[:, 0]], -curve_inverse[curve[:, 1]]]
-    shape = (count + n, n)
-    rows = sp.csr_matrix((np.concatenate(data), (np.concatenate(row), np.concatenate(col))), shape=shape)
-    return ScanSystem(rows, _penalty(triangles, n, root), referenced, boundary, weight)
-
-
-def _curve_inverse(curve: np.ndarray, n: int, t: float) -> np.ndarray:
-    """``t / c_i`` for the ``c_i`` boundary-curve neighbours of each vertex (0 off the curve), ``(n,)``."""
-    valence = np.bincount(curve.ravel(), minlength=n)
-    return np.divide(t, valence, out=np.zeros(n), where=valence > 0)
-
-
 def _penalty(triangles: np.ndarray, n: int, root: np.ndarray) -> sp.csr_matrix:
-    """``sqrt(mu W) H`` for ``root = sqrt(mu w_t)``, ``(m, n)`` CSR."""
+    """``sqrt(mu W) H`` for ``root = sqrt(mu w_t)``, ``(m, n)`` CSR: the rows that carry the targets."""
     corners = np.arange(0, 3 * len(triangles) + 1, 3)
     return sp.csr_matrix((np.repeat(root, 3), triangles.ravel(), corners), shape=(len(triangles), n))
 
 
-def scan_normal_matrix(
-    triangles: np.ndarray,
-    n: int,
-    *,
-    mu: float,
-    membrane: float,
-    boundary_weight: float,
-    conn: Connectivity | None = None,
-    rim_curve: float = 0.0,
-) -> sp.csr_matrix:
-    """The normal matrix ``R^T R`` of :func:`scan_system` from the mesh's edges, ``(n, n)`` canonical CSR.
-
-    ``(H^T W H)_ij`` sums ``w_t`` over the triangles on edge ``ij``, scattered into the 1-ring
-    pattern; only ``K^T K`` is a sparse product.
-
-    >>> scan_normal_matrix(np.array([[0, 1, 2], [0, 2, 3]]), 5, mu=0.03, membrane=0.45, boundary_weight=0.1).shape
-    (5, 5)
-    """
-    return _normal_matrix(triangles, n, mu, membrane, boundary_weight, conn, rim_curve)[0]
+def _surface(triangles: np.ndarray, n: int, conn: Connectivity | None) -> tuple[np.ndarray, Connectivity]:
+    """The triangles of three distinct vertices and their connectivity: a collapsed one has no surface."""
+    collapsed = collapsed_triangles(triangles)
+    if collapsed.any():
+        triangles = triangles[~collapsed]
+        return triangles, Connectivity(triangles, n)
+    return triangles, Connectivity(triangles, n) if conn is None else conn
 
 
-def _normal_matrix(
-    triangles: np.ndarray,
-    n: int,
-    mu: float,
-    membrane: float,
-    boundary_weight: float,
-    conn: Connectivity | None = None,
-    rim_curve: float = 0.0,
-) -> tuple[sp.csr_matrix, sp.csc_matrix | None, np.ndarray]:
-    # scan_normal_matrix; the pattern of K (the 1-ring, diagonal included) when K^T K holds the matrix's;
-    # the (m,) triangle weights w_t
-    triangles = np.asarray(triangles)
-    if collapsed_triangles(triangles).any():
-        rows = scan_system(
-            triangles,
-            n,
-            mu=mu,
-            membrane=membrane,
-            boundary_weight=boundary_weight,
-            conn=conn,
-            rim_curve=rim_curve,
-        )
-        return rows.normal_matrix().tocsr(), None, rows.triangle_weight
-    conn = Connectivity(triangles, n) if conn is None else conn
-    edges, counts, halfedge_edge = conn.edges, conn.edge_triangles, conn.halfedge_edge
-    boundary, valence = _rim(conn)
-    lo, hi = edges[:, 0], edges[:, 1]
-    referenced = valence > 0
-    indptr, indices, diagonal, forward, backward = conn.ring_pattern
-    weight = np.where(boundary[triangles].any(axis=1), float(boundary_weight), 1.0)  # (m,) w_t
-    # mu H^T W H + lambda G (+ 1 on an unreferenced vertex's diagonal), on the 1-ring pattern
-    data = np.empty(len(indices))
-    data[diagonal] = mu * np.bincount(triangles.ravel(), np.repeat(weight, 3), minlength=n)
-    data[diagonal] += membrane * valence
-    data[diagonal[~referenced]] = 1.0
-    # half-edge a * m + t is triangle t's edge from corner a: its weights are np.tile(w, 3)
-    on_edge = mu * np.bincount(halfedge_edge, np.tile(weight, 3), minlength=len(edges)) - membrane
-    data[forward] = on_edge
-    data[backward] = on_edge
-    matrix = sp.csr_matrix((data, indices, indptr), shape=(n, n))
-    # K: row i is 1 at i and -(1 - t) / n_i - t / c_i at each neighbour (the second part only across
-    # boundary edges, c_i of them; t = rim_curve for a rim vertex, the one-sided row otherwise)
-    t = float(rim_curve)
-    inverse = np.zeros(n)
-    np.divide(np.where(boundary, 1.0 - t, 1.0), valence, out=inverse, where=referenced)
-    plate = np.empty(len(indices))
-    plate[diagonal] = referenced
-    plate[forward] = -inverse[lo]
-    plate[backward] = -inverse[hi]
-    if t > 0.0:
-        rim = counts == 1
-        curve_inverse = _curve_inverse(edges[rim], n, t)
-        plate[forward[rim]] -= curve_inverse[lo[rim]]
-        plate[backward[rim]] -= curve_inverse[hi[rim]]
-    # K's CSR arrays are K^T's CSC: K^T K by the compiled product on every core; symmetric, so its
-    # CSC arrays are its CSR ones. Its pattern holds the 1-ring (K_ii K_ij), so
-    # the 1-ring terms are added into it in place (a sum would make a third 2-ring matrix)
-    from .. import _block_kernel  # compiled by the package's build: imported where used
-
-    square = gram_matrix(sp.csc_matrix((plate, indices, indptr), shape=(n, n)))
-    del plate
-    index = square.indices.dtype
-    missing = _block_kernel.add_subset(
-        square.indptr,
-        square.indices,
-        square.data,
-        matrix.indptr.astype(index, copy=False),
-        matrix.indices.astype(index, copy=False),
-        matrix.data,
-    )
-    assert missing == 0, "the 1-ring lies within K^T K's pattern"
-    del matrix
-    ring = sp.csc_matrix((np.ones(len(indices)), indices, indptr), shape=(n, n))
-    normal = sp.csr_matrix((square.data, square.indices, square.indptr), shape=(n, n))
-    normal.has_sorted_indices = True  # canonical: CHOLMOD and the lower-triangle cut need it
-    return normal, ring, weight
-
-
-def _lower_csc(symmetric: sp.csr_matrix) -> sp.csc_matrix:
-    """The lower triangle of a symmetric canonical CSR matrix as CSC: its upper CSR triangle, reinterpreted."""
-    n = symmetric.shape[0]
-    rows = np.repeat(np.arange(n, dtype=symmetric.indices.dtype), np.diff(symmetric.indptr))
-    keep = symmetric.indices >= rows
-    indptr = np.zeros(n + 1, dtype=symmetric.indptr.dtype)
-    np.cumsum(np.bincount(rows[keep], minlength=n), out=indptr[1:])
-    return sp.csc_matrix((symmetric.data[keep], symmetric.indices[keep], indptr), shape=(n, n))
-
-
-class ScanFairingSolver(_Penalized):
+class ScanFairingSolver:
     """The scan energy assembled once; :meth:`solve` faires positions with it.
 
     Parameters
@@ -323,11 +126,8 @@ class ScanFairingSolver(_Penalized):
         self.mu = float(mu)
         self.membrane = float(membrane)
         backend = solver_backend(solver)
-        triangles = np.asarray(triangles)
-        conn = Connectivity(triangles, n) if conn is None else conn
-        normal, ring, weight = _normal_matrix(
-            triangles, n, self.mu, self.membrane, boundary_weight, conn, rim_curve
-        )
+        triangles, conn = _surface(np.asarray(triangles), n, conn)
+        normal, ring, weight = scan_normal_matrix(conn, self.mu, self.membrane, boundary_weight, rim_curve)
         self.penalty = _penalty(triangles, n, np.sqrt(self.mu * weight))
         self.referenced = _rim(conn)[1] > 0
         if backend == "auto" and n >= SCAN_ITERATIVE_VERTICES:
@@ -337,25 +137,23 @@ class ScanFairingSolver(_Penalized):
             # matrix, numbered by the 1-ring's reverse Cuthill-McKee order (a scan's is scattered)
             whole = sp.csc_matrix((normal.data, normal.indices, normal.indptr), shape=normal.shape)
             del normal
-            self._solver = SPDSolver(
-                whole,
-                backend=backend,
-                preconditioner="ic0",
-                reduction=SCAN_REDUCTION,
-                locality_of=ring,
-                progress=progress,
-            )
+            plan = Plan(preconditioner="ic0", reduction=SCAN_REDUCTION, locality_of=ring)
+            self._solver = SPDSolver(whole, backend=backend, progress=progress, _plan=plan)
             return
         # COLAMD on K's 1-ring pattern; the assembled lower triangle, not product rows (whose memory
         # estimate sent backend="auto" to the slower iterative path)
         self._solver = SPDSolver(
-            _lower_csc(normal),
+            lower_csc(normal),
             lower=True,
             backend=backend,
-            ordering="amd" if ring is None else "colamd",
-            pattern_of=ring,
+            ordering="colamd",
             progress=progress,
+            _plan=Plan(pattern_of=ring),
         )
+
+    def normal_rhs(self, positions0: np.ndarray) -> np.ndarray:
+        """``mu H^T W H X0``, ``(n, 3)``."""
+        return self.penalty.T @ (self.penalty @ positions0)
 
     @property
     def backend(self) -> str:
@@ -414,7 +212,8 @@ def scan_denoise(
     """The default denoiser on arrays: :func:`scan_parameters`, one system, the twiced filter, :func:`relax_rim`.
 
     ``mu``, ``membrane``, ``boundary_weight`` replace the measured values when given; ``solver`` and
-    ``progress`` as in :class:`ScanFairingSolver`; ``conn``: the mesh's connectivity when the caller has it. Returns new ``(n, 3) float64`` positions.
+    ``progress`` as in :class:`ScanFairingSolver`; ``conn``: the mesh's connectivity when the caller
+    has it. A triangle repeating a vertex (no surface) is left out. Returns new ``(n, 3)`` positions.
 
     >>> import open3d as o3d
     >>> box = o3d.geometry.TriangleMesh.create_box()
@@ -425,7 +224,7 @@ def scan_denoise(
     # at 10M vertices the measures and the assembly take tens of seconds before CG shows its residual
     with stages(progress, "constrained fairing (scan)", ("measure", "assemble", "solve")) as begin:
         begin("measure")
-        conn = Connectivity(triangles, n) if conn is None else conn
+        triangles, conn = _surface(np.asarray(triangles), n, conn)
         measured = scan_parameters(vertices, triangles, conn=conn)
         begin("assemble")
         system = ScanFairingSolver(

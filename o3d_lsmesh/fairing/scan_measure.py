@@ -14,7 +14,7 @@ from typing import NamedTuple
 import numpy as np
 import scipy.sparse as sp
 
-from .._normals import area_weighted_normals
+from ..core.arrays import area_weighted_normals
 from ..core.connectivity import Connectivity
 from ..core.operators import two_ring_rows, umbrella
 from .tuning import (
@@ -222,7 +222,7 @@ class ScanParameters:
         Weight ``t`` of the twicing step, ``X = X1 + t S (X0 - X1)``.
     rim_curve : float
         Weight of the boundary-curve Laplacian in a rim vertex's thin-plate
-        row (:func:`scan_system`).
+        row (:func:`o3d_lsmesh.core.operators.scan_normal_matrix`).
     scan_likeness : float
         ``s`` of :func:`scan_likeness`.
     noise, detail : float
