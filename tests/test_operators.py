@@ -507,3 +507,8 @@ def test_triangle_coefficients_with_hundreds_of_distinct_valences():
         Q, C = rng.normal(size=3), rng.normal()
         P = C / 3.0 + basis @ np.linalg.lstsq(A @ basis, Q - A @ np.full(3, C / 3.0), rcond=None)[0]
         np.testing.assert_allclose(M[k] @ Q + u[k] * C, P, atol=1e-9)
+
+
+def test_scan_normal_matrix_takes_triangles_of_three_distinct_vertices():
+    with pytest.raises(ValueError, match="three distinct vertices"):
+        ops.scan_normal_matrix(Connectivity(np.array([[0, 1, 2], [2, 2, 3]])), 0.03, 0.45, 0.1)
