@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 import o3d_lsmesh as lsm
 from o3d_lsmesh import metrics
 from o3d_lsmesh._o3d import read_mesh
-from o3d_lsmesh._validate import COORDINATE_LIMIT
+from o3d_lsmesh.core.validate import COORDINATE_LIMIT
 
 RTOL = 1e-9
 

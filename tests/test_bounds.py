@@ -1,4 +1,4 @@
-"""Iteration counts: bounded everywhere by ``_validate.MAX_ITERATIONS``; an iteration count on the default
+"""Iteration counts: bounded everywhere by ``core.validate.MAX_ITERATIONS``; an iteration count on the default
 (one-solve) scan energy means the iterative local operator, and ``method="scan"`` refuses more than one solve."""
 
 from __future__ import annotations
@@ -8,8 +8,8 @@ import pytest
 from conftest import grid
 
 from o3d_lsmesh import constrained_fairing, multiresolution_fairing, smooth_boundary_curves
-from o3d_lsmesh._validate import MAX_ITERATIONS, as_iterations
 from o3d_lsmesh.cli import main
+from o3d_lsmesh.core.validate import MAX_ITERATIONS, as_iterations
 from o3d_lsmesh.fairing.boundary_curve import smooth_boundary_curves_arrays
 from o3d_lsmesh.fairing.constrained import constrained_fairing_arrays
 

@@ -10,8 +10,8 @@ import tqdm.auto
 import tqdm.std
 from conftest import grid
 
-from o3d_lsmesh._progress import check_progress, decades_bar, iterate, progress_bar, stages
-from o3d_lsmesh._solvers import SPDSolver
+from o3d_lsmesh.core.progress import check_progress, decades_bar, iterate, progress_bar, stages
+from o3d_lsmesh.core.solve import SPDSolver
 from o3d_lsmesh.encoding import decode_geometry, encode_geometry, iter_decode_geometry
 from o3d_lsmesh.fairing import constrained_fairing
 from o3d_lsmesh.lsmesh import ls_mesh, reconstruct_geometry
@@ -224,3 +224,20 @@ def test_iterate_yields_every_item_and_its_bar_ends_at_the_total(bars):
     assert len(made) == 2
     with pytest.raises(TypeError, match="progress"):
         iterate(1, [1], desc="x")
+
+
+def test_one_progress_object_makes_every_bar_and_close_all_ends_the_open_ones(bars):
+    from o3d_lsmesh.core.progress import Progress, close_all
+
+    made, _ = bars
+    progress = Progress(True, "load")
+    assert list(progress.over(range(3))) == [0, 1, 2]
+    left_open = progress.bar(5)  # as a bar held by a traceback would stay
+    left_open.update(2)
+    with progress.stages(("read", "write")) as begin:
+        begin("read")
+    close_all()
+    assert all(bar.disable or bar.n <= bar.total for bar in made) and left_open.disable
+    assert [bar.desc for bar in made] == ["load"] * 3
+    with pytest.raises(TypeError, match="progress must be a bool"):
+        Progress("yes", "x")

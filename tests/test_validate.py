@@ -7,7 +7,7 @@ from hypothesis import strategies as st
 
 from o3d_lsmesh import O3DLSMeshWarning
 from o3d_lsmesh._o3d import mesh_from_state, mesh_state, new_mesh, read_mesh
-from o3d_lsmesh._validate import (
+from o3d_lsmesh.core.validate import (
     COORDINATE_LIMIT,
     as_bool,
     as_choice,
@@ -284,7 +284,7 @@ def test_weights_positions_and_vectors_never_accept_non_numbers(value):
 
 
 def test_mesh_arrays_is_the_one_check_of_array_functions_and_read_mesh():
-    from o3d_lsmesh._validate import mesh_arrays
+    from o3d_lsmesh.core.validate import mesh_arrays
     from o3d_lsmesh.fairing import constrained_fairing_arrays
     from o3d_lsmesh.fairing.boundary_curve import smooth_boundary_curves_arrays
     from o3d_lsmesh.hierarchy.hierarchy import build_hierarchy_arrays
