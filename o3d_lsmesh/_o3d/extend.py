@@ -11,8 +11,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .._solvers import solve_spd
-from ..topology import connected_components, unique_edges
+from ..core.connectivity import Connectivity
+from ..core.operators import cotangent_laplacian
+from ..core.solve import solve_spd
 
 if TYPE_CHECKING:
     from . import MeshData
@@ -33,7 +34,7 @@ class Appended:
         touched[new] = True
         near = np.flatnonzero(touched[old].sum(axis=1) >= 2)
         # edge c of a triangle runs from corner c to c + 1: half-edge row c * k + t of its triangle t
-        inverse = unique_edges(np.concatenate([old[near], new]), total)[2]
+        inverse = Connectivity(np.concatenate([old[near], new]), total).halfedge_edge
         shared = np.zeros(inverse.max(initial=-1) + 1, dtype=bool)
         k = len(near)
         shared[inverse.reshape(3, -1)[:, k:]] = True
@@ -44,7 +45,7 @@ class Appended:
         self.loop, self.first = np.unique(self.vertex, return_index=True)
         # each new patch (vertex-connected new triangles: a hole, or holes touching at a vertex) takes
         # its per-triangle defaults from the triangle of its first loop corner
-        self.patch = connected_components(new, total)[1]
+        self.patch = Connectivity(new, total).components[1]
         reference = np.zeros(total, dtype=np.int64)
         labels, first_corner = np.unique(self.patch[self.vertex], return_index=True)
         reference[labels] = first_corner
@@ -60,11 +61,11 @@ class Appended:
             # harmonic values of the new vertices, L_uu x_u = -L_ub x_b with the cotangent Laplacian of
             # the new triangles (a new vertex has no other; numbered among their vertices alone, the new
             # ones last). L is not symmetric (rows scaled by 1/D): its normal equations
-            from ..laplacian import cotangent_laplacian  # (laplacian reads meshes through this package)
-
             local, local_triangles = np.unique(new, return_inverse=True)
             k = int(np.searchsorted(local, nw))
-            laplacian = cotangent_laplacian(vertices[local], local_triangles.reshape(-1, 3))
+            laplacian = cotangent_laplacian(
+                vertices[local], Connectivity(local_triangles.reshape(-1, 3), len(local))
+            )
             self.around, self.inner, self.coupling = local[:k], laplacian[k:, k:], laplacian[k:, :k]
             self.normal = (self.inner.T @ self.inner).tocsc()
 
