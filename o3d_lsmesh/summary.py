@@ -132,25 +132,19 @@ def topology_summary(mesh: AnyMesh) -> dict:
     Returns
     -------
     dict
-        ``vertices``, ``triangles``; ``edge_manifold`` (no edge of more than two triangles) and
-        ``vertex_manifold`` (also every vertex's triangles form one fan); ``components`` (over
-        shared vertices, referenced vertices only) and ``surface_pieces`` (over edges of exactly two
-        triangles: pinches and fins separate them); ``boundary_loops`` (continuing at a pinch along
-        the rim of the same fan, :func:`o3d_lsmesh.core.boundary.boundary_loops`); ``boundary_components``
-        (pieces of the boundary graph: loops touching at a pinch count once, as in Open3D-based
-        counts); ``boundary_edges``; ``seam_edges``: how many of them are a UV seam or normal crease
-        that Open3D's readers split (both sides at exactly equal coordinates: the counts here are of
-        the mesh as given, as Open3D counts them, while :func:`~o3d_lsmesh.fill_holes` and the fairing
-        functions work on the welded surface, where a seam is no boundary);
-        ``open_boundary_chains`` (ending at a fin); ``holes_by_size`` (loops per
-        :data:`HOLE_SIZE_BINS` bin, an open scan's outer rim and seams included) and
-        ``largest_hole_edges``; ``nonmanifold_edges``, ``nonmanifold_vertices``,
-        ``unreferenced_vertices``, ``degenerate_triangles`` (twice the area at most
-        :data:`DEGENERATE_TOLERANCE` times the longest edge squared), ``duplicate_triangles`` (same
-        three vertices as an earlier one), ``misoriented_edges`` (run the same way by both
-        triangles); ``euler`` (``V - E + F`` over referenced vertices), ``genus`` (when connected
-        and manifold, else ``None``) and ``total_genus`` (with every non-manifold vertex split into
-        its fans, when edge-manifold and consistently oriented, else ``None``: 0 for a range scan).
+        ``vertices``, ``triangles``; ``edge_manifold`` (no edge of more than two triangles),
+        ``vertex_manifold`` (also one fan per vertex); ``components`` (over shared vertices) and
+        ``surface_pieces`` (over edges of two triangles); ``boundary_loops`` (through pinches along
+        the same fan), ``boundary_components`` (pieces of the boundary graph, as Open3D counts),
+        ``boundary_edges``, ``seam_edges`` (UV seams or normal creases Open3D's readers split: both
+        sides at equal coordinates; fill_holes and the fairing work on the welded surface),
+        ``open_boundary_chains`` (ending at a fin), ``holes_by_size`` (loops per
+        :data:`HOLE_SIZE_BINS` bin), ``largest_hole_edges``; ``nonmanifold_edges``,
+        ``nonmanifold_vertices``, ``unreferenced_vertices``, ``degenerate_triangles`` (twice the
+        area at most :data:`DEGENERATE_TOLERANCE` times the longest edge squared),
+        ``duplicate_triangles``, ``misoriented_edges``; ``euler`` (``V - E + F``, referenced
+        vertices), ``genus`` (connected and manifold, else None) and ``total_genus`` (non-manifold
+        vertices split into fans; edge-manifold and oriented, else None).
 
     Examples
     --------
