@@ -56,14 +56,9 @@ def check_components_constrained(graph: sp.spmatrix, constrained: np.ndarray, *,
 
 
 class LSMeshSystem:
-    """The array core of :class:`LSMeshSolver` on validated arrays (the options and methods are its own).
+    """The array core of :class:`LSMeshSolver` (its options and methods) on ``(n, 3) float64`` vertices and
+    ``(m, 3) int64`` triangles as :func:`~o3d_lsmesh.core.validate.mesh_arrays` returns them (held, not copied).
 
-    ``vertices (n, 3) float64`` and ``triangles (m, 3) int64`` as :func:`~o3d_lsmesh.core.validate.mesh_arrays`
-    returns them (not checked again; held, not copied: do not modify them), ``constraint_vertex_indices`` in
-    their numbering. :meth:`solve` returns ``(n, 3)`` positions.
-
-    Examples
-    --------
     >>> from o3d_lsmesh.core.validate import mesh_arrays
     >>> V, F = mesh_arrays([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 1]], [[0, 1, 2], [1, 3, 2]])
     >>> LSMeshSystem(V, F, [0, 3], interpolate=True).solve().shape
@@ -86,15 +81,13 @@ class LSMeshSystem:
         progress: bool = False,
     ) -> None:
         n = len(vertices)
-        # a vertex named twice (two copies of a welded vertex) is two terms of the energy
         indices = as_indices(
             constraint_vertex_indices, n, name="constraint_vertex_indices", allow_repeats=True
         )
         weights = as_weights(weights, len(indices), name="weights")
         as_choice(laplacian, LAPLACIAN_KINDS, name="laplacian")
         interpolate = as_bool(interpolate, name="interpolate")
-        # solve() and add_anchors() each read and change the factor and the anchor arrays:
-        # one lock makes an update and a solve on other threads exclusive (never a half-updated system)
+        # one lock: an update and a solve on other threads never see a half-updated system
         self._lock = threading.RLock()
         backend = solver_backend(solver, backend)
         L = laplacian_matrix(vertices, triangles, laplacian).tocsr()
@@ -130,31 +123,23 @@ class LSMeshSystem:
             L = L.tocsc()
             L_free = L[:, self._free]
             operator = L_free.tocsr()
-            # the normal matrix L_free^T L_free, given to CHOLMOD as a product it never forms:
-            # L_free^T in CSC is L_free's CSR arrays, shared with the refinement operator
-            product = operator.T
-            # right-hand side operator: -L_free^T L_ctrl maps control positions to the free rhs
-            # a vertex fixed twice is one column: its positions must agree (checked by _solve)
+            product = operator.T  # L_free^T L_free as a product never formed (L_free's CSR arrays, shared)
+            # -L_free^T L_ctrl maps control positions to the free rhs; a vertex fixed twice is one column
             _, first, self._hard_groups = np.unique(indices, return_index=True, return_inverse=True)
             self._hard_first = first if len(first) < len(indices) else None
             columns = indices if self._hard_first is None else indices[first]
             self._rhs_hard = -(L_free.T @ L[:, columns]).tocsr()
         else:
             self._free = self._reduced = None  # every vertex is unknown: no index arrays to hold
-            # L^T L + W^2 = A A^T for A = [L^T | W] (one weighted column per control vertex):
-            # CHOLMOD factors it without it being formed, in less time and memory than L^T L
+            # L^T L + W^2 = A A^T for A = [L^T | W] (one weighted column per control vertex), never formed
             controls = sp.csc_matrix((weights, indices, np.arange(len(indices) + 1)), shape=(n, len(indices)))
             product = sp.hstack([L.T, controls], format="csc")
-            # rebuilt on demand for refinement: not holding it while CHOLMOD factors lowers the peak memory
-            operator = None
+            operator = None  # rebuilt for refinement: not held while the factor is formed
             self._rhs_hard = None
             self._hard_first = None
-        # the Laplacian (of the free columns) serves the residual of iterative refinement:
-        # L^T (L x) needs a third of the memory of L^T L
-        self._operator = operator
+        self._operator = operator  # L (of the free columns) for the refinement residual L^T (L x)
         del L  # not held while CHOLMOD factors
-        # the iterative path renumbers scattered unknowns by the 1-ring, not the normal matrix's 2-ring:
-        # L^T is the product's first n columns (a view of its arrays; L's pattern is symmetric)
+        # the iterative path's locality order: the 1-ring, L^T, a view of the product's first n columns
         locality = None
         if not self.interpolate:
             end = product.indptr[n]
@@ -172,8 +157,7 @@ class LSMeshSystem:
             _plan=Plan(product_of=product, locality_of=locality),
         )
 
-    def _reduce(self, indices: np.ndarray) -> np.ndarray:
-        # row of each (free) vertex in the reduced system
+    def _reduce(self, indices: np.ndarray) -> np.ndarray:  # row of each (free) vertex in the reduced system
         return indices if self._reduced is None else self._reduced[indices]
 
     @property
@@ -194,16 +178,8 @@ class LSMeshSystem:
             return np.concatenate([self._hard_weights, self._soft_weights])
 
     def solve(self, constraint_vertex_positions: Any = None, *, refine: bool | None = None) -> np.ndarray:
-        """Vertex positions ``(n, 3)`` for the given control positions (back-substitution only).
-
-        Parameters
-        ----------
-        constraint_vertex_positions : (k, 3) array-like, optional
-            One row per entry of :attr:`constraint_vertex_indices`; default the positions given so far.
-        refine : bool, optional
-            One step of iterative refinement (a second back-substitution on the residual); by default only
-            after :meth:`add_anchors`, whose large ``w^2`` cost accuracy (see the docs page).
-        """
+        """Vertex positions ``(n, 3)`` for control positions ``(k, 3)`` (default: those given so far), by
+        back-substitution; ``refine``: one step of iterative refinement (default: only after :meth:`add_anchors`)."""
         refine = as_bool(refine, name="refine", allow_none=True)
         with self._lock:
             return self._solve(constraint_vertex_positions, refine)
@@ -216,27 +192,20 @@ class LSMeshSystem:
             positions = as_positions(
                 constraint_vertex_positions, k, name="constraint_vertex_positions", limit=True
             )
-        # solved about the controls' centroid (an LS mesh moves with its controls: L 1 = 0): the iterative
-        # path's relative residual then measures the shape, not the distance to the origin
+        # about the controls' centroid (L 1 = 0): the iterative path's residual measures the shape
         centre = positions.mean(axis=0) if len(positions) else np.zeros(3)
         original, positions = positions, positions - centre
         hard_pos, soft_pos = positions[: len(self._hard)], positions[len(self._hard) :]
-        # checked on the given rows, so that a disagreement is reported in the caller's coordinates
-        fixed = (
-            hard_pos
-            if self._hard_first is None
-            else self._fixed_positions(original[: len(self._hard)]) - centre
-        )
+        fixed = hard_pos
+        if self._hard_first is not None:  # checked on the given rows (a disagreement in the caller's terms)
+            fixed = self._fixed_positions(original[: len(self._hard)]) - centre
         rhs = np.zeros((self._unknowns, 3))
         if self.interpolate:
             rhs += self._rhs_hard @ fixed
-        with np.errstate(over="ignore", invalid="ignore"):  # overflow is reported by name below
-            # add.at: a vertex named twice takes both terms
+        with np.errstate(over="ignore", invalid="ignore"):  # overflow reported below; add.at: repeats add up
             np.add.at(rhs, self._reduce(self._soft), (self._soft_weights**2)[:, None] * soft_pos)
         check_finite(rhs, name="constraint_vertex_positions", what="weights**2 * constraint_vertex_positions")
-        # the iterative path starts from the mesh's own geometry, which an LS mesh of its own controls
-        # approximates; a direct solve needs no start
-        start = None
+        start = None  # the iterative path starts from the mesh's own geometry
         if self._solver.backend == "iterative":
             start = (self._vertices if self._free is None else self._vertices[self._free]) - centre
         solution = self._solver.solve(rhs, x0=start)
@@ -276,17 +245,8 @@ class LSMeshSystem:
     def add_anchors(self, indices: Any, positions: Any = None, *, weights: Any = 1.0) -> None:
         """Add relaxed anchors by a rank-k update of the kept factor (bases paper, section III).
 
-        Adds ``w^2`` to the normal matrix's diagonal at each new anchor (relaxed constraints on free
-        vertices in interpolatory mode).
-
-        Parameters
-        ----------
-        indices : (a,) int array-like
-            New anchors; none may already be a control vertex.
-        positions : (a, 3) array-like, optional
-            Their positions; default the mesh's own.
-        weights : float or (a,) array-like
-            Positive anchor weights.
+        ``indices (a,)``: new anchors, none already a control vertex; ``positions (a, 3)``: default the
+        mesh's own; ``weights``: positive, a float or ``(a,)``. Adds ``w^2`` to the normal matrix's diagonal.
         """
         with self._lock:
             self._add_anchors(indices, positions, weights)
@@ -298,7 +258,6 @@ class LSMeshSystem:
         existing[self._hard] = existing[self._soft] = True  # (not the property: LSMeshSolver maps it)
         if existing[new].any():
             at = int(np.flatnonzero(existing[new])[0])
-            # the position names it in the caller's list too when LSMeshSolver welded the mesh
             raise InputError(
                 f"indices must not already be control vertices, got {int(new[at])} at position {at}",
                 param="indices",
@@ -308,7 +267,7 @@ class LSMeshSystem:
             pos = self._vertices[new]
         else:
             pos = as_positions(positions, len(new), name="positions", limit=True)
-        # one nonzero per column: build the CSC arrays directly (the COO route costs more than a small update)
+        # one nonzero per column: the CSC arrays directly
         c = sp.csc_matrix((w, self._reduce(new), np.arange(len(new) + 1)), shape=(self._unknowns, len(new)))
         self._solver.update(c)
         self._updated = True
@@ -330,46 +289,36 @@ class LSMeshSystem:
 class LSMeshSolver(LSMeshSystem):
     """A least-squares mesh system with its Cholesky factor kept for editing.
 
-    Minimizes ``||L X||^2 + sum_s w_s^2 |X_s - C_s|^2`` separately for x, y and z (eq. 3 and section 6)
-    over the positions ``X (n, 3)``, control vertices ``s`` at ``C_s`` with weights ``w_s``. The normal
-    matrix is factored once; :meth:`solve` with new control positions is a back-substitution and
-    :meth:`add_anchors` a rank-k update (docs: ``docs/algorithms/least_squares_meshes.rst``).
+    Minimizes ``||L X||^2 + sum_s w_s^2 |X_s - C_s|^2`` for x, y and z (eq. 3 and section 6) over the
+    positions ``X (n, 3)``. The normal matrix is factored once; :meth:`solve` with new control positions
+    is a back-substitution, :meth:`add_anchors` a rank-k update. Thread-safe (one lock); pickles with its
+    factor's matrix. Docs: ``docs/algorithms/least_squares_meshes.rst``.
 
     Parameters
     ----------
     mesh : open3d.geometry.TriangleMesh, open3d.t.geometry.TriangleMesh or (vertices, triangles)
-        Its connectivity, and its positions as default control positions. Vertices at equal coordinates
-        (UV seams) are welded; indices stay in the mesh's own layout.
+        Its connectivity, and its positions as default control positions; vertices at equal coordinates
+        (UV seams) are welded, indices stay in the mesh's own layout.
     constraint_vertex_indices : (k,) int array-like
-        Control vertices in ``[0, n)``; two copies of a split vertex are two terms (with ``interpolate``,
-        their positions must agree).
+        Control vertices (two copies of a split vertex are two terms).
     weights : float or (k,) array-like
         Positive weights ``w_s`` of the soft constraints (ignored when ``interpolate``).
     interpolate : bool
-        Interpolatory scheme (bases paper II.B): the control vertices are hit exactly.
+        Hit the control vertices exactly (bases paper II.B).
     laplacian : {"uniform", "cotangent"}
-        The smoothness operator; the paper's is ``"uniform"``.
     backend : {"auto", "cholmod", "scipy"}
-        Direct backend of the solver gateway.
     ordering : str
-        CHOLMOD's fill-reducing ordering (:class:`~o3d_lsmesh.SPDSolver`).
+        CHOLMOD's ordering (:class:`~o3d_lsmesh.SPDSolver`).
     solver : {"auto", "cholmod", "iterative"}
-        ``"auto"`` factors unless the factor would exceed the memory budget, then solves by conjugate
-        gradients with an AMG preconditioner; ``"iterative"`` forces that path.
+        ``"auto"`` factors unless the factor would exceed the memory budget, then uses conjugate gradients.
     tol : float, optional
-        Relative residual of the iterative path (default ``DEFAULT_TOLERANCE`` of the gateway).
+        Relative residual of the iterative path.
     progress : bool
-        Show a progress bar.
 
     Raises
     ------
     SingularSystemError
         A connected component (or unreferenced vertex) without a control vertex.
-
-    Notes
-    -----
-    Thread-safe (one lock: a solve sees the system before or after an update, never half of it).
-    Pickles with its factor's matrix (refactored on load).
 
     Examples
     --------
@@ -396,19 +345,9 @@ class LSMeshSolver(LSMeshSystem):
         data = read_mesh(mesh, weld=True)
         self._data = data
         indices = data.welded_indices(constraint_vertex_indices, name="constraint_vertex_indices")
-        super().__init__(
-            data.vertices,
-            data.triangles,
-            indices,
-            weights=weights,
-            interpolate=interpolate,
-            laplacian=laplacian,
-            backend=backend,
-            ordering=ordering,
-            solver=solver,
-            tol=tol,
-            progress=progress,
-        )
+        options: dict[str, Any] = dict(weights=weights, interpolate=interpolate, laplacian=laplacian, tol=tol)
+        options.update(backend=backend, ordering=ordering, solver=solver, progress=progress)
+        super().__init__(data.vertices, data.triangles, indices, **options)
 
     @property
     def constraint_vertex_indices(self) -> np.ndarray:
@@ -429,8 +368,7 @@ class LSMeshSolver(LSMeshSystem):
 
     def __getstate__(self) -> dict:
         state = super().__getstate__()
-        # Open3D meshes do not pickle: keep arrays and what rebuilds a mesh of the input's kind
-        state["_data"] = mesh_state(self._data)
+        state["_data"] = mesh_state(self._data)  # Open3D meshes do not pickle
         return state
 
     def __setstate__(self, state: dict) -> None:
@@ -452,25 +390,22 @@ def ls_mesh(
 ) -> MeshT:
     """Least-squares mesh: the fairest geometry for ``mesh``'s connectivity near the control points.
 
-    Minimizes ``||L X||^2 + sum_s w_s^2 |X_s - C_s|^2`` (eq. 3 with the weights of section 6), or, with
-    ``interpolate=True``, ``||L X||^2`` with the control vertices fixed (bases paper II.B).
+    Minimizes ``||L X||^2 + sum_s w_s^2 |X_s - C_s|^2`` (eq. 3, weights of section 6), or with
+    ``interpolate=True`` ``||L X||^2`` with the control vertices fixed (bases paper II.B).
 
     Parameters
     ----------
     mesh : open3d.geometry.TriangleMesh, open3d.t.geometry.TriangleMesh or (vertices, triangles)
-        Split vertices (UV seams) are welded, indices given in its own layout.
     constraint_vertex_indices : (k,) int array-like
     constraint_vertex_positions : (k, 3) array-like, optional
-        Default the mesh's own positions at those indices (approximation).
-    weights, interpolate, laplacian, solver, tol
+        Default the mesh's own positions at those indices.
+    weights, interpolate, laplacian, solver, tol, progress
         See :class:`LSMeshSolver`.
-    progress : bool
-        Show a bar over the stages (factor, solve).
 
     Returns
     -------
     TriangleMesh
-        A new mesh of the input's kind, same triangles and colors (normals recomputed if it had them).
+        A new mesh of the input's kind, same triangles and colors.
 
     Raises
     ------
@@ -490,16 +425,9 @@ def ls_mesh(
     indices = data.welded_indices(constraint_vertex_indices, name="constraint_vertex_indices")
     with stages(progress, "ls_mesh", ("factor", "solve")) as begin:
         begin("factor")
+        options: dict[str, Any] = dict(weights=weights, interpolate=interpolate, laplacian=laplacian, tol=tol)
         system = LSMeshSystem(
-            data.vertices,
-            data.triangles,
-            indices,
-            weights=weights,
-            interpolate=interpolate,
-            laplacian=laplacian,
-            solver=solver,
-            tol=tol,
-            progress=progress,
+            data.vertices, data.triangles, indices, solver=solver, progress=progress, **options
         )
         begin("solve")
         vertices = system.solve(constraint_vertex_positions)
@@ -520,20 +448,9 @@ def reconstruct_geometry(
 ) -> MeshT:
     """Rebuild the positions of vertices whose geometry is missing (figures 5 and 8 of LS meshes).
 
-    With ``interpolate=True``: the interpolatory LS mesh with every known vertex as an anchor, solved on
-    the rows of ``L`` that touch an unknown vertex only; known vertices stay bit-identical. With
-    ``interpolate=False`` every known vertex is a soft control point of weight ``weights``.
-
-    Parameters
-    ----------
-    mesh : open3d.geometry.TriangleMesh, open3d.t.geometry.TriangleMesh or (vertices, triangles)
-        The unknown vertices' positions are ignored; split vertices are welded.
-    unknown_vertex_indices : (u,) int array-like
-        In the mesh's own layout (any copy of a split vertex makes it unknown).
-    interpolate, weights, laplacian, solver, tol
-        See :class:`LSMeshSolver`.
-    progress : bool
-        Show a bar over the stages (factor, solve).
+    ``interpolate=True``: the interpolatory LS mesh with every known vertex as an anchor, on the rows of
+    ``L`` that touch an unknown vertex only (known vertices stay bit-identical); ``False``: every known
+    vertex a soft control point of weight ``weights``. Other options: see :class:`LSMeshSolver`.
 
     Raises
     ------
@@ -562,15 +479,8 @@ def reconstruct_geometry(
     with stages(progress, "reconstruct_geometry", ("factor", "solve")) as begin:
         begin("factor")
         if not interpolate:
-            system = LSMeshSystem(
-                data.vertices,
-                data.triangles,
-                known,
-                weights=weights,
-                laplacian=laplacian,
-                solver=solver,
-                tol=tol,
-            )
+            options: dict[str, Any] = dict(weights=weights, laplacian=laplacian, solver=solver, tol=tol)
+            system = LSMeshSystem(data.vertices, data.triangles, known, **options)
             begin("solve")
             return new_mesh(data, system.solve())
         L_unknown = L[:, unknown].tocsr()
