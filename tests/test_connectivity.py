@@ -8,6 +8,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 from conftest import grid, triangle_soups
 from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from o3d_lsmesh.core.connectivity import Connectivity
 
@@ -124,3 +125,36 @@ def test_pickles_and_reads_from_threads():
 def test_empty_mesh():
     c = Connectivity(np.zeros((0, 3), dtype=np.int64), 3)
     assert len(c.edges) == 0 and c.valence.tolist() == [0, 0, 0] and c.components[0] == 3
+
+
+@settings(max_examples=80, deadline=None)
+@given(triangle_soups(), st.sampled_from([2, 1 << 14]))
+def test_ring_slots_hold_the_triangles_of_their_edge(soup, block):
+    # every slot (v, w) of the 1-ring pattern names triangles on the edge {v, w}: its two entries are
+    # the edge's two triangles, its one entry twice, or two of three and more; the diagonal 6 m
+    from o3d_lsmesh.core.connectivity import RING_COLUMN_SLOT, RING_ROW_SLOT, vertex_rings
+
+    n, triangles = soup
+    F = np.array(triangles, dtype=np.int64)
+    m = len(F)
+    rings = vertex_rings(F, n, block=block)
+    entries = {}
+    for t, tri in enumerate(triangles):
+        for d, (a, b) in enumerate(zip(RING_ROW_SLOT, RING_COLUMN_SLOT)):
+            entries.setdefault((tri[a], tri[b]), []).append(d * m + t)
+    ring = plain_neighbours(triangles, n)
+    for v in range(n):
+        row = range(rings.indptr[v], rings.indptr[v + 1])
+        assert rings.indices[row.start : row.stop].tolist() == sorted(ring[v] | {v})
+        assert rings.indices[rings.diagonal[v]] == v and rings.valence[v] == len(ring[v])
+        for slot in row:
+            w = int(rings.indices[slot])
+            first, second = rings.pairs[:, slot].tolist()
+            if w == v:
+                assert first == second == 6 * m
+                continue
+            on_edge = entries[(v, w)]
+            assert first in on_edge and second in on_edge
+            assert (first == second) == (len(on_edge) == 1)
+        on_odd_edge = any(len(entries[(v, w)]) != 2 for w in ring[v])
+        assert rings.boundary[v] == on_odd_edge
