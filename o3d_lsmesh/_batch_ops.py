@@ -1,73 +1,9 @@
-"""Old home of the batch operations and the task: now :mod:`o3d_lsmesh.app.ops`, ``files`` and ``tasks``."""
+"""Old home of the batch operations: :mod:`o3d_lsmesh.app.ops`, ``app.files`` and ``app.tasks``."""
 
-from .app.files import (
-    READABLE,
-    TEMPORARY,
-    WRITABLE,
-    digest,
-    inside,
-    output_path,
-    read_mesh_file,
-    write_atomic,
-    write_mesh,
-)
-from .app.ops import (
-    OPS,
-    RESERVED,
-    BatchOp,
-    Option,
-    TaskContext,
-    change_metrics,
-    choice,
-    count_or_percent,
-    denoise_op,
-    fill_op,
-    flag,
-    int_at_least,
-    normal_change,
-    optional,
-    parse_levels,
-    parse_ops,
-    real,
-    register_op,
-    resolve_count,
-    resolve_options,
-)
-from .app.tasks import RECORD_FIELDS, configure_threads, jsonable, new_record, run_task
+from .app.batch import parse_ops, resolve_options  # noqa: F401
+from .app.files import READABLE, WRITABLE, read_mesh_file  # noqa: F401
+from .app.ops import OPS, BatchOp, Option, TaskContext, register_op  # noqa: F401
+from .app.tasks import run_task  # noqa: F401
 
-__all__ = [
-    "OPS",
-    "READABLE",
-    "RECORD_FIELDS",
-    "RESERVED",
-    "TEMPORARY",
-    "WRITABLE",
-    "BatchOp",
-    "Option",
-    "TaskContext",
-    "change_metrics",
-    "choice",
-    "configure_threads",
-    "count_or_percent",
-    "denoise_op",
-    "digest",
-    "fill_op",
-    "flag",
-    "inside",
-    "int_at_least",
-    "jsonable",
-    "new_record",
-    "normal_change",
-    "optional",
-    "output_path",
-    "parse_levels",
-    "parse_ops",
-    "read_mesh_file",
-    "real",
-    "register_op",
-    "resolve_count",
-    "resolve_options",
-    "run_task",
-    "write_atomic",
-    "write_mesh",
-]
+__all__ = "OPS READABLE WRITABLE BatchOp Option TaskContext parse_ops read_mesh_file register_op resolve_options run_task"
+__all__ = __all__.split()  # type: ignore[assignment]

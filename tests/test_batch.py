@@ -21,7 +21,7 @@ import numpy as np
 import open3d as o3d
 import pytest
 
-from o3d_lsmesh.app import batch
+from o3d_lsmesh.app import batch, tasks
 from o3d_lsmesh.app.cli import main
 from o3d_lsmesh.app.ops import OPS, BatchOp, Option, int_at_least
 from o3d_lsmesh.core.errors import O3DLSMeshWarning
@@ -134,7 +134,7 @@ def test_global_method_equals_the_serial_cli_with_the_same_threads_bit_for_bit(d
         "OPENBLAS_NUM_THREADS": "1",
         "MKL_NUM_THREADS": "1",
         "PYTHONPATH": os.pathsep.join(
-            [str(Path(batch.__file__).parents[1]), os.environ.get("PYTHONPATH", "")]
+            [str(Path(batch.__file__).parents[2]), os.environ.get("PYTHONPATH", "")]
         ),
     }
     argv = [
@@ -445,7 +445,7 @@ def _environment(mesh, options, context):
 
 
 def test_no_fork_based_pool_in_the_package():
-    package = Path(batch.__file__).parent
+    package = Path(batch.__file__).parents[1]
     for path in package.rglob("*.py"):
         text = path.read_text()
         for banned in (
@@ -462,7 +462,7 @@ def test_no_fork_based_pool_in_the_package():
 
 
 def test_without_dask_a_serial_loop_with_a_message(data, tmp_path, monkeypatch):
-    monkeypatch.setattr(batch, "_dask_available", lambda: False)
+    monkeypatch.setattr(tasks, "_dask_available", lambda: False)
     with pytest.warns(O3DLSMeshWarning, match="dask.distributed is not installed.*one after another"):
         records = batch.run(data.good[:2], tmp_path / "out", progress=False)
     assert [(r["status"], r["worker"]) for r in records] == [("ok", "local"), ("ok", "local")]

@@ -1082,7 +1082,7 @@ def _options():
 
 @pytest.mark.parametrize("op, option", _options(), ids=lambda x: getattr(x, "name", ""))
 def test_each_option_is_a_flag_of_its_command_and_of_batch_with_its_default(op, option):
-    from o3d_lsmesh.app.ops import resolve_options
+    from o3d_lsmesh.app.batch import resolve_options
 
     commands = _subparsers()
     if option.cli:  # the subcommand of the same name has the flag, with the table's default and help

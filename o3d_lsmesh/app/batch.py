@@ -1,11 +1,10 @@
-"""Run an operation over many mesh files: on a local Dask cluster by default, or on an existing one.
+"""Run an operation, or a pipeline of them, over many mesh files: :func:`run`.
 
-Each file is one task (:func:`~o3d_lsmesh.app.tasks.run_task`) that reads, runs and writes inside
-a worker process and returns a small JSON record: meshes never travel between processes, and a file
-that fails, even one that crashes its worker, costs that file only. A local cluster's workers are
-*spawned* (a forked worker deadlocks once the parent has used CHOLMOD's OpenMP runtime); without
-Dask the files run one after another in this process. Tasks are submitted in a window a few times
-the cluster's threads (:class:`_Window`). Docs: ``docs/batch.md``.
+Parses the pipeline and its options from the op table (:mod:`o3d_lsmesh.app.ops`), collects the
+inputs, skips what a report says is done (``resume``), hands the rest to
+:func:`~o3d_lsmesh.app.tasks.dispatch` (a Dask cluster, or one after another in this process) and
+writes one report record per file as it arrives. Errors name Python parameters, never flags.
+Docs: ``docs/batch.md``.
 """
 
 from __future__ import annotations
@@ -13,34 +12,31 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
-import logging
 import os
-import time
 import warnings
 from collections import Counter
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
-from itertools import islice
 from pathlib import Path
 from typing import Any, Callable
 
-from ..core.errors import InputError, O3DLSMeshWarning
+from ..core.errors import InputError, InputTypeError, O3DLSMeshWarning
 from ..core.progress import check_progress, progress_bar
-from ..core.validate import as_workers
 from .files import WRITABLE, collect_inputs, digest, inside, output_path
-from .ops import OPS, BatchOp, Option, parse_ops, register_op, resolve_options
-from .tasks import new_record, run_task
+from .ops import OPS, BatchOp, Option, register_op
+from .tasks import Task, check_scheduler_file, dispatch, failure_record, local_cluster, new_record
 
-__all__ = ["OPS", "BatchOp", "Option", "collect_inputs", "local_cluster", "register_op", "run", "summarize"]
-
-
-@dataclass(frozen=True)
-class _Task:
-    index: int
-    path: str
-    relative: str
-    output: str | None
-    key: str
+__all__ = [
+    "OPS",
+    "BatchOp",
+    "Option",
+    "collect_inputs",
+    "local_cluster",
+    "parse_ops",
+    "register_op",
+    "resolve_options",
+    "run",
+    "summarize",
+]
 
 
 def task_key(path: str, ops: Sequence[BatchOp], options: Sequence[dict], suffix: str) -> str:
@@ -105,198 +101,94 @@ def _intact(outdir: Path, files: Any) -> bool:
     return True
 
 
-# --------------------------------------------------------------------------- engines
+# --------------------------------------------------------------------------- the pipeline and its options
 
 
-def _dask_available() -> bool:
-    try:
-        import distributed  # noqa: F401
-    except ImportError:
-        return False
-    return True
-
-
-def _scheduler_address() -> str | None:
-    address = os.environ.get("DASK_SCHEDULER_ADDRESS")
-    if address:
-        return address
-    try:
-        import dask
-
-        return dask.config.get("scheduler-address", None)
-    except ImportError:
-        return None
-
-
-def _check_scheduler_file(path: str | os.PathLike) -> None:
-    """Refuse a scheduler file that is missing or holds no address (Dask's client would wait for it forever)."""
-    expected = "scheduler_file must be the JSON file a running Dask scheduler wrote"
-    if not os.path.isfile(path):
-        raise InputError(f"{expected}, got {os.fspath(path)!r}, which does not exist", param="scheduler_file")
-    try:
-        with open(path, encoding="utf-8") as handle:
-            address = json.load(handle).get("address")
-    except (ValueError, AttributeError):
-        address = None
-    if not isinstance(address, str):
-        raise InputError(
-            f"{expected}, got {os.fspath(path)!r}, which holds no JSON 'address'", param="scheduler_file"
+def parse_ops(op: Any) -> list[BatchOp]:
+    """``"fill,denoise"``, ``["fill", "denoise"]`` or BatchOp objects -> the pipeline, checked."""
+    if isinstance(op, (str, BatchOp)):
+        items: list[Any] = op.split(",") if isinstance(op, str) else [op]
+    elif isinstance(op, Sequence):
+        items = list(op)
+    else:
+        raise InputTypeError(
+            f"op must be a name, a comma-separated pipeline or a list of names, got {type(op).__name__}",
+            param="op",
         )
+    ops = []
+    for item in items:
+        name = item.name if isinstance(item, BatchOp) else str(item).strip()
+        if not isinstance(item, BatchOp) and name not in OPS:
+            raise InputError(
+                f"op must be one of {', '.join(sorted(OPS))} or a pipeline like 'denoise,compare', got {name!r}",
+                param="op",
+            )
+        ops.append(item if isinstance(item, BatchOp) else OPS[name])
+    if not ops:
+        raise InputError(f"op must name at least one operation, got {op!r}", param="op")
+    for first in ops[:-1]:
+        if first.output != "mesh":
+            raise InputError(
+                f"op {first.name!r} writes {first.output}, not a mesh, so it must be last in a pipeline",
+                param="op",
+            )
+    return ops
 
 
-def _start_method() -> str:
-    """The worker start method: the configured one unless it is ``fork`` (then ``spawn``)."""
-    import dask
+def parse_option(op: BatchOp, option: Option, value: Any) -> Any:
+    """``option.parse(value)``; ``InputError`` naming the option (``param``) and its op."""
+    try:
+        return option.parse(value)
+    except ValueError as error:
+        raise InputError(f"{option.name} {error} (an option of op {op.name})", param=option.name) from None
 
-    method = dask.config.get("distributed.worker.multiprocessing-method", "spawn")
-    return "spawn" if method not in ("spawn", "forkserver") else method
 
+def resolve_options(ops: Sequence[BatchOp], options: Mapping[str, Any] | None) -> list[dict]:
+    """Parse ``options`` for each op of a pipeline; return one ``{name: value}`` dict per op.
 
-def local_cluster(workers: int, threads_per_worker: int = 1, *, retries: int = 1, **kwargs: Any) -> Any:
-    """A ``LocalCluster`` of ``workers`` spawned processes with ``threads_per_worker`` threads each.
-
-    BLAS/OpenMP thread variables are set before the workers start (CHOLMOD and
-    OpenBLAS read them once, when they load), Dask's ``MALLOC_TRIM_THRESHOLD_``
-    is left out (it doubles the time of array-heavy tasks), a task may kill at most
-    ``retries + 1`` workers before it is reported failed (Dask's
-    ``allowed-failures``), and the dashboard takes a free port on 127.0.0.1.
+    A key ``"name"`` applies to every op of the pipeline that has that option; a key
+    ``"op.name"`` (or a nested ``{"op": {"name": value}}``) to that op only. Unknown names and bad
+    values raise :class:`~o3d_lsmesh.core.errors.InputError` naming the option.
     """
-    import dask
-    from distributed import LocalCluster
-
-    threads = str(threads_per_worker)
-    environ = dict(dask.config.get("distributed.nanny.pre-spawn-environ", {}) or {})
-    environ.update(OMP_NUM_THREADS=threads, OPENBLAS_NUM_THREADS=threads, MKL_NUM_THREADS=threads)
-    # Dask sets MALLOC_TRIM_THRESHOLD_=65536, which turns off glibc's dynamic mmap threshold: every array
-    # above 128 KiB becomes a fresh mmap whose pages fault in zeroed (benchmarks/results/batch.md)
-    environ.pop("MALLOC_TRIM_THRESHOLD_", None)
-    with dask.config.set(
-        {
-            "distributed.worker.multiprocessing-method": _start_method(),
-            "distributed.scheduler.allowed-failures": retries,
-            # One task per worker thread at a time: a dying worker takes no queued task along.
-            "distributed.scheduler.worker-saturation": 1.0,
-            "distributed.nanny.pre-spawn-environ": environ,
-        }
-    ):
-        # The scheduler always serves HTTP (8787 unless told): a free local port avoids clashing with another
-        # cluster on this machine (and gives a dashboard when bokeh is installed).
-        kwargs.setdefault("dashboard_address", "127.0.0.1:0")
-        kwargs.setdefault("silence_logs", logging.ERROR)
-        return LocalCluster(
-            n_workers=workers, threads_per_worker=threads_per_worker, processes=True, **kwargs
-        )
-
-
-class _Window:
-    """How many tasks to keep submitted: sized from the cluster's worker threads, re-read at most once a second.
-
-    Above ``2 x threads`` tasks, Dask treats the tasks as root tasks and queues them on the scheduler,
-    handing each worker only ``worker-saturation x threads`` at a time (1 on :func:`local_cluster`): so a
-    worker that dies holds no innocent task (Dask counts every task held by a dying worker as suspect),
-    and a finished worker gets its next file without a round trip through this client. A window of
-    ``4 x threads + 4`` keeps that queue filled; a batch of at most ``2 x threads`` files, which Dask
-    would hand out all at once, gets a window of ``threads`` instead.
-    """
-
-    def __init__(self, client: Any, total: int):
-        self.client, self.total, self.value, self.when = client, total, 1, -1.0
-
-    def __call__(self) -> int:
-        now = time.monotonic()
-        if now - self.when > 1.0:
-            threads = max(1, sum(self.client.nthreads().values()))
-            self.value = threads if self.total <= 2 * threads else 4 * threads + 4
-            self.when = now
-        return self.value
-
-
-def _failure(task: _Task, op: str, message: str, stage: str = "worker") -> dict:
-    return new_record(input=task.path, error=message, stage=stage, op=op, key=task.key)
-
-
-def _run_dask(client: Any, tasks: list[_Task], job: dict, emit: Callable[[dict], bool], retries: int) -> None:
-    from concurrent.futures import CancelledError
-
-    from distributed import KilledWorker, as_completed
-
-    cancelled: tuple[type[BaseException], ...]
-    try:
-        from distributed.client import FutureCancelledError
-
-        cancelled = (CancelledError, FutureCancelledError)
-    except ImportError:  # pragma: no cover - distributed before 2024.8
-        cancelled = (CancelledError,)
-
-    token = os.urandom(4).hex()
-    pending = iter(tasks)
-    by_key: dict[str, _Task] = {}
-    queue = as_completed()
-
-    def submit(n: int) -> None:
-        chunk = list(islice(pending, max(0, n)))
-        if not chunk:
-            return
-        keys = [f"o3d-lsmesh-batch-{token}-{task.index}" for task in chunk]
-        futures = client.map(
-            run_task,
-            [t.path for t in chunk],
-            [t.relative for t in chunk],
-            [t.key for t in chunk],
-            key=keys,
-            pure=False,
-            **job,
-        )
-        for task, future in zip(chunk, futures):
-            by_key[future.key] = task
-            queue.add(future)
-
-    window = _Window(client, len(tasks))
-    submit(window())
-    op_name = ",".join(op.name for op in job["ops"])
-    try:
-        for future in queue:
-            task = by_key.pop(future.key)
-            try:
-                record = future.result()
-            except KilledWorker as error:
-                tries = getattr(error, "allowed_failures", retries) + 1
-                last = getattr(getattr(error, "last_worker", None), "address", "?")
-                record = _failure(
-                    task,
-                    op_name,
-                    f"KilledWorker: each of the {tries} workers that ran it died (a crash "
-                    f"such as a segfault, or killed, e.g. for memory); last worker {last}",
-                )
-                record["worker"] = last
-            except cancelled:
-                record = _failure(task, op_name, "cancelled")
-            except Exception as error:
-                record = _failure(task, op_name, f"{type(error).__name__}: {error}")
-            future.release()
-            if str(record.get("error")).startswith("TaskTimeout"):
-                record["error"] += _restart(client, record.get("worker"))
-            if not emit(record):
-                break
-            size, held = window(), queue.count()
-            if held <= size // 2:  # refill in chunks: each client.map is one graph update on the scheduler
-                submit(size - held)
-    finally:
-        # Whatever stopped the loop (--fail-fast, an exception, Ctrl-C): drop what is still queued or running.
-        remaining = list(getattr(queue, "futures", ()))
-        if remaining:
-            client.cancel(remaining)
-
-
-def _restart(client: Any, worker: Any) -> str:
-    """Restart the worker running an abandoned task (only a nanny can: else it runs on there)."""
-    try:
-        status = client.restart_workers([worker], raise_for_error=False).get(worker)
-    except Exception as error:  # whatever it is, the record says so
-        status = f"{type(error).__name__}: {error}"
-    if status == "OK":
-        return "; its worker was restarted"
-    return f"; its worker could not be restarted ({status}), so it runs on there"
+    shared: dict[str, Any] = {}
+    specific: dict[tuple[str, str], Any] = {}
+    names = {op.name for op in ops}
+    for key, value in dict(options or {}).items():
+        if isinstance(value, Mapping) and key in names:
+            specific.update({(key, str(k).replace("-", "_")): v for k, v in value.items()})
+        elif "." in key and key.split(".", 1)[0] in names:
+            op_name, name = key.split(".", 1)
+            specific[(op_name, name.replace("-", "_"))] = value
+        else:
+            shared[key.replace("-", "_")] = value
+    known = {option.name for op in ops for option in op.options}
+    pipeline = ",".join(op.name for op in ops)
+    for name in shared:
+        if name not in known:
+            raise InputError(
+                f"{name} is not an option of op {pipeline} (its options: {', '.join(sorted(known)) or 'none'})",
+                param=name,
+            )
+    for op_name, name in specific:
+        op = next(op for op in ops if op.name == op_name)
+        if name not in {option.name for option in op.options}:
+            raise InputError(
+                f"options: {op_name} has no option {name!r} (its options: "
+                f"{', '.join(o.name for o in op.options) or 'none'})",
+                param="options",
+            )
+    resolved = []
+    for op in ops:
+        values = {}
+        for option in op.options:
+            pair = (op.name, option.name)
+            if pair in specific or option.name in shared:
+                given = specific[pair] if pair in specific else shared[option.name]
+                values[option.name] = parse_option(op, option, given)
+            else:
+                values[option.name] = option.default
+        resolved.append(values)
+    return resolved
 
 
 # --------------------------------------------------------------------------- the API
@@ -328,90 +220,59 @@ def run(
     Parameters
     ----------
     inputs : path, glob pattern, or a list of them
-        Files, folders (searched recursively for ``.ply .obj .stl .off .gltf .glb``) and globs;
-        folder searches and globs leave out ``outdir`` and a killed batch's hidden temporary names.
+        Files, folders (searched recursively for mesh files) and globs; searches leave out ``outdir``.
     outdir : path
-        Output folder (created). The result of ``a/b.ply`` from a folder INPUT
-        is ``outdir/a/b<suffix>``; ``encode`` writes ``<name>.bin``,
-        ``hierarchy`` a folder ``<name>/``, ``compare`` nothing. A stem ``.`` or
-        ``..`` (the file ``..ply``) is written as ``_dot`` or ``_dotdot``. Nothing
-        is written outside ``outdir`` and nothing this call did not write is
-        removed (an existing output folder is updated file by file).
-    op : str, keyword-only
-        An operation of :data:`OPS` (``denoise``, ``hierarchy``,
-        ``approximate``, ``encode``, ``compare``, ...) or a pipeline run in
-        order on each file, e.g. ``"denoise,compare"``.
-    options : dict, keyword-only
-        Options of the operations, e.g. ``{"iterations": 5, "method": "global"}``
-        (applies to every op of the pipeline that has the option) or
-        ``{"denoise.method": "global"}`` for one op.
-    client : dask.distributed.Client, keyword-only
-        Use this client (its cluster is left running). Otherwise ``scheduler``,
-        ``scheduler_file`` or ``DASK_SCHEDULER_ADDRESS`` connect to an existing
-        cluster, else a local cluster of ``workers`` spawned processes is
-        started for this call and closed at the end.
-    workers : int, keyword-only
-        Local worker processes (default: CPUs // ``threads_per_worker``);
-        ``0`` runs the files one after another in this process.
-    threads_per_worker : int, keyword-only
-        Threads of each worker and its BLAS/OpenMP/Open3D thread cap.
-    resume : bool, keyword-only
-        Skip inputs whose last ``report`` entry is ``ok`` for the same key
-        (pipeline, options, suffix, input size and mtime) and output, and
-        whose output files are all there with the recorded size and sha256;
-        they come back with status ``skipped``.
-    report : path, keyword-only
-        JSON-lines file getting one record per result as it arrives (appended
-        to with ``resume``, else overwritten).
-    retries : int, keyword-only
-        How many times a task whose worker died is run again on a new worker
-        (Dask's ``allowed-failures`` of the local cluster; an existing
-        cluster keeps its own setting).
-    fail_fast : bool, keyword-only
-        Stop at the first failure; files not run come back as ``cancelled``.
-    suffix : str, keyword-only
-        Output mesh format, one of ``.ply .obj .stl .off .gltf``.
-    force : bool, keyword-only
-        Allow an output path to be one of the input files.
-    progress : bool, keyword-only
-        Show a tqdm bar with done/failed counts and an ETA.
-    on_record : callable, keyword-only
-        Called with each record as it arrives; an exception it raises stops the batch.
-    task_timeout : float or None, keyword-only
-        Seconds a file may take (``None`` or 0: no limit). Past them its record says
-        ``TaskTimeout`` and the task can no longer write; on Dask its worker process is
-        restarted (a nanny's worker; else it runs on there). In the serial loop
-        (``workers=0``) Python cannot stop it: it runs on in a background thread of this
-        process until it ends, taking a core, while the next files run.
+        Output folder: ``a/b.ply`` of a folder INPUT gives ``outdir/a/b<suffix>`` (``encode``:
+        ``<name>.bin``, ``hierarchy``: a folder ``<name>/``, ``compare``: nothing). Nothing is
+        written outside it, nothing this call did not write is removed.
+    op : str, list of str or BatchOp
+        An operation of :data:`OPS` or a pipeline run in order on each file (``"denoise,compare"``).
+    options : dict
+        ``{"iterations": 5}`` applies to every op of the pipeline that has the option,
+        ``{"denoise.method": "global"}`` to one op.
+    client, scheduler, scheduler_file
+        An existing Dask cluster (a client is left running); else ``DASK_SCHEDULER_ADDRESS``, else a
+        local cluster of ``workers`` spawned processes for this call.
+    workers, threads_per_worker : int
+        Local worker processes (default: CPUs // ``threads_per_worker``; ``0``: one after another in
+        this process) and each one's threads and BLAS/OpenMP/Open3D thread cap.
+    resume, report
+        ``report`` is a JSON-lines file getting one record per result as it arrives; with
+        ``resume``, inputs whose last record is ``ok`` for the same key (pipeline, options,
+        suffix, input size and mtime) and whose files are intact (size and sha256) are ``skipped``.
+    retries, fail_fast : int, bool
+        Runs of a task whose worker died (the local cluster's ``allowed-failures``); stop at the
+        first failure (files not run are ``cancelled``).
+    suffix, force : str, bool
+        Output mesh format (one of ``.ply .obj .stl .off .gltf``); allow an output to be an input.
+    progress, on_record : bool, callable
+        A progress bar; a function called with each record (an exception it raises stops the batch).
+    task_timeout : float or None
+        Seconds a file may take (None or 0: no limit); past them its record says ``TaskTimeout`` and
+        it can no longer write (a Dask worker is restarted; the serial loop lets it run on).
 
     Returns
     -------
     list of dict
-        One record per input, in input order: ``input``, ``output``,
-        ``status`` (``ok``, ``failed``, ``skipped`` or ``cancelled``),
-        ``error``, ``stage`` (where it failed: ``read``, an op name, ``write``
-        or ``worker``), ``seconds`` and ``cpu_seconds`` of the task, ``vertices_before/after``,
-        ``triangles_before/after``, ``metrics`` (per op), ``key``, ``worker``,
-        ``files`` (each written file's ``bytes`` and ``sha256``) and ``warnings``
-        (what the task warned, also re-issued here with the file name).
+        One record per input, in order: ``input``, ``output``, ``status`` (``ok``, ``failed``,
+        ``skipped``, ``cancelled``), ``error``, ``stage``, ``seconds``, ``cpu_seconds``, sizes before
+        and after, ``metrics`` per op, ``key``, ``worker``, ``files`` (bytes, sha256), ``warnings``
+        (also re-issued here with the file name).
 
     Raises
     ------
     InputError
-        Unknown op or option, a bad value (``param`` names the parameter or option), no input
-        file, two inputs with the same output, an output that is an input file (without ``force``).
+        A bad argument (``param`` names it or the option), no input file, two inputs with one output,
+        an output that is an input (without ``force``).
     InputTypeError
         ``inputs`` or ``op`` of the wrong kind.
 
     Examples
     --------
     >>> import tempfile, open3d as o3d
-    >>> from o3d_lsmesh.app import batch
     >>> with tempfile.TemporaryDirectory() as folder:
-    ...     ball = o3d.geometry.TriangleMesh.create_sphere(resolution=8)
-    ...     _ = o3d.io.write_triangle_mesh(f"{folder}/ball.ply", ball)
-    ...     records = batch.run(folder, f"{folder}/out", op="denoise", workers=0, progress=False)
-    >>> [r["status"] for r in records]
+    ...     _ = o3d.io.write_triangle_mesh(f"{folder}/ball.ply", o3d.geometry.TriangleMesh.create_sphere())
+    ...     [r["status"] for r in run(folder, f"{folder}/out", op="denoise", workers=0, progress=False)]
     ['ok']
     """
     ops = parse_ops(op)
@@ -432,7 +293,7 @@ def run(
             "scheduler_file must be None when scheduler is given (not both)", param="scheduler_file"
         )
     if scheduler_file is not None:
-        _check_scheduler_file(scheduler_file)
+        check_scheduler_file(scheduler_file)
     if task_timeout is not None and (
         isinstance(task_timeout, bool)
         or not isinstance(task_timeout, (int, float))
@@ -450,7 +311,7 @@ def run(
     items = collect_inputs(inputs, exclude=outdir)
     if outdir.exists() and not outdir.is_dir():
         raise InputError(f"OUTDIR {str(outdir)!r} exists and is not a folder", param="outdir")
-    tasks: list[_Task] = []
+    tasks: list[Task] = []
     outputs: dict[str, str] = {}
     refused: list[dict] = []
     for index, (path, relative) in enumerate(items):
@@ -476,7 +337,7 @@ def run(
                     "suffix, or force)",
                     param="outdir",
                 )
-        tasks.append(_Task(index, os.path.abspath(path), relative, output, key))
+        tasks.append(Task(index, os.path.abspath(path), relative, output, key))
 
     report_path = None if report is None else Path(report)
     # (resume without a report was refused above)
@@ -548,7 +409,7 @@ def run(
 
     try:
         if all(emit(record) for record in refused) and todo:
-            _dispatch(
+            dispatch(
                 todo,
                 job,
                 emit,
@@ -566,70 +427,10 @@ def run(
     return [
         record
         if record is not None
-        else _failure(task, pipeline, "not run (--fail-fast stopped the batch)", stage="cancelled")
+        else failure_record(task, pipeline, "not run (--fail-fast stopped the batch)", stage="cancelled")
         | {"status": "cancelled"}
         for task, record in zip(tasks, records)
     ]
-
-
-def _dispatch(
-    todo: list[_Task],
-    job: dict,
-    emit: Callable[[dict], bool],
-    *,
-    client: Any,
-    workers: int | None,
-    threads_per_worker: int,
-    scheduler: Any,
-    scheduler_file: Any,
-    retries: int,
-) -> None:
-    address = None if client is not None else (scheduler or _scheduler_address())
-    remote = client is not None or address is not None or scheduler_file is not None
-    if not remote and workers == 0:
-        return _run_serial(todo, job, emit)
-    if not _dask_available():
-        if remote:
-            raise ImportError(
-                "connecting to a Dask scheduler needs dask.distributed: pip install 'o3d_lsmesh[dask]'"
-            )
-        warnings.warn(
-            "dask.distributed is not installed, so the files run one after another in this process; "
-            "pip install 'o3d_lsmesh[dask]' to use every core or a cluster",
-            O3DLSMeshWarning,
-            stacklevel=3,
-        )
-        return _run_serial(todo, job, emit)
-    from distributed import Client
-
-    if client is not None:
-        return _run_dask(client, todo, job, emit, retries)
-    if remote:
-        if workers is not None:
-            warnings.warn(
-                "--workers is ignored when connecting to an existing cluster", O3DLSMeshWarning, stacklevel=3
-            )
-        kwargs = (
-            {"scheduler_file": os.fspath(scheduler_file)}
-            if scheduler_file is not None
-            else {"address": address}
-        )
-        with Client(**kwargs) as own:
-            return _run_dask(own, todo, job, emit, retries)
-    n = workers if workers is not None else max(1, as_workers(None) // threads_per_worker)
-    n = min(n, len(todo))  # no worker that would never get a file
-    with local_cluster(n, threads_per_worker, retries=retries) as cluster, Client(cluster) as own:
-        return _run_dask(own, todo, job, emit, retries)
-
-
-def _run_serial(todo: list[_Task], job: dict, emit: Callable[[dict], bool]) -> None:
-    # Threads are left as the caller's process has them: this loop runs in the caller's process, whose
-    # warning state each task restores (a task routes its warnings into its record; emit re-issues them).
-    for task in todo:
-        with warnings.catch_warnings():
-            record = run_task(task.path, task.relative, task.key, **{**job, "threads": None})
-        if not emit(record):
-            return
 
 
 def summarize(records: Sequence[dict], seconds: float | None = None) -> str:

@@ -8,7 +8,6 @@ what a single file needs (output checks, pictures, the human report). Docs: ``do
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import math
 import os
 import textwrap
@@ -19,9 +18,9 @@ from typing import Any, Callable
 
 import numpy as np
 
-from .cli import PictureError, Run, add_command, op_options
+from .cli import Run, add_command, approximate, denoise, draw, fill, hierarchy, run_op, shape_change_text
 from .files import WRITABLE, CLIError, check_output, mesh_suffix, read_input, write_output
-from .ops import OPS, Option, TaskContext
+from .ops import OPS, Option
 
 __all__ = ["add_parsers", "parse_index_spec"]
 
@@ -64,6 +63,19 @@ def add_parsers(sub: Any, writing: argparse.ArgumentParser, common: argparse.Arg
     help = "known vertices as soft constraints (whole mesh re-solved)"
     p.add_argument("--soft", action="store_true", help=help)
     p.set_defaults(flags={"unknown_vertex_indices": "--unknown"})
+    add_command(sub, writing, encode, {"input": "mesh file", "output": "file for the encoded bytes"})
+    names = {
+        "mesh": "mesh file the data was encoded on",
+        "data": "file written by encode",
+        "output": _FILES["output"],
+    }
+    p = add_command(sub, writing, decode, names)
+    p.add_argument(
+        "--anchors",
+        type=bounded(int, 1, "a positive integer"),
+        help="use only the first K anchors (default: all)",
+    )
+    p.set_defaults(flags={"anchors": "--anchors"})
     p = add_command(
         sub,
         writing,
@@ -73,15 +85,6 @@ def add_parsers(sub: Any, writing: argparse.ArgumentParser, common: argparse.Arg
     p.add_argument(
         "--format", type=mesh_suffix, default=".ply", help="file format of the levels (.ply .obj ...)"
     )
-    add_command(sub, writing, encode, {"input": "mesh file", "output": "file for the encoded bytes"})
-    names = {
-        "mesh": "mesh file the data was encoded on",
-        "data": "file written by encode",
-        "output": _FILES["output"],
-    }
-    p = add_command(sub, writing, decode, names)
-    p.add_argument("--anchors", type=int, help="use only the first K anchors (default: all)")
-    p.set_defaults(flags={"anchors": "--anchors"})
     p = add_command(sub, writing, compare, {"a": "first mesh file (the reference)", "b": "second mesh file"})
     help = "write a distance map: A and B side by side, colored by distance to A (default: none)"
     p.add_argument("--render", metavar="PNG", help=help)
@@ -158,203 +161,6 @@ def _add_batch(p: argparse.ArgumentParser) -> None:
     p.set_defaults(positionals=("inputs", "outdir"), flags=flags)
 
 
-def shape_change_text(change: dict) -> str:
-    """One line for :func:`~o3d_lsmesh.metrics.shape_change`: a closed mesh's volume change, an open one's
-    inward shift along the normals (its volume about the origin means nothing)."""
-    if change["closed"]:
-        percent = change["volume_change_percent"]
-        return "volume change " + ("n/a (input volume 0)" if percent is None else f"{percent:+.3f}%")
-    if change["inward_shift_mean"] is None:
-        return "open surface (no volume; no vertex correspondence for a shift)"
-    rim, interior = (change[f"inward_shift_{key}"] for key in ("rim", "interior"))
-    return (
-        f"open surface (no volume): inward shift along the normals {change['inward_shift_mean']:.4g} "
-        f"(rim {'n/a' if rim is None else f'{rim:.4g}'}, "
-        f"interior {'n/a' if interior is None else f'{interior:.4g}'})"
-    )
-
-
-def draw(
-    meshes: list[Any], path: str, run: Run, *, what: str = "left: input, right: result", **options: Any
-) -> str:
-    """Draw ``meshes`` side by side into ``path``; :class:`PictureError` when no renderer works."""
-    from ..rendering import render
-
-    start = time.perf_counter()
-    try:
-        render(meshes, path, **options)
-    except RuntimeError as error:  # Filament and the raycasting fallback both failed: not the input's fault
-        raise PictureError(str(error)) from error
-    run.say(f"picture ({time.perf_counter() - start:.1f} s): {path}  ({what})")
-    return path
-
-
-def _run_op(
-    name: str, mesh: Any, args: argparse.Namespace, run: Run, **options: Any
-) -> tuple[Any, dict, float]:
-    """Run the operation ``name`` on ``mesh`` with the command line's options; the result, metrics, seconds."""
-    context = TaskContext(args.input, args.input, None, progress=run.progress)
-    start = time.perf_counter()
-    out, metrics = OPS[name].function(mesh, {**op_options(args, OPS[name]), **options}, context)
-    return out, metrics, time.perf_counter() - start
-
-
-# --------------------------------------------------------------------------- the operations' commands
-
-
-def denoise(args: argparse.Namespace, run: Run) -> int:
-    """Barycenter-constrained (or multiresolution) fairing.
-
-    Remove noise with barycenter-constrained fairing (Liu et al. 2001, section 3): the membrane
-    energy is minimized while every triangle keeps its barycenter. With --level L, multiresolution
-    fairing (section 4.2): fair a coarse level of the volume-cost hierarchy, then split back up
-    (--mu, --reimpose-every and --fixed-boundary are refused with it).
-
-    example: scan.ply smooth.ply --iterations 20 --render before_after.png
-    """
-    options = {
-        "--mu": args.mu,
-        "--reimpose-every": args.reimpose_every,
-        "--fixed-boundary": args.fixed_boundary or None,
-    }
-    given = [flag for flag, value in options.items() if value is not None]
-    if args.level and given:  # multiresolution fairing fairs every level with its own defaults
-        raise CLIError(
-            f"{', '.join(given)} cannot be combined with --level (multiresolution fairing does not take "
-            f"{'them' if len(given) > 1 else 'it'}), got --level {args.level}"
-        )
-    check_output(args.output, [args.input], force=args.force)
-    if args.render:
-        check_output(args.render, [args.input], force=args.force, suffixes=(".png",))
-    mesh = read_input(args.input)
-    from ..fairing.constrained import resolved_options
-
-    scan = resolved_options(args.method, args.iterations, args.reimpose_every)[0] == "scan"
-    if not args.level and args.fixed_boundary and scan:
-        raise CLIError(
-            "--fixed-boundary cannot be used with --method scan, the default (its boundary moves with "
-            "the surface): add --method local or --method global"
-        )
-    out, report, seconds = _run_op("denoise", mesh, args, run)
-    report["seconds"] = seconds
-    write_output(args.output, out)
-    run.say(
-        f"denoised {args.input} ({len(mesh.vertices)} vertices) by {report['method']} fairing in {seconds:.2f} s "
-        f"-> {args.output}; mean displacement {report['displacement_mean']:.4g}, {shape_change_text(report)}"
-    )
-    if args.render:
-        method, iterations = report["method"], report["iterations"]  # what ran
-        title = f"{method} fairing" + (f", mu {args.mu:g}" if args.mu is not None else "")
-        if args.level:
-            title = f"multiresolution fairing, level {args.level}, {iterations} iterations per level"
-        elif method not in ("scan", "features"):  # one solve / a measured pass count: no iteration count
-            title += f", {iterations} iteration{'s' if iterations != 1 else ''}"
-        report["render"] = draw(
-            [mesh, out], args.render, run, titles=[f"input: {Path(args.input).name}", title]
-        )
-    return run.finish(mesh, **report)
-
-
-def fill(args: argparse.Namespace, run: Run) -> int:
-    """Fill holes with faired patches (LS meshes).
-
-    Close holes: minimum-weight triangulation (Liepa 2003), refinement to the surrounding edge
-    density, then LS-mesh fairing of the new vertices with the hole's rings as anchors. Each open
-    component's outer border stays open unless --fill-border. --max-hole-diameter is in model units.
-    Every loop left open is listed with why (outer border, size limits, every fill crossing the mesh).
-
-    example: scan.ply filled.ply --max-hole-edges 200
-    """
-    check_output(args.output, [args.input], force=args.force)
-    mesh = read_input(args.input)
-    from .._o3d import read_mesh
-    from ..hole_filling import find_holes
-
-    def holes(mesh: Any) -> list:  # of the welded surface, as fill_holes sees it: a UV seam is no hole
-        welded = read_mesh(mesh, weld=True)
-        return find_holes(welded.vertices, welded.triangles)
-
-    before = holes(mesh)
-    out, metrics, seconds = _run_op("fill", mesh, args, run)
-    report = metrics["_report"]
-    write_output(args.output, out)
-    after = holes(out)
-    run.say(
-        f"filled {len(report.filled)} of {len(report.holes)} holes of {args.input} in {seconds:.2f} s "
-        f"({metrics['new_vertices']} new vertices) -> {args.output}; {len(after)} loops left open"
-    )
-    for hole in report.skipped:  # every loop left open, and why
-        run.say(f"  left open: loop {hole.id} ({hole.edges} edges, diameter {hole.diameter:.4g}): {hole.how}")
-    return run.finish(
-        mesh,
-        holes_before=len(before),
-        holes_after=len(after),
-        borders_left_open=0 if args.fill_border else sum(hole.border for hole in before),
-        new_vertices=metrics["new_vertices"],
-        new_triangles=metrics["new_triangles"],
-        holes_filled=len(report.filled),
-        skipped=[dataclasses.asdict(hole) for hole in report.skipped],
-        seconds=seconds,
-    )
-
-
-def approximate(args: argparse.Namespace, run: Run) -> int:
-    """LS-mesh approximation from N control points.
-
-    Rebuild the geometry from the connectivity and N control points chosen on the mesh
-    (least-squares meshes, Sorkine and Cohen-Or 2004).
-
-    example: bunny.ply approx.ply --count 400 --indices controls.npy
-    """
-    check_output(args.output, [args.input], force=args.force)
-    if args.indices:
-        check_output(args.indices, [args.input], force=args.force, suffixes=(".npy", ".txt"))
-    mesh = read_input(args.input)
-    out, metrics, seconds = _run_op("approximate", mesh, args, run)
-    write_output(args.output, out)
-    indices = metrics.pop("_indices")
-    if args.indices:
-        np.save(args.indices, indices) if args.indices.endswith(".npy") else np.savetxt(
-            args.indices, indices, fmt="%d"
-        )
-    run.say(
-        f"approximated {args.input} from {len(indices)} control points in {seconds:.2f} s -> {args.output}; "
-        f"L-inf error {metrics['error_linf']:.4g}, RMS {metrics['error_rms']:.4g}"
-    )
-    return run.finish(mesh, **metrics, seconds=seconds)
-
-
-def hierarchy(args: argparse.Namespace, run: Run) -> int:
-    """Write levels of the volume-cost collapse hierarchy.
-
-    Build the volume-cost edge-collapse hierarchy (Liu et al. 2001, section 4.1) and write the
-    chosen levels as mesh files, level_00 being the input.
-
-    example: bunny.ply levels/ --levels 0,2,4 --maps
-    """
-    mesh = read_input(args.input)
-    outdir = Path(args.outdir)
-    if outdir.exists() and not outdir.is_dir():
-        raise CLIError(f"OUTDIR {args.outdir!r} exists and is not a folder")
-    built, metrics, seconds = _run_op("hierarchy", mesh, args, run)
-    outdir.mkdir(parents=True, exist_ok=True)
-    written: list[str] = []
-    for name, item in built.items():
-        path = str(outdir / (name if isinstance(item, bytes) else name + args.format))
-        if isinstance(item, bytes):
-            Path(path).write_bytes(item)
-        else:
-            check_output(path, [args.input], force=args.force, suffixes=None)
-            write_output(path, item)
-        written.append(path)
-    counts = metrics["vertex_counts"]
-    run.say(
-        f"hierarchy of {args.input}: {len(counts)} levels ({counts[0]} -> {counts[-1]} vertices) "
-        f"in {seconds:.2f} s; wrote {len(written)} files to {outdir}/"
-    )
-    return run.finish(mesh, levels=len(counts), vertex_counts=counts, written=written, seconds=seconds)
-
-
 def encode(args: argparse.Namespace, run: Run) -> int:
     """Encode the geometry as quantized LS-mesh anchors.
 
@@ -365,7 +171,7 @@ def encode(args: argparse.Namespace, run: Run) -> int:
     """
     check_output(args.output, [args.input], force=args.force, suffixes=None)
     mesh = read_input(args.input)
-    data, metrics, seconds = _run_op("encode", mesh, args, run)
+    data, metrics, seconds = run_op("encode", mesh, args, run)
     Path(args.output).write_bytes(data)
     run.say(
         f"encoded {args.input}: {metrics['anchors']} anchors at {args.bits} bits -> {len(data)} bytes "

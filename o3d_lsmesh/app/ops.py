@@ -12,7 +12,6 @@ from __future__ import annotations
 import contextlib
 import io
 import os
-from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
@@ -27,9 +26,7 @@ __all__ = [
     "BatchOp",
     "Option",
     "TaskContext",
-    "parse_ops",
     "register_op",
-    "resolve_options",
 ]
 
 #: Names an operation option may not take: they are flags of ``o3d-lsmesh batch`` itself.
@@ -229,97 +226,60 @@ def operation(name: str, **fields: Any) -> Callable[[OpFunction], OpFunction]:
     return add
 
 
-def parse_ops(op: Any) -> list[BatchOp]:
-    """``"fill,denoise"``, ``["fill", "denoise"]`` or BatchOp objects -> the pipeline, checked."""
-    if isinstance(op, (str, BatchOp)):
-        items: list[Any] = op.split(",") if isinstance(op, str) else [op]
-    elif isinstance(op, Sequence):
-        items = list(op)
-    else:
-        raise InputTypeError(
-            f"op must be a name, a comma-separated pipeline or a list of names, got {type(op).__name__}",
-            param="op",
-        )
-    ops = []
-    for item in items:
-        name = item.name if isinstance(item, BatchOp) else str(item).strip()
-        if not isinstance(item, BatchOp) and name not in OPS:
-            raise InputError(
-                f"op must be one of {', '.join(sorted(OPS))} or a pipeline like 'denoise,compare', got {name!r}",
-                param="op",
-            )
-        ops.append(item if isinstance(item, BatchOp) else OPS[name])
-    if not ops:
-        raise InputError(f"op must name at least one operation, got {op!r}", param="op")
-    for first in ops[:-1]:
-        if first.output != "mesh":
-            raise InputError(
-                f"op {first.name!r} writes {first.output}, not a mesh, so it must be last in a pipeline",
-                param="op",
-            )
-    return ops
-
-
-def parse_option(op: BatchOp, option: Option, value: Any) -> Any:
-    """``option.parse(value)``; ``InputError`` naming the option (``param``) and its op."""
-    try:
-        return option.parse(value)
-    except ValueError as error:
-        raise InputError(f"{option.name} {error} (an option of op {op.name})", param=option.name) from None
-
-
-def resolve_options(ops: Sequence[BatchOp], options: Mapping[str, Any] | None) -> list[dict]:
-    """Parse ``options`` for each op of a pipeline; return one ``{name: value}`` dict per op.
-
-    A key ``"name"`` applies to every op of the pipeline that has that option; a key
-    ``"op.name"`` (or a nested ``{"op": {"name": value}}``) to that op only. Unknown names and bad
-    values raise :class:`~o3d_lsmesh.core.errors.InputError` naming the option.
-    """
-    shared: dict[str, Any] = {}
-    specific: dict[tuple[str, str], Any] = {}
-    names = {op.name for op in ops}
-    for key, value in dict(options or {}).items():
-        if isinstance(value, Mapping) and key in names:
-            specific.update({(key, str(k).replace("-", "_")): v for k, v in value.items()})
-        elif "." in key and key.split(".", 1)[0] in names:
-            op_name, name = key.split(".", 1)
-            specific[(op_name, name.replace("-", "_"))] = value
-        else:
-            shared[key.replace("-", "_")] = value
-    known = {option.name for op in ops for option in op.options}
-    pipeline = ",".join(op.name for op in ops)
-    for name in shared:
-        if name not in known:
-            raise InputError(
-                f"{name} is not an option of op {pipeline} (its options: {', '.join(sorted(known)) or 'none'})",
-                param=name,
-            )
-    for op_name, name in specific:
-        op = next(op for op in ops if op.name == op_name)
-        if name not in {option.name for option in op.options}:
-            raise InputError(
-                f"options: {op_name} has no option {name!r} (its options: "
-                f"{', '.join(o.name for o in op.options) or 'none'})",
-                param="options",
-            )
-    resolved = []
-    for op in ops:
-        values = {}
-        for option in op.options:
-            pair = (op.name, option.name)
-            if pair in specific or option.name in shared:
-                given = specific[pair] if pair in specific else shared[option.name]
-                values[option.name] = parse_option(op, option, given)
-            else:
-                values[option.name] = option.default
-        resolved.append(values)
-    return resolved
-
-
 # --------------------------------------------------------------------------- the operations
 
+
+_LEVELS = "levels of the volume-cost collapse hierarchy, written to OUTDIR/<name>/level_NN<suffix>"
+_ANCHORS = "quantized LS-mesh anchors, written as OUTDIR/<name>.bin"
 _SELECTIONS = ("greedy", "random", "combined")
-_DENOISE_METHODS = ("scan", "local", "global", "features")
+_METHODS = ("scan", "local", "global", "features")
+
+# fmt: off
+DENOISE = (
+    Option("iterations", optional(int_at_least(0)), None, "number of fairing iterations (default: the API's, "
+           "10 for local; with --level, 5 per level)", param="number_of_iterations"),
+    Option("method", optional(choice(*_METHODS)), None, "fairing energy (default: scan, the API's default; "
+           "local with --level, --iterations or --reimpose-every); features keeps sharp creases (guided normal "
+           "filtering)"),
+    Option("level", int_at_least(0), 0, "multiresolution level (0: plain fairing)"),
+    Option("mu", optional(real), None, "barycenter penalty weight of --method global or scan (default: the API's)"),
+    Option("reimpose_every", optional(int_at_least(1)), None, "re-take the barycenters every k iterations "
+           "(default: never)"),
+    Option("fixed_boundary", flag, False, "keep boundary vertices fixed (default: smooth the boundary curves)",
+           is_flag=True, param="smooth_boundary"),
+)
+FILL = (
+    Option("max_hole_edges", optional(int_at_least(3)), None, "fill only holes of at most this many edges "
+           "(default: no limit)"),
+    Option("max_hole_diameter", optional(real), None, "fill only holes at most this wide (default: no limit)"),
+    Option("continuity", choice(0, 1, 2), 2, "0 harmonic, 1 LS mesh, 2 tri-Laplacian"),
+    Option("density", real, 1.0, "new vertex density relative to the surroundings (0 to 4)"),
+    Option("fill_border", flag, False, "also fill the outer border of open components", is_flag=True),
+)
+HIERARCHY = (
+    Option("levels", levels_spec, "all", "'all' or comma-separated level numbers (0 is the input)"),
+    Option("min_vertices", int_at_least(1), 100, "stop at this many vertices"),
+    Option("max_levels", optional(int_at_least(1)), None, "stop after this many levels (default: no limit)"),
+    Option("maps", flag, False, "also write vertex_maps.npz (input vertex -> level vertex)", is_flag=True),
+)
+APPROXIMATE = (
+    Option("count", count_or_percent, "2%", "control points: a count, or a share of each mesh's vertices "
+           "like 2%", required=True),
+    Option("method", choice(*_SELECTIONS), "greedy", "how the control points are chosen"),
+    Option("interpolate", flag, False, "interpolate the control points exactly", is_flag=True),
+    Option("seed", int_at_least(0), 0, "random seed of --method random/combined"),
+)
+ENCODE = (
+    Option("count", count_or_percent, "2%", "anchors: a count, or a share of each mesh's vertices like 2%"),
+    Option("bits", int_at_least(1), 12, "quantization bits per coordinate"),
+    Option("method", choice(*_SELECTIONS), "greedy", "how the anchors are chosen"),
+)
+COMPARE = (
+    Option("reference", optional(folder), None, "folder holding a reference for every input (same name or "
+           "stem)", cli=False),
+    Option("points", int_at_least(1, MAX_POINTS), 100_000, "surface samples per mesh", param="number_of_points"),
+)
+# fmt: on
 
 
 def normal_change(a: Any, b: Any) -> float | None:
@@ -350,45 +310,7 @@ def change_metrics(before: Any, after: Any) -> dict:
 
 
 @operation(
-    "denoise",
-    help="barycenter-constrained (or multiresolution with --level) fairing",
-    options=(
-        Option(
-            "iterations",
-            optional(int_at_least(0)),
-            None,
-            "number of fairing iterations (default: the API's, 10 for local; with --level, 5 per level)",
-            param="number_of_iterations",
-        ),
-        Option(
-            "method",
-            optional(choice(*_DENOISE_METHODS)),
-            None,
-            "fairing energy (default: scan, the API's default; local with --level, --iterations or "
-            "--reimpose-every); features keeps sharp creases (guided normal filtering)",
-        ),
-        Option("level", int_at_least(0), 0, "multiresolution level (0: plain fairing)"),
-        Option(
-            "mu",
-            optional(real),
-            None,
-            "barycenter penalty weight of --method global or scan (default: the API's)",
-        ),
-        Option(
-            "reimpose_every",
-            optional(int_at_least(1)),
-            None,
-            "re-take the barycenters every k iterations (default: never)",
-        ),
-        Option(
-            "fixed_boundary",
-            flag,
-            False,
-            "keep boundary vertices fixed (default: smooth the boundary curves)",
-            is_flag=True,
-            param="smooth_boundary",
-        ),
-    ),
+    "denoise", options=DENOISE, help="barycenter-constrained (or multiresolution with --level) fairing"
 )
 def denoise_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
     """``--op denoise`` and ``o3d-lsmesh denoise``: fairing with the method and iterations that ran."""
@@ -421,24 +343,7 @@ def denoise_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dic
     return out, {"method": method, "iterations": iterations, "level": level, **change_metrics(mesh, out)}
 
 
-@operation(
-    "fill",
-    help="fill holes with faired patches (LS meshes)",
-    options=(
-        Option(
-            "max_hole_edges",
-            optional(int_at_least(3)),
-            None,
-            "fill only holes of at most this many edges (default: no limit)",
-        ),
-        Option(
-            "max_hole_diameter", optional(real), None, "fill only holes at most this wide (default: no limit)"
-        ),
-        Option("continuity", choice(0, 1, 2), 2, "0 harmonic, 1 LS mesh, 2 tri-Laplacian"),
-        Option("density", real, 1.0, "new vertex density relative to the surroundings (0 to 4)"),
-        Option("fill_border", flag, False, "also fill the outer border of open components", is_flag=True),
-    ),
-)
+@operation("fill", options=FILL, help="fill holes with faired patches (LS meshes)")
 def fill_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
     """``--op fill`` and ``o3d-lsmesh fill``: counts of new elements and of the loops filled and left open."""
     from ..hole_filling import fill_holes
@@ -467,31 +372,13 @@ def parse_levels(spec: str, count: int) -> list[int]:
     return levels
 
 
-@operation(
-    "hierarchy",
-    output="files",
-    help="levels of the volume-cost collapse hierarchy, written to OUTDIR/<name>/level_NN<suffix>",
-    options=(
-        Option("levels", levels_spec, "all", "'all' or comma-separated level numbers (0 is the input)"),
-        Option("min_vertices", int_at_least(1), 100, "stop at this many vertices"),
-        Option(
-            "max_levels", optional(int_at_least(1)), None, "stop after this many levels (default: no limit)"
-        ),
-        Option(
-            "maps", flag, False, "also write vertex_maps.npz (input vertex -> level vertex)", is_flag=True
-        ),
-    ),
-)
+@operation("hierarchy", options=HIERARCHY, output="files", help=_LEVELS)
 def hierarchy_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
     """``--op hierarchy`` and ``o3d-lsmesh hierarchy``: ``{level_NN: mesh, vertex_maps.npz: bytes}``."""
     from ..hierarchy import build_hierarchy
 
-    built = build_hierarchy(
-        mesh,
-        min_vertices=options["min_vertices"],
-        max_levels=options["max_levels"],
-        progress=context.progress,
-    )
+    sizes = {key: options[key] for key in ("min_vertices", "max_levels")}
+    built = build_hierarchy(mesh, **sizes, progress=context.progress)
     levels = parse_levels(options["levels"], len(built))
     files: dict[str, Any] = {f"level_{level:02d}": built.level(level) for level in levels}
     if options["maps"]:  # each map composes the parents of every level above it: only when asked
@@ -503,59 +390,25 @@ def hierarchy_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, d
     return files, {"levels": len(built), "written_levels": levels, "vertex_counts": counts}
 
 
-@operation(
-    "approximate",
-    help="LS-mesh approximation from control points",
-    options=(
-        Option(
-            "count",
-            count_or_percent,
-            "2%",
-            "control points: a count, or a share of each mesh's vertices like 2%",
-            required=True,
-        ),
-        Option("method", choice(*_SELECTIONS), "greedy", "how the control points are chosen"),
-        Option("interpolate", flag, False, "interpolate the control points exactly", is_flag=True),
-        Option("seed", int_at_least(0), 0, "random seed of --method random/combined"),
-    ),
-)
+@operation("approximate", options=APPROXIMATE, help="LS-mesh approximation from control points")
 def approximate_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
     """``--op approximate`` and ``o3d-lsmesh approximate``: the result, its control indices and errors."""
     from ..metrics import vertex_error
     from ..selection import approximate
 
     count = resolve_count(options["count"], len(mesh.vertices))
+    method, interpolate, seed = options["method"], options["interpolate"], options["seed"]
     out, indices = approximate(
-        mesh,
-        count,
-        method=options["method"],
-        interpolate=options["interpolate"],
-        seed=options["seed"],
-        progress=context.progress,
+        mesh, count, method=method, interpolate=interpolate, seed=seed, progress=context.progress
     )
     error = vertex_error(out, mesh)
-    return out, {
-        "count": len(indices),
-        "method": options["method"],
-        "error_linf": error["linf"],
-        "error_rms": error["rms"],
-        "_indices": np.asarray(indices, dtype=np.int64),  # (the CLI writes them with --indices)
-    }
+    indices = np.asarray(indices, dtype=np.int64)  # ("_" keys: for the CLI, not in records)
+    return out, dict(
+        count=len(indices), method=method, error_linf=error["linf"], error_rms=error["rms"], _indices=indices
+    )
 
 
-@operation(
-    "encode",
-    output="bytes",
-    extension=".bin",
-    help="quantized LS-mesh anchors, written as OUTDIR/<name>.bin",
-    options=(
-        Option(
-            "count", count_or_percent, "2%", "anchors: a count, or a share of each mesh's vertices like 2%"
-        ),
-        Option("bits", int_at_least(1), 12, "quantization bits per coordinate"),
-        Option("method", choice(*_SELECTIONS), "greedy", "how the anchors are chosen"),
-    ),
-)
+@operation("encode", options=ENCODE, output="bytes", extension=".bin", help=_ANCHORS)
 def encode_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
     """``--op encode`` and ``o3d-lsmesh encode``: the bytes, their size and the decoded error."""
     from ..encoding import decode_geometry, encode_geometry
@@ -566,14 +419,10 @@ def encode_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict
     progress = context.progress
     data = encode_geometry(mesh, count, bits=options["bits"], method=options["method"], progress=progress)
     error = vertex_error(decode_geometry(mesh, data, progress=progress), mesh)
-    return data, {
-        "anchors": count,
-        "bits": options["bits"],
-        "bytes": len(data),
-        "bits_per_vertex": 8.0 * len(data) / n,
-        "decoded_error_linf": error["linf"],
-        "decoded_error_rms": error["rms"],
-    }
+    decoded = {"decoded_error_linf": error["linf"], "decoded_error_rms": error["rms"]}
+    return data, dict(
+        anchors=count, bits=options["bits"], bytes=len(data), bits_per_vertex=8.0 * len(data) / n, **decoded
+    )
 
 
 def find_reference(base: str, relative: str) -> str:
@@ -595,27 +444,7 @@ def find_reference(base: str, relative: str) -> str:
     )
 
 
-@operation(
-    "compare",
-    output="none",
-    help="metrics against the matching file in --reference",
-    options=(
-        Option(
-            "reference",
-            optional(folder),
-            None,
-            "folder holding a reference for every input (same name or stem)",
-            cli=False,
-        ),
-        Option(
-            "points",
-            int_at_least(1, MAX_POINTS),
-            100_000,
-            "surface samples per mesh",
-            param="number_of_points",
-        ),
-    ),
-)
+@operation("compare", options=COMPARE, output="none", help="metrics against the matching file in --reference")
 def compare_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
     """``--op compare``: metrics against the matching file of ``reference``."""
     from ..metrics import surface_distance, vertex_error

@@ -1,29 +1,35 @@
-"""One batch task: read a file, run the pipeline in a thread of its own, write the result atomically.
+"""Where a batch's tasks run: one task per file (:func:`run_task`), on Dask or in this process.
 
-:func:`run_task` runs inside a worker and returns a small JSON record, so meshes never travel
-between processes. Every failure (unreadable file, an operation raising, a write Open3D refuses,
-the time limit) becomes a failure record, never an exception; each task's warnings go into its
-record. Docs: ``docs/batch.md``.
+:func:`run_task` reads a file, runs the pipeline in a thread of its own (time limit) and writes the
+result atomically, returning a small JSON record: meshes never travel between processes, and every
+failure (an unreadable file, an operation raising, a write Open3D refuses, the time limit) is a
+record with the task's warnings. :func:`dispatch` runs tasks on a Dask cluster (a local one of
+*spawned* workers, :func:`local_cluster`) or one after another here. Docs: ``docs/batch.md``.
 """
 
 from __future__ import annotations
 
+import json
+import logging
 import os
 import threading
 import time
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from itertools import islice
 from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
 
 from .._o3d.io import cap_threads
+from ..core.errors import InputError, O3DLSMeshWarning
+from ..core.validate import as_workers
 from .files import output_path, read_mesh_file, write_atomic
 from .ops import BatchOp, TaskContext
 
-__all__ = ["RECORD_FIELDS", "configure_threads", "jsonable", "new_record", "run_task"]
+__all__ = ["RECORD_FIELDS", "configure_threads", "jsonable", "local_cluster", "new_record", "run_task"]
 
 #: The fields of a report record, in the order they are written.
 RECORD_FIELDS = (
@@ -217,3 +223,266 @@ def _run_pipeline(
         record["error"] = f"{type(error).__name__}: {error}"
     finally:
         _LOCAL.warnings = None
+
+
+@dataclass(frozen=True)
+class Task:
+    index: int
+    path: str
+    relative: str
+    output: str | None
+    key: str
+
+
+# --------------------------------------------------------------------------- engines
+
+
+def _dask_available() -> bool:
+    try:
+        import distributed  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def _scheduler_address() -> str | None:
+    address = os.environ.get("DASK_SCHEDULER_ADDRESS")
+    if address:
+        return address
+    try:
+        import dask
+
+        return dask.config.get("scheduler-address", None)
+    except ImportError:
+        return None
+
+
+def check_scheduler_file(path: str | os.PathLike) -> None:
+    """Refuse a scheduler file that is missing or holds no address (Dask's client would wait for it forever)."""
+    expected = "scheduler_file must be the JSON file a running Dask scheduler wrote"
+    if not os.path.isfile(path):
+        raise InputError(f"{expected}, got {os.fspath(path)!r}, which does not exist", param="scheduler_file")
+    try:
+        with open(path, encoding="utf-8") as handle:
+            address = json.load(handle).get("address")
+    except (ValueError, AttributeError):
+        address = None
+    if not isinstance(address, str):
+        raise InputError(
+            f"{expected}, got {os.fspath(path)!r}, which holds no JSON 'address'", param="scheduler_file"
+        )
+
+
+def _start_method() -> str:
+    """The worker start method: the configured one unless it is ``fork`` (then ``spawn``)."""
+    import dask
+
+    method = dask.config.get("distributed.worker.multiprocessing-method", "spawn")
+    return "spawn" if method not in ("spawn", "forkserver") else method
+
+
+def local_cluster(workers: int, threads_per_worker: int = 1, *, retries: int = 1, **kwargs: Any) -> Any:
+    """A ``LocalCluster`` of ``workers`` spawned processes with ``threads_per_worker`` threads each.
+
+    BLAS/OpenMP thread variables are set before the workers start (CHOLMOD and
+    OpenBLAS read them once, when they load), Dask's ``MALLOC_TRIM_THRESHOLD_``
+    is left out (it doubles the time of array-heavy tasks), a task may kill at most
+    ``retries + 1`` workers before it is reported failed (Dask's
+    ``allowed-failures``), and the dashboard takes a free port on 127.0.0.1.
+    """
+    import dask
+    from distributed import LocalCluster
+
+    threads = str(threads_per_worker)
+    environ = dict(dask.config.get("distributed.nanny.pre-spawn-environ", {}) or {})
+    environ.update(OMP_NUM_THREADS=threads, OPENBLAS_NUM_THREADS=threads, MKL_NUM_THREADS=threads)
+    # Dask sets MALLOC_TRIM_THRESHOLD_=65536, which turns off glibc's dynamic mmap threshold: every array
+    # above 128 KiB becomes a fresh mmap whose pages fault in zeroed (benchmarks/results/batch.md)
+    environ.pop("MALLOC_TRIM_THRESHOLD_", None)
+    with dask.config.set(
+        {
+            "distributed.worker.multiprocessing-method": _start_method(),
+            "distributed.scheduler.allowed-failures": retries,
+            # One task per worker thread at a time: a dying worker takes no queued task along.
+            "distributed.scheduler.worker-saturation": 1.0,
+            "distributed.nanny.pre-spawn-environ": environ,
+        }
+    ):
+        # The scheduler always serves HTTP (8787 unless told): a free local port avoids clashing with another
+        # cluster on this machine (and gives a dashboard when bokeh is installed).
+        kwargs.setdefault("dashboard_address", "127.0.0.1:0")
+        kwargs.setdefault("silence_logs", logging.ERROR)
+        return LocalCluster(
+            n_workers=workers, threads_per_worker=threads_per_worker, processes=True, **kwargs
+        )
+
+
+class _Window:
+    """How many tasks to keep submitted: sized from the cluster's worker threads, re-read at most once a second.
+
+    Above ``2 x threads`` tasks, Dask treats the tasks as root tasks and queues them on the scheduler,
+    handing each worker only ``worker-saturation x threads`` at a time (1 on :func:`local_cluster`): so a
+    worker that dies holds no innocent task (Dask counts every task held by a dying worker as suspect),
+    and a finished worker gets its next file without a round trip through this client. A window of
+    ``4 x threads + 4`` keeps that queue filled; a batch of at most ``2 x threads`` files, which Dask
+    would hand out all at once, gets a window of ``threads`` instead.
+    """
+
+    def __init__(self, client: Any, total: int):
+        self.client, self.total, self.value, self.when = client, total, 1, -1.0
+
+    def __call__(self) -> int:
+        now = time.monotonic()
+        if now - self.when > 1.0:
+            threads = max(1, sum(self.client.nthreads().values()))
+            self.value = threads if self.total <= 2 * threads else 4 * threads + 4
+            self.when = now
+        return self.value
+
+
+def failure_record(task: Task, op: str, message: str, stage: str = "worker") -> dict:
+    return new_record(input=task.path, error=message, stage=stage, op=op, key=task.key)
+
+
+def _run_dask(client: Any, tasks: list[Task], job: dict, emit: Callable[[dict], bool], retries: int) -> None:
+    from concurrent.futures import CancelledError
+
+    from distributed import KilledWorker, as_completed
+
+    cancelled: tuple[type[BaseException], ...]
+    try:
+        from distributed.client import FutureCancelledError
+
+        cancelled = (CancelledError, FutureCancelledError)
+    except ImportError:  # pragma: no cover - distributed before 2024.8
+        cancelled = (CancelledError,)
+
+    token = os.urandom(4).hex()
+    pending = iter(tasks)
+    by_key: dict[str, Task] = {}
+    queue = as_completed()
+
+    def submit(n: int) -> None:
+        chunk = list(islice(pending, max(0, n)))
+        if not chunk:
+            return
+        keys = [f"o3d-lsmesh-batch-{token}-{task.index}" for task in chunk]
+        futures = client.map(
+            run_task,
+            [t.path for t in chunk],
+            [t.relative for t in chunk],
+            [t.key for t in chunk],
+            key=keys,
+            pure=False,
+            **job,
+        )
+        for task, future in zip(chunk, futures):
+            by_key[future.key] = task
+            queue.add(future)
+
+    window = _Window(client, len(tasks))
+    submit(window())
+    op_name = ",".join(op.name for op in job["ops"])
+    try:
+        for future in queue:
+            task = by_key.pop(future.key)
+            try:
+                record = future.result()
+            except KilledWorker as error:
+                tries = getattr(error, "allowed_failures", retries) + 1
+                last = getattr(getattr(error, "last_worker", None), "address", "?")
+                record = failure_record(
+                    task,
+                    op_name,
+                    f"KilledWorker: each of the {tries} workers that ran it died (a crash "
+                    f"such as a segfault, or killed, e.g. for memory); last worker {last}",
+                )
+                record["worker"] = last
+            except cancelled:
+                record = failure_record(task, op_name, "cancelled")
+            except Exception as error:
+                record = failure_record(task, op_name, f"{type(error).__name__}: {error}")
+            future.release()
+            if str(record.get("error")).startswith("TaskTimeout"):
+                record["error"] += _restart(client, record.get("worker"))
+            if not emit(record):
+                break
+            size, held = window(), queue.count()
+            if held <= size // 2:  # refill in chunks: each client.map is one graph update on the scheduler
+                submit(size - held)
+    finally:
+        # Whatever stopped the loop (--fail-fast, an exception, Ctrl-C): drop what is still queued or running.
+        remaining = list(getattr(queue, "futures", ()))
+        if remaining:
+            client.cancel(remaining)
+
+
+def _restart(client: Any, worker: Any) -> str:
+    """Restart the worker running an abandoned task (only a nanny can: else it runs on there)."""
+    try:
+        status = client.restart_workers([worker], raise_for_error=False).get(worker)
+    except Exception as error:  # whatever it is, the record says so
+        status = f"{type(error).__name__}: {error}"
+    if status == "OK":
+        return "; its worker was restarted"
+    return f"; its worker could not be restarted ({status}), so it runs on there"
+
+
+def dispatch(
+    todo: list[Task],
+    job: dict,
+    emit: Callable[[dict], bool],
+    *,
+    client: Any,
+    workers: int | None,
+    threads_per_worker: int,
+    scheduler: Any,
+    scheduler_file: Any,
+    retries: int,
+) -> None:
+    address = None if client is not None else (scheduler or _scheduler_address())
+    remote = client is not None or address is not None or scheduler_file is not None
+    if not remote and workers == 0:
+        return _run_serial(todo, job, emit)
+    if not _dask_available():
+        if remote:
+            raise ImportError(
+                "connecting to a Dask scheduler needs dask.distributed: pip install 'o3d_lsmesh[dask]'"
+            )
+        warnings.warn(
+            "dask.distributed is not installed, so the files run one after another in this process; "
+            "pip install 'o3d_lsmesh[dask]' to use every core or a cluster",
+            O3DLSMeshWarning,
+            stacklevel=3,
+        )
+        return _run_serial(todo, job, emit)
+    from distributed import Client
+
+    if client is not None:
+        return _run_dask(client, todo, job, emit, retries)
+    if remote:
+        if workers is not None:
+            warnings.warn(
+                "--workers is ignored when connecting to an existing cluster", O3DLSMeshWarning, stacklevel=3
+            )
+        kwargs = (
+            {"scheduler_file": os.fspath(scheduler_file)}
+            if scheduler_file is not None
+            else {"address": address}
+        )
+        with Client(**kwargs) as own:
+            return _run_dask(own, todo, job, emit, retries)
+    n = workers if workers is not None else max(1, as_workers(None) // threads_per_worker)
+    n = min(n, len(todo))  # no worker that would never get a file
+    with local_cluster(n, threads_per_worker, retries=retries) as cluster, Client(cluster) as own:
+        return _run_dask(own, todo, job, emit, retries)
+
+
+def _run_serial(todo: list[Task], job: dict, emit: Callable[[dict], bool]) -> None:
+    # Threads are left as the caller's process has them: this loop runs in the caller's process, whose
+    # warning state each task restores (a task routes its warnings into its record; emit re-issues them).
+    for task in todo:
+        with warnings.catch_warnings():
+            record = run_task(task.path, task.relative, task.key, **{**job, "threads": None})
+        if not emit(record):
+            return
