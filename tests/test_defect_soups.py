@@ -26,9 +26,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import o3d_lsmesh
+from o3d_lsmesh.core.connectivity import connected_components
 from o3d_lsmesh.fairing import constrained_fairing_arrays, smooth_boundary_curves_arrays
-from o3d_lsmesh.selection import start_vertices
-from o3d_lsmesh.topology import connected_components
+from o3d_lsmesh.lsmesh.selection import start_vertices
 
 
 @st.composite

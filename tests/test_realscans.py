@@ -27,9 +27,10 @@ from defect_meshes import DEFECTS, all_defects
 import o3d_lsmesh
 from o3d_lsmesh import O3DLSMeshWarning, metrics
 from o3d_lsmesh._o3d import weld_map
-from o3d_lsmesh.cli import main
-from o3d_lsmesh.selection import start_vertices
-from o3d_lsmesh.topology import boundary_halfedges, connected_components
+from o3d_lsmesh.app.cli import main
+from o3d_lsmesh.core.boundary import boundary_halfedges
+from o3d_lsmesh.core.connectivity import connected_components
+from o3d_lsmesh.lsmesh.selection import start_vertices
 
 FULL = os.environ.get("O3D_LSMESH_FULL") == "1"
 SCAN_NAMES = sorted(p.stem for p in SCANS.glob("*.ply")) if SCANS.is_dir() else ["(no scans)"]
