@@ -39,15 +39,11 @@ __all__ = [
 ]
 
 
-#: Largest coordinate magnitude accepted in a mesh or in control positions. The algorithms
-#: square and cube lengths (areas, volumes, normal equations, the volume cost of the
-#: hierarchy raises them to the sixth power) and Open3D's RaycastingScene works in single
-#: precision (largest float32 3.4e38): 1e30 leaves room for all of it, where 1e300 would
-#: overflow to inf and NaN. Scale such a mesh down first (the algorithms are scale-free).
+#: Largest coordinate magnitude accepted: lengths are raised up to the sixth power (the hierarchy's
+#: volume cost) and Open3D's raycasting works in float32; the algorithms are scale-free.
 COORDINATE_LIMIT = 1e30
 
-# dtype kinds that hold real numbers: signed and unsigned integers and floats (not bool,
-# complex, strings or objects, which np.array(..., dtype=float) would silently convert)
+# dtype kinds of real numbers (not bool, complex, strings or objects, which a float cast would convert)
 _REAL_KINDS = "iuf"
 
 
@@ -87,21 +83,17 @@ def mesh_arrays(
 ) -> tuple[np.ndarray, np.ndarray]:
     """The one check of a mesh given as arrays: new ``(n, 3) float64`` vertices and ``(m, 3) int64`` triangles.
 
-    Every array function and :func:`~o3d_lsmesh._o3d.read_mesh` (for every mesh kind) go through it:
-    :func:`as_vertex_array`, :func:`as_triangle_array` (indices in ``[0, n)``), then the checks
-    below. The results are copies: the caller's arrays are never modified (``narrow=True``: the
-    triangles may be the given array, int32, for callers that only read them; see
-    :func:`as_triangle_array`).
+    Every array function and ``read_mesh`` go through it: :func:`as_vertex_array`,
+    :func:`as_triangle_array`, then the checks below. The results are copies (``narrow=True``: the
+    triangles may be the given int32 array, for callers that only read them).
 
     Raises
     ------
-    TypeError
-        Positions that are not real numbers (bool, complex, strings, objects; integers are
-        converted exactly) or indices that are not integers (a float index would be truncated).
-    ValueError
-        Arrays not of shape ``(k, 3)`` (never reshaped); an empty mesh, no triangles, non-finite
-        coordinates or beyond :data:`COORDINATE_LIMIT`, out-of-range indices (checked before any
-        cast), or triangles repeating a vertex (unreferenced vertices are fine).
+    InputTypeError
+        Positions that are not real numbers, indices that are not integers.
+    InputError
+        A shape not ``(k, 3)``, an empty mesh, no triangles, coordinates not finite or beyond
+        :data:`COORDINATE_LIMIT`, indices out of range, triangles repeating a vertex.
 
     Examples
     --------
@@ -117,7 +109,7 @@ def mesh_arrays(
     if len(triangles) == 0:
         raise InputError(f"{name} must have triangles, got {n} vertices and no triangles", param=name)
     # two whole-array reductions (max and min carry NaN and inf) clear the usual mesh; rows are
-    # looked at only to name a bad one (an (n, 3) abs temporary and a row-wise max cost ten times more)
+    # looked at only to name a bad one
     smallest, largest = float(vertices.min()), float(vertices.max())
     if not (-COORDINATE_LIMIT <= smallest and largest <= COORDINATE_LIMIT):
         finite = np.isfinite(vertices).all(axis=1)
@@ -140,7 +132,7 @@ def mesh_arrays(
 
 
 def _check_magnitude(array: np.ndarray, *, what: str, row: str, param: str) -> None:
-    """Raise ``ValueError`` if a coordinate of ``array (k, 3)`` exceeds :data:`COORDINATE_LIMIT`."""
+    """Raise if a coordinate of ``array (k, 3)`` exceeds :data:`COORDINATE_LIMIT`."""
     if array.size == 0:
         return
     big = np.abs(array).max(axis=1) > COORDINATE_LIMIT
@@ -177,12 +169,7 @@ def _real_array(value: Any, *, name: str, expected: str, param: str | None = Non
 
 
 def as_vertex_array(value: Any, *, name: str = "mesh") -> np.ndarray:
-    """Vertex positions as a new ``(n, 3) float64`` array; the one check every mesh kind goes through.
-
-    Integer positions are converted exactly (the result of an algorithm is then
-    floating point); bool, complex, string and object arrays are a ``TypeError``
-    and any shape but ``(n, 3)`` a ``ValueError`` (never reshaped).
-    """
+    """Vertex positions as a new ``(n, 3) float64`` array (integers converted exactly, never reshaped)."""
     array = _real_array(value, name=f"{name} vertices", expected="an (n, 3) array", param=name)
     if array.size == 0 and array.ndim <= 2:
         return np.zeros((0, 3))  # an empty mesh: mesh_arrays says so
@@ -192,17 +179,9 @@ def as_vertex_array(value: Any, *, name: str = "mesh") -> np.ndarray:
 
 
 def as_triangle_array(value: Any, n: int, *, name: str = "mesh", narrow: bool = False) -> np.ndarray:
-    """Triangle indices as a new ``(m, 3) int64`` array, checked against ``n`` vertices before any cast.
-
-    Float, bool and other non-integer dtypes are a ``TypeError`` (a float index
-    would be truncated); any shape but ``(m, 3)`` a ``ValueError``; indices
-    outside ``[0, n)`` a ``ValueError`` reporting the value as given (an
-    unsigned index too large for int64 is not wrapped to a negative one).
-    An empty array of any dtype means no triangles.
-
-    ``narrow=True`` (for callers that only read the indices): int32 when ``n`` fits, and then the
-    given array itself when it is int32 in C order already (an Open3D mesh's triangles): no copy.
-    """
+    """Triangle indices as a new ``(m, 3) int64`` array, checked against ``n`` vertices before any cast
+    (an empty array of any dtype means no triangles). ``narrow=True``: int32 when ``n`` fits, the given
+    array itself when it is int32 in C order already (an Open3D mesh's triangles)."""
     array = _array(value, name=f"{name} triangles", expected="an (m, 3) integer array", param=name)
     if array.size == 0 and array.ndim <= 2 and (array.ndim < 2 or array.shape[1] in (0, 3)):
         return np.zeros((0, 3), dtype=np.int64)
@@ -248,11 +227,7 @@ def as_bool(value: Any, *, name: str, allow_none: bool = False) -> bool | None:
 def as_real_vector(
     value: Any, length: int, *, name: str, low: float | None = None, high: float | None = None
 ) -> np.ndarray:
-    """Return ``value`` as a finite ``(length,) float64`` array (e.g. an RGB triple or a direction).
-
-    Strings, bools and complex numbers are a ``TypeError``; a wrong length,
-    non-finite entries or entries outside ``[low, high]`` a ``ValueError``.
-    """
+    """Return ``value`` as a finite ``(length,) float64`` array within ``[low, high]`` (an RGB triple...)."""
     expected = f"a sequence of {length} numbers"
     array = _real_array(value, name=name, expected=expected)
     if array.shape != (length,):
@@ -310,12 +285,8 @@ def as_indices(indices: Any, n: int, *, name: str, allow_repeats: bool = False) 
 
 
 def as_positions(positions: Any, count: int, *, name: str, limit: bool = False) -> np.ndarray:
-    """Return ``positions`` as a finite ``(count, 3) float64`` array (a copy).
-
-    ``limit=True`` (positions a user gives as coordinates) also refuses
-    coordinates beyond :data:`COORDINATE_LIMIT`, as for mesh vertices; internal
-    callers pass computed positions, which may overshoot the input slightly.
-    """
+    """Return ``positions`` as a finite ``(count, 3) float64`` copy; ``limit=True`` (a user's coordinates)
+    also refuses coordinates beyond :data:`COORDINATE_LIMIT` (computed ones may overshoot slightly)."""
     array = _real_array(positions, name=name, expected=f"an array of shape ({count}, 3)")
     if array.shape != (count, 3):
         raise InputError(f"{name} must have shape ({count}, 3), got {array.shape}", param=name)
