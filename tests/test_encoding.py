@@ -132,9 +132,9 @@ def test_progressive_decoding_equals_a_dense_solve(backend, anchors, step, weigh
     from conftest import grid
     from scipy.linalg import cho_factor, cho_solve
 
-    import o3d_lsmesh._solvers as solvers
+    import o3d_lsmesh.core.solve as solvers
     from o3d_lsmesh._o3d import read_mesh
-    from o3d_lsmesh._quantization import quantize
+    from o3d_lsmesh.core.arrays import quantize
     from o3d_lsmesh.laplacian import laplacian_matrix
     from o3d_lsmesh.lsmesh.encoding import _parse
 
@@ -405,7 +405,7 @@ def test_prefix_missing_a_component_raises():
 
 
 def test_progressive_decoding_factors_once(torus, stream, monkeypatch):
-    from o3d_lsmesh._solvers import SPDSolver, cholmod_available
+    from o3d_lsmesh.core.solve import SPDSolver, cholmod_available
 
     calls = {"factorize": 0, "update": 0}
     factorize, update = SPDSolver._factorize, SPDSolver.update
