@@ -1,10 +1,12 @@
-"""The README's API tour runs as written (on a generated mesh instead of scan.ply)."""
+"""The README's API tour runs as written, on a generated mesh instead of scan.ply, with a small
+raycast picture and 300 encoded controls (the renderer and encoder have their own tests)."""
 
 from pathlib import Path
 
 import numpy as np
 
 README = Path(__file__).resolve().parents[1] / "README.md"
+SMALL_PICTURE = ', backend="raycast", width=96, height=96'
 
 
 def test_readme_tour_runs(tmp_path):
@@ -13,8 +15,11 @@ def test_readme_tour_runs(tmp_path):
     assert 'o3d.io.read_triangle_mesh("scan.ply")' in code
     code = code.replace(
         'mesh = o3d.io.read_triangle_mesh("scan.ply")',
-        "from o3d_lsmesh.shapes import demo_mesh\nmesh = demo_mesh(4)",
-    ).replace('"before_after.png"', repr(str(tmp_path / "before_after.png")))
+        "from o3d_lsmesh.app.shapes import demo_mesh\nmesh = demo_mesh(4)",
+    )
+    code = code.replace('"before_after.png"', repr(str(tmp_path / "before_after.png")) + SMALL_PICTURE)
+    assert "encode_geometry(mesh, 1000," in code
+    code = code.replace("encode_geometry(mesh, 1000,", "encode_geometry(mesh, 300,")
     namespace: dict = {}
     try:
         exec(compile(code, str(README), "exec"), namespace)
