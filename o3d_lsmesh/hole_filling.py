@@ -1,7 +1,6 @@
 """The hole filling's old module path: its names now live in :mod:`o3d_lsmesh.holes`."""
 
 from .holes.crossings import _crossings, _TriangleIndex
-from .holes.fair import _solve_blocks
 from .holes.fill import FilledHoles, FillReport, HoleFiller, HoleOutcome, fill_holes, fill_holes_arrays
 from .holes.find import Hole, find_holes
 from .holes.tuning import BORDER_FACING_AWAY, DENSITY_MAX, DP_MAX_EDGES
@@ -17,7 +16,6 @@ __all__ = [
     "HoleOutcome",
     "_TriangleIndex",
     "_crossings",
-    "_solve_blocks",
     "fill_holes",
     "fill_holes_arrays",
     "find_holes",

@@ -873,13 +873,18 @@ def test_cli_fill(tmp_path, capsys):
         ({"continuity": 1.0}, TypeError, "continuity must be an integer"),
         ({"density": -0.5}, ValueError, "density must be non-negative"),
         ({"density": float("nan")}, ValueError, "density must be non-negative"),
+        ({"density": 5.0}, ValueError, "density must be at most 4"),
         ({"fill_border": 1}, TypeError, "fill_border must be a bool"),
     ],
 )
 def test_bad_options_raise(kwargs, error, match):
+    # an InputError (a ValueError; InputTypeError also a TypeError) naming the Python parameter
+    from o3d_lsmesh.core.errors import InputError
+
     V, T = icosphere(1)
-    with pytest.raises(error, match=match):
+    with pytest.raises(error, match=match) as caught:
         fill_holes(legacy(V, T[1:]), **kwargs)
+    assert isinstance(caught.value, InputError) and caught.value.param == next(iter(kwargs))
 
 
 def test_bad_meshes_raise():
@@ -1391,3 +1396,32 @@ def indptr_of(tris, n):
 def data_of(tris, n):
     """Each vertex's triangles, CSR column indices."""
     return (np.argsort(tris.ravel(), kind="stable") // 3).astype(np.int64)
+
+
+@settings(max_examples=12, deadline=None)
+@given(
+    st.integers(0, 2**32 - 1),
+    st.lists(st.floats(1.2, 3.5), min_size=1, max_size=3),
+    st.floats(0.0, 0.3),
+    st.sampled_from([0, 1, 2]),
+)
+def test_fill_is_closed_manifold_oriented_no_crossing(seed, radii, bump, continuity):
+    # invariants, not another implementation: holes cut from a bumpy sphere (no self-intersection) are
+    # all filled, and the result is closed, edge- and vertex-manifold, consistently wound, and no new
+    # triangle crosses any other (Open3D's own intersection test)
+    rng = np.random.default_rng(seed)
+    V, T = icosphere(2)
+    V = V * (1 + bump * np.sin(3 * V[:, [0]]) * np.cos(2 * V[:, [1]]))
+    h = mean_edge(V, T)
+    for radius in radii:
+        V, T, _ = cut_disk(V, T, int(rng.integers(len(V))), radius * h)
+    holes = find_holes(V, T)
+    assume(holes and all(len(np.unique(hole.vertices)) == hole.edges for hole in holes))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no loop left open
+        out = fill_holes_arrays(
+            V, T, continuity=continuity, fill_border=True
+        )  # large holes look like borders
+    assert len(out.holes) == len(holes)
+    assert boundary_edge_count(out.triangles, len(out.vertices)) == 0
+    check_valid(out.vertices, out.triangles, len(T))

@@ -170,23 +170,6 @@ def _two_holes():
     return V, T[~gone]
 
 
-def test_solve_blocks_leaves_only_the_non_finite_block():
-    from o3d_lsmesh.holes.fair import _solve_blocks
-
-    rng = np.random.default_rng(0)
-    blocks = [rng.random((3, 3)) for _ in range(3)]
-    blocks = [b @ b.T + 3 * np.eye(3) for b in blocks]
-    rhs = rng.random((9, 3))
-    matrix = np.zeros((9, 9))
-    for k, b in enumerate(blocks):
-        matrix[3 * k : 3 * k + 3, 3 * k : 3 * k + 3] = b
-    matrix[4, 5] = matrix[5, 4] = np.inf  # the middle block
-    x = _solve_blocks(matrix, rhs)
-    assert np.isnan(x[3:6]).all()
-    for k in (0, 2):
-        np.testing.assert_allclose(x[3 * k : 3 * k + 3], np.linalg.solve(blocks[k], rhs[3 * k : 3 * k + 3]))
-
-
 def test_non_finite_cotangent_system_falls_back_for_its_hole_alone(monkeypatch):
     # dragon.ply: one hole's cotangent system was not finite and the whole call raised "matrix must have
     # finite entries", blaming the input. Here one hole's cotangent weights are made infinite: that hole

@@ -10,10 +10,10 @@ from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse import csgraph
 
-from .. import _solvers
-from .._errors import SingularSystemError
+from ..core import tuning as core_tuning
+from ..core.errors import SingularSystemError
+from ..core.solve import solve_spd
 from .crossings import _crossings
 from .triangulate import _kernel
 
@@ -36,7 +36,7 @@ def _fair(
     vertices, ``rings[1]`` the ring around them; ``edges`` is :func:`o3d_lsmesh._fill_kernel.unique_edges`
     of ``tris``. Solved by the gateway; a block whose system is not finite is left NaN.
     """
-    dense = len(unknown) <= _solvers.DENSE_UNKNOWNS
+    dense = len(unknown) <= core_tuning.DENSE_UNKNOWNS
     ring0 = rings[0] if rings else np.zeros(0, dtype=np.int64)
     ring1 = rings[1] if level > 1 else ring0
     normal, rhs = _kernel().patch_system(x, tris, *edges, unknown, ring0, ring1, level, cot, dense)
@@ -45,28 +45,11 @@ def _fair(
         normal = sp.csr_matrix((data, indices, indptr), shape=(len(indptr) - 1, len(unknown)))
         if level > 0:
             normal, rhs = (normal.T @ normal).tocsr(), -(normal.T @ rhs)
-    return _solve_blocks(normal, rhs)
-
-
-def _solve_blocks(matrix: Any, rhs: np.ndarray) -> np.ndarray:
-    """:func:`o3d_lsmesh._solvers.solve_spd` of a fairing system (dense or sparse), whose blocks are the
-    patches (and patches sharing rings): a block with a non-finite entry (cotangent weights of a
-    degenerate triangle) is left NaN, for the caller to fall back on that patch alone; the others solved."""
-    bad = ~np.isfinite(rhs).all(axis=1)
-    if not sp.issparse(matrix):
-        bad |= ~np.isfinite(matrix).all(axis=1)
-        if not bad.any():
-            return _solvers.solve_spd(matrix, rhs)
-    matrix = sp.csr_matrix(matrix)
-    bad[np.repeat(np.arange(matrix.shape[0]), np.diff(matrix.indptr))[~np.isfinite(matrix.data)]] = True
-    if not bad.any():
-        return _solvers.solve_spd(matrix, rhs)
-    _, label = csgraph.connected_components(matrix, directed=False)
-    ok = ~np.isin(label, label[bad])
-    x = np.full(rhs.shape, np.nan)
-    if ok.any():
-        x[ok] = _solvers.solve_spd(matrix[ok][:, ok], rhs[ok])
-    return x
+    elif np.isfinite(normal).all() and np.isfinite(rhs).all():
+        return solve_spd(normal, rhs)
+    # the blocks (patches, and patches sharing rings) with a non-finite entry are left NaN, for the
+    # caller to fall back on those patches alone
+    return solve_spd(sp.csr_matrix(normal), rhs, isolate_nonfinite=True)
 
 
 def _vertex_owner(new_tris: np.ndarray, owner: np.ndarray, n: int, p: int) -> np.ndarray:

@@ -8,18 +8,17 @@ Least-squares Meshes, SMI 2004. See docs/algorithms/hole_filling.rst.
 
 from __future__ import annotations
 
-import warnings
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import scipy.sparse as sp
 
-from .._errors import O3DLSMeshWarning
 from .._o3d import new_mesh, read_mesh
-from .._progress import check_progress
-from .._validate import as_bool, as_choice, as_count, as_positive_float, mesh_arrays
-from ..topology import unique_edges_and_runs
+from ..core.connectivity import unique_edges_and_runs
+from ..core.errors import InputError, warn
+from ..core.progress import check_progress
+from ..core.validate import as_bool, as_choice, as_count, as_positive_float, mesh_arrays
 from .crossings import _crossings, _TriangleIndex
 from .fair import _interpolation, _vertex_owner, fair_patches
 from .find import Hole, find_holes
@@ -280,7 +279,9 @@ class HoleFiller:
         continuity = as_count(continuity, name="continuity", minimum=0, maximum=2)
         density = as_positive_float(density, name="density", allow_zero=True)
         if density > DENSITY_MAX:
-            raise ValueError(f"density must be at most {DENSITY_MAX:g} (DENSITY_MAX), got {density:g}")
+            raise InputError(
+                f"density must be at most {DENSITY_MAX:g} (DENSITY_MAX), got {density:g}", param="density"
+            )
         weights = as_choice(weights, ("uniform", "cotangent"), name="weights")
         fill_border = bool(as_bool(fill_border, name="fill_border"))
         check_progress(progress)
@@ -341,11 +342,9 @@ class HoleFiller:
         # said: every loop left open but those the size limits exclude and flaps (no holes)
         said = FillReport(tuple(h for h in report.skipped if h.how.startswith(("every", "taken"))))
         if said.holes:
-            warnings.warn(
+            warn(
                 f"fill_holes: {len(said.holes)} of {len(self.holes)} loops left open: {said.describe(10)}"
-                " (every loop, filled or not: fill_holes(..., return_report=True), a FillReport)",
-                O3DLSMeshWarning,
-                stacklevel=3,
+                " (every loop, filled or not: fill_holes(..., return_report=True), a FillReport)"
             )
         order = np.argsort([number[id(hole)] for hole in filled], kind="stable").astype(np.int64)
         skipped = [hole for hole in self.holes if id(hole) in why]

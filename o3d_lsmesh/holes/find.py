@@ -12,7 +12,8 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse import csgraph
 
-from ..topology import boundary_loops, unique_edges_and_runs
+from ..core.boundary import boundary_loops
+from ..core.connectivity import unique_edges_and_runs
 from .tuning import BORDER_FACING_AWAY, SIDEWAYS
 
 __all__ = ["Hole", "find_holes"]

@@ -9,8 +9,8 @@ from typing import Any
 
 import numpy as np
 
-from .._progress import progress_bar
-from .._ranges import concatenated_ranges
+from ..core.arrays import concatenated_ranges
+from ..core.progress import progress_bar
 from .tuning import ALPHA, DP_MAX_EDGES
 
 _KERNEL: Any = None
