@@ -13,7 +13,6 @@ import os
 import subprocess
 import sys
 import tempfile
-import warnings
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -21,10 +20,10 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .._o3d import MeshData, read_mesh
-from .._o3d.io import distances_to_surface, open3d, raycasting_scene, write_image
+from .._o3d.io import cast_rays, distances_to_surface, open3d, raycasting_scene, write_image
 from ..core.arrays import area_weighted_normals
 from ..core.connectivity import unique_edges
-from ..core.errors import InputError, InputTypeError, O3DLSMeshWarning
+from ..core.errors import InputError, InputTypeError, warn
 from ..core.validate import as_choice, as_count, as_positive_float, as_real_vector
 from .metrics import common_frame
 
@@ -35,20 +34,11 @@ __all__ = ["VIRIDIS", "RenderedImage", "error_colors", "render"]
 
 #: matplotlib's viridis sampled at 11 points, interpolated linearly (no matplotlib needed).
 VIRIDIS = np.array(
-    [
-        [0.267, 0.005, 0.329],
-        [0.283, 0.141, 0.458],
-        [0.254, 0.265, 0.530],
-        [0.207, 0.372, 0.553],
-        [0.164, 0.471, 0.558],
-        [0.128, 0.567, 0.551],
-        [0.135, 0.659, 0.518],
-        [0.267, 0.749, 0.441],
-        [0.478, 0.821, 0.318],
-        [0.741, 0.873, 0.150],
-        [0.993, 0.906, 0.144],
-    ]
-)
+    "0.267 0.005 0.329  0.283 0.141 0.458  0.254 0.265 0.530  0.207 0.372 0.553  0.164 0.471 0.558  "
+    "0.128 0.567 0.551  0.135 0.659 0.518  0.267 0.749 0.441  0.478 0.821 0.318  0.741 0.873 0.150  "
+    "0.993 0.906 0.144".split(),
+    dtype=np.float64,
+).reshape(-1, 3)
 
 _DEFAULT_COLOR = (0.72, 0.74, 0.78)
 #: Largest picture: 64 megapixels, whose rays and image buffers take about 5 GB on the raycast path.
@@ -102,12 +92,8 @@ def _layout(arrays, view_direction, up, width, height, margin, align):
         centers = [common_frame(*(v for v, _ in arrays))[0]] * len(arrays)
     else:
         centers = [0.5 * (v.min(axis=0) + v.max(axis=0)) for v, _ in arrays]
-    extents = np.array(
-        [
-            np.abs((v - c) @ np.stack([right, true_up, back], axis=1)).max(axis=0)
-            for (v, _), c in zip(arrays, centers)
-        ]
-    )
+    frame = np.stack([right, true_up, back], axis=1)
+    extents = np.array([np.abs((v - c) @ frame).max(axis=0) for (v, _), c in zip(arrays, centers)])
     half = max(extents[:, 0].max(), extents[:, 1].max(), 1e-12) * (1.0 + margin)
     # Panels keep the pixel aspect ratio so that nothing is stretched.
     aspect = width / height
@@ -137,7 +123,6 @@ def _layout(arrays, view_direction, up, width, height, margin, align):
 
 
 def _raycast(vertices, triangles, colors, camera, width, height, background) -> np.ndarray:
-    o3d = open3d()
     scene = raycasting_scene(vertices, triangles)
     right, up, back = (np.array(camera[k]) for k in ("right", "up", "back"))
     xs = camera["left"] + (np.arange(width) + 0.5) / width * (camera["right_edge"] - camera["left"])
@@ -145,11 +130,10 @@ def _raycast(vertices, triangles, colors, camera, width, height, background) -> 
     px, py = np.meshgrid(xs, ys)
     origins = np.array(camera["eye"]) + px[..., None] * right + py[..., None] * up
     rays = np.concatenate([origins, np.broadcast_to(-back, origins.shape)], axis=-1).astype(np.float32)
-    hit = scene.cast_rays(o3d.core.Tensor(rays))
-    t_hit = hit["t_hit"].numpy()
-    found = np.isfinite(t_hit)
-    ids = hit["primitive_ids"].numpy()[found].astype(np.int64)
-    uv = hit["primitive_uvs"].numpy()[found].astype(np.float64)
+    hit = cast_rays(scene, rays)
+    found = np.isfinite(hit["t_hit"])
+    ids = hit["primitive_ids"][found].astype(np.int64)
+    uv = hit["primitive_uvs"][found].astype(np.float64)
     bary = np.stack([1.0 - uv[:, 0] - uv[:, 1], uv[:, 0], uv[:, 1]], axis=1)
     corners = triangles[ids]
     normals = area_weighted_normals(vertices, triangles)
@@ -177,10 +161,13 @@ def _filament_worker(spec_path: str, image_path: str) -> None:
     rendering = o3d.visualization.rendering
     renderer = rendering.OffscreenRenderer(width, height)
     view = renderer.scene.view
-    view.set_post_processing(False)
-    view.set_antialiasing(False)
-    view.set_ambient_occlusion(False)
-    view.set_shadowing(False)
+    for switch in (
+        view.set_post_processing,
+        view.set_antialiasing,
+        view.set_ambient_occlusion,
+        view.set_shadowing,
+    ):
+        switch(False)
     background = spec["background"].astype(np.float32)
     renderer.scene.set_background(np.append(background, 1.0))
     mesh = o3d.geometry.TriangleMesh(
@@ -193,22 +180,14 @@ def _filament_worker(spec_path: str, image_path: str) -> None:
     material.shader = "defaultLit"
     renderer.scene.add_geometry("meshes", mesh, material)
     right, up, back = (np.array(camera[k]) for k in ("right", "up", "back"))
-    # A sun from behind the viewer's upper left (the direction is the one the light travels),
-    # the same as the raycast backend's, plus the default image-based ambient light.
+    # a sun from behind the viewer's upper left (as the raycast backend's), plus image-based ambient light
     light = -(back + 0.4 * up - 0.3 * right)
     renderer.scene.set_lighting(renderer.scene.LightingProfile.NO_SHADOWS, light / np.linalg.norm(light))
     renderer.scene.scene.set_sun_light(light / np.linalg.norm(light), [1.0, 1.0, 1.0], _SUN_LUX)
     renderer.scene.scene.enable_sun_light(True)
     renderer.scene.scene.set_indirect_light_intensity(_AMBIENT)
-    renderer.scene.camera.set_projection(
-        rendering.Camera.Projection.Ortho,
-        camera["left"],
-        camera["right_edge"],
-        camera["bottom"],
-        camera["top"],
-        camera["near"],
-        camera["far"],
-    )
+    box = (camera[key] for key in ("left", "right_edge", "bottom", "top", "near", "far"))
+    renderer.scene.camera.set_projection(rendering.Camera.Projection.Ortho, *box)
     renderer.scene.camera.look_at(camera["center"], camera["eye"], camera["up"])
     image = np.asarray(renderer.render_to_image())[..., :3]
     np.save(image_path, np.ascontiguousarray(image, dtype=np.uint8))
@@ -226,7 +205,7 @@ def _filament(vertices, triangles, colors, camera, width, height, background, ti
             size=np.array([width, height]),
             background=np.asarray(background, dtype=np.float64),
         )
-        package_parent = str(Path(__file__).resolve().parents[1])
+        package_parent = str(Path(__file__).resolve().parents[2])
         env = dict(os.environ)
         env["PYTHONPATH"] = package_parent + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
         code = "import sys; from o3d_lsmesh.app.render import _filament_worker; _filament_worker(sys.argv[1], sys.argv[2])"
@@ -258,14 +237,8 @@ def _colorbar(image: np.ndarray, thickness: int) -> None:
 class RenderedImage(np.ndarray):
     """The picture ``render`` drew: a ``(height, width, 3)`` uint8 ndarray with the scale it used.
 
-    Attributes
-    ----------
-    error_max : float or None
-        Top of the color scale, in ``units`` (None without a reference).
-    units : str or None
-        ``"model"`` or ``"edge"`` (mean edge lengths of the reference), or None.
-    edge_length : float or None
-        The reference's mean edge length, in model units (None without a reference).
+    ``error_max`` (top of the color scale in ``units``), ``units`` (``"model"`` or ``"edge"``) and
+    ``edge_length`` (the reference's mean edge length): None without a reference.
     """
 
     error_max: float | None
@@ -295,10 +268,8 @@ def _matplotlib():
 
 
 def _annotate(image, panel_width, titles, bar, background):
-    """Add a title band above the panels and, if ``bar = (error_max, label)``, a labelled color bar below.
-
-    The panels' pixels are copied unchanged (``figimage``, no resampling).
-    """
+    """Add a title band above the panels and, if ``bar = (error_max, label)``, a labelled color bar below
+    (the panels' pixels copied unchanged: ``figimage``, no resampling)."""
     FigureCanvasAgg, ColorbarBase, LinearSegmentedColormap, Normalize, Figure = _matplotlib()
     height, total_width = image.shape[:2]
     font = float(np.clip(panel_width / 22.0, 8.0, 18.0))  # points = pixels at dpi 72
@@ -310,17 +281,9 @@ def _annotate(image, panel_width, titles, bar, background):
     fig.figimage(image, xo=0, yo=bar_band, origin="upper")
     text_color = "white" if np.mean(background) < 0.5 else "black"
     if titles is not None:
+        style = {"ha": "center", "va": "center", "fontsize": font, "color": text_color, "clip_on": True}
         for k, title in enumerate(titles):
-            fig.text(
-                (k + 0.5) * panel_width / total_width,
-                1.0 - 0.5 * title_band / full,
-                title,
-                ha="center",
-                va="center",
-                fontsize=font,
-                color=text_color,
-                clip_on=True,
-            )
+            fig.text((k + 0.5) * panel_width / total_width, 1.0 - 0.5 * title_band / full, title, **style)
     if bar is not None:
         error_max, label = bar
         cmap = LinearSegmentedColormap.from_list("o3d_lsmesh_viridis", VIRIDIS)
@@ -333,8 +296,7 @@ def _annotate(image, panel_width, titles, bar, background):
         bar_artist.ax.tick_params(labelsize=0.85 * font, colors=text_color, length=0.3 * font)
         bar_artist.outline.set_edgecolor(text_color)
         cax.set_title(label, fontsize=0.9 * font, color=text_color, pad=0.25 * font)
-    canvas = FigureCanvasAgg(fig)
-    canvas.draw()
+    (canvas := FigureCanvasAgg(fig)).draw()
     return np.ascontiguousarray(np.asarray(canvas.buffer_rgba())[..., :3])
 
 
@@ -404,13 +366,8 @@ def render(
     Returns
     -------
     RenderedImage
-        ``(H, width * len(meshes), 3)`` uint8, ``H = height`` plus the title band and color bar;
-        ``image.error_max`` is the scale used (in ``image.units``), None without a reference.
-
-    Notes
-    -----
-    Titles and the labelled bar need matplotlib (optional); without it titles are left out and
-    the bar is an unlabelled strip, with an ``O3DLSMeshWarning``.
+        ``(H, width * len(meshes), 3)`` uint8, ``H = height`` plus the title band and color bar
+        (drawn with matplotlib if installed, else an unlabelled strip and a warning).
 
     Raises
     ------
@@ -473,12 +430,8 @@ def render(
         )
     datas = [read_mesh(mesh, name=f"meshes[{k}]") for k, mesh in enumerate(items)]
     ref = read_mesh(reference, name="reference") if reference is not None else None
-    # Draw in a frame scaled to unit size: an orthographic picture does not depend on the scale,
-    # and single-precision raycasting would overflow on coordinates near 1e30 (distances are
-    # scaled back to model units for the colors).
-    scale = max(
-        [float(np.abs(d.vertices).max()) for d in datas + ([ref] if ref is not None else [])] + [1e-300]
-    )
+    # drawn at unit size (float32 raycasting overflows near 1e30); distances scaled back to model units
+    scale = max([float(np.abs(d.vertices).max()) for d in [*datas, ref] if d is not None] + [1e-300])
     arrays = [(d.vertices / scale, d.triangles) for d in datas]
     colors = []
     for data, (vertices, _) in zip(datas, arrays):
@@ -488,8 +441,7 @@ def render(
         )
     edge_length = None
     if ref is not None:
-        # the reference itself, drawn beside what is compared with it, keeps its own colors: its distance
-        # to itself is zero everywhere (a uniformly dark panel, and zeros pulling the scale down)
+        # the reference itself, drawn beside the others, keeps its own colors (its distances are zero)
         measured = [k for k, mesh in enumerate(items) if mesh is not reference]
         distances = [
             scale * distances_to_surface(arrays[k][0], ref.vertices / scale, ref.triangles) for k in measured
@@ -499,9 +451,8 @@ def render(
             distances = [d / edge_length for d in distances]
         if error_max is None:
             pooled = np.concatenate([np.zeros(0), *distances])
-            error_max = float(np.percentile(pooled, 99.0)) if pooled.size else 1.0
-            if error_max <= 0:
-                error_max = 1.0
+            error_max = float(np.percentile(pooled, 99.0)) if pooled.size else 0.0
+            error_max = error_max if error_max > 0 else 1.0
         for k, d in zip(measured, distances):
             colors[k] = error_colors(d, error_max)
 
@@ -517,9 +468,7 @@ def render(
         except RuntimeError as error:
             if backend == "filament":
                 raise
-            warnings.warn(
-                f"{error}; drawing with the RaycastingScene backend instead", O3DLSMeshWarning, stacklevel=2
-            )
+            warn(f"{error}; drawing with the RaycastingScene backend instead")
     if image is None:
         image = _raycast(vertices, triangles, all_colors, camera, total_width, height, background)
     image = np.ascontiguousarray(image, dtype=np.uint8)
@@ -531,11 +480,8 @@ def render(
         if _matplotlib() is not None:
             image = _annotate(image, width, titles, bar, background)
         else:
-            warnings.warn(
-                "matplotlib is not installed: the picture has no titles and an unlabelled color bar "
-                "(pip install matplotlib)",
-                O3DLSMeshWarning,
-                stacklevel=2,
+            warn(
+                "matplotlib is not installed: the picture has no titles and an unlabelled color bar (pip install matplotlib)"
             )
             if bar is not None:
                 _colorbar(image, max(3, height // 40))
@@ -546,6 +492,4 @@ def render(
             raise InputError(f"path must be in an existing folder, got {path!r}", param="path")
         if not write_image(path, image):
             raise InputError(f"path must name a writable .png file, got {path!r}", param="path")
-    if reference is None:
-        return RenderedImage(image)
-    return RenderedImage(image, error_max, units, edge_length)
+    return RenderedImage(image) if reference is None else RenderedImage(image, error_max, units, edge_length)
