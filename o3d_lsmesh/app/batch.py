@@ -359,8 +359,7 @@ def run(
         else:
             todo.append(task)
     outdir.mkdir(parents=True, exist_ok=True)
-    # The workers need the op functions, not the option parsers: without them (closures that only cloudpickle
-    # can send) every task pickles in ~200 bytes with the standard pickle instead of ~3 kB.
+    # the workers need the op functions, not the option parsers (closures only cloudpickle can send)
     shipped = [dataclasses.replace(o, options=()) for o in ops]
     job = {
         "outdir": str(outdir),
@@ -391,7 +390,7 @@ def run(
                 handle.write(b"\n")  # a killed run's torn last line: the next record starts a line of its own
 
     def emit(record: dict) -> bool:
-        """Store, report and show one result; False asks the engine to stop (--fail-fast)."""
+        """Store, report and show one result; False asks the engine to stop (``fail_fast``)."""
         records[index_of[record["input"]]] = record
         counts[record["status"]] += 1
         if handle is not None:
@@ -399,9 +398,7 @@ def run(
             handle.flush()
         bar.update(1)
         bar.set_postfix(ok=counts["ok"], failed=counts["failed"], refresh=False)
-        for text in (
-            record.get("warnings") or ()
-        ):  # (after the report: a warning filtered to an error stops here)
+        for text in record.get("warnings") or ():  # (after the report: a warning made an error stops here)
             warnings.warn(f"{record['input']}: {text}", O3DLSMeshWarning, stacklevel=2)
         if on_record is not None:
             on_record(record)
@@ -427,7 +424,7 @@ def run(
     return [
         record
         if record is not None
-        else failure_record(task, pipeline, "not run (--fail-fast stopped the batch)", stage="cancelled")
+        else failure_record(task, pipeline, "not run (fail_fast stopped the batch)", stage="cancelled")
         | {"status": "cancelled"}
         for task, record in zip(tasks, records)
     ]

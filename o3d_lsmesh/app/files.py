@@ -35,7 +35,6 @@ __all__ = [
     "read_input",
     "read_mesh_file",
     "write_atomic",
-    "write_mesh",
     "write_output",
 ]
 
@@ -49,16 +48,9 @@ TEMPORARY = re.compile(r"\..*\.[0-9a-f]{12}\.(tmp|old)(\.[^.]+)?")
 _GLOB_CHARACTERS = set("*?[")
 
 
-def write_mesh(mesh: Any, path: Path) -> None:
-    """Write a mesh file (an OBJ with its ``.mtl`` and textures); ``OSError`` when Open3D cannot."""
-    write_mesh_file(mesh, path)
-
-
 def _write_item(value: Any, path: Path) -> None:
-    if isinstance(value, (bytes, bytearray)):
-        path.write_bytes(bytes(value))
-    else:
-        write_mesh(value, path)
+    """Write bytes, or a mesh file (an OBJ with its ``.mtl`` and textures; ``OSError`` if Open3D cannot)."""
+    path.write_bytes(bytes(value)) if isinstance(value, (bytes, bytearray)) else write_mesh_file(value, path)
 
 
 def digest(path: Path) -> dict:

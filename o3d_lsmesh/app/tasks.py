@@ -269,7 +269,7 @@ def check_scheduler_file(path: str | os.PathLike) -> None:
         address = None
     if not isinstance(address, str):
         raise InputError(
-            f"{expected}, got {os.fspath(path)!r}, which holds no JSON 'address'", param="scheduler_file"
+            f"{expected}, got {os.fspath(path)!r}, which holds no 'address'", param="scheduler_file"
         )
 
 
@@ -284,11 +284,9 @@ def _start_method() -> str:
 def local_cluster(workers: int, threads_per_worker: int = 1, *, retries: int = 1, **kwargs: Any) -> Any:
     """A ``LocalCluster`` of ``workers`` spawned processes with ``threads_per_worker`` threads each.
 
-    BLAS/OpenMP thread variables are set before the workers start (CHOLMOD and
-    OpenBLAS read them once, when they load), Dask's ``MALLOC_TRIM_THRESHOLD_``
-    is left out (it doubles the time of array-heavy tasks), a task may kill at most
-    ``retries + 1`` workers before it is reported failed (Dask's
-    ``allowed-failures``), and the dashboard takes a free port on 127.0.0.1.
+    BLAS/OpenMP thread variables are set before the workers start (CHOLMOD and OpenBLAS read them
+    when they load), without Dask's ``MALLOC_TRIM_THRESHOLD_``; a task may kill ``retries + 1``
+    workers before it fails (``allowed-failures``); the dashboard takes a free port on 127.0.0.1.
     """
     import dask
     from distributed import LocalCluster
@@ -318,14 +316,11 @@ def local_cluster(workers: int, threads_per_worker: int = 1, *, retries: int = 1
 
 
 class _Window:
-    """How many tasks to keep submitted: sized from the cluster's worker threads, re-read at most once a second.
+    """How many tasks to keep submitted, from the cluster's threads (re-read at most once a second).
 
-    Above ``2 x threads`` tasks, Dask treats the tasks as root tasks and queues them on the scheduler,
-    handing each worker only ``worker-saturation x threads`` at a time (1 on :func:`local_cluster`): so a
-    worker that dies holds no innocent task (Dask counts every task held by a dying worker as suspect),
-    and a finished worker gets its next file without a round trip through this client. A window of
-    ``4 x threads + 4`` keeps that queue filled; a batch of at most ``2 x threads`` files, which Dask
-    would hand out all at once, gets a window of ``threads`` instead.
+    Above ``2 x threads`` tasks Dask queues them on the scheduler and hands each worker one at a time
+    (``worker-saturation`` 1): a dying worker holds no innocent task. ``4 x threads + 4`` keeps that
+    queue filled; a batch of at most ``2 x threads`` files gets ``threads``.
     """
 
     def __init__(self, client: Any, total: int):
@@ -367,15 +362,8 @@ def _run_dask(client: Any, tasks: list[Task], job: dict, emit: Callable[[dict], 
         if not chunk:
             return
         keys = [f"o3d-lsmesh-batch-{token}-{task.index}" for task in chunk]
-        futures = client.map(
-            run_task,
-            [t.path for t in chunk],
-            [t.relative for t in chunk],
-            [t.key for t in chunk],
-            key=keys,
-            pure=False,
-            **job,
-        )
+        columns = ([t.path for t in chunk], [t.relative for t in chunk], [t.key for t in chunk])
+        futures = client.map(run_task, *columns, key=keys, pure=False, **job)
         for task, future in zip(chunk, futures):
             by_key[future.key] = task
             queue.add(future)
@@ -391,11 +379,9 @@ def _run_dask(client: Any, tasks: list[Task], job: dict, emit: Callable[[dict], 
             except KilledWorker as error:
                 tries = getattr(error, "allowed_failures", retries) + 1
                 last = getattr(getattr(error, "last_worker", None), "address", "?")
+                message = f"KilledWorker: each of the {tries} workers that ran it died (a crash such as a "
                 record = failure_record(
-                    task,
-                    op_name,
-                    f"KilledWorker: each of the {tries} workers that ran it died (a crash "
-                    f"such as a segfault, or killed, e.g. for memory); last worker {last}",
+                    task, op_name, message + f"segfault, or killed for memory); last {last}"
                 )
                 record["worker"] = last
             except cancelled:
@@ -462,15 +448,11 @@ def dispatch(
         return _run_dask(client, todo, job, emit, retries)
     if remote:
         if workers is not None:
-            warnings.warn(
-                "--workers is ignored when connecting to an existing cluster", O3DLSMeshWarning, stacklevel=3
-            )
-        kwargs = (
-            {"scheduler_file": os.fspath(scheduler_file)}
-            if scheduler_file is not None
-            else {"address": address}
+            warnings.warn("workers is ignored with an existing cluster", O3DLSMeshWarning, stacklevel=3)
+        where = (
+            {"address": address} if scheduler_file is None else {"scheduler_file": os.fspath(scheduler_file)}
         )
-        with Client(**kwargs) as own:
+        with Client(**where) as own:
             return _run_dask(own, todo, job, emit, retries)
     n = workers if workers is not None else max(1, as_workers(None) // threads_per_worker)
     n = min(n, len(todo))  # no worker that would never get a file
