@@ -1,9 +1,5 @@
 """Moved to :mod:`o3d_lsmesh.app.demo` (silent re-export)."""
 
-from .app.demo import (
-    METHODS,
-    SLIVER_QUALITY,
-    run_demo,
-)
+from .app.demo import METHODS, SLIVER_QUALITY, run_demo
 
 __all__ = ["METHODS", "SLIVER_QUALITY", "run_demo"]
