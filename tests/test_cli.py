@@ -322,12 +322,12 @@ def test_demo_small(tmp_path, capsys):
     # The table's distances are those of the written meshes, in grid spacings, to the written surface.
     written = np.asarray(o3d.io.read_triangle_mesh(str(tmp_path / "demo" / "ours.ply")).vertices)
     surface = o3d.io.read_triangle_mesh(str(tmp_path / "demo" / "surface.ply"))
-    sample = np.random.default_rng(0).choice(len(written), 40, replace=False)
+    sample = np.random.default_rng(0).choice(len(written), 20, replace=False)
     exact = _closest_point_distances(
         written[sample], np.asarray(surface.vertices), np.asarray(surface.triangles)
     )
     measured = np.abs(report["spacing"] * np.asarray([rows["ours"]["mean_distance"]]))
-    assert exact.mean() == pytest.approx(measured[0], rel=0.35)  # 40 of the vertices against all of them
+    assert exact.mean() == pytest.approx(measured[0], rel=0.35)  # 20 of the vertices against all of them
     for name in ("surface.ply", "scan.ply", "ours.ply", "o3d_taubin.ply", "metrics.json", "metrics.md"):
         assert (tmp_path / "demo" / name).exists()
 
