@@ -237,15 +237,10 @@ def template(kind: str, tensor_format: tuple = ()) -> MeshData:
     o3d = open3d()
     if kind == "legacy":
         return MeshData(empty_v, empty_t, o3d.geometry.TriangleMesh(), "legacy")
-    device, position_dtype, index_dtype = tensor_format
-    device = o3d.core.Device(device)
+    device, positions, indices = o3d.core.Device(tensor_format[0]), *tensor_format[1:]
     source = o3d.t.geometry.TriangleMesh(device)
-    source.vertex.positions = o3d.core.Tensor(
-        empty_v, dtype=getattr(o3d.core, position_dtype.lower()), device=device
-    )
-    source.triangle.indices = o3d.core.Tensor(
-        empty_t, dtype=getattr(o3d.core, index_dtype.lower()), device=device
-    )
+    source.vertex.positions = o3d.core.Tensor(empty_v, getattr(o3d.core, positions.lower()), device)
+    source.triangle.indices = o3d.core.Tensor(empty_t, getattr(o3d.core, indices.lower()), device)
     return MeshData(empty_v, empty_t, source, "tensor")
 
 
@@ -288,11 +283,8 @@ def _label(row: Attribute, key: str) -> str:
 def _dropped(data: MeshData, *, normals: bool = False) -> list[str]:
     """Names of the source's attributes that a result with new connectivity cannot keep (``normals``: its
     normals too, for results that do not recompute them)."""
-    return [
-        _label(row, key)
-        for row, key in present_attributes(data)
-        if row.follows in _PER_ELEMENT or (row.follows == "texture") or (normals and row.follows == "normals")
-    ]
+    dropped = (*_PER_ELEMENT, "texture", "normals") if normals else (*_PER_ELEMENT, "texture")
+    return [_label(row, key) for row, key in present_attributes(data) if row.follows in dropped]
 
 
 def lost_in_file(mesh: Any, suffix: str) -> list[str]:

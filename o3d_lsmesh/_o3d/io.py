@@ -66,10 +66,7 @@ def cap_threads(threads: int) -> None:
 
 @contextlib.contextmanager
 def captured_native_output() -> Iterator[list[str]]:
-    """Capture what C/C++ libraries write straight to file descriptors 1 and 2 (RPly, Assimp, Open3D).
-
-    Yields a list that holds the captured text once the block ends.
-    """
+    """Capture what C/C++ libraries write straight to file descriptors 1 and 2: a list holding the text at the end."""
     sys.stdout.flush()
     sys.stderr.flush()
     saved = [os.dup(1), os.dup(2)]
@@ -160,16 +157,8 @@ def read_mesh_file(path: str, *, what: str = "INPUT") -> Any:
 
 
 def write_mesh_file(mesh: Any, path: str | os.PathLike) -> list[str]:
-    """Write a mesh file; an OBJ with UVs gets its ``.mtl`` and texture images (:func:`obj_writable`).
-
-    Returns the names of the ``.mtl`` and images Open3D did not write (it says so only in a native
-    warning); empty when all are there or none were due.
-
-    Raises
-    ------
-    OSError
-        Open3D could not write the mesh file (it returns False instead of raising).
-    """
+    """Write a mesh file (an OBJ with UVs with its ``.mtl`` and images: :func:`obj_writable`); ``OSError`` if
+    Open3D could not. Returns the names of the ``.mtl`` and images it did not write (said only natively)."""
     o3d = quiet_open3d()
     path = Path(path)
     suffix = path.suffix.lower()
@@ -254,8 +243,7 @@ def raycasting_scene(vertices: np.ndarray, triangles: np.ndarray) -> Any:
 
 
 def cast_rays(scene: Any, rays: np.ndarray) -> dict[str, np.ndarray]:
-    """Rays ``(..., 6)`` (origin, direction) cast into ``scene``: ``t_hit``, ``primitive_ids``, ``primitive_uvs``,
-    ``primitive_normals`` as arrays (``t_hit`` inf where nothing is hit)."""
+    """Rays ``(..., 6)`` (origin, direction) cast into ``scene``: its answer's arrays (``t_hit`` inf: no hit)."""
     answer = scene.cast_rays(open3d().core.Tensor(np.asarray(rays, dtype=np.float32)))
     return {
         key: answer[key].numpy() for key in ("t_hit", "primitive_ids", "primitive_uvs", "primitive_normals")
@@ -269,9 +257,6 @@ def signed_distances(scene: Any, points: np.ndarray) -> np.ndarray:
 
 
 def distances_to_surface(points: np.ndarray, vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
-    """Distance ``(p,)`` from each of ``points (p, 3)`` to the nearest point of the surface ``(vertices, triangles)``.
-
-    Single precision: callers pass coordinates in a frame of unit size and scale back.
-    """
+    """Distance ``(p,)`` from ``points (p, 3)`` to the surface ``(vertices, triangles)``, in float32 (pass a unit frame)."""
     tensor = open3d().core.Tensor(points.astype(np.float32))
     return raycasting_scene(vertices, triangles).compute_distance(tensor).numpy().astype(np.float64)
