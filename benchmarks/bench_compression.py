@@ -28,10 +28,10 @@ import numpy as np
 from _common import RESULTS, load_mesh, markdown_table, write_markdown
 from scipy.sparse.csgraph import breadth_first_order
 
+from o3d_lsmesh.core.connectivity import adjacency_matrix, connected_components
 from o3d_lsmesh.lsmesh.encoding import HEADER, decode_geometry, encode_geometry
 from o3d_lsmesh.lsmesh.spectral import quantize_coefficients, spectral_basis
 from o3d_lsmesh.metrics import surface_distance, vertex_error
-from o3d_lsmesh.topology import adjacency_matrix, connected_components
 
 BITS = 12
 SPECTRAL_BITS = 14

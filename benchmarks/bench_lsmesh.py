@@ -50,7 +50,7 @@ def torus_mesh(nu: int, nv: int):
 
 
 def control_points(mesh, fraction=0.02, seed=0):
-    from o3d_lsmesh.topology import connected_components
+    from o3d_lsmesh.core.connectivity import connected_components
 
     F = np.asarray(mesh.triangles).astype(np.int64)
     n = len(mesh.vertices)
@@ -66,7 +66,7 @@ def _splu_worker(N, rhs, queue, spd=False) -> None:
 
     start = time.perf_counter()
     if spd:
-        # our fallback's setting (o3d_lsmesh._solvers._splu_spd): symmetric ordering, no pivoting
+        # our fallback's setting (o3d_lsmesh.core._iterative.splu_spd): symmetric ordering, no pivoting
         options = {"diag_pivot_thresh": 0.0, "options": {"SymmetricMode": True}}
     else:
         options = {}

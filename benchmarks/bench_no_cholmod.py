@@ -71,7 +71,8 @@ def solve_widths(name: str, threads: bool, widths=(1, 2, 4, 6, 8, 16)) -> list:
     import scipy.sparse as sp
 
     from o3d_lsmesh._o3d import read_mesh
-    from o3d_lsmesh._solvers import _splu_spd, single_threaded_blas
+    from o3d_lsmesh.core._iterative import splu_spd as _splu_spd
+    from o3d_lsmesh.core.solve import single_threaded_blas
     from o3d_lsmesh.laplacian import laplacian_matrix
 
     data = read_mesh(o3d.io.read_triangle_mesh(str(DATA / name)), weld=True)

@@ -26,7 +26,7 @@ import scipy.sparse.linalg as spla
 from _common import DATA, REPO, markdown_table, timed, write_markdown
 from scipy.sparse import csgraph
 
-from o3d_lsmesh._solvers import SPDSolver
+from o3d_lsmesh.core.solve import SPDSolver
 from o3d_lsmesh.lsmesh.spectral import _SHIFT, combinatorial_laplacian, spectral_basis
 
 SCANS = Path(os.environ.get("O3D_LSMESH_SCANS", REPO.parent / "shared" / "data" / "scans"))

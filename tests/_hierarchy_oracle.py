@@ -12,9 +12,9 @@ import math
 
 import numpy as np
 
+from o3d_lsmesh.core.boundary import nonmanifold_edges, nonmanifold_vertices
 from o3d_lsmesh.hierarchy.collapse import FAR, TIE
 from o3d_lsmesh.hierarchy.hierarchy import ALPHA, BETA, MAX_NORMAL_ANGLE, MAX_TRIES, MIN_QUALITY
-from o3d_lsmesh.topology import nonmanifold_edges, nonmanifold_vertices
 
 
 def locked_vertices(F: np.ndarray, n: int) -> np.ndarray:
@@ -267,7 +267,7 @@ def boundary_loop_count(F: np.ndarray, n: int) -> int:
 def topology(F: np.ndarray, n: int, representatives: np.ndarray) -> dict:
     """What every level must keep: Euler characteristic, components, boundary loops, and (in input
     indices) the non-manifold vertices and edges."""
-    from o3d_lsmesh.topology import connected_components, unique_edges
+    from o3d_lsmesh.core.connectivity import connected_components, unique_edges
 
     F = np.asarray(F, dtype=np.int64)
     edges = unique_edges(F, n)[0]

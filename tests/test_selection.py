@@ -9,13 +9,13 @@ from hypothesis import strategies as st
 from selection_reference import greedy_dense
 
 from o3d_lsmesh import ls_mesh
+from o3d_lsmesh.core.connectivity import adjacency_matrix
 from o3d_lsmesh.lsmesh.selection import (
     approximate,
     forbid_around,
     select_control_points,
     start_vertices,
 )
-from o3d_lsmesh.topology import adjacency_matrix
 
 
 def noisy_sphere(resolution=8, seed=0):
@@ -164,13 +164,13 @@ def test_vectorized_bfs_matches_queue_bfs(seed, start):
 def test_error_decreases_as_anchors_are_added_on_a_real_mesh():
     mesh = load_mesh("camel.ply")
     V = np.asarray(mesh.vertices)
-    selection = select_control_points(mesh, 400, method="greedy")
+    selection = select_control_points(mesh, 200, method="greedy")
     linf = []
-    for k in (25, 50, 100, 200, 400):
+    for k in (25, 50, 100, 200):
         X = np.asarray(ls_mesh(mesh, selection[:k]).vertices)
         linf.append(np.linalg.norm(X - V, axis=1).max())
     assert all(b < a for a, b in zip(linf, linf[1:])), linf
-    random = select_control_points(mesh, 400, method="random", seed=0)
+    random = select_control_points(mesh, 200, method="random", seed=0)
     X = np.asarray(ls_mesh(mesh, random).vertices)
     # greedy targets the maximum error: it must beat random selection there
     assert linf[-1] < 0.5 * np.linalg.norm(X - V, axis=1).max()
@@ -239,7 +239,7 @@ def test_selection_errors():
 
 
 def test_greedy_factors_once_and_updates_per_anchor(monkeypatch):
-    from o3d_lsmesh._solvers import SPDSolver, cholmod_available
+    from o3d_lsmesh.core.solve import SPDSolver, cholmod_available
 
     calls = {"factorize": 0, "ranks": []}
     factorize, update = SPDSolver._factorize, SPDSolver.update
@@ -279,7 +279,7 @@ def test_scan_defects_seed_every_small_component(method):
     from defect_meshes import all_defects
 
     from o3d_lsmesh import SingularSystemError, decode_geometry, encode_geometry
-    from o3d_lsmesh.topology import connected_components
+    from o3d_lsmesh.core.connectivity import connected_components
 
     V, F, _ = all_defects()
     V = np.vstack([V, [[9.0, 9.0, 9.0], [9.5, 9.0, 9.0]]])  # two unreferenced vertices: components too

@@ -5,13 +5,13 @@ import scipy.linalg as sla
 from conftest import grid
 
 import o3d_lsmesh.lsmesh.spectral as spectral
+from o3d_lsmesh.core.connectivity import adjacency_matrix
 from o3d_lsmesh.lsmesh.spectral import (
     combinatorial_laplacian,
     quantize_coefficients,
     spectral_approximation,
     spectral_basis,
 )
-from o3d_lsmesh.topology import adjacency_matrix
 
 
 def bumpy_grid(n=16):
