@@ -1,12 +1,5 @@
-"""Generated test shapes: the demo's bumpy blob, seeded noise, and the mean edge length noise is measured in.
-
-The demo, the examples and the tests use these instead of shipping mesh files:
-every shape is made by code with fixed seeds.
-
->>> mesh = demo_mesh(2)
->>> noisy = add_noise(mesh, 0.1 * mean_edge_length(mesh), seed=1)
->>> len(noisy.vertices), len(noisy.triangles)
-(162, 320)
+"""Generated test shapes (fixed seeds, no mesh files): the demo's bumpy blob, a simulated range scan of
+it, seeded noise, and the mean edge length noise is measured in.
 """
 
 from __future__ import annotations
@@ -23,14 +16,10 @@ __all__ = ["add_noise", "demo_mesh", "mean_edge_length", "simulated_range_scan"]
 def demo_mesh(subdivisions: int = 6, *, seed: int = 7) -> Any:
     """The built-in scan-like test surface as a legacy ``open3d.geometry.TriangleMesh``.
 
-    A unit icosahedron midpoint-subdivided ``subdivisions`` times
-    (``10 * 4**subdivisions + 2`` vertices: 40,962 for 6), projected to the
-    sphere and displaced along the radius by smooth lobes, eight Gaussian
-    bumps at seeded directions and a ring of creases (``|sin|`` profile, so
-    the creases are sharp). Closed, genus 0, well-shaped triangles.
+    A unit icosahedron midpoint-subdivided ``subdivisions`` times (``10 * 4**subdivisions + 2``
+    vertices) on the sphere, displaced by smooth lobes, eight seeded Gaussian bumps and a ring of
+    sharp creases: closed, genus 0, well-shaped triangles.
 
-    Examples
-    --------
     >>> mesh = demo_mesh(3)
     >>> len(mesh.vertices), mesh.is_watertight()
     (642, True)
@@ -74,24 +63,11 @@ def simulated_range_scan(
 ) -> tuple[Any, Any]:
     """A raw range scan of :func:`demo_mesh` from one view, and the surface it was scanned from.
 
-    The blob is sampled on a scanner's ``resolution x resolution`` grid of
-    parallel rays, and the grid is triangulated as range scans are (two
-    triangles per cell whose four corners hit, no triangle across a depth
-    jump), so the scan has what raw scans have and clean meshes do not:
+    Parallel rays on a ``resolution x resolution`` grid, triangulated as range scans are (two
+    triangles per cell whose corners hit, none across a depth jump): range noise of ``noise`` grid
+    spacings growing at grazing angles and correlated along scanlines, a ragged silhouette, islands
+    and dropout holes. Returns ``(scan, surface)``, both legacy Open3D meshes.
 
-    * noise along the rays of ``noise`` grid spacings, growing at grazing angles
-      (as ``cos**-1.5``: off the surface, the silhouette is the noisiest part) and correlated
-      along each scanline (a per-line offset and a smooth drift beside white noise);
-    * a ragged boundary: returns at grazing angles drop out at random;
-    * small islands and holes: isolated returns near the silhouette and a few
-      patches of lost returns inside (specular dropouts).
-
-    Returns ``(scan, surface)``, both legacy ``open3d.geometry.TriangleMesh``:
-    the scan's vertices are the noisy returns (unreferenced ones removed),
-    ``surface`` the clean blob to measure a denoiser against.
-
-    Examples
-    --------
     >>> scan, surface = simulated_range_scan(60)
     >>> len(scan.vertices) > 1000, scan.is_watertight(), surface.is_watertight()
     (True, False, True)
