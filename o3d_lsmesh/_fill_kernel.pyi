@@ -1,87 +1,59 @@
-"""Type stub of the compiled hole-filling kernel (``_fill_kernel.pyx``)."""
-
-from typing import Any
-
 import numpy as np
 
-def delaunay_triangles(points: np.ndarray) -> np.ndarray | None: ...
+Array = np.ndarray
+
+def delaunay_triangles(points: Array) -> Array | None: ...
 def minimum_weight_triangulation(
-    points: np.ndarray,
-    outer_normals: np.ndarray,
-    forbidden: np.ndarray | None = None,
-    allowed: np.ndarray | None = None,
-) -> np.ndarray: ...
-def relax(
-    points: np.ndarray, triangles: np.ndarray, fixed_pairs: np.ndarray, dirty: np.ndarray
-) -> np.ndarray: ...
+    points: Array, outer_normals: Array, forbidden: Array | None = None, allowed: Array | None = None
+) -> Array: ...
+def relax(points: Array, triangles: Array, fixed_pairs: Array, dirty: Array) -> Array: ...
 def refine(
-    points: np.ndarray,
-    sigma: np.ndarray,
-    triangles: np.ndarray,
-    fixed_pairs: np.ndarray,
-    owner: np.ndarray,
+    points: Array,
+    sigma: Array,
+    triangles: Array,
+    fixed_pairs: Array,
+    owner: Array,
     alpha: float,
     max_points: int = -1,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
-def refine_budget(points: np.ndarray, triangles: np.ndarray, sigma: np.ndarray) -> int: ...
-def tangential_relax(
-    vertices: np.ndarray, new_tris: np.ndarray, first_new: int, iterations: int = 10
-) -> np.ndarray: ...
+) -> tuple[Array, Array, Array]: ...
+def refine_budget(points: Array, triangles: Array, sigma: Array) -> int: ...
+def tangential_relax(vertices: Array, new_tris: Array, first_new: int, iterations: int = 10) -> Array: ...
 def rings(
-    triangles: np.ndarray, indptr: np.ndarray, data: np.ndarray, seeds: np.ndarray, count: int
-) -> tuple[np.ndarray, list[np.ndarray]]: ...
-def laplacian_weights(
-    tris: np.ndarray,
-    nv: int,
-    i: np.ndarray,
-    j: np.ndarray,
-    inverse: np.ndarray,
-    vertices: np.ndarray | None = None,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
+    triangles: Array, indptr: Array, data: Array, seeds: Array, count: int
+) -> tuple[Array, list[Array]]: ...
 def loop_geometry(
-    loop: np.ndarray,
-    rows: np.ndarray,
-    vertices: np.ndarray,
-    triangles: np.ndarray,
-    indptr: np.ndarray,
-    data: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, np.ndarray]: ...
-def unique_edges(tris: np.ndarray, nv: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
-def keeps_facing(x: np.ndarray, again: np.ndarray, new_tris: np.ndarray) -> bool: ...
+    loop: Array, rows: Array, vertices: Array, triangles: Array, indptr: Array, data: Array
+) -> tuple[Array, Array, Array, float, Array]: ...
+def unique_edges(tris: Array, nv: int) -> tuple[Array, Array, Array]: ...
+def keeps_facing(x: Array, again: Array, new_tris: Array) -> bool: ...
 def patch_system(
-    x: np.ndarray,
-    tris: np.ndarray,
-    i: np.ndarray,
-    j: np.ndarray,
-    inverse: np.ndarray,
-    unknown: np.ndarray,
-    ring0: np.ndarray,
-    ring1: np.ndarray,
+    x: Array,
+    tris: Array,
+    i: Array,
+    j: Array,
+    inverse: Array,
+    unknown: Array,
+    ring0: Array,
+    ring1: Array,
     level: int,
     cot: bool,
     dense: bool,
-) -> tuple[Any, np.ndarray]: ...
+) -> tuple[Array | tuple[Array, Array, Array], Array]: ...
 def patch_crossings(
-    vertices: np.ndarray,
-    triangles: np.ndarray,
+    vertices: Array,
+    triangles: Array,
     first_new: int,
-    grids: list[tuple[np.ndarray, float, np.ndarray, np.ndarray, np.ndarray, float]],
-    tri_centre: np.ndarray,
-    tri_radius: np.ndarray,
-    new_grids: list[tuple[np.ndarray, float, np.ndarray, np.ndarray, np.ndarray, float]],
-    new_centre: np.ndarray,
-    new_radius: np.ndarray,
-    owner: np.ndarray | None = None,
-) -> np.ndarray: ...
+    grids: list[tuple[Array, float, Array, Array, Array, float]],
+    tri_centre: Array,
+    tri_radius: Array,
+    new_grids: list[tuple[Array, float, Array, Array, Array, float]],
+    new_centre: Array,
+    new_radius: Array,
+    owner: Array | None = None,
+) -> Array: ...
 def local_mesh(
-    triangles: np.ndarray, first_new: int, ring_tris: np.ndarray, rings: list[np.ndarray], nv: int
-) -> tuple[np.ndarray, np.ndarray, list[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]]: ...
+    triangles: Array, first_new: int, ring_tris: Array, rings: list[Array], nv: int
+) -> tuple[Array, Array, list[Array], tuple[Array, Array, Array]]: ...
 def ring_mesh(
-    triangles: np.ndarray,
-    indptr: np.ndarray,
-    data: np.ndarray,
-    seeds: np.ndarray,
-    count: int,
-    all_triangles: np.ndarray,
-    nv: int,
-) -> tuple[np.ndarray, np.ndarray, list[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]]: ...
+    triangles: Array, indptr: Array, data: Array, seeds: Array, count: int, all_triangles: Array, nv: int
+) -> tuple[Array, Array, list[Array], tuple[Array, Array, Array]]: ...

@@ -1,13 +1,8 @@
 # cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
-"""Hole filling's sequential loops (the rules and their reasons: ``o3d_lsmesh.holes``), compiled.
+"""Hole filling's sequential loops, compiled: Liepa's programme, flips and refinement, the tangential
+relaxation, the fairing system and the crossing test (docs/algorithms/hole_filling.rst).
 
-The arithmetic is plain (sums left to right, no summation order kept for its own sake); the fills equal
-those of the NumPy version it replaced up to rounding, measured on 88 fills: the same triangles, vertices
-within 1e-12 relative on 84, 1.4e-12 on three and 3.3e-11 on one large patch whose fairing system
-magnifies rounding (the NumPy version itself moves 3.7e-10 there when its input is translated).
-
-Local meshes (a patch and the rings around it) index their vertices below 2^31: edge keys pack two
-indices in one int64.
+Local meshes index their vertices below 2^31: edge keys pack two indices in one int64.
 """
 
 import numpy as np
@@ -46,7 +41,6 @@ cdef inline void _cross(const double* u, const double* v, double* out) noexcept 
     out[2] = u[0] * v[1] - u[1] * v[0]
 
 
-# ----------------------------------------------------------------------------------------------------------
 # Liepa's minimum-weight triangulation (SGP 2003, section 3)
 
 
@@ -54,14 +48,8 @@ cdef void _liepa(const double* P, const double* outer, const uint8_t* forbidden,
                  int64_t k, double* angle,
                  double* area, int64_t* split, double* normal, uint8_t* known, double* t_angle,
                  double* t_area, double* t_twice, double* t_normal) noexcept nogil:
-    """Fill the tables of the programme: for each chord ``(i, j)``, the best triangulation of the polygon
-    ``i..j`` is its triangle ``(j, m, i)`` with the best ``m`` and the best ones of ``i..m`` and ``m..j``;
-    its weight is the lexicographic pair (largest dihedral angle, total area), where the angle is taken
-    between neighbouring triangles, and with the mesh triangle across a loop edge (``outer``, zero
-    where unknown: no constraint). ``normal[i, j]`` holds the unit normal of the triangle on chord
-    ``(i, j)``, which the next, larger polygon meets there. ``forbidden`` (or NULL) marks chords that
-    are mesh edges already (a non-manifold edge otherwise): infinitely bad; ``allowed`` (or NULL), the
-    triangles ``i < m < j`` at ``(i k + m) k + j`` that may be used, the others infinitely bad."""
+    """Fill the programme's tables: weight (largest dihedral angle, area) of the best triangulation of each
+    polygon ``i..j``; ``forbidden`` chords and triangles not ``allowed`` (either may be NULL) infinitely bad."""
     cdef int64_t i, j, m, d, c, r, choice
     cdef double u[3]
     cdef double v[3]
@@ -145,15 +133,8 @@ cdef double _COSPHERICAL = 1e-9  # Delaunay: a point this near (relative) a circ
 
 
 def delaunay_triangles(points):
-    """The triangles of the 3D Delaunay tetrahedralization of a loop's ``k`` points, as the ``allowed``
-    of :func:`minimum_weight_triangulation` (``(k^3,)`` uint8), or None where it restricts nothing
-    (``k < 5``), does not exist (Qhull refuses coplanar points) or is not unique (cospherical points).
-
-    Liepa's weight over every triangle of the loop lets a loop that winds around a curved part (a hole
-    across a tube) take triangles spanning the part, which fairing keeps; the Delaunay faces join only
-    near neighbours (Zou, Hu, Gu, Li, Sun: *An algorithm for triangulating multiple 3D polygons*, SGP
-    2013, section 4; CGAL's ``triangulate_hole`` does the same by default).
-    """
+    """The triangles of the 3D Delaunay tetrahedralization of a loop's ``k`` points (``(k^3,)`` uint8), or
+    None where it restricts nothing (``k < 5``, coplanar or cospherical points; Zou et al. 2013)."""
     from scipy.spatial import Delaunay, QhullError
 
     cdef int64_t k = len(points)
@@ -188,14 +169,8 @@ def delaunay_triangles(points):
 
 def minimum_weight_triangulation(const double[:, ::1] points, const double[:, ::1] outer_normals,
                                  const uint8_t[:, ::1] forbidden=None, const uint8_t[::1] allowed=None):
-    """Liepa's dynamic programme on one loop of ``k >= 3`` points: its ``k - 2`` triangles ``(j, m, i)``.
-
-    ``outer_normals[i]``: the unit normal of the mesh triangle on loop edge ``(i, i + 1)`` (zero where
-    unknown); ``forbidden (k, k)`` (or None) marks chords that are mesh edges already; ``allowed`` (or
-    None: every triangle), the triangles that may be used (:func:`delaunay_triangles`). O(k^3) time,
-    O(k^2) memory (``allowed``: k^3 bytes). If no triangulation uses only allowed triangles, the best
-    over every triangle; if none avoids every forbidden chord, the best one ignoring them.
-    """
+    """Liepa's dynamic programme on ``k >= 3`` loop points: the ``k - 2`` triangles ``(j, m, i)``;
+    ``outer_normals (k, 3)``, ``forbidden (k, k)`` chords and the ``allowed`` triangles as in the docs page."""
     cdef int64_t k = points.shape[0]
     if outer_normals.shape[0] != k or points.shape[1] != 3 or outer_normals.shape[1] != 3:
         raise ValueError("points and outer_normals must be (k, 3)")
@@ -245,7 +220,6 @@ def minimum_weight_triangulation(const double[:, ::1] points, const double[:, ::
     return out
 
 
-# ----------------------------------------------------------------------------------------------------------
 # Liepa's refinement (section 4): centroid splits, then Delaunay edge flips
 
 
@@ -272,32 +246,20 @@ cdef inline int64_t _key(int64_t a, int64_t b) noexcept nogil:
     return (a << 32) | b if a < b else (b << 32) | a
 
 
-cdef bint _has_half(const Half* sorted_, int64_t n, int64_t key) noexcept nogil:
+cdef bint _has(const int64_t* sorted_, int64_t n, int64_t key, int64_t stride=1) noexcept nogil:
+    """Whether ``key`` is among the ``n`` sorted values ``sorted_[0], sorted_[stride], ...``."""
     cdef int64_t lo = 0, hi = n, mid
     while lo < hi:
         mid = (lo + hi) >> 1
-        if sorted_[mid].key < key:
+        if sorted_[mid * stride] < key:
             lo = mid + 1
         else:
             hi = mid
-    return lo < n and sorted_[lo].key == key
-
-
-cdef bint _has(const int64_t* sorted_, int64_t n, int64_t key) noexcept nogil:
-    cdef int64_t lo = 0, hi = n, mid
-    while lo < hi:
-        mid = (lo + hi) >> 1
-        if sorted_[mid] < key:
-            lo = mid + 1
-        else:
-            hi = mid
-    return lo < n and sorted_[lo] == key
+    return lo < n and sorted_[lo * stride] == key
 
 
 cdef bint _in_circumsphere(const double* p0, const double* p1, const double* p2, const double* q) noexcept nogil:
-    """Whether ``q`` is strictly inside the circumsphere of triangle ``(p0, p1, p2)`` by a relative margin
-    (near-co-circular quads, common on regular patches, are not flipped, so that the result does not
-    hinge on rounding: rigid motions give the same connectivity)."""
+    """Whether ``q`` is inside the circumsphere of ``(p0, p1, p2)`` by a relative margin."""
     cdef double u[3]
     cdef double v[3]
     cdef double w[3]
@@ -344,10 +306,7 @@ cdef double _min_angle(const double* p0, const double* p1, const double* p2) noe
 
 
 cdef bint _flip_improves(const double* pa, const double* pb, const double* pc, const double* pd) noexcept nogil:
-    """Whether edge ``(a, b)`` between ``(a, b, c)`` and ``(b, a, d)`` flips to ``(c, d)``: ``d`` inside the
-    circumsphere of ``(a, b, c)`` or ``c`` inside that of ``(b, a, d)`` (in 3D the two differ), the new
-    ``(c, a, d)`` and ``(d, b, c)`` facing as the old pair, and the pair's smallest angle growing
-    (without it an edge could flip back and forth, the two sphere tests disagreeing)."""
+    """Whether edge ``(a, b)`` between ``(a, b, c)`` and ``(b, a, d)`` flips to ``(c, d)`` (docs page)."""
     cdef double x[3]
     cdef double y[3]
     cdef double n1[3]
@@ -381,14 +340,8 @@ cdef bint _flip_improves(const double* pa, const double* pb, const double* pc, c
 
 cdef int _relax(const double* points, int64_t* tris, int64_t t, const int64_t* fixed, int64_t n_fixed,
                 uint8_t* dirty) noexcept nogil:
-    """Delaunay edge flips (Liepa's relaxation) until none applies, in passes of independent flips.
-
-    Each pass tests the interior edges whose verdict can have changed (an edge of a ``dirty`` triangle,
-    or one whose flip a removed edge blocked), then flips, in the edges' key order, those whose two
-    triangles no earlier proposed flip of the pass claimed; the triangles of every proposal are dirty
-    for the next pass. The new edge must not exist yet (in the patch, or in the ``fixed`` keys, sorted,
-    around it). Passes rather than flips one by one: the result does not depend on a visiting order.
-    Returns -1 if out of memory."""
+    """Delaunay edge flips (Liepa's relaxation) in passes of independent flips until none applies; -1 if
+    out of memory."""
     cdef int64_t nh = 3 * t, ne, e, i, h1, h2, t1, t2, s1, s2, a, b, c, d, n_prop, n_cand, n_removed = 0
     cdef int64_t key, n_new
     cdef int pass_
@@ -424,7 +377,7 @@ cdef int _relax(const double* points, int64_t* tris, int64_t t, const int64_t* f
             key = _key(c, d)
             if not (dirty[t1] or dirty[t2] or _has(removed, n_removed, key)):
                 continue
-            if c == d or _has_half(half, nh, key) or _has(fixed, n_fixed, key):
+            if c == d or _has(&half[0].key, nh, key, 2) or _has(fixed, n_fixed, key):
                 continue
             if _flip_improves(points + 3 * a, points + 3 * b, points + 3 * c, points + 3 * d):
                 proposed[n_prop] = e
@@ -490,11 +443,8 @@ cdef int64_t[::1] _fixed_keys(fixed_pairs):
 
 
 def relax(const double[:, ::1] points, triangles, fixed_pairs, dirty):
-    """Liepa's relaxation of a patch (see ``_relax``): the flipped triangles, a new ``(t, 3)`` array.
-
-    ``fixed_pairs (f, 2)``: edges around the patch that no flip may make; ``dirty (t,)`` bool: the
-    triangles whose edges are tested first.
-    """
+    """Liepa's relaxation of a patch: the flipped ``(t, 3)`` triangles; ``fixed_pairs (f, 2)`` edges no flip
+    may make, ``dirty (t,)`` the triangles tested first."""
     out = np.array(triangles, dtype=np.int64, order="C", copy=True)
     mask = np.array(dirty, dtype=np.uint8, copy=True)
     if out.ndim != 2 or out.shape[1] != 3 or mask.shape != (len(out),):
@@ -519,15 +469,7 @@ def relax(const double[:, ::1] points, triangles, fixed_pairs, dirty):
 
 def refine(points, sigma, triangles, fixed_pairs, owner, double alpha, int64_t max_points=-1):
     """Liepa's refinement: rounds of centroid splits, each followed by a relaxation, until none splits or
-    a round would pass ``max_points`` points (if not negative: a bound on the work).
-
-    A triangle with centroid ``c`` and ``sigma_c`` the mean of its corners' scales splits when ``alpha
-    |c - v_m| > max(sigma_c, sigma_m)`` for each corner ``m``; the new vertex takes ``sigma_c`` and the
-    ``owner`` (patch) of the triangle's first corner. No flips before the first split (as Liepa and
-    CGAL: on a short loop, Delaunay flips made the minimum-weight triangles slimmer, and coarse holes got
-    no new vertex); after a relaxation only edges of split triangles can flip. Returns the points (the
-    given ones first), the triangles and the points' owners.
-    """
+    a round would pass ``max_points``; the points, the triangles and the points' owners."""
     cdef int64_t nv = len(points), t = len(triangles), cap_v, cap_t, i, j, m, count, a, b, c, p
     cap_v, cap_t = 2 * nv + 16, 3 * t + 16
     P_ = np.empty((cap_v, 3))
@@ -615,20 +557,13 @@ def refine(points, sigma, triangles, fixed_pairs, owner, double alpha, int64_t m
     return P_[:nv].copy(), T_[:t].copy(), O_[:nv].copy()
 
 
-# ----------------------------------------------------------------------------------------------------------
 # tangential relaxation and the crossing test
 
 
 def tangential_relax(const double[:, ::1] vertices, const int64_t[:, ::1] new_tris, int64_t first_new,
                      int iterations=10):
-    """Move each new vertex (index ``>= first_new``) ``iterations`` times half-way to its star's
-    area-weighted centroid, the move's part along the star's area-weighted normal removed (all moves
-    from the same positions); the new vertices' positions ``(n - first_new, 3)``.
-
-    The star's centroid (a step of centroidal Voronoi smoothing), not the neighbours' mean, which on an
-    irregular star sits towards the short edges and leaves a sliver; tangential, so that the faired
-    surface is kept to first order.
-    """
+    """The new vertices (from ``first_new``) moved ``iterations`` times half-way to their star's
+    area-weighted centroid, tangentially: ``(n - first_new, 3)``."""
     cdef int64_t n = vertices.shape[0], p = n - first_new, q = new_tris.shape[0], i, r, v, c
     if p < 0:
         raise ValueError("first_new beyond the vertices")
@@ -683,11 +618,8 @@ def tangential_relax(const double[:, ::1] vertices, const int64_t[:, ::1] new_tr
 
 
 cdef bint _cross_pair(const double* P, const double* Q) noexcept nogil:
-    """Whether triangles ``P`` and ``Q`` (3 x 3, row-major corners; a segment is a triangle with its last
-    two corners equal) intersect: no separating axis among the 23 candidates (two normals, nine edge-edge
-    cross products, twelve in-plane edge normals, each triangle's edges in both planes, for coplanar
-    pairs and segments). Axes too short to trust (parallel edges, a segment's normal) are skipped; a gap
-    must exceed a relative ``1e-12`` (touching and coplanar pairs count as crossing)."""
+    """Whether triangles ``P`` and ``Q`` (3 x 3; a segment repeats its last corner) intersect: no
+    separating axis among the 23 candidates; touching and coplanar pairs cross."""
     cdef double eP[3][3]
     cdef double eQ[3][3]
     cdef double nP[3]
@@ -732,9 +664,7 @@ cdef bint _cross_pair(const double* P, const double* Q) noexcept nogil:
 
 
 cdef bint _folded(const double* u, const double* w, const double* a, const double* b) noexcept nogil:
-    """Whether triangles ``(u, w, a)`` and ``(u, w, b)``, which share the edge ``u w``, overlap beyond it:
-    ``a`` and ``b`` on one side of the edge and their half-planes within ``1e-9`` radians (folded flat
-    onto each other). Otherwise they meet only on the edge."""
+    """Whether ``(u, w, a)`` and ``(u, w, b)`` fold flat onto each other beyond their shared edge."""
     cdef double e[3]
     cdef double da[3]
     cdef double db[3]
@@ -756,12 +686,7 @@ cdef inline bint _same_point(const double* V, int64_t a, int64_t b) noexcept nog
 
 
 cdef bint _pair_crosses(const double* V, const int64_t* T, int64_t ta, int64_t tb) noexcept nogil:
-    """Whether triangles ``ta`` and ``tb`` (rows of ``T`` over the points ``V``) meet anywhere but at the
-    corners and edge they share (by index or position, :func:`_same_point`). No shared corner: the bounding boxes (where most pairs stop), then the
-    axes of :func:`_cross_pair`. One shared corner: they meet elsewhere iff the edge opposite it in one
-    meets the other triangle (their intersection is convex and holds the corner; its far end lies on
-    such an edge). A shared edge: iff they fold onto each other (:func:`_folded`). Three: one triangle
-    twice."""
+    """Whether triangles ``ta`` and ``tb`` meet anywhere but at the corners and edge they share."""
     cdef double P[9]
     cdef double Q[9]
     cdef double S[9]
@@ -805,7 +730,6 @@ cdef bint _pair_crosses(const double* V, const int64_t* T, int64_t ta, int64_t t
     return _cross_pair(S, P)
 
 
-# ----------------------------------------------------------------------------------------------------------
 # the rings of fixed vertices around the holes
 
 
@@ -818,14 +742,8 @@ cdef object _sorted(int64_t[::1] a, int64_t count):
 
 def rings(const int64_t[:, ::1] triangles, const int64_t[::1] indptr, const int64_t[::1] data, seeds,
           int count):
-    """Breadth-first vertex rings around ``seeds`` (ring 0) over each vertex's triangles (CSR ``indptr``,
-    ``data``): the triangles (sorted) touching rings ``0 .. count - 1`` and the ``count + 1`` rings,
-    each sorted (the last one incomplete: its vertices' other triangles are not taken); ring 0 is
-    ``seeds`` as given.
-
-    Visited marks over the whole mesh are allocated zeroed (pages the walk does not touch cost nothing),
-    so the work grows with the rings, not with the mesh.
-    """
+    """Breadth-first rings around ``seeds`` over each vertex's triangles (CSR ``indptr``, ``data``): the
+    sorted triangles touching rings ``0 .. count - 1`` and the ``count + 1`` sorted rings."""
     cdef int64_t n = indptr.shape[0] - 1, m = triangles.shape[0], i, j, v, t, c, size, found, total = 0
     seeds_ = np.ascontiguousarray(seeds, dtype=np.int64)
     cdef const int64_t[::1] given = seeds_
@@ -890,7 +808,6 @@ def rings(const int64_t[:, ::1] triangles, const int64_t[::1] indptr, const int6
     return _sorted(taken, total), out_rings
 
 
-# ----------------------------------------------------------------------------------------------------------
 # the fairing's Laplacian weights
 
 
@@ -902,16 +819,10 @@ cdef double _sum(const double* a, int64_t n) noexcept nogil:
     return total
 
 
-cpdef laplacian_weights(const int64_t[:, ::1] tris, int64_t nv, const int64_t[::1] i, const int64_t[::1] j,
+cdef laplacian_weights(const int64_t[:, ::1] tris, int64_t nv, const int64_t[::1] i, const int64_t[::1] j,
                       const int64_t[::1] inverse, vertices=None):
-    """Edge weights ``w`` (edges ``(i, j)``; ``inverse``: the edge of each half-edge ``(c, c + 1)`` of each
-    triangle, corner-major), vertex degrees ``sum w`` and the Laplacian's row scales of a local mesh.
-
-    Uniform (``vertices`` None): ``w = 1``, scale ``1 / degree`` (eq. 1 of LS meshes). Cotangent:
-    ``w = (cot a + cot b) / 2`` clamped below at 5% of the mean ``|w|`` (obtuse pairs would make the
-    stiffness indefinite), scale the inverse of the vertex areas (a third of each triangle's) normalized
-    to mean 1. A vertex without area (or degree) gets scale 0.
-    """
+    """Edge weights ``w``, degrees ``sum w`` and Laplacian row scales of a local mesh (edges ``(i, j)``,
+    ``inverse`` the edge of each corner-major half-edge): uniform, or cotangent if ``vertices`` given."""
     cdef int64_t t = tris.shape[0], e = i.shape[0], h, k, c, a, b, o, positive = 0
     if inverse.shape[0] != 3 * t or j.shape[0] != e:
         raise ValueError("inverse must have 3 t entries, i and j one length")
@@ -974,21 +885,13 @@ cpdef laplacian_weights(const int64_t[:, ::1] tris, int64_t nv, const int64_t[::
     return w_, degree_, scale_
 
 
-# ----------------------------------------------------------------------------------------------------------
 # what the triangulation needs of a loop
 
 
 def loop_geometry(const int64_t[::1] loop, const int64_t[::1] rows, const double[:, ::1] vertices,
                   const int64_t[:, ::1] triangles, const int64_t[::1] indptr, const int64_t[::1] data):
-    """A loop's points ``(k, 3)``, the unit normals ``(k, 3)`` of the mesh triangles on its edges (the
-    triangle of half-edge row ``rows[i]``, that is ``rows[i] % m``, on edge ``(i, i + 1)``), its chords
-    that already are mesh edges ``(k, k)`` bool (its own edges excepted: a chord the triangulation must
-    not use, a non-manifold edge otherwise), its mean edge length, and those chords as pairs ``(c, 2)``,
-    ``i < j`` row by row.
-
-    The chords come from each loop vertex's triangles (CSR ``indptr``, ``data``), the loop's positions
-    looked up by binary search: the work grows with the loop's stars, not with the mesh.
-    """
+    """A loop's points ``(k, 3)``, the unit normals of the mesh triangles on its edges ``(k, 3)``, its chords
+    that are mesh edges ``(k, k)`` bool, its mean edge length, and those chords as pairs ``(c, 2)``."""
     cdef int64_t k = loop.shape[0], n = vertices.shape[0], m = triangles.shape[0], p, q, r, lo, hi, mid, w
     cdef int64_t c, t, count
     if rows.shape[0] != k or indptr.shape[0] != n + 1:
@@ -1067,17 +970,12 @@ def loop_geometry(const int64_t[::1] loop, const int64_t[::1] rows, const double
     return points_, outer_, chords_.view(bool), spacing, pairs_
 
 
-# ----------------------------------------------------------------------------------------------------------
 # a local mesh's edges, and the check of a re-weighted solve
 
 
 def unique_edges(const int64_t[:, ::1] tris, int64_t nv):
-    """The undirected edges ``i < j`` of a local mesh, sorted, and the edge of each of its ``3 t``
-    half-edges ``(c, c + 1)``, corner-major (all ``(0, 1)`` first): ``(i, j, inverse)``.
-
-    The edges and ``inverse`` of :func:`o3d_lsmesh.topology.unique_edges`, for the tiny local meshes of
-    one hole (called twice per hole): 30 against 176 us at 60 triangles, where that function's counting
-    sorts over whole-mesh arrays cost more than the sort itself."""
+    """The sorted edges ``i < j`` of a local mesh and the edge of each corner-major half-edge:
+    ``(i, j, inverse)``."""
     cdef int64_t t = tris.shape[0], nh = 3 * t, h, e = 0, a, b
     if t and _outside(&tris[0, 0], 3 * t, nv):
         raise ValueError("tris index outside the nv vertices")
@@ -1106,9 +1004,8 @@ def unique_edges(const int64_t[:, ::1] tris, int64_t nv):
 
 
 def keeps_facing(const double[:, ::1] x, const double[:, :] again, const int64_t[:, ::1] new_tris):
-    """Whether ``again``, new positions of the last ``len(again)`` vertices of ``x``, keeps every new
-    triangle facing as in ``x`` and moves no vertex by a tenth of the patch's size or more (obtuse slivers
-    can make cotangent weights ill-conditioned)."""
+    """Whether ``again`` (the last vertices of ``x`` moved) keeps every new triangle facing as in ``x`` and
+    moves no vertex by a tenth of the patch's size."""
     cdef int64_t n = x.shape[0], p = again.shape[0], first = n - p, q = new_tris.shape[0], r, c, v
     if p > n or again.shape[1] != 3:
         raise ValueError("again must be (p, 3) with p <= len(x)")
@@ -1152,23 +1049,16 @@ def keeps_facing(const double[:, ::1] x, const double[:, :] again, const int64_t
     return bool(facing and move < 0.1 * size)
 
 
-# ----------------------------------------------------------------------------------------------------------
 # the fairing's normal equations on a small patch
 
 
 def patch_system(const double[:, ::1] x, const int64_t[:, ::1] tris, const int64_t[::1] i,
                  const int64_t[::1] j, const int64_t[::1] inverse, const int64_t[::1] unknown,
                  const int64_t[::1] ring0, const int64_t[::1] ring1, int level, bint cot, bint dense):
-    """The fairing system of the ``unknown`` local vertices at continuity ``level``, the others fixed at
-    ``x``. Weights of :func:`laplacian_weights` (cotangent if ``cot``) on the edges ``(i, j)``
-    (``inverse``: the edge of each half-edge).
-
-    Level 0: ``K_uu`` and ``-K_uk x_k``, ``K = D - W``. Levels 1 and 2: the least squares of the rows
-    ``A = L[plus] - L[minus]`` of ``L = S K``: for 1 every row touching an unknown (the ``unknown`` and
-    ``ring0``); for 2 the edges between those rows and ``ring1`` with one end among them. If ``dense``:
-    the normal matrix ``(p, p)`` and right-hand side ``(p, 3)``. Else CSR ``(indptr, indices, data)`` of
-    ``M`` over the unknowns and ``b``: level 0 ``M = K_uu``, ``b = -K_uk x_k``; levels 1 and 2
-    ``M = A_u``, ``b = A_k x_k`` (the system ``M^T M = -M^T b``).
+    """The fairing system of the ``unknown`` vertices at continuity ``level`` (docs page), the others fixed
+    at ``x``. ``dense``: the normal matrix ``(p, p)`` and right-hand side ``(p, 3)``. Else the CSR
+    ``(indptr, indices, data)`` of ``M`` and ``b``: level 0 ``M = K_uu``, ``b = -K_uk x_k``; 1 and 2 the
+    rows ``M = A_u`` and ``b = A_k x_k`` of the least squares (the system ``M^T M = -M^T b``).
     """
     cdef int64_t nv = x.shape[0], e = i.shape[0], p = unknown.shape[0], rows, r, k, s, c, v
     cdef int64_t a, count, u1, u2, side, size = 0, capacity = 0
@@ -1309,7 +1199,6 @@ def patch_system(const double[:, ::1] x, const int64_t[:, ::1] tris, const int64
     return (out_indptr_, out_indices_[:size], out_data_[:size]), rhs_
 
 
-# ---------------------------------------------------------------------------------------------------
 # the crossing test: candidates from a uniform grid of triangle centres
 
 
@@ -1322,15 +1211,8 @@ def patch_crossings(const double[:, ::1] vertices, const int64_t[:, ::1] triangl
                     grids, const double[:, ::1] tri_centre, const double[::1] tri_radius,
                     new_grids, const double[:, ::1] new_centre, const double[::1] new_radius, owner=None):
     """For each new triangle (from ``first_new`` on), the number of triangles it meets beyond the corners
-    and edge they share (:func:`_pair_crosses`): the crossing test of every fill. Each new triangle's
-    bounding sphere (``new_centre``, ``new_radius``) is queried in the grids of the input triangles
-    (``grids``: ``(origin, cell, dims, indptr, members, reach)`` each, the cells of side ``cell`` from
-    ``origin``, ``indptr`` over the cells ``(x * dims[1] + y) * dims[2] + z``; their spheres
-    ``tri_centre``, ``tri_radius``) and in those of the new ones (``new_grids``, numbered from 0), and
-    tested against each triangle whose sphere overlaps it (each pair of new triangles once). Linear in
-    the new triangles times the triangles near each. ``(q,)`` float. With ``owner`` (the patch of each
-    new triangle, ``(q,)`` int64), a patch's triangles are not tested once one of them crosses: the
-    counts then only say which patches cross."""
+    and edge they share, from grids of the triangles' bounding spheres; with ``owner``, a crossing
+    patch's other triangles are not tested (docs page)."""
     cdef int64_t q = triangles.shape[0] - first_new
     result_ = np.zeros(max(q, 0))
     if q <= 0:
@@ -1354,11 +1236,7 @@ cdef _grid_crossings(const double[:, ::1] vertices, const int64_t[:, ::1] triang
                      const double[:, ::1] centre, const double[::1] radius, grid, const double[:, ::1] tc,
                      const double[::1] tr, bint among_new, double[::1] result, const int64_t[::1] owner,
                      uint8_t[::1] crossed, bint stop):
-    """:func:`patch_crossings` against one grid's triangles (the new ones if ``among_new``: then indices
-    from ``first_new`` on, and each pair once), into ``result``; the candidates gathered in a buffer
-    grown between runs of queries. A crossing marks its patches ``crossed``; if ``stop``, a marked
-    patch's triangles are not tested against the input, nor pairs of new ones whose patches are both
-    marked."""
+    """:func:`patch_crossings` against one grid's triangles (the new ones if ``among_new``)."""
     origin_, cell_, dims_, indptr_, members_, reach_ = grid
     cdef double cell = cell_, reach = reach_
     cdef const double[::1] origin = origin_
@@ -1454,17 +1332,13 @@ cdef int64_t _gather(const double* lo, const double* hi, const int64_t* lo_cell,
     return count
 
 
-# ---------------------------------------------------------------------------------------------------
 # a small patch's local mesh and its dense fairing solve, each in one call
 
 
 def local_mesh(const int64_t[:, ::1] triangles, int64_t first_new, const int64_t[::1] ring_tris, rings,
                int64_t nv):
-    """The local mesh of the fairing: the triangles ``ring_tris`` of the input (rows of ``triangles``
-    before ``first_new``) and every new one (from ``first_new`` on), over their vertices renumbered in
-    increasing order (as ``np.unique`` and ``np.searchsorted`` would): the vertices ``(l,)``, the local
-    triangles ``(t, 3)``, ``rings`` (arrays of vertices of the ``nv``) renumbered, and
-    :func:`unique_edges` of the local triangles."""
+    """The input's ``ring_tris`` and the new triangles on their vertices renumbered in increasing order:
+    the vertices, the local triangles, ``rings`` renumbered and :func:`unique_edges`."""
     cdef int64_t r = ring_tris.shape[0], q = triangles.shape[0] - first_new, t = r + q, k, c, v, count = 0
     cdef bint bad = False
     local_ = np.empty((t, 3), dtype=np.int64)
@@ -1507,10 +1381,7 @@ def local_mesh(const int64_t[:, ::1] triangles, int64_t first_new, const int64_t
 
 
 def refine_budget(points, triangles, sigma):
-    """The most new points :func:`refine` may add to a patch (``triangles`` over ``points``) whose loop
-    has the scales ``sigma`` (density 1): ``4 A / mean(sigma)^2``, ``A`` its area, about what density 2
-    adds to a patch of even scale (an equilateral mesh of spacing ``s`` has ``2 / (sqrt(3) s^2)``
-    vertices per unit area). Uneven scales (short loop edges next to long ones) would add more."""
+    """The most new points :func:`refine` may add to a patch: ``4 A / mean(sigma)^2``, ``A`` its area."""
     p = np.asarray(points)[np.asarray(triangles)]
     area = 0.5 * np.sqrt((np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]) ** 2).sum(axis=1)).sum()
     mean = float(np.mean(sigma))
@@ -1519,8 +1390,6 @@ def refine_budget(points, triangles, sigma):
 
 def ring_mesh(const int64_t[:, ::1] triangles, const int64_t[::1] indptr, const int64_t[::1] data, seeds,
               int count, const int64_t[:, ::1] all_triangles, int64_t nv):
-    """:func:`rings` around ``seeds`` in the input ``triangles``, then :func:`local_mesh` of their
-    triangles and the new ones (``all_triangles`` from ``len(triangles)`` on) over the ``nv`` vertices,
-    in one call."""
+    """:func:`rings` around ``seeds``, then :func:`local_mesh` of their triangles and the new ones."""
     ring_tris, found = rings(triangles, indptr, data, seeds, count)
     return local_mesh(all_triangles, triangles.shape[0], ring_tris, found, nv)

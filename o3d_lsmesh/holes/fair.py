@@ -52,6 +52,15 @@ def _fair(
     return solve_spd(sp.csr_matrix(normal), rhs, isolate_nonfinite=True)
 
 
+def _empty_csr(rows: int, cols: int) -> sp.csr_matrix:
+    """An all-zero ``(rows, cols)`` CSR matrix, from its arrays (SciPy's shape-only form costs more)."""
+    return sp.csr_matrix(
+        (np.zeros(0), np.zeros(0, dtype=np.int32), np.zeros(rows + 1, dtype=np.int32)),
+        shape=(rows, cols),
+        copy=False,
+    )
+
+
 def _vertex_owner(new_tris: np.ndarray, owner: np.ndarray, n: int, p: int) -> np.ndarray:
     """The hole of each of the ``p`` new vertices (numbered from ``n``), from that of each new triangle."""
     vertex_owner = np.zeros(p, dtype=np.int64)
@@ -152,14 +161,6 @@ def fair_patches(
         yield -1, refined  # the refined patch as triangulated
 
     tried = []
-    if len(holes) == 1:  # the first candidate free of crossings, without the per-hole bookkeeping
-        for level, candidate in candidates():
-            tried.append(level)
-            work[n:] = candidate
-            if np.isfinite(candidate).all() and not _crossings(work, triangles, m, index, owner).any():
-                return np.array([level], dtype=np.int64), np.zeros(0, dtype=np.int64)
-        work[n:] = refined
-        return np.array([tried[0]], dtype=np.int64), np.zeros(1, dtype=np.int64)
     vertex_owner = _vertex_owner(new_tris, owner, n, total - n)
     chosen = np.full(len(holes), -1)
     out = refined.copy()
