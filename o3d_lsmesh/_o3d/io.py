@@ -18,6 +18,8 @@ from typing import Any
 
 import numpy as np
 
+from ..core.errors import InputError
+
 __all__ = [
     "cap_threads",
     "captured_native_output",
@@ -116,18 +118,18 @@ def read_mesh_file(path: str, *, what: str = "INPUT") -> Any:
 
     Raises
     ------
-    ValueError
-        Naming ``what`` and the file: missing, a folder, empty, unreadable, truncated or corrupt
-        (Open3D's warnings and the PLY header's counts), or without triangles.
+    InputError
+        ``param="path"``, naming ``what`` and the file: missing, a folder, empty, unreadable,
+        truncated or corrupt (Open3D's warnings and the PLY header's counts), or without triangles.
     """
     o3d = quiet_open3d()
     name = f"{what} {path!r}"
     if not os.path.exists(path):
-        raise ValueError(f"{name} does not exist")
+        raise InputError(f"{name} does not exist", param="path")
     if os.path.isdir(path):
-        raise ValueError(f"{name} is a folder, not a mesh file")
+        raise InputError(f"{name} is a folder, not a mesh file", param="path")
     if os.path.getsize(path) == 0:
-        raise ValueError(f"{name} is an empty file")
+        raise InputError(f"{name} is an empty file", param="path")
     o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Warning)
     try:
         with captured_native_output() as captured:
@@ -137,22 +139,25 @@ def read_mesh_file(path: str, *, what: str = "INPUT") -> Any:
     n, m = len(mesh.vertices), len(mesh.triangles)
     failure = _READ_FAILURE.search(_ANSI.sub("", captured[0]))
     if failure and n:
-        raise ValueError(
-            f"{name} is truncated or corrupt: Open3D read only part of it ({failure.group(0).strip()})"
+        raise InputError(
+            f"{name} is truncated or corrupt: Open3D read only part of it ({failure.group(0).strip()})",
+            param="path",
         )
     header = ply_header_counts(path) if Path(path).suffix.lower() == ".ply" and n else {}
     # a polygon face gives at least one triangle: fewer triangles than faces means faces were lost
     if header.get("vertex", n) != n or header.get("face", 0) > m:
-        raise ValueError(
+        raise InputError(
             f"{name} is truncated or corrupt: its header declares {header.get('vertex')} vertices "
-            f"and {header.get('face', 0)} faces, Open3D read {n} and {m} triangles"
+            f"and {header.get('face', 0)} faces, Open3D read {n} and {m} triangles",
+            param="path",
         )
     if n == 0:
-        raise ValueError(
-            f"{name} could not be read as a triangle mesh (empty, corrupt or unsupported format)"
+        raise InputError(
+            f"{name} could not be read as a triangle mesh (empty, corrupt or unsupported format)",
+            param="path",
         )
     if m == 0:
-        raise ValueError(f"{name} has {n} vertices but no triangles")
+        raise InputError(f"{name} has {n} vertices but no triangles", param="path")
     return mesh.remove_duplicated_vertices() if Path(path).suffix.lower() == ".stl" else mesh
 
 
