@@ -20,35 +20,26 @@ def mesh_state(data: MeshData) -> dict:
     device and dtypes): :func:`~o3d_lsmesh._o3d.new_mesh` on the rebuilt data gives the same result.
     """
     state: dict[str, Any] = {
-        "vertices": data.vertices,
-        "triangles": data.triangles,
-        "kind": data.kind,
-        "split": data.split,
-        "split_triangles": data.split_triangles,
+        key: getattr(data, key) for key in ("vertices", "triangles", "kind", "split", "split_triangles")
     }
     src = data.source
     if data.kind == "legacy":
-        state["attributes"] = {
-            row.key: [None if t.is_empty() else np.asarray(t).copy() for t in src.textures]
-            if row.follows == "texture"
-            else True
-            if row.follows == "normals"
-            else np.asarray(getattr(src, row.key)).copy()
-            for row, _ in present_attributes(data)
-        }
+        state["attributes"] = {row.key: _legacy_state(src, row) for row, _ in present_attributes(data)}
     elif data.kind == "tensor":
         state["device"] = str(src.vertex.positions.device)
+        values = [(row.group, key, getattr(src, row.group)[key]) for row, key in present_attributes(data)]
         state["tensor"] = [
-            (
-                row.group,
-                key,
-                getattr(src, row.group)[key].cpu().numpy().copy(),
-                str(getattr(src, row.group)[key].dtype),
-            )
-            for row, key in present_attributes(data)
+            (group, key, value.cpu().numpy().copy(), str(value.dtype)) for group, key, value in values
         ]
         state["material"] = _material_state(src.material) if src.has_valid_material() else None
     return state
+
+
+def _legacy_state(src: Any, row: Any) -> Any:
+    """A legacy mesh's attribute of ``row`` as plain values (normals: True, they are recomputed)."""
+    if row.follows == "texture":
+        return [None if texture.is_empty() else np.asarray(texture).copy() for texture in src.textures]
+    return True if row.follows == "normals" else np.asarray(getattr(src, row.key)).copy()
 
 
 def _material_state(material: Any) -> dict:
