@@ -59,7 +59,7 @@ _SERIAL_CHILD = """
 import json, resource, sys, time
 from o3d_lsmesh.app import batch
 import open3d, o3d_lsmesh.fairing  # the imports the workers do before the clock starts
-from o3d_lsmesh._solvers import cholmod_available
+from o3d_lsmesh.core.solve import cholmod_available
 cholmod_available()
 folder, out, method, iterations = sys.argv[1:5]
 start = time.perf_counter()
@@ -77,7 +77,7 @@ def make_files(folder: Path, kinds: tuple[str, ...], copies: int, *, noise: floa
     """``copies`` noisy copies cycling through ``kinds``; returns the vertex count of each file."""
     import open3d as o3d
 
-    from o3d_lsmesh.shapes import add_noise, mean_edge_length
+    from o3d_lsmesh.app.shapes import add_noise, mean_edge_length
 
     folder.mkdir(parents=True, exist_ok=True)
     meshes = {name: o3d.io.read_triangle_mesh(str(DATA / name)) for name in kinds}
@@ -112,7 +112,7 @@ def _warm() -> None:
     import open3d  # noqa: F401
 
     import o3d_lsmesh.fairing  # noqa: F401
-    from o3d_lsmesh._solvers import cholmod_available
+    from o3d_lsmesh.core.solve import cholmod_available
 
     cholmod_available()
 
@@ -185,7 +185,7 @@ def tiny_overhead(root: Path, count: int, workers: int) -> dict:
     """Per-task cost of the engine: ``count`` files of 162 vertices, 1 fairing iteration (a task of ~10 ms)."""
     import open3d as o3d
 
-    from o3d_lsmesh.shapes import demo_mesh
+    from o3d_lsmesh.app.shapes import demo_mesh
 
     folder = root / "tiny"
     folder.mkdir()

@@ -24,9 +24,9 @@ import pytest
 from o3d_lsmesh.app import batch, tasks
 from o3d_lsmesh.app.cli import main
 from o3d_lsmesh.app.ops import OPS, BatchOp, Option, int_at_least
+from o3d_lsmesh.app.shapes import add_noise, demo_mesh, mean_edge_length
 from o3d_lsmesh.core.errors import O3DLSMeshWarning
 from o3d_lsmesh.fairing import constrained_fairing
-from o3d_lsmesh.shapes import add_noise, demo_mesh, mean_edge_length
 
 distributed = pytest.importorskip(
     "distributed", reason="dask.distributed is the batch engine: pip install '.[dask]'"
@@ -522,10 +522,10 @@ def test_fail_fast_stops_at_the_first_failure(data, tmp_path):
 
 
 def test_other_ops_and_a_pipeline_match_the_library(data, tmp_path):
-    from o3d_lsmesh.encoding import decode_geometry, encode_geometry
+    from o3d_lsmesh.app.metrics import surface_distance
     from o3d_lsmesh.hierarchy import build_hierarchy
-    from o3d_lsmesh.metrics import surface_distance
-    from o3d_lsmesh.selection import approximate
+    from o3d_lsmesh.lsmesh.encoding import decode_geometry, encode_geometry
+    from o3d_lsmesh.lsmesh.selection import approximate
 
     source = data.good[0]
     mesh = o3d.io.read_triangle_mesh(str(source))

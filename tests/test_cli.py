@@ -19,9 +19,9 @@ from conftest import REPO, load_mesh
 from o3d_lsmesh.app import batch
 from o3d_lsmesh.app.cli import CLIError, build_parser, main
 from o3d_lsmesh.app.commands import parse_index_spec
+from o3d_lsmesh.app.metrics import signed_volume
+from o3d_lsmesh.app.shapes import add_noise, demo_mesh, mean_edge_length
 from o3d_lsmesh.fairing import constrained_fairing
-from o3d_lsmesh.metrics import signed_volume
-from o3d_lsmesh.shapes import add_noise, demo_mesh, mean_edge_length
 
 
 @pytest.fixture(scope="module")
@@ -158,7 +158,7 @@ def test_human_report_goes_to_stdout_and_json_alone_to_stdout(tmp_path, capsys, 
 
 
 def test_approximate_writes_mesh_and_indices(tmp_path, capsys, clean):
-    from o3d_lsmesh.selection import approximate
+    from o3d_lsmesh.lsmesh.selection import approximate
 
     source = _write(clean, tmp_path / "clean.ply")
     report = run_json(
@@ -263,7 +263,7 @@ def test_hierarchy_builds_vertex_maps_only_with_maps(tmp_path, capsys, clean, mo
 
 
 def test_encode_then_decode(tmp_path, capsys, clean):
-    from o3d_lsmesh.encoding import decode_geometry
+    from o3d_lsmesh.lsmesh.encoding import decode_geometry
 
     source = _write(clean, tmp_path / "clean.ply")
     report = run_json(
@@ -474,7 +474,7 @@ def test_render_failure_exits_1(tmp_path, capsys, clean, monkeypatch):
     def broken(*args, **kwargs):
         raise RuntimeError("Filament OffscreenRenderer failed: no device")
 
-    monkeypatch.setattr(importlib.import_module("o3d_lsmesh.rendering"), "render", broken)
+    monkeypatch.setattr(importlib.import_module("o3d_lsmesh.app.render"), "render", broken)
     src = str(_write(clean, tmp_path / "clean.ply"))
     code = main(["denoise", src, str(tmp_path / "o.ply"), "--render", str(tmp_path / "p.png"), "--quiet"])
     err = capsys.readouterr().err
@@ -536,7 +536,7 @@ def test_open_mesh_reports_the_inward_shift_and_no_volume(tmp_path, capsys):
     # report the inward shift along the normals, rim and interior, of metrics.shape_change
     from conftest import grid
 
-    from o3d_lsmesh.metrics import shape_change
+    from o3d_lsmesh.app.metrics import shape_change
 
     vertices, triangles = grid(12, 12, z=lambda x, y: 0.1 * np.sin(5 * x) * np.cos(4 * y))
     mesh = o3d.geometry.TriangleMesh(
@@ -954,7 +954,7 @@ def raycast_render(monkeypatch):
     """Draw the CLI's pictures with the in-process raycast backend (fast, no child process); record the calls."""
     import importlib
 
-    rendering = importlib.import_module("o3d_lsmesh.rendering")
+    rendering = importlib.import_module("o3d_lsmesh.app.render")
     real, calls = rendering.render, []
 
     def spy(*args, **kwargs):

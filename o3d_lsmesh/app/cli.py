@@ -246,7 +246,7 @@ def draw(
     meshes: list[Any], path: str, run: Run, *, what: str = "left: input, right: result", **options: Any
 ) -> str:
     """Draw ``meshes`` side by side into ``path``; :class:`PictureError` when no renderer works."""
-    from ..rendering import render
+    from .render import render
 
     start = time.perf_counter()
     try:
@@ -336,7 +336,7 @@ def fill(args: argparse.Namespace, run: Run) -> int:
     check_output(args.output, [args.input], force=args.force)
     mesh = read_input(args.input)
     from .._o3d import read_mesh
-    from ..hole_filling import find_holes
+    from ..holes import find_holes
 
     def holes(mesh: Any) -> list:  # of the welded surface, as fill_holes sees it: a UV seam is no hole
         welded = read_mesh(mesh, weld=True)

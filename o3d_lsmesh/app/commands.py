@@ -282,7 +282,7 @@ def decode(args: argparse.Namespace, run: Run) -> int:
     mesh = read_input(args.mesh, what="MESH")
     if not os.path.exists(args.data):
         raise CLIError(f"DATA {args.data!r} does not exist")
-    from ..encoding import decode_geometry
+    from ..lsmesh.encoding import decode_geometry
 
     start = time.perf_counter()
     out = decode_geometry(mesh, Path(args.data).read_bytes(), anchors=args.anchors, progress=run.progress)
@@ -304,7 +304,7 @@ def compare(args: argparse.Namespace, run: Run) -> int:
     if args.render:
         check_output(args.render, [args.a, args.b], force=args.force, suffixes=(".png",))
     a, b = read_input(args.a, what="A"), read_input(args.b, what="B")
-    from ..metrics import shape_change, surface_distance, topology_summary, triangle_angles, vertex_error
+    from .metrics import shape_change, surface_distance, topology_summary, triangle_angles, vertex_error
     from .ops import normal_change
 
     size = {
@@ -421,7 +421,7 @@ def demo(args: argparse.Namespace, run: Run) -> int:
 
     example: --out demo_out --resolution 150
     """
-    from ..demo import run_demo
+    from .demo import run_demo
 
     result = run_demo(
         args.out,

@@ -284,7 +284,7 @@ COMPARE = (
 
 def normal_change(a: Any, b: Any) -> float | None:
     """Mean face-normal deviation of two meshes with the same triangles; None when no triangle has an area in both."""
-    from ..metrics import normal_deviation
+    from .metrics import normal_deviation
 
     try:
         return normal_deviation(a, b)
@@ -295,7 +295,7 @@ def normal_change(a: Any, b: Any) -> float | None:
 def change_metrics(before: Any, after: Any) -> dict:
     """Vertex displacement, shape change and (same triangles) normal change, on arrays read once."""
     from .._o3d import read_mesh
-    from ..metrics import shape_change, vertex_error
+    from .metrics import shape_change, vertex_error
 
     # read once: the metrics take a MeshData as it is (Any: their annotations name the public mesh kinds)
     a: Any = read_mesh(before, name="before")
@@ -347,7 +347,7 @@ def denoise_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dic
 @operation("fill", options=FILL, help="fill holes with faired patches (LS meshes)")
 def fill_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
     """``--op fill`` and ``o3d-lsmesh fill``: counts of new elements and of the loops filled and left open."""
-    from ..hole_filling import fill_holes
+    from ..holes import fill_holes
 
     out, report = fill_holes(mesh, **options, progress=context.progress, return_report=True)
     return out, {
@@ -394,8 +394,8 @@ def hierarchy_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, d
 @operation("approximate", options=APPROXIMATE, help="LS-mesh approximation from control points")
 def approximate_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
     """``--op approximate`` and ``o3d-lsmesh approximate``: the result, its control indices and errors."""
-    from ..metrics import vertex_error
-    from ..selection import approximate
+    from ..lsmesh.selection import approximate
+    from .metrics import vertex_error
 
     count = resolve_count(options["count"], len(mesh.vertices))
     method, interpolate, seed = options["method"], options["interpolate"], options["seed"]
@@ -412,8 +412,8 @@ def approximate_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any,
 @operation("encode", options=ENCODE, output="bytes", extension=".bin", help=_ANCHORS)
 def encode_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
     """``--op encode`` and ``o3d-lsmesh encode``: the bytes, their size and the decoded error."""
-    from ..encoding import decode_geometry, encode_geometry
-    from ..metrics import vertex_error
+    from ..lsmesh.encoding import decode_geometry, encode_geometry
+    from .metrics import vertex_error
 
     n = len(mesh.vertices)
     count = resolve_count(options["count"], n)
@@ -449,8 +449,8 @@ def find_reference(base: str, relative: str) -> str:
 def compare_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
     """``--op compare``: metrics against the matching file of ``reference``."""
     from .._o3d import read_mesh
-    from ..metrics import surface_distance, vertex_error
     from .files import read_mesh_file
+    from .metrics import surface_distance, vertex_error
 
     if options["reference"] is None:
         raise InputError(
