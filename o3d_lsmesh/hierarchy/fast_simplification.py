@@ -72,30 +72,20 @@ def from_fast_simplification(
 ) -> MeshHierarchy:
     """Build a :class:`MeshHierarchy` from fast-simplification's quadric-error collapses.
 
-    The structure of :func:`build_hierarchy` (so that multiresolution fairing runs on either), but the
-    QEM collapses are neither independent (refinement then solves split vertices together) nor checked
-    for topology. Unreferenced vertices are kept at every level. A level's triangles are the level
-    above's mapped by ``parents[i]``, in order, without collapsed ones, repeated vertex sets and every
-    triangle beyond the first two on an edge (edge-manifold levels).
+    The structure of :func:`build_hierarchy`, but the collapses are neither independent nor checked for
+    topology; levels stay edge-manifold and keep unreferenced vertices (rules:
+    ``docs/algorithms/mesh_hierarchy.rst``). A level whose target is not reached is left out.
 
     Parameters
     ----------
     mesh : open3d.geometry.TriangleMesh, open3d.t.geometry.TriangleMesh or (vertices, triangles)
-        Any mesh; not modified.
     levels : int or sequence of int, keyword-only
-        Number of levels at geometrically decreasing vertex counts down to ``min_vertices``, or the
-        strictly decreasing target vertex counts.
+        Number of levels (vertex counts decreasing geometrically to ``min_vertices``), or the strictly
+        decreasing target vertex counts.
     min_vertices : int, keyword-only
-        Coarsest vertex count when ``levels`` is an integer.
     agg : float, keyword-only
         fast-simplification's aggressiveness.
     progress : bool, keyword-only
-        Show a bar over the levels.
-
-    Returns
-    -------
-    MeshHierarchy
-        ``method == "fast_simplification"``; a level whose target is not reached is left out.
 
     Examples
     --------

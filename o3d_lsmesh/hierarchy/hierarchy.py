@@ -46,32 +46,22 @@ def _frozen(array: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True, eq=False)
 class MeshHierarchy:
-    """Levels ``M_0, M_1, ..., M_L`` of decreasing size with the collapses between them.
-
-    Build it with :func:`build_hierarchy` (volume-cost collapses) or
-    :func:`~o3d_lsmesh.hierarchy.from_fast_simplification` (QEM collapses). Plain read-only numpy arrays:
-    it pickles, and concurrent reads are safe.
+    """Levels ``M_0, M_1, ..., M_L`` of decreasing size with the collapses between them (read-only arrays).
 
     Attributes
     ----------
     vertices : (n_0, 3) float64
         Input positions.
-    triangles : tuple of (m_i, 3) int64
-        Triangles of each level, in that level's vertex indices.
-    representatives : tuple of (n_i,) int64
-        Input index of every vertex of each level.
+    triangles, representatives : tuple of (m_i, 3) and (n_i,) int64
+        Each level's triangles (its own indices) and the input index of each of its vertices.
     parents : tuple of (n_{i-1},) int64
         ``parents[i]`` maps level ``i - 1`` vertices to level ``i`` (``parents[0]`` is empty).
-    removed, targets : tuple of (r_i,) int64
-        Level-``i - 1`` indices of the vertices removed at level ``i`` and of their targets.
-    ring_offsets, rings : tuple of int64 arrays
-        CSR 1-ring (level ``i - 1`` indices) of each removed vertex.
+    removed, targets, ring_offsets, rings : tuple of int64 arrays
+        Per level, in level ``i - 1`` indices: the removed vertices, their targets, their CSR 1-rings.
     independent : bool
         Whether every level's removed vertices are pairwise non-adjacent (:func:`build_hierarchy`).
-    method : str
-        ``"volume"`` or ``"fast_simplification"``.
-    mesh_kind : str
-        Kind of mesh :meth:`level` returns: ``"legacy"``, ``"tensor"`` or ``"arrays"``.
+    method, mesh_kind : str
+        ``"volume"`` or ``"fast_simplification"``; the kind :meth:`level` returns.
     tensor_format : tuple of str
         ``(device, position dtype, index dtype)`` of a tensor input, else empty.
     """
@@ -282,17 +272,9 @@ def build_hierarchy_arrays(
         max_levels = as_count(max_levels, name="max_levels")
     progress = check_progress(progress)
     vertices, triangles = mesh_arrays(vertices, triangles)
-    return collapse_hierarchy(
-        vertices,
-        triangles,
-        alpha=alpha,
-        beta=beta,
-        min_vertices=min_vertices,
-        max_levels=max_levels,
-        progress=bool(progress),
-        mesh_kind=mesh_kind,
-        tensor_format=tensor_format,
-    )
+    options: dict[str, Any] = dict(alpha=alpha, beta=beta, min_vertices=min_vertices, max_levels=max_levels)
+    options.update(progress=bool(progress), mesh_kind=mesh_kind, tensor_format=tensor_format)
+    return collapse_hierarchy(vertices, triangles, **options)
 
 
 def collapse_hierarchy(
@@ -313,36 +295,19 @@ def collapse_hierarchy(
     with progress_bar(progress, total=total, desc="mesh hierarchy", unit="vertex") as bar:
         from .collapse import collapse_levels
 
-        _, levels = collapse_levels(
-            vertices,
-            triangles,
-            alpha=alpha,
-            beta=beta,
-            max_normal_angle=MAX_NORMAL_ANGLE,
-            min_quality=MIN_QUALITY,
-            max_tries=MAX_TRIES,
-            min_vertices=min_vertices,
-            max_levels=max_levels,
-            report=bar.update,
+        tuned: dict[str, Any] = dict(
+            alpha=alpha, beta=beta, max_normal_angle=MAX_NORMAL_ANGLE, max_tries=MAX_TRIES
         )
+        tuned.update(
+            min_quality=MIN_QUALITY, min_vertices=min_vertices, max_levels=max_levels, report=bar.update
+        )
+        _, levels = collapse_levels(vertices, triangles, **tuned)
         bar.update(total - bar.n)  # done: the bar ends at its total
     empty, no_ring = np.zeros(0, dtype=np.int64), np.zeros(1, dtype=np.int64)
     first = (empty, empty, no_ring, empty, empty, triangles, np.arange(n0, dtype=np.int64))  # level 0
     removed, targets, offsets, rings, parents, tris, reps = zip(first, *levels)
-    return MeshHierarchy(
-        vertices,
-        tris,
-        reps,
-        parents,
-        removed,
-        targets,
-        offsets,
-        rings,
-        True,
-        "volume",
-        mesh_kind,
-        tensor_format,
-    )
+    records = (removed, targets, offsets, rings)
+    return MeshHierarchy(vertices, tris, reps, parents, *records, True, "volume", mesh_kind, tensor_format)
 
 
 def build_hierarchy(
@@ -358,35 +323,26 @@ def build_hierarchy(
     """Build the multiresolution hierarchy of Liu et al. 2001, section 4.1, by volume-cost half-edge collapses.
 
     Each level removes an independent set of vertices in increasing ``alpha * min_edge + beta * max_edge``,
-    each merged into its neighbour of least cone volume, by collapses that keep the Euler characteristic,
-    components, boundary loops and triangle orientation. Any mesh is accepted: non-manifold and
-    unreferenced vertices are locked (kept at every level). Rules: ``docs/algorithms/mesh_hierarchy.rst``.
+    each into its neighbour of least cone volume, keeping the Euler characteristic, components, boundary
+    loops and orientation; non-manifold and unreferenced vertices are locked. Levels hold positions and
+    triangles only (other attributes dropped with one warning). Rules: ``docs/algorithms/mesh_hierarchy.rst``.
 
     Parameters
     ----------
     mesh : open3d.geometry.TriangleMesh, open3d.t.geometry.TriangleMesh or (vertices, triangles)
-        Any triangle mesh; not modified.
     alpha, beta : float, keyword-only
         Non-negative weights of the shortest and longest incident edge in the cost.
     min_vertices : int, keyword-only
         Stop when a level has this many vertices (or fewer cannot be reached).
     max_levels : int, optional, keyword-only
-        Stop after this many levels below the input.
     progress : bool, keyword-only
-        Show a progress bar.
     workers : int, optional, keyword-only
         Deprecated and ignored (a ``FutureWarning``).
-
-    Returns
-    -------
-    MeshHierarchy
-        Level 0 is the input; it stops when no valid collapse remains. Levels hold positions and
-        triangles only (other attributes are dropped with one ``O3DLSMeshWarning``).
 
     Raises
     ------
     InputError
-        Invalid mesh arrays, negative options, or an option of the wrong type (``InputTypeError``).
+        Invalid mesh arrays or options (``InputTypeError`` for a wrong type).
 
     Examples
     --------
@@ -398,14 +354,6 @@ def build_hierarchy(
     _warn_workers(workers)
     data = read_mesh(mesh)  # any mesh: non-manifold, unreferenced vertices
     warn_dropped_attributes(data, "hierarchy levels have new connectivity", normals=True)
-    return build_hierarchy_arrays(
-        data.vertices,
-        data.triangles,
-        alpha=alpha,
-        beta=beta,
-        min_vertices=min_vertices,
-        max_levels=max_levels,
-        progress=progress,
-        mesh_kind=data.kind,
-        tensor_format=tensor_format_of(data),
-    )
+    options: dict[str, Any] = dict(alpha=alpha, beta=beta, min_vertices=min_vertices, max_levels=max_levels)
+    options.update(progress=progress, mesh_kind=data.kind, tensor_format=tensor_format_of(data))
+    return build_hierarchy_arrays(data.vertices, data.triangles, **options)

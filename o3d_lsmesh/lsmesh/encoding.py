@@ -97,9 +97,8 @@ def encode_geometry(
 ) -> bytes:
     """Encode the geometry of ``mesh`` as ``count`` quantized anchors (geometry-aware bases, section V).
 
-    The anchors come from :func:`~o3d_lsmesh.select_control_points` at the decoder's weight (so greedy
-    selection minimizes the error of the decoder's reconstruction, section IV): about
-    ``count * (log2 n + 3 bits)`` bits plus an 80-byte header and checksum.
+    Anchors from :func:`~o3d_lsmesh.select_control_points` at the decoder's weight (section IV), stored in
+    about ``count * (log2 n + 3 bits)`` bits plus an 80-byte header and checksum.
 
     Parameters
     ----------
@@ -109,26 +108,19 @@ def encode_geometry(
     bits : int
         Quantization bits per coordinate, 1 to 31 (the paper uses 10 to 12).
     method : {"greedy", "combined", "random"}
-        Anchor selection; ``"greedy"`` is the paper's.
     weight : float, optional
         Anchor weight ``omega``; default ``10 n`` as in the paper.
     progress : bool
-        Show a bar over the anchors selected.
-
-    Returns
-    -------
-    bytes
 
     Raises
     ------
     InputError
-        ``count``, ``bits`` or ``weight`` out of range, more than ``2**32 - 1`` vertices, an invalid mesh.
+        An option out of range, more than ``2**32 - 1`` vertices, an invalid mesh.
 
     Examples
     --------
     >>> import open3d as o3d
-    >>> sphere = o3d.geometry.TriangleMesh.create_sphere(resolution=10)
-    >>> len(encode_geometry(sphere, 20, bits=10))  # 76-byte header + 20 * (8 + 3 * 10) bits + 4-byte CRC
+    >>> len(encode_geometry(o3d.geometry.TriangleMesh.create_sphere(resolution=10), 20, bits=10))
     175
     """
     data = read_mesh(mesh, weld=True)
@@ -242,31 +234,24 @@ def _parse(data: Any, mesh_data: MeshData) -> tuple[np.ndarray, np.ndarray, floa
 def decode_geometry(mesh: MeshT, data: Any, *, anchors: int | None = None, progress: bool = False) -> MeshT:
     """Reconstruct the geometry encoded by :func:`encode_geometry` on the connectivity of ``mesh``.
 
-    Solves eq. 1 of the geometry-aware bases paper (relaxed anchors of the stream's weight ``omega``,
-    uniform Laplacian) with the decoded anchor positions; ``anchors`` uses the first ones only (the
-    progressive decoding of section III).
+    Solves eq. 1 of the bases paper (relaxed anchors of the stream's ``omega``, uniform Laplacian);
+    ``anchors`` uses the first ones only (progressive decoding, section III).
 
     Parameters
     ----------
     mesh : open3d.geometry.TriangleMesh, open3d.t.geometry.TriangleMesh or (vertices, triangles)
         Supplies the connectivity; its positions are ignored.
     data : bytes
-        A stream written by :func:`encode_geometry` for this connectivity.
+        A stream of :func:`encode_geometry` for this connectivity.
     anchors : int, optional
         Number of leading anchors to use, ``1..k``; default all.
     progress : bool
-        Show a bar over the stages (factor, solve).
-
-    Returns
-    -------
-    TriangleMesh
-        A new mesh of ``mesh``'s kind with the decoded positions.
 
     Raises
     ------
     InputError
-        Truncated, padded, corrupted or foreign ``data`` (``InputTypeError`` if not bytes); a stream for
-        another connectivity; ``anchors`` out of range; a prefix missing a component (``SingularSystemError``).
+        Bad ``data`` (``InputTypeError`` if not bytes), a stream for another mesh, ``anchors`` out of
+        range, a prefix missing a component (``SingularSystemError``).
 
     Examples
     --------
@@ -294,29 +279,20 @@ def iter_decode_geometry(
 ) -> Iterator[MeshT]:
     """Yield successively refined reconstructions as anchors arrive (progressive scheme, section III).
 
-    The first mesh uses the first ``step`` anchors (a factorization); each following one adds the next
-    ``step`` by a rank-``step`` update of the kept factor and one step of iterative refinement. The last
-    mesh uses every anchor and equals :func:`decode_geometry` up to round-off.
+    The first mesh uses the first ``step`` anchors; each next one adds ``step`` more by a rank-``step``
+    update of the kept factor. The last equals :func:`decode_geometry` up to round-off.
 
     Parameters
     ----------
-    mesh, data
+    mesh, data, progress
         As :func:`decode_geometry`.
     step : int, optional
         Anchors per refinement; default ``ceil(k / 10)``, or the number of connected components if larger.
-    progress : bool
-        Show a bar over the anchors decoded.
-
-    Yields
-    ------
-    TriangleMesh
-        Reconstructions from ``step``, ``2 step``, ..., ``k`` anchors.
 
     Raises
     ------
     InputError
-        As :func:`decode_geometry`, or ``step`` below 1 or below the number of components; raised by the
-        call itself, before any mesh is yielded.
+        As :func:`decode_geometry`, or ``step`` below 1 or the number of components (at the call).
 
     Examples
     --------

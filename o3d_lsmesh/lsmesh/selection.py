@@ -148,17 +148,8 @@ def control_point_selection(
     seed: Any = None,
     progress: bool = False,
 ) -> tuple[np.ndarray, LSMeshSystem | None]:
-    """Array core of :func:`select_control_points` on validated arrays: the indices and their system.
-
-    Returns the ``(count,) int64`` selection and, for ``"greedy"`` and ``"combined"``, the
-    :class:`~o3d_lsmesh.lsmesh.LSMeshSystem` holding every selected point at weight ``weights``
-    (None for ``"random"``).
-
-    >>> from o3d_lsmesh.core.validate import mesh_arrays
-    >>> V, F = mesh_arrays([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 1]], [[0, 1, 2], [1, 3, 2]])
-    >>> control_point_selection(V, F, 2)[0].shape
-    (2,)
-    """
+    """Array core of :func:`select_control_points` on validated arrays: ``(count,) int64`` indices and, for
+    ``"greedy"`` and ``"combined"``, the :class:`~o3d_lsmesh.lsmesh.LSMeshSystem` holding them (else None)."""
     n = len(vertices)
     method = as_choice(method, SELECTION_METHODS, name="method")
     count = as_count(count, name="count", minimum=1, maximum=n)
@@ -199,32 +190,30 @@ def select_control_points(
 ) -> np.ndarray:
     """Choose ``count`` control points that make the LS mesh close to ``mesh`` (LS meshes section 4).
 
-    A vertex's error is the distance between its position in the LS mesh of the current selection (soft
-    constraints of weight ``weights``, uniform Laplacian) and its own. ``"random"``: a random order
-    (``seed``); ``"greedy"``: one vertex of largest error at a time (a rank-1 update and a solve);
-    ``"combined"``: the local maxima, ``batch`` picks per solve, each forbidding the region around it
-    along which the error decreases. Methods and start set: ``docs/algorithms/least_squares_meshes.rst``.
+    A vertex's error is its distance in the LS mesh of the current selection (soft constraints of weight
+    ``weights``, uniform Laplacian). ``"random"``: a random order; ``"greedy"``: the largest error, one at
+    a time; ``"combined"``: local maxima, ``batch`` per solve. Every selection starts with one vertex per
+    connected component. Details: ``docs/algorithms/least_squares_meshes.rst``.
 
     Parameters
     ----------
     mesh : open3d.geometry.TriangleMesh, open3d.t.geometry.TriangleMesh or (vertices, triangles)
-        Split vertices (UV seams) are welded and selected once; indices are returned in the mesh's layout.
+        Split vertices (UV seams) are welded; indices are returned in the mesh's layout.
     count : int
-        Number of control points, from the number of connected components to ``n``.
+        From the number of connected components to ``n``.
     method : {"greedy", "combined", "random"}
     batch : int, optional
-        Picks per solve of ``"combined"`` (default 31, figure 6 of the paper); None for the others.
+        Picks per solve of ``"combined"`` (default 31); None for the others.
     weights : float
         Positive weight of every soft control point while selecting.
     seed : int or numpy.random.Generator, optional
         Random state of ``"random"``.
     progress : bool
-        Show a bar over the control points (``"random"`` shows none).
 
     Returns
     -------
     indices : (count,) int64
-        Vertex indices in selection order, without repetition.
+        In selection order, without repetition.
 
     Raises
     ------
@@ -258,17 +247,8 @@ def approximate(
 ) -> tuple[MeshT, np.ndarray]:
     """Approximate ``mesh`` by the LS mesh of ``count`` control points from :func:`select_control_points`.
 
-    The LS mesh (eq. 3, weights of section 6) through the selection at its original positions, or with
-    ``interpolate=True`` the interpolatory one (bases paper II.B). Greedy and combined selections without
-    ``interpolate`` cost one more back-substitution (their kept factor holds every point).
-
-    Parameters
-    ----------
-    mesh : open3d.geometry.TriangleMesh, open3d.t.geometry.TriangleMesh or (vertices, triangles)
-    count, method, weights, batch, seed, progress
-        See :func:`select_control_points`.
-    interpolate : bool
-        Hit the control points exactly.
+    The LS mesh (eq. 3) through the selection at its positions, or the interpolatory one with
+    ``interpolate=True`` (bases paper II.B). Other options: see :func:`select_control_points`.
 
     Returns
     -------
@@ -277,16 +257,10 @@ def approximate(
     indices : (count,) int64
         The control points in selection order.
 
-    Raises
-    ------
-    InputError
-        As :func:`select_control_points`.
-
     Examples
     --------
     >>> import open3d as o3d
-    >>> approx, idx = approximate(o3d.geometry.TriangleMesh.create_torus(), 60)
-    >>> idx.shape
+    >>> approximate(o3d.geometry.TriangleMesh.create_torus(), 60)[1].shape
     (60,)
     """
     interpolate = as_bool(interpolate, name="interpolate")

@@ -130,9 +130,9 @@ def quantize_coefficients(coefficients: np.ndarray, bits: int) -> np.ndarray:
 def spectral_approximation(mesh: MeshT, k: int, *, bits: int | None = None, progress: bool = False) -> MeshT:
     """Project the geometry on the first ``k`` Laplacian eigenvectors (Karni and Gotsman's spectral compression).
 
-    ``U (U^T X)`` for positions ``X (n, 3)`` and ``U (n, k)`` the orthonormal eigenvectors of the ``k``
-    smallest eigenvalues of ``L = D - A`` (section II of the bases paper); ``bits`` quantizes the ``3k``
-    coefficients first (Karni and Gotsman use 14).
+    ``U (U^T X)`` for positions ``X (n, 3)`` and ``U (n, k)`` the eigenvectors of the ``k`` smallest
+    eigenvalues of ``D - A`` (bases paper, section II); ``bits`` quantizes the ``3k`` coefficients first
+    (Karni and Gotsman use 14). With ``k`` below the number of components, the ``k`` largest are kept.
 
     Parameters
     ----------
@@ -141,32 +141,19 @@ def spectral_approximation(mesh: MeshT, k: int, *, bits: int | None = None, prog
     k : int
         Number of basis functions, ``1..n``.
     bits : int, optional
-        Quantization bits per coefficient, 1 to 31; default none.
+        Quantization bits per coefficient, 1 to 31.
     progress : bool
-        Show a bar over the stages (factor, eigensolve).
-
-    Returns
-    -------
-    TriangleMesh
-        A new mesh of the input's kind with the approximated positions.
 
     Raises
     ------
     InputError
-        ``k`` or ``bits`` out of range, or beyond the practical sizes (more than 50,000 vertices,
-        ``n * k > 2e7``, or ``k > n / 4`` above 5,000 vertices); ``InputTypeError`` for ``progress``.
-
-    Notes
-    -----
-    With ``k`` below the number of components, the ``k`` largest components are kept (each projected to
-    its centroid) and the vertices of the others go to the origin.
+        ``k`` or ``bits`` out of range, or beyond the practical sizes (module constants).
 
     Examples
     --------
     >>> import open3d as o3d, numpy as np
     >>> sphere = o3d.geometry.TriangleMesh.create_sphere(resolution=10)
-    >>> full = spectral_approximation(sphere, len(sphere.vertices))
-    >>> bool(np.allclose(np.asarray(full.vertices), np.asarray(sphere.vertices)))
+    >>> bool(np.allclose(spectral_approximation(sphere, len(sphere.vertices)).vertices, sphere.vertices))
     True
     """
     check_progress(progress)
