@@ -171,10 +171,8 @@ def user_message(error: Exception, args: argparse.Namespace | None) -> str:
         option = _option(args, name)
         for value in getattr(getattr(option, "parse", None), "choices", None) or ():
             text = text.replace(f"{name}={value!r}", f"{flag} {value}")
-        renamed = "_" in name and flag != "--" + name.replace(
-            "_", "-"
-        )  # an API name (identifier) of the flag
-        if renamed and not (option and option.is_flag):  # (a switch may mean the parameter's negation)
+        # an API name (an identifier) the flag renames; not a switch's: it may mean the parameter's negation
+        if "_" in name and flag != "--" + name.replace("_", "-") and not (option and option.is_flag):
             text = text.replace(name, flag)
     if param:
         word = _spell(param, args)
@@ -265,9 +263,6 @@ def run_op(
     start = time.perf_counter()
     out, metrics = OPS[name].function(mesh, {**op_options(args, OPS[name]), **options}, context)
     return out, metrics, time.perf_counter() - start
-
-
-# --------------------------------------------------------------------------- the operations' commands
 
 
 def denoise(args: argparse.Namespace, run: Run) -> int:
