@@ -163,9 +163,7 @@ def run_demo(
             bar.update(1)
 
     table = _format_table(rows)
-    say("")
-    say(table)
-    say("")
+    say(f"\n{table}\n")
     say(
         f"distances of the vertices to the true surface in grid spacings h = {spacing:.5f}: mean, rim (boundary "
         "and two rings), interior; offset = mean signed distance (negative: inward); slivers: triangles of "
@@ -182,13 +180,8 @@ def run_demo(
         for key, mesh in {"surface": surface, **results}.items():
             write_mesh_file(mesh, folder / f"{key}.ply")
             files.append(folder / f"{key}.ply")
-        payload = {
-            "spacing": spacing,
-            "noise": noise,
-            "seed": seed,
-            "rows": rows,
-            "sweeps": {k: [[v, d] for v, d in s] for k, s in sweeps.items()},
-        }
+        listed = {k: [[v, d] for v, d in s] for k, s in sweeps.items()}
+        payload = {"spacing": spacing, "noise": noise, "seed": seed, "rows": rows, "sweeps": listed}
         (folder / "metrics.json").write_text(json.dumps(payload, indent=2))
         (folder / "metrics.md").write_text("```\n" + table + "\n```\n")
         files += [folder / "metrics.json", folder / "metrics.md"]
@@ -200,14 +193,12 @@ def run_demo(
             if theirs:
                 keys.append(min(theirs, key=lambda r: r["mean_distance"])["key"])
             by_key = {r["key"]: r for r in rows}
-            titles = [
-                "raw scan"
-                if key == "scan"
-                else "ours (defaults)"
-                if key == "ours"
-                else f"{by_key[key]['label'].removeprefix('Open3D ')} ({by_key[key]['value']}, its best)"
-                for key in keys
-            ]
+            named = {"scan": "raw scan", "ours": "ours (defaults)"}
+            peer = {
+                k: f"{r['label'].removeprefix('Open3D ')} ({r.get('value')}, its best)"
+                for k, r in by_key.items()
+            }
+            titles = [named.get(key, peer[key]) for key in keys]
             picture = folder / "before_after.png"
             start = time.perf_counter()
             draw(
