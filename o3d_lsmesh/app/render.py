@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .._o3d import MeshData, read_mesh
-from .._o3d.io import cast_rays, distances_to_surface, open3d, raycasting_scene, write_image
+from .._o3d.io import cast_rays, distances_to_surface, raycasting_scene, write_image
 from ..core.arrays import area_weighted_normals
 from ..core.connectivity import unique_edges
 from ..core.errors import InputError, InputTypeError, warn
@@ -153,7 +153,8 @@ def _raycast(vertices, triangles, colors, camera, width, height, background) -> 
 
 def _filament_worker(spec_path: str, image_path: str) -> None:
     """Child-process entry point: draw the scene in ``spec_path`` (npz) and save the image to ``image_path`` (npy)."""
-    o3d = open3d()
+    import open3d as o3d  # noqa: TID251 (the renderer is the one module of app/ that draws with Open3D)
+
     o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
     spec = np.load(spec_path)
     camera = json.loads(str(spec["camera"]))
