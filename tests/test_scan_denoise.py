@@ -730,27 +730,24 @@ def test_solver_option_raises():
             constrained_fairing_arrays(V, F, None, method=method, solver=1)
 
 
-def scan_files():
-    return sorted(SCANS.glob("*.ply")) if SCANS.is_dir() else []
-
-
-def test_every_raw_scan_gets_closer_to_the_reference_surface():
-    files = scan_files()
-    reference = DATA / "bunny.ply"
-    if not files or not reference.exists():
-        pytest.skip(f"raw scans not found in {SCANS} (set O3D_LSMESH_SCANS) or bunny.ply not in {DATA}")
+@pytest.mark.parametrize("name", ["bun000.ply", "bun090.ply", "top2.ply"])
+def test_raw_scans_get_closer_to_the_reference_surface(name):
+    # three of the ten bunny scans (a front, a side one the coarse-scan rule changed, a top one); all
+    # ten: benchmarks/bench_realscans_denoise.py
+    path, reference = SCANS / name, DATA / "bunny.ply"
+    if not path.exists() or not reference.exists():
+        pytest.skip(f"raw scan {name} not in {SCANS} (set O3D_LSMESH_SCANS) or bunny.ply not in {DATA}")
     scene = o3d.t.geometry.RaycastingScene()
     scene.add_triangles(o3d.t.geometry.TriangleMesh.from_legacy(o3d.io.read_triangle_mesh(str(reference))))
 
     def mean_distance(points):
         return float(scene.compute_distance(o3d.core.Tensor(points.astype(np.float32))).numpy().mean())
 
-    for path in files:
-        V, F = arrays(o3d.io.read_triangle_mesh(str(path)))
-        used = np.unique(F)
-        raw = mean_distance(V[used])
-        ours = mean_distance(constrained_fairing_arrays(V, F, None, method=None)[used])
-        assert ours < SCAN_IMPROVEMENT * raw, f"{path.name}: {ours * 1e6:.1f} um vs raw {raw * 1e6:.1f} um"
+    V, F = arrays(o3d.io.read_triangle_mesh(str(path)))
+    used = np.unique(F)
+    raw = mean_distance(V[used])
+    ours = mean_distance(constrained_fairing_arrays(V, F, None, method=None)[used])
+    assert ours < SCAN_IMPROVEMENT * raw, f"{name}: {ours * 1e6:.1f} um vs raw {raw * 1e6:.1f} um"
 
 
 SCANS_DRAGON = Path(

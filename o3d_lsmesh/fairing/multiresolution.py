@@ -10,6 +10,7 @@ import numpy as np
 from .._o3d import new_mesh, read_mesh
 from ..core.boundary import boundary_curves
 from ..core.connectivity import Connectivity, VertexRings
+from ..core.errors import InputError, InputTypeError
 from ..core.progress import check_progress, progress_bar
 from ..core.validate import as_choice, as_count, as_iterations
 from ..hierarchy.hierarchy import MeshHierarchy, boundary_degree, collapse_hierarchy
@@ -55,7 +56,7 @@ def multiresolution_fairing_arrays(
     if remaining == 0:
         return positions
     # the boundary curves are put where level 0 puts them and held: re-faired round after round, their
-    # midpoint constraints are a curve-shortening flow that closes holes (measured in the docstring)
+    # midpoint constraints are a curve-shortening flow that closes holes (docs/algorithms/multiresolution.rst)
     boundary, placed = _input_boundary(hierarchy.vertices, conn, number_of_iterations, method)
     positions[boundary] = placed
     # the connectivity is fixed: one operator for all rounds ("global" re-takes its targets at every solve)
@@ -140,29 +141,10 @@ def multiresolution_fairing(
     positions it had on entering the step; (2.2) refine to ``M_{i-1}`` by
     vertex splits, each split vertex put at its 1-ring average and moved by
     Kobbelt's step ``x <- x - L^2(x)/nu`` (:meth:`MeshHierarchy.refine`).
-    Then (our addition) ``M_0`` itself is faired, in rounds of
-    ``number_of_iterations`` with its barycenters re-imposed after each, one
-    round more per level (``final_iterations`` in all), its boundary curves
-    put where constrained fairing of the input puts them (section 3.3 with
-    the input's segment midpoints: the boundary of ``level=0``) and held
-    there. Without the rounds the split vertices show the facets of the
-    coarse triangulation and a coarser start left the result *rougher*
-    (noisy bunny: uniform-Laplacian energy 2.5e-3 at level 0, 4.8e-3 at
-    level 6); without holding the boundary, re-faired round after round, the
-    holes shrank (the bunny's boundary length down to 0.82 of the clean
-    one at level 6, its 2000-vertex copy's to 0.22) and their stretched rims
-    made the upper Laplacian spectrum rise again from level 2. Measured at
-    levels 0..6 (``benchmarks/bench_multiresolution.py``, the bunny, the
-    horse and a blob, noise 0.3 and 0.1 edge lengths): the normal part of
-    the energy in the upper half of the graph-Laplacian spectrum of
-    2000-vertex copies falls at every level (bunny at 0.3: 2.1e-3 to
-    1.6e-4), so does the normal roughness of the full meshes (but the blob's
-    at 0.1, which flattens at its sphere's own curvature), the volume stays
-    within 0.25% and the boundary length as at level 0. Details
-    smaller than the vertex spacing of ``M_level`` are not restored, so a
-    larger ``level`` removes larger details; the boundary curves are faired
-    as at ``level=0`` whatever the level. ``level=0`` is plain constrained
-    fairing of the input.
+    Then (our addition) ``M_0`` itself is faired in rounds of ``number_of_iterations``, barycenters
+    re-imposed after each (``final_iterations`` in all), its boundary curves put where
+    ``level=0`` puts them and held. A larger ``level`` removes larger details. Why the rounds and
+    the held boundary, measured: ``docs/algorithms/multiresolution.rst``.
 
     Any mesh is accepted (non-manifold vertices, several components, holes,
     unreferenced vertices): the hierarchy keeps its topology at every level
@@ -233,21 +215,25 @@ def multiresolution_fairing(
             progress=bool(progress),
         )
         if level >= len(hierarchy):
-            raise ValueError(
-                f"level must be < {len(hierarchy)} (the levels build_hierarchy reaches for this mesh), got {level}"
+            raise InputError(
+                f"level must be < {len(hierarchy)} (the levels build_hierarchy reaches for this mesh), got {level}",
+                param="level",
             )
     else:
         if not isinstance(hierarchy, MeshHierarchy):
-            raise TypeError(f"hierarchy must be a MeshHierarchy, got {type(hierarchy).__name__}")
+            raise InputTypeError(
+                f"hierarchy must be a MeshHierarchy, got {type(hierarchy).__name__}", param="hierarchy"
+            )
         if len(hierarchy.vertices) != len(data.vertices) or not np.array_equal(
             hierarchy.triangles[0], data.triangles
         ):
-            raise ValueError(
+            raise InputError(
                 f"hierarchy must be built from mesh, got one of {len(hierarchy.vertices)} vertices and "
-                f"{len(hierarchy.triangles[0])} triangles for a mesh of {len(data.vertices)} and {len(data.triangles)}"
+                f"{len(hierarchy.triangles[0])} triangles for a mesh of {len(data.vertices)} and {len(data.triangles)}",
+                param="hierarchy",
             )
         if level >= len(hierarchy):
-            raise ValueError(f"level must be < len(hierarchy) = {len(hierarchy)}, got {level}")
+            raise InputError(f"level must be < len(hierarchy) = {len(hierarchy)}, got {level}", param="level")
         if not np.array_equal(hierarchy.vertices, data.vertices):
             # same connectivity, new positions: the coarse levels take their positions from this mesh
             hierarchy = dataclasses.replace(hierarchy, vertices=data.vertices)

@@ -181,7 +181,7 @@ class ScanFairingSolver:
         given = np.asarray(positions0, dtype=np.float64)
         # solved about the centroid (``K 1 = 0``, the other terms are differences: ``S`` commutes with
         # translations), so the iterative path's relative residual measures the shape, not the distance
-        # to the origin: a scan in world coordinates, 1e6 sizes away, lost 0.2% of its size before
+        # to the origin (a scan far from the origin in world coordinates)
         centre = given[self.referenced].mean(axis=0) if self.referenced.any() else np.zeros(3)
         targets = given - centre
         positions = targets
