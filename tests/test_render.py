@@ -67,17 +67,26 @@ def test_raycast_backend_draws_side_by_side():
     _check_layout(image)
 
 
-def test_filament_offscreen_renderer_draws_side_by_side(tmp_path):
+def test_filament_offscreen_renderer_draws_side_by_side_and_keeps_highlights(tmp_path):
+    """One Filament child process for both checks: the layout, and a white sphere under the default
+    light shaded from dark to bright without clipping to pure white (the fourth panel)."""
     sphere = _sphere()
     bumped, _ = _bumped(sphere)
-    path = tmp_path / "three.png"
+    white = o3d.geometry.TriangleMesh(sphere).paint_uniform_color([1.0, 1.0, 1.0])
+    path = tmp_path / "four.png"
     try:
-        image = render([sphere, sphere, bumped], path, width=W, height=H, backend="filament", timeout=240)
+        image = render(
+            [sphere, sphere, bumped, white], path, width=W, height=H, backend="filament", timeout=240
+        )
     except RuntimeError as error:
         pytest.skip(f"Open3D's OffscreenRenderer cannot render on this machine: {error}")
-    _check_layout(image)
+    _check_layout(np.ascontiguousarray(image[:, : 3 * W]))
     # The PNG holds exactly the returned picture.
     np.testing.assert_array_equal(np.asarray(o3d.io.read_image(str(path))), image)
+    first, _, _, fourth = _panels(image, 4)
+    lit = fourth[_foreground(first)]  # the same sphere at the same pixels, white on white
+    assert lit.max() > 200
+    assert (lit >= 254).all(axis=1).mean() < 0.01
 
 
 def test_error_color_map_marks_the_changed_region():
@@ -201,21 +210,6 @@ def test_the_reference_beside_the_others_keeps_its_own_colors():
     assert np.array_equal(_panels(image[:H], 2)[0], _panels(plain, 2)[0])
     # every coarse vertex lies 0.1 straight above a fine one (resolution 36 refines 6's grid)
     assert image.error_max == pytest.approx(0.1, rel=1e-6)
-
-
-def test_filament_exposure_keeps_highlights():
-    sphere, _ = _sphere_pair()
-    sphere.paint_uniform_color([1.0, 1.0, 1.0])
-    try:
-        image = render(
-            sphere, None, width=W, height=H, backend="filament", background=(0.0, 0.0, 0.0), timeout=240
-        )
-    except RuntimeError as error:
-        pytest.skip(f"Open3D's OffscreenRenderer cannot render on this machine: {error}")
-    lit = image[np.any(image > 8, axis=2)]
-    # a white sphere under the default light: shaded from dark to bright, and not clipped to pure white
-    assert lit.max() > 200
-    assert (lit >= 254).all(axis=1).mean() < 0.01
 
 
 def test_titles_and_units_bad_values_raise():
