@@ -1003,55 +1003,6 @@ def unique_edges(const int64_t[:, ::1] tris, int64_t nv):
     return i_[:e].copy(), j_[:e].copy(), inverse_
 
 
-def keeps_facing(const double[:, ::1] x, const double[:, :] again, const int64_t[:, ::1] new_tris):
-    """Whether ``again`` (the last vertices of ``x`` moved) keeps every new triangle facing as in ``x`` and
-    moves no vertex by a tenth of the patch's size."""
-    cdef int64_t n = x.shape[0], p = again.shape[0], first = n - p, q = new_tris.shape[0], r, c, v
-    if p > n or again.shape[1] != 3:
-        raise ValueError("again must be (p, 3) with p <= len(x)")
-    if q and _outside(&new_tris[0, 0], 3 * q, n):
-        raise ValueError("new_tris index outside x")
-    cdef double lo[3]
-    cdef double hi[3]
-    cdef double P[3][3]
-    cdef double Q[3][3]
-    cdef double u[3]
-    cdef double w[3]
-    cdef double np_[3]
-    cdef double nq[3]
-    cdef double move = 0.0, size
-    cdef bint facing = True
-    cdef int k
-    with nogil:
-        for c in range(3):
-            lo[c], hi[c] = INFINITY, -INFINITY
-        for r in range(q):
-            for k in range(3):
-                v = new_tris[r, k]
-                for c in range(3):
-                    P[k][c] = x[v, c]
-                    Q[k][c] = again[v - first, c] if v >= first else x[v, c]
-                    lo[c], hi[c] = fmin(lo[c], P[k][c]), fmax(hi[c], P[k][c])
-            _sub(P[1], P[0], u)
-            _sub(P[2], P[0], w)
-            _cross(u, w, np_)
-            _sub(Q[1], Q[0], u)
-            _sub(Q[2], Q[0], w)
-            _cross(u, w, nq)
-            if not _dot(np_, nq) > 0:
-                facing = False
-        for r in range(p):
-            for c in range(3):
-                move = fmax(move, fabs(again[r, c] - x[first + r, c]))
-        for c in range(3):
-            u[c] = hi[c] - lo[c]
-        size = sqrt(_dot(u, u))
-    return bool(facing and move < 0.1 * size)
-
-
-# the fairing's normal equations on a small patch
-
-
 def patch_system(const double[:, ::1] x, const int64_t[:, ::1] tris, const int64_t[::1] i,
                  const int64_t[::1] j, const int64_t[::1] inverse, const int64_t[::1] unknown,
                  const int64_t[::1] ring0, const int64_t[::1] ring1, int level, bint cot, bint dense):

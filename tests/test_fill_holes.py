@@ -23,6 +23,7 @@ from scipy.sparse.csgraph import dijkstra
 from o3d_lsmesh import O3DLSMeshWarning, _fill_kernel, fill_holes
 from o3d_lsmesh.holes import DP_MAX_EDGES, HoleFiller, fill_holes_arrays, find_holes
 from o3d_lsmesh.holes.crossings import _crossings, _TriangleIndex
+from o3d_lsmesh.holes.fair import keeps_facing
 from o3d_lsmesh.topology import boundary_loops
 
 
@@ -1255,7 +1256,7 @@ def test_keeps_facing_matches_plain_loops(seed):
     ]
     size = np.linalg.norm(x[np.unique(tris)].max(axis=0) - x[np.unique(tris)].min(axis=0))
     expected = not any(flips) and np.abs(again - x[-p:]).max() < 0.1 * size
-    assert _fill_kernel.keeps_facing(x, again, tris) == expected
+    assert keeps_facing(x, again, tris) == expected
 
 
 def _plain_weights(points, tris, i, j, cot):

@@ -98,6 +98,20 @@ def _interpolation(
     return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(p, n))
 
 
+def keeps_facing(x: np.ndarray, again: np.ndarray, new_tris: np.ndarray) -> bool:
+    """Whether ``again`` (new positions of the last ``len(again)`` vertices of ``x``) keeps every new
+    triangle facing as in ``x`` and moves no vertex by a tenth of the patch's size (obtuse slivers can
+    make cotangent weights ill-conditioned)."""
+    first = len(x) - len(again)
+    p = x[new_tris]
+    q = np.where((new_tris >= first)[..., None], again[np.maximum(new_tris - first, 0)], p)
+    before = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    after = np.cross(q[:, 1] - q[:, 0], q[:, 2] - q[:, 0])
+    size = np.linalg.norm(p.max(axis=(0, 1)) - p.min(axis=(0, 1))) if len(p) else 0.0
+    move = np.abs(again - x[first:]).max() if len(again) else 0.0
+    return bool(((before * after).sum(axis=1) > 0).all() and move < 0.1 * size)
+
+
 def fair_patches(
     filler: Any,
     vertices: np.ndarray,
@@ -152,7 +166,7 @@ def fair_patches(
                 again = solve(level, True)
                 if again is not None:  # a patch whose cotangent system is not finite keeps uniform
                     again = np.where(np.isfinite(again).all(axis=1)[:, None], again, solution)
-                if again is not None and _kernel().keeps_facing(work, again, new_tris):
+                if again is not None and keeps_facing(work, again, new_tris):
                     work[n:] = again
                     yield level, _kernel().tangential_relax(work, new_tris, n)
                     work[n:] = solution
