@@ -112,12 +112,17 @@ class NoiseEstimate(NamedTuple):
 
 
 def measured_noise(
-    vertices: np.ndarray, triangles: np.ndarray, *, conn: Connectivity | None = None
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    *,
+    conn: Connectivity | None = None,
+    rows: int = NOISE_ROWS,
+    block: int = NOISE_BLOCK,
 ) -> NoiseEstimate:
     """The noise ``sigma`` and the surface's detail ``g`` along the normal, in RMS edge lengths.
 
     From the mean squared 1- and 2-ring umbrellas of the vertices two rings from the rim (at most
-    ``NOISE_ROWS`` of them), two equations in ``sigma^2`` and ``g^2``; ``(0, 0)`` when no vertex is
+    ``rows`` of them; the 2-ring formed ``block`` rows or more at a time), two equations in ``sigma^2`` and ``g^2``; ``(0, 0)`` when no vertex is
     two rings from the rim. The derivation: ``docs/algorithms/scan_denoiser.rst``.
 
     >>> import open3d as o3d
@@ -143,7 +148,7 @@ def measured_noise(
     smooth_square = np.einsum("ij,ij->i", smooth, smooth)
     normal = area_weighted_normals(smooth, triangles)
     inner_rows = np.flatnonzero(inner)
-    inner_rows = inner_rows[:: -(-len(inner_rows) // NOISE_ROWS)]
+    inner_rows = inner_rows[:: -(-len(inner_rows) // rows)]
     # per inner vertex: 1-ring umbrella along the normal, and the 1-ring's mean squared distance
     sub, x = smooth[inner_rows], vertices[inner_rows]
     nrm = normal[inner_rows]
@@ -162,7 +167,7 @@ def measured_noise(
     # 2-ring pattern (about 19 entries a row, with its product and sum) took 800 bytes a vertex
     sum_a2, sum_k2, sum_h2 = 0.0, 0.0, 0.0
     # a few blocks, not blocks of a fixed size: each product clears a work array as long as the mesh
-    block_rows = max(NOISE_BLOCK, -(-len(inner_rows) // NOISE_BLOCKS))
+    block_rows = max(block, -(-len(inner_rows) // NOISE_BLOCKS))
     for start in range(0, len(inner_rows), block_rows):
         rows = inner_rows[start : start + block_rows]
         two = two_ring_rows(ring, rows)
