@@ -163,21 +163,21 @@ def measured_noise(
     if not h2 > 0.0:
         return NoiseEstimate(0.0, 0.0)
     del ring_sum, sub, x
-    # the same over the 2-ring (every vertex within two edges), a block of rows at a time: the whole
-    # 2-ring pattern (about 19 entries a row, with its product and sum) took 800 bytes a vertex
+    # the same over the 2-ring (every vertex within two edges), a block of rows at a time (the whole
+    # 2-ring pattern, with its product and sum, is several times the mesh)
     sum_a2, sum_k2, sum_h2 = 0.0, 0.0, 0.0
     # a few blocks, not blocks of a fixed size: each product clears a work array as long as the mesh
     block_rows = max(block, -(-len(inner_rows) // NOISE_BLOCKS))
     for start in range(0, len(inner_rows), block_rows):
-        rows = inner_rows[start : start + block_rows]
-        two = two_ring_rows(ring, rows)
+        part = inner_rows[start : start + block_rows]
+        two = two_ring_rows(ring, part)
         d2 = np.diff(two.indptr).astype(np.float64)
         a2 = np.einsum(
-            "ij,ij->i", two @ vertices / d2[:, None] - vertices[rows], nrm[start : start + len(rows)]
+            "ij,ij->i", two @ vertices / d2[:, None] - vertices[part], nrm[start : start + len(part)]
         )
         sum_a2 += float(a2 @ a2)
         sum_k2 += float(np.sum(1.0 + 1.0 / d2))
-        sum_h2 += float(np.sum(_mean_square_distances(two @ smooth_square, two @ smooth, smooth[rows], d2)))
+        sum_h2 += float(np.sum(_mean_square_distances(two @ smooth_square, two @ smooth, smooth[part], d2)))
     count = len(inner_rows)
     growth = (sum_h2 / count / h2) ** 2
     k1, k2 = float(np.mean(1.0 + 1.0 / di)), sum_k2 / count
