@@ -32,10 +32,10 @@ from pathlib import Path
 import numpy as np
 import open3d as o3d
 
+from o3d_lsmesh import render
+from o3d_lsmesh.app.metrics import raycasting_scene
+from o3d_lsmesh.app.shapes import simulated_range_scan
 from o3d_lsmesh.fairing import constrained_fairing
-from o3d_lsmesh.metrics import raycasting_scene
-from o3d_lsmesh.rendering import render
-from o3d_lsmesh.shapes import simulated_range_scan
 
 
 def main(argv=None) -> int:

@@ -20,12 +20,11 @@ from pathlib import Path
 import numpy as np
 import open3d as o3d
 
-from o3d_lsmesh import laplacian
+from o3d_lsmesh import laplacian, render
+from o3d_lsmesh.app.metrics import signed_volume
+from o3d_lsmesh.app.shapes import add_noise, demo_mesh, mean_edge_length
 from o3d_lsmesh.fairing.multiresolution import multiresolution_fairing
 from o3d_lsmesh.hierarchy import build_hierarchy
-from o3d_lsmesh.metrics import signed_volume
-from o3d_lsmesh.rendering import render
-from o3d_lsmesh.shapes import add_noise, demo_mesh, mean_edge_length
 
 
 def main(argv=None) -> int:

@@ -21,9 +21,8 @@ from pathlib import Path
 import numpy as np
 import open3d as o3d
 
-from o3d_lsmesh.encoding import decode_geometry, encode_geometry, iter_decode_geometry
-from o3d_lsmesh.rendering import render
-from o3d_lsmesh.shapes import demo_mesh
+from o3d_lsmesh import decode_geometry, encode_geometry, iter_decode_geometry, render
+from o3d_lsmesh.app.shapes import demo_mesh
 
 
 def main(argv=None) -> int:

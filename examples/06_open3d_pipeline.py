@@ -20,10 +20,9 @@ from pathlib import Path
 import numpy as np
 import open3d as o3d
 
-from o3d_lsmesh.metrics import signed_volume
-from o3d_lsmesh.registration import register, unregister
-from o3d_lsmesh.rendering import render
-from o3d_lsmesh.shapes import add_noise, demo_mesh, mean_edge_length
+from o3d_lsmesh import register, render, unregister
+from o3d_lsmesh.app.metrics import signed_volume
+from o3d_lsmesh.app.shapes import add_noise, demo_mesh, mean_edge_length
 
 
 def main(argv=None) -> int:

@@ -25,9 +25,8 @@ import open3d as o3d
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 
-from o3d_lsmesh import fill_holes
-from o3d_lsmesh.rendering import render
-from o3d_lsmesh.shapes import demo_mesh
+from o3d_lsmesh import fill_holes, render
+from o3d_lsmesh.app.shapes import demo_mesh
 
 
 def cut_disk(mesh, centre: int, radius: float):
