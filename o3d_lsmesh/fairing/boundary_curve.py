@@ -128,12 +128,11 @@ def smooth_boundary_curves(mesh: MeshT, number_of_iterations: int = 10) -> MeshT
 
     Examples
     --------
-    >>> import numpy as np, open3d as o3d
+    >>> import open3d as o3d
     >>> box = o3d.geometry.TriangleMesh.create_box()
     >>> box.triangles = o3d.utility.Vector3iVector(np.asarray(box.triangles)[2:])  # open one face
-    >>> out = smooth_boundary_curves(box, number_of_iterations=3)
-    >>> len(out.vertices) == len(box.vertices)
-    True
+    >>> len(smooth_boundary_curves(box, number_of_iterations=3).vertices)
+    8
     """
     number_of_iterations = as_iterations(number_of_iterations)
     data = read_mesh(mesh, weld=True)
