@@ -41,7 +41,7 @@ __all__ = [
 
 def open3d() -> Any:
     """Import and return the ``open3d`` module (lazily: the array core works without it)."""
-    import open3d as o3d  # noqa: TID251 (the adapter)
+    import open3d as o3d
 
     return o3d
 

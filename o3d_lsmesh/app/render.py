@@ -153,7 +153,7 @@ def _raycast(vertices, triangles, colors, camera, width, height, background) -> 
 
 def _filament_worker(spec_path: str, image_path: str) -> None:
     """Child-process entry point: draw the scene in ``spec_path`` (npz) and save the image to ``image_path`` (npy)."""
-    import open3d as o3d  # noqa: TID251 (the renderer is the one module of app/ that draws with Open3D)
+    import open3d as o3d
 
     o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
     spec = np.load(spec_path)
