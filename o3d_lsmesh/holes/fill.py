@@ -15,7 +15,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._o3d import new_mesh, read_mesh
-from ..core.connectivity import unique_edges_and_runs
+from ..core.connectivity import Connectivity
 from ..core.errors import InputError, warn
 from ..core.progress import check_progress
 from ..core.validate import as_bool, as_choice, as_count, as_positive_float, mesh_arrays
@@ -222,20 +222,27 @@ class HoleFiller:
         vertices, triangles = mesh_arrays(vertices, triangles)  # copies: the state must not change under it
         for array in (vertices, triangles):
             array.setflags(write=False)
-        n, m = len(vertices), len(triangles)
+        self._build(vertices, triangles, index_triangles)
+
+    @classmethod
+    def _from_valid(cls, vertices: np.ndarray, triangles: np.ndarray) -> HoleFiller:
+        """A filler of arrays :func:`~o3d_lsmesh.core.validate.mesh_arrays` gave (no second check), for one fill."""
+        filler = cls.__new__(cls)
+        filler._build(vertices, triangles, False)
+        return filler
+
+    def _build(self, vertices: np.ndarray, triangles: np.ndarray, index_triangles: bool) -> None:
+        n = len(vertices)
         self.vertices, self.triangles = vertices, triangles
-        edge_info = unique_edges_and_runs(triangles, n)  # the one whole-mesh sort
-        edges = edge_info[0][0]
+        conn = Connectivity(triangles, n)  # the one whole-mesh grouping
+        es = conn.edge_structure
+        edges = es.edges.astype(np.int64)
+        edge_info = (edges, es.counts.astype(np.int64), es.inverse.astype(np.int64)), es.runs
         self.holes = find_holes(vertices, triangles, _edge_info=edge_info)
         length = np.linalg.norm(vertices[edges[:, 0]] - vertices[edges[:, 1]], axis=1)
         degree = np.maximum(np.bincount(edges.ravel(), minlength=n), 1)
         self.sigma = np.bincount(edges.ravel(), weights=np.repeat(length, 2), minlength=n) / degree
-        # the triangles of each vertex (CSR), by a transpose (linear, no sort)
-        by_vertex = sp.csr_matrix(
-            (np.repeat(np.arange(m, dtype=np.int64), 3), triangles.ravel(), np.arange(0, 3 * m + 1, 3)),
-            shape=(m, n),
-        ).tocsc()
-        self.vertex_triangles = (by_vertex.indptr.astype(np.int64), by_vertex.data.astype(np.int64))
+        self.vertex_triangles = tuple(a.astype(np.int64) for a in conn.vertex_triangles)
         self.index = _TriangleIndex(vertices, triangles) if index_triangles else None
 
     def fill(
@@ -414,10 +421,8 @@ def fill_holes(
     * ``continuity=2``: ``(L x)^T K (L x)``, tri-Laplacian: the Laplacian itself varies smoothly, so
       curvature continues across the loop,
 
-    with ``L = I - D^-1 A`` the uniform Laplacian of eq. 1 and ``K = D - A``; only the new vertices are
-    unknowns, ``continuity + 1`` rings of the input fixed around each loop. ``weights="cotangent"``
-    then solves again with cotangent weights read off that fair solution (``K = D - W``, ``L = M^-1 K``,
-    ``M`` the vertex areas), closer to the true surface on irregular meshes.
+    with ``L = I - D^-1 A`` (eq. 1) and ``K = D - A``, ``continuity + 1`` rings of the input fixed around
+    each loop; ``weights="cotangent"`` then solves again with the cotangent weights of that solution.
 
     Parameters
     ----------
@@ -481,10 +486,8 @@ def fill_holes(
     >>> fill_holes(holed).is_watertight()
     True
     """
-    data = read_mesh(mesh, weld=True)  # the welded surface's holes: a UV seam is not one
-    result = fill_holes_arrays(
-        data.vertices,
-        data.triangles,
+    data = read_mesh(mesh, weld=True)  # the welded surface's holes: a UV seam is not one; validated once
+    result = HoleFiller._from_valid(data.vertices, data.triangles).fill(
         max_hole_edges=max_hole_edges,
         max_hole_diameter=max_hole_diameter,
         continuity=continuity,
