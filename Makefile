@@ -15,7 +15,7 @@ DOCS_BUILD := docs/_build/html
 .PHONY: demo test bench system venv clean docs docs-check docs-system sdist matrix matrix-lowest matrix-newest wheel
 
 demo: $(STAMP)
-	$(PY) -m o3d_lsmesh.cli demo
+	$(PY) -m o3d_lsmesh demo
 
 # second pass: the solver-facing tests again on the SciPy fallback (as without scikit-sparse)
 FALLBACK_TESTS := tests/test_solvers.py tests/test_fallback.py tests/test_lsmesh.py tests/test_encoding.py tests/test_selection.py

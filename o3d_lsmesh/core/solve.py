@@ -7,7 +7,6 @@ gradients above a memory budget), solves ``(n, k)`` right-hand sides, refactors 
 
 from __future__ import annotations
 
-import importlib
 import os
 import threading
 from dataclasses import replace
@@ -70,9 +69,10 @@ def _import_cholmod() -> Any:
     if _cholmod_disabled():
         return None
     try:
-        return importlib.import_module("sksparse.cholmod")  # ``import sksparse`` alone does not load it
+        from sksparse import cholmod
     except ImportError:
         return None
+    return cholmod
 
 
 _cholmod = _import_cholmod()
