@@ -37,6 +37,12 @@ MAX_TRIES = 3  # targets tried per vertex, least volume first: hierarchy.md, who
 FILL_TIE = 1e-9  # split vertices' tie to their placeholders in the harmonic fill: a regularization, not tuned
 
 
+def _same(a: Any, b: Any) -> bool:
+    if isinstance(a, tuple):
+        return isinstance(b, tuple) and len(a) == len(b) and all(map(_same, a, b))
+    return bool(np.array_equal(a, b)) if isinstance(a, np.ndarray) else bool(a == b)
+
+
 def _frozen(array: np.ndarray) -> np.ndarray:
     # a read-only view: the caller's own array (the input of build_hierarchy_arrays) stays writeable
     view = np.ascontiguousarray(array).view()
@@ -95,17 +101,7 @@ class MeshHierarchy:
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, MeshHierarchy):
             return NotImplemented
-        for f in fields(self):
-            a, b = getattr(self, f.name), getattr(other, f.name)
-            if isinstance(a, np.ndarray):
-                if not np.array_equal(a, b):
-                    return False
-            elif isinstance(a, tuple) and a and isinstance(a[0], np.ndarray):
-                if len(a) != len(b) or not all(np.array_equal(x, y) for x, y in zip(a, b)):
-                    return False
-            elif a != b:
-                return False
-        return True
+        return all(_same(getattr(self, f.name), getattr(other, f.name)) for f in fields(self))
 
     __hash__ = None  # type: ignore[assignment]
 
@@ -146,20 +142,12 @@ class MeshHierarchy:
         }
 
     def refine(self, i: int, positions: Any) -> np.ndarray:
-        """Split the vertices removed at level ``i`` back in: positions ``(n_{i-1}, 3) float64`` of level ``i - 1``.
+        """Positions ``(n_{i-1}, 3)`` of level ``i - 1`` from ``positions (n_i, 3)`` of level ``i >= 1``.
 
-        Kept vertices keep their positions exactly. Each split vertex goes to the average of its 1-ring
-        at level ``i - 1`` (a discrete harmonic fill when split vertices are adjacent), then moves once
-        by Kobbelt's step ``x <- x - U^2(x) / nu`` (section 4.2), every split vertex at once (a Jacobi
-        step). Split boundary vertices read their two boundary neighbours only. Details:
-        ``docs/algorithms/mesh_hierarchy.rst``.
-
-        Parameters
-        ----------
-        i : int
-            Level to refine from, ``1 <= i < len(self)``.
-        positions : (n_i, 3) array-like of float
-            Positions of level ``i``'s vertices.
+        Kept vertices keep theirs exactly; each split vertex goes to the average of its 1-ring (a harmonic
+        fill when split vertices are adjacent), then moves once by Kobbelt's step ``x <- x - U^2(x) / nu``
+        (section 4.2), all at once; split boundary vertices read their boundary neighbours only
+        (``docs/algorithms/mesh_hierarchy.rst``).
         """
         i = self._check_level(i, minimum=1)
         positions = as_positions(positions, len(self.representatives[i]), name="positions")

@@ -139,17 +139,9 @@ def encode_geometry(
     )
     positions = data.vertices[indices]
     lower, upper = positions.min(axis=0), positions.max(axis=0)
-    return assemble_stream(
-        n=n,
-        indices=indices,
-        quantized=quantize(positions, lower, upper, bits),
-        bits=bits,
-        index_bits=index_width(n),
-        edges_crc=connectivity_checksum(data.triangles, n),
-        omega=omega,
-        lower=lower,
-        upper=upper,
-    )
+    fields: dict[str, Any] = dict(n=n, indices=indices, bits=bits, index_bits=index_width(n), omega=omega)
+    fields.update(quantized=quantize(positions, lower, upper, bits), lower=lower, upper=upper)
+    return assemble_stream(edges_crc=connectivity_checksum(data.triangles, n), **fields)
 
 
 def _bad(message: str) -> InputError:

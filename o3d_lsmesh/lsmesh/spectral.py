@@ -55,13 +55,9 @@ def null_space_basis(adjacency: sp.spmatrix) -> sp.csc_matrix:
 def spectral_basis(
     triangles: np.ndarray, n: int, k: int, *, progress: bool = False
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The ``k`` smallest eigenpairs of ``D - A``: ``(eigenvalues (k,), eigenvectors (n, k))``, ascending.
-
-    The ``c`` eigenvectors of 0 are written down (:func:`null_space_basis`); the others come from ``eigsh``
-    on the deflated shift-invert operator ``P (L - sigma I)^-1 P`` (solves by the gateway), or dense
-    LAPACK ``eigh`` when ``k > n / 4`` up to ``DENSE_MAX_VERTICES``. ``InputError`` beyond the practical
-    sizes (module constants).
-    """
+    """The ``k`` smallest eigenpairs of ``D - A``, ascending: ``(eigenvalues (k,), eigenvectors (n, k))``; the
+    null space written down, the rest by ARPACK on the deflated shift-invert operator (solves by the
+    gateway) or dense ``eigh`` (docs page). ``InputError`` beyond the practical sizes (module constants)."""
     if n > SPECTRAL_MAX_VERTICES:
         raise InputError(
             f"mesh must have at most {SPECTRAL_MAX_VERTICES} vertices for the spectral baseline "
