@@ -387,11 +387,10 @@ def test_default_is_scan_and_reimpose_every_keeps_the_local_meaning():
     assert_allclose(
         np.asarray(constrained_fairing((V, F))[0]), constrained_fairing_arrays(V, F, 1, method="scan"), atol=0
     )
-    assert_allclose(
-        constrained_fairing_arrays(V, F, 4, reimpose_every=2),
-        constrained_fairing_arrays(V, F, 4, method="local", reimpose_every=2),
-        atol=0,
-    )
+    # the array core's former default (method="local") still runs without method=, with a warning
+    with pytest.warns(DeprecationWarning, match="without method= runs method='local'"):
+        implicit = constrained_fairing_arrays(V, F, 4, reimpose_every=2)
+    assert_allclose(implicit, constrained_fairing_arrays(V, F, 4, method="local", reimpose_every=2), atol=0)
 
 
 def test_measured_boundary_weight_against_loops_and_its_properties(rng):

@@ -16,7 +16,7 @@ import numpy as np
 from .._o3d import new_mesh, read_mesh
 from ..core.boundary import boundary_curves
 from ..core.connectivity import Connectivity
-from ..core.errors import InputError
+from ..core.errors import InputError, warn
 from ..core.progress import check_progress, iterate
 from ..core.solve import SOLVERS
 from ..core.validate import (
@@ -108,6 +108,13 @@ METHOD_OPTIONS: dict[str, dict[str, Option]] = {
 FAIRING_METHODS = tuple(METHOD_OPTIONS)
 
 
+class _Implicit(str):
+    """The array core's former default method, told apart from an explicit ``method="local"``."""
+
+
+_LOCAL = _Implicit("local")
+
+
 def resolved_options(method: str | None, number_of_iterations: int | None, reimpose_every: int | None):
     """The method and iteration count that ``None`` stands for (unchecked values pass through)."""
     if method is None:
@@ -137,7 +144,7 @@ def constrained_fairing_arrays(
     triangles: np.ndarray,
     number_of_iterations: int | None = 10,
     *,
-    method: str | None = "local",
+    method: str | None = _LOCAL,
     mu: float | None = None,
     membrane: float | None = None,
     boundary_weight: float | None = None,
@@ -150,17 +157,26 @@ def constrained_fairing_arrays(
 
     The arguments are those of :func:`constrained_fairing`; unlike it, the defaults are
     ``method="local"`` with 10 iterations (pass ``method=None, number_of_iterations=None`` for the
-    wrapper's). The input arrays are not modified.
+    wrapper's). Without ``method`` it warns (``DeprecationWarning``): 0.4 takes the wrapper's
+    defaults. The input arrays are not modified.
 
     Examples
     --------
     >>> import numpy as np, open3d as o3d
     >>> box = o3d.geometry.TriangleMesh.create_box()
-    >>> constrained_fairing_arrays(np.asarray(box.vertices), np.asarray(box.triangles), 5).shape
+    >>> constrained_fairing_arrays(np.asarray(box.vertices), np.asarray(box.triangles), 5, method="local").shape
     (8, 3)
     """
-    method, options = _check_options(method, _given(locals()))
+    implicit = type(method) is _Implicit
+    method, options = _check_options(str(method) if implicit else method, _given(locals()))
     vertices, triangles = mesh_arrays(vertices, triangles)  # copies: _fair may write to its positions
+    if implicit:
+        warn(
+            "constrained_fairing_arrays without method= runs method='local' (10 iterations); pass "
+            "method='local' to keep that, or method=None for constrained_fairing's default ('scan'), "
+            "which 0.4 makes the default",
+            DeprecationWarning,
+        )
     return _fair(vertices, Connectivity(triangles, len(vertices)), method, options, solver)
 
 
