@@ -82,10 +82,8 @@ def from_fast_simplification(
     levels : int or sequence of int, keyword-only
         Number of levels (vertex counts decreasing geometrically to ``min_vertices``), or the strictly
         decreasing target vertex counts.
-    min_vertices : int, keyword-only
-    agg : float, keyword-only
-        fast-simplification's aggressiveness.
-    progress : bool, keyword-only
+    min_vertices, agg, progress : keyword-only
+        The coarsest count for an integer ``levels``; fast-simplification's aggressiveness; a progress bar.
 
     Examples
     --------

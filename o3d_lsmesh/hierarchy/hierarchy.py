@@ -320,12 +320,9 @@ def build_hierarchy(
     mesh : open3d.geometry.TriangleMesh, open3d.t.geometry.TriangleMesh or (vertices, triangles)
     alpha, beta : float, keyword-only
         Non-negative weights of the shortest and longest incident edge in the cost.
-    min_vertices : int, keyword-only
-        Stop when a level has this many vertices (or fewer cannot be reached).
-    max_levels : int, optional, keyword-only
-    progress : bool, keyword-only
-    workers : int, optional, keyword-only
-        Deprecated and ignored (a ``FutureWarning``).
+    min_vertices, max_levels, progress, workers : keyword-only
+        Stop at this many vertices or after this many levels; a progress bar; ``workers`` is deprecated
+        and ignored (a ``FutureWarning``).
 
     Raises
     ------

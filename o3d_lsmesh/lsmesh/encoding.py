@@ -103,10 +103,8 @@ def encode_geometry(
     Parameters
     ----------
     mesh : open3d.geometry.TriangleMesh, open3d.t.geometry.TriangleMesh or (vertices, triangles)
-    count : int
-        Number of anchors, from the number of connected components to ``n``.
-    bits : int
-        Quantization bits per coordinate, 1 to 31 (the paper uses 10 to 12).
+    count, bits : int
+        Anchors (from the number of components to ``n``); bits per coordinate, 1 to 31 (paper: 10 to 12).
     method : {"greedy", "combined", "random"}
     weight : float, optional
         Anchor weight ``omega``; default ``10 n`` as in the paper.
@@ -235,9 +233,8 @@ def decode_geometry(mesh: MeshT, data: Any, *, anchors: int | None = None, progr
         Supplies the connectivity; its positions are ignored.
     data : bytes
         A stream of :func:`encode_geometry` for this connectivity.
-    anchors : int, optional
-        Number of leading anchors to use, ``1..k``; default all.
-    progress : bool
+    anchors, progress
+        Number of leading anchors to use, ``1..k`` (default all); a progress bar.
 
     Raises
     ------

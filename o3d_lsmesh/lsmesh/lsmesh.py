@@ -297,22 +297,16 @@ class LSMeshSolver(LSMeshSystem):
     Parameters
     ----------
     mesh : open3d.geometry.TriangleMesh, open3d.t.geometry.TriangleMesh or (vertices, triangles)
-        Its connectivity, and its positions as default control positions; vertices at equal coordinates
-        (UV seams) are welded, indices stay in the mesh's own layout.
+        Its connectivity and default control positions; equal-coordinate vertices (UV seams) are welded.
     constraint_vertex_indices : (k,) int array-like
-        Control vertices (two copies of a split vertex are two terms).
     weights : float or (k,) array-like
         Positive weights ``w_s`` of the soft constraints (ignored when ``interpolate``).
     interpolate : bool
         Hit the control vertices exactly (bases paper II.B).
-    laplacian : {"uniform", "cotangent"}
-    backend : {"auto", "cholmod", "scipy"}
-    ordering : str
-        CHOLMOD's ordering (:class:`~o3d_lsmesh.SPDSolver`).
-    solver : {"auto", "cholmod", "iterative"}
-        ``"auto"`` factors unless the factor would exceed the memory budget, then uses conjugate gradients.
-    tol : float, optional
-        Relative residual of the iterative path.
+    laplacian, backend, ordering : str
+        ``"uniform"``/``"cotangent"``; the direct backend and CHOLMOD ordering (:class:`~o3d_lsmesh.SPDSolver`).
+    solver, tol
+        ``"auto"`` factors unless the factor exceeds the memory budget (then conjugate gradients to ``tol``).
     progress : bool
 
     Raises
@@ -391,7 +385,8 @@ def ls_mesh(
     """Least-squares mesh: the fairest geometry for ``mesh``'s connectivity near the control points.
 
     Minimizes ``||L X||^2 + sum_s w_s^2 |X_s - C_s|^2`` (eq. 3, weights of section 6), or with
-    ``interpolate=True`` ``||L X||^2`` with the control vertices fixed (bases paper II.B).
+    ``interpolate=True`` ``||L X||^2`` with the control vertices fixed (bases paper II.B). Returns a new
+    mesh of the input's kind (same triangles and colors).
 
     Parameters
     ----------
@@ -401,11 +396,6 @@ def ls_mesh(
         Default the mesh's own positions at those indices.
     weights, interpolate, laplacian, solver, tol, progress
         See :class:`LSMeshSolver`.
-
-    Returns
-    -------
-    TriangleMesh
-        A new mesh of the input's kind, same triangles and colors.
 
     Raises
     ------

@@ -193,7 +193,8 @@ def select_control_points(
     A vertex's error is its distance in the LS mesh of the current selection (soft constraints of weight
     ``weights``, uniform Laplacian). ``"random"``: a random order; ``"greedy"``: the largest error, one at
     a time; ``"combined"``: local maxima, ``batch`` per solve. Every selection starts with one vertex per
-    connected component. Details: ``docs/algorithms/least_squares_meshes.rst``.
+    connected component. Returns ``(count,) int64`` indices in selection order, without repetition.
+    Details: ``docs/algorithms/least_squares_meshes.rst``.
 
     Parameters
     ----------
@@ -202,18 +203,9 @@ def select_control_points(
     count : int
         From the number of connected components to ``n``.
     method : {"greedy", "combined", "random"}
-    batch : int, optional
-        Picks per solve of ``"combined"`` (default 31); None for the others.
-    weights : float
-        Positive weight of every soft control point while selecting.
-    seed : int or numpy.random.Generator, optional
-        Random state of ``"random"``.
-    progress : bool
-
-    Returns
-    -------
-    indices : (count,) int64
-        In selection order, without repetition.
+    batch, weights, seed, progress
+        Picks per solve of ``"combined"`` (default 31); the positive weight of the soft control points;
+        the random state of ``"random"`` (int or Generator); a progress bar.
 
     Raises
     ------

@@ -134,10 +134,8 @@ def spectral_approximation(mesh: MeshT, k: int, *, bits: int | None = None, prog
     ----------
     mesh : open3d.geometry.TriangleMesh, open3d.t.geometry.TriangleMesh or (vertices, triangles)
         At most 50,000 vertices.
-    k : int
-        Number of basis functions, ``1..n``.
-    bits : int, optional
-        Quantization bits per coefficient, 1 to 31.
+    k, bits : int
+        Basis functions, ``1..n``; optional quantization bits per coefficient, 1 to 31.
     progress : bool
 
     Raises
