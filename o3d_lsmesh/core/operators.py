@@ -9,6 +9,8 @@ local operator (eq. 6-7), penalty (eq. 5) and curve Laplacian (section 3.3) live
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 import scipy.sparse as sp
 
@@ -20,11 +22,9 @@ from .connectivity import (
 from .liu import (
     CurveOperator,
     LocalMatrices,
-    Penalty,
     accumulate_block,
     curve_laplacian,
     local_operator,
-    penalty_matrix,
     ring_csr,
     triangle_coefficients,
     valence_tables,
@@ -422,3 +422,52 @@ def patch_system(
     fixed = x.copy()
     fixed[unknown] = 0.0  # A_known x_known, without slicing the known columns out
     return A_u.T @ A_u, -(A_u.T @ (A_full @ fixed))
+
+
+class Penalty(NamedTuple):
+    """Eq. 5's penalty form on the free (interior) vertices (:func:`penalty_matrix`)."""
+
+    normal: sp.csc_matrix  # (f, f) K_F^T K_F + mu H_F^T H_F, sorted
+    laplacian: sp.csr_matrix  # (f, f) K_F
+    pull: sp.csr_matrix | None  # (f, b) K_F^T K_B, the known vertices' pull (None without known ones)
+    incidence: sp.csr_matrix  # (k, f) sqrt(mu) H_F over the interior triangles
+    free: np.ndarray  # (f,) vertex ids
+    known: np.ndarray  # (b,) vertex ids
+
+
+def penalty_matrix(conn: Connectivity, mu: float) -> Penalty:
+    """``K_F^T K_F + mu H_F^T H_F`` of ``min |K_I X|^2 + mu |H_I (X - X0)|^2`` (Liu et al. eq. 5, penalty form).
+
+    ``K`` the uniform Laplacian, ``H`` the triangle-vertex incidence of the interior triangles (no
+    vertex on an edge of other than two triangles); boundary and isolated vertices are known and
+    eliminated. Right-hand side: ``H_F^T (H_F X0_F) - K_F^T K_B X_B``.
+
+    >>> p = penalty_matrix(Connectivity(np.array([[0, 1, 2], [0, 2, 3], [0, 3, 1], [1, 3, 2]])), 1.0)
+    >>> p.normal.shape, p.known.tolist()
+    ((4, 4), [])
+    """
+    from ._iterative import gram_matrix
+
+    n = conn.n
+    valence = np.bincount(conn.edges.ravel(), minlength=n).astype(np.int64)
+    boundary = np.zeros(n, dtype=bool)
+    boundary[conn.edges[conn.edge_triangles != 2].ravel()] = True
+    free = (valence > 0) & ~boundary
+    free_ids, known = np.flatnonzero(free), np.flatnonzero(~free)
+    K = uniform_laplacian(conn, keep_pattern=True)
+    if len(free_ids) < n:  # the rows of the interior vertices, their columns (none to cut when closed)
+        K = K[free_ids]
+    K_F = K if len(free_ids) == n else K[:, free_ids]
+    pull = (K_F.T @ K[:, known]).tocsr() if len(known) else None
+    tri = conn.triangles[np.flatnonzero(~boundary[conn.triangles].any(axis=1))]
+    k = len(tri)
+    index = K_F.indices.dtype  # one index type for both blocks: a mixed stack goes to int64
+    reduced = np.full(n, -1, dtype=index)
+    reduced[free_ids] = np.arange(len(free_ids), dtype=index)
+    H = sp.csr_matrix(
+        (np.full(3 * k, np.sqrt(float(mu))), reduced[tri].ravel(), np.arange(0, 3 * k + 1, 3, dtype=index)),
+        shape=(k, len(free_ids)),
+    )
+    # one product of the stacked rows (no sum of two 2-ring matrices), sorted
+    normal = gram_matrix(sp.vstack([K_F, H], format="csr").T)
+    return Penalty(normal, K_F, pull, H, free_ids, known)
