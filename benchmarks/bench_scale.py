@@ -141,7 +141,7 @@ def _study_worker(n: int, variant: str, queue) -> None:
     import pyamg
     import scipy.sparse as sp
 
-    from o3d_lsmesh._solvers import _aggregation_levels, _amg_preconditioner, _block_cg, _splu_spd, _vcycle
+    from o3d_lsmesh.core._iterative import VCycle, aggregation_levels, block_cg, preconditioner, splu_spd
     from o3d_lsmesh.laplacian import laplacian_matrix
 
     V, F = noisy_sphere(n)
@@ -153,16 +153,16 @@ def _study_worker(n: int, variant: str, queue) -> None:
     b = w2[:, None] * V
 
     def levels_of(ml):  # a pyamg hierarchy as the block V-cycle's levels
-        return [(level.A, level.R, level.P) for level in ml.levels[:-1]], _splu_spd(ml.levels[-1].A.tocsc())
+        return [(level.A, level.R, level.P) for level in ml.levels[:-1]], splu_spd(ml.levels[-1].A.tocsc())
 
     start = time.perf_counter()
     if variant == "SA on N's strong part, B = 1 (ours)":
-        apply = _amg_preconditioner(N)
+        apply = preconditioner(N, "amg")
     elif variant == "SA on N's whole stencil, B = 1":
-        apply = _vcycle(*_aggregation_levels(N, theta=0.0))  # theta 0: every entry strong
+        apply = VCycle(*aggregation_levels(N, theta=0.0))  # theta 0: every entry strong
     else:
         if variant == "SA on N, B = [1, x, y, z]":
-            apply = _vcycle(
+            apply = VCycle(
                 *levels_of(
                     pyamg.smoothed_aggregation_solver(
                         N,
@@ -178,7 +178,7 @@ def _study_worker(n: int, variant: str, queue) -> None:
             degree = np.diff(L.indptr).astype(float) - 1
             G = (sp.diags(degree) @ L).tocsr()
             Gs = (G + sp.diags(np.sqrt(w2) * degree * 1e-3 + 1e-8 * degree)).tocsr()
-            cycle = _vcycle(
+            cycle = VCycle(
                 *levels_of(
                     pyamg.smoothed_aggregation_solver(
                         Gs,
@@ -195,7 +195,7 @@ def _study_worker(n: int, variant: str, queue) -> None:
 
     setup = time.perf_counter() - start
     try:
-        _, iterations, residual = _block_cg(N, b, None, apply, tol=1e-10, max_iterations=600, progress=False)
+        _, iterations, residual = block_cg(N, b, None, apply, tol=1e-10, max_iterations=600, progress=False)
     except Exception:  # ConvergenceError
         iterations, residual = "> 600", float("nan")
     queue.put((n, setup, time.perf_counter() - start, iterations, residual))
