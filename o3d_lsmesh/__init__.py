@@ -15,20 +15,20 @@ import os
 # below, or the compiled kernels'): a value the user set is kept.
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
-from . import metrics
-from ._errors import ConvergenceError, O3DLSMeshWarning, SingularSystemError
-from ._solvers import SPDSolver
-from .encoding import decode_geometry, encode_geometry, iter_decode_geometry
+from .app import metrics
+from .app.registration import register, unregister
+from .app.render import render
+from .core.errors import ConvergenceError, InputError, InputTypeError, O3DLSMeshWarning, SingularSystemError
+from .core.solve import SPDSolver
 from .fairing import constrained_fairing, multiresolution_fairing, smooth_boundary_curves
 from .fairing.features import detect_creases
 from .hierarchy import MeshHierarchy, build_hierarchy, from_fast_simplification
-from .hole_filling import FillReport, HoleFiller, HoleOutcome, fill_holes
+from .holes import FillReport, HoleFiller, HoleOutcome, fill_holes
 from .laplacian import laplacian
 from .lsmesh import LSMeshSolver, ls_mesh, reconstruct_geometry
-from .registration import register, unregister
-from .rendering import render
-from .selection import approximate, select_control_points
-from .spectral import spectral_approximation
+from .lsmesh.encoding import decode_geometry, encode_geometry, iter_decode_geometry
+from .lsmesh.selection import approximate, select_control_points
+from .lsmesh.spectral import spectral_approximation
 from .summary import topology_summary
 
 __all__ = [
@@ -36,6 +36,8 @@ __all__ = [
     "FillReport",
     "HoleFiller",
     "HoleOutcome",
+    "InputError",
+    "InputTypeError",
     "LSMeshSolver",
     "MeshHierarchy",
     "O3DLSMeshWarning",

@@ -9,7 +9,7 @@ hand after changing a validation rule or the tests of one::
 
 The mutants: the cotangent Laplacian's uniform fallback for rows it cannot
 normalize (``laplacian.py``), and every ``raise`` of ``core/validate.py`` and of
-the adapter's mesh reader (``_o3d.py``: the mesh kind, a tensor mesh without
+the adapter's mesh reader (``_o3d/__init__.py``: the mesh kind, a tensor mesh without
 positions), each replaced by ``pass``. Each runs against a copy of the package in a temporary
 folder, first on the test files that own the rule, then (if it survives) on a
 wider set. By default the real meshes are absent (``O3D_LSMESH_DATA`` and
@@ -36,7 +36,7 @@ REPO = Path(__file__).resolve().parents[1]
 #: the test files that own each module's rules, then the wider net for a survivor
 FIRST = {
     "o3d_lsmesh/core/validate.py": ["tests/test_validate.py", "tests/test_bad_input.py"],
-    "o3d_lsmesh/_o3d.py": ["tests/test_validate.py", "tests/test_bad_input.py"],
+    "o3d_lsmesh/_o3d/__init__.py": ["tests/test_validate.py", "tests/test_bad_input.py"],
     "o3d_lsmesh/laplacian.py": ["tests/test_laplacian.py"],
 }
 WIDER = [
@@ -137,7 +137,7 @@ def main(argv: list[str] | None = None) -> int:
     mutants = [
         cotangent_fallback_mutant(),
         *raise_mutants("o3d_lsmesh/core/validate.py"),
-        *raise_mutants("o3d_lsmesh/_o3d.py"),
+        *raise_mutants("o3d_lsmesh/_o3d/__init__.py"),
     ]
     mutants = [m for m in mutants if not args.only or any(text in m.name for text in args.only)]
     env = dict(os.environ, PYTHONDONTWRITEBYTECODE="1")
