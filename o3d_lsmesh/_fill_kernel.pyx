@@ -730,85 +730,7 @@ cdef bint _pair_crosses(const double* V, const int64_t* T, int64_t ta, int64_t t
     return _cross_pair(S, P)
 
 
-# the rings of fixed vertices around the holes
-
-
-cdef object _sorted(int64_t[::1] a, int64_t count):
-    """The first ``count`` values of ``a``, sorted in place (``qsort``), as an array view."""
-    if count > 1:
-        qsort(&a[0], count, sizeof(int64_t), _by_value)
-    return a.base[:count] if a.base is not None else np.asarray(a)[:count]
-
-
-def rings(const int64_t[:, ::1] triangles, const int64_t[::1] indptr, const int64_t[::1] data, seeds,
-          int count):
-    """Breadth-first rings around ``seeds`` over each vertex's triangles (CSR ``indptr``, ``data``): the
-    sorted triangles touching rings ``0 .. count - 1`` and the ``count + 1`` sorted rings."""
-    cdef int64_t n = indptr.shape[0] - 1, m = triangles.shape[0], i, j, v, t, c, size, found, total = 0
-    seeds_ = np.ascontiguousarray(seeds, dtype=np.int64)
-    cdef const int64_t[::1] given = seeds_
-    if given.shape[0] and _outside(&given[0], given.shape[0], n):
-        raise ValueError("seeds outside the mesh")
-    seen_ = np.zeros(n, dtype=np.uint8)
-    took_ = np.zeros(m, dtype=np.uint8)
-    cdef uint8_t[::1] seen = seen_, took = took_
-    cdef int64_t[::1] front, touch, fresh
-    front_ = np.empty(given.shape[0], dtype=np.int64)
-    front = front_
-    size = 0
-    for i in range(given.shape[0]):  # the distinct seeds (np.unique's set; the order does not matter)
-        if not seen[given[i]]:
-            seen[given[i]] = 1
-            front[size] = given[i]
-            size += 1
-    front = front_[:size]
-    out_rings, out_taken = [np.asarray(seeds)], []
-    for _ in range(count):
-        size = 0
-        for i in range(front.shape[0]):
-            size += indptr[front[i] + 1] - indptr[front[i]]
-        touch_ = np.empty(size, dtype=np.int64)
-        touch = touch_
-        found = 0
-        with nogil:
-            for i in range(front.shape[0]):  # the ring's triangles not taken before
-                v = front[i]
-                for j in range(indptr[v], indptr[v + 1]):
-                    t = data[j]
-                    if not took[t]:
-                        took[t] = 1
-                        touch[found] = t
-                        found += 1
-        touch_ = _sorted(touch, found)
-        touch = touch_
-        total += found
-        fresh_ = np.empty(3 * found, dtype=np.int64)
-        fresh = fresh_
-        size = 0
-        with nogil:
-            for i in range(found):  # their corners not seen before: the next ring
-                for c in range(3):
-                    v = triangles[touch[i], c]
-                    if not seen[v]:
-                        seen[v] = 1
-                        fresh[size] = v
-                        size += 1
-        front_ = _sorted(fresh, size)
-        front = front_
-        out_taken.append(touch_)
-        out_rings.append(front_)
-    taken_ = np.empty(total, dtype=np.int64)
-    cdef int64_t[::1] taken = taken_
-    size = 0
-    for touch_ in out_taken:
-        touch = touch_
-        for i in range(touch.shape[0]):
-            taken[size] = touch[i]
-            size += 1
-    return _sorted(taken, total), out_rings
-
-
-# the fairing's Laplacian weights
+# the fairing system's weights
 
 
 cdef double _sum(const double* a, int64_t n) noexcept nogil:
@@ -970,37 +892,8 @@ def loop_geometry(const int64_t[::1] loop, const int64_t[::1] rows, const double
     return points_, outer_, chords_.view(bool), spacing, pairs_
 
 
-# a local mesh's edges, and the check of a re-weighted solve
 
-
-def unique_edges(const int64_t[:, ::1] tris, int64_t nv):
-    """The sorted edges ``i < j`` of a local mesh and the edge of each corner-major half-edge:
-    ``(i, j, inverse)``."""
-    cdef int64_t t = tris.shape[0], nh = 3 * t, h, e = 0, a, b
-    if t and _outside(&tris[0, 0], 3 * t, nv):
-        raise ValueError("tris index outside the nv vertices")
-    if nv >= 2**31:
-        raise ValueError("a local mesh has fewer than 2^31 vertices")
-    cdef Half* half = <Half*>malloc(max(nh, 1) * sizeof(Half))
-    if not half:
-        raise MemoryError
-    inverse_ = np.empty(nh, dtype=np.int64)
-    i_ = np.empty(nh, dtype=np.int64)
-    j_ = np.empty(nh, dtype=np.int64)
-    cdef int64_t[::1] inverse = inverse_, i = i_, j = j_
-    with nogil:
-        for h in range(nh):
-            a, b = tris[h % t, h // t], tris[h % t, (h // t + 1) % 3]
-            half[h].key = _key(a, b)
-            half[h].h = h
-        qsort(half, nh, sizeof(Half), _by_key)
-        for h in range(nh):
-            if h == 0 or half[h].key != half[h - 1].key:
-                i[e], j[e] = half[h].key >> 32, half[h].key - ((half[h].key >> 32) << 32)
-                e += 1
-            inverse[half[h].h] = e - 1
-    free(half)
-    return i_[:e].copy(), j_[:e].copy(), inverse_
+# the fairing system of a local mesh
 
 
 def patch_system(const double[:, ::1] x, const int64_t[:, ::1] tris, const int64_t[::1] i,
@@ -1283,52 +1176,7 @@ cdef int64_t _gather(const double* lo, const double* hi, const int64_t* lo_cell,
     return count
 
 
-# a small patch's local mesh and its dense fairing solve, each in one call
-
-
-def local_mesh(const int64_t[:, ::1] triangles, int64_t first_new, const int64_t[::1] ring_tris, rings,
-               int64_t nv):
-    """The input's ``ring_tris`` and the new triangles on their vertices renumbered in increasing order:
-    the vertices, the local triangles, ``rings`` renumbered and :func:`unique_edges`."""
-    cdef int64_t r = ring_tris.shape[0], q = triangles.shape[0] - first_new, t = r + q, k, c, v, count = 0
-    cdef bint bad = False
-    local_ = np.empty((t, 3), dtype=np.int64)
-    number_ = np.zeros(nv, dtype=np.int64)  # 1 + the local number (0: not local); untouched pages cost nothing
-    cdef int64_t[:, ::1] local = local_
-    cdef int64_t[::1] number = number_, ring, out
-    vertices_ = np.empty(3 * t, dtype=np.int64)
-    out = vertices_
-    with nogil:
-        for k in range(t):
-            for c in range(3):
-                v = triangles[ring_tris[k] if k < r else first_new + k - r, c]
-                if v < 0 or v >= nv:
-                    bad = True
-                    continue
-                local[k, c] = v
-                if number[v] == 0:
-                    number[v] = 1
-                    out[count] = v
-                    count += 1
-    if bad:
-        raise ValueError("a triangle outside the nv vertices")
-    with nogil:
-        qsort(&out[0], count, sizeof(int64_t), _by_value)  # increasing, as np.unique
-        for k in range(count):
-            number[out[k]] = k + 1
-        for k in range(t):
-            for c in range(3):
-                local[k, c] = number[local[k, c]] - 1
-    vertices_ = vertices_[:count].copy()
-    local_rings = []
-    for ring_ in rings:
-        ring = np.asarray(ring_, dtype=np.int64)
-        mapped_ = np.empty(ring.shape[0], dtype=np.int64)
-        out = mapped_
-        for k in range(ring.shape[0]):
-            out[k] = number[ring[k]] - 1
-        local_rings.append(mapped_)
-    return vertices_, local_, local_rings, unique_edges(local_, count)
+# the refinement's budget
 
 
 def refine_budget(points, triangles, sigma):
@@ -1337,10 +1185,3 @@ def refine_budget(points, triangles, sigma):
     area = 0.5 * np.sqrt((np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]) ** 2).sum(axis=1)).sum()
     mean = float(np.mean(sigma))
     return int(min(4.0 * area / mean**2, 2.0**62)) if mean > 0 else 0
-
-
-def ring_mesh(const int64_t[:, ::1] triangles, const int64_t[::1] indptr, const int64_t[::1] data, seeds,
-              int count, const int64_t[:, ::1] all_triangles, int64_t nv):
-    """:func:`rings` around ``seeds``, then :func:`local_mesh` of their triangles and the new ones."""
-    ring_tris, found = rings(triangles, indptr, data, seeds, count)
-    return local_mesh(all_triangles, triangles.shape[0], ring_tris, found, nv)

@@ -12,9 +12,11 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..core import tuning as core_tuning
+from ..core.arrays import concatenated_ranges
 from ..core.errors import SingularSystemError
 from ..core.solve import solve_spd
 from .crossings import _crossings
+from .find import _cross
 from .triangulate import _kernel
 
 _Edges = tuple[np.ndarray, np.ndarray, np.ndarray]  # edges i < j of a local mesh, each half-edge's edge
@@ -86,9 +88,7 @@ def _interpolation(
         k, nl = len(loop), len(numbering)
         # the membrane (continuity 0) with the loop's unit vectors as the fixed "positions"
         unit = np.eye(nl, k)
-        harmonic = _fair(
-            unit, tris_local, np.arange(k, nl), [], 0, _kernel().unique_edges(tris_local, nl), False
-        )
+        harmonic = _fair(unit, tris_local, np.arange(k, nl), [], 0, _unique_edges(tris_local, nl), False)
         r, c = np.nonzero(np.abs(harmonic) > 1e-12)
         rows.append(inner[r] - n)
         cols.append(loop[c])
@@ -98,6 +98,32 @@ def _interpolation(
     return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(p, n))
 
 
+def _rings(triangles: np.ndarray, indptr: np.ndarray, data: np.ndarray, seeds: np.ndarray, count: int):
+    """Breadth-first rings around ``seeds`` over each vertex's triangles (CSR ``indptr``, ``data``): the
+    sorted triangles touching rings ``0 .. count - 1`` and the ``count + 1`` rings (ring 0 ``seeds``)."""
+    seen, took = np.zeros(len(indptr) - 1, dtype=bool), np.zeros(len(triangles), dtype=bool)
+    front = np.unique(seeds)
+    seen[front] = True
+    rings, taken = [seeds], [np.zeros(0, dtype=np.int64)]
+    for _ in range(count):
+        t = data[concatenated_ranges(indptr[front], indptr[front + 1] - indptr[front])]
+        t = np.unique(t[~took[t]])
+        took[t] = True
+        front = np.unique(triangles[t])
+        front = front[~seen[front]]
+        seen[front] = True
+        taken.append(t)
+        rings.append(front)
+    return np.sort(np.concatenate(taken)), rings
+
+
+def _unique_edges(tris: np.ndarray, nv: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The sorted edges ``i < j`` of a local mesh and the edge of each corner-major half-edge."""
+    half = np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]])
+    keys, inverse = np.unique(half.min(axis=1) * nv + half.max(axis=1), return_inverse=True)
+    return keys // nv, keys % nv, inverse.ravel()
+
+
 def keeps_facing(x: np.ndarray, again: np.ndarray, new_tris: np.ndarray) -> bool:
     """Whether ``again`` (new positions of the last ``len(again)`` vertices of ``x``) keeps every new
     triangle facing as in ``x`` and moves no vertex by a tenth of the patch's size (obtuse slivers can
@@ -105,8 +131,8 @@ def keeps_facing(x: np.ndarray, again: np.ndarray, new_tris: np.ndarray) -> bool
     first = len(x) - len(again)
     p = x[new_tris]
     q = np.where((new_tris >= first)[..., None], again[np.maximum(new_tris - first, 0)], p)
-    before = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
-    after = np.cross(q[:, 1] - q[:, 0], q[:, 2] - q[:, 0])
+    before = _cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    after = _cross(q[:, 1] - q[:, 0], q[:, 2] - q[:, 0])
     size = np.linalg.norm(p.max(axis=(0, 1)) - p.min(axis=(0, 1))) if len(p) else 0.0
     move = np.abs(again - x[first:]).max() if len(again) else 0.0
     return bool(((before * after).sum(axis=1) > 0).all() and move < 0.1 * size)
@@ -138,9 +164,14 @@ def fair_patches(
     # numbering (nothing as long as the mesh): the new vertices, every one on a new triangle and
     # numbered last, stay last; one connectivity for every solve below
     new_tris = triangles[m:]
-    local_vertices, local, local_rings, local_edges = _kernel().ring_mesh(
-        filler.triangles, *filler.vertex_triangles, loops, continuity, triangles, total
+    indptr, data = filler.vertex_triangles
+    ring_tris, rings = _rings(filler.triangles, indptr, data, loops, continuity)
+    local_vertices, local = np.unique(
+        np.concatenate([filler.triangles[ring_tris], new_tris]), return_inverse=True
     )
+    local = local.reshape(-1, 3)
+    local_rings = [np.searchsorted(local_vertices, ring) for ring in rings]
+    local_edges = _unique_edges(local, len(local_vertices))
     local_unknown = np.arange(len(local_vertices) - len(unknown), len(local_vertices))
     refined = vertices[n:].copy()
     work = vertices  # its new rows hold the candidate being solved from or checked
