@@ -660,12 +660,9 @@ NOTES = """\
   case; from the OFF file 0.51-1.51 (horse 2.5h 58 ms against 69 in the first, of which Open3D's OFF
   reader about 43). On this virtual machine the same hole's whole call from a file (camel 6h) took
   49-60 ms (ours) and 43-75 ms (CGAL) in three back-to-back runs of five: a ratio near 1 swings either
-  way between runs. The per-hole work is compiled
-  (``o3d_lsmesh/_fill_kernel.pyx``), and a small hole's steps are each one call: the loop's
-  triangulation and refinement (``fill_loop``: the loop's geometry, the dynamic programme, the splits
-  and flips), the fixed rings with the local mesh (``ring_mesh``), the uniform and cotangent fairing
-  solves (``fair_dense_twice``: weights, normal equations, LAPACK's Cholesky reached directly), the
-  tangential relaxation, and the crossing test (``patch_crossings``: the triangles near the patch from
+  way between runs. The per-hole loops are compiled (``o3d_lsmesh/_fill_kernel.pyx``: the dynamic
+  programme, the splits and flips, the fairing system's assembly, the tangential relaxation and the
+  crossing test ``patch_crossings``: the triangles near the patch from
   uniform grids built with the filler, every new triangle against each, the separating axes). From
   arrays a single small hole costs 12-23x CGAL's prebuilt call (the analysis: 8-15 ms at 10k-20k
   vertices). What is left on a small hole is mostly the first touch of code and data after building a

@@ -393,7 +393,7 @@ def _mesh_case(kind: str, name: str, seed: int, size: float):
     return V, T
 
 
-@settings(max_examples=12, deadline=None)
+@settings(max_examples=6, deadline=None)
 @given(
     st.sampled_from(
         [("scan", "bun000.ply"), ("scan", "top3.ply"), ("scan", "ear_back.ply")]

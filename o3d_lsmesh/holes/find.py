@@ -20,9 +20,9 @@ __all__ = ["Hole", "find_holes"]
 
 
 def _loop_rows(triangles: np.ndarray, n: int, edge_info: Any) -> list[tuple[np.ndarray, np.ndarray]]:
-    """The loops of :func:`o3d_lsmesh.topology.boundary_loops`, each with the row (of
-    :func:`o3d_lsmesh.topology.halfedges`) of the one half-edge on each loop edge ``(loop[i], loop[i + 1])``;
-    ``edge_info`` is :func:`o3d_lsmesh.topology.unique_edges_and_runs` of the mesh."""
+    """The loops of :func:`o3d_lsmesh.core.boundary.boundary_loops`, each with the row (of
+    :func:`o3d_lsmesh.core.connectivity.halfedges`) of the one half-edge on each loop edge ``(loop[i], loop[i + 1])``;
+    ``edge_info`` is :func:`o3d_lsmesh.core.connectivity.unique_edges_and_runs` of the mesh."""
     (edges, counts, inverse), runs = edge_info
     loops = boundary_loops(triangles, n, _runs=runs)
     if not loops:
@@ -53,7 +53,7 @@ class Hole:
     border : bool
         Whether it is its component's outer border (see :data:`BORDER_FACING_AWAY`).
     rows : (k,) int64
-        The half-edge of each loop edge, row of :func:`o3d_lsmesh.topology.halfedges`.
+        The half-edge of each loop edge, row of :func:`o3d_lsmesh.core.connectivity.halfedges`.
     """
 
     vertices: np.ndarray
@@ -87,7 +87,7 @@ def find_holes(vertices: np.ndarray, triangles: np.ndarray, *, _edge_info=None) 
     Returns
     -------
     list of Hole
-        In the order of :func:`o3d_lsmesh.topology.boundary_loops` (by smallest vertex index).
+        In the order of :func:`o3d_lsmesh.core.boundary.boundary_loops` (by smallest vertex index).
 
     Examples
     --------

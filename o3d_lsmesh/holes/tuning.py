@@ -8,7 +8,7 @@ DP_MAX_EDGES = 200
 BORDER_FACING_AWAY = 0.25
 # "sideways" to the loop: cosine below this (a box with a hole in its top): benchmarks/results/border.md
 SIDEWAYS = 0.2
-# the largest density (the refinement's budget caps the work near density 2): benchmarks/results/fill_holes.md
+# the largest density; not fitted: the refinement's budget stops at about density 2 (see the docs page)
 DENSITY_MAX = 4.0
-# Liepa's density factor (SGP 2003, section 4), as CGAL's default: benchmarks/results/fill_holes.md
+# Liepa's density factor (SGP 2003, section 4; CGAL's default), not fitted: benchmarks/results/fill_holes.md
 ALPHA = float(np.sqrt(2.0))
