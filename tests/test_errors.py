@@ -91,7 +91,7 @@ def _cg(matrix, b, **options):
 
 
 SOLVE = [
-    (lambda: SPDSolver(EYE, magic=1), TypeError, None, "unexpected keyword argument 'magic'"),
+    (lambda: SPDSolver(EYE, magic=1), InputTypeError, "magic", "unexpected keyword argument 'magic'"),
     (lambda: SPDSolver(EYE, _plan=Plan(product_of=EYE)), InputTypeError, "matrix", "exactly one of"),
     (
         lambda: SPDSolver(EYE, backend="iterative", _plan=Plan(locality_of=sp.identity(2))),

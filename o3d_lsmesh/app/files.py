@@ -77,7 +77,8 @@ def write_atomic(value: Any, final: Path, *, kind: str, suffix: str, root: Path)
     existing folder, file by file: nothing already there is removed.
     """
     if not inside(final, root):
-        raise ValueError(f"output {str(final)!r} does not resolve to a place inside OUTDIR {str(root)!r}")
+        message = f"output {str(final)!r} does not resolve to a place inside OUTDIR {str(root)!r}"
+        raise InputError(message, param="outdir")  # a symbolic link made while the batch ran
     final.parent.mkdir(parents=True, exist_ok=True)
     temporary = final.with_name(f".{final.name}.{uuid.uuid4().hex[:12]}.tmp")
     temporary.mkdir()

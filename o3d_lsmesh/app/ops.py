@@ -184,13 +184,18 @@ class BatchOp:
 
     def __post_init__(self) -> None:
         if self.output not in ("mesh", "bytes", "files", "none"):
-            raise ValueError(f"output must be one of mesh, bytes, files, none, got {self.output!r}")
+            raise InputError(
+                f"output must be one of mesh, bytes, files, none, got {self.output!r}", param="output"
+            )
         if self.output == "bytes" and not self.extension.startswith("."):
-            raise ValueError(f"extension must start with '.' for a bytes output, got {self.extension!r}")
+            message = f"extension must start with '.' for a bytes output, got {self.extension!r}"
+            raise InputError(message, param="extension")
         for option in self.options:
             if option.name in RESERVED:
-                raise ValueError(
-                    f"option name {option.name!r} of op {self.name!r} is a flag of the batch itself"
+                raise InputError(
+                    f"options must not reuse a parameter of the batch itself, got option name "
+                    f"{option.name!r} of op {self.name!r}",
+                    param="options",
                 )
 
 

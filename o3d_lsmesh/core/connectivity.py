@@ -15,6 +15,7 @@ import scipy.sparse as sp
 from scipy.sparse import csgraph
 
 from .arrays import _run_lengths, _runs, gather, run_heads
+from .errors import InputError
 
 __all__ = [
     "Connectivity",
@@ -460,7 +461,7 @@ def directed_edges(triangles: np.ndarray, n: int):
     """
     bits = max(1, int(n - 1).bit_length())
     if 2 * bits > 62:  # beyond 2^31 vertices: keys by multiplication do not fit either
-        raise ValueError(f"n must be below 2**31, got {n}")
+        raise InputError(f"mesh must have fewer than 2**31 vertices, got {n}", param="mesh")
     shift = np.int64(bits)
     triangles = np.asarray(triangles, dtype=np.int64)
     m = len(triangles)

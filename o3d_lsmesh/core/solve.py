@@ -152,7 +152,9 @@ class SPDSolver:
     ) -> None:
         unknown = sorted(set(deprecated) - set(Plan.__dataclass_fields__))
         if unknown:
-            raise TypeError(f"SPDSolver() got an unexpected keyword argument {unknown[0]!r}")
+            raise InputTypeError(
+                f"SPDSolver() got an unexpected keyword argument {unknown[0]!r}", param=unknown[0]
+            )
         plan = replace(_plan or Plan(), **deprecated)
         backend = as_choice(backend, BACKENDS, name="backend")
         self.preconditioner = as_choice(plan.preconditioner, PRECONDITIONERS, name="preconditioner")

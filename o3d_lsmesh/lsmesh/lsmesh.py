@@ -39,7 +39,9 @@ def laplacian_matrix(vertices: np.ndarray, triangles: np.ndarray, kind: str) -> 
     return operators.cotangent_laplacian(vertices, conn)
 
 
-def check_components_constrained(graph: sp.spmatrix, constrained: np.ndarray, *, what: str) -> np.ndarray:
+def check_components_constrained(
+    graph: sp.spmatrix, constrained: np.ndarray, *, what: str, param: str | None = None
+) -> np.ndarray:
     """Component labels ``(n,)`` of ``graph`` (an ``(n, n)`` matrix of the edge pattern), or
     :class:`SingularSystemError` if a component (an unreferenced vertex is one) has no ``constrained`` index."""
     count, labels = csgraph.connected_components(graph, directed=False)
@@ -50,7 +52,8 @@ def check_components_constrained(graph: sp.spmatrix, constrained: np.ndarray, *,
         first = int(np.flatnonzero(~has[labels])[0])
         raise SingularSystemError(
             f"every connected component needs at least one {what}, got {missing} of {count} components "
-            f"without one (first at vertex {first}); the least-squares system would be singular"
+            f"without one (first at vertex {first}); the least-squares system would be singular",
+            param=param,
         )
     return labels
 
@@ -91,7 +94,9 @@ class LSMeshSystem:
         self._lock = threading.RLock()
         backend = solver_backend(solver, backend)
         L = laplacian_matrix(vertices, triangles, laplacian).tocsr()
-        labels = check_components_constrained(L, indices, what="control vertex")
+        labels = check_components_constrained(
+            L, indices, what="control vertex", param="constraint_vertex_indices"
+        )
         if not interpolate:
             # squares of huge weights overflow; tiny ones leave a component's translation to round-off
             check_finite(lambda: weights**2, name="weights", what="weights**2")
@@ -465,7 +470,9 @@ def reconstruct_geometry(
     check_progress(progress)
     L = laplacian_matrix(data.vertices, data.triangles, laplacian).tocsc()
     # checked here for both schemes, so that the message names the known vertices the caller left
-    check_components_constrained(L, known, what="known vertex (outside unknown_vertex_indices)")
+    check_components_constrained(
+        L, known, what="known vertex (outside unknown_vertex_indices)", param="unknown_vertex_indices"
+    )
     with stages(progress, "reconstruct_geometry", ("factor", "solve")) as begin:
         begin("factor")
         if not interpolate:
