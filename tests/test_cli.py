@@ -607,6 +607,17 @@ def test_internal_errors_show_a_traceback_and_exit_1(tmp_path, capsys, clean, mo
     assert main(["denoise", str(source), str(tmp_path / "out.ply"), "--quiet"]) == 1
     assert "Traceback" in capsys.readouterr().err
 
+    def invariant(*args, **kwargs):  # a plain ValueError raised by o3d_lsmesh itself: a bug all the same
+        from o3d_lsmesh.core.connectivity import Connectivity
+
+        return Connectivity(np.zeros((2, 2), np.int64))
+
+    monkeypatch.setattr(importlib.import_module("o3d_lsmesh.fairing"), "constrained_fairing", invariant)
+    assert main(["denoise", str(source), str(tmp_path / "out.ply"), "--quiet"]) == 1
+    err = capsys.readouterr().err
+    assert "o3d_lsmesh/core/connectivity.py" in err.replace(os.sep, "/") and "triangles must have shape" in err
+    assert err.strip().splitlines()[-1].startswith("o3d-lsmesh: internal error")
+
 
 def test_only_expected_user_errors_exit_2(tmp_path, capsys, clean, monkeypatch):
     import importlib
@@ -919,6 +930,14 @@ def test_input_errors_are_mapped_to_flags_by_param_not_by_words():
     assert user_message(error, args) == "--mu must be None for --method local, got 1"
     error = InputError("number_of_iterations must be >= 0", param="number_of_iterations")
     assert user_message(error, args) == "--iterations must be >= 0"
+    # a parameter with an underscore is its flag wherever its own error names it; other words stay
+    error = InputError("mu must be positive (number_of_iterations counts)", param="mu")
+    assert user_message(error, args) == "--mu must be positive (number_of_iterations counts)"
+    error = InputError("fewer than 10 (within number_of_iterations)", param="number_of_iterations")
+    assert user_message(error, args) == "fewer than 10 (within --iterations)"
+    # a switch's parameter may mean its negation: named only where it leads the message
+    error = InputError("a closed mesh has no smooth_boundary", param="smooth_boundary")
+    assert user_message(error, args) == "--fixed-boundary: a closed mesh has no smooth_boundary"
 
 
 def test_invalid_mesh_files_are_named_in_the_error(tmp_path, capsys, clean):

@@ -13,7 +13,7 @@ import argparse
 import dataclasses
 import inspect
 import json
-import os
+import re
 import sys
 import textwrap
 import time
@@ -161,24 +161,27 @@ def _spell(param: str, args: argparse.Namespace | None) -> str:
     return "--" + param.replace("_", "-") if hasattr(args, param) else param
 
 
-def user_message(error: Exception, args: argparse.Namespace | None) -> str:
-    """An input error in the words of the command line, by its ``param`` and the command's option table."""
-    text, param = str(error), getattr(error, "param", None)
-    if param is None and not isinstance(error, InputError):  # not an InputError yet: "<param> must ..."
-        head = text.split(" ", 1)[0]
-        param = head if head in getattr(args, "flags", {}) or hasattr(args, head) else None
+def user_message(error: InputError, args: argparse.Namespace | None) -> str:
+    """``error`` in the words of the command line: its ``param`` spelled as the command's flag or file.
+
+    The flag replaces the parameter leading the message (``"<param> must ..."``), or prefixes it; a
+    parameter with an underscore (no English word has one) is its flag wherever the message names it,
+    unless a switch's (it may mean the negation). An option quoted with one of its choices
+    (``method='local'``) reads ``--method local``.
+    """
+    text, param = str(error), error.param
     for name, flag in getattr(args, "flags", {}).items():
         option = _option(args, name)
         for value in getattr(getattr(option, "parse", None), "choices", None) or ():
             text = text.replace(f"{name}={value!r}", f"{flag} {value}")
-        # an API name (an identifier) the flag renames; not a switch's: it may mean the parameter's negation
-        if "_" in name and flag != "--" + name.replace("_", "-") and not (option and option.is_flag):
-            text = text.replace(name, flag)
     if param:
         word = _spell(param, args)
-        if text.startswith(param + " "):
+        option = _option(args, param)
+        if "_" in param and param in getattr(args, "flags", {}) and not (option and option.is_flag):
+            text = re.sub(rf"\b{re.escape(param)}\b", word, text)
+        elif text.startswith(param + " "):
             text = word + text[len(param) :]
-        elif word != param and not text.startswith(word):
+        if word != param and word not in text:
             text = f"{word}: {text}"
     return text
 
@@ -186,16 +189,6 @@ def user_message(error: Exception, args: argparse.Namespace | None) -> str:
 def _option(args: argparse.Namespace | None, param: str) -> Option | None:
     op = OPS.get(getattr(args, "command", None) or "")
     return next((o for o in op.options if o.api_param == param), None) if op else None
-
-
-def _from_library(error: BaseException) -> bool:
-    """Whether ``error`` was raised in o3d_lsmesh (its innermost frame), not in numpy, Open3D or the caller.
-
-    Transitional, until every check of the library raises :class:`InputError`.
-    """
-    frames = traceback.extract_tb(error.__traceback__)
-    package = os.path.dirname(os.path.dirname(os.path.abspath(__file__))) + os.sep
-    return bool(frames) and os.path.abspath(frames[-1].filename).startswith(package)
 
 
 def fail(text: str, code: int) -> int:
@@ -465,11 +458,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return int(args.handler(args, Run(args)))
     except CLIError as error:
         return fail(str(error), 2)
-    except InputError as error:
+    except InputError as error:  # by class: any other ValueError or TypeError is a bug (below)
         return fail(user_message(error, args), 2)
-    except (ValueError, TypeError) as error:
-        # until every library check raises InputError: one raised in o3d_lsmesh is the user's
-        return fail(user_message(error, args), 2) if _from_library(error) else internal_error(error)
     except MemoryError:
         return fail("not enough memory for this request: try a smaller mesh or smaller options", 2)
     except OSError as error:
