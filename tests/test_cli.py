@@ -615,7 +615,9 @@ def test_internal_errors_show_a_traceback_and_exit_1(tmp_path, capsys, clean, mo
     monkeypatch.setattr(importlib.import_module("o3d_lsmesh.fairing"), "constrained_fairing", invariant)
     assert main(["denoise", str(source), str(tmp_path / "out.ply"), "--quiet"]) == 1
     err = capsys.readouterr().err
-    assert "o3d_lsmesh/core/connectivity.py" in err.replace(os.sep, "/") and "triangles must have shape" in err
+    assert (
+        "o3d_lsmesh/core/connectivity.py" in err.replace(os.sep, "/") and "triangles must have shape" in err
+    )
     assert err.strip().splitlines()[-1].startswith("o3d-lsmesh: internal error")
 
 
