@@ -28,7 +28,6 @@ by default; a few minutes on 2 cores). Writes ``benchmarks/results/realscans.md`
 
 from __future__ import annotations
 
-import dataclasses
 import os
 import sys
 import time
@@ -39,8 +38,9 @@ import open3d as o3d
 from _common import DATA, REPO, markdown_table, timed, write_markdown
 
 import o3d_lsmesh
-from o3d_lsmesh.selection import start_vertices
-from o3d_lsmesh.topology import boundary_chains, boundary_halfedges, connected_components
+from o3d_lsmesh.core.boundary import boundary_chains, boundary_halfedges
+from o3d_lsmesh.core.connectivity import connected_components
+from o3d_lsmesh.lsmesh.selection import start_vertices
 
 SCANS = Path(os.environ.get("O3D_LSMESH_SCANS", REPO.parent / "shared" / "data" / "scans"))
 SECTIONS = ("timing", "topology", "pinches")
@@ -240,7 +240,7 @@ def timing_and_topology(scans, *, want_timing=True, want_topology=True):
 
 def pinches(scans):
     """Distance of boundary vertices to bunny.ply after constrained_fairing, pinches moving or held."""
-    from o3d_lsmesh.fairing import barycenter, constrained
+    from o3d_lsmesh.fairing import constrained
 
     reference = DATA / "bunny.ply"
     if not reference.exists():
@@ -252,15 +252,12 @@ def pinches(scans):
     def distance(points):
         return scene.compute_distance(o3d.core.Tensor(points.astype(np.float32))).numpy().astype(np.float64)
 
-    moving = barycenter.fairing_topology
+    # the fairing walks its boundary curves with core.boundary.boundary_curves (loops pass through the
+    # pinches, which move); held: the boundary cut into chains at the pinches, whose ends are held
+    moving = constrained.boundary_curves
 
-    def held(triangles, n, *, with_loops):
-        topo = moving(triangles, n, with_loops=with_loops)
-        return (
-            dataclasses.replace(topo, loops=boundary_chains(triangles, n))
-            if with_loops and len(topo.loops)
-            else topo
-        )
+    def held(triangles, n, **_edges):
+        return boundary_chains(triangles, n)
 
     rows, totals = [], []
     for name, path in scans:
@@ -281,11 +278,11 @@ def pinches(scans):
             if method is None:
                 P = V
             else:
-                constrained.fairing_topology = moving if mode == "move" else held
+                constrained.boundary_curves = moving if mode == "move" else held
                 try:
                     P = o3d_lsmesh.fairing.constrained_fairing_arrays(V, F, method=method)
                 finally:
-                    constrained.fairing_topology = moving
+                    constrained.boundary_curves = moving
             line += [
                 1e6 * distance(P[pinch]).mean(),
                 1e6 * distance(P[near]).mean(),
