@@ -488,14 +488,21 @@ def solve_spd(matrix: Any, rhs: np.ndarray, *, isolate_nonfinite: bool = False) 
             if ok.any():
                 x[ok] = solve_spd(matrix[ok][:, ok], rhs[ok])
             return x
-    from scipy.linalg import cho_factor, cho_solve
-
     if matrix.shape[0] > tuning.DENSE_UNKNOWNS:
         # small systems: SciPy without its warning when CHOLMOD is missing
         backend = "auto" if cholmod_available() else "scipy"
         return SPDSolver(sp.csc_matrix(matrix), ordering="amd", backend=backend).solve(np.asarray(rhs))
+    from scipy.linalg.lapack import dpotrf, dpotrs  # cho_factor/cho_solve's calls, without their checks
+
     dense = matrix.toarray() if sp.issparse(matrix) else np.asarray(matrix, dtype=np.float64)
-    try:
-        return cho_solve(cho_factor(dense), rhs)
-    except np.linalg.LinAlgError as error:
-        raise SingularSystemError(f"the system is not positive definite: {error}") from error
+    rhs = np.asarray(rhs, dtype=np.float64)
+    if not (np.isfinite(dense).all() and np.isfinite(rhs).all()):
+        raise ValueError("array must not contain infs or NaNs")
+    if not len(dense):
+        return np.zeros(rhs.shape)
+    factor, info = dpotrf(dense, lower=0, clean=0)
+    if info > 0:
+        raise SingularSystemError(
+            f"the system is not positive definite: {info}-th leading minor of the array is not positive definite"
+        )
+    return dpotrs(factor, rhs, lower=0)[0]
