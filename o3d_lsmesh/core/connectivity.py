@@ -466,8 +466,7 @@ def directed_edges(triangles: np.ndarray, n: int):
     triangles = np.asarray(triangles, dtype=np.int64)
     m = len(triangles)
     corners = triangles.T  # a view: columns read in place
-    # written in place: on large meshes fresh temporaries cost as much as the sort
-    keys = np.empty(6 * m, dtype=np.int64)
+    keys = np.empty(6 * m, dtype=np.int64)  # in place: on large meshes temporaries cost as much as the sort
     rows = keys.reshape(6, m)
     np.left_shift(corners, shift, out=rows[:3])
     rows[3:] = rows[:3]

@@ -150,11 +150,9 @@ class SPDSolver:
         _plan: Plan | None = None,
         **deprecated: Any,
     ) -> None:
-        unknown = sorted(set(deprecated) - set(Plan.__dataclass_fields__))
+        unknown = next(iter(sorted(set(deprecated) - set(Plan.__dataclass_fields__))), None)
         if unknown:
-            raise InputTypeError(
-                f"SPDSolver() got an unexpected keyword argument {unknown[0]!r}", param=unknown[0]
-            )
+            raise InputTypeError(f"SPDSolver() got an unexpected keyword argument {unknown!r}", param=unknown)
         plan = replace(_plan or Plan(), **deprecated)
         backend = as_choice(backend, BACKENDS, name="backend")
         self.preconditioner = as_choice(plan.preconditioner, PRECONDITIONERS, name="preconditioner")
