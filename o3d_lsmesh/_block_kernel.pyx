@@ -7,6 +7,7 @@ on every core (OpenMP; ``OMP_NUM_THREADS`` sets how many). A Gauss-Seidel sweep 
 nature: each column gets the arithmetic of pyamg's ``gauss_seidel`` (same products in the same order),
 and for several cores the rows are cut into a fixed number of blocks swept side by side (hybrid
 Gauss-Seidel), a count set by the matrix's size alone, so results never depend on the thread count.
+:func:`no_huge_pages` is the package's one OS memory advice (for large work arrays).
 """
 
 import numpy as np
@@ -27,6 +28,28 @@ cdef extern from *:
     """
     int omp_get_max_threads() noexcept nogil
 
+cdef extern from *:
+    # the OS's public madvise where it has transparent huge pages (Linux; NumPy advises them there only),
+    # nothing elsewhere (macOS, Windows)
+    """
+    #if defined(__linux__)
+    #include <stdint.h>
+    #include <sys/mman.h>
+    #include <unistd.h>
+    #endif
+    static int o3d_no_huge_pages(char* p, size_t n) {
+    #if defined(__linux__) && defined(MADV_NOHUGEPAGE)
+        uintptr_t page = (uintptr_t)sysconf(_SC_PAGESIZE);
+        uintptr_t start = ((uintptr_t)p + page - 1) / page * page, end = ((uintptr_t)p + n) / page * page;
+        return end > start ? madvise((void*)start, end - start, MADV_NOHUGEPAGE) : 0;
+    #else
+        (void)p; (void)n;
+        return 0;
+    #endif
+    }
+    """
+    int o3d_no_huge_pages(char* p, size_t n) noexcept nogil
+
 #: Loops over fewer rows stay on one thread: a parallel region costs a time slice whenever another job
 #: holds a core the team waits for (benchmarks/results/realscans_denoise_speed.md); results do not
 #: depend on the thread count.
@@ -42,6 +65,28 @@ def threads(Py_ssize_t rows):
     """Threads a parallel loop over ``rows`` rows runs on: OpenMP's limit in the calling thread
     (``OMP_NUM_THREADS``, threadpoolctl's ``threadpool_limits``) from :data:`PARALLEL_ROWS` rows, else 1."""
     return _threads(rows)
+
+
+def no_huge_pages(array):
+    """``array``, its buffer's whole pages advised to the OS as no transparent huge pages (``madvise``).
+
+    For a fresh ``np.empty`` or ``np.zeros`` of many megabytes, before it is written: NumPy advises huge
+    pages for such arrays, and on a kernel that compacts memory at the fault they cost more system time
+    than they save (``docs/algorithms/constrained_fairing.rst``). The data are untouched; a no-op where
+    the OS has no such advice (outside Linux), for an empty array or one within a page.
+
+    Raises
+    ------
+    ValueError
+        ``array`` is not a C-contiguous ndarray.
+    """
+    if not isinstance(array, np.ndarray):
+        raise ValueError(f"array must be a C-contiguous numpy array, got {type(array).__name__}")
+    if not array.flags.c_contiguous:
+        raise ValueError(f"array must be a C-contiguous numpy array, got strides {array.strides} of shape {array.shape}")
+    if array.nbytes:
+        o3d_no_huge_pages(<char*> <size_t> array.__array_interface__["data"][0], array.nbytes)
+    return array
 
 
 ctypedef fused index_t:

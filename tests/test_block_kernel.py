@@ -524,3 +524,47 @@ def test_symmetry_gap_is_the_dense_largest_difference_to_the_transpose(seed):
     difference = np.abs(dense - dense.T)
     assert gap == difference.max() and (gap == 0 or (difference[i, j] == gap and dense[i, j] != 0))
     assert above == np.count_nonzero(np.triu(dense, 1))
+
+
+@pytest.mark.parametrize("size", [0, 1, 7, 511, 512, 513, 4096, 1 << 20])
+@pytest.mark.parametrize("offset", [0, 1, 8, 4095])
+def test_no_huge_pages_leaves_any_array_as_it_was(size, offset):
+    # any size, any alignment of the buffer (a view that starts inside a page), read-only too
+    rng = np.random.default_rng(size + offset)
+    base = rng.integers(0, 256, size=size + offset + 8, dtype=np.uint8)
+    before = base.copy()
+    array = base[offset : offset + size]
+    assert _block_kernel.no_huge_pages(array) is array
+    np.testing.assert_array_equal(base, before)  # the array and its neighbours
+    array.flags.writeable = False
+    assert _block_kernel.no_huge_pages(array) is array
+    fresh = _block_kernel.no_huge_pages(np.zeros((size, 3)))  # advised before it is written
+    fresh[:] = 1.5
+    assert fresh.sum() == 4.5 * size
+
+
+def test_no_huge_pages_refuses_what_has_no_single_buffer():
+    with pytest.raises(ValueError, match="C-contiguous"):
+        _block_kernel.no_huge_pages(np.zeros((4, 4))[:, ::2])
+    with pytest.raises(ValueError, match="C-contiguous"):
+        _block_kernel.no_huge_pages(np.zeros((4, 4)).T)
+    with pytest.raises(ValueError, match="numpy array"):
+        _block_kernel.no_huge_pages([1.0, 2.0])
+    empty = np.zeros((0, 3))[:, ::2]  # an empty view is C-contiguous: nothing to advise
+    assert _block_kernel.no_huge_pages(empty) is empty
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the advice exists on Linux only")
+def test_no_huge_pages_advises_the_arrays_whole_pages():
+    array = _block_kernel.no_huge_pages(np.empty(1 << 22))  # 32 MiB
+    inside = array.__array_interface__["data"][0] + 4096  # within its first whole page
+    area = None
+    with open("/proc/self/smaps") as smaps:
+        for line in smaps:
+            if line.startswith("VmFlags:") and area is not None and area[0] <= inside < area[1]:
+                assert "nh" in line.split()  # the kernel's flag of MADV_NOHUGEPAGE
+                return
+            first = line.split()[0]
+            if "-" in first and not first.endswith(":"):
+                area = tuple(int(x, 16) for x in first.split("-"))
+    pytest.fail("the array's pages are not in /proc/self/smaps")

@@ -12,6 +12,8 @@ in full: ``docs/algorithms/mesh_hierarchy.rst``.
 
 import numpy as np
 
+from .._block_kernel import no_huge_pages
+
 from libc.math cimport INFINITY, fabs, rint, sqrt
 from libc.stdint cimport int32_t, int64_t, uint8_t
 from libc.string cimport memset
@@ -21,16 +23,13 @@ cdef enum: LOCKED = 1, BOUNDARY = 2, TOUCHED = 4  # TOUCHED: in the closed 1-rin
 cdef struct Vertex:  # together, so that a visit's random reads of a neighbour hit one cache line
     int32_t start, corners, valence, flags  # corners pair[2 * start:][:2 * corners]; ring ring[2 * start:][:valence]
 
-cdef extern from *:  # PLAIN: madvise from the first whole 4 KiB page (an aligned start); NumPy advises on Linux only
-    "#if defined(__GNUC__) || defined(__clang__)\n#define PREFETCH(p) __builtin_prefetch(p)\n#else\n#define PREFETCH(p) ((void)0)\n#endif\n#ifdef __linux__\n#include <sys/mman.h>\n#define PLAIN(p, n, s) ((n) > (s) ? madvise((p) + (s), (n) - (s), MADV_NOHUGEPAGE) : 0)\n#else\n#define PLAIN(p, n, s) 0\n#endif"
+cdef extern from *:
+    "#if defined(__GNUC__) || defined(__clang__)\n#define PREFETCH(p) __builtin_prefetch(p)\n#else\n#define PREFETCH(p) ((void)0)\n#endif"
     void prefetch "PREFETCH"(const void* p) noexcept nogil
-    int plain_pages "PLAIN"(char* p, size_t n, size_t skip) noexcept nogil
 
 def _empty(shape, dtype):
-    """``np.empty`` on 4 KiB pages (not NumPy's huge pages, zeroed whole; see docs/algorithms/mesh_hierarchy.rst)."""
-    a = np.empty(shape, dtype)
-    plain_pages(<char*> <size_t> a.ctypes.data, a.nbytes, -a.ctypes.data % 4096)
-    return a
+    """``np.empty`` on small pages, not NumPy's huge pages (zeroed whole; docs/algorithms/mesh_hierarchy.rst)."""
+    return no_huge_pages(np.empty(shape, dtype))
 
 cdef inline double _dot(const double* a, const double* b) noexcept nogil:
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
