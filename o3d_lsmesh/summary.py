@@ -28,7 +28,10 @@ DEGENERATE_TOLERANCE = 1e-10
 
 def topology_summary_arrays(vertices: np.ndarray, triangles: np.ndarray) -> dict:
     """Array core of :func:`topology_summary` (``(n, 3) float64`` vertices, ``(m, 3) int64`` triangles)."""
-    vertices, F = mesh_arrays(vertices, triangles)
+    return _summary(*mesh_arrays(vertices, triangles))
+
+
+def _summary(vertices: np.ndarray, F: np.ndarray) -> dict:
     n, m = len(vertices), len(F)
     referenced = np.zeros(n, dtype=bool)
     referenced[F.ravel()] = True
@@ -154,5 +157,5 @@ def topology_summary(mesh: AnyMesh) -> dict:
     >>> s["boundary_loops"], s["boundary_components"], s["nonmanifold_vertices"], s["total_genus"]
     (2, 1, 1, 0)
     """
-    data = read_mesh(mesh)
-    return topology_summary_arrays(data.vertices, data.triangles)
+    data = read_mesh(mesh)  # validated once
+    return _summary(data.vertices, data.triangles)

@@ -11,6 +11,7 @@ primitives: :mod:`._o3d.io`; pickling: :mod:`._o3d.state`. The open3d import is 
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
 from dataclasses import dataclass
 from typing import Any, NamedTuple
@@ -194,7 +195,8 @@ def read_mesh(mesh: Any, *, name: str = "mesh", weld: bool = False, narrow: bool
     ``weld=True`` merges vertices at exactly equal coordinates (:func:`weld_map`; indices map with
     :meth:`MeshData.welded_indices` / :meth:`MeshData.source_indices`). ``narrow=True``: int32
     triangles, shared with a legacy source, for callers that only read them. Every kind goes
-    through :func:`~o3d_lsmesh.core.validate.mesh_arrays`; a :class:`MeshData` is returned as it is.
+    through :func:`~o3d_lsmesh.core.validate.mesh_arrays` once: a :class:`MeshData` is not checked again
+    (its positions are copied; it is welded when ``weld=True`` asks for it).
 
     Raises
     ------
@@ -203,27 +205,30 @@ def read_mesh(mesh: Any, *, name: str = "mesh", weld: bool = False, narrow: bool
     InputError
         A tensor mesh without positions; see :func:`~o3d_lsmesh.core.validate.mesh_arrays`.
     """
-    if isinstance(mesh, MeshData):
-        return mesh  # read and validated once already (the application's pipeline)
-    kind = _kind(mesh, name=name)
-    if kind == "legacy":
-        raw_v, raw_t = np.asarray(mesh.vertices), np.asarray(mesh.triangles)
-    elif kind == "tensor":
-        if "positions" not in mesh.vertex:
-            raise InputError(f"{name} must have vertex positions, got an empty mesh", param=name)
-        raw_v = mesh.vertex.positions.cpu().numpy()
-        raw_t = (
-            mesh.triangle.indices.cpu().numpy() if "indices" in mesh.triangle else np.zeros((0, 3), np.int64)
-        )
+    if isinstance(mesh, MeshData):  # read and validated once already (the application's pipeline)
+        if not weld or mesh.split is not None:  # its own positions: callers may write to theirs
+            return dataclasses.replace(mesh, vertices=mesh.vertices.copy())
+        vertices, triangles = mesh.vertices.copy(), mesh.triangles.astype(np.int64, copy=False)
+        source, kind = mesh.source, mesh.kind
     else:
-        raw_v, raw_t = mesh
-    vertices, triangles = mesh_arrays(raw_v, raw_t, name=name, narrow=narrow)
+        kind, source = _kind(mesh, name=name), mesh
+        if kind == "legacy":
+            raw_v, raw_t = np.asarray(mesh.vertices), np.asarray(mesh.triangles)
+        elif kind == "tensor":
+            if "positions" not in mesh.vertex:
+                raise InputError(f"{name} must have vertex positions, got an empty mesh", param=name)
+            raw_v = mesh.vertex.positions.cpu().numpy()
+            indices = mesh.triangle.indices.cpu().numpy() if "indices" in mesh.triangle else None
+            raw_t = np.zeros((0, 3), np.int64) if indices is None else indices
+        else:
+            raw_v, raw_t = mesh
+        vertices, triangles = mesh_arrays(raw_v, raw_t, name=name, narrow=narrow)
     split = weld_map(vertices, triangles) if weld else None
     if split is not None:
         welded = np.zeros((int(split.max()) + 1, 3))
         welded[split] = vertices  # duplicates hold the same coordinates: any writer gives the same row
-        return MeshData(welded, split[triangles], mesh, kind, split, triangles)
-    return MeshData(vertices, triangles, mesh, kind)
+        return MeshData(welded, split[triangles], source, kind, split, triangles)
+    return MeshData(vertices, triangles, source, kind)
 
 
 def template(kind: str, tensor_format: tuple = ()) -> MeshData:

@@ -139,8 +139,12 @@ def signed_volume(mesh: AnyMesh) -> float:
     2.0
     """
     data = read_mesh(mesh)
-    top = float(np.abs(data.vertices).max()) or 1.0
-    c = data.vertices[data.triangles] / top
+    return _volume(data.vertices, data.triangles)
+
+
+def _volume(vertices: np.ndarray, triangles: np.ndarray) -> float:
+    top = float(np.abs(vertices).max()) or 1.0
+    c = vertices[triangles] / top
     return float(np.einsum("ij,ij->i", c[:, 0], np.cross(c[:, 1], c[:, 2])).sum() / 6.0) * top**3
 
 
@@ -178,8 +182,8 @@ def shape_change(before: AnyMesh, after: AnyMesh) -> dict:
     unmatched = np.bincount(conn.halfedge_edge, weights=direction, minlength=len(conn.edges)) != 0
     if not unmatched.any():
         volume_before, volume_after = (
-            signed_volume((a.vertices, triangles)),
-            signed_volume((b.vertices, b.triangles)),
+            _volume(a.vertices, triangles),
+            _volume(b.vertices, b.triangles),
         )
         change = 100.0 * (volume_after - volume_before) / volume_before if volume_before != 0 else None
         return {

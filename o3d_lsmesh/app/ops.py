@@ -320,6 +320,9 @@ def change_metrics(before: Any, after: Any) -> dict:
 )
 def denoise_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
     """``--op denoise`` and ``o3d-lsmesh denoise``: fairing with the method and iterations that ran."""
+    from .._o3d import read_mesh
+
+    mesh = read_mesh(mesh)  # validated once: the fairing and the metrics take it as it is
     level, progress = options["level"], context.progress
     if level:
         from ..fairing.multiresolution import multiresolution_fairing
@@ -352,8 +355,10 @@ def denoise_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dic
 @operation("fill", options=FILL, help="fill holes with faired patches (LS meshes)")
 def fill_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
     """``--op fill`` and ``o3d-lsmesh fill``: counts of new elements and of the loops filled and left open."""
+    from .._o3d import read_mesh
     from ..holes import fill_holes
 
+    mesh = read_mesh(mesh)  # validated once (fill_holes welds it without a second check)
     out, report = fill_holes(mesh, **options, progress=context.progress, return_report=True)
     return out, {
         "new_vertices": len(out.vertices) - len(mesh.vertices),
@@ -399,9 +404,11 @@ def hierarchy_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, d
 @operation("approximate", options=APPROXIMATE, help="LS-mesh approximation from control points")
 def approximate_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
     """``--op approximate`` and ``o3d-lsmesh approximate``: the result, its control indices and errors."""
+    from .._o3d import read_mesh
     from ..lsmesh.selection import approximate
     from .metrics import vertex_error
 
+    mesh = read_mesh(mesh)  # validated once: the selection and the metrics take it as it is
     count = resolve_count(options["count"], len(mesh.vertices))
     method, interpolate, seed = options["method"], options["interpolate"], options["seed"]
     out, indices = approximate(
