@@ -230,7 +230,9 @@ def fair_local(positions, conn, number_of_iterations, smooth_boundary, reimpose_
     # E3 @ X0 is formed during the assembly; E3 itself is kept only when the targets are re-taken
     op = local_operator(conn, positions0=positions, keep_constraint=reimpose_every is not None)
     constant = op.initial
-    spare, work = np.empty(positions.shape), np.empty(positions.shape)
+    from .._block_kernel import no_huge_pages  # compiled by the package's build: imported where used
+
+    spare, work = (no_huge_pages(np.empty(positions.shape)) for _ in range(2))
     result = positions
     curve_target = curve.target(positions)
     steps = iterate(progress, range(number_of_iterations), desc="constrained fairing (local)")
