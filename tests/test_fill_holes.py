@@ -21,6 +21,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 
 from o3d_lsmesh import O3DLSMeshWarning, _fill_kernel, fill_holes
+from o3d_lsmesh.core.operators import patch_system
 from o3d_lsmesh.holes import DP_MAX_EDGES, HoleFiller, fill_holes_arrays, find_holes
 from o3d_lsmesh.holes.crossings import _crossings, _TriangleIndex
 from o3d_lsmesh.holes.fair import _rings, keeps_facing
@@ -1279,9 +1280,9 @@ def test_patch_system_is_the_plain_loop_energy(seed, size, level, cot, dense):
     # the normal equations with NumPy; unknowns anywhere in the numbering
     points, tris, rng = _random_patch(seed, size, 0.5)
     n = len(points)
-    half = np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1)
-    keys, inverse = np.unique(half[:, 0] * n + half[:, 1], return_inverse=True)
-    i, j = keys // n, keys % n
+    i, j = np.array(
+        sorted({(min(a, b), max(a, b)) for t in tris.tolist() for a, b in zip(t, t[1:] + t[:1])})
+    ).T
     w, degree, scale = _plain_weights(points, tris, i, j, cot)
     K = np.diag(degree)
     K[i, j] = K[j, i] = -w
@@ -1301,14 +1302,8 @@ def test_patch_system_is_the_plain_loop_energy(seed, size, level, cot, dense):
             valid = np.isin(i, np.union1d(touched, ring1)) & np.isin(j, np.union1d(touched, ring1))
             A = L[i[rows & valid]] - L[j[rows & valid]]
         normal, rhs = A[:, unknown].T @ A[:, unknown], -A[:, unknown].T @ (A[:, known] @ points[known])
-    got, got_rhs = _fill_kernel.patch_system(
-        points, tris, i, j, inverse, unknown, ring0, ring1, level, cot, dense
-    )
-    if not dense:
-        indptr, indices, data = got
-        M = np.zeros((len(indptr) - 1, len(unknown)))
-        np.add.at(M, (np.repeat(np.arange(len(indptr) - 1), np.diff(indptr)), indices), data)
-        got, got_rhs = (M, got_rhs) if level == 0 else (M.T @ M, -M.T @ got_rhs)
+    got, got_rhs = patch_system(points, tris, unknown, [ring0, ring1], level, cotangent=cot, dense=dense)
+    got = got if dense else got.toarray()
     big = np.abs(K).max() ** 2 * max(1.0, np.abs(scale).max()) ** 2
     np.testing.assert_allclose(got, normal, rtol=1e-9, atol=1e-10 * big)
     np.testing.assert_allclose(got_rhs, rhs, rtol=1e-9, atol=1e-10 * big * size)

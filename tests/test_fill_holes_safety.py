@@ -174,30 +174,23 @@ def test_non_finite_cotangent_system_falls_back_for_its_hole_alone(monkeypatch):
     # dragon.ply: one hole's cotangent system was not finite and the whole call raised "matrix must have
     # finite entries", blaming the input. Here one hole's cotangent weights are made infinite: that hole
     # gets the uniform fill, the other the cotangent one, each as when filled alone; no error.
-    from o3d_lsmesh.holes import triangulate as hole_filling
+    from o3d_lsmesh import _fill_kernel
 
     V, T = _two_holes()
-    kernel = hole_filling._kernel()
+    assemble = _fill_kernel.patch_system
 
-    class Poisoned:
-        def __getattr__(self, name):
-            return getattr(kernel, name)
-
-        @staticmethod
-        def patch_system(x, tris, i, j, inverse, unknown, ring0, ring1, level, cot, dense):
-            normal, rhs = kernel.patch_system(
-                x, tris, i, j, inverse, unknown, ring0, ring1, level, cot, dense
-            )
-            if cot:  # the cotangent pass: infinite on the south hole's unknowns
-                south = x[unknown, 2] < -0.5
-                rhs = np.where(south[:, None], np.inf, rhs) if dense or level == 0 else rhs
-                if not dense and level > 0:  # rows of the least squares touching a southern unknown
-                    indptr, indices, data = normal
-                    normal = (indptr, indices, np.where(south[indices], np.inf, data))
-            return normal, rhs
+    def poison(x, tris, i, j, inverse, unknown, ring0, ring1, level, cot, dense):
+        normal, rhs = assemble(x, tris, i, j, inverse, unknown, ring0, ring1, level, cot, dense)
+        if cot:  # the cotangent pass: infinite on the south hole's unknowns
+            south = x[unknown, 2] < -0.5
+            rhs = np.where(south[:, None], np.inf, rhs) if dense or level == 0 else rhs
+            if not dense and level > 0:  # rows of the least squares touching a southern unknown
+                indptr, indices, data = normal
+                normal = (indptr, indices, np.where(south[indices], np.inf, data))
+        return normal, rhs
 
     both = fill_quietly(V, T)
-    monkeypatch.setattr(hole_filling, "_KERNEL", Poisoned())
+    monkeypatch.setattr(_fill_kernel, "patch_system", poison)
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # no warning either: both holes are filled
         poisoned = fill_holes_arrays(V, T)

@@ -40,8 +40,8 @@ __all__ = [
     "graph_laplacian",
     "local_operator",
     "lower_csc",
+    "patch_edges",
     "patch_system",
-    "patch_weights",
     "penalty_matrix",
     "rim_neighbours",
     "scan_normal_matrix",
@@ -313,115 +313,53 @@ def lower_csc(symmetric: sp.csr_matrix) -> sp.csc_matrix:
 # ---------------------------------------------------------------------------------- the hole patch
 
 
-def patch_weights(
-    vertices: np.ndarray, conn: Connectivity, cotangent: bool
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Edge weights ``w (e,)``, degrees ``sum w (nv,)`` and Laplacian row scales ``(nv,)`` of a local mesh.
-
-    Uniform: ``w = 1``, scale ``1 / degree`` (eq. 1). Cotangent: ``w = (cot a + cot b) / 2`` clamped
-    below at 5% of the mean ``|w|`` (obtuse pairs would make ``K`` indefinite), scale the inverse
-    vertex areas (a third of each triangle's) normalized to mean 1. No area or degree: scale 0.
-    """
-    tris, nv, x = conn.triangles, conn.n, vertices
-    i, j = conn.edges[:, 0], conn.edges[:, 1]
-    e = len(i)
-    if cotangent:  # corner-major, as the half-edges: the angle at c + 2, opposite (c, c + 1)
-        cot = []
-        for c in range(3):
-            o = x[tris[:, (c + 2) % 3]]
-            u, v = x[tris[:, c]] - o, x[tris[:, (c + 1) % 3]] - o
-            cot.append(_dot(u, v) / np.fmax(np.sqrt(_dot(*[np.cross(u, v)] * 2)), 1e-300))
-        w = 0.5 * np.bincount(conn.halfedge_edge, np.concatenate(cot), minlength=e)
-        floor = 0.05 * (_sequential_sum(np.abs(w)) / e) if e else 0.0
-        w = np.fmax(w, floor)
-    else:
-        w = np.ones(e)
-    # summed edge by edge, both ends in turn (the order of the sums is part of the result)
-    degree = np.bincount(np.stack([i, j], axis=1).ravel(), np.repeat(w, 2), minlength=nv)
-    mass: np.ndarray = degree
-    if cotangent:
-        cross = np.cross(x[tris[:, 1]] - x[tris[:, 0]], x[tris[:, 2]] - x[tris[:, 0]])
-        mass = np.bincount(tris.ravel(), np.repeat(0.5 * np.sqrt(_dot(cross, cross)) / 3.0, 3), minlength=nv)
-        positive = mass[mass > 0]
-        mass = mass / (_sequential_sum(positive) / len(positive) if len(positive) else 1.0)
-    scale = np.divide(1.0, mass, out=np.zeros(nv), where=mass > 0)
-    return w, degree, scale
-
-
-def _dot(u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    return u[:, 0] * v[:, 0] + u[:, 1] * v[:, 1] + u[:, 2] * v[:, 2]
-
-
-def _sequential_sum(values: np.ndarray) -> float:
-    return float(np.cumsum(values)[-1]) if len(values) else 0.0
+def patch_edges(triangles: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A local mesh's edges ``i < j`` (sorted, ``(e,)`` each) and the edge of each corner-major half-edge ``(3m,)``."""
+    half = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]])
+    keys, inverse = np.unique(half.min(axis=1) * n + half.max(axis=1), return_inverse=True)
+    return keys // n, keys % n, inverse.ravel()
 
 
 def patch_system(
     vertices: np.ndarray,
-    conn: Connectivity,
+    triangles: np.ndarray,
     unknown: np.ndarray,
     rings: list,
     level: int,
     *,
     cotangent: bool = False,
-) -> tuple[sp.csr_matrix, np.ndarray]:
+    dense: bool = True,
+    edges: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+) -> tuple[np.ndarray | sp.csr_matrix, np.ndarray]:
     """The SPD system ``(A (u, u), b (u, 3))`` whose solution places the ``unknown`` local vertices.
 
-    ``K = D - W``, ``L = S K`` of :func:`patch_weights`; the energy at continuity ``level``:
-    0 ``x^T K x`` (harmonic); 1 ``sum |(L x)_r|^2`` over the rows touching an unknown (LS meshes eq. 3);
-    2 ``sum |(L x)_r - (L x)_s|^2`` over the edges touching such a row (``rings[0]`` the loop
-    vertices, ``rings[1]`` the next ring: rows only where one-rings are complete). Others fixed at
-    ``vertices``.
+    ``K = D - W``, ``L = S K``: uniform (``W`` the adjacency, ``S = D^-1``, eq. 1) or, if ``cotangent``,
+    cotangent weights clamped below at 5% of their mean ``|w|`` with ``S`` the inverse vertex areas
+    normalized to mean 1. The energy at continuity ``level``: 0 ``x^T K x`` (harmonic); 1
+    ``sum |(L x)_r|^2`` over the rows touching an unknown (LS meshes eq. 3); 2 ``sum |(L x)_r - (L x)_s|^2``
+    over the edges touching such a row (``rings[0]`` the loop vertices, ``rings[1]`` the next ring).
+    Others fixed at ``vertices (n, 3)``; ``A`` dense if ``dense``, else CSR; ``edges`` of
+    :func:`patch_edges`. Assembled in one compiled pass (docs/algorithms/hole_filling.rst).
 
-    >>> conn = Connectivity(np.array([[0, 1, 3], [1, 2, 3], [2, 0, 3]]))
-    >>> A, b = patch_system(np.eye(4)[:, :3], conn, np.array([3]), [np.arange(3)], 0)
-    >>> (np.linalg.solve(A.toarray(), b) * 3).round(6).tolist()
+    >>> fan = np.array([[0, 1, 3], [1, 2, 3], [2, 0, 3]])
+    >>> A, b = patch_system(np.eye(4, 3), fan, np.array([3]), [], 0)  # the centre of a fan
+    >>> (np.linalg.solve(A, b) * 3).round(6).tolist()
     [[1.0, 1.0, 1.0]]
     """
-    x, nv = vertices, conn.n
-    i, j = conn.edges[:, 0], conn.edges[:, 1]
-    w, degree, scale = patch_weights(x, conn, cotangent)
-    diagonal = np.arange(nv)
-    K = sp.csr_matrix(
-        (
-            np.concatenate([-w, -w, degree]),
-            (np.concatenate([i, j, diagonal]), np.concatenate([j, i, diagonal])),
-        ),
-        shape=(nv, nv),
-    )
+    from .._fill_kernel import patch_system as assemble  # compiled by the package's build
+
+    if edges is None:
+        edges = patch_edges(triangles, len(vertices))
+    ring0 = rings[0] if rings else np.zeros(0, dtype=np.int64)
+    ring1 = rings[1] if level > 1 else ring0
+    normal, rhs = assemble(vertices, triangles, *edges, unknown, ring0, ring1, level, cotangent, dense)
+    if dense:
+        return normal, rhs
+    indptr, indices, data = normal  # K_uu, or the rows A_u of the least squares
+    matrix = sp.csr_matrix((data, indices, indptr), shape=(len(indptr) - 1, len(unknown)))
     if level == 0:
-        known = np.ones(nv, dtype=bool)
-        known[unknown] = False
-        return K[unknown][:, unknown], -(K[unknown][:, np.flatnonzero(known)] @ x[known])
-    L = K.copy()  # L = S K: K's pattern with its rows scaled
-    L.data = L.data * np.repeat(scale, np.diff(L.indptr))
-    rows = np.zeros(nv, dtype=bool)
-    rows[unknown] = True
-    rows[rings[0]] = True  # rows whose Laplacian involves an unknown
-    if level == 1:
-        A_full = L[np.flatnonzero(rows)]
-    else:  # the edge difference operator: row e is +1 at plus[e] and -1 at minus[e]
-        valid = rows.copy()
-        valid[rings[1]] = True
-        keep = (rows[i] | rows[j]) & valid[i] & valid[j]
-        plus, minus = i[keep], j[keep]
-        G = sp.csr_matrix(
-            (
-                np.tile([1.0, -1.0], len(plus)),
-                np.stack([plus, minus], axis=1).ravel(),
-                np.arange(0, 2 * len(plus) + 1, 2),
-            ),
-            shape=(len(plus), nv),
-        )
-        A_full = G @ L
-    A_full = A_full.tocsc()
-    if len(unknown) and unknown[0] == nv - len(unknown) and (np.diff(unknown) == 1).all():
-        A_u = A_full[:, nv - len(unknown) :]  # the usual layout: the unknowns are the last columns
-    else:
-        A_u = A_full[:, unknown]
-    fixed = x.copy()
-    fixed[unknown] = 0.0  # A_known x_known, without slicing the known columns out
-    return A_u.T @ A_u, -(A_u.T @ (A_full @ fixed))
+        return matrix, rhs
+    return (matrix.T @ matrix).tocsr(), -(matrix.T @ rhs)
 
 
 class Penalty(NamedTuple):

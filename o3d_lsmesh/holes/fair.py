@@ -14,40 +14,24 @@ import scipy.sparse as sp
 from ..core import tuning as core_tuning
 from ..core.arrays import concatenated_ranges
 from ..core.errors import SingularSystemError
+from ..core.operators import patch_edges, patch_system
 from ..core.solve import solve_spd
 from .crossings import _crossings
 from .find import _cross
 from .triangulate import _kernel
 
-_Edges = tuple[np.ndarray, np.ndarray, np.ndarray]  # edges i < j of a local mesh, each half-edge's edge
-
 
 def _fair(
-    x: np.ndarray, tris: np.ndarray, unknown: np.ndarray, rings: list, level: int, edges: _Edges, cot: bool
+    x: np.ndarray, tris: np.ndarray, unknown: np.ndarray, rings: list, level: int, edges: Any, cot: bool
 ):
-    """Positions ``(p, 3)`` of the ``unknown`` local vertices minimizing continuity ``level``'s energy,
-    the others fixed at ``x``:
-
-    * ``0``: ``x^T K x`` (membrane, harmonic: ``L x = 0`` at the unknowns);
-    * ``1``: ``sum_r |(L x)_r|^2`` over the rows touching an unknown: the LS-mesh energy ``||L x||^2``
-      with interpolated anchors (eq. 3, section 6);
-    * ``2``: ``sum |(L x)_r - (L x)_s|^2`` over edges ``(r, s)`` touching such a row: the tri-Laplacian,
-
-    with ``K = D - W`` and ``L = S K``: uniform (``S = D^-1``, eq. 1), or cotangent weights of ``x`` if
-    ``cot`` (the system: :func:`o3d_lsmesh._fill_kernel.patch_system`). ``rings[0]`` are the loop
-    vertices, ``rings[1]`` the ring around them; ``edges`` is :func:`o3d_lsmesh._fill_kernel.unique_edges`
-    of ``tris``. Solved by the gateway; a block whose system is not finite is left NaN.
+    """Positions ``(p, 3)`` of the ``unknown`` local vertices minimizing continuity ``level``'s energy
+    (:func:`o3d_lsmesh.core.operators.patch_system`), the others fixed at ``x``; ``edges`` of
+    :func:`~o3d_lsmesh.core.operators.patch_edges`. Solved by the gateway; a block whose system is not
+    finite is left NaN.
     """
     dense = len(unknown) <= core_tuning.DENSE_UNKNOWNS
-    ring0 = rings[0] if rings else np.zeros(0, dtype=np.int64)
-    ring1 = rings[1] if level > 1 else ring0
-    normal, rhs = _kernel().patch_system(x, tris, *edges, unknown, ring0, ring1, level, cot, dense)
-    if not dense:  # K_uu, or the rows A_u of the least squares
-        indptr, indices, data = normal
-        normal = sp.csr_matrix((data, indices, indptr), shape=(len(indptr) - 1, len(unknown)))
-        if level > 0:
-            normal, rhs = (normal.T @ normal).tocsr(), -(normal.T @ rhs)
-    elif np.isfinite(normal).all() and np.isfinite(rhs).all():
+    normal, rhs = patch_system(x, tris, unknown, rings, level, cotangent=cot, dense=dense, edges=edges)
+    if dense and np.isfinite(normal).all() and np.isfinite(rhs).all():
         return solve_spd(normal, rhs)
     # the blocks (patches, and patches sharing rings) with a non-finite entry are left NaN, for the
     # caller to fall back on those patches alone
@@ -88,7 +72,7 @@ def _interpolation(
         k, nl = len(loop), len(numbering)
         # the membrane (continuity 0) with the loop's unit vectors as the fixed "positions"
         unit = np.eye(nl, k)
-        harmonic = _fair(unit, tris_local, np.arange(k, nl), [], 0, _unique_edges(tris_local, nl), False)
+        harmonic = _fair(unit, tris_local, np.arange(k, nl), [], 0, patch_edges(tris_local, nl), False)
         r, c = np.nonzero(np.abs(harmonic) > 1e-12)
         rows.append(inner[r] - n)
         cols.append(loop[c])
@@ -115,13 +99,6 @@ def _rings(triangles: np.ndarray, indptr: np.ndarray, data: np.ndarray, seeds: n
         taken.append(t)
         rings.append(front)
     return np.sort(np.concatenate(taken)), rings
-
-
-def _unique_edges(tris: np.ndarray, nv: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The sorted edges ``i < j`` of a local mesh and the edge of each corner-major half-edge."""
-    half = np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]])
-    keys, inverse = np.unique(half.min(axis=1) * nv + half.max(axis=1), return_inverse=True)
-    return keys // nv, keys % nv, inverse.ravel()
 
 
 def keeps_facing(x: np.ndarray, again: np.ndarray, new_tris: np.ndarray) -> bool:
@@ -171,7 +148,7 @@ def fair_patches(
     )
     local = local.reshape(-1, 3)
     local_rings = [np.searchsorted(local_vertices, ring) for ring in rings]
-    local_edges = _unique_edges(local, len(local_vertices))
+    local_edges = patch_edges(local, len(local_vertices))
     local_unknown = np.arange(len(local_vertices) - len(unknown), len(local_vertices))
     refined = vertices[n:].copy()
     work = vertices  # its new rows hold the candidate being solved from or checked
