@@ -20,14 +20,16 @@ demo: $(STAMP)
 # second pass: the solver-facing tests again on the SciPy fallback (as without scikit-sparse)
 FALLBACK_TESTS := tests/test_solvers.py tests/test_fallback.py tests/test_lsmesh.py tests/test_encoding.py tests/test_selection.py
 
-# lint, format and types first: they take seconds and fail on any finding; then the docstring examples
+# lint, format, types and the import rules first: they take seconds and fail on any finding; then the
+# docstring examples, and the suite on every core (pytest-xdist)
 test: $(STAMP)
 	$(PY) -m ruff check .
 	$(PY) -m ruff format --check .
 	$(PY) -m mypy
+	$(VENV)/bin/lint-imports
 	$(PY) -m pytest -p no:dash -q --doctest-modules o3d_lsmesh
-	$(PY) -m pytest -p no:dash -q
-	O3D_LSMESH_NO_CHOLMOD=1 $(PY) -m pytest -p no:dash -q $(FALLBACK_TESTS)
+	$(PY) -m pytest -p no:dash -q -n auto
+	O3D_LSMESH_NO_CHOLMOD=1 $(PY) -m pytest -p no:dash -q -n auto $(FALLBACK_TESTS)
 	$(MAKE) docs-check
 
 # Version matrix and sdist check (CI runs it after `make test`): the sdist is built and unpacked, the
