@@ -1,0 +1,152 @@
+"""Old main against new main, side by side in one run: the same public calls, their outputs and their CPU time.
+
+Each case runs in a fresh process of each tree (``--before`` a checkout of the old main with its kernels
+built in place, ``--after`` this one), alternating, ``--repeat`` times; the table gives the median CPU
+seconds of the call (the process's user + system time, the import excluded), the ratio after/before, and the
+largest difference between the two outputs (0 means bit-identical: every quality figure computed from
+them is unchanged).
+
+    python benchmarks/bench_before_after.py --before /path/to/old/checkout [--repeat 5]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+DATA = Path(os.environ.get("O3D_LSMESH_DATA", HERE.parent.parent / "shared" / "data" / "meshes"))
+SCANS = Path(os.environ.get("O3D_LSMESH_SCANS", HERE.parent.parent / "shared" / "data" / "scans"))
+
+# name -> (mesh file, code run on `mesh` with `np`, `o3d`, `o3d_lsmesh` in scope; it sets `out`)
+CASES = {
+    "constrained_fairing default (scan bun000)": (
+        SCANS / "bun000.ply",
+        "out = o3d_lsmesh.constrained_fairing(mesh)",
+    ),
+    "constrained_fairing local x10 (bunny)": (
+        DATA / "bunny.ply",
+        "out = o3d_lsmesh.constrained_fairing(mesh, 10, method='local')",
+    ),
+    "constrained_fairing global (bunny)": (
+        DATA / "bunny.ply",
+        "out = o3d_lsmesh.constrained_fairing(mesh, 2, method='global')",
+    ),
+    "constrained_fairing features (bunny)": (
+        DATA / "bunny.ply",
+        "out = o3d_lsmesh.constrained_fairing(mesh, method='features')",
+    ),
+    "multiresolution_fairing level 2 (bunny)": (
+        DATA / "bunny.ply",
+        "out = o3d_lsmesh.multiresolution_fairing(mesh, 2, number_of_iterations=5)",
+    ),
+    "fill_holes 8 holes (horse)": (
+        DATA / "horse.ply",
+        "mesh.remove_triangles_by_index(np.flatnonzero(np.isin(np.asarray(mesh.triangles),"
+        " np.arange(0, len(mesh.vertices), len(mesh.vertices) // 8)).any(axis=1)))\n"
+        "out = o3d_lsmesh.fill_holes(mesh)",
+    ),
+    "ls_mesh 2% controls (horse)": (
+        DATA / "horse.ply",
+        "out = o3d_lsmesh.ls_mesh(mesh, np.arange(0, len(mesh.vertices), 50))",
+    ),
+    "build_hierarchy (bunny)": (
+        DATA / "bunny.ply",
+        "h = o3d_lsmesh.build_hierarchy(mesh)\nout = h.level(len(h) // 2)",
+    ),
+    "encode + decode 2% (bunny)": (
+        DATA / "bunny.ply",
+        "out = o3d_lsmesh.decode_geometry(o3d_lsmesh.encode_geometry(mesh, len(mesh.vertices) // 50))",
+    ),
+    "topology_summary (scan bun000)": (
+        SCANS / "bun000.ply",
+        "out = o3d_lsmesh.topology_summary(mesh)",
+    ),
+}
+
+WORKER = """
+import json, os, sys, time, warnings
+sys.path.insert(0, sys.argv[1])
+import numpy as np, open3d as o3d
+import o3d_lsmesh
+assert o3d_lsmesh.__file__.startswith(sys.argv[1]), o3d_lsmesh.__file__
+mesh = o3d.io.read_triangle_mesh(sys.argv[2])
+code = sys.argv[3]
+warnings.simplefilter("ignore")
+start = time.process_time()
+exec(code)
+cpu = time.process_time() - start
+if isinstance(out, dict):
+    np.savez(sys.argv[4], s=np.array(json.dumps(out, sort_keys=True, default=str)))
+elif isinstance(out, o3d.geometry.TriangleMesh):
+    np.savez(sys.argv[4], v=np.asarray(out.vertices), t=np.asarray(out.triangles))
+else:
+    np.savez(sys.argv[4], v=np.asarray(out), t=np.zeros(0))
+print(json.dumps({"cpu": cpu}))
+"""
+
+
+def run(tree: Path, mesh: Path, code: str, out: Path) -> float:
+    result = subprocess.run(
+        [sys.executable, "-c", WORKER, str(tree), str(mesh), code, str(out)],
+        capture_output=True,
+        text=True,
+        check=True,
+        cwd=tempfile.gettempdir(),  # neither tree on the path but the one given
+        env={**os.environ, "PYTHONPATH": ""},
+    )
+    return json.loads(result.stdout.strip().splitlines()[-1])["cpu"]
+
+
+def difference(a: Path, b: Path) -> float:
+    import numpy as np
+
+    x, y = np.load(a), np.load(b)
+    if "s" in x.files:  # a dict of figures, as JSON text
+        return 0.0 if str(x["s"]) == str(y["s"]) else float("inf")
+    if x["t"].shape != y["t"].shape or not np.array_equal(x["t"], y["t"]) or x["v"].shape != y["v"].shape:
+        return float("inf")
+    return float(np.abs(x["v"] - y["v"]).max()) if x["v"].size else 0.0
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--before", type=Path, required=True, help="checkout of the old main, kernels built")
+    parser.add_argument("--after", type=Path, default=HERE.parent)
+    parser.add_argument("--repeat", type=int, default=5)
+    parser.add_argument("--only", nargs="*", help="case names containing one of these words")
+    args = parser.parse_args()
+    rows = []
+    with tempfile.TemporaryDirectory() as scratch:
+        for name, (mesh, code) in CASES.items():
+            if args.only and not any(word in name for word in args.only):
+                continue
+            if not mesh.exists():
+                print(f"skipping {name}: {mesh} not found (set O3D_LSMESH_DATA / O3D_LSMESH_SCANS)")
+                continue
+            times: dict[str, list[float]] = {"before": [], "after": []}
+            outs = {side: Path(scratch) / f"{side}.npz" for side in times}
+            for _ in range(args.repeat):  # alternate, so that a busy spell weighs on both
+                for side, tree in (("before", args.before), ("after", args.after)):
+                    times[side].append(run(tree.resolve(), mesh, code, outs[side]))
+            before, after = (statistics.median(times[s]) for s in ("before", "after"))
+            diff = difference(outs["before"], outs["after"])
+            rows.append((name, before, after, after / before, diff))
+            print(
+                f"{name:<45} {before:8.3f} s {after:8.3f} s  x{after / before:5.2f}  max diff {diff:.3g}",
+                flush=True,
+            )
+    print("\n| case | before CPU s | after CPU s | after / before | largest output difference |")
+    print("|---|---|---|---|---|")
+    for name, before, after, ratio, diff in rows:
+        print(f"| {name} | {before:.3f} | {after:.3f} | {ratio:.2f} | {diff:.3g} |")
+
+
+if __name__ == "__main__":
+    main()
