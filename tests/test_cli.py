@@ -663,16 +663,16 @@ def test_library_checks_are_user_errors_naming_flags(tmp_path, capsys, clean):
 def test_error_during_a_bar_starts_its_own_line(tmp_path, capsys, clean, monkeypatch):
     import importlib
 
-    from o3d_lsmesh.core.progress import progress_bar
+    from o3d_lsmesh.core.progress import Progress
     from o3d_lsmesh.core.validate import as_count
 
     def failing(mesh, iterations, **kwargs):
-        bar = progress_bar(True, total=10, desc="fairing")  # left open, as when an exception leaves its loop
+        bar = Progress(True, "fairing").bar(10)  # left open, as when an exception leaves its loop
         bar.update(3)
         as_count(-1, name="number_of_iterations")  # a check of ours fails mid-bar
 
     def crashing(mesh, iterations, **kwargs):
-        bar = progress_bar(True, total=10, desc="fairing")
+        bar = Progress(True, "fairing").bar(10)
         bar.update(3)
         return np.zeros(3) + np.zeros(2)  # a bug mid-bar: the traceback too starts on its own line
 

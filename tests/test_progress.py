@@ -10,7 +10,7 @@ import tqdm.auto
 import tqdm.std
 from conftest import grid
 
-from o3d_lsmesh.core.progress import check_progress, decades_bar, iterate, progress_bar, stages
+from o3d_lsmesh.core.progress import Progress, close_all
 from o3d_lsmesh.core.solve import SPDSolver
 from o3d_lsmesh.encoding import decode_geometry, encode_geometry, iter_decode_geometry
 from o3d_lsmesh.fairing import constrained_fairing
@@ -171,26 +171,26 @@ def test_every_function_rejects_a_non_bool_progress():
         call(np.bool_(False))  # numpy's bool is a bool
 
 
-def test_helpers(bars):
+def test_bars_end_at_their_totals_and_an_error_leaves_its_stage(bars):
     made, stream = bars
-    assert check_progress(np.bool_(True)) is True
+    assert Progress(np.bool_(True), "x").enabled is True
     with pytest.raises(TypeError, match="progress must be a bool, got int"):
-        check_progress(1)
-    silent = progress_bar(False, total=5, desc="x")
+        Progress(1, "x")
+    silent = Progress(False, "x").bar(5)
     silent.update(3)
     silent.close()
     assert made == []
-    with pytest.raises(RuntimeError), stages(True, "failing", ("factor", "solve")) as begin:
+    with pytest.raises(RuntimeError), Progress(True, "failing").stages(("factor", "solve")) as begin:
         begin("factor")
         raise RuntimeError("boom")
     assert made[-1].n == 0 and made[-1].total == 2  # an error leaves the bar where it happened
-    with stages(True, "ok", ("factor", "solve")) as begin:
+    with Progress(True, "ok").stages(("factor", "solve")) as begin:
         begin("factor")
         assert made[-1].n == 0
         begin("solve")
         assert made[-1].n == 1
     assert made[-1].n == 2
-    with progress_bar(True, total=10, initial=4, desc="seeded") as bar:
+    with Progress(True, "seeded").bar(10, initial=4) as bar:
         bar.update(6)
     assert "10/10" in stream.getvalue()
 
@@ -206,7 +206,7 @@ def test_cg_bar_counts_the_decades_to_its_tolerance_not_the_iteration_cap(bars):
     (bar,) = made
     assert (bar.desc, bar.total, bar.n) == ("conjugate gradients", 6, 6)
     assert "/5000" not in stream.getvalue() and "residual=" in stream.getvalue()
-    with decades_bar(True, to_go=1e6, desc="solve") as bar:
+    with Progress(True, "solve").decades(1e6) as bar:
         bar.reached(1e4)
         assert made[-1].n == 2
         bar.reached(2e4)  # CG's residual may rise: the bar shows it
@@ -215,20 +215,18 @@ def test_cg_bar_counts_the_decades_to_its_tolerance_not_the_iteration_cap(bars):
     assert (made[-1].n, made[-1].total) == (6, 6)
 
 
-def test_iterate_yields_every_item_and_its_bar_ends_at_the_total(bars):
+def test_over_yields_every_item_and_its_bar_ends_at_the_total(bars):
     made, stream = bars
-    assert list(iterate(True, (x * x for x in range(4)), desc="squares", total=4)) == [0, 1, 4, 9]
-    assert list(iterate(True, [5, 6, 7], desc="list")) == [5, 6, 7]  # total from len()
+    assert list(Progress(True, "squares").over((x * x for x in range(4)), total=4)) == [0, 1, 4, 9]
+    assert list(Progress(True, "list").over([5, 6, 7])) == [5, 6, 7]  # total from len()
     assert_complete(made, stream, count=3)
-    assert list(iterate(False, "ab", desc="silent")) == ["a", "b"]
+    assert list(Progress(False, "silent").over("ab")) == ["a", "b"]
     assert len(made) == 2
     with pytest.raises(TypeError, match="progress"):
-        iterate(1, [1], desc="x")
+        Progress(1, "x").over([1])
 
 
 def test_one_progress_object_makes_every_bar_and_close_all_ends_the_open_ones(bars):
-    from o3d_lsmesh.core.progress import Progress, close_all
-
     made, _ = bars
     progress = Progress(True, "load")
     assert list(progress.over(range(3))) == [0, 1, 2]

@@ -20,7 +20,8 @@ from pathlib import Path
 from typing import Any, Callable
 
 from ..core.errors import InputError, InputTypeError, O3DLSMeshWarning
-from ..core.progress import check_progress, progress_bar
+from ..core.progress import Progress
+from ..core.validate import as_bool
 from .files import WRITABLE, collect_inputs, digest, inside, output_path
 from .ops import OPS, BatchOp, Option, register_op
 from .tasks import Task, check_scheduler_file, dispatch, failure_record, local_cluster, new_record
@@ -303,7 +304,7 @@ def run(
             f"task_timeout must be a number of seconds >= 0 (0: no limit) or None, got {task_timeout!r}",
             param="task_timeout",
         )
-    progress = check_progress(progress)
+    progress = as_bool(progress, name="progress")
     if resume and report is None:
         raise InputError("resume needs a report (the file that says which inputs are done)", param="report")
 
@@ -370,13 +371,8 @@ def run(
         "timeout": task_timeout or None,
     }
 
-    bar = progress_bar(
-        progress,
-        total=len(tasks),
-        initial=len(tasks) - len(todo) - len(refused),
-        desc=f"batch {pipeline}",
-        unit="file",
-        dynamic_ncols=True,
+    bar = Progress(progress, f"batch {pipeline}").bar(
+        len(tasks), initial=len(tasks) - len(todo) - len(refused), unit="file", dynamic_ncols=True
     )
     counts: Counter = Counter()
     index_of = {task.path: task.index for task in tasks}

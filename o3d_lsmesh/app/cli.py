@@ -209,9 +209,9 @@ def internal_error(error: BaseException) -> int:
 
 
 def _show_warning(message: Warning | str, category: type[Warning], *_args: Any, **_kwargs: Any) -> None:
-    from ..core.progress import write
+    from ..core.progress import Progress
 
-    write(f"{PROG}: warning: {message}")
+    Progress.write(f"{PROG}: warning: {message}")
 
 
 # --------------------------------------------------------------------------- the operations' commands

@@ -18,7 +18,7 @@ import numpy as np
 
 from .._o3d.io import raycasting_scene, signed_distances, write_mesh_file
 from ..core.connectivity import Connectivity
-from ..core.progress import progress_bar
+from ..core.progress import Progress
 from ..fairing.scan_fairing import SLIVER_QUALITY, triangle_quality
 from .metrics import rim_mask
 from .shapes import simulated_range_scan
@@ -138,7 +138,7 @@ def run_demo(
     ]
     results = {"scan": scan}
     sweeps: dict[str, list] = {}
-    with progress_bar(progress and not quiet, total=len(METHODS), desc="demo", unit="method") as bar:
+    with Progress(progress and not quiet, "demo").bar(len(METHODS), unit="method") as bar:
         for key, label, function, values in METHODS:
             bar.set_postfix_str(key)
             try:

@@ -15,7 +15,7 @@ import scipy.sparse.linalg as spla
 
 from . import tuning
 from .errors import ConvergenceError, SingularSystemError
-from .progress import decades_bar
+from .progress import Progress
 
 #: Entries a 32-bit index array can address.
 INT32_ENTRIES = int(np.iinfo(np.int32).max)
@@ -272,7 +272,7 @@ def block_cg(
     if norms.size and not (norms > 0).any():
         return (np.zeros_like(b), 0, 0.0)
     # the bar counts the decades the worst column's residual falls to its stopping point
-    bar = decades_bar(progress, to_go=float((relative / limit).max()), desc="conjugate gradients")
+    bar = Progress(progress, "conjugate gradients").decades(float((relative / limit).max()))
     converged = False
     if hasattr(precondition, "bound"):  # work blocks allocated once for the solve
         apply = precondition.bound(B.shape[1])

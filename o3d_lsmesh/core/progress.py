@@ -18,16 +18,7 @@ from typing import Any, TypeVar
 
 from .validate import as_bool
 
-__all__ = [
-    "Progress",
-    "check_progress",
-    "close_all",
-    "decades_bar",
-    "iterate",
-    "progress_bar",
-    "stages",
-    "write",
-]
+__all__ = ["Progress", "close_all"]
 
 T = TypeVar("T")
 
@@ -35,23 +26,11 @@ T = TypeVar("T")
 _OPEN: weakref.WeakSet[Any] = weakref.WeakSet()
 
 
-def check_progress(progress: Any) -> bool:
-    """``progress`` as a bool; ``InputTypeError`` naming ``progress`` for anything else (1, "yes", None)."""
-    return bool(as_bool(progress, name="progress"))
-
-
 def close_all() -> None:
     """Close every open bar (each ends its line), so that a message printed next starts on its own line."""
     for bar in list(_OPEN):
         with contextlib.suppress(Exception):
             bar.close()
-
-
-def write(text: str) -> None:
-    """Print one line on stderr above any open bar (a plain print would land in the bar's line)."""
-    from tqdm.auto import tqdm
-
-    tqdm.write(text, file=sys.stderr)
 
 
 class _Silent:
@@ -102,7 +81,14 @@ class Progress:
     """
 
     def __init__(self, enabled: Any, desc: str) -> None:
-        self.enabled, self.desc = check_progress(enabled), desc
+        self.enabled, self.desc = as_bool(enabled, name="progress"), desc
+
+    @staticmethod
+    def write(text: str) -> None:
+        """Print one line on stderr above any open bar (a plain print would land in the bar's line)."""
+        from tqdm.auto import tqdm
+
+        tqdm.write(text, file=sys.stderr)
 
     def _tqdm(self, *args: Any, **options: Any) -> Any:
         from tqdm.auto import tqdm
@@ -161,36 +147,3 @@ class Progress:
             return _Silent()
         decades = max(1, math.ceil(math.log10(to_go))) if math.isfinite(to_go) and to_go > 1 else 1
         return _Decades(self.bar(decades, unit="decade"), to_go)
-
-
-def progress_bar(progress: Any, *, total: int, desc: str, **options: Any) -> Any:
-    """``Progress(progress, desc).bar(total, **options)``.
-
-    >>> with progress_bar(False, total=3, desc="work") as bar:
-    ...     bar.update(3)
-    """
-    return Progress(progress, desc).bar(total, **options)
-
-
-def decades_bar(progress: Any, *, to_go: float, desc: str) -> Any:
-    """``Progress(progress, desc).decades(to_go)``."""
-    return Progress(progress, desc).decades(to_go)
-
-
-def iterate(
-    progress: Any, items: Iterable[T], *, desc: str, unit: str = "it", total: int | None = None
-) -> Iterator[T]:
-    """``Progress(progress, desc).over(items, unit=unit, total=total)``."""
-    return Progress(progress, desc).over(items, unit=unit, total=total)
-
-
-def stages(
-    progress: Any, desc: str, names: Sequence[str]
-) -> contextlib.AbstractContextManager[Callable[[str], None]]:
-    """``Progress(progress, desc).stages(names)``.
-
-    >>> with stages(False, "ls_mesh", ("factor", "solve")) as begin:
-    ...     begin("factor")
-    ...     begin("solve")
-    """
-    return Progress(progress, desc).stages(names)

@@ -17,7 +17,7 @@ from .._o3d import new_mesh, read_mesh
 from ..core.boundary import boundary_curves
 from ..core.connectivity import Connectivity
 from ..core.errors import InputError, warn
-from ..core.progress import check_progress, iterate
+from ..core.progress import Progress
 from ..core.solve import SOLVERS
 from ..core.validate import (
     Option,
@@ -133,7 +133,7 @@ def _check_options(method: Any, given: dict[str, Any]) -> tuple[str, dict[str, A
     # a bool's type is checked for every method; True is what scan and features require
     smooth = as_bool(given["smooth_boundary"], name="smooth_boundary")
     given = {**given, "smooth_boundary": None if smooth else False}
-    progress = check_progress(given.pop("progress"))
+    progress = as_bool(given.pop("progress"), name="progress")
     method, options = check_options(METHOD_OPTIONS, method, given)
     options["progress"] = progress
     return method, options
@@ -209,7 +209,7 @@ def _fair(positions, conn, method, options, solver="auto"):
     if method == "local":
         return fair_local(positions, conn, iterations, smooth_boundary, options["reimpose_every"], progress)
     curve = _curve(conn, smooth_boundary and bool((conn.edge_triangles != 2).any()))
-    steps = iterate(progress, range(iterations), desc=f"constrained fairing ({method})")
+    steps = Progress(progress, f"constrained fairing ({method})").over(range(iterations))
     system = GlobalSolver(conn, options["mu"], solver=solver, progress=progress)
     for _ in steps:
         known = positions.copy()
@@ -235,7 +235,7 @@ def fair_local(positions, conn, number_of_iterations, smooth_boundary, reimpose_
     spare, work = (no_huge_pages(np.empty(positions.shape)) for _ in range(2))
     result = positions
     curve_target = curve.target(positions)
-    steps = iterate(progress, range(number_of_iterations), desc="constrained fairing (local)")
+    steps = Progress(progress, "constrained fairing (local)").over(range(number_of_iterations))
     for iteration in steps:
         if reimpose_every is not None and iteration and iteration % reimpose_every == 0:
             constant, curve_target = op.constant(positions, out=constant), curve.target(positions)

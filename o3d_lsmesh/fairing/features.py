@@ -17,7 +17,7 @@ from .._o3d import read_mesh
 from ..core.arrays import face_normals
 from ..core.connectivity import Connectivity, FaceAdjacency, run_heads
 from ..core.errors import InputError
-from ..core.progress import iterate
+from ..core.progress import Progress
 from ..core.validate import as_count, as_positive_float, mesh_arrays
 from .scan_measure import measured_noise
 from .tuning import CREASE_ANGLE, PASSES_PER_NOISE, SIGMA_R, VERTEX_STEPS
@@ -198,7 +198,7 @@ def feature_denoise(
     used = np.bincount(triangles.ravel(), minlength=n) > 0
     centre = vertices[used].mean(axis=0)
     x = vertices - centre
-    for _ in iterate(progress, range(passes), desc="constrained fairing (features)"):
+    for _ in Progress(progress, "constrained fairing (features)").over(range(passes)):
         normals = filter_pass(x, triangles, adjacency, patch_edges, sigma_r=sigma_r, guided=guided)
         x = normal_steps(x, triangles, normals, incidence=adjacency.incidence)
     x += centre

@@ -11,8 +11,8 @@ from .._o3d import new_mesh, read_mesh
 from ..core.boundary import boundary_curves
 from ..core.connectivity import Connectivity, VertexRings
 from ..core.errors import InputError, InputTypeError
-from ..core.progress import check_progress, progress_bar
-from ..core.validate import as_choice, as_count, as_iterations
+from ..core.progress import Progress
+from ..core.validate import as_bool, as_choice, as_count, as_iterations
 from ..hierarchy.hierarchy import MeshHierarchy, boundary_degree, collapse_hierarchy
 from .boundary_curve import curve_operator, run_curve_iterations
 from .constrained import FAIRING_METHODS, _fair, fair_local
@@ -44,7 +44,7 @@ def multiresolution_fairing_arrays(
     positions = hierarchy.vertices[hierarchy.representatives[level]]  # a copy: fairing writes to it
     if level == 0:
         return _fair_level(positions, conn, number_of_iterations, method)
-    with progress_bar(progress, total=level, desc="multiresolution fairing", unit="level") as bar:
+    with Progress(progress, "multiresolution fairing").bar(level, unit="level") as bar:
         for i in range(level, 0, -1):
             positions = _fair_level(positions, conn, number_of_iterations, method)
             conn = Connectivity(triangles[i - 1], len(hierarchy.representatives[i - 1]))
@@ -200,7 +200,7 @@ def multiresolution_fairing(
         final_iterations = as_iterations(final_iterations, name="final_iterations")
     # the feature mode is not a per-level fairing: refused, not run as the local operator
     method = as_choice(method, tuple(m for m in FAIRING_METHODS if m != "features"), name="method")
-    progress = check_progress(progress)
+    progress = as_bool(progress, name="progress")
     # a given hierarchy indexes the mesh's own vertices (build_hierarchy does not weld): weld only
     # when the hierarchy is built here, on the welded surface
     data = read_mesh(mesh, weld=hierarchy is None)

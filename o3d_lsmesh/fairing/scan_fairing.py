@@ -15,7 +15,7 @@ import scipy.sparse as sp
 from ..core.arrays import area_weighted_normals
 from ..core.connectivity import Connectivity
 from ..core.operators import lower_csc, rim_neighbours, scan_normal_matrix
-from ..core.progress import stages
+from ..core.progress import Progress
 from ..core.solve import Plan, SPDSolver, solver_backend
 from ..core.validate import collapsed_triangles
 from .scan_measure import (
@@ -222,7 +222,7 @@ def scan_denoise(
     """
     n = len(vertices)
     # at 10M vertices the measures and the assembly take tens of seconds before CG shows its residual
-    with stages(progress, "constrained fairing (scan)", ("measure", "assemble", "solve")) as begin:
+    with Progress(progress, "constrained fairing (scan)").stages(("measure", "assemble", "solve")) as begin:
         begin("measure")
         triangles, conn = _surface(np.asarray(triangles), n, conn)
         measured = scan_parameters(vertices, triangles, conn=conn)

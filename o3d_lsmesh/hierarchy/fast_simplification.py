@@ -18,8 +18,8 @@ from .._o3d import read_mesh, warn_dropped_attributes
 from ..core.arrays import concatenated_ranges
 from ..core.connectivity import Connectivity, run_heads
 from ..core.errors import InputError, InputTypeError
-from ..core.progress import check_progress, progress_bar
-from ..core.validate import as_count, as_positive_float, collapsed_triangles
+from ..core.progress import Progress
+from ..core.validate import as_bool, as_count, as_positive_float, collapsed_triangles
 from .hierarchy import MeshHierarchy, tensor_format_of
 
 if TYPE_CHECKING:
@@ -101,7 +101,7 @@ def from_fast_simplification(
 
     min_vertices = as_count(min_vertices, name="min_vertices", minimum=4)
     agg = as_positive_float(agg, name="agg", allow_zero=True)
-    progress = check_progress(progress)
+    progress = as_bool(progress, name="progress")
     data = read_mesh(mesh)
     warn_dropped_attributes(data, "hierarchy levels have new connectivity", normals=True)
     V, F = data.vertices, data.triangles
@@ -126,9 +126,7 @@ def from_fast_simplification(
         )
         collapses = np.asarray(collapses, dtype=np.int32).reshape(-1, 2)
         mappings = []
-        with progress_bar(
-            progress, total=len(counts), desc="fast-simplification levels", unit="level"
-        ) as bar:
+        with Progress(progress, "fast-simplification levels").bar(len(counts), unit="level") as bar:
             for count in counts:
                 bar.update(1)
                 prefix = min(n0 - int(count), len(collapses))

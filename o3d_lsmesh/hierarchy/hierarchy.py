@@ -18,9 +18,9 @@ import scipy.sparse as sp
 from .._o3d import MeshData, new_mesh, read_mesh, template, warn_dropped_attributes
 from ..core.connectivity import VertexRings, vertex_rings
 from ..core.operators import single_slots, umbrella_weights
-from ..core.progress import check_progress, progress_bar
+from ..core.progress import Progress
 from ..core.solve import solve_spd
-from ..core.validate import as_count, as_positions, as_positive_float, mesh_arrays
+from ..core.validate import as_bool, as_count, as_positions, as_positive_float, mesh_arrays
 
 if TYPE_CHECKING:
     from .._types import AnyMesh
@@ -258,7 +258,7 @@ def build_hierarchy_arrays(
     min_vertices = as_count(min_vertices, name="min_vertices")
     if max_levels is not None:
         max_levels = as_count(max_levels, name="max_levels")
-    progress = check_progress(progress)
+    progress = as_bool(progress, name="progress")
     vertices, triangles = mesh_arrays(vertices, triangles)
     options: dict[str, Any] = dict(alpha=alpha, beta=beta, min_vertices=min_vertices, max_levels=max_levels)
     options.update(progress=bool(progress), mesh_kind=mesh_kind, tensor_format=tensor_format)
@@ -280,7 +280,7 @@ def collapse_hierarchy(
     """:func:`build_hierarchy_arrays` of checked arrays and options (:func:`read_mesh`'s, kept)."""
     n0 = len(vertices)
     total = max(n0 - min_vertices, 0)  # at most: a level may find no valid collapse before
-    with progress_bar(progress, total=total, desc="mesh hierarchy", unit="vertex") as bar:
+    with Progress(progress, "mesh hierarchy").bar(total, unit="vertex") as bar:
         from .collapse import collapse_levels
 
         tuned: dict[str, Any] = dict(

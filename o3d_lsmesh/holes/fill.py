@@ -17,7 +17,6 @@ import scipy.sparse as sp
 from .._o3d import new_mesh, read_mesh
 from ..core.connectivity import Connectivity
 from ..core.errors import InputError, warn
-from ..core.progress import check_progress
 from ..core.validate import as_bool, as_choice, as_count, as_positive_float, mesh_arrays
 from .crossings import _crossings, _TriangleIndex
 from .fair import _empty_csr, _interpolation, _vertex_owner, fair_patches
@@ -270,7 +269,7 @@ class HoleFiller:
             )
         weights = as_choice(weights, ("uniform", "cotangent"), name="weights")
         fill_border = bool(as_bool(fill_border, name="fill_border"))
-        check_progress(progress)
+        as_bool(progress, name="progress")
         m = len(self.triangles)
         holes: list[Hole] = []
         why: dict[int, str] = {}  # id(hole) -> why it is left open

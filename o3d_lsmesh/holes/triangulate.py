@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from ..core.arrays import concatenated_ranges
-from ..core.progress import progress_bar
+from ..core.progress import Progress
 from .tuning import ALPHA, DP_MAX_EDGES
 
 _KERNEL: Any = None
@@ -138,7 +138,7 @@ def triangulate_holes(filler: Any, holes: list, density: float, progress: bool) 
         )
     )
     piece_extra, piece_tris = [], []
-    with progress_bar(progress, total=count, desc="filling holes", unit="loop") as bar:
+    with Progress(progress, "filling holes").bar(count, unit="loop") as bar:
         for points, outer, forbidden, spacing in zip(
             piece_points, piece_outer, piece_forbidden, piece_spacing
         ):

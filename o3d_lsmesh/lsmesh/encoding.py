@@ -21,9 +21,9 @@ from .._o3d import MeshData, new_mesh, read_mesh
 from ..core.arrays import dequantize, quantize
 from ..core.connectivity import connected_components, unique_edges
 from ..core.errors import InputError, InputTypeError
-from ..core.progress import check_progress, progress_bar, stages
+from ..core.progress import Progress
 from ..core.solve import check_weight_pins_components
-from ..core.validate import as_choice, as_count, as_positive_float
+from ..core.validate import as_bool, as_choice, as_count, as_positive_float
 from .lsmesh import LSMeshSystem, laplacian_matrix
 from .selection import SELECTION_METHODS, control_point_selection
 
@@ -249,12 +249,12 @@ def decode_geometry(mesh: MeshT, data: Any, *, anchors: int | None = None, progr
     >>> len(decode_geometry(box, encode_geometry(box, 8)).vertices)
     8
     """
-    check_progress(progress)
+    as_bool(progress, name="progress")
     mesh_data = read_mesh(mesh, weld=True)
     indices, positions, omega = _parse(data, mesh_data)
     k = len(indices)
     m = k if anchors is None else as_count(anchors, name="anchors", minimum=1, maximum=k)
-    with stages(progress, "decode_geometry", ("factor", "solve")) as begin:
+    with Progress(progress, "decode_geometry").stages(("factor", "solve")) as begin:
         begin("factor")
         # LSMeshSolver raises SingularSystemError if the prefix misses a component
         solver = LSMeshSystem(mesh_data.vertices, mesh_data.triangles, indices[:m], weights=omega)
@@ -290,7 +290,7 @@ def iter_decode_geometry(
     >>> len(list(iter_decode_geometry(sphere, encode_geometry(sphere, 30), step=10)))
     3
     """
-    progress = check_progress(progress)
+    progress = as_bool(progress, name="progress")
     mesh_data = read_mesh(mesh, weld=True)
     indices, positions, omega = _parse(data, mesh_data)
     k = len(indices)
@@ -308,7 +308,7 @@ def iter_decode_geometry(
     def refinements() -> Iterator[Any]:
         # the bar counts the anchors in the mesh about to be yielded; it closes when the
         # caller stops iterating too (GeneratorExit runs the finally)
-        with progress_bar(progress, total=k, desc="progressive decoding", unit="anchor") as bar:
+        with Progress(progress, "progressive decoding").bar(k, unit="anchor") as bar:
             for begin in [0, *range(first, k, step)]:
                 end = min(begin + step, k) if begin else first
                 if begin:

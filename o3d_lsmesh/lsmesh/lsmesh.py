@@ -18,7 +18,7 @@ from .._o3d import mesh_from_state, mesh_state, new_mesh, read_mesh
 from ..core import operators
 from ..core.connectivity import Connectivity
 from ..core.errors import InputError, SingularSystemError
-from ..core.progress import check_progress, stages
+from ..core.progress import Progress
 from ..core.solve import Plan, SPDSolver, check_constant_modes, check_finite, operator_scale, solver_backend
 from ..core.tuning import DEFAULT_TOLERANCE
 from ..core.validate import as_bool, as_choice, as_indices, as_positions, as_weights
@@ -418,7 +418,7 @@ def ls_mesh(
     """
     data = read_mesh(mesh, weld=True)
     indices = data.welded_indices(constraint_vertex_indices, name="constraint_vertex_indices")
-    with stages(progress, "ls_mesh", ("factor", "solve")) as begin:
+    with Progress(progress, "ls_mesh").stages(("factor", "solve")) as begin:
         begin("factor")
         options: dict[str, Any] = dict(weights=weights, interpolate=interpolate, laplacian=laplacian, tol=tol)
         system = LSMeshSystem(
@@ -467,13 +467,13 @@ def reconstruct_geometry(
     as_choice(laplacian, LAPLACIAN_KINDS, name="laplacian")
     # checked with either scheme (the interpolatory one does not use them): a bad value is a mistake either way
     as_weights(weights, len(known), name="weights")
-    check_progress(progress)
+    as_bool(progress, name="progress")
     L = laplacian_matrix(data.vertices, data.triangles, laplacian).tocsc()
     # checked here for both schemes, so that the message names the known vertices the caller left
     check_components_constrained(
         L, known, what="known vertex (outside unknown_vertex_indices)", param="unknown_vertex_indices"
     )
-    with stages(progress, "reconstruct_geometry", ("factor", "solve")) as begin:
+    with Progress(progress, "reconstruct_geometry").stages(("factor", "solve")) as begin:
         begin("factor")
         if not interpolate:
             options: dict[str, Any] = dict(weights=weights, laplacian=laplacian, solver=solver, tol=tol)

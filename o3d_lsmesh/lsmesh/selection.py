@@ -17,7 +17,7 @@ from .._o3d import new_mesh, read_mesh
 from ..core.arrays import concatenated_ranges
 from ..core.connectivity import adjacency_matrix, connected_components
 from ..core.errors import InputError, InputTypeError
-from ..core.progress import check_progress, progress_bar, stages
+from ..core.progress import Progress
 from ..core.validate import as_bool, as_choice, as_count, as_positive_float
 from .lsmesh import LSMeshSystem
 
@@ -103,7 +103,7 @@ def _select(
     n = len(vertices)
     start = start_vertices(vertices, triangles)
     # the per-component seeds are control points too: the bar starts at them and ends at count
-    with progress_bar(progress, total=count, initial=len(start), desc=desc, unit="point") as bar:
+    with Progress(progress, desc).bar(count, initial=len(start), unit="point") as bar:
         bar.set_postfix_str("factor")
         indptr = neighbours = np.zeros(0, dtype=np.int64)  # a batch of one forbids nothing
         if batch > 1:
@@ -169,7 +169,7 @@ def control_point_selection(
             param="batch",
         )
     rng = _rng(seed)
-    check_progress(progress)
+    as_bool(progress, name="progress")
     if method == "random":  # instant: no progress bar
         return _random(vertices, triangles, count, rng), None
     # greedy is the combined method with one pick per solve (batch is None for it)
@@ -264,7 +264,7 @@ def approximate(
     if system is not None and not interpolate:
         return new_mesh(data, system.solve()), data.source_indices(indices)
     # a new factorization: the LS mesh of the selection, with ls_mesh's bar
-    with stages(progress, "ls_mesh", ("factor", "solve")) as begin:
+    with Progress(progress, "ls_mesh").stages(("factor", "solve")) as begin:
         begin("factor")
         system = LSMeshSystem(
             V, F, indices, weights=weights, interpolate=bool(interpolate), progress=progress

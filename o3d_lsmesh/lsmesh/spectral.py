@@ -20,9 +20,9 @@ from ..core.arrays import dequantize, quantize
 from ..core.connectivity import Connectivity
 from ..core.errors import InputError
 from ..core.operators import graph_laplacian
-from ..core.progress import check_progress, stages
+from ..core.progress import Progress
 from ..core.solve import SPDSolver, single_threaded_blas
-from ..core.validate import as_count
+from ..core.validate import as_bool, as_count
 
 if TYPE_CHECKING:
     from .._types import MeshT
@@ -77,7 +77,7 @@ def spectral_basis(
             f"(the Lanczos basis would exceed n * k = {SPECTRAL_MAX_WORK:.0e} doubles), got {k}",
             param="k",
         )
-    check_progress(progress)
+    as_bool(progress, name="progress")
     L = combinatorial_laplacian(triangles, n)
     Z = null_space_basis(L)  # (n, c): the components of L's graph are the mesh's
     c = Z.shape[1]
@@ -86,9 +86,8 @@ def spectral_basis(
     m = k - c
     # ARPACK needs m well below the rank n - c of the deflated operator; small meshes go dense
     dense = dense or (m > (n - c) // 4 and n <= DENSE_MAX_VERTICES)
-    with stages(
-        progress, "spectral basis", ("eigensolve (dense)",) if dense else ("factor", "eigensolve")
-    ) as begin:
+    stage_names = ("eigensolve (dense)",) if dense else ("factor", "eigensolve")
+    with Progress(progress, "spectral basis").stages(stage_names) as begin:
         if dense:
             begin("eigensolve (dense)")
             # indices c..k-1: past the c zero eigenvalues, the smallest nonzero ones
@@ -150,7 +149,7 @@ def spectral_approximation(mesh: MeshT, k: int, *, bits: int | None = None, prog
     >>> bool(np.allclose(spectral_approximation(sphere, len(sphere.vertices)).vertices, sphere.vertices))
     True
     """
-    check_progress(progress)
+    as_bool(progress, name="progress")
     data = read_mesh(mesh, weld=True)
     n = len(data.vertices)
     k = as_count(k, name="k", minimum=1, maximum=n)
