@@ -484,9 +484,10 @@ def with_constant(name, value, fn):
     """``fn()`` with the scan energy's constant ``name`` set to ``value``."""
     from o3d_lsmesh.fairing import scan_fairing as sf
     from o3d_lsmesh.fairing import scan_measure as sm
+    from o3d_lsmesh.fairing import tuning
 
     modules = [module for module in (sf, sm) if hasattr(module, name)]  # where the constant is read
-    saved = getattr(sf, name)
+    saved = getattr(tuning, name)
     coupled = value == "off"
     for module in modules:
         setattr(module, name, saved if coupled else value)
@@ -496,8 +497,8 @@ def with_constant(name, value, fn):
         def coupled_parameters(V, F, *, conn=None):
             p = parameters(V, F, conn=conn)
             ratio = p.detail / p.noise if p.noise > 0 else np.inf
-            scan = float(np.clip(sf.SCAN_MU * ratio**2, *sf.MU_RANGE))
-            rim = p.boundary_weight * (scan / sf.SCAN_RIM_MU) ** p.scan_likeness
+            scan = float(np.clip(sm.SCAN_MU * ratio**2, *sm.MU_RANGE))
+            rim = p.boundary_weight * (scan / sm.SCAN_RIM_MU) ** p.scan_likeness
             return dataclasses.replace(p, boundary_weight=rim)
 
         sf.scan_parameters = coupled_parameters
@@ -531,14 +532,14 @@ def cross_validation(objects, grid):
 
 def cv_tables(table, grid, objects):
     """Fitted on one object, scored on the other: one markdown table per direction."""
-    from o3d_lsmesh.fairing import scan_fairing as sf
+    from o3d_lsmesh.fairing import tuning
 
     out = []
     for fit, other in ((objects[0], objects[1]), (objects[1], objects[0])):
         rows = []
         for name, values in grid.items():
             best = min(values, key=lambda v: table[name, v, fit][0])
-            default = getattr(sf, name)
+            default = getattr(tuning, name)
             rows.append(
                 [name, default, best, table[name, best, fit][0], table[name, default, fit][0]]
                 + [table[name, best, other][0], table[name, default, other][0]]

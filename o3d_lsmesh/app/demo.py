@@ -19,7 +19,8 @@ import numpy as np
 from .._o3d.io import raycasting_scene, signed_distances, write_mesh_file
 from ..core.connectivity import Connectivity
 from ..core.progress import Progress
-from ..fairing.scan_fairing import SLIVER_QUALITY, triangle_quality
+from ..fairing.scan_fairing import triangle_quality
+from ..fairing.tuning import SLIVER_QUALITY
 from .metrics import rim_mask
 from .shapes import simulated_range_scan
 

@@ -108,11 +108,9 @@ METHOD_OPTIONS: dict[str, dict[str, Option]] = {
 FAIRING_METHODS = tuple(METHOD_OPTIONS)
 
 
-class _Implicit(str):
-    """The array core's former default method, told apart from an explicit ``method="local"``."""
-
-
-_LOCAL = _Implicit("local")
+#: ``constrained_fairing_arrays``' default method: ``"local"`` with a DeprecationWarning (``None``
+#: already means the wrapper's default, so it cannot mark an omitted ``method``).
+_OMITTED: Any = object()
 
 
 def resolved_options(method: str | None, number_of_iterations: int | None, reimpose_every: int | None):
@@ -144,7 +142,7 @@ def constrained_fairing_arrays(
     triangles: np.ndarray,
     number_of_iterations: int | None = 10,
     *,
-    method: str | None = _LOCAL,
+    method: str | None = _OMITTED,
     mu: float | None = None,
     membrane: float | None = None,
     boundary_weight: float | None = None,
@@ -167,8 +165,8 @@ def constrained_fairing_arrays(
     >>> constrained_fairing_arrays(np.asarray(box.vertices), np.asarray(box.triangles), 5, method="local").shape
     (8, 3)
     """
-    implicit = type(method) is _Implicit
-    method, options = _check_options(str(method) if implicit else method, _given(locals()))
+    implicit = method is _OMITTED
+    method, options = _check_options("local" if implicit else method, _given(locals()))
     vertices, triangles = mesh_arrays(vertices, triangles)  # copies: _fair may write to its positions
     if implicit:
         warn(

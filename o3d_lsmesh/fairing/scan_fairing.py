@@ -18,58 +18,10 @@ from ..core.operators import lower_csc, rim_neighbours, scan_normal_matrix
 from ..core.progress import Progress
 from ..core.solve import Plan, SPDSolver, solver_backend
 from ..core.validate import collapsed_triangles
-from .scan_measure import (
-    NoiseEstimate,
-    ScanParameters,
-    _rim,
-    measured_boundary_weight,
-    measured_noise,
-    rim_noise_ratio,
-    scan_likeness,
-    scan_parameters,
-)
-from .tuning import (
-    MU_RANGE,
-    NOISE_MU_POWER,
-    NOISE_MU_SCALE,
-    RIM_RINGS,
-    SCAN_BOUNDARY_FRACTION,
-    SCAN_BOUNDARY_WEIGHT,
-    SCAN_ITERATIVE_VERTICES,
-    SCAN_MEMBRANE,
-    SCAN_MU,
-    SCAN_REDUCTION,
-    SCAN_RIM_MU,
-    SCAN_RIM_RATIO,
-    SLIVER_QUALITY,
-)
+from .scan_measure import _rim, scan_parameters
+from .tuning import RIM_RINGS, SCAN_ITERATIVE_VERTICES, SCAN_REDUCTION, SLIVER_QUALITY
 
-__all__ = [
-    "MU_RANGE",
-    "NOISE_MU_POWER",
-    "NOISE_MU_SCALE",
-    "RIM_RINGS",
-    "SCAN_BOUNDARY_FRACTION",
-    "SCAN_BOUNDARY_WEIGHT",
-    "SCAN_ITERATIVE_VERTICES",
-    "SCAN_MEMBRANE",
-    "SCAN_MU",
-    "SCAN_REDUCTION",
-    "SCAN_RIM_MU",
-    "SCAN_RIM_RATIO",
-    "SLIVER_QUALITY",
-    "NoiseEstimate",
-    "ScanFairingSolver",
-    "ScanParameters",
-    "measured_boundary_weight",
-    "measured_noise",
-    "relax_rim",
-    "rim_noise_ratio",
-    "scan_denoise",
-    "scan_likeness",
-    "scan_parameters",
-    "triangle_quality",
-]
+__all__ = ["ScanFairingSolver", "relax_rim", "scan_denoise", "triangle_quality"]
 
 
 def _penalty(triangles: np.ndarray, n: int, root: np.ndarray) -> sp.csr_matrix:
