@@ -218,53 +218,20 @@ def run(
 ) -> list[dict]:
     """Run ``op`` on every mesh file of ``inputs`` and write the results into ``outdir``.
 
-    Parameters
-    ----------
-    inputs : path, glob pattern, or a list of them
-        Files, folders (searched recursively for mesh files) and globs; searches leave out ``outdir``.
-    outdir : path
-        Output folder: ``a/b.ply`` of a folder INPUT gives ``outdir/a/b<suffix>`` (``encode``:
-        ``<name>.bin``, ``hierarchy``: a folder ``<name>/``, ``compare``: nothing). Nothing is
-        written outside it, nothing this call did not write is removed.
-    op : str, list of str or BatchOp
-        An operation of :data:`OPS` or a pipeline run in order on each file (``"denoise,compare"``).
-    options : dict
-        ``{"iterations": 5}`` applies to every op of the pipeline that has the option,
-        ``{"denoise.method": "global"}`` to one op.
-    client, scheduler, scheduler_file
-        An existing Dask cluster (a client is left running); else ``DASK_SCHEDULER_ADDRESS``, else a
-        local cluster of ``workers`` spawned processes for this call.
-    workers, threads_per_worker : int
-        Local worker processes (default: CPUs // ``threads_per_worker``; ``0``: one after another in
-        this process) and each one's threads and BLAS/OpenMP/Open3D thread cap.
-    resume, report
-        ``report`` is a JSON-lines file getting one record per result as it arrives; with
-        ``resume``, inputs whose last record is ``ok`` for the same key (pipeline, options,
-        suffix, input size and mtime) and whose files are intact (size and sha256) are ``skipped``.
-    retries, fail_fast : int, bool
-        Runs of a task whose worker died (the local cluster's ``allowed-failures``); stop at the
-        first failure (files not run are ``cancelled``).
-    suffix, force : str, bool
-        Output mesh format (one of ``.ply .obj .stl .off .gltf``); allow an output to be an input.
-    progress, on_record : bool, callable
-        A progress bar; a function called with each record (an exception it raises stops the batch).
-    task_timeout : float or None
-        Seconds a file may take (None or 0: no limit); past them its record says ``TaskTimeout`` and
-        it can no longer write (a Dask worker is restarted; the serial loop lets it run on).
+    Each parameter is the ``o3d-lsmesh batch`` flag of the same name (``docs/batch.md``, section
+    Python, says what each does); ``options`` maps ``"name"`` (every op that has it) or
+    ``"op.name"`` (one op) to a value; ``client`` is an existing ``dask.distributed.Client`` (left
+    running); ``on_record`` is called with each record (an exception it raises stops the batch).
 
     Returns
     -------
     list of dict
-        One record per input, in order: ``input``, ``output``, ``status`` (``ok``, ``failed``,
-        ``skipped``, ``cancelled``), ``error``, ``stage``, ``seconds``, ``cpu_seconds``, sizes before
-        and after, ``metrics`` per op, ``key``, ``worker``, ``files`` (bytes, sha256), ``warnings``
-        (also re-issued here with the file name).
+        One record per input, in order (fields: :data:`~o3d_lsmesh.app.tasks.RECORD_FIELDS`).
 
     Raises
     ------
     InputError
-        A bad argument (``param`` names it or the option), no input file, two inputs with one output,
-        an output that is an input (without ``force``).
+        A bad argument (``param`` names it or the option), no input, two inputs with one output.
     InputTypeError
         ``inputs`` or ``op`` of the wrong kind.
 
@@ -279,31 +246,27 @@ def run(
     ops = parse_ops(op)
     pipeline = ",".join(o.name for o in ops)
     values = resolve_options(ops, options)
-    if not isinstance(suffix, str) or suffix.lower() not in WRITABLE:
-        raise InputError(f"suffix must be one of {', '.join(WRITABLE)}, got {suffix!r}", param="suffix")
+
+    def count(value: Any, minimum: int) -> bool:
+        return isinstance(value, int) and not isinstance(value, bool) and value >= minimum
+
+    seconds = task_timeout
+    both = scheduler is not None and scheduler_file is not None
+    for name, value, bad, expected in (
+        ("suffix", suffix, not isinstance(suffix, str) or suffix.lower() not in WRITABLE, f"one of {', '.join(WRITABLE)}"),
+        ("threads_per_worker", threads_per_worker, not count(threads_per_worker, 1), "an integer >= 1"),
+        ("retries", retries, not count(retries, 0), "an integer >= 0"),
+        ("workers", workers, not count(0 if workers is None else workers, 0), "an integer >= 0"),
+        ("scheduler_file", None, both, "None when scheduler is given (not both)"),
+        ("task_timeout", seconds, seconds is not None and (isinstance(seconds, bool) or not isinstance(seconds, (int, float))
+         or not 0 <= seconds < float("inf")), "a number of seconds >= 0 (0: no limit) or None"),
+    ):  # fmt: skip
+        if bad:
+            got = "" if name == "scheduler_file" else f", got {value!r}"
+            raise InputError(f"{name} must be {expected}{got}", param=name)
     suffix = suffix.lower()
-    for name, value, minimum in (
-        ("threads_per_worker", threads_per_worker, 1),
-        ("retries", retries, 0),
-        ("workers", 0 if workers is None else workers, 0),
-    ):
-        if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
-            raise InputError(f"{name} must be an integer >= {minimum}, got {value!r}", param=name)
-    if scheduler is not None and scheduler_file is not None:
-        raise InputError(
-            "scheduler_file must be None when scheduler is given (not both)", param="scheduler_file"
-        )
     if scheduler_file is not None:
         check_scheduler_file(scheduler_file)
-    if task_timeout is not None and (
-        isinstance(task_timeout, bool)
-        or not isinstance(task_timeout, (int, float))
-        or not 0 <= task_timeout < float("inf")
-    ):
-        raise InputError(
-            f"task_timeout must be a number of seconds >= 0 (0: no limit) or None, got {task_timeout!r}",
-            param="task_timeout",
-        )
     progress = as_bool(progress, name="progress")
     if resume and report is None:
         raise InputError("resume needs a report (the file that says which inputs are done)", param="report")
