@@ -129,44 +129,6 @@ cdef void _liepa(const double* P, const double* outer, const uint8_t* forbidden,
             known[c] = t_twice[choice] > 0
 
 
-cdef double _COSPHERICAL = 1e-9  # Delaunay: a point this near (relative) a circumsphere is on it
-
-
-def delaunay_triangles(points):
-    """The triangles of the 3D Delaunay tetrahedralization of a loop's ``k`` points (``(k^3,)`` uint8), or
-    None where it restricts nothing (``k < 5``, coplanar or cospherical points; Zou et al. 2013)."""
-    from scipy.spatial import Delaunay, QhullError
-
-    cdef int64_t k = len(points)
-    if k < 5:
-        return None
-    points = np.asarray(points, dtype=np.float64)
-    try:
-        tets = Delaunay(points).simplices.astype(np.int64)
-    except (QhullError, ValueError):
-        return None
-    # a point on (within rounding of) a tetrahedron's circumsphere makes the tetrahedralization one of
-    # several (a loop on a sphere or a cylinder), chosen by rounding: not the same after a rigid motion
-    p = points[tets]
-    with np.errstate(all="ignore"):
-        try:
-            centre = p[:, 0] + np.linalg.solve(
-                2.0 * (p[:, 1:] - p[:, :1]), ((p[:, 1:] - p[:, :1]) ** 2).sum(axis=2)[..., None]
-            )[..., 0]
-        except np.linalg.LinAlgError:  # a flat tetrahedron (Qhull's triangulated output): not unique
-            return None
-        radius = np.linalg.norm(p[:, 0] - centre, axis=1)
-        gap = np.abs(np.linalg.norm(points[None] - centre[:, None], axis=2) - radius[:, None])
-    gap[np.arange(len(tets))[:, None], tets] = np.inf
-    if not (gap > _COSPHERICAL * radius[:, None]).all():
-        return None
-    faces = np.sort(np.concatenate([tets[:, [0, 1, 2]], tets[:, [0, 1, 3]], tets[:, [0, 2, 3]], tets[:, [1, 2, 3]]]),
-                    axis=1)
-    allowed = np.zeros(k * k * k, dtype=np.uint8)
-    allowed[(faces[:, 0] * k + faces[:, 1]) * k + faces[:, 2]] = 1
-    return allowed
-
-
 def minimum_weight_triangulation(const double[:, ::1] points, const double[:, ::1] outer_normals,
                                  const uint8_t[:, ::1] forbidden=None, const uint8_t[::1] allowed=None):
     """Liepa's dynamic programme on ``k >= 3`` loop points: the ``k - 2`` triangles ``(j, m, i)``;
@@ -1174,14 +1136,3 @@ cdef int64_t _gather(const double* lo, const double* hi, const int64_t* lo_cell,
                     out[count] = t
                     count += 1
     return count
-
-
-# the refinement's budget
-
-
-def refine_budget(points, triangles, sigma):
-    """The most new points :func:`refine` may add to a patch: ``4 A / mean(sigma)^2``, ``A`` its area."""
-    p = np.asarray(points)[np.asarray(triangles)]
-    area = 0.5 * np.sqrt((np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]) ** 2).sum(axis=1)).sum()
-    mean = float(np.mean(sigma))
-    return int(min(4.0 * area / mean**2, 2.0**62)) if mean > 0 else 0

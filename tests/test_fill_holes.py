@@ -25,6 +25,7 @@ from o3d_lsmesh.core.operators import patch_system
 from o3d_lsmesh.holes import DP_MAX_EDGES, HoleFiller, fill_holes_arrays, find_holes
 from o3d_lsmesh.holes.crossings import _crossings, _TriangleIndex
 from o3d_lsmesh.holes.fair import _rings, keeps_facing
+from o3d_lsmesh.holes.triangulate import delaunay_triangles
 from o3d_lsmesh.topology import boundary_loops
 
 
@@ -269,7 +270,7 @@ def test_dynamic_programme_within_delaunay_triangles(k, seed, bump):
     faces = {
         tuple(sorted(f)) for t in Delaunay(points).simplices.tolist() for f in itertools.combinations(t, 3)
     }
-    allowed = _fill_kernel.delaunay_triangles(points)
+    allowed = delaunay_triangles(points)
     assume(allowed is not None)  # near-cospherical points: not restricted (the test below)
     assert {tuple(np.unravel_index(c, (k, k, k))) for c in np.flatnonzero(allowed)} == faces
     tris = _fill_kernel.minimum_weight_triangulation(points, outer, None, allowed)
@@ -287,14 +288,14 @@ def test_dynamic_programme_within_delaunay_triangles(k, seed, bump):
 def test_delaunay_triangles_of_coplanar_short_or_cospherical_loops_restrict_nothing():
     square = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0.0]])
     circle = np.stack([np.cos(np.arange(8)), np.sin(np.arange(8)), np.zeros(8)], axis=1)
-    assert _fill_kernel.delaunay_triangles(square) is None  # four points: one tetrahedron at most
-    assert _fill_kernel.delaunay_triangles(circle) is None  # Qhull refuses a flat set
+    assert delaunay_triangles(square) is None  # four points: one tetrahedron at most
+    assert delaunay_triangles(circle) is None  # Qhull refuses a flat set
     # a zigzag loop on a sphere: every tetrahedralization of its hull is Delaunay, none is chosen
     t, z = np.arange(10) * 2 * np.pi / 10, 0.3 * (-1.0) ** np.arange(10)
     sphere = np.stack([np.sqrt(1 - z**2) * np.cos(t), np.sqrt(1 - z**2) * np.sin(t), z], axis=1)
-    assert _fill_kernel.delaunay_triangles(sphere) is None
+    assert delaunay_triangles(sphere) is None
     moved = sphere + 0.01 * np.random.default_rng(0).normal(size=sphere.shape)
-    assert _fill_kernel.delaunay_triangles(moved) is not None  # moved off the sphere: one
+    assert delaunay_triangles(moved) is not None  # moved off the sphere: one
 
 
 def test_dynamic_programme_avoids_existing_edges():

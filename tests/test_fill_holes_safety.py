@@ -316,6 +316,7 @@ def test_density_is_bounded():
 
 def test_refinement_stops_at_its_budget():
     from o3d_lsmesh import _fill_kernel
+    from o3d_lsmesh.holes.triangulate import refine_budget
 
     # a large flat triangle with tiny scales: unbounded, it splits for many rounds
     points = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], float)
@@ -325,9 +326,7 @@ def test_refinement_stops_at_its_budget():
     capped = _fill_kernel.refine(*args, 200)[0]
     assert len(free) > 1000 and 3 < len(capped) <= 200
     # the budget: 4 A / mean(sigma)^2, about twice an even mesh at that spacing
-    assert _fill_kernel.refine_budget(points, tris, np.full(3, 0.01)) == pytest.approx(
-        4 * 0.5 / 1e-4, rel=1e-9
-    )
+    assert refine_budget(points, tris, np.full(3, 0.01)) == pytest.approx(4 * 0.5 / 1e-4, rel=1e-9)
 
 
 def test_fill_border_on_a_raw_scan_is_bounded():

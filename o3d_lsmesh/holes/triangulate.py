@@ -11,7 +11,7 @@ import numpy as np
 
 from ..core.arrays import concatenated_ranges
 from ..core.progress import Progress
-from .tuning import ALPHA, DP_MAX_EDGES
+from .tuning import ALPHA, COSPHERICAL, DP_MAX_EDGES
 
 _KERNEL: Any = None
 
@@ -25,6 +25,51 @@ def _kernel() -> Any:
 
         _KERNEL = _fill_kernel
     return _KERNEL
+
+
+def delaunay_triangles(points: np.ndarray) -> np.ndarray | None:
+    """The triangles of the 3D Delaunay tetrahedralization of a loop's ``k`` points, as the ``allowed`` of
+    the minimum-weight programme (``(k^3,)`` uint8), or None where it restricts nothing (``k < 5``,
+    coplanar or cospherical points; Zou et al. 2013, see the docs page)."""
+    from scipy.spatial import Delaunay, QhullError
+
+    k = len(points)
+    if k < 5:
+        return None
+    points = np.asarray(points, dtype=np.float64)
+    try:
+        tets = Delaunay(points).simplices.astype(np.int64)
+    except (QhullError, ValueError):
+        return None
+    # a point on (within rounding of) a tetrahedron's circumsphere makes the tetrahedralization one of
+    # several (a loop on a sphere or a cylinder), chosen by rounding: not the same after a rigid motion
+    p = points[tets]
+    with np.errstate(all="ignore"):
+        try:
+            edges = p[:, 1:] - p[:, :1]
+            centre = p[:, 0] + np.linalg.solve(2.0 * edges, (edges**2).sum(axis=2)[..., None])[..., 0]
+        except np.linalg.LinAlgError:  # a flat tetrahedron (Qhull's triangulated output): not unique
+            return None
+        radius = np.linalg.norm(p[:, 0] - centre, axis=1)
+        gap = np.abs(np.linalg.norm(points[None] - centre[:, None], axis=2) - radius[:, None])
+    gap[np.arange(len(tets))[:, None], tets] = np.inf
+    if not (gap > COSPHERICAL * radius[:, None]).all():
+        return None
+    faces = np.sort(
+        np.concatenate([tets[:, [0, 1, 2]], tets[:, [0, 1, 3]], tets[:, [0, 2, 3]], tets[:, [1, 2, 3]]]),
+        axis=1,
+    )
+    allowed = np.zeros(k * k * k, dtype=np.uint8)
+    allowed[(faces[:, 0] * k + faces[:, 1]) * k + faces[:, 2]] = 1
+    return allowed
+
+
+def refine_budget(points: np.ndarray, triangles: np.ndarray, sigma: np.ndarray) -> int:
+    """The most new points the refinement may add to a patch: ``4 A / mean(sigma)^2``, ``A`` its area."""
+    p = np.asarray(points)[np.asarray(triangles)]
+    area = 0.5 * np.sqrt((np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]) ** 2).sum(axis=1)).sum()
+    mean = float(np.mean(sigma))
+    return int(min(4.0 * area / mean**2, 2.0**62)) if mean > 0 else 0
 
 
 def _triangulate(
@@ -41,7 +86,7 @@ def _triangulate(
             points,
             outer_normals,
             None if forbidden is None or not forbidden.any() else forbidden.view(np.uint8),
-            _kernel().delaunay_triangles(points),
+            delaunay_triangles(points),
         )
     # the shortest chord between vertices 1/3 to 2/3 of the loop apart, in chunks of rows
     best = (np.inf, 0, k // 2)
@@ -171,8 +216,7 @@ def triangulate_holes(filler: Any, holes: list, density: float, progress: bool) 
             np.concatenate([f + s for f, s in zip(piece_pairs, starts)]),
             point_piece,
             ALPHA,
-            len(all_points)
-            + _kernel().refine_budget(all_points, all_tris, filler.sigma[np.concatenate(piece_loop)]),
+            len(all_points) + refine_budget(all_points, all_tris, filler.sigma[np.concatenate(piece_loop)]),
         )
     # global numbering: loop points (first in each piece, in order) are mesh vertices; the others
     # are new, numbered piece by piece

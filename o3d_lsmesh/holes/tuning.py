@@ -12,3 +12,5 @@ SIDEWAYS = 0.2
 DENSITY_MAX = 4.0
 # Liepa's density factor (SGP 2003, section 4; CGAL's default), not fitted: benchmarks/results/fill_holes.md
 ALPHA = float(np.sqrt(2.0))
+# Delaunay restriction: a point this near (relative) a circumsphere is on it; a tolerance, not fitted
+COSPHERICAL = 1e-9
