@@ -120,15 +120,10 @@ class SPDSolver:
     progress : bool
         Show the iterative solves' residual in a progress bar.
 
-    The keywords ``preconditioner``, ``product_of``, ``pattern_of``, ``locality_of``, ``memory_budget``
-    and ``reduction`` are deprecated: they are the fields of :class:`Plan`, passed as ``_plan=``.
-
-    Attributes ``backend`` (the one that runs: ``"cholmod"``, ``"scipy"``, ``"iterative"``), ``iterations``
-    and ``residual`` (of the last CG solve; 0 for direct backends). Solves and updates hold a lock: a
-    solver may be shared between threads. It pickles as its matrix and refactors on load.
-
-    Raises :class:`InputError` for a matrix not square, finite and symmetric (``SYMMETRY_TOLERANCE``)
-    or bad options, :class:`InputTypeError` for one that is not sparse or not real.
+    Attributes ``backend`` (the one that runs), ``iterations`` and ``residual`` (the last CG solve's).
+    Thread-safe; pickles as its matrix. :class:`Plan`'s fields as keywords are deprecated (``_plan=``).
+    Raises :class:`InputError` (:class:`InputTypeError`) for a bad matrix or option. See
+    docs/algorithms/solvers.rst.
 
     Examples
     --------
@@ -197,8 +192,7 @@ class SPDSolver:
         self._lower = self.backend == "cholmod"
         self._matrix: sp.csc_matrix | None = None
         self._product_of: sp.csc_matrix | None = None
-        # the iterative path's renumbering of the unknowns (``_matrix`` is stored renumbered), and
-        # whether it was chosen (at the first solve, unless ``locality_of`` chose it here)
+        # the iterative path's renumbering (``_matrix`` stored renumbered); chosen at the first solve
         self._order: np.ndarray | None = None
         self._ordered = False
         if self.backend == "iterative" and plan.locality_of is not None:
