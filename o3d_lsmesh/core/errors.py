@@ -25,9 +25,8 @@ __all__ = [
 class InputError(ValueError):
     """A bad argument: ``param`` is the Python parameter it is about (or None when none is to blame alone).
 
-    >>> error = InputError("count must be >= 1, got 0", param="count")
-    >>> isinstance(error, ValueError), error.param
-    (True, 'count')
+    >>> InputError("count must be >= 1, got 0", param="count").param
+    'count'
     """
 
     def __init__(self, message: str = "", *, param: str | None = None) -> None:
@@ -40,11 +39,7 @@ class InputTypeError(InputError, TypeError):
 
 
 class SingularSystemError(InputError):
-    """The linear system cannot be solved as posed.
-
-    Raised before factoring when it is cheap to see (a connected component
-    without any constraint), otherwise translated from the factorization.
-    """
+    """The linear system cannot be solved as posed (a component without constraint, or the factorization's)."""
 
 
 class O3DLSMeshWarning(UserWarning):
@@ -59,36 +54,30 @@ class ConvergenceError(RuntimeError):
 _PACKAGE = os.path.dirname(os.path.dirname(os.path.abspath(__file__))) + os.sep
 
 
-def warn(message: str, category: type[Warning] = O3DLSMeshWarning) -> None:
-    """``warnings.warn`` pointing at the first caller outside o3d_lsmesh, whatever the call path.
+def _outside(frame: object) -> bool:
+    return frame is None or not os.path.abspath(frame.f_code.co_filename).startswith(_PACKAGE)  # type: ignore[attr-defined]
 
-    >>> with warnings.catch_warnings(record=True) as caught:
-    ...     warnings.simplefilter("always")
-    ...     warn("careful")
-    >>> caught[0].category.__name__, str(caught[0].message)
-    ('O3DLSMeshWarning', 'careful')
-    """
+
+def warn(message: str, category: type[Warning] = O3DLSMeshWarning) -> None:
+    """``warnings.warn`` pointing at the first caller outside o3d_lsmesh, whatever the call path."""
     if sys.version_info >= (3, 12):
         warnings.warn(message, category, skip_file_prefixes=(_PACKAGE,))  # type: ignore[call-arg]
         return
-    frame = inspect.currentframe()  # this function's frame: stacklevel 1
-    level = 1
+    frame, level = inspect.currentframe(), 1  # this function's frame: stacklevel 1
     try:
-        while frame is not None and os.path.abspath(frame.f_code.co_filename).startswith(_PACKAGE):
-            frame = frame.f_back
-            level += 1
+        while not _outside(frame):
+            frame, level = frame.f_back, level + 1  # type: ignore[union-attr]
     finally:
         del frame
     warnings.warn(message, category, stacklevel=level)
 
 
 def called_from_outside(depth: int = 1) -> bool:
-    """Whether the function ``depth`` calls above the caller of this one was called from outside the package
-    (``depth=1``: the caller's own caller), e.g. to warn about a deprecated keyword only to users."""
+    """Whether the function ``depth`` calls above this one's caller was called from outside the package."""
     frame = inspect.currentframe()
     try:
         for _ in range(depth + 1):
             frame = frame.f_back if frame is not None else None
-        return frame is None or not os.path.abspath(frame.f_code.co_filename).startswith(_PACKAGE)
+        return _outside(frame)
     finally:
         del frame
