@@ -70,22 +70,13 @@ class Connectivity:
 
     Attributes
     ----------
-    triangles : (m, 3) int64
-    n : int
     edge_structure : EdgeStructure
-        Edges and the grouping of the ``3 m`` half-edges (rows of :func:`halfedges`).
-    edges : (e, 2)
-        ``lo < hi``, sorted.
-    edge_triangles : (e,)
-        Triangles on each edge; ``boundary_edges`` (one), ``nonmanifold_edges`` (more than two) ``(e,) bool``.
-    halfedge_edge : (3m,)
-        Edge of each half-edge row.
+        Edges ``(e, 2)`` (``lo < hi``, sorted), ``edge_triangles (e,)`` and ``halfedge_edge (3m,)`` (the edge
+        of each row of :func:`halfedges`); ``boundary_edges``, ``nonmanifold_edges``: ``(e,) bool``.
     rings : VertexRings
         1-ring CSR with diagonal slots and the triangles behind every slot; ``valence (n,) int64``.
-    ring_pattern : tuple
-        ``(indptr, indices, diagonal, forward, backward)`` of :func:`ring_pattern`.
-    adjacency : (n, n) CSR
-        Binary vertex adjacency, canonical.
+    ring_pattern, adjacency
+        :func:`ring_pattern`'s ``(indptr, indices, diagonal, forward, backward)``; ``(n, n)`` binary CSR.
     vertex_triangles : tuple
         ``(indptr (n + 1,), triangle (3m,))``: vertex ``v``'s triangles, increasing, once per corner.
     face_adjacency : FaceAdjacency
@@ -170,7 +161,6 @@ class Connectivity:
 
     def k_rings(self, seeds: np.ndarray, k: int) -> np.ndarray:
         """Sorted vertices within ``k`` edges of any of ``seeds`` (the seeds included), ``(q,) int64``.
-
         >>> Connectivity(np.array([[0, 1, 2], [2, 3, 4]])).k_rings([0], 1).tolist()
         [0, 1, 2]
         """
@@ -185,10 +175,7 @@ class Connectivity:
         return np.flatnonzero(inside)
 
     def submesh(self, triangle_ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The triangles ``triangle_ids`` on their own vertices: ``(local (s, 3) int64, vertices (q,) int64)``.
-
-        ``vertices`` are the sorted original indices; ``vertices[local]`` equals
-        ``triangles[triangle_ids]``.
+        """``triangles[triangle_ids]`` renumbered: ``(local (s, 3), vertices (q,))`` int64, ``vertices[local]`` equal to it.
 
         >>> local, vertices = Connectivity(np.array([[0, 1, 2], [2, 3, 4]])).submesh([1])
         >>> local.tolist(), vertices.tolist()
@@ -241,10 +228,8 @@ class EdgeStructure:
 
 
 def edge_structure(triangles: np.ndarray, n: int | None = None) -> EdgeStructure:
-    """The :class:`EdgeStructure` of a mesh: its half-edges grouped by undirected edge.
-
-    Two stable counting sorts (CSR-to-CSC transposes) by ``hi`` then ``lo``: the result equals a
-    stable sort of the keys ``lo * n + hi``.
+    """The :class:`EdgeStructure` of a mesh: its half-edges grouped by undirected edge (a stable sort by
+    ``lo * n + hi`` made of two counting sorts, by ``hi`` then ``lo``).
 
     >>> edge_structure(np.array([[0, 1, 2], [0, 2, 3]]), 4).counts.tolist()
     [1, 2, 1, 1, 1]
@@ -313,10 +298,8 @@ class VertexRings:
 
 
 def vertex_rings(triangles: np.ndarray, n: int, *, block: int = _RING_BLOCK) -> VertexRings:
-    """The :class:`VertexRings` of a mesh in one pass over its corners, ``block`` vertices at a time.
-
-    Corners grouped by vertex (a stable counting sort), each row's columns sorted: equal columns of a
-    row are the triangles of one edge.
+    """The :class:`VertexRings` of a mesh in one pass over its corners (grouped by vertex), ``block`` vertices
+    at a time; equal columns of a row are the triangles of one edge.
 
     >>> rings = vertex_rings(np.array([[0, 1, 2], [0, 2, 3]]), 4)
     >>> rings.indices.tolist(), rings.valence.tolist()
@@ -409,11 +392,8 @@ def unique_edges_and_runs(triangles: np.ndarray, n: int | None = None):
 
 
 def ring_pattern(edges: np.ndarray, n: int):
-    """CSR layout of the 1-ring pattern (diagonal plus both directions of every edge), without a sort.
-
-    ``edges (e, 2)`` sorted, ``lo < hi``. Returns ``indptr (n+1,)``, ``indices`` and the CSR
-    positions of the diagonal ``(n,)``, of each edge forward (row ``lo``) and backward (row ``hi``),
-    all int32 when they fit, so that data can be scattered straight into CSR order.
+    """The 1-ring CSR of sorted ``edges (e, 2)`` (``lo < hi``): ``indptr (n+1,)``, ``indices`` and the positions
+    of the diagonal ``(n,)`` and of each edge forward (row ``lo``) and backward (row ``hi``), int32 if they fit.
 
     >>> ring_pattern(np.array([[0, 1], [0, 2], [1, 2]]), 3)[3:]  # forward, backward
     (array([1, 2, 5], dtype=int32), array([3, 6, 7], dtype=int32))
