@@ -160,7 +160,7 @@ def test_directed_edges_and_adjacency_match_a_plain_count(case):
 
 
 def test_directed_edges_refuses_vertex_counts_its_keys_cannot_hold():
-    with pytest.raises(ValueError, match=r"n must be below 2\*\*31"):
+    with pytest.raises(ValueError, match=r"fewer than 2\*\*31 vertices"):
         directed_edges(np.array([[0, 1, 2]]), 2**40)
 
 
