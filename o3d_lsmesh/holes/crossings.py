@@ -25,9 +25,10 @@ class _TriangleIndex:
 
     def __init__(self, vertices: np.ndarray, triangles: np.ndarray) -> None:
         p = vertices[triangles]
-        self.centre = p.mean(axis=1)
-        self.radius = np.linalg.norm(p - self.centre[:, None, :], axis=2).max(axis=1)
-        small = self.radius <= (4.0 * float(np.median(self.radius)) if len(self.radius) else 0.0)
+        self.centre = p.sum(axis=1) / 3.0  # the bits of p.mean(axis=1), np.linalg.norm and np.median, quicker
+        offset = p - self.centre[:, None, :]
+        self.radius = np.sqrt((offset * offset).sum(axis=2)).max(axis=1)
+        small = self.radius <= (4.0 * _median(self.radius) if len(self.radius) else 0.0)
         self.grids = [self._grid(g) for g in (np.flatnonzero(small), np.flatnonzero(~small)) if len(g)]
 
     def _grid(self, members: np.ndarray) -> tuple:
@@ -46,6 +47,15 @@ class _TriangleIndex:
         indptr = np.zeros(int(np.prod(dims)) + 1, dtype=np.int64)
         np.cumsum(np.bincount(key, minlength=len(indptr) - 1), out=indptr[1:])
         return origin, cell, dims, indptr, members[order], reach
+
+
+def _median(values: np.ndarray) -> float:
+    """``np.median`` of a non-empty 1-D array: the middle value, or the mean of the middle two."""
+    half = len(values) // 2
+    part = np.partition(values, [half - 1, half] if len(values) % 2 == 0 else [half])
+    if np.isnan(part[-1]):
+        return float("nan")
+    return float(part[half]) if len(values) % 2 else float((part[half - 1] + part[half]) / 2.0)
 
 
 def _crossings(

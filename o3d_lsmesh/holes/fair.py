@@ -12,7 +12,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..core import tuning as core_tuning
-from ..core.arrays import concatenated_ranges
+from ..core.arrays import concatenated_ranges, run_heads
 from ..core.errors import SingularSystemError
 from ..core.operators import patch_edges, patch_system
 from ..core.solve import solve_spd
@@ -50,8 +50,9 @@ def _empty_csr(rows: int, cols: int) -> sp.csr_matrix:
 def _vertex_owner(new_tris: np.ndarray, owner: np.ndarray, n: int, p: int) -> np.ndarray:
     """The hole of each of the ``p`` new vertices (numbered from ``n``), from that of each new triangle."""
     vertex_owner = np.zeros(p, dtype=np.int64)
-    inside = new_tris >= n
-    vertex_owner[new_tris[inside] - n] = np.broadcast_to(owner[:, None], new_tris.shape)[inside]
+    corners = new_tris.ravel()
+    inside = corners >= n
+    vertex_owner[corners[inside] - n] = np.repeat(owner, 3)[inside]
     return vertex_owner
 
 
@@ -82,18 +83,24 @@ def _interpolation(
     return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(p, n))
 
 
+def _sorted_unique(values: np.ndarray) -> np.ndarray:
+    """``np.unique`` of a small integer array by one sort (NumPy's hash table costs more at this size)."""
+    values = np.sort(values, axis=None)
+    return values[run_heads(values)]
+
+
 def _rings(triangles: np.ndarray, indptr: np.ndarray, data: np.ndarray, seeds: np.ndarray, count: int):
     """Breadth-first rings around ``seeds`` over each vertex's triangles (CSR ``indptr``, ``data``): the
     sorted triangles touching rings ``0 .. count - 1`` and the ``count + 1`` rings (ring 0 ``seeds``)."""
     seen, took = np.zeros(len(indptr) - 1, dtype=bool), np.zeros(len(triangles), dtype=bool)
-    front = np.unique(seeds)
+    front = _sorted_unique(seeds)
     seen[front] = True
     rings, taken = [seeds], [np.zeros(0, dtype=np.int64)]
     for _ in range(count):
         t = data[concatenated_ranges(indptr[front], indptr[front + 1] - indptr[front])]
-        t = np.unique(t[~took[t]])
+        t = _sorted_unique(t[~took[t]])
         took[t] = True
-        front = np.unique(triangles[t])
+        front = _sorted_unique(triangles[t])
         front = front[~seen[front]]
         seen[front] = True
         taken.append(t)

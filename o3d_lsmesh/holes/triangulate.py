@@ -11,6 +11,7 @@ import numpy as np
 
 from ..core.arrays import concatenated_ranges
 from ..core.progress import Progress
+from .find import _cross
 from .tuning import ALPHA, COSPHERICAL, DP_MAX_EDGES
 
 _KERNEL: Any = None
@@ -67,8 +68,9 @@ def delaunay_triangles(points: np.ndarray) -> np.ndarray | None:
 def refine_budget(points: np.ndarray, triangles: np.ndarray, sigma: np.ndarray) -> int:
     """The most new points the refinement may add to a patch: ``4 A / mean(sigma)^2``, ``A`` its area."""
     p = np.asarray(points)[np.asarray(triangles)]
-    area = 0.5 * np.sqrt((np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]) ** 2).sum(axis=1)).sum()
-    mean = float(np.mean(sigma))
+    area = 0.5 * np.sqrt((_cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]) ** 2).sum(axis=1)).sum()
+    sigma = np.asarray(sigma, dtype=np.float64)
+    mean = float(sigma.sum() / len(sigma)) if len(sigma) else float("nan")  # np.mean's bits
     return int(min(4.0 * area / mean**2, 2.0**62)) if mean > 0 else 0
 
 
