@@ -11,13 +11,13 @@ from ._o3d import read_mesh
 from .core import operators
 from .core.connectivity import Connectivity
 from .core.validate import as_choice
+from .lsmesh.lsmesh import LAPLACIAN_KINDS
+from .lsmesh.lsmesh import laplacian_matrix as _matrix
 
 if TYPE_CHECKING:
     from ._types import AnyMesh
 
 __all__ = ["cotangent_laplacian", "laplacian", "laplacian_matrix", "uniform_laplacian"]
-
-LAPLACIAN_KINDS = ("uniform", "cotangent")
 
 
 def uniform_laplacian(triangles: np.ndarray, n: int, *, edges: np.ndarray | None = None) -> sp.csr_matrix:
@@ -34,10 +34,7 @@ def cotangent_laplacian(vertices: np.ndarray, triangles: np.ndarray) -> sp.csr_m
 
 def laplacian_matrix(vertices: np.ndarray, triangles: np.ndarray, kind: str = "uniform") -> sp.csr_matrix:
     """Array twin of :func:`laplacian`."""
-    kind = as_choice(kind, LAPLACIAN_KINDS, name="kind")
-    if kind == "uniform":
-        return uniform_laplacian(triangles, len(vertices))
-    return cotangent_laplacian(vertices, triangles)
+    return _matrix(vertices, triangles, as_choice(kind, LAPLACIAN_KINDS, name="kind"))
 
 
 def laplacian(mesh: AnyMesh, kind: str = "uniform") -> sp.csr_matrix:

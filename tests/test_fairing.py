@@ -14,8 +14,9 @@ from numpy.testing import assert_allclose
 
 from o3d_lsmesh.core.boundary import boundary_halfedges
 from o3d_lsmesh.core.connectivity import Connectivity
+from o3d_lsmesh.core.operators import triangle_coefficients
 from o3d_lsmesh.fairing import constrained_fairing, constrained_fairing_arrays, smooth_boundary_curves_arrays
-from o3d_lsmesh.fairing.barycenter import local_operator, triangle_coefficients
+from o3d_lsmesh.fairing.barycenter import local_operator
 from o3d_lsmesh.metrics import signed_volume, surface_distance
 
 TIGHT = 1e-12

@@ -1,11 +1,9 @@
-"""Barycenter-constrained fairing (Liu et al. 2001, sections 3.1-3.2): the local operator and the global solver.
+"""Barycenter-constrained fairing (Liu et al. 2001, sections 3.1-3.2): local operator, global solver.
 
-Both minimize ``X^T K^T K X`` subject to ``H (X - X0) = 0`` (eq. 5; ``K`` the uniform Laplacian,
-``H`` the triangle-vertex incidence) over the interior triangles (no boundary vertex):
-:class:`LocalOperator` iterates eq. 7 as the fixed linear map ``X <- E1 W X + E2 X + E3 X0``,
-:class:`GlobalSolver` solves the penalty form once. Their matrices come from
-:mod:`o3d_lsmesh.core.operators`; the boundary is left to :mod:`.boundary_curve`.
-Docs page: ``docs/algorithms/constrained_fairing.rst``.
+Both minimize ``|K X|^2`` subject to ``H (X - X0) = 0`` (eq. 5) over the interior triangles:
+:class:`LocalOperator` iterates eq. 7 as ``X <- E1 W X + E2 X + E3 X0``, :class:`GlobalSolver` solves
+the penalty form once (matrices: :mod:`o3d_lsmesh.core.operators`; the boundary: :mod:`.boundary_curve`).
+Docs: ``docs/algorithms/constrained_fairing.rst``.
 """
 
 from __future__ import annotations
@@ -16,12 +14,12 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..core.connectivity import Connectivity
-from ..core.operators import accumulate_block, penalty_matrix, triangle_coefficients
+from ..core.operators import accumulate_block, penalty_matrix
 from ..core.operators import local_operator as local_matrices
 from ..core.solve import SPDSolver, check_constant_modes, check_finite, operator_scale, solver_backend
-from .tuning import BLOCK_ROWS, DEFAULT_MU
+from .tuning import BLOCK_ROWS
 
-__all__ = ["DEFAULT_MU", "GlobalSolver", "LocalOperator", "local_operator", "triangle_coefficients"]
+__all__ = ["GlobalSolver", "LocalOperator", "local_operator"]
 
 
 @dataclass(frozen=True)

@@ -1,10 +1,8 @@
 """Boundary-curve fairing with segment-midpoint constraints (Liu et al. 2001, section 3.3).
 
-For each boundary segment the curve Laplacian energy is minimized with the segment's midpoint
-held (the section's local closed form); every point averages its two estimates, a fixed linear
-map of the current curve and the constraint curve assembled once (:class:`CurveOperator`).
-Loops pass through pinch vertices fan by fan; chains end at fins, whose vertices are held.
-Docs page: ``docs/algorithms/boundary_curves.rst``.
+Each segment's curve Laplacian energy is minimized with its midpoint held; every point averages its
+two estimates, a fixed linear map assembled once (:class:`CurveOperator`). Loops pass pinches fan by
+fan; chains end at fins, which are held. Docs: ``docs/algorithms/boundary_curves.rst``.
 """
 
 from __future__ import annotations
@@ -29,9 +27,8 @@ __all__ = [
     "smooth_boundary_curves_arrays",
 ]
 
-#: Closed loops shorter than this are held fixed: three segment midpoints fix a triangle, but the
-#: per-segment relaxation degenerates on a 3-loop (both outer neighbours are one vertex) and would
-#: shrink the hole, each corner moving three quarters of the way to the centroid in one step.
+#: Closed loops shorter than this are held: on a 3-loop the per-segment relaxation degenerates (both
+#: outer neighbours are one vertex) and would shrink the hole (docs/algorithms/boundary_curves.rst).
 MIN_LOOP_LENGTH = 4
 
 
@@ -63,19 +60,24 @@ def smooth_boundary_curves_arrays(
     number_of_iterations : int
         Steps of the section 3.3 update; 0 returns a copy.
     reimpose_every : int or None
-        Re-take the midpoint constraints from the current curve every this many
-        steps (stronger smoothing); ``None`` keeps the input curve as ``p^0``.
-
-    Works on any boundary, walked as :func:`~o3d_lsmesh.topology.boundary_curves`.
+        Re-take the midpoint constraints from the current curve every this many steps (stronger
+        smoothing); ``None`` keeps the input curve as ``p^0``.
     """
     vertices, triangles = mesh_arrays(vertices, triangles)
     number_of_iterations = as_iterations(number_of_iterations)
     if reimpose_every is not None:
         reimpose_every = as_count(reimpose_every, name="reimpose_every", minimum=1)
-    if number_of_iterations == 0:
+    return _smooth(vertices, triangles, number_of_iterations, reimpose_every)
+
+
+def _smooth(
+    vertices: np.ndarray, triangles: np.ndarray, iterations: int, reimpose_every: int | None
+) -> np.ndarray:
+    # checked arrays and options in, new (n, 3) positions out
+    if iterations == 0:
         return vertices
     op = curve_operator(boundary_curves(triangles, len(vertices)))
-    return run_curve_iterations(vertices, op, number_of_iterations, reimpose_every=reimpose_every)
+    return run_curve_iterations(vertices, op, iterations, reimpose_every=reimpose_every)
 
 
 def run_curve_iterations(
@@ -94,13 +96,11 @@ def run_curve_iterations(
 
 
 def smooth_boundary_curves(mesh: MeshT, number_of_iterations: int = 10) -> MeshT:
-    """Smooth every boundary loop of an open mesh with midpoint-constrained curve fairing.
+    """Smooth every boundary loop of an open mesh with midpoint-constrained curve fairing (section 3.3).
 
-    The local curve equation of Liu et al. 2001, section 3.3 (module docstring): each boundary
-    segment is relaxed with its midpoint held at the input and a point's estimates are averaged.
-    Interior vertices do not move; a closed mesh comes back unchanged. A pinch (holes touching at
-    a vertex) averages its estimates from every passage; a fin's vertices, the ends of the open
-    chains there, 3-loops and chains of fewer than four edges (:data:`MIN_LOOP_LENGTH`) are held.
+    Interior vertices do not move; a closed mesh comes back unchanged. Pinches average their
+    passages; fins, 3-loops and chains under :data:`MIN_LOOP_LENGTH` edges are held
+    (``docs/algorithms/boundary_curves.rst``).
 
     Parameters
     ----------
@@ -111,8 +111,7 @@ def smooth_boundary_curves(mesh: MeshT, number_of_iterations: int = 10) -> MeshT
     Returns
     -------
     mesh
-        A new mesh of the input's kind with the same triangles; vertex colors
-        and other per-vertex attributes are kept, normals recomputed if present.
+        A new mesh of the input's kind, same triangles, attributes kept, normals recomputed.
 
     Raises
     ------
@@ -120,11 +119,6 @@ def smooth_boundary_curves(mesh: MeshT, number_of_iterations: int = 10) -> MeshT
         ``mesh`` is not a mesh, or ``number_of_iterations`` is not an integer.
     ValueError
         Negative ``number_of_iterations``; an invalid mesh.
-
-    See Also
-    --------
-    smooth_boundary_curves_arrays : the array core.
-    o3d_lsmesh.fairing.constrained_fairing : surface fairing that calls this for the boundary.
 
     Examples
     --------
@@ -136,4 +130,4 @@ def smooth_boundary_curves(mesh: MeshT, number_of_iterations: int = 10) -> MeshT
     """
     number_of_iterations = as_iterations(number_of_iterations)
     data = read_mesh(mesh, weld=True)
-    return new_mesh(data, smooth_boundary_curves_arrays(data.vertices, data.triangles, number_of_iterations))
+    return new_mesh(data, _smooth(data.vertices, data.triangles, number_of_iterations, None))

@@ -1,9 +1,8 @@
-"""Constrained fairing (Liu et al. 2001, section 3): the public entry points and their option table.
+"""Constrained fairing (Liu et al. 2001, section 3): the entry points and their option table.
 
-Four energies: ``"scan"`` (the default, :mod:`.scan_fairing`), the paper's ``"local"`` (eq. 7) and
-``"global"`` (penalty form of eq. 5, :mod:`.barycenter`), and ``"features"`` (:mod:`.features`).
-:data:`METHOD_OPTIONS` says which option applies to which method. Docs page:
-``docs/algorithms/constrained_fairing.rst``.
+Four energies: ``"scan"`` (:mod:`.scan_fairing`), ``"local"`` (eq. 7), ``"global"`` (eq. 5 in penalty
+form, :mod:`.barycenter`), ``"features"`` (:mod:`.features`); :data:`METHOD_OPTIONS` says which option
+applies to which. Docs: ``docs/algorithms/constrained_fairing.rst``.
 """
 
 from __future__ import annotations
@@ -151,15 +150,11 @@ def constrained_fairing_arrays(
     progress: bool = False,
     solver: str = "auto",
 ) -> np.ndarray:
-    """Array core of :func:`constrained_fairing`: faired ``(n, 3) float64`` positions.
+    """Array core of :func:`constrained_fairing` (same arguments): faired ``(n, 3) float64`` positions.
 
-    The arguments are those of :func:`constrained_fairing`; unlike it, the defaults are
-    ``method="local"`` with 10 iterations (pass ``method=None, number_of_iterations=None`` for the
-    wrapper's). Without ``method`` it warns (``DeprecationWarning``): 0.4 takes the wrapper's
-    defaults. The input arrays are not modified.
+    Without ``method`` it runs ``"local"`` (10 iterations) and warns (``DeprecationWarning``: 0.4 takes
+    the wrapper's defaults, which ``method=None, number_of_iterations=None`` give now).
 
-    Examples
-    --------
     >>> import numpy as np, open3d as o3d
     >>> box = o3d.geometry.TriangleMesh.create_box()
     >>> constrained_fairing_arrays(np.asarray(box.vertices), np.asarray(box.triangles), 5, method="local").shape
@@ -261,19 +256,14 @@ def constrained_fairing(
 ) -> MeshT:
     """Remove noise from a mesh while holding its triangle barycenters (Liu et al. 2001).
 
-    The default (``method="scan"``, nothing to set) is made for raw range scans and first as well
-    on independent noise: eq. 5 in penalty form with the boundary freed, noise-weighted
-    barycenters, a membrane term and a twicing step, every weight measured on the input
-    (:mod:`o3d_lsmesh.fairing.scan_fairing`). ``"local"`` and ``"global"`` are the paper's operators
-    (eq. 7; eq. 5 in penalty form), holding the boundary or fairing it as curves (section 3.3);
-    ``"features"`` keeps sharp creases. The energies, their measurements and limits:
-    ``docs/algorithms/constrained_fairing.rst`` and ``docs/algorithms/scan_denoiser.rst``.
+    ``"scan"`` (the default, every weight measured) is made for raw range scans and independent
+    noise; ``"local"`` and ``"global"`` are the paper's operators (eq. 7, eq. 5), ``"features"`` keeps
+    creases. Docs: ``docs/algorithms/constrained_fairing.rst``, ``scan_denoiser.rst``.
 
     Parameters
     ----------
     mesh : open3d.geometry.TriangleMesh, open3d.t.geometry.TriangleMesh or (vertices, triangles)
-        ``(n, 3)`` vertices and ``(m, 3)`` triangles; components, isolated vertices, zero-area
-        triangles, non-manifold edges and vertices are fine.
+        Any ``(n, 3)`` vertices, ``(m, 3)`` triangles (non-manifold, several components).
     number_of_iterations : int or None
         Local iterations or global solves (``None``: 10); ``"scan"``: None, 0 or 1 (one solve);
         ``"features"``: filter passes (``None``: measured). 0 returns an unchanged copy.
@@ -302,9 +292,8 @@ def constrained_fairing(
     TypeError
         An argument of the wrong type.
     ValueError
-        A value out of range, an option given to a method it does not apply to, or an invalid
-        mesh; ``"local"``/``"global"``: an edge of more than two triangles, or (with
-        ``smooth_boundary``) a boundary vertex on other than two boundary edges.
+        A value out of range, an option of another method, an invalid mesh; ``"local"``/``"global"``:
+        an edge of three triangles, or (``smooth_boundary``) a pinched boundary vertex.
 
     Examples
     --------

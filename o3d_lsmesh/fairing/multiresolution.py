@@ -1,4 +1,7 @@
-"""Multiresolution fairing (Liu et al. 2001, section 4.2): fair a coarse level, split back up, repeat."""
+"""Multiresolution fairing (Liu et al. 2001, section 4.2): fair a coarse level, split back up, repeat.
+
+Docs: ``docs/algorithms/multiresolution.rst``.
+"""
 
 from __future__ import annotations
 
@@ -33,12 +36,8 @@ def multiresolution_fairing_arrays(
     method: str = "local",
     progress: bool = False,
 ) -> np.ndarray:
-    """Array core of :func:`multiresolution_fairing`: faired ``(n_0, 3)`` positions of level 0.
-
-    Every level's :class:`~o3d_lsmesh.core.connectivity.Connectivity` is built once and serves the
-    split into that level, its fairing and, on ``M_0``, the boundary; the rounds on ``M_0`` run on
-    one fairing operator, their targets re-taken between rounds.
-    """
+    """Array core of :func:`multiresolution_fairing`: faired ``(n_0, 3)`` positions of level 0 (each
+    level's Connectivity built once; the rounds on ``M_0`` run on one operator)."""
     triangles = hierarchy.triangles
     conn = Connectivity(triangles[level], len(hierarchy.representatives[level]))
     positions = hierarchy.vertices[hierarchy.representatives[level]]  # a copy: fairing writes to it
@@ -80,10 +79,7 @@ def _fair_level(
     smooth_boundary: bool = True,
     reimpose_every: int | None = None,
 ) -> np.ndarray:
-    """Constrained fairing of a level, ``positions (n, 3)`` overwritten.
-
-    A pinched boundary (a level of a fast-simplification hierarchy can have one) is held fixed.
-    """
+    """Constrained fairing of a level, ``positions (n, 3)`` overwritten; a pinched boundary is held."""
     if iterations == 0:
         return positions
     smooth_boundary = smooth_boundary and _is_simple(conn.rings)
@@ -96,12 +92,8 @@ def _fair_level(
 def _input_boundary(
     vertices: np.ndarray, conn: Connectivity, iterations: int, method: str
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The boundary vertices ``(b,)`` (sorted) and the positions ``(b, 3)`` ``_fair_level`` gives them on the input.
-
-    Its boundary steps read boundary vertices only, so they run alone: the curve update of section 3.3
-    with the input's midpoints (``"local"``), or re-taken from the current curve at every step
-    (``"global"``); a pinched boundary is held.
-    """
+    """The sorted boundary vertices ``(b,)`` and the positions ``(b, 3)`` ``_fair_level`` gives them on
+    the input (its boundary steps read boundary vertices only, so they run alone)."""
     degree = boundary_degree(conn.rings)
     boundary = np.flatnonzero(degree)
     if len(boundary) == 0 or not _is_simple(conn.rings, degree):
@@ -135,44 +127,28 @@ def multiresolution_fairing(
 ) -> MeshT:
     """Smooth a mesh at a chosen scale by fairing a coarse level and splitting back up (Liu et al. 2001, 4.2).
 
-    For ``i`` from ``level`` down to 1: (2.1) fair level ``M_i`` by
-    constrained fairing (section 3, ``number_of_iterations`` iterations of
-    ``method``), holding the barycenters of its own triangles at the
-    positions it had on entering the step; (2.2) refine to ``M_{i-1}`` by
-    vertex splits, each split vertex put at its 1-ring average and moved by
-    Kobbelt's step ``x <- x - L^2(x)/nu`` (:meth:`MeshHierarchy.refine`).
-    Then (our addition) ``M_0`` itself is faired in rounds of ``number_of_iterations``, barycenters
-    re-imposed after each (``final_iterations`` in all), its boundary curves put where
-    ``level=0`` puts them and held. A larger ``level`` removes larger details. Why the rounds and
-    the held boundary, measured: ``docs/algorithms/multiresolution.rst``.
-
-    Any mesh is accepted (non-manifold vertices, several components, holes,
-    unreferenced vertices): the hierarchy keeps its topology at every level
-    (:func:`~o3d_lsmesh.hierarchy.build_hierarchy`), and a level whose
-    boundary is pinched is faired with that boundary held fixed.
+    From ``level`` down to 1: fair ``M_i`` (section 3, its own barycenters held), then split to
+    ``M_{i-1}`` (:meth:`MeshHierarchy.refine`); then ``M_0`` is faired in rounds, barycenters
+    re-imposed, boundary held where ``level=0`` puts it. Any mesh; a pinched boundary is held.
+    Why the rounds: ``docs/algorithms/multiresolution.rst``.
 
     Parameters
     ----------
     mesh : open3d.geometry.TriangleMesh, open3d.t.geometry.TriangleMesh or (vertices, triangles)
-        Any triangle mesh; not modified.
     level : int
         Starting level, ``0 <= level < len(hierarchy)``.
-    hierarchy : MeshHierarchy, optional, keyword-only
-        Built from ``mesh`` (by :func:`~o3d_lsmesh.hierarchy.build_hierarchy` or
-        :func:`~o3d_lsmesh.hierarchy.from_fast_simplification`); reuse it across
-        calls. By default the first ``level`` levels of
-        ``build_hierarchy(mesh, min_vertices=4)`` are built.
-    number_of_iterations : int, keyword-only
+    hierarchy : MeshHierarchy, optional
+        Built from ``mesh`` (reuse it across calls); default ``build_hierarchy(mesh, min_vertices=4)``
+        up to ``level``.
+    number_of_iterations : int
         Fairing iterations on every level.
-    final_iterations : int, optional, keyword-only
-        Fairing iterations on ``M_0`` after the last split, barycenters re-imposed every
-        ``number_of_iterations``, boundary held as ``level=0`` leaves it (``None``:
-        ``number_of_iterations * (level + 1)``; ``0``: the paper's loop exactly, boundary included).
-        Not used at ``level=0``.
-    method : {"local", "global"}, keyword-only
-        Constrained fairing solver (see ``constrained_fairing``).
-    progress : bool, keyword-only
-        Show tqdm bars: the hierarchy build (when built here), then the levels.
+    final_iterations : int, optional
+        Iterations on ``M_0`` after the last split, in rounds of ``number_of_iterations`` (``None``:
+        ``number_of_iterations * (level + 1)``; 0: the paper's loop, boundary included).
+    method : {"local", "global"}
+        Constrained fairing operator.
+    progress : bool
+        Bars for the hierarchy build and the levels.
 
     Returns
     -------
@@ -181,17 +157,15 @@ def multiresolution_fairing(
     Raises
     ------
     TypeError
-        Wrong argument types.
+        A wrong argument type.
     ValueError
-        Invalid mesh arrays, negative ``level``, ``level`` beyond the hierarchy, or a
-        hierarchy built from another mesh.
+        Invalid mesh, ``level`` out of range, or a hierarchy of another mesh.
 
     Examples
     --------
     >>> import numpy as np, open3d as o3d
     >>> sphere = o3d.geometry.TriangleMesh.create_sphere(resolution=20)
-    >>> smooth = multiresolution_fairing(sphere, 3)
-    >>> np.asarray(smooth.triangles).shape == np.asarray(sphere.triangles).shape
+    >>> len(multiresolution_fairing(sphere, 3).triangles) == len(sphere.triangles)
     True
     """
     level = as_count(level, name="level")
