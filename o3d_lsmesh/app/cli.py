@@ -58,7 +58,8 @@ class Parser(argparse.ArgumentParser):
         raise CLIError(f"{self.prog}: error: {message} (see {self.prog} --help)")
 
 
-def _argparse_type(parse: Callable[[Any], Any]) -> Callable[[str], Any]:
+def argparse_type(parse: Callable[[Any], Any]) -> Callable[[str], Any]:
+    """``parse`` as an argparse type (its ``ValueError`` the flag's one-line error)."""
     def convert(text: str) -> Any:
         try:
             return parse(text)
@@ -77,7 +78,7 @@ def add_option(parser: Any, option: Option, **overrides: Any) -> None:
         choices = option.parse.choices  # type: ignore[attr-defined]
         kwargs.update(choices=choices, type=type(choices[0]))
     else:
-        kwargs["type"] = _argparse_type(option.parse)
+        kwargs["type"] = argparse_type(option.parse)
     if option.required:
         kwargs.update(required=True, default=None)
     parser.add_argument(option.cli_flag, dest=option.name, **{**kwargs, **overrides})

@@ -8,19 +8,18 @@ what a single file needs (output checks, pictures, the human report). Docs: ``do
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import textwrap
 import time
 from collections import Counter
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
-from .cli import Run, add_command, approximate, denoise, draw, fill, hierarchy, run_op, shape_change_text
+from .cli import Run, add_command, argparse_type, draw, run_op, shape_change_text
 from .files import WRITABLE, CLIError, check_output, mesh_suffix, read_input, write_output
-from .ops import OPS, Option
+from .ops import OPS, Option, int_at_least, non_negative
 
 __all__ = ["add_parsers", "parse_index_spec"]
 
@@ -29,27 +28,10 @@ MAX_RESOLUTION = 2000
 _FILES = {"input": "mesh file", "output": "mesh file to write"}
 
 
-def bounded(
-    kind: Callable[[str], Any], minimum: float, rule: str, maximum: float | None = None
-) -> Callable[[str], Any]:
-    """An argparse type for finite ``kind`` numbers in ``[minimum, maximum]`` (the demo's own flags)."""
-
-    def parse(text: str) -> Any:
-        try:
-            value = kind(text)
-        except ValueError:
-            value = math.nan
-        if not minimum <= value < math.inf:  # (nan fails too)
-            raise argparse.ArgumentTypeError(f"must be {rule}, got {text!r}")
-        if maximum is not None and value > maximum:
-            raise argparse.ArgumentTypeError(f"must be at most {maximum:,}, got {text!r}")
-        return value
-
-    return parse
-
-
 def add_parsers(sub: Any, writing: argparse.ArgumentParser, common: argparse.ArgumentParser) -> None:
     """Add every subcommand; ``writing`` adds ``--force`` to ``common`` (not for the demo: it reads no file)."""
+    from .cli import approximate, denoise, fill, hierarchy
+
     files = {"input": "mesh file to denoise", "output": f"mesh file to write ({', '.join(WRITABLE)})"}
     p = add_command(sub, writing, denoise, files)
     p.add_argument("--render", metavar="PNG", help="write a before/after picture (default: none)")
@@ -72,7 +54,7 @@ def add_parsers(sub: Any, writing: argparse.ArgumentParser, common: argparse.Arg
     p = add_command(sub, writing, decode, names)
     p.add_argument(
         "--anchors",
-        type=bounded(int, 1, "a positive integer"),
+        type=argparse_type(int_at_least(1)),
         help="use only the first K anchors (default: all)",
     )
     p.set_defaults(flags={"anchors": "--anchors"})
@@ -95,12 +77,11 @@ def add_parsers(sub: Any, writing: argparse.ArgumentParser, common: argparse.Arg
     p = add_command(sub, common, demo, {})
     p.add_argument("--out", default="demo_out", help="output folder")
     p.add_argument("--no-render", action="store_true", help="skip the picture")
-    resolution = bounded(int, 20, "a grid size of at least 20 rays", MAX_RESOLUTION)
+    resolution = argparse_type(int_at_least(20, MAX_RESOLUTION, "a grid size of at least 20 rays"))
     help = "the scanner's grid of R x R rays (200: about 22,000 vertices)"
     p.add_argument("--resolution", type=resolution, default=200, help=help)
-    noise = bounded(float, 0, "a non-negative finite number")
     help = "range noise in grid spacings where the surface faces the scanner"
-    p.add_argument("--noise", type=noise, default=0.3, help=help)
+    p.add_argument("--noise", type=argparse_type(non_negative), default=0.3, help=help)
     p.add_argument("--seed", type=int, default=0, help="random seed of the noise and dropouts")
 
 

@@ -40,9 +40,9 @@ MAX_POINTS = 10_000_000
 # --------------------------------------------------------------------------- parsers: value -> value or ValueError
 
 
-def int_at_least(minimum: int, maximum: int | None = None) -> Callable[[Any], int]:
-    """Parser of an integer in ``[minimum, maximum]`` given as an int or its text."""
-    rule = {0: "a non-negative integer", 1: "a positive integer"}.get(minimum, f"an integer >= {minimum}")
+def int_at_least(minimum: int, maximum: int | None = None, rule: str = "") -> Callable[[Any], int]:
+    """Parser of an integer in ``[minimum, maximum]`` given as an int or its text (``rule``: what it must be)."""
+    rule = rule or {0: "a non-negative integer", 1: "a positive integer"}.get(minimum, f"an integer >= {minimum}")
 
     def parse(value: Any) -> int:
         number = minimum - 1  # refused unless value is an int (not a bool) or its text
@@ -77,6 +77,14 @@ def real(value: Any) -> float:
     if not np.isfinite(number):
         raise ValueError(f"must be a finite number, got {value!r}")
     return number
+
+
+def non_negative(value: Any) -> float:
+    """Parser of a finite float >= 0."""
+    with contextlib.suppress(ValueError):
+        if (number := real(value)) >= 0:
+            return number
+    raise ValueError(f"must be a non-negative finite number, got {value!r}")
 
 
 def choice(*choices: Any) -> Callable[[Any], Any]:
