@@ -16,7 +16,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._o3d import MeshData, new_mesh, read_mesh, template, warn_dropped_attributes
-from ..core.connectivity import VertexRings, vertex_rings
+from ..core.connectivity import Connectivity, VertexRings
 from ..core.operators import single_slots, umbrella_weights
 from ..core.progress import Progress
 from ..core.solve import solve_spd
@@ -151,7 +151,9 @@ class MeshHierarchy:
         """
         i = self._check_level(i, minimum=1)
         positions = as_positions(positions, len(self.representatives[i]), name="positions")
-        return self.refine_with_rings(i, positions, vertex_rings(self.triangles[i - 1], len(self.parents[i])))
+        return self.refine_with_rings(
+            i, positions, Connectivity(self.triangles[i - 1], len(self.parents[i])).rings
+        )
 
     def refine_with_rings(self, i: int, positions: np.ndarray, rings: VertexRings) -> np.ndarray:
         """:meth:`refine` of checked positions with the :class:`~o3d_lsmesh.core.connectivity.VertexRings` of
@@ -238,6 +240,17 @@ def _warn_workers(workers: Any) -> None:
         )
 
 
+def _options(alpha: Any, beta: Any, min_vertices: Any, max_levels: Any, progress: Any) -> dict[str, Any]:
+    # the one check of build_hierarchy's options
+    return dict(
+        alpha=as_positive_float(alpha, name="alpha", allow_zero=True),
+        beta=as_positive_float(beta, name="beta", allow_zero=True),
+        min_vertices=as_count(min_vertices, name="min_vertices"),
+        max_levels=None if max_levels is None else as_count(max_levels, name="max_levels"),
+        progress=as_bool(progress, name="progress"),
+    )
+
+
 def build_hierarchy_arrays(
     vertices: np.ndarray,
     triangles: np.ndarray,
@@ -253,16 +266,11 @@ def build_hierarchy_arrays(
 ) -> MeshHierarchy:
     """Array core of :func:`build_hierarchy` on ``(n, 3)`` vertices and ``(m, 3)`` triangles (checked and copied)."""
     _warn_workers(workers)
-    alpha = as_positive_float(alpha, name="alpha", allow_zero=True)
-    beta = as_positive_float(beta, name="beta", allow_zero=True)
-    min_vertices = as_count(min_vertices, name="min_vertices")
-    if max_levels is not None:
-        max_levels = as_count(max_levels, name="max_levels")
-    progress = as_bool(progress, name="progress")
+    options = _options(alpha, beta, min_vertices, max_levels, progress)
     vertices, triangles = mesh_arrays(vertices, triangles)
-    options: dict[str, Any] = dict(alpha=alpha, beta=beta, min_vertices=min_vertices, max_levels=max_levels)
-    options.update(progress=bool(progress), mesh_kind=mesh_kind, tensor_format=tensor_format)
-    return collapse_hierarchy(vertices, triangles, **options)
+    return collapse_hierarchy(
+        vertices, triangles, mesh_kind=mesh_kind, tensor_format=tensor_format, **options
+    )
 
 
 def collapse_hierarchy(
@@ -277,7 +285,7 @@ def collapse_hierarchy(
     mesh_kind: str = "arrays",
     tensor_format: tuple = (),
 ) -> MeshHierarchy:
-    """:func:`build_hierarchy_arrays` of checked arrays and options (:func:`read_mesh`'s, kept)."""
+    """:func:`build_hierarchy_arrays` of checked arrays and options (the arrays are kept)."""
     n0 = len(vertices)
     total = max(n0 - min_vertices, 0)  # at most: a level may find no valid collapse before
     with Progress(progress, "mesh hierarchy").bar(total, unit="vertex") as bar:
@@ -339,6 +347,7 @@ def build_hierarchy(
     _warn_workers(workers)
     data = read_mesh(mesh)  # any mesh: non-manifold, unreferenced vertices
     warn_dropped_attributes(data, "hierarchy levels have new connectivity", normals=True)
-    options: dict[str, Any] = dict(alpha=alpha, beta=beta, min_vertices=min_vertices, max_levels=max_levels)
-    options.update(progress=progress, mesh_kind=data.kind, tensor_format=tensor_format_of(data))
-    return build_hierarchy_arrays(data.vertices, data.triangles, **options)
+    options = _options(alpha, beta, min_vertices, max_levels, progress)
+    return collapse_hierarchy(
+        data.vertices, data.triangles, mesh_kind=data.kind, tensor_format=tensor_format_of(data), **options
+    )

@@ -19,12 +19,12 @@ import numpy as np
 
 from .._o3d import MeshData, new_mesh, read_mesh
 from ..core.arrays import dequantize, quantize
-from ..core.connectivity import connected_components, unique_edges
+from ..core.connectivity import Connectivity
 from ..core.errors import InputError, InputTypeError
 from ..core.progress import Progress
 from ..core.solve import check_weight_pins_components
 from ..core.validate import as_bool, as_choice, as_count, as_positive_float
-from .lsmesh import LSMeshSystem, laplacian_matrix
+from .lsmesh import LSMeshSystem, laplacian_matrix, solve_once
 from .selection import SELECTION_METHODS, control_point_selection
 
 if TYPE_CHECKING:
@@ -45,7 +45,7 @@ def index_width(n: int) -> int:
 
 def connectivity_checksum(triangles: np.ndarray, n: int) -> int:
     """CRC-32 of the sorted unique edges: the graph that the uniform Laplacian depends on."""
-    edges, _, _ = unique_edges(triangles, n)
+    edges = Connectivity(triangles, n).edges
     return zlib.crc32(np.ascontiguousarray(edges, dtype="<i8").tobytes()) & 0xFFFFFFFF
 
 
@@ -254,13 +254,11 @@ def decode_geometry(mesh: MeshT, data: Any, *, anchors: int | None = None, progr
     indices, positions, omega = _parse(data, mesh_data)
     k = len(indices)
     m = k if anchors is None else as_count(anchors, name="anchors", minimum=1, maximum=k)
-    with Progress(progress, "decode_geometry").stages(("factor", "solve")) as begin:
-        begin("factor")
-        # LSMeshSolver raises SingularSystemError if the prefix misses a component
-        solver = LSMeshSystem(mesh_data.vertices, mesh_data.triangles, indices[:m], weights=omega)
-        begin("solve")
-        vertices = solver.solve(positions[:m])
-    return new_mesh(mesh_data, vertices)
+    # SingularSystemError if the prefix misses a component
+    return new_mesh(
+        mesh_data,
+        solve_once("decode_geometry", progress, mesh_data, indices[:m], positions[:m], weights=omega),
+    )
 
 
 def iter_decode_geometry(
@@ -297,7 +295,7 @@ def iter_decode_geometry(
     if step is None:
         # the first mesh needs an anchor in every component (the selection puts those first): on a
         # raw scan with many small components a tenth of the anchors may not cover them
-        components = connected_components(mesh_data.triangles, len(mesh_data.vertices))[0]
+        components = Connectivity(mesh_data.triangles, len(mesh_data.vertices)).components[0]
         step = max(1, math.ceil(k / 10), min(k, components))
     else:
         step = as_count(step, name="step", minimum=1)

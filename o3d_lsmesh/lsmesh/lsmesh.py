@@ -14,7 +14,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse import csgraph
 
-from .._o3d import mesh_from_state, mesh_state, new_mesh, read_mesh
+from .._o3d import MeshData, mesh_from_state, mesh_state, new_mesh, read_mesh
 from ..core import operators
 from ..core.connectivity import Connectivity
 from ..core.errors import InputError, SingularSystemError
@@ -418,16 +418,22 @@ def ls_mesh(
     """
     data = read_mesh(mesh, weld=True)
     indices = data.welded_indices(constraint_vertex_indices, name="constraint_vertex_indices")
-    with Progress(progress, "ls_mesh").stages(("factor", "solve")) as begin:
-        begin("factor")
-        options: dict[str, Any] = dict(weights=weights, interpolate=interpolate, laplacian=laplacian, tol=tol)
-        system = LSMeshSystem(
-            data.vertices, data.triangles, indices, solver=solver, progress=progress, **options
-        )
-        begin("solve")
-        vertices = system.solve(constraint_vertex_positions)
-        del system  # the factor goes before the output mesh is built
+    options: dict[str, Any] = dict(weights=weights, interpolate=interpolate, laplacian=laplacian, tol=tol)
+    options.update(solver=solver, progress=progress)
+    vertices = solve_once("ls_mesh", progress, data, indices, constraint_vertex_positions, **options)
     return new_mesh(data, vertices)
+
+
+def solve_once(
+    desc: str, bar: bool, data: MeshData, indices: Any, positions: Any = None, **options: Any
+) -> np.ndarray:
+    """One :class:`LSMeshSystem` of ``data`` factored and solved under a two-stage bar, ``(n, 3)``; the
+    factor is freed before the caller builds its mesh."""
+    with Progress(bar, desc).stages(("factor", "solve")) as begin:
+        begin("factor")
+        system = LSMeshSystem(data.vertices, data.triangles, indices, **options)
+        begin("solve")
+        return system.solve(positions)
 
 
 def reconstruct_geometry(
@@ -473,13 +479,11 @@ def reconstruct_geometry(
     check_components_constrained(
         L, known, what="known vertex (outside unknown_vertex_indices)", param="unknown_vertex_indices"
     )
+    if not interpolate:
+        options: dict[str, Any] = dict(weights=weights, laplacian=laplacian, solver=solver, tol=tol)
+        return new_mesh(data, solve_once("reconstruct_geometry", progress, data, known, **options))
     with Progress(progress, "reconstruct_geometry").stages(("factor", "solve")) as begin:
         begin("factor")
-        if not interpolate:
-            options: dict[str, Any] = dict(weights=weights, laplacian=laplacian, solver=solver, tol=tol)
-            system = LSMeshSystem(data.vertices, data.triangles, known, **options)
-            begin("solve")
-            return new_mesh(data, system.solve())
         L_unknown = L[:, unknown].tocsr()
         rows = np.flatnonzero(np.diff(L_unknown.indptr) > 0)  # rows touching an unknown vertex
         A = L_unknown[rows]

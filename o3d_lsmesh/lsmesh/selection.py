@@ -15,11 +15,11 @@ import numpy as np
 
 from .._o3d import new_mesh, read_mesh
 from ..core.arrays import concatenated_ranges
-from ..core.connectivity import adjacency_matrix, connected_components
+from ..core.connectivity import Connectivity
 from ..core.errors import InputError, InputTypeError
 from ..core.progress import Progress
 from ..core.validate import as_bool, as_choice, as_count, as_positive_float
-from .lsmesh import LSMeshSystem
+from .lsmesh import LSMeshSystem, solve_once
 
 if TYPE_CHECKING:
     from .._types import AnyMesh, MeshT
@@ -52,7 +52,7 @@ def _first_per_label(labels: np.ndarray, order: np.ndarray, count: int) -> np.nd
 def start_vertices(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     """``(c,) int64``: per connected component, in component order, its vertex farthest from its centroid."""
     n = len(vertices)
-    count, labels = connected_components(triangles, n)
+    count, labels = Connectivity(triangles, n).components
     size = np.bincount(labels, minlength=count).astype(np.float64)
     sums = np.stack([np.bincount(labels, weights=vertices[:, a], minlength=count) for a in range(3)], axis=1)
     centroid = sums / size[:, None]
@@ -64,7 +64,7 @@ def start_vertices(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
 
 def _random(vertices: np.ndarray, triangles: np.ndarray, count: int, rng: np.random.Generator) -> np.ndarray:
     n = len(vertices)
-    components, labels = connected_components(triangles, n)
+    components, labels = Connectivity(triangles, n).components
     order = rng.permutation(n)
     start = _first_per_label(labels, order, components)
     rest = np.ones(n, dtype=bool)
@@ -107,7 +107,7 @@ def _select(
         bar.set_postfix_str("factor")
         indptr = neighbours = np.zeros(0, dtype=np.int64)  # a batch of one forbids nothing
         if batch > 1:
-            adjacency = adjacency_matrix(triangles, n)
+            adjacency = Connectivity(triangles, n).adjacency
             indptr, neighbours = adjacency.indptr.astype(np.int64), adjacency.indices.astype(np.int64)
         solver = LSMeshSystem(vertices, triangles, start, weights=weight)
         selected = np.zeros(n, dtype=bool)
@@ -154,7 +154,7 @@ def control_point_selection(
     method = as_choice(method, SELECTION_METHODS, name="method")
     count = as_count(count, name="count", minimum=1, maximum=n)
     weight = as_positive_float(weights, name="weights")
-    components, _ = connected_components(triangles, n)
+    components, _ = Connectivity(triangles, n).components
     if count < components:
         raise InputError(
             f"count must be at least the number of connected components ({components}, "
@@ -264,11 +264,6 @@ def approximate(
     if system is not None and not interpolate:
         return new_mesh(data, system.solve()), data.source_indices(indices)
     # a new factorization: the LS mesh of the selection, with ls_mesh's bar
-    with Progress(progress, "ls_mesh").stages(("factor", "solve")) as begin:
-        begin("factor")
-        system = LSMeshSystem(
-            V, F, indices, weights=weights, interpolate=bool(interpolate), progress=progress
-        )
-        begin("solve")
-        vertices = system.solve()
+    options: dict[str, Any] = dict(weights=weights, interpolate=bool(interpolate), progress=progress)
+    vertices = solve_once("ls_mesh", progress, data, indices, **options)
     return new_mesh(data, vertices), data.source_indices(indices)
