@@ -26,8 +26,8 @@ from typing import Any, Callable
 import numpy as np
 
 from ..core.errors import InputError
-from .files import CLIError, check_output, read_input, write_output
-from .ops import OPS, BatchOp, Option, TaskContext
+from .files import WRITABLE, CLIError, check_output, read_input, write_output
+from .ops import OPS, Option, TaskContext
 from .tasks import jsonable
 
 __all__ = ["CLIError", "PictureError", "Run", "build_parser", "main"]
@@ -60,6 +60,7 @@ class Parser(argparse.ArgumentParser):
 
 def argparse_type(parse: Callable[[Any], Any]) -> Callable[[str], Any]:
     """``parse`` as an argparse type (its ``ValueError`` the flag's one-line error)."""
+
     def convert(text: str) -> Any:
         try:
             return parse(text)
@@ -110,11 +111,6 @@ def add_command(
     flags = {option.api_param: option.cli_flag for option in options}
     parser.set_defaults(handler=handler, positionals=tuple(arguments), flags=flags)
     return parser
-
-
-def op_options(args: argparse.Namespace, op: BatchOp) -> dict[str, Any]:
-    """The values of ``op``'s options on the command line (parsed by argparse, or the defaults)."""
-    return {option.name: getattr(args, option.name, option.default) for option in op.options}
 
 
 # --------------------------------------------------------------------------- output
@@ -249,14 +245,27 @@ def draw(
     return path
 
 
-def run_op(
-    name: str, mesh: Any, args: argparse.Namespace, run: Run, **options: Any
-) -> tuple[Any, dict, float]:
+def run_op(name: str, mesh: Any, args: argparse.Namespace, run: Run) -> tuple[Any, dict, float]:
     """Run the operation ``name`` on ``mesh`` with the command line's options; the result, metrics, seconds."""
     context = TaskContext(args.input, args.input, None, progress=run.progress)
+    options = {option.name: getattr(args, option.name, option.default) for option in OPS[name].options}
     start = time.perf_counter()
-    out, metrics = OPS[name].function(mesh, {**op_options(args, OPS[name]), **options}, context)
+    out, metrics = OPS[name].function(mesh, options, context)
     return out, metrics, time.perf_counter() - start
+
+
+def run_file_op(name: str, args: argparse.Namespace, run: Run, *extra: Any) -> tuple[Any, Any, dict, float]:
+    """The flow of an op's subcommand: check OUTPUT and the ``extra`` ``(path, suffixes)`` outputs, read
+    INPUT, run the op, write its mesh or bytes; the input, the output, the metrics and the seconds."""
+    kind = OPS[name].output
+    check_output(args.output, [args.input], force=args.force, suffixes=None if kind == "bytes" else WRITABLE)
+    for path, suffixes in extra:
+        if path:
+            check_output(path, [args.input], force=args.force, suffixes=suffixes)
+    mesh = read_input(args.input)
+    out, metrics, seconds = run_op(name, mesh, args, run)
+    Path(args.output).write_bytes(out) if kind == "bytes" else write_output(args.output, out)
+    return mesh, out, metrics, seconds
 
 
 def denoise(args: argparse.Namespace, run: Run) -> int:
@@ -280,10 +289,6 @@ def denoise(args: argparse.Namespace, run: Run) -> int:
             f"{', '.join(given)} cannot be combined with --level (multiresolution fairing does not take "
             f"{'them' if len(given) > 1 else 'it'}), got --level {args.level}"
         )
-    check_output(args.output, [args.input], force=args.force)
-    if args.render:
-        check_output(args.render, [args.input], force=args.force, suffixes=(".png",))
-    mesh = read_input(args.input)
     from ..fairing.constrained import resolved_options
 
     scan = resolved_options(args.method, args.iterations, args.reimpose_every)[0] == "scan"
@@ -292,9 +297,8 @@ def denoise(args: argparse.Namespace, run: Run) -> int:
             "--fixed-boundary cannot be used with --method scan, the default (its boundary moves with "
             "the surface): add --method local or --method global"
         )
-    out, report, seconds = run_op("denoise", mesh, args, run)
+    mesh, out, report, seconds = run_file_op("denoise", args, run, (args.render, (".png",)))
     report["seconds"] = seconds
-    write_output(args.output, out)
     run.say(
         f"denoised {args.input} ({len(mesh.vertices)} vertices) by {report['method']} fairing in {seconds:.2f} s "
         f"-> {args.output}; mean displacement {report['displacement_mean']:.4g}, {shape_change_text(report)}"
@@ -322,8 +326,6 @@ def fill(args: argparse.Namespace, run: Run) -> int:
 
     example: scan.ply filled.ply --max-hole-edges 200
     """
-    check_output(args.output, [args.input], force=args.force)
-    mesh = read_input(args.input)
     from .._o3d import read_mesh
     from ..holes import find_holes
 
@@ -331,11 +333,8 @@ def fill(args: argparse.Namespace, run: Run) -> int:
         welded = read_mesh(mesh, weld=True)
         return find_holes(welded.vertices, welded.triangles)
 
-    before = holes(mesh)
-    out, metrics, seconds = run_op("fill", mesh, args, run)
-    report = metrics["_report"]
-    write_output(args.output, out)
-    after = holes(out)
+    mesh, out, metrics, seconds = run_file_op("fill", args, run)
+    before, after, report = holes(mesh), holes(out), metrics["_report"]
     run.say(
         f"filled {len(report.filled)} of {len(report.holes)} holes of {args.input} in {seconds:.2f} s "
         f"({metrics['new_vertices']} new vertices) -> {args.output}; {len(after)} loops left open"
@@ -363,12 +362,7 @@ def approximate(args: argparse.Namespace, run: Run) -> int:
 
     example: bunny.ply approx.ply --count 400 --indices controls.npy
     """
-    check_output(args.output, [args.input], force=args.force)
-    if args.indices:
-        check_output(args.indices, [args.input], force=args.force, suffixes=(".npy", ".txt"))
-    mesh = read_input(args.input)
-    out, metrics, seconds = run_op("approximate", mesh, args, run)
-    write_output(args.output, out)
+    mesh, _, metrics, seconds = run_file_op("approximate", args, run, (args.indices, (".npy", ".txt")))
     indices = metrics.pop("_indices")
     if args.indices:
         np.save(args.indices, indices) if args.indices.endswith(".npy") else np.savetxt(

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from .cli import Run, add_command, argparse_type, draw, run_op, shape_change_text
+from .cli import Run, add_command, argparse_type, draw, run_file_op, shape_change_text
 from .files import WRITABLE, CLIError, check_output, mesh_suffix, read_input, write_output
 from .ops import OPS, Option, int_at_least, non_negative
 
@@ -25,6 +25,29 @@ __all__ = ["add_parsers", "parse_index_spec"]
 
 #: the demo scan has up to about 0.55 * resolution**2 vertices: 2000 gives about 2.2 million
 MAX_RESOLUTION = 2000
+#: batch.run's own parameters as flags of ``o3d-lsmesh batch`` (the scheduler's two exclude each other)
+RUN_FLAGS: dict[str, dict[str, Any]] = {
+    "workers": dict(type=int, help="local worker processes (default: CPUs; 0: this process)"),
+    "threads_per_worker": dict(type=int, default=1, help="threads of each worker"),
+    "scheduler": dict(
+        metavar="ADDRESS",
+        help="existing Dask scheduler, e.g. tcp://host:8786 (default: $DASK_SCHEDULER_ADDRESS)",
+    ),
+    "scheduler_file": dict(metavar="FILE", help="existing scheduler's JSON file (default: none)"),
+    "resume": dict(action="store_true", help="skip inputs the report lists as ok with the same key"),
+    "report": dict(
+        metavar="FILE", help="JSON-lines report, one record per file (default: OUTDIR/batch_report.jsonl)"
+    ),
+    "retries": dict(type=int, default=1, help="runs of a task whose worker died before it fails"),
+    "fail_fast": dict(action="store_true", help="stop at the first failure"),
+    "task_timeout": dict(
+        type=float,
+        default=3600.0,
+        metavar="SECONDS",
+        help="a file still running after this long fails (TaskTimeout; 0: no limit; default: 3600)",
+    ),
+    "suffix": dict(default=".ply", help="output mesh format (.ply .obj .stl .off .gltf)"),
+}
 _FILES = {"input": "mesh file", "output": "mesh file to write"}
 
 
@@ -96,23 +119,9 @@ def _add_batch(p: argparse.ArgumentParser) -> None:
     help = "an operation or a pipeline in order, e.g. denoise or denoise,compare"
     p.add_argument("--op", required=True, help=help)
     p.add_argument("--set", action="append", default=[], metavar="OP.NAME=VALUE", help="an option of one op")
-    p.add_argument("--workers", type=int, help="local worker processes (default: CPUs; 0: this process)")
-    p.add_argument("--threads-per-worker", type=int, default=1, help="threads of each worker")
     where = p.add_mutually_exclusive_group()
-    help = "existing Dask scheduler, e.g. tcp://host:8786 (default: $DASK_SCHEDULER_ADDRESS)"
-    where.add_argument("--scheduler", metavar="ADDRESS", help=help)
-    where.add_argument(
-        "--scheduler-file", metavar="FILE", help="existing scheduler's JSON file (default: none)"
-    )
-    help = "skip inputs the report lists as ok with the same key"
-    p.add_argument("--resume", action="store_true", help=help)
-    help = "JSON-lines report, one record per file (default: OUTDIR/batch_report.jsonl)"
-    p.add_argument("--report", metavar="FILE", help=help)
-    p.add_argument("--retries", type=int, default=1, help="runs of a task whose worker died before it fails")
-    p.add_argument("--fail-fast", action="store_true", help="stop at the first failure")
-    help = "a file still running after this long fails (TaskTimeout; 0: no limit; default: 3600)"
-    p.add_argument("--task-timeout", type=float, default=3600.0, metavar="SECONDS", help=help)
-    p.add_argument("--suffix", default=".ply", help="output mesh format (.ply .obj .stl .off .gltf)")
+    for name, keywords in RUN_FLAGS.items():
+        (where if name.startswith("scheduler") else p).add_argument("--" + name.replace("_", "-"), **keywords)
     group = p.add_argument_group(
         "operation options (each applies to every op of the pipeline that has it; "
         "--set OP.NAME=VALUE for one op)"
@@ -136,9 +145,7 @@ def _add_batch(p: argparse.ArgumentParser) -> None:
         group.add_argument(
             option.cli_flag, dest=f"opt_{name}", default=argparse.SUPPRESS, help=text, **kwargs
         )
-    flags = {name: "--" + name.replace("_", "-") for name in owners}
-    names = "op workers threads_per_worker scheduler scheduler_file resume report retries suffix task_timeout"
-    flags.update({name: "--" + name.replace("_", "-") for name in names.split()})
+    flags = {name: "--" + name.replace("_", "-") for name in [*owners, "op", *RUN_FLAGS]}
     p.set_defaults(positionals=("inputs", "outdir"), flags=flags)
 
 
@@ -150,10 +157,7 @@ def encode(args: argparse.Namespace, run: Run) -> int:
 
     example: bunny.ply bunny.lsm --count 500 --bits 12
     """
-    check_output(args.output, [args.input], force=args.force, suffixes=None)
-    mesh = read_input(args.input)
-    data, metrics, seconds = run_op("encode", mesh, args, run)
-    Path(args.output).write_bytes(data)
+    mesh, data, metrics, seconds = run_file_op("encode", args, run)
     run.say(
         f"encoded {args.input}: {metrics['anchors']} anchors at {args.bits} bits -> {len(data)} bytes "
         f"({metrics['bits_per_vertex']:.3f} bits/vertex) in {seconds:.2f} s; "
@@ -369,7 +373,6 @@ def batch(args: argparse.Namespace, run: Run) -> int:
             raise CLIError(f"--set must look like OP.NAME=VALUE, got {item!r}")
         options[name] = value
     report = args.report if args.report is not None else os.path.join(args.outdir, "batch_report.jsonl")
-    names = "workers threads_per_worker scheduler scheduler_file resume retries fail_fast suffix force task_timeout"
     start = time.perf_counter()
     try:
         records = run_batch(
@@ -379,7 +382,8 @@ def batch(args: argparse.Namespace, run: Run) -> int:
             options=options,
             report=report,
             progress=run.progress,
-            **{name: getattr(args, name) for name in names.split()},
+            force=args.force,
+            **{name: getattr(args, name) for name in RUN_FLAGS if name != "report"},
         )
     except ImportError as error:  # --scheduler without dask installed
         raise CLIError(str(error)) from None

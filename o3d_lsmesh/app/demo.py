@@ -98,26 +98,11 @@ def run_demo(
 ) -> dict:
     """Run the demo; return ``{"rows": [...], "spacing": h, "sweeps": {...}, "files": [...]}``.
 
-    Parameters
-    ----------
-    out : path or None
-        Folder for ``scan.ply``, ``surface.ply``, one PLY per method, ``metrics.json``,
-        ``metrics.md`` and ``before_after.png`` (created if needed); ``None`` writes nothing.
-    resolution : int
-        The scanner's grid is ``resolution x resolution`` rays.
-    noise : float
-        Range noise, in grid spacings, where the surface faces the scanner.
-    seed : int
-        Seed of the scan's noise and dropouts.
-    render : bool
-        Write ``before_after.png`` (raw scan, ours, Open3D's best; colored by distance).
-    quiet, progress : bool
-        Print nothing (the table is still returned); a progress bar over the methods.
-    stream : file, optional
-        Where the table goes (default ``sys.stdout``).
-
-    Distances are of the vertices to the true surface in grid spacings ``h``: ``rim`` the boundary
-    and the two rings inside it, ``offset`` the mean signed distance (negative: moved inward).
+    ``out``: the folder for ``scan.ply``, ``surface.ply``, one PLY per method, ``metrics.json``,
+    ``metrics.md`` and (``render``) ``before_after.png`` (None: nothing written); ``resolution``,
+    ``noise``, ``seed``: the flags of ``o3d-lsmesh demo``; ``stream``: where the table goes (default
+    stdout; ``quiet``: nowhere). Distances: of the vertices to the true surface in grid spacings ``h``
+    (``rim``: the boundary and two rings; ``offset``: the mean signed one, negative inward).
     """
     stream = sys.stdout if stream is None else stream
     say = (lambda *a: None) if quiet else (lambda *a: print(*a, file=stream, flush=True))

@@ -22,7 +22,7 @@ import numpy as np
 from .._o3d import MeshData, read_mesh
 from .._o3d.io import cast_rays, distances_to_surface, raycasting_scene, write_image
 from ..core.arrays import area_weighted_normals
-from ..core.connectivity import unique_edges
+from ..core.connectivity import Connectivity
 from ..core.errors import InputError, InputTypeError, warn
 from ..core.validate import as_choice, as_count, as_positive_float, as_real_vector
 from .metrics import common_frame
@@ -303,7 +303,7 @@ def _annotate(image, panel_width, titles, bar, background):
 
 def _mean_edge_length(vertices: np.ndarray, triangles: np.ndarray) -> float:
     """Mean length of the undirected edges (each counted once), the unit of ``units="edge"``."""
-    edges = unique_edges(triangles, len(vertices))[0]
+    edges = Connectivity(triangles, len(vertices)).edges.astype(np.int64)
     return float(np.linalg.norm(vertices[edges[:, 0]] - vertices[edges[:, 1]], axis=1).mean())
 
 
@@ -340,29 +340,18 @@ def render(
     width, height : int
         Size of one panel in pixels.
     reference : mesh, optional
-        Color every vertex by its distance to ``reference`` (viridis, dark = 0, yellow = ``error_max``)
-        and add a labelled color bar below. Without it: a mesh's own vertex colors, else ``color``
-        (also for ``reference`` itself when it is one of ``meshes``).
-    error_max : float, optional
-        Top of the error scale, in ``units``; default the 99th percentile of all distances.
+        Color each vertex by its distance to it (viridis, dark 0, yellow ``error_max``: default the
+        99th percentile, in ``units``: ``"model"`` or ``"edge"``, mean edge lengths of the reference)
+        under a color bar titled ``colorbar_title``. Without it: a mesh's own colors, else ``color``.
     titles : sequence of str, optional
         One title per panel, in a band above the panels.
-    units : {"model", "edge"}
-        Distances in model units or in mean edge lengths of ``reference``.
-    colorbar_title : str, optional
-        Title of the color bar; default "distance to reference" and the units.
-    color, background : RGB triples in [0, 1]
-    view_direction, up : 3-vectors
-        From the scene towards the camera, and the camera's up direction.
-    margin : float
-        Empty border around the largest mesh, as a fraction of its half size.
-    align : {"common", "each"}
-        One center for every panel (versions of one surface), or each mesh centered on its own.
-    backend : {"auto", "filament", "raycast"}
-        Filament in a child process; Open3D's ``RaycastingScene`` with Lambert shading, in-process;
-        ``"auto"``: Filament, else raycasting with an ``O3DLSMeshWarning``.
-    timeout : float
-        Seconds to wait for the Filament child process.
+    color, background, view_direction, up : 3-vectors
+        RGB in [0, 1]; from the scene towards the camera, and the camera's up.
+    margin, align : float, {"common", "each"}
+        Border as a fraction of the largest half size; one center for every panel, or each its own.
+    backend, timeout : {"auto", "filament", "raycast"}, float
+        Filament in a child process (given ``timeout`` seconds), or Open3D's ``RaycastingScene``
+        in-process; ``"auto"``: Filament, else raycasting with an ``O3DLSMeshWarning``.
 
     Returns
     -------
