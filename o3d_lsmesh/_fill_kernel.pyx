@@ -15,7 +15,6 @@ cdef double _TIE = 1e-6  # dynamic programme: largest angles this close tie, and
 cdef double _COCIRCULAR = 1.0 - 1e-6  # flips: a point must be this far inside a circumsphere
 cdef int64_t _MAX_FAN = 64  # refinement: no split at a corner of this many triangles
 
-
 cdef bint _outside(const int64_t* a, int64_t count, int64_t n) noexcept nogil:
     """Whether an index of ``a`` is outside ``[0, n)`` (the arguments' check, without NumPy's reductions)."""
     cdef int64_t k
@@ -24,25 +23,20 @@ cdef bint _outside(const int64_t* a, int64_t count, int64_t n) noexcept nogil:
             return True
     return False
 
-
 cdef inline double _dot(const double* a, const double* b) noexcept nogil:
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-
 
 cdef inline void _sub(const double* a, const double* b, double* out) noexcept nogil:
     out[0] = a[0] - b[0]
     out[1] = a[1] - b[1]
     out[2] = a[2] - b[2]
 
-
 cdef inline void _cross(const double* u, const double* v, double* out) noexcept nogil:
     out[0] = u[1] * v[2] - u[2] * v[1]
     out[1] = u[2] * v[0] - u[0] * v[2]
     out[2] = u[0] * v[1] - u[1] * v[0]
 
-
 # Liepa's minimum-weight triangulation (SGP 2003, section 3)
-
 
 cdef void _liepa(const double* P, const double* outer, const uint8_t* forbidden, const uint8_t* allowed,
                  int64_t k, double* angle,
@@ -51,20 +45,11 @@ cdef void _liepa(const double* P, const double* outer, const uint8_t* forbidden,
     """Fill the programme's tables: weight (largest dihedral angle, area) of the best triangulation of each
     polygon ``i..j``; ``forbidden`` chords and triangles not ``allowed`` (either may be NULL) infinitely bad."""
     cdef int64_t i, j, m, d, c, r, choice
-    cdef double u[3]
-    cdef double v[3]
-    cdef double cr[3]
+    cdef double[3] u, v, cr
     cdef double twice, cos1, cos2, worst, theta, longest, best_angle, best_area, near, uu, vv
     cdef const double* a
     cdef double* nm
     cdef bint closing_known = fabs(outer[3 * (k - 1)]) + fabs(outer[3 * (k - 1) + 1]) + fabs(outer[3 * (k - 1) + 2]) > 0
-    for i in range(k * k):
-        angle[i] = 0.0
-        area[i] = 0.0
-        split[i] = -1
-        known[i] = 0
-    for i in range(3 * k * k):
-        normal[i] = 0.0
     for i in range(k - 1):  # the loop's edges: the mesh triangles across them
         for c in range(3):
             normal[3 * (i * k + i + 1) + c] = outer[3 * i + c]
@@ -128,7 +113,6 @@ cdef void _liepa(const double* P, const double* outer, const uint8_t* forbidden,
                 normal[3 * c + m] = t_normal[3 * choice + m]
             known[c] = t_twice[choice] > 0
 
-
 def minimum_weight_triangulation(const double[:, ::1] points, const double[:, ::1] outer_normals,
                                  const uint8_t[:, ::1] forbidden=None, const uint8_t[::1] allowed=None):
     """Liepa's dynamic programme on ``k >= 3`` loop points: the ``k - 2`` triangles ``(j, m, i)``;
@@ -147,11 +131,8 @@ def minimum_weight_triangulation(const double[:, ::1] points, const double[:, ::
     if k == 3:
         tris[0, 0], tris[0, 1], tris[0, 2] = 2, 1, 0
         return out
-    angle_ = np.empty(k * k)
-    area_ = np.empty(k * k)
-    split_ = np.empty(k * k, dtype=np.int64)
-    normal_ = np.empty(3 * k * k)
-    known_ = np.empty(k * k, dtype=np.uint8)
+    angle_, area_, normal_, known_ = np.zeros(k * k), np.zeros(k * k), np.zeros(3 * k * k), np.zeros(k * k, np.uint8)
+    split_ = np.full(k * k, -1, dtype=np.int64)
     scratch = np.empty(6 * k)
     cdef double[::1] angle = angle_, area = area_, normal = normal_, s = scratch
     cdef int64_t[::1] split = split_
@@ -181,14 +162,11 @@ def minimum_weight_triangulation(const double[:, ::1] points, const double[:, ::
                 top += 4
     return out
 
-
 # Liepa's refinement (section 4): centroid splits, then Delaunay edge flips
-
 
 ctypedef struct Half:  # a half-edge's undirected key and its index 3 t + s
     int64_t key
     int64_t h
-
 
 cdef int _by_key(const void* x, const void* y) noexcept nogil:
     cdef const Half* p = <const Half*>x
@@ -197,19 +175,16 @@ cdef int _by_key(const void* x, const void* y) noexcept nogil:
         return -1 if p.key < q.key else 1
     return -1 if p.h < q.h else (1 if p.h > q.h else 0)
 
-
 cdef int _by_value(const void* x, const void* y) noexcept nogil:
     cdef int64_t p = (<const int64_t*>x)[0], q = (<const int64_t*>y)[0]
     return -1 if p < q else (1 if p > q else 0)
-
 
 cdef inline int64_t _key(int64_t a, int64_t b) noexcept nogil:
     """An undirected edge's key, ordered as ``(min, max)``."""
     return (a << 32) | b if a < b else (b << 32) | a
 
-
-cdef bint _has(const int64_t* sorted_, int64_t n, int64_t key, int64_t stride=1) noexcept nogil:
-    """Whether ``key`` is among the ``n`` sorted values ``sorted_[0], sorted_[stride], ...``."""
+cdef int64_t _lower(const int64_t* sorted_, int64_t n, int64_t key, int64_t stride) noexcept nogil:
+    """The first of the ``n`` sorted values ``sorted_[0], sorted_[stride], ...`` not below ``key`` (or ``n``)."""
     cdef int64_t lo = 0, hi = n, mid
     while lo < hi:
         mid = (lo + hi) >> 1
@@ -217,18 +192,15 @@ cdef bint _has(const int64_t* sorted_, int64_t n, int64_t key, int64_t stride=1)
             lo = mid + 1
         else:
             hi = mid
-    return lo < n and sorted_[lo * stride] == key
+    return lo
 
+cdef inline bint _has(const int64_t* sorted_, int64_t n, int64_t key, int64_t stride=1) noexcept nogil:
+    cdef int64_t lo = _lower(sorted_, n, key, stride)
+    return lo < n and sorted_[lo * stride] == key
 
 cdef bint _in_circumsphere(const double* p0, const double* p1, const double* p2, const double* q) noexcept nogil:
     """Whether ``q`` is inside the circumsphere of ``(p0, p1, p2)`` by a relative margin."""
-    cdef double u[3]
-    cdef double v[3]
-    cdef double w[3]
-    cdef double wu[3]
-    cdef double vw[3]
-    cdef double centre[3]
-    cdef double e[3]
+    cdef double[3] u, v, w, wu, vw, centre, e
     cdef double ww, safe, uu, vv, radius
     cdef int c
     _sub(p1, p0, u)
@@ -246,14 +218,10 @@ cdef bint _in_circumsphere(const double* p0, const double* p1, const double* p2,
     _sub(q, centre, e)
     return sqrt(_dot(e, e)) < radius * _COCIRCULAR
 
-
 cdef double _min_angle(const double* p0, const double* p1, const double* p2) noexcept nogil:
     """The smallest interior angle, opposite the shortest edge (law of sines): ``arcsin(2 area / (l_mid
     l_max))``."""
-    cdef double a[3]
-    cdef double b[3]
-    cdef double c[3]
-    cdef double n[3]
+    cdef double[3] a, b, c, n
     cdef double la, lb, lc, mid, top, denominator, ratio
     _sub(p1, p0, a)
     _sub(p2, p1, b)
@@ -266,14 +234,9 @@ cdef double _min_angle(const double* p0, const double* p1, const double* p2) noe
     ratio = sqrt(_dot(n, n)) / denominator if denominator > 0 else 0.0
     return asin(fmin(ratio, 1.0))
 
-
 cdef bint _flip_improves(const double* pa, const double* pb, const double* pc, const double* pd) noexcept nogil:
     """Whether edge ``(a, b)`` between ``(a, b, c)`` and ``(b, a, d)`` flips to ``(c, d)`` (docs page)."""
-    cdef double x[3]
-    cdef double y[3]
-    cdef double n1[3]
-    cdef double n2[3]
-    cdef double old[3]
+    cdef double[3] x, y, n1, n2, old
     cdef int c
     if not (_in_circumsphere(pa, pb, pc, pd) or _in_circumsphere(pb, pa, pd, pc)):
         return False
@@ -298,7 +261,6 @@ cdef bint _flip_improves(const double* pa, const double* pb, const double* pc, c
     return fmin(_min_angle(pc, pa, pd), _min_angle(pd, pb, pc)) > (
         fmin(_min_angle(pa, pb, pc), _min_angle(pb, pa, pd)) + 1e-9
     )
-
 
 cdef int _relax(const double* points, int64_t* tris, int64_t t, const int64_t* fixed, int64_t n_fixed,
                 uint8_t* dirty) noexcept nogil:
@@ -391,7 +353,6 @@ cdef int _relax(const double* points, int64_t* tris, int64_t t, const int64_t* f
     free(half); free(pairs); free(proposed); free(owner); free(removed); free(chosen); free(keep)
     return 0
 
-
 cdef int64_t[::1] _fixed_keys(fixed_pairs):
     """The sorted keys of edges ``(f, 2)``."""
     cdef const int64_t[:, ::1] pairs = np.ascontiguousarray(fixed_pairs, dtype=np.int64).reshape(-1, 2)
@@ -402,7 +363,6 @@ cdef int64_t[::1] _fixed_keys(fixed_pairs):
         out[i] = _key(pairs[i, 0], pairs[i, 1])
     keys.sort()
     return out
-
 
 def relax(const double[:, ::1] points, triangles, fixed_pairs, dirty):
     """Liepa's relaxation of a patch: the flipped ``(t, 3)`` triangles; ``fixed_pairs (f, 2)`` edges no flip
@@ -428,7 +388,6 @@ def relax(const double[:, ::1] points, triangles, fixed_pairs, dirty):
         raise MemoryError
     return out
 
-
 def refine(points, sigma, triangles, fixed_pairs, owner, double alpha, int64_t max_points=-1):
     """Liepa's refinement: rounds of centroid splits, each followed by a relaxation, until none splits or
     a round would pass ``max_points``; the points, the triangles and the points' owners."""
@@ -450,8 +409,7 @@ def refine(points, sigma, triangles, fixed_pairs, owner, double alpha, int64_t m
     cdef int64_t[:, ::1] T = T_
     cdef uint8_t[::1] D = D_
     cdef int64_t[::1] fixed = _fixed_keys(fixed_pairs)
-    cdef double centre[3]
-    cdef double e[3]
+    cdef double[3] centre, e
     cdef double sigma_c, dist
     cdef bint split, relaxed = False
     cdef int status = 0
@@ -518,9 +476,7 @@ def refine(points, sigma, triangles, fixed_pairs, owner, double alpha, int64_t m
             chosen = C_
     return P_[:nv].copy(), T_[:t].copy(), O_[:nv].copy()
 
-
 # tangential relaxation and the crossing test
-
 
 def tangential_relax(const double[:, ::1] vertices, const int64_t[:, ::1] new_tris, int64_t first_new,
                      int iterations=10):
@@ -534,11 +490,8 @@ def tangential_relax(const double[:, ::1] vertices, const int64_t[:, ::1] new_tr
         return out
     sums_ = np.empty((p, 7))  # per new vertex: normal sum, weighted centroid sum, area sum
     cdef double[:, ::1] x = out, acc = sums_
-    cdef double pts[3][3]
-    cdef double u[3]
-    cdef double w[3]
-    cdef double fn[3]
-    cdef double move[3]
+    cdef double[3][3] pts
+    cdef double[3] u, w, fn, move
     cdef double area, norm, along
     cdef int it
     with nogil:
@@ -578,15 +531,12 @@ def tangential_relax(const double[:, ::1] vertices, const int64_t[:, ::1] new_tr
                     x[v, c] += 0.5 * acc[v, 3 + c]
     return out
 
-
 cdef bint _cross_pair(const double* P, const double* Q) noexcept nogil:
     """Whether triangles ``P`` and ``Q`` (3 x 3; a segment repeats its last corner) intersect: no
     separating axis among the 23 candidates; touching and coplanar pairs cross."""
-    cdef double eP[3][3]
-    cdef double eQ[3][3]
-    cdef double nP[3]
-    cdef double nQ[3]
-    cdef double axes[23][3]
+    cdef double[3][3] eP, eQ
+    cdef double[3] nP, nQ
+    cdef double[23][3] axes
     cdef double scale = 0.0, spread = 0.0, length, inv, x, p_lo, p_hi, q_lo, q_hi
     cdef int c, r, s
     for c in range(3):
@@ -624,15 +574,9 @@ cdef bint _cross_pair(const double* P, const double* Q) noexcept nogil:
             return False
     return True
 
-
 cdef bint _folded(const double* u, const double* w, const double* a, const double* b) noexcept nogil:
     """Whether ``(u, w, a)`` and ``(u, w, b)`` fold flat onto each other beyond their shared edge."""
-    cdef double e[3]
-    cdef double da[3]
-    cdef double db[3]
-    cdef double na[3]
-    cdef double nb[3]
-    cdef double both[3]
+    cdef double[3] e, da, db, na, nb, both
     _sub(w, u, e)
     _sub(a, u, da)
     _sub(b, u, db)
@@ -641,20 +585,15 @@ cdef bint _folded(const double* u, const double* w, const double* a, const doubl
     _cross(na, nb, both)
     return _dot(na, nb) > 0 and sqrt(_dot(both, both)) <= 1e-9 * sqrt(_dot(na, na) * _dot(nb, nb))
 
-
 cdef inline bint _same_point(const double* V, int64_t a, int64_t b) noexcept nogil:
     """One vertex, or two at the same position (a duplicated vertex: the triangles share that corner)."""
     return a == b or (V[3 * a] == V[3 * b] and V[3 * a + 1] == V[3 * b + 1] and V[3 * a + 2] == V[3 * b + 2])
 
-
 cdef bint _pair_crosses(const double* V, const int64_t* T, int64_t ta, int64_t tb) noexcept nogil:
     """Whether triangles ``ta`` and ``tb`` meet anywhere but at the corners and edge they share."""
-    cdef double P[9]
-    cdef double Q[9]
-    cdef double S[9]
+    cdef double[9] P, Q, S
     cdef int r, s, c, shared = 0, ra = 0, rb = 0
-    cdef int in_a[3]
-    cdef int in_b[3]
+    cdef int[3] in_a, in_b
     for r in range(3):
         in_a[r], in_b[r] = 0, 0
     for r in range(3):
@@ -691,92 +630,62 @@ cdef bint _pair_crosses(const double* V, const int64_t* T, int64_t ta, int64_t t
         S[c], S[3 + c], S[6 + c] = Q[3 * ((rb + 1) % 3) + c], Q[3 * ((rb + 2) % 3) + c], Q[3 * ((rb + 2) % 3) + c]
     return _cross_pair(S, P)
 
+# the fairing system (docs page)
 
-# the fairing system's weights
-
-
-cdef double _sum(const double* a, int64_t n) noexcept nogil:
-    cdef double total = 0.0
-    cdef int64_t i
-    for i in range(n):
-        total += a[i]
-    return total
-
-
-cdef laplacian_weights(const int64_t[:, ::1] tris, int64_t nv, const int64_t[::1] i, const int64_t[::1] j,
-                      const int64_t[::1] inverse, vertices=None):
-    """Edge weights ``w``, degrees ``sum w`` and Laplacian row scales of a local mesh (edges ``(i, j)``,
-    ``inverse`` the edge of each corner-major half-edge): uniform, or cotangent if ``vertices`` given."""
-    cdef int64_t t = tris.shape[0], e = i.shape[0], h, k, c, a, b, o, positive = 0
-    if inverse.shape[0] != 3 * t or j.shape[0] != e:
-        raise ValueError("inverse must have 3 t entries, i and j one length")
-    if t and _outside(&tris[0, 0], 3 * t, nv):
-        raise ValueError("tris index outside the nv vertices")
-    cdef bint cot = vertices is not None
-    cdef const double[:, ::1] x = np.ascontiguousarray(vertices if cot else np.zeros((0, 3)), dtype=np.float64)
-    if cot and x.shape[0] < nv:
-        raise ValueError("vertices must have nv rows")
-    w_, degree_, scale_ = np.zeros(e), np.zeros(nv), np.zeros(nv)
-    mass_, scratch_ = np.zeros(nv), np.zeros(max(e, nv))
-    cdef double[::1] w = w_, degree = degree_, scale = scale_, mass = mass_
-    cdef double[::1] scratch = scratch_
-    cdef double u[3]
-    cdef double v[3]
-    cdef double n[3]
-    cdef double floor, mean, area
-    with nogil:
-        if cot:
-            for c in range(3):  # corner-major, as the half-edges: the angle at c + 2, opposite (c, c + 1)
-                for k in range(t):
-                    a, b, o = tris[k, c], tris[k, (c + 1) % 3], tris[k, (c + 2) % 3]
-                    _sub(&x[a, 0], &x[o, 0], u)
-                    _sub(&x[b, 0], &x[o, 0], v)
-                    _cross(u, v, n)
-                    w[inverse[c * t + k]] += _dot(u, v) / fmax(sqrt(_dot(n, n)), 1e-300)
-            for h in range(e):
-                w[h] = 0.5 * w[h]
-                scratch[h] = fabs(w[h])
-            floor = 0.05 * (_sum(&scratch[0], e) / e) if e else 0.0
-            for h in range(e):
-                w[h] = fmax(w[h], floor)
-        else:
-            for h in range(e):
-                w[h] = 1.0
-        for h in range(e):
-            degree[i[h]] += w[h]
-            degree[j[h]] += w[h]
-        for k in range(nv):
-            mass[k] = degree[k]
-        if cot:
-            for k in range(nv):
-                mass[k] = 0.0
+cdef void _weights(const int64_t[:, ::1] tris, const double[:, ::1] x, const int64_t[::1] i, const int64_t[::1] j,
+                   const int64_t[::1] inverse, bint cot, double[::1] w, double[::1] degree,
+                   double[::1] scale) noexcept nogil:
+    """Edge weights ``w``, degrees ``sum w`` and Laplacian row scales (all zeroed on entry): uniform, or
+    cotangent weights clamped at 5% of their mean ``|w|`` with the inverse vertex areas normalized to mean 1."""
+    cdef int64_t t = tris.shape[0], e = i.shape[0], nv = degree.shape[0], h, k, c, a, b, o, positive = 0
+    cdef double[3] u, v, n
+    cdef double total = 0.0, area, mean
+    for h in range(e):
+        w[h] = 0.0 if cot else 1.0
+    if cot:
+        for c in range(3):  # corner-major, as the half-edges: the angle at c + 2, opposite (c, c + 1)
             for k in range(t):
-                _sub(&x[tris[k, 1], 0], &x[tris[k, 0], 0], u)
-                _sub(&x[tris[k, 2], 0], &x[tris[k, 0], 0], v)
+                a, b, o = tris[k, c], tris[k, (c + 1) % 3], tris[k, (c + 2) % 3]
+                _sub(&x[a, 0], &x[o, 0], u)
+                _sub(&x[b, 0], &x[o, 0], v)
                 _cross(u, v, n)
-                area = 0.5 * sqrt(_dot(n, n))
-                for c in range(3):
-                    mass[tris[k, c]] += area / 3.0
-            for k in range(nv):
-                if mass[k] > 0:
-                    scratch[positive] = mass[k]
-                    positive += 1
-            mean = _sum(&scratch[0], positive) / positive if positive else 1.0
-            for k in range(nv):
-                mass[k] = mass[k] / mean
+                w[inverse[c * t + k]] += _dot(u, v) / fmax(sqrt(_dot(n, n)), 1e-300)
+        for h in range(e):
+            w[h] = 0.5 * w[h]
+            total += fabs(w[h])
+        for h in range(e):
+            w[h] = fmax(w[h], 0.05 * (total / e))
+    for h in range(e):
+        degree[i[h]] += w[h]
+        degree[j[h]] += w[h]
+    if not cot:
         for k in range(nv):
-            scale[k] = 1.0 / mass[k] if mass[k] > 0 else 0.0
-    return w_, degree_, scale_
-
+            scale[k] = 1.0 / degree[k] if degree[k] > 0 else 0.0
+        return
+    for k in range(t):  # the vertex areas, a third of each triangle's, gathered in scale first
+        _sub(&x[tris[k, 1], 0], &x[tris[k, 0], 0], u)
+        _sub(&x[tris[k, 2], 0], &x[tris[k, 0], 0], v)
+        _cross(u, v, n)
+        area = 0.5 * sqrt(_dot(n, n))
+        for c in range(3):
+            scale[tris[k, c]] += area / 3.0
+    total = 0.0
+    for k in range(nv):
+        if scale[k] > 0:
+            total += scale[k]
+            positive += 1
+    mean = total / positive if positive else 1.0
+    for k in range(nv):
+        area = scale[k] / mean
+        scale[k] = 1.0 / area if area > 0 else 0.0
 
 # what the triangulation needs of a loop
-
 
 def loop_geometry(const int64_t[::1] loop, const int64_t[::1] rows, const double[:, ::1] vertices,
                   const int64_t[:, ::1] triangles, const int64_t[::1] indptr, const int64_t[::1] data):
     """A loop's points ``(k, 3)``, the unit normals of the mesh triangles on its edges ``(k, 3)``, its chords
     that are mesh edges ``(k, k)`` bool, its mean edge length, and those chords as pairs ``(c, 2)``."""
-    cdef int64_t k = loop.shape[0], n = vertices.shape[0], m = triangles.shape[0], p, q, r, lo, hi, mid, w
+    cdef int64_t k = loop.shape[0], n = vertices.shape[0], m = triangles.shape[0], p, q, r, lo, w
     cdef int64_t c, t, count
     if rows.shape[0] != k or indptr.shape[0] != n + 1:
         raise ValueError("rows must be (k,), indptr (n + 1,)")
@@ -786,15 +695,12 @@ def loop_geometry(const int64_t[::1] loop, const int64_t[::1] rows, const double
     sorted_ = np.empty(k, dtype=np.int64)
     points_ = np.empty((k, 3))
     outer_ = np.empty((k, 3))
-    lengths_ = np.empty(k)
     chords_ = np.zeros((k, k), dtype=np.uint8)
     cdef int64_t[::1] by_vertex = by_vertex_, ordered = sorted_
     cdef uint8_t[:, ::1] out = chords_
     cdef double[:, ::1] points = points_, outer = outer_
-    cdef double[::1] lengths = lengths_
-    cdef double u[3]
-    cdef double v[3]
-    cdef double norm
+    cdef double[3] u, v
+    cdef double norm, spacing = 0.0
     cdef Half* order = <Half*>malloc(max(k, 1) * sizeof(Half))
     if not order:
         raise MemoryError
@@ -817,19 +723,13 @@ def loop_geometry(const int64_t[::1] loop, const int64_t[::1] rows, const double
             for c in range(3):
                 outer[p, c] = outer[p, c] / (norm if norm > 0 else 1.0)
             _sub(&points[(p + 1) % k, 0], &points[p, 0], u)
-            lengths[p] = sqrt(_dot(u, u))
+            spacing += sqrt(_dot(u, u))
         for p in range(k):
             for r in range(indptr[loop[p]], indptr[loop[p] + 1]):
                 t = data[r]
                 for c in range(3):
                     w = triangles[t, c]
-                    lo, hi = 0, k
-                    while lo < hi:
-                        mid = (lo + hi) >> 1
-                        if ordered[mid] < w:
-                            lo = mid + 1
-                        else:
-                            hi = mid
+                    lo = _lower(&ordered[0], k, w, 1)
                     if lo < k and ordered[lo] == w and w != loop[p]:
                         q = by_vertex[lo]
                         out[p, q] = 1
@@ -838,7 +738,7 @@ def loop_geometry(const int64_t[::1] loop, const int64_t[::1] rows, const double
             q = (p + 1) % k
             out[p, q] = 0
             out[q, p] = 0
-    spacing = _sum(&lengths[0], k) / k if k else 0.0
+    spacing = spacing / k if k else 0.0
     count = 0
     for p in range(k):
         for q in range(p + 1, k):
@@ -853,10 +753,7 @@ def loop_geometry(const int64_t[::1] loop, const int64_t[::1] rows, const double
                 count += 1
     return points_, outer_, chords_.view(bool), spacing, pairs_
 
-
-
 # the fairing system of a local mesh
-
 
 def patch_system(const double[:, ::1] x, const int64_t[:, ::1] tris, const int64_t[::1] i,
                  const int64_t[::1] j, const int64_t[::1] inverse, const int64_t[::1] unknown,
@@ -872,8 +769,14 @@ def patch_system(const double[:, ::1] x, const int64_t[:, ::1] tris, const int64
         raise ValueError("level must be 0, 1 or 2")
     if p and _outside(&unknown[0], p, nv):
         raise ValueError("unknown outside the vertices of x")
-    w_, degree_, scale_ = laplacian_weights(tris, nv, i, j, inverse, x.base if cot else None)
-    cdef const double[::1] w = w_, degree = degree_, scale = scale_
+    if inverse.shape[0] != 3 * tris.shape[0] or j.shape[0] != e:
+        raise ValueError("inverse must have 3 t entries, i and j one length")
+    if tris.shape[0] and _outside(&tris[0, 0], 3 * tris.shape[0], nv):
+        raise ValueError("tris index outside the nv vertices")
+    w_, degree_, scale_ = np.zeros(e), np.zeros(nv), np.zeros(nv)
+    cdef double[::1] w = w_, degree = degree_, scale = scale_
+    with nogil:
+        _weights(tris, x, i, j, inverse, cot, w, degree, scale)
     mark_ = np.zeros(nv, dtype=np.uint8)
     valid_ = np.zeros(nv, dtype=np.uint8)
     keep_ = np.zeros(e, dtype=np.uint8)
@@ -924,16 +827,10 @@ def patch_system(const double[:, ::1] x, const int64_t[:, ::1] tris, const int64
     cdef double[:, ::1] normal = normal_, rhs = rhs_
     cdef int64_t[::1] out_indptr = out_indptr_, out_indices = out_indices_
     cdef double[::1] out_data = out_data_
-    cdef int64_t* slot = <int64_t*>malloc(max(nv, 1) * sizeof(int64_t))
-    cdef int64_t* entry = <int64_t*>malloc(max(nv, 1) * sizeof(int64_t))
-    cdef double* value = <double*>malloc(max(nv, 1) * sizeof(double))
+    cdef int64_t[::1] slot = indptr_[:-1].copy(), entry = np.empty(nv, dtype=np.int64)
+    cdef double[::1] value = np.empty(nv)
     cdef double bx, by, bz, f
-    if not (slot and entry and value):
-        free(slot); free(entry); free(value)
-        raise MemoryError
     with nogil:
-        for v in range(nv):
-            slot[v] = indptr[v]
         for k in range(e):
             nbr[slot[i[k]]], wt[slot[i[k]]] = j[k], w[k]
             slot[i[k]] += 1
@@ -999,19 +896,15 @@ def patch_system(const double[:, ::1] x, const int64_t[:, ::1] tris, const int64
                         u2 = col[entry[s]]
                         if u2 >= 0:
                             normal[u1, u2] += value[k] * value[s]
-    free(slot); free(entry); free(value)
     if dense:
         return normal_, rhs_
     return (out_indptr_, out_indices_[:size], out_data_[:size]), rhs_
 
-
 # the crossing test: candidates from a uniform grid of triangle centres
-
 
 cdef inline bint _overlap(const double* c, double r, const double* d, double s) noexcept nogil:
     cdef double d0 = c[0] - d[0], d1 = c[1] - d[1], d2 = c[2] - d[2]
     return sqrt((d0 * d0 + d1 * d1) + d2 * d2) <= r + s
-
 
 def patch_crossings(const double[:, ::1] vertices, const int64_t[:, ::1] triangles, int64_t first_new,
                     grids, const double[:, ::1] tri_centre, const double[::1] tri_radius,
@@ -1037,7 +930,6 @@ def patch_crossings(const double[:, ::1] vertices, const int64_t[:, ::1] triangl
                         True, result_, owner_, crossed_, owner is not None)
     return result_
 
-
 cdef _grid_crossings(const double[:, ::1] vertices, const int64_t[:, ::1] triangles, int64_t first_new,
                      const double[:, ::1] centre, const double[::1] radius, grid, const double[:, ::1] tc,
                      const double[::1] tr, bint among_new, double[::1] result, const int64_t[::1] owner,
@@ -1048,10 +940,8 @@ cdef _grid_crossings(const double[:, ::1] vertices, const int64_t[:, ::1] triang
     cdef const double[::1] origin = origin_
     cdef const int64_t[::1] dims = dims_, indptr = indptr_, members = members_
     cdef int64_t q = centre.shape[0], i = 0, k, t, count, capacity, other
-    cdef int64_t lo_cell[3]
-    cdef int64_t hi_cell[3]
-    cdef double lo[3]
-    cdef double hi[3]
+    cdef int64_t[3] lo_cell, hi_cell
+    cdef double[3] lo, hi
     cdef int c
     cdef const double* V = &vertices[0, 0]
     cdef const int64_t* T = &triangles[0, 0]
@@ -1092,7 +982,6 @@ cdef _grid_crossings(const double[:, ::1] vertices, const int64_t[:, ::1] triang
             buffer_ = np.empty(2 * capacity, dtype=np.int64)
             buffer = buffer_
 
-
 cdef int64_t _cells(const double* lo, const double* hi, const double* origin, double cell, const int64_t* dims,
                     const int64_t* indptr, double reach, int64_t* lo_cell, int64_t* hi_cell) noexcept nogil:
     """The cells of one grid within ``reach`` of the box ``lo .. hi`` (clamped to the grid; floor of a
@@ -1111,7 +1000,6 @@ cdef int64_t _cells(const double* lo, const double* hi, const double* origin, do
                 capacity += indptr[(x * dims[1] + y) * dims[2] + hi_cell[2] + 1] - indptr[
                     (x * dims[1] + y) * dims[2] + lo_cell[2]]
     return capacity
-
 
 cdef int64_t _gather(const double* lo, const double* hi, const int64_t* lo_cell, const int64_t* hi_cell,
                      const int64_t* dims, const int64_t* indptr, const int64_t* members,
