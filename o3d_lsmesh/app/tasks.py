@@ -15,6 +15,7 @@ import os
 import threading
 import time
 import warnings
+from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from itertools import islice
@@ -111,10 +112,7 @@ def capture_warnings() -> None:
 
 
 def _summary(caught: list[str], limit: int = 20) -> list[str]:
-    counts = dict.fromkeys(caught, 0)
-    for text in caught:
-        counts[text] += 1
-    lines = [text if n == 1 else f"{text} ({n} times)" for text, n in counts.items()]
+    lines = [text if n == 1 else f"{text} ({n} times)" for text, n in Counter(caught).items()]
     return lines[:limit] + ([f"... and {len(lines) - limit} more"] if len(lines) > limit else [])
 
 
@@ -157,9 +155,42 @@ def run_task(
     )
     capture_warnings()
     gate = _Gate()
+
+    def pipeline(record: dict) -> None:  # (the record it fills: an abandoned task's is copied below)
+        _LOCAL.warnings = record["warnings"]
+        try:
+            configure_threads(threads)
+            current = read_mesh_file(path)
+            record.update(vertices_before=len(current.vertices), triangles_before=len(current.triangles))
+            context = TaskContext(input=path, relative=relative, threads=threads)
+            for index, (op, values) in enumerate(zip(ops, options)):
+                record["stage"] = op.name
+                current, metrics = op.function(current, dict(values), context)
+                slot = f"{op.name}#{index + 1}" if op.name in record["metrics"] else op.name  # (run twice)
+                record["metrics"][slot] = {k: v for k, v in metrics.items() if not k.startswith("_")}
+            last = ops[-1]
+            if last.output == "mesh":
+                record.update(vertices_after=len(current.vertices), triangles_after=len(current.triangles))
+            target = output_path(Path(outdir), relative, last, suffix)
+            with gate.lock:
+                if gate.abandoned:
+                    return
+                if target is not None:
+                    record["stage"] = "write"
+                    record["files"] = write_atomic(
+                        current, target, kind=last.output, suffix=suffix, root=Path(outdir)
+                    )
+                    record["output"] = str(target)
+                gate.written = True
+            record["status"], record["stage"] = "ok", None
+        except Exception as error:
+            record["error"] = f"{type(error).__name__}: {error}"
+        finally:
+            _LOCAL.warnings = None
+
     task = threading.Thread(
-        target=_run_pipeline,
-        args=(record, gate, path, relative, outdir, ops, options, suffix, threads),
+        target=pipeline,
+        args=(record,),
         name=f"o3d-lsmesh task {relative}",
         daemon=True,  # an abandoned task must not keep the process alive
     )
@@ -177,52 +208,6 @@ def run_task(
     record["seconds"] = time.perf_counter() - start
     record["cpu_seconds"] = time.process_time() - cpu  # CPU time of this worker process (all its threads)
     return jsonable(record)
-
-
-def _run_pipeline(
-    record: dict,
-    gate: _Gate,
-    path: str,
-    relative: str,
-    outdir: str,
-    ops: Sequence[BatchOp],
-    options: Sequence[dict],
-    suffix: str,
-    threads: int | None,
-) -> None:
-    _LOCAL.warnings = record["warnings"]
-    try:
-        configure_threads(threads)
-        current = read_mesh_file(path)
-        record["vertices_before"], record["triangles_before"] = len(current.vertices), len(current.triangles)
-        context = TaskContext(input=path, relative=relative, threads=threads)
-        for index, (op, values) in enumerate(zip(ops, options)):
-            record["stage"] = op.name
-            current, metrics = op.function(current, dict(values), context)
-            slot = op.name if op.name not in record["metrics"] else f"{op.name}#{index + 1}"  # (op run twice)
-            record["metrics"][slot] = {k: v for k, v in metrics.items() if not k.startswith("_")}
-        last = ops[-1]
-        if last.output == "mesh":
-            record["vertices_after"], record["triangles_after"] = (
-                len(current.vertices),
-                len(current.triangles),
-            )
-        target = output_path(Path(outdir), relative, last, suffix)
-        with gate.lock:
-            if gate.abandoned:
-                return
-            if target is not None:
-                record["stage"] = "write"
-                record["files"] = write_atomic(
-                    current, target, kind=last.output, suffix=suffix, root=Path(outdir)
-                )
-                record["output"] = str(target)
-            gate.written = True
-        record["status"], record["stage"] = "ok", None
-    except Exception as error:
-        record["error"] = f"{type(error).__name__}: {error}"
-    finally:
-        _LOCAL.warnings = None
 
 
 @dataclass(frozen=True)
