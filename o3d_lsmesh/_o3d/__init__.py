@@ -27,7 +27,6 @@ __all__ = [
     "Attribute",
     "MeshData",
     "has_textures",
-    "lost_in_file",
     "mesh_from_state",
     "mesh_state",
     "new_mesh",
@@ -50,22 +49,21 @@ class Attribute(NamedTuple):
     follows: str  # "vertex" / "triangle" / "corner": per-element data; "texture"; "normals"; "own"
     vector: str = ""  # a legacy array's open3d.utility type
     label: str = ""  # its name in warnings (tensor "*" rows: the key is added)
-    obj_only: bool = False  # of mesh files, only an OBJ with UVs holds it (with its .mtl and images)
 
 
-#: The attribute policy, read by :func:`new_mesh`, :func:`warn_dropped_attributes`, :func:`lost_in_file`
-#: and :mod:`.state`. Per-element rows are kept with the connectivity, extended to appended elements
+#: The attribute policy, read by :func:`new_mesh`, :func:`warn_dropped_attributes` and
+#: :mod:`.state`. Per-element rows are kept with the connectivity, extended to appended elements
 #: and dropped with new connectivity; "texture" (and a tensor mesh's material) stays; "normals" are
 #: recomputed when present; "own" rows are the geometry itself.
 ATTRIBUTES: tuple[Attribute, ...] = (
     Attribute("legacy", "vertex", "vertex_normals", "normals", "Vector3dVector", "vertex normals"),
     Attribute("legacy", "triangle", "triangle_normals", "normals", "Vector3dVector", "triangle normals"),
     Attribute("legacy", "vertex", "vertex_colors", "vertex", "Vector3dVector", "vertex colors"),
-    Attribute("legacy", "triangle", "triangle_uvs", "corner", "Vector2dVector", "triangle UVs", True),
+    Attribute("legacy", "triangle", "triangle_uvs", "corner", "Vector2dVector", "triangle UVs"),
     Attribute(
         "legacy", "triangle", "triangle_material_ids", "triangle", "IntVector", "triangle material ids"
     ),
-    Attribute("legacy", "", "textures", "texture", "", "textures", True),
+    Attribute("legacy", "", "textures", "texture", "", "textures"),
     Attribute("tensor", "vertex", "positions", "own"),
     Attribute("tensor", "vertex", "normals", "normals", "", "vertex normals"),
     Attribute("tensor", "vertex", "*", "vertex", "", "vertex attribute"),
@@ -290,16 +288,6 @@ def _dropped(data: MeshData, *, normals: bool = False) -> list[str]:
     normals too, for results that do not recompute them)."""
     dropped = (*_PER_ELEMENT, "texture", "normals") if normals else (*_PER_ELEMENT, "texture")
     return [_label(row, key) for row, key in present_attributes(data) if row.follows in dropped]
-
-
-def lost_in_file(mesh: Any, suffix: str) -> list[str]:
-    """Names of ``mesh``'s attributes a mesh file ending in ``suffix`` does not hold (Open3D's PLY, STL,
-    OFF and glTF writers write no UVs or textures; its OBJ writer only with UVs)."""
-    kind = "legacy" if isinstance(mesh, open3d().geometry.TriangleMesh) else ""
-    present = _present(mesh, kind)
-    if suffix.lower() == ".obj" and any(row.key == "triangle_uvs" for row, _ in present):
-        return []
-    return [row.label for row, _ in present if row.obj_only]
 
 
 def warn_dropped_attributes(

@@ -26,10 +26,6 @@ if TYPE_CHECKING:
     from .._types import MeshT
 
 __all__ = [
-    "CREASE_ANGLE",
-    "PASSES_PER_NOISE",
-    "SIGMA_R",
-    "VERTEX_STEPS",
     "detect_creases",
     "detect_creases_arrays",
     "feature_denoise",
@@ -223,12 +219,21 @@ def detect_creases_arrays(
     >>> len(detect_creases_arrays(V, F))  # the 12 edges of the cube (its face diagonals are flat)
     12
     """
+    angle = _angle(angle)
+    vertices, triangles = mesh_arrays(vertices, triangles)
+    return _creases(vertices, triangles, angle, passes)
+
+
+def _angle(angle: object) -> float:
     angle = as_positive_float(angle, name="angle")
     if angle >= 180.0:
         raise InputError(f"angle must be below 180 degrees, got {angle}", param="angle")
-    vertices, triangles = mesh_arrays(vertices, triangles)
-    if passes is not None:
-        passes = as_count(passes, name="passes")
+    return angle
+
+
+def _creases(vertices: np.ndarray, triangles: np.ndarray, angle: float, passes: object) -> np.ndarray:
+    # checked arrays and angle in, the crease edges out
+    passes = None if passes is None else as_count(passes, name="passes")
     conn = Connectivity(triangles, len(vertices))
     normals = face_normals(feature_denoise(vertices, triangles, passes=passes, conn=conn), triangles)[0]
     adjacency = conn.face_adjacency
@@ -241,11 +246,8 @@ def detect_creases_arrays(
 def detect_creases(mesh: MeshT, *, angle: float = CREASE_ANGLE, passes: int | None = None) -> np.ndarray:
     """Crease edges of a mesh, ``(k, 2) int64``: each row the two vertex indices of one edge.
 
-    The edges where the feature-preserving denoiser's result
-    (``constrained_fairing(mesh, method="features")``) folds by more than
-    ``angle`` degrees; see :func:`detect_creases_arrays`. Vertices at equal
-    positions are welded first (a CAD mesh split along its creases), and an
-    edge is given by the first copy of each of its vertices.
+    Where ``constrained_fairing(mesh, method="features")`` folds by more than ``angle`` degrees.
+    Vertices at equal positions are welded first; an edge names the first copy of each vertex.
 
     Parameters
     ----------
@@ -274,5 +276,5 @@ def detect_creases(mesh: MeshT, *, angle: float = CREASE_ANGLE, passes: int | No
     (12, 2)
     """
     data = read_mesh(mesh, weld=True)
-    edges = detect_creases_arrays(data.vertices, data.triangles, angle=angle, passes=passes)
+    edges = _creases(data.vertices, data.triangles, _angle(angle), passes)
     return data.source_indices(edges.ravel()).reshape(-1, 2)
