@@ -38,9 +38,7 @@ __all__ = [
 
 
 def vertex_error(a: AnyMesh, b: AnyMesh) -> dict:
-    """Per-vertex distances between two meshes with the same vertex count.
-
-    Returns ``{"linf": max_i |a_i - b_i|, "rms": sqrt(mean_i |a_i - b_i|^2), "mean": mean_i |a_i - b_i|}``.
+    """Per-vertex distances of two meshes with one vertex count: ``linf``, ``rms`` and ``mean`` of ``|a_i - b_i|``.
 
     Examples
     --------
@@ -75,16 +73,10 @@ def _sample_surface(
 
 
 def surface_distance(a: AnyMesh, b: AnyMesh, *, number_of_points: int = 100_000, seed: int = 0) -> dict:
-    """Two-sided sampled surface distance (Metro style) between two meshes.
+    """Two-sided sampled surface distance (Metro style): ``hausdorff``, ``mean`` and ``rms`` in a dict.
 
-    ``number_of_points`` samples uniform by area on each surface, plus its vertices, measured to
-    the other surface by Open3D's ``RaycastingScene`` (float32: below ~1e-7 of the size is noise).
-    Measured in a frame centered on both meshes at unit size, scaled back to model units.
-
-    Returns
-    -------
-    dict
-        ``hausdorff`` (max of both directions), ``mean`` and ``rms`` (over both samples).
+    ``number_of_points`` samples uniform by area on each surface, plus its vertices, measured to the
+    other by Open3D's ``RaycastingScene`` (float32: below ~1e-7 of the size is noise) at unit size.
 
     Examples
     --------
@@ -155,18 +147,15 @@ RIM_RINGS = 2
 def shape_change(before: AnyMesh, after: AnyMesh) -> dict:
     """How a filter changed a mesh's shape: the volume change of a closed mesh, the inward shift of an open one.
 
-    Closed: every edge has as many triangles along it one way as the other (an open surface's volume
-    depends on the origin). The inward shift of vertex ``i`` is ``-(a_i - b_i) . n_i``, ``n_i`` the
-    unit area-weighted normal of ``before`` (positive: moved against the normal), averaged over every
-    vertex with a normal, the rim (boundary and :data:`RIM_RINGS` rings) and the interior; None for
-    an empty region or meshes without correspondence.
+    Closed: every edge has as many triangles along it one way as the other. The inward shift of
+    vertex ``i`` is ``-(b_i - a_i) . n_i`` (``n_i``: ``before``'s unit area-weighted normal), averaged
+    over the vertices with a normal, the rim (boundary and :data:`RIM_RINGS` rings) and the interior.
 
     Returns
     -------
     dict
-        Closed: ``closed=True``, ``volume_before``, ``volume_after``, ``volume_change_percent`` (None for a
-        zero volume). Open: ``closed=False``, ``inward_shift_mean``, ``inward_shift_rim``,
-        ``inward_shift_interior`` (model units).
+        ``closed``; closed: ``volume_before``, ``volume_after``, ``volume_change_percent`` (None for a
+        zero volume); open: ``inward_shift_mean``, ``_rim``, ``_interior`` (None: empty, or no correspondence).
 
     Examples
     --------
@@ -181,10 +170,7 @@ def shape_change(before: AnyMesh, after: AnyMesh) -> dict:
     direction = np.where(half[:, 0] < half[:, 1], 1.0, -1.0)
     unmatched = np.bincount(conn.halfedge_edge, weights=direction, minlength=len(conn.edges)) != 0
     if not unmatched.any():
-        volume_before, volume_after = (
-            _volume(a.vertices, triangles),
-            _volume(b.vertices, b.triangles),
-        )
+        volume_before, volume_after = _volume(a.vertices, triangles), _volume(b.vertices, b.triangles)
         change = 100.0 * (volume_after - volume_before) / volume_before if volume_before != 0 else None
         return {
             "closed": True,
@@ -220,12 +206,8 @@ def rim_mask(conn: Connectivity, rings: int) -> np.ndarray:
 def normal_deviation(a: AnyMesh, b: AnyMesh) -> float:
     """Mean angle in degrees between corresponding face normals of two meshes with the same triangles.
 
-    A triangle of zero area (in either mesh) has no normal: it is left out of the mean.
-
-    Raises
-    ------
-    InputError
-        Different triangles, or no triangle with non-zero area in both meshes.
+    A triangle of zero area (in either mesh) is left out; ``InputError`` if no triangle is left or
+    the triangles differ.
 
     Examples
     --------
