@@ -28,7 +28,7 @@ import numpy as np
 from _common import RESULTS, load_mesh, markdown_table, write_markdown
 from scipy.sparse.csgraph import breadth_first_order
 
-from o3d_lsmesh.core.connectivity import adjacency_matrix, connected_components
+from o3d_lsmesh.core.connectivity import Connectivity
 from o3d_lsmesh.lsmesh.encoding import HEADER, decode_geometry, encode_geometry
 from o3d_lsmesh.lsmesh.spectral import quantize_coefficients, spectral_basis
 from o3d_lsmesh.metrics import surface_distance, vertex_error
@@ -41,9 +41,9 @@ FRACTIONS = (0.005, 0.01, 0.02, 0.03, 0.05, 0.075, 0.10, 0.15)
 def cut(vertices: np.ndarray, triangles: np.ndarray, seed_vertex: int, size: int):
     """The connected submesh of the ``size`` vertices nearest ``seed_vertex`` in BFS order."""
     n = len(vertices)
-    region = breadth_first_order(adjacency_matrix(triangles, n), seed_vertex, return_predecessors=False)[
-        :size
-    ]
+    region = breadth_first_order(
+        Connectivity(triangles, n).adjacency, seed_vertex, return_predecessors=False
+    )[:size]
     inside = np.zeros(n, dtype=bool)
     inside[region] = True
     tris = triangles[inside[triangles].all(axis=1)]
@@ -52,7 +52,7 @@ def cut(vertices: np.ndarray, triangles: np.ndarray, seed_vertex: int, size: int
     remap = np.full(n, -1, dtype=np.int64)
     remap[used] = np.arange(used.sum())
     V, F = vertices[used], remap[tris]
-    count, labels = connected_components(F, len(V))
+    count, labels = Connectivity(F, len(V)).components
     if count > 1:  # keep the largest piece
         keep = labels == np.argmax(np.bincount(labels))
         remap = np.full(len(V), -1, dtype=np.int64)

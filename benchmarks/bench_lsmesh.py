@@ -50,12 +50,12 @@ def torus_mesh(nu: int, nv: int):
 
 
 def control_points(mesh, fraction=0.02, seed=0):
-    from o3d_lsmesh.core.connectivity import connected_components
+    from o3d_lsmesh.core.connectivity import Connectivity
 
     F = np.asarray(mesh.triangles).astype(np.int64)
     n = len(mesh.vertices)
     rng = np.random.default_rng(seed)
-    _count, labels = connected_components(F, n)
+    _count, labels = Connectivity(F, n).components
     one_per_component = np.unique(labels, return_index=True)[1]
     chosen = rng.choice(n, max(1, int(fraction * n)), replace=False)
     return np.union1d(chosen, one_per_component)

@@ -26,7 +26,7 @@ import scipy.sparse as sp
 from _common import load_mesh, markdown_table, write_markdown
 
 from o3d_lsmesh.core.boundary import boundary_halfedges
-from o3d_lsmesh.core.connectivity import vertex_rings
+from o3d_lsmesh.core.connectivity import Connectivity
 from o3d_lsmesh.fairing.constrained import constrained_fairing_arrays
 from o3d_lsmesh.fairing.multiresolution import _is_simple, multiresolution_fairing_arrays
 from o3d_lsmesh.hierarchy.hierarchy import build_hierarchy_arrays
@@ -53,7 +53,7 @@ def _previous_default(h, level):
         return P
     remaining = ITERATIONS * (level + 1)
     F = h.triangles[0]
-    simple = _is_simple(vertex_rings(F, len(P)))  # a pinched boundary is held
+    simple = _is_simple(Connectivity(F, len(P)).rings)  # a pinched boundary is held
     while remaining > 0:
         P = constrained_fairing_arrays(
             P, F, min(remaining, ITERATIONS), method="local", smooth_boundary=simple

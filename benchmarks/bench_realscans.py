@@ -39,7 +39,7 @@ from _common import DATA, REPO, markdown_table, timed, write_markdown
 
 import o3d_lsmesh
 from o3d_lsmesh.core.boundary import boundary_chains, boundary_halfedges
-from o3d_lsmesh.core.connectivity import connected_components
+from o3d_lsmesh.core.connectivity import Connectivity
 from o3d_lsmesh.lsmesh.selection import start_vertices
 
 SCANS = Path(os.environ.get("O3D_LSMESH_SCANS", REPO.parent / "shared" / "data" / "scans"))
@@ -81,7 +81,7 @@ def _operations(name, mesh, V, F):
     import fast_simplification
 
     n = len(V)
-    components, _ = connected_components(F, n)
+    components, _ = Connectivity(F, n).components
     rng = np.random.default_rng(0)
     count = components + n // 1000
     controls = np.union1d(start_vertices(V, F), rng.choice(n, n // 100, replace=False))

@@ -60,7 +60,7 @@ def _summary(vertices: np.ndarray, F: np.ndarray) -> dict:
     # boundary
     rows, _, head, _ = boundary_rows(F, n, runs)
     boundary_edges = len(rows)
-    curves = boundary_curves(F, n, edges=conn.edge_structure)
+    curves = boundary_curves(F, n, conn=conn)
     loop_edges = np.array([len(loop) for loop in curves.loops], dtype=np.int64)
     holes = {}
     for lo, hi in HOLE_SIZE_BINS:

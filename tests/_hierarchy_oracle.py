@@ -267,14 +267,14 @@ def boundary_loop_count(F: np.ndarray, n: int) -> int:
 def topology(F: np.ndarray, n: int, representatives: np.ndarray) -> dict:
     """What every level must keep: Euler characteristic, components, boundary loops, and (in input
     indices) the non-manifold vertices and edges."""
-    from o3d_lsmesh.core.connectivity import connected_components, unique_edges
+    from o3d_lsmesh.core.connectivity import Connectivity
 
     F = np.asarray(F, dtype=np.int64)
-    edges = unique_edges(F, n)[0]
+    edges = Connectivity(F, n).edges
     bad_edges = representatives[nonmanifold_edges(F, n)]
     return {
         "euler": n - len(edges) + len(F),
-        "components": connected_components(F, n)[0],
+        "components": Connectivity(F, n).components[0],
         "loops": boundary_loop_count(F, n),
         "nonmanifold_vertices": sorted(representatives[nonmanifold_vertices(F, n)].tolist()),
         "nonmanifold_edges": sorted(map(tuple, np.sort(bad_edges, axis=1).tolist())),

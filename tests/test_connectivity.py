@@ -132,12 +132,12 @@ def test_empty_mesh():
 def test_ring_slots_hold_the_triangles_of_their_edge(soup, block):
     # every slot (v, w) of the 1-ring pattern names triangles on the edge {v, w}: its two entries are
     # the edge's two triangles, its one entry twice, or two of three and more; the diagonal 6 m
-    from o3d_lsmesh.core.connectivity import RING_COLUMN_SLOT, RING_ROW_SLOT, vertex_rings
+    from o3d_lsmesh.core.connectivity import RING_COLUMN_SLOT, RING_ROW_SLOT, _vertex_rings
 
     n, triangles = soup
     F = np.array(triangles, dtype=np.int64)
     m = len(F)
-    rings = vertex_rings(F, n, block=block)
+    rings = _vertex_rings(F, n, block)
     entries = {}
     for t, tri in enumerate(triangles):
         for d, (a, b) in enumerate(zip(RING_ROW_SLOT, RING_COLUMN_SLOT)):

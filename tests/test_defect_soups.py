@@ -26,7 +26,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import o3d_lsmesh
-from o3d_lsmesh.core.connectivity import connected_components
+from o3d_lsmesh.core.connectivity import Connectivity
 from o3d_lsmesh.fairing import constrained_fairing_arrays, smooth_boundary_curves_arrays
 from o3d_lsmesh.lsmesh.selection import start_vertices
 
@@ -83,7 +83,7 @@ def _welded_triangles(V, F):
 def test_ls_mesh_on_any_soup(soup):
     V, F = soup
     welded, merged = _welded_triangles(V, F)
-    count = connected_components(welded, len(V))[0] - merged  # merged copies are not components
+    count = Connectivity(welded, len(V)).components[0] - merged  # merged copies are not components
     controls = start_vertices(V, F)
     out = o3d_lsmesh.ls_mesh((V, F), controls)[0]
     assert np.isfinite(out).all()

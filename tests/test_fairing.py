@@ -376,11 +376,11 @@ def _soup(seed):
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_edge_structure_equals_a_stable_sort_of_the_edge_keys(seed):
-    from o3d_lsmesh.core.connectivity import edge_structure, halfedges
+    from o3d_lsmesh.core.connectivity import Connectivity, halfedges
 
     V, F = _soup(seed)
     n = len(V)
-    es = edge_structure(F, n)
+    es = Connectivity(F, n).edge_structure
     h = halfedges(F)
     keys = np.minimum(h[:, 0], h[:, 1]) * n + np.maximum(h[:, 0], h[:, 1])
     order = np.argsort(keys, kind="stable")  # the reference: numpy's stable sort
@@ -404,14 +404,14 @@ def _fin_and_isolated():
 def test_vertex_rings_equal_plain_loops(case):
     # issue 16: local fairing's one pass over the corners against sets built triangle by triangle,
     # in blocks of 2 vertices (so that rows meet block ends) and in one block
-    from o3d_lsmesh.core.connectivity import RING_COLUMN_SLOT, RING_ROW_SLOT, vertex_rings
+    from o3d_lsmesh.core.connectivity import RING_COLUMN_SLOT, RING_ROW_SLOT, _vertex_rings
 
     if case.startswith("soup"):
         V, F = _soup(int(case[-1]))
     else:
         V, F = {"sphere": noisy_sphere(6), "grid": grid(5, 4), "fin": _fin_and_isolated()}[case]
     n, m = len(V), len(F)
-    rings = vertex_rings(F, n, block=2 if case in ("soup1", "fin") else 1 << 14)
+    rings = _vertex_rings(F, n, 2 if case in ("soup1", "fin") else 1 << 14)
     ring = neighbours(F, n)
     on_edge = {}
     for t, tri in enumerate(F.tolist()):
@@ -471,12 +471,12 @@ def test_local_result_is_a_plain_array_of_the_reference(iterations):
 
 
 def test_laplacian_from_the_edge_structure_equals_the_reference():
-    from o3d_lsmesh.core.connectivity import edge_structure
+    from o3d_lsmesh.core.connectivity import Connectivity
     from o3d_lsmesh.laplacian import uniform_laplacian
 
     V, F = _soup(3)
     n = len(V) + 2  # two unreferenced vertices: zero rows
-    L = uniform_laplacian(F, n, edges=edge_structure(F, n).edges)
+    L = uniform_laplacian(F, n, edges=Connectivity(F, n).edges)
     ring = neighbours(F, n)
     reference = np.zeros((n, n))
     for i, js in enumerate(ring):
@@ -504,8 +504,8 @@ def test_one_connectivity_per_fairing_call(monkeypatch, method):
 
     init = connectivity.Connectivity.__init__
     monkeypatch.setattr(connectivity.Connectivity, "__init__", counting("Connectivity", init))
-    monkeypatch.setattr(connectivity, "edge_structure", counting("edges", connectivity.edge_structure))
-    monkeypatch.setattr(connectivity, "vertex_rings", counting("rings", connectivity.vertex_rings))
+    monkeypatch.setattr(connectivity, "_edge_structure", counting("edges", connectivity._edge_structure))
+    monkeypatch.setattr(connectivity, "_vertex_rings", counting("rings", connectivity._vertex_rings))
     V, F = grid(12, 12)
     open_ = (V + np.random.default_rng(0).normal(scale=0.01, size=V.shape), F)
     for mesh in (open_, noisy_sphere(resolution=6)):

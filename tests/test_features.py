@@ -8,7 +8,7 @@ from conftest import grid
 from defect_meshes import DEFECTS, all_defects
 
 from o3d_lsmesh import constrained_fairing, detect_creases
-from o3d_lsmesh.core.connectivity import Connectivity, edge_structure
+from o3d_lsmesh.core.connectivity import Connectivity
 from o3d_lsmesh.fairing import constrained_fairing_arrays
 from o3d_lsmesh.fairing import features as fe
 
@@ -106,7 +106,7 @@ def dihedral(X, F, edges_of):
 
 def test_noisy_cube_keeps_its_creases():
     V, F = cube(3)  # 8 segments an edge, spacing 1/8
-    es = edge_structure(F, len(V))
+    es = Connectivity(F, len(V)).edge_structure
     halves = (es.order[es.starts] % len(F), es.order[es.starts + 1] % len(F))
     crease = dihedral(V, F, halves) > 45.0
     noisy = V + np.random.default_rng(0).normal(0.0, 0.1 / 8, V.shape)
@@ -129,7 +129,7 @@ def test_detect_creases_on_cubes():
     V = np.asarray(o3d.geometry.TriangleMesh.create_box().vertices)
     assert sorted(np.count_nonzero(V[a] != V[b]) for a, b in edges) == [1] * 12  # along one axis each
     V, F = cube(3)
-    es = edge_structure(F, len(V))
+    es = Connectivity(F, len(V)).edge_structure
     halves = (es.order[es.starts] % len(F), es.order[es.starts + 1] % len(F))
     crease = dihedral(V, F, halves) > 45.0
     midpoint = V[es.edges].mean(axis=1)

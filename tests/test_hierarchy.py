@@ -20,7 +20,7 @@ from o3d_lsmesh.core.boundary import (
     nonmanifold_edges,
     nonmanifold_vertices,
 )
-from o3d_lsmesh.core.connectivity import adjacency_matrix
+from o3d_lsmesh.core.connectivity import Connectivity
 from o3d_lsmesh.hierarchy import build_hierarchy, from_fast_simplification
 from o3d_lsmesh.hierarchy import hierarchy as tuning
 from o3d_lsmesh.hierarchy.collapse import collapse_levels
@@ -93,7 +93,7 @@ def test_removed_sets_are_independent_collapses(name, request):
     for i in range(1, len(h)):
         rec = h.collapses(i)
         removed, targets = rec["removed"], rec["targets"]
-        A = adjacency_matrix(h.triangles[i - 1], h.vertex_count(i - 1))
+        A = Connectivity(h.triangles[i - 1], h.vertex_count(i - 1)).adjacency
         # no two removed vertices are neighbours ...
         assert A[removed][:, removed].nnz == 0
         # ... every target is a neighbour and is kept, and a removed vertex next to another one's target

@@ -66,9 +66,9 @@ def test_agrees_with_lsqr_on_real_scan():
     F = F[inside[F].all(axis=1)]
     used = np.unique(F)
     V, F = V[used], np.searchsorted(used, F)
-    from o3d_lsmesh.core.connectivity import connected_components
+    from o3d_lsmesh.core.connectivity import Connectivity
 
-    _, labels = connected_components(F, len(V))
+    _, labels = Connectivity(F, len(V)).components
     one_per_component = np.unique(labels, return_index=True)[1]
     idx = np.union1d(np.random.default_rng(2).choice(len(V), len(V) // 50, replace=False), one_per_component)
     w = np.full(len(idx), 2.0)

@@ -18,7 +18,7 @@ import o3d_lsmesh
 from o3d_lsmesh.app.files import write_atomic
 from o3d_lsmesh.app.ops import BatchOp, Option, int_at_least
 from o3d_lsmesh.app.shapes import demo_mesh
-from o3d_lsmesh.core.connectivity import directed_edges
+from o3d_lsmesh.core.connectivity import Connectivity
 from o3d_lsmesh.core.errors import InputError, SingularSystemError
 from o3d_lsmesh.lsmesh import reconstruct_geometry
 
@@ -98,7 +98,7 @@ def _batch_op(**fields):
     "call, param, match",
     [
         (
-            lambda: directed_edges(np.zeros((0, 3), np.int64), 2**31 + 1),
+            lambda: Connectivity(np.zeros((0, 3), np.int64), 2**31 + 1).adjacency,
             "mesh",
             "fewer than 2\\*\\*31 vertices",
         ),

@@ -29,7 +29,7 @@ from o3d_lsmesh import O3DLSMeshWarning, metrics
 from o3d_lsmesh._o3d import weld_map
 from o3d_lsmesh.app.cli import main
 from o3d_lsmesh.core.boundary import boundary_halfedges
-from o3d_lsmesh.core.connectivity import connected_components
+from o3d_lsmesh.core.connectivity import Connectivity
 from o3d_lsmesh.lsmesh.selection import start_vertices
 
 FULL = os.environ.get("O3D_LSMESH_FULL") == "1"
@@ -288,9 +288,9 @@ def test_ls_mesh_and_reconstruct_geometry(key):
     _same_connectivity(out, V, F)
     # ls_mesh welds vertices at equal coordinates (a seam the reader left split): its components
     split = weld_map(V, F)
-    count, labels = connected_components(
+    count, labels = Connectivity(
         F if split is None else split[F], n if split is None else split.max() + 1
-    )
+    ).components
     labels = labels if split is None else labels[split]
     if count > 1:  # the user's system: a component without a control is refused, naming the cause
         missing = np.flatnonzero(labels != labels[controls[0]])
@@ -311,7 +311,7 @@ def test_ls_mesh_and_reconstruct_geometry(key):
 def test_selection_approximation_and_encoding_seed_every_component(key):
     mesh, V, F = corpus(key)
     n = len(V)
-    count, labels = connected_components(F, n)
+    count, labels = Connectivity(F, n).components
     k = min(n, count + 20)
     indices = o3d_lsmesh.select_control_points(mesh, k)
     assert len(np.unique(indices)) == k and set(labels[indices].tolist()) == set(range(count))
@@ -453,7 +453,7 @@ def test_cli_subcommands_on_scans(scan_file, tmp_path, capsys):
     W, G = _read(out)
     assert np.isfinite(W).all() and np.array_equal(G, F) and not np.array_equal(W, V)
     _cli(capsys, ["denoise", str(path), str(tmp_path / "global.ply"), "--method", "global"])
-    count = connected_components(F, len(V))[0] + 10
+    count = Connectivity(F, len(V)).components[0] + 10
     _cli(capsys, ["approximate", str(path), str(tmp_path / "approx.ply"), "--count", str(count)])
     assert np.isfinite(_read(tmp_path / "approx.ply")[0]).all()
     _cli(capsys, ["reconstruct", str(path), str(tmp_path / "rec.ply"), "--unknown", "0:20"])

@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 from selection_reference import greedy_dense
 
 from o3d_lsmesh import ls_mesh
-from o3d_lsmesh.core.connectivity import adjacency_matrix
+from o3d_lsmesh.core.connectivity import Connectivity
 from o3d_lsmesh.lsmesh.selection import (
     approximate,
     forbid_around,
@@ -112,7 +112,7 @@ def test_greedy_equals_dense_solves_at_the_encoding_weight():
 @pytest.mark.parametrize("batch", [1, 5, 31])
 def test_combined_never_picks_a_forbidden_vertex(batch):
     V, F = noisy_sphere(12, seed=5)
-    adjacency = adjacency_matrix(F, len(V))
+    adjacency = Connectivity(F, len(V)).adjacency
     count = 70
     selection = select_control_points((V, F), count, method="combined", batch=batch)
     assert len(np.unique(selection)) == count
@@ -149,7 +149,7 @@ def test_combined_batch_of_one_is_greedy():
 @given(st.integers(0, 2**32 - 1), st.integers(0, 99))
 def test_vectorized_bfs_matches_queue_bfs(seed, start):
     V, F = grid(10, 10)
-    adjacency = adjacency_matrix(F, len(V))
+    adjacency = Connectivity(F, len(V)).adjacency
     rng = np.random.default_rng(seed)
     errors = rng.random(len(V))
     errors[rng.random(len(V)) < 0.2] = 0.5  # ties: equal errors must stop the walk
@@ -279,11 +279,10 @@ def test_scan_defects_seed_every_small_component(method):
     from defect_meshes import all_defects
 
     from o3d_lsmesh import SingularSystemError, decode_geometry, encode_geometry
-    from o3d_lsmesh.core.connectivity import connected_components
 
     V, F, _ = all_defects()
     V = np.vstack([V, [[9.0, 9.0, 9.0], [9.5, 9.0, 9.0]]])  # two unreferenced vertices: components too
-    count, labels = connected_components(F, len(V))
+    count, labels = Connectivity(F, len(V)).components
     assert count == 16
     for k in (count, count + 7):
         chosen = select_control_points((V, F), k, method=method, seed=0)

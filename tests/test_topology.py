@@ -10,7 +10,7 @@ from o3d_lsmesh.core.boundary import (
     boundary_loops,
     nonmanifold_vertices,
 )
-from o3d_lsmesh.core.connectivity import adjacency_matrix, connected_components, directed_edges, unique_edges
+from o3d_lsmesh.core.connectivity import Connectivity
 
 
 def grid_with_holes():
@@ -60,9 +60,10 @@ def test_closed_mesh_has_no_loops(sphere):
     assert boundary_loops(np.asarray(sphere.triangles).astype(np.int64), len(sphere.vertices)) == []
 
 
-def test_unique_edges_counts():
+def test_edges_counts_and_each_halfedges_edge():
     F = np.array([[0, 1, 2], [0, 2, 3]])
-    edges, counts, inverse = unique_edges(F, 4)
+    c = Connectivity(F, 4)
+    edges, counts, inverse = c.edges, c.edge_triangles, c.halfedge_edge
     assert edges.tolist() == [[0, 1], [0, 2], [0, 3], [1, 2], [2, 3]]
     assert counts.tolist() == [1, 2, 1, 1, 1]
     assert np.all(
@@ -135,13 +136,13 @@ def test_a_pinch_has_a_loop_per_fan():
 
 
 def test_components_count_isolated_vertices():
-    count, labels = connected_components(np.array([[0, 1, 2], [3, 4, 5]]), 7)
+    count, labels = Connectivity(np.array([[0, 1, 2], [3, 4, 5]]), 7).components
     assert count == 3 and labels[0] == labels[2] and labels[3] != labels[0]
 
 
 @settings(max_examples=60, deadline=None)
 @given(triangle_soups())
-def test_directed_edges_and_adjacency_match_a_plain_count(case):
+def test_edges_and_adjacency_match_a_plain_count(case):
     n, triangles = case
     F = np.array(triangles, dtype=np.int64)
     counts = {}
@@ -149,19 +150,20 @@ def test_directed_edges_and_adjacency_match_a_plain_count(case):
         for a, b in ((tri[0], tri[1]), (tri[1], tri[2]), (tri[2], tri[0])):
             counts[(a, b)] = counts.get((a, b), 0) + 1
             counts[(b, a)] = counts.get((b, a), 0) + 1
-    src, dst, triangle_count = directed_edges(F, n)
-    assert list(zip(src.tolist(), dst.tolist())) == sorted(counts)
-    assert triangle_count.tolist() == [counts[key] for key in sorted(counts)]
-    A = adjacency_matrix(F, n)
+    c = Connectivity(F, n)
+    undirected = sorted(key for key in counts if key[0] < key[1])
+    assert c.edges.tolist() == [list(key) for key in undirected]
+    assert c.edge_triangles.tolist() == [counts[key] for key in undirected]
+    A = c.adjacency
     dense = np.zeros((n, n))
     for a, b in counts:
         dense[a, b] = 1.0
     assert np.array_equal(A.toarray(), dense) and A.has_canonical_format
 
 
-def test_directed_edges_refuses_vertex_counts_its_keys_cannot_hold():
+def test_adjacency_refuses_vertex_counts_its_keys_cannot_hold():
     with pytest.raises(ValueError, match=r"fewer than 2\*\*31 vertices"):
-        directed_edges(np.array([[0, 1, 2]]), 2**40)
+        _ = Connectivity(np.array([[0, 1, 2]]), 2**40).adjacency
 
 
 # --------------------------------------------------------------------------- boundaries of any mesh (issue 12)

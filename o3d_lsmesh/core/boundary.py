@@ -1,8 +1,8 @@
 """Boundary of a triangle mesh: boundary half-edges, loops, chains between junctions, corner fans.
 
-Functions of ``triangles (m, 3)`` and ``n`` that take the half-edge grouping of a
-:class:`~o3d_lsmesh.core.connectivity.Connectivity` when the caller has one (one edge sort per
-operation). Pinches, fins and the walk: ``docs/algorithms/connectivity.rst``.
+Functions of ``triangles (m, 3)`` and ``n`` that take the mesh's
+:class:`~o3d_lsmesh.core.connectivity.Connectivity` (``conn=``) when the caller has one (one edge sort
+per operation). Pinches, fins and the walk: ``docs/algorithms/connectivity.rst``.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ import scipy.sparse as sp
 from scipy.sparse import csgraph
 
 from .arrays import _runs
-from .connectivity import EdgeStructure, edge_runs, halfedges, unique_edges
+from .connectivity import Connectivity, halfedges
 
 __all__ = [
     "BoundaryCurves",
@@ -31,20 +31,20 @@ __all__ = [
 
 def boundary_halfedges(triangles: np.ndarray, n: int | None = None) -> np.ndarray:
     """Half-edges ``(b, 2)`` on edges used by exactly one triangle, oriented as in that triangle."""
-    _, counts, inverse = unique_edges(triangles, n)
-    return halfedges(triangles)[counts[inverse] == 1]
+    es = Connectivity(triangles, n).edge_structure
+    return halfedges(triangles)[es.counts[es.inverse] == 1]
 
 
 def nonmanifold_edges(triangles: np.ndarray, n: int | None = None) -> np.ndarray:
     """Edges ``(k, 2)`` shared by more than two triangles."""
-    edges, counts, _ = unique_edges(triangles, n)
-    return edges[counts > 2]
+    es = Connectivity(triangles, n).edge_structure
+    return es.edges[es.counts > 2].astype(np.int64)
 
 
 def nonmanifold_vertices(triangles: np.ndarray, n: int) -> np.ndarray:
     """Vertices whose triangles do not form a single fan (linked through manifold edges), sorted."""
     tail = triangles.T.reshape(-1)
-    fan_count, fan = corner_fans(triangles, n, edge_runs(triangles, n))
+    fan_count, fan = corner_fans(triangles, n, Connectivity(triangles, n).edge_structure.runs)
     # links only join corners of one vertex, so every fan belongs to exactly one vertex
     vertex_of_fan = np.zeros(fan_count, dtype=np.int64)
     vertex_of_fan[fan] = tail
@@ -54,7 +54,7 @@ def nonmanifold_vertices(triangles: np.ndarray, n: int) -> np.ndarray:
 def corner_fans(triangles: np.ndarray, n: int, runs, *, only: np.ndarray | None = None):
     """Fans of triangle corners: ``(count, label (3m,))``, corners linked across edges of two triangles.
 
-    Corner ``p*m + t`` holds ``triangles[t, p]``; ``runs`` the edge structure's half-edge grouping.
+    Corner ``p*m + t`` holds ``triangles[t, p]``; ``runs``: ``Connectivity.edge_structure.runs``.
     With a vertex mask ``only`` the other vertices' corners are labelled ``-1``.
     """
     m = len(triangles)
@@ -141,7 +141,7 @@ class BoundaryCurves:
         return len(self.loops) + len(self.chains)
 
 
-def boundary_loops(triangles: np.ndarray, n: int, *, _runs=None) -> list[np.ndarray]:
+def boundary_loops(triangles: np.ndarray, n: int, *, conn: Connectivity | None = None) -> list[np.ndarray]:
     """Every closed boundary loop as an ordered ``(l,) int64`` array of vertices, on any mesh.
 
     At a pinch a loop continues along the rim of the same fan; a boundary edge whose fan ends at a
@@ -150,7 +150,8 @@ def boundary_loops(triangles: np.ndarray, n: int, *, _runs=None) -> list[np.ndar
     >>> [loop.tolist() for loop in boundary_loops(np.array([[0, 1, 2], [0, 3, 4]]), 5)]  # a bow-tie
     [[0, 1, 2], [0, 3, 4]]
     """
-    closed, _ = _boundary_walk(np.asarray(triangles, dtype=np.int64), n, split_at_junctions=False, runs=_runs)
+    runs = None if conn is None else conn.edge_structure.runs
+    closed, _ = _boundary_walk(np.asarray(triangles, dtype=np.int64), n, split_at_junctions=False, runs=runs)
     return closed
 
 
@@ -166,10 +167,8 @@ def boundary_chains(triangles: np.ndarray, n: int) -> BoundaryCurves:
     return BoundaryCurves(closed, open_, _junctions(triangles, n)[0])
 
 
-def boundary_curves(triangles: np.ndarray, n: int, *, edges: EdgeStructure | None = None) -> BoundaryCurves:
+def boundary_curves(triangles: np.ndarray, n: int, *, conn: Connectivity | None = None) -> BoundaryCurves:
     """The loops of :func:`boundary_loops`, the open paths ending at fins, and the fins' boundary vertices.
-
-    ``edges``: the mesh's :class:`~.connectivity.EdgeStructure` when the caller has it.
 
     >>> curves = boundary_curves(np.array([[0, 1, 2], [1, 0, 3], [0, 1, 4]]), 5)  # a fin on (0, 1)
     >>> curves.loops, [c.tolist() for c in curves.chains], curves.junctions.tolist()
@@ -178,7 +177,7 @@ def boundary_curves(triangles: np.ndarray, n: int, *, edges: EdgeStructure | Non
     triangles = np.asarray(triangles, dtype=np.int64)
     if len(triangles) == 0:
         return BoundaryCurves([], [], np.zeros(0, dtype=np.int64))
-    runs = edge_runs(triangles, n) if edges is None else edges.runs
+    runs = (Connectivity(triangles, n) if conn is None else conn).edge_structure.runs
     closed, open_ = _boundary_walk(triangles, n, split_at_junctions=False, runs=runs)
     rows, tail, _, on_crowded = boundary_rows(triangles, n, runs)
     on_boundary = np.zeros(n, dtype=bool)
@@ -202,7 +201,7 @@ def boundary_rows(triangles: np.ndarray, n: int, runs):
 
 def _junctions(triangles: np.ndarray, n: int, runs=None):
     if runs is None:
-        runs = edge_runs(triangles, n)
+        runs = Connectivity(triangles, n).edge_structure.runs
     rows, tail, head, on_crowded = boundary_rows(triangles, n, runs)
     degree = np.bincount(tail[rows], minlength=n) + np.bincount(head[rows], minlength=n)
     special = (degree > 0) & ((degree != 2) | on_crowded)

@@ -17,20 +17,7 @@ from scipy.sparse import csgraph
 from .arrays import _run_lengths, _runs, gather, run_heads
 from .errors import InputError
 
-__all__ = [
-    "Connectivity",
-    "EdgeStructure",
-    "FaceAdjacency",
-    "VertexRings",
-    "adjacency_matrix",
-    "connected_components",
-    "directed_edges",
-    "edge_structure",
-    "halfedges",
-    "ring_pattern",
-    "unique_edges",
-    "vertex_rings",
-]
+__all__ = ["Connectivity", "EdgeStructure", "FaceAdjacency", "VertexRings", "halfedges", "ring_pattern"]
 
 
 if TYPE_CHECKING:
@@ -104,7 +91,7 @@ class Connectivity:
 
     @_cached
     def edge_structure(self) -> EdgeStructure:
-        return edge_structure(self.triangles, self.n)
+        return _edge_structure(self.triangles, self.n)
 
     edges = property(lambda self: self.edge_structure.edges)
     edge_triangles = property(lambda self: self.edge_structure.counts)
@@ -115,7 +102,7 @@ class Connectivity:
 
     @_cached
     def rings(self) -> VertexRings:
-        return vertex_rings(self.triangles, self.n)
+        return _vertex_rings(self.triangles, self.n, _RING_BLOCK)
 
     @_cached
     def ring_pattern(self) -> tuple:
@@ -123,7 +110,7 @@ class Connectivity:
 
     @_cached
     def adjacency(self) -> sp.csr_matrix:
-        return adjacency_matrix(self.triangles, self.n)
+        return _adjacency(self.triangles, self.n)
 
     @_cached
     def vertex_triangles(self) -> tuple[np.ndarray, np.ndarray]:
@@ -195,13 +182,9 @@ def halfedges(triangles: np.ndarray) -> np.ndarray:
     return np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]], axis=0)
 
 
-def edge_runs(triangles: np.ndarray, n: int):  # (order, starts, counts) of edge_structure
-    return edge_structure(triangles, n).runs
-
-
 @dataclass(frozen=True)
 class EdgeStructure:
-    """The undirected edges of a mesh and the grouping of its half-edges (:func:`edge_structure`).
+    """The undirected edges of a mesh and the grouping of its half-edges (:attr:`Connectivity.edge_structure`).
 
     Index arrays int32 (int64 beyond ``2**31`` half-edges); ``inverse`` formed on first use.
     """
@@ -227,16 +210,8 @@ class EdgeStructure:
         return self.order, self.starts, self.counts
 
 
-def edge_structure(triangles: np.ndarray, n: int | None = None) -> EdgeStructure:
-    """The :class:`EdgeStructure` of a mesh: its half-edges grouped by undirected edge (a stable sort by
-    ``lo * n + hi`` made of two counting sorts, by ``hi`` then ``lo``).
-
-    >>> edge_structure(np.array([[0, 1, 2], [0, 2, 3]]), 4).counts.tolist()
-    [1, 2, 1, 1, 1]
-    """
-    triangles = np.asarray(triangles)
-    if n is None:
-        n = int(triangles.max()) + 1 if len(triangles) else 0
+def _edge_structure(triangles: np.ndarray, n: int) -> EdgeStructure:
+    # a stable sort of the half-edges by lo * n + hi made of two counting sorts, by hi then lo
     m = len(triangles)
     count = 3 * m
     index = np.int32 if max(count, n) < np.iinfo(np.int32).max else np.int64
@@ -268,18 +243,18 @@ def edge_structure(triangles: np.ndarray, n: int | None = None) -> EdgeStructure
     return EdgeStructure(edges, counts, order, starts)
 
 
-#: Corners (row, column) of the six entries ``d * m + t`` of a triangle in :func:`vertex_rings`:
+#: Corners (row, column) of the six entries ``d * m + t`` of a triangle in :attr:`Connectivity.rings`:
 #: entries 0-2 are the half-edges of :func:`halfedges`, 3-5 the same edges reversed.
 RING_ROW_SLOT = (0, 1, 2, 1, 2, 0)
 RING_COLUMN_SLOT = (1, 2, 0, 0, 1, 2)
 
-#: Vertices per block of :func:`vertex_rings`: temporaries of a few megabytes, reused by the allocator.
+#: Vertices per block of the rings' builder: temporaries of a few megabytes, reused by the allocator.
 _RING_BLOCK = 1 << 14
 
 
 @dataclass(frozen=True)
 class VertexRings:
-    """The 1-ring CSR pattern with the triangles behind every slot (:func:`vertex_rings`).
+    """The 1-ring CSR pattern with the triangles behind every slot (:attr:`Connectivity.rings`).
 
     Triangle ``t`` gives six entries: entry ``d * m + t`` sits in row ``triangles[t, RING_ROW_SLOT[d]]``
     and column ``triangles[t, RING_COLUMN_SLOT[d]]``. Index arrays int32 (int64 beyond ``2**31``).
@@ -297,15 +272,9 @@ class VertexRings:
         return len(self.indptr) - 1
 
 
-def vertex_rings(triangles: np.ndarray, n: int, *, block: int = _RING_BLOCK) -> VertexRings:
-    """The :class:`VertexRings` of a mesh in one pass over its corners (grouped by vertex), ``block`` vertices
-    at a time; equal columns of a row are the triangles of one edge.
-
-    >>> rings = vertex_rings(np.array([[0, 1, 2], [0, 2, 3]]), 4)
-    >>> rings.indices.tolist(), rings.valence.tolist()
-    ([0, 1, 2, 3, 0, 1, 2, 0, 1, 2, 3, 0, 2, 3], [3, 2, 3, 2])
-    """
-    triangles = np.asarray(triangles)
+def _vertex_rings(triangles: np.ndarray, n: int, block: int) -> VertexRings:
+    # one pass over the corners grouped by vertex, block vertices at a time; equal columns of a row
+    # are the triangles of one edge
     m = len(triangles)
     corners = 3 * m
     bound = 6 * m + n
@@ -379,18 +348,6 @@ def vertex_rings(triangles: np.ndarray, n: int, *, block: int = _RING_BLOCK) -> 
     return VertexRings(indptr, indices[:offset], diagonal, pairs[:, :offset], valence, boundary)
 
 
-def unique_edges(triangles: np.ndarray, n: int | None = None):
-    """``(edges (k, 2), counts (k,), inverse (3m,))`` int64: edges ``lo < hi`` sorted, triangles per edge,
-    edge of each half-edge of :func:`halfedges`."""
-    return unique_edges_and_runs(triangles, n)[0]
-
-
-def unique_edges_and_runs(triangles: np.ndarray, n: int | None = None):
-    """:func:`unique_edges` and the half-edge runs of :func:`boundary_loops` (``_runs``) from one edge structure."""
-    es = edge_structure(triangles, n)
-    return (es.edges.astype(np.int64), es.counts.astype(np.int64), es.inverse.astype(np.int64)), es.runs
-
-
 def ring_pattern(edges: np.ndarray, n: int):
     """The 1-ring CSR of sorted ``edges (e, 2)`` (``lo < hi``): ``indptr (n+1,)``, ``indices`` and the positions
     of the diagonal ``(n,)`` and of each edge forward (row ``lo``) and backward (row ``hi``), int32 if they fit.
@@ -434,11 +391,8 @@ def ring_pattern(edges: np.ndarray, n: int):
     return indptr, indices, diagonal, forward, backward
 
 
-def directed_edges(triangles: np.ndarray, n: int):
-    """Both directions of every edge sorted by ``(source, target)``: ``src, dst, triangle_count (2e,) int64``.
-
-    One sort of the plain int64 keys ``src << bits | dst`` (``src`` sorted: the CSR of the adjacency).
-    """
+def _adjacency(triangles: np.ndarray, n: int) -> sp.csr_matrix:
+    # both directions of every edge by one sort of the int64 keys src << bits | dst: the CSR
     bits = max(1, int(n - 1).bit_length())
     if 2 * bits > 62:  # beyond 2^31 vertices: keys by multiplication do not fit either
         raise InputError(f"mesh must have fewer than 2**31 vertices, got {n}", param="mesh")
@@ -453,16 +407,10 @@ def directed_edges(triangles: np.ndarray, n: int):
     for row, head in enumerate((1, 2, 0, 2, 0, 1)):
         rows[row] |= corners[head]
     keys.sort()
-    _, at, triangle_count = _runs(keys)
-    keys = keys[at]
+    keys = keys[_runs(keys)[1]]
     src = keys >> shift
     keys &= np.int64((1 << int(shift)) - 1)
-    return src, keys, triangle_count
-
-
-def adjacency_matrix(triangles: np.ndarray, n: int) -> sp.csr_matrix:
-    """Symmetric binary vertex adjacency ``(n, n)`` CSR (1 where an edge joins two vertices), sorted indices."""
-    src, dst, _ = directed_edges(triangles, n)
+    dst = keys
     indptr = np.zeros(n + 1, dtype=np.int64)
     np.cumsum(np.bincount(src, minlength=n), out=indptr[1:])
     # SciPy keeps 32-bit indices when they fit; giving them so avoids a copy
@@ -472,9 +420,3 @@ def adjacency_matrix(triangles: np.ndarray, n: int) -> sp.csr_matrix:
     )
     adjacency.has_canonical_format = True  # sorted, no duplicates
     return adjacency
-
-
-def connected_components(triangles: np.ndarray, n: int):
-    """Connected components over edges: ``(count, labels (n,) int64)``; isolated vertices are their own."""
-    count, labels = csgraph.connected_components(adjacency_matrix(triangles, n), directed=False)
-    return int(count), labels.astype(np.int64)

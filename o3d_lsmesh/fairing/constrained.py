@@ -214,7 +214,7 @@ def _fair(positions, conn, method, options, solver="auto"):
 
 def _curve(conn: Connectivity, walk: bool) -> CurveOperator:
     # the boundary curves' operator, or an empty one
-    return curve_operator(boundary_curves(conn.triangles, conn.n, edges=conn.edge_structure) if walk else [])
+    return curve_operator(boundary_curves(conn.triangles, conn.n, conn=conn) if walk else [])
 
 
 def fair_local(positions, conn, number_of_iterations, smooth_boundary, reimpose_every, progress):

@@ -100,7 +100,7 @@ def _input_boundary(
         return boundary, vertices[boundary]
     smoothed = run_curve_iterations(
         vertices,
-        curve_operator(boundary_curves(conn.triangles, len(vertices), edges=conn.edge_structure)),
+        curve_operator(boundary_curves(conn.triangles, len(vertices), conn=conn)),
         iterations,
         reimpose_every=1 if method == "global" else None,
     )

@@ -236,8 +236,7 @@ class HoleFiller:
         conn = Connectivity(triangles, n)  # the one whole-mesh grouping
         es = conn.edge_structure
         edges = es.edges.astype(np.int64)
-        edge_info = (edges, es.counts.astype(np.int64), es.inverse.astype(np.int64)), es.runs
-        self.holes = find_holes(vertices, triangles, _edge_info=edge_info)
+        self.holes = find_holes(vertices, triangles, _conn=conn)
         length = np.linalg.norm(vertices[edges[:, 0]] - vertices[edges[:, 1]], axis=1)
         degree = np.maximum(np.bincount(edges.ravel(), minlength=n), 1)
         self.sigma = np.bincount(edges.ravel(), weights=np.repeat(length, 2), minlength=n) / degree

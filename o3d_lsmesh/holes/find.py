@@ -6,25 +6,25 @@ See docs/algorithms/hole_filling.rst.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse import csgraph
 
 from ..core.boundary import boundary_loops
-from ..core.connectivity import unique_edges_and_runs
+from ..core.connectivity import Connectivity
 from .tuning import BORDER_FACING_AWAY, SIDEWAYS
 
 __all__ = ["Hole", "find_holes"]
 
 
-def _loop_rows(triangles: np.ndarray, n: int, edge_info: Any) -> list[tuple[np.ndarray, np.ndarray]]:
+def _loop_rows(triangles: np.ndarray, n: int, conn: Connectivity) -> list[tuple[np.ndarray, np.ndarray]]:
     """The loops of :func:`o3d_lsmesh.core.boundary.boundary_loops`, each with the row (of
     :func:`o3d_lsmesh.core.connectivity.halfedges`) of the one half-edge on each loop edge ``(loop[i], loop[i + 1])``;
-    ``edge_info`` is :func:`o3d_lsmesh.core.connectivity.unique_edges_and_runs` of the mesh."""
-    (edges, counts, inverse), runs = edge_info
-    loops = boundary_loops(triangles, n, _runs=runs)
+    ``conn`` is the mesh's Connectivity."""
+    es = conn.edge_structure
+    edges, counts, inverse = es.edges.astype(np.int64), es.counts, es.inverse
+    loops = boundary_loops(triangles, n, conn=conn)
     if not loops:
         return []
     single = np.flatnonzero(counts[inverse] == 1)
@@ -72,7 +72,9 @@ def _diameter(points: np.ndarray) -> float:
     )
 
 
-def find_holes(vertices: np.ndarray, triangles: np.ndarray, *, _edge_info=None) -> list[Hole]:
+def find_holes(
+    vertices: np.ndarray, triangles: np.ndarray, *, _conn: Connectivity | None = None
+) -> list[Hole]:
     """Every boundary loop of the mesh with its size and whether it is an outer border.
 
     A component's outer border is its longest loop when less than :data:`BORDER_FACING_AWAY` of the
@@ -97,11 +99,11 @@ def find_holes(vertices: np.ndarray, triangles: np.ndarray, *, _edge_info=None) 
     (3, True)
     """
     n = len(vertices)
-    _edge_info = unique_edges_and_runs(triangles, n) if _edge_info is None else _edge_info
-    loops = _loop_rows(triangles, n, _edge_info)
+    conn = Connectivity(triangles, n) if _conn is None else _conn
+    loops = _loop_rows(triangles, n, conn)
     if not loops:
         return []
-    edges = _edge_info[0][0]
+    edges = conn.edges.astype(np.int64)
     # components over the sorted edges: the upper triangle of the adjacency in CSR order (no second sort)
     indptr = np.zeros(n + 1, dtype=np.int64)
     np.cumsum(np.bincount(edges[:, 0], minlength=n), out=indptr[1:])
