@@ -294,10 +294,9 @@ class LSMeshSystem:
 class LSMeshSolver(LSMeshSystem):
     """A least-squares mesh system with its Cholesky factor kept for editing.
 
-    Minimizes ``||L X||^2 + sum_s w_s^2 |X_s - C_s|^2`` for x, y and z (eq. 3 and section 6) over the
-    positions ``X (n, 3)``. The normal matrix is factored once; :meth:`solve` with new control positions
-    is a back-substitution, :meth:`add_anchors` a rank-k update. Thread-safe (one lock); pickles with its
-    factor's matrix. Docs: ``docs/algorithms/least_squares_meshes.rst``.
+    Minimizes ``||L X||^2 + sum_s w_s^2 |X_s - C_s|^2`` (eq. 3, section 6): :meth:`solve` is a
+    back-substitution, :meth:`add_anchors` a rank-k update. Thread-safe; pickles. Docs:
+    ``docs/algorithms/least_squares_meshes.rst``.
 
     Parameters
     ----------
@@ -427,8 +426,7 @@ def ls_mesh(
 def solve_once(
     desc: str, bar: bool, data: MeshData, indices: Any, positions: Any = None, **options: Any
 ) -> np.ndarray:
-    """One :class:`LSMeshSystem` of ``data`` factored and solved under a two-stage bar, ``(n, 3)``; the
-    factor is freed before the caller builds its mesh."""
+    """One :class:`LSMeshSystem` of ``data`` factored and solved under a two-stage bar, ``(n, 3)``."""
     with Progress(bar, desc).stages(("factor", "solve")) as begin:
         begin("factor")
         system = LSMeshSystem(data.vertices, data.triangles, indices, **options)
