@@ -20,17 +20,7 @@ def loop_geometry(
     loop: Array, rows: Array, vertices: Array, triangles: Array, indptr: Array, data: Array
 ) -> tuple[Array, Array, Array, float, Array]: ...
 def patch_system(
-    x: Array,
-    tris: Array,
-    i: Array,
-    j: Array,
-    inverse: Array,
-    unknown: Array,
-    ring0: Array,
-    ring1: Array,
-    level: int,
-    cot: bool,
-    dense: bool,
+    x: Array, tris: Array, unknown: Array, ring0: Array, ring1: Array, level: int, cot: bool, dense: bool
 ) -> tuple[Array | tuple[Array, Array, Array], Array]: ...
 def patch_crossings(
     vertices: Array,

@@ -755,24 +755,43 @@ def loop_geometry(const int64_t[::1] loop, const int64_t[::1] rows, const double
 
 # the fairing system of a local mesh
 
-def patch_system(const double[:, ::1] x, const int64_t[:, ::1] tris, const int64_t[::1] i,
-                 const int64_t[::1] j, const int64_t[::1] inverse, const int64_t[::1] unknown,
+cdef int64_t _edges(const int64_t[:, ::1] tris, int64_t[::1] i, int64_t[::1] j, int64_t[::1] inverse,
+                    Half* half) noexcept nogil:
+    """The sorted edges ``i < j`` of a local mesh and the edge of each corner-major half-edge; how many."""
+    cdef int64_t t = tris.shape[0], e = 0, h, k, c
+    for c in range(3):
+        for k in range(t):
+            half[c * t + k].key, half[c * t + k].h = _key(tris[k, c], tris[k, (c + 1) % 3]), c * t + k
+    qsort(half, 3 * t, sizeof(Half), _by_key)
+    for h in range(3 * t):
+        if h == 0 or half[h].key != half[h - 1].key:
+            i[e], j[e] = half[h].key >> 32, half[h].key & <int64_t>0xFFFFFFFF
+            e += 1
+        inverse[half[h].h] = e - 1
+    return e
+
+def patch_system(const double[:, ::1] x, const int64_t[:, ::1] tris, const int64_t[::1] unknown,
                  const int64_t[::1] ring0, const int64_t[::1] ring1, int level, bint cot, bint dense):
     """The fairing system of the ``unknown`` vertices at continuity ``level`` (docs page), the others fixed
     at ``x``. ``dense``: the normal matrix ``(p, p)`` and right-hand side ``(p, 3)``. Else the CSR
     ``(indptr, indices, data)`` of ``M`` and ``b``: level 0 ``M = K_uu``, ``b = -K_uk x_k``; 1 and 2 the
     rows ``M = A_u`` and ``b = A_k x_k`` of the least squares (the system ``M^T M = -M^T b``).
     """
-    cdef int64_t nv = x.shape[0], e = i.shape[0], p = unknown.shape[0], rows, r, k, s, c, v
+    cdef int64_t nv = x.shape[0], e, p = unknown.shape[0], t = tris.shape[0], rows, r, k, s, c, v
     cdef int64_t a, count, u1, u2, side, size = 0, capacity = 0
-    if level not in (0, 1, 2):
-        raise ValueError("level must be 0, 1 or 2")
-    if p and _outside(&unknown[0], p, nv):
-        raise ValueError("unknown outside the vertices of x")
-    if inverse.shape[0] != 3 * tris.shape[0] or j.shape[0] != e:
-        raise ValueError("inverse must have 3 t entries, i and j one length")
-    if tris.shape[0] and _outside(&tris[0, 0], 3 * tris.shape[0], nv):
-        raise ValueError("tris index outside the nv vertices")
+    if level not in (0, 1, 2) or nv >= 2**31:
+        raise ValueError("level must be 0, 1 or 2, and a local mesh has fewer than 2^31 vertices")
+    if (p and _outside(&unknown[0], p, nv)) or (t and _outside(&tris[0, 0], 3 * t, nv)):
+        raise ValueError("unknown and tris index the vertices of x")
+    i_, j_, inverse_ = np.empty(3 * t, dtype=np.int64), np.empty(3 * t, dtype=np.int64), np.empty(3 * t, dtype=np.int64)
+    cdef int64_t[::1] i = i_, j = j_, inverse = inverse_
+    cdef Half* half = <Half*>malloc(max(3 * t, 1) * sizeof(Half))
+    if not half:
+        raise MemoryError
+    with nogil:
+        e = _edges(tris, i, j, inverse, half)
+    free(half)
+    i, j = i[:e], j[:e]
     w_, degree_, scale_ = np.zeros(e), np.zeros(nv), np.zeros(nv)
     cdef double[::1] w = w_, degree = degree_, scale = scale_
     with nogil:
@@ -794,7 +813,7 @@ def patch_system(const double[:, ::1] x, const int64_t[:, ::1] tris, const int64
             valid[ring1[k]] = 1
         for k in range(e):
             keep[k] = (mark[i[k]] or mark[j[k]]) and valid[i[k]] and valid[j[k]]
-        plus_, minus_ = np.asarray(i)[keep_.view(bool)], np.asarray(j)[keep_.view(bool)]
+        plus_, minus_ = i_[:e][keep_.view(bool)], j_[:e][keep_.view(bool)]
     cdef const int64_t[::1] plus = plus_, minus = minus_
     rows = plus.shape[0] if level else p
     # each vertex's neighbours (CSR over the edges, both directions)

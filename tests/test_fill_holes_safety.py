@@ -179,8 +179,8 @@ def test_non_finite_cotangent_system_falls_back_for_its_hole_alone(monkeypatch):
     V, T = _two_holes()
     assemble = _fill_kernel.patch_system
 
-    def poison(x, tris, i, j, inverse, unknown, ring0, ring1, level, cot, dense):
-        normal, rhs = assemble(x, tris, i, j, inverse, unknown, ring0, ring1, level, cot, dense)
+    def poison(x, tris, unknown, ring0, ring1, level, cot, dense):
+        normal, rhs = assemble(x, tris, unknown, ring0, ring1, level, cot, dense)
         if cot:  # the cotangent pass: infinite on the south hole's unknowns
             south = x[unknown, 2] < -0.5
             rhs = np.where(south[:, None], np.inf, rhs) if dense or level == 0 else rhs

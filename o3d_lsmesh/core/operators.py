@@ -40,7 +40,6 @@ __all__ = [
     "graph_laplacian",
     "local_operator",
     "lower_csc",
-    "patch_edges",
     "patch_system",
     "penalty_matrix",
     "rim_neighbours",
@@ -313,13 +312,6 @@ def lower_csc(symmetric: sp.csr_matrix) -> sp.csc_matrix:
 # ---------------------------------------------------------------------------------- the hole patch
 
 
-def patch_edges(triangles: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """A local mesh's edges ``i < j`` (sorted, ``(e,)`` each) and the edge of each corner-major half-edge ``(3m,)``."""
-    half = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]])
-    keys, inverse = np.unique(half.min(axis=1) * n + half.max(axis=1), return_inverse=True)
-    return keys // n, keys % n, inverse.ravel()
-
-
 def patch_system(
     vertices: np.ndarray,
     triangles: np.ndarray,
@@ -329,7 +321,6 @@ def patch_system(
     *,
     cotangent: bool = False,
     dense: bool = True,
-    edges: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
 ) -> tuple[np.ndarray | sp.csr_matrix, np.ndarray]:
     """The SPD system ``(A (u, u), b (u, 3))`` whose solution places the ``unknown`` local vertices.
 
@@ -338,8 +329,8 @@ def patch_system(
     normalized to mean 1. The energy at continuity ``level``: 0 ``x^T K x`` (harmonic); 1
     ``sum |(L x)_r|^2`` over the rows touching an unknown (LS meshes eq. 3); 2 ``sum |(L x)_r - (L x)_s|^2``
     over the edges touching such a row (``rings[0]`` the loop vertices, ``rings[1]`` the next ring).
-    Others fixed at ``vertices (n, 3)``; ``A`` dense if ``dense``, else CSR; ``edges`` of
-    :func:`patch_edges`. Assembled in one compiled pass (docs/algorithms/hole_filling.rst).
+    Others fixed at ``vertices (n, 3)``; ``A`` dense if ``dense``, else CSR. Assembled in one compiled
+    pass (docs/algorithms/hole_filling.rst).
 
     >>> fan = np.array([[0, 1, 3], [1, 2, 3], [2, 0, 3]])
     >>> A, b = patch_system(np.eye(4, 3), fan, np.array([3]), [], 0)  # the centre of a fan
@@ -348,11 +339,9 @@ def patch_system(
     """
     from .._fill_kernel import patch_system as assemble  # compiled by the package's build
 
-    if edges is None:
-        edges = patch_edges(triangles, len(vertices))
     ring0 = rings[0] if rings else np.zeros(0, dtype=np.int64)
     ring1 = rings[1] if level > 1 else ring0
-    normal, rhs = assemble(vertices, triangles, *edges, unknown, ring0, ring1, level, cotangent, dense)
+    normal, rhs = assemble(vertices, triangles, unknown, ring0, ring1, level, cotangent, dense)
     if dense:
         return normal, rhs
     indptr, indices, data = normal  # K_uu, or the rows A_u of the least squares

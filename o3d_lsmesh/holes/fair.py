@@ -14,23 +14,20 @@ import scipy.sparse as sp
 from ..core import tuning as core_tuning
 from ..core.arrays import concatenated_ranges, run_heads
 from ..core.errors import SingularSystemError
-from ..core.operators import patch_edges, patch_system
+from ..core.operators import patch_system
 from ..core.solve import solve_spd
 from .crossings import _crossings
 from .find import _cross
 from .triangulate import _kernel
 
 
-def _fair(
-    x: np.ndarray, tris: np.ndarray, unknown: np.ndarray, rings: list, level: int, edges: Any, cot: bool
-):
+def _fair(x: np.ndarray, tris: np.ndarray, unknown: np.ndarray, rings: list, level: int, cot: bool):
     """Positions ``(p, 3)`` of the ``unknown`` local vertices minimizing continuity ``level``'s energy
-    (:func:`o3d_lsmesh.core.operators.patch_system`), the others fixed at ``x``; ``edges`` of
-    :func:`~o3d_lsmesh.core.operators.patch_edges`. Solved by the gateway; a block whose system is not
-    finite is left NaN.
+    (:func:`o3d_lsmesh.core.operators.patch_system`), the others fixed at ``x``. Solved by the gateway; a
+    block whose system is not finite is left NaN.
     """
     dense = len(unknown) <= core_tuning.DENSE_UNKNOWNS
-    normal, rhs = patch_system(x, tris, unknown, rings, level, cotangent=cot, dense=dense, edges=edges)
+    normal, rhs = patch_system(x, tris, unknown, rings, level, cotangent=cot, dense=dense)
     if dense and np.isfinite(normal).all() and np.isfinite(rhs).all():
         return solve_spd(normal, rhs)
     # the blocks (patches, and patches sharing rings) with a non-finite entry are left NaN, for the
@@ -73,7 +70,7 @@ def _interpolation(
         k, nl = len(loop), len(numbering)
         # the membrane (continuity 0) with the loop's unit vectors as the fixed "positions"
         unit = np.eye(nl, k)
-        harmonic = _fair(unit, tris_local, np.arange(k, nl), [], 0, patch_edges(tris_local, nl), False)
+        harmonic = _fair(unit, tris_local, np.arange(k, nl), [], 0, False)
         r, c = np.nonzero(np.abs(harmonic) > 1e-12)
         rows.append(inner[r] - n)
         cols.append(loop[c])
@@ -117,7 +114,8 @@ def keeps_facing(x: np.ndarray, again: np.ndarray, new_tris: np.ndarray) -> bool
     q = np.where((new_tris >= first)[..., None], again[np.maximum(new_tris - first, 0)], p)
     before = _cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
     after = _cross(q[:, 1] - q[:, 0], q[:, 2] - q[:, 0])
-    size = np.linalg.norm(p.max(axis=(0, 1)) - p.min(axis=(0, 1))) if len(p) else 0.0
+    extent = p.max(axis=(0, 1)) - p.min(axis=(0, 1)) if len(p) else np.zeros(3)
+    size = np.sqrt(extent.dot(extent))  # np.linalg.norm's bits
     move = np.abs(again - x[first:]).max() if len(again) else 0.0
     return bool(((before * after).sum(axis=1) > 0).all() and move < 0.1 * size)
 
@@ -155,14 +153,13 @@ def fair_patches(
     )
     local = local.reshape(-1, 3)
     local_rings = [np.searchsorted(local_vertices, ring) for ring in rings]
-    local_edges = patch_edges(local, len(local_vertices))
     local_unknown = np.arange(len(local_vertices) - len(unknown), len(local_vertices))
     refined = vertices[n:].copy()
     work = vertices  # its new rows hold the candidate being solved from or checked
 
     def solve(level: int, weighted: bool) -> np.ndarray | None:
         try:
-            x = _fair(work[local_vertices], local, local_unknown, local_rings, level, local_edges, weighted)
+            x = _fair(work[local_vertices], local, local_unknown, local_rings, level, weighted)
         except SingularSystemError:
             return None
         return x if np.isfinite(x).any() else None  # a patch whose system is not finite: NaN rows
