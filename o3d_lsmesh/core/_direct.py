@@ -18,7 +18,7 @@ import scipy.sparse as sp
 from . import tuning
 from ._iterative import csr_parts
 from .errors import InputError, InputTypeError, called_from_outside, warn
-from .validate import as_choice
+from .validate import as_choice, check_finite
 
 ORDERINGS = ("default", "nesdis", "metis", "amd", "colamd", "natural")
 #: What the public functions took as ``solver=`` (deprecated for ``backend=``).
@@ -240,24 +240,6 @@ def operator_scale(operator: sp.spmatrix) -> float:
     return float(np.bincount(csr.indices, weights=csr.data**2, minlength=csr.shape[1]).max())
 
 
-def check_finite(values: Any, *, name: str, what: str) -> None:
-    """Raise :class:`InputError` naming ``name`` when ``values`` (built from it) holds inf or NaN.
-
-    ``values`` may be a callable, run with overflow warnings off (the overflow is what this reports).
-    """
-    if callable(values):
-        with np.errstate(over="ignore", invalid="ignore"):
-            values = values()
-    finite = np.isfinite(values)
-    if not finite.all():
-        first = int(np.flatnonzero(~finite.ravel())[0])
-        raise InputError(
-            f"{name} must be small enough that {what} is finite, got {np.ravel(values)[first]} "
-            f"(overflow) at entry {first}",
-            param=name,
-        )
-
-
 def check_constant_modes(
     ones_product: np.ndarray,
     labels: np.ndarray,
@@ -328,32 +310,6 @@ def _short(value: Any) -> str:
     return f"array of {array.size} (min {array.min():g})"
 
 
-def as_csc(matrix: Any, *, name: str = "matrix", square: bool = True) -> sp.csc_matrix:
-    """``matrix`` as canonical float64 CSC with CHOLMOD's 32-bit indices where they fit (a copy if needed)."""
-    if not sp.issparse(matrix):
-        raise InputTypeError(f"{name} must be a scipy sparse matrix, got {type(matrix).__name__}", param=name)
-    if square and matrix.shape[0] != matrix.shape[1]:
-        raise InputError(f"{name} must be square, got shape {matrix.shape}", param=name)
-    if matrix.dtype.kind not in "biuf":
-        raise InputTypeError(f"{name} must have real entries, got {matrix.dtype}", param=name)
-    csc = sp.csc_matrix(matrix, dtype=np.float64)
-    if not np.isfinite(csc.data).all():
-        first = int(np.flatnonzero(~np.isfinite(csc.data))[0])
-        raise InputError(
-            f"{name} must have finite entries, got {csc.data[first]} (an overflowing weight or a NaN input?)",
-            param=name,
-        )
-    if not csc.has_canonical_format:
-        csc = csc.copy()
-        csc.sum_duplicates()
-    if csc.indices.dtype != np.int32 and max(csc.nnz, *csc.shape) < np.iinfo(np.int32).max:
-        # CHOLMOD's int interface: the long one would copy and store 64-bit indices
-        csc = sp.csc_matrix(
-            (csc.data, csc.indices.astype(np.int32), csc.indptr.astype(np.int32)), shape=csc.shape
-        )
-    return csc
-
-
 def check_symmetric(csc: sp.csc_matrix, *, lower: bool, name: str = "matrix") -> None:
     """Raise unless the canonical ``csc`` is symmetric within :data:`~o3d_lsmesh.core.tuning.SYMMETRY_TOLERANCE`
     (with ``lower``: has no entry above the diagonal): CHOLMOD reads one triangle, LU and CG the whole."""
@@ -392,31 +348,28 @@ def stored(csc: sp.csc_matrix, *, given_lower: bool, keep_lower: bool) -> sp.csc
     return stored
 
 
-def _not_a(value: Any, types: tuple[type, ...]) -> bool:
-    return isinstance(value, bool) or not isinstance(value, types)
-
-
 def check_numbers(tol: Any, reduction: Any, max_iterations: Any, memory_budget: Any) -> None:
-    """Raise :class:`InputError` naming the first of :class:`~o3d_lsmesh.core.solve.SPDSolver`'s numbers out of range."""
-    if _not_a(tol, (int, float, np.floating)) or not 0 < tol < 1:
-        raise InputError(f"tol must be a number in (0, 1), got {tol!r}", param="tol")
-    if reduction is not None and _not_a(reduction, (int, float, np.floating)):
-        raise InputTypeError(
-            f"reduction must be None or a number in (0, 1), got {reduction!r}", param="reduction"
-        )
-    if reduction is not None and not 0 < reduction < 1:
-        raise InputError(
-            f"reduction must be None or a number in (0, 1), got {reduction!r}", param="reduction"
-        )
-    if _not_a(max_iterations, (int, np.integer)) or max_iterations < 1:
-        raise InputError(
-            f"max_iterations must be a positive integer, got {max_iterations!r}", param="max_iterations"
-        )
-    if memory_budget is not None and (_not_a(memory_budget, (int, float, np.integer)) or memory_budget < 0):
-        raise InputError(
-            f"memory_budget must be a non-negative number of bytes, got {memory_budget!r}",
-            param="memory_budget",
-        )
+    """Raise :class:`InputError` naming the first of :class:`~o3d_lsmesh.core.solve.SPDSolver`'s numbers out of
+    range (:class:`InputTypeError` when it is not a number)."""
+    real, integer = (int, float, np.floating), (int, np.integer)
+    for name, value, types, rule, fits in (
+        ("tol", tol, real, "a number in (0, 1)", lambda v: 0 < v < 1),
+        ("reduction", reduction, real, "None or a number in (0, 1)", lambda v: 0 < v < 1),
+        ("max_iterations", max_iterations, integer, "a positive integer", lambda v: v >= 1),
+        (
+            "memory_budget",
+            memory_budget,
+            (*integer, float),
+            "a non-negative number of bytes",
+            lambda v: v >= 0,
+        ),
+    ):
+        if value is None and name in ("reduction", "memory_budget"):
+            continue
+        if isinstance(value, bool) or not isinstance(value, types):
+            raise InputTypeError(f"{name} must be {rule}, got {value!r}", param=name)
+        if not fits(value):
+            raise InputError(f"{name} must be {rule}, got {value!r}", param=name)
 
 
 def nonfinite_blocks(matrix: sp.csr_matrix, rhs: np.ndarray) -> np.ndarray | None:

@@ -34,7 +34,7 @@ from ._direct import (
 )
 from ._iterative import block_cg, csr_view, gram_matrix, locality_order, preconditioner, renumbered, splu_spd
 from .errors import InputError, InputTypeError, SingularSystemError, called_from_outside, warn
-from .validate import as_choice
+from .validate import as_choice, as_csc
 
 __all__ = [
     "BACKENDS",
@@ -168,10 +168,10 @@ class SPDSolver:
         if (matrix is None) == (product_of is None):
             raise InputTypeError("pass exactly one of matrix and product_of", param="matrix")
         if product_of is None:
-            given = _direct.as_csc(matrix)
+            given = as_csc(matrix)
             _direct.check_symmetric(given, lower=bool(lower))
         else:
-            given = _direct.as_csc(product_of, name="product_of", square=False)
+            given = as_csc(product_of, name="product_of", square=False)
         if backend == "auto":
             n = given.shape[0]
             # entries of the (whole) matrix: the product's are about those of A A^T's pattern
@@ -196,7 +196,7 @@ class SPDSolver:
         self._order: np.ndarray | None = None
         self._ordered = False
         if self.backend == "iterative" and plan.locality_of is not None:
-            graph = _direct.as_csc(plan.locality_of, name="locality_of")
+            graph = as_csc(plan.locality_of, name="locality_of")
             if graph.shape[0] != given.shape[0]:
                 raise InputError(
                     f"locality_of must have shape {(given.shape[0],) * 2}, got {graph.shape}",
@@ -220,7 +220,7 @@ class SPDSolver:
         del given
         pattern_of = plan.pattern_of
         self._pattern_of = (
-            None if pattern_of is None else _direct.as_csc(pattern_of, name="pattern_of", square=False)
+            None if pattern_of is None else as_csc(pattern_of, name="pattern_of", square=False)
         )
         if self._pattern_of is not None and self._pattern_of.shape[0] != self.shape[0]:
             raise InputError(
@@ -307,7 +307,7 @@ class SPDSolver:
                 "refactor takes a matrix, and this solver factors a product: build a new SPDSolver",
                 param="matrix",
             )
-        csc = _direct.as_csc(matrix)
+        csc = as_csc(matrix)
         _direct.check_symmetric(csc, lower=lower)
         assert self._matrix is not None  # a product solver raised above
         if csc.shape != self._matrix.shape:

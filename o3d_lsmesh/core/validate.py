@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from typing import Any, Literal, overload
 
 import numpy as np
+import scipy.sparse as sp
 
 from .errors import InputError, InputTypeError
 
@@ -24,6 +25,7 @@ __all__ = [
     "as_bool",
     "as_choice",
     "as_count",
+    "as_csc",
     "as_indices",
     "as_iterations",
     "as_positions",
@@ -33,6 +35,7 @@ __all__ = [
     "as_vertex_array",
     "as_weights",
     "as_workers",
+    "check_finite",
     "check_options",
     "collapsed_triangles",
     "mesh_arrays",
@@ -426,3 +429,47 @@ def check_options(
         else:
             options[key] = value if option.check is None else option.check(value, name=key)
     return method, options
+
+
+def as_csc(matrix: Any, *, name: str = "matrix", square: bool = True) -> sp.csc_matrix:
+    """``matrix`` as canonical float64 CSC with CHOLMOD's 32-bit indices where they fit (a copy if needed)."""
+    if not sp.issparse(matrix):
+        raise InputTypeError(f"{name} must be a scipy sparse matrix, got {type(matrix).__name__}", param=name)
+    if square and matrix.shape[0] != matrix.shape[1]:
+        raise InputError(f"{name} must be square, got shape {matrix.shape}", param=name)
+    if matrix.dtype.kind not in "biuf":
+        raise InputTypeError(f"{name} must have real entries, got {matrix.dtype}", param=name)
+    csc = sp.csc_matrix(matrix, dtype=np.float64)
+    if not np.isfinite(csc.data).all():
+        first = int(np.flatnonzero(~np.isfinite(csc.data))[0])
+        raise InputError(
+            f"{name} must have finite entries, got {csc.data[first]} (an overflowing weight or a NaN input?)",
+            param=name,
+        )
+    if not csc.has_canonical_format:
+        csc = csc.copy()
+        csc.sum_duplicates()
+    if csc.indices.dtype != np.int32 and max(csc.nnz, *csc.shape) < np.iinfo(np.int32).max:
+        # CHOLMOD's int interface: the long one would copy and store 64-bit indices
+        csc = sp.csc_matrix(
+            (csc.data, csc.indices.astype(np.int32), csc.indptr.astype(np.int32)), shape=csc.shape
+        )
+    return csc
+
+
+def check_finite(values: Any, *, name: str, what: str) -> None:
+    """Raise :class:`InputError` naming ``name`` when ``values`` (built from it) holds inf or NaN.
+
+    ``values`` may be a callable, run with overflow warnings off (the overflow is what this reports).
+    """
+    if callable(values):
+        with np.errstate(over="ignore", invalid="ignore"):
+            values = values()
+    finite = np.isfinite(values)
+    if not finite.all():
+        first = int(np.flatnonzero(~finite.ravel())[0])
+        raise InputError(
+            f"{name} must be small enough that {what} is finite, got {np.ravel(values)[first]} "
+            f"(overflow) at entry {first}",
+            param=name,
+        )
