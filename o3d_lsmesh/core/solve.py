@@ -219,9 +219,7 @@ class SPDSolver:
             self._product_of = given
         del given
         pattern_of = plan.pattern_of
-        self._pattern_of = (
-            None if pattern_of is None else as_csc(pattern_of, name="pattern_of", square=False)
-        )
+        self._pattern_of = None if pattern_of is None else as_csc(pattern_of, name="pattern_of", square=False)
         if self._pattern_of is not None and self._pattern_of.shape[0] != self.shape[0]:
             raise InputError(
                 f"pattern_of must have {self.shape[0]} rows, got shape {self._pattern_of.shape}",
