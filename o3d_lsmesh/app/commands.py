@@ -88,7 +88,10 @@ def add_parsers(sub: Any, writing: argparse.ArgumentParser, common: argparse.Arg
         {"input": "mesh file", "outdir": "folder for level_NN files (created if needed)"},
     )
     p.add_argument(
-        "--format", type=mesh_suffix, default=".ply", help="file format of the levels (.ply .obj ...)"
+        "--format",
+        type=argparse_type(mesh_suffix),
+        default=".ply",
+        help="file format of the levels (.ply .obj ...)",
     )
     p = add_command(sub, writing, compare, {"a": "first mesh file (the reference)", "b": "second mesh file"})
     help = "write a distance map: A and B side by side, colored by distance to A (default: none)"

@@ -208,14 +208,10 @@ def glb_hint(suffix: str) -> str:
 
 
 def mesh_suffix(text: str) -> str:
-    """An argparse type for an output format (``ply`` or ``.ply``); ``.glb`` is refused with the way out."""
-    import argparse
-
+    """Parser of an output format (``ply`` or ``.ply``); ``.glb`` is refused with the way out."""
     suffix = "." + text.lstrip(".").lower()
     if suffix not in WRITABLE:
-        raise argparse.ArgumentTypeError(
-            f"must be one of {', '.join(WRITABLE)}{glb_hint(suffix)}, got {text!r}"
-        )
+        raise ValueError(f"must be one of {', '.join(WRITABLE)}{glb_hint(suffix)}, got {text!r}")
     return suffix
 
 
