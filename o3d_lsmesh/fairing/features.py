@@ -60,13 +60,8 @@ def _patch_edges(adjacency: FaceAdjacency) -> sp.csr_matrix:
 
 
 def _guidance(normals, area, adjacency, patch_edges):
-    """Zhang et al.'s guidance: the mean normal of the most consistent patch containing each face.
-
-    A patch (a face's ring) scores ``H = D R``: ``D`` the largest deviation of its normals from
-    their mean (the paper's largest pairwise difference, up to a factor under 2), ``R`` the
-    largest normal jump across an edge inside it over ``eps +`` their sum (a patch across one
-    clean crease has one large jump among small ones).
-    """
+    """Zhang et al.'s guidance: the mean normal of the most consistent patch (least ``H = D R``, docs
+    page) containing each face."""
     ring, rows, cols, pairs = adjacency.ring, adjacency.rows, adjacency.cols, adjacency.pairs
     jump = np.linalg.norm(normals[pairs[:, 0]] - normals[pairs[:, 1]], axis=1)
     saliency = _row_reduce(np.maximum, patch_edges, jump.take(patch_edges.indices)) / (
@@ -103,14 +98,8 @@ def filter_pass(
     sigma_r: float = SIGMA_R,
     guided: bool = True,
 ) -> np.ndarray:
-    """One pass of the guided (or plain bilateral) normal filter over the mesh's face normals, ``(m, 3)``.
-
-    ``n_i <- normalize(sum_j a_j K_s(|c_i - c_j|) K_r(|g_i - g_j|) n_j)`` over the faces ``j``
-    sharing a vertex with ``i`` (Zhang et al.'s joint bilateral filter), Gaussian kernels of widths
-    ``sigma_s`` (the mean distance between the centroids of neighbouring faces) and ``sigma_r``;
-    ``g`` the guidance (:func:`_guidance`), or ``g = n`` with ``guided=False`` (Zheng et al.
-    2011's bilateral normal filter).
-    """
+    """One pass of the guided (``guided=False``: bilateral) normal filter over the face normals, ``(m, 3)``:
+    ``n_i <- normalize(sum_j a_j K_s(|c_i - c_j|) K_r(|g_i - g_j|) n_j)`` (docs page)."""
     normals, area = face_normals(vertices, triangles)
     ring, rows, cols = adjacency.ring, adjacency.rows, adjacency.cols
     centroid = (adjacency.incidence @ vertices) / 3.0
@@ -136,11 +125,7 @@ def normal_steps(
     incidence: sp.csr_matrix | None = None,
 ) -> np.ndarray:
     """Sun et al. 2007's vertex update, ``(n, 3)``: ``iterations`` steps of
-    ``x_i += 1/|F_i| sum_(f in F_i) n_f (n_f . (c_f - x_i))``, ``c_f`` the face's centroid.
-
-    Split as ``sum_f n_f (n_f . c_f) - (sum_f n_f n_f^T) x_i``: the per-vertex ``3 x 3`` sums are
-    formed once, a step is two products with the incidence ``H``. A vertex on no face stays.
-    """
+    ``x_i += 1/|F_i| sum_(f in F_i) n_f (n_f . (c_f - x_i))`` (per-vertex ``3 x 3`` sums formed once)."""
     n = len(vertices)
     if incidence is None:
         incidence = Connectivity(triangles, n).face_adjacency.incidence

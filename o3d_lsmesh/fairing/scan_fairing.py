@@ -55,11 +55,8 @@ class ScanFairingSolver:
     progress : bool
         Show the iterative solves' residual.
 
-    Notes
-    -----
-    ``R^T R`` is positive definite (``1^T H^T W H 1 = 9 sum_t w_t > 0`` on each component). The
-    factor is analyzed as ``K^T K`` from the 1-ring pattern (COLAMD); why CG from 5,000 vertices:
-    ``docs/algorithms/scan_denoiser.rst``. The object pickles.
+    Positive definite (``1^T H^T W H 1 = 9 sum_t w_t > 0`` on each component); pickles. Why CG from
+    ``SCAN_ITERATIVE_VERTICES``: ``docs/algorithms/scan_denoiser.rst``.
     """
 
     def __init__(
@@ -163,9 +160,8 @@ def scan_denoise(
 ) -> np.ndarray:
     """The default denoiser on arrays: :func:`scan_parameters`, one system, the twiced filter, :func:`relax_rim`.
 
-    ``mu``, ``membrane``, ``boundary_weight`` replace the measured values when given; ``solver`` and
-    ``progress`` as in :class:`ScanFairingSolver`; ``conn``: the mesh's connectivity when the caller
-    has it. A triangle repeating a vertex (no surface) is left out. Returns new ``(n, 3)`` positions.
+    Given ``mu``, ``membrane``, ``boundary_weight`` replace the measured values; ``conn``: the mesh's
+    connectivity if known. Triangles repeating a vertex are left out. Returns new ``(n, 3)`` positions.
 
     >>> import open3d as o3d
     >>> box = o3d.geometry.TriangleMesh.create_box()
@@ -218,13 +214,10 @@ def relax_rim(
     strength: float = 1.0,
     conn: Connectivity | None = None,
 ) -> np.ndarray:
-    """Even out the triangles near the rim of a faired scan, moving each vertex in its tangent plane only.
+    """Even out the triangles near the rim of a faired scan, each vertex moving in its tangent plane.
 
-    ``RIM_RINGS`` damped tangential Jacobi sweeps (weight ``strength / 2``) on the vertices within
-    ``RIM_RINGS`` edges of the rim (a rim vertex averages its boundary-curve neighbours), then each
-    vertex of a triangle of quality under ``min(SLIVER_QUALITY, its quality in the scan)`` gives back
-    a quarter of its tangential drift from the scan at a time. ``scan``, ``positions``: ``(n, 3)``;
-    returns new ``(n, 3)`` positions. The steps in full: ``docs/algorithms/scan_denoiser.rst``.
+    ``RIM_RINGS`` damped tangential Jacobi sweeps near the rim, then slivers give back their drift
+    (``docs/algorithms/scan_denoiser.rst``). ``scan``, ``positions``: ``(n, 3)``; returns new ``(n, 3)``.
     """
     n = len(positions)
     conn = Connectivity(triangles, n) if conn is None else conn
