@@ -86,11 +86,9 @@ class Woodbury:
 
         (B + C C^T)^-1 b = y + Z (I + C^T Z)^-1 (d - C^T y),   y = B^-1 (b - C d),   Z = B^-1 C
 
-    with ``d`` the least-norm vector making ``b - C d`` zero on each column's largest entry's row (so
-    ``y`` does not carry an anchor's ``w^2 c``). The capacitance is held by its Cholesky factor, extended
-    a block per update; right-hand sides in the span of those solved before are recycled. :attr:`work`
-    counts the correction's multiply-adds, :attr:`factor_work` a factorization's: the owner refactors
-    once the first reaches the second.
+    with ``d`` zeroing ``b - C d`` on each column's pivot row (docs/algorithms/solvers.rst); the
+    capacitance's Cholesky factor grows a block per update. The owner refactors once :attr:`work` (the
+    correction's multiply-adds) reaches :attr:`factor_work` (a factorization's).
     """
 
     def __init__(self, lu: Any) -> None:
@@ -254,20 +252,10 @@ def check_constant_modes(
 
     For ``N = L^T L + P`` with ``L 1_c = 0`` on each component ``c``, only ``P`` makes
     ``q_c = 1_c^T N 1_c / n_c`` positive; round-off moves the solution along ``1_c`` by
-    ``eps ||L^T L|| / q_c``. Raises when ``q_c < NEGLIGIBLE * scale``.
-
-    Parameters
-    ----------
-    ones_product : (u,) float array
-        ``N @ 1`` (components are diagonal blocks, so ``1_c^T N 1_c`` is its sum over ``c``).
-    labels : (u,) int array
-        Connected component of each unknown.
-    scale : float
-        ``||L^T L||`` of the smoothness term alone, e.g. :func:`operator_scale` of ``L``.
-    name, value
-        The caller's parameter and its value, for the message.
-    vertex_of : (u,) int array, optional
-        The mesh vertex of each unknown (when some vertices are known), for the message.
+    ``eps ||L^T L|| / q_c``. Raises when ``q_c < NEGLIGIBLE * scale``. ``ones_product (u,)``: ``N @ 1``
+    (summed over ``c``: ``1_c^T N 1_c``); ``labels (u,)``: each unknown's component; ``scale``: ``||L^T L||``
+    (:func:`operator_scale` of ``L``); ``name``, ``value``, ``what``, ``vertex_of (u,)`` (each unknown's
+    vertex, when some are known): the message's words.
     """
     labels = np.asarray(labels)
     if labels.size == 0 or not scale > 0:

@@ -1,10 +1,8 @@
 """Progress bars of every long operation (``progress=True`` in the API): the package's only tqdm import.
 
-:class:`Progress` makes every bar: a count of work units (:meth:`~Progress.bar`), a loop
-(:meth:`~Progress.over`), the named stages of one operation (:meth:`~Progress.stages`) and the decades
-an iterative solve's residual falls (:meth:`~Progress.decades`). Every bar ends at its total when the
-work completes. The open bars are tracked here: :func:`close_all` ends them (the command line does
-before it prints an error). With ``progress=False`` tqdm is not even imported.
+:class:`Progress` makes every bar (work units, a loop, named stages, an iterative solve's decades);
+each ends at its total when the work completes. :func:`close_all` ends the open ones (the command line
+does before it prints an error). With ``progress=False`` tqdm is not even imported.
 """
 
 from __future__ import annotations
