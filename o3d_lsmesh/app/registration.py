@@ -29,45 +29,23 @@ def _approximate_mesh(mesh: Any, count: int, **kwargs: Any) -> Any:
     return approximate(mesh, count, **kwargs)[0]
 
 
-#: method name: (the public function of o3d_lsmesh it calls, the method's summary). Each method has
-#: that function's signature with ``self`` for its ``mesh`` (help() and completion show the options).
-_METHODS: dict[str, tuple[str, str]] = {
-    "filter_smooth_constrained": (
-        "constrained_fairing",
-        "Barycenter-constrained fairing (Liu et al. 2001, eq. 5-7). ``mu`` here is the weight of the "
-        'barycenter penalty (method="global" or "scan"), not the Taubin factor of Open3D\'s '
-        "``filter_smooth_taubin(mu=)``.",
-    ),
-    "filter_smooth_multiresolution": (
-        "multiresolution_fairing",
-        "Multiresolution fairing at hierarchy ``level`` (Liu et al. 2001, section 4), with the caller's "
-        "connectivity.",
-    ),
-    "filter_smooth_boundary_curves": (
-        "smooth_boundary_curves",
-        "Smooth only the boundary loops with the curve operator of Liu et al. 2001, section 3.3.",
-    ),
-    "ls_mesh": (
-        "ls_mesh",
-        "Least-squares mesh of this connectivity near the control vertices (Sorkine and Cohen-Or 2004, eq. 3).",
-    ),
-    "reconstruct_geometry": (
-        "reconstruct_geometry",
-        "Rebuild the positions of the vertices in ``unknown_vertex_indices`` from the rest (LS meshes).",
-    ),
-    "approximate_ls": (
-        "approximate",
-        "LS-mesh approximation from ``count`` selected control points: the mesh only, so that calls chain "
-        "(:func:`o3d_lsmesh.approximate` returns the selected indices too).",
-    ),
-    "decode_geometry": (
-        "decode_geometry",
-        "Geometry decoded from ``data`` (bytes of :func:`o3d_lsmesh.encode_geometry`) on this connectivity.",
-    ),
-    "fill_holes_faired": (
-        "fill_holes",
-        "Close holes with triangulated, refined patches faired as LS meshes.",
-    ),
+#: method name: the public function of o3d_lsmesh it calls (its signature, ``self`` for ``mesh``, and
+#: the first line of its docstring, then the note below if any, make the method's)
+_METHODS = {
+    "filter_smooth_constrained": "constrained_fairing",
+    "filter_smooth_multiresolution": "multiresolution_fairing",
+    "filter_smooth_boundary_curves": "smooth_boundary_curves",
+    "ls_mesh": "ls_mesh",
+    "reconstruct_geometry": "reconstruct_geometry",
+    "approximate_ls": "approximate",
+    "decode_geometry": "decode_geometry",
+    "fill_holes_faired": "fill_holes",
+}
+_NOTES = {
+    "filter_smooth_constrained": '``mu`` is the weight of the barycenter penalty (method "global" or '
+    '"scan"), not the Taubin factor of Open3D\'s ``filter_smooth_taubin(mu=)``.',
+    "approximate_ls": "The mesh only, so that calls chain (:func:`o3d_lsmesh.approximate` returns the "
+    "selected indices too).",
 }
 
 #: Names that :func:`register` adds to both mesh classes.
@@ -81,8 +59,9 @@ def _is_ours(value: Any) -> bool:
 def _method(name: str, cls: type) -> Callable[..., Any]:
     # A fresh function object per class so that __qualname__ and the marker
     # describe where it lives, and unregister() can tell it apart.
-    public, summary = _METHODS[name]
+    public = _METHODS[name]
     target = getattr(importlib.import_module("o3d_lsmesh"), public)
+    summary = " ".join([(inspect.getdoc(target) or "").split("\n")[0], _NOTES.get(name, "")]).strip()
     function = _approximate_mesh if name == "approximate_ls" else target
 
     def method(self: Any, *args: Any, **kwargs: Any) -> Any:
