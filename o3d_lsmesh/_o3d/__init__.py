@@ -87,11 +87,8 @@ class MeshData:
     split_triangles: np.ndarray | None = None  # (m, 3) int64 the source's triangles, when welded
 
     def welded_indices(self, indices: Any, *, name: str, merge: bool = False) -> np.ndarray:
-        """Check vertex indices given in the source's layout and return the welded vertices', ``(k,) int64``.
-
-        Any copy of a split vertex means the welded vertex; two copies give it twice (aligned with
-        per-index data), or once, sorted, with ``merge=True`` (a set of vertices).
-        """
+        """Check vertex indices of the source's layout; the welded vertices', ``(k,) int64`` (any copy of a
+        split vertex means it; ``merge=True``: each once, sorted)."""
         if self.split is None:
             return as_indices(indices, len(self.vertices), name=name)
         welded = self.split[as_indices(indices, len(self.split), name=name)]
@@ -190,11 +187,9 @@ def _kind(mesh: Any, *, name: str = "mesh") -> str:
 def read_mesh(mesh: Any, *, name: str = "mesh", weld: bool = False, narrow: bool = False) -> MeshData:
     """Copy ``mesh`` into ``(n,3) float64`` vertices and ``(m,3) int64`` triangles and validate them.
 
-    ``weld=True`` merges vertices at exactly equal coordinates (:func:`weld_map`; indices map with
-    :meth:`MeshData.welded_indices` / :meth:`MeshData.source_indices`). ``narrow=True``: int32
-    triangles, shared with a legacy source, for callers that only read them. Every kind goes
-    through :func:`~o3d_lsmesh.core.validate.mesh_arrays` once: a :class:`MeshData` is not checked again
-    (its positions are copied; it is welded when ``weld=True`` asks for it).
+    ``weld=True`` merges vertices at equal coordinates (:func:`weld_map`); ``narrow=True``: int32
+    triangles shared with a legacy source (read-only callers). A :class:`MeshData` is not checked
+    again (its positions are copied; welded if asked).
 
     Raises
     ------
@@ -230,10 +225,8 @@ def read_mesh(mesh: Any, *, name: str = "mesh", weld: bool = False, narrow: bool
 
 
 def template(kind: str, tensor_format: tuple = ()) -> MeshData:
-    """An empty stand-in source of ``kind`` so that :func:`new_mesh` builds that kind (hierarchy levels).
-
-    ``tensor_format``: ``(device, position dtype, index dtype)`` names, e.g. ``("CPU:0", "Float64", "Int64")``.
-    """
+    """An empty stand-in source of ``kind`` for :func:`new_mesh` (``tensor_format``: device, position and
+    index dtype names, e.g. ``("CPU:0", "Float64", "Int64")``)."""
     empty_v, empty_t = np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)
     if kind == "arrays":
         return MeshData(empty_v, empty_t, None, "arrays")
@@ -293,12 +286,8 @@ def _dropped(data: MeshData, *, normals: bool = False) -> list[str]:
 def warn_dropped_attributes(
     data: MeshData, reason: str, *, stacklevel: int = 3, normals: bool = False
 ) -> bool:
-    """Warn once (:class:`~o3d_lsmesh.O3DLSMeshWarning`) if ``data``'s source has attributes a new connectivity drops.
-
-    For results with new triangles not built by :func:`new_mesh` from ``data`` (hierarchy levels);
-    ``normals=True``: the results carry no normals, so the source's are named as well. Returns
-    whether it warned; ``stacklevel=3`` points at the caller of the public function.
-    """
+    """Warn once (:class:`~o3d_lsmesh.O3DLSMeshWarning`) if ``data``'s source has attributes a new connectivity
+    drops (results not built by :func:`new_mesh`; ``normals=True``: normals too); whether it warned."""
     dropped = _dropped(data, normals=normals)
     if dropped:
         warnings.warn(
@@ -319,12 +308,9 @@ def new_mesh(
 ) -> Any:
     """Build a new mesh of ``data``'s kind with ``vertices`` (and ``triangles``, if they changed).
 
-    ``triangles=None`` keeps ``data``'s connectivity and every attribute. If ``data`` was welded,
-    ``vertices`` are the welded ones and the result has the source's split layout.
-    ``appended=True``: ``vertices`` and ``triangles`` are ``data``'s (welded, in order) then new
-    ones; attributes are extended to the new elements (:class:`.extend.Appended`). Other new
-    ``triangles`` drop what no longer matches them, with one warning (``warn=False``: the caller
-    warns itself).
+    ``triangles=None`` keeps every attribute (a welded ``data``: back in the source's layout);
+    ``appended=True``: ``data``'s elements then new ones, attributes extended (:mod:`.extend`); other
+    new ``triangles`` drop what no longer matches, with one warning unless ``warn=False``.
     """
     same_topology = triangles is None
     extension = None

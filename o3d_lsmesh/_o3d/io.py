@@ -1,8 +1,5 @@
-"""Open3D beyond mesh conversion: mesh files, images, raycasting, primitives and its thread cap.
-
-The only module besides the renderer that calls Open3D for the application (``app/``): files are
-read with every defect named (Open3D returns a partial mesh from a cut-off file and says so only in
-a native warning), OBJ files are written with their ``.mtl`` and textures.
+"""Open3D beyond mesh conversion, for the application: mesh files (read with every defect named, OBJ
+written with its ``.mtl`` and textures), images, raycasting, primitives and its thread cap.
 """
 
 from __future__ import annotations
@@ -116,11 +113,8 @@ def ply_header_counts(path: str | os.PathLike) -> dict[str, int]:
 def read_mesh_file(path: str, *, what: str = "INPUT") -> Any:
     """Read a triangle mesh file as a legacy Open3D mesh (STL files welded: three vertices a triangle).
 
-    Raises
-    ------
-    InputError
-        ``param="path"``, naming ``what`` and the file: missing, a folder, empty, unreadable,
-        truncated or corrupt (Open3D's warnings and the PLY header's counts), or without triangles.
+    Raises ``InputError(param="path")`` naming ``what`` and the file: missing, a folder, empty,
+    unreadable, truncated or corrupt (Open3D's warnings, the PLY header's counts), no triangles.
     """
     o3d = quiet_open3d()
     name = f"{what} {path!r}"
@@ -185,12 +179,8 @@ def write_mesh_file(mesh: Any, path: str | os.PathLike) -> list[str]:
 
 
 def obj_writable(mesh: Any) -> Any:
-    """A legacy mesh that Open3D's OBJ writer writes with every texture (``mesh`` itself if it already is).
-
-    The writer stops at the first empty texture slot, and its own OBJ reader puts an empty slot
-    first (faces without a material): the copy drops the empty slots no triangle uses (material
-    ids renumbered) and gives those in use a 1x1 white image (untextured white).
-    """
+    """A legacy mesh Open3D's OBJ writer writes with every texture (``mesh`` itself if it already is): the
+    writer stops at an empty slot, so unused empty slots go (ids renumbered), used ones turn 1x1 white."""
     textures = list(mesh.textures)
     empty = np.array([texture.is_empty() for texture in textures], dtype=bool)
     if not empty.any() or not mesh.has_triangle_uvs():  # (without UVs the writer writes no material)
