@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from .core.arrays import gather, group_keys, run_heads
+from .core.arrays import _runs, gather, run_heads
 from .core.boundary import (
     BoundaryCurves,
     boundary_chains,
@@ -56,6 +56,14 @@ def adjacency_matrix(triangles, n):
 
 def connected_components(triangles, n):
     return Connectivity(triangles, n).components
+
+
+def group_keys(keys, bound):
+    order = np.argsort(keys, kind="stable")
+    _, starts, counts = _runs(keys[order])
+    inverse = np.empty(len(keys), dtype=np.int64)
+    inverse[order] = np.repeat(np.arange(len(starts), dtype=np.int64), counts)
+    return order, starts, counts, inverse
 
 
 def directed_edges(triangles, n):

@@ -11,7 +11,6 @@ __all__ = [
     "dequantize",
     "face_normals",
     "gather",
-    "group_keys",
     "quantize",
     "run_heads",
 ]
@@ -76,33 +75,6 @@ def area_weighted_normals(positions: np.ndarray, triangles: np.ndarray) -> np.nd
     for k in range(3):
         normal[:, k] = sum(np.bincount(triangles[:, i], face[:, k], minlength=n) for i in range(3))
     return normal
-
-
-def group_keys(keys: np.ndarray, bound: int):
-    """Sort-and-mask grouping of integer ``keys`` in ``[0, bound)``: (order, starts, counts, inverse).
-
-    Key and position packed into one ``uint64`` when they fit (a plain sort, not an argsort); ties
-    keep their input order.
-    """
-    count = len(keys)
-    index_bits = max(1, int(count - 1).bit_length())
-    if max(1, int(bound - 1).bit_length()) + index_bits <= 64:
-        packed = keys.astype(np.uint64)
-        packed <<= np.uint64(index_bits)
-        packed |= np.arange(count, dtype=np.uint64)
-        packed.sort()
-        order = np.bitwise_and(packed, np.uint64((1 << index_bits) - 1)).view(np.int64)
-        packed >>= np.uint64(index_bits)
-        sorted_keys = packed.view(np.int64)
-    else:
-        order = np.argsort(keys, kind="stable")
-        sorted_keys = keys[order]
-    first, starts, counts = _runs(sorted_keys)
-    rank = np.cumsum(first, dtype=np.int64)
-    rank -= 1
-    inverse = np.empty(count, dtype=np.int64)
-    inverse[order] = rank
-    return order, starts, counts, inverse
 
 
 def _runs(sorted_keys: np.ndarray):
