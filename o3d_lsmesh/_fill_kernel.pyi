@@ -19,6 +19,9 @@ def tangential_relax(vertices: Array, new_tris: Array, first_new: int, iteration
 def loop_geometry(
     loop: Array, rows: Array, vertices: Array, triangles: Array, indptr: Array, data: Array
 ) -> tuple[Array, Array, Array, float, Array]: ...
+def local_mesh(
+    triangles: Array, indptr: Array, data: Array, seeds: Array, count: int, new_tris: Array
+) -> tuple[Array, Array, list[Array]]: ...
 def patch_system(
     x: Array, tris: Array, unknown: Array, ring0: Array, ring1: Array, level: int, cot: bool, dense: bool
 ) -> tuple[Array | tuple[Array, Array, Array], Array]: ...

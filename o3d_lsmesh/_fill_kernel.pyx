@@ -9,7 +9,7 @@ import numpy as np
 
 from libc.math cimport INFINITY, acos, asin, fabs, fmax, fmin, sqrt
 from libc.stdint cimport int64_t, uint8_t
-from libc.stdlib cimport free, malloc, qsort
+from libc.stdlib cimport calloc, free, malloc, qsort
 
 cdef double _TIE = 1e-6  # dynamic programme: largest angles this close tie, and the area decides
 cdef double _COCIRCULAR = 1.0 - 1e-6  # flips: a point must be this far inside a circumsphere
@@ -629,6 +629,76 @@ cdef bint _pair_crosses(const double* V, const int64_t* T, int64_t ta, int64_t t
     for c in range(3):
         S[c], S[3 + c], S[6 + c] = Q[3 * ((rb + 1) % 3) + c], Q[3 * ((rb + 2) % 3) + c], Q[3 * ((rb + 2) % 3) + c]
     return _cross_pair(S, P)
+
+# the fairing's local mesh
+
+def local_mesh(const int64_t[:, ::1] triangles, const int64_t[::1] indptr, const int64_t[::1] data,
+               const int64_t[::1] seeds, int64_t count, new_tris):
+    """The triangles within ``count`` rings of ``seeds`` (breadth first over each vertex's triangles, CSR
+    ``indptr``, ``data``), sorted, then ``new_tris``, renumbered: the sorted vertices ``(l,)``, the local
+    triangles ``(r + q, 3)`` and the ``count + 1`` rings locally (ring 0 ``seeds``, each next one sorted)."""
+    cdef int64_t n = indptr.shape[0] - 1, m = triangles.shape[0], k = seeds.shape[0], nd = data.shape[0]
+    cdef int64_t step, f, r, t, c, w, start = 0, stop = 0, taken = 0, first, nl = 0
+    cdef bint bad = k and _outside(&seeds[0], k, n)
+    tri_, vert_, stops_ = np.empty(m, dtype=np.int64), np.empty(n + k, dtype=np.int64), np.empty(count + 1, np.int64)
+    cdef int64_t[::1] tri = tri_, vert = vert_, stops = stops_, ring
+    cdef uint8_t* seen = <uint8_t*>calloc(max(n, 1), 1)
+    cdef uint8_t* took = <uint8_t*>calloc(max(m, 1), 1)
+    if not (seen and took):
+        free(seen); free(took)
+        raise MemoryError
+    with nogil:
+        for r in range(k if not bad else 0):  # ring 0's vertices, each once
+            vert[r] = seeds[r]
+        qsort(&vert[0], k if not bad else 0, sizeof(int64_t), _by_value)
+        for r in range(k if not bad else 0):
+            if not seen[vert[r]]:
+                seen[vert[r]] = 1
+                vert[stop] = vert[r]
+                stop += 1
+        for step in range(count if not bad else 0):
+            stops[step], first = stop, taken
+            for f in range(start, stop):  # the front's triangles not taken yet, then their new vertices
+                for r in range(indptr[vert[f]], indptr[vert[f] + 1]):
+                    t = data[r] if 0 <= r < nd else -1
+                    bad = bad or not 0 <= t < m
+                    if not bad and not took[t]:
+                        took[t] = 1
+                        tri[taken] = t
+                        taken += 1
+            qsort(&tri[first], taken - first, sizeof(int64_t), _by_value)
+            start = stop
+            for t in range(first, taken):
+                for c in range(3):
+                    w = triangles[tri[t], c]
+                    bad = bad or not 0 <= w < n
+                    if not bad and not seen[w]:
+                        seen[w] = 1
+                        vert[stop] = w
+                        stop += 1
+            qsort(&vert[start], stop - start, sizeof(int64_t), _by_value)
+        stops[count] = stop
+        qsort(&tri[0], taken, sizeof(int64_t), _by_value)
+    free(seen); free(took)
+    if bad:
+        raise ValueError("seeds, data and triangles must index the mesh")
+    local_ = np.concatenate([np.asarray(triangles)[tri_[:taken]], np.asarray(new_tris, dtype=np.int64)])
+    ids_ = np.sort(local_, axis=None)
+    cdef int64_t[:, ::1] local = local_
+    cdef int64_t[::1] ids = ids_
+    for r in range(ids.shape[0]):  # the sorted vertices, then each corner's position among them
+        if r == 0 or ids[r] != ids[r - 1]:
+            ids[nl] = ids[r]
+            nl += 1
+    for r in range(local.shape[0]):
+        for c in range(3):
+            local[r, c] = _lower(&ids[0], nl, local[r, c], 1)
+    rings = [np.array(seeds)] + [vert_[stops[r]:stops[r + 1]].copy() for r in range(count)]
+    for r in range(count + 1):
+        ring = rings[r]
+        for c in range(ring.shape[0]):
+            ring[c] = _lower(&ids[0], nl, ring[c], 1) if nl else 0
+    return ids_[:nl].copy(), local_, rings
 
 # the fairing system (docs page)
 

@@ -24,7 +24,7 @@ from o3d_lsmesh import O3DLSMeshWarning, _fill_kernel, fill_holes
 from o3d_lsmesh.core.operators import patch_system
 from o3d_lsmesh.holes import DP_MAX_EDGES, HoleFiller, fill_holes_arrays, find_holes
 from o3d_lsmesh.holes.crossings import _crossings, _TriangleIndex
-from o3d_lsmesh.holes.fair import _rings, keeps_facing
+from o3d_lsmesh.holes.fair import keeps_facing
 from o3d_lsmesh.holes.triangulate import delaunay_triangles
 from o3d_lsmesh.topology import boundary_loops
 
@@ -336,13 +336,14 @@ def test_dynamic_programme_never_takes_collinear_chord_samples(seed):
     assert area.min() > 1e-3
 
 
-def test_rings_are_the_plain_breadth_first_rings():
+def test_local_mesh_is_the_plain_breadth_first_rings():
     # reference: a plain breadth-first search over the edge graph, and the triangles touching rings 0..c-1
     V, T = icosphere(2)
     seeds = np.array([0, 5])
     indptr = np.concatenate([[0], np.cumsum(np.bincount(T.ravel(), minlength=len(V)))])
     order = np.argsort(T.ravel(), kind="stable")
-    tris, rings = _rings(T, indptr, order // 3, seeds, 2)
+    vertices, local, rings = _fill_kernel.local_mesh(T, indptr, order // 3, seeds, 2, T[:1] + 0)
+    rings = [vertices[ring] for ring in rings]
     neighbours = {v: set() for v in range(len(V))}
     for a, b, c in T.tolist():
         neighbours[a] |= {b, c}
@@ -355,7 +356,8 @@ def test_rings_are_the_plain_breadth_first_rings():
         expected.append(sorted(front))
     assert [sorted(r.tolist()) for r in rings] == expected
     inner = set(expected[0]) | set(expected[1])
-    assert tris.tolist() == [t for t, tri in enumerate(T.tolist()) if inner & set(tri)]
+    expected = [tri for tri in T.tolist() if inner & set(tri)] + [T[0].tolist()]  # then the new triangles
+    assert vertices[local].tolist() == expected and vertices.tolist() == sorted(set(np.ravel(expected)))
 
 
 def reference_crossings(V, T, first_new):

@@ -12,7 +12,6 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..core import tuning as core_tuning
-from ..core.arrays import concatenated_ranges, run_heads
 from ..core.errors import SingularSystemError
 from ..core.operators import patch_system
 from ..core.solve import solve_spd
@@ -80,31 +79,6 @@ def _interpolation(
     return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(p, n))
 
 
-def _sorted_unique(values: np.ndarray) -> np.ndarray:
-    """``np.unique`` of a small integer array by one sort (NumPy's hash table costs more at this size)."""
-    values = np.sort(values, axis=None)
-    return values[run_heads(values)]
-
-
-def _rings(triangles: np.ndarray, indptr: np.ndarray, data: np.ndarray, seeds: np.ndarray, count: int):
-    """Breadth-first rings around ``seeds`` over each vertex's triangles (CSR ``indptr``, ``data``): the
-    sorted triangles touching rings ``0 .. count - 1`` and the ``count + 1`` rings (ring 0 ``seeds``)."""
-    seen, took = np.zeros(len(indptr) - 1, dtype=bool), np.zeros(len(triangles), dtype=bool)
-    front = _sorted_unique(seeds)
-    seen[front] = True
-    rings, taken = [seeds], [np.zeros(0, dtype=np.int64)]
-    for _ in range(count):
-        t = data[concatenated_ranges(indptr[front], indptr[front + 1] - indptr[front])]
-        t = _sorted_unique(t[~took[t]])
-        took[t] = True
-        front = _sorted_unique(triangles[t])
-        front = front[~seen[front]]
-        seen[front] = True
-        taken.append(t)
-        rings.append(front)
-    return np.sort(np.concatenate(taken)), rings
-
-
 def keeps_facing(x: np.ndarray, again: np.ndarray, new_tris: np.ndarray) -> bool:
     """Whether ``again`` (new positions of the last ``len(again)`` vertices of ``x``) keeps every new
     triangle facing as in ``x`` and moves no vertex by a tenth of the patch's size (obtuse slivers can
@@ -146,13 +120,9 @@ def fair_patches(
     # numbering (nothing as long as the mesh): the new vertices, every one on a new triangle and
     # numbered last, stay last; one connectivity for every solve below
     new_tris = triangles[m:]
-    indptr, data = filler.vertex_triangles
-    ring_tris, rings = _rings(filler.triangles, indptr, data, loops, continuity)
-    local_vertices, local = np.unique(
-        np.concatenate([filler.triangles[ring_tris], new_tris]), return_inverse=True
+    local_vertices, local, local_rings = _kernel().local_mesh(
+        filler.triangles, *filler.vertex_triangles, loops, continuity, new_tris
     )
-    local = local.reshape(-1, 3)
-    local_rings = [np.searchsorted(local_vertices, ring) for ring in rings]
     local_unknown = np.arange(len(local_vertices) - len(unknown), len(local_vertices))
     refined = vertices[n:].copy()
     work = vertices  # its new rows hold the candidate being solved from or checked
