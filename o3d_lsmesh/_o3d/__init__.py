@@ -20,7 +20,7 @@ import numpy as np
 
 from ..core.errors import InputError, InputTypeError, O3DLSMeshWarning
 from ..core.validate import as_indices, collapsed_triangles, mesh_arrays
-from .io import obj_writable, open3d
+from .io import legacy_mesh, obj_writable, open3d
 
 __all__ = [
     "ATTRIBUTES",
@@ -346,9 +346,7 @@ def new_mesh(
             out.vertex_normals = o3d.utility.Vector3dVector()
             out.triangle_normals = o3d.utility.Vector3dVector()
         else:
-            out = o3d.geometry.TriangleMesh(
-                o3d.utility.Vector3dVector(vertices), o3d.utility.Vector3iVector(faces.astype(np.int32))
-            )
+            out = legacy_mesh(vertices, faces)
         present = present_attributes(data)
         if extension is not None:
             for row, key in present:

@@ -7,7 +7,7 @@ from typing import Any
 import numpy as np
 
 from . import MeshData, present_attributes
-from .io import open3d
+from .io import legacy_mesh, open3d
 
 __all__ = ["mesh_from_state", "mesh_state"]
 
@@ -77,9 +77,7 @@ def mesh_from_state(state: dict) -> MeshData:
         return MeshData(vertices, triangles, (source_v, source_t), kind, split, split_triangles)
     o3d = open3d()
     if kind == "legacy":
-        source = o3d.geometry.TriangleMesh(
-            o3d.utility.Vector3dVector(source_v), o3d.utility.Vector3iVector(source_t.astype(np.int32))
-        )
+        source = legacy_mesh(source_v, source_t)
         for row in ATTRIBUTES:
             value = state["attributes"].get(row.key) if row.kind == "legacy" else None
             if value is None:
