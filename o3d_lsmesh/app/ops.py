@@ -42,7 +42,8 @@ MAX_POINTS = 10_000_000
 
 def int_at_least(minimum: int, maximum: int | None = None, rule: str = "") -> Callable[[Any], int]:
     """Parser of an integer in ``[minimum, maximum]`` given as an int or its text (``rule``: what it must be)."""
-    rule = rule or {0: "a non-negative integer", 1: "a positive integer"}.get(minimum, f"an integer >= {minimum}")
+    usual = {0: "a non-negative integer", 1: "a positive integer"}.get(minimum, f"an integer >= {minimum}")
+    rule = rule or usual
 
     def parse(value: Any) -> int:
         number = minimum - 1  # refused unless value is an int (not a bool) or its text
