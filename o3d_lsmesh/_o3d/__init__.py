@@ -35,6 +35,7 @@ __all__ = [
     "present_attributes",
     "read_mesh",
     "template",
+    "tensor_format_of",
     "warn_dropped_attributes",
     "weld_map",
 ]
@@ -238,6 +239,15 @@ def template(kind: str, tensor_format: tuple = ()) -> MeshData:
     source.vertex.positions = o3d.core.Tensor(empty_v, getattr(o3d.core, positions.lower()), device)
     source.triangle.indices = o3d.core.Tensor(empty_t, getattr(o3d.core, indices.lower()), device)
     return MeshData(empty_v, empty_t, source, "tensor")
+
+
+def tensor_format_of(data: MeshData) -> tuple:
+    """The :func:`template` format of a tensor mesh's source (empty for other kinds)."""
+    if data.kind != "tensor":
+        return ()
+    src = data.source
+    index_dtype = str(src.triangle.indices.dtype) if "indices" in src.triangle else "Int64"
+    return (str(src.vertex.positions.device), str(src.vertex.positions.dtype), index_dtype)
 
 
 def has_textures(mesh: Any) -> bool:

@@ -14,13 +14,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .._o3d import read_mesh, warn_dropped_attributes
+from .._o3d import read_mesh, tensor_format_of, warn_dropped_attributes
 from ..core.arrays import concatenated_ranges
 from ..core.connectivity import Connectivity, run_heads
 from ..core.errors import InputError, InputTypeError
 from ..core.progress import Progress
 from ..core.validate import as_bool, as_count, as_positive_float, collapsed_triangles
-from .hierarchy import MeshHierarchy, tensor_format_of
+from .hierarchy import MeshHierarchy
 
 if TYPE_CHECKING:
     from .._types import AnyMesh

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import scipy.sparse as sp
 
-from .._o3d import MeshData, new_mesh, read_mesh, template, warn_dropped_attributes
+from .._o3d import MeshData, new_mesh, read_mesh, template, tensor_format_of, warn_dropped_attributes
 from ..core.connectivity import Connectivity, VertexRings
 from ..core.operators import single_slots, umbrella_weights
 from ..core.progress import Progress
@@ -220,14 +220,6 @@ def _harmonic_fill(
         rhs = pattern[:, np.flatnonzero(~inside)] @ x[~inside] + (FILL_TIE * degree)[:, None] * x[rows]
         x[rows] = solve_spd(system.tocsc(), rhs)
     return x[removed]
-
-
-def tensor_format_of(data: MeshData) -> tuple:
-    if data.kind != "tensor":
-        return ()
-    src = data.source
-    index_dtype = str(src.triangle.indices.dtype) if "indices" in src.triangle else "Int64"
-    return (str(src.vertex.positions.device), str(src.vertex.positions.dtype), index_dtype)
 
 
 def _warn_workers(workers: Any) -> None:
