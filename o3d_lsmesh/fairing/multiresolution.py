@@ -6,7 +6,7 @@ Docs: ``docs/algorithms/multiresolution.rst``.
 from __future__ import annotations
 
 import dataclasses
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -16,7 +16,7 @@ from ..core.connectivity import Connectivity, VertexRings
 from ..core.errors import InputError, InputTypeError
 from ..core.progress import Progress
 from ..core.validate import as_bool, as_choice, as_count, as_iterations
-from ..hierarchy.hierarchy import MeshHierarchy, boundary_degree, collapse_hierarchy
+from ..hierarchy.hierarchy import ALPHA, BETA, MeshHierarchy, boundary_degree, collapse_hierarchy
 from .boundary_curve import curve_operator, run_curve_iterations
 from .constrained import FAIRING_METHODS, _fair, fair_local
 from .tuning import DEFAULT_MU
@@ -179,15 +179,10 @@ def multiresolution_fairing(
     # when the hierarchy is built here, on the welded surface
     data = read_mesh(mesh, weld=hierarchy is None)
     if hierarchy is None:
-        hierarchy = collapse_hierarchy(  # the arrays are read_mesh's checked copies
-            data.vertices,
-            data.triangles,
-            alpha=1.0,
-            beta=0.01,
-            min_vertices=4,
-            max_levels=level,
-            progress=bool(progress),
+        options: dict[str, Any] = dict(
+            alpha=ALPHA, beta=BETA, min_vertices=4, max_levels=level, progress=progress
         )
+        hierarchy = collapse_hierarchy(data.vertices, data.triangles, **options)  # read_mesh's checked copies
         if level >= len(hierarchy):
             raise InputError(
                 f"level must be < {len(hierarchy)} (the levels build_hierarchy reaches for this mesh), got {level}",
@@ -217,6 +212,6 @@ def multiresolution_fairing(
         number_of_iterations=number_of_iterations,
         final_iterations=final_iterations,
         method=method,
-        progress=bool(progress),
+        progress=progress,
     )
     return new_mesh(data, positions)
