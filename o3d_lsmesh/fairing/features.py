@@ -77,8 +77,7 @@ def _guidance(normals, area, adjacency, patch_edges):
 
 
 def _entry_dots(a: np.ndarray, b: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
-    """``a[rows[k]] . b[cols[k]]`` for every stored entry ``k`` (1-D takes of transposed copies: a
-    third of the time of fancy-indexing two ``(r, 3)`` arrays)."""
+    """``a[rows[k]] . b[cols[k]]`` for every stored entry ``k`` (1-D takes of transposed copies)."""
     at, bt = np.ascontiguousarray(a.T), np.ascontiguousarray(b.T)
     out = at[0].take(rows)
     out *= bt[0].take(cols)
