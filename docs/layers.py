@@ -54,6 +54,39 @@ def main() -> None:
     for (a, b), count in sorted(between.items(), key=lambda item: (rank[item[0][0]], rank[item[0][1]])):
         up = "  <- runs back up" if rank[b] < rank[a] else ""
         print(f"  {a:<9} -> {b:<9} {count:>3}{up}")
+    # circles: strongly connected groups of modules (Tarjan's algorithm)
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    circles = []
+    nodes = set(modules)
+    succ = {m: [b for a, b in edges if a == m and b in nodes] for m in modules}
+
+    def visit(m: str) -> None:
+        index[m] = low[m] = len(index)
+        stack.append(m)
+        for b in succ[m]:
+            if b not in index:
+                visit(b)
+                low[m] = min(low[m], low[b])
+            elif b in stack:
+                low[m] = min(low[m], index[b])
+        if low[m] == index[m]:
+            group = []
+            while True:
+                b = stack.pop()
+                group.append(b)
+                if b == m:
+                    break
+            if len(group) > 1:
+                circles.append(sorted(group))
+
+    for m in modules:
+        if m not in index:
+            visit(m)
+    print(f"circles (modules that import each other): {len(circles)}")
+    for group in circles:
+        print("  " + " <-> ".join(group))
     upward = sorted((a, b) for a, b in edges if rank[layer(b)] < rank[layer(a)] and layer(a) != "root")
     print(f"imports that run back up: {len(upward)}")
     for a, b in upward:
