@@ -393,19 +393,12 @@ def refine(points, sigma, triangles, fixed_pairs, owner, double alpha, int64_t m
     a round would pass ``max_points``; the points, the triangles and the points' owners."""
     cdef int64_t nv = len(points), t = len(triangles), cap_v, cap_t, i, j, m, count, a, b, c, p
     cap_v, cap_t = 2 * nv + 16, 3 * t + 16
-    P_ = np.empty((cap_v, 3))
-    P_[:nv] = points
-    S_ = np.empty(cap_v)
-    S_[:nv] = sigma
-    O_ = np.empty(cap_v, dtype=np.int64)
-    O_[:nv] = owner
-    T_ = np.empty((cap_t, 3), dtype=np.int64)
-    T_[:t] = triangles
-    D_ = np.empty(cap_t, dtype=np.uint8)
-    C_ = np.empty(t, dtype=np.int64)
+    P_, S_, O_ = np.empty((cap_v, 3)), np.empty(cap_v), np.empty(cap_v, dtype=np.int64)
+    T_, D_, C_ = np.empty((cap_t, 3), dtype=np.int64), np.empty(cap_t, dtype=np.uint8), np.empty(t, dtype=np.int64)
+    P_[:nv], S_[:nv], O_[:nv], T_[:t] = points, sigma, owner, triangles
     cdef double[:, ::1] P = P_
     cdef double[::1] S = S_
-    cdef int64_t[::1] O = O_, chosen = C_
+    cdef int64_t[::1] O = O_, chosen = C_, fan
     cdef int64_t[:, ::1] T = T_
     cdef uint8_t[::1] D = D_
     cdef int64_t[::1] fixed = _fixed_keys(fixed_pairs)
@@ -413,11 +406,9 @@ def refine(points, sigma, triangles, fixed_pairs, owner, double alpha, int64_t m
     cdef double sigma_c, dist
     cdef bint split, relaxed = False
     cdef int status = 0
-    cdef int64_t[::1] fan
     for _ in range(60):
         count = 0
-        fan_ = np.zeros(nv, dtype=np.int64)
-        fan = fan_
+        fan = np.zeros(nv, dtype=np.int64)
         with nogil:
             for i in range(t):
                 for m in range(3):
@@ -443,11 +434,8 @@ def refine(points, sigma, triangles, fixed_pairs, owner, double alpha, int64_t m
             break
         if nv + count > cap_v or t + 2 * count > cap_t:  # grow the buffers (amortized doubling)
             cap_v, cap_t = max(2 * cap_v, nv + count), max(2 * cap_t, t + 2 * count)
-            P_ = np.resize(P_, (cap_v, 3))
-            S_ = np.resize(S_, cap_v)
-            O_ = np.resize(O_, cap_v)
-            T_ = np.resize(T_, (cap_t, 3))
-            D_ = np.resize(D_, cap_t)
+            P_, S_, O_ = np.resize(P_, (cap_v, 3)), np.resize(S_, cap_v), np.resize(O_, cap_v)
+            T_, D_ = np.resize(T_, (cap_t, 3)), np.resize(D_, cap_t)
             P, S, O, T, D = P_, S_, O_, T_, D_
         with nogil:
             for i in range(count):  # the centroid splits (a, b, c) into (a, b, p), (b, c, p), (c, a, p)

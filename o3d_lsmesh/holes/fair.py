@@ -102,6 +102,7 @@ def fair_patches(
     continuity: int,
     cot: bool,
     owner: np.ndarray,
+    vertex_owner: np.ndarray,
     index: Any,
 ):
     """Fair every new vertex at once: one local system over the patches and the rings around them.
@@ -109,9 +110,10 @@ def fair_patches(
     ``vertices`` (the input's, then the refined patches' new ones) take the result in place.
     Candidates, best first: the asked continuity (after its cotangent pass if ``cot``, then
     without), then each lower continuity, then the refined patch unfaired. Each hole (``owner`` of
-    each new triangle) keeps the first candidate whose new triangles cross no triangle of the mesh
-    (a tri-Laplacian patch can overshoot into a thin part next to the hole); returns the continuity
-    each hole got and the holes where none is (the caller leaves them open).
+    each new triangle, ``vertex_owner`` of each new vertex) keeps the first candidate whose new
+    triangles cross no triangle of the mesh (a tri-Laplacian patch can overshoot into a thin part next
+    to the hole); returns the continuity each hole got and the holes where none is (the caller leaves
+    them open).
     """
     total, m, n = len(vertices), len(filler.triangles), len(filler.vertices)
     unknown = np.arange(n, total)
@@ -157,7 +159,6 @@ def fair_patches(
         yield -1, refined  # the refined patch as triangulated
 
     tried = []
-    vertex_owner = _vertex_owner(new_tris, owner, n, total - n)
     chosen = np.full(len(holes), -1)
     out = refined.copy()
     for rank, (level, candidate) in enumerate(candidates()):

@@ -368,8 +368,10 @@ class HoleFiller:
             weights_matrix = (p, n)
         out_vertices = np.concatenate([vertices, fresh_points])
         out_triangles = np.concatenate([triangles, new_tris])
-        used, stuck = fair_patches(self, out_vertices, out_triangles, holes, continuity, cot, owner, index)
         vertex_owner = _vertex_owner(new_tris, owner, n, p)
+        used, stuck = fair_patches(
+            self, out_vertices, out_triangles, holes, continuity, cot, owner, vertex_owner, index
+        )
         used[np.bincount(vertex_owner, minlength=len(holes)) == 0] = -2  # no new vertex: the bare programme
         if len(stuck):
             keep_vertex = ~np.isin(vertex_owner, stuck)
