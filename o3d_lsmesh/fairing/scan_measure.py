@@ -1,9 +1,7 @@
 """Measures of a mesh's noise that set the weights of the scan default (:func:`scan_parameters`).
 
-Noise and detail along the normal from the 1- and 2-ring umbrellas, the rim's noise against the
-interior's, and how much the mesh looks like one raw range scan; all dimensionless (invariant
-under rigid motions and uniform scaling), never taken from a reference.
-Docs page: ``docs/algorithms/scan_denoiser.rst``.
+Noise and detail along the normal, the rim's noise against the interior's, the scan likeness; all
+dimensionless, never taken from a reference. Docs: ``docs/algorithms/scan_denoiser.rst``.
 """
 
 from __future__ import annotations
@@ -85,11 +83,8 @@ def rim_noise_ratio(
 
 
 def measured_boundary_weight(vertices: np.ndarray, triangles: np.ndarray) -> float:
-    """The rim triangles' barycenter weight ``w = clip(c (9/7) E_int / E_bd, SCAN_BOUNDARY_WEIGHT, c)``.
-
-    ``E_int``, ``E_bd``: mean squared uniform Laplacian of the interior vertices and, along the
-    boundary curve, of the rim's; ``c`` the interior's triangles per vertex over the rim's. 1
-    without a boundary. ``vertices (n, 3)``, ``triangles (m, 3)``; returns a float.
+    """The rim triangles' barycenter weight ``w = clip(c (9/7) E_int / E_bd, SCAN_BOUNDARY_WEIGHT, c)``
+    (docs page); 1 without a boundary. ``vertices (n, 3)``, ``triangles (m, 3)``.
 
     >>> import open3d as o3d
     >>> box = o3d.geometry.TriangleMesh.create_box()
@@ -119,11 +114,9 @@ def measured_noise(
     rows: int = NOISE_ROWS,
     block: int = NOISE_BLOCK,
 ) -> NoiseEstimate:
-    """The noise ``sigma`` and the surface's detail ``g`` along the normal, in RMS edge lengths.
-
-    From the mean squared 1- and 2-ring umbrellas of the vertices two rings from the rim (at most
-    ``rows`` of them; the 2-ring formed ``block`` rows or more at a time), two equations in ``sigma^2`` and ``g^2``; ``(0, 0)`` when no vertex is
-    two rings from the rim. The derivation: ``docs/algorithms/scan_denoiser.rst``.
+    """The noise ``sigma`` and the surface's detail ``g`` along the normal, in RMS edge lengths, from the
+    1- and 2-ring umbrellas of at most ``rows`` vertices two rings from the rim (else ``(0, 0)``); the
+    2-ring formed ``block`` rows or more at a time. Derivation: ``docs/algorithms/scan_denoiser.rst``.
 
     >>> import open3d as o3d
     >>> s = o3d.geometry.TriangleMesh.create_sphere(radius=1.0, resolution=30)
@@ -198,12 +191,8 @@ def _mean_square_distances(
 
 
 def scan_likeness(rim_ratio: float, boundary_fraction: float) -> float:
-    """How much the mesh looks like one raw range scan, from 0 to 1 (a closed mesh: 0).
-
-    The product of two ramps, linear in the logarithm of their measure, between the ends of
-    ``SCAN_RIM_RATIO`` (the rim's unclipped data weight, :func:`rim_noise_ratio`) and of
-    ``SCAN_BOUNDARY_FRACTION`` (the fraction of boundary vertices).
-    """
+    """How much the mesh looks like one raw range scan, 0 to 1: two log-linear ramps over ``SCAN_RIM_RATIO``
+    (:func:`rim_noise_ratio`) and ``SCAN_BOUNDARY_FRACTION`` (of boundary vertices), multiplied."""
 
     def ramp(value: float, zero: float, one: float) -> float:
         with np.errstate(divide="ignore"):
@@ -247,12 +236,8 @@ class ScanParameters:
 def scan_parameters(
     vertices: np.ndarray, triangles: np.ndarray, *, conn: Connectivity | None = None
 ) -> ScanParameters:
-    """Every weight of the default energy, measured on the mesh (never on a reference).
-
-    A raw range scan (scan likeness ``s = 1``) gets ``mu = SCAN_MU (g / sigma)^2``, rim weight
-    ``SCAN_RIM_MU w``, ``lambda = SCAN_MEMBRANE`` and twicing; independent noise (``s = 0``) the
-    barycenter-only energy with ``mu = NOISE_MU_SCALE (g / sigma)^NOISE_MU_POWER`` in ``MU_RANGE``;
-    in between every weight moves with ``s``. Invariant under rigid motions and uniform scaling.
+    """Every weight of the default energy, measured on the mesh: a range scan's (scan likeness ``s = 1``),
+    independent noise's (``s = 0``) or in between (docs page).
 
     >>> import open3d as o3d
     >>> sphere = o3d.geometry.TriangleMesh.create_sphere(radius=1.0, resolution=20)
