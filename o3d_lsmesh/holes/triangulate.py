@@ -51,8 +51,9 @@ def delaunay_triangles(points: np.ndarray) -> np.ndarray | None:
             centre = p[:, 0] + np.linalg.solve(2.0 * edges, (edges**2).sum(axis=2)[..., None])[..., 0]
         except np.linalg.LinAlgError:  # a flat tetrahedron (Qhull's triangulated output): not unique
             return None
-        radius = np.linalg.norm(p[:, 0] - centre, axis=1)
-        gap = np.abs(np.linalg.norm(points[None] - centre[:, None], axis=2) - radius[:, None])
+        to_corner, to_points = p[:, 0] - centre, points[None] - centre[:, None]
+        radius = np.sqrt((to_corner * to_corner).sum(axis=1))  # np.linalg.norm's bits, without its wrapper
+        gap = np.abs(np.sqrt((to_points * to_points).sum(axis=2)) - radius[:, None])
     gap[np.arange(len(tets))[:, None], tets] = np.inf
     if not (gap > COSPHERICAL * radius[:, None]).all():
         return None
