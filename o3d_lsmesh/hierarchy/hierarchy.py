@@ -142,13 +142,8 @@ class MeshHierarchy:
         }
 
     def refine(self, i: int, positions: Any) -> np.ndarray:
-        """Positions ``(n_{i-1}, 3)`` of level ``i - 1`` from ``positions (n_i, 3)`` of level ``i >= 1``.
-
-        Kept vertices keep theirs exactly; each split vertex goes to the average of its 1-ring (a harmonic
-        fill when split vertices are adjacent), then moves once by Kobbelt's step ``x <- x - U^2(x) / nu``
-        (section 4.2), all at once; split boundary vertices read their boundary neighbours only
-        (``docs/algorithms/mesh_hierarchy.rst``).
-        """
+        """Positions ``(n_{i-1}, 3)`` of level ``i - 1`` from ``positions (n_i, 3)`` of level ``i >= 1``: split
+        vertices at their 1-ring average, then one Kobbelt step (``docs/algorithms/mesh_hierarchy.rst``)."""
         i = self._check_level(i, minimum=1)
         positions = as_positions(positions, len(self.representatives[i]), name="positions")
         return self.refine_with_rings(
@@ -196,12 +191,8 @@ def boundary_degree(rings: VertexRings) -> np.ndarray:
 def _harmonic_fill(
     weights: sp.csr_matrix, out: np.ndarray, removed: np.ndarray, on_boundary: np.ndarray | None
 ) -> np.ndarray:
-    """Positions of ``removed`` equal to the ``weights`` average of their neighbours, the others fixed.
-
-    Row ``i`` times its degree ``d_i`` is ``(1 + FILL_TIE) d_i x_i - sum_j a_ij x_j = FILL_TIE d_i x0_i``
-    (``a`` the rows' 0/1 pattern, ``x0`` the placeholders), symmetric positive definite within the
-    boundary rows (which read their curve only) and within the inner ones: boundary first, two SPD solves.
-    """
+    """Positions of ``removed`` equal to the ``weights`` average of their neighbours, the others fixed (the
+    docs page's harmonic fill: boundary rows first, two SPD solves)."""
     x = out.copy()
     groups = (
         [removed] if on_boundary is None else [removed[on_boundary[removed]], removed[~on_boundary[removed]]]
@@ -310,10 +301,9 @@ def build_hierarchy(
 ) -> MeshHierarchy:
     """Build the multiresolution hierarchy of Liu et al. 2001, section 4.1, by volume-cost half-edge collapses.
 
-    Each level removes an independent set of vertices in increasing ``alpha * min_edge + beta * max_edge``,
-    each into its neighbour of least cone volume, keeping the Euler characteristic, components, boundary
-    loops and orientation; non-manifold and unreferenced vertices are locked. Levels hold positions and
-    triangles only (other attributes dropped with one warning). Rules: ``docs/algorithms/mesh_hierarchy.rst``.
+    Each level removes an independent set of vertices, each into its neighbour of least cone volume,
+    keeping the topology; levels hold positions and triangles only (other attributes dropped with one
+    warning). Rules: ``docs/algorithms/mesh_hierarchy.rst``.
 
     Parameters
     ----------
