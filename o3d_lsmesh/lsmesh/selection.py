@@ -190,11 +190,9 @@ def select_control_points(
 ) -> np.ndarray:
     """Choose ``count`` control points that make the LS mesh close to ``mesh`` (LS meshes section 4).
 
-    A vertex's error is its distance in the LS mesh of the current selection (soft constraints of weight
-    ``weights``, uniform Laplacian). ``"random"``: a random order; ``"greedy"``: the largest error, one at
-    a time; ``"combined"``: local maxima, ``batch`` per solve. Every selection starts with one vertex per
-    connected component. Returns ``(count,) int64`` indices in selection order, without repetition.
-    Details: ``docs/algorithms/least_squares_meshes.rst``.
+    ``"greedy"`` picks the vertex farthest from the current selection's LS mesh, ``"combined"`` ``batch``
+    local maxima per solve, ``"random"`` a random order; each starts with one vertex per component.
+    Returns ``(count,) int64`` indices in selection order (``docs/algorithms/least_squares_meshes.rst``).
 
     Parameters
     ----------
@@ -219,11 +217,8 @@ def select_control_points(
     (8,)
     """
     data = read_mesh(mesh, weld=True)
-    V, F = data.vertices, data.triangles
-    indices, _ = control_point_selection(
-        V, F, count, method=method, batch=batch, weights=weights, seed=seed, progress=progress
-    )
-    return data.source_indices(indices)
+    options: dict[str, Any] = dict(method=method, batch=batch, weights=weights, seed=seed, progress=progress)
+    return data.source_indices(control_point_selection(data.vertices, data.triangles, count, **options)[0])
 
 
 def approximate(

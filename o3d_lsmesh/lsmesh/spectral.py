@@ -1,8 +1,7 @@
 """Spectral mesh compression baseline (Karni and Gotsman, 2000), as compared in the geometry-aware bases paper.
 
-The geometry is projected on the first ``k`` eigenvectors of the combinatorial Laplacian ``D - A``
-(section II of Sorkine et al., *Geometry-aware Bases for Shape Approximation*), the smoothest orthonormal
-mesh functions; only small meshes are practical. Docs: ``docs/algorithms/least_squares_meshes.rst``.
+The geometry projected on the first ``k`` eigenvectors of ``D - A`` (bases paper, section II); small
+meshes only. Docs: ``docs/algorithms/least_squares_meshes.rst``.
 """
 
 from __future__ import annotations
