@@ -263,23 +263,20 @@ def _row(kind: str, group: str, key: str) -> Attribute:
     raise KeyError(key)  # (unreachable: each tensor group ends in a "*" row)
 
 
-def _present(mesh: Any, kind: str) -> list[tuple[Attribute, str]]:
-    if kind == "legacy":
+def present_attributes(data: MeshData) -> list[tuple[Attribute, str]]:
+    """The rows of :data:`ATTRIBUTES` that ``data``'s source holds, each with its key, in table order
+    (a tensor mesh: its own order, vertex group first)."""
+    mesh = data.source
+    if data.kind == "legacy":
         return [
             (row, row.key)
             for row in ATTRIBUTES
             if row.kind == "legacy"
             and (has_textures(mesh) if row.follows == "texture" else getattr(mesh, f"has_{row.key}")())
         ]
-    if kind == "tensor":
-        return [(_row(kind, g, key), key) for g in ("vertex", "triangle") for key in getattr(mesh, g)]
+    if data.kind == "tensor":
+        return [(_row("tensor", g, key), key) for g in ("vertex", "triangle") for key in getattr(mesh, g)]
     return []
-
-
-def present_attributes(data: MeshData) -> list[tuple[Attribute, str]]:
-    """The rows of :data:`ATTRIBUTES` that ``data``'s source holds, each with its key, in table order
-    (a tensor mesh: its own order, vertex group first)."""
-    return [] if data.source is None else _present(data.source, data.kind)
 
 
 def _label(row: Attribute, key: str) -> str:
