@@ -11,9 +11,10 @@ from libc.math cimport INFINITY, acos, asin, fabs, fmax, fmin, sqrt
 from libc.stdint cimport int64_t, uint8_t
 from libc.stdlib cimport calloc, free, malloc, qsort
 
+# numerical tolerances and a safeguard, none fitted to a benchmark (the fitted constants: holes/tuning.py)
 cdef double _TIE = 1e-6  # dynamic programme: largest angles this close tie, and the area decides
 cdef double _COCIRCULAR = 1.0 - 1e-6  # flips: a point must be this far inside a circumsphere
-cdef int64_t _MAX_FAN = 64  # refinement: no split at a corner of this many triangles
+cdef int64_t _MAX_FAN = 64  # refinement: no split at a corner of this many triangles (runaway fans)
 
 cdef bint _outside(const int64_t* a, int64_t count, int64_t n) noexcept nogil:
     """Whether an index of ``a`` is outside ``[0, n)`` (the arguments' check, without NumPy's reductions)."""
