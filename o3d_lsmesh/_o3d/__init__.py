@@ -279,23 +279,17 @@ def present_attributes(data: MeshData) -> list[tuple[Attribute, str]]:
     return []
 
 
-def _label(row: Attribute, key: str) -> str:
-    return f"{row.label} {key!r}" if row.kind == "tensor" and row.follows in _PER_ELEMENT else row.label
-
-
-def _dropped(data: MeshData, *, normals: bool = False) -> list[str]:
-    """Names of the source's attributes that a result with new connectivity cannot keep (``normals``: its
-    normals too, for results that do not recompute them)."""
-    dropped = (*_PER_ELEMENT, "texture", "normals") if normals else (*_PER_ELEMENT, "texture")
-    return [_label(row, key) for row, key in present_attributes(data) if row.follows in dropped]
-
-
 def warn_dropped_attributes(
     data: MeshData, reason: str, *, stacklevel: int = 3, normals: bool = False
 ) -> bool:
     """Warn once (:class:`~o3d_lsmesh.O3DLSMeshWarning`) if ``data``'s source has attributes a new connectivity
     drops (results not built by :func:`new_mesh`; ``normals=True``: normals too); whether it warned."""
-    dropped = _dropped(data, normals=normals)
+    kinds = (*_PER_ELEMENT, "texture", "normals") if normals else (*_PER_ELEMENT, "texture")
+    dropped = [
+        f"{row.label} {key!r}" if row.kind == "tensor" and row.follows in _PER_ELEMENT else row.label
+        for row, key in present_attributes(data)
+        if row.follows in kinds
+    ]
     if dropped:
         warnings.warn(
             f"{reason}: {', '.join(dropped)} of the input cannot follow it and were dropped",

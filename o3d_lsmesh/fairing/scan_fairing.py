@@ -24,12 +24,6 @@ from .tuning import RIM_RINGS, SCAN_ITERATIVE_VERTICES, SCAN_REDUCTION, SLIVER_Q
 __all__ = ["ScanFairingSolver", "relax_rim", "scan_denoise", "triangle_quality"]
 
 
-def _penalty(triangles: np.ndarray, n: int, root: np.ndarray) -> sp.csr_matrix:
-    """``sqrt(mu W) H`` for ``root = sqrt(mu w_t)``, ``(m, n)`` CSR: the rows that carry the targets."""
-    corners = np.arange(0, 3 * len(triangles) + 1, 3)
-    return sp.csr_matrix((np.repeat(root, 3), triangles.ravel(), corners), shape=(len(triangles), n))
-
-
 def _surface(triangles: np.ndarray, n: int, conn: Connectivity | None) -> tuple[np.ndarray, Connectivity]:
     """The triangles of three distinct vertices and their connectivity: a collapsed one has no surface."""
     collapsed = collapsed_triangles(triangles)
@@ -77,7 +71,11 @@ class ScanFairingSolver:
         backend = solver_backend(solver)
         triangles, conn = _surface(np.asarray(triangles), n, conn)
         normal, ring, weight = scan_normal_matrix(conn, self.mu, self.membrane, boundary_weight, rim_curve)
-        self.penalty = _penalty(triangles, n, np.sqrt(self.mu * weight))
+        # sqrt(mu W) H, (m, n) CSR: the rows that carry the targets
+        root, corners = np.sqrt(self.mu * weight), np.arange(0, 3 * len(triangles) + 1, 3)
+        self.penalty = sp.csr_matrix(
+            (np.repeat(root, 3), triangles.ravel(), corners), shape=(len(triangles), n)
+        )
         self.referenced = _rim(conn)[1] > 0
         if backend == "auto" and n >= SCAN_ITERATIVE_VERTICES:
             backend = "iterative"
