@@ -1,8 +1,6 @@
-"""The subcommands of ``o3d-lsmesh``: each reads its files, runs its operation and reports.
-
-The flags of an operation's subcommand (denoise, fill, approximate, hierarchy, encode, and batch's
-operation options) come from the option tables of :mod:`o3d_lsmesh.app.ops`; the handlers here add
-what a single file needs (output checks, pictures, the human report). Docs: ``docs/cli.rst``.
+"""The parsers of every ``o3d-lsmesh`` subcommand and the commands with a flow of their own
+(reconstruct, decode, compare, batch with every op's options, demo); the operations' commands are in
+:mod:`o3d_lsmesh.app.op_commands`, what all use in :mod:`o3d_lsmesh.app.cli_kit`. Docs: ``docs/cli.rst``.
 """
 
 from __future__ import annotations
@@ -17,8 +15,9 @@ from typing import Any
 
 import numpy as np
 
-from .cli import Run, add_command, argparse_type, draw, run_file_op, shape_change_text
+from .cli_kit import Run, add_command, argparse_type, draw, shape_change_text
 from .files import WRITABLE, CLIError, check_output, mesh_suffix, read_input, write_output
+from .op_commands import approximate, denoise, encode, fill, hierarchy
 from .ops import OPS, Option, int_at_least, non_negative
 
 __all__ = ["add_parsers", "parse_index_spec"]
@@ -53,8 +52,6 @@ _FILES = {"input": "mesh file", "output": "mesh file to write"}
 
 def add_parsers(sub: Any, writing: argparse.ArgumentParser, common: argparse.ArgumentParser) -> None:
     """Add every subcommand; ``writing`` adds ``--force`` to ``common`` (not for the demo: it reads no file)."""
-    from .cli import approximate, denoise, fill, hierarchy
-
     files = {"input": "mesh file to denoise", "output": f"mesh file to write ({', '.join(WRITABLE)})"}
     p = add_command(sub, writing, denoise, files)
     p.add_argument("--render", metavar="PNG", help="write a before/after picture (default: none)")
@@ -75,24 +72,13 @@ def add_parsers(sub: Any, writing: argparse.ArgumentParser, common: argparse.Arg
         "output": _FILES["output"],
     }
     p = add_command(sub, writing, decode, names)
-    p.add_argument(
-        "--anchors",
-        type=argparse_type(int_at_least(1)),
-        help="use only the first K anchors (default: all)",
-    )
+    help = "use only the first K anchors (default: all)"
+    p.add_argument("--anchors", type=argparse_type(int_at_least(1)), help=help)
     p.set_defaults(flags={"anchors": "--anchors"})
-    p = add_command(
-        sub,
-        writing,
-        hierarchy,
-        {"input": "mesh file", "outdir": "folder for level_NN files (created if needed)"},
-    )
-    p.add_argument(
-        "--format",
-        type=argparse_type(mesh_suffix),
-        default=".ply",
-        help="file format of the levels (.ply .obj ...)",
-    )
+    names = {"input": "mesh file", "outdir": "folder for level_NN files (created if needed)"}
+    p = add_command(sub, writing, hierarchy, names)
+    help = "file format of the levels (.ply .obj ...)"
+    p.add_argument("--format", type=argparse_type(mesh_suffix), default=".ply", help=help)
     p = add_command(sub, writing, compare, {"a": "first mesh file (the reference)", "b": "second mesh file"})
     help = "write a distance map: A and B side by side, colored by distance to A (default: none)"
     p.add_argument("--render", metavar="PNG", help=help)
@@ -152,23 +138,6 @@ def _add_batch(p: argparse.ArgumentParser) -> None:
     p.set_defaults(positionals=("inputs", "outdir"), flags=flags)
 
 
-def encode(args: argparse.Namespace, run: Run) -> int:
-    """Encode the geometry as quantized LS-mesh anchors.
-
-    Store the geometry as the quantized positions of a few anchors; decode rebuilds it from the
-    connectivity (geometry-aware bases, Sorkine et al.).
-
-    example: bunny.ply bunny.lsm --count 500 --bits 12
-    """
-    mesh, data, metrics, seconds = run_file_op("encode", args, run)
-    run.say(
-        f"encoded {args.input}: {metrics['anchors']} anchors at {args.bits} bits -> {len(data)} bytes "
-        f"({metrics['bits_per_vertex']:.3f} bits/vertex) in {seconds:.2f} s; "
-        f"decoded L-inf error {metrics['decoded_error_linf']:.4g}"
-    )
-    return run.finish(mesh, **metrics, seconds=seconds)
-
-
 # --------------------------------------------------------------------------- commands with a flow of their own
 
 
@@ -191,9 +160,8 @@ def parse_index_spec(spec: str, n: int) -> np.ndarray:
             raise CLIError(
                 f"--unknown must be an existing index file or a list like '0:100,250', got {spec!r}"
             ) from None
-        if (
-            start < 0 or stop > n or stop < start
-        ):  # before any array: '0:99999999999' must not allocate 800 GB
+        # checked before any array: '0:99999999999' must not allocate 800 GB
+        if start < 0 or stop > n or stop < start:
             what = f"range {item!r}" if colon else f"index {item!r}"
             raise CLIError(
                 f"--unknown must name vertices in 0..{n - 1} (the mesh has {n} vertices), got {what}"
