@@ -11,8 +11,6 @@ from ._o3d import read_mesh
 from .core import operators
 from .core.connectivity import Connectivity
 from .core.validate import as_choice
-from .lsmesh.lsmesh import LAPLACIAN_KINDS
-from .lsmesh.lsmesh import laplacian_matrix as _matrix
 
 if TYPE_CHECKING:
     from ._types import AnyMesh
@@ -34,7 +32,8 @@ def cotangent_laplacian(vertices: np.ndarray, triangles: np.ndarray) -> sp.csr_m
 
 def laplacian_matrix(vertices: np.ndarray, triangles: np.ndarray, kind: str = "uniform") -> sp.csr_matrix:
     """Array twin of :func:`laplacian`."""
-    return _matrix(vertices, triangles, as_choice(kind, LAPLACIAN_KINDS, name="kind"))
+    kind = as_choice(kind, operators.LAPLACIAN_KINDS, name="kind")
+    return operators.laplacian_of_kind(vertices, Connectivity(triangles, len(vertices)), kind)
 
 
 def laplacian(mesh: AnyMesh, kind: str = "uniform") -> sp.csr_matrix:

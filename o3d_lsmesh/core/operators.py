@@ -31,6 +31,7 @@ from .liu import (
 )
 
 __all__ = [
+    "LAPLACIAN_KINDS",
     "CurveOperator",
     "LocalMatrices",
     "Penalty",
@@ -38,6 +39,7 @@ __all__ = [
     "cotangent_laplacian",
     "curve_laplacian",
     "graph_laplacian",
+    "laplacian_of_kind",
     "local_operator",
     "lower_csc",
     "patch_system",
@@ -127,6 +129,15 @@ def cotangent_laplacian(vertices: np.ndarray, conn: Connectivity) -> sp.csr_matr
         keep = sp.diags((~degenerate).astype(np.float64))
         weights = keep @ weights + fallback @ conn.adjacency
     return _normalized(sp.csr_matrix(weights), n)
+
+
+#: The Laplacians of eq. 1 a caller may name.
+LAPLACIAN_KINDS = ("uniform", "cotangent")
+
+
+def laplacian_of_kind(vertices: np.ndarray, conn: Connectivity, kind: str) -> sp.csr_matrix:
+    """The ``(n, n)`` Laplacian of eq. 1 named by ``kind`` (one of :data:`LAPLACIAN_KINDS`, checked by the caller)."""
+    return uniform_laplacian(conn) if kind == "uniform" else cotangent_laplacian(vertices, conn)
 
 
 def graph_laplacian(conn: Connectivity) -> sp.csc_matrix:

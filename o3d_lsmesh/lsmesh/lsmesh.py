@@ -28,15 +28,10 @@ if TYPE_CHECKING:
 
 __all__ = ["LSMeshSolver", "LSMeshSystem", "check_components_constrained", "ls_mesh", "reconstruct_geometry"]
 
-LAPLACIAN_KINDS = ("uniform", "cotangent")
-
 
 def laplacian_matrix(vertices: np.ndarray, triangles: np.ndarray, kind: str) -> sp.csr_matrix:
     """The ``(n, n)`` uniform or cotangent Laplacian of eq. 1 (:mod:`o3d_lsmesh.core.operators`)."""
-    conn = Connectivity(triangles, len(vertices))
-    if kind == "uniform":
-        return operators.uniform_laplacian(conn)
-    return operators.cotangent_laplacian(vertices, conn)
+    return operators.laplacian_of_kind(vertices, Connectivity(triangles, len(vertices)), kind)
 
 
 def check_components_constrained(
@@ -88,7 +83,7 @@ class LSMeshSystem:
             constraint_vertex_indices, n, name="constraint_vertex_indices", allow_repeats=True
         )
         weights = as_weights(weights, len(indices), name="weights")
-        as_choice(laplacian, LAPLACIAN_KINDS, name="laplacian")
+        as_choice(laplacian, operators.LAPLACIAN_KINDS, name="laplacian")
         interpolate = as_bool(interpolate, name="interpolate")
         # one lock: an update and a solve on other threads never see a half-updated system
         self._lock = threading.RLock()
@@ -468,7 +463,7 @@ def reconstruct_geometry(
     unknown = data.welded_indices(unknown_vertex_indices, name="unknown_vertex_indices", merge=True)
     known = np.setdiff1d(np.arange(n), unknown, assume_unique=True)  # in increasing order
     interpolate = as_bool(interpolate, name="interpolate")
-    as_choice(laplacian, LAPLACIAN_KINDS, name="laplacian")
+    as_choice(laplacian, operators.LAPLACIAN_KINDS, name="laplacian")
     # checked with either scheme (the interpolatory one does not use them): a bad value is a mistake either way
     as_weights(weights, len(known), name="weights")
     as_bool(progress, name="progress")
