@@ -6,7 +6,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from o3d_lsmesh import O3DLSMeshWarning
-from o3d_lsmesh._o3d import mesh_from_state, mesh_state, new_mesh, read_mesh
+from o3d_lsmesh._o3d import new_mesh, read_mesh
+from o3d_lsmesh._o3d.state import mesh_from_state, mesh_state
 from o3d_lsmesh.core.validate import (
     COORDINATE_LIMIT,
     as_bool,

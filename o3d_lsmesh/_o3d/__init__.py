@@ -27,8 +27,6 @@ __all__ = [
     "Attribute",
     "MeshData",
     "has_textures",
-    "mesh_from_state",
-    "mesh_state",
     "new_mesh",
     "obj_writable",
     "open3d",
@@ -392,6 +390,3 @@ def new_mesh(
         if normals == {"vertex"} and "normals" in out.triangle:
             del out.triangle["normals"]
     return out
-
-
-from .state import mesh_from_state, mesh_state  # noqa: E402  (state reads the table above)

@@ -14,7 +14,8 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse import csgraph
 
-from .._o3d import MeshData, mesh_from_state, mesh_state, new_mesh, read_mesh
+from .._o3d import MeshData, new_mesh, read_mesh
+from .._o3d.state import mesh_from_state, mesh_state
 from ..core import operators
 from ..core.connectivity import Connectivity
 from ..core.errors import InputError, SingularSystemError
