@@ -314,3 +314,24 @@ def test_textures_not_written_is_an_error(tmp_path, capsys, monkeypatch):
     assert main(["fill", str(tmp_path / "in.obj"), str(tmp_path / "out.obj"), "--quiet"]) == 2
     err = capsys.readouterr().err
     assert "out.obj' but not its material and textures out.mtl, out_0.png, out_1.png" in err, err
+
+
+def test_unwritten_attributes_name_what_each_format_drops():
+    # Open3D's PLY/STL/OFF/glTF writers hold no UVs or textures; its OBJ writer no textures without UVs
+    from o3d_lsmesh._o3d.io import unwritten_attributes
+
+    V, T = grid(3, 3)
+    textured = _textured(V, T, np.zeros(len(T), dtype=int))
+    untextured_uvs = o3d.geometry.TriangleMesh(textured)
+    untextured_uvs.textures = []
+    bare_texture = o3d.geometry.TriangleMesh(textured)
+    bare_texture.triangle_uvs = o3d.utility.Vector2dVector()
+    plain = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(V), o3d.utility.Vector3iVector(T))
+    for suffix in (".ply", ".stl", ".off", ".gltf"):
+        assert unwritten_attributes(textured, suffix) == ["texture coordinates or textures"]
+        assert unwritten_attributes(untextured_uvs, suffix) == ["texture coordinates or textures"]
+        assert unwritten_attributes(plain, suffix) == []
+    assert unwritten_attributes(textured, ".obj") == []
+    assert unwritten_attributes(untextured_uvs, ".obj") == []
+    assert unwritten_attributes(bare_texture, ".OBJ") == ["textures"]
+    assert unwritten_attributes((V, T), ".ply") == []  # arrays hold no attributes

@@ -31,6 +31,7 @@ __all__ = [
     "raycasting_scene",
     "read_mesh_file",
     "signed_distances",
+    "unwritten_attributes",
     "write_image",
     "write_mesh_file",
 ]
@@ -176,6 +177,17 @@ def write_mesh_file(mesh: Any, path: str | os.PathLike) -> list[str]:
     expected = [path.with_suffix(".mtl")]
     expected += [path.with_name(f"{path.stem}_{i}.png") for i in range(len(mesh.textures))]
     return [file.name for file in expected if not file.exists()]
+
+
+def unwritten_attributes(mesh: Any, suffix: str) -> list[str]:
+    """What of a legacy ``mesh`` a mesh file ending in ``suffix`` does not hold: Open3D's PLY, STL, OFF and
+    glTF writers write no texture coordinates or textures, its OBJ writer no textures without them."""
+    if not isinstance(mesh, open3d().geometry.TriangleMesh):
+        return []
+    uvs, textures = mesh.has_triangle_uvs(), any(not texture.is_empty() for texture in mesh.textures)
+    if suffix.lower() == ".obj":
+        return ["textures"] if textures and not uvs else []
+    return ["texture coordinates or textures"] if uvs or textures else []
 
 
 def obj_writable(mesh: Any) -> Any:

@@ -18,8 +18,8 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
-from .._o3d import has_textures, open3d, read_mesh
-from .._o3d.io import read_mesh_file, write_mesh_file
+from .._o3d import read_mesh
+from .._o3d.io import read_mesh_file, unwritten_attributes, write_mesh_file
 from ..core.errors import InputError, InputTypeError, O3DLSMeshWarning
 
 __all__ = [
@@ -256,11 +256,11 @@ def write_output(path: str, mesh: Any) -> None:
     """Write a mesh; an OBJ with its ``.mtl`` and textures, other formats with a warning when they
     cannot hold the mesh's UVs and textures."""
     suffix = Path(path).suffix.lower()
-    legacy = isinstance(mesh, open3d().geometry.TriangleMesh)
-    if suffix != ".obj" and legacy and (mesh.has_triangle_uvs() or has_textures(mesh)):
-        warnings.warn(  # (Open3D's PLY, STL, OFF and glTF writers write neither)
-            f"OUTPUT {path!r}: the {suffix} output has no texture coordinates or textures; the input's "
-            "are not written (write .obj to keep them)",
+    lost = unwritten_attributes(mesh, suffix)
+    if lost:
+        keep = "write .obj to keep them" if suffix != ".obj" else "an OBJ holds textures only with UVs"
+        warnings.warn(
+            f"OUTPUT {path!r}: the {suffix} output has no {lost[0]}; the input's are not written ({keep})",
             O3DLSMeshWarning,
             stacklevel=2,
         )
