@@ -419,7 +419,7 @@ def picture(result, reference, path):
     import matplotlib.pyplot as plt
     from matplotlib import cm, colors
 
-    from o3d_lsmesh.rendering import error_colors, render
+    from o3d_lsmesh.app.render import error_colors, render
 
     V, F = result["V"], result["F"]
     o3d_label = min(

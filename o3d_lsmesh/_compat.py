@@ -7,13 +7,19 @@ import warnings
 from typing import Any, Callable
 
 
-def deprecated_module(old: str, new: str) -> Callable[[str], Any]:
-    """Return a module ``__getattr__`` that forwards ``old.name`` to ``new.name`` with a warning.
+def deprecated_module(
+    old: str, *new: str, replaced: dict[str, tuple[Any, str]] | None = None
+) -> Callable[[str], Any]:
+    """Return a module ``__getattr__`` that forwards ``old.name`` to the first of ``new`` holding it, warning.
 
     Parameters
     ----------
-    old, new : str
-        Dotted module paths: the deprecated one (usually ``__name__``) and its replacement.
+    old : str
+        The deprecated module's path (its ``__name__``).
+    *new : str
+        The modules its names moved to, searched in order.
+    replaced : dict, optional
+        Names with no counterpart of that name: ``{name: (object, "what to use instead")}``.
 
     Examples
     --------
@@ -28,11 +34,20 @@ def deprecated_module(old: str, new: str) -> Callable[[str], Any]:
     def __getattr__(name: str) -> Any:
         if name.startswith("__"):
             raise AttributeError(name)
-        value = getattr(importlib.import_module(new), name)  # AttributeError names the new module
+        if replaced and name in replaced:
+            value, instead = replaced[name]
+        else:
+            for path in new:
+                module = importlib.import_module(path)
+                if hasattr(module, name):
+                    value, instead = getattr(module, name), f"{path}.{name}"
+                    break
+            else:
+                raise AttributeError(
+                    f"module {old!r} has no attribute {name!r} (it moved to {', '.join(new)})"
+                )
         warnings.warn(
-            f"{old}.{name} moved to {new}.{name}; import it from there ({old} goes in 0.4)",
-            DeprecationWarning,
-            stacklevel=2,
+            f"{old}.{name} is deprecated: use {instead} ({old} goes in 0.4)", DeprecationWarning, stacklevel=2
         )
         return value
 

@@ -1,5 +1,5 @@
-"""Old path of :mod:`o3d_lsmesh.app.batch` (``run``, ``collect_inputs``, ``summarize``, the op registry)."""
+"""Deprecated path of :mod:`o3d_lsmesh.app.batch` (0.2's layout; it goes in 0.4)."""
 
-from .app.batch import OPS, BatchOp, Option, collect_inputs, local_cluster, register_op, run, summarize
+from ._compat import deprecated_module
 
-__all__ = ["OPS", "BatchOp", "Option", "collect_inputs", "local_cluster", "register_op", "run", "summarize"]
+__getattr__ = deprecated_module(__name__, "o3d_lsmesh.app.batch")

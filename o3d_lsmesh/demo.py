@@ -1,5 +1,5 @@
-"""Moved to :mod:`o3d_lsmesh.app.demo` (silent re-export)."""
+"""Deprecated path of :mod:`o3d_lsmesh.app.demo` (0.2's layout; it goes in 0.4)."""
 
-from .app.demo import METHODS, SLIVER_QUALITY, run_demo
+from ._compat import deprecated_module
 
-__all__ = ["METHODS", "SLIVER_QUALITY", "run_demo"]
+__getattr__ = deprecated_module(__name__, "o3d_lsmesh.app.demo")

@@ -1,5 +1,5 @@
-"""Old path of :mod:`o3d_lsmesh.lsmesh.encoding`."""
+"""Deprecated path of :mod:`o3d_lsmesh.lsmesh.encoding` (0.2's layout; it goes in 0.4)."""
 
-from .lsmesh.encoding import decode_geometry, encode_geometry, iter_decode_geometry
+from ._compat import deprecated_module
 
-__all__ = ["decode_geometry", "encode_geometry", "iter_decode_geometry"]
+__getattr__ = deprecated_module(__name__, "o3d_lsmesh.lsmesh.encoding")

@@ -1,5 +1,5 @@
-"""Moved to :mod:`o3d_lsmesh.app.registration` (silent re-export)."""
+"""Deprecated path of :mod:`o3d_lsmesh.app.registration` (0.2's layout; it goes in 0.4)."""
 
-from .app.registration import METHOD_NAMES, register, registered_methods, unregister
+from ._compat import deprecated_module
 
-__all__ = ["METHOD_NAMES", "register", "registered_methods", "unregister"]
+__getattr__ = deprecated_module(__name__, "o3d_lsmesh.app.registration")

@@ -1,5 +1,5 @@
-"""Moved to :mod:`o3d_lsmesh.app.render` (silent re-export)."""
+"""Deprecated path of :mod:`o3d_lsmesh.app.render` (0.2's layout; it goes in 0.4)."""
 
-from .app.render import MAX_PIXELS, VIRIDIS, RenderedImage, error_colors, render
+from ._compat import deprecated_module
 
-__all__ = ["MAX_PIXELS", "VIRIDIS", "RenderedImage", "error_colors", "render"]
+__getattr__ = deprecated_module(__name__, "o3d_lsmesh.app.render")

@@ -1,17 +1,5 @@
-"""Old path of :mod:`o3d_lsmesh.lsmesh.selection`."""
+"""Deprecated path of :mod:`o3d_lsmesh.lsmesh.selection` (0.2's layout; it goes in 0.4)."""
 
-from .lsmesh.selection import (
-    SELECTION_METHODS,
-    approximate,
-    control_point_selection,
-    select_control_points,
-    start_vertices,
-)
+from ._compat import deprecated_module
 
-__all__ = [
-    "SELECTION_METHODS",
-    "approximate",
-    "control_point_selection",
-    "select_control_points",
-    "start_vertices",
-]
+__getattr__ = deprecated_module(__name__, "o3d_lsmesh.lsmesh.selection")

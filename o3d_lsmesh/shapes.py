@@ -1,5 +1,5 @@
-"""Moved to :mod:`o3d_lsmesh.app.shapes` (silent re-export)."""
+"""Deprecated path of :mod:`o3d_lsmesh.app.shapes` (0.2's layout; it goes in 0.4)."""
 
-from .app.shapes import add_noise, demo_mesh, mean_edge_length, simulated_range_scan
+from ._compat import deprecated_module
 
-__all__ = ["add_noise", "demo_mesh", "mean_edge_length", "simulated_range_scan"]
+__getattr__ = deprecated_module(__name__, "o3d_lsmesh.app.shapes")

@@ -1,10 +1,5 @@
-"""Old path of :mod:`o3d_lsmesh.lsmesh.spectral`."""
+"""Deprecated path of :mod:`o3d_lsmesh.lsmesh.spectral` (0.2's layout; it goes in 0.4)."""
 
-from .lsmesh.spectral import (
-    SPECTRAL_MAX_VERTICES,
-    combinatorial_laplacian,
-    null_space_basis,
-    spectral_approximation,
-)
+from ._compat import deprecated_module
 
-__all__ = ["SPECTRAL_MAX_VERTICES", "combinatorial_laplacian", "null_space_basis", "spectral_approximation"]
+__getattr__ = deprecated_module(__name__, "o3d_lsmesh.lsmesh.spectral")

@@ -14,7 +14,7 @@ from conftest import grid  # noqa: E402
 
 import o3d_lsmesh  # noqa: E402
 from o3d_lsmesh._o3d import obj_writable  # noqa: E402
-from o3d_lsmesh.cli import main  # noqa: E402
+from o3d_lsmesh.app.cli import main  # noqa: E402
 
 #: UV = position @ AFFINE + OFFSET: on a flat patch, harmonic (cotangent) values of it stay on it
 AFFINE = np.array([[0.7, 0.2], [-0.1, 0.6], [0.0, 0.0]])

@@ -8,7 +8,7 @@ import pytest
 from conftest import grid
 
 from o3d_lsmesh import constrained_fairing, multiresolution_fairing, smooth_boundary_curves
-from o3d_lsmesh.cli import main
+from o3d_lsmesh.app.cli import main
 from o3d_lsmesh.core.validate import MAX_ITERATIONS, as_iterations
 from o3d_lsmesh.fairing.boundary_curve import smooth_boundary_curves_arrays
 from o3d_lsmesh.fairing.constrained import constrained_fairing_arrays

@@ -40,7 +40,7 @@ def test_fallback_warns_once_in_a_fresh_process_running_several_operations():
     code = (
         "import sys, warnings; sys.modules['sksparse'] = None\n"
         "import o3d_lsmesh\n"
-        "from o3d_lsmesh.shapes import demo_mesh\n"
+        "from o3d_lsmesh.app.shapes import demo_mesh\n"
         "mesh = demo_mesh(2)\n"
         "o3d_lsmesh.approximate(mesh, 30)\n"
         "list(o3d_lsmesh.iter_decode_geometry(mesh, o3d_lsmesh.encode_geometry(mesh, 30), step=10))\n"

@@ -21,12 +21,12 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 
 from o3d_lsmesh import O3DLSMeshWarning, _fill_kernel, fill_holes
+from o3d_lsmesh.core.boundary import boundary_loops
 from o3d_lsmesh.core.operators import patch_system
 from o3d_lsmesh.holes import DP_MAX_EDGES, HoleFiller, fill_holes_arrays, find_holes
 from o3d_lsmesh.holes.crossings import _crossings, _TriangleIndex
 from o3d_lsmesh.holes.fair import keeps_facing
 from o3d_lsmesh.holes.triangulate import delaunay_triangles
-from o3d_lsmesh.topology import boundary_loops
 
 
 def _minimum_weight_triangulation(points, outer, forbidden):
@@ -833,7 +833,7 @@ def test_closed_mesh_returns_a_copy():
 
 
 def test_registered_method():
-    from o3d_lsmesh.registration import register, unregister
+    from o3d_lsmesh.app.registration import register, unregister
 
     register()
     try:
@@ -846,7 +846,7 @@ def test_registered_method():
 
 
 def test_cli_fill(tmp_path, capsys):
-    from o3d_lsmesh.cli import main
+    from o3d_lsmesh.app.cli import main
 
     V, T = icosphere(3)
     Vh, Th, _ = cut_disk(V, T, 0, 0.4)

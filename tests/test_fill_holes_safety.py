@@ -344,7 +344,7 @@ def test_fill_border_on_a_raw_scan_is_bounded():
 def test_cli_fill_lists_every_loop_left_open(tmp_path, capsys):
     import json
 
-    from o3d_lsmesh.cli import main
+    from o3d_lsmesh.app.cli import main
 
     V, T = _two_holes()
     path = tmp_path / "holed.ply"

@@ -119,7 +119,7 @@ def test_fairing_welded_equals_fairing_of_welded_mesh(tmp_path):
 
 
 def test_obj_seams_stay_closed_cli(tmp_path):
-    from o3d_lsmesh.cli import main
+    from o3d_lsmesh.app.cli import main
 
     mesh, path = _noisy_uv_sphere(tmp_path)
     out_path = tmp_path / "out.obj"

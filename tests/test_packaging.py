@@ -225,7 +225,7 @@ def test_fast_simplification_is_an_extra_named_where_it_is_missing(monkeypatch):
     import o3d_lsmesh
 
     monkeypatch.setitem(sys.modules, "fast_simplification", None)  # import fails as if not installed
-    from o3d_lsmesh.shapes import demo_mesh
+    from o3d_lsmesh.app.shapes import demo_mesh
 
     sphere = demo_mesh(3)
     assert len(o3d_lsmesh.build_hierarchy(sphere)) > 1
@@ -282,7 +282,7 @@ def test_the_package_imports_from_a_source_tree_without_its_built_extensions(tmp
     # without an editable install's finder, which would map the extensions to the checkout's builds
     code = (
         "import sys; sys.meta_path[:] = [f for f in sys.meta_path if '__editable__' not in getattr(f, "
-        "'__module__', '')]; import o3d_lsmesh, o3d_lsmesh.cli, o3d_lsmesh.hole_filling; "
+        "'__module__', '')]; import o3d_lsmesh, o3d_lsmesh.app.cli, o3d_lsmesh.holes; "
         "assert o3d_lsmesh.__file__.startswith(sys.argv[1]), o3d_lsmesh.__file__"
     )
     done = subprocess.run(

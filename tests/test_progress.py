@@ -10,14 +10,14 @@ import tqdm.auto
 import tqdm.std
 from conftest import grid
 
+from o3d_lsmesh.core.connectivity import Connectivity
 from o3d_lsmesh.core.progress import Progress, close_all
 from o3d_lsmesh.core.solve import SPDSolver
-from o3d_lsmesh.encoding import decode_geometry, encode_geometry, iter_decode_geometry
 from o3d_lsmesh.fairing import constrained_fairing
 from o3d_lsmesh.lsmesh import ls_mesh, reconstruct_geometry
-from o3d_lsmesh.selection import approximate, select_control_points
-from o3d_lsmesh.spectral import spectral_approximation
-from o3d_lsmesh.topology import connected_components
+from o3d_lsmesh.lsmesh.encoding import decode_geometry, encode_geometry, iter_decode_geometry
+from o3d_lsmesh.lsmesh.selection import approximate, select_control_points
+from o3d_lsmesh.lsmesh.spectral import spectral_approximation
 
 
 def pieces():
@@ -61,7 +61,7 @@ def assert_complete(made, stream, *, count=None):
 def test_selection_bar_counts_the_component_seeds(bars, method):
     made, stream = bars
     V, F = pieces()
-    assert connected_components(F, len(V))[0] == 3
+    assert Connectivity(F, len(V)).components[0] == 3
     _, indices = approximate((V, F), 40, method=method, progress=True)
     assert len(indices) == 40
     assert_complete(made, stream, count=40)

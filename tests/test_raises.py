@@ -42,6 +42,8 @@ ALLOWED = {
     ("app/ops.py", "count_or_percent"): "option parser",
     ("app/ops.py", "levels_spec"): "option parser",
     ("app/ops.py", "folder"): "option parser",
+    ("app/ops.py", "non_negative"): "option parser",
+    ("app/files.py", "mesh_suffix"): "option parser (--format)",
 }
 
 

@@ -145,8 +145,8 @@ def test_ls_methods_equal_the_functions(registered, noisy):
 
 
 def test_approximate_and_decode_methods(registered, noisy):
-    from o3d_lsmesh.encoding import decode_geometry, encode_geometry
-    from o3d_lsmesh.selection import approximate
+    from o3d_lsmesh.lsmesh.encoding import decode_geometry, encode_geometry
+    from o3d_lsmesh.lsmesh.selection import approximate
 
     expected, _ = approximate(noisy, 20, method="greedy")
     np.testing.assert_array_equal(

@@ -790,7 +790,7 @@ def test_a_dragon_scan_keeps_its_fine_detail_and_gets_no_slivers():
 def test_a_smooth_coarsely_sampled_scan_is_not_shrunk():
     """A smooth blob scanned on a coarse grid (60 x 60 rays) measures little detail against its noise; the
     interior's weight then stops at the rim's instead of letting the membrane pull the scan inward."""
-    from o3d_lsmesh.shapes import simulated_range_scan
+    from o3d_lsmesh.app.shapes import simulated_range_scan
 
     scan, surface = simulated_range_scan(60)
     V, S = np.asarray(surface.vertices), np.asarray(surface.triangles)

@@ -298,7 +298,7 @@ def test_overflowing_weights_raise_naming_weights():
 
 
 def test_encoding_weight_checked():
-    from o3d_lsmesh.encoding import decode_geometry, encode_geometry
+    from o3d_lsmesh.lsmesh.encoding import decode_geometry, encode_geometry
 
     _, moved = _translated_sphere()
     with pytest.raises(ValueError, match="weight is too small"):

@@ -289,7 +289,7 @@ def test_mesh_arrays_is_the_one_check_of_array_functions_and_read_mesh():
     from o3d_lsmesh.fairing import constrained_fairing_arrays
     from o3d_lsmesh.fairing.boundary_curve import smooth_boundary_curves_arrays
     from o3d_lsmesh.hierarchy.hierarchy import build_hierarchy_arrays
-    from o3d_lsmesh.hole_filling import fill_holes_arrays
+    from o3d_lsmesh.holes import fill_holes_arrays
     from o3d_lsmesh.summary import topology_summary_arrays
 
     v, f = grid(3, 3)

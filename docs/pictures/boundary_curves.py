@@ -16,7 +16,7 @@ import numpy as np
 import open3d as o3d
 
 from o3d_lsmesh import constrained_fairing, render
-from o3d_lsmesh.shapes import add_noise, demo_mesh, mean_edge_length
+from o3d_lsmesh.app.shapes import add_noise, demo_mesh, mean_edge_length
 
 OUT = Path(__file__).resolve().parents[1] / "images" / "boundary_curves.png"
 

@@ -1,6 +1,5 @@
-"""Old path of the command line, :mod:`o3d_lsmesh.app.cli` (``python -m o3d_lsmesh.cli`` still runs it)."""
+"""Deprecated path of :mod:`o3d_lsmesh.app.cli` (``python -m o3d_lsmesh.cli`` still runs the command line)."""
 
-from ..app.cli import CLIError, build_parser, main
-from ..app.commands import parse_index_spec
+from .._compat import deprecated_module
 
-__all__ = ["CLIError", "build_parser", "main", "parse_index_spec"]
+__getattr__ = deprecated_module(__name__, "o3d_lsmesh.app.cli", "o3d_lsmesh.app.commands")
