@@ -130,7 +130,8 @@ system:
 	  apt-get update -qq && apt-get install -y -qq --no-install-recommends $$missing; \
 	fi
 
-$(STAMP): setup.cfg setup.py pyproject.toml o3d_lsmesh/hierarchy/collapse.pyx o3d_lsmesh/_fill_kernel.pyx o3d_lsmesh/_block_kernel.pyx | system
+$(STAMP): setup.cfg setup.py pyproject.toml o3d_lsmesh/hierarchy/collapse.pyx o3d_lsmesh/_block_kernel.pyx \
+		o3d_lsmesh/_triangulation_kernel.pyx o3d_lsmesh/_patch_kernel.pyx o3d_lsmesh/_fill_common.pxd | system
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q -e '.[test]'

@@ -63,8 +63,12 @@ extensions = [
     Extension(
         "o3d_lsmesh.hierarchy.collapse", ["o3d_lsmesh/hierarchy/collapse.pyx"], extra_compile_args=flags
     ),
-    # hole filling's dynamic programme, refinement flips, relaxation and crossing test
-    Extension("o3d_lsmesh._fill_kernel", ["o3d_lsmesh/_fill_kernel.pyx"], extra_compile_args=flags),
+    # hole filling's loops, in two (sharing _fill_common.pxd): Liepa's programme, the refinement's splits
+    # and flips, a loop's geometry; then the fairing's local mesh and system, the relaxation, the crossings
+    Extension(
+        "o3d_lsmesh._triangulation_kernel", ["o3d_lsmesh/_triangulation_kernel.pyx"], extra_compile_args=flags
+    ),
+    Extension("o3d_lsmesh._patch_kernel", ["o3d_lsmesh/_patch_kernel.pyx"], extra_compile_args=flags),
     # the iterative solver's block products and Gauss-Seidel sweeps, on every core where the compiler
     # has OpenMP (BuildExt adds the flag)
     Extension("o3d_lsmesh._block_kernel", ["o3d_lsmesh/_block_kernel.pyx"], extra_compile_args=list(flags)),

@@ -20,7 +20,7 @@ from hypothesis import strategies as st
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 
-from o3d_lsmesh import O3DLSMeshWarning, _fill_kernel, fill_holes
+from o3d_lsmesh import O3DLSMeshWarning, _patch_kernel, _triangulation_kernel, fill_holes
 from o3d_lsmesh.core.boundary import boundary_loops
 from o3d_lsmesh.core.operators import patch_system
 from o3d_lsmesh.holes import DP_MAX_EDGES, HoleFiller, fill_holes_arrays, find_holes
@@ -31,7 +31,7 @@ from o3d_lsmesh.holes.triangulate import delaunay_triangles
 
 def _minimum_weight_triangulation(points, outer, forbidden):
     """The compiled dynamic programme on one loop (``forbidden`` a bool array or None)."""
-    return _fill_kernel.minimum_weight_triangulation(
+    return _triangulation_kernel.minimum_weight_triangulation(
         np.ascontiguousarray(points, dtype=float),
         np.ascontiguousarray(outer, dtype=float),
         None if forbidden is None else np.ascontiguousarray(forbidden, dtype=np.uint8),
@@ -273,7 +273,7 @@ def test_dynamic_programme_within_delaunay_triangles(k, seed, bump):
     allowed = delaunay_triangles(points)
     assume(allowed is not None)  # near-cospherical points: not restricted (the test below)
     assert {tuple(np.unravel_index(c, (k, k, k))) for c in np.flatnonzero(allowed)} == faces
-    tris = _fill_kernel.minimum_weight_triangulation(points, outer, None, allowed)
+    tris = _triangulation_kernel.minimum_weight_triangulation(points, outer, None, allowed)
     best = reference_triangulation(points, outer, faces)
     if best is None:
         assert np.array_equal(tris, _minimum_weight_triangulation(points, outer, None))
@@ -342,7 +342,7 @@ def test_local_mesh_is_the_plain_breadth_first_rings():
     seeds = np.array([0, 5])
     indptr = np.concatenate([[0], np.cumsum(np.bincount(T.ravel(), minlength=len(V)))])
     order = np.argsort(T.ravel(), kind="stable")
-    vertices, local, rings = _fill_kernel.local_mesh(T, indptr, order // 3, seeds, 2, T[:1] + 0)
+    vertices, local, rings = _patch_kernel.local_mesh(T, indptr, order // 3, seeds, 2, T[:1] + 0)
     rings = [vertices[ring] for ring in rings]
     neighbours = {v: set() for v in range(len(V))}
     for a, b, c in T.tolist():
@@ -974,7 +974,7 @@ def test_dynamic_programme_is_optimal_on_random_loops(k, seed, bump, unknown):
 
 
 def reference_relax(points, tris, fixed_pairs, dirty):
-    """Liepa's relaxation as plain loops over lists: the rules of ``_fill_kernel.relax``'s docstring.
+    """Liepa's relaxation as plain loops over lists: the rules of ``_triangulation_kernel.relax``'s docstring.
 
     Passes: every interior edge (in the order of its vertex pair) of a dirty triangle, or whose flip a
     removed edge blocked, is proposed if its flip makes a new edge, ``d`` is inside the circumsphere of
@@ -1092,11 +1092,11 @@ def test_relax_matches_plain_flip_loop(seed, size, bump):
     dirty = rng.random(len(tris)) < 0.7
     border = np.array([(i, i + 1) for i in range(size - 1)])  # edges around the patch: never made
     fixed = np.concatenate([border, [[0, size + 1]]])  # and a chord (made by no flip)
-    got = _fill_kernel.relax(points, tris, fixed, dirty)
+    got = _triangulation_kernel.relax(points, tris, fixed, dirty)
     assert np.array_equal(got, reference_relax(points, tris, fixed, dirty))
     # all dirty: no flip is left for a plain check of every edge
     every = np.ones(len(tris), dtype=bool)
-    done = _fill_kernel.relax(points, tris, fixed, every)
+    done = _triangulation_kernel.relax(points, tris, fixed, every)
     assert np.array_equal(reference_relax(points, done, fixed, every), done)
 
 
@@ -1142,7 +1142,7 @@ def test_refine_matches_plain_loops(seed, size, scale):
     sigma = scale * rng.uniform(0.5, 1.0, len(points))
     owner = np.arange(len(points)) % 3
     fixed = np.array([(i, i + 1) for i in range(size - 1)])
-    got = _fill_kernel.refine(points, sigma, tris, fixed, owner, np.sqrt(2.0))
+    got = _triangulation_kernel.refine(points, sigma, tris, fixed, owner, np.sqrt(2.0))
     expected = reference_refine(points, sigma, tris, fixed, owner, np.sqrt(2.0))
     assert np.array_equal(got[1], expected[1]) and np.array_equal(got[2], expected[2])
     np.testing.assert_allclose(got[0], expected[0], rtol=0, atol=1e-12)
@@ -1155,7 +1155,7 @@ def test_tangential_relax_matches_plain_loop():
     order = np.argsort(np.isin(np.arange(len(points)), [7, 8, 9, 13, 14, 15, 20, 21]), kind="stable")
     rank = np.argsort(order)  # renumber so that the eight inner vertices come last (the new ones)
     V, T, first = points[order].copy(), rank[tris], len(points) - 8
-    got = _fill_kernel.tangential_relax(V, T, first)
+    got = _patch_kernel.tangential_relax(V, T, first)
     x = V.copy()
     for _ in range(10):
         moves = {}
@@ -1175,19 +1175,21 @@ def test_tangential_relax_matches_plain_loop():
 
 def test_kernel_rejects_bad_shapes():
     with pytest.raises(ValueError, match="at least 3"):
-        _fill_kernel.minimum_weight_triangulation(np.zeros((2, 3)), np.zeros((2, 3)))
+        _triangulation_kernel.minimum_weight_triangulation(np.zeros((2, 3)), np.zeros((2, 3)))
     with pytest.raises(ValueError, match=r"\(k, 3\)"):
-        _fill_kernel.minimum_weight_triangulation(np.zeros((4, 3)), np.zeros((3, 3)))
+        _triangulation_kernel.minimum_weight_triangulation(np.zeros((4, 3)), np.zeros((3, 3)))
     with pytest.raises(ValueError, match=r"\(k, k\)"):
-        _fill_kernel.minimum_weight_triangulation(
+        _triangulation_kernel.minimum_weight_triangulation(
             np.zeros((4, 3)), np.zeros((4, 3)), np.zeros((3, 3), np.uint8)
         )
     with pytest.raises(ValueError, match="outside points"):
-        _fill_kernel.relax(np.zeros((3, 3)), np.array([[0, 1, 5]]), np.zeros((0, 2), np.int64), [True])
+        _triangulation_kernel.relax(
+            np.zeros((3, 3)), np.array([[0, 1, 5]]), np.zeros((0, 2), np.int64), [True]
+        )
     with pytest.raises(ValueError, match="first_new"):
-        _fill_kernel.tangential_relax(np.zeros((3, 3)), np.array([[0, 1, 2]]), 4)
+        _patch_kernel.tangential_relax(np.zeros((3, 3)), np.array([[0, 1, 2]]), 4)
     with pytest.raises(ValueError, match="one row per new triangle"):
-        _fill_kernel.patch_crossings(
+        _patch_kernel.patch_crossings(
             np.eye(3),
             np.array([[0, 1, 2]]),
             0,
@@ -1211,7 +1213,7 @@ def test_loop_geometry_matches_plain_loops(seed, size):
     rows = rng.integers(0, 3 * m, len(loop))
     order = np.argsort(tris.ravel(), kind="stable")
     indptr = np.concatenate([[0], np.cumsum(np.bincount(tris.ravel(), minlength=n))])
-    got_points, outer, got, spacing, pairs = _fill_kernel.loop_geometry(
+    got_points, outer, got, spacing, pairs = _triangulation_kernel.loop_geometry(
         loop, rows, points, tris, indptr, order // 3
     )
     assert np.array_equal(got_points, points[loop])

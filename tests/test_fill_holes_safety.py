@@ -174,10 +174,10 @@ def test_non_finite_cotangent_system_falls_back_for_its_hole_alone(monkeypatch):
     # dragon.ply: one hole's cotangent system was not finite and the whole call raised "matrix must have
     # finite entries", blaming the input. Here one hole's cotangent weights are made infinite: that hole
     # gets the uniform fill, the other the cotangent one, each as when filled alone; no error.
-    from o3d_lsmesh import _fill_kernel
+    from o3d_lsmesh import _patch_kernel
 
     V, T = _two_holes()
-    assemble = _fill_kernel.patch_system
+    assemble = _patch_kernel.patch_system
 
     def poison(x, tris, unknown, ring0, ring1, level, cot, dense):
         normal, rhs = assemble(x, tris, unknown, ring0, ring1, level, cot, dense)
@@ -190,7 +190,7 @@ def test_non_finite_cotangent_system_falls_back_for_its_hole_alone(monkeypatch):
         return normal, rhs
 
     both = fill_quietly(V, T)
-    monkeypatch.setattr(_fill_kernel, "patch_system", poison)
+    monkeypatch.setattr(_patch_kernel, "patch_system", poison)
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # no warning either: both holes are filled
         poisoned = fill_holes_arrays(V, T)
@@ -315,15 +315,15 @@ def test_density_is_bounded():
 
 
 def test_refinement_stops_at_its_budget():
-    from o3d_lsmesh import _fill_kernel
+    from o3d_lsmesh import _triangulation_kernel
     from o3d_lsmesh.holes.triangulate import refine_budget
 
     # a large flat triangle with tiny scales: unbounded, it splits for many rounds
     points = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], float)
     tris = np.array([[0, 1, 2]])
     args = (points, np.full(3, 0.01), tris, np.zeros((0, 2), np.int64), np.zeros(3, np.int64), np.sqrt(2))
-    free = _fill_kernel.refine(*args)[0]
-    capped = _fill_kernel.refine(*args, 200)[0]
+    free = _triangulation_kernel.refine(*args)[0]
+    capped = _triangulation_kernel.refine(*args, 200)[0]
     assert len(free) > 1000 and 3 < len(capped) <= 200
     # the budget: 4 A / mean(sigma)^2, about twice an even mesh at that spacing
     assert refine_budget(points, tris, np.full(3, 0.01)) == pytest.approx(4 * 0.5 / 1e-4, rel=1e-9)

@@ -41,7 +41,9 @@ SDIST_MUST_HOLD = [
     "pyproject.toml",
     "MANIFEST.in",
     "o3d_lsmesh/hierarchy/collapse.pyx",
-    "o3d_lsmesh/_fill_kernel.pyx",
+    "o3d_lsmesh/_triangulation_kernel.pyx",
+    "o3d_lsmesh/_patch_kernel.pyx",
+    "o3d_lsmesh/_fill_common.pxd",
     "o3d_lsmesh/_block_kernel.pyx",
     "o3d_lsmesh/py.typed",
     "tests/conftest.py",
@@ -193,7 +195,8 @@ def test_wheel_metadata_licence_and_contents():
     assert any(re.fullmatch(r"o3d_lsmesh/hierarchy/collapse\..*(so|pyd)", n) for n in names), (
         "no compiled kernel"
     )
-    assert any(re.fullmatch(r"o3d_lsmesh/_fill_kernel\..*(so|pyd)", n) for n in names), "no fill kernel"
+    for kernel in ("_triangulation_kernel", "_patch_kernel"):
+        assert any(re.fullmatch(rf"o3d_lsmesh/{kernel}\..*(so|pyd)", n) for n in names), f"no {kernel}"
     assert any(re.fullmatch(r"o3d_lsmesh/_block_kernel\..*(so|pyd)", n) for n in names), "no block kernel"
     assert "o3d_lsmesh/py.typed" in names
     assert not [n for n in names if n.startswith(("tests/", "benchmarks/", "examples/", "docs/"))]

@@ -19,7 +19,12 @@ assert "site-packages" in o3d_lsmesh.__file__, f"not the installed package: {o3d
 if "--no-compiler" in sys.argv:
     found = [name for name in ("gcc", "cc", "clang") if shutil.which(name)]
     assert not found, f"a compiler is on PATH: {found}"
-for kernel in ("o3d_lsmesh.hierarchy.collapse", "o3d_lsmesh._fill_kernel", "o3d_lsmesh._block_kernel"):
+for kernel in (
+    "o3d_lsmesh.hierarchy.collapse",
+    "o3d_lsmesh._triangulation_kernel",
+    "o3d_lsmesh._patch_kernel",
+    "o3d_lsmesh._block_kernel",
+):
     print("loaded", importlib.import_module(kernel).__file__)
 
 # a noisy unit sphere of 6.4k vertices: the denoiser brings its radii closer to 1

@@ -348,7 +348,7 @@ def patch_system(
     >>> (np.linalg.solve(A, b) * 3).round(6).tolist()
     [[1.0, 1.0, 1.0]]
     """
-    from .._fill_kernel import patch_system as assemble  # compiled by the package's build
+    from .._patch_kernel import patch_system as assemble  # compiled by the package's build
 
     ring0 = rings[0] if rings else np.zeros(0, dtype=np.int64)
     ring1 = rings[1] if level > 1 else ring0

@@ -9,7 +9,19 @@ from typing import Any
 
 import numpy as np
 
-from .triangulate import _kernel
+_KERNEL: Any = None
+
+
+def _patch_kernel() -> Any:
+    """The compiled loops of a patch (``_patch_kernel.pyx``: its local mesh and fairing system, the
+    relaxation, the crossing test), imported at first use, so that the package imports from a source
+    tree whose extensions are not built."""
+    global _KERNEL
+    if _KERNEL is None:
+        from .. import _patch_kernel
+
+        _KERNEL = _patch_kernel
+    return _KERNEL
 
 
 class _TriangleIndex:
@@ -18,7 +30,7 @@ class _TriangleIndex:
     Two grids, the spheres of radius at most 4 times the median and the rest, each queried with its own
     largest radius, so that a few long slivers do not make every query reach far. Each grid (cells of
     about that radius, at most ``4 m`` of them) lists its triangles cell by cell (one stable sort):
-    a patch's query reads a few cells in the compiled :func:`o3d_lsmesh._fill_kernel.patch_crossings`,
+    a patch's query reads a few cells in the compiled :func:`o3d_lsmesh._patch_kernel.patch_crossings`,
     where a k-d tree's ball query cost SciPy's per-call overhead (queries are thread-safe; the grids
     pickle).
     """
@@ -65,7 +77,7 @@ def _crossings(
     and edge they share: crossings, and folds flat onto a neighbour. With ``owner`` (each new triangle's
     hole), a hole's triangles are not tested once one crosses: nonzero counts then only mark the holes.
 
-    One compiled test (:func:`o3d_lsmesh._fill_kernel.patch_crossings`): each new triangle against the
+    One compiled test (:func:`o3d_lsmesh._patch_kernel.patch_crossings`): each new triangle against the
     input triangles of ``index`` (a :class:`_TriangleIndex` of ``triangles[:first_new]``; if None, one
     is built of the input triangles in the new triangles' box) and the new ones, near it.
     """
@@ -80,7 +92,7 @@ def _crossings(
         boxed = np.flatnonzero(in_box[triangles[:first_new]].any(axis=1))
         index = _TriangleIndex(vertices, triangles[boxed])
         triangles, first_new = np.concatenate([triangles[boxed], triangles[first_new:]]), len(boxed)
-    return _kernel().patch_crossings(
+    return _patch_kernel().patch_crossings(
         vertices,
         triangles,
         first_new,

@@ -15,9 +15,8 @@ from ..core import tuning as core_tuning
 from ..core.errors import SingularSystemError
 from ..core.operators import patch_system
 from ..core.solve import solve_spd
-from .crossings import _crossings
+from .crossings import _crossings, _patch_kernel
 from .find import _cross
-from .triangulate import _kernel
 
 
 def _fair(x: np.ndarray, tris: np.ndarray, unknown: np.ndarray, rings: list, level: int, cot: bool):
@@ -122,7 +121,7 @@ def fair_patches(
     # numbering (nothing as long as the mesh): the new vertices, every one on a new triangle and
     # numbered last, stay last; one connectivity for every solve below
     new_tris = triangles[m:]
-    local_vertices, local, local_rings = _kernel().local_mesh(
+    local_vertices, local, local_rings = _patch_kernel().local_mesh(
         filler.triangles, *filler.vertex_triangles, loops, continuity, new_tris
     )
     local_unknown = np.arange(len(local_vertices) - len(unknown), len(local_vertices))
@@ -152,9 +151,9 @@ def fair_patches(
                     again = np.where(np.isfinite(again).all(axis=1)[:, None], again, solution)
                 if again is not None and keeps_facing(work, again, new_tris):
                     work[n:] = again
-                    yield level, _kernel().tangential_relax(work, new_tris, n)
+                    yield level, _patch_kernel().tangential_relax(work, new_tris, n)
                     work[n:] = solution
-            yield level, _kernel().tangential_relax(work, new_tris, n)
+            yield level, _patch_kernel().tangential_relax(work, new_tris, n)
             work[n:] = refined
         yield -1, refined  # the refined patch as triangulated
 

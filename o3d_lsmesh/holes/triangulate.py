@@ -18,13 +18,13 @@ _KERNEL: Any = None
 
 
 def _kernel() -> Any:
-    """The compiled loops (``_fill_kernel.pyx``), imported at first use, so that the package imports from
-    a source tree whose extensions are not built."""
+    """The compiled loops (``_triangulation_kernel.pyx``), imported at first use, so that the package
+    imports from a source tree whose extensions are not built."""
     global _KERNEL
     if _KERNEL is None:
-        from .. import _fill_kernel
+        from .. import _triangulation_kernel
 
-        _KERNEL = _fill_kernel
+        _KERNEL = _triangulation_kernel
     return _KERNEL
 
 

@@ -2,23 +2,7 @@ import numpy as np
 
 Array = np.ndarray
 
-def minimum_weight_triangulation(
-    points: Array, outer_normals: Array, forbidden: Array | None = None, allowed: Array | None = None
-) -> Array: ...
-def relax(points: Array, triangles: Array, fixed_pairs: Array, dirty: Array) -> Array: ...
-def refine(
-    points: Array,
-    sigma: Array,
-    triangles: Array,
-    fixed_pairs: Array,
-    owner: Array,
-    alpha: float,
-    max_points: int = -1,
-) -> tuple[Array, Array, Array]: ...
 def tangential_relax(vertices: Array, new_tris: Array, first_new: int, iterations: int = 10) -> Array: ...
-def loop_geometry(
-    loop: Array, rows: Array, vertices: Array, triangles: Array, indptr: Array, data: Array
-) -> tuple[Array, Array, Array, float, Array]: ...
 def local_mesh(
     triangles: Array, indptr: Array, data: Array, seeds: Array, count: int, new_tris: Array
 ) -> tuple[Array, Array, list[Array]]: ...

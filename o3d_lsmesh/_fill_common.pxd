@@ -1,0 +1,56 @@
+# cython: language_level=3
+# What both hole-filling kernels (_triangulation_kernel, _patch_kernel) share: 3-vector arithmetic,
+# undirected edge keys and their sorting and search, the index check of their arguments.
+
+from libc.stdint cimport int64_t
+
+cdef inline bint _outside(const int64_t* a, int64_t count, int64_t n) noexcept nogil:
+    """Whether an index of ``a`` is outside ``[0, n)`` (the arguments' check, without NumPy's reductions)."""
+    cdef int64_t k
+    for k in range(count):
+        if a[k] < 0 or a[k] >= n:
+            return True
+    return False
+
+cdef inline double _dot(const double* a, const double* b) noexcept nogil:
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+cdef inline void _sub(const double* a, const double* b, double* out) noexcept nogil:
+    out[0] = a[0] - b[0]
+    out[1] = a[1] - b[1]
+    out[2] = a[2] - b[2]
+
+cdef inline void _cross(const double* u, const double* v, double* out) noexcept nogil:
+    out[0] = u[1] * v[2] - u[2] * v[1]
+    out[1] = u[2] * v[0] - u[0] * v[2]
+    out[2] = u[0] * v[1] - u[1] * v[0]
+
+ctypedef struct Half:  # a half-edge's undirected key and its index 3 t + s
+    int64_t key
+    int64_t h
+
+cdef inline int _by_key(const void* x, const void* y) noexcept nogil:
+    cdef const Half* p = <const Half*>x
+    cdef const Half* q = <const Half*>y
+    if p.key != q.key:
+        return -1 if p.key < q.key else 1
+    return -1 if p.h < q.h else (1 if p.h > q.h else 0)
+
+cdef inline int _by_value(const void* x, const void* y) noexcept nogil:
+    cdef int64_t p = (<const int64_t*>x)[0], q = (<const int64_t*>y)[0]
+    return -1 if p < q else (1 if p > q else 0)
+
+cdef inline int64_t _key(int64_t a, int64_t b) noexcept nogil:
+    """An undirected edge's key, ordered as ``(min, max)``."""
+    return (a << 32) | b if a < b else (b << 32) | a
+
+cdef inline int64_t _lower(const int64_t* sorted_, int64_t n, int64_t key, int64_t stride) noexcept nogil:
+    """The first of the ``n`` sorted values ``sorted_[0], sorted_[stride], ...`` not below ``key`` (or ``n``)."""
+    cdef int64_t lo = 0, hi = n, mid
+    while lo < hi:
+        mid = (lo + hi) >> 1
+        if sorted_[mid * stride] < key:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
