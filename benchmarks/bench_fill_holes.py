@@ -660,7 +660,7 @@ NOTES = """\
   case; from the OFF file 0.51-1.51 (horse 2.5h 58 ms against 69 in the first, of which Open3D's OFF
   reader about 43). On this virtual machine the same hole's whole call from a file (camel 6h) took
   49-60 ms (ours) and 43-75 ms (CGAL) in three back-to-back runs of five: a ratio near 1 swings either
-  way between runs. The per-hole loops are compiled (``o3d_lsmesh/_fill_kernel.pyx``: the dynamic
+  way between runs. The per-hole loops are compiled (``o3d_lsmesh/_triangulation_kernel.pyx``, ``_patch_kernel.pyx``: the dynamic
   programme, the splits and flips, the fairing system's assembly, the tangential relaxation and the
   crossing test ``patch_crossings``: the triangles near the patch from
   uniform grids built with the filler, every new triangle against each, the separating axes). From
