@@ -1,6 +1,6 @@
 """The redesign's budgets (#36): the package's size, the size of each module, and no private internals.
 
-Counted like a reviewer would: every line of ``.py``, ``.pyx`` and ``.pyi`` under ``o3d_lsmesh/``,
+Counted like a reviewer would: every line of ``.py``, ``.pyx``, ``.pxd`` and ``.pyi`` under ``o3d_lsmesh/``,
 docstrings and blanks included (generated C is not source).
 """
 
@@ -13,7 +13,7 @@ import pytest
 
 PACKAGE = Path(__file__).resolve().parents[1] / "o3d_lsmesh"
 TOTAL_LINES = 13_000
-MODULE_LINES = {".py": 500, ".pyx": 900, ".pyi": 500}
+MODULE_LINES = {".py": 500, ".pyx": 900, ".pyi": 500, ".pxd": 500}
 
 # what the package must not reach into: numpy's, SciPy's, Cython's, tqdm's and the interpreter's own
 PRIVATE = {
