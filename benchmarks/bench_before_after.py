@@ -1,9 +1,10 @@
 """Old main against new main, side by side in one run: the same public calls, their outputs and their CPU time.
 
 Each case runs in a fresh process of each tree (``--before`` a checkout of the old main with its kernels
-built in place, ``--after`` this one), alternating, ``--repeat`` times; the table gives the median CPU
-seconds of the first call in a fresh process (lazy imports and the kernels' first use included) and
-of a warm call (the best of three more), each ratio after/before, and the
+built in place, ``--after`` this one), alternating, ``--repeat`` times; it prints the median CPU
+seconds of ``import o3d_lsmesh``, and the table those of the first call in a fresh process (lazy
+imports and the kernels' first use included) and of a warm call (the best of three more), each ratio
+after/before, and the
 largest difference between the two outputs (0 means bit-identical: every quality figure computed from
 them is unchanged).
 
@@ -75,7 +76,9 @@ WORKER = """
 import json, os, sys, time, warnings
 sys.path.insert(0, sys.argv[1])
 import numpy as np, open3d as o3d
+start = time.process_time()
 import o3d_lsmesh
+imported = time.process_time() - start
 assert o3d_lsmesh.__file__.startswith(sys.argv[1]), o3d_lsmesh.__file__
 code = sys.argv[3]
 warnings.simplefilter("ignore")
@@ -91,7 +94,7 @@ elif isinstance(out, o3d.geometry.TriangleMesh):
     np.savez(sys.argv[4], v=np.asarray(out.vertices), t=np.asarray(out.triangles))
 else:
     np.savez(sys.argv[4], v=np.asarray(out), t=np.zeros(0))
-print(json.dumps({"first": cpu[0], "warm": min(cpu[1:])}))
+print(json.dumps({"import": imported, "first": cpu[0], "warm": min(cpu[1:])}))
 """
 
 
@@ -126,6 +129,7 @@ def main() -> None:
     parser.add_argument("--only", nargs="*", help="case names containing one of these words")
     args = parser.parse_args()
     rows = []
+    import_times: dict[str, list[float]] = {"before": [], "after": []}
     with tempfile.TemporaryDirectory() as scratch:
         for name, (mesh, code) in CASES.items():
             if args.only and not any(word in name for word in args.only):
@@ -138,6 +142,8 @@ def main() -> None:
             for _ in range(args.repeat):  # alternate, so that a busy spell weighs on both
                 for side, tree in (("before", args.before), ("after", args.after)):
                     times[side].append(run(tree.resolve(), mesh, code, outs[side]))
+            for side in ("before", "after"):
+                import_times[side] += [t["import"] for t in times[side]]
             row = [name]
             for kind in ("first", "warm"):
                 before, after = (statistics.median(t[kind] for t in times[s]) for s in ("before", "after"))
