@@ -151,6 +151,8 @@ def main() -> None:
             row.append(difference(outs["before"], outs["after"]))
             rows.append(row)
             print(" ".join(str(round(x, 4)) if isinstance(x, float) else x for x in row), flush=True)
+    before, after = (statistics.median(import_times[s]) for s in ("before", "after"))
+    print(f"\nimport o3d_lsmesh, CPU s (median over every process): before {before:.3f}, after {after:.3f}")
     print(
         "\n| case | first call: before | after | ratio | warm call: before | after | ratio | largest output difference |"
     )
