@@ -18,7 +18,7 @@ demo: $(STAMP)
 	$(PY) -m o3d_lsmesh demo
 
 # second pass: the solver-facing tests again on the SciPy fallback (as without scikit-sparse)
-FALLBACK_TESTS := tests/test_solvers.py tests/test_fallback.py tests/test_lsmesh.py tests/test_encoding.py tests/test_selection.py
+FALLBACK_TESTS := tests/test_solve.py tests/test_solvers.py tests/test_fallback.py tests/test_lsmesh.py tests/test_encoding.py tests/test_selection.py
 
 # lint, format, types and the import rules first: they take seconds and fail on any finding; then the
 # docstring examples, and the suite on every core (pytest-xdist)
@@ -46,7 +46,7 @@ MATRIX_LOWEST := numpy==1.23.2 scipy==1.9.2 open3d==0.18.0 tqdm==4.62.0 threadpo
 MATRIX_TOOLS := pytest hypothesis
 MATRIX_TESTS := tests/test_packaging.py tests/test_solvers.py tests/test_fallback.py tests/test_lsmesh.py \
   tests/test_fairing.py tests/test_hierarchy.py tests/test_formats.py tests/test_validate.py \
-  tests/test_readme.py tests/test_render.py tests/test_laplacian.py tests/test_topology.py
+  tests/test_readme.py tests/test_render.py tests/test_operators.py tests/test_topology.py
 # Open3D 0.18's CUDA build warns at import on a machine without a GPU, and its Filament renderer finds
 # no EGL display headless, so render() says it draws with the RaycastingScene fallback (the pictures are
 # still checked): neither is a defect to turn into an error here
