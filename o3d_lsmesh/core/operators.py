@@ -289,12 +289,12 @@ def scan_normal_matrix(
         plate[backward[rim]] -= curve_inverse[hi[rim]]
     # K's CSR arrays are K^T's CSC: K^T K by the compiled product; symmetric, so its CSC arrays are its
     # CSR ones. Its pattern holds the 1-ring (K_ii K_ij): the 1-ring terms are added into it in place
-    from .. import _block_kernel  # compiled by the package's build: imported where used
+    from .._block_kernel import add_subset  # compiled by the package's build: imported where used
 
     square = gram_matrix(sp.csc_matrix((plate, indices, indptr), shape=(n, n)))
     del plate
     index = square.indices.dtype
-    missing = _block_kernel.add_subset(
+    missing = add_subset(
         square.indptr,
         square.indices,
         square.data,

@@ -55,17 +55,15 @@ class LocalOperator:
         work: np.ndarray | None = None,
     ) -> np.ndarray:
         """``E1 @ (W @ X) + E2 @ X + constant``, ``(n, 3)``, into ``out`` with scratch ``work`` when given."""
-        from .. import _block_kernel  # compiled by the package's build: imported where used
+        from .._block_kernel import block_product, pair_product  # compiled: imported where used
 
         positions = np.ascontiguousarray(positions, dtype=np.float64)
         out = np.empty_like(constant) if out is None else out
         work = np.empty_like(out) if work is None else work
         indptr = self.e1.indptr.astype(self.e1.indices.dtype, copy=False)  # the four share one pattern
-        _block_kernel.block_product(indptr, self.e1.indices, self.adjacency.data, positions, work)
+        block_product(indptr, self.e1.indices, self.adjacency.data, positions, work)
         # E2 X and E1 (W X) in one pass over the pattern, on top of the constant
-        _block_kernel.pair_product(
-            indptr, self.e1.indices, self.e2.data, positions, self.e1.data, work, constant, out
-        )
+        pair_product(indptr, self.e1.indices, self.e2.data, positions, self.e1.data, work, constant, out)
         return out
 
 

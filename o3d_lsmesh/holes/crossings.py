@@ -18,9 +18,9 @@ def _patch_kernel() -> Any:
     tree whose extensions are not built."""
     global _KERNEL
     if _KERNEL is None:
-        from .. import _patch_kernel
+        import o3d_lsmesh._patch_kernel as kernel  # the module by its own name, not the package's
 
-        _KERNEL = _patch_kernel
+        _KERNEL = kernel
     return _KERNEL
 
 

@@ -22,9 +22,9 @@ def _kernel() -> Any:
     imports from a source tree whose extensions are not built."""
     global _KERNEL
     if _KERNEL is None:
-        from .. import _triangulation_kernel
+        import o3d_lsmesh._triangulation_kernel as kernel  # the module by its own name, not the package's
 
-        _KERNEL = _triangulation_kernel
+        _KERNEL = kernel
     return _KERNEL
 
 
