@@ -57,8 +57,20 @@ def sphere(holes: int = 0) -> o3d.geometry.TriangleMesh:
         (3, lambda mesh: o3d_lsmesh.fill_holes(mesh)),
         (0, lambda mesh: o3d_lsmesh.ls_mesh(mesh, np.arange(0, 200, 7))),
         (0, lambda mesh: o3d_lsmesh.topology_summary(mesh)),
+        (0, lambda mesh: o3d_lsmesh.select_control_points(mesh, 12)),
+        (0, lambda mesh: o3d_lsmesh.select_control_points(mesh, 40, method="combined", batch=8)),
     ],
-    ids=["scan", "local", "global", "features", "fill_holes", "ls_mesh", "topology_summary"],
+    ids=[
+        "scan",
+        "local",
+        "global",
+        "features",
+        "fill_holes",
+        "ls_mesh",
+        "topology_summary",
+        "greedy",
+        "combined",
+    ],
 )
 def test_a_public_call_validates_once_and_builds_one_connectivity(counts, holes, call):
     mesh = sphere(holes)

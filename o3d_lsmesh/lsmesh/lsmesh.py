@@ -78,6 +78,7 @@ class LSMeshSystem:
         solver: str = "auto",
         tol: float | None = None,
         progress: bool = False,
+        _conn: Connectivity | None = None,
     ) -> None:
         n = len(vertices)
         indices = as_indices(
@@ -89,7 +90,9 @@ class LSMeshSystem:
         # one lock: an update and a solve on other threads never see a half-updated system
         self._lock = threading.RLock()
         backend = solver_backend(solver, backend)
-        L = laplacian_matrix(vertices, triangles, laplacian).tocsr()
+        # the caller's connectivity of these triangles when it holds one (one grouping per call)
+        conn = Connectivity(triangles, n) if _conn is None else _conn
+        L = operators.laplacian_of_kind(vertices, conn, laplacian).tocsr()
         labels = check_components_constrained(
             L, indices, what="control vertex", param="constraint_vertex_indices"
         )

@@ -49,10 +49,12 @@ def _first_per_label(labels: np.ndarray, order: np.ndarray, count: int) -> np.nd
     return order[first]
 
 
-def start_vertices(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+def start_vertices(
+    vertices: np.ndarray, triangles: np.ndarray, *, conn: Connectivity | None = None
+) -> np.ndarray:
     """``(c,) int64``: per connected component, in component order, its vertex farthest from its centroid."""
     n = len(vertices)
-    count, labels = Connectivity(triangles, n).components
+    count, labels = (Connectivity(triangles, n) if conn is None else conn).components
     size = np.bincount(labels, minlength=count).astype(np.float64)
     sums = np.stack([np.bincount(labels, weights=vertices[:, a], minlength=count) for a in range(3)], axis=1)
     centroid = sums / size[:, None]
@@ -62,9 +64,9 @@ def start_vertices(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     return _first_per_label(labels, order, count)
 
 
-def _random(vertices: np.ndarray, triangles: np.ndarray, count: int, rng: np.random.Generator) -> np.ndarray:
+def _random(vertices: np.ndarray, conn: Connectivity, count: int, rng: np.random.Generator) -> np.ndarray:
     n = len(vertices)
-    components, labels = Connectivity(triangles, n).components
+    components, labels = conn.components
     order = rng.permutation(n)
     start = _first_per_label(labels, order, components)
     rest = np.ones(n, dtype=bool)
@@ -90,7 +92,7 @@ def forbid_around(
 
 def _select(
     vertices: np.ndarray,
-    triangles: np.ndarray,
+    conn: Connectivity,
     count: int,
     weight: float,
     batch: int,
@@ -101,15 +103,15 @@ def _select(
     """Greedy (``batch=1``) or combined selection: one solve per ``batch`` picks, which join the kept factor
     by one rank-``batch`` update; the selection and the system holding all of it."""
     n = len(vertices)
-    start = start_vertices(vertices, triangles)
+    start = start_vertices(vertices, conn.triangles, conn=conn)
     # the per-component seeds are control points too: the bar starts at them and ends at count
     with Progress(progress, desc).bar(count, initial=len(start), unit="point") as bar:
         bar.set_postfix_str("factor")
         indptr = neighbours = np.zeros(0, dtype=np.int64)  # a batch of one forbids nothing
         if batch > 1:
-            adjacency = Connectivity(triangles, n).adjacency
+            adjacency = conn.adjacency
             indptr, neighbours = adjacency.indptr.astype(np.int64), adjacency.indices.astype(np.int64)
-        solver = LSMeshSystem(vertices, triangles, start, weights=weight)
+        solver = LSMeshSystem(vertices, conn.triangles, start, weights=weight, _conn=conn)
         selected = np.zeros(n, dtype=bool)
         selected[start] = True
         order = [start]
@@ -154,7 +156,8 @@ def control_point_selection(
     method = as_choice(method, SELECTION_METHODS, name="method")
     count = as_count(count, name="count", minimum=1, maximum=n)
     weight = as_positive_float(weights, name="weights")
-    components, _ = Connectivity(triangles, n).components
+    conn = Connectivity(triangles, n)  # one grouping of the mesh for the whole selection
+    components, _ = conn.components
     if count < components:
         raise InputError(
             f"count must be at least the number of connected components ({components}, "
@@ -171,11 +174,9 @@ def control_point_selection(
     rng = _rng(seed)
     as_bool(progress, name="progress")
     if method == "random":  # instant: no progress bar
-        return _random(vertices, triangles, count, rng), None
+        return _random(vertices, conn, count, rng), None
     # greedy is the combined method with one pick per solve (batch is None for it)
-    return _select(
-        vertices, triangles, count, weight, batch or 1, desc=f"{method} selection", progress=progress
-    )
+    return _select(vertices, conn, count, weight, batch or 1, desc=f"{method} selection", progress=progress)
 
 
 def select_control_points(
