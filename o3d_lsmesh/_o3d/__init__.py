@@ -20,7 +20,7 @@ import numpy as np
 
 from ..core.errors import InputError, InputTypeError, O3DLSMeshWarning
 from ..core.validate import as_indices, collapsed_triangles, mesh_arrays
-from .io import legacy_mesh, obj_writable, open3d
+from .io import has_textures, legacy_mesh, obj_writable, open3d
 
 __all__ = [
     "ATTRIBUTES",
@@ -246,12 +246,6 @@ def tensor_format_of(data: MeshData) -> tuple:
     src = data.source
     index_dtype = str(src.triangle.indices.dtype) if "indices" in src.triangle else "Int64"
     return (str(src.vertex.positions.device), str(src.vertex.positions.dtype), index_dtype)
-
-
-def has_textures(mesh: Any) -> bool:
-    """Whether a legacy mesh holds a texture image (Open3D's ``has_textures`` is False when one of them
-    is empty, as the empty first slot its OBJ reader adds for faces without a material)."""
-    return any(not texture.is_empty() for texture in mesh.textures)
 
 
 def _row(kind: str, group: str, key: str) -> Attribute:

@@ -179,12 +179,18 @@ def write_mesh_file(mesh: Any, path: str | os.PathLike) -> list[str]:
     return [file.name for file in expected if not file.exists()]
 
 
+def has_textures(mesh: Any) -> bool:
+    """Whether a legacy mesh holds a texture image (Open3D's ``has_textures`` is False when one of them
+    is empty, as the empty first slot its OBJ reader adds for faces without a material)."""
+    return any(not texture.is_empty() for texture in mesh.textures)
+
+
 def unwritten_attributes(mesh: Any, suffix: str) -> list[str]:
     """What of a legacy ``mesh`` a mesh file ending in ``suffix`` does not hold: Open3D's PLY, STL, OFF and
     glTF writers write no texture coordinates or textures, its OBJ writer no textures without them."""
     if not isinstance(mesh, open3d().geometry.TriangleMesh):
         return []
-    uvs, textures = mesh.has_triangle_uvs(), any(not texture.is_empty() for texture in mesh.textures)
+    uvs, textures = mesh.has_triangle_uvs(), has_textures(mesh)
     if suffix.lower() == ".obj":
         return ["textures"] if textures and not uvs else []
     return ["texture coordinates or textures"] if uvs or textures else []
