@@ -21,10 +21,11 @@ from .._o3d import MeshData, new_mesh, read_mesh
 from ..core.arrays import dequantize, quantize
 from ..core.connectivity import Connectivity
 from ..core.errors import InputError, InputTypeError
+from ..core.operators import uniform_laplacian
 from ..core.progress import Progress
 from ..core.solve import check_weight_pins_components
 from ..core.validate import as_bool, as_choice, as_count, as_positive_float
-from .lsmesh import LSMeshSystem, laplacian_matrix, solve_once
+from .lsmesh import LSMeshSystem, solve_once
 from .selection import SELECTION_METHODS, control_point_selection
 
 if TYPE_CHECKING:
@@ -129,9 +130,7 @@ def encode_geometry(
     method = as_choice(method, SELECTION_METHODS, name="method")
     omega = 10.0 * n if weight is None else as_positive_float(weight, name="weight")
     if weight is not None:  # a weight too small to pin the anchors decodes to a drifted mesh
-        check_weight_pins_components(
-            laplacian_matrix(data.vertices, data.triangles, "uniform"), omega, name="weight"
-        )
+        check_weight_pins_components(uniform_laplacian(Connectivity(data.triangles, n)), omega, name="weight")
     indices, _ = control_point_selection(
         data.vertices, data.triangles, count, method=method, weights=omega, seed=0, progress=progress
     )

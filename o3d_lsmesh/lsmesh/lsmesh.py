@@ -30,11 +30,6 @@ if TYPE_CHECKING:
 __all__ = ["LSMeshSolver", "LSMeshSystem", "check_components_constrained", "ls_mesh", "reconstruct_geometry"]
 
 
-def laplacian_matrix(vertices: np.ndarray, triangles: np.ndarray, kind: str) -> sp.csr_matrix:
-    """The ``(n, n)`` uniform or cotangent Laplacian of eq. 1 (:mod:`o3d_lsmesh.core.operators`)."""
-    return operators.laplacian_of_kind(vertices, Connectivity(triangles, len(vertices)), kind)
-
-
 def check_components_constrained(
     graph: sp.spmatrix, constrained: np.ndarray, *, what: str, param: str | None = None
 ) -> np.ndarray:
@@ -216,7 +211,8 @@ class LSMeshSystem:
         if self._updated if refine is None else refine:
             reduced_soft = self._reduce(self._soft)
             if self._operator is None:
-                self._operator = laplacian_matrix(self._vertices, self._triangles, self.laplacian).tocsr()
+                conn = Connectivity(self._triangles, len(self._vertices))
+                self._operator = operators.laplacian_of_kind(self._vertices, conn, self.laplacian).tocsr()
             residual = -(self._operator.T @ (self._operator @ solution))
             if self.interpolate:
                 residual += self._rhs_hard @ fixed
@@ -471,7 +467,9 @@ def reconstruct_geometry(
     # checked with either scheme (the interpolatory one does not use them): a bad value is a mistake either way
     as_weights(weights, len(known), name="weights")
     as_bool(progress, name="progress")
-    L = laplacian_matrix(data.vertices, data.triangles, laplacian).tocsc()
+    L = operators.laplacian_of_kind(
+        data.vertices, Connectivity(data.triangles, len(data.vertices)), laplacian
+    ).tocsc()
     # checked here for both schemes, so that the message names the known vertices the caller left
     check_components_constrained(
         L, known, what="known vertex (outside unknown_vertex_indices)", param="unknown_vertex_indices"
