@@ -126,6 +126,21 @@ def crossover(repeat: int) -> str:
     return markdown_table(["busy processes", "rows", "1 thread (ms)", "2 threads (ms)", "2 / 1"], rows)
 
 
+NOTES = """\
+- The kernels' loops run on one thread below `PARALLEL_ROWS` = 65,536 rows (was 20,000), chosen on the
+  per-loop table above: two threads pay under 10% below 80k rows on a quiet machine and lose beside busy
+  processes. Scored on the whole call: on a quiet machine (load 0.3) the default's ratio went 2.24 -> 2.05
+  (median of 9), its quiet time unchanged (0.150 -> 0.146 s).
+- numpy's OpenBLAS wakes its threads for a dot product of a long vector, and they spin afterwards. The
+  default made two such calls (a work estimate and a sum of squares); both are plain reductions now, and a
+  call makes no BLAS call (breakpoints on every CBLAS entry point of numpy's library). Limiting that one
+  library to one thread had moved the loaded median 0.299 -> 0.231 s before this change.
+- After both changes, four runs on the same quiet machine gave ratios of 2.05, 2.00, 2.06 (9 rounds) and
+  1.94 (15 rounds, the table above): at the target, not clearly below it. One thread on two busy cores
+  gets two thirds of a core, a floor of 1.5x; `OMP_NUM_THREADS=1` measured 1.55-2.00 in the same runs.
+- Earlier run (2026-12-04, load average 12.5 at the start): default 0.749 / 1.585 s, ratio 2.12."""
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=7)
@@ -169,6 +184,7 @@ def main() -> None:
                 "Where threads pay: one CG iteration's loops, median of " + str(args.repeat),
                 crossover(args.repeat),
             ),
+            ("What set the rules", NOTES),
         ],
     )
 

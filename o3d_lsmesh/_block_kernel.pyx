@@ -51,10 +51,11 @@ cdef extern from *:
     int o3d_no_huge_pages(char* p, size_t n) noexcept nogil
 
 #: Loops over fewer rows stay on one thread: a parallel region costs a time slice whenever another job
-#: holds a core the team waits for (benchmarks/results/realscans_denoise_speed.md); results do not
-#: depend on the thread count.
+#: holds a core the team waits for. Chosen on the per-loop table of benchmarks/results/under_load.md
+#: (two threads pay under 10% below 80k rows quiet and lose beside busy processes), scored on the whole
+#: default call on a 40k raw scan in the same file; results do not depend on the thread count.
 cdef enum:
-    PARALLEL_ROWS = 20000
+    PARALLEL_ROWS = 65536
 
 
 cdef inline int _threads(Py_ssize_t rows) noexcept nogil:

@@ -95,7 +95,7 @@ def preconditioner(matrix: sp.spmatrix, kind: str) -> Any:
     if kind == "ic0":
         # row i's lower part times its upper part bounds the products its column takes part in
         lengths = np.diff(csr.indptr).astype(np.float64)
-        if float(np.dot(lengths, lengths)) / 4.0 <= tuning.IC_WORK * max(matrix.nnz, 1):
+        if float(np.square(lengths).sum()) / 4.0 <= tuning.IC_WORK * max(matrix.nnz, 1):
             return IncompleteCholesky(matrix)
     if csr.shape[0] <= tuning.COARSE_UNKNOWNS:
         dense = splu_spd(csr.tocsc())

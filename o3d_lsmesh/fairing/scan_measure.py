@@ -168,7 +168,9 @@ def measured_noise(
         a2 = np.einsum(
             "ij,ij->i", two @ vertices / d2[:, None] - vertices[part], nrm[start : start + len(part)]
         )
-        sum_a2 += float(a2 @ a2)
+        # not a BLAS dot: OpenBLAS wakes its threads for long vectors, and they spin afterwards, which costs
+        # twice the call's time beside busy processes (benchmarks/results/under_load.md)
+        sum_a2 += float(np.square(a2).sum())
         sum_k2 += float(np.sum(1.0 + 1.0 / d2))
         sum_h2 += float(np.sum(_mean_square_distances(two @ smooth_square, two @ smooth, smooth[part], d2)))
     count = len(inner_rows)
