@@ -21,7 +21,7 @@ from typing import Any, Callable
 
 from ..core.errors import InputError, InputTypeError, O3DLSMeshWarning
 from ..core.progress import Progress
-from ..core.validate import as_bool
+from ..core.validate import as_bool, as_choice, as_count, as_positive_float
 from .files import WRITABLE, collect_inputs, digest, inside, output_path
 from .ops import OPS, BatchOp, Option, register_op
 from .tasks import Task, check_scheduler_file, dispatch, failure_record, local_cluster, new_record
@@ -137,7 +137,10 @@ def parse_ops(op: Any) -> list[BatchOp]:
 
 
 def parse_option(op: BatchOp, option: Option, value: Any) -> Any:
-    """``option.parse(value)``; ``InputError`` naming the option (``param``) and its op."""
+    """``option.parse(value)`` (``None`` for an option whose default it is); ``InputError`` naming the
+    option (``param``) and its op."""
+    if value is None and option.default is None:
+        return None
     try:
         return option.parse(value)
     except ValueError as error:
@@ -247,24 +250,15 @@ def run(
     pipeline = ",".join(o.name for o in ops)
     values = resolve_options(ops, options)
 
-    def count(value: Any, minimum: int) -> bool:
-        return isinstance(value, int) and not isinstance(value, bool) and value >= minimum
-
-    seconds = task_timeout
-    both = scheduler is not None and scheduler_file is not None
-    for name, value, bad, expected in (
-        ("suffix", suffix, not isinstance(suffix, str) or suffix.lower() not in WRITABLE, f"one of {', '.join(WRITABLE)}"),
-        ("threads_per_worker", threads_per_worker, not count(threads_per_worker, 1), "an integer >= 1"),
-        ("retries", retries, not count(retries, 0), "an integer >= 0"),
-        ("workers", workers, not count(0 if workers is None else workers, 0), "an integer >= 0"),
-        ("scheduler_file", None, both, "None when scheduler is given (not both)"),
-        ("task_timeout", seconds, seconds is not None and (isinstance(seconds, bool) or not isinstance(seconds, (int, float))
-         or not 0 <= seconds < float("inf")), "a number of seconds >= 0 (0: no limit) or None"),
-    ):  # fmt: skip
-        if bad:
-            got = "" if name == "scheduler_file" else f", got {value!r}"
-            raise InputError(f"{name} must be {expected}{got}", param=name)
-    suffix = suffix.lower()
+    suffix = as_choice(suffix.lower() if isinstance(suffix, str) else suffix, WRITABLE, name="suffix")
+    threads_per_worker = as_count(threads_per_worker, name="threads_per_worker", minimum=1)
+    retries = as_count(retries, name="retries")
+    workers = None if workers is None else as_count(workers, name="workers")
+    if scheduler is not None and scheduler_file is not None:
+        message = "scheduler_file must be None when scheduler is given (not both)"
+        raise InputError(message, param="scheduler_file")
+    if task_timeout is not None:  # 0: no limit
+        task_timeout = as_positive_float(task_timeout, name="task_timeout", allow_zero=True)
     if scheduler_file is not None:
         check_scheduler_file(scheduler_file)
     progress = as_bool(progress, name="progress")

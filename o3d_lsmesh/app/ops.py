@@ -59,16 +59,6 @@ def int_at_least(minimum: int, maximum: int | None = None, rule: str = "") -> Ca
     return parse
 
 
-def optional(parse: Callable[[Any], Any]) -> Callable[[Any], Any]:
-    """Parser accepting ``None`` as well (a choice keeps its ``choices``)."""
-
-    def parse_optional(value: Any) -> Any:
-        return None if value is None else parse(value)
-
-    parse_optional.choices = getattr(parse, "choices", None)  # type: ignore[attr-defined]
-    return parse_optional
-
-
 def real(value: Any) -> float:
     """Parser of a finite float."""
     try:
@@ -151,7 +141,8 @@ class Option:
     """One option of an operation: its flag is ``--`` + ``name`` with ``-`` for ``_``.
 
     ``parse`` takes the value as given (text from the command line or any Python value) and returns
-    it parsed or raises ``ValueError`` saying what it must be; ``is_flag`` makes the flag a switch;
+    it parsed or raises ``ValueError`` saying what it must be (``None`` is taken as it is when it is
+    the default); ``is_flag`` makes the flag a switch;
     ``param`` is the Python API parameter it maps to (default: ``name``); ``cli`` whether the
     subcommand of the same name has the flag (else batch only); ``required`` on the command line.
     """
@@ -250,22 +241,22 @@ _METHODS = ("scan", "local", "global", "features")
 
 # fmt: off
 DENOISE = (
-    Option("iterations", optional(int_at_least(0)), None, "number of fairing iterations (default: the API's, "
+    Option("iterations", int_at_least(0), None, "number of fairing iterations (default: the API's, "
            "10 for local; with --level, 5 per level)", param="number_of_iterations"),
-    Option("method", optional(choice(*_METHODS)), None, "fairing energy (default: scan, the API's default; "
+    Option("method", choice(*_METHODS), None, "fairing energy (default: scan, the API's default; "
            "local with --level, --iterations or --reimpose-every); features keeps sharp creases (guided normal "
            "filtering)"),
     Option("level", int_at_least(0), 0, "multiresolution level (0: plain fairing)"),
-    Option("mu", optional(real), None, "barycenter penalty weight of --method global or scan (default: the API's)"),
-    Option("reimpose_every", optional(int_at_least(1)), None, "re-take the barycenters every k iterations "
+    Option("mu", real, None, "barycenter penalty weight of --method global or scan (default: the API's)"),
+    Option("reimpose_every", int_at_least(1), None, "re-take the barycenters every k iterations "
            "(default: never)"),
     Option("fixed_boundary", flag, False, "keep boundary vertices fixed (default: smooth the boundary curves)",
            is_flag=True, param="smooth_boundary"),
 )
 FILL = (
-    Option("max_hole_edges", optional(int_at_least(3)), None, "fill only holes of at most this many edges "
+    Option("max_hole_edges", int_at_least(3), None, "fill only holes of at most this many edges "
            "(default: no limit)"),
-    Option("max_hole_diameter", optional(real), None, "fill only holes at most this wide (default: no limit)"),
+    Option("max_hole_diameter", real, None, "fill only holes at most this wide (default: no limit)"),
     Option("continuity", choice(0, 1, 2), 2, "0 harmonic, 1 LS mesh, 2 tri-Laplacian"),
     Option("density", real, 1.0, "new vertex density relative to the surroundings (0 to 4)"),
     Option("fill_border", flag, False, "also fill the outer border of open components", is_flag=True),
@@ -273,7 +264,7 @@ FILL = (
 HIERARCHY = (
     Option("levels", levels_spec, "all", "'all' or comma-separated level numbers (0 is the input)"),
     Option("min_vertices", int_at_least(1), 100, "stop at this many vertices"),
-    Option("max_levels", optional(int_at_least(1)), None, "stop after this many levels (default: no limit)"),
+    Option("max_levels", int_at_least(1), None, "stop after this many levels (default: no limit)"),
     Option("maps", flag, False, "also write vertex_maps.npz (input vertex -> level vertex)", is_flag=True),
 )
 APPROXIMATE = (
@@ -289,7 +280,7 @@ ENCODE = (
     Option("method", choice(*_SELECTIONS), "greedy", "how the anchors are chosen"),
 )
 COMPARE = (
-    Option("reference", optional(folder), None, "folder holding a reference for every input (same name or "
+    Option("reference", folder, None, "folder holding a reference for every input (same name or "
            "stem)", cli=False),
     Option("points", int_at_least(1, MAX_POINTS), 100_000, "surface samples per mesh", param="number_of_points"),
 )
