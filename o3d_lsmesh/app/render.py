@@ -392,23 +392,19 @@ def render(
     background = as_real_vector(background, 3, name="background", low=0.0, high=1.0)
     units = as_choice(units, _UNITS, name="units")
     if titles is not None:
-        if isinstance(titles, str) or not isinstance(titles, Sequence):
-            raise InputTypeError(
-                f"titles must be a sequence of strings (one per mesh), got {type(titles).__name__}",
-                param="titles",
-            )
+        if (
+            isinstance(titles, str)
+            or not isinstance(titles, Sequence)
+            or not all(isinstance(t, str) for t in titles)
+        ):
+            message = f"titles must be a sequence of strings (one per mesh), got {titles!r}"
+            raise InputTypeError(message, param="titles")
         if len(titles) != len(items):
-            raise InputError(
-                f"titles must hold one title per mesh ({len(items)}), got {len(titles)}", param="titles"
-            )
-        if not all(isinstance(t, str) for t in titles):
-            raise InputTypeError(
-                "titles must be a sequence of strings (one per mesh), got a non-string item", param="titles"
-            )
+            message = f"titles must hold one title per mesh ({len(items)}), got {len(titles)}"
+            raise InputError(message, param="titles")
     if colorbar_title is not None and not isinstance(colorbar_title, str):
-        raise InputTypeError(
-            f"colorbar_title must be a string, got {type(colorbar_title).__name__}", param="colorbar_title"
-        )
+        message = f"colorbar_title must be a string, got {type(colorbar_title).__name__}"
+        raise InputTypeError(message, param="colorbar_title")
     base_color = as_real_vector(color, 3, name="color", low=0.0, high=1.0)
 
     if width * height * len(items) > MAX_PIXELS:
