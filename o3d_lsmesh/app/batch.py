@@ -24,7 +24,7 @@ from ..core.progress import Progress
 from ..core.validate import as_bool, as_choice, as_count, as_positive_float
 from .files import WRITABLE, collect_inputs, digest, inside, output_path
 from .ops import OPS, BatchOp, Option, register_op
-from .tasks import Task, check_scheduler_file, dispatch, failure_record, local_cluster, new_record
+from .tasks import Task, check_scheduler_file, dispatch, failure_record, local_cluster
 
 __all__ = [
     "OPS",
@@ -275,12 +275,10 @@ def run(
     for index, (path, relative) in enumerate(items):
         target = output_path(outdir, relative, ops[-1], suffix)
         output = None if target is None else str(target)
-        key = task_key(path, ops, values, suffix)
+        task = Task(index, os.path.abspath(path), relative, output, key=task_key(path, ops, values, suffix))
         if output is not None and not inside(output, outdir):  # a symbolic link inside OUTDIR leads out
             message = f"output {output!r} resolves to {os.path.realpath(output)!r}, outside OUTDIR"
-            refused.append(
-                new_record(input=os.path.abspath(path), error=message, stage="write", op=pipeline, key=key)
-            )
+            refused.append(failure_record(task, pipeline, message, stage="write"))
         elif output is not None:
             if output in outputs:
                 raise InputError(
@@ -295,7 +293,7 @@ def run(
                     "suffix, or force)",
                     param="outdir",
                 )
-        tasks.append(Task(index, os.path.abspath(path), relative, output, key))
+        tasks.append(task)
 
     report_path = None if report is None else Path(report)
     # (resume without a report was refused above)

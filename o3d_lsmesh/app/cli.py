@@ -1,10 +1,7 @@
 """The ``o3d-lsmesh`` command line: the entry point, its parser and the mapping of errors to exit codes.
 
 It imports the commands (:mod:`~o3d_lsmesh.app.commands`, :mod:`~o3d_lsmesh.app.op_commands`),
-which import their kit (:mod:`~o3d_lsmesh.app.cli_kit`), never back. Exit codes: 0 success; 2 a
-user error, one line on stderr naming the flag or the file (an :class:`~o3d_lsmesh.core.errors.InputError`
-is mapped to its flag by ``param``); 1 a picture that could not be drawn, or any other error with its
-traceback (a bug); 130 an interrupt. Docs: ``docs/cli.rst`` (generated from ``--help``).
+which import their kit (:mod:`~o3d_lsmesh.app.cli_kit`), never back. Docs: ``docs/cli.rst``.
 """
 
 from __future__ import annotations
@@ -122,8 +119,9 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``o3d-lsmesh`` with ``argv`` (default ``sys.argv[1:]``); return the exit code.
 
-    Exit codes: 0 success, 2 a user error (one line on stderr), 1 a picture that could not be
-    drawn or an internal error (with its traceback), 130 an interrupt.
+    Exit codes: 0 success, 2 a user error (one line on stderr naming the flag or the file: an
+    ``InputError`` is mapped to its flag by ``param``), 1 a picture that could not be drawn or an
+    internal error (with its traceback), 130 an interrupt.
     """
     args = None
     try:

@@ -9,6 +9,7 @@ record with the task's warnings. :func:`dispatch` runs tasks on a Dask cluster (
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import logging
 import os
@@ -223,11 +224,7 @@ class Task:
 
 
 def _dask_available() -> bool:
-    try:
-        import distributed  # noqa: F401
-    except ImportError:
-        return False
-    return True
+    return importlib.util.find_spec("distributed") is not None
 
 
 def _scheduler_address() -> str | None:
