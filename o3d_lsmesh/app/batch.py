@@ -89,17 +89,9 @@ def _intact(outdir: Path, files: Any) -> bool:
     """Whether every file a report record lists is in ``outdir`` with the recorded size and sha256."""
     if not isinstance(files, dict) or not files:
         return False  # a record of an older version, or damaged: run the file again
-    for name, expected in files.items():
-        path = outdir / name
-        if (
-            not isinstance(expected, dict)
-            or not path.is_file()
-            or path.stat().st_size != expected.get("bytes")
-        ):
-            return False
-        if digest(path) != expected:
-            return False
-    return True
+    return all(
+        (outdir / name).is_file() and digest(outdir / name) == expected for name, expected in files.items()
+    )
 
 
 # --------------------------------------------------------------------------- the pipeline and its options
@@ -269,17 +261,23 @@ def run(
     items = collect_inputs(inputs, exclude=outdir)
     if outdir.exists() and not outdir.is_dir():
         raise InputError(f"OUTDIR {str(outdir)!r} exists and is not a folder", param="outdir")
+    # (resume without a report was refused above)
+    previous = _read_report(Path(report)) if resume and report is not None else {}
     tasks: list[Task] = []
+    todo: list[Task] = []
+    records: list[dict | None] = [None] * len(items)
     outputs: dict[str, str] = {}
     refused: list[dict] = []
     for index, (path, relative) in enumerate(items):
         target = output_path(outdir, relative, ops[-1], suffix)
         output = None if target is None else str(target)
         task = Task(index, os.path.abspath(path), relative, output, key=task_key(path, ops, values, suffix))
+        tasks.append(task)
         if output is not None and not inside(output, outdir):  # a symbolic link inside OUTDIR leads out
             message = f"output {output!r} resolves to {os.path.realpath(output)!r}, outside OUTDIR"
             refused.append(failure_record(task, pipeline, message, stage="write"))
-        elif output is not None:
+            continue
+        if output is not None:
             if output in outputs:
                 raise InputError(
                     f"INPUT files {outputs[output]!r} and {path!r} would both write {output!r}; "
@@ -293,17 +291,6 @@ def run(
                     "suffix, or force)",
                     param="outdir",
                 )
-        tasks.append(task)
-
-    report_path = None if report is None else Path(report)
-    # (resume without a report was refused above)
-    previous = _read_report(report_path) if resume and report_path is not None else {}
-    records: list[dict | None] = [None] * len(tasks)
-    todo = []
-    not_run = {record["input"] for record in refused}
-    for task in tasks:
-        if task.path in not_run:
-            continue
         old = previous.get(task.path, {})
         if (
             old.get("status") == "ok"
@@ -332,9 +319,9 @@ def run(
     counts: Counter = Counter()
     index_of = {task.path: task.index for task in tasks}
     handle = None
-    if report_path is not None:
-        report_path.parent.mkdir(parents=True, exist_ok=True)
-        handle = open(report_path, "a+b" if resume else "wb")
+    if report is not None:
+        Path(report).parent.mkdir(parents=True, exist_ok=True)
+        handle = open(report, "a+b" if resume else "wb")
         if handle.tell():
             handle.seek(-1, os.SEEK_END)
             if handle.read(1) != b"\n":

@@ -174,17 +174,15 @@ def run_demo(
         if render:
             from .render import render as draw
 
+            keys, titles = ["scan"], ["raw scan"]
+            if "ours" in results:
+                keys.append("ours")
+                titles.append("ours (defaults)")
             theirs = [r for r in rows if r["key"].startswith("o3d_") and "skipped" not in r]
-            keys = ["scan"] + (["ours"] if "ours" in results else [])
-            if theirs:
-                keys.append(min(theirs, key=lambda r: r["mean_distance"])["key"])
-            by_key = {r["key"]: r for r in rows}
-            named = {"scan": "raw scan", "ours": "ours (defaults)"}
-            peer = {
-                k: f"{r['label'].removeprefix('Open3D ')} ({r.get('value')}, its best)"
-                for k, r in by_key.items()
-            }
-            titles = [named.get(key, peer[key]) for key in keys]
+            if theirs:  # the best Open3D filter
+                best = min(theirs, key=lambda r: r["mean_distance"])
+                keys.append(best["key"])
+                titles.append(f"{best['label'].removeprefix('Open3D ')} ({best['value']}, its best)")
             picture = folder / "before_after.png"
             start = time.perf_counter()
             draw(
