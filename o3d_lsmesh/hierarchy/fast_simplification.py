@@ -31,11 +31,7 @@ _LOCK = threading.Lock()
 
 
 def _level_counts(levels: Any, n: int, min_vertices: int) -> np.ndarray:
-    if isinstance(levels, (bool, np.bool_)):
-        raise InputTypeError(
-            f"levels must be an integer or a sequence of vertex counts, got {levels!r}", param="levels"
-        )
-    if isinstance(levels, (int, np.integer)):
+    if isinstance(levels, (int, np.integer)) and not isinstance(levels, bool):
         # more levels than vertices could not be distinct: the limit also keeps the request's memory bounded
         count = as_count(levels, name="levels", minimum=1, maximum=max(n, 1))
         low = max(min(min_vertices, n - 1), 4)
@@ -44,10 +40,9 @@ def _level_counts(levels: Any, n: int, min_vertices: int) -> np.ndarray:
     else:
         try:
             counts = np.asarray(levels)
-        except Exception as error:  # ragged input
-            raise InputTypeError(
-                f"levels must be an integer or a sequence of vertex counts, got {levels!r}", param="levels"
-            ) from error
+        except Exception:  # ragged input
+            counts = np.zeros(0, dtype=np.int64)
+        # (a bool is a 0-d array here)
         if counts.ndim != 1 or counts.size == 0 or not np.issubdtype(counts.dtype, np.integer):
             raise InputTypeError(
                 f"levels must be an integer or a sequence of integer vertex counts, got {levels!r}",
@@ -181,21 +176,9 @@ def from_fast_simplification(
         built.append(
             (mapped, reps[keep], parent, gone, np.flatnonzero(keep)[parent[gone]], ring_offsets, ring)
         )
-    tris, representatives, parents, removed, targets, offsets, rings = zip(*built)
-    return MeshHierarchy(
-        V,
-        tris,
-        representatives,
-        parents,
-        removed,
-        targets,
-        offsets,
-        rings,
-        False,
-        "fast_simplification",
-        data.kind,
-        tensor_format_of(data),
-    )
+    tris, reps, parents, removed, targets, offsets, rings = zip(*built)
+    kind = (False, "fast_simplification", data.kind, tensor_format_of(data))
+    return MeshHierarchy(V, tris, reps, parents, removed, targets, offsets, rings, *kind)
 
 
 def _drop_duplicate_triangles(triangles: np.ndarray, n: int) -> np.ndarray:
