@@ -135,19 +135,12 @@ def topology_summary(mesh: AnyMesh) -> dict:
     Returns
     -------
     dict
-        ``vertices``, ``triangles``; ``edge_manifold`` (no edge of more than two triangles),
-        ``vertex_manifold`` (also one fan per vertex); ``components`` (over shared vertices) and
-        ``surface_pieces`` (over edges of two triangles); ``boundary_loops`` (through pinches along
-        the same fan), ``boundary_components`` (pieces of the boundary graph, as Open3D counts),
-        ``boundary_edges``, ``seam_edges`` (UV seams or normal creases Open3D's readers split: both
-        sides at equal coordinates; fill_holes and the fairing work on the welded surface),
-        ``open_boundary_chains`` (ending at a fin), ``holes_by_size`` (loops per
-        :data:`HOLE_SIZE_BINS` bin), ``largest_hole_edges``; ``nonmanifold_edges``,
-        ``nonmanifold_vertices``, ``unreferenced_vertices``, ``degenerate_triangles`` (twice the
-        area at most :data:`DEGENERATE_TOLERANCE` times the longest edge squared),
-        ``duplicate_triangles``, ``misoriented_edges``; ``euler`` (``V - E + F``, referenced
-        vertices), ``genus`` (connected and manifold, else None) and ``total_genus`` (non-manifold
-        vertices split into fans; edge-manifold and oriented, else None).
+        ``vertices``, ``triangles``, ``edge_manifold``, ``vertex_manifold``, ``components``,
+        ``surface_pieces``, ``boundary_loops``, ``boundary_components``, ``boundary_edges``,
+        ``seam_edges``, ``open_boundary_chains``, ``holes_by_size``, ``largest_hole_edges``,
+        ``nonmanifold_edges``, ``nonmanifold_vertices``, ``unreferenced_vertices``,
+        ``degenerate_triangles``, ``duplicate_triangles``, ``misoriented_edges``, ``euler``, ``genus``,
+        ``total_genus``: each defined in ``docs/algorithms/connectivity.rst``.
 
     Examples
     --------
