@@ -257,25 +257,26 @@ def symmetry_gap(const index_t[::1] indptr, const index_t[::1] indices, const do
     """How far a square CSC (or CSR) matrix with sorted indices is from symmetric, without a copy.
 
     Returns ``(gap, i, j, above)``: the largest ``|a_ij - a_ji|`` (a missing mirror counts as zero) at
-    its entry ``(i, j)`` (row, column), and how many entries lie above the diagonal. One pass, a
-    binary search per entry for its mirror.
+    its entry ``(i, j)`` (row, column), and how many entries lie above the diagonal. One pass: the
+    columns are read in order, so the mirrors sought in column ``i`` come in increasing rows, and a
+    cursor per column walks to each (each column's entries passed over once).
     """
-    cdef Py_ssize_t n = indptr.shape[0] - 1, j, lo, hi, mid, wi = 0, wj = 0, above = 0
+    cdef Py_ssize_t n = indptr.shape[0] - 1, j, lo, wi = 0, wj = 0, above = 0
     cdef index_t k, i
     cdef double mirror, gap, largest = 0.0
+    cdef int64_t[::1] cursor = np.empty(n, dtype=np.int64)
     with nogil:
+        for j in range(n):
+            cursor[j] = indptr[j]
         for j in range(n):
             for k in range(indptr[j], indptr[j + 1]):
                 i = indices[k]
                 if i < j:
                     above += 1
-                lo, hi = indptr[i], indptr[i + 1]
-                while lo < hi:  # row j of column i
-                    mid = (lo + hi) // 2
-                    if indices[mid] < j:
-                        lo = mid + 1
-                    else:
-                        hi = mid
+                lo = cursor[i]
+                while lo < indptr[i + 1] and indices[lo] < j:  # row j of column i
+                    lo += 1
+                cursor[i] = lo
                 mirror = data[lo] if lo < indptr[i + 1] and indices[lo] == j else 0.0
                 gap = fabs(data[k] - mirror)
                 if gap > largest:
@@ -656,3 +657,97 @@ def add_subset(const index_t[::1] indptr, const index_t[::1] indices, double[::1
                 else:
                     missing += 1
     return missing
+
+
+def area_normals(const double[:, ::1] positions, const index_t[:, ::1] triangles):
+    """Each vertex's sum of the cross products ``(b - a) x (c - a)`` of its triangles ``(a, b, c)``,
+    ``(n, 3)``, in one pass over the triangles (arrays.area_weighted_normals' loop). Each corner's sums
+    are kept apart and added at the end, corner 0's and 1's first: the order of
+    ``sum(np.bincount(triangles[:, i], face) for i in range(3))``, whose values it reproduces."""
+    cdef Py_ssize_t n = positions.shape[0], m = triangles.shape[0], t, c, v
+    cdef index_t a, b, d
+    cdef double u0, u1, u2, w0, w1, w2
+    if triangles.shape[1] != 3 or positions.shape[1] != 3:
+        raise ValueError(f"positions and triangles must have 3 columns, got {positions.shape[1]} and {triangles.shape[1]}")
+    for t in range(m):
+        for c in range(3):
+            if not 0 <= triangles[t, c] < n:
+                raise ValueError(f"triangle {t} names vertex {triangles[t, c]}, outside 0..{n - 1}")
+    sums_array = np.zeros((3, n, 3))
+    cdef double[:, :, ::1] sums = sums_array
+    with nogil:
+        for t in range(m):
+            a, b, d = triangles[t, 0], triangles[t, 1], triangles[t, 2]
+            u0, u1, u2 = positions[b, 0] - positions[a, 0], positions[b, 1] - positions[a, 1], positions[b, 2] - positions[a, 2]
+            w0, w1, w2 = positions[d, 0] - positions[a, 0], positions[d, 1] - positions[a, 1], positions[d, 2] - positions[a, 2]
+            # numpy's cross: each product rounded, then the difference
+            w0, w1, w2 = u1 * w2 - u2 * w1, u2 * w0 - u0 * w2, u0 * w1 - u1 * w0
+            for c in range(3):
+                v = triangles[t, c]
+                sums[c, v, 0] += w0
+                sums[c, v, 1] += w1
+                sums[c, v, 2] += w2
+        for v in range(n):
+            for c in range(3):
+                sums[0, v, c] = sums[0, v, c] + sums[1, v, c] + sums[2, v, c]
+    return sums_array[0]
+
+
+def edge_sums(const index_t[:, ::1] edges, const double[:, ::1] values):
+    """``(n, k)``: each vertex's sum of ``values`` over its ``edges`` neighbours (an edge listed twice
+    counts twice), in one pass: the sums over the edges where it is first, then those where it is second,
+    each in the edges' order (``np.bincount(lo, values[hi]) + np.bincount(hi, values[lo])``)."""
+    cdef Py_ssize_t n = values.shape[0], k = values.shape[1], e = edges.shape[0], t, c
+    cdef index_t lo, hi
+    if edges.shape[1] != 2:
+        raise ValueError(f"edges must have 2 columns, got {edges.shape[1]}")
+    for t in range(e):
+        if not (0 <= edges[t, 0] < n and 0 <= edges[t, 1] < n):
+            raise ValueError(f"edge {t} names a vertex outside 0..{n - 1}")
+    first_array, second_array = np.zeros((n, k)), np.zeros((n, k))
+    cdef double[:, ::1] first = first_array, second = second_array
+    with nogil:
+        for t in range(e):
+            lo, hi = edges[t, 0], edges[t, 1]
+            for c in range(k):
+                first[lo, c] += values[hi, c]
+                second[hi, c] += values[lo, c]
+        for t in range(n):
+            for c in range(k):
+                first[t, c] = first[t, c] + second[t, c]
+    return first_array
+
+
+def two_ring_sums(const index_t[::1] indptr, const index_t[::1] indices, const int64_t[::1] rows,
+                  const double[:, ::1] values):
+    """For each of ``rows``: how many vertices lie within two edges of it (itself excluded) and the sum of
+    their ``values`` rows, ``((r,) float64, (r, k))``, from the 1-ring CSR ``(indptr, indices)`` without
+    the 2-ring's matrix (a mark per vertex: each counted once)."""
+    cdef Py_ssize_t n = indptr.shape[0] - 1, r = rows.shape[0], k = values.shape[1], s, c
+    cdef int64_t i, a, b
+    cdef index_t p, q
+    if values.shape[0] != n:
+        raise ValueError(f"values must have {n} rows, got {values.shape[0]}")
+    for s in range(r):
+        if not 0 <= rows[s] < n:
+            raise ValueError(f"rows must lie in 0..{n - 1}, got {rows[s]}")
+    counts_array, sums_array = np.zeros(r), np.zeros((r, k))
+    cdef double[::1] counts = counts_array
+    cdef double[:, ::1] sums = sums_array
+    cdef int64_t[::1] mark = np.full(n, -1, dtype=np.int64)
+    with nogil:
+        for s in range(r):
+            i = rows[s]
+            mark[i] = s
+            for p in range(indptr[i], indptr[i + 1]):
+                a = indices[p]
+                q = indptr[a] - 1
+                while q < indptr[a + 1]:  # the neighbour, then its own neighbours
+                    b = a if q < indptr[a] else indices[q]
+                    q = q + 1
+                    if mark[b] != s:
+                        mark[b] = s
+                        counts[s] += 1.0
+                        for c in range(k):
+                            sums[s, c] += values[b, c]
+    return counts_array, sums_array

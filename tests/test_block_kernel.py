@@ -526,6 +526,56 @@ def test_symmetry_gap_is_the_dense_largest_difference_to_the_transpose(seed):
     assert above == np.count_nonzero(np.triu(dense, 1))
 
 
+@pytest.mark.parametrize("seed", range(3))
+def test_symmetry_gap_on_a_mesh_sized_matrix_with_sparse_columns(seed):
+    # long columns, empty ones, a lone entry above the diagonal: every mirror found or missed as dense says
+    A = sp.random(300, 300, density=0.05, random_state=seed, format="csc")
+    A = (A + A.T).tolil()
+    A[5, 250], A[299, 0] = 1.0, 2.0
+    A = A.tocsc()
+    A.sort_indices()
+    gap, _, _, above = _block_kernel.symmetry_gap(A.indptr, A.indices, A.data)
+    dense = A.toarray()
+    assert gap == np.abs(dense - dense.T).max() and above == np.count_nonzero(np.triu(dense, 1))
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    n=st.integers(1, 12),
+    m=st.integers(0, 20),
+    seed=st.integers(0, 2**16),
+    index=st.sampled_from([np.int32, np.int64]),
+)
+def test_area_normals_and_edge_sums_match_plain_loops(n, m, seed, index):
+    rng = np.random.default_rng(seed)
+    V, T = rng.normal(size=(n, 3)), rng.integers(0, n, size=(m, 3)).astype(index)  # repeats, unused vertices
+    expected = np.zeros((n, 3))
+    for a, b, c in T.tolist():
+        face = np.cross(V[b] - V[a], V[c] - V[a])
+        for v in (a, b, c):
+            expected[v] += face
+    np.testing.assert_allclose(_block_kernel.area_normals(V, T), expected, rtol=1e-12, atol=1e-12)
+    edges, values = T[:, :2].copy(), rng.normal(size=(n, 2))
+    sums = np.zeros((n, 2))
+    for a, b in edges.tolist():
+        sums[a] += values[b]
+        sums[b] += values[a]
+    np.testing.assert_allclose(_block_kernel.edge_sums(edges, values), sums, rtol=1e-12, atol=1e-12)
+
+
+def test_mesh_loops_refuse_vertices_out_of_range():
+    V = np.zeros((3, 3))
+    with pytest.raises(ValueError, match="outside 0..2"):
+        _block_kernel.area_normals(V, np.array([[0, 1, 3]]))
+    with pytest.raises(ValueError, match="outside 0..2"):
+        _block_kernel.edge_sums(np.array([[-1, 0]]), V)
+    indptr, indices = np.array([0, 1, 2, 2]), np.array([1, 0])
+    with pytest.raises(ValueError, match="rows must lie in 0..2"):
+        _block_kernel.two_ring_sums(indptr, indices, np.array([3]), V)
+    with pytest.raises(ValueError, match="values must have 3 rows"):
+        _block_kernel.two_ring_sums(indptr, indices, np.array([0]), V[:2])
+
+
 @pytest.mark.parametrize("size", [0, 1, 7, 511, 512, 513, 4096, 1 << 20])
 @pytest.mark.parametrize("offset", [0, 1, 8, 4095])
 def test_no_huge_pages_leaves_any_array_as_it_was(size, offset):

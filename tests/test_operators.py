@@ -178,11 +178,14 @@ def test_umbrellas_match_plain_means_of_the_rings(case, seed):
     mask = np.array([len(r) > 0 for r in ring])
     expected = [V[sorted(ring[i])].mean(axis=0) - V[i] for i in np.flatnonzero(mask)]
     np.testing.assert_allclose(ops.umbrella(V, c.edges, mask), np.reshape(expected, (-1, 3)), atol=1e-12)
-    rows = np.flatnonzero(mask)
-    two = ops.two_ring_rows(c.adjacency, rows)
+    rows = np.flatnonzero(mask)[::-1]  # any order, a row twice
+    rows = np.r_[rows, rows[:1]]
+    values = np.random.default_rng(seed + 1).normal(size=(n, 4))
+    counts, sums = ops.two_ring_sums(c.adjacency, rows, values)
     for k, i in enumerate(rows):
-        reach = set(ring[i]) | {w for v in ring[i] for w in ring[v]}
-        assert sorted(two[k].indices.tolist()) == sorted(reach - {i}) and np.all(two[k].data == 1.0)
+        reach = sorted((set(ring[i]) | {w for v in ring[i] for w in ring[v]}) - {i})
+        assert counts[k] == len(reach)
+        np.testing.assert_allclose(sums[k], values[reach].sum(axis=0), rtol=1e-12, atol=1e-12)
 
 
 @settings(max_examples=40, deadline=None)

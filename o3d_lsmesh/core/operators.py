@@ -48,7 +48,7 @@ __all__ = [
     "scan_normal_matrix",
     "single_slots",
     "triangle_coefficients",
-    "two_ring_rows",
+    "two_ring_sums",
     "umbrella",
     "umbrella_weights",
     "uniform_from_edges",
@@ -162,29 +162,37 @@ def umbrella(vertices: np.ndarray, edges: np.ndarray, mask: np.ndarray) -> np.nd
     >>> umbrella(np.eye(3), np.array([[0, 1], [0, 2]]), np.array([True, False, False])).tolist()
     [[-1.0, 0.5, 0.5]]
     """
+    from .._block_kernel import edge_sums  # compiled by the package's build: imported where used
+
     n = len(vertices)
-    lo, hi = edges[:, 0], edges[:, 1]
+    index = edges.dtype if edges.dtype in (np.int32, np.int64) else np.int64
+    edges = np.ascontiguousarray(edges, dtype=index)
     degree = np.bincount(edges.ravel(), minlength=n)[mask].astype(np.float64)
-    total = np.empty((int(mask.sum()), 3))
-    for k in range(3):
-        total[:, k] = (
-            np.bincount(lo, vertices[hi, k], minlength=n) + np.bincount(hi, vertices[lo, k], minlength=n)
-        )[mask]
+    total = edge_sums(edges.reshape(-1, 2), np.ascontiguousarray(vertices, dtype=np.float64))[mask]
     return total / degree[:, None] - vertices[mask]
 
 
-def two_ring_rows(ring: sp.csr_matrix, rows: np.ndarray) -> sp.csr_matrix:
-    """Binary ``(len(rows), n)`` CSR: the vertices within two edges of each of ``rows``, itself excluded.
+def two_ring_sums(ring: sp.csr_matrix, rows: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For each of ``rows``: the number of vertices within two edges of it, itself excluded, ``(r,)``
+    float64, and the sum of their rows of ``values (n, k)``, ``(r, k)``.
 
-    ``ring`` the binary 1-ring adjacency (:attr:`~.connectivity.Connectivity.adjacency`).
+    ``ring`` the binary 1-ring adjacency (:attr:`~.connectivity.Connectivity.adjacency`); one compiled
+    pass, the 2-ring's matrix never formed.
+
+    >>> c = Connectivity(np.array([[0, 1, 2], [1, 3, 2], [3, 4, 2]]))
+    >>> counts, sums = two_ring_sums(c.adjacency, np.array([0]), np.arange(5.0)[:, None])
+    >>> counts.tolist(), sums.tolist()
+    ([4.0], [[10.0]])
     """
-    block = ring[rows]
-    two = block @ ring + block
-    two.data[:] = 1.0
-    own = np.repeat(rows, np.diff(two.indptr)) == two.indices  # the vertex itself is not its neighbour
-    two.data[own] = 0.0
-    two.eliminate_zeros()
-    return two
+    from .._block_kernel import two_ring_sums as sums  # compiled by the package's build
+
+    index = np.result_type(ring.indptr, ring.indices)
+    return sums(
+        ring.indptr.astype(index, copy=False),
+        ring.indices.astype(index, copy=False),
+        np.ascontiguousarray(rows, dtype=np.int64),
+        np.ascontiguousarray(values, dtype=np.float64),
+    )
 
 
 def rim_neighbours(conn: Connectivity, movable: np.ndarray) -> sp.csr_matrix:

@@ -14,7 +14,7 @@ import scipy.sparse as sp
 
 from ..core.arrays import area_weighted_normals
 from ..core.connectivity import Connectivity
-from ..core.operators import two_ring_rows, umbrella
+from ..core.operators import two_ring_sums, umbrella
 from .tuning import (
     MU_RANGE,
     NOISE_BLOCK,
@@ -159,20 +159,18 @@ def measured_noise(
     # the same over the 2-ring (every vertex within two edges), a block of rows at a time (the whole
     # 2-ring pattern, with its product and sum, is several times the mesh)
     sum_a2, sum_k2, sum_h2 = 0.0, 0.0, 0.0
+    stacked = np.column_stack([vertices, smooth, smooth_square])  # the 2-ring sums of all three in one pass
     # a few blocks, not blocks of a fixed size: each product clears a work array as long as the mesh
     block_rows = max(block, -(-len(inner_rows) // NOISE_BLOCKS))
     for start in range(0, len(inner_rows), block_rows):
         part = inner_rows[start : start + block_rows]
-        two = two_ring_rows(ring, part)
-        d2 = np.diff(two.indptr).astype(np.float64)
-        a2 = np.einsum(
-            "ij,ij->i", two @ vertices / d2[:, None] - vertices[part], nrm[start : start + len(part)]
-        )
+        d2, sums = two_ring_sums(ring, part, stacked)
+        a2 = np.einsum("ij,ij->i", sums[:, :3] / d2[:, None] - vertices[part], nrm[start : start + len(part)])
         # not a BLAS dot: OpenBLAS wakes its threads for long vectors, and they spin afterwards, which costs
         # twice the call's time beside busy processes (benchmarks/results/under_load.md)
         sum_a2 += float(np.square(a2).sum())
         sum_k2 += float(np.sum(1.0 + 1.0 / d2))
-        sum_h2 += float(np.sum(_mean_square_distances(two @ smooth_square, two @ smooth, smooth[part], d2)))
+        sum_h2 += float(np.sum(_mean_square_distances(sums[:, 6], sums[:, 3:6], smooth[part], d2)))
     count = len(inner_rows)
     growth = (sum_h2 / count / h2) ** 2
     k1, k2 = float(np.mean(1.0 + 1.0 / di)), sum_k2 / count
