@@ -16,6 +16,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from ..core.errors import InputError
+from ..core.progress import Progress, close_all
 from .cli_kit import PROG, Parser, PictureError, Run
 from .commands import add_parsers
 from .files import CLIError
@@ -67,8 +68,6 @@ def _option(args: argparse.Namespace | None, param: str) -> Option | None:
 
 
 def fail(text: str, code: int) -> int:
-    from ..core.progress import close_all
-
     close_all()
     sys.stdout.flush()
     print(text if text.startswith(PROG) else f"{PROG}: error: {text}", file=sys.stderr, flush=True)
@@ -76,16 +75,12 @@ def fail(text: str, code: int) -> int:
 
 
 def internal_error(error: BaseException) -> int:
-    from ..core.progress import close_all
-
     close_all()
     traceback.print_exception(type(error), error, error.__traceback__, file=sys.stderr)
     return fail(f"{PROG}: internal error (a bug in o3d-lsmesh, not in your input: please report it)", 1)
 
 
 def _show_warning(message: Warning | str, category: type[Warning], *_args: Any, **_kwargs: Any) -> None:
-    from ..core.progress import Progress
-
     Progress.write(f"{PROG}: warning: {message}")
 
 

@@ -14,6 +14,7 @@ import time
 from pathlib import Path
 from typing import Any, Callable
 
+from . import render as rendering
 from .files import WRITABLE, CLIError, check_output, read_input, write_output
 from .ops import OPS, Option, TaskContext
 from .tasks import jsonable
@@ -146,11 +147,9 @@ def draw(
     meshes: list[Any], path: str, run: Run, *, what: str = "left: input, right: result", **options: Any
 ) -> str:
     """Draw ``meshes`` side by side into ``path``; :class:`PictureError` when no renderer works."""
-    from .render import render
-
     start = time.perf_counter()
     try:
-        render(meshes, path, **options)
+        rendering.render(meshes, path, **options)
     except RuntimeError as error:  # Filament and the raycasting fallback both failed: not the input's fault
         raise PictureError(str(error)) from error
     run.say(f"picture ({time.perf_counter() - start:.1f} s): {path}  ({what})")

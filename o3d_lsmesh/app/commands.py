@@ -16,10 +16,16 @@ from typing import Any
 import numpy as np
 
 from ..core.validate import as_indices
+from ..lsmesh import reconstruct_geometry
+from ..lsmesh.encoding import decode_geometry
+from .batch import run as run_batch
+from .batch import summarize
 from .cli_kit import Run, add_command, argparse_type, draw, shape_change_text
+from .demo import run_demo
 from .files import WRITABLE, CLIError, check_output, mesh_suffix, read_input, write_output
+from .metrics import shape_change, surface_distance, topology_summary, triangle_angles, vertex_error
 from .op_commands import approximate, denoise, encode, fill, hierarchy
-from .ops import OPS, Option, int_at_least, non_negative
+from .ops import OPS, Option, int_at_least, non_negative, normal_change
 
 __all__ = ["add_parsers", "parse_index_spec"]
 
@@ -192,8 +198,6 @@ def reconstruct(args: argparse.Namespace, run: Run) -> int:
     check_output(args.output, [args.input], force=args.force)
     mesh = read_input(args.input)
     unknown = parse_index_spec(args.unknown, len(mesh.vertices))
-    from ..lsmesh import reconstruct_geometry
-
     start = time.perf_counter()
     out = reconstruct_geometry(mesh, unknown, interpolate=not args.soft, progress=run.progress)
     seconds = time.perf_counter() - start
@@ -224,8 +228,6 @@ def decode(args: argparse.Namespace, run: Run) -> int:
     mesh = read_input(args.mesh, what="MESH")
     if not os.path.exists(args.data):
         raise CLIError(f"DATA {args.data!r} does not exist")
-    from ..lsmesh.encoding import decode_geometry
-
     start = time.perf_counter()
     out = decode_geometry(mesh, Path(args.data).read_bytes(), anchors=args.anchors, progress=run.progress)
     seconds = time.perf_counter() - start
@@ -246,9 +248,6 @@ def compare(args: argparse.Namespace, run: Run) -> int:
     if args.render:
         check_output(args.render, [args.a, args.b], force=args.force, suffixes=(".png",))
     a, b = read_input(args.a, what="A"), read_input(args.b, what="B")
-    from .metrics import shape_change, surface_distance, topology_summary, triangle_angles, vertex_error
-    from .ops import normal_change
-
     size = {
         key: {"vertices": len(m.vertices), "triangles": len(m.triangles)} for key, m in (("a", a), ("b", b))
     }
@@ -320,9 +319,6 @@ def batch(args: argparse.Namespace, run: Run) -> int:
 
     example: scans/ out/ --op fill,denoise --workers 2
     """
-    from .batch import run as run_batch
-    from .batch import summarize
-
     options: dict[str, Any] = {k[4:]: v for k, v in vars(args).items() if k.startswith("opt_")}
     for item in args.set:
         name, equals, value = item.partition("=")
@@ -363,8 +359,6 @@ def demo(args: argparse.Namespace, run: Run) -> int:
 
     example: --out demo_out --resolution 150
     """
-    from .demo import run_demo
-
     result = run_demo(
         args.out,
         resolution=args.resolution,

@@ -16,11 +16,13 @@ from typing import Any, Callable
 
 import numpy as np
 
+from .. import fairing
 from .._o3d.io import raycasting_scene, signed_distances, write_mesh_file
 from ..core.connectivity import Connectivity
 from ..core.progress import Progress
 from ..fairing.scan_fairing import triangle_quality
 from ..fairing.tuning import SLIVER_QUALITY
+from . import render as rendering
 from .metrics import rim_mask
 from .shapes import simulated_range_scan
 
@@ -28,9 +30,7 @@ __all__ = ["METHODS", "run_demo"]
 
 
 def _ours(mesh: Any, _: Any) -> Any:
-    from ..fairing import constrained_fairing
-
-    return constrained_fairing(mesh)
+    return fairing.constrained_fairing(mesh)
 
 
 #: (key, label, function(mesh, parameter), sweep of the parameter: iteration counts; ours has none)
@@ -172,20 +172,18 @@ def run_demo(
         (folder / "metrics.md").write_text("```\n" + table + "\n```\n")
         files += [folder / "metrics.json", folder / "metrics.md"]
         if render:
-            from .render import render as draw
-
             keys, titles = ["scan"], ["raw scan"]
             if "ours" in results:
                 keys.append("ours")
                 titles.append("ours (defaults)")
             theirs = [r for r in rows if r["key"].startswith("o3d_") and "skipped" not in r]
             if theirs:  # the best Open3D filter
-                best = min(theirs, key=lambda r: r["mean_distance"])
-                keys.append(best["key"])
-                titles.append(f"{best['label'].removeprefix('Open3D ')} ({best['value']}, its best)")
+                peer = min(theirs, key=lambda r: r["mean_distance"])
+                keys.append(peer["key"])
+                titles.append(f"{peer['label'].removeprefix('Open3D ')} ({peer['value']}, its best)")
             picture = folder / "before_after.png"
             start = time.perf_counter()
-            draw(
+            rendering.render(
                 [results[key] for key in keys],
                 picture,
                 width=420,

@@ -12,6 +12,9 @@ from typing import Any
 
 import numpy as np
 
+from .._o3d import read_mesh
+from ..fairing.constrained import resolved_options
+from ..holes import find_holes
 from .cli_kit import Run, draw, run_file_op, run_op, shape_change_text
 from .files import CLIError, check_output, read_input, write_output
 
@@ -37,8 +40,6 @@ def denoise(args: argparse.Namespace, run: Run) -> int:
             f"{', '.join(given)} cannot be combined with --level (multiresolution fairing does not take "
             f"{'them' if len(given) > 1 else 'it'}), got --level {args.level}"
         )
-    from ..fairing.constrained import resolved_options
-
     scan = resolved_options(args.method, args.iterations, args.reimpose_every)[0] == "scan"
     if not args.level and args.fixed_boundary and scan:
         raise CLIError(
@@ -74,8 +75,6 @@ def fill(args: argparse.Namespace, run: Run) -> int:
 
     example: scan.ply filled.ply --max-hole-edges 200
     """
-    from .._o3d import read_mesh
-    from ..holes import find_holes
 
     def holes(mesh: Any) -> list:  # of the welded surface, as fill_holes sees it: a UV seam is no hole
         welded = read_mesh(mesh, weld=True)

@@ -18,7 +18,17 @@ from typing import Any, Callable
 
 import numpy as np
 
+from .. import fairing
+from .._o3d import read_mesh
 from ..core.errors import InputError, InputTypeError
+from ..fairing.constrained import resolved_options
+from ..fairing.multiresolution import multiresolution_fairing
+from ..hierarchy import build_hierarchy
+from ..holes import fill_holes
+from ..lsmesh.encoding import decode_geometry, encode_geometry
+from ..lsmesh.selection import approximate
+from .files import READABLE, read_mesh_file
+from .metrics import MAX_SAMPLE_POINTS, normal_deviation, shape_change, surface_distance, vertex_error
 
 __all__ = [
     "OPS",
@@ -34,8 +44,6 @@ RESERVED = frozenset(
     "op workers threads_per_worker scheduler scheduler_file resume report retries fail_fast suffix set "
     "task_timeout quiet json force help".split()
 )
-#: Surface samples at most (metrics.MAX_SAMPLE_POINTS; not imported: --help must not load numerics).
-MAX_POINTS = 10_000_000
 
 # --------------------------------------------------------------------------- parsers: value -> value or ValueError
 
@@ -282,15 +290,13 @@ ENCODE = (
 COMPARE = (
     Option("reference", folder, None, "folder holding a reference for every input (same name or "
            "stem)", cli=False),
-    Option("points", int_at_least(1, MAX_POINTS), 100_000, "surface samples per mesh", param="number_of_points"),
+    Option("points", int_at_least(1, MAX_SAMPLE_POINTS), 100_000, "surface samples per mesh", param="number_of_points"),
 )
 # fmt: on
 
 
 def normal_change(a: Any, b: Any) -> float | None:
     """Mean face-normal deviation of two meshes with the same triangles; None when no triangle has an area in both."""
-    from .metrics import normal_deviation
-
     try:
         return normal_deviation(a, b)
     except ValueError:  # every triangle of zero area in a or b: the angle is undefined
@@ -299,9 +305,6 @@ def normal_change(a: Any, b: Any) -> float | None:
 
 def change_metrics(before: Any, after: Any) -> dict:
     """Vertex displacement, shape change and (same triangles) normal change, on arrays read once."""
-    from .._o3d import read_mesh
-    from .metrics import shape_change, vertex_error
-
     # read once: the metrics take a MeshData as it is (Any: their annotations name the public mesh kinds)
     a: Any = read_mesh(before, name="before")
     b: Any = read_mesh(after, name="after")
@@ -320,27 +323,20 @@ def change_metrics(before: Any, after: Any) -> dict:
 )
 def denoise_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
     """``--op denoise`` and ``o3d-lsmesh denoise``: fairing with the method and iterations that ran."""
-    from .._o3d import read_mesh
-
     mesh = read_mesh(mesh)  # validated once: the fairing and the metrics take it as it is
     level, progress = options["level"], context.progress
     if level:
-        from ..fairing.multiresolution import multiresolution_fairing
-
         iterations = 5 if options["iterations"] is None else options["iterations"]
         method = options["method"] or "local"
         out = multiresolution_fairing(
             mesh, level, number_of_iterations=iterations, method=method, progress=progress
         )
     else:
-        from ..fairing import constrained_fairing
-        from ..fairing.constrained import resolved_options
-
         # no flag: the API's defaults (method='scan'); the record names what ran
         method, iterations = resolved_options(
             options["method"], options["iterations"], options["reimpose_every"]
         )
-        out = constrained_fairing(
+        out = fairing.constrained_fairing(
             mesh,
             iterations,
             method=method,
@@ -355,9 +351,6 @@ def denoise_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dic
 @operation("fill", options=FILL, help="fill holes with faired patches (LS meshes)")
 def fill_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
     """``--op fill`` and ``o3d-lsmesh fill``: counts of new elements and of the loops filled and left open."""
-    from .._o3d import read_mesh
-    from ..holes import fill_holes
-
     mesh = read_mesh(mesh)  # validated once (fill_holes welds it without a second check)
     out, report = fill_holes(mesh, **options, progress=context.progress, return_report=True)
     return out, {
@@ -386,8 +379,6 @@ def parse_levels(spec: str, count: int) -> list[int]:
 @operation("hierarchy", options=HIERARCHY, output="files", help=_LEVELS)
 def hierarchy_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
     """``--op hierarchy`` and ``o3d-lsmesh hierarchy``: ``{level_NN: mesh, vertex_maps.npz: bytes}``."""
-    from ..hierarchy import build_hierarchy
-
     sizes = {key: options[key] for key in ("min_vertices", "max_levels")}
     built = build_hierarchy(mesh, **sizes, progress=context.progress)
     levels = parse_levels(options["levels"], len(built))
@@ -404,10 +395,6 @@ def hierarchy_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, d
 @operation("approximate", options=APPROXIMATE, help="LS-mesh approximation from control points")
 def approximate_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
     """``--op approximate`` and ``o3d-lsmesh approximate``: the result, its control indices and errors."""
-    from .._o3d import read_mesh
-    from ..lsmesh.selection import approximate
-    from .metrics import vertex_error
-
     mesh = read_mesh(mesh)  # validated once: the selection and the metrics take it as it is
     count = resolve_count(options["count"], len(mesh.vertices))
     method, interpolate, seed = options["method"], options["interpolate"], options["seed"]
@@ -424,9 +411,6 @@ def approximate_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any,
 @operation("encode", options=ENCODE, output="bytes", extension=".bin", help=_ANCHORS)
 def encode_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
     """``--op encode`` and ``o3d-lsmesh encode``: the bytes, their size and the decoded error."""
-    from ..lsmesh.encoding import decode_geometry, encode_geometry
-    from .metrics import vertex_error
-
     n = len(mesh.vertices)
     count = resolve_count(options["count"], n)
     progress = context.progress
@@ -440,8 +424,6 @@ def encode_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict
 
 def find_reference(base: str, relative: str) -> str:
     """The reference for the input named ``relative``: same relative path, else same stem with any mesh extension."""
-    from .files import READABLE
-
     exact = Path(base) / relative
     if exact.is_file():
         return str(exact)
@@ -460,10 +442,6 @@ def find_reference(base: str, relative: str) -> str:
 @operation("compare", options=COMPARE, output="none", help="metrics against the matching file in --reference")
 def compare_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
     """``--op compare``: metrics against the matching file of ``reference``."""
-    from .._o3d import read_mesh
-    from .files import read_mesh_file
-    from .metrics import surface_distance, vertex_error
-
     if options["reference"] is None:
         raise InputError(
             "reference is required by op compare (a folder of the files to compare with)", param="reference"
