@@ -20,7 +20,14 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .._o3d import MeshData, read_mesh
-from .._o3d.io import cast_rays, distances_to_surface, raycasting_scene, write_image
+from .._o3d.io import (
+    cast_rays,
+    distances_to_surface,
+    legacy_mesh,
+    quiet_open3d,
+    raycasting_scene,
+    write_image,
+)
 from ..core.arrays import area_weighted_normals
 from ..core.connectivity import Connectivity
 from ..core.errors import InputError, InputTypeError, warn
@@ -153,9 +160,7 @@ def _raycast(vertices, triangles, colors, camera, width, height, background) -> 
 
 def _filament_worker(spec_path: str, image_path: str) -> None:
     """Child-process entry point: draw the scene in ``spec_path`` (npz) and save the image to ``image_path`` (npy)."""
-    import open3d as o3d
-
-    o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
+    o3d = quiet_open3d()
     spec = np.load(spec_path)
     camera = json.loads(str(spec["camera"]))
     width, height = int(spec["size"][0]), int(spec["size"][1])
@@ -171,10 +176,7 @@ def _filament_worker(spec_path: str, image_path: str) -> None:
         switch(False)
     background = spec["background"].astype(np.float32)
     renderer.scene.set_background(np.append(background, 1.0))
-    mesh = o3d.geometry.TriangleMesh(
-        o3d.utility.Vector3dVector(spec["vertices"]),
-        o3d.utility.Vector3iVector(spec["triangles"].astype(np.int32)),
-    )
+    mesh = legacy_mesh(spec["vertices"], spec["triangles"])
     mesh.vertex_colors = o3d.utility.Vector3dVector(spec["colors"])
     mesh.compute_vertex_normals()
     material = rendering.MaterialRecord()
