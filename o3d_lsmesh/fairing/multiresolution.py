@@ -60,14 +60,8 @@ def multiresolution_fairing_arrays(
     positions[boundary] = placed
     # the connectivity is fixed: one operator for all rounds ("global" re-takes its targets at every solve)
     rounds = method == "local" and 0 < number_of_iterations < remaining
-    return _fair_level(
-        positions,
-        conn,
-        remaining,
-        method,
-        smooth_boundary=False,
-        reimpose_every=number_of_iterations if rounds else None,
-    )
+    reimpose = number_of_iterations if rounds else None
+    return _fair_level(positions, conn, remaining, method, smooth_boundary=False, reimpose_every=reimpose)
 
 
 def _fair_level(

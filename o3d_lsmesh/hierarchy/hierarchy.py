@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import scipy.sparse as sp
 
-from .._o3d import MeshData, new_mesh, read_mesh, template, tensor_format_of, warn_dropped_attributes
+from .._o3d import new_mesh, read_mesh, template, tensor_format_of, warn_dropped_attributes
 from ..core.connectivity import Connectivity, VertexRings
 from ..core.operators import single_slots, umbrella_weights
 from ..core.progress import Progress
@@ -120,7 +120,7 @@ class MeshHierarchy:
     def level(self, i: int) -> AnyMesh:
         """Level ``i`` as a mesh of the input's kind; positions are the input positions of its vertices."""
         vertices, triangles = self.level_arrays(i)
-        return new_mesh(self._template(), vertices, triangles)
+        return new_mesh(template(self.mesh_kind, self.tensor_format), vertices, triangles)
 
     def vertex_map(self, i: int) -> np.ndarray:
         """``(n_0,) int64``: the level-``i`` vertex that represents each input vertex."""
@@ -176,9 +176,6 @@ class MeshHierarchy:
         nu += 1.0
         out[removed] -= second / nu[:, None]
         return out
-
-    def _template(self) -> MeshData:
-        return template(self.mesh_kind, self.tensor_format)
 
 
 def boundary_degree(rings: VertexRings) -> np.ndarray:

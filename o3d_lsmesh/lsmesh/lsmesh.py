@@ -128,23 +128,22 @@ class LSMeshSystem:
             self._hard_first = first if len(first) < len(indices) else None
             columns = indices if self._hard_first is None else indices[first]
             self._rhs_hard = -(L_free.T @ L[:, columns]).tocsr()
+            locality = None
         else:
             self._free = self._reduced = None  # every vertex is unknown: no index arrays to hold
             # L^T L + W^2 = A A^T for A = [L^T | W] (one weighted column per control vertex), never formed
             controls = sp.csc_matrix((weights, indices, np.arange(len(indices) + 1)), shape=(n, len(indices)))
             product = sp.hstack([L.T, controls], format="csc")
+            # the iterative path's locality order: the 1-ring, L^T, a view of the product's first n columns
+            end = product.indptr[n]
+            locality = sp.csc_matrix(
+                (product.data[:end], product.indices[:end], product.indptr[: n + 1]), (n, n)
+            )
             operator = None  # rebuilt for refinement: not held while the factor is formed
             self._rhs_hard = None
             self._hard_first = None
         self._operator = operator  # L (of the free columns) for the refinement residual L^T (L x)
         del L  # not held while CHOLMOD factors
-        # the iterative path's locality order: the 1-ring, L^T, a view of the product's first n columns
-        locality = None
-        if not self.interpolate:
-            end = product.indptr[n]
-            locality = sp.csc_matrix(
-                (product.data[:end], product.indices[:end], product.indptr[: n + 1]), (n, n)
-            )
         self._updated = False
         self._n = n
         self._unknowns = n if self._free is None else len(self._free)
