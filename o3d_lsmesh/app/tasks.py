@@ -126,10 +126,17 @@ class _Gate:
     written: bool = False
 
 
+@dataclass(frozen=True)
+class Task:
+    index: int
+    path: str
+    relative: str
+    output: str | None
+    key: str
+
+
 def run_task(
-    path: str,
-    relative: str,
-    key: str,
+    task: Task,
     *,
     outdir: str,
     ops: Sequence[BatchOp],
@@ -138,7 +145,7 @@ def run_task(
     threads: int | None,
     timeout: float | None = None,
 ) -> dict:
-    """Read ``path``, run the pipeline, write the result; return the JSON record (never raises an Exception).
+    """Read ``task.path``, run the pipeline, write the result; return the JSON record (never raises an Exception).
 
     The pipeline runs in a thread of its own, given ``timeout`` seconds: past them the record says
     ``TaskTimeout`` and the task is abandoned (it can no longer write; Python cannot stop a thread,
@@ -146,10 +153,10 @@ def run_task(
     """
     start, cpu = time.perf_counter(), time.process_time()
     record = new_record(
-        input=path,
+        input=task.path,
         stage="read",
         op=",".join(op.name for op in ops),
-        key=key,
+        key=task.key,
         worker=_worker_address(),
         pid=os.getpid(),
         warnings=[],
@@ -161,9 +168,9 @@ def run_task(
         _LOCAL.warnings = record["warnings"]
         try:
             configure_threads(threads)
-            current = read_mesh_file(path)
+            current = read_mesh_file(task.path)
             record.update(vertices_before=len(current.vertices), triangles_before=len(current.triangles))
-            context = TaskContext(input=path, relative=relative, threads=threads)
+            context = TaskContext(input=task.path, relative=task.relative, threads=threads)
             for index, (op, values) in enumerate(zip(ops, options)):
                 record["stage"] = op.name
                 current, metrics = op.function(current, dict(values), context)
@@ -172,7 +179,7 @@ def run_task(
             last = ops[-1]
             if last.output == "mesh":
                 record.update(vertices_after=len(current.vertices), triangles_after=len(current.triangles))
-            target = output_path(Path(outdir), relative, last, suffix)
+            target = output_path(Path(outdir), task.relative, last, suffix)
             with gate.lock:
                 if gate.abandoned:
                     return
@@ -189,35 +196,26 @@ def run_task(
         finally:
             _LOCAL.warnings = None
 
-    task = threading.Thread(
+    thread = threading.Thread(
         target=pipeline,
         args=(record,),
-        name=f"o3d-lsmesh task {relative}",
+        name=f"o3d-lsmesh task {task.relative}",
         daemon=True,  # an abandoned task must not keep the process alive
     )
-    task.start()
-    task.join(timeout)
-    if task.is_alive():
+    thread.start()
+    thread.join(timeout)
+    if thread.is_alive():
         with gate.lock:  # (waits for a write under way: a written output is reported as such)
             gate.abandoned = not gate.written
     if gate.abandoned:
         record = {**record, "metrics": dict(record["metrics"]), "warnings": list(record["warnings"])}
         record["error"] = f"TaskTimeout: still running after {timeout:g} s (task_timeout), abandoned"
     else:
-        task.join()
+        thread.join()
     record["warnings"] = _summary(record["warnings"])
     record["seconds"] = time.perf_counter() - start
     record["cpu_seconds"] = time.process_time() - cpu  # CPU time of this worker process (all its threads)
     return jsonable(record)
-
-
-@dataclass(frozen=True)
-class Task:
-    index: int
-    path: str
-    relative: str
-    output: str | None
-    key: str
 
 
 # --------------------------------------------------------------------------- engines
@@ -344,8 +342,7 @@ def _run_dask(client: Any, tasks: list[Task], job: dict, emit: Callable[[dict], 
         if not chunk:
             return
         keys = [f"o3d-lsmesh-batch-{token}-{task.index}" for task in chunk]
-        columns = ([t.path for t in chunk], [t.relative for t in chunk], [t.key for t in chunk])
-        futures = client.map(run_task, *columns, key=keys, pure=False, **job)
+        futures = client.map(run_task, chunk, key=keys, pure=False, **job)
         for task, future in zip(chunk, futures):
             by_key[future.key] = task
             queue.add(future)
@@ -447,6 +444,6 @@ def _run_serial(todo: list[Task], job: dict, emit: Callable[[dict], bool]) -> No
     # warning state each task restores (a task routes its warnings into its record; emit re-issues them).
     for task in todo:
         with warnings.catch_warnings():
-            record = run_task(task.path, task.relative, task.key, **{**job, "threads": None})
+            record = run_task(task, **{**job, "threads": None})
         if not emit(record):
             return
