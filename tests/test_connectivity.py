@@ -47,6 +47,10 @@ def test_edges_valence_and_incidence_match_plain_walks(soup):
     assert c.nonmanifold_edges.tolist() == [len(edges[k]) > 2 for k in keys]
     ring = plain_neighbours(triangles, n)
     assert c.valence.tolist() == [len(r) for r in ring]
+    on_rim, edge_valence = c.rim
+    assert on_rim.tolist() == [any(v in k for k in keys if len(edges[k]) == 1) for v in range(n)]
+    assert edge_valence.tolist() == [len(r) for r in ring]
+    assert not (on_rim.flags.writeable or edge_valence.flags.writeable)  # shared by a call's steps
     indptr, triangle = c.vertex_triangles
     for v in range(n):
         corners = [t for t, tri in enumerate(triangles) for a in tri if a == v]

@@ -245,6 +245,11 @@ def test_a_start_worse_than_zero_is_dropped_per_column():
     from_far = system._solver.solve(rhs, x0=far)
     assert system._solver.iterations == cold_iterations
     np.testing.assert_array_equal(from_far, cold)
+    # one column far, the others at the solution: only that one restarts from zero, the others stay
+    mixed = cold.copy()
+    mixed[:, 1] = 1e6
+    np.testing.assert_array_equal(system._solver.solve(rhs, x0=mixed), cold)
+    assert system._solver.iterations == cold_iterations
 
 
 def test_progress_bar_shows_the_residual(monkeypatch):

@@ -255,17 +255,22 @@ def block_cg(
     vector = b.ndim == 1
     B = np.ascontiguousarray(b[:, None] if vector else b, dtype=np.float64)
     X = np.zeros_like(B) if x0 is None else np.array(x0, dtype=np.float64, order="C").reshape(B.shape)
-    norms = np.linalg.norm(B, axis=0)
+    # column norms by the kernel's one pass (numpy's axis-0 norm strides over the block per column)
+    norms = np.sqrt(column_dots(B, B))
     scale = np.where(norms > 0, norms, 1.0)
     parts = csr_parts(matrix)
     R = B.copy()
+    start = norms
     if x0 is not None:
         block_product(*parts, X, R, -1.0, B)  # B - A X in one pass
+        start = np.sqrt(column_dots(R, R))
         # a start farther from the solution than zero (e.g. controls moved far from the mesh) is dropped
-        worse = np.linalg.norm(R, axis=0) > norms
-        X[:, worse] = 0.0
-        R[:, worse] = B[:, worse]
-    relative = np.linalg.norm(R, axis=0) / scale
+        worse = start > norms
+        if worse.any():
+            X[:, worse] = 0.0
+            R[:, worse] = B[:, worse]
+            start = np.where(worse, norms, start)
+    relative = start / scale
     relative[norms == 0] = 0.0
     # each column's stopping point as a relative residual
     limit = np.full(B.shape[1], tol) if reduction is None else np.maximum(tol, reduction * relative)

@@ -64,6 +64,9 @@ class Connectivity:
         1-ring CSR with diagonal slots and the triangles behind every slot; ``valence (n,) int64``.
     ring_pattern, adjacency
         :func:`ring_pattern`'s ``(indptr, indices, diagonal, forward, backward)``; ``(n, n)`` binary CSR.
+    rim : tuple
+        ``(on_rim (n,) bool, edge_valence (n,) int64)``, read-only: on an edge of one triangle; edge
+        neighbours (from the edges alone, without :attr:`rings`).
     vertex_triangles : tuple
         ``(indptr (n + 1,), triangle (3m,))``: vertex ``v``'s triangles, increasing, once per corner.
     face_adjacency : FaceAdjacency
@@ -107,6 +110,15 @@ class Connectivity:
     @_cached
     def ring_pattern(self) -> tuple:
         return ring_pattern(self.edges, self.n)
+
+    @_cached
+    def rim(self) -> tuple[np.ndarray, np.ndarray]:
+        on_rim = np.zeros(self.n, dtype=bool)
+        on_rim[self.edges[self.boundary_edges].ravel()] = True
+        valence = np.bincount(self.edges.ravel(), minlength=self.n).astype(np.int64, copy=False)
+        on_rim.setflags(write=False)  # shared by every step of a call
+        valence.setflags(write=False)
+        return on_rim, valence
 
     @_cached
     def adjacency(self) -> sp.csr_matrix:

@@ -196,15 +196,20 @@ def two_ring_sums(ring: sp.csr_matrix, rows: np.ndarray, values: np.ndarray) -> 
 
 
 def rim_neighbours(conn: Connectivity, movable: np.ndarray) -> sp.csr_matrix:
-    """Binary ``(n, n)`` CSR of the ``movable`` rows: a rim vertex's neighbours along the rim, others' 1-ring."""
-    n, counts = conn.n, conn.edge_triangles
-    lo, hi = conn.edges[:, 0].astype(np.int64), conn.edges[:, 1].astype(np.int64)
-    boundary = np.zeros(n, dtype=bool)
-    boundary[conn.edges[counts == 1].ravel()] = True
-    on_curve = np.tile(counts == 1, 2)
-    rows, cols = np.r_[lo, hi], np.r_[hi, lo]
-    keep = movable[rows] & (~boundary[rows] | on_curve)
-    return sp.csr_matrix((np.ones(int(keep.sum())), (rows[keep], cols[keep])), shape=(n, n))
+    """Binary ``(n, n)`` CSR of the ``movable`` rows: a rim vertex's neighbours along the rim, others' 1-ring.
+
+    Cut from the 1-ring pattern (:attr:`~.connectivity.Connectivity.ring_pattern`), canonical.
+    """
+    n, on_curve = conn.n, conn.boundary_edges
+    boundary = conn.rim[0]
+    indptr, indices, _, forward, backward = conn.ring_pattern
+    lo, hi = conn.edges[:, 0], conn.edges[:, 1]
+    data = np.zeros(len(indices))
+    data[forward] = movable[lo] & (~boundary[lo] | on_curve)
+    data[backward] = movable[hi] & (~boundary[hi] | on_curve)
+    neighbours = sp.csr_matrix((data, indices, indptr), shape=(n, n))
+    neighbours.eliminate_zeros()  # the diagonal and the rows and edges left out
+    return neighbours
 
 
 def umbrella_weights(rings: VertexRings) -> tuple[sp.csr_matrix, np.ndarray, np.ndarray | None]:
@@ -263,9 +268,7 @@ def scan_normal_matrix(
     ):
         raise ValueError("scan_normal_matrix takes triangles of three distinct vertices")
     edges, counts, halfedge_edge = conn.edges, conn.edge_triangles, conn.halfedge_edge
-    boundary = np.zeros(n, dtype=bool)
-    boundary[edges[counts == 1].ravel()] = True
-    valence = np.bincount(edges.ravel(), minlength=n)
+    boundary, valence = conn.rim
     lo, hi = edges[:, 0], edges[:, 1]
     referenced = valence > 0
     indptr, indices, diagonal, forward, backward = conn.ring_pattern

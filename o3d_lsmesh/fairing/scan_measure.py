@@ -48,9 +48,7 @@ _IID_BOUNDARY_RATIO = 1.5 / (1.0 + 1.0 / 6.0)
 
 def _rim(conn: Connectivity) -> tuple[np.ndarray, np.ndarray]:
     """``(boundary, valence)``, ``(n,)`` each: on an edge of one triangle; edge neighbours (int64)."""
-    boundary = np.zeros(conn.n, dtype=bool)
-    boundary[conn.edges[conn.boundary_edges].ravel()] = True
-    return boundary, np.bincount(conn.edges.ravel(), minlength=conn.n)
+    return conn.rim  # computed once per connectivity, read-only
 
 
 def _mean_square_laplacian(vertices: np.ndarray, pairs: np.ndarray, mask: np.ndarray) -> float:
