@@ -1,11 +1,4 @@
-"""Run an operation, or a pipeline of them, over many mesh files: :func:`run`.
-
-Parses the pipeline and its options from the op table (:mod:`o3d_lsmesh.app.ops`), collects the
-inputs, skips what a report says is done (``resume``), hands the rest to
-:func:`~o3d_lsmesh.app.tasks.dispatch` (a Dask cluster, or one after another in this process) and
-writes one report record per file as it arrives. Errors name Python parameters, never flags.
-Docs: ``docs/batch.md``.
-"""
+"""Run an operation, or a pipeline of them, over many mesh files: :func:`run` (``docs/batch.md``)."""
 
 from __future__ import annotations
 

@@ -1,9 +1,5 @@
-"""Mesh files of the application: inputs, output paths strictly inside OUTDIR, atomic writes, digests.
-
-Open3D reads and writes through the adapter (:mod:`o3d_lsmesh._o3d.io`). Outputs are written into a
-hidden temporary folder and moved into place with ``os.replace``, so a killed batch never leaves a
-half-written file under a final name. Docs: ``docs/batch.md``.
-"""
+"""Mesh files of the application: inputs, output paths strictly inside OUTDIR, atomic writes, digests
+(``docs/batch.md``)."""
 
 from __future__ import annotations
 

@@ -1,11 +1,5 @@
-"""The operations of the command line and the batch, each with its options declared once.
-
-An :class:`Option` names one option (the CLI flag is ``--`` + its name with ``-``), its parser,
-default, help and the Python parameter it maps to; a :class:`BatchOp` is an operation's function
-``function(mesh, options, context) -> (output, metrics)`` with its options. The CLI's subcommands
-(:mod:`o3d_lsmesh.app.cli`) and :func:`o3d_lsmesh.app.batch.run` are both generated from :data:`OPS`.
-Docs: ``docs/cli.rst`` and ``docs/batch.md``.
-"""
+"""The operations of the command line and the batch, each with its options declared once
+(:data:`OPS`; ``docs/batch.md``, section How it runs)."""
 
 from __future__ import annotations
 
@@ -150,9 +144,9 @@ class Option:
 
     ``parse`` takes the value as given (text from the command line or any Python value) and returns
     it parsed or raises ``ValueError`` saying what it must be (``None`` is taken as it is when it is
-    the default); ``is_flag`` makes the flag a switch;
-    ``param`` is the Python API parameter it maps to (default: ``name``); ``cli`` whether the
-    subcommand of the same name has the flag (else batch only); ``required`` on the command line.
+    the default); ``is_flag`` makes the flag a switch; ``param`` is the Python API parameter it maps
+    to (default: ``name``); ``cli`` whether the subcommand of the same name has the flag (else batch
+    only); ``required`` on the command line.
     """
 
     name: str
@@ -332,19 +326,18 @@ def denoise_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dic
             mesh, level, number_of_iterations=iterations, method=method, progress=progress
         )
     else:
-        # no flag: the API's defaults (method='scan'); the record names what ran
-        method, iterations = resolved_options(
-            options["method"], options["iterations"], options["reimpose_every"]
-        )
-        out = fairing.constrained_fairing(
+        # no flag: the API's defaults (the mesh chooses features or scan); the record names what ran
+        out, ran = fairing.constrained_fairing(
             mesh,
-            iterations,
-            method=method,
+            options["iterations"],
+            method=options["method"],
             mu=options["mu"],
             smooth_boundary=not options["fixed_boundary"],
             reimpose_every=options["reimpose_every"],
             progress=progress,
+            return_report=True,
         )
+        method, iterations = resolved_options(ran.method, options["iterations"], options["reimpose_every"])
     return out, {"method": method, "iterations": iterations, "level": level, **change_metrics(mesh, out)}
 
 

@@ -1,11 +1,5 @@
-"""Where a batch's tasks run: one task per file (:func:`run_task`), on Dask or in this process.
-
-:func:`run_task` reads a file, runs the pipeline in a thread of its own (time limit) and writes the
-result atomically, returning a small JSON record: meshes never travel between processes, and every
-failure (an unreadable file, an operation raising, a write Open3D refuses, the time limit) is a
-record with the task's warnings. :func:`dispatch` runs tasks on a Dask cluster (a local one of
-*spawned* workers, :func:`local_cluster`) or one after another here. Docs: ``docs/batch.md``.
-"""
+"""Where a batch's tasks run: one task per file (:func:`run_task`), on Dask or in this process
+(:func:`dispatch`; ``docs/batch.md``, section How it runs)."""
 
 from __future__ import annotations
 
