@@ -74,12 +74,6 @@ def fail(text: str, code: int) -> int:
     return code
 
 
-def internal_error(error: BaseException) -> int:
-    close_all()
-    traceback.print_exception(type(error), error, error.__traceback__, file=sys.stderr)
-    return fail(f"{PROG}: internal error (a bug in o3d-lsmesh, not in your input: please report it)", 1)
-
-
 def _show_warning(message: Warning | str, category: type[Warning], *_args: Any, **_kwargs: Any) -> None:
     Progress.write(f"{PROG}: warning: {message}")
 
@@ -137,5 +131,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return fail(str(error), 1)
     except KeyboardInterrupt:
         return fail(f"{PROG}: interrupted", 130)
-    except Exception as error:
-        return internal_error(error)
+    except Exception as error:  # a bug: its traceback, below any open bar
+        close_all()
+        traceback.print_exception(type(error), error, error.__traceback__, file=sys.stderr)
+        return fail(f"{PROG}: internal error (a bug in o3d-lsmesh, not in your input: please report it)", 1)

@@ -81,7 +81,6 @@ def add_parsers(sub: Any, writing: argparse.ArgumentParser, common: argparse.Arg
     p = add_command(sub, writing, decode, names)
     help = "use only the first K anchors (default: all)"
     p.add_argument("--anchors", type=argparse_type(int_at_least(1)), help=help)
-    p.set_defaults(flags={"anchors": "--anchors"})
     names = {"input": "mesh file", "outdir": "folder for level_NN files (created if needed)"}
     p = add_command(sub, writing, hierarchy, names)
     help = "file format of the levels (.ply .obj ...)"
