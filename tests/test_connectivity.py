@@ -62,6 +62,19 @@ def test_edges_valence_and_incidence_match_plain_walks(soup):
     ]
 
 
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.tuples(*[st.integers(0, 6)] * 3), min_size=1, max_size=12))
+def test_adjacency_keeps_a_repeated_corners_self_loop(triangles):
+    # any triangles, a vertex repeated in some: each corner's other two corners are its neighbours
+    ring = [set() for _ in range(7)]
+    for tri in triangles:
+        for p in range(3):
+            ring[tri[p]] |= {tri[q] for q in range(3) if q != p}
+    adjacency = Connectivity(np.array(triangles), 7).adjacency
+    assert [set(adjacency[v].indices.tolist()) for v in range(7)] == ring
+    assert adjacency.has_sorted_indices and np.all(adjacency.data == 1.0)
+
+
 @settings(max_examples=100, deadline=None)
 @given(triangle_soups())
 def test_components_and_k_rings_match_a_breadth_first_walk(soup):

@@ -122,7 +122,19 @@ class Connectivity:
 
     @_cached
     def adjacency(self) -> sp.csr_matrix:
-        return _adjacency(self.triangles, self.n)
+        edges, n = self.edges, self.n
+        if (edges[:, 0] == edges[:, 1]).any():  # a triangle repeating a vertex: its self-loop is kept
+            return _adjacency(self.triangles, n)
+        # the 1-ring pattern without its diagonal (every row has one): no second grouping of the edges
+        indptr, indices, diagonal = self.ring_pattern[:3]
+        keep = np.ones(len(indices), dtype=bool)
+        keep[diagonal] = False
+        adjacency = sp.csr_matrix(
+            (np.ones(len(indices) - n), indices[keep], indptr - np.arange(n + 1, dtype=indptr.dtype)),
+            shape=(n, n),
+        )
+        adjacency.has_canonical_format = True  # sorted, no duplicates
+        return adjacency
 
     @_cached
     def vertex_triangles(self) -> tuple[np.ndarray, np.ndarray]:

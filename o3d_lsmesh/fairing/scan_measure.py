@@ -10,7 +10,6 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
-import scipy.sparse as sp
 
 from ..core.arrays import area_weighted_normals
 from ..core.connectivity import Connectivity
@@ -125,8 +124,7 @@ def measured_noise(
     n = len(vertices)
     conn = Connectivity(triangles, n) if conn is None else conn
     boundary, valence = _rim(conn)
-    lo, hi = conn.edges[:, 0], conn.edges[:, 1]
-    ring = sp.csr_matrix((np.ones(2 * len(lo)), (np.r_[lo, hi], np.r_[hi, lo])), shape=(n, n))
+    ring = conn.adjacency
     inner = (valence > 0) & ~boundary
     inner[ring[boundary].indices] = False  # two rings from the rim: full 1- and 2-rings
     if not inner.any():
