@@ -71,7 +71,7 @@ cdef bint _legal(const double* p, const Vertex* V, const int32_t* pair, const in
 #: stay equal after a rigid motion.
 TIE = 2.0 ** -20
 #: Squared distances to the centroid (a last tie-break, between copies of one ring along a scanline: an edge or
-#: more apart) in units of this fraction of ``h^2``: 10M-vertex meshes' fit in one word with their runs.
+#: more apart) in units of this fraction of ``h^2``.
 FAR = 2.0 ** -8
 
 
@@ -100,13 +100,9 @@ def visiting_order(costs, spreads, candidates, positions, centre, double h):
         tied[:-1] |= same
         members = np.flatnonzero(tied)
         sub = order[members]
-        run = np.cumsum(np.r_[True, key[members][1:] != key[members][:-1]]).astype(np.uint64)
+        run = np.cumsum(np.r_[True, key[members][1:] != key[members][:-1]])
         distance = np.rint(_far(positions, candidates[sub], centre) / (h * h * FAR))
-        if distance.max() < 2.0 ** (64 - int(run[-1]).bit_length()):  # run and distance in one word: one sort
-            run = run << np.uint64(64 - int(run[-1]).bit_length()) | distance.astype(np.uint64)
-            order[members] = sub[np.argsort(run, kind="stable")]
-        else:
-            order[members] = sub[np.lexsort((sub, distance, run))]
+        order[members] = sub[np.lexsort((sub, distance, run))]
     return order
 
 
