@@ -40,6 +40,8 @@ def new_record(**fields: Any) -> dict:
 
 
 _THREADS_SET: list[int] = []
+#: The thread counts BLAS and OpenMP read when they load.
+THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 
 
 def configure_threads(threads: int | None) -> None:
@@ -50,8 +52,7 @@ def configure_threads(threads: int | None) -> None:
     """
     if threads is None or _THREADS_SET == [threads]:
         return
-    for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-        os.environ[name] = str(threads)
+    os.environ.update(dict.fromkeys(THREAD_VARIABLES, str(threads)))
     cap_threads(threads)
     _THREADS_SET[:] = [threads]
 
@@ -265,9 +266,8 @@ def local_cluster(workers: int, threads_per_worker: int = 1, *, retries: int = 1
     import dask
     from distributed import LocalCluster
 
-    threads = str(threads_per_worker)
     environ = dict(dask.config.get("distributed.nanny.pre-spawn-environ", {}) or {})
-    environ.update(OMP_NUM_THREADS=threads, OPENBLAS_NUM_THREADS=threads, MKL_NUM_THREADS=threads)
+    environ.update(dict.fromkeys(THREAD_VARIABLES, str(threads_per_worker)))
     # Dask sets MALLOC_TRIM_THRESHOLD_=65536, which turns off glibc's dynamic mmap threshold: every array
     # above 128 KiB becomes a fresh mmap whose pages fault in zeroed (benchmarks/results/batch.md)
     environ.pop("MALLOC_TRIM_THRESHOLD_", None)
@@ -314,17 +314,9 @@ def failure_record(task: Task, op: str, message: str, stage: str = "worker") -> 
 
 
 def _run_dask(client: Any, tasks: list[Task], job: dict, emit: Callable[[dict], bool], retries: int) -> None:
-    from concurrent.futures import CancelledError
+    from concurrent.futures import CancelledError  # (distributed's FutureCancelledError is one)
 
     from distributed import KilledWorker, as_completed
-
-    cancelled: tuple[type[BaseException], ...]
-    try:
-        from distributed.client import FutureCancelledError
-
-        cancelled = (CancelledError, FutureCancelledError)
-    except ImportError:  # pragma: no cover - distributed before 2024.8
-        cancelled = (CancelledError,)
 
     token = os.urandom(4).hex()
     pending = iter(tasks)
@@ -357,7 +349,7 @@ def _run_dask(client: Any, tasks: list[Task], job: dict, emit: Callable[[dict], 
                     task, op_name, message + f"segfault, or killed for memory); last {last}"
                 )
                 record["worker"] = last
-            except cancelled:
+            except CancelledError:
                 record = failure_record(task, op_name, "cancelled")
             except Exception as error:
                 record = failure_record(task, op_name, f"{type(error).__name__}: {error}")
