@@ -21,13 +21,23 @@ steps, the time against Open3D ``filter_smooth_taubin(100)`` at ~35k and
 ~50k vertices with the memory per vertex (tracemalloc peak), and a run at
 defaults on every raw scan (bunny, dragon, bunny_scan.ply).
 
-Run: ``.venv/bin/python benchmarks/bench_features_denoise.py`` (about 15 minutes on 2 cores);
-writes ``results/features_denoise.md``.
+The default's choice (``constrained_fairing(mesh)``: the feature mode where the
+feature likeness of :mod:`o3d_lsmesh.fairing.feature_measure` reaches
+``FEATURE_LIKENESS``, the scan energy elsewhere): its two constants (probe passes
+per unit noise, the likeness threshold) chosen leave-one-object-out over every
+mesh above with added noise at several levels and seeds, the synthetic-noise
+meshes of ``bench_denoise.py`` and the raw scans; the left-out classification
+of each mesh, the default against ``method="scan"`` where it keeps the scan
+energy (bit-identical), and the probe's cost against the scan energy's.
+
+Run: ``.venv/bin/python benchmarks/bench_features_denoise.py`` (about 25 minutes on 2 cores);
+writes ``results/features_denoise.md``; ``--choice`` prints only the choice's table.
 """
 
 from __future__ import annotations
 
 import os
+import sys
 import time
 import tracemalloc
 from pathlib import Path
@@ -40,8 +50,9 @@ from bench_realscans_denoise import PEERS
 
 from o3d_lsmesh.core.connectivity import Connectivity
 from o3d_lsmesh.core.solve import SPDSolver
-from o3d_lsmesh.fairing import constrained_fairing_arrays
+from o3d_lsmesh.fairing import constrained_fairing_arrays, tuning
 from o3d_lsmesh.fairing import features as fe
+from o3d_lsmesh.fairing.feature_measure import dihedral_likeness, feature_probe
 from o3d_lsmesh.fairing.scan_measure import measured_noise
 
 DATA = Path(os.environ.get("O3D_LSMESH_DENOISE", REPO.parent / "shared" / "data" / "denoise-benchmark"))
@@ -165,6 +176,7 @@ def run_case(case, notes):
     row["features"] = scores(constrained_fairing_arrays(V, F, None, method="features"), F, truth, h)
     row["features_seconds"] = time.perf_counter() - start
     row["default"] = scores(constrained_fairing_arrays(V, F, None, method=None), F, truth, h)
+    row["chose"] = "features" if feature_probe(V, F).features else "scan"
     # our grid: theta after every pass, per sigma_r
     row["grid"] = {s: series(V, F, truth, sigma_r=s, guided=True, passes=MAX_PASSES)[0] for s in SIGMAS}
     peers = {}
@@ -315,7 +327,216 @@ def raw_scans():
     return markdown_table(header, rows)
 
 
+# ---------------------------------------------------------------- the default's choice
+
+PROBE_GRID = (6, 8, 10, 12)  # probe passes per unit noise
+SHARP_SOURCES = [  # (group, clean mesh in DATA): noisy copies at NOISE_LEVELS, SEEDS
+    ("block", "gd_Block0.4_Original"),
+    ("fandisk", "gd_Fandisk0.3_Original"),
+    ("sharpsphere", "gd_SharpSphere0.3_Original"),
+]
+ORGANIC_SOURCES = [("fertility", "gcn_fertility"), ("nicolo", "gcn_nicolo")]
+NOISE_LEVELS, SEEDS = (0.1, 0.3, 0.5), (0, 1)
+DENOISE_MESHES = ("bunny", "venus", "screwdriver", "feline")  # bench_denoise.py's, at 0.2 and 0.5
+DENOISE_SEEDS = (2001, 7)  # bench_denoise.py's seed and one more
+
+
+def with_noise(V, F, sigma, seed):
+    edge = float(np.linalg.norm(V[F[:, 0]] - V[F[:, 1]], axis=1).mean())
+    return V + np.random.default_rng(seed).normal(0.0, sigma * edge, V.shape)
+
+
+def read_welded(path):
+    from o3d_lsmesh._o3d import read_mesh
+
+    data = read_mesh(o3d.io.read_triangle_mesh(str(path)), weld=True)
+    return data.vertices, data.triangles
+
+
+def choice_meshes():
+    """(label, group, sharp, loader) of every mesh the choice is scored on."""
+    from _common import DATA as MESHES
+
+    out = []
+    for label, noisy, _, sharp, _ in CASES:
+        group = next(
+            g
+            for g in ("block", "fandisk", "sharpsphere", "nicolo", "bunny", "fertility")
+            if g in noisy.lower()
+        )
+        out.append((label, group, sharp, lambda n=noisy: read_welded(DATA / f"{n}.ply")))
+    sources = [(g, n, True) for g, n in SHARP_SOURCES] + [(g, n, False) for g, n in ORGANIC_SOURCES]
+    for group, name, sharp in sources:
+        for sigma in NOISE_LEVELS:
+            for seed in SEEDS:
+                load_noisy = lambda n=name, s=sigma, k=seed: (lambda V, F: (with_noise(V, F, s, k), F))(
+                    *read_welded(DATA / f"{n}.ply")
+                )
+                out.append((f"{name} + {sigma} noise, seed {seed}", group, sharp, load_noisy))
+    for name in DENOISE_MESHES:
+        for sigma in (0.2, 0.5):
+            for seed in DENOISE_SEEDS:
+                load_noisy = lambda n=name, s=sigma, k=seed: (lambda V, F: (with_noise(V, F, s, k), F))(
+                    *read_welded(MESHES / f"{n}.ply")
+                )
+                out.append((f"{name} + {sigma} noise, seed {seed}", name, False, load_noisy))
+    for group, folder in (("bunny scans", SCANS), ("dragon scans", SCANS.parent / "scans-dragon")):
+        for path in sorted(folder.glob("*.ply")):
+            out.append((f"scan {path.name}", group, False, lambda p=path: read_welded(p)))
+    return out
+
+
+SCANS = Path(os.environ.get("O3D_LSMESH_SCANS", REPO.parent / "shared" / "data" / "scans"))
+
+
+def probe_series(V, F):
+    """The likeness after each of the most passes the grid takes, the noise, and the probe's seconds."""
+    conn = Connectivity(F, len(V))
+    noise = measured_noise(V, F, conn=conn).noise
+    run = fe.FeatureRun(V, F, conn)
+    count = max(1, int(np.ceil(max(PROBE_GRID) * noise)))
+    return noise, [dihedral_likeness(run.step(), run.adjacency.pairs) for _ in range(count)]
+
+
+def likeness_at(row, per_noise):
+    return row["series"][max(1, int(np.ceil(per_noise * row["noise"]))) - 1]
+
+
+def fitted(rows):
+    """(passes per noise, threshold) of the widest margin on ``rows``: threshold at the margin's
+    geometric middle; a grid point that cannot separate the rows scores its margin below 1."""
+
+    def margin(c):
+        sharp = min(likeness_at(r, c) for r in rows if r["sharp"])
+        smooth = max(likeness_at(r, c) for r in rows if not r["sharp"])
+        return sharp / smooth, float(np.sqrt(sharp * smooth))
+
+    c = max(PROBE_GRID, key=lambda c: margin(c)[0])
+    return c, margin(c)[1], margin(c)[0]
+
+
+def choice_section():
+    rows = []
+    for label, group, sharp, loader in choice_meshes():
+        V, F = loader()
+        noise, series = probe_series(V, F)
+        rows.append(
+            {"mesh": label, "group": group, "sharp": sharp, "n": len(V), "noise": noise, "series": series}
+        )
+        print("choice:", label, round(noise, 3), [round(x, 3) for x in series])
+    c_all, t_all, m_all = fitted(rows)
+    table, wrong = [], 0
+    for r in rows:
+        c, t, _ = fitted([x for x in rows if x["group"] != r["group"]])
+        value = likeness_at(r, c)
+        right = (value >= t) == r["sharp"]
+        wrong += not right
+        table.append(
+            [
+                r["mesh"],
+                r["group"],
+                r["n"],
+                "features" if r["sharp"] else "not features",
+                round(r["noise"], 3),
+                f"{c:g}, {t:.3f}",
+                round(value, 3),
+                "features" if value >= t else "not features",
+                "yes" if right else "NO",
+            ]
+        )
+    header = [
+        "mesh",
+        "object (left out)",
+        "vertices",
+        "wanted",
+        "noise",
+        "chosen on the others (c, threshold)",
+    ]
+    header += ["likeness", "left-out class", "right"]
+    text = (
+        f"Probe passes = max(1, ceil(c noise)), c in {PROBE_GRID}; likeness = mean / median of the angles "
+        "between edge-adjacent faces' filtered normals of the probe's last pass. For each object left out "
+        "(all noisy copies and scans of one object), c is the grid point of the widest margin (least "
+        "'features' likeness over greatest 'not features' one) on the other objects and the threshold the "
+        f"margin's geometric middle. Left-out errors: {wrong} of {len(rows)}. Chosen on all: c = {c_all:g}, "
+        f"threshold {t_all:.3f} (margin {m_all:.3f}); the module's PROBE_PASSES_PER_NOISE = "
+        f"{tuning.PROBE_PASSES_PER_NOISE:g}, FEATURE_LIKENESS = {tuning.FEATURE_LIKENESS:g}.\n\n"
+    )
+    return text + markdown_table(header, table)
+
+
+def keeps_the_scan_energy(repeat=3):
+    """Where the default keeps the scan energy its result is the scan energy's bit for bit; the probe's
+    cost against the scan energy's (best of ``repeat``, interleaved)."""
+    from _common import DATA as MESHES
+
+    cases = [
+        (
+            f"{n} + {s} noise",
+            lambda n=n, s=s: (lambda V, F: (with_noise(V, F, s, 2001), F))(*read_welded(MESHES / f"{n}.ply")),
+        )
+        for n in DENOISE_MESHES
+        for s in (0.2, 0.5)
+    ]
+    cases += [
+        (f"scan {p.name}", lambda p=p: read_welded(p))
+        for p in (
+            SCANS / "bun000.ply",
+            SCANS.parent / "scans-dragon" / "dragonUpRight_0.ply",
+            SCANS.parent.parent / "meshes" / "bunny_scan.ply",
+        )
+    ]
+    cases += [
+        (label, lambda n=noisy: read_welded(DATA / f"{n}.ply"))
+        for label, noisy, _, sharp, _ in CASES
+        if not sharp
+    ]
+    rows = []
+    for label, loader in cases:
+        V, F = loader()
+        scan, probe, default = [], [], []
+        for _ in range(repeat):
+            start = time.perf_counter()
+            by_scan = constrained_fairing_arrays(V, F, None, method="scan")
+            scan.append(time.perf_counter() - start)
+            start = time.perf_counter()
+            measured = feature_probe(V, F)
+            probe.append(time.perf_counter() - start)
+            start = time.perf_counter()
+            by_default = constrained_fairing_arrays(V, F, None, method=None)
+            default.append(time.perf_counter() - start)
+        same = bool(np.array_equal(by_scan, by_default))
+        rows.append(
+            [
+                label,
+                len(V),
+                round(measured.likeness, 3),
+                measured.probe_passes,
+                "yes" if same else "NO",
+                min(scan),
+                min(probe),
+                min(probe) / min(scan),
+                min(default),
+            ]
+        )
+    header = [
+        "mesh",
+        "vertices",
+        "likeness",
+        "probe passes",
+        "default = scan, bit for bit",
+        "scan s",
+        "probe s",
+        "probe / scan",
+        "default s",
+    ]
+    return markdown_table(header, rows)
+
+
 def main():
+    if "--choice" in sys.argv:  # only the choice's leave-one-object-out table, printed
+        print(choice_section())
+        return
     notes: set[str] = set()
     rows = [run_case(case, notes) for case in CASES]
     peer_names = list(rows[0]["peers"])
@@ -343,12 +564,14 @@ def main():
                 "yes" if r["features"][0] <= classical else "no",
                 round(r["noise"], 3),
                 fe.feature_passes(*load(CASES[[c[0] for c in CASES].index(r["mesh"])][1])),
+                r["chose"],
             ]
         )
     gcn_rows = [r for r in rows if r["gcn"] is not None]
     ours_mean = float(np.mean([r["features"][0] for r in gcn_rows]))
     gcn_mean = float(np.mean([r["gcn"][0] for r in gcn_rows]))
     chosen, loo = leave_one_out(rows)
+    choice = choice_section()
     sections = [
         (
             "Theta (degrees) and mean vertex distance (mean edge lengths), each peer at its best setting",
@@ -359,7 +582,16 @@ def main():
         (
             "Targets",
             markdown_table(
-                ["mesh", "features", "best classical peer", "which", "at most", "noise (edges)", "passes"],
+                [
+                    "mesh",
+                    "features",
+                    "best classical peer",
+                    "which",
+                    "at most",
+                    "noise (edges)",
+                    "passes",
+                    "default ran",
+                ],
                 targets,
             )
             + f"\n\nMean theta over GCN-Denoiser's released meshes: ours {ours_mean:.2f}, GCN-Denoiser "
@@ -371,6 +603,11 @@ def main():
             f"at most {MAX_PASSES}). Meshes with sharp features only. Loss: mean over meshes of theta over the grid's best theta on that mesh. "
             f"Chosen on all meshes: sigma_r {chosen[0]}, {chosen[1]} passes per unit noise (the module's "
             f"SIGMA_R = {fe.SIGMA_R}, PASSES_PER_NOISE = {fe.PASSES_PER_NOISE:g}).\n\n" + loo,
+        ),
+        ("The default's choice: feature likeness, leave-one-object-out", choice),
+        (
+            "Where the default keeps the scan energy: the same result, and the probe's cost",
+            keeps_the_scan_energy(),
         ),
         ("Vertex update: Sun et al.'s steps against one least-squares solve a pass", update_comparison()),
         ("Time against Open3D filter_smooth_taubin(100), best of 3 interleaved; memory", speed()),

@@ -223,3 +223,161 @@ def test_multiresolution_refuses_the_feature_mode():
 def test_detect_creases_rejects_a_non_mesh():
     with pytest.raises(TypeError, match="mesh"):
         detect_creases("cube.ply")
+
+
+# ----------------------------------------------------------------- the default's choice (feature_measure)
+
+
+def noisy(V, F, sigma, seed=0):
+    """``V`` with Gaussian noise of ``sigma`` mean edge lengths per coordinate."""
+    edge = np.linalg.norm(V[F[:, 0]] - V[F[:, 1]], axis=1).mean()
+    return V + np.random.default_rng(seed).normal(0.0, sigma * edge, V.shape)
+
+
+def o3d_arrays(mesh):
+    from o3d_lsmesh._o3d import read_mesh
+
+    data = read_mesh(mesh, weld=True)
+    return data.vertices, data.triangles
+
+
+def cad_meshes():
+    import open3d as o3d
+
+    return {
+        "cube": cube(3),
+        "cylinder": o3d_arrays(o3d.geometry.TriangleMesh.create_cylinder(1.0, 2.0, 48, 16)),
+    }
+
+
+def smooth_meshes():
+    import open3d as o3d
+
+    return {
+        "sphere": o3d_arrays(o3d.geometry.TriangleMesh.create_sphere(1.0, 30)),
+        "torus": o3d_arrays(o3d.geometry.TriangleMesh.create_torus(1.0, 0.4, 60, 24)),
+    }
+
+
+def test_dihedral_likeness_matches_a_loop_over_pairs():
+    from statistics import mean, median
+
+    from o3d_lsmesh.fairing.feature_measure import dihedral_likeness
+
+    rng = np.random.default_rng(7)
+    normals = rng.normal(size=(40, 3))
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    pairs = rng.integers(0, 40, size=(90, 2))
+    pairs = pairs[pairs[:, 0] != pairs[:, 1]]  # (an angle near 0 is only known to about 1e-8)
+    angles = [float(np.arccos(np.clip(normals[a] @ normals[b], -1, 1))) for a, b in pairs]
+    assert dihedral_likeness(normals, pairs) == pytest.approx(mean(angles) / median(angles), rel=1e-10)
+    up = np.tile([0.0, 0.0, 1.0], (4, 1))
+    assert dihedral_likeness(up, np.array([[0, 1], [2, 3]])) == 0.0  # flat: no angle at all
+    assert dihedral_likeness(up, np.zeros((0, 2), dtype=np.int64)) == 0.0
+
+
+@pytest.mark.parametrize("sigma", [0.1, 0.3])
+@pytest.mark.parametrize("name", ["cube", "cylinder"])
+def test_the_default_takes_the_feature_mode_on_cad_meshes(name, sigma):
+    V, F = cad_meshes()[name]
+    X = noisy(V, F, sigma)
+    out, report = constrained_fairing((X, F), return_report=True)
+    assert report.method == "features" and report.feature_likeness >= fe_tuning().FEATURE_LIKENESS
+    # the probe's passes are the feature mode's first ones: the same result, bit for bit
+    np.testing.assert_array_equal(
+        np.asarray(out[0]), constrained_fairing_arrays(X, F, None, method="features")
+    )
+    np.testing.assert_array_equal(constrained_fairing_arrays(X, F, None, method=None), np.asarray(out[0]))
+
+
+@pytest.mark.parametrize("sigma", [0.1, 0.3])
+@pytest.mark.parametrize("name", ["sphere", "torus"])
+def test_the_default_is_the_scan_energy_on_smooth_meshes(name, sigma):
+    V, F = smooth_meshes()[name]
+    X = noisy(V, F, sigma)
+    out, report = constrained_fairing((X, F), return_report=True)
+    assert report.method == "scan" and report.feature_likeness < fe_tuning().FEATURE_LIKENESS
+    np.testing.assert_array_equal(np.asarray(out[0]), constrained_fairing_arrays(X, F, None, method="scan"))
+    np.testing.assert_array_equal(constrained_fairing_arrays(X, F, None, method=None), np.asarray(out[0]))
+
+
+def test_the_default_is_the_scan_energy_on_a_raw_scan():
+    from conftest import load_scan
+
+    V, F = load_scan("bun000.ply")
+    out, report = constrained_fairing((V, F), return_report=True)
+    assert report.method == "scan"
+    np.testing.assert_array_equal(
+        np.asarray(out[0]), np.asarray(constrained_fairing((V, F), method="scan")[0])
+    )
+
+
+def test_a_given_method_or_scan_weight_is_not_chosen():
+    V, F = cube(3)
+    X = noisy(V, F, 0.2)
+    assert constrained_fairing((X, F), 3, return_report=True)[1] == fe_report()("local")
+    assert constrained_fairing((X, F), method="scan", return_report=True)[1] == fe_report()("scan")
+    # a weight of the scan energy given without a method: the scan energy, as before
+    assert constrained_fairing((X, F), mu=0.05, return_report=True)[1] == fe_report()("scan")
+    with pytest.raises(TypeError, match="return_report"):
+        constrained_fairing((X, F), return_report="yes")
+
+
+def test_the_choice_is_invariant_under_rigid_motion_and_scale():
+    from o3d_lsmesh.fairing.feature_measure import feature_probe
+
+    q, _ = np.linalg.qr(np.random.default_rng(5).normal(size=(3, 3)))
+    shift = np.array([1e4, -3e3, 2e4])
+    for V, F in [*cad_meshes().values(), *smooth_meshes().values()]:
+        X = noisy(V, F, 0.2)
+        moved = 7.5 * X @ q.T + shift
+        a, b = feature_probe(X, F), feature_probe(moved, F)
+        assert (a.probe_passes, a.passes, a.features) == (b.probe_passes, b.passes, b.features)
+        assert b.likeness == pytest.approx(a.likeness, rel=1e-6)
+    X = noisy(*cube(2), 0.2)
+    F = cube(2)[1]
+    out = constrained_fairing_arrays(X, F, None, method=None)
+    np.testing.assert_allclose(
+        constrained_fairing_arrays(7.5 * X @ q.T + shift, F, None, method=None),
+        7.5 * out @ q.T + shift,
+        atol=1e-12 * 7.5e4,
+    )
+
+
+def test_the_probe_never_takes_more_passes_than_the_feature_mode():
+    import math
+
+    tuning = fe_tuning()
+    for sigma in np.linspace(0.0, 3.0, 3001):
+        passes = fe.passes_for_noise(sigma)
+        probe = max(1, math.ceil(tuning.PROBE_PASSES_PER_NOISE * sigma))
+        assert passes == 0 or probe <= passes, sigma
+
+
+def test_the_command_line_names_the_chosen_method(tmp_path, capsys):
+    import json
+
+    import open3d as o3d
+
+    from o3d_lsmesh.app.cli import main
+
+    V, F = cube(3)
+    mesh = o3d.geometry.TriangleMesh(
+        o3d.utility.Vector3dVector(noisy(V, F, 0.2)), o3d.utility.Vector3iVector(F)
+    )
+    source = tmp_path / "cube.ply"
+    o3d.io.write_triangle_mesh(str(source), mesh)
+    assert main(["denoise", str(source), str(tmp_path / "out.ply"), "--json", "--quiet"]) == 0
+    assert json.loads(capsys.readouterr().out)["method"] == "features"
+
+
+def fe_tuning():
+    from o3d_lsmesh.fairing import tuning
+
+    return tuning
+
+
+def fe_report():
+    from o3d_lsmesh.fairing.constrained import FairingReport
+
+    return FairingReport

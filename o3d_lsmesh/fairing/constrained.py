@@ -2,11 +2,13 @@
 
 Four energies: ``"scan"`` (:mod:`.scan_fairing`), ``"local"`` (eq. 7), ``"global"`` (eq. 5 in penalty
 form, :mod:`.barycenter`), ``"features"`` (:mod:`.features`); :data:`METHOD_OPTIONS` says which option
-applies to which. Docs: ``docs/algorithms/constrained_fairing.rst``.
+applies to which. The default chooses ``"features"`` or ``"scan"`` by the mesh's feature likeness
+(:mod:`.feature_measure`). Docs: ``docs/algorithms/constrained_fairing.rst``.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from functools import partial
 from typing import TYPE_CHECKING, Any
 
@@ -30,6 +32,7 @@ from ..core.validate import (
 )
 from .barycenter import GlobalSolver, local_operator
 from .boundary_curve import CurveOperator, curve_operator
+from .feature_measure import FeatureProbe, feature_probe
 from .features import feature_denoise
 from .scan_fairing import scan_denoise
 from .tuning import DEFAULT_MU
@@ -41,12 +44,31 @@ __all__ = [
     "DEFAULT_METHOD",
     "FAIRING_METHODS",
     "METHOD_OPTIONS",
+    "FairingReport",
     "constrained_fairing",
     "constrained_fairing_arrays",
 ]
 
-#: The energy of ``constrained_fairing(mesh)``.
+#: The energy of ``constrained_fairing(mesh)`` where the mesh has no sharp creases (it chooses
+#: ``"features"`` where its feature likeness says so) or a weight of this energy is given.
 DEFAULT_METHOD = "scan"
+_AUTO = "auto"  # the default's choice, made on the mesh (_chosen)
+
+
+@dataclass(frozen=True)
+class FairingReport:
+    """What ``constrained_fairing(..., return_report=True)`` ran.
+
+    Attributes
+    ----------
+    method : str
+        The energy that ran: the one given, or the default's choice (``"features"`` or ``"scan"``).
+    feature_likeness : float or None
+        The measure the default chose by (:mod:`.feature_measure`); None when ``method`` was given.
+    """
+
+    method: str
+    feature_likeness: float | None = None
 
 
 def _one_solve(value: Any, *, name: str) -> int:
@@ -127,13 +149,30 @@ def _check_options(method: Any, given: dict[str, Any]) -> tuple[str, dict[str, A
     # the one check of every option: the method's row of METHOD_OPTIONS, then progress
     if method is None:
         method = resolved_options(None, given["number_of_iterations"], given["reimpose_every"])[0]
+        # no weight of the scan energy given: the mesh chooses (its options are checked as the scan's)
+        auto = method == DEFAULT_METHOD and all(
+            given[k] is None for k in ("mu", "membrane", "boundary_weight")
+        )
+    else:
+        auto = False
     # a bool's type is checked for every method; True is what scan and features require
     smooth = as_bool(given["smooth_boundary"], name="smooth_boundary")
     given = {**given, "smooth_boundary": None if smooth else False}
     progress = as_bool(given.pop("progress"), name="progress")
     method, options = check_options(METHOD_OPTIONS, method, given)
     options["progress"] = progress
-    return method, options
+    return _AUTO if auto else method, options
+
+
+def _chosen(positions, conn, method, progress) -> tuple[str, FeatureProbe | None]:
+    # the default's choice on the mesh: "features" or "scan", and the probe that started the feature mode
+    if method != _AUTO:
+        return method, None
+    probe = feature_probe(positions, conn.triangles, conn=conn)
+    method = "features" if probe.features else "scan"
+    if progress:
+        Progress.write(f"constrained fairing: feature likeness {probe.likeness:.3g}, method {method!r}")
+    return method, probe
 
 
 def constrained_fairing_arrays(
@@ -170,7 +209,9 @@ def constrained_fairing_arrays(
             "which 0.4 makes the default",
             DeprecationWarning,
         )
-    return _fair(vertices, Connectivity(triangles, len(vertices)), method, options, solver)
+    conn = Connectivity(triangles, len(vertices))
+    method, probe = _chosen(vertices, conn, method, options["progress"])
+    return _fair(vertices, conn, method, options, solver, probe)
 
 
 def _given(arguments: dict[str, Any]) -> dict[str, Any]:
@@ -178,10 +219,12 @@ def _given(arguments: dict[str, Any]) -> dict[str, Any]:
     return {name: arguments[name] for name in (*names, "progress")}
 
 
-def _fair(positions, conn, method, options, solver="auto"):
+def _fair(positions, conn, method, options, solver="auto", probe=None):
     # validated positions (a private copy) and the mesh's one Connectivity in, new (n, 3) positions out
     solver = as_choice(solver, SOLVERS, name="solver")  # checked for every method ("local" solves none)
     iterations, progress = options["number_of_iterations"], options["progress"]
+    if probe is not None and method == "features":
+        return probe.finish(progress)  # the default's choice goes on with the probe's passes
     if iterations == 0:
         return positions
     triangles = conn.triangles
@@ -253,12 +296,14 @@ def constrained_fairing(
     reimpose_every: int | None = None,
     progress: bool = False,
     solver: str = "auto",
-) -> MeshT:
+    return_report: bool = False,
+) -> MeshT | tuple[MeshT, FairingReport]:
     """Remove noise from a mesh while holding its triangle barycenters (Liu et al. 2001).
 
-    ``"scan"`` (the default, every weight measured) is made for raw range scans and independent
-    noise; ``"local"`` and ``"global"`` are the paper's operators (eq. 7, eq. 5), ``"features"`` keeps
-    creases. Docs: ``docs/algorithms/constrained_fairing.rst``, ``scan_denoiser.rst``.
+    ``"scan"`` (every weight measured) is made for raw range scans and independent noise, ``"features"``
+    keeps creases; the default runs ``"features"`` where the mesh's feature likeness says it has sharp
+    creases, ``"scan"`` elsewhere (``return_report=True`` says which). ``"local"`` and ``"global"`` are
+    the paper's operators (eq. 7, eq. 5). Docs: ``docs/algorithms/constrained_fairing.rst``, ``features.rst``.
 
     Parameters
     ----------
@@ -268,7 +313,9 @@ def constrained_fairing(
         Local iterations or global solves (``None``: 10); ``"scan"``: None, 0 or 1 (one solve);
         ``"features"``: filter passes (``None``: measured). 0 returns an unchanged copy.
     method : {"scan", "local", "global", "features"} or None
-        ``None``: ``"scan"``, or ``"local"`` when ``number_of_iterations`` or ``reimpose_every`` is given.
+        ``None``: ``"features"`` or ``"scan"`` as the mesh's feature likeness says; ``"scan"`` when ``mu``,
+        ``membrane`` or ``boundary_weight`` is given, ``"local"`` when ``number_of_iterations`` or
+        ``reimpose_every`` is.
     mu : float or None
         ``"scan"`` and ``"global"``: barycenter penalty weight (``None``: measured; ``DEFAULT_MU``).
     membrane, boundary_weight : float or None
@@ -281,10 +328,12 @@ def constrained_fairing(
         Show a progress bar.
     solver : {"auto", "cholmod", "iterative"}
         How ``"scan"`` and ``"global"`` solve their system (see :class:`~o3d_lsmesh.SPDSolver`).
+    return_report : bool
+        Also return a :class:`FairingReport` (the method that ran, the measured feature likeness).
 
     Returns
     -------
-    mesh
+    mesh or (mesh, FairingReport)
         A new mesh of the input's kind, same triangles, attributes kept, normals recomputed.
 
     Raises
@@ -301,10 +350,15 @@ def constrained_fairing(
     >>> sphere = o3d.geometry.TriangleMesh.create_sphere(radius=1.0, resolution=20)
     >>> len(constrained_fairing(sphere).vertices) == len(sphere.vertices)
     True
+    >>> constrained_fairing(sphere, return_report=True)[1].method  # a smooth sphere: no creases
+    'scan'
     """
     method, options = _check_options(method, _given(locals()))
+    report = as_bool(return_report, name="return_report")
     # read_mesh's vertices are a private copy: _fair may write to them; the local path only reads the
     # triangles, so it takes Open3D's own int32 array (no int64 copy, no cast back)
     data = read_mesh(mesh, weld=True, narrow=method == "local")
     conn = Connectivity(data.triangles, len(data.vertices))
-    return new_mesh(data, _fair(data.vertices, conn, method, options, solver))
+    method, probe = _chosen(data.vertices, conn, method, options["progress"])
+    out = new_mesh(data, _fair(data.vertices, conn, method, options, solver, probe))
+    return (out, FairingReport(method, None if probe is None else probe.likeness)) if report else out

@@ -26,12 +26,14 @@ if TYPE_CHECKING:
     from .._types import MeshT
 
 __all__ = [
+    "FeatureRun",
     "detect_creases",
     "detect_creases_arrays",
     "feature_denoise",
     "feature_passes",
     "filter_pass",
     "normal_steps",
+    "passes_for_noise",
 ]
 
 
@@ -140,7 +142,42 @@ def normal_steps(
 def feature_passes(vertices: np.ndarray, triangles: np.ndarray, *, conn: Connectivity | None = None) -> int:
     """The pass count of :func:`feature_denoise`: ``round(PASSES_PER_NOISE * sigma)``, ``sigma`` the
     measured noise in mean edge lengths (0 on a noiseless mesh: it is left as it is)."""
-    return round(PASSES_PER_NOISE * measured_noise(vertices, triangles, conn=conn).noise)
+    return passes_for_noise(measured_noise(vertices, triangles, conn=conn).noise)
+
+
+def passes_for_noise(noise: float) -> int:
+    """``round(PASSES_PER_NOISE * noise)``: the feature mode's pass count at ``noise`` mean edge lengths."""
+    return round(PASSES_PER_NOISE * noise)
+
+
+class FeatureRun:
+    """The feature mode's passes on one mesh, taken one at a time (:meth:`step`); :meth:`positions` reads
+    the result. ``feature_denoise`` takes them all; the default's chooser takes the first few, measures,
+    and may go on (:mod:`.feature_measure`)."""
+
+    def __init__(self, vertices, triangles, conn, *, sigma_r=SIGMA_R, guided=True):
+        self.vertices, self.triangles, self.sigma_r, self.guided = vertices, triangles, sigma_r, guided
+        self.adjacency = conn.face_adjacency
+        self.patch_edges = _patch_edges(self.adjacency) if guided else None
+        # about the centroid: the planes' offsets n_f . c_f do not carry the distance to the origin
+        self.used = np.bincount(triangles.ravel(), minlength=len(vertices)) > 0
+        self.centre = vertices[self.used].mean(axis=0) if self.used.any() else np.zeros(3)
+        self.x = vertices - self.centre
+
+    def step(self) -> np.ndarray:
+        """One pass: the filtered face normals ``(m, 3)``, then the vertex steps towards their planes."""
+        a = self.adjacency
+        normals = filter_pass(
+            self.x, self.triangles, a, self.patch_edges, sigma_r=self.sigma_r, guided=self.guided
+        )
+        self.x = normal_steps(self.x, self.triangles, normals, incidence=a.incidence)
+        return normals
+
+    def positions(self) -> np.ndarray:
+        """The positions after the passes taken, ``(n, 3)``; unreferenced vertices exactly where they were."""
+        x = self.x + self.centre
+        x[~self.used] = self.vertices[~self.used]
+        return x
 
 
 def feature_denoise(
@@ -167,23 +204,14 @@ def feature_denoise(
     >>> feature_denoise(V + np.random.default_rng(0).normal(0.0, 0.01, V.shape), F).shape
     (386, 3)
     """
-    n = len(vertices)
-    conn = Connectivity(triangles, n) if conn is None else conn
+    conn = Connectivity(triangles, len(vertices)) if conn is None else conn
     passes = feature_passes(vertices, triangles, conn=conn) if passes is None else passes
     if passes == 0:
         return np.array(vertices, dtype=np.float64)
-    adjacency = conn.face_adjacency
-    patch_edges = _patch_edges(adjacency) if guided else None
-    # about the centroid: the planes' offsets n_f . c_f do not carry the distance to the origin
-    used = np.bincount(triangles.ravel(), minlength=n) > 0
-    centre = vertices[used].mean(axis=0)
-    x = vertices - centre
+    run = FeatureRun(vertices, triangles, conn, sigma_r=sigma_r, guided=guided)
     for _ in Progress(progress, "constrained fairing (features)").over(range(passes)):
-        normals = filter_pass(x, triangles, adjacency, patch_edges, sigma_r=sigma_r, guided=guided)
-        x = normal_steps(x, triangles, normals, incidence=adjacency.incidence)
-    x += centre
-    x[~used] = vertices[~used]  # exactly where they were
-    return x
+        run.step()
+    return run.positions()
 
 
 def detect_creases_arrays(
