@@ -230,15 +230,18 @@ def restore_volume(given: np.ndarray, positions: np.ndarray, conn: Connectivity)
     normal = area_weighted_normals(positions, faces)
     length = np.linalg.norm(normal, axis=1)
     direction = np.divide(normal, length[:, None], out=np.zeros_like(normal), where=length[:, None] > 0)
-    a, b, c = ((positions - centre)[faces[:, k]] for k in range(3))
-    p, q, r = (direction[faces[:, k]] for k in range(3))
+    owner, corner = label[faces[:, 0]], faces.T
 
-    owner = label[faces[:, 0]]
+    def rows(x: np.ndarray) -> list[np.ndarray]:  # each corner's coordinates, (3, faces) with contiguous rows
+        x = np.ascontiguousarray(x.T)
+        return [x[:, k] for k in corner]
 
     def per_component(u: np.ndarray, v: np.ndarray, w: np.ndarray) -> np.ndarray:  # sums of u . (v x w) / 6
-        return np.bincount(owner, np.einsum("ij,ij->i", u, np.cross(v, w)), minlength=count) / 6.0
+        triple = u[0] * (v[1] * w[2] - v[2] * w[1]) + u[1] * (v[2] * w[0] - v[0] * w[2])
+        return np.bincount(owner, triple + u[2] * (v[0] * w[1] - v[1] * w[0]), minlength=count) / 6.0
 
-    target = per_component(*((given - centre)[faces[:, k]] for k in range(3)))
+    (a, b, c), (p, q, r) = rows(positions - centre), rows(direction)
+    target = per_component(*rows(given - centre))
     cubic = (
         per_component(a, b, c) - target,
         per_component(p, b, c) + per_component(a, q, c) + per_component(a, b, r),
