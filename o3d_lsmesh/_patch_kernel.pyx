@@ -476,59 +476,91 @@ def patch_crossings(const double[:, ::1] vertices, const int64_t[:, ::1] triangl
         raise ValueError("owner must hold one patch in [0, q) per new triangle")
     crossed_ = np.zeros(q, dtype=np.uint8)
     for grid in grids:
-        _grid_crossings(vertices, triangles, first_new, new_centre, new_radius, grid, tri_centre, tri_radius,
+        _grid_crossings(vertices, triangles, first_new, new_centre, new_radius, [grid], tri_centre, tri_radius,
                         False, result_, owner_, crossed_, owner is not None)
-    for grid in new_grids:
-        _grid_crossings(vertices, triangles, first_new, new_centre, new_radius, grid, new_centre, new_radius,
-                        True, result_, owner_, crossed_, owner is not None)
+    _grid_crossings(vertices, triangles, first_new, new_centre, new_radius, list(new_grids), new_centre,
+                    new_radius, True, result_, owner_, crossed_, owner is not None)
     return result_
 
 cdef _grid_crossings(const double[:, ::1] vertices, const int64_t[:, ::1] triangles, int64_t first_new,
-                     const double[:, ::1] centre, const double[::1] radius, grid, const double[:, ::1] tc,
-                     const double[::1] tr, bint among_new, double[::1] result, const int64_t[::1] owner,
-                     uint8_t[::1] crossed, bint stop):
-    """:func:`patch_crossings` against one grid's triangles (the new ones if ``among_new``)."""
-    origin_, cell_, dims_, indptr_, members_, reach_ = grid
-    cdef double cell = cell_, reach = reach_
-    cdef const double[::1] origin = origin_
-    cdef const int64_t[::1] dims = dims_, indptr = indptr_, members = members_
-    cdef int64_t q = centre.shape[0], i = 0, k, t, count, capacity, other
+                     const double[:, ::1] centre, const double[::1] radius, list grids,
+                     const double[:, ::1] tc, const double[::1] tr, bint among_new, double[::1] result,
+                     const int64_t[::1] owner, uint8_t[::1] crossed, bint stop):
+    """:func:`patch_crossings` against the triangles of ``grids`` (the new ones if ``among_new``: each pair
+    once, queried from its first triangle; with ``stop``, a triangle of a patch already crossing is no
+    query, its pairs tested from the other side, and a query ends at its first crossing: the patches
+    found crossing are the same, and a crossing patch's triangles cost nothing more)."""
+    cdef int64_t q = centre.shape[0], i = 0, k, t, g, count, capacity, first, other, n_grids = len(grids)
     cdef int64_t[3] lo_cell, hi_cell
     cdef double[3] lo, hi
     cdef int c
     cdef const double* V = &vertices[0, 0]
     cdef const int64_t* T = &triangles[0, 0]
-    if members.shape[0] == 0:
+    if n_grids == 0 or n_grids > 4:
+        if n_grids:
+            raise ValueError("at most 4 grids")
         return
-    buffer_ = np.empty(min(members.shape[0], 4096), dtype=np.int64)
+    # each grid's arrays (a _TriangleIndex makes at most 2): origin, cell, dims, reach, indptr, members
+    cdef double[4][3] origin
+    cdef double[4] cell, reach
+    cdef int64_t[4][3] dims
+    cdef const int64_t* indptr[4]
+    cdef const int64_t* members[4]
+    cdef const int64_t[::1] view
+    keep = []
+    for g in range(n_grids):
+        o_, cell_, d_, p_, m_, r_ = grids[g]
+        cell[g], reach[g] = cell_, r_
+        for c in range(3):
+            origin[g][c], dims[g][c] = o_[c], d_[c]
+        p_, m_ = np.ascontiguousarray(p_, dtype=np.int64), np.ascontiguousarray(m_, dtype=np.int64)
+        keep += [p_, m_]
+        view = p_
+        indptr[g] = &view[0]
+        view = m_ if m_.shape[0] else np.zeros(1, dtype=np.int64)
+        keep.append(view)
+        members[g] = &view[0]
+    # among_new with stop: whether each triangle's query ran to its end (its pairs with later ones tested)
+    done_ = np.zeros(q, dtype=np.uint8)
+    cdef uint8_t[::1] done = done_
+    buffer_ = np.empty(4096, dtype=np.int64)
     cdef int64_t[::1] buffer = buffer_
     while i < q:
         with nogil:
             while i < q:
-                if stop and crossed[owner[i]] and not among_new:  # a pair of new ones may mark the other
+                if stop and crossed[owner[i]]:  # known crossing: its pairs are tested from the other side
                     i += 1
                     continue
                 for c in range(3):
                     lo[c], hi[c] = centre[i, c] - radius[i], centre[i, c] + radius[i]
-                capacity = _cells(lo, hi, &origin[0], cell, &dims[0], &indptr[0], reach, lo_cell, hi_cell)
+                capacity = 0
+                for g in range(n_grids):
+                    capacity += _cells(lo, hi, origin[g], cell[g], dims[g], indptr[g], reach[g], lo_cell, hi_cell)
                 if capacity > buffer.shape[0]:
                     break
-                count = _gather(lo, hi, lo_cell, hi_cell, &dims[0], &indptr[0], &members[0], &tc[0, 0], &tr[0],
-                                &buffer[0])
+                count = 0
+                for g in range(n_grids):
+                    _cells(lo, hi, origin[g], cell[g], dims[g], indptr[g], reach[g], lo_cell, hi_cell)
+                    count += _gather(lo, hi, lo_cell, hi_cell, dims[g], indptr[g], members[g], &tc[0, 0], &tr[0],
+                                     &buffer[count])
+                done[i] = 1
                 for k in range(count):
                     t = buffer[k]
-                    if among_new and (t <= i or (stop and crossed[owner[i]] and crossed[owner[t]])):
+                    # a pair of new ones once: from its first triangle, or from the second where the
+                    # first's query was skipped or cut short
+                    if among_new and (t == i or (t < i and (done[t] or not stop))):
                         continue
-                    other = first_new + t if among_new else t
-                    if _overlap(&centre[i, 0], radius[i], &tc[t, 0], tr[t]) and _pair_crosses(
-                        V, T, first_new + i, other
-                    ):
+                    first, other = first_new + i, t
+                    if among_new:  # the pair in index order, as queried from its first triangle
+                        first, other = first_new + min(i, t), first_new + max(i, t)
+                    if _overlap(&centre[i, 0], radius[i], &tc[t, 0], tr[t]) and _pair_crosses(V, T, first, other):
                         result[i] += 1.0
                         crossed[owner[i]] = 1
                         if among_new:
                             result[t] += 1.0
                             crossed[owner[t]] = 1
-                        if stop and not among_new:
+                        if stop:
+                            done[i] = 0
                             break
                 i += 1
         if i < q:

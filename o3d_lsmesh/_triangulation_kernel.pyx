@@ -8,9 +8,10 @@ Local meshes index their vertices below 2^31: edge keys pack two indices in one 
 
 import numpy as np
 
-from libc.math cimport INFINITY, acos, asin, fabs, fmax, fmin, sqrt
+from libc.math cimport INFINITY, acos, asin, cos, fabs, fmax, fmin, sqrt
 from libc.stdint cimport int64_t, uint8_t
 from libc.stdlib cimport free, malloc, qsort
+from libc.string cimport memcpy, memset
 
 from o3d_lsmesh._fill_common cimport Half, _by_key, _by_value, _cross, _dot, _key, _lower, _outside, _sub
 
@@ -22,14 +23,14 @@ cdef int64_t _MAX_FAN = 64  # refinement: no split at a corner of this many tria
 # Liepa's minimum-weight triangulation (SGP 2003, section 3)
 
 cdef void _liepa(const double* P, const double* outer, const uint8_t* forbidden, const uint8_t* allowed,
-                 int64_t k, double* angle,
+                 int64_t k, double* angle, double* cosine,
                  double* area, int64_t* split, double* normal, uint8_t* known, double* t_angle,
                  double* t_area, double* t_twice, double* t_normal) noexcept nogil:
     """Fill the programme's tables: weight (largest dihedral angle, area) of the best triangulation of each
     polygon ``i..j``; ``forbidden`` chords and triangles not ``allowed`` (either may be NULL) infinitely bad."""
     cdef int64_t i, j, m, d, c, r, choice
     cdef double[3] u, v, cr
-    cdef double twice, cos1, cos2, worst, theta, longest, best_angle, best_area, near, uu, vv
+    cdef double twice, cos1, cos2, worst, theta, longest, best_angle, best_area, near, uu, vv, sub
     cdef const double* a
     cdef double* nm
     cdef bint closing_known = fabs(outer[3 * (k - 1)]) + fabs(outer[3 * (k - 1) + 1]) + fabs(outer[3 * (k - 1) + 2]) > 0
@@ -43,6 +44,16 @@ cdef void _liepa(const double* P, const double* outer, const uint8_t* forbidden,
             a = P + 3 * j
             for r in range(d - 1):
                 m = i + 1 + r
+                # a triangle not allowed or on a forbidden chord is infinitely bad: not computed (with the
+                # Delaunay restriction most are not), so the programme's work follows the allowed triangles
+                if (allowed != NULL and not allowed[(i * k + m) * k + j]) or (
+                    forbidden != NULL and (forbidden[i * k + m] or forbidden[m * k + j])
+                ):
+                    t_angle[r] = INFINITY
+                    t_area[r] = INFINITY
+                    t_twice[r] = 0.0
+                    t_normal[3 * r] = t_normal[3 * r + 1] = t_normal[3 * r + 2] = 0.0
+                    continue
                 _sub(P + 3 * m, a, u)
                 _sub(P + 3 * i, a, v)
                 _cross(u, v, cr)  # triangle (j, m, i)
@@ -55,22 +66,22 @@ cdef void _liepa(const double* P, const double* outer, const uint8_t* forbidden,
                 worst = fmin(cos1 if known[i * k + m] else 1.0, cos2 if known[m * k + j] else 1.0)
                 if d == k - 1 and closing_known:  # the triangle on the closing loop edge (k - 1, 0)
                     worst = fmin(worst, _dot(nm, outer + 3 * (k - 1)))
-                theta = acos(fmin(fmax(worst, -1.0), 1.0))
                 # a degenerate triangle (collinear chord samples) is worse than any real one: neither
                 # its noise normal nor its zero area may win (both sides of a chord taking it make a
                 # non-manifold edge)
                 uu = _dot(u, u)
                 vv = _dot(v, v)
                 longest = uu if uu >= vv else vv
-                if not twice > 1e-9 * longest:
-                    theta = 2.0 * 3.141592653589793
-                t_angle[r] = fmax(theta, fmax(angle[i * k + m], angle[m * k + j]))
+                sub = fmax(angle[i * k + m], angle[m * k + j])
+                if twice > 1e-9 * longest and worst >= fmin(cosine[i * k + m], cosine[m * k + j]) + 1e-9:
+                    t_angle[r] = sub  # its angle is below sub's (|d acos| >= |d cos|): no acos needed
+                else:
+                    theta = acos(fmin(fmax(worst, -1.0), 1.0))
+                    if not twice > 1e-9 * longest:
+                        theta = 2.0 * 3.141592653589793
+                    t_angle[r] = fmax(theta, sub)
                 t_area[r] = 0.5 * twice + area[i * k + m] + area[m * k + j]
                 t_twice[r] = twice
-                if forbidden != NULL and (forbidden[i * k + m] or forbidden[m * k + j]):
-                    t_angle[r] = INFINITY
-                if allowed != NULL and not allowed[(i * k + m) * k + j]:
-                    t_angle[r] = INFINITY
             best_angle = INFINITY
             for r in range(d - 1):
                 best_angle = fmin(best_angle, t_angle[r])
@@ -90,6 +101,7 @@ cdef void _liepa(const double* P, const double* outer, const uint8_t* forbidden,
             angle[c] = t_angle[choice]
             if forbidden != NULL and d < k - 1 and forbidden[c]:
                 angle[c] = INFINITY
+            cosine[c] = cos(angle[c])
             area[c] = t_area[choice]
             split[c] = i + 1 + choice
             for m in range(3):
@@ -117,13 +129,14 @@ def minimum_weight_triangulation(const double[:, ::1] points, const double[:, ::
     angle_, area_, normal_, known_ = np.zeros(k * k), np.zeros(k * k), np.zeros(3 * k * k), np.zeros(k * k, np.uint8)
     split_ = np.full(k * k, -1, dtype=np.int64)
     scratch = np.empty(6 * k)
-    cdef double[::1] angle = angle_, area = area_, normal = normal_, s = scratch
+    cosine_ = np.ones(k * k)  # cos of each angle (a loop edge's: 0, cos 1)
+    cdef double[::1] angle = angle_, area = area_, normal = normal_, s = scratch, cosine = cosine_
     cdef int64_t[::1] split = split_
     cdef uint8_t[::1] known = known_
     cdef const uint8_t* f = NULL if forbidden is None else &forbidden[0, 0]
     with nogil:
         _liepa(&points[0, 0], &outer_normals[0, 0], f, NULL if allowed is None else &allowed[0], k, &angle[0],
-               &area[0], &split[0], &normal[0], &known[0], &s[0], &s[k], &s[2 * k], &s[3 * k])
+               &cosine[0], &area[0], &split[0], &normal[0], &known[0], &s[0], &s[k], &s[2 * k], &s[3 * k])
     if allowed is not None and not np.isfinite(angle_[k - 1]):  # no triangulation within ``allowed``
         return minimum_weight_triangulation(points, outer_normals, forbidden)
     if f != NULL and not np.isfinite(angle_[k - 1]):
@@ -215,6 +228,37 @@ cdef bint _flip_improves(const double* pa, const double* pb, const double* pc, c
         fmin(_min_angle(pa, pb, pc), _min_angle(pb, pa, pd)) + 1e-9
     )
 
+cdef void _sort_halves(Half* a, Half* tmp, int64_t n, int64_t* count) noexcept nogil:
+    """Sort ``n`` half-edges given in index order by (key, index): a stable radix sort of the keys, 16 bits a
+    pass, digits that all share skipped (``tmp``: ``n`` more, ``count``: 4 * 65536 scratch); the same order
+    as qsort by ``_by_key`` in linear time (a pass of flips sorted every half-edge of the patch)."""
+    cdef int64_t i, s, total, c
+    cdef int d
+    cdef Half* src = a
+    cdef Half* dst = tmp
+    cdef Half* swap
+    memset(count, 0, 4 * 65536 * sizeof(int64_t))
+    for i in range(n):
+        for d in range(4):
+            count[d * 65536 + ((a[i].key >> (16 * d)) & 0xFFFF)] += 1
+    for d in range(4):
+        if n == 0 or count[d * 65536 + ((a[0].key >> (16 * d)) & 0xFFFF)] == n:
+            continue
+        total = 0
+        for s in range(65536):
+            c = count[d * 65536 + s]
+            count[d * 65536 + s] = total
+            total += c
+        for i in range(n):
+            s = d * 65536 + ((src[i].key >> (16 * d)) & 0xFFFF)
+            dst[count[s]] = src[i]
+            count[s] += 1
+        swap = src
+        src = dst
+        dst = swap
+    if src != a:
+        memcpy(a, src, n * sizeof(Half))
+
 cdef int _relax(const double* points, int64_t* tris, int64_t t, const int64_t* fixed, int64_t n_fixed,
                 uint8_t* dirty) noexcept nogil:
     """Delaunay edge flips (Liepa's relaxation) in passes of independent flips until none applies; -1 if
@@ -229,15 +273,18 @@ cdef int _relax(const double* points, int64_t* tris, int64_t t, const int64_t* f
     cdef int64_t* removed = <int64_t*>malloc(max(nh, 1) * sizeof(int64_t))
     cdef Half* chosen = <Half*>malloc(max(nh, 1) * sizeof(Half))
     cdef uint8_t* keep = <uint8_t*>malloc(max(nh, 1))
-    if not (half and pairs and proposed and owner and removed and chosen and keep):
+    cdef Half* spare = <Half*>malloc(max(nh, 1) * sizeof(Half))
+    cdef int64_t* count = <int64_t*>malloc(4 * 65536 * sizeof(int64_t))
+    if not (half and pairs and proposed and owner and removed and chosen and keep and spare and count):
         free(half); free(pairs); free(proposed); free(owner); free(removed); free(chosen); free(keep)
+        free(spare); free(count)
         return -1
     for pass_ in range(100):
         # the interior edges in key order: consecutive equal keys of the sorted half-edges
         for i in range(nh):
             half[i].key = _key(tris[i], tris[3 * (i // 3) + (i % 3 + 1) % 3])
             half[i].h = i
-        qsort(half, nh, sizeof(Half), _by_key)
+        _sort_halves(half, spare, nh, count)
         ne = 0
         for i in range(nh - 1):
             if half[i + 1].key == half[i].key:
@@ -304,6 +351,7 @@ cdef int _relax(const double* points, int64_t* tris, int64_t t, const int64_t* f
             tris[3 * t2], tris[3 * t2 + 1], tris[3 * t2 + 2] = d, b, c
         qsort(removed, n_removed, sizeof(int64_t), _by_value)
     free(half); free(pairs); free(proposed); free(owner); free(removed); free(chosen); free(keep)
+    free(spare); free(count)
     return 0
 
 cdef int64_t[::1] _fixed_keys(fixed_pairs):
