@@ -100,7 +100,8 @@ def smooth_boundary_curves(mesh: MeshT, number_of_iterations: int = 10) -> MeshT
 
     Interior vertices do not move; a closed mesh comes back unchanged. Pinches average their
     passages; fins, 3-loops and chains under :data:`MIN_LOOP_LENGTH` edges are held
-    (``docs/algorithms/boundary_curves.rst``).
+    (``docs/algorithms/boundary_curves.rst``). Returns a new mesh of the input's kind, same
+    triangles, attributes kept, normals recomputed.
 
     Parameters
     ----------
@@ -108,17 +109,10 @@ def smooth_boundary_curves(mesh: MeshT, number_of_iterations: int = 10) -> MeshT
     number_of_iterations : int
         Smoothing steps; 0 returns an unchanged copy.
 
-    Returns
-    -------
-    mesh
-        A new mesh of the input's kind, same triangles, attributes kept, normals recomputed.
-
     Raises
     ------
-    TypeError
-        ``mesh`` is not a mesh, or ``number_of_iterations`` is not an integer.
-    ValueError
-        Negative ``number_of_iterations``; an invalid mesh.
+    InputError
+        An invalid mesh or a negative ``number_of_iterations`` (``InputTypeError``: a wrong type).
 
     Examples
     --------

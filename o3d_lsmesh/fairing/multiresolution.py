@@ -124,7 +124,8 @@ def multiresolution_fairing(
     From ``level`` down to 1: fair ``M_i`` (section 3, its own barycenters held), then split to
     ``M_{i-1}`` (:meth:`MeshHierarchy.refine`); then ``M_0`` is faired in rounds, barycenters
     re-imposed, boundary held where ``level=0`` puts it. Any mesh; a pinched boundary is held.
-    Why the rounds: ``docs/algorithms/multiresolution.rst``.
+    Returns a new mesh of the input's kind and connectivity. Why the rounds:
+    ``docs/algorithms/multiresolution.rst``.
 
     Parameters
     ----------
@@ -144,16 +145,10 @@ def multiresolution_fairing(
     progress : bool
         Bars for the hierarchy build and the levels.
 
-    Returns
-    -------
-    Mesh of the input's kind with the input's connectivity.
-
     Raises
     ------
-    TypeError
-        A wrong argument type.
-    ValueError
-        Invalid mesh, ``level`` out of range, or a hierarchy of another mesh.
+    InputError
+        Invalid mesh, ``level`` out of range, a hierarchy of another mesh (``InputTypeError``: a wrong type).
 
     Examples
     --------
