@@ -29,11 +29,14 @@ def splu_spd(matrix: sp.csc_matrix) -> Any:
     )
 
 
-def gram_matrix(a: sp.csc_matrix) -> sp.csc_matrix:
-    """``A A^T`` for a CSC ``A``, sorted CSC, exactly symmetric (``_block_kernel.gram``, on every core)."""
+def gram_matrix(a: sp.csc_matrix, *, rows: sp.csr_matrix | None = None) -> sp.csc_matrix:
+    """``A A^T`` for a CSC ``A``, sorted CSC, exactly symmetric (``_block_kernel.gram``, on every core).
+
+    ``rows``: ``A`` as canonical CSR, where the caller has it (else ``a.tocsr()``, a transpose pass).
+    """
     from .._block_kernel import gram
 
-    rows = a.tocsr()
+    rows = a.tocsr() if rows is None else rows
     index = np.result_type(rows.indptr, rows.indices, a.indptr, a.indices)
     # the product's entries are at most the sum of the columns' squared lengths: 64-bit indices where
     # 32 bits might not hold them

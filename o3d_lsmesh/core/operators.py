@@ -272,7 +272,8 @@ def scan_normal_matrix(
     lo, hi = edges[:, 0], edges[:, 1]
     referenced = valence > 0
     indptr, indices, diagonal, forward, backward = conn.ring_pattern
-    weight = np.where(boundary[triangles].any(axis=1), float(boundary_weight), 1.0)  # (m,) w_t
+    at_rim = boundary[triangles[:, 0]] | boundary[triangles[:, 1]] | boundary[triangles[:, 2]]
+    weight = np.where(at_rim, float(boundary_weight), 1.0)  # (m,) w_t
     # mu H^T W H + lambda G (+ 1 on an unreferenced vertex's diagonal), on the 1-ring pattern
     data = np.empty(len(indices))
     data[diagonal] = mu * np.bincount(triangles.ravel(), np.repeat(weight, 3), minlength=n)
@@ -302,8 +303,12 @@ def scan_normal_matrix(
     # CSR ones. Its pattern holds the 1-ring (K_ii K_ij): the 1-ring terms are added into it in place
     from .._block_kernel import add_subset  # compiled by the package's build: imported where used
 
-    square = gram_matrix(sp.csc_matrix((plate, indices, indptr), shape=(n, n)))
-    del plate
+    # K^T's rows: K's values mirrored on the symmetric 1-ring pattern (no transpose of K)
+    mirrored = plate.copy()
+    mirrored[forward], mirrored[backward] = plate[backward], plate[forward]
+    rows = sp.csr_matrix((mirrored, indices, indptr), shape=(n, n))
+    square = gram_matrix(sp.csc_matrix((plate, indices, indptr), shape=(n, n)), rows=rows)
+    del plate, mirrored, rows
     index = square.indices.dtype
     missing = add_subset(
         square.indptr,
