@@ -214,7 +214,9 @@ def test_umbrella_weights_average_the_rim_on_the_rim_and_the_ring_inside(case):
         on_boundary is None or on_boundary.tolist() == [bool(r) for r in rim]
     )
     movable = np.arange(n) % 2 == 0
+    pattern = [part.copy() for part in c.ring_pattern]
     N = ops.rim_neighbours(c, movable).toarray()
+    assert all(np.array_equal(a, b) for a, b in zip(c.ring_pattern, pattern))  # the cached pattern kept
     for v in range(n):
         expected_row = (rim[v] if rim[v] else plain_neighbours(F, n)[v]) if movable[v] else set()
         assert set(np.flatnonzero(N[v]).tolist()) == expected_row

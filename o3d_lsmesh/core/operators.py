@@ -207,7 +207,8 @@ def rim_neighbours(conn: Connectivity, movable: np.ndarray) -> sp.csr_matrix:
     data = np.zeros(len(indices))
     data[forward] = movable[lo] & (~boundary[lo] | on_curve)
     data[backward] = movable[hi] & (~boundary[hi] | on_curve)
-    neighbours = sp.csr_matrix((data, indices, indptr), shape=(n, n))
+    # copies: eliminate_zeros works in place, and the pattern is the connectivity's cached one
+    neighbours = sp.csr_matrix((data, indices.copy(), indptr.copy()), shape=(n, n))
     neighbours.eliminate_zeros()  # the diagonal and the rows and edges left out
     return neighbours
 
