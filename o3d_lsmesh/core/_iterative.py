@@ -253,16 +253,23 @@ def block_cg(
     Column ``j`` stops when ``||r_j|| <= max(tol ||b_j||, reduction ||r_j^0||)``. Returns the solution,
     the iteration count and the largest relative residual.
     """
-    from .._block_kernel import block_product, cg_direction, cg_step, column_dots
+    from .._block_kernel import block_product, cg_direction, cg_step, column_dots, no_huge_pages
 
     vector = b.ndim == 1
     B = np.ascontiguousarray(b[:, None] if vector else b, dtype=np.float64)
-    X = np.zeros_like(B) if x0 is None else np.array(x0, dtype=np.float64, order="C").reshape(B.shape)
+
+    # work blocks on small pages: huge-page faults cost more system time than they save (constrained_fairing.rst)
+    def block(like: Any) -> np.ndarray:
+        out = no_huge_pages(np.empty(B.shape))
+        np.copyto(out, like)
+        return out
+
+    X = block(0.0 if x0 is None else np.reshape(x0, B.shape))
     # column norms by the kernel's one pass (numpy's axis-0 norm strides over the block per column)
     norms = np.sqrt(column_dots(B, B))
     scale = np.where(norms > 0, norms, 1.0)
     parts = csr_parts(matrix)
-    R = B.copy()
+    R = block(B)
     start = norms
     if x0 is not None:
         block_product(*parts, X, R, -1.0, B)  # B - A X in one pass
@@ -286,9 +293,9 @@ def block_cg(
         apply = precondition.bound(B.shape[1])
     else:
         apply = lambda r, out: np.copyto(out, precondition(r))
-    Z, Q = np.empty_like(B), np.empty_like(B)
+    Z, Q = block(0.0), no_huge_pages(np.empty(B.shape))
     apply(R, Z)
-    P = Z.copy()
+    P = block(Z)
     rz = column_dots(R, Z)
     iteration = 0
     try:
