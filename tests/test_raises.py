@@ -35,14 +35,12 @@ ALLOWED = {
     ("fairing/barycenter.py", "LocalOperator.constant"): "built with keep_constraint=False",
     # argparse's type-function protocol: the CLI turns the ValueError into an ArgumentTypeError naming the
     # flag, batch.run into an InputError naming the option (app/batch.py)
-    ("app/ops.py", "int_at_least.parse"): "option parser",
-    ("app/ops.py", "real"): "option parser",
+    ("app/ops.py", "number.parse"): "option parser",
     ("app/ops.py", "choice.parse"): "option parser",
     ("app/ops.py", "flag"): "option parser",
     ("app/ops.py", "count_or_percent"): "option parser",
     ("app/ops.py", "levels_spec"): "option parser",
     ("app/ops.py", "folder"): "option parser",
-    ("app/ops.py", "non_negative"): "option parser",
     ("app/files.py", "mesh_suffix"): "option parser (--format)",
 }
 

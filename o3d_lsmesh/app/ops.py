@@ -42,42 +42,33 @@ RESERVED = frozenset(
 # --------------------------------------------------------------------------- parsers: value -> value or ValueError
 
 
-def int_at_least(minimum: int, maximum: int | None = None, rule: str = "") -> Callable[[Any], int]:
-    """Parser of an integer in ``[minimum, maximum]`` given as an int or its text (``rule``: what it must be)."""
-    usual = {0: "a non-negative integer", 1: "a positive integer"}.get(minimum, f"an integer >= {minimum}")
-    rule = rule or usual
+def number(kind: type, minimum: float = -np.inf, maximum: float | None = None, rule: str = "") -> Callable:
+    """Parser of a finite ``kind`` (int or float) in ``[minimum, maximum]``, given as itself (not a bool;
+    an int for an int) or its text; ``rule`` says what it must be."""
+    accepted = (int, np.integer, str) if kind is int else (int, float, np.integer, np.floating, str)
 
-    def parse(value: Any) -> int:
-        number = minimum - 1  # refused unless value is an int (not a bool) or its text
-        if isinstance(value, (int, np.integer, str)) and not isinstance(value, (bool, np.bool_)):
+    def parse(value: Any) -> Any:
+        parsed = np.nan  # refused unless value is one of accepted (not a bool) and converts
+        if isinstance(value, accepted) and not isinstance(value, (bool, np.bool_)):
             with contextlib.suppress(ValueError):
-                number = int(value)
-        if number < minimum:
+                parsed = kind(value)
+        if not (abs(parsed) < np.inf and parsed >= minimum):  # (NaN compares False)
             raise ValueError(f"must be {rule}, got {value!r}")
-        if maximum is not None and number > maximum:
+        if maximum is not None and parsed > maximum:
             raise ValueError(f"must be at most {maximum:,}, got {value!r}")
-        return number
+        return parsed
 
     return parse
 
 
-def real(value: Any) -> float:
-    """Parser of a finite float."""
-    try:
-        number = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"must be a number, got {value!r}") from None
-    if not np.isfinite(number):
-        raise ValueError(f"must be a finite number, got {value!r}")
-    return number
+def int_at_least(minimum: int, maximum: int | None = None, rule: str = "") -> Callable[[Any], int]:
+    """Parser of an integer in ``[minimum, maximum]`` given as an int or its text (``rule``: what it must be)."""
+    usual = {0: "a non-negative integer", 1: "a positive integer"}.get(minimum, f"an integer >= {minimum}")
+    return number(int, minimum, maximum, rule or usual)
 
 
-def non_negative(value: Any) -> float:
-    """Parser of a finite float >= 0."""
-    with contextlib.suppress(ValueError):
-        if (number := real(value)) >= 0:
-            return number
-    raise ValueError(f"must be a non-negative finite number, got {value!r}")
+real = number(float, rule="a finite number")
+non_negative = number(float, 0, rule="a non-negative finite number")
 
 
 def choice(*choices: Any) -> Callable[[Any], Any]:
