@@ -15,7 +15,7 @@ from typing import Any, Callable
 from ..core.errors import InputError, InputTypeError, O3DLSMeshWarning
 from ..core.progress import Progress
 from ..core.validate import as_bool, as_choice, as_count, as_positive_float
-from .files import WRITABLE, collect_inputs, digest, inside, output_path
+from .files import WRITABLE, collect_inputs, digest, inside, output_path, same_file
 from .ops import OPS, BatchOp, Option, register_op
 from .tasks import Task, check_scheduler_file, dispatch, failure_record, local_cluster
 
@@ -278,7 +278,7 @@ def run(
                     param="inputs",
                 )
             outputs[output] = path
-            if not force and os.path.exists(output) and os.path.samefile(output, path):
+            if not force and same_file(output, path):
                 raise InputError(
                     f"OUTDIR {str(outdir)!r} would overwrite the input {path!r} (use another OUTDIR or "
                     "suffix, or force)",

@@ -223,7 +223,7 @@ def read_input(path: str, *, what: str = "INPUT") -> Any:
     return mesh
 
 
-def _same_file(a: str, b: str) -> bool:
+def same_file(a: str, b: str) -> bool:
     try:
         return os.path.exists(a) and os.path.exists(b) and os.path.samefile(a, b)
     except OSError:
@@ -235,7 +235,7 @@ def check_output(
 ) -> None:
     """Refuse, before any work, an output that would overwrite an input or cannot be written."""
     for source in inputs:
-        if _same_file(path, source) and not force:
+        if same_file(path, source) and not force:
             raise CLIError(
                 f"OUTPUT {path!r} is the input file {source!r}; refusing to overwrite it (use --force)"
             )

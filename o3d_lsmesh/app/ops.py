@@ -15,6 +15,7 @@ import numpy as np
 from .. import fairing
 from .._o3d import read_mesh
 from ..core.errors import InputError, InputTypeError
+from ..core.validate import as_choice
 from ..fairing.constrained import resolved_options
 from ..fairing.multiresolution import multiresolution_fairing
 from ..hierarchy import build_hierarchy
@@ -176,10 +177,7 @@ class BatchOp:
     help: str = ""
 
     def __post_init__(self) -> None:
-        if self.output not in ("mesh", "bytes", "files", "none"):
-            raise InputError(
-                f"output must be one of mesh, bytes, files, none, got {self.output!r}", param="output"
-            )
+        as_choice(self.output, ("mesh", "bytes", "files", "none"), name="output")
         if self.output == "bytes" and not self.extension.startswith("."):
             message = f"extension must start with '.' for a bytes output, got {self.extension!r}"
             raise InputError(message, param="extension")
