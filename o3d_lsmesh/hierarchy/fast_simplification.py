@@ -109,11 +109,9 @@ def from_fast_simplification(
     target_triangles = max(int(m0 * counts[-1] / n0 * 0.95), 4)
     # fast-simplification merges unreferenced vertices too: it runs on the referenced ones only, and
     # the others are carried through every level as they are
-    used = np.zeros(n0, dtype=bool)
-    used[F.ravel()] = True
-    referenced = np.flatnonzero(used)
-    compact = np.cumsum(used) - 1
-    Vr, Fr = np.ascontiguousarray(V[referenced]), np.ascontiguousarray(compact[F])
+    conn = Connectivity(F, n0)
+    Fr, referenced = conn.submesh(np.arange(m0))
+    Vr = np.ascontiguousarray(V[referenced])
     points32 = Vr.astype(np.float32)
     with _LOCK:
         _, _, collapses = fast_simplification.simplify(
@@ -133,7 +131,7 @@ def from_fast_simplification(
                 mappings.append((prefix, full))
     collapses = referenced[collapses] if len(collapses) else collapses.astype(np.int64)
 
-    n_components, component = Connectivity(F, n0).components
+    n_components, component = conn.components
     empty = np.zeros(0, dtype=np.int64)
     # per level: triangles, representatives, parents, removed, targets, ring offsets, rings
     built: list[tuple[np.ndarray, ...]] = [
