@@ -167,16 +167,10 @@ def resolve_options(ops: Sequence[BatchOp], options: Mapping[str, Any] | None) -
                 param="options",
             )
     resolved = []
-    for op in ops:
-        values = {}
-        for option in op.options:
-            pair = (op.name, option.name)
-            if pair in specific or option.name in shared:
-                given = specific[pair] if pair in specific else shared[option.name]
-                values[option.name] = parse_option(op, option, given)
-            else:
-                values[option.name] = option.default
-        resolved.append(values)
+    for op in ops:  # the values given to every op, then those given to this one
+        given = shared | {name: value for (owner, name), value in specific.items() if owner == op.name}
+        parsed = {o.name: parse_option(op, o, given[o.name]) for o in op.options if o.name in given}
+        resolved.append({o.name: parsed.get(o.name, o.default) for o in op.options})
     return resolved
 
 
