@@ -242,20 +242,29 @@ def _edge_structure(triangles: np.ndarray, n: int) -> EdgeStructure:
     if count == 0:
         empty = np.zeros(0, dtype=index)
         return EdgeStructure(np.zeros((0, 2), dtype=index), empty, empty, empty, _inverse=empty)
-    tail = triangles.T
-    head = triangles[:, [1, 2, 0]].T
-    lo = np.minimum(tail, head).astype(index).reshape(-1)  # rows of halfedges() order
-    hi = np.maximum(tail, head).astype(index).reshape(-1)
-    del tail, head
-    rows = np.arange(count + 1, dtype=np.int64)
+    from .._block_kernel import no_huge_pages  # compiled by the package's build: imported where used
+
+    def fresh(size: int, dtype: Any) -> np.ndarray:  # mesh-sized, on small pages (constrained_fairing.rst)
+        return no_huge_pages(np.empty(size, dtype))
+
+    lo, hi = fresh(count, index), fresh(count, index)  # rows of halfedges() order, written in place
+    for a in range(3):
+        tail, head, part = triangles[:, a], triangles[:, (a + 1) % 3], slice(a * m, (a + 1) * m)
+        np.minimum(tail, head, out=lo[part], casting="unsafe")
+        np.maximum(tail, head, out=hi[part], casting="unsafe")
+    rows = fresh(count + 1, np.int64)
+    rows[0] = 0
+    np.cumsum(np.broadcast_to(np.int64(1), (count,)), out=rows[1:])
+    ids = fresh(count, index)
+    np.copyto(ids, rows[:-1], casting="unsafe")
     # pass 1: half-edges by hi; pass 2: that order, stably by lo
-    by_hi = sp.csr_matrix((rows[:-1].astype(index), hi, rows), shape=(count, n)).tocsc().data
-    by_lo = sp.csr_matrix((by_hi, lo[by_hi], rows), shape=(count, n)).tocsc()
-    del by_hi, rows
+    by_hi = sp.csr_matrix((ids, hi, rows), shape=(count, n)).tocsc().data
+    by_lo = sp.csr_matrix((by_hi, gather(lo, by_hi, out=ids), rows), shape=(count, n)).tocsc()
+    del by_hi, rows, ids
     order = by_lo.data
     lo_start = by_lo.indptr
     del by_lo
-    sorted_hi = hi[order]
+    sorted_hi = gather(hi, order, out=fresh(count, index))
     first = run_heads(sorted_hi)
     first[lo_start[:-1][lo_start[:-1] < lo_start[1:]]] = True  # a new lo starts a new edge
     starts = np.flatnonzero(first).astype(index)

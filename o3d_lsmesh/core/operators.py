@@ -259,7 +259,11 @@ def scan_normal_matrix(
     >>> N.shape, w.tolist()
     ((5, 5), [0.1, 0.1])
     """
+    from .._block_kernel import add_subset, no_huge_pages  # compiled by the package's build
     from ._iterative import gram_matrix
+
+    def fresh(size: int) -> np.ndarray:  # mesh-sized values, on small pages (constrained_fairing.rst)
+        return no_huge_pages(np.empty(size))
 
     triangles, n = conn.triangles, conn.n
     if len(triangles) and (
@@ -276,12 +280,15 @@ def scan_normal_matrix(
     at_rim = boundary[triangles[:, 0]] | boundary[triangles[:, 1]] | boundary[triangles[:, 2]]
     weight = np.where(at_rim, float(boundary_weight), 1.0)  # (m,) w_t
     # mu H^T W H + lambda G (+ 1 on an unreferenced vertex's diagonal), on the 1-ring pattern
-    data = np.empty(len(indices))
-    data[diagonal] = mu * np.bincount(triangles.ravel(), np.repeat(weight, 3), minlength=n)
+    data, corner_weight = fresh(len(indices)), fresh(3 * len(triangles))
+    corner_weight.reshape(-1, 3)[:] = weight[:, None]  # np.repeat(weight, 3)
+    data[diagonal] = mu * np.bincount(triangles.ravel(), corner_weight, minlength=n)
     data[diagonal] += membrane * valence
     data[diagonal[~referenced]] = 1.0
     # half-edge a * m + t is triangle t's edge from corner a: its weights are np.tile(w, 3)
-    on_edge = mu * np.bincount(halfedge_edge, np.tile(weight, 3), minlength=len(edges)) - membrane
+    corner_weight.reshape(3, -1)[:] = weight  # np.tile(weight, 3)
+    on_edge = mu * np.bincount(halfedge_edge, corner_weight, minlength=len(edges)) - membrane
+    del corner_weight
     data[forward] = on_edge
     data[backward] = on_edge
     matrix = sp.csr_matrix((data, indices, indptr), shape=(n, n))
@@ -290,7 +297,7 @@ def scan_normal_matrix(
     t = float(rim_curve)
     inverse = np.zeros(n)
     np.divide(np.where(boundary, 1.0 - t, 1.0), valence, out=inverse, where=referenced)
-    plate = np.empty(len(indices))
+    plate = fresh(len(indices))
     plate[diagonal] = referenced
     plate[forward] = -inverse[lo]
     plate[backward] = -inverse[hi]
@@ -302,10 +309,9 @@ def scan_normal_matrix(
         plate[backward[rim]] -= curve_inverse[hi[rim]]
     # K's CSR arrays are K^T's CSC: K^T K by the compiled product; symmetric, so its CSC arrays are its
     # CSR ones. Its pattern holds the 1-ring (K_ii K_ij): the 1-ring terms are added into it in place
-    from .._block_kernel import add_subset  # compiled by the package's build: imported where used
-
     # K^T's rows: K's values mirrored on the symmetric 1-ring pattern (no transpose of K)
-    mirrored = plate.copy()
+    mirrored = fresh(len(indices))
+    mirrored[diagonal] = plate[diagonal]
     mirrored[forward], mirrored[backward] = plate[backward], plate[forward]
     rows = sp.csr_matrix((mirrored, indices, indptr), shape=(n, n))
     square = gram_matrix(sp.csc_matrix((plate, indices, indptr), shape=(n, n)), rows=rows)
@@ -321,7 +327,9 @@ def scan_normal_matrix(
     )
     assert missing == 0, "the 1-ring lies within K^T K's pattern"
     del matrix
-    ring = sp.csc_matrix((np.ones(len(indices)), indices, indptr), shape=(n, n))
+    ones = fresh(len(indices))
+    ones.fill(1.0)
+    ring = sp.csc_matrix((ones, indices, indptr), shape=(n, n))
     normal = sp.csr_matrix((square.data, square.indices, square.indptr), shape=(n, n))
     normal.has_sorted_indices = True  # canonical: CHOLMOD and the lower-triangle cut need it
     return normal, ring, weight
