@@ -45,7 +45,8 @@ class Appended:
         self.loop, self.first = np.unique(self.vertex, return_index=True)
         # each new patch (vertex-connected new triangles: a hole, or holes touching at a vertex) takes
         # its per-triangle defaults from the triangle of its first loop corner
-        self.patch = Connectivity(new, total).components[1]
+        patches = Connectivity(new, total)
+        self.patch = patches.components[1]
         reference = np.zeros(total, dtype=np.int64)
         labels, first_corner = np.unique(self.patch[self.vertex], return_index=True)
         reference[labels] = first_corner
@@ -61,11 +62,9 @@ class Appended:
             # harmonic values of the new vertices, L_uu x_u = -L_ub x_b with the cotangent Laplacian of
             # the new triangles (a new vertex has no other; numbered among their vertices alone, the new
             # ones last). L is not symmetric (rows scaled by 1/D): its normal equations
-            local, local_triangles = np.unique(new, return_inverse=True)
+            local_triangles, local = patches.submesh(np.arange(len(new)))
             k = int(np.searchsorted(local, nw))
-            laplacian = cotangent_laplacian(
-                vertices[local], Connectivity(local_triangles.reshape(-1, 3), len(local))
-            )
+            laplacian = cotangent_laplacian(vertices[local], Connectivity(local_triangles, len(local)))
             self.around, self.inner, self.coupling = local[:k], laplacian[k:, k:], laplacian[k:, :k]
             self.normal = (self.inner.T @ self.inner).tocsc()
 
