@@ -7,12 +7,14 @@ which import their kit (:mod:`~o3d_lsmesh.app.cli_kit`), never back. Docs: ``doc
 from __future__ import annotations
 
 import argparse
+import contextlib
 import re
 import sys
 import textwrap
 import traceback
 import warnings
 from collections.abc import Sequence
+from importlib.metadata import PackageNotFoundError, version
 from typing import Any
 
 from ..core.errors import InputError
@@ -89,12 +91,8 @@ def build_parser() -> argparse.ArgumentParser:
         ),
         epilog=f"example:\n  {PROG} denoise scan.ply smooth.ply\n  {PROG} denoise --help",
     )
-    from importlib.metadata import PackageNotFoundError, version
-
-    try:
+    with contextlib.suppress(PackageNotFoundError):  # (a source tree that was never installed: no --version)
         parser.add_argument("--version", action="version", version=f"{PROG} {version('o3d_lsmesh')}")
-    except PackageNotFoundError:  # pragma: no cover - a source tree that was never installed
-        pass
     common = argparse.ArgumentParser(add_help=False)
     common.add_argument("--quiet", action="store_true", help="no progress bars and no report")
     common.add_argument("--json", action="store_true", help="print the metrics as one JSON object on stdout")

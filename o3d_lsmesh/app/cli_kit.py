@@ -57,7 +57,7 @@ def argparse_type(parse: Callable[[Any], Any]) -> Callable[[str], Any]:
     return convert
 
 
-def add_option(parser: Any, option: Option, **overrides: Any) -> None:
+def add_option(parser: Any, option: Option) -> None:
     """The flag of ``option`` (a switch, a choice, or a value its parser checks)."""
     kwargs: dict[str, Any] = {"help": option.help.replace("%", "%%"), "default": option.default}
     if option.is_flag:
@@ -69,7 +69,7 @@ def add_option(parser: Any, option: Option, **overrides: Any) -> None:
         kwargs["type"] = argparse_type(option.parse)
     if option.required:
         kwargs.update(required=True, default=None)
-    parser.add_argument(option.cli_flag, dest=option.name, **{**kwargs, **overrides})
+    parser.add_argument(option.cli_flag, dest=option.name, **kwargs)
 
 
 def add_command(
