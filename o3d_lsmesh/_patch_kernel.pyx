@@ -472,9 +472,9 @@ def patch_crossings(const double[:, ::1] vertices, const int64_t[:, ::1] triangl
     if new_centre.shape[0] != q or new_radius.shape[0] != q:
         raise ValueError("new_centre and new_radius must have one row per new triangle")
     owner_ = np.zeros(q, dtype=np.int64) if owner is None else np.ascontiguousarray(owner, dtype=np.int64)
-    if owner_.shape[0] != q or (q and (owner_.min() < 0 or owner_.max() >= q)):
-        raise ValueError("owner must hold one patch in [0, q) per new triangle")
-    crossed_ = np.zeros(q, dtype=np.uint8)
+    if owner_.shape[0] != q or owner_.min() < 0:
+        raise ValueError("owner must hold one patch (>= 0) per new triangle")
+    crossed_ = np.zeros(int(owner_.max()) + 1, dtype=np.uint8)  # holes without a triangle hold a number too
     for grid in grids:
         _grid_crossings(vertices, triangles, first_new, new_centre, new_radius, [grid], tri_centre, tri_radius,
                         False, result_, owner_, crossed_, owner is not None)

@@ -428,3 +428,99 @@ def test_crossings_by_hole_mark_the_same_holes():
             np.bincount(owner, weights=full, minlength=3) > 0,
             np.bincount(owner, weights=marked, minlength=3) > 0,
         )
+
+
+def test_crossings_by_hole_match_the_plain_reference_with_interleaved_holes():
+    # the holes' triangles interleaved (a crossing hole's triangles are no query; their pairs are tested
+    # from the other side) and long slivers in a second grid: the holes marked are those of plain loops
+    from test_fill_holes import reference_crossings
+
+    from o3d_lsmesh.holes.crossings import _TriangleIndex
+
+    rng = np.random.default_rng(11)
+    for trial in range(12):
+        V = rng.random((60, 3))
+        V[:4] *= 6.0  # corners far out: slivers much longer than the median triangle
+        T = np.array([rng.choice(60, 3, replace=False) for _ in range(50)])
+        T[trial % 5] = [0, 1, 2 + trial % 50 if trial % 50 > 1 else 5]
+        first_new = 38
+        owner = rng.integers(0, 6, len(T) - first_new)  # unsorted: a hole's triangles apart
+        expected = np.bincount(owner, weights=reference_crossings(V, T, first_new), minlength=6) > 0
+        for index in (None, _TriangleIndex(V, T[:first_new])):
+            marked = _crossings(V, T, first_new, index, owner)
+            assert np.array_equal(np.bincount(owner, weights=marked, minlength=6) > 0, expected)
+
+
+def test_a_fill_whose_fixed_triangle_crosses_is_not_faired(monkeypatch):
+    # a triangle on three loop vertices is in every candidate of its hole: one crossing the mesh (here a
+    # needle through it, a component of its own) means the hole is not faired (the work of a scan's
+    # silhouette); the other hole is faired as asked, nothing crosses, the crossing one is reported
+    import o3d_lsmesh.holes.fair as fair
+    from o3d_lsmesh.holes import HoleFiller
+    from o3d_lsmesh.holes.triangulate import triangulate_holes
+
+    sphere = o3d.geometry.TriangleMesh.create_sphere(resolution=30)
+    V, T = np.asarray(sphere.vertices), np.asarray(sphere.triangles).astype(np.int64)
+    V, T, _ = cut_disk(V, T, 5, 0.45)
+    V, T, _ = cut_disk(V, T, int(np.argmin(V[:, 2])), 0.3)
+    filler = HoleFiller(V, T)
+    assert len(filler.holes) == 2
+    _, new, owner, _, _ = triangulate_holes(filler, filler.holes, 1.0, False)
+    fixed = np.flatnonzero((new < len(V)).all(axis=1))
+    doomed = int(owner[fixed[0]])  # a hole refined (new vertices) with a triangle on three loop vertices
+    assert (new[owner == doomed] >= len(V)).any()
+    p = V[new[fixed[0]]]
+    centre, normal = p.mean(axis=0), np.cross(p[1] - p[0], p[2] - p[0])
+    normal /= np.linalg.norm(normal)
+    side = np.cross(normal, p[1] - p[0])
+    side *= 0.01 / np.linalg.norm(side)
+    needle = np.array([centre - 0.03 * normal, centre + 0.03 * normal - side, centre + 0.03 * normal + side])
+    V2, T2 = np.concatenate([V, needle]), np.concatenate([T, [[len(V), len(V) + 1, len(V) + 2]]])
+    solved = []
+    real_fair = fair._fair
+    monkeypatch.setattr(fair, "_fair", lambda x, t, u, *a: solved.append(len(u)) or real_fair(x, t, u, *a))
+    out = fill_quietly(V2, T2)
+    other_new = len(np.unique(new[owner == 1 - doomed][new[owner == 1 - doomed] >= len(V)]))
+    assert solved and set(solved) == {other_new}  # the doomed hole's new vertices in no solve
+    outcome = {h.id: h for h in out.report.holes}
+    assert outcome[1 - doomed].how == "continuity 2"
+    assert outcome[doomed].how == "minimum-weight triangulation" or not outcome[doomed].filled
+    assert added_crossings(out.vertices, out.triangles, len(T2)) == 0
+
+
+def wiggly_scan(step=1 / 45):
+    """A one-sided scan on a grid (as range scans are: their loops' points cospherical, no unique Delaunay
+    restriction), a wavy height field inside a wiggly silhouette of several hundred edges."""
+    x, y = np.meshgrid(np.arange(-1.3, 1.3, step), np.arange(-1.3, 1.3, step), indexing="ij")
+    r, theta = np.hypot(x, y), np.arctan2(y, x)
+    inside = r < 1 + 0.15 * np.sin(13 * theta) + 0.05 * np.sin(31 * theta)
+    ids = np.cumsum(inside).reshape(inside.shape) - 1
+    V = np.stack([x[inside], y[inside], 0.2 * np.sin(2 * x[inside]) * np.cos(3 * y[inside])], axis=1)
+    a, b, c, d = ids[:-1, :-1], ids[1:, :-1], ids[1:, 1:], ids[:-1, 1:]
+    ia, ib, ic, id_ = inside[:-1, :-1], inside[1:, :-1], inside[1:, 1:], inside[:-1, 1:]
+    T = np.concatenate(
+        [np.stack([a, b, c], -1)[ia & ib & ic], np.stack([a, c, d], -1)[ia & ic & id_]]
+    ).astype(np.int64)
+    used = np.unique(T)
+    remap = np.full(len(V), -1)
+    remap[used] = np.arange(len(used))
+    return V[used], remap[T]
+
+
+def test_fill_border_of_a_long_wiggly_silhouette_is_bounded(monkeypatch):
+    # a silhouette of hundreds of edges on a grid (no Delaunay restriction), chord-split and refined into
+    # a patch as large as the scan: at most one solve per candidate (continuity 2 and 1 with their
+    # cotangent pass, 0); every loop filled or reported, nothing crossing
+    import o3d_lsmesh.holes.fair as fair
+
+    V, T = wiggly_scan()
+    holes = find_holes(V, T)
+    assert max(h.edges for h in holes) > 500 and any(h.border for h in holes)
+    solved = []
+    real_fair = fair._fair
+    monkeypatch.setattr(fair, "_fair", lambda x, t, u, *a: solved.append(len(u)) or real_fair(x, t, u, *a))
+    out = fill_quietly(V, T, fill_border=True)
+    assert 0 < len(solved) <= 5
+    assert {h.id for h in out.report.holes} == set(range(len(holes)))
+    assert all(h.filled or h.how.startswith("every") for h in out.report.holes)
+    assert added_crossings(out.vertices, out.triangles, len(T)) == 0

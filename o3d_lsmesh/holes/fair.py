@@ -115,6 +115,36 @@ def fair_patches(
     them open).
     """
     total, m, n = len(vertices), len(filler.triangles), len(filler.vertices)
+    # a new triangle on three loop vertices is the same in every candidate: one crossing the mesh (or
+    # another such) makes its hole's every candidate cross, so that hole is not faired (a scan's
+    # silhouette: a patch as large as the scan, faired five times over, to be left open)
+    fixed = (triangles[m:] < n).all(axis=1)
+    crossing = _crossings(
+        vertices, np.concatenate([triangles[:m], triangles[m:][fixed]]), m, index, owner[fixed]
+    )
+    doomed = np.bincount(owner[fixed], weights=crossing, minlength=len(holes)) > 0
+    if doomed.all():
+        return np.full(len(holes), continuity, dtype=np.int64), np.arange(len(holes))
+    if doomed.any():  # the others faired without them: a candidate meeting a patch that goes is no crossing
+        keep = ~doomed[vertex_owner]
+        renumber = np.concatenate([np.arange(n), n + np.cumsum(keep) - 1])
+        kept = np.flatnonzero(~doomed)
+        part = vertices[np.concatenate([np.arange(n), n + np.flatnonzero(keep)])]
+        used, stuck = fair_patches(
+            filler,
+            part,
+            np.concatenate([triangles[:m], renumber[triangles[m:][~doomed[owner]]]]),
+            [holes[i] for i in kept],
+            continuity,
+            cot,
+            (np.cumsum(~doomed) - 1)[owner[~doomed[owner]]],
+            (np.cumsum(~doomed) - 1)[vertex_owner[keep]],
+            index,
+        )
+        vertices[n:][keep] = part[n:]
+        all_used = np.full(len(holes), continuity, dtype=np.int64)
+        all_used[kept] = used
+        return all_used, np.sort(np.concatenate([np.flatnonzero(doomed), kept[stuck]]))
     unknown = np.arange(n, total)
     loops = holes[0].vertices if len(holes) == 1 else np.concatenate([hole.vertices for hole in holes])
     # triangles within `continuity` rings of the loops in the input, plus every new triangle; a local
