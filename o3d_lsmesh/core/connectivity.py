@@ -122,8 +122,10 @@ class Connectivity:
 
     @_cached
     def adjacency(self) -> sp.csr_matrix:
-        edges, n = self.edges, self.n
-        if (edges[:, 0] == edges[:, 1]).any():  # a triangle repeating a vertex: its self-loop is kept
+        n = self.n
+        # beyond 2**31 vertices _adjacency refuses the mesh before any n-sized array; a triangle repeating
+        # a vertex keeps its self-loop there
+        if n >= 2**31 or (self.edges[:, 0] == self.edges[:, 1]).any():
             return _adjacency(self.triangles, n)
         # the 1-ring pattern without its diagonal (every row has one): no second grouping of the edges
         indptr, indices, diagonal = self.ring_pattern[:3]
