@@ -357,14 +357,13 @@ def run(
 
 def summarize(records: Sequence[dict], seconds: float | None = None) -> str:
     """A plain-text summary table of ``records`` (counts and time per status, then the failures)."""
-    rows = []
+    lines = [f"{'status':<10} {'files':>7} {'task s':>9} {'s/file':>8}"]
     for status in ("ok", "failed", "skipped", "cancelled"):
         chosen = [r for r in records if r["status"] == status]
         if chosen or status in ("ok", "failed"):
             times = [r["seconds"] for r in chosen if r.get("seconds") is not None and status != "skipped"]
-            rows.append((status, len(chosen), sum(times), (sum(times) / len(times)) if times else 0.0))
-    lines = [f"{'status':<10} {'files':>7} {'task s':>9} {'s/file':>8}"]
-    lines += [f"{s:<10} {n:>7} {t:>9.1f} {m:>8.2f}" for s, n, t, m in rows]
+            mean = sum(times) / len(times) if times else 0.0
+            lines.append(f"{status:<10} {len(chosen):>7} {sum(times):>9.1f} {mean:>8.2f}")
     if seconds is not None:
         done = sum(1 for r in records if r["status"] in ("ok", "failed"))
         lines.append(
