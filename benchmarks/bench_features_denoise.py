@@ -483,7 +483,7 @@ def keeps_the_scan_energy(repeat=3):
         for p in (
             SCANS / "bun000.ply",
             SCANS.parent / "scans-dragon" / "dragonUpRight_0.ply",
-            SCANS.parent.parent / "meshes" / "bunny_scan.ply",
+            MESHES / "bunny_scan.ply",
         )
     ]
     cases += [
