@@ -248,14 +248,6 @@ def check_scheduler_file(path: str | os.PathLike) -> None:
         )
 
 
-def _start_method() -> str:
-    """The worker start method: the configured one unless it is ``fork`` (then ``spawn``)."""
-    import dask
-
-    method = dask.config.get("distributed.worker.multiprocessing-method", "spawn")
-    return "spawn" if method not in ("spawn", "forkserver") else method
-
-
 def local_cluster(workers: int, threads_per_worker: int = 1, *, retries: int = 1, **kwargs: Any) -> Any:
     """A ``LocalCluster`` of ``workers`` spawned processes with ``threads_per_worker`` threads each.
 
@@ -266,6 +258,7 @@ def local_cluster(workers: int, threads_per_worker: int = 1, *, retries: int = 1
     import dask
     from distributed import LocalCluster
 
+    method = dask.config.get("distributed.worker.multiprocessing-method", "spawn")  # never fork
     environ = dict(dask.config.get("distributed.nanny.pre-spawn-environ", {}) or {})
     environ.update(dict.fromkeys(THREAD_VARIABLES, str(threads_per_worker)))
     # Dask sets MALLOC_TRIM_THRESHOLD_=65536, which turns off glibc's dynamic mmap threshold: every array
@@ -273,7 +266,7 @@ def local_cluster(workers: int, threads_per_worker: int = 1, *, retries: int = 1
     environ.pop("MALLOC_TRIM_THRESHOLD_", None)
     with dask.config.set(
         {
-            "distributed.worker.multiprocessing-method": _start_method(),
+            "distributed.worker.multiprocessing-method": method if method == "forkserver" else "spawn",
             "distributed.scheduler.allowed-failures": retries,
             # One task per worker thread at a time: a dying worker takes no queued task along.
             "distributed.scheduler.worker-saturation": 1.0,
