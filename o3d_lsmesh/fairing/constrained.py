@@ -205,8 +205,8 @@ def constrained_fairing_arrays(
     if implicit:
         warn(
             "constrained_fairing_arrays without method= runs method='local' (10 iterations); pass "
-            "method='local' to keep that, or method=None for constrained_fairing's default ('scan'), "
-            "which 0.4 makes the default",
+            "method='local' to keep that, or method=None for constrained_fairing's default ('features' or "
+            "'scan', as the mesh's feature likeness says), which 0.4 makes the default",
             DeprecationWarning,
         )
     conn = Connectivity(triangles, len(vertices))
