@@ -17,6 +17,7 @@ from ..fairing.constrained import resolved_options
 from ..holes import find_holes
 from .cli_kit import Run, draw, run_file_op, run_op, shape_change_text
 from .files import CLIError, check_output, read_input, write_output
+from .ops import level_conflicts
 
 
 def denoise(args: argparse.Namespace, run: Run) -> int:
@@ -29,13 +30,8 @@ def denoise(args: argparse.Namespace, run: Run) -> int:
 
     example: scan.ply smooth.ply --iterations 20 --render before_after.png
     """
-    options = {
-        "--mu": args.mu,
-        "--reimpose-every": args.reimpose_every,
-        "--fixed-boundary": args.fixed_boundary or None,
-    }
-    given = [flag for flag, value in options.items() if value is not None]
-    if args.level and given:  # multiresolution fairing fairs every level with its own defaults
+    given = ["--" + name.replace("_", "-") for name in level_conflicts(vars(args))]
+    if given:  # before the mesh is read (denoise_op refuses them too, for batch)
         raise CLIError(
             f"{', '.join(given)} cannot be combined with --level (multiresolution fairing does not take "
             f"{'them' if len(given) > 1 else 'it'}), got --level {args.level}"

@@ -301,6 +301,15 @@ def change_metrics(before: Any, after: Any) -> dict:
     return out
 
 
+#: denoise options that multiresolution fairing does not take: it fairs every level with its own defaults
+NOT_WITH_LEVEL = ("mu", "reimpose_every", "fixed_boundary")
+
+
+def level_conflicts(options: Any) -> list[str]:
+    """The options of :data:`NOT_WITH_LEVEL` given (not ``None`` or ``False``) beside a nonzero ``level``."""
+    return [name for name in NOT_WITH_LEVEL if options[name] not in (None, False)] if options["level"] else []
+
+
 @operation(
     "denoise", options=DENOISE, help="barycenter-constrained (or multiresolution with --level) fairing"
 )
@@ -308,6 +317,12 @@ def denoise_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dic
     """``--op denoise`` and ``o3d-lsmesh denoise``: fairing with the method and iterations that ran."""
     mesh = read_mesh(mesh)  # validated once: the fairing and the metrics take it as it is
     level, progress = options["level"], context.progress
+    if conflicts := level_conflicts(options):  # a batch would otherwise drop them without a word
+        raise InputError(
+            f"{', '.join(conflicts)} cannot be combined with level (multiresolution fairing does not take "
+            f"them), got level {level}",
+            param="level",
+        )
     if level:
         iterations = 5 if options["iterations"] is None else options["iterations"]
         method = options["method"] or "local"
