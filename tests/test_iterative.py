@@ -386,3 +386,12 @@ def test_gram_matrix_takes_64_bit_indices_where_32_might_not_hold_the_product(mo
     monkeypatch.setattr(_iterative, "INT32_ENTRIES", 10)  # as if 32 bits held ten entries
     wide = _iterative.gram_matrix(A)
     assert seen[-1] == np.int64 and abs(wide - A @ A.T).max() < 1e-14
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_gram_matrix_from_given_rows_is_the_dense_product(seed):
+    # the caller's CSR form of A (scan_normal_matrix's mirrored K) stands for A's transpose pass
+    A = sp.random(50, 35, density=0.15, random_state=seed, format="csc")
+    product = _iterative.gram_matrix(A, rows=A.tocsr())
+    np.testing.assert_allclose(product.toarray(), (A @ A.T).toarray(), rtol=1e-13, atol=1e-14)
+    assert product.has_sorted_indices and (product != product.T).nnz == 0
