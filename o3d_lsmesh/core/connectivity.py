@@ -149,7 +149,7 @@ class Connectivity:
 
     @_cached
     def face_adjacency(self) -> FaceAdjacency:
-        from .._block_kernel import gram  # compiled by the package's build: imported where used
+        from .._block_kernel import gram, no_huge_pages  # compiled by the package's build
 
         triangles, n, m = self.triangles, self.n, len(self.triangles)
         incidence = sp.csr_matrix(
@@ -163,16 +163,22 @@ class Connectivity:
         data[:] = 1.0
         ring = sp.csr_matrix((data, indices, indptr), shape=(m, m))
         ring.has_canonical_format = True  # sorted, no duplicates
-        rows = np.repeat(np.arange(m, dtype=np.intp), np.diff(ring.indptr))
+        # each entry's row and column as intp, on small pages (constrained_fairing.rst): a row starts at
+        # each indptr (every face shares its own vertices), so the rows are a running count of the starts
+        rows, cols = (no_huge_pages(np.empty(len(indices), dtype=np.intp)) for _ in range(2))
+        rows.fill(0)
+        rows[indptr[1:-1]] = 1
+        np.cumsum(rows, out=rows)
+        np.copyto(cols, indices)
         # edge-adjacent faces: consecutive half-edges of one edge group (half-edge a * m + t is in triangle t)
         es = self.edge_structure
-        group = np.repeat(np.arange(len(es.counts)), es.counts)
-        follows = np.flatnonzero(~run_heads(group))
-        half = es.order.astype(np.int64)
-        pairs = np.stack([half[follows - 1] % m, half[follows] % m], axis=1)
-        return FaceAdjacency(
-            incidence, ring, rows, ring.indices.astype(np.intp), pairs, es.edges, group[follows]
-        )
+        follows = np.ones(len(es.order), dtype=bool)
+        follows[es.starts] = False  # every half-edge but its edge's first
+        follows = np.flatnonzero(follows)
+        first, second = es.order[follows - 1].astype(np.int64), es.order[follows].astype(np.int64)
+        pairs = np.stack([first % m, second % m], axis=1)
+        pair_edge = np.repeat(np.arange(len(es.counts)), es.counts - 1)
+        return FaceAdjacency(incidence, ring, rows, cols, pairs, es.edges, pair_edge)
 
     @_cached
     def components(self) -> tuple[int, np.ndarray]:
