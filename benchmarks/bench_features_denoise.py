@@ -613,8 +613,8 @@ def main():
         ("Time against Open3D filter_smooth_taubin(100), best of 3 interleaved; memory", speed()),
         ("Raw scans at defaults (method='features', detect_creases)", raw_scans()),
     ]
-    if notes:
-        sections.append(("Notes", "\n".join(f"- {n}" for n in sorted(notes))))
+    notes.add("The machine was shared with other work during the run: the times are indicative.")
+    sections.append(("Notes", "\n".join(f"- {n}" for n in sorted(notes))))
     write_markdown("features_denoise.md", "Feature-preserving denoising (method='features')", sections)
 
 
