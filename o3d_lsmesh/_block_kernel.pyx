@@ -104,32 +104,46 @@ ctypedef fused index_t:
     int64_t
 
 
+cdef inline void _product3(const index_t[::1] indptr, const index_t[::1] indices, const double[::1] data,
+                           const double[:, ::1] x, double[:, ::1] out, double scale,
+                           const double[:, ::1] offset, bint shifted, Py_ssize_t start,
+                           Py_ssize_t stop) noexcept nogil:
+    """:func:`block_product`'s rows ``start:stop`` for three columns, the sums in registers."""
+    cdef Py_ssize_t i
+    cdef index_t jj, j
+    cdef double a, s0, s1, s2
+    for i in range(start, stop):
+        s0 = s1 = s2 = 0.0
+        for jj in range(indptr[i], indptr[i + 1]):
+            j, a = indices[jj], data[jj]
+            s0, s1, s2 = s0 + a * x[j, 0], s1 + a * x[j, 1], s2 + a * x[j, 2]
+        if shifted:
+            out[i, 0], out[i, 1], out[i, 2] = offset[i, 0] + scale * s0, offset[i, 1] + scale * s1, offset[i, 2] + scale * s2
+        else:
+            out[i, 0], out[i, 1], out[i, 2] = scale * s0, scale * s1, scale * s2
+
+
 def block_product(const index_t[::1] indptr, const index_t[::1] indices, const double[::1] data,
                   const double[:, ::1] x, double[:, ::1] out, double scale=1.0,
                   const double[:, ::1] offset=None):
     """``out = offset + scale A @ x`` for CSR ``A`` (``(m, n)``), ``x`` ``(n, k)``, ``out`` and ``offset``
     ``(m, k)`` (no ``offset``: zero). ``offset`` may be ``out`` itself (accumulate) or ``b`` with
     ``scale=-1`` (a residual): each row reads its offset before writing, in the same pass."""
-    cdef Py_ssize_t m = out.shape[0], k = x.shape[1], i, c
-    cdef index_t jj, j
-    cdef double a, s0, s1, s2
+    cdef Py_ssize_t m = out.shape[0], k = x.shape[1], i, c, t, threads = _threads(out.shape[0])
+    cdef index_t jj
+    cdef double s0
     cdef bint shifted = offset is not None
     if shifted and (offset.shape[0] != m or offset.shape[1] != k):
         raise ValueError(f"offset must have the shape of out {(m, k)}, got {(offset.shape[0], offset.shape[1])}")
     with nogil:
-        if k == 3:  # the coordinates: sums in registers
-            for i in prange(m, schedule="static", num_threads=_threads(m)):
-                s0 = s1 = s2 = 0.0
-                for jj in range(indptr[i], indptr[i + 1]):
-                    j, a = indices[jj], data[jj]
-                    s0, s1, s2 = s0 + a * x[j, 0], s1 + a * x[j, 1], s2 + a * x[j, 2]
-                if shifted:
-                    out[i, 0], out[i, 1], out[i, 2] = (offset[i, 0] + scale * s0, offset[i, 1] + scale * s1,
-                                                       offset[i, 2] + scale * s2)
-                else:
-                    out[i, 0], out[i, 1], out[i, 2] = scale * s0, scale * s1, scale * s2
+        if k == 3 and threads == 1:  # the coordinates: sums in registers, no parallel region (its code is slower)
+            _product3(indptr, indices, data, x, out, scale, offset, shifted, 0, m)
+        elif k == 3:  # a contiguous block of rows per thread; each row's sum as on one thread
+            for t in prange(threads, schedule="static", num_threads=threads):
+                _product3(indptr, indices, data, x, out, scale, offset, shifted, t * m // threads,
+                          (t + 1) * m // threads)
         else:  # a column at a time: the row's entries are in cache after the first
-            for i in prange(m, schedule="static", num_threads=_threads(m)):
+            for i in prange(m, schedule="static", num_threads=threads):
                 for c in range(k):
                     s0 = 0.0
                     for jj in range(indptr[i], indptr[i + 1]):

@@ -63,6 +63,24 @@ def test_block_product_residual_and_accumulation(k):
         _block_kernel.block_product(A.indptr, A.indices, A.data, x, scaled, 1.0, b[:29])
 
 
+def test_block_product_on_threads_is_scipys_product_whatever_the_thread_count():
+    from threadpoolctl import threadpool_limits
+
+    # above the rows where the loops go parallel: a block of rows per thread, each row summed as on one
+    rng = np.random.default_rng(21)
+    indptr = np.r_[0, np.cumsum(rng.integers(0, 9, 100_000))].astype(np.int32)  # empty rows too
+    A = sp.csr_matrix(
+        (rng.standard_normal(indptr[-1]), rng.integers(0, 3000, indptr[-1]), indptr), shape=(100_000, 3000)
+    )
+    x, b = rng.standard_normal((2, 100_000, 3))
+    want = b - np.column_stack([A @ x[:3000, c] for c in range(3)])
+    for limit in (1, 2):
+        with threadpool_limits(limits=limit, user_api="openmp"):
+            out = np.full((100_000, 3), np.nan)
+            _block_kernel.block_product(A.indptr, A.indices, A.data, x[:3000], out, -1.0, b)
+            assert np.array_equal(out, want)
+
+
 @pytest.mark.parametrize("k", [1, 3, 5])
 def test_column_dots_and_cg_direction_are_numpys(k):
     rng = np.random.default_rng(13)
