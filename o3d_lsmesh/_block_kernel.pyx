@@ -579,33 +579,70 @@ def level_order(const index_t[::1] indptr, const index_t[::1] indices):
     return order_array[::-1].copy()
 
 
+cdef void _gram_count(const index_t[::1] row_ptr, const index_t[::1] row_cols, const index_t[::1] col_ptr,
+                      const index_t[::1] col_rows, int64_t[::1] marker, int64_t[::1] counts, Py_ssize_t start,
+                      Py_ssize_t stop) noexcept nogil:
+    """:func:`gram`'s counting pass over rows ``start:stop``, with one thread's marker."""
+    cdef Py_ssize_t i
+    cdef index_t cc, jj
+    for i in range(start, stop):
+        for cc in range(row_ptr[i], row_ptr[i + 1]):
+            for jj in range(col_ptr[row_cols[cc]], col_ptr[row_cols[cc] + 1]):
+                if marker[col_rows[jj]] != i:
+                    marker[col_rows[jj]] = i
+                    counts[i + 1] += 1
+
+
+cdef void _gram_fill(const index_t[::1] row_ptr, const index_t[::1] row_cols, const double[::1] row_data,
+                     const index_t[::1] col_ptr, const index_t[::1] col_rows, const double[::1] col_data,
+                     const index_t[::1] indptr, index_t[::1] indices, double[::1] data, int64_t[::1] marker,
+                     Py_ssize_t start, Py_ssize_t stop) noexcept nogil:
+    """:func:`gram`'s filling pass over rows ``start:stop`` (ascending), with one thread's marker."""
+    cdef Py_ssize_t i
+    cdef index_t cc, jj, j
+    cdef int64_t first, next_
+    cdef double weight
+    for i in range(start, stop):
+        first = indptr[i]
+        next_ = first
+        for cc in range(row_ptr[i], row_ptr[i + 1]):
+            weight = row_data[cc]
+            for jj in range(col_ptr[row_cols[cc]], col_ptr[row_cols[cc] + 1]):
+                j = col_rows[jj]
+                if marker[j] < first:  # the rows ascend: older marks are below the row's first entry
+                    marker[j] = next_
+                    indices[next_] = j
+                    data[next_] = weight * col_data[jj]
+                    next_ = next_ + 1
+                else:
+                    data[marker[j]] += weight * col_data[jj]
+        _sort_row(indices, data, first, next_)
+
+
 def gram(const index_t[::1] row_ptr, const index_t[::1] row_cols, const double[::1] row_data,
          const index_t[::1] col_ptr, const index_t[::1] col_rows, const double[::1] col_data):
     """``A A^T`` for an ``(n, k)`` sparse ``A`` given both as CSR (``row_*``) and as CSC (``col_*``):
     CSR ``(indptr, indices, data)`` of the ``(n, n)`` product, each row's columns sorted, on every core.
 
     Row ``i`` is ``sum_(c in row i) a_ic A[:, c]^T``, gathered with a per-thread marker (Gustavson's
-    algorithm): a counting pass, then a filling one. Entry ``(i, j)`` sums ``a_ic a_jc`` over the common
-    columns in increasing ``c``, as ``(j, i)`` does: the product is exactly symmetric (SciPy's runs on
-    one thread, then transposes to sort).
+    algorithm): a counting pass, then a filling one, each thread on a contiguous block of rows (one
+    thread: no parallel region). Entry ``(i, j)`` sums ``a_ic a_jc`` over the common columns in
+    increasing ``c``, as ``(j, i)`` does: the product is exactly symmetric (SciPy's runs on one thread,
+    then transposes to sort).
     """
-    cdef Py_ssize_t n = row_ptr.shape[0] - 1, i, threads = _threads(n)
-    cdef index_t cc, jj, j
-    cdef int64_t start, next_, tid
-    cdef double weight
+    cdef Py_ssize_t n = row_ptr.shape[0] - 1, t, threads = _threads(row_ptr.shape[0] - 1)
     dtype = np.int32 if index_t is int32_t else np.int64
     marker_array = _fresh((threads, max(n, 1)), np.int64, -1)
     cdef int64_t[:, ::1] marker = marker_array
     counts_array = _fresh(n + 1, np.int64, 0)
     cdef int64_t[::1] counts = counts_array
     with nogil:
-        for i in prange(n, schedule="static", num_threads=threads):
-            tid = threadid()
-            for cc in range(row_ptr[i], row_ptr[i + 1]):
-                for jj in range(col_ptr[row_cols[cc]], col_ptr[row_cols[cc] + 1]):
-                    if marker[tid, col_rows[jj]] != i:
-                        marker[tid, col_rows[jj]] = i
-                        counts[i + 1] += 1
+        if threads == 1:
+            _gram_count(row_ptr, row_cols, col_ptr, col_rows, marker[0], counts, 0, n)
+        else:
+            for t in prange(threads, schedule="static", num_threads=threads):
+                _gram_count(row_ptr, row_cols, col_ptr, col_rows, marker[t], counts, t * n // threads,
+                            (t + 1) * n // threads)
     indptr_array = np.cumsum(counts_array)
     if indptr_array[n] >= np.iinfo(dtype).max:
         raise ValueError("the product has too many entries for 32-bit indices: pass 64-bit ones")
@@ -615,22 +652,13 @@ def gram(const index_t[::1] row_ptr, const index_t[::1] row_cols, const double[:
     cdef double[::1] data = data_array
     marker_array.fill(-1)
     with nogil:
-        for i in prange(n, schedule="static", num_threads=threads):
-            tid = threadid()
-            start = indptr[i]
-            next_ = start
-            for cc in range(row_ptr[i], row_ptr[i + 1]):
-                weight = row_data[cc]
-                for jj in range(col_ptr[row_cols[cc]], col_ptr[row_cols[cc] + 1]):
-                    j = col_rows[jj]
-                    if marker[tid, j] < start:  # a thread's rows ascend: older marks are below start
-                        marker[tid, j] = next_
-                        indices[next_] = j
-                        data[next_] = weight * col_data[jj]
-                        next_ = next_ + 1
-                    else:
-                        data[marker[tid, j]] += weight * col_data[jj]
-            _sort_row(indices, data, start, next_)
+        if threads == 1:
+            _gram_fill(row_ptr, row_cols, row_data, col_ptr, col_rows, col_data, indptr, indices, data,
+                       marker[0], 0, n)
+        else:
+            for t in prange(threads, schedule="static", num_threads=threads):
+                _gram_fill(row_ptr, row_cols, row_data, col_ptr, col_rows, col_data, indptr, indices, data,
+                           marker[t], t * n // threads, (t + 1) * n // threads)
     return indptr_array, indices_array, data_array
 
 

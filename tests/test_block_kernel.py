@@ -353,6 +353,27 @@ def test_gram_is_a_sorted_exactly_symmetric_a_at(index, n, k, density, seed):
     assert got.nnz == pattern.nnz
 
 
+def test_gram_on_threads_is_scipys_product_whatever_the_thread_count():
+    from threadpoolctl import threadpool_limits
+
+    # above the rows where the loops go parallel: a block of rows per thread, each with its own marker
+    rng = np.random.default_rng(23)
+    indptr = np.r_[0, np.cumsum(rng.integers(0, 4, 70_000))]
+    A = sp.csr_matrix(
+        (rng.standard_normal(indptr[-1]), rng.integers(0, 20_000, indptr[-1]), indptr), shape=(70_000, 20_000)
+    )
+    A.sum_duplicates()
+    columns = A.tocsc()
+    parts = (A.indptr, A.indices, A.data, columns.indptr, columns.indices, columns.data)
+    results = []
+    for limit in (1, 2):
+        with threadpool_limits(limits=limit, user_api="openmp"):
+            results.append(_block_kernel.gram(*parts))
+    assert all(np.array_equal(a, b) for a, b in zip(*results))
+    got = sp.csr_matrix(results[0][::-1], shape=(70_000, 70_000))
+    assert abs(got - A @ A.T).max() < 1e-12 and got.nnz == (abs(A) @ abs(A).T).nnz
+
+
 @pytest.mark.parametrize("n", [40, 150_000])  # one thread, and every core
 def test_pair_product_is_offset_plus_two_scipy_products_on_one_pattern(n):
     rng = np.random.default_rng(9)
