@@ -217,27 +217,58 @@ cdef void _sweep(const index_t[::1] indptr, const index_t[::1] indices, const do
                     x[i, c] = (b[i, c] - rest[c]) / diagonal
 
 
+cdef void _step3(double[:, ::1] x, double[:, ::1] r, const double[:, ::1] p, const double[:, ::1] q,
+                 const double[::1] alpha, double[::1] squares, Py_ssize_t start, Py_ssize_t stop) noexcept nogil:
+    """:func:`cg_step` on rows ``start:stop`` of three columns; the rows' ``|r|^2`` summed in order."""
+    cdef Py_ssize_t i
+    cdef double s0 = 0.0, s1 = 0.0, s2 = 0.0
+    for i in range(start, stop):
+        x[i, 0] += alpha[0] * p[i, 0]
+        x[i, 1] += alpha[1] * p[i, 1]
+        x[i, 2] += alpha[2] * p[i, 2]
+        r[i, 0] -= alpha[0] * q[i, 0]
+        r[i, 1] -= alpha[1] * q[i, 1]
+        r[i, 2] -= alpha[2] * q[i, 2]
+        s0 = s0 + r[i, 0] * r[i, 0]
+        s1 = s1 + r[i, 1] * r[i, 1]
+        s2 = s2 + r[i, 2] * r[i, 2]
+    squares[0], squares[1], squares[2] = s0, s1, s2
+
+
+cdef void _dots3(const double[:, ::1] a, const double[:, ::1] b, double[::1] dots, Py_ssize_t start,
+                 Py_ssize_t stop) noexcept nogil:
+    """:func:`column_dots` on rows ``start:stop`` of three columns, summed in order."""
+    cdef Py_ssize_t i
+    cdef double d0 = 0.0, d1 = 0.0, d2 = 0.0
+    for i in range(start, stop):
+        d0 = d0 + a[i, 0] * b[i, 0]
+        d1 = d1 + a[i, 1] * b[i, 1]
+        d2 = d2 + a[i, 2] * b[i, 2]
+    dots[0], dots[1], dots[2] = d0, d1, d2
+
+
+cdef inline Py_ssize_t _blocks(Py_ssize_t rows) noexcept nogil:
+    # the reductions' blocks of PARALLEL_ROWS rows, set by the size alone: sums independent of the threads
+    return max(1, (rows + PARALLEL_ROWS - 1) // PARALLEL_ROWS)
+
+
 def cg_step(double[:, ::1] x, double[:, ::1] r, const double[:, ::1] p, const double[:, ::1] q,
             const double[::1] alpha):
     """Conjugate gradients' update ``x += alpha p``, ``r -= alpha q`` (per column) in one pass; returns the
-    columns' ``|r|^2`` after it, ``(k,)``."""
-    cdef Py_ssize_t n = x.shape[0], k = x.shape[1], i, c
-    cdef double q0 = 0.0, q1 = 0.0, q2 = 0.0
+    columns' ``|r|^2`` after it, ``(k,)``: for three columns, summed in order over blocks of
+    :data:`PARALLEL_ROWS` rows (blocks side by side on every core), then over the blocks in order, so that
+    the sums do not depend on the thread count."""
+    cdef Py_ssize_t n = x.shape[0], k = x.shape[1], i, c, t, blocks = _blocks(x.shape[0])
     squares = np.zeros(k)
     cdef double[::1] sq = squares
+    cdef double[:, ::1] partial = np.zeros((blocks, 3))
     with nogil:
-        if k == 3:  # the coordinates: parallel, the sums as OpenMP reductions
-            for i in prange(n, schedule="static", num_threads=_threads(n)):
-                x[i, 0] += alpha[0] * p[i, 0]
-                x[i, 1] += alpha[1] * p[i, 1]
-                x[i, 2] += alpha[2] * p[i, 2]
-                r[i, 0] -= alpha[0] * q[i, 0]
-                r[i, 1] -= alpha[1] * q[i, 1]
-                r[i, 2] -= alpha[2] * q[i, 2]
-                q0 += r[i, 0] * r[i, 0]
-                q1 += r[i, 1] * r[i, 1]
-                q2 += r[i, 2] * r[i, 2]
-            sq[0], sq[1], sq[2] = q0, q1, q2
+        if k == 3:
+            for t in prange(blocks, schedule="static", num_threads=_threads(n)):
+                _step3(x, r, p, q, alpha, partial[t], t * PARALLEL_ROWS, min(n, (t + 1) * PARALLEL_ROWS))
+            for t in range(blocks):
+                for c in range(3):
+                    sq[c] += partial[t, c]
         else:
             for i in range(n):
                 for c in range(k):
@@ -248,18 +279,20 @@ def cg_step(double[:, ::1] x, double[:, ::1] r, const double[:, ::1] p, const do
 
 
 def column_dots(const double[:, ::1] a, const double[:, ::1] b):
-    """``(k,)`` dot products of the columns of ``a`` and ``b`` (both ``(n, k)``), on every core."""
-    cdef Py_ssize_t n = a.shape[0], k = a.shape[1], i, c
-    cdef double d0 = 0.0, d1 = 0.0, d2 = 0.0
+    """``(k,)`` dot products of the columns of ``a`` and ``b`` (both ``(n, k)``); for three columns over
+    blocks of :data:`PARALLEL_ROWS` rows as :func:`cg_step`'s sums (on every core, independent of the
+    thread count)."""
+    cdef Py_ssize_t n = a.shape[0], k = a.shape[1], i, c, t, blocks = _blocks(a.shape[0])
     dots = np.zeros(k)
     cdef double[::1] d = dots
+    cdef double[:, ::1] partial = np.zeros((blocks, 3))
     with nogil:
         if k == 3:
-            for i in prange(n, schedule="static", num_threads=_threads(n)):
-                d0 += a[i, 0] * b[i, 0]
-                d1 += a[i, 1] * b[i, 1]
-                d2 += a[i, 2] * b[i, 2]
-            d[0], d[1], d[2] = d0, d1, d2
+            for t in prange(blocks, schedule="static", num_threads=_threads(n)):
+                _dots3(a, b, partial[t], t * PARALLEL_ROWS, min(n, (t + 1) * PARALLEL_ROWS))
+            for t in range(blocks):
+                for c in range(3):
+                    d[c] += partial[t, c]
         else:
             for i in range(n):
                 for c in range(k):

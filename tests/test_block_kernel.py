@@ -81,6 +81,27 @@ def test_block_product_on_threads_is_scipys_product_whatever_the_thread_count():
             assert np.array_equal(out, want)
 
 
+def test_cg_sums_do_not_depend_on_the_thread_count():
+    from threadpoolctl import threadpool_limits
+
+    # 200k rows: blocks side by side on every core, the same sums on one thread
+    rng = np.random.default_rng(24)
+    a, b, x, r = rng.standard_normal((4, 200_000, 3))
+    alpha = np.array([0.3, -1.2, 2.0])
+    results = []
+    for limit in (1, 2):
+        with threadpool_limits(limits=limit, user_api="openmp"):
+            x1, r1 = x.copy(), r.copy()
+            results.append(
+                (_block_kernel.column_dots(a, b), _block_kernel.cg_step(x1, r1, a, b, alpha), x1, r1)
+            )
+    assert all(np.array_equal(u, v) for u, v in zip(*results))
+    dots, squares, x1, r1 = results[0]
+    np.testing.assert_allclose(dots, np.einsum("ij,ij->j", a, b), rtol=1e-12)
+    assert np.array_equal(x1, x + alpha * a) and np.array_equal(r1, r - alpha * b)
+    np.testing.assert_allclose(squares, np.einsum("ij,ij->j", r1, r1), rtol=1e-12)
+
+
 @pytest.mark.parametrize("k", [1, 3, 5])
 def test_column_dots_and_cg_direction_are_numpys(k):
     rng = np.random.default_rng(13)
