@@ -225,7 +225,7 @@ def test_detect_creases_rejects_a_non_mesh():
         detect_creases("cube.ply")
 
 
-# ----------------------------------------------------------------- the default's choice (feature_measure)
+# ----------------------------------------------------------------- method="auto" (feature_measure)
 
 
 def noisy(V, F, sigma, seed=0):
@@ -278,34 +278,40 @@ def test_dihedral_likeness_matches_a_loop_over_pairs():
 
 @pytest.mark.parametrize("sigma", [0.1, 0.3])
 @pytest.mark.parametrize("name", ["cube", "cylinder"])
-def test_the_default_takes_the_feature_mode_on_cad_meshes(name, sigma):
+def test_auto_takes_the_feature_mode_on_cad_meshes(name, sigma):
     V, F = cad_meshes()[name]
     X = noisy(V, F, sigma)
-    out, report = constrained_fairing((X, F), return_report=True)
+    out, report = constrained_fairing((X, F), method="auto", return_report=True)
     assert report.method == "features" and report.feature_likeness >= fe_tuning().FEATURE_LIKENESS
     # the probe's passes are the feature mode's first ones: the same result, bit for bit
     np.testing.assert_array_equal(
         np.asarray(out[0]), constrained_fairing_arrays(X, F, None, method="features")
     )
-    np.testing.assert_array_equal(constrained_fairing_arrays(X, F, None, method=None), np.asarray(out[0]))
+    np.testing.assert_array_equal(constrained_fairing_arrays(X, F, None, method="auto"), np.asarray(out[0]))
+    # the default does not choose: the scan energy, no probe (its likeness is not measured)
+    by_default, report = constrained_fairing((X, F), return_report=True)
+    assert report == fe_report()("scan")
+    np.testing.assert_array_equal(
+        np.asarray(by_default[0]), constrained_fairing_arrays(X, F, None, method="scan")
+    )
 
 
 @pytest.mark.parametrize("sigma", [0.1, 0.3])
 @pytest.mark.parametrize("name", ["sphere", "torus"])
-def test_the_default_is_the_scan_energy_on_smooth_meshes(name, sigma):
+def test_auto_is_the_scan_energy_on_smooth_meshes(name, sigma):
     V, F = smooth_meshes()[name]
     X = noisy(V, F, sigma)
-    out, report = constrained_fairing((X, F), return_report=True)
+    out, report = constrained_fairing((X, F), method="auto", return_report=True)
     assert report.method == "scan" and report.feature_likeness < fe_tuning().FEATURE_LIKENESS
     np.testing.assert_array_equal(np.asarray(out[0]), constrained_fairing_arrays(X, F, None, method="scan"))
-    np.testing.assert_array_equal(constrained_fairing_arrays(X, F, None, method=None), np.asarray(out[0]))
+    np.testing.assert_array_equal(constrained_fairing_arrays(X, F, None, method="auto"), np.asarray(out[0]))
 
 
-def test_the_default_is_the_scan_energy_on_a_raw_scan():
+def test_auto_is_the_scan_energy_on_a_raw_scan():
     from conftest import load_scan
 
     V, F = load_scan("bun000.ply")
-    out, report = constrained_fairing((V, F), return_report=True)
+    out, report = constrained_fairing((V, F), method="auto", return_report=True)
     assert report.method == "scan"
     np.testing.assert_array_equal(
         np.asarray(out[0]), np.asarray(constrained_fairing((V, F), method="scan")[0])
@@ -336,9 +342,9 @@ def test_the_choice_is_invariant_under_rigid_motion_and_scale():
         assert b.likeness == pytest.approx(a.likeness, rel=1e-6)
     X = noisy(*cube(2), 0.2)
     F = cube(2)[1]
-    out = constrained_fairing_arrays(X, F, None, method=None)
+    out = constrained_fairing_arrays(X, F, None, method="auto")
     np.testing.assert_allclose(
-        constrained_fairing_arrays(7.5 * X @ q.T + shift, F, None, method=None),
+        constrained_fairing_arrays(7.5 * X @ q.T + shift, F, None, method="auto"),
         7.5 * out @ q.T + shift,
         atol=1e-12 * 7.5e4,
     )
@@ -367,7 +373,8 @@ def test_the_command_line_names_the_chosen_method(tmp_path, capsys):
     )
     source = tmp_path / "cube.ply"
     o3d.io.write_triangle_mesh(str(source), mesh)
-    assert main(["denoise", str(source), str(tmp_path / "out.ply"), "--json", "--quiet"]) == 0
+    out = str(tmp_path / "out.ply")
+    assert main(["denoise", str(source), out, "--method", "auto", "--json", "--quiet"]) == 0
     assert json.loads(capsys.readouterr().out)["method"] == "features"
 
 

@@ -228,7 +228,7 @@ def operation(name: str, **fields: Any) -> Callable[[OpFunction], OpFunction]:
 _LEVELS = "levels of the volume-cost collapse hierarchy, written to OUTDIR/<name>/level_NN<suffix>"
 _ANCHORS = "quantized LS-mesh anchors, written as OUTDIR/<name>.bin"
 _SELECTIONS = ("greedy", "random", "combined")
-_METHODS = ("scan", "local", "global", "features")
+_METHODS = ("scan", "local", "global", "features", "auto")
 
 # fmt: off
 DENOISE = (
@@ -236,7 +236,7 @@ DENOISE = (
            "10 for local; with --level, 5 per level)", param="number_of_iterations"),
     Option("method", choice(*_METHODS), None, "fairing energy (default: scan, the API's default; "
            "local with --level, --iterations or --reimpose-every); features keeps sharp creases (guided normal "
-           "filtering)"),
+           "filtering); auto measures the mesh and runs features or scan"),
     Option("level", int_at_least(0), 0, "multiresolution level (0: plain fairing)"),
     Option("mu", real, None, "barycenter penalty weight of --method global or scan (default: the API's)"),
     Option("reimpose_every", int_at_least(1), None, "re-take the barycenters every k iterations "
@@ -330,7 +330,7 @@ def denoise_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dic
             mesh, level, number_of_iterations=iterations, method=method, progress=progress
         )
     else:
-        # no flag: the API's defaults (the mesh chooses features or scan); the record names what ran
+        # no flag: the API's defaults; the record names what ran (auto's choice included)
         out, ran = fairing.constrained_fairing(
             mesh,
             options["iterations"],

@@ -2,8 +2,8 @@
 
 Four energies: ``"scan"`` (:mod:`.scan_fairing`), ``"local"`` (eq. 7), ``"global"`` (eq. 5 in penalty
 form, :mod:`.barycenter`), ``"features"`` (:mod:`.features`); :data:`METHOD_OPTIONS` says which option
-applies to which. The default chooses ``"features"`` or ``"scan"`` by the mesh's feature likeness
-(:mod:`.feature_measure`). Docs: ``docs/algorithms/constrained_fairing.rst``.
+applies to which. ``method="auto"`` chooses ``"features"`` or ``"scan"`` by the mesh's feature
+likeness (:mod:`.feature_measure`). Docs: ``docs/algorithms/constrained_fairing.rst``.
 """
 
 from __future__ import annotations
@@ -49,10 +49,10 @@ __all__ = [
     "constrained_fairing_arrays",
 ]
 
-#: The energy of ``constrained_fairing(mesh)`` where the mesh has no sharp creases (it chooses
-#: ``"features"`` where its feature likeness says so) or a weight of this energy is given.
+#: The energy of ``constrained_fairing(mesh)``. Not ``"auto"``: its probe costs more than this energy
+#: and took coarse organic meshes for CAD ones (benchmarks/results/features_denoise.md).
 DEFAULT_METHOD = "scan"
-_AUTO = "auto"  # the default's choice, made on the mesh (_chosen)
+_AUTO = "auto"  # the choice made on the mesh (_chosen), asked for by name
 
 
 @dataclass(frozen=True)
@@ -62,9 +62,9 @@ class FairingReport:
     Attributes
     ----------
     method : str
-        The energy that ran: the one given, or the default's choice (``"features"`` or ``"scan"``).
+        The energy that ran: the one given, or ``"auto"``'s choice (``"features"`` or ``"scan"``).
     feature_likeness : float or None
-        The measure the default chose by (:mod:`.feature_measure`); None when ``method`` was given.
+        The measure ``"auto"`` chose by (:mod:`.feature_measure`); None for any other method.
     """
 
     method: str
@@ -147,14 +147,13 @@ def resolved_options(method: str | None, number_of_iterations: int | None, reimp
 
 def _check_options(method: Any, given: dict[str, Any]) -> tuple[str, dict[str, Any]]:
     # the one check of every option: the method's row of METHOD_OPTIONS, then progress
-    if method is None:
+    if method is not None:
+        as_choice(method, (*FAIRING_METHODS, _AUTO), name="method")
+    auto = method == _AUTO  # the mesh chooses; its options are checked as the scan energy's
+    if auto:
+        method = "scan"
+    elif method is None:
         method = resolved_options(None, given["number_of_iterations"], given["reimpose_every"])[0]
-        # no weight of the scan energy given: the mesh chooses (its options are checked as the scan's)
-        auto = method == DEFAULT_METHOD and all(
-            given[k] is None for k in ("mu", "membrane", "boundary_weight")
-        )
-    else:
-        auto = False
     # a bool's type is checked for every method; True is what scan and features require
     smooth = as_bool(given["smooth_boundary"], name="smooth_boundary")
     given = {**given, "smooth_boundary": None if smooth else False}
@@ -165,7 +164,7 @@ def _check_options(method: Any, given: dict[str, Any]) -> tuple[str, dict[str, A
 
 
 def _chosen(positions, conn, method, progress) -> tuple[str, FeatureProbe | None]:
-    # the default's choice on the mesh: "features" or "scan", and the probe that started the feature mode
+    # method="auto" on the mesh: "features" or "scan", and the probe that started the feature mode
     if method != _AUTO:
         return method, None
     probe = feature_probe(positions, conn.triangles, conn=conn)
@@ -205,8 +204,8 @@ def constrained_fairing_arrays(
     if implicit:
         warn(
             "constrained_fairing_arrays without method= runs method='local' (10 iterations); pass "
-            "method='local' to keep that, or method=None for constrained_fairing's default ('features' or "
-            "'scan', as the mesh's feature likeness says), which 0.4 makes the default",
+            "method='local' to keep that, or method=None for constrained_fairing's default ('scan'), "
+            "which 0.4 makes the default",
             DeprecationWarning,
         )
     conn = Connectivity(triangles, len(vertices))
@@ -224,7 +223,7 @@ def _fair(positions, conn, method, options, solver="auto", probe=None):
     solver = as_choice(solver, SOLVERS, name="solver")  # checked for every method ("local" solves none)
     iterations, progress = options["number_of_iterations"], options["progress"]
     if probe is not None and method == "features":
-        return probe.finish(progress)  # the default's choice goes on with the probe's passes
+        return probe.finish(progress)  # "auto" goes on with the probe's passes
     if iterations == 0:
         return positions
     triangles = conn.triangles
@@ -300,10 +299,10 @@ def constrained_fairing(
 ) -> MeshT | tuple[MeshT, FairingReport]:
     """Remove noise from a mesh while holding its triangle barycenters (Liu et al. 2001).
 
-    ``"scan"`` (every weight measured) is made for raw range scans and independent noise, ``"features"``
-    keeps creases; the default runs ``"features"`` where the mesh's feature likeness says it has sharp
-    creases, ``"scan"`` elsewhere (``return_report=True`` says which). ``"local"`` and ``"global"`` are
-    the paper's operators (eq. 7, eq. 5). Docs: ``docs/algorithms/constrained_fairing.rst``, ``features.rst``.
+    ``"scan"`` (the default, every weight measured) is made for raw range scans and independent noise,
+    ``"features"`` keeps creases, ``"auto"`` runs ``"features"`` where the mesh's feature likeness says
+    it has sharp creases and ``"scan"`` elsewhere (``return_report=True`` says which). ``"local"`` and
+    ``"global"`` are the paper's operators (eq. 7, eq. 5). Docs: ``docs/algorithms/constrained_fairing.rst``, ``features.rst``.
 
     Parameters
     ----------
@@ -312,10 +311,9 @@ def constrained_fairing(
     number_of_iterations : int or None
         Local iterations or global solves (``None``: 10); ``"scan"``: None, 0 or 1 (one solve);
         ``"features"``: filter passes (``None``: measured). 0 returns an unchanged copy.
-    method : {"scan", "local", "global", "features"} or None
-        ``None``: ``"features"`` or ``"scan"`` as the mesh's feature likeness says; ``"scan"`` when ``mu``,
-        ``membrane`` or ``boundary_weight`` is given, ``"local"`` when ``number_of_iterations`` or
-        ``reimpose_every`` is.
+    method : {"scan", "local", "global", "features", "auto"} or None
+        ``None``: ``"scan"``, or ``"local"`` when ``number_of_iterations`` or ``reimpose_every`` is given.
+        ``"auto"`` takes the scan energy's options.
     mu : float or None
         ``"scan"`` and ``"global"``: barycenter penalty weight (``None``: measured; ``DEFAULT_MU``).
     membrane, boundary_weight : float or None
@@ -350,7 +348,7 @@ def constrained_fairing(
     >>> sphere = o3d.geometry.TriangleMesh.create_sphere(radius=1.0, resolution=20)
     >>> len(constrained_fairing(sphere).vertices) == len(sphere.vertices)
     True
-    >>> constrained_fairing(sphere, return_report=True)[1].method  # a smooth sphere: no creases
+    >>> constrained_fairing(sphere, method="auto", return_report=True)[1].method  # no creases
     'scan'
     """
     method, options = _check_options(method, _given(locals()))

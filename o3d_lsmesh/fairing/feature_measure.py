@@ -1,5 +1,5 @@
-"""The default's choice between the feature mode and the scan energy: a feature likeness measured on the
-mesh alone (no reference surface). Docs: ``docs/algorithms/features.rst`` (the default's choice).
+"""``method="auto"``'s choice between the feature mode and the scan energy: a feature likeness measured on
+the mesh alone (no reference surface). Docs: ``docs/algorithms/features.rst`` (choosing on the mesh).
 
 The first passes of the feature mode (:class:`.features.FeatureRun`) are taken, as many as
 ``PROBE_PASSES_PER_NOISE`` times the measured noise (at least one); the likeness is the mean over the

@@ -37,7 +37,7 @@ SIGMA_R = 0.35  # range kernel width on unit-normal differences (Zhang et al.'s)
 PASSES_PER_NOISE = 60.0  # filter passes per unit of measured noise: features_denoise.md (leave-one-mesh-out)
 VERTEX_STEPS = 10  # vertex steps after each filter pass (the reference code's): features_denoise.md
 CREASE_ANGLE = 30.0  # degrees between denoised face normals of a crease: features_denoise.md (crease recall)
-# the default's choice (feature_measure): probe passes = ceil(PROBE_PASSES_PER_NOISE sigma), at least one;
+# method="auto"'s choice (feature_measure): probe passes = ceil(PROBE_PASSES_PER_NOISE sigma), at least one;
 # "features" where the mean over the median of the filtered dihedral angles is at least FEATURE_LIKENESS:
 # features_denoise.md (leave-one-mesh-out classification)
 PROBE_PASSES_PER_NOISE = 10.0
