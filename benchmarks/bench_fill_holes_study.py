@@ -255,6 +255,9 @@ def main() -> int:
         "--save", help="write every hole's measures to this JSON file as they come (a rerun resumes from it)"
     )
     parser.add_argument("--load", help="tabulate the measures of a --save file instead of running")
+    parser.add_argument(
+        "--out", default="fill_holes_study.md", help="the results file (a --holes subset: another)"
+    )
     args = parser.parse_args()
     if args.load:
         with open(args.load) as f:
@@ -393,7 +396,7 @@ def main() -> int:
         )
     )
     sections.append(("Reading (the run of 2026-12-04; check against the tables above after a rerun)", NOTES))
-    write_markdown("fill_holes_study.md", "Hole filling on every closed mesh, leave one mesh out", sections)
+    write_markdown(args.out, "Hole filling on every closed mesh, leave one mesh out", sections)
     return 0
 
 

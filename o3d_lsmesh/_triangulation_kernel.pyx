@@ -229,28 +229,28 @@ cdef bint _flip_improves(const double* pa, const double* pb, const double* pc, c
     )
 
 cdef void _sort_halves(Half* a, Half* tmp, int64_t n, int64_t* count) noexcept nogil:
-    """Sort ``n`` half-edges given in index order by (key, index): a stable radix sort of the keys, 16 bits a
-    pass, digits that all share skipped (``tmp``: ``n`` more, ``count``: 4 * 65536 scratch); the same order
+    """Sort ``n`` half-edges given in index order by (key, index): a stable radix sort of the keys, 8 bits a
+    pass, digits that all share skipped (``tmp``: ``n`` more, ``count``: 8 * 256 scratch); the same order
     as qsort by ``_by_key`` in linear time (a pass of flips sorted every half-edge of the patch)."""
     cdef int64_t i, s, total, c
     cdef int d
     cdef Half* src = a
     cdef Half* dst = tmp
     cdef Half* swap
-    memset(count, 0, 4 * 65536 * sizeof(int64_t))
+    memset(count, 0, 8 * 256 * sizeof(int64_t))
     for i in range(n):
-        for d in range(4):
-            count[d * 65536 + ((a[i].key >> (16 * d)) & 0xFFFF)] += 1
-    for d in range(4):
-        if n == 0 or count[d * 65536 + ((a[0].key >> (16 * d)) & 0xFFFF)] == n:
+        for d in range(8):
+            count[d * 256 + ((a[i].key >> (8 * d)) & 0xFF)] += 1
+    for d in range(8):
+        if n == 0 or count[d * 256 + ((a[0].key >> (8 * d)) & 0xFF)] == n:
             continue
         total = 0
-        for s in range(65536):
-            c = count[d * 65536 + s]
-            count[d * 65536 + s] = total
+        for s in range(256):
+            c = count[d * 256 + s]
+            count[d * 256 + s] = total
             total += c
         for i in range(n):
-            s = d * 65536 + ((src[i].key >> (16 * d)) & 0xFFFF)
+            s = d * 256 + ((src[i].key >> (8 * d)) & 0xFF)
             dst[count[s]] = src[i]
             count[s] += 1
         swap = src
@@ -274,7 +274,7 @@ cdef int _relax(const double* points, int64_t* tris, int64_t t, const int64_t* f
     cdef Half* chosen = <Half*>malloc(max(nh, 1) * sizeof(Half))
     cdef uint8_t* keep = <uint8_t*>malloc(max(nh, 1))
     cdef Half* spare = <Half*>malloc(max(nh, 1) * sizeof(Half))
-    cdef int64_t* count = <int64_t*>malloc(4 * 65536 * sizeof(int64_t))
+    cdef int64_t* count = <int64_t*>malloc(8 * 256 * sizeof(int64_t))
     if not (half and pairs and proposed and owner and removed and chosen and keep and spare and count):
         free(half); free(pairs); free(proposed); free(owner); free(removed); free(chosen); free(keep)
         free(spare); free(count)

@@ -93,6 +93,33 @@ def keeps_facing(x: np.ndarray, again: np.ndarray, new_tris: np.ndarray) -> bool
     return bool(((before * after).sum(axis=1) > 0).all() and move < 0.1 * size)
 
 
+def _fair_without(doomed, filler, vertices, triangles, holes, continuity, cot, owner, vertex_owner, index):
+    """:func:`fair_patches` of the holes but the ``doomed`` ones (given up: stuck); the others faired and
+    checked without them (a candidate meeting a patch that goes is no crossing)."""
+    m, n = len(filler.triangles), len(filler.vertices)
+    if doomed.all():
+        return np.full(len(holes), continuity, dtype=np.int64), np.arange(len(holes))
+    keep = ~doomed[vertex_owner]
+    renumber = np.concatenate([np.arange(n), n + np.cumsum(keep) - 1])
+    kept = np.flatnonzero(~doomed)
+    part = vertices[np.concatenate([np.arange(n), n + np.flatnonzero(keep)])]
+    used, stuck = fair_patches(
+        filler,
+        part,
+        np.concatenate([triangles[:m], renumber[triangles[m:][~doomed[owner]]]]),
+        [holes[i] for i in kept],
+        continuity,
+        cot,
+        (np.cumsum(~doomed) - 1)[owner[~doomed[owner]]],
+        (np.cumsum(~doomed) - 1)[vertex_owner[keep]],
+        index,
+    )
+    vertices[n:][keep] = part[n:]
+    all_used = np.full(len(holes), continuity, dtype=np.int64)
+    all_used[kept] = used
+    return all_used, np.sort(np.concatenate([np.flatnonzero(doomed), kept[stuck]]))
+
+
 def fair_patches(
     filler: Any,
     vertices: np.ndarray,
@@ -117,34 +144,18 @@ def fair_patches(
     total, m, n = len(vertices), len(filler.triangles), len(filler.vertices)
     # a new triangle on three loop vertices is the same in every candidate: one crossing the mesh (or
     # another such) makes its hole's every candidate cross, so that hole is not faired (a scan's
-    # silhouette: a patch as large as the scan, faired five times over, to be left open)
+    # silhouette: a patch as large as the scan, faired five times over, to be left open). Tested with
+    # those triangles first among the new ones, in place (no copy of the mesh), then put back
     fixed = (triangles[m:] < n).all(axis=1)
-    crossing = _crossings(
-        vertices, np.concatenate([triangles[:m], triangles[m:][fixed]]), m, index, owner[fixed]
-    )
-    doomed = np.bincount(owner[fixed], weights=crossing, minlength=len(holes)) > 0
-    if doomed.all():
-        return np.full(len(holes), continuity, dtype=np.int64), np.arange(len(holes))
-    if doomed.any():  # the others faired without them: a candidate meeting a patch that goes is no crossing
-        keep = ~doomed[vertex_owner]
-        renumber = np.concatenate([np.arange(n), n + np.cumsum(keep) - 1])
-        kept = np.flatnonzero(~doomed)
-        part = vertices[np.concatenate([np.arange(n), n + np.flatnonzero(keep)])]
-        used, stuck = fair_patches(
-            filler,
-            part,
-            np.concatenate([triangles[:m], renumber[triangles[m:][~doomed[owner]]]]),
-            [holes[i] for i in kept],
-            continuity,
-            cot,
-            (np.cumsum(~doomed) - 1)[owner[~doomed[owner]]],
-            (np.cumsum(~doomed) - 1)[vertex_owner[keep]],
-            index,
+    order, count, new_tris = np.argsort(~fixed, kind="stable"), int(fixed.sum()), triangles[m:].copy()
+    triangles[m:] = new_tris[order]
+    crossing = _crossings(vertices, triangles[: m + count], m, index, owner[order][:count])
+    triangles[m:] = new_tris
+    doomed = np.bincount(owner[order][:count], weights=crossing, minlength=len(holes)) > 0
+    if doomed.any():
+        return _fair_without(
+            doomed, filler, vertices, triangles, holes, continuity, cot, owner, vertex_owner, index
         )
-        vertices[n:][keep] = part[n:]
-        all_used = np.full(len(holes), continuity, dtype=np.int64)
-        all_used[kept] = used
-        return all_used, np.sort(np.concatenate([np.flatnonzero(doomed), kept[stuck]]))
     unknown = np.arange(n, total)
     loops = holes[0].vertices if len(holes) == 1 else np.concatenate([hole.vertices for hole in holes])
     # triangles within `continuity` rings of the loops in the input, plus every new triangle; a local
