@@ -200,9 +200,12 @@ cdef double _min_angle(const double* p0, const double* p1, const double* p2) noe
     ratio = sqrt(_dot(n, n)) / denominator if denominator > 0 else 0.0
     return asin(fmin(ratio, 1.0))
 
-cdef bint _flip_improves(const double* pa, const double* pb, const double* pc, const double* pd) noexcept nogil:
-    """Whether edge ``(a, b)`` between ``(a, b, c)`` and ``(b, a, d)`` flips to ``(c, d)`` (docs page)."""
-    cdef double[3] x, y, n1, n2, old
+cdef bint _flip_improves(const double* pa, const double* pb, const double* pc, const double* pd,
+                         bint smooth=False) noexcept nogil:
+    """Whether edge ``(a, b)`` between ``(a, b, c)`` and ``(b, a, d)`` flips to ``(c, d)`` (docs page); with
+    ``smooth``, only to a crease no sharper (the cosine of the new triangles' normals not below the old)."""
+    cdef double[3] x, y, n1, n2, m2, old
+    cdef double crease = 0.0
     cdef int c
     if not (_in_circumsphere(pa, pb, pc, pd) or _in_circumsphere(pb, pa, pd, pc)):
         return False
@@ -214,6 +217,8 @@ cdef bint _flip_improves(const double* pa, const double* pb, const double* pc, c
     _cross(x, y, n2)
     for c in range(3):
         old[c] = n1[c] + n2[c]
+    if smooth:
+        crease = _dot(n1, n2) / sqrt(_dot(n1, n1) * _dot(n2, n2))
     _sub(pa, pc, x)
     _sub(pd, pc, y)
     _cross(x, y, n1)
@@ -221,8 +226,10 @@ cdef bint _flip_improves(const double* pa, const double* pb, const double* pc, c
         return False
     _sub(pb, pd, x)
     _sub(pc, pd, y)
-    _cross(x, y, n1)
-    if not _dot(n1, old) > 0:
+    _cross(x, y, m2)
+    if not _dot(m2, old) > 0:
+        return False
+    if smooth and not _dot(n1, m2) / sqrt(_dot(n1, n1) * _dot(m2, m2)) >= crease:
         return False
     return fmin(_min_angle(pc, pa, pd), _min_angle(pd, pb, pc)) > (
         fmin(_min_angle(pa, pb, pc), _min_angle(pb, pa, pd)) + 1e-9
@@ -260,7 +267,7 @@ cdef void _sort_halves(Half* a, Half* tmp, int64_t n, int64_t* count) noexcept n
         memcpy(a, src, n * sizeof(Half))
 
 cdef int _relax(const double* points, int64_t* tris, int64_t t, const int64_t* fixed, int64_t n_fixed,
-                uint8_t* dirty) noexcept nogil:
+                uint8_t* dirty, bint smooth=False) noexcept nogil:
     """Delaunay edge flips (Liepa's relaxation) in passes of independent flips until none applies; -1 if
     out of memory."""
     cdef int64_t nh = 3 * t, ne, e, i, h1, h2, t1, t2, s1, s2, a, b, c, d, n_prop, n_cand, n_removed = 0
@@ -303,7 +310,7 @@ cdef int _relax(const double* points, int64_t* tris, int64_t t, const int64_t* f
                 continue
             if c == d or _has(&half[0].key, nh, key, 2) or _has(fixed, n_fixed, key):
                 continue
-            if _flip_improves(points + 3 * a, points + 3 * b, points + 3 * c, points + 3 * d):
+            if _flip_improves(points + 3 * a, points + 3 * b, points + 3 * c, points + 3 * d, smooth):
                 proposed[n_prop] = e
                 n_prop += 1
         if n_prop == 0:
@@ -365,7 +372,7 @@ cdef int64_t[::1] _fixed_keys(fixed_pairs):
     keys.sort()
     return out
 
-def relax(const double[:, ::1] points, triangles, fixed_pairs, dirty):
+def relax(const double[:, ::1] points, triangles, fixed_pairs, dirty, bint smooth=False):
     """Liepa's relaxation of a patch: the flipped ``(t, 3)`` triangles; ``fixed_pairs (f, 2)`` edges no flip
     may make, ``dirty (t,)`` the triangles tested first."""
     out = np.array(triangles, dtype=np.int64, order="C", copy=True)
@@ -384,7 +391,7 @@ def relax(const double[:, ::1] points, triangles, fixed_pairs, dirty):
     if t:
         with nogil:
             status = _relax(&points[0, 0], &tris[0, 0], t, &fixed[0] if fixed.shape[0] else NULL,
-                            fixed.shape[0], &d[0])
+                            fixed.shape[0], &d[0], smooth)
     if status:
         raise MemoryError
     return out

@@ -973,8 +973,9 @@ def test_dynamic_programme_is_optimal_on_random_loops(k, seed, bump, unknown):
     assert all(((i + 1) % k, i) in half for i in range(k))
 
 
-def reference_relax(points, tris, fixed_pairs, dirty):
-    """Liepa's relaxation as plain loops over lists: the rules of ``_triangulation_kernel.relax``'s docstring.
+def reference_relax(points, tris, fixed_pairs, dirty, smooth=False):
+    """Liepa's relaxation as plain loops over lists: the rules of ``_triangulation_kernel.relax``'s docstring
+    (``smooth``: a flip also keeps the cosine between its two triangles' normals at least the old one's).
 
     Passes: every interior edge (in the order of its vertex pair) of a dirty triangle, or whose flip a
     removed edge blocked, is proposed if its flip makes a new edge, ``d`` is inside the circumsphere of
@@ -1019,6 +1020,13 @@ def reference_relax(points, tris, fixed_pairs, dirty):
         if dot(cross(sub(pa, pc), sub(pd, pc)), old) <= 0 or dot(cross(sub(pb, pd), sub(pc, pd)), old) <= 0:
             return False
         before = min(min_angle(pa, pb, pc), min_angle(pb, pa, pd))
+        if smooth:
+            n1, n2 = cross(sub(pb, pa), sub(pc, pa)), cross(sub(pa, pb), sub(pd, pb))
+            m1, m2 = cross(sub(pa, pc), sub(pd, pc)), cross(sub(pb, pd), sub(pc, pd))
+            if not dot(m1, m2) / math.sqrt(dot(m1, m1) * dot(m2, m2)) >= dot(n1, n2) / math.sqrt(
+                dot(n1, n1) * dot(n2, n2)
+            ):
+                return False
         return min(min_angle(pc, pa, pd), min_angle(pd, pb, pc)) > before + 1e-9
 
     P = points.tolist()
@@ -1098,6 +1106,9 @@ def test_relax_matches_plain_flip_loop(seed, size, bump):
     every = np.ones(len(tris), dtype=bool)
     done = _triangulation_kernel.relax(points, tris, fixed, every)
     assert np.array_equal(reference_relax(points, done, fixed, every), done)
+    # smooth (the flips after fairing): no crease made sharper
+    got = _triangulation_kernel.relax(points, tris, fixed, dirty, True)
+    assert np.array_equal(got, reference_relax(points, tris, fixed, dirty, smooth=True))
 
 
 def reference_refine(points, sigma, tris, fixed, owner, alpha):
@@ -1390,3 +1401,40 @@ def test_fill_is_closed_manifold_oriented_no_crossing(seed, radii, bump, continu
     assert len(out.holes) == len(holes)
     assert boundary_edge_count(out.triangles, len(out.vertices)) == 0
     check_valid(out.vertices, out.triangles, len(T))
+
+
+def _smallest_angles(V, T):
+    """Each triangle's smallest interior angle in degrees, by the law of cosines (plain NumPy)."""
+    P = V[T]
+    out = []
+    for r in range(3):
+        u, w = P[:, (r + 1) % 3] - P[:, r], P[:, (r + 2) % 3] - P[:, r]
+        cos = (u * w).sum(1) / (np.linalg.norm(u, axis=1) * np.linalg.norm(w, axis=1))
+        out.append(np.degrees(np.arccos(np.clip(cos, -1, 1))))
+    return np.min(out, axis=0)
+
+
+@pytest.mark.parametrize("centre", [3, 200, 700])
+def test_flips_after_fairing_raise_the_smallest_angle_and_keep_the_patch(monkeypatch, centre):
+    # the faired patch flipped again (Liepa's rule, no crease made sharper): the same vertices, a closed
+    # oriented surface with each hole's new triangles, their smallest angle no lower than unflipped
+    import o3d_lsmesh.holes.fair as fair
+
+    class Unflipped:
+        def relax(self, points, triangles, *rest):
+            return triangles
+
+    sphere = o3d.geometry.TriangleMesh.create_sphere(resolution=24)
+    V, T = np.asarray(sphere.vertices), np.asarray(sphere.triangles).astype(np.int64)
+    V = V * np.array([1.0, 0.7, 1.3])  # an ellipsoid: curvature varies across the hole
+    Vh, Th, _ = cut_disk(V, T, centre, 0.6)
+    flipped = fill_holes_arrays(Vh, Th)
+    monkeypatch.setattr(fair, "_kernel", Unflipped)
+    plain = fill_holes_arrays(Vh, Th)
+    assert np.array_equal(flipped.vertices, plain.vertices) and len(flipped.triangles) == len(plain.triangles)
+    assert not np.array_equal(flipped.triangles, plain.triangles)  # some flip is made
+    new = slice(len(Th), None)
+    angles = [_smallest_angles(out.vertices, out.triangles[new]) for out in (flipped, plain)]
+    assert angles[0].min() >= angles[1].min() - 1e-9  # each flip raises the smaller angle of its pair
+    check_valid(flipped.vertices, flipped.triangles, len(Th))
+    assert boundary_edge_count(flipped.triangles, len(flipped.vertices)) == 0

@@ -12,11 +12,13 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..core import tuning as core_tuning
+from ..core.arrays import concatenated_ranges
 from ..core.errors import SingularSystemError
 from ..core.operators import patch_system
 from ..core.solve import solve_spd
 from .crossings import _crossings, _patch_kernel
 from .find import _cross
+from .triangulate import _kernel
 
 
 def _fair(x: np.ndarray, tris: np.ndarray, unknown: np.ndarray, rings: list, level: int, cot: bool):
@@ -102,11 +104,12 @@ def _fair_without(doomed, filler, vertices, triangles, holes, continuity, cot, o
     keep = ~doomed[vertex_owner]
     renumber = np.concatenate([np.arange(n), n + np.cumsum(keep) - 1])
     kept = np.flatnonzero(~doomed)
-    part = vertices[np.concatenate([np.arange(n), n + np.flatnonzero(keep)])]
+    back = np.concatenate([np.arange(n), n + np.flatnonzero(keep)])
+    part, inner = vertices[back], np.concatenate([triangles[:m], renumber[triangles[m:][~doomed[owner]]]])
     used, stuck = fair_patches(
         filler,
         part,
-        np.concatenate([triangles[:m], renumber[triangles[m:][~doomed[owner]]]]),
+        inner,
         [holes[i] for i in kept],
         continuity,
         cot,
@@ -115,6 +118,7 @@ def _fair_without(doomed, filler, vertices, triangles, holes, continuity, cot, o
         index,
     )
     vertices[n:][keep] = part[n:]
+    triangles[m:][~doomed[owner]] = back[inner[m:]]  # flipped in there
     all_used = np.full(len(holes), continuity, dtype=np.int64)
     all_used[kept] = used
     return all_used, np.sort(np.concatenate([np.flatnonzero(doomed), kept[stuck]]))
@@ -133,7 +137,8 @@ def fair_patches(
 ):
     """Fair every new vertex at once: one local system over the patches and the rings around them.
 
-    ``vertices`` (the input's, then the refined patches' new ones) take the result in place.
+    ``vertices`` (the input's, then the refined patches' new ones) take the result in place, and
+    ``triangles``' new rows their flips (a caller's view of them sees the flipped patches).
     Candidates, best first: the asked continuity (after its cotangent pass if ``cot``, then
     without), then each lower continuity, then the refined patch unfaired. Each hole (``owner`` of
     each new triangle, ``vertex_owner`` of each new vertex) keeps the first candidate whose new
@@ -161,7 +166,7 @@ def fair_patches(
     # triangles within `continuity` rings of the loops in the input, plus every new triangle; a local
     # numbering (nothing as long as the mesh): the new vertices, every one on a new triangle and
     # numbered last, stay last; one connectivity for every solve below
-    new_tris = triangles[m:]
+    new_tris = triangles[m:].copy()  # as refined: the candidates' flips start from it
     local_vertices, local, local_rings = _patch_kernel().local_mesh(
         filler.triangles, *filler.vertex_triangles, loops, continuity, new_tris
     )
@@ -200,22 +205,36 @@ def fair_patches(
 
     tried = []
     chosen = np.full(len(holes), -1)
-    out = refined.copy()
+    out, final = refined.copy(), new_tris.copy()
+    # each candidate's patches flipped again as the refinement's were (Liepa's rule, and no crease made
+    # sharper): fairing moved the vertices those flips were chosen on; holes without a new vertex keep
+    # the bare programme. The input's edges between patch vertices: no flip may make one twice
+    flip = (np.bincount(vertex_owner, minlength=len(holes)) > 0)[owner]
+    used = np.unique(new_tris[flip])
+    loop = used[used < n]
+    indptr, data = filler.vertex_triangles
+    near = filler.triangles[data[concatenated_ranges(indptr[loop], indptr[loop + 1] - indptr[loop])]]
+    inside = np.isin(near, used)
+    fixed = np.concatenate([near[:, e][inside[:, e].all(axis=1)] for e in ([0, 1], [1, 2], [2, 0])])
     for rank, (level, candidate) in enumerate(candidates()):
         tried.append(level)
         # a patch left NaN (its system not finite) is checked as refined and fails this candidate
         broken = ~np.isfinite(candidate).all(axis=1)
         work[n:] = np.where(broken[:, None], refined, candidate)
+        if flip.any():
+            dirty = np.ones(int(flip.sum()), dtype=bool)
+            triangles[m:][flip] = _kernel().relax(work, new_tris[flip], fixed, dirty, True)
         crossing = _crossings(work, triangles, m, index, owner)  # (q,) nonzero on crossing holes
         per_hole = np.bincount(owner, weights=crossing, minlength=len(holes))
         per_hole += np.bincount(vertex_owner, weights=broken, minlength=len(holes))
         for hole_index in np.flatnonzero((chosen < 0) & (per_hole == 0)):
             mine = vertex_owner == hole_index
             out[mine] = candidate[mine]
+            final[owner == hole_index] = triangles[m:][owner == hole_index]
             chosen[hole_index] = rank
         if (chosen >= 0).all():
             break
-    work[n:] = out
+    work[n:], triangles[m:] = out, final
     return np.array([tried[c] if c >= 0 else tried[0] for c in chosen], dtype=np.int64), np.flatnonzero(
         chosen < 0
     )

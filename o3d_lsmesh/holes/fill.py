@@ -367,7 +367,7 @@ class HoleFiller:
         else:
             weights_matrix = (p, n)
         out_vertices = np.concatenate([vertices, fresh_points])
-        out_triangles = np.concatenate([triangles, new_tris])
+        new_tris = (out_triangles := np.concatenate([triangles, new_tris]))[len(triangles) :]
         vertex_owner = _vertex_owner(new_tris, owner, n, p)
         used, stuck = fair_patches(
             self, out_vertices, out_triangles, holes, continuity, cot, owner, vertex_owner, index
