@@ -324,7 +324,11 @@ def test_raises():
         (ValueError, "number_of_iterations must be >= 0, got -1", dict(number_of_iterations=-1)),
         (TypeError, "number_of_iterations must be an integer, got 1.5", dict(number_of_iterations=1.5)),
         (TypeError, "number_of_iterations must be an integer, got True", dict(number_of_iterations=True)),
-        (ValueError, r"method must be one of \[.*'global', 'features', 'auto'\], got 'cg'", dict(method="cg")),
+        (
+            ValueError,
+            r"method must be one of \[.*'global', 'features', 'auto'\], got 'cg'",
+            dict(method="cg"),
+        ),
         (TypeError, r"method must be one of \[.*'global', 'features', 'auto'\], got 3", dict(method=3)),
         (ValueError, "mu must be positive and finite, got 0.0", dict(method="global", mu=0.0)),
         (TypeError, "mu must be a number, got 'big'", dict(method="global", mu="big")),
