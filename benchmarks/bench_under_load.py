@@ -136,8 +136,11 @@ NOTES = """\
   call makes no BLAS call (breakpoints on every CBLAS entry point of numpy's library). Limiting that one
   library to one thread had moved the loaded median 0.299 -> 0.231 s before this change.
 - After both changes, four runs on the same quiet machine gave ratios of 2.05, 2.00, 2.06 (9 rounds) and
-  1.94 (15 rounds, the table above): at the target, not clearly below it. One thread on two busy cores
-  gets two thirds of a core, a floor of 1.5x; `OMP_NUM_THREADS=1` measured 1.55-2.00 in the same runs.
+  1.94 (15 rounds): at the target, not clearly below it. One thread on two busy cores gets two thirds
+  of a core, a floor of 1.5x; `OMP_NUM_THREADS=1` measured 1.55-2.00 in the same runs.
+- Then the block kernel's loops stopped opening an OpenMP region below `PARALLEL_ROWS` (they ran
+  serially inside one), and the default's measures became single compiled passes: 1.66 in the table
+  above (15 rounds, load 0.6 at the start), the defaults now as `OMP_NUM_THREADS=1`.
 - Earlier run (2026-12-04, load average 12.5 at the start): default 0.749 / 1.585 s, ratio 2.12."""
 
 
