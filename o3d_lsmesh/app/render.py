@@ -23,7 +23,6 @@ from .._o3d import MeshData, read_mesh
 from .._o3d.io import (
     cast_rays,
     distances_to_surface,
-    legacy_mesh,
     quiet_open3d,
     raycasting_scene,
     write_image,
@@ -176,7 +175,10 @@ def _filament_worker(spec_path: str, image_path: str) -> None:
         switch(False)
     background = spec["background"].astype(np.float32)
     renderer.scene.set_background(np.append(background, 1.0))
-    mesh = legacy_mesh(spec["vertices"], spec["triangles"])
+    mesh = o3d.geometry.TriangleMesh(
+        o3d.utility.Vector3dVector(spec["vertices"]),
+        o3d.utility.Vector3iVector(spec["triangles"].astype(np.int32)),
+    )
     mesh.vertex_colors = o3d.utility.Vector3dVector(spec["colors"])
     mesh.compute_vertex_normals()
     material = rendering.MaterialRecord()
