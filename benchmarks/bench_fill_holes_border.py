@@ -77,7 +77,7 @@ def main() -> int:
         f"total {sum(walls):.1f} s. The machine was shared with other jobs (2 cores; load average "
         f"{load:.1f} at the start, {os.getloadavg()[0]:.1f} at the end; OMP_NUM_THREADS="
         f"{os.environ.get('OMP_NUM_THREADS', 'unset')}): wall times are inflated by the others' work, CPU "
-        "time less so (it counts the solver's threads, which spin when the cores are taken)."
+        "time less so (it sums the time of every thread of the call)."
     )
     write_markdown(
         args.out,
