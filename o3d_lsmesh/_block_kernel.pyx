@@ -90,9 +90,9 @@ def no_huge_pages(array):
     return array
 
 
-def _fresh(shape, dtype=np.float64, fill=None):
+def empty_small_pages(shape, dtype=np.float64, fill=None):
     """A new array advised to small pages (:func:`no_huge_pages`) before it is written, ``fill`` if given:
-    the kernels' mesh-sized outputs and work arrays."""
+    the package's mesh-sized outputs and work arrays."""
     array = no_huge_pages(np.empty(shape, dtype))
     if fill is not None:
         array.fill(fill)
@@ -320,7 +320,7 @@ def symmetry_gap(const index_t[::1] indptr, const index_t[::1] indices, const do
     cdef Py_ssize_t n = indptr.shape[0] - 1, j, lo, wi = 0, wj = 0, above = 0
     cdef index_t k, i
     cdef double mirror, gap, largest = 0.0
-    cdef int64_t[::1] cursor = _fresh(n, np.int64)
+    cdef int64_t[::1] cursor = empty_small_pages(n, np.int64)
     with nogil:
         for j in range(n):
             cursor[j] = indptr[j]
@@ -358,12 +358,12 @@ def incomplete_cholesky(const index_t[::1] indptr, const index_t[::1] indices, c
     """
     cdef Py_ssize_t n = indptr.shape[0] - 1, i, p, q, j, d, failed = -1, bad = -1
     cdef double s, pivot
-    values = _fresh(data.shape[0])
-    diagonal = _fresh(n, np.int64)
+    values = empty_small_pages(data.shape[0])
+    diagonal = empty_small_pages(n, np.int64)
     cdef double[::1] L = values
     cdef int64_t[::1] diag = diagonal
-    cdef int64_t[::1] mirror = _fresh(n, np.int64)  # each row's next upper entry to fill
-    cdef double[::1] work = _fresh(n, fill=0.0)
+    cdef int64_t[::1] mirror = empty_small_pages(n, np.int64)  # each row's next upper entry to fill
+    cdef double[::1] work = empty_small_pages(n, fill=0.0)
     with nogil:
         for i in range(n):
             diag[i] = -1
@@ -531,14 +531,14 @@ def permuted(const index_t[::1] indptr, const index_t[::1] indices, const double
     if order.shape[0] != n:
         raise ValueError(f"order must have one entry per row ({n}), got {order.shape[0]}")
     dtype = np.int32 if index_t is int32_t else np.int64
-    inverse_array = _fresh(n, dtype, -1)
+    inverse_array = empty_small_pages(n, dtype, -1)
     cdef index_t[::1] inverse = inverse_array
     for r in range(n):
         if not 0 <= order[r] < n or inverse[order[r]] != -1:
             raise ValueError("order must be a permutation of the rows")
         inverse[order[r]] = r
-    new_indptr, new_indices = _fresh(n + 1, dtype), _fresh(indptr[n], dtype)
-    new_data = _fresh(indptr[n])
+    new_indptr, new_indices = empty_small_pages(n + 1, dtype), empty_small_pages(indptr[n], dtype)
+    new_data = empty_small_pages(indptr[n])
     cdef index_t[::1] ip = new_indptr, ix = new_indices
     cdef double[::1] dx = new_data
     ip[0] = 0
@@ -591,9 +591,9 @@ def level_order(const index_t[::1] indptr, const index_t[::1] indices):
     sorts every vertex by degree first.
     """
     cdef Py_ssize_t n = indptr.shape[0] - 1, done = 0, reached, s = 0, i
-    order_array = _fresh(n, np.int64)
-    probe_array = _fresh(n, np.int64)
-    seen_array = _fresh(n, np.int64, -1)
+    order_array = empty_small_pages(n, np.int64)
+    probe_array = empty_small_pages(n, np.int64)
+    seen_array = empty_small_pages(n, np.int64, -1)
     cdef int64_t[::1] order = order_array, probe = probe_array, seen = seen_array
     cdef int64_t component = 0, start, v
     with nogil:
@@ -665,9 +665,9 @@ def gram(const index_t[::1] row_ptr, const index_t[::1] row_cols, const double[:
     """
     cdef Py_ssize_t n = row_ptr.shape[0] - 1, t, threads = _threads(row_ptr.shape[0] - 1)
     dtype = np.int32 if index_t is int32_t else np.int64
-    marker_array = _fresh((threads, max(n, 1)), np.int64, -1)
+    marker_array = empty_small_pages((threads, max(n, 1)), np.int64, -1)
     cdef int64_t[:, ::1] marker = marker_array
-    counts_array = _fresh(n + 1, np.int64, 0)
+    counts_array = empty_small_pages(n + 1, np.int64, 0)
     cdef int64_t[::1] counts = counts_array
     with nogil:
         if threads == 1:
@@ -680,7 +680,7 @@ def gram(const index_t[::1] row_ptr, const index_t[::1] row_cols, const double[:
     if indptr_array[n] >= np.iinfo(dtype).max:
         raise ValueError("the product has too many entries for 32-bit indices: pass 64-bit ones")
     indptr_array = indptr_array.astype(dtype)
-    indices_array, data_array = _fresh(indptr_array[n], dtype), _fresh(indptr_array[n])
+    indices_array, data_array = empty_small_pages(indptr_array[n], dtype), empty_small_pages(indptr_array[n])
     cdef index_t[::1] indptr = indptr_array, indices = indices_array
     cdef double[::1] data = data_array
     marker_array.fill(-1)
@@ -757,7 +757,7 @@ def area_normals(const double[:, ::1] positions, const index_t[:, ::1] triangles
         for c in range(3):
             if not 0 <= triangles[t, c] < n:
                 raise ValueError(f"triangle {t} names vertex {triangles[t, c]}, outside 0..{n - 1}")
-    sums_array = _fresh((3, n, 3), fill=0.0)
+    sums_array = empty_small_pages((3, n, 3), fill=0.0)
     cdef double[:, :, ::1] sums = sums_array
     with nogil:
         for t in range(m):
@@ -788,7 +788,7 @@ def edge_sums(const index_t[:, ::1] edges, const double[:, ::1] values):
     for t in range(e):
         if not (0 <= edges[t, 0] < n and 0 <= edges[t, 1] < n):
             raise ValueError(f"edge {t} names a vertex outside 0..{n - 1}")
-    first_array, second_array = _fresh((n, k), fill=0.0), _fresh((n, k), fill=0.0)
+    first_array, second_array = empty_small_pages((n, k), fill=0.0), empty_small_pages((n, k), fill=0.0)
     cdef double[:, ::1] first = first_array, second = second_array
     with nogil:
         for t in range(e):
@@ -818,7 +818,7 @@ def two_ring_sums(const index_t[::1] indptr, const index_t[::1] indices, const i
     counts_array, sums_array = np.zeros(r), np.zeros((r, k))
     cdef double[::1] counts = counts_array
     cdef double[:, ::1] sums = sums_array
-    cdef int64_t[::1] mark = _fresh(n, np.int64, -1)
+    cdef int64_t[::1] mark = empty_small_pages(n, np.int64, -1)
     with nogil:
         for s in range(r):
             i = rows[s]

@@ -253,14 +253,14 @@ def block_cg(
     Column ``j`` stops when ``||r_j|| <= max(tol ||b_j||, reduction ||r_j^0||)``. Returns the solution,
     the iteration count and the largest relative residual.
     """
-    from .._block_kernel import block_product, cg_direction, cg_step, column_dots, no_huge_pages
+    from .._block_kernel import block_product, cg_direction, cg_step, column_dots, empty_small_pages
 
     vector = b.ndim == 1
     B = np.ascontiguousarray(b[:, None] if vector else b, dtype=np.float64)
 
     # work blocks on small pages: huge-page faults cost more system time than they save (constrained_fairing.rst)
     def block(like: Any) -> np.ndarray:
-        out = no_huge_pages(np.empty(B.shape))
+        out = empty_small_pages(B.shape)
         np.copyto(out, like)
         return out
 
@@ -293,7 +293,7 @@ def block_cg(
         apply = precondition.bound(B.shape[1])
     else:
         apply = lambda r, out: np.copyto(out, precondition(r))
-    Z, Q = block(0.0), no_huge_pages(np.empty(B.shape))
+    Z, Q = block(0.0), empty_small_pages(B.shape)
     apply(R, Z)
     P = block(Z)
     rz = column_dots(R, Z)

@@ -149,7 +149,7 @@ class Connectivity:
 
     @_cached
     def face_adjacency(self) -> FaceAdjacency:
-        from .._block_kernel import gram, no_huge_pages  # compiled by the package's build
+        from .._block_kernel import empty_small_pages, gram  # compiled by the package's build
 
         triangles, n, m = self.triangles, self.n, len(self.triangles)
         incidence = sp.csr_matrix(
@@ -165,7 +165,7 @@ class Connectivity:
         ring.has_canonical_format = True  # sorted, no duplicates
         # each entry's row and column as intp, on small pages (constrained_fairing.rst): a row starts at
         # each indptr (every face shares its own vertices), so the rows are a running count of the starts
-        rows, cols = (no_huge_pages(np.empty(len(indices), dtype=np.intp)) for _ in range(2))
+        rows, cols = (empty_small_pages(len(indices), np.intp) for _ in range(2))
         rows.fill(0)
         rows[indptr[1:-1]] = 1
         np.cumsum(rows, out=rows)
@@ -257,10 +257,8 @@ def _edge_structure(triangles: np.ndarray, n: int) -> EdgeStructure:
     if count == 0:
         empty = np.zeros(0, dtype=index)
         return EdgeStructure(np.zeros((0, 2), dtype=index), empty, empty, empty, _inverse=empty)
-    from .._block_kernel import no_huge_pages  # compiled by the package's build: imported where used
-
-    def fresh(size: int, dtype: Any) -> np.ndarray:  # mesh-sized, on small pages (constrained_fairing.rst)
-        return no_huge_pages(np.empty(size, dtype))
+    # mesh-sized, on small pages (constrained_fairing.rst); compiled by the package's build: imported here
+    from .._block_kernel import empty_small_pages as fresh
 
     lo, hi = fresh(count, index), fresh(count, index)  # rows of halfedges() order, written in place
     for a in range(3):

@@ -196,13 +196,13 @@ def local_operator(
     # diagonal coefficient is the diagonal. E3's entries hold u_a for diagonal and column alike (its
     # diagonal is half its row sum); beta_aa = -(alpha_ab + alpha_ac) makes E2's diagonal minus E1's row sum.
     pairs, diagonal = rings.pairs, rings.diagonal
-    from .._block_kernel import no_huge_pages  # compiled by the package's build: imported where used
+    from .._block_kernel import empty_small_pages  # compiled by the package's build: imported where used
 
     # E1, E2, W, E3 (and E3 X0): mesh-sized, written once, on small pages (docs: constrained_fairing.rst)
-    data = [no_huge_pages(np.empty(len(indices))) for _ in range(4 if keep_constraint else 3)]
+    data = [empty_small_pages(len(indices)) for _ in range(4 if keep_constraint else 3)]
     if positions0 is not None:
         positions0 = np.ascontiguousarray(positions0, dtype=np.float64)
-        initial = no_huge_pages(np.zeros((n, 3)))
+        initial = empty_small_pages((n, 3), fill=0.0)
     for r0 in range(0, n, block_rows):
         r1 = min(n, r0 + block_rows)
         s0, s1 = int(indptr[r0]), int(indptr[r1])

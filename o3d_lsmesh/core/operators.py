@@ -259,11 +259,9 @@ def scan_normal_matrix(
     >>> N.shape, w.tolist()
     ((5, 5), [0.1, 0.1])
     """
-    from .._block_kernel import add_subset, no_huge_pages  # compiled by the package's build
+    from .._block_kernel import add_subset  # compiled by the package's build
+    from .._block_kernel import empty_small_pages as fresh  # mesh-sized values (constrained_fairing.rst)
     from ._iterative import gram_matrix
-
-    def fresh(size: int) -> np.ndarray:  # mesh-sized values, on small pages (constrained_fairing.rst)
-        return no_huge_pages(np.empty(size))
 
     triangles, n = conn.triangles, conn.n
     if len(triangles) and (

@@ -265,9 +265,9 @@ def fair_local(positions, conn, number_of_iterations, smooth_boundary, reimpose_
     # E3 @ X0 is formed during the assembly; E3 itself is kept only when the targets are re-taken
     op = local_operator(conn, positions0=positions, keep_constraint=reimpose_every is not None)
     constant = op.initial
-    from .._block_kernel import no_huge_pages  # compiled by the package's build: imported where used
+    from .._block_kernel import empty_small_pages  # compiled by the package's build: imported where used
 
-    spare, work = (no_huge_pages(np.empty(positions.shape)) for _ in range(2))
+    spare, work = (empty_small_pages(positions.shape) for _ in range(2))
     result = positions
     curve_target = curve.target(positions)
     steps = Progress(progress, "constrained fairing (local)").over(range(number_of_iterations))

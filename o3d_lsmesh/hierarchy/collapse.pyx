@@ -12,7 +12,7 @@ in full: ``docs/algorithms/mesh_hierarchy.rst``.
 
 import numpy as np
 
-from .._block_kernel import no_huge_pages
+from .._block_kernel import empty_small_pages as _empty  # small pages: docs/algorithms/mesh_hierarchy.rst
 
 from libc.math cimport INFINITY, fabs, rint, sqrt
 from libc.stdint cimport int32_t, int64_t, uint8_t
@@ -26,10 +26,6 @@ cdef struct Vertex:  # together, so that a visit's random reads of a neighbour h
 cdef extern from *:
     "#if defined(__GNUC__) || defined(__clang__)\n#define PREFETCH(p) __builtin_prefetch(p)\n#else\n#define PREFETCH(p) ((void)0)\n#endif"
     void prefetch "PREFETCH"(const void* p) noexcept nogil
-
-def _empty(shape, dtype):
-    """``np.empty`` on small pages, not NumPy's huge pages (zeroed whole; docs/algorithms/mesh_hierarchy.rst)."""
-    return no_huge_pages(np.empty(shape, dtype))
 
 cdef inline double _dot(const double* a, const double* b) noexcept nogil:
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
