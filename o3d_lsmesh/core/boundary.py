@@ -151,8 +151,7 @@ def boundary_loops(triangles: np.ndarray, n: int, *, conn: Connectivity | None =
     [[0, 1, 2], [0, 3, 4]]
     """
     runs = None if conn is None else conn.edge_structure.runs
-    closed, _ = _boundary_walk(np.asarray(triangles, dtype=np.int64), n, split_at_junctions=False, runs=runs)
-    return closed
+    return _boundary_walk(np.asarray(triangles, dtype=np.int64), n, split_at_junctions=False, runs=runs)[0]
 
 
 def boundary_chains(triangles: np.ndarray, n: int) -> BoundaryCurves:
@@ -162,9 +161,10 @@ def boundary_chains(triangles: np.ndarray, n: int) -> BoundaryCurves:
     >>> [c.tolist() for c in curves.chains], curves.loops, curves.junctions.tolist()
     ([[0, 1, 2, 0], [0, 3, 4, 0]], [], [0])
     """
-    triangles = np.asarray(triangles, dtype=np.int64)
-    closed, open_ = _boundary_walk(triangles, n, split_at_junctions=True)
-    return BoundaryCurves(closed, open_, _junctions(triangles, n)[0])
+    closed, open_, junctions, _ = _boundary_walk(
+        np.asarray(triangles, dtype=np.int64), n, split_at_junctions=True
+    )
+    return BoundaryCurves(closed, open_, np.flatnonzero(junctions))
 
 
 def boundary_curves(triangles: np.ndarray, n: int, *, conn: Connectivity | None = None) -> BoundaryCurves:
@@ -174,15 +174,11 @@ def boundary_curves(triangles: np.ndarray, n: int, *, conn: Connectivity | None 
     >>> curves.loops, [c.tolist() for c in curves.chains], curves.junctions.tolist()
     ([], [[0, 3, 1], [1, 2, 0], [1, 4, 0]], [0, 1])
     """
-    triangles = np.asarray(triangles, dtype=np.int64)
-    if len(triangles) == 0:
-        return BoundaryCurves([], [], np.zeros(0, dtype=np.int64))
-    runs = (Connectivity(triangles, n) if conn is None else conn).edge_structure.runs
-    closed, open_ = _boundary_walk(triangles, n, split_at_junctions=False, runs=runs)
-    rows, tail, _, on_crowded = boundary_rows(triangles, n, runs)
-    on_boundary = np.zeros(n, dtype=bool)
-    on_boundary[tail[rows]] = True
-    return BoundaryCurves(closed, open_, np.flatnonzero(on_boundary & on_crowded))
+    runs = None if conn is None else conn.edge_structure.runs
+    closed, open_, _, fins = _boundary_walk(
+        np.asarray(triangles, dtype=np.int64), n, split_at_junctions=False, runs=runs
+    )
+    return BoundaryCurves(closed, open_, np.flatnonzero(fins))
 
 
 def boundary_rows(triangles: np.ndarray, n: int, runs):
@@ -199,28 +195,26 @@ def boundary_rows(triangles: np.ndarray, n: int, runs):
     return rows, tail, head, on_crowded
 
 
-def _junctions(triangles: np.ndarray, n: int, runs=None):
+def _boundary_walk(triangles: np.ndarray, n: int, *, split_at_junctions: bool, runs=None):
+    """Closed and open boundary curves, each a sorted list, and ``(n,) bool`` masks of the junctions and
+    of the boundary vertices on fins (see ``docs/algorithms/connectivity.rst``).
+
+    State ``2i`` runs boundary edge ``i`` forward, ``2i + 1`` backward; the next state is the
+    partner of the end it leaves, ``partner[s ^ 1]``.
+    """
+    if len(triangles) == 0:
+        return [], [], np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
     if runs is None:
         runs = Connectivity(triangles, n).edge_structure.runs
     rows, tail, head, on_crowded = boundary_rows(triangles, n, runs)
     degree = np.bincount(tail[rows], minlength=n) + np.bincount(head[rows], minlength=n)
     special = (degree > 0) & ((degree != 2) | on_crowded)
-    return np.flatnonzero(special), special, rows, tail, head, runs
-
-
-def _boundary_walk(triangles: np.ndarray, n: int, *, split_at_junctions: bool, runs=None):
-    """Closed and open boundary curves, each a sorted list (see ``docs/algorithms/connectivity.rst``).
-
-    State ``2i`` runs boundary edge ``i`` forward, ``2i + 1`` backward; the next state is the
-    partner of the end it leaves, ``partner[s ^ 1]``.
-    """
-    empty: tuple[list, list] = ([], [])
-    if len(triangles) == 0:
-        return empty
-    _, special, rows, tail, head, runs = _junctions(triangles, n, runs)
+    fins = np.zeros(n, dtype=bool)
+    fins[tail[rows]] = True
+    fins &= on_crowded
     b = len(rows)
     if b == 0:
-        return empty
+        return [], [], special, fins
     m = len(triangles)
     end_vertex = np.empty(2 * b, dtype=np.int64)
     end_vertex[0::2], end_vertex[1::2] = tail[rows], head[rows]
@@ -293,7 +287,7 @@ def _boundary_walk(triangles: np.ndarray, n: int, *, split_at_junctions: bool, r
             open_.append(np.append(piece, exit_[states_of[-1]]))
         else:
             closed.append(np.ascontiguousarray(piece))
-    return _sorted_curves(closed), _sorted_curves(open_)
+    return _sorted_curves(closed), _sorted_curves(open_), special, fins
 
 
 def _sorted_curves(curves: list) -> list:

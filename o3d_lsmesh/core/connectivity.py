@@ -14,7 +14,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse import csgraph
 
-from .arrays import _run_lengths, _runs, gather, run_heads
+from .arrays import _run_lengths, gather, run_heads
 from .errors import InputError
 
 __all__ = ["Connectivity", "EdgeStructure", "FaceAdjacency", "VertexRings", "halfedges", "ring_pattern"]
@@ -122,12 +122,10 @@ class Connectivity:
 
     @_cached
     def adjacency(self) -> sp.csr_matrix:
-        n = self.n
-        # beyond 2**31 vertices _adjacency refuses the mesh before any n-sized array; a triangle repeating
-        # a vertex keeps its self-loop there
-        if n >= 2**31 or (self.edges[:, 0] == self.edges[:, 1]).any():
-            return _adjacency(self.triangles, n)
         # the 1-ring pattern without its diagonal (every row has one): no second grouping of the edges
+        n = self.n
+        if n > 2**31:  # refused before any n-sized array
+            raise InputError(f"mesh must have fewer than 2**31 vertices, got {n}", param="mesh")
         indptr, indices, diagonal = self.ring_pattern[:3]
         keep = np.ones(len(indices), dtype=bool)
         keep[diagonal] = False
@@ -135,6 +133,9 @@ class Connectivity:
             (np.ones(len(indices) - n), indices[keep], indptr - np.arange(n + 1, dtype=indptr.dtype)),
             shape=(n, n),
         )
+        if (self.edges[:, 0] == self.edges[:, 1]).any():  # a triangle repeating a vertex: its self-loop once
+            adjacency.sum_duplicates()
+            adjacency.data.fill(1.0)
         adjacency.has_canonical_format = True  # sorted, no duplicates
         return adjacency
 
@@ -435,34 +436,3 @@ def ring_pattern(edges: np.ndarray, n: int):
     indices[forward] = hi
     indices[backward] = lo
     return indptr, indices, diagonal, forward, backward
-
-
-def _adjacency(triangles: np.ndarray, n: int) -> sp.csr_matrix:
-    # both directions of every edge by one sort of the int64 keys src << bits | dst: the CSR
-    bits = max(1, int(n - 1).bit_length())
-    if 2 * bits > 62:  # beyond 2^31 vertices: keys by multiplication do not fit either
-        raise InputError(f"mesh must have fewer than 2**31 vertices, got {n}", param="mesh")
-    shift = np.int64(bits)
-    triangles = np.asarray(triangles, dtype=np.int64)
-    m = len(triangles)
-    corners = triangles.T  # a view: columns read in place
-    keys = np.empty(6 * m, dtype=np.int64)  # in place: on large meshes temporaries cost as much as the sort
-    rows = keys.reshape(6, m)
-    np.left_shift(corners, shift, out=rows[:3])
-    rows[3:] = rows[:3]
-    for row, head in enumerate((1, 2, 0, 2, 0, 1)):
-        rows[row] |= corners[head]
-    keys.sort()
-    keys = keys[_runs(keys)[1]]
-    src = keys >> shift
-    keys &= np.int64((1 << int(shift)) - 1)
-    dst = keys
-    indptr = np.zeros(n + 1, dtype=np.int64)
-    np.cumsum(np.bincount(src, minlength=n), out=indptr[1:])
-    # SciPy keeps 32-bit indices when they fit; giving them so avoids a copy
-    index_dtype = np.int32 if len(dst) < np.iinfo(np.int32).max and n < np.iinfo(np.int32).max else np.int64
-    adjacency = sp.csr_matrix(
-        (np.ones(len(dst)), dst.astype(index_dtype), indptr.astype(index_dtype)), shape=(n, n)
-    )
-    adjacency.has_canonical_format = True  # sorted, no duplicates
-    return adjacency
