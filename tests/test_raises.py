@@ -98,7 +98,7 @@ def _batch_op(**fields):
     "call, param, match",
     [
         (
-            lambda: Connectivity(np.zeros((0, 3), np.int64), 2**31 + 1).adjacency,
+            lambda: Connectivity(np.zeros((0, 3), np.int64), 2**31).adjacency,
             "mesh",
             "fewer than 2\\*\\*31 vertices",
         ),

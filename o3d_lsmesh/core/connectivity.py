@@ -59,7 +59,7 @@ class Connectivity:
     ----------
     edge_structure : EdgeStructure
         Edges ``(e, 2)`` (``lo < hi``, sorted), ``edge_triangles (e,)`` and ``halfedge_edge (3m,)`` (the edge
-        of each row of :func:`halfedges`); ``boundary_edges``, ``nonmanifold_edges``: ``(e,) bool``.
+        of each row of :func:`halfedges`); ``boundary_edges``: ``(e,) bool``.
     rings : VertexRings
         1-ring CSR with diagonal slots and the triangles behind every slot; ``valence (n,) int64``.
     ring_pattern, adjacency
@@ -90,8 +90,6 @@ class Connectivity:
     def __repr__(self) -> str:
         return f"Connectivity(m={len(self.triangles)}, n={self.n})"
 
-    m = property(lambda self: len(self.triangles))
-
     @_cached
     def edge_structure(self) -> EdgeStructure:
         return _edge_structure(self.triangles, self.n)
@@ -100,7 +98,6 @@ class Connectivity:
     edge_triangles = property(lambda self: self.edge_structure.counts)
     halfedge_edge = property(lambda self: self.edge_structure.inverse)
     boundary_edges = property(lambda self: self.edge_structure.counts == 1)
-    nonmanifold_edges = property(lambda self: self.edge_structure.counts > 2)
     valence = property(lambda self: self.rings.valence)
 
     @_cached
@@ -124,7 +121,7 @@ class Connectivity:
     def adjacency(self) -> sp.csr_matrix:
         # the 1-ring pattern without its diagonal (every row has one): no second grouping of the edges
         n = self.n
-        if n > 2**31:  # refused before any n-sized array
+        if n >= 2**31:  # refused before any n-sized array
             raise InputError(f"mesh must have fewer than 2**31 vertices, got {n}", param="mesh")
         indptr, indices, diagonal = self.ring_pattern[:3]
         keep = np.ones(len(indices), dtype=bool)
