@@ -9,20 +9,6 @@ from typing import Any
 
 import numpy as np
 
-_KERNEL: Any = None
-
-
-def _patch_kernel() -> Any:
-    """The compiled loops of a patch (``_patch_kernel.pyx``: its local mesh and fairing system, the
-    relaxation, the crossing test), imported at first use, so that the package imports from a source
-    tree whose extensions are not built."""
-    global _KERNEL
-    if _KERNEL is None:
-        import o3d_lsmesh._patch_kernel as kernel  # the module by its own name, not the package's
-
-        _KERNEL = kernel
-    return _KERNEL
-
 
 class _TriangleIndex:
     """Bounding spheres (about the centroids) of a mesh's triangles in uniform grids, for crossing queries.
@@ -81,6 +67,8 @@ def _crossings(
     input triangles of ``index`` (a :class:`_TriangleIndex` of ``triangles[:first_new]``; if None, one
     is built of the input triangles in the new triangles' box) and the new ones, near it.
     """
+    from .._patch_kernel import patch_crossings  # compiled: imported where used
+
     if len(triangles) == first_new:
         return np.zeros(0)
     new = _TriangleIndex(vertices, triangles[first_new:])
@@ -92,7 +80,7 @@ def _crossings(
         boxed = np.flatnonzero(in_box[triangles[:first_new]].any(axis=1))
         index = _TriangleIndex(vertices, triangles[boxed])
         triangles, first_new = np.concatenate([triangles[boxed], triangles[first_new:]]), len(boxed)
-    return _patch_kernel().patch_crossings(
+    return patch_crossings(
         vertices,
         triangles,
         first_new,

@@ -16,9 +16,8 @@ from ..core.arrays import concatenated_ranges
 from ..core.errors import SingularSystemError
 from ..core.operators import patch_system
 from ..core.solve import solve_spd
-from .crossings import _crossings, _patch_kernel
+from .crossings import _crossings
 from .find import _cross
-from .triangulate import _kernel
 
 
 def _fair(x: np.ndarray, tris: np.ndarray, unknown: np.ndarray, rings: list, level: int, cot: bool):
@@ -146,6 +145,9 @@ def fair_patches(
     to the hole); returns the continuity each hole got and the holes where none is (the caller leaves
     them open).
     """
+    from .._patch_kernel import local_mesh, tangential_relax  # compiled: imported where used
+    from .._triangulation_kernel import relax
+
     total, m, n = len(vertices), len(filler.triangles), len(filler.vertices)
     # a new triangle on three loop vertices is the same in every candidate: one crossing the mesh (or
     # another such) makes its hole's every candidate cross, so that hole is not faired (a scan's
@@ -167,8 +169,9 @@ def fair_patches(
     # numbering (nothing as long as the mesh): the new vertices, every one on a new triangle and
     # numbered last, stay last; one connectivity for every solve below
     new_tris = triangles[m:].copy()  # as refined: the candidates' flips start from it
-    local_vertices, local, local_rings = _patch_kernel().local_mesh(
-        filler.triangles, *filler.vertex_triangles, loops, continuity, new_tris
+    indptr, data = filler.vertex_triangles
+    local_vertices, local, local_rings = local_mesh(
+        filler.triangles, indptr, data, loops, continuity, new_tris
     )
     local_unknown = np.arange(len(local_vertices) - len(unknown), len(local_vertices))
     refined = vertices[n:].copy()
@@ -197,9 +200,9 @@ def fair_patches(
                     again = np.where(np.isfinite(again).all(axis=1)[:, None], again, solution)
                 if again is not None and keeps_facing(work, again, new_tris):
                     work[n:] = again
-                    yield level, _patch_kernel().tangential_relax(work, new_tris, n)
+                    yield level, tangential_relax(work, new_tris, n)
                     work[n:] = solution
-            yield level, _patch_kernel().tangential_relax(work, new_tris, n)
+            yield level, tangential_relax(work, new_tris, n)
             work[n:] = refined
         yield -1, refined  # the refined patch as triangulated
 
@@ -212,7 +215,6 @@ def fair_patches(
     flip = (np.bincount(vertex_owner, minlength=len(holes)) > 0)[owner]
     used = np.unique(new_tris[flip])
     loop = used[used < n]
-    indptr, data = filler.vertex_triangles
     near = filler.triangles[data[concatenated_ranges(indptr[loop], indptr[loop + 1] - indptr[loop])]]
     inside = np.isin(near, used)
     fixed = np.concatenate([near[:, e][inside[:, e].all(axis=1)] for e in ([0, 1], [1, 2], [2, 0])])
@@ -223,7 +225,7 @@ def fair_patches(
         work[n:] = np.where(broken[:, None], refined, candidate)
         if flip.any():
             dirty = np.ones(int(flip.sum()), dtype=bool)
-            triangles[m:][flip] = _kernel().relax(work, new_tris[flip], fixed, dirty, True)
+            triangles[m:][flip] = relax(work, new_tris[flip], fixed, dirty, True)
         crossing = _crossings(work, triangles, m, index, owner)  # (q,) nonzero on crossing holes
         per_hole = np.bincount(owner, weights=crossing, minlength=len(holes))
         per_hole += np.bincount(vertex_owner, weights=broken, minlength=len(holes))

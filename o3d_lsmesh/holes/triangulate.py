@@ -14,19 +14,6 @@ from ..core.progress import Progress
 from .find import _cross
 from .tuning import ALPHA, COSPHERICAL, DP_MAX_EDGES
 
-_KERNEL: Any = None
-
-
-def _kernel() -> Any:
-    """The compiled loops (``_triangulation_kernel.pyx``), imported at first use, so that the package
-    imports from a source tree whose extensions are not built."""
-    global _KERNEL
-    if _KERNEL is None:
-        import o3d_lsmesh._triangulation_kernel as kernel  # the module by its own name, not the package's
-
-        _KERNEL = kernel
-    return _KERNEL
-
 
 def delaunay_triangles(points: np.ndarray) -> np.ndarray | None:
     """The triangles of the 3D Delaunay tetrahedralization of a loop's ``k`` points, as the ``allowed`` of
@@ -86,9 +73,11 @@ def _triangulate(
     Returns the extra points (on the chords) and triangles over the loop's indices ``[0, k)`` followed
     by the extra points'.
     """
+    from .._triangulation_kernel import minimum_weight_triangulation  # compiled: imported where used
+
     k = len(points)
     if k <= DP_MAX_EDGES:
-        return np.zeros((0, 3)), _kernel().minimum_weight_triangulation(
+        return np.zeros((0, 3)), minimum_weight_triangulation(
             points,
             outer_normals,
             None if forbidden is None or not forbidden.any() else forbidden.view(np.uint8),
@@ -170,6 +159,8 @@ def triangulate_holes(filler: Any, holes: list, density: float, progress: bool) 
     """Triangulate and refine every piece of ``holes`` (loops of ``filler``, a :class:`HoleFiller`): the new
     points ``(p, 3)`` (numbered from ``n`` piece by piece), the new triangles ``(q, 3)`` in the mesh's
     numbering, the hole and the piece of each new triangle, and each piece's loop."""
+    from .._triangulation_kernel import loop_geometry, refine  # compiled: imported where used
+
     vertices, triangles = filler.vertices, filler.triangles
     n = len(vertices)
     # each piece (a loop; one through a vertex twice is cut in pieces) is triangulated on its own,
@@ -184,7 +175,7 @@ def triangulate_holes(filler: Any, holes: list, density: float, progress: bool) 
     # each piece's points, the normals across its edges, its chords that are mesh edges, its spacing
     piece_points, piece_outer, piece_forbidden, piece_spacing, piece_pairs = zip(
         *(
-            _kernel().loop_geometry(loop, rows, vertices, triangles, *filler.vertex_triangles)
+            loop_geometry(loop, rows, vertices, triangles, *filler.vertex_triangles)
             for loop, rows in zip(piece_loop, piece_rows)
         )
     )
@@ -215,7 +206,7 @@ def triangulate_holes(filler: Any, holes: list, density: float, progress: bool) 
             for loop, extra, spacing in zip(piece_loop, piece_extra, piece_spacing)
         ]
         # mesh edges between loop vertices: no flip may make them twice
-        all_points, all_tris, point_piece = _kernel().refine(
+        all_points, all_tris, point_piece = refine(
             all_points,
             np.concatenate(sigma),
             all_tris,
