@@ -14,6 +14,8 @@ from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.linalg import cho_solve, solve_triangular
+from scipy.sparse import csgraph
 
 from . import tuning
 from ._iterative import csr_parts
@@ -92,9 +94,7 @@ class Woodbury:
     """
 
     def __init__(self, lu: Any) -> None:
-        from scipy.linalg import cho_solve, solve_triangular
-
-        self._lu, self._cho_solve, self._triangular = lu, cho_solve, solve_triangular
+        self._lu = lu
         self.factor_work = self._solve_work = 0.0  # counted at the first update (reading L copies it)
         n = lu.shape[0]
         self._columns = sp.csc_matrix((n, 0))
@@ -151,7 +151,7 @@ class Woodbury:
             self._extend(new, solved[:, f:])
         if self._rank:
             self.work += m * self._rank * (y.shape[0] + self._rank)
-            y = y + self._z[:, : self._rank] @ self._cho_solve((self._cholesky, True), d - C.T @ y)
+            y = y + self._z[:, : self._rank] @ cho_solve((self._cholesky, True), d - C.T @ y)
         return y[:, 0] if vector else y
 
     def _recycle(self, residual: np.ndarray, solved: np.ndarray) -> None:
@@ -177,7 +177,7 @@ class Woodbury:
         block[:k, :k] = self._cholesky
         if k:
             # [[L, 0], [M, N]] with L M^T = C_old^T Z_new and N N^T = corner - M M^T
-            below = self._triangular(self._cholesky, self._columns[:, :k].T @ z, lower=True).T
+            below = solve_triangular(self._cholesky, self._columns[:, :k].T @ z, lower=True).T
             corner -= below @ below.T
             block[k:, :k] = below
         block[k:, k:] = np.linalg.cholesky(corner)
@@ -280,8 +280,6 @@ def check_constant_modes(
 def check_weight_pins_components(operator: sp.spmatrix, weight: float, *, name: str) -> None:
     """:func:`check_constant_modes` for a scalar weight ``w`` of ``||L x||^2 + w^2 sum_a |x_a - c_a|^2`` with
     one anchor per component at least (``q_c = w^2 / n_c``); also rejects ``w`` whose square overflows."""
-    from scipy.sparse import csgraph
-
     check_finite(lambda: np.asarray([weight], dtype=np.float64) ** 2, name=name, what=f"{name}**2")
     labels = csgraph.connected_components(operator, directed=False)[1]
     pinned = np.zeros(operator.shape[0])
@@ -340,17 +338,12 @@ def check_numbers(tol: Any, reduction: Any, max_iterations: Any, memory_budget: 
     """Raise :class:`InputError` naming the first of :class:`~o3d_lsmesh.core.solve.SPDSolver`'s numbers out of
     range (:class:`InputTypeError` when it is not a number)."""
     real, integer = (int, float, np.floating), (int, np.integer)
+    bytes_ = (*integer, float)
     for name, value, types, rule, fits in (
         ("tol", tol, real, "a number in (0, 1)", lambda v: 0 < v < 1),
         ("reduction", reduction, real, "None or a number in (0, 1)", lambda v: 0 < v < 1),
         ("max_iterations", max_iterations, integer, "a positive integer", lambda v: v >= 1),
-        (
-            "memory_budget",
-            memory_budget,
-            (*integer, float),
-            "a non-negative number of bytes",
-            lambda v: v >= 0,
-        ),
+        ("memory_budget", memory_budget, bytes_, "a non-negative number of bytes", lambda v: v >= 0),
     ):
         if value is None and name in ("reduction", "memory_budget"):
             continue
@@ -363,8 +356,6 @@ def check_numbers(tol: Any, reduction: Any, max_iterations: Any, memory_budget: 
 def nonfinite_blocks(matrix: sp.csr_matrix, rhs: np.ndarray) -> np.ndarray | None:
     """Rows of the connected blocks of ``matrix`` free of non-finite entries (in it or in their ``(n, k)``
     ``rhs`` rows), or None when every entry is finite."""
-    from scipy.sparse import csgraph
-
     bad = ~np.isfinite(rhs).all(axis=1)
     bad[np.repeat(np.arange(matrix.shape[0]), np.diff(matrix.indptr))[~np.isfinite(matrix.data)]] = True
     if not bad.any():

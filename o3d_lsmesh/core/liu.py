@@ -40,20 +40,15 @@ def triangle_coefficients(valences: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     >>> u.round(4).tolist()
     [[0.3333, 0.3333, 0.3333]]
     """
-    group, _table, M, u = valence_tables(valences)
+    valences = np.asarray(valences, dtype=np.int64)
+    group, _table, M, u = valence_tables(np.arange(valences.size).reshape(-1, 3), valences.ravel())
     return M[group], u[group]
 
 
-def valence_tables(triangles: np.ndarray, valence: np.ndarray | None = None):
-    """Eq. 7 once per distinct valence triple: ``group (k,)``, ``table (g, 3)``, ``M (g, 3, 3)``, ``u (g, 3)``.
-
-    ``triangles (k, 3)`` with ``valence (n,)`` per vertex, or (``valence=None``) the valences of
-    each triangle's corners themselves.
-    """
+def valence_tables(triangles: np.ndarray, valence: np.ndarray):
+    """Eq. 7 once per distinct valence triple of ``triangles (k, 3)`` with ``valence (n,)`` per vertex:
+    ``group (k,)``, ``table (g, 3)``, ``M (g, 3, 3)``, ``u (g, 3)``."""
     triangles = np.asarray(triangles).reshape(-1, 3)
-    if valence is None:
-        valence = np.asarray(triangles, dtype=np.int64).ravel()
-        triangles = np.arange(len(valence)).reshape(-1, 3)
     valence = np.asarray(valence, dtype=np.int64)
     if len(triangles) == 0:
         return np.zeros(0, dtype=np.int64), np.ones((0, 3)), np.zeros((0, 3, 3)), np.zeros((0, 3))
@@ -215,26 +210,29 @@ def local_operator(
         scale = reciprocal[r0:r1]
         row_scale = np.repeat(scale, np.diff(indptr[r0 : r1 + 1]))
         local_diagonal = diagonal[r0:r1] - s0
-        part = {}  # the block's slots of E1, E2, E3
-        part[0] = _slot_sums(columns[0], first, second, data[0][s0:s1], spare)
-        diagonals = [
-            _half_row_sums(_slot_sums(columns[3], first, second, np.empty(s1 - s0), spare), local_starts),
-            -np.add.reduceat(part[0], local_starts),
-        ]
-        part[2] = _slot_sums(columns[2], first, second, data[3][s0:s1] if keep_constraint else None, spare)
-        diagonals.append(_half_row_sums(part[2], local_starts))
-        part[1] = _slot_sums(columns[1], first, second, data[1][s0:s1], spare)
-        for block_data, diagonal_values in zip((part[0], part[1], part[2]), diagonals):
+        # the block's slots of E1, E2, E3 and their diagonals
+        e1_part = _slot_sums(columns[0], first, second, data[0][s0:s1], spare)
+        e1_diagonal = _half_row_sums(
+            _slot_sums(columns[3], first, second, np.empty(s1 - s0), spare), local_starts
+        )
+        e2_diagonal = -np.add.reduceat(e1_part, local_starts)
+        e3_part = _slot_sums(columns[2], first, second, data[3][s0:s1] if keep_constraint else None, spare)
+        e2_part = _slot_sums(columns[1], first, second, data[1][s0:s1], spare)
+        for block_data, diagonal_values in (
+            (e1_part, e1_diagonal),
+            (e2_part, e2_diagonal),
+            (e3_part, _half_row_sums(e3_part, local_starts)),
+        ):
             block_data *= row_scale
             diagonal_values *= scale
             block_data[local_diagonal] = diagonal_values
-        part[1][local_diagonal[count[r0:r1] == 0]] = 1.0  # vertices without estimates stay put
+        e2_part[local_diagonal[count[r0:r1] == 0]] = 1.0  # vertices without estimates stay put
         adjacency = data[2][s0:s1]
         adjacency.fill(1.0)
         adjacency[local_diagonal] = 0.0
         if positions0 is not None:  # the block's rows of E3 @ X0
             block_indptr = indptr[r0 : r1 + 1] - indptr[r0]
-            accumulate_block(block_indptr, indices[s0:s1], part[2], positions0, initial[r0:r1])
+            accumulate_block(block_indptr, indices[s0:s1], e3_part, positions0, initial[r0:r1])
     del triangle_group
     e1, e2, adjacency = (ring_csr(values, indices, indptr, n) for values in data[:3])
     e3 = ring_csr(data[3], indices, indptr, n) if keep_constraint else None

@@ -7,6 +7,7 @@ gradients above a memory budget), solves ``(n, k)`` right-hand sides, refactors 
 
 from __future__ import annotations
 
+import contextlib
 import os
 import threading
 from dataclasses import replace
@@ -66,13 +67,12 @@ def _cholmod_disabled() -> bool:
 
 
 def _import_cholmod() -> Any:
-    if _cholmod_disabled():
-        return None
-    try:
-        from sksparse import cholmod
-    except ImportError:
-        return None
-    return cholmod
+    if not _cholmod_disabled():
+        with contextlib.suppress(ImportError):
+            from sksparse import cholmod
+
+            return cholmod
+    return None
 
 
 _cholmod = _import_cholmod()
@@ -218,8 +218,9 @@ class SPDSolver:
         else:
             self._product_of = given
         del given
-        pattern_of = plan.pattern_of
-        self._pattern_of = None if pattern_of is None else as_csc(pattern_of, name="pattern_of", square=False)
+        self._pattern_of = (
+            None if plan.pattern_of is None else as_csc(plan.pattern_of, name="pattern_of", square=False)
+        )
         if self._pattern_of is not None and self._pattern_of.shape[0] != self.shape[0]:
             raise InputError(
                 f"pattern_of must have {self.shape[0]} rows, got shape {self._pattern_of.shape}",
@@ -438,25 +439,16 @@ class SPDSolver:
             }
 
     def __setstate__(self, state: dict) -> None:
-        product_of = state.get("product_of")
-        plan = Plan(
-            product_of=product_of,
-            pattern_of=state.get("pattern_of"),
-            preconditioner=state.get("preconditioner", "amg"),
-            reduction=state.get("reduction"),
-            memory_budget=state.get("memory_budget"),
-        )
-        SPDSolver.__init__(
-            self,
-            state["matrix"] if product_of is None else None,
-            backend="scipy" if state["backend"] == "cholmod" and _cholmod is None else state["backend"],
-            ordering=state.get("ordering", "default"),
-            lower=state.get("lower", False),
-            tol=state.get("tol", tuning.DEFAULT_TOLERANCE),
-            max_iterations=state.get("max_iterations", tuning.MAX_ITERATIONS),
-            progress=state.get("progress", False),
-            _plan=plan,
-        )
+        # a key missing from an older pickle takes the constructor's or Plan's default
+        plan = Plan(**{key: state[key] for key in Plan.__dataclass_fields__ if key in state})
+        options = {
+            key: state[key]
+            for key in ("ordering", "lower", "tol", "max_iterations", "progress")
+            if key in state
+        }
+        matrix = state["matrix"] if plan.product_of is None else None
+        backend = "scipy" if state["backend"] == "cholmod" and _cholmod is None else state["backend"]
+        SPDSolver.__init__(self, matrix, backend=backend, _plan=plan, **options)
 
 
 def solve_spd(matrix: Any, rhs: np.ndarray, *, isolate_nonfinite: bool = False) -> np.ndarray:

@@ -136,8 +136,6 @@ def mesh_arrays(
 
 def _check_magnitude(array: np.ndarray, *, what: str, row: str, param: str) -> None:
     """Raise if a coordinate of ``array (k, 3)`` exceeds :data:`COORDINATE_LIMIT`."""
-    if array.size == 0:
-        return
     big = np.abs(array).max(axis=1) > COORDINATE_LIMIT
     if big.any():
         first = int(np.flatnonzero(big)[0])
