@@ -18,11 +18,9 @@ if TYPE_CHECKING:
 __all__ = ["cotangent_laplacian", "laplacian", "laplacian_matrix", "uniform_laplacian"]
 
 
-def uniform_laplacian(triangles: np.ndarray, n: int, *, edges: np.ndarray | None = None) -> sp.csr_matrix:
-    """:func:`o3d_lsmesh.core.operators.uniform_laplacian` of ``triangles`` (on the sorted ``edges`` if given)."""
-    if edges is None:
-        return operators.uniform_laplacian(Connectivity(triangles, n))
-    return operators.uniform_from_edges(edges, n)
+def uniform_laplacian(triangles: np.ndarray, n: int) -> sp.csr_matrix:
+    """:func:`o3d_lsmesh.core.operators.uniform_laplacian` of ``triangles``."""
+    return operators.uniform_laplacian(Connectivity(triangles, n))
 
 
 def cotangent_laplacian(vertices: np.ndarray, triangles: np.ndarray) -> sp.csr_matrix:

@@ -13,7 +13,7 @@ o3d = pytest.importorskip("open3d")
 from conftest import grid  # noqa: E402
 
 import o3d_lsmesh  # noqa: E402
-from o3d_lsmesh._o3d import obj_writable  # noqa: E402
+from o3d_lsmesh._o3d.io import obj_writable  # noqa: E402
 from o3d_lsmesh.app.cli import main  # noqa: E402
 
 #: UV = position @ AFFINE + OFFSET: on a flat patch, harmonic (cotangent) values of it stay on it

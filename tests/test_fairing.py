@@ -476,11 +476,11 @@ def test_local_result_is_a_plain_array_of_the_reference(iterations):
 
 def test_laplacian_from_the_edge_structure_equals_the_reference():
     from o3d_lsmesh.core.connectivity import Connectivity
-    from o3d_lsmesh.laplacian import uniform_laplacian
+    from o3d_lsmesh.core.operators import uniform_from_edges
 
     V, F = _soup(3)
     n = len(V) + 2  # two unreferenced vertices: zero rows
-    L = uniform_laplacian(F, n, edges=Connectivity(F, n).edges)
+    L = uniform_from_edges(Connectivity(F, n).edges, n)
     ring = neighbours(F, n)
     reference = np.zeros((n, n))
     for i, js in enumerate(ring):

@@ -40,8 +40,6 @@ def test_new_mesh_policy_legacy(sphere):
     with pytest.warns(O3DLSMeshWarning, match="vertex colors"):
         changed = new_mesh(data, data.vertices[:3], np.array([[0, 1, 2]]))
     assert not changed.has_vertex_colors()
-    quiet = new_mesh(data, data.vertices[:3], np.array([[0, 1, 2]]), warn=False)  # the caller warns itself
-    assert not quiet.has_vertex_colors()
     sphere.compute_vertex_normals()
     with_normals = new_mesh(read_mesh(sphere), data.vertices * 2)
     assert with_normals.has_vertex_normals()

@@ -1,12 +1,7 @@
-"""The only Open3D adapter: meshes to arrays and back, with the only attribute policy (:data:`ATTRIBUTES`).
-
-Every public function reads its mesh with :func:`read_mesh` (legacy or tensor Open3D mesh, or a
-``(vertices, triangles)`` tuple; copied, validated, optionally welded) and builds its result with
-:func:`new_mesh`: a new mesh of the caller's kind whose attributes follow :data:`ATTRIBUTES`, kept
-with the connectivity, extended to appended elements (:mod:`._o3d.extend`), dropped with one
-warning when the connectivity changes otherwise; normals recomputed. The policy in full, with the
-weld of UV seams and the tensor dtypes: ``docs/algorithms/attributes.rst``. Files, raycasting and
-primitives: :mod:`._o3d.io`; pickling: :mod:`._o3d.state`. The open3d import is lazy.
+"""The only Open3D adapter: meshes to arrays (:func:`read_mesh`: copied, validated, optionally welded) and
+back (:func:`new_mesh`: the caller's kind), with the only attribute policy (:data:`ATTRIBUTES`), in full in
+``docs/algorithms/attributes.rst``. Files, raycasting and primitives: :mod:`._o3d.io`; pickling:
+:mod:`._o3d.state`; attributes of appended elements: :mod:`._o3d.extend`. The open3d import is lazy.
 """
 
 from __future__ import annotations
@@ -20,17 +15,11 @@ import numpy as np
 
 from ..core.errors import InputError, InputTypeError, O3DLSMeshWarning
 from ..core.validate import as_indices, collapsed_triangles, mesh_arrays
-from .io import has_textures, legacy_mesh, obj_writable, open3d
+from .io import has_textures, legacy_mesh, open3d
 
 __all__ = [
-    "ATTRIBUTES",
-    "Attribute",
     "MeshData",
-    "has_textures",
     "new_mesh",
-    "obj_writable",
-    "open3d",
-    "present_attributes",
     "read_mesh",
     "template",
     "tensor_format_of",
@@ -111,31 +100,14 @@ def _may_have_duplicates(vertices: np.ndarray) -> bool:
     # column by column (+0.0 maps -0.0 to 0.0), each mixed in by MurmurHash3's finalizer: its shifts
     # carry the high bits down, so coordinates with few low mantissa bits do not collide
     key = np.zeros(len(vertices), dtype=np.uint64)
-    column = np.empty(len(vertices))
-    shifted = np.empty(len(vertices), dtype=np.uint64)
     for c in range(3):
-        np.add(vertices[:, c], 0.0, out=column)
-        key ^= column.view(np.uint64)
+        key ^= (vertices[:, c] + 0.0).view(np.uint64)
         for multiplier in (0xFF51AFD7ED558CCD, 0xC4CEB9FE1A85EC53, None):
-            np.right_shift(key, np.uint64(33), out=shifted)
-            key ^= shifted
+            key ^= key >> np.uint64(33)
             if multiplier is not None:
                 key *= np.uint64(multiplier)
-    del column, shifted
-    # sort the high halves; only rows whose high half another shares have their whole keys compared
-    high = (key >> np.uint64(32)).astype(np.uint32)
-    ordered = np.sort(high)
-    shared = ordered[1:][ordered[1:] == ordered[:-1]]
-    del ordered
-    if not len(shared):
-        return False
-    # a 2^20-bucket filter on the shared high halves picks the candidates in one pass over the keys
-    bucket = np.zeros(1 << 20, dtype=bool)
-    bucket[shared >> np.uint32(12)] = True
-    del high
-    candidates = key[bucket[(key >> np.uint64(44)).view(np.int64)]]  # (an intp index: no converted copy)
-    candidates.sort()
-    return bool(np.any(candidates[1:] == candidates[:-1]))
+    key.sort()
+    return bool(np.any(key[1:] == key[:-1]))
 
 
 def weld_map(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray | None:
@@ -273,9 +245,9 @@ def present_attributes(data: MeshData) -> list[tuple[Attribute, str]]:
 
 def warn_dropped_attributes(
     data: MeshData, reason: str, *, stacklevel: int = 3, normals: bool = False
-) -> bool:
+) -> None:
     """Warn once (:class:`~o3d_lsmesh.O3DLSMeshWarning`) if ``data``'s source has attributes a new connectivity
-    drops (results not built by :func:`new_mesh`; ``normals=True``: normals too); whether it warned."""
+    drops (results not built by :func:`new_mesh`; ``normals=True``: normals too)."""
     kinds = (*_PER_ELEMENT, "texture", "normals") if normals else (*_PER_ELEMENT, "texture")
     dropped = [
         f"{row.label} {key!r}" if row.kind == "tensor" and row.follows in _PER_ELEMENT else row.label
@@ -288,22 +260,16 @@ def warn_dropped_attributes(
             O3DLSMeshWarning,
             stacklevel=stacklevel,
         )
-    return bool(dropped)
 
 
 def new_mesh(
-    data: MeshData,
-    vertices: np.ndarray,
-    triangles: np.ndarray | None = None,
-    *,
-    warn: bool = True,
-    appended: bool = False,
+    data: MeshData, vertices: np.ndarray, triangles: np.ndarray | None = None, *, appended: bool = False
 ) -> Any:
     """Build a new mesh of ``data``'s kind with ``vertices`` (and ``triangles``, if they changed).
 
     ``triangles=None`` keeps every attribute (a welded ``data``: back in the source's layout);
     ``appended=True``: ``data``'s elements then new ones, attributes extended (:mod:`.extend`); other
-    new ``triangles`` drop what no longer matches, with one warning unless ``warn=False``.
+    new ``triangles`` drop what no longer matches, with one warning.
     """
     same_topology = triangles is None
     extension = None
@@ -318,7 +284,7 @@ def new_mesh(
         triangles = data.split_triangles
     elif triangles is None:
         triangles = data.triangles
-    elif data.source is not None and warn and extension is None:
+    elif data.source is not None:
         warn_dropped_attributes(data, "the result has new connectivity", stacklevel=4)
     vertices = np.ascontiguousarray(vertices, dtype=np.float64)
     # (a legacy mesh of the same connectivity copies the source's own triangles: no int64 copy here)

@@ -15,7 +15,6 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .._o3d import read_mesh, tensor_format_of, warn_dropped_attributes
-from ..core.arrays import concatenated_ranges
 from ..core.connectivity import Connectivity, run_heads
 from ..core.errors import InputError, InputTypeError
 from ..core.progress import Progress
@@ -167,10 +166,8 @@ def from_fast_simplification(
         mapped = _drop_nonmanifold(
             _drop_duplicate_triangles(mapped[~collapsed_triangles(mapped)], n_new), n_new
         )
-        adjacency = Connectivity(previous, n_prev).adjacency
-        starts, sizes = adjacency.indptr[gone], np.diff(adjacency.indptr)[gone]
-        ring = adjacency.indices[concatenated_ranges(starts, sizes)].astype(np.int64)
-        ring_offsets = np.r_[0, np.cumsum(sizes)].astype(np.int64)
+        rings = Connectivity(previous, n_prev).adjacency[gone]  # the removed vertices' 1-rings, CSR rows
+        ring, ring_offsets = rings.indices.astype(np.int64), rings.indptr.astype(np.int64)
         built.append(
             (mapped, reps[keep], parent, gone, np.flatnonzero(keep)[parent[gone]], ring_offsets, ring)
         )
