@@ -1353,17 +1353,6 @@ def test_crossings_in_spread_soup_with_slivers(seed, q):
     assert np.array_equal(_crossings(V, T, 120, index), reference_crossings(V, T, 120))
 
 
-def test_empty_interpolation_is_built_when_read():
-    # the all-zero interpolation matrix of a fill without interpolation: its shape, and it pickles
-    import pickle
-
-    V, T = icosphere(2)
-    out = fill_holes_arrays(V, T[3:])
-    assert out.interpolation.shape == (len(out.vertices) - len(V), len(V))
-    assert out.interpolation.nnz == 0
-    assert pickle.loads(pickle.dumps(out)).interpolation.shape == out.interpolation.shape
-
-
 def indptr_of(tris, n):
     """Each vertex's triangles, CSR row pointers (as HoleFiller's ``vertex_triangles``)."""
     return np.concatenate([[0], np.cumsum(np.bincount(tris.ravel(), minlength=n))]).astype(np.int64)

@@ -465,7 +465,7 @@ def test_a_fill_whose_fixed_triangle_crosses_is_not_faired(monkeypatch):
     V, T, _ = cut_disk(V, T, int(np.argmin(V[:, 2])), 0.3)
     filler = HoleFiller(V, T)
     assert len(filler.holes) == 2
-    _, new, owner, _, _ = triangulate_holes(filler, filler.holes, 1.0, False)
+    _, new, owner = triangulate_holes(filler, filler.holes, 1.0, False)
     fixed = np.flatnonzero((new < len(V)).all(axis=1))
     doomed = int(owner[fixed[0]])  # a hole refined (new vertices) with a triangle on three loop vertices
     assert (new[owner == doomed] >= len(V)).any()

@@ -34,15 +34,6 @@ def _fair(x: np.ndarray, tris: np.ndarray, unknown: np.ndarray, rings: list, lev
     return solve_spd(sp.csr_matrix(normal), rhs, isolate_nonfinite=True)
 
 
-def _empty_csr(rows: int, cols: int) -> sp.csr_matrix:
-    """An all-zero ``(rows, cols)`` CSR matrix, from its arrays (SciPy's shape-only form costs more)."""
-    return sp.csr_matrix(
-        (np.zeros(0), np.zeros(0, dtype=np.int32), np.zeros(rows + 1, dtype=np.int32)),
-        shape=(rows, cols),
-        copy=False,
-    )
-
-
 def _vertex_owner(new_tris: np.ndarray, owner: np.ndarray, n: int, p: int) -> np.ndarray:
     """The hole of each of the ``p`` new vertices (numbered from ``n``), from that of each new triangle."""
     vertex_owner = np.zeros(p, dtype=np.int64)
@@ -50,33 +41,6 @@ def _vertex_owner(new_tris: np.ndarray, owner: np.ndarray, n: int, p: int) -> np
     inside = corners >= n
     vertex_owner[corners[inside] - n] = np.repeat(owner, 3)[inside]
     return vertex_owner
-
-
-def _interpolation(
-    new_tris: np.ndarray, bounds: np.ndarray, piece_loop: Any, n: int, p: int
-) -> sp.csr_matrix:
-    """Harmonic weights ``(p, n)`` of the new vertices over their loop's (for colours and other attributes):
-    one small solve per piece, whose new triangles are ``new_tris[bounds[i]:bounds[i + 1]]``."""
-    rows, cols, vals = [], [], []
-    for piece, loop in enumerate(piece_loop):
-        local = new_tris[bounds[piece] : bounds[piece + 1]]
-        inner = np.unique(local[local >= n])
-        if len(inner) == 0:
-            continue
-        numbering = np.concatenate([loop, inner])
-        by_index = np.argsort(numbering)
-        tris_local = by_index[np.searchsorted(numbering[by_index], local)]
-        k, nl = len(loop), len(numbering)
-        # the membrane (continuity 0) with the loop's unit vectors as the fixed "positions"
-        unit = np.eye(nl, k)
-        harmonic = _fair(unit, tris_local, np.arange(k, nl), [], 0, False)
-        r, c = np.nonzero(np.abs(harmonic) > 1e-12)
-        rows.append(inner[r] - n)
-        cols.append(loop[c])
-        vals.append(harmonic[r, c])
-    if not rows:
-        return sp.csr_matrix((p, n))
-    return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(p, n))
 
 
 def keeps_facing(x: np.ndarray, again: np.ndarray, new_tris: np.ndarray) -> bool:

@@ -8,18 +8,17 @@ Least-squares Meshes, SMI 2004. See docs/algorithms/hole_filling.rst.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import scipy.sparse as sp
 
 from .._o3d import new_mesh, read_mesh
 from ..core.connectivity import Connectivity
 from ..core.errors import InputError, warn
 from ..core.validate import as_bool, as_choice, as_count, as_positive_float, mesh_arrays
 from .crossings import _crossings, _TriangleIndex
-from .fair import _empty_csr, _interpolation, _vertex_owner, fair_patches
+from .fair import _vertex_owner, fair_patches
 from .find import Hole, find_holes
 from .triangulate import triangulate_holes
 from .tuning import DENSITY_MAX
@@ -113,9 +112,6 @@ class FilledHoles:
         The holes that were filled.
     skipped : list of Hole
         Loops left open (outer borders, beyond the size limits, or every fill crossing the mesh).
-    interpolation : (p, n) scipy.sparse.csr_matrix
-        Harmonic weights of the new vertices over the input's (rows sum to 1):
-        ``interpolation @ colors`` gives the new vertices' colours (empty unless asked for).
     continuity : (len(holes),) int64
         The continuity each hole was faired with: the asked one, or a lower one where the asked one
         made the patch cross the mesh (-1: left as refined, unfaired; -2: the minimum-weight
@@ -128,17 +124,8 @@ class FilledHoles:
     triangles: np.ndarray
     holes: list
     skipped: list
-    # the matrix, or the (p, n) shape of an all-zero one, built when first read: SciPy's constructor
-    # costs about a third of a small hole's fill when the caches are cold
-    _interpolation: Any = field(repr=False)
-    continuity: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
-    report: FillReport = field(default_factory=lambda: FillReport(()))
-
-    @property
-    def interpolation(self) -> sp.csr_matrix:
-        if isinstance(self._interpolation, tuple):
-            object.__setattr__(self, "_interpolation", _empty_csr(*self._interpolation))
-        return self._interpolation
+    continuity: np.ndarray
+    report: FillReport
 
 
 def fill_holes_arrays(
@@ -151,7 +138,6 @@ def fill_holes_arrays(
     density: float = 1.0,
     weights: str = "cotangent",
     fill_border: bool = False,
-    interpolation: bool = False,
     progress: bool = False,
 ) -> FilledHoles:
     """Fill the holes of ``(vertices, triangles)``: the array core of :func:`fill_holes`.
@@ -162,8 +148,6 @@ def fill_holes_arrays(
     triangles : (m, 3) int64
     max_hole_edges, max_hole_diameter, continuity, density, weights, fill_border, progress
         As in :func:`fill_holes`.
-    interpolation : bool
-        Also compute :attr:`FilledHoles.interpolation` (else an empty matrix).
 
     Returns
     -------
@@ -183,7 +167,6 @@ def fill_holes_arrays(
         density=density,
         weights=weights,
         fill_border=fill_border,
-        interpolation=interpolation,
         progress=progress,
     )
 
@@ -252,7 +235,6 @@ class HoleFiller:
         density: float = 1.0,
         weights: str = "cotangent",
         fill_border: bool = False,
-        interpolation: bool = False,
         progress: bool = False,
     ) -> FilledHoles:
         """Fill the chosen holes: the options and result of :func:`fill_holes_arrays`."""
@@ -291,17 +273,18 @@ class HoleFiller:
         if index is None and len(holes) > 1:
             index = _TriangleIndex(self.vertices, self.triangles)
         cot = weights == "cotangent"
-        out = self._fill_pass(holes, continuity, density, cot, interpolation, progress, index)
-        vertices, triangles, filled, stuck, used, weights_matrix, own = out
+        vertices, triangles, filled, stuck, used, own = self._fill_pass(
+            holes, continuity, density, cot, progress, index
+        )
         if stuck and density > 0:
             # simpler forms: the bare minimum-weight triangulation (no new vertex), checked against the
             # fills kept so far too; what still crosses is given up
-            retry = self._fill_pass(stuck, continuity, 0.0, False, False, False, index)
+            retry = self._fill_pass(stuck, continuity, 0.0, False, False, index)
             again = np.concatenate([triangles, retry[1][m:]])
-            crossing = _crossings(vertices, again, m, index, np.concatenate([own, len(filled) + retry[6]]))
+            crossing = _crossings(vertices, again, m, index, np.concatenate([own, len(filled) + retry[5]]))
             crossing = crossing[len(triangles) - m :]
-            bad = np.bincount(retry[6], weights=crossing, minlength=len(retry[2])) > 0
-            keep = ~bad[retry[6]]
+            bad = np.bincount(retry[5], weights=crossing, minlength=len(retry[2])) > 0
+            keep = ~bad[retry[5]]
             triangles = np.concatenate([triangles, retry[1][m:][keep]])
             filled = filled + [hole for hole, b in zip(retry[2], bad) if not b]
             used = np.concatenate([used, np.full(int((~bad).sum()), -2, dtype=np.int64)])
@@ -332,9 +315,7 @@ class HoleFiller:
             )
         order = np.argsort([number[id(hole)] for hole in filled], kind="stable").astype(np.int64)
         skipped = [hole for hole in self.holes if id(hole) in why]
-        return FilledHoles(
-            vertices, triangles, [filled[i] for i in order], skipped, weights_matrix, used[order], report
-        )
+        return FilledHoles(vertices, triangles, [filled[i] for i in order], skipped, used[order], report)
 
     def _fill_pass(
         self,
@@ -342,30 +323,20 @@ class HoleFiller:
         continuity: int,
         density: float,
         cot: bool,
-        interpolation: bool,
         progress: bool,
         index: Any,
     ) -> tuple:
         """Fill ``holes``: the vertices and triangles (the input's, then the new ones), the holes filled,
-        those whose every fill crosses (left open), the continuity of each filled one, the
-        interpolation (or its shape) and the filled hole (index in the list) of each new triangle.
+        those whose every fill crosses (left open), the continuity of each filled one and the filled
+        hole (index in the list) of each new triangle.
         ``index``: the crossing checks' (:func:`_crossings`)."""
         vertices, triangles = self.vertices, self.triangles
         n = len(vertices)
         empty = np.zeros(0, dtype=np.int64)
         if not holes:
-            return vertices.copy(), triangles.copy(), [], [], empty, (0, n), empty
-        fresh_points, new_tris, owner, tri_piece, piece_loop = triangulate_holes(
-            self, holes, density, progress
-        )
-        count = len(piece_loop)
+            return vertices.copy(), triangles.copy(), [], [], empty, empty
+        fresh_points, new_tris, owner = triangulate_holes(self, holes, density, progress)
         p = len(fresh_points)
-        weights_matrix: Any
-        if interpolation and p:
-            bounds = np.searchsorted(tri_piece, np.arange(count + 1))
-            weights_matrix = _interpolation(new_tris, bounds, piece_loop, n, p)
-        else:
-            weights_matrix = (p, n)
         out_vertices = np.concatenate([vertices, fresh_points])
         new_tris = (out_triangles := np.concatenate([triangles, new_tris]))[len(triangles) :]
         vertex_owner = _vertex_owner(new_tris, owner, n, p)
@@ -378,11 +349,6 @@ class HoleFiller:
             remap = np.concatenate([np.arange(n), n + np.cumsum(keep_vertex) - 1])
             out_vertices = np.concatenate([vertices, out_vertices[n:][keep_vertex]])
             out_triangles = np.concatenate([triangles, remap[new_tris[~np.isin(owner, stuck)]]])
-            weights_matrix = (
-                (int(keep_vertex.sum()), n)
-                if isinstance(weights_matrix, tuple)
-                else weights_matrix[np.flatnonzero(keep_vertex)]
-            )
             left = np.isin(np.arange(len(holes)), stuck)
             owner = (np.cumsum(~left) - 1)[owner[~np.isin(owner, stuck)]]
             return (
@@ -391,10 +357,9 @@ class HoleFiller:
                 [hole for hole, out in zip(holes, left) if not out],
                 [hole for hole, out in zip(holes, left) if out],
                 used[~left],
-                weights_matrix,
                 owner,
             )
-        return out_vertices, out_triangles, list(holes), [], used, weights_matrix, owner
+        return out_vertices, out_triangles, list(holes), [], used, owner
 
 
 def fill_holes(

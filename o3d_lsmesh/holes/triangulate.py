@@ -158,7 +158,7 @@ def _simple_pieces(loop: np.ndarray, rows: np.ndarray, points: np.ndarray):
 def triangulate_holes(filler: Any, holes: list, density: float, progress: bool) -> tuple:
     """Triangulate and refine every piece of ``holes`` (loops of ``filler``, a :class:`HoleFiller`): the new
     points ``(p, 3)`` (numbered from ``n`` piece by piece), the new triangles ``(q, 3)`` in the mesh's
-    numbering, the hole and the piece of each new triangle, and each piece's loop."""
+    numbering and the hole of each new triangle."""
     from .._triangulation_kernel import loop_geometry, refine  # compiled: imported where used
 
     vertices, triangles = filler.vertices, filler.triangles
@@ -227,7 +227,5 @@ def triangulate_holes(filler: Any, holes: list, density: float, progress: bool) 
     fresh_points = all_points[fresh]
     tri_piece = point_piece[all_tris[:, 0]]
     tri_order = np.argsort(tri_piece, kind="stable")
-    tri_piece = tri_piece[tri_order]
-    new_tris = global_index[all_tris[tri_order]]
-    owner = np.asarray(piece_hole, dtype=np.int64)[tri_piece]  # the hole of each new triangle
-    return fresh_points, new_tris, owner, tri_piece, piece_loop
+    owner = np.asarray(piece_hole, dtype=np.int64)[tri_piece[tri_order]]  # the hole of each new triangle
+    return fresh_points, global_index[all_tris[tri_order]], owner
