@@ -571,6 +571,10 @@ def test_other_ops_and_a_pipeline_match_the_library(data, tmp_path):
         np.asarray(decode_geometry(mesh, encode_geometry(mesh, 20, bits=10)).vertices),
     )
 
+    # the default count "2%" is parsed as if given (it reached the op as text before)
+    (record,) = batch.run(source, tmp_path / "d", op="approximate,encode", workers=0, progress=False)
+    assert record["status"] == "ok" and record["metrics"]["encode"]["anchors"] == int(np.ceil(0.02 * 642))
+
     (record,) = batch.run(
         source,
         tmp_path / "h",

@@ -167,10 +167,13 @@ def resolve_options(ops: Sequence[BatchOp], options: Mapping[str, Any] | None) -
                 param="options",
             )
     resolved = []
-    for op in ops:  # the values given to every op, then those given to this one
-        given = shared | {name: value for (owner, name), value in specific.items() if owner == op.name}
-        parsed = {o.name: parse_option(op, o, given[o.name]) for o in op.options if o.name in given}
-        resolved.append({o.name: parsed.get(o.name, o.default) for o in op.options})
+    for op in ops:
+        # its defaults written as text ("2%": parsed as if given, as argparse does for the flags), the
+        # values given to every op, then those given to this one
+        given = {o.name: o.default for o in op.options if isinstance(o.default, str)} | shared
+        given |= {name: value for (owner, name), value in specific.items() if owner == op.name}
+        values = {o.name: parse_option(op, o, given[o.name]) for o in op.options if o.name in given}
+        resolved.append({o.name: values.get(o.name, o.default) for o in op.options})
     return resolved
 
 
