@@ -60,6 +60,8 @@ def argparse_type(parse: Callable[[Any], Any]) -> Callable[[str], Any]:
 def add_option(parser: Any, option: Option) -> None:
     """The flag of ``option`` (a switch, a choice, or a value its parser checks)."""
     kwargs: dict[str, Any] = {"help": option.help.replace("%", "%%"), "default": option.default}
+    if option.metavar:
+        kwargs["metavar"] = option.metavar
     if option.is_flag:
         kwargs["action"] = "store_true"
     elif getattr(option.parse, "choices", None):
@@ -73,10 +75,10 @@ def add_option(parser: Any, option: Option) -> None:
 
 
 def add_command(
-    sub: Any, common: argparse.ArgumentParser, handler: Callable[..., int], arguments: dict[str, str]
+    sub: Any, common: argparse.ArgumentParser, handler: Callable[..., int], arguments: dict, *extra: Option
 ) -> argparse.ArgumentParser:
-    """Add the subcommand ``handler.__name__`` with its positional ``arguments`` (name: help) and,
-    when it names an operation of :data:`OPS`, that operation's flags.
+    """Add the subcommand ``handler.__name__`` with its positional ``arguments`` (name: help), the
+    flags of the operation of :data:`OPS` it names if any, then the flags of its ``extra`` options.
 
     ``--help`` is the handler's docstring: its first line the summary, its last paragraph
     (``example: ...``) the example, the paragraphs between the description.
@@ -93,6 +95,7 @@ def add_command(
     for argument, text in arguments.items():
         parser.add_argument(argument, metavar=argument.upper(), help=text)
     options = [option for option in OPS[name].options if option.cli] if name in OPS else []
+    options += extra
     for option in options:
         add_option(parser, option)
     flags = {option.api_param: option.cli_flag for option in options}

@@ -20,12 +20,12 @@ from ..lsmesh import reconstruct_geometry
 from ..lsmesh.encoding import decode_geometry
 from .batch import run as run_batch
 from .batch import summarize
-from .cli_kit import Run, add_command, argparse_type, draw, shape_change_text
+from .cli_kit import Run, add_command, draw, shape_change_text
 from .demo import run_demo
 from .files import WRITABLE, CLIError, check_output, mesh_suffix, read_input, write_output
 from .metrics import shape_change, surface_distance, topology_summary, triangle_angles, vertex_error
 from .op_commands import approximate, denoise, encode, fill, hierarchy
-from .ops import OPS, Option, int_at_least, non_negative, normal_change
+from .ops import OPS, Option, choice, flag, int_at_least, non_negative, normal_change, number
 
 __all__ = ["add_parsers", "parse_index_spec"]
 
@@ -55,52 +55,46 @@ RUN_FLAGS: dict[str, dict[str, Any]] = {
     "suffix": dict(default=".ply", help="output mesh format (.ply .obj .stl .off .gltf)"),
 }
 _FILES = {"input": "mesh file", "output": "mesh file to write"}
+#: the demo's flags
+DEMO = (
+    Option("out", str, "demo_out", "output folder"),
+    Option("no_render", flag, False, "skip the picture", is_flag=True),
+    Option(
+        "resolution",
+        int_at_least(20, MAX_RESOLUTION, "a grid size of at least 20 rays"),
+        200,
+        "the scanner's grid of R x R rays (200: about 22,000 vertices)",
+    ),
+    Option("noise", non_negative, 0.3, "range noise in grid spacings where the surface faces the scanner"),
+    Option("seed", number(int, rule="an integer"), 0, "random seed of the noise and dropouts"),
+)
 
 
 def add_parsers(sub: Any, writing: argparse.ArgumentParser, common: argparse.ArgumentParser) -> None:
     """Add every subcommand; ``writing`` adds ``--force`` to ``common`` (not for the demo: it reads no file)."""
     files = {"input": "mesh file to denoise", "output": f"mesh file to write ({', '.join(WRITABLE)})"}
-    p = add_command(sub, writing, denoise, files)
-    p.add_argument("--render", metavar="PNG", help="write a before/after picture (default: none)")
+    picture = Option("render", str, help="write a before/after picture (default: none)", metavar="PNG")
+    add_command(sub, writing, denoise, files, picture)
     add_command(sub, writing, fill, _FILES)
-    p = add_command(sub, writing, approximate, _FILES)
     help = "also write the control indices, .npy or .txt (default: not written)"
-    p.add_argument("--indices", metavar="FILE", help=help)
-    p = add_command(sub, writing, reconstruct, _FILES)
+    add_command(sub, writing, approximate, _FILES, Option("indices", str, help=help, metavar="FILE"))
     help = "index file (.npy or text) or list of indices and a:b ranges, e.g. '0:100,250'"
-    p.add_argument("--unknown", required=True, metavar="SPEC", help=help)
+    unknown = Option("unknown", str, help=help, param="unknown_vertex_indices", required=True, metavar="SPEC")
     help = "known vertices as soft constraints (whole mesh re-solved)"
-    p.add_argument("--soft", action="store_true", help=help)
-    p.set_defaults(flags={"unknown_vertex_indices": "--unknown"})
+    add_command(sub, writing, reconstruct, _FILES, unknown, Option("soft", flag, False, help, is_flag=True))
     add_command(sub, writing, encode, {"input": "mesh file", "output": "file for the encoded bytes"})
-    names = {
-        "mesh": "mesh file the data was encoded on",
-        "data": "file written by encode",
-        "output": _FILES["output"],
-    }
-    p = add_command(sub, writing, decode, names)
-    help = "use only the first K anchors (default: all)"
-    p.add_argument("--anchors", type=argparse_type(int_at_least(1)), help=help)
+    names = {"mesh": "mesh file the data was encoded on", "data": "file written by encode"}
+    anchors = Option("anchors", int_at_least(1), help="use only the first K anchors (default: all)")
+    add_command(sub, writing, decode, names | {"output": _FILES["output"]}, anchors)
     names = {"input": "mesh file", "outdir": "folder for level_NN files (created if needed)"}
-    p = add_command(sub, writing, hierarchy, names)
     help = "file format of the levels (.ply .obj ...)"
-    p.add_argument("--format", type=argparse_type(mesh_suffix), default=".ply", help=help)
-    p = add_command(sub, writing, compare, {"a": "first mesh file (the reference)", "b": "second mesh file"})
+    add_command(sub, writing, hierarchy, names, Option("format", mesh_suffix, ".ply", help))
+    names = {"a": "first mesh file (the reference)", "b": "second mesh file"}
     help = "write a distance map: A and B side by side, colored by distance to A (default: none)"
-    p.add_argument("--render", metavar="PNG", help=help)
-    p.add_argument(
-        "--units", choices=("model", "edge"), default="model", help="model units or mean edge lengths of A"
-    )
+    units = Option("units", choice("model", "edge"), "model", "model units or mean edge lengths of A")
+    add_command(sub, writing, compare, names, Option("render", str, help=help, metavar="PNG"), units)
     _add_batch(add_command(sub, writing, batch, {}))
-    p = add_command(sub, common, demo, {})
-    p.add_argument("--out", default="demo_out", help="output folder")
-    p.add_argument("--no-render", action="store_true", help="skip the picture")
-    resolution = argparse_type(int_at_least(20, MAX_RESOLUTION, "a grid size of at least 20 rays"))
-    help = "the scanner's grid of R x R rays (200: about 22,000 vertices)"
-    p.add_argument("--resolution", type=resolution, default=200, help=help)
-    help = "range noise in grid spacings where the surface faces the scanner"
-    p.add_argument("--noise", type=argparse_type(non_negative), default=0.3, help=help)
-    p.add_argument("--seed", type=int, default=0, help="random seed of the noise and dropouts")
+    add_command(sub, common, demo, {}, *DEMO)
 
 
 def _add_batch(p: argparse.ArgumentParser) -> None:

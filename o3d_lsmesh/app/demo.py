@@ -172,15 +172,12 @@ def run_demo(
         (folder / "metrics.md").write_text("```\n" + table + "\n```\n")
         files += [folder / "metrics.json", folder / "metrics.md"]
         if render:
-            keys, titles = ["scan"], ["raw scan"]
-            if "ours" in results:
-                keys.append("ours")
-                titles.append("ours (defaults)")
+            panels = {"scan": "raw scan"} | ({"ours": "ours (defaults)"} if "ours" in results else {})
             theirs = [r for r in rows if r["key"].startswith("o3d_") and "skipped" not in r]
             if theirs:  # the best Open3D filter
                 peer = min(theirs, key=lambda r: r["mean_distance"])
-                keys.append(peer["key"])
-                titles.append(f"{peer['label'].removeprefix('Open3D ')} ({peer['value']}, its best)")
+                panels[peer["key"]] = f"{peer['label'].removeprefix('Open3D ')} ({peer['value']}, its best)"
+            keys, titles = list(panels), list(panels.values())
             picture = folder / "before_after.png"
             start = time.perf_counter()
             rendering.render(

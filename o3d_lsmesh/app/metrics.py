@@ -247,12 +247,8 @@ def triangle_angles(mesh: AnyMesh) -> dict:
     """
     data = read_mesh(mesh)
     c = _unit_scale(data.vertices)[data.triangles]
-    angles = []
-    for p in range(3):
-        u = c[:, (p + 1) % 3] - c[:, p]
-        v = c[:, (p + 2) % 3] - c[:, p]
-        nu, nv = np.linalg.norm(u, axis=1), np.linalg.norm(v, axis=1)
-        cos = np.einsum("ij,ij->i", u, v) / np.maximum(nu * nv, 1e-300)
-        angles.append(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
-    smallest = np.min(np.stack(angles, axis=1), axis=1)
+    u, v = c[:, [1, 2, 0]] - c, c[:, [2, 0, 1]] - c  # the two sides at each corner
+    lengths = np.linalg.norm(u, axis=2) * np.linalg.norm(v, axis=2)
+    cos = np.einsum("ijk,ijk->ij", u, v) / np.maximum(lengths, 1e-300)
+    smallest = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))).min(axis=1)
     return {"min_angle": float(smallest.min()), "share_under_10": float(np.mean(smallest < 10.0))}

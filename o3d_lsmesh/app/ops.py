@@ -138,7 +138,7 @@ class Option:
     it parsed or raises ``ValueError`` saying what it must be (``None`` is taken as it is when it is
     the default); ``is_flag`` makes the flag a switch; ``param`` is the Python API parameter it maps
     to (default: ``name``); ``cli`` whether the subcommand of the same name has the flag (else batch
-    only); ``required`` on the command line.
+    only); ``required`` and ``metavar`` on the command line.
     """
 
     name: str
@@ -149,6 +149,7 @@ class Option:
     param: str = ""
     cli: bool = True
     required: bool = False
+    metavar: str | None = None
 
     @property
     def cli_flag(self) -> str:

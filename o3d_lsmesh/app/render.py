@@ -20,13 +20,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .._o3d import MeshData, read_mesh
-from .._o3d.io import (
-    cast_rays,
-    distances_to_surface,
-    quiet_open3d,
-    raycasting_scene,
-    write_image,
-)
+from .._o3d.io import cast_rays, distances_to_surface, quiet_open3d, raycasting_scene, write_image
 from ..core.arrays import area_weighted_normals
 from ..core.connectivity import Connectivity
 from ..core.errors import InputError, InputTypeError, warn
@@ -112,12 +106,14 @@ def _layout(arrays, view_direction, up, width, height, margin, align):
         all_triangles.append(triangles + offset)
         offset += len(vertices)
     depth = max(extents[:, 2].max(), half) * 2.0 + 1.0
+    light = back + 0.4 * true_up - 0.3 * right  # towards the viewer's upper left (the sun: its opposite)
     camera = {
         "center": [0.0, 0.0, 0.0],
         "eye": (back * depth).tolist(),
         "up": true_up.tolist(),
         "right": right.tolist(),
         "back": back.tolist(),
+        "light": (light / np.linalg.norm(light)).tolist(),
         "left": -count * half_w,
         "right_edge": count * half_w,
         "bottom": -half_h,
@@ -130,7 +126,7 @@ def _layout(arrays, view_direction, up, width, height, margin, align):
 
 def _raycast(vertices, triangles, colors, camera, width, height, background) -> np.ndarray:
     scene = raycasting_scene(vertices, triangles)
-    right, up, back = (np.array(camera[k]) for k in ("right", "up", "back"))
+    right, up, back, light = (np.array(camera[k]) for k in ("right", "up", "back", "light"))
     xs = camera["left"] + (np.arange(width) + 0.5) / width * (camera["right_edge"] - camera["left"])
     ys = camera["top"] - (np.arange(height) + 0.5) / height * (camera["top"] - camera["bottom"])
     px, py = np.meshgrid(xs, ys)
@@ -147,8 +143,6 @@ def _raycast(vertices, triangles, colors, camera, width, height, background) -> 
     normal = np.einsum("pk,pkc->pc", bary, normals[corners])
     normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
     color = np.einsum("pk,pkc->pc", bary, colors[corners])
-    light = back + 0.4 * up - 0.3 * right
-    light /= np.linalg.norm(light)
     # abs(): the inside of an open mesh, seen through a hole, is lit rather than black.
     shade = 0.25 + 0.75 * np.abs(normal @ light)
     image = np.zeros((height, width, 3))
@@ -165,14 +159,8 @@ def _filament_worker(spec_path: str, image_path: str) -> None:
     width, height = int(spec["size"][0]), int(spec["size"][1])
     rendering = o3d.visualization.rendering
     renderer = rendering.OffscreenRenderer(width, height)
-    view = renderer.scene.view
-    for switch in (
-        view.set_post_processing,
-        view.set_antialiasing,
-        view.set_ambient_occlusion,
-        view.set_shadowing,
-    ):
-        switch(False)
+    for switch in ("post_processing", "antialiasing", "ambient_occlusion", "shadowing"):
+        getattr(renderer.scene.view, f"set_{switch}")(False)
     background = spec["background"].astype(np.float32)
     renderer.scene.set_background(np.append(background, 1.0))
     mesh = o3d.geometry.TriangleMesh(
@@ -184,11 +172,10 @@ def _filament_worker(spec_path: str, image_path: str) -> None:
     material = rendering.MaterialRecord()
     material.shader = "defaultLit"
     renderer.scene.add_geometry("meshes", mesh, material)
-    right, up, back = (np.array(camera[k]) for k in ("right", "up", "back"))
     # a sun from behind the viewer's upper left (as the raycast backend's), plus image-based ambient light
-    light = -(back + 0.4 * up - 0.3 * right)
-    renderer.scene.set_lighting(renderer.scene.LightingProfile.NO_SHADOWS, light / np.linalg.norm(light))
-    renderer.scene.scene.set_sun_light(light / np.linalg.norm(light), [1.0, 1.0, 1.0], _SUN_LUX)
+    sun = -np.array(camera["light"])
+    renderer.scene.set_lighting(renderer.scene.LightingProfile.NO_SHADOWS, sun)
+    renderer.scene.scene.set_sun_light(sun, [1.0, 1.0, 1.0], _SUN_LUX)
     renderer.scene.scene.enable_sun_light(True)
     renderer.scene.scene.set_indirect_light_intensity(_AMBIENT)
     box = (camera[key] for key in ("left", "right_edge", "bottom", "top", "near", "far"))

@@ -12,7 +12,7 @@ import time
 import warnings
 from collections import Counter
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from itertools import islice
 from pathlib import Path
 from typing import Any, Callable
@@ -112,15 +112,6 @@ def _summary(caught: list[str], limit: int = 20) -> list[str]:
     return lines[:limit] + ([f"... and {len(lines) - limit} more"] if len(lines) > limit else [])
 
 
-@dataclass
-class _Gate:
-    """Stops an abandoned (timed-out) task from writing: the write and the abandonment exclude each other."""
-
-    lock: threading.Lock = field(default_factory=threading.Lock)
-    abandoned: bool = False
-    written: bool = False
-
-
 @dataclass(frozen=True)
 class Task:
     index: int
@@ -157,7 +148,8 @@ def run_task(
         warnings=[],
     )
     capture_warnings()
-    gate = _Gate()
+    # stops an abandoned (timed-out) task from writing: the write and the abandonment exclude each other
+    lock, gate = threading.Lock(), {"abandoned": False, "written": False}
 
     def pipeline(record: dict) -> None:  # (the record it fills: an abandoned task's is copied below)
         _LOCAL.warnings = record["warnings"]
@@ -175,8 +167,8 @@ def run_task(
             if last.output == "mesh":
                 record.update(vertices_after=len(current.vertices), triangles_after=len(current.triangles))
             target = output_path(Path(outdir), task.relative, last, suffix)
-            with gate.lock:
-                if gate.abandoned:
+            with lock:
+                if gate["abandoned"]:
                     return
                 if target is not None:
                     record["stage"] = "write"
@@ -184,7 +176,7 @@ def run_task(
                         current, target, kind=last.output, suffix=suffix, root=Path(outdir)
                     )
                     record["output"] = str(target)
-                gate.written = True
+                gate["written"] = True
             record["status"], record["stage"] = "ok", None
         except Exception as error:
             record["error"] = f"{type(error).__name__}: {error}"
@@ -200,9 +192,9 @@ def run_task(
     thread.start()
     thread.join(timeout)
     if thread.is_alive():
-        with gate.lock:  # (waits for a write under way: a written output is reported as such)
-            gate.abandoned = not gate.written
-    if gate.abandoned:
+        with lock:  # (waits for a write under way: a written output is reported as such)
+            gate["abandoned"] = not gate["written"]
+    if gate["abandoned"]:
         record = {**record, "metrics": dict(record["metrics"]), "warnings": list(record["warnings"])}
         record["error"] = f"TaskTimeout: still running after {timeout:g} s (task_timeout), abandoned"
     else:
@@ -282,26 +274,6 @@ def local_cluster(workers: int, threads_per_worker: int = 1, *, retries: int = 1
         )
 
 
-class _Window:
-    """How many tasks to keep submitted, from the cluster's threads (re-read at most once a second).
-
-    Above ``2 x threads`` tasks Dask queues them on the scheduler and hands each worker one at a time
-    (``worker-saturation`` 1): a dying worker holds no innocent task. ``4 x threads + 4`` keeps that
-    queue filled; a batch of at most ``2 x threads`` files gets ``threads``.
-    """
-
-    def __init__(self, client: Any, total: int):
-        self.client, self.total, self.value, self.when = client, total, 1, -1.0
-
-    def __call__(self) -> int:
-        now = time.monotonic()
-        if now - self.when > 1.0:
-            threads = max(1, sum(self.client.nthreads().values()))
-            self.value = threads if self.total <= 2 * threads else 4 * threads + 4
-            self.when = now
-        return self.value
-
-
 def failure_record(task: Task, op: str, message: str, stage: str = "worker") -> dict:
     return new_record(input=task.path, error=message, stage=stage, op=op, key=task.key)
 
@@ -326,7 +298,20 @@ def _run_dask(client: Any, tasks: list[Task], job: dict, emit: Callable[[dict], 
             by_key[future.key] = task
             queue.add(future)
 
-    window = _Window(client, len(tasks))
+    seen = {"size": 1, "when": -1.0}
+
+    def window() -> int:
+        """How many tasks to keep submitted, from the cluster's threads (re-read at most once a second).
+
+        Above ``2 x threads`` tasks Dask queues them on the scheduler and hands each worker one at a
+        time (``worker-saturation`` 1): a dying worker holds no innocent task. ``4 x threads + 4`` keeps
+        that queue filled; a batch of at most ``2 x threads`` files gets ``threads``.
+        """
+        if time.monotonic() - seen["when"] > 1.0:
+            threads = max(1, sum(client.nthreads().values()))
+            seen.update(size=threads if len(tasks) <= 2 * threads else 4 * threads + 4, when=time.monotonic())
+        return int(seen["size"])
+
     submit(window())
     op_name = ",".join(op.name for op in job["ops"])
     try:
