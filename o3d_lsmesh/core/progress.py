@@ -11,7 +11,7 @@ import contextlib
 import math
 import sys
 import weakref
-from collections.abc import Callable, Iterable, Iterator, Sequence, Sized
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from typing import Any, TypeVar
 
 from .validate import as_bool
@@ -103,13 +103,9 @@ class Progress:
         """
         return self._tqdm(total=int(total), **options) if self.enabled else _Silent()
 
-    def over(self, items: Iterable[T], *, unit: str = "it", total: int | None = None) -> Iterator[T]:
-        """``items`` with a bar that advances as each is taken; ``total`` defaults to ``len(items)``."""
-        if not self.enabled:
-            return iter(items)
-        if total is None and isinstance(items, Sized):
-            total = len(items)
-        return iter(self._tqdm(items, total=total, unit=unit))
+    def over(self, items: Iterable[T]) -> Iterator[T]:
+        """``items`` with a bar that advances as each is taken, over ``len(items)`` when they have one."""
+        return iter(self._tqdm(items) if self.enabled else items)
 
     @contextlib.contextmanager
     def stages(self, names: Sequence[str]) -> Iterator[Callable[[str], None]]:

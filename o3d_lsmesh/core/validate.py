@@ -115,13 +115,7 @@ def mesh_arrays(
     # looked at only to name a bad one
     smallest, largest = float(vertices.min()), float(vertices.max())
     if not (-COORDINATE_LIMIT <= smallest and largest <= COORDINATE_LIMIT):
-        finite = np.isfinite(vertices).all(axis=1)
-        if not finite.all():
-            bad = int(np.flatnonzero(~finite)[0])
-            raise InputError(
-                f"{name} vertices must be finite, got {vertices[bad].tolist()} at vertex {bad}", param=name
-            )
-        _check_magnitude(vertices, what=f"{name} vertices", row="vertex", param=name)
+        _check_coordinates(vertices, what=f"{name} vertices", row="vertex", param=name)
     repeated = collapsed_triangles(triangles)
     if repeated.any():
         row = int(np.flatnonzero(repeated)[0])
@@ -134,8 +128,14 @@ def mesh_arrays(
     return vertices, triangles
 
 
-def _check_magnitude(array: np.ndarray, *, what: str, row: str, param: str) -> None:
-    """Raise if a coordinate of ``array (k, 3)`` exceeds :data:`COORDINATE_LIMIT`."""
+def _check_coordinates(array: np.ndarray, *, what: str, row: str, param: str, limit: bool = True) -> None:
+    """Raise if a coordinate of ``array (k, 3)`` is not finite, or (``limit``) beyond :data:`COORDINATE_LIMIT`."""
+    finite = np.isfinite(array).all(axis=1)
+    if not finite.all():
+        first = int(np.flatnonzero(~finite)[0])
+        raise InputError(f"{what} must be finite, got {array[first].tolist()} at {row} {first}", param=param)
+    if not limit:
+        return
     big = np.abs(array).max(axis=1) > COORDINATE_LIMIT
     if big.any():
         first = int(np.flatnonzero(big)[0])
@@ -292,12 +292,7 @@ def as_positions(positions: Any, count: int, *, name: str, limit: bool = False) 
     if array.shape != (count, 3):
         raise InputError(f"{name} must have shape ({count}, 3), got {array.shape}", param=name)
     array = np.array(array, dtype=np.float64)
-    finite = np.isfinite(array).all(axis=1)
-    if not finite.all():
-        row = int(np.flatnonzero(~finite)[0])
-        raise InputError(f"{name} must be finite, got {array[row].tolist()} at row {row}", param=name)
-    if limit:
-        _check_magnitude(array, what=name, row="row", param=name)
+    _check_coordinates(array, what=name, row="row", param=name, limit=limit)
     return array
 
 
