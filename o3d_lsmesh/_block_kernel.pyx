@@ -7,7 +7,7 @@ on every core (OpenMP; ``OMP_NUM_THREADS`` sets how many). A Gauss-Seidel sweep 
 nature: each column gets the arithmetic of pyamg's ``gauss_seidel`` (same products in the same order),
 and for several cores the rows are cut into a fixed number of blocks swept side by side (hybrid
 Gauss-Seidel), a count set by the matrix's size alone, so results never depend on the thread count.
-:func:`no_huge_pages` is the package's one OS memory advice (for large work arrays).
+:func:`empty_small_pages` is the package's one OS memory advice (for large work arrays).
 """
 
 import numpy as np
@@ -62,38 +62,17 @@ cdef inline int _threads(Py_ssize_t rows) noexcept nogil:
     return omp_get_max_threads() if rows >= PARALLEL_ROWS else 1
 
 
-def threads(Py_ssize_t rows):
-    """Threads a parallel loop over ``rows`` rows runs on: OpenMP's limit in the calling thread
-    (``OMP_NUM_THREADS``, threadpoolctl's ``threadpool_limits``) from :data:`PARALLEL_ROWS` rows, else 1."""
-    return _threads(rows)
+def empty_small_pages(shape, dtype=np.float64, fill=None):
+    """A new array, its buffer's whole pages advised to the OS as no transparent huge pages (``madvise``)
+    before it is written, ``fill`` if given: the package's mesh-sized outputs and work arrays.
 
-
-def no_huge_pages(array):
-    """``array``, its buffer's whole pages advised to the OS as no transparent huge pages (``madvise``).
-
-    For a fresh ``np.empty`` or ``np.zeros`` of many megabytes, before it is written: NumPy advises huge
-    pages for such arrays, and on a kernel that compacts memory at the fault they cost more system time
-    than they save (``docs/algorithms/constrained_fairing.rst``). The data are untouched; a no-op where
-    the OS has no such advice (outside Linux), for an empty array or one within a page.
-
-    Raises
-    ------
-    ValueError
-        ``array`` is not a C-contiguous ndarray.
+    NumPy advises huge pages for arrays of many megabytes, and on a kernel that compacts memory at the
+    fault they cost more system time than they save (``docs/algorithms/constrained_fairing.rst``); no
+    advice outside Linux, none for an array within a page.
     """
-    if not isinstance(array, np.ndarray):
-        raise ValueError(f"array must be a C-contiguous numpy array, got {type(array).__name__}")
-    if not array.flags.c_contiguous:
-        raise ValueError(f"array must be a C-contiguous numpy array, got strides {array.strides} of shape {array.shape}")
+    array = np.empty(shape, dtype)
     if array.nbytes:
         o3d_no_huge_pages(<char*> <size_t> array.__array_interface__["data"][0], array.nbytes)
-    return array
-
-
-def empty_small_pages(shape, dtype=np.float64, fill=None):
-    """A new array advised to small pages (:func:`no_huge_pages`) before it is written, ``fill`` if given:
-    the package's mesh-sized outputs and work arrays."""
-    array = no_huge_pages(np.empty(shape, dtype))
     if fill is not None:
         array.fill(fill)
     return array
@@ -217,24 +196,6 @@ cdef void _sweep(const index_t[::1] indptr, const index_t[::1] indices, const do
                     x[i, c] = (b[i, c] - rest[c]) / diagonal
 
 
-cdef void _step3(double[:, ::1] x, double[:, ::1] r, const double[:, ::1] p, const double[:, ::1] q,
-                 const double[::1] alpha, double[::1] squares, Py_ssize_t start, Py_ssize_t stop) noexcept nogil:
-    """:func:`cg_step` on rows ``start:stop`` of three columns; the rows' ``|r|^2`` summed in order."""
-    cdef Py_ssize_t i
-    cdef double s0 = 0.0, s1 = 0.0, s2 = 0.0
-    for i in range(start, stop):
-        x[i, 0] += alpha[0] * p[i, 0]
-        x[i, 1] += alpha[1] * p[i, 1]
-        x[i, 2] += alpha[2] * p[i, 2]
-        r[i, 0] -= alpha[0] * q[i, 0]
-        r[i, 1] -= alpha[1] * q[i, 1]
-        r[i, 2] -= alpha[2] * q[i, 2]
-        s0 = s0 + r[i, 0] * r[i, 0]
-        s1 = s1 + r[i, 1] * r[i, 1]
-        s2 = s2 + r[i, 2] * r[i, 2]
-    squares[0], squares[1], squares[2] = s0, s1, s2
-
-
 cdef void _dots3(const double[:, ::1] a, const double[:, ::1] b, double[::1] dots, Py_ssize_t start,
                  Py_ssize_t stop) noexcept nogil:
     """:func:`column_dots` on rows ``start:stop`` of three columns, summed in order."""
@@ -254,34 +215,21 @@ cdef inline Py_ssize_t _blocks(Py_ssize_t rows) noexcept nogil:
 
 def cg_step(double[:, ::1] x, double[:, ::1] r, const double[:, ::1] p, const double[:, ::1] q,
             const double[::1] alpha):
-    """Conjugate gradients' update ``x += alpha p``, ``r -= alpha q`` (per column) in one pass; returns the
-    columns' ``|r|^2`` after it, ``(k,)``: for three columns, summed in order over blocks of
-    :data:`PARALLEL_ROWS` rows (blocks side by side on every core), then over the blocks in order, so that
-    the sums do not depend on the thread count."""
-    cdef Py_ssize_t n = x.shape[0], k = x.shape[1], i, c, t, blocks = _blocks(x.shape[0])
-    squares = np.zeros(k)
-    cdef double[::1] sq = squares
-    cdef double[:, ::1] partial = np.zeros((blocks, 3))
+    """Conjugate gradients' update ``x += alpha p``, ``r -= alpha q`` (per column), in place; returns the
+    columns' ``|r|^2`` after it, ``(k,)`` (:func:`column_dots`)."""
+    cdef Py_ssize_t n = x.shape[0], k = x.shape[1], i, c
     with nogil:
-        if k == 3:
-            for t in prange(blocks, schedule="static", num_threads=_threads(n)):
-                _step3(x, r, p, q, alpha, partial[t], t * PARALLEL_ROWS, min(n, (t + 1) * PARALLEL_ROWS))
-            for t in range(blocks):
-                for c in range(3):
-                    sq[c] += partial[t, c]
-        else:
-            for i in range(n):
-                for c in range(k):
-                    x[i, c] += alpha[c] * p[i, c]
-                    r[i, c] -= alpha[c] * q[i, c]
-                    sq[c] += r[i, c] * r[i, c]
-    return squares
+        for i in prange(n, schedule="static", num_threads=_threads(n)):
+            for c in range(k):
+                x[i, c] += alpha[c] * p[i, c]
+                r[i, c] -= alpha[c] * q[i, c]
+    return column_dots(r, r)
 
 
 def column_dots(const double[:, ::1] a, const double[:, ::1] b):
-    """``(k,)`` dot products of the columns of ``a`` and ``b`` (both ``(n, k)``); for three columns over
-    blocks of :data:`PARALLEL_ROWS` rows as :func:`cg_step`'s sums (on every core, independent of the
-    thread count)."""
+    """``(k,)`` dot products of the columns of ``a`` and ``b`` (both ``(n, k)``): for three columns, summed in
+    order over blocks of :data:`PARALLEL_ROWS` rows (blocks side by side on every core), then over the
+    blocks in order, so that the sums do not depend on the thread count."""
     cdef Py_ssize_t n = a.shape[0], k = a.shape[1], i, c, t, blocks = _blocks(a.shape[0])
     dots = np.zeros(k)
     cdef double[::1] d = dots
@@ -416,38 +364,35 @@ def incomplete_cholesky_solve(const index_t[::1] indptr, const index_t[::1] indi
     """``z = (L L^T)^-1 r`` for :func:`incomplete_cholesky`'s ``L``: forward then backward substitution,
     both reading rows (``l_ji`` of ``L^T`` is stored at ``(i, j)``), every column at once (``r`` and
     ``z`` ``(n, k)``; ``z`` may be ``r``). Sequential by nature."""
-    cdef Py_ssize_t n = z.shape[0], k = z.shape[1], i, p, c
+    with nogil:
+        _substitute(indptr, indices, L, diag, r, z, True)  # L y = r
+        _substitute(indptr, indices, L, diag, z, z, False)  # L^T z = y
+
+
+cdef void _substitute(const index_t[::1] indptr, const index_t[::1] indices, const double[::1] L,
+                      const int64_t[::1] diag, const double[:, ::1] b, double[:, ::1] z,
+                      bint lower) noexcept nogil:
+    """``z = L^-1 b`` over the rows in order (``lower``), else ``z = L^-T b`` in reverse; ``b`` may be ``z``."""
+    cdef Py_ssize_t n = z.shape[0], k = z.shape[1], t, i, p, c, start, stop
     cdef index_t j
     cdef double l, s0, s1, s2
-    with nogil:
+    for t in range(n):
+        i = t if lower else n - 1 - t
+        start = indptr[i] if lower else diag[i] + 1
+        stop = diag[i] if lower else indptr[i + 1]
         if k == 3:  # the coordinates: sums in registers
-            for i in range(n):  # L y = r
-                s0, s1, s2 = r[i, 0], r[i, 1], r[i, 2]
-                for p in range(indptr[i], diag[i]):
-                    j, l = indices[p], L[p]
-                    s0, s1, s2 = s0 - l * z[j, 0], s1 - l * z[j, 1], s2 - l * z[j, 2]
-                l = L[diag[i]]
-                z[i, 0], z[i, 1], z[i, 2] = s0 / l, s1 / l, s2 / l
-            for i in range(n - 1, -1, -1):  # L^T z = y
-                s0, s1, s2 = z[i, 0], z[i, 1], z[i, 2]
-                for p in range(diag[i] + 1, indptr[i + 1]):
-                    j, l = indices[p], L[p]
-                    s0, s1, s2 = s0 - l * z[j, 0], s1 - l * z[j, 1], s2 - l * z[j, 2]
-                l = L[diag[i]]
-                z[i, 0], z[i, 1], z[i, 2] = s0 / l, s1 / l, s2 / l
+            s0, s1, s2 = b[i, 0], b[i, 1], b[i, 2]
+            for p in range(start, stop):
+                j, l = indices[p], L[p]
+                s0, s1, s2 = s0 - l * z[j, 0], s1 - l * z[j, 1], s2 - l * z[j, 2]
+            l = L[diag[i]]
+            z[i, 0], z[i, 1], z[i, 2] = s0 / l, s1 / l, s2 / l
         else:
-            for i in range(n):
-                for c in range(k):
-                    s0 = r[i, c]
-                    for p in range(indptr[i], diag[i]):
-                        s0 = s0 - L[p] * z[indices[p], c]
-                    z[i, c] = s0 / L[diag[i]]
-            for i in range(n - 1, -1, -1):
-                for c in range(k):
-                    s0 = z[i, c]
-                    for p in range(diag[i] + 1, indptr[i + 1]):
-                        s0 = s0 - L[p] * z[indices[p], c]
-                    z[i, c] = s0 / L[diag[i]]
+            for c in range(k):
+                s0 = b[i, c]
+                for p in range(start, stop):
+                    s0 = s0 - L[p] * z[indices[p], c]
+                z[i, c] = s0 / L[diag[i]]
 
 
 def strong_part(const index_t[::1] indptr, const index_t[::1] indices, const double[::1] data, double theta):

@@ -548,17 +548,6 @@ def test_incomplete_cholesky_refuses_a_missing_diagonal_and_an_unsymmetric_patte
         _block_kernel.incomplete_cholesky(B.indptr, B.indices, B.data, 0.0)
 
 
-def test_threadpool_limits_make_the_kernels_serial():
-    from threadpoolctl import threadpool_limits
-
-    rows = 10**9  # far above the size where the loops go parallel
-    with threadpool_limits(limits=2, user_api="openmp"):
-        assert _block_kernel.threads(rows) == 2
-        assert _block_kernel.threads(1) == 1  # small loops stay on one thread
-    with threadpool_limits(limits=1, user_api="openmp"):
-        assert _block_kernel.threads(rows) == 1
-
-
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the kernels link GCC's libgomp on Linux")
 def test_openmp_threads_sleep_at_barriers_instead_of_spinning():
     # libgomp reads its wait policy when it loads: checked in a fresh interpreter, through OpenMP's own report
@@ -637,36 +626,17 @@ def test_mesh_loops_refuse_vertices_out_of_range():
 
 
 @pytest.mark.parametrize("size", [0, 1, 7, 511, 512, 513, 4096, 1 << 20])
-@pytest.mark.parametrize("offset", [0, 1, 8, 4095])
-def test_no_huge_pages_leaves_any_array_as_it_was(size, offset):
-    # any size, any alignment of the buffer (a view that starts inside a page), read-only too
-    rng = np.random.default_rng(size + offset)
-    base = rng.integers(0, 256, size=size + offset + 8, dtype=np.uint8)
-    before = base.copy()
-    array = base[offset : offset + size]
-    assert _block_kernel.no_huge_pages(array) is array
-    np.testing.assert_array_equal(base, before)  # the array and its neighbours
-    array.flags.writeable = False
-    assert _block_kernel.no_huge_pages(array) is array
-    fresh = _block_kernel.no_huge_pages(np.zeros((size, 3)))  # advised before it is written
-    fresh[:] = 1.5
-    assert fresh.sum() == 4.5 * size
-
-
-def test_no_huge_pages_refuses_what_has_no_single_buffer():
-    with pytest.raises(ValueError, match="C-contiguous"):
-        _block_kernel.no_huge_pages(np.zeros((4, 4))[:, ::2])
-    with pytest.raises(ValueError, match="C-contiguous"):
-        _block_kernel.no_huge_pages(np.zeros((4, 4)).T)
-    with pytest.raises(ValueError, match="numpy array"):
-        _block_kernel.no_huge_pages([1.0, 2.0])
-    empty = np.zeros((0, 3))[:, ::2]  # an empty view is C-contiguous: nothing to advise
-    assert _block_kernel.no_huge_pages(empty) is empty
+def test_small_pages_arrays_hold_what_is_written(size):
+    # any size: within a page, across pages, not starting on a page
+    assert _block_kernel.empty_small_pages((size, 3), fill=1.5).sum() == 4.5 * size
+    fresh = _block_kernel.empty_small_pages(size, np.int64)
+    fresh[:] = np.arange(size)
+    assert fresh.dtype == np.int64 and fresh.tolist() == list(range(size))
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the advice exists on Linux only")
-def test_no_huge_pages_advises_the_arrays_whole_pages():
-    array = _block_kernel.no_huge_pages(np.empty(1 << 22))  # 32 MiB
+def test_small_pages_arrays_advise_their_whole_pages():
+    array = _block_kernel.empty_small_pages(1 << 22)  # 32 MiB
     inside = array.__array_interface__["data"][0] + 4096  # within its first whole page
     area = None
     with open("/proc/self/smaps") as smaps:
