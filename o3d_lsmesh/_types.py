@@ -1,13 +1,7 @@
 """The mesh types the public functions accept and return, named once for the type checker.
 
-Every public mesh function takes a legacy ``open3d.geometry.TriangleMesh``, a
-tensor ``open3d.t.geometry.TriangleMesh`` or a ``(vertices, triangles)`` pair
-of arrays, and returns a new mesh of the kind it was given (:data:`MeshT`).
-
-Open3D is imported here only while type checking, so these names exist only
-then: modules import them under ``if TYPE_CHECKING:`` and use them in
-annotations, which stay unevaluated strings (``from __future__ import
-annotations``); importing the package never pays for them.
+They exist only while type checking (Open3D is imported here only then): import them under
+``if TYPE_CHECKING:`` and use them in annotations (``from __future__ import annotations``).
 """
 
 from __future__ import annotations

@@ -215,16 +215,8 @@ def tensor_format_of(data: MeshData) -> tuple:
     """The :func:`template` format of a tensor mesh's source (empty for other kinds)."""
     if data.kind != "tensor":
         return ()
-    src = data.source
-    index_dtype = str(src.triangle.indices.dtype) if "indices" in src.triangle else "Int64"
-    return (str(src.vertex.positions.device), str(src.vertex.positions.dtype), index_dtype)
-
-
-def _row(kind: str, group: str, key: str) -> Attribute:
-    for row in ATTRIBUTES:
-        if row.kind == kind and row.group == group and row.key in (key, "*"):
-            return row
-    raise KeyError(key)  # (unreachable: each tensor group ends in a "*" row)
+    positions = data.source.vertex.positions  # (and triangles: read_mesh refuses a mesh without them)
+    return (str(positions.device), str(positions.dtype), str(data.source.triangle.indices.dtype))
 
 
 def present_attributes(data: MeshData) -> list[tuple[Attribute, str]]:
@@ -239,7 +231,8 @@ def present_attributes(data: MeshData) -> list[tuple[Attribute, str]]:
             and (has_textures(mesh) if row.follows == "texture" else getattr(mesh, f"has_{row.key}")())
         ]
     if data.kind == "tensor":
-        return [(_row("tensor", g, key), key) for g in ("vertex", "triangle") for key in getattr(mesh, g)]
+        rows = {(row.group, row.key): row for row in ATTRIBUTES if row.kind == "tensor"}  # else "*"
+        return [(rows.get((g, k), rows[g, "*"]), k) for g in ("vertex", "triangle") for k in getattr(mesh, g)]
     return []
 
 
@@ -326,10 +319,9 @@ def new_mesh(
     if position_dtype not in (o3d.core.float32, o3d.core.float64):
         # integer positions in, computed positions out: rounding them back would give a wrong answer
         position_dtype = o3d.core.float64
-    index_dtype = src.triangle.indices.dtype if "indices" in src.triangle else o3d.core.int64
     out = o3d.t.geometry.TriangleMesh(device)
     out.vertex.positions = o3d.core.Tensor(vertices, device=device).to(position_dtype)
-    out.triangle.indices = o3d.core.Tensor(faces, device=device).to(index_dtype)
+    out.triangle.indices = o3d.core.Tensor(faces, device=device).to(src.triangle.indices.dtype)
     normals = set()
     for row, key in present_attributes(data):
         source, target = getattr(src, row.group), getattr(out, row.group)

@@ -78,10 +78,9 @@ def mesh_from_state(state: dict) -> MeshData:
     o3d = open3d()
     if kind == "legacy":
         source = legacy_mesh(source_v, source_t)
-        for row in ATTRIBUTES:
-            value = state["attributes"].get(row.key) if row.kind == "legacy" else None
-            if value is None:
-                continue
+        rows = {row.key: row for row in ATTRIBUTES if row.kind == "legacy"}
+        for key, value in state["attributes"].items():  # (in the table's order)
+            row = rows[key]
             if row.follows == "texture":
                 source.textures = [
                     o3d.geometry.Image() if t is None else o3d.geometry.Image(t) for t in value

@@ -1,13 +1,7 @@
 # cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
 """Levels of the volume-cost hierarchy (Liu et al. 2001, section 4.1): one sequential loop, like OpenMesh's
 ``DecimaterT``; ``tests/_hierarchy_oracle.py`` is this loop in plain Python (same arithmetic, same levels).
-
-The unlocked vertices are visited in increasing ``alpha * min_edge(x) + beta * max_edge(x)`` (ties:
-:func:`visiting_order`); each collapses into the first of at most ``max_tries`` neighbours in increasing
-cone volume that keeps the boundary, every surviving triangle's orientation, normal (``max_normal_angle``)
-and quality (``min_quality``), and the link condition; the removed vertices of a level are independent.
-Locked: vertices on an edge of more than two triangles, unreferenced and several-fan vertices. The rules
-in full: ``docs/algorithms/mesh_hierarchy.rst``.
+The visiting order, the targets' rules and the locked vertices: ``docs/algorithms/mesh_hierarchy.rst``.
 """
 
 import numpy as np
@@ -62,12 +56,9 @@ cdef bint _legal(const double* p, const Vertex* V, const int32_t* pair, const in
         i, l = i + (ring[i] <= ring[l]), l + (ring[l] <= ring[i])
     return common == mult[2 * V[x].start + e]  # link condition: only the edge's opposite vertices in common
 
-#: Lengths are compared in units of this fraction of the input's mean edge length ``h``, squared lengths in
-#: ``TIE h^2``: values the mesh's own rounding makes equal (a scan's fixed decimals, rows of identical rings)
-#: stay equal after a rigid motion.
+#: Lengths are compared in units of this fraction of the input's mean edge length ``h`` (squared: ``TIE h^2``).
 TIE = 2.0 ** -20
-#: Squared distances to the centroid (a last tie-break, between copies of one ring along a scanline: an edge or
-#: more apart) in units of this fraction of ``h^2``.
+#: Squared distances to the centroid (the last tie-break) are compared in units of this fraction of ``h^2``.
 FAR = 2.0 ** -8
 
 
@@ -78,10 +69,8 @@ def _far(positions, vertices, centre):
 
 def visiting_order(costs, spreads, candidates, positions, centre, double h):
     """The candidates' visiting order (indices into them): by cost, then ring spread (the sum of squared edge
-    lengths), in :data:`TIE` units of the mean edge length ``h``, then squared distance to the input's
-    centroid ``centre`` (rows of identical rings; :data:`FAR` units), then index: a rule of the geometry alone,
-    which reordering and rigid motions keep (up to ties in all four, or a value within 1e-12 of an edge of a
-    unit's boundary)."""
+    lengths), then squared distance to the input's centroid ``centre``, in :data:`TIE` and :data:`FAR` units of
+    the mean edge length ``h``, then index (why: ``docs/algorithms/mesh_hierarchy.rst``)."""
     q = h * h * TIE
     cost, spread = np.rint(costs / (h * TIE)), np.rint(spreads / q)
     if cost.size == 0 or max(cost.max(), spread.max()) >= 2.0**32:  # past 4096 mean edges: the general sort

@@ -241,16 +241,11 @@ def build_hierarchy_arrays(
     max_levels: int | None = None,
     progress: bool = False,
     workers: int | None = None,
-    mesh_kind: str = "arrays",
-    tensor_format: tuple = (),
 ) -> MeshHierarchy:
     """Array core of :func:`build_hierarchy` on ``(n, 3)`` vertices and ``(m, 3)`` triangles (checked and copied)."""
     _warn_workers(workers)
     options = _options(alpha, beta, min_vertices, max_levels, progress)
-    vertices, triangles = mesh_arrays(vertices, triangles)
-    return collapse_hierarchy(
-        vertices, triangles, mesh_kind=mesh_kind, tensor_format=tensor_format, **options
-    )
+    return collapse_hierarchy(*mesh_arrays(vertices, triangles), **options)
 
 
 def collapse_hierarchy(

@@ -254,10 +254,8 @@ def decode_geometry(mesh: MeshT, data: Any, *, anchors: int | None = None, progr
     k = len(indices)
     m = k if anchors is None else as_count(anchors, name="anchors", minimum=1, maximum=k)
     # SingularSystemError if the prefix misses a component
-    return new_mesh(
-        mesh_data,
-        solve_once("decode_geometry", progress, mesh_data, indices[:m], positions[:m], weights=omega),
-    )
+    vertices = solve_once("decode_geometry", progress, mesh_data, indices[:m], positions[:m], weights=omega)
+    return new_mesh(mesh_data, vertices)
 
 
 def iter_decode_geometry(
