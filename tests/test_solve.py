@@ -14,7 +14,7 @@ import scipy.sparse as sp
 from conftest import grid
 
 from o3d_lsmesh.core import tuning
-from o3d_lsmesh.core.solve import ORDERINGS, Plan, SPDSolver, cholmod_available, resolve_backend, solve_spd
+from o3d_lsmesh.core.solve import ORDERINGS, Plan, SPDSolver, cholmod_available, solve_spd
 from o3d_lsmesh.laplacian import laplacian_matrix
 
 CHOLMOD = pytest.mark.skipif(not cholmod_available(), reason="scikit-sparse is not installed")
@@ -141,12 +141,3 @@ def test_old_keywords_warn_from_outside_the_package_and_keep_working():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         pickle.loads(pickle.dumps(SPDSolver(N, backend="scipy", _plan=Plan(memory_budget=10**9))))
-
-
-def test_solver_is_deprecated_for_backend_only_for_callers_outside_the_package():
-    assert resolve_backend("scipy") == "scipy"
-    assert resolve_backend("auto", None) == "auto"
-    with pytest.warns(DeprecationWarning, match="solver= is deprecated: pass backend='iterative'"):
-        assert resolve_backend("auto", "iterative") == "iterative"
-    with pytest.raises(ValueError, match="backend must be one of"):
-        resolve_backend("magic")

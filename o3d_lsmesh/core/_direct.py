@@ -19,7 +19,7 @@ from scipy.sparse import csgraph
 
 from . import tuning
 from ._iterative import csr_parts
-from .errors import InputError, InputTypeError, called_from_outside, warn
+from .errors import InputError, InputTypeError
 from .validate import as_choice, check_finite
 
 ORDERINGS = ("default", "nesdis", "metis", "amd", "colamd", "natural")
@@ -35,20 +35,6 @@ def solver_backend(solver: Any, backend: str = "auto") -> str:
     """The :class:`SPDSolver` backend for a ``solver=`` option (``"auto"`` defers to ``backend``); silent."""
     solver = as_choice(solver, SOLVERS, name="solver")
     return backend if solver == "auto" else solver
-
-
-def resolve_backend(backend: Any = "auto", solver: Any = None) -> str:
-    """A public function's ``backend=``, or its deprecated ``solver=`` (None: not given).
-
-    ``solver=`` from outside the package warns (``DeprecationWarning`` naming ``backend=``); the package's
-    own calls stay silent. Call it directly from the public function.
-    """
-    backend = as_choice(backend, BACKENDS, name="backend")
-    if solver is None:
-        return backend
-    if called_from_outside(2):
-        warn(f"solver= is deprecated: pass backend={solver!r}", DeprecationWarning)
-    return solver_backend(solver, backend)
 
 
 @dataclass(frozen=True, eq=False)

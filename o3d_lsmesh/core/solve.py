@@ -29,7 +29,6 @@ from ._direct import (
     default_memory_budget,
     estimate_factor_bytes,
     operator_scale,
-    resolve_backend,
     single_threaded_blas,
     solver_backend,
 )
@@ -52,7 +51,6 @@ __all__ = [
     "estimate_factor_bytes",
     "gram_matrix",
     "operator_scale",
-    "resolve_backend",
     "single_threaded_blas",
     "solve_spd",
     "solver_backend",
