@@ -14,7 +14,7 @@ from numpy.testing import assert_allclose
 
 from o3d_lsmesh.core.boundary import boundary_halfedges
 from o3d_lsmesh.core.connectivity import Connectivity
-from o3d_lsmesh.core.operators import triangle_coefficients
+from o3d_lsmesh.core.liu import triangle_coefficients
 from o3d_lsmesh.fairing import constrained_fairing, constrained_fairing_arrays, smooth_boundary_curves_arrays
 from o3d_lsmesh.fairing.barycenter import local_operator
 from o3d_lsmesh.metrics import signed_volume, surface_distance

@@ -2,9 +2,9 @@
 
 Least-squares meshes (Sorkine & Cohen-Or 2004): uniform and cotangent Laplacians (eq. 1), the graph
 Laplacian ``D - A``, the hole patch's continuity-0/1/2 system; the scan energy's normal matrix
-``K^T K + mu H^T W H + lambda G``; umbrella (1- and 2-ring) vectors and weights. Liu et al. 2001's
-local operator (eq. 6-7), penalty (eq. 5) and curve Laplacian (section 3.3) live in
-:mod:`o3d_lsmesh.core.liu` and are re-exported here. Docs: ``docs/algorithms/connectivity.rst``.
+``K^T K + mu H^T W H + lambda G``; umbrella (1- and 2-ring) vectors and weights; Liu et al. 2001's
+penalty (eq. 5). Their local operator (eq. 6-7) and curve Laplacian (section 3.3): :mod:`.liu`. Docs:
+``docs/algorithms/connectivity.rst``.
 """
 
 from __future__ import annotations
@@ -19,41 +19,25 @@ from .connectivity import (
     VertexRings,
     ring_pattern,
 )
-from .liu import (
-    CurveOperator,
-    LocalMatrices,
-    accumulate_block,
-    curve_laplacian,
-    local_operator,
-    ring_csr,
-    triangle_coefficients,
-    valence_tables,
-)
+from .liu import ring_csr
 
 __all__ = [
     "LAPLACIAN_KINDS",
-    "CurveOperator",
-    "LocalMatrices",
     "Penalty",
-    "accumulate_block",
     "cotangent_laplacian",
-    "curve_laplacian",
     "graph_laplacian",
     "laplacian_of_kind",
-    "local_operator",
     "lower_csc",
     "patch_system",
     "penalty_matrix",
     "rim_neighbours",
     "scan_normal_matrix",
     "single_slots",
-    "triangle_coefficients",
     "two_ring_sums",
     "umbrella",
     "umbrella_weights",
     "uniform_from_edges",
     "uniform_laplacian",
-    "valence_tables",
 ]
 
 # ---------------------------------------------------------------------------------- eq. 1 and D - A

@@ -14,8 +14,9 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..core.connectivity import Connectivity
-from ..core.operators import accumulate_block, penalty_matrix
-from ..core.operators import local_operator as local_matrices
+from ..core.liu import accumulate_block
+from ..core.liu import local_operator as local_matrices
+from ..core.operators import penalty_matrix
 from ..core.solve import SPDSolver, check_constant_modes, check_finite, operator_scale, solver_backend
 from .tuning import BLOCK_ROWS
 
@@ -26,7 +27,7 @@ __all__ = ["GlobalSolver", "LocalOperator", "local_operator"]
 class LocalOperator:
     """One iteration of the paper's local operator: ``X_new = E1 @ (W @ X) + E2 @ X + E3 @ X0``.
 
-    The four ``(n, n)`` CSR share the 1-ring pattern (:func:`o3d_lsmesh.core.operators.local_operator`);
+    The four ``(n, n)`` CSR share the 1-ring pattern (:func:`o3d_lsmesh.core.liu.local_operator`);
     ``e3`` is None when built with ``keep_constraint=False``; ``initial`` is ``E3 @ X0`` of the
     ``positions0`` given to :func:`local_operator`. The object pickles.
     """

@@ -13,7 +13,7 @@ import numpy as np
 
 from .._o3d import new_mesh, read_mesh
 from ..core.boundary import BoundaryCurves, boundary_curves
-from ..core.operators import CurveOperator, curve_laplacian
+from ..core.liu import CurveOperator, curve_laplacian
 from ..core.validate import as_count, as_iterations, mesh_arrays
 
 if TYPE_CHECKING:
@@ -33,10 +33,10 @@ MIN_LOOP_LENGTH = 4
 
 
 def curve_operator(curves: BoundaryCurves | list) -> CurveOperator:
-    """The :class:`~o3d_lsmesh.core.operators.CurveOperator` of boundary curves (loops or ``BoundaryCurves``).
+    """The :class:`~o3d_lsmesh.core.liu.CurveOperator` of boundary curves (loops or ``BoundaryCurves``).
 
     Loops of fewer than :data:`MIN_LOOP_LENGTH` vertices and chains of fewer edges are held
-    (:func:`o3d_lsmesh.core.operators.curve_laplacian`).
+    (:func:`o3d_lsmesh.core.liu.curve_laplacian`).
 
     >>> curve_operator([np.array([5, 6, 7, 8])]).vertex.tolist()
     [5, 6, 7, 8]

@@ -19,7 +19,7 @@ from ..core.operators import lower_csc, rim_neighbours, scan_normal_matrix
 from ..core.progress import Progress
 from ..core.solve import Plan, SPDSolver, solver_backend
 from ..core.validate import collapsed_triangles
-from .scan_measure import _rim, scan_parameters
+from .scan_measure import scan_parameters
 from .tuning import RIM_RINGS, SCAN_ITERATIVE_VERTICES, SCAN_REDUCTION, SLIVER_QUALITY
 
 __all__ = ["ScanFairingSolver", "relax_rim", "restore_volume", "scan_denoise", "triangle_quality"]
@@ -77,7 +77,7 @@ class ScanFairingSolver:
         self.penalty = sp.csr_matrix(
             (np.repeat(root, 3), triangles.ravel(), corners), shape=(len(triangles), n)
         )
-        self.referenced = _rim(conn)[1] > 0
+        self.referenced = conn.rim[1] > 0
         if backend == "auto" and n >= SCAN_ITERATIVE_VERTICES:
             backend = "iterative"
         if backend == "iterative":
@@ -292,7 +292,7 @@ def relax_rim(
     """
     n = len(positions)
     conn = Connectivity(triangles, n) if conn is None else conn
-    boundary = _rim(conn)[0]
+    boundary = conn.rim[0]
     out = np.array(positions, dtype=np.float64)
     if not boundary.any():
         return out

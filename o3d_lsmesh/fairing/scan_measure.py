@@ -45,11 +45,6 @@ __all__ = [
 _IID_BOUNDARY_RATIO = 1.5 / (1.0 + 1.0 / 6.0)
 
 
-def _rim(conn: Connectivity) -> tuple[np.ndarray, np.ndarray]:
-    """``(boundary, valence)``, ``(n,)`` each: on an edge of one triangle; edge neighbours (int64)."""
-    return conn.rim  # computed once per connectivity, read-only
-
-
 def _mean_square_laplacian(vertices: np.ndarray, pairs: np.ndarray, mask: np.ndarray) -> float:
     """Mean over the ``mask`` vertices of ``|mean of the pairs-neighbours - x_i|^2``."""
     lap = umbrella(vertices, pairs, mask)
@@ -65,7 +60,7 @@ def rim_noise_ratio(
     """
     n = len(vertices)
     conn = Connectivity(triangles, n) if conn is None else conn
-    boundary, valence = _rim(conn)
+    boundary, valence = conn.rim
     on_curve = conn.edges[conn.boundary_edges]
     interior = (valence > 0) & ~boundary
     if not len(on_curve) or not interior.any():
@@ -123,7 +118,7 @@ def measured_noise(
     """
     n = len(vertices)
     conn = Connectivity(triangles, n) if conn is None else conn
-    boundary, valence = _rim(conn)
+    boundary, valence = conn.rim
     ring = conn.adjacency
     inner = (valence > 0) & ~boundary
     inner[ring[boundary].indices] = False  # two rings from the rim: full 1- and 2-rings
@@ -242,7 +237,7 @@ def scan_parameters(
     """
     n = len(vertices)
     conn = Connectivity(triangles, n) if conn is None else conn
-    boundary, valence = _rim(conn)
+    boundary, valence = conn.rim
     ratio, coverage = rim_noise_ratio(vertices, triangles, conn=conn)
     weight = _clipped_weight(ratio, coverage)
     referenced = int(np.count_nonzero(valence))
