@@ -23,7 +23,7 @@ from .errors import InputError, InputTypeError
 from .validate import as_choice, check_finite
 
 ORDERINGS = ("default", "nesdis", "metis", "amd", "colamd", "natural")
-#: What the public functions took as ``solver=`` (deprecated for ``backend=``).
+#: What the public functions take as ``solver=`` (``constrained_fairing``, ``ls_mesh``, ...).
 SOLVERS = ("auto", "cholmod", "iterative")
 #: What :class:`SPDSolver` and the public functions take as ``backend=``.
 BACKENDS = ("auto", "cholmod", "scipy", "iterative")
