@@ -73,14 +73,6 @@ def uniform_from_edges(edges: np.ndarray, n: int) -> sp.csr_matrix:
     return laplacian
 
 
-def _normalized(weights: sp.csr_matrix, n: int) -> sp.csr_matrix:
-    row_sum = np.asarray(weights.sum(axis=1)).ravel()
-    inv = np.zeros(n)
-    np.divide(1.0, row_sum, out=inv, where=row_sum > 0)
-    has_neighbours = (row_sum > 0).astype(np.float64)
-    return (sp.diags(has_neighbours) - sp.diags(inv) @ weights).tocsr()
-
-
 def cotangent_laplacian(vertices: np.ndarray, conn: Connectivity) -> sp.csr_matrix:
     """Normalized cotangent Laplacian ``I - D^-1 W`` ``(n, n)`` CSR, ``W_ij = (cot a_ij + cot b_ij) / 2``.
 
@@ -112,7 +104,11 @@ def cotangent_laplacian(vertices: np.ndarray, conn: Connectivity) -> sp.csr_matr
         fallback = sp.diags(degenerate.astype(np.float64))
         keep = sp.diags((~degenerate).astype(np.float64))
         weights = keep @ weights + fallback @ conn.adjacency
-    return _normalized(sp.csr_matrix(weights), n)
+    weights = sp.csr_matrix(weights)
+    row_sum = np.asarray(weights.sum(axis=1)).ravel()
+    inv = np.zeros(n)
+    np.divide(1.0, row_sum, out=inv, where=row_sum > 0)
+    return (sp.diags((row_sum > 0).astype(np.float64)) - sp.diags(inv) @ weights).tocsr()
 
 
 #: The Laplacians of eq. 1 a caller may name.

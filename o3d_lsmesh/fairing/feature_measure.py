@@ -1,12 +1,6 @@
 """``method="auto"``'s choice between the feature mode and the scan energy: a feature likeness measured on
-the mesh alone (no reference surface). Docs: ``docs/algorithms/features.rst`` (choosing on the mesh).
-
-The first passes of the feature mode (:class:`.features.FeatureRun`) are taken, as many as
-``PROBE_PASSES_PER_NOISE`` times the measured noise (at least one); the likeness is the mean over the
-median of the dihedral angles between the last pass's filtered normals of edge-adjacent faces. A CAD
-surface filters to near-flat pieces (a small median) cut by creases (a large mean); an organic one to a
-continuum of angles (a mean near the median). Where the likeness reaches ``FEATURE_LIKENESS`` the run goes
-on to the feature mode's own pass count, so the probe's passes are not taken twice.
+the mesh alone (no reference surface), the mean over the median of the dihedral angles after the feature
+mode's first passes. Docs: ``docs/algorithms/features.rst`` (choosing on the mesh).
 """
 
 from __future__ import annotations
@@ -85,7 +79,8 @@ class FeatureProbe:
 def feature_probe(
     vertices: np.ndarray, triangles: np.ndarray, *, conn: Connectivity | None = None
 ) -> FeatureProbe:
-    """Measure the feature likeness of a mesh (validated arrays): see the module's docstring.
+    """Measure the feature likeness of a mesh (validated arrays) after the feature mode's first
+    ``max(1, ceil(PROBE_PASSES_PER_NOISE sigma))`` passes, ``sigma`` the measured noise.
 
     Examples
     --------

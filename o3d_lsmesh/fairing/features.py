@@ -155,10 +155,10 @@ class FeatureRun:
     the result. ``feature_denoise`` takes them all; the default's chooser takes the first few, measures,
     and may go on (:mod:`.feature_measure`)."""
 
-    def __init__(self, vertices, triangles, conn, *, sigma_r=SIGMA_R, guided=True):
-        self.vertices, self.triangles, self.sigma_r, self.guided = vertices, triangles, sigma_r, guided
+    def __init__(self, vertices, triangles, conn):
+        self.vertices, self.triangles = vertices, triangles
         self.adjacency = conn.face_adjacency
-        self.patch_edges = _patch_edges(self.adjacency) if guided else None
+        self.patch_edges = _patch_edges(self.adjacency)
         # about the centroid: the planes' offsets n_f . c_f do not carry the distance to the origin
         self.used = np.bincount(triangles.ravel(), minlength=len(vertices)) > 0
         self.centre = vertices[self.used].mean(axis=0) if self.used.any() else np.zeros(3)
@@ -166,11 +166,8 @@ class FeatureRun:
 
     def step(self) -> np.ndarray:
         """One pass: the filtered face normals ``(m, 3)``, then the vertex steps towards their planes."""
-        a = self.adjacency
-        normals = filter_pass(
-            self.x, self.triangles, a, self.patch_edges, sigma_r=self.sigma_r, guided=self.guided
-        )
-        self.x = normal_steps(self.x, self.triangles, normals, incidence=a.incidence)
+        normals = filter_pass(self.x, self.triangles, self.adjacency, self.patch_edges)
+        self.x = normal_steps(self.x, self.triangles, normals, incidence=self.adjacency.incidence)
         return normals
 
     def positions(self) -> np.ndarray:
@@ -185,8 +182,6 @@ def feature_denoise(
     triangles: np.ndarray,
     *,
     passes: int | None = None,
-    sigma_r: float = SIGMA_R,
-    guided: bool = True,
     progress: bool = False,
     conn: Connectivity | None = None,
 ) -> np.ndarray:
@@ -208,7 +203,7 @@ def feature_denoise(
     passes = feature_passes(vertices, triangles, conn=conn) if passes is None else passes
     if passes == 0:
         return np.array(vertices, dtype=np.float64)
-    run = FeatureRun(vertices, triangles, conn, sigma_r=sigma_r, guided=guided)
+    run = FeatureRun(vertices, triangles, conn)
     for _ in Progress(progress, "constrained fairing (features)").over(range(passes)):
         run.step()
     return run.positions()

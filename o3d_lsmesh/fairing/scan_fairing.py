@@ -112,12 +112,6 @@ class ScanFairingSolver:
         """``S X0``: the minimizer of the energy for targets ``X0``, ``(n, 3)`` (unreferenced rows kept)."""
         return self.solve(positions0, twice=False)
 
-    def _filter(self, rhs: np.ndarray, positions0: np.ndarray) -> np.ndarray:
-        # the iterative path starts from the targets (the scan, close to its faired self) and solves
-        # the displacement from them to SCAN_REDUCTION; a start worse than zero is dropped per column by
-        # the gateway; direct solvers ignore it
-        return self._solver.solve(rhs, x0=positions0)
-
     def solve(
         self, positions0: np.ndarray, *, number_of_iterations: int = 1, twice: bool | float = True
     ) -> np.ndarray:
@@ -132,13 +126,16 @@ class ScanFairingSolver:
         # to the origin (a scan far from the origin in world coordinates)
         centre = given[self.referenced].mean(axis=0) if self.referenced.any() else np.zeros(3)
         targets = given - centre
+        # the iterative path starts from the targets (the scan, close to its faired self) and solves the
+        # displacement from them to SCAN_REDUCTION (the gateway drops a start worse than zero); direct
+        # solvers ignore x0
         positions = targets
         for _ in range(number_of_iterations):
-            positions = self._filter(self.normal_rhs(positions), positions)
+            positions = self._solver.solve(self.normal_rhs(positions), x0=positions)
         weight = float(twice)
         if weight and number_of_iterations:
             rest = targets - positions
-            positions = positions + weight * self._filter(self.normal_rhs(rest), rest)
+            positions = positions + weight * self._solver.solve(self.normal_rhs(rest), x0=rest)
         out = positions + centre
         unused = ~self.referenced
         out[unused] = given[unused]  # exactly where they were
@@ -196,13 +193,11 @@ def scan_denoise(
 def restore_volume(given: np.ndarray, positions: np.ndarray, conn: Connectivity) -> np.ndarray:
     """Offset each closed component of ``positions`` along its vertex normals to ``given``'s enclosed volume.
 
-    Desbrun et al. (1999)'s volume preservation as one uniform offset per component: on a component whose
-    every edge joins two triangles that run it in opposite directions (closed, consistently oriented),
-    ``x_i + t n_i`` (``n_i`` the unit area-weighted normal of ``positions``) with the ``t`` solving
-    ``V(t) = V(given)``, ``V(t) = 1/6 sum_abc (a + t n_a) . ((b + t n_b) x (c + t n_c))`` a cubic in ``t``
-    (Newton from 0: ``V'(0) = 1/6 sum_i |N_i|``, about the area). Open components (scans) and unreferenced
-    vertices are returned as they are. ``given``, ``positions``: ``(n, 3)``; returns new ``(n, 3)``.
-    Why the input's volume: ``docs/algorithms/scan_denoiser.rst``.
+    Desbrun et al. (1999)'s volume preservation as one offset ``x_i + t n_i`` per closed, consistently
+    oriented component (``n_i`` the unit area-weighted normals of ``positions``), ``t`` the root of the
+    cubic ``V(t) = V(given)`` by Newton from 0; open components and unreferenced vertices are returned as
+    they are. ``given``, ``positions``: ``(n, 3)``; returns new ``(n, 3)``. Why and how:
+    ``docs/algorithms/scan_denoiser.rst``.
 
     >>> import open3d as o3d
     >>> box = o3d.geometry.TriangleMesh.create_box()
