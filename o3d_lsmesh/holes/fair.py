@@ -58,35 +58,6 @@ def keeps_facing(x: np.ndarray, again: np.ndarray, new_tris: np.ndarray) -> bool
     return bool(((before * after).sum(axis=1) > 0).all() and move < 0.1 * size)
 
 
-def _fair_without(doomed, filler, vertices, triangles, holes, continuity, cot, owner, vertex_owner, index):
-    """:func:`fair_patches` of the holes but the ``doomed`` ones (given up: stuck); the others faired and
-    checked without them (a candidate meeting a patch that goes is no crossing)."""
-    m, n = len(filler.triangles), len(filler.vertices)
-    if doomed.all():
-        return np.full(len(holes), continuity, dtype=np.int64), np.arange(len(holes))
-    keep = ~doomed[vertex_owner]
-    renumber = np.concatenate([np.arange(n), n + np.cumsum(keep) - 1])
-    kept = np.flatnonzero(~doomed)
-    back = np.concatenate([np.arange(n), n + np.flatnonzero(keep)])
-    part, inner = vertices[back], np.concatenate([triangles[:m], renumber[triangles[m:][~doomed[owner]]]])
-    used, stuck = fair_patches(
-        filler,
-        part,
-        inner,
-        [holes[i] for i in kept],
-        continuity,
-        cot,
-        (np.cumsum(~doomed) - 1)[owner[~doomed[owner]]],
-        (np.cumsum(~doomed) - 1)[vertex_owner[keep]],
-        index,
-    )
-    vertices[n:][keep] = part[n:]
-    triangles[m:][~doomed[owner]] = back[inner[m:]]  # flipped in there
-    all_used = np.full(len(holes), continuity, dtype=np.int64)
-    all_used[kept] = used
-    return all_used, np.sort(np.concatenate([np.flatnonzero(doomed), kept[stuck]]))
-
-
 def fair_patches(
     filler: Any,
     vertices: np.ndarray,
@@ -113,20 +84,6 @@ def fair_patches(
     from .._triangulation_kernel import relax
 
     total, m, n = len(vertices), len(filler.triangles), len(filler.vertices)
-    # a new triangle on three loop vertices is the same in every candidate: one crossing the mesh (or
-    # another such) makes its hole's every candidate cross, so that hole is not faired (a scan's
-    # silhouette: a patch as large as the scan, faired five times over, to be left open). Tested with
-    # those triangles first among the new ones, in place (no copy of the mesh), then put back
-    fixed = (triangles[m:] < n).all(axis=1)
-    order, count, new_tris = np.argsort(~fixed, kind="stable"), int(fixed.sum()), triangles[m:].copy()
-    triangles[m:] = new_tris[order]
-    crossing = _crossings(vertices, triangles[: m + count], m, index, owner[order][:count])
-    triangles[m:] = new_tris
-    doomed = np.bincount(owner[order][:count], weights=crossing, minlength=len(holes)) > 0
-    if doomed.any():
-        return _fair_without(
-            doomed, filler, vertices, triangles, holes, continuity, cot, owner, vertex_owner, index
-        )
     unknown = np.arange(n, total)
     loops = holes[0].vertices if len(holes) == 1 else np.concatenate([hole.vertices for hole in holes])
     # triangles within `continuity` rings of the loops in the input, plus every new triangle; a local

@@ -93,11 +93,6 @@ class FillReport:
         return shown + (f"; and {len(left) - limit} more" if limit is not None and len(left) > limit else "")
 
 
-def _how(level: int) -> str:
-    """:attr:`HoleOutcome.how` of a hole filled at ``level`` (:attr:`FilledHoles.continuity`)."""
-    return {-1: "refined, unfaired", -2: "minimum-weight triangulation"}.get(level, f"continuity {level}")
-
-
 @dataclass(frozen=True)
 class FilledHoles:
     """The result of :func:`fill_holes_arrays`.
@@ -278,32 +273,24 @@ class HoleFiller:
         )
         if stuck and density > 0:
             # simpler forms: the bare minimum-weight triangulation (no new vertex), checked against the
-            # fills kept so far too; what still crosses is given up
-            retry = self._fill_pass(stuck, continuity, 0.0, False, False, index)
-            again = np.concatenate([triangles, retry[1][m:]])
-            crossing = _crossings(vertices, again, m, index, np.concatenate([own, len(filled) + retry[5]]))
-            crossing = crossing[len(triangles) - m :]
-            bad = np.bincount(retry[5], weights=crossing, minlength=len(retry[2])) > 0
-            keep = ~bad[retry[5]]
-            triangles = np.concatenate([triangles, retry[1][m:][keep]])
-            filled = filled + [hole for hole, b in zip(retry[2], bad) if not b]
+            # mesh, the fills kept so far and each other; what still crosses is given up
+            _, retry, retry_owner = triangulate_holes(self, stuck, 0.0, False)
+            again = np.concatenate([triangles, retry])
+            crossing = _crossings(vertices, again, m, index, np.concatenate([own, len(filled) + retry_owner]))
+            bad = np.bincount(retry_owner, weights=crossing[len(own) :], minlength=len(stuck)) > 0
+            triangles = np.concatenate([triangles, retry[~bad[retry_owner]]])
+            filled = filled + [hole for hole, b in zip(stuck, bad) if not b]
             used = np.concatenate([used, np.full(int((~bad).sum()), -2, dtype=np.int64)])
-            stuck = retry[3] + [hole for hole, b in zip(retry[2], bad) if b]
+            stuck = [hole for hole, b in zip(stuck, bad) if b]
         for hole in stuck:
             why[id(hole)] = "every fill crosses the surface (folded or overlapping triangles next to it)"
-        number = {id(hole): i for i, hole in enumerate(self.holes)}
-        level = {id(hole): int(c) for hole, c in zip(filled, used)}
+        # every loop is filled (at a continuity, FilledHoles.continuity) or left open (why)
+        named = {-1: "refined, unfaired", -2: "minimum-weight triangulation"}
+        how = {**why, **{id(hole): named.get(int(c), f"continuity {c}") for hole, c in zip(filled, used)}}
         report = FillReport(
             tuple(
-                HoleOutcome(
-                    i,
-                    hole.edges,
-                    hole.diameter,
-                    id(hole) in level,
-                    _how(level[id(hole)]) if id(hole) in level else why[id(hole)],
-                )
-                for i, hole in enumerate(self.holes)
-                if id(hole) in level or id(hole) in why
+                HoleOutcome(i, h.edges, h.diameter, id(h) not in why, how[id(h)])
+                for i, h in enumerate(self.holes)
             )
         )
         # said: every loop left open but those the size limits exclude and flaps (no holes)
@@ -313,6 +300,7 @@ class HoleFiller:
                 f"fill_holes: {len(said.holes)} of {len(self.holes)} loops left open: {said.describe(10)}"
                 " (every loop, filled or not: fill_holes(..., return_report=True), a FillReport)"
             )
+        number = {id(hole): i for i, hole in enumerate(self.holes)}
         order = np.argsort([number[id(hole)] for hole in filled], kind="stable").astype(np.int64)
         skipped = [hole for hole in self.holes if id(hole) in why]
         return FilledHoles(vertices, triangles, [filled[i] for i in order], skipped, used[order], report)
@@ -330,36 +318,77 @@ class HoleFiller:
         those whose every fill crosses (left open), the continuity of each filled one and the filled
         hole (index in the list) of each new triangle.
         ``index``: the crossing checks' (:func:`_crossings`)."""
-        vertices, triangles = self.vertices, self.triangles
-        n = len(vertices)
-        empty = np.zeros(0, dtype=np.int64)
+        n, m = len(self.vertices), len(self.triangles)
         if not holes:
-            return vertices.copy(), triangles.copy(), [], [], empty, empty
+            empty = np.zeros(0, dtype=np.int64)
+            return self.vertices.copy(), self.triangles.copy(), [], [], empty, empty
         fresh_points, new_tris, owner = triangulate_holes(self, holes, density, progress)
-        p = len(fresh_points)
-        out_vertices = np.concatenate([vertices, fresh_points])
-        new_tris = (out_triangles := np.concatenate([triangles, new_tris]))[len(triangles) :]
-        vertex_owner = _vertex_owner(new_tris, owner, n, p)
-        used, stuck = fair_patches(
-            self, out_vertices, out_triangles, holes, continuity, cot, owner, vertex_owner, index
-        )
-        used[np.bincount(vertex_owner, minlength=len(holes)) == 0] = -2  # no new vertex: the bare programme
-        if len(stuck):
-            keep_vertex = ~np.isin(vertex_owner, stuck)
-            remap = np.concatenate([np.arange(n), n + np.cumsum(keep_vertex) - 1])
-            out_vertices = np.concatenate([vertices, out_vertices[n:][keep_vertex]])
-            out_triangles = np.concatenate([triangles, remap[new_tris[~np.isin(owner, stuck)]]])
-            left = np.isin(np.arange(len(holes)), stuck)
-            owner = (np.cumsum(~left) - 1)[owner[~np.isin(owner, stuck)]]
-            return (
-                out_vertices,
-                out_triangles,
-                [hole for hole, out in zip(holes, left) if not out],
-                [hole for hole, out in zip(holes, left) if out],
-                used[~left],
-                owner,
+        vertices = np.concatenate([self.vertices, fresh_points])
+        triangles = np.concatenate([self.triangles, new_tris])
+        vertex_owner = _vertex_owner(new_tris, owner, n, len(fresh_points))
+        # a new triangle on three loop vertices is the same in every candidate: one crossing the mesh (or
+        # another such) makes its hole's every candidate cross, so that hole is not faired (a scan's
+        # silhouette: a patch as large as the scan, faired five times over, to be left open). Tested with
+        # those triangles first among the new ones, in place (no copy of the mesh), then put back
+        fixed = (new_tris < n).all(axis=1)
+        order, count = np.argsort(~fixed, kind="stable"), int(fixed.sum())
+        triangles[m:] = new_tris[order]
+        crossing = _crossings(vertices, triangles[: m + count], m, index, owner[order][:count])
+        triangles[m:] = new_tris
+        gone = np.bincount(owner[order][:count], weights=crossing, minlength=len(holes)) > 0
+        kept = np.flatnonzero(~gone)
+        if gone.any():  # the others faired without them (a candidate meeting a patch given up is no crossing)
+            vertices, triangles, owner, vertex_owner = _without(
+                gone, n, m, vertices, triangles, owner, vertex_owner
             )
-        return out_vertices, out_triangles, list(holes), [], used, owner
+        used = np.full(len(kept), -2, dtype=np.int64)  # no new vertex: the bare programme
+        if len(vertex_owner):
+            used, stuck = fair_patches(
+                self,
+                vertices,
+                triangles,
+                [holes[i] for i in kept],
+                continuity,
+                cot,
+                owner,
+                vertex_owner,
+                index,
+            )
+            used[np.bincount(vertex_owner, minlength=len(kept)) == 0] = -2
+            if len(stuck):
+                left = np.isin(np.arange(len(kept)), stuck)
+                vertices, triangles, owner, _ = _without(left, n, m, vertices, triangles, owner, vertex_owner)
+                gone[kept[left]] = True
+                kept, used = kept[~left], used[~left]
+        return (
+            vertices,
+            triangles,
+            [holes[i] for i in kept],
+            [hole for hole, out in zip(holes, gone) if out],
+            used,
+            owner,
+        )
+
+
+def _without(
+    gone: np.ndarray,
+    n: int,
+    m: int,
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    owner: Any,
+    vertex_owner: Any,
+) -> tuple:
+    """The vertices, triangles, each new triangle's hole and each new vertex's without the holes ``gone``
+    (a mask over the holes; the input's ``n`` vertices and ``m`` triangles first), renumbered."""
+    keep_vertex, keep_triangle, renumber = ~gone[vertex_owner], ~gone[owner], np.cumsum(~gone) - 1
+    remap = np.concatenate([np.arange(n), n + np.cumsum(keep_vertex) - 1])
+    return (
+        np.concatenate([vertices[:n], vertices[n:][keep_vertex]]),
+        np.concatenate([triangles[:m], remap[triangles[m:][keep_triangle]]]),
+        renumber[owner[keep_triangle]],
+        renumber[vertex_owner[keep_vertex]],
+    )
 
 
 def fill_holes(
