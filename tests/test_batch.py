@@ -680,12 +680,12 @@ def test_fill_op_and_a_fill_denoise_pipeline_match_the_library(data, tmp_path):
 
 
 def test_the_batch_flags_are_run_s_parameters_and_reserved_for_it():
-    # one table (commands.RUN_FLAGS) makes the flags of `o3d-lsmesh batch` and hands them to batch.run;
+    # one table (ops.RUN_FLAGS) makes the flags of `o3d-lsmesh batch` and hands them to batch.run;
     # an op option may not take any of their names
     import inspect
 
-    from o3d_lsmesh.app.commands import RUN_FLAGS
-    from o3d_lsmesh.app.ops import RESERVED
+    from o3d_lsmesh.app.ops import RESERVED, RUN_FLAGS
 
-    assert set(RUN_FLAGS) <= set(inspect.signature(batch.run).parameters)
-    assert RESERVED == set(RUN_FLAGS) | {"op", "set", "quiet", "json", "force", "help"}
+    names = {option.name for option in RUN_FLAGS}
+    assert names <= set(inspect.signature(batch.run).parameters)
+    assert RESERVED == names | {"op", "set", "quiet", "json", "force", "help"}

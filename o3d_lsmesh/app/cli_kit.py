@@ -67,8 +67,8 @@ def add_option(parser: Any, option: Option) -> None:
     elif getattr(option.parse, "choices", None):
         choices = option.parse.choices  # type: ignore[attr-defined]
         kwargs.update(choices=choices, type=type(choices[0]))
-    else:
-        kwargs["type"] = argparse_type(option.parse)
+    else:  # (int, float, str as themselves: argparse's own message for them)
+        kwargs["type"] = option.parse if isinstance(option.parse, type) else argparse_type(option.parse)
     if option.required:
         kwargs.update(required=True, default=None)
     parser.add_argument(option.cli_flag, dest=option.name, **kwargs)

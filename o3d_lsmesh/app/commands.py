@@ -20,40 +20,17 @@ from ..lsmesh import reconstruct_geometry
 from ..lsmesh.encoding import decode_geometry
 from .batch import run as run_batch
 from .batch import summarize
-from .cli_kit import Run, add_command, draw, shape_change_text
+from .cli_kit import Run, add_command, add_option, draw, shape_change_text
 from .demo import run_demo
 from .files import WRITABLE, CLIError, check_output, mesh_suffix, read_input, write_output
 from .metrics import shape_change, surface_distance, topology_summary, triangle_angles, vertex_error
 from .op_commands import approximate, denoise, encode, fill, hierarchy
-from .ops import OPS, Option, choice, flag, int_at_least, non_negative, normal_change, number
+from .ops import OPS, RUN_FLAGS, Option, choice, flag, int_at_least, non_negative, normal_change
 
 __all__ = ["add_parsers", "parse_index_spec"]
 
 #: the demo scan has up to about 0.55 * resolution**2 vertices: 2000 gives about 2.2 million
 MAX_RESOLUTION = 2000
-#: batch.run's own parameters as flags of ``o3d-lsmesh batch`` (the scheduler's two exclude each other)
-RUN_FLAGS: dict[str, dict[str, Any]] = {
-    "workers": dict(type=int, help="local worker processes (default: CPUs; 0: this process)"),
-    "threads_per_worker": dict(type=int, default=1, help="threads of each worker"),
-    "scheduler": dict(
-        metavar="ADDRESS",
-        help="existing Dask scheduler, e.g. tcp://host:8786 (default: $DASK_SCHEDULER_ADDRESS)",
-    ),
-    "scheduler_file": dict(metavar="FILE", help="existing scheduler's JSON file (default: none)"),
-    "resume": dict(action="store_true", help="skip inputs the report lists as ok with the same key"),
-    "report": dict(
-        metavar="FILE", help="JSON-lines report, one record per file (default: OUTDIR/batch_report.jsonl)"
-    ),
-    "retries": dict(type=int, default=1, help="runs of a task whose worker died before it fails"),
-    "fail_fast": dict(action="store_true", help="stop at the first failure"),
-    "task_timeout": dict(
-        type=float,
-        default=3600.0,
-        metavar="SECONDS",
-        help="a file still running after this long fails (TaskTimeout; 0: no limit; default: 3600)",
-    ),
-    "suffix": dict(default=".ply", help="output mesh format (.ply .obj .stl .off .gltf)"),
-}
 _FILES = {"input": "mesh file", "output": "mesh file to write"}
 #: the demo's flags
 DEMO = (
@@ -66,7 +43,7 @@ DEMO = (
         "the scanner's grid of R x R rays (200: about 22,000 vertices)",
     ),
     Option("noise", non_negative, 0.3, "range noise in grid spacings where the surface faces the scanner"),
-    Option("seed", number(int, rule="an integer"), 0, "random seed of the noise and dropouts"),
+    Option("seed", int, 0, "random seed of the noise and dropouts"),
 )
 
 
@@ -109,8 +86,8 @@ def _add_batch(p: argparse.ArgumentParser) -> None:
     p.add_argument("--op", required=True, help=help)
     p.add_argument("--set", action="append", default=[], metavar="OP.NAME=VALUE", help="an option of one op")
     where = p.add_mutually_exclusive_group()
-    for name, keywords in RUN_FLAGS.items():
-        (where if name.startswith("scheduler") else p).add_argument("--" + name.replace("_", "-"), **keywords)
+    for option in RUN_FLAGS:
+        add_option(where if option.name.startswith("scheduler") else p, option)
     group = p.add_argument_group(
         "operation options (each applies to every op of the pipeline that has it; "
         "--set OP.NAME=VALUE for one op)"
@@ -134,7 +111,8 @@ def _add_batch(p: argparse.ArgumentParser) -> None:
         group.add_argument(
             option.cli_flag, dest=f"opt_{name}", default=argparse.SUPPRESS, help=text, **kwargs
         )
-    flags = {name: "--" + name.replace("_", "-") for name in [*owners, "op", *RUN_FLAGS]}
+    flags = {name: "--" + name.replace("_", "-") for name in [*owners, "op"]}
+    flags |= {option.name: option.cli_flag for option in RUN_FLAGS}
     p.set_defaults(positionals=("inputs", "outdir"), flags=flags)
 
 
@@ -329,7 +307,7 @@ def batch(args: argparse.Namespace, run: Run) -> int:
             report=report,
             progress=run.progress,
             force=args.force,
-            **{name: getattr(args, name) for name in RUN_FLAGS if name != "report"},
+            **{o.name: getattr(args, o.name) for o in RUN_FLAGS if o.name != "report"},
         )
     except ImportError as error:  # --scheduler without dask installed
         raise CLIError(str(error)) from None

@@ -28,17 +28,12 @@ from .metrics import MAX_SAMPLE_POINTS, normal_deviation, shape_change, surface_
 __all__ = [
     "OPS",
     "RESERVED",
+    "RUN_FLAGS",
     "BatchOp",
     "Option",
     "TaskContext",
     "register_op",
 ]
-
-#: Names an operation option may not take: they are flags of ``o3d-lsmesh batch`` itself.
-RESERVED = frozenset(
-    "op workers threads_per_worker scheduler scheduler_file resume report retries fail_fast suffix set "
-    "task_timeout quiet json force help".split()
-)
 
 # --------------------------------------------------------------------------- parsers: value -> value or ValueError
 
@@ -229,6 +224,9 @@ def operation(name: str, **fields: Any) -> Callable[[OpFunction], OpFunction]:
 _LEVELS = "levels of the volume-cost collapse hierarchy, written to OUTDIR/<name>/level_NN<suffix>"
 _ANCHORS = "quantized LS-mesh anchors, written as OUTDIR/<name>.bin"
 _SELECTIONS = ("greedy", "random", "combined")
+_SCHEDULER = "existing Dask scheduler, e.g. tcp://host:8786 (default: $DASK_SCHEDULER_ADDRESS)"
+_REPORT = "JSON-lines report, one record per file (default: OUTDIR/batch_report.jsonl)"
+_TIMEOUT = "a file still running after this long fails (TaskTimeout; 0: no limit; default: 3600)"
 _METHODS = ("scan", "local", "global", "features", "auto")
 
 # fmt: off
@@ -277,6 +275,23 @@ COMPARE = (
     Option("points", int_at_least(1, MAX_SAMPLE_POINTS), 100_000, "surface samples per mesh", param="number_of_points"),
 )
 # fmt: on
+
+
+#: batch.run's own parameters, the flags of ``o3d-lsmesh batch`` (the scheduler's two exclude each other)
+RUN_FLAGS = (
+    Option("workers", int, None, "local worker processes (default: CPUs; 0: this process)"),
+    Option("threads_per_worker", int, 1, "threads of each worker"),
+    Option("scheduler", str, None, _SCHEDULER, metavar="ADDRESS"),
+    Option("scheduler_file", str, None, "existing scheduler's JSON file (default: none)", metavar="FILE"),
+    Option("resume", flag, False, "skip inputs the report lists as ok with the same key", is_flag=True),
+    Option("report", str, None, _REPORT, metavar="FILE"),
+    Option("retries", int, 1, "runs of a task whose worker died before it fails"),
+    Option("fail_fast", flag, False, "stop at the first failure", is_flag=True),
+    Option("task_timeout", float, 3600.0, _TIMEOUT, metavar="SECONDS"),
+    Option("suffix", str, ".ply", "output mesh format (.ply .obj .stl .off .gltf)"),
+)
+#: Names an operation option may not take: they are flags of ``o3d-lsmesh batch`` itself.
+RESERVED = frozenset([option.name for option in RUN_FLAGS] + "op set quiet json force help".split())
 
 
 def normal_change(a: Any, b: Any) -> float | None:
