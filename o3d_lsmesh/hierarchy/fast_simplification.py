@@ -152,11 +152,8 @@ def from_fast_simplification(
         collapsed = np.zeros(n0, dtype=bool)
         collapsed[collapses[:prefix, 1]] = True
         order = np.lexsort((np.arange(n_prev), collapsed[reps], parent))
-        first = run_heads(parent[order])
-        kept_child = np.empty(n_new, dtype=np.int64)
-        kept_child[parent[order[first]]] = order[first]
         keep = np.zeros(n_prev, dtype=bool)
-        keep[kept_child] = True
+        keep[order[run_heads(parent[order])]] = True
         # renumber level i in the order of its kept children, like the volume hierarchy
         renumber = np.empty(n_new, dtype=np.int64)
         renumber[parent[np.flatnonzero(keep)]] = np.arange(n_new)

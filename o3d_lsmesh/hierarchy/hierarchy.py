@@ -105,8 +105,8 @@ class MeshHierarchy:
 
     __hash__ = None  # type: ignore[assignment]
 
-    def _check_level(self, i: Any, *, minimum: int = 0, name: str = "i") -> int:
-        return as_count(i, name=name, minimum=minimum, maximum=len(self) - 1)
+    def _check_level(self, i: Any, *, minimum: int = 0) -> int:
+        return as_count(i, name="i", minimum=minimum, maximum=len(self) - 1)
 
     def vertex_count(self, i: int) -> int:
         """Number of vertices of level ``i``."""
