@@ -603,10 +603,9 @@ def gram(const index_t[::1] row_ptr, const index_t[::1] row_cols, const double[:
     CSR ``(indptr, indices, data)`` of the ``(n, n)`` product, each row's columns sorted, on every core.
 
     Row ``i`` is ``sum_(c in row i) a_ic A[:, c]^T``, gathered with a per-thread marker (Gustavson's
-    algorithm): a counting pass, then a filling one, each thread on a contiguous block of rows (one
-    thread: no parallel region). Entry ``(i, j)`` sums ``a_ic a_jc`` over the common columns in
-    increasing ``c``, as ``(j, i)`` does: the product is exactly symmetric (SciPy's runs on one thread,
-    then transposes to sort).
+    algorithm): a counting pass, then a filling one, each thread on a contiguous block of rows. Entry
+    ``(i, j)`` sums ``a_ic a_jc`` over the common columns in increasing ``c``, as ``(j, i)`` does: the
+    product is exactly symmetric (SciPy's runs on one thread, then transposes to sort).
     """
     cdef Py_ssize_t n = row_ptr.shape[0] - 1, t, threads = _threads(row_ptr.shape[0] - 1)
     dtype = np.int32 if index_t is int32_t else np.int64
@@ -615,12 +614,9 @@ def gram(const index_t[::1] row_ptr, const index_t[::1] row_cols, const double[:
     counts_array = empty_small_pages(n + 1, np.int64, 0)
     cdef int64_t[::1] counts = counts_array
     with nogil:
-        if threads == 1:
-            _gram_count(row_ptr, row_cols, col_ptr, col_rows, marker[0], counts, 0, n)
-        else:
-            for t in prange(threads, schedule="static", num_threads=threads):
-                _gram_count(row_ptr, row_cols, col_ptr, col_rows, marker[t], counts, t * n // threads,
-                            (t + 1) * n // threads)
+        for t in prange(threads, schedule="static", num_threads=threads):
+            _gram_count(row_ptr, row_cols, col_ptr, col_rows, marker[t], counts, t * n // threads,
+                        (t + 1) * n // threads)
     indptr_array = np.cumsum(counts_array)
     if indptr_array[n] >= np.iinfo(dtype).max:
         raise ValueError("the product has too many entries for 32-bit indices: pass 64-bit ones")
@@ -630,13 +626,9 @@ def gram(const index_t[::1] row_ptr, const index_t[::1] row_cols, const double[:
     cdef double[::1] data = data_array
     marker_array.fill(-1)
     with nogil:
-        if threads == 1:
+        for t in prange(threads, schedule="static", num_threads=threads):
             _gram_fill(row_ptr, row_cols, row_data, col_ptr, col_rows, col_data, indptr, indices, data,
-                       marker[0], 0, n)
-        else:
-            for t in prange(threads, schedule="static", num_threads=threads):
-                _gram_fill(row_ptr, row_cols, row_data, col_ptr, col_rows, col_data, indptr, indices, data,
-                           marker[t], t * n // threads, (t + 1) * n // threads)
+                       marker[t], t * n // threads, (t + 1) * n // threads)
     return indptr_array, indices_array, data_array
 
 

@@ -1,7 +1,7 @@
 """Every raise of the core's checks, reached once: the class, the parameter it names, the message.
 
 A table of calls, one row per ``raise`` in ``core/validate.py``, ``core/solve.py``, ``core/_direct.py`` and
-``core/_iterative.py`` (the pyamg ImportError aside): an :class:`InputError` names its parameter in
+``core/_iterative.py``: an :class:`InputError` names its parameter in
 ``param``, an :class:`InputTypeError` is also a ``TypeError``.
 """
 

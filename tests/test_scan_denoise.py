@@ -17,7 +17,7 @@ from numpy.testing import assert_allclose
 from o3d_lsmesh.core.boundary import boundary_halfedges
 from o3d_lsmesh.core.connectivity import Connectivity
 from o3d_lsmesh.core.operators import scan_normal_matrix
-from o3d_lsmesh.fairing import constrained_fairing, constrained_fairing_arrays, scan_fairing
+from o3d_lsmesh.fairing import constrained_fairing, constrained_fairing_arrays, scan_fairing, scan_measure
 from o3d_lsmesh.fairing.constrained import DEFAULT_METHOD
 from o3d_lsmesh.fairing.scan_fairing import ScanFairingSolver, relax_rim, restore_volume, scan_denoise
 from o3d_lsmesh.fairing.scan_measure import (
@@ -430,14 +430,16 @@ def test_measured_boundary_weight_against_loops_and_its_properties(rng):
     assert measured_boundary_weight(S, T) == 1.0
 
 
-def test_measured_noise_against_loops_the_added_noise_and_the_curvature(rng):
+def test_measured_noise_against_loops_the_added_noise_and_the_curvature(rng, monkeypatch):
     S, T = arrays(o3d.geometry.TriangleMesh.create_sphere(radius=1.0, resolution=12))
     for _, V, F in [*small_meshes(), ("sphere", S + rng.normal(0, 0.02, S.shape), T)]:
         assert measured_noise(V, F) == pytest.approx(reference_noise(V, F), rel=1e-9, abs=1e-12)
         # the 2-ring formed a few rows at a time; every k-th vertex, at most five of them
-        assert measured_noise(V, F, block=7) == pytest.approx(reference_noise(V, F), rel=1e-9, abs=1e-12)
-        noise = measured_noise(V, F, block=7, rows=5)
-        assert noise == pytest.approx(reference_noise(V, F, 5), rel=1e-9, abs=1e-12)
+        with monkeypatch.context() as patch:
+            patch.setattr(scan_measure, "NOISE_BLOCK", 7)
+            assert measured_noise(V, F) == pytest.approx(reference_noise(V, F), rel=1e-9, abs=1e-12)
+            patch.setattr(scan_measure, "NOISE_ROWS", 5)
+            assert measured_noise(V, F) == pytest.approx(reference_noise(V, F, 5), rel=1e-9, abs=1e-12)
     # on a fine sphere: sigma recovers the deviation we added (in root-mean-square edge lengths), and g the
     # sphere's own umbrella h^2 / (2 R) per unit h (the mean of the 1-ring lies (mean |x_j - x_i|^2) / 2R
     # inside), the same at every noise level

@@ -152,11 +152,9 @@ def aggregation_levels(
     (``|a_ij| >= theta sqrt(|a_ii a_jj|)``, the weak ones lumped onto the diagonal: ``A_F``) and smooths
     ``P = (I - omega D^-1 A_F) T`` with ``D`` the rows' absolute sums (a local Gershgorin bound).
     """
-    try:
-        from pyamg.aggregation.aggregate import standard_aggregation
-        from pyamg.aggregation.tentative import fit_candidates
-    except ImportError as error:  # pragma: no cover - pyamg is in install_requires
-        raise ImportError("the iterative solver path needs pyamg: pip install pyamg") from error
+    from pyamg.aggregation.aggregate import standard_aggregation
+    from pyamg.aggregation.tentative import fit_candidates
+
     from .._block_kernel import gauss_seidel, strong_part
 
     theta = tuning.STRENGTH if theta is None else theta
@@ -288,7 +286,6 @@ def block_cg(
         return (np.zeros_like(b), 0, 0.0)
     # the bar counts the decades the worst column's residual falls to its stopping point
     bar = Progress(progress, "conjugate gradients").decades(float((relative / limit).max()))
-    converged = False
     if hasattr(precondition, "bound"):  # work blocks allocated once for the solve
         apply = precondition.bound(B.shape[1])
     else:
@@ -323,10 +320,8 @@ def block_cg(
             beta = np.where(active, rz_new / np.where(rz != 0, rz, 1.0), 0.0)
             cg_direction(P, Z, beta)
             rz = rz_new
-        converged = True
+        bar.finish()
     finally:
-        if converged:
-            bar.finish()
         bar.close()
     if not np.isfinite(X).all():
         raise SingularSystemError("conjugate gradients diverged: the matrix is not positive definite")

@@ -228,16 +228,8 @@ def _fair(positions, conn, method, options, solver="auto", probe=None):
         return positions
     triangles = conn.triangles
     if method == "scan":
-        weights = {key: options[key] for key in ("mu", "membrane", "boundary_weight")}
-        return scan_denoise(
-            positions,
-            triangles,
-            number_of_iterations=iterations,
-            solver=solver,
-            progress=progress,
-            conn=conn,
-            **weights,
-        )
+        scan = {key: options[key] for key in ("number_of_iterations", "mu", "membrane", "boundary_weight")}
+        return scan_denoise(positions, triangles, solver=solver, progress=progress, conn=conn, **scan)
     if method == "features":
         return feature_denoise(positions, triangles, passes=iterations, progress=progress, conn=conn)
     smooth_boundary = options["smooth_boundary"]

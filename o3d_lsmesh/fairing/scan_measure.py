@@ -99,16 +99,11 @@ class NoiseEstimate(NamedTuple):
 
 
 def measured_noise(
-    vertices: np.ndarray,
-    triangles: np.ndarray,
-    *,
-    conn: Connectivity | None = None,
-    rows: int = NOISE_ROWS,
-    block: int = NOISE_BLOCK,
+    vertices: np.ndarray, triangles: np.ndarray, *, conn: Connectivity | None = None
 ) -> NoiseEstimate:
     """The noise ``sigma`` and the surface's detail ``g`` along the normal, in RMS edge lengths, from the
-    1- and 2-ring umbrellas of at most ``rows`` vertices two rings from the rim (else ``(0, 0)``); the
-    2-ring formed ``block`` rows or more at a time. Derivation: ``docs/algorithms/scan_denoiser.rst``.
+    1- and 2-ring umbrellas of at most ``NOISE_ROWS`` vertices two rings from the rim (else ``(0, 0)``);
+    the 2-ring formed ``NOISE_BLOCK`` rows or more at a time. Derivation: ``docs/algorithms/scan_denoiser.rst``.
 
     >>> import open3d as o3d
     >>> s = o3d.geometry.TriangleMesh.create_sphere(radius=1.0, resolution=30)
@@ -132,7 +127,7 @@ def measured_noise(
     smooth_square = np.einsum("ij,ij->i", smooth, smooth)
     normal = area_weighted_normals(smooth, triangles)
     inner_rows = np.flatnonzero(inner)
-    inner_rows = inner_rows[:: -(-len(inner_rows) // rows)]
+    inner_rows = inner_rows[:: -(-len(inner_rows) // NOISE_ROWS)]
     # per inner vertex: 1-ring umbrella along the normal, and the 1-ring's mean squared distance
     sub, x = smooth[inner_rows], vertices[inner_rows]
     nrm = normal[inner_rows]
@@ -152,7 +147,7 @@ def measured_noise(
     sum_a2, sum_k2, sum_h2 = 0.0, 0.0, 0.0
     stacked = np.column_stack([vertices, smooth, smooth_square])  # the 2-ring sums of all three in one pass
     # a few blocks, not blocks of a fixed size: each product clears a work array as long as the mesh
-    block_rows = max(block, -(-len(inner_rows) // NOISE_BLOCKS))
+    block_rows = max(NOISE_BLOCK, -(-len(inner_rows) // NOISE_BLOCKS))
     for start in range(0, len(inner_rows), block_rows):
         part = inner_rows[start : start + block_rows]
         d2, sums = two_ring_sums(ring, part, stacked)
