@@ -271,13 +271,11 @@ def new_mesh(
 
         extension = Appended(data, np.asarray(vertices, dtype=np.float64), np.asarray(triangles))
         vertices, triangles = extension.vertices, extension.triangles
-    elif same_topology and data.split is not None:
-        # back to the source's split layout: every duplicate gets its welded vertex's position
+    elif same_topology:
+        # a welded source: back to its split layout, every duplicate at its welded vertex's position
         vertices = data.source_positions(np.asarray(vertices, dtype=np.float64))
-        triangles = data.split_triangles
-    elif triangles is None:
-        triangles = data.triangles
-    elif data.source is not None:
+        triangles = data.triangles if data.split is None else data.split_triangles
+    else:
         warn_dropped_attributes(data, "the result has new connectivity", stacklevel=4)
     vertices = np.ascontiguousarray(vertices, dtype=np.float64)
     # (a legacy mesh of the same connectivity copies the source's own triangles: no int64 copy here)
