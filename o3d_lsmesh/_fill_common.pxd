@@ -25,6 +25,13 @@ cdef inline void _cross(const double* u, const double* v, double* out) noexcept 
     out[1] = u[2] * v[0] - u[0] * v[2]
     out[2] = u[0] * v[1] - u[1] * v[0]
 
+cdef inline void _normal(const double* p0, const double* p1, const double* p2, double* out) noexcept nogil:
+    """Triangle ``(p0, p1, p2)``'s normal ``(p1 - p0) x (p2 - p0)``, twice its area long."""
+    cdef double[3] u, v
+    _sub(p1, p0, u)
+    _sub(p2, p0, v)
+    _cross(u, v, out)
+
 ctypedef struct Half:  # a half-edge's undirected key and its index 3 t + s
     int64_t key
     int64_t h

@@ -12,7 +12,7 @@ from libc.math cimport INFINITY, fabs, fmax, fmin, sqrt
 from libc.stdint cimport int64_t, uint8_t
 from libc.stdlib cimport calloc, free, malloc, qsort
 
-from o3d_lsmesh._fill_common cimport Half, _by_key, _by_value, _cross, _dot, _key, _lower, _outside, _sub
+from o3d_lsmesh._fill_common cimport Half, _by_key, _by_value, _cross, _dot, _key, _lower, _normal, _outside, _sub
 
 # tangential relaxation and the crossing test
 
@@ -29,7 +29,7 @@ def tangential_relax(const double[:, ::1] vertices, const int64_t[:, ::1] new_tr
     sums_ = np.empty((p, 7))  # per new vertex: normal sum, weighted centroid sum, area sum
     cdef double[:, ::1] x = out, acc = sums_
     cdef double[3][3] pts
-    cdef double[3] u, w, fn, move
+    cdef double[3] fn, move
     cdef double area, norm, along
     cdef int it
     with nogil:
@@ -42,9 +42,7 @@ def tangential_relax(const double[:, ::1] vertices, const int64_t[:, ::1] new_tr
                     v = new_tris[i, r]
                     for c in range(3):
                         pts[r][c] = x[v - first_new, c] if v >= first_new else vertices[v, c]
-                _sub(pts[1], pts[0], u)
-                _sub(pts[2], pts[0], w)
-                _cross(u, w, fn)
+                _normal(pts[0], pts[1], pts[2], fn)
                 area = sqrt(_dot(fn, fn))
                 for r in range(3):
                     v = new_tris[i, r] - first_new
@@ -114,12 +112,9 @@ cdef bint _cross_pair(const double* P, const double* Q) noexcept nogil:
 
 cdef bint _folded(const double* u, const double* w, const double* a, const double* b) noexcept nogil:
     """Whether ``(u, w, a)`` and ``(u, w, b)`` fold flat onto each other beyond their shared edge."""
-    cdef double[3] e, da, db, na, nb, both
-    _sub(w, u, e)
-    _sub(a, u, da)
-    _sub(b, u, db)
-    _cross(e, da, na)
-    _cross(e, db, nb)
+    cdef double[3] na, nb, both
+    _normal(u, w, a, na)
+    _normal(u, w, b, nb)
     _cross(na, nb, both)
     return _dot(na, nb) > 0 and sqrt(_dot(both, both)) <= 1e-9 * sqrt(_dot(na, na) * _dot(nb, nb))
 
@@ -271,9 +266,7 @@ cdef void _weights(const int64_t[:, ::1] tris, const double[:, ::1] x, const int
             scale[k] = 1.0 / degree[k] if degree[k] > 0 else 0.0
         return
     for k in range(t):  # the vertex areas, a third of each triangle's, gathered in scale first
-        _sub(&x[tris[k, 1], 0], &x[tris[k, 0], 0], u)
-        _sub(&x[tris[k, 2], 0], &x[tris[k, 0], 0], v)
-        _cross(u, v, n)
+        _normal(&x[tris[k, 0], 0], &x[tris[k, 1], 0], &x[tris[k, 2], 0], n)
         area = 0.5 * sqrt(_dot(n, n))
         for c in range(3):
             scale[tris[k, c]] += area / 3.0

@@ -16,5 +16,5 @@ def refine(
     max_points: int = -1,
 ) -> tuple[Array, Array, Array]: ...
 def loop_geometry(
-    loop: Array, rows: Array, vertices: Array, triangles: Array, indptr: Array, data: Array
+    loop_: Array, rows: Array, vertices_: Array, triangles: Array, indptr: Array, data: Array
 ) -> tuple[Array, Array, Array, float, Array]: ...

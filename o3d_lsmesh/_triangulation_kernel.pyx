@@ -13,7 +13,7 @@ from libc.stdint cimport int64_t, uint8_t
 from libc.stdlib cimport free, malloc, qsort
 from libc.string cimport memcpy, memset
 
-from o3d_lsmesh._fill_common cimport Half, _by_key, _by_value, _cross, _dot, _key, _lower, _outside, _sub
+from o3d_lsmesh._fill_common cimport Half, _by_key, _by_value, _cross, _dot, _key, _lower, _normal, _outside, _sub
 
 # numerical tolerances and a safeguard, none fitted to a benchmark (the fitted constants: holes/tuning.py)
 cdef double _TIE = 1e-6  # dynamic programme: largest angles this close tie, and the area decides
@@ -204,29 +204,21 @@ cdef bint _flip_improves(const double* pa, const double* pb, const double* pc, c
                          bint smooth=False) noexcept nogil:
     """Whether edge ``(a, b)`` between ``(a, b, c)`` and ``(b, a, d)`` flips to ``(c, d)`` (docs page); with
     ``smooth``, only to a crease no sharper (the cosine of the new triangles' normals not below the old)."""
-    cdef double[3] x, y, n1, n2, m2, old
+    cdef double[3] n1, n2, m2, old
     cdef double crease = 0.0
     cdef int c
     if not (_in_circumsphere(pa, pb, pc, pd) or _in_circumsphere(pb, pa, pd, pc)):
         return False
-    _sub(pb, pa, x)
-    _sub(pc, pa, y)
-    _cross(x, y, n1)
-    _sub(pa, pb, x)
-    _sub(pd, pb, y)
-    _cross(x, y, n2)
+    _normal(pa, pb, pc, n1)
+    _normal(pb, pa, pd, n2)
     for c in range(3):
         old[c] = n1[c] + n2[c]
     if smooth:
         crease = _dot(n1, n2) / sqrt(_dot(n1, n1) * _dot(n2, n2))
-    _sub(pa, pc, x)
-    _sub(pd, pc, y)
-    _cross(x, y, n1)
+    _normal(pc, pa, pd, n1)
     if not _dot(n1, old) > 0:
         return False
-    _sub(pb, pd, x)
-    _sub(pc, pd, y)
-    _cross(x, y, m2)
+    _normal(pd, pb, pc, m2)
     if not _dot(m2, old) > 0:
         return False
     if smooth and not _dot(n1, m2) / sqrt(_dot(n1, n1) * _dot(m2, m2)) >= crease:
@@ -362,15 +354,9 @@ cdef int _relax(const double* points, int64_t* tris, int64_t t, const int64_t* f
     return 0
 
 cdef int64_t[::1] _fixed_keys(fixed_pairs):
-    """The sorted keys of edges ``(f, 2)``."""
-    cdef const int64_t[:, ::1] pairs = np.ascontiguousarray(fixed_pairs, dtype=np.int64).reshape(-1, 2)
-    keys = np.empty(pairs.shape[0], dtype=np.int64)
-    cdef int64_t[::1] out = keys
-    cdef int64_t i
-    for i in range(pairs.shape[0]):
-        out[i] = _key(pairs[i, 0], pairs[i, 1])
-    keys.sort()
-    return out
+    """The sorted keys (``_key``) of edges ``(f, 2)``."""
+    pairs = np.ascontiguousarray(fixed_pairs, dtype=np.int64).reshape(-1, 2)
+    return np.sort((pairs.min(axis=1) << 32) | pairs.max(axis=1))
 
 def relax(const double[:, ::1] points, triangles, fixed_pairs, dirty, bint smooth=False):
     """Liepa's relaxation of a patch: the flipped ``(t, 3)`` triangles; ``fixed_pairs (f, 2)`` edges no flip
@@ -474,44 +460,33 @@ def refine(points, sigma, triangles, fixed_pairs, owner, double alpha, int64_t m
 
 # what the triangulation needs of a loop
 
-def loop_geometry(const int64_t[::1] loop, const int64_t[::1] rows, const double[:, ::1] vertices,
-                  const int64_t[:, ::1] triangles, const int64_t[::1] indptr, const int64_t[::1] data):
+def loop_geometry(loop_, const int64_t[::1] rows, vertices_, const int64_t[:, ::1] triangles,
+                  const int64_t[::1] indptr, const int64_t[::1] data):
     """A loop's points ``(k, 3)``, the unit normals of the mesh triangles on its edges ``(k, 3)``, its chords
     that are mesh edges ``(k, k)`` bool, its mean edge length, and those chords as pairs ``(c, 2)``."""
+    cdef const int64_t[::1] loop = loop_
+    cdef const double[:, ::1] vertices = vertices_
     cdef int64_t k = loop.shape[0], n = vertices.shape[0], m = triangles.shape[0], p, q, r, lo, w
-    cdef int64_t c, t, count
+    cdef int64_t c, t
     if rows.shape[0] != k or indptr.shape[0] != n + 1:
         raise ValueError("rows must be (k,), indptr (n + 1,)")
     if k and _outside(&loop[0], k, n):
         raise ValueError("loop outside the mesh")
-    by_vertex_ = np.empty(k, dtype=np.int64)
-    sorted_ = np.empty(k, dtype=np.int64)
-    points_ = np.empty((k, 3))
+    loop_ = np.asarray(loop_)
+    by_vertex_ = np.argsort(loop_, kind="stable")  # the loop sorted by vertex, ties by position
+    sorted_, points_ = loop_[by_vertex_], np.asarray(vertices_)[loop_]
     outer_ = np.empty((k, 3))
     chords_ = np.zeros((k, k), dtype=np.uint8)
     cdef int64_t[::1] by_vertex = by_vertex_, ordered = sorted_
     cdef uint8_t[:, ::1] out = chords_
     cdef double[:, ::1] points = points_, outer = outer_
-    cdef double[3] u, v
+    cdef double[3] u
     cdef double norm, spacing = 0.0
-    cdef Half* order = <Half*>malloc(max(k, 1) * sizeof(Half))
-    if not order:
-        raise MemoryError
     with nogil:
-        for p in range(k):  # the loop sorted by vertex, ties by position: a stable argsort
-            order[p].key, order[p].h = loop[p], p
-        qsort(order, k, sizeof(Half), _by_key)
-        for p in range(k):
-            ordered[p], by_vertex[p] = order[p].key, order[p].h
-        free(order)
-        for p in range(k):
-            for c in range(3):
-                points[p, c] = vertices[loop[p], c]
         for p in range(k):
             t = rows[p] % m
-            _sub(&vertices[triangles[t, 1], 0], &vertices[triangles[t, 0], 0], u)
-            _sub(&vertices[triangles[t, 2], 0], &vertices[triangles[t, 0], 0], v)
-            _cross(u, v, &outer[p, 0])
+            _normal(&vertices[triangles[t, 0], 0], &vertices[triangles[t, 1], 0], &vertices[triangles[t, 2], 0],
+                    &outer[p, 0])
             norm = sqrt(_dot(&outer[p, 0], &outer[p, 0]))
             for c in range(3):
                 outer[p, c] = outer[p, c] / (norm if norm > 0 else 1.0)
@@ -532,16 +507,4 @@ def loop_geometry(const int64_t[::1] loop, const int64_t[::1] rows, const double
             out[p, q] = 0
             out[q, p] = 0
     spacing = spacing / k if k else 0.0
-    count = 0
-    for p in range(k):
-        for q in range(p + 1, k):
-            count += out[p, q]
-    pairs_ = np.empty((count, 2), dtype=np.int64)
-    cdef int64_t[:, ::1] pairs = pairs_
-    count = 0
-    for p in range(k):  # row by row, as np.argwhere(np.triu(chords))
-        for q in range(p + 1, k):
-            if out[p, q]:
-                pairs[count, 0], pairs[count, 1] = p, q
-                count += 1
-    return points_, outer_, chords_.view(bool), spacing, pairs_
+    return points_, outer_, chords_.view(bool), spacing, np.argwhere(np.triu(chords_))
