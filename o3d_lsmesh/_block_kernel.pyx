@@ -2,11 +2,8 @@
 """Sparse products and Gauss-Seidel sweeps on ``(n, k)`` blocks: the iterative solver's inner loops.
 
 SciPy's block product and pyamg's Gauss-Seidel stream the matrix once per column; these stream it
-once for all ``k`` columns (row-major blocks: a row's ``k`` values share a cache line),
-on every core (OpenMP; ``OMP_NUM_THREADS`` sets how many). A Gauss-Seidel sweep is sequential by
-nature: each column gets the arithmetic of pyamg's ``gauss_seidel`` (same products in the same order),
-and for several cores the rows are cut into a fixed number of blocks swept side by side (hybrid
-Gauss-Seidel), a count set by the matrix's size alone, so results never depend on the thread count.
+once for all ``k`` columns (row-major blocks: a row's ``k`` values share a cache line), on every core
+(OpenMP; ``OMP_NUM_THREADS`` sets how many), with results that never depend on the thread count.
 :func:`empty_small_pages` is the package's one OS memory advice (for large work arrays).
 """
 
@@ -134,7 +131,8 @@ def gauss_seidel(const index_t[::1] indptr, const index_t[::1] indices, const do
                  double[:, ::1] x, const double[:, ::1] b, bint forward, Py_ssize_t blocks=1):
     """One Gauss-Seidel sweep of ``A x = b`` over the rows in order (``forward``) or in reverse, in place.
 
-    Row ``i``: ``x_i = (b_i - sum_(j != i) a_ij x_j) / a_ii``, skipped where ``a_ii = 0`` (as pyamg).
+    Row ``i``: ``x_i = (b_i - sum_(j != i) a_ij x_j) / a_ii``, skipped where ``a_ii = 0`` (pyamg's
+    ``gauss_seidel``: the same products in the same order, per column).
     With ``blocks > 1`` the rows are cut into that many contiguous blocks, swept in parallel (OpenMP):
     inside a block each row sees its block's updated values, across blocks the values from before the
     sweep (hybrid Gauss-Seidel, as hypre's). The result depends on ``blocks``, not on the thread count,

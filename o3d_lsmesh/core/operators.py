@@ -20,6 +20,7 @@ from .connectivity import (
     ring_pattern,
 )
 from .liu import ring_csr
+from .validate import collapsed_triangles
 
 __all__ = [
     "LAPLACIAN_KINDS",
@@ -244,11 +245,7 @@ def scan_normal_matrix(
     from ._iterative import gram_matrix
 
     triangles, n = conn.triangles, conn.n
-    if len(triangles) and (
-        (triangles[:, 0] == triangles[:, 1]).any()
-        | (triangles[:, 1] == triangles[:, 2]).any()
-        | (triangles[:, 2] == triangles[:, 0]).any()
-    ):
+    if collapsed_triangles(triangles).any():
         raise ValueError("scan_normal_matrix takes triangles of three distinct vertices")
     edges, counts, halfedge_edge = conn.edges, conn.edge_triangles, conn.halfedge_edge
     boundary, valence = conn.rim

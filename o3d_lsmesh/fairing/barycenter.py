@@ -107,12 +107,10 @@ class GlobalSolver:
         if len(self.free):
             # a closed component is held in place only by mu |H 1|^2: a tiny mu lets it drift. Two free
             # vertices are coupled exactly when a path of free-free mesh edges joins them
-            free = np.zeros(conn.n, dtype=bool)
-            free[self.free] = True
             reduced = np.full(conn.n, -1, dtype=np.int64)
             reduced[self.free] = np.arange(len(self.free))
-            both = free[conn.edges[:, 0]] & free[conn.edges[:, 1]]
-            coupled = reduced[conn.edges[both]]
+            coupled = reduced[conn.edges]
+            coupled = coupled[(coupled >= 0).all(axis=1)]
             graph = sp.csr_matrix(
                 (np.ones(len(coupled), dtype=np.int8), (coupled[:, 0], coupled[:, 1])), shape=normal.shape
             )

@@ -147,18 +147,15 @@ def resolved_options(method: str | None, number_of_iterations: int | None, reimp
 
 def _check_options(method: Any, given: dict[str, Any]) -> tuple[str, dict[str, Any]]:
     # the one check of every option: the method's row of METHOD_OPTIONS, then progress
-    if method is not None:
-        as_choice(method, (*FAIRING_METHODS, _AUTO), name="method")
-    auto = method == _AUTO  # the mesh chooses; its options are checked as the scan energy's
-    if auto:
-        method = "scan"
-    elif method is None:
+    if method is None:
         method = resolved_options(None, given["number_of_iterations"], given["reimpose_every"])[0]
+    # "auto": the mesh chooses; its options are checked as the scan energy's
+    auto = as_choice(method, (*FAIRING_METHODS, _AUTO), name="method") == _AUTO
     # a bool's type is checked for every method; True is what scan and features require
     smooth = as_bool(given["smooth_boundary"], name="smooth_boundary")
     given = {**given, "smooth_boundary": None if smooth else False}
     progress = as_bool(given.pop("progress"), name="progress")
-    method, options = check_options(METHOD_OPTIONS, method, given)
+    method, options = check_options(METHOD_OPTIONS, "scan" if auto else method, given)
     options["progress"] = progress
     return _AUTO if auto else method, options
 

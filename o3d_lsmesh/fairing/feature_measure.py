@@ -11,7 +11,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core.connectivity import Connectivity
-from ..core.progress import Progress
 from .features import FeatureRun, passes_for_noise
 from .scan_measure import measured_noise
 from .tuning import FEATURE_LIKENESS, PROBE_PASSES_PER_NOISE
@@ -69,11 +68,7 @@ class FeatureProbe:
         if self.passes == 0:
             return np.array(self.run.vertices, dtype=np.float64)
         # a probe never takes more than the mode's passes (PROBE_PASSES_PER_NOISE < PASSES_PER_NOISE / 2)
-        for _ in Progress(progress, "constrained fairing (features)").over(
-            range(self.passes - self.probe_passes)
-        ):
-            self.run.step()
-        return self.run.positions()
+        return self.run.finish(self.passes - self.probe_passes, progress)
 
 
 def feature_probe(

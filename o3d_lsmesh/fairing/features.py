@@ -151,8 +151,8 @@ def passes_for_noise(noise: float) -> int:
 
 
 class FeatureRun:
-    """The feature mode's passes on one mesh, taken one at a time (:meth:`step`); :meth:`positions` reads
-    the result. ``feature_denoise`` takes them all; the default's chooser takes the first few, measures,
+    """The feature mode's passes on one mesh, taken one at a time (:meth:`step`); :meth:`finish` takes the
+    rest and reads the result. ``feature_denoise`` takes them all; the default's chooser takes the first few, measures,
     and may go on (:mod:`.feature_measure`)."""
 
     def __init__(self, vertices, triangles, conn):
@@ -170,8 +170,10 @@ class FeatureRun:
         self.x = normal_steps(self.x, self.triangles, normals, incidence=self.adjacency.incidence)
         return normals
 
-    def positions(self) -> np.ndarray:
-        """The positions after the passes taken, ``(n, 3)``; unreferenced vertices exactly where they were."""
+    def finish(self, passes: int, progress: bool = False) -> np.ndarray:
+        """``passes`` more passes, then the positions ``(n, 3)``; unreferenced vertices exactly where they were."""
+        for _ in Progress(progress, "constrained fairing (features)").over(range(passes)):
+            self.step()
         x = self.x + self.centre
         x[~self.used] = self.vertices[~self.used]
         return x
@@ -203,10 +205,7 @@ def feature_denoise(
     passes = feature_passes(vertices, triangles, conn=conn) if passes is None else passes
     if passes == 0:
         return np.array(vertices, dtype=np.float64)
-    run = FeatureRun(vertices, triangles, conn)
-    for _ in Progress(progress, "constrained fairing (features)").over(range(passes)):
-        run.step()
-    return run.positions()
+    return FeatureRun(vertices, triangles, conn).finish(passes, progress)
 
 
 def detect_creases_arrays(
