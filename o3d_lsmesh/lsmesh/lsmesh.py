@@ -466,9 +466,7 @@ def reconstruct_geometry(
     # checked with either scheme (the interpolatory one does not use them): a bad value is a mistake either way
     as_weights(weights, len(known), name="weights")
     as_bool(progress, name="progress")
-    L = operators.laplacian_of_kind(
-        data.vertices, Connectivity(data.triangles, len(data.vertices)), laplacian
-    ).tocsc()
+    L = operators.laplacian_of_kind(data.vertices, Connectivity(data.triangles, n), laplacian).tocsc()
     # checked here for both schemes, so that the message names the known vertices the caller left
     check_components_constrained(
         L, known, what="known vertex (outside unknown_vertex_indices)", param="unknown_vertex_indices"
