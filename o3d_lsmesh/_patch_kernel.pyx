@@ -12,7 +12,7 @@ from libc.math cimport INFINITY, fabs, fmax, fmin, sqrt
 from libc.stdint cimport int64_t, uint8_t
 from libc.stdlib cimport calloc, free, malloc, qsort
 
-from o3d_lsmesh._fill_common cimport Half, _by_key, _by_value, _cross, _dot, _key, _lower, _normal, _outside, _sub
+from o3d_lsmesh._fill_common cimport Half, _by_key, _by_value, _cross, _dot, _key, _normal, _outside, _sub
 
 # tangential relaxation and the crossing test
 
@@ -171,10 +171,10 @@ def local_mesh(const int64_t[:, ::1] triangles, const int64_t[::1] indptr, const
     ``indptr``, ``data``), sorted, then ``new_tris``, renumbered: the sorted vertices ``(l,)``, the local
     triangles ``(r + q, 3)`` and the ``count + 1`` rings locally (ring 0 ``seeds``, each next one sorted)."""
     cdef int64_t n = indptr.shape[0] - 1, m = triangles.shape[0], k = seeds.shape[0], nd = data.shape[0]
-    cdef int64_t step, f, r, t, c, w, start = 0, stop = 0, taken = 0, first, nl = 0
+    cdef int64_t step, f, r, t, c, w, start = 0, stop = 0, taken = 0, first
     cdef bint bad = k and _outside(&seeds[0], k, n)
     tri_, vert_, stops_ = np.empty(m, dtype=np.int64), np.empty(n + k, dtype=np.int64), np.empty(count + 1, np.int64)
-    cdef int64_t[::1] tri = tri_, vert = vert_, stops = stops_, ring
+    cdef int64_t[::1] tri = tri_, vert = vert_, stops = stops_
     cdef uint8_t* seen = <uint8_t*>calloc(max(n, 1), 1)
     cdef uint8_t* took = <uint8_t*>calloc(max(m, 1), 1)
     if not (seen and took):
@@ -216,22 +216,9 @@ def local_mesh(const int64_t[:, ::1] triangles, const int64_t[::1] indptr, const
     if bad:
         raise ValueError("seeds, data and triangles must index the mesh")
     local_ = np.concatenate([np.asarray(triangles)[tri_[:taken]], np.asarray(new_tris, dtype=np.int64)])
-    ids_ = np.sort(local_, axis=None)
-    cdef int64_t[:, ::1] local = local_
-    cdef int64_t[::1] ids = ids_
-    for r in range(ids.shape[0]):  # the sorted vertices, then each corner's position among them
-        if r == 0 or ids[r] != ids[r - 1]:
-            ids[nl] = ids[r]
-            nl += 1
-    for r in range(local.shape[0]):
-        for c in range(3):
-            local[r, c] = _lower(&ids[0], nl, local[r, c], 1)
-    rings = [np.array(seeds)] + [vert_[stops[r]:stops[r + 1]].copy() for r in range(count)]
-    for r in range(count + 1):
-        ring = rings[r]
-        for c in range(ring.shape[0]):
-            ring[c] = _lower(&ids[0], nl, ring[c], 1) if nl else 0
-    return ids_[:nl].copy(), local_, rings
+    ids_, corners = np.unique(local_, return_inverse=True)  # the sorted vertices, each corner's among them
+    rings = [np.asarray(seeds)] + [vert_[stops[r]:stops[r + 1]] for r in range(count)]
+    return ids_, corners.reshape(-1, 3), [np.searchsorted(ids_, ring) for ring in rings]
 
 # the fairing system (docs page)
 

@@ -123,9 +123,6 @@ def minimum_weight_triangulation(const double[:, ::1] points, const double[:, ::
         raise ValueError(f"a loop needs at least 3 points, got {k}")
     out = np.empty((k - 2, 3), dtype=np.int64)
     cdef int64_t[:, ::1] tris = out
-    if k == 3:
-        tris[0, 0], tris[0, 1], tris[0, 2] = 2, 1, 0
-        return out
     angle_, area_, normal_, known_ = np.zeros(k * k), np.zeros(k * k), np.zeros(3 * k * k), np.zeros(k * k, np.uint8)
     split_ = np.full(k * k, -1, dtype=np.int64)
     scratch = np.empty(6 * k)

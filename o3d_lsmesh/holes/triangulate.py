@@ -130,15 +130,11 @@ def _simple_pieces(loop: np.ndarray, rows: np.ndarray, points: np.ndarray):
     """Split a loop that passes a vertex (or a position: duplicated vertices, ``points`` of the loop)
     more than once into loops that do not, each filled on its own: a patch across the pinch would cross
     the surface there."""
-    key = loop
-    if len(set(map(tuple, points.tolist()))) < len(loop):
-        key = np.unique(points, axis=0, return_inverse=True)[1].ravel()
-    elif len(set(loop.tolist())) == len(
-        loop
-    ):  # the usual loop: simple (a set is quicker than np.unique here)
+    if len(set(map(tuple, points.tolist()))) == len(loop):  # the usual loop (a set is quicker than np.unique)
         if len(loop) >= 3:
             yield loop, rows
         return
+    key = np.unique(points, axis=0, return_inverse=True)[1].ravel()
     stack = [(loop, rows, key)]
     while stack:
         loop, rows, key = stack.pop()
@@ -198,11 +194,7 @@ def triangulate_holes(filler: Any, holes: list, density: float, progress: bool) 
     if density > 0:
         # Liepa's scale: each loop vertex's mean edge length, the chords' spacing on their points
         sigma = [
-            np.concatenate(
-                [filler.sigma[loop] / max(density, 1e-300), np.full(len(extra), spacing / density)]
-            )
-            if len(extra)
-            else filler.sigma[loop] / max(density, 1e-300)
+            np.concatenate([filler.sigma[loop] / density, np.full(len(extra), spacing / density)])
             for loop, extra, spacing in zip(piece_loop, piece_extra, piece_spacing)
         ]
         # mesh edges between loop vertices: no flip may make them twice
