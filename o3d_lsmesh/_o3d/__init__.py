@@ -303,10 +303,8 @@ def new_mesh(
                 if row.follows in _PER_ELEMENT:
                     value = np.asarray(getattr(src, key))
                     shape = (-1, 3, 2) if row.follows == "corner" else value.shape
-                    extended = extension.extend(row.follows, value.reshape(shape)).reshape(
-                        (-1,) + value.shape[1:]
-                    )
-                    setattr(out, key, getattr(o3d.utility, row.vector)(extended))
+                    value = extension.extend(row.follows, value.reshape(shape)).reshape(-1, *value.shape[1:])
+                    setattr(out, key, getattr(o3d.utility, row.vector)(value))
             out.textures = [o3d.geometry.Image(texture) for texture in src.textures]
         for row, key in present:
             if row.follows == "normals":
