@@ -455,9 +455,8 @@ def patch_crossings(const double[:, ::1] vertices, const int64_t[:, ::1] triangl
     if owner_.shape[0] != q or owner_.min() < 0:
         raise ValueError("owner must hold one patch (>= 0) per new triangle")
     crossed_ = np.zeros(int(owner_.max()) + 1, dtype=np.uint8)  # holes without a triangle hold a number too
-    for grid in grids:
-        _grid_crossings(vertices, triangles, first_new, new_centre, new_radius, [grid], tri_centre, tri_radius,
-                        False, result_, owner_, crossed_, owner is not None)
+    _grid_crossings(vertices, triangles, first_new, new_centre, new_radius, list(grids), tri_centre, tri_radius,
+                    False, result_, owner_, crossed_, owner is not None)
     _grid_crossings(vertices, triangles, first_new, new_centre, new_radius, list(new_grids), new_centre,
                     new_radius, True, result_, owner_, crossed_, owner is not None)
     return result_

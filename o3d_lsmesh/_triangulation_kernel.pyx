@@ -134,11 +134,9 @@ def minimum_weight_triangulation(const double[:, ::1] points, const double[:, ::
     with nogil:
         _liepa(&points[0, 0], &outer_normals[0, 0], f, NULL if allowed is None else &allowed[0], k, &angle[0],
                &cosine[0], &area[0], &split[0], &normal[0], &known[0], &s[0], &s[k], &s[2 * k], &s[3 * k])
-    if allowed is not None and not np.isfinite(angle_[k - 1]):  # no triangulation within ``allowed``
-        return minimum_weight_triangulation(points, outer_normals, forbidden)
-    if f != NULL and not np.isfinite(angle_[k - 1]):
-        # no triangulation avoids every existing edge: accept one that does not
-        return minimum_weight_triangulation(points, outer_normals, None)
+    if not np.isfinite(angle_[k - 1]) and (allowed is not None or f != NULL):
+        # none within ``allowed``: without it; then none avoids every existing edge: accept one that does not
+        return minimum_weight_triangulation(points, outer_normals, forbidden if allowed is not None else None)
     # the triangles from the split table, depth first from the whole polygon (0, k - 1)
     cdef int64_t[::1] stack = np.empty(2 * k, dtype=np.int64)
     cdef int64_t top = 2, lo, hi, mid, found = 0

@@ -34,15 +34,6 @@ def _fair(x: np.ndarray, tris: np.ndarray, unknown: np.ndarray, rings: list, lev
     return solve_spd(sp.csr_matrix(normal), rhs, isolate_nonfinite=True)
 
 
-def _vertex_owner(new_tris: np.ndarray, owner: np.ndarray, n: int, p: int) -> np.ndarray:
-    """The hole of each of the ``p`` new vertices (numbered from ``n``), from that of each new triangle."""
-    vertex_owner = np.zeros(p, dtype=np.int64)
-    corners = new_tris.ravel()
-    inside = corners >= n
-    vertex_owner[corners[inside] - n] = np.repeat(owner, 3)[inside]
-    return vertex_owner
-
-
 def keeps_facing(x: np.ndarray, again: np.ndarray, new_tris: np.ndarray) -> bool:
     """Whether ``again`` (new positions of the last ``len(again)`` vertices of ``x``) keeps every new
     triangle facing as in ``x`` and moves no vertex by a tenth of the patch's size (obtuse slivers can
@@ -69,7 +60,8 @@ def fair_patches(
     vertex_owner: np.ndarray,
     index: Any,
 ):
-    """Fair every new vertex at once: one local system over the patches and the rings around them.
+    """Fair every new vertex (there is one at least) at once: one local system over the patches and the
+    rings around them.
 
     ``vertices`` (the input's, then the refined patches' new ones) take the result in place, and
     ``triangles``' new rows their flips (a caller's view of them sees the flipped patches).
@@ -106,9 +98,7 @@ def fair_patches(
         return x if np.isfinite(x).any() else None  # a patch whose system is not finite: NaN rows
 
     def candidates():  # lazily: most calls stop at the first
-        for level in (
-            range(continuity, -1, -1) if len(unknown) else []
-        ):  # nothing to fair without new vertices
+        for level in range(continuity, -1, -1):
             solution = solve(level, False)
             if solution is None:
                 continue
@@ -144,9 +134,7 @@ def fair_patches(
         # a patch left NaN (its system not finite) is checked as refined and fails this candidate
         broken = ~np.isfinite(candidate).all(axis=1)
         work[n:] = np.where(broken[:, None], refined, candidate)
-        if flip.any():
-            dirty = np.ones(int(flip.sum()), dtype=bool)
-            triangles[m:][flip] = relax(work, new_tris[flip], fixed, dirty, True)
+        triangles[m:][flip] = relax(work, new_tris[flip], fixed, np.ones(int(flip.sum()), dtype=bool), True)
         crossing = _crossings(work, triangles, m, index, owner)  # (q,) nonzero on crossing holes
         per_hole = np.bincount(owner, weights=crossing, minlength=len(holes))
         per_hole += np.bincount(vertex_owner, weights=broken, minlength=len(holes))

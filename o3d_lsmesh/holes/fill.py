@@ -18,7 +18,7 @@ from ..core.connectivity import Connectivity
 from ..core.errors import InputError, warn
 from ..core.validate import as_bool, as_choice, as_count, as_positive_float, mesh_arrays
 from .crossings import _crossings, _TriangleIndex
-from .fair import _vertex_owner, fair_patches
+from .fair import fair_patches
 from .find import Hole, find_holes
 from .triangulate import triangulate_holes
 from .tuning import DENSITY_MAX
@@ -325,7 +325,9 @@ class HoleFiller:
         fresh_points, new_tris, owner = triangulate_holes(self, holes, density, progress)
         vertices = np.concatenate([self.vertices, fresh_points])
         triangles = np.concatenate([self.triangles, new_tris])
-        vertex_owner = _vertex_owner(new_tris, owner, n, len(fresh_points))
+        vertex_owner = np.zeros(len(fresh_points), dtype=np.int64)  # the hole of each new vertex
+        corners = new_tris.ravel()
+        vertex_owner[corners[corners >= n] - n] = np.repeat(owner, 3)[corners >= n]
         # a new triangle on three loop vertices is the same in every candidate: one crossing the mesh (or
         # another such) makes its hole's every candidate cross, so that hole is not faired (a scan's
         # silhouette: a patch as large as the scan, faired five times over, to be left open). Tested with
