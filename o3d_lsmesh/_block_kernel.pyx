@@ -194,56 +194,68 @@ cdef void _sweep(const index_t[::1] indptr, const index_t[::1] indices, const do
                     x[i, c] = (b[i, c] - rest[c]) / diagonal
 
 
-cdef void _dots3(const double[:, ::1] a, const double[:, ::1] b, double[::1] dots, Py_ssize_t start,
-                 Py_ssize_t stop) noexcept nogil:
-    """:func:`column_dots` on rows ``start:stop`` of three columns, summed in order."""
+cdef void _rows3(double[:, ::1] x, double[:, ::1] r, const double[:, ::1] p, const double[:, ::1] q,
+                 const double[::1] alpha, double[::1] sums, Py_ssize_t start, Py_ssize_t stop,
+                 bint step) noexcept nogil:
+    """Rows ``start:stop`` of three columns, summed in order: with ``step`` :func:`cg_step`'s update and
+    ``|r|^2``, else the dot products of ``p`` and ``q``."""
     cdef Py_ssize_t i
-    cdef double d0 = 0.0, d1 = 0.0, d2 = 0.0
-    for i in range(start, stop):
-        d0 = d0 + a[i, 0] * b[i, 0]
-        d1 = d1 + a[i, 1] * b[i, 1]
-        d2 = d2 + a[i, 2] * b[i, 2]
-    dots[0], dots[1], dots[2] = d0, d1, d2
+    cdef double s0 = 0.0, s1 = 0.0, s2 = 0.0
+    if step:  # two loops: a test inside one costs the update twice its time
+        for i in range(start, stop):
+            x[i, 0] += alpha[0] * p[i, 0]
+            x[i, 1] += alpha[1] * p[i, 1]
+            x[i, 2] += alpha[2] * p[i, 2]
+            r[i, 0] -= alpha[0] * q[i, 0]
+            r[i, 1] -= alpha[1] * q[i, 1]
+            r[i, 2] -= alpha[2] * q[i, 2]
+            s0, s1, s2 = s0 + r[i, 0] * r[i, 0], s1 + r[i, 1] * r[i, 1], s2 + r[i, 2] * r[i, 2]
+    else:
+        for i in range(start, stop):
+            s0, s1, s2 = s0 + p[i, 0] * q[i, 0], s1 + p[i, 1] * q[i, 1], s2 + p[i, 2] * q[i, 2]
+    sums[0], sums[1], sums[2] = s0, s1, s2
 
 
-cdef inline Py_ssize_t _blocks(Py_ssize_t rows) noexcept nogil:
-    # the reductions' blocks of PARALLEL_ROWS rows, set by the size alone: sums independent of the threads
-    return max(1, (rows + PARALLEL_ROWS - 1) // PARALLEL_ROWS)
-
-
-def cg_step(double[:, ::1] x, double[:, ::1] r, const double[:, ::1] p, const double[:, ::1] q,
-            const double[::1] alpha):
-    """Conjugate gradients' update ``x += alpha p``, ``r -= alpha q`` (per column), in place; returns the
-    columns' ``|r|^2`` after it, ``(k,)`` (:func:`column_dots`)."""
-    cdef Py_ssize_t n = x.shape[0], k = x.shape[1], i, c
-    with nogil:
-        for i in prange(n, schedule="static", num_threads=_threads(n)):
-            for c in range(k):
-                x[i, c] += alpha[c] * p[i, c]
-                r[i, c] -= alpha[c] * q[i, c]
-    return column_dots(r, r)
-
-
-def column_dots(const double[:, ::1] a, const double[:, ::1] b):
-    """``(k,)`` dot products of the columns of ``a`` and ``b`` (both ``(n, k)``): for three columns, summed in
-    order over blocks of :data:`PARALLEL_ROWS` rows (blocks side by side on every core), then over the
-    blocks in order, so that the sums do not depend on the thread count."""
-    cdef Py_ssize_t n = a.shape[0], k = a.shape[1], i, c, t, blocks = _blocks(a.shape[0])
-    dots = np.zeros(k)
-    cdef double[::1] d = dots
+cdef _column_sums(double[:, ::1] x, double[:, ::1] r, const double[:, ::1] p, const double[:, ::1] q,
+                  const double[::1] alpha, bint step):
+    # cg_step (step) and column_dots in one pass: for three columns over blocks of PARALLEL_ROWS rows (side
+    # by side on every core), then over the blocks in order, so that the sums do not depend on the threads
+    cdef Py_ssize_t n = p.shape[0], k = p.shape[1], i, c, t
+    cdef Py_ssize_t blocks = max(1, (n + PARALLEL_ROWS - 1) // PARALLEL_ROWS)
+    sums_array = np.zeros(k)
+    cdef double[::1] sums = sums_array
     cdef double[:, ::1] partial = np.zeros((blocks, 3))
     with nogil:
         if k == 3:
             for t in prange(blocks, schedule="static", num_threads=_threads(n)):
-                _dots3(a, b, partial[t], t * PARALLEL_ROWS, min(n, (t + 1) * PARALLEL_ROWS))
+                _rows3(x, r, p, q, alpha, partial[t], t * PARALLEL_ROWS, min(n, (t + 1) * PARALLEL_ROWS), step)
             for t in range(blocks):
                 for c in range(3):
-                    d[c] += partial[t, c]
+                    sums[c] += partial[t, c]
         else:
             for i in range(n):
                 for c in range(k):
-                    d[c] += a[i, c] * b[i, c]
-    return dots
+                    if step:
+                        x[i, c] += alpha[c] * p[i, c]
+                        r[i, c] -= alpha[c] * q[i, c]
+                        sums[c] += r[i, c] * r[i, c]
+                    else:
+                        sums[c] += p[i, c] * q[i, c]
+    return sums_array
+
+
+def cg_step(double[:, ::1] x, double[:, ::1] r, const double[:, ::1] p, const double[:, ::1] q,
+            const double[::1] alpha):
+    """Conjugate gradients' update ``x += alpha p``, ``r -= alpha q`` (per column) in one pass; returns the
+    columns' ``|r|^2`` after it, ``(k,)``, summed as :func:`column_dots`'s."""
+    return _column_sums(x, r, p, q, alpha, True)
+
+
+def column_dots(const double[:, ::1] a, const double[:, ::1] b):
+    """``(k,)`` dot products of the columns of ``a`` and ``b`` (both ``(n, k)``): for three columns summed in
+    order over blocks of :data:`PARALLEL_ROWS` rows, then over the blocks in order, so that the sums do not
+    depend on the thread count."""
+    return _column_sums(None, None, a, b, None, False)
 
 
 def cg_direction(double[:, ::1] p, const double[:, ::1] z, const double[::1] beta):
