@@ -93,16 +93,13 @@ def renumbered(symmetric: sp.spmatrix, order: np.ndarray) -> sp.csc_matrix:
 
 def preconditioner(matrix: sp.spmatrix, kind: str) -> Any:
     """``"ic0"``: :class:`IncompleteCholesky` where its set-up is linear (:data:`~o3d_lsmesh.core.tuning.IC_WORK`),
-    else (and for ``"amg"``) one AMG V-cycle, or the exact LU of a matrix too small for a hierarchy."""
+    else (and for ``"amg"``) one AMG V-cycle (the exact LU of a matrix too small for a hierarchy)."""
     csr = csr_view(matrix)
     if kind == "ic0":
         # row i's lower part times its upper part bounds the products its column takes part in
         lengths = np.diff(csr.indptr).astype(np.float64)
         if float(np.square(lengths).sum()) / 4.0 <= tuning.IC_WORK * max(matrix.nnz, 1):
             return IncompleteCholesky(matrix)
-    if csr.shape[0] <= tuning.COARSE_UNKNOWNS:
-        dense = splu_spd(csr.tocsc())
-        return lambda r: dense.solve(np.asfortranarray(r))
     return VCycle(*aggregation_levels(csr))
 
 

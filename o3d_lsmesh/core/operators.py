@@ -302,9 +302,7 @@ def scan_normal_matrix(
     )
     assert missing == 0, "the 1-ring lies within K^T K's pattern"
     del matrix
-    ones = fresh(len(indices))
-    ones.fill(1.0)
-    ring = sp.csc_matrix((ones, indices, indptr), shape=(n, n))
+    ring = sp.csc_matrix((fresh(len(indices), fill=1.0), indices, indptr), shape=(n, n))
     normal = sp.csr_matrix((square.data, square.indices, square.indptr), shape=(n, n))
     normal.has_sorted_indices = True  # canonical: CHOLMOD and the lower-triangle cut need it
     return normal, ring, weight

@@ -53,15 +53,8 @@ def smooth_boundary_curves_arrays(
 ) -> np.ndarray:
     """Array core of :func:`smooth_boundary_curves`: new ``(n, 3)`` positions, interior vertices unchanged.
 
-    Parameters
-    ----------
-    vertices : (n, 3) float64
-    triangles : (m, 3) int64
-    number_of_iterations : int
-        Steps of the section 3.3 update; 0 returns a copy.
-    reimpose_every : int or None
-        Re-take the midpoint constraints from the current curve every this many steps (stronger
-        smoothing); ``None`` keeps the input curve as ``p^0``.
+    ``reimpose_every``: re-take the midpoint constraints from the current curve every this many steps
+    (stronger smoothing); ``None`` keeps the input curve as ``p^0``.
     """
     vertices, triangles = mesh_arrays(vertices, triangles)
     number_of_iterations = as_iterations(number_of_iterations)

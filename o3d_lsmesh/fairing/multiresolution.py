@@ -172,11 +172,7 @@ def multiresolution_fairing(
             alpha=ALPHA, beta=BETA, min_vertices=4, max_levels=level, progress=progress
         )
         hierarchy = collapse_hierarchy(data.vertices, data.triangles, **options)  # read_mesh's checked copies
-        if level >= len(hierarchy):
-            raise InputError(
-                f"level must be < {len(hierarchy)} (the levels build_hierarchy reaches for this mesh), got {level}",
-                param="level",
-            )
+        levels = f"{len(hierarchy)} (the levels build_hierarchy reaches for this mesh)"
     else:
         if not isinstance(hierarchy, MeshHierarchy):
             raise InputTypeError(
@@ -190,11 +186,12 @@ def multiresolution_fairing(
                 f"{len(hierarchy.triangles[0])} triangles for a mesh of {len(data.vertices)} and {len(data.triangles)}",
                 param="hierarchy",
             )
-        if level >= len(hierarchy):
-            raise InputError(f"level must be < len(hierarchy) = {len(hierarchy)}, got {level}", param="level")
+        levels = f"len(hierarchy) = {len(hierarchy)}"
         if not np.array_equal(hierarchy.vertices, data.vertices):
             # same connectivity, new positions: the coarse levels take their positions from this mesh
             hierarchy = dataclasses.replace(hierarchy, vertices=data.vertices)
+    if level >= len(hierarchy):
+        raise InputError(f"level must be < {levels}, got {level}", param="level")
     positions = multiresolution_fairing_arrays(
         hierarchy,
         level,
