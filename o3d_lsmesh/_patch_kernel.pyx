@@ -180,15 +180,11 @@ def local_mesh(const int64_t[:, ::1] triangles, const int64_t[::1] indptr, const
     if not (seen and took):
         free(seen); free(took)
         raise MemoryError
+    ring0 = np.zeros(0, dtype=np.int64) if bad else np.unique(seeds)  # ring 0's vertices, each once
+    vert_[: len(ring0)], stop = ring0, len(ring0)
     with nogil:
-        for r in range(k if not bad else 0):  # ring 0's vertices, each once
-            vert[r] = seeds[r]
-        qsort(&vert[0], k if not bad else 0, sizeof(int64_t), _by_value)
-        for r in range(k if not bad else 0):
-            if not seen[vert[r]]:
-                seen[vert[r]] = 1
-                vert[stop] = vert[r]
-                stop += 1
+        for r in range(stop):
+            seen[vert[r]] = 1
         for step in range(count if not bad else 0):
             stops[step], first = stop, taken
             for f in range(start, stop):  # the front's triangles not taken yet, then their new vertices
@@ -466,9 +462,7 @@ cdef _grid_crossings(const double[:, ::1] vertices, const int64_t[:, ::1] triang
                      const double[:, ::1] tc, const double[::1] tr, bint among_new, double[::1] result,
                      const int64_t[::1] owner, uint8_t[::1] crossed, bint stop):
     """:func:`patch_crossings` against the triangles of ``grids`` (the new ones if ``among_new``: each pair
-    once, queried from its first triangle; with ``stop``, a triangle of a patch already crossing is no
-    query, its pairs tested from the other side, and a query ends at its first crossing: the patches
-    found crossing are the same, and a crossing patch's triangles cost nothing more)."""
+    once); with ``stop``, a crossing patch's triangles are no query and a query ends at its first crossing."""
     cdef int64_t q = centre.shape[0], i = 0, k, t, g, count, capacity, first, other, n_grids = len(grids)
     cdef int64_t[3] lo_cell, hi_cell
     cdef double[3] lo, hi

@@ -11,15 +11,9 @@ import numpy as np
 
 
 class _TriangleIndex:
-    """Bounding spheres (about the centroids) of a mesh's triangles in uniform grids, for crossing queries.
-
-    Two grids, the spheres of radius at most 4 times the median and the rest, each queried with its own
-    largest radius, so that a few long slivers do not make every query reach far. Each grid (cells of
-    about that radius, at most ``4 m`` of them) lists its triangles cell by cell (one stable sort):
-    a patch's query reads a few cells in the compiled :func:`o3d_lsmesh._patch_kernel.patch_crossings`,
-    where a k-d tree's ball query cost SciPy's per-call overhead (queries are thread-safe; the grids
-    pickle).
-    """
+    """Bounding spheres (about the centroids) of a mesh's triangles in two uniform grids (radius at most 4
+    times the median, and the rest; docs page), each cell's triangles listed by one stable sort, for the
+    compiled :func:`o3d_lsmesh._patch_kernel.patch_crossings` (thread-safe queries; the grids pickle)."""
 
     def __init__(self, vertices: np.ndarray, triangles: np.ndarray) -> None:
         p = vertices[triangles]
@@ -60,13 +54,9 @@ def _crossings(
     vertices: np.ndarray, triangles: np.ndarray, first_new: int, index: Any, owner: Any = None
 ) -> np.ndarray:
     """For each new triangle (from ``first_new`` on), the number of triangles it meets beyond the corners
-    and edge they share: crossings, and folds flat onto a neighbour. With ``owner`` (each new triangle's
-    hole), a hole's triangles are not tested once one crosses: nonzero counts then only mark the holes.
-
-    One compiled test (:func:`o3d_lsmesh._patch_kernel.patch_crossings`): each new triangle against the
-    input triangles of ``index`` (a :class:`_TriangleIndex` of ``triangles[:first_new]``; if None, one
-    is built of the input triangles in the new triangles' box) and the new ones, near it.
-    """
+    and edge they share (:func:`o3d_lsmesh._patch_kernel.patch_crossings`), against those of ``index`` (a
+    :class:`_TriangleIndex` of ``triangles[:first_new]``; if None, of those in the new triangles' box) and
+    the new ones. With ``owner`` (each new triangle's hole), nonzero counts only mark the crossing holes."""
     from .._patch_kernel import patch_crossings  # compiled: imported where used
 
     if len(triangles) == first_new:

@@ -63,14 +63,10 @@ def fair_patches(
     """Fair every new vertex (there is one at least) at once: one local system over the patches and the
     rings around them.
 
-    ``vertices`` (the input's, then the refined patches' new ones) take the result in place, and
-    ``triangles``' new rows their flips (a caller's view of them sees the flipped patches).
-    Candidates, best first: the asked continuity (after its cotangent pass if ``cot``, then
-    without), then each lower continuity, then the refined patch unfaired. Each hole (``owner`` of
-    each new triangle, ``vertex_owner`` of each new vertex) keeps the first candidate whose new
-    triangles cross no triangle of the mesh (a tri-Laplacian patch can overshoot into a thin part next
-    to the hole); returns the continuity each hole got and the holes where none is (the caller leaves
-    them open).
+    ``vertices`` (the input's, then the new ones) take the result in place, ``triangles``' new rows their
+    flips. Each hole (``owner`` of each new triangle, ``vertex_owner`` of each new vertex) keeps the first
+    candidate (the docs page's order) whose new triangles cross nothing; returns the continuity each hole
+    got and the holes where none is (the caller leaves them open).
     """
     from .._patch_kernel import local_mesh, tangential_relax  # compiled: imported where used
     from .._triangulation_kernel import relax
