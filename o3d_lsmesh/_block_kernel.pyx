@@ -542,8 +542,7 @@ def level_order(const index_t[::1] indptr, const index_t[::1] indices):
 
     Reverse Cuthill-McKee, as SciPy's ``reverse_cuthill_mckee``: per component, a breadth-first
     search from its vertex of least degree, each vertex's new neighbours by increasing degree, and the
-    whole order reversed. Linear (a first search finds the component, a second orders it); SciPy's
-    sorts every vertex by degree first.
+    whole order reversed; linear (a first search finds the component, a second orders it).
     """
     cdef Py_ssize_t n = indptr.shape[0] - 1, done = 0, reached, s = 0, i
     order_array = empty_small_pages(n, np.int64)

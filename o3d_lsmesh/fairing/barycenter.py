@@ -98,8 +98,7 @@ class GlobalSolver:
 
         self.mu = float(mu)
         system = penalty_matrix(conn, self.mu)
-        self.free, self.known, self._H = system.free, system.known, system.incidence
-        self._pull = system.pull
+        self.free, self.known, self._H, self._pull = system.free, system.known, system.incidence, system.pull
         normal = system.normal
         # H^T H's largest entry is the most triangles at a free vertex
         most = np.bincount(self._H.indices, minlength=1).max()

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import partial
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NoReturn
 
 import numpy as np
 
@@ -84,17 +84,16 @@ def _one_solve(value: Any, *, name: str) -> int:
 
 
 def _boundary_moves(method: str) -> Option:
-    # scan and features move the boundary with the surface: it cannot be held
-    def check(value: Any, *, name: str) -> bool:
-        if not as_bool(value, name=name):
-            raise InputError(
-                f"{name} must be True for method={method!r} (its boundary moves with the surface; hold it "
-                "fixed with method='global' or 'local'), got False",
-                param=name,
-            )
-        return True
+    # scan and features move the boundary with the surface: it cannot be held (_check_options passes
+    # smooth_boundary=True on as None, so only False reaches the check)
+    def refuse(value: Any, *, name: str) -> NoReturn:
+        raise InputError(
+            f"{name} must be True for method={method!r} (its boundary moves with the surface; hold it "
+            "fixed with method='global' or 'local'), got False",
+            param=name,
+        )
 
-    return Option(check, True)
+    return Option(refuse, True)
 
 
 _MU = "it weighs the barycenter penalty of method='scan' or 'global'"

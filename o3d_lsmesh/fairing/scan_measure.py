@@ -134,14 +134,11 @@ def measured_noise(
     nrm /= np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), np.finfo(float).tiny)
     di = d1[inner_rows]
     a1 = np.einsum("ij,ij->i", ring_sum[inner_rows] / di[:, None] - x, nrm)
-    h2 = float(
-        np.mean(
-            _mean_square_distances((ring @ smooth_square)[inner_rows], (ring @ smooth)[inner_rows], sub, di)
-        )
-    )
+    near = _mean_square_distances((ring @ smooth_square)[inner_rows], (ring @ smooth)[inner_rows], sub, di)
+    h2 = float(np.mean(near))
     if not h2 > 0.0:
         return NoiseEstimate(0.0, 0.0)
-    del ring_sum, sub, x
+    del ring_sum, sub, x, near
     # the same over the 2-ring (every vertex within two edges), a block of rows at a time (the whole
     # 2-ring pattern, with its product and sum, is several times the mesh)
     sum_a2, sum_k2, sum_h2 = 0.0, 0.0, 0.0
@@ -184,10 +181,7 @@ def scan_likeness(rim_ratio: float, boundary_fraction: float) -> float:
         with np.errstate(divide="ignore"):
             return float(np.clip(np.log(value / zero) / np.log(one / zero), 0.0, 1.0))
 
-    low, high = SCAN_RIM_RATIO
-    rim = ramp(rim_ratio, high, low)
-    fraction = ramp(boundary_fraction, *SCAN_BOUNDARY_FRACTION)
-    return rim * fraction
+    return ramp(rim_ratio, *SCAN_RIM_RATIO[::-1]) * ramp(boundary_fraction, *SCAN_BOUNDARY_FRACTION)
 
 
 @dataclass(frozen=True)
