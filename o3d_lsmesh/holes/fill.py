@@ -372,15 +372,7 @@ class HoleFiller:
         )
 
 
-def _without(
-    gone: np.ndarray,
-    n: int,
-    m: int,
-    vertices: np.ndarray,
-    triangles: np.ndarray,
-    owner: Any,
-    vertex_owner: Any,
-) -> tuple:
+def _without(gone, n: int, m: int, vertices, triangles, owner, vertex_owner) -> tuple:
     """The vertices, triangles, each new triangle's hole and each new vertex's without the holes ``gone``
     (a mask over the holes; the input's ``n`` vertices and ``m`` triangles first), renumbered."""
     keep_vertex, keep_triangle, renumber = ~gone[vertex_owner], ~gone[owner], np.cumsum(~gone) - 1
