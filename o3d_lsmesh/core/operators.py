@@ -385,10 +385,9 @@ def penalty_matrix(conn: Connectivity, mu: float) -> Penalty:
     from ._iterative import gram_matrix
 
     n = conn.n
-    valence = np.bincount(conn.edges.ravel(), minlength=n).astype(np.int64)
     boundary = np.zeros(n, dtype=bool)
     boundary[conn.edges[conn.edge_triangles != 2].ravel()] = True
-    free = (valence > 0) & ~boundary
+    free = (conn.rim[1] > 0) & ~boundary
     free_ids, known = np.flatnonzero(free), np.flatnonzero(~free)
     K = uniform_laplacian(conn, keep_pattern=True)
     if len(free_ids) < n:  # the rows of the interior vertices, their columns (none to cut when closed)

@@ -122,14 +122,13 @@ def normal_steps(
     triangles: np.ndarray,
     normals: np.ndarray,
     *,
+    incidence: sp.csr_matrix,
     iterations: int = VERTEX_STEPS,
-    incidence: sp.csr_matrix | None = None,
 ) -> np.ndarray:
     """Sun et al. 2007's vertex update, ``(n, 3)``: ``iterations`` steps of
-    ``x_i += 1/|F_i| sum_(f in F_i) n_f (n_f . (c_f - x_i))`` (per-vertex ``3 x 3`` sums formed once)."""
+    ``x_i += 1/|F_i| sum_(f in F_i) n_f (n_f . (c_f - x_i))`` (per-vertex ``3 x 3`` sums formed once;
+    ``incidence`` the face adjacency's triangle-vertex incidence)."""
     n = len(vertices)
-    if incidence is None:
-        incidence = Connectivity(triangles, n).face_adjacency.incidence
     count = np.maximum(np.bincount(triangles.ravel(), minlength=n), 1)[:, None]
     outer = (incidence.T @ (normals[:, :, None] * normals[:, None, :]).reshape(-1, 9)).reshape(n, 3, 3)
     x = np.array(vertices, dtype=np.float64)
