@@ -345,16 +345,9 @@ class HoleFiller:
             )
         used = np.full(len(kept), -2, dtype=np.int64)  # no new vertex: the bare programme
         if len(vertex_owner):
+            faired = [holes[i] for i in kept]
             used, stuck = fair_patches(
-                self,
-                vertices,
-                triangles,
-                [holes[i] for i in kept],
-                continuity,
-                cot,
-                owner,
-                vertex_owner,
-                index,
+                self, vertices, triangles, faired, continuity, cot, owner, vertex_owner, index
             )
             used[np.bincount(vertex_owner, minlength=len(kept)) == 0] = -2
             if len(stuck):
