@@ -28,9 +28,8 @@ __all__ = ["ScanFairingSolver", "relax_rim", "restore_volume", "scan_denoise", "
 def _surface(triangles: np.ndarray, n: int, conn: Connectivity | None) -> tuple[np.ndarray, Connectivity]:
     """The triangles of three distinct vertices and their connectivity: a collapsed one has no surface."""
     collapsed = collapsed_triangles(triangles)
-    if collapsed.any():
-        triangles = triangles[~collapsed]
-        return triangles, Connectivity(triangles, n)
+    if collapsed.any():  # the given connectivity is the whole mesh's
+        triangles, conn = triangles[~collapsed], None
     return triangles, Connectivity(triangles, n) if conn is None else conn
 
 
