@@ -83,6 +83,10 @@ assert o3d_lsmesh.__file__.startswith(sys.argv[1]), o3d_lsmesh.__file__
 code = sys.argv[3]
 warnings.simplefilter("ignore")
 cpu = []
+# OpenBLAS's threads busy-wait for a fixed time after the library loads (numpy's and SciPy's, at import):
+# without this pause that spin lands in whichever call comes first, so a faster import showed as a slower
+# first call (benchmarks/results/before_after.md)
+time.sleep(1.0)
 for _ in range(4):  # the first call (lazy imports, first use of the kernels), then three warm ones
     mesh = o3d.io.read_triangle_mesh(sys.argv[2])
     start = time.process_time()
