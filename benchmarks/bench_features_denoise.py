@@ -33,7 +33,8 @@ choice on the data folder's other meshes (not used to choose it) with the theta
 of both methods there.
 
 Run: ``.venv/bin/python benchmarks/bench_features_denoise.py`` (about 25 minutes on 2 cores);
-writes ``results/features_denoise.md``; ``--choice`` prints only the choice's table.
+writes ``results/features_denoise.md``; ``--choice`` prints only the choice's table; ``--passes`` writes
+``results/features_passes_study.md`` (theta after k passes from the noisy mesh and from the scan energy's result).
 """
 
 from __future__ import annotations
@@ -584,9 +585,63 @@ def keeps_the_scan_energy(repeat=3):
     return markdown_table(header, rows)
 
 
+STUDY_PASSES = (1, 2, 4, 8, 16, 24, 32, 40)
+
+
+def passes_study():
+    """How many filter passes each mesh wants, from the noisy mesh (the feature mode as it is) and from the
+    scan energy's result (a candidate: the isotropic solve first, then the filter): theta after k passes
+    of the guided and the bilateral filter (sigma_r = SIGMA_R), the best k, and the RMS vertex move of
+    passes 1 and 8 (mean edge lengths), the quantity a stopping rule without the truth could read."""
+    header = ["mesh", "sharp", "start", "filter", "passes used", "theta there"]
+    header += [f"{k}" for k in STUDY_PASSES] + ["best (passes)", "move pass 1 / 8"]
+    rows = []
+    for label, noisy, truth, sharp, _ in CASES:
+        V, F = load(noisy)
+        T, _ = load(truth)
+        h = float(np.linalg.norm(V[F[:, 0]] - V[F[:, 1]], axis=1).mean())
+        used = fe.passes_for_noise(measured_noise(V, F).noise)
+        starts = [
+            ("noisy", V),
+            ("scan energy", constrained_fairing_arrays(V, F, method=None, number_of_iterations=None)),
+        ]
+        for start, X in starts:
+            for guided in (True, False):
+                thetas, positions = series(
+                    X, F, T, sigma_r=fe.SIGMA_R, guided=guided, passes=STUDY_PASSES[-1]
+                )
+                moves = [
+                    float(np.sqrt(np.mean(np.sum((positions[k] - positions[k - 1]) ** 2, axis=1)))) / h
+                    for k in (1, 8)
+                ]
+                best = int(np.argmin(thetas))
+                rows.append(
+                    [
+                        label,
+                        "yes" if sharp else "no",
+                        start,
+                        "guided" if guided else "bilateral",
+                        used,
+                        f"{thetas[min(used, len(thetas) - 1)]:.2f}",
+                    ]
+                    + [f"{thetas[k]:.2f}" for k in STUDY_PASSES]
+                    + [f"{thetas[best]:.2f} ({best})", f"{moves[0]:.3f} / {moves[1]:.3f}"]
+                )
+                print(" | ".join(str(c) for c in rows[-1]), flush=True)
+    return markdown_table(header, rows)
+
+
 def main():
     if "--choice" in sys.argv:  # only the choice's leave-one-object-out table, printed
         print(choice_section())
+        return
+    if "--passes" in sys.argv:  # only the pass-count study, its own results file
+        text = passes_study()
+        write_markdown(
+            "features_passes_study.md",
+            "How many passes each mesh wants (#39)",
+            [("Theta after k passes", text)],
+        )
         return
     notes: set[str] = set()
     rows = [run_case(case, notes) for case in CASES]
