@@ -10,7 +10,7 @@ from __future__ import annotations
 import contextlib
 import os
 import threading
-from dataclasses import replace
+from dataclasses import fields, replace
 from typing import Any
 
 import numpy as np
@@ -143,7 +143,7 @@ class SPDSolver:
         _plan: Plan | None = None,
         **deprecated: Any,
     ) -> None:
-        unknown = next(iter(sorted(set(deprecated) - set(Plan.__dataclass_fields__))), None)
+        unknown = next(iter(sorted(set(deprecated) - {f.name for f in fields(Plan)})), None)
         if unknown:
             raise InputTypeError(f"SPDSolver() got an unexpected keyword argument {unknown!r}", param=unknown)
         plan = replace(_plan or Plan(), **deprecated)
@@ -438,7 +438,7 @@ class SPDSolver:
 
     def __setstate__(self, state: dict) -> None:
         # a key missing from an older pickle takes the constructor's or Plan's default
-        plan = Plan(**{key: state[key] for key in Plan.__dataclass_fields__ if key in state})
+        plan = Plan(**{key: state[key] for key in (f.name for f in fields(Plan)) if key in state})
         options = {
             key: state[key]
             for key in ("ordering", "lower", "tol", "max_iterations", "progress")
