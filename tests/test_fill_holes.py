@@ -496,18 +496,9 @@ def test_coarse_hole_is_refined_and_rounder_than_its_triangulation():
     flat = fill_holes_arrays(Vh, Th, density=0)
     out = fill_holes_arrays(Vh, Th)
     assert len(out.vertices) > len(Vh)
-
-    def smallest_angle(W, G):
-        p = W[G]
-        angles = []
-        for i in range(3):
-            u, w = p[:, (i + 1) % 3] - p[:, i], p[:, (i + 2) % 3] - p[:, i]
-            cos = (u * w).sum(1) / (np.linalg.norm(u, axis=1) * np.linalg.norm(w, axis=1))
-            angles.append(np.degrees(np.arccos(np.clip(cos, -1, 1))))
-        return float(np.min(angles))
-
-    assert smallest_angle(out.vertices, out.triangles[len(Th) :]) >= smallest_angle(
-        flat.vertices, flat.triangles[len(Th) :]
+    assert (
+        _smallest_angles(out.vertices, out.triangles[len(Th) :]).min()
+        >= _smallest_angles(flat.vertices, flat.triangles[len(Th) :]).min()
     )
     # closer to the sphere than the flat triangulation
     new = out.vertices[len(Vh) :]
