@@ -1,7 +1,7 @@
 """The ``o3d-lsmesh`` command line: the entry point, its parser and the mapping of errors to exit codes.
 
-It imports the commands (:mod:`~o3d_lsmesh.app.commands`, :mod:`~o3d_lsmesh.app.op_commands`),
-which import their kit (:mod:`~o3d_lsmesh.app.cli_kit`), never back. Docs: ``docs/cli.rst``.
+It imports the commands (:mod:`~o3d_lsmesh.app.commands`), which import their kit
+(:mod:`~o3d_lsmesh.app.cli_kit`), never back. Docs: ``docs/cli.rst``.
 """
 
 from __future__ import annotations
@@ -19,10 +19,10 @@ from typing import Any
 
 from ..core.errors import InputError
 from ..core.progress import Progress, close_all
-from .cli_kit import PROG, Parser, PictureError, Run
-from .commands import add_parsers
-from .files import CLIError
-from .ops import OPS, Option
+from .cli_kit import PROG, Parser, PictureError, Run, add_command, add_option
+from .commands import approximate, batch, compare, decode, demo, denoise, encode, fill, hierarchy, reconstruct
+from .files import WRITABLE, CLIError, mesh_suffix
+from .ops import OPS, RUN_FLAGS, Option, choice, flag, int_at_least, non_negative
 
 __all__ = ["CLIError", "PictureError", "Run", "build_parser", "main"]
 
@@ -48,10 +48,10 @@ def user_message(error: InputError, args: argparse.Namespace | None) -> str:
     (``method='local'``) reads ``--method local``.
     """
     text, param = str(error), error.param
-    for name, flag in getattr(args, "flags", {}).items():
+    for name, spelled in getattr(args, "flags", {}).items():
         option = _option(args, name)
         for value in getattr(getattr(option, "parse", None), "choices", None) or ():
-            text = text.replace(f"{name}={value!r}", f"{flag} {value}")
+            text = text.replace(f"{name}={value!r}", f"{spelled} {value}")
     if param:
         word = _spell(param, args)
         option = _option(args, param)
@@ -78,6 +78,93 @@ def fail(text: str, code: int) -> int:
 
 def _show_warning(message: Warning | str, category: type[Warning], *_args: Any, **_kwargs: Any) -> None:
     Progress.write(f"{PROG}: warning: {message}")
+
+
+#: the demo scan has up to about 0.55 * resolution**2 vertices: 2000 gives about 2.2 million
+MAX_RESOLUTION = 2000
+_FILES = {"input": "mesh file", "output": "mesh file to write"}
+#: the demo's flags
+DEMO = (
+    Option("out", str, "demo_out", "output folder"),
+    Option("no_render", flag, False, "skip the picture", is_flag=True),
+    Option(
+        "resolution",
+        int_at_least(20, MAX_RESOLUTION, "a grid size of at least 20 rays"),
+        200,
+        "the scanner's grid of R x R rays (200: about 22,000 vertices)",
+    ),
+    Option("noise", non_negative, 0.3, "range noise in grid spacings where the surface faces the scanner"),
+    Option("seed", int, 0, "random seed of the noise and dropouts"),
+)
+
+
+def add_parsers(sub: Any, writing: argparse.ArgumentParser, common: argparse.ArgumentParser) -> None:
+    """Add every subcommand; ``writing`` adds ``--force`` to ``common`` (not for the demo: it reads no file)."""
+    files = {"input": "mesh file to denoise", "output": f"mesh file to write ({', '.join(WRITABLE)})"}
+    picture = Option("render", str, help="write a before/after picture (default: none)", metavar="PNG")
+    add_command(sub, writing, denoise, files, picture)
+    add_command(sub, writing, fill, _FILES)
+    help = "also write the control indices, .npy or .txt (default: not written)"
+    add_command(sub, writing, approximate, _FILES, Option("indices", str, help=help, metavar="FILE"))
+    help = "index file (.npy or text) or list of indices and a:b ranges, e.g. '0:100,250'"
+    unknown = Option("unknown", str, help=help, param="unknown_vertex_indices", required=True, metavar="SPEC")
+    help = "known vertices as soft constraints (whole mesh re-solved)"
+    add_command(sub, writing, reconstruct, _FILES, unknown, Option("soft", flag, False, help, is_flag=True))
+    add_command(sub, writing, encode, {"input": "mesh file", "output": "file for the encoded bytes"})
+    names = {"mesh": "mesh file the data was encoded on", "data": "file written by encode"}
+    anchors = Option("anchors", int_at_least(1), help="use only the first K anchors (default: all)")
+    add_command(sub, writing, decode, names | {"output": _FILES["output"]}, anchors)
+    names = {"input": "mesh file", "outdir": "folder for level_NN files (created if needed)"}
+    help = "file format of the levels (.ply .obj ...)"
+    add_command(sub, writing, hierarchy, names, Option("format", mesh_suffix, ".ply", help))
+    names = {"a": "first mesh file (the reference)", "b": "second mesh file"}
+    help = "write a distance map: A and B side by side, colored by distance to A (default: none)"
+    units = Option("units", choice("model", "edge"), "model", "model units or mean edge lengths of A")
+    add_command(sub, writing, compare, names, Option("render", str, help=help, metavar="PNG"), units)
+    _add_batch(add_command(sub, writing, batch, {}))
+    add_command(sub, common, demo, {}, *DEMO)
+
+
+def _add_batch(p: argparse.ArgumentParser) -> None:
+    """``batch``: its own flags (:func:`~o3d_lsmesh.app.batch.run`'s parameters) and every op's options."""
+    p.add_argument(
+        "inputs", nargs="+", metavar="INPUT", help="files, folders (searched recursively) or globs"
+    )
+    p.add_argument("outdir", metavar="OUTDIR", help="folder for the outputs and the report")
+    operations = ", ".join(f"{name} ({op.help})" for name, op in OPS.items())
+    p.description = f"{p.description}\n\n" + textwrap.fill(f"Operations: {operations}.", 79)
+    help = "an operation or a pipeline in order, e.g. denoise or denoise,compare"
+    p.add_argument("--op", required=True, help=help)
+    p.add_argument("--set", action="append", default=[], metavar="OP.NAME=VALUE", help="an option of one op")
+    where = p.add_mutually_exclusive_group()
+    for option in RUN_FLAGS:
+        add_option(where if option.name.startswith("scheduler") else p, option)
+    group = p.add_argument_group(
+        "operation options (each applies to every op of the pipeline that has it; "
+        "--set OP.NAME=VALUE for one op)"
+    )
+    owners: dict[str, list[tuple[str, Option]]] = {}
+    for op in OPS.values():
+        for option in op.options:
+            owners.setdefault(option.name, []).append((op.name, option))
+    for name, pairs in owners.items():
+        option = pairs[0][1]
+        helps = {o.help for _, o in pairs}
+        text = (
+            f"{option.help} [{', '.join(n for n, _ in pairs)}]"
+            if len(helps) == 1
+            else "; ".join(f"{n}: {o.help}" for n, o in pairs)
+        )
+        # SUPPRESS: an option not given is left to each op's default (and --help shows none); values are
+        # parsed per op by batch.run, from the same table
+        kwargs: dict[str, Any] = {"action": "store_true"} if option.is_flag else {"metavar": "VALUE"}
+        text = text.replace("%", "%%").replace("(default:", "(op default:")
+        group.add_argument(
+            option.cli_flag, dest=f"opt_{name}", default=argparse.SUPPRESS, help=text, **kwargs
+        )
+    flags = {name: "--" + name.replace("_", "-") for name in [*owners, "op"]}
+    flags |= {option.name: option.cli_flag for option in RUN_FLAGS}
+    p.set_defaults(positionals=("inputs", "outdir"), flags=flags)
 
 
 def build_parser() -> argparse.ArgumentParser:

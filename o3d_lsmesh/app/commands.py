@@ -1,13 +1,14 @@
-"""The parsers of every ``o3d-lsmesh`` subcommand and the commands with a flow of their own
-(reconstruct, decode, compare, batch with every op's options, demo); the operations' commands are in
-:mod:`o3d_lsmesh.app.op_commands`, what all use in :mod:`o3d_lsmesh.app.cli_kit`. Docs: ``docs/cli.rst``.
+"""The ``o3d-lsmesh`` subcommands: those of the operations (denoise, fill, approximate, hierarchy,
+encode: their flags come from the option tables of :mod:`o3d_lsmesh.app.ops`) and those with a flow of
+their own (reconstruct, decode, compare, batch, demo). Each checks its files, runs and reports with the
+kit of :mod:`o3d_lsmesh.app.cli_kit`. Docs: ``docs/cli.rst``.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
-import textwrap
 import time
 from collections import Counter
 from pathlib import Path
@@ -15,108 +16,167 @@ from typing import Any
 
 import numpy as np
 
+from .._o3d import read_mesh
 from ..core.validate import as_indices
+from ..fairing.constrained import resolved_options
+from ..holes import find_holes
 from ..lsmesh import reconstruct_geometry
 from ..lsmesh.encoding import decode_geometry
 from .batch import run as run_batch
 from .batch import summarize
-from .cli_kit import Run, add_command, add_option, draw, shape_change_text
+from .cli_kit import Run, draw, run_file_op, run_op, shape_change_text
 from .demo import run_demo
-from .files import WRITABLE, CLIError, check_output, mesh_suffix, read_input, write_output
+from .files import CLIError, check_output, read_input, write_output
 from .metrics import shape_change, surface_distance, topology_summary, triangle_angles, vertex_error
-from .op_commands import approximate, denoise, encode, fill, hierarchy
-from .ops import OPS, RUN_FLAGS, Option, choice, flag, int_at_least, non_negative, normal_change
+from .ops import RUN_FLAGS, level_conflicts, normal_change
 
-__all__ = ["add_parsers", "parse_index_spec"]
-
-#: the demo scan has up to about 0.55 * resolution**2 vertices: 2000 gives about 2.2 million
-MAX_RESOLUTION = 2000
-_FILES = {"input": "mesh file", "output": "mesh file to write"}
-#: the demo's flags
-DEMO = (
-    Option("out", str, "demo_out", "output folder"),
-    Option("no_render", flag, False, "skip the picture", is_flag=True),
-    Option(
-        "resolution",
-        int_at_least(20, MAX_RESOLUTION, "a grid size of at least 20 rays"),
-        200,
-        "the scanner's grid of R x R rays (200: about 22,000 vertices)",
-    ),
-    Option("noise", non_negative, 0.3, "range noise in grid spacings where the surface faces the scanner"),
-    Option("seed", int, 0, "random seed of the noise and dropouts"),
-)
+__all__ = ["parse_index_spec"]
 
 
-def add_parsers(sub: Any, writing: argparse.ArgumentParser, common: argparse.ArgumentParser) -> None:
-    """Add every subcommand; ``writing`` adds ``--force`` to ``common`` (not for the demo: it reads no file)."""
-    files = {"input": "mesh file to denoise", "output": f"mesh file to write ({', '.join(WRITABLE)})"}
-    picture = Option("render", str, help="write a before/after picture (default: none)", metavar="PNG")
-    add_command(sub, writing, denoise, files, picture)
-    add_command(sub, writing, fill, _FILES)
-    help = "also write the control indices, .npy or .txt (default: not written)"
-    add_command(sub, writing, approximate, _FILES, Option("indices", str, help=help, metavar="FILE"))
-    help = "index file (.npy or text) or list of indices and a:b ranges, e.g. '0:100,250'"
-    unknown = Option("unknown", str, help=help, param="unknown_vertex_indices", required=True, metavar="SPEC")
-    help = "known vertices as soft constraints (whole mesh re-solved)"
-    add_command(sub, writing, reconstruct, _FILES, unknown, Option("soft", flag, False, help, is_flag=True))
-    add_command(sub, writing, encode, {"input": "mesh file", "output": "file for the encoded bytes"})
-    names = {"mesh": "mesh file the data was encoded on", "data": "file written by encode"}
-    anchors = Option("anchors", int_at_least(1), help="use only the first K anchors (default: all)")
-    add_command(sub, writing, decode, names | {"output": _FILES["output"]}, anchors)
-    names = {"input": "mesh file", "outdir": "folder for level_NN files (created if needed)"}
-    help = "file format of the levels (.ply .obj ...)"
-    add_command(sub, writing, hierarchy, names, Option("format", mesh_suffix, ".ply", help))
-    names = {"a": "first mesh file (the reference)", "b": "second mesh file"}
-    help = "write a distance map: A and B side by side, colored by distance to A (default: none)"
-    units = Option("units", choice("model", "edge"), "model", "model units or mean edge lengths of A")
-    add_command(sub, writing, compare, names, Option("render", str, help=help, metavar="PNG"), units)
-    _add_batch(add_command(sub, writing, batch, {}))
-    add_command(sub, common, demo, {}, *DEMO)
+def denoise(args: argparse.Namespace, run: Run) -> int:
+    """Barycenter-constrained (or multiresolution) fairing.
 
+    Remove noise with barycenter-constrained fairing (Liu et al. 2001, section 3): the membrane
+    energy is minimized while every triangle keeps its barycenter. With --level L, multiresolution
+    fairing (section 4.2): fair a coarse level of the volume-cost hierarchy, then split back up
+    (--mu, --reimpose-every and --fixed-boundary are refused with it).
 
-def _add_batch(p: argparse.ArgumentParser) -> None:
-    """``batch``: its own flags (:func:`~o3d_lsmesh.app.batch.run`'s parameters) and every op's options."""
-    p.add_argument(
-        "inputs", nargs="+", metavar="INPUT", help="files, folders (searched recursively) or globs"
-    )
-    p.add_argument("outdir", metavar="OUTDIR", help="folder for the outputs and the report")
-    operations = ", ".join(f"{name} ({op.help})" for name, op in OPS.items())
-    p.description = f"{p.description}\n\n" + textwrap.fill(f"Operations: {operations}.", 79)
-    help = "an operation or a pipeline in order, e.g. denoise or denoise,compare"
-    p.add_argument("--op", required=True, help=help)
-    p.add_argument("--set", action="append", default=[], metavar="OP.NAME=VALUE", help="an option of one op")
-    where = p.add_mutually_exclusive_group()
-    for option in RUN_FLAGS:
-        add_option(where if option.name.startswith("scheduler") else p, option)
-    group = p.add_argument_group(
-        "operation options (each applies to every op of the pipeline that has it; "
-        "--set OP.NAME=VALUE for one op)"
-    )
-    owners: dict[str, list[tuple[str, Option]]] = {}
-    for op in OPS.values():
-        for option in op.options:
-            owners.setdefault(option.name, []).append((op.name, option))
-    for name, pairs in owners.items():
-        option = pairs[0][1]
-        helps = {o.help for _, o in pairs}
-        text = (
-            f"{option.help} [{', '.join(n for n, _ in pairs)}]"
-            if len(helps) == 1
-            else "; ".join(f"{n}: {o.help}" for n, o in pairs)
+    example: scan.ply smooth.ply --iterations 20 --render before_after.png
+    """
+    given = ["--" + name.replace("_", "-") for name in level_conflicts(vars(args))]
+    if given:  # before the mesh is read (denoise_op refuses them too, for batch)
+        raise CLIError(
+            f"{', '.join(given)} cannot be combined with --level (multiresolution fairing does not take "
+            f"{'them' if len(given) > 1 else 'it'}), got --level {args.level}"
         )
-        # SUPPRESS: an option not given is left to each op's default (and --help shows none); values are
-        # parsed per op by batch.run, from the same table
-        kwargs: dict[str, Any] = {"action": "store_true"} if option.is_flag else {"metavar": "VALUE"}
-        text = text.replace("%", "%%").replace("(default:", "(op default:")
-        group.add_argument(
-            option.cli_flag, dest=f"opt_{name}", default=argparse.SUPPRESS, help=text, **kwargs
+    scan = resolved_options(args.method, args.iterations, args.reimpose_every)[0] == "scan"
+    if not args.level and args.fixed_boundary and scan:
+        raise CLIError(
+            "--fixed-boundary cannot be used with --method scan, the default (its boundary moves with "
+            "the surface): add --method local or --method global"
         )
-    flags = {name: "--" + name.replace("_", "-") for name in [*owners, "op"]}
-    flags |= {option.name: option.cli_flag for option in RUN_FLAGS}
-    p.set_defaults(positionals=("inputs", "outdir"), flags=flags)
+    mesh, out, report, seconds = run_file_op("denoise", args, run, (args.render, (".png",)))
+    report["seconds"] = seconds
+    run.say(
+        f"denoised {args.input} ({len(mesh.vertices)} vertices) by {report['method']} fairing in {seconds:.2f} s "
+        f"-> {args.output}; mean displacement {report['displacement_mean']:.4g}, {shape_change_text(report)}"
+    )
+    if args.render:
+        method, iterations = report["method"], report["iterations"]  # what ran
+        title = f"{method} fairing" + (f", mu {args.mu:g}" if args.mu is not None else "")
+        if args.level:
+            title = f"multiresolution fairing, level {args.level}, {iterations} iterations per level"
+        elif method not in ("scan", "features"):  # one solve / a measured pass count: no iteration count
+            title += f", {iterations} iteration{'s' if iterations != 1 else ''}"
+        report["render"] = draw(
+            [mesh, out], args.render, run, titles=[f"input: {Path(args.input).name}", title]
+        )
+    return run.finish(mesh, **report)
 
 
-# --------------------------------------------------------------------------- commands with a flow of their own
+def fill(args: argparse.Namespace, run: Run) -> int:
+    """Fill holes with faired patches (LS meshes).
+
+    Close holes: minimum-weight triangulation (Liepa 2003), refinement to the surrounding edge
+    density, then LS-mesh fairing of the new vertices with the hole's rings as anchors. Each open
+    component's outer border stays open unless --fill-border. --max-hole-diameter is in model units.
+    Every loop left open is listed with why (outer border, size limits, every fill crossing the mesh).
+
+    example: scan.ply filled.ply --max-hole-edges 200
+    """
+
+    def holes(mesh: Any) -> list:  # of the welded surface, as fill_holes sees it: a UV seam is no hole
+        welded = read_mesh(mesh, weld=True)
+        return find_holes(welded.vertices, welded.triangles)
+
+    mesh, out, metrics, seconds = run_file_op("fill", args, run)
+    before, after, report = holes(mesh), holes(out), metrics["_report"]
+    run.say(
+        f"filled {len(report.filled)} of {len(report.holes)} holes of {args.input} in {seconds:.2f} s "
+        f"({metrics['new_vertices']} new vertices) -> {args.output}; {len(after)} loops left open"
+    )
+    for hole in report.skipped:  # every loop left open, and why
+        run.say(f"  left open: loop {hole.id} ({hole.edges} edges, diameter {hole.diameter:.4g}): {hole.how}")
+    return run.finish(
+        mesh,
+        holes_before=len(before),
+        holes_after=len(after),
+        borders_left_open=0 if args.fill_border else sum(hole.border for hole in before),
+        new_vertices=metrics["new_vertices"],
+        new_triangles=metrics["new_triangles"],
+        holes_filled=len(report.filled),
+        skipped=[dataclasses.asdict(hole) for hole in report.skipped],
+        seconds=seconds,
+    )
+
+
+def approximate(args: argparse.Namespace, run: Run) -> int:
+    """LS-mesh approximation from N control points.
+
+    Rebuild the geometry from the connectivity and N control points chosen on the mesh
+    (least-squares meshes, Sorkine and Cohen-Or 2004).
+
+    example: bunny.ply approx.ply --count 400 --indices controls.npy
+    """
+    mesh, _, metrics, seconds = run_file_op("approximate", args, run, (args.indices, (".npy", ".txt")))
+    indices = metrics.pop("_indices")
+    if args.indices:
+        np.save(args.indices, indices) if args.indices.endswith(".npy") else np.savetxt(
+            args.indices, indices, fmt="%d"
+        )
+    run.say(
+        f"approximated {args.input} from {len(indices)} control points in {seconds:.2f} s -> {args.output}; "
+        f"L-inf error {metrics['error_linf']:.4g}, RMS {metrics['error_rms']:.4g}"
+    )
+    return run.finish(mesh, **metrics, seconds=seconds)
+
+
+def hierarchy(args: argparse.Namespace, run: Run) -> int:
+    """Write levels of the volume-cost collapse hierarchy.
+
+    Build the volume-cost edge-collapse hierarchy (Liu et al. 2001, section 4.1) and write the
+    chosen levels as mesh files, level_00 being the input.
+
+    example: bunny.ply levels/ --levels 0,2,4 --maps
+    """
+    mesh = read_input(args.input)
+    outdir = Path(args.outdir)
+    if outdir.exists() and not outdir.is_dir():
+        raise CLIError(f"OUTDIR {args.outdir!r} exists and is not a folder")
+    built, metrics, seconds = run_op("hierarchy", mesh, args, run)
+    outdir.mkdir(parents=True, exist_ok=True)
+    written: list[str] = []
+    for name, item in built.items():
+        path = str(outdir / (name if isinstance(item, bytes) else name + args.format))
+        if isinstance(item, bytes):
+            Path(path).write_bytes(item)
+        else:
+            check_output(path, [args.input], force=args.force, suffixes=None)
+            write_output(path, item)
+        written.append(path)
+    counts = metrics["vertex_counts"]
+    run.say(
+        f"hierarchy of {args.input}: {len(counts)} levels ({counts[0]} -> {counts[-1]} vertices) "
+        f"in {seconds:.2f} s; wrote {len(written)} files to {outdir}/"
+    )
+    return run.finish(mesh, levels=len(counts), vertex_counts=counts, written=written, seconds=seconds)
+
+
+def encode(args: argparse.Namespace, run: Run) -> int:
+    """Encode the geometry as quantized LS-mesh anchors.
+
+    Store the geometry as the quantized positions of a few anchors; decode rebuilds it from the
+    connectivity (geometry-aware bases, Sorkine et al.).
+
+    example: bunny.ply bunny.lsm --count 500 --bits 12
+    """
+    mesh, data, metrics, seconds = run_file_op("encode", args, run)
+    run.say(
+        f"encoded {args.input}: {metrics['anchors']} anchors at {args.bits} bits -> {len(data)} bytes "
+        f"({metrics['bits_per_vertex']:.3f} bits/vertex) in {seconds:.2f} s; "
+        f"decoded L-inf error {metrics['decoded_error_linf']:.4g}"
+    )
+    return run.finish(mesh, **metrics, seconds=seconds)
 
 
 def parse_index_spec(spec: str, n: int) -> np.ndarray:
