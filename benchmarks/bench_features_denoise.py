@@ -12,10 +12,9 @@ installed), bilateral normal filtering (Zheng et al. 2011: our filter pass with
 the normals as their own guidance, alternated with the same vertex update);
 GCN-Denoiser's released results as the learned anchor.
 
-Our two constants (``SIGMA_R`` and ``PASSES_PER_NOISE``) are scored on a grid by
-leave-one-mesh-out over the meshes with sharp features: each is scored at the
-pair that is best on the others (mean of theta over the grid's best theta per
-mesh) and at the pair best on all; both are printed. Also:
+Our constants (``SIGMA_R`` and the pass count's ``CONCENTRATION`` and ``MAX_PASSES``) are scored on a
+grid by leave-one-mesh-out over the nine meshes (:func:`rule_loo`): each mesh at the grid point best on
+the others and at the one best on all; both are printed. Also:
 the least-squares vertex update (one sparse solve a pass) against Sun et al.'s
 steps, the time against Open3D ``filter_smooth_taubin(100)`` at ~35k and
 ~50k vertices with the memory per vertex (tracemalloc peak), and a run at
@@ -34,7 +33,8 @@ of both methods there.
 
 Run: ``.venv/bin/python benchmarks/bench_features_denoise.py`` (about 25 minutes on 2 cores);
 writes ``results/features_denoise.md``; ``--choice`` prints only the choice's table; ``--passes`` writes
-``results/features_passes_study.md`` (theta after k passes from the noisy mesh and from the scan energy's result).
+``results/features_passes_study.md`` (truth-free stopping rules for the passes, scored leave-one-mesh-out,
+and theta after k passes from the noisy mesh and from the scan energy's result; about 4 minutes).
 """
 
 from __future__ import annotations
@@ -72,8 +72,10 @@ CASES = [
     ("GCN nicolo", "gcn_nicolo_imp6_noisy", "gcn_nicolo", False, "gcn_nicolo_imp_n6_denoised"),
 ]
 SIGMAS = (0.35, 0.5)  # our range-kernel grid
-PER_NOISE = (20, 30, 40, 60)  # our passes-per-noise grid
-MAX_PASSES = 40
+CONCENTRATIONS = (0.6, 0.65, 0.7, 0.75, 0.8, 0.85, 0.9)  # the stop's grid: median ratio over k // 2 .. k
+CAPS = (20, 25, 30, 35, 40)  # most passes (40: the most the earlier grid took)
+MAX_PASSES = max(CAPS)
+MOROZOV = (0.85, 0.9, 0.95, 1.0, 1.05, 1.1)  # discrepancy multiples of the measured noise
 BNF_SIGMAS = (0.35, 0.5, 0.7)
 BNF_PASSES = 30
 OPEN3D = ("Open3D simple", "Open3D Laplacian", "Open3D Taubin")
@@ -95,8 +97,9 @@ def scores(vertices, triangles, truth, h):
     return theta(vertices, triangles, truth), float(np.linalg.norm(vertices - truth, axis=1).mean() / h)
 
 
-def series(V, F, truth, *, sigma_r, guided, passes):
-    """theta after each of ``passes`` passes (index 0: the input), and the positions at each."""
+def series(V, F, truth, *, sigma_r, guided, passes, medians=None):
+    """theta after each of ``passes`` passes (index 0: the input), and the positions at each; ``medians``, a
+    list: the median filtered dihedral angle of each pass is appended (the measured stop's signal)."""
     adjacency = Connectivity(F, len(V)).face_adjacency
     patch_edges = fe._patch_edges(adjacency) if guided else None
     x, out, positions = V.copy(), [theta(V, F, truth)], [V]
@@ -105,7 +108,24 @@ def series(V, F, truth, *, sigma_r, guided, passes):
         x = fe.normal_steps(x, F, normals, incidence=adjacency.incidence)
         out.append(theta(x, F, truth))
         positions.append(x)
+        if medians is not None:
+            medians.append(fe.median_angle(normals, adjacency.pairs))
     return out, positions
+
+
+def measured_passes(V, F):
+    """The pass count ``method="features"`` takes at its defaults (0 without measured noise)."""
+    if measured_noise(V, F).noise == 0.0:
+        return 0
+    run = fe.FeatureRun(V, F, Connectivity(F, len(V)))
+    run.finish()
+    return len(run.medians)
+
+
+def concentration_stop(medians, ratio, cap):
+    """The module's stop on a recorded series: the first ``k >= 2`` with ``medians[k] > ratio medians[k // 2]``
+    (1-based), else ``cap``."""
+    return next((k for k in range(2, cap + 1) if medians[k - 1] > ratio * medians[k // 2 - 1]), cap)
 
 
 def least_squares_update(V, F, normals, mu):
@@ -181,7 +201,11 @@ def run_case(case, notes):
     row["default"] = scores(constrained_fairing_arrays(V, F, None, method="auto"), F, truth, h)
     row["chose"] = "features" if feature_probe(V, F).features else "scan"
     # our grid: theta after every pass, per sigma_r
-    row["grid"] = {s: series(V, F, truth, sigma_r=s, guided=True, passes=MAX_PASSES)[0] for s in SIGMAS}
+    row["grid"] = {}
+    for s in SIGMAS:
+        medians: list[float] = []
+        thetas = series(V, F, truth, sigma_r=s, guided=True, passes=MAX_PASSES, medians=medians)[0]
+        row["grid"][s] = {"theta": thetas, "median": medians}
     peers = {}
     for name in OPEN3D:
         run, sweep = PEERS[name]
@@ -216,46 +240,66 @@ def run_case(case, notes):
     return row
 
 
-def passes_for(noise, per_noise):
-    return int(min(MAX_PASSES, round(per_noise * noise)))
+def concentration_passes(row, point):
+    return concentration_stop(row["grid"][point[0]]["median"], *point[1:])
 
 
-def grid_theta(row, sigma, per_noise):
-    return row["grid"][sigma][passes_for(row["noise"], per_noise)]
+def morozov_passes(row, point):
+    """The discrepancy principle: the first pass whose discrepancy reaches ``c`` times the measured noise."""
+    found = [k for k, d in enumerate(row["grid"][point[0]]["discrepancy"]) if d >= point[1] * row["noise"]]
+    return found[0] if found else MAX_PASSES
 
 
-def leave_one_out(rows):
-    rows = [r for r in rows if r["sharp"]]  # the mode's purpose: meshes with sharp creases
-    pairs = [(s, c) for s in SIGMAS for c in PER_NOISE]
-    best = {r["mesh"]: min(grid_theta(r, *p) for p in pairs) for r in rows}
+def rule_loo(rows, points, passes, names):
+    """Leave-one-mesh-out of a pass count's constants ``points`` (tuples named ``names``, the first sigma_r)
+    over ``rows`` (each: "mesh", "noise", "grid" {sigma_r: {"theta": after each pass, ...}}, "peer": the best
+    classical peer's theta or None); ``passes(row, point)`` the count. A point is admissible on a set of
+    meshes when every one with a "peer" ends at most at it (the issue's targets); among those, the least
+    mean over the meshes of theta over the grid's best theta on that mesh."""
+
+    def at(row, point):
+        return row["grid"][point[0]]["theta"][passes(row, point)]
+
+    best = {r["mesh"]: min(at(r, p) for p in points) for r in rows}
 
     def loss(p, subset):
-        return float(np.mean([grid_theta(r, *p) / best[r["mesh"]] for r in subset]))
+        if any(r["peer"] is not None and at(r, p) > r["peer"] for r in subset):
+            return np.inf
+        return float(np.mean([at(r, p) / best[r["mesh"]] for r in subset]))
 
-    chosen = min(pairs, key=lambda p: loss(p, rows))
+    chosen = min(points, key=lambda p: loss(p, rows))
     table = []
     for r in rows:
-        others = [x for x in rows if x is not r]
-        held = min(pairs, key=lambda p: loss(p, others))
+        held = min(points, key=lambda p: loss(p, [x for x in rows if x is not r]))
         table.append(
-            [
-                r["mesh"],
-                f"{held[0]}, {held[1]}",
-                round(grid_theta(r, *held), 2),
-                f"{chosen[0]}, {chosen[1]}",
-                round(grid_theta(r, *chosen), 2),
-                round(best[r["mesh"]], 2),
-            ]
+            [r["mesh"], ", ".join(f"{v:g}" for v in held), passes(r, held), round(at(r, held), 2)]
+            + [passes(r, chosen), round(at(r, chosen), 2), round(best[r["mesh"]], 2)]
+            + ["-" if r["peer"] is None else round(r["peer"], 2)]
         )
-    header = [
-        "mesh",
-        "chosen on the others (sigma_r, passes/noise)",
-        "theta",
-        "chosen on all",
-        "theta",
-        "grid's best",
-    ]
-    return chosen, markdown_table(header, table)
+    header = ["mesh", f"chosen on the others ({names})", "passes", "theta", "passes, chosen on all"]
+    header += ["theta", "grid's best", "must be at most"]
+    text = (
+        "Admissible: every mesh with a bound ends at most at it (the best classical peer's theta on Block, "
+        "Fandisk 0.3 and 0.7 and GCN fandisk; SharpSphere's is out of reach of every rule here); loss among "
+        "those: mean over the meshes of theta over the grid's best theta. Chosen on all: "
+        + (", ".join(f"{v:g}" for v in chosen) if loss(chosen, rows) < np.inf else "none is admissible")
+        + ".\n\n"
+    )
+    return chosen, text + markdown_table(header, table)
+
+
+def concentration_loo(rows, sigmas):
+    points = [(s, r, c) for s in sigmas for r in CONCENTRATIONS for c in CAPS]
+    chosen, text = rule_loo(rows, points, concentration_passes, "sigma_r, concentration, cap")
+    grid = f"Grid: sigma_r in {sigmas}, concentration in {CONCENTRATIONS}, cap in {CAPS}. "
+    module = (
+        f"The module's SIGMA_R = {fe.SIGMA_R}, CONCENTRATION = {tuning.CONCENTRATION:g}, "
+        f"MAX_PASSES = {tuning.MAX_PASSES}. "
+    )
+    return chosen, grid + module + text
+
+
+BOUNDED = ("Block 0.4", "Fandisk 0.3", "Fandisk 0.7", "GCN fandisk")  # the meshes a target bounds
 
 
 def update_comparison(names=("Block 0.4", "SharpSphere 0.3", "GCN fertility")):
@@ -266,7 +310,7 @@ def update_comparison(names=("Block 0.4", "SharpSphere 0.3", "GCN fertility")):
         V, F = load(case[1])
         truth = load(case[2])[0]
         h = float(np.linalg.norm(truth[F[:, 0]] - truth[F[:, 1]], axis=1).mean())
-        passes = fe.feature_passes(V, F)
+        passes = measured_passes(V, F)
         start = time.perf_counter()
         sun = scores(fe.feature_denoise(V, F, passes=passes), F, truth, h)
         sun_time = time.perf_counter() - start
@@ -299,7 +343,7 @@ def speed(names=("Bunny 0.2", "GCN nicolo"), repeat=3):
         constrained_fairing_arrays(V, F, None, method="features")
         peak = tracemalloc.get_traced_memory()[1]
         tracemalloc.stop()
-        passes = fe.feature_passes(V, F)
+        passes = measured_passes(V, F)
         rows.append([case[0], len(V), passes, min(ours), min(taubin), min(ours) / min(taubin), peak / len(V)])
     header = ["mesh", "vertices", "passes", "ours s", "Taubin(100) s", "ratio", "peak bytes / vertex"]
     return markdown_table(header, rows)
@@ -588,11 +632,98 @@ def keeps_the_scan_energy(repeat=3):
 STUDY_PASSES = (1, 2, 4, 8, 16, 24, 32, 40)
 
 
+def discrepancy(before, after, triangles, edges):
+    """RMS of ``after - before`` along ``after``'s area-weighted vertex normals, in ``after``'s RMS edge
+    lengths (the unit of :func:`measured_noise`): the displacement the discrepancy principle reads."""
+    from o3d_lsmesh.core.arrays import area_weighted_normals
+
+    normals = area_weighted_normals(after, triangles)
+    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
+    along = np.einsum("ij,ij->i", after - before, normals)
+    h = np.sqrt(np.mean(np.sum((after[edges[:, 0]] - after[edges[:, 1]]) ** 2, axis=1)))
+    return float(np.sqrt(np.mean(along**2)) / h)
+
+
+def bilateral_peer(V, F, T):
+    """Bilateral normal filtering's least theta over BNF_SIGMAS and up to BNF_PASSES passes."""
+    return min(min(series(V, F, T, sigma_r=s, guided=False, passes=BNF_PASSES)[0]) for s in BNF_SIGMAS)
+
+
+def stopping_rules():
+    """Truth-free stopping rules for the feature mode's passes on the nine meshes (guided, from the noisy
+    mesh): the discrepancy principle (Morozov: stop when the displacement along the normals reaches c times
+    the measured noise, c = 1 by theory) and the concentration stop of the module (stop when the median
+    filtered dihedral angle stops falling), each scored leave-one-mesh-out; the removed rule
+    (round(60 x noise)) beside them. Bounds: bilateral normal filtering at its best (the best classical peer
+    on each bounded mesh in features_denoise.md)."""
+    rows = []
+    for label, noisy, truth, sharp, _ in CASES:
+        V, F = load(noisy)
+        T, _ = load(truth)
+        edges = Connectivity(F, len(V)).edges
+        medians: list[float] = []
+        thetas, positions = series(
+            V, F, T, sigma_r=fe.SIGMA_R, guided=True, passes=MAX_PASSES, medians=medians
+        )
+        found = [discrepancy(V, x, F, edges) for x in positions]
+        grid = {fe.SIGMA_R: {"theta": thetas, "median": medians, "discrepancy": found}}
+        row = {"mesh": label, "sharp": sharp, "noise": measured_noise(V, F).noise, "grid": grid}
+        row["true noise"] = discrepancy(V, T, F, edges)  # the truth from the noisy mesh, as a result would be
+        row["peer"] = bilateral_peer(V, F, T) if label in BOUNDED else None
+        rows.append(row)
+        print(label, round(row["noise"], 3), round(row["true noise"], 3), flush=True)
+    points = [(fe.SIGMA_R, c) for c in MOROZOV]
+    _, morozov = rule_loo(rows, points, morozov_passes, "sigma_r, c")
+    _, concentration = concentration_loo(rows, (fe.SIGMA_R,))
+    header = ["mesh", "sharp", "measured noise", "true noise / measured", "best passes", "best theta"]
+    header += ["discrepancy there / measured", "60 x noise: passes", "theta", "module: passes", "theta"]
+    table = []
+    for r in rows:
+        g = r["grid"][fe.SIGMA_R]
+        best = int(np.argmin(g["theta"]))
+        old = min(MAX_PASSES, round(60 * r["noise"]))
+        new = concentration_passes(r, (fe.SIGMA_R, tuning.CONCENTRATION, tuning.MAX_PASSES))
+        table.append(
+            [
+                r["mesh"],
+                "yes" if r["sharp"] else "no",
+                round(r["noise"], 3),
+                round(r["true noise"] / r["noise"], 3),
+            ]
+            + [best, round(g["theta"][best], 2), round(g["discrepancy"][best] / r["noise"], 3)]
+            + [old, round(g["theta"][old], 2), new, round(g["theta"][new], 2)]
+        )
+    gcn = [r for r in rows if r["mesh"].startswith("GCN")]
+    mean = {
+        name: np.mean([r["grid"][fe.SIGMA_R]["theta"][count(r)] for r in gcn])
+        for name, count in (
+            ("60 x noise", lambda r: min(MAX_PASSES, round(60 * r["noise"]))),
+            (
+                "module",
+                lambda r: concentration_passes(r, (fe.SIGMA_R, tuning.CONCENTRATION, tuning.MAX_PASSES)),
+            ),
+        )
+    }
+    summary = (
+        "\n\nMean theta over GCN-Denoiser's three meshes (its own: 4.33): "
+        + ", ".join(f"{k} {v:.2f} ({v / 4.33:.2f}x)" for k, v in mean.items())
+        + "."
+    )
+    return [
+        ("The two rules on the nine meshes", markdown_table(header, table) + summary),
+        (
+            "Discrepancy principle (Morozov), leave-one-mesh-out",
+            f"c in {MOROZOV}, at most {MAX_PASSES} passes. " + morozov,
+        ),
+        ("Concentration stop (the module's), leave-one-mesh-out", concentration),
+    ]
+
+
 def passes_study():
     """How many filter passes each mesh wants, from the noisy mesh (the feature mode as it is) and from the
     scan energy's result (a candidate: the isotropic solve first, then the filter): theta after k passes
     of the guided and the bilateral filter (sigma_r = SIGMA_R), the best k, and the RMS vertex move of
-    passes 1 and 8 (mean edge lengths), the quantity a stopping rule without the truth could read."""
+    passes 1 and 8 (mean edge lengths)."""
     header = ["mesh", "sharp", "start", "filter", "passes used", "theta there"]
     header += [f"{k}" for k in STUDY_PASSES] + ["best (passes)", "move pass 1 / 8"]
     rows = []
@@ -600,7 +731,7 @@ def passes_study():
         V, F = load(noisy)
         T, _ = load(truth)
         h = float(np.linalg.norm(V[F[:, 0]] - V[F[:, 1]], axis=1).mean())
-        used = fe.passes_for_noise(measured_noise(V, F).noise)
+        used = measured_passes(V, F)
         starts = [
             ("noisy", V),
             ("scan energy", constrained_fairing_arrays(V, F, method=None, number_of_iterations=None)),
@@ -636,12 +767,8 @@ def main():
         print(choice_section())
         return
     if "--passes" in sys.argv:  # only the pass-count study, its own results file
-        text = passes_study()
-        write_markdown(
-            "features_passes_study.md",
-            "How many passes each mesh wants (#39)",
-            [("Theta after k passes", text)],
-        )
+        sections = stopping_rules() + [("Theta after k passes", passes_study())]
+        write_markdown("features_passes_study.md", "How many passes each mesh wants (#39)", sections)
         return
     notes: set[str] = set()
     rows = [run_case(case, notes) for case in CASES]
@@ -669,14 +796,16 @@ def main():
                 min(r["peers"], key=lambda p: r["peers"][p][0]),
                 "yes" if r["features"][0] <= classical else "no",
                 round(r["noise"], 3),
-                fe.feature_passes(*load(CASES[[c[0] for c in CASES].index(r["mesh"])][1])),
+                measured_passes(*load(CASES[[c[0] for c in CASES].index(r["mesh"])][1])),
                 r["chose"],
             ]
         )
     gcn_rows = [r for r in rows if r["gcn"] is not None]
     ours_mean = float(np.mean([r["features"][0] for r in gcn_rows]))
     gcn_mean = float(np.mean([r["gcn"][0] for r in gcn_rows]))
-    chosen, loo = leave_one_out(rows)
+    for r in rows:
+        r["peer"] = min(v[0] for v in r["peers"].values()) if r["mesh"] in BOUNDED else None
+    _, loo = concentration_loo(rows, SIGMAS)
     choice = choice_section()
     sections = [
         (
@@ -703,13 +832,7 @@ def main():
             + f"\n\nMean theta over GCN-Denoiser's released meshes: ours {ours_mean:.2f}, GCN-Denoiser "
             f"{gcn_mean:.2f} (ratio {ours_mean / gcn_mean:.2f}; target 1.25).",
         ),
-        (
-            "Constants by leave-one-mesh-out",
-            f"Grid: sigma_r in {SIGMAS}, passes per unit noise in {PER_NOISE} (passes = round(c sigma), "
-            f"at most {MAX_PASSES}). Meshes with sharp features only. Loss: mean over meshes of theta over the grid's best theta on that mesh. "
-            f"Chosen on all meshes: sigma_r {chosen[0]}, {chosen[1]} passes per unit noise (the module's "
-            f"SIGMA_R = {fe.SIGMA_R}, PASSES_PER_NOISE = {fe.PASSES_PER_NOISE:g}).\n\n" + loo,
-        ),
+        ("Constants by leave-one-mesh-out", loo),
         ("method='auto': feature likeness, leave-one-object-out", choice),
         (
             "Where 'auto' keeps the scan energy: the same result, and the probe's cost",

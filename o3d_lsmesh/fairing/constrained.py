@@ -119,7 +119,7 @@ METHOD_OPTIONS: dict[str, dict[str, Option]] = {
         "mu": Option(as_positive_float, DEFAULT_MU, _MU),
         "smooth_boundary": _SMOOTH,
     },
-    # None iterations: a pass count measured from the noise
+    # None iterations: a pass count measured on the mesh as the passes go
     "features": {
         "number_of_iterations": Option(as_iterations),
         "smooth_boundary": _boundary_moves("features"),

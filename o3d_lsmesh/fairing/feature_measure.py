@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core.connectivity import Connectivity
-from .features import FeatureRun, passes_for_noise
+from .features import FeatureRun
 from .scan_measure import measured_noise
 from .tuning import FEATURE_LIKENESS, PROBE_PASSES_PER_NOISE
 
@@ -46,15 +46,14 @@ class FeatureProbe:
         Mean over median of the filtered dihedral angles after ``probe_passes`` passes.
     noise : float
         The measured noise in mean edge lengths (:func:`.scan_measure.measured_noise`).
-    passes, probe_passes : int
-        The feature mode's pass count (:func:`.features.passes_for_noise`) and the probe's.
+    probe_passes : int
+        The probe's pass count.
     run : FeatureRun
         The feature mode after the probe's passes (:meth:`finish` takes the rest).
     """
 
     likeness: float
     noise: float
-    passes: int
     probe_passes: int
     run: FeatureRun
 
@@ -65,10 +64,10 @@ class FeatureProbe:
 
     def finish(self, progress: bool = False) -> np.ndarray:
         """The feature mode's result, ``(n, 3)``: equal to ``feature_denoise(vertices, triangles)``."""
-        if self.passes == 0:
+        if self.noise == 0.0:
             return np.array(self.run.vertices, dtype=np.float64)
-        # a probe never takes more than the mode's passes (PROBE_PASSES_PER_NOISE < PASSES_PER_NOISE / 2)
-        return self.run.finish(self.passes - self.probe_passes, progress)
+        # where the mode's count ended within the probe, the run kept those positions
+        return self.run.finish(None, progress)
 
 
 def feature_probe(
@@ -87,9 +86,8 @@ def feature_probe(
     """
     conn = Connectivity(triangles, len(vertices)) if conn is None else conn
     noise = measured_noise(vertices, triangles, conn=conn).noise
-    passes = passes_for_noise(noise)
     probe_passes = max(1, math.ceil(PROBE_PASSES_PER_NOISE * noise))
     run = FeatureRun(vertices, triangles, conn)
     for _ in range(probe_passes):
         normals = run.step()
-    return FeatureProbe(dihedral_likeness(normals, run.adjacency.pairs), noise, passes, probe_passes, run)
+    return FeatureProbe(dihedral_likeness(normals, run.adjacency.pairs), noise, probe_passes, run)

@@ -1,9 +1,10 @@
 """Feature-preserving denoising (``method="features"``): guided normal filtering alternated with Sun's update.
 
-Each of ``k`` passes filters the face normals once (Zhang et al. 2015, guided; ``guided=False``:
+Each pass filters the face normals once (Zhang et al. 2015, guided; ``guided=False``:
 Zheng et al. 2011, bilateral) and takes ``VERTEX_STEPS`` of Sun et al. 2007's vertex update
-towards the planes of the faces. ``k = PASSES_PER_NOISE`` times the measured noise; all weights
-are dimensionless. Docs page: ``docs/algorithms/features.rst``.
+towards the planes of the faces. The passes stop when the filtered normals stop concentrating
+(:meth:`FeatureRun.concentrated`), at most ``MAX_PASSES``; all weights are dimensionless. Docs page:
+``docs/algorithms/features.rst``.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ from ..core.errors import InputError
 from ..core.progress import Progress
 from ..core.validate import as_count, as_positive_float, mesh_arrays
 from .scan_measure import measured_noise
-from .tuning import CREASE_ANGLE, PASSES_PER_NOISE, SIGMA_R, VERTEX_STEPS
+from .tuning import CONCENTRATION, CREASE_ANGLE, MAX_PASSES, SIGMA_R, VERTEX_STEPS
 
 if TYPE_CHECKING:
     from .._types import MeshT
@@ -30,10 +31,9 @@ __all__ = [
     "detect_creases",
     "detect_creases_arrays",
     "feature_denoise",
-    "feature_passes",
     "filter_pass",
+    "median_angle",
     "normal_steps",
-    "passes_for_noise",
 ]
 
 
@@ -138,15 +138,14 @@ def normal_steps(
     return x
 
 
-def feature_passes(vertices: np.ndarray, triangles: np.ndarray, *, conn: Connectivity | None = None) -> int:
-    """The pass count of :func:`feature_denoise`: ``round(PASSES_PER_NOISE * sigma)``, ``sigma`` the
-    measured noise in mean edge lengths (0 on a noiseless mesh: it is left as it is)."""
-    return passes_for_noise(measured_noise(vertices, triangles, conn=conn).noise)
+def median_angle(normals: np.ndarray, pairs: np.ndarray) -> float:
+    """Median angle (radians) between ``normals[pairs[:, 0]]`` and ``normals[pairs[:, 1]]``; 0 without pairs.
 
-
-def passes_for_noise(noise: float) -> int:
-    """``round(PASSES_PER_NOISE * noise)``: the feature mode's pass count at ``noise`` mean edge lengths."""
-    return round(PASSES_PER_NOISE * noise)
+    >>> median_angle(np.array([[0.0, 0, 1], [0, 0, 1], [0, 1, 0]]), np.array([[0, 1], [1, 2], [0, 2]]))
+    1.5707963267948966
+    """
+    cosine = np.einsum("ij,ij->i", normals[pairs[:, 0]], normals[pairs[:, 1]])
+    return float(np.median(np.arccos(np.clip(cosine, -1.0, 1.0)))) if len(cosine) else 0.0
 
 
 class FeatureRun:
@@ -154,7 +153,7 @@ class FeatureRun:
     rest and reads the result. ``feature_denoise`` takes them all; the default's chooser takes the first few, measures,
     and may go on (:mod:`.feature_measure`)."""
 
-    def __init__(self, vertices, triangles, conn):
+    def __init__(self, vertices: np.ndarray, triangles: np.ndarray, conn: Connectivity) -> None:
         self.vertices, self.triangles = vertices, triangles
         self.adjacency = conn.face_adjacency
         self.patch_edges = _patch_edges(self.adjacency)
@@ -162,18 +161,37 @@ class FeatureRun:
         self.used = np.bincount(triangles.ravel(), minlength=len(vertices)) > 0
         self.centre = vertices[self.used].mean(axis=0) if self.used.any() else np.zeros(3)
         self.x = vertices - self.centre
+        self.medians: list[float] = []  # the median filtered dihedral angle of each pass
+        self.stop: np.ndarray | None = None  # the positions where the measured count ended
 
     def step(self) -> np.ndarray:
         """One pass: the filtered face normals ``(m, 3)``, then the vertex steps towards their planes."""
         normals = filter_pass(self.x, self.triangles, self.adjacency, self.patch_edges)
         self.x = normal_steps(self.x, self.triangles, normals, incidence=self.adjacency.incidence)
+        self.medians.append(median_angle(normals, self.adjacency.pairs))
+        if self.stop is None and (self.concentrated() or len(self.medians) >= MAX_PASSES):
+            self.stop = self.x  # kept: a probe may take passes past it (normal_steps returns a new array)
         return normals
 
-    def finish(self, passes: int, progress: bool = False) -> np.ndarray:
-        """``passes`` more passes, then the positions ``(n, 3)``; unreferenced vertices exactly where they were."""
-        for _ in Progress(progress, "constrained fairing (features)").over(range(passes)):
+    def concentrated(self) -> bool:
+        """Whether the filtered normals stopped concentrating after pass ``k``: the median dihedral angle
+        is above ``CONCENTRATION`` times pass ``k // 2``'s. On piecewise-flat (CAD) surfaces it keeps
+        falling like a power of ``k``; on curved ones it levels off at the surface's own angles, and the
+        passes after that flatten the surface (docs page)."""
+        k = len(self.medians)
+        return k >= 2 and self.medians[-1] > CONCENTRATION * self.medians[k // 2 - 1]
+
+    def finish(self, passes: int | None = None, progress: bool = False) -> np.ndarray:
+        """``passes`` more passes (``None``: until the measured stop), then the positions ``(n, 3)``;
+        unreferenced vertices exactly where they were."""
+        measured = passes is None
+        for _ in Progress(progress, "constrained fairing (features)").over(
+            range(MAX_PASSES - len(self.medians) if passes is None else passes)
+        ):
+            if measured and self.stop is not None:
+                break
             self.step()
-        x = self.x + self.centre
+        x = (self.stop if measured and self.stop is not None else self.x) + self.centre
         x[~self.used] = self.vertices[~self.used]
         return x
 
@@ -188,9 +206,10 @@ def feature_denoise(
 ) -> np.ndarray:
     """The feature mode on validated arrays: new ``(n, 3) float64`` positions.
 
-    ``passes`` filter passes (``None``: :func:`feature_passes`), each followed by
-    :data:`VERTEX_STEPS` vertex steps (:func:`filter_pass`, :func:`normal_steps`); ``conn``: the
-    mesh's connectivity when the caller has it.
+    ``passes`` filter passes (``None``: until the filtered normals stop concentrating,
+    :meth:`FeatureRun.concentrated`, at most :data:`MAX_PASSES`; none on a mesh without measured noise),
+    each followed by :data:`VERTEX_STEPS` vertex steps (:func:`filter_pass`, :func:`normal_steps`);
+    ``conn``: the mesh's connectivity when the caller has it.
 
     Examples
     --------
@@ -201,8 +220,7 @@ def feature_denoise(
     (386, 3)
     """
     conn = Connectivity(triangles, len(vertices)) if conn is None else conn
-    passes = feature_passes(vertices, triangles, conn=conn) if passes is None else passes
-    if passes == 0:
+    if passes == 0 or (passes is None and measured_noise(vertices, triangles, conn=conn).noise == 0.0):
         return np.array(vertices, dtype=np.float64)
     return FeatureRun(vertices, triangles, conn).finish(passes, progress)
 

@@ -34,7 +34,10 @@ BLOCK_ROWS = 1 << 13  # rows per block of the local operator's assembly: scale.m
 
 # --- the feature-preserving denoiser (features) -----------------------------------------------
 SIGMA_R = 0.35  # range kernel width on unit-normal differences (Zhang et al.'s): features_denoise.md
-PASSES_PER_NOISE = 60.0  # filter passes per unit of measured noise: features_denoise.md (leave-one-mesh-out)
+# the passes stop when the median filtered dihedral angle of pass k is above CONCENTRATION times pass k // 2's,
+# at most MAX_PASSES: features_passes_study.md (leave-one-mesh-out)
+CONCENTRATION = 0.75
+MAX_PASSES = 35
 VERTEX_STEPS = 10  # vertex steps after each filter pass (the reference code's): features_denoise.md
 CREASE_ANGLE = 30.0  # degrees between denoised face normals of a crease: features_denoise.md (crease recall)
 # method="auto"'s choice (feature_measure): probe passes = ceil(PROBE_PASSES_PER_NOISE sigma), at least one;
