@@ -12,7 +12,9 @@ from libc.math cimport INFINITY, fabs, fmax, fmin, sqrt
 from libc.stdint cimport int64_t, uint8_t
 from libc.stdlib cimport calloc, free, malloc, qsort
 
-from o3d_lsmesh._fill_common cimport Half, _by_key, _by_value, _cross, _dot, _key, _normal, _outside, _sub
+from o3d_lsmesh._fill_common cimport (
+    Half, _by_key, _by_value, _cross, _dot, _key, _max, _min, _normal, _outside, _sub
+)
 
 # tangential relaxation and the crossing test
 
@@ -69,44 +71,48 @@ def tangential_relax(const double[:, ::1] vertices, const int64_t[:, ::1] new_tr
 
 cdef bint _cross_pair(const double* P, const double* Q) noexcept nogil:
     """Whether triangles ``P`` and ``Q`` (3 x 3; a segment repeats its last corner) intersect: no
-    separating axis among the 23 candidates; touching and coplanar pairs cross."""
+    separating axis among the 23 candidates; touching and coplanar pairs cross. Each axis is made when
+    its turn comes (most pairs part on one of the first)."""
     cdef double[3][3] eP, eQ
-    cdef double[3] nP, nQ
-    cdef double[23][3] axes
+    cdef double[3] nP, nQ, axis
     cdef double scale = 0.0, spread = 0.0, length, inv, x, p_lo, p_hi, q_lo, q_hi
-    cdef int c, r, s
+    cdef int c, r
     for c in range(3):
         _sub(P + 3 * ((c + 1) % 3), P + 3 * c, eP[c])
         _sub(Q + 3 * ((c + 1) % 3), Q + 3 * c, eQ[c])
     _cross(eP[0], eP[1], nP)
     _cross(eQ[0], eQ[1], nQ)
-    for c in range(3):
-        axes[0][c], axes[1][c] = nP[c], nQ[c]
-    for r in range(3):
-        for s in range(3):
-            _cross(eP[r], eQ[s], axes[2 + 3 * r + s])
-        _cross(nP, eP[r], axes[11 + r])
-        _cross(nQ, eQ[r], axes[14 + r])
-        _cross(nQ, eP[r], axes[17 + r])
-        _cross(nP, eQ[r], axes[20 + r])
     for c in range(9):
-        scale = fmax(scale, fmax(fabs(P[c]), fabs(Q[c])))
-        spread = fmax(spread, fmax(fabs(eP[c // 3][c % 3]), fabs(eQ[c // 3][c % 3])))
+        scale = _max(scale, _max(fabs(P[c]), fabs(Q[c])))
+        spread = _max(spread, _max(fabs(eP[c // 3][c % 3]), fabs(eQ[c // 3][c % 3])))
     scale = scale + spread
-    for r in range(23):
-        length = sqrt((axes[r][0] * axes[r][0] + axes[r][1] * axes[r][1]) + axes[r][2] * axes[r][2])
+    for r in range(23):  # the normals, the edges' crosses, then each normal's with each edge
+        if r < 2:
+            for c in range(3):
+                axis[c] = nP[c] if r == 0 else nQ[c]
+        elif r < 11:
+            _cross(eP[(r - 2) // 3], eQ[(r - 2) % 3], axis)
+        elif r < 14:
+            _cross(nP, eP[r - 11], axis)
+        elif r < 17:
+            _cross(nQ, eQ[r - 14], axis)
+        elif r < 20:
+            _cross(nQ, eP[r - 17], axis)
+        else:
+            _cross(nP, eQ[r - 20], axis)
+        length = sqrt((axis[0] * axis[0] + axis[1] * axis[1]) + axis[2] * axis[2])
         if not length > 1e-12 * (scale * scale):
             continue
         inv = 1.0 / length
         for c in range(3):
-            axes[r][c] = axes[r][c] * inv
+            axis[c] = axis[c] * inv
         p_lo, p_hi, q_lo, q_hi = INFINITY, -INFINITY, INFINITY, -INFINITY
         for c in range(3):
-            x = (axes[r][0] * P[3 * c] + axes[r][1] * P[3 * c + 1]) + axes[r][2] * P[3 * c + 2]
-            p_lo, p_hi = fmin(p_lo, x), fmax(p_hi, x)
-            x = (axes[r][0] * Q[3 * c] + axes[r][1] * Q[3 * c + 1]) + axes[r][2] * Q[3 * c + 2]
-            q_lo, q_hi = fmin(q_lo, x), fmax(q_hi, x)
-        if fmax(q_lo - p_hi, p_lo - q_hi) > 1e-12 * scale:
+            x = (axis[0] * P[3 * c] + axis[1] * P[3 * c + 1]) + axis[2] * P[3 * c + 2]
+            p_lo, p_hi = _min(p_lo, x), _max(p_hi, x)
+            x = (axis[0] * Q[3 * c] + axis[1] * Q[3 * c + 1]) + axis[2] * Q[3 * c + 2]
+            q_lo, q_hi = _min(q_lo, x), _max(q_hi, x)
+        if _max(q_lo - p_hi, p_lo - q_hi) > 1e-12 * scale:
             return False
     return True
 
@@ -123,10 +129,20 @@ cdef inline bint _same_point(const double* V, int64_t a, int64_t b) noexcept nog
     return a == b or (V[3 * a] == V[3 * b] and V[3 * a + 1] == V[3 * b + 1] and V[3 * a + 2] == V[3 * b + 2])
 
 cdef bint _pair_crosses(const double* V, const int64_t* T, int64_t ta, int64_t tb) noexcept nogil:
-    """Whether triangles ``ta`` and ``tb`` meet anywhere but at the corners and edge they share."""
+    """Whether triangles ``ta`` and ``tb`` meet anywhere but at the corners and edge they share (finite
+    coordinates: boxes apart share no corner, so the box test comes first, for every pair)."""
     cdef double[9] P, Q, S
     cdef int r, s, c, shared = 0, ra = 0, rb = 0
     cdef int[3] in_a, in_b
+    for r in range(3):
+        for c in range(3):
+            P[3 * r + c] = V[3 * T[3 * ta + r] + c]
+            Q[3 * r + c] = V[3 * T[3 * tb + r] + c]
+    for c in range(3):
+        if _min(_min(P[c], P[3 + c]), P[6 + c]) > _max(_max(Q[c], Q[3 + c]), Q[6 + c]) or (
+            _min(_min(Q[c], Q[3 + c]), Q[6 + c]) > _max(_max(P[c], P[3 + c]), P[6 + c])
+        ):
+            return False
     for r in range(3):
         in_a[r], in_b[r] = 0, 0
     for r in range(3):
@@ -137,16 +153,7 @@ cdef bint _pair_crosses(const double* V, const int64_t* T, int64_t ta, int64_t t
                 break
     if shared == 3:
         return True
-    for r in range(3):
-        for c in range(3):
-            P[3 * r + c] = V[3 * T[3 * ta + r] + c]
-            Q[3 * r + c] = V[3 * T[3 * tb + r] + c]
     if shared == 0:
-        for c in range(3):
-            if fmin(fmin(P[c], P[3 + c]), P[6 + c]) > fmax(fmax(Q[c], Q[3 + c]), Q[6 + c]) or (
-                fmin(fmin(Q[c], Q[3 + c]), Q[6 + c]) > fmax(fmax(P[c], P[3 + c]), P[6 + c])
-            ):
-                return False
         return _cross_pair(P, Q)
     for r in range(3):
         if in_a[r] == (shared == 1):  # one corner: the shared one; an edge: the unshared one
@@ -576,7 +583,7 @@ cdef int64_t _gather(const double* lo, const double* hi, const int64_t* lo_cell,
                 t = members[k]
                 gap = 0.0
                 for c in range(3):
-                    g = fmax(fmax(lo[c] - tc[3 * t + c], tc[3 * t + c] - hi[c]), 0.0)
+                    g = _max(_max(lo[c] - tc[3 * t + c], tc[3 * t + c] - hi[c]), 0.0)
                     gap += g * g
                 if gap <= tr[t] * tr[t] * (1.0 + 1e-9):
                     out[count] = t
