@@ -279,10 +279,9 @@ def compare(args: argparse.Namespace, run: Run) -> int:
     if args.render:
         check_output(args.render, [args.a, args.b], force=args.force, suffixes=(".png",))
     a, b = read_input(args.a, what="A"), read_input(args.b, what="B")
-    size = {
-        key: {"vertices": len(m.vertices), "triangles": len(m.triangles)} for key, m in (("a", a), ("b", b))
-    }
-    report: dict[str, Any] = {"a": args.a, "b": args.b, "size_a": size["a"], "size_b": size["b"]}
+    report: dict[str, Any] = {"a": args.a, "b": args.b}
+    for key, mesh in (("size_a", a), ("size_b", b)):
+        report[key] = {"vertices": len(mesh.vertices), "triangles": len(mesh.triangles)}
     report["surface_distance"] = surface_distance(a, b, number_of_points=args.points)
     if len(a.vertices) == len(b.vertices):
         report["vertex_error"] = vertex_error(a, b)
@@ -292,19 +291,13 @@ def compare(args: argparse.Namespace, run: Run) -> int:
     report["angles_a"], report["angles_b"] = triangle_angles(a), triangle_angles(b)
     report["topology_a"], report["topology_b"] = topology_summary(a), topology_summary(b)
     if not run.json:
-        for line in _lines(report):
-            run.say(line)
+        run.say("\n".join(_lines(report)))
     if args.render:
         units = "mean edge lengths of A" if args.units == "edge" else "model units"
+        titles = [f"A: {Path(args.a).name} (reference)", f"B: {Path(args.b).name}"]
+        kw = dict(reference=a, units=args.units, titles=titles, colorbar_title="distance to A")
         report["render"] = draw(
-            [a, b],
-            args.render,
-            run,
-            reference=a,
-            units=args.units,
-            what=f"B colored by distance to A, in {units}",
-            titles=[f"A: {Path(args.a).name} (reference)", f"B: {Path(args.b).name}"],
-            colorbar_title="distance to A",
+            [a, b], args.render, run, what=f"B colored by distance to A, in {units}", **kw
         )
     return run.finish(**report)
 
@@ -373,8 +366,7 @@ def batch(args: argparse.Namespace, run: Run) -> int:
         raise CLIError(str(error)) from None
     seconds = time.perf_counter() - start
     counts = Counter(record["status"] for record in records)
-    run.say(summarize(records, seconds))
-    run.say(f"report: {report}")
+    run.say(f"{summarize(records, seconds)}\nreport: {report}")
     failed = [r["input"] for r in records if r["status"] == "failed"]
     run.finish(op=args.op, report=report, seconds=seconds, counts=dict(counts), failed=failed)
     return 0 if counts["failed"] == 0 and counts["cancelled"] == 0 else 2
@@ -390,14 +382,6 @@ def demo(args: argparse.Namespace, run: Run) -> int:
 
     example: --out demo_out --resolution 150
     """
-    result = run_demo(
-        args.out,
-        resolution=args.resolution,
-        noise=args.noise,
-        seed=args.seed,
-        render=not args.no_render,
-        quiet=run.quiet,
-        progress=run.progress,
-        stream=run.stream,
-    )
+    scan = {name: getattr(args, name) for name in ("resolution", "noise", "seed")}
+    result = run_demo(args.out, **scan, render=not args.no_render, say=run.say, progress=run.progress)
     return run.finish(**result)

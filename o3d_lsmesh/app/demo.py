@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import json
 import os
-import sys
 import time
 from pathlib import Path
 from typing import Any, Callable
@@ -86,26 +85,23 @@ def _format_table(rows: list[dict]) -> str:
 
 
 def run_demo(
-    out: str | os.PathLike | None = "demo_out",
+    out: str | os.PathLike = "demo_out",
     *,
     resolution: int = 200,
     noise: float = 0.3,
     seed: int = 0,
     render: bool = True,
-    quiet: bool = False,
     progress: bool = False,
-    stream: Any = None,
+    say: Callable[[str], Any] = print,
 ) -> dict:
     """Run the demo; return ``{"rows": [...], "spacing": h, "sweeps": {...}, "files": [...]}``.
 
     ``out``: the folder for ``scan.ply``, ``surface.ply``, one PLY per method, ``metrics.json``,
-    ``metrics.md`` and (``render``) ``before_after.png`` (None: nothing written); ``resolution``,
-    ``noise``, ``seed``: the flags of ``o3d-lsmesh demo``; ``stream``: where the table goes (default
-    stdout; ``quiet``: nowhere). Distances: of the vertices to the true surface in grid spacings ``h``
-    (``rim``: the boundary and two rings; ``offset``: the mean signed one, negative inward).
+    ``metrics.md`` and (``render``) ``before_after.png``; ``resolution``, ``noise``, ``seed``: the flags
+    of ``o3d-lsmesh demo``; ``say``: what prints each line. Distances: of the vertices to the true
+    surface in grid spacings ``h`` (``rim``: the boundary and two rings; ``offset``: the mean signed one,
+    negative inward).
     """
-    stream = sys.stdout if stream is None else stream
-    say = (lambda *a: None) if quiet else (lambda *a: print(*a, file=stream, flush=True))
     scan, surface = simulated_range_scan(resolution, noise=noise, seed=seed)
     scene = raycasting_scene(np.asarray(surface.vertices), np.asarray(surface.triangles))
     extent = np.ptp(np.asarray(surface.vertices)[:, :2], axis=0).max()
@@ -124,7 +120,7 @@ def run_demo(
     ]
     results = {"scan": scan}
     sweeps: dict[str, list] = {}
-    with Progress(progress and not quiet, "demo").bar(len(METHODS), unit="method") as bar:
+    with Progress(progress, "demo").bar(len(METHODS), unit="method") as bar:
         for key, label, function, values in METHODS:
             bar.set_postfix_str(key)
             try:
@@ -160,37 +156,29 @@ def run_demo(
             say(f"  {key:14s} " + ", ".join(f"{v}: {d:.3f}" for v, d in sweep))
 
     files: list[Path] = []
-    if out is not None:
-        folder = Path(out)
-        folder.mkdir(parents=True, exist_ok=True)
-        for key, mesh in {"surface": surface, **results}.items():
-            write_mesh_file(mesh, folder / f"{key}.ply")
-            files.append(folder / f"{key}.ply")
-        listed = {k: [[v, d] for v, d in s] for k, s in sweeps.items()}
-        payload = {"spacing": spacing, "noise": noise, "seed": seed, "rows": rows, "sweeps": listed}
-        (folder / "metrics.json").write_text(json.dumps(payload, indent=2))
-        (folder / "metrics.md").write_text("```\n" + table + "\n```\n")
-        files += [folder / "metrics.json", folder / "metrics.md"]
-        if render:
-            panels = {"scan": "raw scan"} | ({"ours": "ours (defaults)"} if "ours" in results else {})
-            theirs = [r for r in rows if r["key"].startswith("o3d_") and "skipped" not in r]
-            if theirs:  # the best Open3D filter
-                peer = min(theirs, key=lambda r: r["mean_distance"])
-                panels[peer["key"]] = f"{peer['label'].removeprefix('Open3D ')} ({peer['value']}, its best)"
-            keys, titles = list(panels), list(panels.values())
-            picture = folder / "before_after.png"
-            start = time.perf_counter()
-            rendering.render(
-                [results[key] for key in keys],
-                picture,
-                width=420,
-                height=420,
-                reference=surface,
-                titles=titles,
-                colorbar_title="distance to the true surface",
-                view_direction=(0.25, 0.3, 1.0),
-            )
-            files.append(picture)
-            say(f"picture ({time.perf_counter() - start:.1f} s): {picture}  panels: {' | '.join(titles)}")
-        say(f"wrote {len(files)} files to {folder}/")
+    folder = Path(out)
+    folder.mkdir(parents=True, exist_ok=True)
+    for key, mesh in {"surface": surface, **results}.items():
+        write_mesh_file(mesh, folder / f"{key}.ply")
+        files.append(folder / f"{key}.ply")
+    listed = {k: [[v, d] for v, d in s] for k, s in sweeps.items()}
+    payload = {"spacing": spacing, "noise": noise, "seed": seed, "rows": rows, "sweeps": listed}
+    (folder / "metrics.json").write_text(json.dumps(payload, indent=2))
+    (folder / "metrics.md").write_text("```\n" + table + "\n```\n")
+    files += [folder / "metrics.json", folder / "metrics.md"]
+    if render:
+        panels = {"scan": "raw scan"} | ({"ours": "ours (defaults)"} if "ours" in results else {})
+        theirs = [r for r in rows if r["key"].startswith("o3d_") and "skipped" not in r]
+        if theirs:  # the best Open3D filter
+            peer = min(theirs, key=lambda r: r["mean_distance"])
+            panels[peer["key"]] = f"{peer['label'].removeprefix('Open3D ')} ({peer['value']}, its best)"
+        keys, titles = list(panels), list(panels.values())
+        picture = folder / "before_after.png"
+        start = time.perf_counter()
+        view: dict[str, Any] = dict(width=420, height=420, view_direction=(0.25, 0.3, 1.0), titles=titles)
+        title = "distance to the true surface"
+        rendering.render([results[k] for k in keys], picture, reference=surface, colorbar_title=title, **view)
+        files.append(picture)
+        say(f"picture ({time.perf_counter() - start:.1f} s): {picture}  panels: {' | '.join(titles)}")
+    say(f"wrote {len(files)} files to {folder}/")
     return {"rows": rows, "spacing": spacing, "sweeps": sweeps, "files": [str(f) for f in files]}
