@@ -83,16 +83,12 @@ def _show_warning(message: Warning | str, category: type[Warning], *_args: Any, 
 #: the demo scan has up to about 0.55 * resolution**2 vertices: 2000 gives about 2.2 million
 MAX_RESOLUTION = 2000
 _FILES = {"input": "mesh file", "output": "mesh file to write"}
+_GRID = int_at_least(20, MAX_RESOLUTION, "a grid size of at least 20 rays")
 #: the demo's flags
 DEMO = (
     Option("out", str, "demo_out", "output folder"),
     Option("no_render", flag, False, "skip the picture", is_flag=True),
-    Option(
-        "resolution",
-        int_at_least(20, MAX_RESOLUTION, "a grid size of at least 20 rays"),
-        200,
-        "the scanner's grid of R x R rays (200: about 22,000 vertices)",
-    ),
+    Option("resolution", _GRID, 200, "the scanner's grid of R x R rays (200: about 22,000 vertices)"),
     Option("noise", non_negative, 0.3, "range noise in grid spacings where the surface faces the scanner"),
     Option("seed", int, 0, "random seed of the noise and dropouts"),
 )
@@ -139,22 +135,17 @@ def _add_batch(p: argparse.ArgumentParser) -> None:
     where = p.add_mutually_exclusive_group()
     for option in RUN_FLAGS:
         add_option(where if option.name.startswith("scheduler") else p, option)
-    group = p.add_argument_group(
-        "operation options (each applies to every op of the pipeline that has it; "
-        "--set OP.NAME=VALUE for one op)"
-    )
+    title = "operation options (each applies to every op of the pipeline that has it; --set OP.NAME=VALUE for one op)"
+    group = p.add_argument_group(title)
     owners: dict[str, list[tuple[str, Option]]] = {}
     for op in OPS.values():
         for option in op.options:
             owners.setdefault(option.name, []).append((op.name, option))
     for name, pairs in owners.items():
         option = pairs[0][1]
-        helps = {o.help for _, o in pairs}
-        text = (
-            f"{option.help} [{', '.join(n for n, _ in pairs)}]"
-            if len(helps) == 1
-            else "; ".join(f"{n}: {o.help}" for n, o in pairs)
-        )
+        text = f"{option.help} [{', '.join(n for n, _ in pairs)}]"
+        if len({o.help for _, o in pairs}) > 1:
+            text = "; ".join(f"{n}: {o.help}" for n, o in pairs)
         # SUPPRESS: an option not given is left to each op's default (and --help shows none); values are
         # parsed per op by batch.run, from the same table
         kwargs: dict[str, Any] = {"action": "store_true"} if option.is_flag else {"metavar": "VALUE"}
