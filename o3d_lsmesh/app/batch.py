@@ -36,18 +36,10 @@ __all__ = [
 def task_key(path: str, ops: Sequence[BatchOp], options: Sequence[dict], suffix: str) -> str:
     """Hash of the pipeline, its options, the output suffix and the input's size and mtime (the resume key)."""
     stat = os.stat(path)
-    payload = json.dumps(
-        {
-            "op": [op.name for op in ops],
-            "options": options,
-            "suffix": suffix,
-            "size": stat.st_size,
-            "mtime_ns": stat.st_mtime_ns,
-        },
-        sort_keys=True,
-        default=str,
+    key = dict(
+        op=[o.name for o in ops], options=options, suffix=suffix, size=stat.st_size, mtime_ns=stat.st_mtime_ns
     )
-    return hashlib.sha256(payload.encode()).hexdigest()[:32]
+    return hashlib.sha256(json.dumps(key, sort_keys=True, default=str).encode()).hexdigest()[:32]
 
 
 def _read_report(path: Path) -> dict[str, dict]:
@@ -294,14 +286,8 @@ def run(
     outdir.mkdir(parents=True, exist_ok=True)
     # the workers need the op functions, not the option parsers (closures only cloudpickle can send)
     shipped = [dataclasses.replace(o, options=()) for o in ops]
-    job = {
-        "outdir": str(outdir),
-        "ops": shipped,
-        "options": values,
-        "suffix": suffix,
-        "threads": threads_per_worker,
-        "timeout": task_timeout or None,
-    }
+    job: dict[str, Any] = dict(outdir=str(outdir), ops=shipped, options=values, suffix=suffix)
+    job.update(threads=threads_per_worker, timeout=task_timeout or None)
 
     bar = Progress(progress, f"batch {pipeline}").bar(
         len(tasks), initial=len(tasks) - len(todo) - len(refused), unit="file", dynamic_ncols=True
