@@ -46,7 +46,7 @@ _GLOB_CHARACTERS = set("*?[")
 
 def _write_item(value: Any, path: Path) -> None:
     """Write bytes, or a mesh file (an OBJ with its ``.mtl`` and textures; ``OSError`` if Open3D cannot)."""
-    path.write_bytes(bytes(value)) if isinstance(value, (bytes, bytearray)) else write_mesh_file(value, path)
+    path.write_bytes(value) if isinstance(value, (bytes, bytearray)) else write_mesh_file(value, path)
 
 
 def digest(path: Path) -> dict:
@@ -79,13 +79,10 @@ def write_atomic(value: Any, final: Path, *, kind: str, suffix: str, root: Path)
     temporary = final.with_name(f".{final.name}.{uuid.uuid4().hex[:12]}.tmp")
     temporary.mkdir()
     try:
-        if kind == "files":
-            for name, item in value.items():
-                _write_item(
-                    item, temporary / (name if isinstance(item, (bytes, bytearray)) else name + suffix)
-                )
-        else:
-            _write_item(value, temporary / final.name)
+        for name, item in value.items() if kind == "files" else [(final.name, value)]:
+            # a bytes output's file name has its suffix
+            mesh = kind == "files" and not isinstance(item, (bytes, bytearray))
+            _write_item(item, temporary / (name + suffix if mesh else name))
         where = final if kind == "files" else final.parent
         base = Path(os.path.relpath(where, root))
         files = {(base / p.name).as_posix(): digest(p) for p in sorted(temporary.iterdir())}
