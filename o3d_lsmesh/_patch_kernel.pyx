@@ -8,7 +8,7 @@ Local meshes index their vertices below 2^31: edge keys pack two indices in one 
 
 import numpy as np
 
-from libc.math cimport INFINITY, fabs, fmax, fmin, sqrt
+from libc.math cimport INFINITY, fabs, floor, fmax, fmin, sqrt
 from libc.stdint cimport int64_t, uint8_t
 from libc.stdlib cimport calloc, free, malloc, qsort
 
@@ -441,6 +441,64 @@ def patch_system(const double[:, ::1] x, const int64_t[:, ::1] tris, const int64
 cdef inline bint _overlap(const double* c, double r, const double* d, double s) noexcept nogil:
     cdef double d0 = c[0] - d[0], d1 = c[1] - d[1], d2 = c[2] - d[2]
     return sqrt((d0 * d0 + d1 * d1) + d2 * d2) <= r + s
+
+def triangle_grids(const double[:, ::1] centre, const double[::1] radius):
+    """The crossing test's grids of triangles' bounding spheres (``centre (t, 3)``, ``radius (t,)``): those
+    of radius at most 4 times the median, then the rest (docs page), each in cells as wide as its largest
+    radius (wider while the cells outnumber ``4 t + 64``), each cell's triangles in index order: a list of
+    ``(origin, cell, dims, indptr, members, reach)``."""
+    cdef int64_t t = radius.shape[0], half = t // 2, k, g, count, x
+    cdef double reach, width, limit
+    cdef double[3] low, high
+    cdef const int64_t[::1] members
+    cdef int64_t[::1] dims, key, indptr, out
+    cdef int c
+    if centre.shape[0] != t:
+        raise ValueError("centre and radius must have one row per triangle")
+    if t == 0:
+        return []
+    part = np.partition(np.asarray(radius), [half - 1, half] if t % 2 == 0 else [half])
+    limit = 4.0 * (part[half] if t % 2 else (part[half - 1] + part[half]) / 2.0)
+    small_ = np.asarray(radius) <= limit
+    grids = []
+    for members_ in (np.flatnonzero(small_), np.flatnonzero(~small_)):
+        count = members_.shape[0]
+        if count == 0:
+            continue
+        members = members_
+        reach = 0.0
+        low[0] = low[1] = low[2] = INFINITY
+        high[0] = high[1] = high[2] = -INFINITY
+        for k in range(count):
+            reach = fmax(reach, radius[members[k]])
+            for c in range(3):
+                low[c], high[c] = fmin(low[c], centre[members[k], c]), fmax(high[c], centre[members[k], c])
+        width = reach if reach > 0 else fmax(fmax(fmax(high[0] - low[0], high[1] - low[1]), high[2] - low[2]), 1.0)
+        while ((floor((high[0] - low[0]) / width) + 1) * (floor((high[1] - low[1]) / width) + 1)
+               * (floor((high[2] - low[2]) / width) + 1)) > 4 * count + 64:  # the grid stays linear in t
+            width *= 1.5
+        dims_ = np.array([<int64_t>floor((high[c] - low[c]) / width) + 1 for c in range(3)], dtype=np.int64)
+        dims = dims_
+        key_ = np.empty(count, dtype=np.int64)
+        indptr_ = np.zeros(dims[0] * dims[1] * dims[2] + 1, dtype=np.int64)
+        sorted_ = np.empty(count, dtype=np.int64)
+        key, indptr, out = key_, indptr_, sorted_
+        for k in range(count):  # each member's cell, counted, then the members listed by cell (stable)
+            x = 0
+            for c in range(3):
+                x = x * dims[c] + min(<int64_t>floor((centre[members[k], c] - low[c]) / width), dims[c] - 1)
+            key[k] = x
+            indptr[x + 1] += 1
+        for g in range(indptr.shape[0] - 1):
+            indptr[g + 1] += indptr[g]
+        for k in range(count):
+            out[indptr[key[k]]] = members[k]
+            indptr[key[k]] += 1
+        for g in range(indptr.shape[0] - 1, 0, -1):
+            indptr[g] = indptr[g - 1]
+        indptr[0] = 0
+        grids.append((np.array([low[0], low[1], low[2]]), width, dims_, indptr_, sorted_, reach))
+    return grids
 
 def patch_crossings(const double[:, ::1] vertices, const int64_t[:, ::1] triangles, int64_t first_new,
                     grids, const double[:, ::1] tri_centre, const double[::1] tri_radius,
