@@ -54,6 +54,7 @@ from o3d_lsmesh.holes import HoleFiller
 RADII = (2.5, 6.0, 15.0)
 HOLES = 10
 SEED = 37  # fixed before any result of this study was seen
+TIMED = 3  # fills timed per tool and hole, the best kept
 #: the leave-one-mesh-out candidates: (label, fill_holes_arrays options); the first is the default
 CANDIDATES = [
     ("default", {}),
@@ -174,22 +175,26 @@ def boundary_vertices(V, T):
 def ours_with(options):
     """Timed as CGAL is: the whole-mesh analysis (``HoleFiller``, as CGAL's ``Polyhedron_3``) built before
     the clock; CPU time of the process (both single-threaded), which the other jobs of a shared machine
-    do not inflate as they do the wall clock."""
+    do not inflate as they do the wall clock; the best of ``TIMED`` fills (the first of a run also pays
+    the imports of the fill's modules)."""
 
     def run(V, T):
-        filler = HoleFiller(V, T)
-        start = time.process_time()
-        out = filler.fill(**options)
-        return (out.vertices, out.triangles), time.process_time() - start
+        filler, best = HoleFiller(V, T), np.inf
+        for _ in range(TIMED):
+            start = time.process_time()
+            out = filler.fill(**options)
+            best = min(best, time.process_time() - start)
+        return (out.vertices, out.triangles), best
 
     return run
 
 
-def cgal_once(continuity):
+def cgal_once(continuity, repeat=1):
+    """CGAL's fill, the best of ``repeat`` (each on a fresh ``Polyhedron_3``, built before the clock)."""
     run = cgal(continuity)
 
     def once(V, T):
-        out, clock = run(V, T, repeat=1)
+        out, clock = run(V, T, repeat=repeat)
         return out, clock.cpu
 
     return once
@@ -203,7 +208,7 @@ def run_study(meshes_asked, count, save=None):
     tools = [(label, ours_with(options)) for label, options in CANDIDATES]
     peers = []
     if available("CGAL"):
-        peers += [("CGAL c2", cgal_once(2)), ("CGAL c1", cgal_once(1))]
+        peers += [("CGAL c2", cgal_once(2, TIMED)), ("CGAL c1", cgal_once(1, TIMED))]
     if available("meshlib"):
         peers.append(("MeshLib", meshlib))
     rng = np.random.default_rng(SEED)
@@ -390,8 +395,8 @@ def main() -> int:
         (
             "Set-up",
             f"Meshes: {', '.join(meshes)} (the closed, edge-manifold meshes of the data folder asked for). {holes} seeded "
-            f"holes (seed {SEED}) per mesh and size, each loop simple; one fill per tool and hole; times are the "
-            "CPU time of one fill (ours on a prebuilt HoleFiller, CGAL on a prebuilt Polyhedron_3; MeshLib wall "
+            f"holes (seed {SEED}) per mesh and size, each loop simple; times are the CPU time of a fill, the best "
+            f"of {TIMED} (ours on a prebuilt HoleFiller, CGAL on a prebuilt Polyhedron_3; MeshLib one fill, wall "
             "clock) on a shared 2-core machine (read the ratios).",
         )
     )
