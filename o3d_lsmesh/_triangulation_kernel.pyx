@@ -153,6 +153,44 @@ def minimum_weight_triangulation(const double[:, ::1] points, const double[:, ::
                 top += 4
     return out
 
+def delaunay_allowed(const double[:, ::1] points, const int64_t[:, ::1] tets, const double[:, ::1] centre,
+                     double cospherical):
+    """The faces of the tetrahedra ``tets`` of ``points (k, 3)`` as the programme's ``allowed`` ``(k^3,)``,
+    or None where a point not on a tetrahedron is within ``cospherical`` (relative) of its circumsphere
+    (``centre (t, 3)``; radius from its first corner): the tetrahedralization is then one of several."""
+    cdef int64_t k = points.shape[0], t = tets.shape[0], a, v, f, w
+    cdef double radius, gap, d0, d1, d2
+    cdef int64_t[4] q
+    cdef int r
+    if centre.shape[0] != t or tets.shape[1] != 4 or (t and _outside(&tets[0, 0], 4 * t, k)):
+        raise ValueError("tets index the points, four a row, and centre has one row per tetrahedron")
+    allowed_ = np.zeros(k * k * k, dtype=np.uint8)
+    cdef uint8_t[::1] allowed = allowed_
+    for a in range(t):
+        d0, d1, d2 = points[tets[a, 0], 0] - centre[a, 0], points[tets[a, 0], 1] - centre[a, 1], points[tets[a, 0], 2] - centre[a, 2]
+        radius = sqrt((d0 * d0 + d1 * d1) + d2 * d2)
+        for v in range(k):
+            if v == tets[a, 0] or v == tets[a, 1] or v == tets[a, 2] or v == tets[a, 3]:
+                continue
+            d0, d1, d2 = points[v, 0] - centre[a, 0], points[v, 1] - centre[a, 1], points[v, 2] - centre[a, 2]
+            gap = fabs(sqrt((d0 * d0 + d1 * d1) + d2 * d2) - radius)
+            if not gap > cospherical * radius:
+                return None
+        for f in range(4):  # the face without corner f, its corners sorted
+            w = 0
+            for r in range(4):
+                if r != f:
+                    q[w] = tets[a, r]
+                    w += 1
+            if q[0] > q[1]:
+                q[0], q[1] = q[1], q[0]
+            if q[1] > q[2]:
+                q[1], q[2] = q[2], q[1]
+            if q[0] > q[1]:
+                q[0], q[1] = q[1], q[0]
+            allowed[(q[0] * k + q[1]) * k + q[2]] = 1
+    return allowed_
+
 # Liepa's refinement (section 4): centroid splits, then Delaunay edge flips
 
 cdef inline bint _has(const int64_t* sorted_, int64_t n, int64_t key, int64_t stride=1) noexcept nogil:

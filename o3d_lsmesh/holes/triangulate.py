@@ -21,10 +21,12 @@ def delaunay_triangles(points: np.ndarray) -> np.ndarray | None:
     coplanar or cospherical points; Zou et al. 2013, see the docs page)."""
     from scipy.spatial import Delaunay, QhullError
 
+    from .._triangulation_kernel import delaunay_allowed  # compiled: imported where used
+
     k = len(points)
     if k < 5:
         return None
-    points = np.asarray(points, dtype=np.float64)
+    points = np.ascontiguousarray(points, dtype=np.float64)
     try:
         tets = Delaunay(points).simplices.astype(np.int64)
     except (QhullError, ValueError):
@@ -38,22 +40,7 @@ def delaunay_triangles(points: np.ndarray) -> np.ndarray | None:
             centre = p[:, 0] + np.linalg.solve(2.0 * edges, (edges**2).sum(axis=2)[..., None])[..., 0]
         except np.linalg.LinAlgError:  # a flat tetrahedron (Qhull's triangulated output): not unique
             return None
-        to_corner = p[:, 0] - centre
-        radius = np.sqrt((to_corner * to_corner).sum(axis=1))  # np.linalg.norm's bits, without its wrapper
-        # in blocks of tetrahedra, the first cospherical point ends it (a scan's grid has them at once)
-        for s in range(0, len(tets), 64):
-            to_points = points[None] - centre[s : s + 64, None]
-            gap = np.abs(np.sqrt((to_points * to_points).sum(axis=2)) - radius[s : s + 64, None])
-            gap[np.arange(len(gap))[:, None], tets[s : s + 64]] = np.inf
-            if not (gap > COSPHERICAL * radius[s : s + 64, None]).all():
-                return None
-    faces = np.sort(
-        np.concatenate([tets[:, [0, 1, 2]], tets[:, [0, 1, 3]], tets[:, [0, 2, 3]], tets[:, [1, 2, 3]]]),
-        axis=1,
-    )
-    allowed = np.zeros(k * k * k, dtype=np.uint8)
-    allowed[(faces[:, 0] * k + faces[:, 1]) * k + faces[:, 2]] = 1
-    return allowed
+    return delaunay_allowed(points, tets, centre, COSPHERICAL)
 
 
 def refine_budget(points: np.ndarray, triangles: np.ndarray, sigma: np.ndarray) -> int:
