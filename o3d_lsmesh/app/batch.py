@@ -320,17 +320,9 @@ def run(
 
     try:
         if all(emit(record) for record in refused) and todo:
-            dispatch(
-                todo,
-                job,
-                emit,
-                client=client,
-                workers=workers,
-                threads_per_worker=threads_per_worker,
-                scheduler=scheduler,
-                scheduler_file=scheduler_file,
-                retries=retries,
-            )
+            where: dict[str, Any] = dict(client=client, scheduler=scheduler, scheduler_file=scheduler_file)
+            where.update(workers=workers, threads_per_worker=threads_per_worker, retries=retries)
+            dispatch(todo, job, emit, **where)
     finally:
         bar.close()
         if handle is not None:
