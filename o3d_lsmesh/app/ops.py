@@ -347,15 +347,10 @@ def denoise_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dic
         )
     else:
         # no flag: the API's defaults; the record names what ran (auto's choice included)
+        given = {name: options[name] for name in ("method", "mu", "reimpose_every")}
+        given["smooth_boundary"] = not options["fixed_boundary"]
         out, ran = fairing.constrained_fairing(
-            mesh,
-            options["iterations"],
-            method=options["method"],
-            mu=options["mu"],
-            smooth_boundary=not options["fixed_boundary"],
-            reimpose_every=options["reimpose_every"],
-            progress=progress,
-            return_report=True,
+            mesh, options["iterations"], **given, progress=progress, return_report=True
         )
         method, iterations = resolved_options(ran.method, options["iterations"], options["reimpose_every"])
     return out, {"method": method, "iterations": iterations, "level": level, **change_metrics(mesh, out)}
