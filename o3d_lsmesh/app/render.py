@@ -188,27 +188,17 @@ def _filament_worker(spec_path: str, image_path: str) -> None:
 def _filament(vertices, triangles, colors, camera, width, height, background, timeout) -> np.ndarray:
     with tempfile.TemporaryDirectory(prefix="o3d_lsmesh_render_") as folder:
         spec_path, image_path = os.path.join(folder, "spec.npz"), os.path.join(folder, "image.npy")
+        scene = dict(vertices=vertices, triangles=triangles, colors=colors, camera=json.dumps(camera))
         np.savez(
-            spec_path,
-            vertices=vertices,
-            triangles=triangles,
-            colors=colors,
-            camera=json.dumps(camera),
-            size=np.array([width, height]),
-            background=np.asarray(background, dtype=np.float64),
+            spec_path, **scene, size=np.array([width, height]), background=np.asarray(background, dtype=float)
         )
         package_parent = str(Path(__file__).resolve().parents[2])
         env = dict(os.environ)
         env["PYTHONPATH"] = package_parent + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
         code = "import sys; from o3d_lsmesh.app.render import _filament_worker; _filament_worker(sys.argv[1], sys.argv[2])"
         try:
-            done = subprocess.run(
-                [sys.executable, "-c", code, spec_path, image_path],
-                capture_output=True,
-                env=env,
-                timeout=timeout,
-                check=False,
-            )
+            command = [sys.executable, "-c", code, spec_path, image_path]
+            done = subprocess.run(command, capture_output=True, env=env, timeout=timeout, check=False)
         except subprocess.TimeoutExpired as error:
             raise RuntimeError(
                 f"Filament OffscreenRenderer did not finish within timeout={timeout} s"
