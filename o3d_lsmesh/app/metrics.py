@@ -172,18 +172,12 @@ def shape_change(before: AnyMesh, after: AnyMesh) -> dict:
     if not unmatched.any():
         volume_before, volume_after = _volume(a.vertices, triangles), _volume(b.vertices, b.triangles)
         change = 100.0 * (volume_after - volume_before) / volume_before if volume_before != 0 else None
-        return {
-            "closed": True,
-            "volume_before": volume_before,
-            "volume_after": volume_after,
-            "volume_change_percent": change,
-        }
-    out: dict[str, Any] = {
-        "closed": False,
-        "inward_shift_mean": None,
-        "inward_shift_rim": None,
-        "inward_shift_interior": None,
-    }
+        return dict(
+            closed=True, volume_before=volume_before, volume_after=volume_after, volume_change_percent=change
+        )
+    out: dict[str, Any] = dict(
+        closed=False, inward_shift_mean=None, inward_shift_rim=None, inward_shift_interior=None
+    )
     if len(b.vertices) != n:
         return out
     normals = area_weighted_normals(_unit_scale(a.vertices), triangles)
