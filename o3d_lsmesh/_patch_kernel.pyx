@@ -13,7 +13,7 @@ from libc.stdint cimport int64_t, uint8_t
 from libc.stdlib cimport calloc, free, malloc, qsort
 
 from o3d_lsmesh._fill_common cimport (
-    Half, _by_key, _by_value, _cross, _dot, _key, _max, _min, _normal, _outside, _sub
+    Half, _by_value, _cross, _dot, _key, _max, _min, _normal, _outside, _sort_halves, _sub
 )
 
 # tangential relaxation and the crossing test
@@ -273,13 +273,14 @@ cdef void _weights(const int64_t[:, ::1] tris, const double[:, ::1] x, const int
 # the fairing system of a local mesh
 
 cdef int64_t _edges(const int64_t[:, ::1] tris, int64_t[::1] i, int64_t[::1] j, int64_t[::1] inverse,
-                    Half* half) noexcept nogil:
-    """The sorted edges ``i < j`` of a local mesh and the edge of each corner-major half-edge; how many."""
+                    Half* half, int64_t* counts) noexcept nogil:
+    """The sorted edges ``i < j`` of a local mesh and the edge of each corner-major half-edge; how many
+    (``half``: 6 t half-edges of room, ``counts``: the radix sort's)."""
     cdef int64_t t = tris.shape[0], e = 0, h, k, c
     for c in range(3):
         for k in range(t):
             half[c * t + k].key, half[c * t + k].h = _key(tris[k, c], tris[k, (c + 1) % 3]), c * t + k
-    qsort(half, 3 * t, sizeof(Half), _by_key)
+    _sort_halves(half, half + 3 * t, 3 * t, counts)
     for h in range(3 * t):
         if h == 0 or half[h].key != half[h - 1].key:
             i[e], j[e] = half[h].key >> 32, half[h].key & <int64_t>0xFFFFFFFF
@@ -302,12 +303,16 @@ def patch_system(const double[:, ::1] x, const int64_t[:, ::1] tris, const int64
         raise ValueError("unknown and tris index the vertices of x")
     i_, j_, inverse_ = np.empty(3 * t, dtype=np.int64), np.empty(3 * t, dtype=np.int64), np.empty(3 * t, dtype=np.int64)
     cdef int64_t[::1] i = i_, j = j_, inverse = inverse_
-    cdef Half* half = <Half*>malloc(max(3 * t, 1) * sizeof(Half))
-    if not half:
+    cdef Half* half = <Half*>malloc(max(6 * t, 1) * sizeof(Half))  # and the sort's spare half
+    cdef int64_t* counts = <int64_t*>malloc(8 * 256 * sizeof(int64_t))
+    if not half or not counts:
+        free(half)
+        free(counts)
         raise MemoryError
     with nogil:
-        e = _edges(tris, i, j, inverse, half)
+        e = _edges(tris, i, j, inverse, half, counts)
     free(half)
+    free(counts)
     i, j = i[:e], j[:e]
     w_, degree_, scale_ = np.zeros(e), np.zeros(nv), np.zeros(nv)
     cdef double[::1] w = w_, degree = degree_, scale = scale_

@@ -11,9 +11,10 @@ import numpy as np
 from libc.math cimport INFINITY, acos, asin, cos, fabs, fmax, fmin, sqrt
 from libc.stdint cimport int64_t, uint8_t
 from libc.stdlib cimport free, malloc, qsort
-from libc.string cimport memcpy, memset
 
-from o3d_lsmesh._fill_common cimport Half, _by_key, _by_value, _cross, _dot, _key, _lower, _normal, _outside, _sub
+from o3d_lsmesh._fill_common cimport (
+    Half, _by_key, _by_value, _cross, _dot, _key, _lower, _normal, _outside, _sort_halves, _sub
+)
 
 # numerical tolerances and a safeguard, none fitted to a benchmark (the fitted constants: holes/tuning.py)
 cdef double _TIE = 1e-6  # dynamic programme: largest angles this close tie, and the area decides
@@ -259,37 +260,6 @@ cdef bint _flip_improves(const double* pa, const double* pb, const double* pc, c
     return fmin(_min_angle(pc, pa, pd), _min_angle(pd, pb, pc)) > (
         fmin(_min_angle(pa, pb, pc), _min_angle(pb, pa, pd)) + 1e-9
     )
-
-cdef void _sort_halves(Half* a, Half* tmp, int64_t n, int64_t* count) noexcept nogil:
-    """Sort ``n`` half-edges given in index order by (key, index): a stable radix sort of the keys, 8 bits a
-    pass, digits that all share skipped (``tmp``: ``n`` more, ``count``: 8 * 256 scratch); the same order
-    as qsort by ``_by_key`` in linear time (a pass of flips sorted every half-edge of the patch)."""
-    cdef int64_t i, s, total, c
-    cdef int d
-    cdef Half* src = a
-    cdef Half* dst = tmp
-    cdef Half* swap
-    memset(count, 0, 8 * 256 * sizeof(int64_t))
-    for i in range(n):
-        for d in range(8):
-            count[d * 256 + ((a[i].key >> (8 * d)) & 0xFF)] += 1
-    for d in range(8):
-        if n == 0 or count[d * 256 + ((a[0].key >> (8 * d)) & 0xFF)] == n:
-            continue
-        total = 0
-        for s in range(256):
-            c = count[d * 256 + s]
-            count[d * 256 + s] = total
-            total += c
-        for i in range(n):
-            s = d * 256 + ((src[i].key >> (8 * d)) & 0xFF)
-            dst[count[s]] = src[i]
-            count[s] += 1
-        swap = src
-        src = dst
-        dst = swap
-    if src != a:
-        memcpy(a, src, n * sizeof(Half))
 
 cdef int _relax(const double* points, int64_t* tris, int64_t t, const int64_t* fixed, int64_t n_fixed,
                 uint8_t* dirty, bint smooth=False) noexcept nogil:
