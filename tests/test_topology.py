@@ -169,14 +169,16 @@ def test_adjacency_refuses_vertex_counts_its_keys_cannot_hold():
 # --------------------------------------------------------------------------- boundaries of any mesh (issue 12)
 
 
-def _reference_boundary(F, n, *, split):
+def _reference_boundary(F, n, *, split, join=False):
     """Plain-Python boundary walk: closed curves and open curves as vertex lists.
 
     Boundary edges are edges of exactly one triangle. At every vertex the ends of its
     boundary edges are paired: a vertex on exactly two boundary edges and no edge of more
     than two triangles pairs them; otherwise (a junction) ends pair when their triangles are
     in the same fan (triangles linked through edges of exactly two triangles around the
-    vertex), or never with ``split``.
+    vertex), or never with ``split``. With ``join``, at a junction of two such fans, each with one
+    end in and one out and neither a triangle of three boundary edges, each fan's end in pairs with the
+    other's end out.
     """
     edge_triangles = {}
     for t, tri in enumerate(F.tolist()):
@@ -214,6 +216,14 @@ def _reference_boundary(F, n, *, split):
             junction = degree[v] != 2 or v in crowded
             key = ("v", v) if not junction else (("x", e, side) if split else ("f", v, fan(v, t)))
             ends.setdefault(key, []).append((e, side))
+    lone = [t for _, _, t in boundary]
+    for v in {key[1] for key in ends if join and key[0] == "f"}:
+        fans = [ends.pop(key) for key in list(ends) if key[:2] == ("f", v)]
+        if len(fans) == 2 and all(sorted(s for _, s in g) == [0, 1] for g in fans):
+            if not any(lone.count(boundary[e][2]) == 3 for g in fans for e, _ in g):
+                (a_out, a_in), (b_out, b_in) = (sorted(g, key=lambda end: end[1]) for g in fans)
+                fans = [[a_in, b_out], [b_in, a_out]]
+        ends.update({("f", v, i): g for i, g in enumerate(fans)})
     partner = {}
     for group in ends.values():
         if len(group) == 2:
@@ -312,6 +322,32 @@ def test_pinched_loops_of_bunny_scan_match_a_plain_walk():
     # two loops, the 29 others sit on one loop that visits them twice
     chains = boundary_chains(F, n)
     assert len(chains.junctions) == 51 and len(chains.loops) + len(chains.chains) == 92 + 102
+
+
+@settings(max_examples=120, deadline=None)
+@given(triangle_soups())
+def test_loops_joining_fans_match_a_plain_walk_on_any_soup(soup):
+    n, triangles = soup
+    F = np.array(triangles, dtype=np.int64)
+    closed, _ = _reference_boundary(F, n, split=False, join=True)
+    loops = boundary_loops(F, n, join_fans=True)
+    assert sorted(_canonical(l.tolist(), True) for l in loops) == sorted(_canonical(c, True) for c in closed)
+
+
+def test_loops_joining_fans_are_each_hole_of_a_grid_and_of_bunny_scan():
+    # two cells of a grid touching at vertex 12: across the gaps between its two fans, one loop a cell
+    _V, F = grid(5, 5)
+    F = F[[not (set(t) <= {6, 7, 11, 12} or set(t) <= {12, 13, 17, 18}) for t in F.tolist()]]
+    cells = [l.tolist() for l in boundary_loops(F, 25, join_fans=True)[1:]]
+    assert cells == [[6, 11, 12, 7], [12, 17, 18, 13]]
+    mesh = load_mesh("bunny_scan.ply")
+    F, n = np.asarray(mesh.triangles).astype(np.int64), len(mesh.vertices)
+    loops = boundary_loops(F, n, join_fans=True)
+    closed, open_ = _reference_boundary(F, n, split=False, join=True)
+    assert not open_ and all_cycles_in_order(loops, F)
+    assert sorted(_canonical(l.tolist(), True) for l in loops) == sorted(_canonical(c, True) for c in closed)
+    # every boundary edge on one loop, as without joining
+    assert sum(map(len, loops)) == 2898
 
 
 def test_pinch_continues_along_the_rim_of_its_fan():

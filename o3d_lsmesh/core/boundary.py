@@ -141,17 +141,26 @@ class BoundaryCurves:
         return len(self.loops) + len(self.chains)
 
 
-def boundary_loops(triangles: np.ndarray, n: int, *, conn: Connectivity | None = None) -> list[np.ndarray]:
+def boundary_loops(
+    triangles: np.ndarray, n: int, *, conn: Connectivity | None = None, join_fans: bool = False
+) -> list[np.ndarray]:
     """Every closed boundary loop as an ordered ``(l,) int64`` array of vertices, on any mesh.
 
     At a pinch a loop continues along the rim of the same fan; a boundary edge whose fan ends at a
-    fin is on no closed loop (:func:`boundary_curves` covers those).
+    fin is on no closed loop (:func:`boundary_curves` covers those). With ``join_fans`` (hole
+    filling), at a pinch of two fans, each with one edge in and one out and neither a lone triangle
+    (a flap), a loop crosses the gaps between the fans instead: each loop is one hole's rim, and
+    filling the holes joins the fans.
 
     >>> [loop.tolist() for loop in boundary_loops(np.array([[0, 1, 2], [0, 3, 4]]), 5)]  # a bow-tie
     [[0, 1, 2], [0, 3, 4]]
+    >>> wings = np.array([[0, 1, 2], [0, 2, 3], [0, 4, 5], [0, 5, 6]])  # fans of two triangles at 0
+    >>> [loop.tolist() for loop in boundary_loops(wings, 7, join_fans=True)]  # both gaps: one region
+    [[0, 1, 2, 3, 0, 4, 5, 6]]
     """
     runs = None if conn is None else conn.edge_structure.runs
-    return _boundary_walk(np.asarray(triangles, dtype=np.int64), n, split_at_junctions=False, runs=runs)[0]
+    triangles = np.asarray(triangles, dtype=np.int64)
+    return _boundary_walk(triangles, n, split_at_junctions=False, runs=runs, join_fans=join_fans)[0]
 
 
 def boundary_chains(triangles: np.ndarray, n: int) -> BoundaryCurves:
@@ -195,7 +204,7 @@ def boundary_rows(triangles: np.ndarray, n: int, runs):
     return rows, tail, head, on_crowded
 
 
-def _boundary_walk(triangles: np.ndarray, n: int, *, split_at_junctions: bool, runs=None):
+def _boundary_walk(triangles: np.ndarray, n: int, *, split_at_junctions: bool, runs=None, join_fans=False):
     """Closed and open boundary curves, each a sorted list, and ``(n,) bool`` masks of the junctions and
     of the boundary vertices on fins (see ``docs/algorithms/connectivity.rst``).
 
@@ -226,12 +235,22 @@ def _boundary_walk(triangles: np.ndarray, n: int, *, split_at_junctions: bool, r
         if split_at_junctions:
             key[ends] = n + np.arange(len(ends))  # unique: never paired
         else:
-            _, fan = corner_fans(triangles, n, runs, only=special)
+            fans, fan = corner_fans(triangles, n, runs, only=special)
             corner = np.empty(2 * b, dtype=np.int64)
             corner[0::2] = rows  # a half-edge's row is the corner it starts from
             q, t = np.divmod(rows, m)
             corner[1::2] = ((q + 1) % 3) * m + t  # ... and it ends at the next corner of its triangle
-            key[ends] = n + fan[corner[ends]]
+            fan = fan[corner[ends]]
+            key[ends] = n + fan
+            if join_fans:  # each fan's end in (odd) pairs with the other fan's end out, across a gap
+                v, incoming = end_vertex[ends], ends & 1
+                one_each = np.bincount(fan, incoming, fans) * np.bincount(fan, 1 - incoming, fans) == 1
+                low = np.full(n, fans)
+                np.minimum.at(low, v, fan)
+                flap = np.bincount(rows % m, minlength=m) == 3  # a lone triangle keeps its own rim
+                two = (degree[v] == 4) & one_each[fan] & ~flap[corner[ends] % m]
+                two &= np.bincount(v, ~two, n)[v] == 0  # all four ends of a vertex, or none
+                key[ends[two]] = n + fans + 2 * low[v[two]] + ((fan[two] == low[v[two]]) ^ incoming[two])
     order = np.argsort(key, kind="stable")
     _, run_start, run_length = _runs(key[order])
     pairs = run_start[run_length == 2]  # a fan or a plain vertex holds at most two boundary ends

@@ -24,7 +24,7 @@ def _loop_rows(triangles: np.ndarray, n: int, conn: Connectivity) -> list[tuple[
     ``conn`` is the mesh's Connectivity."""
     es = conn.edge_structure
     edges, counts, inverse = es.edges.astype(np.int64), es.counts, es.inverse
-    loops = boundary_loops(triangles, n, conn=conn)
+    loops = boundary_loops(triangles, n, conn=conn, join_fans=True)  # a hole's rim crosses a pinch
     if not loops:
         return []
     single = np.flatnonzero(counts[inverse] == 1)
