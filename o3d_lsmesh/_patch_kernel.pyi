@@ -9,7 +9,9 @@ def local_mesh(
 def patch_system(
     x: Array, tris: Array, unknown: Array, ring0: Array, ring1: Array, level: int, cot: bool, dense: bool
 ) -> tuple[Array | tuple[Array, Array, Array], Array]: ...
-def triangle_grids(centre: Array, radius: Array) -> list[tuple[Array, float, Array, Array, Array, float]]: ...
+def triangle_grids(
+    vertices: Array, triangles: Array
+) -> tuple[Array, Array, list[tuple[Array, float, Array, Array, Array, float]]]: ...
 def patch_crossings(
     vertices: Array,
     triangles: Array,

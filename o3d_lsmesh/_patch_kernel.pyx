@@ -447,24 +447,38 @@ cdef inline bint _overlap(const double* c, double r, const double* d, double s) 
     cdef double d0 = c[0] - d[0], d1 = c[1] - d[1], d2 = c[2] - d[2]
     return sqrt((d0 * d0 + d1 * d1) + d2 * d2) <= r + s
 
-def triangle_grids(const double[:, ::1] centre, const double[::1] radius):
-    """The crossing test's grids of triangles' bounding spheres (``centre (t, 3)``, ``radius (t,)``): those
-    of radius at most 4 times the median, then the rest (docs page), each in cells as wide as its largest
-    radius (wider while the cells outnumber ``4 t + 64``), each cell's triangles in index order: a list of
+def triangle_grids(const double[:, ::1] vertices, const int64_t[:, ::1] triangles):
+    """The crossing test's bounding spheres of ``triangles``: centres ``(t, 3)`` (the centroids, NumPy's
+    ``p.sum(axis=1) / 3`` bits), radii ``(t,)`` (the farthest corner), and their grids: those of radius
+    at most 4 times the median, then the rest (docs page), each in cells as wide as its largest radius
+    (wider while the cells outnumber ``4 t + 64``), each cell's triangles in index order, a list of
     ``(origin, cell, dims, indptr, members, reach)``."""
-    cdef int64_t t = radius.shape[0], half = t // 2, k, g, count, x
-    cdef double reach, width, limit
+    cdef int64_t t = triangles.shape[0], half = t // 2, k, g, count, x
+    cdef double reach, width, limit, d0, d1, d2
     cdef double[3] low, high
     cdef const int64_t[::1] members
     cdef int64_t[::1] dims, key, indptr, out
-    cdef int c
-    if centre.shape[0] != t:
-        raise ValueError("centre and radius must have one row per triangle")
+    cdef int c, r
+    if t and _outside(&triangles[0, 0], 3 * t, vertices.shape[0]):
+        raise ValueError("triangles index the vertices")
+    centre_, radius_ = np.empty((t, 3)), np.empty(t)
+    cdef double[:, ::1] centre = centre_
+    cdef double[::1] radius = radius_
+    for k in range(t):
+        for c in range(3):
+            centre[k, c] = ((vertices[triangles[k, 0], c] + vertices[triangles[k, 1], c])
+                            + vertices[triangles[k, 2], c]) / 3.0
+        for r in range(3):
+            d0 = vertices[triangles[k, r], 0] - centre[k, 0]
+            d1 = vertices[triangles[k, r], 1] - centre[k, 1]
+            d2 = vertices[triangles[k, r], 2] - centre[k, 2]
+            d0 = sqrt((d0 * d0 + d1 * d1) + d2 * d2)
+            radius[k] = d0 if r == 0 else _max(radius[k], d0)
     if t == 0:
-        return []
-    part = np.partition(np.asarray(radius), [half - 1, half] if t % 2 == 0 else [half])
+        return centre_, radius_, []
+    part = np.partition(radius_, [half - 1, half] if t % 2 == 0 else [half])
     limit = 4.0 * (part[half] if t % 2 else (part[half - 1] + part[half]) / 2.0)
-    small_ = np.asarray(radius) <= limit
+    small_ = radius_ <= limit
     grids = []
     for members_ in (np.flatnonzero(small_), np.flatnonzero(~small_)):
         count = members_.shape[0]
@@ -503,7 +517,7 @@ def triangle_grids(const double[:, ::1] centre, const double[::1] radius):
             indptr[g] = indptr[g - 1]
         indptr[0] = 0
         grids.append((np.array([low[0], low[1], low[2]]), width, dims_, indptr_, sorted_, reach))
-    return grids
+    return centre_, radius_, grids
 
 def patch_crossings(const double[:, ::1] vertices, const int64_t[:, ::1] triangles, int64_t first_new,
                     grids, const double[:, ::1] tri_centre, const double[::1] tri_radius,

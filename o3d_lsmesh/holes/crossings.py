@@ -18,11 +18,9 @@ class _TriangleIndex:
     def __init__(self, vertices: np.ndarray, triangles: np.ndarray) -> None:
         from .._patch_kernel import triangle_grids  # compiled: imported where used
 
-        p = vertices[triangles]
-        self.centre = p.sum(axis=1) / 3.0  # the bits of p.mean(axis=1) and np.linalg.norm, quicker
-        offset = p - self.centre[:, None, :]
-        self.radius = np.sqrt((offset * offset).sum(axis=2)).max(axis=1)
-        self.grids = triangle_grids(self.centre, self.radius)
+        self.centre, self.radius, self.grids = triangle_grids(
+            np.ascontiguousarray(vertices, dtype=np.float64), np.ascontiguousarray(triangles, dtype=np.int64)
+        )
 
 
 def _crossings(
