@@ -1154,3 +1154,31 @@ def test_batch_run_errors_name_the_parameter_and_the_cli_adds_the_dashes(tmp_pat
     assert error.value.param == param and not str(error.value).startswith("--")
     args = build_parser().parse_args(["batch", "in.ply", "out", "--op", "denoise"])
     assert user_message(error.value, args).startswith(flag)
+
+
+@pytest.mark.parametrize(
+    "argv, meshes",
+    [
+        (["denoise", "{a}", "{out}.ply"], 2),  # the input, and the output the metrics read
+        (["fill", "{a}", "{out}.ply"], 2),  # the input, and the output whose holes are counted
+        (["approximate", "{a}", "{out}.ply", "--count", "30"], 2),  # the input, and the output's error
+        (["encode", "{a}", "{out}.bin"], 2),  # the input, and the decoded mesh's error
+        (["hierarchy", "{a}", "{out}"], 1),
+        (["reconstruct", "{a}", "{out}.ply", "--unknown", "0:10"], 1),
+        (["compare", "{a}", "{b}"], 2),
+    ],
+)
+def test_each_mesh_a_command_reads_or_makes_is_checked_once(
+    tmp_path, capsys, monkeypatch, clean, noisy, argv, meshes
+):
+    # the command checks a file's arrays when it reads it; the operation and the metrics take them as they are
+    import o3d_lsmesh._o3d as adapter
+
+    checks, check = [], adapter.mesh_arrays
+    monkeypatch.setattr(
+        adapter, "mesh_arrays", lambda *args, **kwargs: checks.append(1) or check(*args, **kwargs)
+    )
+    a, b = _write(clean, tmp_path / "a.ply"), _write(noisy, tmp_path / "b.ply")
+    argv = [item.format(a=a, b=b, out=tmp_path / "out") for item in argv]
+    assert main([*argv, "--quiet"]) == 0, capsys.readouterr().err
+    assert len(checks) == meshes

@@ -209,15 +209,16 @@ def mesh_suffix(text: str) -> str:
 
 
 def read_input(path: str, *, what: str = "INPUT") -> Any:
-    """Read a mesh file and check its arrays once, or raise :class:`CLIError` naming the file."""
+    """Read a mesh file and check its arrays once, or raise :class:`CLIError` naming the file.
+
+    Returns the checked arrays (a ``MeshData``, which the operations and metrics take without a
+    second check); the checks are made here so that the message names the file (an index past the
+    vertices is also how a cut-off text file shows: "3 18" read as 182).
+    """
     try:
-        mesh = read_mesh_file(path, what=what)
-        # the checks every command would make, made here so that the message names the file (an index
-        # past the vertices is also how a cut-off text file shows: "3 18" read as 182)
-        read_mesh(mesh, name=f"{what} {path!r}")
+        return read_mesh(read_mesh_file(path, what=what), name=f"{what} {path!r}")
     except (ValueError, TypeError) as error:
         raise CLIError(str(error)) from None
-    return mesh
 
 
 def same_file(a: str, b: str) -> bool:
