@@ -94,6 +94,18 @@ def test_a_batch_task_validates_its_input_once(counts, tmp_path):
     assert counts["validated"] == 3, counts
 
 
+@pytest.mark.parametrize("op, checks", [("encode", 2), ("approximate", 2), ("hierarchy", 1)])
+def test_a_batch_op_validates_its_input_once(counts, tmp_path, op, checks):
+    # the input once, and the mesh the record measures (the decoded one, the approximation) once
+    from o3d_lsmesh.app.batch import run
+
+    (tmp_path / "in").mkdir()
+    o3d.io.write_triangle_mesh(str(tmp_path / "in" / "a.ply"), sphere())
+    records = run([str(tmp_path / "in")], str(tmp_path / "out"), op=op, workers=0, progress=False)
+    assert [r["status"] for r in records] == ["ok"], records
+    assert counts["validated"] == checks, counts
+
+
 @pytest.mark.parametrize("method", ["scan", "local", "global"])
 def test_a_mesh_read_once_is_not_written_by_the_calls_it_is_handed_to(method):
     # read_mesh hands a MeshData on without a second check: the callee gets its own positions

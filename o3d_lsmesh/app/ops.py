@@ -419,6 +419,7 @@ def approximate_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any,
 @operation("encode", options=ENCODE, output="bytes", extension=".bin", help=_ANCHORS)
 def encode_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
     """``--op encode`` and ``o3d-lsmesh encode``: the bytes, their size and the decoded error."""
+    mesh = read_mesh(mesh)  # validated once: the encoder, the decoder and the error take it as it is
     n = len(mesh.vertices)
     count = resolve_count(options["count"], n)
     progress = context.progress
