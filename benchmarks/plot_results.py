@@ -85,7 +85,7 @@ def features() -> None:
     x = range(len(rows))
     series = [
         ("features (ours)", [number(r["features (ours)"]) for r in rows], "tab:blue"),
-        ("default (ours)", [number(r["default (ours)"]) for r in rows], "tab:cyan"),
+        ("auto (ours)", [number(r["auto (ours)"]) for r in rows], "tab:cyan"),
         ("best classical peer", [min(number(r[c]) for c in classical if c in r) for r in rows], "tab:orange"),
         ("GCN-Denoiser (released results)", [number(r.get("GCN-Denoiser", "-")) for r in rows], "tab:green"),
     ]
