@@ -16,8 +16,8 @@ Our constants (``SIGMA_R`` and the pass count's ``CONCENTRATION`` and ``MAX_PASS
 grid by leave-one-mesh-out over the nine meshes (:func:`rule_loo`): each mesh at the grid point best on
 the others and at the one best on all; both are printed. Also:
 the least-squares vertex update (one sparse solve a pass) against Sun et al.'s
-steps, the time against Open3D ``filter_smooth_taubin(100)`` at ~35k and
-~50k vertices with the memory per vertex (tracemalloc peak), and a run at
+steps, the time against Open3D ``filter_smooth_taubin(100)`` on two CAD meshes (the most passes) and
+at ~35k and ~50k vertices with the memory per vertex (tracemalloc peak), and a run at
 defaults on every raw scan (bunny, dragon, bunny_scan.ply).
 
 ``method="auto"`` (``constrained_fairing(mesh, method="auto")``: the feature mode where the
@@ -324,7 +324,7 @@ def update_comparison(names=("Block 0.4", "SharpSphere 0.3", "GCN fertility")):
     return markdown_table(header, rows)
 
 
-def speed(names=("Bunny 0.2", "GCN nicolo"), repeat=3):
+def speed(names=("Block 0.4", "Bunny 0.2", "GCN fandisk", "GCN nicolo"), repeat=3):
     rows = []
     for case in CASES:
         if case[0] not in names:
