@@ -197,9 +197,8 @@ def parse_index_spec(spec: str, n: int) -> np.ndarray:
             start = int(start_text) if start_text or not colon else 0
             stop = (int(stop_text) if stop_text else n) if colon else start + 1
         except ValueError:
-            raise CLIError(
-                f"--unknown must be an existing index file or a list like '0:100,250', got {spec!r}"
-            ) from None
+            message = f"--unknown must be an existing index file or a list like '0:100,250', got {spec!r}"
+            raise CLIError(message) from None
         # checked before any array: '0:99999999999' must not allocate 800 GB
         if start < 0 or stop > n or stop < start:
             what = f"range {item!r}" if colon else f"index {item!r}"

@@ -452,9 +452,8 @@ def find_reference(base: str, relative: str) -> str:
 def compare_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
     """``--op compare``: metrics against the matching file of ``reference``."""
     if options["reference"] is None:
-        raise InputError(
-            "reference is required by op compare (a folder of the files to compare with)", param="reference"
-        )
+        message = "reference is required by op compare (a folder of the files to compare with)"
+        raise InputError(message, param="reference")
     reference_path = find_reference(options["reference"], context.relative)
     reference: Any = read_mesh(read_mesh_file(reference_path), name="reference")  # each read once
     mesh = read_mesh(mesh)

@@ -354,12 +354,8 @@ def render(
     >>> render([sphere, o3d.geometry.TriangleMesh.create_box()], None, width=64, height=64, backend="raycast").shape
     (64, 128, 3)
     """
-    if isinstance(meshes, (list, tuple)) and not (
-        isinstance(meshes, tuple) and len(meshes) == 2 and isinstance(meshes[0], np.ndarray)
-    ):
-        items = list(meshes)
-    else:
-        items = [meshes]
+    pair = isinstance(meshes, tuple) and len(meshes) == 2 and isinstance(meshes[0], np.ndarray)  # one (V, F)
+    items = list(meshes) if isinstance(meshes, (list, tuple)) and not pair else [meshes]
     if not items:
         raise InputError("meshes must hold at least one mesh, got an empty sequence", param="meshes")
     width = as_count(width, name="width", minimum=8, maximum=8192)
