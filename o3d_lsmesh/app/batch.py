@@ -36,10 +36,18 @@ __all__ = [
 def task_key(path: str, ops: Sequence[BatchOp], options: Sequence[dict], suffix: str) -> str:
     """Hash of the pipeline, its options, the output suffix and the input's size and mtime (the resume key)."""
     stat = os.stat(path)
-    key = dict(
-        op=[o.name for o in ops], options=options, suffix=suffix, size=stat.st_size, mtime_ns=stat.st_mtime_ns
+    payload = json.dumps(
+        {
+            "op": [op.name for op in ops],
+            "options": options,
+            "suffix": suffix,
+            "size": stat.st_size,
+            "mtime_ns": stat.st_mtime_ns,
+        },
+        sort_keys=True,
+        default=str,
     )
-    return hashlib.sha256(json.dumps(key, sort_keys=True, default=str).encode()).hexdigest()[:32]
+    return hashlib.sha256(payload.encode()).hexdigest()[:32]
 
 
 def _read_report(path: Path) -> dict[str, dict]:
@@ -286,8 +294,14 @@ def run(
     outdir.mkdir(parents=True, exist_ok=True)
     # the workers need the op functions, not the option parsers (closures only cloudpickle can send)
     shipped = [dataclasses.replace(o, options=()) for o in ops]
-    job: dict[str, Any] = dict(outdir=str(outdir), ops=shipped, options=values, suffix=suffix)
-    job.update(threads=threads_per_worker, timeout=task_timeout or None)
+    job = {
+        "outdir": str(outdir),
+        "ops": shipped,
+        "options": values,
+        "suffix": suffix,
+        "threads": threads_per_worker,
+        "timeout": task_timeout or None,
+    }
 
     bar = Progress(progress, f"batch {pipeline}").bar(
         len(tasks), initial=len(tasks) - len(todo) - len(refused), unit="file", dynamic_ncols=True
@@ -320,9 +334,17 @@ def run(
 
     try:
         if all(emit(record) for record in refused) and todo:
-            where: dict[str, Any] = dict(client=client, scheduler=scheduler, scheduler_file=scheduler_file)
-            where.update(workers=workers, threads_per_worker=threads_per_worker, retries=retries)
-            dispatch(todo, job, emit, **where)
+            dispatch(
+                todo,
+                job,
+                emit,
+                client=client,
+                workers=workers,
+                threads_per_worker=threads_per_worker,
+                scheduler=scheduler,
+                scheduler_file=scheduler_file,
+                retries=retries,
+            )
     finally:
         bar.close()
         if handle is not None:

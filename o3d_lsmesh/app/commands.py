@@ -97,11 +97,17 @@ def fill(args: argparse.Namespace, run: Run) -> int:
     )
     for hole in report.skipped:  # every loop left open, and why
         run.say(f"  left open: loop {hole.id} ({hole.edges} edges, diameter {hole.diameter:.4g}): {hole.how}")
-    fields = dict(holes_before=len(before), holes_after=len(after))
-    fields["borders_left_open"] = 0 if args.fill_border else sum(hole.border for hole in before)
-    fields |= {key: metrics[key] for key in ("new_vertices", "new_triangles")}
-    skipped = [dataclasses.asdict(hole) for hole in report.skipped]
-    return run.finish(mesh, **fields, holes_filled=len(report.filled), skipped=skipped, seconds=seconds)
+    return run.finish(
+        mesh,
+        holes_before=len(before),
+        holes_after=len(after),
+        borders_left_open=0 if args.fill_border else sum(hole.border for hole in before),
+        new_vertices=metrics["new_vertices"],
+        new_triangles=metrics["new_triangles"],
+        holes_filled=len(report.filled),
+        skipped=[dataclasses.asdict(hole) for hole in report.skipped],
+        seconds=seconds,
+    )
 
 
 def approximate(args: argparse.Namespace, run: Run) -> int:
@@ -231,8 +237,13 @@ def reconstruct(args: argparse.Namespace, run: Run) -> int:
         f"reconstructed {len(unknown)} vertices of {args.input} in {seconds:.2f} s -> {args.output}; "
         f"mean distance to the file's positions {moved.mean():.4g}"
     )
-    distances = {"distance_to_input_mean": float(moved.mean()), "distance_to_input_max": float(moved.max())}
-    return run.finish(mesh, unknown=len(unknown), seconds=seconds, **distances)
+    return run.finish(
+        mesh,
+        unknown=len(unknown),
+        seconds=seconds,
+        distance_to_input_mean=float(moved.mean()),
+        distance_to_input_max=float(moved.max()),
+    )
 
 
 def decode(args: argparse.Namespace, run: Run) -> int:
@@ -340,9 +351,16 @@ def batch(args: argparse.Namespace, run: Run) -> int:
     report = args.report if args.report is not None else os.path.join(args.outdir, "batch_report.jsonl")
     start = time.perf_counter()
     try:
-        given = {o.name: getattr(args, o.name) for o in RUN_FLAGS if o.name != "report"}
-        given.update(op=args.op, options=options, report=report, progress=run.progress, force=args.force)
-        records = run_batch(args.inputs, args.outdir, **given)
+        records = run_batch(
+            args.inputs,
+            args.outdir,
+            op=args.op,
+            options=options,
+            report=report,
+            progress=run.progress,
+            force=args.force,
+            **{o.name: getattr(args, o.name) for o in RUN_FLAGS if o.name != "report"},
+        )
     except ImportError as error:  # --scheduler without dask installed
         raise CLIError(str(error)) from None
     seconds = time.perf_counter() - start

@@ -138,8 +138,15 @@ def run_task(
     so it runs on until it ends, unless its process is restarted, as the Dask engine does).
     """
     start, cpu = time.perf_counter(), time.process_time()
-    record = new_record(input=task.path, stage="read", op=",".join(op.name for op in ops), key=task.key)
-    record.update(worker=_worker_address(), pid=os.getpid(), warnings=[])
+    record = new_record(
+        input=task.path,
+        stage="read",
+        op=",".join(op.name for op in ops),
+        key=task.key,
+        worker=_worker_address(),
+        pid=os.getpid(),
+        warnings=[],
+    )
     capture_warnings()
     # stops an abandoned (timed-out) task from writing: the write and the abandonment exclude each other
     lock, gate = threading.Lock(), {"abandoned": False, "written": False}
@@ -176,9 +183,12 @@ def run_task(
         finally:
             _LOCAL.warnings = None
 
-    # a daemon: an abandoned task must not keep the process alive
-    thread = threading.Thread(target=pipeline, args=(record,), name=f"o3d-lsmesh task {task.relative}")
-    thread.daemon = True
+    thread = threading.Thread(
+        target=pipeline,
+        args=(record,),
+        name=f"o3d-lsmesh task {task.relative}",
+        daemon=True,  # an abandoned task must not keep the process alive
+    )
     thread.start()
     thread.join(timeout)
     if thread.is_alive():
