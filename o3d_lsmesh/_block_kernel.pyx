@@ -781,3 +781,62 @@ def two_ring_sums(const index_t[::1] indptr, const index_t[::1] indices, const i
                         for c in range(k):
                             sums[s, c] += values[b, c]
     return counts_array, sums_array
+
+
+def ring_entries(const index_t[::1] indptr, const index_t[::1] indices, const double[:, ::1] a,
+                 const double[:, ::1] b, bint difference):
+    """For each stored entry ``k`` (row ``i``, column ``j``) of a CSR pattern, ``(r,)``: ``a[i] . b[j]``, or
+    with ``difference`` ``|a[i] - b[j]|^2``, three columns summed left to right (the order of NumPy's
+    column-at-a-time sums over ``a[rows]`` and ``b[cols]``, which it reproduces) without their gathers."""
+    cdef Py_ssize_t m = indptr.shape[0] - 1, i
+    cdef index_t k, j
+    cdef double s, d
+    if a.shape[0] != m or a.shape[1] != 3 or b.shape[1] != 3 or indptr[m] != indices.shape[0]:
+        raise ValueError(f"a must be ({m}, 3) and b (*, 3) on a pattern of {indices.shape[0]} entries")
+    out_array = empty_small_pages(indices.shape[0])
+    cdef double[::1] out = out_array
+    with nogil:
+        for i in prange(m, schedule="static", num_threads=_threads(m)):
+            for k in range(indptr[i], indptr[i + 1]):
+                j = indices[k]
+                if difference:
+                    d = a[i, 0] - b[j, 0]
+                    s = d * d
+                    d = a[i, 1] - b[j, 1]
+                    s = s + d * d
+                    d = a[i, 2] - b[j, 2]
+                    out[k] = s + d * d
+                else:
+                    out[k] = a[i, 0] * b[j, 0] + a[i, 1] * b[j, 1] + a[i, 2] * b[j, 2]
+    return out_array
+
+
+def ring_least(const index_t[::1] indptr, const index_t[::1] indices, const double[::1] values,
+               bint ratio):
+    """Per row of a CSR pattern, ``(m,)``: the first column ``j`` (in stored order) of least ``values[j]``
+    (``-1`` on an empty row); with ``ratio``, ``max_k values[j] / (1e-9 + sum_k values[j])`` over the row's
+    entries instead (0 on an empty row; ``values >= 0``: the guided filter's patch saliency)."""
+    cdef Py_ssize_t m = indptr.shape[0] - 1, i
+    cdef index_t k, j, first
+    cdef double most, total
+    if indptr[m] != indices.shape[0]:
+        raise ValueError(f"indptr ends at {indptr[m]}, the pattern has {indices.shape[0]} entries")
+    out_array = np.empty(m, dtype=np.float64 if ratio else np.intp)
+    cdef double[::1] saliency = out_array if ratio else np.empty(0)
+    cdef Py_ssize_t[::1] least = np.empty(0, dtype=np.intp) if ratio else out_array
+    with nogil:
+        for i in prange(m, schedule="static", num_threads=_threads(m)):
+            if ratio:
+                most, total = 0.0, 0.0
+                for k in range(indptr[i], indptr[i + 1]):
+                    most = max(most, values[indices[k]])
+                    total = total + values[indices[k]]
+                saliency[i] = most / (1e-9 + total)
+            else:
+                first = -1
+                for k in range(indptr[i], indptr[i + 1]):
+                    j = indices[k]
+                    if first < 0 or values[j] < values[first]:
+                        first = j
+                least[i] = first
+    return out_array

@@ -16,7 +16,7 @@ import scipy.sparse as sp
 
 from .._o3d import read_mesh
 from ..core.arrays import face_normals
-from ..core.connectivity import Connectivity, FaceAdjacency, run_heads
+from ..core.connectivity import Connectivity, FaceAdjacency
 from ..core.errors import InputError
 from ..core.progress import Progress
 from ..core.validate import as_count, as_positive_float, mesh_arrays
@@ -64,30 +64,17 @@ def _patch_edges(adjacency: FaceAdjacency) -> sp.csr_matrix:
 def _guidance(normals, area, adjacency, patch_edges):
     """Zhang et al.'s guidance: the mean normal of the most consistent patch (least ``H = D R``, docs
     page) containing each face."""
-    ring, rows, cols, pairs = adjacency.ring, adjacency.rows, adjacency.cols, adjacency.pairs
+    from .._block_kernel import ring_entries, ring_least  # compiled by the package's build
+
+    ring, pairs = adjacency.ring, adjacency.pairs
     jump = np.linalg.norm(normals[pairs[:, 0]] - normals[pairs[:, 1]], axis=1)
-    saliency = _row_reduce(np.maximum, patch_edges, jump.take(patch_edges.indices)) / (
-        1e-9 + patch_edges @ jump
-    )
+    saliency = ring_least(patch_edges.indptr, patch_edges.indices, jump, True)
     mean = _unit(ring @ (area[:, None] * normals))
     # |n_j - m_i|^2 = 2 - 2 n_j . m_i for unit normals: the largest deviation is the least dot product
-    least = _row_reduce(np.minimum, ring, _entry_dots(mean, normals, rows, cols))
-    score = (np.sqrt(np.maximum(2.0 - 2.0 * least, 0.0)) * saliency).take(cols)
+    least = _row_reduce(np.minimum, ring, ring_entries(ring.indptr, ring.indices, mean, normals, False))
+    score = np.sqrt(np.maximum(2.0 - 2.0 * least, 0.0)) * saliency
     # per face, the first patch of least score among those containing it (the ring is symmetric)
-    hits = np.flatnonzero(score == _row_reduce(np.minimum, ring, score).take(rows))
-    return mean[cols[hits[run_heads(rows[hits])]]]
-
-
-def _entry_dots(a: np.ndarray, b: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
-    """``a[rows[k]] . b[cols[k]]`` for every stored entry ``k`` (1-D takes of transposed copies)."""
-    at, bt = np.ascontiguousarray(a.T), np.ascontiguousarray(b.T)
-    out = at[0].take(rows)
-    out *= bt[0].take(cols)
-    for k in (1, 2):
-        term = at[k].take(rows)
-        term *= bt[k].take(cols)
-        out += term
-    return out
+    return mean[ring_least(ring.indptr, ring.indices, score, False)]
 
 
 def filter_pass(
@@ -101,20 +88,27 @@ def filter_pass(
 ) -> np.ndarray:
     """One pass of the guided (``guided=False``: bilateral) normal filter over the face normals, ``(m, 3)``:
     ``n_i <- normalize(sum_j a_j K_s(|c_i - c_j|) K_r(|g_i - g_j|) n_j)`` (docs page)."""
+    from .._block_kernel import block_product, ring_entries  # compiled by the package's build
+
     normals, area = face_normals(vertices, triangles)
     ring, rows, cols = adjacency.ring, adjacency.rows, adjacency.cols
     centroid = (adjacency.incidence @ vertices) / 3.0
-    d2 = np.zeros(len(rows))
-    for coordinate in centroid.T:  # differences, not |a|^2 + |b|^2 - 2 a.b: far from the origin it cancels
-        step = coordinate.take(rows) - coordinate.take(cols)
-        d2 += step * step
+    # differences, not |a|^2 + |b|^2 - 2 a.b: far from the origin it cancels
+    d2 = ring_entries(ring.indptr, ring.indices, centroid, centroid, True)
     others = rows != cols
     spacing = float(np.sqrt(d2[others]).mean()) if others.any() else 1.0
     guide = _guidance(normals, area, adjacency, patch_edges) if guided else normals
-    exponent = (_entry_dots(guide, guide, rows, cols) - 1.0) / sigma_r**2
-    exponent -= d2 / (2.0 * max(spacing, np.finfo(float).tiny) ** 2)
-    weights = sp.csr_matrix((area.take(cols) * np.exp(exponent), cols, ring.indptr), shape=ring.shape)
-    return _unit(weights @ normals)
+    # the weights in place, one entry-sized array: exp((g_i . g_j - 1) / sigma_r^2 - d2 / (2 spacing^2)) a_j
+    weights = ring_entries(ring.indptr, ring.indices, guide, guide, False)
+    weights -= 1.0
+    weights /= sigma_r**2
+    d2 /= 2.0 * max(spacing, np.finfo(float).tiny) ** 2
+    weights -= d2
+    np.exp(weights, out=weights)
+    weights *= area.take(cols)
+    out = np.empty((len(triangles), 3))
+    block_product(ring.indptr, ring.indices, weights, normals, out)
+    return _unit(out)
 
 
 def normal_steps(
