@@ -840,3 +840,41 @@ def ring_least(const index_t[::1] indptr, const index_t[::1] indices, const doub
                         first = j
                 least[i] = first
     return out_array
+
+
+def plane_steps(const index_t[::1] corners, const index_t[::1] indptr, const index_t[::1] faces,
+                const double[:, ::1] normals, double[:, ::1] x, Py_ssize_t iterations):
+    """Sun et al.'s vertex update in place, ``iterations`` steps of ``x_v += 1/|F_v| sum_(f in F_v) n_f
+    (n_f . (c_f - x_v))``: ``corners`` the faces' vertices ``(3m,)``, ``(indptr, faces)`` each vertex's
+    faces in increasing order (once per corner: the incidence's CSC). Each step reads the planes
+    ``n_f . c_f`` of the previous positions (one pass over the faces, then one over the vertices)."""
+    cdef Py_ssize_t m = normals.shape[0], n = x.shape[0], f, v, step, c, e
+    cdef index_t k
+    cdef double d, s0, s1, s2
+    if corners.shape[0] != 3 * m or indptr.shape[0] != n + 1 or indptr[n] != faces.shape[0]:
+        raise ValueError(f"corners must have {3 * m} entries and indptr {n + 1}, ending at len(faces)")
+    plane_array, outer_array = np.empty(m), np.zeros((n, 9))
+    cdef double[::1] plane = plane_array
+    cdef double[:, ::1] outer = outer_array
+    with nogil:
+        for v in prange(n, schedule="static", num_threads=_threads(n)):
+            for k in range(indptr[v], indptr[v + 1]):
+                for e in range(9):
+                    outer[v, e] += normals[faces[k], e // 3] * normals[faces[k], e % 3]
+        for step in range(iterations):
+            for f in prange(m, schedule="static", num_threads=_threads(m)):
+                d = 0.0
+                for c in range(3):
+                    d = d + normals[f, c] * (x[corners[3 * f], c] + x[corners[3 * f + 1], c] + x[corners[3 * f + 2], c])
+                plane[f] = d / 3.0
+            for v in prange(n, schedule="static", num_threads=_threads(n)):
+                s0, s1, s2 = 0.0, 0.0, 0.0
+                for k in range(indptr[v], indptr[v + 1]):
+                    s0 = s0 + normals[faces[k], 0] * plane[faces[k]]
+                    s1 = s1 + normals[faces[k], 1] * plane[faces[k]]
+                    s2 = s2 + normals[faces[k], 2] * plane[faces[k]]
+                d = max(indptr[v + 1] - indptr[v], 1)
+                s0 = (s0 - (outer[v, 0] * x[v, 0] + outer[v, 1] * x[v, 1] + outer[v, 2] * x[v, 2])) / d
+                s1 = (s1 - (outer[v, 3] * x[v, 0] + outer[v, 4] * x[v, 1] + outer[v, 5] * x[v, 2])) / d
+                s2 = (s2 - (outer[v, 6] * x[v, 0] + outer[v, 7] * x[v, 1] + outer[v, 8] * x[v, 2])) / d
+                x[v, 0], x[v, 1], x[v, 2] = x[v, 0] + s0, x[v, 1] + s1, x[v, 2] + s2

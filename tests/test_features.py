@@ -68,6 +68,27 @@ def test_filter_pass_matches_a_loop_over_faces(guided):
     np.testing.assert_allclose(ours, reference_filter(V, F, fe.SIGMA_R, guided), atol=1e-12)
 
 
+@pytest.mark.parametrize("guided", [True, False])
+@pytest.mark.parametrize("name", ["fin", "bowtie", "isolated_triangles", "pinched_boundary"])
+def test_filter_pass_and_vertex_step_match_the_loops_on_raw_scan_defects(name, guided):
+    # edges of three faces, faces whose patch has no edge-adjacent pair, a vertex shared by two fans
+    V, F, _ = DEFECTS[name](0)
+    if name == "isolated_triangles":  # not its pillow: two opposite faces sum to no normal (the loop's 0 / 0)
+        F = np.delete(F, [-5, -4], axis=0)
+    adjacency = Connectivity(F, len(V)).face_adjacency
+    ours = fe.filter_pass(V, F, adjacency, fe._patch_edges(adjacency) if guided else None, guided=guided)
+    np.testing.assert_allclose(ours, reference_filter(V, F, fe.SIGMA_R, guided), atol=1e-12)
+    step, count = np.zeros_like(V), np.zeros(len(V))
+    for f, normal in zip(F, ours):
+        for i in f:
+            step[i] += normal * (normal @ (V[f].mean(axis=0) - V[i]))
+            count[i] += 1
+    expected = V + step / np.maximum(count, 1)[:, None]  # vertices of no face stay
+    np.testing.assert_allclose(
+        fe.normal_steps(V, F, ours, incidence=adjacency.incidence, iterations=1), expected, atol=1e-14
+    )
+
+
 def test_normal_steps_match_a_loop_and_converge_to_the_least_squares_solution():
     V, F = cube(0)
     rng = np.random.default_rng(4)

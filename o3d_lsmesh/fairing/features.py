@@ -122,13 +122,13 @@ def normal_steps(
     """Sun et al. 2007's vertex update, ``(n, 3)``: ``iterations`` steps of
     ``x_i += 1/|F_i| sum_(f in F_i) n_f (n_f . (c_f - x_i))`` (per-vertex ``3 x 3`` sums formed once;
     ``incidence`` the face adjacency's triangle-vertex incidence)."""
-    n = len(vertices)
-    count = np.maximum(np.bincount(triangles.ravel(), minlength=n), 1)[:, None]
-    outer = (incidence.T @ (normals[:, :, None] * normals[:, None, :]).reshape(-1, 9)).reshape(n, 3, 3)
-    x = np.array(vertices, dtype=np.float64)
-    for _ in range(iterations):
-        plane = np.einsum("ij,ij->i", incidence @ x, normals) / 3.0  # n_f . c_f
-        x += (incidence.T @ (normals * plane[:, None]) - np.einsum("nij,nj->ni", outer, x)) / count
+    from .._block_kernel import plane_steps  # compiled by the package's build
+
+    # each vertex's faces, increasing: the order in which the transposed product summed them
+    by_vertex = incidence.tocsc()
+    corners = incidence.indices.astype(by_vertex.indices.dtype, copy=False)
+    x = np.array(vertices, dtype=np.float64, order="C")
+    plane_steps(corners, by_vertex.indptr, by_vertex.indices, np.ascontiguousarray(normals), x, iterations)
     return x
 
 
