@@ -56,7 +56,8 @@ def _patch_edges(adjacency: FaceAdjacency) -> sp.csr_matrix:
         (np.ones(2 * p), (adjacency.pairs.T.ravel(), np.tile(np.arange(p), 2))), shape=(m, p)
     )
     inside = (adjacency.ring @ ends).tocsr()
-    inside.data = (inside.data == 2).astype(np.float64)
+    # each entry counts the pair's faces in the patch, 1 or 2: keep the 2s, as ones, without a new array
+    inside.data -= 1.0
     inside.eliminate_zeros()
     return inside
 
