@@ -16,8 +16,9 @@ Our constants (``SIGMA_R`` and the pass count's ``CONCENTRATION`` and ``MAX_PASS
 grid by leave-one-mesh-out over the nine meshes (:func:`rule_loo`): each mesh at the grid point best on
 the others and at the one best on all; both are printed. Also:
 the least-squares vertex update (one sparse solve a pass) against Sun et al.'s
-steps, the time against Open3D ``filter_smooth_taubin(100)`` on two CAD meshes (the most passes) and
-at ~35k and ~50k vertices with the memory per vertex (tracemalloc peak), and a run at
+steps, the time against Open3D ``filter_smooth_taubin(100)`` on two CAD meshes (the most passes),
+at ~35k and ~50k vertices and on a ~1M-vertex subdivided mesh, with the memory per vertex (tracemalloc
+peak), and a run at
 defaults on every raw scan (bunny, dragon, bunny_scan.ply).
 
 ``method="auto"`` (``constrained_fairing(mesh, method="auto")``: the feature mode where the
@@ -32,7 +33,8 @@ choice on the data folder's other meshes (not used to choose it) with the theta
 of both methods there.
 
 Run: ``.venv/bin/python benchmarks/bench_features_denoise.py`` (about 25 minutes on 2 cores);
-writes ``results/features_denoise.md``; ``--choice`` prints only the choice's table; ``--passes`` writes
+writes ``results/features_denoise.md``; ``--choice`` prints only the choice's table, ``--speed`` only the
+time table (about 5 minutes); ``--passes`` writes
 ``results/features_passes_study.md`` (truth-free stopping rules for the passes, scored leave-one-mesh-out,
 and theta after k passes from the noisy mesh and from the scan energy's result; about 4 minutes).
 """
@@ -324,15 +326,25 @@ def update_comparison(names=("Block 0.4", "SharpSphere 0.3", "GCN fertility")):
     return markdown_table(header, rows)
 
 
-def speed(names=("Block 0.4", "Bunny 0.2", "GCN fandisk", "GCN nicolo"), repeat=3):
-    rows = []
-    for case in CASES:
-        if case[0] not in names:
-            continue
-        V, F = load(case[1])
+LARGE = ("Nicolo 0.2", 3)  # the ~1M-vertex row: this mesh Loop-subdivided so many times (950k vertices)
+
+
+def speed(names=("Block 0.4", "Bunny 0.2", "GCN fandisk", "GCN nicolo"), repeat=3, large=LARGE):
+    """Ours at defaults against Open3D's Taubin(100), interleaved (both see the same machine load), best of
+    ``repeat`` on each of ``names``, one run of each on ``large`` (see :data:`LARGE`; ``None``: no such row);
+    the tracemalloc peak of one more run of ours, per vertex."""
+    rows, noisy = [], {case[0]: case[1] for case in CASES}
+    meshes = [(name, *load(noisy[name]), repeat) for name in names]
+    if large is not None:
+        V, F = load(noisy[large[0]])
+        mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(V), o3d.utility.Vector3iVector(F))
+        mesh = mesh.subdivide_loop(number_of_iterations=large[1])
+        V, F = np.asarray(mesh.vertices), np.asarray(mesh.triangles).astype(np.int64)
+        meshes.append((f"{large[0]}, Loop-subdivided {large[1]}x", V, F, 1))
+    for name, V, F, runs in meshes:
         mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(V), o3d.utility.Vector3iVector(F))
         ours, taubin = [], []
-        for _ in range(repeat):  # interleaved: both see the same machine load
+        for _ in range(runs):
             start = time.perf_counter()
             constrained_fairing_arrays(V, F, None, method="features")
             ours.append(time.perf_counter() - start)
@@ -344,7 +356,8 @@ def speed(names=("Block 0.4", "Bunny 0.2", "GCN fandisk", "GCN nicolo"), repeat=
         peak = tracemalloc.get_traced_memory()[1]
         tracemalloc.stop()
         passes = measured_passes(V, F)
-        rows.append([case[0], len(V), passes, min(ours), min(taubin), min(ours) / min(taubin), peak / len(V)])
+        rows.append([name, len(V), passes, min(ours), min(taubin), min(ours) / min(taubin), peak / len(V)])
+        print(rows[-1], flush=True)
     header = ["mesh", "vertices", "passes", "ours s", "Taubin(100) s", "ratio", "peak bytes / vertex"]
     return markdown_table(header, rows)
 
@@ -812,6 +825,9 @@ def main():
     if "--choice" in sys.argv:  # only the choice's leave-one-object-out table, printed
         print(choice_section()[0])
         return
+    if "--speed" in sys.argv:  # only the time table, printed (its section of results/features_denoise.md)
+        print(speed())
+        return
     if "--passes" in sys.argv:  # only the pass-count study, its own results file
         sections = stopping_rules() + [("Theta after k passes", passes_study())]
         write_markdown("features_passes_study.md", "How many passes each mesh wants (#39)", sections)
@@ -888,7 +904,10 @@ def main():
         ("The choice on meshes it was not chosen on", others),
         ("The choice's errors over every mesh, leave-one-object-out", threshold_loo(choice_rows, other_rows)),
         ("Vertex update: Sun et al.'s steps against one least-squares solve a pass", update_comparison()),
-        ("Time against Open3D filter_smooth_taubin(100), best of 3 interleaved; memory", speed()),
+        (
+            "Time against Open3D filter_smooth_taubin(100), best of 3 interleaved (one on ~1M vertices); memory",
+            speed(),
+        ),
         ("Raw scans at defaults (method='features', detect_creases)", raw_scans()),
     ]
     notes.add("The machine was shared with other work during the run: the times are indicative.")
