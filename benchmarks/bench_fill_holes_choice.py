@@ -22,7 +22,9 @@ picks one candidate per hole from what the input alone shows:
   around centres 2R to 3R from the loop (the first nearest 2.5R, the next farthest from those before),
   each filled by each candidate and scored against the surface it removed; the lowest mean wins;
 * ``crease``: the candidate whose patch meets the mesh with the smaller mean dihedral angle at the loop's
-  edges (the truth is smooth across the loop); no extra fill;
+  edges (the truth is smooth across the loop); no validation fill, but every candidate fills the hole;
+* ``size``: CGAL-like on loops of at least E edges, ours on the others, E chosen leave-one-mesh-out;
+* ``+c1``: the rule choosing among all three candidates (otherwise among ours and CGAL-like);
 * the oracle: the candidate nearest the truth (known only with the answer), the bound of any rule.
 
 Reported per mesh and size: the ratio of mean distances (to the removed surface) against CGAL c2 on the
@@ -632,7 +634,7 @@ NOTES = """\
 * Neighbour disks (same radius, 2R-3R from the loop, 1-3 disks): 102-121 of 200 right; 20 holes have no
   centre that far (15h disks on the eight and tentacle tips); 6-7 cells above 1; 4.3x-9.5x CGAL's time.
 * Loop crease (the candidate meeting the mesh with the smaller mean dihedral angle at the loop's edges; no
-  constant, no extra fill): chosen on every fold; left out, better than today on camel (0.869 vs 0.935),
+  constant, no validation fill): chosen on every fold; left out, better than today on camel (0.869 vs 0.935),
   eight (0.938 vs 0.987), horse (0.859 vs 0.864), octopus (0.978 vs 1.267), screwdriver (1.016 vs 1.065)
   and venus_head (0.831 vs 0.856), worse on feline (0.968 vs 0.936). Cells above 1: camel 15h (1.046),
   feline 6h (1.051), horse 15h (1.003), screwdriver 2.5h (1.192) and 15h (1.087). 118 of 200 right. It
