@@ -65,12 +65,14 @@ def _patch_edges(adjacency: FaceAdjacency) -> sp.csr_matrix:
 def _guidance(normals, area, adjacency, patch_edges):
     """Zhang et al.'s guidance: the mean normal of the most consistent patch (least ``H = D R``, docs
     page) containing each face."""
-    from .._block_kernel import ring_entries, ring_least  # compiled by the package's build
+    from .._block_kernel import block_product, ring_entries, ring_least  # compiled by the package's build
 
     ring, pairs = adjacency.ring, adjacency.pairs
     jump = np.linalg.norm(normals[pairs[:, 0]] - normals[pairs[:, 1]], axis=1)
     saliency = ring_least(patch_edges.indptr, patch_edges.indices, jump, True)
-    mean = _unit(ring @ (area[:, None] * normals))
+    mean = np.empty((len(normals), 3))
+    block_product(ring.indptr, ring.indices, ring.data, area[:, None] * normals, mean)
+    mean = _unit(mean)
     # |n_j - m_i|^2 = 2 - 2 n_j . m_i for unit normals: the largest deviation is the least dot product
     least = _row_reduce(np.minimum, ring, ring_entries(ring.indptr, ring.indices, mean, normals, False))
     score = np.sqrt(np.maximum(2.0 - 2.0 * least, 0.0)) * saliency
@@ -92,12 +94,13 @@ def filter_pass(
     from .._block_kernel import block_product, ring_entries  # compiled by the package's build
 
     normals, area = face_normals(vertices, triangles)
-    ring, rows, cols = adjacency.ring, adjacency.rows, adjacency.cols
+    ring, cols = adjacency.ring, adjacency.cols
     centroid = (adjacency.incidence @ vertices) / 3.0
     # differences, not |a|^2 + |b|^2 - 2 a.b: far from the origin it cancels
     d2 = ring_entries(ring.indptr, ring.indices, centroid, centroid, True)
-    others = rows != cols
-    spacing = float(np.sqrt(d2[others]).mean()) if others.any() else 1.0
+    # the mean distance between distinct faces of a ring: each row holds its own face once, at distance 0
+    others = len(d2) - len(triangles)
+    spacing = float(np.sqrt(d2).sum()) / others if others else 1.0
     guide = _guidance(normals, area, adjacency, patch_edges) if guided else normals
     # the weights in place, one entry-sized array: exp((g_i . g_j - 1) / sigma_r^2 - d2 / (2 spacing^2)) a_j
     weights = ring_entries(ring.indptr, ring.indices, guide, guide, False)
