@@ -1232,6 +1232,10 @@ def test_kernel_rejects_bad_shapes():
             np.zeros((2, 3)),
             np.zeros(2),
         )
+    with pytest.raises(ValueError, match="index the vertices"):
+        _patch_kernel.triangle_grids(np.eye(3), np.array([[0, 1, 3]]))
+    with pytest.raises(ValueError, match="index the points"):
+        _triangulation_kernel.delaunay_allowed(np.eye(3), np.array([[0, 1, 2, 3]]), np.zeros((1, 3)), 1e-9)
 
 
 @settings(max_examples=25, deadline=None)
