@@ -261,57 +261,47 @@ def run(count, meshes, save):
         with open(save) as f:
             rows = json.load(f)
     done = {(r["mesh"], r["radius"], r["k"]) for r in rows}
-    rng = np.random.default_rng(SEED)  # the study's cuts: same seed, meshes, radii and order
     reference = cgal_once(2)
-    for name, V, T in closed_meshes([f"{m}.ply" for m in meshes]):
-        h = mean_edge(V, T)
-        for radius in RADII:
-            for k in range(count):
-                try:
-                    holed, (_, removed) = simple_cut(V, T, radius * h, rng)
-                except RuntimeError:
-                    break
-                if (name, radius, k) in done:
-                    continue
-                case = {"holed": holed, "h": h, "truth": {"full": (V, T), "removed": removed}}
-                filler = HoleFiller(*holed)
-                row = {
-                    "mesh": name,
-                    "radius": radius,
-                    "k": k,
-                    "dist": {},
-                    "ms": {},
-                    "closed": {},
-                    "crease": {},
-                }
-                outs = {}
-                for candidate in CANDIDATES:
-                    out, seconds = fill_with(filler, candidate)
-                    outs[candidate] = out
-                    measured = measure(case, (out.vertices, out.triangles), seconds, 1)
-                    row["dist"][candidate], row["ms"][candidate] = measured["mean dist (h)"], 1000 * seconds
-                    row["closed"][candidate] = bool(measured["boundary edges"] == 0)
-                    row["crease"][candidate] = loop_crease(holed, out) if row["closed"][candidate] else np.inf
-                out, seconds = reference(*holed)
-                measured = measure(case, out, seconds, 1)
-                row["dist"]["CGAL c2"], row["ms"]["CGAL c2"] = measured["mean dist (h)"], 1000 * seconds
-                row["closed"]["CGAL c2"] = bool(measured["boundary edges"] == 0)
-                n = len(holed[0])
-                row["new vertices"] = len(outs["ours"].vertices) - n
-                row["loop edges"] = boundary_edges(*holed)
-                vr = np.random.default_rng(k)
-                for rings in (1, 2):
-                    row[f"ring {rings}"], seconds = ring_scores(*holed, h, rings, vr)
-                    row[f"ring {rings} ms"] = 1000 * seconds
-                row["disks"], seconds = disk_scores(
-                    holed, (outs["ours"].vertices, outs["ours"].triangles), h, vr
-                )
-                row["disks ms"] = [1000 * s for s in seconds]
-                rows.append(row)
-                if save:
-                    with open(save, "w") as f:
-                        json.dump(rows, f)
-                print(name, f"{radius:g}h", k, {c: round(v, 4) for c, v in row["dist"].items()}, flush=True)
+    for name, radius, k, holed, removed, V, T, h in each_cut(meshes, count):
+        if (name, radius, k) in done:
+            continue
+        case = {"holed": holed, "h": h, "truth": {"full": (V, T), "removed": removed}}
+        filler = HoleFiller(*holed)
+        row = {
+            "mesh": name,
+            "radius": radius,
+            "k": k,
+            "dist": {},
+            "ms": {},
+            "closed": {},
+            "crease": {},
+        }
+        outs = {}
+        for candidate in CANDIDATES:
+            out, seconds = fill_with(filler, candidate)
+            outs[candidate] = out
+            measured = measure(case, (out.vertices, out.triangles), seconds, 1)
+            row["dist"][candidate], row["ms"][candidate] = measured["mean dist (h)"], 1000 * seconds
+            row["closed"][candidate] = bool(measured["boundary edges"] == 0)
+            row["crease"][candidate] = loop_crease(holed, out) if row["closed"][candidate] else np.inf
+        out, seconds = reference(*holed)
+        measured = measure(case, out, seconds, 1)
+        row["dist"]["CGAL c2"], row["ms"]["CGAL c2"] = measured["mean dist (h)"], 1000 * seconds
+        row["closed"]["CGAL c2"] = bool(measured["boundary edges"] == 0)
+        n = len(holed[0])
+        row["new vertices"] = len(outs["ours"].vertices) - n
+        row["loop edges"] = boundary_edges(*holed)
+        vr = np.random.default_rng(k)
+        for rings in (1, 2):
+            row[f"ring {rings}"], seconds = ring_scores(*holed, h, rings, vr)
+            row[f"ring {rings} ms"] = 1000 * seconds
+        row["disks"], seconds = disk_scores(holed, (outs["ours"].vertices, outs["ours"].triangles), h, vr)
+        row["disks ms"] = [1000 * s for s in seconds]
+        rows.append(row)
+        if save:
+            with open(save, "w") as f:
+                json.dump(rows, f)
+        print(name, f"{radius:g}h", k, {c: round(v, 4) for c, v in row["dist"].items()}, flush=True)
     return rows
 
 
