@@ -785,14 +785,14 @@ def two_ring_sums(const index_t[::1] indptr, const index_t[::1] indices, const i
 
 def ring_entries(const index_t[::1] indptr, const index_t[::1] indices, const double[:, ::1] a,
                  const double[:, ::1] b, bint difference):
-    """For each stored entry ``k`` (row ``i``, column ``j``) of a CSR pattern, ``(r,)``: ``a[i] . b[j]``, or
+    """For each stored entry ``k`` (row ``i``, column ``j``) of an ``(m, m)`` CSR pattern, ``(r,)``: ``a[i] . b[j]``, or
     with ``difference`` ``|a[i] - b[j]|^2``, three columns summed left to right (the order of NumPy's
     column-at-a-time sums over ``a[rows]`` and ``b[cols]``, which it reproduces) without their gathers."""
     cdef Py_ssize_t m = indptr.shape[0] - 1, i
     cdef index_t k, j
     cdef double s, d
-    if a.shape[0] != m or a.shape[1] != 3 or b.shape[1] != 3 or indptr[m] != indices.shape[0]:
-        raise ValueError(f"a must be ({m}, 3) and b (*, 3) on a pattern of {indices.shape[0]} entries")
+    if a.shape[0] != m or b.shape[0] != m or a.shape[1] != 3 or b.shape[1] != 3 or indptr[m] != indices.shape[0]:
+        raise ValueError(f"a and b must be ({m}, 3) on an ({m}, {m}) pattern of {indices.shape[0]} entries")
     out_array = empty_small_pages(indices.shape[0])
     cdef double[::1] out = out_array
     with nogil:
@@ -853,6 +853,8 @@ def plane_steps(const index_t[::1] corners, const index_t[::1] indptr, const ind
     cdef double d, s0, s1, s2
     if corners.shape[0] != 3 * m or indptr.shape[0] != n + 1 or indptr[n] != faces.shape[0]:
         raise ValueError(f"corners must have {3 * m} entries and indptr {n + 1}, ending at len(faces)")
+    if normals.shape[1] != 3 or x.shape[1] != 3:
+        raise ValueError(f"normals and x must have 3 columns, got {normals.shape[1]} and {x.shape[1]}")
     plane_array, outer_array = np.empty(m), np.zeros((n, 9))
     cdef double[::1] plane = plane_array
     cdef double[:, ::1] outer = outer_array

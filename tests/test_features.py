@@ -123,6 +123,21 @@ def test_normal_steps_match_a_loop_and_converge_to_the_least_squares_solution():
     np.testing.assert_allclose(steps, expected, atol=1e-9)
 
 
+def test_filter_pass_and_normal_steps_refuse_arrays_of_another_mesh():
+    V, F = cube(1)
+    adjacency = Connectivity(F, len(V)).face_adjacency
+    other = Connectivity(F[:-2], len(V)).face_adjacency
+    with pytest.raises(ValueError, match="patch_edges"):
+        fe.filter_pass(V, F, adjacency, fe._patch_edges(other))
+    normals = fe.face_normals(V, F)[0]
+    with pytest.raises(ValueError, match="corners"):  # a normal short
+        fe.normal_steps(V, F, normals[:-1], incidence=adjacency.incidence)
+    with pytest.raises(ValueError, match="3 columns"):
+        fe.normal_steps(V, F, normals[:, :2], incidence=adjacency.incidence)
+    with pytest.raises(ValueError, match="indptr"):  # the incidence of a mesh with one vertex more
+        fe.normal_steps(V[:-1], F, normals, incidence=adjacency.incidence)
+
+
 def dihedral(X, F, edges_of):
     normals = fe.face_normals(X, F)[0]
     a, b = edges_of

@@ -68,6 +68,8 @@ def _guidance(normals, area, adjacency, patch_edges):
     from .._block_kernel import block_product, ring_entries, ring_least  # compiled by the package's build
 
     ring, pairs = adjacency.ring, adjacency.pairs
+    if patch_edges.shape != (len(normals), len(pairs)):  # the compiled loop reads jump at its columns
+        raise ValueError(f"patch_edges must be _patch_edges(adjacency), {(len(normals), len(pairs))}")
     jump = np.linalg.norm(normals[pairs[:, 0]] - normals[pairs[:, 1]], axis=1)
     saliency = ring_least(patch_edges.indptr, patch_edges.indices, jump, True)
     mean = np.empty((len(normals), 3))
