@@ -296,33 +296,39 @@ def relax_rim(
     def at(mask: np.ndarray, faces: np.ndarray) -> np.ndarray:  # faces with a vertex in the mask
         return mask[faces[:, 0]] | mask[faces[:, 1]] | mask[faces[:, 2]]
 
-    band = boundary.copy()
+    # grown ring by ring from the last ring's rows of the 1-ring (a triangle's corners are edge neighbours)
+    band, front = boundary, np.flatnonzero(boundary)
     for _ in range(RIM_RINGS):
-        band[triangles[at(band, triangles)]] = True
+        grown = band.copy()
+        grown[conn.adjacency[front].indices] = True
+        front, band = np.flatnonzero(grown & ~band), grown
     near = triangles[at(band, triangles)]
-    normal = area_weighted_normals(out, near)
-    length = np.linalg.norm(normal, axis=1)
+    # only the band's rows are read: their lengths alone
+    rows = np.flatnonzero(band)
+    normal, scan_normal = area_weighted_normals(out, near), area_weighted_normals(scan, near)
+    length, scan_length = np.linalg.norm(normal[rows], axis=1), np.linalg.norm(scan_normal[rows], axis=1)
     # a fan the fairing shrank to a point (a lone triangle of the scan), its area under sqrt(eps) of the
     # scan's (then its normal is round-off), takes the scan's tangent plane
-    scan_normal = area_weighted_normals(scan, near)
-    scan_length = np.linalg.norm(scan_normal, axis=1)
     flat = length <= np.sqrt(np.finfo(float).eps) * scan_length
-    normal[flat], length[flat] = scan_normal[flat], scan_length[flat]
+    normal[rows[flat]], length[flat] = scan_normal[rows[flat]], scan_length[flat]
     del scan_normal, scan_length
-    movable = band & (length > 0.0)  # a vertex without a tangent plane stays
-    normal[movable] /= length[movable, None]
+    rows = rows[length > 0.0]  # a vertex without a tangent plane stays
+    movable = np.zeros(n, dtype=bool)
+    movable[rows] = True
+    normal[rows] /= length[length > 0.0, None]
 
-    def tangential(move: np.ndarray, rows: np.ndarray) -> np.ndarray:
-        return move - np.einsum("ij,ij->i", move, normal[rows])[:, None] * normal[rows]
+    def tangential(move: np.ndarray, rows: np.ndarray) -> np.ndarray:  # rows (k,), or their normals (k, 3)
+        planes = normal[rows] if rows.ndim == 1 else rows
+        return move - np.einsum("ij,ij->i", move, planes)[:, None] * planes
 
     # a rim vertex averages its neighbours along the rim, any other vertex its 1-ring
     neighbours = rim_neighbours(conn, movable)
     count = np.diff(neighbours.indptr)
     moved = np.flatnonzero(count)
     neighbours = neighbours[moved]
-    share = 0.5 * strength / count[moved, None]
+    share, planes = 0.5 * strength / count[moved, None], normal[moved]
     for _ in range(RIM_RINGS):
-        out[moved] += tangential(share * (neighbours @ out) - 0.5 * strength * out[moved], moved)
+        out[moved] += tangential(share * (neighbours @ out) - 0.5 * strength * out[moved], planes)
     # where a triangle still degenerates, its vertices give back their tangential drift from the scan, a
     # quarter at a time (all of it at once was measured worse)
     given_back = np.where(movable, 0, 4)

@@ -121,9 +121,10 @@ def measured_noise(
         return NoiseEstimate(0.0, 0.0)
     d1 = valence.astype(np.float64)
     referenced = valence > 0
-    ring_sum = ring @ vertices
-    smooth = vertices.copy()
-    smooth[referenced] += ring_sum[referenced] / d1[referenced, None] - vertices[referenced]
+    with np.errstate(divide="ignore", invalid="ignore"):  # an unreferenced row (0 / 0) is not taken
+        mean = (ring @ vertices) / d1[:, None]
+    # whole rows, not a boolean selection of each (n, 3) array
+    smooth = np.where(referenced[:, None], vertices + (mean - vertices), vertices)
     smooth_square = np.einsum("ij,ij->i", smooth, smooth)
     normal = area_weighted_normals(smooth, triangles)
     inner_rows = np.flatnonzero(inner)
@@ -133,16 +134,18 @@ def measured_noise(
     nrm = normal[inner_rows]
     nrm /= np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), np.finfo(float).tiny)
     di = d1[inner_rows]
-    a1 = np.einsum("ij,ij->i", ring_sum[inner_rows] / di[:, None] - x, nrm)
-    near = _mean_square_distances((ring @ smooth_square)[inner_rows], (ring @ smooth)[inner_rows], sub, di)
+    a1 = np.einsum("ij,ij->i", mean[inner_rows] - x, nrm)
+    stacked = np.column_stack([vertices, smooth, smooth_square])  # the 2-ring sums of all three in one pass
+    # the 1-ring sums of the sampled rows only (the same sums in the same order as the whole product's)
+    sums = ring[inner_rows] @ stacked[:, 3:]
+    near = _mean_square_distances(sums[:, 3], sums[:, :3], sub, di)
     h2 = float(np.mean(near))
     if not h2 > 0.0:
         return NoiseEstimate(0.0, 0.0)
-    del ring_sum, sub, x, near
+    del mean, sub, x, near, sums
     # the same over the 2-ring (every vertex within two edges), a block of rows at a time (the whole
     # 2-ring pattern, with its product and sum, is several times the mesh)
     sum_a2, sum_k2, sum_h2 = 0.0, 0.0, 0.0
-    stacked = np.column_stack([vertices, smooth, smooth_square])  # the 2-ring sums of all three in one pass
     # a few blocks, not blocks of a fixed size: each product clears a work array as long as the mesh
     block_rows = max(NOISE_BLOCK, -(-len(inner_rows) // NOISE_BLOCKS))
     for start in range(0, len(inner_rows), block_rows):
