@@ -272,22 +272,22 @@ def scan_normal_matrix(
     t = float(rim_curve)
     inverse = np.zeros(n)
     np.divide(np.where(boundary, 1.0 - t, 1.0), valence, out=inverse, where=referenced)
-    plate = fresh(len(indices))
-    plate[diagonal] = referenced
-    plate[forward] = -inverse[lo]
-    plate[backward] = -inverse[hi]
+    from_lo, from_hi = -inverse[lo], -inverse[hi]  # each edge's entry in row lo, in row hi
     if t > 0.0:
         rim = counts == 1
         curve_valence = np.bincount(edges[rim].ravel(), minlength=n)
         curve_inverse = np.divide(t, curve_valence, out=np.zeros(n), where=curve_valence > 0)
-        plate[forward[rim]] -= curve_inverse[lo[rim]]
-        plate[backward[rim]] -= curve_inverse[hi[rim]]
+        from_lo[rim] -= curve_inverse[lo[rim]]
+        from_hi[rim] -= curve_inverse[hi[rim]]
     # K's CSR arrays are K^T's CSC: K^T K by the compiled product; symmetric, so its CSC arrays are its
     # CSR ones. Its pattern holds the 1-ring (K_ii K_ij): the 1-ring terms are added into it in place
-    # K^T's rows: K's values mirrored on the symmetric 1-ring pattern (no transpose of K)
-    mirrored = fresh(len(indices))
-    mirrored[diagonal] = plate[diagonal]
-    mirrored[forward], mirrored[backward] = plate[backward], plate[forward]
+    # K^T's rows: K's values mirrored on the symmetric 1-ring pattern (no transpose of K), both written
+    # from the edges' values (no gather of K's)
+    plate, mirrored = fresh(len(indices)), fresh(len(indices))
+    plate[diagonal] = mirrored[diagonal] = referenced
+    plate[forward], plate[backward] = from_lo, from_hi
+    mirrored[forward], mirrored[backward] = from_hi, from_lo
+    del from_lo, from_hi
     rows = sp.csr_matrix((mirrored, indices, indptr), shape=(n, n))
     square = gram_matrix(sp.csc_matrix((plate, indices, indptr), shape=(n, n)), rows=rows)
     del plate, mirrored, rows
@@ -303,6 +303,7 @@ def scan_normal_matrix(
     assert missing == 0, "the 1-ring lies within K^T K's pattern"
     del matrix
     ring = sp.csc_matrix((fresh(len(indices), fill=1.0), indices, indptr), shape=(n, n))
+    ring.has_canonical_format = True  # the connectivity's pattern: sorted, no duplicates
     normal = sp.csr_matrix((square.data, square.indices, square.indptr), shape=(n, n))
     normal.has_sorted_indices = True  # canonical: CHOLMOD and the lower-triangle cut need it
     return normal, ring, weight

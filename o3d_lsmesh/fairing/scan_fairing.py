@@ -83,6 +83,7 @@ class ScanFairingSolver:
             # symmetric and canonical: its CSR arrays are its CSC form (no copy); CG runs on the whole
             # matrix, numbered by the 1-ring's reverse Cuthill-McKee order (a scan's is scattered)
             whole = sp.csc_matrix((normal.data, normal.indices, normal.indptr), shape=normal.shape)
+            whole.has_canonical_format = True  # as assembled: the gateway need not check it again
             del normal
             plan = Plan(preconditioner="ic0", reduction=SCAN_REDUCTION, locality_of=ring)
             self._solver = SPDSolver(whole, backend=backend, progress=progress, _plan=plan)
@@ -123,7 +124,8 @@ class ScanFairingSolver:
         # solved about the centroid (``K 1 = 0``, the other terms are differences: ``S`` commutes with
         # translations), so the iterative path's relative residual measures the shape, not the distance
         # to the origin (a scan far from the origin in world coordinates)
-        centre = given[self.referenced].mean(axis=0) if self.referenced.any() else np.zeros(3)
+        used = np.ascontiguousarray(given) if self.referenced.all() else given[self.referenced]
+        centre = used.mean(axis=0) if len(used) else np.zeros(3)
         targets = given - centre
         # the iterative path starts from the targets (the scan, close to its faired self) and solves the
         # displacement from them to SCAN_REDUCTION (the gateway drops a start worse than zero); direct
@@ -136,8 +138,8 @@ class ScanFairingSolver:
             rest = targets - positions
             positions = positions + weight * self._solver.solve(self.normal_rhs(rest), x0=rest)
         out = positions + centre
-        unused = ~self.referenced
-        out[unused] = given[unused]  # exactly where they were
+        if not self.referenced.all():
+            out[~self.referenced] = given[~self.referenced]  # exactly where they were
         return out
 
 
