@@ -72,6 +72,8 @@ extensions = [
     # the iterative solver's block products and Gauss-Seidel sweeps, on every core where the compiler
     # has OpenMP (BuildExt adds the flag)
     Extension("o3d_lsmesh._block_kernel", ["o3d_lsmesh/_block_kernel.pyx"], extra_compile_args=list(flags)),
+    # the scan default's serial loops (the connectivity's half-edge grouping)
+    Extension("o3d_lsmesh._scan_kernel", ["o3d_lsmesh/_scan_kernel.pyx"], extra_compile_args=flags),
 ]
 if __name__ == "__main__":
     setup(

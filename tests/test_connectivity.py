@@ -6,11 +6,14 @@ import pickle
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
+import pytest
 from conftest import grid, triangle_soups
+from defect_meshes import DEFECTS, all_defects
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from o3d_lsmesh.core.connectivity import Connectivity
+from o3d_lsmesh._scan_kernel import edge_groups
+from o3d_lsmesh.core.connectivity import Connectivity, halfedges
 
 
 def plain_edges(triangles):
@@ -178,3 +181,51 @@ def test_ring_slots_hold_the_triangles_of_their_edge(soup, block):
             assert (first == second) == (len(on_edge) == 1)
         on_odd_edge = any(len(entries[(v, w)]) != 2 for w in ring[v])
         assert rings.boundary[v] == on_odd_edge
+
+
+def plain_edge_groups(lo, hi):
+    """The half-edges in (lo, hi, row) order by a plain sort, and their runs of one edge: (order, starts, counts, edges)."""
+    order = sorted(range(len(lo)), key=lambda i: (lo[i], hi[i], i))
+    starts = [
+        s
+        for s in range(len(order))
+        if s == 0 or (lo[order[s]], hi[order[s]]) != (lo[order[s - 1]], hi[order[s - 1]])
+    ]
+    counts = [b - a for a, b in zip(starts, starts[1:] + [len(order)])]
+    return order, starts, counts, [[lo[order[s]], hi[order[s]]] for s in starts]
+
+
+@settings(max_examples=60, deadline=None)
+@given(triangle_soups(), st.sampled_from([np.int32, np.int64]))
+def test_edge_groups_against_a_plain_sort(soup, dtype):
+    n, triangles = soup
+    pairs = np.sort(halfedges(np.array(triangles, dtype=np.int64).reshape(-1, 3)), axis=1).astype(dtype)
+    lo, hi = np.ascontiguousarray(pairs[:, 0]), np.ascontiguousarray(pairs[:, 1])
+    got = edge_groups(lo, hi, n)
+    assert [part.tolist() for part in got] == list(plain_edge_groups(lo.tolist(), hi.tolist()))
+    assert all(part.dtype == dtype for part in got)
+
+
+@pytest.mark.parametrize("name", [*DEFECTS, "all"])
+def test_edge_groups_on_raw_scan_defects(name):
+    vertices, triangles = (all_defects() if name == "all" else DEFECTS[name]())[:2]
+    pairs = np.sort(halfedges(triangles), axis=1).astype(np.int32)
+    lo, hi = np.ascontiguousarray(pairs[:, 0]), np.ascontiguousarray(pairs[:, 1])
+    got = edge_groups(lo, hi, len(vertices))
+    assert [part.tolist() for part in got] == list(plain_edge_groups(lo.tolist(), hi.tolist()))
+    es = Connectivity(triangles, len(vertices)).edge_structure
+    assert [es.order.tolist(), es.starts.tolist(), es.counts.tolist(), es.edges.tolist()] == [
+        part.tolist() for part in got
+    ]
+
+
+def test_edge_groups_refuses_arrays_it_would_index_out_of_bounds():
+    lo, hi = np.array([0, 1], dtype=np.int32), np.array([1, 2], dtype=np.int32)
+    with pytest.raises(ValueError, match="hi must have as many entries as lo"):
+        edge_groups(lo, hi[:1], 3)
+    with pytest.raises(ValueError, match="lo and hi must lie in 0..1"):
+        edge_groups(lo, hi, 2)
+    with pytest.raises(ValueError, match="lo and hi must lie in 0..2"):
+        edge_groups(np.array([-1, 0], dtype=np.int32), hi, 3)
+    with pytest.raises(ValueError, match="n must be at least 0"):
+        edge_groups(lo[:0], hi[:0], -1)

@@ -195,7 +195,7 @@ def test_wheel_metadata_licence_and_contents():
     assert any(re.fullmatch(r"o3d_lsmesh/hierarchy/collapse\..*(so|pyd)", n) for n in names), (
         "no compiled kernel"
     )
-    for kernel in ("_triangulation_kernel", "_patch_kernel"):
+    for kernel in ("_triangulation_kernel", "_patch_kernel", "_scan_kernel"):
         assert any(re.fullmatch(rf"o3d_lsmesh/{kernel}\..*(so|pyd)", n) for n in names), f"no {kernel}"
     assert any(re.fullmatch(r"o3d_lsmesh/_block_kernel\..*(so|pyd)", n) for n in names), "no block kernel"
     assert "o3d_lsmesh/py.typed" in names

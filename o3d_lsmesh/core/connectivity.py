@@ -14,7 +14,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse import csgraph
 
-from .arrays import _run_lengths, gather, run_heads
+from .arrays import gather, run_heads
 from .errors import InputError
 
 __all__ = ["Connectivity", "EdgeStructure", "FaceAdjacency", "VertexRings", "halfedges", "ring_pattern"]
@@ -257,33 +257,16 @@ def _edge_structure(triangles: np.ndarray, n: int) -> EdgeStructure:
         return EdgeStructure(np.zeros((0, 2), dtype=index), empty, empty, empty, _inverse=empty)
     # mesh-sized, on small pages (constrained_fairing.rst); compiled by the package's build: imported here
     from .._block_kernel import empty_small_pages as fresh
+    from .._scan_kernel import edge_groups
 
     lo, hi = fresh(count, index), fresh(count, index)  # rows of halfedges() order, written in place
     for a in range(3):
         tail, head, part = triangles[:, a], triangles[:, (a + 1) % 3], slice(a * m, (a + 1) * m)
         np.minimum(tail, head, out=lo[part], casting="unsafe")
         np.maximum(tail, head, out=hi[part], casting="unsafe")
-    rows = fresh(count + 1, np.int64)
-    rows[0] = 0
-    np.cumsum(np.broadcast_to(np.int64(1), (count,)), out=rows[1:])
-    ids = fresh(count, index)
-    np.copyto(ids, rows[:-1], casting="unsafe")
-    # pass 1: half-edges by hi; pass 2: that order, stably by lo
-    by_hi = sp.csr_matrix((ids, hi, rows), shape=(count, n)).tocsc().data
-    by_lo = sp.csr_matrix((by_hi, gather(lo, by_hi, out=ids), rows), shape=(count, n)).tocsc()
-    del by_hi, rows, ids
-    order = by_lo.data
-    lo_start = by_lo.indptr
-    del by_lo
-    sorted_hi = gather(hi, order, out=fresh(count, index))
-    first = run_heads(sorted_hi)
-    first[lo_start[:-1][lo_start[:-1] < lo_start[1:]]] = True  # a new lo starts a new edge
-    starts = np.flatnonzero(first).astype(index)
-    counts = _run_lengths(starts, count)
-    edges = np.empty((len(starts), 2), dtype=index)
-    edges[:, 0] = lo[order[starts]]
-    edges[:, 1] = sorted_hi[starts]
-    del sorted_hi, lo, hi, first
+    # two counting sorts (by hi, then that order stably by lo) and the runs of one edge, compiled
+    order, starts, counts, edges = edge_groups(lo, hi, n)
+    del lo, hi
     return EdgeStructure(edges, counts, order, starts)
 
 

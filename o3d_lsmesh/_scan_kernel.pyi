@@ -1,0 +1,5 @@
+import numpy as np
+
+Array = np.ndarray
+
+def edge_groups(lo: Array, hi: Array, n: int) -> tuple[Array, Array, Array, Array]: ...
