@@ -193,10 +193,11 @@ def test_rigid_motion_and_scale_equivariance():
     np.testing.assert_allclose(out_moved, 7.5 * out @ q.T + np.array([1e4, -3e3, 2e4]), atol=1e-12 * 7.5e4)
 
 
+@pytest.mark.parametrize("passes", [3, None])
 @pytest.mark.parametrize("name", sorted(DEFECTS))
-def test_raw_scan_defects_are_accepted(name):
+def test_raw_scan_defects_are_accepted(name, passes):
     V, F, _ = DEFECTS[name](0)
-    out = constrained_fairing_arrays(V, F, 3, method="features")
+    out = constrained_fairing_arrays(V, F, passes, method="features")
     assert out.shape == V.shape and np.isfinite(out).all()
     unused = np.setdiff1d(np.arange(len(V)), F)
     np.testing.assert_array_equal(out[unused], V[unused])
@@ -389,9 +390,10 @@ def test_the_choice_is_invariant_under_rigid_motion_and_scale():
     )
 
 
-def stop_by_loop(X, F, limit):
+def stop_by_loop(X, F, limit, concentration=None):
     """The pass where the measured count ends, from the definition: pass k's median filtered dihedral angle
-    above CONCENTRATION times pass k // 2's (k >= 2), else ``limit``; angles by a plain loop over pairs."""
+    above ``concentration`` (None: CONCENTRATION) times pass k // 2's (k >= 2), else ``limit``; angles by a
+    plain loop over pairs."""
     import math
     import statistics
 
@@ -405,18 +407,26 @@ def stop_by_loop(X, F, limit):
                 for a, b in conn.face_adjacency.pairs
             )
         )
-        if k >= 2 and medians[-1] > fe_tuning().CONCENTRATION * medians[k // 2 - 1]:
+        if k >= 2 and medians[-1] > (concentration or fe_tuning().CONCENTRATION) * medians[k // 2 - 1]:
             return k
     return limit
 
 
 def test_the_measured_pass_count_stops_where_the_normals_stop_concentrating():
+    from o3d_lsmesh.fairing.scan_fairing import scan_denoise
+
     limit = fe_tuning().MAX_PASSES
     stops = {}
     for name, (V, F) in [*cad_meshes().items(), *smooth_meshes().items()]:
         X = noisy(V, F, 0.3)
         stops[name] = k = stop_by_loop(X, F, limit)
-        np.testing.assert_array_equal(fe.feature_denoise(X, F), fe.feature_denoise(X, F, passes=k))
+        if k == limit:  # the cap: the passes from the noisy mesh
+            expected = fe.feature_denoise(X, F, passes=k)
+        else:  # an early stop: the scan energy's result, then the passes to the scan start's own stop
+            start = scan_denoise(X, F)
+            again = stop_by_loop(start, F, limit, fe_tuning().SCAN_START_CONCENTRATION)
+            expected = fe.feature_denoise(start, F, passes=again)
+        np.testing.assert_array_equal(fe.feature_denoise(X, F), expected)
     # flat pieces keep concentrating (the cube to the cap), curved surfaces level off within a few passes
     assert stops["cube"] == limit and max(stops["sphere"], stops["torus"]) <= 8, stops
 

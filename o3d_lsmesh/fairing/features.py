@@ -3,8 +3,9 @@
 Each pass filters the face normals once (Zhang et al. 2015, guided; ``guided=False``:
 Zheng et al. 2011, bilateral) and takes ``VERTEX_STEPS`` of Sun et al. 2007's vertex update
 towards the planes of the faces. The passes stop when the filtered normals stop concentrating
-(:meth:`FeatureRun.concentrated`), at most ``MAX_PASSES``; all weights are dimensionless. Docs page:
-``docs/algorithms/features.rst``.
+(:meth:`FeatureRun.concentrated`), at most ``MAX_PASSES``; where they stop before the cap (a curved
+surface) the result is the scan energy's followed by the passes from there (:meth:`FeatureRun.finish`).
+All weights are dimensionless. Docs page: ``docs/algorithms/features.rst``.
 """
 
 from __future__ import annotations
@@ -20,8 +21,16 @@ from ..core.connectivity import Connectivity, FaceAdjacency
 from ..core.errors import InputError
 from ..core.progress import Progress
 from ..core.validate import as_count, as_positive_float, mesh_arrays
+from .scan_fairing import scan_denoise
 from .scan_measure import measured_noise
-from .tuning import CONCENTRATION, CREASE_ANGLE, MAX_PASSES, SIGMA_R, VERTEX_STEPS
+from .tuning import (
+    CONCENTRATION,
+    CREASE_ANGLE,
+    MAX_PASSES,
+    SCAN_START_CONCENTRATION,
+    SIGMA_R,
+    VERTEX_STEPS,
+)
 
 if TYPE_CHECKING:
     from .._types import MeshT
@@ -151,11 +160,17 @@ def median_angle(normals: np.ndarray, pairs: np.ndarray) -> float:
 class FeatureRun:
     """The feature mode's passes on one mesh, taken one at a time (:meth:`step`); :meth:`finish` takes the
     rest and reads the result. ``feature_denoise`` takes them all; the default's chooser takes the first few, measures,
-    and may go on (:mod:`.feature_measure`)."""
+    and may go on (:mod:`.feature_measure`). ``scan_start``: ``vertices`` are the scan energy's result, the
+    stop takes ``SCAN_START_CONCENTRATION`` and :meth:`finish` does not switch."""
 
-    def __init__(self, vertices: np.ndarray, triangles: np.ndarray, conn: Connectivity) -> None:
-        self.vertices, self.triangles = vertices, triangles
+    def __init__(
+        self, vertices: np.ndarray, triangles: np.ndarray, conn: Connectivity, *, scan_start: bool = False
+    ) -> None:
+        self.vertices, self.triangles, self.conn = vertices, triangles, conn
         self.adjacency = conn.face_adjacency
+        self.scan_start = scan_start
+        # from the scan energy's result the medians concentrate less per pass than from the noise
+        self.concentration = SCAN_START_CONCENTRATION if scan_start else CONCENTRATION
         self.patch_edges = _patch_edges(self.adjacency)
         # about the centroid: the planes' offsets n_f . c_f do not carry the distance to the origin
         self.used = np.bincount(triangles.ravel(), minlength=len(vertices)) > 0
@@ -163,6 +178,7 @@ class FeatureRun:
         self.x = vertices - self.centre
         self.medians: list[float] = []  # the median filtered dihedral angle of each pass
         self.stop: np.ndarray | None = None  # the positions where the measured count ended
+        self.stop_pass = 0  # and its pass
 
     def step(self) -> np.ndarray:
         """One pass: the filtered face normals ``(m, 3)``, then the vertex steps towards their planes."""
@@ -171,19 +187,24 @@ class FeatureRun:
         self.medians.append(median_angle(normals, self.adjacency.pairs))
         if self.stop is None and (self.concentrated() or len(self.medians) >= MAX_PASSES):
             self.stop = self.x  # kept: a probe may take passes past it (normal_steps returns a new array)
+            self.stop_pass = len(self.medians)
         return normals
 
     def concentrated(self) -> bool:
         """Whether the filtered normals stopped concentrating after pass ``k``: the median dihedral angle
-        is above ``CONCENTRATION`` times pass ``k // 2``'s. On piecewise-flat (CAD) surfaces it keeps
-        falling like a power of ``k``; on curved ones it levels off at the surface's own angles, and the
-        passes after that flatten the surface (docs page)."""
+        is above ``self.concentration`` (``CONCENTRATION``, or ``SCAN_START_CONCENTRATION`` from the scan
+        energy's result) times pass ``k // 2``'s. On piecewise-flat (CAD) surfaces it keeps falling like a
+        power of ``k``; on curved ones it levels off at the surface's own angles, and the passes after that
+        flatten the surface (docs page)."""
         k = len(self.medians)
-        return k >= 2 and self.medians[-1] > CONCENTRATION * self.medians[k // 2 - 1]
+        return k >= 2 and self.medians[-1] > self.concentration * self.medians[k // 2 - 1]
 
     def finish(self, passes: int | None = None, progress: bool = False) -> np.ndarray:
         """``passes`` more passes (``None``: until the measured stop), then the positions ``(n, 3)``;
-        unreferenced vertices exactly where they were."""
+        unreferenced vertices exactly where they were.
+
+        With the measured stop before ``MAX_PASSES`` (a curved surface), the positions are instead
+        :func:`.scan_denoise`'s result followed by a ``scan_start`` run to its own measured stop."""
         measured = passes is None
         for _ in Progress(progress, "constrained fairing (features)").over(
             range(MAX_PASSES - len(self.medians) if passes is None else passes)
@@ -191,7 +212,14 @@ class FeatureRun:
             if measured and self.stop is not None:
                 break
             self.step()
-        x = (self.stop if measured and self.stop is not None else self.x) + self.centre
+        if measured and not self.scan_start and self.stop_pass < MAX_PASSES:
+            # the guided passes flatten a curved surface into facets before the noise is gone; the scan
+            # energy removes it without facets, and a few passes from there sharpen what creases it has
+            # (docs page). The stop from the noisy mesh decides: CAD meshes reach the cap and keep it.
+            start = scan_denoise(self.vertices, self.triangles, progress=progress, conn=self.conn)
+            x = FeatureRun(start, self.triangles, self.conn, scan_start=True).finish(None, progress)
+        else:
+            x = (self.stop if measured and self.stop is not None else self.x) + self.centre
         x[~self.used] = self.vertices[~self.used]
         return x
 
@@ -207,8 +235,9 @@ def feature_denoise(
     """The feature mode on validated arrays: new ``(n, 3) float64`` positions.
 
     ``passes`` filter passes (``None``: until the filtered normals stop concentrating,
-    :meth:`FeatureRun.concentrated`, at most :data:`MAX_PASSES`; none on a mesh without measured noise),
-    each followed by :data:`VERTEX_STEPS` vertex steps (:func:`filter_pass`, :func:`normal_steps`);
+    :meth:`FeatureRun.concentrated`, at most :data:`MAX_PASSES`, from the scan energy's result where that
+    stop comes before the cap, :meth:`FeatureRun.finish`; none on a mesh without measured noise), each
+    followed by :data:`VERTEX_STEPS` vertex steps (:func:`filter_pass`, :func:`normal_steps`);
     ``conn``: the mesh's connectivity when the caller has it.
 
     Examples
