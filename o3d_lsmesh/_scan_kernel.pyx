@@ -74,3 +74,55 @@ def edge_groups(const index_t[::1] lo, const index_t[::1] hi, Py_ssize_t n):
         for s in range(e):
             counts[s] = (starts[s + 1] if s + 1 < e else k) - starts[s]
     return order_array, starts_array, counts_array, edges_array
+
+
+ctypedef fused slot_t:
+    int32_t
+    int64_t
+
+
+def ring_slots(const index_t[:, ::1] edges, slot_t[::1] indptr, slot_t[::1] indices, slot_t[::1] diagonal,
+               slot_t[::1] forward, slot_t[::1] backward):
+    """The 1-ring CSR of ``edges (e, 2)`` sorted by ``(lo, hi)`` on ``n = len(indptr) - 1`` vertices, written
+    into ``indptr (n + 1,)``, ``indices (n + 2e,)`` and the slots of the diagonal ``(n,)``, of each edge
+    forward (row ``lo``) and backward (row ``hi``), ``(e,)`` each: a row's backward edges (by ``lo``), its
+    diagonal, its forward edges (by ``hi``), in one pass over the edges per part.
+    """
+    cdef Py_ssize_t n = indptr.shape[0] - 1, e = edges.shape[0], i, t
+    cdef index_t lo, hi
+    if edges.shape[1] != 2:
+        raise ValueError(f"edges must have 2 columns, got {edges.shape[1]}")
+    if diagonal.shape[0] != n or indices.shape[0] != n + 2 * e:
+        raise ValueError(f"diagonal and indices must have {n} and {n + 2 * e} entries, got {diagonal.shape[0]} "
+                         f"and {indices.shape[0]}")
+    if forward.shape[0] != e or backward.shape[0] != e:
+        raise ValueError(f"forward and backward must have {e} entries, got {forward.shape[0]} and {backward.shape[0]}")
+    for t in range(e):
+        if not (0 <= edges[t, 0] < n and 0 <= edges[t, 1] < n):
+            raise ValueError(f"edges must name vertices in 0..{n - 1}, got ({edges[t, 0]}, {edges[t, 1]}) at {t}")
+    cursor_array = np.empty(n, np.int32 if slot_t is int32_t else np.int64)
+    cdef slot_t[::1] cursor = cursor_array
+    with nogil:
+        indptr[:] = 0
+        diagonal[:] = 0
+        for t in range(e):
+            indptr[edges[t, 0] + 1] += 1
+            indptr[edges[t, 1] + 1] += 1
+            diagonal[edges[t, 1]] += 1  # the backward edges before the diagonal
+        for i in range(n):
+            indptr[i + 1] += indptr[i] + 1
+            diagonal[i] += indptr[i]
+            indices[diagonal[i]] = i
+            cursor[i] = indptr[i]
+        for t in range(e):  # sorted by lo: each row's backward edges arrive by increasing lo
+            lo, hi = edges[t, 0], edges[t, 1]
+            backward[t] = cursor[hi]
+            indices[cursor[hi]] = lo
+            cursor[hi] += 1
+        for i in range(n):
+            cursor[i] = diagonal[i] + 1
+        for t in range(e):  # and each row's forward edges by increasing hi
+            lo, hi = edges[t, 0], edges[t, 1]
+            forward[t] = cursor[lo]
+            indices[cursor[lo]] = hi
+            cursor[lo] += 1

@@ -12,8 +12,8 @@ from defect_meshes import DEFECTS, all_defects
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from o3d_lsmesh._scan_kernel import edge_groups
-from o3d_lsmesh.core.connectivity import Connectivity, halfedges
+from o3d_lsmesh._scan_kernel import edge_groups, ring_slots
+from o3d_lsmesh.core.connectivity import Connectivity, halfedges, ring_pattern
 
 
 def plain_edges(triangles):
@@ -229,3 +229,54 @@ def test_edge_groups_refuses_arrays_it_would_index_out_of_bounds():
         edge_groups(np.array([-1, 0], dtype=np.int32), hi, 3)
     with pytest.raises(ValueError, match="n must be at least 0"):
         edge_groups(lo[:0], hi[:0], -1)
+
+
+def plain_ring_slots(edges, n):
+    """Row by row: the edges ending at v (in edge order), v, the edges starting at v; each edge's two slots."""
+    rows, diagonal, forward, backward = [], [], [0] * len(edges), [0] * len(edges)
+    for v in range(n):
+        before = [t for t, (lo, hi) in enumerate(edges) if hi == v]
+        after = [t for t, (lo, hi) in enumerate(edges) if lo == v]
+        start = sum(len(r) for r in rows)
+        for k, t in enumerate(before):
+            backward[t] = start + k
+        diagonal.append(start + len(before))
+        for k, t in enumerate(after):
+            forward[t] = start + len(before) + 1 + k
+        rows.append([edges[t][0] for t in before] + [v] + [edges[t][1] for t in after])
+    indptr = np.cumsum([0] + [len(r) for r in rows]).tolist()
+    return indptr, [c for r in rows for c in r], diagonal, forward, backward
+
+
+@settings(max_examples=60, deadline=None)
+@given(triangle_soups())
+def test_ring_pattern_against_plain_rows(soup):
+    n, triangles = soup
+    c = Connectivity(np.array(triangles, dtype=np.int64).reshape(-1, 3), n)
+    got = ring_pattern(c.edges, n)
+    assert [part.tolist() for part in got] == list(plain_ring_slots(c.edges.tolist(), n))
+    assert got[0].dtype == np.int32
+
+
+@pytest.mark.parametrize("name", [*DEFECTS, "all"])
+def test_ring_pattern_on_raw_scan_defects(name):
+    vertices, triangles = (all_defects() if name == "all" else DEFECTS[name]())[:2]
+    c = Connectivity(triangles, len(vertices))
+    for edges in (c.edges, c.edges.astype(np.int64), c.edges.astype(np.int16)):
+        got = ring_pattern(edges, len(vertices))
+        assert [part.tolist() for part in got] == list(plain_ring_slots(c.edges.tolist(), len(vertices)))
+
+
+def test_ring_slots_refuses_arrays_of_another_shape():
+    edges = np.array([[0, 1], [0, 2], [1, 2]], dtype=np.int32)
+    parts = [np.zeros(k, dtype=np.int64) for k in (4, 9, 3, 3, 3)]  # n = 3
+    ring_slots(edges, *parts)
+    assert parts[1].tolist() == [0, 1, 2, 0, 1, 2, 0, 1, 2]
+    with pytest.raises(ValueError, match="edges must have 2 columns"):
+        ring_slots(np.zeros((3, 3), dtype=np.int32), *parts)
+    with pytest.raises(ValueError, match="diagonal and indices must have 3 and 9"):
+        ring_slots(edges, parts[0], parts[1][:8], *parts[2:])
+    with pytest.raises(ValueError, match="forward and backward must have 3"):
+        ring_slots(edges, *parts[:4], parts[4][:2])
+    with pytest.raises(ValueError, match="edges must name vertices in 0..2"):
+        ring_slots(np.array([[0, 1], [0, 3], [1, 2]], dtype=np.int32), *parts)

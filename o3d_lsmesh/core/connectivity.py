@@ -382,37 +382,14 @@ def ring_pattern(edges: np.ndarray, n: int):
     >>> ring_pattern(np.array([[0, 1], [0, 2], [1, 2]]), 3)[3:]  # forward, backward
     (array([1, 2, 5], dtype=int32), array([3, 6, 7], dtype=int32))
     """
-    lo, hi = edges[:, 0], edges[:, 1]
+    from .._scan_kernel import ring_slots  # compiled by the package's build: imported where used
+
     e = len(edges)
     index = np.int32 if 2 * e + n < np.iinfo(np.int32).max else np.int64
-    n_forward = np.bincount(lo, minlength=n)
-    n_backward = np.bincount(hi, minlength=n)
-    indptr = np.zeros(n + 1, dtype=index)
-    np.cumsum(n_forward, out=indptr[1:])
-    indptr[1:] += n_backward.cumsum()
-    indptr[1:] += np.arange(1, n + 1, dtype=index)
-    diagonal = indptr[:-1] + n_backward.astype(index)
-    # edges are sorted by (lo, hi), so the forward edges of a row are contiguous
-    first_forward = np.zeros(n, dtype=index)
-    np.cumsum(n_forward[:-1], out=first_forward[1:])
-    forward = np.arange(e, dtype=index)
-    forward += (diagonal + 1 - first_forward)[lo]
-    del first_forward, n_forward
-    # backward: edges by (hi, lo), a stable counting sort of the edge list by hi (a CSC transpose)
-    by_hi = (
-        sp.csr_matrix((np.arange(e, dtype=index), hi, np.arange(e + 1, dtype=np.int64)), shape=(e, max(n, 1)))
-        .tocsc()
-        .data
+    kind = edges.dtype if edges.dtype in (np.int32, np.int64) else np.int64
+    indptr, indices = np.empty(n + 1, dtype=index), np.empty(n + 2 * e, dtype=index)
+    diagonal, forward, backward = np.empty(n, dtype=index), np.empty(e, dtype=index), np.empty(e, dtype=index)
+    ring_slots(
+        np.ascontiguousarray(edges, dtype=kind).reshape(-1, 2), indptr, indices, diagonal, forward, backward
     )
-    first_backward = np.zeros(n, dtype=index)
-    np.cumsum(n_backward[:-1], out=first_backward[1:])
-    backward = np.empty(e, dtype=index)
-    rank = np.arange(e, dtype=index)
-    rank += (indptr[:-1] - first_backward)[hi[by_hi]]
-    backward[by_hi] = rank
-    del rank, by_hi, first_backward
-    indices = np.empty(int(indptr[-1]), dtype=index)
-    indices[diagonal] = np.arange(n, dtype=index)
-    indices[forward] = hi
-    indices[backward] = lo
     return indptr, indices, diagonal, forward, backward
