@@ -126,9 +126,12 @@ def measured_noise(
     # whole rows, not a boolean selection of each (n, 3) array
     smooth = np.where(referenced[:, None], vertices + (mean - vertices), vertices)
     smooth_square = np.einsum("ij,ij->i", smooth, smooth)
-    normal = area_weighted_normals(smooth, triangles)
     inner_rows = np.flatnonzero(inner)
     inner_rows = inner_rows[:: -(-len(inner_rows) // NOISE_ROWS)]
+    # the sampled rows' normals from their own triangles alone (the same sums in the same order)
+    sampled = np.zeros(n, dtype=bool)
+    sampled[inner_rows] = True
+    normal = area_weighted_normals(smooth, triangles[sampled[triangles].any(axis=1)])
     # per inner vertex: 1-ring umbrella along the normal, and the 1-ring's mean squared distance
     sub, x = smooth[inner_rows], vertices[inner_rows]
     nrm = normal[inner_rows]
@@ -137,8 +140,8 @@ def measured_noise(
     a1 = np.einsum("ij,ij->i", mean[inner_rows] - x, nrm)
     stacked = np.column_stack([vertices, smooth, smooth_square])  # the 2-ring sums of all three in one pass
     # the 1-ring sums of the sampled rows only (the same sums in the same order as the whole product's)
-    sums = ring[inner_rows] @ stacked[:, 3:]
-    near = _mean_square_distances(sums[:, 3], sums[:, :3], sub, di)
+    sums = ring[inner_rows] @ stacked
+    near = _mean_square_distances(sums[:, 6], sums[:, 3:6], sub, di)
     h2 = float(np.mean(near))
     if not h2 > 0.0:
         return NoiseEstimate(0.0, 0.0)
