@@ -318,7 +318,7 @@ Open3D's Laplacian at its best count; the table above is a later run): 40k 3.55 
 3.39 / 4.03 and, in a slower hour (Open3D 0.068-0.083 s against 0.054-0.061 s), 3.99 / 5.01; 1.4M
 2.69 / 2.57, 2.59 / 2.50, 2.76 / 2.63, 2.56 / 2.43. Those runs were on a loaded machine, where Open3D's
 threaded filter lost more than our call did: on a quiet machine (2026-12-05, load 0.3-1.7, the table
-above) its five iterations take 17-23 ms at 40k, and the ratio was 7.6 wall / 6.2 CPU before that day's
+before #38's run) its five iterations take 17-23 ms at 40k, and the ratio was 7.6 wall / 6.2 CPU before that day's
 compiled passes, 5.8 / 4.8 after (1.4M: 5.5 / 5.8 before, 4.7 / 4.0 after). The block kernel's loops
 run on one thread below 65,536 rows (benchmarks/results/under_load.md).
 
@@ -357,7 +357,37 @@ GFlop but a 0.26-0.30 s analysis), METIS or nested dissection of the 1-ring grap
 2-ring matrix (6.3 and 5.7 GFlop), geometric nested dissection (1.15 GFlop; 72 s at 1.4M), the
 quasi-definite mixed system [[mu H^T W H + lambda G, K^T], [K, -I]] (simplicial LDL^T 0.44 s against
 0.23 s), one BLAS thread, CG preconditioned by the factor of the 1-ring part (0.40 against 0.33 s),
-fewer candidate sweeps in the AMG set-up (no iteration change)."""
+fewer candidate sweeps in the AMG set-up (no iteration change).
+
+2026-12-05 (#38, the same results faster): the connectivity's grouping of the half-edges into edges and
+its 1-ring slots in a compiled serial module (``_scan_kernel.edge_groups``: two counting sorts and the
+runs of one edge; ``ring_slots``: one pass over the edges per part), instead of SciPy's CSR-to-CSC
+transposes and NumPy scatters; the rim band grown from the 1-ring rows of the last ring reached (not
+three passes over every triangle); measured_noise's normals and 1-ring sums and relax_rim's normal
+lengths on the rows they are read at; the scan matrix's K and K^T values written from each edge's two
+values; the assembled matrix and pattern marked canonical for the gateway. Final positions
+np.array_equal to the code before on the ten bunny scans, three dragon scans, a noisy sphere and box;
+the same CG iterations. _edge_structure 8.6 -> 4.3 ms at 40k, 490 -> 301 ms at 1.4M; ring_pattern
+4.0 -> 0.9 ms, 227 -> 70 ms (best of 15 / 5). Stages of the default call, medians before / after,
+milliseconds (40k: bun000, 3 interleaved rounds of 7 calls; 1.4M: the merged mesh, 2 rounds of 2),
+on a shared machine with another job holding one of the two cores throughout (load 1.7-2.8):
+
+| mesh | OMP threads | connectivity | measures | assembly + solver set-up | two solves | relax_rim | restore_volume | whole call | call ratio | CG iterations |
+|---|---|---|---|---|---|---|---|---|---|---|
+| bun000 (39,977) | default | 19 / 16 | 24 / 24 | 32 / 33 | 87 / 89 | 21 / 18 | 1 / 1 | 191 / 187 | 1.02 | 11 / 11 |
+| bun000 (39,977) | 1 | 21 / 18 | 26 / 27 | 35 / 36 | 94 / 94 | 22 / 19 | 1 / 2 | 202 / 195 | 1.04 | 11 / 11 |
+| merged (1,404,335) | default | 962 / 653 | 909 / 789 | 2581 / 2463 | 5582 / 5281 | 927 / 664 | 53 / 53 | 10393 / 10322 | 1.01 | 8 / 8 |
+| merged (1,404,335) | 1 | 890 / 623 | 894 / 754 | 2337 / 2330 | 4847 / 5392 | 848 / 648 | 50 / 49 | 10433 / 9525 | 1.10 | 8 / 8 |
+
+The issue's 1.3x is not met: the steps this work could change without changing the energy, the
+tolerance or the method (connectivity, measures, assembly, rim relaxation: about 40% of the call) fell
+by 10-30% at 1.4M and less at 40k, while the two IC(0)-CG solves with the IC(0) factor, and the
+gateway's symmetry check and renumbering (in the assembly column), are the rest and unchanged; on this
+loaded machine their trial-to-trial spread (up to 15% at 1.4M) is larger than the whole gain. The
+speed table above is the run after this work (08:17 UTC, the same loaded machine): Open3D took 30-32 ms
+at 40k against 21-23 ms in the quiet run it replaces and ours 0.142-0.152 s against 0.122-0.130 s, so
+its lower ratios (4.6 wall at 40k, 3.2 at 1.4M, against 5.8 and 4.7) come from Open3D's threaded filter
+losing more under load, not from this work."""
 
 
 def speed_rows(results):
