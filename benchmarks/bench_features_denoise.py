@@ -1055,9 +1055,10 @@ def main():
     ]
     notes.add("The machine was shared with other work during the run: the times are indicative.")
     notes.add(
-        "constrained_fairing(mesh) runs the scan energy; 'auto' is asked for by name. It is not the default "
-        "because of the tables above: on meshes it was not chosen on it takes some coarse organic meshes for "
-        "CAD ones, and its probe costs more than the scan energy on the organic meshes and raw scans."
+        "constrained_fairing(mesh) runs the scan energy; 'auto' is asked for by name. It is not the default: "
+        "its probe costs more than the scan energy on the organic meshes and raw scans, and where it keeps the "
+        "scan energy the feature mode (from the scan energy's result on curved surfaces) is now often the "
+        "better (the tables above), so its threshold would have to be chosen again."
     )
     sections.append(("Notes", "\n".join(f"- {n}" for n in sorted(notes))))
     write_markdown("features_denoise.md", "Feature-preserving denoising (method='features')", sections)
