@@ -79,5 +79,10 @@ def ring_entries(
 ) -> np.ndarray: ...
 def ring_least(indptr: np.ndarray, indices: np.ndarray, values: np.ndarray, ratio: bool) -> np.ndarray: ...
 def plane_steps(
-    corners: np.ndarray, indptr: np.ndarray, faces: np.ndarray, normals: np.ndarray, x: np.ndarray, iterations: int
+    corners: np.ndarray,
+    indptr: np.ndarray,
+    faces: np.ndarray,
+    normals: np.ndarray,
+    x: np.ndarray,
+    iterations: int,
 ) -> None: ...
