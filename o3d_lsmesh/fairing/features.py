@@ -78,7 +78,10 @@ def _guidance(normals, area, adjacency, patch_edges):
 
     ring, pairs = adjacency.ring, adjacency.pairs
     if patch_edges.shape != (len(normals), len(pairs)):  # the compiled loop reads jump at its columns
-        raise ValueError(f"patch_edges must be _patch_edges(adjacency), {(len(normals), len(pairs))}")
+        expected = f"_patch_edges(adjacency) of shape {(len(normals), len(pairs))}"
+        raise InputError(
+            f"patch_edges must be {expected}, got shape {patch_edges.shape}", param="patch_edges"
+        )
     jump = np.linalg.norm(normals[pairs[:, 0]] - normals[pairs[:, 1]], axis=1)
     saliency = ring_least(patch_edges.indptr, patch_edges.indices, jump, True)
     mean = np.empty((len(normals), 3))
