@@ -21,7 +21,7 @@ from ..core.connectivity import Connectivity, FaceAdjacency
 from ..core.errors import InputError
 from ..core.progress import Progress
 from ..core.validate import as_count, as_positive_float, mesh_arrays
-from .scan_fairing import scan_denoise
+from .scan_fairing import relax_rim, scan_denoise
 from .scan_measure import measured_noise
 from .tuning import (
     CONCENTRATION,
@@ -207,7 +207,8 @@ class FeatureRun:
         unreferenced vertices exactly where they were.
 
         With the measured stop before ``MAX_PASSES`` (a curved surface), the positions are instead
-        :func:`.scan_denoise`'s result followed by a ``scan_start`` run to its own measured stop."""
+        :func:`.scan_denoise`'s result followed by a ``scan_start`` run to its own measured stop. Slivers
+        at a rim then give back their drift (:func:`.relax_rim` with ``strength=0``)."""
         measured = passes is None
         for _ in Progress(progress, "constrained fairing (features)").over(
             range(MAX_PASSES - len(self.medians) if passes is None else passes)
@@ -223,6 +224,10 @@ class FeatureRun:
             x = FeatureRun(start, self.triangles, self.conn, scan_start=True).finish(None, progress)
         else:
             x = (self.stop if measured and self.stop is not None else self.x) + self.centre
+        if not self.scan_start:  # the outer run only: the inner one's result comes back here
+            # the vertex steps leave slivers at a scan's rim, where a triangle has a free side; their corners
+            # give back their tangential drift as in the scan default, with its rim sweeps off (strength 0)
+            x = relax_rim(self.vertices, x, self.triangles, strength=0.0, conn=self.conn)
         x[~self.used] = self.vertices[~self.used]
         return x
 
