@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core.connectivity import Connectivity
-from .features import FeatureRun
+from .features import FeatureRun, pair_angles
 from .scan_measure import measured_noise
 from .tuning import FEATURE_LIKENESS, PROBE_PASSES_PER_NOISE
 
@@ -27,8 +27,7 @@ def dihedral_likeness(normals: np.ndarray, pairs: np.ndarray) -> float:
     >>> dihedral_likeness(n, np.array([[0, 1], [1, 2], [2, 3]]))
     inf
     """
-    cosine = np.einsum("ij,ij->i", normals[pairs[:, 0]], normals[pairs[:, 1]])
-    angle = np.arccos(np.clip(cosine, -1.0, 1.0))
+    angle = pair_angles(normals, pairs)
     mean = float(angle.mean()) if len(angle) else 0.0
     median = float(np.median(angle)) if len(angle) else 0.0
     if median > 0.0:

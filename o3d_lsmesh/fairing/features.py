@@ -156,8 +156,14 @@ def median_angle(normals: np.ndarray, pairs: np.ndarray) -> float:
     >>> median_angle(np.array([[0.0, 0, 1], [0, 0, 1], [0, 1, 0]]), np.array([[0, 1], [1, 2], [0, 2]]))
     1.5707963267948966
     """
+    angles = pair_angles(normals, pairs)
+    return float(np.median(angles)) if len(angles) else 0.0
+
+
+def pair_angles(normals: np.ndarray, pairs: np.ndarray) -> np.ndarray:
+    """Angles (radians) between the unit ``normals[pairs[:, 0]]`` and ``normals[pairs[:, 1]]``, ``(p,)``."""
     cosine = np.einsum("ij,ij->i", normals[pairs[:, 0]], normals[pairs[:, 1]])
-    return float(np.median(np.arccos(np.clip(cosine, -1.0, 1.0)))) if len(cosine) else 0.0
+    return np.arccos(np.clip(cosine, -1.0, 1.0))
 
 
 class FeatureRun:
