@@ -806,7 +806,7 @@ def test_top_level_help_states_the_start_up_cost_and_points_to_batch(capsys):
     [
         (
             ["denoise", "{src}", "{out}", "--fixed-boundary"],
-            "--fixed-boundary cannot be used with --method scan",
+            "--fixed-boundary cannot be used with --method auto, the default",
         ),
         (
             ["denoise", "{src}", "{out}", "--method", "local", "--mu", "2"],
@@ -852,7 +852,7 @@ def test_help_lists_the_real_defaults(capsys):
         main(["denoise", "--help"])
     text = " ".join(capsys.readouterr().out.split())
     assert (
-        "(default: scan, the API's default" in text
+        "(default: auto, the API's default" in text
         and "multiresolution level (0: plain fairing) (default: 0)" in text
     )
     with pytest.raises(SystemExit):

@@ -140,12 +140,18 @@ def test_default_denoiser_bar_names_its_stages_and_cg_shows_its_residual(bars):
     made, stream = bars
     V, F = pieces()
     V = V + np.random.default_rng(0).normal(0, 0.01, V.shape)
-    constrained_fairing((V, F), progress=True)  # factored: one bar, over its three stages
-    assert [bar.desc for bar in made] == ["constrained fairing (scan)"]
+    # the feature mode's passes to their stop (curved pieces: before the cap, whose total the bar ends at),
+    # then the scan energy, factored: one bar over its three stages
+    constrained_fairing((V, F), progress=True)
+    assert [bar.desc for bar in made] == ["feature passes", "constrained fairing (scan)"]
     assert_complete(made, stream, count=3)
-    assert "solve" in stream.getvalue()
+    assert "solve" in stream.getvalue() and "stopped at pass" in stream.getvalue()
     constrained_fairing((V, F), progress=True, solver="iterative")
-    assert [bar.desc for bar in made[1:]] == ["constrained fairing (scan)", "conjugate gradients"]
+    assert [bar.desc for bar in made[2:]] == [
+        "feature passes",
+        "constrained fairing (scan)",
+        "conjugate gradients",
+    ]
     assert_complete(made, stream)
     assert "residual=" in stream.getvalue()
 

@@ -49,11 +49,12 @@ def denoise(args: argparse.Namespace, run: Run) -> int:
             f"{', '.join(given)} cannot be combined with --level (multiresolution fairing does not take "
             f"{'them' if len(given) > 1 else 'it'}), got --level {args.level}"
         )
-    scan = resolved_options(args.method, args.iterations, args.reimpose_every)[0] == "scan"
-    if not args.level and args.fixed_boundary and scan:
+    method = resolved_options(args.method, args.iterations, args.reimpose_every)[0]
+    if not args.level and args.fixed_boundary and method in ("scan", "auto"):
         raise CLIError(
-            "--fixed-boundary cannot be used with --method scan, the default (its boundary moves with "
-            "the surface): add --method local or --method global"
+            f"--fixed-boundary cannot be used with --method {method}"
+            f"{', the default' if args.method is None else ''} (its boundary moves with the surface): add "
+            "--method local or --method global"
         )
     mesh, out, report, seconds = run_file_op("denoise", args, run, (args.render, (".png",)))
     report["seconds"] = seconds

@@ -233,9 +233,10 @@ _METHODS = ("scan", "local", "global", "features", "auto")
 DENOISE = (
     Option("iterations", int_at_least(0), None, "number of fairing iterations (default: the API's, "
            "10 for local; with --level, 5 per level)", param="number_of_iterations"),
-    Option("method", choice(*_METHODS), None, "fairing energy (default: scan, the API's default; "
+    Option("method", choice(*_METHODS), None, "fairing energy (default: auto, the API's default; "
            "local with --level, --iterations or --reimpose-every); features keeps sharp creases (guided normal "
-           "filtering); auto measures the mesh and runs features or scan"),
+           "filtering), scan is made for raw scans; auto runs features where its passes reach their cap, "
+           "scan elsewhere"),
     Option("level", int_at_least(0), 0, "multiresolution level (0: plain fairing)"),
     Option("mu", real, None, "barycenter penalty weight of --method global or scan (default: the API's)"),
     Option("reimpose_every", int_at_least(1), None, "re-take the barycenters every k iterations "

@@ -90,6 +90,10 @@ class Connectivity:
     def __repr__(self) -> str:
         return f"Connectivity(m={len(self.triangles)}, n={self.n})"
 
+    def release(self, part: str) -> None:
+        """Free a computed part (an attribute name); it is computed again where it is used again."""
+        self.__dict__.pop(part, None)
+
     @_cached
     def edge_structure(self) -> EdgeStructure:
         return _edge_structure(self.triangles, self.n)

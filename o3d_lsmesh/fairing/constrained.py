@@ -2,8 +2,9 @@
 
 Four energies: ``"scan"`` (:mod:`.scan_fairing`), ``"local"`` (eq. 7), ``"global"`` (eq. 5 in penalty
 form, :mod:`.barycenter`), ``"features"`` (:mod:`.features`); :data:`METHOD_OPTIONS` says which option
-applies to which. ``method="auto"`` chooses ``"features"`` or ``"scan"`` by the mesh's feature
-likeness (:mod:`.feature_measure`). Docs: ``docs/algorithms/constrained_fairing.rst``.
+applies to which. ``method="auto"``, the default, runs ``"features"`` where its passes reach their cap
+(the filtered normals keep concentrating: flat pieces cut by creases) and ``"scan"`` elsewhere. Docs:
+``docs/algorithms/constrained_fairing.rst``.
 """
 
 from __future__ import annotations
@@ -32,8 +33,7 @@ from ..core.validate import (
 )
 from .barycenter import GlobalSolver, local_operator
 from .boundary_curve import CurveOperator, curve_operator
-from .feature_measure import FeatureProbe, feature_probe
-from .features import feature_denoise
+from .features import FeatureRun, feature_denoise
 from .scan_fairing import scan_denoise
 from .tuning import DEFAULT_MU
 
@@ -49,10 +49,10 @@ __all__ = [
     "constrained_fairing_arrays",
 ]
 
-#: The energy of ``constrained_fairing(mesh)``. Not ``"auto"``: its probe costs more than this energy
-#: and took coarse organic meshes for CAD ones (benchmarks/results/features_denoise.md).
-DEFAULT_METHOD = "scan"
-_AUTO = "auto"  # the choice made on the mesh (_chosen), asked for by name
+#: The energy of ``constrained_fairing(mesh)``: the choice made on the mesh (:func:`_chosen`).
+DEFAULT_METHOD = "auto"
+_AUTO = "auto"
+_SCAN_WEIGHTS = ("mu", "membrane", "boundary_weight")
 
 
 @dataclass(frozen=True)
@@ -63,12 +63,13 @@ class FairingReport:
     ----------
     method : str
         The energy that ran: the one given, or ``"auto"``'s choice (``"features"`` or ``"scan"``).
-    feature_likeness : float or None
-        The measure ``"auto"`` chose by (:mod:`.feature_measure`); None for any other method.
+    feature_passes : int or None
+        ``"auto"``: the passes of the feature mode to its measured stop, ``MAX_PASSES`` where it ran the
+        feature mode (the stop came at the cap); None for any other method.
     """
 
     method: str
-    feature_likeness: float | None = None
+    feature_passes: int | None = None
 
 
 def _one_solve(value: Any, *, name: str) -> int:
@@ -148,8 +149,11 @@ def _check_options(method: Any, given: dict[str, Any]) -> tuple[str, dict[str, A
     # the one check of every option: the method's row of METHOD_OPTIONS, then progress
     if method is None:
         method = resolved_options(None, given["number_of_iterations"], given["reimpose_every"])[0]
-    # "auto": the mesh chooses; its options are checked as the scan energy's
+    # "auto": the mesh chooses; its options are checked as the scan energy's, and a weight of that energy
+    # given chooses it (the feature mode has no use for it)
     auto = as_choice(method, (*FAIRING_METHODS, _AUTO), name="method") == _AUTO
+    if auto and any(given[name] is not None for name in _SCAN_WEIGHTS):
+        auto, method = False, "scan"
     # a bool's type is checked for every method; True is what scan and features require
     smooth = as_bool(given["smooth_boundary"], name="smooth_boundary")
     given = {**given, "smooth_boundary": None if smooth else False}
@@ -159,15 +163,22 @@ def _check_options(method: Any, given: dict[str, Any]) -> tuple[str, dict[str, A
     return _AUTO if auto else method, options
 
 
-def _chosen(positions, conn, method, progress) -> tuple[str, FeatureProbe | None]:
-    # method="auto" on the mesh: "features" or "scan", and the probe that started the feature mode
+def _chosen(positions, conn, method, options) -> tuple[str, FeatureRun | None, int | None]:
+    # method="auto" on the mesh: the feature mode's passes to their measured stop. At the cap the filtered
+    # normals kept concentrating (flat pieces cut by creases) and the feature mode goes on from them; an
+    # earlier stop is a curved surface, where the scan energy runs on the input (docs: features.rst)
     if method != _AUTO:
-        return method, None
-    probe = feature_probe(positions, conn.triangles, conn=conn)
-    method = "features" if probe.features else "scan"
-    if progress:
-        Progress.write(f"constrained fairing: feature likeness {probe.likeness:.3g}, method {method!r}")
-    return method, probe
+        return method, None, None
+    if options["number_of_iterations"] == 0:  # an unchanged copy: nothing to choose
+        return "scan", None, None
+    run = FeatureRun(positions, conn.triangles, conn)
+    method = "features" if run.reaches_cap(options["progress"]) else "scan"
+    if options["progress"]:
+        Progress.write(f"constrained fairing: feature passes {run.stop_pass}, method {method!r}")
+    if method == "scan":  # the scan energy does not hold the passes' face neighbourhoods in memory
+        conn.release("face_adjacency")
+        return method, None, run.stop_pass
+    return method, run, run.stop_pass
 
 
 def constrained_fairing_arrays(
@@ -200,13 +211,13 @@ def constrained_fairing_arrays(
     if implicit:
         warn(
             "constrained_fairing_arrays without method= runs method='local' (10 iterations); pass "
-            "method='local' to keep that, or method=None for constrained_fairing's default ('scan'), "
+            "method='local' to keep that, or method=None for constrained_fairing's default ('auto'), "
             "which 0.4 makes the default",
             DeprecationWarning,
         )
     conn = Connectivity(triangles, len(vertices))
-    method, probe = _chosen(vertices, conn, method, options["progress"])
-    return _fair(vertices, conn, method, options, solver, probe)
+    method, run, _ = _chosen(vertices, conn, method, options)
+    return _fair(vertices, conn, method, options, solver, run)
 
 
 def _given(arguments: dict[str, Any]) -> dict[str, Any]:
@@ -214,12 +225,13 @@ def _given(arguments: dict[str, Any]) -> dict[str, Any]:
     return {name: arguments[name] for name in (*names, "progress")}
 
 
-def _fair(positions, conn, method, options, solver="auto", probe=None):
-    # validated positions (a private copy) and the mesh's one Connectivity in, new (n, 3) positions out
+def _fair(positions, conn, method, options, solver="auto", run=None):
+    # validated positions (a private copy) and the mesh's one Connectivity in, new (n, 3) positions out;
+    # run: "auto"'s passes, the feature mode's first ones
     solver = as_choice(solver, SOLVERS, name="solver")  # checked for every method ("local" solves none)
     iterations, progress = options["number_of_iterations"], options["progress"]
-    if probe is not None and method == "features":
-        return probe.finish(progress)  # "auto" goes on with the probe's passes
+    if run is not None and method == "features":
+        return feature_denoise(positions, conn.triangles, progress=progress, conn=conn, run=run)
     if iterations == 0:
         return positions
     triangles = conn.triangles
@@ -287,9 +299,9 @@ def constrained_fairing(
 ) -> MeshT | tuple[MeshT, FairingReport]:
     """Remove noise from a mesh while holding its triangle barycenters (Liu et al. 2001).
 
-    ``"scan"`` (the default, every weight measured) is made for raw range scans and independent noise,
-    ``"features"`` keeps creases, ``"auto"`` runs ``"features"`` where the mesh's feature likeness says
-    it has sharp creases and ``"scan"`` elsewhere (``return_report=True`` says which). ``"local"`` and
+    ``"auto"`` (the default, every weight measured) runs ``"features"``, which keeps creases, where its
+    passes reach their cap (flat pieces cut by creases) and ``"scan"``, made for raw range scans and
+    independent noise, elsewhere (``return_report=True`` says which). ``"local"`` and
     ``"global"`` are the paper's operators (eq. 7, eq. 5). Docs: ``docs/algorithms/constrained_fairing.rst``, ``features.rst``.
 
     Parameters
@@ -300,8 +312,8 @@ def constrained_fairing(
         Local iterations or global solves (``None``: 10); ``"scan"``: None, 0 or 1 (one solve);
         ``"features"``: filter passes (``None``: measured). 0 returns an unchanged copy.
     method : {"scan", "local", "global", "features", "auto"} or None
-        ``None``: ``"scan"``, or ``"local"`` when ``number_of_iterations`` or ``reimpose_every`` is given.
-        ``"auto"`` takes the scan energy's options.
+        ``None``: ``"auto"``, or ``"local"`` when ``number_of_iterations`` or ``reimpose_every`` is given.
+        ``"auto"`` takes the scan energy's options; a weight of it given runs ``"scan"``.
     mu : float or None
         ``"scan"`` and ``"global"``: barycenter penalty weight (``None``: measured; ``DEFAULT_MU``).
     membrane, boundary_weight : float or None
@@ -315,7 +327,7 @@ def constrained_fairing(
     solver : {"auto", "cholmod", "iterative"}
         How ``"scan"`` and ``"global"`` solve their system (see :class:`~o3d_lsmesh.SPDSolver`).
     return_report : bool
-        Also return a :class:`FairingReport` (the method that ran, the measured feature likeness).
+        Also return a :class:`FairingReport` (the method that ran, ``"auto"``'s feature passes).
 
     Returns
     -------
@@ -336,7 +348,7 @@ def constrained_fairing(
     >>> sphere = o3d.geometry.TriangleMesh.create_sphere(radius=1.0, resolution=20)
     >>> len(constrained_fairing(sphere).vertices) == len(sphere.vertices)
     True
-    >>> constrained_fairing(sphere, method="auto", return_report=True)[1].method  # no creases
+    >>> constrained_fairing(sphere, return_report=True)[1].method  # no creases
     'scan'
     """
     method, options = _check_options(method, _given(locals()))
@@ -345,6 +357,6 @@ def constrained_fairing(
     # triangles, so it takes Open3D's own int32 array (no int64 copy, no cast back)
     data = read_mesh(mesh, weld=True, narrow=method == "local")
     conn = Connectivity(data.triangles, len(data.vertices))
-    method, probe = _chosen(data.vertices, conn, method, options["progress"])
-    out = new_mesh(data, _fair(data.vertices, conn, method, options, solver, probe))
-    return (out, FairingReport(method, None if probe is None else probe.likeness)) if report else out
+    method, run, passes = _chosen(data.vertices, conn, method, options)
+    out = new_mesh(data, _fair(data.vertices, conn, method, options, solver, run))
+    return (out, FairingReport(method, passes)) if report else out

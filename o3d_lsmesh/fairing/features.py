@@ -168,8 +168,8 @@ def pair_angles(normals: np.ndarray, pairs: np.ndarray) -> np.ndarray:
 
 class FeatureRun:
     """The feature mode's passes on one mesh, taken one at a time (:meth:`step`); :meth:`finish` takes the
-    rest and reads the result. ``feature_denoise`` takes them all; the default's chooser takes the first few, measures,
-    and may go on (:mod:`.feature_measure`). ``scan_start``: ``vertices`` are the scan energy's result, the
+    rest and reads the result. ``feature_denoise`` takes them all; ``method="auto"`` takes them to the measured
+    stop (:meth:`reaches_cap`) and goes on where it came at the cap. ``scan_start``: ``vertices`` are the scan energy's result, the
     stop takes ``SCAN_START_CONCENTRATION`` and :meth:`finish` does not switch."""
 
     def __init__(
@@ -186,18 +186,30 @@ class FeatureRun:
         self.centre = vertices[self.used].mean(axis=0) if self.used.any() else np.zeros(3)
         self.x = vertices - self.centre
         self.medians: list[float] = []  # the median filtered dihedral angle of each pass
-        self.stop: np.ndarray | None = None  # the positions where the measured count ended
-        self.stop_pass = 0  # and its pass
+        self.stop_pass = 0  # the pass where the measured count ended (0: not yet)
 
     def step(self) -> np.ndarray:
         """One pass: the filtered face normals ``(m, 3)``, then the vertex steps towards their planes."""
         normals = filter_pass(self.x, self.triangles, self.adjacency, self.patch_edges)
         self.x = normal_steps(self.x, self.triangles, normals, incidence=self.adjacency.incidence)
         self.medians.append(median_angle(normals, self.adjacency.pairs))
-        if self.stop is None and (self.concentrated() or len(self.medians) >= MAX_PASSES):
-            self.stop = self.x  # kept: a probe may take passes past it (normal_steps returns a new array)
+        if not self.stop_pass and (self.concentrated() or len(self.medians) >= MAX_PASSES):
             self.stop_pass = len(self.medians)
         return normals
+
+    def reaches_cap(self, progress: bool = False) -> bool:
+        """Take passes to the measured stop; whether it came at ``MAX_PASSES``: the filtered normals kept
+        concentrating, as on flat pieces cut by creases (``method="auto"``'s choice, docs page)."""
+        if not self.stop_pass:
+            # the count is measured as the passes go: where the stop comes first the bar ends at the cap
+            bar = Progress(progress, "feature passes").bar(MAX_PASSES, unit="pass", initial=len(self.medians))
+            with bar:
+                while not self.stop_pass:
+                    self.step()
+                    bar.update(1)
+                bar.set_postfix_str(f"stopped at pass {self.stop_pass}")
+                bar.update(MAX_PASSES - self.stop_pass)
+        return self.stop_pass == MAX_PASSES
 
     def concentrated(self) -> bool:
         """Whether the filtered normals stopped concentrating after pass ``k``: the median dihedral angle
@@ -216,12 +228,11 @@ class FeatureRun:
         :func:`.scan_denoise`'s result followed by a ``scan_start`` run to its own measured stop. Slivers
         at a rim then give back their drift (:func:`.relax_rim` with ``strength=0``)."""
         measured = passes is None
-        for _ in Progress(progress, "constrained fairing (features)").over(
-            range(MAX_PASSES - len(self.medians) if passes is None else passes)
-        ):
-            if measured and self.stop is not None:
-                break
-            self.step()
+        if passes is None:
+            self.reaches_cap(progress)
+        else:
+            for _ in Progress(progress, "constrained fairing (features)").over(range(passes)):
+                self.step()
         if measured and not self.scan_start and self.stop_pass < MAX_PASSES:
             # the guided passes flatten a curved surface into facets before the noise is gone; the scan
             # energy removes it without facets, and a few passes from there sharpen what creases it has
@@ -229,7 +240,7 @@ class FeatureRun:
             start = scan_denoise(self.vertices, self.triangles, progress=progress, conn=self.conn)
             x = FeatureRun(start, self.triangles, self.conn, scan_start=True).finish(None, progress)
         else:
-            x = (self.stop if measured and self.stop is not None else self.x) + self.centre
+            x = self.x + self.centre
         if not self.scan_start:  # the outer run only: the inner one's result comes back here
             # the vertex steps leave slivers at a scan's rim, where a triangle has a free side; their corners
             # give back their tangential drift as in the scan default, with its rim sweeps off (strength 0)
@@ -245,6 +256,7 @@ def feature_denoise(
     passes: int | None = None,
     progress: bool = False,
     conn: Connectivity | None = None,
+    run: FeatureRun | None = None,
 ) -> np.ndarray:
     """The feature mode on validated arrays: new ``(n, 3) float64`` positions.
 
@@ -252,7 +264,7 @@ def feature_denoise(
     :meth:`FeatureRun.concentrated`, at most :data:`MAX_PASSES`, from the scan energy's result where that
     stop comes before the cap, :meth:`FeatureRun.finish`; none on a mesh without measured noise), each
     followed by :data:`VERTEX_STEPS` vertex steps (:func:`filter_pass`, :func:`normal_steps`);
-    ``conn``: the mesh's connectivity when the caller has it.
+    ``conn``: the mesh's connectivity when the caller has it; ``run``: its passes begun on ``vertices``.
 
     Examples
     --------
@@ -265,7 +277,7 @@ def feature_denoise(
     conn = Connectivity(triangles, len(vertices)) if conn is None else conn
     if passes == 0 or (passes is None and measured_noise(vertices, triangles, conn=conn).noise == 0.0):
         return np.array(vertices, dtype=np.float64)
-    return FeatureRun(vertices, triangles, conn).finish(passes, progress)
+    return (run or FeatureRun(vertices, triangles, conn)).finish(passes, progress)
 
 
 def detect_creases_arrays(

@@ -43,8 +43,5 @@ MAX_PASSES = 35
 SCAN_START_CONCENTRATION = 0.8
 VERTEX_STEPS = 10  # vertex steps after each filter pass (the reference code's): features_denoise.md
 CREASE_ANGLE = 30.0  # degrees between denoised face normals of a crease: features_denoise.md (crease recall)
-# method="auto"'s choice (feature_measure): probe passes = ceil(PROBE_PASSES_PER_NOISE sigma), at least one;
-# "features" where the mean over the median of the filtered dihedral angles is at least FEATURE_LIKENESS:
-# features_denoise.md (leave-one-mesh-out classification)
-PROBE_PASSES_PER_NOISE = 10.0
-FEATURE_LIKENESS = 2.05
+# method="auto" (the default) has no constant of its own: the feature mode where the stop above comes at
+# MAX_PASSES, the scan energy where it comes before (features_denoise.md: the choice on every mesh)
