@@ -42,8 +42,6 @@ class FaceAdjacency(NamedTuple):
 
     incidence: sp.csr_matrix  # (m, n) triangle-vertex incidence, three ones a row
     ring: sp.csr_matrix  # (m, m) faces sharing a vertex with each face (itself included), sorted, data 1
-    rows: np.ndarray  # (r,) intp row of each entry of ring (cols: its column)
-    cols: np.ndarray
     pairs: np.ndarray  # (p, 2) int64 faces sharing an edge (k - 1 consecutive pairs on an edge of k)
     edges: np.ndarray  # (e, 2) the mesh's edges
     pair_edge: np.ndarray  # (p,) int64 the edge each pair shares
@@ -151,7 +149,7 @@ class Connectivity:
 
     @_cached
     def face_adjacency(self) -> FaceAdjacency:
-        from .._block_kernel import empty_small_pages, gram  # compiled by the package's build
+        from .._block_kernel import gram  # compiled by the package's build
 
         triangles, n, m = self.triangles, self.n, len(self.triangles)
         incidence = sp.csr_matrix(
@@ -165,13 +163,6 @@ class Connectivity:
         data[:] = 1.0
         ring = sp.csr_matrix((data, indices, indptr), shape=(m, m))
         ring.has_canonical_format = True  # sorted, no duplicates
-        # each entry's row and column as intp, on small pages (constrained_fairing.rst): a row starts at
-        # each indptr (every face shares its own vertices), so the rows are a running count of the starts
-        rows, cols = (empty_small_pages(len(indices), np.intp) for _ in range(2))
-        rows.fill(0)
-        rows[indptr[1:-1]] = 1
-        np.cumsum(rows, out=rows)
-        np.copyto(cols, indices)
         # edge-adjacent faces: consecutive half-edges of one edge group (half-edge a * m + t is in triangle t)
         es = self.edge_structure
         follows = np.ones(len(es.order), dtype=bool)
@@ -180,7 +171,7 @@ class Connectivity:
         first, second = es.order[follows - 1].astype(np.int64), es.order[follows].astype(np.int64)
         pairs = np.stack([first % m, second % m], axis=1)
         pair_edge = np.repeat(np.arange(len(es.counts)), es.counts - 1)
-        return FaceAdjacency(incidence, ring, rows, cols, pairs, es.edges, pair_edge)
+        return FaceAdjacency(incidence, ring, pairs, es.edges, pair_edge)
 
     @_cached
     def components(self) -> tuple[int, np.ndarray]:

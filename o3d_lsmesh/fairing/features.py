@@ -108,7 +108,7 @@ def filter_pass(
     from .._block_kernel import block_product, ring_entries  # compiled by the package's build
 
     normals, area = face_normals(vertices, triangles)
-    ring, cols = adjacency.ring, adjacency.cols
+    ring = adjacency.ring
     centroid = (adjacency.incidence @ vertices) / 3.0
     # differences, not |a|^2 + |b|^2 - 2 a.b: far from the origin it cancels
     d2 = ring_entries(ring.indptr, ring.indices, centroid, centroid, True)
@@ -123,7 +123,7 @@ def filter_pass(
     d2 /= 2.0 * max(spacing, np.finfo(float).tiny) ** 2
     weights -= d2
     np.exp(weights, out=weights)
-    weights *= area.take(cols)
+    weights *= area.take(ring.indices)
     out = np.empty((len(triangles), 3))
     block_product(ring.indptr, ring.indices, weights, normals, out)
     return _unit(out)
