@@ -449,9 +449,7 @@ def test_the_feature_mode_goes_on_from_the_passes_to_the_stop(kind):
     run = fe.FeatureRun(X, F, Connectivity(F, len(X)))
     assert run.reaches_cap() == (kind == "cube")
     assert run.stop_pass == len(run.medians) == stop_by_loop(X, F, fe_tuning().MAX_PASSES)
-    np.testing.assert_array_equal(
-        fe.feature_denoise(X, F, conn=run.conn, run=run), fe.feature_denoise(X, F)
-    )
+    np.testing.assert_array_equal(fe.feature_denoise(X, F, conn=run.conn, run=run), fe.feature_denoise(X, F))
 
 
 def test_the_command_line_names_the_chosen_method(tmp_path, capsys):
