@@ -30,7 +30,8 @@ def no_compiler_message(error: BaseException) -> str:
 
 class BuildExt(build_ext):
     """Check the compiler once before the kernels: say what is missing, and use OpenMP where it exists
-    (the block kernel's loops then run serially, with the same results: they never depend on threads)."""
+    (the block and feature kernels' loops then run serially, with the same results: they never depend on
+    threads)."""
 
     def _build(self, source: str, args: list[str], *, link: bool) -> None:
         with tempfile.TemporaryDirectory() as folder:
@@ -53,7 +54,7 @@ class BuildExt(build_ext):
             openmp = []
         print(f"o3d_lsmesh: OpenMP {' '.join(openmp) if openmp else 'not available: serial kernels'}")
         for extension in self.extensions:
-            if extension.name == "o3d_lsmesh._block_kernel":
+            if extension.name in ("o3d_lsmesh._block_kernel", "o3d_lsmesh._feature_kernel"):
                 extension.extra_compile_args += openmp
                 extension.extra_link_args += openmp
         super().build_extensions()
@@ -72,6 +73,11 @@ extensions = [
     # the iterative solver's block products and Gauss-Seidel sweeps, on every core where the compiler
     # has OpenMP (BuildExt adds the flag)
     Extension("o3d_lsmesh._block_kernel", ["o3d_lsmesh/_block_kernel.pyx"], extra_compile_args=list(flags)),
+    # the feature mode's loops over each face's ring of faces and Sun's vertex steps, on every core likewise
+    # (sharing _parallel.pxd's thread rule with the block kernel)
+    Extension(
+        "o3d_lsmesh._feature_kernel", ["o3d_lsmesh/_feature_kernel.pyx"], extra_compile_args=list(flags)
+    ),
     # the scan default's serial loops (the connectivity's half-edge grouping)
     Extension("o3d_lsmesh._scan_kernel", ["o3d_lsmesh/_scan_kernel.pyx"], extra_compile_args=flags),
 ]

@@ -13,17 +13,7 @@ from cython.parallel cimport prange, threadid
 from libc.math cimport fabs, sqrt
 from libc.stdint cimport int32_t, int64_t
 
-cdef extern from *:
-    # OpenMP's thread count where the build has OpenMP (setup.py's probe), one thread otherwise: prange
-    # and threadid() fall back to serial loops by themselves, omp.h may not exist (Apple's clang)
-    """
-    #ifdef _OPENMP
-    #include <omp.h>
-    #else
-    static int omp_get_max_threads(void) { return 1; }
-    #endif
-    """
-    int omp_get_max_threads() noexcept nogil
+from o3d_lsmesh._parallel cimport PARALLEL_ROWS, _threads, index_t
 
 cdef extern from *:
     # the OS's public madvise where it has transparent huge pages (Linux; NumPy advises them there only),
@@ -47,17 +37,6 @@ cdef extern from *:
     """
     int o3d_no_huge_pages(char* p, size_t n) noexcept nogil
 
-#: Loops over fewer rows stay on one thread: a parallel region costs a time slice whenever another job
-#: holds a core the team waits for. Chosen on the per-loop table of benchmarks/results/under_load.md
-#: (two threads pay under 10% below 80k rows quiet and lose beside busy processes), scored on the whole
-#: default call on a 40k raw scan in the same file; results do not depend on the thread count.
-cdef enum:
-    PARALLEL_ROWS = 65536
-
-
-cdef inline int _threads(Py_ssize_t rows) noexcept nogil:
-    return omp_get_max_threads() if rows >= PARALLEL_ROWS else 1
-
 
 def empty_small_pages(shape, dtype=np.float64, fill=None):
     """A new array, its buffer's whole pages advised to the OS as no transparent huge pages (``madvise``)
@@ -73,11 +52,6 @@ def empty_small_pages(shape, dtype=np.float64, fill=None):
     if fill is not None:
         array.fill(fill)
     return array
-
-
-ctypedef fused index_t:
-    int32_t
-    int64_t
 
 
 cdef inline void _product3(const index_t[::1] indptr, const index_t[::1] indices, const double[::1] data,
@@ -781,102 +755,3 @@ def two_ring_sums(const index_t[::1] indptr, const index_t[::1] indices, const i
                         for c in range(k):
                             sums[s, c] += values[b, c]
     return counts_array, sums_array
-
-
-def ring_entries(const index_t[::1] indptr, const index_t[::1] indices, const double[:, ::1] a,
-                 const double[:, ::1] b, bint difference):
-    """For each stored entry ``k`` (row ``i``, column ``j``) of an ``(m, m)`` CSR pattern, ``(r,)``: ``a[i] . b[j]``, or
-    with ``difference`` ``|a[i] - b[j]|^2``, three columns summed left to right (the order of NumPy's
-    column-at-a-time sums over ``a[rows]`` and ``b[cols]``, which it reproduces) without their gathers."""
-    cdef Py_ssize_t m = indptr.shape[0] - 1, i
-    cdef index_t k, j
-    cdef double s, d
-    if a.shape[0] != m or b.shape[0] != m or a.shape[1] != 3 or b.shape[1] != 3 or indptr[m] != indices.shape[0]:
-        raise ValueError(f"a and b must be ({m}, 3) on an ({m}, {m}) pattern of {indices.shape[0]} entries")
-    out_array = empty_small_pages(indices.shape[0])
-    cdef double[::1] out = out_array
-    with nogil:
-        for i in prange(m, schedule="static", num_threads=_threads(m)):
-            for k in range(indptr[i], indptr[i + 1]):
-                j = indices[k]
-                if difference:
-                    d = a[i, 0] - b[j, 0]
-                    s = d * d
-                    d = a[i, 1] - b[j, 1]
-                    s = s + d * d
-                    d = a[i, 2] - b[j, 2]
-                    out[k] = s + d * d
-                else:
-                    out[k] = a[i, 0] * b[j, 0] + a[i, 1] * b[j, 1] + a[i, 2] * b[j, 2]
-    return out_array
-
-
-def ring_least(const index_t[::1] indptr, const index_t[::1] indices, const double[::1] values,
-               bint ratio):
-    """Per row of a CSR pattern, ``(m,)``: the first column ``j`` (in stored order) of least ``values[j]``
-    (``-1`` on an empty row); with ``ratio``, ``max_k values[j] / (1e-9 + sum_k values[j])`` over the row's
-    entries instead (0 on an empty row; ``values >= 0``: the guided filter's patch saliency)."""
-    cdef Py_ssize_t m = indptr.shape[0] - 1, i
-    cdef index_t k, j, first
-    cdef double most, total
-    if indptr[m] != indices.shape[0]:
-        raise ValueError(f"indptr ends at {indptr[m]}, the pattern has {indices.shape[0]} entries")
-    out_array = np.empty(m, dtype=np.float64 if ratio else np.intp)
-    cdef double[::1] saliency = out_array if ratio else np.empty(0)
-    cdef Py_ssize_t[::1] least = np.empty(0, dtype=np.intp) if ratio else out_array
-    with nogil:
-        for i in prange(m, schedule="static", num_threads=_threads(m)):
-            if ratio:
-                most, total = 0.0, 0.0
-                for k in range(indptr[i], indptr[i + 1]):
-                    most = max(most, values[indices[k]])
-                    total = total + values[indices[k]]
-                saliency[i] = most / (1e-9 + total)
-            else:
-                first = -1
-                for k in range(indptr[i], indptr[i + 1]):
-                    j = indices[k]
-                    if first < 0 or values[j] < values[first]:
-                        first = j
-                least[i] = first
-    return out_array
-
-
-def plane_steps(const index_t[::1] corners, const index_t[::1] indptr, const index_t[::1] faces,
-                const double[:, ::1] normals, double[:, ::1] x, Py_ssize_t iterations):
-    """Sun et al.'s vertex update in place, ``iterations`` steps of ``x_v += 1/|F_v| sum_(f in F_v) n_f
-    (n_f . (c_f - x_v))``: ``corners`` the faces' vertices ``(3m,)``, ``(indptr, faces)`` each vertex's
-    faces in increasing order (once per corner: the incidence's CSC). Each step reads the planes
-    ``n_f . c_f`` of the previous positions (one pass over the faces, then one over the vertices)."""
-    cdef Py_ssize_t m = normals.shape[0], n = x.shape[0], f, v, step, c, e
-    cdef index_t k
-    cdef double d, s0, s1, s2
-    if corners.shape[0] != 3 * m or indptr.shape[0] != n + 1 or indptr[n] != faces.shape[0]:
-        raise ValueError(f"corners must have {3 * m} entries and indptr {n + 1}, ending at len(faces)")
-    if normals.shape[1] != 3 or x.shape[1] != 3:
-        raise ValueError(f"normals and x must have 3 columns, got {normals.shape[1]} and {x.shape[1]}")
-    plane_array, outer_array = np.empty(m), np.zeros((n, 9))
-    cdef double[::1] plane = plane_array
-    cdef double[:, ::1] outer = outer_array
-    with nogil:
-        for v in prange(n, schedule="static", num_threads=_threads(n)):
-            for k in range(indptr[v], indptr[v + 1]):
-                for e in range(9):
-                    outer[v, e] += normals[faces[k], e // 3] * normals[faces[k], e % 3]
-        for step in range(iterations):
-            for f in prange(m, schedule="static", num_threads=_threads(m)):
-                d = 0.0
-                for c in range(3):
-                    d = d + normals[f, c] * (x[corners[3 * f], c] + x[corners[3 * f + 1], c] + x[corners[3 * f + 2], c])
-                plane[f] = d / 3.0
-            for v in prange(n, schedule="static", num_threads=_threads(n)):
-                s0, s1, s2 = 0.0, 0.0, 0.0
-                for k in range(indptr[v], indptr[v + 1]):
-                    s0 = s0 + normals[faces[k], 0] * plane[faces[k]]
-                    s1 = s1 + normals[faces[k], 1] * plane[faces[k]]
-                    s2 = s2 + normals[faces[k], 2] * plane[faces[k]]
-                d = max(indptr[v + 1] - indptr[v], 1)
-                s0 = (s0 - (outer[v, 0] * x[v, 0] + outer[v, 1] * x[v, 1] + outer[v, 2] * x[v, 2])) / d
-                s1 = (s1 - (outer[v, 3] * x[v, 0] + outer[v, 4] * x[v, 1] + outer[v, 5] * x[v, 2])) / d
-                s2 = (s2 - (outer[v, 6] * x[v, 0] + outer[v, 7] * x[v, 1] + outer[v, 8] * x[v, 2])) / d
-                x[v, 0], x[v, 1], x[v, 2] = x[v, 0] + s0, x[v, 1] + s1, x[v, 2] + s2

@@ -45,6 +45,8 @@ SDIST_MUST_HOLD = [
     "o3d_lsmesh/_patch_kernel.pyx",
     "o3d_lsmesh/_fill_common.pxd",
     "o3d_lsmesh/_block_kernel.pyx",
+    "o3d_lsmesh/_feature_kernel.pyx",
+    "o3d_lsmesh/_parallel.pxd",
     "o3d_lsmesh/py.typed",
     "tests/conftest.py",
     "tests/test_packaging.py",
@@ -195,7 +197,7 @@ def test_wheel_metadata_licence_and_contents():
     assert any(re.fullmatch(r"o3d_lsmesh/hierarchy/collapse\..*(so|pyd)", n) for n in names), (
         "no compiled kernel"
     )
-    for kernel in ("_triangulation_kernel", "_patch_kernel", "_scan_kernel"):
+    for kernel in ("_triangulation_kernel", "_patch_kernel", "_scan_kernel", "_feature_kernel"):
         assert any(re.fullmatch(rf"o3d_lsmesh/{kernel}\..*(so|pyd)", n) for n in names), f"no {kernel}"
     assert any(re.fullmatch(r"o3d_lsmesh/_block_kernel\..*(so|pyd)", n) for n in names), "no block kernel"
     assert "o3d_lsmesh/py.typed" in names

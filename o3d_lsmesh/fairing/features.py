@@ -50,14 +50,6 @@ def _unit(vectors: np.ndarray) -> np.ndarray:
     return vectors / np.maximum(np.linalg.norm(vectors, axis=1, keepdims=True), np.finfo(float).tiny)
 
 
-def _row_reduce(ufunc: np.ufunc, matrix: sp.csr_matrix, values: np.ndarray) -> np.ndarray:
-    """``ufunc.reduceat`` of ``values`` (one per stored entry) over each row; 0 on an empty row."""
-    out = np.zeros(matrix.shape[0])
-    full = np.diff(matrix.indptr) > 0
-    out[full] = ufunc.reduceat(values, matrix.indptr[:-1][full])
-    return out
-
-
 def _patch_edges(adjacency: FaceAdjacency) -> sp.csr_matrix:
     """``(m, p)`` pattern: the edge-adjacent pairs with both faces in each face's patch (its ring)."""
     m, p = adjacency.ring.shape[0], len(adjacency.pairs)
@@ -74,7 +66,8 @@ def _patch_edges(adjacency: FaceAdjacency) -> sp.csr_matrix:
 def _guidance(normals, area, adjacency, patch_edges):
     """Zhang et al.'s guidance: the mean normal of the most consistent patch (least ``H = D R``, docs
     page) containing each face."""
-    from .._block_kernel import block_product, ring_entries, ring_least  # compiled by the package's build
+    from .._block_kernel import block_product  # compiled by the package's build
+    from .._feature_kernel import least_dot, ring_least
 
     ring, pairs = adjacency.ring, adjacency.pairs
     if patch_edges.shape != (len(normals), len(pairs)):  # the compiled loop reads jump at its columns
@@ -88,7 +81,7 @@ def _guidance(normals, area, adjacency, patch_edges):
     block_product(ring.indptr, ring.indices, ring.data, area[:, None] * normals, mean)
     mean = _unit(mean)
     # |n_j - m_i|^2 = 2 - 2 n_j . m_i for unit normals: the largest deviation is the least dot product
-    least = _row_reduce(np.minimum, ring, ring_entries(ring.indptr, ring.indices, mean, normals, False))
+    least = least_dot(ring.indptr, ring.indices, mean, normals)
     score = np.sqrt(np.maximum(2.0 - 2.0 * least, 0.0)) * saliency
     # per face, the first patch of least score among those containing it (the ring is symmetric)
     return mean[ring_least(ring.indptr, ring.indices, score, False)]
@@ -105,27 +98,20 @@ def filter_pass(
 ) -> np.ndarray:
     """One pass of the guided (``guided=False``: bilateral) normal filter over the face normals, ``(m, 3)``:
     ``n_i <- normalize(sum_j a_j K_s(|c_i - c_j|) K_r(|g_i - g_j|) n_j)`` (docs page)."""
-    from .._block_kernel import block_product, ring_entries  # compiled by the package's build
+    from .._feature_kernel import filtered_normals, ring_spacing  # compiled by the package's build
 
     normals, area = face_normals(vertices, triangles)
     ring = adjacency.ring
     centroid = (adjacency.incidence @ vertices) / 3.0
-    # differences, not |a|^2 + |b|^2 - 2 a.b: far from the origin it cancels
-    d2 = ring_entries(ring.indptr, ring.indices, centroid, centroid, True)
     # the mean distance between distinct faces of a ring: each row holds its own face once, at distance 0
-    others = len(d2) - len(triangles)
-    spacing = float(np.sqrt(d2).sum()) / others if others else 1.0
+    others = len(ring.indices) - len(triangles)
+    spacing = ring_spacing(ring.indptr, ring.indices, centroid) / others if others else 1.0
     guide = _guidance(normals, area, adjacency, patch_edges) if guided else normals
-    # the weights in place, one entry-sized array: exp((g_i . g_j - 1) / sigma_r^2 - d2 / (2 spacing^2)) a_j
-    weights = ring_entries(ring.indptr, ring.indices, guide, guide, False)
-    weights -= 1.0
-    weights /= sigma_r**2
-    d2 /= 2.0 * max(spacing, np.finfo(float).tiny) ** 2
-    weights -= d2
-    np.exp(weights, out=weights)
-    weights *= area.take(ring.indices)
+    # each ring entry's weight exp((g_i . g_j - 1) / sigma_r^2 - |c_i - c_j|^2 / (2 spacing^2)) a_j in
+    # registers, summed into its row at once: no array with one value per entry (fresh memory faults)
     out = np.empty((len(triangles), 3))
-    block_product(ring.indptr, ring.indices, weights, normals, out)
+    space = 2.0 * max(spacing, np.finfo(float).tiny) ** 2
+    filtered_normals(ring.indptr, ring.indices, centroid, guide, area, normals, sigma_r**2, space, out)
     return _unit(out)
 
 
@@ -140,7 +126,7 @@ def normal_steps(
     """Sun et al. 2007's vertex update, ``(n, 3)``: ``iterations`` steps of
     ``x_i += 1/|F_i| sum_(f in F_i) n_f (n_f . (c_f - x_i))`` (per-vertex ``3 x 3`` sums formed once;
     ``incidence`` the face adjacency's triangle-vertex incidence)."""
-    from .._block_kernel import plane_steps  # compiled by the package's build
+    from .._feature_kernel import plane_steps  # compiled by the package's build
 
     # each vertex's faces, increasing: the order in which the transposed product summed them
     by_vertex = incidence.tocsc()

@@ -1,0 +1,197 @@
+# cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
+"""The feature mode's loops over each face's ring of faces and Sun's vertex steps.
+
+Each loop reads a face's ring (a CSR pattern, about 13 entries per face) once and keeps what it needs of
+an entry in registers: no array with one value per stored entry is formed (fresh memory costs page
+faults). Rows run on every core (OpenMP; ``OMP_NUM_THREADS`` sets how many), each row's sums in stored
+order, so the results never depend on the thread count.
+"""
+
+import numpy as np
+
+from cython.parallel cimport prange
+from libc.math cimport exp, sqrt
+
+from o3d_lsmesh._parallel cimport _threads, index_t
+
+
+cdef Py_ssize_t _rows(const index_t[::1] indptr, Py_ssize_t entries) except -1:
+    """The rows ``m`` of a CSR pattern whose ``indptr`` ends at its ``entries`` (a ValueError otherwise)."""
+    if indptr.shape[0] < 1:
+        raise ValueError("indptr must have at least 1 entry, got 0")
+    cdef Py_ssize_t m = indptr.shape[0] - 1
+    if indptr[0] != 0 or indptr[m] != entries:
+        raise ValueError(f"indptr must run from 0 to the pattern's {entries} entries, got {indptr[0]} to {indptr[m]}")
+    return m
+
+
+cdef int _check_rows(str name, const double[:, ::1] a, Py_ssize_t rows) except -1:
+    """A ValueError naming ``name`` unless ``a`` is ``(rows, 3)``."""
+    if a.shape[0] != rows or a.shape[1] != 3:
+        raise ValueError(f"{name} must have shape ({rows}, 3), got ({a.shape[0]}, {a.shape[1]})")
+    return 0
+
+
+cdef inline double _distance2(const double[:, ::1] c, Py_ssize_t i, Py_ssize_t j) noexcept nogil:
+    """``|c_i - c_j|^2``, the three coordinates summed left to right (differences, not ``|a|^2 + |b|^2 -
+    2 a.b``: far from the origin that cancels)."""
+    cdef double d = c[i, 0] - c[j, 0]
+    cdef double s = d * d
+    d = c[i, 1] - c[j, 1]
+    s = s + d * d
+    d = c[i, 2] - c[j, 2]
+    return s + d * d
+
+
+cdef inline double _dot(const double[:, ::1] a, Py_ssize_t i, const double[:, ::1] b,
+                        Py_ssize_t j) noexcept nogil:
+    return a[i, 0] * b[j, 0] + a[i, 1] * b[j, 1] + a[i, 2] * b[j, 2]
+
+
+def ring_spacing(const index_t[::1] indptr, const index_t[::1] indices, const double[:, ::1] centroid):
+    """The sum over the stored entries ``(i, j)`` of an ``(m, m)`` CSR pattern of ``|c_i - c_j|``:
+    ``centroid`` ``(m, 3)``; each row's distances summed in stored order into an ``(m,)`` array, then
+    that array's NumPy sum (the same value whatever the thread count)."""
+    cdef Py_ssize_t m = _rows(indptr, indices.shape[0]), i
+    cdef index_t k
+    cdef double s
+    _check_rows("centroid", centroid, m)
+    partial_array = np.empty(m)
+    cdef double[::1] partial = partial_array
+    with nogil:
+        for i in prange(m, schedule="static", num_threads=_threads(m)):
+            s = 0.0
+            for k in range(indptr[i], indptr[i + 1]):
+                s = s + sqrt(_distance2(centroid, i, indices[k]))
+            partial[i] = s
+    return float(partial_array.sum())
+
+
+def filtered_normals(const index_t[::1] indptr, const index_t[::1] indices, const double[:, ::1] centroid,
+                     const double[:, ::1] guide, const double[::1] area, const double[:, ::1] normals,
+                     double range_divisor, double space_divisor, double[:, ::1] out):
+    """The bilateral (or guided) filter's weighted sums, ``out`` ``(m, 3)``: for each row ``i`` of an
+    ``(m, m)`` CSR pattern, over its stored entries ``(i, j)`` in order,
+    ``sum_j exp((g_i . g_j - 1) / range_divisor - |c_i - c_j|^2 / space_divisor) a_j n_j``.
+
+    ``centroid``, ``guide`` (``g``) and ``normals`` (``n``) ``(m, 3)``, ``area`` (``a``) ``(m,)``. The
+    operations in the order of the former entry-sized NumPy arrays: the dot product and the squared
+    distance summed left to right, then ``- 1``, the divisions, the difference, ``exp``, times ``a_j``,
+    times ``n_j``.
+    """
+    cdef Py_ssize_t m = _rows(indptr, indices.shape[0]), i
+    cdef index_t k, j
+    cdef double w, s0, s1, s2
+    _check_rows("centroid", centroid, m)
+    _check_rows("guide", guide, m)
+    _check_rows("normals", normals, m)
+    _check_rows("out", out, m)
+    if area.shape[0] != m:
+        raise ValueError(f"area must have shape ({m},), got ({area.shape[0]},)")
+    with nogil:
+        for i in prange(m, schedule="static", num_threads=_threads(m)):
+            s0, s1, s2 = 0.0, 0.0, 0.0
+            for k in range(indptr[i], indptr[i + 1]):
+                j = indices[k]
+                w = (_dot(guide, i, guide, j) - 1.0) / range_divisor
+                w = exp(w - _distance2(centroid, i, j) / space_divisor) * area[j]
+                s0 = s0 + w * normals[j, 0]
+                s1 = s1 + w * normals[j, 1]
+                s2 = s2 + w * normals[j, 2]
+            out[i, 0], out[i, 1], out[i, 2] = s0, s1, s2
+
+
+def least_dot(const index_t[::1] indptr, const index_t[::1] indices, const double[:, ::1] a,
+              const double[:, ::1] b):
+    """Per row ``i`` of an ``(m, m)`` CSR pattern, ``(m,)``: the least ``a_i . b_j`` over its stored
+    entries ``(i, j)`` (three columns summed left to right; a NaN stays, as ``np.minimum``'s), 0 on an
+    empty row; ``a`` and ``b`` ``(m, 3)``."""
+    cdef Py_ssize_t m = _rows(indptr, indices.shape[0]), i
+    cdef index_t k
+    cdef double least, v
+    _check_rows("a", a, m)
+    _check_rows("b", b, m)
+    out_array = np.empty(m)
+    cdef double[::1] out = out_array
+    with nogil:
+        for i in prange(m, schedule="static", num_threads=_threads(m)):
+            least = _dot(a, i, b, indices[indptr[i]]) if indptr[i] < indptr[i + 1] else 0.0
+            for k in range(indptr[i] + 1, indptr[i + 1]):
+                v = _dot(a, i, b, indices[k])
+                if v != v:  # predicted never taken: the minimum itself stays a branchless select
+                    least = v
+                    break
+                least = v if v < least else least
+            out[i] = least
+    return out_array
+
+
+def ring_least(const index_t[::1] indptr, const index_t[::1] indices, const double[::1] values,
+               bint ratio):
+    """Per row of a CSR pattern, ``(m,)``: the first column ``j`` (in stored order) of least ``values[j]``
+    (``-1`` on an empty row); with ``ratio``, ``max_k values[j] / (1e-9 + sum_k values[j])`` over the row's
+    entries instead (0 on an empty row; ``values >= 0``: the guided filter's patch saliency)."""
+    cdef Py_ssize_t m = indptr.shape[0] - 1, i
+    cdef index_t k, j, first
+    cdef double most, total
+    if indptr[m] != indices.shape[0]:
+        raise ValueError(f"indptr ends at {indptr[m]}, the pattern has {indices.shape[0]} entries")
+    out_array = np.empty(m, dtype=np.float64 if ratio else np.intp)
+    cdef double[::1] saliency = out_array if ratio else np.empty(0)
+    cdef Py_ssize_t[::1] least = np.empty(0, dtype=np.intp) if ratio else out_array
+    with nogil:
+        for i in prange(m, schedule="static", num_threads=_threads(m)):
+            if ratio:
+                most, total = 0.0, 0.0
+                for k in range(indptr[i], indptr[i + 1]):
+                    most = max(most, values[indices[k]])
+                    total = total + values[indices[k]]
+                saliency[i] = most / (1e-9 + total)
+            else:
+                first = -1
+                for k in range(indptr[i], indptr[i + 1]):
+                    j = indices[k]
+                    if first < 0 or values[j] < values[first]:
+                        first = j
+                least[i] = first
+    return out_array
+
+
+def plane_steps(const index_t[::1] corners, const index_t[::1] indptr, const index_t[::1] faces,
+                const double[:, ::1] normals, double[:, ::1] x, Py_ssize_t iterations):
+    """Sun et al.'s vertex update in place, ``iterations`` steps of ``x_v += 1/|F_v| sum_(f in F_v) n_f
+    (n_f . (c_f - x_v))``: ``corners`` the faces' vertices ``(3m,)``, ``(indptr, faces)`` each vertex's
+    faces in increasing order (once per corner: the incidence's CSC). Each step reads the planes
+    ``n_f . c_f`` of the previous positions (one pass over the faces, then one over the vertices)."""
+    cdef Py_ssize_t m = normals.shape[0], n = x.shape[0], f, v, step, c, e
+    cdef index_t k
+    cdef double d, s0, s1, s2
+    if corners.shape[0] != 3 * m or indptr.shape[0] != n + 1 or indptr[n] != faces.shape[0]:
+        raise ValueError(f"corners must have {3 * m} entries and indptr {n + 1}, ending at len(faces)")
+    if normals.shape[1] != 3 or x.shape[1] != 3:
+        raise ValueError(f"normals and x must have 3 columns, got {normals.shape[1]} and {x.shape[1]}")
+    plane_array, outer_array = np.empty(m), np.zeros((n, 9))
+    cdef double[::1] plane = plane_array
+    cdef double[:, ::1] outer = outer_array
+    with nogil:
+        for v in prange(n, schedule="static", num_threads=_threads(n)):
+            for k in range(indptr[v], indptr[v + 1]):
+                for e in range(9):
+                    outer[v, e] += normals[faces[k], e // 3] * normals[faces[k], e % 3]
+        for step in range(iterations):
+            for f in prange(m, schedule="static", num_threads=_threads(m)):
+                d = 0.0
+                for c in range(3):
+                    d = d + normals[f, c] * (x[corners[3 * f], c] + x[corners[3 * f + 1], c] + x[corners[3 * f + 2], c])
+                plane[f] = d / 3.0
+            for v in prange(n, schedule="static", num_threads=_threads(n)):
+                s0, s1, s2 = 0.0, 0.0, 0.0
+                for k in range(indptr[v], indptr[v + 1]):
+                    s0 = s0 + normals[faces[k], 0] * plane[faces[k]]
+                    s1 = s1 + normals[faces[k], 1] * plane[faces[k]]
+                    s2 = s2 + normals[faces[k], 2] * plane[faces[k]]
+                d = max(indptr[v + 1] - indptr[v], 1)
+                s0 = (s0 - (outer[v, 0] * x[v, 0] + outer[v, 1] * x[v, 1] + outer[v, 2] * x[v, 2])) / d
+                s1 = (s1 - (outer[v, 3] * x[v, 0] + outer[v, 4] * x[v, 1] + outer[v, 5] * x[v, 2])) / d
+                s2 = (s2 - (outer[v, 6] * x[v, 0] + outer[v, 7] * x[v, 1] + outer[v, 8] * x[v, 2])) / d
+                x[v, 0], x[v, 1], x[v, 2] = x[v, 0] + s0, x[v, 1] + s1, x[v, 2] + s2
