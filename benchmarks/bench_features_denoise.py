@@ -119,8 +119,7 @@ def measured_passes(V, F):
     if measured_noise(V, F).noise == 0.0:
         return 0
     run = fe.FeatureRun(V, F, Connectivity(F, len(V)))
-    while run.stop is None:
-        run.step()
+    run.reaches_cap()
     return run.stop_pass
 
 
@@ -132,8 +131,7 @@ def passes_taken(V, F):
         return first
     conn = Connectivity(F, len(V))
     again = fe.FeatureRun(scan_denoise(V, F, conn=conn), F, conn, scan_start=True)
-    while again.stop is None:
-        again.step()
+    again.reaches_cap()
     return f"{first}, scan + {again.stop_pass}"
 
 
