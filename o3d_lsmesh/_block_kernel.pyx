@@ -9,7 +9,7 @@ once for all ``k`` columns (row-major blocks: a row's ``k`` values share a cache
 
 import numpy as np
 
-from cython.parallel cimport prange, threadid
+from cython.parallel cimport prange
 from libc.math cimport fabs, sqrt
 from libc.stdint cimport int32_t, int64_t
 

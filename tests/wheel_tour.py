@@ -1,5 +1,5 @@
 """A short tour of an installed wheel (``make wheel``, cibuildwheel's test): the package comes from the
-install, its three compiled kernels load, and the default denoiser (the compiled CG path above 5k
+install, its compiled kernels load, and the default denoiser (the compiled CG path above 5k
 vertices), hole filling and an LS mesh give what they should. ``--no-compiler``: also check that no C
 compiler is on PATH (the wheel must not need one).
 
@@ -24,6 +24,8 @@ for kernel in (
     "o3d_lsmesh._triangulation_kernel",
     "o3d_lsmesh._patch_kernel",
     "o3d_lsmesh._block_kernel",
+    "o3d_lsmesh._feature_kernel",
+    "o3d_lsmesh._scan_kernel",
 ):
     print("loaded", importlib.import_module(kernel).__file__)
 
