@@ -1,6 +1,6 @@
 """Type stub of the compiled block kernel (``_block_kernel.pyx``)."""
 
-from typing import Any
+from typing import Any, Literal, overload
 
 import numpy as np
 
@@ -74,3 +74,11 @@ def edge_sums(edges: np.ndarray, values: np.ndarray) -> np.ndarray: ...
 def two_ring_sums(
     indptr: np.ndarray, indices: np.ndarray, rows: np.ndarray, values: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]: ...
+@overload
+def triangle_normals(
+    positions: np.ndarray, triangles: np.ndarray, centroids: Literal[True]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
+@overload
+def triangle_normals(
+    positions: np.ndarray, triangles: np.ndarray, centroids: Literal[False] = False
+) -> tuple[np.ndarray, np.ndarray, None]: ...

@@ -11,6 +11,7 @@ import numpy as np
 
 from cython.parallel cimport prange
 from libc.math cimport exp, sqrt
+from libc.stdint cimport int64_t
 
 from o3d_lsmesh._parallel cimport _threads, index_t
 
@@ -195,3 +196,27 @@ def plane_steps(const index_t[::1] corners, const index_t[::1] indptr, const ind
                 s1 = (s1 - (outer[v, 3] * x[v, 0] + outer[v, 4] * x[v, 1] + outer[v, 5] * x[v, 2])) / d
                 s2 = (s2 - (outer[v, 6] * x[v, 0] + outer[v, 7] * x[v, 1] + outer[v, 8] * x[v, 2])) / d
                 x[v, 0], x[v, 1], x[v, 2] = x[v, 0] + s0, x[v, 1] + s1, x[v, 2] + s2
+
+
+def pair_jumps(const int64_t[:, ::1] pairs, const double[:, ::1] normals):
+    """``|n_a - n_b|`` of each pair ``(a, b)`` of ``pairs`` ``(p, 2)``, ``(p,)``; ``normals`` ``(m, 3)``.
+    The operations of ``np.linalg.norm(normals[a] - normals[b], axis=1)``: ``sqrt((x*x + y*y) + z*z)``."""
+    cdef Py_ssize_t p = pairs.shape[0], m = normals.shape[0], k
+    cdef int64_t a, b
+    cdef double d0, d1, d2
+    if pairs.shape[1] != 2:
+        raise ValueError(f"pairs must have shape (p, 2), got ({p}, {pairs.shape[1]})")
+    if normals.shape[1] != 3:
+        raise ValueError(f"normals must have shape (m, 3), got ({m}, {normals.shape[1]})")
+    for k in range(p):
+        if not (0 <= pairs[k, 0] < m and 0 <= pairs[k, 1] < m):
+            raise ValueError(f"pairs must name rows of normals in 0..{m - 1}, got pair {k}: {pairs[k, 0]}, {pairs[k, 1]}")
+    out_array = np.empty(p)
+    cdef double[::1] out = out_array
+    with nogil:
+        for k in prange(p, schedule="static", num_threads=_threads(p)):
+            a, b = pairs[k, 0], pairs[k, 1]
+            d0, d1, d2 = normals[a, 0] - normals[b, 0], normals[a, 1] - normals[b, 1], normals[a, 2] - normals[b, 2]
+            out[k] = sqrt((d0 * d0 + d1 * d1) + d2 * d2)
+    return out_array
+

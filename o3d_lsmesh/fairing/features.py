@@ -67,7 +67,7 @@ def _guidance(normals, area, adjacency, patch_edges):
     """Zhang et al.'s guidance: the mean normal of the most consistent patch (least ``H = D R``, docs
     page) containing each face."""
     from .._block_kernel import block_product  # compiled by the package's build
-    from .._feature_kernel import least_dot, ring_least
+    from .._feature_kernel import least_dot, pair_jumps, ring_least
 
     ring, pairs = adjacency.ring, adjacency.pairs
     if patch_edges.shape != (len(normals), len(pairs)):  # the compiled loop reads jump at its columns
@@ -75,7 +75,7 @@ def _guidance(normals, area, adjacency, patch_edges):
         raise InputError(
             f"patch_edges must be {expected}, got shape {patch_edges.shape}", param="patch_edges"
         )
-    jump = np.linalg.norm(normals[pairs[:, 0]] - normals[pairs[:, 1]], axis=1)
+    jump = pair_jumps(np.ascontiguousarray(pairs, dtype=np.int64), normals)  # |n_a - n_b| per pair
     saliency = ring_least(patch_edges.indptr, patch_edges.indices, jump, True)
     mean = np.empty((len(normals), 3))
     block_product(ring.indptr, ring.indices, ring.data, area[:, None] * normals, mean)
@@ -98,11 +98,16 @@ def filter_pass(
 ) -> np.ndarray:
     """One pass of the guided (``guided=False``: bilateral) normal filter over the face normals, ``(m, 3)``:
     ``n_i <- normalize(sum_j a_j K_s(|c_i - c_j|) K_r(|g_i - g_j|) n_j)`` (docs page)."""
-    from .._feature_kernel import filtered_normals, ring_spacing  # compiled by the package's build
+    from .._block_kernel import triangle_normals  # compiled by the package's build
+    from .._feature_kernel import filtered_normals, ring_spacing
 
-    normals, area = face_normals(vertices, triangles)
+    # the normals, areas and centroids (the incidence's (a + b + c) / 3) in one pass over the triangles
+    triangles = np.asarray(triangles)
+    index = triangles.dtype if triangles.dtype in (np.int32, np.int64) else np.int64
+    normals, area, centroid = triangle_normals(
+        np.ascontiguousarray(vertices, dtype=np.float64), np.ascontiguousarray(triangles, dtype=index), True
+    )
     ring = adjacency.ring
-    centroid = (adjacency.incidence @ vertices) / 3.0
     # the mean distance between distinct faces of a ring: each row holds its own face once, at distance 0
     others = len(ring.indices) - len(triangles)
     spacing = ring_spacing(ring.indptr, ring.indices, centroid) / others if others else 1.0
@@ -122,18 +127,26 @@ def normal_steps(
     *,
     incidence: sp.csr_matrix,
     iterations: int = VERTEX_STEPS,
+    grouping: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
 ) -> np.ndarray:
     """Sun et al. 2007's vertex update, ``(n, 3)``: ``iterations`` steps of
     ``x_i += 1/|F_i| sum_(f in F_i) n_f (n_f . (c_f - x_i))`` (per-vertex ``3 x 3`` sums formed once;
-    ``incidence`` the face adjacency's triangle-vertex incidence)."""
+    ``incidence`` the face adjacency's triangle-vertex incidence). ``grouping``: :func:`_vertex_grouping`
+    of ``incidence``, when the caller keeps it across passes."""
     from .._feature_kernel import plane_steps  # compiled by the package's build
 
-    # each vertex's faces, increasing: the order in which the transposed product summed them
+    corners, indptr, faces = _vertex_grouping(incidence) if grouping is None else grouping
+    x = np.array(vertices, dtype=np.float64, order="C")
+    plane_steps(corners, indptr, faces, np.ascontiguousarray(normals), x, iterations)
+    return x
+
+
+def _vertex_grouping(incidence: sp.csr_matrix) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(corners (3m,), indptr (n + 1,), faces (3m,))``, one index dtype: the faces' vertices and each
+    vertex's faces, increasing (the order in which the transposed product summed them), the incidence's CSC."""
     by_vertex = incidence.tocsc()
     corners = incidence.indices.astype(by_vertex.indices.dtype, copy=False)
-    x = np.array(vertices, dtype=np.float64, order="C")
-    plane_steps(corners, by_vertex.indptr, by_vertex.indices, np.ascontiguousarray(normals), x, iterations)
-    return x
+    return corners, by_vertex.indptr.astype(by_vertex.indices.dtype, copy=False), by_vertex.indices
 
 
 def median_angle(normals: np.ndarray, pairs: np.ndarray) -> float:
@@ -167,6 +180,8 @@ class FeatureRun:
         # from the scan energy's result the medians concentrate less per pass than from the noise
         self.concentration = SCAN_START_CONCENTRATION if scan_start else CONCENTRATION
         self.patch_edges = _patch_edges(self.adjacency)
+        # the vertex steps' grouping of the faces depends on the connectivity alone: formed once
+        self.grouping = _vertex_grouping(self.adjacency.incidence)
         # about the centroid: the planes' offsets n_f . c_f do not carry the distance to the origin
         self.used = np.bincount(triangles.ravel(), minlength=len(vertices)) > 0
         self.centre = vertices[self.used].mean(axis=0) if self.used.any() else np.zeros(3)
@@ -177,7 +192,8 @@ class FeatureRun:
     def step(self) -> np.ndarray:
         """One pass: the filtered face normals ``(m, 3)``, then the vertex steps towards their planes."""
         normals = filter_pass(self.x, self.triangles, self.adjacency, self.patch_edges)
-        self.x = normal_steps(self.x, self.triangles, normals, incidence=self.adjacency.incidence)
+        incidence = self.adjacency.incidence
+        self.x = normal_steps(self.x, self.triangles, normals, incidence=incidence, grouping=self.grouping)
         self.medians.append(median_angle(normals, self.adjacency.pairs))
         if not self.stop_pass and (self.concentrated() or len(self.medians) >= MAX_PASSES):
             self.stop_pass = len(self.medians)
