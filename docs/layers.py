@@ -20,7 +20,10 @@ LAYERS = [
     ("hierarchy", r"hierarchy"),
     ("adapter", r"_o3d"),
     ("core", r"core|topology|_solvers|_validate|_progress|_errors|_collapsed|_ranges|_quantization|_normals"),
-    ("kernels", r"_block_kernel|_feature_kernel|_scan_kernel|_triangulation_kernel|_patch_kernel|_fill_kernel|_types|_compat"),
+    (
+        "kernels",
+        r"_block_kernel|_feature_kernel|_scan_kernel|_triangulation_kernel|_patch_kernel|_fill_kernel|_types|_compat",
+    ),
 ]
 
 
