@@ -9,7 +9,14 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from o3d_lsmesh._feature_kernel import filtered_normals, least_dot, plane_steps, ring_least, ring_spacing
+from o3d_lsmesh._feature_kernel import (
+    filtered_normals,
+    least_dot,
+    patch_saliency,
+    plane_steps,
+    ring_least,
+    ring_spacing,
+)
 
 
 @st.composite
@@ -177,7 +184,7 @@ def test_each_kernel_names_the_argument_of_the_wrong_shape(kernel, position, val
 @pytest.mark.parametrize("index", [np.int32, np.int64])
 def test_the_moved_loops_refuse_patterns_of_another_size(index):
     with pytest.raises(ValueError, match="indptr ends at 3, the pattern has 2 entries"):
-        ring_least(np.array([0, 1, 3], dtype=index), np.zeros(2, dtype=index), np.zeros(2), False)
+        ring_least(np.array([0, 1, 3], dtype=index), np.zeros(2, dtype=index), np.zeros(2))
     corners, indptr, faces = (
         np.arange(3, dtype=index),
         np.array([0, 1, 2, 3], dtype=index),
@@ -187,3 +194,65 @@ def test_the_moved_loops_refuse_patterns_of_another_size(index):
         plane_steps(corners, indptr, faces, np.zeros((2, 3)), np.zeros((3, 3)), 1)
     with pytest.raises(ValueError, match="normals and x must have 3 columns, got 3 and 2"):
         plane_steps(corners, indptr, faces, np.zeros((1, 3)), np.zeros((3, 2)), 1)
+
+
+@settings(max_examples=80, deadline=None)
+@given(patterns())
+def test_ring_least_is_the_first_column_of_least_value(pattern):
+    indptr, indices, seed = pattern
+    values = np.random.default_rng(seed).integers(0, 4, len(indptr) - 1).astype(np.float64)  # ties
+    want = []
+    for i in range(len(indptr) - 1):
+        row = [int(j) for j in indices[indptr[i] : indptr[i + 1]]]
+        want.append(min(row, key=lambda j: values[j]) if row else -1)  # min keeps the first of ties
+    assert ring_least(indptr, indices, values).tolist() == want
+
+
+@st.composite
+def rings_and_pairs(draw):
+    """A symmetric ring pattern with sorted rows (each face in its own ring) and pairs of faces, as the
+    feature mode's face adjacency has them, int32 or int64."""
+    m = draw(st.integers(1, 8))
+    linked = draw(st.sets(st.tuples(st.integers(0, m - 1), st.integers(0, m - 1)), max_size=12))
+    ring = [{i} for i in range(m)]
+    for a, b in linked:
+        ring[a].add(b)
+        ring[b].add(a)
+    pairs = draw(st.lists(st.tuples(st.integers(0, m - 1), st.integers(0, m - 1)), max_size=10))
+    index = draw(st.sampled_from([np.int32, np.int64]))
+    indptr = np.array([0, *np.cumsum([len(r) for r in ring])], dtype=index)
+    indices = np.array([j for r in ring for j in sorted(r)], dtype=index)
+    return indptr, indices, np.array(pairs, dtype=np.int64).reshape(-1, 2), draw(st.integers(0, 2**16))
+
+
+@settings(max_examples=100, deadline=None)
+@given(rings_and_pairs())
+def test_patch_saliency_reads_each_patchs_pairs_once(case):
+    indptr, indices, pairs, seed = case
+    m, p = len(indptr) - 1, len(pairs)
+    jump = np.random.default_rng(seed).random(p)
+    order = sorted(range(p), key=lambda q: (pairs[q, 0], q))  # each face's pairs as their first face
+    first_indptr = np.array([0, *np.cumsum(np.bincount(pairs[:, 0], minlength=m))], dtype=indptr.dtype)
+    first_pairs = np.array(order, dtype=indptr.dtype)
+    got = patch_saliency(indptr, indices, first_indptr, first_pairs, np.ascontiguousarray(pairs[:, 1]), jump)
+    for i in range(m):
+        patch = set(indices[indptr[i] : indptr[i + 1]].tolist())
+        inside = [jump[q] for q in range(p) if pairs[q, 0] in patch and pairs[q, 1] in patch]
+        want = max(inside, default=0.0) / (1e-9 + math.fsum(inside))
+        assert got[i] == pytest.approx(want, rel=1e-12, abs=1e-300)
+
+
+@pytest.mark.parametrize("index", [np.int32, np.int64])
+def test_patch_saliency_refuses_inconsistent_arrays(index):
+    indptr, indices = np.array([0, 1, 2], dtype=index), np.array([0, 1], dtype=index)
+    first_indptr, first_pairs = np.array([0, 1, 1], dtype=index), np.array([0], dtype=index)
+    second, jump = np.array([1], dtype=np.int64), np.array([0.5])
+    with pytest.raises(ValueError, match="first_indptr must have 3 entries"):
+        patch_saliency(indptr, indices, np.array([0, 1], dtype=index), first_pairs, second, jump)
+    with pytest.raises(ValueError, match="second must have one entry per pair of jump"):
+        patch_saliency(indptr, indices, first_indptr, first_pairs, np.array([1, 0], dtype=np.int64), jump)
+    with pytest.raises(ValueError, match="first_pairs must name pairs in 0..0, got 3"):
+        patch_saliency(indptr, indices, first_indptr, np.array([3], dtype=index), second, jump)
+    with pytest.raises(ValueError, match="second must name faces in 0..1, got 2"):
+        patch_saliency(indptr, indices, first_indptr, first_pairs, np.array([2], dtype=np.int64), jump)
+    assert patch_saliency(indptr, indices, first_indptr, first_pairs, second, jump).tolist() == [0.0, 0.0]

@@ -51,23 +51,20 @@ def _unit(vectors: np.ndarray) -> np.ndarray:
 
 
 def _patch_edges(adjacency: FaceAdjacency) -> sp.csr_matrix:
-    """``(m, p)`` pattern: the edge-adjacent pairs with both faces in each face's patch (its ring)."""
+    """``(m, p)`` pattern: each face's edge-adjacent pairs as their first face, the pairs increasing; the
+    patches' pairs are read from it and the ring (:func:`.patch_saliency`)."""
     m, p = adjacency.ring.shape[0], len(adjacency.pairs)
-    ends = sp.csr_matrix(
-        (np.ones(2 * p), (adjacency.pairs.T.ravel(), np.tile(np.arange(p), 2))), shape=(m, p)
-    )
-    inside = (adjacency.ring @ ends).tocsr()
-    # each entry counts the pair's faces in the patch, 1 or 2: keep the 2s, as ones, without a new array
-    inside.data -= 1.0
-    inside.eliminate_zeros()
-    return inside
+    first = sp.csr_matrix((np.ones(p), (adjacency.pairs[:, 0], np.arange(p))), shape=(m, p))
+    index = adjacency.ring.indices.dtype  # one index type in the compiled loop
+    first.indptr, first.indices = first.indptr.astype(index), first.indices.astype(index)
+    return first
 
 
 def _guidance(normals, area, adjacency, patch_edges):
     """Zhang et al.'s guidance: the mean normal of the most consistent patch (least ``H = D R``, docs
     page) containing each face."""
     from .._block_kernel import block_product  # compiled by the package's build
-    from .._feature_kernel import least_dot, pair_jumps, ring_least
+    from .._feature_kernel import least_dot, pair_jumps, patch_saliency, ring_least
 
     ring, pairs = adjacency.ring, adjacency.pairs
     if patch_edges.shape != (len(normals), len(pairs)):  # the compiled loop reads jump at its columns
@@ -75,8 +72,12 @@ def _guidance(normals, area, adjacency, patch_edges):
         raise InputError(
             f"patch_edges must be {expected}, got shape {patch_edges.shape}", param="patch_edges"
         )
-    jump = pair_jumps(np.ascontiguousarray(pairs, dtype=np.int64), normals)  # |n_a - n_b| per pair
-    saliency = ring_least(patch_edges.indptr, patch_edges.indices, jump, True)
+    pairs = np.ascontiguousarray(pairs, dtype=np.int64)
+    jump = pair_jumps(pairs, normals)  # |n_a - n_b| per pair
+    second = np.ascontiguousarray(pairs[:, 1])
+    saliency = patch_saliency(
+        ring.indptr, ring.indices, patch_edges.indptr, patch_edges.indices, second, jump
+    )
     mean = np.empty((len(normals), 3))
     block_product(ring.indptr, ring.indices, ring.data, area[:, None] * normals, mean)
     mean = _unit(mean)
@@ -84,7 +85,7 @@ def _guidance(normals, area, adjacency, patch_edges):
     least = least_dot(ring.indptr, ring.indices, mean, normals)
     score = np.sqrt(np.maximum(2.0 - 2.0 * least, 0.0)) * saliency
     # per face, the first patch of least score among those containing it (the ring is symmetric)
-    return mean[ring_least(ring.indptr, ring.indices, score, False)]
+    return mean[ring_least(ring.indptr, ring.indices, score)]
 
 
 def filter_pass(
