@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 from o3d_lsmesh._feature_kernel import (
     filtered_normals,
     least_dot,
+    patch_pairs,
     patch_saliency,
     plane_steps,
     ring_least,
@@ -225,34 +226,56 @@ def rings_and_pairs(draw):
     return indptr, indices, np.array(pairs, dtype=np.int64).reshape(-1, 2), draw(st.integers(0, 2**16))
 
 
+def _first(pairs, m, index):
+    """Each face's pairs as their first face, CSR, the pairs increasing."""
+    order = sorted(range(len(pairs)), key=lambda q: (pairs[q, 0], q))
+    indptr = np.array([0, *np.cumsum(np.bincount(pairs[:, 0], minlength=m))], dtype=index)
+    return indptr, np.array(order, dtype=index)
+
+
 @settings(max_examples=100, deadline=None)
 @given(rings_and_pairs())
-def test_patch_saliency_reads_each_patchs_pairs_once(case):
+def test_patch_pairs_are_each_patchs_pairs_once_in_ring_order(case):
     indptr, indices, pairs, seed = case
-    m, p = len(indptr) - 1, len(pairs)
-    jump = np.random.default_rng(seed).random(p)
-    order = sorted(range(p), key=lambda q: (pairs[q, 0], q))  # each face's pairs as their first face
-    first_indptr = np.array([0, *np.cumsum(np.bincount(pairs[:, 0], minlength=m))], dtype=indptr.dtype)
-    first_pairs = np.array(order, dtype=indptr.dtype)
-    got = patch_saliency(indptr, indices, first_indptr, first_pairs, np.ascontiguousarray(pairs[:, 1]), jump)
+    m = len(indptr) - 1
+    first_indptr, first_pairs = _first(pairs, m, indptr.dtype)
+    got_indptr, got = patch_pairs(
+        indptr, indices, first_indptr, first_pairs, np.ascontiguousarray(pairs[:, 1])
+    )
+    assert got_indptr.dtype == got.dtype == indptr.dtype
     for i in range(m):
-        patch = set(indices[indptr[i] : indptr[i + 1]].tolist())
-        inside = [jump[q] for q in range(p) if pairs[q, 0] in patch and pairs[q, 1] in patch]
-        want = max(inside, default=0.0) / (1e-9 + math.fsum(inside))
-        assert got[i] == pytest.approx(want, rel=1e-12, abs=1e-300)
+        ring = indices[indptr[i] : indptr[i + 1]].tolist()
+        want = [
+            q
+            for j in ring
+            for q in first_pairs[first_indptr[j] : first_indptr[j + 1]].tolist()
+            if pairs[q, 1] in ring
+        ]
+        assert got[got_indptr[i] : got_indptr[i + 1]].tolist() == want
+    # the saliency over those pairs, summed in stored order
+    jump = np.random.default_rng(seed).random(len(pairs))
+    saliency = patch_saliency(got_indptr, got, jump)
+    for i in range(m):
+        inside = [jump[q] for q in got[got_indptr[i] : got_indptr[i + 1]]]
+        total = 0.0
+        for value in inside:
+            total = total + value
+        assert saliency[i] == max(inside, default=0.0) / (1e-9 + total)
 
 
 @pytest.mark.parametrize("index", [np.int32, np.int64])
-def test_patch_saliency_refuses_inconsistent_arrays(index):
+def test_patch_pairs_and_saliency_refuse_inconsistent_arrays(index):
     indptr, indices = np.array([0, 1, 2], dtype=index), np.array([0, 1], dtype=index)
     first_indptr, first_pairs = np.array([0, 1, 1], dtype=index), np.array([0], dtype=index)
-    second, jump = np.array([1], dtype=np.int64), np.array([0.5])
+    second = np.array([1], dtype=np.int64)
     with pytest.raises(ValueError, match="first_indptr must have 3 entries"):
-        patch_saliency(indptr, indices, np.array([0, 1], dtype=index), first_pairs, second, jump)
-    with pytest.raises(ValueError, match="second must have one entry per pair of jump"):
-        patch_saliency(indptr, indices, first_indptr, first_pairs, np.array([1, 0], dtype=np.int64), jump)
-    with pytest.raises(ValueError, match="first_pairs must name pairs in 0..0, got 3"):
-        patch_saliency(indptr, indices, first_indptr, np.array([3], dtype=index), second, jump)
+        patch_pairs(indptr, indices, np.array([0, 1], dtype=index), first_pairs, second)
+    with pytest.raises(ValueError, match="first_pairs must name pairs of second in 0..0, got 3"):
+        patch_pairs(indptr, indices, first_indptr, np.array([3], dtype=index), second)
     with pytest.raises(ValueError, match="second must name faces in 0..1, got 2"):
-        patch_saliency(indptr, indices, first_indptr, first_pairs, np.array([2], dtype=np.int64), jump)
-    assert patch_saliency(indptr, indices, first_indptr, first_pairs, second, jump).tolist() == [0.0, 0.0]
+        patch_pairs(indptr, indices, first_indptr, first_pairs, np.array([2], dtype=np.int64))
+    got_indptr, got = patch_pairs(indptr, indices, first_indptr, first_pairs, second)
+    assert got_indptr.tolist() == [0, 0, 0] and got.tolist() == []  # face 1 is in no ring of face 0
+    with pytest.raises(ValueError, match="pairs must name entries of jump in 0..0, got 4"):
+        patch_saliency(np.array([0, 1], dtype=index), np.array([4], dtype=index), np.array([0.5]))
+    assert patch_saliency(got_indptr, got, np.array([0.5])).tolist() == [0.0, 0.0]

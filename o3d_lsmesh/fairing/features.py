@@ -51,13 +51,18 @@ def _unit(vectors: np.ndarray) -> np.ndarray:
 
 
 def _patch_edges(adjacency: FaceAdjacency) -> sp.csr_matrix:
-    """``(m, p)`` pattern: each face's edge-adjacent pairs as their first face, the pairs increasing; the
-    patches' pairs are read from it and the ring (:func:`.patch_saliency`)."""
-    m, p = adjacency.ring.shape[0], len(adjacency.pairs)
+    """``(m, p)`` pattern: the edge-adjacent pairs with both faces in each face's patch (its ring), in the
+    ring's order of their first faces (:func:`.patch_pairs`)."""
+    from .._feature_kernel import patch_pairs  # compiled by the package's build
+
+    m, p, ring = adjacency.ring.shape[0], len(adjacency.pairs), adjacency.ring
     first = sp.csr_matrix((np.ones(p), (adjacency.pairs[:, 0], np.arange(p))), shape=(m, p))
-    index = adjacency.ring.indices.dtype  # one index type in the compiled loop
-    first.indptr, first.indices = first.indptr.astype(index), first.indices.astype(index)
-    return first
+    index = ring.indices.dtype  # one index type in the compiled loop
+    second = np.ascontiguousarray(adjacency.pairs[:, 1], dtype=np.int64)
+    parts = (first.indptr.astype(index), first.indices.astype(index), second)
+    indptr, pairs = patch_pairs(ring.indptr, ring.indices, *parts)
+    # only the pattern is read: one byte a value
+    return sp.csr_matrix((np.ones(len(pairs), dtype=np.int8), pairs, indptr), shape=(m, p))
 
 
 def _guidance(normals, area, adjacency, patch_edges):
@@ -72,12 +77,8 @@ def _guidance(normals, area, adjacency, patch_edges):
         raise InputError(
             f"patch_edges must be {expected}, got shape {patch_edges.shape}", param="patch_edges"
         )
-    pairs = np.ascontiguousarray(pairs, dtype=np.int64)
-    jump = pair_jumps(pairs, normals)  # |n_a - n_b| per pair
-    second = np.ascontiguousarray(pairs[:, 1])
-    saliency = patch_saliency(
-        ring.indptr, ring.indices, patch_edges.indptr, patch_edges.indices, second, jump
-    )
+    jump = pair_jumps(np.ascontiguousarray(pairs, dtype=np.int64), normals)  # |n_a - n_b| per pair
+    saliency = patch_saliency(patch_edges.indptr, patch_edges.indices, jump)
     mean = np.empty((len(normals), 3))
     block_product(ring.indptr, ring.indices, ring.data, area[:, None] * normals, mean)
     mean = _unit(mean)
