@@ -387,7 +387,16 @@ loaded machine their trial-to-trial spread (up to 15% at 1.4M) is larger than th
 speed table above is the run after this work (08:17 UTC, the same loaded machine): Open3D took 30-32 ms
 at 40k against 21-23 ms in the quiet run it replaces and ours 0.142-0.152 s against 0.122-0.130 s, so
 its lower ratios (4.6 wall at 40k, 3.2 at 1.4M, against 5.8 and 4.7) come from Open3D's threaded filter
-losing more under load, not from this work."""
+losing more under load, not from this work.
+
+2026-12-05 (#39, the default chooses): the default first takes the feature mode's passes to their
+measured stop and runs the scan energy where the stop comes before the cap (features_denoise.md). On
+every raw scan it does (pass 2 on bun000, 4 on the merged mesh) and the result is the scan energy's bit
+for bit, but the passes and their set-up come first. The table above is the first run with them (after
+the passes' compiled loops, 5ede1ed-39d196a): bun000 0.235-0.244 s, the merged mesh 15.7-16.9 s,
+against 0.142-0.152 s and 9.1-10.2 s for the scan energy alone in the run before. The ratio to
+Open3D's Laplacian went 4.6 -> 9.4 at 40k and 3.2 -> 8.1 at 1.4M (Open3D 24-26 ms and 2.0 s here,
+30-32 ms and 2.8-3.2 s then). Beside two busy processes the call keeps its ratio (1.66, under_load.md)."""
 
 
 def speed_rows(results):
