@@ -130,3 +130,20 @@ def test_pair_jumps_raises():
         pair_jumps(np.zeros((2, 2), dtype=np.int64), np.zeros((4, 2)))
     with pytest.raises(ValueError, match=r"pairs must name rows of normals in 0\.\.3, got pair 1: 0, 4"):
         pair_jumps(np.array([[0, 1], [0, 4]]), normals)
+
+
+@pytest.mark.parametrize("count", [1, 2, 3, 4, 7, 10, 33])
+def test_median_angle_is_the_median_of_every_pairs_angle(count):
+    import statistics
+
+    from o3d_lsmesh.fairing.features import median_angle
+
+    rng = np.random.default_rng(count)
+    normals = rng.standard_normal((12, 3))
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    normals[3] = normals[2]  # a pair at angle 0 and repeated angles: ties in the middle
+    pairs = rng.integers(0, 12, size=(count, 2))
+    pairs[0] = [2, 3]
+    angles = [math.acos(max(-1.0, min(1.0, float(normals[a] @ normals[b])))) for a, b in pairs.tolist()]
+    assert median_angle(normals, pairs) == pytest.approx(statistics.median(angles), rel=1e-12, abs=1e-15)
+    assert median_angle(normals, np.zeros((0, 2), dtype=np.int64)) == 0.0
