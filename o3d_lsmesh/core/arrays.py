@@ -48,6 +48,18 @@ def dequantize(codes: np.ndarray, lower: np.ndarray, upper: np.ndarray, bits: in
     return lower + codes * ((np.asarray(upper, dtype=np.float64) - lower) / levels)
 
 
+def kernel_index(rows: ArrayLike, width: int) -> np.ndarray:
+    """``rows`` as a C-contiguous ``(k, width)`` int32 or int64 array (their own type where it is one of the
+    two), the index types the compiled kernels are built for.
+
+    >>> kernel_index(np.array([[0, 1, 2]], dtype=np.uint16), 3).dtype
+    dtype('int64')
+    """
+    rows = np.asarray(rows)
+    index = rows.dtype if rows.dtype in (np.int32, np.int64) else np.int64
+    return np.ascontiguousarray(rows, dtype=index).reshape(-1, width)
+
+
 def face_normals(vertices: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Unit face normals ``(m, 3)`` (zero on a degenerate face) and face areas ``(m,)``.
 
@@ -61,10 +73,7 @@ def face_normals(vertices: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarra
     if vertices.dtype == np.float64 and triangles.dtype.kind in "iu":
         from .._block_kernel import triangle_normals  # compiled by the package's build: imported where used
 
-        index = triangles.dtype if triangles.dtype in (np.int32, np.int64) else np.int64
-        normals, area, _ = triangle_normals(
-            np.ascontiguousarray(vertices), np.ascontiguousarray(triangles, dtype=index).reshape(-1, 3)
-        )
+        normals, area, _ = triangle_normals(np.ascontiguousarray(vertices), kernel_index(triangles, 3))
         return normals, area
     p0 = vertices[triangles[:, 0]]
     cross = np.cross(vertices[triangles[:, 1]] - p0, vertices[triangles[:, 2]] - p0)
@@ -83,12 +92,7 @@ def area_weighted_normals(positions: np.ndarray, triangles: np.ndarray) -> np.nd
     """
     from .._block_kernel import area_normals  # compiled by the package's build: imported where used
 
-    triangles = np.asarray(triangles)
-    index = triangles.dtype if triangles.dtype in (np.int32, np.int64) else np.int64
-    return area_normals(
-        np.ascontiguousarray(positions, dtype=np.float64),
-        np.ascontiguousarray(triangles, dtype=index).reshape(-1, 3),
-    )
+    return area_normals(np.ascontiguousarray(positions, dtype=np.float64), kernel_index(triangles, 3))
 
 
 def _runs(sorted_keys: np.ndarray):

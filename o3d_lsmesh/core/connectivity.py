@@ -14,7 +14,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse import csgraph
 
-from .arrays import gather, run_heads
+from .arrays import gather, kernel_index, run_heads
 from .errors import InputError
 
 __all__ = ["Connectivity", "EdgeStructure", "FaceAdjacency", "VertexRings", "halfedges", "ring_pattern"]
@@ -381,10 +381,7 @@ def ring_pattern(edges: np.ndarray, n: int):
 
     e = len(edges)
     index = np.int32 if 2 * e + n < np.iinfo(np.int32).max else np.int64
-    kind = edges.dtype if edges.dtype in (np.int32, np.int64) else np.int64
     indptr, indices = np.empty(n + 1, dtype=index), np.empty(n + 2 * e, dtype=index)
     diagonal, forward, backward = np.empty(n, dtype=index), np.empty(e, dtype=index), np.empty(e, dtype=index)
-    ring_slots(
-        np.ascontiguousarray(edges, dtype=kind).reshape(-1, 2), indptr, indices, diagonal, forward, backward
-    )
+    ring_slots(kernel_index(edges, 2), indptr, indices, diagonal, forward, backward)
     return indptr, indices, diagonal, forward, backward

@@ -14,6 +14,7 @@ from typing import NamedTuple
 import numpy as np
 import scipy.sparse as sp
 
+from .arrays import kernel_index
 from .connectivity import (
     Connectivity,
     VertexRings,
@@ -146,10 +147,9 @@ def umbrella(vertices: np.ndarray, edges: np.ndarray, mask: np.ndarray) -> np.nd
     from .._block_kernel import edge_sums  # compiled by the package's build: imported where used
 
     n = len(vertices)
-    index = edges.dtype if edges.dtype in (np.int32, np.int64) else np.int64
-    edges = np.ascontiguousarray(edges, dtype=index)
+    edges = kernel_index(edges, 2)
     degree = np.bincount(edges.ravel(), minlength=n)[mask].astype(np.float64)
-    total = edge_sums(edges.reshape(-1, 2), np.ascontiguousarray(vertices, dtype=np.float64))[mask]
+    total = edge_sums(edges, np.ascontiguousarray(vertices, dtype=np.float64))[mask]
     return total / degree[:, None] - vertices[mask]
 
 

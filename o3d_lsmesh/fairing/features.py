@@ -16,7 +16,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._o3d import read_mesh
-from ..core.arrays import face_normals
+from ..core.arrays import face_normals, kernel_index
 from ..core.connectivity import Connectivity, FaceAdjacency
 from ..core.errors import InputError
 from ..core.progress import Progress
@@ -104,10 +104,8 @@ def filter_pass(
     from .._feature_kernel import filtered_normals, ring_spacing
 
     # the normals, areas and centroids (the incidence's (a + b + c) / 3) in one pass over the triangles
-    triangles = np.asarray(triangles)
-    index = triangles.dtype if triangles.dtype in (np.int32, np.int64) else np.int64
     normals, area, centroid = triangle_normals(
-        np.ascontiguousarray(vertices, dtype=np.float64), np.ascontiguousarray(triangles, dtype=index), True
+        np.ascontiguousarray(vertices, dtype=np.float64), kernel_index(triangles, 3), True
     )
     ring = adjacency.ring
     # the mean distance between distinct faces of a ring: each row holds its own face once, at distance 0
@@ -159,11 +157,17 @@ def median_angle(normals: np.ndarray, pairs: np.ndarray) -> float:
     >>> median_angle(np.array([[0.0, 0, 1], [0, 0, 1], [0, 1, 0]]), np.array([[0, 1], [1, 2], [0, 2]]))
     1.5707963267948966
     """
-    cosine = np.einsum("ij,ij->i", normals[pairs[:, 0]], normals[pairs[:, 1]])
+    cosine = pair_cosines(normals, pairs)
     if not len(cosine):
         return 0.0
     middle = [(len(cosine) - 1) // 2, len(cosine) // 2]  # one index twice for an odd count
     return float(np.arccos(np.clip(np.partition(cosine, middle)[middle], -1.0, 1.0)).mean())
+
+
+def pair_cosines(normals: np.ndarray, pairs: np.ndarray) -> np.ndarray:
+    """``normals[a] . normals[b]`` of each pair ``(a, b)`` of ``pairs`` ``(p, 2)``, ``(p,)``: the cosines of
+    the dihedral angles the stop and the crease test read."""
+    return np.einsum("ij,ij->i", normals[pairs[:, 0]], normals[pairs[:, 1]])
 
 
 class FeatureRun:
@@ -319,7 +323,7 @@ def _creases(vertices: np.ndarray, triangles: np.ndarray, angle: float, passes: 
     normals = face_normals(feature_denoise(vertices, triangles, passes=passes, conn=conn), triangles)[0]
     adjacency = conn.face_adjacency
     pairs = adjacency.pairs
-    cosine = np.einsum("ij,ij->i", normals[pairs[:, 0]], normals[pairs[:, 1]])
+    cosine = pair_cosines(normals, pairs)
     sharp = np.unique(adjacency.pair_edge[cosine < np.cos(np.radians(angle))])
     return adjacency.edges[sharp].astype(np.int64)
 
