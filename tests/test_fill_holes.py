@@ -26,6 +26,7 @@ from o3d_lsmesh.core.operators import patch_system
 from o3d_lsmesh.holes import DP_MAX_EDGES, HoleFiller, fill_holes_arrays, find_holes
 from o3d_lsmesh.holes.crossings import _crossings, _TriangleIndex
 from o3d_lsmesh.holes.fair import keeps_facing
+from o3d_lsmesh.holes.find import _diameter
 from o3d_lsmesh.holes.triangulate import delaunay_triangles
 
 
@@ -788,6 +789,34 @@ def test_size_limits_choose_holes():
     assert small.diameter == pytest.approx(
         max(np.linalg.norm(p - q) for p, q in itertools.combinations(points, 2))
     )
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    count=st.integers(0, 1200),
+    shape=st.sampled_from(["cloud", "line", "circle", "cluster"]),
+    offset=st.floats(-1e6, 1e6),
+    seed=st.integers(0, 2**16),
+)
+def test_loop_diameter_is_the_largest_pairwise_distance(count, shape, offset, seed):
+    # the pruned, matrix-product diameter against every pair's difference (plain loops over blocks)
+    rng = np.random.default_rng(seed)
+    if shape == "circle":  # every point at the same distance from the centroid: nothing pruned
+        t = np.sort(rng.uniform(0.0, 2 * np.pi, count))
+        points = np.c_[np.cos(t), np.sin(t), np.zeros(count)]
+    elif shape == "line":
+        points = rng.uniform(-1.0, 1.0, (count, 1)) * rng.normal(size=3)
+    elif shape == "cluster":  # far from the origin, small spread
+        points = 1e-3 * rng.normal(size=(count, 3))
+    else:
+        points = rng.normal(size=(count, 3))
+    points = points + offset
+    reference = 0.0
+    for start in range(0, count, 256):
+        block = points[start : start + 256, None] - points[None]
+        reference = max(reference, float(np.sqrt((block**2).sum(axis=-1)).max()))
+    scale = float(np.abs(points).max()) if count else 1.0
+    assert _diameter(points) == pytest.approx(reference, abs=1e-12 * scale + 1e-7 * reference)
 
 
 def test_density_zero_adds_no_vertex_and_nonmanifold_elsewhere_is_kept():
