@@ -342,20 +342,35 @@ def update_comparison(names=("Block 0.4", "SharpSphere 0.3", "GCN fertility")):
 
 
 LARGE = ("Nicolo 0.2", 3)  # the ~1M-vertex row: this mesh Loop-subdivided so many times (950k vertices)
+# CAD meshes at the target's sizes, where the feature mode takes all its passes: a clean original split at
+# edge midpoints (flat faces and creases stay exact; Loop's scheme would round them) so many times, then
+# Gaussian noise of 0.4 mean edge lengths (seed 0): 35k and 1.66M vertices
+CAD_SIZES = (("Block", "gd_Block0.4_Original", 1, 3), ("GCN fandisk", "gcn_fandisk", 4, 1))
 
 
-def speed(names=("Block 0.4", "Bunny 0.2", "GCN fandisk", "GCN nicolo"), repeat=3, large=LARGE):
+def subdivided(V, F, times, *, loop):
+    mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(V), o3d.utility.Vector3iVector(F))
+    mesh = (mesh.subdivide_loop if loop else mesh.subdivide_midpoint)(number_of_iterations=times)
+    return np.asarray(mesh.vertices), np.asarray(mesh.triangles).astype(np.int64)
+
+
+def speed(
+    names=("Block 0.4", "Bunny 0.2", "GCN fandisk", "GCN nicolo"), repeat=3, large=LARGE, cad=CAD_SIZES
+):
     """Ours at defaults against Open3D's Taubin(100), interleaved (both see the same machine load), best of
-    ``repeat`` on each of ``names``, one run of each on ``large`` (see :data:`LARGE`; ``None``: no such row);
-    the tracemalloc peak of one more run of ours, per vertex."""
+    ``repeat`` on each of ``names``, one run of each on ``large`` (see :data:`LARGE`; ``None``: no such row)
+    and best of the given count on each of ``cad`` (:data:`CAD_SIZES`); the tracemalloc peak of one more run
+    of ours, per vertex."""
     rows, noisy = [], {case[0]: case[1] for case in CASES}
     meshes = [(name, *load(noisy[name]), repeat) for name in names]
     if large is not None:
-        V, F = load(noisy[large[0]])
-        mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(V), o3d.utility.Vector3iVector(F))
-        mesh = mesh.subdivide_loop(number_of_iterations=large[1])
-        V, F = np.asarray(mesh.vertices), np.asarray(mesh.triangles).astype(np.int64)
+        V, F = subdivided(*load(noisy[large[0]]), large[1], loop=True)
         meshes.append((f"{large[0]}, Loop-subdivided {large[1]}x", V, F, 1))
+    for label, clean, times, runs in cad:
+        V, F = subdivided(*load(clean), times, loop=False)
+        meshes.append(
+            (f"{label}, midpoint-subdivided {times}x, 0.4 noise", with_noise(V, F, 0.4, 0), F, runs)
+        )
     for name, V, F, runs in meshes:
         mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(V), o3d.utility.Vector3iVector(F))
         ours, taubin = [], []
@@ -926,7 +941,7 @@ def main():
         ("The default's choice on the data folder's other meshes", others),
         ("Vertex update: Sun et al.'s steps against one least-squares solve a pass", update_comparison()),
         (
-            "Time against Open3D filter_smooth_taubin(100), best of 3 interleaved (one on ~1M vertices); memory",
+            "Time against Open3D filter_smooth_taubin(100), best of 3 interleaved (one on the ~1M- and 1.66M-vertex rows); memory",
             speed(),
         ),
         ("Raw scans at defaults (method='features', detect_creases)", raw_scans()),
