@@ -18,6 +18,7 @@ from ..core.operators import patch_system
 from ..core.solve import solve_spd
 from .crossings import _crossings
 from .find import _cross
+from .tuning import RELAX_STEPS, RELAX_TOLERANCE
 
 
 def _fair(x: np.ndarray, tris: np.ndarray, unknown: np.ndarray, rings: list, level: int, cot: bool):
@@ -107,9 +108,9 @@ def fair_patches(
                     again = np.where(np.isfinite(again).all(axis=1)[:, None], again, solution)
                 if again is not None and keeps_facing(work, again, new_tris):
                     work[n:] = again
-                    yield level, tangential_relax(work, new_tris, n)
+                    yield level, tangential_relax(work, new_tris, n, owner, RELAX_STEPS, RELAX_TOLERANCE)
                     work[n:] = solution
-            yield level, tangential_relax(work, new_tris, n)
+            yield level, tangential_relax(work, new_tris, n, owner, RELAX_STEPS, RELAX_TOLERANCE)
             work[n:] = refined
         yield -1, refined  # the refined patch as triangulated
 
