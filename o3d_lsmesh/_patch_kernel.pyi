@@ -2,14 +2,7 @@ import numpy as np
 
 Array = np.ndarray
 
-def tangential_relax(
-    vertices: Array,
-    new_tris: Array,
-    first_new: int,
-    patch: Array,
-    iterations: int,
-    tolerance: float,
-) -> Array: ...
+def tangential_relax(vertices: Array, new_tris: Array, first_new: int, iterations: int = 10) -> Array: ...
 def local_mesh(
     triangles: Array, indptr: Array, data: Array, seeds: Array, count: int, new_tris: Array
 ) -> tuple[Array, Array, list[Array]]: ...

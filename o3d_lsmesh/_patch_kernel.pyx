@@ -19,58 +19,27 @@ from o3d_lsmesh._fill_common cimport (
 # tangential relaxation and the crossing test
 
 def tangential_relax(const double[:, ::1] vertices, const int64_t[:, ::1] new_tris, int64_t first_new,
-                     const int64_t[::1] patch, int iterations, double tolerance):
-    """The new vertices (from ``first_new``) moved half-way to their star's area-weighted centroid,
-    tangentially, each patch (``patch``: the patch of each new triangle) until none of its steps is longer
-    than ``tolerance`` times its new triangles' mean side as given (the relaxation's fixed point; 0:
-    never), at most ``iterations`` times: ``(n - first_new, 3)``. A patch stops on its own figures alone,
-    so patches relaxed together move as each alone."""
-    cdef int64_t n = vertices.shape[0], p = n - first_new, q = new_tris.shape[0], i, r, v, c, k
-    cdef int64_t count = 0, moving
+                     int iterations=10):
+    """The new vertices (from ``first_new``) moved ``iterations`` times half-way to their star's
+    area-weighted centroid, tangentially: ``(n - first_new, 3)``."""
+    cdef int64_t n = vertices.shape[0], p = n - first_new, q = new_tris.shape[0], i, r, v, c
     if p < 0:
         raise ValueError("first_new beyond the vertices")
-    if patch.shape[0] != q:
-        raise ValueError(f"patch must hold one patch per new triangle ({q}), got {patch.shape[0]}")
-    for i in range(q):
-        if patch[i] < 0:
-            raise ValueError("patch must hold non-negative patch numbers")
-        count = max(count, patch[i] + 1)
     out = np.array(vertices[first_new:], dtype=np.float64, order="C")
     if p == 0:
         return out
     sums_ = np.empty((p, 7))  # per new vertex: normal sum, weighted centroid sum, area sum
-    owner_ = np.full(p, -1, dtype=np.int64)  # each new vertex's patch (-1: on no new triangle, kept)
-    scale_ = np.zeros((count, 3))  # per patch: summed sides, their count, the largest squared step
-    live_ = np.ones(count, dtype=np.uint8)
-    cdef double[:, ::1] x = out, acc = sums_, scale = scale_
-    cdef int64_t[::1] owner = owner_
-    cdef uint8_t[::1] live = live_
+    cdef double[:, ::1] x = out, acc = sums_
     cdef double[3][3] pts
     cdef double[3] fn, move
     cdef double area, norm, along
     cdef int it
     with nogil:
-        # each patch's stop scale: the mean side of its new triangles as given
-        for i in range(q):
-            k = patch[i]
-            for r in range(3):
-                v = new_tris[i, r]
-                for c in range(3):
-                    pts[r][c] = vertices[v, c]
-                if v >= first_new:
-                    owner[v - first_new] = k
-            for r in range(3):
-                _sub(pts[(r + 1) % 3], pts[r], move)
-                scale[k, 0] += sqrt(_dot(move, move))
-            scale[k, 1] += 3.0
-        moving = count
         for it in range(iterations):
             for v in range(p):
                 for c in range(7):
                     acc[v, c] = 0.0
             for i in range(q):
-                if not live[patch[i]]:
-                    continue
                 for r in range(3):
                     v = new_tris[i, r]
                     for c in range(3):
@@ -86,8 +55,6 @@ def tangential_relax(const double[:, ::1] vertices, const int64_t[:, ::1] new_tr
                         acc[v, 3 + c] += area * ((pts[0][c] + pts[1][c] + pts[2][c]) / 3.0)
                     acc[v, 6] += area
             for v in range(p):
-                if owner[v] < 0 or not live[owner[v]]:
-                    continue
                 norm = sqrt(_dot(&acc[v, 0], &acc[v, 0]))
                 if norm > 0:
                     for c in range(3):
@@ -98,18 +65,8 @@ def tangential_relax(const double[:, ::1] vertices, const int64_t[:, ::1] new_tr
                 for c in range(3):
                     acc[v, 3 + c] = move[c] - along * acc[v, c]  # the move, kept until every one is known
             for v in range(p):
-                if owner[v] < 0 or not live[owner[v]]:
-                    continue
                 for c in range(3):
                     x[v, c] += 0.5 * acc[v, 3 + c]
-                scale[owner[v], 2] = fmax(scale[owner[v], 2], 0.25 * _dot(&acc[v, 3], &acc[v, 3]))
-            for k in range(count):
-                if live[k] and scale[k, 2] <= (tolerance * scale[k, 0] / fmax(scale[k, 1], 1.0)) ** 2:
-                    live[k] = 0
-                    moving -= 1
-                scale[k, 2] = 0.0
-            if moving == 0:
-                break
     return out
 
 cdef bint _cross_pair(const double* P, const double* Q) noexcept nogil:

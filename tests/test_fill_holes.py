@@ -28,7 +28,6 @@ from o3d_lsmesh.holes.crossings import _crossings, _TriangleIndex
 from o3d_lsmesh.holes.fair import keeps_facing
 from o3d_lsmesh.holes.find import _diameter
 from o3d_lsmesh.holes.triangulate import delaunay_triangles
-from o3d_lsmesh.holes.tuning import RELAX_STEPS, RELAX_TOLERANCE
 
 
 def _minimum_weight_triangulation(points, outer, forbidden):
@@ -558,7 +557,7 @@ def test_real_mesh_hole_within_bound_of_truth(name, bound):
             if continuity == 2:
                 check_valid(out.vertices, out.triangles, len(Th))
                 assert boundary_edge_count(out.triangles, len(out.vertices)) == 0
-    # measured (continuity 0 / 1 / 2): horse 2.5h 0.30 / 0.078 / 0.073, 6h 0.57 / 0.088 / 0.041;
+    # measured (continuity 0 / 1 / 2): horse 2.5h 0.30 / 0.078 / 0.073, 6h 0.56 / 0.087 / 0.040;
     # camel (coarse: h is large next to its legs and neck) 2.5h 0.15 / 0.24 / 0.16, 6h 0.57 / 0.54 / 0.50
     assert errors[2.5, 2] < bound and errors[6.0, 2] < bound
     assert errors[6.0, 2] < errors[6.0, 0]
@@ -1211,12 +1210,15 @@ def test_refine_matches_plain_loops(seed, size, scale):
     assert np.array_equal(got[0][: len(points)], points)
 
 
-def reference_tangential_relax(V, T, first, iterations, tolerance):
-    # per iteration and new vertex, its star's area-weighted centroid and area-weighted normal; the stop:
-    # no step longer than tolerance times the mean side of the new triangles as given
-    side = np.mean([np.linalg.norm(V[t[(r + 1) % 3]] - V[t[r]]) for t in T.tolist() for r in range(3)])
+def test_tangential_relax_matches_plain_loop():
+    # reference: per iteration and new vertex, its star's area-weighted centroid and area-weighted normal
+    points, tris, _ = _random_patch(3, 6, 0.4)
+    order = np.argsort(np.isin(np.arange(len(points)), [7, 8, 9, 13, 14, 15, 20, 21]), kind="stable")
+    rank = np.argsort(order)  # renumber so that the eight inner vertices come last (the new ones)
+    V, T, first = points[order].copy(), rank[tris], len(points) - 8
+    got = _patch_kernel.tangential_relax(V, T, first)
     x = V.copy()
-    for _ in range(iterations):
+    for _ in range(10):
         moves = {}
         for v in range(first, len(x)):
             star = [t for t in T.tolist() if v in t]
@@ -1228,42 +1230,8 @@ def reference_tangential_relax(V, T, first, iterations, tolerance):
             moves[v] = move - (move @ normal) * normal
         for v, move in moves.items():
             x[v] += 0.5 * move
-        if max(np.linalg.norm(0.5 * move) for move in moves.values()) <= tolerance * side:
-            break
-    return x[first:]
-
-
-@pytest.mark.parametrize("iterations, tolerance", [(10, 0.0), (RELAX_STEPS, RELAX_TOLERANCE), (100, 0.05)])
-def test_tangential_relax_matches_plain_loop(iterations, tolerance):
-    points, tris, _ = _random_patch(3, 6, 0.4)
-    order = np.argsort(np.isin(np.arange(len(points)), [7, 8, 9, 13, 14, 15, 20, 21]), kind="stable")
-    rank = np.argsort(order)  # renumber so that the eight inner vertices come last (the new ones)
-    V, T, first = points[order].copy(), rank[tris], len(points) - 8
-    got = _patch_kernel.tangential_relax(V, T, first, np.zeros(len(T), dtype=np.int64), iterations, tolerance)
-    np.testing.assert_allclose(
-        got, reference_tangential_relax(V, T, first, iterations, tolerance), rtol=0, atol=1e-12
-    )
+    np.testing.assert_allclose(got, x[first:], rtol=0, atol=1e-12)
     assert np.abs(got - V[first:]).max() > 1e-3  # it did move them
-
-
-def test_tangential_relax_stops_at_its_fixed_point():
-    # the package's constants stop before the cap on this patch, where one more iteration moves no vertex farther
-    # than the tolerance
-    points, tris, _ = _random_patch(3, 6, 0.4)
-    order = np.argsort(np.isin(np.arange(len(points)), [7, 8, 9, 13, 14, 15, 20, 21]), kind="stable")
-    rank = np.argsort(order)
-    V, T, first = points[order].copy(), rank[tris], len(points) - 8
-    side = np.mean([np.linalg.norm(V[t[(r + 1) % 3]] - V[t[r]]) for t in T.tolist() for r in range(3)])
-    one = np.zeros(len(T), dtype=np.int64)
-    relaxed = _patch_kernel.tangential_relax(V, T, first, one, RELAX_STEPS, RELAX_TOLERANCE)
-    capped = _patch_kernel.tangential_relax(V, T, first, one, RELAX_STEPS, 0.0)
-    again = V.copy()
-    again[first:] = relaxed
-    step = np.linalg.norm(
-        _patch_kernel.tangential_relax(again, T, first, one, 1, 0.0) - relaxed, axis=1
-    ).max()
-    assert step <= RELAX_TOLERANCE * side
-    assert not np.array_equal(relaxed, capped)  # it stopped before the cap
 
 
 def test_kernel_rejects_bad_shapes():
@@ -1280,17 +1248,7 @@ def test_kernel_rejects_bad_shapes():
             np.zeros((3, 3)), np.array([[0, 1, 5]]), np.zeros((0, 2), np.int64), [True]
         )
     with pytest.raises(ValueError, match="first_new"):
-        _patch_kernel.tangential_relax(
-            np.zeros((3, 3)), np.array([[0, 1, 2]]), 4, np.zeros(1, np.int64), 1, 0.0
-        )
-    with pytest.raises(ValueError, match="one patch per new triangle"):
-        _patch_kernel.tangential_relax(
-            np.zeros((3, 3)), np.array([[0, 1, 2]]), 2, np.zeros(2, np.int64), 1, 0.0
-        )
-    with pytest.raises(ValueError, match="non-negative"):
-        _patch_kernel.tangential_relax(
-            np.zeros((3, 3)), np.array([[0, 1, 2]]), 2, np.full(1, -1, np.int64), 1, 0.0
-        )
+        _patch_kernel.tangential_relax(np.zeros((3, 3)), np.array([[0, 1, 2]]), 4)
     with pytest.raises(ValueError, match="one row per new triangle"):
         _patch_kernel.patch_crossings(
             np.eye(3),

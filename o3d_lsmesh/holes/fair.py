@@ -18,7 +18,6 @@ from ..core.operators import patch_system
 from ..core.solve import solve_spd
 from .crossings import _crossings
 from .find import _cross
-from .tuning import RELAX_STEPS, RELAX_TOLERANCE
 
 
 def _fair(x: np.ndarray, tris: np.ndarray, unknown: np.ndarray, rings: list, level: int, cot: bool):
@@ -108,9 +107,9 @@ def fair_patches(
                     again = np.where(np.isfinite(again).all(axis=1)[:, None], again, solution)
                 if again is not None and keeps_facing(work, again, new_tris):
                     work[n:] = again
-                    yield level, tangential_relax(work, new_tris, n, owner, RELAX_STEPS, RELAX_TOLERANCE)
+                    yield level, tangential_relax(work, new_tris, n)
                     work[n:] = solution
-            yield level, tangential_relax(work, new_tris, n, owner, RELAX_STEPS, RELAX_TOLERANCE)
+            yield level, tangential_relax(work, new_tris, n)
             work[n:] = refined
         yield -1, refined  # the refined patch as triangulated
 

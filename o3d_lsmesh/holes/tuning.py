@@ -14,7 +14,3 @@ DENSITY_MAX = 4.0
 ALPHA = float(np.sqrt(2.0))
 # Delaunay restriction: a point this near (relative) a circumsphere is on it; a tolerance, not fitted
 COSPHERICAL = 1e-9
-# the tangential relaxation stops where no step of a patch is longer than this fraction of its mean side,
-# or after RELAX_STEPS: benchmarks/results/fill_holes_study.md (smallest angles; 1e-4 to 3e-3 the same)
-RELAX_TOLERANCE = 3e-3
-RELAX_STEPS = 100  # a bound on the work (ten times the former fixed count), not fitted
