@@ -81,8 +81,8 @@ def _diameter(points: np.ndarray) -> float:
     largest = float(((p - far) ** 2).sum(axis=1).max())
     radius = np.sqrt(square)
     # the bound's rounding: a point within 1e-9 R of it is kept
-    p = p[radius >= np.sqrt(largest) - radius.max() * (1.0 + 1e-9)]
-    square = np.einsum("ij,ij->i", p, p)
+    kept = radius >= np.sqrt(largest) - radius.max() * (1.0 + 1e-9)
+    p, square = p[kept], square[kept]
     for s in range(0, len(p), 512):
         block = square[s : s + 512, None] + square[None, s:] - 2.0 * (p[s : s + 512] @ p[s:].T)
         largest = max(largest, float(block.max()))
