@@ -25,13 +25,14 @@ cdef int64_t _MAX_FAN = 64  # refinement: no split at a corner of this many tria
 
 cdef void _liepa(const double* P, const double* outer, const uint8_t* forbidden, const uint8_t* allowed,
                  int64_t k, double* angle, double* cosine,
-                 double* area, int64_t* split, double* normal, uint8_t* known, double* t_angle,
-                 double* t_area, double* t_twice, double* t_normal) noexcept nogil:
-    """Fill the programme's tables: weight (largest dihedral angle, area) of the best triangulation of each
-    polygon ``i..j``; ``forbidden`` chords and triangles not ``allowed`` (either may be NULL) infinitely bad."""
+                 double* area, double* shape, int64_t* split, double* normal, uint8_t* known, double* t_angle,
+                 double* t_area, double* t_shape, double* t_twice, double* t_normal) noexcept nogil:
+    """Fill the programme's tables: weight (largest dihedral angle, area, then shape) of the best triangulation
+    of each polygon ``i..j``; ``forbidden`` chords and triangles not ``allowed`` (either may be NULL)
+    infinitely bad."""
     cdef int64_t i, j, m, d, c, r, choice
-    cdef double[3] u, v, cr
-    cdef double twice, cos1, cos2, worst, theta, longest, best_angle, best_area, near, uu, vv, sub
+    cdef double[3] u, v, w, cr
+    cdef double twice, cos1, cos2, worst, theta, longest, best_angle, best_area, best_shape, uu, vv, sub
     cdef const double* a
     cdef double* nm
     cdef bint closing_known = fabs(outer[3 * (k - 1)]) + fabs(outer[3 * (k - 1) + 1]) + fabs(outer[3 * (k - 1) + 2]) > 0
@@ -90,12 +91,24 @@ cdef void _liepa(const double* P, const double* outer, const uint8_t* forbidden,
             for r in range(d - 1):
                 if t_angle[r] <= best_angle + _TIE:
                     best_area = fmin(best_area, t_area[r])
-            # the first of the (near-)smallest areas: symmetric loops tie exactly, and rounding must not
-            # decide
+            # the sum of squared sides decides where angle and area tie (a planar loop: every
+            # triangulation): the shortest chords, not the first choice's fan of slivers from one corner
+            # (the sum of cotangents, the inverse quality, ties again on a circle)
+            best_shape = INFINITY
+            for r in range(d - 1):
+                t_shape[r] = INFINITY
+                if t_angle[r] <= best_angle + _TIE and t_area[r] <= best_area * (1.0 + 1e-9):
+                    m = i + 1 + r
+                    _sub(P + 3 * m, P + 3 * i, u)
+                    _sub(P + 3 * j, P + 3 * m, v)
+                    _sub(P + 3 * i, P + 3 * j, w)
+                    t_shape[r] = _dot(u, u) + _dot(v, v) + _dot(w, w) + shape[i * k + m] + shape[m * k + j]
+                    best_shape = fmin(best_shape, t_shape[r])
+            # the first of the (near-)smallest shapes among those: symmetric loops tie exactly, and
+            # rounding must not decide
             choice = 0
             for r in range(d - 1):
-                near = t_area[r] if t_angle[r] <= best_angle + _TIE else INFINITY
-                if near <= best_area * (1.0 + 1e-9):
+                if t_shape[r] <= best_shape * (1.0 + 1e-9):
                     choice = r
                     break
             c = i * k + j
@@ -104,6 +117,7 @@ cdef void _liepa(const double* P, const double* outer, const uint8_t* forbidden,
                 angle[c] = INFINITY
             cosine[c] = cos(angle[c])
             area[c] = t_area[choice]
+            shape[c] = t_shape[choice]
             split[c] = i + 1 + choice
             for m in range(3):
                 normal[3 * c + m] = t_normal[3 * choice + m]
@@ -125,16 +139,18 @@ def minimum_weight_triangulation(const double[:, ::1] points, const double[:, ::
     out = np.empty((k - 2, 3), dtype=np.int64)
     cdef int64_t[:, ::1] tris = out
     angle_, area_, normal_, known_ = np.zeros(k * k), np.zeros(k * k), np.zeros(3 * k * k), np.zeros(k * k, np.uint8)
+    shape_ = np.zeros(k * k)
     split_ = np.full(k * k, -1, dtype=np.int64)
-    scratch = np.empty(6 * k)
+    scratch = np.empty(7 * k)
     cosine_ = np.ones(k * k)  # cos of each angle (a loop edge's: 0, cos 1)
-    cdef double[::1] angle = angle_, area = area_, normal = normal_, s = scratch, cosine = cosine_
+    cdef double[::1] angle = angle_, area = area_, shape = shape_, normal = normal_, s = scratch, cosine = cosine_
     cdef int64_t[::1] split = split_
     cdef uint8_t[::1] known = known_
     cdef const uint8_t* f = NULL if forbidden is None else &forbidden[0, 0]
     with nogil:
         _liepa(&points[0, 0], &outer_normals[0, 0], f, NULL if allowed is None else &allowed[0], k, &angle[0],
-               &cosine[0], &area[0], &split[0], &normal[0], &known[0], &s[0], &s[k], &s[2 * k], &s[3 * k])
+               &cosine[0], &area[0], &shape[0], &split[0], &normal[0], &known[0], &s[0], &s[k], &s[2 * k],
+               &s[3 * k], &s[4 * k])
     if not np.isfinite(angle_[k - 1]) and (allowed is not None or f != NULL):
         # none within ``allowed``: without it; then none avoids every existing edge: accept one that does not
         return minimum_weight_triangulation(points, outer_normals, forbidden if allowed is not None else None)

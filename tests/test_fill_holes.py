@@ -288,6 +288,74 @@ def test_dynamic_programme_matches_plain_recursion(seed):
     assert all(((i + 1) % k, i) in half for i in range(k))
 
 
+def _all_triangulations(lo, hi):
+    """Every triangulation of the polygon ``lo..hi`` (plain enumeration, Catalan many)."""
+    if hi - lo < 2:
+        yield []
+        return
+    for m in range(lo + 1, hi):
+        for left in _all_triangulations(lo, m):
+            for right in _all_triangulations(m, hi):
+                yield left + right + [(hi, m, lo)]
+
+
+@pytest.mark.parametrize("shape", ["regular", "convex", "staircase"])
+def test_dynamic_programme_on_a_planar_loop_takes_the_shortest_chords(shape):
+    # on a planar loop every triangulation ties on the largest dihedral angle (0) and on area (the
+    # polygon's); the programme then takes the one of least total squared side length, the optimum over
+    # all triangulations enumerated, not the fan from one corner that ties on both (and on the sum of
+    # cotangents, a circle's)
+    rng = np.random.default_rng(7)
+    if shape == "staircase":
+        xy = np.array([[0, 0], [1, 0], [2, 0], [2, 1], [3, 1], [3, 2], [2, 2], [1, 2], [1, 1], [0, 1.0]])
+    else:
+        k = 10
+        angle = 2 * np.pi * np.arange(k) / k
+        if shape == "convex":
+            angle = np.sort(angle + rng.uniform(0, 0.5, k))
+        xy = np.stack([np.cos(angle), np.sin(angle)], axis=1)
+    points = np.c_[xy, np.zeros(len(xy))]
+    k = len(points)
+    outer = np.zeros((k, 3))  # the loop's own triangles unknown: only the patch's angles count
+    tris = _minimum_weight_triangulation(points, outer, None)
+
+    def signed_area(t):
+        a, b, c = points[list(t)]
+        return np.cross(b - a, c - a)[2] / 2
+
+    def squared_sides(t):
+        return sum(((points[a] - points[b]) ** 2).sum() for a, b in itertools.combinations(t, 2))
+
+    valid = [t for t in _all_triangulations(0, k - 1) if all(signed_area(x) < 0 for x in t)]
+    best = min(sum(map(squared_sides, t)) for t in valid)
+    assert all(signed_area(t) < 0 for t in tris.tolist())  # not folded: the loop's own orientation
+    assert sum(map(squared_sides, tris.tolist())) <= best * (1 + 1e-12)
+    assert np.bincount(tris.ravel()).max() < k - 2  # not a fan
+
+
+def test_a_planar_hole_is_refined_and_stays_in_its_plane():
+    # a disk of radius 15 h cut out of a flat grid: before the shape rule the programme made a fan and
+    # the refinement, which splits no triangle at a corner of 64, added no vertex (a bare fan of slivers)
+    V, T = grid(41, 41)
+    centre = V[T].mean(axis=1)
+    cut = np.linalg.norm(centre - [0.5, 0.5, 0.0], axis=1) < 15 / 40
+    with pytest.warns(O3DLSMeshWarning, match="outer border"):  # the grid's own border stays open
+        out = fill_holes_arrays(V, T[~cut])
+    assert [h.how for h in out.report.holes] == [
+        "taken as the outer border of an open surface (fill_border=False)",
+        "continuity 2",
+    ]
+    new = out.triangles[int((~cut).sum()) :]
+    p = out.vertices[new]
+    normal = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    inside = np.linalg.norm(V - [0.5, 0.5, 0.0], axis=1) < 15 / 40 - 1 / 40  # vertices cut out, about
+    assert len(out.vertices) - len(V) > 0.5 * inside.sum()
+    assert np.all(out.vertices[:, 2] == 0) and np.all(normal[:, 2] > 0)  # flat and not folded
+    # the patch covers the cut area once: no overlap, no gap
+    removed = np.cross(*(V[T[cut]][:, 1:] - V[T[cut]][:, :1]).transpose(1, 0, 2))[:, 2].sum() / 2
+    assert np.isclose(normal[:, 2].sum() / 2, removed, rtol=1e-12)
+
+
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.filter_too_much])
 @given(st.integers(5, 9), st.integers(0, 2**32 - 1), st.floats(0.1, 1.5))
 def test_dynamic_programme_within_delaunay_triangles(k, seed, bump):
