@@ -63,22 +63,17 @@ def kernel_index(rows: ArrayLike, width: int) -> np.ndarray:
 def face_normals(vertices: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Unit face normals ``(m, 3)`` (zero on a degenerate face) and face areas ``(m,)``.
 
-    One compiled pass over the triangles (``_block_kernel.triangle_normals``) for float64 positions, the
-    values of the NumPy code below (which other dtypes take: it computes in theirs).
+    One compiled pass over the triangles (``_block_kernel.triangle_normals``), in float64 whatever the
+    positions' dtype.
 
     >>> face_normals(np.eye(3), np.array([[0, 1, 2]]))[1].round(4).tolist()
     [0.866]
     """
-    vertices, triangles = np.asarray(vertices), np.asarray(triangles)
-    if vertices.dtype == np.float64 and triangles.dtype.kind in "iu":
-        from .._block_kernel import triangle_normals  # compiled by the package's build: imported where used
+    from .._block_kernel import triangle_normals  # compiled by the package's build: imported where used
 
-        normals, area, _ = triangle_normals(np.ascontiguousarray(vertices), kernel_index(triangles, 3))
-        return normals, area
-    p0 = vertices[triangles[:, 0]]
-    cross = np.cross(vertices[triangles[:, 1]] - p0, vertices[triangles[:, 2]] - p0)
-    length = np.linalg.norm(cross, axis=1)
-    return cross / np.maximum(length, np.finfo(float).tiny)[:, None], 0.5 * length
+    positions = np.ascontiguousarray(vertices, dtype=np.float64)
+    normals, area, _ = triangle_normals(positions, kernel_index(triangles, 3))
+    return normals, area
 
 
 def area_weighted_normals(positions: np.ndarray, triangles: np.ndarray) -> np.ndarray:
