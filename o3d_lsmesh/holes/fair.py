@@ -16,8 +16,8 @@ from ..core.arrays import concatenated_ranges
 from ..core.errors import SingularSystemError
 from ..core.operators import patch_system
 from ..core.solve import solve_spd
+from . import tuning
 from .crossings import _crossings
-from .find import _cross
 
 
 def _fair(x: np.ndarray, tris: np.ndarray, unknown: np.ndarray, rings: list, level: int, cot: bool):
@@ -34,19 +34,16 @@ def _fair(x: np.ndarray, tris: np.ndarray, unknown: np.ndarray, rings: list, lev
     return solve_spd(sp.csr_matrix(normal), rhs, isolate_nonfinite=True)
 
 
-def keeps_facing(x: np.ndarray, again: np.ndarray, new_tris: np.ndarray) -> bool:
-    """Whether ``again`` (new positions of the last ``len(again)`` vertices of ``x``) keeps every new
-    triangle facing as in ``x`` and moves no vertex by a tenth of the patch's size (obtuse slivers can
-    make cotangent weights ill-conditioned)."""
+def moves_little(x: np.ndarray, again: np.ndarray, new_tris: np.ndarray) -> bool:
+    """Whether ``again`` (new positions of the last ``len(again)`` vertices of ``x``) moves no vertex by
+    :data:`~o3d_lsmesh.holes.tuning.COTANGENT_LEAP` of the size of the patch ``new_tris`` in ``x`` (obtuse
+    slivers can make cotangent weights ill-conditioned: the solve then leaps away)."""
     first = len(x) - len(again)
     p = x[new_tris]
-    q = np.where((new_tris >= first)[..., None], again[np.maximum(new_tris - first, 0)], p)
-    before = _cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
-    after = _cross(q[:, 1] - q[:, 0], q[:, 2] - q[:, 0])
     extent = p.max(axis=(0, 1)) - p.min(axis=(0, 1)) if len(p) else np.zeros(3)
     size = np.sqrt(extent.dot(extent))  # np.linalg.norm's bits
     move = np.abs(again - x[first:]).max() if len(again) else 0.0
-    return bool(((before * after).sum(axis=1) > 0).all() and move < 0.1 * size)
+    return bool(move < tuning.COTANGENT_LEAP * size)
 
 
 def fair_patches(
@@ -105,7 +102,7 @@ def fair_patches(
                 again = solve(level, True)
                 if again is not None:  # a patch whose cotangent system is not finite keeps uniform
                     again = np.where(np.isfinite(again).all(axis=1)[:, None], again, solution)
-                if again is not None and keeps_facing(work, again, new_tris):
+                if again is not None and moves_little(work, again, new_tris):
                     work[n:] = again
                     yield level, tangential_relax(work, new_tris, n)
                     work[n:] = solution

@@ -14,3 +14,6 @@ DENSITY_MAX = 4.0
 ALPHA = float(np.sqrt(2.0))
 # Delaunay restriction: a point this near (relative) a circumsphere is on it; a tolerance, not fitted
 COSPHERICAL = 1e-9
+# a cotangent solve that moves a vertex by more than this fraction of its patch's size from the uniform
+# one is taken for ill-conditioned and not kept: leave one mesh out in benchmarks/results/fill_holes_study.md
+COTANGENT_LEAP = 0.1
