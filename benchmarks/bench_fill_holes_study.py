@@ -216,8 +216,10 @@ def run_study(meshes_asked, count, save=None):
                 except RuntimeError:
                     print(f"{name} {radius:g}h: no centre leaves a single simple hole")
                     break
-                if k < len(done.get((name, radius), [])):
-                    rows.setdefault((name, radius), []).append(done[(name, radius)][k])
+                former = done.get((name, radius), [])
+                # a former row of other tools (another candidate list) is filled again, not mixed in
+                if k < len(former) and set(former[k]) == {label for label, _ in tools + peers}:
+                    rows.setdefault((name, radius), []).append(former[k])
                     continue
                 case = {"holed": holed, "h": h, "truth": {"full": (V, T), "removed": removed}}
                 row = {}
