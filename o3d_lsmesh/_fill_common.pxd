@@ -1,7 +1,9 @@
 # cython: language_level=3
-# What both hole-filling kernels (_triangulation_kernel, _patch_kernel) share: 3-vector arithmetic,
-# undirected edge keys and their sorting and search, the index check of their arguments.
+# What both hole-filling kernels (_triangulation_kernel, _patch_kernel) share: 3-vector arithmetic, a
+# triangle's smallest angle, undirected edge keys and their sorting and search, the index check of their
+# arguments.
 
+from libc.math cimport asin, fmax, fmin, sqrt
 from libc.stdint cimport int64_t
 from libc.string cimport memcpy, memset
 
@@ -41,6 +43,22 @@ cdef inline void _normal(const double* p0, const double* p1, const double* p2, d
     _sub(p1, p0, u)
     _sub(p2, p0, v)
     _cross(u, v, out)
+
+cdef inline double _min_angle(const double* p0, const double* p1, const double* p2) noexcept nogil:
+    """The smallest interior angle, opposite the shortest edge (law of sines): ``arcsin(2 area / (l_mid
+    l_max))``."""
+    cdef double[3] a, b, c, n
+    cdef double la, lb, lc, mid, top, denominator, ratio
+    _sub(p1, p0, a)
+    _sub(p2, p1, b)
+    _sub(p0, p2, c)
+    la, lb, lc = _dot(a, a), _dot(b, b), _dot(c, c)
+    top = fmax(la, fmax(lb, lc))
+    mid = fmax(fmin(la, lb), fmin(fmax(la, lb), lc))  # the median of three
+    _cross(a, c, n)
+    denominator = sqrt(mid * top)
+    ratio = sqrt(_dot(n, n)) / denominator if denominator > 0 else 0.0
+    return asin(fmin(ratio, 1.0))
 
 ctypedef struct Half:  # a half-edge's undirected key and its index 3 t + s
     int64_t key

@@ -13,7 +13,7 @@ from libc.stdint cimport int64_t, uint8_t
 from libc.stdlib cimport calloc, free, malloc, qsort
 
 from o3d_lsmesh._fill_common cimport (
-    Half, _by_value, _cross, _dot, _key, _max, _min, _normal, _outside, _sort_halves, _sub
+    Half, _by_value, _cross, _dot, _key, _max, _min, _min_angle, _normal, _outside, _sort_halves, _sub
 )
 
 # tangential relaxation and the crossing test
@@ -21,24 +21,27 @@ from o3d_lsmesh._fill_common cimport (
 def tangential_relax(const double[:, ::1] vertices, const int64_t[:, ::1] new_tris, int64_t first_new,
                      int iterations=10):
     """The new vertices (from ``first_new``) moved ``iterations`` times half-way to their star's
-    area-weighted centroid, tangentially: ``(n - first_new, 3)``."""
+    area-weighted centroid, tangentially, each step kept only where it does not lower the smallest angle
+    of the vertex's star (the others held): ``(n - first_new, 3)``."""
     cdef int64_t n = vertices.shape[0], p = n - first_new, q = new_tris.shape[0], i, r, v, c
     if p < 0:
         raise ValueError("first_new beyond the vertices")
     out = np.array(vertices[first_new:], dtype=np.float64, order="C")
     if p == 0:
         return out
-    sums_ = np.empty((p, 7))  # per new vertex: normal sum, weighted centroid sum, area sum
+    sums_ = np.empty((p, 9))  # per new vertex: normal sum, weighted centroid sum, area sum, star's angles
     cdef double[:, ::1] x = out, acc = sums_
     cdef double[3][3] pts
-    cdef double[3] fn, move
-    cdef double area, norm, along
+    cdef double[3] fn, move, kept
+    cdef double area, norm, along, before
     cdef int it
     with nogil:
         for it in range(iterations):
             for v in range(p):
                 for c in range(7):
                     acc[v, c] = 0.0
+                acc[v, 7] = INFINITY
+                acc[v, 8] = INFINITY
             for i in range(q):
                 for r in range(3):
                     v = new_tris[i, r]
@@ -64,9 +67,29 @@ def tangential_relax(const double[:, ::1] vertices, const int64_t[:, ::1] new_tr
                 along = _dot(move, &acc[v, 0])
                 for c in range(3):
                     acc[v, 3 + c] = move[c] - along * acc[v, c]  # the move, kept until every one is known
+            # each star's smallest angle before and after its vertex's own half-step (Freitag's "smart"
+            # smoothing): a step towards the centroid can narrow a triangle on a short loop edge
+            for i in range(q):
+                for r in range(3):
+                    v = new_tris[i, r]
+                    for c in range(3):
+                        pts[r][c] = x[v - first_new, c] if v >= first_new else vertices[v, c]
+                before = _min_angle(pts[0], pts[1], pts[2])
+                for r in range(3):
+                    v = new_tris[i, r] - first_new
+                    if v < 0:
+                        continue
+                    for c in range(3):
+                        kept[c] = pts[r][c]
+                        pts[r][c] = kept[c] + 0.5 * acc[v, 3 + c]
+                    acc[v, 7] = fmin(acc[v, 7], before)
+                    acc[v, 8] = fmin(acc[v, 8], _min_angle(pts[0], pts[1], pts[2]))
+                    for c in range(3):
+                        pts[r][c] = kept[c]
             for v in range(p):
-                for c in range(3):
-                    x[v, c] += 0.5 * acc[v, 3 + c]
+                if acc[v, 8] >= acc[v, 7]:
+                    for c in range(3):
+                        x[v, c] += 0.5 * acc[v, 3 + c]
     return out
 
 cdef bint _cross_pair(const double* P, const double* Q) noexcept nogil:

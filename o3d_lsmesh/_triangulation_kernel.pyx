@@ -8,12 +8,12 @@ Local meshes index their vertices below 2^31: edge keys pack two indices in one 
 
 import numpy as np
 
-from libc.math cimport INFINITY, acos, asin, cos, fabs, fmax, fmin, sqrt
+from libc.math cimport INFINITY, acos, cos, fabs, fmax, fmin, sqrt
 from libc.stdint cimport int64_t, uint8_t
 from libc.stdlib cimport free, malloc, qsort
 
 from o3d_lsmesh._fill_common cimport (
-    Half, _by_key, _by_value, _cross, _dot, _key, _lower, _normal, _outside, _sort_halves, _sub
+    Half, _by_key, _by_value, _cross, _dot, _key, _lower, _min_angle, _normal, _outside, _sort_halves, _sub
 )
 
 # numerical tolerances and a safeguard, none fitted to a benchmark (the fitted constants: holes/tuning.py)
@@ -233,22 +233,6 @@ cdef bint _in_circumsphere(const double* p0, const double* p1, const double* p2,
     radius = sqrt(_dot(e, e)) if ww > 0 else INFINITY
     _sub(q, centre, e)
     return sqrt(_dot(e, e)) < radius * _COCIRCULAR
-
-cdef double _min_angle(const double* p0, const double* p1, const double* p2) noexcept nogil:
-    """The smallest interior angle, opposite the shortest edge (law of sines): ``arcsin(2 area / (l_mid
-    l_max))``."""
-    cdef double[3] a, b, c, n
-    cdef double la, lb, lc, mid, top, denominator, ratio
-    _sub(p1, p0, a)
-    _sub(p2, p1, b)
-    _sub(p0, p2, c)
-    la, lb, lc = _dot(a, a), _dot(b, b), _dot(c, c)
-    top = fmax(la, fmax(lb, lc))
-    mid = fmax(fmin(la, lb), fmin(fmax(la, lb), lc))  # the median of three
-    _cross(a, c, n)
-    denominator = sqrt(mid * top)
-    ratio = sqrt(_dot(n, n)) / denominator if denominator > 0 else 0.0
-    return asin(fmin(ratio, 1.0))
 
 cdef bint _flip_improves(const double* pa, const double* pb, const double* pc, const double* pd,
                          bint smooth=False) noexcept nogil:

@@ -127,7 +127,13 @@ def fair_patches(
         # a patch left NaN (its system not finite) is checked as refined and fails this candidate
         broken = ~np.isfinite(candidate).all(axis=1)
         work[n:] = np.where(broken[:, None], refined, candidate)
-        triangles[m:][flip] = relax(work, new_tris[flip], fixed, np.ones(int(flip.sum()), dtype=bool), True)
+        dirty = np.ones(int(flip.sum()), dtype=bool)
+        triangles[m:][flip] = relax(work, new_tris[flip], fixed, dirty, True)
+        # relaxed once more on the flipped patch, and flipped again (remeshing's alternation): the flips
+        # made the new triangles the relaxation had not seen
+        candidate = np.where(broken[:, None], candidate, tangential_relax(work, triangles[m:], n))
+        work[n:] = np.where(broken[:, None], refined, candidate)
+        triangles[m:][flip] = relax(work, triangles[m:][flip], fixed, dirty, True)
         crossing = _crossings(work, triangles, m, index, owner)  # (q,) nonzero on crossing holes
         per_hole = np.bincount(owner, weights=crossing, minlength=len(holes))
         per_hole += np.bincount(vertex_owner, weights=broken, minlength=len(holes))
