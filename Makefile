@@ -130,8 +130,10 @@ system:
 	  apt-get update -qq && apt-get install -y -qq --no-install-recommends $$missing; \
 	fi
 
-$(STAMP): setup.cfg setup.py pyproject.toml o3d_lsmesh/hierarchy/collapse.pyx o3d_lsmesh/_block_kernel.pyx \
-		o3d_lsmesh/_triangulation_kernel.pyx o3d_lsmesh/_patch_kernel.pyx o3d_lsmesh/_fill_common.pxd | system
+# every compiled kernel: an edited one is built again by the editable install
+KERNELS := $(wildcard o3d_lsmesh/*.pyx o3d_lsmesh/*.pxd o3d_lsmesh/*/*.pyx o3d_lsmesh/*/*.pxd)
+
+$(STAMP): setup.cfg setup.py pyproject.toml $(KERNELS) | system
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q -e '.[test]'
