@@ -396,9 +396,9 @@ def test_the_choice_is_invariant_under_rigid_motion_and_scale():
     )
 
 
-def stop_by_loop(X, F, limit, concentration=None):
+def stop_by_loop(X, F, limit):
     """The pass where the measured count ends, from the definition: pass k's median filtered dihedral angle
-    above ``concentration`` (None: CONCENTRATION) times pass k // 2's (k >= 2), else ``limit``; angles by a
+    above CONCENTRATION times pass k // 2's (k >= 2), else ``limit``; angles by a
     plain loop over pairs."""
     import math
     import statistics
@@ -413,7 +413,7 @@ def stop_by_loop(X, F, limit, concentration=None):
                 for a, b in conn.face_adjacency.pairs
             )
         )
-        if k >= 2 and medians[-1] > (concentration or fe_tuning().CONCENTRATION) * medians[k // 2 - 1]:
+        if k >= 2 and medians[-1] > fe_tuning().CONCENTRATION * medians[k // 2 - 1]:
             return k
     return limit
 
@@ -433,10 +433,9 @@ def test_the_measured_pass_count_stops_where_the_normals_stop_concentrating():
         stops[name] = k = stop_by_loop(X, F, limit)
         if k == limit:  # the cap: the passes from the noisy mesh
             expected = fe.feature_denoise(X, F, passes=k)
-        else:  # an early stop: the scan energy's result, then the passes to the scan start's own stop
+        else:  # an early stop: the scan energy's result, then k // 2 bilateral passes
             start = scan_denoise(X, F)
-            again = stop_by_loop(start, F, limit, fe_tuning().SCAN_START_CONCENTRATION)
-            expected = fe.feature_denoise(start, F, passes=again)
+            expected = fe.FeatureRun(start, F, Connectivity(F, len(X)), scan_start=True).finish(k // 2)
         np.testing.assert_array_equal(fe.feature_denoise(X, F), expected)
     # flat pieces keep concentrating (the cube to the cap), curved surfaces level off within a few passes
     assert stops["cube"] == limit and max(stops["sphere"], stops["torus"]) <= 8, stops
@@ -450,6 +449,17 @@ def test_the_feature_mode_goes_on_from_the_passes_to_the_stop(kind):
     assert run.reaches_cap() == (kind == "cube")
     assert run.stop_pass == len(run.medians) == stop_by_loop(X, F, fe_tuning().MAX_PASSES)
     np.testing.assert_array_equal(fe.feature_denoise(X, F, conn=run.conn, run=run), fe.feature_denoise(X, F))
+
+
+def test_the_passes_from_the_scan_energy_filter_without_guidance():
+    V, F = smooth_meshes()["torus"]
+    X = noisy(V, F, 0.4)
+    conn = Connectivity(F, len(X))
+    centred, adjacency = X - X.mean(axis=0), conn.face_adjacency
+    bilateral = fe.filter_pass(centred, F, adjacency, None, guided=False)
+    np.testing.assert_allclose(fe.FeatureRun(X, F, conn, scan_start=True).step(), bilateral, atol=1e-12)
+    guided = fe.filter_pass(centred, F, adjacency, fe._patch_edges(adjacency))
+    assert np.abs(guided - bilateral).max() > 0.01  # the two filters differ on this mesh
 
 
 def test_the_command_line_names_the_chosen_method(tmp_path, capsys):

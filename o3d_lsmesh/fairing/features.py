@@ -4,7 +4,7 @@ Each pass filters the face normals once (Zhang et al. 2015, guided; ``guided=Fal
 Zheng et al. 2011, bilateral) and takes ``VERTEX_STEPS`` of Sun et al. 2007's vertex update
 towards the planes of the faces. The passes stop when the filtered normals stop concentrating
 (:meth:`FeatureRun.concentrated`), at most ``MAX_PASSES``; where they stop before the cap (a curved
-surface) the result is the scan energy's followed by the passes from there (:meth:`FeatureRun.finish`).
+surface, at pass k) the result is the scan energy's followed by k // 2 bilateral passes (:meth:`FeatureRun.finish`).
 All weights are dimensionless. Docs page: ``docs/algorithms/features.rst``.
 """
 
@@ -27,7 +27,6 @@ from .tuning import (
     CONCENTRATION,
     CREASE_ANGLE,
     MAX_PASSES,
-    SCAN_START_CONCENTRATION,
     SIGMA_R,
     VERTEX_STEPS,
 )
@@ -174,7 +173,7 @@ class FeatureRun:
     """The feature mode's passes on one mesh, taken one at a time (:meth:`step`); :meth:`finish` takes the
     rest and reads the result. ``feature_denoise`` takes them all; ``method="auto"`` takes them to the measured
     stop (:meth:`reaches_cap`) and goes on where it came at the cap. ``scan_start``: ``vertices`` are the scan energy's result, the
-    stop takes ``SCAN_START_CONCENTRATION`` and :meth:`finish` does not switch."""
+    passes are bilateral (no guidance: the surface is curved) and :meth:`finish` does not switch."""
 
     def __init__(
         self, vertices: np.ndarray, triangles: np.ndarray, conn: Connectivity, *, scan_start: bool = False
@@ -182,9 +181,8 @@ class FeatureRun:
         self.vertices, self.triangles, self.conn = vertices, triangles, conn
         self.adjacency = conn.face_adjacency
         self.scan_start = scan_start
-        # from the scan energy's result the medians concentrate less per pass than from the noise
-        self.concentration = SCAN_START_CONCENTRATION if scan_start else CONCENTRATION
-        self.patch_edges = _patch_edges(self.adjacency)
+        # the guidance's patches: only the guided passes read them
+        self.patch_edges = None if scan_start else _patch_edges(self.adjacency)
         # the vertex steps' grouping of the faces depends on the connectivity alone: formed once
         self.grouping = _vertex_grouping(self.adjacency.incidence)
         # about the centroid: the planes' offsets n_f . c_f do not carry the distance to the origin
@@ -196,7 +194,8 @@ class FeatureRun:
 
     def step(self) -> np.ndarray:
         """One pass: the filtered face normals ``(m, 3)``, then the vertex steps towards their planes."""
-        normals = filter_pass(self.x, self.triangles, self.adjacency, self.patch_edges)
+        guided = not self.scan_start
+        normals = filter_pass(self.x, self.triangles, self.adjacency, self.patch_edges, guided=guided)
         incidence = self.adjacency.incidence
         self.x = normal_steps(self.x, self.triangles, normals, incidence=incidence, grouping=self.grouping)
         self.medians.append(median_angle(normals, self.adjacency.pairs))
@@ -220,19 +219,18 @@ class FeatureRun:
 
     def concentrated(self) -> bool:
         """Whether the filtered normals stopped concentrating after pass ``k``: the median dihedral angle
-        is above ``self.concentration`` (``CONCENTRATION``, or ``SCAN_START_CONCENTRATION`` from the scan
-        energy's result) times pass ``k // 2``'s. On piecewise-flat (CAD) surfaces it keeps falling like a
+        is above ``CONCENTRATION`` times pass ``k // 2``'s. On piecewise-flat (CAD) surfaces it keeps falling like a
         power of ``k``; on curved ones it levels off at the surface's own angles, and the passes after that
         flatten the surface (docs page)."""
         k = len(self.medians)
-        return k >= 2 and self.medians[-1] > self.concentration * self.medians[k // 2 - 1]
+        return k >= 2 and self.medians[-1] > CONCENTRATION * self.medians[k // 2 - 1]
 
     def finish(self, passes: int | None = None, progress: bool = False) -> np.ndarray:
         """``passes`` more passes (``None``: until the measured stop), then the positions ``(n, 3)``;
         unreferenced vertices exactly where they were.
 
         With the measured stop before ``MAX_PASSES`` (a curved surface), the positions are instead
-        :func:`.scan_denoise`'s result followed by a ``scan_start`` run to its own measured stop. Slivers
+        :func:`.scan_denoise`'s result followed by ``stop_pass // 2`` passes of a ``scan_start`` run. Slivers
         at a rim then give back their drift (:func:`.relax_rim` with ``strength=0``)."""
         measured = passes is None
         if passes is None:
@@ -242,10 +240,12 @@ class FeatureRun:
                 self.step()
         if measured and not self.scan_start and self.stop_pass < MAX_PASSES:
             # the guided passes flatten a curved surface into facets before the noise is gone; the scan
-            # energy removes it without facets, and a few passes from there sharpen what creases it has
-            # (docs page). The stop from the noisy mesh decides: CAD meshes reach the cap and keep it.
+            # energy removes it without facets, and bilateral passes from there (the guidance's patches
+            # assume flat pieces) sharpen what creases it has: as many as concentrated the normals here,
+            # the stop's k // 2 (docs page). The stop from the noisy mesh decides: CAD meshes reach the cap.
             start = scan_denoise(self.vertices, self.triangles, progress=progress, conn=self.conn)
-            x = FeatureRun(start, self.triangles, self.conn, scan_start=True).finish(None, progress)
+            again = FeatureRun(start, self.triangles, self.conn, scan_start=True)
+            x = again.finish(self.stop_pass // 2, progress)
         else:
             x = self.x + self.centre
         if not self.scan_start:  # the outer run only: the inner one's result comes back here

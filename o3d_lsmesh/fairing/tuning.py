@@ -38,9 +38,6 @@ SIGMA_R = 0.35  # range kernel width on unit-normal differences (Zhang et al.'s)
 # at most MAX_PASSES: features_passes_study.md (leave-one-mesh-out)
 CONCENTRATION = 0.75
 MAX_PASSES = 35
-# where that stop comes before MAX_PASSES the passes restart from the scan energy's result and stop at this
-# ratio: features_passes_study.md ("start: scan energy, filter: guided", 0.8 on every left-out fold)
-SCAN_START_CONCENTRATION = 0.8
 VERTEX_STEPS = 10  # vertex steps after each filter pass (the reference code's): features_denoise.md
 CREASE_ANGLE = 30.0  # degrees between denoised face normals of a crease: features_denoise.md (crease recall)
 # method="auto" (the default) has no constant of its own: the feature mode where the stop above comes at
