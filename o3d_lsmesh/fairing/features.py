@@ -3,9 +3,9 @@
 Each pass filters the face normals once (Zhang et al. 2015, guided; ``guided=False``:
 Zheng et al. 2011, bilateral) and takes ``VERTEX_STEPS`` of Sun et al. 2007's vertex update
 towards the planes of the faces. The passes stop when the filtered normals stop concentrating
-(:meth:`FeatureRun.concentrated`), at most ``MAX_PASSES``; where they stop before the cap (a curved
-surface, at pass k) the result is the scan energy's followed by k // 2 bilateral passes (:meth:`FeatureRun.finish`).
-All weights are dimensionless. Docs page: ``docs/algorithms/features.rst``.
+(:meth:`FeatureRun.concentrated`), at most ``MAX_PASSES``; where they stop before the cap, at pass k (a
+curved surface), the result is the scan energy's followed by k // 2 bilateral passes
+(:meth:`FeatureRun.finish`). All weights are dimensionless. Docs page: ``docs/algorithms/features.rst``.
 """
 
 from __future__ import annotations
@@ -171,9 +171,10 @@ def pair_cosines(normals: np.ndarray, pairs: np.ndarray) -> np.ndarray:
 
 class FeatureRun:
     """The feature mode's passes on one mesh, taken one at a time (:meth:`step`); :meth:`finish` takes the
-    rest and reads the result. ``feature_denoise`` takes them all; ``method="auto"`` takes them to the measured
-    stop (:meth:`reaches_cap`) and goes on where it came at the cap. ``scan_start``: ``vertices`` are the scan energy's result, the
-    passes are bilateral (no guidance: the surface is curved) and :meth:`finish` does not switch."""
+    rest and reads the result. ``feature_denoise`` takes them all; ``method="auto"`` takes them to the
+    measured stop (:meth:`reaches_cap`) and goes on where it came at the cap. ``scan_start``: ``vertices``
+    are the scan energy's result, the passes are bilateral (no guidance: the surface is curved) and
+    :meth:`finish` does not switch."""
 
     def __init__(
         self, vertices: np.ndarray, triangles: np.ndarray, conn: Connectivity, *, scan_start: bool = False
@@ -219,9 +220,9 @@ class FeatureRun:
 
     def concentrated(self) -> bool:
         """Whether the filtered normals stopped concentrating after pass ``k``: the median dihedral angle
-        is above ``CONCENTRATION`` times pass ``k // 2``'s. On piecewise-flat (CAD) surfaces it keeps falling like a
-        power of ``k``; on curved ones it levels off at the surface's own angles, and the passes after that
-        flatten the surface (docs page)."""
+        is above ``CONCENTRATION`` times pass ``k // 2``'s. On piecewise-flat (CAD) surfaces it keeps falling
+        like a power of ``k``; on curved ones it levels off at the surface's own angles, and the passes after
+        that flatten the surface (docs page)."""
         k = len(self.medians)
         return k >= 2 and self.medians[-1] > CONCENTRATION * self.medians[k // 2 - 1]
 
@@ -230,8 +231,8 @@ class FeatureRun:
         unreferenced vertices exactly where they were.
 
         With the measured stop before ``MAX_PASSES`` (a curved surface), the positions are instead
-        :func:`.scan_denoise`'s result followed by ``stop_pass // 2`` passes of a ``scan_start`` run. Slivers
-        at a rim then give back their drift (:func:`.relax_rim` with ``strength=0``)."""
+        :func:`.scan_denoise`'s result followed by ``stop_pass // 2`` passes of a ``scan_start`` run.
+        Slivers at a rim then give back their drift (:func:`.relax_rim` with ``strength=0``)."""
         measured = passes is None
         if passes is None:
             self.reaches_cap(progress)
