@@ -35,7 +35,9 @@ time table (about 5 minutes); ``--passes`` writes
 theta after k passes from the noisy mesh and from the scan energy's result, and the four configurations
 {start: noisy, scan energy} x {filter: guided, bilateral} with the measured stop, its constants chosen
 leave-one-mesh-out per configuration, against #39's targets; about 5 minutes); ``--configurations``
-rewrites only the last of these in that file (about 1 minute).
+rewrites only the last of these in that file (about 1 minute); ``--curved`` only the section of the curved
+branch's pass count (:func:`curved_rules`: chosen on the nine meshes, scored on the data folder's others;
+about 10 minutes).
 """
 
 from __future__ import annotations
