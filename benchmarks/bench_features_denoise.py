@@ -842,7 +842,7 @@ def curved_rules():
     data folder's other meshes at 0.2 and 0.5 edge lengths of noise (not used to choose)."""
     from _common import DATA as MESHES
 
-    cases = [(label, True, lambda c=c: (load(c[1]), load(c[2])[0])) for c in CASES for label in [c[0]]]
+    cases = [(c[0], True, lambda c=c: (load(c[1]), load(c[2])[0])) for c in CASES]
     for name in OTHER_MESHES:
         if (MESHES / f"{name}.ply").exists():
             for sigma in (0.2, 0.5):
