@@ -1034,6 +1034,57 @@ def test_a_flap_triangle_hanging_by_a_vertex_is_not_a_hole():
     assert len(out.holes) == 0 and any(hole.edges == 3 for hole in out.skipped)
 
 
+def _open_edges(triangles):
+    """The directed edges with no triangle on their other side, by a plain loop over the triangles."""
+    directed = {(int(t[i]), int(t[(i + 1) % 3])) for t in triangles for i in range(3)}
+    return {(a, b) for a, b in directed if (b, a) not in directed}
+
+
+def _cracked_sphere():
+    """A sphere without the fan of triangles at one pole (a hole of one edge each) and with a zero-width
+    crack: the vertices of a meridian arc duplicated for the triangles on one side of it (the loop runs
+    out and back along coincident vertices: two edges per arc vertex, and two at its ends)."""
+    sphere = o3d.geometry.TriangleMesh.create_sphere(1.0, 16)
+    V, T = np.asarray(sphere.vertices).copy(), np.asarray(sphere.triangles).astype(np.int64)
+    arc = np.flatnonzero((np.abs(V[:, 1]) < 1e-9) & (V[:, 0] > 1e-9) & (np.abs(V[:, 2]) < 0.9))
+    twin = dict(zip(arc.tolist(), range(len(V), len(V) + len(arc))))
+    V = np.concatenate([V, V[arc]])
+    for t in np.flatnonzero(V[T].mean(axis=1)[:, 1] < 0):
+        T[t] = [twin.get(int(v), int(v)) for v in T[t]]
+    fan = (T == np.argmax(V[:, 2])).any(axis=1)
+    return V, T[~fan], int(fan.sum()), 2 * len(arc) + 2
+
+
+def test_a_zero_width_crack_is_reported_open_and_the_report_matches_the_output():
+    V, T, pole_edges, crack_edges = _cracked_sphere()
+    before = _open_edges(T)
+    assert len(before) == pole_edges + crack_edges
+    with pytest.warns(O3DLSMeshWarning, match="zero-width crack"):
+        out = fill_holes_arrays(V, T)
+    np.testing.assert_array_equal(out.triangles[: len(T)], T)
+    outcomes = {outcome.edges: outcome for outcome in out.report.holes}
+    assert set(outcomes) == {pole_edges, crack_edges}
+    assert outcomes[pole_edges].filled and not outcomes[crack_edges].filled
+    assert outcomes[crack_edges].how.startswith("a zero-width crack")
+    # what the report leaves open is what the output leaves open: the crack's edges, every one
+    left = _open_edges(out.triangles)
+    assert len(left) == sum(o.edges for o in out.report.holes if not o.filled) == crack_edges
+    assert left <= before
+    # fill_holes finds holes on the welded surface: the crack is a seam there, no hole, and stays as it is
+    filled, report = fill_holes((V, T), return_report=True)
+    assert [(o.edges, o.filled) for o in report.holes] == [(pole_edges, True)]
+    assert _open_edges(filled[1]) == left
+
+
+def test_a_loop_of_coincident_vertices_alone_is_reported_not_a_crash():
+    V = np.zeros((4, 3))
+    T = np.array([[0, 1, 2], [0, 2, 3]])
+    with pytest.warns(O3DLSMeshWarning, match="zero-width crack"):
+        out = fill_holes_arrays(V, T, fill_border=True)
+    np.testing.assert_array_equal(out.triangles, T)
+    assert [(o.edges, o.filled) for o in out.report.holes] == [(4, False)]
+
+
 # --------------------------------------------------------------------------- the compiled kernel, against plain loops
 
 

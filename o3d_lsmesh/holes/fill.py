@@ -20,7 +20,7 @@ from ..core.validate import as_bool, as_choice, as_count, as_positive_float, mes
 from .crossings import _crossings, _TriangleIndex
 from .fair import fair_patches
 from .find import Hole, find_holes
-from .triangulate import triangulate_holes
+from .triangulate import closable, triangulate_holes
 from .tuning import DENSITY_MAX
 
 if TYPE_CHECKING:
@@ -254,6 +254,10 @@ class HoleFiller:
             # common in raw scans), not a hole: "filling" it would add that triangle's reverse
             if hole.edges == 3 and len(np.unique(np.asarray(hole.rows) % m)) == 1:
                 why[id(hole)] = "the rim of one triangle hanging by a vertex (a flap, not a hole)"
+            elif not closable(hole.vertices, self.vertices[hole.vertices]):
+                why[id(hole)] = (
+                    "a zero-width crack: the loop runs along coincident vertices (merge them to close it)"
+                )
             elif max_hole_edges is not None and hole.edges > max_hole_edges:
                 why[id(hole)] = f"more than max_hole_edges={max_hole_edges} edges"
             elif max_hole_diameter is not None and hole.diameter > max_hole_diameter:
@@ -294,7 +298,9 @@ class HoleFiller:
             )
         )
         # said: every loop left open but those the size limits exclude and flaps (no holes)
-        said = FillReport(tuple(h for h in report.skipped if h.how.startswith(("every", "taken"))))
+        said = FillReport(
+            tuple(h for h in report.skipped if h.how.startswith(("every", "taken", "a zero-width")))
+        )
         if said.holes:
             warn(
                 f"fill_holes: {len(said.holes)} of {len(self.holes)} loops left open: {said.describe(10)}"

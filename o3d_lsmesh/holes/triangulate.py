@@ -138,6 +138,13 @@ def _simple_pieces(loop: np.ndarray, rows: np.ndarray, points: np.ndarray):
         stack.append((loop[rest], rows[rest], key[rest]))
 
 
+def closable(loop: np.ndarray, points: np.ndarray) -> bool:
+    """Whether triangles can close a loop (``points`` its vertices' positions): each of its edges lies in
+    a piece of :func:`_simple_pieces`. A piece of two vertices between two visits of one position is a
+    zero-width crack (the loop runs out and back along coincident vertices), which no triangle closes."""
+    return sum(len(piece) for piece, _ in _simple_pieces(loop, loop, points)) == len(loop)
+
+
 def triangulate_holes(filler: Any, holes: list, density: float, progress: bool) -> tuple:
     """Triangulate and refine every piece of ``holes`` (loops of ``filler``, a :class:`HoleFiller`): the new
     points ``(p, 3)`` (numbered from ``n`` piece by piece), the new triangles ``(q, 3)`` in the mesh's
