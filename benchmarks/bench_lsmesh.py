@@ -106,6 +106,10 @@ def run_one(name: str, queue) -> None:
         if mesh is None:
             queue.put(None)
             return
+        # the dragon's marching-cubes duplicates merged and its zero-area needles dropped (Open3D's own
+        # clean-up): ls_mesh solves on the welded surface, and the bare system below is built on these arrays
+        mesh.remove_duplicated_vertices()
+        mesh.remove_degenerate_triangles()
     n = len(mesh.vertices)
     idx = control_points(mesh)
     row = {"mesh": name, "n": n, "controls": len(idx)}

@@ -69,13 +69,14 @@ def test_fairing_gives_a_finite_result_on_any_soup(soup, method, smooth_boundary
 
 def _welded_triangles(V, F):
     # -> (triangles on first copies, how many copies were merged away)
-    # ls_mesh welds exactly coincident vertices (first occurrence wins) unless a triangle would lose
-    # a corner: the components it sees are those of the welded mesh (a plain dictionary here)
-    first = {}
-    to = np.array([first.setdefault(tuple(row + 0.0), i) for i, row in enumerate(V)])
-    W = to[F]
-    collapsed = (W[:, 0] == W[:, 1]) | (W[:, 1] == W[:, 2]) | (W[:, 0] == W[:, 2])
-    return (F, 0) if collapsed.any() else (W, len(V) - len(first))
+    # ls_mesh welds exactly coincident vertices (first occurrence wins), but a triangle never loses a
+    # corner: those of a triangle with two coincident corners are welded to nothing. The components it
+    # sees are those of the welded mesh (a plain dictionary here)
+    position = [tuple(row + 0.0) for row in V]
+    alone = {int(v) for t in F if len({position[u] for u in t}) < 3 for v in t}
+    first: dict = {}
+    to = np.array([i if i in alone else first.setdefault(p, i) for i, p in enumerate(position)])
+    return to[F], len(V) - len(set(to.tolist()))
 
 
 @SETTINGS

@@ -51,8 +51,11 @@ def test_weld_map_reference():
     # duplicates: 3 -> 1, 5 -> 0 (-0.0 == 0.0); numbered by first occurrence
     np.testing.assert_array_equal(split, [0, 1, 2, 1, 3, 0])
     assert weld_map(vertices[:3], triangles[:1]) is None  # no duplicates
-    # a triangle with two coincident corners would collapse: the mesh is not welded
+    # a triangle with two coincident corners keeps its corners apart (it would lose one); nothing else
+    # merges here (5 would join 0, a corner of that triangle), so nothing is welded
     assert weld_map(vertices, np.array([[0, 1, 3]])) is None
+    # the other duplicates still merge: 5 -> 0, while that triangle's corners 1 and 3 stay apart
+    np.testing.assert_array_equal(weld_map(vertices, np.array([[1, 3, 2]])), [0, 1, 2, 3, 4, 0])
 
 
 @settings(max_examples=150, deadline=None)
@@ -62,12 +65,24 @@ def test_weld_map_reference():
     seed=st.integers(0, 2**16),
 )
 def test_weld_map_groups_equal_rows_by_first_occurrence(rows, picks, seed):
-    pool = np.random.default_rng(seed).choice([-1.0, -0.0, 0.0, 0.5, 2.0], size=(8, 3))
+    rng = np.random.default_rng(seed)
+    pool = rng.choice([-1.0, -0.0, 0.0, 0.5, 2.0], size=(8, 3))
     pool[0] = rows
     vertices = pool[picks]
-    split = weld_map(vertices, np.zeros((0, 3), dtype=np.int64))
-    index: dict = {}  # plain reference: number rows by first occurrence (-0.0 == 0.0 as dict keys)
-    expected = np.array([index.setdefault(tuple(p), len(index)) for p in vertices])
+    # a few triangles on distinct vertices; some have coincident corners
+    count = len(vertices) // 3 if len(vertices) >= 3 else 0
+    triangles = np.array([rng.choice(len(vertices), 3, replace=False) for _ in range(count)], dtype=np.int64)
+    split = weld_map(vertices, triangles.reshape(-1, 3))
+    # plain reference: number rows by first occurrence (-0.0 == 0.0 as dict keys); the corners of a
+    # triangle with two coincident corners each numbered alone
+    alone = {int(v) for t in triangles for v in t if len({tuple(vertices[u]) for u in t}) < 3}
+    index: dict = {}
+    expected = np.array(
+        [
+            index.setdefault(("alone", i) if i in alone else tuple(p), len(index))
+            for i, p in enumerate(vertices)
+        ]
+    )
     if len(index) == len(vertices):
         assert split is None
     else:

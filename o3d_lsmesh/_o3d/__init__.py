@@ -113,8 +113,9 @@ def _may_have_duplicates(vertices: np.ndarray) -> bool:
 def weld_map(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray | None:
     """Map each vertex to the first vertex at exactly the same coordinates, ``(n,)`` int64, or None.
 
-    None when no two vertices coincide, or when a triangle would repeat a vertex (such a mesh is
-    processed as it is). Welded vertices are numbered in order of first occurrence.
+    A triangle never loses a corner: the corners of a triangle with two coincident corners (a zero-area
+    triangle, as marching cubes leaves them) are welded to nothing, every other vertex is. None when no two
+    vertices merge. Welded vertices are numbered in order of first occurrence.
     """
     n = len(vertices)
     if n == 0 or not _may_have_duplicates(vertices):
@@ -132,9 +133,18 @@ def weld_map(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray | None:
     rank = np.empty(len(first), dtype=np.int64)
     rank[np.argsort(first, kind="stable")] = np.arange(len(first))
     split = rank[group]
-    welded = split[triangles]  # (m, 3)
-    if collapsed_triangles(welded).any():
-        return None
+    collapsed = collapsed_triangles(split[triangles])
+    if collapsed.any():
+        # those corners each in a group of its own (after the others), the groups numbered again
+        alone = np.zeros(n, dtype=bool)
+        alone[triangles[collapsed].ravel()] = True
+        key = np.where(alone, len(first) + np.arange(n), split)
+        _, first, group = np.unique(key, return_index=True, return_inverse=True)
+        if len(first) == n:
+            return None
+        rank = np.empty(len(first), dtype=np.int64)
+        rank[np.argsort(first, kind="stable")] = np.arange(len(first))
+        split = rank[group.ravel()]
     return split
 
 
