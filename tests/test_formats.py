@@ -119,6 +119,19 @@ def test_obj_seams_stay_closed_api(tmp_path):
         assert np.abs(np.asarray(out.vertices) - np.asarray(mesh.vertices)).max() > 1e-3
 
 
+def test_a_needle_elsewhere_does_not_unweld_the_seams(tmp_path):
+    # a zero-area needle (two coincident corners) keeps its own corners apart; the sphere's UV seam is
+    # still welded, so fairing keeps it closed (the whole mesh went unwelded, and tore, before)
+    mesh, _ = _noisy_uv_sphere(tmp_path)
+    V, T = np.asarray(mesh.vertices), np.asarray(mesh.triangles).astype(np.int64)
+    needle = np.array([[3.0, 0.0, 0.0], [3.0, 0.0, 0.0], [3.0, 1.0, 0.0]])
+    V2, T2 = np.concatenate([V, needle]), np.concatenate([T, [len(V) + np.arange(3)]])
+    for out in (o3d_lsmesh.constrained_fairing((V2, T2)), o3d_lsmesh.constrained_fairing((V2, T2), 5)):
+        assert np.abs(out[0][: len(V)] - V).max() > 1e-3  # the sphere did move
+        for group in _coincident_groups(V):  # the sphere's seam, by a plain dictionary
+            np.testing.assert_array_equal(out[0][group], np.repeat(out[0][group[:1]], len(group), axis=0))
+
+
 def test_fairing_welded_equals_fairing_of_welded_mesh(tmp_path):
     """Fairing the split mesh gives, on each vertex, what fairing the welded mesh gives (plain reference weld)."""
     mesh, _ = _noisy_uv_sphere(tmp_path)
