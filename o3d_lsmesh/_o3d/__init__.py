@@ -130,22 +130,20 @@ def weld_map(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray | None:
     group = np.empty(n, dtype=np.int64)
     group[order] = np.cumsum(starts) - 1  # group of each vertex, groups in sorted order
     first = order[starts]  # first occurrence of each group
-    rank = np.empty(len(first), dtype=np.int64)
-    rank[np.argsort(first, kind="stable")] = np.arange(len(first))
-    split = rank[group]
-    collapsed = collapsed_triangles(split[triangles])
+    collapsed = collapsed_triangles(group[triangles])
     if collapsed.any():
         # those corners each in a group of its own (after the others), the groups numbered again
         alone = np.zeros(n, dtype=bool)
         alone[triangles[collapsed].ravel()] = True
-        key = np.where(alone, len(first) + np.arange(n), split)
-        _, first, group = np.unique(key, return_index=True, return_inverse=True)
+        _, first, group = np.unique(
+            np.where(alone, len(first) + np.arange(n), group), return_index=True, return_inverse=True
+        )
+        group = group.ravel()
         if len(first) == n:
             return None
-        rank = np.empty(len(first), dtype=np.int64)
-        rank[np.argsort(first, kind="stable")] = np.arange(len(first))
-        split = rank[group.ravel()]
-    return split
+    rank = np.empty(len(first), dtype=np.int64)
+    rank[np.argsort(first, kind="stable")] = np.arange(len(first))
+    return rank[group]
 
 
 def _kind(mesh: Any, *, name: str = "mesh") -> str:
