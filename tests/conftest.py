@@ -24,6 +24,16 @@ DATA = Path(os.environ.get("O3D_LSMESH_DATA", REPO.parent / "shared" / "data" / 
 SCANS = Path(os.environ.get("O3D_LSMESH_SCANS", REPO.parent / "shared" / "data" / "scans"))
 
 
+def welded_vertices(V, F) -> np.ndarray:
+    """Each vertex's first copy at exactly equal coordinates, by a plain dictionary (-0.0 == 0.0 as keys),
+    except that the corners of a triangle with two coincident corners stay themselves: the package's weld,
+    written independently of ``o3d_lsmesh._o3d.weld_map``."""
+    position = [tuple(row + 0.0) for row in np.asarray(V)]
+    alone = {int(v) for t in np.asarray(F) if len({position[u] for u in t}) < 3 for v in t}
+    first: dict = {}
+    return np.array([i if i in alone else first.setdefault(p, i) for i, p in enumerate(position)])
+
+
 def load_mesh(name: str):
     """Read ``name`` (e.g. ``"bunny.ply"``) from the data folder, or skip the test with the reason."""
     path = DATA / name

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import triangle_soups
+from conftest import triangle_soups, welded_vertices
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -70,12 +70,8 @@ def test_fairing_gives_a_finite_result_on_any_soup(soup, method, smooth_boundary
 def _welded_triangles(V, F):
     # -> (triangles on first copies, how many copies were merged away)
     # ls_mesh welds exactly coincident vertices (first occurrence wins), but a triangle never loses a
-    # corner: those of a triangle with two coincident corners are welded to nothing. The components it
-    # sees are those of the welded mesh (a plain dictionary here)
-    position = [tuple(row + 0.0) for row in V]
-    alone = {int(v) for t in F if len({position[u] for u in t}) < 3 for v in t}
-    first: dict = {}
-    to = np.array([i if i in alone else first.setdefault(p, i) for i, p in enumerate(position)])
+    # corner: the components it sees are those of the welded mesh
+    to = welded_vertices(V, F)
     return to[F], len(V) - len(set(to.tolist()))
 
 

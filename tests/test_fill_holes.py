@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import open3d as o3d
 import pytest
-from conftest import REPO, grid, load_mesh
+from conftest import DATA, REPO, grid, load_mesh
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 from scipy.sparse import coo_matrix
@@ -1090,10 +1090,7 @@ def _data_files():
     """Every mesh of the three data folders, one parameter each; a folder without any: one skipped case."""
     cases = []
     for folder, variable in (
-        (
-            Path(os.environ.get("O3D_LSMESH_DATA", REPO.parent / "shared" / "data" / "meshes")),
-            "O3D_LSMESH_DATA",
-        ),
+        (DATA, "O3D_LSMESH_DATA"),
         (SCANS, "O3D_LSMESH_SCANS"),
         (SCANS_DRAGON, "O3D_LSMESH_SCANS_DRAGON"),
     ):

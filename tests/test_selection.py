@@ -3,7 +3,7 @@ from collections import deque
 import numpy as np
 import open3d as o3d
 import pytest
-from conftest import grid, load_mesh
+from conftest import grid, load_mesh, welded_vertices
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from selection_reference import greedy_dense
@@ -282,12 +282,9 @@ def test_scan_defects_seed_every_small_component(method):
 
     V, F, _ = all_defects()
     V = np.vstack([V, [[9.0, 9.0, 9.0], [9.5, 9.0, 9.0]]])  # two unreferenced vertices: components too
-    # the components of the welded surface (a plain dictionary): coincident vertices merged, but not the
-    # corners of a zero-area needle, so the duplicated seam's two parts are one component
-    position = [tuple(p + 0.0) for p in V]
-    alone = {int(v) for t in F if len({position[u] for u in t}) < 3 for v in t}
-    first: dict = {}
-    to = np.array([i if i in alone else first.setdefault(p, i) for i, p in enumerate(position)])
+    # the components of the welded surface: coincident vertices merged, but not the corners of a
+    # zero-area needle, so the duplicated seam's two parts are one component
+    to = welded_vertices(V, F)
     labels = Connectivity(to[F], len(V)).components[1][to]  # each vertex's welded component
     components = set(labels.tolist())
     count = len(components)
