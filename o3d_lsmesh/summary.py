@@ -11,7 +11,7 @@ from scipy.sparse import csgraph
 from ._o3d import read_mesh, weld_map
 from .core.boundary import boundary_curves, boundary_halfedges, boundary_rows, corner_fans
 from .core.connectivity import Connectivity
-from .core.validate import mesh_arrays
+from .core.validate import collapsed_triangles, mesh_arrays
 
 if TYPE_CHECKING:
     from ._types import AnyMesh
@@ -71,9 +71,11 @@ def _summary(vertices: np.ndarray, F: np.ndarray) -> dict:
     boundary_label = csgraph.connected_components(graph, directed=False)[1]
     boundary_components = len(np.unique(boundary_label[tail[rows]]))
     # UV seams and normal creases as Open3D's readers split them: boundary edges that vertices at equal
-    # coordinates close (fill_holes and the fairing functions work on that welded surface)
+    # coordinates close (fill_holes and the fairing functions work on that welded surface, without the
+    # triangles that lose a corner so)
     split = weld_map(vertices, F)
-    seam_edges = 0 if split is None else boundary_edges - len(boundary_halfedges(split[F], n))
+    welded = F if split is None else split[F][~collapsed_triangles(split[F])]
+    seam_edges = 0 if split is None else boundary_edges - len(boundary_halfedges(welded, n))
     # degenerate triangles: (near) zero area relative to the longest edge
     corners = vertices[F]
     sides = corners[:, [1, 2, 0]] - corners

@@ -24,14 +24,22 @@ DATA = Path(os.environ.get("O3D_LSMESH_DATA", REPO.parent / "shared" / "data" / 
 SCANS = Path(os.environ.get("O3D_LSMESH_SCANS", REPO.parent / "shared" / "data" / "scans"))
 
 
-def welded_vertices(V, F) -> np.ndarray:
-    """Each vertex's first copy at exactly equal coordinates, by a plain dictionary (-0.0 == 0.0 as keys),
-    except that the corners of a triangle with two coincident corners stay themselves: the package's weld,
-    written independently of ``o3d_lsmesh._o3d.weld_map``."""
-    position = [tuple(row + 0.0) for row in np.asarray(V)]
-    alone = {int(v) for t in np.asarray(F) if len({position[u] for u in t}) < 3 for v in t}
+def welded_vertices(V) -> np.ndarray:
+    """Each vertex's first copy at exactly equal coordinates, by a plain dictionary (-0.0 == 0.0 as keys):
+    the package's weld, written independently of ``o3d_lsmesh._o3d.weld_map``."""
     first: dict = {}
-    return np.array([i if i in alone else first.setdefault(p, i) for i, p in enumerate(position)])
+    return np.array([first.setdefault(tuple(row + 0.0), i) for i, row in enumerate(np.asarray(V))])
+
+
+def welded_surface(V, F) -> tuple[np.ndarray, np.ndarray]:
+    """(each vertex's first copy, the triangles on first copies): the surface the package's operations
+    see, the triangles that lose a corner (zero-area needles) left out, by plain loops; nothing welded
+    where every triangle would lose one."""
+    to = welded_vertices(V)
+    kept = [[int(to[v]) for v in t] for t in np.asarray(F) if len({int(to[v]) for v in t}) == 3]
+    if not kept:
+        return np.arange(len(V)), np.asarray(F, dtype=np.int64)
+    return to, np.array(kept, dtype=np.int64)
 
 
 def load_mesh(name: str):

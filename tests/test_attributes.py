@@ -91,6 +91,29 @@ def test_legacy_fill_keeps_uvs_ids_textures_and_new_uvs_are_the_affine_map():
         np.testing.assert_array_equal(np.asarray(got), np.asarray(expected))
 
 
+def test_fill_with_needles_before_the_hole_extends_the_attributes_of_the_right_triangles():
+    # zero-area needles (two coincident corners, as marching cubes leaves them) first among the triangles:
+    # welded, they are left out of the surface, so the surface's triangle k is the source's k + 3; the new
+    # triangles must take their material and UVs from the source's loop triangles, not 3 rows off
+    V, T = _holed_box()
+    copies = np.array([0, 5, 9])  # a vertex at the position of each of these, used by its needle alone
+    far = [int(next(v for t in T if c in t for v in t if v != c)) for c in copies]
+    V2 = np.concatenate([V, V[copies]])
+    needles = np.stack([copies, len(V) + np.arange(3), far], axis=1)
+    T2 = np.concatenate([needles, T])
+    ids = np.arange(len(T2))  # every triangle its own material: a row off is seen
+    mesh = _textured(V2, T2, ids)
+    out = o3d_lsmesh.fill_holes(mesh)
+    W, F = np.asarray(out.vertices), np.asarray(out.triangles)
+    m = len(T2)
+    np.testing.assert_array_equal(F[:m], T2)  # the needles kept, in place
+    out_ids = np.asarray(out.triangle_material_ids)
+    np.testing.assert_array_equal(out_ids[:m], ids)
+    assert len(F) > m and out_ids[m] in set(ids[_loop_triangles(T2, F[m:])].tolist())
+    uvs = np.asarray(out.triangle_uvs).reshape(-1, 3, 2)
+    np.testing.assert_allclose(uvs[m:], _affine(W[F[m:]]), rtol=0, atol=1e-9)
+
+
 def test_legacy_fill_without_new_vertices_keeps_uvs():
     V, T = _holed_box()
     mesh = _textured(V, T, np.zeros(len(T)))

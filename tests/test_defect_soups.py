@@ -21,14 +21,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import triangle_soups, welded_vertices
+from conftest import triangle_soups, welded_surface
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import o3d_lsmesh
 from o3d_lsmesh.core.connectivity import Connectivity
 from o3d_lsmesh.fairing import constrained_fairing_arrays, smooth_boundary_curves_arrays
-from o3d_lsmesh.lsmesh.selection import start_vertices
 
 
 @st.composite
@@ -67,21 +66,16 @@ def test_fairing_gives_a_finite_result_on_any_soup(soup, method, smooth_boundary
     assert np.array_equal(mesh[1], F) and np.isfinite(mesh[0]).all()
 
 
-def _welded_triangles(V, F):
-    # -> (triangles on first copies, how many copies were merged away)
-    # ls_mesh welds exactly coincident vertices (first occurrence wins), but a triangle never loses a
-    # corner: the components it sees are those of the welded mesh
-    to = welded_vertices(V, F)
-    return to[F], len(V) - len(set(to.tolist()))
-
-
 @SETTINGS
 @given(defect_soups())
 def test_ls_mesh_on_any_soup(soup):
     V, F = soup
-    welded, merged = _welded_triangles(V, F)
-    count = Connectivity(welded, len(V)).components[0] - merged  # merged copies are not components
-    controls = start_vertices(V, F)
+    # ls_mesh welds exactly coincident vertices (first occurrence wins) and leaves out the triangles
+    # that lose a corner so: the components it sees are those of that welded surface
+    to, welded = welded_surface(V, F)
+    labels = Connectivity(welded, len(V)).components[1][to]  # each vertex's component there
+    count = len(set(labels.tolist()))
+    controls = np.unique(labels, return_index=True)[1]  # a vertex of each
     out = o3d_lsmesh.ls_mesh((V, F), controls)[0]
     assert np.isfinite(out).all()
     exact = o3d_lsmesh.ls_mesh((V, F), controls, interpolate=True)[0]

@@ -84,6 +84,9 @@ def test_decoding_ignores_the_decoder_mesh_positions(torus, stream):
     V, F = torus
     scrambled = (np.random.default_rng(1).random(V.shape), F)
     np.testing.assert_array_equal(decode_geometry(scrambled, stream)[0], decode_geometry(torus, stream)[0])
+    # a receiver with the connectivity alone (every position zero: every vertex coincides) decodes it too
+    blank = (np.zeros_like(V), F)
+    np.testing.assert_array_equal(decode_geometry(blank, stream)[0], decode_geometry(torus, stream)[0])
 
 
 def test_decoding_equals_a_dense_solve_at_the_anchors(torus):

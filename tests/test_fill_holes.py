@@ -1077,8 +1077,8 @@ def test_a_zero_width_crack_is_reported_open_and_the_report_matches_the_output()
     filled, report = fill_holes((V, T), return_report=True)
     assert [(o.edges, o.filled) for o in report.holes] == [(pole_edges, True)]
     assert _open_edges(filled[1]) == left
-    # a zero-area needle elsewhere (a triangle with two coincident corners) keeps only its own corners
-    # apart: the seam is still welded, no hole (the whole mesh went unwelded before)
+    # a zero-area needle elsewhere (a triangle with two coincident corners) is left out of the welded
+    # surface: the seam is still welded, no hole (the whole mesh went unwelded before)
     needle = np.array([[5.0, 0, 0], [5.0, 0, 0], [5.0, 1.0, 0]])
     with_needle = (np.concatenate([V, needle]), np.concatenate([T, [len(V) + np.arange(3)]]))
     report = fill_holes(with_needle, return_report=True)[1]

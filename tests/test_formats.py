@@ -10,6 +10,8 @@ from hypothesis import strategies as st
 o3d = pytest.importorskip("open3d")
 
 
+from conftest import welded_vertices  # noqa: E402
+
 import o3d_lsmesh  # noqa: E402
 from o3d_lsmesh import O3DLSMeshWarning  # noqa: E402
 from o3d_lsmesh._o3d import new_mesh, read_mesh, weld_map  # noqa: E402
@@ -51,11 +53,16 @@ def test_weld_map_reference():
     # duplicates: 3 -> 1, 5 -> 0 (-0.0 == 0.0); numbered by first occurrence
     np.testing.assert_array_equal(split, [0, 1, 2, 1, 3, 0])
     assert weld_map(vertices[:3], triangles[:1]) is None  # no duplicates
-    # a triangle with two coincident corners keeps its corners apart (it would lose one); nothing else
-    # merges here (5 would join 0, a corner of that triangle), so nothing is welded
+    # vertices guarded (maybe placeholders) stay alone where a triangle would lose them, others merge
+    needle = np.array([[0, 1, 3], [5, 4, 2]])
+    np.testing.assert_array_equal(weld_map(vertices, needle, guarded=np.array([1])), [0, 1, 2, 3, 4, 0])
+    np.testing.assert_array_equal(weld_map(vertices, needle, guarded=np.array([5])), [0, 1, 2, 1, 3, 0])
+    np.testing.assert_array_equal(weld_map(vertices, triangles, guarded=np.array([1, 3])), split)
+    # a triangle that loses a corner (a zero-area needle) does not stop the others' weld ...
+    np.testing.assert_array_equal(weld_map(vertices, np.array([[0, 1, 3], [5, 4, 2]])), [0, 1, 2, 1, 3, 0])
+    # ... but when every triangle would (positions that say nothing of the surface), nothing merges
+    assert weld_map(np.zeros((4, 3)), np.array([[0, 1, 2], [1, 2, 3]])) is None
     assert weld_map(vertices, np.array([[0, 1, 3]])) is None
-    # the other duplicates still merge: 5 -> 0, while that triangle's corners 1 and 3 stay apart
-    np.testing.assert_array_equal(weld_map(vertices, np.array([[1, 3, 2]])), [0, 1, 2, 3, 4, 0])
 
 
 @settings(max_examples=150, deadline=None)
@@ -69,24 +76,48 @@ def test_weld_map_groups_equal_rows_by_first_occurrence(rows, picks, seed):
     pool = rng.choice([-1.0, -0.0, 0.0, 0.5, 2.0], size=(8, 3))
     pool[0] = rows
     vertices = pool[picks]
-    # a few triangles on distinct vertices; some have coincident corners
     count = len(vertices) // 3 if len(vertices) >= 3 else 0
     triangles = np.array([rng.choice(len(vertices), 3, replace=False) for _ in range(count)], dtype=np.int64)
-    split = weld_map(vertices, triangles.reshape(-1, 3))
-    # plain reference: number rows by first occurrence (-0.0 == 0.0 as dict keys); the corners of a
-    # triangle with two coincident corners each numbered alone
-    alone = {int(v) for t in triangles for v in t if len({tuple(vertices[u]) for u in t}) < 3}
+    triangles = triangles.reshape(-1, 3)
+    guarded = np.flatnonzero(rng.random(len(vertices)) < 0.3)
+    split = weld_map(vertices, triangles, guarded=guarded)
+    # plain reference: number rows by first occurrence (-0.0 == 0.0 as dict keys); a guarded corner of a
+    # triangle that would lose a corner so alone
     index: dict = {}
-    expected = np.array(
-        [
-            index.setdefault(("alone", i) if i in alone else tuple(p), len(index))
-            for i, p in enumerate(vertices)
-        ]
-    )
-    if len(index) == len(vertices):
+    plain = [index.setdefault(tuple(p), len(index)) for p in vertices]
+    losing = {int(v) for t in triangles if len({plain[u] for u in t}) < 3 for v in t}
+    alone = losing & set(guarded.tolist())
+    index = {}
+    keys = [("alone", i) if i in alone else tuple(p) for i, p in enumerate(vertices)]
+    expected = np.array([index.setdefault(key, len(index)) for key in keys])
+    every_collapses = len(triangles) > 0 and all(len({expected[v] for v in t}) < 3 for t in triangles)
+    if len(index) == len(vertices) or every_collapses:
         assert split is None
     else:
         np.testing.assert_array_equal(split, expected)
+
+
+@settings(max_examples=100, deadline=None)
+@given(picks=st.lists(st.integers(0, 5), min_size=3, max_size=30), seed=st.integers(0, 2**16))
+def test_read_mesh_leaves_out_exactly_the_triangles_the_weld_collapses(picks, seed):
+    # triangles on distinct vertices, some with coincident corners (zero-area needles); welded, those
+    # lose a corner: left out of the welded surface, named by their source rows, and kept in the result
+    rng = np.random.default_rng(seed)
+    vertices = rng.normal(size=(6, 3))[picks]
+    triangles = np.array([rng.choice(len(vertices), 3, replace=False) for _ in range(len(vertices))])
+    data = read_mesh((vertices, triangles), weld=True)
+    welded = welded_vertices(vertices)
+    kept = [t for t, row in enumerate(triangles) if len({welded[v] for v in row}) == 3]
+    if not kept:  # every triangle would lose a corner: nothing is welded
+        assert data.split is None
+        welded, kept = np.arange(len(vertices)), list(range(len(triangles)))
+    rows = np.arange(len(triangles)) if data.rows is None else data.rows
+    np.testing.assert_array_equal(rows, kept)
+    # the welded triangles are the kept rows', each corner at its (first copy's) position
+    np.testing.assert_array_equal(data.vertices[data.triangles], vertices[welded[triangles[kept]]])
+    out_v, out_t = new_mesh(data, data.vertices + 1.0)
+    np.testing.assert_array_equal(out_t, triangles)
+    np.testing.assert_array_equal(out_v, vertices + 1.0)
 
 
 def test_read_mesh_weld_round_trip_arrays():
@@ -119,17 +150,30 @@ def test_obj_seams_stay_closed_api(tmp_path):
         assert np.abs(np.asarray(out.vertices) - np.asarray(mesh.vertices)).max() > 1e-3
 
 
-def test_a_needle_elsewhere_does_not_unweld_the_seams(tmp_path):
-    # a zero-area needle (two coincident corners) keeps its own corners apart; the sphere's UV seam is
-    # still welded, so fairing keeps it closed (the whole mesh went unwelded, and tore, before)
+def test_a_needle_on_a_seam_keeps_the_seam_and_its_corners_together(tmp_path):
+    # a zero-area needle (a triangle with two coincident corners) sewn into the sphere's UV seam, as
+    # marching cubes leaves them: welded, it is left out and its neighbours meet across it; the result
+    # keeps it, and every group of coincident vertices (the seam's and the needle's) stays together
     mesh, _ = _noisy_uv_sphere(tmp_path)
     V, T = np.asarray(mesh.vertices), np.asarray(mesh.triangles).astype(np.int64)
-    needle = np.array([[3.0, 0.0, 0.0], [3.0, 0.0, 0.0], [3.0, 1.0, 0.0]])
-    V2, T2 = np.concatenate([V, needle]), np.concatenate([T, [len(V) + np.arange(3)]])
-    for out in (o3d_lsmesh.constrained_fairing((V2, T2)), o3d_lsmesh.constrained_fairing((V2, T2), 5)):
+    a, b = next(group for group in _coincident_groups(V) if len(group) == 2)[:2]
+    c = next(int(v) for t in T if a in t for v in t if v != a and not np.array_equal(V[v], V[a]))
+    # the needle's corners: a copy of seam vertex a (a vertex of its own), and c
+    V2 = np.concatenate([V, V[[a]]])
+    T2 = np.concatenate([T, [[a, len(V), c]]])
+    t = np.flatnonzero((T2[: len(T)] == b).any(axis=1))[0]  # a triangle at b uses the needle's copy
+    T2[t][T2[t] == b] = len(V)
+    for out in (
+        o3d_lsmesh.constrained_fairing((V2, T2)),
+        o3d_lsmesh.constrained_fairing((V2, T2), 5),
+        o3d_lsmesh.constrained_fairing((V2, T2), 5, method="global"),
+    ):
         assert np.abs(out[0][: len(V)] - V).max() > 1e-3  # the sphere did move
-        for group in _coincident_groups(V):  # the sphere's seam, by a plain dictionary
+        np.testing.assert_array_equal(out[1], T2)
+        for group in _coincident_groups(V2):  # by a plain dictionary
             np.testing.assert_array_equal(out[0][group], np.repeat(out[0][group[:1]], len(group), axis=0))
+    # the needle is no boundary: the welded sphere is closed, nothing to fill
+    assert o3d_lsmesh.fill_holes((V2, T2), return_report=True)[1].holes == ()
 
 
 def test_fairing_welded_equals_fairing_of_welded_mesh(tmp_path):

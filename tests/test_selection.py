@@ -3,7 +3,7 @@ from collections import deque
 import numpy as np
 import open3d as o3d
 import pytest
-from conftest import grid, load_mesh, welded_vertices
+from conftest import grid, load_mesh, welded_surface
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from selection_reference import greedy_dense
@@ -282,10 +282,10 @@ def test_scan_defects_seed_every_small_component(method):
 
     V, F, _ = all_defects()
     V = np.vstack([V, [[9.0, 9.0, 9.0], [9.5, 9.0, 9.0]]])  # two unreferenced vertices: components too
-    # the components of the welded surface: coincident vertices merged, but not the corners of a
-    # zero-area needle, so the duplicated seam's two parts are one component
-    to = welded_vertices(V, F)
-    labels = Connectivity(to[F], len(V)).components[1][to]  # each vertex's welded component
+    # the components of the welded surface: coincident vertices merged (the duplicated seam's two parts
+    # are one component), the zero-area needles that welding collapses left out
+    to, welded = welded_surface(V, F)
+    labels = Connectivity(welded, len(V)).components[1][to]  # each vertex's welded component
     components = set(labels.tolist())
     count = len(components)
     assert count == 15

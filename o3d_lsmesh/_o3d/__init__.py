@@ -72,7 +72,10 @@ class MeshData:
     source: Any
     kind: str  # "legacy", "tensor" or "arrays"
     split: np.ndarray | None = None  # (n_source,) int64 source vertex -> welded vertex
-    split_triangles: np.ndarray | None = None  # (m, 3) int64 the source's triangles, when welded
+    split_triangles: np.ndarray | None = None  # (m_source, 3) int64 the source's triangles, when welded
+    # (m,) int64 the source triangle of each of ``triangles``, when the weld collapsed some (zero-area
+    # needles, as marching cubes leaves them: two corners at one position) and they were left out
+    rows: np.ndarray | None = None
 
     def welded_indices(self, indices: Any, *, name: str, merge: bool = False) -> np.ndarray:
         """Check vertex indices of the source's layout; the welded vertices', ``(k,) int64`` (any copy of a
@@ -110,12 +113,15 @@ def _may_have_duplicates(vertices: np.ndarray) -> bool:
     return bool(np.any(key[1:] == key[:-1]))
 
 
-def weld_map(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray | None:
+def weld_map(
+    vertices: np.ndarray, triangles: np.ndarray, *, guarded: np.ndarray | None = None
+) -> np.ndarray | None:
     """Map each vertex to the first vertex at exactly the same coordinates, ``(n,)`` int64, or None.
 
-    A triangle never loses a corner: the corners of a triangle with two coincident corners (a zero-area
-    triangle, as marching cubes leaves them) are welded to nothing, every other vertex is. None when no two
-    vertices merge. Welded vertices are numbered in order of first occurrence.
+    Vertices ``guarded`` (positions that may be placeholders, all equal: unknown ones) merge only where
+    no triangle then loses a corner: those among a losing triangle's corners each stay alone. None when
+    no two vertices merge, or when every triangle would lose a corner (positions that say nothing of the
+    surface). Welded vertices are numbered in order of first occurrence.
     """
     n = len(vertices)
     if n == 0 or not _may_have_duplicates(vertices):
@@ -125,22 +131,23 @@ def weld_map(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray | None:
     ordered = vertices[order]
     starts = np.ones(n, dtype=bool)
     starts[1:] = (ordered[1:] != ordered[:-1]).any(axis=1)
-    if starts.all():
-        return None
     group = np.empty(n, dtype=np.int64)
     group[order] = np.cumsum(starts) - 1  # group of each vertex, groups in sorted order
     first = order[starts]  # first occurrence of each group
     collapsed = collapsed_triangles(group[triangles])
-    if collapsed.any():
-        # those corners each in a group of its own (after the others), the groups numbered again
-        alone = np.zeros(n, dtype=bool)
-        alone[triangles[collapsed].ravel()] = True
+    if guarded is not None and collapsed.any():
+        # those guarded corners each in a group of its own, the groups numbered again
+        alone, losing = np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
+        alone[guarded] = True
+        losing[triangles[collapsed].ravel()] = True
+        alone &= losing
         _, first, group = np.unique(
-            np.where(alone, len(first) + np.arange(n), group), return_index=True, return_inverse=True
+            np.where(alone, n + np.arange(n), group), return_index=True, return_inverse=True
         )
         group = group.ravel()
-        if len(first) == n:
-            return None
+        collapsed = collapsed_triangles(group[triangles])
+    if len(first) == n or (len(triangles) and collapsed.all()):
+        return None
     rank = np.empty(len(first), dtype=np.int64)
     rank[np.argsort(first, kind="stable")] = np.arange(len(first))
     return rank[group]
@@ -163,10 +170,18 @@ def _kind(mesh: Any, *, name: str = "mesh") -> str:
     )
 
 
-def read_mesh(mesh: Any, *, name: str = "mesh", weld: bool = False, narrow: bool = False) -> MeshData:
+def read_mesh(
+    mesh: Any,
+    *,
+    name: str = "mesh",
+    weld: bool = False,
+    narrow: bool = False,
+    guarded: np.ndarray | None = None,
+) -> MeshData:
     """Copy ``mesh`` into ``(n,3) float64`` vertices and ``(m,3) int64`` triangles and validate them.
 
-    ``weld=True`` merges vertices at equal coordinates (:func:`weld_map`); ``narrow=True``: int32
+    ``weld=True`` merges vertices at equal coordinates (:func:`weld_map`) and leaves out the triangles
+    that lose a corner so (:attr:`MeshData.rows`; ``guarded``: :func:`weld_map`); ``narrow=True``: int32
     triangles shared with a legacy source (read-only callers). A :class:`MeshData` is not checked
     again (its positions are copied; welded if asked).
 
@@ -195,11 +210,16 @@ def read_mesh(mesh: Any, *, name: str = "mesh", weld: bool = False, narrow: bool
         else:
             raw_v, raw_t = mesh
         vertices, triangles = mesh_arrays(raw_v, raw_t, name=name, narrow=narrow)
-    split = weld_map(vertices, triangles) if weld else None
+    split = weld_map(vertices, triangles, guarded=guarded) if weld else None
     if split is not None:
         welded = np.zeros((int(split.max()) + 1, 3))
         welded[split] = vertices  # duplicates hold the same coordinates: any writer gives the same row
-        return MeshData(welded, split[triangles], source, kind, split, triangles)
+        # a triangle that loses a corner (a zero-area needle) is left out of the welded surface: its
+        # neighbours meet across it; the result keeps it, its corners at their one welded position
+        faces = split[triangles]
+        kept = ~collapsed_triangles(faces)
+        rows = None if kept.all() else np.flatnonzero(kept)
+        return MeshData(welded, faces if rows is None else faces[rows], source, kind, split, triangles, rows)
     return MeshData(vertices, triangles, source, kind)
 
 

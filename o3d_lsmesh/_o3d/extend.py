@@ -39,9 +39,11 @@ class Appended:
         k = len(near)
         shared[inverse.reshape(3, -1)[:, k:]] = True
         row, corner = np.nonzero(shared[inverse.reshape(3, -1)[:, :k]].T)
-        self.tri = np.concatenate([near[row], near[row]])
         self.corner = np.concatenate([corner, (corner + 1) % 3])
-        self.vertex = old[self.tri, self.corner]
+        self.vertex = old[np.concatenate([near[row], near[row]]), self.corner]
+        # the loop triangles as rows of the source (its attributes' rows; the weld may have left some out)
+        near = near if data.rows is None else data.rows[near]
+        self.tri = np.concatenate([near[row], near[row]])
         self.loop, self.first = np.unique(self.vertex, return_index=True)
         # each new patch (vertex-connected new triangles: a hole, or holes touching at a vertex) takes
         # its per-triangle defaults from the triangle of its first loop corner

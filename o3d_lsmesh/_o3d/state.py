@@ -20,7 +20,8 @@ def mesh_state(data: MeshData) -> dict:
     device and dtypes): :func:`~o3d_lsmesh._o3d.new_mesh` on the rebuilt data gives the same result.
     """
     state: dict[str, Any] = {
-        key: getattr(data, key) for key in ("vertices", "triangles", "kind", "split", "split_triangles")
+        key: getattr(data, key)
+        for key in ("vertices", "triangles", "kind", "split", "split_triangles", "rows")
     }
     src = data.source
     if data.kind == "legacy":
@@ -69,18 +70,18 @@ def mesh_from_state(state: dict) -> MeshData:
     from . import ATTRIBUTES
 
     vertices, triangles, kind = state["vertices"], state["triangles"], state["kind"]
-    split, split_triangles = state["split"], state["split_triangles"]
+    split, split_triangles, rows = state["split"], state["split_triangles"], state["rows"]
     # the source's own layout: a welded source's positions are its welded vertices' (they coincide)
     source_v = vertices if split is None else vertices[split]
     source_t = triangles if split is None else split_triangles
     if kind == "arrays":
-        return MeshData(vertices, triangles, (source_v, source_t), kind, split, split_triangles)
+        return MeshData(vertices, triangles, (source_v, source_t), kind, split, split_triangles, rows)
     o3d = open3d()
     if kind == "legacy":
         source = legacy_mesh(source_v, source_t)
-        rows = {row.key: row for row in ATTRIBUTES if row.kind == "legacy"}
+        table = {row.key: row for row in ATTRIBUTES if row.kind == "legacy"}
         for key, value in state["attributes"].items():  # (in the table's order)
-            row = rows[key]
+            row = table[key]
             if row.follows == "texture":
                 source.textures = [
                     o3d.geometry.Image() if t is None else o3d.geometry.Image(t) for t in value
@@ -89,7 +90,7 @@ def mesh_from_state(state: dict) -> MeshData:
                 getattr(source, f"compute_{row.key}")()
             else:
                 setattr(source, row.key, getattr(o3d.utility, row.vector)(value))
-        return MeshData(vertices, triangles, source, kind, split, split_triangles)
+        return MeshData(vertices, triangles, source, kind, split, split_triangles, rows)
     device = o3d.core.Device(state["device"])
     source = o3d.t.geometry.TriangleMesh(device)
     for group, key, array, dtype in state["tensor"]:
@@ -98,4 +99,4 @@ def mesh_from_state(state: dict) -> MeshData:
         )
     if state["material"] is not None:
         source.material = _material_from_state(state["material"])
-    return MeshData(vertices, triangles, source, kind, split, split_triangles)
+    return MeshData(vertices, triangles, source, kind, split, split_triangles, rows)

@@ -457,9 +457,13 @@ def reconstruct_geometry(
     >>> np.asarray(reconstruct_geometry(sphere, np.arange(20)).vertices).shape == (len(sphere.vertices), 3)
     True
     """
-    data = read_mesh(mesh, weld=True)
+    data = read_mesh(mesh)
+    unknown = as_indices(unknown_vertex_indices, len(data.vertices), name="unknown_vertex_indices")
+    # the unknown vertices' positions may be placeholders (all equal): welded only where no triangle
+    # loses a corner (a copy of a seam vertex does weld)
+    data = read_mesh(data, weld=True, guarded=unknown)
     n = len(data.vertices)
-    unknown = data.welded_indices(unknown_vertex_indices, name="unknown_vertex_indices", merge=True)
+    unknown = data.welded_indices(unknown, name="unknown_vertex_indices", merge=True)
     known = np.setdiff1d(np.arange(n), unknown, assume_unique=True)  # in increasing order
     interpolate = as_bool(interpolate, name="interpolate")
     as_choice(laplacian, operators.LAPLACIAN_KINDS, name="laplacian")
