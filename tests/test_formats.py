@@ -58,6 +58,16 @@ def test_weld_map_reference():
     np.testing.assert_array_equal(weld_map(vertices, needle, guarded=np.array([1])), [0, 1, 2, 3, 4, 0])
     np.testing.assert_array_equal(weld_map(vertices, needle, guarded=np.array([5])), [0, 1, 2, 1, 3, 0])
     np.testing.assert_array_equal(weld_map(vertices, triangles, guarded=np.array([1, 3])), split)
+    # a guarded vertex inside the surface (a placeholder among known neighbours) merges with nothing
+    ring = np.array(
+        [[0, 0, 0], [1, 0, 0], [0, 1, 0], [-1, 0, 0], [0, -1, 0], [0, 0, 0], [5, 0, 0], [5, 1, 0]]
+    )
+    fan = np.array([[0, 1, 2], [0, 2, 3], [0, 3, 4], [0, 4, 1], [5, 6, 7]])
+    np.testing.assert_array_equal(weld_map(ring.astype(float), fan), [0, 1, 2, 3, 4, 0, 5, 6])
+    assert weld_map(ring.astype(float), fan, guarded=np.array([0])) is None
+    np.testing.assert_array_equal(
+        weld_map(ring.astype(float), fan, guarded=np.array([5])), [0, 1, 2, 3, 4, 0, 5, 6]
+    )
     # a triangle that loses a corner (a zero-area needle) does not stop the others' weld ...
     np.testing.assert_array_equal(weld_map(vertices, np.array([[0, 1, 3], [5, 4, 2]])), [0, 1, 2, 1, 3, 0])
     # ... but when every triangle would (positions that say nothing of the surface), nothing merges
@@ -81,12 +91,17 @@ def test_weld_map_groups_equal_rows_by_first_occurrence(rows, picks, seed):
     triangles = triangles.reshape(-1, 3)
     guarded = np.flatnonzero(rng.random(len(vertices)) < 0.3)
     split = weld_map(vertices, triangles, guarded=guarded)
-    # plain reference: number rows by first occurrence (-0.0 == 0.0 as dict keys); a guarded corner of a
-    # triangle that would lose a corner so alone
+    # plain reference: number rows by first occurrence (-0.0 == 0.0 as dict keys); a guarded vertex alone
+    # unless it is on a boundary (an edge of one triangle) and on no triangle that would lose a corner
     index: dict = {}
     plain = [index.setdefault(tuple(p), len(index)) for p in vertices]
     losing = {int(v) for t in triangles if len({plain[u] for u in t}) < 3 for v in t}
-    alone = losing & set(guarded.tolist())
+    uses: dict = {}
+    for t in triangles.tolist():
+        for e in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0])):
+            uses[frozenset(e)] = uses.get(frozenset(e), 0) + 1
+    rim = {v for e, k in uses.items() if k == 1 for v in e}
+    alone = {int(v) for v in guarded if v in losing or v not in rim}
     index = {}
     keys = [("alone", i) if i in alone else tuple(p) for i, p in enumerate(vertices)]
     expected = np.array([index.setdefault(key, len(index)) for key in keys])

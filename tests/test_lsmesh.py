@@ -198,6 +198,22 @@ def test_reconstruct_equals_a_dense_least_squares_solve():
     assert np.abs(soft - full).max() < 1e-2 * np.ptp(V)
 
 
+def test_reconstruct_ignores_placeholder_positions_of_lone_unknown_vertices():
+    # unknown vertices given one placeholder position, some of them alone among known neighbours: the
+    # result is the one with the true positions (they merged into one vertex before)
+    mesh = o3d.geometry.TriangleMesh.create_sphere(resolution=20)
+    V = np.asarray(mesh.vertices)
+    equator = np.flatnonzero(np.abs(V[:, 2]) < 0.1)
+    lone = equator[[0, 7, 14]]  # no two of them on a triangle, none near the cap
+    region = np.concatenate([np.flatnonzero(V[:, 2] > 0.8), lone])
+    blank = o3d.geometry.TriangleMesh(mesh)
+    np.asarray(blank.vertices)[region] = 0.0
+    expected = np.asarray(reconstruct_geometry(mesh, region).vertices)
+    np.testing.assert_array_equal(np.asarray(reconstruct_geometry(blank, region).vertices), expected)
+    # the lone ones stay three vertices, each near where it was
+    assert (np.linalg.norm(expected[lone] - V[lone], axis=1) < 0.2).all()
+
+
 def test_kinds_attributes_and_input_untouched(sphere):
     sphere.compute_vertex_normals()
     sphere.vertex_colors = o3d.utility.Vector3dVector(

@@ -13,6 +13,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from ..core.boundary import boundary_halfedges
 from ..core.errors import InputError, InputTypeError, O3DLSMeshWarning
 from ..core.validate import as_indices, collapsed_triangles, mesh_arrays
 from .io import has_textures, legacy_mesh, open3d
@@ -118,10 +119,11 @@ def weld_map(
 ) -> np.ndarray | None:
     """Map each vertex to the first vertex at exactly the same coordinates, ``(n,)`` int64, or None.
 
-    Vertices ``guarded`` (positions that may be placeholders, all equal: unknown ones) merge only where
-    no triangle then loses a corner: those among a losing triangle's corners each stay alone. None when
-    no two vertices merge, or when every triangle would lose a corner (positions that say nothing of the
-    surface). Welded vertices are numbered in order of first occurrence.
+    Vertices ``guarded`` (positions that may be placeholders, all equal: unknown ones) merge only as
+    copies on a cut (on a boundary of the unwelded mesh, as a seam the reader split leaves them) and
+    where no triangle then loses a corner; the others each stay alone. None when no two vertices merge,
+    or when every triangle would lose a corner (positions that say nothing of the surface). Welded
+    vertices are numbered in order of first occurrence.
     """
     n = len(vertices)
     if n == 0 or not _may_have_duplicates(vertices):
@@ -135,12 +137,14 @@ def weld_map(
     group[order] = np.cumsum(starts) - 1  # group of each vertex, groups in sorted order
     first = order[starts]  # first occurrence of each group
     collapsed = collapsed_triangles(group[triangles])
-    if guarded is not None and collapsed.any():
-        # those guarded corners each in a group of its own, the groups numbered again
-        alone, losing = np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
+    if guarded is not None and len(guarded):
+        # a guarded vertex inside the surface (a placeholder among known neighbours) or on a losing
+        # triangle stays alone, the groups numbered again
+        alone, cut = np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
         alone[guarded] = True
-        losing[triangles[collapsed].ravel()] = True
-        alone &= losing
+        cut[boundary_halfedges(triangles, n).ravel()] = True
+        cut[triangles[collapsed].ravel()] = False
+        alone &= ~cut
         _, first, group = np.unique(
             np.where(alone, n + np.arange(n), group), return_index=True, return_inverse=True
         )
