@@ -8,10 +8,10 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse import csgraph
 
-from ._o3d import read_mesh, weld_map
+from ._o3d import read_mesh, weld_map, welded_triangles
 from .core.boundary import boundary_curves, boundary_halfedges, boundary_rows, corner_fans
 from .core.connectivity import Connectivity
-from .core.validate import collapsed_triangles, mesh_arrays
+from .core.validate import mesh_arrays
 
 if TYPE_CHECKING:
     from ._types import AnyMesh
@@ -74,8 +74,9 @@ def _summary(vertices: np.ndarray, F: np.ndarray) -> dict:
     # coordinates close (fill_holes and the fairing functions work on that welded surface, without the
     # triangles that lose a corner so)
     split = weld_map(vertices, F)
-    welded = F if split is None else split[F][~collapsed_triangles(split[F])]
-    seam_edges = 0 if split is None else boundary_edges - len(boundary_halfedges(welded, n))
+    seam_edges = (
+        0 if split is None else boundary_edges - len(boundary_halfedges(welded_triangles(split, F)[0], n))
+    )
     # degenerate triangles: (near) zero area relative to the longest edge
     corners = vertices[F]
     sides = corners[:, [1, 2, 0]] - corners

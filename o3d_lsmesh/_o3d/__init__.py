@@ -26,6 +26,7 @@ __all__ = [
     "tensor_format_of",
     "warn_dropped_attributes",
     "weld_map",
+    "welded_triangles",
 ]
 
 
@@ -157,6 +158,15 @@ def weld_map(
     return rank[group]
 
 
+def welded_triangles(split: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    """The triangles on the welded vertices of ``split`` (:func:`weld_map`) without those that lose a
+    corner (zero-area needles: their neighbours meet across them; a result keeps them, their corners at
+    one welded position), and the source row of each, ``(m,)`` int64 (None when none is left out)."""
+    faces = split[triangles]
+    kept = ~collapsed_triangles(faces)
+    return (faces, None) if kept.all() else (faces[kept], np.flatnonzero(kept))
+
+
 def _kind(mesh: Any, *, name: str = "mesh") -> str:
     if isinstance(mesh, tuple) and len(mesh) == 2:
         return "arrays"
@@ -218,12 +228,8 @@ def read_mesh(
     if split is not None:
         welded = np.zeros((int(split.max()) + 1, 3))
         welded[split] = vertices  # duplicates hold the same coordinates: any writer gives the same row
-        # a triangle that loses a corner (a zero-area needle) is left out of the welded surface: its
-        # neighbours meet across it; the result keeps it, its corners at their one welded position
-        faces = split[triangles]
-        kept = ~collapsed_triangles(faces)
-        rows = None if kept.all() else np.flatnonzero(kept)
-        return MeshData(welded, faces if rows is None else faces[rows], source, kind, split, triangles, rows)
+        faces, rows = welded_triangles(split, triangles)
+        return MeshData(welded, faces, source, kind, split, triangles, rows)
     return MeshData(vertices, triangles, source, kind)
 
 
