@@ -324,6 +324,26 @@ def test_obj_outputs_name_their_material_and_texture_after_the_output_and_leave_
     assert [np.asarray(t).mean() for t in back.textures if not t.is_empty()] == [200]
 
 
+@pytest.mark.parametrize("suffix", [".ply", ".off"])
+def test_a_textured_input_written_where_the_format_cannot_hold_it_says_so(tmp_path, slow_op, suffix):
+    # the OBJ's UVs and texture cannot go into a .ply or .off output: the file's record names what was
+    # not written (it went without a word), as the single-file command line does
+    mesh = o3d.geometry.TriangleMesh.create_sphere(resolution=4)
+    mesh.triangle_uvs = o3d.utility.Vector2dVector(np.tile([[0.1, 0.2]], (3 * len(mesh.triangles), 1)))
+    mesh.textures = [o3d.geometry.Image(np.full((4, 4, 3), 200, np.uint8))]
+    mesh.triangle_material_ids = o3d.utility.IntVector([0] * len(mesh.triangles))
+    folder = tmp_path / "in"
+    folder.mkdir()
+    assert o3d.io.write_triangle_mesh(str(folder / "tex.obj"), mesh)
+    out = tmp_path / "out"
+    with pytest.warns(O3DLSMeshWarning, match="texture coordinates or textures"):
+        (record,) = batch.run(folder / "tex.obj", out, op=slow_op, suffix=suffix, workers=0, progress=False)
+    assert record["status"] == "ok" and sorted(record["files"]) == [f"tex{suffix}"]
+    (said,) = record["warnings"]
+    assert f"OUTPUT {str(out / f'tex{suffix}')!r}: the {suffix} output has no texture coordinates" in said
+    assert ".tmp" not in said  # the output's name, not the temporary one
+
+
 # --------------------------------------------------------------------------- acceptance fuzz (#40)
 
 _STEMS = ["..", ".", "...", "-x", "-", "a b", " ", "ü", "名前", "x", ".hidden", "_dot"]

@@ -44,9 +44,32 @@ TEMPORARY = re.compile(r"\..*\.[0-9a-f]{12}\.(tmp|old)(\.[^.]+)?")
 _GLOB_CHARACTERS = set("*?[")
 
 
-def _write_item(value: Any, path: Path) -> None:
-    """Write bytes, or a mesh file (an OBJ with its ``.mtl`` and textures; ``OSError`` if Open3D cannot)."""
-    path.write_bytes(value) if isinstance(value, (bytes, bytearray)) else write_mesh_file(value, path)
+class _Incomplete(OSError):
+    """Open3D wrote an OBJ but not its material and textures."""
+
+
+def _write_mesh(mesh: Any, path: Path, shown: str | os.PathLike) -> None:
+    """Write a mesh file (an OBJ with its ``.mtl`` and textures), with a warning naming ``shown`` when the
+    format cannot hold the mesh's UVs and textures; ``OSError`` if Open3D cannot write it all."""
+    suffix = path.suffix.lower()
+    lost = unwritten_attributes(mesh, suffix)
+    if lost:
+        keep = "write .obj to keep them" if suffix != ".obj" else "an OBJ holds textures only with UVs"
+        warnings.warn(
+            f"OUTPUT {str(shown)!r}: the {suffix} output has no {lost[0]}; the input's are not written ({keep})",
+            O3DLSMeshWarning,
+            stacklevel=3,
+        )
+    missing = write_mesh_file(mesh, path)
+    if missing:  # Open3D says it failed only in a native warning
+        raise _Incomplete(
+            f"wrote OUTPUT {str(shown)!r} but not its material and textures {', '.join(missing)}"
+        )
+
+
+def _write_item(value: Any, path: Path, shown: Path) -> None:
+    """Write bytes, or a mesh file as :func:`write_output` does (``shown``: its name in messages)."""
+    path.write_bytes(value) if isinstance(value, (bytes, bytearray)) else _write_mesh(value, path, shown)
 
 
 def digest(path: Path) -> dict:
@@ -82,7 +105,8 @@ def write_atomic(value: Any, final: Path, *, kind: str, suffix: str, root: Path)
         for name, item in value.items() if kind == "files" else [(final.name, value)]:
             # a bytes output's file name has its suffix
             mesh = kind == "files" and not isinstance(item, (bytes, bytearray))
-            _write_item(item, temporary / (name + suffix if mesh else name))
+            name = name + suffix if mesh else name
+            _write_item(item, temporary / name, final / name if kind == "files" else final)
         where = final if kind == "files" else final.parent
         base = Path(os.path.relpath(where, root))
         files = {(base / p.name).as_posix(): digest(p) for p in sorted(temporary.iterdir())}
@@ -249,18 +273,9 @@ def check_output(
 def write_output(path: str, mesh: Any) -> None:
     """Write a mesh; an OBJ with its ``.mtl`` and textures, other formats with a warning when they
     cannot hold the mesh's UVs and textures."""
-    suffix = Path(path).suffix.lower()
-    lost = unwritten_attributes(mesh, suffix)
-    if lost:
-        keep = "write .obj to keep them" if suffix != ".obj" else "an OBJ holds textures only with UVs"
-        warnings.warn(
-            f"OUTPUT {path!r}: the {suffix} output has no {lost[0]}; the input's are not written ({keep})",
-            O3DLSMeshWarning,
-            stacklevel=2,
-        )
     try:
-        missing = write_mesh_file(mesh, path)
+        _write_mesh(mesh, Path(path), path)
+    except _Incomplete as error:
+        raise CLIError(str(error)) from None
     except OSError:
         raise CLIError(f"could not write OUTPUT {path!r}") from None
-    if missing:  # Open3D says it failed only in a native warning
-        raise CLIError(f"wrote OUTPUT {path!r} but not its material and textures {', '.join(missing)}")
