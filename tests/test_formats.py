@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 o3d = pytest.importorskip("open3d")
 
 
-from conftest import welded_vertices  # noqa: E402
+from conftest import load_mesh, welded_vertices  # noqa: E402
 
 import o3d_lsmesh  # noqa: E402
 from o3d_lsmesh import O3DLSMeshWarning  # noqa: E402
@@ -189,6 +189,20 @@ def test_a_needle_on_a_seam_keeps_the_seam_and_its_corners_together(tmp_path):
             np.testing.assert_array_equal(out[0][group], np.repeat(out[0][group[:1]], len(group), axis=0))
     # the needle is no boundary: the welded sphere is closed, nothing to fill
     assert o3d_lsmesh.fill_holes((V2, T2), return_report=True)[1].holes == ()
+
+
+def test_a_marching_cubes_surface_keeps_its_seams_and_needles_together():
+    # the data folder's dragon: 2,100 duplicated vertices and 108 zero-area needles (marching cubes);
+    # the fairing keeps every group of coincident vertices at one position (45 groups tore apart when the
+    # needles' corners were kept apart, every one of them when one needle stopped the weld)
+    mesh = load_mesh("dragon.ply")
+    V = np.asarray(mesh.vertices)
+    groups = _coincident_groups(V)
+    assert len(groups) > 1000
+    out = np.asarray(o3d_lsmesh.constrained_fairing(mesh, 5).vertices)
+    assert np.abs(out - V).max() > 0
+    for group in groups:
+        np.testing.assert_array_equal(out[group], np.repeat(out[group[:1]], len(group), axis=0))
 
 
 def test_fairing_welded_equals_fairing_of_welded_mesh(tmp_path):
