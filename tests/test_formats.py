@@ -58,16 +58,15 @@ def test_weld_map_reference():
     np.testing.assert_array_equal(weld_map(vertices, needle, guarded=np.array([1])), [0, 1, 2, 3, 4, 0])
     np.testing.assert_array_equal(weld_map(vertices, needle, guarded=np.array([5])), [0, 1, 2, 1, 3, 0])
     np.testing.assert_array_equal(weld_map(vertices, triangles, guarded=np.array([1, 3])), split)
-    # a guarded vertex inside the surface (a placeholder among known neighbours) merges with nothing
+    # a guarded vertex whose merged vertex would be two fans (a placeholder among known neighbours, or
+    # on a far triangle) merges with nothing
     ring = np.array(
         [[0, 0, 0], [1, 0, 0], [0, 1, 0], [-1, 0, 0], [0, -1, 0], [0, 0, 0], [5, 0, 0], [5, 1, 0]]
     )
     fan = np.array([[0, 1, 2], [0, 2, 3], [0, 3, 4], [0, 4, 1], [5, 6, 7]])
     np.testing.assert_array_equal(weld_map(ring.astype(float), fan), [0, 1, 2, 3, 4, 0, 5, 6])
     assert weld_map(ring.astype(float), fan, guarded=np.array([0])) is None
-    np.testing.assert_array_equal(
-        weld_map(ring.astype(float), fan, guarded=np.array([5])), [0, 1, 2, 3, 4, 0, 5, 6]
-    )
+    assert weld_map(ring.astype(float), fan, guarded=np.array([5])) is None  # two fans far apart
     # a triangle that loses a corner (a zero-area needle) does not stop the others' weld ...
     np.testing.assert_array_equal(weld_map(vertices, np.array([[0, 1, 3], [5, 4, 2]])), [0, 1, 2, 1, 3, 0])
     # ... but when every triangle would (positions that say nothing of the surface), nothing merges
@@ -92,16 +91,29 @@ def test_weld_map_groups_equal_rows_by_first_occurrence(rows, picks, seed):
     guarded = np.flatnonzero(rng.random(len(vertices)) < 0.3)
     split = weld_map(vertices, triangles, guarded=guarded)
     # plain reference: number rows by first occurrence (-0.0 == 0.0 as dict keys); a guarded vertex alone
-    # unless it is on a boundary (an edge of one triangle) and on no triangle that would lose a corner
+    # where a triangle would lose a corner, or where its merged vertex is not one fan of the welded
+    # triangles (triangles around it linked across edges of exactly two triangles)
     index: dict = {}
     plain = [index.setdefault(tuple(p), len(index)) for p in vertices]
-    losing = {int(v) for t in triangles if len({plain[u] for u in t}) < 3 for v in t}
+    welded = [[plain[v] for v in t] for t in triangles.tolist()]
+    losing = {int(v) for t, w in zip(triangles, welded) if len(set(w)) < 3 for v in t}
+    kept = [w for w in welded if len(set(w)) == 3]
     uses: dict = {}
-    for t in triangles.tolist():
-        for e in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0])):
+    for w in kept:
+        for e in ((w[0], w[1]), (w[1], w[2]), (w[2], w[0])):
             uses[frozenset(e)] = uses.get(frozenset(e), 0) + 1
-    rim = {v for e, k in uses.items() if k == 1 for v in e}
-    alone = {int(v) for v in guarded if v in losing or v not in rim}
+
+    def fans(g):
+        around = [w for w in kept if g in w]
+        label = list(range(len(around)))
+        for i, a in enumerate(around):
+            for j in range(i):
+                shared = (set(a) & set(around[j])) - {g}  # edges (g, x) of both
+                if any(uses[frozenset((g, x))] == 2 for x in shared):
+                    label = [label[j] if x == label[i] else x for x in label]
+        return len(set(label))
+
+    alone = {int(v) for v in guarded if v in losing or fans(plain[v]) != 1}
     index = {}
     keys = [("alone", i) if i in alone else tuple(p) for i, p in enumerate(vertices)]
     expected = np.array([index.setdefault(key, len(index)) for key in keys])

@@ -13,7 +13,8 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from ..core.boundary import boundary_halfedges
+from ..core.boundary import corner_fans
+from ..core.connectivity import Connectivity
 from ..core.errors import InputError, InputTypeError, O3DLSMeshWarning
 from ..core.validate import as_indices, collapsed_triangles, mesh_arrays
 from .io import has_textures, legacy_mesh, open3d
@@ -120,9 +121,9 @@ def weld_map(
 ) -> np.ndarray | None:
     """Map each vertex to the first vertex at exactly the same coordinates, ``(n,)`` int64, or None.
 
-    Vertices ``guarded`` (positions that may be placeholders, all equal: unknown ones) merge only as
-    copies on a cut (on a boundary of the unwelded mesh, as a seam the reader split leaves them) and
-    where no triangle then loses a corner; the others each stay alone. None when no two vertices merge,
+    Vertices ``guarded`` (positions that may be placeholders, all equal: unknown ones) merge only into
+    one fan of the welded surface (copies matched across a cut, as a seam the reader split leaves them)
+    and where no triangle then loses a corner; the others each stay alone. None when no two vertices merge,
     or when every triangle would lose a corner (positions that say nothing of the surface). Welded
     vertices are numbered in order of first occurrence.
     """
@@ -139,13 +140,16 @@ def weld_map(
     first = order[starts]  # first occurrence of each group
     collapsed = collapsed_triangles(group[triangles])
     if guarded is not None and len(guarded):
-        # a guarded vertex inside the surface (a placeholder among known neighbours) or on a losing
-        # triangle stays alone, the groups numbered again
-        alone, cut = np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
-        alone[guarded] = True
-        cut[boundary_halfedges(triangles, n).ravel()] = True
-        cut[triangles[collapsed].ravel()] = False
-        alone &= ~cut
+        # guarded copies merge only into one fan of the welded surface (copies matched across a cut, as a
+        # seam's are) and where no triangle loses a corner: placeholders among known neighbours, or far
+        # apart on a rim, each stay alone; the groups numbered again
+        faces = group[triangles[~collapsed]]
+        count, fan = corner_fans(faces, n, Connectivity(faces, n).edge_structure.runs)
+        vertex_of_fan = np.zeros(count, dtype=np.int64)
+        vertex_of_fan[fan] = faces.T.reshape(-1)
+        alone = np.bincount(vertex_of_fan, minlength=n)[group] != 1
+        alone[triangles[collapsed].ravel()] = True
+        alone &= np.isin(np.arange(n), guarded)
         _, first, group = np.unique(
             np.where(alone, n + np.arange(n), group), return_index=True, return_inverse=True
         )

@@ -459,8 +459,8 @@ def reconstruct_geometry(
     """
     data = read_mesh(mesh)
     unknown = as_indices(unknown_vertex_indices, len(data.vertices), name="unknown_vertex_indices")
-    # the unknown vertices' positions may be placeholders (all equal): welded only as copies on a cut
-    # (a seam's; weld_map's guarded vertices)
+    # the unknown vertices' positions may be placeholders (all equal): welded only as copies matched
+    # across a cut (a seam's; weld_map's guarded vertices)
     data = read_mesh(data, weld=True, guarded=unknown)
     n = len(data.vertices)
     unknown = data.welded_indices(unknown, name="unknown_vertex_indices", merge=True)
