@@ -114,6 +114,25 @@ def test_fill_with_needles_before_the_hole_extends_the_attributes_of_the_right_t
     np.testing.assert_allclose(uvs[m:], _affine(W[F[m:]]), rtol=0, atol=1e-9)
 
 
+def test_attributes_that_do_not_match_the_triangles_are_named_when_dropped():
+    # Open3D's remove_triangles_by_index keeps every material id: 3 more ids than triangles, which
+    # Open3D then says the mesh has none of; a fill drops them with a warning (it went without a word)
+    mesh = o3d.geometry.TriangleMesh.create_sphere(resolution=12)
+    mesh.triangle_material_ids = o3d.utility.IntVector(list(range(len(mesh.triangles))))
+    mesh.remove_triangles_by_index([100, 101, 102])
+    assert len(mesh.triangle_material_ids) == len(mesh.triangles) + 3
+    with pytest.warns(o3d_lsmesh.O3DLSMeshWarning, match="triangle material ids do not match"):
+        out = o3d_lsmesh.fill_holes(mesh)
+    assert len(out.triangles) > len(mesh.triangles) and not out.has_triangle_material_ids()
+    # the same connectivity keeps them as given, without a warning
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        same = o3d_lsmesh.constrained_fairing(mesh)
+    np.testing.assert_array_equal(
+        np.asarray(same.triangle_material_ids), np.asarray(mesh.triangle_material_ids)
+    )
+
+
 def test_legacy_fill_without_new_vertices_keeps_uvs():
     V, T = _holed_box()
     mesh = _textured(V, T, np.zeros(len(T)))

@@ -329,6 +329,19 @@ def new_mesh(
     o3d = open3d()
     src = data.source
     if data.kind == "legacy":
+        stale = [  # present, but not one value per element: Open3D's has_*() says no
+            row.label
+            for row in ATTRIBUTES
+            if row.kind == "legacy" and row.follows in _PER_ELEMENT and len(getattr(src, row.key))
+            if not getattr(src, f"has_{row.key}")()
+        ]
+        if stale and not same_topology:
+            warnings.warn(
+                f"the input's {', '.join(stale)} do not match its vertices or triangles in number (Open3D's "
+                "remove_triangles_by_index leaves the material ids so) and were dropped",
+                O3DLSMeshWarning,
+                stacklevel=3,
+            )
         if same_topology:
             # Open3D's own copy of the source (one memcpy per attribute) with the new positions written
             # into it: faster at scan sizes than building the vectors from arrays
