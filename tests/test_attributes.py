@@ -131,6 +131,12 @@ def test_attributes_that_do_not_match_the_triangles_are_named_when_dropped():
     np.testing.assert_array_equal(
         np.asarray(same.triangle_material_ids), np.asarray(mesh.triangle_material_ids)
     )
+    # a tensor mesh's attribute of the wrong length likewise (it was extended: 3 rows too many)
+    tensor = o3d.t.geometry.TriangleMesh.from_legacy(mesh)
+    tensor.triangle["label"] = o3d.core.Tensor(np.arange(len(mesh.triangles) + 3, dtype=np.int32))
+    with pytest.warns(o3d_lsmesh.O3DLSMeshWarning, match="triangle attribute 'label' do not match"):
+        out = o3d_lsmesh.fill_holes(tensor)
+    assert "label" not in out.triangle and len(out.triangle.indices) > len(mesh.triangles)
 
 
 def test_legacy_fill_without_new_vertices_keeps_uvs():

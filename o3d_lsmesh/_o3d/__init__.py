@@ -278,6 +278,27 @@ def present_attributes(data: MeshData) -> list[tuple[Attribute, str]]:
     return []
 
 
+def _mismatched(data: MeshData) -> list[str]:
+    """The per-element attributes of ``data``'s source that are not one value per vertex or triangle (a
+    legacy mesh's ``has_*()`` says it has none), as named in warnings."""
+    src = data.source
+    if data.kind == "legacy":
+        return [
+            row.label
+            for row in ATTRIBUTES
+            if row.kind == "legacy" and row.follows in _PER_ELEMENT and len(getattr(src, row.key))
+            if not getattr(src, f"has_{row.key}")()
+        ]
+    if data.kind != "tensor":
+        return []
+    count = {"vertex": len(src.vertex.positions), "triangle": len(src.triangle.indices)}
+    return [
+        f"{row.label} {key!r}"
+        for row, key in present_attributes(data)
+        if row.follows in _PER_ELEMENT and len(getattr(src, row.group)[key]) != count[row.group]
+    ]
+
+
 def warn_dropped_attributes(
     data: MeshData, reason: str, *, stacklevel: int = 3, normals: bool = False
 ) -> None:
@@ -328,20 +349,21 @@ def new_mesh(
         return vertices.copy(), faces.copy()
     o3d = open3d()
     src = data.source
+    # per-element attributes not one value per element: kept as given with the same connectivity, else
+    # dropped with a warning (new connectivity's warning above names a tensor mesh's already)
+    stale = (
+        []
+        if same_topology
+        else [k for k in _mismatched(data) if data.kind == "legacy" or extension is not None]
+    )
+    if stale:
+        warnings.warn(
+            f"the input's {', '.join(stale)} do not match its vertices or triangles in number (Open3D's "
+            "remove_triangles_by_index leaves the material ids so) and were dropped",
+            O3DLSMeshWarning,
+            stacklevel=3,
+        )
     if data.kind == "legacy":
-        stale = [  # present, but not one value per element: Open3D's has_*() says no
-            row.label
-            for row in ATTRIBUTES
-            if row.kind == "legacy" and row.follows in _PER_ELEMENT and len(getattr(src, row.key))
-            if not getattr(src, f"has_{row.key}")()
-        ]
-        if stale and not same_topology:
-            warnings.warn(
-                f"the input's {', '.join(stale)} do not match its vertices or triangles in number (Open3D's "
-                "remove_triangles_by_index leaves the material ids so) and were dropped",
-                O3DLSMeshWarning,
-                stacklevel=3,
-            )
         if same_topology:
             # Open3D's own copy of the source (one memcpy per attribute) with the new positions written
             # into it: faster at scan sizes than building the vectors from arrays
@@ -379,6 +401,8 @@ def new_mesh(
         if row.follows == "normals":
             normals.add(row.group)
         elif row.follows not in _PER_ELEMENT or not (same_topology or extension is not None):
+            continue
+        elif f"{row.label} {key!r}" in stale:
             continue
         elif extension is None:
             target[key] = source[key].clone()
