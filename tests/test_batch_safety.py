@@ -302,9 +302,8 @@ def test_each_file_warnings_go_to_its_record_and_are_shown_with_its_name(tmp_pat
     ]
 
 
-def test_obj_outputs_name_their_material_and_texture_after_the_output_and_leave_no_temporary(
-    tmp_path, slow_op
-):
+def _textured_obj(tmp_path):
+    """A folder holding ``tex.obj`` (a small sphere, its UVs, one grey texture), and an output folder."""
     mesh = o3d.geometry.TriangleMesh.create_sphere(resolution=4)
     mesh.triangle_uvs = o3d.utility.Vector2dVector(np.tile([[0.1, 0.2]], (3 * len(mesh.triangles), 1)))
     mesh.textures = [o3d.geometry.Image(np.full((4, 4, 3), 200, np.uint8))]
@@ -312,7 +311,13 @@ def test_obj_outputs_name_their_material_and_texture_after_the_output_and_leave_
     folder = tmp_path / "in"
     folder.mkdir()
     assert o3d.io.write_triangle_mesh(str(folder / "tex.obj"), mesh)
-    out = tmp_path / "out"
+    return folder, tmp_path / "out"
+
+
+def test_obj_outputs_name_their_material_and_texture_after_the_output_and_leave_no_temporary(
+    tmp_path, slow_op
+):
+    folder, out = _textured_obj(tmp_path)
     (record,) = batch.run(folder / "tex.obj", out, op=slow_op, suffix=".obj", workers=0, progress=False)
     assert record["status"] == "ok"
     assert sorted(p.name for p in out.iterdir()) == ["tex.mtl", "tex.obj", "tex_0.png"]  # nothing hidden
@@ -328,14 +333,7 @@ def test_obj_outputs_name_their_material_and_texture_after_the_output_and_leave_
 def test_a_textured_input_written_where_the_format_cannot_hold_it_says_so(tmp_path, slow_op, suffix):
     # the OBJ's UVs and texture cannot go into a .ply or .off output: the file's record names what was
     # not written (it went without a word), as the single-file command line does
-    mesh = o3d.geometry.TriangleMesh.create_sphere(resolution=4)
-    mesh.triangle_uvs = o3d.utility.Vector2dVector(np.tile([[0.1, 0.2]], (3 * len(mesh.triangles), 1)))
-    mesh.textures = [o3d.geometry.Image(np.full((4, 4, 3), 200, np.uint8))]
-    mesh.triangle_material_ids = o3d.utility.IntVector([0] * len(mesh.triangles))
-    folder = tmp_path / "in"
-    folder.mkdir()
-    assert o3d.io.write_triangle_mesh(str(folder / "tex.obj"), mesh)
-    out = tmp_path / "out"
+    folder, out = _textured_obj(tmp_path)
     with pytest.warns(O3DLSMeshWarning, match="texture coordinates or textures"):
         (record,) = batch.run(folder / "tex.obj", out, op=slow_op, suffix=suffix, workers=0, progress=False)
     assert record["status"] == "ok" and sorted(record["files"]) == [f"tex{suffix}"]
