@@ -13,8 +13,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from ..core.boundary import corner_fans
-from ..core.connectivity import Connectivity
+from ..core.boundary import nonmanifold_vertices
 from ..core.errors import InputError, InputTypeError, O3DLSMeshWarning
 from ..core.validate import as_indices, collapsed_triangles, mesh_arrays
 from .io import has_textures, legacy_mesh, open3d
@@ -144,12 +143,14 @@ def weld_map(
         # seam's are) and where no triangle loses a corner: placeholders among known neighbours, or far
         # apart on a rim, each stay alone; the groups numbered again
         faces = group[triangles[~collapsed]]
-        count, fan = corner_fans(faces, n, Connectivity(faces, n).edge_structure.runs)
-        vertex_of_fan = np.zeros(count, dtype=np.int64)
-        vertex_of_fan[fan] = faces.T.reshape(-1)
-        alone = np.bincount(vertex_of_fan, minlength=n)[group] != 1
+        one_fan = np.zeros(n, dtype=bool)  # per group: its triangles are one fan
+        one_fan[faces.ravel()] = True
+        one_fan[nonmanifold_vertices(faces, n)] = False
+        alone = ~one_fan[group]
         alone[triangles[collapsed].ravel()] = True
-        alone &= np.isin(np.arange(n), guarded)
+        is_guarded = np.zeros(n, dtype=bool)
+        is_guarded[guarded] = True
+        alone &= is_guarded
         _, first, group = np.unique(
             np.where(alone, n + np.arange(n), group), return_index=True, return_inverse=True
         )
