@@ -155,6 +155,7 @@ cdef bint _pair_crosses(const double* V, const int64_t* T, int64_t ta, int64_t t
     """Whether triangles ``ta`` and ``tb`` meet anywhere but at the corners and edge they share (finite
     coordinates: boxes apart share no corner, so the box test comes first, for every pair)."""
     cdef double[9] P, Q, S
+    cdef double origin
     cdef int r, s, c, shared = 0, ra = 0, rb = 0
     cdef int[3] in_a, in_b
     for r in range(3):
@@ -166,6 +167,11 @@ cdef bint _pair_crosses(const double* V, const int64_t* T, int64_t ta, int64_t t
             _min(_min(Q[c], Q[3 + c]), Q[6 + c]) > _max(_max(P[c], P[3 + c]), P[6 + c])
         ):
             return False
+    for c in range(3):  # about P's first corner: the tests' tolerances follow the pair's size, not the
+        origin = P[c]  # distance to the origin (a scan in world coordinates); near points subtract exactly
+        for r in range(3):
+            P[3 * r + c] -= origin
+            Q[3 * r + c] -= origin
     for r in range(3):
         in_a[r], in_b[r] = 0, 0
     for r in range(3):

@@ -22,6 +22,8 @@ REPO = Path(__file__).resolve().parents[1]
 PACKAGE_HOME = str(Path(importlib.util.find_spec("o3d_lsmesh").origin).resolve().parents[1])
 DATA = Path(os.environ.get("O3D_LSMESH_DATA", REPO.parent / "shared" / "data" / "meshes"))
 SCANS = Path(os.environ.get("O3D_LSMESH_SCANS", REPO.parent / "shared" / "data" / "scans"))
+# a scan in world coordinates (UTM easting, northing, height in metres), where georeferenced scans lie
+WORLD = np.array([5.1e5, 4.2e6, 120.0])
 
 
 def welded_vertices(V) -> np.ndarray:

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import open3d as o3d
 import pytest
-from conftest import DATA, REPO, grid, load_mesh
+from conftest import DATA, REPO, WORLD, grid, load_mesh
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 from scipy.sparse import coo_matrix
@@ -397,6 +397,8 @@ def test_delaunay_triangles_of_coplanar_short_or_cospherical_loops_restrict_noth
     assert delaunay_triangles(sphere) is None
     moved = sphere + 0.01 * np.random.default_rng(0).normal(size=sphere.shape)
     assert delaunay_triangles(moved) is not None  # moved off the sphere: one
+    # the same triangles 4,200 km from the origin (Qhull and the circumsphere test about the centroid)
+    np.testing.assert_array_equal(delaunay_triangles(0.01 * moved + WORLD), delaunay_triangles(0.01 * moved))
 
 
 def test_dynamic_programme_avoids_existing_edges():
@@ -680,6 +682,23 @@ def test_rigid_motion_equivariance():
     b = fill_holes_arrays(Vh @ rotation.T + shift, Th)
     np.testing.assert_array_equal(a.triangles, b.triangles)
     np.testing.assert_allclose(b.vertices, a.vertices @ rotation.T + shift, atol=1e-9)
+
+
+def test_a_mesh_in_world_coordinates_fills_as_at_the_origin():
+    # a 10 cm sphere 4,200 km from the origin: the crossing test's tolerances followed the coordinates'
+    # size (every pair of 1 cm triangles "crossed", no hole was filled), and the patch's solve lost the
+    # digits the distance takes
+    V, T = icosphere(3)
+    Vh, Th, _ = cut_disk(V, T, 5, 0.5)
+    # bumped: the regular sphere's exact ties (equal angles, cospherical points) go either way at the
+    # 1e-7 relative precision that 4.2e6 leaves a 10 cm sphere
+    Vh = 0.1 * Vh * (1.0 + 0.02 * np.random.default_rng(0).random((len(Vh), 1)))
+    a = fill_holes_arrays(Vh, Th)
+    b = fill_holes_arrays(Vh + WORLD, Th)
+    assert len(a.triangles) > len(Th)
+    np.testing.assert_array_equal(a.triangles, b.triangles)
+    # the positions to the precision of coordinates of 4.2e6 (an ulp 9.3e-10) times the solve's condition
+    np.testing.assert_allclose(b.vertices - WORLD, a.vertices, atol=1e-7)
 
 
 def test_closed_result_has_positive_volume_and_no_boundary():

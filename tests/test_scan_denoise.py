@@ -11,7 +11,7 @@ import numpy as np
 import open3d as o3d
 import pytest
 import scipy.sparse as sp
-from conftest import DATA, REPO, SCANS, grid
+from conftest import DATA, REPO, SCANS, WORLD, grid
 from numpy.testing import assert_allclose
 
 from o3d_lsmesh.core.boundary import boundary_halfedges
@@ -454,6 +454,9 @@ def test_measured_noise_against_loops_the_added_noise_and_the_curvature(rng, mon
         assert detail == pytest.approx(h / 2.0, rel=0.35)
     moved = 17.0 * V @ np.linalg.qr(rng.normal(size=(3, 3)))[0].T + [1.0, 2.0, 3.0]
     assert measured_noise(moved, F) == pytest.approx(measured_noise(V, F), rel=1e-7)
+    # a 10 cm sphere in world coordinates: the sums of squares lost every digit of the noise there
+    noisy = 0.1 * (V + rng.normal(0, 0.2 * h, V.shape))
+    assert measured_noise(noisy + WORLD, F) == pytest.approx(measured_noise(noisy, F), rel=1e-5)
 
 
 def test_scan_likeness_tells_a_range_scan_from_independent_noise(rng):
@@ -493,6 +496,14 @@ def test_rigid_motion_and_scale_equivariance_of_the_measured_weights(rng):
         constrained_fairing_arrays(moved, F, None, method=None),
         40.0 * out @ q.T + [2.0, -1.0, 500.0],
         atol=1e-9 * 500,
+    )
+    # 10 cm across in world coordinates: the noise's sums of squares lost their digits there
+    far = scan_parameters(0.1 * V + WORLD, F)
+    assert dataclasses.astuple(far) == pytest.approx(
+        dataclasses.astuple(scan_parameters(0.1 * V, F)), rel=1e-5
+    )
+    assert_allclose(
+        constrained_fairing_arrays(0.1 * V + WORLD, F, None, method=None) - WORLD, 0.1 * out, atol=1e-8
     )
 
 

@@ -125,6 +125,9 @@ def measured_noise(
         mean = (ring @ vertices) / d1[:, None]
     # whole rows, not a boolean selection of each (n, 3) array
     smooth = np.where(referenced[:, None], vertices + (mean - vertices), vertices)
+    # about the centroid: the mean squared distances are formed from sums of squares, whose round-off
+    # grows with the distance to the origin (a scan in world coordinates)
+    smooth -= (referenced @ smooth) / max(int(referenced.sum()), 1)  # a product: no selected copy
     smooth_square = np.einsum("ij,ij->i", smooth, smooth)
     inner_rows = np.flatnonzero(inner)
     inner_rows = inner_rows[:: -(-len(inner_rows) // NOISE_ROWS)]

@@ -26,12 +26,15 @@ def _fair(x: np.ndarray, tris: np.ndarray, unknown: np.ndarray, rings: list, lev
     block whose system is not finite is left NaN.
     """
     dense = len(unknown) <= core_tuning.DENSE_UNKNOWNS
-    normal, rhs = patch_system(x, tris, unknown, rings, level, cotangent=cot, dense=dense)
+    # about the local mesh's centroid: the normal equations' round-off grows with the coordinates' size
+    # (a mesh in world coordinates), not only with the patch's
+    centre = x.mean(axis=0)  # the unknowns are rows of x: never empty
+    normal, rhs = patch_system(x - centre, tris, unknown, rings, level, cotangent=cot, dense=dense)
     if dense and np.isfinite(normal).all() and np.isfinite(rhs).all():
-        return solve_spd(normal, rhs)
+        return solve_spd(normal, rhs) + centre
     # the blocks (patches, and patches sharing rings) with a non-finite entry are left NaN, for the
     # caller to fall back on those patches alone
-    return solve_spd(sp.csr_matrix(normal), rhs, isolate_nonfinite=True)
+    return solve_spd(sp.csr_matrix(normal), rhs, isolate_nonfinite=True) + centre
 
 
 def moves_little(x: np.ndarray, again: np.ndarray, new_tris: np.ndarray) -> bool:

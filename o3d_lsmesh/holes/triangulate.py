@@ -26,7 +26,9 @@ def delaunay_triangles(points: np.ndarray) -> np.ndarray | None:
     k = len(points)
     if k < 5:
         return None
-    points = np.ascontiguousarray(points, dtype=np.float64)
+    points = np.asarray(points, dtype=np.float64)
+    # about the centroid: Qhull's and the circumsphere test's round-off follow the coordinates' size
+    points = np.ascontiguousarray(points - points.mean(axis=0))
     try:
         tets = Delaunay(points).simplices.astype(np.int64)
     except (QhullError, ValueError):
