@@ -11,9 +11,10 @@ import numpy as np
 
 
 class _TriangleIndex:
-    """Bounding spheres (about the centroids) of a mesh's triangles in two uniform grids (radius at most 4
-    times the median, and the rest; docs page) by the compiled :func:`o3d_lsmesh._patch_kernel.triangle_grids`,
-    for :func:`o3d_lsmesh._patch_kernel.patch_crossings` (thread-safe queries; the grids pickle)."""
+    """Bounding spheres (about the centroids) of a mesh's triangles in three uniform grids (radius at most
+    1.5 and 4 times the median, and the rest; docs page) by the compiled
+    :func:`o3d_lsmesh._patch_kernel.triangle_grids`, for :func:`o3d_lsmesh._patch_kernel.patch_crossings`
+    (thread-safe queries; the grids pickle)."""
 
     def __init__(self, vertices: np.ndarray, triangles: np.ndarray) -> None:
         from .._patch_kernel import triangle_grids  # compiled: imported where used
