@@ -124,7 +124,9 @@ def _unit_scale(vertices: np.ndarray) -> np.ndarray:
 def signed_volume(mesh: AnyMesh) -> float:
     """Signed volume enclosed by the mesh (divergence theorem); positive when wound outward.
 
-    Computed at unit size and scaled back, so that no coordinate overflows or underflows the triple products.
+    Computed about the centre of the mesh's bounding box at unit size and scaled back, so that no
+    coordinate overflows or underflows the triple products and a mesh far from the origin (in world
+    coordinates) keeps its digits; an open mesh's value depends on that centre.
 
     >>> import open3d as o3d
     >>> signed_volume(o3d.geometry.TriangleMesh.create_box(2.0, 1.0, 1.0))
@@ -135,9 +137,11 @@ def signed_volume(mesh: AnyMesh) -> float:
 
 
 def _volume(vertices: np.ndarray, triangles: np.ndarray) -> float:
-    top = float(np.abs(vertices).max()) or 1.0
-    c = vertices[triangles] / top
-    return float(np.einsum("ij,ij->i", c[:, 0], np.cross(c[:, 1], c[:, 2])).sum() / 6.0) * top**3
+    if not len(triangles):
+        return 0.0
+    centre, half = common_frame(vertices[triangles].reshape(-1, 3))
+    c = (vertices[triangles] - centre) / half
+    return float(np.einsum("ij,ij->i", c[:, 0], np.cross(c[:, 1], c[:, 2])).sum() / 6.0) * half**3
 
 
 #: Vertices within this many edges of the boundary are the rim of :func:`shape_change`.
