@@ -465,8 +465,9 @@ def refine(points, sigma, triangles, fixed_pairs, owner, double alpha, int64_t m
 
 def loop_geometry(loop_, const int64_t[::1] rows, vertices_, const int64_t[:, ::1] triangles,
                   const int64_t[::1] indptr, const int64_t[::1] data):
-    """A loop's points ``(k, 3)``, the unit normals of the mesh triangles on its edges ``(k, 3)``, its chords
-    that are mesh edges ``(k, k)`` bool, its mean edge length, and those chords as pairs ``(c, 2)``."""
+    """A loop's points ``(k, 3)``, the unit normals of the mesh triangles on its edges ``(k, 3)``, its mean
+    edge length, and its chords that are mesh edges as pairs ``(c, 2)`` (``p < q``, sorted): no ``(k, k)``
+    matrix, whose size a silhouette of tens of thousands of edges would square."""
     cdef const int64_t[::1] loop = loop_
     cdef const double[:, ::1] vertices = vertices_
     cdef int64_t k = loop.shape[0], n = vertices.shape[0], m = triangles.shape[0], p, q, r, lo, w
@@ -479,9 +480,10 @@ def loop_geometry(loop_, const int64_t[::1] rows, vertices_, const int64_t[:, ::
     by_vertex_ = np.argsort(loop_, kind="stable")  # the loop sorted by vertex, ties by position
     sorted_, points_ = loop_[by_vertex_], np.asarray(vertices_)[loop_]
     outer_ = np.empty((k, 3))
-    chords_ = np.zeros((k, k), dtype=np.uint8)
-    cdef int64_t[::1] by_vertex = by_vertex_, ordered = sorted_
-    cdef uint8_t[:, ::1] out = chords_
+    # each chord once per triangle at each end: at most three keys p k + q per triangle at a loop vertex
+    keys_ = np.empty(3 * sum(indptr[loop[p] + 1] - indptr[loop[p]] for p in range(k)), dtype=np.int64)
+    cdef int64_t[::1] by_vertex = by_vertex_, ordered = sorted_, keys = keys_
+    cdef int64_t count = 0
     cdef double[:, ::1] points = points_, outer = outer_
     cdef double[3] u
     cdef double norm, spacing = 0.0
@@ -503,11 +505,9 @@ def loop_geometry(loop_, const int64_t[::1] rows, vertices_, const int64_t[:, ::
                     lo = _lower(&ordered[0], k, w, 1)
                     if lo < k and ordered[lo] == w and w != loop[p]:
                         q = by_vertex[lo]
-                        out[p, q] = 1
-                        out[q, p] = 1
-        for p in range(k):  # the loop's own edges
-            q = (p + 1) % k
-            out[p, q] = 0
-            out[q, p] = 0
+                        if q != (p + 1) % k and p != (q + 1) % k:  # not one of the loop's own edges
+                            keys[count] = min(p, q) * k + max(p, q)
+                            count += 1
     spacing = spacing / k if k else 0.0
-    return points_, outer_, chords_.view(bool), spacing, np.argwhere(np.triu(chords_))
+    chords = np.unique(keys_[:count])
+    return points_, outer_, spacing, np.stack([chords // max(k, 1), chords % max(k, 1)], axis=1)

@@ -55,23 +55,25 @@ def refine_budget(points: np.ndarray, triangles: np.ndarray, sigma: np.ndarray) 
 
 
 def _triangulate(
-    points: np.ndarray, outer_normals: np.ndarray, forbidden: np.ndarray | None, spacing: float
+    points: np.ndarray, outer_normals: np.ndarray, forbidden: np.ndarray, spacing: float
 ) -> tuple[np.ndarray, np.ndarray]:
     """Triangulate a loop, splitting it by chords while it is longer than :data:`DP_MAX_EDGES`.
 
-    Returns the extra points (on the chords) and triangles over the loop's indices ``[0, k)`` followed
-    by the extra points'.
+    ``forbidden``: the chords that are mesh edges, ``(c, 2)`` loop indices ``p < q``. Returns the extra
+    points (on the chords) and triangles over the loop's indices ``[0, k)`` followed by the extra points'.
     """
     from .._triangulation_kernel import minimum_weight_triangulation  # compiled: imported where used
 
     k = len(points)
     if k <= DP_MAX_EDGES:
+        matrix = None
+        if len(forbidden):  # the programme reads a (k, k) matrix: at most DP_MAX_EDGES squared
+            matrix = np.zeros((k, k), dtype=np.uint8)
+            matrix[forbidden[:, 0], forbidden[:, 1]] = matrix[forbidden[:, 1], forbidden[:, 0]] = 1
         return np.zeros((0, 3)), minimum_weight_triangulation(
-            points,
-            outer_normals,
-            None if forbidden is None or not forbidden.any() else forbidden.view(np.uint8),
-            delaunay_triangles(points),
+            points, outer_normals, matrix, delaunay_triangles(points)
         )
+    keys = np.sort(forbidden[:, 0] * k + forbidden[:, 1])
     # the shortest chord between vertices 1/3 to 2/3 of the loop apart, in chunks of rows
     best = (np.inf, 0, k // 2)
     gap = np.arange(k // 3, k - k // 3 + 1)[None, :]
@@ -79,8 +81,9 @@ def _triangulate(
         i = np.arange(start, min(k, start + 256))[:, None]
         j = (i + gap) % k
         dist = np.linalg.norm(points[i] - points[j], axis=-1)
-        if forbidden is not None:
-            dist = np.where(forbidden[i, j], np.inf, dist)
+        if len(keys):
+            key = np.minimum(i, j) * k + np.maximum(i, j)
+            dist = np.where(keys[np.minimum(np.searchsorted(keys, key), len(keys) - 1)] == key, np.inf, dist)
         r, c = divmod(int(np.argmin(dist)), dist.shape[1])
         if dist[r, c] < best[0]:
             best = (float(dist[r, c]), int(i[r, 0]), int(j[r, c]))
@@ -93,6 +96,7 @@ def _triangulate(
     e = k + np.arange(count)
     all_points = np.concatenate([points, chord])
     triangles, extra, offset = [], [chord], k + count
+    local = np.full(k + count, -1)  # each point's index in the piece being cut out
     for piece in (
         np.concatenate([np.arange(a, b + 1), e[::-1]]),
         np.concatenate([np.arange(b, k), np.arange(0, a + 1), e]),
@@ -102,12 +106,12 @@ def _triangulate(
         on_loop = (piece < k) & (nxt < k) & (nxt == (piece + 1) % k)
         loop_normals = np.zeros((len(piece), 3))
         loop_normals[on_loop] = outer_normals[piece[on_loop]]
-        sub_forbidden = None
-        if forbidden is not None:
-            sub_forbidden = np.zeros((len(piece), len(piece)), dtype=bool)
-            idx = np.flatnonzero(piece < k)
-            sub_forbidden[np.ix_(idx, idx)] = forbidden[np.ix_(piece[idx], piece[idx])]
-        sub_extra, sub_tris = _triangulate(all_points[piece], loop_normals, sub_forbidden, spacing)
+        # the forbidden chords with both ends in the piece, renumbered, each p < q again
+        local[:] = -1
+        local[piece] = np.arange(len(piece))
+        ends = local[forbidden]
+        ends = np.sort(ends[(ends >= 0).all(axis=1)], axis=1)
+        sub_extra, sub_tris = _triangulate(all_points[piece], loop_normals, ends, spacing)
         # the piece's local indices back: [0, len(piece)) -> piece, beyond -> its new extra points
         triangles.append(np.concatenate([piece, offset + np.arange(len(sub_extra))])[sub_tris])
         offset += len(sub_extra)
@@ -164,8 +168,8 @@ def triangulate_holes(filler: Any, holes: list, density: float, progress: bool) 
     ]
     piece_hole, piece_loop, piece_rows = zip(*pieces)
     count = len(piece_loop)
-    # each piece's points, the normals across its edges, its chords that are mesh edges, its spacing
-    piece_points, piece_outer, piece_forbidden, piece_spacing, piece_pairs = zip(
+    # each piece's points, the normals across its edges, its spacing and its chords that are mesh edges
+    piece_points, piece_outer, piece_spacing, piece_pairs = zip(
         *(
             loop_geometry(loop, rows, vertices, triangles, *filler.vertex_triangles)
             for loop, rows in zip(piece_loop, piece_rows)
@@ -173,10 +177,8 @@ def triangulate_holes(filler: Any, holes: list, density: float, progress: bool) 
     )
     piece_extra, piece_tris = [], []
     with Progress(progress, "filling holes").bar(count, unit="loop") as bar:
-        for points, outer, forbidden, spacing in zip(
-            piece_points, piece_outer, piece_forbidden, piece_spacing
-        ):
-            extra, tris = _triangulate(points, outer, forbidden, spacing / density if density > 0 else 0.0)
+        for points, outer, pairs, spacing in zip(piece_points, piece_outer, piece_pairs, piece_spacing):
+            extra, tris = _triangulate(points, outer, pairs, spacing / density if density > 0 else 0.0)
             piece_extra.append(extra)
             piece_tris.append(tris)
             bar.update(1)
