@@ -481,7 +481,8 @@ def loop_geometry(loop_, const int64_t[::1] rows, vertices_, const int64_t[:, ::
     sorted_, points_ = loop_[by_vertex_], np.asarray(vertices_)[loop_]
     outer_ = np.empty((k, 3))
     # each chord once per triangle at each end: at most three keys p k + q per triangle at a loop vertex
-    keys_ = np.empty(3 * sum(indptr[loop[p] + 1] - indptr[loop[p]] for p in range(k)), dtype=np.int64)
+    fan = np.asarray(indptr)[loop_ + 1] - np.asarray(indptr)[loop_]  # each loop vertex's triangles
+    keys_ = np.empty(3 * int(fan.sum()), dtype=np.int64)
     cdef int64_t[::1] by_vertex = by_vertex_, ordered = sorted_, keys = keys_
     cdef int64_t count = 0
     cdef double[:, ::1] points = points_, outer = outer_

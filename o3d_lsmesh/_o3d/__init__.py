@@ -279,13 +279,13 @@ def present_attributes(data: MeshData) -> list[tuple[Attribute, str]]:
     return []
 
 
-def _mismatched(data: MeshData) -> list[str]:
-    """The per-element attributes of ``data``'s source that are not one value per vertex or triangle (a
-    legacy mesh's ``has_*()`` says it has none), as named in warnings."""
+def _mismatched(data: MeshData) -> list[tuple[Attribute, str]]:
+    """The per-element attributes ``(row, key)`` of ``data``'s source that are not one value per vertex or
+    triangle (a legacy mesh's ``has_*()`` says it has none)."""
     src = data.source
     if data.kind == "legacy":
         return [
-            row.label
+            (row, row.key)
             for row in ATTRIBUTES
             if row.kind == "legacy" and row.follows in _PER_ELEMENT and len(getattr(src, row.key))
             if not getattr(src, f"has_{row.key}")()
@@ -294,7 +294,7 @@ def _mismatched(data: MeshData) -> list[str]:
         return []
     count = {"vertex": len(src.vertex.positions), "triangle": len(src.triangle.indices)}
     return [
-        f"{row.label} {key!r}"
+        (row, key)
         for row, key in present_attributes(data)
         if row.follows in _PER_ELEMENT and len(getattr(src, row.group)[key]) != count[row.group]
     ]
@@ -358,8 +358,9 @@ def new_mesh(
         else [k for k in _mismatched(data) if data.kind == "legacy" or extension is not None]
     )
     if stale:
+        named = [row.label if data.kind == "legacy" else f"{row.label} {key!r}" for row, key in stale]
         warnings.warn(
-            f"the input's {', '.join(stale)} do not match its vertices or triangles in number (Open3D's "
+            f"the input's {', '.join(named)} do not match its vertices or triangles in number (Open3D's "
             "remove_triangles_by_index leaves the material ids so) and were dropped",
             O3DLSMeshWarning,
             stacklevel=3,
@@ -403,7 +404,7 @@ def new_mesh(
             normals.add(row.group)
         elif row.follows not in _PER_ELEMENT or not (same_topology or extension is not None):
             continue
-        elif f"{row.label} {key!r}" in stale:
+        elif (row, key) in stale:
             continue
         elif extension is None:
             target[key] = source[key].clone()

@@ -139,8 +139,9 @@ def signed_volume(mesh: AnyMesh) -> float:
 def _volume(vertices: np.ndarray, triangles: np.ndarray) -> float:
     if not len(triangles):
         return 0.0
-    centre, half = common_frame(vertices[triangles].reshape(-1, 3))
-    c = (vertices[triangles] - centre) / half
+    corners = vertices[triangles]
+    centre, half = common_frame(corners.reshape(-1, 3))
+    c = (corners - centre) / half
     return float(np.einsum("ij,ij->i", c[:, 0], np.cross(c[:, 1], c[:, 2])).sum() / 6.0) * half**3
 
 
