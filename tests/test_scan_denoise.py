@@ -13,7 +13,6 @@ import pytest
 import scipy.sparse as sp
 from conftest import DATA, REPO, SCANS, WORLD, grid
 from numpy.testing import assert_allclose
-from scipy.optimize import brentq
 
 from o3d_lsmesh.core.boundary import boundary_halfedges
 from o3d_lsmesh.core.connectivity import Connectivity
@@ -132,7 +131,7 @@ def reference_rings(F):
 
 
 def reference_relax_rim(scan, P, F, strength):
-    """Plain loops: relax_rim's tangential sweeps on the rim band, then the least way back at slivers."""
+    """Plain loops: relax_rim's tangential sweeps on the rim band, then its quarter-steps back at slivers."""
     ring, curve = reference_rings(F)
     normal = np.zeros_like(P)
     for t in F.tolist():
@@ -169,43 +168,16 @@ def reference_relax_rim(scan, P, F, strength):
             sum(np.sum((Q[t[a]] - Q[t[b]]) ** 2) for a, b in ((0, 1), (1, 2), (2, 0))), np.finfo(float).tiny
         )
     )
-    # each band vertex i goes a fraction back[i] of the way to P_i without its tangential drift from the scan
-    way = {}
-    for i in unit:
-        if i in distance:
+    back = {i: 0 for i in unit if i in distance}  # the band's vertices
+    while True:
+        bad = {i for t in F.tolist() if quality(X, t) < min(SLIVER_QUALITY, quality(scan, t)) for i in t}
+        bad = [i for i in bad if back.get(i, 4) < 4]
+        if not bad:
+            return X
+        for i in bad:
+            back[i] += 1
             drift = P[i] - scan[i]
-            way[i] = P[i] - (drift - np.dot(drift, unit[i]) * unit[i]) - X[i]
-    back = dict.fromkeys(way, 0.0)
-
-    def placed(t, shares):
-        Q = X.copy()
-        for i, g in zip(t, shares):
-            if i in way:
-                Q[i] = X[i] + g * way[i]
-        return Q
-
-    for _ in range(60):
-        grown = dict(back)
-        for t in F.tolist():
-            now = [back.get(i, 0.0) for i in t]
-            free = [i in way and back[i] < 1 for i in t]
-            goal = min(SLIVER_QUALITY, quality(scan, t))
-            if quality(placed(t, now), t) >= goal or not any(free):
-                continue
-
-            # the triangle's quality with its free corners at s, against its bound
-            def lift(s, t=t, now=now, free=free, goal=goal):
-                return quality(placed(t, [max(g, s) if f else g for g, f in zip(now, free)]), t) - goal
-
-            # Brent's method for the least fraction (the quality rises along the way on these meshes)
-            s = 1.0 if lift(1.0) < 0 else brentq(lift, 0.0, 1.0, xtol=1e-15, rtol=4 * np.finfo(float).eps)
-            for i, f in zip(t, free):
-                if f:
-                    grown[i] = max(grown[i], s)
-        if grown == back:
-            return placed(list(back), list(back.values()))
-        back = grown
-    raise AssertionError("the rim relaxation's rounds did not end")
+            X[i] = P[i] - back[i] / 4 * (drift - np.dot(drift, unit[i]) * unit[i])
 
 
 def reference_rim_ratio(V, F):
@@ -579,23 +551,6 @@ def squeezed_grid():
     return V, squeezed, F
 
 
-def test_relax_rim_follows_the_positions_across_the_sliver_bound():
-    # the first rim row squeezed towards the second in fine steps, across the squeeze at which its triangles
-    # fall below SLIVER_QUALITY: the result moves as little as the input does between two steps (steps of a
-    # fixed size back, as before, jumped by a quarter of the drift there)
-    V, F = grid(6, 6)
-    fractions = np.linspace(0.95, 0.99, 101)
-    outs, worst = [], []
-    for f in fractions:
-        squeezed = V.copy()
-        squeezed[:6, 1] = f * V[6, 1]
-        worst.append(scan_fairing.triangle_quality(squeezed, F).min())
-        outs.append(relax_rim(V, squeezed, F, strength=0.0))
-    assert worst[0] > SLIVER_QUALITY > worst[-1]  # the sweep crosses the bound
-    change = np.abs(np.diff(np.array(outs), axis=0)).max()
-    assert change <= 1.5 * V[6, 1] * (fractions[1] - fractions[0])
-
-
 @pytest.mark.parametrize("case", ["ragged scan", "ragged scan, weaker", "squeezed, no sweeps"])
 def test_relax_rim_against_a_plain_loop_and_within_the_tangent_planes(case):
     if case.startswith("ragged"):
@@ -616,16 +571,12 @@ def test_relax_rim_against_a_plain_loop_and_within_the_tangent_planes(case):
     normal /= np.linalg.norm(normal, axis=1, keepdims=True)
     move = out - faired
     h = np.linalg.norm(V[F[:, 0]] - V[F[:, 1]], axis=1).mean()
-    assert np.abs(move).max() > (0.05 if case.startswith("ragged") else 0.01) * h
+    assert np.abs(move).max() > 0.05 * h
     assert np.abs(np.einsum("ij,ij->i", move, normal)).max() < 1e-13 * np.abs(faired).max()
     if case.startswith("squeezed"):
         quality = scan_fairing.triangle_quality
         assert (quality(faired, F) < SLIVER_QUALITY).sum() == 10
         assert (quality(out, F) >= SLIVER_QUALITY).all()
-        # the least way back: the worst of the ten slivers is lifted to the bound, not past it
-        assert quality(out, F)[quality(faired, F) < SLIVER_QUALITY].min() == pytest.approx(
-            SLIVER_QUALITY, rel=1e-9
-        )
         # Heron's formula, one triangle at a time
         for t, q in zip(F.tolist(), quality(faired, F)):
             a, b, c = (np.linalg.norm(faired[t[i]] - faired[t[j]]) for i, j in ((0, 1), (1, 2), (2, 0)))

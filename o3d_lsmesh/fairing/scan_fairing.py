@@ -265,12 +265,8 @@ def triangle_quality(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     >>> triangle_quality(np.array([[0.0, 0, 0], [1, 0, 0], [0.5, 0.75**0.5, 0]]), np.array([[0, 1, 2]])).round(12)
     array([1.])
     """
-    return _quality(*(vertices[triangles[:, k]] for k in range(3)))
-
-
-def _quality(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
-    """:func:`triangle_quality` of the triangles of corners ``a``, ``b``, ``c`` (each ``(k, 3)``)."""
-    ab, ac = b - a, c - a
+    a = vertices[triangles[:, 0]]
+    ab, ac = vertices[triangles[:, 1]] - a, vertices[triangles[:, 2]] - a
     twice_area = np.linalg.norm(np.cross(ab, ac), axis=1)
     bc = ac - ab
     squares = np.einsum("ij,ij->i", ab, ab) + np.einsum("ij,ij->i", ac, ac) + np.einsum("ij,ij->i", bc, bc)
@@ -335,44 +331,21 @@ def relax_rim(
     share, planes = 0.5 * strength / count[moved, None], normal[moved]
     for _ in range(RIM_RINGS):
         out[moved] += tangential(share * (neighbours @ out) - 0.5 * strength * out[moved], planes)
-    # where a triangle is still below min(SLIVER_QUALITY, its quality in the scan), its band vertices go
-    # back, a fraction g_i of the way from here to their solved place without its tangential drift from
-    # the scan; g_i the least that lifts each such triangle at it there, by bisection to the last bit,
-    # so that g and the result follow the positions continuously (steps of a fixed size flipped on the
-    # solve's round-off)
-    way = np.zeros_like(out)
-    way[rows] = positions[rows] - tangential(positions[rows] - scan[rows], rows) - out[rows]
-    back, candidates = np.zeros(n), np.arange(len(near))
-
-    def quality_at(start: np.ndarray, step: np.ndarray, shares: np.ndarray) -> np.ndarray:
-        placed = start + shares[..., None] * step  # (k, 3, 3) corners, (k, 3) fractions
-        return _quality(placed[:, 0], placed[:, 1], placed[:, 2])
-
-    steps = np.finfo(float).nmant  # bisection to the last bit of g
-    # g only grows, so the rounds end; past `steps` of them what is still below goes the whole way
-    for rounds_left in range(steps, -1, -1):
-        corners = near[candidates]
-        quality = triangle_quality(out + back[:, None] * way, corners)
-        low = np.flatnonzero(quality < SLIVER_QUALITY)
-        goal = np.minimum(SLIVER_QUALITY, triangle_quality(scan, corners[low]))
-        free = movable[corners[low]] & (back[corners[low]] < 1.0)
-        keep = (quality[low] < goal) & free.any(axis=1)
-        corners, goal, free = corners[low[keep]], goal[keep], free[keep]
+    # where a triangle still degenerates, its vertices give back their tangential drift from the scan, a
+    # quarter at a time (all of it at once was measured worse)
+    given_back = np.where(movable, 0, 4)
+    candidates = near
+    while True:
+        # only the triangles at a vertex moved in the last round can have changed
+        quality = triangle_quality(out, candidates)
+        low = candidates[quality < SLIVER_QUALITY]
+        corners = np.unique(low[quality[quality < SLIVER_QUALITY] < triangle_quality(scan, low)])
+        corners = corners[given_back[corners] < 4]
         if not len(corners):
-            break
-        start, step, shares = out[corners], way[corners], back[corners]
-        below, above = np.zeros(len(corners)), np.ones(len(corners))
-        for _ in range(steps if rounds_left else 0):
-            middle = 0.5 * (below + above)
-            lifted = (
-                quality_at(start, step, np.where(free, np.maximum(shares, middle[:, None]), shares)) >= goal
-            )
-            above, below = np.where(lifted, middle, above), np.where(lifted, below, middle)
-        # a triangle that the whole way back leaves below its bound takes all of it
-        whole = quality_at(start, step, np.where(free, 1.0, shares)) >= goal
-        least = np.broadcast_to(np.where(whole, above, 1.0)[:, None], free.shape)
-        before = back.copy()
-        np.maximum.at(back, corners[free], least[free])
-        # only the triangles at a vertex that went further can have changed
-        candidates = np.flatnonzero(at(back != before, near))
-    return out + back[:, None] * way
+            return out
+        given_back[corners] += 1
+        drift = tangential(positions[corners] - scan[corners], corners)
+        out[corners] = positions[corners] - 0.25 * given_back[corners, None] * drift
+        touched = np.zeros(n, dtype=bool)
+        touched[corners] = True
+        candidates = near[at(touched, near)]
