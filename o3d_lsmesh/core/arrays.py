@@ -11,6 +11,7 @@ __all__ = [
     "dequantize",
     "face_normals",
     "gather",
+    "in_sorted",
     "quantize",
     "run_heads",
 ]
@@ -28,6 +29,19 @@ def concatenated_ranges(starts: ArrayLike, counts: ArrayLike) -> np.ndarray:
     starts = np.broadcast_to(np.asarray(starts, dtype=np.int64), counts.shape)
     first = np.cumsum(counts) - counts  # where each range begins in the output
     return np.arange(int(counts.sum()), dtype=np.int64) + np.repeat(starts - first, counts)
+
+
+def in_sorted(sorted_values: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """``np.isin(values, sorted_values)`` for an ascending 1-D ``sorted_values``, by one binary search each
+    (no sort of either), boolean of ``values``' shape.
+
+    >>> in_sorted(np.array([2, 5, 9]), np.array([[5, 3], [9, 10]])).tolist()
+    [[True, False], [True, False]]
+    """
+    if not len(sorted_values):
+        return np.zeros(np.shape(values), dtype=bool)
+    found = np.minimum(np.searchsorted(sorted_values, values), len(sorted_values) - 1)
+    return sorted_values[found] == values
 
 
 def quantize(values: np.ndarray, lower: np.ndarray, upper: np.ndarray, bits: int) -> np.ndarray:

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from ..core.arrays import concatenated_ranges
+from ..core.arrays import concatenated_ranges, in_sorted
 from ..core.progress import Progress
 from .find import _cross
 from .tuning import ALPHA, COSPHERICAL, DP_MAX_EDGES
@@ -82,8 +82,7 @@ def _triangulate(
         j = (i + gap) % k
         dist = np.linalg.norm(points[i] - points[j], axis=-1)
         if len(keys):
-            key = np.minimum(i, j) * k + np.maximum(i, j)
-            dist = np.where(keys[np.minimum(np.searchsorted(keys, key), len(keys) - 1)] == key, np.inf, dist)
+            dist = np.where(in_sorted(keys, np.minimum(i, j) * k + np.maximum(i, j)), np.inf, dist)
         r, c = divmod(int(np.argmin(dist)), dist.shape[1])
         if dist[r, c] < best[0]:
             best = (float(dist[r, c]), int(i[r, 0]), int(j[r, c]))
