@@ -154,4 +154,9 @@ def topology_summary(mesh: AnyMesh) -> dict:
     (2, 1, 1, 0)
     """
     data = read_mesh(mesh)  # validated once
-    return _summary(data.vertices, data.triangles)
+    summary = _summary(data.vertices, data.triangles)
+    if data.split_triangles is not None:  # triangles repeating a vertex, left out of the analysis: degenerate
+        left_out = len(data.split_triangles) - len(data.triangles)
+        summary["triangles"] += left_out
+        summary["degenerate_triangles"] += left_out
+    return summary

@@ -117,3 +117,59 @@ def test_hierarchy_and_multiresolution_fairing_on_any_soup(soup):
         assert str(error).startswith(("mesh", "level")), error
         return
     assert np.array_equal(out[1], F) and np.isfinite(out[0]).all()
+
+
+def _sphere_with_a_hole():
+    import open3d as o3d
+
+    sphere = o3d.geometry.TriangleMesh.create_sphere(resolution=10)
+    V = np.asarray(sphere.vertices) + np.random.default_rng(3).normal(0.0, 0.01, (len(sphere.vertices), 3))
+    T = np.asarray(sphere.triangles).astype(np.int64)
+    T = T[V[T].mean(axis=1)[:, 2] < 0.8]  # a cap cut off: one hole
+    used, T = np.unique(T, return_inverse=True)
+    return V[used], T.reshape(-1, 3)
+
+
+_SAME_CONNECTIVITY = {
+    "default": lambda m: o3d_lsmesh.constrained_fairing(m),
+    "features": lambda m: o3d_lsmesh.constrained_fairing(m, method="features"),
+    "local": lambda m: o3d_lsmesh.constrained_fairing(m, 3, method="local"),
+    "boundary curves": lambda m: o3d_lsmesh.smooth_boundary_curves(m),
+    "ls_mesh": lambda m: o3d_lsmesh.ls_mesh(m, [0, 40, 80]),
+    "reconstruct": lambda m: o3d_lsmesh.reconstruct_geometry(m, np.arange(20, 40)),
+    "multiresolution": lambda m: o3d_lsmesh.multiresolution_fairing(m, 1),
+}
+
+
+@pytest.mark.parametrize("op", sorted(_SAME_CONNECTIVITY))
+def test_triangles_repeating_a_vertex_are_left_out_and_kept(op):
+    # a triangle repeating a vertex has no surface (a raw scan's, an STL soup's once merged): every operation
+    # gives what it gives without it, and a result of the same connectivity keeps it in place
+    V, T = _sphere_with_a_hole()
+    T2 = np.insert(T, [4, len(T)], [[3, 3, 7], [9, 20, 20]], axis=0)
+    without, with_them = _SAME_CONNECTIVITY[op]((V, T)), _SAME_CONNECTIVITY[op]((V, T2))
+    np.testing.assert_array_equal(with_them[0], without[0])
+    np.testing.assert_array_equal(with_them[1], T2)
+
+
+def test_triangles_repeating_a_vertex_in_hole_filling_the_hierarchy_and_the_summary():
+    V, T = _sphere_with_a_hole()
+    T2 = np.insert(T, [4, len(T)], [[3, 3, 7], [9, 20, 20]], axis=0)
+    (V1, F1), (V2, F2) = o3d_lsmesh.fill_holes((V, T)), o3d_lsmesh.fill_holes((V, T2))
+    np.testing.assert_array_equal(V2, V1)  # the same new vertices
+    np.testing.assert_array_equal(F2[: len(T2)], T2)  # the input's triangles first, in order
+    np.testing.assert_array_equal(F2[len(T2) :], F1[len(T) :])  # then the same new ones
+    h1, h2 = o3d_lsmesh.build_hierarchy((V, T)), o3d_lsmesh.build_hierarchy((V, T2))
+    for level in range(len(h1.triangles)):
+        for a, b in zip(h1.level_arrays(level), h2.level_arrays(level)):
+            np.testing.assert_array_equal(a, b)
+    s1, s2 = o3d_lsmesh.topology_summary((V, T)), o3d_lsmesh.topology_summary((V, T2))
+    assert (s2["triangles"], s2["degenerate_triangles"]) == (
+        s1["triangles"] + 2,
+        s1["degenerate_triangles"] + 2,
+    )
+    assert {k: v for k, v in s2.items() if "triangles" not in k} == {
+        k: v for k, v in s1.items() if "triangles" not in k
+    }
+    with pytest.raises(ValueError, match="mesh must have a triangle of three distinct vertices, got 2"):
+        o3d_lsmesh.constrained_fairing((V, np.array([[0, 0, 1], [2, 3, 3]])))

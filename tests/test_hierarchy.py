@@ -457,8 +457,10 @@ def _nonmanifold():
 
 def test_bad_input_raises():
     V, F = _noisy_sphere(8)
-    with pytest.raises(ValueError, match="three distinct vertices"):
-        build_hierarchy((V, np.vstack([F, [[0, 0, 1]]])))
+    with pytest.raises(ValueError, match="three distinct vertices"):  # the arrays' one check
+        build_hierarchy_arrays(V, np.vstack([F, [[0, 0, 1]]]))
+    with pytest.raises(ValueError, match="a triangle of three distinct vertices, got 1 triangles"):
+        build_hierarchy((V, np.array([[0, 0, 1]])))  # (a mesh's are left out: none is left)
     with pytest.raises(ValueError, match="vertices must be finite"):
         build_hierarchy((np.vstack([V, [[np.nan, 0, 0]]]), F))
     with pytest.raises(FutureWarning, match="workers is deprecated"):

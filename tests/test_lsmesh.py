@@ -304,8 +304,8 @@ def test_mesh_errors():
         ls_mesh((V, np.array([[0, 1, 9]])), [0])
     with pytest.raises(ValueError, match=r"triangle indices must lie in \[0, 9\)"):
         ls_mesh((V, np.array([[0, 1, -1]])), [0])
-    with pytest.raises(ValueError, match="three distinct vertices"):
-        ls_mesh((V, np.array([[0, 1, 1], [0, 1, 2]])), [0])
+    with pytest.raises(ValueError, match="a triangle of three distinct vertices, got 2 triangles"):
+        ls_mesh((V, np.array([[0, 1, 1], [0, 2, 2]])), [0])
     with pytest.raises(SingularSystemError, match="components"):
         # vertex 3 is unreferenced: a component of its own without a control vertex
         ls_mesh((V[:4], np.array([[0, 1, 2]])), [0])

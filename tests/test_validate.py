@@ -310,6 +310,8 @@ def test_mesh_arrays_is_the_one_check_of_array_functions_and_read_mesh():
             (fill_holes_arrays, (vertices, triangles)),
             (topology_summary_arrays, (vertices, triangles)),
         ):
+            if case == "repeat" and check is read_mesh:
+                continue  # a mesh's are left out (test_defect_soups); the array functions refuse them
             with pytest.raises((TypeError, ValueError)) as info:
                 check(*args)
             errors.append((type(info.value), str(info.value)))

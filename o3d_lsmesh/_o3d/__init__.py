@@ -74,9 +74,11 @@ class MeshData:
     source: Any
     kind: str  # "legacy", "tensor" or "arrays"
     split: np.ndarray | None = None  # (n_source,) int64 source vertex -> welded vertex
-    split_triangles: np.ndarray | None = None  # (m_source, 3) int64 the source's triangles, when welded
-    # (m,) int64 the source triangle of each of ``triangles``, when the weld collapsed some (zero-area
-    # needles, as marching cubes leaves them: two corners at one position) and they were left out
+    # (m_source, 3) int64 the source's triangles, when welded or when some were left out
+    split_triangles: np.ndarray | None = None
+    # (m,) int64 the source triangle of each of ``triangles``, when some were left out: those repeating a
+    # vertex, and those the weld collapsed (zero-area needles, as marching cubes leaves them: two corners
+    # at one position)
     rows: np.ndarray | None = None
 
     def welded_indices(self, indices: Any, *, name: str, merge: bool = False) -> np.ndarray:
@@ -199,10 +201,12 @@ def read_mesh(
 ) -> MeshData:
     """Copy ``mesh`` into ``(n,3) float64`` vertices and ``(m,3) int64`` triangles and validate them.
 
+    Triangles repeating a vertex (a raw scan's, an STL soup's once merged) have no surface: they are
+    left out of ``triangles`` and kept in a result of the same connectivity (:attr:`MeshData.rows`).
     ``weld=True`` merges vertices at equal coordinates (:func:`weld_map`) and leaves out the triangles
-    that lose a corner so (:attr:`MeshData.rows`; ``guarded``: :func:`weld_map`); ``narrow=True``: int32
-    triangles shared with a legacy source (read-only callers). A :class:`MeshData` is not checked
-    again (its positions are copied; welded if asked).
+    that lose a corner so (``guarded``: :func:`weld_map`); ``narrow=True``: int32 triangles shared with
+    a legacy source (read-only callers). A :class:`MeshData` is not checked again (its positions are
+    copied; welded if asked).
 
     Raises
     ------
@@ -214,8 +218,9 @@ def read_mesh(
     if isinstance(mesh, MeshData):  # read and validated once already (the application's pipeline)
         if not weld or mesh.split is not None:  # its own positions: callers may write to theirs
             return dataclasses.replace(mesh, vertices=mesh.vertices.copy())
-        vertices, triangles = mesh.vertices.copy(), mesh.triangles.astype(np.int64, copy=False)
-        source, kind = mesh.source, mesh.kind
+        vertices, source, kind = mesh.vertices.copy(), mesh.source, mesh.kind
+        triangles = mesh.triangles if mesh.split_triangles is None else mesh.split_triangles
+        triangles = triangles.astype(np.int64, copy=False)
     else:
         kind, source = _kind(mesh, name=name), mesh
         if kind == "legacy":
@@ -228,14 +233,25 @@ def read_mesh(
             raw_t = np.zeros((0, 3), np.int64) if indices is None else indices
         else:
             raw_v, raw_t = mesh
-        vertices, triangles = mesh_arrays(raw_v, raw_t, name=name, narrow=narrow)
-    split = weld_map(vertices, triangles, guarded=guarded) if weld else None
+        vertices, triangles = mesh_arrays(raw_v, raw_t, name=name, narrow=narrow, collapsed=True)
+    kept = ~collapsed_triangles(triangles)
+    if not kept.any():
+        raise InputError(
+            f"{name} must have a triangle of three distinct vertices, got {len(triangles)} triangles that "
+            "each repeat a vertex",
+            param=name,
+        )
+    rows = None if kept.all() else np.flatnonzero(kept)
+    faces = triangles if rows is None else triangles[rows]
+    split = weld_map(vertices, faces, guarded=guarded) if weld else None
     if split is not None:
         welded = np.zeros((int(split.max()) + 1, 3))
         welded[split] = vertices  # duplicates hold the same coordinates: any writer gives the same row
-        faces, rows = welded_triangles(split, triangles)
+        faces, left = welded_triangles(split, faces)
+        if left is not None:
+            rows = left if rows is None else rows[left]
         return MeshData(welded, faces, source, kind, split, triangles, rows)
-    return MeshData(vertices, triangles, source, kind)
+    return MeshData(vertices, faces, source, kind, None, None if rows is None else triangles, rows)
 
 
 def template(kind: str, tensor_format: tuple = ()) -> MeshData:
@@ -338,7 +354,7 @@ def new_mesh(
     elif same_topology:
         # a welded source: back to its split layout, every duplicate at its welded vertex's position
         vertices = data.source_positions(np.asarray(vertices, dtype=np.float64))
-        triangles = data.triangles if data.split is None else data.split_triangles
+        triangles = data.triangles if data.split_triangles is None else data.split_triangles
     else:
         warn_dropped_attributes(data, "the result has new connectivity", stacklevel=4)
     vertices = np.ascontiguousarray(vertices, dtype=np.float64)

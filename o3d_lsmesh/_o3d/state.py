@@ -73,7 +73,7 @@ def mesh_from_state(state: dict) -> MeshData:
     split, split_triangles, rows = state["split"], state["split_triangles"], state["rows"]
     # the source's own layout: a welded source's positions are its welded vertices' (they coincide)
     source_v = vertices if split is None else vertices[split]
-    source_t = triangles if split is None else split_triangles
+    source_t = triangles if split_triangles is None else split_triangles
     if kind == "arrays":
         return MeshData(vertices, triangles, (source_v, source_t), kind, split, split_triangles, rows)
     o3d = open3d()

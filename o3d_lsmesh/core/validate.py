@@ -82,13 +82,14 @@ def _describe(value: Any) -> str:
 
 
 def mesh_arrays(
-    vertices: Any, triangles: Any, *, name: str = "mesh", narrow: bool = False
+    vertices: Any, triangles: Any, *, name: str = "mesh", narrow: bool = False, collapsed: bool = False
 ) -> tuple[np.ndarray, np.ndarray]:
     """The one check of a mesh given as arrays: new ``(n, 3) float64`` vertices and ``(m, 3) int64`` triangles.
 
     Every array function and ``read_mesh`` go through it: :func:`as_vertex_array`,
     :func:`as_triangle_array`, then the checks below. The results are copies (``narrow=True``: the
-    triangles may be the given int32 array, for callers that only read them).
+    triangles may be the given int32 array, for callers that only read them). ``collapsed=True`` lets
+    triangles repeat a vertex (``read_mesh`` leaves them out of the computation).
 
     Raises
     ------
@@ -117,7 +118,7 @@ def mesh_arrays(
     if not (-COORDINATE_LIMIT <= smallest and largest <= COORDINATE_LIMIT):
         _check_coordinates(vertices, what=f"{name} vertices", row="vertex", param=name)
     repeated = collapsed_triangles(triangles)
-    if repeated.any():
+    if repeated.any() and not collapsed:
         row = int(np.flatnonzero(repeated)[0])
         raise InputError(
             f"{name} triangles must have three distinct vertices, got {triangles[row].tolist()} "
