@@ -97,6 +97,35 @@ def test_an_output_behind_a_symbolic_link_out_of_outdir_is_refused_per_file(tmp_
     assert "outside OUTDIR" in records["x.ply"]["error"] and list(elsewhere.iterdir()) == []
 
 
+def test_a_report_is_never_written_over_a_mesh(tmp_path):
+    # "--report scans/*.ply out": the shell makes the first match the report, which truncated that mesh
+    scans = [_sphere(tmp_path / "scans" / name) for name in ("a.ply", "b.ply")]
+    before = _tree(tmp_path / "scans")
+    for report in (scans[0], tmp_path / "notes" / "report.ply", scans[1]):
+        with pytest.raises(ValueError, match="report must name a file of its own") as info:
+            batch.run(scans[1:], tmp_path / "out", report=report, workers=0, progress=False)
+        assert info.value.param == "report"
+    assert _tree(tmp_path / "scans") == before and not (tmp_path / "out").exists()
+    # an output's name without a mesh suffix (encode writes .bin): refused before the run writes it
+    with pytest.raises(ValueError, match=r"a\.bin', the batch's input or output"):
+        batch.run(scans[0], tmp_path / "out", op="encode", report=tmp_path / "out" / "a.bin", workers=0)
+
+
+def test_two_names_of_one_file_each_write_their_output(tmp_path):
+    # a dataset split as links (two names, one file): each name is an input of its own, none dropped
+    source = _sphere(tmp_path / "data" / "scan.ply")
+    for name in ("train_0.ply", "test_0.ply"):
+        (tmp_path / "in").mkdir(exist_ok=True)
+        (tmp_path / "in" / name).symlink_to(source)
+    records = batch.run(tmp_path / "in", tmp_path / "out", workers=0, progress=False)
+    assert sorted(Path(r["output"]).name for r in records if r["status"] == "ok") == [
+        "test_0.ply",
+        "train_0.ply",
+    ]
+    # a path given twice (a folder and a file in it) is still one input
+    assert len(batch.run([tmp_path / "in", tmp_path / "in" / "test_0.ply"], tmp_path / "o2", workers=0)) == 2
+
+
 def test_outdir_inside_an_input_folder_and_leftover_temporaries_are_never_inputs(tmp_path):
     folder = tmp_path / "in"
     _sphere(folder / "a.ply")

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -563,3 +566,24 @@ def test_an_obj_with_uvs_is_written_with_its_material_and_textures(tmp_path):
     assert write_mesh_file(box, tmp_path / "box.obj") == []  # the .mtl and its image written beside it
     assert sorted(p.name for p in tmp_path.iterdir()) == ["box.mtl", "box.obj", "box_0.png"]
     assert len(read_mesh_file(str(tmp_path / "box.obj")).triangles) == 12
+
+
+@pytest.mark.skipif(
+    sys.platform != "linux", reason="a file-size limit (RLIMIT_FSIZE) stands in for a full disk"
+)
+def test_a_file_written_short_is_an_error_and_not_left(tmp_path):
+    # Open3D's writers ignore failed writes: under a 20 KiB limit (as on a full disk) they report a short file
+    # as written. The write reads it back: an OSError saying so, and no file left to be taken for the result
+    code = f"""
+import resource, open3d as o3d
+from o3d_lsmesh._o3d.io import write_mesh_file
+resource.setrlimit(resource.RLIMIT_FSIZE, (20 * 1024, 20 * 1024))
+sphere = o3d.geometry.TriangleMesh.create_sphere(resolution=40)  # about 100 KiB as binary PLY
+try:
+    write_mesh_file(sphere, {str(tmp_path / "out.ply")!r})
+except OSError as error:
+    print("OSError", error)
+"""
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert "Open3D wrote it short" in done.stdout, done.stdout + done.stderr
+    assert not (tmp_path / "out.ply").exists()

@@ -156,9 +156,13 @@ def read_mesh_file(path: str, *, what: str = "INPUT") -> Any:
     return mesh.remove_duplicated_vertices() if Path(path).suffix.lower() == ".stl" else mesh
 
 
+class ShortWrite(OSError):
+    """A mesh file that reads back with fewer triangles than were written (a full disk)."""
+
+
 def write_mesh_file(mesh: Any, path: str | os.PathLike) -> list[str]:
     """Write a mesh file (an OBJ with UVs with its ``.mtl`` and images: :func:`obj_writable`); ``OSError`` if
-    Open3D could not. Returns the names of the ``.mtl`` and images it did not write (said only natively)."""
+    Open3D could not (:class:`ShortWrite` if it wrote less than all). Returns the names of the ``.mtl`` and images it did not write (said only natively)."""
     o3d = quiet_open3d()
     path = Path(path)
     suffix = path.suffix.lower()
@@ -172,6 +176,17 @@ def write_mesh_file(mesh: Any, path: str | os.PathLike) -> list[str]:
         written = o3d.io.write_triangle_mesh(str(path), mesh)
     if not written or not path.exists() or path.stat().st_size == 0:
         raise OSError(f"Open3D could not write {str(path)!r}")
+    # Open3D's writers do not check their writes: a full disk or a file-size limit leaves a short file
+    # reported as written. Read back, it holds fewer triangles (or none)
+    with captured_native_output():
+        back = o3d.io.read_triangle_mesh(str(path))
+    count = len(mesh.triangles) if isinstance(mesh, o3d.geometry.TriangleMesh) else len(mesh.triangle.indices)
+    if len(back.triangles) != count:
+        path.unlink()  # not left to be taken for the result
+        raise ShortWrite(
+            f"Open3D wrote it short: it reads back with {len(back.triangles)} of {count} triangles (a full "
+            "disk or a file-size limit?)"
+        )
     if not textured:
         return []
     expected = [path.with_suffix(".mtl")]

@@ -15,7 +15,7 @@ from typing import Any, Callable
 from ..core.errors import InputError, InputTypeError, O3DLSMeshWarning
 from ..core.progress import Progress
 from ..core.validate import as_bool, as_choice, as_count, as_positive_float
-from .files import WRITABLE, collect_inputs, digest, inside, output_path, same_file
+from .files import READABLE, WRITABLE, collect_inputs, digest, inside, output_path, same_file
 from .ops import OPS, BatchOp, Option, register_op
 from .tasks import Task, check_scheduler_file, dispatch, failure_record, local_cluster
 
@@ -270,8 +270,9 @@ def run(
         if output is not None:
             if output in outputs:
                 raise InputError(
-                    f"INPUT files {outputs[output]!r} and {path!r} would both write {output!r}; "
-                    "pass their folder instead of a glob so that outputs keep the subfolders",
+                    f"INPUT files {outputs[output]!r} and {path!r} would both write {output!r} (outputs "
+                    "take an input's name below its folder, without its suffix): run them in two batches "
+                    "with two OUTDIRs, or pass one folder holding both so that outputs keep the subfolders",
                     param="inputs",
                 )
             outputs[output] = path
@@ -291,6 +292,18 @@ def run(
             records[task.index] = {**old, "status": "skipped"}
         else:
             todo.append(task)
+    if report is not None:  # a report written over a mesh (a slip of the shell: --report *.ply) loses it
+        name = os.fspath(report)
+        meshes = [path for path, _ in items] + list(outputs)
+        clash = [
+            path for path in meshes if os.path.abspath(name) == os.path.abspath(path) or same_file(name, path)
+        ]
+        if clash or Path(name).suffix.lower() in READABLE:
+            got = f"the batch's input or output {clash[0]!r}" if clash else "a mesh file's name"
+            raise InputError(
+                f"report must name a file of its own (JSON lines, e.g. report.jsonl), got {name!r}, {got}",
+                param="report",
+            )
     outdir.mkdir(parents=True, exist_ok=True)
     # the workers need the op functions, not the option parsers (closures only cloudpickle can send)
     shipped = [dataclasses.replace(o, options=()) for o in ops]

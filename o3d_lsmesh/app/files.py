@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from .._o3d import read_mesh
-from .._o3d.io import read_mesh_file, unwritten_attributes, write_mesh_file
+from .._o3d.io import ShortWrite, read_mesh_file, unwritten_attributes, write_mesh_file
 from ..core.errors import InputError, InputTypeError, O3DLSMeshWarning
 
 __all__ = [
@@ -157,7 +157,9 @@ def collect_inputs(
     def excluded(match: Any) -> bool:
         return skip is not None and (os.path.realpath(match) == skip or inside(match, skip))
 
-    found: dict[str, tuple[str, str]] = {}  # by real path: a path given twice is taken once
+    # by absolute path: a path given twice is taken once; links are names of their own (two names of one
+    # file, as dataset splits make them, each write their output)
+    found: dict[str, tuple[str, str]] = {}
     for item in inputs:
         if not isinstance(item, (str, os.PathLike)):
             raise InputTypeError(
@@ -187,7 +189,7 @@ def collect_inputs(
             else:
                 pairs = [(match, match.name)]
             for path, relative in pairs:
-                found.setdefault(os.path.realpath(path), (str(path), relative))
+                found.setdefault(os.path.abspath(path), (str(path), relative))
     if not found:
         raise InputError(
             f"INPUT must name at least one mesh file ({', '.join(READABLE)}), got none in {inputs!r}",
@@ -277,5 +279,7 @@ def write_output(path: str, mesh: Any) -> None:
         _write_mesh(mesh, Path(path), path)
     except _Incomplete as error:
         raise CLIError(str(error)) from None
+    except ShortWrite as error:
+        raise CLIError(f"could not write OUTPUT {path!r}: {error}") from None
     except OSError:
         raise CLIError(f"could not write OUTPUT {path!r}") from None
