@@ -347,17 +347,17 @@ def test_obj_writable_fills_or_drops_empty_texture_slots(tmp_path):
     assert obj_writable(full) is full  # nothing to fix
 
 
-def _write_text(path, text):
-    with open(path, "w") as handle:
-        return bool(handle.write(text))
-
-
 def test_textures_not_written_is_an_error(tmp_path, capsys, monkeypatch):
     V, T = _holed_box()
     mesh = _textured(V, T, np.zeros(len(T)))
     assert o3d.io.write_triangle_mesh(str(tmp_path / "in.obj"), mesh)
     # a writer that writes the OBJ alone (as Open3D does when it cannot write an image)
-    monkeypatch.setattr(o3d.io, "write_triangle_mesh", lambda path, mesh, **_: _write_text(path, "v 0 0 0\n"))
+    real = o3d.io.write_triangle_mesh
+
+    def geometry_alone(path, mesh, **_):
+        return real(path, o3d.geometry.TriangleMesh(mesh.vertices, mesh.triangles))
+
+    monkeypatch.setattr(o3d.io, "write_triangle_mesh", geometry_alone)
     capsys.readouterr()
     assert main(["fill", str(tmp_path / "in.obj"), str(tmp_path / "out.obj"), "--quiet"]) == 2
     err = capsys.readouterr().err
@@ -383,3 +383,35 @@ def test_unwritten_attributes_name_what_each_format_drops():
     assert unwritten_attributes(untextured_uvs, ".obj") == []
     assert unwritten_attributes(bare_texture, ".OBJ") == ["textures"]
     assert unwritten_attributes((V, T), ".ply") == []  # arrays hold no attributes
+
+
+def test_an_unknown_value_at_a_rim_is_unknown_inside_its_patch_alone():
+    # a NaN in a per-vertex attribute (a scan's missing confidence) at one hole's rim: that hole's new
+    # vertices get NaN in that column, every other value is what it is without the NaN (the fill ran)
+    sphere = o3d.geometry.TriangleMesh.create_sphere(resolution=16)
+    V, T = np.asarray(sphere.vertices), np.asarray(sphere.triangles)
+    centroids = V[T].mean(axis=1)
+    T = T[np.abs(centroids[:, 2]) < 0.85]  # two caps cut off: two holes
+    values = np.c_[V[:, 0], V[:, 1] + 2.0, V[:, 2]]
+    top = int(np.flatnonzero(np.abs(V[:, 2] - V[T][..., 2].max()) < 1e-12)[0])  # a vertex on the top rim
+
+    def filled(attribute):
+        mesh = o3d.t.geometry.TriangleMesh()
+        mesh.vertex.positions = o3d.core.Tensor(V)
+        mesh.triangle.indices = o3d.core.Tensor(T)
+        mesh.vertex["confidence"] = o3d.core.Tensor(attribute)
+        out = o3d_lsmesh.fill_holes(mesh)
+        return out.vertex.positions.numpy(), out.vertex["confidence"].numpy()
+
+    positions, want = filled(values)
+    unknown = values.copy()
+    unknown[top, 1] = np.nan
+    same_positions, got = filled(unknown)
+    np.testing.assert_array_equal(same_positions, positions)
+    new = np.arange(len(V), len(positions))
+    upper = new[positions[new, 2] > 0]
+    assert len(upper) and len(upper) < len(new)
+    assert np.isnan(got[upper, 1]).all()  # the top hole's new vertices: no value in that column
+    known = np.isfinite(got)
+    assert known.sum() == got.size - len(upper) - 1  # ... and nowhere else (the rim vertex's own NaN kept)
+    np.testing.assert_array_equal(got[known], want[known])

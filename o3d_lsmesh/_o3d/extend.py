@@ -83,14 +83,23 @@ class Appended:
         """Values ``(nw, k)`` of the welded vertices extended harmonically to the new ones, ``(p, k)``."""
         if self.inner is None:
             return np.zeros((0, values.shape[1]))
-        solution = solve_spd(self.normal, self.inner.T @ -(self.coupling @ values[self.around]))
-        return np.asarray(solution).reshape(-1, values.shape[1])
+        rim = values[self.around]
+        unknown = ~np.isfinite(rim)  # (a NaN at the rim: "no value", as a scan's missing confidence)
+        rhs = self.inner.T @ -(self.coupling @ np.where(unknown, 0.0, rim))
+        solution = np.asarray(solve_spd(self.normal, rhs)).reshape(-1, values.shape[1])
+        # a patch with an unknown value at its rim has none inside either (per column)
+        patch = self.patch[self.nw :]
+        for column in np.flatnonzero(unknown.any(axis=0)):
+            solution[np.isin(patch, self.patch[self.around[unknown[:, column]]]), column] = np.nan
+        return solution
 
     def per_vertex(self, values: np.ndarray) -> np.ndarray:
         """Per-vertex values ``(n_source, ...)`` followed by the new vertices' (clipped to the input's range;
         integers rounded)."""
         flat = values.reshape(len(values), -1)
-        extra = np.clip(self.harmonic(flat[self.copy].astype(np.float64)), flat.min(axis=0), flat.max(axis=0))
+        finite = np.isfinite(flat)
+        low, high = np.where(finite, flat, np.inf).min(axis=0), np.where(finite, flat, -np.inf).max(axis=0)
+        extra = np.clip(self.harmonic(flat[self.copy].astype(np.float64)), low, high)
         if not np.issubdtype(values.dtype, np.floating):
             extra = np.rint(extra)
         return np.concatenate([values, extra.reshape((-1,) + values.shape[1:]).astype(values.dtype)])
