@@ -169,12 +169,12 @@ cdef void _sweep(const index_t[::1] indptr, const index_t[::1] indices, const do
 
 
 cdef void _rows3(double[:, ::1] x, double[:, ::1] r, const double[:, ::1] p, const double[:, ::1] q,
-                 const double[::1] alpha, double[::1] sums, Py_ssize_t start, Py_ssize_t stop,
-                 bint step) noexcept nogil:
+                 const double[::1] alpha, const double[::1] w, double[::1] sums, Py_ssize_t start,
+                 Py_ssize_t stop, bint step) noexcept nogil:
     """Rows ``start:stop`` of three columns, summed in order: with ``step`` :func:`cg_step`'s update and
-    ``|r|^2``, else the dot products of ``p`` and ``q``."""
+    ``|w r|^2``, else the dot products of ``p`` and ``q``."""
     cdef Py_ssize_t i
-    cdef double s0 = 0.0, s1 = 0.0, s2 = 0.0
+    cdef double s0 = 0.0, s1 = 0.0, s2 = 0.0, t0, t1, t2
     if step:  # two loops: a test inside one costs the update twice its time
         for i in range(start, stop):
             x[i, 0] += alpha[0] * p[i, 0]
@@ -183,7 +183,8 @@ cdef void _rows3(double[:, ::1] x, double[:, ::1] r, const double[:, ::1] p, con
             r[i, 0] -= alpha[0] * q[i, 0]
             r[i, 1] -= alpha[1] * q[i, 1]
             r[i, 2] -= alpha[2] * q[i, 2]
-            s0, s1, s2 = s0 + r[i, 0] * r[i, 0], s1 + r[i, 1] * r[i, 1], s2 + r[i, 2] * r[i, 2]
+            t0, t1, t2 = w[i] * r[i, 0], w[i] * r[i, 1], w[i] * r[i, 2]
+            s0, s1, s2 = s0 + t0 * t0, s1 + t1 * t1, s2 + t2 * t2
     else:
         for i in range(start, stop):
             s0, s1, s2 = s0 + p[i, 0] * q[i, 0], s1 + p[i, 1] * q[i, 1], s2 + p[i, 2] * q[i, 2]
@@ -191,7 +192,7 @@ cdef void _rows3(double[:, ::1] x, double[:, ::1] r, const double[:, ::1] p, con
 
 
 cdef _column_sums(double[:, ::1] x, double[:, ::1] r, const double[:, ::1] p, const double[:, ::1] q,
-                  const double[::1] alpha, bint step):
+                  const double[::1] alpha, const double[::1] w, bint step):
     # cg_step (step) and column_dots in one pass: for three columns over blocks of PARALLEL_ROWS rows (side
     # by side on every core), then over the blocks in order, so that the sums do not depend on the threads
     cdef Py_ssize_t n = p.shape[0], k = p.shape[1], i, c, t
@@ -202,7 +203,8 @@ cdef _column_sums(double[:, ::1] x, double[:, ::1] r, const double[:, ::1] p, co
     with nogil:
         if k == 3:
             for t in prange(blocks, schedule="static", num_threads=_threads(n)):
-                _rows3(x, r, p, q, alpha, partial[t], t * PARALLEL_ROWS, min(n, (t + 1) * PARALLEL_ROWS), step)
+                _rows3(x, r, p, q, alpha, w, partial[t], t * PARALLEL_ROWS, min(n, (t + 1) * PARALLEL_ROWS),
+                       step)
             for t in range(blocks):
                 for c in range(3):
                     sums[c] += partial[t, c]
@@ -212,24 +214,24 @@ cdef _column_sums(double[:, ::1] x, double[:, ::1] r, const double[:, ::1] p, co
                     if step:
                         x[i, c] += alpha[c] * p[i, c]
                         r[i, c] -= alpha[c] * q[i, c]
-                        sums[c] += r[i, c] * r[i, c]
+                        sums[c] += (w[i] * r[i, c]) * (w[i] * r[i, c])
                     else:
                         sums[c] += p[i, c] * q[i, c]
     return sums_array
 
 
 def cg_step(double[:, ::1] x, double[:, ::1] r, const double[:, ::1] p, const double[:, ::1] q,
-            const double[::1] alpha):
+            const double[::1] alpha, const double[::1] w):
     """Conjugate gradients' update ``x += alpha p``, ``r -= alpha q`` (per column) in one pass; returns the
-    columns' ``|r|^2`` after it, ``(k,)``, summed as :func:`column_dots`'s."""
-    return _column_sums(x, r, p, q, alpha, True)
+    columns' ``|w r|^2`` after it (``w`` a weight per row), ``(k,)``, summed as :func:`column_dots`'s."""
+    return _column_sums(x, r, p, q, alpha, w, True)
 
 
 def column_dots(const double[:, ::1] a, const double[:, ::1] b):
     """``(k,)`` dot products of the columns of ``a`` and ``b`` (both ``(n, k)``): for three columns summed in
     order over blocks of :data:`PARALLEL_ROWS` rows, then over the blocks in order, so that the sums do not
     depend on the thread count."""
-    return _column_sums(None, None, a, b, None, False)
+    return _column_sums(None, None, a, b, None, None, False)
 
 
 def cg_direction(double[:, ::1] p, const double[:, ::1] z, const double[::1] beta):

@@ -88,18 +88,19 @@ def test_cg_sums_do_not_depend_on_the_thread_count():
     rng = np.random.default_rng(24)
     a, b, x, r = rng.standard_normal((4, 200_000, 3))
     alpha = np.array([0.3, -1.2, 2.0])
+    w = rng.random(200_000)
     results = []
     for limit in (1, 2):
         with threadpool_limits(limits=limit, user_api="openmp"):
             x1, r1 = x.copy(), r.copy()
             results.append(
-                (_block_kernel.column_dots(a, b), _block_kernel.cg_step(x1, r1, a, b, alpha), x1, r1)
+                (_block_kernel.column_dots(a, b), _block_kernel.cg_step(x1, r1, a, b, alpha, w), x1, r1)
             )
     assert all(np.array_equal(u, v) for u, v in zip(*results))
     dots, squares, x1, r1 = results[0]
     np.testing.assert_allclose(dots, np.einsum("ij,ij->j", a, b), rtol=1e-12)
     assert np.array_equal(x1, x + alpha * a) and np.array_equal(r1, r - alpha * b)
-    np.testing.assert_allclose(squares, np.einsum("ij,ij->j", r1, r1), rtol=1e-12)
+    np.testing.assert_allclose(squares, np.einsum("ij,ij->j", w[:, None] * r1, w[:, None] * r1), rtol=1e-12)
 
 
 @pytest.mark.parametrize("k", [1, 3, 5])
@@ -186,11 +187,11 @@ def test_gauss_seidel_rejects_more_than_sixteen_columns():
 def test_cg_step_is_the_numpy_update(n):
     rng = np.random.default_rng(2)
     x, r, p, q = (rng.standard_normal((n, 3)) for _ in range(4))
-    alpha = rng.standard_normal(3)
+    alpha, w = rng.standard_normal(3), rng.random(n)  # w: a weight per row
     x_want, r_want = x + alpha * p, r - alpha * q
-    squares = _block_kernel.cg_step(x, r, p, q, alpha)
+    squares = _block_kernel.cg_step(x, r, p, q, alpha, w)
     assert np.array_equal(x, x_want) and np.array_equal(r, r_want)
-    assert np.allclose(squares, (r_want**2).sum(axis=0), rtol=1e-12)
+    assert np.allclose(squares, ((w[:, None] * r_want) ** 2).sum(axis=0), rtol=1e-12)
 
 
 def test_aggregation_vcycle_is_pyamgs_smoothed_aggregation_vcycle():

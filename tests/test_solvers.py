@@ -484,3 +484,23 @@ def test_spd_solver_refuses_what_is_not_a_real_symmetric_matrix(backend):
         SPDSolver(A, backend=backend).solve(["a"] * A.shape[0])
     with pytest.raises(TypeError, match="C must be a sparse matrix or an array of real numbers, got str"):
         SPDSolver(A, backend=backend).update("x")
+
+
+@pytest.mark.parametrize("weight", [1.0, 1e2, 1e4, 1e6])
+def test_iterative_stop_is_not_met_by_heavy_rows_alone(weight):
+    # an LS mesh's system: L^T L + w^2 C^T C, started where the controls already are. Its heavy rows make
+    # ||b|| large and hold a residual of 0 there, so a plain ||r|| <= tol ||b|| stopped at the start (the
+    # mesh's own positions returned); the residual is weighed by the diagonal, as a step of each unknown
+    rng = np.random.default_rng(5)
+    path = sp.diags([-np.ones(19), 2 * np.ones(20), -np.ones(19)], [-1, 0, 1]).tolil()
+    path[0, 0] = path[-1, -1] = 1.0  # a path's Laplacian (free ends); a 20 x 20 grid's below
+    grid = sp.kron(path, sp.eye(20)) + sp.kron(sp.eye(20), path)
+    heavy = np.zeros(400)
+    heavy[[0, 137, 250, 399]] = weight**2
+    matrix = (grid.T @ grid + sp.diags(heavy)).tocsc()
+    start = rng.normal(size=(400, 3))
+    rhs = heavy[:, None] * start  # the controls' targets: where the start already holds them
+    want = spla.spsolve(matrix, rhs)
+    solver = SPDSolver(matrix, backend="iterative")
+    got = solver.solve(rhs, x0=start)
+    np.testing.assert_allclose(got, want, atol=1e-6 * np.abs(want).max())

@@ -245,8 +245,10 @@ def block_cg(
 ) -> tuple[np.ndarray, int, float]:
     """Preconditioned conjugate gradients on every column of ``b`` at once (one sparse product per step).
 
-    Column ``j`` stops when ``||r_j|| <= max(tol ||b_j||, reduction ||r_j^0||)``. Returns the solution,
-    the iteration count and the largest relative residual.
+    Column ``j`` stops when ``||D^-1 r_j|| <= max(tol ||D^-1 b_j||, reduction ||D^-1 r_j^0||)``, ``D`` the
+    diagonal of ``matrix``: each row's residual as the step it asks of its unknown (Jacobi's), so that rows
+    of large weight (an LS mesh's heavy controls) do not drown the others, which a plain ``||b||`` lets
+    pass at the start. Returns the solution, the iteration count and the largest relative residual.
     """
     from .._block_kernel import block_product, cg_direction, cg_step, column_dots, empty_small_pages
 
@@ -260,15 +262,21 @@ def block_cg(
         return out
 
     X = block(0.0 if x0 is None else np.reshape(x0, B.shape))
-    # column norms by the kernel's one pass (numpy's axis-0 norm strides over the block per column)
-    norms = np.sqrt(column_dots(B, B))
+    diagonal = matrix.diagonal()
+    weight = 1.0 / np.where(diagonal > 0, diagonal, 1.0)  # (a diagonal not positive fails below)
+
+    def norm(block: np.ndarray) -> np.ndarray:  # the columns' ||D^-1 .||, by the kernel's one pass
+        weighted = np.ascontiguousarray(block * weight[:, None])
+        return np.sqrt(column_dots(weighted, weighted))
+
+    norms = norm(B)
     scale = np.where(norms > 0, norms, 1.0)
     parts = csr_parts(matrix)
     R = block(B)
     start = norms
     if x0 is not None:
         block_product(*parts, X, R, -1.0, B)  # B - A X in one pass
-        start = np.sqrt(column_dots(R, R))
+        start = norm(R)
         # a start farther from the solution than zero (e.g. controls moved far from the mesh) is dropped
         worse = start > norms
         if worse.any():
@@ -308,7 +316,7 @@ def block_cg(
                     "curvature"
                 )
             alpha = np.where(active, rz / np.where(active, pq, 1.0), 0.0)
-            relative = np.sqrt(cg_step(X, R, P, Q, alpha)) / scale  # one pass, no temporaries
+            relative = np.sqrt(cg_step(X, R, P, Q, alpha, weight)) / scale  # one pass, no temporaries
             relative[norms == 0] = 0.0
             iteration += 1
             bar.reached(float((relative / limit).max()), f"residual={relative.max():.2e}, {iteration} it")

@@ -112,7 +112,8 @@ class SPDSolver:
     lower : bool
         ``matrix`` holds only its lower triangle.
     tol : float
-        Relative residual ``||b - A x|| / ||b||`` per column at which the iterative path stops.
+        Relative residual ``||D^-1 (b - A x)|| / ||D^-1 b||`` per column (``D`` the diagonal of ``A``) at
+        which the iterative path stops.
     max_iterations : int
         Conjugate-gradient iterations before :class:`ConvergenceError`.
     progress : bool
