@@ -248,6 +248,7 @@ def test_options_raise(error, message, kwargs):
         (TypeError, "angle must be a number", dict(angle="sharp")),
         (ValueError, "passes must be >= 0", dict(passes=-2)),
         (TypeError, "passes must be an integer", dict(passes=1.5)),
+        (ValueError, "passes must be <= 10000, got 1000000000000", dict(passes=10**12)),  # not a hang
     ],
 )
 def test_detect_creases_raises(error, message, kwargs):

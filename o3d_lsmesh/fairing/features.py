@@ -20,7 +20,7 @@ from ..core.arrays import face_normals, kernel_index
 from ..core.connectivity import Connectivity, FaceAdjacency
 from ..core.errors import InputError
 from ..core.progress import Progress
-from ..core.validate import as_count, as_positive_float, mesh_arrays
+from ..core.validate import as_iterations, as_positive_float, mesh_arrays
 from .scan_fairing import relax_rim, scan_denoise
 from .scan_measure import measured_noise
 from .tuning import (
@@ -319,7 +319,7 @@ def _angle(angle: object) -> float:
 
 def _creases(vertices: np.ndarray, triangles: np.ndarray, angle: float, passes: object) -> np.ndarray:
     # checked arrays and angle in, the crease edges out
-    passes = None if passes is None else as_count(passes, name="passes")
+    passes = None if passes is None else as_iterations(passes, name="passes")
     conn = Connectivity(triangles, len(vertices))
     normals = face_normals(feature_denoise(vertices, triangles, passes=passes, conn=conn), triangles)[0]
     adjacency = conn.face_adjacency

@@ -196,7 +196,10 @@ def _parse(data: Any, mesh_data: MeshData) -> tuple[np.ndarray, np.ndarray, floa
     vertex_count = len(mesh_data.vertices)
     if vertex_count != n:
         raise InputError(
-            f"mesh must have the {n} vertices the stream was encoded for, got {vertex_count}", param="mesh"
+            f"mesh must have the {n} vertices the stream was encoded for, got {vertex_count} (vertices at "
+            "equal positions count once, as when encoding: a mesh split at UV seams needs its own positions "
+            "there, or the welded mesh)",
+            param="mesh",
         )
     if connectivity_checksum(mesh_data.triangles, n) != edges_crc:
         raise InputError(
@@ -229,7 +232,8 @@ def decode_geometry(mesh: MeshT, data: Any, *, anchors: int | None = None, progr
     Parameters
     ----------
     mesh : open3d.geometry.TriangleMesh, open3d.t.geometry.TriangleMesh or (vertices, triangles)
-        Supplies the connectivity; its positions are ignored.
+        Supplies the connectivity; its positions serve only to merge vertices at equal positions, as
+        :func:`encode_geometry` did (a mesh split at UV seams: give it its own positions there).
     data : bytes
         A stream of :func:`encode_geometry` for this connectivity.
     anchors, progress
