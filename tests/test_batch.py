@@ -524,14 +524,13 @@ def test_fail_fast_stops_at_the_first_failure(data, tmp_path):
 
 @pytest.mark.parametrize("option", [{"mu": 0.5}, {"reimpose_every": 2}, {"fixed_boundary": True}])
 def test_denoise_at_a_level_refuses_what_multiresolution_fairing_does_not_take(data, tmp_path, option):
-    # the command line refuses these flags beside --level; a batch must not drop them without a word
-    (record,) = batch.run(
-        data.mixed[:1], tmp_path / "out", options={"level": 1, **option}, workers=0, progress=False
-    )
-    name = next(iter(option))
-    assert record["status"] == "failed" and record["stage"] == "denoise"
-    assert f"{name} cannot be combined with level" in record["error"] and "got level 1" in record["error"]
-    assert not any((tmp_path / "out").glob("*.ply"))
+    # the command line refuses these flags beside --level; a batch must not drop them without a word,
+    # and refuses them as the command does: before any file is read
+    with pytest.raises(ValueError, match=r"cannot be combined with level=1") as info:
+        batch.run(data.mixed[:1], tmp_path / "out", options={"level": 1, **option}, workers=0, progress=False)
+    name, value = next(iter(option.items()))
+    assert f"{name}={value!r}" in str(info.value) and info.value.param == "level"
+    assert not (tmp_path / "out").exists()
 
 
 def test_other_ops_and_a_pipeline_match_the_library(data, tmp_path):

@@ -410,10 +410,22 @@ def test_unreadable_and_empty_meshes(tmp_path, capsys, clean):
         (["demo", "--resolution", "5"], "--resolution: must be a grid size of at least 20 rays, got '5'"),
         (["demo", "--noise", "-1"], "--noise: must be a non-negative finite number, got '-1'"),
         (["demo", "--noise", "nan"], "--noise: must be a non-negative finite number, got 'nan'"),
-        (["denoise", "{src}", "{out}", "--level", "2", "--mu", "1"], "--mu cannot be combined with --level"),
+        (
+            ["denoise", "{src}", "{out}", "--level", "2", "--mu", "1"],
+            "--mu 1.0 cannot be combined with --level 2",
+        ),
+        # batch refuses what the command refuses, in its flags, before a worker starts or a file is read
+        (
+            ["batch", "{src}", "{out}", "--op", "denoise", "--fixed-boundary", "--workers", "0"],
+            "--fixed-boundary cannot be used with --method auto (the default): its boundary moves",
+        ),
+        (
+            ["batch", "{src}", "{out}", "--op", "compare", "--workers", "0"],
+            "--reference is required by op compare",
+        ),
         (
             ["denoise", "{src}", "{out}", "--level", "2", "--reimpose-every", "2", "--fixed-boundary"],
-            "--reimpose-every, --fixed-boundary cannot be combined with --level",
+            "--reimpose-every 2, --fixed-boundary cannot be combined with --level 2",
         ),
         (
             ["denoise", "{src}", "{out}", "--iterations", "1", "--method", "global", "--reimpose-every", "2"],
@@ -806,7 +818,7 @@ def test_top_level_help_states_the_start_up_cost_and_points_to_batch(capsys):
     [
         (
             ["denoise", "{src}", "{out}", "--fixed-boundary"],
-            "--fixed-boundary cannot be used with --method auto, the default",
+            "--fixed-boundary cannot be used with --method auto (the default)",
         ),
         (
             ["denoise", "{src}", "{out}", "--method", "local", "--mu", "2"],
@@ -868,7 +880,7 @@ def test_denoise_level_passes_or_refuses_every_option(tmp_path, capsys, noisy):
     source = _write(noisy, tmp_path / "noisy.ply")
     for option in (["--mu", "0.5"], ["--reimpose-every", "2"], ["--fixed-boundary"]):
         line = run_error(capsys, ["denoise", str(source), str(tmp_path / "o.ply"), "--level", "1", *option])
-        assert f"{option[0]} cannot be combined with --level" in line
+        assert f"{' '.join(option)} cannot be combined with --level 1" in line
     # the options it does take change the result
     a = run_json(
         capsys, ["denoise", str(source), str(tmp_path / "a.ply"), "--level", "1", "--iterations", "1"]

@@ -231,6 +231,9 @@ def run(
     ops = parse_ops(op)
     pipeline = ",".join(o.name for o in ops)
     values = resolve_options(ops, options)
+    for checked, given in zip(ops, values):  # before any worker starts or file is read
+        if checked.check is not None:
+            checked.check(given)
 
     suffix = as_choice(suffix.lower() if isinstance(suffix, str) else suffix, WRITABLE, name="suffix")
     threads_per_worker = as_count(threads_per_worker, name="threads_per_worker", minimum=1)

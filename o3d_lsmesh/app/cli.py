@@ -14,6 +14,7 @@ import textwrap
 import traceback
 import warnings
 from collections.abc import Sequence
+from functools import partial
 from importlib.metadata import PackageNotFoundError, version
 from typing import Any
 
@@ -45,13 +46,14 @@ def user_message(error: InputError, args: argparse.Namespace | None) -> str:
     The flag replaces the parameter leading the message (``"<param> must ..."``), or prefixes it; a
     parameter with an underscore (no English word has one) is its flag wherever the message names it,
     unless a switch's (it may mean the negation). An option quoted with one of its choices
-    (``method='local'``) reads ``--method local``.
+    (``method='local'``) or with the value given (``level=2``) reads ``--method local``, ``--level 2``.
     """
     text, param = str(error), error.param
-    for name, spelled in getattr(args, "flags", {}).items():
-        option = _option(args, name)
-        for value in getattr(getattr(option, "parse", None), "choices", None) or ():
-            text = text.replace(f"{name}={value!r}", f"{spelled} {value}")
+    spellings = {option.name: option.cli_flag for option in _options(args)} | getattr(args, "flags", {})
+    for name, spelled in spellings.items():
+        # name=value (a Python literal): the flag and the value as typed; a switch's True: the flag alone
+        found = re.compile(rf"\b{re.escape(name)}=(True\b|'[^']*'|[-+.\w]+)")
+        text = found.sub(partial(_as_typed, spelled), text)
     if param:
         word = _spell(param, args)
         option = _option(args, param)
@@ -64,9 +66,19 @@ def user_message(error: InputError, args: argparse.Namespace | None) -> str:
     return text
 
 
+def _as_typed(flag: str, found: re.Match) -> str:
+    return flag if found[1] == "True" else f"{flag} {found[1].strip(chr(39))}"
+
+
+def _options(args: argparse.Namespace | None) -> list[Option]:
+    """The options of the command's operation (batch: of its ``--op``'s)."""
+    command = getattr(args, "command", None) or ""
+    names = str(getattr(args, "op", "") or "") if command == "batch" else command
+    return [o for name in names.split(",") if name.strip() in OPS for o in OPS[name.strip()].options]
+
+
 def _option(args: argparse.Namespace | None, param: str) -> Option | None:
-    op = OPS.get(getattr(args, "command", None) or "")
-    return next((o for o in op.options if o.api_param == param), None) if op else None
+    return next((o for o in _options(args) if param in (o.api_param, o.name)), None)
 
 
 def fail(text: str, code: int) -> int:

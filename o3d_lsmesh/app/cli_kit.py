@@ -162,16 +162,25 @@ def draw(
 def run_op(name: str, mesh: Any, args: argparse.Namespace, run: Run) -> tuple[Any, dict, float]:
     """Run the operation ``name`` on ``mesh`` with the command line's options; the result, metrics, seconds."""
     context = TaskContext(args.input, args.input, None, progress=run.progress)
-    options = {option.name: getattr(args, option.name, option.default) for option in OPS[name].options}
     start = time.perf_counter()
-    out, metrics = OPS[name].function(mesh, options, context)
+    out, metrics = OPS[name].function(mesh, op_options(name, args), context)
     return out, metrics, time.perf_counter() - start
+
+
+def op_options(name: str, args: argparse.Namespace) -> dict:
+    """The options of the operation ``name`` from the command line, checked as batch checks them."""
+    op = OPS[name]
+    options = {option.name: getattr(args, option.name, option.default) for option in op.options}
+    if op.check is not None:
+        op.check(options)
+    return options
 
 
 def run_file_op(name: str, args: argparse.Namespace, run: Run, *extra: Any) -> tuple[Any, Any, dict, float]:
     """The flow of an op's subcommand: check OUTPUT and the ``extra`` ``(path, suffixes)`` outputs, read
     INPUT, run the op, write its mesh or bytes; the input, the output, the metrics and the seconds."""
     kind = OPS[name].output
+    op_options(name, args)  # before anything is read or written
     check_output(args.output, [args.input], force=args.force, suffixes=None if kind == "bytes" else WRITABLE)
     for path, suffixes in extra:
         if path:

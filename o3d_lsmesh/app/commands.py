@@ -18,7 +18,6 @@ import numpy as np
 
 from .._o3d import read_mesh
 from ..core.validate import as_indices
-from ..fairing.constrained import resolved_options
 from ..holes import find_holes
 from ..lsmesh import reconstruct_geometry
 from ..lsmesh.encoding import decode_geometry
@@ -28,7 +27,7 @@ from .cli_kit import Run, draw, run_file_op, run_op, shape_change_text
 from .demo import run_demo
 from .files import CLIError, check_output, read_input, write_output
 from .metrics import shape_change, surface_distance, topology_summary, triangle_angles, vertex_error
-from .ops import RUN_FLAGS, level_conflicts, normal_change
+from .ops import RUN_FLAGS, normal_change
 
 __all__ = ["parse_index_spec"]
 
@@ -43,19 +42,6 @@ def denoise(args: argparse.Namespace, run: Run) -> int:
 
     example: scan.ply smooth.ply --iterations 20 --render before_after.png
     """
-    given = ["--" + name.replace("_", "-") for name in level_conflicts(vars(args))]
-    if given:  # before the mesh is read (denoise_op refuses them too, for batch)
-        raise CLIError(
-            f"{', '.join(given)} cannot be combined with --level (multiresolution fairing does not take "
-            f"{'them' if len(given) > 1 else 'it'}), got --level {args.level}"
-        )
-    method = resolved_options(args.method, args.iterations, args.reimpose_every)[0]
-    if not args.level and args.fixed_boundary and method in ("scan", "auto"):
-        raise CLIError(
-            f"--fixed-boundary cannot be used with --method {method}"
-            f"{', the default' if args.method is None else ''} (its boundary moves with the surface): add "
-            "--method local or --method global"
-        )
     mesh, out, report, seconds = run_file_op("denoise", args, run, (args.render, (".png",)))
     report["seconds"] = seconds
     run.say(

@@ -171,6 +171,8 @@ class BatchOp:
     output: str = "mesh"
     extension: str = ""
     help: str = ""
+    # refuses a combination of parsed options before any file is read (the command and batch alike)
+    check: Callable[[dict], None] | None = None
 
     def __post_init__(self) -> None:
         as_choice(self.output, ("mesh", "bytes", "files", "none"), name="output")
@@ -327,19 +329,35 @@ def level_conflicts(options: Any) -> list[str]:
     return [name for name in NOT_WITH_LEVEL if options[name] not in (None, False)] if options["level"] else []
 
 
+def _denoise_check(options: dict) -> None:
+    level = options["level"]
+    if conflicts := level_conflicts(options):  # a batch would otherwise drop them without a word
+        given = ", ".join(f"{name}={options[name]!r}" for name in conflicts)
+        raise InputError(
+            f"{given} cannot be combined with level={level!r} (multiresolution fairing does not take "
+            f"{'them' if len(conflicts) > 1 else 'it'})",
+            param="level",
+        )
+    method = resolved_options(options["method"], options["iterations"], options["reimpose_every"])[0]
+    if not level and options["fixed_boundary"] and method in ("scan", "auto"):
+        default = " (the default)" if options["method"] is None else ""
+        raise InputError(
+            f"fixed_boundary=True cannot be used with method={method!r}{default}: its boundary moves with the "
+            "surface; add method='local' or method='global'",
+            param="fixed_boundary",
+        )
+
+
 @operation(
-    "denoise", options=DENOISE, help="barycenter-constrained (or multiresolution with --level) fairing"
+    "denoise",
+    options=DENOISE,
+    help="barycenter-constrained (or multiresolution with --level) fairing",
+    check=_denoise_check,
 )
 def denoise_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
     """``--op denoise`` and ``o3d-lsmesh denoise``: fairing with the method and iterations that ran."""
     mesh = read_mesh(mesh)  # validated once: the fairing and the metrics take it as it is
     level, progress = options["level"], context.progress
-    if conflicts := level_conflicts(options):  # a batch would otherwise drop them without a word
-        raise InputError(
-            f"{', '.join(conflicts)} cannot be combined with level (multiresolution fairing does not take "
-            f"them), got level {level}",
-            param="level",
-        )
     if level:
         iterations = 5 if options["iterations"] is None else options["iterations"]
         method = options["method"] or "local"
@@ -449,12 +467,21 @@ def find_reference(base: str, relative: str) -> str:
     )
 
 
-@operation("compare", options=COMPARE, output="none", help="metrics against the matching file in --reference")
-def compare_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
-    """``--op compare``: metrics against the matching file of ``reference``."""
+def _compare_check(options: dict) -> None:
     if options["reference"] is None:
         message = "reference is required by op compare (a folder of the files to compare with)"
         raise InputError(message, param="reference")
+
+
+@operation(
+    "compare",
+    options=COMPARE,
+    output="none",
+    help="metrics against the matching file in --reference",
+    check=_compare_check,
+)
+def compare_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
+    """``--op compare``: metrics against the matching file of ``reference``."""
     reference_path = find_reference(options["reference"], context.relative)
     reference: Any = read_mesh(read_mesh_file(reference_path), name="reference")  # each read once
     mesh = read_mesh(mesh)
