@@ -364,9 +364,9 @@ def test_textures_not_written_is_an_error(tmp_path, capsys, monkeypatch):
     assert "out.obj' but not its material and textures out.mtl, out_0.png, out_1.png" in err, err
 
 
-def test_unwritten_attributes_name_what_each_format_drops():
+def test_unwritten_attributes_name_what_each_format_drops(tmp_path):
     # Open3D's PLY/STL/OFF/glTF writers hold no UVs or textures; its OBJ writer no textures without UVs
-    from o3d_lsmesh._o3d.io import unwritten_attributes
+    from o3d_lsmesh._o3d.io import unwritten_attributes, write_mesh_file
 
     V, T = grid(3, 3)
     textured = _textured(V, T, np.zeros(len(T), dtype=int))
@@ -376,13 +376,20 @@ def test_unwritten_attributes_name_what_each_format_drops():
     bare_texture.triangle_uvs = o3d.utility.Vector2dVector()
     plain = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(V), o3d.utility.Vector3iVector(T))
     for suffix in (".ply", ".stl", ".off", ".gltf"):
-        assert unwritten_attributes(textured, suffix) == ["texture coordinates or textures"]
-        assert unwritten_attributes(untextured_uvs, suffix) == ["texture coordinates or textures"]
+        assert unwritten_attributes(textured, suffix)[-1:] == ["texture coordinates or textures"]
+        assert unwritten_attributes(untextured_uvs, suffix)[-1:] == ["texture coordinates or textures"]
         assert unwritten_attributes(plain, suffix) == []
     assert unwritten_attributes(textured, ".obj") == []
     assert unwritten_attributes(untextured_uvs, ".obj") == []
     assert unwritten_attributes(bare_texture, ".OBJ") == ["textures"]
     assert unwritten_attributes((V, T), ".ply") == []  # arrays hold no attributes
+    # vertex colours: named lost exactly where the file read back has none (STL)
+    coloured = o3d.geometry.TriangleMesh(plain)
+    coloured.vertex_colors = o3d.utility.Vector3dVector(np.random.default_rng(0).random((len(V), 3)))
+    for suffix in (".ply", ".stl", ".off", ".gltf", ".obj"):
+        write_mesh_file(coloured, tmp_path / f"c{suffix}")
+        kept = o3d.io.read_triangle_mesh(str(tmp_path / f"c{suffix}")).has_vertex_colors()
+        assert ("vertex colours" in unwritten_attributes(coloured, suffix)) == (not kept), suffix
 
 
 def test_an_unknown_value_at_a_rim_is_unknown_inside_its_patch_alone():

@@ -332,6 +332,21 @@ def test_demo_small(tmp_path, capsys):
         assert (tmp_path / "demo" / name).exists()
 
 
+def test_demo_replaces_its_own_files_and_never_the_users(tmp_path, capsys):
+    mine = tmp_path / "work"
+    mine.mkdir()
+    (mine / "scan.ply").write_bytes(b"my scan")  # the name every example uses
+    argv = ["demo", "--out", str(mine), "--resolution", "20", "--no-render", "--quiet"]
+    line = run_error(capsys, argv)
+    assert "--out" in line and "holds scan.ply, which the demo would replace" in line
+    assert (mine / "scan.ply").read_bytes() == b"my scan" and sorted(os.listdir(mine)) == ["scan.ply"]
+    again = ["demo", "--out", str(tmp_path / "demo"), "--resolution", "20", "--no-render", "--quiet"]
+    assert main(again) == 0 and main(again) == 0  # a second run replaces the first's files
+    assert "--out must be a folder, got the file" in run_error(
+        capsys, [*argv[:2], str(mine / "scan.ply"), *argv[3:]]
+    )
+
+
 # ----------------------------------------------------------------- error exits: code 2, one line
 
 

@@ -156,6 +156,19 @@ def test_singular_matrix_raises(backend):
     singular = sp.csc_matrix(np.array([[1.0, -1.0], [-1.0, 1.0]]))
     with pytest.raises(SingularSystemError):
         SPDSolver(singular, backend=backend).solve(np.ones(2))
+    # a path's Laplacian (free ends): the iterative backend's direct coarse solve said RuntimeError
+    path = sp.diags([-np.ones(49), 2 * np.ones(50), -np.ones(49)], [-1, 0, 1]).tolil()
+    path[0, 0] = path[-1, -1] = 1.0
+    with pytest.raises(SingularSystemError):
+        SPDSolver(path.tocsc(), backend=backend).solve(np.ones(50))
+
+
+@pytest.mark.parametrize("backend", ["scipy", "iterative"])
+def test_a_complex_or_empty_right_hand_side(backend):
+    A, _ = spd(5)
+    with pytest.raises(TypeError, match="rhs must be an array of real numbers, got dtype complex128"):
+        SPDSolver(A, backend=backend).solve(np.full(5, 1j))  # (it was cast to its real part, 0)
+    assert SPDSolver(A, backend=backend).solve(np.ones((5, 0))).shape == (5, 0)
 
 
 def test_bad_arguments():

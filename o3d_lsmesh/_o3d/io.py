@@ -202,13 +202,15 @@ def has_textures(mesh: Any) -> bool:
 
 def unwritten_attributes(mesh: Any, suffix: str) -> list[str]:
     """What of a legacy ``mesh`` a mesh file ending in ``suffix`` does not hold: Open3D's PLY, STL, OFF and
-    glTF writers write no texture coordinates or textures, its OBJ writer no textures without them."""
+    glTF writers write no texture coordinates or textures, its OBJ writer no textures without them, its
+    STL writer no vertex colours."""
     if not isinstance(mesh, open3d().geometry.TriangleMesh):
         return []
-    uvs, textures = mesh.has_triangle_uvs(), has_textures(mesh)
-    if suffix.lower() == ".obj":
-        return ["textures"] if textures and not uvs else []
-    return ["texture coordinates or textures"] if uvs or textures else []
+    uvs, textures, suffix = mesh.has_triangle_uvs(), has_textures(mesh), suffix.lower()
+    lost = ["vertex colours"] if suffix == ".stl" and mesh.has_vertex_colors() else []
+    if suffix == ".obj":
+        return lost + (["textures"] if textures and not uvs else [])
+    return lost + (["texture coordinates or textures"] if uvs or textures else [])
 
 
 def obj_writable(mesh: Any) -> Any:

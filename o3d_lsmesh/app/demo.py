@@ -18,6 +18,7 @@ import numpy as np
 from .. import fairing
 from .._o3d.io import raycasting_scene, signed_distances, write_mesh_file
 from ..core.connectivity import Connectivity
+from ..core.errors import InputError
 from ..core.progress import Progress
 from ..fairing.scan_fairing import triangle_quality
 from ..fairing.tuning import SLIVER_QUALITY
@@ -84,6 +85,26 @@ def _format_table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def _check_out(folder: Path, meshes: list[str]) -> None:
+    """Refuse a folder ``out`` that is a file, or holds files of the demo's names that an earlier demo did
+    not write (its ``metrics.json`` says it did): the user's own ``scan.ply`` would be replaced."""
+    if folder.exists() and not folder.is_dir():
+        raise InputError(f"out must be a folder, got the file {str(folder)!r}", param="out")
+    present = [
+        n for n in [*meshes, "metrics.json", "metrics.md", "before_after.png"] if (folder / n).exists()
+    ]
+    try:
+        earlier = {"spacing", "sweeps"} <= json.loads((folder / "metrics.json").read_text()).keys()
+    except (OSError, ValueError, AttributeError):  # none, or not a demo's
+        earlier = False
+    if present and not earlier:
+        raise InputError(
+            f"out {str(folder)!r} holds {', '.join(present)}, which the demo would replace and an earlier "
+            "demo did not write: name another folder",
+            param="out",
+        )
+
+
 def run_demo(
     out: str | os.PathLike = "demo_out",
     *,
@@ -102,6 +123,8 @@ def run_demo(
     surface in grid spacings ``h`` (``rim``: the boundary and two rings; ``offset``: the mean signed one,
     negative inward).
     """
+    folder = Path(out)
+    _check_out(folder, [f"{key}.ply" for key in ("surface", "scan", *(m[0] for m in METHODS))])
     scan, surface = simulated_range_scan(resolution, noise=noise, seed=seed)
     scene = raycasting_scene(np.asarray(surface.vertices), np.asarray(surface.triangles))
     extent = np.ptp(np.asarray(surface.vertices)[:, :2], axis=0).max()
@@ -156,7 +179,6 @@ def run_demo(
             say(f"  {key:14s} " + ", ".join(f"{v}: {d:.3f}" for v, d in sweep))
 
     files: list[Path] = []
-    folder = Path(out)
     folder.mkdir(parents=True, exist_ok=True)
     for key, mesh in {"surface": surface, **results}.items():
         write_mesh_file(mesh, folder / f"{key}.ply")

@@ -56,7 +56,8 @@ def _write_mesh(mesh: Any, path: Path, shown: str | os.PathLike) -> None:
     if lost:
         keep = "write .obj to keep them" if suffix != ".obj" else "an OBJ holds textures only with UVs"
         warnings.warn(
-            f"OUTPUT {str(shown)!r}: the {suffix} output has no {lost[0]}; the input's are not written ({keep})",
+            f"OUTPUT {str(shown)!r}: the {suffix} output has no {' or '.join(lost)}; the input's are not "
+            f"written ({keep})",
             O3DLSMeshWarning,
             stacklevel=3,
         )

@@ -96,6 +96,18 @@ def _warn_fallback_once() -> None:
         )
 
 
+def _singular(error: Exception) -> Exception:
+    """What a factorization's ``error`` means: :class:`SingularSystemError` for a singular or indefinite
+    matrix (CHOLMOD's failing pivot, SciPy's exactly singular factor), else ``error`` itself."""
+    if _cholmod is not None and isinstance(error, _cholmod.CholmodNotPositiveDefiniteError):
+        return SingularSystemError(
+            f"matrix must be positive definite, got a failing pivot at column {error.column}"
+        )
+    if isinstance(error, RuntimeError) and "singular" in str(error).lower():
+        return SingularSystemError(f"matrix must be non-singular: {error}")
+    return error
+
+
 class SPDSolver:
     """Factor a sparse SPD matrix once and solve, refactor or update it.
 
@@ -290,13 +302,9 @@ class SPDSolver:
                     splu_spd(self._matrix if self._product_of is None else gram_matrix(self._product_of))
                 )
         except Exception as error:
-            if _cholmod is not None and isinstance(error, _cholmod.CholmodNotPositiveDefiniteError):
-                raise SingularSystemError(
-                    f"matrix must be positive definite, got a failing pivot at column {error.column}"
-                ) from error
-            if isinstance(error, RuntimeError) and "singular" in str(error).lower():
-                raise SingularSystemError(f"matrix must be non-singular: {error}") from error
-            raise
+            if _singular(error) is error:
+                raise
+            raise _singular(error) from error
 
     def refactor(self, matrix: Any, *, lower: bool = False) -> None:
         """Factor a new matrix of the same sparsity pattern (``lower``: its lower triangle), reusing the analysis."""
@@ -322,11 +330,13 @@ class SPDSolver:
         ``x0`` (same shape) is a starting guess for the iterative backend; direct backends ignore it.
         """
         try:
-            b = np.asarray(rhs, dtype=np.float64)
+            b = np.asarray(rhs)
+            if b.dtype.kind not in "biuf":  # (a complex one would be cast to its real part)
+                raise TypeError(f"dtype {b.dtype}")
+            b = b.astype(np.float64, copy=False)
         except (TypeError, ValueError) as error:
-            raise InputTypeError(
-                f"rhs must be an array of real numbers, got {type(rhs).__name__}", param="rhs"
-            ) from error
+            got = f"dtype {b.dtype}" if isinstance(rhs, np.ndarray) else type(rhs).__name__
+            raise InputTypeError(f"rhs must be an array of real numbers, got {got}", param="rhs") from error
         n = self.shape[0]
         if b.shape[:1] != (n,) or b.ndim > 2:
             raise InputError(f"rhs must have shape ({n},) or ({n}, k), got {b.shape}", param="rhs")
@@ -337,6 +347,8 @@ class SPDSolver:
                 "(an overflowing weight or position?)",
                 param="rhs",
             )
+        if b.size == 0:  # (n, 0): no column to solve
+            return np.zeros(b.shape)
         with self._lock:
             if self.backend == "iterative":
                 x = self._solve_iterative(b, x0)
@@ -370,7 +382,12 @@ class SPDSolver:
                 self._order, self._ordered = locality_order(self._matrix), True
                 if self._order is not None:
                     self._matrix = renumbered(self._matrix, self._order)
-            self._factor = preconditioner(self._matrix, self.preconditioner)
+            try:
+                self._factor = preconditioner(self._matrix, self.preconditioner)
+            except Exception as error:  # (a direct coarse solve meeting a singular matrix)
+                if _singular(error) is error:
+                    raise
+                raise _singular(error) from error
         order = self._order
         x, self.iterations, self.residual = block_cg(
             csr_view(self._matrix),
