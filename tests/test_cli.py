@@ -896,6 +896,8 @@ def test_denoise_level_passes_or_refuses_every_option(tmp_path, capsys, noisy):
     for option in (["--mu", "0.5"], ["--reimpose-every", "2"], ["--fixed-boundary"]):
         line = run_error(capsys, ["denoise", str(source), str(tmp_path / "o.ply"), "--level", "1", *option])
         assert f"{' '.join(option)} cannot be combined with --level 1" in line
+    assert main(["denoise", str(source), str(tmp_path / "l.ply"), "--level", "1"]) == 0
+    assert "by multiresolution fairing (level 1, local fairing per level)" in capsys.readouterr().out
     # the options it does take change the result
     a = run_json(
         capsys, ["denoise", str(source), str(tmp_path / "a.ply"), "--level", "1", "--iterations", "1"]

@@ -44,8 +44,11 @@ def denoise(args: argparse.Namespace, run: Run) -> int:
     """
     mesh, out, report, seconds = run_file_op("denoise", args, run, (args.render, (".png",)))
     report["seconds"] = seconds
+    how = f"{report['method']} fairing"
+    if args.level:
+        how = f"multiresolution fairing (level {args.level}, {how} per level)"
     run.say(
-        f"denoised {args.input} ({len(mesh.vertices)} vertices) by {report['method']} fairing in {seconds:.2f} s "
+        f"denoised {args.input} ({len(mesh.vertices)} vertices) by {how} in {seconds:.2f} s "
         f"-> {args.output}; mean displacement {report['displacement_mean']:.4g}, {shape_change_text(report)}"
     )
     if args.render:
