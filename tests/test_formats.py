@@ -587,3 +587,53 @@ except OSError as error:
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert "Open3D wrote it short" in done.stdout, done.stdout + done.stderr
     assert not (tmp_path / "out.ply").exists()
+
+
+@pytest.mark.parametrize("suffix", [".ply", ".obj", ".off", ".stl", ".gltf"])
+@pytest.mark.parametrize("offset", [0.0, 4.2e6])  # at the origin, and georeferenced (UTM northing, metres)
+def test_rounding_loss_is_what_the_file_read_back_holds(tmp_path, suffix, offset):
+    # Open3D's OBJ/OFF writers print 6 significant digits, STL and glTF hold single precision: the loss the
+    # write warns about is the one a reader finds (each written vertex against its nearest read back)
+    import open3d as o3d
+
+    from o3d_lsmesh._o3d.io import rounding_loss
+
+    sphere = o3d.geometry.TriangleMesh.create_sphere(radius=1.0, resolution=8)
+    sphere.translate((0.5 * offset, offset, 120.5))
+    sphere.compute_triangle_normals()
+    assert o3d.io.write_triangle_mesh(str(tmp_path / f"s{suffix}"), sphere)
+    written = np.asarray(sphere.vertices)
+    back = np.asarray(o3d.io.read_triangle_mesh(str(tmp_path / f"s{suffix}")).vertices)
+    nearest = np.sqrt(((written[:, None] - back[None]) ** 2).sum(axis=2).min(axis=1)).max()
+    triangles = np.asarray(sphere.triangles)
+    edge = np.linalg.norm(written[triangles] - np.roll(written[triangles], 1, axis=1), axis=2).mean()
+    loss = rounding_loss(sphere, suffix)
+    read = np.spacing(np.abs(written).astype(np.float32)).max() / edge  # (Open3D's OBJ/OFF readers: single)
+    assert nearest / edge <= loss + read  # never more than said, but for the reader's own rounding
+    assert (loss > 0.01) == (nearest / edge > 0.01)  # warned exactly where a reader sees it
+
+
+@pytest.mark.parametrize("suffix", [".obj", ".off"])
+def test_a_file_read_in_single_precision_says_what_it_loses(tmp_path, suffix):
+    # Open3D's OBJ and OFF readers keep single precision: a georeferenced file (full digits in it) loses
+    # a quarter of a metre at 4.2e6 m. Read, it warns with the loss; at the origin it says nothing
+    import warnings
+
+    from o3d_lsmesh._o3d.io import read_mesh_file
+
+    for offset, loud in ((0.0, False), (4.2e6, True)):
+        corners = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 1.0, 0.3]])
+        V = corners + [0.5 * offset + 0.31415926, offset + 0.27182818, 120.123456789]
+        rows = [f"{x:.10f} {y:.10f} {z:.10f}" for x, y, z in V]
+        path = tmp_path / f"m{offset:g}{suffix}"
+        if suffix == ".obj":
+            path.write_text("".join(f"v {row}\n" for row in rows) + "f 1 2 3\nf 2 4 3\n")
+        else:
+            path.write_text("OFF\n4 2 0\n" + "".join(f"{row}\n" for row in rows) + "3 0 1 2\n3 1 3 2\n")
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            mesh = read_mesh_file(str(path))
+        said = [str(w.message) for w in caught if "single precision" in str(w.message)]
+        back = np.asarray(mesh.vertices)
+        lost = np.abs(np.sort(back, axis=0) - np.sort(V, axis=0)).max()  # what the reader kept
+        assert bool(said) == loud == (lost > 0.01 * 1.0)  # (edges about 1)

@@ -9,13 +9,14 @@ import os
 import re
 import sys
 import tempfile
+import warnings
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from ..core.errors import InputError
+from ..core.errors import InputError, O3DLSMeshWarning
 
 __all__ = [
     "cap_threads",
@@ -153,7 +154,16 @@ def read_mesh_file(path: str, *, what: str = "INPUT") -> Any:
         )
     if m == 0:
         raise InputError(f"{name} has {n} vertices but no triangles", param="path")
-    return mesh.remove_duplicated_vertices() if Path(path).suffix.lower() == ".stl" else mesh
+    suffix = Path(path).suffix.lower()
+    loss = rounding_loss(mesh, suffix, reading=True)
+    if loss > 0.01:  # as for writing: visible
+        warnings.warn(
+            f"{name}: Open3D reads {suffix} in single precision, which rounds its positions by up to "
+            f"{loss:.3g} mean edge lengths (a mesh far from the origin loses most): convert it to .ply",
+            O3DLSMeshWarning,
+            stacklevel=2,
+        )
+    return mesh.remove_duplicated_vertices() if suffix == ".stl" else mesh
 
 
 class ShortWrite(OSError):
@@ -211,6 +221,33 @@ def unwritten_attributes(mesh: Any, suffix: str) -> list[str]:
     if suffix == ".obj":
         return lost + (["textures"] if textures and not uvs else [])
     return lost + (["texture coordinates or textures"] if uvs or textures else [])
+
+
+def rounding_loss(mesh: Any, suffix: str, *, reading: bool = False) -> float:
+    """How far a mesh file ending in ``suffix`` moves ``mesh``'s positions, in mean edge lengths: Open3D's
+    OBJ and OFF writers print 6 significant digits (``%g``), STL and glTF hold single precision, PLY
+    double (0); ``reading``: its OBJ and OFF readers, single precision. A mesh far from the origin
+    (georeferenced: 4.2e6 m) loses metres."""
+    suffix = suffix.lower()
+    if reading:
+        suffix = ".stl" if suffix in (".obj", ".off") else ".ply"  # (the precision each reader keeps)
+    if suffix not in (".obj", ".off", ".stl", ".gltf"):
+        return 0.0
+    legacy = isinstance(mesh, open3d().geometry.TriangleMesh)
+    vertices = np.asarray(mesh.vertices) if legacy else mesh.vertex.positions.cpu().numpy()
+    triangles = np.asarray(mesh.triangles) if legacy else mesh.triangle.indices.cpu().numpy()
+    vertices = np.asarray(vertices, dtype=np.float64)
+    if not len(triangles) or not len(vertices):
+        return 0.0
+    if suffix in (".stl", ".gltf"):  # a unit in the last place (the writers' own float arithmetic included)
+        worst = float(np.spacing(np.abs(vertices).astype(np.float32)).max())
+    else:  # %g: 6 significant digits (zeros print exactly)
+        magnitude = np.abs(vertices)
+        unit = 10.0 ** (np.floor(np.log10(np.where(magnitude > 0, magnitude, 1.0))) - 5)
+        worst = float(np.abs(np.round(vertices / unit) * unit - vertices).max())
+    corners = vertices[triangles]
+    edge = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).mean()
+    return worst / edge if edge > 0 else (np.inf if worst > 0 else 0.0)
 
 
 def obj_writable(mesh: Any) -> Any:

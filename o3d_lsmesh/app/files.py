@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from .._o3d import read_mesh
-from .._o3d.io import ShortWrite, read_mesh_file, unwritten_attributes, write_mesh_file
+from .._o3d.io import ShortWrite, read_mesh_file, rounding_loss, unwritten_attributes, write_mesh_file
 from ..core.errors import InputError, InputTypeError, O3DLSMeshWarning
 
 __all__ = [
@@ -58,6 +58,15 @@ def _write_mesh(mesh: Any, path: Path, shown: str | os.PathLike) -> None:
         warnings.warn(
             f"OUTPUT {str(shown)!r}: the {suffix} output has no {' or '.join(lost)}; the input's are not "
             f"written ({keep})",
+            O3DLSMeshWarning,
+            stacklevel=3,
+        )
+    loss = rounding_loss(mesh, suffix)
+    if loss > 0.01:  # visible: a hundredth of an edge
+        warnings.warn(
+            f"OUTPUT {str(shown)!r}: the {suffix} file rounds the positions by up to {loss:.3g} mean edge "
+            "lengths (6 significant digits, or single precision; a mesh far from the origin loses most): "
+            "write .ply to keep them",
             O3DLSMeshWarning,
             stacklevel=3,
         )
