@@ -11,7 +11,7 @@ import contextlib
 import os
 import threading
 from dataclasses import fields, replace
-from typing import Any
+from typing import Any, NoReturn
 
 import numpy as np
 import scipy.sparse as sp
@@ -96,16 +96,14 @@ def _warn_fallback_once() -> None:
         )
 
 
-def _singular(error: Exception) -> Exception:
-    """What a factorization's ``error`` means: :class:`SingularSystemError` for a singular or indefinite
-    matrix (CHOLMOD's failing pivot, SciPy's exactly singular factor), else ``error`` itself."""
+def _reraise(error: Exception) -> NoReturn:
+    """Raise a factorization's ``error`` as :class:`SingularSystemError` where it means a singular matrix."""
     if _cholmod is not None and isinstance(error, _cholmod.CholmodNotPositiveDefiniteError):
-        return SingularSystemError(
-            f"matrix must be positive definite, got a failing pivot at column {error.column}"
-        )
+        message = f"matrix must be positive definite, got a failing pivot at column {error.column}"
+        raise SingularSystemError(message) from error
     if isinstance(error, RuntimeError) and "singular" in str(error).lower():
-        return SingularSystemError(f"matrix must be non-singular: {error}")
-    return error
+        raise SingularSystemError(f"matrix must be non-singular: {error}") from error
+    raise error
 
 
 class SPDSolver:
@@ -302,9 +300,7 @@ class SPDSolver:
                     splu_spd(self._matrix if self._product_of is None else gram_matrix(self._product_of))
                 )
         except Exception as error:
-            if _singular(error) is error:
-                raise
-            raise _singular(error) from error
+            _reraise(error)
 
     def refactor(self, matrix: Any, *, lower: bool = False) -> None:
         """Factor a new matrix of the same sparsity pattern (``lower``: its lower triangle), reusing the analysis."""
@@ -331,12 +327,12 @@ class SPDSolver:
         """
         try:
             b = np.asarray(rhs)
-            if b.dtype.kind not in "biuf":  # (a complex one would be cast to its real part)
-                raise TypeError(f"dtype {b.dtype}")
-            b = b.astype(np.float64, copy=False)
-        except (TypeError, ValueError) as error:
+        except (TypeError, ValueError):  # (ragged)
+            b = np.asarray(None)
+        if b.dtype.kind not in "biuf":  # (a complex one would be cast to its real part)
             got = f"dtype {b.dtype}" if isinstance(rhs, np.ndarray) else type(rhs).__name__
-            raise InputTypeError(f"rhs must be an array of real numbers, got {got}", param="rhs") from error
+            raise InputTypeError(f"rhs must be an array of real numbers, got {got}", param="rhs")
+        b = b.astype(np.float64, copy=False)
         n = self.shape[0]
         if b.shape[:1] != (n,) or b.ndim > 2:
             raise InputError(f"rhs must have shape ({n},) or ({n}, k), got {b.shape}", param="rhs")
@@ -385,9 +381,7 @@ class SPDSolver:
             try:
                 self._factor = preconditioner(self._matrix, self.preconditioner)
             except Exception as error:  # (a direct coarse solve meeting a singular matrix)
-                if _singular(error) is error:
-                    raise
-                raise _singular(error) from error
+                _reraise(error)
         order = self._order
         x, self.iterations, self.residual = block_cg(
             csr_view(self._matrix),
