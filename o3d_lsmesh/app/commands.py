@@ -10,6 +10,7 @@ import argparse
 import dataclasses
 import os
 import time
+import warnings
 from collections import Counter
 from pathlib import Path
 from typing import Any
@@ -17,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from .._o3d import read_mesh
+from ..core.errors import O3DLSMeshWarning
 from ..core.validate import as_indices
 from ..holes import find_holes
 from ..lsmesh import reconstruct_geometry
@@ -217,6 +219,14 @@ def reconstruct(args: argparse.Namespace, run: Run) -> int:
     """
     check_output(args.output, [args.input], force=args.force)
     mesh = read_input(args.input)
+    if Path(args.input).suffix.lower() == ".obj":
+        # Open3D's OBJ reader numbers the vertices as the faces first use them, not as the file lists them
+        warnings.warn(
+            f"INPUT {args.input!r}: --unknown counts the vertices of an OBJ as Open3D reads them (in the order "
+            "the faces first use them, not the file's 'v' lines); the output lists them so too",
+            O3DLSMeshWarning,
+            stacklevel=2,
+        )
     unknown = parse_index_spec(args.unknown, len(mesh.vertices))
     start = time.perf_counter()
     out = reconstruct_geometry(mesh, unknown, interpolate=not args.soft, progress=run.progress)
