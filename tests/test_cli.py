@@ -439,6 +439,10 @@ def test_unreadable_and_empty_meshes(tmp_path, capsys, clean):
             "--reference is required by op compare",
         ),
         (
+            ["compare", "{src}", "{src}", "--units", "edge"],
+            "--units edge applies to the distance map of --render",
+        ),
+        (
             ["denoise", "{src}", "{out}", "--level", "2", "--reimpose-every", "2", "--fixed-boundary"],
             "--reimpose-every 2, --fixed-boundary cannot be combined with --level 2",
         ),

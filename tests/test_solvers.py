@@ -517,3 +517,26 @@ def test_iterative_stop_is_not_met_by_heavy_rows_alone(weight):
     solver = SPDSolver(matrix, backend="iterative")
     got = solver.solve(rhs, x0=start)
     np.testing.assert_allclose(got, want, atol=1e-6 * np.abs(want).max())
+
+
+def test_a_solver_contradicting_the_backend_is_refused():
+    # ls_mesh's solver='iterative' beside backend='cholmod' ran conjugate gradients without a word
+    from conftest import grid
+
+    from o3d_lsmesh import LSMeshSolver
+    from o3d_lsmesh.core._direct import solver_backend
+
+    V, F = grid(4, 4)
+    with pytest.raises(ValueError, match="solver='iterative' contradicts backend='cholmod'") as info:
+        LSMeshSolver((V, F), [0, 5], backend="cholmod", solver="iterative")
+    assert info.value.param == "solver"
+    with pytest.raises(ValueError, match="solver='cholmod' contradicts backend='iterative'"):
+        solver_backend("cholmod", "iterative")
+    # agreeing, or one of them "auto": the one asked for
+    assert [
+        solver_backend(*pair) for pair in [("iterative", "iterative"), ("auto", "scipy"), ("cholmod", "auto")]
+    ] == [
+        "iterative",
+        "scipy",
+        "cholmod",
+    ]

@@ -275,6 +275,8 @@ def compare(args: argparse.Namespace, run: Run) -> int:
 
     example: clean.ply smooth.ply --json --render distance.png
     """
+    if args.units != "model" and not args.render:  # (the metrics are in model units)
+        raise CLIError(f"--units {args.units} applies to the distance map of --render, which was not given")
     if args.render:
         check_output(args.render, [args.a, args.b], force=args.force, suffixes=(".png",))
     a, b = read_input(args.a, what="A"), read_input(args.b, what="B")

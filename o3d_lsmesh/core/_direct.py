@@ -32,8 +32,13 @@ PRECONDITIONERS = ("amg", "ic0")
 
 
 def solver_backend(solver: Any, backend: str = "auto") -> str:
-    """The :class:`SPDSolver` backend for a ``solver=`` option (``"auto"`` defers to ``backend``); silent."""
+    """The :class:`SPDSolver` backend for a ``solver=`` option (``"auto"`` defers to ``backend``); a
+    factorization asked of one and conjugate gradients of the other is refused, not settled silently."""
     solver = as_choice(solver, SOLVERS, name="solver")
+    if "iterative" in (solver, backend) and "auto" not in (solver, backend) and solver != backend:
+        raise InputError(
+            f"solver={solver!r} contradicts backend={backend!r}: give one of them", param="solver"
+        )
     return backend if solver == "auto" else solver
 
 
