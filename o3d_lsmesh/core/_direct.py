@@ -35,7 +35,8 @@ def solver_backend(solver: Any, backend: str = "auto") -> str:
     """The :class:`SPDSolver` backend for a ``solver=`` option (``"auto"`` defers to ``backend``); a
     factorization asked of one and conjugate gradients of the other is refused, not settled silently."""
     solver = as_choice(solver, SOLVERS, name="solver")
-    if "iterative" in (solver, backend) and "auto" not in (solver, backend) and solver != backend:
+    both = isinstance(backend, str) and "auto" not in (solver, backend)  # (backend checked by SPDSolver)
+    if both and "iterative" in (solver, backend) and solver != backend:
         raise InputError(
             f"solver={solver!r} contradicts backend={backend!r}: give one of them", param="solver"
         )
