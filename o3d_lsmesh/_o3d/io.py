@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from ..core.arrays import mean_edge_length
 from ..core.errors import InputError, O3DLSMeshWarning
 
 __all__ = [
@@ -172,7 +173,8 @@ class ShortWrite(OSError):
 
 def write_mesh_file(mesh: Any, path: str | os.PathLike) -> list[str]:
     """Write a mesh file (an OBJ with UVs with its ``.mtl`` and images: :func:`obj_writable`); ``OSError`` if
-    Open3D could not (:class:`ShortWrite` if it wrote less than all). Returns the names of the ``.mtl`` and images it did not write (said only natively)."""
+    Open3D could not (:class:`ShortWrite` if it wrote less than all). Returns the names of the ``.mtl``
+    and images it did not write (said only natively)."""
     o3d = quiet_open3d()
     path = Path(path)
     suffix = path.suffix.lower()
@@ -223,15 +225,18 @@ def unwritten_attributes(mesh: Any, suffix: str) -> list[str]:
     return lost + (["texture coordinates or textures"] if uvs or textures else [])
 
 
+#: How Open3D keeps positions, per file suffix: its writers (OBJ and OFF print ``%g``, 6 significant digits;
+#: STL and glTF hold single precision; PLY double, left out) and its readers (OBJ and OFF: single).
+_WRITTEN = {".obj": "digits", ".off": "digits", ".stl": "single", ".gltf": "single"}
+_READ = {".obj": "single", ".off": "single"}
+
+
 def rounding_loss(mesh: Any, suffix: str, *, reading: bool = False) -> float:
-    """How far a mesh file ending in ``suffix`` moves ``mesh``'s positions, in mean edge lengths: Open3D's
-    OBJ and OFF writers print 6 significant digits (``%g``), STL and glTF hold single precision, PLY
-    double (0); ``reading``: its OBJ and OFF readers, single precision. A mesh far from the origin
+    """How far a mesh file ending in ``suffix`` moves ``mesh``'s positions (``reading``: how far reading
+    it does), in mean edge lengths (:data:`_WRITTEN`, :data:`_READ`). A mesh far from the origin
     (georeferenced: 4.2e6 m) loses metres."""
-    suffix = suffix.lower()
-    if reading:
-        suffix = ".stl" if suffix in (".obj", ".off") else ".ply"  # (the precision each reader keeps)
-    if suffix not in (".obj", ".off", ".stl", ".gltf"):
+    kept = (_READ if reading else _WRITTEN).get(suffix.lower())
+    if kept is None:
         return 0.0
     legacy = isinstance(mesh, open3d().geometry.TriangleMesh)
     vertices = np.asarray(mesh.vertices) if legacy else mesh.vertex.positions.cpu().numpy()
@@ -239,14 +244,13 @@ def rounding_loss(mesh: Any, suffix: str, *, reading: bool = False) -> float:
     vertices = np.asarray(vertices, dtype=np.float64)
     if not len(triangles) or not len(vertices):
         return 0.0
-    if suffix in (".stl", ".gltf"):  # a unit in the last place (the writers' own float arithmetic included)
+    if kept == "single":  # a unit in the last place (the writers' own float arithmetic included)
         worst = float(np.spacing(np.abs(vertices).astype(np.float32)).max())
     else:  # %g: 6 significant digits (zeros print exactly)
         magnitude = np.abs(vertices)
         unit = 10.0 ** (np.floor(np.log10(np.where(magnitude > 0, magnitude, 1.0))) - 5)
         worst = float(np.abs(np.round(vertices / unit) * unit - vertices).max())
-    corners = vertices[triangles]
-    edge = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).mean()
+    edge = mean_edge_length(vertices, triangles)
     return worst / edge if edge > 0 else (np.inf if worst > 0 else 0.0)
 
 

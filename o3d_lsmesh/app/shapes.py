@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from .._o3d.io import cast_rays, icosphere, legacy_mesh, raycasting_scene
+from ..core import arrays
 
 __all__ = ["add_noise", "demo_mesh", "mean_edge_length", "simulated_range_scan"]
 
@@ -45,10 +46,7 @@ def mean_edge_length(mesh: Any) -> float:
     >>> round(mean_edge_length(demo_mesh(0)), 3)  # the icosahedron, displaced
     1.098
     """
-    vertices = np.asarray(mesh.vertices)
-    triangles = np.asarray(mesh.triangles)
-    edges = vertices[triangles[:, [1, 2, 0]]] - vertices[triangles]
-    return float(np.linalg.norm(edges, axis=2).mean())
+    return arrays.mean_edge_length(np.asarray(mesh.vertices), np.asarray(mesh.triangles))
 
 
 def add_noise(mesh: Any, sigma: float, *, seed: int = 0) -> Any:

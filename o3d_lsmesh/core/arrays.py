@@ -12,6 +12,7 @@ __all__ = [
     "face_normals",
     "gather",
     "in_sorted",
+    "mean_edge_length",
     "quantize",
     "run_heads",
 ]
@@ -42,6 +43,16 @@ def in_sorted(sorted_values: np.ndarray, values: np.ndarray) -> np.ndarray:
         return np.zeros(np.shape(values), dtype=bool)
     found = np.minimum(np.searchsorted(sorted_values, values), len(sorted_values) - 1)
     return sorted_values[found] == values
+
+
+def mean_edge_length(vertices: np.ndarray, triangles: np.ndarray) -> float:
+    """Mean length of the triangles' edges ``(n, 3)``, ``(m, 3)`` (an interior edge counted twice).
+
+    >>> round(mean_edge_length(np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]]), np.array([[0, 1, 2]])), 3)
+    1.138
+    """
+    sides = vertices[triangles[:, [1, 2, 0]]] - vertices[triangles]
+    return float(np.linalg.norm(sides, axis=2).mean())
 
 
 def quantize(values: np.ndarray, lower: np.ndarray, upper: np.ndarray, bits: int) -> np.ndarray:
