@@ -637,3 +637,45 @@ def test_a_file_read_in_single_precision_says_what_it_loses(tmp_path, suffix):
         back = np.asarray(mesh.vertices)
         lost = np.abs(np.sort(back, axis=0) - np.sort(V, axis=0)).max()  # what the reader kept
         assert bool(said) == loud == (lost > 0.01 * 1.0)  # (edges about 1)
+
+
+@pytest.mark.parametrize(
+    ("vertex", "face", "unread"),
+    [
+        (["nx", "ny", "nz", "red", "green", "blue"], [], []),
+        (["confidence", "intensity"], [], ["vertex confidence", "vertex intensity"]),
+        (["red", "green", "blue", "alpha"], ["quality"], ["vertex alpha", "face quality"]),
+    ],
+)
+def test_ply_properties_open3d_leaves_out_are_named(tmp_path, vertex, face, unread):
+    # a scanner's PLY holds per-point confidence and intensity, which Open3D's reader drops: the read
+    # names each one left out, and none it keeps (those it says it keeps are in its mesh)
+    import warnings
+
+    from o3d_lsmesh._o3d.io import read_mesh_file
+
+    head = ["ply", "format ascii 1.0", "element vertex 4"]
+    head += [f"property float {name}" for name in ["x", "y", "z"] + vertex]
+    head += ["element face 2", "property list uchar int vertex_indices"]
+    head += [f"property uchar {name}" for name in face] + ["end_header"]
+    corners = ["0 0 0", "1 0 0", "0 1 0", "1 1 0"]
+    rows = [f"{xyz} " + " ".join(["1"] * len(vertex)) for xyz in corners]
+    rows += [f"3 {a} {b} {c} " + " ".join(["7"] * len(face)) for a, b, c in [(0, 1, 2), (1, 3, 2)]]
+    path = tmp_path / "scan.ply"
+    path.write_text("\n".join(head + rows) + "\n")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        mesh = read_mesh_file(str(path))
+    said = [str(w.message) for w in caught if "leaves out" in str(w.message)]
+    assert bool(said) == bool(unread)
+    if said:
+        named = said[0].split("leaves out ")[1].split(";")[0].split(", ")
+        assert named == unread
+    assert mesh.has_vertex_normals() == ("nx" in vertex)
+    assert mesh.has_vertex_colors() == ("red" in vertex)
+    # what the package writes reads back without a word
+    mesh.compute_triangle_normals()
+    assert o3d.io.write_triangle_mesh(str(tmp_path / "out.ply"), mesh)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        read_mesh_file(str(tmp_path / "out.ply"))

@@ -94,23 +94,41 @@ _READ_FAILURE = re.compile(
 _ANSI = re.compile(r"\x1b\[[0-9;]*m")
 
 
-def ply_header_counts(path: str | os.PathLike) -> dict[str, int]:
-    """Element counts of a PLY header (``{"vertex": n, "face": m}``); empty if the header is unreadable."""
-    counts = {}
+def ply_header(path: str | os.PathLike) -> dict[str, tuple[int, list[str]]]:
+    """Each element of a PLY header with its count and property names (``{"vertex": (n, ["x", ...])}``);
+    empty if the header is unreadable."""
+    elements: dict[str, tuple[int, list[str]]] = {}
     try:
         with open(path, "rb") as handle:
             if handle.readline().strip() != b"ply":
                 return {}
             for _ in range(10_000):
-                line = handle.readline()
-                if not line or line.strip() == b"end_header":
+                parts = handle.readline().decode("ascii", "replace").split()
+                if not parts or parts == ["end_header"]:
                     break
-                parts = line.split()
-                if len(parts) == 3 and parts[0] == b"element":
-                    counts[parts[1].decode("ascii", "replace")] = int(parts[2])
+                if len(parts) == 3 and parts[0] == "element":
+                    elements[parts[1]] = (int(parts[2]), [])
+                elif len(parts) >= 3 and parts[0] == "property" and elements:
+                    elements[next(reversed(elements))][1].append(parts[-1])
     except (OSError, ValueError):
         return {}
-    return counts
+    return elements
+
+
+#: What Open3D's PLY reader keeps of each element (positions, normals, colours; the faces' corners)
+_PLY_READ = {"vertex": {"x", "y", "z", "nx", "ny", "nz", "red", "green", "blue"}}
+_PLY_READ["face"] = {"vertex_indices", "vertex_index"}
+
+
+def _ply_unread(header: dict[str, tuple[int, list[str]]]) -> list[str]:
+    """The properties of a PLY ``header`` (:func:`ply_header`) Open3D's reader leaves out, as ``"element
+    property"`` (a whole element it does not read: ``"element"``)."""
+    unread = []
+    for element, (_, properties) in header.items():
+        if element not in _PLY_READ:
+            unread.append(element)
+        unread += [f"{element} {name}" for name in properties if name not in _PLY_READ[element]]
+    return unread
 
 
 def read_mesh_file(path: str, *, what: str = "INPUT") -> Any:
@@ -140,13 +158,21 @@ def read_mesh_file(path: str, *, what: str = "INPUT") -> Any:
             f"{name} is truncated or corrupt: Open3D read only part of it ({failure.group(0).strip()})",
             param="path",
         )
-    header = ply_header_counts(path) if Path(path).suffix.lower() == ".ply" and n else {}
+    header = ply_header(path) if Path(path).suffix.lower() == ".ply" and n else {}
+    counts = {element: count for element, (count, _) in header.items()}
     # a polygon face gives at least one triangle: fewer triangles than faces means faces were lost
-    if header.get("vertex", n) != n or header.get("face", 0) > m:
+    if counts.get("vertex", n) != n or counts.get("face", 0) > m:
         raise InputError(
-            f"{name} is truncated or corrupt: its header declares {header.get('vertex')} vertices "
-            f"and {header.get('face', 0)} faces, Open3D read {n} and {m} triangles",
+            f"{name} is truncated or corrupt: its header declares {counts.get('vertex')} vertices "
+            f"and {counts.get('face', 0)} faces, Open3D read {n} and {m} triangles",
             param="path",
+        )
+    if unread := _ply_unread(header):  # a scanner's confidence or intensity, say: gone from every output
+        warnings.warn(
+            f"{name}: Open3D's PLY reader leaves out {', '.join(unread)}; only positions, normals and "
+            "colours are read, so outputs do not hold them",
+            O3DLSMeshWarning,
+            stacklevel=2,
         )
     if n == 0:
         raise InputError(
