@@ -679,3 +679,32 @@ def test_ply_properties_open3d_leaves_out_are_named(tmp_path, vertex, face, unre
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         read_mesh_file(str(tmp_path / "out.ply"))
+
+
+def test_obj_materials_without_an_image_say_their_colours_are_lost(tmp_path):
+    # Open3D's OBJ reader keeps texture images, not a material's colour (Kd): an OBJ coloured by two
+    # plain materials says so; one without a material, one textured by an image and Open3D's own OBJ
+    # with UVs (one plain white material) do not
+    import warnings
+
+    from o3d_lsmesh._o3d.io import read_mesh_file
+
+    (tmp_path / "c.mtl").write_text("newmtl red\nKd 1 0 0\nnewmtl blue\nKd 0 0 1\n")
+    corners = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\n"
+    (tmp_path / "c.obj").write_text(f"mtllib c.mtl\n{corners}usemtl red\nf 1 2 3\nusemtl blue\nf 2 4 3\n")
+    plain = o3d.geometry.TriangleMesh.create_box()
+    plain.vertex_colors = o3d.utility.Vector3dVector()
+    assert o3d.io.write_triangle_mesh(str(tmp_path / "p.obj"), plain)  # no material at all
+    box = o3d.geometry.TriangleMesh.create_box(create_uv_map=True)
+    box.textures = [o3d.geometry.Image(np.full((4, 4, 3), 200, dtype=np.uint8))]
+    box.triangle_material_ids = o3d.utility.IntVector(np.zeros(12, dtype=np.int32))
+    assert o3d.io.write_triangle_mesh(str(tmp_path / "t.obj"), box)
+    _, sphere = _noisy_uv_sphere(tmp_path)
+    for name, lost in (("c.obj", 2), ("p.obj", 0), ("t.obj", 0), (sphere.name, 0)):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            read_mesh_file(str(tmp_path / name))
+        said = [str(w.message) for w in caught if "colours" in str(w.message)]
+        assert len(said) == (1 if lost else 0), (name, said)
+        if lost:
+            assert f"the {lost} materials without an image" in said[0]

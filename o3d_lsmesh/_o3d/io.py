@@ -190,7 +190,24 @@ def read_mesh_file(path: str, *, what: str = "INPUT") -> Any:
             O3DLSMeshWarning,
             stacklevel=2,
         )
+    # one plain material is a uniform colour (Open3D's own OBJs: white); more tell the faces apart
+    if suffix == ".obj" and (plain := _untextured_materials(mesh)) > 1:
+        warnings.warn(
+            f"{name}: Open3D's OBJ reader keeps a material's texture image, not its colours: the {plain} "
+            "materials without an image, which tell the faces apart, are not in any output",
+            O3DLSMeshWarning,
+            stacklevel=2,
+        )
     return mesh.remove_duplicated_vertices() if suffix == ".stl" else mesh
+
+
+def _untextured_materials(mesh: Any) -> int:
+    """How many materials the triangles of a legacy mesh read from an OBJ use without a texture image (its
+    reader's slot 0, faces without a material, left out): their colours were not read."""
+    if not mesh.has_triangle_material_ids():
+        return 0
+    used = np.unique(np.asarray(mesh.triangle_material_ids))
+    return sum(1 for i in used if i > 0 and (i >= len(mesh.textures) or mesh.textures[i].is_empty()))
 
 
 class ShortWrite(OSError):
