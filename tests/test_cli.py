@@ -429,6 +429,22 @@ def test_unreadable_and_empty_meshes(tmp_path, capsys, clean):
             ["denoise", "{src}", "{out}", "--level", "2", "--mu", "1"],
             "--mu 1.0 cannot be combined with --level 2",
         ),
+        (
+            [
+                "batch",
+                "{src}",
+                "{out}",
+                "--op",
+                "denoise",
+                "--level",
+                "2",
+                "--method",
+                "scan",
+                "--workers",
+                "0",
+            ],
+            "--method scan cannot be combined with --level 2 (multiresolution fairing takes --method local or --method global)",
+        ),
         # batch refuses what the command refuses, in its flags, before a worker starts or a file is read
         (
             ["batch", "{src}", "{out}", "--op", "denoise", "--fixed-boundary", "--workers", "0"],

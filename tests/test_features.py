@@ -256,11 +256,13 @@ def test_detect_creases_raises(error, message, kwargs):
         detect_creases(cube(1), **kwargs)
 
 
-def test_multiresolution_refuses_the_feature_mode():
+@pytest.mark.parametrize("method", ["features", "scan", "auto"])
+def test_multiresolution_refuses_what_is_not_a_per_level_fairing(method):
+    # (each was run as the local operator without a word, but the feature mode)
     from o3d_lsmesh import multiresolution_fairing
 
-    with pytest.raises(ValueError, match="method must be one of .*, got 'features'"):
-        multiresolution_fairing(cube(1), 2, method="features")
+    with pytest.raises(ValueError, match=rf"method must be one of \['local', 'global'\], got '{method}'"):
+        multiresolution_fairing(cube(1), 2, method=method)
 
 
 def test_detect_creases_rejects_a_non_mesh():

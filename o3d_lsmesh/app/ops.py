@@ -338,6 +338,12 @@ def _denoise_check(options: dict) -> None:
             f"{'them' if len(conflicts) > 1 else 'it'})",
             param="level",
         )
+    if level and options["method"] not in (None, "local", "global"):  # Liu's per-level operators only
+        raise InputError(
+            f"method={options['method']!r} cannot be combined with level={level!r} (multiresolution fairing "
+            "takes method='local' or method='global')",
+            param="method",
+        )
     method = resolved_options(options["method"], options["iterations"], options["reimpose_every"])[0]
     if not level and options["fixed_boundary"] and method in ("scan", "auto"):
         default = " (the default)" if options["method"] is None else ""

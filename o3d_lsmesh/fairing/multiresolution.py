@@ -18,7 +18,7 @@ from ..core.progress import Progress
 from ..core.validate import as_bool, as_choice, as_count, as_iterations
 from ..hierarchy.hierarchy import ALPHA, BETA, MeshHierarchy, boundary_degree, collapse_hierarchy
 from .boundary_curve import curve_operator, run_curve_iterations
-from .constrained import FAIRING_METHODS, _fair, fair_local
+from .constrained import _fair, fair_local
 from .tuning import DEFAULT_MU
 
 if TYPE_CHECKING:
@@ -161,8 +161,9 @@ def multiresolution_fairing(
     number_of_iterations = as_iterations(number_of_iterations)
     if final_iterations is not None:
         final_iterations = as_iterations(final_iterations, name="final_iterations")
-    # the feature mode is not a per-level fairing: refused, not run as the local operator
-    method = as_choice(method, tuple(m for m in FAIRING_METHODS if m != "features"), name="method")
+    # Liu's per-level operators only: the scan energy and the feature mode are not per-level fairings
+    # (refused, not run as the local operator)
+    method = as_choice(method, ("local", "global"), name="method")
     progress = as_bool(progress, name="progress")
     # a given hierarchy indexes the mesh's own vertices (build_hierarchy does not weld): weld only
     # when the hierarchy is built here, on the welded surface
