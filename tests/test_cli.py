@@ -174,7 +174,7 @@ def test_approximate_writes_mesh_and_indices(tmp_path, capsys, clean):
         ],
     )
     indices = np.loadtxt(tmp_path / "idx.txt", dtype=np.int64)
-    expected, expected_indices = approximate(_read(source), 40, method="greedy", seed=0)
+    expected, expected_indices = approximate(_read(source), 40, method="greedy")
     np.testing.assert_array_equal(indices, expected_indices)
     np.testing.assert_allclose(
         np.asarray(_read(tmp_path / "approx.ply").vertices), np.asarray(expected.vertices), atol=1e-12
@@ -870,6 +870,10 @@ def test_top_level_help_states_the_start_up_cost_and_points_to_batch(capsys):
         (
             ["approximate", "{src}", "{out}", "--count", "10", "--method", "random", "--seed", "-1"],
             "--seed: must be a non-negative integer",
+        ),
+        (
+            ["approximate", "{src}", "{out}", "--count", "10", "--seed", "3"],
+            "--seed 3 applies only to --method random, got --method greedy",
         ),
         (["encode", "{src}", "{dir}/x.bin", "--bits", "64"], "--bits must be <= "),
         (

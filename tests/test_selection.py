@@ -193,7 +193,7 @@ def test_approximate_matches_ls_mesh_and_keeps_kind():
     )
     before = np.asarray(legacy.vertices).copy()
     for method in ("greedy", "combined", "random"):
-        out, idx = approximate(legacy, 20, method=method, seed=0)
+        out, idx = approximate(legacy, 20, method=method, seed=0 if method == "random" else None)
         assert isinstance(out, o3d.geometry.TriangleMesh)
         expected = np.asarray(ls_mesh(legacy, idx).vertices)
         np.testing.assert_allclose(np.asarray(out.vertices), expected, atol=1e-10)
@@ -222,6 +222,10 @@ def test_selection_errors():
         select_control_points(mesh, 1)
     with pytest.raises(ValueError, match="batch applies only to method='combined'"):
         select_control_points(mesh, 5, method="greedy", batch=4)
+    with pytest.raises(
+        ValueError, match="seed applies only to method='random', got seed=3 with method='combined'"
+    ):
+        select_control_points(mesh, 5, method="combined", seed=3)
     with pytest.raises(ValueError, match="batch must be >= 1"):
         select_control_points(mesh, 5, method="combined", batch=0)
     with pytest.raises(ValueError, match="weights must be positive"):
@@ -289,10 +293,11 @@ def test_scan_defects_seed_every_small_component(method):
     components = set(labels.tolist())
     count = len(components)
     assert count == 15
+    seed = 0 if method == "random" else None  # (the others draw nothing)
     for k in (count, count + 7):
-        chosen = select_control_points((V, F), k, method=method, seed=0)
+        chosen = select_control_points((V, F), k, method=method, seed=seed)
         assert len(np.unique(chosen)) == k and set(labels[chosen].tolist()) == components
-        approx, indices = approximate((V, F), k, method=method, seed=0)
+        approx, indices = approximate((V, F), k, method=method, seed=seed)
         assert np.isfinite(approx[0]).all() and set(labels[indices].tolist()) == components
     decoded = decode_geometry((V, F), encode_geometry((V, F), count + 7, method=method))
     assert np.isfinite(decoded[0]).all()

@@ -265,7 +265,7 @@ APPROXIMATE = (
            "like 2%", required=True),
     Option("method", choice(*_SELECTIONS), "greedy", "how the control points are chosen"),
     Option("interpolate", flag, False, "interpolate the control points exactly", is_flag=True),
-    Option("seed", int_at_least(0), 0, "random seed of --method random/combined"),
+    Option("seed", int_at_least(0), None, "random seed of --method random (default 0)"),
 )
 ENCODE = (
     Option("count", count_or_percent, "2%", "anchors: a count, or a share of each mesh's vertices like 2%"),
@@ -425,12 +425,26 @@ def hierarchy_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, d
     return files, {"levels": len(built), "written_levels": levels, "vertex_counts": counts}
 
 
-@operation("approximate", options=APPROXIMATE, help="LS-mesh approximation from control points")
+def _approximate_check(options: dict) -> None:
+    if options["seed"] is not None and options["method"] != "random":  # the others draw nothing
+        raise InputError(
+            f"seed={options['seed']!r} applies only to method='random', got method={options['method']!r}",
+            param="seed",
+        )
+
+
+@operation(
+    "approximate",
+    options=APPROXIMATE,
+    help="LS-mesh approximation from control points",
+    check=_approximate_check,
+)
 def approximate_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
     """``--op approximate`` and ``o3d-lsmesh approximate``: the result, its control indices and errors."""
     mesh = read_mesh(mesh)  # validated once: the selection and the metrics take it as it is
     count = resolve_count(options["count"], len(mesh.vertices))
     method, interpolate, seed = options["method"], options["interpolate"], options["seed"]
+    seed = 0 if seed is None and method == "random" else seed  # the same selection each run
     out, indices = approximate(
         mesh, count, method=method, interpolate=interpolate, seed=seed, progress=context.progress
     )

@@ -132,7 +132,13 @@ def encode_geometry(
     if weight is not None:  # a weight too small to pin the anchors decodes to a drifted mesh
         check_weight_pins_components(uniform_laplacian(Connectivity(data.triangles, n)), omega, name="weight")
     indices, _ = control_point_selection(
-        data.vertices, data.triangles, count, method=method, weights=omega, seed=0, progress=progress
+        data.vertices,
+        data.triangles,
+        count,
+        method=method,
+        weights=omega,
+        seed=0 if method == "random" else None,  # a file encoded twice is the same file
+        progress=progress,
     )
     positions = data.vertices[indices]
     lower, upper = positions.min(axis=0), positions.max(axis=0)

@@ -172,6 +172,10 @@ def control_point_selection(
             param="batch",
         )
     rng = _rng(seed)
+    if method != "random" and seed is not None:  # greedy and combined draw nothing: a seed changes nothing
+        raise InputError(
+            f"seed applies only to method='random', got seed={seed!r} with method={method!r}", param="seed"
+        )
     as_bool(progress, name="progress")
     if method == "random":  # instant: no progress bar
         return _random(vertices, conn, count, rng), None
