@@ -488,3 +488,26 @@ def test_fuzz_resume_after_sigkill_neither_loses_nor_duplicates_and_reruns_damag
         assert visible == sorted(p.relative_to(reference) for p in reference.rglob("*") if p.is_file())
         for path in visible:
             assert (out / path).read_bytes() == (reference / path).read_bytes()
+
+
+def test_ctrl_c_on_a_running_batch_stops_it_without_a_traceback(tmp_path):
+    # a terminal's Ctrl-C reaches the whole process group: the Dask workers printed their tracebacks
+    # (interrupted mid-task or mid-import) below the command's "interrupted"
+    sphere = o3d.geometry.TriangleMesh.create_sphere(resolution=120)
+    for i in range(6):
+        assert o3d.io.write_triangle_mesh(str(tmp_path / f"s{i}.ply"), sphere)
+    out = tmp_path / "out"
+    argv = [sys.executable, "-m", "o3d_lsmesh.cli", "batch", *sorted(map(str, tmp_path.glob("s*.ply")))]
+    argv += [str(out), "--op", "denoise", "--workers", "2", "--report", str(tmp_path / "r.jsonl")]
+    process = subprocess.Popen(
+        argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True
+    )
+    report, start = tmp_path / "r.jsonl", time.monotonic()
+    while process.poll() is None and time.monotonic() - start < 120:
+        if report.exists() and b"\n" in report.read_bytes():
+            break  # a file is done: the workers are running the others
+        time.sleep(0.01)
+    os.killpg(process.pid, 2)  # SIGINT to the group, as a terminal sends it
+    _, err = process.communicate(timeout=120)
+    assert process.returncode == 130 and "interrupted" in err, err[-2000:]
+    assert "Traceback" not in err, err[-2000:]

@@ -7,6 +7,7 @@ import importlib.util
 import json
 import logging
 import os
+import signal
 import threading
 import time
 import warnings
@@ -269,9 +270,20 @@ def local_cluster(workers: int, threads_per_worker: int = 1, *, retries: int = 1
         # cluster on this machine (and gives a dashboard when bokeh is installed).
         kwargs.setdefault("dashboard_address", "127.0.0.1:0")
         kwargs.setdefault("silence_logs", logging.ERROR)
-        return LocalCluster(
-            n_workers=workers, threads_per_worker=threads_per_worker, processes=True, **kwargs
-        )
+        # A terminal's Ctrl-C reaches the whole process group: the workers, interrupted mid-import or
+        # mid-task, printed tracebacks, and so did a cluster interrupted half-built. SIGINT is ignored
+        # while the cluster starts: its processes keep ignoring it (Python keeps an inherited SIG_IGN), the
+        # caller closes them. (Blocking it instead did not reach the workers.) The cost: a Ctrl-C in that
+        # second is not seen (docs/limits)
+        ignoring = threading.current_thread() is threading.main_thread()  # (only it may set handlers)
+        handler = signal.signal(signal.SIGINT, signal.SIG_IGN) if ignoring else None
+        try:
+            return LocalCluster(
+                n_workers=workers, threads_per_worker=threads_per_worker, processes=True, **kwargs
+            )
+        finally:
+            if ignoring:
+                signal.signal(signal.SIGINT, handler)
 
 
 def failure_record(task: Task, op: str, message: str, stage: str = "worker") -> dict:
