@@ -495,3 +495,28 @@ def fe_report():
     from o3d_lsmesh.fairing.constrained import FairingReport
 
     return FairingReport
+
+
+@pytest.mark.parametrize("solver", ["cholmod", "iterative"])
+def test_the_solver_asked_for_solves_the_scan_start(monkeypatch, solver):
+    # the feature mode's curved branch solves the scan energy: with the solver the caller named (it was
+    # always "auto"), through constrained_fairing's features and auto methods
+    import o3d_lsmesh.fairing.features as features
+
+    asked = []
+    scan_denoise = features.scan_denoise
+
+    def spy(*args, **kwargs):
+        asked.append(kwargs["solver"])
+        return scan_denoise(*args, **kwargs)
+
+    from o3d_lsmesh.core.solve import cholmod_available
+
+    monkeypatch.setattr(features, "scan_denoise", spy)
+    V, F = grid(16, 16)
+    V = V + [0.0, 0.0, 1.0] * (0.05 * np.sin(3 * V[:, :1]))  # curved: the branch that solves the scan energy
+    mesh = (V + np.random.default_rng(5).normal(0.0, 0.01, V.shape), F)
+    if solver == "cholmod" and not cholmod_available():
+        pytest.skip("scikit-sparse (CHOLMOD) is not installed")
+    constrained_fairing(mesh, method="features", solver=solver)
+    assert asked == [solver]

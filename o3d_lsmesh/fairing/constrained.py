@@ -231,7 +231,9 @@ def _fair(positions, conn, method, options, solver="auto", run=None):
     solver = as_choice(solver, SOLVERS, name="solver")  # checked for every method ("local" solves none)
     iterations, progress = options["number_of_iterations"], options["progress"]
     if run is not None and method == "features":
-        return feature_denoise(positions, conn.triangles, progress=progress, conn=conn, run=run)
+        return feature_denoise(
+            positions, conn.triangles, progress=progress, conn=conn, run=run, solver=solver
+        )
     if iterations == 0:
         return positions
     triangles = conn.triangles
@@ -239,7 +241,9 @@ def _fair(positions, conn, method, options, solver="auto", run=None):
         scan = {key: options[key] for key in ("number_of_iterations", "mu", "membrane", "boundary_weight")}
         return scan_denoise(positions, triangles, solver=solver, progress=progress, conn=conn, **scan)
     if method == "features":
-        return feature_denoise(positions, triangles, passes=iterations, progress=progress, conn=conn)
+        return feature_denoise(
+            positions, triangles, passes=iterations, progress=progress, conn=conn, solver=solver
+        )
     smooth_boundary = options["smooth_boundary"]
     if method == "local":
         return fair_local(positions, conn, iterations, smooth_boundary, options["reimpose_every"], progress)
@@ -325,7 +329,8 @@ def constrained_fairing(
     progress : bool
         Show a progress bar.
     solver : {"auto", "cholmod", "iterative"}
-        How ``"scan"`` and ``"global"`` solve their system (see :class:`~o3d_lsmesh.SPDSolver`).
+        How ``"scan"``, ``"global"`` and the feature mode's scan-energy start solve their system (see
+        :class:`~o3d_lsmesh.SPDSolver`).
     return_report : bool
         Also return a :class:`FairingReport` (the method that ran, ``"auto"``'s feature passes).
 
@@ -339,8 +344,8 @@ def constrained_fairing(
     TypeError
         An argument of the wrong type.
     ValueError
-        A value out of range, an option of another method, an invalid mesh; ``"local"``/``"global"``:
-        an edge of three triangles, or (``smooth_boundary``) a pinched boundary vertex.
+        A value out of range, an option of another method, an invalid mesh (non-manifold edges and
+        vertices, pinched boundaries and several components are handled, not refused).
 
     Examples
     --------

@@ -226,12 +226,13 @@ class FeatureRun:
         k = len(self.medians)
         return k >= 2 and self.medians[-1] > CONCENTRATION * self.medians[k // 2 - 1]
 
-    def finish(self, passes: int | None = None, progress: bool = False) -> np.ndarray:
+    def finish(self, passes: int | None = None, progress: bool = False, solver: str = "auto") -> np.ndarray:
         """``passes`` more passes (``None``: until the measured stop), then the positions ``(n, 3)``;
         unreferenced vertices exactly where they were.
 
         With the measured stop before ``MAX_PASSES`` (a curved surface), the positions are instead
-        :func:`.scan_denoise`'s result followed by ``stop_pass // 2`` passes of a ``scan_start`` run.
+        :func:`.scan_denoise`'s result (solved by ``solver``) followed by ``stop_pass // 2`` passes of a
+        ``scan_start`` run.
         Slivers at a rim then give back their drift (:func:`.relax_rim` with ``strength=0``)."""
         measured = passes is None
         if passes is None:
@@ -244,7 +245,9 @@ class FeatureRun:
             # energy removes it without facets, and bilateral passes from there (the guidance's patches
             # assume flat pieces) sharpen what creases it has: as many as concentrated the normals here,
             # the stop's k // 2 (docs page). The stop from the noisy mesh decides: CAD meshes reach the cap.
-            start = scan_denoise(self.vertices, self.triangles, progress=progress, conn=self.conn)
+            start = scan_denoise(
+                self.vertices, self.triangles, solver=solver, progress=progress, conn=self.conn
+            )
             again = FeatureRun(start, self.triangles, self.conn, scan_start=True)
             x = again.finish(self.stop_pass // 2, progress)
         else:
@@ -265,6 +268,7 @@ def feature_denoise(
     progress: bool = False,
     conn: Connectivity | None = None,
     run: FeatureRun | None = None,
+    solver: str = "auto",
 ) -> np.ndarray:
     """The feature mode on validated arrays: new ``(n, 3) float64`` positions.
 
@@ -272,7 +276,8 @@ def feature_denoise(
     :meth:`FeatureRun.concentrated`, at most :data:`MAX_PASSES`, from the scan energy's result where that
     stop comes before the cap, :meth:`FeatureRun.finish`; none on a mesh without measured noise), each
     followed by :data:`VERTEX_STEPS` vertex steps (:func:`filter_pass`, :func:`normal_steps`);
-    ``conn``: the mesh's connectivity when the caller has it; ``run``: its passes begun on ``vertices``.
+    ``conn``: the mesh's connectivity when the caller has it; ``run``: its passes begun on ``vertices``;
+    ``solver``: how the scan energy's start is solved (:class:`~o3d_lsmesh.SPDSolver`).
 
     Examples
     --------
@@ -285,7 +290,7 @@ def feature_denoise(
     conn = Connectivity(triangles, len(vertices)) if conn is None else conn
     if passes == 0 or (passes is None and measured_noise(vertices, triangles, conn=conn).noise == 0.0):
         return np.array(vertices, dtype=np.float64)
-    return (run or FeatureRun(vertices, triangles, conn)).finish(passes, progress)
+    return (run or FeatureRun(vertices, triangles, conn)).finish(passes, progress, solver)
 
 
 def detect_creases_arrays(
