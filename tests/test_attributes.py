@@ -422,3 +422,18 @@ def test_an_unknown_value_at_a_rim_is_unknown_inside_its_patch_alone():
     known = np.isfinite(got)
     assert known.sum() == got.size - len(upper) - 1  # ... and nowhere else (the rim vertex's own NaN kept)
     np.testing.assert_array_equal(got[known], want[known])
+
+
+def test_a_tensor_mesh_with_narrow_indices_gets_indices_that_hold_its_new_vertices():
+    # uint8 indices at 256 vertices: the fill's new vertices (256 and up) wrapped to 0.. in the input's dtype
+    sphere = o3d.geometry.TriangleMesh.create_sphere(resolution=10)
+    V, T = np.asarray(sphere.vertices), np.asarray(sphere.triangles).astype(np.int64)
+    T = T[V[T].mean(axis=1)[:, 2] < 0.8]  # a hole around the top pole
+    V = np.vstack([V, 1000.0 + np.arange(256 - len(V))[:, None] * np.ones(3)])  # unreferenced up to 255
+    mesh = o3d.t.geometry.TriangleMesh()
+    mesh.vertex.positions = o3d.core.Tensor(V)
+    mesh.triangle.indices = o3d.core.Tensor(T.astype(np.uint8))
+    out = o3d_lsmesh.fill_holes(mesh)
+    reference = o3d_lsmesh.fill_holes((V, T))  # the array path: int64 throughout
+    assert len(reference[0]) > 256
+    np.testing.assert_array_equal(out.triangle.indices.numpy(), reference[1])

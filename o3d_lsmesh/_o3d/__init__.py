@@ -412,7 +412,10 @@ def new_mesh(
         position_dtype = o3d.core.float64
     out = o3d.t.geometry.TriangleMesh(device)
     out.vertex.positions = o3d.core.Tensor(vertices, device=device).to(position_dtype)
-    out.triangle.indices = o3d.core.Tensor(faces, device=device).to(src.triangle.indices.dtype)
+    index_dtype = src.triangle.indices.dtype
+    if len(vertices) - 1 > np.iinfo(src.triangle.indices.cpu().numpy().dtype).max:
+        index_dtype = o3d.core.int64  # new vertices past what the input's indices hold: wrapped otherwise
+    out.triangle.indices = o3d.core.Tensor(faces, device=device).to(index_dtype)
     normals = set()
     for row, key in present_attributes(data):
         source, target = getattr(src, row.group), getattr(out, row.group)
