@@ -708,3 +708,37 @@ def test_obj_materials_without_an_image_say_their_colours_are_lost(tmp_path):
         assert len(said) == (1 if lost else 0), (name, said)
         if lost:
             assert f"the {lost} materials without an image" in said[0]
+
+
+_CONCURRENT_READS = """
+import sys, threading
+from o3d_lsmesh._o3d.io import read_mesh_file
+good, bad = sys.argv[1:]
+verdicts, barrier = [], threading.Barrier(2)
+def read(path):
+    barrier.wait()  # both reads at once, as a batch worker's threads
+    try:
+        read_mesh_file(path)
+        verdicts.append((path, "read"))
+    except ValueError:
+        verdicts.append((path, "refused"))
+for _ in range(20):
+    threads = [threading.Thread(target=read, args=(p,)) for p in (good, bad)]
+    [t.start() for t in threads]
+    [t.join() for t in threads]
+print(sorted(set(verdicts)))
+"""
+
+
+def test_reads_in_two_threads_at_once_each_judge_their_own_file(tmp_path):
+    # the truncation check reads Open3D's native messages from the process's descriptors 1 and 2 (and its
+    # process-wide verbosity): two reads at once took each other's messages, a truncated file was read and
+    # a good one refused. In a child: a failing run would leave this process's descriptors swapped
+    sphere = o3d.geometry.TriangleMesh.create_sphere(resolution=100)
+    good = tmp_path / "good.off"
+    assert o3d.io.write_triangle_mesh(str(good), sphere)
+    data = good.read_bytes()
+    (tmp_path / "bad.off").write_bytes(data[: int(0.9 * len(data))])  # cut among the faces
+    argv = [sys.executable, "-c", _CONCURRENT_READS, str(good), str(tmp_path / "bad.off")]
+    result = subprocess.run(argv, capture_output=True, text=True, timeout=300)
+    assert result.stdout.strip() == str([(str(tmp_path / "bad.off"), "refused"), (str(good), "read")]), result

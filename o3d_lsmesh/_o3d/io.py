@@ -5,10 +5,12 @@ written with its ``.mtl`` and textures), images, raycasting, primitives and its 
 from __future__ import annotations
 
 import contextlib
+import functools
 import os
 import re
 import sys
 import tempfile
+import threading
 import warnings
 from collections.abc import Iterator
 from pathlib import Path
@@ -46,8 +48,10 @@ def open3d() -> Any:
     return o3d
 
 
+@functools.cache
 def quiet_open3d() -> Any:
-    """The ``open3d`` module with its own messages off (ours are clearer and ``--json`` needs stdout clean)."""
+    """The ``open3d`` module with its own messages off (ours are clearer and ``--json`` needs stdout clean).
+    Set once: a read in another thread raises the (process-wide) level while it captures them."""
     o3d = open3d()
     o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
     return o3d
@@ -66,25 +70,32 @@ def cap_threads(threads: int) -> None:
         o3d.utility.set_max_threads(threads)
 
 
+# descriptors 1 and 2 belong to the process: one capture at a time (threads of a batch worker read at
+# once; a second capture would save the first one's sink as "the terminal" and mix their texts)
+_CAPTURE = threading.Lock()
+
+
 @contextlib.contextmanager
 def captured_native_output() -> Iterator[list[str]]:
-    """Capture what C/C++ libraries write straight to file descriptors 1 and 2: a list holding the text at the end."""
-    sys.stdout.flush()
-    sys.stderr.flush()
-    saved = [os.dup(1), os.dup(2)]
-    captured: list[str] = []
-    with tempfile.TemporaryFile() as sink:
-        try:
-            os.dup2(sink.fileno(), 1)
-            os.dup2(sink.fileno(), 2)
-            yield captured
-        finally:
-            os.dup2(saved[0], 1)
-            os.dup2(saved[1], 2)
-            for fd in saved:
-                os.close(fd)
-            sink.seek(0)
-            captured.append(sink.read().decode("utf-8", "replace"))
+    """Capture what C/C++ libraries write straight to file descriptors 1 and 2: a list holding the text at the
+    end. One capture at a time in a process (others wait)."""
+    with _CAPTURE:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        saved = [os.dup(1), os.dup(2)]
+        captured: list[str] = []
+        with tempfile.TemporaryFile() as sink:
+            try:
+                os.dup2(sink.fileno(), 1)
+                os.dup2(sink.fileno(), 2)
+                yield captured
+            finally:
+                os.dup2(saved[0], 1)
+                os.dup2(saved[1], 2)
+                for fd in saved:
+                    os.close(fd)
+                sink.seek(0)
+                captured.append(sink.read().decode("utf-8", "replace"))
 
 
 # Open3D's readers report a file they could not read to the end with these words (and return what they got)
@@ -145,12 +156,12 @@ def read_mesh_file(path: str, *, what: str = "INPUT") -> Any:
         raise InputError(f"{name} is a folder, not a mesh file", param="path")
     if os.path.getsize(path) == 0:
         raise InputError(f"{name} is an empty file", param="path")
-    o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Warning)
-    try:
-        with captured_native_output() as captured:
+    with captured_native_output() as captured:  # (Open3D's verbosity is process-wide too: set within)
+        o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Warning)
+        try:
             mesh = o3d.io.read_triangle_mesh(path)
-    finally:
-        o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
+        finally:
+            o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
     n, m = len(mesh.vertices), len(mesh.triangles)
     failure = _READ_FAILURE.search(_ANSI.sub("", captured[0]))
     if failure and n:
