@@ -443,7 +443,7 @@ def test_unreadable_and_empty_meshes(tmp_path, capsys, clean):
                 "--workers",
                 "0",
             ],
-            "--method scan cannot be combined with --level 2 (multiresolution fairing takes --method local or --method global)",
+            "--method scan cannot be combined with --level 2 (multiresolution fairing does not take it: it takes --method local",
         ),
         # batch refuses what the command refuses, in its flags, before a worker starts or a file is read
         (

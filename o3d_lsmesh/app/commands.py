@@ -28,8 +28,15 @@ from .batch import summarize
 from .cli_kit import Run, draw, run_file_op, run_op, shape_change_text
 from .demo import run_demo
 from .files import CLIError, check_output, read_input, write_output
-from .metrics import shape_change, surface_distance, topology_summary, triangle_angles, vertex_error
-from .ops import RUN_FLAGS, normal_change
+from .metrics import (
+    normal_change,
+    shape_change,
+    surface_distance,
+    topology_summary,
+    triangle_angles,
+    vertex_error,
+)
+from .ops import RUN_FLAGS
 
 __all__ = ["parse_index_spec"]
 

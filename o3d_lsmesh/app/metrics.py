@@ -236,6 +236,14 @@ def normal_deviation(a: AnyMesh, b: AnyMesh) -> float:
     return float(np.degrees(np.arctan2(sine, cosine)).mean())
 
 
+def normal_change(a: Any, b: Any) -> float | None:
+    """:func:`normal_deviation`, or None when no triangle has an area in both (the angle is undefined)."""
+    try:
+        return normal_deviation(a, b)
+    except ValueError:
+        return None
+
+
 def triangle_angles(mesh: AnyMesh) -> dict:
     """Smallest interior angle (degrees) and the share of triangles with an angle under 10 degrees.
 

@@ -23,7 +23,7 @@ from ..holes import fill_holes
 from ..lsmesh.encoding import decode_geometry, encode_geometry
 from ..lsmesh.selection import approximate
 from .files import READABLE, read_mesh_file
-from .metrics import MAX_SAMPLE_POINTS, normal_deviation, shape_change, surface_distance, vertex_error
+from .metrics import MAX_SAMPLE_POINTS, normal_change, shape_change, surface_distance, vertex_error
 
 __all__ = [
     "OPS",
@@ -181,11 +181,9 @@ class BatchOp:
             raise InputError(message, param="extension")
         for option in self.options:
             if option.name in RESERVED:
-                raise InputError(
-                    f"options must not reuse a parameter of the batch itself, got option name "
-                    f"{option.name!r} of op {self.name!r}",
-                    param="options",
-                )
+                given = f"option name {option.name!r} of op {self.name!r}"
+                message = f"options must not reuse a parameter of the batch itself, got {given}"
+                raise InputError(message, param="options")
 
 
 @dataclass(frozen=True)
@@ -297,14 +295,6 @@ RUN_FLAGS = (
 RESERVED = frozenset([option.name for option in RUN_FLAGS] + "op set quiet json force help".split())
 
 
-def normal_change(a: Any, b: Any) -> float | None:
-    """Mean face-normal deviation of two meshes with the same triangles; None when no triangle has an area in both."""
-    try:
-        return normal_deviation(a, b)
-    except ValueError:  # every triangle of zero area in a or b: the angle is undefined
-        return None
-
-
 def change_metrics(before: Any, after: Any) -> dict:
     """Vertex displacement, shape change and (same triangles) normal change, on arrays read once."""
     # read once: the metrics take a MeshData as it is (Any: their annotations name the public mesh kinds)
@@ -324,25 +314,17 @@ def change_metrics(before: Any, after: Any) -> dict:
 NOT_WITH_LEVEL = ("mu", "reimpose_every", "fixed_boundary")
 
 
-def level_conflicts(options: Any) -> list[str]:
-    """The options of :data:`NOT_WITH_LEVEL` given (not ``None`` or ``False``) beside a nonzero ``level``."""
-    return [name for name in NOT_WITH_LEVEL if options[name] not in (None, False)] if options["level"] else []
-
-
 def _denoise_check(options: dict) -> None:
     level = options["level"]
-    if conflicts := level_conflicts(options):  # a batch would otherwise drop them without a word
+    # a batch would otherwise drop them without a word; a method but Liu's per-level operators too
+    conflicts = [name for name in NOT_WITH_LEVEL if options[name] not in (None, False)]
+    conflicts += ["method"] if options["method"] not in (None, "local", "global") else []
+    if level and conflicts:
         given = ", ".join(f"{name}={options[name]!r}" for name in conflicts)
         raise InputError(
             f"{given} cannot be combined with level={level!r} (multiresolution fairing does not take "
-            f"{'them' if len(conflicts) > 1 else 'it'})",
+            f"{'them' if len(conflicts) > 1 else 'it'}: it takes method='local' or method='global')",
             param="level",
-        )
-    if level and options["method"] not in (None, "local", "global"):  # Liu's per-level operators only
-        raise InputError(
-            f"method={options['method']!r} cannot be combined with level={level!r} (multiresolution fairing "
-            "takes method='local' or method='global')",
-            param="method",
         )
     method = resolved_options(options["method"], options["iterations"], options["reimpose_every"])[0]
     if not level and options["fixed_boundary"] and method in ("scan", "auto"):
@@ -426,19 +408,17 @@ def hierarchy_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, d
 
 
 def _approximate_check(options: dict) -> None:
-    if options["seed"] is not None and options["method"] != "random":  # the others draw nothing
+    method, seed = options["method"], options["seed"]
+    if seed is not None and method != "random":  # the others draw nothing
         raise InputError(
-            f"seed={options['seed']!r} applies only to method='random', got method={options['method']!r}",
-            param="seed",
+            f"seed={seed!r} applies only to method='random', got method={method!r}", param="seed"
         )
 
 
-@operation(
-    "approximate",
-    options=APPROXIMATE,
-    help="LS-mesh approximation from control points",
-    check=_approximate_check,
-)
+_APPROXIMATE = "LS-mesh approximation from control points"
+
+
+@operation("approximate", options=APPROXIMATE, help=_APPROXIMATE, check=_approximate_check)
 def approximate_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
     """``--op approximate`` and ``o3d-lsmesh approximate``: the result, its control indices and errors."""
     mesh = read_mesh(mesh)  # validated once: the selection and the metrics take it as it is
