@@ -493,8 +493,8 @@ def test_fuzz_resume_after_sigkill_neither_loses_nor_duplicates_and_reruns_damag
 def test_ctrl_c_on_a_running_batch_stops_it_without_a_traceback(tmp_path):
     # a terminal's Ctrl-C reaches the whole process group: the Dask workers printed their tracebacks
     # (interrupted mid-task or mid-import) below the command's "interrupted"
-    sphere = o3d.geometry.TriangleMesh.create_sphere(resolution=120)
-    for i in range(6):
+    sphere = o3d.geometry.TriangleMesh.create_sphere(resolution=200)  # about a second a file
+    for i in range(10):
         assert o3d.io.write_triangle_mesh(str(tmp_path / f"s{i}.ply"), sphere)
     out = tmp_path / "out"
     argv = [sys.executable, "-m", "o3d_lsmesh.cli", "batch", *sorted(map(str, tmp_path.glob("s*.ply")))]

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import io
 import os
 import re
 import sys
@@ -77,14 +78,16 @@ _CAPTURE = threading.Lock()
 
 @contextlib.contextmanager
 def captured_native_output() -> Iterator[list[str]]:
-    """Capture what C/C++ libraries write straight to file descriptors 1 and 2: a list holding the text at the
-    end. One capture at a time in a process (others wait)."""
+    """Capture what C/C++ libraries write straight to file descriptors 1 and 2, and Open3D's messages (it
+    prints them through Python's ``sys.stdout``: a notebook's or pytest's stream, not descriptor 1): a list
+    holding the text at the end. One capture at a time in a process (others wait)."""
     with _CAPTURE:
         sys.stdout.flush()
         sys.stderr.flush()
         saved = [os.dup(1), os.dup(2)]
         captured: list[str] = []
-        with tempfile.TemporaryFile() as sink:
+        printed = io.StringIO()
+        with tempfile.TemporaryFile() as sink, contextlib.redirect_stdout(printed):
             try:
                 os.dup2(sink.fileno(), 1)
                 os.dup2(sink.fileno(), 2)
@@ -95,7 +98,7 @@ def captured_native_output() -> Iterator[list[str]]:
                 for fd in saved:
                     os.close(fd)
                 sink.seek(0)
-                captured.append(sink.read().decode("utf-8", "replace"))
+                captured.append(sink.read().decode("utf-8", "replace") + printed.getvalue())
 
 
 # Open3D's readers report a file they could not read to the end with these words (and return what they got)
@@ -156,12 +159,17 @@ def read_mesh_file(path: str, *, what: str = "INPUT") -> Any:
         raise InputError(f"{name} is a folder, not a mesh file", param="path")
     if os.path.getsize(path) == 0:
         raise InputError(f"{name} is an empty file", param="path")
+    suffix = Path(path).suffix.lower()
     with captured_native_output() as captured:  # (Open3D's verbosity is process-wide too: set within)
-        o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Warning)
+        # its OBJ reader says only at Info that it skips polygons of more than three corners
+        level = o3d.utility.VerbosityLevel
+        o3d.utility.set_verbosity_level(level.Info if suffix == ".obj" else level.Warning)
         try:
             mesh = o3d.io.read_triangle_mesh(path)
         finally:
-            o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
+            o3d.utility.set_verbosity_level(level.Error)
+    if suffix == ".obj" and "non-triangle" in captured[0]:
+        mesh = _obj_polygons(path, mesh, name)
     n, m = len(mesh.vertices), len(mesh.triangles)
     failure = _READ_FAILURE.search(_ANSI.sub("", captured[0]))
     if failure and n:
@@ -169,7 +177,7 @@ def read_mesh_file(path: str, *, what: str = "INPUT") -> Any:
             f"{name} is truncated or corrupt: Open3D read only part of it ({failure.group(0).strip()})",
             param="path",
         )
-    header = ply_header(path) if Path(path).suffix.lower() == ".ply" and n else {}
+    header = ply_header(path) if suffix == ".ply" and n else {}
     counts = {element: count for element, (count, _) in header.items()}
     # a polygon face gives at least one triangle: fewer triangles than faces means faces were lost
     if counts.get("vertex", n) != n or counts.get("face", 0) > m:
@@ -192,7 +200,6 @@ def read_mesh_file(path: str, *, what: str = "INPUT") -> Any:
         )
     if m == 0:
         raise InputError(f"{name} has {n} vertices but no triangles", param="path")
-    suffix = Path(path).suffix.lower()
     loss = rounding_loss(mesh, suffix, reading=True)
     if loss > 0.01:  # as for writing: visible
         warnings.warn(
@@ -210,6 +217,24 @@ def read_mesh_file(path: str, *, what: str = "INPUT") -> Any:
             stacklevel=2,
         )
     return mesh.remove_duplicated_vertices() if suffix == ".stl" else mesh
+
+
+def _obj_polygons(path: str, mesh: Any, name: str) -> Any:
+    """An OBJ whose polygons (more than three corners) Open3D's legacy reader skipped, read by its tensor
+    reader, which fans them out; where it holds more triangles. That reader keeps one material and no
+    texture image: said, where the legacy reader found them."""
+    with captured_native_output():
+        polygons = open3d().t.io.read_triangle_mesh(path)
+    if len(polygons.triangle.indices) <= len(mesh.triangles):
+        return mesh
+    if has_textures(mesh) or len(set(np.asarray(mesh.triangle_material_ids).tolist())) > 1:
+        warnings.warn(
+            f"{name}: Open3D's OBJ reader skips faces of more than three corners; read by its tensor "
+            "reader, which keeps their texture coordinates but not the materials' images",
+            O3DLSMeshWarning,
+            stacklevel=3,
+        )
+    return polygons.to_legacy()
 
 
 def _untextured_materials(mesh: Any) -> int:
