@@ -777,3 +777,22 @@ def test_a_truncated_file_is_refused_where_python_s_stdout_is_not_the_terminal(t
     with pytest.raises(ValueError, match="truncated or corrupt: Open3D read only part of it"):
         read_mesh_file(str(tmp_path / "cut.off"))
     assert sys.stdout.getvalue() == ""  # and nothing of Open3D's shown there
+
+
+@pytest.mark.parametrize(
+    ("kind", "scale"), [("uchar", 255), ("float", 1.0), ("double", 1.0), ("ushort", 65535)]
+)
+def test_ply_colours_of_every_type_are_read_as_stored(tmp_path, kind, scale):
+    # Open3D's PLY reader divides every colour by 255, whatever its type: float colours in [0, 1] came out
+    # all but black, 16-bit ones far above 1
+    from o3d_lsmesh._o3d.io import read_mesh_file
+
+    shares = np.array([[0.2, 0.4, 0.6], [1.0, 0.0, 0.5], [0.1, 0.9, 0.3]])
+    stored = np.round(shares * scale) if scale > 1 else shares
+    head = ["ply", "format ascii 1.0", "element vertex 3", "property float x", "property float y"]
+    head += ["property float z"] + [f"property {kind} {c}" for c in ("red", "green", "blue")]
+    head += ["element face 1", "property list uchar int vertex_indices", "end_header"]
+    rows = [f"{i} {i * i} 0 " + " ".join(f"{c:g}" for c in colour) for i, colour in enumerate(stored)]
+    (tmp_path / "c.ply").write_text("\n".join([*head, *rows, "3 0 1 2"]) + "\n")
+    colours = np.asarray(read_mesh_file(str(tmp_path / "c.ply")).vertex_colors)
+    np.testing.assert_allclose(colours, stored / scale, rtol=0, atol=1e-7)

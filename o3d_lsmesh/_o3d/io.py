@@ -108,10 +108,10 @@ _READ_FAILURE = re.compile(
 _ANSI = re.compile(r"\x1b\[[0-9;]*m")
 
 
-def ply_header(path: str | os.PathLike) -> dict[str, tuple[int, list[str]]]:
-    """Each element of a PLY header with its count and property names (``{"vertex": (n, ["x", ...])}``);
-    empty if the header is unreadable."""
-    elements: dict[str, tuple[int, list[str]]] = {}
+def ply_header(path: str | os.PathLike) -> dict[str, tuple[int, dict[str, str]]]:
+    """Each element of a PLY header with its count and its properties' types by name
+    (``{"vertex": (n, {"x": "float", ...})}``); empty if the header is unreadable."""
+    elements: dict[str, tuple[int, dict[str, str]]] = {}
     try:
         with open(path, "rb") as handle:
             if handle.readline().strip() != b"ply":
@@ -121,12 +121,20 @@ def ply_header(path: str | os.PathLike) -> dict[str, tuple[int, list[str]]]:
                 if not parts or parts == ["end_header"]:
                     break
                 if len(parts) == 3 and parts[0] == "element":
-                    elements[parts[1]] = (int(parts[2]), [])
+                    elements[parts[1]] = (int(parts[2]), {})
                 elif len(parts) >= 3 and parts[0] == "property" and elements:
-                    elements[next(reversed(elements))][1].append(parts[-1])
+                    elements[next(reversed(elements))][1][parts[-1]] = parts[-2]
     except (OSError, ValueError):
         return {}
     return elements
+
+
+#: The full scale of a PLY colour type: Open3D's reader divides every colour by 255, whatever its type
+_COLOUR_SCALE = {"uchar": 255, "uint8": 255, "char": 127, "int8": 127, "ushort": 65535, "uint16": 65535}
+_COLOUR_SCALE |= {"short": 32767, "int16": 32767, "uint": 2**32 - 1, "uint32": 2**32 - 1}
+_COLOUR_SCALE |= {"int": 2**31 - 1, "int32": 2**31 - 1} | dict.fromkeys(
+    ("float", "float32", "double", "float64"), 1
+)
 
 
 #: What Open3D's PLY reader keeps of each element (positions, normals, colours; the faces' corners)
@@ -134,7 +142,7 @@ _PLY_READ = {"vertex": {"x", "y", "z", "nx", "ny", "nz", "red", "green", "blue"}
 _PLY_READ["face"] = {"vertex_indices", "vertex_index"}
 
 
-def _ply_unread(header: dict[str, tuple[int, list[str]]]) -> list[str]:
+def _ply_unread(header: dict[str, tuple[int, dict[str, str]]]) -> list[str]:
     """The properties of a PLY ``header`` (:func:`ply_header`) Open3D's reader leaves out, as ``"element
     property"`` (a whole element it does not read: ``"element"``)."""
     unread = []
@@ -185,6 +193,11 @@ def read_mesh_file(path: str, *, what: str = "INPUT") -> Any:
             f"{name} is truncated or corrupt: its header declares {counts.get('vertex')} vertices "
             f"and {counts.get('face', 0)} faces, Open3D read {n} and {m} triangles",
             param="path",
+        )
+    colour = header.get("vertex", (0, {}))[1].get("red", "uchar")
+    if mesh.has_vertex_colors() and _COLOUR_SCALE.get(colour, 255) != 255:  # (float colours: 0..1/255)
+        mesh.vertex_colors = o3d.utility.Vector3dVector(
+            np.asarray(mesh.vertex_colors) * (255 / _COLOUR_SCALE[colour])
         )
     if unread := _ply_unread(header):  # a scanner's confidence or intensity, say: gone from every output
         warnings.warn(
