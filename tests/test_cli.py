@@ -136,9 +136,9 @@ def test_compare_identical_and_different_meshes(tmp_path, capsys, clean, noisy):
     assert report["vertex_error"]["linf"] == 0.0 and report["normal_deviation_deg"] < 1e-5  # arccos near 1
     assert report["surface_distance"]["hausdorff"] < 1e-6
     assert report["topology_a"]["genus"] == 0 and report["shape_change"]["volume_change_percent"] == 0.0
-    b = _write(noisy, tmp_path / "b.obj")
+    b = _write(noisy, tmp_path / "b.ply")  # (an OBJ is renumbered as read: no vertex correspondence)
     report = run_json(capsys, ["compare", str(a), str(b), "--points", "5000"])
-    expected = np.linalg.norm(np.asarray(clean.vertices) - np.asarray(_read(b).vertices), axis=1).max()
+    expected = np.linalg.norm(np.asarray(clean.vertices) - np.asarray(noisy.vertices), axis=1).max()
     assert report["vertex_error"]["linf"] == pytest.approx(expected, rel=1e-6)
     # A decimated mesh has another vertex count: only the surface measures apply.
     c = _write(clean.simplify_quadric_decimation(300), tmp_path / "c.ply")
@@ -1256,3 +1256,19 @@ def test_reconstruct_on_an_obj_says_whose_vertex_order_unknown_counts(tmp_path, 
     assert "--unknown counts the vertices of an OBJ as Open3D reads them" in capsys.readouterr().err
     out = np.asarray(o3d.io.read_triangle_mesh(str(tmp_path / "o.obj")).vertices)
     np.testing.assert_array_equal(np.flatnonzero(np.linalg.norm(out - read, axis=1) > 1e-4), np.arange(5))
+
+
+def test_compare_pairs_vertices_only_where_the_meshes_correspond(tmp_path, capsys):
+    # Open3D renumbers a glTF's vertices: the same sphere as .ply and .gltf has as many vertices, which
+    # compare took for a correspondence (a vertex error of the sphere's diameter)
+    sphere = o3d.geometry.TriangleMesh.create_sphere(radius=1.0, resolution=12)
+    sphere.compute_vertex_normals()
+    for suffix in (".ply", ".gltf"):
+        assert o3d.io.write_triangle_mesh(str(tmp_path / f"s{suffix}"), sphere)
+    report = run_json(capsys, ["compare", str(tmp_path / "s.ply"), str(tmp_path / "s.gltf")])
+    assert report["size_a"]["vertices"] == report["size_b"]["vertices"]
+    assert "vertex_error" not in report and report["surface_distance"]["hausdorff"] < 1e-5
+    assert report["shape_change"]["volume_change_percent"] == pytest.approx(0.0, abs=1e-4)
+    # a filter's result (the same triangles) is compared vertex by vertex
+    report = run_json(capsys, ["compare", str(tmp_path / "s.ply"), str(tmp_path / "s.ply")])
+    assert report["vertex_error"]["linf"] == 0.0

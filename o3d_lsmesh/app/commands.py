@@ -29,6 +29,7 @@ from .cli_kit import Run, draw, run_file_op, run_op, shape_change_text
 from .demo import run_demo
 from .files import CLIError, check_output, read_input, write_output
 from .metrics import (
+    corresponding,
     normal_change,
     shape_change,
     surface_distance,
@@ -291,10 +292,9 @@ def compare(args: argparse.Namespace, run: Run) -> int:
     for key, mesh in (("size_a", a), ("size_b", b)):
         report[key] = {"vertices": len(mesh.vertices), "triangles": len(mesh.triangles)}
     report["surface_distance"] = surface_distance(a, b, number_of_points=args.points)
-    if len(a.vertices) == len(b.vertices):
+    if corresponding(a, b):
         report["vertex_error"] = vertex_error(a, b)
-        if np.array_equal(np.asarray(a.triangles), np.asarray(b.triangles)):
-            report["normal_deviation_deg"] = normal_change(a, b)
+        report["normal_deviation_deg"] = normal_change(a, b)
     report["shape_change"] = shape_change(a, b)
     report["angles_a"], report["angles_b"] = triangle_angles(a), triangle_angles(b)
     report["topology_a"], report["topology_b"] = topology_summary(a), topology_summary(b)

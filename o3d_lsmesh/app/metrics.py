@@ -183,7 +183,7 @@ def shape_change(before: AnyMesh, after: AnyMesh) -> dict:
     out: dict[str, Any] = dict(
         closed=False, inward_shift_mean=None, inward_shift_rim=None, inward_shift_interior=None
     )
-    if len(b.vertices) != n:
+    if not corresponding(a, b):
         return out
     normals = area_weighted_normals(_unit_scale(a.vertices), triangles)
     length = np.linalg.norm(normals, axis=1)
@@ -193,6 +193,13 @@ def shape_change(before: AnyMesh, after: AnyMesh) -> dict:
     for key, region in (("mean", has), ("rim", has & rim), ("interior", has & ~rim)):
         out[f"inward_shift_{key}"] = float(shift[region].mean()) if region.any() else None
     return out
+
+
+def corresponding(a: Any, b: Any) -> bool:
+    """Whether vertex ``i`` of ``a`` is vertex ``i`` of ``b``: the same triangles on as many vertices (a
+    filter's result; not the same mesh from a format that renumbers, as OBJ and glTF are read)."""
+    a_triangles, b_triangles = np.asarray(a.triangles), np.asarray(b.triangles)
+    return len(a.vertices) == len(b.vertices) and np.array_equal(a_triangles, b_triangles)
 
 
 def rim_mask(conn: Connectivity, rings: int) -> np.ndarray:

@@ -23,7 +23,14 @@ from ..holes import fill_holes
 from ..lsmesh.encoding import decode_geometry, encode_geometry
 from ..lsmesh.selection import approximate
 from .files import READABLE, read_mesh_file
-from .metrics import MAX_SAMPLE_POINTS, normal_change, shape_change, surface_distance, vertex_error
+from .metrics import (
+    MAX_SAMPLE_POINTS,
+    corresponding,
+    normal_change,
+    shape_change,
+    surface_distance,
+    vertex_error,
+)
 
 __all__ = [
     "OPS",
@@ -223,6 +230,8 @@ def operation(name: str, **fields: Any) -> Callable[[OpFunction], OpFunction]:
 
 _LEVELS = "levels of the volume-cost collapse hierarchy, written to OUTDIR/<name>/level_NN<suffix>"
 _ANCHORS = "quantized LS-mesh anchors, written as OUTDIR/<name>.bin"
+_APPROXIMATE = "LS-mesh approximation from control points"
+_AGAINST = "metrics against the matching file in --reference"
 _SELECTIONS = ("greedy", "random", "combined")
 _SCHEDULER = "existing Dask scheduler, e.g. tcp://host:8786 (default: $DASK_SCHEDULER_ADDRESS)"
 _REPORT = "JSON-lines report, one record per file (default: OUTDIR/batch_report.jsonl)"
@@ -301,11 +310,10 @@ def change_metrics(before: Any, after: Any) -> dict:
     a: Any = read_mesh(before, name="before")
     b: Any = read_mesh(after, name="after")
     out: dict[str, Any] = {}
-    if len(a.vertices) == len(b.vertices):
+    if corresponding(a, b):
         moved = vertex_error(b, a)
         out["displacement_mean"], out["displacement_max"] = moved["mean"], moved["linf"]
-        if np.array_equal(a.triangles, b.triangles):
-            out["normal_change_deg"] = normal_change(b, a)
+        out["normal_change_deg"] = normal_change(b, a)
     out.update(shape_change(a, b))
     return out
 
@@ -410,12 +418,8 @@ def hierarchy_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, d
 def _approximate_check(options: dict) -> None:
     method, seed = options["method"], options["seed"]
     if seed is not None and method != "random":  # the others draw nothing
-        raise InputError(
-            f"seed={seed!r} applies only to method='random', got method={method!r}", param="seed"
-        )
-
-
-_APPROXIMATE = "LS-mesh approximation from control points"
+        message = f"seed={seed!r} applies only to method='random', got method={method!r}"
+        raise InputError(message, param="seed")
 
 
 @operation("approximate", options=APPROXIMATE, help=_APPROXIMATE, check=_approximate_check)
@@ -473,13 +477,7 @@ def _compare_check(options: dict) -> None:
         raise InputError(message, param="reference")
 
 
-@operation(
-    "compare",
-    options=COMPARE,
-    output="none",
-    help="metrics against the matching file in --reference",
-    check=_compare_check,
-)
+@operation("compare", options=COMPARE, output="none", help=_AGAINST, check=_compare_check)
 def compare_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
     """``--op compare``: metrics against the matching file of ``reference``."""
     reference_path = find_reference(options["reference"], context.relative)
@@ -490,7 +488,7 @@ def compare_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dic
         "vertices_reference": len(reference.vertices),
         "surface_distance": surface_distance(mesh, reference, number_of_points=options["points"]),
     }
-    if len(mesh.vertices) == len(reference.vertices):
+    if corresponding(mesh, reference):
         metrics["vertex_error"] = vertex_error(mesh, reference)
     metrics.update(change_metrics(reference, mesh))
     return None, metrics
