@@ -1256,6 +1256,15 @@ def test_reconstruct_on_an_obj_says_whose_vertex_order_unknown_counts(tmp_path, 
     assert "--unknown counts the vertices of an OBJ as Open3D reads them" in capsys.readouterr().err
     out = np.asarray(o3d.io.read_triangle_mesh(str(tmp_path / "o.obj")).vertices)
     np.testing.assert_array_equal(np.flatnonzero(np.linalg.norm(out - read, axis=1) > 1e-4), np.arange(5))
+    # and a glTF, which Open3D renumbers too
+    assert o3d.io.write_triangle_mesh(str(tmp_path / "s.gltf"), sphere)
+    read = np.asarray(o3d.io.read_triangle_mesh(str(tmp_path / "s.gltf")).vertices)
+    assert not np.allclose(read, np.asarray(sphere.vertices), atol=1e-5)  # the premise
+    with warnings.catch_warnings():
+        warnings.simplefilter("default")
+        argv = ["reconstruct", str(tmp_path / "s.gltf"), str(tmp_path / "o.ply"), "--unknown", "0:5"]
+        assert main(argv) == 0
+    assert "--unknown counts the vertices of a glTF as Open3D reads them" in capsys.readouterr().err
 
 
 def test_compare_pairs_vertices_only_where_the_meshes_correspond(tmp_path, capsys):

@@ -227,11 +227,12 @@ def reconstruct(args: argparse.Namespace, run: Run) -> int:
     """
     check_output(args.output, [args.input], force=args.force)
     mesh = read_input(args.input)
-    if Path(args.input).suffix.lower() == ".obj":
-        # Open3D's OBJ reader numbers the vertices as the faces first use them, not as the file lists them
+    renumbered = {".obj": "an OBJ", ".gltf": "a glTF", ".glb": "a glTF"}.get(Path(args.input).suffix.lower())
+    if renumbered:
+        # Open3D's OBJ and glTF readers number the vertices as the faces first use them, not as the file does
         warnings.warn(
-            f"INPUT {args.input!r}: --unknown counts the vertices of an OBJ as Open3D reads them (in the order "
-            "the faces first use them, not the file's 'v' lines); the output lists them so too",
+            f"INPUT {args.input!r}: --unknown counts the vertices of {renumbered} as Open3D reads them (in the "
+            "order the faces first use them, not the file's); the output lists them so too",
             O3DLSMeshWarning,
             stacklevel=2,
         )
