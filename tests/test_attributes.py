@@ -437,3 +437,30 @@ def test_a_tensor_mesh_with_narrow_indices_gets_indices_that_hold_its_new_vertic
     reference = o3d_lsmesh.fill_holes((V, T))  # the array path: int64 throughout
     assert len(reference[0]) > 256
     np.testing.assert_array_equal(out.triangle.indices.numpy(), reference[1])
+
+
+def test_integer_vertex_attributes_are_extended_exactly_at_every_width():
+    # integers went through float64: a constant uint64 sentinel (its max) came out 0 on the new vertices,
+    # int64 max as int64 min, 2**53 + 1 as 2**53. Small integers are the float attribute's values rounded
+    sphere = o3d.geometry.TriangleMesh.create_sphere(radius=1.0, resolution=16)
+    V, T = np.asarray(sphere.vertices), np.asarray(sphere.triangles).astype(np.int64)
+    T = T[V[T].mean(axis=1)[:, 2] < 0.85]  # a hole around the top pole
+    mesh = o3d.t.geometry.TriangleMesh()
+    mesh.vertex.positions = o3d.core.Tensor(V)
+    mesh.triangle.indices = o3d.core.Tensor(T)
+    constants = {"u64": np.iinfo(np.uint64).max, "i64": np.iinfo(np.int64).max, "odd": 2**53 + 1}
+    for key, value in constants.items():
+        mesh.vertex[key] = o3d.core.Tensor(
+            np.full(len(V), value, dtype=np.uint64 if key == "u64" else np.int64)
+        )
+    label = np.rint(40 * V[:, 0] - 20).astype(np.int8)  # negative and positive
+    mesh.vertex["label"] = o3d.core.Tensor(label)
+    mesh.vertex["as_float"] = o3d.core.Tensor(label.astype(np.float64))
+    out = o3d_lsmesh.fill_holes(mesh)
+    n = len(V)
+    assert len(out.vertex.positions) > n
+    for key, value in constants.items():
+        assert (out.vertex[key].numpy()[n:] == value).all(), key
+    np.testing.assert_array_equal(
+        out.vertex["label"].numpy()[n:], np.rint(out.vertex["as_float"].numpy()[n:])
+    )

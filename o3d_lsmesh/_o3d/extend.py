@@ -97,11 +97,17 @@ class Appended:
         """Per-vertex values ``(n_source, ...)`` followed by the new vertices' (clipped to the input's range;
         integers rounded)."""
         flat = values.reshape(len(values), -1)
+        if not np.issubdtype(values.dtype, np.floating):
+            # integers as differences from their least (exact in float64 up to 2**53: a 64-bit id or sentinel
+            # is not rounded), in wrapping unsigned arithmetic (an int64's range spans more than an int64)
+            base = flat.min(axis=0).astype(np.uint64)
+            offset = (flat.astype(np.uint64) - base).astype(np.float64)
+            extra = np.rint(np.clip(self.harmonic(offset[self.copy]), 0.0, offset.max(axis=0)))
+            extra = (extra.astype(np.uint64) + base).astype(values.dtype)
+            return np.concatenate([values, extra.reshape((-1,) + values.shape[1:])])
         finite = np.isfinite(flat)
         low, high = np.where(finite, flat, np.inf).min(axis=0), np.where(finite, flat, -np.inf).max(axis=0)
         extra = np.clip(self.harmonic(flat[self.copy].astype(np.float64)), low, high)
-        if not np.issubdtype(values.dtype, np.floating):
-            extra = np.rint(extra)
         return np.concatenate([values, extra.reshape((-1,) + values.shape[1:]).astype(values.dtype)])
 
     def per_triangle(self, values: np.ndarray) -> np.ndarray:
