@@ -439,7 +439,7 @@ def test_a_tensor_mesh_with_narrow_indices_gets_indices_that_hold_its_new_vertic
     np.testing.assert_array_equal(out.triangle.indices.numpy(), reference[1])
 
 
-def test_integer_vertex_attributes_are_extended_exactly_at_every_width():
+def test_integer_and_empty_vertex_attributes_are_extended_exactly():
     # integers went through float64: a constant uint64 sentinel (its max) came out 0 on the new vertices,
     # int64 max as int64 min, 2**53 + 1 as 2**53. Small integers are the float attribute's values rounded
     sphere = o3d.geometry.TriangleMesh.create_sphere(radius=1.0, resolution=16)
@@ -456,9 +456,10 @@ def test_integer_vertex_attributes_are_extended_exactly_at_every_width():
     label = np.rint(40 * V[:, 0] - 20).astype(np.int8)  # negative and positive
     mesh.vertex["label"] = o3d.core.Tensor(label)
     mesh.vertex["as_float"] = o3d.core.Tensor(label.astype(np.float64))
+    mesh.vertex["none"] = o3d.core.Tensor(np.zeros((len(V), 0)))  # no value a vertex (it crashed)
     out = o3d_lsmesh.fill_holes(mesh)
     n = len(V)
-    assert len(out.vertex.positions) > n
+    assert len(out.vertex.positions) > n and out.vertex["none"].shape == (len(out.vertex.positions), 0)
     for key, value in constants.items():
         assert (out.vertex[key].numpy()[n:] == value).all(), key
     np.testing.assert_array_equal(

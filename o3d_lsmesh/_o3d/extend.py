@@ -97,6 +97,8 @@ class Appended:
         """Per-vertex values ``(n_source, ...)`` followed by the new vertices' (clipped to the input's range;
         integers rounded)."""
         flat = values.reshape(len(values), -1)
+        if flat.shape[1] == 0:  # an attribute of no values a vertex
+            return np.zeros((len(self.vertices),) + values.shape[1:], dtype=values.dtype)
         if not np.issubdtype(values.dtype, np.floating):
             # integers as differences from their least (exact in float64 up to 2**53: a 64-bit id or sentinel
             # is not rounded), in wrapping unsigned arithmetic (an int64's range spans more than an int64)
