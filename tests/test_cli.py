@@ -206,6 +206,14 @@ def test_reconstruct_from_range_and_file(tmp_path, capsys, clean):
         ["reconstruct", str(source), str(tmp_path / "r3.ply"), "--unknown", str(tmp_path / "unknown.npy")],
     )
     np.testing.assert_array_equal(np.asarray(_read(tmp_path / "r3.ply").vertices), result)
+    # a suffix in capitals is the same format (it was read as text, and written as text by approximate)
+    argv = ["approximate", str(source), str(tmp_path / "a.ply"), "--count", "40", "--indices"]
+    run_json(capsys, [*argv, str(tmp_path / "chosen.NPY")])
+    assert np.load(tmp_path / "chosen.NPY").shape == (40,)
+    (tmp_path / "unknown.NPY").write_bytes((tmp_path / "unknown.npy").read_bytes())
+    argv = ["reconstruct", str(source), str(tmp_path / "r4.ply"), "--unknown", str(tmp_path / "unknown.NPY")]
+    run_json(capsys, argv)
+    np.testing.assert_array_equal(np.asarray(_read(tmp_path / "r4.ply").vertices), result)
 
 
 def test_parse_index_spec():

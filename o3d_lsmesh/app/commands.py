@@ -120,10 +120,11 @@ def approximate(args: argparse.Namespace, run: Run) -> int:
     """
     mesh, _, metrics, seconds = run_file_op("approximate", args, run, (args.indices, (".npy", ".txt")))
     indices = metrics.pop("_indices")
-    if args.indices:
-        np.save(args.indices, indices) if args.indices.endswith(".npy") else np.savetxt(
-            args.indices, indices, fmt="%d"
-        )
+    if args.indices and args.indices.lower().endswith(".npy"):
+        with open(args.indices, "wb") as handle:  # (np.save adds ".npy" to a name ending ".NPY")
+            np.save(handle, indices)
+    elif args.indices:
+        np.savetxt(args.indices, indices, fmt="%d")
     run.say(
         f"approximated {args.input} from {len(indices)} control points in {seconds:.2f} s -> {args.output}; "
         f"L-inf error {metrics['error_linf']:.4g}, RMS {metrics['error_rms']:.4g}"
@@ -188,7 +189,7 @@ def parse_index_spec(spec: str, n: int) -> np.ndarray:
     """
     if os.path.exists(spec):
         try:
-            if spec.endswith(".npy"):
+            if spec.lower().endswith(".npy"):
                 values = np.asarray(np.load(spec, allow_pickle=False)).ravel()
             else:
                 values = np.array([int(t) for t in Path(spec).read_text().replace(",", " ").split()])
