@@ -168,6 +168,19 @@ def test_bad_input_raises(rippled):
         multiresolution_fairing((V, F), 1, hierarchy=h, method="cotangent")
     with pytest.raises(TypeError, match="progress must be a bool"):
         multiresolution_fairing((V, F), 1, hierarchy=h, progress=1)
+    # the array core checks them too (level=-1 returned the coarsest level's positions)
+    from o3d_lsmesh.fairing.multiresolution import multiresolution_fairing_arrays as arrays
+
+    with pytest.raises(ValueError, match="level must be >= 0, got -1"):
+        arrays(h, -1)
+    with pytest.raises(ValueError, match=f"level must be < len\\(hierarchy\\) = {len(h)}, got 99"):
+        arrays(h, 99)
+    with pytest.raises(ValueError, match="method must be one of"):
+        arrays(h, 1, method="bogus")
+    with pytest.raises(ValueError, match="number_of_iterations must be >= 0"):
+        arrays(h, 1, number_of_iterations=-3)
+    with pytest.raises(TypeError, match="hierarchy must be a MeshHierarchy, got tuple"):
+        arrays((V, F), 1)
 
 
 # ----------------------------------------------------- smoothing by scale (issue 13)

@@ -38,6 +38,15 @@ def multiresolution_fairing_arrays(
 ) -> np.ndarray:
     """Array core of :func:`multiresolution_fairing`: faired ``(n_0, 3)`` positions of level 0 (each
     level's Connectivity built once; the rounds on ``M_0`` run on one operator)."""
+    if not isinstance(hierarchy, MeshHierarchy):
+        raise InputTypeError(
+            f"hierarchy must be a MeshHierarchy, got {type(hierarchy).__name__}", param="hierarchy"
+        )
+    level, number_of_iterations, final_iterations, method, progress = _checked(
+        level, number_of_iterations, final_iterations, method, progress
+    )
+    if level >= len(hierarchy):
+        raise InputError(f"level must be < len(hierarchy) = {len(hierarchy)}, got {level}", param="level")
     triangles = hierarchy.triangles
     conn = Connectivity(triangles[level], len(hierarchy.representatives[level]))
     positions = hierarchy.vertices[hierarchy.representatives[level]]  # a copy: fairing writes to it
@@ -62,6 +71,21 @@ def multiresolution_fairing_arrays(
     rounds = method == "local" and 0 < number_of_iterations < remaining
     reimpose = number_of_iterations if rounds else None
     return _fair_level(positions, conn, remaining, method, smooth_boundary=False, reimpose_every=reimpose)
+
+
+def _checked(level: Any, iterations: Any, final: Any, method: Any, progress: Any) -> tuple:
+    """The options of :func:`multiresolution_fairing`, checked (``level`` against a hierarchy: its caller)."""
+    final = None if final is None else as_iterations(final, name="final_iterations")
+    # Liu's per-level operators only: the scan energy and the feature mode are not per-level fairings
+    # (refused, not run as the local operator)
+    method = as_choice(method, ("local", "global"), name="method")
+    return (
+        as_count(level, name="level"),
+        as_iterations(iterations),
+        final,
+        method,
+        as_bool(progress, name="progress"),
+    )
 
 
 def _fair_level(
@@ -157,14 +181,9 @@ def multiresolution_fairing(
     >>> len(multiresolution_fairing(sphere, 3).triangles) == len(sphere.triangles)
     True
     """
-    level = as_count(level, name="level")
-    number_of_iterations = as_iterations(number_of_iterations)
-    if final_iterations is not None:
-        final_iterations = as_iterations(final_iterations, name="final_iterations")
-    # Liu's per-level operators only: the scan energy and the feature mode are not per-level fairings
-    # (refused, not run as the local operator)
-    method = as_choice(method, ("local", "global"), name="method")
-    progress = as_bool(progress, name="progress")
+    level, number_of_iterations, final_iterations, method, progress = _checked(
+        level, number_of_iterations, final_iterations, method, progress
+    )
     # a given hierarchy indexes the mesh's own vertices (build_hierarchy does not weld): weld only
     # when the hierarchy is built here, on the welded surface
     data = read_mesh(mesh, weld=hierarchy is None)
