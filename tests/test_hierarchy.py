@@ -447,6 +447,18 @@ def test_from_fast_simplification_structure():
     assert len(counts) == 5 and all(a > b for a, b in zip(counts, counts[1:])) and counts[-1] <= 70
 
 
+@pytest.mark.parametrize(("scale", "offset"), [(1e8, 0.0), (1e-8, 0.0), (1.0, 1e6)])
+def test_from_fast_simplification_is_the_same_at_any_scale_and_place(scale, offset):
+    # the extension's thresholds are absolute and its replay single precision: at 1e8 it made no level,
+    # a million units away other levels
+    V, F = _noisy_sphere(20)
+    h = from_fast_simplification((V, F), levels=[500, 250, 120])
+    moved = from_fast_simplification((V * scale + offset, F), levels=[500, 250, 120])
+    assert len(moved) == len(h)
+    for i in range(len(h)):
+        np.testing.assert_array_equal(moved.triangles[i], h.triangles[i])
+
+
 # ------------------------------------------------------------------- errors
 
 

@@ -110,7 +110,10 @@ def from_fast_simplification(
     # the others are carried through every level as they are
     conn = Connectivity(F, n0)
     Fr, referenced = conn.submesh(np.arange(m0))
-    Vr = np.ascontiguousarray(V[referenced])
+    # in a unit box about their centroid: the extension's error thresholds are absolute and its replay reads
+    # single precision (at 1e8 no level was made; a million units from the origin, other levels)
+    Vr = V[referenced] - V[referenced].mean(axis=0)
+    Vr = np.ascontiguousarray(Vr / (np.ptp(Vr, axis=0).max() or 1.0))
     points32 = Vr.astype(np.float32)
     with _LOCK:
         _, _, collapses = fast_simplification.simplify(
