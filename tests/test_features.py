@@ -520,3 +520,15 @@ def test_the_solver_asked_for_solves_the_scan_start(monkeypatch, solver):
         pytest.skip("scikit-sparse (CHOLMOD) is not installed")
     constrained_fairing(mesh, method="features", solver=solver)
     assert asked == [solver]
+
+
+def test_a_face_without_area_is_no_crease():
+    # on a flat grid, a vertex moved onto an opposite edge (in the plane) gives a zero-area triangle,
+    # whose zero normal read as folded by 90 degrees against its neighbours
+    V, F = grid(6, 6)
+    W = V.copy()
+    W[8] = (V[1] + V[2]) / 2
+    areas = np.linalg.norm(np.cross(W[F[:, 1]] - W[F[:, 0]], W[F[:, 2]] - W[F[:, 0]]), axis=1)
+    assert (areas == 0).sum() == 1 and (W[:, 2] == 0).all()  # the premise
+    assert detect_creases((W, F)).shape == (0, 2)
+    assert len(detect_creases(cube(1))) == 12  # a fold next to faces with area still is one

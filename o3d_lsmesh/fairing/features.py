@@ -329,8 +329,11 @@ def _creases(vertices: np.ndarray, triangles: np.ndarray, angle: float, passes: 
     normals = face_normals(feature_denoise(vertices, triangles, passes=passes, conn=conn), triangles)[0]
     adjacency = conn.face_adjacency
     pairs = adjacency.pairs
-    cosine = pair_cosines(normals, pairs)
-    sharp = np.unique(adjacency.pair_edge[cosine < np.cos(np.radians(angle))])
+    # a face without area has no normal (zero here): no fold against it
+    folded = (pair_cosines(normals, pairs) < np.cos(np.radians(angle))) & (normals[pairs] != 0).any(
+        axis=2
+    ).all(axis=1)
+    sharp = np.unique(adjacency.pair_edge[folded])
     return adjacency.edges[sharp].astype(np.int64)
 
 
