@@ -540,3 +540,19 @@ def test_a_solver_contradicting_the_backend_is_refused():
         "scipy",
         "cholmod",
     ]
+
+
+@pytest.mark.parametrize("solver", ["cholmod", "iterative"])
+def test_scan_fairing_mu_checked(solver):
+    # only mu H^T W H holds a component of the scan energy in place: mu=1e-20 failed at a CHOLMOD pivot
+    # naming nothing, or collapsed the mesh to a point under CG
+    from o3d_lsmesh import constrained_fairing
+    from o3d_lsmesh.core.solve import cholmod_available
+
+    if solver == "cholmod" and not cholmod_available():
+        pytest.skip("scikit-sparse (CHOLMOD) is not installed")
+    _, moved = _translated_sphere()
+    with pytest.raises(ValueError, match=r"mu is too small: mu H\^T W H must pin every connected component"):
+        constrained_fairing(moved, method="scan", mu=1e-20, solver=solver)
+    out = np.asarray(constrained_fairing(moved, method="scan", mu=1e-3, solver=solver).vertices)
+    np.testing.assert_allclose(out.mean(axis=0), 5.0, atol=1e-3)  # pinned: it stays where it was

@@ -17,7 +17,7 @@ from ..core.arrays import area_weighted_normals
 from ..core.connectivity import Connectivity, halfedges
 from ..core.operators import lower_csc, rim_neighbours, scan_normal_matrix
 from ..core.progress import Progress
-from ..core.solve import Plan, SPDSolver, solver_backend
+from ..core.solve import Plan, SPDSolver, check_constant_modes, solver_backend
 from ..core.validate import collapsed_triangles
 from .scan_measure import scan_parameters
 from .tuning import RIM_RINGS, SCAN_ITERATIVE_VERTICES, SCAN_REDUCTION, SLIVER_QUALITY
@@ -71,6 +71,12 @@ class ScanFairingSolver:
         backend = solver_backend(solver)
         triangles, conn = _surface(np.asarray(triangles), n, conn)
         normal, ring, weight = scan_normal_matrix(conn, self.mu, self.membrane, boundary_weight, rim_curve)
+        # only mu H^T W H holds a component in place (K 1 = G 1 = 0): a mu too small against the rest let it
+        # drift (CHOLMOD failed at a pivot naming nothing, CG collapsed the mesh to a point)
+        ones, scale = normal @ np.ones(n), float(normal.diagonal().max(initial=0.0))
+        check_constant_modes(
+            ones, conn.components[1], scale=scale, name="mu", value=self.mu, what="mu H^T W H"
+        )
         # sqrt(mu W) H, (m, n) CSR: the rows that carry the targets
         root, corners = np.sqrt(self.mu * weight), np.arange(0, 3 * len(triangles) + 1, 3)
         self.penalty = sp.csr_matrix(
