@@ -357,3 +357,28 @@ def test_mesh_arrays_refuses_each_defect_on_its_own():
         with pytest.raises(ValueError, match=message):
             mesh_arrays(vertices, triangles, **options)
     mesh_arrays(np.vstack([V, [[5.0, 5, 5]]]), F)  # an unreferenced vertex is allowed
+
+
+def test_plain_sequences_are_read_as_written():
+    # numpy reads [True, 5] as [1, 5] (a bool taken for vertex 1) and [int64, uint64] as floats (then
+    # refused as "cast with astype(int)")
+    from o3d_lsmesh.core.validate import as_indices, as_weights
+
+    with pytest.raises(TypeError, match="got bools among numbers"):
+        as_indices([True, 5], 10, name="indices")
+    with pytest.raises(TypeError, match="got bools among numbers"):
+        as_weights([True, 2.0], 2)
+    np.testing.assert_array_equal(as_indices([np.int64(3), np.uint64(7), 2], 10, name="i"), [3, 7, 2])
+    assert as_indices([np.int64(3), np.uint64(7)], 10, name="i").dtype == np.int64
+    np.testing.assert_array_equal(as_weights([1, 2.5], 2), [1.0, 2.5])  # numbers of two kinds, as before
+
+
+def test_spd_solver_flags_are_bools():
+    import scipy.sparse as sp
+
+    from o3d_lsmesh import SPDSolver
+
+    matrix = sp.csc_matrix(np.diag([2.0, 3.0]))
+    for flag in ("lower", "progress"):
+        with pytest.raises(TypeError, match=f"{flag} must be a bool, got str 'no'"):
+            SPDSolver(matrix, **{flag: "no"})

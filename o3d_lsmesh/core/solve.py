@@ -34,7 +34,7 @@ from ._direct import (
 )
 from ._iterative import block_cg, csr_view, gram_matrix, locality_order, preconditioner, renumbered, splu_spd
 from .errors import InputError, InputTypeError, SingularSystemError, called_from_outside, warn
-from .validate import as_choice, as_csc
+from .validate import as_bool, as_choice, as_csc
 
 __all__ = [
     "BACKENDS",
@@ -166,7 +166,7 @@ class SPDSolver:
         self.tol = float(tol)
         self.reduction = None if reduction is None else float(reduction)
         self.max_iterations = int(max_iterations)
-        self.progress = bool(progress)
+        self.progress = as_bool(progress, name="progress")
         self.memory_budget = memory_budget
         if backend == "cholmod" and _cholmod is None:
             raise ImportError(
@@ -178,7 +178,7 @@ class SPDSolver:
             raise InputTypeError("pass exactly one of matrix and product_of", param="matrix")
         if product_of is None:
             given = as_csc(matrix)
-            _direct.check_symmetric(given, lower=bool(lower))
+            _direct.check_symmetric(given, lower=as_bool(lower, name="lower"))
         else:
             given = as_csc(product_of, name="product_of", square=False)
         if backend == "auto":

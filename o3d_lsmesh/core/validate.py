@@ -152,12 +152,25 @@ def _array(value: Any, *, name: str, expected: str, param: str | None = None) ->
     """``np.asarray(value)`` (an Open3D tensor converted first); ``TypeError`` for strings, None, ragged input."""
     if isinstance(value, (str, bytes)) or value is None:
         raise InputTypeError(f"{name} must be {expected}, got {_describe(value)}", param=param or name)
+    if isinstance(value, (list, tuple)):
+        value = _plain_numbers(value, name=name, expected=expected, param=param or name)
     try:
         return np.asarray(_open3d_tensor_to_numpy(value))
     except Exception as error:  # ragged input and the like: a type problem
         raise InputTypeError(
             f"{name} must be {expected}, got {_describe(value)}", param=param or name
         ) from error
+
+
+def _plain_numbers(values: list | tuple, *, name: str, expected: str, param: str) -> Any:
+    """A flat sequence as numpy should read it: bools among numbers refused (numpy reads ``[True, 5]`` as
+    ``[1, 5]``), integers of mixed kinds as Python ints (numpy reads ``[int64, uint64]`` as floats)."""
+    bools = [isinstance(v, (bool, np.bool_)) for v in values]
+    if any(bools) and not all(bools):
+        raise InputTypeError(f"{name} must be {expected}, got bools among numbers", param=param)
+    if values and not any(bools) and all(isinstance(v, (int, np.integer)) for v in values):
+        return [int(v) for v in values]
+    return values
 
 
 def _real_array(value: Any, *, name: str, expected: str, param: str | None = None) -> np.ndarray:
