@@ -382,3 +382,18 @@ def test_spd_solver_flags_are_bools():
     for flag in ("lower", "progress"):
         with pytest.raises(TypeError, match=f"{flag} must be a bool, got str 'no'"):
             SPDSolver(matrix, **{flag: "no"})
+
+
+def test_a_mesh_too_small_for_double_precision_is_refused():
+    # at 1e-40 the hierarchy made no level, at 1e-100 the feature mode returned NaN, the cotangent LS mesh
+    # was off by 73% of its size and fill_holes added nothing: powers of the lengths underflow
+    from o3d_lsmesh import constrained_fairing
+
+    V, F = grid(6, 6, z=lambda x, y: 0.1 * x * y)
+    for scale in (1e-40, 1e-100):
+        with pytest.raises(ValueError, match="mesh vertices must span at least 1e-30 .* scale the mesh up"):
+            constrained_fairing((V * scale, F), method="features")
+    out = constrained_fairing((V * 1e-20, F), method="features")[0]  # small, but within range
+    assert np.isfinite(out).all()
+    # a mesh whose vertices all coincide spans nothing: not this error (its own, or none)
+    mesh_arrays(np.zeros((3, 3)), np.array([[0, 1, 2]]))

@@ -97,7 +97,8 @@ def mesh_arrays(
         Positions that are not real numbers, indices that are not integers.
     InputError
         A shape not ``(k, 3)``, an empty mesh, no triangles, coordinates not finite or beyond
-        :data:`COORDINATE_LIMIT`, indices out of range, triangles repeating a vertex.
+        :data:`COORDINATE_LIMIT`, a mesh spanning less than its inverse, indices out of range, triangles
+        repeating a vertex.
 
     Examples
     --------
@@ -117,6 +118,13 @@ def mesh_arrays(
     smallest, largest = float(vertices.min()), float(vertices.max())
     if not (-COORDINATE_LIMIT <= smallest and largest <= COORDINATE_LIMIT):
         _check_coordinates(vertices, what=f"{name} vertices", row="vertex", param=name)
+    if 0.0 < largest - smallest < 1.0 / COORDINATE_LIMIT:  # powers of its lengths would underflow
+        raise InputError(
+            f"{name} vertices must span at least {1 / COORDINATE_LIMIT:.0e} (cotangents, areas and the "
+            f"hierarchy's costs would underflow to zero), got a mesh of extent {largest - smallest:.3g}; "
+            "scale the mesh up first",
+            param=name,
+        )
     repeated = collapsed_triangles(triangles)
     if repeated.any() and not collapsed:
         row = int(np.flatnonzero(repeated)[0])
