@@ -131,8 +131,8 @@ class SPDSolver:
 
     Attributes ``backend`` (the one that runs), ``iterations`` and ``residual`` (the last CG solve's).
     Thread-safe; pickles as its matrix. :class:`Plan`'s fields as keywords are deprecated (``_plan=``).
-    Raises :class:`InputError` (:class:`InputTypeError`) for a bad matrix or option. See
-    docs/algorithms/solvers.rst.
+    Raises :class:`InputError` (:class:`InputTypeError`) for a bad matrix or option; an indefinite matrix
+    is solved by CHOLMOD's ``LDL^T`` and SciPy's LU, refused by CG (docs/algorithms/solvers.rst).
 
     Examples
     --------
@@ -467,7 +467,7 @@ def solve_spd(matrix: Any, rhs: np.ndarray, *, isolate_nonfinite: bool = False) 
 
     ``isolate_nonfinite=True`` (sparse ``matrix``, ``(n, k)`` ``rhs``): the connected blocks of the matrix
     holding a non-finite entry (in it or in their ``rhs`` rows) are left NaN and the others solved.
-    Raises :class:`SingularSystemError` if the matrix is not numerically positive definite.
+    Raises :class:`SingularSystemError` if the matrix is not numerically positive definite (sparse: see SPDSolver).
 
     >>> solve_spd(np.array([[4.0, 1.0], [1.0, 3.0]]), np.array([1.0, 2.0])).round(4)
     array([0.0909, 0.6364])
