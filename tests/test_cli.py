@@ -1289,3 +1289,21 @@ def test_compare_pairs_vertices_only_where_the_meshes_correspond(tmp_path, capsy
     # a filter's result (the same triangles) is compared vertex by vertex
     report = run_json(capsys, ["compare", str(tmp_path / "s.ply"), str(tmp_path / "s.ply")])
     assert report["vertex_error"]["linf"] == 0.0
+
+
+def test_hierarchy_level_0_is_the_input_with_its_attributes(tmp_path, capsys):
+    # level 0 ("the input") was written without the input's colours and normals
+    sphere = o3d.geometry.TriangleMesh.create_sphere(radius=1.0, resolution=16)
+    sphere.compute_vertex_normals()
+    colours = np.random.default_rng(0).random((len(sphere.vertices), 3))
+    sphere.vertex_colors = o3d.utility.Vector3dVector(colours)
+    assert o3d.io.write_triangle_mesh(str(tmp_path / "s.ply"), sphere)
+    given = o3d.io.read_triangle_mesh(str(tmp_path / "s.ply"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("default")  # (the coarse levels' colours are dropped, with a warning)
+        assert main(["hierarchy", str(tmp_path / "s.ply"), str(tmp_path / "out"), "--levels", "0,1"]) == 0
+    level0 = o3d.io.read_triangle_mesh(str(tmp_path / "out" / "level_00.ply"))
+    np.testing.assert_array_equal(np.asarray(level0.vertex_colors), np.asarray(given.vertex_colors))
+    np.testing.assert_array_equal(np.asarray(level0.triangles), np.asarray(given.triangles))
+    assert level0.has_vertex_normals()
+    assert not o3d.io.read_triangle_mesh(str(tmp_path / "out" / "level_01.ply")).has_vertex_colors()

@@ -13,7 +13,7 @@ from typing import Any, Callable
 import numpy as np
 
 from .. import fairing
-from .._o3d import read_mesh
+from .._o3d import new_mesh, read_mesh
 from ..core.errors import InputError, InputTypeError
 from ..core.validate import as_choice
 from ..fairing.constrained import resolved_options
@@ -402,10 +402,14 @@ def parse_levels(spec: str, count: int) -> list[int]:
 @operation("hierarchy", options=HIERARCHY, output="files", help=_LEVELS)
 def hierarchy_op(mesh: Any, options: dict, context: TaskContext) -> tuple[Any, dict]:
     """``--op hierarchy`` and ``o3d-lsmesh hierarchy``: ``{level_NN: mesh, vertex_maps.npz: bytes}``."""
+    mesh = read_mesh(mesh)  # validated once (Any: the API's annotations name the public mesh kinds)
     sizes = {key: options[key] for key in ("min_vertices", "max_levels")}
     built = build_hierarchy(mesh, **sizes, progress=context.progress)
     levels = parse_levels(options["levels"], len(built))
-    files: dict[str, Any] = {f"level_{level:02d}": built.level(level) for level in levels}
+    # level 0 is the input: with its attributes (the others have new connectivity: dropped, said)
+    files: dict[str, Any] = {
+        f"level_{i:02d}": built.level(i) if i else new_mesh(mesh, mesh.vertices) for i in levels
+    }
     if options["maps"]:  # each map composes the parents of every level above it: only when asked
         buffer = io.BytesIO()
         maps = {f"level_{level:02d}": np.asarray(built.vertex_map(level), dtype=np.int64) for level in levels}
