@@ -524,3 +524,30 @@ def test_fill_border_of_a_long_wiggly_silhouette_is_bounded(monkeypatch):
     assert {h.id for h in out.report.holes} == set(range(len(holes)))
     assert all(h.filled or h.how.startswith("every") for h in out.report.holes)
     assert added_crossings(out.vertices, out.triangles, len(T)) == 0
+
+
+def test_a_rim_running_into_a_fin_or_a_repeated_triangle_is_reported():
+    # a raw scan's fin or repeated triangle at a hole's rim leaves the rim on no closed loop: the hole was
+    # neither filled nor reported (an empty report, no warning, "0 of 0 holes")
+    import o3d_lsmesh
+
+    sphere = o3d.geometry.TriangleMesh.create_sphere(resolution=20)
+    V, T = np.asarray(sphere.vertices), np.asarray(sphere.triangles).astype(np.int64)
+    T = T[V[T].mean(axis=1)[:, 0] <= 0.8]  # one hole
+
+    def single_edges(T):  # plain count: edges of exactly one triangle
+        e = np.sort(np.concatenate([T[:, [0, 1]], T[:, [1, 2]], T[:, [2, 0]]]), axis=1)
+        keys, count = np.unique(e, axis=0, return_counts=True)
+        return keys[count == 1]
+
+    rim = np.unique(single_edges(T))
+    e = np.sort(np.concatenate([T[:, [0, 1]], T[:, [1, 2]], T[:, [2, 0]]]), axis=1)
+    keys, count = np.unique(e, axis=0, return_counts=True)
+    a, b = keys[(count == 2) & (np.isin(keys, rim).sum(axis=1) == 1)][0]
+    fin = (np.vstack([V, 1.3 * (V[a] + V[b]) / 2]), np.vstack([T, [[a, b, len(V)]]]))
+    repeated = (V, np.vstack([T, T[np.flatnonzero(np.isin(T, rim).any(axis=1))[0]]]))
+    for mesh in (fin, repeated):
+        with pytest.warns(O3DLSMeshWarning, match="boundary edges on no closed loop"):
+            (_, out), report = o3d_lsmesh.fill_holes(mesh, return_report=True)
+        assert report.holes == () and report.stray_edges == len(rim) > 0  # the hole's rim (not a fin's two)
+        assert len(single_edges(out)) == len(single_edges(mesh[1]))  # left open, as said

@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .._o3d import new_mesh, read_mesh
+from ..core.boundary import boundary_curves
 from ..core.connectivity import Connectivity
 from ..core.errors import InputError, warn
 from ..core.validate import as_bool, as_choice, as_count, as_positive_float, mesh_arrays
@@ -65,6 +66,8 @@ class FillReport:
     ----------
     holes : tuple of HoleOutcome
         One per loop, by id.
+    stray_edges : int
+        Boundary edges on no closed loop (a rim that runs into a fin or a repeated triangle): left open.
 
     Examples
     --------
@@ -75,6 +78,7 @@ class FillReport:
     """
 
     holes: tuple[HoleOutcome, ...]
+    stray_edges: int = 0
 
     @property
     def filled(self) -> list[HoleOutcome]:
@@ -90,7 +94,9 @@ class FillReport:
         shown = "; ".join(
             f"loop {h.id} ({h.edges} edges, diameter {h.diameter:.4g}): {h.how}" for h in left[:limit]
         )
-        return shown + (f"; and {len(left) - limit} more" if limit is not None and len(left) > limit else "")
+        shown += f"; and {len(left) - limit} more" if limit is not None and len(left) > limit else ""
+        stray = f"{self.stray_edges} boundary edges on no closed loop (a fin or a repeated triangle at a rim)"
+        return "; ".join(part for part in (shown, stray if self.stray_edges else "") if part)
 
 
 @dataclass(frozen=True)
@@ -215,6 +221,10 @@ class HoleFiller:
         es = conn.edge_structure
         edges = es.edges.astype(np.int64)
         self.holes = find_holes(vertices, triangles, _conn=conn)
+        # a rim that runs into a fin or a repeated triangle is on no closed loop: its edges (a lone fin's two
+        # free edges are no hole)
+        chains = boundary_curves(triangles, n, conn=conn).chains
+        self.stray_edges = sum(len(chain) - 1 for chain in chains if len(chain) > 3)
         length = np.linalg.norm(vertices[edges[:, 0]] - vertices[edges[:, 1]], axis=1)
         degree = np.maximum(np.bincount(edges.ravel(), minlength=n), 1)
         self.sigma = np.bincount(edges.ravel(), weights=np.repeat(length, 2), minlength=n) / degree
@@ -295,13 +305,15 @@ class HoleFiller:
             tuple(
                 HoleOutcome(i, h.edges, h.diameter, id(h) not in why, how[id(h)])
                 for i, h in enumerate(self.holes)
-            )
+            ),
+            self.stray_edges,
         )
         # said: every loop left open but those the size limits exclude and flaps (no holes)
         said = FillReport(
-            tuple(h for h in report.skipped if h.how.startswith(("every", "taken", "a zero-width")))
+            tuple(h for h in report.skipped if h.how.startswith(("every", "taken", "a zero-width"))),
+            self.stray_edges,
         )
-        if said.holes:
+        if said.holes or said.stray_edges:
             warn(
                 f"fill_holes: {len(said.holes)} of {len(self.holes)} loops left open: {said.describe(10)}"
                 " (every loop, filled or not: fill_holes(..., return_report=True), a FillReport)"
