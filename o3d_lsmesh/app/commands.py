@@ -101,7 +101,7 @@ def fill(args: argparse.Namespace, run: Run) -> int:
         mesh,
         holes_before=len(before),
         holes_after=len(after),
-        borders_left_open=0 if args.fill_border else sum(hole.border for hole in before),
+        borders_left_open=sum(before[hole.id].border for hole in report.skipped),  # (report ids: before's)
         new_vertices=metrics["new_vertices"],
         new_triangles=metrics["new_triangles"],
         holes_filled=len(report.filled),
