@@ -431,8 +431,9 @@ def test_unreadable_and_empty_meshes(tmp_path, capsys, clean):
         (["compare", "{src}", "{src}", "--points", "10000000000"], "--points: must be at most 10,000,000"),
         (["demo", "--resolution", "5000"], "--resolution: must be at most 2,000"),
         (["demo", "--resolution", "5"], "--resolution: must be a grid size of at least 20 rays, got '5'"),
-        (["demo", "--noise", "-1"], "--noise: must be a non-negative finite number, got '-1'"),
-        (["demo", "--noise", "nan"], "--noise: must be a non-negative finite number, got 'nan'"),
+        (["demo", "--noise", "-1"], "--noise: must be a number in [0, 10], got '-1'"),
+        (["demo", "--noise", "nan"], "--noise: must be a number in [0, 10], got 'nan'"),
+        (["demo", "--noise", "1e308"], "--noise: must be at most 10.0, got '1e308'"),  # (a NaN vertex)
         (
             ["denoise", "{src}", "{out}", "--level", "2", "--mu", "1"],
             "--mu 1.0 cannot be combined with --level 2",

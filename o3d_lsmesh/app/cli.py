@@ -23,7 +23,7 @@ from ..core.progress import Progress, close_all
 from .cli_kit import PROG, Parser, PictureError, Run, add_command, add_option
 from .commands import approximate, batch, compare, decode, demo, denoise, encode, fill, hierarchy, reconstruct
 from .files import WRITABLE, CLIError, mesh_suffix
-from .ops import OPS, RUN_FLAGS, Option, choice, flag, int_at_least, non_negative
+from .ops import OPS, RUN_FLAGS, Option, choice, flag, int_at_least, number
 
 __all__ = ["CLIError", "PictureError", "Run", "build_parser", "main"]
 
@@ -101,7 +101,13 @@ DEMO = (
     Option("out", str, "demo_out", "output folder"),
     Option("no_render", flag, False, "skip the picture", is_flag=True),
     Option("resolution", _GRID, 200, "the scanner's grid of R x R rays (200: about 22,000 vertices)"),
-    Option("noise", non_negative, 0.3, "range noise in grid spacings where the surface faces the scanner"),
+    # (beyond 10 spacings the scan is noise; 1e308 overflowed to a NaN vertex)
+    Option(
+        "noise",
+        number(float, 0, 10.0, "a number in [0, 10]"),
+        0.3,
+        "range noise in grid spacings where the surface faces the scanner (at most 10)",
+    ),
     Option("seed", int, 0, "random seed of the noise and dropouts"),
 )
 

@@ -71,7 +71,6 @@ def int_at_least(minimum: int, maximum: int | None = None, rule: str = "") -> Ca
 
 
 real = number(float, rule="a finite number")
-non_negative = number(float, 0, rule="a non-negative finite number")
 
 
 def choice(*choices: Any) -> Callable[[Any], Any]:
