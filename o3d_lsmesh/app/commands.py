@@ -132,6 +132,10 @@ def approximate(args: argparse.Namespace, run: Run) -> int:
     return run.finish(mesh, **metrics, seconds=seconds)
 
 
+#: Open3D's readers of these formats number the vertices as the faces first use them, not as the file does
+_RENUMBERED = {".obj": "an OBJ", ".gltf": "a glTF", ".glb": "a glTF"}
+
+
 def hierarchy(args: argparse.Namespace, run: Run) -> int:
     """Write levels of the volume-cost collapse hierarchy.
 
@@ -144,6 +148,14 @@ def hierarchy(args: argparse.Namespace, run: Run) -> int:
     outdir = Path(args.outdir)
     if outdir.exists() and not outdir.is_dir():
         raise CLIError(f"OUTDIR {args.outdir!r} exists and is not a folder")
+    if args.maps and args.format.lower() in _RENUMBERED:
+        warnings.warn(
+            f"--maps numbers each level's vertices as {args.format} files list them, and Open3D reads "
+            f"{_RENUMBERED[args.format.lower()]} in another order (as its faces first use them): read the "
+            "levels with another reader, or write them as .ply",
+            O3DLSMeshWarning,
+            stacklevel=2,
+        )
     built, metrics, seconds = run_op("hierarchy", mesh, args, run)
     outdir.mkdir(parents=True, exist_ok=True)
     written: list[str] = []
@@ -228,7 +240,7 @@ def reconstruct(args: argparse.Namespace, run: Run) -> int:
     """
     check_output(args.output, [args.input], force=args.force)
     mesh = read_input(args.input)
-    renumbered = {".obj": "an OBJ", ".gltf": "a glTF", ".glb": "a glTF"}.get(Path(args.input).suffix.lower())
+    renumbered = _RENUMBERED.get(Path(args.input).suffix.lower())
     if renumbered:
         # Open3D's OBJ and glTF readers number the vertices as the faces first use them, not as the file does
         warnings.warn(
