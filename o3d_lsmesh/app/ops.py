@@ -271,7 +271,7 @@ APPROXIMATE = (
            "like 2%", required=True),
     Option("method", choice(*_SELECTIONS), "greedy", "how the control points are chosen"),
     Option("interpolate", flag, False, "interpolate the control points exactly", is_flag=True),
-    Option("seed", int_at_least(0), None, "random seed of --method random (default 0)"),
+    Option("seed", int_at_least(0), None, "random seed of --method random (default: 0 there)"),
 )
 ENCODE = (
     Option("count", count_or_percent, "2%", "anchors: a count, or a share of each mesh's vertices like 2%"),
