@@ -424,7 +424,9 @@ def test_unreadable_and_empty_meshes(tmp_path, capsys, clean):
         (["denoise", "{src}", "{dir}/out.xyz"], "must end in one of .ply, .obj, .stl, .off, .gltf"),
         (["denoise", "{src}", "{dir}/out.glb"], "(Open3D writes .glb files it cannot read back: use .gltf)"),
         (["denoise", "{src}", "{dir}/missing/out.ply"], "OUTPUT folder"),
+        (["denoise", "{src}", "{out}", "--render", "{dir}/picture.jpg"], "--render '"),  # (not "OUTPUT")
         (["denoise", "{src}", "{out}", "--render", "{dir}/picture.jpg"], "must end in one of .png"),
+        (["approximate", "{src}", "{out}", "--count", "5", "--indices", "{dir}/i.csv"], "--indices '"),
         (["approximate", "{src}", "{out}", "--count", "100000"], "--count must be <= 642, got 100000"),
         (["reconstruct", "{src}", "{out}", "--unknown", "100000"], "--unknown must name vertices in 0..641"),
         (["reconstruct", "{src}", "{out}", "--unknown", "0:99999999999"], "got range '0:99999999999'"),

@@ -177,14 +177,14 @@ def op_options(name: str, args: argparse.Namespace) -> dict:
 
 
 def run_file_op(name: str, args: argparse.Namespace, run: Run, *extra: Any) -> tuple[Any, Any, dict, float]:
-    """The flow of an op's subcommand: check OUTPUT and the ``extra`` ``(path, suffixes)`` outputs, read
+    """The flow of an op's subcommand: check OUTPUT and the ``extra`` ``(path, suffixes, flag)`` outputs, read
     INPUT, run the op, write its mesh or bytes; the input, the output, the metrics and the seconds."""
     kind = OPS[name].output
     op_options(name, args)  # before anything is read or written
     check_output(args.output, [args.input], force=args.force, suffixes=None if kind == "bytes" else WRITABLE)
-    for path, suffixes in extra:
+    for path, suffixes, what in extra:
         if path:
-            check_output(path, [args.input], force=args.force, suffixes=suffixes)
+            check_output(path, [args.input], force=args.force, suffixes=suffixes, what=what)
     mesh = read_input(args.input)
     out, metrics, seconds = run_op(name, mesh, args, run)
     Path(args.output).write_bytes(out) if kind == "bytes" else write_output(args.output, out)

@@ -52,7 +52,7 @@ def denoise(args: argparse.Namespace, run: Run) -> int:
 
     example: scan.ply smooth.ply --iterations 20 --render before_after.png
     """
-    mesh, out, report, seconds = run_file_op("denoise", args, run, (args.render, (".png",)))
+    mesh, out, report, seconds = run_file_op("denoise", args, run, (args.render, (".png",), "--render"))
     report["seconds"] = seconds
     how = f"{report['method']} fairing"
     if args.level:
@@ -118,7 +118,9 @@ def approximate(args: argparse.Namespace, run: Run) -> int:
 
     example: bunny.ply approx.ply --count 400 --indices controls.npy
     """
-    mesh, _, metrics, seconds = run_file_op("approximate", args, run, (args.indices, (".npy", ".txt")))
+    mesh, _, metrics, seconds = run_file_op(
+        "approximate", args, run, (args.indices, (".npy", ".txt"), "--indices")
+    )
     indices = metrics.pop("_indices")
     if args.indices and args.indices.lower().endswith(".npy"):
         with open(args.indices, "wb") as handle:  # (np.save adds ".npy" to a name ending ".NPY")
@@ -300,7 +302,7 @@ def compare(args: argparse.Namespace, run: Run) -> int:
     if args.units != "model" and not args.render:  # (the metrics are in model units)
         raise CLIError(f"--units {args.units} applies to the distance map of --render, which was not given")
     if args.render:
-        check_output(args.render, [args.a, args.b], force=args.force, suffixes=(".png",))
+        check_output(args.render, [args.a, args.b], force=args.force, suffixes=(".png",), what="--render")
     a, b = read_input(args.a, what="A"), read_input(args.b, what="B")
     report: dict[str, Any] = {"a": args.a, "b": args.b}
     for key, mesh in (("size_a", a), ("size_b", b)):

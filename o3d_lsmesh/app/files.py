@@ -265,21 +265,27 @@ def same_file(a: str, b: str) -> bool:
 
 
 def check_output(
-    path: str, inputs: Sequence[str], *, force: bool, suffixes: Sequence[str] | None = WRITABLE
+    path: str,
+    inputs: Sequence[str],
+    *,
+    force: bool,
+    suffixes: Sequence[str] | None = WRITABLE,
+    what: str = "OUTPUT",
 ) -> None:
-    """Refuse, before any work, an output that would overwrite an input or cannot be written."""
+    """Refuse, before any work, an output that would overwrite an input or cannot be written (``what``: the
+    argument that names it, ``--render`` say)."""
     for source in inputs:
         if same_file(path, source) and not force:
             raise CLIError(
-                f"OUTPUT {path!r} is the input file {source!r}; refusing to overwrite it (use --force)"
+                f"{what} {path!r} is the input file {source!r}; refusing to overwrite it (use --force)"
             )
     suffix = Path(path).suffix.lower()
     if suffixes is not None and suffix not in suffixes:
         hint = glb_hint(suffix) if ".gltf" in suffixes else ""
-        raise CLIError(f"OUTPUT {path!r} must end in one of {', '.join(suffixes)}{hint}")
+        raise CLIError(f"{what} {path!r} must end in one of {', '.join(suffixes)}{hint}")
     folder = os.path.dirname(os.path.abspath(path))
     if not os.path.isdir(folder):
-        raise CLIError(f"OUTPUT folder {folder!r} does not exist")
+        raise CLIError(f"{what} folder {folder!r} does not exist")
 
 
 def write_output(path: str, mesh: Any) -> None:
