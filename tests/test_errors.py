@@ -79,7 +79,7 @@ VALIDATE = [
     (lambda: v.as_choice(3, ["a"], name="kind"), InputTypeError, "kind", "one of"),
     (lambda: v.as_choice("b", ["a"], name="kind"), InputError, "kind", "one of"),
     (lambda: v.check_options(ORDER, "c", {}), InputError, "method", "method must be one of"),
-    (lambda: v.check_options(ORDER, "b", {"k": 2}), InputError, "k", r"k must be None for method='b'"),
+    (lambda: v.check_options(ORDER, "b", {"k": 2}), InputError, "k", r"k does not apply to method='b'"),
     (lambda: v.check_options(ORDER, "a", {"j": 2}), InputError, "j", r"\(only for a\)"),
     (lambda: v.check_options(ORDER, "a", {"z": 2}), InputError, "z", "not an option of any method"),
     (lambda: v.check_options(ORDER, "a", {"k": 0.5}), InputTypeError, "k", "k must be an integer"),

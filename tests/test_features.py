@@ -225,10 +225,10 @@ def test_noiseless_plane_is_left_alone():
 @pytest.mark.parametrize(
     ("error", "message", "kwargs"),
     [
-        (ValueError, "mu must be None for method='features'", dict(mu=0.1)),
-        (ValueError, "reimpose_every must be None for method='features'", dict(reimpose_every=2)),
+        (ValueError, "mu does not apply to method='features'", dict(mu=0.1)),
+        (ValueError, "reimpose_every does not apply to method='features'", dict(reimpose_every=2)),
         (ValueError, "smooth_boundary must be True for method='features'", dict(smooth_boundary=False)),
-        (ValueError, "membrane must be None for method='features'", dict(membrane=0.1)),
+        (ValueError, "membrane does not apply to method='features'", dict(membrane=0.1)),
         (ValueError, "number_of_iterations must be >= 0", dict(number_of_iterations=-1)),
         (TypeError, "number_of_iterations must be an integer", dict(number_of_iterations=2.5)),
     ],

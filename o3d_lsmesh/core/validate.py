@@ -422,7 +422,7 @@ def check_options(
     >>> check_options(table, "b", {"k": 2})
     Traceback (most recent call last):
     ...
-    o3d_lsmesh.core.errors.InputError: k must be None for method='b' (it applies to method='a'), got 2
+    o3d_lsmesh.core.errors.InputError: k does not apply to method='b' (it applies to method='a'), got 2
     """
     method = as_choice(method, tuple(table), name=name)
     row = table[method]
@@ -434,7 +434,7 @@ def check_options(
             raise InputError(f"{key} is not an option of any {name}, got {key}={_describe(value)}", param=key)
         why = table[users[0]][key].why or "it applies to " + " or ".join(f"{name}={m!r}" for m in users)
         raise InputError(
-            f"{key} must be None for {name}={method!r} ({why}), got {_describe(value)}", param=key
+            f"{key} does not apply to {name}={method!r} ({why}), got {_describe(value)}", param=key
         )
     options = {}
     for key, option in row.items():

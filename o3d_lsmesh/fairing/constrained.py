@@ -77,7 +77,7 @@ def _one_solve(value: Any, *, name: str) -> int:
     value = as_iterations(value, name=name)
     if value > 1:
         raise InputError(
-            f"{name} must be None, 0 or 1 for method='scan' (its energy is one solve; for smoothing by "
+            f"{name} must be 0 or 1 for method='scan' (its energy is one solve; for smoothing by "
             f"iterations use method='local'), got {value}",
             param=name,
         )
@@ -97,7 +97,7 @@ def _boundary_moves(method: str) -> Option:
     return Option(refuse, True)
 
 
-_MU = "it weighs the barycenter penalty of method='scan' or 'global'"
+_MU = "it weighs the barycenter penalty of method='scan' or method='global'"
 _SCAN_TERM = "it weighs a term of method='scan'"
 _REIMPOSE = "it re-takes the targets of method='local'"
 _SMOOTH = Option(as_bool, True)
