@@ -662,6 +662,11 @@ def test_ply_properties_open3d_leaves_out_are_named(tmp_path, vertex, face, unre
     corners = ["0 0 0", "1 0 0", "0 1 0", "1 1 0"]
     rows = [f"{xyz} " + " ".join(["1"] * len(vertex)) for xyz in corners]
     rows += [f"3 {a} {b} {c} " + " ".join(["7"] * len(face)) for a, b, c in [(0, 1, 2), (1, 3, 2)]]
+    if unread:  # an element Open3D does not read at all (an exporter's edges), after the faces
+        head.insert(-1, "element edge 1")
+        head[-1:-1] = ["property int vertex1", "property int vertex2"]
+        rows.append("0 1")
+        unread = [*unread, "edge"]
     path = tmp_path / "scan.ply"
     path.write_text("\n".join(head + rows) + "\n")
     with warnings.catch_warnings(record=True) as caught:

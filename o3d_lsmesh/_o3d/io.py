@@ -149,7 +149,8 @@ def _ply_unread(header: dict[str, tuple[int, dict[str, str]]]) -> list[str]:
     for element, (_, properties) in header.items():
         if element not in _PLY_READ:
             unread.append(element)
-        unread += [f"{element} {name}" for name in properties if name not in _PLY_READ[element]]
+        else:
+            unread += [f"{element} {name}" for name in properties if name not in _PLY_READ[element]]
     return unread
 
 
