@@ -73,7 +73,7 @@ def cap_threads(threads: int) -> None:
 
 # descriptors 1 and 2 belong to the process: one capture at a time (threads of a batch worker read at
 # once; a second capture would save the first one's sink as "the terminal" and mix their texts)
-_CAPTURE = threading.Lock()
+_CAPTURE = threading.RLock()  # (re-entrant: a capture within a capture of the same thread is no deadlock)
 
 
 @contextlib.contextmanager
