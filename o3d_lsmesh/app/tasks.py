@@ -159,17 +159,20 @@ def run_task(
             current = read_mesh_file(task.path)
             record.update(vertices_before=len(current.vertices), triangles_before=len(current.triangles))
             context = TaskContext(input=task.path, relative=task.relative, threads=threads)
-            last, kept = ops[-1], None  # the output: the last op's, or (metrics last) the last mesh made
+            kept: Any
+            # written: the last op's output, or (a metrics op last) the last mesh made
+            last, kept = ops[-1], None
             for index, (op, values) in enumerate(zip(ops, options)):
                 record["stage"] = op.name
                 current, metrics = op.function(current, dict(values), context)
                 slot = f"{op.name}#{index + 1}" if op.name in record["metrics"] else op.name  # (run twice)
                 record["metrics"][slot] = {k: v for k, v in metrics.items() if not k.startswith("_")}
-                last, kept = (op, current) if op.output != "none" else (last, kept)
-            current = current if ops[-1].output != "none" else kept
-            if last.output == "mesh" and current is not None:
+                if op.output != "none":  # (a metrics op is last, parse_ops says)
+                    last, kept = op, current
+            current = kept
+            if last.output == "mesh":
                 record.update(vertices_after=len(current.vertices), triangles_after=len(current.triangles))
-            target = output_path(Path(outdir), task.relative, last, suffix) if current is not None else None
+            target = output_path(Path(outdir), task.relative, last, suffix)  # (None: compare alone)
             with lock:
                 if gate["abandoned"]:
                     return
