@@ -130,11 +130,9 @@ def ply_header(path: str | os.PathLike) -> dict[str, tuple[int, dict[str, str]]]
 
 
 #: The full scale of a PLY colour type: Open3D's reader divides every colour by 255, whatever its type
-_COLOUR_SCALE = {"uchar": 255, "uint8": 255, "char": 127, "int8": 127, "ushort": 65535, "uint16": 65535}
-_COLOUR_SCALE |= {"short": 32767, "int16": 32767, "uint": 2**32 - 1, "uint32": 2**32 - 1}
-_COLOUR_SCALE |= {"int": 2**31 - 1, "int32": 2**31 - 1} | dict.fromkeys(
-    ("float", "float32", "double", "float64"), 1
-)
+_COLOUR_SCALE = {"char": 127, "int8": 127, "uchar": 255, "uint8": 255, "short": 32767, "int16": 32767}
+_COLOUR_SCALE |= {"ushort": 65535, "uint16": 65535, "int": 2**31 - 1, "int32": 2**31 - 1}
+_COLOUR_SCALE |= {"uint": 2**32 - 1, "uint32": 2**32 - 1, "float": 1, "float32": 1, "double": 1, "float64": 1}
 
 
 #: What Open3D's PLY reader keeps of each element (positions, normals, colours; the faces' corners)
